@@ -1,0 +1,3 @@
+from calibctl.cli.main import run
+
+run()

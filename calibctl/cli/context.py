@@ -1,0 +1,33 @@
+"""Per-invocation state the global options resolve to; every command module reads it from here."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import typer
+
+from calibctl.config import Settings, load_settings
+
+
+@dataclass
+class AppState:
+    db: str | None = None
+    station_config: Path | None = None
+    json_output: bool = False
+
+    def settings(self, station: str | None = None, operator: str | None = None) -> Settings:
+        return load_settings(db=self.db, station_config=self.station_config, station=station, operator=operator)
+
+
+def state(ctx: typer.Context) -> AppState:
+    """The global options of this invocation (works from sub-command groups too)."""
+    root = ctx.find_root()
+    if not isinstance(root.obj, AppState):
+        root.obj = AppState()
+    return root.obj
+
+
+def wants_json(ctx: typer.Context, local_flag: bool = False) -> bool:
+    """True when either the global ``--json`` or the command's own ``--json`` was given."""
+    return local_flag or state(ctx).json_output

@@ -1,0 +1,93 @@
+"""The calibctl command line: global options, command registration and the one error boundary."""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from pathlib import Path
+from typing import Annotated, Any
+
+import click
+import typer
+from typer.core import TyperGroup
+
+from calibctl import __version__
+from calibctl.cli.context import AppState
+from calibctl.errors import EXIT_CANNOT_RUN, CalibctlError
+
+
+class CalibctlGroup(TyperGroup):
+    """The error boundary: CalibctlError -> 'Error: ...' + 'Hint: ...' on stderr and its exit code.
+
+    Living in the group (not in ``run``) means CliRunner tests see exactly what users see.
+    """
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except CalibctlError as exc:
+            print(f"Error: {exc.message}", file=sys.stderr)
+            if exc.hint:
+                print(f"Hint: {exc.hint}", file=sys.stderr)
+            raise click.exceptions.Exit(exc.exit_code) from exc
+        except (click.exceptions.Exit, click.ClickException, click.exceptions.Abort):
+            raise
+        except KeyboardInterrupt:
+            print("Interrupted; nothing half-written was kept.", file=sys.stderr)
+            raise click.exceptions.Exit(130) from None
+        except Exception:
+            # A bug: keep the traceback, and never exit 1 (which means "verdict: fail").
+            traceback.print_exc()
+            raise click.exceptions.Exit(EXIT_CANNOT_RUN) from None
+
+
+app = typer.Typer(
+    name="calibctl",
+    cls=CalibctlGroup,
+    help="Factory-line camera calibration with gates, honest uncertainty and an immutable artifact store.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        print(f"calibctl {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def main(
+    ctx: typer.Context,
+    db: Annotated[
+        str | None,
+        typer.Option("--db", help="Store URL (default sqlite:///calibctl.db; env CALIBCTL_DB).", show_default=False),
+    ] = None,
+    station_config: Annotated[
+        Path | None,
+        typer.Option("--station-config", help="Station YAML with gate/lint overrides (env CALIBCTL_STATION_CONFIG)."),
+    ] = None,
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    ctx.obj = AppState(db=db, station_config=station_config, json_output=json_output)
+
+
+def _register_commands() -> None:
+    # Each module adds its commands to ``app``; this order is the order in --help.
+    from calibctl.cli import artifacts, board, capture, db, demo, diagnostics, lint, solve
+
+    for module in (capture, solve, lint, board, artifacts, db, diagnostics, demo):
+        module.register(app)
+
+
+_register_commands()
+
+
+def run() -> None:
+    app()

@@ -1,0 +1,123 @@
+"""Settings: CLI flag > environment (CALIBCTL_*) > station file > default.
+
+A station file is YAML (``--station-config FILE``, ``CALIBCTL_STATION_CONFIG``, or
+``./calibctl-station.yaml`` when it exists) holding what one station overrides::
+
+    station: line3-cam-bench
+    db: postgresql+psycopg://calib@factory-db/calibctl
+    image_retention_days: 30
+    gates: {observability_min: 1.0e-4, tilt_min_deg: 20}
+    lint: {sigma_fx_max_px: 1.5}
+"""
+
+from __future__ import annotations
+
+import getpass
+import os
+import socket
+from collections.abc import Mapping
+from pathlib import Path
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from calibctl.errors import InputError
+
+DEFAULT_DB_URL = "sqlite:///calibctl.db"
+DEFAULT_STATION_FILE = Path("calibctl-station.yaml")
+
+
+class GateThresholds(BaseModel):
+    """Capture-time gates (seed chapter 1: the capture rule and the sigma5/sigma1 gate)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    observability_min: float = Field(1e-4, gt=0, description="minimum sigma5/sigma1 of Zhang's V matrix")
+    tilt_min_deg: float = Field(20.0, ge=0, description="a view counts as tilted from this angle")
+    tilt_max_deg: float = Field(45.0, gt=0, description="above this the detector's accuracy collapses")
+    tilt_directions_min: int = Field(3, ge=1, description="distinct tilt directions needed in the window")
+    min_views: int = Field(8, ge=3, description="fewest accepted views for a session to pass")
+
+
+class LintThresholds(BaseModel):
+    """Calibration lint (seed chapter 1: the three-line calibration lint)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    sigma_fx_max_px: float = Field(2.0, gt=0, description="one-sigma on fx above which fx is not observable")
+    principal_point_max_frac: float = Field(0.1, gt=0, description="|cx - W/2| must be below this * W")
+    outer_ring_ratio_max: float = Field(1.1, gt=0, description="held-out outer-ring RMS / fit outer-ring RMS")
+    aspect_max_frac: float = Field(0.01, gt=0, description="|fx/fy - 1| above this is a warning")
+
+
+class StationConfig(BaseModel):
+    """The contents of a station file."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    station: str | None = None
+    operator: str | None = None
+    db: str | None = None
+    image_retention_days: int = Field(30, ge=0)
+    gates: GateThresholds = Field(default_factory=GateThresholds)
+    lint: LintThresholds = Field(default_factory=LintThresholds)
+
+
+class Settings(BaseModel):
+    """Resolved settings for one invocation."""
+
+    db_url: str
+    station: str
+    operator: str
+    station_file: str | None
+    image_retention_days: int
+    gates: GateThresholds
+    lint: LintThresholds
+
+
+def load_station_file(path: Path) -> StationConfig:
+    try:
+        raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except OSError as exc:
+        raise InputError(f"cannot read station file {path}: {exc.strerror}") from exc
+    except yaml.YAMLError as exc:
+        raise InputError(f"station file {path} is not valid YAML: {exc}") from exc
+    if not isinstance(raw, dict):
+        raise InputError(f"station file {path} must be a mapping, got {type(raw).__name__}")
+    try:
+        return StationConfig.model_validate(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise InputError(f"station file {path}: {where}: {first['msg']}") from exc
+
+
+def load_settings(
+    db: str | None = None,
+    station_config: Path | None = None,
+    station: str | None = None,
+    operator: str | None = None,
+    env: Mapping[str, str] | None = None,
+) -> Settings:
+    """Resolve settings with the precedence CLI flag > environment > station file > default."""
+    env = os.environ if env is None else env
+    path = station_config or (Path(env["CALIBCTL_STATION_CONFIG"]) if env.get("CALIBCTL_STATION_CONFIG") else None)
+    if path is None and DEFAULT_STATION_FILE.exists():
+        path = DEFAULT_STATION_FILE
+    file_cfg = load_station_file(path) if path is not None else StationConfig()
+    return Settings(
+        db_url=db or env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL,
+        station=station or env.get("CALIBCTL_STATION") or file_cfg.station or socket.gethostname(),
+        operator=operator or env.get("CALIBCTL_OPERATOR") or file_cfg.operator or _login_name(),
+        station_file=str(path) if path else None,
+        image_retention_days=file_cfg.image_retention_days,
+        gates=file_cfg.gates,
+        lint=file_cfg.lint,
+    )
+
+
+def _login_name() -> str:
+    try:
+        return getpass.getuser()
+    except Exception:  # no passwd entry in some containers
+        return "unknown"

@@ -1,0 +1,70 @@
+"""The one error hierarchy of calibctl.
+
+Every failure a user can cause is a ``CalibctlError``. Each class knows its exit code (the contract
+factory scripts and CI rely on) and carries a hint that names the fix. The CLI boundary
+(``calibctl.cli.main``) is the only place that turns these into ``Error: ...`` lines and exit codes;
+anything else that escapes is a bug and keeps its traceback.
+
+Exit codes:
+    0  success; the check passed
+    1  the tool worked and the verdict is "fail" (gate, lint, verify, tampered import)
+    2  the tool could not do its job (usage, unreadable input, unknown serial/board/version, database)
+"""
+
+from __future__ import annotations
+
+EXIT_OK = 0
+EXIT_VERDICT_FAIL = 1
+EXIT_CANNOT_RUN = 2
+
+
+class CalibctlError(Exception):
+    """Base class. ``message`` says what went wrong, ``hint`` says what to do about it."""
+
+    exit_code: int = EXIT_CANNOT_RUN
+
+    def __init__(self, message: str, hint: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.hint = hint
+
+    def __str__(self) -> str:
+        return self.message if not self.hint else f"{self.message} ({self.hint})"
+
+
+class UsageError(CalibctlError):
+    """The command line or a setting asks for something that cannot be done."""
+
+
+class InputError(CalibctlError):
+    """An input file or stream is unreadable, malformed or not what it claims to be."""
+
+
+class NotFoundError(CalibctlError):
+    """An unknown serial, board, revision, version or session."""
+
+
+class AlreadyExistsError(CalibctlError):
+    """A thing that must be unique exists already (board name, output file without --force)."""
+
+
+class DatabaseError(CalibctlError):
+    """The store is unreachable, locked for too long, or refused the operation."""
+
+
+class DatabaseOutOfDateError(DatabaseError):
+    """The database schema is older than this calibctl; ``calibctl db upgrade`` migrates it."""
+
+
+class NumericalError(CalibctlError):
+    """A numerical step could not produce a trustworthy answer (diverged, non-finite, too few data)."""
+
+
+class VerdictFailed(CalibctlError):
+    """The tool ran and the verdict is "fail": gates, lint, verify. Exit 1."""
+
+    exit_code = EXIT_VERDICT_FAIL
+
+
+class IntegrityError(VerdictFailed):
+    """Content does not match its recorded sha256: the bytes were changed after they were written."""
