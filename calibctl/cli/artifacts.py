@@ -1,9 +1,102 @@
-"""calibctl artifacts commands."""
+"""history, show, export, import, rollback: what a field technician runs."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated
+
 import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.report import history_table, print_calibration
+from calibctl.workflows import records
+
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+
+
+def history(
+    ctx: typer.Context,
+    serial: Annotated[str, typer.Argument(help="Camera serial number.")],
+    json_output: JsonFlag = False,
+) -> None:
+    """Versions of a camera's calibration, the active one, and every activation/rollback event."""
+    hist = records.history(state(ctx).settings(), serial)
+    if wants_json(ctx, json_output):
+        emit_json(hist.as_json())
+        return
+    stdout.print(history_table(hist.versions, serial))
+    if hist.events:
+        stdout.print("events:")
+        for e in hist.events:
+            prev = f" (was {e.previous_version})" if e.previous_version else ""
+            stdout.print(
+                f"  {e.at.isoformat()[:19].replace('T', ' ')}  {e.kind:<8} -> v{e.version}{prev}  "
+                f"by {e.actor} at {e.station}: {e.reason}"
+            )
+
+
+def show(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
+    json_output: JsonFlag = False,
+) -> None:
+    """One calibration in full: parameters with their one-sigma, held-out error, gates and lint."""
+    art = records.show(state(ctx).settings(), ref)
+    if wants_json(ctx, json_output):
+        emit_json(art)
+        return
+    print_calibration(art)
+
+
+def export(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
+    fmt: Annotated[str, typer.Option("--format", "-f", help="json | yaml | ros | opencv")] = "json",
+    out: Annotated[Path | None, typer.Option("--output", "-o", help="Write here instead of stdout.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
+) -> None:
+    """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, or OpenCV FileStorage."""
+    text = records.export(state(ctx).settings(), ref, fmt, out, force=force)
+    if out is None:
+        print(text, end="")
+    else:
+        print(f"wrote {out}", flush=True)
+
+
+def import_(
+    ctx: typer.Context,
+    path: Annotated[Path, typer.Argument(metavar="FILE", help="An artifact exported with --format json.")],
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it the active version.")] = True,
+    json_output: JsonFlag = False,
+) -> None:
+    """Bring an exported artifact into this store after checking its sha256 (tampered files exit 1)."""
+    art = records.import_file(state(ctx).settings(), path, activate=activate)
+    if wants_json(ctx, json_output):
+        emit_json(art)
+        return
+    stdout.print(f"imported {art.serial}@{art.version} ({art.status}, sha256 {art.content_sha256[:12]})")
+
+
+def rollback(
+    ctx: typer.Context,
+    serial: Annotated[str, typer.Argument(help="Camera serial number.")],
+    to: Annotated[int, typer.Option("--to", help="Version to make active.")],
+    reason: Annotated[str, typer.Option("--reason", help="Why; kept forever in the event log.")],
+    json_output: JsonFlag = False,
+) -> None:
+    """Make an earlier accepted version active again (an append-only event; nothing is deleted)."""
+    event = records.rollback(state(ctx).settings(), serial, to, reason)
+    if wants_json(ctx, json_output):
+        emit_json(event)
+        return
+    was = f" (was v{event.previous_version})" if event.previous_version else ""
+    stdout.print(f"{serial}: active version is now v{event.version}{was}")
 
 
 def register(app: typer.Typer) -> None:
-    """Add this module's commands to the root app."""
+    app.command("history")(history)
+    app.command("show")(show)
+    app.command("export")(export)
+    app.command("import")(import_)
+    app.command("rollback")(rollback)

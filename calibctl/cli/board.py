@@ -1,9 +1,144 @@
-"""calibctl board commands."""
+"""calibctl board add | list | show: the registry of calibration targets and their measured square size."""
 
 from __future__ import annotations
 
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
 import typer
+from rich.table import Table
+
+from calibctl.artifacts.board import BoardRevision
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.workflows import boards
+
+
+class BoardKind(StrEnum):
+    chessboard = "chessboard"
+    charuco = "charuco"
+
+
+def say(line: str) -> None:
+    """One result line on stdout, never wrapped or interpreted as markup (it holds URLs and user text)."""
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+
+board_app = typer.Typer(
+    name="board",
+    help="Register calibration boards (square size measured, with provenance) and look them up.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+
+def _mm(value_m: float | None) -> str:
+    return "-" if value_m is None else f"{value_m * 1000:.3f} mm"
+
+
+def square_text(board: BoardRevision) -> str:
+    m = board.measurement
+    if m.status == "nominal":
+        return f"{_mm(m.square_size_m)} NOMINAL (not measured)"
+    return f"{_mm(m.square_size_m)} ± {_mm(m.uncertainty_m)} (1σ)"
+
+
+def pattern_text(board: BoardRevision) -> str:
+    text = f"{board.kind} {board.cols}x{board.rows} inner corners"
+    if board.kind == "charuco":
+        text += f", markers {_mm(board.marker_size_m)} {board.dictionary}"
+    return text
+
+
+def print_board(board: BoardRevision, revisions: list[int] | None = None) -> None:
+    m = board.measurement
+    say(f"board {board.ref}: {pattern_text(board)}")
+    say(f"  square size   {square_text(board)}")
+    if m.status == "measured":
+        say(f"  measured      with {m.instrument} by {m.measured_by} on {m.measured_on}")
+        if m.evidence_sha256:
+            say(f"  evidence      {m.evidence_name} sha256 {m.evidence_sha256}")
+    say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")
+    if board.note:
+        say(f"  note          {board.note}")
+    if revisions and len(revisions) > 1:
+        say(f"  revisions     {', '.join(str(r) for r in revisions)}")
+
+
+@board_app.command("add")
+def add(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(metavar="NAME", help="Board name, e.g. A17 (an existing name gets its next revision).")],
+    cols: Annotated[int, typer.Option("--cols", help="Inner corners per row (OpenCV patternSize width).")],
+    rows: Annotated[int, typer.Option("--rows", help="Inner corners per column.")],
+    square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge in millimetres.")],
+    kind: Annotated[BoardKind, typer.Option("--kind", help="Pattern type.")] = BoardKind.chessboard,
+    uncertainty_mm: Annotated[float | None, typer.Option("--uncertainty-mm", help="One-sigma of the square size, mm.")] = None,
+    instrument: Annotated[str | None, typer.Option("--instrument", help="What measured it, e.g. 'Mitutoyo calipers'.")] = None,
+    measured_by: Annotated[str | None, typer.Option("--measured-by", help="Who measured it.")] = None,
+    measured_on: Annotated[str | None, typer.Option("--measured-on", help="When, YYYY-MM-DD.")] = None,
+    evidence: Annotated[Path | None, typer.Option("--evidence", help="Evidence file (photo, report); its sha256 is kept.")] = None,
+    marker_mm: Annotated[float | None, typer.Option("--marker-mm", help="ChArUco marker edge, mm.")] = None,
+    dictionary: Annotated[str | None, typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_5X5_100.")] = None,
+    note: Annotated[str | None, typer.Option("--note", help="Free text, e.g. why it was re-measured.")] = None,
+    json_output: JsonFlag = False,
+) -> None:
+    """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
+    --measured-on, optionally --evidence); with only --square-mm the size is recorded as nominal."""
+    reg = boards.BoardRegistration(
+        name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, uncertainty_mm=uncertainty_mm,
+        instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
+        marker_mm=marker_mm, dictionary=dictionary, note=note,
+    )  # fmt: skip
+    board = boards.add_board(state(ctx).settings(), reg)
+    if board.measurement.status == "nominal":
+        stderr.print(
+            f"warning: {board.ref} has a NOMINAL square size; every calibration made with it fails lint "
+            "until the board is measured (board add again with the measurement)",
+            soft_wrap=True,
+            markup=False,
+        )
+    if wants_json(ctx, json_output):
+        emit_json(board)
+        return
+    say(f"registered board {board.ref}: {pattern_text(board)}, square {square_text(board)}")
+
+
+@board_app.command("list")
+def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
+    """Every revision of every registered board."""
+    all_boards = boards.list_boards(state(ctx).settings())
+    if wants_json(ctx, json_output):
+        emit_json([b.model_dump(mode="json") for b in all_boards])
+        return
+    if not all_boards:
+        say("no boards registered yet; add one with `calibctl board add`")
+        return
+    table = Table("board", "pattern", "square size", "measured", "registered")
+    for b in all_boards:
+        m = b.measurement
+        measured = f"{m.measured_on} by {m.measured_by}" if m.status == "measured" else "-"
+        table.add_row(b.ref, pattern_text(b), square_text(b), measured, b.created_at.date().isoformat())
+    stdout.print(table)
+
+
+@board_app.command("show")
+def show(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="NAME[@REV]", help="Board name, optionally @revision (default: latest).")],
+    json_output: JsonFlag = False,
+) -> None:
+    """One board revision with its measurement provenance."""
+    board, revisions = boards.show_board(state(ctx).settings(), ref)
+    if wants_json(ctx, json_output):
+        emit_json(board)
+        return
+    print_board(board, revisions)
 
 
 def register(app: typer.Typer) -> None:
-    """Add this module's commands to the root app."""
+    """Add the ``board`` command group to the root app."""
+    app.add_typer(board_app, name="board")

@@ -1,9 +1,88 @@
-"""calibctl db commands."""
+"""calibctl db upgrade | current | verify: create and migrate the store, and prove nothing was changed."""
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.errors import EXIT_VERDICT_FAIL
+from calibctl.workflows import database
+
+
+def say(line: str) -> None:
+    """One result line on stdout, never wrapped or interpreted as markup (it holds URLs and user text)."""
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+
+db_app = typer.Typer(
+    name="db",
+    help="Create and migrate the store (SQLite or PostgreSQL) and verify every stored hash.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+
+def _counts_text(counts: dict[str, int]) -> str:
+    order = ("artifacts", "serials", "boards", "sessions", "events", "images")
+    return ", ".join(f"{counts[k]} {k}" for k in order if k in counts)
+
+
+@db_app.command("upgrade")
+def upgrade(ctx: typer.Context, json_output: JsonFlag = False) -> None:
+    """Create the database at the newest schema, or migrate an older one keeping its data."""
+    result = database.upgrade(state(ctx).settings())
+    if wants_json(ctx, json_output):
+        emit_json(result.as_json())
+        return
+    if not result.changed:
+        say(f"{result.url}: already at {result.after} (head); nothing to do")
+    elif result.before is None:
+        say(f"{result.url}: created at {result.after} (head)")
+    else:
+        say(f"{result.url}: upgraded {result.before} -> {result.after} (head)")
+
+
+@db_app.command("current")
+def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
+    """Show the database's schema revision against this calibctl's (and what the store holds)."""
+    status = database.status(state(ctx).settings())
+    if wants_json(ctx, json_output):
+        emit_json(status.as_json())
+        return
+    say(f"database  {status.url} ({status.backend})")
+    say(f"revision  {status.current or '-'}")
+    say(f"head      {status.head}")
+    say(f"status    {status.description}")
+    if status.counts is not None:
+        say(f"holds     {_counts_text(status.counts)}")
+
+
+@db_app.command("verify")
+def verify(ctx: typer.Context, json_output: JsonFlag = False) -> None:
+    """Re-hash every artifact, board revision and capture session. Exit 1 naming each mismatch."""
+    report = database.verify(state(ctx).settings())
+    if wants_json(ctx, json_output):
+        emit_json(report.as_json())
+    else:
+        for line in report.problems:
+            say(f"MISMATCH {line}")
+        verdict = "all intact" if report.ok else f"{len(report.problems)} mismatch(es)"
+        say(f"verified {_counts_text(report.counts)} in {report.url}: {verdict}")
+    if not report.ok:
+        stderr.print(
+            f"Error: {len(report.problems)} stored record(s) do not match their sha256; restore them from an "
+            "export or a backup",
+            soft_wrap=True,
+            markup=False,
+        )
+        raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def register(app: typer.Typer) -> None:
-    """Add this module's commands to the root app."""
+    """Add the ``db`` command group to the root app."""
+    app.add_typer(db_app, name="db")

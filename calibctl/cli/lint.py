@@ -1,9 +1,59 @@
-"""calibctl lint commands."""
+"""calibctl lint: exit 0 clean, 1 errors found, 2 an input could not be read."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated
+
 import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.report import print_findings
+from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
+from calibctl.workflows import lint as lint_workflow
+
+FORMATS = ("text", "json", "github")
+
+
+def _github_line(source: str, f) -> str:
+    level = {"error": "error", "warning": "warning"}.get(f.severity, "notice")
+    message = f.message + (f" Fix: {f.fix}" if f.fix else "")
+    message = message.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+    return f"::{level} file={source},title=calibctl {f.rule}::{message}"
+
+
+def lint(
+    ctx: typer.Context,
+    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Artifacts (JSON/YAML) or ROS camera_info YAML.")] = None,
+    serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
+    all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
+    fmt: Annotated[str, typer.Option("--format", help="text | json | github (workflow annotations)")] = "text",
+    json_output: Annotated[bool, typer.Option("--json", help="Same as --format json.")] = False,
+) -> None:
+    """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
+    if fmt not in FORMATS:
+        raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")
+    if wants_json(ctx, json_output):
+        fmt = "json"
+    st = state(ctx)
+    results = lint_workflow.lint(st.settings(), files or [], serial, all_serials)
+    failed = any(r.failed for r in results)
+    if fmt == "json":
+        emit_json({"verdict": "fail" if failed else "pass", "results": [r.as_json() for r in results]})
+    elif fmt == "github":
+        for r in results:
+            for f in r.findings:
+                print(_github_line(r.source, f))
+        print(f"calibctl lint: {sum(r.failed for r in results)} of {len(results)} calibration(s) failed")
+    else:
+        for r in results:
+            verdict = "[red]FAIL[/red]" if r.failed else "[green]pass[/green]"
+            stdout.print(f"{r.source} ({r.kind}): {verdict}")
+            print_findings(r.findings)
+    if failed:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def register(app: typer.Typer) -> None:
-    """Add this module's commands to the root app."""
+    app.command("lint")(lint)

@@ -29,16 +29,19 @@ class CalibctlGroup(TyperGroup):
             print(f"Error: {exc.message}", file=sys.stderr)
             if exc.hint:
                 print(f"Hint: {exc.hint}", file=sys.stderr)
-            raise click.exceptions.Exit(exc.exit_code) from exc
+            raise typer.Exit(exc.exit_code) from exc
+        # This typer vendors click: its Exit/Abort/usage errors are typer's own classes, not click's.
+        except (typer.Exit, typer.Abort, typer.TyperException):
+            raise
         except (click.exceptions.Exit, click.ClickException, click.exceptions.Abort):
             raise
         except KeyboardInterrupt:
             print("Interrupted; nothing half-written was kept.", file=sys.stderr)
-            raise click.exceptions.Exit(130) from None
+            raise typer.Exit(130) from None
         except Exception:
             # A bug: keep the traceback, and never exit 1 (which means "verdict: fail").
             traceback.print_exc()
-            raise click.exceptions.Exit(EXIT_CANNOT_RUN) from None
+            raise typer.Exit(EXIT_CANNOT_RUN) from None
 
 
 app = typer.Typer(

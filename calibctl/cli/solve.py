@@ -1,9 +1,61 @@
-"""calibctl solve commands."""
+"""calibctl solve: stored corners -> the serial's next calibration version, with its verdict."""
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.report import print_calibration
+from calibctl.errors import EXIT_VERDICT_FAIL
+from calibctl.workflows import solve as solve_workflow
+
+ModelOption = Annotated[
+    str,
+    typer.Option(
+        "--model",
+        help="k1k2 (default: FIX_K3|ZERO_TANGENT_DIST|FIX_ASPECT_RATIO), k1k2k3, k1k2p1p2k3, rational, "
+        "opencv-default (flags 0), or auto (enable a coefficient only if fit RMS improves >= 10% "
+        "and the held-out outer ring does not worsen).",
+    ),
+]
+
+
+def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
+    art = outcome.artifact
+    if as_json:
+        emit_json(art)
+    else:
+        print_calibration(art, active=outcome.active)
+        for c in outcome.outlier_corners[:10]:
+            stdout.print(f"  outlier corner: {c['view']} id {c['corner_id']} residual {c['residual_px']:.2f} px")
+        if art.status == "accepted":
+            state_word = "active" if outcome.active else "stored, not activated (--no-activate)"
+            stdout.print(f"[green]{art.serial}@{art.version} accepted[/green] and {state_word}")
+        else:
+            stdout.print(f"[red]{art.serial}@{art.version} rejected[/red]: stored for the record, never active")
+    if art.status != "accepted":
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def solve(
+    ctx: typer.Context,
+    session_id: Annotated[str | None, typer.Argument(metavar="[SESSION_ID]", help="Capture session to solve.")] = None,
+    serial: Annotated[str | None, typer.Option("--serial", help="Solve this serial's latest accepted session.")] = None,
+    model: ModelOption = "k1k2",
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
+    drop_outliers: Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")] = False,
+    json_output: Annotated[bool, typer.Option("--json", help="Print the artifact as JSON.")] = False,
+) -> None:
+    """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
+    request = solve_workflow.SolveRequest(
+        session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers
+    )
+    outcome = solve_workflow.solve(state(ctx).settings(), request)
+    render_outcome(outcome, wants_json(ctx, json_output))
 
 
 def register(app: typer.Typer) -> None:
-    """Add this module's commands to the root app."""
+    app.command("solve")(solve)

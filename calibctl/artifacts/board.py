@@ -1,0 +1,93 @@
+"""Board revisions: the pattern geometry plus the *measured* square size and its provenance.
+
+The square size is the one metric input of an intrinsic calibration (seed chapter 0): it scales every
+translation the robot will ever report and leaves no residual when it is wrong. So it is recorded as
+a measurement (value, one-sigma uncertainty, instrument, who, when, evidence hash), never as a bare
+number. A board registered without one is ``nominal`` and every calibration made with it fails lint.
+Revisions are immutable; re-measuring a board creates the next revision.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from calibctl.artifacts.common import Document, Sha256Hex, UtcDatetime
+
+BOARD_SCHEMA_VERSION = 1
+BOARD_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+_REF = re.compile(r"^(?P<name>[A-Za-z0-9][A-Za-z0-9._-]{0,63})(?:@(?P<rev>[0-9]+))?$")
+
+
+class SquareMeasurement(Document):
+    """How the square size was obtained. ``measured`` needs the full provenance; ``nominal`` is a typed number."""
+
+    status: Literal["measured", "nominal"] = Field(description="measured with an instrument, or nominal (typed)")
+    square_size_m: float = Field(gt=0, lt=1.0, description="edge of one printed square, metres")
+    uncertainty_m: float | None = Field(None, gt=0, description="one-sigma uncertainty of square_size_m, metres")
+    instrument: str | None = Field(None, min_length=1, description="what measured it, e.g. 'Mitutoyo 500-196 calipers'")
+    measured_by: str | None = Field(None, min_length=1, description="who measured it")
+    measured_on: dt.date | None = Field(None, description="date of the measurement")
+    evidence_sha256: Sha256Hex | None = Field(None, description="sha256 of the evidence file (photo of the calipers)")
+    evidence_name: str | None = Field(None, description="file name of the evidence when it was registered")
+
+    @model_validator(mode="after")
+    def _provenance_complete(self) -> SquareMeasurement:
+        if self.status == "measured":
+            missing = [
+                name
+                for name in ("uncertainty_m", "instrument", "measured_by", "measured_on")
+                if getattr(self, name) is None
+            ]
+            if missing:
+                raise ValueError(f"a measured square size needs {', '.join(missing)}")
+        return self
+
+
+class BoardRevision(Document):
+    """One immutable revision of a registered calibration board."""
+
+    schema_version: Literal[1] = Field(BOARD_SCHEMA_VERSION, description="version of this document's schema")
+    name: str = Field(pattern=BOARD_NAME_PATTERN, description="board name, unique in a store")
+    revision: int = Field(ge=1, description="1, 2, ...; a re-measured board gets the next revision")
+    kind: Literal["chessboard", "charuco"] = Field(description="pattern type")
+    cols: int = Field(ge=2, le=200, description="inner corners per row (OpenCV patternSize width)")
+    rows: int = Field(ge=2, le=200, description="inner corners per column (OpenCV patternSize height)")
+    marker_size_m: float | None = Field(None, gt=0, description="ChArUco only: marker edge, metres")
+    dictionary: str | None = Field(None, description="ChArUco only: cv2.aruco dictionary name, e.g. DICT_5X5_100")
+    measurement: SquareMeasurement = Field(description="the square size and where it came from")
+    created_at: UtcDatetime = Field(description="when this revision was registered (UTC)")
+    created_by: str = Field(min_length=1, description="who registered it")
+    note: str | None = Field(None, description="free text, e.g. why it was re-measured")
+
+    @model_validator(mode="after")
+    def _charuco_fields(self) -> BoardRevision:
+        if self.kind == "charuco":
+            if self.marker_size_m is None or self.dictionary is None:
+                raise ValueError("a ChArUco board needs marker_size_m and dictionary")
+            if self.marker_size_m >= self.measurement.square_size_m:
+                raise ValueError("the marker must be smaller than the square")
+        elif self.marker_size_m is not None or self.dictionary is not None:
+            raise ValueError("marker_size_m and dictionary apply to ChArUco boards only")
+        return self
+
+    @property
+    def ref(self) -> str:
+        """``NAME@REV``, how artifacts reference a board."""
+        return f"{self.name}@{self.revision}"
+
+    @property
+    def square_size_m(self) -> float:
+        return self.measurement.square_size_m
+
+
+def parse_board_ref(ref: str) -> tuple[str, int | None]:
+    """``NAME`` or ``NAME@REV`` -> (name, revision or None for the latest)."""
+    match = _REF.match(ref.strip())
+    if not match:
+        raise ValueError(f"'{ref}' is not a board reference; expected NAME or NAME@REV (e.g. A17@2)")
+    rev = match.group("rev")
+    return match.group("name"), int(rev) if rev is not None else None

@@ -1,0 +1,147 @@
+"""The camera calibration artifact: immutable, serial-keyed, self-describing and hashed.
+
+Everything a robot or an auditor needs is inside: the intrinsics with one-sigma uncertainty, the
+model that was fitted, the evidence that it is right (held-out error, per-view residuals, gates,
+lint) and where every input came from (board snapshot with its measured square size, image hashes,
+versions). ``content_sha256`` covers every other field; the store re-checks it on every read.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime, content_hash
+from calibctl.artifacts.lint import Finding
+from calibctl.artifacts.session import GateResult
+
+CALIBRATION_SCHEMA_VERSION = 1
+
+
+class DistortionModelInfo(Document):
+    """Which coefficients were free and the exact OpenCV flags the solve used."""
+
+    name: str = Field(description="calibctl model name: k1k2, k1k2k3, k1k2p1p2k3, rational, opencv-default, imported")
+    opencv_flags: int = Field(ge=0, description="flags passed to cv2.calibrateCameraExtended")
+    flag_names: list[str] = Field(default_factory=list, description="names of the set flags, e.g. CALIB_FIX_K3")
+    free_parameters: list[str] = Field(description="parameters the solve estimated, e.g. [fx, fy, cx, cy, k1, k2]")
+    selection: list[dict[str, float | str | bool]] = Field(
+        default_factory=list, description="--model auto: each candidate with fit and held-out numbers"
+    )
+
+
+class Uncertainty(Document):
+    """One-sigma per estimated intrinsic parameter (pixels for K, unitless for distortion)."""
+
+    sigma: dict[str, float] = Field(default_factory=dict, description="parameter name -> one-sigma")
+    refused_reason: str | None = Field(None, description="why no sigma is reported (too few residuals)")
+    residual_count: int = Field(0, ge=0, description="number of scalar residuals in the fit")
+    parameter_count: int = Field(0, ge=0, description="number of estimated parameters incl. poses")
+
+
+class RingRms(Document):
+    label: str = Field(description="quintile or octant label")
+    fit_rms_px: float | None = Field(None, ge=0, description="RMS on the fitted views, pixels")
+    held_out_rms_px: float | None = Field(None, ge=0, description="RMS on held-out views, pixels")
+    count: int = Field(0, ge=0, description="corners in this bin")
+
+
+class HeldOut(Document):
+    """k-fold held-out validation: intrinsics frozen, each held-out pose re-fitted with solvePnP."""
+
+    k_folds: int = Field(ge=0, description="number of folds (0 when not enough views)")
+    rms_px: float | None = Field(None, ge=0, description="held-out RMS over all corners, pixels")
+    outer_ring_rms_px: float | None = Field(None, ge=0, description="held-out RMS in the outer radial quintile")
+    fit_outer_ring_rms_px: float | None = Field(None, ge=0, description="fit RMS in the same outer ring")
+    by_radius: list[RingRms] = Field(default_factory=list, description="residual RMS per radius quintile")
+    by_octant: list[RingRms] = Field(default_factory=list, description="residual RMS per image octant")
+
+
+class ViewResult(Document):
+    name: str = Field(description="image the view came from")
+    rms_px: float = Field(ge=0, description="this view's reprojection RMS, pixels")
+    rvec: tuple[float, float, float] = Field(description="T_cam_board rotation, Rodrigues vector, radians")
+    tvec_m: tuple[float, float, float] = Field(description="T_cam_board translation, metres")
+    outlier: bool = Field(False, description="flagged as an outlier view")
+    dropped: bool = Field(False, description="removed by --drop-outliers before the final solve")
+    worst_corner_px: float | None = Field(None, ge=0, description="largest single-corner residual, pixels")
+
+
+class Provenance(Document):
+    calibctl_version: str = Field(description="calibctl version that produced the artifact")
+    opencv_version: str = Field(description="OpenCV version used for the solve")
+    station: str = Field(description="station id")
+    operator: str = Field(description="who ran it")
+    created_at: UtcDatetime = Field(description="UTC time of the solve")
+    session_id: str | None = Field(None, description="capture session the corners came from")
+    input_image_sha256: list[Sha256Hex] = Field(default_factory=list, description="sha256 of every input image")
+    imported_from: str | None = Field(None, description="set when the artifact came from another store/file")
+
+
+class CalibrationArtifact(Document):
+    """One immutable version of one camera's calibration."""
+
+    schema_version: Literal[1] = Field(CALIBRATION_SCHEMA_VERSION, description="version of this document's schema")
+    serial: str = Field(pattern=SERIAL_PATTERN, description="camera serial number (letters, digits, . _ : -)")
+    version: int = Field(ge=1, description="1, 2, 3, ... per serial, allocated by the store")
+    status: Literal["accepted", "rejected"] = Field(description="accepted when lint passed; rejected is never active")
+    image_size: tuple[int, int] = Field(description="[W, H] pixels the corners were detected at")
+    camera_matrix: tuple[
+        tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
+    ] = Field(description="K, 3x3, pixels")
+    dist_coeffs: list[float] = Field(description="OpenCV order: k1, k2, p1, p2[, k3[, k4, k5, k6]]")
+    model: DistortionModelInfo = Field(description="which coefficients were free")
+    stdev: Uncertainty = Field(description="one-sigma per estimated intrinsic parameter")
+    rms_px: float = Field(ge=0, description="fit reprojection RMS (OpenCV's definition), pixels")
+    held_out: HeldOut = Field(description="held-out validation")
+    gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
+    board: BoardRevision = Field(description="full snapshot of the board revision used")
+    views: list[ViewResult] = Field(default_factory=list, description="per-view RMS and pose")
+    lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
+    provenance: Provenance = Field(description="how, where, when and from what it was made")
+    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
+
+    @field_validator("image_size")
+    @classmethod
+    def _positive_size(cls, value: tuple[int, int]) -> tuple[int, int]:
+        if value[0] <= 0 or value[1] <= 0:
+            raise ValueError(f"image size must be positive, got {value[0]}x{value[1]}")
+        return value
+
+    @field_validator("dist_coeffs")
+    @classmethod
+    def _dist_length(cls, value: list[float]) -> list[float]:
+        if len(value) not in (4, 5, 8, 12, 14):
+            raise ValueError(f"OpenCV distortion has 4, 5, 8, 12 or 14 coefficients, got {len(value)}")
+        return value
+
+    @model_validator(mode="after")
+    def _k_shape(self) -> CalibrationArtifact:
+        k = self.camera_matrix
+        if k[1][0] != 0 or k[2][0] != 0 or k[2][1] != 0 or k[2][2] != 1:
+            raise ValueError("camera_matrix must be upper triangular with K[2][2] = 1")
+        if k[0][0] <= 0 or k[1][1] <= 0:
+            raise ValueError("focal lengths must be positive")
+        return self
+
+    @property
+    def fx(self) -> float:
+        return self.camera_matrix[0][0]
+
+    @property
+    def ref(self) -> str:
+        return f"{self.serial}@{self.version}"
+
+    def computed_sha256(self) -> str:
+        """The hash the content should have; compare with ``content_sha256``."""
+        return content_hash(self)
+
+    def sealed(self) -> CalibrationArtifact:
+        """A copy whose ``content_sha256`` matches its content."""
+        return self.model_copy(update={"content_sha256": self.computed_sha256()})
+
+
+UNSEALED = "0" * 64
+"""Placeholder hash for an artifact under construction; the store seals it when it allocates the version."""

@@ -1,0 +1,94 @@
+"""Human reports for calibrations: reads like the seed's sentence, 'fx = 1002.31 +/- 0.84 px'."""
+
+from __future__ import annotations
+
+from rich.table import Table
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.lint import Finding
+from calibctl.artifacts.session import GateResult
+from calibctl.cli.render import fmt_px, stdout
+
+_K_NAMES = (("fx", 0, 0), ("fy", 1, 1), ("cx", 0, 2), ("cy", 1, 2))
+_DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+
+
+def _with_sigma(name: str, value: float, sigma: dict[str, float], unit: str, digits: int) -> str:
+    s = sigma.get(name)
+    core = f"{name} = {value:.{digits}f}"
+    if s is None:
+        return f"{core} {unit} (fixed)" if unit else f"{core} (fixed)"
+    return f"{core} +/- {s:.{digits}f} {unit}".rstrip()
+
+
+def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> None:
+    marker = "" if active is None else (" (active)" if active else "")
+    status_style = "green" if art.status == "accepted" else "red"
+    stdout.print(
+        f"[bold]{art.serial}@{art.version}[/bold]{marker}  [{status_style}]{art.status}[/{status_style}]  "
+        f"{art.image_size[0]}x{art.image_size[1]}  model {art.model.name}  board {art.board.ref} "
+        f"({art.board.measurement.square_size_m * 1000:.3f} mm, {art.board.measurement.status})"
+    )
+    sigma = art.stdev.sigma
+    for name, r, c in _K_NAMES:
+        free = name in art.model.free_parameters
+        text = _with_sigma(name, art.camera_matrix[r][c], sigma if free else {}, "px", 2)
+        stdout.print(f"  {text}")
+    for i, value in enumerate(art.dist_coeffs):
+        name = _DIST_NAMES[i] if i < len(_DIST_NAMES) else f"d{i}"
+        if name in art.model.free_parameters:
+            stdout.print(f"  {_with_sigma(name, value, sigma, '', 4)}")
+    if art.stdev.refused_reason:
+        stdout.print(f"  [yellow]no uncertainty: {art.stdev.refused_reason}[/yellow]")
+    ho = art.held_out
+    stdout.print(
+        f"  RMS fit {fmt_px(art.rms_px)} px / held-out {fmt_px(ho.rms_px)} px ({ho.k_folds}-fold); "
+        f"outer ring fit {fmt_px(ho.fit_outer_ring_rms_px)} px / held-out {fmt_px(ho.outer_ring_rms_px)} px"
+    )
+    n_out = sum(v.outlier for v in art.views)
+    n_drop = sum(v.dropped for v in art.views)
+    stdout.print(f"  views {len(art.views)} ({n_out} outlier, {n_drop} dropped)")
+    if art.gates:
+        print_gates(art.gates)
+    print_findings(art.lint)
+
+
+def print_gates(gates: list[GateResult]) -> None:
+    for g in gates:
+        mark = "[green]pass[/green]" if g.passed else "[red]FAIL[/red]"
+        value = f"{g.value:.3g}" if g.gate == "observability" else f"{g.value:g}"
+        line = f"  gate {g.gate:<13} {mark}  {value} (needs {g.threshold:g})"
+        if not g.passed and g.hint:
+            line += f" -> {g.hint}"
+        stdout.print(line)
+
+
+def print_findings(findings: list[Finding]) -> None:
+    if not findings:
+        stdout.print("  lint: [green]clean[/green]")
+        return
+    for f in findings:
+        style = {"error": "red", "warning": "yellow"}.get(f.severity, "cyan")
+        stdout.print(f"  lint [{style}]{f.severity}[/{style}] {f.rule}: {f.message}")
+        if f.fix and f.severity != "info":
+            stdout.print(f"       fix: {f.fix}")
+
+
+def history_table(rows: list, serial: str) -> Table:
+    table = Table(title=f"calibration history of {serial}", title_justify="left")
+    for col in ("ver", "status", "", "rms px", "sigma fx px", "outer held-out px", "board", "station", "operator", "created (UTC)"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            str(r.version),
+            r.status,
+            "* active" if r.active else "",
+            fmt_px(r.rms_px),
+            fmt_px(r.sigma_fx_px, 2),
+            fmt_px(r.held_out_outer_rms_px),
+            r.board,
+            r.station,
+            r.operator,
+            r.created_at[:19].replace("T", " "),
+        )
+    return table

@@ -1,0 +1,195 @@
+"""Numeric lint checks of a calibration that need only arrays (seed chapter 1, "three-line lint").
+
+Every check returns a Finding: the rule id, the severity it carries when it fails, whether it
+passed, a message with the numbers, and the fix. Thresholds are arguments (defaults are the
+issue's); the caller passes the configured values. Rules that need artifacts (square-size
+provenance, schema, content hash) live with the artifacts, not here.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+ERROR = "error"
+WARNING = "warning"
+RADIAL_GRID_STEPS = 4000  # samples of r_u between 0 and the farthest image corner's r_d
+RADIAL_SEARCH_MAX_FACTOR = 10.0  # look for the corner's r_u up to this multiple of its r_d
+POLAR_GRID = (200, 360)  # radii x angles for the 2-D Jacobian check
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One lint result. ``severity`` is what a failure means (error or warning)."""
+
+    rule: str
+    severity: str
+    passed: bool
+    message: str
+    fix: str | None = None
+
+
+def check_principal_point(camera_matrix: np.ndarray, image_size: tuple[int, int],
+                          max_frac: float = 0.1) -> Finding:
+    """|cx - W/2| < max_frac * W and |cy - H/2| < max_frac * H. camera_matrix: (3, 3) px."""
+    w, h = image_size
+    cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
+    dx, dy = abs(cx - w / 2), abs(cy - h / 2)
+    ok = dx < max_frac * w and dy < max_frac * h
+    msg = (f"principal point ({cx:.2f}, {cy:.2f}) is ({dx:.1f}, {dy:.1f}) px from the centre of the "
+           f"declared {w}x{h} image; limit ({max_frac * w:.1f}, {max_frac * h:.1f}) px")
+    return Finding("principal-point", ERROR, ok, msg, None if ok else
+                   "check that the image size is the resolution the corners were detected at "
+                   "(a K fitted at another resolution scales with it); if it is, recalibrate with tilted views")
+
+
+def check_sigma_fx(sigma_fx_px: float | None, refused_reason: str | None = None,
+                   max_px: float = 2.0) -> Finding:
+    """sigma(fx) must exist, be finite and stay under max_px (fx observable)."""
+    fix = "capture more views tilted 20-40 deg in at least three directions"
+    if sigma_fx_px is None:
+        return Finding("sigma-fx", ERROR, False,
+                       f"sigma(fx) is not available: {refused_reason or 'not recorded'}", fix)
+    ok = math.isfinite(sigma_fx_px) and sigma_fx_px < max_px
+    return Finding("sigma-fx", ERROR, ok, f"sigma(fx) = {sigma_fx_px:.3f} px; limit {max_px:.3f} px",
+                   None if ok else fix)
+
+
+def check_outer_ring_holdout(holdout_outer_rms_px: float, fit_outer_rms_px: float,
+                             max_ratio: float = 1.1) -> Finding:
+    """Held-out outer-ring RMS <= max_ratio * fit outer-ring RMS (no overfit distortion)."""
+    ratio = holdout_outer_rms_px / fit_outer_rms_px if fit_outer_rms_px > 0 else float("inf")
+    ok = math.isfinite(ratio) and ratio <= max_ratio
+    msg = (f"held-out outer-ring RMS {holdout_outer_rms_px:.4f} px vs fit outer-ring RMS "
+           f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f}")
+    return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else
+                   "the distortion model is fitting noise in the outer ring: solve with fewer "
+                   "coefficients (--model k1k2 or auto) or capture more corners near the image edges")
+
+
+def check_image_size(image_size: tuple[int, int] | None, camera_matrix: np.ndarray) -> Finding:
+    """The image size is recorded, positive, and the principal point lies inside it."""
+    if image_size is None:
+        return Finding("image-size", ERROR, False, "no image size is recorded with the calibration",
+                       "record the resolution the corners were detected at")
+    w, h = image_size
+    if not (int(w) == w and int(h) == h and w > 0 and h > 0):
+        return Finding("image-size", ERROR, False, f"image size {image_size} is not two positive integers",
+                       "record the resolution the corners were detected at")
+    cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
+    ok = 0 < cx < w and 0 < cy < h
+    return Finding("image-size", ERROR, ok,
+                   f"principal point ({cx:.2f}, {cy:.2f}) {'lies' if ok else 'does not lie'} inside the "
+                   f"recorded {w}x{h} image", None if ok else
+                   "the recorded image size does not belong to this K; record the detection resolution")
+
+
+def check_finite(values: Mapping[str, object]) -> Finding:
+    """Every named number or array is finite. values: name -> float or array."""
+    bad = [name for name, v in values.items()
+           if not np.isfinite(np.asarray(v, dtype=np.float64)).all()]
+    return Finding("finite", ERROR, not bad,
+                   f"non-finite values in: {', '.join(bad)}" if bad else
+                   f"all {len(values)} recorded quantities are finite",
+                   "re-solve; a calibration with NaN or infinity cannot be used" if bad else None)
+
+
+def check_aspect_ratio(camera_matrix: np.ndarray, max_frac: float = 0.01) -> Finding:
+    """|fx/fy - 1| <= max_frac (warning: square pixels expected on a modern sensor)."""
+    fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
+    dev = abs(fx / fy - 1.0)
+    ok = dev <= max_frac
+    return Finding("aspect-ratio", WARNING, ok,
+                   f"fx/fy = {fx / fy:.5f} ({100 * dev:.2f} % from 1; limit {100 * max_frac:.2f} %)",
+                   None if ok else "unusual for square pixels: check for one-axis binning or an "
+                                   "anamorphic lens, or a poorly tilted capture")
+
+
+def _padded(dist_coeffs: np.ndarray) -> np.ndarray:
+    d = np.zeros(12)
+    src = np.asarray(dist_coeffs, dtype=np.float64).ravel()
+    if src.size > 12 and np.any(src[12:] != 0):
+        raise ValueError("tilted-sensor distortion terms (tau_x, tau_y) are not supported by this check")
+    d[: min(12, src.size)] = src[:12]
+    return d
+
+
+def distort_normalised(x: np.ndarray, y: np.ndarray, dist_coeffs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """OpenCV's distortion (k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4) of normalised coordinates.
+
+    Returns (x_d, y_d, denominator) arrays of the input shape; denominator is 1 + k4 r^2 + ...
+    """
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = _padded(dist_coeffs)
+    r2 = x * x + y * y
+    num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    g = num / den
+    xd = x * g + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r2 * r2
+    yd = y * g + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r2 * r2
+    return xd, yd, den
+
+
+def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int]) -> float:
+    w, h = image_size
+    fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
+    cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
+    us, vs = np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5])
+    return float(max(math.hypot((u - cx) / fx, (v - cy) / fy) for u in us for v in vs))
+
+
+def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
+                              image_size: tuple[int, int]) -> Finding:
+    """The distortion is one-to-one out to the farthest image corner.
+
+    Radial part: r_d(r_u) = r_u * (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)
+    must increase strictly, with a positive denominator, on a fine grid from 0 until it reaches
+    the distorted normalised radius of the farthest image corner (it must reach it at all).
+    Full model incl. tangential and thin-prism terms: the Jacobian determinant of
+    (x, y) -> (x_d, y_d) must be positive on a polar grid over that same disc of r_u.
+    """
+    rule, fix = "distortion-foldover", ("the distortion polynomial turns back inside the image: "
+                                        "re-solve with fewer coefficients (--model k1k2) or with "
+                                        "corners captured out to the image corners")
+    rd_corner = _farthest_corner_rd(camera_matrix, image_size)
+    r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner
+    r = np.linspace(0.0, r_max, int(RADIAL_GRID_STEPS * RADIAL_SEARCH_MAX_FACTOR) + 1)
+    radial_only = _padded(dist_coeffs)
+    radial_only[[2, 3, 8, 9, 10, 11]] = 0.0  # p1 p2 s1..s4
+    rd, _, den = distort_normalised(r, np.zeros_like(r), radial_only)
+    reach_idx = np.flatnonzero(rd >= rd_corner)
+    stop = int(reach_idx[0]) if reach_idx.size else len(r) - 1
+    seg_rd, seg_den = rd[: stop + 1], den[: stop + 1]
+    falling = np.flatnonzero((np.diff(seg_rd) <= 0) | (seg_den[1:] <= 0))
+    if falling.size or not reach_idx.size:
+        if falling.size:
+            i = int(falling[0])
+            where = f"stops increasing at r_u = {r[i]:.4f} (r_d = {rd[i]:.4f})"
+        else:
+            i = int(np.argmax(rd))
+            where = f"never exceeds r_d = {rd[i]:.4f} (at r_u = {r[i]:.4f}, searched to r_u = {r_max:.3f})"
+        return Finding(rule, ERROR, False,
+                       f"radial distortion r_d(r_u) {where}, but the farthest image corner is at "
+                       f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the image", fix)
+    r_reach = float(r[stop])
+    radii = np.linspace(0.0, r_reach, POLAR_GRID[0])[1:]
+    angles = np.linspace(0.0, 2 * np.pi, POLAR_GRID[1], endpoint=False)
+    rr, aa = np.meshgrid(radii, angles)
+    x, y = rr * np.cos(aa), rr * np.sin(aa)
+    step = 1e-6
+    xp, yp, _ = distort_normalised(x + step, y, dist_coeffs)
+    xm, ym, _ = distort_normalised(x - step, y, dist_coeffs)
+    xq, yq, _ = distort_normalised(x, y + step, dist_coeffs)
+    xn, yn, _ = distort_normalised(x, y - step, dist_coeffs)
+    det = ((xp - xm) * (yq - yn) - (xq - xn) * (yp - ym)) / (4 * step * step)
+    worst = np.unravel_index(int(np.argmin(det)), det.shape)
+    if not det[worst] > 0:
+        return Finding(rule, ERROR, False,
+                       f"the distortion (incl. tangential terms) folds over: Jacobian determinant "
+                       f"{det[worst]:.3g} at r_u = {rr[worst]:.4f}, angle {np.rad2deg(aa[worst]):.0f} deg, "
+                       f"inside the disc reaching the farthest image corner (r_u = {r_reach:.4f})", fix)
+    return Finding(rule, ERROR, True,
+                   f"distortion is one-to-one out to the farthest image corner (r_d = {rd_corner:.4f}, "
+                   f"r_u = {r_reach:.4f}); smallest Jacobian determinant {det[worst]:.3f}")

@@ -1,0 +1,110 @@
+"""``--model auto``: choose the distortion model by the seed's rule (chapter 1, failure mode B).
+
+Ladder: k1k2 -> k1k2k3 -> k1k2p1p2k3 -> rational; each rung adds coefficients to the one before.
+Each rung is compared with the currently accepted model and accepted only if BOTH
+    fit RMS improves by at least MIN_FIT_IMPROVEMENT (10 %), and
+    held-out outer-ring RMS (calibctl.core.validation) does not increase at all.
+All rungs share the radius rings of the starting model's fit, so "outer ring" is the same corners
+for every candidate. A rejected rung does not end the search: the next rung is still compared with the accepted model,
+because e.g. a decentred lens can need the tangential terms while k3 alone buys nothing. A rung that
+cannot be solved (too few views for it, diverged) is recorded as rejected with the reason.
+
+Note: this is the issue's wording (enable only if >= 10 % AND not worse held-out). The seed's own
+sentence is the contrapositive of a weaker rule ("disable if < 10 % AND worse held-out"); the issue's
+stricter reading is implemented on purpose, so a coefficient must earn its place on both counts.
+Its cost, measured (tests/core/test_model_select.py): a 12-view session of a lens with k3 = -0.1
+at f = 450 px gains only 9.5 % fit RMS from k3 while its held-out outer-ring RMS drops from 0.47
+to 0.27 px; the AND rule keeps k1k2 there. Fit RMS is diluted by the four inner rings that k3
+barely touches.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibctl.core.solve import IntrinsicsSolution, solve_intrinsics
+from calibctl.core.validation import HoldoutReport, validate_holdout
+from calibctl.errors import NumericalError
+
+LADDER = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational")
+MIN_FIT_IMPROVEMENT = 0.10
+
+
+@dataclass(frozen=True)
+class ModelCandidate:
+    """One rung of the ladder and the verdict on it.
+
+    Attributes:
+        model: the candidate's name. compared_to: the accepted model it was compared with (None
+            for the starting rung).
+        fit_rms_px, holdout_outer_rms_px, fit_outer_rms_px: its numbers (None when unsolvable).
+        fit_improvement_frac: (rms_accepted - rms_candidate) / rms_accepted.
+        accepted: the verdict. reason: why, with the numbers.
+    """
+
+    model: str
+    compared_to: str | None
+    fit_rms_px: float | None
+    fit_outer_rms_px: float | None
+    holdout_outer_rms_px: float | None
+    fit_improvement_frac: float | None
+    accepted: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class ModelSelection:
+    """The chosen model, its solve and held-out report, and the trail that led to it."""
+
+    chosen: str
+    solution: IntrinsicsSolution
+    holdout: HoldoutReport
+    trail: tuple[ModelCandidate, ...]
+
+
+def _evaluate(model: str, obj: Sequence[np.ndarray], img: Sequence[np.ndarray],
+              image_size: tuple[int, int], centre: tuple[float, float] | None
+              ) -> tuple[IntrinsicsSolution, HoldoutReport]:
+    fit = solve_intrinsics(obj, img, image_size, model)
+    return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre)
+
+
+def select_model(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    ladder: Sequence[str] = LADDER,
+) -> ModelSelection:
+    """Walk the ladder and return the chosen model (shapes as in solve_intrinsics).
+
+    Raises:
+        NumericalError: the first rung itself cannot be solved or validated.
+    """
+    start = ladder[0]
+    best_fit, best_hold = _evaluate(start, object_points_per_view, image_points_per_view, image_size, None)
+    centre = (best_fit.cx, best_fit.cy)  # every rung uses the same rings, so the same corners
+    best = start
+    trail = [ModelCandidate(start, None, best_fit.rms_px, best_hold.fit_outer_rms_px,
+                            best_hold.holdout_outer_rms_px, None, True, "starting model")]
+    for name in ladder[1:]:
+        try:
+            fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre)
+        except NumericalError as exc:
+            trail.append(ModelCandidate(name, best, None, None, None, None, False,
+                                        f"not solvable: {exc.message}"))
+            continue
+        gain = (best_fit.rms_px - fit.rms_px) / best_fit.rms_px
+        worse = hold.holdout_outer_rms_px > best_hold.holdout_outer_rms_px
+        accepted = gain >= MIN_FIT_IMPROVEMENT and not worse
+        reason = (f"fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px ({100 * gain:+.1f} %, "
+                  f"needs >= {100 * MIN_FIT_IMPROVEMENT:.0f} %); held-out outer-ring RMS "
+                  f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px"
+                  f" ({'worse' if worse else 'not worse'})")
+        trail.append(ModelCandidate(name, best, fit.rms_px, hold.fit_outer_rms_px,
+                                    hold.holdout_outer_rms_px, gain, accepted, reason))
+        if accepted:
+            best, best_fit, best_hold = name, fit, hold
+    return ModelSelection(best, best_fit, best_hold, tuple(trail))

@@ -1,0 +1,187 @@
+"""Documents <-> rows, and the integrity checks every read makes.
+
+A row keeps the canonical JSON of its document (``payload``) and a sha256: for a calibration
+artifact its own ``content_sha256`` (the hash of every other field, as the contract defines it),
+for boards and sessions the sha256 of the payload bytes. Decoding re-computes the hash, checks the
+query columns agree with the payload, and raises IntegrityError naming the document when anything
+differs: bytes changed underneath the database are never returned as data.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.common import canonical_json_bytes, sha256_hex
+from calibctl.artifacts.events import ActivationEvent
+from calibctl.artifacts.session import CaptureSession
+from calibctl.errors import IntegrityError
+from calibctl.store.models import ArtifactRow, BoardRow, EventRow, SessionRow
+
+TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
+
+
+def canonical_text(model: BaseModel) -> str:
+    return canonical_json_bytes(model.model_dump(mode="json")).decode("utf-8")
+
+
+def _short(sha: str) -> str:
+    return sha[:12]
+
+
+def _mismatch(what: str, recorded: str, computed: str) -> IntegrityError:
+    return IntegrityError(
+        f"{what} does not match its recorded sha256 (recorded {_short(recorded)}, content hashes to "
+        f"{_short(computed)}): it was changed after it was written",
+        TAMPER_HINT,
+    )
+
+
+def _parse(model: type[BaseModel], payload: str, what: str) -> Any:
+    try:
+        return model.model_validate(json.loads(payload))
+    except (ValueError, ValidationError) as exc:  # JSONDecodeError is a ValueError
+        first = str(exc).splitlines()[0]
+        raise IntegrityError(f"{what} is stored as an unreadable document ({first})", TAMPER_HINT) from exc
+
+
+def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
+    wrong = [name for name, (column, inside) in pairs.items() if column != inside]
+    if wrong:
+        raise IntegrityError(
+            f"{what}: the stored columns {', '.join(wrong)} disagree with the stored document", TAMPER_HINT
+        )
+
+
+# boards -------------------------------------------------------------------------------------------
+
+
+def board_row(board: BoardRevision) -> BoardRow:
+    payload = canonical_text(board)
+    return BoardRow(
+        name=board.name,
+        revision=board.revision,
+        kind=board.kind,
+        measurement_status=board.measurement.status,
+        square_size_m=board.measurement.square_size_m,
+        created_at=board.created_at,
+        payload=payload,
+        payload_sha256=sha256_hex(payload.encode("utf-8")),
+    )
+
+
+def decode_board(row: BoardRow) -> BoardRevision:
+    what = f"board {row.name}@{row.revision}"
+    actual = sha256_hex(row.payload.encode("utf-8"))
+    if actual != row.payload_sha256:
+        raise _mismatch(what, row.payload_sha256, actual)
+    board: BoardRevision = _parse(BoardRevision, row.payload, what)
+    _check_columns(
+        what,
+        {
+            "name": (row.name, board.name),
+            "revision": (row.revision, board.revision),
+            "kind": (row.kind, board.kind),
+            "measurement_status": (row.measurement_status, board.measurement.status),
+        },
+    )
+    return board
+
+
+# capture sessions ---------------------------------------------------------------------------------
+
+
+def session_row(session: CaptureSession) -> SessionRow:
+    payload = canonical_text(session)
+    return SessionRow(
+        session_id=session.session_id,
+        serial=session.serial,
+        board_ref=session.board.ref,
+        status=session.status,
+        station=session.station,
+        operator=session.operator,
+        started_at=session.started_at,
+        finished_at=session.finished_at,
+        payload=payload,
+        payload_sha256=sha256_hex(payload.encode("utf-8")),
+    )
+
+
+def decode_session(row: SessionRow) -> CaptureSession:
+    what = f"capture session {row.session_id}"
+    actual = sha256_hex(row.payload.encode("utf-8"))
+    if actual != row.payload_sha256:
+        raise _mismatch(what, row.payload_sha256, actual)
+    session: CaptureSession = _parse(CaptureSession, row.payload, what)
+    _check_columns(
+        what,
+        {
+            "session_id": (row.session_id, session.session_id),
+            "serial": (row.serial, session.serial),
+            "status": (row.status, session.status),
+        },
+    )
+    return session
+
+
+# calibration artifacts ----------------------------------------------------------------------------
+
+
+def artifact_row(artifact: CalibrationArtifact, stored_at: dt.datetime) -> ArtifactRow:
+    """The row for a *sealed* artifact (its content_sha256 must already match its content)."""
+    return ArtifactRow(
+        serial=artifact.serial,
+        version=artifact.version,
+        status=artifact.status,
+        rms_px=artifact.rms_px,
+        sigma_fx_px=artifact.stdev.sigma.get("fx"),
+        station=artifact.provenance.station,
+        operator=artifact.provenance.operator,
+        created_at=artifact.provenance.created_at,
+        board_ref=artifact.board.ref,
+        session_id=artifact.provenance.session_id,
+        stored_at=stored_at,
+        payload=canonical_text(artifact),
+        content_sha256=artifact.content_sha256,
+    )
+
+
+def decode_artifact(row: ArtifactRow) -> CalibrationArtifact:
+    what = f"{row.serial}@{row.version}"
+    artifact: CalibrationArtifact = _parse(CalibrationArtifact, row.payload, what)
+    actual = artifact.computed_sha256()
+    if actual != row.content_sha256:
+        raise _mismatch(what, row.content_sha256, actual)
+    _check_columns(
+        what,
+        {
+            "content_sha256": (row.content_sha256, artifact.content_sha256),
+            "serial": (row.serial, artifact.serial),
+            "version": (row.version, artifact.version),
+            "status": (row.status, artifact.status),
+            "rms_px": (row.rms_px, artifact.rms_px),
+        },
+    )
+    return artifact
+
+
+# events -------------------------------------------------------------------------------------------
+
+
+def decode_event(row: EventRow) -> ActivationEvent:
+    return ActivationEvent(
+        event_id=row.id,
+        serial=row.serial,
+        version=row.version,
+        previous_version=row.previous_version,
+        kind=row.kind,  # type: ignore[arg-type]
+        actor=row.actor,
+        station=row.station,
+        at=row.at,
+        reason=row.reason,
+    )

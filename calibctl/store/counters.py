@@ -1,0 +1,62 @@
+"""Version allocation that stays correct when several stations write at once.
+
+Each (scope, key) -- ('artifact', serial) or ('board', name) -- has one row in ``version_counters``.
+Allocating the next version is a single upsert that bumps the row and returns the new value inside
+the caller's transaction:
+
+* PostgreSQL: the upsert takes the row lock, so a second writer for the same serial waits (bounded
+  by ``lock_timeout``) until the first commits or rolls back, then sees its value. Different serials
+  never wait for each other.
+* SQLite: write transactions start with ``BEGIN IMMEDIATE``, so writers are serialised anyway.
+
+A rolled-back or crashed transaction rolls its bump back with it: no version is lost or half-made.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Table, case, select
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.orm import Session
+
+from calibctl.store.models import CounterRow
+
+_counters: Table = CounterRow.__table__  # type: ignore[assignment]
+
+
+def _insert(session: Session) -> Any:
+    dialect = session.get_bind().dialect.name
+    return (postgresql.insert if dialect == "postgresql" else sqlite.insert)(_counters)
+
+
+def next_value(session: Session, scope: str, key: str) -> int:
+    """Bump and return the counter of (scope, key); the first value is 1."""
+    stmt = _insert(session).values(scope=scope, key=key, last_value=1)
+    stmt = stmt.on_conflict_do_update(
+        index_elements=[_counters.c.scope, _counters.c.key],
+        set_={"last_value": _counters.c.last_value + 1},
+    ).returning(_counters.c.last_value)
+    return int(session.execute(stmt).scalar_one())
+
+
+def raise_to(session: Session, scope: str, key: str, value: int) -> int:
+    """Make sure the counter of (scope, key) is at least ``value`` (an imported version); returns it."""
+    stmt = _insert(session).values(scope=scope, key=key, last_value=value)
+    stmt = stmt.on_conflict_do_update(
+        index_elements=[_counters.c.scope, _counters.c.key],
+        set_={
+            "last_value": case(
+                (_counters.c.last_value < stmt.excluded.last_value, stmt.excluded.last_value),
+                else_=_counters.c.last_value,
+            )
+        },
+    ).returning(_counters.c.last_value)
+    return int(session.execute(stmt).scalar_one())
+
+
+def lock(session: Session, scope: str, key: str) -> int | None:
+    """Hold the counter row of (scope, key) until the transaction ends (PostgreSQL ``FOR UPDATE``;
+    SQLite's write transactions hold the database lock already). Returns the counter, None if absent."""
+    stmt = select(_counters.c.last_value).where(_counters.c.scope == scope, _counters.c.key == key)
+    return session.execute(stmt.with_for_update()).scalar_one_or_none()

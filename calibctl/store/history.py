@@ -1,0 +1,71 @@
+"""The activation history of a serial, and lookups every artifact operation shares.
+
+These run inside a Store transaction (they take its Session). The active version of a serial is
+the version of its latest activation event; events are only ever appended.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.common import utc_now
+from calibctl.artifacts.events import ActivationEvent
+from calibctl.errors import NotFoundError, UsageError
+from calibctl.store import codec
+from calibctl.store.models import ArtifactRow, EventRow
+
+
+def known_list(names: Sequence[object], limit: int = 20) -> str:
+    """``A, B, C`` (and N more)."""
+    shown = ", ".join(str(n) for n in names[:limit])
+    return shown + (f" (and {len(names) - limit} more)" if len(names) > limit else "")
+
+
+def check_activation(artifact: CalibrationArtifact, activate: bool, reason: str) -> None:
+    if activate and artifact.status != "accepted":
+        raise UsageError(
+            f"{artifact.serial}: a {artifact.status} calibration can never become active",
+            "store it without activating it; fix what lint reported and solve again",
+        )
+    if activate and not reason.strip():
+        raise UsageError("activating a calibration needs a reason")
+
+
+def statuses(s: Session, serial: str) -> dict[int, str]:
+    """version -> status of ``serial``; NotFoundError listing the known serials when there is none."""
+    rows = s.execute(
+        select(ArtifactRow.version, ArtifactRow.status).where(ArtifactRow.serial == serial).order_by(ArtifactRow.version)
+    ).all()
+    if rows:
+        return {int(v): str(st) for v, st in rows}
+    serials = list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial)))
+    listing = f"known: {known_list(serials)}" if serials else "no calibrations are stored yet"
+    raise NotFoundError(f"unknown serial '{serial}'; {listing}", "check the serial, or `calibctl history` another one")
+
+
+def artifact_row(s: Session, serial: str, version: int) -> ArtifactRow:
+    return s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial, ArtifactRow.version == version)).one()
+
+
+def active_in(s: Session, serial: str) -> int | None:
+    return s.scalar(select(EventRow.version).where(EventRow.serial == serial).order_by(EventRow.id.desc()).limit(1))
+
+
+def append_event(s: Session, serial: str, version: int, kind: str, actor: str, station: str, reason: str) -> ActivationEvent:
+    row = EventRow(
+        serial=serial,
+        version=version,
+        previous_version=active_in(s, serial),
+        kind=kind,
+        actor=actor,
+        station=station,
+        at=utc_now(),
+        reason=reason,
+    )
+    s.add(row)
+    s.flush()
+    return codec.decode_event(row)

@@ -1,0 +1,115 @@
+"""The content-addressed image directory beside the database.
+
+Images are what a re-capture would need and what an auditor may want to look at, but they are big
+(~350x the corners they produce), so they are kept for a retention period only. Each file is named
+by its sha256 (``<dir>/ab/ab12...``); its row in ``images`` says when it expires. Where the directory is:
+
+* ``CALIBCTL_IMAGE_DIR`` when set;
+* SQLite: ``calibctl-images/`` next to the database file;
+* PostgreSQL (or in-memory SQLite): ``./calibctl-images`` (set CALIBCTL_IMAGE_DIR on every station
+  to a shared mount when the store is shared).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import delete, select
+from sqlalchemy.engine import URL
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import sha256_hex, utc_now
+from calibctl.errors import UsageError
+from calibctl.store.engine import sqlite_path
+from calibctl.store.models import ImageRow
+
+IMAGE_DIR_ENV = "CALIBCTL_IMAGE_DIR"
+IMAGE_DIR_NAME = "calibctl-images"
+_HEX = set("0123456789abcdef")
+
+
+def default_image_dir(url: URL, env: Mapping[str, str] | None = None) -> Path:
+    env = os.environ if env is None else env
+    if env.get(IMAGE_DIR_ENV):
+        return Path(env[IMAGE_DIR_ENV])
+    db_file = sqlite_path(url)
+    if db_file is not None:
+        return db_file.resolve().parent / IMAGE_DIR_NAME
+    return Path(IMAGE_DIR_NAME)
+
+
+def image_file(image_dir: Path, sha256: str) -> Path:
+    if len(sha256) != 64 or not set(sha256) <= _HEX:
+        raise UsageError(f"'{sha256}' is not a sha256 (64 lower-case hex digits)")
+    return image_dir / sha256[:2] / sha256
+
+
+def write_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary file in the same directory and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:12]}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class ImageStoreMixin:
+    """The image methods of the Store (it provides ``image_dir`` and ``_run``)."""
+
+    image_dir: Path
+    _run: Callable[..., Any]
+
+    def put_image(self, data: bytes, *, retention_days: int) -> str:
+        """Keep ``data`` for ``retention_days`` (an image stored again keeps the later expiry); returns its sha256."""
+        if retention_days < 0:
+            raise UsageError(f"image retention must be 0 days or more, got {retention_days}")
+        sha = sha256_hex(data)
+        path = image_file(self.image_dir, sha)
+        now = utc_now()
+        expires = now + dt.timedelta(days=retention_days)
+
+        def work(s: Session) -> None:
+            row = s.get(ImageRow, sha, with_for_update=True)
+            if row is None:
+                s.add(ImageRow(sha256=sha, size_bytes=len(data), stored_at=now, expires_at=expires))
+            elif row.expires_at < expires:
+                row.expires_at = expires
+
+        # Row first, file after the commit: a concurrent prune either ran before (and our row is new)
+        # or waits for us (and then sees the later expiry), so it never deletes a file we just kept.
+        self._run(work, write=True, retry_conflicts=True)
+        if not (path.exists() and path.stat().st_size == len(data)):
+            write_atomically(path, data)
+        return sha
+
+    def image_path(self, sha256: str) -> Path | None:
+        """The file of a kept image, or None when it was never stored, has been pruned or is missing."""
+        path = image_file(self.image_dir, sha256)
+        row = self._run(lambda s: s.get(ImageRow, sha256))
+        return path if row is not None and path.exists() else None
+
+    def prune_images(self, now: dt.datetime | None = None) -> int:
+        """Delete image files (and their rows) whose retention has expired; returns how many.
+        Never touches corners, sessions or artifacts."""
+        when = now or utc_now()
+
+        def work(s: Session) -> int:
+            expired = list(s.scalars(select(ImageRow.sha256).where(ImageRow.expires_at <= when).with_for_update()))
+            if expired:
+                s.execute(delete(ImageRow).where(ImageRow.sha256.in_(expired)))
+                for sha in expired:
+                    image_file(self.image_dir, sha).unlink(missing_ok=True)
+            return len(expired)
+
+        return self._run(work, write=True)

@@ -1,0 +1,162 @@
+"""Schema revisions: where a database stands, and programmatic alembic upgrade/downgrade.
+
+The migration scripts live in the top-level ``migrations/`` directory (next to ``alembic.ini``),
+found relative to this package. Every migration runs inside one write transaction that also holds
+a migration lock (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: a transaction-scoped advisory lock), so
+two stations opening a brand-new shared store at the same moment create it exactly once, and a
+failed migration leaves the database at its previous revision.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from alembic import command
+from alembic.config import Config
+from alembic.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Connection, Engine, inspect, text
+
+from calibctl.errors import DatabaseError, DatabaseOutOfDateError
+from calibctl.store.engine import WRITE_OPTION, database_errors, display_url, make_engine, sqlite_path
+from calibctl.store.models import Base
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+MIGRATIONS_DIR = REPO_ROOT / "migrations"
+ALEMBIC_INI = REPO_ROOT / "alembic.ini"
+_MIGRATION_LOCK_KEY = 0x63616C6962  # "calib": pg_advisory_xact_lock key for migrations
+
+SchemaStatus = Literal["absent", "empty", "current", "out_of_date", "unknown"]
+
+
+def alembic_config(connection: Connection | None = None) -> Config:
+    """An alembic Config for calibctl's migrations; ``connection`` is used instead of a URL when given."""
+    cfg = Config(str(ALEMBIC_INI)) if ALEMBIC_INI.exists() else Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    if connection is not None:
+        cfg.attributes["connection"] = connection
+    return cfg
+
+
+def script_directory() -> ScriptDirectory:
+    return ScriptDirectory.from_config(alembic_config())
+
+
+def head_revision() -> str:
+    head = script_directory().get_current_head()
+    if head is None:  # pragma: no cover - the repository always has migrations
+        raise DatabaseError(f"no migrations found in {MIGRATIONS_DIR}")
+    return head
+
+
+def known_revisions() -> list[str]:
+    """Every revision this calibctl knows, oldest first."""
+    return [script.revision for script in reversed(list(script_directory().walk_revisions()))]
+
+
+@dataclass(frozen=True)
+class SchemaState:
+    """Where a database stands relative to this calibctl's migrations."""
+
+    url: str
+    current: str | None
+    head: str
+    status: SchemaStatus
+
+    def require_current(self) -> None:
+        """Raise unless the database is at head (absent/empty databases are the caller's business)."""
+        if self.status == "out_of_date":
+            raise DatabaseOutOfDateError(
+                f"the database {self.url} is at revision {self.current}, this calibctl needs {self.head}",
+                "run `calibctl db upgrade` (it migrates the database and keeps its data)",
+            )
+        if self.status == "unknown":
+            raise DatabaseError(
+                f"the database {self.url} is at revision {self.current}, which this calibctl does not know "
+                f"(its newest is {self.head}); a newer calibctl migrated it",
+                "upgrade calibctl on this station",
+            )
+
+
+def _current_revision(conn: Connection) -> str | None:
+    return MigrationContext.configure(conn).get_current_revision()
+
+
+def _state_on(conn: Connection, url: str) -> SchemaState:
+    head = head_revision()
+    tables = set(inspect(conn).get_table_names())
+    if "alembic_version" not in tables or (current := _current_revision(conn)) is None:
+        ours = tables & set(Base.metadata.tables)
+        if ours:
+            raise DatabaseError(
+                f"the database {url} has calibctl tables ({', '.join(sorted(ours))}) but no schema revision",
+                "it was not created by calibctl; point --db at a calibctl store or an empty database",
+            )
+        return SchemaState(url, None, head, "empty")
+    if current == head:
+        return SchemaState(url, current, head, "current")
+    status: SchemaStatus = "out_of_date" if current in known_revisions() else "unknown"
+    return SchemaState(url, current, head, status)
+
+
+def read_state(engine: Engine) -> SchemaState:
+    """The schema state of ``engine``'s database. A SQLite file that does not exist is ``absent``
+    (and is not created by looking at it)."""
+    url = display_url(engine.url)
+    path = sqlite_path(engine.url)
+    if path is not None and not path.exists():
+        return SchemaState(url, None, head_revision(), "absent")
+    with database_errors(engine), engine.connect() as conn:
+        state = _state_on(conn, url)
+        conn.rollback()
+    return state
+
+
+def _migrate(engine: Engine, target: str, *, down: bool) -> tuple[str | None, str | None]:
+    url = display_url(engine.url)
+    with database_errors(engine), engine.connect() as conn:
+        conn.execution_options(**{WRITE_OPTION: True})
+        with conn.begin():
+            if conn.dialect.name == "postgresql":
+                conn.execute(text("SELECT pg_advisory_xact_lock(:key)"), {"key": _MIGRATION_LOCK_KEY})
+            state = _state_on(conn, url)
+            if state.status == "unknown":
+                state.require_current()
+            before = state.current
+            cfg = alembic_config(conn)
+            if down:
+                command.downgrade(cfg, target)
+            else:
+                command.upgrade(cfg, target)
+            after = _current_revision(conn)
+    return before, after
+
+
+def upgrade(engine: Engine, target: str = "head") -> tuple[str | None, str | None]:
+    """Migrate to ``target`` keeping the data; returns (revision before, revision after)."""
+    return _migrate(engine, target, down=False)
+
+
+def downgrade(engine: Engine, target: str) -> tuple[str | None, str | None]:
+    """Migrate down to ``target`` ("base" drops every calibctl table); returns (before, after)."""
+    return _migrate(engine, target, down=True)
+
+
+def state_of(url: str) -> SchemaState:
+    """Where the database at ``url`` stands (does not create anything)."""
+    engine = make_engine(url)
+    try:
+        return read_state(engine)
+    finally:
+        engine.dispose()
+
+
+def upgrade_url(url: str) -> tuple[str | None, str | None]:
+    """Create or migrate the database at ``url`` to head, keeping its data; returns (before, after)."""
+    engine = make_engine(url)
+    try:
+        return upgrade(engine)
+    finally:
+        engine.dispose()

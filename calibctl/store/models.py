@@ -1,0 +1,194 @@
+"""Tables of the store (SQLAlchemy 2.0 typed models).
+
+Each document is kept as the canonical JSON the contract hashes (``payload``) plus its sha256, so a
+read can prove the bytes are the ones that were written; the other columns are copies of payload
+fields that queries filter and sort on. Board revisions, capture sessions, calibration artifacts
+and activation events are immutable: triggers created by the migrations refuse UPDATE and DELETE on
+them in the database itself (see migrations/versions/*_0001_*). ``version_counters`` is the one
+mutable table: the per-serial (and per-board) counter that hands out versions under concurrency.
+
+These models must match the migrations; tests/store/test_migrations.py compares them.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+
+from sqlalchemy import (
+    BigInteger,
+    CheckConstraint,
+    DateTime,
+    Double,
+    ForeignKeyConstraint,
+    Index,
+    Integer,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.engine import Dialect
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy.types import TypeDecorator
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(table_name)s_%(column_0_N_name)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_N_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+SERIAL_LEN = 128
+BOARD_REF_LEN = 80
+SHA256_LEN = 64
+SESSION_ID_LEN = 12
+
+
+class UtcDateTime(TypeDecorator[dt.datetime]):
+    """Timezone-aware UTC datetimes on both backends (SQLite stores naive UTC text)."""
+
+    impl = DateTime(timezone=True)
+    cache_ok = True
+
+    def process_bind_param(self, value: dt.datetime | None, dialect: Dialect) -> dt.datetime | None:
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            raise ValueError("the store only keeps timezone-aware datetimes")
+        value = value.astimezone(dt.UTC)
+        return value if dialect.name == "postgresql" else value.replace(tzinfo=None)
+
+    def process_result_value(self, value: dt.datetime | None, dialect: Dialect) -> dt.datetime | None:
+        if value is None:
+            return None
+        return value.replace(tzinfo=dt.UTC) if value.tzinfo is None else value.astimezone(dt.UTC)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING_CONVENTION)
+
+
+class BoardRow(Base):
+    """One immutable board revision."""
+
+    __tablename__ = "board_revisions"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64))
+    revision: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(16))
+    measurement_status: Mapped[str] = mapped_column(String(16))
+    square_size_m: Mapped[float] = mapped_column(Double)
+    created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (
+        UniqueConstraint("name", "revision"),
+        CheckConstraint("revision >= 1", name="revision_positive"),
+    )
+
+
+class SessionRow(Base):
+    """One immutable capture session (corners are kept forever; images only for the retention time)."""
+
+    __tablename__ = "capture_sessions"
+
+    session_id: Mapped[str] = mapped_column(String(SESSION_ID_LEN), primary_key=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    board_ref: Mapped[str] = mapped_column(String(BOARD_REF_LEN))
+    status: Mapped[str] = mapped_column(String(16))
+    station: Mapped[str] = mapped_column(Text)
+    operator: Mapped[str] = mapped_column(Text)
+    started_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    finished_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (Index(None, "serial", "started_at"),)
+
+
+class ArtifactRow(Base):
+    """One immutable calibration version of one serial."""
+
+    __tablename__ = "calibration_artifacts"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    version: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(16))
+    rms_px: Mapped[float] = mapped_column(Double)
+    sigma_fx_px: Mapped[float | None] = mapped_column(Double, nullable=True)
+    station: Mapped[str] = mapped_column(Text)
+    operator: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    board_ref: Mapped[str] = mapped_column(String(BOARD_REF_LEN))
+    session_id: Mapped[str | None] = mapped_column(String(SESSION_ID_LEN), nullable=True)
+    stored_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    content_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (
+        UniqueConstraint("serial", "version"),
+        CheckConstraint("version >= 1", name="version_positive"),
+        CheckConstraint("status IN ('accepted', 'rejected')", name="status_known"),
+        Index(None, "status"),
+        Index(None, "station", "created_at"),
+    )
+
+
+class EventRow(Base):
+    """One append-only move of a serial's active version."""
+
+    __tablename__ = "activation_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    version: Mapped[int] = mapped_column(Integer)
+    previous_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    actor: Mapped[str] = mapped_column(Text)
+    station: Mapped[str] = mapped_column(Text)
+    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    reason: Mapped[str] = mapped_column(Text)
+
+    __table_args__ = (
+        ForeignKeyConstraint(
+            ["serial", "version"], ["calibration_artifacts.serial", "calibration_artifacts.version"]
+        ),
+        CheckConstraint("kind IN ('activate', 'rollback')", name="kind_known"),
+        Index(None, "serial", "id"),
+    )
+
+
+class CounterRow(Base):
+    """The last version handed out per (scope, key): ('artifact', serial) and ('board', name)."""
+
+    __tablename__ = "version_counters"
+
+    scope: Mapped[str] = mapped_column(String(16), primary_key=True)
+    key: Mapped[str] = mapped_column(String(SERIAL_LEN), primary_key=True)
+    last_value: Mapped[int] = mapped_column(Integer)
+
+
+class ImageRow(Base):
+    """A content-addressed image file beside the database, kept until ``expires_at`` (revision 0002)."""
+
+    __tablename__ = "images"
+
+    sha256: Mapped[str] = mapped_column(String(SHA256_LEN), primary_key=True)
+    size_bytes: Mapped[int] = mapped_column(BigInteger)
+    stored_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    expires_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+
+    __table_args__ = (Index(None, "expires_at"),)
+
+
+IMMUTABLE_TABLES = {
+    "board_revisions": "board revisions are immutable",
+    "capture_sessions": "capture sessions are immutable",
+    "calibration_artifacts": "calibration artifacts are immutable",
+    "activation_events": "activation events are append-only",
+}
+"""Table -> the message its UPDATE/DELETE trigger raises (the migrations create the triggers)."""

@@ -1,0 +1,405 @@
+"""The Store: boards, capture sessions, calibration artifacts, activation events and images.
+
+Every public method is one transaction and returns contract documents (pydantic), never ORM rows.
+Every read of a document re-checks its sha256 (IntegrityError naming it on mismatch). The active
+version of a serial is not a mutable pointer: it is the version of the serial's latest activation
+event, and events are append-only (database triggers refuse UPDATE/DELETE).
+
+Decisions worth knowing:
+* ``add_artifact(..., activate=True)`` with a rejected artifact is refused *before anything is
+  written* (UsageError): the caller stores rejected artifacts with ``activate=False``.
+* ``rollback`` to the version that is already active is refused (UsageError): nothing would move.
+* ``import_artifact`` keeps the artifact's version; versions of a serial may then have gaps, and the
+  next solve gets (highest version) + 1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import Any, TypeVar
+
+from sqlalchemy import Engine, func, select
+from sqlalchemy import exc as sa_exc
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.common import utc_now
+from calibctl.artifacts.events import ActivationEvent
+from calibctl.artifacts.session import CaptureSession
+from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
+from calibctl.store import codec, counters, history, images, migrate
+from calibctl.store.engine import (
+    WRITE_OPTION,
+    as_database_error,
+    display_url,
+    is_retryable,
+    is_unique_violation,
+)
+from calibctl.store.engine import make_engine as _make_engine
+from calibctl.store.images import ImageStoreMixin
+from calibctl.store.models import ArtifactRow, BoardRow, EventRow, ImageRow, SessionRow
+
+T = TypeVar("T")
+MAX_ATTEMPTS = 5
+_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
+
+
+class Store(ImageStoreMixin):
+    """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
+
+    def __init__(self, engine: Engine, image_dir: Path) -> None:
+        self._engine = engine
+        self._write_engine = engine.execution_options(**{WRITE_OPTION: True})
+        self.image_dir = image_dir
+
+    @classmethod
+    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None) -> Store:
+        """Open the store at ``url``. A new (absent or empty) database is created at the newest schema
+        revision when ``create``; an older revision is refused with DatabaseOutOfDateError."""
+        engine = _make_engine(url)
+        try:
+            state = migrate.read_state(engine)
+            if state.status in ("absent", "empty"):
+                if not create:
+                    raise NotFoundError(
+                        f"there is no calibctl database at {state.url}", "run `calibctl db upgrade` to create it"
+                    )
+                migrate.upgrade(engine)
+                state = migrate.read_state(engine)
+            state.require_current()
+        except BaseException:
+            engine.dispose()
+            raise
+        return cls(engine, image_dir or images.default_image_dir(engine.url))
+
+    @property
+    def url(self) -> str:
+        """The database URL with the password hidden."""
+        return display_url(self._engine.url)
+
+    @property
+    def backend(self) -> str:
+        return self._engine.dialect.name
+
+    def close(self) -> None:
+        self._engine.dispose()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
+
+    def _run(self, work: Callable[[Session], T], *, write: bool = False, retry_conflicts: bool = False) -> T:
+        """Run ``work`` in one transaction; retry (bounded) on serialization failures and, when asked,
+        on unique-key conflicts with a concurrent writer (the retry then sees the committed row)."""
+        for attempt in range(1, MAX_ATTEMPTS + 1):
+            try:
+                engine = self._write_engine if write else self._engine
+                with Session(engine, expire_on_commit=False) as session, session.begin():
+                    return work(session)
+            except sa_exc.DBAPIError as exc:
+                retry = is_retryable(exc) or (retry_conflicts and is_unique_violation(exc))
+                if retry and attempt < MAX_ATTEMPTS:
+                    continue
+                mapped = as_database_error(exc, self._engine)
+                if mapped is None:
+                    raise
+                raise mapped from exc
+        raise DatabaseError(f"the database {self.url} kept refusing the transaction")  # pragma: no cover
+
+    # boards --------------------------------------------------------------------------------------
+
+    def add_board(self, board: BoardRevision) -> BoardRevision:
+        """Store the next revision of ``board.name`` (``board.revision`` is ignored); returns the stored copy.
+        A new revision re-measures the same pattern: kind, size and markers must not change."""
+
+        def work(s: Session) -> BoardRevision:
+            revision = counters.next_value(s, "board", board.name)
+            latest = s.scalars(
+                select(BoardRow).where(BoardRow.name == board.name).order_by(BoardRow.revision.desc()).limit(1)
+            ).first()
+            if latest is not None:
+                previous = codec.decode_board(latest)
+                changed = [f for f in _GEOMETRY if getattr(previous, f) != getattr(board, f)]
+                if changed:
+                    raise UsageError(
+                        f"board {previous.ref} is a {previous.cols}x{previous.rows} {previous.kind}; a new revision "
+                        f"may only re-measure it, but {', '.join(changed)} differ",
+                        "register a different pattern under a new name",
+                    )
+            stored = board.model_copy(update={"revision": revision})
+            s.add(codec.board_row(stored))
+            s.flush()
+            return stored
+
+        return self._run(work, write=True)
+
+    def get_board(self, name: str, revision: int | None = None) -> BoardRevision:
+        """Revision ``revision`` of board ``name`` (None: the latest)."""
+
+        def work(s: Session) -> BoardRevision:
+            revisions = list(s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision)))
+            if not revisions:
+                names = list(s.scalars(select(BoardRow.name).distinct().order_by(BoardRow.name)))
+                if not names:
+                    raise NotFoundError(f"unknown board '{name}'; no boards are registered yet", "add one with `calibctl board add`")
+                raise NotFoundError(f"unknown board '{name}'; known: {history.known_list(names)}", "see `calibctl board list`")
+            wanted = revisions[-1] if revision is None else revision
+            if wanted not in revisions:
+                raise NotFoundError(
+                    f"board {name} has no revision {revision}; revisions: {history.known_list(revisions)}",
+                    f"see `calibctl board show {name}`",
+                )
+            row = s.scalars(select(BoardRow).where(BoardRow.name == name, BoardRow.revision == wanted)).one()
+            return codec.decode_board(row)
+
+        return self._run(work)
+
+    def board_revisions(self, name: str) -> list[int]:
+        """The revision numbers of board ``name`` (empty when it is unknown)."""
+        return self._run(
+            lambda s: list(s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision)))
+        )
+
+    def list_boards(self) -> list[BoardRevision]:
+        """Every revision of every board, by name then revision."""
+        return self._run(
+            lambda s: [codec.decode_board(r) for r in s.scalars(select(BoardRow).order_by(BoardRow.name, BoardRow.revision))]
+        )
+
+    # capture sessions ----------------------------------------------------------------------------
+
+    def add_session(self, session: CaptureSession) -> None:
+        """Store a capture session; its id must be new (sessions are immutable)."""
+
+        def work(s: Session) -> None:
+            if s.get(SessionRow, session.session_id) is not None:
+                raise AlreadyExistsError(f"capture session {session.session_id} is already stored")
+            s.add(codec.session_row(session))
+            s.flush()
+
+        self._run(work, write=True, retry_conflicts=True)
+
+    def get_session(self, session_id: str) -> CaptureSession:
+        def work(s: Session) -> CaptureSession:
+            row = s.get(SessionRow, session_id)
+            if row is None:
+                recent = list(
+                    s.scalars(select(SessionRow.session_id).order_by(SessionRow.started_at.desc()).limit(10))
+                )
+                listing = f"recent: {history.known_list(recent)}" if recent else "no sessions are stored yet"
+                raise NotFoundError(f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`")
+            return codec.decode_session(row)
+
+        return self._run(work)
+
+    def latest_session(self, serial: str, status: str | None = "accepted") -> CaptureSession:
+        """The most recent session of ``serial`` (with ``status``, unless None)."""
+
+        def work(s: Session) -> CaptureSession:
+            query = select(SessionRow).where(SessionRow.serial == serial)
+            if status is not None:
+                query = query.where(SessionRow.status == status)
+            row = s.scalars(query.order_by(SessionRow.finished_at.desc(), SessionRow.started_at.desc()).limit(1)).first()
+            if row is not None:
+                return codec.decode_session(row)
+            theirs = s.execute(
+                select(SessionRow.session_id, SessionRow.status).where(SessionRow.serial == serial).order_by(SessionRow.started_at)
+            ).all()
+            what = f"no {status} capture session" if status else "no capture session"
+            if theirs:
+                listing = history.known_list([f"{sid} ({st})" for sid, st in theirs])
+                raise NotFoundError(f"{what} for serial '{serial}'; its sessions: {listing}", "capture again")
+            serials = list(s.scalars(select(SessionRow.serial).distinct().order_by(SessionRow.serial)))
+            listing = f"serials with sessions: {history.known_list(serials)}" if serials else "no sessions are stored yet"
+            raise NotFoundError(f"{what} for serial '{serial}'; {listing}", "run `calibctl capture` first")
+
+        return self._run(work)
+
+    def list_sessions(self, serial: str | None = None) -> list[CaptureSession]:
+        def work(s: Session) -> list[CaptureSession]:
+            query = select(SessionRow).order_by(SessionRow.started_at, SessionRow.session_id)
+            if serial is not None:
+                query = query.where(SessionRow.serial == serial)
+            return [codec.decode_session(r) for r in s.scalars(query)]
+
+        return self._run(work)
+
+    # calibration artifacts -----------------------------------------------------------------------
+
+    def add_artifact(
+        self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str
+    ) -> CalibrationArtifact:
+        """Store ``artifact`` as the serial's next version (sealing its hash) and, when ``activate``,
+        make it active. Activating a rejected artifact is refused before anything is written."""
+        history.check_activation(artifact, activate, reason)
+
+        def work(s: Session) -> CalibrationArtifact:
+            version = counters.next_value(s, "artifact", artifact.serial)
+            stored = artifact.model_copy(update={"version": version}).sealed()
+            s.add(codec.artifact_row(stored, utc_now()))
+            s.flush()
+            if activate:
+                history.append_event(s, artifact.serial, version, "activate", actor, station, reason)
+            return stored
+
+        return self._run(work, write=True)
+
+    def import_artifact(
+        self, artifact: CalibrationArtifact, *, actor: str, station: str, activate: bool, reason: str | None = None
+    ) -> CalibrationArtifact:
+        """Store an artifact made elsewhere under its own serial@version after checking its hash.
+        The same serial@version with the same hash again is a no-op (plus activation when asked)."""
+        computed = artifact.computed_sha256()
+        if computed != artifact.content_sha256:
+            raise IntegrityError(
+                f"{artifact.ref} does not match its content_sha256 (recorded {artifact.content_sha256[:12]}, "
+                f"content hashes to {computed[:12]}): it was changed after export",
+                "re-export it from the store it came from; never edit an artifact by hand",
+            )
+        why = reason or f"imported {artifact.ref}"
+        history.check_activation(artifact, activate, why)
+
+        def work(s: Session) -> CalibrationArtifact:
+            counters.raise_to(s, "artifact", artifact.serial, artifact.version)
+            row = s.scalars(
+                select(ArtifactRow).where(ArtifactRow.serial == artifact.serial, ArtifactRow.version == artifact.version)
+            ).first()
+            if row is not None:
+                if row.content_sha256 != artifact.content_sha256:
+                    raise AlreadyExistsError(
+                        f"{artifact.ref} already exists in {self.url} with different content (stored sha256 "
+                        f"{row.content_sha256[:12]}, imported {artifact.content_sha256[:12]})",
+                        "versions are immutable: this store's history for that serial differs from the file's",
+                    )
+                stored = codec.decode_artifact(row)
+            else:
+                s.add(codec.artifact_row(artifact, utc_now()))
+                s.flush()
+                stored = artifact
+            if activate and history.active_in(s, artifact.serial) != artifact.version:
+                history.append_event(s, artifact.serial, artifact.version, "activate", actor, station, why)
+            return stored
+
+        return self._run(work, write=True, retry_conflicts=True)
+
+    def get_artifact(self, serial: str, version: int | None = None) -> CalibrationArtifact:
+        """``serial@version``; None means the active version. The hash is re-checked (IntegrityError)."""
+
+        def work(s: Session) -> CalibrationArtifact:
+            statuses = history.statuses(s, serial)
+            if version is None:
+                wanted = history.active_in(s, serial)
+                if wanted is None:
+                    listing = history.known_list([f"{v} ({st})" for v, st in statuses.items()])
+                    raise NotFoundError(
+                        f"{serial} has no active version; versions: {listing}",
+                        f"ask for a version ({serial}@N) or roll back to an accepted one",
+                    )
+                if statuses.get(wanted) != "accepted":  # only possible if the event log was forged
+                    raise IntegrityError(
+                        f"the active version of {serial} is {serial}@{wanted}, which is not accepted: "
+                        "the activation log was changed outside calibctl",
+                        codec.TAMPER_HINT,
+                    )
+            elif version not in statuses:
+                raise NotFoundError(
+                    f"{serial} has no version {version}; versions: {history.known_list(list(statuses))}",
+                    f"see `calibctl history {serial}`",
+                )
+            else:
+                wanted = version
+            return codec.decode_artifact(history.artifact_row(s, serial, wanted))
+
+        return self._run(work)
+
+    def list_artifacts(self, serial: str) -> list[CalibrationArtifact]:
+        """Every version of ``serial``, oldest first (each hash re-checked)."""
+
+        def work(s: Session) -> list[CalibrationArtifact]:
+            history.statuses(s, serial)
+            rows = s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial).order_by(ArtifactRow.version))
+            return [codec.decode_artifact(r) for r in rows]
+
+        return self._run(work)
+
+    def serials(self) -> list[str]:
+        return self._run(lambda s: list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial))))
+
+    def active_version(self, serial: str) -> int | None:
+        """The version of the serial's latest activation event; None when nothing was ever activated."""
+        return self._run(lambda s: history.active_in(s, serial))
+
+    def rollback(self, serial: str, to_version: int, *, reason: str, actor: str, station: str) -> ActivationEvent:
+        """Make ``to_version`` (accepted, intact) the active version of ``serial``; appends an event."""
+        if not reason.strip():
+            raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
+
+        def work(s: Session) -> ActivationEvent:
+            counters.lock(s, "artifact", serial)
+            statuses = history.statuses(s, serial)
+            if to_version not in statuses:
+                raise NotFoundError(
+                    f"{serial} has no version {to_version}; versions: {history.known_list(list(statuses))}",
+                    f"see `calibctl history {serial}`",
+                )
+            if statuses[to_version] != "accepted":
+                accepted = [v for v, st in statuses.items() if st == "accepted"]
+                listing = f"accepted versions: {history.known_list(accepted)}" if accepted else "no version is accepted"
+                raise UsageError(f"{serial}@{to_version} is rejected and can never become active; {listing}")
+            if history.active_in(s, serial) == to_version:
+                raise UsageError(f"{serial}@{to_version} is already the active version; nothing to roll back")
+            codec.decode_artifact(history.artifact_row(s, serial, to_version))  # never activate tampered bytes
+            return history.append_event(s, serial, to_version, "rollback", actor, station, reason)
+
+        return self._run(work, write=True)
+
+    def events(self, serial: str) -> list[ActivationEvent]:
+        """The serial's activation events, oldest first."""
+        return self._run(
+            lambda s: [
+                codec.decode_event(r) for r in s.scalars(select(EventRow).where(EventRow.serial == serial).order_by(EventRow.id))
+            ]
+        )
+
+    # audit ---------------------------------------------------------------------------------------
+
+    def counts(self) -> dict[str, int]:
+        def work(s: Session) -> dict[str, int]:
+            tables = {"artifacts": ArtifactRow, "boards": BoardRow, "sessions": SessionRow, "events": EventRow, "images": ImageRow}
+            result = {name: int(s.scalar(select(func.count()).select_from(model)) or 0) for name, model in tables.items()}
+            result["serials"] = int(s.scalar(select(func.count(ArtifactRow.serial.distinct()))) or 0)
+            return result
+
+        return self._run(work)
+
+    def verify(self) -> list[str]:
+        """Re-hash every artifact, board revision and session; one line per problem (empty: all intact)."""
+
+        def work(s: Session) -> list[str]:
+            problems: list[str] = []
+            checks: list[tuple[Any, Callable[[Any], object], tuple[Any, ...]]] = [
+                (BoardRow, codec.decode_board, (BoardRow.name, BoardRow.revision)),
+                (SessionRow, codec.decode_session, (SessionRow.started_at, SessionRow.session_id)),
+                (ArtifactRow, codec.decode_artifact, (ArtifactRow.serial, ArtifactRow.version)),
+            ]
+            for model, decode, order in checks:
+                for row in s.scalars(select(model).order_by(*order).execution_options(yield_per=200)):
+                    try:
+                        decode(row)
+                    except IntegrityError as exc:
+                        problems.append(exc.message)
+            bad_events = s.execute(
+                select(EventRow.id, EventRow.serial, EventRow.version)
+                .join(ArtifactRow, (ArtifactRow.serial == EventRow.serial) & (ArtifactRow.version == EventRow.version))
+                .where(ArtifactRow.status != "accepted")
+                .order_by(EventRow.id)
+            ).all()
+            problems += [f"activation event {i} activates {sn}@{v}, which is not accepted" for i, sn, v in bad_events]
+            return problems
+
+        return self._run(work)

@@ -1,0 +1,166 @@
+"""Board registry use cases: register a (re-)measured board, list boards, show one revision.
+
+The square size is the one metric input of a calibration, so ``board add`` records it as a
+measurement -- value, one-sigma uncertainty, instrument, who, when and the sha256 of an evidence
+file -- or, when only ``--square-mm`` is given, as *nominal* (every calibration made with a nominal
+board fails lint until the board is measured). Registering an existing name creates its next
+revision; revisions never change.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from calibctl.artifacts.board import BOARD_NAME_PATTERN, BoardRevision, SquareMeasurement, parse_board_ref
+from calibctl.artifacts.common import sha256_hex, utc_now, validation_message
+from calibctl.config import Settings
+from calibctl.core.board_spec import BOARD_KINDS, BoardSpec
+from calibctl.errors import InputError, UsageError
+from calibctl.store.repository import Store
+
+_MEASUREMENT_FLAGS = {
+    "uncertainty_mm": "--uncertainty-mm",
+    "instrument": "--instrument",
+    "measured_by": "--measured-by",
+    "measured_on": "--measured-on",
+}
+FUTURE_SLACK = dt.timedelta(days=1)
+"""A measurement dated after tomorrow (UTC) is a typo, not a time zone."""
+
+
+@dataclass(frozen=True)
+class BoardRegistration:
+    """What ``calibctl board add`` was given (lengths in millimetres, as printed on a caliper)."""
+
+    name: str
+    kind: str
+    cols: int
+    rows: int
+    square_mm: float
+    uncertainty_mm: float | None = None
+    instrument: str | None = None
+    measured_by: str | None = None
+    measured_on: str | None = None
+    evidence: Path | None = None
+    marker_mm: float | None = None
+    dictionary: str | None = None
+    note: str | None = None
+
+
+def parse_measured_on(text: str, today: dt.date) -> dt.date:
+    """``YYYY-MM-DD`` -> date; refuses other spellings and dates in the future."""
+    if not re.fullmatch(r"\d{4}-\d{2}-\d{2}", text.strip()):
+        raise UsageError(f"--measured-on '{text}' is not a date; use YYYY-MM-DD (e.g. 2026-03-11)")
+    try:
+        day = dt.date.fromisoformat(text.strip())
+    except ValueError as exc:
+        raise UsageError(f"--measured-on '{text}' is not a date: {exc}") from exc
+    if day > today + FUTURE_SLACK:
+        raise UsageError(f"--measured-on {day} is in the future (today is {today})", "give the day it was measured")
+    return day
+
+
+def read_evidence(path: Path) -> tuple[str, str]:
+    """(sha256, file name) of an evidence file (a photo of the calipers on the board, a lab report)."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read evidence file {path}: {exc.strerror or exc}") from exc
+    if not data:
+        raise InputError(f"evidence file {path} is empty")
+    return sha256_hex(data), path.name
+
+
+def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
+    square_m = reg.square_mm / 1000.0
+    given = {flag for field, flag in _MEASUREMENT_FLAGS.items() if getattr(reg, field) is not None}
+    if not given and reg.evidence is None:
+        return SquareMeasurement(status="nominal", square_size_m=square_m)
+    missing = [flag for flag in _MEASUREMENT_FLAGS.values() if flag not in given]
+    if missing:
+        raise UsageError(
+            f"a measured square size needs {', '.join(_MEASUREMENT_FLAGS.values())}; missing: {', '.join(missing)}",
+            "give all of them, or only --square-mm to register the size as nominal (unmeasured)",
+        )
+    assert reg.uncertainty_mm is not None and reg.measured_on is not None
+    if not 0 < reg.uncertainty_mm < reg.square_mm:
+        raise UsageError(f"--uncertainty-mm {reg.uncertainty_mm:g} must be positive and smaller than the square")
+    evidence_sha, evidence_name = read_evidence(reg.evidence) if reg.evidence is not None else (None, None)
+    return SquareMeasurement(
+        status="measured",
+        square_size_m=square_m,
+        uncertainty_m=reg.uncertainty_mm / 1000.0,
+        instrument=reg.instrument,
+        measured_by=reg.measured_by,
+        measured_on=parse_measured_on(reg.measured_on, today),
+        evidence_sha256=evidence_sha,
+        evidence_name=evidence_name,
+    )
+
+
+def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:
+    """The BoardRevision a registration describes (revision 1 here; the store allocates the real one)."""
+    now = now or utc_now()
+    if not re.fullmatch(BOARD_NAME_PATTERN, reg.name):
+        raise UsageError(
+            f"'{reg.name}' is not a board name: use letters, digits, '.', '_' and '-' (at most 64, "
+            "starting with a letter or digit)"
+        )
+    if reg.kind not in BOARD_KINDS:
+        raise UsageError(f"unknown board kind '{reg.kind}'; choose {' or '.join(BOARD_KINDS)}")
+    if not 0 < reg.square_mm < 1000:
+        raise UsageError(f"--square-mm {reg.square_mm:g} must be a positive length below 1000 mm")
+    charuco_flags = reg.marker_mm is not None or reg.dictionary is not None
+    if reg.kind == "chessboard" and charuco_flags:
+        raise UsageError("--marker-mm and --dictionary apply to ChArUco boards only", "add --kind charuco")
+    if reg.kind == "charuco" and (reg.marker_mm is None or reg.dictionary is None):
+        raise UsageError("a ChArUco board needs --marker-mm and --dictionary (e.g. DICT_5X5_100)")
+    marker_m = reg.marker_mm / 1000.0 if reg.marker_mm is not None else None
+    try:  # the geometry the detector will use: checks the grid, the marker and the dictionary name
+        BoardSpec(reg.kind, reg.cols, reg.rows, reg.square_mm / 1000.0, marker_m, reg.dictionary)
+    except ValueError as exc:
+        raise UsageError(f"board {reg.name}: {exc}") from exc
+    measurement = _measurement(reg, now.date())
+    try:
+        return BoardRevision(
+            name=reg.name,
+            revision=1,
+            kind=reg.kind,  # type: ignore[arg-type]
+            cols=reg.cols,
+            rows=reg.rows,
+            marker_size_m=marker_m,
+            dictionary=reg.dictionary,
+            measurement=measurement,
+            created_at=now,
+            created_by=created_by,
+            note=reg.note,
+        )
+    except ValidationError as exc:
+        raise UsageError(validation_message(exc, f"board {reg.name}")) from exc
+
+
+def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
+    """Register ``reg`` as the next revision of its name; returns what was stored (with its revision)."""
+    board = build_board(reg, created_by=settings.operator)
+    with Store.open(settings.db_url) as store:
+        return store.add_board(board)
+
+
+def list_boards(settings: Settings) -> list[BoardRevision]:
+    with Store.open(settings.db_url) as store:
+        return store.list_boards()
+
+
+def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
+    """``NAME`` (latest) or ``NAME@REV`` -> that revision, and every revision number of the board."""
+    try:
+        name, revision = parse_board_ref(ref)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+    with Store.open(settings.db_url) as store:
+        return store.get_board(name, revision), store.board_revisions(name)

@@ -1,0 +1,241 @@
+"""calibctl solve: stored corners -> an immutable, linted calibration artifact (the serial's next version).
+
+The numbers come from calibctl.core (cv2.calibrateCameraExtended with our own covariance, k-fold
+held-out validation, outlier flags, the --model auto rule); this module turns them into the artifact,
+runs lint on it, and writes it: ``accepted`` and active when lint passes (unless --no-activate),
+``rejected`` and never active otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from calibctl import __version__
+from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.calibration import (
+    UNSEALED,
+    CalibrationArtifact,
+    DistortionModelInfo,
+    HeldOut,
+    Provenance,
+    RingRms,
+    Uncertainty,
+    ViewResult,
+)
+from calibctl.artifacts.common import utc_now
+from calibctl.artifacts.lint import has_errors
+from calibctl.artifacts.session import CaptureSession
+from calibctl.config import Settings
+from calibctl.core.board_spec import BoardSpec
+from calibctl.core.model_select import select_model
+from calibctl.core.outliers import flag_outliers, solve_dropping_outliers
+from calibctl.core.solve import IntrinsicsSolution, get_model, solve_intrinsics
+from calibctl.core.validation import HoldoutReport, ResidualBreakdown, validate_holdout
+from calibctl.errors import UsageError
+from calibctl.workflows.lint import facts_from_document, lint_facts
+from calibctl.workflows.records import open_store
+
+MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "auto")
+_OCTANT_LABELS = tuple(f"octant {i}" for i in range(8))
+_FLAG_NAMES = (
+    "CALIB_USE_INTRINSIC_GUESS", "CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_PRINCIPAL_POINT", "CALIB_ZERO_TANGENT_DIST",
+    "CALIB_FIX_K1", "CALIB_FIX_K2", "CALIB_FIX_K3", "CALIB_FIX_K4", "CALIB_FIX_K5", "CALIB_FIX_K6",
+    "CALIB_RATIONAL_MODEL",
+)
+
+
+@dataclass(frozen=True)
+class SolveRequest:
+    session_id: str | None = None
+    serial: str | None = None
+    model: str = "k1k2"
+    activate: bool = True
+    drop_outliers: bool = False
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    artifact: CalibrationArtifact
+    active: bool
+    outlier_corners: list[dict[str, float | int | str]]
+
+
+def board_spec(board: BoardRevision) -> BoardSpec:
+    """The core view of a registered board revision."""
+    m = board.measurement
+    if board.kind == "charuco":
+        return BoardSpec("charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary)
+    return BoardSpec.chessboard(board.cols, board.rows, m.square_size_m)
+
+
+def flag_names(flags: int) -> list[str]:
+    return [name for name in _FLAG_NAMES if flags & int(getattr(cv2, name))]
+
+
+def _rings(fit: ResidualBreakdown, held: ResidualBreakdown, labels: Sequence[str], which: str) -> list[RingRms]:
+    fit_rms = fit.ring_rms_px if which == "ring" else fit.octant_rms_px
+    held_rms = held.ring_rms_px if which == "ring" else held.octant_rms_px
+    counts = fit.ring_counts if which == "ring" else fit.octant_counts
+    return [
+        RingRms(
+            label=label,
+            fit_rms_px=float(f) if np.isfinite(f) else None,
+            held_out_rms_px=float(h) if np.isfinite(h) else None,
+            count=int(c),
+        )
+        for label, f, h, c in zip(labels, fit_rms, held_rms, counts, strict=True)
+    ]
+
+
+def _held_out(report: HoldoutReport) -> HeldOut:
+    edges = report.fit.radius_edges_px
+    bounds = [0.0, *[float(e) for e in edges], None]
+    ring_labels = [
+        f"quintile {i + 1} (r {bounds[i]:.0f}-{bounds[i + 1]:.0f} px)" if bounds[i + 1] is not None
+        else f"quintile {i + 1} (r >= {bounds[i]:.0f} px)"
+        for i in range(5)
+    ]
+    finite = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
+    return HeldOut(
+        k_folds=report.n_folds,
+        rms_px=finite(report.holdout_rms_px),
+        outer_ring_rms_px=finite(report.holdout_outer_rms_px),
+        fit_outer_ring_rms_px=finite(report.fit_outer_rms_px),
+        by_radius=_rings(report.fit, report.holdout, ring_labels, "ring"),
+        by_octant=_rings(report.fit, report.holdout, _OCTANT_LABELS, "octant"),
+    )
+
+
+def _solve_numbers(session: CaptureSession, request: SolveRequest):
+    """Run the core solve pipeline on a session's corners. Returns everything the artifact records."""
+    size = session.image_size
+    if size is None or not session.views:
+        raise UsageError(f"session {session.session_id} has no accepted views to solve")
+    model_points = board_spec(session.board).object_points()
+    ids = [np.asarray(v.corner_ids, dtype=np.int64) for v in session.views]
+    obj = [model_points[i] for i in ids]
+    img = [np.asarray(v.corners_px, dtype=np.float64) for v in session.views]
+    trail: list[dict[str, float | str | bool]] = []
+    if request.model == "auto":
+        selection = select_model(obj, img, size)
+        model_name, solution = selection.chosen, selection.solution
+        trail = [
+            {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail  # type: ignore[misc]
+        ]
+    else:
+        model_name = get_model(request.model).name
+        solution = solve_intrinsics(obj, img, size, model_name)
+    outliers = flag_outliers(solution, ids)
+    kept = list(range(len(obj)))
+    dropped: tuple[int, ...] = ()
+    if request.drop_outliers and outliers.outlier_views:
+        result = solve_dropping_outliers(obj, img, size, model_name)
+        solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
+    holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
+    return model_name, solution, outliers, kept, dropped, holdout, trail
+
+
+def _views(session: CaptureSession, solution: IntrinsicsSolution, outliers, kept, dropped) -> list[ViewResult]:
+    out, pos = [], {v: i for i, v in enumerate(kept)}
+    outlier_views = set(outliers.outlier_views)
+    for i, view in enumerate(session.views):
+        j = pos.get(i)
+        res = solution.residuals_px[j] if j is not None else None
+        out.append(
+            ViewResult(
+                name=view.name,
+                rms_px=float(solution.per_view_rms_px[j]) if j is not None else 0.0,
+                rvec=tuple(float(x) for x in solution.rvecs[j]) if j is not None else (0.0, 0.0, 0.0),
+                tvec_m=tuple(float(x) for x in solution.tvecs[j]) if j is not None else (0.0, 0.0, 0.0),
+                outlier=i in outlier_views,
+                dropped=i in dropped,
+                worst_corner_px=float(np.linalg.norm(res, axis=1).max()) if res is not None and len(res) else None,
+            )
+        )
+    return out
+
+
+def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
+    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
+    model_name, sol, outliers, kept, dropped, holdout, trail = _solve_numbers(session, request)
+    model = get_model(model_name)
+    free = [p for p in model.free_intrinsics] + list(model.free_distortion)
+    art = CalibrationArtifact(
+        serial=session.serial,
+        version=1,
+        status="accepted",
+        image_size=session.image_size,  # type: ignore[arg-type]
+        camera_matrix=tuple(tuple(float(x) for x in row) for row in sol.camera_matrix),  # type: ignore[arg-type]
+        dist_coeffs=[float(x) for x in sol.dist_coeffs],
+        model=DistortionModelInfo(
+            name=model_name,
+            opencv_flags=int(model.flags),
+            flag_names=flag_names(int(model.flags)),
+            free_parameters=free,
+            selection=trail,
+        ),
+        stdev=Uncertainty(
+            sigma={k: float(v) for k, v in sol.sigma.items()},
+            refused_reason=sol.sigma_refused_reason,
+            residual_count=int(sol.n_residuals),
+            parameter_count=int(sol.n_parameters),
+        ),
+        rms_px=float(sol.rms_px),
+        held_out=_held_out(holdout),
+        gates=list(session.gates),
+        board=session.board,
+        views=_views(session, sol, outliers, kept, dropped),
+        provenance=Provenance(
+            calibctl_version=__version__,
+            opencv_version=cv2.__version__,
+            station=settings.station,
+            operator=settings.operator,
+            created_at=utc_now(),
+            session_id=session.session_id,
+            input_image_sha256=sorted({v.image_sha256 for v in session.views if v.image_sha256}),
+        ),
+        content_sha256=UNSEALED,
+    )
+    findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
+    status = "rejected" if has_errors(findings) else "accepted"
+    corner_outliers = [
+        {
+            "view": session.views[c.view_index].name,
+            "corner_id": c.corner_id,
+            "residual_px": c.residual_px,
+        }
+        for c in outliers.outlier_corners
+    ]
+    return art.model_copy(update={"lint": findings, "status": status}), corner_outliers
+
+
+def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
+    if request.model not in MODEL_CHOICES:
+        raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    if not request.session_id and not request.serial:
+        raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
+    with open_store(settings) as store:
+        session = (
+            store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
+        )
+        if session.status != "accepted":
+            failed = ", ".join(g.gate for g in session.gates if not g.passed) or "capture gates"
+            raise UsageError(
+                f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
+                "capture again following the gate hints, then solve the new session",
+            )
+        art, corner_outliers = build_artifact(session, request, settings)
+        activate = request.activate and art.status == "accepted"
+        stored = store.add_artifact(
+            art,
+            activate=activate,
+            actor=settings.operator,
+            station=settings.station,
+            reason=f"solve of session {session.session_id}",
+        )
+        active = store.active_version(stored.serial) == stored.version
+    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers)

@@ -1,0 +1,46 @@
+"""Small valid documents for store tests (deterministic; artifacts and boards come from tests.artifacts)."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+from calibctl.artifacts.session import CaptureSession, ImageOutcome, ViewCorners
+from tests.artifacts.factories import FIXED_TIME, measured_board
+
+
+def capture_session(
+    session_id: str = "0123456789ab",
+    serial: str = "CAM-0001",
+    status: str = "accepted",
+    minutes_after: int = 0,
+) -> CaptureSession:
+    started = FIXED_TIME + dt.timedelta(minutes=minutes_after)
+    return CaptureSession(
+        session_id=session_id,
+        serial=serial,
+        board=measured_board(),
+        source="/data/cam-0001/run1",
+        source_kind="folder",
+        station="st1",
+        operator="op",
+        started_at=started,
+        finished_at=started + dt.timedelta(seconds=42),
+        image_size=(640, 480),
+        status=status,  # type: ignore[arg-type]
+        outcomes=[
+            ImageOutcome(name="img01.png", status="accepted", sha256="ab" * 32, image_size=(640, 480), corners_found=4),
+            ImageOutcome(name="img02.png", status="no_board", reason="no chessboard found"),
+        ],
+        views=[
+            ViewCorners(
+                name="img01.png",
+                image_sha256="ab" * 32,
+                corner_ids=[0, 1, 9, 10],
+                corners_px=[(100.25, 80.5), (130.125, 80.75), (100.5, 110.0625), (130.0, 110.25)],
+                tilt_deg=24.5,
+                tilt_direction="top left",
+            )
+        ],
+        calibctl_version="0.1.0",
+        opencv_version="5.0.0",
+    )

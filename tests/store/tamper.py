@@ -1,0 +1,64 @@
+"""What an attacker with access to the database files or a superuser login can do (for tamper tests)."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import psycopg
+from sqlalchemy.engine import make_url
+
+
+def _sqlite_file(url: str) -> Path | None:
+    parsed = make_url(url)
+    return Path(parsed.database) if parsed.get_backend_name() == "sqlite" and parsed.database else None
+
+
+def _libpq(url: str) -> str:
+    return url.replace("postgresql+psycopg://", "postgresql://", 1)
+
+
+def patch_stored_bytes(url: str, table: str, old: str, new: str) -> None:
+    """Replace ``old`` by ``new`` (same length) in the stored payload of ``table``, underneath calibctl.
+
+    SQLite: edit the database file's bytes directly (the store must be closed, so the WAL has been
+    checkpointed into the file). PostgreSQL: as a superuser, disable the immutability trigger,
+    UPDATE the payload, enable the trigger again.
+    """
+    assert len(old) == len(new) and old != new
+    path = _sqlite_file(url)
+    if path is not None:
+        wal = path.with_name(path.name + "-wal")
+        assert not wal.exists() or wal.stat().st_size == 0, "close the store first (its WAL is not checkpointed)"
+        data = path.read_bytes()
+        assert data.count(old.encode()) == 1, f"{old!r} occurs {data.count(old.encode())} times in {path}"
+        path.write_bytes(data.replace(old.encode(), new.encode()))
+        return
+    with psycopg.connect(_libpq(url), autocommit=True) as conn:
+        conn.execute(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable")
+        changed = conn.execute(
+            f"UPDATE {table} SET payload = replace(payload, %s, %s) WHERE strpos(payload, %s) > 0", (old, new, old)
+        ).rowcount
+        conn.execute(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable")
+    assert changed == 1, f"{old!r} found in {changed} rows of {table}"
+
+
+def forge_activation(url: str, serial: str, version: int) -> None:
+    """Insert an activation event the accepted-only trigger would refuse (by removing the trigger first)."""
+    insert = (
+        "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, at, reason) "
+        f"VALUES ('{serial}', {version}, NULL, 'rollback', 'mallory', 'nowhere', '2026-01-01 00:00:00', 'forged')"
+    )
+    path = _sqlite_file(url)
+    if path is not None:
+        conn = sqlite3.connect(path, isolation_level=None)
+        try:
+            conn.execute("DROP TRIGGER trg_activation_events_accepted_only")
+            conn.execute(insert)
+        finally:
+            conn.close()
+        return
+    with psycopg.connect(_libpq(url), autocommit=True) as pg:
+        pg.execute("ALTER TABLE activation_events DISABLE TRIGGER trg_activation_events_accepted_only")
+        pg.execute(insert)
+        pg.execute("ALTER TABLE activation_events ENABLE TRIGGER trg_activation_events_accepted_only")

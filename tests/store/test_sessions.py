@@ -1,0 +1,55 @@
+"""Capture sessions: immutable, found by id or as a serial's latest, with messages listing what exists."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from calibctl.errors import AlreadyExistsError, NotFoundError
+from calibctl.store.repository import Store
+from tests.store.documents import capture_session
+
+
+@pytest.fixture
+def store(db_url: str) -> Iterator[Store]:
+    with Store.open(db_url) as opened:
+        yield opened
+
+
+def test_session_round_trip(store: Store):
+    session = capture_session()
+    store.add_session(session)
+    assert store.get_session(session.session_id) == session
+    assert store.list_sessions() == [session]
+    assert store.list_sessions("CAM-0001") == [session] and store.list_sessions("OTHER") == []
+
+
+def test_a_session_id_is_stored_once(store: Store):
+    store.add_session(capture_session())
+    with pytest.raises(AlreadyExistsError, match="capture session 0123456789ab is already stored"):
+        store.add_session(capture_session(serial="CAM-0002"))
+    assert store.get_session("0123456789ab").serial == "CAM-0001"
+
+
+def test_latest_session_is_the_newest_with_the_status(store: Store):
+    store.add_session(capture_session("aaaaaaaaaaa1", minutes_after=0))
+    store.add_session(capture_session("aaaaaaaaaaa2", minutes_after=10))
+    store.add_session(capture_session("aaaaaaaaaaa3", status="rejected", minutes_after=20))
+    store.add_session(capture_session("bbbbbbbbbbb1", serial="CAM-0002", minutes_after=30))
+    assert store.latest_session("CAM-0001").session_id == "aaaaaaaaaaa2"
+    assert store.latest_session("CAM-0001", status=None).session_id == "aaaaaaaaaaa3"
+    assert store.latest_session("CAM-0001", status="rejected").session_id == "aaaaaaaaaaa3"
+    assert [s.session_id for s in store.list_sessions()] == ["aaaaaaaaaaa1", "aaaaaaaaaaa2", "aaaaaaaaaaa3", "bbbbbbbbbbb1"]
+
+
+def test_missing_sessions_name_what_exists(store: Store):
+    with pytest.raises(NotFoundError, match="unknown capture session 'ffffffffffff'; no sessions are stored yet"):
+        store.get_session("ffffffffffff")
+    store.add_session(capture_session("aaaaaaaaaaa1", status="rejected"))
+    with pytest.raises(NotFoundError, match=r"unknown capture session 'ffffffffffff'; recent: aaaaaaaaaaa1"):
+        store.get_session("ffffffffffff")
+    with pytest.raises(NotFoundError, match=r"no accepted capture session for serial 'CAM-0001'; its sessions: aaaaaaaaaaa1 \(rejected\)"):
+        store.latest_session("CAM-0001")
+    with pytest.raises(NotFoundError, match="no accepted capture session for serial 'CAM-7'; serials with sessions: CAM-0001"):
+        store.latest_session("CAM-7")

@@ -1,0 +1,56 @@
+"""Capture sessions made from seeded synthetic corners, for workflow tests that start after capture."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+
+from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.core.synthetic_corners import synthesize_session
+
+K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+D_TRUE = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])
+T0 = dt.datetime(2026, 3, 11, 10, 0, tzinfo=dt.UTC)
+
+
+def synthetic_capture(
+    board: BoardRevision,
+    serial: str = "CAM-0001",
+    session_id: str = "0123456789ab",
+    n_views: int = 18,
+    seed: int = 7,
+    tilt_deg: tuple[float, float] = (20.0, 40.0),
+    status: str = "accepted",
+) -> CaptureSession:
+    syn = synthesize_session(
+        K_TRUE, D_TRUE, (640, 480), n_views, seed, noise_px=0.2, tilt_deg=tilt_deg,
+        cols=board.cols, rows=board.rows, square_size_m=board.measurement.square_size_m,
+    )
+    views = [
+        ViewCorners(
+            name=f"view{i:02d}.png",
+            corner_ids=list(range(board.cols * board.rows)),
+            corners_px=[(float(u), float(v)) for u, v in img],
+        )
+        for i, img in enumerate(syn.image_points_per_view)
+    ]
+    gate = GateResult(gate="observability", passed=status == "accepted", value=2e-4, threshold=1e-4)
+    return CaptureSession(
+        session_id=session_id,
+        serial=serial,
+        board=board,
+        source="synthetic",
+        source_kind="synthetic",
+        station="st1",
+        operator="op",
+        started_at=T0,
+        finished_at=T0,
+        image_size=(640, 480),
+        status=status,  # type: ignore[arg-type]
+        gates=[gate],
+        views=views,
+        calibctl_version="0.1.0",
+        opencv_version="5.0.0",
+    )

@@ -1,0 +1,107 @@
+"""solve: session in the store -> linted, immutable artifact as the serial's next version."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibctl.config import load_settings
+from calibctl.errors import NotFoundError, UsageError
+from calibctl.store.repository import Store
+from calibctl.workflows import solve as solve_workflow
+from tests.artifacts.factories import measured_board, nominal_board
+from tests.workflows.sessions import K_TRUE, synthetic_capture
+
+
+@pytest.fixture
+def settings(tmp_path):
+    return load_settings(db=f"sqlite:///{tmp_path / 'w.db'}", station="st-test", operator="tester", env={})
+
+
+def _store_session(settings, session):
+    with Store.open(settings.db_url) as store:
+        board = store.add_board(session.board)
+        session = session.model_copy(update={"board": board})
+        store.add_session(session)
+    return session
+
+
+def test_good_session_solves_accepted_active_and_close_to_truth(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+    art = out.artifact
+    assert art.status == "accepted" and out.active and art.version == 1
+    assert art.lint == []
+    sigma_fx = art.stdev.sigma["fx"]
+    assert 0 < sigma_fx < 2.0
+    assert abs(art.fx - K_TRUE[0, 0]) < 4 * sigma_fx
+    assert art.held_out.k_folds == 5 and art.held_out.outer_ring_rms_px is not None
+    assert art.content_sha256 == art.computed_sha256()
+    assert art.provenance.session_id == session.session_id and art.board.ref == "A17@1"
+
+
+def test_same_session_solved_twice_gives_identical_numbers(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    req = solve_workflow.SolveRequest(session_id=session.session_id)
+    a = solve_workflow.solve(settings, req).artifact
+    b = solve_workflow.solve(settings, req).artifact
+    assert b.version == a.version + 1
+    assert a.camera_matrix == b.camera_matrix and a.dist_coeffs == b.dist_coeffs
+    assert a.stdev == b.stdev and a.held_out == b.held_out
+
+
+def test_nominal_board_is_rejected_and_never_active(settings):
+    session = _store_session(settings, synthetic_capture(nominal_board()))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(serial="CAM-0001"))
+    assert out.artifact.status == "rejected" and not out.active
+    assert [f.rule for f in out.artifact.lint] == ["square-size-provenance"]
+    with Store.open(settings.db_url) as store:
+        assert store.active_version("CAM-0001") is None
+
+
+def test_no_activate_keeps_the_previous_active_version(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    first = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+    second = solve_workflow.solve(
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, activate=False)
+    )
+    assert first.active and not second.active and second.artifact.status == "accepted"
+    with Store.open(settings.db_url) as store:
+        assert store.active_version("CAM-0001") == 1
+
+
+def test_auto_model_records_its_trail(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id, model="auto")).artifact
+    assert art.model.selection and art.model.selection[0]["model"] == "k1k2"
+    assert art.model.name in {"k1k2", "k1k2k3", "k1k2p1p2k3", "rational"}
+
+
+def test_rejected_session_cannot_be_solved(settings):
+    session = _store_session(settings, synthetic_capture(measured_board(), status="rejected"))
+    with pytest.raises(UsageError, match=f"session {session.session_id} was rejected at capture"):
+        solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+
+
+def test_unknown_session_and_model_are_refused(settings):
+    _store_session(settings, synthetic_capture(measured_board()))
+    with pytest.raises(NotFoundError):
+        solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id="ffffffffffff"))
+    with pytest.raises(UsageError, match="unknown model 'k9'"):
+        solve_workflow.solve(settings, solve_workflow.SolveRequest(serial="CAM-0001", model="k9"))
+
+
+def test_outlier_corner_is_flagged_and_drop_outliers_records_the_view(settings):
+    session = synthetic_capture(measured_board())
+    views = list(session.views)
+    bad = views[3].corners_px.copy()
+    bad[10] = (bad[10][0] + 15.0, bad[10][1])
+    views[3] = views[3].model_copy(update={"corners_px": bad})
+    session = _store_session(settings, session.model_copy(update={"views": views}))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id, drop_outliers=True))
+    first = out.outlier_corners[0]
+    assert (first["view"], first["corner_id"]) == ("view03.png", 10)
+    assert first["residual_px"] > 10.0
+    v3 = out.artifact.views[3]
+    assert v3.outlier and v3.dropped
+    assert np.isclose(out.artifact.fx, K_TRUE[0, 0], atol=4 * out.artifact.stdev.sigma["fx"])
