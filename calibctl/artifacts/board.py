@@ -17,7 +17,7 @@ from pydantic import Field, model_validator
 
 from calibctl.artifacts.common import Document, Sha256Hex, UtcDatetime
 
-BOARD_SCHEMA_VERSION = 1
+BOARD_SCHEMA_VERSION: Literal[1] = 1
 BOARD_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 _REF = re.compile(r"^(?P<name>[A-Za-z0-9][A-Za-z0-9._-]{0,63})(?:@(?P<rev>[0-9]+))?$")
 

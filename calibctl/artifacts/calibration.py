@@ -17,7 +17,7 @@ from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDa
 from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.session import GateResult
 
-CALIBRATION_SCHEMA_VERSION = 1
+CALIBRATION_SCHEMA_VERSION: Literal[1] = 1
 
 
 class DistortionModelInfo(Document):

@@ -16,7 +16,6 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationErr
 
 from calibctl.errors import InputError
 
-
 T = TypeVar("T", bound=BaseModel)
 
 

@@ -13,7 +13,7 @@ from pydantic import Field, model_validator
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
 
-SESSION_SCHEMA_VERSION = 1
+SESSION_SCHEMA_VERSION: Literal[1] = 1
 
 ImageStatus = Literal["accepted", "no_board", "blurred", "near_duplicate", "wrong_size", "unreadable", "skipped"]
 

@@ -1,16 +1,38 @@
-"""calibctl capture commands."""
+"""calibctl capture commands: capture, calibrate (capture then solve), prune, synth."""
 
 from __future__ import annotations
 
+from collections import Counter
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.table import Table
 
-from calibctl.cli.context import wants_json
-from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.live_view import capture_observer
+from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.cli.report import print_gates
+from calibctl.cli.solve import ModelOption, render_outcome
+from calibctl.errors import EXIT_VERDICT_FAIL
+from calibctl.workflows import capture as capture_workflow
 from calibctl.workflows import synth as synth_workflow
+
+SerialOption = Annotated[str, typer.Option("--serial", help="Camera serial number.", show_default=False)]
+BoardOption = Annotated[str, typer.Option("--board", help="Registered board NAME or NAME@REV.", show_default=False)]
+SourceOption = Annotated[str, typer.Option(
+    "--source", show_default=False,
+    help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0).")]
+StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
+OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
+MaxViewsOption = Annotated[int | None, typer.Option(
+    "--max-views", show_default=False,
+    help="Video/camera: stop once the gates pass and this many views are kept (camera default: as soon as "
+         "the gates pass; a video file is otherwise read to the end).")]
+DurationOption = Annotated[float | None, typer.Option(
+    "--duration", show_default=False, help="Video/camera: stop after S seconds (video time for a file).")]
+JsonOption = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
 
 class Scenario(StrEnum):
@@ -28,7 +50,141 @@ class Pattern(StrEnum):
 
 def register(app: typer.Typer) -> None:
     """Add this module's commands to the root app."""
+    app.command("capture")(capture)
+    app.command("calibrate")(calibrate)
+    app.command("prune")(prune)
     register_synth(app)
+
+
+def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run):
+    settings = state(ctx).settings(station=station, operator=operator)
+    observer = capture_observer(as_json, settings.gates.min_views, None)
+    if observer is None:
+        return settings, run(settings, None)
+    with observer:
+        return settings, run(settings, observer)
+
+
+def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
+    session = result.session
+    tilts = {v.name: v for v in session.views}
+    stream = session.source_kind in ("video", "camera")
+    rows = [o for o in session.outcomes if o.status == "accepted"] if stream else session.outcomes
+    table = Table(title=f"{'kept frames' if stream else 'images'} of {session.source}", title_justify="left")
+    for col in ("image" if not stream else "frame", "status", "size", "corners", "tilt", "reason"):
+        table.add_column(col)
+    for o in rows:
+        view = tilts.get(o.name)
+        tilt = "" if view is None or view.tilt_deg is None else (
+            f"{view.tilt_deg:.0f} deg" + (f" {view.tilt_direction}" if view.tilt_direction else ""))
+        style = "green" if o.status == "accepted" else "yellow"
+        table.add_row(o.name, f"[{style}]{o.status}[/{style}]",
+                      f"{o.image_size[0]}x{o.image_size[1]}" if o.image_size else "-",
+                      str(o.corners_found), tilt, o.reason or "")
+    return table
+
+
+def print_capture(result: capture_workflow.CaptureResult) -> None:
+    """The per-image outcome table, the gate table with hints, and the session id."""
+    session = result.session
+    stdout.print(_outcome_table(result))
+    counts = Counter(o.status for o in session.outcomes)
+    noun = "frames" if session.source_kind in ("video", "camera") else "images"
+    stdout.print(f"{len(session.outcomes)} {noun} examined: " + ", ".join(f"{n} {s}" for s, n in counts.most_common()))
+    stdout.print(f"stopped: {result.stop_reason}")
+    print_gates(session.gates)
+    style = "green" if result.passed else "red"
+    size = f", {session.image_size[0]}x{session.image_size[1]}" if session.image_size else ""
+    stdout.print(f"session [bold]{session.session_id}[/bold] [{style}]{session.status}[/{style}]: "
+                 f"{len(session.views)} views of {session.serial} with board {session.board.ref}{size}")
+    stdout.print(f"{result.images_stored} image(s) kept in {result.image_dir}")
+    if not result.passed:
+        reasons = ", ".join(g.reason for g in session.gates if g.reason)
+        stdout.print(f"[red]rejected[/red] ({reasons}); stored for the record. Follow the hints and capture again.")
+    if result.interrupted:
+        stderr.print(f"Interrupted: {result.stop_reason}.")
+
+
+def capture(
+    ctx: typer.Context,
+    serial: SerialOption,
+    board: BoardOption,
+    source: SourceOption,
+    station: StationOption = None,
+    operator: OperatorOption = None,
+    max_views: MaxViewsOption = None,
+    duration: DurationOption = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Detect the board in a folder, video or camera, run the capture gates and store the session.
+
+    Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
+    reasons and hints), 2 when the capture could not run (nothing is stored).
+    """
+    as_json = wants_json(ctx, json_output)
+    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    _, result = _run_capture(ctx, as_json, station, operator,
+                             lambda settings, obs: capture_workflow.capture(settings, request, obs))
+    if as_json:
+        emit_json(result.as_json())
+    else:
+        print_capture(result)
+    if not result.passed:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def calibrate(
+    ctx: typer.Context,
+    serial: SerialOption,
+    board: BoardOption,
+    source: SourceOption,
+    station: StationOption = None,
+    operator: OperatorOption = None,
+    max_views: MaxViewsOption = None,
+    duration: DurationOption = None,
+    model: ModelOption = "k1k2",
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
+    drop_outliers: Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")] = False,
+    json_output: JsonOption = False,
+) -> None:
+    """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
+
+    Exit 0 when the gates pass and the calibration is accepted, 1 when a gate or lint rejects it, 2 when
+    it could not run.
+    """
+    as_json = wants_json(ctx, json_output)
+    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
+        settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
+    solved = result.solve
+    if as_json:
+        emit_json({"capture": result.capture.as_json(),
+                   "calibration": solved.artifact.model_dump(mode="json") if solved else None,
+                   "active": bool(solved and solved.active)})
+        if solved is None or solved.artifact.status != "accepted":
+            raise typer.Exit(EXIT_VERDICT_FAIL)
+        return
+    print_capture(result.capture)
+    if solved is None:
+        stdout.print("[red]not solved[/red]: the capture gates failed")
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+    render_outcome(solved, as_json=False)
+
+
+def prune(
+    ctx: typer.Context,
+    now: Annotated[str | None, typer.Option(
+        "--now", show_default=False, help="Prune as of this ISO time (default: now; no zone means UTC).")] = None,
+    json_output: JsonOption = False,
+) -> None:
+    """Delete stored images whose retention has expired. Corners, sessions and calibrations are never touched."""
+    when = capture_workflow.parse_now(now) if now is not None else None
+    result = capture_workflow.prune(state(ctx).settings(), when)
+    if wants_json(ctx, json_output):
+        emit_json({"pruned": result.pruned, "image_dir": result.image_dir, "now": result.now.isoformat()})
+        return
+    stdout.print(f"pruned {result.pruned} expired image(s) from {result.image_dir} as of "
+                 f"{result.now.isoformat(timespec='seconds')}; corners, sessions and calibrations are kept")
 
 
 def register_synth(app: typer.Typer) -> None:

@@ -7,8 +7,10 @@ import traceback
 from pathlib import Path
 from typing import Annotated, Any
 
-import click
 import typer
+
+# typer vendors its own click; its Context is the one the group's invoke receives.
+from typer._click.core import Context as ClickContext  # noqa: PLC2701
 from typer.core import TyperGroup
 
 from calibctl import __version__
@@ -22,7 +24,7 @@ class CalibctlGroup(TyperGroup):
     Living in the group (not in ``run``) means CliRunner tests see exactly what users see.
     """
 
-    def invoke(self, ctx: click.Context) -> Any:
+    def invoke(self, ctx: ClickContext) -> Any:
         try:
             return super().invoke(ctx)
         except CalibctlError as exc:
@@ -32,8 +34,6 @@ class CalibctlGroup(TyperGroup):
             raise typer.Exit(exc.exit_code) from exc
         # This typer vendors click: its Exit/Abort/usage errors are typer's own classes, not click's.
         except (typer.Exit, typer.Abort, typer.TyperException):
-            raise
-        except (click.exceptions.Exit, click.ClickException, click.exceptions.Abort):
             raise
         except KeyboardInterrupt:
             print("Interrupted; nothing half-written was kept.", file=sys.stderr)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from rich import box
 from rich.table import Table
 
 from calibctl.artifacts.calibration import CalibrationArtifact
@@ -75,20 +76,27 @@ def print_findings(findings: list[Finding]) -> None:
 
 
 def history_table(rows: list, serial: str) -> Table:
-    table = Table(title=f"calibration history of {serial}", title_justify="left")
-    for col in ("ver", "status", "", "rms px", "sigma fx px", "outer held-out px", "board", "station", "operator", "created (UTC)"):
-        table.add_column(col)
+    table = Table(
+        title=f"calibration history of {serial} (rms, sigma(fx), held-out outer ring: px)",
+        title_justify="left",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+    )
+    for col in ("ver", "status", "act", "rms", "sig fx", "outer", "created UTC"):
+        table.add_column(col, no_wrap=True)
+    for col in ("board", "station", "operator"):
+        table.add_column(col, overflow="fold")
     for r in rows:
         table.add_row(
             str(r.version),
             r.status,
-            "* active" if r.active else "",
+            "*" if r.active else "",
             fmt_px(r.rms_px),
             fmt_px(r.sigma_fx_px, 2),
             fmt_px(r.held_out_outer_rms_px),
+            r.created_at[:16].replace("T", " "),
             r.board,
             r.station,
             r.operator,
-            r.created_at[:19].replace("T", " "),
         )
     return table

@@ -179,7 +179,7 @@ def decode_event(row: EventRow) -> ActivationEvent:
         serial=row.serial,
         version=row.version,
         previous_version=row.previous_version,
-        kind=row.kind,  # type: ignore[arg-type]
+        kind=row.kind,
         actor=row.actor,
         station=row.station,
         at=row.at,

@@ -130,7 +130,7 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
         return BoardRevision(
             name=reg.name,
             revision=1,
-            kind=reg.kind,  # type: ignore[arg-type]
+            kind=reg.kind,
             cols=reg.cols,
             rows=reg.rows,
             marker_size_m=marker_m,

@@ -185,7 +185,7 @@ def _adopt(check: lens_checks.Finding) -> list[Finding]:
     """A failed core check becomes a finding; a passed one is not reported."""
     if check.passed:
         return []
-    return [Finding(rule=check.rule, severity=check.severity, message=check.message, fix=check.fix)]  # type: ignore[arg-type]
+    return [Finding(rule=check.rule, severity=check.severity, message=check.message, fix=check.fix)]
 
 
 def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:

@@ -10,7 +10,7 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import parse_document
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
-from calibctl.errors import IntegrityError, InputError, UsageError
+from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows import formats
 

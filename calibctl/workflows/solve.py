@@ -124,7 +124,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         selection = select_model(obj, img, size)
         model_name, solution = selection.chosen, selection.solution
         trail = [
-            {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail  # type: ignore[misc]
+            {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail
         ]
     else:
         model_name = get_model(request.model).name
@@ -168,8 +168,8 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         serial=session.serial,
         version=1,
         status="accepted",
-        image_size=session.image_size,  # type: ignore[arg-type]
-        camera_matrix=tuple(tuple(float(x) for x in row) for row in sol.camera_matrix),  # type: ignore[arg-type]
+        image_size=session.image_size,
+        camera_matrix=tuple(tuple(float(x) for x in row) for row in sol.camera_matrix),
         dist_coeffs=[float(x) for x in sol.dist_coeffs],
         model=DistortionModelInfo(
             name=model_name,

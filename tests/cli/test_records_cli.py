@@ -73,7 +73,8 @@ def test_history_marks_the_active_version_and_lists_events(run):
     assert [v["version"] for v in hist["versions"]] == [1, 2]
     assert [e["kind"] for e in hist["events"]] == ["activate", "activate"]
     text = run("history", SERIAL)
-    assert "* active" in text.stdout and "field-van-2" in text.stdout
+    row2 = next(line for line in text.stdout.splitlines() if line.lstrip().startswith("2 "))
+    assert " * " in row2 and "field-van-2" in row2
 
 
 def test_rollback_moves_active_version_and_is_logged(run):
@@ -197,3 +198,16 @@ def test_import_schema_violation_names_the_field(run, tmp_path: Path):
     exported.write_text(json.dumps(doc))
     result = run("import", str(exported))
     assert result.exit_code == 2 and "held_out.k_folds" in result.stderr
+
+
+@pytest.mark.parametrize(("views", "model", "message"), [(4, "rational", "model rational needs at least 5 board views, got 4")])
+def test_too_few_views_for_the_model_exits_2_and_writes_nothing(sqlite_url, views, model, message):
+    with Store.open(sqlite_url) as store:
+        board = store.add_board(measured_board())
+        session = synthetic_capture(board, serial="FEW-1", n_views=views)
+        store.add_session(session.model_copy(update={"board": board}))
+    result = CliRunner().invoke(app, ["--db", sqlite_url, "solve", "--serial", "FEW-1", "--model", model])
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr and "Hint:" in result.stderr
+    with Store.open(sqlite_url) as store:
+        assert store.serials() == []

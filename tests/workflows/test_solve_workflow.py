@@ -51,7 +51,7 @@ def test_same_session_solved_twice_gives_identical_numbers(settings):
 
 
 def test_nominal_board_is_rejected_and_never_active(settings):
-    session = _store_session(settings, synthetic_capture(nominal_board()))
+    _store_session(settings, synthetic_capture(nominal_board()))
     out = solve_workflow.solve(settings, solve_workflow.SolveRequest(serial="CAM-0001"))
     assert out.artifact.status == "rejected" and not out.active
     assert [f.rule for f in out.artifact.lint] == ["square-size-provenance"]

@@ -1,0 +1,370 @@
+"""``calibctl capture`` / ``calibrate`` / ``prune``: pictures -> a stored capture session with its gate verdict.
+
+A capture reads a folder of images (detected in parallel, every image gets an outcome) or a video /
+live camera (each frame detected in turn and offered to ``core.frame_select.FrameSelector``, which
+keeps still frames that add coverage or tilt), checks that the registered board matches the board in
+the pictures (``pattern_check``), evaluates the capture gates (``core.gates``, thresholds from the
+settings, so a station file can override them) and stores the session.
+
+What is written, and when:
+  * images first, each in its own transaction, into the content-addressed image store
+    (``Store.put_image``, retention ``settings.image_retention_days``): every readable image of a
+    folder, and every kept frame of a video or camera encoded as PNG. A crash after this point leaves
+    only images, which are harmless (content-addressed, they expire);
+  * then the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
+    reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
+Nothing is written when the capture cannot run (exit 2): unknown board, unreadable source, no
+readable image, a pattern that matches nothing or only part of the board.
+
+Stopping a video or camera capture: when the gates pass and ``max_views`` views are kept (a camera
+without ``max_views`` stops as soon as the gates pass; a video file without it is read to the end), on
+``duration_s`` (video time for a file, wall time for a camera), at the end of the stream, or on Ctrl-C
+- KeyboardInterrupt finishes the session with the views kept so far and says so.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import re
+import secrets
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from calibctl import __version__
+from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
+from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
+from calibctl.config import Settings
+from calibctl.core import image_outcomes as outcomes_core
+from calibctl.core.board_spec import BoardSpec
+from calibctl.core.detect import detect_board
+from calibctl.core.frame_select import KEPT, FrameDecision, FrameSelector, SelectionProgress, SelectorSettings
+from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
+from calibctl.core.views import BoardView
+from calibctl.errors import InputError, UsageError
+from calibctl.store.repository import Store
+from calibctl.workflows import capture_sources as sources
+from calibctl.workflows import pattern_check
+from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, board_spec, solve
+
+MAX_WORKERS = 8
+SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
+_FRAME_STATUS = {KEPT: "accepted", "no_board": "no_board", "blurred": "blurred",
+                 "near_duplicate": "near_duplicate", "moving": "skipped", "adds_nothing": "skipped"}
+_SERIAL_HINT = "a serial is letters, digits and . _ : - (no spaces, no '@'), e.g. CAM-0001"
+
+
+@dataclass(frozen=True)
+class CaptureRequest:
+    serial: str
+    board: str
+    source: str
+    max_views: int | None = None
+    duration_s: float | None = None
+    workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    session: CaptureSession
+    stop_reason: str
+    interrupted: bool
+    images_stored: int
+    image_dir: str
+    ignored_files: tuple[str, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        return self.session.status == "accepted"
+
+    def as_json(self) -> dict[str, object]:
+        return {"session": self.session.model_dump(mode="json"), "passed": self.passed,
+                "stop_reason": self.stop_reason, "interrupted": self.interrupted,
+                "images_stored": self.images_stored, "image_dir": self.image_dir,
+                "ignored_files": list(self.ignored_files)}
+
+
+@dataclass(frozen=True)
+class CalibrateResult:
+    capture: CaptureResult
+    solve: SolveOutcome | None
+
+
+@dataclass(frozen=True)
+class PruneResult:
+    pruned: int
+    image_dir: str
+    now: dt.datetime
+
+
+class CaptureObserver:
+    """What a capture reports while it runs (the CLI draws a progress bar or a live view). No-ops here."""
+
+    def folder_started(self, total: int) -> None: ...
+
+    def image_done(self, done: int, total: int, name: str, status: str) -> None: ...
+
+    def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None: ...
+
+
+@dataclass
+class _Collected:
+    """What a source produced, before the gates: outcomes, views with their image hashes."""
+
+    outcomes: list[OutcomeRecord]
+    views: list[tuple[BoardView, str | None]]
+    image_size: tuple[int, int]
+    stop_reason: str
+    images_stored: int
+    interrupted: bool = False
+    ignored: list[str] = field(default_factory=list)
+
+
+def core_thresholds(settings: Settings) -> GateThresholds:
+    """The settings' gate thresholds (defaults < station file) as the core dataclass."""
+    return GateThresholds(**settings.gates.model_dump())
+
+
+def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
+    if not re.fullmatch(SERIAL_PATTERN, request.serial):
+        raise UsageError(f"'{request.serial}' is not a camera serial", _SERIAL_HINT)
+    if request.max_views is not None and request.max_views < 1:
+        raise UsageError(f"--max-views must be 1 or more, got {request.max_views}")
+    if request.duration_s is not None and not request.duration_s > 0:
+        raise UsageError(f"--duration must be a positive number of seconds, got {request.duration_s:g}")
+    try:
+        return parse_board_ref(request.board)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+
+
+def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None) -> CaptureResult:
+    """Run one capture and store its session (see the module docstring). Raises CalibctlError (exit 2)
+    when it cannot run; a session that fails the gates is stored as rejected and returned."""
+    observer = observer or CaptureObserver()
+    board_name, revision = _check_request(request)
+    source = sources.resolve_source(request.source)
+    if source.kind == sources.FOLDER and (request.max_views is not None or request.duration_s is not None):
+        raise UsageError("--max-views and --duration apply to video and camera sources, not to a folder",
+                         "a folder is captured whole; leave out images you do not want")
+    started = utc_now()
+    with Store.open(settings.db_url) as store:
+        board = store.get_board(board_name, revision)
+        spec = board_spec(board)
+        if source.kind == sources.FOLDER:
+            assert isinstance(source.target, Path)
+            got = _capture_folder(store, settings, spec, board, source.target, request.workers, observer)
+        else:
+            got = _capture_stream(store, settings, spec, board, source, request, observer)
+        session = _build_session(settings, request, board, spec, source, got, started)
+        store.add_session(session)
+        return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
+                             tuple(got.ignored))
+
+
+def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:
+    return OutcomeRecord(name=o.name, status=o.status, reason=o.reason or None,
+                         sha256=o.sha256 or None, image_size=o.image_size,
+                         corners_found=0 if o.corner_ids is None else len(o.corner_ids))
+
+
+def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_check.Sample]:
+    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
+    samples = []
+    for name, path in picks:
+        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if gray is not None:
+            samples.append((name, gray))
+    return samples
+
+
+def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision, folder: Path,
+                    workers: int, observer: CaptureObserver) -> _Collected:
+    paths = outcomes_core.list_images(folder)
+    ignored = sources.ignored_files(folder)
+    if not paths:
+        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {', '.join(ignored[:10])}" \
+            if ignored else ""
+        raise InputError(f"no images in {folder}{also}",
+                         f"put the session's images ({', '.join(outcomes_core.IMAGE_SUFFIXES)}) in the folder")
+    observer.folder_started(len(paths))
+    with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
+        results = outcomes_core.classify_session(paths, spec, workers=workers, progress=lambda done, total, o:
+                                                 observer.image_done(done, total, o.name, o.status))
+    readable = [o for o in results if o.status != outcomes_core.UNREADABLE]
+    if not readable:
+        problems = "\n".join(f"  {o.name}: {o.reason}" for o in results)
+        raise InputError(f"none of the {len(results)} image files in {folder} could be read; nothing was stored:\n"
+                         f"{problems}", "re-copy the images from the camera; they are truncated or not images")
+    with_board = [o for o in readable if o.corner_ids is not None]
+    if not with_board:
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {folder}", len(readable),
+                                                _load_samples(readable))
+    accepted = [o for o in results if o.accepted]
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, _load_samples(accepted or with_board))
+    if larger is not None:
+        raise larger
+    stored = 0
+    for o in readable:
+        data = Path(o.path).read_bytes()
+        if store.put_image(data, retention_days=settings.image_retention_days) != o.sha256:
+            raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
+                             "capture again from a folder nothing else writes to")
+        stored += 1
+    size = outcomes_core.session_image_size(results)
+    assert size is not None  # there are readable images
+    views: list[tuple[BoardView, str | None]] = [
+        (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
+    return _Collected([_record(o) for o in results], views, size,
+                      f"every image in the folder was examined ({len(results)})", stored, ignored=ignored)
+
+
+class _StreamState:
+    """What a video or camera capture accumulates, frame by frame."""
+
+    def __init__(self, store: Store, settings: Settings, spec: BoardSpec) -> None:
+        self.store, self.settings, self.spec = store, settings, spec
+        self.selector: FrameSelector | None = None
+        self.progress: SelectionProgress | None = None
+        self.outcomes: list[OutcomeRecord] = []
+        self.shas: dict[str, str] = {}
+        self.no_board_samples: deque[pattern_check.Sample] = deque(maxlen=pattern_check.PROBE_IMAGES)
+        self.kept_samples: list[pattern_check.Sample] = []
+        self.boards_seen = self.stored = 0
+
+    def take(self, frame: sources.Frame) -> FrameDecision | None:
+        """Detect, select and (when kept) store one frame; None when it has the wrong size."""
+        gray = sources.to_gray(frame.image)
+        size = (int(gray.shape[1]), int(gray.shape[0]))
+        if self.selector is None:
+            thresholds = core_thresholds(self.settings)
+            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds))
+            self.progress = self.selector.progress()
+        if size != self.selector.image_size:
+            w, h = self.selector.image_size
+            self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
+                f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
+            return None
+        detection, why = detect_board(gray, self.spec)
+        if detection is None:
+            if frame.index % SAMPLE_EVERY_FRAMES == 0:
+                self.no_board_samples.append((frame.label, gray))
+        else:
+            self.boards_seen += 1
+        decision = self.selector.offer(frame.index, detection, frame.label)
+        sha = None
+        if decision.kept:
+            png = sources.encode_png(frame.image)
+            sha = self.store.put_image(png, retention_days=self.settings.image_retention_days)
+            self.shas[frame.label], self.stored = sha, self.stored + 1
+            if len(self.kept_samples) < pattern_check.PROBE_IMAGES:
+                self.kept_samples.append((frame.label, gray))
+            self.progress = self.selector.progress()
+        self.outcomes.append(OutcomeRecord(
+            name=frame.label, status=_FRAME_STATUS[decision.status],
+            reason=None if decision.kept else (why or decision.reason), sha256=sha, image_size=size,
+            corners_found=0 if detection is None else len(detection.corner_ids)))
+        return decision
+
+
+def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                    source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
+    stream = sources.open_stream(source)
+    is_file = source.kind == sources.VIDEO
+    target = request.max_views if request.max_views is not None else (None if is_file else 0)
+    state = _StreamState(store, settings, spec)
+    interrupted = False
+    stop = "end of the video" if is_file else "the camera stopped delivering frames"
+    try:
+        for frame in stream.frames():
+            if request.duration_s is not None and frame.t_s >= request.duration_s:
+                stop = f"--duration {request.duration_s:g} s reached"
+                break
+            decision = state.take(frame)
+            progress = state.progress
+            if decision is None or progress is None:
+                continue
+            observer.frame_done(decision, progress, frame.t_s)
+            if decision.kept and target is not None and progress.report.passed and progress.n_views >= target:
+                stop = f"the gates passed with {progress.n_views} views" + (
+                    f" (--max-views {target})" if request.max_views is not None else "")
+                break
+    except KeyboardInterrupt:
+        interrupted, stop = True, "interrupted (Ctrl-C)"
+    finally:
+        stream.close()
+    if state.selector is None:
+        raise InputError(f"no frame arrived from {source.label}; nothing was stored",
+                         "check that the camera streams (e.g. with another viewer) and try again")
+    if state.boards_seen == 0:
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"frames of {source.label}",
+                                                len(state.outcomes), list(state.no_board_samples))
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, state.kept_samples)
+    if larger is not None:
+        raise larger
+    views = [(view, state.shas.get(view.name)) for view in state.selector.kept]
+    if interrupted:
+        stop += f"; the session was finished with the {len(views)} view(s) kept"
+    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted)
+
+
+def _gate_records(report: GateReport) -> list[GateResult]:
+    return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in report.gates]
+
+
+def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
+                   source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
+    board_views = [view for view, _ in got.views]
+    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings))
+    geometry = {g.name: g for g in report.views}
+    views = []
+    for view, sha in got.views:
+        g = geometry.get(view.name)
+        views.append(ViewCorners(
+            name=view.name, image_sha256=sha, corner_ids=[int(i) for i in view.corner_ids],
+            corners_px=[(float(u), float(v)) for u, v in np.asarray(view.corners_px, np.float64)],
+            tilt_deg=None if g is None else float(g.tilt_deg), tilt_direction=None if g is None else g.direction_name))
+    return CaptureSession(
+        session_id=secrets.token_hex(6), serial=request.serial, board=board,
+        source=str(Path(source.target).resolve()) if isinstance(source.target, Path) else source.text,
+        source_kind=source.kind,
+        station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
+        image_size=got.image_size, status="accepted" if report.passed else "rejected",
+        gates=_gate_records(report), outcomes=got.outcomes, views=views,
+        calibctl_version=__version__, opencv_version=cv2.__version__)
+
+
+def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,
+              drop_outliers: bool = False, observer: CaptureObserver | None = None) -> CalibrateResult:
+    """Capture, then - when the gates pass - solve the new session (``workflows.solve``)."""
+    if model not in MODEL_CHOICES:
+        raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    captured = capture(settings, request, observer)
+    if not captured.passed:
+        return CalibrateResult(captured, None)
+    solved = solve(settings, SolveRequest(session_id=captured.session.session_id, model=model, activate=activate,
+                                          drop_outliers=drop_outliers))
+    return CalibrateResult(captured, solved)
+
+
+def parse_now(text: str) -> dt.datetime:
+    """ISO 8601 date or date-time; a value without a zone is UTC."""
+    try:
+        when = dt.datetime.fromisoformat(text.strip())
+    except ValueError as exc:
+        raise UsageError(f"--now '{text}' is not an ISO 8601 time", "e.g. 2026-04-30 or 2026-04-30T12:00:00Z") from exc
+    return when.replace(tzinfo=dt.UTC) if when.tzinfo is None else when.astimezone(dt.UTC)
+
+
+def prune(settings: Settings, now: dt.datetime | None = None) -> PruneResult:
+    """Delete images whose retention has expired (never corners, sessions or calibrations)."""
+    when = now or utc_now()
+    with Store.open(settings.db_url) as store:
+        return PruneResult(store.prune_images(when), str(store.image_dir), when)
