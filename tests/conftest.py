@@ -98,3 +98,11 @@ def pg_url(pg_server: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> I
 def db_url(request: pytest.FixtureRequest) -> str:
     """The same test on a SQLite file and on a fresh PostgreSQL database."""
     return request.getfixturevalue("sqlite_url" if request.param == "sqlite" else "pg_url")
+
+
+@pytest.fixture
+def _require_datasets() -> None:
+    """Used through tests.datasets.needs_datasets: skip locally / fail in CI without the real photos."""
+    from tests.datasets import require_datasets
+
+    require_datasets()

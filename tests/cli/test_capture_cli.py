@@ -24,11 +24,9 @@ from calibctl.core.synth import PinholeCamera, true_corners_px
 from calibctl.core.synth_scenes import place_board, tilt_rotation
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
+from tests.datasets import LEFT_RIGHT, UDACITY, needs_datasets, require_datasets
 from tests.workflows.synth_folders import rendered
 
-DATASETS = Path(__file__).resolve().parents[3] / "shared" / "datasets"
-LEFT_RIGHT = DATASETS / "opencv-left-right"
-UDACITY = DATASETS / "udacity-camcal"
 SERIAL = "CAM-0007"
 RUNNER = CliRunner()
 SESSION_LINE = re.compile(r"session ([0-9a-f]{12}) (accepted|rejected)")
@@ -42,6 +40,7 @@ def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def left(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The 13 left images of OpenCV's stereo sample (the folder also holds the right ones)."""
+    require_datasets()
     out = tmp_path_factory.mktemp("left")
     for path in sorted(LEFT_RIGHT.glob("left*.jpg")):
         shutil.copy(path, out / path.name)
@@ -88,6 +87,7 @@ def test_opencv_left_images_every_outcome_and_the_gates(db: str, left: Path) -> 
     assert [s.session_id for s in sessions(db)] == [session["session_id"]]
 
 
+@needs_datasets
 def test_udacity_images_every_outcome_named(db: str) -> None:
     result = capture(db, UDACITY, "--json")
     assert result.exit_code == 0, result.output

@@ -26,16 +26,12 @@ from calibctl.core.image_outcomes import (
 )
 from calibctl.core.synth import Photometry, PinholeCamera, render_view, true_corners_px
 from calibctl.core.synth_scenes import place_board, scenario_poses, tilt_rotation
+from tests.datasets import LEFT_RIGHT, UDACITY, needs_datasets
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 CAMERA = PinholeCamera.seed_reference()
 MEAN_ERR_MAX_PX = 0.06  # "well under 0.1 px mean" (measured 0.035-0.04 on these renders)
 P95_ERR_MAX_PX = 0.15
-DATASETS = Path("/work/shared/datasets")
-LEFT_RIGHT = DATASETS / "opencv-left-right"
-UDACITY = DATASETS / "udacity-camcal"
-needs_datasets = pytest.mark.skipif(not LEFT_RIGHT.is_dir() or not UDACITY.is_dir(),
-                                    reason="shared datasets not mounted")
 
 
 @pytest.fixture(scope="module")

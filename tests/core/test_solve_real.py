@@ -17,15 +17,12 @@ from calibctl.core.board_geometry import chessboard_object_points
 from calibctl.core.outliers import corner_outlier_threshold_px, find_corner_outliers, flag_outliers
 from calibctl.core.solve import solve_intrinsics
 from calibctl.core.validation import refit_pose_residuals
+from tests.datasets import LEFT_RIGHT, UDACITY, needs_datasets
 
-DATASETS = Path("/work/shared/datasets")
-LEFT_RIGHT = DATASETS / "opencv-left-right"
-UDACITY = DATASETS / "udacity-camcal"
 PATTERN = (9, 6)
 REFERENCE_TOL_PX = 0.01  # the bar for reproducing plain OpenCV
 
-pytestmark = pytest.mark.skipif(not LEFT_RIGHT.is_dir() or not UDACITY.is_dir(),
-                                reason="shared datasets not mounted")
+pytestmark = needs_datasets
 
 
 def detect(path: Path) -> tuple[np.ndarray | None, tuple[int, int]]:
