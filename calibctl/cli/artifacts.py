@@ -10,7 +10,6 @@ import typer
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import history_table, print_calibration
-from calibctl.workflows import records
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
@@ -21,6 +20,8 @@ def history(
     json_output: JsonFlag = False,
 ) -> None:
     """Versions of a camera's calibration, the active one, and every activation/rollback event."""
+    from calibctl.workflows import records
+
     hist = records.history(state(ctx).settings(), serial)
     if wants_json(ctx, json_output):
         emit_json(hist.as_json())
@@ -42,6 +43,8 @@ def show(
     json_output: JsonFlag = False,
 ) -> None:
     """One calibration in full: parameters with their one-sigma, held-out error, gates and lint."""
+    from calibctl.workflows import records
+
     art = records.show(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):
         emit_json(art)
@@ -57,6 +60,8 @@ def export(
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
 ) -> None:
     """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, or OpenCV FileStorage."""
+    from calibctl.workflows import records
+
     text = records.export(state(ctx).settings(), ref, fmt, out, force=force)
     if out is None:
         print(text, end="")
@@ -71,6 +76,8 @@ def import_(
     json_output: JsonFlag = False,
 ) -> None:
     """Bring an exported artifact into this store after checking its sha256 (tampered files exit 1)."""
+    from calibctl.workflows import records
+
     art = records.import_file(state(ctx).settings(), path, activate=activate)
     if wants_json(ctx, json_output):
         emit_json(art)
@@ -86,6 +93,8 @@ def rollback(
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted version active again (an append-only event; nothing is deleted)."""
+    from calibctl.workflows import records
+
     event = records.rollback(state(ctx).settings(), serial, to, reason)
     if wants_json(ctx, json_output):
         emit_json(event)

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
-from calibctl.artifacts.board import BoardRevision
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stderr, stdout
-from calibctl.workflows import boards
+
+if TYPE_CHECKING:
+    from calibctl.artifacts.board import BoardRevision
 
 
 class BoardKind(StrEnum):
@@ -88,6 +89,8 @@ def add(
 ) -> None:
     """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
     --measured-on, optionally --evidence); with only --square-mm the size is recorded as nominal."""
+    from calibctl.workflows import boards
+
     reg = boards.BoardRegistration(
         name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, uncertainty_mm=uncertainty_mm,
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
@@ -110,6 +113,8 @@ def add(
 @board_app.command("list")
 def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Every revision of every registered board."""
+    from calibctl.workflows import boards
+
     all_boards = boards.list_boards(state(ctx).settings())
     if wants_json(ctx, json_output):
         emit_json([b.model_dump(mode="json") for b in all_boards])
@@ -132,6 +137,8 @@ def show(
     json_output: JsonFlag = False,
 ) -> None:
     """One board revision with its measurement provenance."""
+    from calibctl.workflows import boards
+
     board, revisions = boards.show_board(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):
         emit_json(board)

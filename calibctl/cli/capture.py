@@ -5,19 +5,22 @@ from __future__ import annotations
 from collections import Counter
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.live_view import capture_observer
 from calibctl.cli.render import emit_json, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import ModelOption, render_outcome
 from calibctl.errors import EXIT_VERDICT_FAIL
-from calibctl.workflows import capture as capture_workflow
-from calibctl.workflows import synth as synth_workflow
+
+if TYPE_CHECKING:
+    from calibctl.workflows import capture as capture_workflow
+
+# The workflows (OpenCV, the store, SQLAlchemy, alembic) are imported inside the commands, so that
+# `calibctl --help`, `--version` and the other commands do not pay for them.
 
 SerialOption = Annotated[str, typer.Option("--serial", help="Camera serial number.", show_default=False)]
 BoardOption = Annotated[str, typer.Option("--board", help="Registered board NAME or NAME@REV.", show_default=False)]
@@ -57,6 +60,8 @@ def register(app: typer.Typer) -> None:
 
 
 def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run):
+    from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
+
     settings = state(ctx).settings(station=station, operator=operator)
     observer = capture_observer(as_json, settings.gates.min_views, None)
     if observer is None:
@@ -121,6 +126,8 @@ def capture(
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints), 2 when the capture could not run (nothing is stored).
     """
+    from calibctl.workflows import capture as capture_workflow
+
     as_json = wants_json(ctx, json_output)
     request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
     _, result = _run_capture(ctx, as_json, station, operator,
@@ -152,6 +159,8 @@ def calibrate(
     Exit 0 when the gates pass and the calibration is accepted, 1 when a gate or lint rejects it, 2 when
     it could not run.
     """
+    from calibctl.workflows import capture as capture_workflow
+
     as_json = wants_json(ctx, json_output)
     request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
@@ -178,6 +187,8 @@ def prune(
     json_output: JsonOption = False,
 ) -> None:
     """Delete stored images whose retention has expired. Corners, sessions and calibrations are never touched."""
+    from calibctl.workflows import capture as capture_workflow
+
     when = capture_workflow.parse_now(now) if now is not None else None
     result = capture_workflow.prune(state(ctx).settings(), when)
     if wants_json(ctx, json_output):
@@ -211,6 +222,8 @@ def register_synth(app: typer.Typer) -> None:
         Scenarios: good (passes every gate), flat (tilt < 5 deg), centre (board only in the middle),
         one-direction (every tilt toward the right), video (an MJPG .avi of a hand-held sweep with pauses).
         """
+        from calibctl.workflows import synth as synth_workflow
+
         result = synth_workflow.run_synth(out, scenario.value, seed, views, synth_workflow.parse_size(size),
                                           pattern.value, force)
         if wants_json(ctx, json_output):

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from calibctl.config import Settings, load_settings
+if TYPE_CHECKING:
+    from calibctl.config import Settings
 
 
 @dataclass
@@ -17,6 +19,8 @@ class AppState:
     json_output: bool = False
 
     def settings(self, station: str | None = None, operator: str | None = None) -> Settings:
+        from calibctl.config import load_settings  # pydantic + yaml: not needed for --help or --version
+
         return load_settings(db=self.db, station_config=self.station_config, station=station, operator=operator)
 
 

@@ -9,7 +9,6 @@ import typer
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stderr, stdout
 from calibctl.errors import EXIT_VERDICT_FAIL
-from calibctl.workflows import database
 
 
 def say(line: str) -> None:
@@ -35,6 +34,8 @@ def _counts_text(counts: dict[str, int]) -> str:
 @db_app.command("upgrade")
 def upgrade(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Create the database at the newest schema, or migrate an older one keeping its data."""
+    from calibctl.workflows import database
+
     result = database.upgrade(state(ctx).settings())
     if wants_json(ctx, json_output):
         emit_json(result.as_json())
@@ -50,6 +51,8 @@ def upgrade(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 @db_app.command("current")
 def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Show the database's schema revision against this calibctl's (and what the store holds)."""
+    from calibctl.workflows import database
+
     status = database.status(state(ctx).settings())
     if wants_json(ctx, json_output):
         emit_json(status.as_json())
@@ -65,6 +68,8 @@ def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 @db_app.command("verify")
 def verify(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Re-hash every artifact, board revision and capture session. Exit 1 naming each mismatch."""
+    from calibctl.workflows import database
+
     report = database.verify(state(ctx).settings())
     if wants_json(ctx, json_output):
         emit_json(report.as_json())

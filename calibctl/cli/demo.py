@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from calibctl.cli.context import state
 from calibctl.cli.render import stdout
 from calibctl.cli.report import history_table, print_calibration, print_findings, print_gates
-from calibctl.workflows import demo as demo_workflow
+
+if TYPE_CHECKING:
+    from calibctl.workflows import demo as demo_workflow
+
 
 
 def _render(step: demo_workflow.DemoStep) -> None:
@@ -50,10 +53,16 @@ def _render(step: demo_workflow.DemoStep) -> None:
 
 def demo(
     ctx: typer.Context,
-    out: Annotated[Path, typer.Option("--out", help="Folder for the demo's images, store and export.")] = demo_workflow.DEMO_DIR,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Folder for the demo's images, store and export [default: demo-out].", show_default=False),
+    ] = None,
 ) -> None:
     """Render a synthetic camera, register a measured board, capture, solve, lint, show history, export ROS YAML."""
+    from calibctl.workflows import demo as demo_workflow
+
     st = state(ctx)
+    out = out or demo_workflow.DEMO_DIR
     demo_workflow.prepare_dir(out)
     db = st.db or f"sqlite:///{out / 'calibctl-demo.db'}"
     settings = st.settings(station="demo-station", operator="demo-operator").model_copy(update={"db_url": db})

@@ -17,7 +17,6 @@ from rich.table import Table
 from calibctl.cli.context import wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.errors import EXIT_VERDICT_FAIL
-from calibctl.workflows import diagnostics as wf
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 PlotDir = Annotated[Path | None, typer.Option("--plot", metavar="DIR", help="Write PNG plots into DIR.")]
@@ -109,6 +108,8 @@ def triage(
     json_output: JsonFlag = False,
 ) -> None:
     """Name the calibration fault behind a residual buffer (exit 1 when one is named)."""
+    from calibctl.workflows import diagnostics as wf
+
     result = wf.run_triage(residuals, focal_px=focal_px, camera=camera, t_min=t_min, min_effect_px=min_effect_px, plot_dir=plot)
     _finish(ctx, json_output, result, _render_triage)
 
@@ -141,6 +142,8 @@ def gauge(
     json_output: JsonFlag = False,
 ) -> None:
     """Metric-gauge watchdog: 60 s medians of wheel/VIO distance (exit 1 on alarm)."""
+    from calibctl.workflows import diagnostics as wf
+
     _finish(ctx, json_output, wf.run_gauge(odometry, window_s=window_s, distances=distances, plot_dir=plot), _render_gauge)
 
 
@@ -178,6 +181,8 @@ def timeoffset(
     json_output: JsonFlag = False,
 ) -> None:
     """Camera-IMU time offset by cross-correlating angular rate (exit 1 when the motion cannot pin it)."""
+    from calibctl.workflows import diagnostics as wf
+
     result = wf.run_timeoffset(gyro, camera, rate_hz=rate_hz, max_lag_s=max_lag_s, max_sigma_ms=max_sigma_ms,
                                window_s=window, plot_dir=plot)
     _finish(ctx, json_output, result, _render_timeoffset)
@@ -209,6 +214,8 @@ def synth_residuals(
     json_output: JsonFlag = False,
 ) -> None:
     """Write a residual buffer with one injected fault, plus matching odometry and rate logs."""
+    from calibctl.workflows import diagnostics as wf
+
     result = wf.run_synth(out, fault, magnitude=magnitude, noise_px=noise_px, seed=seed, keyframes=keyframes,
                           features=features, cameras=cameras, slip=slip, odometry_s=odometry_s, rate_log_s=rate_log_s,
                           drift_ppm=drift_ppm,

@@ -11,7 +11,6 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import print_findings
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
-from calibctl.workflows import lint as lint_workflow
 
 FORMATS = ("text", "json", "github")
 
@@ -32,6 +31,8 @@ def lint(
     json_output: Annotated[bool, typer.Option("--json", help="Same as --format json.")] = False,
 ) -> None:
     """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
+    from calibctl.workflows import lint as lint_workflow
+
     if fmt not in FORMATS:
         raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")
     if wants_json(ctx, json_output):

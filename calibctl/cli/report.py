@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from rich import box
 from rich.table import Table
 
-from calibctl.artifacts.calibration import CalibrationArtifact
-from calibctl.artifacts.lint import Finding
-from calibctl.artifacts.session import GateResult
 from calibctl.cli.render import fmt_px, stdout
+
+if TYPE_CHECKING:
+    from calibctl.artifacts.calibration import CalibrationArtifact
+    from calibctl.artifacts.lint import Finding
+    from calibctl.artifacts.session import GateResult
 
 _K_NAMES = (("fx", 0, 0), ("fy", 1, 1), ("cx", 0, 2), ("cy", 1, 2))
 _DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -10,7 +10,9 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import print_calibration
 from calibctl.errors import EXIT_VERDICT_FAIL
-from calibctl.workflows import solve as solve_workflow
+
+if TYPE_CHECKING:
+    from calibctl.workflows import solve as solve_workflow
 
 ModelOption = Annotated[
     str,
@@ -50,6 +52,8 @@ def solve(
     json_output: Annotated[bool, typer.Option("--json", help="Print the artifact as JSON.")] = False,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
+    from calibctl.workflows import solve as solve_workflow
+
     request = solve_workflow.SolveRequest(
         session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers
     )

@@ -182,8 +182,17 @@ class IntrinsicsSolution:
 
 @contextlib.contextmanager
 def single_threaded_opencv() -> Iterator[None]:
-    """Run OpenCV single-threaded inside the block (bit-identical results), restore afterwards."""
+    """Run OpenCV single-threaded inside the block (bit-identical results), restore afterwards.
+
+    ``cv2.setNumThreads`` is process-global, so this is not a per-thread setting: code that solves on
+    several Python threads enters the block once around the whole pool (``validate_holdout``). Inside
+    it, nested blocks see 1 thread already and change nothing, so one thread leaving its block never
+    gives OpenCV its threads back while another thread's solve is running.
+    """
     previous = cv2.getNumThreads()
+    if previous == 1:
+        yield
+        return
     cv2.setNumThreads(1)
     try:
         yield

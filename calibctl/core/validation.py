@@ -9,6 +9,14 @@ re-fitted with cv2.solvePnP (SOLVEPNP_ITERATIVE) with K and distortion frozen, a
 collected. Held-out residuals are therefore honest about the intrinsics and optimistic only by the
 6 pose parameters fitted per view, exactly like the fit residuals of the same view.
 
+The folds are independent, so they are solved on ``HOLDOUT_WORKERS`` Python threads (cv2 releases the
+GIL). Every solve runs with OpenCV single-threaded (``single_threaded_opencv``, entered once around the
+pool because cv2.setNumThreads is process-global), so each fold's result is bit-identical to a
+sequential run whatever the scheduling (tests/core/test_validation.py checks it). numpy's OpenBLAS is
+held to one thread around the pool too (``blas_threads``: its spinning worker thread otherwise takes the
+second core and 2 threads are slower than 1). 20 views at 1280x960 on the 2-core bench machine: 140-180
+ms sequential, 81-96 ms on 2 threads (benchmarks/bench_e2e.py stage profile: BENCHMARKS.md section 1).
+
 Radius rings ("quintiles"): the radius of a corner is the distance of its OBSERVED pixel position
 from the principal point of the full-data fit. The ring edges are the 20/40/60/80 % quantiles of
 those radii over all corners of the session, computed once and applied to both the fit and the
@@ -27,11 +35,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.solve import (
     IntrinsicsSolution,
     get_model,
@@ -41,6 +51,7 @@ from calibctl.core.solve import (
 from calibctl.errors import NumericalError
 
 MAX_FOLDS = 5
+HOLDOUT_WORKERS = 2  # the station PCs and the bench machine have 2 cores
 N_RINGS = 5
 N_OCTANTS = 8
 
@@ -203,6 +214,7 @@ def validate_holdout(
     initial: np.ndarray | None = None,
     max_folds: int = MAX_FOLDS,
     ring_centre_px: tuple[float, float] | None = None,
+    workers: int = HOLDOUT_WORKERS,
 ) -> HoldoutReport:
     """k-fold held-out validation over views.
 
@@ -212,6 +224,7 @@ def validate_holdout(
         max_folds: upper bound on k.
         ring_centre_px: centre of the radius rings; default the fit's principal point. Pass the
             same centre when comparing models so their outer rings hold the same corners.
+        workers: threads solving folds at once; the result does not depend on it (1 = sequential).
 
     Raises:
         NumericalError: too few views to hold any out, or a fold's solve fails (names the fold).
@@ -223,9 +236,9 @@ def validate_holdout(
     if fit.n_views != n_views:
         raise ValueError(f"the fit has {fit.n_views} views but {n_views} were given")
     folds = fold_assignment(n_views, m.min_views, max_folds)
-    holdout: list[np.ndarray] = [np.empty((0, 2))] * n_views
-    fold_K = []
-    for f in range(int(folds.max()) + 1):
+
+    def solve_fold(f: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+        """(K solved without fold f, {held-out view: its residuals})."""
         train = np.flatnonzero(folds != f).tolist()
         held = np.flatnonzero(folds == f).tolist()
         try:
@@ -234,10 +247,17 @@ def validate_holdout(
         except NumericalError as exc:
             raise NumericalError(f"held-out fold {f} (views {held} held out): {exc.message}",
                                  hint=exc.hint) from exc
-        fold_K.append(sol.camera_matrix)
-        for i in held:
-            holdout[i] = refit_pose_residuals(object_points_per_view[i], image_points_per_view[i],
-                                              sol.camera_matrix, sol.dist_coeffs)
+        return sol.camera_matrix, {i: refit_pose_residuals(object_points_per_view[i], image_points_per_view[i],
+                                                           sol.camera_matrix, sol.dist_coeffs) for i in held}
+
+    holdout: list[np.ndarray] = [np.empty((0, 2))] * n_views
+    fold_K = []
+    # map() yields in fold order, so a failure names the same (lowest) fold as a sequential loop would
+    with single_threaded_opencv(), single_threaded_blas(), ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        for K, residuals in pool.map(solve_fold, range(int(folds.max()) + 1)):
+            fold_K.append(K)
+            for i, r in residuals.items():
+                holdout[i] = r
     pp = (fit.cx, fit.cy) if ring_centre_px is None else ring_centre_px
     edges = radius_ring_edges_px(image_points_per_view, pp)
     all_holdout = np.concatenate(holdout)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +50,15 @@ def image_file(image_dir: Path, sha256: str) -> Path:
 
 
 def write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same directory and a rename."""
+    """Write ``data`` to ``path`` via a temporary file in the same directory and a rename.
+
+    The fsync before the rename is what keeps a content address honest: without it a crash can leave
+    the new name pointing at an empty or partly written file (ext4 delayed allocation, new file names).
+    It is cheap: 0.7-1 ms per 1280x960 PNG on the bench machine (20 images: 20 ms with it, 5 ms
+    without), and fsyncing the whole batch after writing it measured the same (18-20 ms), so it stays
+    per file. The directory is not fsynced: an image whose rename is lost in a crash is missing, which
+    the image store tolerates (``image_path`` returns None; the session row is the durable record).
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:12]}.", suffix=".tmp")
     try:
@@ -72,26 +80,37 @@ class ImageStoreMixin:
 
     def put_image(self, data: bytes, *, retention_days: int) -> str:
         """Keep ``data`` for ``retention_days`` (an image stored again keeps the later expiry); returns its sha256."""
+        return self.put_images([data], retention_days=retention_days)[0]
+
+    def put_images(self, images: Sequence[bytes], *, retention_days: int) -> list[str]:
+        """``put_image`` for several images with one transaction for all their rows; their sha256s, in order.
+
+        One commit instead of one per image: each SQLite commit fsyncs the WAL, and 20 separate ones took
+        ~40 ms of the ~55 ms a 20-image folder spent here (benchmarks/bench_e2e.py, 1280x960 PNGs).
+        """
         if retention_days < 0:
             raise UsageError(f"image retention must be 0 days or more, got {retention_days}")
-        sha = sha256_hex(data)
-        path = image_file(self.image_dir, sha)
+        shas = [sha256_hex(data) for data in images]
+        by_sha = dict(zip(shas, images, strict=True))
         now = utc_now()
         expires = now + dt.timedelta(days=retention_days)
 
         def work(s: Session) -> None:
-            row = s.get(ImageRow, sha, with_for_update=True)
-            if row is None:
-                s.add(ImageRow(sha256=sha, size_bytes=len(data), stored_at=now, expires_at=expires))
-            elif row.expires_at < expires:
-                row.expires_at = expires
+            for sha in sorted(by_sha):  # one lock order for every writer (PostgreSQL FOR UPDATE)
+                row = s.get(ImageRow, sha, with_for_update=True)
+                if row is None:
+                    s.add(ImageRow(sha256=sha, size_bytes=len(by_sha[sha]), stored_at=now, expires_at=expires))
+                elif row.expires_at < expires:
+                    row.expires_at = expires
 
-        # Row first, file after the commit: a concurrent prune either ran before (and our row is new)
+        # Rows first, files after the commit: a concurrent prune either ran before (and our rows are new)
         # or waits for us (and then sees the later expiry), so it never deletes a file we just kept.
         self._run(work, write=True, retry_conflicts=True)
-        if not (path.exists() and path.stat().st_size == len(data)):
-            write_atomically(path, data)
-        return sha
+        for sha, data in by_sha.items():
+            path = image_file(self.image_dir, sha)
+            if not (path.exists() and path.stat().st_size == len(data)):
+                write_atomically(path, data)
+        return shas
 
     def image_path(self, sha256: str) -> Path | None:
         """The file of a kept image, or None when it was never stored, has been pruned or is missing."""

@@ -7,9 +7,9 @@ the pictures (``pattern_check``), evaluates the capture gates (``core.gates``, t
 settings, so a station file can override them) and stores the session.
 
 What is written, and when:
-  * images first, each in its own transaction, into the content-addressed image store
-    (``Store.put_image``, retention ``settings.image_retention_days``): every readable image of a
-    folder, and every kept frame of a video or camera encoded as PNG. A crash after this point leaves
+  * images first into the content-addressed image store (``Store.put_images``, retention
+    ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
+    transaction, and every kept frame of a video or camera encoded as PNG, each in its own. A crash after this point leaves
     only images, which are harmless (content-addressed, they expire);
   * then the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
     reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
@@ -55,6 +55,7 @@ from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, 
 
 MAX_WORKERS = 8
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
+IMAGE_BATCH = 16  # folder images per store transaction (one SQLite commit, one WAL fsync, per batch)
 _FRAME_STATUS = {KEPT: "accepted", "no_board": "no_board", "blurred": "blurred",
                  "near_duplicate": "near_duplicate", "moving": "skipped", "adds_nothing": "skipped"}
 _SERIAL_HINT = "a serial is letters, digits and . _ : - (no spaces, no '@'), e.g. CAM-0001"
@@ -211,12 +212,15 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     if larger is not None:
         raise larger
     stored = 0
-    for o in readable:
-        data = Path(o.path).read_bytes()
-        if store.put_image(data, retention_days=settings.image_retention_days) != o.sha256:
-            raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
-                             "capture again from a folder nothing else writes to")
-        stored += 1
+    for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
+        batch = readable[start:start + IMAGE_BATCH]
+        shas = store.put_images([Path(o.path).read_bytes() for o in batch],
+                                retention_days=settings.image_retention_days)
+        for o, sha in zip(batch, shas, strict=True):
+            if sha != o.sha256:
+                raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
+                                 "capture again from a folder nothing else writes to")
+        stored += len(batch)
     size = outcomes_core.session_image_size(results)
     assert size is not None  # there are readable images
     views: list[tuple[BoardView, str | None]] = [

@@ -33,7 +33,9 @@ from calibctl.core.diagnostics.triage import (
 )
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows import diagnostics_io as dio
-from calibctl.workflows import diagnostics_plots as plots
+
+# diagnostics_plots (matplotlib, about 0.3 s to import) is imported inside the run_* functions, only
+# when a plot is drawn.
 
 DEFAULT_FOCAL_PX = 800.0
 RESIDUAL_COLUMNS = ("residual_px", "radius_px", "image_speed_px_s", "inv_range_per_m", "row")
@@ -132,7 +134,11 @@ def run_triage(path: Path, focal_px: float | None = None, camera: str | None = N
     out["input"] = str(path)
     out["focal_px_source"] = "option" if focal_px else "default (the seed bench's 800 px; pass --focal-px)"
     out["camera_rms"].update(warn_above=CAMERA_RMS_WARN, alarm_above=CAMERA_RMS_ALARM)
-    out["plots"] = [str(p) for p in plots.plot_triage(summary, plots.prepare_plot_dir(plot_dir))] if plot_dir else []
+    if plot_dir:
+        from calibctl.workflows import diagnostics_plots as plots  # matplotlib: only when drawing
+        out["plots"] = [str(p) for p in plots.plot_triage(summary, plots.prepare_plot_dir(plot_dir))]
+    else:
+        out["plots"] = []
     return out
 
 
@@ -181,6 +187,7 @@ def run_gauge(path: Path, window_s: float = 60.0, distances: str = "auto", min_s
     if plot_dir:
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(vio >= min_step_m, wheel / np.where(vio >= min_step_m, vio, 1.0), np.nan)
+        from calibctl.workflows import diagnostics_plots as plots  # matplotlib: only when drawing
         out["plots"] = [str(p) for p in plots.plot_gauge(rep, t, ratio, plots.prepare_plot_dir(plot_dir))]
     return out
 
@@ -235,6 +242,7 @@ def run_timeoffset(gyro_path: Path, camera_path: Path, rate_hz: float | None = N
     out["verdict"] = "refused" if refused else "pass"
     out["reason"] = refused
     if plot_dir:
+        from calibctl.workflows import diagnostics_plots as plots  # matplotlib: only when drawing
         out["plots"] = [str(p) for p in plots.plot_timeoffset(est, drift, plots.prepare_plot_dir(plot_dir))]
     return out
 

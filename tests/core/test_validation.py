@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -90,6 +91,27 @@ def test_holdout_is_deterministic(good):
                zip(again.holdout_residuals_px, report.holdout_residuals_px, strict=True))
 
 
+@pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3"])
+def test_folds_solved_on_threads_equal_the_sequential_run_bit_for_bit(good, model):
+    """The folds run on 2 threads; every number must be exactly what one thread gives, and OpenCV's
+    process-global thread count must be what it was before."""
+    ses, _ = good
+    threads_before = cv2.getNumThreads()
+    args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, model)
+    sequential = validate_holdout(*args, workers=1)
+    parallel = validate_holdout(*args, workers=2)
+    assert cv2.getNumThreads() == threads_before
+    assert np.array_equal(parallel.fold_of_view, sequential.fold_of_view)
+    assert np.array_equal(parallel.fold_camera_matrices, sequential.fold_camera_matrices)
+    assert len(parallel.holdout_residuals_px) == len(sequential.holdout_residuals_px) == len(ses.image_points_per_view)
+    assert all(np.array_equal(a, b) for a, b in
+               zip(parallel.holdout_residuals_px, sequential.holdout_residuals_px, strict=True))
+    assert np.array_equal(parallel.holdout_per_view_rms_px, sequential.holdout_per_view_rms_px)
+    assert parallel.holdout_rms_px == sequential.holdout_rms_px
+    for a, b in ((parallel.holdout, sequential.holdout), (parallel.fit, sequential.fit)):
+        assert np.array_equal(a.ring_rms_px, b.ring_rms_px) and np.array_equal(a.octant_rms_px, b.octant_rms_px)
+
+
 def _sparse_outer_ring_session(seed: int):
     """Six small central boards far from the camera and two boards close up reaching the image
     edges: few corners in the outer ring, all of them in two views."""
@@ -123,5 +145,21 @@ def test_a_fold_that_cannot_be_solved_names_the_fold():
     fit = solve_intrinsics(ses.object_points_per_view, ses.image_points_per_view, SIZE, "k1k2")
     obj, img = list(ses.object_points_per_view), list(ses.image_points_per_view)
     obj[4], img[4] = obj[4][:9], img[4][:9]
-    with pytest.raises(NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"):
-        validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
+    for workers in (1, 2):  # on threads too, the error names the first failing fold
+        with pytest.raises(NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"):
+            validate_holdout(obj, img, SIZE, "k1k2", fit=fit, workers=workers)
+
+
+def test_openblas_runs_on_one_thread_inside_the_block_and_gets_its_threads_back():
+    from calibctl.core.blas_threads import _openblas_threads, single_threaded_blas
+
+    threads = _openblas_threads()
+    if not threads:
+        pytest.skip("no bundled OpenBLAS found in this environment")
+    before = [get() for _, get in threads]
+    with single_threaded_blas():
+        assert [get() for _, get in threads] == [1] * len(threads)
+        with single_threaded_blas():  # nested: still 1, and leaving it gives nothing back early
+            pass
+        assert [get() for _, get in threads] == [1] * len(threads)
+    assert [get() for _, get in threads] == before

@@ -70,3 +70,17 @@ def test_sqlite_images_live_next_to_the_database(sqlite_url: str, tmp_path: Path
     monkeypatch.setenv("CALIBCTL_IMAGE_DIR", str(tmp_path / "shared"))
     with Store.open(sqlite_url) as store:
         assert store.image_dir == tmp_path / "shared"
+
+
+def test_several_images_are_stored_in_one_call_in_order(store: Store):
+    shas = store.put_images([PNG_B, PNG_A, PNG_B], retention_days=5)
+    assert shas == [sha256_hex(PNG_B), sha256_hex(PNG_A), sha256_hex(PNG_B)]
+    for sha, data in ((shas[0], PNG_B), (shas[1], PNG_A)):
+        path = store.image_path(sha)
+        assert path is not None and path.read_bytes() == data
+    assert store.counts()["images"] == 2
+    assert store.put_images([PNG_A], retention_days=10) == [shas[1]]  # the later expiry wins, as put_image
+    assert store.prune_images(utc_now() + dt.timedelta(days=6)) == 1
+    assert store.image_path(shas[0]) is None and store.image_path(shas[1]) is not None
+    with pytest.raises(UsageError, match="image retention must be 0 days or more, got -2"):
+        store.put_images([PNG_A], retention_days=-2)
