@@ -130,30 +130,33 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         model_name = get_model(request.model).name
         solution = solve_intrinsics(obj, img, size, model_name)
     outliers = flag_outliers(solution, ids)
+    first = solution  # every view's pose and RMS, including views --drop-outliers removes below
     kept = list(range(len(obj)))
     dropped: tuple[int, ...] = ()
     if request.drop_outliers and outliers.outlier_views:
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
-    return model_name, solution, outliers, kept, dropped, holdout, trail
+    return model_name, solution, first, outliers, kept, dropped, holdout, trail
 
 
-def _views(session: CaptureSession, solution: IntrinsicsSolution, outliers, kept, dropped) -> list[ViewResult]:
+def _views(session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers,
+           kept, dropped) -> list[ViewResult]:
+    """Per-view RMS and pose from the final solve; a dropped view keeps those of the solve that flagged it."""
     out, pos = [], {v: i for i, v in enumerate(kept)}
     outlier_views = set(outliers.outlier_views)
     for i, view in enumerate(session.views):
-        j = pos.get(i)
-        res = solution.residuals_px[j] if j is not None else None
+        src, j = (solution, pos[i]) if i in pos else (first, i)
+        res = src.residuals_px[j]
         out.append(
             ViewResult(
                 name=view.name,
-                rms_px=float(solution.per_view_rms_px[j]) if j is not None else 0.0,
-                rvec=tuple(float(x) for x in solution.rvecs[j]) if j is not None else (0.0, 0.0, 0.0),
-                tvec_m=tuple(float(x) for x in solution.tvecs[j]) if j is not None else (0.0, 0.0, 0.0),
+                rms_px=float(src.per_view_rms_px[j]),
+                rvec=(float(src.rvecs[j][0]), float(src.rvecs[j][1]), float(src.rvecs[j][2])),
+                tvec_m=(float(src.tvecs[j][0]), float(src.tvecs[j][1]), float(src.tvecs[j][2])),
                 outlier=i in outlier_views,
                 dropped=i in dropped,
-                worst_corner_px=float(np.linalg.norm(res, axis=1).max()) if res is not None and len(res) else None,
+                worst_corner_px=float(np.linalg.norm(res, axis=1).max()) if len(res) else None,
             )
         )
     return out
@@ -161,7 +164,7 @@ def _views(session: CaptureSession, solution: IntrinsicsSolution, outliers, kept
 
 def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
-    model_name, sol, outliers, kept, dropped, holdout, trail = _solve_numbers(session, request)
+    model_name, sol, first, outliers, kept, dropped, holdout, trail = _solve_numbers(session, request)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -188,7 +191,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         held_out=_held_out(holdout),
         gates=list(session.gates),
         board=session.board,
-        views=_views(session, sol, outliers, kept, dropped),
+        views=_views(session, sol, first, outliers, kept, dropped),
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,

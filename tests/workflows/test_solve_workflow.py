@@ -104,4 +104,5 @@ def test_outlier_corner_is_flagged_and_drop_outliers_records_the_view(settings):
     assert first["residual_px"] > 10.0
     v3 = out.artifact.views[3]
     assert v3.outlier and v3.dropped
+    assert v3.worst_corner_px > 10.0 and v3.tvec_m[2] > 0.1  # the pose of the solve that flagged it
     assert np.isclose(out.artifact.fx, K_TRUE[0, 0], atol=4 * out.artifact.stdev.sigma["fx"])
