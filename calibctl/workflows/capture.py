@@ -208,7 +208,9 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
         raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {folder}", len(readable),
                                                 _load_samples(readable))
     accepted = [o for o in results if o.accepted]
-    larger = pattern_check.larger_board_error(spec, board.ref, board.name, _load_samples(accepted or with_board))
+    probed = accepted or with_board
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, _load_samples(probed),
+                                              {o.name: o.corners_px for o in probed if o.corners_px is not None})
     if larger is not None:
         raise larger
     stored = 0
@@ -240,6 +242,7 @@ class _StreamState:
         self.shas: dict[str, str] = {}
         self.no_board_samples: deque[pattern_check.Sample] = deque(maxlen=pattern_check.PROBE_IMAGES)
         self.kept_samples: list[pattern_check.Sample] = []
+        self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
 
     def take(self, frame: sources.Frame) -> FrameDecision | None:
@@ -269,6 +272,8 @@ class _StreamState:
             self.shas[frame.label], self.stored = sha, self.stored + 1
             if len(self.kept_samples) < pattern_check.PROBE_IMAGES:
                 self.kept_samples.append((frame.label, gray))
+                if detection is not None:  # always, a kept frame has a board
+                    self.kept_corners_px[frame.label] = detection.corners_px
             self.progress = self.selector.progress()
         self.outcomes.append(OutcomeRecord(
             name=frame.label, status=_FRAME_STATUS[decision.status],
@@ -309,7 +314,7 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     if state.boards_seen == 0:
         raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"frames of {source.label}",
                                                 len(state.outcomes), list(state.no_board_samples))
-    larger = pattern_check.larger_board_error(spec, board.ref, board.name, state.kept_samples)
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, state.kept_samples, state.kept_corners_px)
     if larger is not None:
         raise larger
     views = [(view, state.shas.get(view.name)) for view in state.selector.kept]

@@ -13,6 +13,7 @@ import pytest
 
 from calibctl.config import load_settings
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.detect import DetectorSettings, detect_board
 from calibctl.errors import InputError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows import capture as capture_workflow
@@ -205,6 +206,37 @@ def test_larger_board_check_needs_two_hits(good: Path) -> None:
     assert error is not None and "a 9x6 chessboard is found in" in error.message
     assert pattern_check.larger_board_error(small, "A8@1", "A8", samples[:1]) is None  # one image proves nothing
     assert pattern_check.larger_board_error(BoardSpec.chessboard(9, 6, 0.025), "A9@1", "A9", samples) is None
+
+
+def test_larger_board_probe_is_skipped_only_when_every_probed_view_shows_its_margin(
+        good: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    samples: list[pattern_check.Sample] = []
+    for path in sorted(good.glob("*.png"))[:3]:
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        assert image is not None
+        samples.append((path.name, image))
+    right = BoardSpec.chessboard(9, 6, 0.025)
+    corners: dict[str, np.ndarray] = {}
+    for name, gray in samples:
+        detection, why = detect_board(gray, right)
+        assert detection is not None, why
+        corners[name] = detection.corners_px
+    calls: list[tuple[int, int]] = []
+    real_found = pattern_check._found
+
+    def counted(sample: pattern_check.Sample, pattern: tuple[int, int], spec: BoardSpec,
+                settings: DetectorSettings) -> bool:
+        calls.append(pattern)
+        return real_found(sample, pattern, spec, settings)
+
+    monkeypatch.setattr(pattern_check, "_found", counted)
+    assert pattern_check.larger_board_error(right, "A9@1", "A9", samples, corners) is None
+    assert calls == []  # the margin is visible past every side in all 3: no detector probe
+    assert pattern_check.larger_board_error(right, "A9@1", "A9", samples, dict(list(corners.items())[:2])) is None
+    assert sorted(set(calls)) == [(9, 7), (10, 6)]  # a view without corners is a "maybe": the probe runs
+    short = {name: c.reshape(6, 9, 2)[:, 1:].reshape(-1, 2) for name, c in corners.items()}  # an 8x6 part
+    error = pattern_check.larger_board_error(BoardSpec.chessboard(8, 6, 0.025), "A8@1", "A8", samples, short)
+    assert error is not None and "a 9x6 chessboard is found in" in error.message
 
 
 def test_parse_now() -> None:
