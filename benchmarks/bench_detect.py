@@ -27,6 +27,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
 
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.detect import detect_chessboard
@@ -42,14 +43,6 @@ CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
 UDACITY_NO_BOARD = Path("/work/shared/datasets/udacity-camcal/calibration1.jpg")
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def render_set(folder: Path, size: tuple[int, int], seed: int) -> tuple[list[Path], list[np.ndarray]]:

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
 
 from calibctl.core.diagnostics.faults import DEFAULT_MAGNITUDE, synth_residual_buffer
 from calibctl.core.diagnostics.triage import triage_by_camera
@@ -37,14 +38,6 @@ FEATURES_PER_KEYFRAME = 80
 CAMERAS = 2
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def timed(fn, repeats: int) -> tuple[float, float, object]:

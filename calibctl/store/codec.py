@@ -50,6 +50,14 @@ def _parse(model: type[BaseModel], payload: str, what: str) -> Any:
         raise IntegrityError(f"{what} is stored as an unreadable document ({first})", TAMPER_HINT) from exc
 
 
+def _decode_hashed(model: type[BaseModel], row: BoardRow | SessionRow, what: str) -> Any:
+    """Check a board/session row's payload against its sha256, then parse it."""
+    actual = sha256_hex(row.payload.encode("utf-8"))
+    if actual != row.payload_sha256:
+        raise _mismatch(what, row.payload_sha256, actual)
+    return _parse(model, row.payload, what)
+
+
 def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
     wrong = [name for name, (column, inside) in pairs.items() if column != inside]
     if wrong:
@@ -77,10 +85,7 @@ def board_row(board: BoardRevision) -> BoardRow:
 
 def decode_board(row: BoardRow) -> BoardRevision:
     what = f"board {row.name}@{row.revision}"
-    actual = sha256_hex(row.payload.encode("utf-8"))
-    if actual != row.payload_sha256:
-        raise _mismatch(what, row.payload_sha256, actual)
-    board: BoardRevision = _parse(BoardRevision, row.payload, what)
+    board: BoardRevision = _decode_hashed(BoardRevision, row, what)
     _check_columns(
         what,
         {
@@ -114,10 +119,7 @@ def session_row(session: CaptureSession) -> SessionRow:
 
 def decode_session(row: SessionRow) -> CaptureSession:
     what = f"capture session {row.session_id}"
-    actual = sha256_hex(row.payload.encode("utf-8"))
-    if actual != row.payload_sha256:
-        raise _mismatch(what, row.payload_sha256, actual)
-    session: CaptureSession = _parse(CaptureSession, row.payload, what)
+    session: CaptureSession = _decode_hashed(CaptureSession, row, what)
     _check_columns(
         what,
         {
