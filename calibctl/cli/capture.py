@@ -13,7 +13,7 @@ from rich.table import Table
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stderr, stdout
 from calibctl.cli.report import print_gates
-from calibctl.cli.solve import ModelOption, render_outcome
+from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, render_outcome
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
@@ -150,8 +150,8 @@ def calibrate(
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
     model: ModelOption = "k1k2",
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
-    drop_outliers: Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")] = False,
+    activate: ActivateOption = True,
+    drop_outliers: DropOutliersOption = False,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.

@@ -24,6 +24,9 @@ ModelOption = Annotated[
     ),
 ]
 
+ActivateOption = Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")]
+DropOutliersOption = Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")]
+
 
 def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
     art = outcome.artifact
@@ -47,8 +50,8 @@ def solve(
     session_id: Annotated[str | None, typer.Argument(metavar="[SESSION_ID]", help="Capture session to solve.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Solve this serial's latest accepted session.")] = None,
     model: ModelOption = "k1k2",
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
-    drop_outliers: Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")] = False,
+    activate: ActivateOption = True,
+    drop_outliers: DropOutliersOption = False,
     json_output: Annotated[bool, typer.Option("--json", help="Print the artifact as JSON.")] = False,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""

@@ -65,6 +65,11 @@ class GateThresholds:
     tilt_directions_min: int = TILT_DIRECTIONS_MIN
     min_views: int = MIN_VIEWS
 
+    def __post_init__(self) -> None:
+        # The tilt gate counts 8 compass bins; asking for more than 8 directions can never pass.
+        if not 1 <= self.tilt_directions_min <= len(DIRECTION_NAMES):
+            raise ValueError(f"tilt_directions_min must be 1-{len(DIRECTION_NAMES)}, got {self.tilt_directions_min}")
+
 
 @dataclass(frozen=True)
 class ViewGeometry:
@@ -237,6 +242,8 @@ def pick_missing_directions(have: set[int], count: int) -> list[int]:
 
 def join_words(items: Sequence[str]) -> str:
     items = list(items)
+    if not items:
+        return ""
     return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
 
 

@@ -23,6 +23,11 @@ ExportFormat = Literal["json", "yaml", "ros", "opencv"]
 EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv")
 
 
+def looks_like_artifact(data: Any) -> bool:
+    """A parsed JSON/YAML document that claims to be a calibctl artifact (before schema validation)."""
+    return isinstance(data, dict) and "camera_matrix" in data and "content_sha256" in data
+
+
 def ros_distortion_model(dist_coeffs: list[float]) -> tuple[str, list[float]]:
     """ROS names: 5 coefficients -> plumb_bob, 8 -> rational_polynomial (4 are padded with k3 = 0)."""
     if len(dist_coeffs) == 4:

@@ -125,7 +125,7 @@ def _calibctl_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
 
 def facts_from_document(data: Any, source: str) -> CalibrationFacts:
     """Recognise the format; anything that is not a calibration is an InputError (exit 2)."""
-    if isinstance(data, dict) and "camera_matrix" in data and "content_sha256" in data:
+    if formats.looks_like_artifact(data):
         return _calibctl_facts(data, source)
     if isinstance(data, dict) and "camera_matrix" in data and ("image_width" in data or "distortion_model" in data):
         return _ros_facts(data, source)

@@ -107,7 +107,7 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
 def read_artifact_file(path: Path) -> CalibrationArtifact:
     """Parse an exported artifact (JSON or YAML) and check its hash; a tampered file is IntegrityError."""
     data = formats.load_structured_file(path)
-    if not isinstance(data, dict) or "camera_matrix" not in data or "content_sha256" not in data:
+    if not formats.looks_like_artifact(data):
         raise InputError(
             f"{path} is not a calibctl artifact (no camera_matrix/content_sha256)",
             "export one with `calibctl export SERIAL --format json`",

@@ -177,3 +177,11 @@ def test_station_thresholds_override_the_defaults() -> None:
     strict = GateThresholds(min_views=20)
     views = scenario_report("good", strict).gate("views")
     assert not views.passed and views.reason == "views.too_few" and views.hint == "capture 8 more views"
+
+
+@pytest.mark.parametrize("directions", [0, 9])
+def test_gate_thresholds_refuse_an_impossible_direction_count(directions):
+    from calibctl.core.gates import GateThresholds
+
+    with pytest.raises(ValueError, match="tilt_directions_min must be 1-8"):
+        GateThresholds(tilt_directions_min=directions)
