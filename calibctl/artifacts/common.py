@@ -56,27 +56,23 @@ def canonical_json_bytes(data: dict[str, Any]) -> bytes:
 
 
 MAX_EXACT_INT = 2**53 - 1  # Number.MAX_SAFE_INTEGER
-_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
 
 
 def _jcs_string(text: str) -> str:
-    out = []
-    for ch in text:
-        if ch in _ESCAPES:
-            out.append(_ESCAPES[ch])
-        elif ord(ch) < 0x20:
-            out.append(f"\\u{ord(ch):04x}")
-        else:
-            out.append(ch)
-    return '"' + "".join(out) + '"'
+    # Python's escaping with ensure_ascii=False is JCS's: only '"', '\\' and U+0000..U+001F, in the
+    # short forms \b \t \n \f \r where they exist, else \u00xx in lower-case hex.
+    return json.dumps(text, ensure_ascii=False)
 
 
 def _jcs_number(value: float) -> str:
     """ECMAScript Number.prototype.toString (RFC 8785 section 3.2.2.3), from Python's shortest repr."""
     if not math.isfinite(value):
         raise ValueError(f"{value} has no JSON form")
-    if value == 0:
-        return "0"  # also -0
+    if value.is_integer() and abs(value) <= MAX_EXACT_INT:
+        return str(int(value))  # 1.0 -> "1", -0.0 -> "0"
+    plain = repr(value)
+    if "e" not in plain:  # 1e-4 <= |x| < 1e16: Python's shortest digits in ECMAScript's own layout
+        return plain.removesuffix(".0")
     sign, text = ("-", repr(-value)) if value < 0 else ("", repr(value))
     mantissa, _, exp_text = text.partition("e")
     whole, _, frac = mantissa.partition(".")

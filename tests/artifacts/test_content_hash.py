@@ -44,7 +44,7 @@ def test_numbers_use_ecmascript_formatting(x):
 def test_rfc8785_number_examples():
     # RFC 8785 appendix B style cases: integral floats lose ".0", small and large numbers switch to exponents
     cases = {1.0: b"1", -0.0: b"0", 1e-7: b"1e-7", 1e-6: b"0.000001", 1e21: b"1e+21", 1e20: b"100000000000000000000",
-             5e-324: b"5e-324", 0.1 + 0.2: b"0.30000000000000004", 333333333.3333333: b"333333333.3333333"}
+             5e-324: b"5e-324", 9007199254740994.0: b"9007199254740994", 1.2345678901234568e20: b"123456789012345680000", 0.1 + 0.2: b"0.30000000000000004", 333333333.3333333: b"333333333.3333333"}
     assert {x: jcs_bytes(x) for x in cases} == cases
     with pytest.raises(ValueError, match="not exactly representable"):
         jcs_bytes(2**53)  # beyond Number.MAX_SAFE_INTEGER: another language would read another number

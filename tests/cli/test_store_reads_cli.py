@@ -90,3 +90,13 @@ def test_lint_all_of_an_empty_store_is_exit_2_never_a_pass(sqlite_url: str):
     assert result.exit_code == 2
     assert "nothing to lint: the store sqlite:///" in result.stderr and "holds no calibrations" in result.stderr
     assert result.stdout == ""
+
+
+@pytest.mark.postgres
+def test_an_empty_postgresql_database_is_not_a_store_for_read_commands(pg_url: str):
+    for args in (("history", "CAM-0001"), ("lint", "--all")):
+        result = cli(pg_url, *args)
+        assert result.exit_code == 2, result.output
+        assert "there is no calibctl database at postgresql://" in result.stderr
+        assert "(it has no calibctl tables)" in result.stderr
+    assert cli(pg_url, "db", "current").stdout.count("empty database") == 1  # still empty: nothing was created
