@@ -83,14 +83,16 @@ def _is_opencv(text: str) -> bool:
 
 
 def _opencv_data(text: str, source: str) -> dict[str, Any]:
-    """Every top-level node OpenCV reads from ``text`` (matrices as nested lists)."""
+    """Every top-level number, string and matrix OpenCV reads from ``text`` (matrices as nested lists)."""
     import cv2
 
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error as exc:
-        first = str(exc).strip().splitlines()[-1] if str(exc).strip() else "parse error"
-        raise InputError(f"{source}: OpenCV cannot read this FileStorage file ({first})") from exc
+    except (cv2.error, SystemError) as exc:  # a parse error can surface as SystemError from the binding
+        cause = exc.__cause__ or exc
+        lines = [line for line in str(cause).strip().splitlines() if line.strip()]
+        raise InputError(f"{source}: OpenCV cannot read this FileStorage file ({lines[-1] if lines else 'parse error'})",
+                         "export it again with `calibctl export SERIAL --format opencv`") from exc
     data: dict[str, Any] = {}
     try:
         for key in fs.root().keys():  # noqa: SIM118 - a cv2.FileNode, not a dict
@@ -101,8 +103,12 @@ def _opencv_data(text: str, source: str) -> dict[str, Any]:
                 data[key] = int(node.real())
             elif node.isReal():
                 data[key] = node.real()
-            elif node.isMap() and node.mat() is not None:
-                data[key] = node.mat().tolist()
+            elif node.isMap() and "dt" in node.keys():  # an !!opencv-matrix  # noqa: SIM118
+                try:
+                    data[key] = node.mat().tolist()
+                except cv2.error as exc:
+                    raise InputError(f"{source}: {key} is not a matrix OpenCV can read (rows x cols, dt, data)",
+                                     "export it again with `calibctl export SERIAL --format opencv`") from exc
     finally:
         fs.release()
     return data

@@ -76,8 +76,12 @@ def camera_info(art: CalibrationArtifact, camera_name: str | None = None) -> dic
     }
 
 
+_ROS_KEYS = {"image_width", "image_height", "camera_name", "distortion_model", *MATRICES}
+
+
 def looks_like_camera_info(data: Any) -> bool:
-    return isinstance(data, dict) and "camera_matrix" in data and ("image_width" in data or "distortion_model" in data)
+    """Two or more camera_info keys: a camera_info file (perhaps one ROS would refuse), not another document."""
+    return isinstance(data, dict) and len(_ROS_KEYS & set(data)) >= 2
 
 
 def _refused(message: str) -> Finding:

@@ -181,6 +181,7 @@ def _ros_file(tmp_path: Path, **changes) -> Path:
     ({"projection_matrix": None}, "ros-camera-info", "projection_matrix is missing"),
     ({"rectification_matrix": None}, "ros-camera-info", "rectification_matrix is missing"),
     ({"image_height": None}, "ros-camera-info", "image_height is missing"),
+    ({"camera_matrix": None}, "ros-camera-info", "camera_matrix is missing"),
     ({"camera_matrix": {"rows": 3, "cols": 3, "data": [800.0, 0.0, 320.0]}}, "ros-camera-info",
      "camera_matrix says 3x3 but has 3 numbers"),
     ({"projection_matrix": {"rows": 3, "cols": 3, "data": [1.0] * 9}}, "ros-camera-info",
@@ -232,3 +233,29 @@ def test_import_of_a_ros_or_opencv_export_exits_2_naming_the_format(store_url, t
     result = cli("--db", f"sqlite:///{tmp_path / 'robot.db'}", "import", str(out))
     assert result.exit_code == 2
     assert ("ROS camera_info export" if fmt == "ros" else "OpenCV FileStorage export") in result.stderr
+
+
+OPENCV_HEAD = "%YAML:1.0\n---\n"
+OPENCV_K = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+
+
+@pytest.mark.parametrize(("body", "message"), [
+    (OPENCV_K + "   rows: [\n", "OpenCV cannot read this FileStorage file"),
+    (OPENCV_K + "   data: [ 500., 0., 320. ]\n", "camera_matrix is not a matrix OpenCV can read"),
+    ("image_width: 640\n", "an OpenCV FileStorage file without camera_matrix is not a calibration"),
+])
+def test_an_opencv_file_opencv_cannot_read_is_exit_2(tmp_path, body, message):
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_HEAD + body)
+    result = cli("lint", str(path))
+    assert result.exit_code == 2 and message in result.stderr and "Traceback" not in result.output
+
+
+def test_an_opencv_calibration_from_another_tool_is_linted_on_its_numbers(tmp_path):
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_HEAD + "notes:\n   by: someone\nviews: [1, 2]\n" + OPENCV_K
+                    + "   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]\nimage_width: 640\nimage_height: 480\n")
+    result = cli("lint", str(path), "--json")
+    rules = {f["rule"]: f["severity"] for f in findings(result)}
+    assert json.loads(result.stdout)["results"][0]["kind"] == "opencv"
+    assert rules["traceability"] == "warning" and "principal-point" not in rules and "finite" not in rules
