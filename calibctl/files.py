@@ -56,7 +56,9 @@ def file_errors(action: str, path: Path | str | None = None) -> Iterator[None]:
 
 
 def _umask() -> int:
-    current = os.umask(0o022)  # the only portable way to read it is to set it; restore at once
+    # The only portable way to read the umask is to set it and restore it at once; calibctl writes its
+    # output files from the main thread only, so no other thread creates a file in between.
+    current = os.umask(0o022)
     os.umask(current)
     return current
 
