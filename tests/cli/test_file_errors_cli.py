@@ -206,3 +206,9 @@ def test_plus_minus_under_an_ascii_locale_is_spelled_out(sqlite_url, tmp_path):
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
     assert "25.030 mm +/- 0.020 mm (1sigma)" in done.stdout
+
+
+def test_an_input_that_is_not_utf8_is_exit_2(tmp_path):
+    path = tmp_path / "cam.yaml"
+    path.write_bytes("camera_name: caméra\n".encode("latin-1"))
+    one_line_error(cli("lint", path), f"cannot read {path}", "it is not UTF-8 text")
