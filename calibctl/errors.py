@@ -40,6 +40,10 @@ class InputError(CalibctlError):
     """An input file or stream is unreadable, malformed or not what it claims to be."""
 
 
+class FileSystemError(CalibctlError):
+    """A file or folder cannot be read or written: permission, read-only, disk full, is-a-directory."""
+
+
 class NotFoundError(CalibctlError):
     """An unknown serial, board, revision, version or session."""
 

@@ -13,7 +13,16 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from calibctl.artifacts.board import BoardRevision
-from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime, content_hash
+from calibctl.artifacts.common import (
+    CURRENT_HASH,
+    LEGACY_HASH,
+    SERIAL_PATTERN,
+    Document,
+    HashAlgorithm,
+    Sha256Hex,
+    UtcDatetime,
+    content_hash,
+)
 from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.session import GateResult
 
@@ -101,6 +110,11 @@ class CalibrationArtifact(Document):
     views: list[ViewResult] = Field(default_factory=list, description="per-view RMS and pose")
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
+    content_hash_algorithm: HashAlgorithm = Field(
+        LEGACY_HASH,
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
+        "other field; sha256-python-json = artifacts written before it (absent field), hashed without this field",
+    )
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
 
     @field_validator("image_size")
@@ -135,12 +149,15 @@ class CalibrationArtifact(Document):
         return f"{self.serial}@{self.version}"
 
     def computed_sha256(self) -> str:
-        """The hash the content should have; compare with ``content_sha256``."""
-        return content_hash(self)
+        """The hash the content should have under its ``content_hash_algorithm``; compare with ``content_sha256``."""
+        if self.content_hash_algorithm == LEGACY_HASH:
+            return content_hash(self, {"content_sha256", "content_hash_algorithm"}, LEGACY_HASH)
+        return content_hash(self, {"content_sha256"}, CURRENT_HASH)
 
     def sealed(self) -> CalibrationArtifact:
-        """A copy whose ``content_sha256`` matches its content."""
-        return self.model_copy(update={"content_sha256": self.computed_sha256()})
+        """A copy hashed with the current algorithm (RFC 8785), its ``content_sha256`` matching its content."""
+        current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH})
+        return current.model_copy(update={"content_sha256": current.computed_sha256()})
 
 
 UNSEALED = "0" * 64

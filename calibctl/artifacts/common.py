@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from datetime import UTC, datetime
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
@@ -43,23 +44,97 @@ def utc_now() -> datetime:
 
 
 def canonical_json_bytes(data: dict[str, Any]) -> bytes:
-    """The bytes a content hash is taken over: sorted keys, no whitespace, UTF-8, finite numbers only.
+    """Sorted keys, no whitespace, UTF-8, finite numbers only: how the store keeps documents, and the
+    bytes the *legacy* artifact hash (``sha256-python-json``) was taken over.
 
     Python's float repr is the shortest string that round-trips a float64, so a document survives
-    JSON -> store -> JSON bit-for-bit and its hash is stable across machines.
+    JSON -> store -> JSON bit-for-bit.
     """
     return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode(
         "utf-8"
     )
 
 
+MAX_EXACT_INT = 2**53 - 1  # Number.MAX_SAFE_INTEGER
+
+
+def _jcs_string(text: str) -> str:
+    # Python's escaping with ensure_ascii=False is JCS's: only '"', '\\' and U+0000..U+001F, in the
+    # short forms \b \t \n \f \r where they exist, else \u00xx in lower-case hex.
+    return json.dumps(text, ensure_ascii=False)
+
+
+def _jcs_number(value: float) -> str:
+    """ECMAScript Number.prototype.toString (RFC 8785 section 3.2.2.3), from Python's shortest repr."""
+    if not math.isfinite(value):
+        raise ValueError(f"{value} has no JSON form")
+    if value.is_integer() and abs(value) <= MAX_EXACT_INT:
+        return str(int(value))  # 1.0 -> "1", -0.0 -> "0"
+    plain = repr(value)
+    if "e" not in plain:  # 1e-4 <= |x| < 1e16: Python's shortest digits in ECMAScript's own layout
+        return plain.removesuffix(".0")
+    sign, text = ("-", repr(-value)) if value < 0 else ("", repr(value))
+    mantissa, _, exp_text = text.partition("e")
+    whole, _, frac = mantissa.partition(".")
+    joined = whole + frac
+    digits = joined.lstrip("0")
+    n = len(whole) + int(exp_text or 0) - (len(joined) - len(digits))  # value = 0.DIGITS x 10^n
+    digits = digits.rstrip("0")
+    k = len(digits)
+    if k <= n <= 21:
+        body = digits + "0" * (n - k)
+    elif 0 < n <= 21:
+        body = digits[:n] + "." + digits[n:]
+    elif -6 < n <= 0:
+        body = "0." + "0" * -n + digits
+    else:
+        e = n - 1
+        body = digits[0] + ("." + digits[1:] if k > 1 else "") + "e" + ("+" if e > 0 else "-") + str(abs(e))
+    return sign + body
+
+
+def _jcs(value: Any) -> str:
+    if value is None:
+        return "null"
+    if value is True:
+        return "true"
+    if value is False:
+        return "false"
+    if isinstance(value, int):
+        if abs(value) > MAX_EXACT_INT:
+            raise ValueError(f"{value} is not exactly representable as an IEEE-754 double")
+        return _jcs_number(float(value))
+    if isinstance(value, float):
+        return _jcs_number(value)
+    if isinstance(value, str):
+        return _jcs_string(value)
+    if isinstance(value, list | tuple):
+        return "[" + ",".join(_jcs(v) for v in value) + "]"
+    if isinstance(value, dict):
+        keys = sorted(value, key=lambda k: k.encode("utf-16-be"))  # RFC 8785: by UTF-16 code units
+        return "{" + ",".join(_jcs_string(k) + ":" + _jcs(value[k]) for k in keys) + "}"
+    raise TypeError(f"{type(value).__name__} has no JSON form")
+
+
+def jcs_bytes(data: Any) -> bytes:
+    """RFC 8785 JSON Canonicalization Scheme: the bytes the artifact hash (``sha256-rfc8785``) is taken
+    over, reproducible in any language with a JCS library (see docs/content-hash.md)."""
+    return _jcs(data).encode("utf-8")
+
+
 def sha256_hex(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def content_hash(model: BaseModel, exclude: set[str] | None = None) -> str:
+HashAlgorithm = Literal["sha256-rfc8785", "sha256-python-json"]
+CURRENT_HASH: HashAlgorithm = "sha256-rfc8785"
+LEGACY_HASH: HashAlgorithm = "sha256-python-json"
+
+
+def content_hash(model: BaseModel, exclude: set[str] | None = None, algorithm: HashAlgorithm = LEGACY_HASH) -> str:
     """sha256 of the canonical JSON of ``model`` without the fields in ``exclude``."""
-    return sha256_hex(canonical_json_bytes(model.model_dump(mode="json", exclude=exclude or {"content_sha256"})))
+    data = model.model_dump(mode="json", exclude=exclude or {"content_sha256"})
+    return sha256_hex(jcs_bytes(data) if algorithm == CURRENT_HASH else canonical_json_bytes(data))
 
 
 def validation_message(exc: ValidationError, source: str) -> str:

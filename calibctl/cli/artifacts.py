@@ -57,12 +57,20 @@ def export(
     ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
     fmt: Annotated[str, typer.Option("--format", "-f", help="json | yaml | ros | opencv")] = "json",
     out: Annotated[Path | None, typer.Option("--output", "-o", help="Write here instead of stdout.")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file (keeps its mode).")] = False,
+    allow_rejected: Annotated[
+        bool, typer.Option("--allow-rejected", help="Export a rejected version too (marked rejected).")
+    ] = False,
+    camera_name: Annotated[
+        str | None, typer.Option("--camera-name", help="ROS camera_name ([A-Za-z0-9_]; default: the serial).")
+    ] = None,
 ) -> None:
     """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, or OpenCV FileStorage."""
     from calibctl.workflows import records
 
-    text = records.export(state(ctx).settings(), ref, fmt, out, force=force)
+    text = records.export(
+        state(ctx).settings(), ref, fmt, out, force=force, allow_rejected=allow_rejected, camera_name=camera_name
+    )
     if out is None:
         print(text, end="")
     else:

@@ -43,7 +43,7 @@ def _render(step: demo_workflow.DemoStep) -> None:
     elif step.kind == "history":
         stdout.print(history_table(p.versions, p.serial))
     elif step.kind == "export":
-        stdout.print(p, markup=False, end="")
+        stdout.print(p, markup=False, end="", soft_wrap=True)  # a file: never re-wrapped
     elif step.kind == "truth":
         z_fx = f" = {p.z_fx:+.2f} sigma" if p.z_fx is not None else ""
         z_cx = f" = {p.z_cx:+.2f} sigma" if p.z_cx is not None else ""

@@ -24,7 +24,7 @@ def _github_line(source: str, f) -> str:
 
 def lint(
     ctx: typer.Context,
-    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Artifacts (JSON/YAML) or ROS camera_info YAML.")] = None,
+    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (JSON/YAML artifact, ROS camera_info, OpenCV FileStorage) or a ROS camera_info file.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
     all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
     fmt: Annotated[str, typer.Option("--format", help="text | json | github (workflow annotations)")] = "text",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import traceback
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 
@@ -15,7 +15,16 @@ from typer.core import TyperGroup
 
 from calibctl import __version__
 from calibctl.cli.context import AppState
+from calibctl.cli.streams import make_output_safe
 from calibctl.errors import EXIT_CANNOT_RUN, CalibctlError
+from calibctl.files import ENVIRONMENT_ERRNOS, os_error
+
+
+def _report(exc: CalibctlError) -> NoReturn:
+    print(f"Error: {exc.message}", file=sys.stderr)
+    if exc.hint:
+        print(f"Hint: {exc.hint}", file=sys.stderr)
+    raise typer.Exit(exc.exit_code) from exc
 
 
 class CalibctlGroup(TyperGroup):
@@ -25,13 +34,17 @@ class CalibctlGroup(TyperGroup):
     """
 
     def invoke(self, ctx: ClickContext) -> Any:
+        make_output_safe()
         try:
             return super().invoke(ctx)
         except CalibctlError as exc:
-            print(f"Error: {exc.message}", file=sys.stderr)
-            if exc.hint:
-                print(f"Hint: {exc.hint}", file=sys.stderr)
-            raise typer.Exit(exc.exit_code) from exc
+            _report(exc)
+        except OSError as exc:
+            # A file-system problem (permission, read-only, disk full, ...) is the machine's, not a bug.
+            if exc.errno not in ENVIRONMENT_ERRNOS:
+                traceback.print_exc()
+                raise typer.Exit(EXIT_CANNOT_RUN) from None
+            _report(os_error(exc, "access"))
         # This typer vendors click: its Exit/Abort/usage errors are typer's own classes, not click's.
         except (typer.Exit, typer.Abort, typer.TyperException):
             raise

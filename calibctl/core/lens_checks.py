@@ -193,3 +193,33 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     return Finding(rule, ERROR, True,
                    f"distortion is one-to-one out to the farthest image corner (r_d = {rd_corner:.4f}, "
                    f"r_u = {r_reach:.4f}); smallest Jacobian determinant {det[worst]:.3f}")
+
+
+def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
+                               image_size: tuple[int, int]) -> Finding:
+    """Equidistant (fisheye, k1..k4): theta_d(theta) = theta (1 + k1 t^2 + k2 t^4 + k3 t^6 + k4 t^8)
+    must increase from theta = 0 until it reaches the farthest image corner's normalised radius.
+
+    theta is the angle off the optical axis (radians), searched up to pi. A model that never reaches
+    the corner's radius describes a circular fisheye whose image corners are outside the image circle,
+    where the lens forms no image: it is then checked out to 90 deg off-axis (a 180 deg field).
+    """
+    rule = "distortion-foldover"
+    fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"
+    k1, k2, k3, k4 = (list(np.asarray(dist_coeffs, dtype=np.float64).ravel()) + [0.0] * 4)[:4]
+    rd_corner = _farthest_corner_rd(camera_matrix, image_size)
+    theta = np.linspace(0.0, math.pi, RADIAL_GRID_STEPS + 1)
+    t2 = theta * theta
+    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    reach = np.flatnonzero(theta_d >= rd_corner)
+    stop = int(reach[0]) if reach.size else int(np.searchsorted(theta, math.pi / 2))
+    falling = np.flatnonzero(np.diff(theta_d[: stop + 1]) <= 0)
+    if falling.size:
+        i = int(falling[0])
+        return Finding(rule, ERROR, False,
+                       f"fisheye theta_d(theta) stops increasing at {math.degrees(theta[i]):.1f} deg off-axis "
+                       f"(theta_d = {theta_d[i]:.4f}) before reaching the farthest image corner "
+                       f"(theta_d = {rd_corner:.4f}): the model folds over inside the image", fix)
+    return Finding(rule, ERROR, True,
+                   f"fisheye theta_d(theta) increases out to {math.degrees(theta[stop]):.1f} deg off-axis "
+                   f"(farthest image corner at theta_d = {rd_corner:.4f})")

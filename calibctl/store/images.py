@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import datetime as dt
 import os
-import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.errors import UsageError
+from calibctl.files import file_errors, write_atomic
 from calibctl.store.engine import sqlite_path
 from calibctl.store.models import ImageRow
 
@@ -59,17 +59,9 @@ def write_atomically(path: Path, data: bytes) -> None:
     per file. The directory is not fsynced: an image whose rename is lost in a crash is missing, which
     the image store tolerates (``image_path`` returns None; the session row is the durable record).
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:12]}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with file_errors("create the image folder", path.parent):
+        path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, data, force=True, fsync=True)
 
 
 class ImageStoreMixin:

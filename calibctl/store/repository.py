@@ -37,6 +37,7 @@ from calibctl.store.engine import (
     display_url,
     is_retryable,
     is_unique_violation,
+    sqlite_path,
 )
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.images import ImageStoreMixin
@@ -45,6 +46,16 @@ from calibctl.store.models import ArtifactRow, BoardRow, EventRow, ImageRow, Ses
 T = TypeVar("T")
 MAX_ATTEMPTS = 5
 _GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
+
+
+def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
+    """A read of a store that does not exist: name what was looked for, never create it by looking."""
+    what = f"{path.resolve()} does not exist" if status == "absent" and path is not None else "it has no calibctl tables"
+    return NotFoundError(
+        f"there is no calibctl database at {url} ({what})",
+        "check --db / CALIBCTL_DB for a typo; a new store is created by `calibctl db upgrade` "
+        "(or by `calibctl board add`, `capture` or `import`)",
+    )
 
 
 class Store(ImageStoreMixin):
@@ -64,9 +75,7 @@ class Store(ImageStoreMixin):
             state = migrate.read_state(engine)
             if state.status in ("absent", "empty"):
                 if not create:
-                    raise NotFoundError(
-                        f"there is no calibctl database at {state.url}", "run `calibctl db upgrade` to create it"
-                    )
+                    raise _no_store(state.url, state.status, sqlite_path(engine.url))
                 migrate.upgrade(engine)
                 state = migrate.read_state(engine)
             state.require_current()

@@ -152,7 +152,7 @@ def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
 
 
 def list_boards(settings: Settings) -> list[BoardRevision]:
-    with Store.open(settings.db_url) as store:
+    with Store.open(settings.db_url, create=False) as store:
         return store.list_boards()
 
 
@@ -162,5 +162,5 @@ def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
         name, revision = parse_board_ref(ref)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
-    with Store.open(settings.db_url) as store:
+    with Store.open(settings.db_url, create=False) as store:
         return store.get_board(name, revision), store.board_revisions(name)

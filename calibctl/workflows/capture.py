@@ -48,6 +48,7 @@ from calibctl.core.frame_select import KEPT, FrameDecision, FrameSelector, Selec
 from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
+from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
@@ -187,8 +188,9 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
 
 def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision, folder: Path,
                     workers: int, observer: CaptureObserver) -> _Collected:
-    paths = outcomes_core.list_images(folder)
-    ignored = sources.ignored_files(folder)
+    with file_errors("read the source folder", folder):
+        paths = outcomes_core.list_images(folder)
+        ignored = sources.ignored_files(folder)
     if not paths:
         also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {', '.join(ignored[:10])}" \
             if ignored else ""
@@ -216,7 +218,9 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     stored = 0
     for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
         batch = readable[start:start + IMAGE_BATCH]
-        shas = store.put_images([Path(o.path).read_bytes() for o in batch],
+        with file_errors("read the images in", folder):
+            images = [Path(o.path).read_bytes() for o in batch]
+        shas = store.put_images(images,
                                 retention_days=settings.image_retention_days)
         for o, sha in zip(batch, shas, strict=True):
             if sha != o.sha256:

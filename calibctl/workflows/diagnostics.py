@@ -31,7 +31,7 @@ from calibctl.core.diagnostics.triage import (
     TriageSummary,
     triage_by_camera,
 )
-from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
 from calibctl.workflows import diagnostics_io as dio
 
 # diagnostics_plots (matplotlib, about 0.3 s to import) is imported inside the run_* functions, only
@@ -265,7 +265,7 @@ def run_synth(out_path: Path, fault: str, magnitude: float | None = None, noise_
     paths = sibling_paths(Path(out_path))
     clash = [str(p) for p in paths.values() if p.exists()]
     if clash and not force:
-        raise dio.AlreadyExistsError(f"{', '.join(clash)} already exist(s)", hint="pass --force to overwrite")
+        raise AlreadyExistsError(f"{', '.join(clash)} already exist(s)", hint="pass --force to overwrite")
     buf = faults.synth_residual_buffer(fault, mag, noise_px, seed, keyframes, features, n_cameras=cameras)
     odo = faults.synth_odometry(gauge_scale=mag if fault == "gauge" else 1.0, slip_std=slip,
                                 duration_s=odometry_s, seed=seed)

@@ -11,13 +11,13 @@ interrupted write never leaves half a CSV behind, and an existing file is never 
 from __future__ import annotations
 
 import csv
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from calibctl.errors import AlreadyExistsError, InputError
+from calibctl.errors import InputError
+from calibctl.files import write_atomic
 
 MAX_LISTED = 5
 
@@ -195,19 +195,7 @@ def _format_column(values: np.ndarray) -> list[str]:
 
 def write_table(path: Path, columns: dict[str, np.ndarray], force: bool = False) -> Path:
     """Write columns (each (n,)) as CSV, atomically. Refuses to overwrite unless ``force``."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise AlreadyExistsError(f"{path} already exists", hint="pass --force to overwrite it")
-    if not path.parent.exists():
-        raise InputError(f"directory {path.parent} does not exist", hint="create it first")
     formatted = [_format_column(np.asarray(v)) for v in columns.values()]
-    tmp = path.parent / f".{path.name}.{os.getpid()}.tmp"
-    try:
-        with tmp.open("w", newline="", encoding="utf-8") as handle:
-            handle.write(",".join(columns) + "\n")
-            handle.writelines(",".join(cells) + "\n" for cells in zip(*formatted, strict=True))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    lines = [",".join(columns)] + [",".join(cells) for cells in zip(*formatted, strict=True)]
+    write_atomic(Path(path), "\n".join(lines) + "\n", force=force)
     return path

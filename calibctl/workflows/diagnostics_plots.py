@@ -6,6 +6,7 @@ on a headless station and from several threads.
 
 from __future__ import annotations
 
+import io
 import re
 import textwrap
 from pathlib import Path
@@ -18,6 +19,7 @@ from calibctl.core.diagnostics.gauge import ALARM_BAND, WARN_BAND, GaugeReport
 from calibctl.core.diagnostics.timeoffset import DriftEstimate, OffsetEstimate
 from calibctl.core.diagnostics.triage import CameraTriage, TriageSummary
 from calibctl.errors import InputError
+from calibctl.files import file_errors, write_atomic
 
 _LABELS = {
     "r": ("radius from principal point r [px]", "residual [px]"),
@@ -32,14 +34,16 @@ def prepare_plot_dir(plot_dir: Path) -> Path:
     plot_dir = Path(plot_dir)
     if plot_dir.exists() and not plot_dir.is_dir():
         raise InputError(f"--plot {plot_dir} exists and is not a directory")
-    plot_dir.mkdir(parents=True, exist_ok=True)
+    with file_errors("create the plot folder", plot_dir):
+        plot_dir.mkdir(parents=True, exist_ok=True)
     return plot_dir
 
 
 def _save(fig: Figure, path: Path) -> Path:
     FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=110)
-    return path
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=110)
+    return write_atomic(path, png.getvalue(), force=True)
 
 
 def _safe(name: str) -> str:

@@ -1,64 +1,37 @@
 """Export and read calibration files in the formats robots and tools use.
 
-- ``json``/``yaml``: the full calibctl artifact (hash included; ``calibctl import`` reads the JSON back).
-- ``ros``: the camera_info YAML that ROS camera_calibration_parsers reads (plumb_bob or rational_polynomial).
-- ``opencv``: a cv2.FileStorage YAML (camera_matrix, distortion_coefficients, image_width/height), written
-  by OpenCV itself so cv2.FileStorage is guaranteed to read it.
+- ``json``/``yaml``: the full calibctl artifact (hash and status included; ``calibctl import`` reads it).
+- ``ros``: the camera_info YAML that ROS camera_calibration_parsers reads (see ``ros_camera_info``).
+- ``opencv``: a cv2.FileStorage YAML (camera_matrix, distortion_coefficients, image_width/height,
+  status), written and read back by OpenCV itself.
+
+ROS and OpenCV exports start with the trace header (``trace_header``): the version, its status, the
+evidence lint needs, and a hash of the file. ``load_calibration`` reads any of the four back.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
 
 from calibctl.artifacts.calibration import CalibrationArtifact
-from calibctl.errors import AlreadyExistsError, InputError
+from calibctl.errors import InputError
+from calibctl.files import read_text
+from calibctl.workflows import ros_camera_info, trace_header
 
 ExportFormat = Literal["json", "yaml", "ros", "opencv"]
 EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv")
+FileKind = Literal["calibctl", "ros", "opencv"]
 
 
 def looks_like_artifact(data: Any) -> bool:
     """A parsed JSON/YAML document that claims to be a calibctl artifact (before schema validation)."""
     return isinstance(data, dict) and "camera_matrix" in data and "content_sha256" in data
-
-
-def ros_distortion_model(dist_coeffs: list[float]) -> tuple[str, list[float]]:
-    """ROS names: 5 coefficients -> plumb_bob, 8 -> rational_polynomial (4 are padded with k3 = 0)."""
-    if len(dist_coeffs) == 4:
-        return "plumb_bob", [*dist_coeffs, 0.0]
-    if len(dist_coeffs) == 5:
-        return "plumb_bob", list(dist_coeffs)
-    if len(dist_coeffs) == 8:
-        return "rational_polynomial", list(dist_coeffs)
-    raise InputError(
-        f"ROS camera_info has no distortion model for {len(dist_coeffs)} OpenCV coefficients",
-        "export as json or opencv instead",
-    )
-
-
-def to_ros_camera_info(art: CalibrationArtifact) -> dict[str, Any]:
-    k = art.camera_matrix
-    model, dist = ros_distortion_model(art.dist_coeffs)
-    return {
-        "image_width": art.image_size[0],
-        "image_height": art.image_size[1],
-        "camera_name": art.serial,
-        "camera_matrix": {"rows": 3, "cols": 3, "data": [v for row in k for v in row]},
-        "distortion_model": model,
-        "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
-        "rectification_matrix": {"rows": 3, "cols": 3, "data": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]},
-        "projection_matrix": {
-            "rows": 3,
-            "cols": 4,
-            "data": [k[0][0], k[0][1], k[0][2], 0.0, 0.0, k[1][1], k[1][2], 0.0, 0.0, 0.0, 1.0, 0.0],
-        },
-    }
 
 
 def _opencv_text(art: CalibrationArtifact) -> str:
@@ -70,6 +43,7 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         fs = cv2.FileStorage(path, cv2.FILE_STORAGE_WRITE)
         fs.write("serial", art.serial)
         fs.write("version", art.version)
+        fs.write("status", art.status)
         fs.write("image_width", art.image_size[0])
         fs.write("image_height", art.image_size[1])
         fs.write("camera_matrix", np.array(art.camera_matrix, dtype=np.float64))
@@ -80,44 +54,67 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         return Path(path).read_text(encoding="utf-8")
 
 
-def render(art: CalibrationArtifact, fmt: str) -> str:
-    """The artifact as text in ``fmt``."""
+def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None) -> str:
+    """The artifact as text in ``fmt``; ``camera_name`` is the ROS camera name (default: from the serial)."""
     if fmt == "json":
         return json.dumps(art.model_dump(mode="json"), indent=2, allow_nan=False) + "\n"
     if fmt == "yaml":
         return yaml.safe_dump(art.model_dump(mode="json"), sort_keys=False)
     if fmt == "ros":
-        header = f"# calibctl {art.serial}@{art.version} sha256 {art.content_sha256}\n"
-        return header + yaml.safe_dump(to_ros_camera_info(art), sort_keys=False, default_flow_style=None)
+        info = ros_camera_info.camera_info(art, camera_name)
+        return trace_header.stamp(art, yaml.safe_dump(info, sort_keys=False, default_flow_style=None))
     if fmt == "opencv":
-        return _opencv_text(art)
+        return trace_header.stamp(art, _opencv_text(art))
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
 
 
-def write_new_file(path: Path, text: str, *, force: bool) -> None:
-    """Write atomically (temp file + rename); never overwrite without ``force``."""
-    if path.exists() and not force:
-        raise AlreadyExistsError(f"{path} exists", "pass --force to overwrite it")
-    if not path.parent.exists():
-        raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+@dataclass(frozen=True)
+class CalibrationFile:
+    """A calibration file as read back: its kind, its content as plain data, and its trace header."""
+
+    source: str
+    kind: FileKind
+    data: dict[str, Any]
+    header: trace_header.TraceHeader | None
 
 
-def load_structured_file(path: Path) -> Any:
-    """Read JSON or YAML (safely); unreadable or malformed input is an InputError naming the file."""
+def _is_opencv(text: str) -> bool:
+    return text.startswith("%YAML:") or (text.startswith("%YAML") and "!!opencv-matrix" in text)
+
+
+def _opencv_data(text: str, source: str) -> dict[str, Any]:
+    """Every top-level number, string and matrix OpenCV reads from ``text`` (matrices as nested lists)."""
+    import cv2
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise InputError(f"{path}: no such file") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read it ({exc})") from exc
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError) as exc:  # a parse error can surface as SystemError from the binding
+        cause = exc.__cause__ or exc
+        lines = [line for line in str(cause).strip().splitlines() if line.strip()]
+        raise InputError(f"{source}: OpenCV cannot read this FileStorage file ({lines[-1] if lines else 'parse error'})",
+                         "export it again with `calibctl export SERIAL --format opencv`") from exc
+    data: dict[str, Any] = {}
+    try:
+        for key in fs.root().keys():  # noqa: SIM118 - a cv2.FileNode, not a dict
+            node = fs.getNode(key)
+            if node.isString():
+                data[key] = node.string()
+            elif node.isInt():
+                data[key] = int(node.real())
+            elif node.isReal():
+                data[key] = node.real()
+            elif node.isMap() and "dt" in node.keys():  # an !!opencv-matrix  # noqa: SIM118
+                try:
+                    data[key] = node.mat().tolist()
+                except cv2.error as exc:
+                    raise InputError(f"{source}: {key} is not a matrix OpenCV can read (rows x cols, dt, data)",
+                                     "export it again with `calibctl export SERIAL --format opencv`") from exc
+    finally:
+        fs.release()
+    return data
+
+
+def _structured(text: str, path: Path) -> Any:
     if path.suffix.lower() == ".json":
         try:
             return json.loads(text)
@@ -129,3 +126,26 @@ def load_structured_file(path: Path) -> Any:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
         raise InputError(f"{path}: malformed YAML{where}: {getattr(exc, 'problem', exc)}") from exc
+
+
+def load_structured_file(path: Path) -> Any:
+    """Read JSON or YAML (safely); unreadable or malformed input is an error naming the file."""
+    return _structured(read_text(path), path)
+
+
+def load_calibration(path: Path) -> CalibrationFile:
+    """Read a calibctl artifact (JSON/YAML), a ROS camera_info or an OpenCV FileStorage export."""
+    text = read_text(path)
+    header = trace_header.read(text)
+    source = str(path)
+    if _is_opencv(text):
+        return CalibrationFile(source, "opencv", _opencv_data(text, source), header)
+    data = _structured(text, path)
+    if looks_like_artifact(data):
+        return CalibrationFile(source, "calibctl", data, header)
+    if ros_camera_info.looks_like_camera_info(data):
+        return CalibrationFile(source, "ros", data, header)
+    raise InputError(
+        f"{path} is not a calibration (neither a calibctl artifact, ROS camera_info nor OpenCV FileStorage)",
+        "lint takes files written by `calibctl export` or ROS camera_calibration",
+    )

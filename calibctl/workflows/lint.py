@@ -1,7 +1,10 @@
 """calibctl lint: the gate CI runs on every calibration file (seed chapter 1, 'the calibration lint').
 
-Inputs are calibctl artifacts (JSON/YAML), ROS camera_info YAML, or artifacts in the store. Each rule
-has an id, a severity, a message with the numbers and the fix. Numeric rules live in
+Inputs are every format ``calibctl export`` writes (artifact JSON/YAML, ROS camera_info, OpenCV
+FileStorage), camera_info files from ROS itself, and artifacts in the store. Each rule has an id, a
+severity, a message with the numbers and the fix. ROS and OpenCV exports are checked against their
+trace header (``trace_header``): an edited file is a ``content-hash`` error, a file without one is
+linted on its numbers and says it cannot be traced. Numeric rules live in
 ``calibctl.core.lens_checks`` (pure numpy) so the solve applies exactly the same checks.
 
 A file that is not a calibration at all, or cannot be read, is an InputError (exit 2); a calibration
@@ -23,8 +26,8 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks
-from calibctl.errors import InputError, UsageError
-from calibctl.workflows import formats
+from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.workflows import formats, ros_camera_info
 
 
 @dataclass
@@ -32,10 +35,11 @@ class CalibrationFacts:
     """What lint needs, extracted the same way from every input format."""
 
     source: str
-    kind: str  # "calibctl" or "ros"
+    kind: str  # "calibctl", "ros" or "opencv"
     image_size: tuple[int, int] | None
     camera_matrix: np.ndarray  # (3, 3)
     dist_coeffs: np.ndarray  # (N,)
+    distortion_model: str = "brown-conrady"  # or "equidistant" (ROS fisheye: k1..k4)
     sigma_fx_px: float | None = None
     sigma_refused_reason: str | None = None
     fit_outer_rms_px: float | None = None
@@ -86,22 +90,52 @@ def _matrix(value: Any, shape: tuple[int, ...], source: str, name: str) -> np.nd
     return arr
 
 
+def _with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
+    """What a trace header vouches for (sigma, held-out outer ring, square size) added to the numbers."""
+
+    def number(key: str) -> float | None:
+        value = evidence.get(key)
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+    facts.sigma_fx_px = number("sigma_fx_px")
+    reason = evidence.get("sigma_refused_reason")
+    facts.sigma_refused_reason = reason if isinstance(reason, str) else None
+    facts.fit_outer_rms_px = number("fit_outer_ring_rms_px")
+    facts.held_out_outer_rms_px = number("held_out_outer_ring_rms_px")
+    status = evidence.get("square_size_status")
+    facts.square_size_status = status if isinstance(status, str) else None
+    facts.square_size_m = number("square_size_m")
+    return facts
+
+
 def _ros_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
-    k = data["camera_matrix"]
-    dist = data.get("distortion_coefficients") or {"data": []}
-    w, h = data.get("image_width"), data.get("image_height")
-    size = (int(w), int(h)) if isinstance(w, int) and isinstance(h, int) else None
     return CalibrationFacts(
         source=source,
         kind="ros",
-        image_size=size,
-        camera_matrix=_matrix(k.get("data") if isinstance(k, dict) else k, (3, 3), source, "camera_matrix"),
-        dist_coeffs=_matrix(dist.get("data", []) if isinstance(dist, dict) else dist, (-1,), source, "distortion"),
+        image_size=(data["image_width"], data["image_height"]),
+        camera_matrix=_matrix(data["camera_matrix"]["data"], (3, 3), source, "camera_matrix"),
+        dist_coeffs=_matrix(data["distortion_coefficients"]["data"], (-1,), source, "distortion"),
+        distortion_model="equidistant" if data.get("distortion_model") == "equidistant" else "brown-conrady",
         raw_numbers=_numbers(data),
     )
 
 
-def _calibctl_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
+def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
+    if "camera_matrix" not in data:
+        raise InputError(f"{source}: an OpenCV FileStorage file without camera_matrix is not a calibration")
+    w, h = data.get("image_width"), data.get("image_height")
+    return CalibrationFacts(
+        source=source,
+        kind="opencv",
+        image_size=(w, h) if isinstance(w, int) and isinstance(h, int) else None,
+        camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
+        dist_coeffs=_matrix(data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"),
+        raw_numbers=_numbers(data),
+    )
+
+
+def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
+    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump)."""
     size = data.get("image_size")
     stdev = data.get("stdev") or {}
     held = data.get("held_out") or {}
@@ -120,18 +154,6 @@ def _calibctl_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
         raw_numbers=_numbers(data),
-    )
-
-
-def facts_from_document(data: Any, source: str) -> CalibrationFacts:
-    """Recognise the format; anything that is not a calibration is an InputError (exit 2)."""
-    if formats.looks_like_artifact(data):
-        return _calibctl_facts(data, source)
-    if isinstance(data, dict) and "camera_matrix" in data and ("image_width" in data or "distortion_model" in data):
-        return _ros_facts(data, source)
-    raise InputError(
-        f"{source} is not a calibration (neither a calibctl artifact nor ROS camera_info YAML)",
-        "lint takes files written by `calibctl export` or ROS camera_calibration",
     )
 
 
@@ -227,32 +249,116 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings += _provenance_rule(facts)
     findings += _adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
-        findings += _adopt(lens_checks.check_distortion_foldover(K, facts.dist_coeffs, size))
+        foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
+                    else lens_checks.check_distortion_foldover)
+        findings += _adopt(foldover(K, facts.dist_coeffs, size))
     return findings
 
 
-def lint_document(data: Any, source: str, limits: LintThresholds) -> LintResult:
-    facts = facts_from_document(data, source)
-    findings = _document_rules(data, source) if facts.kind == "calibctl" else []
-    findings += lint_facts(facts, limits)
-    return LintResult(source=source, kind=facts.kind, findings=findings)
+def _status_rule(status: Any, ref: str) -> list[Finding]:
+    if status != "rejected":
+        return []
+    return [
+        Finding(
+            rule="status",
+            severity="error",
+            message=f"{ref} is a rejected calibration (it failed its gates or lint when it was solved)",
+            fix="export an accepted version (calibctl history SERIAL), or recalibrate",
+        )
+    ]
+
+
+def _trace_rules(loaded: formats.CalibrationFile) -> tuple[list[Finding], dict[str, Any]]:
+    """Findings about a ROS/OpenCV export's header, and the evidence it vouches for (when intact)."""
+    header = loaded.header
+    if header is None:
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message="no calibctl header: this file cannot be traced to a stored calibration; "
+                "linted on its numbers only",
+                fix="export it with `calibctl export SERIAL --format ros|opencv`",
+            )
+        ], {}
+    if header.intact is None:
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message=f"the header names {header.ref} but records no file-sha256 (an older calibctl wrote it): "
+                "its numbers cannot be checked against that calibration",
+                fix=f"export {header.ref} again",
+            )
+        ], {}
+    if not header.intact:
+        return [
+            Finding(
+                rule="content-hash",
+                severity="error",
+                message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
+                f"{str(header.file_sha256)[:12]}: it was changed after `calibctl export` wrote {header.ref}",
+                fix=f"export {header.ref} again; never edit an export by hand",
+            )
+        ], {}
+    return _status_rule(header.status, header.ref), header.evidence
+
+
+def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintResult:
+    """Every rule for one calibration file (or stored artifact), whatever its format."""
+    data, source = loaded.data, loaded.source
+    if loaded.kind == "calibctl":
+        findings = _document_rules(data, source)
+        findings += _status_rule(data.get("status"), f"{data.get('serial')}@{data.get('version')}")
+        return LintResult(source, loaded.kind, findings + lint_facts(facts_from_document(data, source), limits))
+    findings, evidence = _trace_rules(loaded)
+    if loaded.kind == "ros":
+        structure = ros_camera_info.check_camera_info(data)
+        findings += structure
+        if has_errors(structure):  # ROS would not load it: its numbers describe no camera
+            return LintResult(source, loaded.kind, findings)
+        facts = _ros_facts(data, source)
+    else:
+        facts = _opencv_facts(data, source)
+    return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
 
 
 def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
-    return [lint_document(formats.load_structured_file(p), str(p), limits) for p in paths]
+    return [lint_file(formats.load_calibration(p), limits) for p in paths]
+
+
+def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> LintResult:
+    """A serial with nothing active is a finding: the camera has no calibration a robot may load."""
+    accepted = [a.version for a in versions if a.status == "accepted"]
+    listing = ", ".join(f"{a.version} ({a.status})" for a in versions)
+    if accepted:
+        message, fix = (f"{serial} has no active version (versions: {listing})",
+                        f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'")
+    else:
+        message, fix = (f"{serial} has no accepted calibration (versions: {listing})",
+                        f"recalibrate it: calibctl calibrate --serial {serial} --board BOARD --source ...")
+    finding = Finding(rule="no-active-version", severity="error", message=message, fix=fix)
+    return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
 def lint_store(settings: Settings, serial: str | None, all_serials: bool) -> list[LintResult]:
-    """Lint the active version of one serial, or of every serial in the store."""
+    """Lint the active version of one serial, or of every serial in the store (an empty store is an error:
+    a CI job pointed at the wrong --db must not pass with nothing checked)."""
     from calibctl.workflows.records import open_store
 
     with open_store(settings) as store:
         serials = store.serials() if all_serials else [serial] if serial else []
+        if not serials:
+            raise NotFoundError(f"nothing to lint: the store {store.url} holds no calibrations",
+                                "check --db / CALIBCTL_DB, or calibrate a camera first")
         results = []
         for s in serials:
+            if store.active_version(s) is None:
+                results.append(_no_active_version(s, store.list_artifacts(s)))
+                continue
             art = store.get_artifact(s, None)
-            data = art.model_dump(mode="json")
-            results.append(lint_document(data, art.ref, settings.lint))
+            stored = formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None)
+            results.append(lint_file(stored, settings.lint))
     return results
 
 

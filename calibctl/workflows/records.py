@@ -11,9 +11,11 @@ from calibctl.artifacts.common import parse_document
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
+from calibctl.files import write_atomic
 from calibctl.store.repository import Store
 from calibctl.workflows import formats
 
+_KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
 _ARTIFACT_REF = re.compile(r"^(?P<serial>.+?)(?:@(?P<version>[0-9]+))?$")
 
 
@@ -26,8 +28,10 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     return match.group("serial"), int(version) if version else None
 
 
-def open_store(settings: Settings) -> Store:
-    return Store.open(settings.db_url)
+def open_store(settings: Settings, *, create: bool = False) -> Store:
+    """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
+    new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked)."""
+    return Store.open(settings.db_url, create=create)
 
 
 @dataclass
@@ -93,26 +97,48 @@ def show(settings: Settings, ref: str) -> CalibrationArtifact:
         return store.get_artifact(serial, version)
 
 
-def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool) -> str:
-    """Render ``ref`` (default: the active version) as ``fmt``; write it to ``out`` when given."""
+def export(
+    settings: Settings,
+    ref: str,
+    fmt: str,
+    out: Path | None,
+    *,
+    force: bool,
+    allow_rejected: bool = False,
+    camera_name: str | None = None,
+) -> str:
+    """Render ``ref`` (default: the active version) as ``fmt``; write it to ``out`` when given.
+
+    A rejected version is refused unless ``allow_rejected`` (exit 2: nothing was exported, the
+    command could not do what was asked; there is no verdict to report). Every export names the
+    version's status: a field in json/yaml, the trace header in ros/opencv.
+    """
     if fmt not in formats.EXPORT_FORMATS:
         raise UsageError(f"unknown export format '{fmt}'", f"choose one of {', '.join(formats.EXPORT_FORMATS)}")
+    if camera_name is not None and fmt != "ros":
+        raise UsageError("--camera-name applies to --format ros only")
     art = show(settings, ref)
-    text = formats.render(art, fmt)
+    if art.status == "rejected" and not allow_rejected:
+        raise UsageError(
+            f"{art.ref} is a rejected calibration; a robot must not load it",
+            "export an accepted version (see `calibctl history`), or pass --allow-rejected to inspect it "
+            "(the export then says it is rejected)",
+        )
+    text = formats.render(art, fmt, camera_name=camera_name)
     if out is not None:
-        formats.write_new_file(out, text, force=force)
+        write_atomic(out, text, force=force)
     return text
 
 
 def read_artifact_file(path: Path) -> CalibrationArtifact:
     """Parse an exported artifact (JSON or YAML) and check its hash; a tampered file is IntegrityError."""
-    data = formats.load_structured_file(path)
-    if not formats.looks_like_artifact(data):
+    loaded = formats.load_calibration(path)
+    if loaded.kind != "calibctl":
         raise InputError(
-            f"{path} is not a calibctl artifact (no camera_matrix/content_sha256)",
-            "export one with `calibctl export SERIAL --format json`",
+            f"{path} is {_KIND_NAMES[loaded.kind]}: it holds the numbers a robot needs, not the whole artifact",
+            "import the artifact itself: `calibctl export SERIAL --format json` on the source store",
         )
-    art = parse_document(CalibrationArtifact, data, str(path))
+    art = parse_document(CalibrationArtifact, loaded.data, str(path))
     actual = art.computed_sha256()
     if actual != art.content_sha256:
         raise IntegrityError(
@@ -125,7 +151,7 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
 
 def import_file(settings: Settings, path: Path, *, activate: bool) -> CalibrationArtifact:
     art = read_artifact_file(path)
-    with open_store(settings) as store:
+    with open_store(settings, create=True) as store:
         return store.import_artifact(art, actor=settings.operator, station=settings.station, activate=activate)
 
 

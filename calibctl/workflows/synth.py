@@ -37,6 +37,7 @@ from calibctl.core.synth import (
 )
 from calibctl.core.synth_scenes import SCENARIOS, scenario_poses, video_plan
 from calibctl.errors import AlreadyExistsError, InputError, UsageError
+from calibctl.files import file_errors, write_atomic
 
 TRUTH_SCHEMA = "calibctl.synth.truth/1"
 DEFAULT_VIEWS = 12
@@ -85,10 +86,12 @@ def _prepare_out(out: Path, force: bool) -> None:
     if out.is_dir() and any(out.iterdir()):
         if not force:
             raise AlreadyExistsError(f"{out} is not empty", "choose an empty or new folder, or pass --force")
-        for old in list(out.glob("view-*.png")) + [out / VIDEO_FILE, out / TRUTH_FILE]:
-            if old.is_file():
-                old.unlink()
-    out.mkdir(parents=True, exist_ok=True)
+        with file_errors("clear", out):
+            for old in list(out.glob("view-*.png")) + [out / VIDEO_FILE, out / TRUTH_FILE]:
+                if old.is_file():
+                    old.unlink()
+    with file_errors("create", out):
+        out.mkdir(parents=True, exist_ok=True)
 
 
 def _view_record(camera: PinholeCamera, board: BoardSpec, T: np.ndarray) -> dict[str, object]:
@@ -143,8 +146,7 @@ def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | Non
                 record = {"frame": i, "still": plan.still[i], "key_pose": plan.key_index[i], **record}
             else:
                 name = f"view-{i:03d}.png"
-                if not cv2.imwrite(str(out / name), img):
-                    raise InputError(f"cannot write {out / name}")
+                write_atomic(out / name, cv2.imencode(".png", img)[1].tobytes(), force=True)
                 files.append(name)
                 record = {"file": name, **record}
             records.append(record)
@@ -163,7 +165,7 @@ def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | Non
     if writer is not None:
         truth["video"] = {"file": VIDEO_FILE, "fps": VIDEO_FPS, "n_frames": len(records)}
     truth_path = out / TRUTH_FILE
-    truth_path.write_text(json.dumps(truth, indent=1) + "\n", encoding="utf-8")
+    write_atomic(truth_path, json.dumps(truth, indent=1) + "\n", force=True)
     return SynthResult(out, scenario, image_size, files, truth_path, len(records))
 
 

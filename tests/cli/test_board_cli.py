@@ -105,7 +105,8 @@ def test_bad_board_input_exits_2_with_a_message(run, args, message):
     result = run("board", "add", "A17", *args)
     assert result.exit_code == 2, result.output
     assert message in result.stderr
-    assert run("board", "list", "--json").stdout.strip() == "[]"  # nothing was registered
+    listed = run("board", "list", "--json")  # nothing was registered: not even a store was created
+    assert listed.exit_code == 2 and "there is no calibctl database" in listed.stderr
 
 
 def test_bad_board_names_are_refused(run):
@@ -114,6 +115,7 @@ def test_bad_board_names_are_refused(run):
 
 
 def test_unknown_board_or_revision_exits_2_listing_what_exists(run):
+    assert run("db", "upgrade").exit_code == 0
     empty = run("board", "show", "A17")
     assert empty.exit_code == 2 and "unknown board 'A17'; no boards are registered yet" in empty.stderr
     run("board", "add", "B2", *CHESS)
@@ -136,5 +138,6 @@ def test_changing_the_pattern_of_an_existing_name_is_refused(run):
 
 
 def test_empty_registry_lists_nothing(run):
+    assert run("db", "upgrade").exit_code == 0
     result = run("board", "list")
     assert result.exit_code == 0 and "no boards registered yet" in result.stdout

@@ -73,7 +73,7 @@ def test_verify_of_a_missing_database_exits_2(sqlite_url: str):
     result = db(sqlite_url, "verify")
     assert result.exit_code == 2
     assert "Error: there is no calibctl database at sqlite:///" in result.stderr
-    assert "Hint: run `calibctl db upgrade` to create it" in result.stderr
+    assert "does not exist" in result.stderr and "Hint:" in result.stderr and "calibctl db upgrade" in result.stderr
 
 
 def test_db_commands_exit_2_when_the_server_is_unreachable():

@@ -180,7 +180,7 @@ def test_import_of_a_tampered_file_exits_1_and_writes_nothing(run, tmp_path: Pat
 
 @pytest.mark.parametrize(
     ("content", "message"),
-    [("{not json", "malformed JSON at line 1"), ('{"hello": 1}', "is not a calibctl artifact")],
+    [("{not json", "malformed JSON at line 1"), ('{"hello": 1}', "is not a calibration")],
 )
 def test_import_of_malformed_input_exits_2(run, tmp_path: Path, content, message):
     path = tmp_path / "bad.json"

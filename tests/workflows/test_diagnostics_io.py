@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
+from calibctl.errors import AlreadyExistsError, FileSystemError, InputError, NotFoundError, UsageError
 from calibctl.workflows import diagnostics as wf
 from calibctl.workflows.diagnostics_io import read_table, require_increasing, write_table
 
@@ -80,7 +80,7 @@ def test_write_table_is_atomic_and_never_overwrites_silently(tmp_path):
     write_table(path, {"x": np.array([3])}, force=True)
     assert path.read_text() == "x\n3\n"
     assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]  # no temporary left behind
-    with pytest.raises(InputError, match="does not exist"):
+    with pytest.raises(FileSystemError, match="does not exist"):
         write_table(tmp_path / "missing" / "o.csv", {"x": np.array([1])})
 
 

@@ -1,0 +1,111 @@
+"""Files calibctl writes, and the one translation of file-system failures into calibctl errors.
+
+Every output file goes through ``write_atomic``: a temporary file in the target folder, then a rename,
+so a reader never sees half a file and a failed write leaves the old file as it was. The new file
+gets the mode the umask gives (0644 under the usual 022, so a robot's service user can read its
+calibration); overwriting keeps the existing file's mode.
+
+``os_error`` turns an OSError (permission, read-only file system, disk full, is-a-directory, ...)
+into one ``FileSystemError`` line naming the path and what to do; the CLI boundary applies the same
+translation to any such error raised elsewhere, so no file-system problem ends in a traceback.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from calibctl.errors import AlreadyExistsError, FileSystemError
+
+# errno -> (what happened, what to do). Anything not listed is reported with the system's own words.
+_REASONS: dict[int, tuple[str, str]] = {
+    errno.EACCES: ("permission denied", "check the permissions of that path, or choose another one"),
+    errno.EPERM: ("operation not permitted", "check the permissions of that path, or choose another one"),
+    errno.EROFS: ("read-only file system", "write to a writable folder instead"),
+    errno.ENOSPC: ("no space left on the device", "free some space or write to another disk; nothing was written"),
+    errno.EDQUOT: ("disk quota exceeded", "free some space or write to another disk; nothing was written"),
+    errno.EISDIR: ("it is a folder", "name a file (for example FOLDER/camera.yaml)"),
+    errno.ENOTDIR: ("a part of the path is not a folder", "check the path"),
+    errno.ENOENT: ("no such file or folder", "check the path"),
+    errno.ENAMETOOLONG: ("the name is too long", "choose a shorter path"),
+    errno.EMFILE: ("too many open files", "raise the open-file limit (ulimit -n)"),
+}
+ENVIRONMENT_ERRNOS = frozenset(_REASONS) | {errno.EIO, errno.ELOOP, errno.EEXIST, errno.EBUSY, errno.ETXTBSY}
+"""OSErrors that describe the machine, not a bug in calibctl: the CLI reports these in one line."""
+
+
+def os_error(exc: OSError, action: str, path: Path | str | None = None) -> FileSystemError:
+    """``cannot <action> <path>: <reason>`` with a hint, for any OSError."""
+    where = path if path is not None else (exc.filename or "")
+    reason, hint = _REASONS.get(exc.errno or -1, (exc.strerror or str(exc), "check the path and the disk"))
+    target = f" {where}" if where != "" else ""
+    return FileSystemError(f"cannot {action}{target}: {reason}", hint)
+
+
+@contextmanager
+def file_errors(action: str, path: Path | str | None = None) -> Iterator[None]:
+    """Re-raise any OSError inside the block as a FileSystemError naming ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        raise os_error(exc, action, path) from exc
+
+
+def _umask() -> int:
+    # The only portable way to read the umask is to set it and restore it at once; calibctl writes its
+    # output files from the main thread only, so no other thread creates a file in between.
+    current = os.umask(0o022)
+    os.umask(current)
+    return current
+
+
+def new_file_mode(existing: Path | None = None) -> int:
+    """The mode of an overwritten file is kept; a new file gets 0666 minus the umask."""
+    if existing is not None:
+        try:
+            return existing.stat().st_mode & 0o7777
+        except FileNotFoundError:
+            pass
+    return 0o666 & ~_umask()
+
+
+def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: bool = False) -> Path:
+    """Write ``data`` to ``path`` (temporary file + rename). Refuses to overwrite unless ``force``;
+    ``fsync`` makes the bytes durable before the rename (content-addressed stores need that)."""
+    path = Path(path)
+    if path.is_dir():
+        raise os_error(IsADirectoryError(errno.EISDIR, "is a directory"), "write", path)
+    if path.exists() and not force:
+        raise AlreadyExistsError(f"{path} already exists", "pass --force to overwrite it")
+    if not path.parent.is_dir():
+        raise FileSystemError(f"cannot write {path}: folder {path.parent} does not exist", "create it first")
+    payload = data.encode("utf-8") if isinstance(data, str) else data
+    mode = new_file_mode(path if force else None)
+    with file_errors("write", path):
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:24]}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(payload)
+                handle.flush()
+                if fsync:
+                    os.fsync(handle.fileno())
+                os.fchmod(handle.fileno(), mode)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    return path
+
+
+def read_text(path: Path, what: str = "read") -> str:
+    """A UTF-8 text file; a missing, unreadable or undecodable file is a FileSystemError naming it."""
+    with file_errors(what, path):
+        try:
+            return Path(path).read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise FileSystemError(f"cannot {what} {path}: it is not UTF-8 text ({exc.reason} at byte {exc.start})",
+                                  "is this the right file?") from exc

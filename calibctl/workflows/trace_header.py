@@ -1,0 +1,102 @@
+"""The comment header that ties a ROS / OpenCV export to its artifact and proves the file is unchanged.
+
+A camera_info or FileStorage file cannot carry the whole artifact, so calibctl writes three comment
+lines at its top (after OpenCV's ``%YAML`` line, which must stay first)::
+
+    # calibctl CAM-0042@3 accepted sha256 <content_sha256 of the artifact in the store>
+    # calibctl evidence {"fit_outer_ring_rms_px":0.039,...,"sigma_fx_px":0.25,...}
+    # calibctl file-sha256 <sha256 of every byte of the file except this line>
+
+The first line names the version and its status (a rejected calibration says so in its export); the
+evidence line carries what lint needs and the format has no field for (sigma(fx), the held-out outer
+ring, how the square size was measured); the last one is checked by ``calibctl lint``, so an edited
+number is a ``content-hash`` error. Anyone can check it: ``grep -v '^# calibctl file-sha256 ' FILE |
+sha256sum``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+
+_PREFIX = "# calibctl "
+_REF = re.compile(r"^# calibctl (?P<ref>\S+@\d+)(?: (?P<status>accepted|rejected))? sha256 (?P<sha>[0-9a-f]{64})\s*$")
+_EVIDENCE = re.compile(r"^# calibctl evidence (?P<json>\{.*\})\s*$")
+_FILE_SHA = re.compile(r"^# calibctl file-sha256 (?P<sha>[0-9a-f]{64})\s*$")
+HEADER_SCAN_LINES = 8
+
+
+@dataclass(frozen=True)
+class TraceHeader:
+    ref: str
+    status: str | None  # None: written before exports carried their status
+    artifact_sha256: str
+    evidence: dict[str, Any] = field(default_factory=dict)
+    file_sha256: str | None = None  # None: written before exports were hashed
+    actual_file_sha256: str | None = None
+
+    @property
+    def intact(self) -> bool | None:
+        """True/False when the file records its hash, None when it cannot be checked."""
+        return None if self.file_sha256 is None else self.file_sha256 == self.actual_file_sha256
+
+
+def evidence_of(art: CalibrationArtifact) -> dict[str, Any]:
+    measurement = art.board.measurement
+    return {
+        "sigma_fx_px": art.stdev.sigma.get("fx"),
+        "sigma_refused_reason": art.stdev.refused_reason,
+        "fit_outer_ring_rms_px": art.held_out.fit_outer_ring_rms_px,
+        "held_out_outer_ring_rms_px": art.held_out.outer_ring_rms_px,
+        "square_size_status": measurement.status if measurement else None,
+        "square_size_m": measurement.square_size_m if measurement else None,
+    }
+
+
+def _without_hash_line(text: str) -> str:
+    return "".join(line for line in text.splitlines(keepends=True) if not _FILE_SHA.match(line.rstrip("\r\n")))
+
+
+def file_sha256(text: str) -> str:
+    return hashlib.sha256(_without_hash_line(text).encode("utf-8")).hexdigest()
+
+
+def stamp(art: CalibrationArtifact, body: str) -> str:
+    """``body`` with the header inserted (after a leading ``%YAML`` directive, which must stay first)."""
+    lines = [
+        f"{_PREFIX}{art.ref} {art.status} sha256 {art.content_sha256}\n",
+        f"{_PREFIX}evidence {json.dumps(evidence_of(art), sort_keys=True, separators=(',', ':'), allow_nan=False)}\n",
+    ]
+    directive, rest = ("", body)
+    if body.startswith("%YAML"):
+        first, _, rest = body.partition("\n")
+        directive = first + "\n"
+    text = directive + "".join(lines) + rest
+    return directive + "".join(lines) + f"{_PREFIX}file-sha256 {file_sha256(text)}\n" + rest
+
+
+def read(text: str) -> TraceHeader | None:
+    """The header of ``text``, or None when it has none (a file not written by calibctl export)."""
+    head = text.splitlines()[:HEADER_SCAN_LINES]
+    ref = next((m for line in head if (m := _REF.match(line))), None)
+    if ref is None:
+        return None
+    evidence_match = next((m for line in head if (m := _EVIDENCE.match(line))), None)
+    try:
+        evidence = json.loads(evidence_match.group("json")) if evidence_match else {}
+    except json.JSONDecodeError:
+        evidence = {}
+    sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
+    return TraceHeader(
+        ref=ref.group("ref"),
+        status=ref.group("status"),
+        artifact_sha256=ref.group("sha"),
+        evidence=evidence if isinstance(evidence, dict) else {},
+        file_sha256=sha,
+        actual_file_sha256=file_sha256(text) if sha else None,
+    )

@@ -1,0 +1,62 @@
+"""calibctl.files: the one atomic writer and the one OSError translation."""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+
+import pytest
+
+from calibctl.errors import AlreadyExistsError, FileSystemError
+from calibctl.files import ENVIRONMENT_ERRNOS, file_errors, os_error, read_text, write_atomic
+
+
+def test_write_atomic_writes_text_and_bytes_and_never_overwrites_without_force(tmp_path):
+    path = tmp_path / "a.txt"
+    write_atomic(path, "x ± 1\n")
+    assert path.read_text(encoding="utf-8") == "x ± 1\n"
+    with pytest.raises(AlreadyExistsError, match="already exists"):
+        write_atomic(path, b"other")
+    write_atomic(path, b"other", force=True)
+    assert path.read_bytes() == b"other"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_new_files_follow_the_umask_and_overwrites_keep_their_mode(tmp_path):
+    old = os.umask(0o077)
+    try:
+        private = write_atomic(tmp_path / "private", "x")
+        assert stat.S_IMODE(private.stat().st_mode) == 0o600
+        os.umask(0o002)
+        shared = write_atomic(tmp_path / "shared", "x")
+        assert stat.S_IMODE(shared.stat().st_mode) == 0o664
+        shared.chmod(0o640)
+        write_atomic(shared, "y", force=True)
+        assert stat.S_IMODE(shared.stat().st_mode) == 0o640
+    finally:
+        os.umask(old)
+
+
+def test_messages_name_the_path_and_the_reason(tmp_path):
+    assert str(os_error(OSError(errno.ENOSPC, "x"), "write", tmp_path / "f")) == (
+        f"cannot write {tmp_path / 'f'}: no space left on the device (free some space or write to another disk; "
+        "nothing was written)")
+    unlisted = os_error(OSError(errno.ENXIO, os.strerror(errno.ENXIO), "/dev/x"), "open")
+    assert unlisted.message == f"cannot open /dev/x: {os.strerror(errno.ENXIO)}"
+    with pytest.raises(FileSystemError, match=r"cannot write .*: it is a folder"):
+        write_atomic(tmp_path, "x", force=True)
+    with pytest.raises(FileSystemError, match="folder .* does not exist"):
+        write_atomic(tmp_path / "no" / "f", "x")
+    with pytest.raises(FileSystemError, match="cannot list .*: permission denied"), file_errors("list", tmp_path):
+        raise PermissionError(errno.EACCES, "Permission denied")
+    assert errno.EROFS in ENVIRONMENT_ERRNOS and errno.EINVAL not in ENVIRONMENT_ERRNOS
+
+
+def test_read_text_refuses_a_file_that_is_not_utf8(tmp_path):
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes("sigma: ± 1\n".encode("latin-1"))
+    with pytest.raises(FileSystemError, match=r"it is not UTF-8 text \(invalid start byte at byte 7\)"):
+        read_text(path)
+    with pytest.raises(FileSystemError, match="no such file or folder"):
+        read_text(tmp_path / "missing.yaml")
