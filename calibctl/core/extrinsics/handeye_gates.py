@@ -1,0 +1,141 @@
+"""Observability gates and screens for hand-eye data (seed chapter 2), checked before any number.
+
+- rotation: R_X is pinned only by two rotations about non-parallel axes (M = sum a_i b_i^T of
+  rank 2; the det guard supplies the third bit). Value: the spread of the motions' rotation axes,
+  2 atan(s2 / s1) of the stacked axis-angle vectors of A, in degrees (for two equal rotations it is
+  the angle between their axes).
+- lever-arm: the translation needs sigma_min of the stacked (R_A - I) >= 0.5 (about 30 deg of
+  excitation): an error d in a motion translation becomes d / sigma_min in the lever arm.
+- time-alignment: conjugation keeps the rotation angle, so |angle(A_i)| = |angle(B_i)| for a
+  synchronised pair; a mismatch is a time offset (failure mode B) or a wrong pairing, and
+  would otherwise be absorbed into R_X. Motions over the limit are named.
+
+Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibctl.core.extrinsics.handeye import HandEyeFit, Motions
+from calibctl.core.gates import GateResult
+
+LEVER_ARM_SIGMA_MIN = 0.5
+AXIS_SPREAD_MIN_DEG = 10.0
+ANGLE_MISMATCH_MAX_DEG = 1.0
+MISMATCH_FRACTION_MAX = 0.1  # more than one motion in ten: a clock problem, not a bad sample
+OUTLIER_FACTOR = 4.0  # |r| / robust sigma: the 99.9 % point of a 3-D Gaussian's norm is 4.03 sigma
+CHI3_MEDIAN = 1.5382  # median of the norm of a 3-D standard Gaussian
+MIN_MOTIONS_FOR_OUTLIERS = 5
+MAX_NAMED = 5
+
+
+@dataclass(frozen=True)
+class HandEyeThresholds:
+    lever_arm_sigma_min: float = LEVER_ARM_SIGMA_MIN
+    axis_spread_min_deg: float = AXIS_SPREAD_MIN_DEG
+    angle_mismatch_max_deg: float = ANGLE_MISMATCH_MAX_DEG
+    mismatch_fraction_max: float = MISMATCH_FRACTION_MAX
+
+    def __post_init__(self) -> None:
+        if not self.lever_arm_sigma_min > 0 or not self.axis_spread_min_deg > 0 or not self.angle_mismatch_max_deg > 0:
+            raise ValueError("hand-eye thresholds must be positive")
+        if not 0 <= self.mismatch_fraction_max < 1:
+            raise ValueError(f"mismatch_fraction_max must be in [0, 1), got {self.mismatch_fraction_max}")
+
+
+def equivalent_rotation_deg(sigma_min: float) -> float:
+    """The single rotation theta with 2 sin(theta/2) = sigma_min, degrees (180 when sigma_min >= 2)."""
+    return math.degrees(2.0 * math.asin(min(1.0, sigma_min / 2.0)))
+
+
+def lever_arm_conditioning(R_A: np.ndarray) -> tuple[float, np.ndarray]:
+    """sigma_min of the stacked (R_A - I) of (n, 3, 3) rotations, and the (3,) direction it belongs to."""
+    _, s, Vt = np.linalg.svd((np.asarray(R_A, np.float64) - np.eye(3)).reshape(-1, 3))
+    return float(s[-1]), Vt[-1]
+
+
+def axis_spread_deg(rotvec_A_rad: np.ndarray) -> float:
+    """2 atan(s2/s1) of the (n, 3) stacked axis-angle vectors, degrees: 0 for one axis (or none)."""
+    s = np.linalg.svd(np.asarray(rotvec_A_rad, np.float64).reshape(-1, 3), compute_uv=False)
+    return 0.0 if s[0] <= 1e-12 else math.degrees(2.0 * math.atan2(s[1], s[0]))
+
+
+def angle_mismatch_deg(motions: Motions) -> np.ndarray:
+    """(n,) |angle(A_i)| - |angle(B_i)| in degrees (signed)."""
+    return np.degrees(np.linalg.norm(motions.rotvec_A_rad, axis=1) - np.linalg.norm(motions.rotvec_B_rad, axis=1))
+
+
+def _named(labels: list[str]) -> str:
+    more = f" and {len(labels) - MAX_NAMED} more" if len(labels) > MAX_NAMED else ""
+    return ", ".join(labels[:MAX_NAMED]) + more
+
+
+def rotation_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    spread = axis_spread_deg(motions.rotvec_A_rad)
+    ok = spread >= th.axis_spread_min_deg
+    message = f"rotation axes spread {spread:.1f} deg (needs {th.axis_spread_min_deg:g})"
+    if ok:
+        return GateResult("rotation", True, spread, th.axis_spread_min_deg, message)
+    return GateResult("rotation", False, spread, th.axis_spread_min_deg,
+                      f"rotation unobservable: {message}; the motions turn about one axis (or not at all)",
+                      "rotation.one_axis", "rotate about at least two non-parallel axes")
+
+
+def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    sigma_min, weakest = lever_arm_conditioning(motions.R_A)
+    ok = sigma_min >= th.lever_arm_sigma_min
+    about = equivalent_rotation_deg(sigma_min)
+    needed = 5.0 * math.ceil(equivalent_rotation_deg(th.lever_arm_sigma_min) / 5.0 - 1e-9)
+    hint = f"rotate at least {needed:.0f} deg about two non-parallel axes"
+    detail: dict[str, float | int | str | list[str]] = {
+        "weakest_direction_a": [f"{v:+.3f}" for v in weakest], "equivalent_rotation_deg": round(about, 3)}
+    if ok:
+        return GateResult("lever-arm", True, sigma_min, th.lever_arm_sigma_min,
+                          f"sigma_min of stacked (R_A - I) {sigma_min:.3f} (needs {th.lever_arm_sigma_min:g})",
+                          detail=detail)
+    return GateResult("lever-arm", False, sigma_min, th.lever_arm_sigma_min,
+                      f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.0f} deg of rotation); {hint}",
+                      "lever_arm.unobservable", hint, detail)
+
+
+def time_alignment_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    mismatch = angle_mismatch_deg(motions)
+    bad = np.flatnonzero(np.abs(mismatch) > th.angle_mismatch_max_deg)
+    fraction = bad.size / max(motions.n, 1)
+    ok = fraction <= th.mismatch_fraction_max
+    worst = int(np.argmax(np.abs(mismatch)))
+    message = (f"{bad.size} of {motions.n} motions turn by a different angle in a and b "
+               f"(> {th.angle_mismatch_max_deg:g} deg; worst {mismatch[worst]:+.2f} deg at {motions.labels[worst]})")
+    detail: dict[str, float | int | str | list[str]] = {"mismatched_motions": [motions.labels[i] for i in bad]}
+    if ok:
+        return GateResult("time-alignment", True, fraction, th.mismatch_fraction_max, message, detail=detail)
+    return GateResult("time-alignment", False, fraction, th.mismatch_fraction_max,
+                      f"time alignment: {message}, e.g. {_named([motions.labels[i] for i in bad])}",
+                      "time_alignment.angle_mismatch",
+                      "a time offset between the sensors masquerades as an extrinsic error: estimate it "
+                      "(calibctl timeoffset), re-synchronise the log and solve again", detail)
+
+
+def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None) -> tuple[GateResult, ...]:
+    th = th or HandEyeThresholds()
+    return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th)
+
+
+def outlier_motions(fit: HandEyeFit) -> np.ndarray:
+    """(n,) bool: a motion whose rotation or translation residual exceeds OUTLIER_FACTOR robust sigmas.
+
+    The robust sigma is median |r| / 1.538 (the median norm of a 3-D Gaussian), so one bad motion
+    cannot hide itself by inflating the scale. Fewer than 5 motions: nothing is named.
+    """
+    flags = np.zeros(fit.residual_rotation_rad.shape[0], dtype=bool)
+    if flags.size < MIN_MOTIONS_FOR_OUTLIERS:
+        return flags
+    for residual in (fit.residual_rotation_rad, fit.residual_translation_m):
+        norm = np.linalg.norm(residual, axis=1)
+        scale = max(float(np.median(norm)) / CHI3_MEDIAN, 1e-12)
+        flags |= norm > OUTLIER_FACTOR * scale
+    return flags
