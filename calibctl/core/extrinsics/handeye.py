@@ -55,14 +55,14 @@ class Motions:
         return cls(A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], labels)
 
     @classmethod
-    def from_poses(cls, T_wa_a: np.ndarray, T_wb_b: np.ndarray, labels: tuple[str, ...]) -> Motions:
+    def from_poses(cls, T_wa_a: np.ndarray, T_wb_b: np.ndarray, labels: tuple[str, ...], prefix: str = "") -> Motions:
         """(n, 4, 4) poses of a in a fixed world wa and of b in a fixed world wb -> n-1 consecutive motions.
 
-        ``labels`` names the poses; motion i is labelled "<label i>-<label i+1>".
+        ``labels`` names the poses; motion i is labelled "<label i>-<label i+1>" (with ``prefix`` before it).
         """
         A = [se3.relative(T_wa_a[i], T_wa_a[i + 1]) for i in range(len(T_wa_a) - 1)]
         B = [se3.relative(T_wb_b[i], T_wb_b[i + 1]) for i in range(len(T_wb_b) - 1)]
-        names = tuple(f"{labels[i]}-{labels[i + 1]}" for i in range(len(labels) - 1))
+        names = tuple(f"{prefix}{labels[i]}-{labels[i + 1]}" for i in range(len(labels) - 1))
         return cls.from_transforms(np.array(A).reshape(-1, 4, 4), np.array(B).reshape(-1, 4, 4), names)
 
     @property

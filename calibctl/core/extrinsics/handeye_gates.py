@@ -1,9 +1,9 @@
 """Observability gates and screens for hand-eye data (seed chapter 2), checked before any number.
 
 - rotation: R_X is pinned only by two rotations about non-parallel axes (M = sum a_i b_i^T of
-  rank 2; the det guard supplies the third bit). Value: the spread of the motions' rotation axes,
-  2 atan(s2 / s1) of the stacked axis-angle vectors of A, in degrees (for two equal rotations it is
-  the angle between their axes).
+  rank 2; the det guard supplies the third bit). Value: s2, the second singular value of the
+  stacked axis-angle vectors of A, in degrees: how much the motions rotate about a second axis
+  (two motions of 30 deg about perpendicular axes: 30; a corridor's noise-level wobble: ~1).
 - lever-arm: the translation needs sigma_min of the stacked (R_A - I) >= 0.5 (about 30 deg of
   excitation): an error d in a motion translation becomes d / sigma_min in the lever arm.
 - time-alignment: conjugation keeps the rotation angle, so |angle(A_i)| = |angle(B_i)| for a
@@ -24,7 +24,7 @@ from calibctl.core.extrinsics.handeye import HandEyeFit, Motions
 from calibctl.core.gates import GateResult
 
 LEVER_ARM_SIGMA_MIN = 0.5
-AXIS_SPREAD_MIN_DEG = 10.0
+SECOND_AXIS_MIN_DEG = 10.0
 ANGLE_MISMATCH_MAX_DEG = 1.0
 MISMATCH_FRACTION_MAX = 0.1  # more than one motion in ten: a clock problem, not a bad sample
 OUTLIER_FACTOR = 4.0  # |r| / robust sigma: the 99.9 % point of a 3-D Gaussian's norm is 4.03 sigma
@@ -36,12 +36,12 @@ MAX_NAMED = 5
 @dataclass(frozen=True)
 class HandEyeThresholds:
     lever_arm_sigma_min: float = LEVER_ARM_SIGMA_MIN
-    axis_spread_min_deg: float = AXIS_SPREAD_MIN_DEG
+    second_axis_min_deg: float = SECOND_AXIS_MIN_DEG
     angle_mismatch_max_deg: float = ANGLE_MISMATCH_MAX_DEG
     mismatch_fraction_max: float = MISMATCH_FRACTION_MAX
 
     def __post_init__(self) -> None:
-        if not self.lever_arm_sigma_min > 0 or not self.axis_spread_min_deg > 0 or not self.angle_mismatch_max_deg > 0:
+        if not self.lever_arm_sigma_min > 0 or not self.second_axis_min_deg > 0 or not self.angle_mismatch_max_deg > 0:
             raise ValueError("hand-eye thresholds must be positive")
         if not 0 <= self.mismatch_fraction_max < 1:
             raise ValueError(f"mismatch_fraction_max must be in [0, 1), got {self.mismatch_fraction_max}")
@@ -58,10 +58,15 @@ def lever_arm_conditioning(R_A: np.ndarray) -> tuple[float, np.ndarray]:
     return float(s[-1]), Vt[-1]
 
 
-def axis_spread_deg(rotvec_A_rad: np.ndarray) -> float:
-    """2 atan(s2/s1) of the (n, 3) stacked axis-angle vectors, degrees: 0 for one axis (or none)."""
+def rotation_excitation_deg(rotvec_A_rad: np.ndarray) -> tuple[float, float]:
+    """(s2 in degrees, axis spread 2 atan(s2/s1) in degrees) of the (n, 3) stacked axis-angle vectors.
+
+    s2 is the root-sum-square rotation about the best second axis; the spread is the angle between
+    the axes of two equal rotations (0 for one axis or none).
+    """
     s = np.linalg.svd(np.asarray(rotvec_A_rad, np.float64).reshape(-1, 3), compute_uv=False)
-    return 0.0 if s[0] <= 1e-12 else math.degrees(2.0 * math.atan2(s[1], s[0]))
+    spread = 0.0 if s[0] <= 1e-12 else math.degrees(2.0 * math.atan2(s[1], s[0]))
+    return math.degrees(s[1]), spread
 
 
 def angle_mismatch_deg(motions: Motions) -> np.ndarray:
@@ -75,14 +80,17 @@ def _named(labels: list[str]) -> str:
 
 
 def rotation_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
-    spread = axis_spread_deg(motions.rotvec_A_rad)
-    ok = spread >= th.axis_spread_min_deg
-    message = f"rotation axes spread {spread:.1f} deg (needs {th.axis_spread_min_deg:g})"
+    second, spread = rotation_excitation_deg(motions.rotvec_A_rad)
+    ok = second >= th.second_axis_min_deg
+    message = (f"{second:.1f} deg of rotation about a second axis (needs {th.second_axis_min_deg:g}; "
+               f"axes spread {spread:.0f} deg)")
+    detail: dict[str, float | int | str | list[str]] = {"axis_spread_deg": round(spread, 3)}
     if ok:
-        return GateResult("rotation", True, spread, th.axis_spread_min_deg, message)
-    return GateResult("rotation", False, spread, th.axis_spread_min_deg,
-                      f"rotation unobservable: {message}; the motions turn about one axis (or not at all)",
-                      "rotation.one_axis", "rotate about at least two non-parallel axes")
+        return GateResult("rotation", True, second, th.second_axis_min_deg, message, detail=detail)
+    return GateResult("rotation", False, second, th.second_axis_min_deg,
+                      f"rotation unobservable: only {message}; the motions turn about one axis (or hardly at all)",
+                      "rotation.one_axis", f"rotate at least {th.second_axis_min_deg:g} deg about a second, "
+                      "non-parallel axis", detail)
 
 
 def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
@@ -98,7 +106,8 @@ def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
                           f"sigma_min of stacked (R_A - I) {sigma_min:.3f} (needs {th.lever_arm_sigma_min:g})",
                           detail=detail)
     return GateResult("lever-arm", False, sigma_min, th.lever_arm_sigma_min,
-                      f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.0f} deg of rotation); {hint}",
+                      f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} deg of "
+                      f"rotation); {hint}",
                       "lever_arm.unobservable", hint, detail)
 
 
