@@ -1,4 +1,5 @@
-"""Seeded motion logs with a known X = T_a_b, for tests, benchmarks and ``calibctl synth-motions``.
+"""Seeded motion logs with a known X = T_a_b, for tests, benchmarks and ``calibctl synth-motions``,
+and robot-arm poses for rendered board views.
 
 Two shapes, matching the two inputs of ``calibctl handeye``:
 
@@ -108,3 +109,17 @@ def synthesize_motions(T_a_b: np.ndarray, n_motions: int, *, excitation: str = "
         second.append(X_inv @ A @ X)
         first.append(_noisy(A, rng, noise_rotation_deg, noise_translation_m))
     return MotionLog(np.arange(n_motions, dtype=np.float64), np.array(first), np.array(second), X, "motions", 0.0)
+
+
+def robot_arm_poses(T_cam_board: list[np.ndarray], X: np.ndarray, *, eye_in_hand: bool = True,
+                    T_fixed: np.ndarray | None = None) -> np.ndarray:
+    """(n, 4, 4) T_base_gripper that put the board at each wanted ``T_cam_board`` (from synth_scenes).
+
+    Eye-in-hand: X = T_gripper_cam, the board fixed at ``T_fixed`` = T_base_board.
+    Eye-to-hand: X = T_base_cam, the board fixed on the gripper at ``T_fixed`` = T_gripper_board.
+    """
+    if T_fixed is None:
+        T_fixed = se3.transform(se3.rotation_from_rotvec(np.array([np.pi, 0.0, 0.0])), np.array([0.6, 0.0, 0.0]))
+    if eye_in_hand:  # T_base_board = T_base_gripper X T_cam_board
+        return np.array([T_fixed @ se3.invert(T) @ se3.invert(X) for T in T_cam_board])
+    return np.array([X @ T @ se3.invert(T_fixed) for T in T_cam_board])  # T_base_cam T_cam_board = T_base_gripper T_gripper_board
