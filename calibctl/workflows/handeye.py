@@ -31,13 +31,14 @@ from calibctl.artifacts.handeye import (
 )
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
-from calibctl.core.extrinsics.handeye import METHODS, HandEyeFit, Motions, fit_handeye
+from calibctl.core.extrinsics.handeye import METHODS, Motions
 from calibctl.core.extrinsics.handeye_gates import (
     HandEyeThresholds,
     angle_mismatch_deg,
     evaluate_handeye_gates,
     outlier_motions,
 )
+from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
 from calibctl.errors import AlreadyExistsError, InputError, UsageError
 from calibctl.workflows import formats, handeye_io

@@ -8,6 +8,7 @@ import pytest
 from calibctl.core.extrinsics import handeye as he
 from calibctl.core.extrinsics import handeye_gates as gates
 from calibctl.core.extrinsics import se3
+from calibctl.core.extrinsics.handeye_refine import fit_handeye
 from calibctl.core.extrinsics.motion_synth import synthesize_motions, synthesize_pose_log
 
 R_Z90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -118,7 +119,7 @@ def test_conditioning_propagation_matches_monte_carlo_of_the_planar_solve():
 
 @pytest.mark.parametrize("method", he.METHODS)
 def test_noise_free_3d_motions_recover_x_exactly(method):
-    fit = he.fit_handeye(_from_log(synthesize_motions(X_3D, 6, seed=1)), method)
+    fit = fit_handeye(_from_log(synthesize_motions(X_3D, 6, seed=1)), method)
     np.testing.assert_allclose(fit.T_a_b, X_3D, atol=1e-9)
 
 
@@ -126,7 +127,7 @@ def test_park_and_tsai_closed_forms_agree_on_noisy_data_and_refine_to_one_answer
     m = _from_log(synthesize_motions(X_3D, 15, noise_rotation_deg=0.1, noise_translation_m=0.003, seed=2))
     R_park, R_tsai = he.solve_rotation_park(m.rotvec_A_rad, m.rotvec_B_rad), he.solve_rotation_tsai(m.rotvec_A_rad, m.rotvec_B_rad)
     assert np.degrees(se3.rotation_angle_rad(R_park.T @ R_tsai)) < 0.2
-    park, tsai = he.fit_handeye(m, "park"), he.fit_handeye(m, "tsai")
+    park, tsai = fit_handeye(m, "park"), fit_handeye(m, "tsai")
     np.testing.assert_allclose(park.T_a_b, tsai.T_a_b, atol=1e-8)
     assert np.degrees(se3.rotation_angle_rad(park.T_a_b[:3, :3].T @ X_3D[:3, :3])) < 0.3
     assert np.linalg.norm(park.T_a_b[:3, 3] - X_3D[:3, 3]) < 0.01
@@ -134,14 +135,14 @@ def test_park_and_tsai_closed_forms_agree_on_noisy_data_and_refine_to_one_answer
 
 def test_unknown_method_is_refused():
     with pytest.raises(ValueError, match="unknown hand-eye method"):
-        he.fit_handeye(_from_log(synthesize_motions(X_3D, 4)), "horaud")
+        fit_handeye(_from_log(synthesize_motions(X_3D, 4)), "horaud")
 
 
 def _z_scores(n_runs: int) -> np.ndarray:
     z = []
     for seed in range(n_runs):
         log = synthesize_motions(X_3D, 12, noise_rotation_deg=0.05, noise_translation_m=0.005, seed=seed)
-        fit = he.fit_handeye(_from_log(log), "park")
+        fit = fit_handeye(_from_log(log), "park")
         z.append((fit.T_a_b[:3, 3] - X_3D[:3, 3]) / fit.sigma_translation_m)
     return np.concatenate(z)
 
@@ -150,6 +151,19 @@ def test_reported_lever_arm_sigma_is_honest_over_seeded_3d_runs():
     z = _z_scores(60)  # 180 z values: standard error of the mean 0.075
     assert abs(z.mean()) <= 0.3
     assert 0.7 <= z.std() <= 1.5
+
+
+def test_pose_logs_are_refined_on_poses_and_their_sigmas_are_honest_too():
+    z_t, z_r = [], []
+    for seed in range(40):
+        log = synthesize_pose_log(X_3D, 20, noise_rotation_deg=0.05, noise_translation_m=0.002, seed=seed)
+        fit = fit_handeye(_from_log(log))
+        assert fit.model == "poses"
+        z_t.append((fit.T_a_b[:3, 3] - X_3D[:3, 3]) / fit.sigma_translation_m)
+        z_r.append(np.degrees(se3.rotvec_from_rotation(fit.T_a_b[:3, :3] @ X_3D[:3, :3].T)) / fit.sigma_rotation_deg)
+    for z in (np.concatenate(z_t), np.concatenate(z_r)):  # 120 values each: standard error of the mean 0.09
+        assert abs(z.mean()) <= 0.3
+        assert 0.7 <= z.std() <= 1.5
 
 
 def test_single_axis_motions_fail_the_rotation_gate_two_axes_pass():
@@ -171,14 +185,14 @@ def test_pose_log_3d_passes_every_gate_and_recovers_x():
     log = synthesize_pose_log(X_3D, 30, noise_rotation_deg=0.02, noise_translation_m=0.001, seed=6)
     m = _from_log(log)
     assert all(g.passed for g in gates.evaluate_handeye_gates(m))
-    fit = he.fit_handeye(m)
+    fit = fit_handeye(m)
     assert np.linalg.norm(fit.T_a_b[:3, 3] - X_3D[:3, 3]) < 5 * np.linalg.norm(fit.sigma_translation_m)
 
 
 def test_one_corrupted_motion_is_named_as_an_outlier():
     log = synthesize_motions(X_3D, 15, noise_rotation_deg=0.05, noise_translation_m=0.002, seed=8)
     log.T_first[6][:3, 3] += [0.0, 0.08, 0.0]
-    fit = he.fit_handeye(_from_log(log))
+    fit = fit_handeye(_from_log(log))
     assert np.flatnonzero(gates.outlier_motions(fit)).tolist() == [6]
 
 

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibctl.core.extrinsics.handeye import HandEyeFit, Motions
+from calibctl.core.extrinsics.handeye import Motions
+from calibctl.core.extrinsics.handeye_refine import HandEyeFit
 from calibctl.core.gates import GateResult
 
 LEVER_ARM_SIGMA_MIN = 0.5
