@@ -42,8 +42,8 @@ class EdgeUncertainty(Document):
     sigma_translation_mm: tuple[float, float, float] = Field(description="along the parent's x, y, z axes, mm")
     covariance: list[list[float]] = Field(
         description="6x6 over (rotation perturbation in the parent frame, rad; translation, m)")
-    residual_rotation_deg: float = Field(ge=0, description="RMS rotation misfit per motion component, degrees")
-    residual_translation_mm: float = Field(ge=0, description="RMS translation misfit per motion component, mm")
+    residual_rotation_deg: float = Field(ge=0, description="RMS rotation residual component of the refinement, degrees")
+    residual_translation_mm: float = Field(ge=0, description="RMS translation residual component of the refinement, mm")
 
 
 class EdgeGate(Document):
@@ -94,6 +94,8 @@ class HandEyeResult(Document):
     status: Literal["accepted", "rejected"] = Field(description="accepted only when every gate passed")
     method: Literal["park", "tsai"] = Field(description="closed-form start before the joint refinement")
     transform: RigidTransform | None = Field(description="T_parent_child; null when rejected")
+    refinement: Literal["motions", "poses"] | None = Field(
+        None, description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when rejected")
     uncertainty: EdgeUncertainty | None = Field(description="one-sigma; null when rejected or not estimable")
     uncertainty_refused_reason: str | None = Field(None, description="why no uncertainty is reported")
     gates: list[EdgeGate] = Field(description="observability gates, checked before the solve")

@@ -34,7 +34,7 @@ def _render(outcome) -> None:
         stdout.print("  translation " + ", ".join(f"{axis} {v * 1e3:+.2f}{s} mm" for axis, v, s in zip("xyz", t, sig_t, strict=True)))
         stdout.print(f"  rotation    quaternion wxyz ({q[0]:+.6f}, {q[1]:+.6f}, {q[2]:+.6f}, {q[3]:+.6f}){sig_r}")
         if u is not None:
-            stdout.print(f"  residual RMS per motion component: {u.residual_rotation_deg:.4f} deg, "
+            stdout.print(f"  refined on {r.refinement}; residual RMS per component {u.residual_rotation_deg:.4f} deg, "
                          f"{u.residual_translation_mm:.3f} mm")
         if r.uncertainty_refused_reason:
             stdout.print(f"  no uncertainty: {escape(r.uncertainty_refused_reason)}")

@@ -150,7 +150,8 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
     result = HandEyeResult(
         parent_frame=parent_frame, child_frame=child_frame, status="accepted" if accepted else "rejected",
         method=method,
-        transform=transform, uncertainty=None if fit is None else _uncertainty(fit),
+        transform=transform, refinement=None if fit is None else fit.model,
+        uncertainty=None if fit is None else _uncertainty(fit),
         uncertainty_refused_reason=None if fit is None else fit.refused_reason,
         gates=[EdgeGate(gate=g.gate, passed=g.passed, value=g.value, threshold=g.threshold,
                         message=g.message, hint=g.hint, detail=g.detail) for g in gates],

@@ -56,6 +56,7 @@ def test_synth_then_solve_recovers_x_within_its_sigma_and_writes_json_and_tf_sta
     doc = HandEyeResult.model_validate_json((tmp_path / "r.json").read_text())
     assert doc.status == "accepted" and doc.content_sha256 == doc.computed_sha256()
     assert doc.parent_frame == "lidar" and doc.child_frame == "camera" and doc.provenance.input_shape == "poses"
+    assert doc.refinement == "poses"
     assert doc.transform is not None and doc.uncertainty is not None
     error_mm = (np.array(doc.transform.translation_m) - TRUTH_T_M) * 1e3
     assert np.all(np.abs(error_mm) < 4 * np.array(doc.uncertainty.sigma_translation_mm))
@@ -78,7 +79,8 @@ def test_motions_input_shape(tmp_path: Path) -> None:
     log = synth(tmp_path / "m.csv", "--shape", "motions", "--rows", "12", "--amplitude-deg", "60")
     result = handeye(log, "--input", "motions", "--json")
     assert result.exit_code == 0, result.output
-    assert json.loads(result.stdout)["provenance"]["input_shape"] == "motions"
+    doc = json.loads(result.stdout)
+    assert doc["provenance"]["input_shape"] == "motions" and doc["refinement"] == "motions"
 
 
 def test_corridor_is_refused_with_the_seed_message_and_no_transform(tmp_path: Path) -> None:
