@@ -202,3 +202,41 @@ def test_synth_motions_refuses_to_overwrite_and_bad_options(tmp_path: Path) -> N
 
 def test_same_seed_same_bytes(tmp_path: Path) -> None:
     assert synth(tmp_path / "a.csv").read_bytes() == synth(tmp_path / "b.csv").read_bytes()
+
+
+def test_two_rotation_forms_for_one_sensor_are_refused(tmp_path: Path) -> None:
+    def add_rotvec(i, row):
+        q = np.array([float(row[f"a_q{c}"]) for c in "wxyz"])
+        v = se3.rotvec_from_rotation(se3.rotation_from_quaternion(q))
+        row.update({f"a_r{c}_rad": repr(float(x)) for c, x in zip("xyz", v, strict=True)})
+
+    bad = rewrite(synth(tmp_path / "m.csv"), tmp_path / "both.csv", add_rotvec)
+    _expect_input_error(handeye(bad), "more than one complete rotation for a (quaternion, rotvec)")
+
+
+def test_half_a_timestamp_pair_and_unsorted_times(tmp_path: Path) -> None:
+    src = synth(tmp_path / "m.csv")
+    half = rewrite(src, tmp_path / "half.csv", lambda i, row: row.update(a_t_s=row.pop("t_s")))
+    _expect_input_error(handeye(half), "give both a_t_s and b_t_s")
+
+    def swap(i, row):
+        if i == 6:
+            row["t_s"] = "0.1"
+
+    _expect_input_error(handeye(rewrite(src, tmp_path / "unsorted.csv", swap)), "t_s does not increase at line 8")
+
+
+def test_one_relative_motion_is_too_few(tmp_path: Path) -> None:
+    log = synth(tmp_path / "m.csv", "--shape", "motions", "--rows", "4")
+    one = tmp_path / "one.csv"
+    one.write_text("\n".join(log.read_text().splitlines()[:2]) + "\n")
+    _expect_input_error(handeye(one, "--input", "motions"), "one.csv has 1 motion; hand-eye needs at least 2")
+
+
+def test_outputs_are_never_overwritten_without_force(tmp_path: Path) -> None:
+    log = synth(tmp_path / "m.csv")
+    (tmp_path / "r.json").write_text("keep me")
+    _expect_input_error(handeye(log, "-o", str(tmp_path / "r.json")), "exists")
+    assert (tmp_path / "r.json").read_text() == "keep me"
+    assert handeye(log, "-o", str(tmp_path / "r.json"), "--force").exit_code == 0
+    _expect_input_error(handeye(log, "-o", str(tmp_path / "no-such-dir" / "r.json")), "does not exist")

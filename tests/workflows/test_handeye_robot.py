@@ -22,7 +22,7 @@ from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.motion_synth import robot_arm_poses
 from calibctl.core.synth import PinholeCamera, render_view
 from calibctl.core.synth_scenes import scenario_poses
-from calibctl.errors import InputError, NotFoundError
+from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.handeye_robot import run_robot_handeye
 from tests.artifacts.factories import calibration, measured_board
@@ -145,3 +145,49 @@ def test_cli_wiring_with_tf_static(scenes, settings, tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "robot-eye-in-hand" in result.stdout and "Result: ACCEPTED" in result.stdout
     assert "child_frame_id: camera_optical" in (tmp_path / "tf.yaml").read_text()
+
+
+def test_robot_input_problems_are_exit_2_naming_what(scenes, settings, tmp_path: Path) -> None:
+    d = scenes["in-hand"]
+    csv_path = d / "poses.csv"
+    with pytest.raises(UsageError, match="needs both --images DIR and --serial SERIAL"):
+        run_robot_handeye(settings, csv_path, d, None, "gripper", "camera")
+    with pytest.raises(InputError, match="is not a folder"):
+        run_robot_handeye(settings, csv_path, tmp_path / "nowhere", "CAM-0001", "gripper", "camera")
+    with pytest.raises(UsageError, match="not a board reference"):
+        run_robot_handeye(settings, csv_path, d, "CAM-0001", "gripper", "camera", board_ref="A17@x")
+
+    no_image = tmp_path / "no_image.csv"
+    no_image.write_text(csv_path.read_text().replace("image,", "picture,", 1))
+    with pytest.raises(InputError, match="no_image.csv has no image column"):
+        run_robot_handeye(settings, no_image, d, "CAM-0001", "gripper", "camera")
+
+
+def test_unreadable_or_wrong_size_images_are_named(scenes, settings, tmp_path: Path) -> None:
+    d = scenes["in-hand"]
+    images = tmp_path / "images"
+    images.mkdir()
+    for p in d.glob("*.png"):
+        (images / p.name).write_bytes(p.read_bytes())
+    (images / "pose-02.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match=r"line 4: .*pose-02.png is not a readable image"):
+        run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera")
+    small = cv2.resize(cv2.imread(str(d / "pose-02.png"), cv2.IMREAD_GRAYSCALE), (320, 240))
+    cv2.imwrite(str(images / "pose-02.png"), small)
+    with pytest.raises(InputError, match="pose-02.png is 320x240 but CAM-0001@1 was fitted at 640x480"):
+        run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera")
+
+
+def test_images_without_a_board_are_skipped_and_too_few_left_is_exit_2(scenes, settings, tmp_path: Path) -> None:
+    d = scenes["in-hand"]
+    images = tmp_path / "images"
+    images.mkdir()
+    blank = np.full((480, 640), 128, np.uint8)
+    for i, p in enumerate(sorted(d.glob("*.png"))):
+        (images / p.name).write_bytes(p.read_bytes() if i != 5 else cv2.imencode(".png", blank)[1].tobytes())
+    result = run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera").result
+    assert result.status == "accepted" and len(result.skipped) == 1 and result.skipped[0].startswith("pose-05.png")
+    for p in images.glob("*.png"):
+        cv2.imwrite(str(p), blank)
+    with pytest.raises(InputError, match="the board was found in 0 of 15 images"):
+        run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera")
