@@ -36,6 +36,7 @@ RESIDUAL_FLOOR = 1e-12  # exact (noise-free) data: weights stay finite and the c
 JACOBIAN_STEP = 1e-6  # central differences in rad / m
 SINGULAR_RCOND = 1e-10  # J^T J eigenvalues below this * largest: a direction the data does not see
 MAX_ITERATIONS = 20
+CONVERGED_STEP = 1e-9  # rad / m: a nanometre; smaller steps only chase rounding
 
 Residuals = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # params -> (m, 3) rad, (m, 3) m
 
@@ -108,7 +109,7 @@ def _gauss_newton(residuals: Residuals, params0: np.ndarray, dof: int) -> _Solut
         step = np.linalg.lstsq(_jacobian(residuals, params, w_rot, w_t),
                                -_weighted(residuals, params, w_rot, w_t), rcond=None)[0]
         params = params + step
-        if np.max(np.abs(step)) < 1e-12:
+        if np.max(np.abs(step)) < CONVERGED_STEP:
             break
     rot, trans = residuals(params)
     s_rot, s_t = _group_sigma(rot, dof), _group_sigma(trans, dof)
