@@ -1,1 +1,1 @@
-"""Extrinsics: rigid transforms between sensors (SE(3) helpers, hand-eye AX = XB)."""
+"""Extrinsics: rigid transforms between sensors (camera rigs; hand-eye)."""
