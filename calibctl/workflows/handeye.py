@@ -40,7 +40,7 @@ from calibctl.core.extrinsics.handeye_gates import (
 )
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
-from calibctl.errors import AlreadyExistsError, InputError, UsageError
+from calibctl.errors import AlreadyExistsError, InputError, NumericalError, UsageError
 from calibctl.workflows import formats, handeye_io
 
 UNSEALED = "0" * 64
@@ -116,7 +116,8 @@ def _motion_rows(motions: Motions, fit: HandEyeFit | None) -> tuple[list[MotionR
 
 
 def _uncertainty(fit: HandEyeFit) -> EdgeUncertainty | None:
-    if fit.covariance is None or fit.sigma_rotation_deg is None or fit.sigma_translation_m is None:
+    if fit.covariance is None or fit.sigma_rotation_deg is None or fit.sigma_translation_m is None \
+            or not np.isfinite(fit.covariance).all():
         return None
     r, t = fit.sigma_rotation_deg, fit.sigma_translation_m * 1e3
     return EdgeUncertainty(sigma_rotation_deg=(float(r[0]), float(r[1]), float(r[2])),
@@ -134,6 +135,9 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
     gates = evaluate_handeye_gates(motions, th)
     accepted = all(g.passed for g in gates)
     fit = fit_handeye(motions, method) if accepted else None
+    if fit is not None and not np.isfinite(fit.T_a_b).all():
+        raise NumericalError("the hand-eye refinement diverged (non-finite transform)",
+                             "check the motions for gross errors; one bad row can be found in the motions table")
     rows, outliers = _motion_rows(motions, fit)
     transform = None
     if fit is not None:

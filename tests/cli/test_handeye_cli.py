@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 
@@ -240,3 +241,16 @@ def test_outputs_are_never_overwritten_without_force(tmp_path: Path) -> None:
     assert (tmp_path / "r.json").read_text() == "keep me"
     assert handeye(log, "-o", str(tmp_path / "r.json"), "--force").exit_code == 0
     _expect_input_error(handeye(log, "-o", str(tmp_path / "no-such-dir" / "r.json")), "does not exist")
+
+
+def test_a_diverged_refinement_is_exit_2_not_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from calibctl.workflows import handeye as wf
+
+    real = wf.fit_handeye
+
+    def diverged(motions, method):
+        fit = real(motions, method)
+        return dataclasses.replace(fit, T_a_b=np.full((4, 4), np.nan))
+
+    monkeypatch.setattr(wf, "fit_handeye", diverged)
+    _expect_input_error(handeye(synth(tmp_path / "m.csv")), "the hand-eye refinement diverged")
