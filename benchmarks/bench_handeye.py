@@ -37,7 +37,7 @@ from calibctl.core.detect import detect_board
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions, lever_arm_sigma_m
-from calibctl.core.extrinsics.handeye_gates import evaluate_handeye_gates
+from calibctl.core.extrinsics.handeye_gates import HandEyeThresholds, consistency_gate, evaluate_handeye_gates
 from calibctl.core.extrinsics.handeye_refine import fit_handeye
 from calibctl.core.extrinsics.motion_synth import robot_arm_poses, synthesize_motions, synthesize_pose_log
 from calibctl.core.synth import PinholeCamera, render_view
@@ -78,9 +78,11 @@ def run_cv4(python: str | None, cases: dict[str, dict[str, np.ndarray]], repeats
 
 def calibctl_solve(T_wa_a: np.ndarray, T_wb_b: np.ndarray, method: str = "park"):
     motions = Motions.from_poses(T_wa_a, T_wb_b, tuple(str(i) for i in range(len(T_wa_a))))
-    gates = evaluate_handeye_gates(motions)
-    failed = [g.message for g in gates if not g.passed]
-    return (None if failed else fit_handeye(motions, method)), failed
+    failed = [g.message for g in evaluate_handeye_gates(motions) if not g.passed]
+    fit = None if failed else fit_handeye(motions, method)
+    if fit is not None and not (gate := consistency_gate(fit, HandEyeThresholds())).passed:
+        return None, [gate.message]
+    return fit, failed
 
 
 def stats(values: list[float]) -> str:
@@ -202,7 +204,7 @@ def section_speed(repeats: int, cv4: str | None) -> list[str]:
     logs = {n: synthesize_pose_log(X_TRUE, n, noise_rotation_deg=0.05, noise_translation_m=0.002, seed=1) for n in (15, 200)}
     res = run_cv4(cv4, {f"speed{n}": cv4_case(v.T_first, v.T_second) for n, v in logs.items()}, repeats)
     out = [f"## 6. Speed of one solve (best of {repeats} in-process calls, ms)", "",
-           "| poses | calibctl: gates + park + joint refinement + covariance | " +
+           "| poses | calibctl: gates + park + joint refinement + covariance + consistency gate | " +
            " | ".join(f"OpenCV {m}" for m in CV4_METHODS) + " |", "|---|---|" + "---|" * len(CV4_METHODS)]
     for n, log in logs.items():
         best = float("inf")

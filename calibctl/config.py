@@ -59,6 +59,7 @@ class HandEyeGates(BaseModel):
     second_axis_min_deg: float = Field(10.0, gt=0, description="minimum rotation about a second axis (s2, deg)")
     angle_mismatch_max_deg: float = Field(1.0, gt=0, description="|angle(A) - angle(B)| above this names a motion")
     mismatch_fraction_max: float = Field(0.1, ge=0, lt=1, description="largest fraction of mismatched motions")
+    rotation_residual_max_deg: float = Field(1.0, gt=0, description="largest rotation residual RMS after the solve")
 
 
 class StationConfig(BaseModel):

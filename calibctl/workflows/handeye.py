@@ -2,8 +2,8 @@
 
 The observability gates (rotation axes, lever arm, time alignment) run on the motions before any
 solve; when one fails the result is ``rejected``, carries no transform, and the command exits 1.
-Otherwise the closed form (Park & Martin or Tsai-Lenz) is refined jointly and reported with its
-one-sigma. The document is written with ``-o`` and, only when accepted, as /tf_static YAML.
+Otherwise the closed form (Park & Martin or Tsai-Lenz) is refined jointly; the consistency gate
+(rotation residual) decides whether it is reported, with its one-sigma. The document is written with ``-o`` and, only when accepted, as /tf_static YAML.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from calibctl.core.extrinsics.handeye import METHODS, Motions
 from calibctl.core.extrinsics.handeye_gates import (
     HandEyeThresholds,
     angle_mismatch_deg,
+    consistency_gate,
     evaluate_handeye_gates,
     outlier_motions,
 )
@@ -82,7 +83,8 @@ class Source:
 def thresholds(settings: Settings, lever_arm_sigma_min: float | None = None) -> HandEyeThresholds:
     cfg = settings.handeye
     return HandEyeThresholds(lever_arm_sigma_min if lever_arm_sigma_min is not None else cfg.lever_arm_sigma_min,
-                             cfg.second_axis_min_deg, cfg.angle_mismatch_max_deg, cfg.mismatch_fraction_max)
+                             cfg.second_axis_min_deg, cfg.angle_mismatch_max_deg, cfg.mismatch_fraction_max,
+                             cfg.rotation_residual_max_deg)
 
 
 def check_frames(parent_frame: str, child_frame: str) -> None:
@@ -133,14 +135,16 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
     if method not in METHODS:
         raise UsageError(f"unknown method '{method}'", f"choose one of {', '.join(METHODS)}")
     gates = evaluate_handeye_gates(motions, th)
-    accepted = all(g.passed for g in gates)
-    fit = fit_handeye(motions, method) if accepted else None
+    fit = fit_handeye(motions, method) if all(g.passed for g in gates) else None
     if fit is not None and not np.isfinite(fit.T_a_b).all():
         raise NumericalError("the hand-eye refinement diverged (non-finite transform)",
                              "check the motions for gross errors; one bad row can be found in the motions table")
+    if fit is not None:
+        gates = (*gates, consistency_gate(fit, th))
+    accepted = all(g.passed for g in gates)
     rows, outliers = _motion_rows(motions, fit)
     transform = None
-    if fit is not None:
+    if fit is not None and accepted:
         q = se3.quaternion_from_rotation(fit.T_a_b[:3, :3])
         t = fit.T_a_b[:3, 3]
         transform = RigidTransform(translation_m=(float(t[0]), float(t[1]), float(t[2])),
@@ -155,8 +159,8 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
         parent_frame=parent_frame, child_frame=child_frame, status="accepted" if accepted else "rejected",
         method=method,
         transform=transform, refinement=None if fit is None else fit.model,
-        uncertainty=None if fit is None else _uncertainty(fit),
-        uncertainty_refused_reason=None if fit is None else fit.refused_reason,
+        uncertainty=None if fit is None or not accepted else _uncertainty(fit),
+        uncertainty_refused_reason=None if fit is None or not accepted else fit.refused_reason,
         gates=[EdgeGate(gate=g.gate, passed=g.passed, value=g.value, threshold=g.threshold,
                         message=g.message, hint=g.hint, detail=g.detail) for g in gates],
         lever_arm_singular_values=(float(s[0]), float(s[1]), float(s[2])), motions=rows,

@@ -254,3 +254,20 @@ def test_a_diverged_refinement_is_exit_2_not_a_traceback(tmp_path: Path, monkeyp
 
     monkeypatch.setattr(wf, "fit_handeye", diverged)
     _expect_input_error(handeye(synth(tmp_path / "m.csv")), "the hand-eye refinement diverged")
+
+
+def test_poses_given_the_wrong_way_round_are_rejected_as_inconsistent(tmp_path: Path) -> None:
+    def invert_b(i, row):
+        q = np.array([float(row[f"b_q{c}"]) for c in "wxyz"])
+        T = se3.invert(se3.transform(se3.rotation_from_quaternion(q), np.array([float(row[f"b_t{c}_m"]) for c in "xyz"])))
+        q_inv = se3.quaternion_from_rotation(T[:3, :3])
+        row.update({f"b_q{c}": repr(float(v)) for c, v in zip("wxyz", q_inv, strict=True)})
+        row.update({f"b_t{c}_m": repr(float(v)) for c, v in zip("xyz", T[:3, 3], strict=True)})
+
+    bad = rewrite(synth(tmp_path / "m.csv"), tmp_path / "inverted.csv", invert_b)
+    result = handeye(bad, "--json")
+    assert result.exit_code == 1
+    doc = HandEyeResult.model_validate(json.loads(result.stdout))
+    assert doc.status == "rejected" and doc.transform is None
+    assert [g.gate for g in doc.gates if not g.passed] == ["consistency"]
+    assert doc.motions[0].residual_rotation_deg is not None  # the residuals stay in the record

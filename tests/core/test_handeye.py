@@ -201,3 +201,5 @@ def test_thresholds_refuse_impossible_values():
         gates.HandEyeThresholds(lever_arm_sigma_min=0.0)
     with pytest.raises(ValueError):
         gates.HandEyeThresholds(mismatch_fraction_max=1.0)
+    with pytest.raises(ValueError):
+        gates.HandEyeThresholds(rotation_residual_max_deg=-1.0)

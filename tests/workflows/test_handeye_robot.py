@@ -102,10 +102,17 @@ def test_eye_to_hand_recovers_x_within_1_mm_and_0_1_deg(scenes, settings) -> Non
     assert error_mm < TOL_MM and error_deg < TOL_DEG
 
 
-def test_the_wrong_mode_does_not_pass_as_a_result(scenes, settings) -> None:
-    d = scenes["to-hand"]  # eye-to-hand data solved as eye-in-hand: motions do not match
+def test_the_wrong_mode_is_rejected_by_the_consistency_gate(scenes, settings) -> None:
+    d = scenes["to-hand"]  # eye-to-hand data solved as eye-in-hand: same angles, no single X
     result = run_robot_handeye(settings, d / "poses.csv", d, "CAM-0001", "gripper", "camera").result
-    assert result.status == "rejected" or _errors(result, X_BASE_CAM)[0] > 10 * TOL_MM
+    assert result.status == "rejected" and result.transform is None and result.uncertainty is None
+    gates = {g.gate: g for g in result.gates}
+    assert gates["rotation"].passed and gates["lever-arm"].passed and gates["time-alignment"].passed
+    assert not gates["consistency"].passed and gates["consistency"].value > 1.0
+    assert gates["consistency"].message.startswith("motions inconsistent with one rigid transform")
+    assert "--eye-in-hand vs --eye-to-hand" in gates["consistency"].hint
+    accepted = run_robot_handeye(settings, d / "poses.csv", d, "CAM-0001", "base", "camera", eye_to_hand=True).result
+    assert next(g for g in accepted.gates if g.gate == "consistency").value < 0.1
 
 
 def test_a_camera_with_no_active_calibration_is_exit_2(scenes, settings) -> None:

@@ -10,6 +10,14 @@
   synchronised pair; a mismatch is a time offset (failure mode B) or a wrong pairing, and
   would otherwise be absorbed into R_X. Motions over the limit are named.
 
+After the solve, one more gate before the number is reported:
+
+- consistency: the rotation residual RMS (per component) of the refined X. Rigidly attached,
+  synchronised sensors leave only their noise (0.08 deg on the real opencv-left-right pair);
+  data that no single X explains (a robot arm solved eye-in-hand instead of eye-to-hand, poses
+  given as gripper->base, mismatched rows) leave degrees, which an observability gate cannot see
+  when the angles of A and B still agree.
+
 Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.
 """
 
@@ -27,6 +35,7 @@ from calibctl.core.gates import GateResult
 LEVER_ARM_SIGMA_MIN = 0.5
 SECOND_AXIS_MIN_DEG = 10.0
 ANGLE_MISMATCH_MAX_DEG = 1.0
+ROTATION_RESIDUAL_MAX_DEG = 1.0
 MISMATCH_FRACTION_MAX = 0.1  # more than one motion in ten: a clock problem, not a bad sample
 OUTLIER_FACTOR = 4.0  # |r| / robust sigma: the 99.9 % point of a 3-D Gaussian's norm is 4.03 sigma
 CHI3_MEDIAN = 1.5382  # median of the norm of a 3-D standard Gaussian
@@ -40,9 +49,12 @@ class HandEyeThresholds:
     second_axis_min_deg: float = SECOND_AXIS_MIN_DEG
     angle_mismatch_max_deg: float = ANGLE_MISMATCH_MAX_DEG
     mismatch_fraction_max: float = MISMATCH_FRACTION_MAX
+    rotation_residual_max_deg: float = ROTATION_RESIDUAL_MAX_DEG
 
     def __post_init__(self) -> None:
-        if not self.lever_arm_sigma_min > 0 or not self.second_axis_min_deg > 0 or not self.angle_mismatch_max_deg > 0:
+        positive = (self.lever_arm_sigma_min, self.second_axis_min_deg, self.angle_mismatch_max_deg,
+                    self.rotation_residual_max_deg)
+        if not all(v > 0 for v in positive):
             raise ValueError("hand-eye thresholds must be positive")
         if not 0 <= self.mismatch_fraction_max < 1:
             raise ValueError(f"mismatch_fraction_max must be in [0, 1), got {self.mismatch_fraction_max}")
@@ -133,6 +145,20 @@ def time_alignment_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
 def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None) -> tuple[GateResult, ...]:
     th = th or HandEyeThresholds()
     return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th)
+
+
+def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:
+    """After the solve: does one rigid X explain the rotations? (see the module docstring)"""
+    rms_deg = math.degrees(fit.sigma_residual_rotation_rad)
+    ok = rms_deg <= th.rotation_residual_max_deg
+    message = f"rotation residual RMS {rms_deg:.3f} deg per component (max {th.rotation_residual_max_deg:g})"
+    if ok:
+        return GateResult("consistency", True, rms_deg, th.rotation_residual_max_deg, message)
+    return GateResult("consistency", False, rms_deg, th.rotation_residual_max_deg,
+                      f"motions inconsistent with one rigid transform: {message}",
+                      "consistency.rotation_residual",
+                      "check the pose conventions (a robot arm: base->gripper poses, --eye-in-hand vs "
+                      "--eye-to-hand), that each row pairs the same instant, and the outlier motions")
 
 
 def outlier_motions(fit: HandEyeFit) -> np.ndarray:
