@@ -50,6 +50,18 @@ class LintThresholds(BaseModel):
     aspect_max_frac: float = Field(0.01, gt=0, description="|fx/fy - 1| above this is a warning")
 
 
+class HandEyeGates(BaseModel):
+    """Hand-eye observability gates (seed chapter 2: the check nobody writes and everybody needs)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    lever_arm_sigma_min: float = Field(0.5, gt=0, description="minimum sigma_min of the stacked (R_A - I)")
+    second_axis_min_deg: float = Field(10.0, gt=0, description="minimum rotation about a second axis (s2, deg)")
+    angle_mismatch_max_deg: float = Field(1.0, gt=0, description="|angle(A) - angle(B)| above this names a motion")
+    mismatch_fraction_max: float = Field(0.1, ge=0, lt=1, description="largest fraction of mismatched motions")
+    rotation_residual_max_deg: float = Field(1.0, gt=0, description="largest rotation residual RMS after the solve")
+
+
 class StationConfig(BaseModel):
     """The contents of a station file."""
 
@@ -61,6 +73,7 @@ class StationConfig(BaseModel):
     image_retention_days: int = Field(30, ge=0)
     gates: GateThresholds = Field(default_factory=GateThresholds)
     lint: LintThresholds = Field(default_factory=LintThresholds)
+    handeye: HandEyeGates = Field(default_factory=HandEyeGates)
 
 
 class Settings(BaseModel):
@@ -73,6 +86,7 @@ class Settings(BaseModel):
     image_retention_days: int
     gates: GateThresholds
     lint: LintThresholds
+    handeye: HandEyeGates = Field(default_factory=HandEyeGates)
 
 
 def load_station_file(path: Path) -> StationConfig:
@@ -113,6 +127,7 @@ def load_settings(
         image_retention_days=file_cfg.image_retention_days,
         gates=file_cfg.gates,
         lint=file_cfg.lint,
+        handeye=file_cfg.handeye,
     )
 
 

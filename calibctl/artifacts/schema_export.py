@@ -15,6 +15,7 @@ from pydantic import BaseModel
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.events import ActivationEvent
+from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.session import CaptureSession
 
 DOCUMENTS: dict[str, type[BaseModel]] = {
@@ -22,6 +23,7 @@ DOCUMENTS: dict[str, type[BaseModel]] = {
     "capture-session": CaptureSession,
     "calibration": CalibrationArtifact,
     "activation-event": ActivationEvent,
+    "handeye-result": HandEyeResult,
 }
 
 
@@ -38,6 +40,7 @@ def expected_files() -> dict[str, str]:
         "capture-session": 1,
         "calibration": 1,
         "activation-event": 1,
+        "handeye-result": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 

@@ -40,7 +40,7 @@ class Table:
         return int(self.lines.size)
 
 
-def _lines_text(lines: np.ndarray) -> str:
+def lines_text(lines: np.ndarray) -> str:
     shown = ", ".join(str(int(v)) for v in lines[:MAX_LISTED])
     more = f" and {lines.size - MAX_LISTED} more" if lines.size > MAX_LISTED else ""
     return f"line{'s' if lines.size > 1 else ''} {shown}{more}"
@@ -63,7 +63,7 @@ def _parse_numeric(name: str, cells: list[str], lines: np.ndarray, path: Path) -
                          hint="every cell of a numeric column must be a number") from None
     finite = np.isfinite(values)
     if not finite.all():
-        raise InputError(f"{path.name}: column {name} has non-finite values (nan/inf) at {_lines_text(lines[~finite])}",
+        raise InputError(f"{path.name}: column {name} has non-finite values (nan/inf) at {lines_text(lines[~finite])}",
                          hint="drop or repair those rows; a diagnosis cannot be built on NaN")
     return values
 
@@ -177,7 +177,7 @@ def require_nonnegative(table: Table, column: str) -> None:
     values = table.numeric[column]
     bad = values < 0
     if bad.any():
-        raise InputError(f"{table.path.name}: column {column} must not be negative; negative at {_lines_text(table.lines[bad])}")
+        raise InputError(f"{table.path.name}: column {column} must not be negative; negative at {lines_text(table.lines[bad])}")
 
 
 def require_min_rows(table: Table, n_min: int, purpose: str) -> None:

@@ -1,0 +1,177 @@
+"""Observability gates and screens for hand-eye data (seed chapter 2), checked before any number.
+
+- rotation: R_X is pinned only by two rotations about non-parallel axes (M = sum a_i b_i^T of
+  rank 2; the det guard supplies the third bit). Value: s2, the second singular value of the
+  stacked axis-angle vectors of A, in degrees: how much the motions rotate about a second axis
+  (two motions of 30 deg about perpendicular axes: 30; a corridor's noise-level wobble: ~1).
+- lever-arm: the translation needs sigma_min of the stacked (R_A - I) >= 0.5 (about 30 deg of
+  excitation): an error d in a motion translation becomes d / sigma_min in the lever arm.
+- time-alignment: conjugation keeps the rotation angle, so |angle(A_i)| = |angle(B_i)| for a
+  synchronised pair; a mismatch is a time offset (failure mode B) or a wrong pairing, and
+  would otherwise be absorbed into R_X. Motions over the limit are named.
+
+After the solve, one more gate before the number is reported:
+
+- consistency: the rotation residual RMS (per component) of the refined X. Rigidly attached,
+  synchronised sensors leave only their noise (0.08 deg on the real opencv-left-right pair);
+  data that no single X explains (a robot arm solved eye-in-hand instead of eye-to-hand, poses
+  given as gripper->base, mismatched rows) leave degrees, which an observability gate cannot see
+  when the angles of A and B still agree.
+
+Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibctl.core.extrinsics.handeye import Motions
+from calibctl.core.extrinsics.handeye_refine import HandEyeFit
+from calibctl.core.gates import GateResult
+
+LEVER_ARM_SIGMA_MIN = 0.5
+SECOND_AXIS_MIN_DEG = 10.0
+ANGLE_MISMATCH_MAX_DEG = 1.0
+ROTATION_RESIDUAL_MAX_DEG = 1.0
+MISMATCH_FRACTION_MAX = 0.1  # more than one motion in ten: a clock problem, not a bad sample
+OUTLIER_FACTOR = 4.0  # |r| / robust sigma: the 99.9 % point of a 3-D Gaussian's norm is 4.03 sigma
+CHI3_MEDIAN = 1.5382  # median of the norm of a 3-D standard Gaussian
+MIN_MOTIONS_FOR_OUTLIERS = 5
+MAX_NAMED = 5
+
+
+@dataclass(frozen=True)
+class HandEyeThresholds:
+    lever_arm_sigma_min: float = LEVER_ARM_SIGMA_MIN
+    second_axis_min_deg: float = SECOND_AXIS_MIN_DEG
+    angle_mismatch_max_deg: float = ANGLE_MISMATCH_MAX_DEG
+    mismatch_fraction_max: float = MISMATCH_FRACTION_MAX
+    rotation_residual_max_deg: float = ROTATION_RESIDUAL_MAX_DEG
+
+    def __post_init__(self) -> None:
+        positive = (self.lever_arm_sigma_min, self.second_axis_min_deg, self.angle_mismatch_max_deg,
+                    self.rotation_residual_max_deg)
+        if not all(v > 0 for v in positive):
+            raise ValueError("hand-eye thresholds must be positive")
+        if not 0 <= self.mismatch_fraction_max < 1:
+            raise ValueError(f"mismatch_fraction_max must be in [0, 1), got {self.mismatch_fraction_max}")
+
+
+def equivalent_rotation_deg(sigma_min: float) -> float:
+    """The single rotation theta with 2 sin(theta/2) = sigma_min, degrees (180 when sigma_min >= 2)."""
+    return math.degrees(2.0 * math.asin(min(1.0, sigma_min / 2.0)))
+
+
+def lever_arm_conditioning(R_A: np.ndarray) -> tuple[float, np.ndarray]:
+    """sigma_min of the stacked (R_A - I) of (n, 3, 3) rotations, and the (3,) direction it belongs to."""
+    _, s, Vt = np.linalg.svd((np.asarray(R_A, np.float64) - np.eye(3)).reshape(-1, 3))
+    return float(s[-1]), Vt[-1]
+
+
+def rotation_excitation_deg(rotvec_A_rad: np.ndarray) -> tuple[float, float]:
+    """(s2 in degrees, axis spread 2 atan(s2/s1) in degrees) of the (n, 3) stacked axis-angle vectors.
+
+    s2 is the root-sum-square rotation about the best second axis; the spread is the angle between
+    the axes of two equal rotations (0 for one axis or none).
+    """
+    s = np.linalg.svd(np.asarray(rotvec_A_rad, np.float64).reshape(-1, 3), compute_uv=False)
+    spread = 0.0 if s[0] <= 1e-12 else math.degrees(2.0 * math.atan2(s[1], s[0]))
+    return math.degrees(s[1]), spread
+
+
+def angle_mismatch_deg(motions: Motions) -> np.ndarray:
+    """(n,) |angle(A_i)| - |angle(B_i)| in degrees (signed)."""
+    return np.degrees(np.linalg.norm(motions.rotvec_A_rad, axis=1) - np.linalg.norm(motions.rotvec_B_rad, axis=1))
+
+
+def _named(labels: list[str]) -> str:
+    more = f" and {len(labels) - MAX_NAMED} more" if len(labels) > MAX_NAMED else ""
+    return ", ".join(labels[:MAX_NAMED]) + more
+
+
+def rotation_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    second, spread = rotation_excitation_deg(motions.rotvec_A_rad)
+    ok = second >= th.second_axis_min_deg
+    message = (f"{second:.1f} deg of rotation about a second axis (needs {th.second_axis_min_deg:g}; "
+               f"axes spread {spread:.0f} deg)")
+    detail: dict[str, float | int | str | list[str]] = {"axis_spread_deg": round(spread, 3)}
+    if ok:
+        return GateResult("rotation", True, second, th.second_axis_min_deg, message, detail=detail)
+    return GateResult("rotation", False, second, th.second_axis_min_deg,
+                      f"rotation unobservable: only {message}; the motions turn about one axis (or hardly at all)",
+                      "rotation.one_axis", f"rotate at least {th.second_axis_min_deg:g} deg about a second, "
+                      "non-parallel axis", detail)
+
+
+def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    sigma_min, weakest = lever_arm_conditioning(motions.R_A)
+    ok = sigma_min >= th.lever_arm_sigma_min
+    about = equivalent_rotation_deg(sigma_min)
+    needed = 5.0 * math.ceil(equivalent_rotation_deg(th.lever_arm_sigma_min) / 5.0 - 1e-9)
+    hint = f"rotate at least {needed:.0f} deg about two non-parallel axes"
+    detail: dict[str, float | int | str | list[str]] = {
+        "weakest_direction_a": [f"{v:+.3f}" for v in weakest], "equivalent_rotation_deg": round(about, 3)}
+    if ok:
+        return GateResult("lever-arm", True, sigma_min, th.lever_arm_sigma_min,
+                          f"sigma_min of stacked (R_A - I) {sigma_min:.3f} (needs {th.lever_arm_sigma_min:g})",
+                          detail=detail)
+    return GateResult("lever-arm", False, sigma_min, th.lever_arm_sigma_min,
+                      f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} deg of "
+                      f"rotation); {hint}",
+                      "lever_arm.unobservable", hint, detail)
+
+
+def time_alignment_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+    mismatch = angle_mismatch_deg(motions)
+    bad = np.flatnonzero(np.abs(mismatch) > th.angle_mismatch_max_deg)
+    fraction = bad.size / max(motions.n, 1)
+    ok = fraction <= th.mismatch_fraction_max
+    worst = int(np.argmax(np.abs(mismatch)))
+    message = (f"{bad.size} of {motions.n} motions turn by a different angle in a and b "
+               f"(> {th.angle_mismatch_max_deg:g} deg; worst {mismatch[worst]:+.2f} deg at {motions.labels[worst]})")
+    detail: dict[str, float | int | str | list[str]] = {"mismatched_motions": [motions.labels[i] for i in bad]}
+    if ok:
+        return GateResult("time-alignment", True, fraction, th.mismatch_fraction_max, message, detail=detail)
+    return GateResult("time-alignment", False, fraction, th.mismatch_fraction_max,
+                      f"time alignment: {message}, e.g. {_named([motions.labels[i] for i in bad])}",
+                      "time_alignment.angle_mismatch",
+                      "a time offset between the sensors masquerades as an extrinsic error: estimate it "
+                      "(calibctl timeoffset), re-synchronise the log and solve again", detail)
+
+
+def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None) -> tuple[GateResult, ...]:
+    th = th or HandEyeThresholds()
+    return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th)
+
+
+def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:
+    """After the solve: does one rigid X explain the rotations? (see the module docstring)"""
+    rms_deg = math.degrees(fit.sigma_residual_rotation_rad)
+    ok = rms_deg <= th.rotation_residual_max_deg
+    message = f"rotation residual RMS {rms_deg:.3f} deg per component (max {th.rotation_residual_max_deg:g})"
+    if ok:
+        return GateResult("consistency", True, rms_deg, th.rotation_residual_max_deg, message)
+    return GateResult("consistency", False, rms_deg, th.rotation_residual_max_deg,
+                      f"motions inconsistent with one rigid transform: {message}",
+                      "consistency.rotation_residual",
+                      "check the pose conventions (a robot arm: base->gripper poses, --eye-in-hand vs "
+                      "--eye-to-hand), that each row pairs the same instant, and the outlier motions")
+
+
+def outlier_motions(fit: HandEyeFit) -> np.ndarray:
+    """(n,) bool: a motion whose rotation or translation residual exceeds OUTLIER_FACTOR robust sigmas.
+
+    The robust sigma is median |r| / 1.538 (the median norm of a 3-D Gaussian), so one bad motion
+    cannot hide itself by inflating the scale. Fewer than 5 motions: nothing is named.
+    """
+    flags = np.zeros(fit.residual_rotation_rad.shape[0], dtype=bool)
+    if flags.size < MIN_MOTIONS_FOR_OUTLIERS:
+        return flags
+    for residual in (fit.residual_rotation_rad, fit.residual_translation_m):
+        norm = np.linalg.norm(residual, axis=1)
+        scale = max(float(np.median(norm)) / CHI3_MEDIAN, 1e-12)
+        flags |= norm > OUTLIER_FACTOR * scale
+    return flags
