@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import yaml
 
-from calibctl import __version__
+from calibctl import __version__, files
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.handeye import (
     FRAME_PATTERN,
@@ -42,7 +42,7 @@ from calibctl.core.extrinsics.handeye_gates import (
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
 from calibctl.errors import AlreadyExistsError, InputError, NumericalError, UsageError
-from calibctl.workflows import formats, handeye_io
+from calibctl.workflows import handeye_io
 
 UNSEALED = "0" * 64
 SHAPES = ("poses", "motions")
@@ -182,19 +182,14 @@ def tf_static_yaml(result: HandEyeResult) -> str:
     return header + yaml.safe_dump(message, sort_keys=False)
 
 
-def _write_text(path: Path, text: str, *, force: bool) -> None:
-    """Atomic, never over an existing file without ``force`` (the one writer every output goes through)."""
-    formats.write_new_file(path, text, force=force)
-
-
 def write_outputs(result: HandEyeResult, outputs: Outputs) -> HandEyeOutcome:
     outcome = HandEyeOutcome(result)
     if outputs.result_json is not None:
-        _write_text(outputs.result_json, result.model_dump_json(indent=2) + "\n", force=outputs.force)
+        files.write_atomic(outputs.result_json, result.model_dump_json(indent=2) + "\n", force=outputs.force)
         outcome.written.append(str(outputs.result_json))
     if outputs.tf_static is not None:
         if result.status == "accepted":
-            _write_text(outputs.tf_static, tf_static_yaml(result), force=outputs.force)
+            files.write_atomic(outputs.tf_static, tf_static_yaml(result), force=outputs.force)
             outcome.written.append(str(outputs.tf_static))
         else:
             outcome.not_written.append(f"{outputs.tf_static} (rejected: no transform is published)")
@@ -260,6 +255,6 @@ def run_synth_motions(request: SynthRequest) -> dict:
     if truth_path.exists() and not request.force:  # checked first so neither file is written
         raise AlreadyExistsError(f"{truth_path} exists", "pass --force to overwrite it")
     handeye_io.write_motion_log(request.out, log.t_s, log.T_first, log.T_second, force=request.force)
-    _write_text(truth_path, json.dumps(truth, indent=2, allow_nan=False) + "\n", force=request.force)
+    files.write_atomic(truth_path, json.dumps(truth, indent=2, allow_nan=False) + "\n", force=request.force)
     return {"schema": "calibctl.synth-motions/1", "verdict": "pass", "files": {"motions": str(request.out),
             "truth": str(truth_path)}, **{k: v for k, v in truth.items() if k != "schema"}}
