@@ -1,0 +1,1 @@
+"""Extrinsics: rigid transforms between sensors (camera rigs; hand-eye)."""
