@@ -215,6 +215,16 @@ def register_synth(app: typer.Typer) -> None:
         pattern: Annotated[Pattern, typer.Option("--pattern", help="Board pattern (9x6 inner corners, 25 mm).")] = (
             Pattern.chessboard),
         force: Annotated[bool, typer.Option("--force", help="Write into a non-empty OUT, replacing earlier synth files.")] = False,
+        rig: Annotated[
+            int | None,
+            typer.Option("--rig", help="Render a synchronised rig of N (2-4) cameras instead: OUT/CAMi/ folders "
+                         "and rig_truth.json (--views = frames, default 14).", show_default=False),
+        ] = None,
+        baseline_mm: Annotated[
+            float | None,
+            typer.Option("--baseline-mm", help="With --rig: the spacing of neighbouring cameras (default 60-120 mm, "
+                         "drawn per camera).", show_default=False),
+        ] = None,
         json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
     ) -> None:
         """Render a synthetic capture session through a known camera and write truth.json beside it.
@@ -224,6 +234,17 @@ def register_synth(app: typer.Typer) -> None:
         """
         from calibctl.workflows import synth as synth_workflow
 
+        if rig is not None:
+            from calibctl.workflows.synth_rig import run_synth_rig
+
+            rig_result = run_synth_rig(out, rig, seed, views, synth_workflow.parse_size(size), baseline_mm, force)
+            if wants_json(ctx, json_output):
+                emit_json(rig_result.as_json())
+                return
+            stdout.print(f"wrote {rig_result.n_frames} synchronised frames of a {rig}-camera rig "
+                         f"({', '.join(f'{c}: {n} photos' for c, n in zip(rig_result.cameras, rig_result.photos_per_camera, strict=True))}) "
+                         f"and {rig_result.truth_path.name} to {rig_result.out_dir}")
+            return
         result = synth_workflow.run_synth(out, scenario.value, seed, views, synth_workflow.parse_size(size),
                                           pattern.value, force)
         if wants_json(ctx, json_output):

@@ -31,11 +31,11 @@ def corner_session(n_cameras: int, seed: int, n_frames: int = 20, noise_px: floa
     return truth, views_from(truth, rig_corners(truth, BOARD, noise_px, rng))
 
 
-def rendered_session(n_cameras: int, seed: int, n_frames: int,
-                     baselines_m: tuple[float, ...] | None = None) -> tuple[RigTruth, RigViews]:
+def rendered_session(n_cameras: int, seed: int, n_frames: int, baselines_m: tuple[float, ...] | None = None,
+                     min_cameras: int = 2) -> tuple[RigTruth, RigViews]:
     """Render every frame, detect with calibctl's detector; a missed detection is a missing view."""
     rng = np.random.default_rng(seed)
-    truth = synthesize_rig(n_cameras, BOARD, n_frames, rng, baselines_m=baselines_m, min_cameras=2)
+    truth = synthesize_rig(n_cameras, BOARD, n_frames, rng, baselines_m=baselines_m, min_cameras=min_cameras)
     rows = []
     for f in range(n_frames):
         row: list[BoardView | None] = []

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
-from calibctl.core.extrinsics.rig_tree import T_to_pose, invert, pose_to_T
+from calibctl.core.extrinsics.rig_tree import T_to_pose, invert, pose_to_T, rotation_angle_deg
 from calibctl.errors import NumericalError
 
 
@@ -80,3 +80,24 @@ def initial_poses(views: RigViews, members: Sequence[MemberIntrinsics]) -> tuple
                                  hint="drop that frame")
         board_poses[f] = T_to_pose(mean_transform(estimates))
     return cam_poses, board_poses
+
+
+def pair_spread(views: RigViews, members: Sequence[MemberIntrinsics]) -> str:
+    """Words on how much the per-frame relative poses of each pair disagree (for a diverged solve)."""
+    poses = view_poses(views, members)
+    parts = []
+    n = len(views.cameras)
+    for a in range(n):
+        for b in range(a + 1, n):
+            rel = [poses[(f, b)] @ invert(poses[(f, a)]) for f in range(len(views.frames))
+                   if (f, a) in poses and (f, b) in poses]
+            if len(rel) < 2:
+                continue
+            mean = mean_transform(rel)
+            base_mm = [float(np.linalg.norm(T[:3, 3]) * 1e3) for T in rel]
+            rot_deg = [rotation_angle_deg(T[:3, :3] @ mean[:3, :3].T) for T in rel]
+            worst = int(np.argmax(rot_deg))
+            frame = [views.frames[f] for f in range(len(views.frames)) if (f, a) in poses and (f, b) in poses][worst]
+            parts.append(f"{views.cameras[a]}-{views.cameras[b]}: per-frame baseline {min(base_mm):.1f}-"
+                         f"{max(base_mm):.1f} mm, rotation up to {max(rot_deg):.2f} deg off the mean (frame {frame})")
+    return "; ".join(parts)

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.covariance import MIN_RCOND
-from calibctl.core.extrinsics.rig_init import initial_poses
+from calibctl.core.extrinsics.rig_init import initial_poses, pair_spread
 from calibctl.core.extrinsics.rig_problem import (
     Layout,
     MemberIntrinsics,
@@ -258,9 +258,11 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         rms.append(float(np.sqrt(np.mean(np.sum(np.vstack(res) ** 2, axis=1)))) if res else float("nan"))
     worst = max(r for r in rms if np.isfinite(r)) if any(np.isfinite(rms)) else float("nan")
     if not worst <= MAX_RMS_PX:
-        raise NumericalError(f"the rig solve diverged: RMS {worst:.2f} px (limit {MAX_RMS_PX:.0f} px)",
-                             hint="check that the sources are synchronised and each camera's calibration "
-                                  "belongs to it")
+        raise NumericalError(f"the rig solve diverged: RMS {worst:.2f} px (limit {MAX_RMS_PX:.0f} px); "
+                             f"{pair_spread(views, members)}",
+                             hint="the cameras must not move against each other and the board must be still "
+                                  "while a frame is taken; check the sources are synchronised and each camera's "
+                                  "calibration belongs to it")
     tree = _tree(views.cameras, cam_poses, cov)
     return RigSolution(views, tuple(members), cam_poses, board_poses, cov, tree, tuple(rms), name,
                        refine_intrinsics, s2)
