@@ -15,6 +15,7 @@ from pydantic import BaseModel
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.events import ActivationEvent
+from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.artifacts.session import CaptureSession
 
 DOCUMENTS: dict[str, type[BaseModel]] = {
@@ -22,6 +23,10 @@ DOCUMENTS: dict[str, type[BaseModel]] = {
     "capture-session": CaptureSession,
     "calibration": CalibrationArtifact,
     "activation-event": ActivationEvent,
+    "rig-definition": RigDefinition,
+    "rig-session": RigSession,
+    "rig-calibration": RigCalibration,
+    "rig-activation": RigActivation,
 }
 
 
@@ -38,6 +43,10 @@ def expected_files() -> dict[str, str]:
         "capture-session": 1,
         "calibration": 1,
         "activation-event": 1,
+        "rig-definition": 1,
+        "rig-session": 1,
+        "rig-calibration": 1,
+        "rig-activation": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 
