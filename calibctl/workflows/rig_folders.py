@@ -157,7 +157,7 @@ def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict
             T = solution.T_a_b(b, a)
             cov = solution.pair_covariance(b, a)
             row: dict[str, object] = {
-                "pair": f"{names[a]}-{names[b]}", "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
+                "pair": f"{names[a]}-{names[b]}", "a": names[a], "b": names[b], "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
                 "sigma_baseline_mm": sigma_translation_mm(cov, T[:3, 3]),
                 "rotation_deg": rotation_angle_deg(T[:3, :3]), "sigma_rotation_deg": sigma_rotation_deg(cov),
                 "shared_views": solution.views.shared_view_counts()[(a, b)]}
