@@ -88,3 +88,15 @@ def test_refusals_exit_2_with_a_message(db, rig2):
                "--source", f"CAM1={rig2 / 'CAM1'}", "--min-shared-views", "9")
     assert r.exit_code == 1 and "CAM0-CAM1 shares 8 view(s) (needs 9)" in r.output
     assert "Traceback" not in r.output
+
+
+def test_solve_and_lint_take_rig(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    r = invoke(db, "solve", "--rig", "R1")
+    assert r.exit_code == 0 and "rig R1@1 (active)  accepted" in r.output
+    r = invoke(db, "--json", "lint", "--rig", "R1")
+    assert r.exit_code == 0
+    assert [x["source"] for x in json.loads(r.output)["results"]] == ["rig R1@1"]
+    r = invoke(db, "lint", "--rig", "R1", "--serial", "CAM0")
+    assert r.exit_code == 0 and "CAM0@1" in r.output and "rig R1@1 (rig): pass" in r.output
