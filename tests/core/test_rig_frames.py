@@ -67,3 +67,13 @@ def test_a_tree_composes_along_its_one_path_and_takes_a_non_camera_edge():
 def test_an_edge_that_does_not_extend_the_tree_is_refused():
     with pytest.raises(ValueError, match="does not extend the tree"):
         RigTree("cam0", (_edge("cam0", "cam1", 0.1), _edge("cam2", "cam1", 0.1)))
+
+
+@pytest.mark.parametrize("angle", [1e-9, 1e-6, 1e-3, 0.5, 3.0])
+def test_rotation_vector_round_trips_down_to_tiny_angles(angle):
+    import cv2
+
+    from calibctl.core.extrinsics.rig_tree import rotation_vector
+
+    rvec = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]) * angle
+    assert np.allclose(rotation_vector(cv2.Rodrigues(rvec)[0]), rvec, rtol=1e-6, atol=1e-15)

@@ -32,10 +32,24 @@ def pose_to_T(pose: np.ndarray) -> np.ndarray:
     return T
 
 
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation -> (3,) Rodrigues vector (rad), smooth down to zero angle.
+
+    Why not cv2.Rodrigues alone: it returns exactly 0 below ~1e-5 rad, which zeroes the derivative a
+    loop-closure residual (a near-identity rotation) needs for its covariance.
+    """
+    R = np.asarray(R, dtype=np.float64)[:3, :3]
+    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # sin(angle) * axis
+    s, c = float(np.linalg.norm(w)), 0.5 * (float(np.trace(R)) - 1.0)
+    if c < -0.99:  # near 180 deg the antisymmetric part vanishes; OpenCV's branch handles it
+        return np.asarray(cv2.Rodrigues(R)[0]).reshape(3)
+    return w if s < 1e-15 else w * (np.arctan2(s, c) / s)
+
+
 def T_to_pose(T: np.ndarray) -> np.ndarray:
     """(4, 4) T -> (6,) float64 rvec (rad), tvec (m)."""
     T = np.asarray(T, dtype=np.float64)
-    return np.concatenate([cv2.Rodrigues(T[:3, :3])[0].reshape(3), T[:3, 3]])
+    return np.concatenate([rotation_vector(T[:3, :3]), T[:3, 3]])
 
 
 def invert(T: np.ndarray) -> np.ndarray:
@@ -49,7 +63,7 @@ def invert(T: np.ndarray) -> np.ndarray:
 
 def rotation_angle_deg(R: np.ndarray) -> float:
     """Angle of a (3, 3) rotation, degrees (0..180)."""
-    return float(np.rad2deg(np.linalg.norm(cv2.Rodrigues(np.asarray(R, np.float64)[:3, :3])[0])))
+    return float(np.rad2deg(np.linalg.norm(rotation_vector(R))))
 
 
 def propagate(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, cov: np.ndarray) -> np.ndarray:
