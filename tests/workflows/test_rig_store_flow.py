@@ -150,3 +150,19 @@ def test_a_capture_at_another_resolution_than_the_members_calibration_is_refused
     rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
     with pytest.raises(InputError, match="capture is 640x480 but its calibration CAM1@2 is 1280x960"):
         rigs.solve_rig_stored(settings, "R1")
+
+
+def test_refine_intrinsics_moves_a_wrong_member_focal_length_back(settings, rig2):
+    with Store.open(settings.db_url) as store:  # CAM1@2: focal length 1 % off the renderer's
+        good = _truth_artifact(rig2, "CAM1")
+        fx = good.camera_matrix[0][0]
+        store.add_artifact(_truth_artifact(rig2, "CAM1").model_copy(update={"camera_matrix": (
+            (fx * 1.01, 0.0, good.camera_matrix[0][2]), (0.0, fx * 1.01, good.camera_matrix[1][2]), (0.0, 0.0, 1.0))}),
+            activate=True, **WHO)
+    rigs.add_rig(settings, "R1", ["CAM0", "CAM1"], None, [])
+    rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
+    fixed = rigs.solve_rig_stored(settings, "R1").calibration
+    refined = rigs.solve_rig_stored(settings, "R1", refine_intrinsics=True).calibration
+    cam1 = next(m for m in refined.members if m.serial == "CAM1")
+    assert cam1.refined and abs(cam1.camera_matrix[0][0] - fx) < 0.2 * abs(0.01 * fx)
+    assert refined.fit_rms_px["CAM1"] < fixed.fit_rms_px["CAM1"]
