@@ -112,13 +112,18 @@ def print_capture(result: capture_workflow.CaptureResult) -> None:
 
 def capture(
     ctx: typer.Context,
-    serial: SerialOption,
     board: BoardOption,
-    source: SourceOption,
+    source: Annotated[list[str], typer.Option(
+        "--source", show_default=False,
+        help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0); with --rig, "
+             "SERIAL=SRC once per member.")],
+    serial: Annotated[str | None, typer.Option("--serial", help="Camera serial number.", show_default=False)] = None,
     station: StationOption = None,
     operator: OperatorOption = None,
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
+    rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
+                                            "capture`).", show_default=False)] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, video or camera, run the capture gates and store the session.
@@ -126,10 +131,20 @@ def capture(
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints), 2 when the capture could not run (nothing is stored).
     """
+    from calibctl.errors import UsageError
     from calibctl.workflows import capture as capture_workflow
 
+    if rig is not None:
+        from calibctl.cli.rig import capture as capture_rig
+
+        capture_rig(ctx, rig, source, board, json_output=json_output)
+        return
+    if serial is None:
+        raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")
+    if len(source) != 1:
+        raise UsageError(f"one camera takes one --source, got {len(source)}", hint="capture a rig with --rig RIG")
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration)
     _, result = _run_capture(ctx, as_json, station, operator,
                              lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:

@@ -100,3 +100,15 @@ def test_solve_and_lint_take_rig(db, rig2):
     assert [x["source"] for x in json.loads(r.output)["results"]] == ["rig R1@1"]
     r = invoke(db, "lint", "--rig", "R1", "--serial", "CAM0")
     assert r.exit_code == 0 and "CAM0@1" in r.output and "rig R1@1 (rig): pass" in r.output
+
+
+def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM1'}")
+    assert r.exit_code == 0, r.output
+    assert "8 synchronised frames" in r.output
+    r = invoke(db, "capture", "--board", "A17", "--source", str(rig2 / "CAM0"))
+    assert r.exit_code == 2 and "capture needs --serial SERIAL" in r.output
+    r = invoke(db, "capture", "--serial", "CAM0", "--board", "A17", "--source", "a", "--source", "b")
+    assert r.exit_code == 2 and "one camera takes one --source, got 2" in r.output
