@@ -47,6 +47,7 @@ BENCHES = (
     Bench("bench_e2e", "bench_e2e.py", ("--repeats", "3"), ("--quick",)),
     Bench("bench_handeye", "bench_handeye.py", ("--seeds", "50", "--scenes", "5"),
           ("--seeds", "10", "--scenes", "2", "--repeats", "5")),
+    Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
 )
 
 

@@ -48,6 +48,9 @@ class LintThresholds(BaseModel):
     principal_point_max_frac: float = Field(0.1, gt=0, description="|cx - W/2| must be below this * W")
     outer_ring_ratio_max: float = Field(1.1, gt=0, description="held-out outer-ring RMS / fit outer-ring RMS")
     aspect_max_frac: float = Field(0.01, gt=0, description="|fx/fy - 1| above this is a warning")
+    epipolar_max_px_at_720: float = Field(0.5, gt=0, description="rig: held-out epipolar RMS limit at 720 rows "
+                                          "(scaled by rows / 720)")
+    loop_closure_max_mahalanobis: float = Field(4.48, gt=0, description="rig: loop residual limit, sqrt(chi2 6 dof 99.7%)")
 
 
 class HandEyeGates(BaseModel):

@@ -16,6 +16,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.handeye import HandEyeResult
+from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.artifacts.session import CaptureSession
 
 DOCUMENTS: dict[str, type[BaseModel]] = {
@@ -24,6 +25,10 @@ DOCUMENTS: dict[str, type[BaseModel]] = {
     "calibration": CalibrationArtifact,
     "activation-event": ActivationEvent,
     "handeye-result": HandEyeResult,
+    "rig-definition": RigDefinition,
+    "rig-session": RigSession,
+    "rig-calibration": RigCalibration,
+    "rig-activation": RigActivation,
 }
 
 
@@ -41,6 +46,10 @@ def expected_files() -> dict[str, str]:
         "calibration": 1,
         "activation-event": 1,
         "handeye-result": 1,
+        "rig-definition": 1,
+        "rig-session": 1,
+        "rig-calibration": 1,
+        "rig-activation": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 

@@ -112,13 +112,18 @@ def print_capture(result: capture_workflow.CaptureResult) -> None:
 
 def capture(
     ctx: typer.Context,
-    serial: SerialOption,
     board: BoardOption,
-    source: SourceOption,
+    source: Annotated[list[str], typer.Option(
+        "--source", show_default=False,
+        help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0); with --rig, "
+             "SERIAL=SRC once per member.")],
+    serial: Annotated[str | None, typer.Option("--serial", help="Camera serial number.", show_default=False)] = None,
     station: StationOption = None,
     operator: OperatorOption = None,
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
+    rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
+                                            "capture`).", show_default=False)] = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, video or camera, run the capture gates and store the session.
@@ -126,10 +131,20 @@ def capture(
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints), 2 when the capture could not run (nothing is stored).
     """
+    from calibctl.errors import UsageError
     from calibctl.workflows import capture as capture_workflow
 
+    if rig is not None:
+        from calibctl.cli.rig import capture as capture_rig
+
+        capture_rig(ctx, rig, source, board, json_output=json_output)
+        return
+    if serial is None:
+        raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")
+    if len(source) != 1:
+        raise UsageError(f"one camera takes one --source, got {len(source)}", hint="capture a rig with --rig RIG")
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration)
     _, result = _run_capture(ctx, as_json, station, operator,
                              lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:
@@ -215,6 +230,16 @@ def register_synth(app: typer.Typer) -> None:
         pattern: Annotated[Pattern, typer.Option("--pattern", help="Board pattern (9x6 inner corners, 25 mm).")] = (
             Pattern.chessboard),
         force: Annotated[bool, typer.Option("--force", help="Write into a non-empty OUT, replacing earlier synth files.")] = False,
+        rig: Annotated[
+            int | None,
+            typer.Option("--rig", help="Render a synchronised rig of N (2-4) cameras instead: OUT/CAMi/ folders "
+                         "and rig_truth.json (--views = frames, default 14).", show_default=False),
+        ] = None,
+        baseline_mm: Annotated[
+            float | None,
+            typer.Option("--baseline-mm", help="With --rig: the spacing of neighbouring cameras (default 60-120 mm, "
+                         "drawn per camera).", show_default=False),
+        ] = None,
         json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
     ) -> None:
         """Render a synthetic capture session through a known camera and write truth.json beside it.
@@ -224,6 +249,17 @@ def register_synth(app: typer.Typer) -> None:
         """
         from calibctl.workflows import synth as synth_workflow
 
+        if rig is not None:
+            from calibctl.workflows.synth_rig import run_synth_rig
+
+            rig_result = run_synth_rig(out, rig, seed, views, synth_workflow.parse_size(size), baseline_mm, force)
+            if wants_json(ctx, json_output):
+                emit_json(rig_result.as_json())
+                return
+            stdout.print(f"wrote {rig_result.n_frames} synchronised frames of a {rig}-camera rig "
+                         f"({', '.join(f'{c}: {n} photos' for c, n in zip(rig_result.cameras, rig_result.photos_per_camera, strict=True))}) "
+                         f"and {rig_result.truth_path.name} to {rig_result.out_dir}")
+            return
         result = synth_workflow.run_synth(out, scenario.value, seed, views, synth_workflow.parse_size(size),
                                           pattern.value, force)
         if wants_json(ctx, json_output):

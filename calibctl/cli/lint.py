@@ -27,6 +27,8 @@ def lint(
     files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (JSON/YAML artifact, ROS camera_info, OpenCV FileStorage) or a ROS camera_info file.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
     all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
+    rig: Annotated[str | None, typer.Option("--rig", help="Lint a rig's active version (RIG or RIG@N): stale members, "
+                                            "design baseline, epipolar, loop closure, members.")] = None,
     fmt: Annotated[str, typer.Option("--format", help="text | json | github (workflow annotations)")] = "text",
     json_output: Annotated[bool, typer.Option("--json", help="Same as --format json.")] = False,
 ) -> None:
@@ -38,7 +40,12 @@ def lint(
     if wants_json(ctx, json_output):
         fmt = "json"
     st = state(ctx)
-    results = lint_workflow.lint(st.settings(), files or [], serial, all_serials)
+    results = lint_workflow.lint(st.settings(), files or [], serial, all_serials) if (
+        files or serial or all_serials or not rig) else []
+    if rig:
+        from calibctl.workflows.rig_lint import lint_rig
+
+        results.append(lint_rig(st.settings(), rig))
     failed = any(r.failed for r in results)
     if fmt == "json":
         emit_json({"verdict": "fail" if failed else "pass", "results": [r.as_json() for r in results]})

@@ -53,9 +53,19 @@ def solve(
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
     json_output: Annotated[bool, typer.Option("--json", help="Print the artifact as JSON.")] = False,
+    rig: Annotated[str | None, typer.Option("--rig", help="Solve this rig instead (SESSION_ID is then a rig session; "
+                                            "same as `calibctl rig solve`).", show_default=False)] = None,
+    refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="With --rig: refine the members' "
+                                                    "intrinsics jointly.")] = False,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
     from calibctl.workflows import solve as solve_workflow
+
+    if rig is not None:
+        from calibctl.cli.rig import solve as solve_rig
+
+        solve_rig(ctx, rig, session_id, refine_intrinsics, activate, json_output)
+        return
 
     request = solve_workflow.SolveRequest(
         session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers

@@ -55,8 +55,9 @@ class IntrinsicCovariance:
     refused_reason: str | None
 
 
-def _intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distortion: Sequence[str],
-                       aspect: float | None) -> tuple[np.ndarray, tuple[str, ...]]:
+def intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distortion: Sequence[str],
+                      aspect: float | None) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Columns of a cv2.projectPoints Jacobian for the free intrinsics, and their names (fy tied when aspect)."""
     cols, names = [], []
     for name in free_intrinsics:
         if name == "fx":
@@ -101,7 +102,7 @@ def intrinsic_covariance(
     ssr = 0.0
     for obj, r, t, res in zip(object_points_per_view, rvecs, tvecs, residuals_px_per_view, strict=True):
         _, J = cv2.projectPoints(np.asarray(obj, dtype=np.float64), r, t, camera_matrix, dist_coeffs)
-        J_int, names = _intrinsic_columns(J, free_intrinsics, free_distortion, aspect)
+        J_int, names = intrinsic_columns(J, free_intrinsics, free_distortion, aspect)
         J_pose = J[:, :6]
         C = J_pose.T @ J_pose
         B = J_int.T @ J_pose

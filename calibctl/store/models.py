@@ -185,10 +185,82 @@ class ImageRow(Base):
     __table_args__ = (Index(None, "expires_at"),)
 
 
+class RigRow(Base):
+    """One registered rig (revision 0003): members, root and design values; immutable."""
+
+    __tablename__ = "rig_definitions"
+
+    name: Mapped[str] = mapped_column(String(SERIAL_LEN), primary_key=True)
+    created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+
+class RigSessionRow(Base):
+    """One immutable rig capture (revision 0003): per-camera session ids and the frame pairing."""
+
+    __tablename__ = "rig_sessions"
+
+    rig_session_id: Mapped[str] = mapped_column(String(SESSION_ID_LEN), primary_key=True)
+    rig: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    status: Mapped[str] = mapped_column(String(16))
+    created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (Index(None, "rig", "created_at"),)
+
+
+class RigCalibrationRow(Base):
+    """One immutable calibration version of one rig (revision 0003)."""
+
+    __tablename__ = "rig_calibrations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    version: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(16))
+    created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    content_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (
+        UniqueConstraint("rig", "version"),
+        CheckConstraint("version >= 1", name="version_positive"),
+        CheckConstraint("status IN ('accepted', 'rejected')", name="status_known"),
+    )
+
+
+class RigEventRow(Base):
+    """One append-only move of a rig's active version (revision 0003)."""
+
+    __tablename__ = "rig_activation_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    version: Mapped[int] = mapped_column(Integer)
+    previous_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    actor: Mapped[str] = mapped_column(Text)
+    station: Mapped[str] = mapped_column(Text)
+    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    reason: Mapped[str] = mapped_column(Text)
+
+    __table_args__ = (
+        ForeignKeyConstraint(["rig", "version"], ["rig_calibrations.rig", "rig_calibrations.version"]),
+        CheckConstraint("kind IN ('activate', 'rollback')", name="kind_known"),
+        Index(None, "rig", "id"),
+    )
+
+
 IMMUTABLE_TABLES = {
     "board_revisions": "board revisions are immutable",
     "capture_sessions": "capture sessions are immutable",
     "calibration_artifacts": "calibration artifacts are immutable",
     "activation_events": "activation events are append-only",
+    "rig_definitions": "rig definitions are immutable",
+    "rig_sessions": "rig sessions are immutable",
+    "rig_calibrations": "rig calibrations are immutable",
+    "rig_activation_events": "rig activation events are append-only",
 }
 """Table -> the message its UPDATE/DELETE trigger raises (the migrations create the triggers)."""

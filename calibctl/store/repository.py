@@ -42,6 +42,7 @@ from calibctl.store.engine import (
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, BoardRow, EventRow, ImageRow, SessionRow
+from calibctl.store.rigs import RigStoreMixin
 
 T = TypeVar("T")
 MAX_ATTEMPTS = 5
@@ -58,7 +59,7 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     )
 
 
-class Store(ImageStoreMixin):
+class Store(ImageStoreMixin, RigStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
     def __init__(self, engine: Engine, image_dir: Path) -> None:

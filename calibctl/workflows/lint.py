@@ -323,6 +323,11 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
     return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
 
 
+def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
+    """Every rule for a stored calibration (the same rules as for its JSON export)."""
+    return lint_file(formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None), limits)
+
+
 def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
     return [lint_file(formats.load_calibration(p), limits) for p in paths]
 
@@ -356,9 +361,7 @@ def lint_store(settings: Settings, serial: str | None, all_serials: bool) -> lis
             if store.active_version(s) is None:
                 results.append(_no_active_version(s, store.list_artifacts(s)))
                 continue
-            art = store.get_artifact(s, None)
-            stored = formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None)
-            results.append(lint_file(stored, settings.lint))
+            results.append(lint_artifact(store.get_artifact(s, None), settings.lint))
     return results
 
 

@@ -16,6 +16,7 @@ from calibctl.store.models import IMMUTABLE_TABLES
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.documents import capture_session
+from tests.store.rig_documents import rig_calibration, rig_definition, rig_session
 from tests.store.tamper import forge_activation, patch_stored_bytes
 
 WHO = {"actor": "qa", "station": "st1"}
@@ -25,6 +26,10 @@ ANY_COLUMN = {
     "capture_sessions": "serial",
     "calibration_artifacts": "rms_px",
     "activation_events": "reason",
+    "rig_definitions": "payload",
+    "rig_sessions": "status",
+    "rig_calibrations": "status",
+    "rig_activation_events": "reason",
 }
 
 
@@ -35,6 +40,9 @@ def filled(db_url: str) -> str:
         store.add_session(capture_session())
         store.add_artifact(calibration(), activate=True, reason="solved", **WHO)
         store.add_artifact(calibration(status="rejected"), activate=False, reason="solved", **WHO)
+        store.add_rig(rig_definition())
+        store.add_rig_session(rig_session())
+        store.add_rig_calibration(rig_calibration(), activate=True, reason="solved", **WHO)
     return db_url
 
 

@@ -1,0 +1,311 @@
+"""calibctl rig solve-folders: stereo and multi-camera extrinsics from per-camera photo folders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stdout
+from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
+
+rig_app = typer.Typer(
+    name="rig",
+    help="Camera rigs: extrinsics of 2+ cameras as a tree from one root, with one-sigma per edge.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+
+def say(line: str) -> None:
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
+def render_run(doc: dict[str, Any]) -> None:
+    """Human report of ``rig_folders.run_json``."""
+    unmatched = doc["unmatched"]
+    say(f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)")
+    for u in unmatched[:10]:
+        say(f"  unmatched {u['camera']} {u['file']}: {u['reason']}")
+    for name, counts in doc["images"].items():
+        say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
+    g = doc["gate"]
+    say(f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
+        + (f" -> {g['hint']}" if g["hint"] else ""))
+    if "tree" not in doc:
+        return
+    say(f"tree from {doc['root']} ({doc['solver']}):")
+    for e in doc["tree"]:
+        say(f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
+            f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg")
+    held = doc.get("held_out", {})
+    for name, rms in doc["fit_rms_px"].items():
+        say(f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
+            f"({held.get('folds', 0)}-fold)")
+    for p in doc["pairs"]:
+        line = (f"  pair {p['pair']}: baseline {p['baseline_mm']:.3f} +/- {p['sigma_baseline_mm']:.3f} mm, "
+                f"{p['shared_views']} shared views")
+        if "epipolar_rms_px" in p:
+            line += (f"; held-out epipolar RMS {p['epipolar_rms_px']:.3f} px (max {p['epipolar_max_px']:.3f}), "
+                     f"rectified rows RMS {p['rectified_rms_px']:.3f} px")
+        say(line)
+    for lc in doc["loops"]:
+        say(f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
+            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}")
+
+
+@rig_app.command("solve-folders")
+def solve_folders(
+    ctx: typer.Context,
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER, one per camera; the first is the root "
+                                              "unless --root. Photos pair up by the last number in their names.")],
+    cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
+    rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
+    square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")],
+    root: Annotated[str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)] = None,
+    model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = "k1k2",
+    refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")] = False,
+    min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    export_dir: Annotated[Path | None, typer.Option("--export-dir", help="Write the robot exports here.",
+                                                    show_default=False)] = None,
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
+) -> None:
+    """Solve a rig from per-camera folders (no store): exit 0 solved, 1 rig gate failed, 2 could not solve.
+
+    Each camera is first calibrated on its own photos; then the extrinsics (cv2.stereoCalibrateExtended
+    for two cameras, calibctl's joint LM for more), their one-sigma, k-fold held-out epipolar error and
+    rectified rows per pair, and loop closure for three or more cameras.
+    """
+    from calibctl.core.board_spec import BoardSpec
+    from calibctl.workflows import rig_folders
+
+    sources = rig_folders.parse_sources(source)
+    if root is not None:
+        if root not in sources:
+            raise UsageError(f"--root {root} is not one of the cameras ({', '.join(sources)})")
+        sources = {root: sources[root], **{k: v for k, v in sources.items() if k != root}}
+    try:
+        spec = BoardSpec.chessboard(cols, rows, square_mm / 1e3)
+    except ValueError as exc:
+        raise UsageError(f"bad board: {exc}") from exc
+    run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views)
+    doc = rig_folders.run_json(run)
+    exports: list[str] = []
+    if export_dir is not None and run.solution is not None:
+        from calibctl.workflows.rig_exports import write_exports
+
+        exports = [str(p) for p in write_exports(run.solution, export_dir)]
+        doc["exports"] = exports
+    if wants_json(ctx, json_output):
+        emit_json(doc)
+    else:
+        render_run(doc)
+        for path in exports:
+            say(f"  wrote {path}")
+    if not run.gate.passed:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+
+
+@rig_app.command("add")
+def add(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(metavar="RIG", help="Rig name.")],
+    camera: Annotated[list[str], typer.Option("--camera", help="Member camera serial (repeat; 2 or more).")],
+    root: Annotated[str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)] = None,
+    design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: design baseline "
+                                                      "and tolerance, mm (repeat per pair).", show_default=False)] = None,
+    json_output: JsonFlag = False,
+) -> None:
+    """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
+    from calibctl.workflows import rigs
+
+    rig = rigs.add_rig(state(ctx).settings(), name, camera, root, design or [])
+    if wants_json(ctx, json_output):
+        emit_json(rig)
+        return
+    say(f"rig {rig.name}: cameras {', '.join(rig.cameras)}, root {rig.root}"
+        + "".join(f"; design {d.a}-{d.b} {d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm" for d in rig.design_baselines))
+
+
+@rig_app.command("capture")
+def capture(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER per member; images pair up by the "
+                                              "last number in their names.")],
+    board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
+    min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    json_output: JsonFlag = False,
+) -> None:
+    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
+    from calibctl.workflows import rig_folders, rigs
+
+    sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
+    result = rigs.capture_rig(state(ctx).settings(), name, sources, board, min_shared_views)
+    s = result.session
+    if wants_json(ctx, json_output):
+        emit_json({"rig_session": s.model_dump(mode="json"),
+                   "camera_sessions": {c: r.session.model_dump(mode="json") for c, r in result.cameras.items()}})
+    else:
+        say(f"rig session {s.rig_session_id} of {s.rig}: {len(s.frames)} synchronised frames, "
+            f"{len(s.unmatched)} unmatched image(s); {s.status}")
+        for c, r in result.cameras.items():
+            gates = ", ".join(f"{g.gate} {'pass' if g.passed else 'FAIL'}" for g in r.session.gates)
+            say(f"  {c}: session {r.session.session_id}, {len(r.session.views)} views ({gates})")
+        for u in s.unmatched[:10]:
+            say(f"  unmatched {u.camera} {Path(u.name).name}: {u.reason}")
+        say("  shared views: " + ", ".join(f"{p} {n}" for p, n in s.shared_views.items()))
+        for g in s.gates:
+            say(f"  gate {g.gate} {'pass' if g.passed else 'FAIL'}  {g.message}" + (f" -> {g.hint}" if g.hint else ""))
+    if not result.passed:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def print_rig_calibration(cal: Any, active: bool) -> None:
+    say(f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root {cal.root}  "
+        f"{cal.solver}")
+    for m in cal.members:
+        say(f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx {m.camera_matrix[0][0]:.2f}"
+            f"{' (refined)' if m.refined else ''}: RMS fit {cal.fit_rms_px[m.serial]:.3f} px / held-out "
+            f"{cal.held_out_rms_px[m.serial]:.3f} px")
+    for e in cal.edges:
+        say(f"  T_{e.parent}_{e.child}: |t| = {e.translation_mm:.3f} +/- {e.sigma_translation_mm:.3f} mm, "
+            f"rotation {e.rotation_deg:.4f} +/- {e.sigma_rotation_deg:.4f} deg")
+    for p in cal.pairs:
+        epi = f"; held-out epipolar RMS {p.epipolar_rms_px:.3f} px" if p.epipolar_rms_px is not None else ""
+        say(f"  pair {p.a}-{p.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm{epi}")
+    for lc in cal.loops:
+        say(f"  loop {'-'.join(lc.cycle)}: {lc.rotation_deg:.4f} deg, {lc.translation_mm:.3f} mm, "
+            f"Mahalanobis {lc.mahalanobis:.2f}")
+    print_findings(cal.lint)
+
+
+def print_findings(findings: list[Any]) -> None:
+    if not findings:
+        say("  lint: clean")
+    for f in findings:
+        say(f"  {f.severity} {f.rule}: {f.message}" + (f" -> {f.fix}" if f.fix else ""))
+
+
+@rig_app.command("solve")
+def solve(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
+    session: Annotated[str | None, typer.Argument(metavar="[RIG_SESSION]", help="Rig session (default: latest "
+                                                  "accepted).")] = None,
+    refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine members' intrinsics.")] = False,
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
+    json_output: JsonFlag = False,
+) -> None:
+    """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
+    from calibctl.workflows import rigs
+
+    out = rigs.solve_rig_stored(state(ctx).settings(), name, session, refine_intrinsics, activate=activate)
+    if wants_json(ctx, json_output):
+        emit_json(out.calibration)
+    else:
+        print_rig_calibration(out.calibration, out.active)
+    if out.calibration.status != "accepted":
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+@rig_app.command("lint")
+def lint(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="RIG[@N]", help="Rig (its active version) or RIG@N.")],
+    json_output: JsonFlag = False,
+) -> None:
+    """Rig lint against the store as it is now (stale members, design baseline, epipolar, loops, members)."""
+    from calibctl.workflows import rig_lint
+
+    result = rig_lint.lint_rig(state(ctx).settings(), ref)
+    if wants_json(ctx, json_output):
+        emit_json(result.as_json())
+    else:
+        say(f"{result.source}: {'fail' if result.failed else 'pass'}")
+        print_findings(result.findings)
+    if result.failed:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+@rig_app.command("history")
+def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG")], json_output: JsonFlag = False) -> None:
+    """Every version of a rig, which one is active, and the activation log."""
+    from calibctl.workflows import rig_lint
+
+    cals, active, events = rig_lint.history(state(ctx).settings(), name)
+    if wants_json(ctx, json_output):
+        emit_json({"rig": name, "active_version": active, "versions": [
+            {"version": c.version, "status": c.status, "created_at": c.provenance.created_at,
+             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint)}
+            for c in cals], "events": [e.model_dump(mode="json") for e in events]})
+        return
+    say(f"rig {name} history (active: {active if active is not None else 'none'})")
+    for c in cals:
+        base = ", ".join(f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs[:3])
+        say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
+            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}")
+    for e in events:
+        say(f"  event {e.event_id}: {e.kind} -> {e.version} by {e.actor} at {e.station}: {e.reason}")
+
+
+@rig_app.command("show")
+def show(ctx: typer.Context, ref: Annotated[str, typer.Argument(metavar="RIG[@N]")], json_output: JsonFlag = False) -> None:
+    """One rig calibration in full."""
+    from calibctl.workflows import rig_lint
+
+    cal = rig_lint.show(state(ctx).settings(), ref)
+    if wants_json(ctx, json_output):
+        emit_json(cal)
+        return
+    _, active, _ = rig_lint.history(state(ctx).settings(), cal.rig)
+    print_rig_calibration(cal, cal.version == active)
+
+
+@rig_app.command("rollback")
+def rollback(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(metavar="RIG")],
+    to: Annotated[int, typer.Option("--to", help="Accepted version to make active.")],
+    reason: Annotated[str, typer.Option("--reason", help="Why.")],
+    json_output: JsonFlag = False,
+) -> None:
+    """Make an earlier accepted rig version active again (appends an event)."""
+    from calibctl.workflows import rig_lint
+
+    event = rig_lint.rollback(state(ctx).settings(), name, to, reason)
+    if wants_json(ctx, json_output):
+        emit_json(event)
+        return
+    say(f"rig {name}: active version {event.previous_version} -> {event.version} ({reason})")
+
+
+@rig_app.command("export")
+def export(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
+    fmt: Annotated[str, typer.Option("--format", help="json, opencv (needs -o), ros, tf, urdf or kalibr.")] = "json",
+    out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file.", show_default=False)] = None,
+    pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
+                                             "second member).", show_default=False)] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite -o.")] = False,
+) -> None:
+    """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr."""
+    from calibctl.workflows import rig_lint
+
+    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair)
+    if out is None:
+        print(text, end="")
+    else:
+        say(f"wrote {out}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``rig`` command group to the root app."""
+    app.add_typer(rig_app, name="rig")

@@ -1,0 +1,202 @@
+"""Rigs in the store: definitions, rig sessions, rig calibrations (versioned per rig) and their
+append-only activation log. Same rules as the camera tables: every read re-checks the sha256, rows are
+immutable in the database (revision 0003's triggers), the active version is the latest event's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import sha256_hex, utc_now
+from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
+from calibctl.errors import AlreadyExistsError, IntegrityError, NotFoundError, UsageError
+from calibctl.store import codec, counters
+from calibctl.store.history import known_list
+from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
+
+T = TypeVar("T")
+
+
+def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> Any:
+    actual = sha256_hex(payload.encode("utf-8"))
+    if actual != recorded:
+        raise codec._mismatch(what, recorded, actual)
+    return codec._parse(model, payload, what)
+
+
+def _decode_calibration(row: RigCalibrationRow) -> RigCalibration:
+    what = f"rig {row.rig}@{row.version}"
+    cal: RigCalibration = codec._parse(RigCalibration, row.payload, what)
+    actual = cal.computed_sha256()
+    if actual != row.content_sha256:
+        raise codec._mismatch(what, row.content_sha256, actual)
+    codec._check_columns(what, {"rig": (row.rig, cal.rig), "version": (row.version, cal.version),
+                                "status": (row.status, cal.status)})
+    return cal
+
+
+def _event(row: RigEventRow) -> RigActivation:
+    return RigActivation(event_id=row.id, rig=row.rig, version=row.version, previous_version=row.previous_version,
+                         kind=row.kind, actor=row.actor, station=row.station, at=row.at, reason=row.reason)
+
+
+def _active(s: Session, rig: str) -> int | None:
+    return s.scalar(select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1))
+
+
+def _append(s: Session, rig: str, version: int, kind: str, actor: str, station: str, reason: str) -> RigActivation:
+    row = RigEventRow(rig=rig, version=version, previous_version=_active(s, rig), kind=kind, actor=actor,
+                      station=station, at=utc_now(), reason=reason)
+    s.add(row)
+    s.flush()
+    return _event(row)
+
+
+def _statuses(s: Session, rig: str) -> dict[int, str]:
+    rows = s.execute(select(RigCalibrationRow.version, RigCalibrationRow.status)
+                     .where(RigCalibrationRow.rig == rig).order_by(RigCalibrationRow.version)).all()
+    if rows:
+        return {int(v): str(st) for v, st in rows}
+    raise NotFoundError(f"rig {rig} has no calibration yet", f"run `calibctl rig solve {rig}` after a rig capture")
+
+
+class RigStoreMixin:
+    """Rig methods of ``Store`` (which provides ``_run``)."""
+
+    _run: Callable[..., Any]
+
+    # definitions ---------------------------------------------------------------------------------
+
+    def add_rig(self, rig: RigDefinition) -> RigDefinition:
+        """Register a rig; a name is registered once (AlreadyExistsError)."""
+        payload = codec.canonical_text(rig)
+
+        def work(s: Session) -> RigDefinition:
+            if s.get(RigRow, rig.name) is not None:
+                raise AlreadyExistsError(f"rig {rig.name} is already registered",
+                                         "rig definitions are immutable: register the new layout under a new name")
+            s.add(RigRow(name=rig.name, created_at=rig.created_at, payload=payload,
+                         payload_sha256=sha256_hex(payload.encode("utf-8"))))
+            return rig
+
+        return self._run(work, write=True)
+
+    def get_rig(self, name: str) -> RigDefinition:
+        def work(s: Session) -> RigDefinition:
+            row = s.get(RigRow, name)
+            if row is None:
+                known = list(s.scalars(select(RigRow.name).order_by(RigRow.name)))
+                listing = f"known: {known_list(known)}" if known else "no rig is registered yet"
+                raise NotFoundError(f"unknown rig '{name}'; {listing}", "register it with `calibctl rig add`")
+            rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {name}")
+            if rig.name != row.name:
+                raise IntegrityError(f"rig {name}: the stored name disagrees with the stored document", codec.TAMPER_HINT)
+            return rig
+
+        return self._run(work)
+
+    # sessions ------------------------------------------------------------------------------------
+
+    def add_rig_session(self, session: RigSession) -> None:
+        payload = codec.canonical_text(session)
+        self._run(lambda s: s.add(RigSessionRow(
+            rig_session_id=session.rig_session_id, rig=session.rig, status=session.status,
+            created_at=session.created_at, payload=payload, payload_sha256=sha256_hex(payload.encode("utf-8")))),
+            write=True)
+
+    def get_rig_session(self, rig: str, rig_session_id: str | None = None) -> RigSession:
+        """A rig session by id, or the rig's latest accepted one."""
+
+        def work(s: Session) -> RigSession:
+            q = select(RigSessionRow).where(RigSessionRow.rig == rig)
+            if rig_session_id is not None:
+                q = q.where(RigSessionRow.rig_session_id == rig_session_id)
+            else:
+                q = q.where(RigSessionRow.status == "accepted")
+            row = s.scalars(q.order_by(RigSessionRow.created_at.desc()).limit(1)).first()
+            if row is None:
+                what = f"rig session {rig_session_id}" if rig_session_id else "an accepted rig session"
+                raise NotFoundError(f"rig {rig} has no {what}", f"run `calibctl rig capture {rig} --source ...` first")
+            out: RigSession = _decode_hashed(RigSession, row.payload, row.payload_sha256,
+                                             f"rig session {row.rig_session_id}")
+            return out
+
+        return self._run(work)
+
+    # calibrations --------------------------------------------------------------------------------
+
+    def add_rig_calibration(self, cal: RigCalibration, *, activate: bool, actor: str, station: str,
+                            reason: str) -> RigCalibration:
+        """Store as the rig's next version (sealed) and activate when asked (accepted only)."""
+        if activate and cal.status != "accepted":
+            raise UsageError(f"rig {cal.rig}: a {cal.status} calibration can never become active")
+
+        def work(s: Session) -> RigCalibration:
+            version = counters.next_value(s, "rig", cal.rig)
+            stored = cal.model_copy(update={"version": version}).sealed()
+            s.add(RigCalibrationRow(rig=stored.rig, version=version, status=stored.status,
+                                    created_at=stored.provenance.created_at, payload=codec.canonical_text(stored),
+                                    content_sha256=stored.content_sha256))
+            s.flush()
+            if activate:
+                _append(s, stored.rig, version, "activate", actor, station, reason)
+            return stored
+
+        return self._run(work, write=True)
+
+    def get_rig_calibration(self, rig: str, version: int | None = None) -> RigCalibration:
+        """``rig@version``; None means the active version."""
+
+        def work(s: Session) -> RigCalibration:
+            statuses = _statuses(s, rig)
+            wanted = _active(s, rig) if version is None else version
+            if wanted is None:
+                raise NotFoundError(f"rig {rig} has no active version; versions: {known_list(list(statuses))}",
+                                    f"ask for a version ({rig}@N) or roll back to an accepted one")
+            if wanted not in statuses:
+                raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {known_list(list(statuses))}",
+                                    f"see `calibctl rig history {rig}`")
+            row = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
+                                                           RigCalibrationRow.version == wanted)).one()
+            return _decode_calibration(row)
+
+        return self._run(work)
+
+    def list_rig_calibrations(self, rig: str) -> list[RigCalibration]:
+        def work(s: Session) -> list[RigCalibration]:
+            _statuses(s, rig)
+            rows = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig)
+                             .order_by(RigCalibrationRow.version))
+            return [_decode_calibration(r) for r in rows]
+
+        return self._run(work)
+
+    def active_rig_version(self, rig: str) -> int | None:
+        return self._run(lambda s: _active(s, rig))
+
+    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str) -> RigActivation:
+        if not reason.strip():
+            raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
+
+        def work(s: Session) -> RigActivation:
+            counters.lock(s, "rig", rig)
+            statuses = _statuses(s, rig)
+            if to_version not in statuses:
+                raise NotFoundError(f"rig {rig} has no version {to_version}; versions: {known_list(list(statuses))}")
+            if statuses[to_version] != "accepted":
+                raise UsageError(f"rig {rig}@{to_version} is rejected and can never become active")
+            if _active(s, rig) == to_version:
+                raise UsageError(f"rig {rig}@{to_version} is already the active version; nothing to roll back")
+            _decode_calibration(s.scalars(select(RigCalibrationRow).where(
+                RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
+            return _append(s, rig, to_version, "rollback", actor, station, reason)
+
+        return self._run(work, write=True)
+
+    def rig_events(self, rig: str) -> list[RigActivation]:
+        return self._run(lambda s: [_event(r) for r in s.scalars(
+            select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))])

@@ -1,0 +1,204 @@
+"""``calibctl rig solve-folders``: a camera rig solved from per-camera photo folders, no store needed.
+
+Steps: list each camera's photos; match them into synchronised frames by frame key (the last run of
+digits in the file name: core.extrinsics.rig_frames); detect and classify every photo with today's
+per-image outcomes; calibrate each camera on its own accepted photos (core.solve, full covariance)
+unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
+held-out numbers and, for three or more cameras, pairwise loop closure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibctl.core.board_spec import BoardSpec
+from calibctl.core.extrinsics.rig_frames import (
+    MIN_SHARED_VIEWS,
+    FrameMatch,
+    match_frames,
+    rig_connected_gate,
+)
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
+from calibctl.core.extrinsics.rig_solve import RigSolution, solve_rig
+from calibctl.core.extrinsics.rig_tree import rotation_angle_deg, sigma_rotation_deg, sigma_translation_mm
+from calibctl.core.extrinsics.rig_validation import (
+    LoopClosure,
+    RigHoldout,
+    loop_closures,
+    validate_rig_holdout,
+)
+from calibctl.core.gates import GateResult
+from calibctl.core.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session, list_images
+from calibctl.core.solve import get_model, solve_intrinsics
+from calibctl.core.views import BoardView
+from calibctl.errors import InputError, NumericalError, UsageError
+
+USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
+
+
+@dataclass(frozen=True)
+class RigFolderRun:
+    """Everything ``solve-folders`` found; ``solution`` etc. are None when the gate failed."""
+
+    cameras: tuple[str, ...]
+    match: FrameMatch
+    outcomes: Mapping[str, Sequence[ImageOutcome]]
+    views: RigViews
+    members: tuple[MemberIntrinsics, ...]
+    gate: GateResult
+    solution: RigSolution | None = None
+    holdout: RigHoldout | None = None
+    loops: tuple[LoopClosure, ...] = ()
+
+
+def parse_sources(items: Sequence[str]) -> dict[str, Path]:
+    """['CAM=DIR', ...] -> {CAM: DIR}; UsageError on a malformed or repeated camera."""
+    out: dict[str, Path] = {}
+    for item in items:
+        name, sep, folder = item.partition("=")
+        if not sep or not name or not folder:
+            raise UsageError(f"--source must look like SERIAL=FOLDER, got {item!r}")
+        if name in out:
+            raise UsageError(f"camera {name} is given twice", hint="name each camera of the rig once")
+        out[name] = Path(folder)
+    if len(out) < 2:
+        raise UsageError(f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera")
+    return out
+
+
+def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec, model: str) -> MemberIntrinsics:
+    """Calibrate one camera on its own accepted photos (core.solve), keeping the full covariance."""
+    views = [(o.corner_ids, o.corners_px) for o in outcomes
+             if o.accepted and o.corner_ids is not None and o.corners_px is not None]
+    size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
+    if size is None or not views:
+        raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
+    points = spec.object_points()
+    m = get_model(model)
+    sol = solve_intrinsics([points[ids] for ids, _ in views], [px for _, px in views], size, m)
+    cov = sol.covariance.covariance if sol.covariance is not None else None
+    return MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, size, m.free_intrinsics, m.free_distortion,
+                            sol.aspect_ratio, cov)
+
+
+def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
+              spec: BoardSpec) -> RigViews:
+    by_path = {o.path: o for name in cameras for o in outcomes[name]}
+    rows, names = [], []
+    for key, photos in match.frames:
+        row: list[BoardView | None] = []
+        for name in cameras:
+            o = by_path.get(photos[name]) if name in photos else None
+            usable = o is not None and o.status in USABLE and o.corner_ids is not None and o.corners_px is not None
+            row.append(BoardView(Path(o.path).name, o.corner_ids, o.corners_px) if usable else None)  # type: ignore[arg-type,union-attr]
+        rows.append(tuple(row))
+        names.append(str(key))
+    return RigViews(tuple(cameras), spec.object_points(), tuple(names), tuple(rows))
+
+
+def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
+                      intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
+                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int = 2) -> RigFolderRun:
+    """Run the folder flow (module docstring). The first source is the root camera.
+
+    Raises:
+        InputError: a folder is missing or empty, or a camera's photos differ in size from its intrinsics.
+        NumericalError: a camera cannot be calibrated, or the rig solve fails.
+    """
+    cameras = tuple(sources)
+    photos: dict[str, list[Path]] = {}
+    for name, folder in sources.items():
+        if not folder.is_dir():
+            raise InputError(f"camera {name}: {folder} is not a folder", hint="give SERIAL=FOLDER with existing folders")
+        photos[name] = list_images(folder)
+        if not photos[name]:
+            raise InputError(f"camera {name}: no images in {folder}", hint="supported: png, jpg, bmp, tif, pgm, webp")
+    match = match_frames(photos)
+    if not match.frames:
+        raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
+                         hint="name the photos so that the last number in the name is the frame number or "
+                              "timestamp, the same for photos taken together (left_0042.png / right_0042.png)")
+    outcomes = {name: classify_session(photos[name], spec, workers=workers) for name in cameras}
+    members = []
+    for name in cameras:
+        given = (intrinsics or {}).get(name)
+        if given is None:
+            members.append(self_calibrated(name, outcomes[name], spec, model))
+            continue
+        sizes = {o.image_size for o in outcomes[name] if o.image_size is not None}
+        if sizes and sizes != {tuple(given.image_size)}:
+            found = ", ".join(f"{w}x{h}" for w, h in sorted(sizes))
+            raise InputError(f"camera {name}: photos are {found} but its calibration is "
+                             f"{given.image_size[0]}x{given.image_size[1]}",
+                             hint="use the calibration made at this resolution, or re-calibrate the camera")
+        members.append(given)
+    views = rig_views(cameras, match, outcomes, spec)
+    gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
+    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate)
+    if not gate.passed:
+        return run
+    solution = solve_rig(views, members, refine_intrinsics, model)
+    holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
+    loops = loop_closures(views, members, model) if len(cameras) >= 3 else ()
+    return RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, solution, holdout, loops)
+
+
+def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict[str, object]]:
+    """Per pair (a < b): baseline mm and rotation deg with one-sigma, and the held-out numbers."""
+    rows = []
+    names = solution.views.cameras
+    held = {(p.a, p.b): p for p in (holdout.pairs if holdout else ())}
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            T = solution.T_a_b(b, a)
+            cov = solution.pair_covariance(b, a)
+            row: dict[str, object] = {
+                "pair": f"{names[a]}-{names[b]}", "a": names[a], "b": names[b], "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
+                "sigma_baseline_mm": sigma_translation_mm(cov, T[:3, 3]),
+                "rotation_deg": rotation_angle_deg(T[:3, :3]), "sigma_rotation_deg": sigma_rotation_deg(cov),
+                "shared_views": solution.views.shared_view_counts()[(a, b)]}
+            if (a, b) in held:
+                p = held[(a, b)]
+                row.update({"epipolar_rms_px": p.epipolar_rms_px, "epipolar_max_px": p.epipolar_max_px,
+                            "rectified_rms_px": p.rectified_rms_px, "rectified_max_px": p.rectified_max_px})
+            rows.append(row)
+    return rows
+
+
+def run_json(run: RigFolderRun) -> dict[str, object]:
+    """The run as plain JSON types (``--json``)."""
+    g = run.gate
+    out: dict[str, object] = {
+        "cameras": list(run.cameras),
+        "frames": len(run.match.frames),
+        "unmatched": [{"camera": u.camera, "file": Path(u.path).name, "reason": u.reason} for u in run.match.unmatched],
+        "images": {n: {s: sum(1 for o in run.outcomes[n] if o.status == s) for s in {o.status for o in run.outcomes[n]}}
+                   for n in run.cameras},
+        "shared_views": {f"{run.cameras[a]}-{run.cameras[b]}": n for (a, b), n in run.views.shared_view_counts().items()},
+        "gate": {"gate": g.gate, "passed": g.passed, "value": g.value, "threshold": g.threshold, "message": g.message,
+                 "hint": g.hint},
+        "members": [{"name": m.name, "image_size": list(m.image_size), "K": np.asarray(m.camera_matrix).tolist(),
+                     "dist": np.asarray(m.dist_coeffs).tolist()} for m in run.members],
+    }
+    sol = run.solution
+    if sol is None:
+        return out
+    out["solver"] = sol.solver
+    out["root"] = sol.tree.root
+    out["tree"] = [{"parent": e.parent, "child": e.child, "T_parent_child": e.T_parent_child.tolist(),
+                    "translation_mm": e.translation_mm, "sigma_translation_mm": e.sigma_translation_mm,
+                    "rotation_deg": e.rotation_deg, "sigma_rotation_deg": e.sigma_rotation_deg}
+                   for e in sol.tree.edges]
+    out["fit_rms_px"] = dict(zip(run.cameras, sol.rms_px, strict=True))
+    if run.holdout is not None:
+        out["held_out"] = {"folds": run.holdout.n_folds,
+                           "rms_px": dict(zip(run.cameras, run.holdout.camera_rms_px, strict=True))}
+    out["pairs"] = pair_summary(sol, run.holdout)
+    out["loops"] = [{"cycle": list(lc.cycle), "rotation_deg": lc.rotation_deg, "translation_mm": lc.translation_mm,
+                     "sigma_rotation_deg": lc.sigma_rotation_deg, "sigma_translation_mm": lc.sigma_translation_mm,
+                     "mahalanobis": lc.mahalanobis} for lc in run.loops]
+    return out

@@ -1,0 +1,171 @@
+"""Rig lint and the rig records: history, show, rollback, export.
+
+Rules (errors fail lint, exit 1):
+- ``rig-stale-member``: a member's active calibration is not the serial@version + content_sha256 the
+  rig solve used (re-calibrated or rolled back since): the rig must be re-solved.
+- ``baseline-design``: a pair's solved baseline is outside the registered design value +- tolerance.
+- ``epipolar``: a pair's held-out epipolar RMS is above ``epipolar_max_px_at_720`` x rows / 720
+  (0.5 px at 720 rows by default, per station; DepthAI's factory flow gates at 0.5-0.6 px).
+- ``loop-closure``: a cycle's residual has Mahalanobis distance above ``loop_closure_max_mahalanobis``
+  (4.48 = sqrt of chi-square(6) at 99.7 %).
+- the camera rules for every member's active calibration (``member:<rule>``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.lint import Finding
+from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition
+from calibctl.config import LintThresholds, Settings
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree
+from calibctl.errors import NotFoundError, UsageError
+from calibctl.files import write_atomic
+from calibctl.workflows.lint import LintResult, lint_artifact
+from calibctl.workflows.records import open_store
+
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "kalibr")
+
+
+def parse_rig_ref(ref: str) -> tuple[str, int | None]:
+    name, sep, version = ref.strip().partition("@")
+    if not name or (sep and not version.isdigit()):
+        raise UsageError(f"'{ref}' is not RIG or RIG@N")
+    return name, int(version) if sep else None
+
+
+def rig_findings(cal: RigCalibration, rig: RigDefinition, active: Mapping[str, CalibrationArtifact | None],
+                 limits: LintThresholds) -> list[Finding]:
+    """Every rig rule on ``cal`` given the members' currently active calibrations."""
+    findings: list[Finding] = []
+    sizes = {m.serial: m.image_size for m in cal.members}
+    for m in cal.members:
+        now = active.get(m.serial)
+        if now is None or (now.version, now.content_sha256) != (m.version, m.content_sha256):
+            current = f"{now.serial}@{now.version}" if now is not None else "no active calibration"
+            findings.append(Finding(
+                rule="rig-stale-member", severity="error",
+                message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
+                fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)"))
+    pairs = {frozenset((p.a, p.b)): p for p in cal.pairs}
+    for d in rig.design_baselines:
+        p = pairs.get(frozenset((d.a, d.b)))
+        if p is not None and abs(p.baseline_mm - d.baseline_mm) > d.tolerance_mm:
+            findings.append(Finding(
+                rule="baseline-design", severity="error", value=p.baseline_mm, threshold=d.tolerance_mm,
+                message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
+                        f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
+                fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size"))
+    for p in cal.pairs:
+        limit = limits.epipolar_max_px_at_720 * sizes[p.a][1] / 720.0
+        if p.epipolar_rms_px is not None and p.epipolar_rms_px > limit:
+            findings.append(Finding(
+                rule="epipolar", severity="error", value=p.epipolar_rms_px, threshold=limit,
+                message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px",
+                fix="re-capture with a still board seen by both cameras, then re-solve"))
+    for lc in cal.loops:
+        if lc.mahalanobis > limits.loop_closure_max_mahalanobis:
+            findings.append(Finding(
+                rule="loop-closure", severity="error", value=lc.mahalanobis,
+                threshold=limits.loop_closure_max_mahalanobis,
+                message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
+                        f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
+                fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved"))
+    for art in active.values():
+        if art is None:
+            continue
+        for f in lint_artifact(art, limits).findings:
+            findings.append(f.model_copy(update={"rule": f"member:{f.rule}", "message": f"{art.ref}: {f.message}"}))
+    return findings
+
+
+def _active_members(store: object, cal: RigCalibration) -> dict[str, CalibrationArtifact | None]:
+    out: dict[str, CalibrationArtifact | None] = {}
+    for m in cal.members:
+        try:
+            out[m.serial] = store.get_artifact(m.serial, None)  # type: ignore[attr-defined]
+        except NotFoundError:
+            out[m.serial] = None
+    return out
+
+
+def lint_rig(settings: Settings, ref: str) -> LintResult:
+    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now."""
+    name, version = parse_rig_ref(ref)
+    with open_store(settings) as store:
+        rig = store.get_rig(name)
+        cal = store.get_rig_calibration(name, version)
+        findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
+    return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
+
+
+def history(settings: Settings, rig: str) -> tuple[list[RigCalibration], int | None, list[RigActivation]]:
+    with open_store(settings) as store:
+        store.get_rig(rig)
+        return store.list_rig_calibrations(rig), store.active_rig_version(rig), store.rig_events(rig)
+
+
+def show(settings: Settings, ref: str) -> RigCalibration:
+    name, version = parse_rig_ref(ref)
+    with open_store(settings) as store:
+        return store.get_rig_calibration(name, version)
+
+
+def rollback(settings: Settings, rig: str, to_version: int, reason: str) -> RigActivation:
+    with open_store(settings) as store:
+        return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station)
+
+
+def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree]:
+    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size)
+               for m in cal.members]
+    tree = RigTree(cal.root, tuple(Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance))
+                                   for e in cal.edges))
+    return members, tree
+
+
+def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None) -> str:
+    """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
+    second member). Returns the text (also written to ``out`` when given; opencv needs ``out``)."""
+    from calibctl.workflows import rig_exports
+
+    if fmt not in EXPORT_FORMATS:
+        raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
+    cal = show(settings, ref)
+    members, tree = _geometry(cal)
+    by_name = {m.name: m for m in members}
+    left = by_name[cal.root]
+    right_name = pair or next(m.name for m in members if m.name != cal.root)
+    if right_name not in by_name or right_name == cal.root:
+        raise UsageError(f"--pair {right_name} is not a non-root member of rig {cal.rig}")
+    right = by_name[right_name]
+    T_right_left = tree.T(right.name, left.name)
+    header = f"# calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
+    if fmt == "json":
+        text = cal.model_dump_json(indent=2) + "\n"
+    elif fmt == "ros":
+        info_l, info_r = rig_exports.ros_stereo_pair(left, right, T_right_left)
+        text = f"{header}# --- {left.name} (left)\n{info_l}---\n# --- {right.name} (right)\n{info_r}"
+    elif fmt == "tf":
+        text = header + rig_exports.tf_static(tree)
+    elif fmt == "urdf":
+        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(tree)
+    elif fmt == "kalibr":
+        text = header + rig_exports.kalibr_camchain(members, tree)
+    else:  # opencv: cv2.FileStorage writes the file itself
+        if out is None:
+            raise UsageError("the OpenCV stereo export needs -o FILE.yaml")
+        if out.exists() and not force:
+            from calibctl.errors import AlreadyExistsError
+
+            raise AlreadyExistsError(f"{out} exists", "pass --force to overwrite it")
+        rig_exports.opencv_stereo(left, right, T_right_left, out)
+        return out.read_text(encoding="utf-8")
+    if out is not None:
+        write_atomic(out, text, force=force)
+    return text

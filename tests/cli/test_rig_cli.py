@@ -1,0 +1,78 @@
+"""`calibctl rig solve-folders` and `calibctl synth --rig`: wiring, exit codes, messages, --json."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from tests.workflows.rig_folders_data import rendered_rig, true_baseline_mm
+
+RUNNER = CliRunner()
+
+
+def invoke(*args: str):
+    return RUNNER.invoke(app, list(args), terminal_width=110)
+
+
+@pytest.fixture(scope="module")
+def rig2(tmp_path_factory):
+    return rendered_rig(tmp_path_factory)
+
+
+def _sources(rig2: Path) -> list[str]:
+    return ["--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}",
+            "--cols", "9", "--rows", "6", "--square-mm", "25"]
+
+
+def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
+    result = invoke("rig", "solve-folders", *_sources(rig2), "--export-dir", str(tmp_path / "out"))
+    assert result.exit_code == 0, result.output
+    assert "T_CAM0_CAM1: |t| = 75." in result.output and "gate rig-connected pass" in result.output
+    assert "held-out epipolar RMS" in result.output
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {
+        "stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
+        "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
+
+
+def test_solve_folders_json_and_root(rig2):
+    result = invoke("--json", "rig", "solve-folders", *_sources(rig2), "--root", "CAM1")
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    assert doc["root"] == "CAM1" and doc["tree"][0]["child"] == "CAM0"
+    assert abs(doc["tree"][0]["translation_mm"] - true_baseline_mm(rig2)) < 3 * doc["tree"][0]["sigma_translation_mm"]
+
+
+def test_a_failed_rig_gate_exits_1_naming_the_pair(rig2):
+    result = invoke("rig", "solve-folders", *_sources(rig2), "--min-shared-views", "30")
+    assert result.exit_code == 1
+    assert "gate rig-connected FAIL" in result.output and "CAM0-CAM1 shares 8 view(s)" in result.output
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--source", "CAM0=/x"], "camera CAM0 is given twice"),
+    (["--root", "CAM9"], "--root CAM9 is not one of the cameras"),
+])
+def test_usage_errors_exit_2(rig2, extra, message):
+    result = invoke("rig", "solve-folders", *_sources(rig2), *extra)
+    assert result.exit_code == 2
+    assert message in result.output and "Traceback" not in result.output
+
+
+def test_synth_rig_writes_folders_and_truth(tmp_path):
+    result = invoke("--json", "synth", str(tmp_path / "r"), "--rig", "3", "--views", "3", "--size", "320x240")
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    assert doc["cameras"] == ["CAM0", "CAM1", "CAM2"] and doc["n_frames"] == 3
+    truth = json.loads((tmp_path / "r" / "rig_truth.json").read_text())
+    assert truth["root"] == "CAM0" and len(truth["frames"]) == 3
+    for name, count in doc["photos_per_camera"].items():
+        assert len(list((tmp_path / "r" / name).glob("*.png"))) == count
+
+
+def test_synth_rig_refuses_five_cameras(tmp_path):
+    result = invoke("synth", str(tmp_path / "r"), "--rig", "5")
+    assert result.exit_code == 2 and "--rig takes 2 to 4 cameras" in result.output

@@ -1,0 +1,114 @@
+"""`calibctl rig add | capture | solve | lint | history | show | rollback | export`: wiring, exit codes, --json."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from calibctl.store.repository import Store
+from tests.artifacts.factories import measured_board
+from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.test_rig_store_flow import WHO, _truth_artifact
+
+RUNNER = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def rig2(tmp_path_factory):
+    return rendered_rig(tmp_path_factory)
+
+
+@pytest.fixture
+def db(tmp_path, rig2):
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    with Store.open(url) as store:
+        store.add_board(measured_board(square_mm=25.0))
+        for name in ("CAM0", "CAM1"):
+            store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
+    return url
+
+
+def invoke(db, *args):
+    return RUNNER.invoke(app, ["--db", db, *args], terminal_width=110)
+
+
+def _capture(db, rig2):
+    return invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+                  "--source", f"CAM1={rig2 / 'CAM1'}")
+
+
+def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
+    r = invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1", "--design-baseline-mm", "CAM0:CAM1=75+-0.5")
+    assert r.exit_code == 0 and "design CAM0-CAM1 75.000 +/- 0.500 mm" in r.output
+    r = _capture(db, rig2)
+    assert r.exit_code == 0, r.output
+    assert "8 synchronised frames" in r.output and "gate rig-connected pass" in r.output
+    r = invoke(db, "rig", "solve", "R1")
+    assert r.exit_code == 0, r.output
+    assert "rig R1@1 (active)  accepted" in r.output and "T_CAM0_CAM1: |t| = 75." in r.output
+    r = invoke(db, "--json", "rig", "lint", "R1")
+    assert r.exit_code == 0 and json.loads(r.output)["verdict"] == "pass"
+    assert invoke(db, "rig", "solve", "R1").exit_code == 0
+    r = invoke(db, "rig", "rollback", "R1", "--to", "1", "--reason", "compare")
+    assert r.exit_code == 0 and "active version 2 -> 1" in r.output
+    r = invoke(db, "--json", "rig", "history", "R1")
+    doc = json.loads(r.output)
+    assert doc["active_version"] == 1 and [v["version"] for v in doc["versions"]] == [1, 2]
+    assert json.loads(invoke(db, "--json", "rig", "show", "R1@2").output)["version"] == 2
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "s.yaml"))
+    assert r.exit_code == 0 and (tmp_path / "s.yaml").is_file()
+    r = invoke(db, "rig", "export", "R1", "--format", "tf")
+    assert r.exit_code == 0 and "child_frame_id: CAM1" in r.output
+
+
+def test_a_stale_member_fails_rig_lint_with_exit_1(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    invoke(db, "rig", "solve", "R1")
+    with Store.open(db) as store:
+        store.add_artifact(_truth_artifact(rig2, "CAM0"), activate=True, **WHO)
+    r = invoke(db, "rig", "lint", "R1")
+    assert r.exit_code == 1 and "rig-stale-member" in r.output and "CAM0@2" in r.output
+
+
+def test_refusals_exit_2_with_a_message(db, rig2):
+    r = invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "NOPE")
+    assert r.exit_code == 2 and "unknown camera(s) NOPE" in r.output
+    r = invoke(db, "rig", "solve", "R9")
+    assert r.exit_code == 2 and "unknown rig 'R9'" in r.output
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "rig", "export", "R1", "--format", "nope")
+    assert r.exit_code == 2 and "unknown rig export format 'nope'" in r.output
+    r = invoke(db, "rig", "export", "R1", "--format", "tf")
+    assert r.exit_code == 2 and "rig R1 has no calibration yet" in r.output
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM1'}", "--min-shared-views", "9")
+    assert r.exit_code == 1 and "CAM0-CAM1 shares 8 view(s) (needs 9)" in r.output
+    assert "Traceback" not in r.output
+
+
+def test_solve_and_lint_take_rig(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    r = invoke(db, "solve", "--rig", "R1")
+    assert r.exit_code == 0 and "rig R1@1 (active)  accepted" in r.output
+    r = invoke(db, "--json", "lint", "--rig", "R1")
+    assert r.exit_code == 0
+    assert [x["source"] for x in json.loads(r.output)["results"]] == ["rig R1@1"]
+    r = invoke(db, "lint", "--rig", "R1", "--serial", "CAM0")
+    assert r.exit_code == 0 and "CAM0@1" in r.output and "rig R1@1 (rig): pass" in r.output
+
+
+def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM1'}")
+    assert r.exit_code == 0, r.output
+    assert "8 synchronised frames" in r.output
+    r = invoke(db, "capture", "--board", "A17", "--source", str(rig2 / "CAM0"))
+    assert r.exit_code == 2 and "capture needs --serial SERIAL" in r.output
+    r = invoke(db, "capture", "--serial", "CAM0", "--board", "A17", "--source", "a", "--source", "b")
+    assert r.exit_code == 2 and "one camera takes one --source, got 2" in r.output
