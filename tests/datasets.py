@@ -20,7 +20,8 @@ _CANDIDATES = [
 DATASETS = next((p for p in _CANDIDATES if p is not None and p.is_dir()), _CANDIDATES[1])
 LEFT_RIGHT = DATASETS / "opencv-left-right"
 UDACITY = DATASETS / "udacity-camcal"
-AVAILABLE = LEFT_RIGHT.is_dir() and UDACITY.is_dir()
+BAKA_STEREO = DATASETS / "baka-stereo"
+AVAILABLE = LEFT_RIGHT.is_dir() and UDACITY.is_dir() and BAKA_STEREO.is_dir()
 
 
 def require_datasets() -> None:
