@@ -26,7 +26,9 @@ SerialOption = Annotated[str, typer.Option("--serial", help="Camera serial numbe
 BoardOption = Annotated[str, typer.Option("--board", help="Registered board NAME or NAME@REV.", show_default=False)]
 SourceOption = Annotated[str, typer.Option(
     "--source", show_default=False,
-    help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0).")]
+    help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list file "
+         "(.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a video "
+         "file; or a camera (/dev/videoN or an index such as 0).")]
 StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
 OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
 MaxViewsOption = Annotated[int | None, typer.Option(

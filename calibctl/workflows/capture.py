@@ -29,7 +29,7 @@ import os
 import re
 import secrets
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -151,16 +151,15 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
     observer = observer or CaptureObserver()
     board_name, revision = _check_request(request)
     source = sources.resolve_source(request.source)
-    if source.kind == sources.FOLDER and (request.max_views is not None or request.duration_s is not None):
-        raise UsageError("--max-views and --duration apply to video and camera sources, not to a folder",
-                         "a folder is captured whole; leave out images you do not want")
+    if source.kind in sources.IMAGE_SETS and (request.max_views is not None or request.duration_s is not None):
+        raise UsageError(f"--max-views and --duration apply to video and camera sources, not to a {source.kind}",
+                         "a set of images is captured whole; leave out images you do not want")
     started = utc_now()
     with Store.open(settings.db_url) as store:
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
-        if source.kind == sources.FOLDER:
-            assert isinstance(source.target, Path)
-            got = _capture_folder(store, settings, spec, board, source.target, request.workers, observer)
+        if source.kind in sources.IMAGE_SETS:
+            got = _capture_images(store, settings, spec, board, source, request.workers, observer)
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
@@ -185,27 +184,27 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
     return samples
 
 
-def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision, folder: Path,
-                    workers: int, observer: CaptureObserver) -> _Collected:
-    paths = outcomes_core.list_images(folder)
-    ignored = sources.ignored_files(folder)
-    if not paths:
-        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {', '.join(ignored[:10])}" \
-            if ignored else ""
-        raise InputError(f"no images in {folder}{also}",
-                         f"put the session's images ({', '.join(outcomes_core.IMAGE_SUFFIXES)}) in the folder")
-    observer.folder_started(len(paths))
+def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                    source: sources.SourceSpec, workers: int, observer: CaptureObserver) -> _Collected:
+    images = sources.select_images(source)
+    where = source.label
+    observer.folder_started(len(images.paths))
     with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
-        results = outcomes_core.classify_session(paths, spec, workers=workers, progress=lambda done, total, o:
-                                                 observer.image_done(done, total, o.name, o.status))
+        found = outcomes_core.classify_files(images.paths, spec, workers=workers, progress=lambda done, total, o:
+                                             observer.image_done(done, total, o.name, o.status))
+    found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
+    mixed = sources.mixed_sizes_error(source, {o.name: o.image_size for o in found if o.image_size is not None})
+    if mixed is not None:
+        raise mixed
+    results = outcomes_core.finalize_session(found)
     readable = [o for o in results if o.status != outcomes_core.UNREADABLE]
     if not readable:
         problems = "\n".join(f"  {o.name}: {o.reason}" for o in results)
-        raise InputError(f"none of the {len(results)} image files in {folder} could be read; nothing was stored:\n"
+        raise InputError(f"none of the {len(results)} image files in {where} could be read; nothing was stored:\n"
                          f"{problems}", "re-copy the images from the camera; they are truncated or not images")
     with_board = [o for o in readable if o.corner_ids is not None]
     if not with_board:
-        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {folder}", len(readable),
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {where}", len(readable),
                                                 _load_samples(readable))
     accepted = [o for o in results if o.accepted]
     probed = accepted or with_board
@@ -228,7 +227,8 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     views: list[tuple[BoardView, str | None]] = [
         (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
     return _Collected([_record(o) for o in results], views, size,
-                      f"every image in the folder was examined ({len(results)})", stored, ignored=ignored)
+                      f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
+                      f"({len(results)})", stored, ignored=images.ignored)
 
 
 class _StreamState:
@@ -342,7 +342,7 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
             tilt_deg=None if g is None else float(g.tilt_deg), tilt_direction=None if g is None else g.direction_name))
     return CaptureSession(
         session_id=secrets.token_hex(6), serial=request.serial, board=board,
-        source=str(Path(source.target).resolve()) if isinstance(source.target, Path) else source.text,
+        source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
         image_size=got.image_size, status="accepted" if report.passed else "rejected",
