@@ -65,10 +65,7 @@ def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operato
     from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
 
     settings = state(ctx).settings(station=station, operator=operator)
-    observer = capture_observer(as_json, settings.gates.min_views, None)
-    if observer is None:
-        return settings, run(settings, None)
-    with observer:
+    with capture_observer(as_json, settings.gates.min_views, None) as observer:
         return settings, run(settings, observer)
 
 

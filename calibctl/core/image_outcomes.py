@@ -214,7 +214,9 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     2 processes 146-158 / 294-496 ms (the first process run also starts the fork server). OpenCV's
     own thread pool is set to one thread for the run (restored afterwards) so the workers do not
     oversubscribe the cores.
-    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes.
+    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
+    KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
+    propagates; nothing is returned.
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
@@ -234,12 +236,18 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
             pool: Executor = (ThreadPoolExecutor(max_workers=workers) if executor == "thread" else
                               ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(),
                                                   initializer=_init_worker))
-            with pool:
+            try:
                 futures = {pool.submit(classify_file, path, spec, settings): i for i, path in enumerate(paths)}
                 for done, future in enumerate(as_completed(futures), start=1):
                     results[futures[future]] = future.result()
                     if progress:
                         progress(done, total, results[futures[future]])  # type: ignore[arg-type]
+            except BaseException:
+                # Ctrl-C (or a failure): drop the queued files at once; only the images being detected
+                # right now (one per worker) run to their end.
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown(wait=True)
     finally:
         cv2.setNumThreads(threads_before)
     return [r for r in results if r is not None]

@@ -380,14 +380,30 @@ def test_live_view_shows_coverage_directions_gauge_count_and_what_is_missing() -
     assert "last: frame-000001 kept" in text
 
 
-def test_live_view_is_drawn_on_terminals_only_and_never_with_json(monkeypatch) -> None:
+def test_live_view_on_terminals_progress_lines_elsewhere_and_with_json(monkeypatch) -> None:
     from calibctl.cli import live_view
 
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO(), force_terminal=True))
-    assert capture_observer(as_json=False, min_views=8, max_views=None) is not None
-    assert capture_observer(as_json=True, min_views=8, max_views=None) is None
+    assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.TerminalObserver)
+    assert isinstance(capture_observer(as_json=True, min_views=8, max_views=None), live_view.LogObserver)
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO()))  # a pipe or a log file
-    assert capture_observer(as_json=False, min_views=8, max_views=None) is None
+    assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.LogObserver)
+
+
+def test_progress_lines_come_at_the_start_and_then_every_few_seconds(capsys) -> None:
+    from calibctl.cli.live_view import LogObserver
+
+    now = [100.0]
+    observer = LogObserver(min_views=8, every_s=5.0, clock=lambda: now[0])
+    observer.folder_started(40)
+    for done in range(1, 41):
+        now[0] += 0.5  # an image every half second: 20 s in all
+        observer.image_done(done, 40, f"v{done:02d}.png", "accepted" if done % 4 else "no_board")
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == ("calibctl capture: examining 40 images (a progress line every 5 s; Ctrl-C stops, "
+                        "nothing is stored)")
+    assert lines[1:] == [f"calibctl capture: {n} of 40 images examined ({n - n // 4} accepted, {n // 4} no_board), "
+                         f"{n // 2} s" for n in (10, 20, 30, 40)]
 
 
 # --source as a glob or a list file -----------------------------------------------------------------
@@ -447,4 +463,18 @@ def test_a_list_file_naming_missing_files_exits_2_naming_them(db: str, tmp_path:
     assert result.exit_code == 2, result.output
     assert "names 1 file(s) that cannot be used; nothing was stored: line 2: view-404.png (missing)" \
         in " ".join(result.stderr.split())
+    assert sessions(db) == []
+
+
+def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, good: Path, monkeypatch) -> None:
+    from calibctl.core import image_outcomes
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    result = capture(db, good)
+    assert result.exit_code == 130, result.output
+    assert "calibctl capture: examining 12 images" in result.stderr
+    assert "Interrupted; nothing half-written was kept." in result.stderr
     assert sessions(db) == []
