@@ -15,7 +15,8 @@ from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDa
 
 SESSION_SCHEMA_VERSION: Literal[1] = 1
 
-ImageStatus = Literal["accepted", "no_board", "blurred", "near_duplicate", "wrong_size", "unreadable", "skipped"]
+ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_duplicate", "wrong_size", "unreadable",
+                      "skipped"]
 
 
 class GateResult(Document):

@@ -43,7 +43,7 @@ from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
+from calibctl.core.detect import FOUND_INCONSISTENT, detect_board
 from calibctl.core.frame_select import KEPT, FrameDecision, FrameSelector, SelectionProgress, SelectorSettings
 from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
 from calibctl.core.views import BoardView
@@ -275,8 +275,9 @@ class _StreamState:
                 if detection is not None:  # always, a kept frame has a board
                     self.kept_corners_px[frame.label] = detection.corners_px
             self.progress = self.selector.progress()
+        status = "bad_grid" if detection is None and FOUND_INCONSISTENT in why else _FRAME_STATUS[decision.status]
         self.outcomes.append(OutcomeRecord(
-            name=frame.label, status=_FRAME_STATUS[decision.status],
+            name=frame.label, status=status,
             reason=None if decision.kept else (why or decision.reason), sha256=sha, image_size=size,
             corners_found=0 if detection is None else len(detection.corner_ids)))
         return decision

@@ -25,11 +25,13 @@ from calibctl.core.detect import (
 )
 from calibctl.core.image_outcomes import (
     ACCEPTED,
+    BAD_GRID,
     BLURRED,
     NEAR_DUPLICATE,
     NO_BOARD,
     UNREADABLE,
     WRONG_SIZE,
+    classify_array,
     classify_file,
     classify_files,
     classify_session,
@@ -241,15 +243,17 @@ def test_sensor_noise_skips_the_classic_search_and_says_why() -> None:
     assert why == "no 9x6 chessboard found (SB detector; the classic one skipped, the image is noise-like)"
 
 
-def test_a_board_under_heavy_noise_is_still_found_by_sb() -> None:
-    """Gaussian noise sigma 80 grey levels: neighbour correlation about 0.3, the classic detector finds
-    nothing at full resolution, SB finds the board (measured on 6 of 6 such renders)."""
-    noisy = _noisy_board(80.0, seed=4)
+@pytest.mark.parametrize(("sigma", "levels"), [(80.0, ["classic", "classic", "sb"]), (110.0, ["sb"])])
+def test_a_board_under_heavy_noise_is_still_found(sigma: float, levels: list[str]) -> None:
+    """Gaussian noise of 80 / 110 grey levels (neighbour correlation about 0.29 / 0.17): the plain
+    full-resolution classic call finds nothing. At 80 the half-size copy still correlates enough for
+    the classic levels to run; at 110 only SB runs, and finds the board."""
+    noisy = _noisy_board(sigma, seed=4)
     assert neighbour_correlation(noisy) < NOISE_CORRELATION_MIN
     assert not cv2.findChessboardCorners(noisy, (9, 6), flags=CLASSIC_FLAGS)[0]
+    assert [m for m, _, _ in search_levels(noisy, DetectorSettings())] == levels
     det, why = detect_chessboard(noisy, 9, 6)
     assert det is not None, why
-    assert det.method == "sb"
 
 
 def test_photographed_scenes_are_not_noise_like() -> None:
@@ -265,3 +269,13 @@ def test_the_search_copy_is_full_resolution_up_to_the_pixel_budget() -> None:
         copy, factor = downscaled_to_pixels(np.zeros((height, width), np.uint8), MAX_SEARCH_PIXELS)
         assert factor == k and copy.shape == (height // k, width // k)
         assert copy.size <= MAX_SEARCH_PIXELS
+
+
+def test_a_board_found_without_a_consistent_grid_is_not_called_no_board() -> None:
+    """Noise of 110 grey levels, seed 6: SB finds the board, no refinement window gives a consistent grid."""
+    noisy = _noisy_board(110.0, seed=6)
+    assert cv2.findChessboardCornersSB(noisy, (9, 6))[0]
+    outcome = classify_array("noisy.png", "noisy.png", noisy, "0" * 64, BOARD)
+    assert outcome.status == BAD_GRID and outcome.corners_px is None
+    assert outcome.reason == ("a 9x6 chessboard was found but its corners do not form a consistent grid "
+                              "(blurred, bent or partly hidden?)")
