@@ -1,13 +1,14 @@
 """Board detection: chessboards (OpenCV classic, SB fallback) and ChArUco, with sub-pixel refinement.
 
-Which chessboard detector, by measurement (benchmarks/bench_detect.py; OpenCV 5.0.0, one thread,
-20 rendered views per size through the seed lens, corner error against the renderer's truth):
+Which chessboard detector, by measurement (benchmarks/bench_detect.py, 2026-11-23; OpenCV 5.0.0, one
+thread, on a loaded 2-core machine; 20 rendered views per size through the seed lens, corner error
+against the renderer's truth):
 
     detector                                   640x480 mean / p95 err    ms   1280x960 mean / p95     ms
-    findChessboardCorners + cornerSubPix 11x11  0.042 / 0.077 px          3    0.044 / 0.081 px       11
-    findChessboardCornersSB                     0.055 / 0.140 px         42    0.042 / 0.085 px      172
-    findChessboardCornersSB + ACCURACY          0.038 / 0.092 px        163    0.026 / 0.053 px      670
-    calibctl detect_chessboard (below)          0.031 / 0.061 px          5    0.033 / 0.062 px        5
+    findChessboardCorners + cornerSubPix 11x11  0.045 / 0.081 px          5    0.041 / 0.076 px       17
+    findChessboardCornersSB                     0.053 / 0.125 px         88    0.048 / 0.127 px      334
+    findChessboardCornersSB + ACCURACY          0.039 / 0.090 px        291    0.027 / 0.065 px     1581
+    calibctl detect_chessboard (below)          0.037 / 0.070 px          5    0.028 / 0.054 px       18
 
 Recall first: wherever one plain full-resolution call (classic with ADAPTIVE_THRESH | NORMALIZE_IMAGE,
 or SB) finds the board, calibctl must find it (tests/core/test_detect_real.py runs the plain calls on
@@ -17,8 +18,8 @@ calibration4.jpg and 5 baka-stereo boards), and both are refined with cornerSubP
 with a half-window of 0.35 x the shortest grid edge (clamped to 2..12 px) instead of the fixed 11x11.
 
 Speed and a bounded time per frame (``search_levels``):
-  * No quick reject. ``cv2.checkChessboard`` (used until 2026-11) rejected 28 of 60 baka-stereo
-    frames whose board a plain call finds, at full resolution as well as on a reduced copy.
+  * No quick reject. ``cv2.checkChessboard`` (used until 2026-11) rejected 29 of the 60 baka-stereo
+    frames, each with a board a plain call finds, on the 640 px copy it ran on (26 at full size).
   * Searches run on an integer-factor INTER_AREA copy of at most ``MAX_SEARCH_PIXELS`` (block
     averaging, fast): the image itself up to 1280x960, 1/4 of a 4000x3000 frame. At full size a
     half-size copy is searched first (3x faster when the board is big enough).
