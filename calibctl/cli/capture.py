@@ -120,7 +120,7 @@ def capture(
     duration: DurationOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Detect the board in a folder, video or camera, run the capture gates and store the session.
+    """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
 
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints), 2 when the capture could not run (nothing is stored).

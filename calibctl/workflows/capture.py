@@ -43,8 +43,15 @@ from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import FOUND_INCONSISTENT, detect_board
-from calibctl.core.frame_select import KEPT, FrameDecision, FrameSelector, SelectionProgress, SelectorSettings
+from calibctl.core.detect import FOUND_INCONSISTENT
+from calibctl.core.frame_select import (
+    KEPT,
+    FrameDecision,
+    FrameSelector,
+    SelectionProgress,
+    SelectorSettings,
+    StreamDetector,
+)
 from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
@@ -237,6 +244,7 @@ class _StreamState:
     def __init__(self, store: Store, settings: Settings, spec: BoardSpec) -> None:
         self.store, self.settings, self.spec = store, settings, spec
         self.selector: FrameSelector | None = None
+        self.detector = StreamDetector(spec)
         self.progress: SelectionProgress | None = None
         self.outcomes: list[OutcomeRecord] = []
         self.shas: dict[str, str] = {}
@@ -258,7 +266,7 @@ class _StreamState:
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
-        detection, why = detect_board(gray, self.spec)
+        detection, why = self.detector.detect(gray)
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:
                 self.no_board_samples.append((frame.label, gray))
