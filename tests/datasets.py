@@ -21,7 +21,7 @@ DATASETS = next((p for p in _CANDIDATES if p is not None and p.is_dir()), _CANDI
 LEFT_RIGHT = DATASETS / "opencv-left-right"
 UDACITY = DATASETS / "udacity-camcal"
 BAKA_STEREO = DATASETS / "baka-stereo"
-AVAILABLE = LEFT_RIGHT.is_dir() and UDACITY.is_dir()
+AVAILABLE = LEFT_RIGHT.is_dir() and UDACITY.is_dir() and BAKA_STEREO.is_dir()
 
 
 def require_datasets() -> None:

@@ -15,7 +15,8 @@ from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDa
 
 SESSION_SCHEMA_VERSION: Literal[1] = 1
 
-ImageStatus = Literal["accepted", "no_board", "blurred", "near_duplicate", "wrong_size", "unreadable", "skipped"]
+ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_duplicate", "wrong_size", "unreadable",
+                      "skipped"]
 
 
 class GateResult(Document):
@@ -35,7 +36,8 @@ class GateResult(Document):
 class ImageOutcome(Document):
     """What happened to one input image or video frame."""
 
-    name: str = Field(description="file name or frame label")
+    name: str = Field(description="file name (folder), path relative to the list file's or the glob's folder, "
+                      "or frame label")
     status: ImageStatus = Field(description="accepted, or why not")
     reason: str | None = Field(None, description="why it was not accepted, in words")
     sha256: Sha256Hex | None = Field(None, description="sha256 of the image bytes (None when unreadable)")
@@ -67,8 +69,9 @@ class CaptureSession(Document):
     session_id: str = Field(pattern=r"^[0-9a-f]{12}$", description="12 hex digits, printed by capture")
     serial: str = Field(pattern=SERIAL_PATTERN, description="camera serial number (letters, digits, . _ : -)")
     board: BoardRevision = Field(description="snapshot of the board revision used")
-    source: str = Field(description="folder, video file or camera the images came from")
-    source_kind: Literal["folder", "video", "camera", "synthetic"] = Field(description="kind of source")
+    source: str = Field(description="folder, glob pattern, list file, video file or camera the images came from")
+    source_kind: Literal["folder", "glob", "list", "video", "camera", "synthetic"] = Field(
+        description="kind of source")
     station: str = Field(description="station id")
     operator: str = Field(description="who ran the capture")
     started_at: UtcDatetime = Field(description="UTC")

@@ -26,7 +26,9 @@ SerialOption = Annotated[str, typer.Option("--serial", help="Camera serial numbe
 BoardOption = Annotated[str, typer.Option("--board", help="Registered board NAME or NAME@REV.", show_default=False)]
 SourceOption = Annotated[str, typer.Option(
     "--source", show_default=False,
-    help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0).")]
+    help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list file "
+         "(.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a video "
+         "file; or a camera (/dev/videoN or an index such as 0).")]
 StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
 OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
 MaxViewsOption = Annotated[int | None, typer.Option(
@@ -63,10 +65,7 @@ def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operato
     from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
 
     settings = state(ctx).settings(station=station, operator=operator)
-    observer = capture_observer(as_json, settings.gates.min_views, None)
-    if observer is None:
-        return settings, run(settings, None)
-    with observer:
+    with capture_observer(as_json, settings.gates.min_views, None) as observer:
         return settings, run(settings, observer)
 
 
@@ -126,7 +125,7 @@ def capture(
                                             "capture`).", show_default=False)] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Detect the board in a folder, video or camera, run the capture gates and store the session.
+    """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
 
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints), 2 when the capture could not run (nothing is stored).

@@ -3,12 +3,18 @@
 The live view (rich Live) shows the 3x3 image-region coverage, the tilt directions collected (a compass
 of the board side that is farther from the camera), the observability gauge against its threshold on a
 log scale, the view count, and what is still missing in words (the gates' hints). Both are drawn only
-when stderr is a terminal and the output is not JSON; ``capture_observer`` returns None otherwise.
+when stderr is a terminal and the output is not JSON. Otherwise (a log file, a pipe, a CI job, --json)
+``LogObserver`` writes one plain progress line when the capture starts and then at most one every
+``PROGRESS_EVERY_S`` seconds, so a long run is visibly alive without flooding the log.
 """
 
 from __future__ import annotations
 
 import math
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable
 from types import TracebackType
 
 from rich.console import Group, RenderableType
@@ -21,6 +27,7 @@ from rich.text import Text
 from calibctl.cli.render import stderr
 from calibctl.workflows.capture import CaptureObserver, FrameDecision, SelectionProgress
 
+PROGRESS_EVERY_S = 5.0
 GAUGE_WIDTH = 24
 GAUGE_DECADES_BELOW = 2.0  # the gauge spans threshold / 100 .. threshold * 10
 GAUGE_DECADES_ABOVE = 1.0
@@ -145,8 +152,59 @@ class TerminalObserver(CaptureObserver):
             self._live.stop()
 
 
-def capture_observer(as_json: bool, min_views: int, max_views: int | None) -> TerminalObserver | None:
-    """A terminal observer when stderr is a terminal and the output is not JSON, else None."""
-    if as_json or not stderr.is_terminal:
+class LogObserver(CaptureObserver):
+    """Plain progress lines on stderr for logs and pipes: at the start, then at most every ``every_s``."""
+
+    def __init__(self, min_views: int, every_s: float = PROGRESS_EVERY_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.min_views = min_views
+        self.every_s = every_s
+        self._clock = clock
+        self._start = self._last = clock()
+        self._statuses: Counter[str] = Counter()
+        self._frames = 0
+
+    def _due(self) -> float | None:
+        """Seconds since the start when a line is due, else None."""
+        now = self._clock()
+        if now - self._last < self.every_s:
+            return None
+        self._last = now
+        return now - self._start
+
+    @staticmethod
+    def _line(text: str) -> None:
+        print(f"calibctl capture: {text}", file=sys.stderr, flush=True)
+
+    def folder_started(self, total: int) -> None:
+        self._line(f"examining {total} images (a progress line every {self.every_s:g} s; Ctrl-C stops, "
+                   "nothing is stored)")
+
+    def image_done(self, done: int, total: int, name: str, status: str) -> None:
+        self._statuses[status] += 1
+        elapsed = self._due()
+        if elapsed is not None:
+            counts = ", ".join(f"{n} {s}" for s, n in self._statuses.most_common())
+            self._line(f"{done} of {total} images examined ({counts}), {elapsed:.0f} s")
+
+    def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
+        self._frames += 1
+        elapsed = self._due()
+        if elapsed is not None:
+            missing = f"; missing: {progress.missing[0]}" if progress.missing else "; every gate passes"
+            self._line(f"{self._frames} frames, {progress.n_views} views kept (need {self.min_views}), "
+                       f"stream time {t_s:.1f} s{missing}")
+
+    def __enter__(self) -> LogObserver:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         return None
+
+
+def capture_observer(as_json: bool, min_views: int, max_views: int | None) -> TerminalObserver | LogObserver:
+    """The live terminal observer when stderr is a terminal and the output is not JSON, else progress lines."""
+    if as_json or not stderr.is_terminal:
+        return LogObserver(min_views)
     return TerminalObserver(min_views, max_views)

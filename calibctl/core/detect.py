@@ -1,38 +1,42 @@
 """Board detection: chessboards (OpenCV classic, SB fallback) and ChArUco, with sub-pixel refinement.
 
-Which chessboard detector, by measurement (benchmarks/bench_detect.py; OpenCV 5.0.0, one thread,
-20 rendered views per size through the seed lens, corner error against the renderer's truth):
+Which chessboard detector, by measurement (benchmarks/bench_detect.py, 2026-11-23; OpenCV 5.0.0, one
+thread, on a loaded 2-core machine; 20 rendered views per size through the seed lens, corner error
+against the renderer's truth):
 
     detector                                   640x480 mean / p95 err    ms   1280x960 mean / p95     ms
-    findChessboardCorners + cornerSubPix 11x11  0.042 / 0.077 px          3    0.044 / 0.081 px       11
-    findChessboardCornersSB                     0.055 / 0.140 px         42    0.042 / 0.085 px      172
-    findChessboardCornersSB + ACCURACY          0.038 / 0.092 px        163    0.026 / 0.053 px      670
-    calibctl detect_chessboard (below)          0.031 / 0.061 px          5    0.033 / 0.062 px        5
+    findChessboardCorners + cornerSubPix 11x11  0.045 / 0.081 px          5    0.041 / 0.076 px       17
+    findChessboardCornersSB                     0.053 / 0.125 px         88    0.048 / 0.127 px      334
+    findChessboardCornersSB + ACCURACY          0.039 / 0.090 px        291    0.027 / 0.065 px     1581
+    calibctl detect_chessboard (below)          0.037 / 0.070 px          5    0.028 / 0.054 px       18
 
-On the real photos in ../shared/datasets the classic detector finds 43 of 46 boards, SB 40; SB alone
-finds udacity calibration4.jpg (its top row of squares is cut by the frame). So: classic first (as
-accurate as SB + ACCURACY at 1/30 to 1/100 of the time, best recall), SB as the fallback, and both
-refined with cornerSubPix at full resolution with a half-window of 0.35 x the shortest grid edge
-(clamped to 2..12 px) instead of the fixed 11x11 window.
+Recall first: wherever one plain full-resolution call (classic with ADAPTIVE_THRESH | NORMALIZE_IMAGE,
+or SB) finds the board, calibctl must find it (tests/core/test_detect_real.py runs the plain calls on
+every real set in ../shared/datasets and compares image by image). Classic is tried first (as
+accurate as SB + ACCURACY at 1/30 to 1/100 of the time), SB last (it alone finds udacity
+calibration4.jpg and 5 baka-stereo boards), and both are refined with cornerSubPix at full resolution
+with a half-window of 0.35 x the shortest grid edge (clamped to 2..12 px) instead of the fixed 11x11.
 
-Speed and a bounded time per frame:
-  * ``cv2.checkChessboard`` on a copy of at most ``CHECK_SIDE_PX`` rejects board-free frames in a
-    few ms; without it the classic search takes 0.65 s on a 640x480 noise frame and 3.9 s at 1024x768.
-    (It is not used on smaller copies: at 320-512 px it misses real boards.)
-  * The classic search runs on an integer-factor INTER_AREA copy of at most ``MAX_SEARCH_SIDE_PX``
-    (block averaging: 0.2 ms for 1280x960 -> 640x480), first on a half-size copy of that when the
-    search copy is at most 2x reduced (3x faster when the board is big enough), SB on a copy of at
-    most ``SB_MAX_SIDE_PX``. Corners are refined at each search scale and then at full resolution.
+Speed and a bounded time per frame (``search_levels``):
+  * No quick reject. ``cv2.checkChessboard`` (used until 2026-11) rejected 29 of the 60 baka-stereo
+    frames, each with a board a plain call finds, on the 640 px copy it ran on (26 at full size).
+  * Searches run on an integer-factor INTER_AREA copy of at most ``MAX_SEARCH_PIXELS`` (block
+    averaging, fast): the image itself up to 1280x960, 1/4 of a 4000x3000 frame. At full size a
+    half-size copy is searched first (3x faster when the board is big enough).
+  * The classic search blows up on noise (3.5 s on 1333x1000 sensor noise), so it is skipped when
+    neighbouring pixels do not correlate (``neighbour_correlation`` below ``NOISE_CORRELATION_MIN``);
+    it found no board there anyway, SB still runs.
   * A refined grid must be consistent (``grid_is_consistent``), else the next level is tried: at
     half size a blurred board once gave a corner 8 px off.
-  Worst board-free 4000x3000 frame measured: 0.56 s (a 39x29 chessboard, which passes the check and
-  runs all three searches); sensor noise 28 ms.
+  Worst board-free 4000x3000 frame: see BENCHMARKS.md (benchmarks/bench_detect.py).
 
-Blur: the median 10-90 % edge rise width over the board's edges (``edge_width_px``). On rendered
-640x480 views (squares 20-40 px) with Gaussian blur sigma 0.7 / 2 / 3 / 4 / 5 / 6 px it measures
-2.5 / 5.5 / 8.0 / 10.5 / 12.7 / 14.4 px and the mean corner error is 0.031 / 0.031 / 0.051 / 0.10 /
-0.30 / 0.41 px. Beyond ``BLUR_MAX_EDGE_PX`` = 8.0 px the error climbs quickly (3x at 10.5 px), so such
-a view is "blurred". The real photos in ../shared/datasets measure 1.6-3.4 px.
+Blur: the 10-90 % edge rise width of the board's edges, the larger of the medians over its
+horizontal and its vertical edges (``edge_width_px``). On rendered 640x480 views (squares 20-40 px)
+with Gaussian blur sigma 0.7 / 2 / 3 / 4 / 5 / 6 px the pooled median measured 2.5 / 5.5 / 8.0 / 10.5
+/ 12.7 / 14.4 px and the mean corner error was 0.031 / 0.031 / 0.051 / 0.10 / 0.30 / 0.41 px. Beyond
+``BLUR_MAX_EDGE_PX`` = 8.0 px the error climbs quickly (3x at 10.5 px), so such a view is "blurred".
+The sharp real photos measure 1.6-5.7 px; baka-stereo boards moved during the exposure 8.3-17 px
+across the motion (and about 1.6 px along it).
 
 Corner order is canonical: rows of ``cols`` corners, the grid right-handed in the image (x right,
 y down), and - when the board has an odd + even number of squares, so it is not 180-degree
@@ -43,6 +47,7 @@ corner the same id, which stereo pairs rely on.
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -51,15 +56,15 @@ import numpy as np
 
 from calibctl.core.board_spec import CHARUCO, BoardSpec, make_charuco_board
 
-MAX_SEARCH_SIDE_PX = 1024
-SB_MAX_SIDE_PX = 1280
-CHECK_SIDE_PX = 640
+MAX_SEARCH_PIXELS = 1_300_000  # 1280x960 and 1281x721 are searched at full resolution, 4000x3000 at 1/4
 QUICK_SEARCH_MIN_SIDE_PX = 320
+NOISE_CORRELATION_MIN = 0.5
 SUBPIX_WINDOW_FRAC = 0.35
 SUBPIX_HALF_WINDOW_PX = (2, 12)
-SUBPIX_FALLBACK_HALF_WINDOW_PX = 5  # OpenCV's usual 11x11
+SUBPIX_FALLBACK_HALF_WINDOWS_PX = (5, 3)  # OpenCV's usual 11x11, then 7x7
 BLUR_MAX_EDGE_PX = 8.0
 CHARUCO_MIN_CORNERS = 6
+FOUND_INCONSISTENT = "was found but its corners do not form a consistent grid"  # in the reason: a board, not none
 GRID_TOL_FRAC = 0.3
 CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 40, 0.001)
@@ -67,9 +72,8 @@ SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 40, 0.001)
 
 @dataclass(frozen=True)
 class DetectorSettings:
-    max_search_side_px: int = MAX_SEARCH_SIDE_PX
-    sb_max_side_px: int = SB_MAX_SIDE_PX
-    check_side_px: int = CHECK_SIDE_PX
+    max_search_pixels: int = MAX_SEARCH_PIXELS
+    noise_correlation_min: float = NOISE_CORRELATION_MIN
     sb_fallback: bool = True
     blur_max_edge_px: float = BLUR_MAX_EDGE_PX
     charuco_min_corners: int = CHARUCO_MIN_CORNERS
@@ -92,15 +96,17 @@ class Detection:
     edge_width_px: float | None = None
 
 
-def downscaled(gray: np.ndarray, max_side_px: int) -> tuple[np.ndarray, int]:
-    """(copy with long side <= max_side_px, integer factor k); the input itself (k = 1) when small enough.
+def downscaled_to_pixels(gray: np.ndarray, max_pixels: int) -> tuple[np.ndarray, int]:
+    """(copy with at most max_pixels pixels, integer factor k); the input itself (k = 1) when small enough.
 
     The factor is an integer so INTER_AREA takes its block-average fast path (1280x960 -> 640x480 in
     0.2 ms, against 5.5 ms for -> 1024x768). Pixel u of the copy covers full-resolution pixels
     k*u .. k*u + k - 1, so ``u_full = (u + 0.5) * k - 0.5``.
     """
     height, width = gray.shape[:2]
-    k = max(1, -(-max(width, height) // max_side_px))
+    k = max(1, math.ceil(math.sqrt(width * height / max_pixels)))
+    while (width // k) * (height // k) > max_pixels:
+        k += 1
     if k == 1:
         return gray, 1
     return cv2.resize(gray, (width // k, height // k), interpolation=cv2.INTER_AREA), k
@@ -156,27 +162,30 @@ def canonical_order(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: i
 
 
 def edge_width_px(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: int) -> float | None:
-    """Median 10-90 % edge rise width over the board's edges, pixels.
+    """The board's edge rise width (10-90 %), pixels: the larger of the medians over its horizontal and
+    over its vertical edges.
 
     ``cv2.estimateChessboardSharpness`` returns one profile per measured edge; its own summary is the
     mean, which broken profiles (glare, the frame border) pull up: on udacity calibration3.jpg most
-    profiles are 2-3 px wide, a few 14-29 px, and the mean is 6.7 px. So the profiles of the horizontal
-    and the vertical edges are pooled and the median taken.
+    profiles are 2-3 px wide, a few 14-29 px, and the mean is 6.7 px. Hence medians. The two edge
+    directions are kept apart because motion smears one of them only: on baka-stereo
+    right_001772846896500.jpg (board moving) they measure 10.0 and 1.6 px, and a pooled median (3.1 px)
+    hid the blur that dragged cornerSubPix up to 6.9 px off the grid.
     """
     pts = np.ascontiguousarray(corners_px, dtype=np.float32).reshape(-1, 1, 2)
-    widths = []
+    medians = []
     for vertical in (False, True):
         try:
             _, profiles = cv2.estimateChessboardSharpness(gray, (cols, rows), pts, 0.8, vertical, None)
         except cv2.error:
             continue
-        if profiles is not None and profiles.size:
-            widths.append(profiles.reshape(-1, 5)[:, 2])
-    if not widths:
-        return None
-    pooled = np.concatenate(widths)
-    pooled = pooled[np.isfinite(pooled) & (pooled > 0)]
-    return float(np.median(pooled)) if pooled.size else None
+        if profiles is None or not profiles.size:
+            continue
+        widths = profiles.reshape(-1, 5)[:, 2]
+        widths = widths[np.isfinite(widths) & (widths > 0)]
+        if widths.size:
+            medians.append(float(np.median(widths)))
+    return max(medians) if medians else None
 
 
 def grid_is_consistent(corners_px: np.ndarray, cols: int, rows: int, tol_frac: float = GRID_TOL_FRAC) -> bool:
@@ -199,10 +208,12 @@ def _refined(gray: np.ndarray, image: np.ndarray, factor: int, corners: np.ndarr
 
     A wide window can catch the board's outer edge at an outer corner and drag it off (opencv
     right12.jpg at 0.4 x the edge: 12.6 px); if the refined grid is not consistent the usual 11x11
-    window is tried from the same start. None when neither gives a consistent grid.
+    window, then a 7x7 one, is tried from the same start (baka-stereo right_001772846884887.jpg, a
+    steep board cut by the top of the frame: 0.301 with 11x11, 0.245 with 7x7). None when no window
+    gives a consistent grid.
     """
     start = corners.reshape(-1, 2).astype(np.float64)
-    for half in (None, SUBPIX_FALLBACK_HALF_WINDOW_PX):
+    for half in (None, *SUBPIX_FALLBACK_HALF_WINDOWS_PX):
         corners_px = start
         if factor > 1:
             corners_px = refine_corners(image, corners_px, _grid_min_edge_px(corners_px, cols, rows), half)
@@ -213,29 +224,65 @@ def _refined(gray: np.ndarray, image: np.ndarray, factor: int, corners: np.ndarr
     return None
 
 
+def neighbour_correlation(gray: np.ndarray, stride: int = 4) -> float:
+    """Correlation of horizontally and of vertically adjacent pixels (every ``stride``-th row / column),
+    the smaller of the two.
+
+    Sensor noise (i.i.d. per pixel) scores about 0, any photographed scene close to 1: the real
+    photos in ../shared/datasets score 0.936-0.992. ``gray``: (H, W) uint8.
+    """
+    img = gray.astype(np.float32)
+    scores = []
+    for a, b in ((img[::stride, :-1], img[::stride, 1:]), (img[:-1, ::stride], img[1:, ::stride])):
+        da, db = a - a.mean(), b - b.mean()
+        denom = float(np.sqrt((da * da).sum() * (db * db).sum()))
+        scores.append(float((da * db).sum()) / denom if denom > 0 else 1.0)
+    return min(scores)
+
+
+def search_levels(gray: np.ndarray, settings: DetectorSettings) -> list[tuple[str, np.ndarray, int]]:
+    """The (method, image, integer factor) searches ``detect_chessboard`` tries, in order.
+
+    Classic on a half-size copy (3x faster when the board is big enough; only when the search copy is
+    the image itself: on a reduced copy of a larger frame the time bound matters more), classic on the
+    search copy, SB on the search copy. The search copy is the image itself up to
+    ``max_search_pixels``, so on every real set in ../shared/datasets the cascade ends with the very
+    calls a plain loop makes. On a noise-like image (``neighbour_correlation`` below
+    ``noise_correlation_min``) the classic levels are left out: there the classic detector costs
+    seconds (3.5 s on 1333x1000 sensor noise) and finds nothing; on rendered boards under Gaussian
+    noise it found none below a correlation of 0.59, SB found every one down to 0.11.
+    """
+    search, k = downscaled_to_pixels(gray, settings.max_search_pixels)
+    half = None
+    if k == 1 and max(search.shape) >= 2 * QUICK_SEARCH_MIN_SIDE_PX:
+        half = cv2.resize(search, (search.shape[1] // 2, search.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    levels: list[tuple[str, np.ndarray, int]] = []
+    # Measured on the smallest copy, for speed: block averaging leaves i.i.d. noise uncorrelated, and a
+    # scene only scores higher there, so the check can only let more images through to the classic.
+    if neighbour_correlation(half if half is not None else search) >= settings.noise_correlation_min:
+        if half is not None:
+            levels.append(("classic", half, 2))
+        levels.append(("classic", search, k))
+    if settings.sb_fallback:
+        levels.append(("sb", search, k))
+    return levels
+
+
 def detect_chessboard(gray: np.ndarray, cols: int, rows: int,
                       settings: DetectorSettings | None = None) -> tuple[Detection | None, str]:
     """Find a full cols x rows inner-corner chessboard in an 8-bit grey image.
 
-    Search order: the quick check; classic on a half-size copy (when the search copy is at most 2x
-    reduced); classic on the search copy; SB on a copy of at most ``sb_max_side_px``. A level whose
-    refined grid is not consistent (``grid_is_consistent``) hands over to the next one.
+    Search order (``search_levels``): classic on a half-size copy of the search copy; classic on the
+    search copy (full resolution up to ``max_search_pixels``; skipped on a noise-like image); SB on the
+    search copy. A level whose refined grid is not consistent (``grid_is_consistent``) hands over to
+    the next one.
 
     Returns:
         (Detection, "") or (None, the reason in words).
     """
     settings = settings or DetectorSettings()
-    search, k = downscaled(gray, settings.max_search_side_px)
-    check = search if max(search.shape) <= settings.check_side_px else downscaled(gray, settings.check_side_px)[0]
-    if not cv2.checkChessboard(check, (cols, rows)):
-        return None, f"no {cols}x{rows} chessboard: nothing chessboard-like in the image"
-    levels = [("classic", search, k)]
-    if k <= 2 and max(search.shape) >= 2 * QUICK_SEARCH_MIN_SIDE_PX:  # a half-size copy first: 3x faster
-        half = cv2.resize(search, (search.shape[1] // 2, search.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        levels.insert(0, ("classic", half, 2 * k))
-    if settings.sb_fallback:
-        levels.append(("sb", *downscaled(gray, settings.sb_max_side_px)))
     inconsistent = False
+    levels = search_levels(gray, settings)
     for method, image, factor in levels:
         if method == "classic":
             found, corners = cv2.findChessboardCorners(image, (cols, rows), flags=CLASSIC_FLAGS)
@@ -251,9 +298,12 @@ def detect_chessboard(gray: np.ndarray, cols: int, rows: int,
         width = edge_width_px(gray, corners_px, cols, rows)
         return Detection(np.arange(cols * rows, dtype=np.int64), corners_px, method, width), ""
     if inconsistent:
-        return None, (f"a {cols}x{rows} chessboard was found but its corners do not form a consistent grid "
-                      f"(blurred, bent or partly hidden?)")
-    tried = "classic and SB detectors" if settings.sb_fallback else "classic detector"
+        return None, (f"a {cols}x{rows} chessboard {FOUND_INCONSISTENT} (blurred, bent or partly hidden?)")
+    methods = {method for method, _, _ in levels}
+    if "classic" not in methods:
+        tried = "SB detector; the classic one skipped, the image is noise-like" if methods else "no detector run"
+        return None, f"no {cols}x{rows} chessboard found ({tried})"
+    tried = "classic and SB detectors" if "sb" in methods else "classic detector"
     return None, f"no {cols}x{rows} chessboard found ({tried}); is the whole board in the frame?"
 
 
@@ -276,7 +326,7 @@ def detect_charuco(gray: np.ndarray, spec: BoardSpec,
     columns (collinear corners do not define the board plane).
     """
     settings = settings or DetectorSettings()
-    search, k = downscaled(gray, settings.max_search_side_px)
+    search, k = downscaled_to_pixels(gray, settings.max_search_pixels)
     corners, ids, _, marker_ids = _charuco_detector(spec).detectBoard(search)
     n_markers = 0 if marker_ids is None else len(marker_ids)
     if ids is None or len(ids) < settings.charuco_min_corners:

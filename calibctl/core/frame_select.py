@@ -1,4 +1,12 @@
-"""Automatic frame selection for video and live sources.
+"""Automatic frame selection for video and live sources, and a detector for consecutive frames.
+
+``StreamDetector`` bounds the cost of board-free frames: the full cascade of ``detect.detect_board``
+(50-300 ms on a board-free 1280x720 frame, mostly SB) runs on a frame when the previous frame had a
+board, on every ``STREAM_FULL_SEARCH_EVERY``-th frame, or when ``cv2.checkChessboard`` on a copy of at
+most ``STREAM_CHECK_SIDE_PX`` says the frame may hold one (a few ms). The quick check alone misses real
+boards (29 of the 60 baka-stereo photos), so it only ever postpones a search: a board it misses is
+found within ``STREAM_FULL_SEARCH_EVERY`` frames, and from then on every frame gets the full search,
+as the stillness rule below needs.
 
 Feed every frame's detection (or None) to ``FrameSelector.offer`` in order. A frame is kept only when
 
@@ -22,10 +30,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import BLUR_MAX_EDGE_PX, Detection
+from calibctl.core.board_spec import CHARUCO, BoardSpec
+from calibctl.core.detect import BLUR_MAX_EDGE_PX, Detection, DetectorSettings, detect_board
 from calibctl.core.gates import (
     CELL_NAMES,
     COVERAGE_GRID,
@@ -43,6 +52,8 @@ from calibctl.core.image_outcomes import NEAR_DUPLICATE_FRAC, mean_corner_motion
 from calibctl.core.views import BoardView
 
 STILL_FRAC = 0.003  # 2.4 px per frame on 640x480
+STREAM_FULL_SEARCH_EVERY = 5
+STREAM_CHECK_SIDE_PX = 640
 TILT_BANDS_DEG = (10.0, 20.0, 30.0, 45.0)
 
 KEPT = "kept"
@@ -180,3 +191,33 @@ class FrameSelector:
         obs = report.gate("observability")
         return SelectionProgress(len(self.kept), covered, report.tilt_directions, obs.value, obs.threshold,
                                  tuple(report.hints), report)
+
+
+class StreamDetector:
+    """``detect_board`` for consecutive frames of one stream, with the quick check in front (see the
+    module docstring). Pure logic: no I/O, no clocks."""
+
+    def __init__(self, spec: BoardSpec, settings: DetectorSettings | None = None,
+                 full_every: int = STREAM_FULL_SEARCH_EVERY) -> None:
+        self.spec = spec
+        self.settings = settings
+        self.full_every = full_every
+        self._frames = 0
+        self._previous_found = False
+
+    def _quick_reject(self, gray: np.ndarray) -> bool:
+        height, width = gray.shape[:2]
+        k = max(1, -(-max(width, height) // STREAM_CHECK_SIDE_PX))
+        small = gray if k == 1 else cv2.resize(gray, (width // k, height // k), interpolation=cv2.INTER_AREA)
+        return not cv2.checkChessboard(small, (self.spec.cols, self.spec.rows))
+
+    def detect(self, gray: np.ndarray) -> tuple[Detection | None, str]:
+        """(Detection, "") or (None, why) for the next frame, (H, W) uint8."""
+        self._frames += 1
+        due = self._previous_found or self._frames % self.full_every == 1 or self.full_every <= 1
+        if not due and self.spec.kind != CHARUCO and self._quick_reject(gray):
+            return None, (f"no {self.spec.cols}x{self.spec.rows} chessboard: nothing chessboard-like at a quick look "
+                          f"(a full search runs on every {self.full_every}th frame and after each board)")
+        detection, why = detect_board(gray, self.spec, self.settings)
+        self._previous_found = detection is not None
+        return detection, why

@@ -5,7 +5,8 @@ Every image gets exactly one outcome, decided in this order:
     unreadable      the bytes do not decode as an image
     wrong_size      not the session's image size (the most common size among readable images, ties to
                     the first file in name order, unless the caller states the size)
-    no_board        the detector found no board (reason from ``detect``)
+    no_board        no detector found a board (reason from ``detect``)
+    bad_grid        a detector found the board but no refinement gives a consistent corner grid
     blurred         the board's edges are wider than ``DetectorSettings.blur_max_edge_px``
     near_duplicate  its corners are within ``NEAR_DUPLICATE_FRAC`` x the image diagonal (mean over
                     shared corners) of an earlier accepted image: it adds no geometry
@@ -31,15 +32,16 @@ import cv2
 import numpy as np
 
 from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import Detection, DetectorSettings, detect_board
+from calibctl.core.detect import FOUND_INCONSISTENT, Detection, DetectorSettings, detect_board
 
 ACCEPTED = "accepted"
 NO_BOARD = "no_board"
+BAD_GRID = "bad_grid"
 BLURRED = "blurred"
 NEAR_DUPLICATE = "near_duplicate"
 WRONG_SIZE = "wrong_size"
 UNREADABLE = "unreadable"
-STATUSES = (ACCEPTED, NO_BOARD, BLURRED, NEAR_DUPLICATE, WRONG_SIZE, UNREADABLE)
+STATUSES = (ACCEPTED, NO_BOARD, BAD_GRID, BLURRED, NEAR_DUPLICATE, WRONG_SIZE, UNREADABLE)
 
 NEAR_DUPLICATE_FRAC = 0.01  # 8 px on a 640x480 image, 14.7 px on 1280x720
 DEFAULT_WORKERS = 2
@@ -96,7 +98,8 @@ def classify_array(name: str, path: str, gray: np.ndarray, sha256: str, spec: Bo
     detection, why = detect_board(gray, spec, settings)
     elapsed = time.perf_counter() - start
     if detection is None:
-        return ImageOutcome(name, path, NO_BOARD, why, size, sha256, elapsed_s=elapsed)
+        status = BAD_GRID if FOUND_INCONSISTENT in why else NO_BOARD
+        return ImageOutcome(name, path, status, why, size, sha256, elapsed_s=elapsed)
     status, reason = ACCEPTED, ""
     width = detection.edge_width_px
     if width is not None and width > settings.blur_max_edge_px:
@@ -214,7 +217,9 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     2 processes 146-158 / 294-496 ms (the first process run also starts the fork server). OpenCV's
     own thread pool is set to one thread for the run (restored afterwards) so the workers do not
     oversubscribe the cores.
-    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes.
+    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
+    KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
+    propagates; nothing is returned.
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
@@ -234,12 +239,18 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
             pool: Executor = (ThreadPoolExecutor(max_workers=workers) if executor == "thread" else
                               ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(),
                                                   initializer=_init_worker))
-            with pool:
+            try:
                 futures = {pool.submit(classify_file, path, spec, settings): i for i, path in enumerate(paths)}
                 for done, future in enumerate(as_completed(futures), start=1):
                     results[futures[future]] = future.result()
                     if progress:
                         progress(done, total, results[futures[future]])  # type: ignore[arg-type]
+            except BaseException:
+                # Ctrl-C (or a failure): drop the queued files at once; only the images being detected
+                # right now (one per worker) run to their end.
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown(wait=True)
     finally:
         cv2.setNumThreads(threads_before)
     return [r for r in results if r is not None]

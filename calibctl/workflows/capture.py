@@ -29,7 +29,7 @@ import os
 import re
 import secrets
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -43,8 +43,15 @@ from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
-from calibctl.core.frame_select import KEPT, FrameDecision, FrameSelector, SelectionProgress, SelectorSettings
+from calibctl.core.detect import FOUND_INCONSISTENT
+from calibctl.core.frame_select import (
+    KEPT,
+    FrameDecision,
+    FrameSelector,
+    SelectionProgress,
+    SelectorSettings,
+    StreamDetector,
+)
 from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
@@ -152,16 +159,15 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
     observer = observer or CaptureObserver()
     board_name, revision = _check_request(request)
     source = sources.resolve_source(request.source)
-    if source.kind == sources.FOLDER and (request.max_views is not None or request.duration_s is not None):
-        raise UsageError("--max-views and --duration apply to video and camera sources, not to a folder",
-                         "a folder is captured whole; leave out images you do not want")
+    if source.kind in sources.IMAGE_SETS and (request.max_views is not None or request.duration_s is not None):
+        raise UsageError(f"--max-views and --duration apply to video and camera sources, not to a {source.kind}",
+                         "a set of images is captured whole; leave out images you do not want")
     started = utc_now()
     with Store.open(settings.db_url) as store:
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
-        if source.kind == sources.FOLDER:
-            assert isinstance(source.target, Path)
-            got = _capture_folder(store, settings, spec, board, source.target, request.workers, observer)
+        if source.kind in sources.IMAGE_SETS:
+            got = _capture_images(store, settings, spec, board, source, request.workers, observer)
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
@@ -186,28 +192,28 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
     return samples
 
 
-def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision, folder: Path,
-                    workers: int, observer: CaptureObserver) -> _Collected:
-    with file_errors("read the source folder", folder):
-        paths = outcomes_core.list_images(folder)
-        ignored = sources.ignored_files(folder)
-    if not paths:
-        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {', '.join(ignored[:10])}" \
-            if ignored else ""
-        raise InputError(f"no images in {folder}{also}",
-                         f"put the session's images ({', '.join(outcomes_core.IMAGE_SUFFIXES)}) in the folder")
-    observer.folder_started(len(paths))
+def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                    source: sources.SourceSpec, workers: int, observer: CaptureObserver) -> _Collected:
+    where = source.label
+    with file_errors(f"read the source {source.kind}", where):
+        images = sources.select_images(source)
+    observer.folder_started(len(images.paths))
     with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
-        results = outcomes_core.classify_session(paths, spec, workers=workers, progress=lambda done, total, o:
-                                                 observer.image_done(done, total, o.name, o.status))
+        found = outcomes_core.classify_files(images.paths, spec, workers=workers, progress=lambda done, total, o:
+                                             observer.image_done(done, total, o.name, o.status))
+    found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
+    mixed = sources.mixed_sizes_error(source, {o.name: o.image_size for o in found if o.image_size is not None})
+    if mixed is not None:
+        raise mixed
+    results = outcomes_core.finalize_session(found)
     readable = [o for o in results if o.status != outcomes_core.UNREADABLE]
     if not readable:
         problems = "\n".join(f"  {o.name}: {o.reason}" for o in results)
-        raise InputError(f"none of the {len(results)} image files in {folder} could be read; nothing was stored:\n"
+        raise InputError(f"none of the {len(results)} image files in {where} could be read; nothing was stored:\n"
                          f"{problems}", "re-copy the images from the camera; they are truncated or not images")
     with_board = [o for o in readable if o.corner_ids is not None]
     if not with_board:
-        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {folder}", len(readable),
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {where}", len(readable),
                                                 _load_samples(readable))
     accepted = [o for o in results if o.accepted]
     probed = accepted or with_board
@@ -218,9 +224,9 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     stored = 0
     for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
         batch = readable[start:start + IMAGE_BATCH]
-        with file_errors("read the images in", folder):
-            images = [Path(o.path).read_bytes() for o in batch]
-        shas = store.put_images(images,
+        with file_errors("read the images in", where):
+            image_bytes = [Path(o.path).read_bytes() for o in batch]
+        shas = store.put_images(image_bytes,
                                 retention_days=settings.image_retention_days)
         for o, sha in zip(batch, shas, strict=True):
             if sha != o.sha256:
@@ -232,7 +238,8 @@ def _capture_folder(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     views: list[tuple[BoardView, str | None]] = [
         (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
     return _Collected([_record(o) for o in results], views, size,
-                      f"every image in the folder was examined ({len(results)})", stored, ignored=ignored)
+                      f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
+                      f"({len(results)})", stored, ignored=images.ignored)
 
 
 class _StreamState:
@@ -241,6 +248,7 @@ class _StreamState:
     def __init__(self, store: Store, settings: Settings, spec: BoardSpec) -> None:
         self.store, self.settings, self.spec = store, settings, spec
         self.selector: FrameSelector | None = None
+        self.detector = StreamDetector(spec)
         self.progress: SelectionProgress | None = None
         self.outcomes: list[OutcomeRecord] = []
         self.shas: dict[str, str] = {}
@@ -262,7 +270,7 @@ class _StreamState:
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
-        detection, why = detect_board(gray, self.spec)
+        detection, why = self.detector.detect(gray)
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:
                 self.no_board_samples.append((frame.label, gray))
@@ -279,8 +287,9 @@ class _StreamState:
                 if detection is not None:  # always, a kept frame has a board
                     self.kept_corners_px[frame.label] = detection.corners_px
             self.progress = self.selector.progress()
+        status = "bad_grid" if detection is None and FOUND_INCONSISTENT in why else _FRAME_STATUS[decision.status]
         self.outcomes.append(OutcomeRecord(
-            name=frame.label, status=_FRAME_STATUS[decision.status],
+            name=frame.label, status=status,
             reason=None if decision.kept else (why or decision.reason), sha256=sha, image_size=size,
             corners_found=0 if detection is None else len(detection.corner_ids)))
         return decision
@@ -346,7 +355,7 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
             tilt_deg=None if g is None else float(g.tilt_deg), tilt_direction=None if g is None else g.direction_name))
     return CaptureSession(
         session_id=secrets.token_hex(6), serial=request.serial, board=board,
-        source=str(Path(source.target).resolve()) if isinstance(source.target, Path) else source.text,
+        source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
         image_size=got.image_size, status="accepted" if report.passed else "rejected",

@@ -1,12 +1,22 @@
-"""Where a capture's pictures come from: a folder of images, a video file, or a live camera.
+"""Where a capture's pictures come from: a set of image files, a video file, or a live camera.
 
 ``resolve_source(text)`` decides what ``--source`` names, without opening anything:
 
-* an existing folder -> ``folder``;
-* an existing file with an image suffix -> refused (a session is a folder of images, not one image);
+* an existing folder -> ``folder`` (the image files directly in it);
+* an existing file with an image suffix -> refused (a session is several images, not one);
+* an existing file ending in .txt, .lst or .list -> ``list``: one image path per line, relative to
+  the list file's folder (absolute paths as they are); blank lines and lines starting with # skipped;
 * any other existing file -> ``video`` (decoded by cv2.VideoCapture);
 * ``/dev/videoN`` or an integer that is not an existing path -> ``camera`` (cv2.VideoCapture);
+* text with * ? or [ that is not an existing path -> ``glob`` (quoted, so the shell leaves it alone;
+  ``**`` reaches into sub-folders), relative to the working directory;
 * anything else -> refused as missing.
+
+``select_images(spec)`` turns a folder, list or glob into the exact files of the session, named by
+their path relative to the folder, the list file's folder or the glob's fixed leading folders (so a
+folder's images keep their plain file names). A glob or list is an explicit choice of files, so files
+it names that are missing, or a glob matching nothing, stop the capture (exit 2) - as do mixed image
+sizes among them (``mixed_sizes_error``), where a folder only marks the odd ones "wrong_size".
 
 Frame sources (``VideoFileSource``, ``CameraSource``) yield ``Frame`` objects in order. A video file
 is read frame by frame, every frame, and its time is the video's own (frame index / fps), so a run on
@@ -18,7 +28,9 @@ arrive while a detection runs are dropped, not queued), and its time is wall-clo
 from __future__ import annotations
 
 import contextlib
+import glob
 import math
+import os
 import re
 import threading
 import time
@@ -29,17 +41,24 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibctl.core.image_outcomes import IMAGE_SUFFIXES
+from calibctl.core.image_outcomes import IMAGE_SUFFIXES, list_images
 from calibctl.errors import InputError, UsageError
 
 FOLDER = "folder"
+GLOB = "glob"
+LIST = "list"
+IMAGE_SETS = (FOLDER, GLOB, LIST)
+LIST_SUFFIXES = (".txt", ".lst", ".list")
 VIDEO = "video"
 CAMERA = "camera"
 DEFAULT_FPS = 30.0
 CAMERA_READ_FAILURES_MAX = 30  # consecutive failed reads before a camera counts as gone
 CAMERA_FRAME_WAIT_S = 5.0  # no new frame for this long: the camera stalled
 _DEVICE = re.compile(r"^/dev/video[0-9]+$")
-SOURCE_HINT = "pass a folder of images, a video file, or a camera (/dev/video0 or an index such as 0)"
+SOURCE_HINT = ("pass a folder of images, a quoted glob ('shots/left*.jpg'), a list file (.txt), a video file, "
+               "or a camera (/dev/video0 or an index such as 0)")
+NAMES_SHOWN = 10  # file names listed in an error before "and N more"
+_GLOB_MAGIC = re.compile(r"[*?\[]")
 
 
 @dataclass(frozen=True)
@@ -53,6 +72,26 @@ class SourceSpec:
     @property
     def label(self) -> str:
         return str(self.target) if self.kind != CAMERA else f"camera {self.text}"
+
+    @property
+    def recorded(self) -> str:
+        """What the session stores as its source: an absolute folder, list file or glob pattern."""
+        if self.kind in (FOLDER, LIST):
+            return str(Path(self.target).resolve())  # type: ignore[arg-type]
+        if self.kind == GLOB:
+            return str(Path(str(self.target)).absolute())
+        return self.text
+
+
+@dataclass(frozen=True)
+class ImageSet:
+    """The files of a folder, list or glob source. ``names[i]`` is ``paths[i]`` relative to ``base``;
+    ``ignored``: files the folder or glob holds that are not images by their suffix."""
+
+    paths: list[Path]
+    names: list[str]
+    base: Path
+    ignored: list[str]
 
 
 @dataclass(frozen=True)
@@ -82,10 +121,12 @@ def resolve_source(text: str) -> SourceSpec:
     if path.is_file():
         if path.suffix.lower() in IMAGE_SUFFIXES:
             raise UsageError(f"--source {text} is a single image; a capture session is a folder of images",
-                             f"pass the folder that holds it ({path.parent})")
-        return SourceSpec(VIDEO, text, path)
+                             f"pass the folder that holds it ({path.parent}), or a quoted glob")
+        return SourceSpec(LIST if path.suffix.lower() in LIST_SUFFIXES else VIDEO, text, path)
     if path.exists():
         raise InputError(f"--source {text} is neither a folder, a regular file nor a camera", SOURCE_HINT)
+    if _GLOB_MAGIC.search(text):
+        return SourceSpec(GLOB, text, os.path.expanduser(text))
     if text.isdigit():
         return SourceSpec(CAMERA, text, int(text))
     raise InputError(f"--source {text} does not exist", SOURCE_HINT)
@@ -106,6 +147,101 @@ def ignored_files(folder: Path) -> list[str]:
     """Visible regular files in ``folder`` that are not images by their suffix (reported, not read)."""
     return sorted(p.name for p in folder.iterdir()
                   if p.is_file() and not p.name.startswith(".") and p.suffix.lower() not in IMAGE_SUFFIXES)
+
+
+def _names(items: list[str]) -> str:
+    more = f" and {len(items) - NAMES_SHOWN} more" if len(items) > NAMES_SHOWN else ""
+    return ", ".join(items[:NAMES_SHOWN]) + more
+
+
+def _glob_base(pattern: str) -> Path:
+    """The pattern's leading folders without wildcards ('shots/left*.jpg' -> shots)."""
+    fixed = []
+    for part in Path(pattern).parts[:-1]:
+        if _GLOB_MAGIC.search(part):
+            break
+        fixed.append(part)
+    return Path(*fixed) if fixed else Path(".")
+
+
+def _image_set(paths: list[Path], base: Path, ignored: list[str]) -> ImageSet:
+    return ImageSet(paths, [os.path.relpath(p, base) for p in paths], base, ignored)
+
+
+def _folder_images(folder: Path) -> ImageSet:
+    paths = list_images(folder)
+    ignored = ignored_files(folder)
+    if not paths:
+        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {_names(ignored)}" if ignored else ""
+        raise InputError(f"no images in {folder}{also}",
+                         f"put the session's images ({', '.join(IMAGE_SUFFIXES)}) in the folder")
+    return _image_set(paths, folder, ignored)
+
+
+def _glob_images(pattern: str) -> ImageSet:
+    matches = sorted(Path(m) for m in glob.glob(pattern, recursive=True))
+    files = [p for p in matches if p.is_file()]
+    paths = [p for p in files if p.suffix.lower() in IMAGE_SUFFIXES]
+    base = _glob_base(pattern)
+    ignored = [os.path.relpath(p, base) for p in files if p.suffix.lower() not in IMAGE_SUFFIXES]
+    if not paths:
+        also = f" ({len(files)} file(s), none an image by its suffix: {_names(ignored)})" if files else ""
+        raise InputError(f"--source '{pattern}' matches no image file{also}; nothing was stored",
+                         "check the pattern (it is relative to the working directory) and quote it so the shell "
+                         "passes it on unexpanded")
+    return _image_set(paths, base, ignored)
+
+
+def _listed_images(list_file: Path) -> ImageSet:
+    try:
+        lines = list_file.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the list file {list_file}: {exc}", "a list file is UTF-8 text") from exc
+    base = list_file.parent
+    paths: list[Path] = []
+    problems: list[str] = []
+    for number, line in enumerate(lines, start=1):
+        entry = line.strip()
+        if not entry or entry.startswith("#"):
+            continue
+        path = base / Path(entry).expanduser()
+        if not path.is_file():
+            problems.append(f"line {number}: {entry} ({'a folder' if path.is_dir() else 'missing'})")
+        elif path.suffix.lower() not in IMAGE_SUFFIXES:
+            problems.append(f"line {number}: {entry} (not an image by its suffix)")
+        elif path not in paths:
+            paths.append(path)
+    if problems:
+        raise InputError(f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
+                         f"stored: {_names(problems)}",
+                         f"paths in a list file are relative to its folder ({base}); fix or remove those lines")
+    if not paths:
+        raise InputError(f"the list file {list_file} names no image", "put one image path per line")
+    return _image_set(paths, base, [])
+
+
+def select_images(spec: SourceSpec) -> ImageSet:
+    """The image files of a folder, glob or list source (InputError, exit 2, when there are none)."""
+    if spec.kind == FOLDER:
+        return _folder_images(Path(spec.target))  # type: ignore[arg-type]
+    if spec.kind == GLOB:
+        return _glob_images(str(spec.target))
+    if spec.kind == LIST:
+        return _listed_images(Path(spec.target))  # type: ignore[arg-type]
+    raise ValueError(f"not an image-set source: {spec.kind}")
+
+
+def mixed_sizes_error(spec: SourceSpec, sizes: dict[str, tuple[int, int]]) -> InputError | None:
+    """For a glob or list: an error naming the files of each size when they are not all one size."""
+    if spec.kind not in (GLOB, LIST) or len(set(sizes.values())) < 2:
+        return None
+    by_size: dict[tuple[int, int], list[str]] = {}
+    for name, size in sizes.items():
+        by_size.setdefault(size, []).append(name)
+    groups = sorted(by_size.items(), key=lambda item: -len(item[1]))
+    listing = "; ".join(f"{w}x{h}: {_names(names)}" for (w, h), names in groups)
+    return InputError(f"--source {spec.text} mixes image sizes ({listing}); nothing was stored",
+                      "one session is one camera at one resolution: narrow the glob or list to one camera's images")
 
 
 class VideoFileSource:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import io
 import json
+import os
 import re
 import shutil
 from pathlib import Path
@@ -379,11 +380,101 @@ def test_live_view_shows_coverage_directions_gauge_count_and_what_is_missing() -
     assert "last: frame-000001 kept" in text
 
 
-def test_live_view_is_drawn_on_terminals_only_and_never_with_json(monkeypatch) -> None:
+def test_live_view_on_terminals_progress_lines_elsewhere_and_with_json(monkeypatch) -> None:
     from calibctl.cli import live_view
 
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO(), force_terminal=True))
-    assert capture_observer(as_json=False, min_views=8, max_views=None) is not None
-    assert capture_observer(as_json=True, min_views=8, max_views=None) is None
+    assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.TerminalObserver)
+    assert isinstance(capture_observer(as_json=True, min_views=8, max_views=None), live_view.LogObserver)
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO()))  # a pipe or a log file
-    assert capture_observer(as_json=False, min_views=8, max_views=None) is None
+    assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.LogObserver)
+
+
+def test_progress_lines_come_at_the_start_and_then_every_few_seconds(capsys) -> None:
+    from calibctl.cli.live_view import LogObserver
+
+    now = [100.0]
+    observer = LogObserver(min_views=8, every_s=5.0, clock=lambda: now[0])
+    observer.folder_started(40)
+    for done in range(1, 41):
+        now[0] += 0.5  # an image every half second: 20 s in all
+        observer.image_done(done, 40, f"v{done:02d}.png", "accepted" if done % 4 else "no_board")
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == ("calibctl capture: examining 40 images (a progress line every 5 s; Ctrl-C stops, "
+                        "nothing is stored)")
+    assert lines[1:] == [f"calibctl capture: {n} of 40 images examined ({n - n // 4} accepted, {n // 4} no_board), "
+                         f"{n // 2} s" for n in (10, 20, 30, 40)]
+
+
+# --source as a glob or a list file -----------------------------------------------------------------
+
+
+@needs_datasets
+def test_a_quoted_glob_captures_one_camera_of_a_stereo_folder(db: str) -> None:
+    """opencv-left-right holds both cameras: the whole folder is 26 images, 'left*.jpg' exactly the 13 left."""
+    whole = json.loads(capture(db, LEFT_RIGHT, "--json").stdout)["session"]
+    assert whole["source_kind"] == "folder" and len(whole["outcomes"]) == 26
+    result = capture(db, f"{LEFT_RIGHT}/left*.jpg", "--json")
+    assert result.exit_code == 0, result.output
+    session = json.loads(result.stdout)["session"]
+    assert session["source_kind"] == "glob" and session["source"] == f"{LEFT_RIGHT}/left*.jpg"
+    assert [o["name"] for o in session["outcomes"]] == sorted(p.name for p in LEFT_RIGHT.glob("left*.jpg"))
+    assert len(session["views"]) == 13 and all(o["status"] == "accepted" for o in session["outcomes"])
+    stored = {s.session_id: s for s in sessions(db)}[session["session_id"]]
+    assert [o.name for o in stored.outcomes] == [o["name"] for o in session["outcomes"]]
+
+
+@needs_datasets
+def test_a_list_file_captures_exactly_the_files_it_names(db: str, tmp_path: Path) -> None:
+    listing = tmp_path / "right-camera.txt"
+    right = sorted(LEFT_RIGHT.glob("right*.jpg"))
+    listing.write_text("# the right camera of the stereo sample\n" +
+                       "".join(f"{os.path.relpath(p, tmp_path)}\n" for p in right))
+    result = capture(db, listing, "--json")
+    assert result.exit_code == 0, result.output
+    session = json.loads(result.stdout)["session"]
+    assert session["source_kind"] == "list" and session["source"] == str(listing.resolve())
+    assert [Path(o["name"]).name for o in session["outcomes"]] == [p.name for p in right]
+    assert [(tmp_path / o["name"]).resolve() for o in session["outcomes"]] == [p.resolve() for p in right]
+
+
+@needs_datasets
+def test_a_glob_over_mixed_image_sizes_exits_2_naming_them_and_stores_nothing(db: str) -> None:
+    result = capture(db, f"{UDACITY}/calibration*.jpg")
+    assert result.exit_code == 2, result.output
+    assert "mixes image sizes (1280x720: " in result.stderr
+    assert "1281x721: calibration15.jpg, calibration7.jpg); nothing was stored" in " ".join(result.stderr.split())
+    assert sessions(db) == []
+    with Store.open(db) as store:
+        assert not store.image_dir.exists() or not any(p.is_file() for p in store.image_dir.rglob("*"))
+
+
+def test_a_glob_matching_nothing_exits_2(db: str, tmp_path: Path) -> None:
+    result = capture(db, f"{tmp_path}/left*.jpg")
+    assert result.exit_code == 2, result.output
+    assert f"--source '{tmp_path}/left*.jpg' matches no image file" in " ".join(result.stderr.split())
+    assert sessions(db) == []
+
+
+def test_a_list_file_naming_missing_files_exits_2_naming_them(db: str, tmp_path: Path, good: Path) -> None:
+    listing = tmp_path / "views.txt"
+    listing.write_text(f"{good / 'view-000.png'}\nview-404.png\n")
+    result = capture(db, listing)
+    assert result.exit_code == 2, result.output
+    assert "names 1 file(s) that cannot be used; nothing was stored: line 2: view-404.png (missing)" \
+        in " ".join(result.stderr.split())
+    assert sessions(db) == []
+
+
+def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, good: Path, monkeypatch) -> None:
+    from calibctl.core import image_outcomes
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    result = capture(db, good)
+    assert result.exit_code == 130, result.output
+    assert "calibctl capture: examining 12 images" in result.stderr
+    assert "Interrupted; nothing half-written was kept." in result.stderr
+    assert sessions(db) == []

@@ -11,14 +11,27 @@ import numpy as np
 import pytest
 
 from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import DetectorSettings, detect_board, detect_chessboard, grid_is_consistent
+from calibctl.core.detect import (
+    CLASSIC_FLAGS,
+    MAX_SEARCH_PIXELS,
+    NOISE_CORRELATION_MIN,
+    DetectorSettings,
+    detect_board,
+    detect_chessboard,
+    downscaled_to_pixels,
+    grid_is_consistent,
+    neighbour_correlation,
+    search_levels,
+)
 from calibctl.core.image_outcomes import (
     ACCEPTED,
+    BAD_GRID,
     BLURRED,
     NEAR_DUPLICATE,
     NO_BOARD,
     UNREADABLE,
     WRONG_SIZE,
+    classify_array,
     classify_file,
     classify_files,
     classify_session,
@@ -59,7 +72,7 @@ def test_rendered_corners_match_truth_well_under_a_tenth_of_a_pixel(good_views) 
 
 
 def test_downscaled_search_refined_at_full_resolution_is_as_accurate(good_views) -> None:
-    err = corner_errors(good_views, DetectorSettings(max_search_side_px=400))
+    err = corner_errors(good_views, DetectorSettings(max_search_pixels=120_000))
     assert err.mean() < MEAN_ERR_MAX_PX and np.percentile(err, 95) < P95_ERR_MAX_PX
 
 
@@ -68,7 +81,7 @@ def test_ids_follow_the_physical_board_even_upside_down() -> None:
     for spin in (0.0, math.pi, math.pi / 2 + 0.2):
         T = place_board(CAMERA, BOARD, tilt_rotation(math.radians(25), 1.0, spin), (320.0, 240.0), 0.55)
         img = render_view(CAMERA, BOARD, T, np.random.default_rng(1))
-        for settings in (DetectorSettings(), DetectorSettings(max_search_side_px=400)):
+        for settings in (DetectorSettings(), DetectorSettings(max_search_pixels=120_000)):
             det, why = detect_chessboard(img, 9, 6, settings)
             assert det is not None, why
             err = np.linalg.norm(det.corners_px - true_corners_px(CAMERA, BOARD, T), axis=1)
@@ -210,3 +223,59 @@ def test_udacity_every_image_outcome() -> None:
     assert by_name["calibration4.jpg"].method == "sb"
     assert by_name["calibration1.jpg"].reason.startswith("no 9x6 chessboard found (classic and SB detectors)")
     assert all(o.edge_width_px < 8.0 for o in outcomes if o.status == ACCEPTED)
+
+
+# ---- noise-like images: the classic detector is skipped, SB still runs --------------------------------
+
+def _noisy_board(sigma: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    T = scenario_poses("good", CAMERA, BOARD, 3, rng)[1]
+    clean = render_view(CAMERA, BOARD, T, rng).astype(np.float64)
+    return np.clip(clean + rng.normal(0.0, sigma, clean.shape), 0, 255).astype(np.uint8)
+
+
+def test_sensor_noise_skips_the_classic_search_and_says_why() -> None:
+    noise = np.random.default_rng(0).integers(0, 256, (480, 640), dtype=np.uint8)
+    assert neighbour_correlation(noise) < NOISE_CORRELATION_MIN
+    assert [method for method, _, _ in search_levels(noise, DetectorSettings())] == ["sb"]
+    det, why = detect_chessboard(noise, 9, 6)
+    assert det is None
+    assert why == "no 9x6 chessboard found (SB detector; the classic one skipped, the image is noise-like)"
+
+
+@pytest.mark.parametrize(("sigma", "levels"), [(80.0, ["classic", "classic", "sb"]), (110.0, ["sb"])])
+def test_a_board_under_heavy_noise_is_still_found(sigma: float, levels: list[str]) -> None:
+    """Gaussian noise of 80 / 110 grey levels (neighbour correlation about 0.29 / 0.17): the plain
+    full-resolution classic call finds nothing. At 80 the half-size copy still correlates enough for
+    the classic levels to run; at 110 only SB runs, and finds the board."""
+    noisy = _noisy_board(sigma, seed=4)
+    assert neighbour_correlation(noisy) < NOISE_CORRELATION_MIN
+    assert not cv2.findChessboardCorners(noisy, (9, 6), flags=CLASSIC_FLAGS)[0]
+    assert [m for m, _, _ in search_levels(noisy, DetectorSettings())] == levels
+    det, why = detect_chessboard(noisy, 9, 6)
+    assert det is not None, why
+
+
+def test_photographed_scenes_are_not_noise_like() -> None:
+    rng = np.random.default_rng(2)
+    T = scenario_poses("good", CAMERA, BOARD, 3, rng)[0]
+    clean = render_view(CAMERA, BOARD, T, rng, Photometry.random(rng))
+    assert neighbour_correlation(clean) > 0.9
+    assert [m for m, _, _ in search_levels(clean, DetectorSettings())] == ["classic", "classic", "sb"]
+
+
+def test_the_search_copy_is_full_resolution_up_to_the_pixel_budget() -> None:
+    for (width, height), k in (((1280, 960), 1), ((1281, 721), 1), ((1920, 1080), 2), ((4000, 3000), 4)):
+        copy, factor = downscaled_to_pixels(np.zeros((height, width), np.uint8), MAX_SEARCH_PIXELS)
+        assert factor == k and copy.shape == (height // k, width // k)
+        assert copy.size <= MAX_SEARCH_PIXELS
+
+
+def test_a_board_found_without_a_consistent_grid_is_not_called_no_board() -> None:
+    """Noise of 110 grey levels, seed 6: SB finds the board, no refinement window gives a consistent grid."""
+    noisy = _noisy_board(110.0, seed=6)
+    assert cv2.findChessboardCornersSB(noisy, (9, 6))[0]
+    outcome = classify_array("noisy.png", "noisy.png", noisy, "0" * 64, BOARD)
+    assert outcome.status == BAD_GRID and outcome.corners_px is None
+    assert outcome.reason == ("a 9x6 chessboard was found but its corners do not form a consistent grid "
+                              "(blurred, bent or partly hidden?)")

@@ -265,3 +265,33 @@ def test_a_video_without_the_registered_pattern_names_what_is_visible(settings, 
     assert "a 9x6 chessboard is visible in frame-000000 and frame-000015" in message
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == [] and store.counts()["images"] == 0
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
+        settings, good: Path, tmp_path: Path, monkeypatch, workers: int) -> None:
+    """KeyboardInterrupt from the third detection: the queued images are never detected (only those
+    already running finish), no session and no image is stored."""
+    from calibctl.core import image_outcomes
+
+    folder = tmp_path / "large"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(60):
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+    calls: list[int] = []
+    real_detect = image_outcomes.detect_board
+
+    def interrupted(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real_detect(*args, **kwargs)
+
+    monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), workers=workers))
+    assert len(calls) <= 3 + workers  # of 60: the rest was cancelled
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == []
+        assert store.counts()["images"] == 0
