@@ -69,6 +69,16 @@ class ViewResult(Document):
     worst_corner_px: float | None = Field(None, ge=0, description="largest single-corner residual, pixels")
 
 
+class RejectedCorner(Document):
+    """A corner removed from the solve because its residual was implausible (the 5-sigma corner rule)."""
+
+    view: str = Field(description="image the corner's view came from")
+    corner_id: int = Field(ge=0, description="board corner id (row-major: row * cols + col)")
+    residual_px: float = Field(ge=0, description="length of observed - projected under the final solve, pixels")
+    dx_px: float = Field(description="u component of observed - projected, pixels")
+    dy_px: float = Field(description="v component of observed - projected, pixels")
+
+
 class Provenance(Document):
     calibctl_version: str = Field(description="calibctl version that produced the artifact")
     opencv_version: str = Field(description="OpenCV version used for the solve")
@@ -99,6 +109,11 @@ class CalibrationArtifact(Document):
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")
     views: list[ViewResult] = Field(default_factory=list, description="per-view RMS and pose")
+    rejected_corners: list[RejectedCorner] = Field(
+        default_factory=list,
+        description="corners removed from the solve (residual beyond the corner rule), largest first; "
+        "absent in artifacts made before the rule removed corners",
+    )
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
@@ -135,8 +150,11 @@ class CalibrationArtifact(Document):
         return f"{self.serial}@{self.version}"
 
     def computed_sha256(self) -> str:
-        """The hash the content should have; compare with ``content_sha256``."""
-        return content_hash(self)
+        """The hash the content should have; compare with ``content_sha256``.
+
+        An empty ``rejected_corners`` is left out, so artifacts sealed before the field existed still verify.
+        """
+        return content_hash(self, {"content_sha256"} | ({"rejected_corners"} if not self.rejected_corners else set()))
 
     def sealed(self) -> CalibrationArtifact:
         """A copy whose ``content_sha256`` matches its content."""
