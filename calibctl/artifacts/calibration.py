@@ -79,6 +79,21 @@ class RejectedCorner(Document):
     dy_px: float = Field(description="v component of observed - projected, pixels")
 
 
+class CameraConsistency(Document):
+    """Do all views come from one camera? The best two-camera split, scored on held-out views."""
+
+    group_a: list[str] = Field(description="views of the first group (the one holding the first view)")
+    group_b: list[str] = Field(description="views of the second group")
+    holdout_rms_px: tuple[float, float] = Field(description="each group's k-fold held-out RMS under its own camera")
+    cross_rms_px: tuple[float, float] = Field(description="each group's RMS under the other group's camera")
+    fx_px: tuple[float, float] = Field(description="fx solved from each group alone, pixels")
+    cx_px: tuple[float, float] = Field(description="cx solved from each group alone, pixels")
+    cy_px: tuple[float, float] = Field(description="cy solved from each group alone, pixels")
+    ratio: float = Field(ge=0, description="smaller of the two groups' cross / held-out RMS")
+    threshold: float = Field(gt=0, description="ratio from which two cameras are suspected")
+    two_cameras_suspected: bool = Field(description="the views disagree the way two cameras would")
+
+
 class Provenance(Document):
     calibctl_version: str = Field(description="calibctl version that produced the artifact")
     opencv_version: str = Field(description="OpenCV version used for the solve")
@@ -114,6 +129,9 @@ class CalibrationArtifact(Document):
         description="corners removed from the solve (residual beyond the corner rule), largest first; "
         "absent in artifacts made before the rule removed corners",
     )
+    camera_consistency: CameraConsistency | None = Field(
+        None, description="two-camera check of the solved views; absent when too few views to split, and in "
+        "artifacts made before the check existed")
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
@@ -152,9 +170,15 @@ class CalibrationArtifact(Document):
     def computed_sha256(self) -> str:
         """The hash the content should have; compare with ``content_sha256``.
 
-        An empty ``rejected_corners`` is left out, so artifacts sealed before the field existed still verify.
+        An empty ``rejected_corners`` and an absent ``camera_consistency`` are left out, so artifacts sealed
+        before those fields existed still verify.
         """
-        return content_hash(self, {"content_sha256"} | ({"rejected_corners"} if not self.rejected_corners else set()))
+        exclude = {"content_sha256"}
+        if not self.rejected_corners:
+            exclude.add("rejected_corners")
+        if self.camera_consistency is None:
+            exclude.add("camera_consistency")
+        return content_hash(self, exclude)
 
     def sealed(self) -> CalibrationArtifact:
         """A copy whose ``content_sha256`` matches its content."""

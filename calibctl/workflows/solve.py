@@ -19,6 +19,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import (
     UNSEALED,
     CalibrationArtifact,
+    CameraConsistency,
     DistortionModelInfo,
     HeldOut,
     Provenance,
@@ -32,6 +33,7 @@ from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import CameraSplit, check_one_camera
 from calibctl.core.model_select import select_model
 from calibctl.core.outliers import (
     CornerRejection,
@@ -145,7 +147,19 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
-    return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection
+    split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
+    consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
+    return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
+
+
+def _consistency(split: CameraSplit, names: list[str]) -> CameraConsistency:
+    Ka, Kb = split.camera_a, split.camera_b
+    return CameraConsistency(
+        group_a=[names[i] for i in split.group_a], group_b=[names[i] for i in split.group_b],
+        holdout_rms_px=split.holdout_rms_px, cross_rms_px=split.cross_rms_px,
+        fx_px=(float(Ka[0, 0]), float(Kb[0, 0])), cx_px=(float(Ka[0, 2]), float(Kb[0, 2])),
+        cy_px=(float(Ka[1, 2]), float(Kb[1, 2])), ratio=split.ratio, threshold=split.threshold,
+        two_cameras_suspected=split.suspected)
 
 
 def _views(session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers,
@@ -177,7 +191,8 @@ def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> li
 
 def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
-    model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection = _solve_numbers(session, request)
+    model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
+        session, request)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -206,6 +221,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         board=session.board,
         views=_views(session, sol, first, outliers, kept, dropped),
         rejected_corners=_rejected_corners(session, rejection),
+        camera_consistency=consistency,
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,

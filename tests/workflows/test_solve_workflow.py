@@ -127,3 +127,30 @@ def test_a_noisy_view_is_flagged_and_dropped_only_with_drop_outliers(settings):
     assert dropped.views[5].outlier and dropped.views[5].dropped
     assert dropped.views[5].tvec_m[2] > 0.1  # the pose of the solve that flagged it
     assert dropped.rms_px < kept.rms_px
+
+
+def test_one_camera_session_records_a_passed_two_camera_check(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    check = art.camera_consistency
+    assert check is not None and not check.two_cameras_suspected and check.ratio < check.threshold
+    assert len(check.group_a) + len(check.group_b) == 18 and art.status == "accepted"
+
+
+def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
+    left = synthetic_capture(measured_board(), n_views=12, seed=1, noise_px=0.1)
+    K_other = K_TRUE.copy()
+    K_other[0, 0] = K_other[1, 1] = 1.04 * K_TRUE[0, 0]
+    right = synthetic_capture(measured_board(), n_views=12, seed=2, noise_px=0.1, camera_matrix=K_other)
+    views = [*left.views, *(v.model_copy(update={"name": "right-" + v.name}) for v in right.views)]
+    session = _store_session(settings, left.model_copy(update={"views": views}))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+    art = out.artifact
+    assert art.status == "rejected" and not out.active
+    check = art.camera_consistency
+    assert check is not None and check.two_cameras_suspected
+    assert sorted(check.group_b) == sorted(v.name for v in views[12:])
+    finding = next(f for f in art.lint if f.rule == "one-camera")
+    assert finding.severity == "error" and "two cameras" in finding.message
+    assert "its own images" in finding.fix and finding.value == pytest.approx(check.ratio)
+    assert art.content_sha256 == art.computed_sha256()
