@@ -124,13 +124,16 @@ class CalibrationArtifact(Document):
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")
     views: list[ViewResult] = Field(default_factory=list, description="per-view RMS and pose")
+    # Both fields below are left out of the document (and so of its hash) while empty, so artifacts
+    # sealed before they existed still verify.
     rejected_corners: list[RejectedCorner] = Field(
-        default_factory=list,
+        default_factory=list, exclude_if=lambda corners: not corners,
         description="corners removed from the solve (residual beyond the corner rule), largest first; "
-        "absent in artifacts made before the rule removed corners",
+        "absent when none was removed, and in artifacts made before the rule removed corners",
     )
     camera_consistency: CameraConsistency | None = Field(
-        None, description="two-camera check of the solved views; absent when too few views to split, and in "
+        None, exclude_if=lambda check: check is None,
+        description="two-camera check of the solved views; absent when too few views to split, and in "
         "artifacts made before the check existed")
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
@@ -168,17 +171,8 @@ class CalibrationArtifact(Document):
         return f"{self.serial}@{self.version}"
 
     def computed_sha256(self) -> str:
-        """The hash the content should have; compare with ``content_sha256``.
-
-        An empty ``rejected_corners`` and an absent ``camera_consistency`` are left out, so artifacts sealed
-        before those fields existed still verify.
-        """
-        exclude = {"content_sha256"}
-        if not self.rejected_corners:
-            exclude.add("rejected_corners")
-        if self.camera_consistency is None:
-            exclude.add("camera_consistency")
-        return content_hash(self, exclude)
+        """The hash the content should have; compare with ``content_sha256``."""
+        return content_hash(self)
 
     def sealed(self) -> CalibrationArtifact:
         """A copy whose ``content_sha256`` matches its content."""

@@ -16,8 +16,7 @@ FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "camera_front.json"
 def _as_written_before_the_field(art: CalibrationArtifact) -> dict:
     """The document an older calibctl wrote: neither key, sealed over what it had."""
     data = art.model_dump(mode="json")
-    data.pop("rejected_corners")
-    data.pop("camera_consistency")
+    assert "rejected_corners" not in data and "camera_consistency" not in data  # left out while empty
     body = {k: v for k, v in data.items() if k != "content_sha256"}
     data["content_sha256"] = sha256_hex(canonical_json_bytes(body))
     return data
