@@ -39,6 +39,7 @@ import numpy as np
 
 from calibctl.core.tilt import (
     DISTINCT_DIRECTION_DEG,
+    MIN_TILT_CORNERS,
     SessionLens,
     directions_to_add,
     distinct_directions,
@@ -114,6 +115,7 @@ class GateReport:
     focal_px: float
     focal_source: str
     unused_views: tuple[tuple[str, str], ...] = ()  # (view name, why it gives no tilt / observability)
+    lens: SessionLens | None = None  # the small lens model tilt was read through (None: no usable view)
 
     @property
     def passed(self) -> bool:
@@ -275,7 +277,7 @@ def view_geometries(views: Sequence[BoardView], model_points: np.ndarray, image_
     model3 = np.column_stack([model, np.zeros(len(model))])
     source = "given"
     if focal_px is None:
-        raw = [H for v in views if len(v.corner_ids) >= 4
+        raw = [H for v in views if len(v.corner_ids) >= MIN_TILT_CORNERS
                and (H := view_homography(model[v.corner_ids], v.corners_px)) is not None]
         focal_px, source = estimate_focal_px(raw, image_size), "session"
         if focal_px is None:
@@ -325,7 +327,7 @@ def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_s
     covered = tuple(CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) in cells)
     return GateReport(tuple(results), tuple(geo.views), covered,
                       tuple(DIRECTION_NAMES[direction_bin(d)] for d in distinct), geo.focal_px, geo.focal_source,
-                      tuple(geo.unused))
+                      tuple(geo.unused), geo.lens)
 
 
 def _observability_gate(value: float, th: GateThresholds) -> GateResult:

@@ -117,7 +117,8 @@ def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarr
     return math.degrees(math.sqrt(max(0.0, float(np.trace(Jn @ cov_r @ Jn.T)))))
 
 
-def _nominal_camera(image_size: tuple[int, int], focal_px: float) -> np.ndarray:
+def nominal_camera(image_size: tuple[int, int], focal_px: float) -> np.ndarray:
+    """(3, 3) K with ``focal_px`` and the principal point at the image centre."""
     width, height = image_size
     return np.array([[focal_px, 0.0, (width - 1) / 2], [0.0, focal_px, (height - 1) / 2], [0.0, 0.0, 1.0]])
 
@@ -135,7 +136,7 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
         (lens, rvecs, tvecs): one (3,) rvec and tvec per view.
     """
     diag = math.hypot(*image_size)
-    K0 = _nominal_camera(image_size, focal_px if focal_px is not None else diag)
+    K0 = nominal_camera(image_size, focal_px if focal_px is not None else diag)
     fit = None
     if focal_source == "session":
         # c free; kept only when it is significantly off the centre (else a weak session lets c wander)
