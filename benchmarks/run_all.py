@@ -45,6 +45,8 @@ BENCHES = (
     Bench("bench_triage", "bench_triage.py", ("--repeats", "3"), ("--repeats", "1", "--rows", "200000"), False),
     Bench("bench_triage_accuracy", "bench_triage.py", ("--accuracy", "20"), ("--accuracy", "5"), False),
     Bench("bench_e2e", "bench_e2e.py", ("--repeats", "3"), ("--quick",)),
+    Bench("bench_tilt", "bench_tilt.py", ("--sessions", "20", "--render", "5"), ("--sessions", "5", "--render", "0")),
+    Bench("bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")),
 )
 
 
