@@ -1,4 +1,5 @@
-"""`calibctl calibrate` on a folder that holds both cameras of a stereo pair: a verdict, not a blend."""
+"""What `calibctl solve` / `calibrate` say beyond the numbers: a folder holding both cameras of a stereo pair
+is a verdict, not a blend; a removed corner is printed and kept in the artifact."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.datasets import LEFT_RIGHT, require_datasets
+from tests.workflows.sessions import synthetic_capture
 
 RUNNER = CliRunner()
 
@@ -55,3 +57,19 @@ def test_each_camera_alone_is_not(tmp_path: Path, sqlite_url: str, camera: str) 
     with Store.open(sqlite_url) as store:
         check = store.get_artifact("STEREO-" + camera.upper()).camera_consistency
     assert check is not None and not check.two_cameras_suspected
+
+
+def test_solve_prints_the_corner_it_removed_and_show_repeats_it(sqlite_url: str) -> None:
+    session = synthetic_capture(measured_board("A17", square_mm=25.0), serial="CAM-0042")
+    views = list(session.views)
+    bad = list(views[3].corners_px)
+    bad[10] = (bad[10][0] + 15.0, bad[10][1])
+    views[3] = views[3].model_copy(update={"corners_px": bad})
+    with Store.open(sqlite_url) as store:
+        board = store.add_board(session.board)
+        store.add_session(session.model_copy(update={"views": views, "board": board}))
+    solved = RUNNER.invoke(app, ["--db", sqlite_url, "solve", "--serial", "CAM-0042"], terminal_width=110)
+    assert solved.exit_code == 0, solved.output
+    assert "corners removed from the solve: 1: view03.png id 10 (15.0 px)" in solved.stdout
+    shown = RUNNER.invoke(app, ["--db", sqlite_url, "show", "CAM-0042"], terminal_width=110)
+    assert shown.exit_code == 0 and "corners removed from the solve: 1: view03.png id 10" in shown.stdout
