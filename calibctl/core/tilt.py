@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from calibctl.core.covariance import intrinsic_covariance
+
 MIN_TILT_CORNERS = 8
 TILT_NOISE_FLOOR_PX = 0.2  # corner noise assumed at least this, even when the session fits better
 TILT_SIGMA_MAX_DEG = 2.0
@@ -141,7 +143,8 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
     if focal_source == "session":
         # c free; kept only when it is significantly off the centre (else a weak session lets c wander)
         fit = _calibrate(object_points, image_points, image_size, K0, _LENS_FLAGS & ~cv2.CALIB_FIX_PRINCIPAL_POINT)
-        if fit is not None and np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) < _CENTRE_SIGNIFICANT_SIGMA * fit[5]):
+        if fit is not None and np.all(np.abs(fit[1][:2, 2] - K0[:2, 2])
+                                      < _CENTRE_SIGNIFICANT_SIGMA * _centre_sigma_px(object_points, image_points, fit)):
             fit = None
     if fit is None:
         fit = _calibrate(object_points, image_points, image_size, K0,
@@ -154,20 +157,20 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
         poses = [best_pose(o, i, lens) for o, i in zip(object_points, image_points, strict=True)]
         return lens, [r for r, _ in poses], [t for _, t in poses]
     assert fit is not None
-    rms, K, D, rvecs, tvecs, _ = fit
+    rms, K, D, rvecs, tvecs = fit
     lens = SessionLens(K, D, focal_source, max(TILT_NOISE_FLOOR_PX, rms / math.sqrt(2.0)))
     poses = [best_pose(o, i, lens, r, t) for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)]
     return lens, [r for r, _ in poses], [t for _, t in poses]
 
 
-_Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]
+_Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
 
 
 def _calibrate(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
                image_size: tuple[int, int], K0: np.ndarray, flags: int) -> _Fit | None:
-    """(rms px, K, dist (5,), rvecs, tvecs, sigma of (cx, cy) px) of cv2.calibrateCameraExtended, or None."""
+    """(rms px, K, dist (5,), rvecs, tvecs) of cv2.calibrateCamera, or None when it fails or is not finite."""
     try:
-        rms, K, D, rvecs, tvecs, std, _, _ = cv2.calibrateCameraExtended(
+        rms, K, D, rvecs, tvecs = cv2.calibrateCamera(
             [np.asarray(o, np.float32).reshape(-1, 3) for o in object_points],
             [np.asarray(i, np.float32).reshape(-1, 2) for i in image_points],
             (int(image_size[0]), int(image_size[1])), K0.copy(), np.zeros(5), flags=flags)
@@ -176,8 +179,22 @@ def _calibrate(object_points: Sequence[np.ndarray], image_points: Sequence[np.nd
     K, D = np.asarray(K, np.float64), np.asarray(D, np.float64).ravel()[:5]
     if not (math.isfinite(rms) and np.isfinite(K).all() and np.isfinite(D).all()):
         return None
-    return (float(rms), K, D, [np.ravel(r) for r in rvecs], [np.ravel(t) for t in tvecs],
-            np.asarray(std, np.float64).ravel()[2:4])
+    return float(rms), K, D, [np.ravel(r) for r in rvecs], [np.ravel(t) for t in tvecs]
+
+
+def _centre_sigma_px(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], fit: _Fit) -> np.ndarray:
+    """(2,) one-sigma of (cx, cy) of a c-free fit, poses eliminated (calibctl.core.covariance): linear in the
+    view count, where OpenCV's calibrateCameraExtended inverts every pose too (5 s at 100 views)."""
+    _, K, D, rvecs, tvecs = fit
+    objs = [np.asarray(o, np.float64).reshape(-1, 3) for o in object_points]
+    residuals = [np.asarray(i, np.float64).reshape(-1, 2) - cv2.projectPoints(o, r, t, K, D)[0].reshape(-1, 2)
+                 for o, i, r, t in zip(objs, image_points, rvecs, tvecs, strict=True)]
+    dof = 2 * sum(len(o) for o in objs) - 6 * len(objs) - 5
+    cov = intrinsic_covariance(objs, np.array(rvecs), np.array(tvecs), K, D, residuals, ("fx", "fy", "cx", "cy"),
+                               ("k1", "k2"), float(K[0, 0] / K[1, 1]), max(dof, 1))
+    if cov.covariance is None:
+        return np.full(2, np.inf)
+    return np.sqrt(np.diag(cov.covariance))[[cov.names.index("cx"), cov.names.index("cy")]]
 
 
 def best_pose(object_points: np.ndarray, image_points: np.ndarray, lens: SessionLens,
