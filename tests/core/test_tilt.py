@@ -149,3 +149,15 @@ def test_tilt_on_rendered_photos_through_calibctl_detection() -> None:
     errors = np.array([g.tilt_deg for g in report.views]) - np.array(kept)
     assert len(report.views) == len(views)
     assert np.abs(errors).max() < TILT_ERR_MAX_DEG and errors.std() < TILT_SD_MAX_DEG
+
+
+def test_a_session_of_only_sparse_views_reads_no_tilt_and_fails_observability_saying_why() -> None:
+    camera = PinholeCamera.seed_reference((640, 480))
+    views, _ = projected_session(camera, 13, n_views=10, tilt_deg=(20.0, 40.0))
+    ids = np.array([0, 1, 2, 9, 10, 11])
+    sparse = [BoardView(v.name, ids, v.corners_px[ids]) for v in views]
+    report = evaluate_gates(sparse, BOARD.object_points(), camera.image_size)
+    assert report.views == () and len(report.unused_views) == 10
+    obs = report.gate("observability")
+    assert not obs.passed and obs.value == 0.0 and obs.detail["views_used"] == 0
+    assert len(obs.detail["views_not_used"]) == 10 and not report.gate("tilt").passed
