@@ -48,6 +48,8 @@ BENCHES = (
     Bench("bench_handeye", "bench_handeye.py", ("--seeds", "50", "--scenes", "5"),
           ("--seeds", "10", "--scenes", "2", "--repeats", "5")),
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
+    Bench("bench_tilt", "bench_tilt.py", ("--sessions", "20", "--render", "5"), ("--sessions", "5", "--render", "0")),
+    Bench("bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")),
 )
 
 

@@ -35,7 +35,7 @@ class GateThresholds(BaseModel):
     observability_min: float = Field(1e-4, gt=0, description="minimum sigma5/sigma1 of Zhang's V matrix")
     tilt_min_deg: float = Field(20.0, ge=0, description="a view counts as tilted from this angle")
     tilt_max_deg: float = Field(45.0, gt=0, description="above this the detector's accuracy collapses")
-    tilt_directions_min: int = Field(3, ge=1, le=8, description="distinct tilt directions needed in the window (of 8)")
+    tilt_directions_min: int = Field(3, ge=1, le=4, description="tilt directions at least 90 deg apart needed (at most 4 fit)")
     min_views: int = Field(8, ge=3, description="fewest accepted views for a session to pass")
 
 

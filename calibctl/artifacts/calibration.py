@@ -78,6 +78,31 @@ class ViewResult(Document):
     worst_corner_px: float | None = Field(None, ge=0, description="largest single-corner residual, pixels")
 
 
+class RejectedCorner(Document):
+    """A corner removed from the solve because its residual was implausible (the 5-sigma corner rule)."""
+
+    view: str = Field(description="image the corner's view came from")
+    corner_id: int = Field(ge=0, description="board corner id (row-major: row * cols + col)")
+    residual_px: float = Field(ge=0, description="length of observed - projected under the final solve, pixels")
+    dx_px: float = Field(description="u component of observed - projected, pixels")
+    dy_px: float = Field(description="v component of observed - projected, pixels")
+
+
+class CameraConsistency(Document):
+    """Do all views come from one camera? The best two-camera split, scored on held-out views."""
+
+    group_a: list[str] = Field(description="views of the first group (the one holding the first view)")
+    group_b: list[str] = Field(description="views of the second group")
+    holdout_rms_px: tuple[float, float] = Field(description="each group's k-fold held-out RMS under its own camera")
+    cross_rms_px: tuple[float, float] = Field(description="each group's RMS under the other group's camera")
+    fx_px: tuple[float, float] = Field(description="fx solved from each group alone, pixels")
+    cx_px: tuple[float, float] = Field(description="cx solved from each group alone, pixels")
+    cy_px: tuple[float, float] = Field(description="cy solved from each group alone, pixels")
+    ratio: float = Field(ge=0, description="smaller of the two groups' cross / held-out RMS")
+    threshold: float = Field(gt=0, description="ratio from which two cameras are suspected")
+    two_cameras_suspected: bool = Field(description="the views disagree the way two cameras would")
+
+
 class Provenance(Document):
     calibctl_version: str = Field(description="calibctl version that produced the artifact")
     opencv_version: str = Field(description="OpenCV version used for the solve")
@@ -108,6 +133,17 @@ class CalibrationArtifact(Document):
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")
     views: list[ViewResult] = Field(default_factory=list, description="per-view RMS and pose")
+    # Both fields below are left out of the document (and so of its hash) while empty, so artifacts
+    # sealed before they existed still verify.
+    rejected_corners: list[RejectedCorner] = Field(
+        default_factory=list, exclude_if=lambda corners: not corners,
+        description="corners removed from the solve (residual beyond the corner rule), largest first; "
+        "absent when none was removed, and in artifacts made before the rule removed corners",
+    )
+    camera_consistency: CameraConsistency | None = Field(
+        None, exclude_if=lambda check: check is None,
+        description="two-camera check of the solved views; absent when too few views to split, and in "
+        "artifacts made before the check existed")
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(

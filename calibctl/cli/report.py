@@ -53,6 +53,10 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     n_out = sum(v.outlier for v in art.views)
     n_drop = sum(v.dropped for v in art.views)
     stdout.print(f"  views {len(art.views)} ({n_out} outlier, {n_drop} dropped)")
+    if art.rejected_corners:
+        shown = ", ".join(f"{c.view} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners[:5])
+        more = f" and {len(art.rejected_corners) - 5} more" if len(art.rejected_corners) > 5 else ""
+        stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {shown}{more}")
     if art.gates:
         print_gates(art.gates)
     print_findings(art.lint)

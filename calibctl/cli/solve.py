@@ -25,7 +25,8 @@ ModelOption = Annotated[
 ]
 
 ActivateOption = Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")]
-DropOutliersOption = Annotated[bool, typer.Option("--drop-outliers", help="Re-solve without outlier views.")]
+DropOutliersOption = Annotated[bool, typer.Option(
+    "--drop-outliers", help="Re-solve without outlier views (implausible corners are always removed).")]
 
 
 def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
@@ -35,7 +36,8 @@ def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
     else:
         print_calibration(art, active=outcome.active)
         for c in outcome.outlier_corners[:10]:
-            stdout.print(f"  outlier corner: {c['view']} id {c['corner_id']} residual {c['residual_px']:.2f} px")
+            stdout.print(f"  outlier corner kept (its view has too few corners to lose it): {c['view']} "
+                         f"id {c['corner_id']} residual {c['residual_px']:.2f} px")
         if art.status == "accepted":
             state_word = "active" if outcome.active else "stored, not activated (--no-activate)"
             stdout.print(f"[green]{art.serial}@{art.version} accepted[/green] and {state_word}")

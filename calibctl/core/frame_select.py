@@ -20,7 +20,9 @@ Feed every frame's detection (or None) to ``FrameSelector.offer`` in order. A fr
    ``min_views``.
 
 Tilt bands are [0, 10), [10, 20), [20, 30), [30, 45] and > 45 degrees; the direction is the 8-sector
-compass direction of ``gates`` (only meaningful from 1 degree). ``progress()`` gives what a live view
+compass direction of ``gates`` (only meaningful from 1 degree). A frame's tilt is read like the gates
+read it (calibctl.core.tilt): through the lens the last ``progress()`` fitted to the kept views, through a
+pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt. ``progress()`` gives what a live view
 shows: coverage, tilt directions collected, the observability gauge against its threshold, the view
 count and the gate hints in words.
 """
@@ -46,9 +48,9 @@ from calibctl.core.gates import (
     estimate_focal_px,
     evaluate_gates,
     view_homography,
-    view_tilt,
 )
 from calibctl.core.image_outcomes import NEAR_DUPLICATE_FRAC, mean_corner_motion_px
+from calibctl.core.tilt import MIN_TILT_CORNERS, SessionLens, best_pose, nominal_camera, normal_tilt_direction
 from calibctl.core.views import BoardView
 
 STILL_FRAC = 0.003  # 2.4 px per frame on 640x480
@@ -125,6 +127,7 @@ class FrameSelector:
         self._cells: set[tuple[int, int]] = set()
         self._pose_bins: set[tuple[int, int]] = set()
         self._homographies: list[np.ndarray] = []
+        self._lens: SessionLens | None = None  # the gates' lens fit of the kept views, from progress()
 
     def _focal(self) -> float:
         if self.focal_px is not None:
@@ -162,8 +165,10 @@ class FrameSelector:
         H = view_homography(self.model[det.corner_ids, :2], det.corners_px)
         tilt = direction = None
         pose_bin = None
-        if H is not None:
-            tilt, direction_deg = view_tilt(H, self.image_size, self._focal())
+        if H is not None and len(det.corner_ids) >= MIN_TILT_CORNERS:
+            lens = self._lens or SessionLens(nominal_camera(self.image_size, self._focal()), np.zeros(5), "pinhole")
+            rvec, _ = best_pose(self.model[det.corner_ids], det.corners_px, lens)
+            tilt, direction_deg = normal_tilt_direction(rvec)
             bin_ = direction_bin(direction_deg) if tilt >= 1.0 else -1
             direction = DIRECTION_NAMES[bin_] if bin_ >= 0 else None
             pose_bin = (bin_, tilt_band(tilt))
@@ -187,6 +192,7 @@ class FrameSelector:
     def progress(self) -> SelectionProgress:
         """Gates on the kept views, for the live view."""
         report = evaluate_gates(self.kept, self.model, self.image_size, self.settings.thresholds, self.focal_px)
+        self._lens = report.lens
         covered = tuple(tuple((r, c) in self._cells for c in range(COVERAGE_GRID)) for r in range(COVERAGE_GRID))
         obs = report.gate("observability")
         return SelectionProgress(len(self.kept), covered, report.tilt_directions, obs.value, obs.threshold,

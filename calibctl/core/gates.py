@@ -20,15 +20,12 @@ How the coordinates are normalised (and why):
     it is also resolution-free but changes the value by ~300x and not by a constant factor, so the
     seed's 1e-4 threshold would no longer mean what chapter 1 measured.
 
-Tilt is measured from the same homographies: with a nominal K (principal point at the image centre,
-square pixels, focal length fitted to the session's homographies in closed form - Zhang's constraints
-with only f free - or the image diagonal when the session is too flat to tell), r1 and r2 are the
-normalised columns of K^-1 H and the board normal is r1 x r2. The tilt is the angle between the normal
-and the optical axis. The tilt *direction* is the image direction (x right, y down) of the board side
-that is farther from the camera, binned into 8 compass sectors named like "top left". Both are
-exact through a pinhole (tests/core/test_gates.py); through the seed lens (k1 = -0.28, corners not
-undistorted, since the lens is not known yet) the tilt reads within 7 deg of the truth (sd 3 deg,
-60 rendered poses) and the direction within 15 deg.
+Tilt and tilt directions come from calibctl.core.tilt: every view's pose through a small lens model
+fitted to the session (f, k1, k2; principal point at the centre), so barrel distortion no longer reads
+as tilt; a view with fewer than 8 corners, or whose corners span too small an area for its normal to be
+known within 2 deg, is used neither for tilt nor for observability, and the report names it. Directions
+count as distinct only when at least 90 deg apart (three directions are three sides of the board).
+Observability is computed on those views' homographies after undistortion through the same lens.
 """
 
 from __future__ import annotations
@@ -40,6 +37,14 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
+from calibctl.core.tilt import (
+    DISTINCT_DIRECTION_DEG,
+    MIN_TILT_CORNERS,
+    SessionLens,
+    directions_to_add,
+    distinct_directions,
+    session_tilts,
+)
 from calibctl.core.views import BoardView
 
 # Defaults (mirrors calibctl.config.GateThresholds; core may not import config).
@@ -50,6 +55,7 @@ TILT_DIRECTIONS_MIN = 3
 MIN_VIEWS = 8
 REFERENCE_LONG_SIDE_PX = 640.0
 COVERAGE_GRID = 3
+MAX_DISTINCT_DIRECTIONS = int(360 // DISTINCT_DIRECTION_DEG)
 
 DIRECTION_NAMES = ("right", "bottom right", "bottom", "bottom left", "left", "top left", "top", "top right")
 CELL_NAMES = (("top-left corner", "top edge", "top-right corner"),
@@ -66,20 +72,24 @@ class GateThresholds:
     min_views: int = MIN_VIEWS
 
     def __post_init__(self) -> None:
-        # The tilt gate counts 8 compass bins; asking for more than 8 directions can never pass.
-        if not 1 <= self.tilt_directions_min <= len(DIRECTION_NAMES):
-            raise ValueError(f"tilt_directions_min must be 1-{len(DIRECTION_NAMES)}, got {self.tilt_directions_min}")
+        # Distinct directions are >= 90 deg apart, so at most 4 fit around the circle.
+        if not 1 <= self.tilt_directions_min <= MAX_DISTINCT_DIRECTIONS:
+            raise ValueError(f"tilt_directions_min must be 1-{MAX_DISTINCT_DIRECTIONS}, got {self.tilt_directions_min}")
 
 
 @dataclass(frozen=True)
 class ViewGeometry:
-    """Per-view pose summary. ``direction_name`` is None when the board is square-on (tilt < 1 deg)."""
+    """Per-view pose summary. ``direction_name`` is None when the board is square-on (tilt < 1 deg).
+
+    ``tilt_sigma_deg``: one-sigma of the board normal at the assumed corner noise (calibctl.core.tilt).
+    """
 
     name: str
     tilt_deg: float
     direction_deg: float
     direction_name: str | None
     n_corners: int
+    tilt_sigma_deg: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -104,6 +114,8 @@ class GateReport:
     tilt_directions: tuple[str, ...]
     focal_px: float
     focal_source: str
+    unused_views: tuple[tuple[str, str], ...] = ()  # (view name, why it gives no tilt / observability)
+    lens: SessionLens | None = None  # the small lens model tilt was read through (None: no usable view)
 
     @property
     def passed(self) -> bool:
@@ -225,21 +237,6 @@ def cells_covered(corners_px: Sequence[np.ndarray], image_size: tuple[int, int])
     return cells
 
 
-def pick_missing_directions(have: set[int], count: int) -> list[int]:
-    """Direction bins to ask for next: greedily the ones farthest from every direction collected."""
-    chosen: list[int] = []
-    taken = set(have)
-    for _ in range(max(0, count)):
-        def spread(b: int) -> int:
-            return min((min((b - h) % 8, (h - b) % 8) for h in taken), default=8)
-        best = max((b for b in range(8) if b not in taken), key=lambda b: (spread(b), -b), default=None)
-        if best is None:
-            break
-        chosen.append(best)
-        taken.add(best)
-    return chosen
-
-
 def join_words(items: Sequence[str]) -> str:
     items = list(items)
     if not items:
@@ -247,49 +244,75 @@ def join_words(items: Sequence[str]) -> str:
     return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
 
 
+@dataclass(frozen=True)
+class SessionGeometry:
+    """What the gates read from the poses: per-view geometry of the usable views and their homographies."""
+
+    views: list[ViewGeometry]
+    homographies: list[np.ndarray]  # of the usable views, undistorted through ``lens``
+    unused: list[tuple[str, str]]  # (view name, reason)
+    focal_px: float
+    focal_source: str
+    lens: SessionLens | None
+
+
+def _undistorted(corners_px: np.ndarray, lens: SessionLens | None) -> np.ndarray:
+    if lens is None or not np.any(lens.dist_coeffs):
+        return corners_px
+    K = lens.camera_matrix
+    return cv2.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(-1, 2)
+
+
 def view_geometries(views: Sequence[BoardView], model_points: np.ndarray, image_size: tuple[int, int],
-                    focal_px: float | None = None) -> tuple[list[ViewGeometry], list[np.ndarray], float, str]:
-    """Homography, tilt and direction of every view with >= 4 corners.
+                    focal_px: float | None = None) -> SessionGeometry:
+    """Tilt and direction of every view that can give one (calibctl.core.tilt), and their homographies.
 
     Args:
         model_points: (M, 3) or (M, 2) board model points indexed by ``corner_ids``, any unit.
-        focal_px: a known focal length; None fits one to the session (``estimate_focal_px``) and falls
-            back to the image diagonal.
-
-    Returns:
-        (geometries, homographies, focal_px used, where it came from: "given", "session" or "nominal").
+        focal_px: a known focal length (held fixed); None fits one to the session
+            (``estimate_focal_px`` as the start, then the small lens model), or holds the image diagonal
+            when the session is too flat to tell.
     """
     model = np.asarray(model_points, np.float64)[:, :2]
-    named: list[tuple[BoardView, np.ndarray]] = []
-    for view in views:
-        H = view_homography(model[view.corner_ids], view.corners_px) if len(view.corner_ids) >= 4 else None
-        if H is not None:
-            named.append((view, H))
-    homographies = [H for _, H in named]
+    model3 = np.column_stack([model, np.zeros(len(model))])
     source = "given"
     if focal_px is None:
-        focal_px, source = estimate_focal_px(homographies, image_size), "session"
+        raw = [H for v in views if len(v.corner_ids) >= MIN_TILT_CORNERS
+               and (H := view_homography(model[v.corner_ids], v.corners_px)) is not None]
+        focal_px, source = estimate_focal_px(raw, image_size), "session"
         if focal_px is None:
             focal_px, source = math.hypot(*image_size), "nominal"
-    geometries = []
-    for view, H in named:
-        tilt, direction = view_tilt(H, image_size, focal_px)
-        name = DIRECTION_NAMES[direction_bin(direction)] if tilt >= 1.0 else None
-        geometries.append(ViewGeometry(view.name, tilt, direction, name, len(view.corner_ids)))
-    return geometries, homographies, float(focal_px), source
+    tilts, lens = session_tilts([model3[v.corner_ids] for v in views], [v.corners_px for v in views],
+                                image_size, focal_px, source)
+    geometries, homographies, unused = [], [], []
+    for view, t in zip(views, tilts, strict=True):
+        H = None if not t.used else view_homography(model[view.corner_ids], _undistorted(view.corners_px, lens))
+        if H is None or t.tilt_deg is None or t.direction_deg is None:
+            unused.append((view.name, t.unused_reason or "no homography"))
+            continue
+        name = DIRECTION_NAMES[direction_bin(t.direction_deg)] if t.tilt_deg >= 1.0 else None
+        geometries.append(ViewGeometry(view.name, t.tilt_deg, t.direction_deg, name, len(view.corner_ids),
+                                       float(t.sigma_deg or 0.0)))
+        homographies.append(H)
+    focal = lens.focal_px if lens is not None else float(focal_px)
+    return SessionGeometry(geometries, homographies, unused, focal,
+                           source if lens is None or lens.source != "pinhole" else f"{source} (pinhole)", lens)
 
 
 def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_size: tuple[int, int],
                    thresholds: GateThresholds | None = None, focal_px: float | None = None) -> GateReport:
     """All capture gates for one session's accepted views (see the module docstring for the maths)."""
     th = thresholds or GateThresholds()
-    geometries, homographies, focal, source = view_geometries(views, model_points, image_size, focal_px)
-    results = [replace(_observability_gate(observability(homographies, image_size), th),
-                       detail={"views_used": len(homographies)})]
+    geo = view_geometries(views, model_points, image_size, focal_px)
+    unused_words = [f"{name}: {why}" for name, why in geo.unused]
+    obs_detail: dict[str, float | int | str | list[str]] = {"views_used": len(geo.homographies)}
+    if unused_words:
+        obs_detail["views_not_used"] = unused_words
+    results = [replace(_observability_gate(observability(geo.homographies, image_size), th), detail=obs_detail)]
 
-    qualifying = [g for g in geometries if th.tilt_min_deg <= g.tilt_deg <= th.tilt_max_deg]
-    have = {direction_bin(g.direction_deg) for g in qualifying}
-    results.append(_tilt_gate(have, geometries, th))
+    qualifying = [g.direction_deg for g in geo.views if th.tilt_min_deg <= g.tilt_deg <= th.tilt_max_deg]
+    distinct = distinct_directions(qualifying)
+    results.append(_tilt_gate(distinct, qualifying, geo, th))
 
     cells = cells_covered([v.corners_px for v in views], image_size)
     results.append(_coverage_gate(cells))
@@ -302,8 +325,9 @@ def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_s
         None if n >= th.min_views else f"capture {th.min_views - n} more view{'s' if th.min_views - n > 1 else ''}"))
 
     covered = tuple(CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) in cells)
-    return GateReport(tuple(results), tuple(geometries), covered,
-                      tuple(DIRECTION_NAMES[b] for b in sorted(have)), focal, source)
+    return GateReport(tuple(results), tuple(geo.views), covered,
+                      tuple(DIRECTION_NAMES[direction_bin(d)] for d in distinct), geo.focal_px, geo.focal_source,
+                      tuple(geo.unused), geo.lens)
 
 
 def _observability_gate(value: float, th: GateThresholds) -> GateResult:
@@ -317,21 +341,32 @@ def _observability_gate(value: float, th: GateThresholds) -> GateResult:
                          f"are not observable from these poses (the gauge grows with the square of the tilt)"))
 
 
-def _tilt_gate(have: set[int], geometries: Sequence[ViewGeometry], th: GateThresholds) -> GateResult:
-    ok = len(have) >= th.tilt_directions_min
-    too_flat = sum(g.tilt_deg < th.tilt_min_deg for g in geometries)
-    too_steep = sum(g.tilt_deg > th.tilt_max_deg for g in geometries)
-    message = (f"{len(have)} tilt direction(s) with views at {th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees "
-               f"(need {th.tilt_directions_min}); {too_flat} view(s) flatter, {too_steep} steeper")
+def _tilt_gate(distinct: Sequence[float], qualifying: Sequence[float], geo: SessionGeometry,
+               th: GateThresholds) -> GateResult:
+    ok = len(distinct) >= th.tilt_directions_min
+    too_flat = sum(g.tilt_deg < th.tilt_min_deg for g in geo.views)
+    too_steep = sum(g.tilt_deg > th.tilt_max_deg for g in geo.views)
+    message = (f"{len(distinct)} tilt direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} degrees apart with views at "
+               f"{th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees (need {th.tilt_directions_min}); "
+               f"{too_flat} view(s) flatter, {too_steep} steeper")
+    if geo.unused:
+        message += f"; {len(geo.unused)} view(s) too small or too sparse to read tilt"
+    have = [DIRECTION_NAMES[direction_bin(d)] for d in distinct]
     detail: dict[str, float | int | str | list[str]] = {
-        "directions": [DIRECTION_NAMES[b] for b in sorted(have)], "views_flatter": too_flat, "views_steeper": too_steep}
+        "directions": have, "views_flatter": too_flat,
+        "views_steeper": too_steep, "views_not_used": [name for name, _ in geo.unused]}
     if ok:
-        return GateResult("tilt", True, float(len(have)), float(th.tilt_directions_min), message, detail=detail)
-    wanted = [DIRECTION_NAMES[b] for b in pick_missing_directions(have, th.tilt_directions_min - len(have))]
+        return GateResult("tilt", True, float(len(distinct)), float(th.tilt_directions_min), message, detail=detail)
+    compass = [45.0 * b for b in range(len(DIRECTION_NAMES))]
+    wanted = [DIRECTION_NAMES[direction_bin(d)]
+              for d in directions_to_add(qualifying, compass, th.tilt_directions_min - len(distinct))]
     detail["missing_directions"] = wanted
     hint = (f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees, "
             f"that side of the board farther from the camera)")
-    return GateResult("tilt", False, float(len(have)), float(th.tilt_directions_min), message,
+    if have:
+        hint += f"; the tilted views so far all lean toward the {join_words(have)} (directions count as "
+        hint += f"different only {DISTINCT_DIRECTION_DEG:.0f} degrees apart)"
+    return GateResult("tilt", False, float(len(distinct)), float(th.tilt_directions_min), message,
                       "tilt.directions", hint, detail)
 
 

@@ -145,6 +145,22 @@ def scenario_poses(scenario: str, camera: PinholeCamera, board: BoardSpec, n_vie
     return poses
 
 
+def sweep_poses(camera: PinholeCamera, board: BoardSpec, n_views: int, rng: np.random.Generator,
+                tilt_deg: tuple[float, float] = (0.0, 50.0)) -> tuple[list[np.ndarray], list[float]]:
+    """Poses for measuring tilt readout: tilt uniform in ``tilt_deg``, any direction, the board centre
+    aimed anywhere in the frame (edges included) at 30-70 % fill. Returns (T_cam_board list, true tilts)."""
+    width, height = camera.image_size
+    dist_range = default_distance_range_m(camera, board, (0.3, 0.7))
+    poses, tilts = [], []
+    for _ in range(n_views):
+        tilt = float(rng.uniform(*tilt_deg))
+        target = (float(rng.uniform(0.03, 0.97)) * width, float(rng.uniform(0.03, 0.97)) * height)
+        T = _sample_pose(camera, board, rng, target, np.deg2rad(tilt), float(rng.uniform(0, 2 * np.pi)), dist_range)
+        poses.append(T)
+        tilts.append(float(np.degrees(np.arccos(min(1.0, abs(T[2, 2]))))))
+    return poses, tilts
+
+
 def _interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Pose on the geodesic from T0 to T1 at fraction s (rotation by axis-angle, translation linear)."""
     delta = cv2.Rodrigues(T1[:3, :3] @ T0[:3, :3].T)[0].reshape(3)

@@ -46,6 +46,7 @@ class CalibrationFacts:
     held_out_outer_rms_px: float | None = None
     square_size_status: str | None = None  # measured | nominal | None (not recorded)
     square_size_m: float | None = None
+    camera_consistency: dict[str, Any] | None = None  # the solve's two-camera check, calibctl artifacts only
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -153,6 +154,7 @@ def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
         held_out_outer_rms_px=held.get("outer_ring_rms_px"),
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
+        camera_consistency=data.get("camera_consistency"),
         raw_numbers=_numbers(data),
     )
 
@@ -228,6 +230,27 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
     )
 
 
+def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
+    check = facts.camera_consistency
+    if not check or not check.get("two_cameras_suspected"):
+        return []
+    a, b = check["group_a"], check["group_b"]
+    held, cross = check["holdout_rms_px"], check["cross_rms_px"]
+
+    def group(names: list[str], k: int) -> str:
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        return (f"{len(names)} views ({shown}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
+                f"cy {check['cy_px'][k]:.1f} px alone)")
+
+    return [Finding(
+        rule="one-camera", severity="error", value=check["ratio"], threshold=check["threshold"],
+        message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each group is "
+        f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's camera than by "
+        f"its own (held-out {held[0]:.3f} / {held[1]:.3f} px); this calibration is a blend",
+        fix="calibrate each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
+        "check that nothing moved (focus, zoom, lens) during the capture")]
+
+
 def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
     """Every rule that applies to one calibration, in a stable order."""
     bad = [x for x in facts.raw_numbers if not math.isfinite(x)]
@@ -247,6 +270,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings += _adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px))
     findings += _outer_ring_rule(facts, limits)
     findings += _provenance_rule(facts)
+    findings += _one_camera_rule(facts)
     findings += _adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
         foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"

@@ -19,9 +19,11 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import (
     UNSEALED,
     CalibrationArtifact,
+    CameraConsistency,
     DistortionModelInfo,
     HeldOut,
     Provenance,
+    RejectedCorner,
     RingRms,
     Uncertainty,
     ViewResult,
@@ -31,9 +33,15 @@ from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import CameraSplit, check_one_camera
 from calibctl.core.model_select import select_model
-from calibctl.core.outliers import flag_outliers, solve_dropping_outliers
-from calibctl.core.solve import IntrinsicsSolution, get_model, solve_intrinsics
+from calibctl.core.outliers import (
+    CornerRejection,
+    flag_outliers,
+    solve_dropping_outliers,
+    solve_rejecting_corners,
+)
+from calibctl.core.solve import IntrinsicsSolution, get_model
 from calibctl.core.validation import HoldoutReport, ResidualBreakdown, validate_holdout
 from calibctl.errors import UsageError
 from calibctl.workflows.lint import facts_from_document, lint_facts
@@ -121,15 +129,17 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
     img = [np.asarray(v.corners_px, dtype=np.float64) for v in session.views]
     trail: list[dict[str, float | str | bool]] = []
     if request.model == "auto":
+        # the model is chosen on every corner; the corner rule then runs under the chosen model
         selection = select_model(obj, img, size)
-        model_name, solution = selection.chosen, selection.solution
+        model_name = selection.chosen
         trail = [
             {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail
         ]
     else:
         model_name = get_model(request.model).name
-        solution = solve_intrinsics(obj, img, size, model_name)
-    outliers = flag_outliers(solution, ids)
+    rejection = solve_rejecting_corners(obj, img, size, model_name, ids)
+    obj, img, solution = rejection.kept(obj), rejection.kept(img), rejection.solution
+    outliers = flag_outliers(solution, rejection.kept(ids))
     first = solution  # every view's pose and RMS, including views --drop-outliers removes below
     kept = list(range(len(obj)))
     dropped: tuple[int, ...] = ()
@@ -137,7 +147,19 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
-    return model_name, solution, first, outliers, kept, dropped, holdout, trail
+    split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
+    consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
+    return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
+
+
+def _consistency(split: CameraSplit, names: list[str]) -> CameraConsistency:
+    Ka, Kb = split.camera_a, split.camera_b
+    return CameraConsistency(
+        group_a=[names[i] for i in split.group_a], group_b=[names[i] for i in split.group_b],
+        holdout_rms_px=split.holdout_rms_px, cross_rms_px=split.cross_rms_px,
+        fx_px=(float(Ka[0, 0]), float(Kb[0, 0])), cx_px=(float(Ka[0, 2]), float(Kb[0, 2])),
+        cy_px=(float(Ka[1, 2]), float(Kb[1, 2])), ratio=split.ratio, threshold=split.threshold,
+        two_cameras_suspected=split.suspected)
 
 
 def _views(session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers,
@@ -162,9 +184,15 @@ def _views(session: CaptureSession, solution: IntrinsicsSolution, first: Intrins
     return out
 
 
+def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
+    return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
+                           dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
+
+
 def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
-    model_name, sol, first, outliers, kept, dropped, holdout, trail = _solve_numbers(session, request)
+    model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
+        session, request)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -192,6 +220,8 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         gates=list(session.gates),
         board=session.board,
         views=_views(session, sol, first, outliers, kept, dropped),
+        rejected_corners=_rejected_corners(session, rejection),
+        camera_consistency=consistency,
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,

@@ -133,3 +133,20 @@ def test_selection_on_a_rendered_video_file(tmp_path: Path) -> None:
     kept = [frames[d.index] for d in decisions if d.kept]
     assert [f["key_pose"] for f in kept] == [0, 1, 2]
     assert all(f["still"] for f in kept)
+
+
+def test_a_frames_tilt_is_read_through_the_lens_the_gates_fitted() -> None:
+    """Once progress() has a lens, a near-flat board at the image edge reads near-flat (through a pinhole
+    the seed lens' barrel distortion reads as several degrees of tilt)."""
+    from calibctl.core.synth_scenes import place_board, tilt_rotation
+
+    selector, _ = run_plan(10)
+    selector.progress()
+    T = place_board(CAMERA, BOARD, tilt_rotation(np.radians(2.0), 0.5, 0.0), (560.0, 80.0), 0.45)
+    still = truth_detection(T)
+    selector.offer(1000, still)
+    decision = selector.offer(1001, still)  # the second still frame: judged on what it adds
+    assert decision.tilt_deg is not None and abs(decision.tilt_deg - 2.0) < 1.0
+    few = Detection(IDS[:6], still.corners_px[:6], "truth", 2.5)  # a 6-corner partial view has no tilt
+    selector.offer(1002, few)
+    assert selector.offer(1003, few).tilt_deg is None

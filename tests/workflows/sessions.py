@@ -23,9 +23,11 @@ def synthetic_capture(
     seed: int = 7,
     tilt_deg: tuple[float, float] = (20.0, 40.0),
     status: str = "accepted",
+    camera_matrix: np.ndarray = K_TRUE,
+    noise_px: float = 0.2,
 ) -> CaptureSession:
     syn = synthesize_session(
-        K_TRUE, D_TRUE, (640, 480), n_views, seed, noise_px=0.2, tilt_deg=tilt_deg,
+        camera_matrix, D_TRUE, (640, 480), n_views, seed, noise_px=noise_px, tilt_deg=tilt_deg,
         cols=board.cols, rows=board.rows, square_size_m=board.measurement.square_size_m,
     )
     views = [

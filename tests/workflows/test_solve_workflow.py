@@ -91,18 +91,66 @@ def test_unknown_session_and_model_are_refused(settings):
         solve_workflow.solve(settings, solve_workflow.SolveRequest(serial="CAM-0001", model="k9"))
 
 
-def test_outlier_corner_is_flagged_and_drop_outliers_records_the_view(settings):
-    session = synthetic_capture(measured_board())
+def _with(session, view: int, corners_px):
     views = list(session.views)
-    bad = views[3].corners_px.copy()
+    views[view] = views[view].model_copy(update={"corners_px": corners_px})
+    return session.model_copy(update={"views": views})
+
+
+def test_an_implausible_corner_is_removed_and_recorded_in_the_artifact(settings):
+    session = synthetic_capture(measured_board())
+    bad = session.views[3].corners_px.copy()
     bad[10] = (bad[10][0] + 15.0, bad[10][1])
-    views[3] = views[3].model_copy(update={"corners_px": bad})
-    session = _store_session(settings, session.model_copy(update={"views": views}))
-    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id, drop_outliers=True))
-    first = out.outlier_corners[0]
-    assert (first["view"], first["corner_id"]) == ("view03.png", 10)
-    assert first["residual_px"] > 10.0
-    v3 = out.artifact.views[3]
-    assert v3.outlier and v3.dropped
-    assert v3.worst_corner_px > 10.0 and v3.tvec_m[2] > 0.1  # the pose of the solve that flagged it
-    assert np.isclose(out.artifact.fx, K_TRUE[0, 0], atol=4 * out.artifact.stdev.sigma["fx"])
+    session = _store_session(settings, _with(session, 3, bad))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+    art = out.artifact
+    assert [(c.view, c.corner_id) for c in art.rejected_corners] == [("view03.png", 10)]
+    assert art.rejected_corners[0].residual_px == pytest.approx(15.0, abs=1.0)
+    assert out.outlier_corners == []  # nothing flagged is left in the solve
+    assert not art.views[3].outlier and not art.views[3].dropped and art.views[3].worst_corner_px < 1.5
+    assert art.status == "accepted" and art.content_sha256 == art.computed_sha256()
+    with Store.open(settings.db_url) as store:
+        assert store.get_artifact(art.serial, art.version).rejected_corners == art.rejected_corners
+    assert np.isclose(art.fx, K_TRUE[0, 0], atol=4 * art.stdev.sigma["fx"])
+
+
+def test_a_noisy_view_is_flagged_and_dropped_only_with_drop_outliers(settings):
+    session = synthetic_capture(measured_board())
+    rng = np.random.default_rng(9)
+    noisy = [(u + rng.normal(0, 1.5), v + rng.normal(0, 1.5)) for u, v in session.views[5].corners_px]
+    session = _store_session(settings, _with(session, 5, noisy))
+    kept = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert kept.views[5].outlier and not kept.views[5].dropped
+    assert [v.name for v in kept.views if v.outlier] == ["view05.png"]
+    dropped = solve_workflow.solve(
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, drop_outliers=True)).artifact
+    assert dropped.views[5].outlier and dropped.views[5].dropped
+    assert dropped.views[5].tvec_m[2] > 0.1  # the pose of the solve that flagged it
+    assert dropped.rms_px < kept.rms_px
+
+
+def test_one_camera_session_records_a_passed_two_camera_check(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    check = art.camera_consistency
+    assert check is not None and not check.two_cameras_suspected and check.ratio < check.threshold
+    assert len(check.group_a) + len(check.group_b) == 18 and art.status == "accepted"
+
+
+def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
+    left = synthetic_capture(measured_board(), n_views=12, seed=1, noise_px=0.1)
+    K_other = K_TRUE.copy()
+    K_other[0, 0] = K_other[1, 1] = 1.04 * K_TRUE[0, 0]
+    right = synthetic_capture(measured_board(), n_views=12, seed=2, noise_px=0.1, camera_matrix=K_other)
+    views = [*left.views, *(v.model_copy(update={"name": "right-" + v.name}) for v in right.views)]
+    session = _store_session(settings, left.model_copy(update={"views": views}))
+    out = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id))
+    art = out.artifact
+    assert art.status == "rejected" and not out.active
+    check = art.camera_consistency
+    assert check is not None and check.two_cameras_suspected
+    assert sorted(check.group_b) == sorted(v.name for v in views[12:])
+    finding = next(f for f in art.lint if f.rule == "one-camera")
+    assert finding.severity == "error" and "two cameras" in finding.message
+    assert "its own images" in finding.fix and finding.value == pytest.approx(check.ratio)
+    assert art.content_sha256 == art.computed_sha256()

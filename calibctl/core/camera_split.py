@@ -1,0 +1,143 @@
+"""Do the views of one session come from one camera? A held-out test against a two-camera split.
+
+A folder holding both cameras of a stereo pair solves without complaint: one K that is a blend of both,
+a sub-pixel RMS, lint clean. What gives it away is prediction: a camera solved from one group of views
+predicts the other group's views worse than those views are predicted by their own camera.
+
+The test (``check_one_camera``):
+  1. Find the best two-camera split: start from the session's first half / second half (a folder sorted
+     by name, left* then right*, or two captures in a row), then alternate, like k-means with cameras for
+     centres: solve each group, move every view to the camera that predicts it better (pose re-fitted,
+     intrinsics frozen), until nothing moves. This also untangles an interleaved capture (tested); a
+     seeded random start is tried only when the halves start leaves a group too small to solve.
+  2. Score it honestly: each group's own held-out RMS (k-fold, calibctl.core.validation) against its
+     cross RMS (its views predicted by the other group's camera). ``ratio`` = the smaller of the two
+     groups' cross / own; a real second camera makes both groups worse under the other's camera.
+  3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
+Measured (tests/core/test_camera_split.py, BENCHMARKS.md section 8): the real opencv-left-right folder
+(13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
+score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
+sessions at most 1.09. Limit: the score is a prediction error,
+so it sees cameras whose difference shows through a re-fitted pose (focal length, distortion); a second
+camera differing only by a principal-point shift of 20 px is largely absorbed by each view's pose (ratio
+1.07 at 0.2 px noise; the split is still found, but not called two cameras).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibctl.core.solve import IntrinsicsSolution, get_model, solve_intrinsics
+from calibctl.core.validation import refit_pose_residuals, validate_holdout
+from calibctl.errors import NumericalError
+
+TWO_CAMERA_RATIO = 1.4
+MIN_GROUP_VIEWS = 5
+RANDOM_STARTS = 1
+MAX_ROUNDS = 8
+SPLIT_SEED = 0
+HOLDOUT_FOLDS = 3  # per group; the solve's own validation uses 5, this only has to separate 1.1 from 1.7
+
+
+@dataclass(frozen=True)
+class CameraSplit:
+    """The best two-camera split of a session and how much better it predicts than one camera.
+
+    Attributes:
+        group_a, group_b: view indices (ascending); group_a holds view 0.
+        holdout_rms_px: (a, b) each group's k-fold held-out RMS under its own camera.
+        cross_rms_px: (a, b) each group's RMS under the other group's camera (poses re-fitted).
+        camera_a, camera_b: (3, 3) K of each group's solve.
+        ratio: min over groups of cross / held-out. suspected: ratio >= threshold.
+    """
+
+    group_a: tuple[int, ...]
+    group_b: tuple[int, ...]
+    holdout_rms_px: tuple[float, float]
+    cross_rms_px: tuple[float, float]
+    camera_a: np.ndarray
+    camera_b: np.ndarray
+    ratio: float
+    threshold: float
+
+    @property
+    def suspected(self) -> bool:
+        return self.ratio >= self.threshold
+
+
+def _rms(per_view_rms: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(per_view_rms)))) if len(per_view_rms) else float("nan")
+
+
+def _view_rms(sol: IntrinsicsSolution, obj: Sequence[np.ndarray], img: Sequence[np.ndarray]) -> np.ndarray:
+    """(V,) every view's RMS under ``sol``'s intrinsics, its pose re-fitted."""
+    out = []
+    for o, i in zip(obj, img, strict=True):
+        r = refit_pose_residuals(o, i, sol.camera_matrix, sol.dist_coeffs)
+        out.append(float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))))
+    return np.array(out)
+
+
+def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarray], size: tuple[int, int],
+            model: str, min_group: int):
+    """Alternate solve / reassign from the split ``in_a`` (V,) bool; None when a group gets too small."""
+    for _ in range(MAX_ROUNDS):
+        a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
+        if len(a) < min_group or len(b) < min_group:
+            return None
+        sol_a = solve_intrinsics([obj[i] for i in a], [img[i] for i in a], size, model)
+        sol_b = solve_intrinsics([obj[i] for i in b], [img[i] for i in b], size, model)
+        rms_a, rms_b = _view_rms(sol_a, obj, img), _view_rms(sol_b, obj, img)
+        moved = rms_a < rms_b
+        if np.array_equal(moved, in_a):
+            break
+        in_a = moved
+    if not in_a[0]:  # name the group holding view 0 "a", so a split reads the same from every start
+        in_a, sol_a, sol_b, rms_a, rms_b = ~in_a, sol_b, sol_a, rms_b, rms_a
+    return in_a, sol_a, sol_b, rms_a, rms_b
+
+
+def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+                     image_size: tuple[int, int], model: str = "k1k2",
+                     threshold: float = TWO_CAMERA_RATIO) -> CameraSplit | None:
+    """The best two-camera split and its score (module docstring); None when the session is too small to
+    split into two groups that can each be solved and validated.
+
+    Shapes as in solve_intrinsics.
+    """
+    obj, img = list(object_points_per_view), list(image_points_per_view)
+    n = len(obj)
+    min_group = max(MIN_GROUP_VIEWS, get_model(model).min_views + 1)
+    if n < 2 * min_group:
+        return None
+    rng = np.random.default_rng(SPLIT_SEED)
+    starts = [np.arange(n) < n // 2] + [rng.random(n) < 0.5 for _ in range(RANDOM_STARTS)]
+    best = None
+    for start in starts:
+        try:
+            found = _refine(start, obj, img, image_size, model, min_group)
+        except NumericalError:
+            continue
+        if found is None:
+            continue
+        best = found
+        break  # the halves start converges on interleaved captures too; the random one is a fallback
+    if best is None:
+        return None
+    in_a, sol_a, sol_b, rms_a, rms_b = best
+    a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
+    try:
+        hold_a = validate_holdout([obj[i] for i in a], [img[i] for i in a], image_size, model, fit=sol_a,
+                                  max_folds=HOLDOUT_FOLDS)
+        hold_b = validate_holdout([obj[i] for i in b], [img[i] for i in b], image_size, model, fit=sol_b,
+                                  max_folds=HOLDOUT_FOLDS)
+    except NumericalError:
+        return None
+    cross = (_rms(rms_b[a]), _rms(rms_a[b]))
+    held = (hold_a.holdout_rms_px, hold_b.holdout_rms_px)
+    ratio = min(cross[0] / held[0], cross[1] / held[1])
+    return CameraSplit(tuple(int(i) for i in a), tuple(int(i) for i in b), held, cross,
+                       sol_a.camera_matrix, sol_b.camera_matrix, float(ratio), threshold)

@@ -1,0 +1,87 @@
+"""One camera or two? The held-out split test, on the real stereo folder and on seeded sessions."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import TWO_CAMERA_RATIO, check_one_camera
+from calibctl.core.detect import detect_board
+from calibctl.core.synthetic_corners import synthesize_session
+from tests.datasets import LEFT_RIGHT, require_datasets
+
+BOARD = BoardSpec.chessboard(9, 6, 1.0)
+D = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])
+
+
+def K(f: float, cx: float, cy: float) -> np.ndarray:
+    return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+
+
+@pytest.fixture(scope="module")
+def stereo_folder():
+    """(names, object points, corners) of every image in opencv-left-right, calibctl's detector."""
+    require_datasets()
+    names, obj, img = [], [], []
+    for path in sorted(LEFT_RIGHT.glob("*.jpg")):
+        det, _ = detect_board(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), BOARD)
+        assert det is not None, path.name  # DATASET.md: 13/13 left and right
+        names.append(path.name)
+        obj.append(BOARD.object_points()[det.corner_ids])
+        img.append(det.corners_px)
+    return names, obj, img
+
+
+def test_the_left_and_right_folder_is_two_cameras_split_exactly(stereo_folder):
+    names, obj, img = stereo_folder
+    split = check_one_camera(obj, img, (640, 480))
+    assert split is not None and split.suspected and split.ratio >= TWO_CAMERA_RATIO
+    assert {names[i][:4] for i in split.group_a} == {"left"} and len(split.group_a) == 13
+    assert {names[i][:5] for i in split.group_b} == {"right"} and len(split.group_b) == 13
+    # each group's camera is the camera a plain OpenCV solve of that camera's files finds
+    for group, camera in ((split.group_a, split.camera_a), (split.group_b, split.camera_b)):
+        _, K_plain, _, _, _ = cv2.calibrateCamera([obj[i].astype(np.float32) for i in group],
+                                                  [img[i].astype(np.float32) for i in group], (640, 480), None, None)
+        assert abs(camera[0, 2] - K_plain[0, 2]) < 3.0 and abs(camera[0, 0] - K_plain[0, 0]) < 5.0
+    assert abs(split.camera_a[0, 2] - split.camera_b[0, 2]) > 10.0  # cx: 342 vs 326 px
+
+
+@pytest.mark.parametrize("camera", ["left", "right"])
+def test_each_camera_alone_is_one_camera(stereo_folder, camera):
+    names, obj, img = stereo_folder
+    mine = [i for i, n in enumerate(names) if n.startswith(camera)]
+    split = check_one_camera([obj[i] for i in mine], [img[i] for i in mine], (640, 480))
+    assert split is not None and not split.suspected and split.ratio < TWO_CAMERA_RATIO
+
+
+def test_two_seeded_cameras_in_one_session_are_found_and_one_camera_is_not() -> None:
+    # focal lengths 4 % apart at 0.1 px noise (the real pair: 0.8 % in f, 15 px in c, k2/k3 differ)
+    one = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 12, seed=1, noise_px=0.1)
+    other = synthesize_session(K(832.0, 321.3, 238.7), D, (640, 480), 12, seed=2, noise_px=0.1)
+    obj = [*one.object_points_per_view, *other.object_points_per_view]
+    img = [*one.image_points_per_view, *other.image_points_per_view]
+    order = np.random.default_rng(0).permutation(24)  # interleaved, not two blocks
+    split = check_one_camera([obj[i] for i in order], [img[i] for i in order], (640, 480))
+    assert split is not None and split.suspected
+    assert {int(order[i]) < 12 for i in split.group_a} == {order[split.group_a[0]] < 12}  # pure groups
+    same = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 24, seed=3, noise_px=0.1)
+    clean = check_one_camera(same.object_points_per_view, same.image_points_per_view, (640, 480))
+    assert clean is not None and not clean.suspected
+
+
+def test_a_session_too_small_to_split_is_not_judged() -> None:
+    ses = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 9, seed=4)
+    assert check_one_camera(ses.object_points_per_view, ses.image_points_per_view, (640, 480)) is None
+
+
+def test_a_principal_point_shift_alone_is_absorbed_by_the_poses() -> None:
+    """The documented limit: a camera that differs only by a 20 px shift of c predicts the other's views
+    almost as well (each view's pose re-fit absorbs most of it), so this is not called two cameras."""
+    one = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 12, seed=1, noise_px=0.2)
+    other = synthesize_session(K(800.0, 341.3, 228.7), D, (640, 480), 12, seed=2, noise_px=0.2)
+    split = check_one_camera([*one.object_points_per_view, *other.object_points_per_view],
+                             [*one.image_points_per_view, *other.image_points_per_view], (640, 480))
+    assert split is not None and split.group_a == tuple(range(12))  # the split itself is found
+    assert not split.suspected
