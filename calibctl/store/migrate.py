@@ -1,10 +1,11 @@
 """Schema revisions: where a database stands, and programmatic alembic upgrade/downgrade.
 
-The migration scripts live in the top-level ``migrations/`` directory (next to ``alembic.ini``),
-found relative to this package. Every migration runs inside one write transaction that also holds
-a migration lock (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: a transaction-scoped advisory lock), so
-two stations opening a brand-new shared store at the same moment create it exactly once, and a
-failed migration leaves the database at its previous revision.
+The migration scripts live in the top-level ``migrations/`` directory (next to ``alembic.ini``); a
+wheel ships them as ``calibctl/_migrations`` (pyproject's package-dir), which is looked for first.
+Every migration runs inside one write transaction that also holds a migration lock (SQLite:
+``BEGIN IMMEDIATE``; PostgreSQL: a transaction-scoped advisory lock), so two stations opening a
+brand-new shared store at the same moment create it exactly once, and a failed migration leaves the
+database at its previous revision.
 """
 
 from __future__ import annotations
@@ -23,9 +24,17 @@ from calibctl.errors import DatabaseError, DatabaseOutOfDateError
 from calibctl.store.engine import WRITE_OPTION, database_errors, display_url, make_engine, sqlite_path
 from calibctl.store.models import Base
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-MIGRATIONS_DIR = REPO_ROOT / "migrations"
-ALEMBIC_INI = REPO_ROOT / "alembic.ini"
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+
+
+def migrations_dir(package_root: Path = PACKAGE_ROOT) -> Path:
+    """``calibctl/_migrations`` in an installed wheel, the checkout's ``migrations/`` otherwise."""
+    packaged = package_root / "_migrations"
+    return packaged if (packaged / "env.py").is_file() else package_root.parent / "migrations"
+
+
+MIGRATIONS_DIR = migrations_dir()
+ALEMBIC_INI = MIGRATIONS_DIR.parent / "alembic.ini"  # a checkout's; a wheel needs none of its settings
 _MIGRATION_LOCK_KEY = 0x63616C6962  # "calib": pg_advisory_xact_lock key for migrations
 
 SchemaStatus = Literal["absent", "empty", "current", "out_of_date", "unknown"]
