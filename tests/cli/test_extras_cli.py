@@ -10,9 +10,16 @@ import sys
 
 from typer.testing import CliRunner
 
+import calibctl.workflows
 from calibctl.cli.main import app
 
 runner = CliRunner()
+
+
+def _hide(monkeypatch, package: str) -> None:
+    """Make ``package`` and every submodule already imported by earlier tests unimportable."""
+    for name in [n for n in sys.modules if n == package or n.startswith(f"{package}.")] + [package]:
+        monkeypatch.setitem(sys.modules, name, None)
 
 
 def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
@@ -23,7 +30,7 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
 
 
 def test_a_postgresql_store_without_psycopg_names_the_postgres_extra(monkeypatch):
-    monkeypatch.setitem(sys.modules, "psycopg", None)
+    _hide(monkeypatch, "psycopg")
     res = runner.invoke(app, ["--db", "postgresql://calib:secret@factory-db/calibctl", "db", "current"])
     _assert_missing_extra(res, "postgres", "psycopg", "the PostgreSQL store postgresql://calib:***@factory-db/calibctl")
 
@@ -31,15 +38,16 @@ def test_a_postgresql_store_without_psycopg_names_the_postgres_extra(monkeypatch
 def test_plot_without_matplotlib_names_the_plots_extra(monkeypatch, tmp_path):
     csv = tmp_path / "in.csv"
     assert runner.invoke(app, ["synth-residuals", str(csv), "--fault", "rotation", "--seed", "2"]).exit_code == 0
-    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    _hide(monkeypatch, "matplotlib")
     monkeypatch.delitem(sys.modules, "calibctl.workflows.diagnostics_plots", raising=False)
+    monkeypatch.delattr(calibctl.workflows, "diagnostics_plots", raising=False)  # re-import it
     res = runner.invoke(app, ["triage", str(csv), "--plot", str(tmp_path / "plots")])
     _assert_missing_extra(res, "plots", "matplotlib", "--plot")
     assert not list(tmp_path.glob("plots/*.png"))
 
 
 def test_without_extras_a_sqlite_store_still_works(monkeypatch, tmp_path):
-    monkeypatch.setitem(sys.modules, "psycopg", None)
-    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    _hide(monkeypatch, "psycopg")
+    _hide(monkeypatch, "matplotlib")
     res = runner.invoke(app, ["--db", f"sqlite:///{tmp_path / 's.db'}", "db", "upgrade"])
     assert res.exit_code == 0, res.output
