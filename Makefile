@@ -49,10 +49,13 @@ lint: $(STAMP) ## ruff, mypy and the import-layer contract
 schemas: $(STAMP) ## regenerate schemas/ from the pydantic artifact models
 	$(PY) -m calibctl.artifacts.schema_export schemas
 
+wheel: $(STAMP) ## build dist/calibctl-*.whl (install it with pipx or uv tool install; see README)
+	$(PY) -m pip wheel --quiet --no-deps -w dist .
+
 bench: $(STAMP) ## run the benchmarks (writes benchmarks/out/, numbers go into BENCHMARKS.md by hand)
 	$(PY) benchmarks/run_all.py
 
 clean: ## remove the virtualenv and caches
 	rm -rf $(VENV) $(FLOOR_VENV) .pytest_cache .mypy_cache .ruff_cache
 
-.PHONY: help install demo test test-floor test-slow lint schemas bench clean
+.PHONY: help install demo test test-floor test-slow lint schemas wheel bench clean

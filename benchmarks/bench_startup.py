@@ -4,7 +4,7 @@
 
 Each command runs ``--repeats`` times (after one warm-up, so the OS file cache is warm) in a new
 interpreter against a small SQLite store holding one board and one calibration (``calibctl demo``);
-best and median wall time are reported. ``--before DIR`` also times the calibctl checkout in DIR
+best and median wall and CPU time are reported. ``--before DIR`` also times the calibctl checkout in DIR
 (e.g. a worktree of main) in the same run, so before/after share the machine's load. Then
 ``python -X importtime`` of each command is summed per top-level package (self time), which says
 where the rest of the time goes. Nothing is asserted; the machine is shared, so the load average is
@@ -17,6 +17,7 @@ import argparse
 import datetime as dt
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -54,15 +55,21 @@ def _env(checkout: Path) -> dict[str, str]:
     return env
 
 
-def wall_times(args: list[str], checkout: Path, repeats: int, cwd: Path) -> list[float]:
-    times = []
+def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path) -> tuple[list[float], list[float]]:
+    """Wall and CPU (user + system) seconds of each run. On a loaded machine the CPU time is the
+    steadier figure: it does not count the time spent waiting for a core."""
+    wall, cpu = [], []
     for i in range(repeats + 1):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run([sys.executable, *args], cwd=cwd, env=_env(checkout), stdout=subprocess.DEVNULL,
                        stderr=subprocess.DEVNULL, check=False)
+        t1 = time.perf_counter()
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if i:  # the first run only warms the file cache
-            times.append(time.perf_counter() - t0)
-    return times
+            wall.append(t1 - t0)
+            cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return wall, cpu
 
 
 def import_profile(args: list[str], checkout: Path, cwd: Path) -> dict[str, float]:
@@ -97,15 +104,16 @@ def main() -> int:
     checkouts = {"this checkout": REPO, **({"before": opts.before.resolve()} if opts.before else {})}
     print(f"# calibctl start-up per command ({dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC)\n")
     print(f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
-          f"best / median of {opts.repeats} runs after a warm-up, wall time in ms.\n")
+          f"best / median of {opts.repeats} runs after a warm-up, ms.\n")
     print(f"Load average before: {_load()}\n")
-    print("| command | " + " | ".join(checkouts) + " |")
-    print("|---|" + "---|" * len(checkouts))
+    print("| command | " + " | ".join(f"{c}: wall | {c}: CPU" for c in checkouts) + " |")
+    print("|---|" + "---|" * 2 * len(checkouts))
     for label, args in commands(db, artifact).items():
         cells = []
         for checkout in checkouts.values():
-            t = wall_times(args, checkout, opts.repeats, work)
-            cells.append(f"{min(t) * 1000:.0f} / {statistics.median(t) * 1000:.0f}")
+            wall, cpu = run_times(args, checkout, opts.repeats, work)
+            cells += [f"{min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f}",
+                      f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}"]
             if label.startswith("python"):
                 cells = cells * len(checkouts)  # no calibctl involved: one measurement
                 break
@@ -114,12 +122,17 @@ def main() -> int:
     print("## Import self time per top-level package (ms, one `python -X importtime` run, this checkout)\n")
     profiles = {label: import_profile(args, REPO, work) for label, args in commands(db, artifact).items()
                 if label.startswith("calibctl")}
-    top = sorted({p for prof in profiles.values() for p, ms in prof.items() if ms >= 10})
-    print("| command | total | " + " | ".join(top) + " |")
-    print("|---|---|" + "---|" * len(top))
+    peak: dict[str, float] = defaultdict(float)
+    for prof in profiles.values():
+        for package, ms in prof.items():
+            peak[package] = max(peak[package], ms)
+    top = sorted(peak, key=peak.__getitem__, reverse=True)[:9]  # the packages that cost most somewhere
+    print("| command | total | " + " | ".join(top) + " | other |")
+    print("|---|---|" + "---|" * (len(top) + 1))
     for label, prof in profiles.items():
         cells = [f"{prof.get(p, 0):.0f}" for p in top]
-        print(f"| `{label}` | {sum(prof.values()):.0f} | " + " | ".join(cells) + " |")
+        other = sum(ms for p, ms in prof.items() if p not in top)
+        print(f"| `{label}` | {sum(prof.values()):.0f} | " + " | ".join(cells) + f" | {other:.0f} |")
     return 0
 
 
