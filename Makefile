@@ -27,7 +27,7 @@ $(FLOOR_STAMP): pyproject.toml constraints/floor.txt
 	$(FLOOR_VENV)/bin/python -m pip install --quiet -c constraints/floor.txt -e '$(EXTRAS)'
 	touch $(FLOOR_STAMP)
 
-install: $(STAMP) ## create .venv and install calibctl with its dev tools
+install: $(STAMP) ## create .venv: calibctl, both extras and the dev tools at the versions in constraints/lock.txt
 
 demo: $(STAMP) ## render a synthetic board session and run the main job on the embedded SQLite store
 	$(VENV)/bin/calibctl demo
