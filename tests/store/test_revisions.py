@@ -36,7 +36,9 @@ def test_a_store_at_two_revisions_is_refused(sqlite_url):
     try:
         with engine.begin() as conn:
             conn.execute(text("INSERT INTO alembic_version (version_num) VALUES ('0001_initial')"))
-        with pytest.raises(DatabaseError, match="several schema revisions at once"):
+        with pytest.raises(DatabaseError, match="several schema revisions at once") as exc:
             migrate.read_state(engine)
+        assert migrate.head_revision() in exc.value.message and "0001_initial" in exc.value.message
+        assert exc.value.exit_code == 2 and "restore it from a backup" in exc.value.hint
     finally:
         engine.dispose()
