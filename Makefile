@@ -5,25 +5,38 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 PYTEST_WORKERS ?= 2
+FLOOR_VENV ?= .venv-floor
+FLOOR_STAMP := $(FLOOR_VENV)/.installed-stamp
+# Everything: both extras (PostgreSQL, plots) and the dev tools, at the versions in the lock file.
+EXTRAS := .[dev,postgres,plots]
 
 .DEFAULT_GOAL := help
 
 help: ## list the targets
 	@grep -hE '^[a-z][a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-12s %s\n", $$1, $$2}'
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints/lock.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -c constraints/lock.txt -e '$(EXTRAS)'
 	touch $(STAMP)
 
-install: $(STAMP) ## create .venv and install calibctl with its dev tools
+$(FLOOR_STAMP): pyproject.toml constraints/floor.txt
+	rm -rf $(FLOOR_VENV)
+	$(PYTHON) -m venv $(FLOOR_VENV)
+	$(FLOOR_VENV)/bin/python -m pip install --quiet -c constraints/floor.txt -e '$(EXTRAS)'
+	touch $(FLOOR_STAMP)
+
+install: $(STAMP) ## create .venv: calibctl, both extras and the dev tools at the versions in constraints/lock.txt
 
 demo: $(STAMP) ## render a synthetic board session and run the main job on the embedded SQLite store
 	$(VENV)/bin/calibctl demo
 
 test: $(STAMP) ## run the test suite (SQLite and the local PostgreSQL), without the slow marker
 	$(PY) -m pytest -q -n $(PYTEST_WORKERS) -m "not slow"
+
+test-floor: $(FLOOR_STAMP) ## the fast suite on the oldest versions pyproject.toml allows (constraints/floor.txt)
+	$(FLOOR_VENV)/bin/python -m pytest -q -n $(PYTEST_WORKERS) -m "not slow" -p no:cacheprovider
 
 test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests
 	$(PY) -m pytest -q -m slow
@@ -36,10 +49,13 @@ lint: $(STAMP) ## ruff, mypy and the import-layer contract
 schemas: $(STAMP) ## regenerate schemas/ from the pydantic artifact models
 	$(PY) -m calibctl.artifacts.schema_export schemas
 
+wheel: $(STAMP) ## build dist/calibctl-*.whl (install it with pipx or uv tool install; see README)
+	$(PY) -m pip wheel --quiet --no-deps -w dist .
+
 bench: $(STAMP) ## run the benchmarks (writes benchmarks/out/, numbers go into BENCHMARKS.md by hand)
 	$(PY) benchmarks/run_all.py
 
 clean: ## remove the virtualenv and caches
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(FLOOR_VENV) .pytest_cache .mypy_cache .ruff_cache
 
-.PHONY: help install demo test test-slow lint schemas bench clean
+.PHONY: help install demo test test-floor test-slow lint schemas wheel bench clean

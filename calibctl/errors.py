@@ -72,3 +72,14 @@ class VerdictFailed(CalibctlError):
 
 class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
+
+
+class MissingExtraError(CalibctlError):
+    """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``."""
+
+    def __init__(self, extra: str, purpose: str, module: str | None) -> None:
+        super().__init__(
+            f"{purpose} needs the Python package {(module or extra).split('.')[0]}, which is not installed",
+            f"install calibctl's {extra} extra: pip install 'calibctl[{extra}]' "
+            f"(pipx: pipx install --force 'calibctl[{extra}]'; uv: uv tool install 'calibctl[{extra}]')",
+        )

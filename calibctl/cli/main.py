@@ -15,6 +15,7 @@ from typer.core import TyperGroup
 
 from calibctl import __version__
 from calibctl.cli.context import AppState
+from calibctl.cli.examples import attach_examples, epilog
 from calibctl.cli.streams import make_output_safe
 from calibctl.errors import EXIT_CANNOT_RUN, CalibctlError
 from calibctl.files import ENVIRONMENT_ERRNOS, os_error
@@ -61,17 +62,29 @@ app = typer.Typer(
     name="calibctl",
     cls=CalibctlGroup,
     help="Factory-line camera calibration with gates, honest uncertainty and an immutable artifact store.",
+    epilog=epilog(""),
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish, PowerShell
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
 
+def version_line() -> str:
+    """calibctl's version and the OpenCV and numpy it runs on (cv2 is imported only for this)."""
+    import platform
+
+    import cv2
+    import numpy
+
+    return (f"calibctl {__version__} (OpenCV {cv2.__version__}, numpy {numpy.__version__}, "
+            f"Python {platform.python_version()})")
+
+
 def _version(value: bool) -> None:
     if value:
-        print(f"calibctl {__version__}")
+        print(version_line())
         raise typer.Exit(0)
 
 
@@ -88,7 +101,7 @@ def main(
     ] = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
     version: Annotated[
-        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print calibctl's version, the OpenCV and numpy it uses, and exit.")
     ] = False,
 ) -> None:
     ctx.obj = AppState(db=db, station_config=station_config, json_output=json_output)
@@ -100,6 +113,7 @@ def _register_commands() -> None:
 
     for module in (capture, solve, lint, board, rig, artifacts, db, diagnostics, handeye, demo):
         module.register(app)
+    attach_examples(app)
 
 
 _register_commands()

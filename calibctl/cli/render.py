@@ -6,11 +6,43 @@ import json
 import math
 from typing import Any
 
-from rich.console import Console
+from rich.console import Console, ConsoleDimensions
+from rich.rule import Rule
 
-# Fixed width keeps reports stable in logs and in CliRunner tests; rich still wraps long tables.
-stdout = Console(width=110, highlight=False, soft_wrap=False)
-stderr = Console(width=110, highlight=False, stderr=True)
+LOG_WIDTH = 110
+"""Width of rules when the output is not a terminal (a CI log, a pipe, a file)."""
+_UNBOUNDED = 100_000  # tables lay out at their natural width: no cell is wrapped
+
+
+class _Console(Console):
+    """On a terminal, rich as usual (its width, wrapped). Anywhere else (a CI log, a pipe, a file) no
+    line is ever broken, so ``grep`` finds every line whole: text soft-wraps and tables take their
+    natural width; rules are LOG_WIDTH long."""
+
+    @property
+    def size(self) -> ConsoleDimensions:
+        if self.is_terminal:
+            return super().size
+        return ConsoleDimensions(_UNBOUNDED, super().size.height)
+
+    @size.setter
+    def size(self, new_size: tuple[int, int]) -> None:
+        Console.size.fset(self, new_size)  # type: ignore[attr-defined]
+
+    def print(self, *objects: Any, **kwargs: Any) -> None:
+        if not self.is_terminal:
+            kwargs.setdefault("soft_wrap", True)
+        super().print(*objects, **kwargs)
+
+    def rule(self, *args: Any, **kwargs: Any) -> None:
+        if self.is_terminal:
+            super().rule(*args, **kwargs)
+        else:
+            super().print(Rule(*args, **kwargs), width=LOG_WIDTH)
+
+
+stdout = _Console(highlight=False)
+stderr = _Console(highlight=False, stderr=True)
 
 
 def _default(obj: Any) -> Any:

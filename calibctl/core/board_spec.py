@@ -10,11 +10,14 @@ the artifact layer). Both kinds are described by their *inner-corner* grid, ``co
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 from calibctl.core.board_geometry import chessboard_object_points
+
+if TYPE_CHECKING:
+    import cv2
 
 CHESSBOARD = "chessboard"
 CHARUCO = "charuco"
@@ -53,6 +56,8 @@ class BoardSpec:
         if self.kind == CHARUCO:
             if self.marker_size_m is None or not 0 < self.marker_size_m < self.square_size_m:
                 raise ValueError("a ChArUco board needs 0 < marker_size_m < square_size_m")
+            import cv2  # here, not at the top: `board list` and other read commands never need it
+
             if self.dictionary is None or not hasattr(cv2.aruco, self.dictionary):
                 raise ValueError(f"unknown ArUco dictionary {self.dictionary!r}")
 
@@ -98,6 +103,8 @@ class BoardSpec:
 
 def make_charuco_board(spec: BoardSpec) -> cv2.aruco.CharucoBoard:
     """The OpenCV board object for a ChArUco spec (its own frame origin is the outer top-left corner)."""
+    import cv2
+
     if spec.kind != CHARUCO:
         raise ValueError(f"not a ChArUco board: {spec.kind}")
     assert spec.marker_size_m is not None  # checked in __post_init__

@@ -318,6 +318,12 @@ def _charuco_detector(spec: BoardSpec) -> cv2.aruco.CharucoDetector:
     return cache[spec]
 
 
+# CharucoDetector before OpenCV 4.14 returns every corner shifted by exactly (+0.5, +0.5) px: it
+# moves the guess by -0.5 before cornerSubPix and back by +0.5 after (opencv/opencv#25539, fixed by
+# #28380). Renders measured +0.48/+0.49 px mean on 4.10 and 4.13, -0.005/+0.002 px on 4.14 and 5.0.
+_CHARUCO_SHIFT_PX = 0.5 if tuple(int(p) for p in cv2.__version__.split(".")[:2]) < (4, 14) else 0.0
+
+
 def detect_charuco(gray: np.ndarray, spec: BoardSpec,
                    settings: DetectorSettings | None = None) -> tuple[Detection | None, str]:
     """Find ChArUco corners (partial views allowed) with cv2.aruco.CharucoDetector.
@@ -335,7 +341,7 @@ def detect_charuco(gray: np.ndarray, spec: BoardSpec,
                       f"(need {settings.charuco_min_corners})")
     ids = ids.reshape(-1).astype(np.int64)
     order = np.argsort(ids)
-    ids, corners_px = ids[order], corners.reshape(-1, 2).astype(np.float64)[order]
+    ids, corners_px = ids[order], corners.reshape(-1, 2).astype(np.float64)[order] - _CHARUCO_SHIFT_PX
     if len(set((ids // spec.cols).tolist())) < 2 or len(set((ids % spec.cols).tolist())) < 2:
         return None, f"ChArUco corners all on one line ({len(ids)} corners): the board plane is undefined"
     if k != 1:

@@ -25,7 +25,7 @@ from sqlalchemy import Engine, create_engine, event
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.engine import URL, make_url
 
-from calibctl.errors import DatabaseError, UsageError
+from calibctl.errors import DatabaseError, MissingExtraError, UsageError
 
 LOCK_TIMEOUT_ENV = "CALIBCTL_DB_LOCK_TIMEOUT_S"
 DEFAULT_LOCK_TIMEOUT_S = 10.0
@@ -109,7 +109,10 @@ def make_engine(url: str, *, lock_timeout: float | None = None) -> Engine:
             "connect_timeout": CONNECT_TIMEOUT_S,
             "options": f"-c lock_timeout={int(timeout_s * 1000)}",
         }
-        engine = create_engine(parsed, connect_args=connect_args)
+        try:
+            engine = create_engine(parsed, connect_args=connect_args)
+        except ModuleNotFoundError as exc:  # psycopg is the optional calibctl[postgres]
+            raise MissingExtraError("postgres", f"the PostgreSQL store {display_url(parsed)}", exc.name) from exc
     return engine.execution_options(**{LOCK_TIMEOUT_OPTION: timeout_s})
 
 

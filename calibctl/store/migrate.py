@@ -1,31 +1,43 @@
 """Schema revisions: where a database stands, and programmatic alembic upgrade/downgrade.
 
-The migration scripts live in the top-level ``migrations/`` directory (next to ``alembic.ini``),
-found relative to this package. Every migration runs inside one write transaction that also holds
-a migration lock (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: a transaction-scoped advisory lock), so
-two stations opening a brand-new shared store at the same moment create it exactly once, and a
-failed migration leaves the database at its previous revision.
+The migration scripts live in the top-level ``migrations/`` directory (next to ``alembic.ini``); a
+wheel ships them as ``calibctl/_migrations`` (pyproject's package-dir), which is looked for first.
+Every migration runs inside one write transaction that also holds a migration lock (SQLite:
+``BEGIN IMMEDIATE``; PostgreSQL: a transaction-scoped advisory lock), so two stations opening a
+brand-new shared store at the same moment create it exactly once, and a failed migration leaves the
+database at its previous revision.
 """
 
 from __future__ import annotations
 
+import ast
+import functools
+import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-from alembic import command
-from alembic.config import Config
-from alembic.migration import MigrationContext
-from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, inspect, text
 
 from calibctl.errors import DatabaseError, DatabaseOutOfDateError
 from calibctl.store.engine import WRITE_OPTION, database_errors, display_url, make_engine, sqlite_path
 from calibctl.store.models import Base
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-MIGRATIONS_DIR = REPO_ROOT / "migrations"
-ALEMBIC_INI = REPO_ROOT / "alembic.ini"
+if TYPE_CHECKING:
+    from alembic.config import Config
+    from alembic.script import ScriptDirectory
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+
+
+def migrations_dir(package_root: Path = PACKAGE_ROOT) -> Path:
+    """``calibctl/_migrations`` in an installed wheel, the checkout's ``migrations/`` otherwise."""
+    packaged = package_root / "_migrations"
+    return packaged if (packaged / "env.py").is_file() else package_root.parent / "migrations"
+
+
+MIGRATIONS_DIR = migrations_dir()
+ALEMBIC_INI = MIGRATIONS_DIR.parent / "alembic.ini"  # a checkout's; a wheel needs none of its settings
 _MIGRATION_LOCK_KEY = 0x63616C6962  # "calib": pg_advisory_xact_lock key for migrations
 
 SchemaStatus = Literal["absent", "empty", "current", "out_of_date", "unknown"]
@@ -33,6 +45,8 @@ SchemaStatus = Literal["absent", "empty", "current", "out_of_date", "unknown"]
 
 def alembic_config(connection: Connection | None = None) -> Config:
     """An alembic Config for calibctl's migrations; ``connection`` is used instead of a URL when given."""
+    from alembic.config import Config
+
     cfg = Config(str(ALEMBIC_INI)) if ALEMBIC_INI.exists() else Config()
     cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
     if connection is not None:
@@ -41,19 +55,49 @@ def alembic_config(connection: Connection | None = None) -> Config:
 
 
 def script_directory() -> ScriptDirectory:
+    from alembic.script import ScriptDirectory
+
     return ScriptDirectory.from_config(alembic_config())
 
 
+# Every command checks the schema revision, but only `db upgrade` and a brand-new store migrate.
+# Reading the revision ids from the migration files and the database directly keeps alembic (and
+# mako, pygments) out of every other command's start-up; tests compare this with alembic's answer.
+_REVISION_LINE = re.compile(r"^(revision|down_revision)\b[^=\n]*=\s*(.+?)\s*$", re.MULTILINE)
+
+
+@functools.cache
+def _revision_graph() -> dict[str, tuple[str, ...]]:
+    """revision -> the revisions it follows, read from ``MIGRATIONS_DIR/versions/*.py``."""
+    graph: dict[str, tuple[str, ...]] = {}
+    for path in sorted((MIGRATIONS_DIR / "versions").glob("*.py")):
+        fields = dict(_REVISION_LINE.findall(path.read_text(encoding="utf-8")))
+        down = ast.literal_eval(fields.get("down_revision", "None"))
+        downs = () if down is None else (down,) if isinstance(down, str) else tuple(down)
+        graph[ast.literal_eval(fields["revision"])] = downs
+    return graph
+
+
 def head_revision() -> str:
-    head = script_directory().get_current_head()
-    if head is None:  # pragma: no cover - the repository always has migrations
-        raise DatabaseError(f"no migrations found in {MIGRATIONS_DIR}")
-    return head
+    graph = _revision_graph()
+    heads = sorted(set(graph) - {d for downs in graph.values() for d in downs})
+    if len(heads) != 1:  # pragma: no cover - the repository always has exactly one head
+        raise DatabaseError(f"{len(heads)} migration heads in {MIGRATIONS_DIR} ({', '.join(heads)}); expected one")
+    return heads[0]
 
 
 def known_revisions() -> list[str]:
     """Every revision this calibctl knows, oldest first."""
-    return [script.revision for script in reversed(list(script_directory().walk_revisions()))]
+    graph, ordered = _revision_graph(), []
+
+    def visit(rev: str) -> None:
+        if rev not in ordered:
+            for down in graph[rev]:
+                visit(down)
+            ordered.append(rev)
+
+    visit(head_revision())
+    return ordered
 
 
 @dataclass(frozen=True)
@@ -81,7 +125,14 @@ class SchemaState:
 
 
 def _current_revision(conn: Connection) -> str | None:
-    return MigrationContext.configure(conn).get_current_revision()
+    """The revision in alembic's version table (None when there is none)."""
+    if not inspect(conn).has_table("alembic_version"):
+        return None
+    rows = conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all()
+    if len(rows) > 1:
+        raise DatabaseError(f"the database is at several schema revisions at once ({', '.join(rows)})",
+                            "it was migrated by something other than calibctl; restore it from a backup")
+    return rows[0] if rows else None
 
 
 def _state_on(conn: Connection, url: str) -> SchemaState:
@@ -125,6 +176,8 @@ def _migrate(engine: Engine, target: str, *, down: bool) -> tuple[str | None, st
             if state.status == "unknown":
                 state.require_current()
             before = state.current
+            from alembic import command
+
             cfg = alembic_config(conn)
             if down:
                 command.downgrade(cfg, target)

@@ -132,15 +132,20 @@ def resolve_source(text: str) -> SourceSpec:
     raise InputError(f"--source {text} does not exist", SOURCE_HINT)
 
 
+_OPENCV_LOG_LEVEL_ERROR = 2  # cv::utils::logging::LOG_LEVEL_ERROR
+
+
 @contextlib.contextmanager
 def quiet_opencv() -> Iterator[None]:
     """Silence OpenCV's own warnings while probing a device or file: we report the failure ourselves."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    # OpenCV 5 has the log level in cv2.utils.logging, 4.x as cv2.getLogLevel/setLogLevel (same levels).
+    api = getattr(cv2.utils, "logging", None) or cv2
+    level = api.getLogLevel()
+    api.setLogLevel(_OPENCV_LOG_LEVEL_ERROR)
     try:
         yield
     finally:
-        cv2.utils.logging.setLogLevel(level)
+        api.setLogLevel(level)
 
 
 def ignored_files(folder: Path) -> list[str]:

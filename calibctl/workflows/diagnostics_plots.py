@@ -12,14 +12,18 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from calibctl.core.diagnostics.gauge import ALARM_BAND, WARN_BAND, GaugeReport
 from calibctl.core.diagnostics.timeoffset import DriftEstimate, OffsetEstimate
 from calibctl.core.diagnostics.triage import CameraTriage, TriageSummary
-from calibctl.errors import InputError
+from calibctl.errors import InputError, MissingExtraError
 from calibctl.files import file_errors, write_atomic
+
+try:  # matplotlib is the optional calibctl[plots]; this module is imported only to draw
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+except ModuleNotFoundError as exc:
+    raise MissingExtraError("plots", "--plot", exc.name) from exc
 
 _LABELS = {
     "r": ("radius from principal point r [px]", "residual [px]"),

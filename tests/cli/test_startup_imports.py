@@ -9,6 +9,9 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
 
 HEAVY = ("matplotlib", "sqlalchemy", "alembic", "cv2", "pydantic", "calibctl.workflows", "calibctl.store")
 
@@ -29,3 +32,31 @@ def test_the_diagnostics_workflow_loads_matplotlib_only_to_draw() -> None:
     loaded = _modules_after("import calibctl.workflows.diagnostics")
     assert "calibctl.workflows.diagnostics" in loaded
     assert not any(m.split(".")[0] == "matplotlib" for m in loaded)
+
+
+# What a read command must not load: alembic (with mako and pygments) is only for migrating, cv2 only
+# for images, matplotlib only for --plot, psycopg and the PostgreSQL dialect only for a PostgreSQL URL.
+NOT_FOR_READING = ("alembic", "mako", "pygments", "cv2", "matplotlib", "psycopg", "sqlalchemy.dialects.postgresql")
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def migrated_store(tmp_path_factory) -> str:
+    url = f"sqlite:///{tmp_path_factory.mktemp('startup') / 'store.db'}"
+    from calibctl.store.migrate import upgrade_url
+
+    upgrade_url(url)
+    return url
+
+
+@pytest.mark.parametrize("args", [
+    ["board", "list"], ["history", "CAM-1"], ["show", "CAM-1"], ["export", "CAM-1"], ["db", "current"],
+    ["lint", str(REPO / "fixtures/camera_front.json")],
+])
+def test_read_commands_load_no_migration_image_plot_or_postgres_module(migrated_store, args) -> None:
+    code = ("import typer.main\nfrom calibctl.cli.main import app\n"
+            f"try:\n    typer.main.get_command(app).main({['--db', migrated_store, *args]!r}, standalone_mode=False)\n"
+            "except BaseException:\n    pass")  # the exit code is not the point here: the imports are
+    loaded = _modules_after(code)
+    assert "calibctl.store.repository" in loaded or args[0] == "lint"
+    assert sorted(m for m in loaded if m.startswith(NOT_FOR_READING)) == []

@@ -1,0 +1,93 @@
+"""An example for every command, printed at the end of its ``--help``.
+
+Kept in one table (not in each command's docstring) so the examples read as a set and a test can
+check every one against the real command tree: its command path exists and each option is one the
+command accepts.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import typer
+
+EXAMPLES: dict[str, tuple[str, ...]] = {
+    "": ("calibctl demo", "calibctl --db postgresql://calib@factory-db/calibctl history CAM-0042"),
+    "capture": ("calibctl capture --serial CAM-0042 --board A17 --source ./shots/",
+                "calibctl capture --serial CAM-0042 --board A17 --source /dev/video0 --max-views 30"),
+    "calibrate": ("calibctl calibrate --serial CAM-0042 --board A17 --source /dev/video0",
+                  "calibctl calibrate --serial CAM-0042 --board A17 --source sweep.mp4 --model auto"),
+    "prune": ("calibctl prune", "calibctl prune --now 2026-12-01T00:00:00Z --json"),
+    "synth": ("calibctl synth ./shots --scenario good --seed 1",
+              "calibctl synth ./sweep --scenario video --size 1280x960"),
+    "solve": ("calibctl solve --serial CAM-0042", "calibctl solve 01f22921ea3f --model auto --drop-outliers"),
+    "lint": ("calibctl lint camera_front.json camera_front_ros.yaml --format github",
+             "calibctl --db sqlite:///station.db lint --all --json"),
+    "history": ("calibctl history CAM-0042", "calibctl history CAM-0042 --json"),
+    "show": ("calibctl show CAM-0042", "calibctl show CAM-0042@3 --json"),
+    "export": ("calibctl export CAM-0042 --format ros -o camera_info.yaml",
+               "calibctl export CAM-0042@3 -f opencv -o cam.yml --force"),
+    "import": ("calibctl import CAM-0042_v3.json", "calibctl import CAM-0042_v3.json --no-activate"),
+    "rollback": ("calibctl rollback CAM-0042 --to 2 --reason 'v3 drifted after the lens was knocked'",),
+    "triage": ("calibctl triage residuals.csv", "calibctl triage residuals.csv --focal-px 1000 --plot plots/"),
+    "gauge": ("calibctl gauge odometry.csv", "calibctl gauge odometry.csv --window-s 30 --plot plots/"),
+    "timeoffset": ("calibctl timeoffset gyro.csv camera.csv", "calibctl timeoffset gyro.csv camera.csv --window 5"),
+    "synth-residuals": ("calibctl synth-residuals res.csv --fault time-offset --seed 2",),
+    "demo": ("calibctl demo", "calibctl demo --out /tmp/demo"),
+    "board": ("calibctl board list", "calibctl board show A17"),
+    "board add": ("calibctl board add A17 --kind chessboard --cols 9 --rows 6 --square-mm 25.03 "
+                  "--uncertainty-mm 0.02 --instrument 'Mitutoyo 500-196' --measured-by anna "
+                  "--measured-on 2026-03-11 --evidence calipers.jpg",),
+    "board list": ("calibctl board list", "calibctl board list --json"),
+    "board show": ("calibctl board show A17", "calibctl board show A17@2 --json"),
+    "db": ("calibctl db upgrade", "calibctl --db postgresql://calib@factory-db/calibctl db verify"),
+    "db upgrade": ("calibctl db upgrade", "calibctl --db postgresql://calib@factory-db/calibctl db upgrade"),
+    "db current": ("calibctl db current", "calibctl --db sqlite:///station.db db current --json"),
+    "db verify": ("calibctl db verify", "calibctl db verify --json"),
+    "handeye": ("calibctl handeye motions.csv --from base_link --to camera --input poses -o X.json",
+                "calibctl handeye arm_poses.csv --from gripper --to camera --images shots/ --serial CAM-0042 "
+                "--eye-in-hand --tf-static X_tf.yaml"),
+    "synth-motions": ("calibctl synth-motions motions.csv --excitation 3d --seed 1",
+                      "calibctl synth-motions corridor.csv --excitation corridor --time-offset-ms 20"),
+    "rig": ("calibctl rig add stereo-7 --camera CAM-L --camera CAM-R --design-baseline-mm CAM-L:CAM-R=75.0+-0.5",
+            "calibctl rig solve stereo-7"),
+    "rig add": ("calibctl rig add stereo-7 --camera CAM-L --camera CAM-R --design-baseline-mm CAM-L:CAM-R=75.0+-0.5",
+                "calibctl rig add head-3 --camera CAM-A --camera CAM-B --camera CAM-C --root CAM-B"),
+    "rig capture": ("calibctl rig capture stereo-7 --board A17 --source CAM-L=left/ --source CAM-R=right/",),
+    "rig solve": ("calibctl rig solve stereo-7", "calibctl rig solve stereo-7 --refine-intrinsics --no-activate"),
+    "rig lint": ("calibctl rig lint stereo-7", "calibctl rig lint stereo-7@2 --json"),
+    "rig history": ("calibctl rig history stereo-7", "calibctl rig history stereo-7 --json"),
+    "rig show": ("calibctl rig show stereo-7", "calibctl rig show stereo-7@2 --json"),
+    "rig rollback": ("calibctl rig rollback stereo-7 --to 1 --reason 'v2 solved on a bent mount'",),
+    "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
+                   "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+    "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
+                          "--square-mm 25.0 --export-dir out/",),
+}
+
+
+def epilog(path: str) -> str:
+    r"""The ``Examples:`` block for command ``path`` ("" is calibctl itself); ``\b`` keeps click
+    from re-wrapping the lines."""
+    examples = EXAMPLES.get(path)
+    if not examples:  # tests/cli/test_cli_habits.py fails on this; a user's --help never does
+        return ""
+    lines = "\n".join(f"  $ {example}" for example in examples)
+    return f"\b\nExamples:\n{lines}"
+
+
+def _name(info: Any) -> str:
+    return str(info.name or info.callback.__name__).lower().replace("_", "-")
+
+
+def attach_examples(app: typer.Typer, prefix: str = "") -> None:
+    """Put each command's examples into its epilog (groups and sub-commands too)."""
+    for command in app.registered_commands:
+        command.epilog = epilog(f"{prefix}{_name(command)}")
+    for group in app.registered_groups:
+        sub = group.typer_instance
+        if sub is None:  # pragma: no cover - every calibctl group is a Typer
+            continue
+        name = group.name or sub.info.name
+        group.epilog = epilog(f"{prefix}{name}")
+        attach_examples(sub, f"{prefix}{name} ")
