@@ -62,3 +62,23 @@ def forge_activation(url: str, serial: str, version: int) -> None:
         pg.execute("ALTER TABLE activation_events DISABLE TRIGGER trg_activation_events_accepted_only")
         pg.execute(insert)
         pg.execute("ALTER TABLE activation_events ENABLE TRIGGER trg_activation_events_accepted_only")
+
+
+def run_underneath(url: str, *statements: str, params: tuple[object, ...] = ()) -> None:
+    """Run SQL the way someone with write access to the database would: SQLite with every calibctl
+    trigger dropped, PostgreSQL as a superuser with triggers (and foreign keys) switched off."""
+    path = _sqlite_file(url)
+    if path is not None:
+        conn = sqlite3.connect(path, isolation_level=None)
+        try:
+            for (name,) in conn.execute("SELECT name FROM sqlite_master WHERE type = 'trigger'").fetchall():
+                conn.execute(f"DROP TRIGGER {name}")
+            for statement in statements:
+                conn.execute(statement.replace("%s", "?"), params if "%s" in statement else ())
+        finally:
+            conn.close()
+        return
+    with psycopg.connect(_libpq(url), autocommit=True) as pg:
+        pg.execute("SET session_replication_role = replica")
+        for statement in statements:
+            pg.execute(statement, params if "%s" in statement else ())  # type: ignore[arg-type]
