@@ -96,9 +96,9 @@ def main(
 
 def _register_commands() -> None:
     # Each module adds its commands to ``app``; this order is the order in --help.
-    from calibctl.cli import artifacts, board, capture, db, demo, diagnostics, lint, solve
+    from calibctl.cli import artifacts, board, capture, db, demo, diagnostics, keys, lint, solve
 
-    for module in (capture, solve, lint, board, artifacts, db, diagnostics, demo):
+    for module in (capture, solve, lint, board, artifacts, db, keys, diagnostics, demo):
         module.register(app)
 
 

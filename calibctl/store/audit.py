@@ -75,19 +75,24 @@ def _heads_at(s: Session, stream: chain.Stream, last_id: int) -> dict[tuple[Any,
     return {tuple(r[: len(keys)]): (int(r[-2]), str(r[-1])) for r in rows if r[-2] is not None}
 
 
-def _check_signature(audit: Audit, stream: chain.Stream, row: Any, trusted: TrustedKeys, require: bool) -> None:
+def _check_signature(
+    audit: Audit, stream: chain.Stream, row: Any, trusted: TrustedKeys, require: bool, after_signed: bool
+) -> None:
+    """``after_signed``: a record before it in its stream is signed. Once a store signs, every writer must:
+    an unsigned record there is what a forger without the key would add."""
     if not row["signature"] and not row["key_id"]:
         audit.unsigned += 1
-        if require:
-            audit.problems.append(f"{stream.label(row)} is not signed")
+        if require or after_signed:
+            why = "" if require else ", but records before it in its chain are"
+            audit.problems.append(f"{stream.label(row)} is not signed{why}")
         return
     if not trusted.keys:
         return  # nothing to check against; the report says signatures were not checked
     subject = row[stream.subject] if stream.subject else None
-    why = trusted.check(row["key_id"], row["signature"], record_message(str(row["chain_hash"]), subject))
+    problem = trusted.check(row["key_id"], row["signature"], record_message(str(row["chain_hash"]), subject))
     audit.signatures_checked += 1
-    if why is not None:
-        audit.problems.append(f"{stream.label(row)} {why}")
+    if problem is not None:
+        audit.problems.append(f"{stream.label(row)} {problem}")
 
 
 def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dict[tuple[Any, ...], tuple[int, str]],
@@ -97,7 +102,7 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
     order = [t.c[k] for k in stream.key] + [t.c.chain_seq, t.c.id]
     heads = audit.heads.setdefault(stream.name, dict(start))
     key: tuple[Any, ...] | None = None
-    seq, prev, last_id, last_version = 0, None, 0, 0
+    seq, prev, last_id, last_version, signed = 0, None, 0, 0, False
     version_col = _VERSION.get(stream.name)
     for row in s.execute(select(t).where(t.c.id > since).order_by(*order).execution_options(yield_per=500)).mappings():
         audit.records_checked += 1
@@ -106,7 +111,7 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
         if stream.key_of(row) != key:
             key = stream.key_of(row)
             seq, prev = start.get(key, (0, None))
-            last_id, last_version = 0, 0
+            last_id, last_version, signed = 0, 0, False
         if row["chain_hash"] is None or row["chain_seq"] is None:
             audit.problems.append(f"{label} has no chain hash: it was inserted outside calibctl")
             continue
@@ -127,7 +132,8 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
             if int(row[version_col]) <= last_version:
                 audit.problems.append(f"{label}: {version_col} {row[version_col]} repeats or goes back along the chain")
             last_version = int(row[version_col])
-        _check_signature(audit, stream, row, trusted, require)
+        _check_signature(audit, stream, row, trusted, require, signed)
+        signed = signed or bool(row["signature"])
         seq, prev, last_id = int(row["chain_seq"]), str(row["chain_hash"]), int(row["id"])
         heads[key] = (seq, prev)
 

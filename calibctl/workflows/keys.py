@@ -9,10 +9,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.config import Settings
-from calibctl.errors import UsageError
+from calibctl.errors import InputError, UsageError
 from calibctl.files import write_atomic
-from calibctl.signing import Signer, TrustedKeys, create_key, load_signer
+from calibctl.signing import Signer, TrustedKeys, create_key, load_signer, record_message
 
 _NO_KEY_HINT = "set CALIBCTL_SIGNING_KEY or signing_key in the station file, or pass --key FILE"
 
@@ -58,3 +59,23 @@ def export_public(settings: Settings, key: Path | None, out: Path | None, *, for
     if out is not None:
         write_atomic(out, signer.public_pem(), force=force)
     return KeyInfo(str(signer.path), signer.key_id, signer.public_pem())
+
+
+def signature_problem(art: CalibrationArtifact, trusted: TrustedKeys) -> str | None:
+    """None when ``art`` carries a valid signature by a trusted key, else why not (``is not signed`` ...)."""
+    seal = art.signature
+    if seal is None:
+        return "is not signed"
+    return trusted.check(seal.key_id, seal.value, record_message(seal.record_sha256, art.content_sha256))
+
+
+def require_trusted(art: CalibrationArtifact, source: str, trusted: TrustedKeys, required: bool) -> None:
+    """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
+    untrusted, and always when it is signed by a trusted key but the signature does not match."""
+    problem = signature_problem(art, trusted)
+    if problem is None or (not required and "does not match" not in problem):
+        return
+    if required and not trusted.keys:
+        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+    raise InputError(f"{source} ({art.ref}) {problem}",
+                     "import only artifacts exported by a store whose public key is in --trusted-keys DIR")

@@ -27,7 +27,8 @@ from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks
 from calibctl.errors import InputError, NotFoundError, UsageError
-from calibctl.workflows import formats, ros_camera_info
+from calibctl.signing import TrustedKeys
+from calibctl.workflows import formats, keys, ros_camera_info
 
 
 @dataclass
@@ -323,10 +324,6 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
     return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
 
 
-def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
-    return [lint_file(formats.load_calibration(p), limits) for p in paths]
-
-
 def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> LintResult:
     """A serial with nothing active is a finding: the camera has no calibration a robot may load."""
     accepted = [a.version for a in versions if a.status == "accepted"]
@@ -341,7 +338,9 @@ def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> Lint
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
-def lint_store(settings: Settings, serial: str | None, all_serials: bool) -> list[LintResult]:
+def lint_store(
+    settings: Settings, serial: str | None, all_serials: bool, trusted: TrustedKeys | None = None
+) -> list[LintResult]:
     """Lint the active version of one serial, or of every serial in the store (an empty store is an error:
     a CI job pointed at the wrong --db must not pass with nothing checked)."""
     from calibctl.workflows.records import open_store
@@ -359,13 +358,50 @@ def lint_store(settings: Settings, serial: str | None, all_serials: bool) -> lis
             art = store.get_artifact(s, None)
             stored = formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None)
             results.append(lint_file(stored, settings.lint))
+            if trusted is not None:
+                _signature_rule(results[-1], art, trusted)
     return results
 
 
-def lint(settings: Settings, paths: list[Path], serial: str | None, all_serials: bool) -> list[LintResult]:
+def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+    """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
+    if isinstance(art, dict):
+        try:
+            art = CalibrationArtifact.model_validate(art)
+        except ValidationError:
+            problem: str | None = "cannot be checked: it is not a valid artifact"
+        else:
+            problem = keys.signature_problem(art, trusted)
+    else:
+        problem = keys.signature_problem(art, trusted)
+    if problem is not None:
+        fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
+        result.findings.append(Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix))
+
+
+def lint(
+    settings: Settings,
+    paths: list[Path],
+    serial: str | None,
+    all_serials: bool,
+    *,
+    require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> list[LintResult]:
+    """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
+    is a ``signature`` error (ROS and OpenCV exports carry no signature: lint the artifact export)."""
     if not paths and not serial and not all_serials:
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
-    results = lint_files(paths, settings.lint)
+    trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
+    if trusted is not None and not trusted.keys:
+        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+    results = []
+    for path in paths:
+        loaded = formats.load_calibration(path)
+        result = lint_file(loaded, settings.lint)
+        if trusted is not None:
+            _signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
+        results.append(result)
     if serial or all_serials:
-        results += lint_store(settings, serial, all_serials)
+        results += lint_store(settings, serial, all_serials, trusted)
     return results

@@ -150,8 +150,12 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
     return art
 
 
-def import_file(settings: Settings, path: Path, *, activate: bool) -> CalibrationArtifact:
+def import_file(
+    settings: Settings, path: Path, *, activate: bool, require_signature: bool = False, trusted_keys: Path | None = None
+) -> CalibrationArtifact:
+    """Import an exported artifact; with ``require_signature`` only one signed by a trusted key."""
     art = read_artifact_file(path)
+    keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
     with open_store(settings, create=True, write=True) as store:
         return store.import_artifact(art, actor=settings.operator, station=settings.station, activate=activate)
 
