@@ -130,3 +130,15 @@ def backfill(conn: Connection) -> None:
             counters = Table("version_counters", meta, autoload_with=conn)
             insert = (postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert)(counters)
             conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
+
+
+def row_problem(stream: Stream, row: Base) -> str | None:
+    """None when ``row``'s chain hash matches its columns (one sha256 over them, payload included), else why
+    not. The cheap integrity check for bulk reads; ``db verify`` also checks the links and signatures."""
+    values = {c.name: getattr(row, c.name) for c in stream.table.columns}
+    if values["chain_hash"] is None or values["chain_seq"] is None:
+        return f"{stream.label(values)} has no chain hash: it was inserted outside calibctl"
+    actual = record_hash(stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values))
+    if actual != values["chain_hash"]:
+        return f"{stream.label(values)} was changed after it was written (its chain hash no longer matches)"
+    return None

@@ -26,7 +26,7 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks
-from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows import formats, keys, ros_camera_info
 
@@ -135,8 +135,10 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
     )
 
 
-def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
-    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump)."""
+def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = False) -> CalibrationFacts:
+    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump). A
+    ``validated`` document (parsed by the contract, which refuses NaN and infinity) skips the walk over
+    every number that the ``finite`` rule needs for files."""
     size = data.get("image_size")
     stdev = data.get("stdev") or {}
     held = data.get("held_out") or {}
@@ -154,7 +156,7 @@ def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
         held_out_outer_rms_px=held.get("outer_ring_rms_px"),
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
-        raw_numbers=_numbers(data),
+        raw_numbers=[] if validated else _numbers(data),
     )
 
 
@@ -324,10 +326,10 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
     return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
 
 
-def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> LintResult:
+def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
     """A serial with nothing active is a finding: the camera has no calibration a robot may load."""
-    accepted = [a.version for a in versions if a.status == "accepted"]
-    listing = ", ".join(f"{a.version} ({a.status})" for a in versions)
+    accepted = [v for v, st in statuses.items() if st == "accepted"]
+    listing = ", ".join(f"{v} ({st})" for v, st in statuses.items())
     if accepted:
         message, fix = (f"{serial} has no active version (versions: {listing})",
                         f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'")
@@ -338,28 +340,49 @@ def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> Lint
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
+def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
+    """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
+    document rules (schema, content-hash) are not run again."""
+    data = art.model_dump(mode="json")
+    findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
+    result = LintResult(art.ref, "calibctl", findings)
+    if trusted is not None:
+        _signature_rule(result, art, trusted)
+    return result
+
+
 def lint_store(
     settings: Settings, serial: str | None, all_serials: bool, trusted: TrustedKeys | None = None
 ) -> list[LintResult]:
     """Lint the active version of one serial, or of every serial in the store (an empty store is an error:
-    a CI job pointed at the wrong --db must not pass with nothing checked)."""
+    a CI job pointed at the wrong --db must not pass with nothing checked).
+
+    ``--all`` reads in bulk: every active version in one query, each checked by its record's chain hash
+    (sha256 over its stored bytes and columns; a mismatch is a ``content-hash`` error for that serial, the
+    others are still linted); ``--serial`` re-derives the content hash as every single read does."""
     from calibctl.workflows.records import open_store
 
     with open_store(settings) as store:
-        serials = store.serials() if all_serials else [serial] if serial else []
-        if not serials:
+        if all_serials:
+            active, inactive = store.active_artifacts()
+        else:
+            versions: dict[int, str] = {a.version: a.status for a in store.list_artifacts(serial or "")}
+            found = store.get_artifact(serial or "", None) if store.active_version(serial or "") is not None else None
+            active, inactive = ({found.serial: found}, {}) if found else ({}, {serial or "": versions})
+        if not active and not inactive:
             raise NotFoundError(f"nothing to lint: the store {store.url} holds no calibrations",
                                 "check --db / CALIBCTL_DB, or calibrate a camera first")
-        results = []
-        for s in serials:
-            if store.active_version(s) is None:
-                results.append(_no_active_version(s, store.list_artifacts(s)))
-                continue
-            art = store.get_artifact(s, None)
-            stored = formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None)
-            results.append(lint_file(stored, settings.lint))
-            if trusted is not None:
-                _signature_rule(results[-1], art, trusted)
+    results = []
+    for name in sorted([*active, *inactive]):
+        found_or_error = active.get(name)
+        if found_or_error is None:
+            results.append(_no_active_version(name, inactive[name]))
+        elif isinstance(found_or_error, IntegrityError):
+            finding = Finding(rule="content-hash", severity="error", message=found_or_error.message,
+                              fix=found_or_error.hint)
+            results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
+        else:
+            results.append(_lint_stored(found_or_error, settings.lint, trusted))
     return results
 
 
