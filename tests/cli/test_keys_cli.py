@@ -138,3 +138,10 @@ def test_db_verify_with_trusted_keys_and_head(keys: dict[str, Path], tmp_path: P
     assert stranger.exit_code == 1 and "which is not trusted" in stranger.stdout
     bad = run("--db", url, "db", "verify", "--since", "HEAD")
     assert bad.exit_code == 2 and "is not a chain head" in bad.stderr
+
+
+def test_import_require_signature_without_trusted_keys_is_exit_2(keys: dict[str, Path], tmp_path: Path):
+    exported = _signed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(exported), "--require-signature")
+    assert result.exit_code == 2 and "needs trusted keys" in result.stderr
+    assert not (tmp_path / "t.db").exists()
