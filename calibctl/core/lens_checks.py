@@ -198,10 +198,11 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     rr, aa = np.meshgrid(radii, angles)
     x, y = rr * np.cos(aa), rr * np.sin(aa)
     step = 1e-6
-    xp, yp, _ = distort_normalised(x + step, y, dist_coeffs)
-    xm, ym, _ = distort_normalised(x - step, y, dist_coeffs)
-    xq, yq, _ = distort_normalised(x, y + step, dist_coeffs)
-    xn, yn, _ = distort_normalised(x, y - step, dist_coeffs)
+    # the four central-difference stencils in one call: the same element-wise arithmetic, a quarter of
+    # numpy's per-call overhead
+    xs, ys, _ = distort_normalised(np.stack([x + step, x - step, x, x]), np.stack([y, y, y + step, y - step]),
+                                   dist_coeffs)
+    (xp, xm, xq, xn), (yp, ym, yq, yn) = xs, ys
     det = ((xp - xm) * (yq - yn) - (xq - xn) * (yp - ym)) / (4 * step * step)
     worst = np.unravel_index(int(np.argmin(det)), det.shape)
     if not det[worst] > 0:
