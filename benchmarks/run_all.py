@@ -45,6 +45,7 @@ BENCHES = (
     Bench("bench_triage", "bench_triage.py", ("--repeats", "3"), ("--repeats", "1", "--rows", "200000"), False),
     Bench("bench_triage_accuracy", "bench_triage.py", ("--accuracy", "20"), ("--accuracy", "5"), False),
     Bench("bench_e2e", "bench_e2e.py", ("--repeats", "3"), ("--quick",)),
+    Bench("bench_store_scale", "bench_store_scale.py", (), ()),
 )
 
 
