@@ -6,6 +6,8 @@ A station file is YAML (``--station-config FILE``, ``CALIBCTL_STATION_CONFIG``, 
     station: line3-cam-bench
     db: postgresql+psycopg://calib@factory-db/calibctl
     image_retention_days: 30
+    signing_key: /etc/calibctl/station-key.pem   # Ed25519, mode 0600: every record written is signed
+    trusted_keys: /etc/calibctl/trusted-keys/    # public keys (*.pem) whose signatures are accepted
     gates: {observability_min: 1.0e-4, tilt_min_deg: 20}
     lint: {sigma_fx_max_px: 1.5}
 """
@@ -73,6 +75,8 @@ class StationConfig(BaseModel):
     station: str | None = None
     operator: str | None = None
     db: str | None = None
+    signing_key: str | None = Field(None, description="private Ed25519 key file (0600) records are signed with")
+    trusted_keys: str | None = Field(None, description="folder of public keys (*.pem) whose signatures are trusted")
     image_retention_days: int = Field(30, ge=0)
     gates: GateThresholds = Field(default_factory=GateThresholds)
     lint: LintThresholds = Field(default_factory=LintThresholds)
@@ -86,6 +90,8 @@ class Settings(BaseModel):
     station: str
     operator: str
     station_file: str | None
+    signing_key: str | None = None
+    trusted_keys: str | None = None
     image_retention_days: int
     gates: GateThresholds
     lint: LintThresholds
@@ -127,6 +133,8 @@ def load_settings(
         station=station or env.get("CALIBCTL_STATION") or file_cfg.station or socket.gethostname(),
         operator=operator or env.get("CALIBCTL_OPERATOR") or file_cfg.operator or _login_name(),
         station_file=str(path) if path else None,
+        signing_key=env.get("CALIBCTL_SIGNING_KEY") or file_cfg.signing_key,
+        trusted_keys=env.get("CALIBCTL_TRUSTED_KEYS") or file_cfg.trusted_keys,
         image_retention_days=file_cfg.image_retention_days,
         gates=file_cfg.gates,
         lint=file_cfg.lint,

@@ -114,6 +114,21 @@ class Provenance(Document):
     imported_from: str | None = Field(None, description="set when the artifact came from another store/file")
 
 
+class RecordSignature(Document):
+    """The signature the store made when it wrote this version (exports carry it; not in content_sha256)."""
+
+    algorithm: Literal["ed25519"] = Field("ed25519", description="signature scheme")
+    key_id: Sha256Hex = Field(description="sha256 of the signer's raw 32-byte public key")
+    record_sha256: Sha256Hex = Field(description="the store's chain hash of this version's record")
+    value: str = Field(
+        pattern=r"^[A-Za-z0-9+/]{86}==$",
+        description="base64 Ed25519 signature of 'calibctl-record-v1\\n<record_sha256>\\n<content_sha256>' (ASCII)",
+    )
+
+
+UNSIGNED_FIELDS = {"content_sha256", "signature"}
+
+
 class CalibrationArtifact(Document):
     """One immutable version of one camera's calibration."""
 
@@ -151,7 +166,10 @@ class CalibrationArtifact(Document):
         description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
         "other field; sha256-python-json = artifacts written before it (absent field), hashed without this field",
     )
-    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
+    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field but signature")
+    signature: RecordSignature | None = Field(
+        None, description="the writing store's signature, when it has a key (absent: unsigned); not hashed"
+    )
 
     @field_validator("image_size")
     @classmethod
@@ -187,8 +205,8 @@ class CalibrationArtifact(Document):
     def computed_sha256(self) -> str:
         """The hash the content should have under its ``content_hash_algorithm``; compare with ``content_sha256``."""
         if self.content_hash_algorithm == LEGACY_HASH:
-            return content_hash(self, {"content_sha256", "content_hash_algorithm"}, LEGACY_HASH)
-        return content_hash(self, {"content_sha256"}, CURRENT_HASH)
+            return content_hash(self, UNSIGNED_FIELDS | {"content_hash_algorithm"}, LEGACY_HASH)
+        return content_hash(self, UNSIGNED_FIELDS, CURRENT_HASH)
 
     def sealed(self) -> CalibrationArtifact:
         """A copy hashed with the current algorithm (RFC 8785), its ``content_sha256`` matching its content."""

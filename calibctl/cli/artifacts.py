@@ -81,12 +81,16 @@ def import_(
     ctx: typer.Context,
     path: Annotated[Path, typer.Argument(metavar="FILE", help="An artifact exported with --format json.")],
     activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it the active version.")] = True,
+    require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")] = False,
+    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Bring an exported artifact into this store after checking its sha256 (tampered files exit 1)."""
+    """Bring an exported artifact into this store after checking its sha256 (tampered files exit 1) and signature."""
     from calibctl.workflows import records
 
-    art = records.import_file(state(ctx).settings(), path, activate=activate)
+    art = records.import_file(
+        state(ctx).settings(), path, activate=activate, require_signature=require_signature, trusted_keys=trusted_keys
+    )
     if wants_json(ctx, json_output):
         emit_json(art)
         return

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -20,7 +21,7 @@ JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on
 
 db_app = typer.Typer(
     name="db",
-    help="Create and migrate the store (SQLite or PostgreSQL) and verify every stored hash.",
+    help="Create and migrate the store (SQLite or PostgreSQL) and verify its hash chains and signatures.",
     no_args_is_help=True,
     rich_markup_mode=None,
 )
@@ -66,21 +67,38 @@ def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 
 
 @db_app.command("verify")
-def verify(ctx: typer.Context, json_output: JsonFlag = False) -> None:
-    """Re-hash every artifact, board revision and capture session. Exit 1 naming each mismatch."""
+def verify(
+    ctx: typer.Context,
+    json_output: JsonFlag = False,
+    head: Annotated[bool, typer.Option("--head", help="Print the chain head (keep it: --since HEAD resumes from it).")] = False,
+    since: Annotated[str | None, typer.Option("--since", metavar="HEAD", help="Check only what was written after this chain head (after proving the head unchanged).")] = None,
+    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
+    require_signature: Annotated[bool, typer.Option("--require-signature", help="An unsigned record is a finding.")] = False,
+) -> None:
+    """Check every hash chain, signature, version counter, activation event and stored hash. Exit 1 naming each problem."""
     from calibctl.workflows import database
 
-    report = database.verify(state(ctx).settings())
+    report = database.verify(
+        state(ctx).settings(), trusted_keys=trusted_keys, require_signature=require_signature, since=since
+    )
     if wants_json(ctx, json_output):
         emit_json(report.as_json())
     else:
         for line in report.problems:
-            say(f"MISMATCH {line}")
-        verdict = "all intact" if report.ok else f"{len(report.problems)} mismatch(es)"
-        say(f"verified {_counts_text(report.counts)} in {report.url}: {verdict}")
+            say(f"PROBLEM {line}")
+        verdict = "all intact" if report.ok else f"{len(report.problems)} problem(s)"
+        scope = f"{report.records_checked} chained records since the given head" if since else _counts_text(report.counts)
+        say(f"verified {scope} in {report.url}: {verdict}")
+        if not report.trusted_keys:
+            say(f"signatures: not checked (no signing key or trusted keys configured); {report.unsigned} unsigned record(s)")
+        else:
+            say(f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted key(s); "
+                f"{report.unsigned} unsigned record(s)")
+        if head:
+            say(f"head {report.head}")
     if not report.ok:
         stderr.print(
-            f"Error: {len(report.problems)} stored record(s) do not match their sha256; restore them from an "
+            f"Error: {len(report.problems)} problem(s) in the stored history; restore the named records from an "
             "export or a backup",
             soft_wrap=True,
             markup=False,

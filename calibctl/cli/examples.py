@@ -44,6 +44,10 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "db upgrade": ("calibctl db upgrade", "calibctl --db postgresql://calib@factory-db/calibctl db upgrade"),
     "db current": ("calibctl db current", "calibctl --db sqlite:///station.db db current --json"),
     "db verify": ("calibctl db verify", "calibctl db verify --json"),
+    "keys": ("calibctl keys init --key /etc/calibctl/station.key",
+             "calibctl keys export-public --key /etc/calibctl/station.key -o trusted/line3-bench2.pem"),
+    "keys init": ("calibctl keys init --key /etc/calibctl/station.key",),
+    "keys export-public": ("calibctl keys export-public --key /etc/calibctl/station.key -o trusted/line3-bench2.pem",),
     "handeye": ("calibctl handeye motions.csv --from base_link --to camera --input poses -o X.json",
                 "calibctl handeye arm_poses.csv --from gripper --to camera --images shots/ --serial CAM-0042 "
                 "--eye-in-hand --tf-static X_tf.yaml"),

@@ -31,6 +31,8 @@ def lint(
                                             "design baseline, epipolar, loop closure, members.")] = None,
     fmt: Annotated[str, typer.Option("--format", help="text | json | github (workflow annotations)")] = "text",
     json_output: Annotated[bool, typer.Option("--json", help="Same as --format json.")] = False,
+    require_signature: Annotated[bool, typer.Option("--require-signature", help="Anything not signed by a trusted key is an error.")] = False,
+    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
 ) -> None:
     """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
     from calibctl.workflows import lint as lint_workflow
@@ -40,8 +42,9 @@ def lint(
     if wants_json(ctx, json_output):
         fmt = "json"
     st = state(ctx)
-    results = lint_workflow.lint(st.settings(), files or [], serial, all_serials) if (
-        files or serial or all_serials or not rig) else []
+    results = lint_workflow.lint(
+        st.settings(), files or [], serial, all_serials, require_signature=require_signature, trusted_keys=trusted_keys
+    ) if (files or serial or all_serials or not rig) else []
     if rig:
         from calibctl.workflows.rig_lint import lint_rig
 

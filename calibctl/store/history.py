@@ -15,7 +15,8 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.errors import NotFoundError, UsageError
-from calibctl.store import codec
+from calibctl.signing import Signer
+from calibctl.store import chain, codec, counters
 from calibctl.store.models import ArtifactRow, EventRow
 
 
@@ -55,7 +56,11 @@ def active_in(s: Session, serial: str) -> int | None:
     return s.scalar(select(EventRow.version).where(EventRow.serial == serial).order_by(EventRow.id.desc()).limit(1))
 
 
-def append_event(s: Session, serial: str, version: int, kind: str, actor: str, station: str, reason: str) -> ActivationEvent:
+def append_event(
+    s: Session, serial: str, version: int, kind: str, actor: str, station: str, reason: str, signer: Signer | None
+) -> ActivationEvent:
+    """Append one event to the store's event log (one hash chain; its counter row is the chain's lock)."""
+    counters.next_value(s, "chain", "event")
     row = EventRow(
         serial=serial,
         version=version,
@@ -66,6 +71,7 @@ def append_event(s: Session, serial: str, version: int, kind: str, actor: str, s
         at=utc_now(),
         reason=reason,
     )
+    chain.link(s, chain.STREAMS["event"], row, signer)
     s.add(row)
     s.flush()
     return codec.decode_event(row)

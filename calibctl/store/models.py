@@ -69,7 +69,20 @@ class Base(DeclarativeBase):
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
 
 
-class BoardRow(Base):
+class ChainColumns:
+    """The hash chain and signature of an immutable record (revision 0005; see ``store.chain``).
+
+    Nullable only because rows are written before 0005 are chained by its migration; ``db verify``
+    reports any row without a chain hash as inserted outside calibctl."""
+
+    chain_seq: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    chain_prev: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
+    chain_hash: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
+    signature: Mapped[str | None] = mapped_column(Text, nullable=True)
+    key_id: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
+
+
+class BoardRow(ChainColumns, Base):
     """One immutable board revision."""
 
     __tablename__ = "board_revisions"
@@ -87,6 +100,7 @@ class BoardRow(Base):
     __table_args__ = (
         UniqueConstraint("name", "revision"),
         CheckConstraint("revision >= 1", name="revision_positive"),
+        Index(None, "name", "chain_seq", unique=True),
     )
 
 
@@ -109,7 +123,7 @@ class SessionRow(Base):
     __table_args__ = (Index(None, "serial", "started_at"),)
 
 
-class ArtifactRow(Base):
+class ArtifactRow(ChainColumns, Base):
     """One immutable calibration version of one serial."""
 
     __tablename__ = "calibration_artifacts"
@@ -135,10 +149,11 @@ class ArtifactRow(Base):
         CheckConstraint("status IN ('accepted', 'rejected')", name="status_known"),
         Index(None, "status"),
         Index(None, "station", "created_at"),
+        Index(None, "serial", "chain_seq", unique=True),
     )
 
 
-class EventRow(Base):
+class EventRow(ChainColumns, Base):
     """One append-only move of a serial's active version."""
 
     __tablename__ = "activation_events"
@@ -159,6 +174,7 @@ class EventRow(Base):
         ),
         CheckConstraint("kind IN ('activate', 'rollback')", name="kind_known"),
         Index(None, "serial", "id"),
+        Index(None, "chain_seq", unique=True),
     )
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy import exc as sa_exc
@@ -30,7 +30,8 @@ from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
-from calibctl.store import codec, counters, history, images, migrate
+from calibctl.signing import Signer, TrustedKeys
+from calibctl.store import audit, chain, codec, counters, history, images, migrate
 from calibctl.store.engine import (
     WRITE_OPTION,
     as_database_error,
@@ -41,10 +42,11 @@ from calibctl.store.engine import (
 )
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.images import ImageStoreMixin
-from calibctl.store.models import ArtifactRow, BoardRow, EventRow, ImageRow, SessionRow
+from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
 from calibctl.store.rigs import RigStoreMixin
 
 T = TypeVar("T")
+R = TypeVar("R", bound=Base)
 MAX_ATTEMPTS = 5
 _GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
 
@@ -62,15 +64,17 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
 class Store(ImageStoreMixin, RigStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
-    def __init__(self, engine: Engine, image_dir: Path) -> None:
+    def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None) -> None:
         self._engine = engine
+        self.signer = signer
         self._write_engine = engine.execution_options(**{WRITE_OPTION: True})
         self.image_dir = image_dir
 
     @classmethod
-    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None) -> Store:
+    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None, signer: Signer | None = None) -> Store:
         """Open the store at ``url``. A new (absent or empty) database is created at the newest schema
-        revision when ``create``; an older revision is refused with DatabaseOutOfDateError."""
+        revision when ``create``; an older revision is refused with DatabaseOutOfDateError. With a
+        ``signer`` every board revision, artifact and event written is signed."""
         engine = _make_engine(url)
         try:
             state = migrate.read_state(engine)
@@ -83,7 +87,7 @@ class Store(ImageStoreMixin, RigStoreMixin):
         except BaseException:
             engine.dispose()
             raise
-        return cls(engine, image_dir or images.default_image_dir(engine.url))
+        return cls(engine, image_dir or images.default_image_dir(engine.url), signer)
 
     @property
     def url(self) -> str:
@@ -121,6 +125,11 @@ class Store(ImageStoreMixin, RigStoreMixin):
                 raise mapped from exc
         raise DatabaseError(f"the database {self.url} kept refusing the transaction")  # pragma: no cover
 
+    def _linked(self, stream: str, s: Session, row: R) -> R:
+        """``row`` with its chain (and, with a key, signature) columns set; the caller holds the stream's lock."""
+        chain.link(s, chain.STREAMS[stream], row, self.signer)
+        return row
+
     # boards --------------------------------------------------------------------------------------
 
     def add_board(self, board: BoardRevision) -> BoardRevision:
@@ -142,7 +151,7 @@ class Store(ImageStoreMixin, RigStoreMixin):
                         "register a different pattern under a new name",
                     )
             stored = board.model_copy(update={"revision": revision})
-            s.add(codec.board_row(stored))
+            s.add(self._linked("board", s, codec.board_row(stored)))
             s.flush()
             return stored
 
@@ -251,10 +260,10 @@ class Store(ImageStoreMixin, RigStoreMixin):
         def work(s: Session) -> CalibrationArtifact:
             version = counters.next_value(s, "artifact", artifact.serial)
             stored = artifact.model_copy(update={"version": version}).sealed()
-            s.add(codec.artifact_row(stored, utc_now()))
+            s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
             s.flush()
             if activate:
-                history.append_event(s, artifact.serial, version, "activate", actor, station, reason)
+                history.append_event(s, artifact.serial, version, "activate", actor, station, reason, self.signer)
             return stored
 
         return self._run(work, write=True)
@@ -288,11 +297,11 @@ class Store(ImageStoreMixin, RigStoreMixin):
                     )
                 stored = codec.decode_artifact(row)
             else:
-                s.add(codec.artifact_row(artifact, utc_now()))
+                s.add(self._linked("artifact", s, codec.artifact_row(artifact, utc_now())))
                 s.flush()
                 stored = artifact
             if activate and history.active_in(s, artifact.serial) != artifact.version:
-                history.append_event(s, artifact.serial, artifact.version, "activate", actor, station, why)
+                history.append_event(s, artifact.serial, artifact.version, "activate", actor, station, why, self.signer)
             return stored
 
         return self._run(work, write=True, retry_conflicts=True)
@@ -337,6 +346,39 @@ class Store(ImageStoreMixin, RigStoreMixin):
 
         return self._run(work)
 
+    def active_artifacts(self) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+        """The active version of every serial in three bulk queries (no per-serial round trip), each checked
+        by its chain hash (an IntegrityError in its place when that fails), and version -> status of
+        every serial with nothing active."""
+
+        def work(s: Session) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+            latest = select(EventRow.serial, func.max(EventRow.id).label("id")).group_by(EventRow.serial).subquery()
+            active = select(EventRow.serial, EventRow.version).join(latest, EventRow.id == latest.c.id).subquery()
+            rows = s.scalars(
+                select(ArtifactRow)
+                .join(active, (ArtifactRow.serial == active.c.serial) & (ArtifactRow.version == active.c.version))
+                .execution_options(yield_per=1000)
+            )
+            found: dict[str, CalibrationArtifact | IntegrityError] = {}
+            for row in rows:
+                try:
+                    art = codec.decode_artifact(row, by_chain=True)
+                    if art.status != "accepted":
+                        raise IntegrityError(f"the active version of {art.serial} is {art.ref}, which is not accepted: "
+                                             "the activation log was changed outside calibctl", codec.TAMPER_HINT)
+                    found[row.serial] = art
+                except IntegrityError as exc:
+                    found[row.serial] = exc
+            inactive: dict[str, dict[int, str]] = {}
+            listing = select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status).order_by(
+                ArtifactRow.serial, ArtifactRow.version
+            )
+            for serial, version, status in s.execute(listing.where(ArtifactRow.serial.not_in(select(active.c.serial)))):
+                inactive.setdefault(serial, {})[int(version)] = str(status)
+            return found, inactive
+
+        return self._run(work)
+
     def serials(self) -> list[str]:
         return self._run(lambda s: list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial))))
 
@@ -364,7 +406,7 @@ class Store(ImageStoreMixin, RigStoreMixin):
             if history.active_in(s, serial) == to_version:
                 raise UsageError(f"{serial}@{to_version} is already the active version; nothing to roll back")
             codec.decode_artifact(history.artifact_row(s, serial, to_version))  # never activate tampered bytes
-            return history.append_event(s, serial, to_version, "rollback", actor, station, reason)
+            return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)
 
@@ -387,29 +429,7 @@ class Store(ImageStoreMixin, RigStoreMixin):
 
         return self._run(work)
 
-    def verify(self) -> list[str]:
-        """Re-hash every artifact, board revision and session; one line per problem (empty: all intact)."""
-
-        def work(s: Session) -> list[str]:
-            problems: list[str] = []
-            checks: list[tuple[Any, Callable[[Any], object], tuple[Any, ...]]] = [
-                (BoardRow, codec.decode_board, (BoardRow.name, BoardRow.revision)),
-                (SessionRow, codec.decode_session, (SessionRow.started_at, SessionRow.session_id)),
-                (ArtifactRow, codec.decode_artifact, (ArtifactRow.serial, ArtifactRow.version)),
-            ]
-            for model, decode, order in checks:
-                for row in s.scalars(select(model).order_by(*order).execution_options(yield_per=200)):
-                    try:
-                        decode(row)
-                    except IntegrityError as exc:
-                        problems.append(exc.message)
-            bad_events = s.execute(
-                select(EventRow.id, EventRow.serial, EventRow.version)
-                .join(ArtifactRow, (ArtifactRow.serial == EventRow.serial) & (ArtifactRow.version == EventRow.version))
-                .where(ArtifactRow.status != "accepted")
-                .order_by(EventRow.id)
-            ).all()
-            problems += [f"activation event {i} activates {sn}@{v}, which is not accepted" for i, sn, v in bad_events]
-            return problems
-
-        return self._run(work)
+    def verify(self, trusted: TrustedKeys | None = None, *, require_signature: bool = False, since: str | None = None) -> audit.Audit:
+        """Every chain, signature, counter, event and stored hash (see ``store.audit``); with ``since``
+        (a chain head) only what was written after it, once the head is proven unchanged."""
+        return self._run(lambda s: audit.run(s, trusted or TrustedKeys(), require_signature=require_signature, since=since))

@@ -22,6 +22,7 @@ from calibctl.config import Settings
 from calibctl.core.board_spec import BOARD_KINDS, BoardSpec
 from calibctl.errors import InputError, UsageError
 from calibctl.store.repository import Store
+from calibctl.workflows import keys
 
 _MEASUREMENT_FLAGS = {
     "uncertainty_mm": "--uncertainty-mm",
@@ -147,7 +148,7 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
 def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
     """Register ``reg`` as the next revision of its name; returns what was stored (with its revision)."""
     board = build_board(reg, created_by=settings.operator)
-    with Store.open(settings.db_url) as store:
+    with Store.open(settings.db_url, signer=keys.signer_of(settings)) as store:
         return store.add_board(board)
 
 

@@ -1,14 +1,16 @@
-"""Database use cases: where the store's schema stands, migrating it, and re-hashing everything in it."""
+"""Database use cases: where the store's schema stands, migrating it, and auditing everything in it."""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 from calibctl.config import Settings
 from calibctl.store import migrate
 from calibctl.store.engine import display_url
 from calibctl.store.repository import Store
+from calibctl.workflows import keys
 
 _STATUS_WORDS = {
     "absent": "no database yet; it is created at head on first use (or by `calibctl db upgrade`)",
@@ -55,6 +57,12 @@ class VerifyReport:
     url: str
     counts: dict[str, int]
     problems: list[str] = field(default_factory=list)
+    head: str = ""
+    since: str | None = None
+    records_checked: int = 0
+    signatures_checked: int = 0
+    unsigned: int = 0
+    trusted_keys: int = 0
 
     @property
     def ok(self) -> bool:
@@ -81,7 +89,14 @@ def upgrade(settings: Settings) -> UpgradeResult:
     return UpgradeResult(display_url(settings.db_url), before, after)
 
 
-def verify(settings: Settings) -> VerifyReport:
-    """Re-hash every artifact, board revision and session; the report lists each mismatch."""
+def verify(
+    settings: Settings, *, trusted_keys: Path | None = None, require_signature: bool = False, since: str | None = None
+) -> VerifyReport:
+    """Check every chain, signature, counter, event and stored hash (or only what came after ``since``)."""
+    trusted = keys.trusted_of(settings, trusted_keys)
     with Store.open(settings.db_url, create=False) as store:
-        return VerifyReport(store.url, store.counts(), store.verify())
+        audit = store.verify(trusted, require_signature=require_signature, since=since)
+        return VerifyReport(
+            store.url, store.counts(), audit.problems, audit.head(), since, audit.records_checked,
+            audit.signatures_checked, audit.unsigned, len(trusted.keys),
+        )

@@ -56,10 +56,11 @@ def _opencv_text(art: CalibrationArtifact) -> str:
 
 def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None) -> str:
     """The artifact as text in ``fmt``; ``camera_name`` is the ROS camera name (default: from the serial)."""
+    document = art.model_dump(mode="json", exclude={"signature"} if art.signature is None else None)
     if fmt == "json":
-        return json.dumps(art.model_dump(mode="json"), indent=2, allow_nan=False) + "\n"
+        return json.dumps(document, indent=2, allow_nan=False) + "\n"
     if fmt == "yaml":
-        return yaml.safe_dump(art.model_dump(mode="json"), sort_keys=False)
+        return yaml.safe_dump(document, sort_keys=False)
     if fmt == "ros":
         info = ros_camera_info.camera_info(art, camera_name)
         return trace_header.stamp(art, yaml.safe_dump(info, sort_keys=False, default_flow_style=None))

@@ -26,8 +26,9 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks
-from calibctl.errors import InputError, NotFoundError, UsageError
-from calibctl.workflows import formats, ros_camera_info
+from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
+from calibctl.signing import TrustedKeys
+from calibctl.workflows import formats, keys, ros_camera_info
 
 
 @dataclass
@@ -135,8 +136,10 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
     )
 
 
-def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
-    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump)."""
+def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = False) -> CalibrationFacts:
+    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump). A
+    ``validated`` document (parsed by the contract, which refuses NaN and infinity) skips the walk over
+    every number that the ``finite`` rule needs for files."""
     size = data.get("image_size")
     stdev = data.get("stdev") or {}
     held = data.get("held_out") or {}
@@ -155,7 +158,7 @@ def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
         camera_consistency=data.get("camera_consistency"),
-        raw_numbers=_numbers(data),
+        raw_numbers=[] if validated else _numbers(data),
     )
 
 
@@ -348,18 +351,18 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
 
 
 def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
-    """Every rule for a stored calibration (the same rules as for its JSON export)."""
-    return lint_file(formats.CalibrationFile(art.ref, "calibctl", art.model_dump(mode="json"), None), limits)
+    """Every rule for a stored calibration (rig members use it too)."""
+    return _lint_stored(art, limits, None)
 
 
 def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
     return [lint_file(formats.load_calibration(p), limits) for p in paths]
 
 
-def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> LintResult:
+def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
     """A serial with nothing active is a finding: the camera has no calibration a robot may load."""
-    accepted = [a.version for a in versions if a.status == "accepted"]
-    listing = ", ".join(f"{a.version} ({a.status})" for a in versions)
+    accepted = [v for v, st in statuses.items() if st == "accepted"]
+    listing = ", ".join(f"{v} ({st})" for v, st in statuses.items())
     if accepted:
         message, fix = (f"{serial} has no active version (versions: {listing})",
                         f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'")
@@ -370,29 +373,91 @@ def _no_active_version(serial: str, versions: list[CalibrationArtifact]) -> Lint
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
-def lint_store(settings: Settings, serial: str | None, all_serials: bool) -> list[LintResult]:
+def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
+    """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
+    document rules (schema, content-hash) are not run again."""
+    data = art.model_dump(mode="json")
+    findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
+    result = LintResult(art.ref, "calibctl", findings)
+    if trusted is not None:
+        _signature_rule(result, art, trusted)
+    return result
+
+
+def lint_store(
+    settings: Settings, serial: str | None, all_serials: bool, trusted: TrustedKeys | None = None
+) -> list[LintResult]:
     """Lint the active version of one serial, or of every serial in the store (an empty store is an error:
-    a CI job pointed at the wrong --db must not pass with nothing checked)."""
+    a CI job pointed at the wrong --db must not pass with nothing checked).
+
+    ``--all`` reads in bulk: every active version in one query, each checked by its record's chain hash
+    (sha256 over its stored bytes and columns; a mismatch is a ``content-hash`` error for that serial, the
+    others are still linted); ``--serial`` re-derives the content hash as every single read does."""
     from calibctl.workflows.records import open_store
 
     with open_store(settings) as store:
-        serials = store.serials() if all_serials else [serial] if serial else []
-        if not serials:
+        if all_serials:
+            active, inactive = store.active_artifacts()
+        else:
+            versions: dict[int, str] = {a.version: a.status for a in store.list_artifacts(serial or "")}
+            found = store.get_artifact(serial or "", None) if store.active_version(serial or "") is not None else None
+            active, inactive = ({found.serial: found}, {}) if found else ({}, {serial or "": versions})
+        if not active and not inactive:
             raise NotFoundError(f"nothing to lint: the store {store.url} holds no calibrations",
                                 "check --db / CALIBCTL_DB, or calibrate a camera first")
-        results = []
-        for s in serials:
-            if store.active_version(s) is None:
-                results.append(_no_active_version(s, store.list_artifacts(s)))
-                continue
-            results.append(lint_artifact(store.get_artifact(s, None), settings.lint))
+    results = []
+    for name in sorted([*active, *inactive]):
+        found_or_error = active.get(name)
+        if found_or_error is None:
+            results.append(_no_active_version(name, inactive[name]))
+        elif isinstance(found_or_error, IntegrityError):
+            finding = Finding(rule="content-hash", severity="error", message=found_or_error.message,
+                              fix=found_or_error.hint)
+            results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
+        else:
+            results.append(_lint_stored(found_or_error, settings.lint, trusted))
     return results
 
 
-def lint(settings: Settings, paths: list[Path], serial: str | None, all_serials: bool) -> list[LintResult]:
+def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+    """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
+    if isinstance(art, dict):
+        try:
+            art = CalibrationArtifact.model_validate(art)
+        except ValidationError:
+            problem: str | None = "cannot be checked: it is not a valid artifact"
+        else:
+            problem = keys.signature_problem(art, trusted)
+    else:
+        problem = keys.signature_problem(art, trusted)
+    if problem is not None:
+        fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
+        result.findings.append(Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix))
+
+
+def lint(
+    settings: Settings,
+    paths: list[Path],
+    serial: str | None,
+    all_serials: bool,
+    *,
+    require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> list[LintResult]:
+    """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
+    is a ``signature`` error (ROS and OpenCV exports carry no signature: lint the artifact export)."""
     if not paths and not serial and not all_serials:
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
-    results = lint_files(paths, settings.lint)
+    trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
+    if trusted is not None and not trusted.keys:
+        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+    results = []
+    for path in paths:
+        loaded = formats.load_calibration(path)
+        result = lint_file(loaded, settings.lint)
+        if trusted is not None:
+            _signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
+        results.append(result)
     if serial or all_serials:
-        results += lint_store(settings, serial, all_serials)
+        results += lint_store(settings, serial, all_serials, trusted)
     return results

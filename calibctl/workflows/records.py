@@ -13,7 +13,7 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store.repository import Store
-from calibctl.workflows import formats
+from calibctl.workflows import formats, keys
 
 _KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
 _ARTIFACT_REF = re.compile(r"^(?P<serial>.+?)(?:@(?P<version>[0-9]+))?$")
@@ -28,10 +28,11 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     return match.group("serial"), int(version) if version else None
 
 
-def open_store(settings: Settings, *, create: bool = False) -> Store:
+def open_store(settings: Settings, *, create: bool = False, write: bool = False) -> Store:
     """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
-    new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked)."""
-    return Store.open(settings.db_url, create=create)
+    new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
+    Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
+    return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None)
 
 
 @dataclass
@@ -149,14 +150,18 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
     return art
 
 
-def import_file(settings: Settings, path: Path, *, activate: bool) -> CalibrationArtifact:
+def import_file(
+    settings: Settings, path: Path, *, activate: bool, require_signature: bool = False, trusted_keys: Path | None = None
+) -> CalibrationArtifact:
+    """Import an exported artifact; with ``require_signature`` only one signed by a trusted key."""
     art = read_artifact_file(path)
-    with open_store(settings, create=True) as store:
+    keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
+    with open_store(settings, create=True, write=True) as store:
         return store.import_artifact(art, actor=settings.operator, station=settings.station, activate=activate)
 
 
 def rollback(settings: Settings, serial: str, to_version: int, reason: str) -> ActivationEvent:
     if not reason.strip():
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         return store.rollback(serial, to_version, reason=reason, actor=settings.operator, station=settings.station)

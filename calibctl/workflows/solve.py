@@ -251,7 +251,7 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if not request.session_id and not request.serial:
         raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         session = (
             store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
         )

@@ -12,7 +12,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.tamper import patch_stored_bytes
 
-HEAD = "0003_rigs"
+HEAD = "0005_chains_signatures"
 runner = CliRunner()
 
 
@@ -64,9 +64,10 @@ def test_verify_exits_0_when_intact_and_1_naming_each_mismatch(db_url: str):
     patch_stored_bytes(db_url, "calibration_artifacts", stdev_b + "137", stdev_b + "138")
     result = db(db_url, "verify")
     assert result.exit_code == 1
-    assert "MISMATCH CAM-B@1 does not match its recorded sha256" in result.stdout
-    assert "CAM-A" not in result.stdout.replace("MISMATCH CAM-B", "")
-    assert "verified 2 artifacts" in result.stdout and "1 mismatch(es)" in result.stdout
+    assert "PROBLEM CAM-B@1 does not match its recorded sha256" in result.stdout
+    assert "PROBLEM CAM-B@1 was changed after it was written" in result.stdout
+    assert "CAM-A" not in result.stdout.replace("PROBLEM CAM-B", "")
+    assert "verified 2 artifacts" in result.stdout and "2 problem(s)" in result.stdout
 
 
 def test_verify_of_a_missing_database_exits_2(sqlite_url: str):

@@ -53,7 +53,7 @@ def test_concurrent_processes_get_distinct_versions_and_lose_nothing(db_url: str
         events = store.events("CAM-9")
         assert [a.version for a in stored] == list(range(1, total + 1))
         assert store.active_version("CAM-9") == total
-        assert store.verify() == []
+        assert store.verify().problems == []
     # Activation events were serialised too: each one names the version active just before it.
     assert [e.previous_version for e in events] == [None] + [e.version for e in events[:-1]]
 
@@ -73,7 +73,7 @@ def test_a_writer_killed_before_commit_leaves_no_artifact_and_no_half_version(db
         assert [a.version for a in store.list_artifacts("CAM-K")] == [1]
         assert [e.version for e in store.events("CAM-K")] == [1]
         assert store.active_version("CAM-K") == 1
-        assert store.verify() == []
+        assert store.verify().problems == []
         assert store.add_artifact(calibration(serial="CAM-K"), activate=True, **WHO).version == 2
 
 

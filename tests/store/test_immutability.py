@@ -99,12 +99,14 @@ def test_tampered_artifact_bytes_are_caught_on_read_and_by_verify(filled: str):
         with pytest.raises(IntegrityError, match="CAM-0001@1"):
             store.list_artifacts("CAM-0001")
         assert store.get_artifact("CAM-0001", 2).version == 2  # an intact version still reads
-        problems = store.verify()
-    assert len(problems) == 1 and problems[0].startswith("CAM-0001@1 does not match its recorded sha256")
+        problems = store.verify().problems
+    assert len(problems) == 2
+    assert problems[0] == "CAM-0001@1 was changed after it was written (its chain hash no longer matches)"
+    assert problems[1].startswith("CAM-0001@1 does not match its recorded sha256")
     result = CliRunner().invoke(app, ["--db", filled, "db", "verify"])
     assert result.exit_code == 1, result.output
-    assert "MISMATCH CAM-0001@1 does not match its recorded sha256" in result.stdout
-    assert "1 stored record(s) do not match their sha256" in result.stderr
+    assert "PROBLEM CAM-0001@1 does not match its recorded sha256" in result.stdout
+    assert "2 problem(s) in the stored history" in result.stderr
 
 
 def test_tampered_board_revision_is_caught_on_read_and_by_verify(db_url: str):
@@ -116,8 +118,8 @@ def test_tampered_board_revision_is_caught_on_read_and_by_verify(db_url: str):
         with pytest.raises(IntegrityError, match=r"board A17@1 does not match its recorded sha256"):
             store.get_board("A17")
         assert store.get_board("B2").name == "B2"
-        problems = store.verify()
-    assert [p.split(" does not")[0] for p in problems] == ["board A17@1"]
+        problems = store.verify().problems
+    assert sorted(p.split(" was changed")[0].split(" does not")[0] for p in problems) == ["board A17@1", "board A17@1"]
 
 
 def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
@@ -127,7 +129,7 @@ def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
     with Store.open(db_url) as store:
         with pytest.raises(IntegrityError, match="capture session 0123456789ab does not match"):
             store.get_session("0123456789ab")
-        assert len(store.verify()) == 1
+        assert len(store.verify().problems) == 1
 
 
 def test_forged_activation_of_a_rejected_version_is_caught(filled: str):
@@ -135,8 +137,12 @@ def test_forged_activation_of_a_rejected_version_is_caught(filled: str):
     with Store.open(filled) as store:
         with pytest.raises(IntegrityError, match="active version of CAM-0001 is CAM-0001@2, which is not accepted"):
             store.get_artifact("CAM-0001")
-        problems = store.verify()
-    assert problems == ["activation event 2 activates CAM-0001@2, which is not accepted"]
+        problems = store.verify().problems
+    assert problems == [
+        "activation event 2 (CAM-0001@2, rollback) has no chain hash: it was inserted outside calibctl",
+        "activation event 2 (CAM-0001@2, rollback) activates CAM-0001@2, which is not accepted",
+        "activation event 2 (CAM-0001@2, rollback) says None was active before it, but the log says 1",
+    ]
     result = CliRunner().invoke(app, ["--db", filled, "db", "verify", "--json"])
     assert result.exit_code == 1
     report = json.loads(result.stdout)
@@ -146,7 +152,7 @@ def test_forged_activation_of_a_rejected_version_is_caught(filled: str):
 
 def test_intact_store_verifies_clean(filled: str):
     with Store.open(filled) as store:
-        assert store.verify() == []
+        assert store.verify().problems == []
     result = CliRunner().invoke(app, ["--db", filled, "db", "verify"])
     assert result.exit_code == 0, result.output
     assert "verified 2 artifacts, 1 serials, 1 boards, 1 sessions, 1 events, 0 images" in result.stdout

@@ -20,7 +20,7 @@ from tests.artifacts.factories import calibration, measured_board
 from tests.store.documents import capture_session
 
 WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
-FIRST, SECOND, HEAD = "0001_initial", "0002_image_retention", "0003_rigs"
+FIRST, SECOND, HEAD = "0001_initial", "0002_image_retention", "0005_chains_signatures"
 
 
 def _diff(url: str, metadata: MetaData) -> list:
@@ -73,7 +73,7 @@ def test_upgrade_downgrade_upgrade_keeps_the_data(db_url: str):
         assert store.get_board("A17") == before["board"]
         assert store.get_artifact("CAM-0001") == before["artifact"]
         assert store.get_session("0123456789ab") == before["session"]
-        assert store.verify() == []
+        assert store.verify().problems == []
         assert store.counts()["images"] == 0  # the images table is what 0002 adds; its rows went with it
     # the triggers of 0001 survived 0002's downgrade and upgrade
     engine = make_engine(db_url)

@@ -1,0 +1,201 @@
+"""``db verify``: every chain, signature, counter and activation event, in bulk reads.
+
+Checked for every chained stream (see ``chain``): positions 1..N with no gap or duplicate, each
+record's ``chain_prev`` equal to the hash of the record before it, its ``chain_hash`` recomputed from
+its columns, ids increasing along the chain (reads order events by id), versions strictly increasing,
+the version counter equal to the highest version, and the signature by a trusted key. Activation
+events must name an accepted artifact and the version that was active before them. Documents are
+re-hashed by ``codec`` (content hash and column copies) as on every read.
+
+A *chain head* (``HEAD``) is ``calibctl-head-v1:<ids>:<digest>``: the highest row id of every chained
+table and a sha256 over the last (position, hash) of every stream at that point. ``--since HEAD``
+proves the heads are still the ones HEAD names (so nothing before it was rewritten or truncated
+without re-chaining, and re-chaining needs the signing key), then checks only the rows written
+after it in full; the small columns of older activation events are still read to check new events.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from sqlalchemy import and_, func, select
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import jcs_bytes, sha256_hex
+from calibctl.errors import IntegrityError, UsageError
+from calibctl.signing import TrustedKeys, record_message
+from calibctl.store import chain, codec
+from calibctl.store.models import ArtifactRow, CounterRow, EventRow, SessionRow
+
+HEAD_PREFIX = "calibctl-head-v1"
+_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board}
+_VERSION = {"artifact": "version", "board": "revision"}
+
+
+@dataclass
+class Audit:
+    problems: list[str] = field(default_factory=list)
+    unsigned: int = 0
+    signatures_checked: int = 0
+    records_checked: int = 0
+    heads: dict[str, dict[tuple[Any, ...], tuple[int, str]]] = field(default_factory=dict)
+    last_ids: dict[str, int] = field(default_factory=dict)
+
+    def head(self) -> str:
+        return make_head(self.last_ids, self.heads)
+
+
+def _digest(heads: dict[str, dict[tuple[Any, ...], tuple[int, str]]]) -> str:
+    flat = sorted([name, list(key), seq, digest] for name, by_key in heads.items() for key, (seq, digest) in by_key.items())
+    return sha256_hex(jcs_bytes(flat))
+
+
+def make_head(last_ids: dict[str, int], heads: dict[str, dict[tuple[Any, ...], tuple[int, str]]]) -> str:
+    ids = ".".join(str(last_ids.get(name, 0)) for name in chain.STREAMS)
+    return f"{HEAD_PREFIX}:{ids}:{_digest(heads)}"
+
+
+def parse_head(text: str) -> tuple[dict[str, int], str]:
+    parts = text.strip().split(":")
+    ids = parts[1].split(".") if len(parts) == 3 else []
+    if len(parts) != 3 or parts[0] != HEAD_PREFIX or len(ids) != len(chain.STREAMS) or not all(i.isdigit() for i in ids):
+        raise UsageError(f"'{text}' is not a chain head", "pass what `calibctl db verify --head` printed")
+    return dict(zip(chain.STREAMS, (int(i) for i in ids), strict=True)), parts[2]
+
+
+def _heads_at(s: Session, stream: chain.Stream, last_id: int) -> dict[tuple[Any, ...], tuple[int, str]]:
+    """The last (seq, hash) of each stream among rows with id <= last_id (one grouped query)."""
+    t = stream.table
+    keys = [t.c[k] for k in stream.key]
+    latest = select(*keys, func.max(t.c.chain_seq).label("seq")).where(t.c.id <= last_id).group_by(*keys).subquery()
+    joined = and_(*(t.c[k] == latest.c[k] for k in stream.key), t.c.chain_seq == latest.c.seq)
+    rows = s.execute(select(*keys, t.c.chain_seq, t.c.chain_hash).join(latest, joined)).all()
+    return {tuple(r[: len(keys)]): (int(r[-2]), str(r[-1])) for r in rows if r[-2] is not None}
+
+
+def _check_signature(
+    audit: Audit, stream: chain.Stream, row: Any, trusted: TrustedKeys, require: bool, after_signed: bool
+) -> None:
+    """``after_signed``: a record before it in its stream is signed. Once a store signs, every writer must:
+    an unsigned record there is what a forger without the key would add."""
+    if not row["signature"] and not row["key_id"]:
+        audit.unsigned += 1
+        if require or after_signed:
+            why = "" if require else ", but records before it in its chain are"
+            audit.problems.append(f"{stream.label(row)} is not signed{why}")
+        return
+    if not trusted.keys:
+        return  # nothing to check against; the report says signatures were not checked
+    subject = row[stream.subject] if stream.subject else None
+    problem = trusted.check(row["key_id"], row["signature"], record_message(str(row["chain_hash"]), subject))
+    audit.signatures_checked += 1
+    if problem is not None:
+        audit.problems.append(f"{stream.label(row)} {problem}")
+
+
+def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dict[tuple[Any, ...], tuple[int, str]],
+          trusted: TrustedKeys, require: bool) -> None:
+    """Check one chained table's rows with id > since, stream by stream, in chain order."""
+    t = stream.table
+    order = [t.c[k] for k in stream.key] + [t.c.chain_seq, t.c.id]
+    heads = audit.heads.setdefault(stream.name, dict(start))
+    key: tuple[Any, ...] | None = None
+    seq, prev, last_id, last_version, signed = 0, None, 0, 0, False
+    version_col = _VERSION.get(stream.name)
+    for row in s.execute(select(t).where(t.c.id > since).order_by(*order).execution_options(yield_per=500)).mappings():
+        audit.records_checked += 1
+        label = stream.label(row)
+        audit.last_ids[stream.name] = max(audit.last_ids.get(stream.name, 0), int(row["id"]))
+        if stream.key_of(row) != key:
+            key = stream.key_of(row)
+            seq, prev = start.get(key, (0, None))
+            last_id, last_version, signed = 0, 0, False
+        if row["chain_hash"] is None or row["chain_seq"] is None:
+            audit.problems.append(f"{label} has no chain hash: it was inserted outside calibctl")
+            continue
+        if row["chain_seq"] == seq:
+            audit.problems.append(f"{label} duplicates position {seq} of its chain")
+        elif row["chain_seq"] != seq + 1:
+            audit.problems.append(f"{label} is at chain position {row['chain_seq']} but {seq + 1} was expected: "
+                                  "records before it are missing")
+        elif row["chain_prev"] != prev:
+            audit.problems.append(f"{label} does not follow the record before it: a record was deleted, inserted "
+                                  "or rewritten there")
+        actual = chain.record_hash(stream, key, int(row["chain_seq"]), row["chain_prev"], chain.body(row))
+        if actual != row["chain_hash"]:
+            audit.problems.append(f"{label} was changed after it was written (its chain hash no longer matches)")
+        if int(row["id"]) <= last_id:
+            audit.problems.append(f"{label} is out of order (its id is lower than the record before it)")
+        if version_col is not None:
+            if int(row[version_col]) <= last_version:
+                audit.problems.append(f"{label}: {version_col} {row[version_col]} repeats or goes back along the chain")
+            last_version = int(row[version_col])
+        _check_signature(audit, stream, row, trusted, require, signed)
+        signed = signed or bool(row["signature"])
+        seq, prev, last_id = int(row["chain_seq"]), str(row["chain_hash"]), int(row["id"])
+        heads[key] = (seq, prev)
+
+
+def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
+    scope, column = stream.counter
+    t = stream.table
+    keys = [t.c[k] for k in stream.key]
+    highest = {tuple(r[:-1]): int(r[-1]) for r in s.execute(select(*keys, func.max(t.c[column])).group_by(*keys)) if r[-1]}
+    counters = {str(k): int(v) for k, v in s.execute(select(CounterRow.key, CounterRow.last_value).where(CounterRow.scope == scope))}
+    for key, value in highest.items():
+        name = stream.counter_key(key)
+        if counters.get(name) != value:
+            audit.problems.append(f"the {scope} counter of {name} is {counters.get(name)} but the highest {column} "
+                                  f"stored is {value}: the counter or the records were changed")
+
+
+def _check_events(s: Session, audit: Audit, since: int) -> None:
+    status = {(sn, int(v)): st for sn, v, st in s.execute(select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status))}
+    active: dict[str, int] = {}
+    rows = s.execute(select(EventRow.id, EventRow.serial, EventRow.version, EventRow.previous_version, EventRow.kind)
+                     .order_by(EventRow.id)).mappings()
+    for row in rows:
+        serial, version = row["serial"], int(row["version"])
+        if row["id"] > since:
+            label = chain.STREAMS["event"].label(row)
+            if (serial, version) not in status:
+                audit.problems.append(f"{label} names {serial}@{version}, which is not stored")
+            elif status[(serial, version)] != "accepted":
+                audit.problems.append(f"{label} activates {serial}@{version}, which is not accepted")
+            if row["previous_version"] != active.get(serial):
+                audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
+                                      f"says {active.get(serial)}")
+        active[serial] = version
+
+
+def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, since: str | None = None) -> Audit:
+    """The whole audit (or, with ``since``, the part written after that chain head)."""
+    audit = Audit()
+    last_ids = {name: 0 for name in chain.STREAMS}
+    starts: dict[str, dict[tuple[Any, ...], tuple[int, str]]] = {name: {} for name in chain.STREAMS}
+    if since is not None:
+        last_ids, digest = parse_head(since)
+        starts = {name: _heads_at(s, stream, last_ids[name]) for name, stream in chain.STREAMS.items()}
+        if _digest(starts) != digest:
+            audit.problems.append("the history up to the given chain head was rewritten or truncated: its stream "
+                                  "heads no longer hash to it")
+    audit.last_ids = dict(last_ids)
+    for name, stream in chain.STREAMS.items():
+        _walk(s, audit, stream, last_ids[name], starts[name], trusted, require_signature)
+        _check_counters(s, audit, stream)
+    _check_events(s, audit, last_ids["event"])
+    for name, decode in _DECODERS.items():
+        t = chain.STREAMS[name].model
+        for row in s.scalars(select(t).where(t.id > last_ids[name]).execution_options(yield_per=500)):  # type: ignore[attr-defined]
+            try:
+                decode(row)
+            except IntegrityError as exc:
+                audit.problems.append(exc.message)
+    for session_row in s.scalars(select(SessionRow).order_by(SessionRow.started_at).execution_options(yield_per=500)):
+        try:
+            codec.decode_session(session_row)
+        except IntegrityError as exc:
+            audit.problems.append(exc.message)
+    return audit

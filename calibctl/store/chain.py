@@ -1,0 +1,144 @@
+"""Hash chains over the store's immutable records: one generic helper for every chained table.
+
+Each chained row carries ``chain_seq`` (its position in its stream, from 1), ``chain_prev`` (the
+``chain_hash`` of the record before it, NULL for the first) and ``chain_hash``:
+
+    sha256(JCS({"v": 1, "stream": NAME, "key": [KEY...], "seq": N, "prev": PREV, "record": BODY}))
+
+BODY is every column of the row except ``id`` and the chain/signature columns, with NULLs left out
+(so a nullable column added by a later migration keeps old hashes valid; setting or clearing a
+value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
+that split it: calibration artifacts per serial, board revisions per board name, activation events
+one stream for the whole store. Editing, deleting, inserting or reordering any record breaks the
+chain at the next record; rewriting a whole stream's tail is caught by signatures (the forger has
+no key) or by a chain head kept elsewhere (``db verify --head``).
+
+A new table joins with a ``Stream`` entry in ``STREAMS`` and a call to ``link`` before its insert.
+The caller holds the stream's lock (a version counter row) so concurrent writers never fork it.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Connection, MetaData, Table, select
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import jcs_bytes, sha256_hex
+from calibctl.signing import Signer, record_message
+from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow
+
+CHAIN_COLUMNS = frozenset({"chain_seq", "chain_prev", "chain_hash", "signature", "key_id"})
+UNHASHED = CHAIN_COLUMNS | {"id"}
+
+
+@dataclass(frozen=True)
+class Stream:
+    """A chained table: ``key`` names the columns that split it into streams (empty: one stream)."""
+
+    name: str
+    model: type[Base]
+    key: tuple[str, ...]
+    subject: str | None  # a content-hash column signed beside the chain hash (portable in exports)
+    label: Callable[[Mapping[Any, Any]], str]
+    counter: tuple[str, str]  # (version_counters scope, the column whose maximum the counter must equal)
+
+    @property
+    def table(self) -> Table:
+        return self.model.__table__  # type: ignore[return-value]
+
+    def key_of(self, values: Mapping[Any, Any]) -> tuple[Any, ...]:
+        return tuple(values[k] for k in self.key)
+
+    def counter_key(self, key: tuple[Any, ...]) -> str:
+        return str(key[0]) if key else self.name
+
+
+STREAMS: dict[str, Stream] = {
+    "artifact": Stream(
+        "artifact", ArtifactRow, ("serial",), "content_sha256", lambda r: f"{r['serial']}@{r['version']}",
+        ("artifact", "version"),
+    ),
+    "board": Stream(
+        "board", BoardRow, ("name",), "payload_sha256", lambda r: f"board {r['name']}@{r['revision']}", ("board", "revision")
+    ),
+    "event": Stream(
+        "event", EventRow, (), None, lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
+        ("chain", "chain_seq"),
+    ),
+}
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dt.datetime):
+        if value.tzinfo is None:  # SQLite hands back naive UTC when read below the ORM type
+            value = value.replace(tzinfo=dt.UTC)
+        return value.astimezone(dt.UTC).isoformat()
+    return value
+
+
+def body(values: Mapping[Any, Any]) -> dict[str, Any]:
+    """The hashed part of a row: every column but id and the chain columns, NULLs left out."""
+    return {n: _jsonable(v) for n, v in values.items() if n not in UNHASHED and v is not None}
+
+
+def record_hash(stream: Stream, key: tuple[Any, ...], seq: int, prev: str | None, record: dict[str, Any]) -> str:
+    envelope = {"v": 1, "stream": stream.name, "key": list(key), "seq": seq, "prev": prev, "record": record}
+    return sha256_hex(jcs_bytes(envelope))
+
+
+def head_of(s: Session, stream: Stream, key: tuple[Any, ...]) -> tuple[int, str] | None:
+    """(seq, hash) of the last record of one stream, or None when it is empty."""
+    t = stream.table
+    where = [t.c[k] == v for k, v in zip(stream.key, key, strict=True)]
+    row = s.execute(select(t.c.chain_seq, t.c.chain_hash).where(*where).order_by(t.c.chain_seq.desc()).limit(1)).first()
+    return None if row is None else (int(row[0]), str(row[1]))
+
+
+def link(s: Session, stream: Stream, row: Base, signer: Signer | None) -> None:
+    """Set the chain (and signature) columns of ``row`` before it is inserted; the caller holds the lock."""
+    values = {c.name: getattr(row, c.name) for c in stream.table.columns}
+    key = stream.key_of(values)
+    head = head_of(s, stream, key)
+    seq, prev = (1, None) if head is None else (head[0] + 1, head[1])
+    digest = record_hash(stream, key, seq, prev, body(values))
+    row.chain_seq, row.chain_prev, row.chain_hash = seq, prev, digest  # type: ignore[attr-defined]
+    if signer is not None:
+        subject = values[stream.subject] if stream.subject else None
+        row.signature = signer.sign(record_message(digest, subject))  # type: ignore[attr-defined]
+        row.key_id = signer.key_id  # type: ignore[attr-defined]
+
+
+def backfill(conn: Connection) -> None:
+    """Chain the rows written before chains existed, in id order (migration 0005; never signed: no key
+    is at hand in a migration). Tables are reflected, so later columns do not matter here."""
+    meta = MetaData()
+    for stream in STREAMS.values():
+        t = Table(stream.table.name, meta, autoload_with=conn)
+        heads: dict[tuple[Any, ...], tuple[int, str]] = {}
+        for row in conn.execute(select(t).order_by(t.c.id)).mappings().all():
+            key = stream.key_of(row)
+            seq, prev = heads.get(key, (0, None))
+            digest = record_hash(stream, key, seq + 1, prev, body(row))
+            conn.execute(t.update().where(t.c.id == row["id"]).values(chain_seq=seq + 1, chain_prev=prev, chain_hash=digest))
+            heads[key] = (seq + 1, digest)
+        if not stream.key and heads:  # a one-stream table's position is counted in version_counters
+            counters = Table("version_counters", meta, autoload_with=conn)
+            insert = (postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert)(counters)
+            conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
+
+
+def row_problem(stream: Stream, row: Base) -> str | None:
+    """None when ``row``'s chain hash matches its columns (one sha256 over them, payload included), else why
+    not. The cheap integrity check for bulk reads; ``db verify`` also checks the links and signatures."""
+    values = {c.name: getattr(row, c.name) for c in stream.table.columns}
+    if values["chain_hash"] is None or values["chain_seq"] is None:
+        return f"{stream.label(values)} has no chain hash: it was inserted outside calibctl"
+    actual = record_hash(stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values))
+    if actual != values["chain_hash"]:
+        return f"{stream.label(values)} was changed after it was written (its chain hash no longer matches)"
+    return None

@@ -1,0 +1,81 @@
+"""Signing keys: create the station's key pair, export its public key, load the keys a command needs.
+
+Without a configured key (``signing_key`` unset) records are written unsigned: a store works as it
+always did, ``db verify`` counts the unsigned records, and ``--require-signature`` refuses them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.config import Settings
+from calibctl.errors import InputError, UsageError
+from calibctl.files import write_atomic
+from calibctl.signing import Signer, TrustedKeys, create_key, load_signer, record_message
+
+_NO_KEY_HINT = "set CALIBCTL_SIGNING_KEY or signing_key in the station file, or pass --key FILE"
+
+
+def signer_of(settings: Settings) -> Signer | None:
+    """The configured private key (None when none is configured); an unreadable key is an error."""
+    return load_signer(Path(settings.signing_key)) if settings.signing_key else None
+
+
+def trusted_of(settings: Settings, folder: Path | None = None) -> TrustedKeys:
+    """The configured key's public half plus every public key in ``folder`` (or the trusted_keys setting)."""
+    chosen = folder or (Path(settings.trusted_keys) if settings.trusted_keys else None)
+    return TrustedKeys.load(chosen, signer_of(settings))
+
+
+@dataclass(frozen=True)
+class KeyInfo:
+    path: str
+    key_id: str
+    public_pem: str
+
+    def as_json(self) -> dict[str, str]:
+        return {"path": self.path, "key_id": self.key_id, "public_pem": self.public_pem}
+
+
+def _key_path(settings: Settings, key: Path | None) -> Path:
+    if key is not None:
+        return key
+    if not settings.signing_key:
+        raise UsageError("no signing key is configured", _NO_KEY_HINT)
+    return Path(settings.signing_key)
+
+
+def init_key(settings: Settings, key: Path | None, *, force: bool) -> KeyInfo:
+    """Create a key pair; the private key file gets mode 0600."""
+    signer = create_key(_key_path(settings, key), force=force)
+    return KeyInfo(str(signer.path), signer.key_id, signer.public_pem())
+
+
+def export_public(settings: Settings, key: Path | None, out: Path | None, *, force: bool) -> KeyInfo:
+    """The public key (PEM) of the signing key; written to ``out`` (e.g. into a trusted-keys folder)."""
+    signer = load_signer(_key_path(settings, key))
+    if out is not None:
+        write_atomic(out, signer.public_pem(), force=force)
+    return KeyInfo(str(signer.path), signer.key_id, signer.public_pem())
+
+
+def signature_problem(art: CalibrationArtifact, trusted: TrustedKeys) -> str | None:
+    """None when ``art`` carries a valid signature by a trusted key, else why not (``is not signed`` ...)."""
+    seal = art.signature
+    if seal is None:
+        return "is not signed"
+    return trusted.check(seal.key_id, seal.value, record_message(seal.record_sha256, art.content_sha256))
+
+
+def require_trusted(art: CalibrationArtifact, source: str, trusted: TrustedKeys, required: bool) -> None:
+    """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
+    untrusted, and always when it is signed by a trusted key but the signature does not match."""
+    problem = signature_problem(art, trusted)
+    if problem is None or (not required and "does not match" not in problem):
+        return
+    if required and not trusted.keys:
+        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+    raise InputError(f"{source} ({art.ref}) {problem}",
+                     "import only artifacts exported by a store whose public key is in --trusted-keys DIR")

@@ -1,0 +1,147 @@
+"""keys init / export-public, signed exports, and import / lint / db verify that require a trusted signature."""
+
+from __future__ import annotations
+
+import json
+import stat
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from calibctl.config import load_settings
+from calibctl.store.repository import Store
+from calibctl.workflows.keys import signer_of
+from tests.artifacts.factories import calibration
+
+runner = CliRunner()
+WHO = {"actor": "qa", "station": "st1"}
+
+
+def run(*args: str, env: dict[str, str] | None = None):
+    return runner.invoke(app, list(args), env=env)
+
+
+@pytest.fixture
+def keys(tmp_path: Path) -> dict[str, Path]:
+    """A station key, its public key in a trusted folder, and a stranger's key in another folder."""
+    paths = {"key": tmp_path / "station.pem", "trusted": tmp_path / "trusted", "stranger": tmp_path / "stranger.pem",
+             "untrusted": tmp_path / "untrusted"}
+    paths["trusted"].mkdir()
+    paths["untrusted"].mkdir()
+    assert run("keys", "init", "--key", str(paths["key"])).exit_code == 0
+    assert run("keys", "export-public", "--key", str(paths["key"]), "-o", str(paths["trusted"] / "station.pem")).exit_code == 0
+    assert run("keys", "init", "--key", str(paths["stranger"])).exit_code == 0
+    assert run("keys", "export-public", "--key", str(paths["stranger"]), "-o", str(paths["untrusted"] / "s.pem")).exit_code == 0
+    return paths
+
+
+def _signed_export(url: str, key: Path, out: Path) -> Path:
+    signer = signer_of(load_settings(env={"CALIBCTL_SIGNING_KEY": str(key)}))
+    with Store.open(url, signer=signer) as store:
+        store.add_artifact(calibration(serial="CAM-S"), activate=True, reason="solved", **WHO)
+    assert run("--db", url, "export", "CAM-S", "-o", str(out)).exit_code == 0
+    return out
+
+
+def test_init_writes_a_0600_key_and_never_overwrites_it(tmp_path: Path):
+    key = tmp_path / "k.pem"
+    first = run("keys", "init", "--key", str(key), "--json")
+    assert first.exit_code == 0, first.output
+    assert stat.S_IMODE(key.stat().st_mode) == 0o600
+    again = run("keys", "init", "--key", str(key))
+    assert again.exit_code == 2 and "exists" in again.stderr and "--force" in again.stderr
+    public = run("keys", "export-public", "--key", str(key))
+    assert public.stdout.startswith("-----BEGIN PUBLIC KEY-----")
+    assert json.loads(first.stdout)["public_pem"] == public.stdout
+
+
+def test_a_missing_or_loose_key_file_is_exit_2_and_nothing_is_written(sqlite_url: str, tmp_path: Path):
+    missing = run("--db", sqlite_url, "board", "add", "A17", "--kind", "chessboard", "--cols", "9", "--rows", "6",
+                  "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument", "calipers", "--measured-by", "qa",
+                  "--measured-on", "2026-03-11", env={"CALIBCTL_SIGNING_KEY": str(tmp_path / "nope.pem")})
+    assert missing.exit_code == 2 and "nope.pem does not exist" in missing.stderr
+    assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
+    loose = tmp_path / "loose.pem"
+    assert run("keys", "init", "--key", str(loose)).exit_code == 0
+    loose.chmod(0o644)
+    result = run("keys", "export-public", "--key", str(loose))
+    assert result.exit_code == 2 and "readable by others" in result.stderr and "chmod 600" in result.stderr
+    assert run("keys", "export-public").exit_code == 2  # no key configured at all
+
+
+def test_export_carries_the_signature_and_import_requires_a_trusted_one(keys: dict[str, Path], tmp_path: Path):
+    source = f"sqlite:///{tmp_path / 'source.db'}"
+    target = f"sqlite:///{tmp_path / 'target.db'}"
+    exported = _signed_export(source, keys["key"], tmp_path / "cam.json")
+    seal = json.loads(exported.read_text())["signature"]
+    assert seal["algorithm"] == "ed25519" and len(seal["key_id"]) == 64
+
+    untrusted = run("--db", target, "import", str(exported), "--require-signature", "--trusted-keys", str(keys["untrusted"]))
+    assert untrusted.exit_code == 2 and "which is not trusted" in untrusted.stderr
+    assert not (tmp_path / "target.db").exists()  # nothing written
+
+    unsigned = tmp_path / "unsigned.json"
+    data = json.loads(exported.read_text())
+    del data["signature"]
+    unsigned.write_text(json.dumps(data))
+    refused = run("--db", target, "import", str(unsigned), "--require-signature", "--trusted-keys", str(keys["trusted"]))
+    assert refused.exit_code == 2 and "is not signed" in refused.stderr
+
+    ok = run("--db", target, "import", str(exported), "--require-signature", "--trusted-keys", str(keys["trusted"]))
+    assert ok.exit_code == 0, ok.output
+
+
+def test_a_signature_moved_to_other_content_is_refused_even_without_require(keys: dict[str, Path], tmp_path: Path):
+    exported = _signed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    other = json.loads(_signed_export(f"sqlite:///{tmp_path / 'o.db'}", keys["key"], tmp_path / "o.json").read_text())
+    data = json.loads(exported.read_text())
+    data["signature"] = {**other["signature"], "record_sha256": "0" * 64}
+    forged = tmp_path / "forged.json"
+    forged.write_text(json.dumps(data))
+    result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(forged), "--trusted-keys", str(keys["trusted"]))
+    assert result.exit_code == 2 and "does not match its content" in result.stderr
+
+
+def test_lint_require_signature(keys: dict[str, Path], tmp_path: Path):
+    url = f"sqlite:///{tmp_path / 's.db'}"
+    exported = _signed_export(url, keys["key"], tmp_path / "cam.json")
+    ros = tmp_path / "cam.yaml"
+    assert run("--db", url, "export", "CAM-S", "--format", "ros", "-o", str(ros)).exit_code == 0
+
+    def signature_findings(*args: str) -> tuple[int, list[str]]:
+        result = run("--db", url, "lint", *args, "--require-signature", "--format", "json")
+        report = json.loads(result.stdout)
+        return result.exit_code, [f["message"] for r in report["results"] for f in r["findings"] if f["rule"] == "signature"]
+
+    assert signature_findings(str(exported), "--trusted-keys", str(keys["trusted"])) == (0, [])
+    code, messages = signature_findings(str(exported), "--trusted-keys", str(keys["untrusted"]))
+    assert code == 1 and "which is not trusted" in messages[0]
+    code, messages = signature_findings(str(ros), "--trusted-keys", str(keys["trusted"]))
+    assert code == 1 and "cannot be checked" in messages[0]
+    assert signature_findings("--all", "--trusted-keys", str(keys["trusted"])) == (0, [])
+    none = run("lint", str(exported), "--require-signature")
+    assert none.exit_code == 2 and "needs trusted keys" in none.stderr
+
+
+def test_db_verify_with_trusted_keys_and_head(keys: dict[str, Path], tmp_path: Path):
+    url = f"sqlite:///{tmp_path / 's.db'}"
+    _signed_export(url, keys["key"], tmp_path / "cam.json")
+    result = run("--db", url, "db", "verify", "--trusted-keys", str(keys["trusted"]), "--require-signature", "--head")
+    assert result.exit_code == 0, result.output
+    assert "signatures: 2 checked against 1 trusted key(s); 0 unsigned record(s)" in result.stdout
+    head = result.stdout.split("head ")[-1].strip()
+    resumed = run("--db", url, "db", "verify", "--since", head, "--json")
+    assert resumed.exit_code == 0 and json.loads(resumed.stdout)["records_checked"] == 0
+    stranger = run("--db", url, "db", "verify", "--trusted-keys", str(keys["untrusted"]))
+    assert stranger.exit_code == 1 and "which is not trusted" in stranger.stdout
+    bad = run("--db", url, "db", "verify", "--since", "HEAD")
+    assert bad.exit_code == 2 and "is not a chain head" in bad.stderr
+
+
+def test_import_require_signature_without_trusted_keys_is_exit_2(keys: dict[str, Path], tmp_path: Path):
+    exported = _signed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(exported), "--require-signature")
+    assert result.exit_code == 2 and "needs trusted keys" in result.stderr
+    assert not (tmp_path / "t.db").exists()
