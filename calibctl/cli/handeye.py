@@ -91,7 +91,7 @@ def handeye(
     if rig is not None:
         from calibctl.workflows import rig_handeye
 
-        rig_handeye.check_target(settings, rig, from_frame, to_frame)  # exit 2 before any solve
+        rig_handeye.check_target(settings, rig, from_frame, to_frame, serial)  # exit 2 before any solve
     outputs = wf.Outputs(out, tf_static, force)
     if images is not None or serial is not None:
         from calibctl.workflows import handeye_robot

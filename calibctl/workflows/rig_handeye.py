@@ -73,12 +73,25 @@ def combined_tree_check(rig: RigDefinition, edges: Sequence[RigEdge], parent: st
                          hint="a frame has one path to every other; attach a frame the tree does not reach") from None
 
 
-def check_target(settings: Settings, rig_name: str, parent: str, child: str) -> None:
-    """Before any solve: the rig exists, has an active version, and the edge can join its tree (exit 2)."""
+def check_target(settings: Settings, rig_name: str, parent: str, child: str, serial: str | None = None) -> None:
+    """Before any solve (exit 2): see ``_checked``."""
     with open_store(settings) as store:
-        rig = store.get_rig(rig_name)
-        base = _active(store, rig_name)
+        _checked(store, rig_name, parent, child, serial)
+
+
+def _checked(store: object, rig_name: str, parent: str, child: str,
+             serial: str | None) -> tuple[RigDefinition, RigCalibration]:
+    """The rig exists and has an active version, the edge can join its tree, and every camera involved
+    (a camera frame of the edge, the robot case's --serial) has an active calibration."""
+    rig: RigDefinition = store.get_rig(rig_name)  # type: ignore[attr-defined]
+    base = _active(store, rig_name)
     combined_tree_check(rig, base.edges, parent, child)
+    cameras = [f for f in (parent, child) if f in rig.cameras] + ([serial] if serial else [])
+    missing = [c for c, v in active_versions(store, cameras).items() if v is None]
+    if missing:
+        raise NotFoundError(f"camera {missing[0]} has no active calibration",
+                            hint=f"calibrate {missing[0]} (or roll it back to an accepted version), then run handeye")
+    return rig, base
 
 
 def _active(store: object, rig_name: str) -> RigCalibration:
@@ -195,10 +208,9 @@ def with_handeye(base: RigCalibration, result: HandEyeResult,
 
 def store_handeye(settings: Settings, rig_name: str, result: HandEyeResult) -> StoredEdge:
     """Store ``result`` as the rig's next version; active only when accepted."""
+    camera = _camera(result)
     with open_store(settings) as store:
-        rig = store.get_rig(rig_name)
-        base = _active(store, rig_name)
-        combined_tree_check(rig, base.edges, result.parent_frame, result.child_frame)
+        _, base = _checked(store, rig_name, result.parent_frame, result.child_frame, camera[0] if camera else None)
         versions = active_versions(store, handeye_cameras([*base.handeye, result]))
         cal = with_handeye(base, result, versions, settings)
         activate = cal.status == "accepted"

@@ -30,6 +30,7 @@ def settings(db_url: str) -> Settings:
         store.add_rig(rig_definition().model_copy(update={"frames": ["flange", "imu", "lidar"]}))
         store.add_rig_calibration(rig_calibration(), activate=True, **WHO)
         store.add_artifact(calibration(serial=ROOT), activate=True, **WHO)
+        store.add_artifact(calibration(serial=OTHER), activate=True, **WHO)
     return s
 
 
@@ -137,6 +138,7 @@ def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(setti
 
 
 def test_refusals_name_what_is_wrong(settings, tmp_path):
+    rig_handeye.check_target(settings, RIG, "imu", ROOT)  # the valid target passes
     with pytest.raises(NotFoundError, match="unknown rig 'NOPE'"):
         rig_handeye.check_target(settings, "NOPE", "imu", OTHER)
     with pytest.raises(NotFoundError, match="frame 'gps' is not in rig"):
@@ -152,5 +154,7 @@ def test_refusals_name_what_is_wrong(settings, tmp_path):
         rig_handeye.check_target(settings, RIG, "imu", ROOT)
     with Store.open(settings.db_url) as store:
         store.add_rig(rig_definition("EMPTY").model_copy(update={"frames": ["imu"]}))
+    with pytest.raises(NotFoundError, match="camera CAM-0009 has no active calibration"):
+        rig_handeye.check_target(settings, RIG, "imu", OTHER, serial="CAM-0009")
     with pytest.raises(NotFoundError, match="rig EMPTY has no active version"):
         rig_handeye.check_target(settings, "EMPTY", "imu", ROOT)
