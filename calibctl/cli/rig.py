@@ -252,14 +252,16 @@ def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG
     if wants_json(ctx, json_output):
         emit_json({"rig": name, "active_version": active, "versions": [
             {"version": c.version, "status": c.status, "created_at": c.provenance.created_at,
-             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint)}
+             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint),
+            "handeye": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.handeye]}
             for c in cals], "events": [e.model_dump(mode="json") for e in events]})
         return
     say(f"rig {name} history (active: {active if active is not None else 'none'})")
     for c in cals:
         base = ", ".join(f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs[:3])
+        hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
-            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}")
+            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}")
     for e in events:
         say(f"  event {e.event_id}: {e.kind} -> {e.version} by {e.actor} at {e.station}: {e.reason}")
 
@@ -306,6 +308,8 @@ def export(
     force: Annotated[bool, typer.Option("--force", help="Overwrite -o.")] = False,
     allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Export a rejected version (to inspect "
                                                  "it; a robot must not load it).")] = False,
+    edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye edge, its result document "
+                                             "(json) or /tf_static (tf).", show_default=False)] = None,
 ) -> None:
     """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr.
 
@@ -313,7 +317,8 @@ def export(
     flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
     from calibctl.workflows import rig_lint
 
-    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected)
+    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
+                           edge=edge)
     if out is None:
         print(text, end="")
     else:

@@ -217,3 +217,22 @@ def store_handeye(settings: Settings, rig_name: str, result: HandEyeResult) -> S
         stored = store.add_rig_calibration(cal, activate=activate, actor=settings.operator, station=settings.station,
                                            reason=f"hand-eye {result.parent_frame} -> {result.child_frame}")
     return StoredEdge(stored, activate)
+
+
+def edge_export(cal: RigCalibration, edge: str, fmt: str) -> str:
+    """One hand-eye edge of a stored version, ``FROM:TO``: its result document (json) or /tf_static (tf)."""
+    from calibctl.workflows.handeye import tf_static_yaml
+
+    parent, sep, child = edge.partition(":")
+    if not sep or not parent or not child:
+        raise UsageError(f"--edge must be FROM:TO, got {edge!r}")
+    found = next((h for h in cal.handeye if (h.parent_frame, h.child_frame) == (parent, child)), None)
+    if found is None:
+        have = ", ".join(f"{h.parent_frame}:{h.child_frame}" for h in cal.handeye) or "none"
+        raise NotFoundError(f"rig {cal.rig}@{cal.version} has no hand-eye edge {parent} -> {child} (it has: {have})",
+                            hint=f"see `calibctl rig show {cal.rig}@{cal.version}`")
+    if fmt == "json":
+        return found.model_dump_json(indent=2) + "\n"
+    if fmt == "tf":
+        return tf_static_yaml(found)
+    raise UsageError(f"--edge exports json or tf, not {fmt}")

@@ -137,9 +137,10 @@ def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, Rig
 
 
 def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
-           allow_rejected: bool = False) -> str:
+           allow_rejected: bool = False, edge: str | None = None) -> str:
     """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
-    second member). Returns the text (also written to ``out`` when given; opencv needs ``out``)."""
+    second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
+    to ``out`` when given; opencv needs ``out``)."""
     from calibctl.workflows import rig_exports
 
     if fmt not in EXPORT_FORMATS:
@@ -148,6 +149,11 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
     if cal.status != "accepted" and not allow_rejected:
         raise UsageError(f"rig {cal.rig}@{cal.version} is {cal.status}: a robot must not load it",
                          hint="export the active version, or pass --allow-rejected to inspect it")
+    if edge is not None:
+        text = rig_handeye.edge_export(cal, edge, fmt)
+        if out is not None:
+            write_atomic(out, text, force=force)
+        return text
     members, tree, full_tree = _geometry(cal)
     by_name = {m.name: m for m in members}
     left = by_name[cal.root]

@@ -57,6 +57,18 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
     doc = json.loads(r.stdout)
     assert r.exit_code == 0 and doc["stored"] == {**doc["stored"], "version": 3, "status": "accepted", "active": True}
     assert doc["result"]["kind"] == "handeye"
+    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["content_sha256"] == doc["result"]["content_sha256"]
+    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "tf")
+    assert r.exit_code == 0 and r.stdout.count("child_frame_id") == 1 and "frame_id: imu" in r.stdout
+    r = invoke(db, "rig", "history", RIG)
+    assert "hand-eye imu -> CAM-0002 accepted" in r.stdout
+    for args, message in ((("--edge", "flange:CAM-0001"), "has no hand-eye edge flange -> CAM-0001 (it has: "
+                                                           "imu:CAM-0002)"),
+                          (("--edge", "imu"), "--edge must be FROM:TO"),
+                          (("--edge", "imu:CAM-0002", "--format", "urdf"), "--edge exports json or tf")):
+        r = invoke(db, "rig", "export", RIG, *args)
+        assert r.exit_code == 2 and message in r.output
 
 
 def test_rejected_result_is_stored_rejected_and_exit_1(db, tmp_path):
@@ -69,7 +81,13 @@ def test_rejected_result_is_stored_rejected_and_exit_1(db, tmp_path):
     r = invoke(db, "rig", "export", f"{RIG}@2", "--format", "tf")
     assert r.exit_code == 2 and "rejected: a robot must not load it" in r.output
     r = invoke(db, "--json", "rig", "history", RIG)
-    assert json.loads(r.stdout)["active_version"] == 1
+    doc = json.loads(r.stdout)
+    assert doc["active_version"] == 1 and doc["versions"][1]["handeye"] == [{"edge": "imu:CAM-0002",
+                                                                            "status": "rejected"}]
+    r = invoke(db, "rig", "export", f"{RIG}@2", "--allow-rejected", "--edge", "imu:CAM-0002", "--format", "tf")
+    assert r.exit_code == 2 and "has no transform" in r.output
+    r = invoke(db, "rig", "export", f"{RIG}@2", "--allow-rejected", "--edge", "imu:CAM-0002")
+    assert r.exit_code == 0 and json.loads(r.stdout)["transform"] is None
 
 
 @pytest.mark.parametrize(("args", "message"), [
