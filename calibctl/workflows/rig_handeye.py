@@ -194,11 +194,12 @@ def with_handeye(base: RigCalibration, result: HandEyeResult,
     key = _key(result.parent_frame, result.child_frame)
     findings = handeye_findings([result], versions)
     accepted = result.status == "accepted" and not has_errors(findings)
-    edges = [e for e in base.edges if not (e.source == "hand-eye" and _key(e.parent, e.child) == key)]
+    others = base.model_copy(update={"handeye": [h for h in base.handeye if _key(h.parent_frame, h.child_frame) != key]})
+    kept, evidence, dropped = carried_forward(others, versions)  # the other edges; stale ones dropped and named
+    edges = [e for e in base.edges if e.source != "hand-eye"] + kept
     if accepted:
         edges.append(rig_edge(result))
-    evidence = [h for h in base.handeye if _key(h.parent_frame, h.child_frame) != key]
-    lint = [f for f in base.lint if not f.rule.startswith("handeye-")] + handeye_findings(evidence, versions) + findings
+    lint = [f for f in base.lint if not f.rule.startswith("handeye-")] + dropped + findings
     prov = Provenance(calibctl_version=__version__, opencv_version=cv2.__version__, station=settings.station,
                       operator=settings.operator, created_at=utc_now(), session_id=base.provenance.session_id)
     return base.model_copy(update={

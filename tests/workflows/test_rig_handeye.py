@@ -135,6 +135,14 @@ def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(setti
     edges, results, dropped = rig_handeye.carried_forward(active, versions)
     assert edges == [] and results == [] and dropped[0].rule == "handeye-dropped"
     assert rig_handeye.carried_forward(active, {ROOT: 1})[1] == [robot]
+    # the next hand-eye on the rig drops the stale edge too (named), instead of being rejected for it
+    nxt = rig_handeye.store_handeye(settings, RIG, _result(tmp_path, settings, "imu", OTHER)).calibration
+    assert nxt.status == "accepted" and [h.parent_frame for h in nxt.handeye] == ["imu"]
+    assert [f.rule for f in nxt.lint] == ["handeye-dropped"] and "flange -> CAM-0001" in nxt.lint[0].message
+    # re-running the stale one replaces it: no warning about itself
+    fresh = robot.model_copy(update={"provenance": robot.provenance.model_copy(update={"camera": f"{ROOT}@2"})})
+    again = rig_handeye.store_handeye(settings, RIG, fresh.sealed()).calibration
+    assert again.status == "accepted" and again.lint == [] and len(again.handeye) == 2
 
 
 def test_refusals_name_what_is_wrong(settings, tmp_path):
