@@ -3,19 +3,20 @@
 A rig calibration stores its extrinsics as a tree of named frames with one root (``edges``: parent ->
 child with ``T_parent_child`` and a 6x6 covariance), never as a set of pairs, so every pairwise
 transform is derived and consistent. An edge's ``source`` says what produced it ("rig-solve" today;
-a hand-eye solve can add e.g. ``flange -> cam0`` later without a schema change). Each member is
+a hand-eye edge such as ``flange -> cam0`` is ``"hand-eye"``, with its evidence in ``handeye``). Each member is
 pinned by serial, version and content_sha256 of the camera calibration the solve used, so
 ``rig-stale-member`` can tell when a member was re-calibrated after the rig solve.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.calibration import Provenance
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime, content_hash
+from calibctl.artifacts.handeye import FRAME_PATTERN, HandEyeResult
 from calibctl.artifacts.lint import Finding
 
 RIG_SCHEMA_VERSION: Literal[1] = 1
@@ -42,6 +43,9 @@ class RigDefinition(Document):
     cameras: list[str] = Field(min_length=2, description="member camera serials; frame names of the tree")
     root: str = Field(description="the tree's root camera")
     design_baselines: list[DesignBaseline] = Field(default_factory=list, description="design distances")
+    frames: list[Annotated[str, Field(pattern=FRAME_PATTERN)]] = Field(
+        default_factory=list, exclude_if=lambda frames: not frames,
+        description="non-camera frames (flange, imu, lidar) that hand-eye edges may join to the tree")
     created_at: UtcDatetime = Field(description="UTC time of registration")
     created_by: str = Field(description="who registered it")
     station: str = Field(description="where")
@@ -52,6 +56,9 @@ class RigDefinition(Document):
             raise ValueError("a camera is listed twice")
         if self.root not in self.cameras:
             raise ValueError(f"root {self.root} is not a member")
+        clash = sorted(set(self.frames) & set(self.cameras)) or [f for i, f in enumerate(self.frames) if f in self.frames[:i]]
+        if clash:
+            raise ValueError(f"frame {clash[0]} is listed twice (frames and cameras share one name space)")
         for d in self.design_baselines:
             if d.a not in self.cameras or d.b not in self.cameras or d.a == d.b:
                 raise ValueError(f"design baseline {d.a}:{d.b} does not name two different members")
@@ -172,6 +179,10 @@ class RigCalibration(Document):
     refine_intrinsics: bool = Field(description="whether the members' intrinsics were refined")
     gates: list[RigGate] = Field(default_factory=list, description="rig gates of the capture")
     lint: list[Finding] = Field(default_factory=list, description="rig lint findings at the time of the solve")
+    handeye: list[HandEyeResult] = Field(
+        default_factory=list, exclude_if=lambda results: not results,
+        description="evidence of every hand-eye edge of this version (source 'hand-eye'), and for a version "
+                    "rejected by a hand-eye gate, the rejected result (it adds no edge)")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
 

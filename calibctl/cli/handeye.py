@@ -80,12 +80,18 @@ def handeye(
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result document (JSON).")] = None,
     tf_static: Annotated[Path | None, typer.Option("--tf-static", help="Write the edge as /tf_static YAML (accepted only).")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
+    rig: Annotated[str | None, typer.Option("--rig", help="Store the result as the rig's next version (edge "
+                                            "FROM -> TO of its tree; rejected results never active).")] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Extrinsics from motion, A X = X B, gated on observability (exit 1 when a gate rejects)."""
     from calibctl.workflows import handeye as wf
 
     settings = state(ctx).settings()
+    if rig is not None:
+        from calibctl.workflows import rig_handeye
+
+        rig_handeye.check_target(settings, rig, from_frame, to_frame, serial)  # exit 2 before any solve
     outputs = wf.Outputs(out, tf_static, force)
     if images is not None or serial is not None:
         from calibctl.workflows import handeye_robot
@@ -97,11 +103,20 @@ def handeye(
         outcome = wf.run_handeye(settings, motions, from_frame, to_frame, shape=input_shape, method=method,
                                  max_skew_s=max_skew_ms / 1e3, lever_arm_sigma_min=lever_arm_sigma_min,
                                  outputs=outputs)
+    stored = None
+    if rig is not None:
+        stored = rig_handeye.store_handeye(settings, rig, outcome.result).calibration
     if wants_json(ctx, json_output):
-        emit_json(outcome.result)
+        emit_json(outcome.result if stored is None else {
+            "result": outcome.result.model_dump(mode="json"),
+            "stored": {"rig": stored.rig, "version": stored.version, "status": stored.status,
+                       "active": stored.status == "accepted", "content_sha256": stored.content_sha256}})
     else:
         _render(outcome)
-    if not outcome.accepted:
+        if stored is not None:
+            stdout.print(f"stored as rig {escape(stored.rig)}@{stored.version} "
+                         + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)"))
+    if not outcome.accepted or (stored is not None and stored.status != "accepted"):
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 

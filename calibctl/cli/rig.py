@@ -120,17 +120,20 @@ def add(
     root: Annotated[str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)] = None,
     design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: design baseline "
                                                       "and tolerance, mm (repeat per pair).", show_default=False)] = None,
+    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu) a hand-eye edge "
+                                                    "may join to the tree (repeat).", show_default=False)] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
     from calibctl.workflows import rigs
 
-    rig = rigs.add_rig(state(ctx).settings(), name, camera, root, design or [])
+    rig = rigs.add_rig(state(ctx).settings(), name, camera, root, design or [], frame or [])
     if wants_json(ctx, json_output):
         emit_json(rig)
         return
     say(f"rig {rig.name}: cameras {', '.join(rig.cameras)}, root {rig.root}"
-        + "".join(f"; design {d.a}-{d.b} {d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm" for d in rig.design_baselines))
+        + "".join(f"; design {d.a}-{d.b} {d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm" for d in rig.design_baselines)
+        + (f"; frames {', '.join(rig.frames)}" if rig.frames else ""))
 
 
 @rig_app.command("capture")
@@ -176,7 +179,13 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
             f"{cal.held_out_rms_px[m.serial]:.3f} px")
     for e in cal.edges:
         say(f"  T_{e.parent}_{e.child}: |t| = {e.translation_mm:.3f} +/- {e.sigma_translation_mm:.3f} mm, "
-            f"rotation {e.rotation_deg:.4f} +/- {e.sigma_rotation_deg:.4f} deg")
+            f"rotation {e.rotation_deg:.4f} +/- {e.sigma_rotation_deg:.4f} deg ({e.source})")
+    for h in cal.handeye:
+        failed = [g.gate for g in h.gates if not g.passed]
+        say(f"  hand-eye {h.parent_frame} -> {h.child_frame}: {h.status}"
+            + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
+            + f", {len(h.motions)} motions from {h.provenance.input_file}"
+            + (f", camera {h.provenance.camera}" if h.provenance.camera else ""))
     for p in cal.pairs:
         epi = f"; held-out epipolar RMS {p.epipolar_rms_px:.3f} px" if p.epipolar_rms_px is not None else ""
         say(f"  pair {p.a}-{p.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm{epi}")
@@ -243,14 +252,16 @@ def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG
     if wants_json(ctx, json_output):
         emit_json({"rig": name, "active_version": active, "versions": [
             {"version": c.version, "status": c.status, "created_at": c.provenance.created_at,
-             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint)}
+             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint),
+            "handeye": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.handeye]}
             for c in cals], "events": [e.model_dump(mode="json") for e in events]})
         return
     say(f"rig {name} history (active: {active if active is not None else 'none'})")
     for c in cals:
         base = ", ".join(f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs[:3])
+        hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
-            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}")
+            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}")
     for e in events:
         say(f"  event {e.event_id}: {e.kind} -> {e.version} by {e.actor} at {e.station}: {e.reason}")
 
@@ -295,11 +306,19 @@ def export(
     pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
                                              "second member).", show_default=False)] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite -o.")] = False,
+    allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Export a rejected version (to inspect "
+                                                 "it; a robot must not load it).")] = False,
+    edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye edge, its result document "
+                                             "(json) or /tf_static (tf).", show_default=False)] = None,
 ) -> None:
-    """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr."""
+    """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr.
+
+    tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
+    flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
     from calibctl.workflows import rig_lint
 
-    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair)
+    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
+                           edge=edge)
     if out is None:
         print(text, end="")
     else:

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from calibctl import __version__, files
 from calibctl.artifacts.common import utc_now
@@ -172,14 +171,12 @@ def tf_static_yaml(result: HandEyeResult) -> str:
     """The edge as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints)."""
     if result.transform is None:
         raise UsageError("a rejected hand-eye result has no transform to export")
-    t, q = result.transform.translation_m, result.transform.rotation_wxyz
-    message = {"transforms": [{
-        "header": {"frame_id": result.parent_frame},
-        "child_frame_id": result.child_frame,
-        "transform": {"translation": {"x": t[0], "y": t[1], "z": t[2]},
-                      "rotation": {"x": q[1], "y": q[2], "z": q[3], "w": q[0]}}}]}
+    from calibctl.workflows.rig_exports import tf_message
+
+    w, x, y, z = result.transform.rotation_wxyz
     header = f"# calibctl handeye {result.parent_frame} -> {result.child_frame} sha256 {result.content_sha256}\n"
-    return header + yaml.safe_dump(message, sort_keys=False)
+    return header + tf_message([(result.parent_frame, result.child_frame, result.transform.translation_m,
+                                 (x, y, z, w))])
 
 
 def write_outputs(result: HandEyeResult, outputs: Outputs) -> HandEyeOutcome:

@@ -22,18 +22,10 @@ from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_m
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_solve import RigSolution
 from calibctl.core.extrinsics.rig_tree import RigTree
+from calibctl.core.extrinsics.se3 import quaternion_xyzw
 from calibctl.errors import InputError
 from calibctl.files import write_atomic
 from calibctl.workflows.ros_camera_info import camera_name_for, distortion_for
-
-
-def quaternion_xyzw(R: np.ndarray) -> list[float]:
-    """(3, 3) rotation -> [x, y, z, w] unit quaternion with w >= 0 (ROS order)."""
-    rvec = cv2.Rodrigues(np.asarray(R, np.float64))[0].ravel()
-    angle = float(np.linalg.norm(rvec))
-    axis = rvec / angle if angle > 0 else np.array([1.0, 0.0, 0.0])
-    q = [*(axis * np.sin(angle / 2)).tolist(), float(np.cos(angle / 2))]
-    return q if q[3] >= 0 else [-v for v in q]
 
 
 def urdf_rpy(R: np.ndarray) -> list[float]:
@@ -81,16 +73,23 @@ def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left:
         fs.release()
 
 
-def tf_static(tree: RigTree) -> str:
-    """tf_static YAML: one TransformStamped per tree edge (parent = header.frame_id)."""
-    transforms = []
-    for e in tree.edges:
-        t = e.T_parent_child[:3, 3]
-        q = quaternion_xyzw(e.T_parent_child[:3, :3])
-        transforms.append({"header": {"frame_id": e.parent}, "child_frame_id": e.child,
-                           "transform": {"translation": dict(zip("xyz", map(float, t), strict=True)),
-                                         "rotation": dict(zip("xyzw", q, strict=True))}})
+TfEdge = tuple[str, str, Sequence[float], Sequence[float]]  # parent, child, translation_m xyz, quaternion xyzw
+
+
+def tf_message(edges: Sequence[TfEdge]) -> str:
+    """tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints): one TransformStamped per edge,
+    parent = header.frame_id. The one tf writer of rig exports and hand-eye results."""
+    transforms = [{"header": {"frame_id": parent}, "child_frame_id": child,
+                   "transform": {"translation": dict(zip("xyz", map(float, t_m), strict=True)),
+                                 "rotation": dict(zip("xyzw", map(float, q_xyzw), strict=True))}}
+                  for parent, child, t_m, q_xyzw in edges]
     return yaml.safe_dump({"transforms": transforms}, sort_keys=False)
+
+
+def tf_static(tree: RigTree) -> str:
+    """tf_static YAML of every tree edge."""
+    return tf_message([(e.parent, e.child, e.T_parent_child[:3, 3].tolist(), quaternion_xyzw(e.T_parent_child[:3, :3]))
+                       for e in tree.edges])
 
 
 def urdf_joints(tree: RigTree) -> str:

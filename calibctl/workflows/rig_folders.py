@@ -24,13 +24,14 @@ from calibctl.core.extrinsics.rig_frames import (
 )
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import RigSolution, solve_rig
-from calibctl.core.extrinsics.rig_tree import rotation_angle_deg, sigma_rotation_deg, sigma_translation_mm
+from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
 from calibctl.core.extrinsics.rig_validation import (
     LoopClosure,
     RigHoldout,
     loop_closures,
     validate_rig_holdout,
 )
+from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.gates import GateResult
 from calibctl.core.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session, list_images
 from calibctl.core.solve import get_model, solve_intrinsics

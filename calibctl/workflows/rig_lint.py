@@ -9,6 +9,9 @@ Rules (errors fail lint, exit 1):
 - ``loop-closure``: a cycle's residual has Mahalanobis distance above ``loop_closure_max_mahalanobis``
   (4.48 = sqrt of chi-square(6) at 99.7 %).
 - the camera rules for every member's active calibration (``member:<rule>``).
+- hand-eye edges (workflows.rig_handeye): ``handeye-gates`` (a gate of the stored result failed),
+  ``handeye-stale-member`` (the camera whose calibration gave the board poses was re-calibrated since),
+  ``handeye-uncertainty`` (an accepted edge without a one-sigma).
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import NotFoundError, UsageError
 from calibctl.files import write_atomic
+from calibctl.workflows import rig_handeye
 from calibctl.workflows.lint import LintResult, lint_artifact
 from calibctl.workflows.records import open_store
 
@@ -101,6 +105,8 @@ def lint_rig(settings: Settings, ref: str) -> LintResult:
         rig = store.get_rig(name)
         cal = store.get_rig_calibration(name, version)
         findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
+        versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
+        findings += rig_handeye.handeye_findings(cal.handeye, versions)
     return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
 
 
@@ -121,23 +127,34 @@ def rollback(settings: Settings, rig: str, to_version: int, reason: str) -> RigA
         return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station)
 
 
-def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree]:
+def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
+    """Members, the cameras' tree (stereo formats) and the whole tree with hand-eye edges (tf, URDF)."""
     members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size)
                for m in cal.members]
-    tree = RigTree(cal.root, tuple(Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance))
-                                   for e in cal.edges))
-    return members, tree
+    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
+    cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))
+    return members, cameras, orient_tree(edges, cal.root)
 
 
-def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None) -> str:
+def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
+           allow_rejected: bool = False, edge: str | None = None) -> str:
     """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
-    second member). Returns the text (also written to ``out`` when given; opencv needs ``out``)."""
+    second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
+    to ``out`` when given; opencv needs ``out``)."""
     from calibctl.workflows import rig_exports
 
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
     cal = show(settings, ref)
-    members, tree = _geometry(cal)
+    if cal.status != "accepted" and not allow_rejected:
+        raise UsageError(f"rig {cal.rig}@{cal.version} is {cal.status}: a robot must not load it",
+                         hint="export the active version, or pass --allow-rejected to inspect it")
+    if edge is not None:
+        text = rig_handeye.edge_export(cal, edge, fmt)
+        if out is not None:
+            write_atomic(out, text, force=force)
+        return text
+    members, tree, full_tree = _geometry(cal)
     by_name = {m.name: m for m in members}
     left = by_name[cal.root]
     right_name = pair or next(m.name for m in members if m.name != cal.root)
@@ -152,9 +169,9 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
         info_l, info_r = rig_exports.ros_stereo_pair(left, right, T_right_left)
         text = f"{header}# --- {left.name} (left)\n{info_l}---\n# --- {right.name} (right)\n{info_r}"
     elif fmt == "tf":
-        text = header + rig_exports.tf_static(tree)
+        text = header + rig_exports.tf_static(full_tree)
     elif fmt == "urdf":
-        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(tree)
+        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
     elif fmt == "kalibr":
         text = header + rig_exports.kalibr_camchain(members, tree)
     else:  # opencv: cv2.FileStorage writes the file itself

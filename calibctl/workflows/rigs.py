@@ -1,7 +1,7 @@
 """Rig use cases on the store: register a rig, capture it, solve it into the rig's next version.
 
 - ``add_rig``: members must be serials the store knows (a calibration exists), each once; design
-  baselines are ``A:B=75.0+-0.5`` (mm).
+  baselines are ``A:B=75.0+-0.5`` (mm); ``frames`` are non-camera frames hand-eye edges may join.
 - ``capture_rig``: one ordinary capture per camera (today's detection, outcomes and gates, stored as
   that camera's session), then the images are paired into frames by the last number in their names
   (core.extrinsics.rig_frames) and the ``rig-connected`` gate decides the rig session's status.
@@ -48,6 +48,7 @@ from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_
 from calibctl.core.solve import MODELS
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.workflows import rig_handeye
 from calibctl.workflows.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.records import open_store
 from calibctl.workflows.rig_folders import pair_summary
@@ -83,7 +84,7 @@ def parse_design(text: str) -> DesignBaseline:
 
 
 def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | None,
-            designs: Sequence[str]) -> RigDefinition:
+            designs: Sequence[str], frames: Sequence[str] = ()) -> RigDefinition:
     """Register a rig (see module docstring)."""
     seen = [c for i, c in enumerate(cameras) if c in cameras[:i]]
     if seen:
@@ -101,7 +102,8 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
                                 hint="calibrate each member first (`calibctl calibrate --serial ...`)")
         doc = parse_document(RigDefinition, {
             "name": name, "cameras": list(cameras), "root": root,
-            "design_baselines": [parse_design(d).model_dump() for d in designs], "created_at": utc_now(),
+            "design_baselines": [parse_design(d).model_dump() for d in designs], "frames": list(frames),
+            "created_at": utc_now(),
             "created_by": settings.operator, "station": settings.station}, f"rig {name}")
         return store.add_rig(doc)
 
@@ -226,10 +228,22 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
             content_sha256=UNSEALED)
         findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint)
         cal = cal.model_copy(update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"})
+        cal = _with_carried_handeye(cal, store)
         do_activate = activate and cal.status == "accepted"
         stored = store.add_rig_calibration(cal, activate=do_activate, actor=settings.operator,
                                            station=settings.station, reason="rig solve")
         return RigSolveOutcome(stored, do_activate)
+
+
+def _with_carried_handeye(cal: RigCalibration, store: object) -> RigCalibration:
+    """Keep the active version's hand-eye edges (not the stale ones) in the re-solved tree."""
+    try:
+        active = store.get_rig_calibration(cal.rig, None)  # type: ignore[attr-defined]
+    except NotFoundError:
+        return cal
+    versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(active.handeye))
+    edges, results, dropped = rig_handeye.carried_forward(active, versions)
+    return cal.model_copy(update={"edges": [*cal.edges, *edges], "handeye": results, "lint": [*cal.lint, *dropped]})
 
 
 def _pair_fields(p: Mapping[str, object]) -> dict[str, object]:

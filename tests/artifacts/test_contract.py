@@ -106,3 +106,18 @@ def test_json_round_trip_is_exact_and_hash_stable(fx, cx, cy, rms, serial, versi
 def test_serials_that_would_be_ambiguous_or_unsafe_are_refused(serial):
     with pytest.raises(ValidationError, match="serial"):
         calibration(serial=serial)
+
+
+def test_rig_hand_eye_fields_are_absent_while_empty_and_frames_are_checked() -> None:
+    """`frames` and `handeye` joined the rig documents later: absent while empty, so older rows hash the same."""
+    import pydantic
+
+    from tests.store.rig_documents import rig_calibration, rig_definition
+
+    cal = rig_calibration().sealed()
+    assert "handeye" not in cal.model_dump(mode="json") and "frames" not in rig_definition().model_dump(mode="json")
+    assert rig_definition().model_copy(update={"frames": ["imu"]}).model_dump(mode="json")["frames"] == ["imu"]
+    data = rig_definition().model_dump(mode="json")
+    for frames in (["CAM-0001"], ["imu", "imu"]):
+        with pytest.raises(pydantic.ValidationError, match="listed twice"):
+            type(rig_definition()).model_validate({**data, "frames": frames})

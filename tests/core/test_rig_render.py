@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from calibctl.core.extrinsics.rig_solve import solve_rig
-from calibctl.core.extrinsics.rig_tree import rotation_angle_deg
 from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_holdout
+from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from tests.core.rig_sessions import rendered_session, true_members
 
 BASELINE_TOL_MM = 0.1

@@ -8,8 +8,8 @@ import pytest
 
 from calibctl.core.extrinsics.rig_problem import RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
-from calibctl.core.extrinsics.rig_tree import rotation_angle_deg
 from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_holdout
+from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.errors import NumericalError
 from tests.core.rig_sessions import corner_session, true_members
 

@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
-from calibctl.core.extrinsics.rig_tree import T_to_pose, invert, pose_to_T, rotation_angle_deg
+from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T
+from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.errors import NumericalError
 
 

@@ -36,7 +36,8 @@ from calibctl.core.extrinsics.rig_problem import (
     RigViews,
     normal_equations,
 )
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, invert, pose_to_T, propagate
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_T, propagate
+from calibctl.core.extrinsics.se3 import invert
 from calibctl.core.solve import MAX_RMS_PX, get_model, single_threaded_opencv
 from calibctl.core.views import BoardView
 from calibctl.errors import NumericalError

@@ -18,6 +18,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from calibctl.core.extrinsics import se3
+from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
+
 # Step of the central differences that carry a covariance through a transform chain: rotations
 # (rad) and translations (m) are both far from 1e-7 in any real rig, and the functions are smooth.
 PROPAGATION_STEP = 1e-7
@@ -38,32 +41,13 @@ def rotation_vector(R: np.ndarray) -> np.ndarray:
     Why not cv2.Rodrigues alone: it returns exactly 0 below ~1e-5 rad, which zeroes the derivative a
     loop-closure residual (a near-identity rotation) needs for its covariance.
     """
-    R = np.asarray(R, dtype=np.float64)[:3, :3]
-    w = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # sin(angle) * axis
-    s, c = float(np.linalg.norm(w)), 0.5 * (float(np.trace(R)) - 1.0)
-    if c < -0.99:  # near 180 deg the antisymmetric part vanishes; OpenCV's branch handles it
-        return np.asarray(cv2.Rodrigues(R)[0]).reshape(3)
-    return w if s < 1e-15 else w * (np.arctan2(s, c) / s)
+    return se3.rotvecs_from_rotations(np.asarray(R, dtype=np.float64)[:3, :3])[0]
 
 
 def T_to_pose(T: np.ndarray) -> np.ndarray:
     """(4, 4) T -> (6,) float64 rvec (rad), tvec (m)."""
     T = np.asarray(T, dtype=np.float64)
     return np.concatenate([rotation_vector(T[:3, :3]), T[:3, 3]])
-
-
-def invert(T: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid (4, 4) transform."""
-    T = np.asarray(T, dtype=np.float64)
-    out = np.eye(4)
-    out[:3, :3] = T[:3, :3].T
-    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return out
-
-
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of a (3, 3) rotation, degrees (0..180)."""
-    return float(np.rad2deg(np.linalg.norm(rotation_vector(R))))
 
 
 def propagate(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -154,6 +138,36 @@ class RigTree:
     def T(self, a: str, b: str) -> np.ndarray:
         """(4, 4) T_a_b between any two frames."""
         return invert(self.T_root(a)) @ self.T_root(b)
+
+
+def inverted(edge: Edge) -> Edge:
+    """The same edge seen from the child: T_child_parent with its covariance carried through."""
+    pose = T_to_pose(edge.T_parent_child)
+    cov = propagate(lambda p: T_to_pose(invert(pose_to_T(p))), pose, edge.covariance)
+    return Edge(edge.child, edge.parent, invert(edge.T_parent_child), cov)
+
+
+def orient_tree(edges: Sequence[Edge], preferred_root: str) -> RigTree:
+    """Edges measured in any direction (a rig solve's ``cam0 -> cam1``, a hand-eye ``flange -> cam0``)
+    as one tree: rooted at the only frame that is nobody's child (``flange``: the tf parent a robot
+    publishes), else at ``preferred_root``; an edge met from its child's side is inverted.
+    Raises ValueError when the edges close a loop or do not all connect.
+    """
+    children = {e.child for e in edges}
+    frames = list(dict.fromkeys(f for e in edges for f in (e.parent, e.child)))
+    tops = [f for f in frames if f not in children]
+    root = tops[0] if len(tops) == 1 else preferred_root
+    seen, out, pending = {root}, [], list(edges)
+    while pending:
+        nxt = next((e for e in pending if (e.parent in seen) != (e.child in seen)), None)
+        if nxt is None:
+            closing = next((e for e in pending if e.parent in seen), pending[0])
+            why = "closes a loop" if closing.parent in seen else f"does not connect to {root}"
+            raise ValueError(f"edge {closing.parent} -> {closing.child} {why}")
+        pending.remove(nxt)
+        out.append(nxt if nxt.parent in seen else inverted(nxt))
+        seen.add(out[-1].child)
+    return RigTree(root, tuple(out))
 
 
 def simple_cycles(nodes: Sequence[int], edges: set[frozenset[int]]) -> list[tuple[int, ...]]:

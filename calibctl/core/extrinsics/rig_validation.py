@@ -26,14 +26,8 @@ from calibctl.core.extrinsics.rig_init import view_poses
 from calibctl.core.extrinsics.rig_metrics import epipolar_distances_px, rectified_cross_disparity_px, rectify
 from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigViews, normal_equations
 from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only, solve_rig
-from calibctl.core.extrinsics.rig_tree import (
-    T_to_pose,
-    invert,
-    pose_to_T,
-    propagate,
-    rotation_angle_deg,
-    simple_cycles,
-)
+from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, propagate, simple_cycles
+from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.core.validation import fold_assignment
 from calibctl.errors import NumericalError
 

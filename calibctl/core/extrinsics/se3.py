@@ -34,6 +34,11 @@ def rotation_angle_rad(R: np.ndarray) -> float:
     return float(np.linalg.norm(rotvec_from_rotation(R)))
 
 
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle (degrees, 0..180) of a (3, 3) rotation, smooth down to zero (see rotvecs_from_rotations)."""
+    return float(np.degrees(np.linalg.norm(rotvecs_from_rotations(np.asarray(R, np.float64)[:3, :3])[0])))
+
+
 def rotation_from_quaternion(q_wxyz: np.ndarray) -> np.ndarray:
     """(4,) unit quaternion (w, x, y, z) -> (3, 3) rotation. The caller checks the norm."""
     w, x, y, z = (float(c) for c in np.asarray(q_wxyz, np.float64).reshape(4))
@@ -52,6 +57,12 @@ def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:
         return np.array([1.0, 0.0, 0.0, 0.0])
     q = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * rotvec / angle])
     return q if q[0] >= 0 else -q
+
+
+def quaternion_xyzw(R: np.ndarray) -> list[float]:
+    """(3, 3) rotation -> [x, y, z, w] with w >= 0: ROS's order (geometry_msgs/Quaternion)."""
+    w, x, y, z = (float(c) for c in quaternion_from_rotation(R))
+    return [x, y, z, w]
 
 
 def orthonormality_error(R: np.ndarray) -> float:
