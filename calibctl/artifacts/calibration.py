@@ -41,6 +41,25 @@ class DistortionModelInfo(Document):
     )
 
 
+class ParameterCovariance(Document):
+    """Full covariance of the free intrinsics and distortion, board poses marginalised (core/covariance.py)."""
+
+    parameters: list[str] = Field(
+        min_length=1, description="names in matrix order, e.g. [fy, cx, cy, k1, k2]; under a fixed aspect ratio "
+        "fx is not listed: it is aspect_ratio * fy")
+    matrix: list[list[float]] = Field(description="symmetric covariance, px^2 for K entries, unitless^2 for distortion")
+    aspect_ratio: float | None = Field(None, gt=0, description="fx / fy when the solve tied them, else null")
+
+    @model_validator(mode="after")
+    def _square(self) -> ParameterCovariance:
+        n = len(self.parameters)
+        if len(self.matrix) != n or any(len(row) != n for row in self.matrix):
+            raise ValueError(f"covariance matrix must be {n}x{n} for {n} parameters")
+        if any(self.matrix[i][i] < 0 for i in range(n)):
+            raise ValueError("covariance diagonal must be non-negative")
+        return self
+
+
 class Uncertainty(Document):
     """One-sigma per estimated intrinsic parameter (pixels for K, unitless for distortion)."""
 
@@ -48,6 +67,10 @@ class Uncertainty(Document):
     refused_reason: str | None = Field(None, description="why no sigma is reported (too few residuals)")
     residual_count: int = Field(0, ge=0, description="number of scalar residuals in the fit")
     parameter_count: int = Field(0, ge=0, description="number of estimated parameters incl. poses")
+    # Left out of the document (and its hash) while None, so artifacts sealed before it existed still verify.
+    covariance: ParameterCovariance | None = Field(
+        None, exclude_if=lambda cov: cov is None,
+        description="full covariance behind sigma; absent when refused, and in artifacts made before it was stored")
 
 
 class RingRms(Document):

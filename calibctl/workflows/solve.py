@@ -22,6 +22,7 @@ from calibctl.artifacts.calibration import (
     CameraConsistency,
     DistortionModelInfo,
     HeldOut,
+    ParameterCovariance,
     Provenance,
     RejectedCorner,
     RingRms,
@@ -184,6 +185,15 @@ def _views(session: CaptureSession, solution: IntrinsicsSolution, first: Intrins
     return out
 
 
+def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
+    """The matrix behind sigma, stored so a report can propagate it (absent whenever sigma was refused)."""
+    cov = sol.covariance
+    if cov is None or cov.covariance is None or sol.sigma_refused_reason:
+        return None
+    return ParameterCovariance(parameters=list(cov.names), matrix=[[float(x) for x in row] for row in cov.covariance],
+                               aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
+
+
 def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
     return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
                            dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
@@ -214,6 +224,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             refused_reason=sol.sigma_refused_reason,
             residual_count=int(sol.n_residuals),
             parameter_count=int(sol.n_parameters),
+            covariance=_covariance(sol),
         ),
         rms_px=float(sol.rms_px),
         held_out=_held_out(holdout),

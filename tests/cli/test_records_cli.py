@@ -211,3 +211,13 @@ def test_too_few_views_for_the_model_exits_2_and_writes_nothing(sqlite_url, view
     assert message in result.stderr and "Hint:" in result.stderr
     with Store.open(sqlite_url) as store:
         assert store.serials() == []
+
+
+def test_show_json_exposes_the_full_covariance(run):
+    assert run("solve", "--serial", SERIAL).exit_code == 0
+    result = run("show", SERIAL, "--json")
+    assert result.exit_code == 0, result.output
+    stdev = json.loads(result.stdout)["stdev"]
+    names, matrix = stdev["covariance"]["parameters"], stdev["covariance"]["matrix"]
+    assert len(matrix) == len(names) and "cx" in names
+    assert matrix[names.index("cx")][names.index("cx")] ** 0.5 == pytest.approx(stdev["sigma"]["cx"], rel=1e-12)
