@@ -17,8 +17,8 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core import report_maps
-from calibctl.errors import NotFoundError
-from calibctl.files import write_atomic
+from calibctl.errors import FileSystemError, NotFoundError
+from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.records import open_store, parse_artifact_ref
 from calibctl.workflows.report_html import render_html
 from calibctl.workflows.solve import board_spec
@@ -107,3 +107,12 @@ def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool)
     path = out if out is not None else default_path(data.artifact)
     write_atomic(path, html, force=force)
     return path, data
+
+
+def ready_folder(folder: Path) -> Path:
+    """Create ``folder`` when missing; checked before a solve, so a solve is never stored without its report."""
+    if folder.exists() and not folder.is_dir():
+        raise FileSystemError(f"cannot write reports to {folder}: it is not a folder", "name a folder for --report")
+    with file_errors("create the report folder", folder):
+        folder.mkdir(parents=True, exist_ok=True)
+    return folder

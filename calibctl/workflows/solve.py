@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -64,6 +65,7 @@ class SolveRequest:
     model: str = "k1k2"
     activate: bool = True
     drop_outliers: bool = False
+    report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,7 @@ class SolveOutcome:
     artifact: CalibrationArtifact
     active: bool
     outlier_corners: list[dict[str, float | int | str]]
+    report_path: Path | None = None
 
 
 def board_spec(board: BoardRevision) -> BoardSpec:
@@ -262,6 +265,11 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if not request.session_id and not request.serial:
         raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
+    # workflows.report draws with this module's board_spec, hence the import here and not at the top
+    from calibctl.workflows import report as report_workflow
+
+    if request.report_dir is not None:
+        report_workflow.ready_folder(request.report_dir)
     with open_store(settings) as store:
         session = (
             store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
@@ -282,4 +290,8 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
             reason=f"solve of session {session.session_id}",
         )
         active = store.active_version(stored.serial) == stored.version
-    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers)
+    report_path = None
+    if request.report_dir is not None:
+        report_path, _ = report_workflow.write_report(
+            settings, stored.ref, report_workflow.default_path(stored, request.report_dir), force=False)
+    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)
