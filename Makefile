@@ -25,7 +25,9 @@ demo: $(STAMP) ## render a synthetic board session and run the main job on the e
 test: $(STAMP) ## run the test suite (SQLite and the local PostgreSQL), without the slow marker
 	$(PY) -m pytest -q -n $(PYTEST_WORKERS) -m "not slow"
 
-test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests
+test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests (installs chromium when missing)
+	command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium) || \
+		(sudo apt-get update && sudo apt-get install -y chromium)
 	$(PY) -m pytest -q -m slow
 
 lint: $(STAMP) ## ruff, mypy and the import-layer contract

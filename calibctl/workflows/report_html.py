@@ -193,10 +193,14 @@ def _uncertainty(d: ReportData) -> str:
     lo, hi = float(m.sigma_px.min()), float(m.sigma_px.max())
     plot = _image_plot(d, "projection one-sigma, worst direction (px)")
     heat(plot, m.sigma_px, np.linspace(0, w, len(m.u_px) + 1), np.linspace(0, h, len(m.v_px) + 1), lo, hi)
+    if d.views:  # where the corners were: the uncertainty grows where they never reached
+        pts = np.concatenate([v.corners_px for v in d.views])
+        k = _stride(len(pts))
+        plot.dots(pts[::k, 0], pts[::k, 1], "#ffffff", 0.8)
     r, c = len(m.v_px) // 2, len(m.u_px) // 2
     return ("<h2>Projection uncertainty</h2><p>The stored intrinsic covariance propagated to the projection of "
             "the ray through each pixel (as mrcal's show-projection-uncertainty, without re-fitting the camera "
-            f'frame): centre <b data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
+            f'frame); white dots: the corners used. Centre <b data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
             f'<b data-key="uncertainty_max">{num(hi, 2)}</b> px.</p>' + plot.svg() + colour_bar(lo, hi, "px", 520))
 
 
