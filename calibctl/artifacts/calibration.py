@@ -27,6 +27,7 @@ from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.session import GateResult
 
 CALIBRATION_SCHEMA_VERSION: Literal[1] = 1
+_COVARIANCE_PARAMETERS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 
 class DistortionModelInfo(Document):
@@ -53,6 +54,10 @@ class ParameterCovariance(Document):
     @model_validator(mode="after")
     def _square(self) -> ParameterCovariance:
         n = len(self.parameters)
+        unknown = [p for p in self.parameters if p not in _COVARIANCE_PARAMETERS]
+        if unknown or len(set(self.parameters)) != n:
+            raise ValueError(f"covariance parameters must be distinct names from {', '.join(_COVARIANCE_PARAMETERS)}; "
+                             f"got {self.parameters}")
         if len(self.matrix) != n or any(len(row) != n for row in self.matrix):
             raise ValueError(f"covariance matrix must be {n}x{n} for {n} parameters")
         if any(self.matrix[i][i] < 0 for i in range(n)):

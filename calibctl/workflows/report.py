@@ -17,7 +17,7 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core import report_maps
-from calibctl.errors import FileSystemError, NotFoundError
+from calibctl.errors import FileSystemError, InputError, NotFoundError
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.records import open_store, parse_artifact_ref
 from calibctl.workflows.report_html import render_html
@@ -70,9 +70,14 @@ def _uncertainty(art: CalibrationArtifact) -> report_maps.UncertaintyMap | None:
     cov = art.stdev.covariance
     if cov is None:
         return None
-    return report_maps.projection_uncertainty(
-        np.asarray(art.camera_matrix, dtype=np.float64), np.asarray(art.dist_coeffs, dtype=np.float64),
-        np.asarray(cov.matrix, dtype=np.float64), cov.parameters, cov.aspect_ratio, art.image_size)
+    try:
+        return report_maps.projection_uncertainty(
+            np.asarray(art.camera_matrix, dtype=np.float64), np.asarray(art.dist_coeffs, dtype=np.float64),
+            np.asarray(cov.matrix, dtype=np.float64), cov.parameters, cov.aspect_ratio, art.image_size)
+    except (ValueError, IndexError) as exc:  # a foreign artifact whose covariance names another model
+        raise InputError(f"{art.ref}: its stored covariance over {cov.parameters} does not fit its "
+                         f"{len(art.dist_coeffs)}-coefficient model ({exc})",
+                         "re-solve the camera, or re-import the artifact from the store that made it") from exc
 
 
 def gather(settings: Settings, ref: str) -> ReportData:

@@ -18,7 +18,7 @@ from calibctl.workflows.report_svg import Plot, colour_bar, heat
 if TYPE_CHECKING:
     from calibctl.workflows.report import ReportData
 
-MAX_DOTS = 5000  # per scatter plot, so a 100-view session stays well under 1 MB
+MAX_DOTS = 5000  # per scatter plot (~40 bytes a dot), so a 200-view session stays under 1 MB
 COVERAGE_CELLS = (16, 12)
 FIELD_CELLS = (16, 12)
 _K = (("fx", 0, 0), ("fy", 1, 1), ("cx", 0, 2), ("cy", 1, 2))
@@ -47,8 +47,8 @@ def _table(header: list[str], rows: list[str]) -> str:
     return f"<table><tr>{head}</tr>{''.join(f'<tr>{r}</tr>' for r in rows)}</table>"
 
 
-def _stride(n: int) -> int:
-    return max(1, -(-n // MAX_DOTS))
+def _stride(n: int, most: int = MAX_DOTS) -> int:
+    return max(1, -(-n // most))
 
 
 def _verdict(d: ReportData) -> str:
@@ -195,7 +195,7 @@ def _uncertainty(d: ReportData) -> str:
     heat(plot, m.sigma_px, np.linspace(0, w, len(m.u_px) + 1), np.linspace(0, h, len(m.v_px) + 1), lo, hi)
     if d.views:  # where the corners were: the uncertainty grows where they never reached
         pts = np.concatenate([v.corners_px for v in d.views])
-        k = _stride(len(pts))
+        k = _stride(len(pts), MAX_DOTS // 2)
         plot.dots(pts[::k, 0], pts[::k, 1], "#ffffff", 0.8)
     r, c = len(m.v_px) // 2, len(m.u_px) // 2
     return ("<h2>Projection uncertainty</h2><p>The stored intrinsic covariance propagated to the projection of "

@@ -83,3 +83,5 @@ def test_the_covariance_is_covered_by_the_hash_and_checked_for_shape() -> None:
     assert tampered.computed_sha256() != art.content_sha256
     with pytest.raises(ValidationError, match="2x2"):
         ParameterCovariance(parameters=["fy", "cx"], matrix=[[0.04, 0.01]])
+    with pytest.raises(ValidationError, match="distinct names"):
+        ParameterCovariance(parameters=["fy", "zoom"], matrix=[[0.04, 0.01], [0.01, 0.09]])

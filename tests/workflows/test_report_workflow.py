@@ -8,7 +8,9 @@ import re
 import numpy as np
 import pytest
 
+from calibctl.artifacts.calibration import UNSEALED
 from calibctl.config import load_settings
+from calibctl.errors import InputError
 from calibctl.store.repository import Store
 from calibctl.workflows import report as report_workflow
 from calibctl.workflows import solve as solve_workflow
@@ -78,3 +80,30 @@ def test_an_artifact_without_covariance_or_session_says_why(solved, tmp_path):
                                       None, report_workflow.gather(settings, art.serial).distortion)
     html = report_workflow.render_html(data)
     assert "made before calibctl stored it" in html and "no capture session is recorded" in html
+
+
+def test_a_200_view_session_stays_under_a_megabyte(solved):
+    settings, art = solved
+    data = report_workflow.gather(settings, art.serial)
+    copies = -(-200 // len(art.views))
+    big = report_workflow.ReportData(
+        art.model_copy(update={"views": (art.views * copies)[:200]}), True, (data.views * copies)[:200], None,
+        data.uncertainty, data.distortion)
+    corners = sum(len(v.corners_px) for v in big.views)
+    html = report_workflow.render_html(big)
+    assert corners > 10_000 and len(html.encode()) < report_workflow.MAX_REPORT_BYTES
+    assert f"every corner used ({corners})" in html and "th corner drawn" in html
+
+
+def test_a_covariance_that_does_not_fit_the_model_exits_2_naming_it(solved, tmp_path):
+    settings, art = solved
+    cov = art.stdev.covariance
+    # k4 is not in the artifact's 5-coefficient model (an artifact from elsewhere, hash and all)
+    swapped = cov.model_copy(update={"parameters": [*cov.parameters[:-1], "k4"]})
+    bad = art.model_copy(update={"stdev": art.stdev.model_copy(update={"covariance": swapped}),
+                                 "content_sha256": UNSEALED})
+    with Store.open(settings.db_url) as store:
+        stored = store.add_artifact(bad, activate=False, actor="t", station="s", reason="foreign")
+    with pytest.raises(InputError, match="does not fit") as err:
+        report_workflow.write_report(settings, stored.ref, tmp_path / "r.html", force=False)
+    assert err.value.exit_code == 2 and not (tmp_path / "r.html").exists()
