@@ -38,7 +38,9 @@ test: $(STAMP) ## run the test suite (SQLite and the local PostgreSQL), without 
 test-floor: $(FLOOR_STAMP) ## the fast suite on the oldest versions pyproject.toml allows (constraints/floor.txt)
 	$(FLOOR_VENV)/bin/python -m pytest -q -n $(PYTEST_WORKERS) -m "not slow" -p no:cacheprovider
 
-test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests
+test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests (installs chromium when missing)
+	command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium) || \
+		(sudo apt-get update && sudo apt-get install -y chromium)
 	$(PY) -m pytest -q -m slow
 
 lint: $(STAMP) ## ruff, mypy and the import-layer contract

@@ -27,6 +27,7 @@ from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.session import GateResult
 
 CALIBRATION_SCHEMA_VERSION: Literal[1] = 1
+_COVARIANCE_PARAMETERS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 
 class DistortionModelInfo(Document):
@@ -41,6 +42,29 @@ class DistortionModelInfo(Document):
     )
 
 
+class ParameterCovariance(Document):
+    """Full covariance of the free intrinsics and distortion, board poses marginalised (core/covariance.py)."""
+
+    parameters: list[str] = Field(
+        min_length=1, description="names in matrix order, e.g. [fy, cx, cy, k1, k2]; under a fixed aspect ratio "
+        "fx is not listed: it is aspect_ratio * fy")
+    matrix: list[list[float]] = Field(description="symmetric covariance, px^2 for K entries, unitless^2 for distortion")
+    aspect_ratio: float | None = Field(None, gt=0, description="fx / fy when the solve tied them, else null")
+
+    @model_validator(mode="after")
+    def _square(self) -> ParameterCovariance:
+        n = len(self.parameters)
+        unknown = [p for p in self.parameters if p not in _COVARIANCE_PARAMETERS]
+        if unknown or len(set(self.parameters)) != n:
+            raise ValueError(f"covariance parameters must be distinct names from {', '.join(_COVARIANCE_PARAMETERS)}; "
+                             f"got {self.parameters}")
+        if len(self.matrix) != n or any(len(row) != n for row in self.matrix):
+            raise ValueError(f"covariance matrix must be {n}x{n} for {n} parameters")
+        if any(self.matrix[i][i] < 0 for i in range(n)):
+            raise ValueError("covariance diagonal must be non-negative")
+        return self
+
+
 class Uncertainty(Document):
     """One-sigma per estimated intrinsic parameter (pixels for K, unitless for distortion)."""
 
@@ -48,6 +72,10 @@ class Uncertainty(Document):
     refused_reason: str | None = Field(None, description="why no sigma is reported (too few residuals)")
     residual_count: int = Field(0, ge=0, description="number of scalar residuals in the fit")
     parameter_count: int = Field(0, ge=0, description="number of estimated parameters incl. poses")
+    # Left out of the document (and its hash) while None, so artifacts sealed before it existed still verify.
+    covariance: ParameterCovariance | None = Field(
+        None, exclude_if=lambda cov: cov is None,
+        description="full covariance behind sigma; absent when refused, and in artifacts made before it was stored")
 
 
 class RingRms(Document):

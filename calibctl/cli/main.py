@@ -109,9 +109,22 @@ def main(
 
 def _register_commands() -> None:
     # Each module adds its commands to ``app``; this order is the order in --help.
-    from calibctl.cli import artifacts, board, capture, db, demo, diagnostics, handeye, keys, lint, rig, solve
+    from calibctl.cli import (
+        artifacts,
+        board,
+        capture,
+        db,
+        demo,
+        diagnostics,
+        handeye,
+        keys,
+        lint,
+        report_page,
+        rig,
+        solve,
+    )
 
-    for module in (capture, solve, lint, board, rig, artifacts, db, keys, diagnostics, handeye, demo):
+    for module in (capture, solve, lint, board, rig, artifacts, report_page, db, keys, diagnostics, handeye, demo):
         module.register(app)
     attach_examples(app)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
@@ -9,7 +10,7 @@ import typer
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import print_calibration
-from calibctl.errors import EXIT_VERDICT_FAIL
+from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 if TYPE_CHECKING:
     from calibctl.workflows import solve as solve_workflow
@@ -35,6 +36,8 @@ def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
         emit_json(art)
     else:
         print_calibration(art, active=outcome.active)
+        if outcome.report_path is not None:
+            stdout.print(f"  report: {outcome.report_path}")
         for c in outcome.outlier_corners[:10]:
             stdout.print(f"  outlier corner kept (its view has too few corners to lose it): {c['view']} "
                          f"id {c['corner_id']} residual {c['residual_px']:.2f} px")
@@ -59,6 +62,9 @@ def solve(
                                             "same as `calibctl rig solve`).", show_default=False)] = None,
     refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="With --rig: refine the members' "
                                                     "intrinsics jointly.")] = False,
+    report_dir: Annotated[Path | None, typer.Option("--report", metavar="DIR", help="Also write the HTML report "
+                                                    "(SERIAL-vN-report.html) of the new version into DIR.",
+                                                    show_default=False)] = None,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
     from calibctl.workflows import solve as solve_workflow
@@ -66,12 +72,14 @@ def solve(
     if rig is not None:
         from calibctl.cli.rig import solve as solve_rig
 
+        if report_dir is not None:
+            raise UsageError("--report is not available with --rig yet", "run `calibctl solve --rig` without it")
         solve_rig(ctx, rig, session_id, refine_intrinsics, activate, json_output)
         return
 
     request = solve_workflow.SolveRequest(
-        session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers
-    )
+        session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers,
+        report_dir=report_dir)
     outcome = solve_workflow.solve(state(ctx).settings(), request)
     render_outcome(outcome, wants_json(ctx, json_output))
 

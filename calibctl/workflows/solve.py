@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -22,6 +23,7 @@ from calibctl.artifacts.calibration import (
     CameraConsistency,
     DistortionModelInfo,
     HeldOut,
+    ParameterCovariance,
     Provenance,
     RejectedCorner,
     RingRms,
@@ -63,6 +65,7 @@ class SolveRequest:
     model: str = "k1k2"
     activate: bool = True
     drop_outliers: bool = False
+    report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,7 @@ class SolveOutcome:
     artifact: CalibrationArtifact
     active: bool
     outlier_corners: list[dict[str, float | int | str]]
+    report_path: Path | None = None
 
 
 def board_spec(board: BoardRevision) -> BoardSpec:
@@ -184,6 +188,15 @@ def _views(session: CaptureSession, solution: IntrinsicsSolution, first: Intrins
     return out
 
 
+def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
+    """The matrix behind sigma, stored so a report can propagate it (absent whenever sigma was refused)."""
+    cov = sol.covariance
+    if cov is None or cov.covariance is None or sol.sigma_refused_reason:
+        return None
+    return ParameterCovariance(parameters=list(cov.names), matrix=[[float(x) for x in row] for row in cov.covariance],
+                               aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
+
+
 def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
     return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
                            dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
@@ -214,6 +227,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             refused_reason=sol.sigma_refused_reason,
             residual_count=int(sol.n_residuals),
             parameter_count=int(sol.n_parameters),
+            covariance=_covariance(sol),
         ),
         rms_px=float(sol.rms_px),
         held_out=_held_out(holdout),
@@ -251,6 +265,11 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if not request.session_id and not request.serial:
         raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
+    # workflows.report draws with this module's board_spec, hence the import here and not at the top
+    from calibctl.workflows import report as report_workflow
+
+    if request.report_dir is not None:
+        report_workflow.ready_folder(request.report_dir)
     with open_store(settings, write=True) as store:
         session = (
             store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
@@ -271,4 +290,8 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
             reason=f"solve of session {session.session_id}",
         )
         active = store.active_version(stored.serial) == stored.version
-    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers)
+    report_path = None
+    if request.report_dir is not None:
+        report_path, _ = report_workflow.write_report(
+            settings, stored.ref, report_workflow.default_path(stored, request.report_dir), force=False)
+    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)

@@ -6,7 +6,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from calibctl.artifacts.calibration import CalibrationArtifact, CameraConsistency, RejectedCorner
+import pytest
+from pydantic import ValidationError
+
+from calibctl.artifacts.calibration import (
+    CalibrationArtifact,
+    CameraConsistency,
+    ParameterCovariance,
+    RejectedCorner,
+)
 from calibctl.artifacts.common import canonical_json_bytes, parse_document, sha256_hex
 from tests.artifacts.factories import calibration
 
@@ -56,3 +64,24 @@ def test_the_two_camera_check_is_covered_by_the_hash() -> None:
     assert art.computed_sha256() == art.content_sha256 != calibration().content_sha256
     flipped = art.model_copy(update={"camera_consistency": check.model_copy(update={"two_cameras_suspected": False})})
     assert flipped.computed_sha256() != art.content_sha256
+
+
+def test_an_artifact_written_before_the_covariance_reads_and_verifies() -> None:
+    old = _as_written_before_the_field(calibration())
+    assert "covariance" not in old["stdev"]  # left out while None
+    art = parse_document(CalibrationArtifact, old, "old.json")
+    assert art.stdev.covariance is None and art.computed_sha256() == old["content_sha256"]
+
+
+def test_the_covariance_is_covered_by_the_hash_and_checked_for_shape() -> None:
+    cov = ParameterCovariance(parameters=["fy", "cx"], matrix=[[0.04, 0.01], [0.01, 0.09]], aspect_ratio=1.0)
+    base = calibration()
+    art = base.model_copy(update={"stdev": base.stdev.model_copy(update={"covariance": cov})}).sealed()
+    assert art.computed_sha256() == art.content_sha256 != base.content_sha256
+    edited = cov.model_copy(update={"matrix": [[0.04, 0.01], [0.01, 0.08]]})
+    tampered = art.model_copy(update={"stdev": art.stdev.model_copy(update={"covariance": edited})})
+    assert tampered.computed_sha256() != art.content_sha256
+    with pytest.raises(ValidationError, match="2x2"):
+        ParameterCovariance(parameters=["fy", "cx"], matrix=[[0.04, 0.01]])
+    with pytest.raises(ValidationError, match="distinct names"):
+        ParameterCovariance(parameters=["fy", "zoom"], matrix=[[0.04, 0.01], [0.01, 0.09]])

@@ -4,7 +4,6 @@ the exports with plain OpenCV / PyYAML the way a robot would."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import cv2
@@ -14,9 +13,8 @@ import yaml
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.store.repository import Store
-from tests.artifacts.factories import measured_board
-from tests.datasets import LEFT_RIGHT, require_datasets
+from tests.cli.real_left import BOARD_9X6_M, PLAIN_FLAGS, calibrated_left_store, plain_opencv_corners
+from tests.datasets import LEFT_RIGHT
 
 SERIAL = "LEFT-01"
 PLAIN_FX_TOLERANCE = 0.01  # calibctl's detector differs from the plain recipe; both must describe one camera
@@ -24,18 +22,9 @@ PLAIN_FX_TOLERANCE = 0.01  # calibctl's detector differs from the plain recipe; 
 
 @pytest.fixture(scope="module")
 def exports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    require_datasets()
     root = tmp_path_factory.mktemp("real-export")
-    left = root / "left"
-    left.mkdir()
-    for path in sorted(LEFT_RIGHT.glob("left*.jpg")):
-        shutil.copy(path, left / path.name)
-    url = f"sqlite:///{root / 'store.db'}"
-    with Store.open(url) as store:
-        store.add_board(measured_board("A17", square_mm=25.0))
+    url = calibrated_left_store(root, SERIAL)
     runner = CliRunner()
-    done = runner.invoke(app, ["--db", url, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(left)])
-    assert done.exit_code == 0, done.output
     out = {}
     for fmt in ("json", "yaml", "ros", "opencv"):
         out[fmt] = root / f"{SERIAL}.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
@@ -45,18 +34,9 @@ def exports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def plain_opencv_fx(images: list[Path]) -> float:
     """cv2.calibrateCamera on corners from findChessboardCorners + cornerSubPix, calibctl's default flags."""
-    obj = np.zeros((54, 3), np.float32)
-    obj[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
-    object_points, image_points = [], []
-    for path in images:
-        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        ok, corners = cv2.findChessboardCorners(gray, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-        assert ok, path
-        criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
-        image_points.append(cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), criteria))
-        object_points.append(obj)
-    flags = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_ASPECT_RATIO
-    _, K, _, _, _ = cv2.calibrateCamera(object_points, image_points, (640, 480), np.eye(3), None, flags=flags)
+    points = plain_opencv_corners(images)
+    _, K, _, _, _ = cv2.calibrateCamera([BOARD_9X6_M] * len(points), points, (640, 480), np.eye(3), None,
+                                        flags=PLAIN_FLAGS)
     return float(K[0, 0])
 
 

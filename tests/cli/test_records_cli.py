@@ -211,3 +211,33 @@ def test_too_few_views_for_the_model_exits_2_and_writes_nothing(sqlite_url, view
     assert message in result.stderr and "Hint:" in result.stderr
     with Store.open(sqlite_url) as store:
         assert store.serials() == []
+
+
+def test_show_json_exposes_the_full_covariance(run):
+    assert run("solve", "--serial", SERIAL).exit_code == 0
+    result = run("show", SERIAL, "--json")
+    assert result.exit_code == 0, result.output
+    stdev = json.loads(result.stdout)["stdev"]
+    names, matrix = stdev["covariance"]["parameters"], stdev["covariance"]["matrix"]
+    assert len(matrix) == len(names) and "cx" in names
+    assert matrix[names.index("cx")][names.index("cx")] ** 0.5 == pytest.approx(stdev["sigma"]["cx"], rel=1e-12)
+
+
+def test_solve_report_writes_the_new_versions_page(run, tmp_path):
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path / "reports"))
+    assert result.exit_code == 0, result.output
+    page = tmp_path / "reports" / f"{SERIAL}-v1-report.html"
+    assert f"report: {page}" in " ".join(result.stdout.split()) and "CAM-0001@1" in page.read_text(encoding="utf-8")
+
+
+def test_solve_report_onto_a_file_exits_2_before_solving(run, tmp_path):
+    not_a_folder = tmp_path / "file.txt"
+    not_a_folder.write_text("x", encoding="utf-8")
+    result = run("solve", "--serial", SERIAL, "--report", str(not_a_folder))
+    assert result.exit_code == 2 and "it is not a folder" in result.stderr
+    assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+
+
+def test_solve_report_with_rig_exits_2(run, tmp_path):
+    result = run("solve", "--rig", "RIG-1", "--report", str(tmp_path))
+    assert result.exit_code == 2 and "--report is not available with --rig" in result.stderr

@@ -154,3 +154,17 @@ def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
     assert finding.severity == "error" and "two cameras" in finding.message
     assert "its own images" in finding.fix and finding.value == pytest.approx(check.ratio)
     assert art.content_sha256 == art.computed_sha256()
+
+
+def test_the_stored_covariance_is_the_one_sigma_comes_from(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    cov = art.stdev.covariance
+    assert cov is not None and cov.parameters == ["fy", "cx", "cy", "k1", "k2"]  # k1k2: fx tied to fy
+    matrix = np.asarray(cov.matrix)
+    assert np.allclose(matrix, matrix.T) and np.all(np.linalg.eigvalsh(matrix) > 0)
+    for i, name in enumerate(cov.parameters):
+        assert np.sqrt(matrix[i, i]) == pytest.approx(art.stdev.sigma[name], rel=1e-12)
+    assert cov.aspect_ratio * np.sqrt(matrix[0, 0]) == pytest.approx(art.stdev.sigma["fx"], rel=1e-12)
+    with Store.open(settings.db_url) as store:
+        assert store.get_artifact(art.serial, art.version).stdev.covariance == cov

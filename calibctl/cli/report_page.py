@@ -1,0 +1,38 @@
+"""calibctl report: one calibration version as a self-contained HTML page."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, stdout
+
+
+def report(
+    ctx: typer.Context,
+    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
+    out: Annotated[Path | None, typer.Option("--output", "-o", help="HTML file to write (default "
+                                             "SERIAL-vN-report.html here).", show_default=False)] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
+    json_output: Annotated[bool, typer.Option("--json", help="Print where it was written as JSON.")] = False,
+) -> None:
+    """Write the calibration report: verdict, lint, parameters with sigma, coverage, residuals, per-view
+    and held-out RMS, projection uncertainty, distortion, gates and provenance. Works after images are pruned.
+
+    Example: calibctl report CAM-0042@3 -o cam-0042-v3.html
+    """
+    from calibctl.workflows import report as report_workflow
+
+    path, data = report_workflow.write_report(state(ctx).settings(), ref, out, force=force)
+    if wants_json(ctx, json_output):
+        emit_json({"ref": data.artifact.ref, "status": data.artifact.status, "path": str(path),
+                   "bytes": path.stat().st_size})
+        return
+    stdout.print(f"{data.artifact.ref} ({data.artifact.status}): report written to {path}")
+
+
+def register(app: typer.Typer) -> None:
+    app.command("report")(report)
