@@ -21,7 +21,7 @@ from pathlib import Path
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from calibctl.errors import InputError
+from calibctl.errors import InputError, UsageError
 
 DEFAULT_DB_URL = "sqlite:///calibctl.db"
 DEFAULT_STATION_FILE = Path("calibctl-station.yaml")
@@ -123,7 +123,7 @@ def load_settings(
         path = DEFAULT_STATION_FILE
     file_cfg = load_station_file(path) if path is not None else StationConfig()
     return Settings(
-        db_url=db or env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL,
+        db_url=persistent_db_url(db if db is not None else env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL),
         station=station or env.get("CALIBCTL_STATION") or file_cfg.station or socket.gethostname(),
         operator=operator or env.get("CALIBCTL_OPERATOR") or file_cfg.operator or _login_name(),
         station_file=str(path) if path else None,
@@ -132,6 +132,23 @@ def load_settings(
         lint=file_cfg.lint,
         handeye=file_cfg.handeye,
     )
+
+
+def persistent_db_url(url: str) -> str:
+    """``url`` unless it names no lasting store: an empty ``--db`` (it used to mean ./calibctl.db) or an
+    in-memory SQLite database, which every calibctl process would create empty and throw away."""
+    text = url.strip()
+    if not text:
+        raise UsageError("--db is empty", "pass --db URL (sqlite:///PATH or postgresql://...), or leave it out")
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "sqlite", "/" + text  # a bare path
+    if scheme.startswith("sqlite"):
+        target, _, query = rest.lstrip("/").partition("?")
+        if target in ("", ":memory:") or "mode=memory" in query:
+            raise UsageError(f"'{url}' is an in-memory database: every calibctl command would start from an empty "
+                             "store and keep nothing", "pass a file (sqlite:///PATH) or postgresql://...")
+    return text
 
 
 def _login_name() -> str:
