@@ -18,9 +18,9 @@ import socket
 from collections.abc import Mapping
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from calibctl import bounded
 from calibctl.errors import InputError, UsageError
 
 DEFAULT_DB_URL = "sqlite:///calibctl.db"
@@ -93,12 +93,7 @@ class Settings(BaseModel):
 
 
 def load_station_file(path: Path) -> StationConfig:
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except OSError as exc:
-        raise InputError(f"cannot read station file {path}: {exc.strerror}") from exc
-    except yaml.YAMLError as exc:
-        raise InputError(f"station file {path} is not valid YAML: {exc}") from exc
+    raw = bounded.load_file(path, "read the station file") or {}
     if not isinstance(raw, dict):
         raise InputError(f"station file {path} must be a mapping, got {type(raw).__name__}")
     try:
