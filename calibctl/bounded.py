@@ -86,17 +86,18 @@ def check_tree(data: Any, source: str) -> Any:
             raise InputError(f"{source}: nested more than {MAX_DEPTH} levels deep (at {where or 'the top'})",
                              "real calibration files nest a few levels; is this the right file?")
         if isinstance(node, str):
-            _check_text(node, source, where)
+            check_text(node, source, where)
         elif isinstance(node, dict):
             for key, value in node.items():
-                _check_text(str(key), source, where)
+                check_text(str(key), source, where)
                 stack.append((value, depth + 1, f"{where}.{key}" if where else str(key)))
         elif isinstance(node, list | tuple):
             stack.extend((value, depth + 1, f"{where}[{i}]") for i, value in enumerate(node))
     return data
 
 
-def _check_text(text: str, source: str, where: str) -> None:
+def check_text(text: str, source: str, where: str) -> None:
+    """InputError when ``text`` holds NUL or another control character (tab, newline, CR excepted)."""
     bad = next((c for c in text if c in _CONTROLS), None)
     if bad is not None:
         name = "a NUL character" if bad == "\x00" else f"control character {bad.encode('unicode_escape').decode()}"

@@ -117,7 +117,7 @@ def load_settings(
     if path is None and DEFAULT_STATION_FILE.exists():
         path = DEFAULT_STATION_FILE
     file_cfg = load_station_file(path) if path is not None else StationConfig()
-    return Settings(
+    return _checked(Settings(
         db_url=persistent_db_url(db if db is not None else env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL),
         station=station or env.get("CALIBCTL_STATION") or file_cfg.station or socket.gethostname(),
         operator=operator or env.get("CALIBCTL_OPERATOR") or file_cfg.operator or _login_name(),
@@ -126,7 +126,14 @@ def load_settings(
         gates=file_cfg.gates,
         lint=file_cfg.lint,
         handeye=file_cfg.handeye,
-    )
+    ))
+
+
+def _checked(settings: Settings) -> Settings:
+    """Station and operator are written into every record: no control characters (PostgreSQL refuses NUL)."""
+    bounded.check_text(settings.station, "the station (--station / CALIBCTL_STATION)", "its value")
+    bounded.check_text(settings.operator, "the operator (--operator / CALIBCTL_OPERATOR)", "its value")
+    return settings
 
 
 def persistent_db_url(url: str) -> str:

@@ -6,6 +6,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import MAX_VERSION, parse_document
 from calibctl.artifacts.events import ActivationEvent
@@ -164,6 +165,7 @@ def rollback(settings: Settings, serial: str, to_version: int, reason: str,
     else against the active version read first; a change in between refuses the rollback."""
     if not reason.strip():
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
+    bounded.check_text(reason, "--reason", "the reason")
     if not 1 <= to_version <= MAX_VERSION:
         raise UsageError(f"version {to_version} is out of range", f"versions go from 1 to {MAX_VERSION}")
     with open_store(settings) as store:

@@ -159,3 +159,14 @@ def test_control_characters_in_stored_text_are_escaped_when_printed(run, sqlite_
     assert "\x1b" not in out and "\r" not in out and "\x07" not in out and "\u202e" not in out
     assert "ok\\x1b[2J\\x1b[1;1Hfake line\\x0a  2026-01-01 rollback -> v9\\x0d[bold]x[/bold]\\u202e" in out
     assert "by tech\\x07 at st\\x00x" in out
+
+
+def test_a_nul_in_a_rollback_reason_or_operator_is_refused_before_the_database(run, db_url):
+    _three_versions(db_url)
+    result = run(db_url, "rollback", SERIAL, "--to", "1", "--reason", "bad\x00reason")
+    assert result.exit_code == 2 and "--reason: the reason holds a NUL character" in result.stderr
+    result = CliRunner().invoke(app, ["--db", db_url, "rollback", SERIAL, "--to", "1", "--reason", "r"],
+                                env={"CALIBCTL_OPERATOR": "o\x01p"})
+    assert result.exit_code == 2 and "CALIBCTL_OPERATOR): its value holds control character \\x01" in result.stderr
+    with Store.open(db_url) as store:
+        assert store.active_version(SERIAL) == 3
