@@ -7,7 +7,8 @@ the result is this store's verdict. The source ``serial@version`` and its sha256
 ``provenance.imported_from``; the artifact gets this store's next version (``keep_version``: the source
 version, only when it is the next one) and a new hash. A rejected import is stored but never activated.
 
-Importing the same source artifact again returns the version it got the first time (no new version).
+Importing the same source artifact again (same serial@version and hash, whatever the file is called)
+returns the version it got the first time (no new version).
 """
 
 from __future__ import annotations
@@ -55,17 +56,20 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
-def _previous_import(store: Store, serial: str, imported_from: str) -> CalibrationArtifact | None:
-    if serial not in store.serials():
+def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
+    """The version an earlier import of the same source artifact (same ref and hash, any file name) got."""
+    if source.serial not in store.serials():
         return None
-    return next((a for a in store.list_artifacts(serial) if a.provenance.imported_from == imported_from), None)
+    key = f"{source.ref} sha256 {source.content_sha256} "
+    return next((a for a in store.list_artifacts(source.serial)
+                 if (a.provenance.imported_from or "").startswith(key)), None)
 
 
 def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
                     activate: bool, keep_version: bool = False) -> ImportOutcome:
     """Store ``source`` (hash already checked) as this store's next version with this store's verdict."""
     label = source_label(source, path)
-    previous = _previous_import(store, source.serial, label)
+    previous = _previous_import(store, source)
     if previous is not None:
         active = store.active_version(source.serial) == previous.version
         return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)

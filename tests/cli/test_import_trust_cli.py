@@ -69,7 +69,9 @@ def test_import_gets_the_next_version_and_a_second_import_is_the_same_version(ru
     assert first.exit_code == 0, first.output
     doc = json.loads(first.stdout)
     assert doc["artifact"]["version"] == 2 and doc["active"] and doc["source"] == f"{SERIAL}@7"
-    again = run(sqlite_url, "import", str(path))
+    renamed = tmp_path / "renamed.json"
+    renamed.write_bytes(path.read_bytes())
+    again = run(sqlite_url, "import", str(renamed))
     assert again.exit_code == 0 and f"already imported as {SERIAL}@2" in again.stdout
     with Store.open(sqlite_url) as store:
         assert [a.version for a in store.list_artifacts(SERIAL)] == [1, 2]
