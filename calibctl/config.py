@@ -20,10 +20,10 @@ import socket
 from collections.abc import Mapping
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from calibctl.errors import InputError
+from calibctl import bounded
+from calibctl.errors import InputError, UsageError
 
 DEFAULT_DB_URL = "sqlite:///calibctl.db"
 DEFAULT_STATION_FILE = Path("calibctl-station.yaml")
@@ -99,12 +99,7 @@ class Settings(BaseModel):
 
 
 def load_station_file(path: Path) -> StationConfig:
-    try:
-        raw = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except OSError as exc:
-        raise InputError(f"cannot read station file {path}: {exc.strerror}") from exc
-    except yaml.YAMLError as exc:
-        raise InputError(f"station file {path} is not valid YAML: {exc}") from exc
+    raw = bounded.load_file(path, "read the station file") or {}
     if not isinstance(raw, dict):
         raise InputError(f"station file {path} must be a mapping, got {type(raw).__name__}")
     try:
@@ -128,8 +123,8 @@ def load_settings(
     if path is None and DEFAULT_STATION_FILE.exists():
         path = DEFAULT_STATION_FILE
     file_cfg = load_station_file(path) if path is not None else StationConfig()
-    return Settings(
-        db_url=db or env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL,
+    return _checked(Settings(
+        db_url=persistent_db_url(db if db is not None else env.get("CALIBCTL_DB") or file_cfg.db or DEFAULT_DB_URL),
         station=station or env.get("CALIBCTL_STATION") or file_cfg.station or socket.gethostname(),
         operator=operator or env.get("CALIBCTL_OPERATOR") or file_cfg.operator or _login_name(),
         station_file=str(path) if path else None,
@@ -139,7 +134,31 @@ def load_settings(
         gates=file_cfg.gates,
         lint=file_cfg.lint,
         handeye=file_cfg.handeye,
-    )
+    ))
+
+
+def _checked(settings: Settings) -> Settings:
+    """Station and operator are written into every record: no control characters (PostgreSQL refuses NUL)."""
+    bounded.check_text(settings.station, "the station (--station / CALIBCTL_STATION)", "its value")
+    bounded.check_text(settings.operator, "the operator (--operator / CALIBCTL_OPERATOR)", "its value")
+    return settings
+
+
+def persistent_db_url(url: str) -> str:
+    """``url`` unless it names no lasting store: an empty ``--db`` (it used to mean ./calibctl.db) or an
+    in-memory SQLite database, which every calibctl process would create empty and throw away."""
+    text = url.strip()
+    if not text:
+        raise UsageError("--db is empty", "pass --db URL (sqlite:///PATH or postgresql://...), or leave it out")
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "sqlite", "/" + text  # a bare path
+    if scheme.startswith("sqlite"):
+        target, _, query = rest.lstrip("/").partition("?")
+        if target in ("", ":memory:") or "mode=memory" in query:
+            raise UsageError(f"'{url}' is an in-memory database: every calibctl command would start from an empty "
+                             "store and keep nothing", "pass a file (sqlite:///PATH) or postgresql://...")
+    return text
 
 
 def _login_name() -> str:

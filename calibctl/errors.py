@@ -56,6 +56,10 @@ class DatabaseError(CalibctlError):
     """The store is unreachable, locked for too long, or refused the operation."""
 
 
+class StaleActiveVersionError(DatabaseError):
+    """A compare-and-set write (rollback) saw an active version that another writer has since changed."""
+
+
 class DatabaseOutOfDateError(DatabaseError):
     """The database schema is older than this calibctl; ``calibctl db upgrade`` migrates it."""
 

@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from calibctl.errors import AlreadyExistsError, FileSystemError
+from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
 # errno -> (what happened, what to do). Anything not listed is reported with the system's own words.
 _REASONS: dict[int, tuple[str, str]] = {
@@ -101,11 +101,23 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
     return path
 
 
-def read_text(path: Path, what: str = "read") -> str:
-    """A UTF-8 text file; a missing, unreadable or undecodable file is a FileSystemError naming it."""
+def read_text(path: Path, what: str = "read", *, max_bytes: int | None = None) -> str:
+    """A UTF-8 text file; a missing, unreadable or undecodable file is a FileSystemError naming it.
+    ``max_bytes``: never read more (a file that grew past it while read is refused, not cut off)."""
     with file_errors(what, path):
         try:
-            return Path(path).read_text(encoding="utf-8")
+            if max_bytes is None:
+                return Path(path).read_text(encoding="utf-8")
+            chunks, total = [], 0
+            with Path(path).open("rb") as handle:  # in chunks: read(max_bytes) would allocate all of it at once
+                while total <= max_bytes and (chunk := handle.read(1 << 20)):
+                    chunks.append(chunk)
+                    total += len(chunk)
+            data = b"".join(chunks)
+            if total > max_bytes:
+                raise InputError(f"{path} is over the {max_bytes / 2**20:g} MiB input limit",
+                                 "raise CALIBCTL_MAX_INPUT_MB if such a file is real")
+            return data.decode("utf-8")
         except UnicodeDecodeError as exc:
             raise FileSystemError(f"cannot {what} {path}: it is not UTF-8 text ({exc.reason} at byte {exc.start})",
                                   "is this the right file?") from exc

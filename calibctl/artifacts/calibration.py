@@ -16,6 +16,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import (
     CURRENT_HASH,
     LEGACY_HASH,
+    MAX_VERSION,
     SERIAL_PATTERN,
     Document,
     HashAlgorithm,
@@ -162,7 +163,7 @@ class CalibrationArtifact(Document):
 
     schema_version: Literal[1] = Field(CALIBRATION_SCHEMA_VERSION, description="version of this document's schema")
     serial: str = Field(pattern=SERIAL_PATTERN, description="camera serial number (letters, digits, . _ : -)")
-    version: int = Field(ge=1, description="1, 2, 3, ... per serial, allocated by the store")
+    version: int = Field(ge=1, le=MAX_VERSION, description="1, 2, 3, ... per serial, allocated by the store")
     status: Literal["accepted", "rejected"] = Field(description="accepted when lint passed; rejected is never active")
     image_size: tuple[int, int] = Field(description="[W, H] pixels the corners were detected at")
     camera_matrix: tuple[

@@ -33,6 +33,8 @@ def _utc(value: datetime) -> datetime:
 
 
 UtcDatetime = Annotated[datetime, AfterValidator(_utc)]
+MAX_VERSION = 2**31 - 1
+"""The largest version/revision: what an INTEGER column holds on PostgreSQL (and SQLite). Refused above."""
 SERIAL_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:-]{0,127}$"
 """Serials never contain '@' (SERIAL@N would be ambiguous), spaces or control characters."""
 Sha256Hex = Annotated[str, Field(pattern=r"^[0-9a-f]{64}$", description="lower-case hex sha256")]

@@ -8,8 +8,9 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stdout
-from calibctl.cli.report import history_table, print_calibration
+from calibctl.cli.render import emit_json, plain, stdout
+from calibctl.cli.report import history_table, print_calibration, print_findings
+from calibctl.errors import EXIT_VERDICT_FAIL
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
@@ -33,7 +34,7 @@ def history(
             prev = f" (was {e.previous_version})" if e.previous_version else ""
             stdout.print(
                 f"  {e.at.isoformat()[:19].replace('T', ' ')}  {e.kind:<8} -> v{e.version}{prev}  "
-                f"by {e.actor} at {e.station}: {e.reason}"
+                f"by {plain(e.actor)} at {plain(e.station)}: {plain(e.reason)}", markup=False, soft_wrap=True
             )
 
 
@@ -80,21 +81,34 @@ def export(
 def import_(
     ctx: typer.Context,
     path: Annotated[Path, typer.Argument(metavar="FILE", help="An artifact exported with --format json.")],
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it the active version.")] = True,
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it active (when this store accepts it).")] = True,
+    keep_version: Annotated[bool, typer.Option(
+        "--keep-version", help="Keep the source version number (only when it is this store's next one).")] = False,
     require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")] = False,
     trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Bring an exported artifact into this store after checking its sha256 (tampered files exit 1) and signature."""
+    """Bring an exported artifact into this store: its hash and signature are checked (tampered files exit 1),
+    its numbers are linted with this store's rules, and the verdict and version are this store's."""
     from calibctl.workflows import records
 
-    art = records.import_file(
-        state(ctx).settings(), path, activate=activate, require_signature=require_signature, trusted_keys=trusted_keys
-    )
+    outcome = records.import_file(state(ctx).settings(), path, activate=activate, keep_version=keep_version,
+                                  require_signature=require_signature, trusted_keys=trusted_keys)
+    art = outcome.artifact
     if wants_json(ctx, json_output):
-        emit_json(art)
-        return
-    stdout.print(f"imported {art.serial}@{art.version} ({art.status}, sha256 {art.content_sha256[:12]})")
+        emit_json({"artifact": art.model_dump(mode="json"), "source": outcome.source_ref,
+                   "source_status": outcome.source_status, "active": outcome.active,
+                   "already_imported": outcome.already_imported})
+    else:
+        again = "already imported as" if outcome.already_imported else "imported"
+        state_word = "active" if outcome.active else "not active"
+        stdout.print(f"{again} {art.serial}@{art.version} ({art.status} by this store's lint, {state_word}; "
+                     f"source {outcome.source_ref} was {outcome.source_status}; sha256 {art.content_sha256[:12]})",
+                     markup=False)
+        if art.status == "rejected":
+            print_findings([f for f in art.lint if f.severity == "error"])
+    if activate and art.status == "rejected":  # asked to make it active; this store's verdict says no
+        raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def rollback(
@@ -102,17 +116,20 @@ def rollback(
     serial: Annotated[str, typer.Argument(help="Camera serial number.")],
     to: Annotated[int, typer.Option("--to", help="Version to make active.")],
     reason: Annotated[str, typer.Option("--reason", help="Why; kept forever in the event log.")],
+    expect_active: Annotated[int | None, typer.Option(
+        "--expect-active", help="The active version you decided on; refused if it has changed since.")] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Make an earlier accepted version active again (an append-only event; nothing is deleted)."""
+    """Make an earlier accepted version active again (an append-only event; nothing is deleted). A newer
+    version activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
     from calibctl.workflows import records
 
-    event = records.rollback(state(ctx).settings(), serial, to, reason)
+    event = records.rollback(state(ctx).settings(), serial, to, reason, expected_active=expect_active)
     if wants_json(ctx, json_output):
         emit_json(event)
         return
     was = f" (was v{event.previous_version})" if event.previous_version else ""
-    stdout.print(f"{serial}: active version is now v{event.version}{was}")
+    stdout.print(f"{serial}: active version is now v{event.version}{was}", markup=False)
 
 
 def register(app: typer.Typer) -> None:

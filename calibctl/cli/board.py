@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.cli.render import emit_json, plain, shown, stderr, stdout
 
 if TYPE_CHECKING:
     from calibctl.artifacts.board import BoardRevision
@@ -23,7 +23,7 @@ class BoardKind(StrEnum):
 
 def say(line: str) -> None:
     """One result line on stdout, never wrapped or interpreted as markup (it holds URLs and user text)."""
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+    stdout.print(plain(line), soft_wrap=True, markup=False, highlight=False)
 
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
@@ -126,7 +126,8 @@ def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     for b in all_boards:
         m = b.measurement
         measured = f"{m.measured_on} by {m.measured_by}" if m.status == "measured" else "-"
-        table.add_row(b.ref, pattern_text(b), square_text(b), measured, b.created_at.date().isoformat())
+        table.add_row(shown(b.ref), shown(pattern_text(b)), shown(square_text(b)), shown(measured),
+                      b.created_at.date().isoformat())
     stdout.print(table)
 
 

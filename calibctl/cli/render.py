@@ -7,6 +7,7 @@ import math
 from typing import Any
 
 from rich.console import Console, ConsoleDimensions
+from rich.markup import escape as _escape_markup
 from rich.rule import Rule
 
 LOG_WIDTH = 110
@@ -67,3 +68,19 @@ def fmt_px(value: float | None, digits: int = 3) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"
     return f"{value:.{digits}f}"
+
+
+# C0 and C1 control characters, DEL, and the Unicode bidi/line-separator controls that can make a terminal
+# show something other than what is stored (a reason that clears the screen or fakes a history line).
+_CONTROL = {*range(0x00, 0x20), *range(0x7F, 0xA0), 0x2028, 0x2029, *range(0x202A, 0x202F), *range(0x2066, 0x206A)}
+_ESCAPES = {c: (f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}") for c in _CONTROL}
+
+
+def plain(text: object) -> str:
+    """Stored text as it may be printed: control characters shown as ``\\xNN`` / ``\\uNNNN`` escapes."""
+    return str(text).translate(_ESCAPES)
+
+
+def shown(text: object) -> str:
+    """``plain`` and with rich markup escaped: stored text for a line or table cell that rich renders."""
+    return _escape_markup(plain(text))

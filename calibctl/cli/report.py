@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 from rich import box
 from rich.table import Table
 
-from calibctl.cli.render import fmt_px, stdout
+from calibctl.cli.render import fmt_px, shown, stdout
 
 if TYPE_CHECKING:
     from calibctl.artifacts.calibration import CalibrationArtifact
@@ -30,8 +30,8 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     marker = "" if active is None else (" (active)" if active else "")
     status_style = "green" if art.status == "accepted" else "red"
     stdout.print(
-        f"[bold]{art.serial}@{art.version}[/bold]{marker}  [{status_style}]{art.status}[/{status_style}]  "
-        f"{art.image_size[0]}x{art.image_size[1]}  model {art.model.name}  board {art.board.ref} "
+        f"[bold]{shown(art.ref)}[/bold]{marker}  [{status_style}]{art.status}[/{status_style}]  "
+        f"{art.image_size[0]}x{art.image_size[1]}  model {shown(art.model.name)}  board {shown(art.board.ref)} "
         f"({art.board.measurement.square_size_m * 1000:.3f} mm, {art.board.measurement.status})"
     )
     sigma = art.stdev.sigma
@@ -44,7 +44,7 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
         if name in art.model.free_parameters:
             stdout.print(f"  {_with_sigma(name, value, sigma, '', 4)}")
     if art.stdev.refused_reason:
-        stdout.print(f"  [yellow]no uncertainty: {art.stdev.refused_reason}[/yellow]")
+        stdout.print(f"  [yellow]no uncertainty: {shown(art.stdev.refused_reason)}[/yellow]")
     ho = art.held_out
     stdout.print(
         f"  RMS fit {fmt_px(art.rms_px)} px / held-out {fmt_px(ho.rms_px)} px ({ho.k_folds}-fold); "
@@ -54,9 +54,9 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     n_drop = sum(v.dropped for v in art.views)
     stdout.print(f"  views {len(art.views)} ({n_out} outlier, {n_drop} dropped)")
     if art.rejected_corners:
-        shown = ", ".join(f"{c.view} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners[:5])
+        listed = ", ".join(f"{shown(c.view)} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners[:5])
         more = f" and {len(art.rejected_corners) - 5} more" if len(art.rejected_corners) > 5 else ""
-        stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {shown}{more}")
+        stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {listed}{more}")
     if art.gates:
         print_gates(art.gates)
     print_findings(art.lint)
@@ -68,7 +68,7 @@ def print_gates(gates: list[GateResult]) -> None:
         value = f"{g.value:.3g}" if g.gate == "observability" else f"{g.value:g}"
         line = f"  gate {g.gate:<13} {mark}  {value} (needs {g.threshold:g})"
         if not g.passed and g.hint:
-            line += f" -> {g.hint}"
+            line += f" -> {shown(g.hint)}"
         stdout.print(line)
 
 
@@ -78,14 +78,14 @@ def print_findings(findings: list[Finding]) -> None:
         return
     for f in findings:
         style = {"error": "red", "warning": "yellow"}.get(f.severity, "cyan")
-        stdout.print(f"  lint [{style}]{f.severity}[/{style}] {f.rule}: {f.message}")
+        stdout.print(f"  lint [{style}]{f.severity}[/{style}] {shown(f.rule)}: {shown(f.message)}")
         if f.fix and f.severity != "info":
-            stdout.print(f"       fix: {f.fix}")
+            stdout.print(f"       fix: {shown(f.fix)}")
 
 
 def history_table(rows: list, serial: str) -> Table:
     table = Table(
-        title=f"calibration history of {serial} (rms, sigma(fx), held-out outer ring: px)",
+        title=f"calibration history of {shown(serial)} (rms, sigma(fx), held-out outer ring: px)",
         title_justify="left",
         box=box.SIMPLE_HEAD,
         pad_edge=False,
@@ -103,8 +103,8 @@ def history_table(rows: list, serial: str) -> Table:
             fmt_px(r.sigma_fx_px, 2),
             fmt_px(r.held_out_outer_rms_px),
             r.created_at[:16].replace("T", " "),
-            r.board,
-            r.station,
-            r.operator,
+            shown(r.board),
+            shown(r.station),
+            shown(r.operator),
         )
     return table

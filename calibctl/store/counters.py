@@ -19,6 +19,8 @@ from typing import Any
 from sqlalchemy import Table, case, select
 from sqlalchemy.orm import Session
 
+from calibctl.artifacts.common import MAX_VERSION
+from calibctl.errors import UsageError
 from calibctl.store.models import CounterRow
 
 _counters: Table = CounterRow.__table__  # type: ignore[assignment]
@@ -36,8 +38,19 @@ def _insert(session: Session) -> Any:
     return sqlite_insert(_counters)
 
 
+def peek(session: Session, scope: str, key: str) -> int | None:
+    """The last value handed out for (scope, key); None when none was."""
+    stmt = select(_counters.c.last_value).where(_counters.c.scope == scope, _counters.c.key == key)
+    return session.execute(stmt).scalar_one_or_none()
+
+
 def next_value(session: Session, scope: str, key: str) -> int:
-    """Bump and return the counter of (scope, key); the first value is 1."""
+    """Bump and return the counter of (scope, key); the first value is 1. At ``MAX_VERSION`` (the
+    largest value a version column holds on both backends) it refuses instead of overflowing."""
+    last = peek(session, scope, key)
+    if last is not None and last >= MAX_VERSION:
+        raise UsageError(f"{scope} {key} has reached version {last}, the largest a store holds ({MAX_VERSION})",
+                         "use a new serial/name; versions are never reused")
     stmt = _insert(session).values(scope=scope, key=key, last_value=1)
     stmt = stmt.on_conflict_do_update(
         index_elements=[_counters.c.scope, _counters.c.key],

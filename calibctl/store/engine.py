@@ -6,10 +6,14 @@ factory) run the same code and the same migrations. Differences are handled here
 * URLs: ``postgresql://`` and ``postgres://`` mean psycopg 3 (``postgresql+psycopg://``); a bare path
   means a SQLite file. Anything else is refused.
 * SQLite: WAL journal (readers never wait for a writer), foreign keys on, and a *bounded* wait for
-  the write lock (``CALIBCTL_DB_LOCK_TIMEOUT_S``, default 10 s). SQLAlchemy emits the ``BEGIN`` itself
+  the write lock (``CALIBCTL_DB_LOCK_TIMEOUT_S``, default 60 s on SQLite). SQLite's busy handler retries
+  the lock with sleeps growing to 100 ms, which is not fair: under 16 station writers plus 8 rollback
+  processes on the 2-core bench machine a writer waited more than 10 s (the old default) for its turn
+  8 times in one run; at 60 s none gave up (tests/store/test_mixed_load.py). SQLAlchemy emits the ``BEGIN`` itself
   so that write transactions start with ``BEGIN IMMEDIATE``: writers queue up at the start of the
   transaction instead of failing half-way when a read lock cannot be upgraded.
-* PostgreSQL: the same bound applies to row-lock waits (``lock_timeout``); connects give up after 10 s.
+* PostgreSQL: the same setting bounds row-lock waits (``lock_timeout``, default 10 s: row locks are
+  per serial and queue fairly); connects give up after 10 s.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from calibctl.errors import DatabaseError, MissingExtraError, UsageError
 
 LOCK_TIMEOUT_ENV = "CALIBCTL_DB_LOCK_TIMEOUT_S"
 DEFAULT_LOCK_TIMEOUT_S = 10.0
+DEFAULT_SQLITE_LOCK_TIMEOUT_S = 60.0
 CONNECT_TIMEOUT_S = 10
 LOCK_TIMEOUT_OPTION = "calibctl_lock_timeout_s"
 WRITE_OPTION = "calibctl_write"
@@ -74,12 +79,12 @@ def display_url(url: str | URL) -> str:
     return shown.replace("postgresql+psycopg://", "postgresql://", 1)
 
 
-def lock_timeout_s(env: Mapping[str, str] | None = None) -> float:
+def lock_timeout_s(env: Mapping[str, str] | None = None, *, backend: str = "postgresql") -> float:
     """How long a writer waits for another writer's lock before giving up (seconds)."""
     env = os.environ if env is None else env
     raw = env.get(LOCK_TIMEOUT_ENV)
     if raw is None or raw.strip() == "":
-        return DEFAULT_LOCK_TIMEOUT_S
+        return DEFAULT_SQLITE_LOCK_TIMEOUT_S if backend == "sqlite" else DEFAULT_LOCK_TIMEOUT_S
     try:
         value = float(raw)
     except ValueError:
@@ -99,8 +104,8 @@ def sqlite_path(url: URL) -> Path | None:
 def make_engine(url: str, *, lock_timeout: float | None = None) -> Engine:
     """An engine for ``url`` with calibctl's connection settings; does not connect yet."""
     parsed = parse_url(url)
-    timeout_s = lock_timeout_s() if lock_timeout is None else lock_timeout
     backend = parsed.get_backend_name()
+    timeout_s = lock_timeout_s(backend=backend) if lock_timeout is None else lock_timeout
     if backend == "sqlite":
         engine = create_engine(parsed, connect_args={"timeout": timeout_s})
         _configure_sqlite(engine, timeout_s, in_memory=sqlite_path(parsed) is None)

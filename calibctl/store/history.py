@@ -14,7 +14,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
-from calibctl.errors import NotFoundError, UsageError
+from calibctl.errors import NotFoundError, StaleActiveVersionError, UsageError
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
 from calibctl.store.models import ArtifactRow, EventRow
@@ -34,6 +34,23 @@ def check_activation(artifact: CalibrationArtifact, activate: bool, reason: str)
         )
     if activate and not reason.strip():
         raise UsageError("activating a calibration needs a reason")
+
+
+UNCHECKED = object()
+"""``expected_active`` default: the caller did not say which active version it saw (no compare-and-set)."""
+
+
+def check_expected_active(serial: str, to_version: int, active: int | None, expected: int | None | object) -> None:
+    """Refuse a rollback decided on a view of ``serial`` that another writer has changed since."""
+    if expected is UNCHECKED or expected == active:
+        return
+    seen = f"v{expected}" if expected is not None else "no active version"
+    now = f"v{active}" if active is not None else "no active version"
+    raise StaleActiveVersionError(
+        f"{serial}: the active version changed underneath this rollback (it saw {seen}, it is now {now}); "
+        f"nothing rolled back to v{to_version}",
+        f"look at `calibctl history {serial}` and roll back again if v{to_version} is still what you want",
+    )
 
 
 def statuses(s: Session, serial: str) -> dict[int, str]:

@@ -13,6 +13,7 @@ by its sha256 (``<dir>/ab/ab12...``); its row in ``images`` says when it expires
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -49,19 +50,79 @@ def image_file(image_dir: Path, sha256: str) -> Path:
     return image_dir / sha256[:2] / sha256
 
 
-def write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same directory and a rename.
+def _fsync_dir(folder: Path) -> None:
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
-    The fsync before the rename is what keeps a content address honest: without it a crash can leave
-    the new name pointing at an empty or partly written file (ext4 delayed allocation, new file names).
-    It is cheap: 0.7-1 ms per 1280x960 PNG on the bench machine (20 images: 20 ms with it, 5 ms
-    without), and fsyncing the whole batch after writing it measured the same (18-20 ms), so it stays
-    per file. The directory is not fsynced: an image whose rename is lost in a crash is missing, which
-    the image store tolerates (``image_path`` returns None; the session row is the durable record).
+
+def _link_fd(fd: int, path: Path, folder: int, size: int) -> None:
+    try:
+        os.link(f"/proc/self/fd/{fd}", path.name, dst_dir_fd=folder)
+    except FileExistsError:
+        if path.stat().st_size == size:  # written by another capture meanwhile: same name, same content
+            return
+        path.unlink()  # a damaged file under a content address: replace it
+        os.link(f"/proc/self/fd/{fd}", path.name, dst_dir_fd=folder)
+
+
+def _link_anonymous(path: Path, data: bytes) -> bool:
+    """Write ``data`` to an unnamed file in ``path``'s folder (O_TMPFILE), fsync it, then give it its name.
+
+    A kill at any point before the link leaves nothing behind (the kernel frees an unnamed file), so no
+    temporary file can be left over. False when the file system has no O_TMPFILE (the caller falls back).
     """
-    with file_errors("create the image folder", path.parent):
+    flag = getattr(os, "O_TMPFILE", 0)
+    if not flag:
+        return False
+    try:
+        fd = os.open(path.parent, flag | os.O_WRONLY, 0o644)
+    except OSError as exc:
+        if exc.errno in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL, errno.ENOENT):
+            return False
+        raise
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
+        os.fsync(fd)
+        try:
+            # A dir fd makes CPython call linkat(..., AT_SYMLINK_FOLLOW): it links the file the /proc
+            # entry names, where plain link() would try to link the /proc symlink itself (EXDEV).
+            folder = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
+            try:
+                _link_fd(fd, path, folder, len(data))
+            finally:
+                os.close(folder)
+        except FileNotFoundError:  # no /proc: use the named-temporary-file path
+            return False
+    finally:
+        os.close(fd)
+    return True
+
+
+def write_durably(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that, once this returns, the file and its name survive a crash.
+
+    The file's bytes are fsynced before it gets its name (a crash can never leave the name pointing at a
+    short file), and the folder is fsynced after (so the name itself is durable). This runs *before* the
+    image rows commit: a row in ``images`` always has its file. The file fsync measured 0.7-1 ms per
+    1280x960 PNG on the bench machine (benchmarks/bench_e2e.py).
+    """
+    with file_errors("write the image", path):
+        created = not path.parent.is_dir()
         path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, data, force=True, fsync=True)
+        if created:
+            _fsync_dir(path.parent.parent)
+        if not _link_anonymous(path, data):
+            write_atomic(path, data, force=True, fsync=True)
+        _fsync_dir(path.parent)
+
+
+def _has_file(path: Path, size: int) -> bool:
+    return path.exists() and path.stat().st_size == size
 
 
 class ImageStoreMixin:
@@ -87,6 +148,9 @@ class ImageStoreMixin:
         now = utc_now()
         expires = now + dt.timedelta(days=retention_days)
 
+        def missing() -> list[str]:
+            return [sha for sha in sorted(by_sha) if not _has_file(image_file(self.image_dir, sha), len(by_sha[sha]))]
+
         def work(s: Session) -> None:
             for sha in sorted(by_sha):  # one lock order for every writer (PostgreSQL FOR UPDATE)
                 row = s.get(ImageRow, sha, with_for_update=True)
@@ -94,14 +158,16 @@ class ImageStoreMixin:
                     s.add(ImageRow(sha256=sha, size_bytes=len(by_sha[sha]), stored_at=now, expires_at=expires))
                 elif row.expires_at < expires:
                     row.expires_at = expires
+            # A prune that committed between the writes below and these locks may have deleted a file we
+            # wrote; holding the rows now, put any such file back before the rows commit.
+            for sha in missing():
+                write_durably(image_file(self.image_dir, sha), by_sha[sha])
 
-        # Rows first, files after the commit: a concurrent prune either ran before (and our rows are new)
-        # or waits for us (and then sees the later expiry), so it never deletes a file we just kept.
+        # Files first (durable), rows after: a kill at any point leaves no row without its file. A file
+        # whose rows never committed is an unreferenced, complete file that the next capture reuses.
+        for sha in missing():
+            write_durably(image_file(self.image_dir, sha), by_sha[sha])
         self._run(work, write=True, retry_conflicts=True)
-        for sha, data in by_sha.items():
-            path = image_file(self.image_dir, sha)
-            if not (path.exists() and path.stat().st_size == len(data)):
-                write_atomically(path, data)
         return shas
 
     def image_path(self, sha256: str) -> Path | None:

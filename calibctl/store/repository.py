@@ -251,14 +251,19 @@ class Store(ImageStoreMixin, RigStoreMixin):
     # calibration artifacts -----------------------------------------------------------------------
 
     def add_artifact(
-        self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str
+        self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str,
+        expect_version: int | None = None,
     ) -> CalibrationArtifact:
         """Store ``artifact`` as the serial's next version (sealing its hash) and, when ``activate``,
-        make it active. Activating a rejected artifact is refused before anything is written."""
+        make it active. Activating a rejected artifact is refused before anything is written;
+        ``expect_version``: refuse (nothing written) unless the next version is that one."""
         history.check_activation(artifact, activate, reason)
 
         def work(s: Session) -> CalibrationArtifact:
             version = counters.next_value(s, "artifact", artifact.serial)
+            if expect_version is not None and version != expect_version:
+                raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
+                                 f"of {artifact.serial} is {version}", "store it as the next version instead")
             stored = artifact.model_copy(update={"version": version}).sealed()
             s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
             s.flush()
@@ -386,8 +391,16 @@ class Store(ImageStoreMixin, RigStoreMixin):
         """The version of the serial's latest activation event; None when nothing was ever activated."""
         return self._run(lambda s: history.active_in(s, serial))
 
-    def rollback(self, serial: str, to_version: int, *, reason: str, actor: str, station: str) -> ActivationEvent:
-        """Make ``to_version`` (accepted, intact) the active version of ``serial``; appends an event."""
+    def next_version(self, serial: str) -> int:
+        """The version the next artifact of ``serial`` would get (nothing is allocated)."""
+        return self._run(lambda s: (counters.peek(s, "artifact", serial) or 0) + 1)
+
+    def rollback(self, serial: str, to_version: int, *, reason: str, actor: str, station: str,
+                 expected_active: int | None | object = history.UNCHECKED) -> ActivationEvent:
+        """Make ``to_version`` (accepted, intact) the active version of ``serial``; appends an event.
+
+        Compare-and-set: ``expected_active`` is the active version the caller decided on (None: nothing
+        was active); when another writer moved it since, nothing is written (StaleActiveVersionError)."""
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
@@ -403,7 +416,9 @@ class Store(ImageStoreMixin, RigStoreMixin):
                 accepted = [v for v, st in statuses.items() if st == "accepted"]
                 listing = f"accepted versions: {history.known_list(accepted)}" if accepted else "no version is accepted"
                 raise UsageError(f"{serial}@{to_version} is rejected and can never become active; {listing}")
-            if history.active_in(s, serial) == to_version:
+            active = history.active_in(s, serial)
+            history.check_expected_active(serial, to_version, active, expected_active)
+            if active == to_version:
                 raise UsageError(f"{serial}@{to_version} is already the active version; nothing to roll back")
             codec.decode_artifact(history.artifact_row(s, serial, to_version))  # never activate tampered bytes
             return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)

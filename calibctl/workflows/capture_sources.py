@@ -41,8 +41,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from calibctl import bounded
 from calibctl.core.image_outcomes import IMAGE_SUFFIXES, list_images
-from calibctl.errors import InputError, UsageError
+from calibctl.errors import FileSystemError, InputError, UsageError
 
 FOLDER = "folder"
 GLOB = "glob"
@@ -199,9 +200,9 @@ def _glob_images(pattern: str) -> ImageSet:
 
 def _listed_images(list_file: Path) -> ImageSet:
     try:
-        lines = list_file.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the list file {list_file}: {exc}", "a list file is UTF-8 text") from exc
+        lines = bounded.read_text(list_file, "read the list file").splitlines()
+    except FileSystemError as exc:
+        raise InputError(exc.message, "a list file is UTF-8 text") from exc
     base = list_file.parent
     paths: list[Path] = []
     problems: list[str] = []

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calibctl import bounded
 from calibctl.errors import InputError
 from calibctl.files import write_atomic
 
@@ -115,6 +116,8 @@ def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[st
     fails it is re-read cell by cell so the error can name the line.
     """
     path = Path(path)
+    if path.is_file():
+        bounded.check_size(path, f"read the {what}")
     try:
         handle = path.open(newline="", encoding="utf-8-sig")
     except FileNotFoundError:

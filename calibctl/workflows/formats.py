@@ -19,9 +19,9 @@ from typing import Any, Literal
 
 import yaml
 
+from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.errors import InputError
-from calibctl.files import read_text
 from calibctl.workflows import ros_camera_info, trace_header
 
 ExportFormat = Literal["json", "yaml", "ros", "opencv"]
@@ -115,33 +115,20 @@ def _opencv_data(text: str, source: str) -> dict[str, Any]:
     return data
 
 
-def _structured(text: str, path: Path) -> Any:
-    if path.suffix.lower() == ".json":
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from exc
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
-        raise InputError(f"{path}: malformed YAML{where}: {getattr(exc, 'problem', exc)}") from exc
-
-
 def load_structured_file(path: Path) -> Any:
-    """Read JSON or YAML (safely); unreadable or malformed input is an error naming the file."""
-    return _structured(read_text(path), path)
+    """Read JSON or YAML through the one bounded loader; unreadable, malformed or hostile input is an
+    error naming the file."""
+    return bounded.load_file(path)
 
 
 def load_calibration(path: Path) -> CalibrationFile:
     """Read a calibctl artifact (JSON/YAML), a ROS camera_info or an OpenCV FileStorage export."""
-    text = read_text(path)
+    text = bounded.read_text(path)
     header = trace_header.read(text)
     source = str(path)
     if _is_opencv(text):
-        return CalibrationFile(source, "opencv", _opencv_data(text, source), header)
-    data = _structured(text, path)
+        return CalibrationFile(source, "opencv", bounded.check_tree(_opencv_data(text, source), source), header)
+    data = bounded.parse_json(text, source) if path.suffix.lower() == ".json" else bounded.parse_yaml(text, source)
     if looks_like_artifact(data):
         return CalibrationFile(source, "calibctl", data, header)
     if ros_camera_info.looks_like_camera_info(data):

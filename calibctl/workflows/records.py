@@ -6,14 +6,15 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
-from calibctl.artifacts.common import parse_document
+from calibctl.artifacts.common import MAX_VERSION, parse_document
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store.repository import Store
-from calibctl.workflows import formats, keys
+from calibctl.workflows import formats, imports, keys
 
 _KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
 _ARTIFACT_REF = re.compile(r"^(?P<serial>.+?)(?:@(?P<version>[0-9]+))?$")
@@ -25,6 +26,8 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     if not match or not match.group("serial"):
         raise UsageError(f"'{ref}' is not SERIAL or SERIAL@N")
     version = match.group("version")
+    if version and (len(version) > 10 or int(version) > MAX_VERSION):
+        raise UsageError(f"'{ref}': version {version[:20]} is out of range", f"versions go from 1 to {MAX_VERSION}")
     return match.group("serial"), int(version) if version else None
 
 
@@ -151,17 +154,27 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
 
 
 def import_file(
-    settings: Settings, path: Path, *, activate: bool, require_signature: bool = False, trusted_keys: Path | None = None
-) -> CalibrationArtifact:
-    """Import an exported artifact; with ``require_signature`` only one signed by a trusted key."""
+    settings: Settings, path: Path, *, activate: bool, keep_version: bool = False, require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> imports.ImportOutcome:
+    """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
+    this store's verdict and version (see ``imports``)."""
     art = read_artifact_file(path)
     keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
     with open_store(settings, create=True, write=True) as store:
-        return store.import_artifact(art, actor=settings.operator, station=settings.station, activate=activate)
+        return imports.import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version)
 
 
-def rollback(settings: Settings, serial: str, to_version: int, reason: str) -> ActivationEvent:
+def rollback(settings: Settings, serial: str, to_version: int, reason: str,
+             expected_active: int | None = None) -> ActivationEvent:
+    """Roll back as a compare-and-set: against ``expected_active`` (what the technician saw) when given,
+    else against the active version read first; a change in between refuses the rollback."""
     if not reason.strip():
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
+    bounded.check_text(reason, "--reason", "the reason")
+    if not 1 <= to_version <= MAX_VERSION:
+        raise UsageError(f"version {to_version} is out of range", f"versions go from 1 to {MAX_VERSION}")
     with open_store(settings, write=True) as store:
-        return store.rollback(serial, to_version, reason=reason, actor=settings.operator, station=settings.station)
+        seen = store.active_version(serial) if expected_active is None else expected_active
+        return store.rollback(serial, to_version, reason=reason, actor=settings.operator, station=settings.station,
+                              expected_active=seen)

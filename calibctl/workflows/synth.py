@@ -25,7 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibctl import __version__
+from calibctl import __version__, bounded
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.synth import (
     Photometry,
@@ -171,10 +171,7 @@ def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | Non
 
 def load_truth(path: Path) -> dict[str, object]:
     """Read a truth.json written by ``run_synth``."""
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(f"cannot read {path}: {exc}") from exc
+    data = bounded.load_file(Path(path))
     if not isinstance(data, dict) or data.get("schema") != TRUTH_SCHEMA:
         raise InputError(f"{path} is not a calibctl synth truth file")
     return data

@@ -22,7 +22,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.errors import InputError
 
 _PREFIX = "# calibctl "
 _REF = re.compile(r"^# calibctl (?P<ref>\S+@\d+)(?: (?P<status>accepted|rejected))? sha256 (?P<sha>[0-9a-f]{64})\s*$")
@@ -88,8 +90,8 @@ def read(text: str) -> TraceHeader | None:
         return None
     evidence_match = next((m for line in head if (m := _EVIDENCE.match(line))), None)
     try:
-        evidence = json.loads(evidence_match.group("json")) if evidence_match else {}
-    except json.JSONDecodeError:
+        evidence = bounded.parse_json(evidence_match.group("json"), "the trace header") if evidence_match else {}
+    except InputError:  # an unreadable evidence line vouches for nothing; the file hash still decides
         evidence = {}
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
     return TraceHeader(

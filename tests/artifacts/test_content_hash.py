@@ -83,12 +83,14 @@ def test_a_legacy_artifact_cannot_be_relabelled_without_failing(tmp_path):
     assert "content-hash" in {f["rule"] for f in json.loads(result.stdout)["results"][0]["findings"]}
 
 
-def test_legacy_artifacts_import_and_keep_their_hash(tmp_path):
+def test_legacy_artifacts_import_verified_and_their_hash_is_kept_as_provenance(tmp_path):
     robot = f"sqlite:///{tmp_path / 'robot.db'}"
     result = CliRunner().invoke(app, ["--db", robot, "import", str(FIXTURES / "camera_front.json"), "--no-activate"])
     assert result.exit_code == 0, result.output
     with Store.open(robot) as store:
         serial = store.serials()[0]
         art = store.list_artifacts(serial)[0]
-    assert art.content_hash_algorithm == LEGACY_HASH
-    assert art.content_sha256 == json.loads((FIXTURES / "camera_front.json").read_text())["content_sha256"]
+    # The legacy hash was checked on the way in; this store re-derives and seals its own version.
+    source_sha = json.loads((FIXTURES / "camera_front.json").read_text())["content_sha256"]
+    assert art.content_hash_algorithm == CURRENT_HASH and art.computed_sha256() == art.content_sha256
+    assert art.provenance.imported_from is not None and f"sha256 {source_sha}" in art.provenance.imported_from

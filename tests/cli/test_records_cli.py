@@ -152,16 +152,18 @@ def test_export_unknown_format_exits_2(run):
     assert result.exit_code == 2 and "unknown export format 'xml'" in result.stderr
 
 
-def test_import_into_another_store_keeps_version_and_hash(run, tmp_path: Path):
+def test_import_into_another_store_gets_its_next_version_and_keeps_the_source_as_provenance(run, tmp_path: Path):
     _two_versions(run)
     exported = tmp_path / "cam.json"
     assert run("export", f"{SERIAL}@2", "-o", str(exported)).exit_code == 0
     robot = f"sqlite:///{tmp_path / 'robot.db'}"
     result = run("import", str(exported), url=robot)
     assert result.exit_code == 0, result.output
-    assert f"imported {SERIAL}@2" in result.stdout
+    assert f"imported {SERIAL}@1 (accepted by this store's lint, active; source {SERIAL}@2" in result.stdout
     shown = json.loads(run("show", SERIAL, "--json", url=robot).stdout)
-    assert shown["version"] == 2 and shown["content_sha256"] == json.loads(exported.read_text())["content_sha256"]
+    source_sha = json.loads(exported.read_text())["content_sha256"]
+    assert shown["version"] == 1 and shown["status"] == "accepted"
+    assert shown["provenance"]["imported_from"].startswith(f"{SERIAL}@2 sha256 {source_sha}")
 
 
 def test_import_of_a_tampered_file_exits_1_and_writes_nothing(run, tmp_path: Path):

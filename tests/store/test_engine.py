@@ -107,3 +107,9 @@ def test_a_missing_postgresql_database_is_a_clear_database_error(pg_server: str)
     url = pg_server.rsplit("/", 1)[0] + "/calibctl_no_such_database"
     with pytest.raises(DatabaseError, match=r'cannot connect to the database .*/calibctl_no_such_database: .*"calibctl_no_such_database" does not exist'):
         Store.open(url)
+
+
+def test_sqlite_writers_wait_longer_by_default_than_postgresql_row_locks():
+    # SQLite's busy handler is not fair under many writers (see calibctl.store.engine); row locks are.
+    assert lock_timeout_s({}, backend="sqlite") == 60.0 and lock_timeout_s({}, backend="postgresql") == 10.0
+    assert lock_timeout_s({"CALIBCTL_DB_LOCK_TIMEOUT_S": "5"}, backend="sqlite") == 5.0
