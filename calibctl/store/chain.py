@@ -25,7 +25,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import Connection, MetaData, Table, select
-from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
@@ -128,7 +127,12 @@ def backfill(conn: Connection) -> None:
             heads[key] = (seq + 1, digest)
         if not stream.key and heads:  # a one-stream table's position is counted in version_counters
             counters = Table("version_counters", meta, autoload_with=conn)
-            insert = (postgresql.insert if conn.dialect.name == "postgresql" else sqlite.insert)(counters)
+            # imported here, as in counters.py: sqlalchemy.dialects.postgresql alone costs ~0.1 s of start-up
+            if conn.dialect.name == "postgresql":
+                from sqlalchemy.dialects.postgresql import insert as dialect_insert
+            else:
+                from sqlalchemy.dialects.sqlite import insert as dialect_insert
+            insert = dialect_insert(counters)
             conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
 
 

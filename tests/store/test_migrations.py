@@ -44,7 +44,7 @@ def _fill(url: str) -> dict:
 def test_one_head_and_date_prefixed_file_names():
     scripts = migrate.script_directory()
     assert scripts.get_heads() == [HEAD]
-    assert migrate.known_revisions() == [FIRST, SECOND, HEAD]
+    assert migrate.known_revisions() == [FIRST, SECOND, "0003_rigs", HEAD]
     for path in sorted(migrate.MIGRATIONS_DIR.joinpath("versions").glob("*.py")):
         assert re.fullmatch(r"\d{4}_\d{2}_\d{2}_\d{4}_[a-z0-9_]+\.py", path.name), path.name
 
