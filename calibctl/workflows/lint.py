@@ -116,9 +116,14 @@ def _ros_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         image_size=(data["image_width"], data["image_height"]),
         camera_matrix=_matrix(data["camera_matrix"]["data"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data["distortion_coefficients"]["data"], (-1,), source, "distortion"),
-        distortion_model="equidistant" if data.get("distortion_model") == "equidistant" else "brown-conrady",
+        distortion_model=_distortion_model(data.get("distortion_model")),
         raw_numbers=_numbers(data),
     )
+
+
+def _distortion_model(name: Any) -> str:
+    """ROS/OpenCV ``distortion_model`` or a calibctl model name -> the lint's lens family."""
+    return "equidistant" if name in ("equidistant", "fisheye") else "brown-conrady"
 
 
 def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
@@ -131,6 +136,7 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         image_size=(w, h) if isinstance(w, int) and isinstance(h, int) else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"),
+        distortion_model=_distortion_model(data.get("distortion_model")),
         raw_numbers=_numbers(data),
     )
 
@@ -148,6 +154,7 @@ def facts_from_document(data: dict[str, Any], source: str) -> CalibrationFacts:
         image_size=(int(size[0]), int(size[1])) if isinstance(size, list | tuple) and len(size) == 2 else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data.get("dist_coeffs", []), (-1,), source, "dist_coeffs"),
+        distortion_model=_distortion_model((data.get("model") or {}).get("name")),
         sigma_fx_px=float(sigma_fx) if isinstance(sigma_fx, int | float) else None,
         sigma_refused_reason=stdev.get("refused_reason"),
         fit_outer_rms_px=held.get("fit_outer_ring_rms_px"),

@@ -47,12 +47,12 @@ from calibctl.errors import UsageError
 from calibctl.workflows.lint import facts_from_document, lint_facts
 from calibctl.workflows.records import open_store
 
-MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "auto")
+MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
 _OCTANT_LABELS = tuple(f"octant {i}" for i in range(8))
 _FLAG_NAMES = (
     "CALIB_USE_INTRINSIC_GUESS", "CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_PRINCIPAL_POINT", "CALIB_ZERO_TANGENT_DIST",
     "CALIB_FIX_K1", "CALIB_FIX_K2", "CALIB_FIX_K3", "CALIB_FIX_K4", "CALIB_FIX_K5", "CALIB_FIX_K6",
-    "CALIB_RATIONAL_MODEL",
+    "CALIB_RATIONAL_MODEL", "CALIB_RECOMPUTE_EXTRINSIC", "CALIB_FIX_SKEW",
 )
 
 

@@ -154,3 +154,31 @@ def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
     assert finding.severity == "error" and "two cameras" in finding.message
     assert "its own images" in finding.fix and finding.value == pytest.approx(check.ratio)
     assert art.content_sha256 == art.computed_sha256()
+
+
+def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tmp_path):
+    from calibctl.workflows import formats
+    from calibctl.workflows.lint import lint_files
+    from tests.workflows.sessions import fisheye_capture
+
+    session = _store_session(settings, fisheye_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id,
+                                                                     model="fisheye")).artifact
+    assert art.status == "accepted" and art.lint == [] and art.model.name == "fisheye"
+    assert len(art.dist_coeffs) == 4 and set(art.stdev.sigma) == {"fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"}
+    assert "CALIB_FIX_SKEW" in art.model.flag_names
+    for fmt in formats.EXPORT_FORMATS:
+        path = tmp_path / f"fe.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
+        path.write_text(formats.render(art, fmt), encoding="utf-8")
+        loaded = formats.load_calibration(path)
+        [result] = lint_files([path], settings.lint)
+        assert not result.failed, (fmt, result.findings)
+        if fmt == "ros":
+            assert loaded.data["distortion_model"] == "equidistant"
+            assert loaded.data["distortion_coefficients"]["data"] == art.dist_coeffs
+        if fmt == "opencv":
+            assert loaded.data["distortion_model"] == "equidistant"
+            np.testing.assert_allclose(np.ravel(loaded.data["distortion_coefficients"]), art.dist_coeffs)
+    from calibctl.workflows.records import read_artifact_file
+
+    assert read_artifact_file(tmp_path / "fe.json.json") == art
