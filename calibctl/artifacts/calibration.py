@@ -132,6 +132,11 @@ class CalibrationArtifact(Document):
     model: DistortionModelInfo = Field(description="which coefficients were free")
     stdev: Uncertainty = Field(description="one-sigma per estimated intrinsic parameter")
     rms_px: float = Field(ge=0, description="fit reprojection RMS (OpenCV's definition), pixels")
+    detector_rms_px: float | None = Field(
+        None, ge=0, exclude_if=lambda value: value is None,
+        description="what the corner detector delivers on this set, per-corner RMS from local quadratic fits of "
+        "4x4 corner blocks (no lens model), pixels; the model-misfit rule compares rms_px with it; absent in "
+        "artifacts made before the rule")
     held_out: HeldOut = Field(description="held-out validation")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")

@@ -85,7 +85,7 @@ def _pose(rng: np.random.Generator, centre_m: np.ndarray, off_axis_rad: float, d
 
 
 def synthesize_fisheye_session(camera: FisheyeCamera, n_views: int, seed: int, noise_px: float = 0.2,
-                               distance_m: tuple[float, float] = (0.18, 0.35), tilt_deg: tuple[float, float] = (15.0, 45.0),
+                               distance_m: tuple[float, float] | None = None, tilt_deg: tuple[float, float] = (15.0, 45.0),
                                max_view_deg: float | None = None, cols: int = 9, rows: int = 6,
                                square_size_m: float = 0.025, margin_px: float = 4.0) -> SyntheticSession:
     """A seeded fisheye session (module docstring); dist_coeffs of the result are k1..k4.
@@ -94,6 +94,9 @@ def synthesize_fisheye_session(camera: FisheyeCamera, n_views: int, seed: int, n
         ValueError: no pose fits after MAX_DRAWS_PER_VIEW draws.
     """
     rng = np.random.default_rng(seed)
+    if distance_m is None:  # the board's image size stays alike at any focal length (0.18-0.35 m at f = 320 px)
+        scale = float(camera.K[1, 1]) / 320.0 * square_size_m / 0.025
+        distance_m = (0.18 * scale, 0.35 * scale)
     obj = chessboard_object_points(cols, rows, square_size_m)
     centre = obj.mean(axis=0)
     limit = np.deg2rad(max_view_deg if max_view_deg is not None else min(camera.fov_deg / 2.0 - 8.0, 75.0))

@@ -34,6 +34,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.camera_split import CameraSplit, check_one_camera
+from calibctl.core.model_fit import detector_rms_px
 from calibctl.core.model_select import select_model
 from calibctl.core.outliers import (
     CornerRejection,
@@ -193,6 +194,9 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
     model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
         session, request)
+    model_points = board_spec(session.board).object_points()
+    detector_rms = detector_rms_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
+                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]))
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -216,6 +220,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             parameter_count=int(sol.n_parameters),
         ),
         rms_px=float(sol.rms_px),
+        detector_rms_px=detector_rms,
         held_out=_held_out(holdout),
         gates=list(session.gates),
         board=session.board,

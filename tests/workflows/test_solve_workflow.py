@@ -182,3 +182,20 @@ def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tm
     from calibctl.workflows.records import read_artifact_file
 
     assert read_artifact_file(tmp_path / "fe.json.json") == art
+
+
+def test_k1k2_on_a_fisheye_session_is_rejected_by_model_misfit(settings):
+    from tests.workflows.sessions import fisheye_capture
+
+    session = _store_session(settings, fisheye_capture(measured_board(), fov_deg=150.0))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert art.status == "rejected" and art.detector_rms_px is not None
+    misfit = [f for f in art.lint if f.rule == "model-misfit"]
+    assert misfit and "--model fisheye" in (misfit[0].fix or "")
+
+
+def test_a_good_pinhole_session_records_its_detector_noise_and_passes_model_misfit(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert art.status == "accepted" and "model-misfit" not in [f.rule for f in art.lint]
+    assert 0.5 * art.rms_px < art.detector_rms_px < 2.0 * art.rms_px
