@@ -140,3 +140,12 @@ def test_aspect_ratio_is_a_warning():
 @pytest.mark.parametrize("dist", [np.zeros(4), np.zeros(5), np.zeros(8), np.zeros(14)])
 def test_foldover_accepts_opencv_coefficient_lengths(dist):
     assert check_distortion_foldover(K_CH0, dist, (640, 480)).passed
+
+
+def test_outer_ring_ratio_counts_only_above_the_absolute_floor():
+    # the good wide-angle solve: ratio 1.14 but only 0.017 px worse held-out
+    small = check_outer_ring_holdout(0.142, 0.125)
+    assert small.passed and "here 0.0170 px" in small.message
+    # the same ratio 1.14 with a 0.5 px excess is over-fitting
+    assert not check_outer_ring_holdout(4.0, 3.5).passed
+    assert not check_outer_ring_holdout(0.142, 0.125, min_excess_px=0.01).passed
