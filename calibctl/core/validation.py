@@ -271,3 +271,38 @@ def validate_holdout(
         holdout=residual_breakdown(image_points_per_view, holdout, pp, image_size, edges),
         fit=residual_breakdown(image_points_per_view, fit.residuals_px, pp, image_size, edges),
     )
+
+
+# A held-out RMS below the fit's by more than this fraction means the folds found a better minimum.
+FOLD_MINIMUM_SLACK = 0.05
+
+
+def agree_with_folds(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    fit: IntrinsicsSolution,
+    report: HoldoutReport,
+) -> tuple[IntrinsicsSolution, HoldoutReport]:
+    """The full solve and its held-out numbers from the same minimum, or a NumericalError.
+
+    Held-out residuals are never expected below the fit's: when they are (by FOLD_MINIMUM_SLACK), the
+    full solve stopped in a worse minimum than its folds. It is re-solved from the folds' median K and
+    validated again; if the fit is still worse than its folds, the solve is refused with both numbers.
+    """
+    if fit.rms_px <= (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
+        return fit, report
+    start = np.median(report.fold_camera_matrices, axis=0)
+    start[0, 1] = start[1, 0] = start[2, 0] = start[2, 1] = 0.0
+    start[2, 2] = 1.0
+    resolved = solve_intrinsics(object_points_per_view, image_points_per_view, image_size, fit.model, start)
+    if resolved.rms_px < fit.rms_px:
+        fit = resolved
+        report = validate_holdout(object_points_per_view, image_points_per_view, image_size, fit.model, fit=fit,
+                                  initial=start)
+    if fit.rms_px > (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
+        raise NumericalError(
+            f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "
+            f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different minima",
+            hint="solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens")
+    return fit, report

@@ -43,7 +43,7 @@ from calibctl.core.outliers import (
     solve_rejecting_corners,
 )
 from calibctl.core.solve import IntrinsicsSolution, get_model
-from calibctl.core.validation import HoldoutReport, ResidualBreakdown, validate_holdout
+from calibctl.core.validation import HoldoutReport, ResidualBreakdown, agree_with_folds, validate_holdout
 from calibctl.errors import UsageError
 from calibctl.workflows.lint import facts_from_document, lint_facts
 from calibctl.workflows.records import open_store
@@ -148,6 +148,8 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
+    # the fit RMS and the held-out RMS the artifact records must come from one minimum
+    solution, holdout = agree_with_folds([obj[i] for i in kept], [img[i] for i in kept], size, solution, holdout)
     split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
     consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
     return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
