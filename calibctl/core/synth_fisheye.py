@@ -14,12 +14,13 @@ MAX_SOLVE_THETA_RAD of the axis (cv2.fisheye cannot fit corners behind the camer
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from calibctl.core.board_geometry import chessboard_object_points
-from calibctl.core.fisheye_model import MAX_SOLVE_THETA_RAD, distort_theta, project_equidistant
+from calibctl.core.fisheye_model import MAX_SOLVE_THETA_RAD, distort_theta, pixel_rays, project_equidistant
 from calibctl.core.synthetic_corners import MAX_DRAWS_PER_VIEW, SyntheticSession
 
 # A mildly non-equidistant lens (k1..k4), the size real fisheye fits land at.
@@ -47,11 +48,27 @@ class FisheyeCamera:
         return cls(K, np.asarray(dist, np.float64), (int(w), int(h)), float(fov_deg),
                    edge_px if circular else None)
 
-    def project(self, points_board_m: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
-        """(N, 3) board points, T_cam_board as rvec (rad) / tvec (m) -> (N, 2) px."""
-        R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
-        cam = np.asarray(points_board_m, np.float64) @ R.T + np.asarray(tvec, np.float64).reshape(1, 3)
-        return project_equidistant(cam, self.K, self.dist)
+    def project(self, points_board_m: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
+        """(N, 3) board points, (4, 4) T_cam_board (m) -> (N, 2) px (the same call as PinholeCamera.project)."""
+        T = np.asarray(T_cam_board, np.float64)
+        return project_equidistant(np.asarray(points_board_m, np.float64) @ T[:3, :3].T + T[:3, 3], self.K, self.dist)
+
+    def key(self) -> tuple[float, ...]:
+        return (*self.K.ravel().tolist(), *self.dist.tolist(), float(self.image_size[0]), float(self.image_size[1]),
+                float(self.circle_radius_px or 0.0))
+
+    def outside_circle(self) -> np.ndarray:
+        """(H, W) bool: pixels outside the image circle (all False for a full-frame lens)."""
+        w, h = self.image_size
+        if self.circle_radius_px is None:
+            return np.zeros((h, w), dtype=bool)
+        u, v = np.meshgrid(np.arange(w), np.arange(h))
+        return np.hypot(u - self.K[0, 2], v - self.K[1, 2]) > self.circle_radius_px
+
+    def ray_map(self) -> tuple[np.ndarray, ...]:
+        """Per-pixel normalised ray (x = X/Z, y = Y/Z), its derivatives wrt (u, v), and where it is valid
+        (inside the image circle and under 89 deg off-axis: boards are staged within 88 deg), as synth's."""
+        return _fisheye_ray_map(self.key())
 
     def inside(self, px: np.ndarray, margin_px: float) -> np.ndarray:
         """(N,) bool: inside the image and the image circle, margin_px clear of both edges."""
@@ -61,6 +78,58 @@ class FisheyeCamera:
         if self.circle_radius_px is not None:
             ok &= np.hypot(px[:, 0] - self.K[0, 2], px[:, 1] - self.K[1, 2]) <= self.circle_radius_px - margin_px
         return ok
+
+
+@lru_cache(maxsize=2)
+def _fisheye_ray_map(key: tuple[float, ...]) -> tuple[np.ndarray, ...]:
+    K, dist = np.array(key[:9]).reshape(3, 3), np.array(key[9:13])
+    width, height, circle = int(key[13]), int(key[14]), key[15]
+    u, v = np.meshgrid(np.arange(-1, width + 1, dtype=np.float64), np.arange(-1, height + 1, dtype=np.float64))
+    rays = pixel_rays(np.stack([u.ravel(), v.ravel()], axis=1), K, dist).reshape(height + 2, width + 2, 3)
+    z = np.maximum(rays[..., 2], 1e-6)
+    x, y = rays[..., 0] / z, rays[..., 1] / z
+    valid = rays[..., 2] > np.cos(np.deg2rad(89.0))
+    if circle > 0:
+        valid &= np.hypot(u - K[0, 2], v - K[1, 2]) <= circle
+    x_u, x_v = (x[1:-1, 2:] - x[1:-1, :-2]) / 2, (x[2:, 1:-1] - x[:-2, 1:-1]) / 2
+    y_u, y_v = (y[1:-1, 2:] - y[1:-1, :-2]) / 2, (y[2:, 1:-1] - y[:-2, 1:-1]) / 2
+    crop = (slice(1, -1), slice(1, -1))
+    valid = valid[crop] & valid[:-2, 1:-1] & valid[2:, 1:-1] & valid[1:-1, :-2] & valid[1:-1, 2:]
+    return x[crop], y[crop], x_u, x_v, y_u, y_v, valid
+
+
+def fisheye_poses(camera: FisheyeCamera, obj: np.ndarray, n_views: int, rng: np.random.Generator,
+                  distance_m: tuple[float, float], tilt_deg: tuple[float, float], max_view_deg: float | None,
+                  margin_px: float) -> list[np.ndarray]:
+    """n_views (4, 4) T_cam_board staged as the module docstring says (obj: (N, 3) board points, m).
+
+    Raises:
+        ValueError: no pose fits after MAX_DRAWS_PER_VIEW draws.
+    """
+    centre = obj.mean(axis=0)
+    limit = np.deg2rad(max_view_deg if max_view_deg is not None else min(camera.fov_deg / 2.0 - 8.0, 75.0))
+    poses = []
+    for k in range(n_views):
+        outer = k % 4 == 0  # every fourth view in the outer band of the field
+        for _ in range(MAX_DRAWS_PER_VIEW):
+            off = float(np.arccos(rng.uniform(np.cos(limit), np.cos(0.75 * limit) if outer else 1.0)))  # uniform in solid angle
+            rvec, tvec = _pose(rng, centre, off, float(rng.uniform(*distance_m)), tilt_deg)
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = cv2.Rodrigues(rvec)[0], tvec
+            cam = obj @ T[:3, :3].T + tvec
+            if np.arctan2(np.hypot(cam[:, 0], cam[:, 1]), cam[:, 2]).max() < MAX_SOLVE_THETA_RAD and camera.inside(
+                    camera.project(obj, T), margin_px).all():
+                break
+        else:
+            raise ValueError(f"no board pose fits the {camera.fov_deg:.0f} deg lens after {MAX_DRAWS_PER_VIEW} draws")
+        poses.append(T)
+    return poses
+
+
+def default_fisheye_distance_m(camera: FisheyeCamera, square_size_m: float) -> tuple[float, float]:
+    """Board distances that keep its image size alike at any focal length (0.18-0.35 m at f = 320 px, 25 mm)."""
+    scale = float(camera.K[1, 1]) / 320.0 * square_size_m / 0.025
+    return 0.18 * scale, 0.35 * scale
 
 
 def _pose(rng: np.random.Generator, centre_m: np.ndarray, off_axis_rad: float, distance_m: float,
@@ -94,33 +163,12 @@ def synthesize_fisheye_session(camera: FisheyeCamera, n_views: int, seed: int, n
         ValueError: no pose fits after MAX_DRAWS_PER_VIEW draws.
     """
     rng = np.random.default_rng(seed)
-    if distance_m is None:  # the board's image size stays alike at any focal length (0.18-0.35 m at f = 320 px)
-        scale = float(camera.K[1, 1]) / 320.0 * square_size_m / 0.025
-        distance_m = (0.18 * scale, 0.35 * scale)
     obj = chessboard_object_points(cols, rows, square_size_m)
-    centre = obj.mean(axis=0)
-    limit = np.deg2rad(max_view_deg if max_view_deg is not None else min(camera.fov_deg / 2.0 - 8.0, 75.0))
-    objs, noisy, clean, rvecs, tvecs, tilts = [], [], [], [], [], []
-    for k in range(n_views):
-        outer = k % 4 == 0  # every fourth view in the outer band of the field
-        for _ in range(MAX_DRAWS_PER_VIEW):
-            lo = np.cos(limit) if not outer else np.cos(limit)
-            hi = 1.0 if not outer else np.cos(0.75 * limit)
-            off = float(np.arccos(rng.uniform(lo, hi)))  # uniform in solid angle
-            rvec, tvec = _pose(rng, centre, off, float(rng.uniform(*distance_m)), tilt_deg)
-            R, _ = cv2.Rodrigues(rvec)
-            cam = obj @ R.T + tvec
-            theta = np.arctan2(np.hypot(cam[:, 0], cam[:, 1]), cam[:, 2])
-            proj = project_equidistant(cam, camera.K, camera.dist)
-            if theta.max() < MAX_SOLVE_THETA_RAD and camera.inside(proj, margin_px).all():
-                break
-        else:
-            raise ValueError(f"no board pose fits the {camera.fov_deg:.0f} deg lens after {MAX_DRAWS_PER_VIEW} draws")
-        objs.append(obj.copy())
-        clean.append(proj)
-        noisy.append(proj + rng.normal(0.0, noise_px, size=proj.shape))
-        rvecs.append(rvec)
-        tvecs.append(tvec)
-        tilts.append(float(np.rad2deg(np.arccos(abs(R[2, 2])))))
-    return SyntheticSession(tuple(objs), tuple(noisy), tuple(clean), camera.K.copy(), camera.dist.copy(),
-                            camera.image_size, np.array(rvecs), np.array(tvecs), np.array(tilts))
+    distance = distance_m if distance_m is not None else default_fisheye_distance_m(camera, square_size_m)
+    poses = fisheye_poses(camera, obj, n_views, rng, distance, tilt_deg, max_view_deg, margin_px)
+    clean = [camera.project(obj, T) for T in poses]
+    noisy = [p + rng.normal(0.0, noise_px, size=p.shape) for p in clean]
+    rvecs = np.array([cv2.Rodrigues(T[:3, :3])[0].ravel() for T in poses])
+    tilts = np.array([float(np.rad2deg(np.arccos(abs(T[2, 2])))) for T in poses])
+    return SyntheticSession(tuple(obj.copy() for _ in poses), tuple(noisy), tuple(clean), camera.K.copy(),
+                            camera.dist.copy(), camera.image_size, rvecs, np.array([T[:3, 3] for T in poses]), tilts)
