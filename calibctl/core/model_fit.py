@@ -11,9 +11,9 @@ k1k2 on a fisheye does not.
 Measured (2026-11-23; benchmarks/bench_model_misfit.py, BENCHMARKS section 12) -- fit RMS / detector RMS,
 after the corner rule: pinhole renders (0.2 px noise, k1k2) 0.91-0.94; real photos under k1k2:
 opencv-left-right left 1.01, right 0.83, udacity-camcal 1.75 (1.62 under rational); k1k2 on fisheye
-renders 150-190 deg 3.5-6.3, on a 120 deg full-frame fisheye 1.29 (k1k2 is nearly adequate there); the
-fisheye model on the same renders 0.63-0.94 (the 4x4 quadratic over-reads the noise of a strongly curved
-circular fisheye by up to 1.5x, which errs on the side of passing). The rule fails a calibration when the
+renders 150-190 deg 4.2-6.2, on a 120 deg full-frame fisheye 1.39 (k1k2 is nearly adequate there); the
+fisheye model on the same renders 0.58-0.95 (the 4x4 quadratic over-reads the noise of a strongly curved
+circular fisheye by up to 1.7x, which errs on the side of passing). The rule fails a calibration when the
 ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a sub-pixel detector's slack).
 """
 
