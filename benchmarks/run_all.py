@@ -53,6 +53,8 @@ BENCHES = (
     Bench("bench_startup", "bench_startup.py", ("--repeats", "7"), ("--repeats", "2")),
     Bench("bench_store_scale", "bench_store_scale.py", (), ()),
     Bench("bench_report", "bench_report.py", ("--repeats", "5"), ("--repeats", "2")),
+    Bench("bench_fisheye", "bench_fisheye.py", ("30",), ("6",)),
+    Bench("bench_model_misfit", "bench_model_misfit.py", (), ()),
 )
 
 

@@ -34,8 +34,10 @@ _COVARIANCE_PARAMETERS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", 
 class DistortionModelInfo(Document):
     """Which coefficients were free and the exact OpenCV flags the solve used."""
 
-    name: str = Field(description="calibctl model name: k1k2, k1k2k3, k1k2p1p2k3, rational, opencv-default, imported")
-    opencv_flags: int = Field(ge=0, description="flags passed to cv2.calibrateCameraExtended")
+    name: str = Field(description="calibctl model name: k1k2, k1k2k3, k1k2p1p2k3, rational, opencv-default, fisheye "
+                      "(equidistant Kannala-Brandt, cv2.fisheye), imported")
+    opencv_flags: int = Field(ge=0, description="OpenCV flags of the solve (cv2.calibrateCameraExtended; the fisheye "
+                              "model: cv2.fisheye.calibrate's equivalent)")
     flag_names: list[str] = Field(default_factory=list, description="names of the set flags, e.g. CALIB_FIX_K3")
     free_parameters: list[str] = Field(description="parameters the solve estimated, e.g. [fx, fy, cx, cy, k1, k2]")
     selection: list[dict[str, float | str | bool]] = Field(
@@ -169,10 +171,16 @@ class CalibrationArtifact(Document):
     camera_matrix: tuple[
         tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
     ] = Field(description="K, 3x3, pixels")
-    dist_coeffs: list[float] = Field(description="OpenCV order: k1, k2, p1, p2[, k3[, k4, k5, k6]]")
+    dist_coeffs: list[float] = Field(description="OpenCV order: k1, k2, p1, p2[, k3[, k4, k5, k6]]; model fisheye: "
+                                  "k1, k2, k3, k4 of cv2.fisheye (ROS equidistant)")
     model: DistortionModelInfo = Field(description="which coefficients were free")
     stdev: Uncertainty = Field(description="one-sigma per estimated intrinsic parameter")
     rms_px: float = Field(ge=0, description="fit reprojection RMS (OpenCV's definition), pixels")
+    detector_rms_px: float | None = Field(
+        None, ge=0, exclude_if=lambda value: value is None,
+        description="what the corner detector delivers on this set, per-corner RMS from local quadratic fits of "
+        "4x4 corner blocks (no lens model), pixels; the model-misfit rule compares rms_px with it; absent in "
+        "artifacts made before the rule")
     held_out: HeldOut = Field(description="held-out validation")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")

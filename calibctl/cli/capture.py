@@ -239,6 +239,13 @@ def register_synth(app: typer.Typer) -> None:
             typer.Option("--baseline-mm", help="With --rig: the spacing of neighbouring cameras (default 60-120 mm, "
                          "drawn per camera).", show_default=False),
         ] = None,
+        fisheye: Annotated[
+            float | None,
+            typer.Option("--fisheye", metavar="FOV_DEG", help="Render through an equidistant fisheye lens of this field "
+                         "of view (60-190 deg; scenario good), truth k1..k4 in truth.json.", show_default=False),
+        ] = None,
+        full_frame: Annotated[bool, typer.Option("--full-frame", help="With --fisheye: the field of view spans the "
+                                                 "image diagonal instead of an image circle.")] = False,
         json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
     ) -> None:
         """Render a synthetic capture session through a known camera and write truth.json beside it.
@@ -260,7 +267,7 @@ def register_synth(app: typer.Typer) -> None:
                          f"and {rig_result.truth_path.name} to {rig_result.out_dir}")
             return
         result = synth_workflow.run_synth(out, scenario.value, seed, views, synth_workflow.parse_size(size),
-                                          pattern.value, force)
+                                          pattern.value, force, fisheye, not full_frame)
         if wants_json(ctx, json_output):
             emit_json(result.as_json())
             return

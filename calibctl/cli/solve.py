@@ -20,7 +20,8 @@ ModelOption = Annotated[
     typer.Option(
         "--model",
         help="k1k2 (default: FIX_K3|ZERO_TANGENT_DIST|FIX_ASPECT_RATIO), k1k2k3, k1k2p1p2k3, rational, "
-        "opencv-default (flags 0), or auto (enable a coefficient only if fit RMS improves >= 10% "
+        "opencv-default (flags 0), fisheye (equidistant k1..k4, cv2.fisheye / ROS equidistant; self-initialising), "
+        "or auto (enable a coefficient, or switch to fisheye, only if fit RMS improves >= 10% "
         "and the held-out outer ring does not worsen).",
     ),
 ]

@@ -76,7 +76,7 @@ def _view_rms(sol: IntrinsicsSolution, obj: Sequence[np.ndarray], img: Sequence[
     """(V,) every view's RMS under ``sol``'s intrinsics, its pose re-fitted."""
     out = []
     for o, i in zip(obj, img, strict=True):
-        r = refit_pose_residuals(o, i, sol.camera_matrix, sol.dist_coeffs)
+        r = refit_pose_residuals(o, i, sol.camera_matrix, sol.dist_coeffs, sol.model)
         out.append(float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))))
     return np.array(out)
 

@@ -23,7 +23,7 @@ column is a * dr/dfx + dr/dfy, and sigma(fx) = a * sigma(fy).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -97,13 +97,31 @@ def intrinsic_covariance(
         free_intrinsics, free_distortion: names (see solve.MODELS). aspect: fx/fy when tied.
         dof: residual count - free parameter count (> 0).
     """
+    def blocks():
+        for obj, r, t in zip(object_points_per_view, rvecs, tvecs, strict=True):
+            _, J = cv2.projectPoints(np.asarray(obj, dtype=np.float64), r, t, camera_matrix, dist_coeffs)
+            J_int, names = intrinsic_columns(J, free_intrinsics, free_distortion, aspect)
+            yield J_int, J[:, :6], names
+
+    return schur_covariance(blocks(), residuals_px_per_view, dof)
+
+
+def schur_covariance(
+    view_jacobians: Iterable[tuple[np.ndarray, np.ndarray, tuple[str, ...]]],
+    residuals_px_per_view: Sequence[np.ndarray],
+    dof: int,
+) -> IntrinsicCovariance:
+    """Covariance of the intrinsics from per-view Jacobians, each view's 6 pose parameters eliminated.
+
+    Args:
+        view_jacobians: per view (J_int (2N, p), J_pose (2N, 6), names of the p columns); any camera
+            model (pinhole here, the fisheye model in calibctl.core.fisheye_solve).
+        residuals_px_per_view: V arrays (N_i, 2) float64 observed - projected.
+        dof: residual count - free parameter count (> 0).
+    """
     S = None
     names: tuple[str, ...] = ()
-    ssr = 0.0
-    for obj, r, t, res in zip(object_points_per_view, rvecs, tvecs, residuals_px_per_view, strict=True):
-        _, J = cv2.projectPoints(np.asarray(obj, dtype=np.float64), r, t, camera_matrix, dist_coeffs)
-        J_int, names = intrinsic_columns(J, free_intrinsics, free_distortion, aspect)
-        J_pose = J[:, :6]
+    for J_int, J_pose, names in view_jacobians:
         C = J_pose.T @ J_pose
         B = J_int.T @ J_pose
         try:
@@ -112,8 +130,8 @@ def intrinsic_covariance(
             return IntrinsicCovariance(names, None, 0.0, float("nan"),
                                        "a view's board pose is not determined by its corners")
         S = block if S is None else S + block
-        ssr += float(np.sum(np.asarray(res, dtype=np.float64) ** 2))
     assert S is not None
+    ssr = sum(float(np.sum(np.asarray(res, dtype=np.float64) ** 2)) for res in residuals_px_per_view)
     s2 = ssr / dof
     S = 0.5 * (S + S.T)
     d = np.sqrt(np.clip(np.diag(S), 0.0, None))

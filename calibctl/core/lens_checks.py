@@ -58,13 +58,24 @@ def check_sigma_fx(sigma_fx_px: float | None, refused_reason: str | None = None,
                    None if ok else fix)
 
 
+# The ratio only counts when the held-out outer ring is also this many px worse than the fit's. Measured
+# (2026-11-23, k-fold held-out of a model that fits): held-out minus fit outer-ring RMS 0.001-0.003 px on
+# pinhole renders (0.2 px noise), 0.007 / 0.009 px on opencv-left-right left / right (k1k2); k1k2 on a
+# 150 deg fisheye render: 1.2 px. 0.05 px is 5x the largest honest excess and far below a misfit's; the
+# issue's rejected wide-angle case (0.142 vs 0.125 px, excess 0.017 px) passes.
+OUTER_RING_MIN_EXCESS_PX = 0.05
+
+
 def check_outer_ring_holdout(holdout_outer_rms_px: float, fit_outer_rms_px: float,
-                             max_ratio: float = 1.1) -> Finding:
-    """Held-out outer-ring RMS <= max_ratio * fit outer-ring RMS (no overfit distortion)."""
+                             max_ratio: float = 1.1, min_excess_px: float = OUTER_RING_MIN_EXCESS_PX) -> Finding:
+    """Held-out outer-ring RMS <= max_ratio * fit outer-ring RMS (no overfit distortion), unless the
+    held-out excess is under min_excess_px (an absolute floor: tiny RMS values make any ratio noisy)."""
     ratio = holdout_outer_rms_px / fit_outer_rms_px if fit_outer_rms_px > 0 else float("inf")
-    ok = math.isfinite(ratio) and ratio <= max_ratio
+    excess = holdout_outer_rms_px - fit_outer_rms_px
+    ok = math.isfinite(ratio) and (ratio <= max_ratio or excess < min_excess_px)
     msg = (f"held-out outer-ring RMS {holdout_outer_rms_px:.4f} px vs fit outer-ring RMS "
-           f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f}")
+           f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f} "
+           f"(counted only when {min_excess_px:.2f} px or more above the fit; here {excess:.4f} px)")
     return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else
                    "the distortion model is fitting noise in the outer ring: solve with fewer "
                    "coefficients (--model k1k2 or auto) or capture more corners near the image edges")

@@ -1,6 +1,9 @@
 """``--model auto``: choose the distortion model by the seed's rule (chapter 1, failure mode B).
 
 Ladder: k1k2 -> k1k2k3 -> k1k2p1p2k3 -> rational; each rung adds coefficients to the one before.
+Then the other lens family, fisheye (equidistant k1..k4), is compared with the ladder's choice by the
+same rule: a wide lens that no polynomial pinhole model fits gains far more than 10 % there, while on a
+pinhole lens it does not gain 10 % and the ladder's model stays.
 Each rung is compared with the currently accepted model and accepted only if BOTH
     fit RMS improves by at least MIN_FIT_IMPROVEMENT (10 %), and
     held-out outer-ring RMS (calibctl.core.validation) does not increase at all.
@@ -30,6 +33,7 @@ from calibctl.core.validation import HoldoutReport, validate_holdout
 from calibctl.errors import NumericalError
 
 LADDER = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational")
+ALTERNATIVES = ("fisheye",)
 MIN_FIT_IMPROVEMENT = 0.10
 
 
@@ -77,6 +81,7 @@ def select_model(
     image_points_per_view: Sequence[np.ndarray],
     image_size: tuple[int, int],
     ladder: Sequence[str] = LADDER,
+    alternatives: Sequence[str] = ALTERNATIVES,
 ) -> ModelSelection:
     """Walk the ladder and return the chosen model (shapes as in solve_intrinsics).
 
@@ -89,7 +94,7 @@ def select_model(
     best = start
     trail = [ModelCandidate(start, None, best_fit.rms_px, best_hold.fit_outer_rms_px,
                             best_hold.holdout_outer_rms_px, None, True, "starting model")]
-    for name in ladder[1:]:
+    for name in (*ladder[1:], *alternatives):
         try:
             fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre)
         except NumericalError as exc:

@@ -29,10 +29,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from calibctl.core.solve import MIN_CORNERS_PER_VIEW, IntrinsicsSolution, get_model, solve_intrinsics
+from calibctl.core.solve import (
+    MIN_CORNERS_PER_VIEW,
+    IntrinsicsSolution,
+    get_model,
+    project_points,
+    solve_intrinsics,
+)
 from calibctl.errors import NumericalError
 
 VIEW_K = 3.0
@@ -270,9 +275,9 @@ def _rejected_residuals(object_points_per_view: Sequence[np.ndarray], image_poin
             continue
         obj = np.asarray(object_points_per_view[k], np.float64).reshape(-1, 3)[~mask]
         img = np.asarray(image_points_per_view[k], np.float64).reshape(-1, 2)[~mask]
-        proj, _ = cv2.projectPoints(obj, solution.rvecs[k], solution.tvecs[k], solution.camera_matrix,
-                                    solution.dist_coeffs)
-        res = img - proj.reshape(-1, 2)
+        proj = project_points(obj, solution.rvecs[k], solution.tvecs[k], solution.camera_matrix,
+                              solution.dist_coeffs, solution.model)
+        res = img - proj
         out += [CornerOutlier(k, int(i), float(np.hypot(*r)), float(r[0]), float(r[1]))
                 for i, r in zip(ids[k][~mask], res, strict=True)]
     out.sort(key=lambda c: (-c.residual_px, c.view_index, c.corner_id))

@@ -42,6 +42,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.covariance import IntrinsicCovariance, intrinsic_covariance
+from calibctl.core.fisheye_model import fisheye_pose, project_fisheye, refine_fisheye_pose
 from calibctl.errors import InputError, NumericalError, UsageError
 
 # Below this many degrees of freedom (residuals - parameters) the residual variance that scales
@@ -61,6 +62,7 @@ MAX_RMS_PX = 10.0
 _STD_INDEX = {"fx": 0, "fy": 1, "cx": 2, "cy": 3, "k1": 4, "k2": 5, "p1": 6, "p2": 7, "k3": 8,
               "k4": 9, "k5": 10, "k6": 11}
 DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+FISHEYE_DIST_NAMES = ("k1", "k2", "k3", "k4")
 
 
 @dataclass(frozen=True)
@@ -74,10 +76,11 @@ class DistortionModel:
     n_coeffs: int  # length of the recorded distortion vector (5 or 8)
     min_views: int
     description: str
+    kind: str = "pinhole"  # "fisheye": equidistant Kannala-Brandt, solved by calibctl.core.fisheye_solve
 
     @property
     def fx_tied_to_fy(self) -> bool:
-        return bool(self.flags & cv2.CALIB_FIX_ASPECT_RATIO)
+        return self.kind == "pinhole" and bool(self.flags & cv2.CALIB_FIX_ASPECT_RATIO)
 
     @property
     def n_free_intrinsic_params(self) -> int:
@@ -100,6 +103,10 @@ MODELS: Mapping[str, DistortionModel] = {
                         DISTORTION_NAMES, 8, 5, "OpenCV rational 8-term model, fx=fy*a"),
         DistortionModel("opencv-default", 0, _FOCAL, ("k1", "k2", "p1", "p2", "k3"), 5, 3,
                         "plain OpenCV flags=0: fx and fy independent; for reference reproduction"),
+        DistortionModel("fisheye", cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW,
+                        _FOCAL, FISHEYE_DIST_NAMES, 4, 3,
+                        "equidistant Kannala-Brandt (cv2.fisheye, ROS equidistant): fx fy cx cy k1..k4, skew 0",
+                        kind="fisheye"),
     )
 }
 DEFAULT_MODEL = "k1k2"
@@ -200,13 +207,13 @@ def single_threaded_opencv() -> Iterator[None]:
         cv2.setNumThreads(previous)
 
 
-def _readonly(a: np.ndarray) -> np.ndarray:
+def readonly(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=np.float64, copy=True)
     a.setflags(write=False)
     return a
 
 
-def _check_inputs(
+def check_inputs(
     object_points: Sequence[np.ndarray],
     image_points: Sequence[np.ndarray],
     image_size: tuple[int, int],
@@ -269,7 +276,7 @@ def _sigma_by_name(cov: IntrinsicCovariance, aspect: float | None) -> tuple[dict
     return sigma, None
 
 
-def _check_output(K: np.ndarray, dist: np.ndarray, rms: float, rvecs: np.ndarray, tvecs: np.ndarray,
+def check_output(K: np.ndarray, dist: np.ndarray, rms: float, rvecs: np.ndarray, tvecs: np.ndarray,
                   image_size: tuple[int, int]) -> None:
     if not (np.isfinite(K).all() and np.isfinite(dist).all() and math.isfinite(rms)
             and np.isfinite(rvecs).all() and np.isfinite(tvecs).all()):
@@ -314,8 +321,12 @@ def solve_intrinsics(
         UsageError: unknown model name.
     """
     m = get_model(model) if isinstance(model, str) else model
+    if m.kind == "fisheye":
+        from calibctl.core.fisheye_solve import solve_fisheye  # it builds on this module's types
+
+        return solve_fisheye(object_points_per_view, image_points_per_view, image_size, m, initial)
     size = (int(image_size[0]), int(image_size[1]))
-    objs, imgs = _check_inputs(object_points_per_view, image_points_per_view, image_size, m)
+    objs, imgs = check_inputs(object_points_per_view, image_points_per_view, image_size, m)
     flags = m.flags
     K0 = np.eye(3, dtype=np.float64)
     if initial is not None:
@@ -339,13 +350,13 @@ def solve_intrinsics(
     D[: min(m.n_coeffs, D_full.size)] = D_full[: m.n_coeffs]
     rv = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
     tv = np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)
-    _check_output(K, D, float(rms), rv, tv, size)
+    check_output(K, D, float(rms), rv, tv, size)
 
     residuals = []
     with single_threaded_opencv():
         for obj, img, r, t in zip(objs, imgs, rv, tv, strict=True):
             proj, _ = cv2.projectPoints(obj.astype(np.float64), r, t, K, D)
-            residuals.append(_readonly(img.astype(np.float64) - proj.reshape(-1, 2)))
+            residuals.append(readonly(img.astype(np.float64) - proj.reshape(-1, 2)))
     n_res = 2 * sum(len(o) for o in objs)
     n_par = parameter_count(m, len(objs))
     dof = n_res - n_par
@@ -358,9 +369,38 @@ def solve_intrinsics(
                                    m.free_intrinsics, m.free_distortion, aspect, dof)
     sigma, reason = _sigma_by_name(cov, aspect)
     return IntrinsicsSolution(
-        model=m.name, image_size=size, camera_matrix=_readonly(K), dist_coeffs=_readonly(D),
-        rms_px=float(rms), per_view_rms_px=_readonly(np.asarray(per_view).ravel()),
-        rvecs=_readonly(rv), tvecs=_readonly(tv), residuals_px=tuple(residuals),
+        model=m.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D),
+        rms_px=float(rms), per_view_rms_px=readonly(np.asarray(per_view).ravel()),
+        rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
         sigma=sigma, sigma_refused_reason=reason, n_residuals=n_res, n_parameters=n_par,
         aspect_ratio=aspect, covariance=cov, sigma_opencv=_opencv_sigma(m, std_int),
     )
+
+
+def is_fisheye(model: str) -> bool:
+    """True for a model solved and projected by the fisheye module (name as in MODELS)."""
+    return model in MODELS and MODELS[model].kind == "fisheye"
+
+
+def project_points(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, camera_matrix: np.ndarray,
+                   dist_coeffs: np.ndarray, model: str) -> np.ndarray:
+    """(N, 3) board points -> (N, 2) float64 px through ``model``'s lens (pinhole or fisheye)."""
+    obj = np.asarray(object_points, np.float64).reshape(-1, 3)
+    if is_fisheye(model):
+        return project_fisheye(obj, rvec, tvec, camera_matrix, dist_coeffs)
+    return cv2.projectPoints(obj, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
+                             np.asarray(camera_matrix, np.float64), np.asarray(dist_coeffs, np.float64))[0].reshape(-1, 2)
+
+
+def fit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
+             dist_coeffs: np.ndarray, model: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """T_cam_board (rvec, tvec) of one view with the lens frozen, minimising pixel residuals; None if none."""
+    obj = np.asarray(object_points, np.float64).reshape(-1, 3)
+    img = np.asarray(image_points, np.float64).reshape(-1, 2)
+    if is_fisheye(model):
+        pose = fisheye_pose(obj, img, camera_matrix, dist_coeffs)
+        return None if pose is None else refine_fisheye_pose(obj, img, camera_matrix, dist_coeffs, *pose)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist_coeffs, flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+        return None
+    return rvec.ravel(), tvec.ravel()

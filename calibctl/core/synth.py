@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -226,7 +227,22 @@ def render_background(image_size: tuple[int, int], rng: np.random.Generator) -> 
     return cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC).clip(0.15, 0.6)
 
 
-def render_view(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarray, rng: np.random.Generator,
+class RayCamera(Protocol):
+    """A lens that supplies its own per-pixel ray map (e.g. synth_fisheye.FisheyeCamera)."""
+
+    @property
+    def image_size(self) -> tuple[int, int]: ...
+
+    def ray_map(self) -> tuple[np.ndarray, ...]: ...
+
+
+class ProjectingCamera(Protocol):
+    """A lens that projects board points itself (e.g. synth_fisheye.FisheyeCamera)."""
+
+    def project(self, points_board_m: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray: ...
+
+
+def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board: np.ndarray, rng: np.random.Generator,
                 photometry: Photometry | None = None, background: np.ndarray | None = None,
                 supersample: int = 6, margin_squares: float = 1.0) -> np.ndarray:
     """Render one board photo.
@@ -241,7 +257,8 @@ def render_view(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarray
     """
     photometry = photometry or Photometry()
     width, height = camera.image_size
-    x, y, x_u, x_v, y_u, y_v, valid = _ray_map(camera.key())
+    rays = camera.ray_map() if not isinstance(camera, PinholeCamera) else _ray_map(camera.key())
+    x, y, x_u, x_v, y_u, y_v, valid = rays
     R, t = np.asarray(T_cam_board, np.float64)[:3, :3], np.asarray(T_cam_board, np.float64)[:3, 3]
     plane = np.column_stack([R[:, 0], R[:, 1], t])
     # board metres -> square units on the way out of the inverse plane map
@@ -282,6 +299,6 @@ def render_view(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarray
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
-def true_corners_px(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarray) -> np.ndarray:
+def true_corners_px(camera: PinholeCamera | ProjectingCamera, board: BoardSpec, T_cam_board: np.ndarray) -> np.ndarray:
     """(cols * rows, 2) float64 true inner-corner pixels, row-major ids."""
     return camera.project(board.object_points(), T_cam_board)

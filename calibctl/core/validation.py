@@ -38,13 +38,14 @@ from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.solve import (
     IntrinsicsSolution,
+    fit_pose,
     get_model,
+    project_points,
     single_threaded_opencv,
     solve_intrinsics,
 )
@@ -83,24 +84,25 @@ def fold_assignment(n_views: int, min_training_views: int, max_folds: int = MAX_
 
 
 def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
-                         camera_matrix: np.ndarray, dist_coeffs: np.ndarray) -> np.ndarray:
+                         camera_matrix: np.ndarray, dist_coeffs: np.ndarray, model: str = "k1k2") -> np.ndarray:
     """Residuals of one view with intrinsics frozen and the board pose re-fitted.
 
     Args:
         object_points: (N, 3) float64 board frame. image_points: (N, 2) float64 px.
-        camera_matrix: (3, 3) px. dist_coeffs: (n,) OpenCV order.
+        camera_matrix: (3, 3) px. dist_coeffs: (n,) OpenCV order. model: a MODELS name (pinhole or
+            fisheye decides the projection; the pinhole models all project alike).
 
     Returns:
-        (N, 2) float64 observed - projected, px.
+        (N, 2) float64 observed - projected.
     """
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
     with single_threaded_opencv():
-        ok, rvec, tvec = cv2.solvePnP(obj, img, camera_matrix, dist_coeffs, flags=cv2.SOLVEPNP_ITERATIVE)
-        if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
-            raise NumericalError("solvePnP could not fit a held-out view's pose")
-        proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist_coeffs)
-    return img - proj.reshape(-1, 2)
+        pose = fit_pose(obj, img, camera_matrix, dist_coeffs, model)
+        if pose is None:
+            raise NumericalError("the board pose of a held-out view could not be fitted")
+        proj = project_points(obj, pose[0], pose[1], camera_matrix, dist_coeffs, model)
+    return img - proj
 
 
 @dataclass(frozen=True)
@@ -248,7 +250,7 @@ def validate_holdout(
             raise NumericalError(f"held-out fold {f} (views {held} held out): {exc.message}",
                                  hint=exc.hint) from exc
         return sol.camera_matrix, {i: refit_pose_residuals(object_points_per_view[i], image_points_per_view[i],
-                                                           sol.camera_matrix, sol.dist_coeffs) for i in held}
+                                                           sol.camera_matrix, sol.dist_coeffs, m.name) for i in held}
 
     holdout: list[np.ndarray] = [np.empty((0, 2))] * n_views
     fold_K = []
@@ -269,3 +271,38 @@ def validate_holdout(
         holdout=residual_breakdown(image_points_per_view, holdout, pp, image_size, edges),
         fit=residual_breakdown(image_points_per_view, fit.residuals_px, pp, image_size, edges),
     )
+
+
+# A held-out RMS below the fit's by more than this fraction means the folds found a better minimum.
+FOLD_MINIMUM_SLACK = 0.05
+
+
+def agree_with_folds(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    fit: IntrinsicsSolution,
+    report: HoldoutReport,
+) -> tuple[IntrinsicsSolution, HoldoutReport]:
+    """The full solve and its held-out numbers from the same minimum, or a NumericalError.
+
+    Held-out residuals are never expected below the fit's: when they are (by FOLD_MINIMUM_SLACK), the
+    full solve stopped in a worse minimum than its folds. It is re-solved from the folds' median K and
+    validated again; if the fit is still worse than its folds, the solve is refused with both numbers.
+    """
+    if fit.rms_px <= (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
+        return fit, report
+    start = np.median(report.fold_camera_matrices, axis=0)
+    start[0, 1] = start[1, 0] = start[2, 0] = start[2, 1] = 0.0
+    start[2, 2] = 1.0
+    resolved = solve_intrinsics(object_points_per_view, image_points_per_view, image_size, fit.model, start)
+    if resolved.rms_px < fit.rms_px:
+        fit = resolved
+        report = validate_holdout(object_points_per_view, image_points_per_view, image_size, fit.model, fit=fit,
+                                  initial=start)
+    if fit.rms_px > (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
+        raise NumericalError(
+            f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "
+            f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different minima",
+            hint="solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens")
+    return fit, report

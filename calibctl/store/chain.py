@@ -128,11 +128,15 @@ def backfill(conn: Connection) -> None:
         if not stream.key and heads:  # a one-stream table's position is counted in version_counters
             counters = Table("version_counters", meta, autoload_with=conn)
             # imported here, as in counters.py: sqlalchemy.dialects.postgresql alone costs ~0.1 s of start-up
+            insert: Any
             if conn.dialect.name == "postgresql":
-                from sqlalchemy.dialects.postgresql import insert as dialect_insert
+                from sqlalchemy.dialects.postgresql import insert as pg_insert
+
+                insert = pg_insert(counters)
             else:
-                from sqlalchemy.dialects.sqlite import insert as dialect_insert
-            insert = dialect_insert(counters)
+                from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+
+                insert = sqlite_insert(counters)
             conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
 
 

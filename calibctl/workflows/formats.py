@@ -3,7 +3,9 @@
 - ``json``/``yaml``: the full calibctl artifact (hash and status included; ``calibctl import`` reads it).
 - ``ros``: the camera_info YAML that ROS camera_calibration_parsers reads (see ``ros_camera_info``).
 - ``opencv``: a cv2.FileStorage YAML (camera_matrix, distortion_coefficients, image_width/height,
-  status), written and read back by OpenCV itself.
+  status), written and read back by OpenCV itself. A fisheye calibration adds
+  ``distortion_model: equidistant``: its distortion_coefficients are cv2.fisheye's k1..k4 (pass them to
+  cv2.fisheye.*, not to cv2.undistort).
 
 ROS and OpenCV exports start with the trace header (``trace_header``): the version, its status, the
 evidence lint needs, and a hash of the file. ``load_calibration`` reads any of the four back.
@@ -48,6 +50,8 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         fs.write("image_height", art.image_size[1])
         fs.write("camera_matrix", np.array(art.camera_matrix, dtype=np.float64))
         fs.write("distortion_coefficients", np.array([art.dist_coeffs], dtype=np.float64))
+        if art.model.name == "fisheye":
+            fs.write("distortion_model", "equidistant")
         fs.write("rms_px", art.rms_px)
         fs.write("content_sha256", art.content_sha256)
         fs.release()

@@ -25,7 +25,7 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
-from calibctl.core import lens_checks
+from calibctl.core import lens_checks, model_fit
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows import formats, keys, ros_camera_info
@@ -48,6 +48,10 @@ class CalibrationFacts:
     square_size_status: str | None = None  # measured | nominal | None (not recorded)
     square_size_m: float | None = None
     camera_consistency: dict[str, Any] | None = None  # the solve's two-camera check, calibctl artifacts only
+    model_name: str | None = None  # calibctl artifacts only, as the three below
+    fit_rms_px: float | None = None
+    detector_rms_px: float | None = None
+    fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -117,9 +121,14 @@ def _ros_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         image_size=(data["image_width"], data["image_height"]),
         camera_matrix=_matrix(data["camera_matrix"]["data"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data["distortion_coefficients"]["data"], (-1,), source, "distortion"),
-        distortion_model="equidistant" if data.get("distortion_model") == "equidistant" else "brown-conrady",
+        distortion_model=_distortion_model(data.get("distortion_model")),
         raw_numbers=_numbers(data),
     )
+
+
+def _distortion_model(name: Any) -> str:
+    """ROS/OpenCV ``distortion_model`` or a calibctl model name -> the lint's lens family."""
+    return "equidistant" if name in ("equidistant", "fisheye") else "brown-conrady"
 
 
 def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
@@ -132,6 +141,7 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         image_size=(w, h) if isinstance(w, int) and isinstance(h, int) else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"),
+        distortion_model=_distortion_model(data.get("distortion_model")),
         raw_numbers=_numbers(data),
     )
 
@@ -151,6 +161,7 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         image_size=(int(size[0]), int(size[1])) if isinstance(size, list | tuple) and len(size) == 2 else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data.get("dist_coeffs", []), (-1,), source, "dist_coeffs"),
+        distortion_model=_distortion_model((data.get("model") or {}).get("name")),
         sigma_fx_px=float(sigma_fx) if isinstance(sigma_fx, int | float) else None,
         sigma_refused_reason=stdev.get("refused_reason"),
         fit_outer_rms_px=held.get("fit_outer_ring_rms_px"),
@@ -158,8 +169,24 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
         camera_consistency=data.get("camera_consistency"),
+        model_name=(data.get("model") or {}).get("name"),
+        fit_rms_px=data.get("rms_px"),
+        detector_rms_px=data.get("detector_rms_px"),
+        fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
         raw_numbers=[] if validated else _numbers(data),
     )
+
+
+def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | None]:
+    fit = [r.get("fit_rms_px") for r in rings if isinstance(r, dict)]
+    return (fit[0], fit[-1]) if len(fit) >= 2 else (None, None)
+
+
+def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
+    if facts.fit_rms_px is None or facts.detector_rms_px is None or facts.model_name is None:
+        return []  # only a calibctl solve records what the detector delivered
+    return _adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
+                                               *facts.fit_ring_rms_px))
 
 
 def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
@@ -274,6 +301,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings += _outer_ring_rule(facts, limits)
     findings += _provenance_rule(facts)
     findings += _one_camera_rule(facts)
+    findings += _misfit_rule(facts)
     findings += _adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
         foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"

@@ -42,8 +42,14 @@ def camera_name_for(serial: str, requested: str | None = None) -> str:
     return requested
 
 
-def distortion_for(dist_coeffs: list[float]) -> tuple[str, list[float]]:
-    """ROS names: 5 coefficients -> plumb_bob, 8 -> rational_polynomial (4 are padded with k3 = 0)."""
+def distortion_for(dist_coeffs: list[float], model_name: str | None = None) -> tuple[str, list[float]]:
+    """ROS names: the fisheye model -> equidistant (D = k1..k4); otherwise 5 coefficients -> plumb_bob,
+    8 -> rational_polynomial (4 are k1 k2 p1 p2, padded with k3 = 0)."""
+    if model_name == "fisheye":
+        if len(dist_coeffs) != DISTORTION_COEFFICIENTS["equidistant"]:
+            raise InputError(f"a fisheye calibration has 4 coefficients (k1..k4), this one has {len(dist_coeffs)}",
+                             "export as json instead")
+        return "equidistant", list(dist_coeffs)
     if len(dist_coeffs) == 4:
         return "plumb_bob", [*dist_coeffs, 0.0]
     if len(dist_coeffs) == 5:
@@ -59,7 +65,7 @@ def distortion_for(dist_coeffs: list[float]) -> tuple[str, list[float]]:
 def camera_info(art: CalibrationArtifact, camera_name: str | None = None) -> dict[str, Any]:
     """The camera_info document for ``art``, in the key order ROS's writer uses."""
     k = art.camera_matrix
-    model, dist = distortion_for(art.dist_coeffs)
+    model, dist = distortion_for(art.dist_coeffs, art.model.name)
     return {
         "image_width": art.image_size[0],
         "image_height": art.image_size[1],

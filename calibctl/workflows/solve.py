@@ -36,6 +36,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.camera_split import CameraSplit, check_one_camera
+from calibctl.core.model_fit import detector_rms_px
 from calibctl.core.model_select import select_model
 from calibctl.core.outliers import (
     CornerRejection,
@@ -44,17 +45,17 @@ from calibctl.core.outliers import (
     solve_rejecting_corners,
 )
 from calibctl.core.solve import IntrinsicsSolution, get_model
-from calibctl.core.validation import HoldoutReport, ResidualBreakdown, validate_holdout
+from calibctl.core.validation import HoldoutReport, ResidualBreakdown, agree_with_folds, validate_holdout
 from calibctl.errors import UsageError
 from calibctl.workflows.lint import facts_from_document, lint_facts
 from calibctl.workflows.records import open_store
 
-MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "auto")
+MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
 _OCTANT_LABELS = tuple(f"octant {i}" for i in range(8))
 _FLAG_NAMES = (
     "CALIB_USE_INTRINSIC_GUESS", "CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_PRINCIPAL_POINT", "CALIB_ZERO_TANGENT_DIST",
     "CALIB_FIX_K1", "CALIB_FIX_K2", "CALIB_FIX_K3", "CALIB_FIX_K4", "CALIB_FIX_K5", "CALIB_FIX_K6",
-    "CALIB_RATIONAL_MODEL",
+    "CALIB_RATIONAL_MODEL", "CALIB_RECOMPUTE_EXTRINSIC", "CALIB_FIX_SKEW",
 )
 
 
@@ -151,6 +152,8 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
+    # the fit RMS and the held-out RMS the artifact records must come from one minimum
+    solution, holdout = agree_with_folds([obj[i] for i in kept], [img[i] for i in kept], size, solution, holdout)
     split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
     consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
     return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
@@ -206,6 +209,9 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
     model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
         session, request)
+    model_points = board_spec(session.board).object_points()
+    detector_rms = detector_rms_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
+                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]))
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -230,6 +236,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             covariance=_covariance(sol),
         ),
         rms_px=float(sol.rms_px),
+        detector_rms_px=detector_rms,
         held_out=_held_out(holdout),
         gates=list(session.gates),
         board=session.board,

@@ -5,7 +5,8 @@ plus ``truth.json``::
 
     {"schema": "calibctl.synth.truth/1",
      "generator": {"scenario", "seed", "calibctl_version", "opencv_version"},
-     "camera": {"model", "K", "dist", "image_size"},   # K: 3x3 px; dist: k1 k2 p1 p2 k3; [W, H]
+     "camera": {"model", "K", "dist", "image_size"[, "fov_deg", "image_circle_px"]},
+                # K: 3x3 px; dist: k1 k2 p1 p2 k3 (pinhole) or k1..k4 (fisheye); [W, H]
      "board": {"kind", "cols", "rows", "square_size_m", ...},
      "views": [{"file" | "frame", "rvec", "tvec", "T_cam_board", "corners_px", "tilt_deg",
                 "direction_deg", "still"?, "key_pose"?}, ...],
@@ -35,6 +36,7 @@ from calibctl.core.synth import (
     rvec_tvec,
     true_corners_px,
 )
+from calibctl.core.synth_fisheye import FisheyeCamera, default_fisheye_distance_m, fisheye_poses
 from calibctl.core.synth_scenes import SCENARIOS, scenario_poses, video_plan
 from calibctl.errors import AlreadyExistsError, InputError, UsageError
 from calibctl.files import file_errors, write_atomic
@@ -94,7 +96,7 @@ def _prepare_out(out: Path, force: bool) -> None:
         out.mkdir(parents=True, exist_ok=True)
 
 
-def _view_record(camera: PinholeCamera, board: BoardSpec, T: np.ndarray) -> dict[str, object]:
+def _view_record(camera: PinholeCamera | FisheyeCamera, board: BoardSpec, T: np.ndarray) -> dict[str, object]:
     rvec, tvec = rvec_tvec(T)
     normal = T[:3, 2]
     facing = -normal if normal[2] > 0 else normal
@@ -105,8 +107,15 @@ def _view_record(camera: PinholeCamera, board: BoardSpec, T: np.ndarray) -> dict
 
 
 def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | None = None,
-              image_size: tuple[int, int] = (640, 480), pattern: str = "chessboard", force: bool = False) -> SynthResult:
-    """Render one scenario into ``out``. Deterministic for a given (scenario, seed, views, size, pattern)."""
+              image_size: tuple[int, int] = (640, 480), pattern: str = "chessboard", force: bool = False,
+              fisheye_fov_deg: float | None = None, circular: bool = True) -> SynthResult:
+    """Render one scenario into ``out``. Deterministic for a given (scenario, seed, views, size, pattern).
+
+    ``fisheye_fov_deg``: render through an equidistant fisheye of that field of view instead (scenario
+    good only; 60-190 deg), with an image circle (``circular``) or full-frame.
+    """
+    if fisheye_fov_deg is not None:
+        return _run_fisheye(out, scenario, seed, views, image_size, pattern, force, fisheye_fov_deg, circular)
     if scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}", f"choose one of {', '.join(SCENARIOS)}")
     if pattern not in PATTERNS:
@@ -175,3 +184,46 @@ def load_truth(path: Path) -> dict[str, object]:
     if not isinstance(data, dict) or data.get("schema") != TRUTH_SCHEMA:
         raise InputError(f"{path} is not a calibctl synth truth file")
     return data
+
+
+def _run_fisheye(out: Path, scenario: str, seed: int, views: int | None, image_size: tuple[int, int], pattern: str,
+                 force: bool, fov_deg: float, circular: bool) -> SynthResult:
+    """``calibctl synth --fisheye FOV``: PNG views through an equidistant lens, and truth.json."""
+    if scenario != "good":
+        raise UsageError(f"--fisheye renders the good scenario only, not {scenario!r}", "drop --scenario")
+    if not 60.0 <= fov_deg <= 190.0:
+        raise UsageError(f"--fisheye field of view must be 60-190 deg, got {fov_deg:g}")
+    if pattern not in PATTERNS:
+        raise UsageError(f"unknown pattern {pattern!r}", f"choose one of {', '.join(PATTERNS)}")
+    camera = FisheyeCamera.from_fov(image_size, fov_deg, circular)
+    board = default_board(pattern)
+    rng = np.random.default_rng(seed)
+    try:
+        poses = fisheye_poses(camera, board.object_points(), views or DEFAULT_VIEWS, rng,
+                              default_fisheye_distance_m(camera, board.square_size_m), (15.0, 45.0), None, 6.0)
+    except ValueError as exc:
+        raise UsageError(f"cannot stage a {fov_deg:g} deg fisheye at {image_size[0]}x{image_size[1]}: {exc}") from exc
+    _prepare_out(out, force)
+    background = render_background(image_size, rng)
+    dark = camera.outside_circle()
+    records, files = [], []
+    for i, T in enumerate(poses):
+        img = render_view(camera, board, T, rng, Photometry.random(rng), background)
+        img[dark] = np.minimum(img[dark], 4)  # no light reaches the sensor outside the image circle
+        name = f"view-{i:03d}.png"
+        write_atomic(out / name, cv2.imencode(".png", img)[1].tobytes(), force=True)
+        files.append(name)
+        records.append({"file": name, **_view_record(camera, board, T)})
+    truth = {
+        "schema": TRUTH_SCHEMA,
+        "generator": {"scenario": scenario, "seed": seed, "calibctl_version": __version__,
+                      "opencv_version": cv2.__version__},
+        "camera": {"model": "fisheye (equidistant Kannala-Brandt, k1..k4; cv2.fisheye, ROS equidistant)",
+                   "K": camera.K.tolist(), "dist": camera.dist.tolist(), "image_size": list(image_size),
+                   "fov_deg": fov_deg, "image_circle_px": camera.circle_radius_px},
+        "board": board.to_dict(),
+        "views": records,
+    }
+    truth_path = out / TRUTH_FILE
+    write_atomic(truth_path, json.dumps(truth, indent=1) + "\n", force=True)
+    return SynthResult(out, scenario, image_size, files, truth_path, len(records))

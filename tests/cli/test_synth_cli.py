@@ -115,3 +115,28 @@ def test_a_scenario_that_cannot_be_staged_exits_2(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "Error: cannot stage scenario 'centre' at 160x120" in result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_fisheye_renders_an_image_circle_with_truth_the_detector_agrees_with(tmp_path: Path) -> None:
+    out = tmp_path / "fisheye"
+    result = invoke("synth", str(out), "--fisheye", "185", "--views", "3", "--seed", "1", "--size", "1024x768")
+    assert result.exit_code == 0, result.output
+    truth = json.loads((out / "truth.json").read_text())
+    cam = truth["camera"]
+    assert cam["fov_deg"] == 185 and len(cam["dist"]) == 4 and "equidistant" in cam["model"]
+    img = cv2.imread(str(out / "view-000.png"), cv2.IMREAD_GRAYSCALE)
+    assert img[0, 0] <= 4 and img[-1, -1] <= 4  # the corners of the frame are outside the image circle
+    spec = BoardSpec.chessboard(9, 6, 0.025)
+    errors = []
+    for view in truth["views"]:
+        det, why = detect_board(cv2.imread(str(out / view["file"]), cv2.IMREAD_GRAYSCALE), spec)
+        assert det is not None, why
+        errors.append(np.linalg.norm(det.corners_px - np.array(view["corners_px"])[det.corner_ids], axis=1).mean())
+    assert max(errors) < 0.15
+
+
+def test_fisheye_refuses_a_field_of_view_it_cannot_render_and_other_scenarios(tmp_path: Path) -> None:
+    result = invoke("synth", str(tmp_path / "a"), "--fisheye", "250")
+    assert result.exit_code == 2 and "60-190 deg, got 250" in result.output
+    result = invoke("synth", str(tmp_path / "b"), "--fisheye", "170", "--scenario", "flat")
+    assert result.exit_code == 2 and "good scenario only" in result.output

@@ -156,3 +156,12 @@ def test_the_radial_fast_path_gives_the_same_bits_as_the_full_model():
         xd, _, den = distort_normalised(r, np.zeros_like(r), d)
         rd, den_fast = _radial(r, d)
         assert np.array_equal(rd, xd) and np.array_equal(den, den_fast)
+
+
+def test_outer_ring_ratio_counts_only_above_the_absolute_floor():
+    # the good wide-angle solve: ratio 1.14 but only 0.017 px worse held-out
+    small = check_outer_ring_holdout(0.142, 0.125)
+    assert small.passed and "here 0.0170 px" in small.message
+    # the same ratio 1.14 with a 0.5 px excess is over-fitting
+    assert not check_outer_ring_holdout(4.0, 3.5).passed
+    assert not check_outer_ring_holdout(0.142, 0.125, min_excess_px=0.01).passed

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibctl.core.model_select import LADDER, MIN_FIT_IMPROVEMENT, select_model
+from calibctl.core.model_select import ALTERNATIVES, LADDER, MIN_FIT_IMPROVEMENT, select_model
 from calibctl.core.synthetic_corners import synthesize_session
 from calibctl.errors import NumericalError
 
@@ -21,7 +21,7 @@ def _session(f_px: float, dist, seed: int = 41, n_views: int = 12):
 
 
 def _check_trail_consistency(selection):
-    assert [c.model for c in selection.trail] == list(LADDER)
+    assert [c.model for c in selection.trail] == [*LADDER, *ALTERNATIVES]  # fisheye is considered, not taken
     accepted = [c.model for c in selection.trail if c.accepted]
     assert selection.chosen == accepted[-1] == selection.solution.model == selection.holdout.model
     current = "k1k2"
@@ -77,3 +77,15 @@ def test_too_few_views_for_the_starting_model_is_an_error():
     obj, img = _session(800.0, [-0.2814, 0.0977, 0, 0, 0], n_views=3)
     with pytest.raises(NumericalError, match="held-out validation needs at least 4 views, got 3"):
         select_model(obj, img, SIZE)
+
+
+@pytest.mark.xfail(reason="measured 09:28: on this 170 deg session auto accepts rational first and fisheye then "
+                   "gains < 10 % over it; fisheye must be compared with k1k2, not the ladder's end (open)", strict=False)
+def test_auto_switches_to_fisheye_for_a_wide_lens():
+    from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session
+
+    size = (1280, 960)
+    s = synthesize_fisheye_session(FisheyeCamera.from_fov(size, 170.0, circular=True), 12, seed=8)
+    sel = select_model(s.object_points_per_view, s.image_points_per_view, size)
+    assert sel.chosen == "fisheye"
+    assert sel.trail[-1].model == "fisheye" and sel.trail[-1].accepted

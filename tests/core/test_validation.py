@@ -163,3 +163,39 @@ def test_openblas_runs_on_one_thread_inside_the_block_and_gets_its_threads_back(
             pass
         assert [get() for _, get in threads] == [1] * len(threads)
     assert [get() for _, get in threads] == before
+
+
+def _stuck(sol, factor):
+    """The same solve reporting a worse minimum than it found (a full solve stuck where its folds were not)."""
+    import dataclasses
+
+    return dataclasses.replace(sol, rms_px=sol.rms_px * factor)
+
+
+def test_a_full_solve_worse_than_its_folds_is_re_solved_from_the_folds_intrinsics(good):
+    from calibctl.core.validation import agree_with_folds
+
+    ses, _ = good
+    obj, img = ses.object_points_per_view, ses.image_points_per_view
+    fit = solve_intrinsics(obj, img, SIZE, "k1k2")
+    report = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
+    same_fit, same_report = agree_with_folds(obj, img, SIZE, fit, report)
+    assert same_fit is fit and same_report is report  # consistent: nothing to do
+    new_fit, new_report = agree_with_folds(obj, img, SIZE, _stuck(fit, 3.0), report)
+    assert new_fit.rms_px == pytest.approx(fit.rms_px, rel=1e-6)
+    assert new_fit.rms_px <= new_report.holdout_rms_px and new_report.fit_rms_px == new_fit.rms_px
+
+
+def test_a_full_solve_that_stays_worse_than_its_folds_is_refused(good):
+    import dataclasses
+
+    from calibctl.core.validation import agree_with_folds
+
+    ses, _ = good
+    obj, img = ses.object_points_per_view, ses.image_points_per_view
+    fit = solve_intrinsics(obj, img, SIZE, "k1k2")
+    report = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
+    optimistic = dataclasses.replace(report, holdout_rms_px=0.5 * fit.rms_px)
+    with pytest.raises(NumericalError, match=r"worse than its held-out folds .* different minima") as exc:
+        agree_with_folds(obj, img, SIZE, fit, optimistic)
+    assert exc.value.exit_code == EXIT_CANNOT_RUN and "--model" in exc.value.hint

@@ -168,3 +168,48 @@ def test_the_stored_covariance_is_the_one_sigma_comes_from(settings):
     assert cov.aspect_ratio * np.sqrt(matrix[0, 0]) == pytest.approx(art.stdev.sigma["fx"], rel=1e-12)
     with Store.open(settings.db_url) as store:
         assert store.get_artifact(art.serial, art.version).stdev.covariance == cov
+
+
+def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tmp_path):
+    from calibctl.workflows import formats
+    from calibctl.workflows.lint import lint_files
+    from tests.workflows.sessions import fisheye_capture
+
+    session = _store_session(settings, fisheye_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id,
+                                                                     model="fisheye")).artifact
+    assert art.status == "accepted" and art.lint == [] and art.model.name == "fisheye"
+    assert len(art.dist_coeffs) == 4 and set(art.stdev.sigma) == {"fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"}
+    assert "CALIB_FIX_SKEW" in art.model.flag_names
+    for fmt in formats.EXPORT_FORMATS:
+        path = tmp_path / f"fe.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
+        path.write_text(formats.render(art, fmt), encoding="utf-8")
+        loaded = formats.load_calibration(path)
+        [result] = lint_files([path], settings.lint)
+        assert not result.failed, (fmt, result.findings)
+        if fmt == "ros":
+            assert loaded.data["distortion_model"] == "equidistant"
+            assert loaded.data["distortion_coefficients"]["data"] == art.dist_coeffs
+        if fmt == "opencv":
+            assert loaded.data["distortion_model"] == "equidistant"
+            np.testing.assert_allclose(np.ravel(loaded.data["distortion_coefficients"]), art.dist_coeffs)
+    from calibctl.workflows.records import read_artifact_file
+
+    assert read_artifact_file(tmp_path / "fe.json.json") == art
+
+
+def test_k1k2_on_a_fisheye_session_is_rejected_by_model_misfit(settings):
+    from tests.workflows.sessions import fisheye_capture
+
+    session = _store_session(settings, fisheye_capture(measured_board(), fov_deg=150.0))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert art.status == "rejected" and art.detector_rms_px is not None
+    misfit = [f for f in art.lint if f.rule == "model-misfit"]
+    assert misfit and "--model fisheye" in (misfit[0].fix or "")
+
+
+def test_a_good_pinhole_session_records_its_detector_noise_and_passes_model_misfit(settings):
+    session = _store_session(settings, synthetic_capture(measured_board()))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert art.status == "accepted" and "model-misfit" not in [f.rule for f in art.lint]
+    assert 0.5 * art.rms_px < art.detector_rms_px < 2.0 * art.rms_px
