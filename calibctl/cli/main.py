@@ -96,9 +96,21 @@ def main(
 
 def _register_commands() -> None:
     # Each module adds its commands to ``app``; this order is the order in --help.
-    from calibctl.cli import artifacts, board, capture, db, demo, diagnostics, handeye, lint, rig, solve
+    from calibctl.cli import (
+        artifacts,
+        board,
+        capture,
+        check,
+        db,
+        demo,
+        diagnostics,
+        handeye,
+        lint,
+        rig,
+        solve,
+    )
 
-    for module in (capture, solve, lint, board, rig, artifacts, db, diagnostics, handeye, demo):
+    for module in (capture, solve, check, lint, board, rig, artifacts, db, diagnostics, handeye, demo):
         module.register(app)
 
 

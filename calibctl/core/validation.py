@@ -93,6 +93,12 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
     Returns:
         (N, 2) float64 observed - projected, px.
     """
+    return refit_pose(object_points, image_points, camera_matrix, dist_coeffs)[0]
+
+
+def refit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
+               dist_coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,) m)."""
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
     with single_threaded_opencv():
@@ -100,7 +106,7 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
         if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
             raise NumericalError("solvePnP could not fit a held-out view's pose")
         proj, _ = cv2.projectPoints(obj, rvec, tvec, camera_matrix, dist_coeffs)
-    return img - proj.reshape(-1, 2)
+    return img - proj.reshape(-1, 2), rvec.reshape(3), tvec.reshape(3)
 
 
 @dataclass(frozen=True)
