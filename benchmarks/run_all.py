@@ -50,6 +50,7 @@ BENCHES = (
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
     Bench("bench_tilt", "bench_tilt.py", ("--sessions", "20", "--render", "5"), ("--sessions", "5", "--render", "0")),
     Bench("bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")),
+    Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
 )
 
 
