@@ -61,7 +61,7 @@ def reference_of(art: CalibrationArtifact) -> Reference:
     ring_rms, ring_counts = column(held.by_radius, N_RINGS)
     oct_rms, oct_counts = column(held.by_octant, N_OCTANTS)
     n_views = sum(1 for v in art.views if not v.dropped) or len(art.views)
-    n_corners = int(ring_counts.sum()) or 54 * n_views
+    n_corners = int(ring_counts.sum()) or art.board.cols * art.board.rows * n_views  # artifacts without rings
     return Reference(held.rms_px, n_corners, n_views, ring_edges, ring_rms, ring_counts, oct_rms, oct_counts)
 
 

@@ -150,3 +150,21 @@ def test_check_events_are_immutable_in_the_database(db: str, assets) -> None:
                 conn.execute(text(statement))
     finally:
         engine.dispose()
+
+
+def test_images_without_the_board_exit_2_and_store_nothing(db: str, tmp_path: Path) -> None:
+    blank = tmp_path / "blank"
+    blank.mkdir()
+    cv2.imwrite(str(blank / "wall.png"), np.full((480, 640), 128, np.uint8))
+    done = invoke(db, "check", "CAM-GOOD", "--source", str(blank))
+    assert done.exit_code == 2
+    assert "no board A17@1 was found in the 1 image(s)" in done.stderr
+    with Store.open(db) as store:
+        assert store.checks("CAM-GOOD") == []
+
+
+def test_a_video_source_is_refused(db: str, tmp_path: Path) -> None:
+    video = tmp_path / "line.mp4"
+    video.write_bytes(b"not really a video")
+    done = invoke(db, "check", "CAM-GOOD", "--source", str(video))
+    assert done.exit_code == 2 and "check reads a folder, glob or list of images, not a video" in done.stderr
