@@ -14,7 +14,7 @@ Two sources of corners:
 Beside it, the plain-OpenCV way to re-test (solvePnP with the stored K + RMS compared with a fixed 1.1x
 of the held-out RMS), on the same sessions.
 
-Run: python benchmarks/bench_check.py [--mode renders|corners] [--sessions 200] [--refs 5]
+Run: python benchmarks/bench_check.py [--mode renders|corners] [--sessions 200] [--refs 5] [--cases unchanged,...]
 """
 
 from __future__ import annotations
@@ -117,6 +117,7 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, default=200, help="check sessions per case")
     parser.add_argument("--refs", type=int, default=5, help="reference calibrations the sessions are spread over")
     parser.add_argument("--noise-px", type=float, default=0.03)
+    parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of: {', '.join(CASES)}")
     args = parser.parse_args()
     refs = [reference(10_000 + r, args.mode, args.noise_px) for r in range(args.refs)]
     print(f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
@@ -125,7 +126,7 @@ def main() -> None:
           f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median")
     print("| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |")
     print("|---|---|---|---|---|")
-    for case in CASES:
+    for case in args.cases.split(","):
         fails = plain = 0
         times = []
         for i in range(args.sessions):
