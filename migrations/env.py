@@ -13,6 +13,7 @@ from logging.config import fileConfig
 from alembic import context
 from sqlalchemy.engine import Connection
 
+from calibctl.store import checks  # noqa: F401  (declares check_events on Base)
 from calibctl.store.engine import WRITE_OPTION, make_engine, normalise_url
 from calibctl.store.models import Base
 

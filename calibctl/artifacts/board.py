@@ -22,10 +22,26 @@ BOARD_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 _REF = re.compile(r"^(?P<name>[A-Za-z0-9][A-Za-z0-9._-]{0,63})(?:@(?P<rev>[0-9]+))?$")
 
 
-class SquareMeasurement(Document):
-    """How the square size was obtained. ``measured`` needs the full provenance; ``nominal`` is a typed number."""
+class SpanMeasurement(Document):
+    """A second, independent measurement of the printed pattern: the distance between the outermost inner
+    corners along the long side (``squares`` squares), with its own instrument (seed chapter 0: only a
+    second measurement of a distance catches a gauge error)."""
 
-    status: Literal["measured", "nominal"] = Field(description="measured with an instrument, or nominal (typed)")
+    span_m: float = Field(gt=0, lt=10.0, description="outermost inner corner to outermost inner corner, metres")
+    squares: int = Field(ge=1, description="squares the span covers (inner corners along the long side - 1)")
+    uncertainty_m: float = Field(gt=0, description="one-sigma uncertainty of span_m, metres")
+    instrument: str = Field(min_length=1, description="what measured it, e.g. 'steel rule 300 mm'")
+    measured_by: str = Field(min_length=1, description="who measured it")
+    measured_on: dt.date = Field(description="date of the measurement")
+
+
+class SquareMeasurement(Document):
+    """How the square size was obtained. ``measured``: the square size and an independent span measurement
+    agree; ``measured-single``: one measurement only (lint warns); ``nominal``: a typed number. Boards
+    registered before the span existed read as ``measured`` without a span."""
+
+    status: Literal["measured", "measured-single", "nominal"] = Field(
+        description="measured twice (square size and span agree), measured-single, or nominal (typed)")
     square_size_m: float = Field(gt=0, lt=1.0, description="edge of one printed square, metres")
     uncertainty_m: float | None = Field(None, gt=0, description="one-sigma uncertainty of square_size_m, metres")
     instrument: str | None = Field(None, min_length=1, description="what measured it, e.g. 'Mitutoyo 500-196 calipers'")
@@ -33,10 +49,16 @@ class SquareMeasurement(Document):
     measured_on: dt.date | None = Field(None, description="date of the measurement")
     evidence_sha256: Sha256Hex | None = Field(None, description="sha256 of the evidence file (photo of the calipers)")
     evidence_name: str | None = Field(None, description="file name of the evidence when it was registered")
+    # Left out of the document while absent, so boards (and calibrations) sealed before it still verify.
+    span: SpanMeasurement | None = Field(
+        None, exclude_if=lambda span: span is None,
+        description="the independent span measurement; present exactly when status is measured (new boards)")
 
     @model_validator(mode="after")
     def _provenance_complete(self) -> SquareMeasurement:
-        if self.status == "measured":
+        if self.span is not None and self.status != "measured":
+            raise ValueError(f"a {self.status} square size carries no span measurement")
+        if self.status in ("measured", "measured-single"):
             missing = [
                 name
                 for name in ("uncertainty_m", "instrument", "measured_by", "measured_on")

@@ -14,6 +14,7 @@ from pydantic import BaseModel
 
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
@@ -21,6 +22,7 @@ from calibctl.artifacts.session import CaptureSession
 
 DOCUMENTS: dict[str, type[BaseModel]] = {
     "board-revision": BoardRevision,
+    "check-event": CheckEvent,
     "capture-session": CaptureSession,
     "calibration": CalibrationArtifact,
     "activation-event": ActivationEvent,
@@ -50,6 +52,7 @@ def expected_files() -> dict[str, str]:
         "rig-session": 1,
         "rig-calibration": 1,
         "rig-activation": 1,
+        "check-event": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 

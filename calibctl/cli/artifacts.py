@@ -36,6 +36,13 @@ def history(
                 f"  {e.at.isoformat()[:19].replace('T', ' ')}  {e.kind:<8} -> v{e.version}{prev}  "
                 f"by {plain(e.actor)} at {plain(e.station)}: {plain(e.reason)}", markup=False, soft_wrap=True
             )
+    if hist.checks:
+        stdout.print("checks:")
+        for c in hist.checks:
+            stdout.print(f"  {c.at.isoformat()[:19].replace('T', ' ')}  check    v{c.version}  "
+                         f"{'pass' if c.passed else 'FAIL'}  {len(c.views)} views, RMS "
+                         f"{c.regions[0].check_rms_px or 0:.3f} px  by {c.operator} at {c.station}"
+                         + (f": {c.reasons[0]}" if c.reasons else ""), markup=False, highlight=False)
 
 
 def show(

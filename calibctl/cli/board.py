@@ -44,7 +44,10 @@ def square_text(board: BoardRevision) -> str:
     m = board.measurement
     if m.status == "nominal":
         return f"{_mm(m.square_size_m)} NOMINAL (not measured)"
-    return f"{_mm(m.square_size_m)} ± {_mm(m.uncertainty_m)} (1σ)"
+    text = f"{_mm(m.square_size_m)} ± {_mm(m.uncertainty_m)} (1σ)"
+    if m.span is not None:
+        return text + f", span {_mm(m.span.span_m)} over {m.span.squares} squares agrees"
+    return text + (" (single measurement)" if m.status == "measured-single" else "")
 
 
 def pattern_text(board: BoardRevision) -> str:
@@ -58,8 +61,10 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
     m = board.measurement
     say(f"board {board.ref}: {pattern_text(board)}")
     say(f"  square size   {square_text(board)}")
-    if m.status == "measured":
+    if m.status != "nominal":
         say(f"  measured      with {m.instrument} by {m.measured_by} on {m.measured_on}")
+    if m.span is not None:
+        say(f"  span          {_mm(m.span.span_m)} ± {_mm(m.span.uncertainty_m)} with {m.span.instrument}")
         if m.evidence_sha256:
             say(f"  evidence      {m.evidence_name} sha256 {m.evidence_sha256}")
     say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")
@@ -85,16 +90,26 @@ def add(
     marker_mm: Annotated[float | None, typer.Option("--marker-mm", help="ChArUco marker edge, mm.")] = None,
     dictionary: Annotated[str | None, typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_5X5_100.")] = None,
     note: Annotated[str | None, typer.Option("--note", help="Free text, e.g. why it was re-measured.")] = None,
+    span_mm: Annotated[float | None, typer.Option(
+        "--span-mm", help="Second measurement: outermost inner corner to outermost inner corner along the long "
+                          "side, mm.")] = None,
+    span_uncertainty_mm: Annotated[float | None, typer.Option("--span-uncertainty-mm", help="One-sigma of the span, mm.")] = None,
+    span_instrument: Annotated[str | None, typer.Option("--span-instrument", help="What measured the span.")] = None,
+    span_squares: Annotated[int | None, typer.Option(
+        "--span-squares", help="Squares the span covers (default: inner corners along the long side - 1).")] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
-    --measured-on, optionally --evidence); with only --square-mm the size is recorded as nominal."""
+    --measured-on, optionally --evidence) and a second, independent one of the pattern's span (--span-mm,
+    --span-uncertainty-mm, --span-instrument): a square size the span contradicts is refused. Both: measured;
+    the square only: measured-single (lint warns); only --square-mm: nominal."""
     from calibctl.workflows import boards
 
     reg = boards.BoardRegistration(
         name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, uncertainty_mm=uncertainty_mm,
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
-        marker_mm=marker_mm, dictionary=dictionary, note=note,
+        marker_mm=marker_mm, dictionary=dictionary, note=note, span_mm=span_mm,
+        span_uncertainty_mm=span_uncertainty_mm, span_instrument=span_instrument, span_squares=span_squares,
     )  # fmt: skip
     board = boards.add_board(state(ctx).settings(), reg)
     if board.measurement.status == "nominal":
@@ -125,7 +140,7 @@ def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     table = Table("board", "pattern", "square size", "measured", "registered")
     for b in all_boards:
         m = b.measurement
-        measured = f"{m.measured_on} by {m.measured_by}" if m.status == "measured" else "-"
+        measured = f"{m.measured_on} by {m.measured_by}" if m.status != "nominal" else "-"
         table.add_row(shown(b.ref), shown(pattern_text(b)), shown(square_text(b)), shown(measured),
                       b.created_at.date().isoformat())
     stdout.print(table)

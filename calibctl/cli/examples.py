@@ -22,6 +22,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
               "calibctl synth ./sweep --scenario video --size 1280x960"),
     "solve": ("calibctl solve --serial CAM-0042", "calibctl solve 01f22921ea3f --model auto --drop-outliers",
               "calibctl solve --serial CAM-0042 --report reports/"),
+    "check": ("calibctl check CAM-0042 --source ./eol-shots/",
+              "calibctl check CAM-0042@3 --source 'eol/*.png' --reference-distance 0.600+-0.001 --json"),
     "report": ("calibctl report CAM-0042", "calibctl report CAM-0042@3 -o CAM-0042-v3.html --force"),
     "lint": ("calibctl lint camera_front.json camera_front_ros.yaml --format github",
              "calibctl --db sqlite:///station.db lint --all --json"),

@@ -113,6 +113,7 @@ def _register_commands() -> None:
         artifacts,
         board,
         capture,
+        check,
         db,
         demo,
         diagnostics,
@@ -124,7 +125,7 @@ def _register_commands() -> None:
         solve,
     )
 
-    for module in (capture, solve, lint, board, rig, artifacts, report_page, db, keys, diagnostics, handeye, demo):
+    for module in (capture, solve, check, lint, board, rig, artifacts, report_page, db, keys, diagnostics, handeye, demo):
         module.register(app)
     attach_examples(app)
 

@@ -95,6 +95,12 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
     Returns:
         (N, 2) float64 observed - projected.
     """
+    return refit_pose(object_points, image_points, camera_matrix, dist_coeffs, model)[0]
+
+
+def refit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
+               dist_coeffs: np.ndarray, model: str = "k1k2") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,) m)."""
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
     with single_threaded_opencv():
@@ -102,7 +108,7 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
         if pose is None:
             raise NumericalError("the board pose of a held-out view could not be fitted")
         proj = project_points(obj, pose[0], pose[1], camera_matrix, dist_coeffs, model)
-    return img - proj
+    return img - proj, np.asarray(pose[0], np.float64).reshape(3), np.asarray(pose[1], np.float64).reshape(3)
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import Signer, TrustedKeys
 from calibctl.store import audit, chain, codec, counters, history, images, migrate
+from calibctl.store.checks import CheckStoreMixin
 from calibctl.store.engine import (
     WRITE_OPTION,
     as_database_error,
@@ -61,7 +62,7 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     )
 
 
-class Store(ImageStoreMixin, RigStoreMixin):
+class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
     def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None) -> None:

@@ -16,9 +16,16 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from calibctl.artifacts.board import BOARD_NAME_PATTERN, BoardRevision, SquareMeasurement, parse_board_ref
+from calibctl.artifacts.board import (
+    BOARD_NAME_PATTERN,
+    BoardRevision,
+    SpanMeasurement,
+    SquareMeasurement,
+    parse_board_ref,
+)
 from calibctl.artifacts.common import sha256_hex, utc_now, validation_message
 from calibctl.config import Settings
+from calibctl.core.board_gauge import K_SIGMA, UNIT_SLIPS, compare_span
 from calibctl.core.board_spec import BOARD_KINDS, BoardSpec
 from calibctl.errors import InputError, UsageError
 from calibctl.store.repository import Store
@@ -51,6 +58,10 @@ class BoardRegistration:
     marker_mm: float | None = None
     dictionary: str | None = None
     note: str | None = None
+    span_mm: float | None = None
+    span_uncertainty_mm: float | None = None
+    span_instrument: str | None = None
+    span_squares: int | None = None
 
 
 def parse_measured_on(text: str, today: dt.date) -> dt.date:
@@ -81,6 +92,10 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     square_m = reg.square_mm / 1000.0
     given = {flag for field, flag in _MEASUREMENT_FLAGS.items() if getattr(reg, field) is not None}
     if not given and reg.evidence is None:
+        if reg.span_mm is not None:
+            raise UsageError("--span-mm checks a measured square size; this one is nominal",
+                             "give the square's measurement too (--uncertainty-mm, --instrument, --measured-by, "
+                             "--measured-on)")
         return SquareMeasurement(status="nominal", square_size_m=square_m)
     missing = [flag for flag in _MEASUREMENT_FLAGS.values() if flag not in given]
     if missing:
@@ -92,16 +107,60 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     if not 0 < reg.uncertainty_mm < reg.square_mm:
         raise UsageError(f"--uncertainty-mm {reg.uncertainty_mm:g} must be positive and smaller than the square")
     evidence_sha, evidence_name = read_evidence(reg.evidence) if reg.evidence is not None else (None, None)
+    day = parse_measured_on(reg.measured_on, today)
+    span = _span(reg, day)
     return SquareMeasurement(
-        status="measured",
+        status="measured" if span is not None else "measured-single",
+        span=span,
         square_size_m=square_m,
         uncertainty_m=reg.uncertainty_mm / 1000.0,
         instrument=reg.instrument,
         measured_by=reg.measured_by,
-        measured_on=parse_measured_on(reg.measured_on, today),
+        measured_on=day,
         evidence_sha256=evidence_sha,
         evidence_name=evidence_name,
     )
+
+
+_SPAN_FLAGS = {"span_uncertainty_mm": "--span-uncertainty-mm", "span_instrument": "--span-instrument"}
+
+
+def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
+    """The span measurement, refused when the square size disagrees with it (seed chapter 0's typo)."""
+    if reg.span_mm is None:
+        extra = [flag for name, flag in {**_SPAN_FLAGS, "span_squares": "--span-squares"}.items()
+                 if getattr(reg, name) is not None]
+        if extra:
+            raise UsageError(f"{', '.join(extra)} describe a span measurement: give --span-mm too")
+        return None
+    missing = [flag for name, flag in _SPAN_FLAGS.items() if getattr(reg, name) is None]
+    if missing:
+        raise UsageError(f"a span measurement needs {', '.join(missing)}",
+                         "the span's own instrument and one-sigma, e.g. --span-uncertainty-mm 0.1 --span-instrument "
+                         "'steel rule'")
+    assert reg.span_uncertainty_mm is not None and reg.span_instrument is not None and reg.uncertainty_mm is not None
+    squares = reg.span_squares if reg.span_squares is not None else max(reg.cols, reg.rows) - 1
+    if not 0 < squares < max(reg.cols, reg.rows):
+        raise UsageError(f"--span-squares {squares} must be between 1 and {max(reg.cols, reg.rows) - 1} "
+                         f"(a {reg.cols}x{reg.rows} board)")
+    if not 0 < reg.span_uncertainty_mm < reg.span_mm:
+        raise UsageError(f"--span-uncertainty-mm {reg.span_uncertainty_mm:g} must be positive and smaller than the span")
+    verdict = compare_span(reg.square_mm / 1000, reg.uncertainty_mm / 1000, squares, reg.span_mm / 1000,
+                           reg.span_uncertainty_mm / 1000)
+    said = (f"--square-mm {reg.square_mm:g} x {squares} squares = {verdict.implied_m * 1000:.2f} mm, but --span-mm "
+            f"{reg.span_mm:g}")
+    if verdict.unit_factor is not None:
+        slip = verdict.unit_factor if verdict.unit_factor >= 1 else 1 / verdict.unit_factor
+        raise UsageError(f"{said} is {verdict.unit_factor:g}x that: wrong units ({UNIT_SLIPS[slip]}?), not a "
+                         "measurement", "give both lengths in millimetres")
+    if not verdict.consistent:
+        raise UsageError(
+            f"{said}: they differ by {verdict.difference_m * 1000:+.2f} mm, more than {K_SIGMA:g} combined sigma "
+            f"({verdict.combined_sigma_m * 1000:.2f} mm); the square size or the span is wrong",
+            f"re-measure; the span implies {reg.span_mm / squares:.3f} mm squares. A wrong square size scales "
+            "every distance the robot reports and leaves no residual")
+    return SpanMeasurement(span_m=reg.span_mm / 1000.0, squares=squares, uncertainty_m=reg.span_uncertainty_mm / 1000.0,
+                           instrument=reg.span_instrument, measured_by=reg.measured_by or "", measured_on=day)
 
 
 def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:

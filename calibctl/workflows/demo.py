@@ -83,6 +83,8 @@ def run_demo(settings: Settings, out: Path, emit: Callable[[DemoStep], None]) ->
             name=BOARD, kind="chessboard", cols=truth["board"]["cols"], rows=truth["board"]["rows"],
             square_mm=square_mm, uncertainty_mm=0.02, instrument="Mitutoyo 500-196 calipers (demo)",
             measured_by="demo-qa", measured_on="2026-03-11", note="rendered board, measured by definition",
+            span_mm=square_mm * (max(truth["board"]["cols"], truth["board"]["rows"]) - 1), span_uncertainty_mm=0.1,
+            span_instrument="steel rule 300 mm (demo)",
         ),
     )
     emit(DemoStep(f"1. board {board.ref} registered with a measured square size", "board", board))

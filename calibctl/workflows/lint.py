@@ -219,6 +219,12 @@ def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
 def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.square_size_status == "measured":
         return []
+    if facts.square_size_status == "measured-single":
+        return [Finding(rule="square-size-single", severity="warning",
+                        message="the square size was measured once, with nothing independent to catch a wrong "
+                        "number (seed chapter 0: 23 mm typed for 25 mm leaves no residual)",
+                        fix="measure the pattern's span too: `calibctl board add NAME ... --span-mm ... "
+                        "--span-uncertainty-mm ... --span-instrument ...`")]
     if facts.square_size_status == "nominal":
         mm = f"{facts.square_size_m * 1000:.3f} mm " if facts.square_size_m else ""
         message = f"square size {mm}is nominal (typed, never measured): every metric output scales with it"

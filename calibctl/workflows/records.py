@@ -8,6 +8,7 @@ from pathlib import Path
 
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.common import MAX_VERSION, parse_document
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
@@ -60,6 +61,7 @@ class History:
     active_version: int | None
     versions: list[HistoryRow] = field(default_factory=list)
     events: list[ActivationEvent] = field(default_factory=list)
+    checks: list[CheckEvent] = field(default_factory=list)
 
     def as_json(self) -> dict:
         return {
@@ -67,6 +69,7 @@ class History:
             "active_version": self.active_version,
             "versions": [row.__dict__ for row in self.versions],
             "events": [e.model_dump(mode="json") for e in self.events],
+            "checks": [c.model_dump(mode="json") for c in self.checks],
         }
 
 
@@ -75,6 +78,7 @@ def history(settings: Settings, serial: str) -> History:
         artifacts = store.list_artifacts(serial)
         active = store.active_version(serial)
         events = store.events(serial)
+        checks = store.checks(serial)
     rows = [
         HistoryRow(
             version=a.version,
@@ -92,7 +96,7 @@ def history(settings: Settings, serial: str) -> History:
         )
         for a in artifacts
     ]
-    return History(serial=serial, active_version=active, versions=rows, events=events)
+    return History(serial=serial, active_version=active, versions=rows, events=events, checks=checks)
 
 
 def show(settings: Settings, ref: str) -> CalibrationArtifact:

@@ -35,7 +35,7 @@ def test_measured_board_is_registered_with_its_provenance(run, tmp_path: Path):
     board = json.loads(result.stdout)
     assert (board["name"], board["revision"], board["kind"], board["cols"], board["rows"]) == ("A17", 1, "chessboard", 9, 6)
     m = board["measurement"]
-    assert m["status"] == "measured" and m["square_size_m"] == 0.02503 and m["uncertainty_m"] == 2e-05
+    assert m["status"] == "measured-single" and m["square_size_m"] == 0.02503 and m["uncertainty_m"] == 2e-05
     assert (m["instrument"], m["measured_by"], m["measured_on"]) == ("Mitutoyo 500-196", "qa-anna", "2026-03-11")
     assert m["evidence_sha256"] == sha256_hex(evidence.read_bytes()) and m["evidence_name"] == "calipers.jpg"
     assert board["created_by"] == "tester"

@@ -1,0 +1,93 @@
+"""core.recheck on seeded synthetic corners: an unchanged camera passes, a changed one is named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibctl.core.recheck import Reference, distance_ratio, ratio_limit, recheck
+from calibctl.core.solve import solve_intrinsics
+from calibctl.core.synthetic_corners import synthesize_session
+from calibctl.core.validation import validate_holdout
+
+K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+D = np.array([-0.28, 0.09, 0.0, 0.0, 0.0])
+SIZE = (640, 480)
+NOISE_PX = 0.03  # per coordinate, about what calibctl's detector leaves on rendered boards
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    s = synthesize_session(K, D, SIZE, 20, seed=7, noise_px=NOISE_PX)
+    fit = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2")
+    rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2", fit=fit, workers=1)
+    h = rep.holdout
+    n = sum(len(p) for p in s.image_points_per_view)
+    ref = Reference(rep.holdout_rms_px, n, 20, h.radius_edges_px, h.ring_rms_px, h.ring_counts,
+                    h.octant_rms_px, h.octant_counts)
+    sigma = {"focal": 0.3 / 800, "cx": 0.3, "cy": 0.3}
+    return fit, ref, sigma
+
+
+def _check(calibrated, camera: np.ndarray, seed: int, square_m: float = 0.025):
+    fit, ref, sigma = calibrated
+    s = synthesize_session(camera, D, SIZE, 10, seed=seed, noise_px=NOISE_PX, square_size_m=square_m)
+    return recheck(s.object_points_per_view, s.image_points_per_view, fit.camera_matrix, fit.dist_coeffs, SIZE,
+                   ref, sigma), s
+
+
+def test_an_unchanged_camera_passes_every_region_and_every_pull(calibrated):
+    result, _ = _check(calibrated, K, seed=100)
+    assert result.passed, (result.failed_regions, result.failed_shifts)
+    assert result.regions[0].region == "overall" and result.regions[0].tested
+    assert {r.region for r in result.regions} >= {"ring 5", "octant 7"}
+    assert [p.name for p in result.shifts] == ["focal", "cx", "cy"]
+    assert 0.7 < result.overall.ratio < result.overall.limit
+
+
+def test_a_half_percent_focal_change_fails_on_the_focal_pull(calibrated):
+    changed = K.copy()
+    changed[0, 0] *= 1.005
+    changed[1, 1] *= 1.005
+    result, _ = _check(calibrated, changed, seed=101)
+    assert not result.passed
+    focal = result.shifts[0]
+    assert not focal.passed and focal.shift == pytest.approx(0.005, abs=0.002)
+
+
+def test_a_principal_point_shift_fails_on_cx_only(calibrated):
+    changed = K.copy()
+    changed[0, 2] += 4.0
+    result, _ = _check(calibrated, changed, seed=102)
+    failed = {p.name for p in result.failed_shifts}
+    assert failed == {"cx"}
+    assert result.shifts[1].shift == pytest.approx(4.0, abs=1.5)
+
+
+def test_a_wrong_board_scale_leaves_no_residual_but_scales_the_distance(calibrated):
+    # Seed chapter 0: printed 25 mm, registered 23 mm -> same pixels, every distance x0.92.
+    fit, ref, sigma = calibrated
+    s = synthesize_session(K, D, SIZE, 10, seed=103, noise_px=NOISE_PX, square_size_m=0.025)
+    true_d = [float(np.linalg.norm(_R(r) @ s.object_points_per_view[i].mean(axis=0) + t))
+              for i, (r, t) in enumerate(zip(s.rvecs, s.tvecs, strict=True))]
+    typo = [o * (0.023 / 0.025) for o in s.object_points_per_view]
+    result = recheck(typo, s.image_points_per_view, fit.camera_matrix, fit.dist_coeffs, SIZE, ref, sigma)
+    assert result.passed  # the residual cannot see it
+    ratios = result.board_distance_m / np.array(true_d)
+    assert np.allclose(ratios, 0.92, atol=0.004)
+
+
+def _R(rvec: np.ndarray) -> np.ndarray:
+    import cv2
+
+    return cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
+
+
+def test_distance_ratio_is_median_over_reference_with_spread():
+    ratio, spread = distance_ratio(np.array([0.59, 0.60, 0.61]), 0.5)
+    assert ratio == pytest.approx(1.2) and spread == pytest.approx(0.02 / 0.60)
+
+
+def test_the_ratio_limit_tightens_with_more_residuals_and_a_smaller_alpha():
+    assert ratio_limit(1000, 2000, 0.01) < ratio_limit(100, 2000, 0.01)
+    assert ratio_limit(1000, 2000, 0.001) > ratio_limit(1000, 2000, 0.01) > 1.0
