@@ -22,11 +22,12 @@ FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "camera_front.json"
 
 
 def _as_written_before_the_field(art: CalibrationArtifact) -> dict:
-    """The document an older calibctl wrote: neither key (nor the later content_hash_algorithm), sealed
-    the way it sealed (the legacy canonical JSON)."""
+    """The document an older calibctl wrote: neither key (nor the later content_hash_algorithm and
+    signature), sealed the way it sealed (the legacy canonical JSON)."""
     data = art.model_dump(mode="json")
     assert "rejected_corners" not in data and "camera_consistency" not in data  # left out while empty
     data.pop("content_hash_algorithm")
+    data.pop("signature")
     body = {k: v for k, v in data.items() if k != "content_sha256"}
     data["content_sha256"] = sha256_hex(canonical_json_bytes(body))
     return data

@@ -75,7 +75,7 @@ def test_import_gets_the_next_version_and_a_second_import_is_the_same_version(ru
     assert again.exit_code == 0 and f"already imported as {SERIAL}@2" in again.stdout
     with Store.open(sqlite_url) as store:
         assert [a.version for a in store.list_artifacts(SERIAL)] == [1, 2]
-        assert store.verify() == []
+        assert store.verify().problems == []
 
 
 def test_keep_version_only_when_it_is_the_next_one(run, sqlite_url, tmp_path):

@@ -11,7 +11,7 @@ from calibctl.core.solve import (
     MIN_SIGMA_DOF,
     MODELS,
     DistortionModel,
-    _check_output,
+    check_output,
     solve_intrinsics,
 )
 from calibctl.core.synthetic_corners import synthesize_session
@@ -187,7 +187,7 @@ def test_scrambled_corners_are_a_numerical_error_not_a_calibration(session, seed
 
 def _check(fx: float, cx: float, rms: float) -> None:
     K = np.array([[fx, 0.0, cx], [0.0, fx, 240.0], [0.0, 0.0, 1.0]])
-    _check_output(K, np.zeros(5), rms, np.zeros((4, 3)), np.ones((4, 3)), SIZE)
+    check_output(K, np.zeros(5), rms, np.zeros((4, 3)), np.ones((4, 3)), SIZE)
 
 
 def test_a_focal_length_under_a_tenth_of_the_image_is_refused_as_diverged():

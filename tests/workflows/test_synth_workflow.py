@@ -24,7 +24,7 @@ def test_truth_round_trips_and_foreign_files_are_refused(tmp_path: Path) -> None
         load_truth(other)
     broken = tmp_path / "broken.json"
     broken.write_text("{")
-    with pytest.raises(InputError, match="cannot read"):
+    with pytest.raises(InputError, match="malformed JSON"):
         load_truth(broken)
 
 
