@@ -63,10 +63,10 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
     say(f"  square size   {square_text(board)}")
     if m.status != "nominal":
         say(f"  measured      with {m.instrument} by {m.measured_by} on {m.measured_on}")
-    if m.span is not None:
-        say(f"  span          {_mm(m.span.span_m)} ± {_mm(m.span.uncertainty_m)} with {m.span.instrument}")
         if m.evidence_sha256:
             say(f"  evidence      {m.evidence_name} sha256 {m.evidence_sha256}")
+    if m.span is not None:
+        say(f"  span          {_mm(m.span.span_m)} ± {_mm(m.span.uncertainty_m)} with {m.span.instrument}")
     say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")
     if board.note:
         say(f"  note          {board.note}")
