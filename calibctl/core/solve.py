@@ -65,6 +65,11 @@ DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 FISHEYE_DIST_NAMES = ("k1", "k2", "k3", "k4")
 
 
+# OpenCV 5 names these flags at the top level; OpenCV 4.x only in cv2.fisheye, with other values. The
+# fisheye solve is calibctl's own and only records them, so the OpenCV 5 values serve on both.
+CALIB_RECOMPUTE_EXTRINSIC = int(getattr(cv2, "CALIB_RECOMPUTE_EXTRINSIC", 1 << 23))
+CALIB_FIX_SKEW = int(getattr(cv2, "CALIB_FIX_SKEW", 1 << 25))
+
 @dataclass(frozen=True)
 class DistortionModel:
     """One row of the model table: OpenCV flags and which parameters they leave free."""
@@ -103,7 +108,7 @@ MODELS: Mapping[str, DistortionModel] = {
                         DISTORTION_NAMES, 8, 5, "OpenCV rational 8-term model, fx=fy*a"),
         DistortionModel("opencv-default", 0, _FOCAL, ("k1", "k2", "p1", "p2", "k3"), 5, 3,
                         "plain OpenCV flags=0: fx and fy independent; for reference reproduction"),
-        DistortionModel("fisheye", cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW,
+        DistortionModel("fisheye", cv2.CALIB_USE_INTRINSIC_GUESS | CALIB_RECOMPUTE_EXTRINSIC | CALIB_FIX_SKEW,
                         _FOCAL, FISHEYE_DIST_NAMES, 4, 3,
                         "equidistant Kannala-Brandt (cv2.fisheye, ROS equidistant): fx fy cx cy k1..k4, skew 0",
                         kind="fisheye"),

@@ -34,6 +34,7 @@ from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
+from calibctl.core import solve as core_solve
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.camera_split import CameraSplit, check_one_camera
 from calibctl.core.model_fit import detector_rms_px
@@ -86,7 +87,7 @@ def board_spec(board: BoardRevision) -> BoardSpec:
 
 
 def flag_names(flags: int) -> list[str]:
-    return [name for name in _FLAG_NAMES if flags & int(getattr(cv2, name))]
+    return [name for name in _FLAG_NAMES if flags & int(getattr(cv2, name, None) or getattr(core_solve, name))]
 
 
 def _rings(fit: ResidualBreakdown, held: ResidualBreakdown, labels: Sequence[str], which: str) -> list[RingRms]:
