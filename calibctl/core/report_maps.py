@@ -60,6 +60,9 @@ def edge_gaps_px(corners_px: np.ndarray, image_size: tuple[int, int]) -> dict[st
 def unproject(points_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray) -> np.ndarray:
     """Pixels (N, 2) -> normalised ray coordinates (N, 2) (x/z, y/z) through the distortion model."""
     pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x: the iteration criteria live in their own call
+        return cv2.undistortPointsIter(pts, camera_matrix, dist_coeffs, None, None,
+                                       _UNDISTORT_CRITERIA).reshape(-1, 2)
     return cv2.undistortPoints(pts, camera_matrix, dist_coeffs, R=None, P=None,
                                criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
 
