@@ -6,17 +6,19 @@ immutable in the database (revision 0003's triggers), the active version is the 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
-from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.errors import AlreadyExistsError, IntegrityError, NotFoundError, UsageError
 from calibctl.store import codec, counters
 from calibctl.store.history import known_list
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
+
+if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
+    from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 
 T = TypeVar("T")
 
@@ -29,6 +31,8 @@ def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> 
 
 
 def _decode_calibration(row: RigCalibrationRow) -> RigCalibration:
+    from calibctl.artifacts.rig import RigCalibration
+
     what = f"rig {row.rig}@{row.version}"
     cal: RigCalibration = codec._parse(RigCalibration, row.payload, what)
     actual = cal.computed_sha256()
@@ -40,6 +44,8 @@ def _decode_calibration(row: RigCalibrationRow) -> RigCalibration:
 
 
 def _event(row: RigEventRow) -> RigActivation:
+    from calibctl.artifacts.rig import RigActivation
+
     return RigActivation(event_id=row.id, rig=row.rig, version=row.version, previous_version=row.previous_version,
                          kind=row.kind, actor=row.actor, station=row.station, at=row.at, reason=row.reason)
 
@@ -86,6 +92,8 @@ class RigStoreMixin:
         return self._run(work, write=True)
 
     def get_rig(self, name: str) -> RigDefinition:
+        from calibctl.artifacts.rig import RigDefinition
+
         def work(s: Session) -> RigDefinition:
             row = s.get(RigRow, name)
             if row is None:
@@ -110,6 +118,7 @@ class RigStoreMixin:
 
     def get_rig_session(self, rig: str, rig_session_id: str | None = None) -> RigSession:
         """A rig session by id, or the rig's latest accepted one."""
+        from calibctl.artifacts.rig import RigSession
 
         def work(s: Session) -> RigSession:
             q = select(RigSessionRow).where(RigSessionRow.rig == rig)

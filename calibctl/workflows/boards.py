@@ -26,7 +26,6 @@ from calibctl.artifacts.board import (
 from calibctl.artifacts.common import sha256_hex, utc_now, validation_message
 from calibctl.config import Settings
 from calibctl.core.board_gauge import K_SIGMA, UNIT_SLIPS, compare_span
-from calibctl.core.board_spec import BOARD_KINDS, BoardSpec
 from calibctl.errors import InputError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows import keys
@@ -165,6 +164,8 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
 
 def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:
     """The BoardRevision a registration describes (revision 1 here; the store allocates the real one)."""
+    from calibctl.core.board_spec import BOARD_KINDS, BoardSpec  # numpy: not for `board list` / `show`
+
     now = now or utc_now()
     if not re.fullmatch(BOARD_NAME_PATTERN, reg.name):
         raise UsageError(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
@@ -15,7 +16,10 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store.repository import Store
-from calibctl.workflows import formats, imports, keys
+from calibctl.workflows import formats, keys
+
+if TYPE_CHECKING:
+    from calibctl.workflows import imports
 
 _KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
 _ARTIFACT_REF = re.compile(r"^(?P<serial>.+?)(?:@(?P<version>[0-9]+))?$")
@@ -163,6 +167,8 @@ def import_file(
 ) -> imports.ImportOutcome:
     """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
     this store's verdict and version (see ``imports``)."""
+    from calibctl.workflows import imports  # lint, numpy and the lens checks: not for history/show/export
+
     art = read_artifact_file(path)
     keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
     with open_store(settings, create=True, write=True) as store:
