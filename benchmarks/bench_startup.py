@@ -146,7 +146,7 @@ def _stage_cpu(stats_path: Path) -> dict[str, float]:
     return out
 
 
-def calibrate_section(work: Path, repeats: int) -> None:
+def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> None:
     """``calibctl calibrate`` of 20 rendered 1280x960 images against the plain OpenCV script, same run."""
     images = work / "synth-1280"
     subprocess.run([sys.executable, "-m", "calibctl", "synth", str(images), "--scenario", "good", "--views", "20",
@@ -168,18 +168,23 @@ def calibrate_section(work: Path, repeats: int) -> None:
     print("## `calibctl calibrate` of 20 images at 1280x960 against the plain OpenCV script\n")
     print(f"Load average before: {_load()}\n")
     print("| path | wall best / median ms | CPU best / median ms |\n|---|---|---|")
+    runs = [("plain OpenCV script, own process", plain, None, REPO)]
+    for name, checkout in checkouts.items():
+        runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh, checkout),
+                 (f"`calibctl --version` ({name}: start-up with cv2 and numpy)", ["-m", "calibctl", "--version"], None,
+                  checkout)]
     rows = {}
-    for label, args, setup in (("plain OpenCV script, own process", plain, None),
-                               ("`calibctl calibrate`, own process", calibrate, fresh),
-                               ("`calibctl --version` (start-up with cv2 and numpy)", ["-m", "calibctl", "--version"],
-                                None)):
-        wall, cpu = run_times(args, REPO, repeats, work, setup)
+    for label, args, setup, checkout in runs:
+        wall, cpu = run_times(args, checkout, repeats, work, setup)
         rows[label] = (min(wall), min(cpu))
         print(f"| {label} | {min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f} | "
               f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f} |")
-    (pw, pc), (cw, cc) = list(rows.values())[:2]
-    print(f"\ncalibctl / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each). "
-          f"Load average after: {_load()}\n")
+    pw, pc = rows[runs[0][0]]
+    print()
+    for name in checkouts:
+        cw, cc = rows[f"`calibctl calibrate`, own process ({name})"]
+        print(f"- calibctl ({name}) / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each)")
+    print(f"\nLoad average after: {_load()}\n")
     fresh()
     out = work / "calibrate.prof"
     subprocess.run([sys.executable, "-c", PROFILE_CODE, "-", *calibrate[2:]], cwd=work,
@@ -244,7 +249,7 @@ def main() -> int:
         print(f"| `{label}` | {sum(prof.values()):.0f} | " + " | ".join(cells) + f" | {other:.0f} |")
     if opts.calibrate:
         print()
-        calibrate_section(work, opts.repeats)
+        calibrate_section(work, opts.repeats, checkouts)
     return 0
 
 
