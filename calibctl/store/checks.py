@@ -44,15 +44,7 @@ class CheckEventRow(Base):
     )
 
 
-def _decode(row: CheckEventRow) -> CheckEvent:
-    what = f"check {row.check_id} of {row.serial}@{row.version}"
-    actual = sha256_hex(row.payload.encode("utf-8"))
-    if actual != row.payload_sha256:
-        raise codec._mismatch(what, row.payload_sha256, actual)
-    event: CheckEvent = codec._parse(CheckEvent, row.payload, what)
-    codec._check_columns(what, {"serial": (row.serial, event.serial), "version": (row.version, event.version),
-                                "passed": (row.passed, event.passed)})
-    return event
+_decode = codec.decode_check  # in codec, which the sqlite3 read path shares
 
 
 class CheckStoreMixin:

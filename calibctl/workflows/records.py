@@ -15,10 +15,11 @@ from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
-from calibctl.store.repository import Store
+from calibctl.store import sqlite_reads
 from calibctl.workflows import formats, keys
 
 if TYPE_CHECKING:
+    from calibctl.store.repository import Store
     from calibctl.workflows import imports
 
 _KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
@@ -40,6 +41,8 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
+    from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
+
     return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None)
 
 
@@ -78,11 +81,12 @@ class History:
 
 
 def history(settings: Settings, serial: str) -> History:
-    with open_store(settings) as store:
-        artifacts = store.list_artifacts(serial)
-        active = store.active_version(serial)
-        events = store.events(serial)
-        checks = store.checks(serial)
+    artifacts, active, events, checks = sqlite_reads.read(
+        settings.db_url,
+        lambda store: (store.list_artifacts(serial), store.active_version(serial), store.events(serial),
+                       store.checks(serial)),
+        lambda: open_store(settings),
+    )
     rows = [
         HistoryRow(
             version=a.version,
@@ -105,8 +109,8 @@ def history(settings: Settings, serial: str) -> History:
 
 def show(settings: Settings, ref: str) -> CalibrationArtifact:
     serial, version = parse_artifact_ref(ref)
-    with open_store(settings) as store:
-        return store.get_artifact(serial, version)
+    return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
+                             lambda: open_store(settings))
 
 
 def export(
