@@ -34,7 +34,6 @@ _PLAIN_SQLITE = re.compile(r"^sqlite:///(?P<path>[^?#%]+)$")
 _DATETIME_COLUMNS = ("created_at", "stored_at", "at")
 LOCK_TIMEOUT_S = 60.0  # engine.DEFAULT_SQLITE_LOCK_TIMEOUT_S (a test keeps them equal); engine imports sqlalchemy
 LOCK_TIMEOUT_ENV = "CALIBCTL_DB_LOCK_TIMEOUT_S"  # set: Store reads, applying (and checking) it
-_ARTIFACT_COLUMNS = "serial, version, status, rms_px, payload, content_sha256, signature, key_id, chain_hash"
 
 
 class Fallback(Exception):  # noqa: N818 - a signal, not an error: read through Store instead
@@ -55,6 +54,12 @@ class StoreReads(Protocol):
 def _utc(text: str | None) -> dt.datetime | None:
     """A datetime column as the store's UtcDateTime returns it (SQLite keeps naive UTC text)."""
     return None if text is None else dt.datetime.fromisoformat(text).replace(tzinfo=dt.UTC)
+
+
+def _decode_artifact(row: SimpleNamespace) -> CalibrationArtifact:
+    """The integrity check ``Store.get_artifact`` / ``list_artifacts`` make, on a row holding every column
+    (so a check over all of them, such as the chain hash, can be made here too): keep the two the same."""
+    return codec.decode_artifact(row)  # type: ignore[arg-type]
 
 
 class SqliteReader:
@@ -83,8 +88,8 @@ class SqliteReader:
 
     def list_artifacts(self, serial: str) -> list[CalibrationArtifact]:
         self._statuses(serial)
-        return [codec.decode_artifact(r) for r in self._rows(  # type: ignore[arg-type]
-            f"SELECT {_ARTIFACT_COLUMNS} FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial)]
+        return [_decode_artifact(r) for r in self._rows(
+            "SELECT * FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial)]
 
     def active_version(self, serial: str) -> int | None:
         rows = self._rows("SELECT version FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial)
@@ -105,9 +110,8 @@ class SqliteReader:
         wanted = self.active_version(serial) if version is None else version
         if wanted not in statuses or (version is None and statuses[wanted] != "accepted"):
             raise Fallback  # nothing active, an active version that is not accepted, an unknown version
-        rows = self._rows(f"SELECT {_ARTIFACT_COLUMNS} FROM calibration_artifacts WHERE serial = ? AND version = ?",
-                          serial, wanted)
-        return codec.decode_artifact(rows[0])  # type: ignore[arg-type]
+        rows = self._rows("SELECT * FROM calibration_artifacts WHERE serial = ? AND version = ?", serial, wanted)
+        return _decode_artifact(rows[0])
 
     def list_boards(self) -> list[BoardRevision]:
         return [codec.decode_board(r) for r in self._rows(  # type: ignore[arg-type]

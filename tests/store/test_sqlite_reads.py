@@ -164,3 +164,24 @@ def test_a_read_leaves_the_store_folder_as_it_found_it(store_url: str, tmp_path:
     sqlite_reads.read(store_url, READS["list_artifacts"], _no_fallback)
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no -wal / -shm left behind by the read
     assert "store.db" in before and not [name for name in before if name.endswith(("-wal", "-shm"))]
+
+
+def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str) -> None:
+    """A tripwire: whatever check Store's reads make on a calibration row (content hash; a chain hash over
+    every column once reads check chains), the sqlite3 path must make too."""
+    from tests.store.tamper import run_underneath
+
+    run_underneath(store_url, "UPDATE calibration_artifacts SET station = 'elsewhere' WHERE version = 3")
+
+    def outcome(work):
+        try:
+            return work()
+        except CalibctlError as exc:
+            return (type(exc), exc.message)
+
+    def via_store():
+        with Store.open(store_url, create=False) as store:
+            return store.get_artifact(SERIAL, 3)
+
+    served = outcome(lambda: sqlite_reads.read(store_url, lambda s: s.get_artifact(SERIAL, 3), _no_fallback))
+    assert served == outcome(via_store)
