@@ -4,6 +4,7 @@ fisheye, a pinhole capture unchanged, and every bad circle (issue 10 item 1 and 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -137,3 +138,13 @@ def test_a_video_capture_checks_a_given_circle_at_its_first_frame_and_records_it
     gate = coverage(json.loads(good.stdout))
     assert gate["detail"]["image_circle_source"] == "given" and gate["detail"]["image_circle_radius_px"] == 120.0
     assert gate["threshold"] == 5  # the four corner cells are less than half inside a 120 px circle
+
+
+def test_the_gate_table_names_the_circle_the_cells_were_counted_in(db: str, circular_190: Path) -> None:
+    result = capture(db, circular_190)
+    assert result.exit_code == 0, result.output
+    line = next(x for x in result.output.splitlines() if "gate coverage" in x)
+    found = re.search(r"5 \(needs 5\) cells inside the image circle \(([\d.]+), ([\d.]+)\) r ([\d.]+) px, detected",
+                      " ".join(line.split()))
+    assert found is not None, line
+    assert all(abs(float(v) - t) < 2 * TOLERANCE_PX for v, t in zip(found.groups(), RENDER_CIRCLE, strict=True))
