@@ -25,7 +25,6 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 DARK_FLOOR = 16.0  # grey levels: a pixel of the maximum picture at or below this was never lit
@@ -101,6 +100,8 @@ def detect_image_circle(max_gray: np.ndarray, image_size: tuple[int, int]) -> Im
 
 def _fit_boundary(lit: np.ndarray) -> tuple[float, float, float] | None:
     """(cx, cy, r) of the circle through the lit region's boundary away from the frame's edge, or None."""
+    import cv2  # here: lint reads recorded circles through this module, and read commands load no OpenCV
+
     mask = cv2.morphologyEx(lit.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
