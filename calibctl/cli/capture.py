@@ -38,6 +38,10 @@ MaxViewsOption = Annotated[int | None, typer.Option(
 DurationOption = Annotated[float | None, typer.Option(
     "--duration", show_default=False, help="Video/camera: stop after S seconds (video time for a file).")]
 JsonOption = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+ImageCircleOption = Annotated[str | None, typer.Option(
+    "--image-circle", metavar="CX,CY,R", show_default=False,
+    help="The image circle of a circular fisheye, pixels: coverage counts only the cells mostly inside it "
+         "(default: found in the frames, none for a pinhole or full-frame lens).")]
 
 
 class Scenario(StrEnum):
@@ -123,6 +127,7 @@ def capture(
     duration: DurationOption = None,
     rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
                                             "capture`).", show_default=False)] = None,
+    image_circle: ImageCircleOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
@@ -132,10 +137,14 @@ def capture(
     """
     from calibctl.errors import UsageError
     from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.image_circles import parse_image_circle
 
     if rig is not None:
         from calibctl.cli.rig import capture as capture_rig
 
+        if image_circle is not None:
+            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
+                             "capture the fisheye camera on its own with --serial")
         capture_rig(ctx, rig, source, board, json_output=json_output)
         return
     if serial is None:
@@ -143,7 +152,8 @@ def capture(
     if len(source) != 1:
         raise UsageError(f"one camera takes one --source, got {len(source)}", hint="capture a rig with --rig RIG")
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration)
+    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration,
+                                              image_circle=parse_image_circle(image_circle))
     _, result = _run_capture(ctx, as_json, station, operator,
                              lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:
@@ -166,6 +176,7 @@ def calibrate(
     model: ModelOption = "k1k2",
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
+    image_circle: ImageCircleOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -174,9 +185,11 @@ def calibrate(
     it could not run.
     """
     from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.image_circles import parse_image_circle
 
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration,
+                                              image_circle=parse_image_circle(image_circle))
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
         settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
     solved = result.solve

@@ -53,12 +53,14 @@ from calibctl.core.frame_select import (
     StreamDetector,
 )
 from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
+from calibctl.core.image_circle import ImageCircle, accumulate_max, corners_inside, detect_image_circle
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
+from calibctl.workflows.image_circles import checked_image_circle
 from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, board_spec, solve
 
 MAX_WORKERS = 8
@@ -77,6 +79,7 @@ class CaptureRequest:
     max_views: int | None = None
     duration_s: float | None = None
     workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
+    image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
 
 
 @dataclass(frozen=True)
@@ -133,6 +136,7 @@ class _Collected:
     images_stored: int
     interrupted: bool = False
     ignored: list[str] = field(default_factory=list)
+    max_gray: np.ndarray | None = None  # per-pixel maximum of the frames, reduced (core.image_circle)
 
 
 def core_thresholds(settings: Settings) -> GateThresholds:
@@ -221,7 +225,7 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
                                               {o.name: o.corners_px for o in probed if o.corners_px is not None})
     if larger is not None:
         raise larger
-    stored = 0
+    stored, max_gray = 0, None
     for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
         batch = readable[start:start + IMAGE_BATCH]
         with file_errors("read the images in", where):
@@ -233,20 +237,26 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
                 raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
                                  "capture again from a folder nothing else writes to")
         stored += len(batch)
+        for data in image_bytes:  # a half-size decode is enough to find an image circle
+            reduced = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_REDUCED_GRAYSCALE_2)
+            if reduced is not None:
+                max_gray = accumulate_max(max_gray, reduced)
     size = outcomes_core.session_image_size(results)
     assert size is not None  # there are readable images
     views: list[tuple[BoardView, str | None]] = [
         (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
     return _Collected([_record(o) for o in results], views, size,
                       f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
-                      f"({len(results)})", stored, ignored=images.ignored)
+                      f"({len(results)})", stored, ignored=images.ignored, max_gray=max_gray)
 
 
 class _StreamState:
     """What a video or camera capture accumulates, frame by frame."""
 
-    def __init__(self, store: Store, settings: Settings, spec: BoardSpec) -> None:
+    def __init__(self, store: Store, settings: Settings, spec: BoardSpec,
+                 image_circle: tuple[float, float, float] | None = None) -> None:
         self.store, self.settings, self.spec = store, settings, spec
+        self.image_circle = image_circle  # a given --image-circle, checked against the first frame
         self.selector: FrameSelector | None = None
         self.detector = StreamDetector(spec)
         self.progress: SelectionProgress | None = None
@@ -256,6 +266,7 @@ class _StreamState:
         self.kept_samples: list[pattern_check.Sample] = []
         self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
+        self.max_gray: np.ndarray | None = None
 
     def take(self, frame: sources.Frame) -> FrameDecision | None:
         """Detect, select and (when kept) store one frame; None when it has the wrong size."""
@@ -263,13 +274,15 @@ class _StreamState:
         size = (int(gray.shape[1]), int(gray.shape[0]))
         if self.selector is None:
             thresholds = core_thresholds(self.settings)
-            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds))
+            circle = None if self.image_circle is None else checked_image_circle(self.image_circle, size)
+            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds, image_circle=circle))
             self.progress = self.selector.progress()
         if size != self.selector.image_size:
             w, h = self.selector.image_size
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
+        self.max_gray = accumulate_max(self.max_gray, gray[::2, ::2])
         detection, why = self.detector.detect(gray)
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:
@@ -300,7 +313,7 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO
     target = request.max_views if request.max_views is not None else (None if is_file else 0)
-    state = _StreamState(store, settings, spec)
+    state = _StreamState(store, settings, spec, request.image_circle)
     interrupted = False
     stop = "end of the video" if is_file else "the camera stopped delivering frames"
     try:
@@ -333,7 +346,8 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     views = [(view, state.shas.get(view.name)) for view in state.selector.kept]
     if interrupted:
         stop += f"; the session was finished with the {len(views)} view(s) kept"
-    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted)
+    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted,
+                      max_gray=state.max_gray)
 
 
 def _gate_records(report: GateReport) -> list[GateResult]:
@@ -344,7 +358,9 @@ def _gate_records(report: GateReport) -> list[GateResult]:
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
                    source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
     board_views = [view for view, _ in got.views]
-    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings))
+    circle = session_image_circle(request.image_circle, got, board_views)
+    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings),
+                            image_circle=circle)
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -361,6 +377,22 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         image_size=got.image_size, status="accepted" if report.passed else "rejected",
         gates=_gate_records(report), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
+
+
+def session_image_circle(given: tuple[float, float, float] | None, got: _Collected,
+                         views: list[BoardView]) -> ImageCircle | None:
+    """The given circle (checked against the image and the board), else the one found in the frames."""
+    if given is None:
+        return None if got.max_gray is None else detect_image_circle(got.max_gray, got.image_size)
+    circle = checked_image_circle(given, got.image_size)
+    corners = [np.asarray(v.corners_px, np.float64).reshape(-1, 2) for v in views]
+    if corners and not any(corners_inside(px, circle).any() for px in corners):
+        nearest = min(float(np.hypot(px[:, 0] - circle.cx_px, px[:, 1] - circle.cy_px).min()) for px in corners)
+        raise InputError(f"the board never enters the image circle ({circle.describe()}): in {len(corners)} "
+                         f"view(s) the nearest corner is {nearest:.1f} px from its centre, "
+                         f"{nearest - circle.radius_px:.1f} px outside it; no session was stored",
+                         "check --image-circle against the frames (its centre and radius in pixels)")
+    return circle
 
 
 def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,

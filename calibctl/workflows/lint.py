@@ -26,6 +26,7 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks, model_fit
+from calibctl.core.image_circle import circle_from_detail
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows import formats, keys, ros_camera_info
@@ -52,6 +53,7 @@ class CalibrationFacts:
     fit_rms_px: float | None = None
     detector_rms_px: float | None = None
     fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
+    image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -173,8 +175,18 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         fit_rms_px=data.get("rms_px"),
         detector_rms_px=data.get("detector_rms_px"),
         fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
+        image_circle=_recorded_circle(data.get("gates")),
         raw_numbers=[] if validated else _numbers(data),
     )
+
+
+def _recorded_circle(gates: Any) -> tuple[float, float, float] | None:
+    """The image circle an artifact's coverage gate records (core.image_circle), or None."""
+    for gate in gates if isinstance(gates, list) else []:
+        if isinstance(gate, dict) and gate.get("gate") == "coverage" and isinstance(gate.get("detail"), dict):
+            circle = circle_from_detail(gate["detail"])
+            return None if circle is None else circle.as_tuple()
+    return None
 
 
 def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | None]:
@@ -312,7 +324,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     if size is not None and facts.dist_coeffs.size:
         foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
                     else lens_checks.check_distortion_foldover)
-        findings += _adopt(foldover(K, facts.dist_coeffs, size))
+        findings += _adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
     return findings
 
 
