@@ -65,6 +65,26 @@ def reference_of(art: CalibrationArtifact) -> Reference:
     return Reference(held.rms_px, n_corners, n_views, ring_edges, ring_rms, ring_counts, oct_rms, oct_counts)
 
 
+def stored_covariance(art: CalibrationArtifact) -> np.ndarray | None:
+    """(3, 3) covariance of the stored (focal scale, cx px, cy px) from the artifact's full covariance, or None.
+
+    focal scale = the mean of dfx/fx and dfy/fy (fx = aspect * fy when the solve tied them: dfy/fy).
+    A parameter the solve held fixed contributes nothing.
+    """
+    cov = art.stdev.covariance
+    if cov is None:
+        return None
+    names = list(cov.parameters)
+    G = np.zeros((3, len(names)))
+    focal = [(name, value) for name, value in (("fx", art.camera_matrix[0][0]), ("fy", art.camera_matrix[1][1])) if name in names]
+    for name, value in focal:
+        G[0, names.index(name)] = 1.0 / (value * len(focal))
+    for row, name in ((1, "cx"), (2, "cy")):
+        if name in names:
+            G[row, names.index(name)] = 1.0
+    return G @ np.asarray(cov.matrix, np.float64) @ G.T
+
+
 def stored_sigma(art: CalibrationArtifact) -> dict[str, float]:
     sigma = art.stdev.sigma
     out: dict[str, float] = {name: sigma[name] for name in ("cx", "cy") if name in sigma}
@@ -146,7 +166,8 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
         ids = [np.asarray(v.corner_ids) for v in views]
         result = recheck([obj[i] for i in ids], [np.asarray(v.corners_px) for v in views],
                          np.array(art.camera_matrix), np.array(art.dist_coeffs), art.image_size,
-                         reference, stored_sigma(art))
+                         reference, stored_sigma(art), model=art.model.name,
+                         stored_covariance=stored_covariance(art))
         distance = None
         if request.reference_distance is not None:
             distance = judge_distance(request.reference_distance, result.board_distance_m, [v.name for v in views])
