@@ -14,7 +14,9 @@ import typer
 EXAMPLES: dict[str, tuple[str, ...]] = {
     "": ("calibctl demo", "calibctl --db postgresql://calib@factory-db/calibctl history CAM-0042"),
     "capture": ("calibctl capture --serial CAM-0042 --board A17 --source ./shots/",
-                "calibctl capture --serial CAM-0042 --board A17 --source /dev/video0 --max-views 30"),
+                "calibctl capture --serial CAM-0042 --board A17 --source /dev/video0 --max-views 30",
+                "calibctl capture --serial CAM-0042 --board A17 --source ./shots/ --reference-distance 0.450+-0.0005 "
+                "--reference-source ./fixture/"),
     "calibrate": ("calibctl calibrate --serial CAM-0042 --board A17 --source /dev/video0",
                   "calibctl calibrate --serial CAM-0042 --board A17 --source sweep.mp4 --model auto"),
     "prune": ("calibctl prune", "calibctl prune --now 2026-12-01T00:00:00Z --json"),
