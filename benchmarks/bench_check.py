@@ -95,8 +95,9 @@ def session(case: str, seed: int, n_views: int, mode: str, noise_px: float, pose
     return objs, imgs
 
 
-def reference(seed: int, mode: str, noise_px: float) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
-    obj, img = session("unchanged", seed, REF_VIEWS, mode, noise_px)
+def reference(seed: int, mode: str, noise_px: float, n_views: int = REF_VIEWS
+              ) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
+    obj, img = session("unchanged", seed, n_views, mode, noise_px)
     t0 = time.perf_counter()
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
     rep = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
@@ -125,13 +126,14 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, default=200, help="check sessions per case")
     parser.add_argument("--refs", type=int, default=5, help="reference calibrations the sessions are spread over")
     parser.add_argument("--noise-px", type=float, default=0.03)
+    parser.add_argument("--ref-views", type=int, default=REF_VIEWS, help="views of each reference calibration")
     parser.add_argument("--check-poses", choices=("good", "near"), default="good",
                         help="check views: the solve's 'good' scenario, or the check protocol's near tilted views")
     parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of: {', '.join(CASES)}")
     args = parser.parse_args()
-    refs = [reference(10_000 + r, args.mode, args.noise_px) for r in range(args.refs)]
+    refs = [reference(10_000 + r, args.mode, args.noise_px, args.ref_views) for r in range(args.refs)]
     print(f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
-          f"mode {args.mode}, check poses {args.check_poses}" + (f" (noise {args.noise_px} px)" if args.mode == "corners" else ""))
+          f"mode {args.mode}, {args.ref_views}-view references, check poses {args.check_poses}" + (f" (noise {args.noise_px} px)" if args.mode == "corners" else ""))
     print(f"reference held-out RMS {np.mean([r[2].rms_px for r in refs]):.4f} px (mean of {args.refs}), "
           f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median")
     print("| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |")
