@@ -195,6 +195,8 @@ def calibrate(
     model: ModelOption = "k1k2",
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: ReferenceSourceOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -203,9 +205,12 @@ def calibrate(
     it could not run.
     """
     from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.distance_gauge import parse_reference_distance
 
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    distance = None if reference_distance is None else parse_reference_distance(reference_distance)
+    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration,
+                                              reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
         settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
     solved = result.solve
@@ -218,7 +223,8 @@ def calibrate(
         return
     print_capture(result.capture)
     if solved is None:
-        stdout.print("[red]not solved[/red]: the capture gates failed")
+        failed = "the distance gauge" if result.capture.session.status == "accepted" else "the capture gates"
+        stdout.print(f"[red]not solved[/red]: {failed} failed")
         raise typer.Exit(EXIT_VERDICT_FAIL)
     render_outcome(solved, as_json=False)
 

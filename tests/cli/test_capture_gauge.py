@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
 from tests.cli.test_check_cli import assets, db, invoke  # noqa: F401 - the shared rendered fixtures
 
@@ -45,3 +46,13 @@ def test_fixture_pictures_of_another_size_exit_2_naming_both(db: str, assets) ->
     done = _capture(db, assets, "A17", *GAUGE, "--reference-source", str(assets["small"]))
     assert done.exit_code == 2
     assert "are not 640x480, the size this session was calibrated at" in done.stderr and "(320x240)" in done.stderr
+
+
+def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) -> None:  # noqa: F811
+    done = invoke(db, "calibrate", "--serial", "CAM-NEW", "--board", "TYPO", "--source", str(assets["good"]),
+                  *GAUGE, "--reference-source", str(assets["fixture"]))
+    assert done.exit_code == 1, done.output
+    assert "ratio 0.920" in done.stdout and "not solved: the distance gauge failed" in done.stdout
+    # no calibration was stored
+    with Store.open(db) as store, pytest.raises(NotFoundError, match="unknown serial 'CAM-NEW'"):
+        store.list_artifacts("CAM-NEW")
