@@ -37,6 +37,7 @@ import numpy as np
 
 from calibctl import __version__
 from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
 from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
 from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
@@ -60,6 +61,7 @@ from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
+from calibctl.workflows.distance_gauge import ReferenceDistance, gauge_capture
 from calibctl.workflows.image_circles import checked_image_circle
 from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, board_spec, solve
 
@@ -80,6 +82,8 @@ class CaptureRequest:
     duration_s: float | None = None
     workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
     image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
+    reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
+    reference_source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -90,16 +94,18 @@ class CaptureResult:
     images_stored: int
     image_dir: str
     ignored_files: tuple[str, ...] = ()
+    distance: DistanceCheck | None = None  # --reference-distance: judged when the gates passed
 
     @property
     def passed(self) -> bool:
-        return self.session.status == "accepted"
+        return self.session.status == "accepted" and (self.distance is None or self.distance.passed)
 
     def as_json(self) -> dict[str, object]:
         return {"session": self.session.model_dump(mode="json"), "passed": self.passed,
                 "stop_reason": self.stop_reason, "interrupted": self.interrupted,
                 "images_stored": self.images_stored, "image_dir": self.image_dir,
-                "ignored_files": list(self.ignored_files)}
+                "ignored_files": list(self.ignored_files),
+                "distance": None if self.distance is None else self.distance.model_dump(mode="json")}
 
 
 @dataclass(frozen=True)
@@ -151,6 +157,9 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
         raise UsageError(f"--max-views must be 1 or more, got {request.max_views}")
     if request.duration_s is not None and not request.duration_s > 0:
         raise UsageError(f"--duration must be a positive number of seconds, got {request.duration_s:g}")
+    if (request.reference_distance is None) != (request.reference_source is None):
+        raise UsageError("--reference-distance and --reference-source go together",
+                         "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
     try:
         return parse_board_ref(request.board)
     except ValueError as exc:
@@ -175,9 +184,14 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
+        distance = None
+        if (request.reference_distance is not None and request.reference_source is not None
+                and session.status == "accepted" and session.image_size is not None):
+            distance = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
+                                     session.views, session.image_size)
         store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
-                             tuple(got.ignored))
+                             tuple(got.ignored), distance)
 
 
 def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:
