@@ -65,8 +65,9 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
 def print_gates(gates: list[GateResult]) -> None:
     for g in gates:
         mark = "[green]pass[/green]" if g.passed else "[red]FAIL[/red]"
-        value = f"{g.value:.3g}" if g.gate == "observability" else f"{g.value:g}"
-        line = f"  gate {g.gate:<13} {mark}  {value} (needs {g.threshold:g})"
+        value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera") else f"{g.value:g}"
+        needs = "two cameras from" if g.gate == "one_camera" else "needs"  # the one gate with an upper limit
+        line = f"  gate {g.gate:<13} {mark}  {value} ({needs} {g.threshold:g})"
         if not g.passed and g.hint:
             line += f" -> {shown(g.hint)}"
         stdout.print(line)

@@ -29,6 +29,7 @@ import os
 import re
 import secrets
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -43,6 +44,7 @@ from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import one_camera_gate
 from calibctl.core.detect import FOUND_INCONSISTENT
 from calibctl.core.frame_select import (
     KEPT,
@@ -52,7 +54,8 @@ from calibctl.core.frame_select import (
     SelectorSettings,
     StreamDetector,
 )
-from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
+from calibctl.core.gates import GateResult as CoreGateResult
+from calibctl.core.gates import GateThresholds, evaluate_gates
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
@@ -336,15 +339,21 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted)
 
 
-def _gate_records(report: GateReport) -> list[GateResult]:
+def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
     return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
-                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in report.gates]
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
 
 
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
                    source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
     board_views = [view for view, _ in got.views]
-    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings))
+    model_points = spec.object_points()
+    report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings))
+    # Same test as the solve's (lint rule one-camera), while the operator still holds the board.
+    two_cameras = one_camera_gate([model_points[np.asarray(v.corner_ids)] for v in board_views],
+                                  [np.asarray(v.corners_px, np.float64) for v in board_views],
+                                  [v.name for v in board_views], got.image_size)
+    gates = [*report.gates, two_cameras]
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -358,8 +367,8 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
-        image_size=got.image_size, status="accepted" if report.passed else "rejected",
-        gates=_gate_records(report), outcomes=got.outcomes, views=views,
+        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        gates=_gate_records(gates), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
 
 
