@@ -42,7 +42,11 @@ MAX_ROUNDS = 8
 SPLIT_SEED = 0
 HOLDOUT_FOLDS = 3  # per group; the solve's own validation uses 5, this only has to separate 1.1 from 1.7
 ONE_CAMERA_GATE = "one_camera"
-CAPTURE_MODEL = "k1k2"  # capture does not know the solve's model yet; the smallest one splits opencv-left-right
+# Capture does not know the solve's model. k1k2 (cheap) first; a suspected split is confirmed under the
+# equidistant fisheye model, which fits both lens families: on seeded 120-degree fisheye sessions k1k2 alone
+# read 1.38-1.47 (2 of 3 over the threshold), the fisheye model 1.01; opencv-left-right mixed reads 1.65 / 1.58.
+CAPTURE_MODELS = ("k1k2", "fisheye")
+CAPTURE_MODEL = CAPTURE_MODELS[0]
 CAPTURE_MAX_VIEWS = 60  # views checked at capture (spread evenly over the session), bounding its cost
 
 
@@ -157,44 +161,66 @@ def _group_words(names: Sequence[str]) -> str:
     return f"{len(names)} views ({shown})"
 
 
+def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int],
+                          models: Sequence[str], threshold: float) -> tuple[CameraSplit | None, dict[str, float]]:
+    """(the split of the first of ``models`` under which the views are not two cameras, or of the first
+    model when every one suspects two; None when a model finds no split at all), and each tried model's ratio."""
+    first: CameraSplit | None = None
+    ratios: dict[str, float] = {}
+    for model in models:
+        try:
+            split = check_one_camera(obj, img, image_size, model, threshold)
+        except NumericalError:  # this model cannot be solved on these views: it confirms nothing
+            split = None
+        if split is None:
+            return None, ratios
+        ratios[model] = split.ratio
+        if not split.suspected:
+            return split, ratios
+        first = first or split
+    return first, ratios
+
+
 def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                    names: Sequence[str], image_size: tuple[int, int], model: str = CAPTURE_MODEL,
+                    names: Sequence[str], image_size: tuple[int, int], models: Sequence[str] = CAPTURE_MODELS,
                     threshold: float = TWO_CAMERA_RATIO, max_views: int = CAPTURE_MAX_VIEWS) -> GateResult:
-    """The capture gate "one_camera": fails when the views look like two cameras (``check_one_camera``).
+    """The capture gate "one_camera": fails when the views look like two cameras (``check_one_camera``)
+    under every one of ``models`` (see CAPTURE_MODELS: k1k2 alone misreads one wide-angle lens).
 
     Runs on at most ``max_views`` views spread evenly over the session (a folder of left* then right*
     keeps both halves). It passes, with words saying so, when there are too few views to split or no
-    split into two solvable groups exists (every view fits one camera). ``value`` is the ratio, which
-    must stay below ``threshold``. Shapes as in solve_intrinsics; ``names``: one per view.
+    split into two solvable groups exists (every view fits one camera). ``value`` is the smallest ratio
+    of the models tried, which must stay below ``threshold``. Shapes as in solve_intrinsics; ``names``:
+    one per view.
     """
     n = len(image_points_per_view)
     picked = np.unique(np.linspace(0, n - 1, max_views).round().astype(int)).tolist() if n > max_views else list(range(n))
-    need = min_views_to_split(model)
-    detail: dict[str, float | int | str | list[str]] = {"views_checked": int(len(picked)), "model": model}
+    need = max(min_views_to_split(m) for m in models)
+    detail: dict[str, float | int | str | list[str]] = {"views_checked": int(len(picked))}
     if len(picked) < need:
         message = f"not checked: {len(picked)} views, {need} are needed to compare two groups"
         return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
-    try:
-        split = check_one_camera([object_points_per_view[i] for i in picked],
-                                 [image_points_per_view[i] for i in picked], image_size, model, threshold)
-    except NumericalError:
-        split = None
+    split, ratios = _first_model_to_clear([object_points_per_view[i] for i in picked],
+                                          [image_points_per_view[i] for i in picked], image_size, models, threshold)
+    detail.update({f"ratio_{m}": r for m, r in ratios.items()})
     if split is None:
         message = f"one camera: no split of the {len(picked)} views into two groups that can each be solved"
         return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
     a = [names[picked[i]] for i in split.group_a]
     b = [names[picked[i]] for i in split.group_b]
     held, cross = split.holdout_rms_px, split.cross_rms_px
+    ratio = min(ratios.values())
     detail.update(group_a=a, group_b=b, fx_a_px=float(split.camera_a[0, 0]), fx_b_px=float(split.camera_b[0, 0]),
                   cx_a_px=float(split.camera_a[0, 2]), cx_b_px=float(split.camera_b[0, 2]))
     message = (f"best two-camera split {_group_words(a)} / {_group_words(b)}: each group predicted "
                f"{cross[0] / held[0]:.2f}x / {cross[1] / held[1]:.2f}x worse by the other's camera than by its own "
-               f"(held-out {held[0]:.3f} / {held[1]:.3f} px); ratio {split.ratio:.2f}, two cameras from {threshold:g}")
+               f"(held-out {held[0]:.3f} / {held[1]:.3f} px); ratio {ratio:.2f} "
+               f"({', '.join(f'{m} {r:.2f}' for m, r in ratios.items())}), two cameras from {threshold:g}")
     detail["summary"] = message
-    if not split.suspected:
-        return GateResult(ONE_CAMERA_GATE, True, split.ratio, threshold, message, detail=detail)
+    if ratio < threshold:
+        return GateResult(ONE_CAMERA_GATE, True, ratio, threshold, message, detail=detail)
     return GateResult(
-        ONE_CAMERA_GATE, False, split.ratio, threshold, "the views look like two cameras: " + message,
+        ONE_CAMERA_GATE, False, ratio, threshold, "the views look like two cameras: " + message,
         "one_camera.two_cameras",
         f"these views come from two cameras: {_group_words(a)} fx {split.camera_a[0, 0]:.0f} cx "
         f"{split.camera_a[0, 2]:.0f} px, {_group_words(b)} fx {split.camera_b[0, 0]:.0f} cx {split.camera_b[0, 2]:.0f} "

@@ -11,6 +11,7 @@ from calibctl.core.board_spec import BoardSpec
 from calibctl.core.camera_split import TWO_CAMERA_RATIO, check_one_camera, min_views_to_split, one_camera_gate
 from calibctl.core.detect import detect_board
 from calibctl.core.solve import solve_intrinsics
+from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session
 from calibctl.core.synthetic_corners import synthesize_session
 from tests.datasets import BAKA_STEREO, LEFT_RIGHT, require_datasets
 
@@ -98,6 +99,7 @@ def test_the_capture_gate_fails_the_mixed_folder_with_a_hint_and_passes_each_cam
     assert not mixed.passed and mixed.gate == "one_camera" and mixed.reason == "one_camera.two_cameras"
     assert mixed.value >= TWO_CAMERA_RATIO and mixed.threshold == TWO_CAMERA_RATIO
     assert "two cameras" in mixed.hint and "--source 'left*.jpg'" in mixed.hint  # type: ignore[operator]
+    assert float(mixed.detail["ratio_k1k2"]) >= TWO_CAMERA_RATIO and float(mixed.detail["ratio_fisheye"]) >= TWO_CAMERA_RATIO
     assert sorted(mixed.detail["group_a"]) == sorted(n for n in names if n.startswith("left"))  # type: ignore[arg-type]
     for camera in ("left", "right"):
         mine = [i for i, n in enumerate(names) if n.startswith(camera)]
@@ -113,10 +115,22 @@ def test_the_capture_gate_spreads_its_views_over_a_long_session(stereo_folder):
 
 
 def test_the_capture_gate_passes_a_session_too_small_to_check_and_says_so() -> None:
-    ses = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), min_views_to_split() - 1, seed=4)
+    too_few = max(min_views_to_split(m) for m in camera_split.CAPTURE_MODELS) - 1
+    ses = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), too_few, seed=4)
     gate = one_camera_gate(ses.object_points_per_view, ses.image_points_per_view,
                            [f"v{i}" for i in range(len(ses.image_points_per_view))], (640, 480))
     assert gate.passed and gate.value == 0.0 and str(gate.detail["summary"]).startswith("not checked")
+
+
+def test_one_wide_angle_lens_is_not_two_cameras_at_capture() -> None:
+    """k1k2 misfits a 120-degree fisheye and its best split reads 1.47 (over the threshold); the gate
+    confirms under the fisheye model (1.01) and passes."""
+    ses = synthesize_fisheye_session(FisheyeCamera.from_fov((1280, 960), 120.0), 24, seed=1)
+    obj, img = ses.object_points_per_view, ses.image_points_per_view
+    k1k2 = check_one_camera(obj, img, (1280, 960), "k1k2")
+    assert k1k2 is not None and k1k2.suspected  # the misreading the confirmation is there for
+    gate = one_camera_gate(obj, img, [f"v{i}" for i in range(24)], (1280, 960))
+    assert gate.passed and gate.value < TWO_CAMERA_RATIO <= float(gate.detail["ratio_k1k2"])
 
 
 def _baka(folders: tuple[str, ...]):
