@@ -14,6 +14,9 @@ The test (``check_one_camera``):
      cross RMS (its views predicted by the other group's camera). ``ratio`` = the smaller of the two
      groups' cross / own; a real second camera makes both groups worse under the other's camera.
   3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
+It runs twice: at solve (under the solve's model; lint rule one-camera) and at capture, as the gate
+``one_camera`` (``one_camera_gate``: k1k2, a suspected split confirmed under the fisheye model), so the
+operator hears it while still holding the board.
 Measured (tests/core/test_camera_split.py, BENCHMARKS.md section 8): the real opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
