@@ -4,7 +4,8 @@ A capture reads a folder of images (detected in parallel, every image gets an ou
 live camera (each frame detected in turn and offered to ``core.frame_select.FrameSelector``, which
 keeps still frames that add coverage or tilt), checks that the registered board matches the board in
 the pictures (``pattern_check``), evaluates the capture gates (``core.gates``, thresholds from the
-settings, so a station file can override them) and stores the session.
+settings, so a station file can override them; then ``one_camera`` from ``core.camera_split``, the
+solve's two-camera test) and stores the session.
 
 What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
