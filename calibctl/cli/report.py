@@ -66,6 +66,7 @@ def print_gates(gates: list[GateResult]) -> None:
     for g in gates:
         mark = "[green]pass[/green]" if g.passed else "[red]FAIL[/red]"
         value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera") else f"{g.value:g}"
+        value = "-" if g.gate == "one_camera" and g.value == 0.0 else value  # not checked, or no split found
         needs = "two cameras from" if g.gate == "one_camera" else "needs"  # the one gate with an upper limit
         line = f"  gate {g.gate:<13} {mark}  {value} ({needs} {g.threshold:g})"
         if not g.passed and g.hint:
