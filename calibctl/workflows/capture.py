@@ -4,7 +4,8 @@ A capture reads a folder of images (detected in parallel, every image gets an ou
 live camera (each frame detected in turn and offered to ``core.frame_select.FrameSelector``, which
 keeps still frames that add coverage or tilt), checks that the registered board matches the board in
 the pictures (``pattern_check``), evaluates the capture gates (``core.gates``, thresholds from the
-settings, so a station file can override them) and stores the session.
+settings, so a station file can override them; then ``one_camera`` from ``core.camera_split``, the
+solve's two-camera test) and stores the session.
 
 What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
@@ -29,6 +30,7 @@ import os
 import re
 import secrets
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -44,6 +46,7 @@ from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import one_camera_gate
 from calibctl.core.detect import FOUND_INCONSISTENT
 from calibctl.core.frame_select import (
     KEPT,
@@ -53,7 +56,8 @@ from calibctl.core.frame_select import (
     SelectorSettings,
     StreamDetector,
 )
-from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
+from calibctl.core.gates import GateResult as CoreGateResult
+from calibctl.core.gates import GateThresholds, evaluate_gates
 from calibctl.core.image_circle import ImageCircle, accumulate_max, corners_inside, detect_image_circle
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
@@ -364,17 +368,23 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
                       max_gray=state.max_gray)
 
 
-def _gate_records(report: GateReport) -> list[GateResult]:
+def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
     return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
-                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in report.gates]
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
 
 
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
                    source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
     board_views = [view for view, _ in got.views]
     circle = session_image_circle(request.image_circle, got, board_views)
-    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings),
+    model_points = spec.object_points()
+    report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings),
                             image_circle=circle)
+    # Same test as the solve's (lint rule one-camera), while the operator still holds the board.
+    two_cameras = one_camera_gate([model_points[np.asarray(v.corner_ids)] for v in board_views],
+                                  [np.asarray(v.corners_px, np.float64) for v in board_views],
+                                  [v.name for v in board_views], got.image_size)
+    gates = [*report.gates, two_cameras]
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -388,8 +398,8 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
-        image_size=got.image_size, status="accepted" if report.passed else "rejected",
-        gates=_gate_records(report), outcomes=got.outcomes, views=views,
+        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        gates=_gate_records(gates), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
 
 
