@@ -3,7 +3,9 @@
 Checked for every chained stream (see ``chain``): positions 1..N with no gap or duplicate, each
 record's ``chain_prev`` equal to the hash of the record before it, its ``chain_hash`` recomputed from
 its columns, ids increasing along the chain (reads order events by id), versions strictly increasing,
-the version counter equal to the highest version, and the signature by a trusted key. Activation
+the version counter equal to the highest version, and the signature by a trusted key. The streams
+are camera artifacts, board revisions, activation events, and (revision 0007) rig versions, rig
+activation events and check events. Activation
 events must name an accepted artifact and the version that was active before them. Documents are
 re-hashed by ``codec`` (content hash and column copies) as on every read.
 
@@ -26,12 +28,13 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec
+from calibctl.store import chain, checks, codec, rigs
 from calibctl.store.models import ArtifactRow, CounterRow, EventRow, SessionRow
 
 HEAD_PREFIX = "calibctl-head-v1"
-_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board}
-_VERSION = {"artifact": "version", "board": "revision"}
+_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
+                                                 "rig": rigs.decode_calibration, "check": checks.decode_check}
+_VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 
 @dataclass
@@ -58,10 +61,13 @@ def make_head(last_ids: dict[str, int], heads: dict[str, dict[tuple[Any, ...], t
 
 
 def parse_head(text: str) -> tuple[dict[str, int], str]:
+    """A head printed before a stream joined the chains (revision 0007) names fewer streams: the missing
+    ones count from id 0, so their records are checked in full (they were not part of its digest)."""
     parts = text.strip().split(":")
     ids = parts[1].split(".") if len(parts) == 3 else []
-    if len(parts) != 3 or parts[0] != HEAD_PREFIX or len(ids) != len(chain.STREAMS) or not all(i.isdigit() for i in ids):
+    if len(parts) != 3 or parts[0] != HEAD_PREFIX or not 3 <= len(ids) <= len(chain.STREAMS) or not all(i.isdigit() for i in ids):
         raise UsageError(f"'{text}' is not a chain head", "pass what `calibctl db verify --head` printed")
+    ids += ["0"] * (len(chain.STREAMS) - len(ids))
     return dict(zip(chain.STREAMS, (int(i) for i in ids), strict=True)), parts[2]
 
 

@@ -181,7 +181,7 @@ def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store:
 def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | None = None,
                      refine_intrinsics: bool = False, model: str = "k1k2", activate: bool = True) -> RigSolveOutcome:
     """Solve a stored rig session into the rig's next version (see module docstring)."""
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         rig = store.get_rig(rig_name)
         session = store.get_rig_session(rig.name, rig_session_id)
         order = [rig.root, *[c for c in rig.cameras if c != rig.root]]
