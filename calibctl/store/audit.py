@@ -29,7 +29,14 @@ from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
 from calibctl.store import chain, checks, codec, rigs
-from calibctl.store.models import ArtifactRow, CounterRow, EventRow, SessionRow
+from calibctl.store.models import (
+    ArtifactRow,
+    CounterRow,
+    EventRow,
+    RigCalibrationRow,
+    RigEventRow,
+    SessionRow,
+)
 
 HEAD_PREFIX = "calibctl-head-v1"
 _DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
@@ -157,23 +164,27 @@ def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
                                   f"stored is {value}: the counter or the records were changed")
 
 
-def _check_events(s: Session, audit: Audit, since: int) -> None:
-    status = {(sn, int(v)): st for sn, v, st in s.execute(select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status))}
+def _check_events(s: Session, audit: Audit, since: int, stream: str = "event") -> None:
+    """Every activation event (camera, or with ``stream="rig_event"`` rig) after ``since`` names a stored,
+    accepted version and the version that was active before it."""
+    events, versions, key = (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
+    ev, ver = events.__table__.c, versions.__table__.c
+    status = {(name, int(v)): st for name, v, st in s.execute(select(ver[key], ver.version, ver.status))}
     active: dict[str, int] = {}
-    rows = s.execute(select(EventRow.id, EventRow.serial, EventRow.version, EventRow.previous_version, EventRow.kind)
-                     .order_by(EventRow.id)).mappings()
+    rows = s.execute(select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind).order_by(ev.id)).mappings()
+    prefix = "" if stream == "event" else "rig "
     for row in rows:
-        serial, version = row["serial"], int(row["version"])
+        name, version = row[key], int(row["version"])
         if row["id"] > since:
-            label = chain.STREAMS["event"].label(row)
-            if (serial, version) not in status:
-                audit.problems.append(f"{label} names {serial}@{version}, which is not stored")
-            elif status[(serial, version)] != "accepted":
-                audit.problems.append(f"{label} activates {serial}@{version}, which is not accepted")
-            if row["previous_version"] != active.get(serial):
+            label = chain.STREAMS[stream].label(row)
+            if (name, version) not in status:
+                audit.problems.append(f"{label} names {prefix}{name}@{version}, which is not stored")
+            elif status[(name, version)] != "accepted":
+                audit.problems.append(f"{label} activates {prefix}{name}@{version}, which is not accepted")
+            if row["previous_version"] != active.get(name):
                 audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
-                                      f"says {active.get(serial)}")
-        active[serial] = version
+                                      f"says {active.get(name)}")
+        active[name] = version
 
 
 def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, since: str | None = None) -> Audit:
@@ -192,6 +203,7 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
         _walk(s, audit, stream, last_ids[name], starts[name], trusted, require_signature)
         _check_counters(s, audit, stream)
     _check_events(s, audit, last_ids["event"])
+    _check_events(s, audit, last_ids["rig_event"], "rig_event")
     for name, decode in _DECODERS.items():
         t = chain.STREAMS[name].model
         for row in s.scalars(select(t).where(t.id > last_ids[name]).execution_options(yield_per=500)):  # type: ignore[attr-defined]

@@ -253,3 +253,13 @@ def test_a_head_printed_before_0007_checks_the_new_streams_in_full(history: str)
     with Store.open(history) as store:
         assert store.verify(since=head).problems == [
             f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"]
+
+
+def test_a_forged_rig_event_activating_a_rejected_version_is_named(history: str):
+    run_underneath(history, "INSERT INTO rig_activation_events (rig, version, previous_version, kind, actor, station, at, "
+                            f"reason) VALUES ('{RIG}', 2, 3, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')")
+    assert problems_of(history) == [
+        f"rig activation event 4 ({RIG}@2, rollback) has no chain hash: it was inserted outside calibctl",
+        f"rig activation event 4 ({RIG}@2, rollback) activates rig {RIG}@2, which is not accepted",
+        f"rig activation event 4 ({RIG}@2, rollback) says 3 was active before it, but the log says 1",
+    ]
