@@ -9,7 +9,8 @@ stored as a rejected version (never active) that carries *no* edge for that fram
 transform of it looks accepted. A rig re-solve carries the active version's hand-eye edges forward,
 except one whose camera was re-calibrated since (it would be stale; named in the findings).
 
-Concurrency: the new version is written compare-and-set on the base version it was built from. When
+Concurrency: the new version (and a rig re-solve's, which carries the active hand-eye edges) is
+written compare-and-set on the base version it was built from. When
 another writer moved the rig's active version in between (another hand-eye edge, a re-solve, a
 rollback), nothing is stored and the command exits 2 naming the newer version; it is never rebased
 silently: the tree check, the stale-camera lint and the carried edges were judged against the base,
