@@ -7,7 +7,7 @@ the version counter equal to the highest version, and the signature by a trusted
 are camera artifacts, board revisions, activation events, and (revision 0007) rig versions, rig
 activation events and check events. Activation
 events must name an accepted artifact and the version that was active before them. Documents are
-re-hashed by ``codec`` (content hash and column copies) as on every read.
+re-hashed by ``codec`` (content hash re-derived, and column copies).
 
 A *chain head* (``HEAD``) is ``calibctl-head-v1:<ids>:<digest>``: the highest row id of every chained
 table and a sha256 over the last (position, hash) of every stream at that point. ``--since HEAD``

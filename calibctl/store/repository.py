@@ -1,7 +1,9 @@
 """The Store: boards, capture sessions, calibration artifacts, activation events and images.
 
 Every public method is one transaction and returns contract documents (pydantic), never ORM rows.
-Every read of a document re-checks its sha256 (IntegrityError naming it on mismatch). The active
+Every read of a document re-checks its hash (IntegrityError naming it on mismatch): a calibration
+artifact by its record's chain hash (covering its bytes and content_sha256), the others by their
+sha256; ``db verify`` and import also re-derive an artifact's content hash. The active
 version of a serial is not a mutable pointer: it is the version of the serial's latest activation
 event, and events are append-only (database triggers refuse UPDATE/DELETE).
 
