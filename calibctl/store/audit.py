@@ -13,7 +13,8 @@ A *chain head* (``HEAD``) is ``calibctl-head-v1:<ids>:<digest>``: the highest ro
 table and a sha256 over the last (position, hash) of every stream at that point. ``--since HEAD``
 proves the heads are still the ones HEAD names (so nothing before it was rewritten or truncated
 without re-chaining, and re-chaining needs the signing key), then checks only the rows written
-after it in full; the small columns of older activation events are still read to check new events.
+after it in full; of the older activation events only each name's last one is read, to check the new
+events against what was active.
 """
 
 from __future__ import annotations
@@ -169,21 +170,25 @@ def _check_events(s: Session, audit: Audit, since: int, stream: str = "event") -
     accepted version and the version that was active before it."""
     events, versions, key = (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
     ev, ver = events.__table__.c, versions.__table__.c
-    status = {(name, int(v)): st for name, v, st in s.execute(select(ver[key], ver.version, ver.status))}
-    active: dict[str, int] = {}
-    rows = s.execute(select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind).order_by(ev.id)).mappings()
+    named = select(ev[key]).where(ev.id > since)  # only the names the checked events name
+    status = {(name, int(v)): st for name, v, st in s.execute(select(ver[key], ver.version, ver.status)
+                                                                .where(ver[key].in_(named)))}
+    # what was active at ``since``: each name's last event up to it, in one grouped query
+    last = select(ev[key], func.max(ev.id).label("id")).where(ev.id <= since).group_by(ev[key]).subquery()
+    active: dict[str, int] = {n: int(v) for n, v in s.execute(select(ev[key], ev.version).join(last, ev.id == last.c.id))}
+    rows = s.execute(select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind).where(ev.id > since)
+                     .order_by(ev.id)).mappings()
     prefix = "" if stream == "event" else "rig "
     for row in rows:
         name, version = row[key], int(row["version"])
-        if row["id"] > since:
-            label = chain.STREAMS[stream].label(row)
-            if (name, version) not in status:
-                audit.problems.append(f"{label} names {prefix}{name}@{version}, which is not stored")
-            elif status[(name, version)] != "accepted":
-                audit.problems.append(f"{label} activates {prefix}{name}@{version}, which is not accepted")
-            if row["previous_version"] != active.get(name):
-                audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
-                                      f"says {active.get(name)}")
+        label = chain.STREAMS[stream].label(row)
+        if (name, version) not in status:
+            audit.problems.append(f"{label} names {prefix}{name}@{version}, which is not stored")
+        elif status[(name, version)] != "accepted":
+            audit.problems.append(f"{label} activates {prefix}{name}@{version}, which is not accepted")
+        if row["previous_version"] != active.get(name):
+            audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
+                                  f"says {active.get(name)}")
         active[name] = version
 
 

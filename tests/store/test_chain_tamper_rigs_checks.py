@@ -263,3 +263,17 @@ def test_a_forged_rig_event_activating_a_rejected_version_is_named(history: str)
         f"rig activation event 4 ({RIG}@2, rollback) activates rig {RIG}@2, which is not accepted",
         f"rig activation event 4 ({RIG}@2, rollback) says 3 was active before it, but the log says 1",
     ]
+
+
+def test_since_head_checks_new_events_against_what_was_active_at_the_head(history: str):
+    """--since reads only each serial's last event before HEAD, and still knows what was active there."""
+    with Store.open(history) as store:
+        head = store.verify().head()
+        store.add_artifact(calibration(serial="CAM-1", fx=802.0), activate=True, reason="solved", **WHO)
+        assert store.verify(since=head).problems == []
+    run_underneath(history, "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, "
+                            "at, reason) VALUES ('CAM-2', 1, 7, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')")
+    with Store.open(history) as store:
+        problems = store.verify(since=head).problems
+    assert problems == ["activation event 4 (CAM-2@1, rollback) has no chain hash: it was inserted outside calibctl",
+                        "activation event 4 (CAM-2@1, rollback) says 7 was active before it, but the log says 1"]
