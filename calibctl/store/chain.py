@@ -9,7 +9,8 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 (so a nullable column added by a later migration keeps old hashes valid; setting or clearing a
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
-one stream for the whole store. Editing, deleting, inserting or reordering any record breaks the
+one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
+one stream, check events per serial. Editing, deleting, inserting or reordering any record breaks the
 chain at the next record; rewriting a whole stream's tail is caught by signatures (the forger has
 no key) or by a chain head kept elsewhere (``db verify --head``).
 
@@ -24,12 +25,20 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, MetaData, Table, select
+from sqlalchemy import Column, Connection, Integer, MetaData, String, Table, Text, select, text
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.signing import Signer, record_message
-from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow
+from calibctl.store.models import (
+    ArtifactRow,
+    Base,
+    BoardRow,
+    CheckEventRow,
+    EventRow,
+    RigCalibrationRow,
+    RigEventRow,
+)
 
 CHAIN_COLUMNS = frozenset({"chain_seq", "chain_prev", "chain_hash", "signature", "key_id"})
 UNHASHED = CHAIN_COLUMNS | {"id"}
@@ -69,7 +78,23 @@ STREAMS: dict[str, Stream] = {
         "event", EventRow, (), None, lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
         ("chain", "chain_seq"),
     ),
+    # revision 0007: rig versions per rig (hand-eye edges are part of the version that adds them), rig
+    # activation events one stream like the cameras' (their counter row is the lock), check events per
+    # serial (a serial's re-tests are read and audited with its history; stations checking different
+    # cameras never wait for each other; the ('check', serial) counter row is the lock and the count).
+    "rig": Stream(
+        "rig", RigCalibrationRow, ("rig",), "content_sha256", lambda r: f"rig {r['rig']}@{r['version']}", ("rig", "version")
+    ),
+    "rig_event": Stream(
+        "rig_event", RigEventRow, (), None,
+        lambda r: f"rig activation event {r['id']} ({r['rig']}@{r['version']}, {r['kind']})", ("chain", "chain_seq"),
+    ),
+    "check": Stream(
+        "check", CheckEventRow, ("serial",), "payload_sha256",
+        lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}", ("check", "chain_seq"),
+    ),
 }
+"""The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
 
 
 def _jsonable(value: Any) -> Any:
@@ -112,11 +137,12 @@ def link(s: Session, stream: Stream, row: Base, signer: Signer | None) -> None:
         row.key_id = signer.key_id  # type: ignore[attr-defined]
 
 
-def backfill(conn: Connection) -> None:
-    """Chain the rows written before chains existed, in id order (migration 0005; never signed: no key
-    is at hand in a migration). Tables are reflected, so later columns do not matter here."""
+def backfill(conn: Connection, names: tuple[str, ...]) -> None:
+    """Chain the rows of streams ``names`` written before they were chained, in id order (migrations 0005
+    and 0007; never signed: no key is at hand in a migration). Tables are reflected, so later columns do
+    not matter here. A stream counted by its chain position gets its counter rows."""
     meta = MetaData()
-    for stream in STREAMS.values():
+    for stream in (STREAMS[n] for n in names):
         t = Table(stream.table.name, meta, autoload_with=conn)
         heads: dict[tuple[Any, ...], tuple[int, str]] = {}
         for row in conn.execute(select(t).order_by(t.c.id)).mappings().all():
@@ -125,7 +151,7 @@ def backfill(conn: Connection) -> None:
             digest = record_hash(stream, key, seq + 1, prev, body(row))
             conn.execute(t.update().where(t.c.id == row["id"]).values(chain_seq=seq + 1, chain_prev=prev, chain_hash=digest))
             heads[key] = (seq + 1, digest)
-        if not stream.key and heads:  # a one-stream table's position is counted in version_counters
+        if stream.counter[1] == "chain_seq" and heads:  # its position is counted in version_counters
             counters = Table("version_counters", meta, autoload_with=conn)
             # imported here, as in counters.py: sqlalchemy.dialects.postgresql alone costs ~0.1 s of start-up
             insert: Any
@@ -137,7 +163,34 @@ def backfill(conn: Connection) -> None:
                 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 
                 insert = sqlite_insert(counters)
-            conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
+            conn.execute(insert, [{"scope": stream.counter[0], "key": stream.counter_key(key), "last_value": seq}
+                                  for key, (seq, _) in heads.items()])
+
+
+def new_columns() -> list[Column[Any]]:
+    """The chain columns a migration adds to a table joining the chains (0005, 0007)."""
+    return [Column("chain_seq", Integer(), nullable=True), Column("chain_prev", String(64), nullable=True),
+            Column("chain_hash", String(64), nullable=True), Column("signature", Text(), nullable=True),
+            Column("key_id", String(64), nullable=True)]
+
+
+def backfill_without_triggers(conn: Connection, names: tuple[str, ...]) -> None:
+    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored."""
+    tables = [STREAMS[n].table.name for n in names]
+    if conn.dialect.name == "sqlite":
+        listed = ", ".join(f"'trg_{t}_no_update'" for t in tables)
+        saved = conn.execute(text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")).all()
+        for name, _ in saved:
+            conn.execute(text(f"DROP TRIGGER {name}"))
+        backfill(conn, names)
+        for _, sql in saved:
+            conn.execute(text(sql))
+        return
+    for table in tables:
+        conn.execute(text(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable"))
+    backfill(conn, names)
+    for table in tables:
+        conn.execute(text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))
 
 
 def row_problem(stream: Stream, row: Base) -> str | None:

@@ -156,8 +156,8 @@ def artifact_row(artifact: CalibrationArtifact, stored_at: dt.datetime) -> Artif
 
 def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationArtifact:
     """The stored artifact after its integrity check: its content hash re-derived from the parsed content
-    (default), or, ``by_chain``, the row's chain hash over its stored bytes and columns (about 100x cheaper
-    in pure Python; what bulk reads such as ``lint --all`` use)."""
+    (default; ``db verify``), or, ``by_chain``, the row's chain hash over its stored bytes and columns (0.19
+    vs 0.93 ms CPU for a 10 kB artifact; what every Store read uses)."""
     what = f"{row.serial}@{row.version}"
     if by_chain:
         problem = chain.row_problem(chain.STREAMS["artifact"], row)

@@ -135,7 +135,7 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
     """
     serial, version = parse_artifact_ref(request.ref)
     source = sources.resolve_source(request.source)
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:  # write: the check event is signed with the station key
         art = store.get_artifact(serial, version)
         reference = reference_of(art)
         spec = board_spec(art.board)
