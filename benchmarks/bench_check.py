@@ -38,7 +38,7 @@ from calibctl.core.detect import detect_board  # noqa: E402
 from calibctl.core.recheck import Reference, recheck  # noqa: E402
 from calibctl.core.solve import solve_intrinsics  # noqa: E402
 from calibctl.core.synth import Photometry, PinholeCamera, render_background, render_view  # noqa: E402
-from calibctl.core.synth_scenes import scenario_poses  # noqa: E402
+from calibctl.core.synth_scenes import _cell_targets, _sample_pose, default_distance_range_m, scenario_poses  # noqa: E402
 from calibctl.core.validation import validate_holdout  # noqa: E402
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
@@ -60,10 +60,18 @@ def camera_for(case: str) -> PinholeCamera:
     return PinholeCamera(K, base.dist.copy(), SIZE)
 
 
-def session(case: str, seed: int, n_views: int, mode: str, noise_px: float) -> Views:
+def near_poses(camera: PinholeCamera, n_views: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """The check protocol's views: the board close (85-100 % of the width), tilted 20-35 deg, directions around."""
+    near = default_distance_range_m(camera, BOARD, (0.85, 1.0))
+    targets = _cell_targets(camera, n_views)
+    return [_sample_pose(camera, BOARD, rng, targets[i], np.deg2rad(rng.uniform(20.0, 35.0)),
+                         2 * np.pi * i / 8 + rng.uniform(-0.2, 0.2), near) for i in range(n_views)]
+
+
+def session(case: str, seed: int, n_views: int, mode: str, noise_px: float, poses_kind: str = "good") -> Views:
     camera = camera_for(case)
     rng = np.random.default_rng(seed)
-    poses = scenario_poses("good", camera, BOARD, n_views, rng)
+    poses = scenario_poses("good", camera, BOARD, n_views, rng) if poses_kind == "good" else near_poses(camera, n_views, rng)
     if mode == "corners":
         obj = BOARD.object_points()
         img = []
@@ -72,7 +80,7 @@ def session(case: str, seed: int, n_views: int, mode: str, noise_px: float) -> V
             proj, _ = cv2.projectPoints(obj, rvec, T[:3, 3], camera.K, camera.dist)
             img.append(proj.reshape(-1, 2) + rng.normal(0.0, noise_px, (len(obj), 2)))
         return [obj] * len(img), img
-    path = CACHE / f"{case.split()[0]}-{n_views}-{seed}.pkl"
+    path = CACHE / f"{case.split()[0]}-{n_views}-{seed}{'' if poses_kind == 'good' else '-' + poses_kind}.pkl"
     if path.exists():
         return pickle.loads(path.read_bytes())
     background = render_background(SIZE, rng)
@@ -87,8 +95,9 @@ def session(case: str, seed: int, n_views: int, mode: str, noise_px: float) -> V
     return objs, imgs
 
 
-def reference(seed: int, mode: str, noise_px: float) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
-    obj, img = session("unchanged", seed, REF_VIEWS, mode, noise_px)
+def reference(seed: int, mode: str, noise_px: float, n_views: int = REF_VIEWS
+              ) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
+    obj, img = session("unchanged", seed, n_views, mode, noise_px)
     t0 = time.perf_counter()
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
     rep = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
@@ -117,11 +126,14 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, default=200, help="check sessions per case")
     parser.add_argument("--refs", type=int, default=5, help="reference calibrations the sessions are spread over")
     parser.add_argument("--noise-px", type=float, default=0.03)
+    parser.add_argument("--ref-views", type=int, default=REF_VIEWS, help="views of each reference calibration")
+    parser.add_argument("--check-poses", choices=("good", "near"), default="good",
+                        help="check views: the solve's 'good' scenario, or the check protocol's near tilted views")
     parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of: {', '.join(CASES)}")
     args = parser.parse_args()
-    refs = [reference(10_000 + r, args.mode, args.noise_px) for r in range(args.refs)]
+    refs = [reference(10_000 + r, args.mode, args.noise_px, args.ref_views) for r in range(args.refs)]
     print(f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
-          f"mode {args.mode}" + (f" (noise {args.noise_px} px)" if args.mode == "corners" else ""))
+          f"mode {args.mode}, {args.ref_views}-view references, check poses {args.check_poses}" + (f" (noise {args.noise_px} px)" if args.mode == "corners" else ""))
     print(f"reference held-out RMS {np.mean([r[2].rms_px for r in refs]):.4f} px (mean of {args.refs}), "
           f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median")
     print("| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |")
@@ -131,7 +143,8 @@ def main() -> None:
         times = []
         for i in range(args.sessions):
             K, D, ref, sigma, _ = refs[i % args.refs]
-            obj, img = session(case, 20_000 + 1000 * list(CASES).index(case) + i, CHECK_VIEWS, args.mode, args.noise_px)
+            obj, img = session(case, 20_000 + 1000 * list(CASES).index(case) + i, CHECK_VIEWS, args.mode, args.noise_px,
+                               args.check_poses)
             t0 = time.perf_counter()
             result = recheck(obj, img, K, D, SIZE, ref, sigma)
             times.append(time.perf_counter() - t0)

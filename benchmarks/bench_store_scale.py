@@ -17,6 +17,8 @@ import argparse
 import hashlib
 import json
 import os
+import resource
+import subprocess
 import sys
 import tempfile
 import time
@@ -25,17 +27,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from sqlalchemy import select  # noqa: E402
+from sqlalchemy import func, insert, select  # noqa: E402
 from sqlalchemy.orm import Session  # noqa: E402
 
 from benchmarks.machine import cpu_model  # noqa: E402
 from calibctl.artifacts.common import utc_now  # noqa: E402
-from calibctl.config import load_settings  # noqa: E402
-from calibctl.signing import Signer, create_key  # noqa: E402
+from calibctl.config import Settings, load_settings  # noqa: E402
+from calibctl.signing import Signer, create_key, record_message  # noqa: E402
 from calibctl.store import chain, codec, counters, history  # noqa: E402
-from calibctl.store.models import ArtifactRow  # noqa: E402
+from calibctl.store.models import ArtifactRow, EventRow  # noqa: E402
 from calibctl.store.repository import Store  # noqa: E402
-from calibctl.workflows import database  # noqa: E402
+from calibctl.workflows import database, records  # noqa: E402
 from calibctl.workflows import lint as lint_workflow  # noqa: E402
 from tests.artifacts.factories import calibration  # noqa: E402
 
@@ -43,22 +45,57 @@ SERIALS = 1000
 BATCH = 1000
 
 
+def _heads(s: Session) -> tuple[dict[str, tuple[int, int, str]], tuple[int, str | None]]:
+    """serial -> (last version, last seq, last hash) and the event log's (seq, hash), as stored now."""
+    t = ArtifactRow.__table__
+    latest = select(t.c.serial, func.max(t.c.chain_seq).label("seq")).group_by(t.c.serial).subquery()
+    rows = s.execute(select(t.c.serial, t.c.version, t.c.chain_seq, t.c.chain_hash)
+                     .join(latest, (t.c.serial == latest.c.serial) & (t.c.chain_seq == latest.c.seq)))
+    serials = {r[0]: (int(r[1]), int(r[2]), str(r[3])) for r in rows}
+    head = chain.head_of(s, chain.STREAMS["event"], ())
+    return serials, (head if head is not None else (0, None))
+
+
 def fill(url: str, total: int, signer: Signer) -> None:
-    """``total`` artifacts over SERIALS serials, each activated, written through the chained insert path."""
+    """``total`` artifacts over SERIALS serials, each activated: bulk inserts (one multi-row INSERT per
+    table and 1 000 rows) whose chain and signature columns are computed as ``chain.link`` computes them
+    (the full ``db verify`` after the fill proves they are the same)."""
     template = calibration()
+    art_stream, event_stream = chain.STREAMS["artifact"], chain.STREAMS["event"]
+    columns = [c.name for c in ArtifactRow.__table__.columns if c.name != "id"]
+    event_columns = [c.name for c in EventRow.__table__.columns if c.name != "id"]
     with Store.open(url, signer=signer) as store:
         engine = store._write_engine  # noqa: SLF001 - a benchmark fills in big transactions
+        with Session(engine) as s:
+            serials, (event_seq, event_prev) = _heads(s)
         for start in range(0, total, BATCH):
+            arts, events = [], []
+            for i in range(start, min(start + BATCH, total)):
+                serial = f"CAM-{i % SERIALS:05d}"
+                version, seq, prev = serials.get(serial, (0, 0, None))  # type: ignore[arg-type]
+                art = template.model_copy(update={"serial": serial, "version": version + 1}).sealed()
+                orm = codec.artifact_row(art, utc_now())
+                row = {c: getattr(orm, c) for c in columns}
+                row["chain_seq"], row["chain_prev"] = seq + 1, prev
+                row["chain_hash"] = chain.record_hash(art_stream, (serial,), seq + 1, prev, chain.body(row))
+                row["signature"] = signer.sign(record_message(row["chain_hash"], row["content_sha256"]))
+                row["key_id"] = signer.key_id
+                arts.append(row)
+                serials[serial] = (version + 1, seq + 1, row["chain_hash"])
+                event = {"serial": serial, "version": version + 1, "previous_version": version or None,
+                         "kind": "activate", "actor": "bench", "station": "bench", "at": utc_now(), "reason": "fill"}
+                event_seq += 1
+                event["chain_seq"], event["chain_prev"] = event_seq, event_prev
+                event["chain_hash"] = chain.record_hash(event_stream, (), event_seq, event_prev, chain.body(event))
+                event["signature"], event["key_id"] = signer.sign(record_message(event["chain_hash"], None)), signer.key_id
+                event_prev = event["chain_hash"]
+                events.append({c: event.get(c) for c in event_columns})
             with Session(engine) as s, s.begin():
-                for i in range(start, min(start + BATCH, total)):
-                    serial = f"CAM-{i % SERIALS:05d}"
-                    version = counters.next_value(s, "artifact", serial)
-                    art = template.model_copy(update={"serial": serial, "version": version}).sealed()
-                    row = codec.artifact_row(art, utc_now())
-                    chain.link(s, chain.STREAMS["artifact"], row, signer)
-                    s.add(row)
-                    s.flush()
-                    history.append_event(s, serial, version, "activate", "bench", "bench", "fill", signer)
+                s.execute(insert(ArtifactRow), arts)
+                s.execute(insert(EventRow), events)
+                for serial in {a["serial"] for a in arts}:
+                    counters.raise_to(s, "artifact", serial, serials[serial][0])
+                counters.raise_to(s, "chain", "event", event_seq)
 
 
 def plain_loop(url: str) -> float:
@@ -85,10 +122,36 @@ def timed(fn, name: str = "") -> tuple[float, object]:  # type: ignore[no-untype
     return time.perf_counter() - t0, result
 
 
+def reads(settings: Settings, url: str) -> dict[str, float]:
+    """CPU ms of history / show / export of one serial: in-process (best of 3) and as a CLI process
+    (user+sys of the child, start-up included)."""
+    serial = f"CAM-{SERIALS // 2:05d}"
+    calls = {
+        "history": (lambda: records.history(settings, serial), ["history", serial]),
+        "show": (lambda: records.show(settings, serial), ["show", serial]),
+        "export": (lambda: records.export(settings, serial, "ros", None, force=False), ["export", serial, "--format", "ros"]),
+    }
+    out: dict[str, float] = {}
+    for name, (call, argv) in calls.items():
+        best = float("inf")
+        for _ in range(3):
+            c0 = time.process_time()
+            call()
+            best = min(best, time.process_time() - c0)
+        out[name] = 1000 * best
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run([sys.executable, "-m", "calibctl", "--db", url, *argv], check=True, capture_output=True,
+                       env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)})
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        out[name + "_cli"] = 1000 * (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return out
+
+
 def measure(url: str, total: int, key: Path) -> dict[str, float]:
     signer = create_key(key, force=True)
     t_fill, _ = timed(lambda: fill(url, total, signer))
     settings = load_settings(db=url, env={"CALIBCTL_SIGNING_KEY": str(key)})
+    read_ms = reads(settings, url)
     t_lint, results = timed(lambda: lint_workflow.lint(settings, [], None, True), "lint_all")
     assert len(results) == SERIALS and not any(r.failed for r in results)  # type: ignore[arg-type]
     t_verify, report = timed(lambda: database.verify(settings), "verify")
@@ -97,7 +160,7 @@ def measure(url: str, total: int, key: Path) -> dict[str, float]:
     t_since, since = timed(lambda: database.verify(settings, since=report.head), "since")  # type: ignore[attr-defined]
     assert since.ok and since.records_checked == 2 * SERIALS, since.problems[:3]  # type: ignore[attr-defined]
     return {"fill": t_fill, "lint_all": t_lint, "plain": plain_loop(url), "verify": t_verify, "since": t_since,
-            "lint_cpu": CPU["lint_all"], "verify_cpu": CPU["verify"], "since_cpu": CPU["since"]}
+            "lint_cpu": CPU["lint_all"], "verify_cpu": CPU["verify"], "since_cpu": CPU["since"], **read_ms}
 
 
 def _pg_url() -> tuple[str, str]:
@@ -127,8 +190,9 @@ def main() -> None:
     print(f"# store scale: {cpu_model()}, nproc {os.cpu_count()}, load {os.getloadavg()[0]:.2f}, {utc_now():%Y-%m-%d %H:%M} UTC\n")
     print("wall seconds, with this process's CPU seconds in brackets (the 2 cores were shared)\n")
     print("| backend | artifacts | lint --all s | lint ms/serial (CPU) | plain loop s | db verify s | "
-          "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | fill s |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | history / show / export CPU ms "
+          "in-process | same, CLI process CPU ms | fill s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     backends = ["sqlite"] + (["postgresql"] if args.pg else [])
     for backend in backends:
         for total in sizes:
@@ -148,7 +212,8 @@ def main() -> None:
             print(f"| {backend} | {total} | {m['lint_all']:.2f} | {1000 * m['lint_all'] / SERIALS:.2f} "
                   f"({1000 * m['lint_cpu'] / SERIALS:.2f}) | {m['plain']:.2f} | {m['verify']:.1f} | "
                   f"{1000 * m['verify'] / (records / 1000):.0f} ({1000 * m['verify_cpu'] / (records / 1000):.0f}) | "
-                  f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['fill']:.0f} |", flush=True)
+                  f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['history']:.0f} / {m['show']:.0f} / {m['export']:.0f} | "
+                  f"{m['history_cli']:.0f} / {m['show_cli']:.0f} / {m['export_cli']:.0f} | {m['fill']:.0f} |", flush=True)
 
 
 if __name__ == "__main__":

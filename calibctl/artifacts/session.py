@@ -22,9 +22,9 @@ ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_dupli
 class GateResult(Document):
     """One capture-time gate: its value against its threshold, and what the operator should do."""
 
-    gate: Literal["observability", "tilt", "coverage", "views"] = Field(description="which gate")
+    gate: Literal["observability", "tilt", "coverage", "views", "one_camera"] = Field(description="which gate")
     passed: bool = Field(description="true when the gate is satisfied")
-    value: float = Field(description="the gate's measured value (sigma5/sigma1, directions, cells, views)")
+    value: float = Field(description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)")
     threshold: float = Field(description="the value it had to reach")
     reason: str | None = Field(None, description="machine-readable reason code when it failed, e.g. tilt.directions")
     hint: str | None = Field(None, description="what the operator should do next, in words")

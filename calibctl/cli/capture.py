@@ -17,6 +17,7 @@ from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, 
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
+    from calibctl.artifacts.check import DistanceCheck
     from calibctl.workflows import capture as capture_workflow
 
 # The workflows (OpenCV, the store, SQLAlchemy, alembic) are imported inside the commands, so that
@@ -38,6 +39,10 @@ MaxViewsOption = Annotated[int | None, typer.Option(
 DurationOption = Annotated[float | None, typer.Option(
     "--duration", show_default=False, help="Video/camera: stop after S seconds (video time for a file).")]
 JsonOption = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+ImageCircleOption = Annotated[str | None, typer.Option(
+    "--image-circle", metavar="CX,CY,R", show_default=False,
+    help="The image circle of a circular fisheye, pixels: coverage counts only the cells mostly inside it "
+         "(default: found in the frames, none for a pinhole or full-frame lens).")]
 
 
 class Scenario(StrEnum):
@@ -102,11 +107,33 @@ def print_capture(result: capture_workflow.CaptureResult) -> None:
     stdout.print(f"session [bold]{session.session_id}[/bold] [{style}]{session.status}[/{style}]: "
                  f"{len(session.views)} views of {session.serial} with board {session.board.ref}{size}")
     stdout.print(f"{result.images_stored} image(s) kept in {result.image_dir}")
-    if not result.passed:
+    if result.distance is not None:
+        print_distance(result.distance)
+    if session.status != "accepted":
         reasons = ", ".join(g.reason for g in session.gates if g.reason)
         stdout.print(f"[red]rejected[/red] ({reasons}); stored for the record. Follow the hints and capture again.")
     if result.interrupted:
         stderr.print(f"Interrupted: {result.stop_reason}.")
+
+
+def print_distance(d: DistanceCheck) -> None:
+    """The gauge line (--reference-distance) and, when it failed, the seed's explanation."""
+    from calibctl.workflows.distance_gauge import distance_reason
+
+    verdict = "pass" if d.passed else "[red]FAIL[/red]"
+    stdout.print(f"distance {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
+                 f"(needs {d.ratio_limits[0]}-{d.ratio_limits[1]}) {verdict}", highlight=False)
+    if not d.passed:
+        stdout.print(f"-> {distance_reason(d)}; do not solve this session", markup=False, highlight=False)
+
+
+ReferenceDistanceOption = Annotated[str | None, typer.Option(
+    "--reference-distance", metavar="D+-S", show_default=False,
+    help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm suffix), "
+         "e.g. 0.450+-0.0005; needs --reference-source.")]
+ReferenceSourceOption = Annotated[str | None, typer.Option(
+    "--reference-source", show_default=False,
+    help="Folder, glob or list of pictures taken with the board in that fixture.")]
 
 
 def capture(
@@ -123,19 +150,28 @@ def capture(
     duration: DurationOption = None,
     rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
                                             "capture`).", show_default=False)] = None,
+    image_circle: ImageCircleOption = None,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: ReferenceSourceOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
 
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
-    reasons and hints), 2 when the capture could not run (nothing is stored).
+    reasons and hints) or the board distance misses --reference-distance (the metric scale is wrong),
+    2 when the capture could not run (nothing is stored).
     """
     from calibctl.errors import UsageError
     from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.distance_gauge import parse_reference_distance
+    from calibctl.workflows.image_circles import parse_image_circle
 
     if rig is not None:
         from calibctl.cli.rig import capture as capture_rig
 
+        if image_circle is not None:
+            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
+                             "capture the fisheye camera on its own with --serial")
         capture_rig(ctx, rig, source, board, json_output=json_output)
         return
     if serial is None:
@@ -143,7 +179,10 @@ def capture(
     if len(source) != 1:
         raise UsageError(f"one camera takes one --source, got {len(source)}", hint="capture a rig with --rig RIG")
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration)
+    distance = None if reference_distance is None else parse_reference_distance(reference_distance)
+    request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration,
+                                              image_circle=parse_image_circle(image_circle),
+                                              reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator,
                              lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:
@@ -166,6 +205,9 @@ def calibrate(
     model: ModelOption = "k1k2",
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
+    image_circle: ImageCircleOption = None,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: ReferenceSourceOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -174,9 +216,14 @@ def calibrate(
     it could not run.
     """
     from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.distance_gauge import parse_reference_distance
+    from calibctl.workflows.image_circles import parse_image_circle
 
     as_json = wants_json(ctx, json_output)
-    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration)
+    distance = None if reference_distance is None else parse_reference_distance(reference_distance)
+    request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration,
+                                              image_circle=parse_image_circle(image_circle),
+                                              reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
         settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
     solved = result.solve
@@ -189,7 +236,8 @@ def calibrate(
         return
     print_capture(result.capture)
     if solved is None:
-        stdout.print("[red]not solved[/red]: the capture gates failed")
+        failed = "the distance gauge" if result.capture.session.status == "accepted" else "the capture gates"
+        stdout.print(f"[red]not solved[/red]: {failed} failed")
         raise typer.Exit(EXIT_VERDICT_FAIL)
     render_outcome(solved, as_json=False)
 

@@ -65,8 +65,14 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
 def print_gates(gates: list[GateResult]) -> None:
     for g in gates:
         mark = "[green]pass[/green]" if g.passed else "[red]FAIL[/red]"
-        value = f"{g.value:.3g}" if g.gate == "observability" else f"{g.value:g}"
-        line = f"  gate {g.gate:<13} {mark}  {value} (needs {g.threshold:g})"
+        value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera") else f"{g.value:g}"
+        value = "-" if g.gate == "one_camera" and g.value == 0.0 else value  # not checked, or no split found
+        needs = "two cameras from" if g.gate == "one_camera" else "needs"  # the one gate with an upper limit
+        line = f"  gate {g.gate:<13} {mark}  {value} ({needs} {g.threshold:g})"
+        circle = [g.detail.get(k) for k in ("image_circle_cx_px", "image_circle_cy_px", "image_circle_radius_px")]
+        if g.gate == "coverage" and all(isinstance(v, int | float) for v in circle):
+            line += (f" cells inside the image circle ({circle[0]:.1f}, {circle[1]:.1f}) r {circle[2]:.1f} px, "
+                     f"{shown(str(g.detail.get('image_circle_source', 'given')))}")
         if not g.passed and g.hint:
             line += f" -> {shown(g.hint)}"
         stdout.print(line)

@@ -13,7 +13,10 @@ from calibctl.cli.render import emit_json, stdout
 
 def report(
     ctx: typer.Context,
-    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
+    ref: Annotated[str | None, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: "
+                                              "active).", show_default=False)] = None,
+    rig: Annotated[str | None, typer.Option("--rig", metavar="RIG[@N]", show_default=False,
+                                            help="Report a rig calibration instead (default: its active version).")] = None,
     out: Annotated[Path | None, typer.Option("--output", "-o", help="HTML file to write (default "
                                              "SERIAL-vN-report.html here).", show_default=False)] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
@@ -22,10 +25,30 @@ def report(
     """Write the calibration report: verdict, lint, parameters with sigma, coverage, residuals, per-view
     and held-out RMS, projection uncertainty, distortion, gates and provenance. Works after images are pruned.
 
+    With --rig: baselines with sigma, the T_root_cam tree, held-out epipolar RMS and vertical disparity,
+    loop closure, and the members' verdicts linked to their own reports.
+
     Example: calibctl report CAM-0042@3 -o cam-0042-v3.html
     """
+    from calibctl.errors import UsageError
+
+    if (ref is None) == (rig is None):
+        raise UsageError("report needs one of SERIAL[@N] or --rig RIG[@N]",
+                         "e.g. calibctl report CAM-0042, or calibctl report --rig stereo-front")
+    if rig is not None:
+        from calibctl.workflows import report_rig
+
+        rig_path, rig_data = report_rig.write_rig_report(state(ctx).settings(), rig, out, force=force)
+        cal = rig_data.calibration
+        if wants_json(ctx, json_output):
+            emit_json({"ref": f"{cal.rig}@{cal.version}", "status": cal.status, "path": str(rig_path),
+                       "bytes": rig_path.stat().st_size})
+            return
+        stdout.print(f"rig {cal.rig}@{cal.version} ({cal.status}): report written to {rig_path}")
+        return
     from calibctl.workflows import report as report_workflow
 
+    assert ref is not None
     path, data = report_workflow.write_report(state(ctx).settings(), ref, out, force=force)
     if wants_json(ctx, json_output):
         emit_json({"ref": data.artifact.ref, "status": data.artifact.status, "path": str(path),

@@ -66,13 +66,21 @@ def solve(
     report_dir: Annotated[Path | None, typer.Option("--report", metavar="DIR", help="Also write the HTML report "
                                                     "(SERIAL-vN-report.html) of the new version into DIR.",
                                                     show_default=False)] = None,
+    image_circle: Annotated[str | None, typer.Option(
+        "--image-circle", metavar="CX,CY,R", show_default=False,
+        help="The image circle of a circular fisheye, pixels: recorded with the calibration, the fold-over check "
+             "stops at it (default: the one the capture found or was given).")] = None,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
     from calibctl.workflows import solve as solve_workflow
+    from calibctl.workflows.image_circles import parse_image_circle
 
     if rig is not None:
         from calibctl.cli.rig import solve as solve_rig
 
+        if image_circle is not None:
+            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
+                             "solve the fisheye camera's own session")
         if report_dir is not None:
             raise UsageError("--report is not available with --rig yet", "run `calibctl solve --rig` without it")
         solve_rig(ctx, rig, session_id, refine_intrinsics, activate, json_output)
@@ -80,7 +88,7 @@ def solve(
 
     request = solve_workflow.SolveRequest(
         session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers,
-        report_dir=report_dir)
+        report_dir=report_dir, image_circle=parse_image_circle(image_circle))
     outcome = solve_workflow.solve(state(ctx).settings(), request)
     render_outcome(outcome, wants_json(ctx, json_output))
 

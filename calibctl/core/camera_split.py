@@ -14,6 +14,9 @@ The test (``check_one_camera``):
      cross RMS (its views predicted by the other group's camera). ``ratio`` = the smaller of the two
      groups' cross / own; a real second camera makes both groups worse under the other's camera.
   3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
+It runs twice: at solve (under the solve's model; lint rule one-camera) and at capture, as the gate
+``one_camera`` (``one_camera_gate``: k1k2, a suspected split confirmed under the fisheye model), so the
+operator hears it while still holding the board.
 Measured (tests/core/test_camera_split.py, BENCHMARKS.md section 8): the real opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
@@ -33,6 +36,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from calibctl.core.blas_threads import single_threaded_blas
+from calibctl.core.gates import GateResult
 from calibctl.core.solve import IntrinsicsSolution, get_model, single_threaded_opencv, solve_intrinsics
 from calibctl.core.validation import refit_pose_residuals, validate_holdout
 from calibctl.errors import NumericalError
@@ -45,6 +49,13 @@ SPLIT_SEED = 0
 HOLDOUT_FOLDS = 3  # per group; the solve's own validation uses 5, this only has to separate 1.1 from 1.7
 PAIR_WORKERS = 2  # the two groups are solved, scored and validated at once; the result does not depend on it
 R = TypeVar("R")
+ONE_CAMERA_GATE = "one_camera"
+# Capture does not know the solve's model. k1k2 (cheap) first; a suspected split is confirmed under the
+# equidistant fisheye model, which fits both lens families: on seeded 120-degree fisheye sessions k1k2 alone
+# read 1.38-1.47 (2 of 3 over the threshold), the fisheye model 1.01; opencv-left-right mixed reads 1.65 / 1.58.
+CAPTURE_MODELS = ("k1k2", "fisheye")
+CAPTURE_MODEL = CAPTURE_MODELS[0]
+CAPTURE_MAX_VIEWS = 60  # views checked at capture (spread evenly over the session), bounding its cost
 
 
 @dataclass(frozen=True)
@@ -97,19 +108,24 @@ def _pair(work: Callable[[Any], R], for_a: Any, for_b: Any) -> tuple[R, R]:
 def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarray], size: tuple[int, int],
             model: str, min_group: int):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool; None when a group gets too small."""
-    for _ in range(MAX_ROUNDS):
+    for round_ in range(MAX_ROUNDS):
         a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
         if len(a) < min_group or len(b) < min_group:
             return None
         sol_a, sol_b = _pair(lambda g: solve_intrinsics([obj[i] for i in g], [img[i] for i in g], size, model), a, b)
         rms_a, rms_b = _pair(lambda sol: _view_rms(sol, obj, img), sol_a, sol_b)
         moved = rms_a < rms_b
-        if np.array_equal(moved, in_a):
-            break
+        if np.array_equal(moved, in_a) or round_ == MAX_ROUNDS - 1:
+            break  # not converged after MAX_ROUNDS: keep the split the two solves were made from
         in_a = moved
     if not in_a[0]:  # name the group holding view 0 "a", so a split reads the same from every start
         in_a, sol_a, sol_b, rms_a, rms_b = ~in_a, sol_b, sol_a, rms_b, rms_a
     return in_a, sol_a, sol_b, rms_a, rms_b
+
+
+def min_views_to_split(model: str = CAPTURE_MODEL) -> int:
+    """Fewest views ``check_one_camera`` can split into two groups that can each be solved and validated."""
+    return 2 * max(MIN_GROUP_VIEWS, get_model(model).min_views + 1)
 
 
 def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
@@ -122,7 +138,7 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     """
     obj, img = list(object_points_per_view), list(image_points_per_view)
     n = len(obj)
-    min_group = max(MIN_GROUP_VIEWS, get_model(model).min_views + 1)
+    min_group = min_views_to_split(model) // 2
     if n < 2 * min_group:
         return None
     rng = np.random.default_rng(SPLIT_SEED)
@@ -152,3 +168,76 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     ratio = min(cross[0] / held[0], cross[1] / held[1])
     return CameraSplit(tuple(int(i) for i in a), tuple(int(i) for i in b), held, cross,
                        sol_a.camera_matrix, sol_b.camera_matrix, float(ratio), threshold)
+
+
+def _group_words(names: Sequence[str]) -> str:
+    shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+    return f"{len(names)} views ({shown})"
+
+
+def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int],
+                          models: Sequence[str], threshold: float) -> tuple[CameraSplit | None, dict[str, float]]:
+    """(the split of the first of ``models`` under which the views are not two cameras, or of the first
+    model when every one suspects two; None when a model finds no split at all), and each tried model's ratio."""
+    first: CameraSplit | None = None
+    ratios: dict[str, float] = {}
+    for model in models:
+        try:
+            split = check_one_camera(obj, img, image_size, model, threshold)
+        except NumericalError:  # this model cannot be solved on these views: it confirms nothing
+            split = None
+        if split is None:
+            return None, ratios
+        ratios[model] = split.ratio
+        if not split.suspected:
+            return split, ratios
+        first = first or split
+    return first, ratios
+
+
+def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+                    names: Sequence[str], image_size: tuple[int, int], models: Sequence[str] = CAPTURE_MODELS,
+                    threshold: float = TWO_CAMERA_RATIO, max_views: int = CAPTURE_MAX_VIEWS) -> GateResult:
+    """The capture gate "one_camera": fails when the views look like two cameras (``check_one_camera``)
+    under every one of ``models`` (see CAPTURE_MODELS: k1k2 alone misreads one wide-angle lens).
+
+    Runs on at most ``max_views`` views spread evenly over the session (a folder of left* then right*
+    keeps both halves). It passes, with words saying so, when there are too few views to split or no
+    split into two solvable groups exists (every view fits one camera). ``value`` is the smallest ratio
+    of the models tried, which must stay below ``threshold``. Shapes as in solve_intrinsics; ``names``:
+    one per view.
+    """
+    n = len(image_points_per_view)
+    picked = np.unique(np.linspace(0, n - 1, max_views).round().astype(int)).tolist() if n > max_views else list(range(n))
+    need = max(min_views_to_split(m) for m in models)
+    detail: dict[str, float | int | str | list[str]] = {"views_checked": int(len(picked))}
+    if len(picked) < need:
+        message = f"not checked: {len(picked)} views, {need} are needed to compare two groups"
+        return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
+    split, ratios = _first_model_to_clear([object_points_per_view[i] for i in picked],
+                                          [image_points_per_view[i] for i in picked], image_size, models, threshold)
+    detail.update({f"ratio_{m}": r for m, r in ratios.items()})
+    if split is None:
+        message = f"one camera: no split of the {len(picked)} views into two groups that can each be solved"
+        return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
+    a = [names[picked[i]] for i in split.group_a]
+    b = [names[picked[i]] for i in split.group_b]
+    held, cross = split.holdout_rms_px, split.cross_rms_px
+    ratio = min(ratios.values())
+    detail.update(group_a=a, group_b=b, fx_a_px=float(split.camera_a[0, 0]), fx_b_px=float(split.camera_b[0, 0]),
+                  cx_a_px=float(split.camera_a[0, 2]), cx_b_px=float(split.camera_b[0, 2]))
+    message = (f"best two-camera split {_group_words(a)} / {_group_words(b)}: each group predicted "
+               f"{cross[0] / held[0]:.2f}x / {cross[1] / held[1]:.2f}x worse by the other's camera than by its own "
+               f"(held-out {held[0]:.3f} / {held[1]:.3f} px); ratio {ratio:.2f} "
+               f"({', '.join(f'{m} {r:.2f}' for m, r in ratios.items())}), two cameras from {threshold:g}")
+    detail["summary"] = message
+    if ratio < threshold:
+        return GateResult(ONE_CAMERA_GATE, True, ratio, threshold, message, detail=detail)
+    return GateResult(
+        ONE_CAMERA_GATE, False, ratio, threshold, "the views look like two cameras: " + message,
+        "one_camera.two_cameras",
+        f"these views come from two cameras: {_group_words(a)} fx {split.camera_a[0, 0]:.0f} cx "
+        f"{split.camera_a[0, 2]:.0f} px, {_group_words(b)} fx {split.camera_b[0, 0]:.0f} cx {split.camera_b[0, 2]:.0f} "
+        f"px; capture each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, check "
+        f"that focus, zoom and lens did not change",
+        detail)

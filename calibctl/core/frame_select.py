@@ -49,6 +49,7 @@ from calibctl.core.gates import (
     evaluate_gates,
     view_homography,
 )
+from calibctl.core.image_circle import ImageCircle
 from calibctl.core.image_outcomes import NEAR_DUPLICATE_FRAC, mean_corner_motion_px
 from calibctl.core.tilt import MIN_TILT_CORNERS, SessionLens, best_pose, nominal_camera, normal_tilt_direction
 from calibctl.core.views import BoardView
@@ -72,6 +73,7 @@ class SelectorSettings:
     near_duplicate_frac: float = NEAR_DUPLICATE_FRAC
     blur_max_edge_px: float = BLUR_MAX_EDGE_PX
     thresholds: GateThresholds = GateThresholds()
+    image_circle: ImageCircle | None = None  # a given image circle: coverage counts the cells inside it
 
 
 @dataclass(frozen=True)
@@ -191,7 +193,8 @@ class FrameSelector:
 
     def progress(self) -> SelectionProgress:
         """Gates on the kept views, for the live view."""
-        report = evaluate_gates(self.kept, self.model, self.image_size, self.settings.thresholds, self.focal_px)
+        report = evaluate_gates(self.kept, self.model, self.image_size, self.settings.thresholds, self.focal_px,
+                                image_circle=self.settings.image_circle)
         self._lens = report.lens
         covered = tuple(tuple((r, c) in self._cells for c in range(COVERAGE_GRID)) for r in range(COVERAGE_GRID))
         obs = report.gate("observability")

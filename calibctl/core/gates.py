@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
+from calibctl.core.image_circle import ImageCircle, cells_inside, circle_detail
 from calibctl.core.tilt import (
     DISTINCT_DIRECTION_DEG,
     MIN_TILT_CORNERS,
@@ -300,8 +301,13 @@ def view_geometries(views: Sequence[BoardView], model_points: np.ndarray, image_
 
 
 def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_size: tuple[int, int],
-                   thresholds: GateThresholds | None = None, focal_px: float | None = None) -> GateReport:
-    """All capture gates for one session's accepted views (see the module docstring for the maths)."""
+                   thresholds: GateThresholds | None = None, focal_px: float | None = None,
+                   image_circle: ImageCircle | None = None) -> GateReport:
+    """All capture gates for one session's accepted views (see the module docstring for the maths).
+
+    ``image_circle``: the disc a circular fisheye images (core.image_circle); coverage then counts only
+    the cells mostly inside it. None: every cell of the grid (a pinhole or full-frame lens).
+    """
     th = thresholds or GateThresholds()
     geo = view_geometries(views, model_points, image_size, focal_px)
     unused_words = [f"{name}: {why}" for name, why in geo.unused]
@@ -315,7 +321,8 @@ def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_s
     results.append(_tilt_gate(distinct, qualifying, geo, th))
 
     cells = cells_covered([v.corners_px for v in views], image_size)
-    results.append(_coverage_gate(cells))
+    results.append(_coverage_gate(cells) if image_circle is None else _circle_coverage_gate(
+        cells, image_circle, cells_inside(image_circle, image_size, COVERAGE_GRID)))
 
     n = len(views)
     results.append(GateResult(
@@ -379,3 +386,20 @@ def _coverage_gate(cells: set[tuple[int, int]]) -> GateResult:
         return GateResult("coverage", True, float(len(cells)), float(total), message, detail=detail)
     return GateResult("coverage", False, float(len(cells)), float(total), message, "coverage.missing_cells",
                       f"cover the {join_words(missing)}", detail)
+
+
+def _circle_coverage_gate(cells: set[tuple[int, int]], circle: ImageCircle,
+                          inside: set[tuple[int, int]]) -> GateResult:
+    """Coverage over the cells mostly inside the image circle; the circle is recorded in the detail."""
+    reached = cells & inside
+    grid = [(r, c) for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID)]
+    missing = [CELL_NAMES[r][c] for r, c in grid if (r, c) in inside and (r, c) not in cells]
+    outside = [CELL_NAMES[r][c] for r, c in grid if (r, c) not in inside]
+    message = (f"corners reach {len(reached)} of the {len(inside)} cells of a 3x3 grid over the image that lie "
+               f"mostly inside the {circle.describe()}")
+    detail: dict[str, float | int | str | list[str]] = {
+        "missing_cells": missing, "cells_outside_circle": outside, **circle_detail(circle)}
+    if not missing:
+        return GateResult("coverage", True, float(len(reached)), float(len(inside)), message, detail=detail)
+    return GateResult("coverage", False, float(len(reached)), float(len(inside)), message, "coverage.missing_cells",
+                      f"cover the {join_words(missing)} (inside the image circle)", detail)

@@ -152,17 +152,32 @@ def _radial(r: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return r * ((1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / den), den
 
 
-def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int]) -> float:
+CIRCLE_SAMPLES = 720  # points on the image circle when the farthest imaged point is looked for
+
+
+def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
+                        image_circle: tuple[float, float, float] | None = None) -> float:
+    """Normalised distorted radius of the image point farthest from the principal point: an image corner,
+    or with ``image_circle`` (cx, cy, r px) the farthest point of the image that lies inside the circle."""
     w, h = image_size
     fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
-    us, vs = np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5])
-    return float(max(math.hypot((u - cx) / fx, (v - cy) / fy) for u in us for v in vs))
+    u, v = np.meshgrid(np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5]))
+    u, v = u.ravel(), v.ravel()
+    if image_circle is not None:
+        ccx, ccy, r = image_circle
+        keep = np.hypot(u - ccx, v - ccy) <= r
+        a = np.linspace(0.0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
+        cu, cv = np.clip(ccx + r * np.cos(a), -0.5, w - 0.5), np.clip(ccy + r * np.sin(a), -0.5, h - 0.5)
+        u, v = np.concatenate([u[keep], cu]), np.concatenate([v[keep], cv])
+    return float(np.hypot((u - cx) / fx, (v - cy) / fy).max())
 
 
 def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                              image_size: tuple[int, int]) -> Finding:
-    """The distortion is one-to-one out to the farthest image corner.
+                              image_size: tuple[int, int],
+                              image_circle: tuple[float, float, float] | None = None) -> Finding:
+    """The distortion is one-to-one out to the farthest image corner (with ``image_circle`` (cx, cy, r)
+    px: out to the farthest point of the image inside the circle, where the lens forms an image).
 
     Radial part: r_d(r_u) = r_u * (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)
     must increase strictly, with a positive denominator, on a fine grid from 0 until it reaches
@@ -173,7 +188,8 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     rule, fix = "distortion-foldover", ("the distortion polynomial turns back inside the image: "
                                         "re-solve with fewer coefficients (--model k1k2) or with "
                                         "corners captured out to the image corners")
-    rd_corner = _farthest_corner_rd(camera_matrix, image_size)
+    rd_corner = _farthest_corner_rd(camera_matrix, image_size, image_circle)
+    edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
     r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner
     steps = int(RADIAL_GRID_STEPS * RADIAL_SEARCH_MAX_FACTOR)
     radial_only = _padded(dist_coeffs)
@@ -199,7 +215,7 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
             i = int(np.argmax(rd))
             where = f"never exceeds r_d = {rd[i]:.4f} (at r_u = {r[i]:.4f}, searched to r_u = {r_max:.3f})"
         return Finding(rule, ERROR, False,
-                       f"radial distortion r_d(r_u) {where}, but the farthest image corner is at "
+                       f"radial distortion r_d(r_u) {where}, but the {edge} is at "
                        f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the image", fix)
     r_reach = float(r[stop])
     radii = np.linspace(0.0, r_reach, POLAR_GRID[0])[1:]
@@ -220,37 +236,48 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
         return Finding(rule, ERROR, False,
                        f"the distortion (incl. tangential terms) folds over: Jacobian determinant "
                        f"{det[worst]:.3g} at r_u = {rr[worst]:.4f}, angle {np.rad2deg(aa[worst]):.0f} deg, "
-                       f"inside the disc reaching the farthest image corner (r_u = {r_reach:.4f})", fix)
+                       f"inside the disc reaching the {edge} (r_u = {r_reach:.4f})", fix)
     return Finding(rule, ERROR, True,
-                   f"distortion is one-to-one out to the farthest image corner (r_d = {rd_corner:.4f}, "
+                   f"distortion is one-to-one out to the {edge} (r_d = {rd_corner:.4f}, "
                    f"r_u = {r_reach:.4f}); smallest Jacobian determinant {det[worst]:.3f}")
 
 
 def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                               image_size: tuple[int, int]) -> Finding:
+                               image_size: tuple[int, int],
+                               image_circle: tuple[float, float, float] | None = None) -> Finding:
     """Equidistant (fisheye, k1..k4): theta_d(theta) = theta (1 + k1 t^2 + k2 t^4 + k3 t^6 + k4 t^8)
     must increase from theta = 0 until it reaches the farthest image corner's normalised radius.
 
     theta is the angle off the optical axis (radians), searched up to pi. A model that never reaches
     the corner's radius describes a circular fisheye whose image corners are outside the image circle,
     where the lens forms no image: it is then checked out to 90 deg off-axis (a 180 deg field).
+    With ``image_circle`` (cx, cy, r) px the farthest point of the image inside the circle replaces the
+    farthest image corner, and the model must reach it (the lens images the circle's edge).
     """
     rule = "distortion-foldover"
     fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"
     k1, k2, k3, k4 = (list(np.asarray(dist_coeffs, dtype=np.float64).ravel()) + [0.0] * 4)[:4]
-    rd_corner = _farthest_corner_rd(camera_matrix, image_size)
+    rd_corner = _farthest_corner_rd(camera_matrix, image_size, image_circle)
+    edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
     theta = np.linspace(0.0, math.pi, RADIAL_GRID_STEPS + 1)
     t2 = theta * theta
     theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
     reach = np.flatnonzero(theta_d >= rd_corner)
-    stop = int(reach[0]) if reach.size else int(np.searchsorted(theta, math.pi / 2))
+    # without a circle, a model that never reaches the corner is a circular fisheye: checked to 90 deg; the
+    # edge of a known circle is imaged, so the model must reach it
+    limit = len(theta) - 1 if image_circle is not None else int(np.searchsorted(theta, math.pi / 2))
+    stop = int(reach[0]) if reach.size else limit
     falling = np.flatnonzero(np.diff(theta_d[: stop + 1]) <= 0)
+    if not falling.size and not reach.size and image_circle is not None:
+        return Finding(rule, ERROR, False,
+                       f"fisheye theta_d(theta) never reaches the {edge} (theta_d = {rd_corner:.4f}; at most "
+                       f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the circle's edge", fix)
     if falling.size:
         i = int(falling[0])
         return Finding(rule, ERROR, False,
                        f"fisheye theta_d(theta) stops increasing at {math.degrees(theta[i]):.1f} deg off-axis "
-                       f"(theta_d = {theta_d[i]:.4f}) before reaching the farthest image corner "
+                       f"(theta_d = {theta_d[i]:.4f}) before reaching the {edge} "
                        f"(theta_d = {rd_corner:.4f}): the model folds over inside the image", fix)
     return Finding(rule, ERROR, True,
                    f"fisheye theta_d(theta) increases out to {math.degrees(theta[stop]):.1f} deg off-axis "
-                   f"(farthest image corner at theta_d = {rd_corner:.4f})")
+                   f"({edge} at theta_d = {rd_corner:.4f})")

@@ -1,9 +1,12 @@
 """``--model auto``: choose the distortion model by the seed's rule (chapter 1, failure mode B).
 
 Ladder: k1k2 -> k1k2k3 -> k1k2p1p2k3 -> rational; each rung adds coefficients to the one before.
-Then the other lens family, fisheye (equidistant k1..k4), is compared with the ladder's choice by the
-same rule: a wide lens that no polynomial pinhole model fits gains far more than 10 % there, while on a
-pinhole lens it does not gain 10 % and the ladder's model stays.
+Then the other lens family, fisheye (equidistant k1..k4), is compared with the ladder's *start* (k1k2)
+by the same rule, and taken when it passes it and is also no worse than the ladder's choice (fit RMS and
+held-out outer-ring RMS both not higher). Comparing it only with the ladder's end let a rational model
+that half-fits a wide lens (accepted on its own 10 % over k1k2) shut fisheye out: on a 170 deg render
+fisheye then gained < 10 % over rational although it is the lens's model. On a pinhole lens fisheye
+does not gain 10 % over k1k2 and the ladder's model stays.
 Each rung is compared with the currently accepted model and accepted only if BOTH
     fit RMS improves by at least MIN_FIT_IMPROVEMENT (10 %), and
     held-out outer-ring RMS (calibctl.core.validation) does not increase at all.
@@ -94,22 +97,39 @@ def select_model(
     best = start
     trail = [ModelCandidate(start, None, best_fit.rms_px, best_hold.fit_outer_rms_px,
                             best_hold.holdout_outer_rms_px, None, True, "starting model")]
+    start_fit, start_hold = best_fit, best_hold
     for name in (*ladder[1:], *alternatives):
+        family_change = name in alternatives
+        base, base_fit, base_hold = (start, start_fit, start_hold) if family_change else (best, best_fit, best_hold)
         try:
             fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre)
         except NumericalError as exc:
-            trail.append(ModelCandidate(name, best, None, None, None, None, False,
+            trail.append(ModelCandidate(name, base, None, None, None, None, False,
                                         f"not solvable: {exc.message}"))
             continue
-        gain = (best_fit.rms_px - fit.rms_px) / best_fit.rms_px
-        worse = hold.holdout_outer_rms_px > best_hold.holdout_outer_rms_px
-        accepted = gain >= MIN_FIT_IMPROVEMENT and not worse
-        reason = (f"fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px ({100 * gain:+.1f} %, "
-                  f"needs >= {100 * MIN_FIT_IMPROVEMENT:.0f} %); held-out outer-ring RMS "
-                  f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px"
-                  f" ({'worse' if worse else 'not worse'})")
-        trail.append(ModelCandidate(name, best, fit.rms_px, hold.fit_outer_rms_px,
+        accepted, gain, reason = _rule(base_fit, base_hold, fit, hold)
+        if family_change and accepted and best != start:
+            # it beat the ladder's start; it must also be no worse than the ladder's choice
+            worse_fit = fit.rms_px > best_fit.rms_px
+            worse_hold = hold.holdout_outer_rms_px > best_hold.holdout_outer_rms_px
+            accepted = not (worse_fit or worse_hold)
+            reason += (f"; against {best} (the ladder's choice): fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} "
+                       f"px, held-out outer-ring RMS {best_hold.holdout_outer_rms_px:.4f} -> "
+                       f"{hold.holdout_outer_rms_px:.4f} px ({'not worse' if accepted else 'worse'})")
+        trail.append(ModelCandidate(name, base, fit.rms_px, hold.fit_outer_rms_px,
                                     hold.holdout_outer_rms_px, gain, accepted, reason))
         if accepted:
             best, best_fit, best_hold = name, fit, hold
     return ModelSelection(best, best_fit, best_hold, tuple(trail))
+
+
+def _rule(base_fit: IntrinsicsSolution, base_hold: HoldoutReport, fit: IntrinsicsSolution,
+          hold: HoldoutReport) -> tuple[bool, float, str]:
+    """(accepted, fit improvement, reason) of a candidate against a base by the 10 % / outer-ring rule."""
+    gain = (base_fit.rms_px - fit.rms_px) / base_fit.rms_px
+    worse = hold.holdout_outer_rms_px > base_hold.holdout_outer_rms_px
+    reason = (f"fit RMS {base_fit.rms_px:.4f} -> {fit.rms_px:.4f} px ({100 * gain:+.1f} %, "
+              f"needs >= {100 * MIN_FIT_IMPROVEMENT:.0f} %); held-out outer-ring RMS "
+              f"{base_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px"
+              f" ({'worse' if worse else 'not worse'})")
+    return gain >= MIN_FIT_IMPROVEMENT and not worse, gain, reason

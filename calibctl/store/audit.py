@@ -3,15 +3,18 @@
 Checked for every chained stream (see ``chain``): positions 1..N with no gap or duplicate, each
 record's ``chain_prev`` equal to the hash of the record before it, its ``chain_hash`` recomputed from
 its columns, ids increasing along the chain (reads order events by id), versions strictly increasing,
-the version counter equal to the highest version, and the signature by a trusted key. Activation
+the version counter equal to the highest version, and the signature by a trusted key. The streams
+are camera artifacts, board revisions, activation events, and (revision 0007) rig versions, rig
+activation events and check events. Activation
 events must name an accepted artifact and the version that was active before them. Documents are
-re-hashed by ``codec`` (content hash and column copies) as on every read.
+re-hashed by ``codec`` (content hash re-derived, and column copies).
 
 A *chain head* (``HEAD``) is ``calibctl-head-v1:<ids>:<digest>``: the highest row id of every chained
 table and a sha256 over the last (position, hash) of every stream at that point. ``--since HEAD``
 proves the heads are still the ones HEAD names (so nothing before it was rewritten or truncated
 without re-chaining, and re-chaining needs the signing key), then checks only the rows written
-after it in full; the small columns of older activation events are still read to check new events.
+after it in full; of the older activation events only each name's last one is read, to check the new
+events against what was active.
 """
 
 from __future__ import annotations
@@ -26,12 +29,20 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec
-from calibctl.store.models import ArtifactRow, CounterRow, EventRow, SessionRow
+from calibctl.store import chain, codec, rigs
+from calibctl.store.models import (
+    ArtifactRow,
+    CounterRow,
+    EventRow,
+    RigCalibrationRow,
+    RigEventRow,
+    SessionRow,
+)
 
 HEAD_PREFIX = "calibctl-head-v1"
-_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board}
-_VERSION = {"artifact": "version", "board": "revision"}
+_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
+                                                 "rig": rigs.decode_calibration, "check": codec.decode_check}
+_VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 
 @dataclass
@@ -58,10 +69,13 @@ def make_head(last_ids: dict[str, int], heads: dict[str, dict[tuple[Any, ...], t
 
 
 def parse_head(text: str) -> tuple[dict[str, int], str]:
+    """A head printed before a stream joined the chains (revision 0007) names fewer streams: the missing
+    ones count from id 0, so their records are checked in full (they were not part of its digest)."""
     parts = text.strip().split(":")
     ids = parts[1].split(".") if len(parts) == 3 else []
-    if len(parts) != 3 or parts[0] != HEAD_PREFIX or len(ids) != len(chain.STREAMS) or not all(i.isdigit() for i in ids):
+    if len(parts) != 3 or parts[0] != HEAD_PREFIX or not 3 <= len(ids) <= len(chain.STREAMS) or not all(i.isdigit() for i in ids):
         raise UsageError(f"'{text}' is not a chain head", "pass what `calibctl db verify --head` printed")
+    ids += ["0"] * (len(chain.STREAMS) - len(ids))
     return dict(zip(chain.STREAMS, (int(i) for i in ids), strict=True)), parts[2]
 
 
@@ -151,23 +165,31 @@ def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
                                   f"stored is {value}: the counter or the records were changed")
 
 
-def _check_events(s: Session, audit: Audit, since: int) -> None:
-    status = {(sn, int(v)): st for sn, v, st in s.execute(select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status))}
-    active: dict[str, int] = {}
-    rows = s.execute(select(EventRow.id, EventRow.serial, EventRow.version, EventRow.previous_version, EventRow.kind)
-                     .order_by(EventRow.id)).mappings()
+def _check_events(s: Session, audit: Audit, since: int, stream: str = "event") -> None:
+    """Every activation event (camera, or with ``stream="rig_event"`` rig) after ``since`` names a stored,
+    accepted version and the version that was active before it."""
+    events, versions, key = (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
+    ev, ver = events.__table__.c, versions.__table__.c
+    named = select(ev[key]).where(ev.id > since)  # only the names the checked events name
+    status = {(name, int(v)): st for name, v, st in s.execute(select(ver[key], ver.version, ver.status)
+                                                                .where(ver[key].in_(named)))}
+    # what was active at ``since``: each name's last event up to it, in one grouped query
+    last = select(ev[key], func.max(ev.id).label("id")).where(ev.id <= since).group_by(ev[key]).subquery()
+    active: dict[str, int] = {n: int(v) for n, v in s.execute(select(ev[key], ev.version).join(last, ev.id == last.c.id))}
+    rows = s.execute(select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind).where(ev.id > since)
+                     .order_by(ev.id)).mappings()
+    prefix = "" if stream == "event" else "rig "
     for row in rows:
-        serial, version = row["serial"], int(row["version"])
-        if row["id"] > since:
-            label = chain.STREAMS["event"].label(row)
-            if (serial, version) not in status:
-                audit.problems.append(f"{label} names {serial}@{version}, which is not stored")
-            elif status[(serial, version)] != "accepted":
-                audit.problems.append(f"{label} activates {serial}@{version}, which is not accepted")
-            if row["previous_version"] != active.get(serial):
-                audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
-                                      f"says {active.get(serial)}")
-        active[serial] = version
+        name, version = row[key], int(row["version"])
+        label = chain.STREAMS[stream].label(row)
+        if (name, version) not in status:
+            audit.problems.append(f"{label} names {prefix}{name}@{version}, which is not stored")
+        elif status[(name, version)] != "accepted":
+            audit.problems.append(f"{label} activates {prefix}{name}@{version}, which is not accepted")
+        if row["previous_version"] != active.get(name):
+            audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
+                                  f"says {active.get(name)}")
+        active[name] = version
 
 
 def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, since: str | None = None) -> Audit:
@@ -186,6 +208,7 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
         _walk(s, audit, stream, last_ids[name], starts[name], trusted, require_signature)
         _check_counters(s, audit, stream)
     _check_events(s, audit, last_ids["event"])
+    _check_events(s, audit, last_ids["rig_event"], "rig_event")
     for name, decode in _DECODERS.items():
         t = chain.STREAMS[name].model
         for row in s.scalars(select(t).where(t.id > last_ids[name]).execution_options(yield_per=500)):  # type: ignore[attr-defined]

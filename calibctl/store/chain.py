@@ -9,85 +9,66 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 (so a nullable column added by a later migration keeps old hashes valid; setting or clearing a
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
-one stream for the whole store. Editing, deleting, inserting or reordering any record breaks the
+one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
+one stream, check events per serial. Editing, deleting, inserting or reordering any record breaks the
 chain at the next record; rewriting a whole stream's tail is caught by signatures (the forger has
 no key) or by a chain head kept elsewhere (``db verify --head``).
 
-A new table joins with a ``Stream`` entry in ``STREAMS`` and a call to ``link`` before its insert.
+The hashing itself (``body``, ``record_hash``, ``row_problem``) is in ``chain_hash``, which imports no
+sqlalchemy (the sqlite3 read path checks with it). A new table joins with a ``StreamSpec`` in
+``chain_hash.SPECS``, its model in ``_MODELS`` here, and a call to ``link`` before its insert.
 The caller holds the stream's lock (a version counter row) so concurrent writers never fork it.
 """
 
 from __future__ import annotations
 
-import datetime as dt
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Connection, MetaData, Table, select
+from sqlalchemy import Column, Connection, Integer, MetaData, String, Table, Text, select, text
 from sqlalchemy.orm import Session
 
-from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.signing import Signer, record_message
-from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow
+from calibctl.store.chain_hash import (  # the hashing itself, shared with the sqlite3 read path
+    CHAIN_COLUMNS,
+    SPECS,
+    UNHASHED,
+    StreamSpec,
+    body,
+    record_hash,
+    row_problem,
+)
+from calibctl.store.models import (
+    ArtifactRow,
+    Base,
+    BoardRow,
+    CheckEventRow,
+    EventRow,
+    RigCalibrationRow,
+    RigEventRow,
+)
 
-CHAIN_COLUMNS = frozenset({"chain_seq", "chain_prev", "chain_hash", "signature", "key_id"})
-UNHASHED = CHAIN_COLUMNS | {"id"}
+__all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
+           "head_of", "link", "new_columns", "record_hash", "row_problem"]
 
 
 @dataclass(frozen=True)
-class Stream:
-    """A chained table: ``key`` names the columns that split it into streams (empty: one stream)."""
+class Stream(StreamSpec):
+    """A chained table: its ``StreamSpec`` and the ORM model of the table."""
 
-    name: str
     model: type[Base]
-    key: tuple[str, ...]
-    subject: str | None  # a content-hash column signed beside the chain hash (portable in exports)
-    label: Callable[[Mapping[Any, Any]], str]
-    counter: tuple[str, str]  # (version_counters scope, the column whose maximum the counter must equal)
 
     @property
     def table(self) -> Table:
         return self.model.__table__  # type: ignore[return-value]
 
-    def key_of(self, values: Mapping[Any, Any]) -> tuple[Any, ...]:
-        return tuple(values[k] for k in self.key)
 
-    def counter_key(self, key: tuple[Any, ...]) -> str:
-        return str(key[0]) if key else self.name
-
-
+_MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
+                                  "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow}
 STREAMS: dict[str, Stream] = {
-    "artifact": Stream(
-        "artifact", ArtifactRow, ("serial",), "content_sha256", lambda r: f"{r['serial']}@{r['version']}",
-        ("artifact", "version"),
-    ),
-    "board": Stream(
-        "board", BoardRow, ("name",), "payload_sha256", lambda r: f"board {r['name']}@{r['revision']}", ("board", "revision")
-    ),
-    "event": Stream(
-        "event", EventRow, (), None, lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
-        ("chain", "chain_seq"),
-    ),
+    name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
 }
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dt.datetime):
-        if value.tzinfo is None:  # SQLite hands back naive UTC when read below the ORM type
-            value = value.replace(tzinfo=dt.UTC)
-        return value.astimezone(dt.UTC).isoformat()
-    return value
-
-
-def body(values: Mapping[Any, Any]) -> dict[str, Any]:
-    """The hashed part of a row: every column but id and the chain columns, NULLs left out."""
-    return {n: _jsonable(v) for n, v in values.items() if n not in UNHASHED and v is not None}
-
-
-def record_hash(stream: Stream, key: tuple[Any, ...], seq: int, prev: str | None, record: dict[str, Any]) -> str:
-    envelope = {"v": 1, "stream": stream.name, "key": list(key), "seq": seq, "prev": prev, "record": record}
-    return sha256_hex(jcs_bytes(envelope))
+"""``chain_hash.SPECS`` with their tables, in the same order (the order of the row ids in a chain head)."""
 
 
 def head_of(s: Session, stream: Stream, key: tuple[Any, ...]) -> tuple[int, str] | None:
@@ -112,11 +93,12 @@ def link(s: Session, stream: Stream, row: Base, signer: Signer | None) -> None:
         row.key_id = signer.key_id  # type: ignore[attr-defined]
 
 
-def backfill(conn: Connection) -> None:
-    """Chain the rows written before chains existed, in id order (migration 0005; never signed: no key
-    is at hand in a migration). Tables are reflected, so later columns do not matter here."""
+def backfill(conn: Connection, names: tuple[str, ...]) -> None:
+    """Chain the rows of streams ``names`` written before they were chained, in id order (migrations 0005
+    and 0007; never signed: no key is at hand in a migration). Tables are reflected, so later columns do
+    not matter here. A stream counted by its chain position gets its counter rows."""
     meta = MetaData()
-    for stream in STREAMS.values():
+    for stream in (STREAMS[n] for n in names):
         t = Table(stream.table.name, meta, autoload_with=conn)
         heads: dict[tuple[Any, ...], tuple[int, str]] = {}
         for row in conn.execute(select(t).order_by(t.c.id)).mappings().all():
@@ -125,7 +107,7 @@ def backfill(conn: Connection) -> None:
             digest = record_hash(stream, key, seq + 1, prev, body(row))
             conn.execute(t.update().where(t.c.id == row["id"]).values(chain_seq=seq + 1, chain_prev=prev, chain_hash=digest))
             heads[key] = (seq + 1, digest)
-        if not stream.key and heads:  # a one-stream table's position is counted in version_counters
+        if stream.counter[1] == "chain_seq" and heads:  # its position is counted in version_counters
             counters = Table("version_counters", meta, autoload_with=conn)
             # imported here, as in counters.py: sqlalchemy.dialects.postgresql alone costs ~0.1 s of start-up
             insert: Any
@@ -137,16 +119,31 @@ def backfill(conn: Connection) -> None:
                 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 
                 insert = sqlite_insert(counters)
-            conn.execute(insert.values(scope=stream.counter[0], key=stream.name, last_value=heads[()][0]))
+            conn.execute(insert, [{"scope": stream.counter[0], "key": stream.counter_key(key), "last_value": seq}
+                                  for key, (seq, _) in heads.items()])
 
 
-def row_problem(stream: Stream, row: Base) -> str | None:
-    """None when ``row``'s chain hash matches its columns (one sha256 over them, payload included), else why
-    not. The cheap integrity check for bulk reads; ``db verify`` also checks the links and signatures."""
-    values = {c.name: getattr(row, c.name) for c in stream.table.columns}
-    if values["chain_hash"] is None or values["chain_seq"] is None:
-        return f"{stream.label(values)} has no chain hash: it was inserted outside calibctl"
-    actual = record_hash(stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values))
-    if actual != values["chain_hash"]:
-        return f"{stream.label(values)} was changed after it was written (its chain hash no longer matches)"
-    return None
+def new_columns() -> list[Column[Any]]:
+    """The chain columns a migration adds to a table joining the chains (0005, 0007)."""
+    return [Column("chain_seq", Integer(), nullable=True), Column("chain_prev", String(64), nullable=True),
+            Column("chain_hash", String(64), nullable=True), Column("signature", Text(), nullable=True),
+            Column("key_id", String(64), nullable=True)]
+
+
+def backfill_without_triggers(conn: Connection, names: tuple[str, ...]) -> None:
+    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored."""
+    tables = [STREAMS[n].table.name for n in names]
+    if conn.dialect.name == "sqlite":
+        listed = ", ".join(f"'trg_{t}_no_update'" for t in tables)
+        saved = conn.execute(text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")).all()
+        for name, _ in saved:
+            conn.execute(text(f"DROP TRIGGER {name}"))
+        backfill(conn, names)
+        for _, sql in saved:
+            conn.execute(text(sql))
+        return
+    for table in tables:
+        conn.execute(text(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable"))
+    backfill(conn, names)
+    for table in tables:
+        conn.execute(text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))

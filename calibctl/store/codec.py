@@ -24,8 +24,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import IntegrityError
 
 if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (sqlite_reads) uses them too
-    from calibctl.store.checks import CheckEventRow
-    from calibctl.store.models import ArtifactRow, BoardRow, EventRow, SessionRow
+    from calibctl.store.models import ArtifactRow, BoardRow, CheckEventRow, EventRow, SessionRow
 
 TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
 
@@ -165,13 +164,13 @@ def artifact_row(artifact: CalibrationArtifact, stored_at: dt.datetime) -> Artif
 
 def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationArtifact:
     """The stored artifact after its integrity check: its content hash re-derived from the parsed content
-    (default), or, ``by_chain``, the row's chain hash over its stored bytes and columns (about 100x cheaper
-    in pure Python; what bulk reads such as ``lint --all`` use)."""
+    (default; ``db verify``), or, ``by_chain``, the row's chain hash over its stored bytes and columns (0.19
+    vs 0.93 ms CPU for a 10 kB artifact; what every Store read uses)."""
     what = f"{row.serial}@{row.version}"
     if by_chain:
-        from calibctl.store import chain
+        from calibctl.store import chain_hash
 
-        problem = chain.row_problem(chain.STREAMS["artifact"], row)
+        problem = chain_hash.row_problem(chain_hash.SPECS["artifact"], row)
         if problem is not None:
             raise IntegrityError(problem, TAMPER_HINT)
         try:

@@ -16,6 +16,7 @@ import datetime as dt
 
 from sqlalchemy import (
     BigInteger,
+    Boolean,
     CheckConstraint,
     DateTime,
     Double,
@@ -227,8 +228,8 @@ class RigSessionRow(Base):
     __table_args__ = (Index(None, "rig", "created_at"),)
 
 
-class RigCalibrationRow(Base):
-    """One immutable calibration version of one rig (revision 0003)."""
+class RigCalibrationRow(ChainColumns, Base):
+    """One immutable calibration version of one rig (revision 0003; chained per rig since 0007)."""
 
     __tablename__ = "rig_calibrations"
 
@@ -244,11 +245,12 @@ class RigCalibrationRow(Base):
         UniqueConstraint("rig", "version"),
         CheckConstraint("version >= 1", name="version_positive"),
         CheckConstraint("status IN ('accepted', 'rejected')", name="status_known"),
+        Index(None, "rig", "chain_seq", unique=True),
     )
 
 
-class RigEventRow(Base):
-    """One append-only move of a rig's active version (revision 0003)."""
+class RigEventRow(ChainColumns, Base):
+    """One append-only move of a rig's active version (revision 0003; one chain for the store since 0007)."""
 
     __tablename__ = "rig_activation_events"
 
@@ -266,6 +268,28 @@ class RigEventRow(Base):
         ForeignKeyConstraint(["rig", "version"], ["rig_calibrations.rig", "rig_calibrations.version"]),
         CheckConstraint("kind IN ('activate', 'rollback')", name="kind_known"),
         Index(None, "rig", "id"),
+        Index(None, "chain_seq", unique=True),
+    )
+
+
+class CheckEventRow(ChainColumns, Base):
+    """One re-test of one calibration version (revision 0006; chained per serial since 0007)."""
+
+    __tablename__ = "check_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    check_id: Mapped[str] = mapped_column(String(12), unique=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    version: Mapped[int] = mapped_column(Integer)
+    passed: Mapped[bool] = mapped_column(Boolean)
+    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (
+        ForeignKeyConstraint(["serial", "version"], ["calibration_artifacts.serial", "calibration_artifacts.version"]),
+        Index(None, "serial", "id"),
+        Index(None, "serial", "chain_seq", unique=True),
     )
 
 

@@ -1,7 +1,9 @@
 """The Store: boards, capture sessions, calibration artifacts, activation events and images.
 
 Every public method is one transaction and returns contract documents (pydantic), never ORM rows.
-Every read of a document re-checks its sha256 (IntegrityError naming it on mismatch). The active
+Every read of a document re-checks its hash (IntegrityError naming it on mismatch): a calibration
+artifact by its record's chain hash (covering its bytes and content_sha256), the others by their
+sha256; ``db verify`` and import also re-derive an artifact's content hash. The active
 version of a serial is not a mutable pointer: it is the version of the serial's latest activation
 event, and events are append-only (database triggers refuse UPDATE/DELETE).
 
@@ -316,7 +318,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
         return self._run(work, write=True, retry_conflicts=True)
 
     def get_artifact(self, serial: str, version: int | None = None) -> CalibrationArtifact:
-        """``serial@version``; None means the active version. The hash is re-checked (IntegrityError)."""
+        """``serial@version``; None means the active version. Its record is checked by its chain hash
+        (IntegrityError): one sha256 over the stored bytes and columns, content_sha256 included, which a
+        writer without the chain cannot change unseen; ``db verify`` and import re-derive content hashes."""
 
         def work(s: Session) -> CalibrationArtifact:
             statuses = history.statuses(s, serial)
@@ -341,17 +345,17 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
                 )
             else:
                 wanted = version
-            return codec.decode_artifact(history.artifact_row(s, serial, wanted))
+            return codec.decode_artifact(history.artifact_row(s, serial, wanted), by_chain=True)
 
         return self._run(work)
 
     def list_artifacts(self, serial: str) -> list[CalibrationArtifact]:
-        """Every version of ``serial``, oldest first (each hash re-checked)."""
+        """Every version of ``serial``, oldest first (each checked by its chain hash, as ``get_artifact``)."""
 
         def work(s: Session) -> list[CalibrationArtifact]:
             history.statuses(s, serial)
             rows = s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial).order_by(ArtifactRow.version))
-            return [codec.decode_artifact(r) for r in rows]
+            return [codec.decode_artifact(r, by_chain=True) for r in rows]
 
         return self._run(work)
 
@@ -424,7 +428,7 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
             history.check_expected_active(serial, to_version, active, expected_active)
             if active == to_version:
                 raise UsageError(f"{serial}@{to_version} is already the active version; nothing to roll back")
-            codec.decode_artifact(history.artifact_row(s, serial, to_version))  # never activate tampered bytes
+            codec.decode_artifact(history.artifact_row(s, serial, to_version), by_chain=True)  # never activate tampered bytes
             return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)

@@ -1,6 +1,8 @@
 """Rigs in the store: definitions, rig sessions, rig calibrations (versioned per rig) and their
 append-only activation log. Same rules as the camera tables: every read re-checks the sha256, rows are
-immutable in the database (revision 0003's triggers), the active version is the latest event's.
+immutable in the database (revision 0003's triggers), the active version is the latest event's, and
+versions (per rig) and activation events (one log) are hash-chained and signed like the cameras'
+(revision 0007, ``chain.STREAMS["rig"]`` and ``["rig_event"]``).
 """
 
 from __future__ import annotations
@@ -12,9 +14,16 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
-from calibctl.errors import AlreadyExistsError, IntegrityError, NotFoundError, UsageError
-from calibctl.store import codec, counters
-from calibctl.store.history import known_list
+from calibctl.errors import (
+    AlreadyExistsError,
+    IntegrityError,
+    NotFoundError,
+    StaleActiveVersionError,
+    UsageError,
+)
+from calibctl.signing import Signer
+from calibctl.store import chain, codec, counters
+from calibctl.store.history import UNCHECKED, known_list
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
 
 if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
@@ -30,7 +39,7 @@ def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> 
     return codec._parse(model, payload, what)
 
 
-def _decode_calibration(row: RigCalibrationRow) -> RigCalibration:
+def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
     from calibctl.artifacts.rig import RigCalibration
 
     what = f"rig {row.rig}@{row.version}"
@@ -54,9 +63,13 @@ def _active(s: Session, rig: str) -> int | None:
     return s.scalar(select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1))
 
 
-def _append(s: Session, rig: str, version: int, kind: str, actor: str, station: str, reason: str) -> RigActivation:
+def _append(s: Session, rig: str, version: int, kind: str, actor: str, station: str, reason: str,
+            signer: Signer | None) -> RigActivation:
+    """Append one event to the store's rig event log (one hash chain; its counter row is the chain's lock)."""
+    counters.next_value(s, "chain", "rig_event")
     row = RigEventRow(rig=rig, version=version, previous_version=_active(s, rig), kind=kind, actor=actor,
                       station=station, at=utc_now(), reason=reason)
+    chain.link(s, chain.STREAMS["rig_event"], row, signer)
     s.add(row)
     s.flush()
     return _event(row)
@@ -74,6 +87,7 @@ class RigStoreMixin:
     """Rig methods of ``Store`` (which provides ``_run``)."""
 
     _run: Callable[..., Any]
+    signer: Signer | None
 
     # definitions ---------------------------------------------------------------------------------
 
@@ -139,20 +153,33 @@ class RigStoreMixin:
     # calibrations --------------------------------------------------------------------------------
 
     def add_rig_calibration(self, cal: RigCalibration, *, activate: bool, actor: str, station: str,
-                            reason: str) -> RigCalibration:
-        """Store as the rig's next version (sealed) and activate when asked (accepted only)."""
+                            reason: str, based_on: int | None | object = UNCHECKED) -> RigCalibration:
+        """Store as the rig's next version (sealed) and activate when asked (accepted only).
+
+        Compare-and-set: ``based_on`` is the active version ``cal`` was derived from (a hand-eye edge
+        added to it); when another writer moved the rig's active version since, nothing is written
+        (StaleActiveVersionError naming the newer version)."""
         if activate and cal.status != "accepted":
             raise UsageError(f"rig {cal.rig}: a {cal.status} calibration can never become active")
 
         def work(s: Session) -> RigCalibration:
-            version = counters.next_value(s, "rig", cal.rig)
+            version = counters.next_value(s, "rig", cal.rig)  # the rig's lock until this transaction ends
+            active = _active(s, cal.rig)
+            if based_on is not UNCHECKED and active != based_on:
+                seen = f"{cal.rig}@{based_on}" if based_on is not None else "no active version"
+                raise StaleActiveVersionError(
+                    f"rig {cal.rig}: the active version changed underneath this write (it was built on {seen}, "
+                    f"the active version is now {cal.rig}@{active}); nothing stored",
+                    f"look at `calibctl rig history {cal.rig}` and run the command again on {cal.rig}@{active}")
             stored = cal.model_copy(update={"version": version}).sealed()
-            s.add(RigCalibrationRow(rig=stored.rig, version=version, status=stored.status,
+            row = RigCalibrationRow(rig=stored.rig, version=version, status=stored.status,
                                     created_at=stored.provenance.created_at, payload=codec.canonical_text(stored),
-                                    content_sha256=stored.content_sha256))
+                                    content_sha256=stored.content_sha256)
+            chain.link(s, chain.STREAMS["rig"], row, self.signer)
+            s.add(row)
             s.flush()
             if activate:
-                _append(s, stored.rig, version, "activate", actor, station, reason)
+                _append(s, stored.rig, version, "activate", actor, station, reason, self.signer)
             return stored
 
         return self._run(work, write=True)
@@ -171,7 +198,7 @@ class RigStoreMixin:
                                     f"see `calibctl rig history {rig}`")
             row = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
                                                            RigCalibrationRow.version == wanted)).one()
-            return _decode_calibration(row)
+            return decode_calibration(row)
 
         return self._run(work)
 
@@ -180,7 +207,7 @@ class RigStoreMixin:
             _statuses(s, rig)
             rows = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig)
                              .order_by(RigCalibrationRow.version))
-            return [_decode_calibration(r) for r in rows]
+            return [decode_calibration(r) for r in rows]
 
         return self._run(work)
 
@@ -200,9 +227,9 @@ class RigStoreMixin:
                 raise UsageError(f"rig {rig}@{to_version} is rejected and can never become active")
             if _active(s, rig) == to_version:
                 raise UsageError(f"rig {rig}@{to_version} is already the active version; nothing to roll back")
-            _decode_calibration(s.scalars(select(RigCalibrationRow).where(
+            decode_calibration(s.scalars(select(RigCalibrationRow).where(
                 RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
-            return _append(s, rig, to_version, "rollback", actor, station, reason)
+            return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)
 

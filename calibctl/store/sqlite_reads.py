@@ -57,9 +57,10 @@ def _utc(text: str | None) -> dt.datetime | None:
 
 
 def _decode_artifact(row: SimpleNamespace) -> CalibrationArtifact:
-    """The integrity check ``Store.get_artifact`` / ``list_artifacts`` make, on a row holding every column
-    (so a check over all of them, such as the chain hash, can be made here too): keep the two the same."""
-    return codec.decode_artifact(row)  # type: ignore[arg-type]
+    """The integrity check ``Store.get_artifact`` / ``list_artifacts`` make - the record's chain hash over
+    every column (``chain_hash``), then the columns against the document - on a ``SELECT *`` row: keep the two
+    the same."""
+    return codec.decode_artifact(row, by_chain=True)  # type: ignore[arg-type]
 
 
 class SqliteReader:

@@ -4,7 +4,8 @@ A capture reads a folder of images (detected in parallel, every image gets an ou
 live camera (each frame detected in turn and offered to ``core.frame_select.FrameSelector``, which
 keeps still frames that add coverage or tilt), checks that the registered board matches the board in
 the pictures (``pattern_check``), evaluates the capture gates (``core.gates``, thresholds from the
-settings, so a station file can override them) and stores the session.
+settings, so a station file can override them; then ``one_camera`` from ``core.camera_split``, the
+solve's two-camera test) and stores the session.
 
 What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
@@ -29,6 +30,7 @@ import os
 import re
 import secrets
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -37,12 +39,14 @@ import numpy as np
 
 from calibctl import __version__
 from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
 from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
 from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.camera_split import one_camera_gate
 from calibctl.core.detect import FOUND_INCONSISTENT
 from calibctl.core.frame_select import (
     KEPT,
@@ -52,13 +56,17 @@ from calibctl.core.frame_select import (
     SelectorSettings,
     StreamDetector,
 )
-from calibctl.core.gates import GateReport, GateThresholds, evaluate_gates
+from calibctl.core.gates import GateResult as CoreGateResult
+from calibctl.core.gates import GateThresholds, evaluate_gates
+from calibctl.core.image_circle import ImageCircle, accumulate_max, corners_inside, detect_image_circle
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
+from calibctl.workflows.distance_gauge import ReferenceDistance, gauge_capture
+from calibctl.workflows.image_circles import checked_image_circle
 from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, board_spec, solve
 
 MAX_WORKERS = 8
@@ -77,6 +85,9 @@ class CaptureRequest:
     max_views: int | None = None
     duration_s: float | None = None
     workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
+    image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
+    reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
+    reference_source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -87,16 +98,18 @@ class CaptureResult:
     images_stored: int
     image_dir: str
     ignored_files: tuple[str, ...] = ()
+    distance: DistanceCheck | None = None  # --reference-distance: judged when the gates passed
 
     @property
     def passed(self) -> bool:
-        return self.session.status == "accepted"
+        return self.session.status == "accepted" and (self.distance is None or self.distance.passed)
 
     def as_json(self) -> dict[str, object]:
         return {"session": self.session.model_dump(mode="json"), "passed": self.passed,
                 "stop_reason": self.stop_reason, "interrupted": self.interrupted,
                 "images_stored": self.images_stored, "image_dir": self.image_dir,
-                "ignored_files": list(self.ignored_files)}
+                "ignored_files": list(self.ignored_files),
+                "distance": None if self.distance is None else self.distance.model_dump(mode="json")}
 
 
 @dataclass(frozen=True)
@@ -133,6 +146,7 @@ class _Collected:
     images_stored: int
     interrupted: bool = False
     ignored: list[str] = field(default_factory=list)
+    max_gray: np.ndarray | None = None  # per-pixel maximum of the frames, reduced (core.image_circle)
 
 
 def core_thresholds(settings: Settings) -> GateThresholds:
@@ -147,6 +161,9 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
         raise UsageError(f"--max-views must be 1 or more, got {request.max_views}")
     if request.duration_s is not None and not request.duration_s > 0:
         raise UsageError(f"--duration must be a positive number of seconds, got {request.duration_s:g}")
+    if (request.reference_distance is None) != (request.reference_source is None):
+        raise UsageError("--reference-distance and --reference-source go together",
+                         "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
     try:
         return parse_board_ref(request.board)
     except ValueError as exc:
@@ -171,9 +188,14 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
+        distance = None
+        if (request.reference_distance is not None and request.reference_source is not None
+                and session.status == "accepted" and session.image_size is not None):
+            distance = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
+                                     session.views, session.image_size)
         store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
-                             tuple(got.ignored))
+                             tuple(got.ignored), distance)
 
 
 def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:
@@ -221,7 +243,7 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
                                               {o.name: o.corners_px for o in probed if o.corners_px is not None})
     if larger is not None:
         raise larger
-    stored = 0
+    stored, max_gray = 0, None
     for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
         batch = readable[start:start + IMAGE_BATCH]
         with file_errors("read the images in", where):
@@ -233,20 +255,26 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
                 raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
                                  "capture again from a folder nothing else writes to")
         stored += len(batch)
+        for data in image_bytes:  # a half-size decode is enough to find an image circle
+            reduced = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_REDUCED_GRAYSCALE_2)
+            if reduced is not None:
+                max_gray = accumulate_max(max_gray, reduced)
     size = outcomes_core.session_image_size(results)
     assert size is not None  # there are readable images
     views: list[tuple[BoardView, str | None]] = [
         (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
     return _Collected([_record(o) for o in results], views, size,
                       f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
-                      f"({len(results)})", stored, ignored=images.ignored)
+                      f"({len(results)})", stored, ignored=images.ignored, max_gray=max_gray)
 
 
 class _StreamState:
     """What a video or camera capture accumulates, frame by frame."""
 
-    def __init__(self, store: Store, settings: Settings, spec: BoardSpec) -> None:
+    def __init__(self, store: Store, settings: Settings, spec: BoardSpec,
+                 image_circle: tuple[float, float, float] | None = None) -> None:
         self.store, self.settings, self.spec = store, settings, spec
+        self.image_circle = image_circle  # a given --image-circle, checked against the first frame
         self.selector: FrameSelector | None = None
         self.detector = StreamDetector(spec)
         self.progress: SelectionProgress | None = None
@@ -256,6 +284,7 @@ class _StreamState:
         self.kept_samples: list[pattern_check.Sample] = []
         self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
+        self.max_gray: np.ndarray | None = None
 
     def take(self, frame: sources.Frame) -> FrameDecision | None:
         """Detect, select and (when kept) store one frame; None when it has the wrong size."""
@@ -263,13 +292,15 @@ class _StreamState:
         size = (int(gray.shape[1]), int(gray.shape[0]))
         if self.selector is None:
             thresholds = core_thresholds(self.settings)
-            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds))
+            circle = None if self.image_circle is None else checked_image_circle(self.image_circle, size)
+            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds, image_circle=circle))
             self.progress = self.selector.progress()
         if size != self.selector.image_size:
             w, h = self.selector.image_size
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
+        self.max_gray = accumulate_max(self.max_gray, gray[::2, ::2])
         detection, why = self.detector.detect(gray)
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:
@@ -300,7 +331,7 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO
     target = request.max_views if request.max_views is not None else (None if is_file else 0)
-    state = _StreamState(store, settings, spec)
+    state = _StreamState(store, settings, spec, request.image_circle)
     interrupted = False
     stop = "end of the video" if is_file else "the camera stopped delivering frames"
     try:
@@ -333,18 +364,27 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     views = [(view, state.shas.get(view.name)) for view in state.selector.kept]
     if interrupted:
         stop += f"; the session was finished with the {len(views)} view(s) kept"
-    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted)
+    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted,
+                      max_gray=state.max_gray)
 
 
-def _gate_records(report: GateReport) -> list[GateResult]:
+def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
     return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
-                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in report.gates]
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
 
 
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
                    source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
     board_views = [view for view, _ in got.views]
-    report = evaluate_gates(board_views, spec.object_points(), got.image_size, core_thresholds(settings))
+    circle = session_image_circle(request.image_circle, got, board_views)
+    model_points = spec.object_points()
+    report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings),
+                            image_circle=circle)
+    # Same test as the solve's (lint rule one-camera), while the operator still holds the board.
+    two_cameras = one_camera_gate([model_points[np.asarray(v.corner_ids)] for v in board_views],
+                                  [np.asarray(v.corners_px, np.float64) for v in board_views],
+                                  [v.name for v in board_views], got.image_size)
+    gates = [*report.gates, two_cameras]
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -358,9 +398,25 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
-        image_size=got.image_size, status="accepted" if report.passed else "rejected",
-        gates=_gate_records(report), outcomes=got.outcomes, views=views,
+        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        gates=_gate_records(gates), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
+
+
+def session_image_circle(given: tuple[float, float, float] | None, got: _Collected,
+                         views: list[BoardView]) -> ImageCircle | None:
+    """The given circle (checked against the image and the board), else the one found in the frames."""
+    if given is None:
+        return None if got.max_gray is None else detect_image_circle(got.max_gray, got.image_size)
+    circle = checked_image_circle(given, got.image_size)
+    corners = [np.asarray(v.corners_px, np.float64).reshape(-1, 2) for v in views]
+    if corners and not any(corners_inside(px, circle).any() for px in corners):
+        nearest = min(float(np.hypot(px[:, 0] - circle.cx_px, px[:, 1] - circle.cy_px).min()) for px in corners)
+        raise InputError(f"the board never enters the image circle ({circle.describe()}): in {len(corners)} "
+                         f"view(s) the nearest corner is {nearest:.1f} px from its centre, "
+                         f"{nearest - circle.radius_px:.1f} px outside it; no session was stored",
+                         "check --image-circle against the frames (its centre and radius in pixels)")
+    return circle
 
 
 def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,

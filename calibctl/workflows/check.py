@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 import secrets
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,10 +25,14 @@ from calibctl.config import Settings
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.recheck import RecheckResult, Reference, recheck
 from calibctl.core.validation import N_OCTANTS, N_RINGS
-from calibctl.errors import InputError, UsageError
-from calibctl.files import file_errors
+from calibctl.errors import UsageError
 from calibctl.workflows import capture_sources as sources
-from calibctl.workflows.distance_gauge import ReferenceDistance, judge_distance
+from calibctl.workflows.distance_gauge import (
+    ReferenceDistance,
+    detect_fixture_views,
+    distance_reason,
+    judge_distance,
+)
 from calibctl.workflows.records import open_store, parse_artifact_ref
 from calibctl.workflows.solve import board_spec
 
@@ -65,36 +69,32 @@ def reference_of(art: CalibrationArtifact) -> Reference:
     return Reference(held.rms_px, n_corners, n_views, ring_edges, ring_rms, ring_counts, oct_rms, oct_counts)
 
 
+def stored_covariance(art: CalibrationArtifact) -> np.ndarray | None:
+    """(3, 3) covariance of the stored (focal scale, cx px, cy px) from the artifact's full covariance, or None.
+
+    focal scale = the mean of dfx/fx and dfy/fy (fx = aspect * fy when the solve tied them: dfy/fy).
+    A parameter the solve held fixed contributes nothing.
+    """
+    cov = art.stdev.covariance
+    if cov is None:
+        return None
+    names = list(cov.parameters)
+    G = np.zeros((3, len(names)))
+    focal = [(name, value) for name, value in (("fx", art.camera_matrix[0][0]), ("fy", art.camera_matrix[1][1])) if name in names]
+    for name, value in focal:
+        G[0, names.index(name)] = 1.0 / (value * len(focal))
+    for row, name in ((1, "cx"), (2, "cy")):
+        if name in names:
+            G[row, names.index(name)] = 1.0
+    return G @ np.asarray(cov.matrix, np.float64) @ G.T
+
+
 def stored_sigma(art: CalibrationArtifact) -> dict[str, float]:
     sigma = art.stdev.sigma
     out: dict[str, float] = {name: sigma[name] for name in ("cx", "cy") if name in sigma}
     if "fx" in sigma:
         out["focal"] = sigma["fx"] / art.fx
     return out
-
-
-def _views(art: CalibrationArtifact, source: sources.SourceSpec) -> tuple[list[outcomes_core.ImageOutcome], int]:
-    if source.kind not in sources.IMAGE_SETS:
-        raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
-                         "save a few board pictures from the camera and check those")
-    spec = board_spec(art.board)
-    with file_errors(f"read the source {source.kind}", source.label):
-        images = sources.select_images(source)
-        with sources.quiet_opencv():
-            found = outcomes_core.classify_files(images.paths, spec)
-    found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
-    w, h = art.image_size
-    wrong = [o for o in found if o.image_size is not None and tuple(o.image_size) != (w, h)]
-    if wrong:
-        listed = ", ".join(f"{o.name} ({o.image_size[0]}x{o.image_size[1]})" for o in wrong[:5])  # type: ignore[index]
-        raise InputError(f"{len(wrong)} image(s) are not {w}x{h}, the size {art.ref} was calibrated at: {listed}",
-                         "check images straight from the camera at its calibrated resolution; calibctl never rescales")
-    final = outcomes_core.finalize_session(found, (w, h))
-    accepted = [o for o in final if o.accepted and o.corner_ids is not None]
-    if not accepted:
-        raise InputError(f"no board {art.board.ref} was found in the {len(final)} image(s) of {source.label}",
-                         "show the board the calibration was made with, whole and sharp")
-    return accepted, len(final)
 
 
 def _event(art: CalibrationArtifact, settings: Settings, source: sources.SourceSpec, n_images: int,
@@ -104,9 +104,7 @@ def _event(art: CalibrationArtifact, settings: Settings, source: sources.SourceS
     reasons += [f"{p.name} moved {_shift_text(p.name, p.shift)} ({p.z:+.1f} sigma, limit {p.z_limit:.1f})"
                 for p in result.failed_shifts]
     if distance is not None and not distance.passed:
-        reasons.append(f"board distance {distance.recovered_m:.4f} m is {distance.ratio:.3f}x the surveyed "
-                       f"{distance.reference_m:.4f} m: the metric scale is wrong (board square size?); "
-                       "the residual cannot show it")
+        reasons.append(distance_reason(distance))
     regions = [RegionCheck(region=r.region, check_rms_px=_finite(r.check_rms_px),
                            reference_rms_px=_finite(r.reference_rms_px),
                            ratio=r.ratio if r.tested else None, limit=r.limit, corners=r.n_corners,
@@ -137,16 +135,20 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
     """
     serial, version = parse_artifact_ref(request.ref)
     source = sources.resolve_source(request.source)
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:  # write: the check event is signed with the station key
         art = store.get_artifact(serial, version)
         reference = reference_of(art)
-        views, n_images = _views(art, source)
         spec = board_spec(art.board)
+        if source.kind not in sources.IMAGE_SETS:
+            raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
+                             "save a few board pictures from the camera and check those")
+        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref)
         obj = spec.object_points()
         ids = [np.asarray(v.corner_ids) for v in views]
         result = recheck([obj[i] for i in ids], [np.asarray(v.corners_px) for v in views],
                          np.array(art.camera_matrix), np.array(art.dist_coeffs), art.image_size,
-                         reference, stored_sigma(art))
+                         reference, stored_sigma(art), model=art.model.name,
+                         stored_covariance=stored_covariance(art))
         distance = None
         if request.reference_distance is not None:
             distance = judge_distance(request.reference_distance, result.board_distance_m, [v.name for v in views])

@@ -3,18 +3,32 @@
 A wrong board scale s leaves K, the distortion and every residual exactly as they were and multiplies
 every recovered translation by s. Only an independent metric distance can see it, so the recovered
 camera-to-board-centre distance is compared with a surveyed one: a ratio outside 0.99-1.01 fails.
+
+Two stations use it: ``calibctl check`` (poses of the fresh views with the stored intrinsics) and
+``calibctl capture`` (``gauge_capture``: the captured session is solved - not stored - and the
+fixture pictures' poses are fitted with those intrinsics), so a wrong scale is caught before a solve
+is ever stored.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from calibctl.artifacts.check import DistanceCheck
+from calibctl.artifacts.session import ViewCorners
+from calibctl.core import image_outcomes as outcomes_core
+from calibctl.core.board_spec import BoardSpec
 from calibctl.core.recheck import distance_ratio
+from calibctl.core.solve import DEFAULT_MODEL, solve_intrinsics
+from calibctl.core.validation import refit_pose
 from calibctl.errors import InputError, UsageError
+from calibctl.files import file_errors
+from calibctl.workflows import capture_sources as sources
 
 RATIO_LIMITS = (0.99, 1.01)
 MAX_RELATIVE_SIGMA = 0.003  # a survey looser than this cannot judge a 1 % scale error
@@ -69,3 +83,64 @@ def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[
     return DistanceCheck(reference_m=ref.distance_m, reference_sigma_m=ref.sigma_m,
                          recovered_m=float(np.median(recovered_m)), spread=spread, ratio=ratio,
                          ratio_limits=RATIO_LIMITS, passed=lo <= ratio <= hi)
+
+
+def distance_reason(d: DistanceCheck) -> str:
+    """The seed's explanation of a failed gauge, with the numbers."""
+    return (f"board distance {d.recovered_m:.4f} m is {d.ratio:.3f}x the surveyed {d.reference_m:.4f} m: the metric "
+            "scale is wrong (board square size?); the residual cannot show it")
+
+
+def detect_fixture_views(spec: BoardSpec, board_ref: str, source: sources.SourceSpec, image_size: tuple[int, int],
+                         calibrated: str) -> tuple[list[outcomes_core.ImageOutcome], int]:
+    """The accepted board views of an image source, all of ``image_size`` (InputError naming both sizes if not).
+
+    Returns (accepted views with corners, images examined). ``calibrated`` names what the size belongs to.
+    """
+    if source.kind not in sources.IMAGE_SETS:
+        raise UsageError(f"the board pictures must be a folder, glob or list of images, not a {source.kind}",
+                         "save a few board pictures from the camera and give those")
+    with file_errors(f"read the source {source.kind}", source.label):
+        images = sources.select_images(source)
+        with sources.quiet_opencv():
+            found = outcomes_core.classify_files(images.paths, spec)
+    found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
+    w, h = image_size
+    wrong = [o for o in found if o.image_size is not None and tuple(o.image_size) != (w, h)]
+    if wrong:
+        listed = ", ".join(f"{o.name} ({o.image_size[0]}x{o.image_size[1]})" for o in wrong[:5])  # type: ignore[index]
+        raise InputError(f"{len(wrong)} image(s) are not {w}x{h}, the size {calibrated} was calibrated at: {listed}",
+                         "use images straight from the camera at its calibrated resolution; calibctl never rescales")
+    final = outcomes_core.finalize_session(found, (w, h))
+    accepted = [o for o in final if o.accepted and o.corner_ids is not None]
+    if not accepted:
+        raise InputError(f"no board {board_ref} was found in the {len(final)} image(s) of {source.label}",
+                         "show the board the calibration was made with, whole and sharp")
+    return accepted, len(final)
+
+
+def board_distances_m(spec: BoardSpec, views: Sequence[outcomes_core.ImageOutcome], camera_matrix: np.ndarray,
+                      dist_coeffs: np.ndarray, model: str) -> np.ndarray:
+    """(V,) metres from the camera centre to the centre of the corners seen, poses fitted with the lens frozen."""
+    obj = spec.object_points()
+    out = []
+    for v in views:
+        o = obj[np.asarray(v.corner_ids)]
+        _, rvec, tvec = refit_pose(o, np.asarray(v.corners_px), camera_matrix, dist_coeffs, model)
+        R = cv2.Rodrigues(rvec.reshape(3, 1))[0]
+        out.append(float(np.linalg.norm(R @ o.mean(axis=0) + tvec)))
+    return np.array(out)
+
+
+def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_ref: str,
+                  views: Sequence[ViewCorners], image_size: tuple[int, int]) -> DistanceCheck:
+    """The gauge at capture: solve the captured views (production model, not stored), then judge the
+    board distance of the ``fixture`` pictures with those intrinsics. Raises CalibctlError (exit 2)
+    when it cannot be judged (see ``judge_distance``, ``detect_fixture_views``)."""
+    obj = spec.object_points()
+    fit = solve_intrinsics([obj[np.asarray(v.corner_ids)] for v in views],
+                           [np.asarray(v.corners_px, np.float64) for v in views], image_size, DEFAULT_MODEL)
+    fixture_views, _ = detect_fixture_views(spec, board_ref, sources.resolve_source(fixture), image_size,
+                                            "this session")
+    distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, DEFAULT_MODEL)
+    return judge_distance(ref, distances, [v.name for v in fixture_views])

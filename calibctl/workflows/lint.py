@@ -26,6 +26,7 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core import lens_checks, model_fit
+from calibctl.core.image_circle import circle_from_detail
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows import formats, keys, ros_camera_info
@@ -52,6 +53,7 @@ class CalibrationFacts:
     fit_rms_px: float | None = None
     detector_rms_px: float | None = None
     fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
+    image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -146,6 +148,14 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
     )
 
 
+FACT_FIELDS: dict[str, Any] = {
+    "image_size": True, "camera_matrix": True, "dist_coeffs": True, "model": {"name"}, "rms_px": True,
+    "detector_rms_px": True, "stdev": {"sigma", "refused_reason"}, "board": {"measurement"},
+    "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"}, "camera_consistency": True,
+}
+"""The parts of an artifact's dump ``facts_from_document`` reads (views, provenance, covariance are not)."""
+
+
 def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = False) -> CalibrationFacts:
     """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump). A
     ``validated`` document (parsed by the contract, which refuses NaN and infinity) skips the walk over
@@ -173,8 +183,18 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         fit_rms_px=data.get("rms_px"),
         detector_rms_px=data.get("detector_rms_px"),
         fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
+        image_circle=_recorded_circle(data.get("gates")),
         raw_numbers=[] if validated else _numbers(data),
     )
+
+
+def _recorded_circle(gates: Any) -> tuple[float, float, float] | None:
+    """The image circle an artifact's coverage gate records (core.image_circle), or None."""
+    for gate in gates if isinstance(gates, list) else []:
+        if isinstance(gate, dict) and gate.get("gate") == "coverage" and isinstance(gate.get("detail"), dict):
+            circle = circle_from_detail(gate["detail"])
+            return None if circle is None else circle.as_tuple()
+    return None
 
 
 def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | None]:
@@ -312,7 +332,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     if size is not None and facts.dist_coeffs.size:
         foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
                     else lens_checks.check_distortion_foldover)
-        findings += _adopt(foldover(K, facts.dist_coeffs, size))
+        findings += _adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
     return findings
 
 
@@ -410,7 +430,7 @@ def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
 def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
     """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
     document rules (schema, content-hash) are not run again."""
-    data = art.model_dump(mode="json")
+    data = art.model_dump(mode="json", include=FACT_FIELDS)  # the fact fields only: a third of the dump's cost
     findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:

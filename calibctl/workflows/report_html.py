@@ -16,6 +16,9 @@ from calibctl.core.report_maps import coverage_grid, edge_gaps_px
 from calibctl.workflows.report_svg import Plot, colour_bar, heat
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from calibctl.artifacts.lint import Finding
     from calibctl.workflows.report import ReportData
 
 MAX_DOTS = 5000  # per scatter plot (~40 bytes a dot), so a 200-view session stays under 1 MB
@@ -23,7 +26,7 @@ COVERAGE_CELLS = (16, 12)
 FIELD_CELLS = (16, 12)
 _K = (("fx", 0, 0), ("fy", 1, 1), ("cx", 0, 2), ("cy", 1, 2))
 _DIST = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
-_CSS = """body{font-family:sans-serif;max-width:1000px;margin:16px auto;color:#222}
+CSS = """body{font-family:sans-serif;max-width:1000px;margin:16px auto;color:#222}
 h1{font-size:22px}h2{font-size:17px;border-bottom:1px solid #ccc;margin-top:28px}
 table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
 th{background:#f2f2f2}td.l,th.l{text-align:left}.accepted{color:#fff;background:#2e7d32}
@@ -36,13 +39,13 @@ def num(value: float | None, digits: int = 3) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
 
-def _cell(value: str, key: str | None = None, cls: str = "") -> str:
+def cell(value: str, key: str | None = None, cls: str = "") -> str:
     attr = f' data-key="{escape(key)}"' if key else ""
     cattr = f' class="{cls}"' if cls else ""
     return f"<td{cattr}{attr}>{escape(value)}</td>"
 
 
-def _table(header: list[str], rows: list[str]) -> str:
+def table(header: list[str], rows: list[str]) -> str:
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
     return f"<table><tr>{head}</tr>{''.join(f'<tr>{r}</tr>' for r in rows)}</table>"
 
@@ -56,13 +59,16 @@ def _verdict(d: ReportData) -> str:
     active = " (active)" if d.active else ""
     lines = [f'<h1>{escape(art.ref)} <span class="badge {art.status}" data-key="status">{art.status}</span>'
              f"{active}</h1>"]
-    if art.lint:
-        rows = [_cell(f.severity, cls=f"l {f.severity}") + _cell(f.rule, cls="l") + _cell(f.message, cls="l")
-                + _cell(f.fix or "", cls="l") for f in art.lint]
-        lines.append(_table(["severity", "rule", "finding", "fix"], rows))
-    else:
-        lines.append('<p data-key="lint">lint: clean</p>')
-    return "".join(lines)
+    return "".join(lines) + lint_block(art.lint)
+
+
+def lint_block(findings: Sequence[Finding]) -> str:
+    """The lint findings as a table (severity, rule, finding, fix), or "lint: clean"."""
+    if not findings:
+        return '<p data-key="lint">lint: clean</p>'
+    rows = [cell(f.severity, cls=f"l {f.severity}") + cell(f.rule, cls="l") + cell(f.message, cls="l")
+            + cell(f.fix or "", cls="l") for f in findings]
+    return table(["severity", "rule", "finding", "fix"], rows)
 
 
 def _parameters(d: ReportData) -> str:
@@ -71,14 +77,14 @@ def _parameters(d: ReportData) -> str:
     rows = []
     for name, r, c in _K:
         s = sigma.get(name) if name in art.model.free_parameters else None
-        rows.append(_cell(name, cls="l") + _cell(num(art.camera_matrix[r][c], 3), name)
-                    + _cell(num(s, 3) if s is not None else "fixed", f"sigma_{name}") + _cell("px", cls="l"))
+        rows.append(cell(name, cls="l") + cell(num(art.camera_matrix[r][c], 3), name)
+                    + cell(num(s, 3) if s is not None else "fixed", f"sigma_{name}") + cell("px", cls="l"))
     for i, value in enumerate(art.dist_coeffs):
         name = _DIST[i] if i < len(_DIST) else f"d{i}"
         if name in art.model.free_parameters or value != 0:
             s = sigma.get(name)
-            rows.append(_cell(name, cls="l") + _cell(num(value, 5), name)
-                        + _cell(num(s, 5) if s is not None else "fixed", f"sigma_{name}") + _cell("", cls="l"))
+            rows.append(cell(name, cls="l") + cell(num(value, 5), name)
+                        + cell(num(s, 5) if s is not None else "fixed", f"sigma_{name}") + cell("", cls="l"))
     ho = art.held_out
     summary = (f'<p>model {escape(art.model.name)}, {art.image_size[0]}x{art.image_size[1]} px; RMS fit '
                f'<b data-key="rms_px">{num(art.rms_px)}</b> px, held-out <b data-key="held_out_rms_px">'
@@ -86,14 +92,14 @@ def _parameters(d: ReportData) -> str:
                f"held-out {num(ho.outer_ring_rms_px)} px</p>")
     refused = f'<p class="warning">no uncertainty: {escape(art.stdev.refused_reason)}</p>' \
         if art.stdev.refused_reason else ""
-    return "<h2>Parameters (one-sigma)</h2>" + summary + refused + _table(["parameter", "value", "sigma", ""], rows)
+    return "<h2>Parameters (one-sigma)</h2>" + summary + refused + table(["parameter", "value", "sigma", ""], rows)
 
 
 def _gates(d: ReportData) -> str:
-    rows = [_cell(g.gate, cls="l") + _cell("pass" if g.passed else "FAIL", f"gate_{g.gate}")
-            + _cell(f"{g.value:.4g}") + _cell(f"{g.threshold:g}") + _cell(g.hint or "", cls="l")
+    rows = [cell(g.gate, cls="l") + cell("pass" if g.passed else "FAIL", f"gate_{g.gate}")
+            + cell(f"{g.value:.4g}") + cell(f"{g.threshold:g}") + cell(g.hint or "", cls="l")
             for g in d.artifact.gates]
-    body = _table(["gate", "result", "value", "needs", "hint"], rows) if rows else "<p>no gates recorded</p>"
+    body = table(["gate", "result", "value", "needs", "hint"], rows) if rows else "<p>no gates recorded</p>"
     return "<h2>Capture gates</h2>" + body
 
 
@@ -163,25 +169,25 @@ def _per_view(d: ReportData) -> str:
     for i, v in enumerate(views):
         fill = "#9e9e9e" if v.dropped else "#c62828" if v.outlier else "#1565c0"
         plot.rect(i + 0.1, 0.0, i + 0.9, v.rms_px, fill)
-    rows = [_cell(str(i), cls="l") + _cell(v.name, cls="l") + _cell(num(v.rms_px), f"view_rms_{i}")
-            + _cell(num(v.worst_corner_px)) + _cell("outlier" if v.outlier else "", cls="l")
-            + _cell("dropped" if v.dropped else "", cls="l") for i, v in enumerate(views)]
+    rows = [cell(str(i), cls="l") + cell(v.name, cls="l") + cell(num(v.rms_px), f"view_rms_{i}")
+            + cell(num(v.worst_corner_px)) + cell("outlier" if v.outlier else "", cls="l")
+            + cell("dropped" if v.dropped else "", cls="l") for i, v in enumerate(views)]
     return ("<h2>Per-view RMS</h2>" + plot.svg()
-            + _table(["#", "view", "RMS px", "worst corner px", "flag", ""], rows))
+            + table(["#", "view", "RMS px", "worst corner px", "flag", ""], rows))
 
 
 def _held_out(d: ReportData) -> str:
     ho = d.artifact.held_out
 
     def rows(bins, prefix):
-        return [_cell(b.label, cls="l") + _cell(num(b.fit_rms_px), f"{prefix}_fit_{i}")
-                + _cell(num(b.held_out_rms_px), f"{prefix}_held_{i}") + _cell(str(b.count))
+        return [cell(b.label, cls="l") + cell(num(b.fit_rms_px), f"{prefix}_fit_{i}")
+                + cell(num(b.held_out_rms_px), f"{prefix}_held_{i}") + cell(str(b.count))
                 for i, b in enumerate(bins)]
 
     header = ["bin", "fit RMS px", "held-out RMS px", "corners"]
     return (f"<h2>Held-out RMS ({ho.k_folds}-fold; intrinsics frozen, poses re-fitted)</h2>"
-            f'<div class="row">{_table(header, rows(ho.by_radius, "ring"))}'
-            f'{_table(header, rows(ho.by_octant, "octant"))}</div>')
+            f'<div class="row">{table(header, rows(ho.by_radius, "ring"))}'
+            f'{table(header, rows(ho.by_octant, "octant"))}</div>')
 
 
 def _uncertainty(d: ReportData) -> str:
@@ -232,7 +238,7 @@ def _provenance(d: ReportData) -> str:
             ("calibctl / OpenCV", f"{p.calibctl_version} / {p.opencv_version}"),
             ("imported from", p.imported_from or "-"),
             ("content sha256", f"{art.content_sha256} ({art.content_hash_algorithm})")]
-    body = "".join(f"<tr><th class=\"l\">{escape(k)}</th>{_cell(v, cls='l')}</tr>" for k, v in rows)
+    body = "".join(f"<tr><th class=\"l\">{escape(k)}</th>{cell(v, cls='l')}</tr>" for k, v in rows)
     return f"<h2>Provenance</h2><table>{body}</table>"
 
 
@@ -246,4 +252,4 @@ def render_html(d: ReportData) -> str:
     parts += [_per_view(d) if d.artifact.views else "", _held_out(d), _uncertainty(d), _distortion(d), _provenance(d)]
     title = escape(f"calibctl report {d.artifact.ref}")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
-            f"<style>{_CSS}</style></head><body>{''.join(parts)}</body></html>\n")
+            f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n")

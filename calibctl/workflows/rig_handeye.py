@@ -9,6 +9,14 @@ stored as a rejected version (never active) that carries *no* edge for that fram
 transform of it looks accepted. A rig re-solve carries the active version's hand-eye edges forward,
 except one whose camera was re-calibrated since (it would be stale; named in the findings).
 
+Concurrency: the new version (and a rig re-solve's, which carries the active hand-eye edges) is
+written compare-and-set on the base version it was built from. When
+another writer moved the rig's active version in between (another hand-eye edge, a re-solve, a
+rollback), nothing is stored and the command exits 2 naming the newer version; it is never rebased
+silently: the tree check, the stale-camera lint and the carried edges were judged against the base,
+and the other change may be a rollback that the operator meant to keep out of the tree. Re-running
+the command builds on the new active version.
+
 Frames: a hand-eye edge joins a rig member camera or a frame declared with ``rig add --frame`` to
 another frame of the rig; the combined edges must stay a tree (core.extrinsics.rig_tree.orient_tree).
 """
@@ -210,13 +218,14 @@ def with_handeye(base: RigCalibration, result: HandEyeResult,
 def store_handeye(settings: Settings, rig_name: str, result: HandEyeResult) -> StoredEdge:
     """Store ``result`` as the rig's next version; active only when accepted."""
     camera = _camera(result)
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         _, base = _checked(store, rig_name, result.parent_frame, result.child_frame, camera[0] if camera else None)
         versions = active_versions(store, handeye_cameras([*base.handeye, result]))
         cal = with_handeye(base, result, versions, settings)
         activate = cal.status == "accepted"
         stored = store.add_rig_calibration(cal, activate=activate, actor=settings.operator, station=settings.station,
-                                           reason=f"hand-eye {result.parent_frame} -> {result.child_frame}")
+                                           reason=f"hand-eye {result.parent_frame} -> {result.child_frame}",
+                                           based_on=base.version)
     return StoredEdge(stored, activate)
 
 

@@ -123,7 +123,7 @@ def show(settings: Settings, ref: str) -> RigCalibration:
 
 
 def rollback(settings: Settings, rig: str, to_version: int, reason: str) -> RigActivation:
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station)
 
 

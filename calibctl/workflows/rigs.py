@@ -181,7 +181,7 @@ def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store:
 def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | None = None,
                      refine_intrinsics: bool = False, model: str = "k1k2", activate: bool = True) -> RigSolveOutcome:
     """Solve a stored rig session into the rig's next version (see module docstring)."""
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:
         rig = store.get_rig(rig_name)
         session = store.get_rig_session(rig.name, rig_session_id)
         order = [rig.root, *[c for c in rig.cameras if c != rig.root]]
@@ -228,22 +228,24 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
             content_sha256=UNSEALED)
         findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint)
         cal = cal.model_copy(update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"})
-        cal = _with_carried_handeye(cal, store)
+        cal, base = _with_carried_handeye(cal, store)
         do_activate = activate and cal.status == "accepted"
         stored = store.add_rig_calibration(cal, activate=do_activate, actor=settings.operator,
-                                           station=settings.station, reason="rig solve")
+                                           station=settings.station, reason="rig solve", based_on=base)
         return RigSolveOutcome(stored, do_activate)
 
 
-def _with_carried_handeye(cal: RigCalibration, store: object) -> RigCalibration:
-    """Keep the active version's hand-eye edges (not the stale ones) in the re-solved tree."""
+def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibration, int | None]:
+    """Keep the active version's hand-eye edges (not the stale ones) in the re-solved tree; and that
+    version (None: nothing active), which the store compares-and-sets on (rig_handeye module docstring)."""
     try:
         active = store.get_rig_calibration(cal.rig, None)  # type: ignore[attr-defined]
     except NotFoundError:
-        return cal
+        return cal, None
     versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(active.handeye))
     edges, results, dropped = rig_handeye.carried_forward(active, versions)
-    return cal.model_copy(update={"edges": [*cal.edges, *edges], "handeye": results, "lint": [*cal.lint, *dropped]})
+    carried = cal.model_copy(update={"edges": [*cal.edges, *edges], "handeye": results, "lint": [*cal.lint, *dropped]})
+    return carried, active.version
 
 
 def _pair_fields(p: Mapping[str, object]) -> dict[str, object]:

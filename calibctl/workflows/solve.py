@@ -48,6 +48,7 @@ from calibctl.core.outliers import (
 from calibctl.core.solve import IntrinsicsSolution, get_model
 from calibctl.core.validation import HoldoutReport, ResidualBreakdown, agree_with_folds, validate_holdout
 from calibctl.errors import UsageError
+from calibctl.workflows.image_circles import checked_image_circle, with_circle
 from calibctl.workflows.lint import facts_from_document, lint_facts
 from calibctl.workflows.records import open_store
 
@@ -68,6 +69,7 @@ class SolveRequest:
     activate: bool = True
     drop_outliers: bool = False
     report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)
+    image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px, recorded for lint
 
 
 @dataclass(frozen=True)
@@ -201,6 +203,13 @@ def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
                                aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
 
 
+def _gates(session: CaptureSession, request: SolveRequest) -> list:
+    """The session's gates; a --image-circle given to the solve is recorded in the coverage gate."""
+    if request.image_circle is None or session.image_size is None:
+        return list(session.gates)
+    return with_circle(list(session.gates), checked_image_circle(request.image_circle, session.image_size))
+
+
 def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
     return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
                            dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
@@ -239,7 +248,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         rms_px=float(sol.rms_px),
         detector_rms_px=detector_rms,
         held_out=_held_out(holdout),
-        gates=list(session.gates),
+        gates=_gates(session, request),
         board=session.board,
         views=_views(session, sol, first, outliers, kept, dropped),
         rejected_corners=_rejected_corners(session, rejection),

@@ -34,40 +34,12 @@ POSITIONS = {
 COLUMNS = ("chain_seq", "chain_prev", "chain_hash", "signature", "key_id")
 
 
-def _columns() -> list[sa.Column]:
-    return [
-        sa.Column("chain_seq", sa.Integer(), nullable=True),
-        sa.Column("chain_prev", sa.String(64), nullable=True),
-        sa.Column("chain_hash", sa.String(64), nullable=True),
-        sa.Column("signature", sa.Text(), nullable=True),
-        sa.Column("key_id", sa.String(64), nullable=True),
-    ]
-
-
-def _backfill_without_triggers() -> None:
-    conn = op.get_bind()
-    if conn.dialect.name == "sqlite":
-        names = ", ".join(f"'trg_{t}_no_update'" for t in TABLES)
-        saved = conn.execute(sa.text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({names})")).all()
-        for name, _ in saved:
-            conn.execute(sa.text(f"DROP TRIGGER {name}"))
-        chain.backfill(conn)
-        for _, sql in saved:
-            conn.execute(sa.text(sql))
-        return
-    for table in TABLES:
-        conn.execute(sa.text(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable"))
-    chain.backfill(conn)
-    for table in TABLES:
-        conn.execute(sa.text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))
-
-
 def upgrade() -> None:
     # Plain ADD COLUMN / CREATE INDEX: no batch copy of the tables, so their triggers stay in place.
     for table in TABLES:
-        for column in _columns():
+        for column in chain.new_columns():
             op.add_column(table, column)
-    _backfill_without_triggers()
+    chain.backfill_without_triggers(op.get_bind(), ("board", "artifact", "event"))
     for table, (name, columns) in POSITIONS.items():
         op.create_index(name, table, columns, unique=True)
 

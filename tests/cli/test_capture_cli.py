@@ -85,6 +85,7 @@ def test_opencv_left_images_every_outcome_and_the_gates(db: str, left: Path) -> 
     assert all(g["passed"] for g in gates.values()) and session["status"] == "accepted"
     assert 1e-4 < gates["observability"]["value"] < 1e-3
     assert gates["tilt"]["value"] >= 3 and gates["coverage"]["value"] == 9 and gates["views"]["value"] == 13
+    assert 0.0 < gates["one_camera"]["value"] < gates["one_camera"]["threshold"]  # measured 1.10
     assert [s.session_id for s in sessions(db)] == [session["session_id"]]
 
 
@@ -422,6 +423,20 @@ def test_a_quoted_glob_captures_one_camera_of_a_stereo_folder(db: str) -> None:
     assert len(session["views"]) == 13 and all(o["status"] == "accepted" for o in session["outcomes"])
     stored = {s.session_id: s for s in sessions(db)}[session["session_id"]]
     assert [o.name for o in stored.outcomes] == [o["name"] for o in session["outcomes"]]
+
+
+@needs_datasets
+def test_a_folder_holding_both_cameras_is_rejected_at_capture_with_the_hint(db: str) -> None:
+    """The solve-time two-camera test runs at capture too, while the operator still holds the board."""
+    result = capture(db, LEFT_RIGHT)
+    assert result.exit_code == 1, result.output
+    out = " ".join(result.stdout.split())
+    assert "gate one_camera FAIL" in out and "these views come from two cameras" in out
+    assert "--source 'left*.jpg'" in out and "rejected (one_camera.two_cameras)" in out
+    session = sessions(db)[0]
+    assert session.status == "rejected" and [g.gate for g in session.gates if not g.passed] == ["one_camera"]
+    gate = next(g for g in session.gates if g.gate == "one_camera")
+    assert sorted(gate.detail["group_a"]) == sorted(p.name for p in LEFT_RIGHT.glob("left*.jpg"))
 
 
 @needs_datasets

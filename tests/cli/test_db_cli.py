@@ -12,7 +12,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.tamper import patch_stored_bytes
 
-HEAD = "0006_check_events"
+HEAD = "0007_chain_rigs_checks"
 runner = CliRunner()
 
 

@@ -145,3 +145,20 @@ def test_import_require_signature_without_trusted_keys_is_exit_2(keys: dict[str,
     result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(exported), "--require-signature")
     assert result.exit_code == 2 and "needs trusted keys" in result.stderr
     assert not (tmp_path / "t.db").exists()
+
+
+def test_rig_rollback_through_the_cli_is_signed_with_the_station_key(sqlite_url: str, keys: dict[str, Path]):
+    from tests.store.rig_documents import RIG, rig_calibration, rig_definition
+
+    env = {"CALIBCTL_SIGNING_KEY": str(keys["key"])}
+    with Store.open(sqlite_url, signer=signer_of(load_settings(env=env))) as store:
+        store.add_rig(rig_definition())
+        store.add_rig_calibration(rig_calibration(), activate=True, reason="rig solve", **WHO)
+        store.add_rig_calibration(rig_calibration(baseline_m=0.076), activate=True, reason="rig solve", **WHO)
+    rolled = run("--db", sqlite_url, "rig", "rollback", RIG, "--to", "1", "--reason", "bent mount", env=env)
+    assert rolled.exit_code == 0, rolled.output
+    checked = run("--db", sqlite_url, "db", "verify", "--require-signature", "--trusted-keys", str(keys["trusted"]),
+                  "--json", env=env)
+    assert checked.exit_code == 0, checked.output
+    report = json.loads(checked.stdout)
+    assert report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3  # rig versions, rig events

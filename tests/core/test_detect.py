@@ -279,3 +279,29 @@ def test_a_board_found_without_a_consistent_grid_is_not_called_no_board() -> Non
     assert outcome.status == BAD_GRID and outcome.corners_px is None
     assert outcome.reason == ("a 9x6 chessboard was found but its corners do not form a consistent grid "
                               "(blurred, bent or partly hidden?)")
+
+
+# ---- a large frame without a board: "no board", from searches on the reduced copy only ----------------
+
+def _large_board_free_frame(kind: str) -> np.ndarray:
+    """4000x3000 frames that cost the most in benchmarks/bench_detect.py section 2."""
+    width, height = 4000, 3000
+    if kind == "wrong-size chessboard":  # 39x29 inner corners of 100 px squares, no 9x6 board
+        return (np.kron(np.indices((30, 40)).sum(0) % 2, np.ones((100, 100))) * 255).astype(np.uint8)
+    rng = np.random.default_rng(0)
+    clutter = np.full((height, width), 128, np.uint8)
+    for _ in range(3000):
+        x, y = (int(v) for v in rng.integers(0, (width, height)))
+        w, h = (int(v) for v in rng.integers(20, 200, 2))
+        cv2.rectangle(clutter, (x, y), (x + w, y + h), int(rng.integers(0, 256)), -1)
+    return clutter
+
+
+@pytest.mark.parametrize("kind", ["wrong-size chessboard", "random rectangles"])
+def test_a_large_board_free_frame_is_no_board_after_two_searches_of_its_quarter_copy(kind: str) -> None:
+    frame = _large_board_free_frame(kind)
+    levels = search_levels(frame, DetectorSettings())
+    assert [(m, img.shape, k) for m, img, k in levels] == [("classic", (750, 1000), 4), ("sb", (750, 1000), 4)]
+    outcome = classify_array("big.png", "big.png", frame, "", BOARD)
+    assert outcome.status == NO_BOARD and outcome.corners_px is None and outcome.image_size == (4000, 3000)
+    assert outcome.reason == "no 9x6 chessboard found (classic and SB detectors); is the whole board in the frame?"

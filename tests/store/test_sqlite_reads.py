@@ -109,7 +109,7 @@ def test_a_tampered_artifact_is_refused_by_the_sqlite3_path_too(tmp_path: Path) 
     patch_stored_bytes(url, "calibration_artifacts", '"operator":"op"', '"operator":"OP"')
     with pytest.raises(IntegrityError) as exc:
         sqlite_reads.read(url, lambda s: s.list_artifacts(SERIAL), _no_fallback)
-    assert f"{SERIAL}@1 does not match its recorded sha256" in exc.value.message
+    assert exc.value.message == f"{SERIAL}@1 was changed after it was written (its chain hash no longer matches)"
 
 
 def test_a_forged_activation_of_a_rejected_version_is_left_to_the_store(store_url: str) -> None:
@@ -166,22 +166,64 @@ def test_a_read_leaves_the_store_folder_as_it_found_it(store_url: str, tmp_path:
     assert "store.db" in before and not [name for name in before if name.endswith(("-wal", "-shm"))]
 
 
-def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str) -> None:
-    """A tripwire: whatever check Store's reads make on a calibration row (content hash; a chain hash over
-    every column once reads check chains), the sqlite3 path must make too."""
+EDITS_UNDERNEATH = {
+    "station": "UPDATE calibration_artifacts SET station = 'elsewhere' WHERE version = 3",
+    "stored_at": "UPDATE calibration_artifacts SET stored_at = '2020-01-01 00:00:00.000000' WHERE version = 3",
+    "payload": "UPDATE calibration_artifacts SET payload = replace(payload, '\"operator\":\"op\"', '\"operator\":\"OP\"') "
+               "WHERE version = 3",
+    "content_sha256": "UPDATE calibration_artifacts SET content_sha256 = substr(content_sha256, 2) || '0' WHERE version = 3",
+    "chain_hash cleared": "UPDATE calibration_artifacts SET chain_hash = NULL WHERE version = 3",
+}
+
+
+def _outcome(work):
+    try:
+        return work()
+    except CalibctlError as exc:
+        return (type(exc), exc.message)
+
+
+@pytest.mark.parametrize("edit", EDITS_UNDERNEATH)
+@pytest.mark.parametrize("read", ["get_artifact", "list_artifacts"])
+def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str, edit: str, read: str) -> None:
+    """A tripwire: whatever check Store's reads make on a calibration row (the record's chain hash over every
+    column, then the columns against the document), the sqlite3 path must make too."""
     from tests.store.tamper import run_underneath
 
-    run_underneath(store_url, "UPDATE calibration_artifacts SET station = 'elsewhere' WHERE version = 3")
-
-    def outcome(work):
-        try:
-            return work()
-        except CalibctlError as exc:
-            return (type(exc), exc.message)
+    run_underneath(store_url, EDITS_UNDERNEATH[edit])
+    work = {"get_artifact": lambda s: s.get_artifact(SERIAL, 3), "list_artifacts": lambda s: s.list_artifacts(SERIAL)}[read]
 
     def via_store():
         with Store.open(store_url, create=False) as store:
-            return store.get_artifact(SERIAL, 3)
+            return work(store)
 
-    served = outcome(lambda: sqlite_reads.read(store_url, lambda s: s.get_artifact(SERIAL, 3), _no_fallback))
-    assert served == outcome(via_store)
+    served = _outcome(lambda: sqlite_reads.read(store_url, work, _no_fallback))
+    assert served == _outcome(via_store)
+    assert served[0] is IntegrityError and f"{SERIAL}@3 " in served[1]
+
+
+def test_a_check_event_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str) -> None:
+    from tests.store.tamper import run_underneath
+
+    run_underneath(store_url, "UPDATE check_events SET payload = replace(payload, '\"station\":\"st1\"', "
+                              "'\"station\":\"st9\"') WHERE passed = 0")
+
+    def via_store():
+        with Store.open(store_url, create=False) as store:
+            return store.checks(SERIAL)
+
+    served = _outcome(lambda: sqlite_reads.read(store_url, lambda s: s.checks(SERIAL), _no_fallback))
+    assert served == _outcome(via_store)
+    assert served[0] is IntegrityError and "does not match its recorded sha256" in served[1]
+
+
+def test_the_sqlite3_rows_of_calibrations_hold_the_columns_the_store_hashes(store_url: str) -> None:
+    """The chain hash is taken over every mapped column: a ``SELECT *`` row must hold exactly those."""
+    from calibctl.store.models import ArtifactRow
+
+    conn = sqlite3.connect(store_url.removeprefix("sqlite:///"))
+    try:
+        names = {r[1] for r in conn.execute("PRAGMA table_info(calibration_artifacts)").fetchall()}
+    finally:
+        conn.close()
+    assert names == {c.name for c in ArtifactRow.__table__.columns}

@@ -67,7 +67,7 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
     assert [o.name for o in stored.outcomes] == [v["file"] for v in truth["views"]]
     assert result.images_stored == len(stored.outcomes) == 12
     assert {g.gate: g.passed for g in stored.gates} == {"observability": True, "tilt": True, "coverage": True,
-                                                       "views": True}
+                                                       "views": True, "one_camera": True}
     assert all(g.reason is None and g.hint is None for g in stored.gates)
     by_file = {v["file"]: np.array(v["corners_px"]) for v in truth["views"]}
     for view in stored.views:

@@ -38,3 +38,23 @@ def test_a_tampered_active_record_is_a_finding_and_the_rest_is_linted(db_url: st
     assert [f.rule for f in results["CAM-B"].findings] == ["content-hash"]
     assert "CAM-B@1 was changed after it was written" in results["CAM-B"].findings[0].message
     assert not results["CAM-A@1"].failed
+
+
+def test_the_stored_lint_reads_only_the_fact_fields_and_gives_the_full_dumps_verdicts(monkeypatch):
+    """``_lint_stored`` dumps only ``FACT_FIELDS`` (a third of the cost): the findings are the full dump's."""
+    import json
+    from pathlib import Path
+
+    from calibctl.artifacts.calibration import CalibrationArtifact
+
+    limits = load_settings(env={}).lint
+    front = CalibrationArtifact.model_validate(json.loads(Path("fixtures/camera_front.json").read_text()))
+    arts = [calibration(), calibration(cx=400.0), calibration(status="rejected"), calibration(fx=90.0),
+            calibration(image_size=(4000, 3000)), front,
+            calibration().model_copy(update={"dist_coeffs": [-1.5, 0.0, 0.0, 0.0, 0.0]})]  # folds over
+    fast = [lint.lint_artifact(a, limits).as_json() for a in arts]
+    monkeypatch.setattr(lint, "FACT_FIELDS", None)  # include=None: the whole document
+    full = [lint.lint_artifact(a, limits).as_json() for a in arts]
+    assert fast == full
+    failing = {f["rule"] for r in full for f in r["findings"] if f["severity"] == "error"}
+    assert {"principal-point", "status", "distortion-foldover"} <= failing  # the cases differ in their verdicts
