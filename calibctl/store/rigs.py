@@ -24,7 +24,7 @@ from calibctl.errors import (
 )
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import UNCHECKED, known_list
+from calibctl.store.history import UNCHECKED, check_rollback, known_list
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
 
 T = TypeVar("T")
@@ -205,19 +205,20 @@ class RigStoreMixin:
     def active_rig_version(self, rig: str) -> int | None:
         return self._run(lambda s: _active(s, rig))
 
-    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str) -> RigActivation:
+    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str,
+                     expected_active: int | None | object = UNCHECKED) -> RigActivation:
+        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event.
+
+        Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
+        caller decided on (None: nothing was active); when another writer moved it since (a solve, a
+        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer one)."""
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
         def work(s: Session) -> RigActivation:
             counters.lock(s, "rig", rig)
-            statuses = _statuses(s, rig)
-            if to_version not in statuses:
-                raise NotFoundError(f"rig {rig} has no version {to_version}; versions: {known_list(list(statuses))}")
-            if statuses[to_version] != "accepted":
-                raise UsageError(f"rig {rig}@{to_version} is rejected and can never become active")
-            if _active(s, rig) == to_version:
-                raise UsageError(f"rig {rig}@{to_version} is already the active version; nothing to roll back")
+            check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
+                           f"calibctl rig history {rig}")
             decode_calibration(s.scalars(select(RigCalibrationRow).where(
                 RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
             return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
