@@ -119,8 +119,9 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
     key: tuple[Any, ...] | None = None
     seq, prev, last_id, last_version, signed = 0, None, 0, 0, False
     version_col = _VERSION.get(stream.name)
-    # a NULL id (rig definitions number theirs; a row inserted outside calibctl may have none) is walked too
-    newer = (t.c.id > since) | t.c.id.is_(None)
+    newer = t.c.id > since
+    if t.c.id.nullable:  # rig definitions: calibctl numbers them, a row inserted outside it may have no id
+        newer = newer | t.c.id.is_(None)
     for row in s.execute(select(t).where(newer).order_by(*order).execution_options(yield_per=500)).mappings():
         audit.records_checked += 1
         label = stream.label(row)

@@ -122,3 +122,20 @@ def test_a_head_kept_elsewhere_catches_a_rechained_definition(rigs: str):
     with Store.open(rigs) as store:
         assert store.verify().problems == []
         assert any("rewritten or truncated" in p for p in store.verify(since=head).problems)
+
+
+def test_a_head_printed_before_0008_checks_the_definitions_in_full(rigs: str):
+    from calibctl.store import audit as audit_module
+
+    with Store.open(rigs) as store:
+        full = store.verify()
+    old = ("artifact", "board", "event", "rig", "rig_event", "check")  # the streams a head named in 0007
+    ids = ".".join(str(full.last_ids.get(name, 0)) for name in old)
+    head = f"{audit_module.HEAD_PREFIX}:{ids}:{audit_module._digest({n: full.heads[n] for n in old if n in full.heads})}"
+    with Store.open(rigs) as store:
+        resumed = store.verify(since=head)
+    assert resumed.problems == [] and resumed.records_checked == 2  # the two definitions
+    _widen_tolerance(rigs)
+    with Store.open(rigs) as store:
+        assert store.verify(since=head).problems == [
+            f"rig definition {RIG} was changed after it was written (its chain hash no longer matches)"]
