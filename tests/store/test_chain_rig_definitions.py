@@ -139,3 +139,14 @@ def test_a_head_printed_before_0008_checks_the_definitions_in_full(rigs: str):
     with Store.open(rigs) as store:
         assert store.verify(since=head).problems == [
             f"rig definition {RIG} was changed after it was written (its chain hash no longer matches)"]
+
+
+def test_the_command_line_refuses_a_changed_definition_with_exit_1(rigs: str):
+    from typer.testing import CliRunner
+
+    from calibctl.cli.main import app
+
+    _widen_tolerance(rigs)
+    result = CliRunner().invoke(app, ["--db", rigs, "rig", "history", RIG], terminal_width=200)
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert f"rig definition {RIG} was changed after it was written" in " ".join(result.stderr.split())
