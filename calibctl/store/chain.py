@@ -10,9 +10,10 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
 one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
-one stream, check events per serial. Editing, deleting, inserting or reordering any record breaks the
-chain at the next record; rewriting a whole stream's tail is caught by signatures (the forger has
-no key) or by a chain head kept elsewhere (``db verify --head``).
+one stream, check events per serial; since 0008 rig definitions, one stream. Editing, deleting,
+inserting or reordering any record breaks the chain at the next record; rewriting a whole stream's
+tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
+(``db verify --head``).
 
 A new table joins with a ``Stream`` entry in ``STREAMS`` and a call to ``link`` before its insert.
 The caller holds the stream's lock (a version counter row) so concurrent writers never fork it.
@@ -38,6 +39,7 @@ from calibctl.store.models import (
     EventRow,
     RigCalibrationRow,
     RigEventRow,
+    RigRow,
 )
 
 CHAIN_COLUMNS = frozenset({"chain_seq", "chain_prev", "chain_hash", "signature", "key_id"})
@@ -92,6 +94,12 @@ STREAMS: dict[str, Stream] = {
     "check": Stream(
         "check", CheckEventRow, ("serial",), "payload_sha256",
         lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}", ("check", "chain_seq"),
+    ),
+    # revision 0008: rig definitions (members, root, design baselines and their tolerances, which rig lint
+    # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
+    "rig_definition": Stream(
+        "rig_definition", RigRow, (), "payload_sha256", lambda r: f"rig definition {r['name']}",
+        ("chain", "chain_seq"),
     ),
 }
 """The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
@@ -174,21 +182,29 @@ def new_columns() -> list[Column[Any]]:
             Column("key_id", String(64), nullable=True)]
 
 
-def backfill_without_triggers(conn: Connection, names: tuple[str, ...]) -> None:
-    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored."""
+def backfill_without_triggers(conn: Connection, names: tuple[str, ...],
+                              prepare: Callable[[Connection], None] | None = None) -> None:
+    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored;
+    ``prepare`` runs first, inside the same window (0008 numbers the rig definitions there)."""
+
+    def work() -> None:
+        if prepare is not None:
+            prepare(conn)
+        backfill(conn, names)
+
     tables = [STREAMS[n].table.name for n in names]
     if conn.dialect.name == "sqlite":
         listed = ", ".join(f"'trg_{t}_no_update'" for t in tables)
         saved = conn.execute(text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")).all()
         for name, _ in saved:
             conn.execute(text(f"DROP TRIGGER {name}"))
-        backfill(conn, names)
+        work()
         for _, sql in saved:
             conn.execute(text(sql))
         return
     for table in tables:
         conn.execute(text(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable"))
-    backfill(conn, names)
+    work()
     for table in tables:
         conn.execute(text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))
 
