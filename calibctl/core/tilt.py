@@ -14,6 +14,10 @@ What is done instead (``session_tilts``):
      the real opencv-left-right views by 2 deg). When the session is too flat to tell f, f is held at
      the image diagonal and c at the centre (a flat board's tilt does not depend on f: K^-1 H keeps
      its columns orthogonal for any f).
+     When that small model does not explain the corners (fit RMS above ``FISHEYE_TRY_RMS_PX``, or no
+     plausible fit), the session's equidistant fisheye lens (calibctl.core.fisheye_solve) is fitted too
+     and kept when it fits better: k1 and k2 cannot bend to a 150-190 deg lens past ~60 deg off-axis, and
+     tilt read through them was up to 35 deg off on circular renders (BENCHMARKS.md section 7).
   3. Each view's pose through that lens is the better of the solve's and both planar (IPPE) solutions.
      Its tilt is the angle between the normal of its fitted pose and the optical axis.
   4. Each view's one-sigma on that normal is propagated through the pose Jacobian (intrinsics held)
