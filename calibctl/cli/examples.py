@@ -71,7 +71,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig lint": ("calibctl rig lint stereo-7", "calibctl rig lint stereo-7@2 --json"),
     "rig history": ("calibctl rig history stereo-7", "calibctl rig history stereo-7 --json"),
     "rig show": ("calibctl rig show stereo-7", "calibctl rig show stereo-7@2 --json"),
-    "rig rollback": ("calibctl rig rollback stereo-7 --to 1 --reason 'v2 solved on a bent mount'",),
+    "rig rollback": ("calibctl rig rollback stereo-7 --to 1 --reason 'v2 solved on a bent mount'",
+                     "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "

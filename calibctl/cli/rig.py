@@ -285,12 +285,15 @@ def rollback(
     name: Annotated[str, typer.Argument(metavar="RIG")],
     to: Annotated[int, typer.Option("--to", help="Accepted version to make active.")],
     reason: Annotated[str, typer.Option("--reason", help="Why.")],
+    expect_active: Annotated[int | None, typer.Option(
+        "--expect-active", help="The active rig version you decided on; refused if it has changed since.")] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Make an earlier accepted rig version active again (appends an event)."""
+    """Make an earlier accepted rig version active again (appends an event). A newer version stored or
+    activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
     from calibctl.workflows import rig_lint
 
-    event = rig_lint.rollback(state(ctx).settings(), name, to, reason)
+    event = rig_lint.rollback(state(ctx).settings(), name, to, reason, expected_active=expect_active)
     if wants_json(ctx, json_output):
         emit_json(event)
         return

@@ -261,6 +261,8 @@ def _undistorted(corners_px: np.ndarray, lens: SessionLens | None) -> np.ndarray
     if lens is None or not np.any(lens.dist_coeffs):
         return corners_px
     K = lens.camera_matrix
+    if lens.fisheye:
+        return cv2.fisheye.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(-1, 2)
     return cv2.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(-1, 2)
 
 

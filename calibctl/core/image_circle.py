@@ -147,18 +147,25 @@ def circle_problem(circle: tuple[float, float, float], image_size: tuple[int, in
 
 def cells_inside(circle: ImageCircle, image_size: tuple[int, int], grid: int) -> set[tuple[int, int]]:
     """(row, col) cells of a grid x grid split of the (W, H) image more than half inside the circle."""
+    mask = cells_inside_mask(circle, image_size, (grid, grid))
+    return {(int(r), int(c)) for r, c in zip(*np.nonzero(mask), strict=True)}
+
+
+def cells_inside_mask(circle: ImageCircle, image_size: tuple[int, int], cells: tuple[int, int]) -> np.ndarray:
+    """(rows, cols) bool: which cells of a cols x rows split of the (W, H) image are more than half inside
+    the circle (the cells a circular fisheye images; the others it cannot)."""
     w, h = image_size
+    cols, rows = cells
     t = (np.arange(CELL_SAMPLES) + 0.5) / CELL_SAMPLES
-    cells = set()
-    for row in range(grid):
-        for col in range(grid):
-            u = (col + t) * w / grid - 0.5
-            v = (row + t) * h / grid - 0.5
+    mask = np.zeros((rows, cols), dtype=bool)
+    for row in range(rows):
+        for col in range(cols):
+            u = (col + t) * w / cols - 0.5
+            v = (row + t) * h / rows - 0.5
             uu, vv = np.meshgrid(u, v)
             inside = np.hypot(uu - circle.cx_px, vv - circle.cy_px) <= circle.radius_px
-            if inside.mean() > CELL_INSIDE_MIN:
-                cells.add((row, col))
-    return cells
+            mask[row, col] = inside.mean() > CELL_INSIDE_MIN
+    return mask
 
 
 def corners_inside(corners_px: np.ndarray, circle: ImageCircle) -> np.ndarray:

@@ -14,6 +14,10 @@ What is done instead (``session_tilts``):
      the real opencv-left-right views by 2 deg). When the session is too flat to tell f, f is held at
      the image diagonal and c at the centre (a flat board's tilt does not depend on f: K^-1 H keeps
      its columns orthogonal for any f).
+     When that small model does not explain the corners (fit RMS above ``FISHEYE_TRY_RMS_PX``, or no
+     plausible fit), the session's equidistant fisheye lens (calibctl.core.fisheye_solve) is fitted too
+     and kept when it fits better: k1 and k2 cannot bend to a 150-190 deg lens past ~60 deg off-axis, and
+     tilt read through them was up to 35 deg off on circular renders (BENCHMARKS.md section 7).
   3. Each view's pose through that lens is the better of the solve's and both planar (IPPE) solutions.
      Its tilt is the angle between the normal of its fitted pose and the optical axis.
   4. Each view's one-sigma on that normal is propagated through the pose Jacobian (intrinsics held)
@@ -41,6 +45,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.covariance import intrinsic_covariance
+from calibctl.core.fisheye_model import fisheye_pose, refine_fisheye_pose
 
 MIN_TILT_CORNERS = 8
 TILT_NOISE_FLOOR_PX = 0.2  # corner noise assumed at least this, even when the session fits better
@@ -50,6 +55,8 @@ _LENS_FLAGS = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | c
                | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
 _MAX_CENTRE_SHIFT_FRAC = 0.2  # a principal point farther off the centre than this is a failed fit
 _MAX_LENS_RMS_PX = 10.0  # above this the small lens model explains nothing; fall back to a pinhole
+# above this fit RMS the small model is tried against the equidistant fisheye lens, the better one kept
+FISHEYE_TRY_RMS_PX = 1.0
 # c is freed only this many of OpenCV's sigmas off the centre: that sigma ignores the small model's own
 # error (no k3), which moved c 8 "sigma" on one rendered session; real off-centre lenses show 15-50
 _CENTRE_SIGNIFICANT_SIGMA = 10.0
@@ -65,8 +72,13 @@ class SessionLens:
 
     camera_matrix: np.ndarray
     dist_coeffs: np.ndarray
-    source: str  # "session" (f, k1, k2 fitted), "nominal" (f = diagonal, k1, k2 fitted), "given", "pinhole"
+    source: str  # "session" (f, k1, k2 fitted), "nominal" (f = diagonal, k1, k2 fitted), "given", "pinhole",
+    # "fisheye" (equidistant fx fy cx cy k1..k4 fitted: dist_coeffs is then (4,) cv2.fisheye order)
     noise_px: float = TILT_NOISE_FLOOR_PX
+
+    @property
+    def fisheye(self) -> bool:
+        return self.source == "fisheye"
 
     @property
     def focal_px(self) -> float:
@@ -106,9 +118,8 @@ def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarr
     Args:
         object_points: (N, 3) float64 board frame. rvec, tvec: (3,) the view's fitted pose.
     """
-    obj = np.asarray(object_points, np.float64).reshape(-1, 1, 3)
-    _, J = cv2.projectPoints(obj, rvec, tvec, lens.camera_matrix, lens.dist_coeffs)
-    info = J[:, :6].T @ J[:, :6]
+    _, J = _project(object_points, rvec, tvec, lens)
+    info = J.T @ J
     if not np.isfinite(info).all() or np.linalg.cond(info) > 1e15:
         return math.inf
     cov_r = lens.noise_px ** 2 * np.linalg.inv(info)[:3, :3]
@@ -117,6 +128,19 @@ def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarr
     eps = 1e-7
     Jn = np.column_stack([(cv2.Rodrigues(r0 + eps * e)[0][:, 2] - n0) / eps for e in np.eye(3)])
     return math.degrees(math.sqrt(max(0.0, float(np.trace(Jn @ cov_r @ Jn.T)))))
+
+
+def _project(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, lens: SessionLens
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) px of the board points through ``lens`` and the (2N, 6) Jacobian on [rvec tvec]."""
+    obj = np.asarray(object_points, np.float64).reshape(-1, 1, 3)
+    r = np.asarray(rvec, np.float64).reshape(3, 1)
+    t = np.asarray(tvec, np.float64).reshape(3, 1)
+    if lens.fisheye:  # cv2.fisheye's Jacobian: [f(2) c(2) k(4) | om(3) T(3) | alpha]
+        px, J = cv2.fisheye.projectPoints(obj, r, t, lens.camera_matrix, lens.dist_coeffs)
+        return px.reshape(-1, 2), J[:, 8:14]
+    px, J = cv2.projectPoints(obj, r, t, lens.camera_matrix, lens.dist_coeffs)
+    return px.reshape(-1, 2), J[:, :6]
 
 
 def nominal_camera(image_size: tuple[int, int], focal_px: float) -> np.ndarray:
@@ -152,7 +176,15 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
     plausible = fit is not None and (
         fit[0] < _MAX_LENS_RMS_PX and 0.2 * diag <= fit[1][0, 0] <= 5 * diag and abs(fit[2][0]) < 2.0
         and bool(np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size))))
-    if not plausible:  # the small model did not fit: read tilt through a pinhole
+    if not plausible or (fit is not None and fit[0] > FISHEYE_TRY_RMS_PX):
+        fisheye = _fit_fisheye(object_points, image_points, image_size)
+        if fisheye is not None and (not plausible or (fit is not None and fisheye[0] < fit[0])):
+            rms, K, D, rvecs, tvecs = fisheye
+            lens = SessionLens(K, D, "fisheye", max(TILT_NOISE_FLOOR_PX, rms / math.sqrt(2.0)))
+            poses = [best_pose(o, i, lens, r, t)
+                     for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)]
+            return lens, [r for r, _ in poses], [t for _, t in poses]
+    if not plausible:  # neither lens model fitted: read tilt through a pinhole
         lens = SessionLens(K0, np.zeros(5), "pinhole", TILT_NOISE_FLOOR_PX)
         poses = [best_pose(o, i, lens) for o, i in zip(object_points, image_points, strict=True)]
         return lens, [r for r, _ in poses], [t for _, t in poses]
@@ -164,6 +196,26 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
 
 
 _Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
+
+
+def _fit_fisheye(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
+                 image_size: tuple[int, int]) -> _Fit | None:
+    """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.fisheye_solve), or None
+    when it cannot be initialised, fails or lands off the image."""
+    from calibctl.core.fisheye_solve import solve_fisheye  # only for sessions the small model cannot explain
+    from calibctl.core.solve import MODELS
+    from calibctl.errors import CalibctlError
+
+    try:
+        sol = solve_fisheye(object_points, image_points, image_size, MODELS["fisheye"])
+    except (CalibctlError, cv2.error, np.linalg.LinAlgError):
+        return None
+    K = np.asarray(sol.camera_matrix, np.float64)
+    if not (math.isfinite(sol.rms_px) and sol.rms_px < _MAX_LENS_RMS_PX and bool(np.all(
+            np.abs(K[:2, 2] - nominal_camera(image_size, 1.0)[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)))):
+        return None
+    return (float(sol.rms_px), K, np.asarray(sol.dist_coeffs, np.float64).copy(),
+            [np.ravel(r) for r in sol.rvecs], [np.ravel(t) for t in sol.tvecs])
 
 
 def _calibrate(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
@@ -206,18 +258,27 @@ def best_pose(object_points: np.ndarray, image_points: np.ndarray, lens: Session
     img = np.asarray(image_points, np.float64).reshape(-1, 2)
     candidates = [] if rvec is None or tvec is None else [(np.ravel(rvec), np.ravel(tvec))]
     with contextlib.suppress(cv2.error):
-        _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, lens.camera_matrix, lens.dist_coeffs,
-                                                 flags=cv2.SOLVEPNP_IPPE)
+        if lens.fisheye:  # IPPE on the corners turned into pinhole rays (normalised, K = I)
+            rays = cv2.fisheye.undistortPoints(img.reshape(-1, 1, 2), lens.camera_matrix, lens.dist_coeffs)
+            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, rays.reshape(-1, 2), np.eye(3), None,
+                                                     flags=cv2.SOLVEPNP_IPPE)
+        else:
+            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, lens.camera_matrix, lens.dist_coeffs,
+                                                     flags=cv2.SOLVEPNP_IPPE)
         candidates += [(np.ravel(r), np.ravel(t)) for r, t in zip(rvecs, tvecs, strict=True)]
+    if not candidates and lens.fisheye:
+        pose = fisheye_pose(obj, img, lens.camera_matrix, lens.dist_coeffs)
+        candidates = [] if pose is None else [pose]
     if not candidates:
         _, r, t = cv2.solvePnP(obj, img, lens.camera_matrix, lens.dist_coeffs)
         candidates = [(np.ravel(r), np.ravel(t))]
 
     def error(pose: tuple[np.ndarray, np.ndarray]) -> float:
-        proj, _ = cv2.projectPoints(obj, pose[0], pose[1], lens.camera_matrix, lens.dist_coeffs)
-        return float(np.sum((proj.reshape(-1, 2) - img) ** 2))
+        return float(np.sum((_project(obj, pose[0], pose[1], lens)[0] - img) ** 2))
 
     r, t = min(candidates, key=error)
+    if lens.fisheye:
+        return refine_fisheye_pose(obj, img, lens.camera_matrix, lens.dist_coeffs, r, t)
     r, t = cv2.solvePnPRefineLM(obj, img, lens.camera_matrix, lens.dist_coeffs, r.copy(), t.copy())
     return np.asarray(r, np.float64).ravel(), np.asarray(t, np.float64).ravel()
 

@@ -4,8 +4,8 @@ Checked for every chained stream (see ``chain``): positions 1..N with no gap or 
 record's ``chain_prev`` equal to the hash of the record before it, its ``chain_hash`` recomputed from
 its columns, ids increasing along the chain (reads order events by id), versions strictly increasing,
 the version counter equal to the highest version, and the signature by a trusted key. The streams
-are camera artifacts, board revisions, activation events, and (revision 0007) rig versions, rig
-activation events and check events. Activation
+are camera artifacts, board revisions, activation events, (revision 0007) rig versions, rig
+activation events and check events, and (revision 0008) rig definitions. Activation
 events must name an accepted artifact and the version that was active before them. Documents are
 re-hashed by ``codec`` (content hash re-derived, and column copies).
 
@@ -41,7 +41,8 @@ from calibctl.store.models import (
 
 HEAD_PREFIX = "calibctl-head-v1"
 _DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
-                                                 "rig": rigs.decode_calibration, "check": codec.decode_check}
+                                                 "rig": rigs.decode_calibration, "check": codec.decode_check,
+                                                 "rig_definition": rigs.decode_definition}
 _VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 
@@ -118,10 +119,13 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
     key: tuple[Any, ...] | None = None
     seq, prev, last_id, last_version, signed = 0, None, 0, 0, False
     version_col = _VERSION.get(stream.name)
-    for row in s.execute(select(t).where(t.c.id > since).order_by(*order).execution_options(yield_per=500)).mappings():
+    newer = t.c.id > since
+    if t.c.id.nullable:  # rig definitions: calibctl numbers them, a row inserted outside it may have no id
+        newer = newer | t.c.id.is_(None)
+    for row in s.execute(select(t).where(newer).order_by(*order).execution_options(yield_per=500)).mappings():
         audit.records_checked += 1
         label = stream.label(row)
-        audit.last_ids[stream.name] = max(audit.last_ids.get(stream.name, 0), int(row["id"]))
+        audit.last_ids[stream.name] = max(audit.last_ids.get(stream.name, 0), int(row["id"] or 0))
         if stream.key_of(row) != key:
             key = stream.key_of(row)
             seq, prev = start.get(key, (0, None))
@@ -140,7 +144,7 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int, start: dic
         actual = chain.record_hash(stream, key, int(row["chain_seq"]), row["chain_prev"], chain.body(row))
         if actual != row["chain_hash"]:
             audit.problems.append(f"{label} was changed after it was written (its chain hash no longer matches)")
-        if int(row["id"]) <= last_id:
+        if int(row["id"] or 0) <= last_id:
             audit.problems.append(f"{label} is out of order (its id is lower than the record before it)")
         if version_col is not None:
             if int(row[version_col]) <= last_version:

@@ -10,9 +10,10 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
 one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
-one stream, check events per serial. Editing, deleting, inserting or reordering any record breaks the
-chain at the next record; rewriting a whole stream's tail is caught by signatures (the forger has
-no key) or by a chain head kept elsewhere (``db verify --head``).
+one stream, check events per serial; since 0008 rig definitions, one stream. Editing, deleting,
+inserting or reordering any record breaks the chain at the next record; rewriting a whole stream's
+tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
+(``db verify --head``).
 
 The hashing itself (``body``, ``record_hash``, ``row_problem``) is in ``chain_hash``, which imports no
 sqlalchemy (the sqlite3 read path checks with it). A new table joins with a ``StreamSpec`` in
@@ -22,6 +23,7 @@ The caller holds the stream's lock (a version counter row) so concurrent writers
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,6 +48,7 @@ from calibctl.store.models import (
     EventRow,
     RigCalibrationRow,
     RigEventRow,
+    RigRow,
 )
 
 __all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
@@ -64,7 +67,8 @@ class Stream(StreamSpec):
 
 
 _MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
-                                  "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow}
+                                  "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow,
+                                  "rig_definition": RigRow}
 STREAMS: dict[str, Stream] = {
     name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
 }
@@ -130,20 +134,28 @@ def new_columns() -> list[Column[Any]]:
             Column("key_id", String(64), nullable=True)]
 
 
-def backfill_without_triggers(conn: Connection, names: tuple[str, ...]) -> None:
-    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored."""
+def backfill_without_triggers(conn: Connection, names: tuple[str, ...],
+                              prepare: Callable[[Connection], None] | None = None) -> None:
+    """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored;
+    ``prepare`` runs first, inside the same window (0008 numbers the rig definitions there)."""
+
+    def work() -> None:
+        if prepare is not None:
+            prepare(conn)
+        backfill(conn, names)
+
     tables = [STREAMS[n].table.name for n in names]
     if conn.dialect.name == "sqlite":
         listed = ", ".join(f"'trg_{t}_no_update'" for t in tables)
         saved = conn.execute(text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")).all()
         for name, _ in saved:
             conn.execute(text(f"DROP TRIGGER {name}"))
-        backfill(conn, names)
+        work()
         for _, sql in saved:
             conn.execute(text(sql))
         return
     for table in tables:
         conn.execute(text(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable"))
-    backfill(conn, names)
+    work()
     for table in tables:
         conn.execute(text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))

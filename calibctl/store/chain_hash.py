@@ -53,6 +53,10 @@ SPECS: dict[str, StreamSpec] = {
                             ("chain", "chain_seq")),
     "check": StreamSpec("check", ("serial",), "payload_sha256",
                         lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}", ("check", "chain_seq")),
+    # revision 0008: rig definitions (members, root, design baselines and their tolerances, which rig lint
+    # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
+    "rig_definition": StreamSpec("rig_definition", (), "payload_sha256", lambda r: f"rig definition {r['name']}",
+                                 ("chain", "chain_seq")),
 }
 """The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
 

@@ -40,17 +40,30 @@ UNCHECKED = object()
 """``expected_active`` default: the caller did not say which active version it saw (no compare-and-set)."""
 
 
-def check_expected_active(serial: str, to_version: int, active: int | None, expected: int | None | object) -> None:
-    """Refuse a rollback decided on a view of ``serial`` that another writer has changed since."""
-    if expected is UNCHECKED or expected == active:
-        return
-    seen = f"v{expected}" if expected is not None else "no active version"
-    now = f"v{active}" if active is not None else "no active version"
-    raise StaleActiveVersionError(
-        f"{serial}: the active version changed underneath this rollback (it saw {seen}, it is now {now}); "
-        f"nothing rolled back to v{to_version}",
-        f"look at `calibctl history {serial}` and roll back again if v{to_version} is still what you want",
-    )
+def check_rollback(label: str, to_version: int, statuses: dict[int, str], active: int | None,
+                   expected: int | None | object, history_command: str) -> None:
+    """What every rollback (a camera's or a rig's) checks under its lock before it appends its event:
+    ``to_version`` is stored and accepted, the active version is still the one the caller decided on
+    (compare-and-set: ``expected``, None = nothing was active, UNCHECKED = not asked), and it is not
+    ``to_version`` already. ``label`` names the subject (``CAM-1``, ``rig R1``); ``history_command``
+    is the command that shows its versions."""
+    if to_version not in statuses:
+        raise NotFoundError(f"{label} has no version {to_version}; versions: {known_list(list(statuses))}",
+                            f"see `{history_command}`")
+    if statuses[to_version] != "accepted":
+        accepted = [v for v, st in statuses.items() if st == "accepted"]
+        listing = f"accepted versions: {known_list(accepted)}" if accepted else "no version is accepted"
+        raise UsageError(f"{label}@{to_version} is rejected and can never become active; {listing}")
+    if expected is not UNCHECKED and expected != active:
+        seen = f"v{expected}" if expected is not None else "no active version"
+        now = f"v{active}" if active is not None else "no active version"
+        raise StaleActiveVersionError(
+            f"{label}: the active version changed underneath this rollback (it saw {seen}, it is now {now}); "
+            f"nothing rolled back to v{to_version}",
+            f"look at `{history_command}` and roll back again if v{to_version} is still what you want",
+        )
+    if active == to_version:
+        raise UsageError(f"{label}@{to_version} is already the active version; nothing to roll back")
 
 
 def statuses(s: Session, serial: str) -> dict[int, str]:

@@ -202,15 +202,22 @@ class ImageRow(Base):
     __table_args__ = (Index(None, "expires_at"),)
 
 
-class RigRow(Base):
-    """One registered rig (revision 0003): members, root and design values; immutable."""
+class RigRow(ChainColumns, Base):
+    """One registered rig (revision 0003): members, root and design values; immutable.
+
+    Chained since revision 0008 in one stream for the store (``chain.STREAMS["rig_definition"]``).
+    ``id`` is its position in that stream, given by calibctl under the stream's counter lock (the name
+    stays the primary key the rig tables refer to); nullable only because the migration adds it."""
 
     __tablename__ = "rig_definitions"
 
     name: Mapped[str] = mapped_column(String(SERIAL_LEN), primary_key=True)
+    id: Mapped[int | None] = mapped_column(Integer, nullable=True)
     created_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (Index(None, "id", unique=True), Index(None, "chain_seq", unique=True))
 
 
 class RigSessionRow(Base):

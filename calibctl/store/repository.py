@@ -414,20 +414,8 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
 
         def work(s: Session) -> ActivationEvent:
             counters.lock(s, "artifact", serial)
-            statuses = history.statuses(s, serial)
-            if to_version not in statuses:
-                raise NotFoundError(
-                    f"{serial} has no version {to_version}; versions: {history.known_list(list(statuses))}",
-                    f"see `calibctl history {serial}`",
-                )
-            if statuses[to_version] != "accepted":
-                accepted = [v for v, st in statuses.items() if st == "accepted"]
-                listing = f"accepted versions: {history.known_list(accepted)}" if accepted else "no version is accepted"
-                raise UsageError(f"{serial}@{to_version} is rejected and can never become active; {listing}")
-            active = history.active_in(s, serial)
-            history.check_expected_active(serial, to_version, active, expected_active)
-            if active == to_version:
-                raise UsageError(f"{serial}@{to_version} is already the active version; nothing to roll back")
+            history.check_rollback(serial, to_version, history.statuses(s, serial), history.active_in(s, serial),
+                                   expected_active, f"calibctl history {serial}")
             codec.decode_artifact(history.artifact_row(s, serial, to_version), by_chain=True)  # never activate tampered bytes
             return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)
 

@@ -2,7 +2,9 @@
 append-only activation log. Same rules as the camera tables: every read re-checks the sha256, rows are
 immutable in the database (revision 0003's triggers), the active version is the latest event's, and
 versions (per rig) and activation events (one log) are hash-chained and signed like the cameras'
-(revision 0007, ``chain.STREAMS["rig"]`` and ``["rig_event"]``).
+(revision 0007, ``chain.STREAMS["rig"]`` and ``["rig_event"]``), and so are the definitions (revision
+0008, ``["rig_definition"]``, one log). Rig sessions are not chained, like the cameras' capture
+sessions (docs/trust.md says why).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from calibctl.errors import (
 )
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import UNCHECKED, known_list
+from calibctl.store.history import UNCHECKED, check_rollback, known_list
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
 
 if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
@@ -37,6 +39,21 @@ def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> 
     if actual != recorded:
         raise codec._mismatch(what, recorded, actual)
     return codec._parse(model, payload, what)
+
+
+def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
+    """The stored definition after its payload hash check and, ``by_chain`` (every read), its chain hash:
+    a design tolerance widened with the payload hash recomputed is refused before rig lint trusts it."""
+    from calibctl.artifacts.rig import RigDefinition
+
+    if by_chain:
+        problem = chain.row_problem(chain.STREAMS["rig_definition"], row)
+        if problem is not None:
+            raise IntegrityError(problem, codec.TAMPER_HINT)
+    rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {row.name}")
+    if rig.name != row.name:
+        raise IntegrityError(f"rig {row.name}: the stored name disagrees with the stored document", codec.TAMPER_HINT)
+    return rig
 
 
 def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
@@ -96,28 +113,26 @@ class RigStoreMixin:
         payload = codec.canonical_text(rig)
 
         def work(s: Session) -> RigDefinition:
+            position = counters.next_value(s, "chain", "rig_definition")  # the stream's lock until commit
             if s.get(RigRow, rig.name) is not None:
                 raise AlreadyExistsError(f"rig {rig.name} is already registered",
                                          "rig definitions are immutable: register the new layout under a new name")
-            s.add(RigRow(name=rig.name, created_at=rig.created_at, payload=payload,
-                         payload_sha256=sha256_hex(payload.encode("utf-8"))))
+            row = RigRow(name=rig.name, id=position, created_at=rig.created_at, payload=payload,
+                         payload_sha256=sha256_hex(payload.encode("utf-8")))
+            chain.link(s, chain.STREAMS["rig_definition"], row, self.signer)
+            s.add(row)
             return rig
 
         return self._run(work, write=True)
 
     def get_rig(self, name: str) -> RigDefinition:
-        from calibctl.artifacts.rig import RigDefinition
-
         def work(s: Session) -> RigDefinition:
             row = s.get(RigRow, name)
             if row is None:
                 known = list(s.scalars(select(RigRow.name).order_by(RigRow.name)))
                 listing = f"known: {known_list(known)}" if known else "no rig is registered yet"
                 raise NotFoundError(f"unknown rig '{name}'; {listing}", "register it with `calibctl rig add`")
-            rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {name}")
-            if rig.name != row.name:
-                raise IntegrityError(f"rig {name}: the stored name disagrees with the stored document", codec.TAMPER_HINT)
-            return rig
+            return decode_definition(row, by_chain=True)
 
         return self._run(work)
 
@@ -214,19 +229,20 @@ class RigStoreMixin:
     def active_rig_version(self, rig: str) -> int | None:
         return self._run(lambda s: _active(s, rig))
 
-    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str) -> RigActivation:
+    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str,
+                     expected_active: int | None | object = UNCHECKED) -> RigActivation:
+        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event.
+
+        Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
+        caller decided on (None: nothing was active); when another writer moved it since (a solve, a
+        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer one)."""
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
         def work(s: Session) -> RigActivation:
             counters.lock(s, "rig", rig)
-            statuses = _statuses(s, rig)
-            if to_version not in statuses:
-                raise NotFoundError(f"rig {rig} has no version {to_version}; versions: {known_list(list(statuses))}")
-            if statuses[to_version] != "accepted":
-                raise UsageError(f"rig {rig}@{to_version} is rejected and can never become active")
-            if _active(s, rig) == to_version:
-                raise UsageError(f"rig {rig}@{to_version} is already the active version; nothing to roll back")
+            check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
+                           f"calibctl rig history {rig}")
             decode_calibration(s.scalars(select(RigCalibrationRow).where(
                 RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
             return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)

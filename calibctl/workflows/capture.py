@@ -71,6 +71,9 @@ from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, 
 
 MAX_WORKERS = 8
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
+# a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
+# circular fisheye can stop once the cells inside the circle are covered (the corners are never lit)
+CIRCLE_EVERY_FRAMES = 10
 IMAGE_BATCH = 16  # folder images per store transaction (one SQLite commit, one WAL fsync, per batch)
 _FRAME_STATUS = {KEPT: "accepted", "no_board": "no_board", "blurred": "blurred",
                  "near_duplicate": "near_duplicate", "moving": "skipped", "adds_nothing": "skipped"}
@@ -285,6 +288,18 @@ class _StreamState:
         self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
         self.max_gray: np.ndarray | None = None
+        self.frames_seen = 0
+
+    def _look_for_circle(self, size: tuple[int, int]) -> None:
+        """The circle the frames so far show (None: the corners were lit, no circle); the live gates count
+        coverage inside it from now on. It may grow as more of the scene is lit; the session's own circle
+        is found again from all the frames when it is stored."""
+        assert self.selector is not None and self.max_gray is not None
+        found = detect_image_circle(self.max_gray, size)
+        if found != self.selector.settings.image_circle:
+            self.selector.settings = replace(self.selector.settings, image_circle=found)
+            if self.selector.kept:
+                self.progress = self.selector.progress()
 
     def take(self, frame: sources.Frame) -> FrameDecision | None:
         """Detect, select and (when kept) store one frame; None when it has the wrong size."""
@@ -301,6 +316,9 @@ class _StreamState:
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
         self.max_gray = accumulate_max(self.max_gray, gray[::2, ::2])
+        self.frames_seen += 1
+        if self.image_circle is None and self.frames_seen % CIRCLE_EVERY_FRAMES == 0:
+            self._look_for_circle(size)
         detection, why = self.detector.detect(gray)
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:

@@ -179,15 +179,21 @@ def import_file(
         return imports.import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version)
 
 
-def rollback(settings: Settings, serial: str, to_version: int, reason: str,
-             expected_active: int | None = None) -> ActivationEvent:
-    """Roll back as a compare-and-set: against ``expected_active`` (what the technician saw) when given,
-    else against the active version read first; a change in between refuses the rollback."""
+def check_rollback_request(to_version: int, reason: str) -> None:
+    """What a rollback (camera or rig) refuses before it opens the store: no reason, a reason with
+    control characters, a version out of range."""
     if not reason.strip():
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
     bounded.check_text(reason, "--reason", "the reason")
     if not 1 <= to_version <= MAX_VERSION:
         raise UsageError(f"version {to_version} is out of range", f"versions go from 1 to {MAX_VERSION}")
+
+
+def rollback(settings: Settings, serial: str, to_version: int, reason: str,
+             expected_active: int | None = None) -> ActivationEvent:
+    """Roll back as a compare-and-set: against ``expected_active`` (what the technician saw) when given,
+    else against the active version read first; a change in between refuses the rollback."""
+    check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
         seen = store.active_version(serial) if expected_active is None else expected_active
         return store.rollback(serial, to_version, reason=reason, actor=settings.operator, station=settings.station,

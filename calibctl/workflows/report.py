@@ -17,6 +17,7 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core import report_maps
+from calibctl.core.solve import is_fisheye
 from calibctl.errors import FileSystemError, InputError, NotFoundError
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.records import open_store, parse_artifact_ref
@@ -61,7 +62,8 @@ def _views(art: CalibrationArtifact, session: CaptureSession) -> list[ViewCorner
         keep = [i for i, cid in enumerate(view.corner_ids) if (view.name, cid) not in removed]
         ids = np.asarray(view.corner_ids, dtype=np.int64)[keep]
         corners = np.asarray(view.corners_px, dtype=np.float64)[keep]
-        res = report_maps.reprojection_residuals(model_points[ids], corners, result.rvec, result.tvec_m, K, D)
+        res = report_maps.reprojection_residuals(model_points[ids], corners, result.rvec, result.tvec_m, K, D,
+                                                   is_fisheye(art.model.name))
         out.append(ViewCorners(result.name, corners, res, result.outlier, result.dropped))
     return out
 
@@ -73,7 +75,8 @@ def _uncertainty(art: CalibrationArtifact) -> report_maps.UncertaintyMap | None:
     try:
         return report_maps.projection_uncertainty(
             np.asarray(art.camera_matrix, dtype=np.float64), np.asarray(art.dist_coeffs, dtype=np.float64),
-            np.asarray(cov.matrix, dtype=np.float64), cov.parameters, cov.aspect_ratio, art.image_size)
+            np.asarray(cov.matrix, dtype=np.float64), cov.parameters, cov.aspect_ratio, art.image_size,
+            fisheye=is_fisheye(art.model.name))
     except (ValueError, IndexError) as exc:  # a foreign artifact whose covariance names another model
         raise InputError(f"{art.ref}: its stored covariance over {cov.parameters} does not fit its "
                          f"{len(art.dist_coeffs)}-coefficient model ({exc})",
@@ -98,7 +101,7 @@ def gather(settings: Settings, ref: str) -> ReportData:
     K = np.asarray(art.camera_matrix, dtype=np.float64)
     D = np.asarray(art.dist_coeffs, dtype=np.float64)
     return ReportData(art, active, views, note, _uncertainty(art),
-                      report_maps.distortion_curve(K, D, art.image_size))
+                      report_maps.distortion_curve(K, D, art.image_size, fisheye=is_fisheye(art.model.name)))
 
 
 def default_path(art: CalibrationArtifact, folder: Path | None = None) -> Path:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from calibctl.core.image_circle import ImageCircle, cells_inside_mask, circle_from_detail
 from calibctl.core.report_maps import coverage_grid, edge_gaps_px
 from calibctl.workflows.report_svg import Plot, colour_bar, heat
 
@@ -113,6 +114,9 @@ def _coverage(d: ReportData) -> str:
     w, h = d.artifact.image_size
     pts = np.concatenate([v.corners_px for v in d.views])
     grid = coverage_grid(pts, (w, h), COVERAGE_CELLS)
+    circle = _image_circle(d)
+    if circle is not None:
+        return _circle_coverage(d, pts, grid, circle)
     plot = _image_plot(d, f"every corner used ({len(pts)}); cells never reached shaded")
     xe = np.linspace(0, w, COVERAGE_CELLS[0] + 1)
     ye = np.linspace(0, h, COVERAGE_CELLS[1] + 1)
@@ -126,6 +130,38 @@ def _coverage(d: ReportData) -> str:
             f'(<span data-key="empty_cells">{empty}</span>). Nearest corner to each edge: '
             + ", ".join(f'{side} <span data-key="gap_{side}">{gap:.0f}</span> px' for side, gap in gaps.items())
             + (f"; every {k}th corner drawn" if k > 1 else "") + "</p>")
+    return "<h2>Coverage</h2>" + plot.svg() + text
+
+
+def _image_circle(d: ReportData) -> ImageCircle | None:
+    """The image circle the session's coverage gate recorded (a circular fisheye), else None."""
+    gate = next((g for g in d.artifact.gates if g.gate == "coverage"), None)
+    return None if gate is None else circle_from_detail(gate.detail)
+
+
+def _circle_coverage(d: ReportData, pts: np.ndarray, grid: np.ndarray, circle: ImageCircle) -> str:
+    """Coverage of a circular fisheye: the circle drawn, cells outside it grey (the lens does not image
+    them), only cells inside it can be "never reached"."""
+    w, h = d.artifact.image_size
+    imaged = cells_inside_mask(circle, (w, h), COVERAGE_CELLS)
+    never = (grid == 0) & imaged
+    plot = _image_plot(d, f"every corner used ({len(pts)}); outside the circle grey, never reached shaded")
+    xe = np.linspace(0, w, COVERAGE_CELLS[0] + 1)
+    ye = np.linspace(0, h, COVERAGE_CELLS[1] + 1)
+    for mask, fill in ((~imaged, "#dddddd"), (never, "#f4c7c3")):
+        for r, c in zip(*np.nonzero(mask), strict=True):
+            plot.rect(xe[c], ye[r], xe[c + 1], ye[r + 1], fill)
+    a = np.linspace(0.0, 2.0 * np.pi, 97)
+    plot.line(circle.cx_px + circle.radius_px * np.cos(a), circle.cy_px + circle.radius_px * np.sin(a), "#555555")
+    k = _stride(len(pts))
+    plot.dots(pts[::k, 0], pts[::k, 1], "#1565c0", 1.2)
+    inside = int(imaged.sum())
+    text = (f'<p>Image circle ({circle.source}): centre ({circle.cx_px:.1f}, {circle.cy_px:.1f}) px, radius '
+            f'<span data-key="image_circle_radius_px">{circle.radius_px:.1f}</span> px. '
+            f'<span data-key="not_imaged_cells">{grid.size - inside}</span> of {grid.size} cells '
+            f'({COVERAGE_CELLS[0]}x{COVERAGE_CELLS[1]}) lie outside it and are not imaged by the lens; '
+            f'<span data-key="empty_cells">{int(never.sum())}</span> of the {inside} inside it never reached'
+            + (f"; every {k}th corner drawn" if k > 1 else "") + ".</p>")
     return "<h2>Coverage</h2>" + plot.svg() + text
 
 

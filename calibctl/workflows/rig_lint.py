@@ -31,7 +31,7 @@ from calibctl.errors import NotFoundError, UsageError
 from calibctl.files import write_atomic
 from calibctl.workflows import rig_handeye
 from calibctl.workflows.lint import LintResult, lint_artifact
-from calibctl.workflows.records import open_store
+from calibctl.workflows.records import check_rollback_request, open_store
 
 EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "kalibr")
 
@@ -122,9 +122,16 @@ def show(settings: Settings, ref: str) -> RigCalibration:
         return store.get_rig_calibration(name, version)
 
 
-def rollback(settings: Settings, rig: str, to_version: int, reason: str) -> RigActivation:
+def rollback(settings: Settings, rig: str, to_version: int, reason: str,
+             expected_active: int | None = None) -> RigActivation:
+    """Roll the rig back as a compare-and-set, like a camera's (``records.rollback``): against
+    ``expected_active`` (what the technician saw) when given, else against the active version read first;
+    a solve, hand-eye edge or rollback stored in between refuses it (exit 2) instead of being undone."""
+    check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
-        return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station)
+        seen = store.active_rig_version(rig) if expected_active is None else expected_active
+        return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station,
+                                  expected_active=seen)
 
 
 def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:

@@ -161,4 +161,4 @@ def test_rig_rollback_through_the_cli_is_signed_with_the_station_key(sqlite_url:
                   "--json", env=env)
     assert checked.exit_code == 0, checked.output
     report = json.loads(checked.stdout)
-    assert report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3  # rig versions, rig events
+    assert report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3 + 1  # rig versions, rig events, definition

@@ -35,15 +35,28 @@ def calibrate(db: str, source: Path, serial: str):
 
 
 def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sqlite_url: str) -> None:
+    # The capture gate catches the blend while the operator still holds the board: nothing is solved.
     result = calibrate(sqlite_url, folder(tmp_path, "*.jpg"), "STEREO-MIX")
     assert result.exit_code == 1, result.output
-    assert "one-camera" in result.stdout and "two cameras" in result.stdout and "rejected" in result.stdout
+    assert "one_camera" in result.stdout and "two cameras" in result.stdout
+    assert "not solved: the capture gates failed" in result.stdout
+    history = RUNNER.invoke(app, ["--db", sqlite_url, "history", "STEREO-MIX"])
+    assert history.exit_code == 2 and "unknown serial" in history.output  # no calibration was made
+    with Store.open(sqlite_url) as store:
+        session = store.latest_session("STEREO-MIX", status=None)
+        assert session.status == "rejected"
+        # The same views solved anyway (a session accepted before the gate existed): the solve's own check
+        # rejects the blend, and the verdict lives in the artifact, so lint finds it again in an exported file.
+        blended = session.model_copy(update={"session_id": session.session_id[::-1], "status": "accepted"})
+        store.add_session(blended)
+    solved = RUNNER.invoke(app, ["--db", sqlite_url, "solve", blended.session_id], terminal_width=110)
+    assert solved.exit_code == 1, solved.output
+    assert "one-camera" in solved.output and "two cameras" in solved.output and "rejected" in solved.output, solved.output
     with Store.open(sqlite_url) as store:
         art = store.get_artifact("STEREO-MIX", 1)
     assert art.status == "rejected" and art.camera_consistency is not None
     assert {n[:4] for n in art.camera_consistency.group_a} == {"left"}
     assert {n[:5] for n in art.camera_consistency.group_b} == {"right"}
-    # the verdict lives in the artifact, so lint finds it again in the exported file
     exported = tmp_path / "mix.json"
     exported.write_text(art.model_dump_json(), encoding="utf-8")
     lint = RUNNER.invoke(app, ["lint", str(exported), "--format", "json"])

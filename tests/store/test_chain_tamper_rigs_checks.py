@@ -184,13 +184,13 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
 
     engine = make_engine(history)
     try:
-        assert migrate.downgrade(engine, "0006_check_events") == ("0007_chain_rigs_checks", "0006_check_events")
-        assert migrate.upgrade(engine) == ("0006_check_events", "0007_chain_rigs_checks")
+        assert migrate.downgrade(engine, "0006_check_events") == ("0008_chain_rig_definitions", "0006_check_events")
+        assert migrate.upgrade(engine) == ("0006_check_events", "0008_chain_rig_definitions")
     finally:
         engine.dispose()
     with Store.open(history) as store:
         audit = store.verify()
-        assert audit.problems == [] and audit.records_checked == 14
+        assert audit.problems == [] and audit.records_checked == 15  # the rig definition too (0008)
     assert _select(history, "SELECT serial, chain_seq FROM check_events ORDER BY id") == [
         ("CAM-1", 1), ("CAM-1", 2), ("CAM-2", 1)]
     run_underneath(history, "DELETE FROM check_events WHERE id = 2")  # the backfilled counters count them
@@ -214,7 +214,8 @@ def test_rig_versions_rig_events_and_checks_are_signed(db_url: str, tmp_path):  
     with Store.open(db_url) as reader:
         audit = reader.verify(trusted, require_signature=True)
     assert audit.problems == [] and audit.unsigned == 0
-    assert audit.signatures_checked == 2 + 2 + 2 + 1  # camera artifact and event, rig versions, rig events, check
+    # camera artifact and event, rig versions, rig events, check, rig definition
+    assert audit.signatures_checked == 2 + 2 + 2 + 1 + 1
 
 
 def test_a_rechained_check_forgery_is_caught_by_the_signature(db_url: str, tmp_path):  # type: ignore[no-untyped-def]
@@ -248,7 +249,8 @@ def test_a_head_printed_before_0007_checks_the_new_streams_in_full(history: str)
     head = f"{audit_module.HEAD_PREFIX}:{ids}:{audit_module._digest({n: full.heads[n] for n in old})}"
     with Store.open(history) as store:
         resumed = store.verify(since=head)
-    assert resumed.problems == [] and resumed.records_checked == 3 + 3 + 3  # rig versions, rig events, checks
+    # rig versions, rig events, checks, the rig definition (0008)
+    assert resumed.problems == [] and resumed.records_checked == 3 + 3 + 3 + 1
     run_underneath(history, "DELETE FROM check_events WHERE id = 1")
     with Store.open(history) as store:
         assert store.verify(since=head).problems == [
