@@ -1,14 +1,21 @@
 """Start-up of each read command in a fresh process, against `python -c 'import cv2'`.
 
-    .venv/bin/python benchmarks/bench_startup.py [--repeats 7] [--before DIR]
+    .venv/bin/python benchmarks/bench_startup.py [--repeats 7] [--before DIR] [--calibrate]
 
 Each command runs ``--repeats`` times (after one warm-up, so the OS file cache is warm) in a new
 interpreter against a small SQLite store holding one board and one calibration (``calibctl demo``);
 best and median wall and CPU time are reported. ``--before DIR`` also times the calibctl checkout in DIR
 (e.g. a worktree of main) in the same run, so before/after share the machine's load. Then
 ``python -X importtime`` of each command is summed per top-level package (self time), which says
-where the rest of the time goes. Nothing is asserted; the machine is shared, so the load average is
-printed before each table.
+where the rest of the time goes. ``--calibrate`` also times ``calibctl calibrate`` of 20 rendered
+1280x960 images against the plain OpenCV script (``bench_e2e.py --plain-only``: sequential
+findChessboardCorners + cornerSubPix, calibrateCamera) in the same run, and profiles one calibrate
+(cProfile with a CPU-time clock, so a stage includes its worker threads' CPU). Nothing is asserted; the
+machine is shared, so the load average is printed before each table.
+
+Every child runs with byte-code caching on (``PYTHONDONTWRITEBYTECODE`` removed, the cache under a
+temporary ``PYTHONPYCACHEPREFIX``), as an installed calibctl runs: pip compiles the .pyc files at install.
+Without it, a checkout run under ``PYTHONDONTWRITEBYTECODE=1`` compiles every calibctl module on every start.
 """
 
 from __future__ import annotations
@@ -18,18 +25,21 @@ import datetime as dt
 import os
 import platform
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 from machine import cpu_model
 
 REPO = Path(__file__).resolve().parents[1]
 SERIAL = "DEMO-CAM-0001"
+PYCACHE = Path(tempfile.mkdtemp(prefix="calibctl-pycache-"))
 
 
 def commands(db: str, artifact: Path) -> dict[str, list[str]]:
@@ -50,16 +60,20 @@ def commands(db: str, artifact: Path) -> dict[str, list[str]]:
 
 
 def _env(checkout: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("CALIBCTL_")}
+    env = {k: v for k, v in os.environ.items() if not k.startswith("CALIBCTL_") and k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(checkout)
+    env["PYTHONPYCACHEPREFIX"] = str(PYCACHE / checkout.name)
     return env
 
 
-def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path) -> tuple[list[float], list[float]]:
+def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
+              setup: Callable[[], None] | None = None) -> tuple[list[float], list[float]]:
     """Wall and CPU (user + system) seconds of each run. On a loaded machine the CPU time is the
     steadier figure: it does not count the time spent waiting for a core."""
     wall, cpu = [], []
     for i in range(repeats + 1):
+        if setup:
+            setup()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run([sys.executable, *args], cwd=cwd, env=_env(checkout), stdout=subprocess.DEVNULL,
@@ -85,6 +99,105 @@ def import_profile(args: list[str], checkout: Path, cwd: Path) -> dict[str, floa
     return dict(per_package)
 
 
+CALIBRATE_STAGES = (  # (function, label): cumulative CPU of one profiled `calibctl calibrate`
+    ("calibctl/__main__.py:1(<module>)", "whole process after interpreter start"),
+    ("calibctl/cli/main.py:1(<module>)", "import of the CLI (typer, rich, command modules)"),
+    ("calibctl/workflows/capture.py:1(<module>)", "import of the workflows (cv2, numpy, sqlalchemy, pydantic models)"),
+    ("calibctl/core/image_outcomes.py", "detection (read, hash, detect, blur; 2 threads)"),
+    ("calibctl/store/images.py", "image files + rows (fsync each)"),
+    ("calibctl/core/gates.py", "capture gates (tilt, coverage)"),
+    ("calibctl/core/outliers.py", "solve with the corner rule (calibrateCameraExtended, sigma)"),
+    ("calibctl/core/validation.py", "held-out k-fold validation (5 folds on 2 threads)"),
+    ("calibctl/core/camera_split.py", "one-camera check (two-camera split, its folds)"),
+    ("calibctl/workflows/lint.py", "lint"),
+    ("calibctl/store/repository.py", "store open, reads, session and artifact writes"),
+)
+
+PROFILE_CODE = """
+import cProfile, pstats, runpy, sys, time
+sys.argv = ["calibctl", *sys.argv[2:]]
+profile = cProfile.Profile(time.process_time)
+profile.enable()
+try:
+    runpy.run_module("calibctl", run_name="__main__")
+except SystemExit:
+    pass
+profile.disable()
+profile.dump_stats(__import__("os").environ["PROFILE_OUT"])
+"""
+
+
+def _stage_cpu(stats_path: Path) -> dict[str, float]:
+    """Largest cumulative CPU seconds of a function matching each CALIBRATE_STAGES key (its outermost call)."""
+    import pstats
+
+    stats = pstats.Stats(str(stats_path)).stats  # type: ignore[attr-defined]
+    out: dict[str, float] = {}
+    for key, label in CALIBRATE_STAGES:
+        file_part, _, fn_part = key.partition(":")
+        best = 0.0
+        for (filename, line, name), (_cc, _nc, _tt, ct, _callers) in stats.items():
+            if not filename.endswith(file_part):
+                continue
+            if f"{line}({name})" != fn_part if fn_part else name == "<module>":
+                continue  # a stage named by its file alone is its functions, not its import
+            best = max(best, ct)
+        out[label] = best
+    return out
+
+
+def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> None:
+    """``calibctl calibrate`` of 20 rendered 1280x960 images against the plain OpenCV script, same run."""
+    images = work / "synth-1280"
+    subprocess.run([sys.executable, "-m", "calibctl", "synth", str(images), "--scenario", "good", "--views", "20",
+                    "--size", "1280x960", "--seed", "1"], cwd=work, env=_env(REPO), check=True,
+                   stdout=subprocess.DEVNULL)
+    template, db = work / "calibrate-template.db", work / "calibrate.db"
+    subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{template}", "board", "add", "BENCH",
+                    "--cols", "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument", "calipers",
+                    "--measured-by", "bench", "--measured-on", "2026-11-23"], cwd=work, env=_env(REPO), check=True,
+                   stdout=subprocess.DEVNULL)
+
+    def fresh() -> None:
+        shutil.rmtree(work / "calibctl-images", ignore_errors=True)
+        shutil.copyfile(template, db)
+
+    calibrate = ["-m", "calibctl", "--db", f"sqlite:///{db}", "calibrate", "--serial", "BENCH-0001", "--board",
+                 "BENCH", "--source", str(images), "--station", "bench", "--operator", "bench"]
+    plain = [str(REPO / "benchmarks/bench_e2e.py"), "--plain-only", str(images), "--square", "0.025"]
+    print("## `calibctl calibrate` of 20 images at 1280x960 against the plain OpenCV script\n")
+    print(f"Load average before: {_load()}\n")
+    print("| path | wall best / median ms | CPU best / median ms |\n|---|---|---|")
+    runs = [("plain OpenCV script, own process", plain, None, REPO)]
+    for name, checkout in checkouts.items():
+        runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh, checkout),
+                 (f"`calibctl --version` ({name}: start-up with cv2 and numpy)", ["-m", "calibctl", "--version"], None,
+                  checkout)]
+    rows = {}
+    for label, args, setup, checkout in runs:
+        wall, cpu = run_times(args, checkout, repeats, work, setup)
+        rows[label] = (min(wall), min(cpu))
+        print(f"| {label} | {min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f} | "
+              f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f} |")
+    pw, pc = rows[runs[0][0]]
+    print()
+    for name in checkouts:
+        cw, cc = rows[f"`calibctl calibrate`, own process ({name})"]
+        print(f"- calibctl ({name}) / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each)")
+    print(f"\nLoad average after: {_load()}\n")
+    fresh()
+    out = work / "calibrate.prof"
+    subprocess.run([sys.executable, "-c", PROFILE_CODE, "-", *calibrate[2:]], cwd=work,
+                   env={**_env(REPO), "PROFILE_OUT": str(out)}, check=False, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    print("Where one `calibctl calibrate` spends its CPU (cProfile with a CPU-time clock, cumulative, largest "
+          "call of the stage's functions; the profiler inflates Python-heavy stages such as imports):\n")
+    print("| stage | CPU ms |\n|---|---|")
+    for label, seconds in _stage_cpu(out).items():
+        print(f"| {label} | {seconds * 1000:.0f} |")
+    print()
+
+
 def _load() -> str:
     return ", ".join(f"{v:.2f}" for v in os.getloadavg())
 
@@ -93,6 +206,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--before", type=Path, help="another calibctl checkout to time in the same run")
+    parser.add_argument("--calibrate", action="store_true", help="also time `calibctl calibrate` against the plain script")
     opts = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="calibctl-startup-"))
     db = f"sqlite:///{work / 'demo-out/calibctl-demo.db'}"
@@ -133,6 +247,9 @@ def main() -> int:
         cells = [f"{prof.get(p, 0):.0f}" for p in top]
         other = sum(ms for p, ms in prof.items() if p not in top)
         print(f"| `{label}` | {sum(prof.values()):.0f} | " + " | ".join(cells) + f" | {other:.0f} |")
+    if opts.calibrate:
+        print()
+        calibrate_section(work, opts.repeats, checkouts)
     return 0
 
 

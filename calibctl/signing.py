@@ -19,20 +19,22 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from cryptography.exceptions import InvalidSignature
-from cryptography.hazmat.primitives import serialization
-from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+if TYPE_CHECKING:  # cryptography is imported by the functions that sign or verify: not by every store read
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
 ALGORITHM = "ed25519"
-_RAW = serialization.Encoding.Raw, serialization.PublicFormat.Raw
 
 
 def key_id_of(public: Ed25519PublicKey) -> str:
     """The fingerprint stored beside every signature: sha256 of the 32 raw public-key bytes, hex."""
-    return hashlib.sha256(public.public_bytes(*_RAW)).hexdigest()
+    from cryptography.hazmat.primitives import serialization
+
+    raw = public.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
+    return hashlib.sha256(raw).hexdigest()
 
 
 def record_message(record_sha256: str, subject: str | None) -> bytes:
@@ -59,6 +61,8 @@ class Signer:
         return base64.b64encode(self.private.sign(message)).decode("ascii")
 
     def public_pem(self) -> str:
+        from cryptography.hazmat.primitives import serialization
+
         pem = self.public.public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo)
         return pem.decode("ascii")
 
@@ -75,6 +79,9 @@ def _read(path: Path, what: str) -> bytes:
 
 def load_signer(path: Path) -> Signer:
     """The private key at ``path``; refused when others may read it (as ssh does) or it is not Ed25519."""
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
     data = _read(path, "signing key")
     mode = path.stat().st_mode
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
@@ -94,6 +101,9 @@ def create_key(path: Path, *, force: bool = False) -> Signer:
     if path.exists() and not force:
         raise AlreadyExistsError(f"{path} exists; a signing key is never overwritten by accident",
                                  "pass --force to replace it (keep its public key trusted: old signatures use it)")
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+
     key = Ed25519PrivateKey.generate()
     pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
@@ -121,6 +131,9 @@ class TrustedKeys:
         trusted = cls({signer.key_id: signer.public} if signer else {})
         if folder is None:
             return trusted
+        from cryptography.hazmat.primitives import serialization
+        from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
         if not folder.is_dir():
             raise FileSystemError(f"the trusted-keys folder {folder} does not exist or is not a folder",
                                   "pass --trusted-keys DIR holding the public keys (`calibctl keys export-public`)")
@@ -141,6 +154,8 @@ class TrustedKeys:
         key = self.keys.get(key_id)
         if key is None:
             return f"is signed by key {key_id[:16]}, which is not trusted"
+        from cryptography.exceptions import InvalidSignature
+
         try:
             key.verify(base64.b64decode(signature, validate=True), message)
         except (InvalidSignature, ValueError):

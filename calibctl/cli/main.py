@@ -16,7 +16,7 @@ from typer.core import TyperGroup
 from calibctl import __version__
 from calibctl.cli.context import AppState
 from calibctl.cli.examples import attach_examples, epilog
-from calibctl.cli.streams import make_output_safe
+from calibctl.cli.streams import flush_stdout_at_exit, make_output_safe, silence_closed_stdout
 from calibctl.errors import EXIT_CANNOT_RUN, CalibctlError
 from calibctl.files import ENVIRONMENT_ERRNOS, os_error
 
@@ -40,6 +40,9 @@ class CalibctlGroup(TyperGroup):
             return super().invoke(ctx)
         except CalibctlError as exc:
             _report(exc)
+        except BrokenPipeError:
+            # The reader of stdout went away (`calibctl export X | head -1`): stop quietly.
+            raise typer.Exit(silence_closed_stdout()) from None
         except OSError as exc:
             # A file-system problem (permission, read-only, disk full, ...) is the machine's, not a bug.
             if exc.errno not in ENVIRONMENT_ERRNOS:
@@ -56,6 +59,14 @@ class CalibctlGroup(TyperGroup):
             # A bug: keep the traceback, and never exit 1 (which means "verdict: fail").
             traceback.print_exc()
             raise typer.Exit(EXIT_CANNOT_RUN) from None
+
+    def make_context(self, info_name: str | None, args: list[str], parent: ClickContext | None = None,
+                     **extra: Any) -> ClickContext:
+        # The root's --help and --version are written while parsing, before invoke.
+        try:
+            return super().make_context(info_name, args, parent, **extra)
+        except BrokenPipeError:
+            raise typer.Exit(silence_closed_stdout()) from None
 
 
 app = typer.Typer(
@@ -134,4 +145,7 @@ _register_commands()
 
 
 def run() -> None:
-    app()
+    try:
+        app()
+    finally:
+        flush_stdout_at_exit()

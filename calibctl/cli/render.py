@@ -10,6 +10,8 @@ from rich.console import Console, ConsoleDimensions
 from rich.markup import escape as _escape_markup
 from rich.rule import Rule
 
+from calibctl.cli.streams import silence_closed_stdout
+
 LOG_WIDTH = 110
 """Width of rules when the output is not a terminal (a CI log, a pipe, a file)."""
 _UNBOUNDED = 100_000  # tables lay out at their natural width: no cell is wrapped
@@ -34,6 +36,11 @@ class _Console(Console):
         if not self.is_terminal:
             kwargs.setdefault("soft_wrap", True)
         super().print(*objects, **kwargs)
+
+    def on_broken_pipe(self) -> None:
+        # rich's default exits 1, which calibctl reserves for a "fail" verdict.
+        self.quiet = True
+        raise SystemExit(silence_closed_stdout())
 
     def rule(self, *args: Any, **kwargs: Any) -> None:
         if self.is_terminal:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import codecs
 import io
+import os
 import sys
 
 HANDLER = "calibctl-ascii"
@@ -34,3 +35,31 @@ def make_output_safe() -> None:
     for stream in (sys.stdout, sys.stderr):
         if isinstance(stream, io.TextIOWrapper) and stream.errors == "strict":
             stream.reconfigure(errors=HANDLER)
+
+
+EXIT_CLOSED_PIPE = 141
+"""Exit code when the reader of stdout went away (``calibctl export X | head -1``): 128 + SIGPIPE, what
+a shell reports for any tool stopped by a closed pipe; never 1 (a verdict) and never a traceback."""
+
+
+def silence_closed_stdout() -> int:
+    """Point stdout at /dev/null after its reader closed the pipe, so the rest of the output (and the
+    flush at exit) goes nowhere instead of raising BrokenPipeError again; returns the exit code to use.
+    Python's recommended pattern (docs.python.org/3/library/signal.html#note-on-sigpipe)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no real file descriptor behind stdout (a test runner's buffer)
+        pass
+    finally:
+        os.close(devnull)
+    return EXIT_CLOSED_PIPE
+
+
+def flush_stdout_at_exit() -> None:
+    """Flush stdout before the interpreter does, so a reader that closed the pipe after the last write
+    ends calibctl with EXIT_CLOSED_PIPE and no 'Exception ignored ... BrokenPipeError' message."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        raise SystemExit(silence_closed_stdout()) from None

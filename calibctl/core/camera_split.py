@@ -28,13 +28,16 @@ camera differing only by a principal-point shift of 20 px is largely absorbed by
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.gates import GateResult
-from calibctl.core.solve import IntrinsicsSolution, get_model, solve_intrinsics
+from calibctl.core.solve import IntrinsicsSolution, get_model, single_threaded_opencv, solve_intrinsics
 from calibctl.core.validation import refit_pose_residuals, validate_holdout
 from calibctl.errors import NumericalError
 
@@ -44,6 +47,8 @@ RANDOM_STARTS = 1
 MAX_ROUNDS = 8
 SPLIT_SEED = 0
 HOLDOUT_FOLDS = 3  # per group; the solve's own validation uses 5, this only has to separate 1.1 from 1.7
+PAIR_WORKERS = 2  # the two groups are solved, scored and validated at once; the result does not depend on it
+R = TypeVar("R")
 ONE_CAMERA_GATE = "one_camera"
 # Capture does not know the solve's model. k1k2 (cheap) first; a suspected split is confirmed under the
 # equidistant fisheye model, which fits both lens families: on seeded 120-degree fisheye sessions k1k2 alone
@@ -92,6 +97,14 @@ def _view_rms(sol: IntrinsicsSolution, obj: Sequence[np.ndarray], img: Sequence[
     return np.array(out)
 
 
+def _pair(work: Callable[[Any], R], for_a: Any, for_b: Any) -> tuple[R, R]:
+    """(work(for_a), work(for_b)) on PAIR_WORKERS threads; an error is raised as a sequential call would
+    (a's first). OpenCV and BLAS run single-threaded inside, so the numbers are those of a sequential run."""
+    with single_threaded_opencv(), single_threaded_blas(), ThreadPoolExecutor(max_workers=PAIR_WORKERS) as pool:
+        done_a, done_b = pool.submit(work, for_a), pool.submit(work, for_b)
+        return done_a.result(), done_b.result()
+
+
 def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarray], size: tuple[int, int],
             model: str, min_group: int):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool; None when a group gets too small."""
@@ -99,9 +112,8 @@ def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarra
         a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
         if len(a) < min_group or len(b) < min_group:
             return None
-        sol_a = solve_intrinsics([obj[i] for i in a], [img[i] for i in a], size, model)
-        sol_b = solve_intrinsics([obj[i] for i in b], [img[i] for i in b], size, model)
-        rms_a, rms_b = _view_rms(sol_a, obj, img), _view_rms(sol_b, obj, img)
+        sol_a, sol_b = _pair(lambda g: solve_intrinsics([obj[i] for i in g], [img[i] for i in g], size, model), a, b)
+        rms_a, rms_b = _pair(lambda sol: _view_rms(sol, obj, img), sol_a, sol_b)
         moved = rms_a < rms_b
         if np.array_equal(moved, in_a) or round_ == MAX_ROUNDS - 1:
             break  # not converged after MAX_ROUNDS: keep the split the two solves were made from
@@ -146,10 +158,9 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     in_a, sol_a, sol_b, rms_a, rms_b = best
     a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
     try:
-        hold_a = validate_holdout([obj[i] for i in a], [img[i] for i in a], image_size, model, fit=sol_a,
-                                  max_folds=HOLDOUT_FOLDS)
-        hold_b = validate_holdout([obj[i] for i in b], [img[i] for i in b], image_size, model, fit=sol_b,
-                                  max_folds=HOLDOUT_FOLDS)
+        hold_a, hold_b = _pair(lambda group: validate_holdout(
+            [obj[i] for i in group[0]], [img[i] for i in group[0]], image_size, model, fit=group[1],
+            max_folds=HOLDOUT_FOLDS, workers=1), (a, sol_a), (b, sol_b))
     except NumericalError:
         return None
     cross = (_rms(rms_b[a]), _rms(rms_a[b]))

@@ -15,22 +15,31 @@ inserting or reordering any record breaks the chain at the next record; rewritin
 tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
 (``db verify --head``).
 
-A new table joins with a ``Stream`` entry in ``STREAMS`` and a call to ``link`` before its insert.
+The hashing itself (``body``, ``record_hash``, ``row_problem``) is in ``chain_hash``, which imports no
+sqlalchemy (the sqlite3 read path checks with it). A new table joins with a ``StreamSpec`` in
+``chain_hash.SPECS``, its model in ``_MODELS`` here, and a call to ``link`` before its insert.
 The caller holds the stream's lock (a version counter row) so concurrent writers never fork it.
 """
 
 from __future__ import annotations
 
-import datetime as dt
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import Column, Connection, Integer, MetaData, String, Table, Text, select, text
 from sqlalchemy.orm import Session
 
-from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.signing import Signer, record_message
+from calibctl.store.chain_hash import (  # the hashing itself, shared with the sqlite3 read path
+    CHAIN_COLUMNS,
+    SPECS,
+    UNHASHED,
+    StreamSpec,
+    body,
+    record_hash,
+    row_problem,
+)
 from calibctl.store.models import (
     ArtifactRow,
     Base,
@@ -42,85 +51,28 @@ from calibctl.store.models import (
     RigRow,
 )
 
-CHAIN_COLUMNS = frozenset({"chain_seq", "chain_prev", "chain_hash", "signature", "key_id"})
-UNHASHED = CHAIN_COLUMNS | {"id"}
+__all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
+           "head_of", "link", "new_columns", "record_hash", "row_problem"]
 
 
 @dataclass(frozen=True)
-class Stream:
-    """A chained table: ``key`` names the columns that split it into streams (empty: one stream)."""
+class Stream(StreamSpec):
+    """A chained table: its ``StreamSpec`` and the ORM model of the table."""
 
-    name: str
     model: type[Base]
-    key: tuple[str, ...]
-    subject: str | None  # a content-hash column signed beside the chain hash (portable in exports)
-    label: Callable[[Mapping[Any, Any]], str]
-    counter: tuple[str, str]  # (version_counters scope, the column whose maximum the counter must equal)
 
     @property
     def table(self) -> Table:
         return self.model.__table__  # type: ignore[return-value]
 
-    def key_of(self, values: Mapping[Any, Any]) -> tuple[Any, ...]:
-        return tuple(values[k] for k in self.key)
 
-    def counter_key(self, key: tuple[Any, ...]) -> str:
-        return str(key[0]) if key else self.name
-
-
+_MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
+                                  "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow,
+                                  "rig_definition": RigRow}
 STREAMS: dict[str, Stream] = {
-    "artifact": Stream(
-        "artifact", ArtifactRow, ("serial",), "content_sha256", lambda r: f"{r['serial']}@{r['version']}",
-        ("artifact", "version"),
-    ),
-    "board": Stream(
-        "board", BoardRow, ("name",), "payload_sha256", lambda r: f"board {r['name']}@{r['revision']}", ("board", "revision")
-    ),
-    "event": Stream(
-        "event", EventRow, (), None, lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
-        ("chain", "chain_seq"),
-    ),
-    # revision 0007: rig versions per rig (hand-eye edges are part of the version that adds them), rig
-    # activation events one stream like the cameras' (their counter row is the lock), check events per
-    # serial (a serial's re-tests are read and audited with its history; stations checking different
-    # cameras never wait for each other; the ('check', serial) counter row is the lock and the count).
-    "rig": Stream(
-        "rig", RigCalibrationRow, ("rig",), "content_sha256", lambda r: f"rig {r['rig']}@{r['version']}", ("rig", "version")
-    ),
-    "rig_event": Stream(
-        "rig_event", RigEventRow, (), None,
-        lambda r: f"rig activation event {r['id']} ({r['rig']}@{r['version']}, {r['kind']})", ("chain", "chain_seq"),
-    ),
-    "check": Stream(
-        "check", CheckEventRow, ("serial",), "payload_sha256",
-        lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}", ("check", "chain_seq"),
-    ),
-    # revision 0008: rig definitions (members, root, design baselines and their tolerances, which rig lint
-    # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
-    "rig_definition": Stream(
-        "rig_definition", RigRow, (), "payload_sha256", lambda r: f"rig definition {r['name']}",
-        ("chain", "chain_seq"),
-    ),
+    name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
 }
-"""The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dt.datetime):
-        if value.tzinfo is None:  # SQLite hands back naive UTC when read below the ORM type
-            value = value.replace(tzinfo=dt.UTC)
-        return value.astimezone(dt.UTC).isoformat()
-    return value
-
-
-def body(values: Mapping[Any, Any]) -> dict[str, Any]:
-    """The hashed part of a row: every column but id and the chain columns, NULLs left out."""
-    return {n: _jsonable(v) for n, v in values.items() if n not in UNHASHED and v is not None}
-
-
-def record_hash(stream: Stream, key: tuple[Any, ...], seq: int, prev: str | None, record: dict[str, Any]) -> str:
-    envelope = {"v": 1, "stream": stream.name, "key": list(key), "seq": seq, "prev": prev, "record": record}
-    return sha256_hex(jcs_bytes(envelope))
+"""``chain_hash.SPECS`` with their tables, in the same order (the order of the row ids in a chain head)."""
 
 
 def head_of(s: Session, stream: Stream, key: tuple[Any, ...]) -> tuple[int, str] | None:
@@ -207,15 +159,3 @@ def backfill_without_triggers(conn: Connection, names: tuple[str, ...],
     work()
     for table in tables:
         conn.execute(text(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable"))
-
-
-def row_problem(stream: Stream, row: Base) -> str | None:
-    """None when ``row``'s chain hash matches its columns (one sha256 over them, payload included), else why
-    not. The cheap integrity check for bulk reads; ``db verify`` also checks the links and signatures."""
-    values = {c.name: getattr(row, c.name) for c in stream.table.columns}
-    if values["chain_hash"] is None or values["chain_seq"] is None:
-        return f"{stream.label(values)} has no chain hash: it was inserted outside calibctl"
-    actual = record_hash(stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values))
-    if actual != values["chain_hash"]:
-        return f"{stream.label(values)} was changed after it was written (its chain hash no longer matches)"
-    return None

@@ -24,17 +24,6 @@ from calibctl.store.models import CheckEventRow
 CHECK_EVENTS_MESSAGE = "check events are append-only"
 
 
-def decode_check(row: CheckEventRow) -> CheckEvent:
-    what = f"check {row.check_id} of {row.serial}@{row.version}"
-    actual = sha256_hex(row.payload.encode("utf-8"))
-    if actual != row.payload_sha256:
-        raise codec._mismatch(what, row.payload_sha256, actual)
-    event: CheckEvent = codec._parse(CheckEvent, row.payload, what)
-    codec._check_columns(what, {"serial": (row.serial, event.serial), "version": (row.version, event.version),
-                                "passed": (row.passed, event.passed)})
-    return event
-
-
 class CheckStoreMixin:
     """Check-event methods of ``Store`` (which provides ``_run``)."""
 
@@ -65,6 +54,6 @@ class CheckStoreMixin:
 
         def work(s: Session) -> list[CheckEvent]:
             rows = s.scalars(select(CheckEventRow).where(CheckEventRow.serial == serial).order_by(CheckEventRow.id))
-            return [decode_check(r) for r in rows]
+            return [codec.decode_check(r) for r in rows]
 
         return self._run(work)

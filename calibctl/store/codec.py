@@ -11,18 +11,20 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ValidationError
 
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
+from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex, validation_message
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import IntegrityError
-from calibctl.store import chain
-from calibctl.store.models import ArtifactRow, BoardRow, EventRow, SessionRow
+
+if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (sqlite_reads) uses them too
+    from calibctl.store.models import ArtifactRow, BoardRow, CheckEventRow, EventRow, SessionRow
 
 TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
 
@@ -71,6 +73,8 @@ def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
 
 
 def board_row(board: BoardRevision) -> BoardRow:
+    from calibctl.store.models import BoardRow
+
     payload = canonical_text(board)
     return BoardRow(
         name=board.name,
@@ -103,6 +107,8 @@ def decode_board(row: BoardRow) -> BoardRevision:
 
 
 def session_row(session: CaptureSession) -> SessionRow:
+    from calibctl.store.models import SessionRow
+
     payload = canonical_text(session)
     return SessionRow(
         session_id=session.session_id,
@@ -137,6 +143,8 @@ def decode_session(row: SessionRow) -> CaptureSession:
 
 def artifact_row(artifact: CalibrationArtifact, stored_at: dt.datetime) -> ArtifactRow:
     """The row for a *sealed* artifact (its content_sha256 must already match its content)."""
+    from calibctl.store.models import ArtifactRow
+
     return ArtifactRow(
         serial=artifact.serial,
         version=artifact.version,
@@ -160,7 +168,9 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
     vs 0.93 ms CPU for a 10 kB artifact; what every Store read uses)."""
     what = f"{row.serial}@{row.version}"
     if by_chain:
-        problem = chain.row_problem(chain.STREAMS["artifact"], row)
+        from calibctl.store import chain_hash
+
+        problem = chain_hash.row_problem(chain_hash.SPECS["artifact"], row)
         if problem is not None:
             raise IntegrityError(problem, TAMPER_HINT)
         try:
@@ -207,3 +217,17 @@ def decode_event(row: EventRow) -> ActivationEvent:
         at=row.at,
         reason=row.reason,
     )
+
+
+# check events -------------------------------------------------------------------------------------
+
+
+def decode_check(row: CheckEventRow) -> CheckEvent:
+    what = f"check {row.check_id} of {row.serial}@{row.version}"
+    actual = sha256_hex(row.payload.encode("utf-8"))
+    if actual != row.payload_sha256:
+        raise _mismatch(what, row.payload_sha256, actual)
+    event: CheckEvent = _parse(CheckEvent, row.payload, what)
+    _check_columns(what, {"serial": (row.serial, event.serial), "version": (row.version, event.version),
+                          "passed": (row.passed, event.passed)})
+    return event

@@ -17,15 +17,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-from sqlalchemy import Connection, Engine, inspect, text
-
 from calibctl.errors import DatabaseError, DatabaseOutOfDateError
-from calibctl.store.engine import WRITE_OPTION, database_errors, display_url, make_engine, sqlite_path
-from calibctl.store.models import Base
 
 if TYPE_CHECKING:
     from alembic.config import Config
     from alembic.script import ScriptDirectory
+    from sqlalchemy import Connection, Engine
+
+# sqlalchemy (through calibctl.store.engine and .models) is imported by the functions that connect:
+# head_revision() is also what the sqlite3 read path (calibctl.store.sqlite_reads) checks a store against.
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 
@@ -126,6 +126,8 @@ class SchemaState:
 
 def _current_revision(conn: Connection) -> str | None:
     """The revision in alembic's version table (None when there is none)."""
+    from sqlalchemy import inspect, text
+
     if not inspect(conn).has_table("alembic_version"):
         return None
     rows = conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all()
@@ -136,6 +138,10 @@ def _current_revision(conn: Connection) -> str | None:
 
 
 def _state_on(conn: Connection, url: str) -> SchemaState:
+    from sqlalchemy import inspect
+
+    from calibctl.store.models import Base
+
     head = head_revision()
     tables = set(inspect(conn).get_table_names())
     if "alembic_version" not in tables or (current := _current_revision(conn)) is None:
@@ -155,6 +161,8 @@ def _state_on(conn: Connection, url: str) -> SchemaState:
 def read_state(engine: Engine) -> SchemaState:
     """The schema state of ``engine``'s database. A SQLite file that does not exist is ``absent``
     (and is not created by looking at it)."""
+    from calibctl.store.engine import database_errors, display_url, sqlite_path
+
     url = display_url(engine.url)
     path = sqlite_path(engine.url)
     if path is not None and not path.exists():
@@ -166,6 +174,10 @@ def read_state(engine: Engine) -> SchemaState:
 
 
 def _migrate(engine: Engine, target: str, *, down: bool) -> tuple[str | None, str | None]:
+    from sqlalchemy import text
+
+    from calibctl.store.engine import WRITE_OPTION, database_errors, display_url
+
     url = display_url(engine.url)
     with database_errors(engine), engine.connect() as conn:
         conn.execution_options(**{WRITE_OPTION: True})
@@ -199,6 +211,8 @@ def downgrade(engine: Engine, target: str) -> tuple[str | None, str | None]:
 
 def state_of(url: str) -> SchemaState:
     """Where the database at ``url`` stands (does not create anything)."""
+    from calibctl.store.engine import make_engine
+
     engine = make_engine(url)
     try:
         return read_state(engine)
@@ -208,6 +222,8 @@ def state_of(url: str) -> SchemaState:
 
 def upgrade_url(url: str) -> tuple[str | None, str | None]:
     """Create or migrate the database at ``url`` to head, keeping its data; returns (before, after)."""
+    from calibctl.store.engine import make_engine
+
     engine = make_engine(url)
     try:
         return upgrade(engine)

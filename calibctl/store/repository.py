@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy import exc as sa_exc
@@ -33,7 +33,7 @@ from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import Signer, TrustedKeys
-from calibctl.store import audit, chain, codec, counters, history, images, migrate
+from calibctl.store import chain, codec, counters, history, images, migrate
 from calibctl.store.checks import CheckStoreMixin
 from calibctl.store.engine import (
     WRITE_OPTION,
@@ -47,6 +47,9 @@ from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
 from calibctl.store.rigs import RigStoreMixin
+
+if TYPE_CHECKING:
+    from calibctl.store import audit
 
 T = TypeVar("T")
 R = TypeVar("R", bound=Base)
@@ -440,4 +443,6 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
     def verify(self, trusted: TrustedKeys | None = None, *, require_signature: bool = False, since: str | None = None) -> audit.Audit:
         """Every chain, signature, counter, event and stored hash (see ``store.audit``); with ``since``
         (a chain head) only what was written after it, once the head is proven unchanged."""
+        from calibctl.store import audit  # the whole-store audit: only `db verify` and its callers
+
         return self._run(lambda s: audit.run(s, trusted or TrustedKeys(), require_signature=require_signature, since=since))

@@ -10,13 +10,12 @@ sessions (docs/trust.md says why).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
-from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.errors import (
     AlreadyExistsError,
     IntegrityError,
@@ -28,6 +27,9 @@ from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
 from calibctl.store.history import UNCHECKED, check_rollback, known_list
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
+
+if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
+    from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 
 T = TypeVar("T")
 
@@ -42,6 +44,8 @@ def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> 
 def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
     """The stored definition after its payload hash check and, ``by_chain`` (every read), its chain hash:
     a design tolerance widened with the payload hash recomputed is refused before rig lint trusts it."""
+    from calibctl.artifacts.rig import RigDefinition
+
     if by_chain:
         problem = chain.row_problem(chain.STREAMS["rig_definition"], row)
         if problem is not None:
@@ -53,6 +57,8 @@ def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
 
 
 def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
+    from calibctl.artifacts.rig import RigCalibration
+
     what = f"rig {row.rig}@{row.version}"
     cal: RigCalibration = codec._parse(RigCalibration, row.payload, what)
     actual = cal.computed_sha256()
@@ -64,6 +70,8 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
 
 
 def _event(row: RigEventRow) -> RigActivation:
+    from calibctl.artifacts.rig import RigActivation
+
     return RigActivation(event_id=row.id, rig=row.rig, version=row.version, previous_version=row.previous_version,
                          kind=row.kind, actor=row.actor, station=row.station, at=row.at, reason=row.reason)
 
@@ -139,6 +147,7 @@ class RigStoreMixin:
 
     def get_rig_session(self, rig: str, rig_session_id: str | None = None) -> RigSession:
         """A rig session by id, or the rig's latest accepted one."""
+        from calibctl.artifacts.rig import RigSession
 
         def work(s: Session) -> RigSession:
             q = select(RigSessionRow).where(RigSessionRow.rig == rig)

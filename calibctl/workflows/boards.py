@@ -13,6 +13,7 @@ import datetime as dt
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
@@ -26,10 +27,12 @@ from calibctl.artifacts.board import (
 from calibctl.artifacts.common import sha256_hex, utc_now, validation_message
 from calibctl.config import Settings
 from calibctl.core.board_gauge import K_SIGMA, UNIT_SLIPS, compare_span
-from calibctl.core.board_spec import BOARD_KINDS, BoardSpec
 from calibctl.errors import InputError, UsageError
-from calibctl.store.repository import Store
+from calibctl.store import sqlite_reads
 from calibctl.workflows import keys
+
+if TYPE_CHECKING:
+    from calibctl.store.repository import Store
 
 _MEASUREMENT_FLAGS = {
     "uncertainty_mm": "--uncertainty-mm",
@@ -165,6 +168,8 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
 
 def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:
     """The BoardRevision a registration describes (revision 1 here; the store allocates the real one)."""
+    from calibctl.core.board_spec import BOARD_KINDS, BoardSpec  # numpy: not for `board list` / `show`
+
     now = now or utc_now()
     if not re.fullmatch(BOARD_NAME_PATTERN, reg.name):
         raise UsageError(
@@ -206,14 +211,20 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
 
 def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
     """Register ``reg`` as the next revision of its name; returns what was stored (with its revision)."""
+    from calibctl.store.repository import Store  # sqlalchemy: `board list` of SQLite reads through sqlite3
+
     board = build_board(reg, created_by=settings.operator)
     with Store.open(settings.db_url, signer=keys.signer_of(settings)) as store:
         return store.add_board(board)
 
 
 def list_boards(settings: Settings) -> list[BoardRevision]:
-    with Store.open(settings.db_url, create=False) as store:
-        return store.list_boards()
+    def full_store() -> Store:
+        from calibctl.store.repository import Store
+
+        return Store.open(settings.db_url, create=False)
+
+    return sqlite_reads.read(settings.db_url, lambda store: store.list_boards(), full_store)
 
 
 def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
@@ -222,5 +233,7 @@ def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
         name, revision = parse_board_ref(ref)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+    from calibctl.store.repository import Store
+
     with Store.open(settings.db_url, create=False) as store:
         return store.get_board(name, revision), store.board_revisions(name)

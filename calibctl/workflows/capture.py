@@ -462,5 +462,6 @@ def parse_now(text: str) -> dt.datetime:
 def prune(settings: Settings, now: dt.datetime | None = None) -> PruneResult:
     """Delete images whose retention has expired (never corners, sessions or calibrations)."""
     when = now or utc_now()
-    with Store.open(settings.db_url) as store:
+    # Maintenance of an existing store: a mistyped --db is exit 2 naming the path, never a new empty store.
+    with Store.open(settings.db_url, create=False) as store:
         return PruneResult(store.prune_images(when), str(store.image_dir), when)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
@@ -14,8 +15,12 @@ from calibctl.artifacts.events import ActivationEvent
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
-from calibctl.store.repository import Store
-from calibctl.workflows import formats, imports, keys
+from calibctl.store import sqlite_reads
+from calibctl.workflows import formats, keys
+
+if TYPE_CHECKING:
+    from calibctl.store.repository import Store
+    from calibctl.workflows import imports
 
 _KIND_NAMES = {"ros": "a ROS camera_info export", "opencv": "an OpenCV FileStorage export"}
 _ARTIFACT_REF = re.compile(r"^(?P<serial>.+?)(?:@(?P<version>[0-9]+))?$")
@@ -36,6 +41,8 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
+    from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
+
     return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None)
 
 
@@ -74,11 +81,12 @@ class History:
 
 
 def history(settings: Settings, serial: str) -> History:
-    with open_store(settings) as store:
-        artifacts = store.list_artifacts(serial)
-        active = store.active_version(serial)
-        events = store.events(serial)
-        checks = store.checks(serial)
+    artifacts, active, events, checks = sqlite_reads.read(
+        settings.db_url,
+        lambda store: (store.list_artifacts(serial), store.active_version(serial), store.events(serial),
+                       store.checks(serial)),
+        lambda: open_store(settings),
+    )
     rows = [
         HistoryRow(
             version=a.version,
@@ -101,8 +109,8 @@ def history(settings: Settings, serial: str) -> History:
 
 def show(settings: Settings, ref: str) -> CalibrationArtifact:
     serial, version = parse_artifact_ref(ref)
-    with open_store(settings) as store:
-        return store.get_artifact(serial, version)
+    return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
+                             lambda: open_store(settings))
 
 
 def export(
@@ -163,6 +171,8 @@ def import_file(
 ) -> imports.ImportOutcome:
     """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
     this store's verdict and version (see ``imports``)."""
+    from calibctl.workflows import imports  # lint, numpy and the lens checks: not for history/show/export
+
     art = read_artifact_file(path)
     keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
     with open_store(settings, create=True, write=True) as store:

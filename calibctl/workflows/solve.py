@@ -282,10 +282,11 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if not request.session_id and not request.serial:
         raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
-    # workflows.report draws with this module's board_spec, hence the import here and not at the top
-    from calibctl.workflows import report as report_workflow
-
     if request.report_dir is not None:
+        # workflows.report draws with this module's board_spec, hence the import here and not at the top
+        # (and only with --report: a plain solve does not load the HTML and SVG writers)
+        from calibctl.workflows import report as report_workflow
+
         report_workflow.ready_folder(request.report_dir)
     with open_store(settings, write=True) as store:
         session = (
@@ -309,6 +310,8 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         active = store.active_version(stored.serial) == stored.version
     report_path = None
     if request.report_dir is not None:
+        from calibctl.workflows import report as report_workflow
+
         report_path, _ = report_workflow.write_report(
             settings, stored.ref, report_workflow.default_path(stored, request.report_dir), force=False)
     return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)

@@ -58,5 +58,36 @@ def test_read_commands_load_no_migration_image_plot_or_postgres_module(migrated_
             f"try:\n    typer.main.get_command(app).main({['--db', migrated_store, *args]!r}, standalone_mode=False)\n"
             "except BaseException:\n    pass")  # the exit code is not the point here: the imports are
     loaded = _modules_after(code)
-    assert "calibctl.store.repository" in loaded or args[0] == "lint"
+    assert loaded & {"calibctl.store.repository", "calibctl.store.sqlite_reads"} or args[0] == "lint"
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_READING)) == []
+
+
+# What reading a SQLite store needs is sqlite3, the artifact models and rich (calibctl.store.sqlite_reads):
+# not sqlalchemy (the ORM is for writes, PostgreSQL and the error paths), not numpy or the lens checks (only
+# lint computes on the numbers), not cryptography (only signing and verifying signatures), not the
+# whole-store audit (`db verify`) nor the rig models.
+NOT_FOR_STORE_READS = ("sqlalchemy", "calibctl.store.repository", "numpy", "cryptography", "calibctl.workflows.lint", "calibctl.store.audit",
+                       "calibctl.artifacts.rig")
+
+
+@pytest.fixture(scope="module")
+def store_with_a_calibration(migrated_store) -> str:
+    from calibctl.store.repository import Store
+    from tests.artifacts.factories import calibration
+
+    with Store.open(migrated_store) as store:
+        store.add_artifact(calibration(serial="CAM-1"), activate=True, actor="qa", station="st1", reason="solved")
+    return migrated_store
+
+
+@pytest.mark.parametrize("args", [
+    ["board", "list"], ["history", "CAM-1"], ["show", "CAM-1"], ["export", "CAM-1"],
+    ["export", "CAM-1", "--format", "ros"],
+])
+def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_or_rig_module(store_with_a_calibration, args) -> None:
+    code = ("import typer.main\nfrom calibctl.cli.main import app\n"
+            f"try:\n    typer.main.get_command(app).main({['--db', store_with_a_calibration, *args]!r}, "
+            "standalone_mode=False)\nexcept BaseException as exc:\n    raise SystemExit(f'failed: {exc!r}')")
+    loaded = _modules_after(code)
+    assert "calibctl.store.sqlite_reads" in loaded
+    assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS)) == []

@@ -27,6 +27,11 @@ def cli(url: str, *args: str):
     ("lint", "--all"),
     ("db", "verify"),
     ("board", "list"),
+    # maintenance and writes to what must already be there: a typo is not a new store either
+    ("prune",),
+    ("prune", "--json"),
+    ("rollback", "CAM-0001", "--to", "1", "--reason", "typo test"),
+    ("solve", "--serial", "CAM-0001"),
 ])
 def test_a_mistyped_sqlite_path_is_exit_2_and_creates_nothing(tmp_path: Path, args):
     typo = tmp_path / "typo.db"
