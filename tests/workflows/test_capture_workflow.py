@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import shutil
+import threading
 from pathlib import Path
 
 import cv2
@@ -280,17 +281,28 @@ def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
     for i in range(60):
         shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
     calls: list[int] = []
+    lock = threading.Lock()
+    # A detection started after the interrupt waits until capture has returned, so each worker can start
+    # at most one more however slowly the calling thread runs (on a loaded machine it may run late).
+    capture_returned = threading.Event()
     real_detect = image_outcomes.detect_board
 
     def interrupted(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
+        with lock:
+            calls.append(1)
+            n = len(calls)
+        if n == 3:
             raise KeyboardInterrupt
+        if n > 3:
+            capture_returned.wait(timeout=30)
         return real_detect(*args, **kwargs)
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), workers=workers))
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            capture(settings, CaptureRequest(SERIAL, "A17", str(folder), workers=workers))
+    finally:
+        capture_returned.set()
     assert len(calls) <= 3 + workers  # of 60: the rest was cancelled
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == []
