@@ -147,6 +147,18 @@ def test_parallel_and_sequential_runs_agree_and_report_progress(tmp_path: Path, 
         classify_files(paths, BOARD, executor="cluster")
 
 
+def test_workers_hand_each_decoded_image_to_on_decoded_once(tmp_path: Path, good_views) -> None:
+    paths = [write(tmp_path / f"v{i}.png", img) for i, (img, _) in enumerate(good_views[:4])]
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    seen: list[np.ndarray] = []
+    outcomes = classify_files([*paths, tmp_path / "broken.png"], BOARD, workers=2, on_decoded=seen.append)
+    assert [o.status for o in outcomes][-1] == UNREADABLE and len(seen) == 4  # the undecodable file is not passed on
+    by_bytes = {img.tobytes() for img, _ in good_views[:4]}
+    assert {gray.tobytes() for gray in seen} == by_bytes
+    with pytest.raises(ValueError, match="on_decoded needs the thread executor"):
+        classify_files(paths, BOARD, workers=2, executor="process", on_decoded=seen.append)
+
+
 def test_a_missing_file_is_unreadable_not_a_crash(tmp_path: Path) -> None:
     outcome = classify_file(tmp_path / "gone.png", BOARD)
     assert outcome.status == UNREADABLE and outcome.reason.startswith("cannot read the file")
