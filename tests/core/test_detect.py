@@ -276,6 +276,26 @@ def test_photographed_scenes_are_not_noise_like() -> None:
     assert [m for m, _, _ in search_levels(clean, DetectorSettings())] == ["classic", "classic", "sb"]
 
 
+def _centred_correlation(gray: np.ndarray, stride: int = 4) -> float:
+    """The textbook form: correlation of the centred neighbour arrays (float64)."""
+    scores = []
+    for lines in (gray[::stride].astype(np.float64), gray[:, ::stride].T.astype(np.float64)):
+        a, b = lines[:, :-1] - lines[:, :-1].mean(), lines[:, 1:] - lines[:, 1:].mean()
+        denom = np.sqrt((a * a).sum() * (b * b).sum())
+        scores.append(float((a * b).sum() / denom) if denom > 0 else 1.0)
+    return min(scores)
+
+
+def test_the_one_pass_neighbour_correlation_equals_the_centred_form() -> None:
+    rng = np.random.default_rng(5)
+    noise = rng.integers(0, 256, (240, 320), dtype=np.uint8)
+    images = [noise, cv2.GaussianBlur(noise, (0, 0), 1.0), _noisy_board(80.0, seed=4), np.full((240, 320), 7, np.uint8),
+              render_view(CAMERA, BOARD, scenario_poses("good", CAMERA, BOARD, 1, rng)[0], rng)]
+    got = [neighbour_correlation(g) for g in images]
+    np.testing.assert_allclose(got, [_centred_correlation(g) for g in images], atol=1e-9)
+    assert got[3] == 1.0 and got[0] < 0.05 < 0.9 < got[4]
+
+
 def test_the_search_copy_is_full_resolution_up_to_the_pixel_budget() -> None:
     for (width, height), k in (((1280, 960), 1), ((1281, 721), 1), ((1920, 1080), 2), ((4000, 3000), 4)):
         copy, factor = downscaled_to_pixels(np.zeros((height, width), np.uint8), MAX_SEARCH_PIXELS)
