@@ -229,15 +229,22 @@ def neighbour_correlation(gray: np.ndarray, stride: int = 4) -> float:
     the smaller of the two.
 
     Sensor noise (i.i.d. per pixel) scores about 0, any photographed scene close to 1: the real
-    photos in ../shared/datasets score 0.936-0.992. ``gray``: (H, W) uint8.
+    photos in ../shared/datasets score 0.936-0.992. ``gray``: (H, W) uint8. One pass of sums over the
+    sampled lines (float64) instead of centring each neighbour array: 0.26 -> 0.15 ms a call on the
+    half-size copies of the renders and real photos, the value within 2e-7 of the centred float32 form.
     """
-    rows = gray[::stride].astype(np.float32)  # only the sampled rows and columns are converted (3x faster)
-    cols = gray[:, ::stride].astype(np.float32)
     scores = []
-    for a, b in ((rows[:, :-1], rows[:, 1:]), (cols[:-1], cols[1:])):
-        da, db = a - a.mean(), b - b.mean()
-        denom = float(np.sqrt((da * da).sum() * (db * db).sum()))
-        scores.append(float((da * db).sum()) / denom if denom > 0 else 1.0)
+    for lines in (gray[::stride], gray[:, ::stride].T):  # only the sampled lines are converted
+        x = lines.astype(np.float64)
+        first, last = x[:, 0], x[:, -1]
+        n = x.shape[0] * (x.shape[1] - 1)  # pairs (x[:, j], x[:, j + 1])
+        total, squares = float(x.sum()), float(np.einsum("ij,ij->", x, x))
+        sum_a, sum_b = total - float(last.sum()), total - float(first.sum())
+        var_a = squares - float(last @ last) - sum_a * sum_a / n
+        var_b = squares - float(first @ first) - sum_b * sum_b / n
+        cov = float(np.einsum("ij,ij->", x[:, :-1], x[:, 1:])) - sum_a * sum_b / n
+        denom = math.sqrt(max(var_a, 0.0) * max(var_b, 0.0))
+        scores.append(cov / denom if denom > 0 else 1.0)
     return min(scores)
 
 

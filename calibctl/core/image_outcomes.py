@@ -50,6 +50,7 @@ DEFAULT_EXECUTOR = "thread"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
 ProgressCallback = Callable[[int, int, "ImageOutcome"], None]
+DecodedCallback = Callable[[np.ndarray], None]
 
 
 @dataclass(frozen=True)
@@ -114,8 +115,13 @@ def _with_detection(outcome: ImageOutcome, detection: Detection) -> ImageOutcome
                    method=detection.method, edge_width_px=detection.edge_width_px)
 
 
-def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings | None = None) -> ImageOutcome:
-    """Read, hash, decode and detect one image file (safe to call in a worker process)."""
+def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings | None = None,
+                  on_decoded: DecodedCallback | None = None) -> ImageOutcome:
+    """Read, hash, decode and detect one image file (safe to call in a worker process).
+
+    ``on_decoded(gray)`` is called with the decoded (H, W) uint8 image before detection, so a caller
+    that needs the pixels too does not decode the file a second time.
+    """
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -126,6 +132,8 @@ def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings 
     if gray is None or gray.size == 0:
         return ImageOutcome(path.name, str(path), UNREADABLE,
                             f"not a decodable image ({len(data)} bytes)", None, digest)
+    if on_decoded is not None:
+        on_decoded(gray)
     return classify_array(path.name, str(path), gray, digest, spec, settings)
 
 
@@ -208,7 +216,7 @@ def _mp_context() -> multiprocessing.context.BaseContext:
 
 def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
                    workers: int = DEFAULT_WORKERS, progress: ProgressCallback | None = None,
-                   executor: str = DEFAULT_EXECUTOR) -> list[ImageOutcome]:
+                   executor: str = DEFAULT_EXECUTOR, on_decoded: DecodedCallback | None = None) -> list[ImageOutcome]:
     """Per-file outcomes (no session rules) in the order of ``paths``, detected on ``workers`` workers.
 
     ``executor`` is "thread" (default) or "process". OpenCV releases the GIL in decoding and
@@ -217,12 +225,16 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     2 processes 146-158 / 294-496 ms (the first process run also starts the fork server). OpenCV's
     own thread pool is set to one thread for the run (restored afterwards) so the workers do not
     oversubscribe the cores.
+    ``on_decoded(gray)`` is called in the worker thread with each decoded image (it must be thread-safe;
+    threads only: a worker process cannot call back into this one).
     ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
     KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
     propagates; nothing is returned.
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if on_decoded is not None and executor == "process":
+        raise ValueError("on_decoded needs the thread executor: a worker process cannot call back")
     paths = [Path(p) for p in paths]
     total = len(paths)
     results: list[ImageOutcome | None] = [None] * total
@@ -232,7 +244,7 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     try:
         if workers == 1:
             for i, path in enumerate(paths):
-                results[i] = classify_file(path, spec, settings)
+                results[i] = classify_file(path, spec, settings, on_decoded)
                 if progress:
                     progress(i + 1, total, results[i])  # type: ignore[arg-type]
         else:
@@ -240,7 +252,8 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
                               ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(),
                                                   initializer=_init_worker))
             try:
-                futures = {pool.submit(classify_file, path, spec, settings): i for i, path in enumerate(paths)}
+                futures = {pool.submit(classify_file, path, spec, settings, on_decoded): i
+                           for i, path in enumerate(paths)}
                 for done, future in enumerate(as_completed(futures), start=1):
                     results[futures[future]] = future.result()
                     if progress:

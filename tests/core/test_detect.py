@@ -147,6 +147,18 @@ def test_parallel_and_sequential_runs_agree_and_report_progress(tmp_path: Path, 
         classify_files(paths, BOARD, executor="cluster")
 
 
+def test_workers_hand_each_decoded_image_to_on_decoded_once(tmp_path: Path, good_views) -> None:
+    paths = [write(tmp_path / f"v{i}.png", img) for i, (img, _) in enumerate(good_views[:4])]
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    seen: list[np.ndarray] = []
+    outcomes = classify_files([*paths, tmp_path / "broken.png"], BOARD, workers=2, on_decoded=seen.append)
+    assert [o.status for o in outcomes][-1] == UNREADABLE and len(seen) == 4  # the undecodable file is not passed on
+    by_bytes = {img.tobytes() for img, _ in good_views[:4]}
+    assert {gray.tobytes() for gray in seen} == by_bytes
+    with pytest.raises(ValueError, match="on_decoded needs the thread executor"):
+        classify_files(paths, BOARD, workers=2, executor="process", on_decoded=seen.append)
+
+
 def test_a_missing_file_is_unreadable_not_a_crash(tmp_path: Path) -> None:
     outcome = classify_file(tmp_path / "gone.png", BOARD)
     assert outcome.status == UNREADABLE and outcome.reason.startswith("cannot read the file")
@@ -262,6 +274,26 @@ def test_photographed_scenes_are_not_noise_like() -> None:
     clean = render_view(CAMERA, BOARD, T, rng, Photometry.random(rng))
     assert neighbour_correlation(clean) > 0.9
     assert [m for m, _, _ in search_levels(clean, DetectorSettings())] == ["classic", "classic", "sb"]
+
+
+def _centred_correlation(gray: np.ndarray, stride: int = 4) -> float:
+    """The textbook form: correlation of the centred neighbour arrays (float64)."""
+    scores = []
+    for lines in (gray[::stride].astype(np.float64), gray[:, ::stride].T.astype(np.float64)):
+        a, b = lines[:, :-1] - lines[:, :-1].mean(), lines[:, 1:] - lines[:, 1:].mean()
+        denom = np.sqrt((a * a).sum() * (b * b).sum())
+        scores.append(float((a * b).sum() / denom) if denom > 0 else 1.0)
+    return min(scores)
+
+
+def test_the_one_pass_neighbour_correlation_equals_the_centred_form() -> None:
+    rng = np.random.default_rng(5)
+    noise = rng.integers(0, 256, (240, 320), dtype=np.uint8)
+    images = [noise, cv2.GaussianBlur(noise, (0, 0), 1.0), _noisy_board(80.0, seed=4), np.full((240, 320), 7, np.uint8),
+              render_view(CAMERA, BOARD, scenario_poses("good", CAMERA, BOARD, 1, rng)[0], rng)]
+    got = [neighbour_correlation(g) for g in images]
+    np.testing.assert_allclose(got, [_centred_correlation(g) for g in images], atol=1e-9)
+    assert got[3] == 1.0 and got[0] < 0.05 < 0.9 < got[4]
 
 
 def test_the_search_copy_is_full_resolution_up_to_the_pixel_budget() -> None:

@@ -78,6 +78,24 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
         assert 15.0 < view.tilt_deg < 45.0 and view.tilt_direction is not None  # the scene's tilts are 20-40 deg
 
 
+def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path,
+                                                                               monkeypatch) -> None:
+    files = sorted(good.glob("*.png"))
+    expected = None
+    for path in files:  # what the capture kept before: a reduced decode of every file, then the maximum
+        reduced = cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_2)
+        expected = reduced if expected is None else np.maximum(expected, reduced)
+    decodes: list[int] = []
+    real_imdecode = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decodes.append(1) or real_imdecode(*a))
+    kept = {}
+    real_collected = capture_workflow._Collected
+    monkeypatch.setattr(capture_workflow, "_Collected", lambda *a, **k: kept.setdefault("got", real_collected(*a, **k)))
+    capture(settings, CaptureRequest(SERIAL, "A17", str(good)))
+    assert len(decodes) == len(files)
+    np.testing.assert_array_equal(kept["got"].max_gray, expected)
+
+
 def test_station_file_overrides_the_gate_thresholds(sqlite_url: str, good: Path, tmp_path: Path) -> None:
     station_file = tmp_path / "station.yaml"
     station_file.write_text("gates: {observability_min: 1.0e-3, min_views: 13}\n", encoding="utf-8")
