@@ -32,7 +32,7 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     url = f"sqlite:///{root / 'r.db'}"
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
-    run_synth(root / "r190", "good", seed=4, views=12, image_size=(640, 480), fisheye_fov_deg=190.0)
+    run_synth(root / "r190", "good", seed=6, views=12, image_size=(640, 480), fisheye_fov_deg=190.0)
     result = RUNNER.invoke(app, ["--db", url, "calibrate", "--serial", "FE-0190", "--board", "A17", "--source",
                                  str(root / "r190"), "--model", "fisheye", "--image-circle", "322.8,237.4,236"])
     assert result.exit_code == 0, result.output

@@ -25,10 +25,10 @@ TOLERANCE_PX = 1.5
 
 @pytest.fixture(scope="module")
 def circular_190(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """190 deg circular fisheye, 640x480, seed 4: every gate passes with the circle; without it the
-    bottom-right corner cell (28 % inside the circle) is never reached."""
+    """190 deg circular fisheye, 640x480, seed 6: every gate passes with the circle (OpenCV 4.10 and 5.0);
+    without it a corner cell, mostly outside the circle, is never reached."""
     out = tmp_path_factory.mktemp("fisheye") / "r190"
-    run_synth(out, "good", seed=4, views=12, image_size=(640, 480), fisheye_fov_deg=190.0)
+    run_synth(out, "good", seed=6, views=12, image_size=(640, 480), fisheye_fov_deg=190.0)
     return out
 
 

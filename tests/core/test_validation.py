@@ -186,9 +186,10 @@ def test_a_full_solve_worse_than_its_folds_is_re_solved_from_the_folds_intrinsic
     assert new_fit.rms_px <= new_report.holdout_rms_px and new_report.fit_rms_px == new_fit.rms_px
 
 
-def test_a_full_solve_that_stays_worse_than_its_folds_is_refused(good):
+def test_a_full_solve_that_stays_worse_than_its_folds_is_refused(good, monkeypatch):
     import dataclasses
 
+    from calibctl.core import validation
     from calibctl.core.validation import agree_with_folds
 
     ses, _ = good
@@ -196,6 +197,8 @@ def test_a_full_solve_that_stays_worse_than_its_folds_is_refused(good):
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
     report = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
     optimistic = dataclasses.replace(report, holdout_rms_px=0.5 * fit.rms_px)
+    # the folds stay better whichever way the re-solve from their K lands (OpenCV 4.x may land a hair lower)
+    monkeypatch.setattr(validation, "validate_holdout", lambda *args, **kwargs: optimistic)
     with pytest.raises(NumericalError, match=r"worse than its held-out folds .* different minima") as exc:
         agree_with_folds(obj, img, SIZE, fit, optimistic)
     assert exc.value.exit_code == EXIT_CANNOT_RUN and "--model" in exc.value.hint
