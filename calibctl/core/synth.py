@@ -127,19 +127,29 @@ def _ray_map(key: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     xr, yr = distort_normalised(x, y, dist)
     valid = (np.abs(xr - xd) < 1e-9) & (np.abs(yr - yd) < 1e-9)
     # central differences on the padded grid, then crop the padding
-    x_u, x_v = (x[1:-1, 2:] - x[1:-1, :-2]) / 2, (x[2:, 1:-1] - x[:-2, 1:-1]) / 2
-    y_u, y_v = (y[1:-1, 2:] - y[1:-1, :-2]) / 2, (y[2:, 1:-1] - y[:-2, 1:-1]) / 2
+    return padded_ray_map(x, y, np.broadcast_to(1.0, x.shape), valid)
+
+
+def padded_ray_map(x: np.ndarray, y: np.ndarray, z: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Rays (x, y, z) (any positive scale) on a grid padded by one pixel all round -> the cropped ray map
+    (x, y, z, x_u, x_v, y_u, y_v, z_u, z_v, valid): central differences wrt (u, v), valid where the pixel
+    and its four neighbours are."""
+    derivatives = []
+    for a in (x, y, z):
+        derivatives += [(a[1:-1, 2:] - a[1:-1, :-2]) / 2, (a[2:, 1:-1] - a[:-2, 1:-1]) / 2]
     crop = (slice(1, -1), slice(1, -1))
     valid = valid[crop] & valid[:-2, 1:-1] & valid[2:, 1:-1] & valid[1:-1, :-2] & valid[1:-1, 2:]
-    return x[crop], y[crop], x_u, x_v, y_u, y_v, valid
+    return x[crop], y[crop], z[crop], *derivatives, valid
 
 
-def _board_coords(G: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Normalised rays -> board-plane coords (square units) and a front-facing mask. G: inverse plane map."""
-    w = G[2, 0] * x + G[2, 1] * y + G[2, 2]
+def _board_coords(G: np.ndarray, x: np.ndarray, y: np.ndarray,
+                  z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays (x, y, z), any positive scale, so also behind the camera plane (z <= 0, a fisheye past 90 deg)
+    -> board-plane coords (square units) and a front-facing mask. G: inverse plane map."""
+    w = G[2, 0] * x + G[2, 1] * y + G[2, 2] * z
     front = w > 1e-12
     w = np.where(front, w, 1.0)
-    return (G[0, 0] * x + G[0, 1] * y + G[0, 2]) / w, (G[1, 0] * x + G[1, 1] * y + G[1, 2]) / w, front
+    return (G[0, 0] * x + G[0, 1] * y + G[0, 2] * z) / w, (G[1, 0] * x + G[1, 1] * y + G[1, 2] * z) / w, front
 
 
 class _Pattern:
@@ -228,7 +238,8 @@ def render_background(image_size: tuple[int, int], rng: np.random.Generator) -> 
 
 
 class RayCamera(Protocol):
-    """A lens that supplies its own per-pixel ray map (e.g. synth_fisheye.FisheyeCamera)."""
+    """A lens that supplies its own per-pixel ray map, as ``padded_ray_map`` returns it (e.g.
+    synth_fisheye.FisheyeCamera)."""
 
     @property
     def image_size(self) -> tuple[int, int]: ...
@@ -258,7 +269,7 @@ def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board
     photometry = photometry or Photometry()
     width, height = camera.image_size
     rays = camera.ray_map() if not isinstance(camera, PinholeCamera) else _ray_map(camera.key())
-    x, y, x_u, x_v, y_u, y_v, valid = rays
+    x, y, z, x_u, x_v, y_u, y_v, z_u, z_v, valid = rays
     R, t = np.asarray(T_cam_board, np.float64)[:3, :3], np.asarray(T_cam_board, np.float64)[:3, 3]
     plane = np.column_stack([R[:, 0], R[:, 1], t])
     # board metres -> square units on the way out of the inverse plane map
@@ -266,7 +277,7 @@ def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board
     pattern = _Pattern(board, margin_squares)
     bg = render_background(camera.image_size, rng) if background is None else background.astype(np.float32)
 
-    bx, by, front = _board_coords(G, x, y)
+    bx, by, front = _board_coords(G, x, y, z)
     hit = front & valid & pattern.inside(bx, by)
     refl = np.where(hit, pattern.value(bx, by), bg).astype(np.float32)
 
@@ -281,7 +292,8 @@ def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board
         ou, ov = _rook_offsets(supersample)
         sx = x[rows, cols][:, None] + x_u[rows, cols][:, None] * ou + x_v[rows, cols][:, None] * ov
         sy = y[rows, cols][:, None] + y_u[rows, cols][:, None] * ou + y_v[rows, cols][:, None] * ov
-        sbx, sby, sfront = _board_coords(G, sx, sy)
+        sz = z[rows, cols][:, None] + z_u[rows, cols][:, None] * ou + z_v[rows, cols][:, None] * ov
+        sbx, sby, sfront = _board_coords(G, sx, sy, sz)
         shit = sfront & pattern.inside(sbx, sby)
         svalue = np.where(shit, pattern.value(sbx, sby), bg[rows, cols][:, None])
         refl[rows, cols] = svalue.mean(axis=1)

@@ -21,6 +21,7 @@ import numpy as np
 
 from calibctl.core.board_geometry import chessboard_object_points
 from calibctl.core.fisheye_model import MAX_SOLVE_THETA_RAD, distort_theta, pixel_rays, project_equidistant
+from calibctl.core.synth import padded_ray_map
 from calibctl.core.synthetic_corners import MAX_DRAWS_PER_VIEW, SyntheticSession
 
 # A mildly non-equidistant lens (k1..k4), the size real fisheye fits land at.
@@ -66,8 +67,9 @@ class FisheyeCamera:
         return np.hypot(u - self.K[0, 2], v - self.K[1, 2]) > self.circle_radius_px
 
     def ray_map(self) -> tuple[np.ndarray, ...]:
-        """Per-pixel normalised ray (x = X/Z, y = Y/Z), its derivatives wrt (u, v), and where it is valid
-        (inside the image circle and under 89 deg off-axis: boards are staged within 88 deg), as synth's."""
+        """Per-pixel unit ray (X, Y, Z), its derivatives wrt (u, v), and where it is valid (inside the image
+        circle), as ``synth.padded_ray_map``. Unit rays, not X/Z, so a 190 deg lens renders the board
+        behind the camera plane too (until 2026-11-23 pixels past 89 deg showed the background)."""
         return _fisheye_ray_map(self.key())
 
     def inside(self, px: np.ndarray, margin_px: float) -> np.ndarray:
@@ -86,16 +88,11 @@ def _fisheye_ray_map(key: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     width, height, circle = int(key[13]), int(key[14]), key[15]
     u, v = np.meshgrid(np.arange(-1, width + 1, dtype=np.float64), np.arange(-1, height + 1, dtype=np.float64))
     rays = pixel_rays(np.stack([u.ravel(), v.ravel()], axis=1), K, dist).reshape(height + 2, width + 2, 3)
-    z = np.maximum(rays[..., 2], 1e-6)
-    x, y = rays[..., 0] / z, rays[..., 1] / z
-    valid = rays[..., 2] > np.cos(np.deg2rad(89.0))
+    # unit rays, not X/Z: a 190 deg lens sees the board's outer squares behind the camera plane
+    valid = rays[..., 2] > -np.cos(np.deg2rad(1.0))
     if circle > 0:
         valid &= np.hypot(u - K[0, 2], v - K[1, 2]) <= circle
-    x_u, x_v = (x[1:-1, 2:] - x[1:-1, :-2]) / 2, (x[2:, 1:-1] - x[:-2, 1:-1]) / 2
-    y_u, y_v = (y[1:-1, 2:] - y[1:-1, :-2]) / 2, (y[2:, 1:-1] - y[:-2, 1:-1]) / 2
-    crop = (slice(1, -1), slice(1, -1))
-    valid = valid[crop] & valid[:-2, 1:-1] & valid[2:, 1:-1] & valid[1:-1, :-2] & valid[1:-1, 2:]
-    return x[crop], y[crop], x_u, x_v, y_u, y_v, valid
+    return padded_ray_map(rays[..., 0], rays[..., 1], rays[..., 2], valid)
 
 
 def fisheye_poses(camera: FisheyeCamera, obj: np.ndarray, n_views: int, rng: np.random.Generator,

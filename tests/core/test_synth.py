@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.fisheye_model import project_equidistant
 from calibctl.core.synth import (
     Photometry,
     PinholeCamera,
@@ -16,6 +17,7 @@ from calibctl.core.synth import (
     true_corners_px,
     undistort_normalised,
 )
+from calibctl.core.synth_fisheye import FisheyeCamera
 from calibctl.core.synth_scenes import (
     fits_in_frame,
     place_board,
@@ -153,3 +155,20 @@ def test_scenarios_refuse_unknown_names_and_impossible_frames() -> None:
     huge = BoardSpec.chessboard(40, 30, 0.1)
     with pytest.raises(ValueError, match="cannot place the board"):
         scenario_poses("good", CAMERA, huge, 1, np.random.default_rng(0))
+
+
+def test_a_190_deg_fisheye_renders_the_board_behind_the_camera_plane() -> None:
+    # A wall-like board 0.1 m to the right, reaching behind the camera plane (Z < 0): the ray 93 deg
+    # off-axis towards +X hits it at Z = -5 mm, 3.79 x 1.5 squares from corner 0, inside a black square.
+    camera = FisheyeCamera.from_fov((640, 480), 190.0)
+    board = BoardSpec.chessboard(9, 6, 0.025)
+    T_cam_board = np.eye(4)
+    T_cam_board[:3, :3] = np.column_stack([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    T_cam_board[:3, 3] = [0.1, -0.0375, -0.1]
+    background = np.full((480, 640), 0.4, np.float32)  # 94 DN at gain 235
+    img = render_view(camera, board, T_cam_board, np.random.default_rng(0),
+                      Photometry(blur_sigma_px=0.0, read_noise_dn=0.0, shot_noise_gain=0.0), background)
+    ray = np.array([[np.sin(np.deg2rad(93.0)), 0.0, np.cos(np.deg2rad(93.0))]])
+    u, v = np.rint(project_equidistant(ray, camera.K, camera.dist)[0]).astype(int)
+    assert camera.circle_radius_px is not None and np.hypot(u - camera.K[0, 2], v - camera.K[1, 2]) < camera.circle_radius_px
+    assert img[v, u] < 30  # black print (235 x 0.06 x 0.8 = 11 DN), not the background
