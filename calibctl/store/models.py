@@ -309,5 +309,6 @@ IMMUTABLE_TABLES = {
     "rig_sessions": "rig sessions are immutable",
     "rig_calibrations": "rig calibrations are immutable",
     "rig_activation_events": "rig activation events are append-only",
+    "check_events": "check events are append-only",
 }
 """Table -> the message its UPDATE/DELETE trigger raises (the migrations create the triggers)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 
+from calibctl.artifacts.check import CheckEvent, RegionCheck
 from calibctl.artifacts.session import CaptureSession, ImageOutcome, ViewCorners
 from tests.artifacts.factories import FIXED_TIME, measured_board
 
@@ -44,3 +45,11 @@ def capture_session(
         calibctl_version="0.1.0",
         opencv_version="5.0.0",
     )
+
+
+def check_event(serial: str, version: int, sha: str, n: int, passed: bool = True) -> CheckEvent:
+    region = RegionCheck(region="overall", check_rms_px=0.2, reference_rms_px=0.2, ratio=1.0, limit=1.5, corners=40,
+                         tested=True, passed=passed)
+    return CheckEvent(check_id=f"{n:012x}", serial=serial, version=version, calibration_sha256=sha, source="folder x",
+                      station="st1", operator="qa", at=FIXED_TIME + dt.timedelta(minutes=n), image_size=(640, 480), images=3,
+                      views=["a.png"], view_rms_px=[0.2], regions=[region], alpha=0.01, passed=passed)

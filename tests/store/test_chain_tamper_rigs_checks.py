@@ -10,27 +10,20 @@ import json
 import numpy as np
 import pytest
 
-from calibctl.artifacts.check import CheckEvent, RegionCheck
+from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.rig import RigCalibration, RigEdge
 from calibctl.signing import TrustedKeys, create_key
 from calibctl.store import codec
 from calibctl.store.engine import make_engine
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
+from tests.store.documents import check_event
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 from tests.store.tamper import rechain, run_underneath
 from tests.store.test_chain_tamper import _select, problems_of
 
 WHO = {"actor": "qa", "station": "st1"}
 AT = dt.datetime(2026, 11, 23, 9, 0, tzinfo=dt.UTC)
-
-
-def check_event(serial: str, version: int, sha: str, n: int, passed: bool = True) -> CheckEvent:
-    region = RegionCheck(region="overall", check_rms_px=0.2, reference_rms_px=0.2, ratio=1.0, limit=1.5, corners=40,
-                         tested=True, passed=passed)
-    return CheckEvent(check_id=f"{n:012x}", serial=serial, version=version, calibration_sha256=sha, source="folder x",
-                      station="st1", operator="qa", at=AT + dt.timedelta(minutes=n), image_size=(640, 480), images=3,
-                      views=["a.png"], view_rms_px=[0.2], regions=[region], alpha=0.01, passed=passed)
 
 
 def with_handeye_edge(cal: RigCalibration) -> RigCalibration:

@@ -15,7 +15,7 @@ from calibctl.store.engine import make_engine
 from calibctl.store.models import IMMUTABLE_TABLES
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
-from tests.store.documents import capture_session
+from tests.store.documents import capture_session, check_event
 from tests.store.rig_documents import rig_calibration, rig_definition, rig_session
 from tests.store.tamper import forge_activation, patch_stored_bytes
 
@@ -30,6 +30,7 @@ ANY_COLUMN = {
     "rig_sessions": "status",
     "rig_calibrations": "status",
     "rig_activation_events": "reason",
+    "check_events": "passed",
 }
 
 
@@ -38,8 +39,9 @@ def filled(db_url: str) -> str:
     with Store.open(db_url) as store:
         store.add_board(measured_board())
         store.add_session(capture_session())
-        store.add_artifact(calibration(), activate=True, reason="solved", **WHO)
+        active = store.add_artifact(calibration(), activate=True, reason="solved", **WHO)
         store.add_artifact(calibration(status="rejected"), activate=False, reason="solved", **WHO)
+        store.add_check(check_event(active.serial, active.version, active.content_sha256, 1))
         store.add_rig(rig_definition())
         store.add_rig_session(rig_session())
         store.add_rig_calibration(rig_calibration(), activate=True, reason="solved", **WHO)
