@@ -13,6 +13,8 @@ These models must match the migrations; tests/store/test_migrations.py compares 
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
+from typing import Any
 
 from sqlalchemy import (
     BigInteger,
@@ -31,6 +33,8 @@ from sqlalchemy import (
 from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 from sqlalchemy.types import TypeDecorator
+
+from calibctl.store.codec import unreadable_datetime
 
 NAMING_CONVENTION = {
     "ix": "ix_%(table_name)s_%(column_0_N_name)s",
@@ -64,6 +68,21 @@ class UtcDateTime(TypeDecorator[dt.datetime]):
         if value is None:
             return None
         return value.replace(tzinfo=dt.UTC) if value.tzinfo is None else value.astimezone(dt.UTC)
+
+    def result_processor(self, dialect: Dialect, coltype: object) -> Callable[[Any], Any] | None:
+        # SQLite keeps text: a value edited outside calibctl ('garbage', a number) fails in SQLAlchemy's own
+        # parser before process_result_value; it is a tampered record (exit 1), never a traceback.
+        process = super().result_processor(dialect, coltype)
+        if process is None:
+            return None
+
+        def checked(value: Any) -> Any:
+            try:
+                return process(value)
+            except (TypeError, ValueError) as exc:
+                raise unreadable_datetime(value) from exc
+        return checked
+
 
 
 class Base(DeclarativeBase):

@@ -53,7 +53,12 @@ class StoreReads(Protocol):
 
 def _utc(text: str | None) -> dt.datetime | None:
     """A datetime column as the store's UtcDateTime returns it (SQLite keeps naive UTC text)."""
-    return None if text is None else dt.datetime.fromisoformat(text).replace(tzinfo=dt.UTC)
+    if text is None:
+        return None
+    try:
+        return dt.datetime.fromisoformat(text).replace(tzinfo=dt.UTC)
+    except (TypeError, ValueError) as exc:
+        raise codec.unreadable_datetime(text) from exc
 
 
 def _decode_artifact(row: SimpleNamespace) -> CalibrationArtifact:

@@ -227,3 +227,37 @@ def test_the_sqlite3_rows_of_calibrations_hold_the_columns_the_store_hashes(stor
     finally:
         conn.close()
     assert names == {c.name for c in ArtifactRow.__table__.columns}
+
+
+@pytest.mark.parametrize("garbage", ["'garbage'", "12345"])
+@pytest.mark.parametrize("read", ["get_artifact", "list_artifacts"])
+def test_an_unparseable_date_edited_underneath_is_a_tampered_record_on_both_paths(
+        store_url: str, garbage: str, read: str) -> None:
+    """SQLite keeps date-times as text: one edited into something that is no date fails in SQLAlchemy's own
+    parser, before any check of calibctl's; it must still be an IntegrityError (exit 1), never a traceback."""
+    from tests.store.tamper import run_underneath
+
+    run_underneath(store_url, f"UPDATE calibration_artifacts SET stored_at = {garbage} WHERE version = 3")
+    work = {"get_artifact": lambda s: s.get_artifact(SERIAL, 3), "list_artifacts": lambda s: s.list_artifacts(SERIAL)}[read]
+
+    def via_store():
+        with Store.open(store_url, create=False) as store:
+            return work(store)
+
+    served = _outcome(lambda: sqlite_reads.read(store_url, work, _no_fallback))
+    assert served == _outcome(via_store)
+    assert served[0] is IntegrityError and "is unreadable: the database was edited outside calibctl" in served[1]
+
+
+def test_an_unparseable_date_fails_db_verify_and_history_with_a_message(store_url: str) -> None:
+    from typer.testing import CliRunner
+
+    from calibctl.cli.main import app
+    from tests.store.tamper import run_underneath
+
+    run_underneath(store_url, "UPDATE calibration_artifacts SET stored_at = 'garbage' WHERE version = 3")
+    for args in (["db", "verify"], ["history", SERIAL], ["show", f"{SERIAL}@3"]):
+        result = CliRunner().invoke(app, ["--db", store_url, *args])
+        assert result.exit_code == 1, result.output
+        assert "a stored date and time ('garbage') is unreadable" in result.output
+        assert not isinstance(result.exception, ValueError | TypeError)
