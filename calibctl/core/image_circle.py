@@ -55,6 +55,15 @@ class ImageCircle:
         return f"image circle centre ({self.cx_px:.1f}, {self.cy_px:.1f}) px, radius {self.radius_px:.1f} px ({how})"
 
 
+def half_size(gray: np.ndarray) -> np.ndarray:
+    """``gray`` (H, W) at half size, area-averaged: enough to find an image circle, a quarter of the pixels
+    to keep per session. Every capture path reduces its frames this way before ``accumulate_max``."""
+    import cv2  # here, as in detect_image_circle: read commands load no OpenCV
+
+    height, width = gray.shape[:2]
+    return cv2.resize(gray, (max(1, width // 2), max(1, height // 2)), interpolation=cv2.INTER_AREA)
+
+
 def accumulate_max(acc: np.ndarray | None, gray: np.ndarray) -> np.ndarray:
     """The per-pixel maximum of ``acc`` and ``gray`` ((H, W) uint8); ``gray`` itself when acc is None or
     of another shape (the first frame of a session)."""

@@ -59,7 +59,13 @@ from calibctl.core.frame_select import (
 )
 from calibctl.core.gates import GateResult as CoreGateResult
 from calibctl.core.gates import GateThresholds, evaluate_gates
-from calibctl.core.image_circle import ImageCircle, accumulate_max, corners_inside, detect_image_circle
+from calibctl.core.image_circle import (
+    ImageCircle,
+    accumulate_max,
+    corners_inside,
+    detect_image_circle,
+    half_size,
+)
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
@@ -230,7 +236,7 @@ class _MaxPicture:
 
     def add(self, gray: np.ndarray) -> None:
         height, width = gray.shape[:2]
-        reduced = cv2.resize(gray, (max(1, width // 2), max(1, height // 2)), interpolation=cv2.INTER_AREA)
+        reduced = half_size(gray)
         with self._lock:
             self._by_size[(width, height)] = accumulate_max(self._by_size.get((width, height)), reduced)
 
@@ -334,7 +340,7 @@ class _StreamState:
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
-        self.max_gray = accumulate_max(self.max_gray, gray[::2, ::2])
+        self.max_gray = accumulate_max(self.max_gray, half_size(gray))
         self.frames_seen += 1
         if self.image_circle is None and self.frames_seen % CIRCLE_EVERY_FRAMES == 0:
             self._look_for_circle(size)
