@@ -30,11 +30,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from statistics import NormalDist
 
-import cv2
 import numpy as np
 
+from calibctl.core.extrinsics.se3 import rotation_from_rotvec
 from calibctl.core.recheck_delta import ParameterShift, intrinsic_shifts, stored_delta_covariance
-from calibctl.core.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown
+from calibctl.core.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown, residual_rms_px
 
 DEFAULT_ALPHA = 0.005  # whole-check false-fail probability under the noise model (target <= 1 %)
 SHIFT_SHARE = 0.8  # of alpha for the delta model (what a focal or principal-point change does); the rest: regions
@@ -129,10 +129,6 @@ def ratio_limit(dof_check: float, dof_reference: float, alpha: float, dispersion
     return math.exp(z * 0.5 * math.sqrt(dispersion * (2.0 / dof_check + 2.0 / dof_reference)))
 
 
-def _rms(res: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if len(res) else float("nan")
-
-
 def view_dispersion(residuals_px: Sequence[np.ndarray]) -> float:
     """phi >= 1: cluster-robust variance of the pooled mean square (views as clusters) over its iid variance.
 
@@ -196,14 +192,14 @@ def recheck(object_points_per_view: Sequence[np.ndarray], image_points_per_view:
         residuals.append(res)
         rvecs.append(rvec)
         tvecs.append(tvec)
-        R = _rotation(rvec)
+        R = rotation_from_rotvec(rvec)
         distances.append(float(np.linalg.norm(R @ np.asarray(obj, np.float64).reshape(-1, 3).mean(axis=0) + tvec)))
     regions = _region_tests(image_points_per_view, residuals, (float(K[0, 2]), float(K[1, 2])), image_size,
                             reference, alpha * (1 - SHIFT_SHARE))
     covariance = stored_delta_covariance(stored_sigma) if stored_covariance is None else stored_covariance
     shifts = intrinsic_shifts(object_points_per_view, K, D, rvecs, tvecs, residuals, covariance,
                               alpha * SHIFT_SHARE, model)
-    return RecheckResult(np.array([_rms(r) for r in residuals]), np.array(rvecs), np.array(tvecs),
+    return RecheckResult(np.array([residual_rms_px(r) for r in residuals]), np.array(rvecs), np.array(tvecs),
                          np.array(distances), tuple(regions), shifts, alpha)
 
 
@@ -215,7 +211,7 @@ def _region_tests(image_points_per_view: Sequence[np.ndarray], residuals: list[n
     all_res = np.concatenate(residuals)
     edges = reference.ring_edges_px if reference.ring_edges_px is not None else np.zeros(N_RINGS - 1)
     parts = residual_breakdown(image_points_per_view, residuals, principal_point_px, image_size, edges)
-    candidates = [("overall", _rms(all_res), reference.rms_px, len(all_res), reference.n_corners)]
+    candidates = [("overall", residual_rms_px(all_res), reference.rms_px, len(all_res), reference.n_corners)]
     if reference.ring_edges_px is not None:
         candidates += [(f"ring {i + 1}", float(parts.ring_rms_px[i]), float(reference.ring_rms_px[i]),
                         int(parts.ring_counts[i]), int(reference.ring_counts[i])) for i in range(N_RINGS)]
@@ -247,11 +243,6 @@ def _testable(c: tuple[str, float, float, int, int]) -> bool:
     _, rms, ref_rms, n, n_ref = c
     return (n >= MIN_REGION_CORNERS and n_ref >= MIN_REGION_CORNERS
             and math.isfinite(rms) and math.isfinite(ref_rms) and ref_rms > 0)
-
-
-def _rotation(rvec: np.ndarray) -> np.ndarray:
-    R, _ = cv2.Rodrigues(np.asarray(rvec, np.float64).reshape(3, 1))
-    return np.asarray(R)
 
 
 def distance_ratio(board_distance_m: np.ndarray, reference_m: float) -> tuple[float, float]:

@@ -57,7 +57,7 @@ N_RINGS = 5
 N_OCTANTS = 8
 
 
-def _rms(residuals: np.ndarray) -> float:
+def residual_rms_px(residuals: np.ndarray) -> float:
     """sqrt(mean squared 2-D residual length) of (N, 2) px; nan for N = 0."""
     if len(residuals) == 0:
         return float("nan")
@@ -162,8 +162,8 @@ def residual_breakdown(
     ring = np.searchsorted(np.asarray(radius_edges_px), radius, side="right")
     angle = np.arctan2(pts[:, 1] - image_size[1] / 2.0, pts[:, 0] - image_size[0] / 2.0)
     octant = np.floor(np.mod(angle, 2 * np.pi) / (np.pi / 4)).astype(np.int64) % N_OCTANTS
-    ring_rms = np.array([_rms(res[ring == i]) for i in range(N_RINGS)])
-    octant_rms = np.array([_rms(res[octant == i]) for i in range(N_OCTANTS)])
+    ring_rms = np.array([residual_rms_px(res[ring == i]) for i in range(N_RINGS)])
+    octant_rms = np.array([residual_rms_px(res[octant == i]) for i in range(N_OCTANTS)])
     return ResidualBreakdown(
         radius_edges_px=np.asarray(radius_edges_px, dtype=np.float64).copy(),
         ring_rms_px=ring_rms, ring_counts=np.bincount(ring, minlength=N_RINGS),
@@ -272,8 +272,8 @@ def validate_holdout(
     return HoldoutReport(
         model=m.name, fold_of_view=folds, fold_camera_matrices=np.stack(fold_K),
         holdout_residuals_px=tuple(holdout),
-        holdout_per_view_rms_px=np.array([_rms(r) for r in holdout]),
-        holdout_rms_px=_rms(all_holdout), fit_rms_px=fit.rms_px,
+        holdout_per_view_rms_px=np.array([residual_rms_px(r) for r in holdout]),
+        holdout_rms_px=residual_rms_px(all_holdout), fit_rms_px=fit.rms_px,
         holdout=residual_breakdown(image_points_per_view, holdout, pp, image_size, edges),
         fit=residual_breakdown(image_points_per_view, fit.residuals_px, pp, image_size, edges),
     )
