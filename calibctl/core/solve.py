@@ -56,6 +56,7 @@ from calibctl.errors import InputError, NumericalError, UsageError
 # Below this many degrees of freedom (residuals - parameters) the residual variance that scales
 # the covariance is itself too uncertain: its relative std is sqrt(2 / dof), 20 % at 50.
 MIN_SIGMA_DOF = 50
+NO_UNCERTAINTY = "not computed: a fit solved only for its numbers (uncertainty=False)"
 # OpenCV needs a homography per view for its initial guess: at least 4 corners.
 MIN_CORNERS_PER_VIEW = 4
 # A solve is declared diverged when it leaves the space of plausible pinhole cameras:
@@ -317,6 +318,7 @@ def solve_intrinsics(
     image_size: tuple[int, int],
     model: str | DistortionModel = DEFAULT_MODEL,
     initial: np.ndarray | None = None,
+    uncertainty: bool = True,
 ) -> IntrinsicsSolution:
     """Solve K and distortion with cv2.calibrateCameraExtended.
 
@@ -327,6 +329,11 @@ def solve_intrinsics(
         model: a MODELS name or a DistortionModel.
         initial: optional (3, 3) K guess (CALIB_USE_INTRINSIC_GUESS); its fx/fy is the ratio held
             under CALIB_FIX_ASPECT_RATIO. Without it the ratio is 1.
+        uncertainty: False for a fit used only for its K, distortion, poses and residuals (a held-out
+            fold, a group of the one-camera check): cv2.calibrateCamera runs the same Levenberg-Marquardt
+            and returns bit-identical K, distortion and poses (checked on OpenCV 4.10 and 5.0), without
+            the (6V + p)-square inverse behind OpenCV's standard deviations, a third of a 16-view k1k2
+            solve. Such a solution has no sigma, covariance or sigma_opencv. Fisheye models ignore it.
 
     Raises:
         InputError: malformed, non-finite, or out-of-image input.
@@ -353,8 +360,11 @@ def solve_intrinsics(
     D0 = np.zeros(m.n_coeffs, dtype=np.float64)
     try:
         with single_threaded_opencv():
-            rms, K, D, rvecs, tvecs, std_int, _std_ext, per_view = cv2.calibrateCameraExtended(
-                objs, imgs, size, K0.copy(), D0.copy(), flags=flags)
+            if uncertainty:
+                rms, K, D, rvecs, tvecs, std_int, _std_ext, per_view = cv2.calibrateCameraExtended(
+                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags)
+            else:
+                rms, K, D, rvecs, tvecs = cv2.calibrateCamera(objs, imgs, size, K0.copy(), D0.copy(), flags=flags)
     except cv2.error as exc:
         detail = str(exc).strip().splitlines()[-1].split(" error: ")[-1]
         raise NumericalError(f"OpenCV could not solve model {m.name}: {detail}",
@@ -375,6 +385,12 @@ def solve_intrinsics(
     n_res = 2 * sum(len(o) for o in objs)
     n_par = parameter_count(m, len(objs))
     dof = n_res - n_par
+    if not uncertainty:  # OpenCV's per-view RMS, from the same residuals
+        return IntrinsicsSolution(
+            model=m.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D), rms_px=float(rms),
+            per_view_rms_px=readonly(np.array([np.sqrt(np.mean(np.sum(r ** 2, axis=1))) for r in residuals])),
+            rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
+            sigma_refused_reason=NO_UNCERTAINTY, n_residuals=n_res, n_parameters=n_par, aspect_ratio=aspect)
     if dof < MIN_SIGMA_DOF:
         cov = IntrinsicCovariance((), None, float("nan"), float("nan"), (
             f"only {dof} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
@@ -397,7 +413,7 @@ def _k1k2_start(object_points_per_view: Sequence[np.ndarray], image_points_per_v
     """(3, 3) K of the k1k2 solve of the same corners, the rational model's start; None when k1k2 fails."""
     try:
         return np.array(solve_intrinsics(object_points_per_view, image_points_per_view, image_size,
-                                         DEFAULT_MODEL).camera_matrix)
+                                         DEFAULT_MODEL, uncertainty=False).camera_matrix)
     except (InputError, NumericalError):  # the rational solve names the problem in its own words
         return None
 

@@ -251,7 +251,8 @@ def validate_holdout(
         held = np.flatnonzero(folds == f).tolist()
         try:
             sol = solve_intrinsics([object_points_per_view[i] for i in train],
-                                   [image_points_per_view[i] for i in train], image_size, m.name, initial)
+                                   [image_points_per_view[i] for i in train], image_size, m.name, initial,
+                                   uncertainty=False)
         except NumericalError as exc:
             raise NumericalError(f"held-out fold {f} (views {held} held out): {exc.message}",
                                  hint=exc.hint) from exc

@@ -139,7 +139,8 @@ def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_r
     when it cannot be judged (see ``judge_distance``, ``detect_fixture_views``)."""
     obj = spec.object_points()
     fit = solve_intrinsics([obj[np.asarray(v.corner_ids)] for v in views],
-                           [np.asarray(v.corners_px, np.float64) for v in views], image_size, DEFAULT_MODEL)
+                           [np.asarray(v.corners_px, np.float64) for v in views], image_size, DEFAULT_MODEL,
+                           uncertainty=False)
     fixture_views, _ = detect_fixture_views(spec, board_ref, sources.resolve_source(fixture), image_size,
                                             "this session")
     distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, DEFAULT_MODEL)

@@ -169,3 +169,27 @@ def test_a_split_that_does_not_settle_is_scored_on_the_groups_it_was_solved_from
     for group, camera in ((split.group_a, split.camera_a), (split.group_b, split.camera_b)):
         alone = solve_intrinsics([obj[i] for i in group], [img[i] for i in group], (640, 480), "k1k2")
         np.testing.assert_allclose(camera, alone.camera_matrix, rtol=1e-9)
+
+
+def test_the_same_question_is_answered_once(monkeypatch) -> None:
+    """calibrate asks twice (the capture gate, then the solve) with the same corners: the second answer is
+    the first, found by the values (copies hit), and any change in corners, model or threshold is asked anew."""
+    session = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 20, seed=3, noise_px=0.1)
+    obj, img = session.object_points_per_view, session.image_points_per_view
+    calls = []
+    real = camera_split._check_one_camera
+    monkeypatch.setattr(camera_split, "_check_one_camera", lambda *a: calls.append(a) or real(*a))
+    first = check_one_camera(obj, img, (640, 480))
+    again = check_one_camera([o.copy() for o in obj], [np.array(i, dtype=np.float64) for i in img], (640, 480))
+    assert first is not None and again is first and len(calls) == 1
+    moved = [i.copy() for i in img]
+    moved[5][7, 0] += 1e-6
+    assert check_one_camera(obj, moved, (640, 480)) is not first and len(calls) == 2
+    check_one_camera(obj, img, (640, 480), "k1k2k3")
+    check_one_camera(obj, img, (640, 480), threshold=1.2)
+    assert len(calls) == 4
+    for k in range(camera_split.RECENT_CHECKS):  # the oldest answer is forgotten, never the store grows
+        check_one_camera(obj, img, (640, 480), threshold=1.5 + k)
+    assert len(camera_split._RECENT) == camera_split.RECENT_CHECKS
+    check_one_camera(obj, img, (640, 480))
+    assert len(calls) == 5 + camera_split.RECENT_CHECKS

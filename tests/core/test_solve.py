@@ -10,6 +10,7 @@ from calibctl.core.solve import (
     MAX_RMS_PX,
     MIN_SIGMA_DOF,
     MODELS,
+    NO_UNCERTAINTY,
     DistortionModel,
     check_output,
     solve_intrinsics,
@@ -120,6 +121,24 @@ def test_same_input_gives_bit_identical_output(session):
         for name in ("camera_matrix", "dist_coeffs", "per_view_rms_px", "rvecs", "tvecs"):
             assert np.array_equal(getattr(other, name), getattr(first, name)), name
         assert all(np.array_equal(a, b) for a, b in zip(other.residuals_px, first.residuals_px, strict=True))
+
+
+@pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3", "rational"])
+def test_a_fit_without_uncertainty_is_the_same_solve_without_sigma(session, model):
+    """uncertainty=False (held-out folds, the one-camera check) runs cv2.calibrateCamera: the same
+    Levenberg-Marquardt as calibrateCameraExtended, so the same minimum, but no sigma is claimed."""
+    obj, img = session.object_points_per_view, session.image_points_per_view
+    full = solve_intrinsics(obj, img, SIZE, model)
+    fit = solve_intrinsics(obj, img, SIZE, model, uncertainty=False)
+    for name in ("camera_matrix", "dist_coeffs", "rvecs", "tvecs", "per_view_rms_px"):
+        np.testing.assert_allclose(getattr(fit, name), getattr(full, name), rtol=1e-10, atol=1e-12, err_msg=name)
+    assert fit.rms_px == pytest.approx(full.rms_px, rel=1e-10)
+    assert fit.n_residuals == full.n_residuals and fit.n_parameters == full.n_parameters
+    assert full.covariance is not None and full.sigma_refused_reason != NO_UNCERTAINTY  # rational: refused, for its reason
+    assert fit.sigma == {} and fit.covariance is None and fit.sigma_opencv == {}
+    assert fit.sigma_refused_reason == NO_UNCERTAINTY
+    with pytest.raises(ValueError):
+        fit.per_view_rms_px[0] = 1.0
 
 
 def test_result_arrays_are_read_only(solved):
