@@ -16,7 +16,9 @@ The test (``check_one_camera``):
   3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
 It runs twice: at solve (under the solve's model; lint rule one-camera) and at capture, as the gate
 ``one_camera`` (``one_camera_gate``: k1k2, a suspected split confirmed under the fisheye model), so the
-operator hears it while still holding the board.
+operator hears it while still holding the board. In one ``calibrate`` process the solve's question is
+usually the gate's (k1k2, every corner kept): ``check_one_camera`` remembers its last answers by the
+inputs' values, so it is answered once.
 Measured (tests/core/test_camera_split.py, BENCHMARKS.md section 8): the real opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered

@@ -64,7 +64,9 @@ class ModelCandidate:
 
 @dataclass(frozen=True)
 class ModelSelection:
-    """The chosen model, its solve and held-out report, and the trail that led to it."""
+    """The chosen model, its solve and held-out report, and the trail that led to it. The solve is a fit
+    without uncertainty (``solve_intrinsics(uncertainty=False)``): the ladder compares residuals, and the
+    calibration is solved again under the chosen model with its corner rule and sigma."""
 
     chosen: str
     solution: IntrinsicsSolution
@@ -75,7 +77,7 @@ class ModelSelection:
 def _evaluate(model: str, obj: Sequence[np.ndarray], img: Sequence[np.ndarray],
               image_size: tuple[int, int], centre: tuple[float, float] | None
               ) -> tuple[IntrinsicsSolution, HoldoutReport]:
-    fit = solve_intrinsics(obj, img, image_size, model)
+    fit = solve_intrinsics(obj, img, image_size, model, uncertainty=False)
     return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre)
 
 
