@@ -134,6 +134,10 @@ ReferenceDistanceOption = Annotated[str | None, typer.Option(
 ReferenceSourceOption = Annotated[str | None, typer.Option(
     "--reference-source", show_default=False,
     help="Folder, glob or list of pictures taken with the board in that fixture.")]
+GaugeModelOption = Annotated[str | None, typer.Option(
+    "--model", show_default=False,
+    help="With --reference-distance: the lens model the gauge solves the session with, the one `solve --model` "
+         "will use (as there; default k1k2, and auto gauges with k1k2). A fisheye needs fisheye.")]
 
 
 def capture(
@@ -153,6 +157,7 @@ def capture(
     image_circle: ImageCircleOption = None,
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
+    model: GaugeModelOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
@@ -163,9 +168,12 @@ def capture(
     """
     from calibctl.errors import UsageError
     from calibctl.workflows import capture as capture_workflow
-    from calibctl.workflows.distance_gauge import parse_reference_distance
+    from calibctl.workflows.distance_gauge import gauge_model, parse_reference_distance
     from calibctl.workflows.image_circles import parse_image_circle
 
+    if model is not None and reference_distance is None:
+        raise UsageError("--model on capture is the lens of the distance gauge; it needs --reference-distance",
+                         "a capture is not solved: give --model to `calibctl solve` or use `calibctl calibrate`")
     if rig is not None:
         from calibctl.cli.rig import capture as capture_rig
 
@@ -182,7 +190,8 @@ def capture(
     distance = None if reference_distance is None else parse_reference_distance(reference_distance)
     request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration,
                                               image_circle=parse_image_circle(image_circle),
-                                              reference_distance=distance, reference_source=reference_source)
+                                              reference_distance=distance, reference_source=reference_source,
+                                              gauge_model=gauge_model(model))
     _, result = _run_capture(ctx, as_json, station, operator,
                              lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:

@@ -66,13 +66,14 @@ from calibctl.core.image_circle import (
     detect_image_circle,
     half_size,
 )
+from calibctl.core.solve import DEFAULT_MODEL, get_model
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
-from calibctl.workflows.distance_gauge import ReferenceDistance, gauge_capture
+from calibctl.workflows.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
 from calibctl.workflows.image_circles import checked_image_circle
 from calibctl.workflows.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, board_spec, solve
 
@@ -98,6 +99,9 @@ class CaptureRequest:
     image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
     reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
     reference_source: str | None = None
+    # The lens model the gauge solves the session with, a MODELS name: calibrate's --model (the lens the
+    # session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
+    gauge_model: str = DEFAULT_MODEL
 
 
 @dataclass(frozen=True)
@@ -174,6 +178,7 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
     if (request.reference_distance is None) != (request.reference_source is None):
         raise UsageError("--reference-distance and --reference-source go together",
                          "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
+    get_model(request.gauge_model)  # an unknown name is a usage error before anything is read
     try:
         return parse_board_ref(request.board)
     except ValueError as exc:
@@ -202,7 +207,7 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         if (request.reference_distance is not None and request.reference_source is not None
                 and session.status == "accepted" and session.image_size is not None):
             distance = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
-                                     session.views, session.image_size)
+                                     session.views, session.image_size, request.gauge_model)
         store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
                              tuple(got.ignored), distance)
@@ -467,7 +472,8 @@ def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", 
     """Capture, then - when the gates pass - solve the new session (``workflows.solve``)."""
     if model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
-    captured = capture(settings, request, observer)
+    # the gauge at capture judges the board distance through the lens this session is solved with
+    captured = capture(settings, replace(request, gauge_model=gauge_model(model)), observer)
     if not captured.passed:
         return CalibrateResult(captured, None)
     solved = solve(settings, SolveRequest(session_id=captured.session.session_id, model=model, activate=activate,

@@ -7,7 +7,10 @@ camera-to-board-centre distance is compared with a surveyed one: a ratio outside
 Two stations use it: ``calibctl check`` (poses of the fresh views with the stored intrinsics) and
 ``calibctl capture`` (``gauge_capture``: the captured session is solved - not stored - and the
 fixture pictures' poses are fitted with those intrinsics), so a wrong scale is caught before a solve
-is ever stored.
+is ever stored. Both go through one lens model: the stored calibration's at check, at capture the one
+``calibrate --model`` asks for (``gauge_model``): a k1k2 lens fitted to a rendered 150 deg fisheye
+session put its fixture board 13.6 % too far away (tests/workflows/test_distance_gauge.py), so the
+wrong lens fails a correct board (or passes a wrong one).
 """
 
 from __future__ import annotations
@@ -24,9 +27,9 @@ from calibctl.artifacts.session import ViewCorners
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.recheck import distance_ratio
-from calibctl.core.solve import DEFAULT_MODEL, solve_intrinsics
+from calibctl.core.solve import DEFAULT_MODEL, get_model, solve_intrinsics
 from calibctl.core.validation import refit_pose
-from calibctl.errors import InputError, UsageError
+from calibctl.errors import InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows import capture_sources as sources
 
@@ -57,6 +60,14 @@ def parse_reference_distance(text: str) -> ReferenceDistance:
         raise UsageError(f"--reference-distance {text}: a one-sigma of {100 * s / d:.2f} % cannot judge a 1 % scale "
                          "error", f"survey the fixture to {100 * MAX_RELATIVE_SIGMA:.1f} % or better")
     return ReferenceDistance(d, s)
+
+
+def gauge_model(model: str | None) -> str:
+    """The lens model the capture gauge solves with for a solve's ``--model`` (UsageError if unknown).
+
+    ``auto`` is only chosen at the solve, after the capture, so it (and no model) gauges with DEFAULT_MODEL.
+    """
+    return DEFAULT_MODEL if model is None or model == "auto" else get_model(model).name
 
 
 def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[str]) -> DistanceCheck:
@@ -133,15 +144,23 @@ def board_distances_m(spec: BoardSpec, views: Sequence[outcomes_core.ImageOutcom
 
 
 def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_ref: str,
-                  views: Sequence[ViewCorners], image_size: tuple[int, int]) -> DistanceCheck:
-    """The gauge at capture: solve the captured views (production model, not stored), then judge the
-    board distance of the ``fixture`` pictures with those intrinsics. Raises CalibctlError (exit 2)
-    when it cannot be judged (see ``judge_distance``, ``detect_fixture_views``)."""
+                  views: Sequence[ViewCorners], image_size: tuple[int, int], model: str) -> DistanceCheck:
+    """The gauge at capture: solve the captured views with ``model`` (a MODELS name, the lens the session
+    will be solved with; not stored), then judge the board distance of the ``fixture`` pictures through
+    that lens. Raises CalibctlError (exit 2) when it cannot be judged (see ``judge_distance``,
+    ``detect_fixture_views``) or the session cannot be solved with ``model``."""
     obj = spec.object_points()
-    fit = solve_intrinsics([obj[np.asarray(v.corner_ids)] for v in views],
-                           [np.asarray(v.corners_px, np.float64) for v in views], image_size, DEFAULT_MODEL,
-                           uncertainty=False)
+    try:
+        fit = solve_intrinsics([obj[np.asarray(v.corner_ids)] for v in views],
+                               [np.asarray(v.corners_px, np.float64) for v in views], image_size, model,
+                               uncertainty=False)
+    except NumericalError as exc:
+        raise NumericalError(
+            f"the distance gauge cannot judge this session: its {len(views)} views do not solve with the {model} "
+            f"lens model ({exc.message}); no session was stored",
+            f"{exc.hint}; or gauge with the model the lens needs (--model)" if exc.hint
+            else "gauge with the model the lens needs (--model)") from exc
     fixture_views, _ = detect_fixture_views(spec, board_ref, sources.resolve_source(fixture), image_size,
                                             "this session")
-    distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, DEFAULT_MODEL)
+    distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, model)
     return judge_distance(ref, distances, [v.name for v in fixture_views])

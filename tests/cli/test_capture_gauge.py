@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
-from calibctl.errors import NotFoundError
+from calibctl.errors import NotFoundError, NumericalError
 from calibctl.store.repository import Store
+from calibctl.workflows import distance_gauge
 from tests.cli.test_check_cli import assets, db, invoke  # noqa: F401 - the shared rendered fixtures
+from tests.workflows.synth_folders import FISHEYE_FIXTURE_M, fisheye_gauge_folders
 
 GAUGE = ("--reference-distance", "0.450+-0.0005")
 
@@ -56,3 +59,70 @@ def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) 
     # no calibration was stored
     with Store.open(db) as store, pytest.raises(NotFoundError, match="unknown serial 'CAM-NEW'"):
         store.list_artifacts("CAM-NEW")
+
+
+# A fisheye station: the gauge judges through the lens the session is solved with (--model).
+FISHEYE_GAUGE = ("--reference-distance", f"{FISHEYE_FIXTURE_M:.3f}+-0.0003")
+
+
+@pytest.fixture(scope="module")
+def fisheye(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    return fisheye_gauge_folders(tmp_path_factory)
+
+
+def test_calibrate_model_fisheye_gauges_a_fisheye_board_through_the_fisheye_lens(db: str, fisheye) -> None:  # noqa: F811
+    session, fixture = fisheye
+    done = invoke(db, "calibrate", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                  "--model", "fisheye", *FISHEYE_GAUGE, "--reference-source", str(fixture), "--json")
+    assert done.exit_code == 0, done.output
+    out = json.loads(done.stdout)
+    distance = out["capture"]["distance"]
+    assert out["capture"]["passed"] and distance["passed"]
+    assert distance["ratio"] == pytest.approx(1.0, abs=0.003)
+    assert out["calibration"]["model"]["name"] == "fisheye" and out["active"]
+
+
+def test_capture_model_sets_the_gauge_lens_and_without_it_k1k2_fails_a_fisheye(db: str, fisheye) -> None:  # noqa: F811
+    session, fixture = fisheye
+    args = ("capture", "--serial", "FE-0007", "--board", "A17", "--source", str(session), *FISHEYE_GAUGE,
+            "--reference-source", str(fixture))
+    plain = invoke(db, *args)  # a plain capture gauges with k1k2, the wrong lens for this camera
+    assert plain.exit_code == 1, plain.output
+    assert "FAIL" in plain.stdout
+    done = invoke(db, *args, "--model", "fisheye")
+    assert done.exit_code == 0, done.output
+    assert "vs surveyed 0.1500 m" in done.stdout and " pass" in done.stdout
+
+
+def test_capture_model_without_a_reference_distance_exits_2(db: str, fisheye) -> None:  # noqa: F811
+    session, _ = fisheye
+    done = invoke(db, "capture", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                  "--model", "fisheye")
+    assert done.exit_code == 2
+    assert "--model on capture is the lens of the distance gauge; it needs --reference-distance" in done.stderr
+    assert "calibctl calibrate" in done.stderr
+
+
+def test_capture_with_an_unknown_gauge_model_exits_2(db: str, fisheye) -> None:  # noqa: F811
+    session, fixture = fisheye
+    done = invoke(db, "capture", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                  *FISHEYE_GAUGE, "--reference-source", str(fixture), "--model", "fish")
+    assert done.exit_code == 2
+    assert "unknown distortion model 'fish'" in done.stderr and "fisheye" in done.stderr
+
+
+def test_a_session_the_gauge_model_cannot_solve_exits_2_without_a_traceback_or_a_session(
+        db: str, fisheye, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: F811
+    def no_solution(*_args, **_kwargs):
+        raise NumericalError("the solve diverged: fx=3 fy=3 cx=320 cy=240 px", "capture views tilted 20-40 deg")
+
+    monkeypatch.setattr(distance_gauge, "solve_intrinsics", no_solution)
+    session, fixture = fisheye
+    done = invoke(db, "calibrate", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                  "--model", "fisheye", *FISHEYE_GAUGE, "--reference-source", str(fixture))
+    assert done.exit_code == 2, done.output
+    assert ("the distance gauge cannot judge this session: its 10 views do not solve with the fisheye lens "
+            "model (the solve diverged") in done.stderr
+    assert "no session was stored" in done.stderr and "Traceback" not in done.output
+    with Store.open(db) as store:
+        assert store.list_sessions("FE-0007") == []
