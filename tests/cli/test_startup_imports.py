@@ -112,6 +112,12 @@ def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_rig_or_yaml_module(st
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS)) == []
 
 
+def test_an_export_prints_its_text_without_loading_rich(store_with_a_calibration) -> None:
+    loaded = _run_loading(["--db", store_with_a_calibration, "export", "CAM-1"])
+    assert "calibctl.cli.artifacts" in loaded
+    assert sorted(m for m in loaded if m.split(".")[0] == "rich" or m in ("calibctl.cli.render", "calibctl.cli.report")) == []
+
+
 def test_a_ros_export_loads_yaml_to_write_it_and_nothing_else_a_read_does_not(store_with_a_calibration) -> None:
     loaded = _run_loading(["--db", store_with_a_calibration, "export", "CAM-1", "--format", "ros"])
     assert "yaml" in loaded
