@@ -118,7 +118,7 @@ def parse_json(text: str, source: str) -> Any:
 @functools.cache
 def _loader_class() -> Any:
     """SafeLoader without aliases and with bounded numbers; made on first use, as yaml is imported only
-    when a YAML file is read (a read command of JSON or the store never pays its 14 ms import)."""
+    when a YAML file is read (a read of JSON or of the store never pays its import)."""
     import yaml
 
     class BoundedLoader(yaml.SafeLoader):

@@ -18,9 +18,8 @@ alone: the block then changes nothing, and only the speed differs.
 
 A command that never solves (``lint``) does better still: its OpenBLAS never starts the
 worker threads at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2). numpy's
-OpenBLAS starts one per core when it loads, and they spin before they sleep: on the bench machine
-``import numpy`` cost 140 ms of CPU for 83 ms wall, and a ``lint FILE`` about 60 ms of CPU more than with
-one thread (BENCHMARKS.md section 12).
+OpenBLAS starts one per core when it loads, and they spin before they sleep: ``import numpy`` took 180 ms
+of CPU with them and 110 with OPENBLAS_NUM_THREADS=1 (BENCHMARKS.md section 12).
 """
 
 from __future__ import annotations
