@@ -16,13 +16,12 @@ from it:
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
-
-import yaml
 
 from calibctl import files
 from calibctl.errors import InputError, UsageError
@@ -116,40 +115,46 @@ def parse_json(text: str, source: str) -> Any:
     return check_tree(data, source)
 
 
-class _BoundedLoader(yaml.SafeLoader):
-    """SafeLoader without aliases and with bounded numbers (``source`` names the file in messages)."""
+@functools.cache
+def _loader_class() -> Any:
+    """SafeLoader without aliases and with bounded numbers; made on first use, as yaml is imported only
+    when a YAML file is read (a read of JSON or of the store never pays its import)."""
+    import yaml
 
-    source = "YAML"
+    class BoundedLoader(yaml.SafeLoader):
+        source = "YAML"  # names the file in messages
 
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        if self.check_event(yaml.AliasEvent):
-            event = self.peek_event()
-            raise InputError(f"{self.source}: YAML alias *{event.anchor} at line {event.start_mark.line + 1}: "
-                             "aliases are not accepted", "write the values out; calibration files use no anchors")
-        if getattr(self, "_depth", 0) >= MAX_DEPTH:
-            raise InputError(f"{self.source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?")
-        self._depth = getattr(self, "_depth", 0) + 1
-        try:
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            if self.check_event(yaml.AliasEvent):
+                event = self.peek_event()
+                raise InputError(f"{self.source}: YAML alias *{event.anchor} at line {event.start_mark.line + 1}: "
+                                 "aliases are not accepted", "write the values out; calibration files use no anchors")
+            if getattr(self, "_depth", 0) >= MAX_DEPTH:
+                raise InputError(f"{self.source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?")
+            self._depth = getattr(self, "_depth", 0) + 1
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._depth -= 1
 
-    def construct_yaml_int(self, node: Any) -> int:
-        _check_int(str(node.value), self.source)
-        return super().construct_yaml_int(node)
+        def construct_yaml_int(self, node: Any) -> int:
+            _check_int(str(node.value), self.source)
+            return super().construct_yaml_int(node)
 
-    def construct_yaml_float(self, node: Any) -> float:
-        _check_float(str(node.value), self.source)
-        return super().construct_yaml_float(node)
+        def construct_yaml_float(self, node: Any) -> float:
+            _check_float(str(node.value), self.source)
+            return super().construct_yaml_float(node)
 
-
-_BoundedLoader.add_constructor("tag:yaml.org,2002:int", _BoundedLoader.construct_yaml_int)
-_BoundedLoader.add_constructor("tag:yaml.org,2002:float", _BoundedLoader.construct_yaml_float)
+    BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_yaml_int)
+    BoundedLoader.add_constructor("tag:yaml.org,2002:float", BoundedLoader.construct_yaml_float)
+    return BoundedLoader
 
 
 def parse_yaml(text: str, source: str) -> Any:
     """YAML (safe subset, no aliases) with bounded numbers, depth and text."""
-    loader = _BoundedLoader(text)
+    import yaml
+
+    loader = _loader_class()(text)
     loader.source = source
     try:
         data = loader.get_single_data()

@@ -8,9 +8,10 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, plain, stdout
-from calibctl.cli.report import history_table, print_calibration, print_findings
 from calibctl.errors import EXIT_VERDICT_FAIL
+
+# render and report (rich) are imported by the commands that print with them: `export` prints the exported
+# text as it is, and does not pay rich's import (42-51 ms of import self time, BENCHMARKS.md section 12).
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
@@ -21,6 +22,8 @@ def history(
     json_output: JsonFlag = False,
 ) -> None:
     """Versions of a camera's calibration, the active one, and every activation/rollback event."""
+    from calibctl.cli.render import emit_json, plain, stdout
+    from calibctl.cli.report import history_table
     from calibctl.workflows import records
 
     hist = records.history(state(ctx).settings(), serial)
@@ -51,6 +54,8 @@ def show(
     json_output: JsonFlag = False,
 ) -> None:
     """One calibration in full: parameters with their one-sigma, held-out error, gates and lint."""
+    from calibctl.cli.render import emit_json
+    from calibctl.cli.report import print_calibration
     from calibctl.workflows import records
 
     art = records.show(state(ctx).settings(), ref)
@@ -97,6 +102,8 @@ def import_(
 ) -> None:
     """Bring an exported artifact into this store: its hash and signature are checked (tampered files exit 1),
     its numbers are linted with this store's rules, and the verdict and version are this store's."""
+    from calibctl.cli.render import emit_json, stdout
+    from calibctl.cli.report import print_findings
     from calibctl.workflows import records
 
     outcome = records.import_file(state(ctx).settings(), path, activate=activate, keep_version=keep_version,
@@ -129,6 +136,7 @@ def rollback(
 ) -> None:
     """Make an earlier accepted version active again (an append-only event; nothing is deleted). A newer
     version activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
+    from calibctl.cli.render import emit_json, stdout
     from calibctl.workflows import records
 
     event = records.rollback(state(ctx).settings(), serial, to, reason, expected_active=expect_active)

@@ -35,7 +35,10 @@ def lint(
     trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
 ) -> None:
     """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
-    from calibctl.workflows import lint as lint_workflow
+    from calibctl.core.blas_threads import blas_starts_on_one_thread
+
+    with blas_starts_on_one_thread():  # lint computes on a few small arrays: no BLAS worker threads to start
+        from calibctl.workflows import lint as lint_workflow
 
     if fmt not in FORMATS:
         raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")

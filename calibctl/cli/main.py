@@ -15,7 +15,8 @@ from typer.core import TyperGroup
 
 from calibctl import __version__
 from calibctl.cli.context import AppState
-from calibctl.cli.examples import attach_examples, epilog
+from calibctl.cli.examples import epilog
+from calibctl.cli.registry import CommandsOnDemand
 from calibctl.cli.streams import flush_stdout_at_exit, make_output_safe, silence_closed_stdout
 from calibctl.errors import EXIT_CANNOT_RUN, CalibctlError
 from calibctl.files import ENVIRONMENT_ERRNOS, os_error
@@ -31,8 +32,18 @@ def _report(exc: CalibctlError) -> NoReturn:
 class CalibctlGroup(TyperGroup):
     """The error boundary: CalibctlError -> 'Error: ...' + 'Hint: ...' on stderr and its exit code.
 
-    Living in the group (not in ``run``) means CliRunner tests see exactly what users see.
+    Living in the group (not in ``run``) means CliRunner tests see exactly what users see. It is the
+    root only: its sub-commands are imported and made on demand (``calibctl.cli.registry``).
     """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.commands = CommandsOnDemand({"pretty_exceptions_short": app.pretty_exceptions_short,
+                                          "rich_markup_mode": self.rich_markup_mode,
+                                          "suggest_commands": self.suggest_commands})
+
+    def list_commands(self, ctx: ClickContext) -> list[str]:
+        return list(self.commands)  # TyperGroup's walks the items, which would make every command
 
     def invoke(self, ctx: ClickContext) -> Any:
         make_output_safe()
@@ -69,7 +80,7 @@ class CalibctlGroup(TyperGroup):
             raise typer.Exit(silence_closed_stdout()) from None
 
 
-app = typer.Typer(
+app = typer.Typer(  # the root: global options; each sub-command's module registers it (cli.registry)
     name="calibctl",
     cls=CalibctlGroup,
     help="Factory-line camera calibration with gates, honest uncertainty and an immutable artifact store.",
@@ -80,7 +91,6 @@ app = typer.Typer(
     rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
-
 
 def version_line() -> str:
     """calibctl's version and the OpenCV and numpy it runs on (cv2 is imported only for this)."""
@@ -116,32 +126,6 @@ def main(
     ] = False,
 ) -> None:
     ctx.obj = AppState(db=db, station_config=station_config, json_output=json_output)
-
-
-def _register_commands() -> None:
-    # Each module adds its commands to ``app``; this order is the order in --help.
-    from calibctl.cli import (
-        artifacts,
-        board,
-        capture,
-        check,
-        db,
-        demo,
-        diagnostics,
-        handeye,
-        keys,
-        lint,
-        report_page,
-        rig,
-        solve,
-    )
-
-    for module in (capture, solve, check, lint, board, rig, artifacts, report_page, db, keys, diagnostics, handeye, demo):
-        module.register(app)
-    attach_examples(app)
-
-
-_register_commands()
 
 
 def run() -> None:

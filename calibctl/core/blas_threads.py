@@ -15,15 +15,19 @@ thread count, the count only decides who spins).
 The thread count is process-global, like cv2.setNumThreads: enter the block once around a whole thread
 pool, not in each task. An OpenBLAS that cannot be found (another wheel layout, another BLAS) is left
 alone: the block then changes nothing, and only the speed differs.
+
+A command that never solves (``lint``) does better still: its OpenBLAS never starts the
+worker threads at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2). numpy's
+OpenBLAS starts one per core when it loads, and they spin before they sleep: ``import numpy`` took 180 ms
+of CPU with them and 110 with OPENBLAS_NUM_THREADS=1 (BENCHMARKS.md section 12).
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import functools
+import os
 from collections.abc import Callable, Iterator
-from importlib.util import find_spec
 from pathlib import Path
 
 # (set, get) symbol pairs: numpy >= 2 wheels bundle scipy-openblas (64-bit ints, prefixed symbols);
@@ -41,6 +45,8 @@ Threads = tuple[Callable[[int], None], Callable[[], int]]  # (set, get)
 def _candidates() -> list[Path]:
     """Bundled OpenBLAS files of the opencv-python and numpy wheels (Linux/Windows: <pkg>.libs beside
     the package; macOS: <pkg>/.dylibs)."""
+    from importlib.util import find_spec
+
     found: list[Path] = []
     for package in _PACKAGES:
         spec = find_spec(package)
@@ -55,6 +61,8 @@ def _candidates() -> list[Path]:
 @functools.cache
 def _openblas_threads() -> tuple[Threads, ...]:
     """(set, get) for every bundled OpenBLAS that can be found."""
+    import ctypes  # here, not at the top: blas_starts_on_one_thread runs before anything is loaded
+
     out: list[Threads] = []
     for path in _candidates():
         try:
@@ -82,3 +90,24 @@ def single_threaded_blas() -> Iterator[None]:
     finally:
         for setter, previous in changed:
             setter(previous)
+
+
+OPENBLAS_THREADS_ENV = "OPENBLAS_NUM_THREADS"
+
+
+@contextlib.contextmanager
+def blas_starts_on_one_thread() -> Iterator[None]:
+    """An OpenBLAS that loads inside the block (numpy's or cv2's, at their first import) starts on one thread.
+
+    For a process that never solves: OpenBLAS reads its thread count once, when it loads, so a library
+    already loaded keeps its threads. The variable is restored on leaving (a child process, or a library
+    loaded later, starts as it always did), and a count the user set is left as it is.
+    """
+    if OPENBLAS_THREADS_ENV in os.environ:
+        yield
+        return
+    os.environ[OPENBLAS_THREADS_ENV] = "1"
+    try:
+        yield
+    finally:
+        del os.environ[OPENBLAS_THREADS_ENV]

@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
-
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.errors import InputError
@@ -58,16 +56,22 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         return Path(path).read_text(encoding="utf-8")
 
 
+def _yaml_text(data: Any, **style: Any) -> str:
+    import yaml  # only the yaml and ros formats write YAML: a JSON export or a lint never imports it
+
+    return yaml.safe_dump(data, sort_keys=False, **style)
+
+
 def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None) -> str:
     """The artifact as text in ``fmt``; ``camera_name`` is the ROS camera name (default: from the serial)."""
     document = art.model_dump(mode="json", exclude={"signature"} if art.signature is None else None)
     if fmt == "json":
         return json.dumps(document, indent=2, allow_nan=False) + "\n"
     if fmt == "yaml":
-        return yaml.safe_dump(document, sort_keys=False)
+        return _yaml_text(document)
     if fmt == "ros":
         info = ros_camera_info.camera_info(art, camera_name)
-        return trace_header.stamp(art, yaml.safe_dump(info, sort_keys=False, default_flow_style=None))
+        return trace_header.stamp(art, _yaml_text(info, default_flow_style=None))
     if fmt == "opencv":
         return trace_header.stamp(art, _opencv_text(art))
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")

@@ -1,4 +1,4 @@
-"""What `calibctl --help` / `--version` load: the CLI imports its workflows inside the commands.
+"""What each command loads: the CLI imports a command's module when it runs, and its workflows inside the command.
 
 The cost of these imports is measured in benchmarks/bench_e2e.py (CLI start-up), not asserted; this
 only checks which modules a bare ``import calibctl.cli.main`` pulls in, in a fresh interpreter.
@@ -7,11 +7,14 @@ only checks which modules a bare ``import calibctl.cli.main`` pulls in, in a fre
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from calibctl.cli import registry
 
 HEAVY = ("matplotlib", "sqlalchemy", "alembic", "cv2", "pydantic", "calibctl.workflows", "calibctl.store")
 
@@ -22,9 +25,20 @@ def _modules_after(code: str) -> set[str]:
     return set(json.loads(out.strip().splitlines()[-1]))
 
 
-def test_importing_the_cli_loads_no_workflow_store_or_plotting_module() -> None:
-    loaded = _modules_after("import calibctl.cli.main")
-    assert "calibctl.cli.capture" in loaded and "typer" in loaded  # the commands are registered
+COMMAND_MODULES = sorted({f"calibctl.cli.{m}" for m in registry.COMMAND_MODULES.values()})
+
+
+def test_importing_the_cli_and_making_the_root_loads_no_command_module() -> None:
+    loaded = _modules_after("import typer.main\nfrom calibctl.cli.main import app\ntyper.main.get_command(app)")
+    assert "typer" in loaded
+    assert sorted(m for m in loaded if m in COMMAND_MODULES) == []  # each is imported when its command runs
+    assert sorted(m for m in loaded if m.split(".")[0] in HEAVY or m.startswith(HEAVY)) == []
+
+
+def test_the_help_loads_every_command_module_and_no_workflow_store_or_plotting_module() -> None:
+    loaded = _modules_after("import typer.main\nfrom calibctl.cli.main import app\n"
+                            "typer.main.get_command(app).main(['--help'], standalone_mode=False)")
+    assert sorted(m for m in loaded if m in COMMAND_MODULES) == COMMAND_MODULES
     assert sorted(m for m in loaded if m.split(".")[0] in HEAVY or m.startswith(HEAVY)) == []
 
 
@@ -60,14 +74,16 @@ def test_read_commands_load_no_migration_image_plot_or_postgres_module(migrated_
     loaded = _modules_after(code)
     assert loaded & {"calibctl.store.repository", "calibctl.store.sqlite_reads"} or args[0] == "lint"
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_READING)) == []
+    # Only the module that registers the command is imported (calibctl.cli.registry), not the other 12.
+    assert sorted(m for m in loaded if m in COMMAND_MODULES) == [f"calibctl.cli.{registry.COMMAND_MODULES[args[0]]}"]
 
 
 # What reading a SQLite store needs is sqlite3, the artifact models and rich (calibctl.store.sqlite_reads):
 # not sqlalchemy (the ORM is for writes, PostgreSQL and the error paths), not numpy or the lens checks (only
 # lint computes on the numbers), not cryptography (only signing and verifying signatures), not the
-# whole-store audit (`db verify`) nor the rig models.
+# whole-store audit (`db verify`) nor the rig models, not yaml (only a YAML file or export).
 NOT_FOR_STORE_READS = ("sqlalchemy", "calibctl.store.repository", "numpy", "cryptography", "calibctl.workflows.lint", "calibctl.store.audit",
-                       "calibctl.artifacts.rig")
+                       "calibctl.artifacts.rig", "yaml")
 
 
 @pytest.fixture(scope="module")
@@ -80,14 +96,75 @@ def store_with_a_calibration(migrated_store) -> str:
     return migrated_store
 
 
-@pytest.mark.parametrize("args", [
-    ["board", "list"], ["history", "CAM-1"], ["show", "CAM-1"], ["export", "CAM-1"],
-    ["export", "CAM-1", "--format", "ros"],
-])
-def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_or_rig_module(store_with_a_calibration, args) -> None:
+def _run_loading(args: list[str]) -> set[str]:
     code = ("import typer.main\nfrom calibctl.cli.main import app\n"
-            f"try:\n    typer.main.get_command(app).main({['--db', store_with_a_calibration, *args]!r}, "
+            f"try:\n    typer.main.get_command(app).main({args!r}, "
             "standalone_mode=False)\nexcept BaseException as exc:\n    raise SystemExit(f'failed: {exc!r}')")
-    loaded = _modules_after(code)
+    return _modules_after(code)
+
+
+@pytest.mark.parametrize("args", [
+    ["board", "list"], ["history", "CAM-1"], ["show", "CAM-1"], ["export", "CAM-1"], ["show", "CAM-1", "--json"],
+])
+def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_rig_or_yaml_module(store_with_a_calibration, args) -> None:
+    loaded = _run_loading(["--db", store_with_a_calibration, *args])
     assert "calibctl.store.sqlite_reads" in loaded
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS)) == []
+
+
+def test_an_export_prints_its_text_without_loading_rich(store_with_a_calibration) -> None:
+    loaded = _run_loading(["--db", store_with_a_calibration, "export", "CAM-1"])
+    assert "calibctl.cli.artifacts" in loaded
+    assert sorted(m for m in loaded if m.split(".")[0] == "rich" or m in ("calibctl.cli.render", "calibctl.cli.report")) == []
+
+
+def test_a_ros_export_loads_yaml_to_write_it_and_nothing_else_a_read_does_not(store_with_a_calibration) -> None:
+    loaded = _run_loading(["--db", store_with_a_calibration, "export", "CAM-1", "--format", "ros"])
+    assert "yaml" in loaded
+    assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS) and m.split(".")[0] != "yaml") == []
+
+
+def test_linting_a_json_file_loads_numpy_but_no_yaml_store_or_crypto_module() -> None:
+    # lint's rules (the distortion fold-over scan, the principal point, ...) compute with numpy: it stays.
+    loaded = _run_loading(["lint", str(REPO / "fixtures/camera_front.json")])
+    assert "numpy" in loaded and "calibctl.workflows.lint" in loaded
+    assert sorted(m for m in loaded if m.startswith(("yaml", "sqlalchemy", "calibctl.store", "cryptography"))) == []
+
+
+NUMPY_BLAS_THREADS = """
+import ctypes, os
+from calibctl.core import blas_threads
+def numpy_blas_threads():  # numpy's own OpenBLAS (cv2 bundles another)
+    for path in blas_threads._candidates():
+        lib = ctypes.CDLL(str(path)) if "numpy" in str(path) else None
+        for _set, get in blas_threads._SYMBOLS if lib is not None else ():
+            if hasattr(lib, get):
+                return getattr(lib, get)()
+    return None
+print(numpy_blas_threads(), os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+def _numpy_blas_threads_after(code: str, openblas_env: str | None = None) -> list[str]:
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if openblas_env is not None:
+        env["OPENBLAS_NUM_THREADS"] = openblas_env
+    out = subprocess.run([sys.executable, "-c", code + NUMPY_BLAS_THREADS], capture_output=True, text=True, check=True,
+                         env=env).stdout
+    return out.strip().splitlines()[-1].split()
+
+
+LINT_FILE = ("import typer.main\nfrom calibctl.cli.main import app\ntry:\n    typer.main.get_command(app).main("
+             f"['lint', {str(REPO / 'fixtures/camera_front.json')!r}], standalone_mode=False)\nexcept SystemExit:\n    pass")
+
+
+def test_lint_starts_numpys_openblas_on_one_thread_and_leaves_the_environment_and_solving_imports_alone() -> None:
+    default, _ = _numpy_blas_threads_after("import numpy")
+    if default == "None":
+        pytest.skip("no bundled OpenBLAS found in this environment")
+    if default == "1":
+        pytest.skip("OpenBLAS starts on one thread here anyway (one CPU), so lint's choice cannot show")
+    assert _numpy_blas_threads_after(LINT_FILE) == ["1", "None"]  # one thread; the variable is gone again
+    # The workflows imported any other way (as every solving command does) keep OpenBLAS's own count.
+    assert _numpy_blas_threads_after("import calibctl.workflows.lint, calibctl.workflows.solve") == [default, "None"]
+    assert _numpy_blas_threads_after(LINT_FILE, openblas_env=default) == [default, default]  # the user's count stays

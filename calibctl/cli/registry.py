@@ -1,0 +1,91 @@
+"""The root's sub-commands on demand: import the one module that registers a command, make that command.
+
+typer makes every command of a group when it makes the group, reading each signature and its type
+hints (62-66 ms of CPU for calibctl's 37, BENCHMARKS.md section 12), and the CLI imported every command
+module to register them first. The root group looks a command up here instead; ``--help``, shell completion and a mistyped name still see every command.
+The commands made, their help and their order are typer's own.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+from collections.abc import Callable, Iterator, MutableMapping
+from typing import Any
+
+import typer
+import typer.main
+from typer._click.core import Command as ClickCommand  # noqa: PLC2701 - typer vendors its own click
+
+from calibctl.cli.examples import attach_examples
+
+COMMAND_MODULES: dict[str, str] = {
+    "capture": "capture", "calibrate": "capture", "prune": "capture", "synth": "capture",
+    "solve": "solve", "check": "check", "lint": "lint",
+    "history": "artifacts", "show": "artifacts", "export": "artifacts", "import": "artifacts", "rollback": "artifacts",
+    "report": "report_page",
+    "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
+    "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
+    "board": "board", "rig": "rig", "db": "db", "keys": "keys",
+}
+"""Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is
+the order in ``--help`` (tests/cli/test_cli_registry.py holds it to what the modules register)."""
+
+
+def makers(registry: typer.Typer, style: dict[str, Any]) -> dict[str, Callable[[], ClickCommand]]:
+    """Name -> how typer makes that command or group from ``registry``, in typer's order (commands, then
+    groups); ``style`` is the root's pretty_exceptions_short, rich_markup_mode and suggest_commands."""
+    command_style = {k: v for k, v in style.items() if k != "suggest_commands"}
+    out: dict[str, Callable[[], ClickCommand]] = {}
+    for info in registry.registered_commands:
+        assert info.callback is not None  # noqa: S101 - typer's own precondition
+        name = info.name or typer.main.get_command_name(info.callback.__name__)
+        out[name] = functools.partial(typer.main.get_command_from_info, info, **command_style)
+    for group in registry.registered_groups:
+        assert group.name  # noqa: S101 - every calibctl group is added with its name
+        out[group.name] = functools.partial(typer.main.get_group_from_info, group, **style)
+    return out
+
+
+@functools.cache
+def module_registry(module: str) -> typer.Typer:
+    """What ``calibctl.cli.<module>`` registers, with each command's examples in its epilog."""
+    registry = typer.Typer()
+    importlib.import_module(f"calibctl.cli.{module}").register(registry)
+    attach_examples(registry)
+    return registry
+
+
+def _make(name: str, style: dict[str, Any]) -> ClickCommand:
+    return makers(module_registry(COMMAND_MODULES[name]), style)[name]()
+
+
+class CommandsOnDemand(MutableMapping[str, ClickCommand]):
+    """The root's sub-commands by name (a group's ``commands``); each is made when first looked up."""
+
+    def __init__(self, style: dict[str, Any]) -> None:
+        self._makers: dict[str, Callable[[], ClickCommand]] = {
+            name: functools.partial(_make, name, style) for name in COMMAND_MODULES}
+        self._made: dict[str, ClickCommand] = {}
+
+    def __getitem__(self, name: str) -> ClickCommand:
+        if name not in self._made:
+            self._made[name] = self._makers[name]()  # KeyError for an unknown name, as a dict's
+        return self._made[name]
+
+    def __setitem__(self, name: str, command: ClickCommand) -> None:
+        self._makers[name] = lambda: command
+        self._made[name] = command
+
+    def __delitem__(self, name: str) -> None:
+        del self._makers[name]
+        self._made.pop(name, None)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._makers  # without making the command
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._makers)
+
+    def __len__(self) -> int:
+        return len(self._makers)
