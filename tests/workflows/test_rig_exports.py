@@ -76,7 +76,7 @@ def test_opencv_file_reads_back_with_filestorage(stereo, tmp_path):
     left, right = stereo.members
     T_rl = stereo.T_a_b(1, 0)
     path = tmp_path / "stereo.yaml"
-    opencv_stereo(left, right, T_rl, path)
+    path.write_text(opencv_stereo(left, right, T_rl), encoding="utf-8")
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     read = {k: fs.getNode(k).mat() for k in ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q")}
     assert int(fs.getNode("image_width").real()) == 640
