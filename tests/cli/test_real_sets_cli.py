@@ -3,7 +3,9 @@ its message and exit code."""
 
 from __future__ import annotations
 
+import errno
 import json
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -42,3 +44,23 @@ def test_a_list_file_of_absolute_paths_names_the_views_as_written(db: str, tmp_p
     session = json.loads(r.stdout)["session"]
     assert [v["name"] for v in session["views"]] == [str(p) for p in lefts]
     assert not any(".." in o["name"] for o in session["outcomes"])
+
+
+def test_solve_report_into_a_folder_it_cannot_write_stores_nothing(db: str, tmp_path: Path, monkeypatch) -> None:
+    """The report folder was checked for existence only: a read-only one gave exit 2 *after* the new version
+    was stored and activated (a rig pinned to the old one went stale without the user knowing)."""
+    r = invoke(db, "capture", "--serial", "L1", "--board", "A17", "--source", str(LEFT_RIGHT / "left*.jpg"))
+    assert r.exit_code == 0, r.output
+    reports = tmp_path / "reports"
+    reports.mkdir()
+
+    def read_only(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)  # root ignores chmod: simulate the read-only folder
+    r = invoke(db, "solve", "--serial", "L1", "--report", str(reports))
+    assert r.exit_code == 2 and isinstance(r.exception, SystemExit)
+    assert f"cannot write reports to {reports}: permission denied" in r.stderr
+    monkeypatch.undo()
+    r = invoke(db, "history", "L1")
+    assert r.exit_code == 2 and "unknown serial 'L1'" in r.stderr  # no version was stored
