@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import json
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -64,3 +65,21 @@ def test_solve_report_into_a_folder_it_cannot_write_stores_nothing(db: str, tmp_
     monkeypatch.undo()
     r = invoke(db, "history", "L1")
     assert r.exit_code == 2 and "unknown serial 'L1'" in r.stderr  # no version was stored
+
+
+def test_the_tilt_hint_does_not_deny_the_directions_the_table_shows(db: str, tmp_path: Path) -> None:
+    """left01-left09: the table lists views tilted bottom, top, left, top left, bottom right; the hint said
+    "the tilted views so far all lean toward the bottom right and left"."""
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    for path in sorted(LEFT_RIGHT.glob("left0*.jpg")):
+        shutil.copy(path, shots / path.name)
+    r = invoke(db, "--json", "capture", "--serial", "L1", "--board", "A17", "--source", str(shots))
+    assert r.exit_code == 1, r.output
+    session = json.loads(r.stdout)["session"]
+    tilt = next(g for g in session["gates"] if g["gate"] == "tilt")
+    assert not tilt["passed"] and tilt["reason"] == "tilt.directions"
+    shown = {v["tilt_direction"] for v in session["views"] if 20.0 <= v["tilt_deg"] <= 45.0}
+    assert len(shown) > len(tilt["detail"]["directions"])  # the case: more names than distinct directions
+    assert "all lean toward" not in tilt["hint"]
+    assert all(name in tilt["hint"] for name in shown), (shown, tilt["hint"])
