@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import json
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -15,7 +16,7 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
-from tests.datasets import LEFT_RIGHT, needs_datasets
+from tests.datasets import BAKA_STEREO, LEFT_RIGHT, needs_datasets
 
 RUNNER = CliRunner()
 
@@ -83,3 +84,20 @@ def test_the_tilt_hint_does_not_deny_the_directions_the_table_shows(db: str, tmp
     assert len(shown) > len(tilt["detail"]["directions"])  # the case: more names than distinct directions
     assert "all lean toward" not in tilt["hint"]
     assert all(name in tilt["hint"] for name in shown), (shown, tilt["hint"])
+
+
+def test_a_view_whose_tilt_cannot_be_read_says_why_in_the_table(tmp_path: Path) -> None:
+    """baka-stereo left: an accepted view with a small board showed an empty tilt cell and no reason."""
+    url = f"sqlite:///{tmp_path / 'store.db'}"
+    with Store.open(url) as store:
+        store.add_board(measured_board("B7", square_mm=23.0).model_copy(update={"cols": 7, "rows": 10}))
+    r = invoke(url, "capture", "--serial", "BL", "--board", "B7", "--source", str(BAKA_STEREO / "left"))
+    assert r.exit_code in (0, 1), r.output  # the verdict is the gates' business, not this test's
+    session_id = re.search(r"session ([0-9a-f]{12}) (accepted|rejected)", r.stdout).group(1)  # type: ignore[union-attr]
+    with Store.open(url) as store:
+        session = store.get_session(session_id)
+    unread = [v.name for v in session.views if v.tilt_deg is None]
+    assert unread, "the case needs a view whose tilt is not read"
+    rows = {line.split("│")[1].strip(): line for line in r.stdout.splitlines() if line.count("│") > 5}
+    for name in unread:
+        assert "not read" in rows[name] and "to read tilt" in rows[name], rows[name]
