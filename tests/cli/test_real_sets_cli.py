@@ -101,3 +101,13 @@ def test_a_view_whose_tilt_cannot_be_read_says_why_in_the_table(tmp_path: Path) 
     rows = {line.split("│")[1].strip(): line for line in r.stdout.splitlines() if line.count("│") > 5}
     for name in unread:
         assert "not read" in rows[name] and "to read tilt" in rows[name], rows[name]
+
+
+def test_rig_add_of_a_captured_but_uncalibrated_camera_says_what_is_missing(db: str) -> None:
+    """baka-stereo's members are rejected at capture (coverage); `rig add` called them "unknown camera(s)"."""
+    r = invoke(db, "capture", "--serial", "L1", "--board", "A17", "--source", str(LEFT_RIGHT / "left*.jpg"))
+    assert r.exit_code == 0, r.output
+    r = invoke(db, "rig", "add", "S1", "--camera", "L1", "--camera", "R1")
+    assert r.exit_code == 2 and isinstance(r.exception, SystemExit)
+    assert "camera(s) L1 have capture sessions but no calibration yet" in r.stderr
+    assert "calibctl solve --serial" in r.stderr and "unknown camera" not in r.stderr
