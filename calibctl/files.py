@@ -82,6 +82,9 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
     if path.exists() and not force:
         raise AlreadyExistsError(f"{path} already exists", "pass --force to overwrite it")
     if not path.parent.is_dir():
+        if path.parent.exists():
+            raise FileSystemError(f"cannot write {path}: {path.parent} is a file, not a folder",
+                                  "choose an output path inside a folder")
         raise FileSystemError(f"cannot write {path}: folder {path.parent} does not exist", "create it first")
     payload = data.encode("utf-8") if isinstance(data, str) else data
     mode = new_file_mode(path if force else None)

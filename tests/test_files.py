@@ -48,6 +48,10 @@ def test_messages_name_the_path_and_the_reason(tmp_path):
         write_atomic(tmp_path, "x", force=True)
     with pytest.raises(FileSystemError, match="folder .* does not exist"):
         write_atomic(tmp_path / "no" / "f", "x")
+    (tmp_path / "plain").write_text("x")
+    with pytest.raises(FileSystemError, match=r"cannot write .*plain/f: .*plain is a file, not a folder") as file_parent:
+        write_atomic(tmp_path / "plain" / "f", "x")
+    assert file_parent.value.exit_code == 2 and "inside a folder" in (file_parent.value.hint or "")
     with pytest.raises(FileSystemError, match="cannot list .*: permission denied"), file_errors("list", tmp_path):
         raise PermissionError(errno.EACCES, "Permission denied")
     assert errno.EROFS in ENVIRONMENT_ERRNOS and errno.EINVAL not in ENVIRONMENT_ERRNOS

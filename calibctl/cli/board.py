@@ -37,7 +37,11 @@ board_app = typer.Typer(
 
 
 def _mm(value_m: float | None) -> str:
-    return "-" if value_m is None else f"{value_m * 1000:.3f} mm"
+    if value_m is None:
+        return "-"
+    mm = value_m * 1000
+    # three decimals read a caliper; a length under 1 um keeps 3 significant digits instead of "0.000 mm"
+    return f"{mm:.3f} mm" if mm >= 0.001 else f"{mm:.3g} mm"
 
 
 def square_text(board: BoardRevision) -> str:
@@ -119,6 +123,8 @@ def add(
             soft_wrap=True,
             markup=False,
         )
+    if (small := boards.square_size_warning(board)) is not None:
+        stderr.print(f"warning: {small}", soft_wrap=True, markup=False)
     if wants_json(ctx, json_output):
         emit_json(board)
         return

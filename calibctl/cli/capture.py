@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
@@ -82,14 +83,21 @@ def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
     table = Table(title=f"{'kept frames' if stream else 'images'} of {session.source}", title_justify="left")
     for col in ("image" if not stream else "frame", "status", "size", "corners", "tilt", "reason"):
         table.add_column(col)
+    # an accepted view whose tilt could not be read: the observability gate's detail says why (else a blank cell)
+    unread = [str(w) for g in session.gates if g.gate == "observability"
+              and isinstance(listed := (g.detail or {}).get("views_not_used"), list) for w in listed]
     for o in rows:
         view = tilts.get(o.name)
         tilt = "" if view is None or view.tilt_deg is None else (
             f"{view.tilt_deg:.0f} deg" + (f" {view.tilt_direction}" if view.tilt_direction else ""))
+        reason = o.reason or ""
+        if view is not None and view.tilt_deg is None:
+            why = next((w[len(o.name) + 2:] for w in unread if w.startswith(f"{o.name}: ")), "")
+            tilt, reason = "not read", reason or why
         style = "green" if o.status == "accepted" else "yellow"
         table.add_row(o.name, f"[{style}]{o.status}[/{style}]",
                       f"{o.image_size[0]}x{o.image_size[1]}" if o.image_size else "-",
-                      str(o.corners_found), tilt, o.reason or "")
+                      str(o.corners_found), tilt, escape(reason))
     return table
 
 

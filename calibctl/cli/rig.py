@@ -304,7 +304,7 @@ def rollback(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
-    fmt: Annotated[str, typer.Option("--format", help="json, opencv (needs -o), ros, tf, urdf or kalibr.")] = "json",
+    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf or kalibr.")] = "json",
     out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file.", show_default=False)] = None,
     pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
                                              "second member).", show_default=False)] = None,

@@ -156,7 +156,7 @@ class FrameSelector:
         still_px = s.still_frac * self.diag_px
         if motion is None or motion >= still_px:
             why = "board not seen in the previous frame" if motion is None else (
-                f"board moving ({motion:.1f} px since the previous frame, still below {still_px:.1f} px)")
+                f"board moving: {motion:.1f} px since the previous frame (still is under {still_px:.1f} px)")
             return FrameDecision(index, name, MOVING, why, motion_px=motion)
         dup_px = s.near_duplicate_frac * self.diag_px
         for view in self.kept:

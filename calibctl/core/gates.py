@@ -372,9 +372,16 @@ def _tilt_gate(distinct: Sequence[float], qualifying: Sequence[float], geo: Sess
     detail["missing_directions"] = wanted
     hint = (f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees, "
             f"that side of the board farther from the camera)")
-    if have:
+    # every 20-45 degree view's compass name: the per-image table shows them, so the hint must not deny them
+    named = list(dict.fromkeys(DIRECTION_NAMES[direction_bin(d)] for d in sorted(qualifying)))
+    within = [n for n in named if n not in have]
+    if have and not within:
         hint += f"; the tilted views so far all lean toward the {join_words(have)} (directions count as "
         hint += f"different only {DISTINCT_DIRECTION_DEG:.0f} degrees apart)"
+    elif have:
+        hint += (f"; the tilted views so far give {len(have)} direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} "
+                 f"degrees apart ({join_words(have)}); those toward the {join_words(within)} are within "
+                 f"{DISTINCT_DIRECTION_DEG:.0f} degrees of them")
     return GateResult("tilt", False, float(len(distinct)), float(th.tilt_directions_min), message,
                       "tilt.directions", hint, detail)
 

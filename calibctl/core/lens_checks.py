@@ -77,8 +77,9 @@ def check_outer_ring_holdout(holdout_outer_rms_px: float, fit_outer_rms_px: floa
            f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f} "
            f"(counted only when {min_excess_px:.2f} px or more above the fit; here {excess:.4f} px)")
     return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else
-                   "the distortion model is fitting noise in the outer ring: solve with fewer "
-                   "coefficients (--model k1k2 or auto) or capture more corners near the image edges")
+                   "the model does not carry over to held-out outer-ring corners: with more than k1 k2, solve "
+                   "with fewer coefficients (--model k1k2 or auto); with k1k2 already, capture more views with "
+                   "corners near the image edges and check that the board is flat")
 
 
 def check_image_size(image_size: tuple[int, int] | None, camera_matrix: np.ndarray) -> Finding:

@@ -340,14 +340,17 @@ def distinct_directions(directions_deg: Sequence[float], min_gap_deg: float = DI
 
 
 def directions_to_add(have_deg: Sequence[float], candidates_deg: Sequence[float], count: int) -> list[float]:
-    """Candidate directions to ask for next: greedily the ones farthest from every direction collected."""
+    """Candidate directions to ask for next: greedily the one that adds most distinct directions, then the one
+    farthest from every direction collected. (Farthest alone asked opencv-left-right's left01-09 for "top
+    right", 74 deg from a kept view: a board tilted exactly as told would not have passed.)"""
     taken = [float(a) for a in have_deg]
     chosen: list[float] = []
     for _ in range(max(0, count)):
         free = [c for c in candidates_deg if c not in chosen]
         if not free:
             break
-        best = max(free, key=lambda c: (min((angular_gap_deg(c, t) for t in taken), default=180.0), -c))
+        best = max(free, key=lambda c: (len(distinct_directions([*taken, c])),
+                                        min((angular_gap_deg(c, t) for t in taken), default=180.0), -c))
         chosen.append(best)
         taken.append(best)
     return chosen

@@ -330,7 +330,10 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
                     listing = history.known_list([f"{v} ({st})" for v, st in statuses.items()])
                     raise NotFoundError(
                         f"{serial} has no active version; versions: {listing}",
-                        f"ask for a version ({serial}@N) or roll back to an accepted one",
+                        f"ask for a version ({serial}@N) or roll back to an accepted one"
+                        if "accepted" in statuses.values() else
+                        f"none is accepted: recalibrate it (`calibctl calibrate --serial {serial} ...`), or ask for "
+                        f"a version ({serial}@N) to inspect it",
                     )
                 if statuses.get(wanted) != "accepted":  # only possible if the event log was forged
                     raise IntegrityError(

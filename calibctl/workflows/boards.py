@@ -40,6 +40,9 @@ _MEASUREMENT_FLAGS = {
     "measured_by": "--measured-by",
     "measured_on": "--measured-on",
 }
+SMALLEST_LIKELY_SQUARE_MM = 1.0
+"""Below this a square is more likely metres typed into --square-mm (0.025 for 25 mm) than a real target;
+kept (microscope targets exist) but warned about, since a wrong square size leaves no residual."""
 FUTURE_SLACK = dt.timedelta(days=1)
 """A measurement dated after tomorrow (UTC) is a typo, not a time zone."""
 
@@ -207,6 +210,16 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
         )
     except ValidationError as exc:
         raise UsageError(validation_message(exc, f"board {reg.name}")) from exc
+
+
+def square_size_warning(board: BoardRevision) -> str | None:
+    """A warning when the square is so small that it was probably given in metres, not millimetres."""
+    square_mm = board.measurement.square_size_m * 1000.0
+    if square_mm >= SMALLEST_LIKELY_SQUARE_MM:
+        return None
+    return (f"{board.ref} has a {square_mm:g} mm square: --square-mm takes millimetres. If {square_mm:g} was metres, "
+            f"register it again with --square-mm {square_mm * 1000:g}; a wrong square size scales every distance "
+            "and rig baseline and leaves no residual")
 
 
 def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:

@@ -13,8 +13,8 @@
 * anything else -> refused as missing.
 
 ``select_images(spec)`` turns a folder, list or glob into the exact files of the session, named by
-their path relative to the folder, the list file's folder or the glob's fixed leading folders (so a
-folder's images keep their plain file names). A glob or list is an explicit choice of files, so files
+their path relative to the folder, the list file's folder (an absolute path in a list stays absolute)
+or the glob's fixed leading folders (so a folder's images keep their plain file names). A glob or list is an explicit choice of files, so files
 it names that are missing, or a glob matching nothing, stop the capture (exit 2) - as do mixed image
 sizes among them (``mixed_sizes_error``), where a folder only marks the odd ones "wrong_size".
 
@@ -205,6 +205,7 @@ def _listed_images(list_file: Path) -> ImageSet:
         raise InputError(exc.message, "a list file is UTF-8 text") from exc
     base = list_file.parent
     paths: list[Path] = []
+    names: list[str] = []  # each file as the list writes it: an absolute path stays absolute, not ../../..
     problems: list[str] = []
     for number, line in enumerate(lines, start=1):
         entry = line.strip()
@@ -217,13 +218,14 @@ def _listed_images(list_file: Path) -> ImageSet:
             problems.append(f"line {number}: {entry} (not an image by its suffix)")
         elif path not in paths:
             paths.append(path)
+            names.append(os.path.relpath(path, base) if not Path(entry).expanduser().is_absolute() else str(path))
     if problems:
         raise InputError(f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
                          f"stored: {_names(problems)}",
                          f"paths in a list file are relative to its folder ({base}); fix or remove those lines")
     if not paths:
         raise InputError(f"the list file {list_file} names no image", "put one image path per line")
-    return _image_set(paths, base, [])
+    return ImageSet(paths, names, base, [])
 
 
 def select_images(spec: SourceSpec) -> ImageSet:

@@ -8,6 +8,8 @@ the stored per-view poses under the stored model; corners the solve removed are 
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,4 +125,8 @@ def ready_folder(folder: Path) -> Path:
         raise FileSystemError(f"cannot write reports to {folder}: it is not a folder", "name a folder for --report")
     with file_errors("create the report folder", folder):
         folder.mkdir(parents=True, exist_ok=True)
+    with file_errors("write reports to", folder):  # a read-only folder too: a file is the only honest probe
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".calibctl-report-probe.")
+        os.close(fd)
+        os.unlink(probe)
     return folder

@@ -24,7 +24,7 @@ from calibctl.core.extrinsics.rig_solve import RigSolution
 from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.core.extrinsics.se3 import quaternion_xyzw
 from calibctl.errors import InputError
-from calibctl.files import write_atomic
+from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.ros_camera_info import camera_name_for, distortion_for
 
 
@@ -55,22 +55,23 @@ def ros_stereo_pair(left: MemberIntrinsics, right: MemberIntrinsics, T_right_lef
             yaml.safe_dump(_ros_info(right, rect.R2, rect.P2), sort_keys=False, default_flow_style=None))
 
 
-def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray, path: Path) -> None:
-    """cv2.FileStorage YAML with K1 D1 K2 D2, R T E F (T_right_left), R1 R2 P1 P2 Q and the image size."""
+def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray) -> str:
+    """cv2.FileStorage YAML text with K1 D1 K2 D2, R T E F (T_right_left), R1 R2 P1 P2 Q and the image size.
+
+    Built in memory, so the caller writes it like every other export (write_atomic: --force, folder and
+    permission errors as exit 2); cv2.FileStorage opening the file itself raised a bare cv2.error."""
     rect = rectify(left, right, T_right_left)
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
-    try:
-        fs.write("image_width", int(left.image_size[0]))
-        fs.write("image_height", int(left.image_size[1]))
-        for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
-                           ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
-                           ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),
-                           ("E", essential_matrix(T_right_left)),
-                           ("F", fundamental_matrix(T_right_left, left.camera_matrix, right.camera_matrix)),
-                           ("R1", rect.R1), ("R2", rect.R2), ("P1", rect.P1), ("P2", rect.P2), ("Q", rect.Q)):
-            fs.write(key, np.asarray(value, dtype=np.float64))
-    finally:
-        fs.release()
+    fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.write("image_width", int(left.image_size[0]))
+    fs.write("image_height", int(left.image_size[1]))
+    for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
+                       ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
+                       ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),
+                       ("E", essential_matrix(T_right_left)),
+                       ("F", fundamental_matrix(T_right_left, left.camera_matrix, right.camera_matrix)),
+                       ("R1", rect.R1), ("R2", rect.R2), ("P1", rect.P1), ("P2", rect.P2), ("Q", rect.Q)):
+        fs.write(key, np.asarray(value, dtype=np.float64))
+    return str(fs.releaseAndGetString())
 
 
 TfEdge = tuple[str, str, Sequence[float], Sequence[float]]  # parent, child, translation_m xyz, quaternion xyzw
@@ -129,15 +130,14 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
 
 def write_exports(solution: RigSolution, out: Path, force: bool = True) -> list[Path]:
     """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera."""
-    out.mkdir(parents=True, exist_ok=True)
+    with file_errors("create the export folder", out):
+        out.mkdir(parents=True, exist_ok=True)
     members, tree = solution.members, solution.tree
     left, right = members[0], members[1]
     T_right_left = solution.T_a_b(1, 0)
     written = []
-    stereo = out / f"stereo_{left.name}_{right.name}.yaml"
-    opencv_stereo(left, right, T_right_left, stereo)
-    written.append(stereo)
-    texts = {"tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_joints(tree),
+    texts = {f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
+             "tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_joints(tree),
              "camchain.yaml": kalibr_camchain(members, tree)}
     try:
         info_left, info_right = ros_stereo_pair(left, right, T_right_left)

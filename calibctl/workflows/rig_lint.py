@@ -147,7 +147,7 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
            allow_rejected: bool = False, edge: str | None = None) -> str:
     """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
     second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
-    to ``out`` when given; opencv needs ``out``)."""
+    to ``out`` when given)."""
     from calibctl.workflows import rig_exports
 
     if fmt not in EXPORT_FORMATS:
@@ -181,15 +181,8 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
         text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
     elif fmt == "kalibr":
         text = header + rig_exports.kalibr_camchain(members, tree)
-    else:  # opencv: cv2.FileStorage writes the file itself
-        if out is None:
-            raise UsageError("the OpenCV stereo export needs -o FILE.yaml")
-        if out.exists() and not force:
-            from calibctl.errors import AlreadyExistsError
-
-            raise AlreadyExistsError(f"{out} exists", "pass --force to overwrite it")
-        rig_exports.opencv_stereo(left, right, T_right_left, out)
-        return out.read_text(encoding="utf-8")
+    else:  # opencv
+        text = rig_exports.opencv_stereo(left, right, T_right_left)
     if out is not None:
         write_atomic(out, text, force=force)
     return text

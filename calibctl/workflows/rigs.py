@@ -97,6 +97,11 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
     with open_store(settings) as store:
         known = set(store.serials())
         unknown = [c for c in cameras if c not in known]
+        captured = [c for c in unknown if store.list_sessions(c)]
+        if captured:  # "unknown camera" misleads when the store holds its (e.g. gate-rejected) captures
+            raise NotFoundError(f"camera(s) {', '.join(captured)} have capture sessions but no calibration yet",
+                                hint="solve an accepted session of each (`calibctl solve --serial ...`), or capture "
+                                     "again following the gate hints; a rig is solved from calibrated members")
         if unknown:
             raise NotFoundError(f"unknown camera(s) {', '.join(unknown)}: the store has no calibration for them",
                                 hint="calibrate each member first (`calibctl calibrate --serial ...`)")

@@ -141,3 +141,15 @@ def test_empty_registry_lists_nothing(run):
     assert run("db", "upgrade").exit_code == 0
     result = run("board", "list")
     assert result.exit_code == 0 and "no boards registered yet" in result.stdout
+
+
+def test_a_square_size_given_in_metres_is_registered_but_warned_about(run):
+    """0.025 typed for 25 mm: intrinsics do not notice, every distance is 1000x off; say so at once."""
+    result = run("board", "add", "M1", "--cols", "9", "--rows", "6", "--square-mm", "0.025", "--uncertainty-mm",
+                 "0.0001", *MEASURED[2:])
+    assert result.exit_code == 0, result.output
+    assert "warning: M1@1 has a 0.025 mm square: --square-mm takes millimetres" in result.stderr
+    assert "register it again with --square-mm 25;" in result.stderr
+    assert "square 0.025 mm ± 0.0001 mm (1σ)" in result.stdout  # not "± 0.000 mm"
+    one_mm = run("board", "add", "U1", "--cols", "9", "--rows", "6", "--square-mm", "1.0", *MEASURED)
+    assert one_mm.exit_code == 0 and "--square-mm takes millimetres" not in one_mm.stderr

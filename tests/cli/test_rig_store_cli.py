@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import json
+import tempfile
 
 import pytest
 from typer.testing import CliRunner
@@ -112,3 +114,24 @@ def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
     assert r.exit_code == 2 and "capture needs --serial SERIAL" in r.output
     r = invoke(db, "capture", "--serial", "CAM0", "--board", "A17", "--source", "a", "--source", "b")
     assert r.exit_code == 2 and "one camera takes one --source, got 2" in r.output
+
+
+def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_path, monkeypatch):
+    """It used to let cv2.FileStorage open the file itself: a folder it could not write was a cv2.error traceback."""
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    assert invoke(db, "rig", "solve", "R1").exit_code == 0
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv")  # stdout, as the other formats
+    assert r.exit_code == 0 and r.output.startswith("%YAML") and "P2: !!opencv-matrix" in r.output
+    (tmp_path / "plain").write_text("x")
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "plain" / "s.yaml"))
+    assert r.exit_code == 2 and "plain is a file, not a folder" in r.output
+    assert isinstance(r.exception, SystemExit)  # a handled error, not a traceback
+
+    def read_only(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)  # root ignores chmod: simulate a read-only folder
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "s.yaml"))
+    assert r.exit_code == 2 and f"cannot write {tmp_path / 's.yaml'}: permission denied" in r.output
+    assert isinstance(r.exception, SystemExit) and not (tmp_path / "s.yaml").exists()

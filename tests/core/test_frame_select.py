@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import cv2
@@ -53,6 +54,9 @@ def test_one_still_frame_is_kept_per_key_pose_and_never_a_moving_one() -> None:
     for still, _, d in rows:
         if not still:
             assert d.status == MOVING and d.motion_px is not None
+            # it read "board moving (156.4 px since the previous frame, still below 2.4 px)"
+            assert re.fullmatch(r"board moving: \d+\.\d px since the previous frame \(still is under \d+\.\d px\)",
+                                d.reason) or d.reason == "board not seen in the previous frame", d.reason
     # the first frame of each pause follows motion, the ones after the kept frame repeat it
     statuses = [d.status for still, _, d in rows if still]
     assert statuses[:4] == [MOVING, KEPT, NEAR_DUPLICATE, NEAR_DUPLICATE]

@@ -113,6 +113,15 @@ def test_outer_ring_holdout_rule():
     assert not check_outer_ring_holdout(0.3, 0.0).passed
 
 
+def test_the_outer_ring_fix_does_not_only_say_k1k2_which_may_be_the_model_already():
+    # udacity-camcal (k1k2, the default) fails this rule by a hair on a non-flat paper board: the hint
+    # used to say "solve with fewer coefficients (--model k1k2 or auto)" and nothing else.
+    fix = check_outer_ring_holdout(1.0762, 0.9766).fix
+    assert fix is not None and "fewer coefficients (--model k1k2 or auto)" in fix
+    assert "with k1k2 already, capture more views with corners near the image edges" in fix
+    assert "board is flat" in fix
+
+
 def test_image_size_rule():
     assert check_image_size((640, 480), K_CH0).passed
     assert not check_image_size(None, K_CH0).passed

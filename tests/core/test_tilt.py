@@ -11,7 +11,7 @@ from calibctl.core.board_spec import BoardSpec
 from calibctl.core.gates import GateThresholds, evaluate_gates
 from calibctl.core.synth import PinholeCamera, true_corners_px
 from calibctl.core.synth_scenes import place_board, sweep_poses, tilt_rotation
-from calibctl.core.tilt import MIN_TILT_CORNERS, distinct_directions
+from calibctl.core.tilt import MIN_TILT_CORNERS, directions_to_add, distinct_directions
 from calibctl.core.views import BoardView
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
@@ -161,3 +161,27 @@ def test_a_session_of_only_sparse_views_reads_no_tilt_and_fails_observability_sa
     obs = report.gate("observability")
     assert not obs.passed and obs.value == 0.0 and obs.detail["views_used"] == 0
     assert len(obs.detail["views_not_used"]) == 10 and not report.gate("tilt").passed
+
+
+# The 20-45 degree directions the tilt gate read on opencv-left-right's left01-left09 (2026-11-23): bottom,
+# top, left, top left, bottom right (image y down: 90 = bottom). Only two are 90 degrees apart.
+LEFT01_09_DIRECTIONS_DEG = [107.5, 252.6, 175.3, 241.9, 29.2]
+COMPASS_DEG = [45.0 * b for b in range(8)]
+
+
+def test_the_direction_asked_for_next_is_one_that_makes_the_gate_pass() -> None:
+    assert len(distinct_directions(LEFT01_09_DIRECTIONS_DEG)) == 2
+    (asked,) = directions_to_add(LEFT01_09_DIRECTIONS_DEG, COMPASS_DEG, 1)
+    # the farthest-from-everything rule asked for 315 (top right): 74 deg from 29.2, still 2 directions
+    assert len(distinct_directions([*LEFT01_09_DIRECTIONS_DEG, 315.0])) == 2
+    assert len(distinct_directions([*LEFT01_09_DIRECTIONS_DEG, asked])) == 3
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_every_direction_asked_for_raises_the_count_when_one_can(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    have = list(rng.uniform(0.0, 360.0, rng.integers(1, 6)))
+    for asked in directions_to_add(have, COMPASS_DEG, 3 - len(distinct_directions(have))):
+        reachable = max(len(distinct_directions([*have, c])) for c in COMPASS_DEG)
+        assert len(distinct_directions([*have, asked])) == reachable
+        have.append(asked)

@@ -133,9 +133,13 @@ def test_unknown_serial_and_version_name_what_exists(store: Store):
 
 def test_serial_without_an_active_version_says_so(store: Store):
     add(store, status="rejected")
-    with pytest.raises(NotFoundError, match=r"CAM-0001 has no active version; versions: 1 \(rejected\)"):
+    with pytest.raises(NotFoundError, match=r"CAM-0001 has no active version; versions: 1 \(rejected\)") as none:
         store.get_artifact("CAM-0001")
     assert store.active_version("CAM-0001") is None
+    # no accepted version to roll back to (udacity-camcal, every solve rejected): the hint must not say "roll back"
+    assert none.value.hint is not None and "roll back" not in none.value.hint
+    assert "recalibrate it (`calibctl calibrate --serial CAM-0001 ...`)" in none.value.hint
+    assert none.value.exit_code == 2
 
 
 def test_import_keeps_the_version_and_is_idempotent(store: Store):

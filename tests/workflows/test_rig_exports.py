@@ -10,7 +10,7 @@ import yaml
 from calibctl.core.extrinsics.rig_metrics import skew
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_tree import pose_to_T
-from calibctl.errors import InputError
+from calibctl.errors import FileSystemError, InputError
 from calibctl.workflows.rig_exports import (
     kalibr_camchain,
     opencv_stereo,
@@ -76,7 +76,7 @@ def test_opencv_file_reads_back_with_filestorage(stereo, tmp_path):
     left, right = stereo.members
     T_rl = stereo.T_a_b(1, 0)
     path = tmp_path / "stereo.yaml"
-    opencv_stereo(left, right, T_rl, path)
+    path.write_text(opencv_stereo(left, right, T_rl), encoding="utf-8")
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     read = {k: fs.getNode(k).mat() for k in ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q")}
     assert int(fs.getNode("image_width").real()) == 640
@@ -130,3 +130,10 @@ def test_write_exports_writes_every_file(stereo, tmp_path):
     assert names == {"stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
                      "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
     assert pose_to_T(np.zeros(6)).shape == (4, 4)
+
+
+def test_an_export_folder_that_cannot_be_created_is_a_file_system_error(stereo, tmp_path):
+    (tmp_path / "plain").write_text("x")
+    with pytest.raises(FileSystemError, match=r"cannot create the export folder .*plain/out") as refused:
+        write_exports(stereo, tmp_path / "plain" / "out")
+    assert refused.value.exit_code == 2

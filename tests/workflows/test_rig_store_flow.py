@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from calibctl.config import load_settings
-from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows import rig_lint, rigs
 from tests.artifacts.factories import calibration, measured_board
@@ -103,8 +103,10 @@ def test_exports_of_a_stored_rig(settings, rig2, tmp_path):
     fs.release()
     for fmt in ("ros", "tf", "urdf", "json"):
         assert "CAM1" in rig_lint.export(settings, "R1", fmt, None, force=False)
-    with pytest.raises(UsageError, match="needs -o"):
-        rig_lint.export(settings, "R1", "opencv", None, force=False)
+    # the stereo FileStorage goes to stdout like every other format, byte for byte what -o wrote
+    assert rig_lint.export(settings, "R1@1", "opencv", None, force=False) == path.read_text(encoding="utf-8")
+    with pytest.raises(AlreadyExistsError, match="already exists"):
+        rig_lint.export(settings, "R1@1", "opencv", path, force=False)
 
 
 def test_registry_refusals(settings):
