@@ -42,7 +42,13 @@ import numpy as np
 
 from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.gates import GateResult
-from calibctl.core.solve import IntrinsicsSolution, get_model, single_threaded_opencv, solve_intrinsics
+from calibctl.core.solve import (
+    IntrinsicsSolution,
+    get_model,
+    residual_rms_px,
+    single_threaded_opencv,
+    solve_intrinsics,
+)
 from calibctl.core.validation import refit_pose_residuals, validate_holdout
 from calibctl.errors import NumericalError
 
@@ -98,7 +104,7 @@ def _view_rms(sol: IntrinsicsSolution, obj: Sequence[np.ndarray], img: Sequence[
     out = []
     for o, i in zip(obj, img, strict=True):
         r = refit_pose_residuals(o, i, sol.camera_matrix, sol.dist_coeffs, sol.model)
-        out.append(float(np.sqrt(np.mean(np.sum(r ** 2, axis=1)))))
+        out.append(residual_rms_px(r))
     return np.array(out)
 
 

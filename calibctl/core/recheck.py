@@ -34,7 +34,8 @@ import numpy as np
 
 from calibctl.core.extrinsics.se3 import rotation_from_rotvec
 from calibctl.core.recheck_delta import ParameterShift, intrinsic_shifts, stored_delta_covariance
-from calibctl.core.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown, residual_rms_px
+from calibctl.core.solve import residual_rms_px
+from calibctl.core.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown
 
 DEFAULT_ALPHA = 0.005  # whole-check false-fail probability under the noise model (target <= 1 %)
 SHIFT_SHARE = 0.8  # of alpha for the delta model (what a focal or principal-point change does); the rest: regions

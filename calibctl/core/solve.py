@@ -268,6 +268,13 @@ def check_inputs(
     return objs, imgs
 
 
+def residual_rms_px(residuals: np.ndarray) -> float:
+    """sqrt(mean squared 2-D residual length) of (N, 2) px, OpenCV's per-view RMS; nan for N = 0."""
+    if len(residuals) == 0:
+        return float("nan")
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
+
+
 def parameter_count(model: DistortionModel, n_views: int) -> int:
     """Free parameters of a solve: intrinsics + distortion + 6 pose parameters per view."""
     return model.n_free_intrinsic_params + 6 * n_views
@@ -388,7 +395,7 @@ def solve_intrinsics(
     if not uncertainty:  # OpenCV's per-view RMS, from the same residuals
         return IntrinsicsSolution(
             model=m.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D), rms_px=float(rms),
-            per_view_rms_px=readonly(np.array([np.sqrt(np.mean(np.sum(r ** 2, axis=1))) for r in residuals])),
+            per_view_rms_px=readonly(np.array([residual_rms_px(r) for r in residuals])),
             rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
             sigma_refused_reason=NO_UNCERTAINTY, n_residuals=n_res, n_parameters=n_par, aspect_ratio=aspect)
     if dof < MIN_SIGMA_DOF:

@@ -46,6 +46,7 @@ from calibctl.core.solve import (
     fit_pose,
     get_model,
     project_points,
+    residual_rms_px,
     single_threaded_opencv,
     solve_intrinsics,
 )
@@ -55,13 +56,6 @@ MAX_FOLDS = 5
 HOLDOUT_WORKERS = 2  # the station PCs and the bench machine have 2 cores
 N_RINGS = 5
 N_OCTANTS = 8
-
-
-def residual_rms_px(residuals: np.ndarray) -> float:
-    """sqrt(mean squared 2-D residual length) of (N, 2) px; nan for N = 0."""
-    if len(residuals) == 0:
-        return float("nan")
-    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
 
 
 def fold_assignment(n_views: int, min_training_views: int, max_folds: int = MAX_FOLDS) -> np.ndarray:

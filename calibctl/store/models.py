@@ -84,7 +84,6 @@ class UtcDateTime(TypeDecorator[dt.datetime]):
         return checked
 
 
-
 class Base(DeclarativeBase):
     metadata = MetaData(naming_convention=NAMING_CONVENTION)
 

@@ -14,9 +14,10 @@
 
 ``select_images(spec)`` turns a folder, list or glob into the exact files of the session, named by
 their path relative to the folder, the list file's folder (an absolute path in a list stays absolute)
-or the glob's fixed leading folders (so a folder's images keep their plain file names). A glob or list is an explicit choice of files, so files
-it names that are missing, or a glob matching nothing, stop the capture (exit 2) - as do mixed image
-sizes among them (``mixed_sizes_error``), where a folder only marks the odd ones "wrong_size".
+or the glob's fixed leading folders (so a folder's images keep their plain file names). A glob or list
+is an explicit choice of files, so files it names that are missing, or a glob matching nothing, stop
+the capture (exit 2) - as do mixed image sizes among them (``mixed_sizes_error``), where a folder only
+marks the odd ones "wrong_size".
 
 Frame sources (``VideoFileSource``, ``CameraSource``) yield ``Frame`` objects in order. A video file
 is read frame by frame, every frame, and its time is the video's own (frame index / fps), so a run on
@@ -211,14 +212,15 @@ def _listed_images(list_file: Path) -> ImageSet:
         entry = line.strip()
         if not entry or entry.startswith("#"):
             continue
-        path = base / Path(entry).expanduser()
+        given = Path(entry).expanduser()
+        path = base / given
         if not path.is_file():
             problems.append(f"line {number}: {entry} ({'a folder' if path.is_dir() else 'missing'})")
         elif path.suffix.lower() not in IMAGE_SUFFIXES:
             problems.append(f"line {number}: {entry} (not an image by its suffix)")
         elif path not in paths:
             paths.append(path)
-            names.append(os.path.relpath(path, base) if not Path(entry).expanduser().is_absolute() else str(path))
+            names.append(str(path) if given.is_absolute() else os.path.relpath(path, base))
     if problems:
         raise InputError(f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
                          f"stored: {_names(problems)}",
