@@ -46,10 +46,27 @@ def check_principal_point(camera_matrix: np.ndarray, image_size: tuple[int, int]
                    "(a K fitted at another resolution scales with it); if it is, recalibrate with tilted views")
 
 
+# sigma(fx) is linear in the corner scatter (seed chapter 1: 20.21 / 13.53 / 6.77 px at 0.3 / 0.2 / 0.1 px of
+# noise), and the seed's production bar assumes sub-pixel corners at 0.2-0.3 px. A fit RMS above the seed's
+# monitor alert level (0.5 px) means the scatter, not the poses, is what sigma(fx) is made of: more tilted
+# views buy only sqrt(N), sharper corners on a flat board buy it linearly.
+SCATTERED_FIT_RMS_PX = 0.5
+SHARP_CORNERS_PX = "0.2-0.3"
+
+
 def check_sigma_fx(sigma_fx_px: float | None, refused_reason: str | None = None,
-                   max_px: float = 2.0) -> Finding:
-    """sigma(fx) must exist, be finite and stay under max_px (fx observable)."""
+                   max_px: float = 2.0, fit_rms_px: float | None = None,
+                   detector_rms_px: float | None = None) -> Finding:
+    """sigma(fx) must exist, be finite and stay under max_px (fx observable). ``fit_rms_px`` (the solve's
+    per-corner RMS) and ``detector_rms_px`` (the corners' own scatter, ``model_fit.detector_rms_px``), when
+    known, pick the fix: above SCATTERED_FIT_RMS_PX the corners, not the poses, are what to improve."""
     fix = "capture more views tilted 20-40 deg in at least three directions"
+    if fit_rms_px is not None and math.isfinite(fit_rms_px) and fit_rms_px > SCATTERED_FIT_RMS_PX:
+        alone = "" if detector_rms_px is None else f" (the corners alone scatter {detector_rms_px:.3f} px)"
+        fix = (f"sigma(fx) grows linearly with the corner scatter: this fit leaves {fit_rms_px:.3f} px{alone}, "
+               f"against {SHARP_CORNERS_PX} px for sharp corners on a flat board; first make the corners sharp "
+               f"(focus, no motion blur, even light) and the board flat and rigid (a printed sheet bends), then "
+               f"{fix}")
     if sigma_fx_px is None:
         return Finding("sigma-fx", ERROR, False,
                        f"sigma(fx) is not available: {refused_reason or 'not recorded'}", fix)

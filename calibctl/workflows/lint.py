@@ -323,7 +323,8 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings = _adopt(lens_checks.check_image_size(size, K))
     if size is not None and not findings:
         findings += _adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
-    findings += _adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px))
+    findings += _adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px,
+                                                  facts.fit_rms_px, facts.detector_rms_px))
     findings += _outer_ring_rule(facts, limits)
     findings += _provenance_rule(facts)
     findings += _one_camera_rule(facts)

@@ -104,6 +104,18 @@ def test_sigma_fx_rule():
     assert not check_sigma_fx(1.9, max_px=1.5).passed
 
 
+def test_sigma_fx_fix_names_the_corner_scatter_when_the_fit_rms_is_high():
+    # udacity-camcal (k1k2, 16 views): sigma(fx) 2.27 px with a 0.889 px fit RMS; more tilted views alone
+    # cannot reach the bar, sharper corners on a flat board can (sigma is linear in the scatter, seed ch.1)
+    scattered = check_sigma_fx(2.27, fit_rms_px=0.889, detector_rms_px=0.508)
+    assert not scattered.passed
+    assert "0.889 px (the corners alone scatter 0.508 px)" in scattered.fix
+    assert "flat" in scattered.fix and scattered.fix.endswith("tilted 20-40 deg in at least three directions")
+    sharp = check_sigma_fx(2.27, fit_rms_px=0.3, detector_rms_px=0.25)
+    assert sharp.fix == "capture more views tilted 20-40 deg in at least three directions"
+    assert check_sigma_fx(1.5, fit_rms_px=0.889).fix is None  # a pass carries no fix
+
+
 def test_outer_ring_holdout_rule():
     # seed ch.1: held-out outer ring doubled from 0.31 to 0.62 px while the fit said 0.261
     assert not check_outer_ring_holdout(0.62, 0.261).passed
