@@ -38,6 +38,9 @@ ACROSS_HALF_SPAN_SQ = 0.15  # sampling half-span across the side, squares
 ALONG_HALF_SPAN_SQ = 0.25  # and along it
 INTERIOR_HALF_SPAN_SQ = 0.25
 FIT_LINES = 3  # corner lines nearest a side used for its homography
+# findChessboardCornersSB grows a board from this seed grid when allowed to (CALIB_CB_LARGER) and returns
+# every corner it reaches: the whole visible board, whatever size was registered.
+SEED_PATTERN = (3, 3)
 
 SIDES = ("top", "bottom", "left", "right")
 
@@ -148,3 +151,18 @@ def might_extend(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: int)
         corners_px: (cols * rows, 2) float64 corners, row-major, full-resolution pixels.
     """
     return any(score.maybe for score in score_sides(gray, corners_px, cols, rows))
+
+
+def visible_chessboard(gray: np.ndarray) -> tuple[int, int] | None:
+    """(a, b) inner corners of the chessboard ``findChessboardCornersSB`` sees in ``gray`` when it may grow
+    from a 3x3 seed (``CALIB_CB_LARGER``), in no particular orientation (a 9x6 board may read 6x9); None
+    when it sees none. Usually the whole board; a partly hidden or shaded one can read smaller, and SB can
+    reach one line into a board's outer edge, so a caller confirms a size with the classic detector.
+
+    Args:
+        gray: (H, W) uint8 image at full resolution.
+    """
+    found, _corners, meta = cv2.findChessboardCornersSBWithMeta(gray, SEED_PATTERN, cv2.CALIB_CB_LARGER)
+    if not found or meta is None or meta.ndim != 2:
+        return None
+    return int(meta.shape[1]), int(meta.shape[0])

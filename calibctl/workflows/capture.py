@@ -275,7 +275,10 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
         raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {where}", len(readable),
                                                 _load_samples(readable))
     accepted = [o for o in results if o.accepted]
-    probed = accepted or with_board
+    # one view or none cannot show a larger board, the other images can: a 7x10 board registered as 9x6
+    # shows a 9x6 part of itself in a stray image and nothing in the rest
+    probed = next((group for group in (accepted, with_board) if len(group) >= pattern_check.LARGER_MIN_HITS),
+                  readable)
     larger = pattern_check.larger_board_error(spec, board.ref, board.name, _load_samples(probed),
                                               {o.name: o.corners_px for o in probed if o.corners_px is not None})
     if larger is not None:
@@ -406,7 +409,10 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     if state.boards_seen == 0:
         raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"frames of {source.label}",
                                                 len(state.outcomes), list(state.no_board_samples))
-    larger = pattern_check.larger_board_error(spec, board.ref, board.name, state.kept_samples, state.kept_corners_px)
+    samples = state.kept_samples
+    if len(samples) < pattern_check.LARGER_MIN_HITS:  # as for a folder: look at the frames without the pattern
+        samples = [*samples, *state.no_board_samples]
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, samples, state.kept_corners_px)
     if larger is not None:
         raise larger
     views = [(view, state.shas.get(view.name)) for view in state.selector.kept]

@@ -2,7 +2,9 @@
 
 1. Nothing found: when no readable image (or frame) shows the registered pattern, a few images are
    probed with near patterns - the transposed one and one more or one fewer corner per side (OpenCV's
-   ``patternSize`` counts *inner* corners, squares - 1 per side, an easy off-by-one) - and the error
+   ``patternSize`` counts *inner* corners, squares - 1 per side, an easy off-by-one) - and with the
+   board findChessboardCornersSB sees when it may grow from a seed grid (``seen_sizes``, any size:
+   a 16x12 registration on a 9x6 board is near nothing), confirmed by the classic detector. The error
    names what is visible: the pattern found in the most probed images, the largest on a tie (a part of
    the real board is found wherever the real board is).
 2. A larger board: OpenCV's chessboard finder happily locks onto an inner part of a larger board. On
@@ -15,7 +17,12 @@
    found in at least ``LARGER_MIN_HITS`` of the probed images (the classic detector once found 10x6 on
    left13.jpg, a single image proves nothing). Probing stops once the verdict is settled, so a correctly
    registered board costs 4 failed classic searches (~0.3 s at 640x480 on this machine, 250-280 ms of
-   the station path for 20 images at 1280x960).
+   the station path for 20 images at 1280x960). The whole board SB sees (``seen_sizes``) is probed
+   first when it holds the registered pattern: on baka-stereo's 7x10 board registered as 9x6 the classic
+   detector finds neither 10x6 nor 9x7 in most images, but 10x7 in all. SB alone is not trusted: grown
+   from a seed on the 9x6 opencv-left-right board it reads 9x7 or 10x6 in 3 of 26 images.
+   With fewer than two views showing the registered pattern the images without it are probed: a 7x10
+   board registered as 9x6 shows a 9x6 part of itself in one stray image (OpenCV 5.0, baka-stereo left).
    So a cheap geometric pre-check runs first (``core.board_extent.might_extend``, ~3 ms a view): a
    chessboard's inner corners are surrounded by exactly one ring of squares, so just past the ring
    there is margin or background, while on a larger board there is another row of alternating squares.
@@ -29,19 +36,20 @@
    registered, it says "no" in left 10/13, right 9/13, udacity 15/18 (the rest: a side's row past the
    ring leaves the image, or right03's background scores 0.23) and 96/96 rendered views (`calibctl
    synth` scenarios good, flat, centre, one-direction at 640x480 and 1280x960; max score 0.01).
-   A grossly smaller registration (5x4 on the 9x6 board) is found in only some images and its +1
-   probe may miss; such a capture then fails the gates (exit 1) rather than being refused here.
+   A grossly smaller registration (5x4 on the 9x6 board) misses the +1 probes, but SB sees the 9x6
+   board, so it is refused naming 9x6 (opencv-left-right left: found in left07 and left08).
 ChArUco boards are not probed: their corner ids come from the markers, a partial view is normal.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from calibctl.core.board_extent import might_extend
+from calibctl.core.board_extent import might_extend, visible_chessboard
 from calibctl.core.board_spec import CHESSBOARD, BoardSpec
 from calibctl.core.detect import DetectorSettings, detect_board
 from calibctl.errors import InputError
@@ -104,6 +112,29 @@ def _probe_near(samples: Sequence[Sample], spec: BoardSpec,
     return found
 
 
+def _oriented(size: tuple[int, int], spec: BoardSpec) -> tuple[int, int]:
+    """``size`` turned to read like the registered pattern (its longer side first when the pattern's is)."""
+    a, b = sorted(size, reverse=spec.cols >= spec.rows)
+    return a, b
+
+
+def _holds_more(size: tuple[int, int], spec: BoardSpec) -> bool:
+    """True when a board of ``size`` inner corners holds the registered pattern and more of it."""
+    big, small = sorted(size, reverse=True)
+    reg_big, reg_small = sorted((spec.cols, spec.rows), reverse=True)
+    return big >= reg_big and small >= reg_small and big * small > reg_big * reg_small
+
+
+def seen_sizes(samples: Sequence[Sample], spec: BoardSpec) -> list[tuple[int, int]]:
+    """The chessboards findChessboardCornersSB sees in the samples growing from a seed grid
+    (``board_extent.visible_chessboard``: whatever their size), oriented like the registered pattern,
+    the most often seen first, then the largest. A size still has to be confirmed by the classic detector."""
+    with ThreadPoolExecutor(max_workers=PROBE_WORKERS) as pool:
+        seen = Counter(_oriented(size, spec) for size in pool.map(lambda sample: visible_chessboard(sample[1]), samples)
+                       if size is not None)
+    return sorted(seen, key=lambda size: (seen[size], size[0] * size[1]), reverse=True)
+
+
 def _a(cols: int, rows: int) -> str:
     """'a 9x6' / 'an 8x6' / 'an 11x7'."""
     text = f"{cols}x{rows}"
@@ -127,6 +158,11 @@ def nothing_found_error(spec: BoardSpec, board_ref: str, board_name: str, where:
     patterns = near_patterns(spec.cols, spec.rows)
     samples = spread(samples, PROBE_IMAGES)
     found = _probe_near(samples, spec, patterns)
+    # a board two or more corners off is not among the near patterns: name what SB sees, once the classic
+    # detector confirms it
+    for size in seen_sizes(samples, spec):
+        if size not in found and size != (spec.cols, spec.rows):
+            found.update(probe(samples, spec, [size], classic_only=True))
     # a sub-board of the real one is found wherever the real one is: prefer the most hits, then the largest
     visible = sorted(((p, names) for p, names in found.items() if names),
                      key=lambda item: (len(item[1]), item[0][0] * item[0][1]), reverse=True)
@@ -174,12 +210,15 @@ def larger_board_error(spec: BoardSpec, board_ref: str, board_name: str, samples
                 names.append(sample[0])
         return names
 
+    # the whole board SB sees, when it holds the registered pattern (a 7x10 board registered as 9x6 shows
+    # neither 10x6 nor 9x7 to the classic detector in most images), then one more column and one more row
+    larger = [size for size in seen_sizes(samples, spec) if _holds_more(size, spec)]
+    larger += [p for p in [(spec.cols + 1, spec.rows), (spec.cols, spec.rows + 1)] if p not in larger]
     with ThreadPoolExecutor(max_workers=PROBE_WORKERS) as pool:
-        larger = [(spec.cols + 1, spec.rows), (spec.cols, spec.rows + 1)]
         hits = [(p, names) for p, names in zip(larger, pool.map(hits_of, larger), strict=True) if len(names) >= need]
     if not hits:
         return None
-    (c, r), names = max(hits, key=lambda item: len(item[1]))
+    (c, r), names = max(hits, key=lambda item: (len(item[1]), item[0][0] * item[0][1]))
     return InputError(
         f"the pictures show a larger board than {board_ref} ({spec.cols}x{spec.rows} inner corners): {_a(c, r)} "
         f"chessboard is found in {_names(names)}. The detector locks onto {_a(spec.cols, spec.rows)} part of it, "

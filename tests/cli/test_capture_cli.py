@@ -10,6 +10,7 @@ import re
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from rich.console import Console
@@ -25,7 +26,7 @@ from calibctl.core.synth import PinholeCamera, true_corners_px
 from calibctl.core.synth_scenes import place_board, tilt_rotation
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
-from tests.datasets import LEFT_RIGHT, UDACITY, needs_datasets, require_datasets
+from tests.datasets import BAKA_STEREO, LEFT_RIGHT, UDACITY, needs_datasets, require_datasets
 from tests.workflows.synth_folders import rendered
 
 SERIAL = "CAM-0007"
@@ -127,6 +128,35 @@ def test_a_board_registered_one_column_short_is_refused(db: str, left: Path) -> 
     assert result.exit_code == 2, result.output
     assert "the pictures show a larger board than B8x6@1 (8x6 inner corners): a 9x6 chessboard" in result.stderr
     assert "calibctl board show B8x6" in result.stderr and "registered as 9x6" in result.stderr
+    assert sessions(db) == []
+
+
+@needs_datasets
+def test_a_board_registered_far_too_small_is_refused_even_when_it_is_found_only_once(db: str, tmp_path: Path) -> None:
+    # baka-stereo is a 7x10 board. Registered as 9x6 (A17), OpenCV 5.0 finds a 9x6 part of it in one left
+    # image (marked blurred) and nothing in the rest: one view cannot be probed for a larger board, so this
+    # capture was stored as rejected with tilt and coverage hints. Now the images without the pattern are
+    # probed and show the 10x7 board. (OpenCV 4.10 finds no 9x6 part: "no 9x6 chessboard", also naming 10x7.)
+    names = ["left_001772846904048.jpg", "left_001772846782141.jpg", "left_001772847170203.jpg",
+             "left_001772859893197.jpg"]
+    listing = tmp_path / "baka-left.txt"
+    listing.write_text("".join(f"{BAKA_STEREO / 'left' / name}\n" for name in names))
+    result = capture(db, listing)
+    assert result.exit_code == 2, result.output
+    assert "a 10x7 chessboard" in result.stderr and "9x6" in result.stderr
+    assert "registered as 10x7" in result.stderr and sessions(db) == []
+
+
+@needs_datasets
+def test_a_board_registered_larger_than_the_pictures_names_the_board_they_show(db: str, left: Path) -> None:
+    # 12x9 is three corners off the 9x6 board on both sides: none of the near patterns (one off); SB, grown
+    # from a seed grid, sees the 9x6 board and the classic detector confirms it
+    with Store.open(db) as store:
+        store.add_board(measured_board("C12x9", square_mm=25.0).model_copy(update={"cols": 12, "rows": 9}))
+    result = capture(db, left, board="C12x9")
+    assert result.exit_code == 2, result.output
+    assert "no 12x9 chessboard (board C12x9@1) was found in any of the 13 readable images" in result.stderr
+    assert "a 9x6 chessboard is visible in" in result.stderr and "registered as 9x6" in result.stderr
     assert sessions(db) == []
 
 
@@ -334,7 +364,8 @@ def test_pattern_that_matches_nothing_names_what_is_visible(db: str, left: Path,
     assert sessions(db) == []
 
 
-def test_pattern_with_nothing_near_it_says_so(db: str, tmp_path: Path, good: Path) -> None:
+def test_pattern_far_from_the_pictures_names_the_board_they_show(db: str, tmp_path: Path, good: Path) -> None:
+    # 16x12 is nowhere near the rendered 9x6 board (no near pattern is visible); SB grown from a seed grid is
     with Store.open(db) as store:
         store.add_board(measured_board("B16x12").model_copy(update={"cols": 16, "rows": 12}))
     one = tmp_path / "one"
@@ -342,8 +373,18 @@ def test_pattern_with_nothing_near_it_says_so(db: str, tmp_path: Path, good: Pat
     shutil.copy(good / "view-000.png", one / "view-000.png")
     result = capture(db, one, board="B16x12")
     assert result.exit_code == 2, result.output
-    assert "no 16x12 chessboard" in result.stderr and "the near patterns 12x16, 17x12" in result.stderr
-    assert "are not visible either (probed 1 of them)" in result.stderr
+    assert "no 16x12 chessboard" in result.stderr and "a 9x6 chessboard is visible in view-000.png" in result.stderr
+    assert "registered as 9x6" in result.stderr
+
+
+def test_pattern_with_no_board_in_the_pictures_says_so(db: str, tmp_path: Path) -> None:
+    blank = tmp_path / "blank"
+    blank.mkdir()
+    cv2.imwrite(str(blank / "wall.png"), np.full((480, 640), 128, np.uint8))
+    result = capture(db, blank)
+    assert result.exit_code == 2, result.output
+    assert "no 9x6 chessboard" in result.stderr and "the near patterns 6x9, 10x6" in result.stderr
+    assert "are not visible either (probed 1 of them)" in result.stderr and sessions(db) == []
 
 
 @pytest.mark.parametrize(("args", "message"), [

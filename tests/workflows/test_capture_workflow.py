@@ -22,6 +22,7 @@ from calibctl.workflows import capture_sources as sources
 from calibctl.workflows import pattern_check
 from calibctl.workflows.capture import CaptureRequest, capture, parse_now
 from tests.artifacts.factories import measured_board
+from tests.datasets import BAKA_STEREO, needs_datasets
 from tests.workflows.synth_folders import rendered
 
 SERIAL = "CAM-0042"
@@ -256,6 +257,21 @@ def test_larger_board_probe_is_skipped_only_when_every_probed_view_shows_its_mar
     short = {name: c.reshape(6, 9, 2)[:, 1:].reshape(-1, 2) for name, c in corners.items()}  # an 8x6 part
     error = pattern_check.larger_board_error(BoardSpec.chessboard(8, 6, 0.025), "A8@1", "A8", samples, short)
     assert error is not None and "a 9x6 chessboard is found in" in error.message
+
+
+@needs_datasets
+def test_larger_board_check_names_the_whole_board_sb_sees() -> None:
+    # baka-stereo's 7x10 board registered as 9x6: in these three left images the classic detector finds
+    # neither 10x6 nor 9x7 in two of them (one more column or row), so the +1 probes alone miss it; SB grown
+    # from a seed grid sees 10x7 and the classic detector confirms it
+    names = ["left_001772846782141.jpg", "left_001772847170203.jpg", "left_001772859893197.jpg"]
+    samples = [(name, cv2.imread(str(BAKA_STEREO / "left" / name), cv2.IMREAD_GRAYSCALE)) for name in names]
+    error = pattern_check.larger_board_error(BoardSpec.chessboard(9, 6, 0.025), "A9@1", "A9", samples)
+    assert error is not None and "a 10x7 chessboard is found in" in error.message
+    assert error.hint is not None and error.hint.endswith("registered as 10x7")
+    transposed = pattern_check.larger_board_error(BoardSpec.chessboard(6, 9, 0.025), "A6@1", "A6", samples)
+    assert transposed is not None and "a 7x10 chessboard is found in" in transposed.message
+    assert pattern_check.larger_board_error(BoardSpec.chessboard(10, 7, 0.025), "A10@1", "A10", samples) is None
 
 
 def test_parse_now() -> None:
