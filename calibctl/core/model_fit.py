@@ -32,6 +32,11 @@ MISFIT_MIN_PX = 0.3
 # Residuals that grow with radius: outer-quintile fit RMS over inner-quintile fit RMS. Measured 1.1-1.3 on
 # the real sets and ~1.0 on pinhole renders (k1k2), 1.5-1.7 for k1k2 on fisheye renders.
 RADIAL_GROWTH_RATIO = 2.0
+# The models that solve fx and fy apart (core.solve MODELS); every other one ties fx to fy
+# (CALIB_FIX_ASPECT_RATIO) and cannot fit non-square pixels either. Real 960x540 frames of a phone video
+# (ynager/visual_odometry_pipeline, calibration_images/iphone6-*.png): fx/fy = 1.06 with the aspect free
+# (RMS 0.26 px), k1k2 left 1.27 px (10.1x the detector) with cx 134 px, and the hint named only fisheye.
+FREE_ASPECT_MODELS = ("fisheye", "opencv-default")
 
 
 def _grid_index(values: np.ndarray) -> np.ndarray:
@@ -78,6 +83,9 @@ def check_model_misfit(fit_rms_px: float, detector_px: float | None, model: str,
     """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius."""
     fix = ("solve with --model fisheye (a wide or fisheye lens), or --model auto" if model != "fisheye" else
            "the fisheye model does not explain these corners either: check the board geometry and corner order")
+    if model not in FREE_ASPECT_MODELS:
+        fix += (f"; if the pixels are not square (frames resized in one axis, binning), {model} ties fx to fy "
+                "and cannot fit them: --model opencv-default solves fx and fy apart")
     if detector_px is None:
         return Finding("model-misfit", ERROR, True, "no detector noise recorded: model adequacy not checked")
     if misfit(fit_rms_px, detector_px):

@@ -87,6 +87,29 @@ def test_a_dark_picture_a_lit_frame_and_a_dark_vignette_are_not_circles() -> Non
     assert detect_image_circle(vignette, SIZE) is None
 
 
+def test_a_circle_is_found_when_dark_things_inside_it_reach_its_rim() -> None:
+    """The lens housing or a dark scene inside the circle bounds the lit region along part of the rim (a
+    real 960x600 circular fisheye had no circle for it and was asked to cover its black corners); the
+    rim that is left still gives the circle, and a rectangle with a dark notch is still no circle."""
+    h, w = 240, 320
+    v, u = np.mgrid[0:h, 0:w]
+    cx, cy, r = 161.0, 118.0, 110.0
+    picture = np.where(np.hypot(u - cx, v - cy) <= r, 200, 6).astype(np.uint8)
+    d = np.hypot(u - cx, v - cy)
+    picture[(v > cy + 0.3 * r) & (d > 0.6 * r) & (d < r - 4)] = 6  # the housing: dark inside a lit crescent
+    picture[np.hypot(u - (cx - r), v - cy) < 30] = 6  # a dark object that reaches the rim at the left
+    circle = detect_image_circle(picture, (2 * w, 2 * h))
+    assert circle is not None
+    # full-resolution pixels: the picture is at half size
+    assert abs(circle.cx_px - (2 * cx + 0.5)) < 2 * CENTRE_TOLERANCE_PX
+    assert abs(circle.cy_px - (2 * cy + 0.5)) < 2 * CENTRE_TOLERANCE_PX
+    assert abs(circle.radius_px - 2 * r) < 2 * CENTRE_TOLERANCE_PX
+    notched = np.full((h, w), 6, np.uint8)
+    notched[20:-20, 20:-20] = 180
+    notched[100:140, 20:120] = 6  # concave, but what is left of its boundary is straight, not a circle
+    assert detect_image_circle(notched, SIZE) is None
+
+
 def test_only_cells_mostly_inside_the_circle_are_asked_for() -> None:
     circle = ImageCircle(322.8, 237.4, 236.0, "given")
     assert cells_inside(circle, SIZE, 3) == {(r, c) for r in range(3) for c in range(3)} - CORNER_CELLS

@@ -45,6 +45,18 @@ def test_k1k2_on_a_fisheye_fails_and_names_the_fisheye_model_which_passes(fov_de
     assert _verdict(obj, img, (1280, 960), "fisheye").passed
 
 
+def test_non_square_pixels_fail_k1k2_and_the_hint_names_the_model_that_frees_fx_from_fy():
+    """Frames resized in one axis (fx/fy = 1.06, as measured on real phone-video frames): k1k2 ties fx to
+    fy and cannot fit them; the hint names opencv-default, which passes; fisheye's hint does not."""
+    K = np.array([[848.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
+    s = synthesize_session(K, np.array([-0.2814, 0.0977, 0, 0, 0]), (640, 480), 18, seed=1, noise_px=NOISE_PX)
+    obj, img = list(s.object_points_per_view), list(s.image_points_per_view)
+    bad = _verdict(obj, img, (640, 480), "k1k2")
+    assert not bad.passed and "--model opencv-default" in bad.fix and "ties fx to fy" in bad.fix
+    assert _verdict(obj, img, (640, 480), "opencv-default").passed
+    assert "opencv-default" not in check_model_misfit(2.0, 0.1, "fisheye").fix
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_good_pinhole_renders_pass(seed):
     K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
