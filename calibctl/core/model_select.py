@@ -2,11 +2,17 @@
 
 Ladder: k1k2 -> k1k2k3 -> k1k2p1p2k3 -> rational; each rung adds coefficients to the one before.
 Then the other lens family, fisheye (equidistant k1..k4), is compared with the ladder's *start* (k1k2)
-by the same rule, and taken when it passes it and is also no worse than the ladder's choice (fit RMS and
-held-out outer-ring RMS both not higher). Comparing it only with the ladder's end let a rational model
-that half-fits a wide lens (accepted on its own 10 % over k1k2) shut fisheye out: on a 170 deg render
-fisheye then gained < 10 % over rational although it is the lens's model. On a pinhole lens fisheye
-does not gain 10 % over k1k2 and the ladder's model stays.
+by the same rule, and taken when it passes it and also predicts the held-out outer ring no worse than
+the ladder's choice. Comparing it only with the ladder's end let a rational model that half-fits a wide
+lens (accepted on its own 10 % over k1k2) shut fisheye out: on a 170 deg render fisheye then gained
+< 10 % over rational although it is the lens's model. Fit RMS is not compared across the families: the
+models are not nested and rational has twice fisheye's coefficients, so on a fisheye lens it fits the
+corners it was solved on as well as fisheye does (never more than 0.0006 px better, 40 rendered 120-180
+deg sessions of 15 views, full-frame and circular, seeds 0-5) while it predicts the held-out outer ring
+worse (up to 1.67 against 0.29 px). A "fit RMS not higher" condition chose rational on 24 of those 40
+sessions and on a real 640x640 full-frame fisheye (fit 0.27573 against 0.27577 px, held-out outer ring
+1.04 against 0.68 px); held-out alone chooses fisheye on 38 of 40 (the other two: rational predicted as
+well or better). On a pinhole lens fisheye does not gain 10 % over k1k2 and the ladder's model stays.
 Each rung is compared with the currently accepted model and accepted only if BOTH
     fit RMS improves by at least MIN_FIT_IMPROVEMENT (10 %), and
     held-out outer-ring RMS (calibctl.core.validation) does not increase at all.
@@ -111,13 +117,13 @@ def select_model(
             continue
         accepted, gain, reason = _rule(base_fit, base_hold, fit, hold)
         if family_change and accepted and best != start:
-            # it beat the ladder's start; it must also be no worse than the ladder's choice
-            worse_fit = fit.rms_px > best_fit.rms_px
-            worse_hold = hold.holdout_outer_rms_px > best_hold.holdout_outer_rms_px
-            accepted = not (worse_fit or worse_hold)
-            reason += (f"; against {best} (the ladder's choice): fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} "
-                       f"px, held-out outer-ring RMS {best_hold.holdout_outer_rms_px:.4f} -> "
-                       f"{hold.holdout_outer_rms_px:.4f} px ({'not worse' if accepted else 'worse'})")
+            # it beat the ladder's start; it must also predict no worse than the ladder's choice (held-out:
+            # fit RMS across lens families rewards the one with more coefficients, module docstring)
+            accepted = hold.holdout_outer_rms_px <= best_hold.holdout_outer_rms_px
+            reason += (f"; against {best} (the ladder's choice): held-out outer-ring RMS "
+                       f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px "
+                       f"({'not worse' if accepted else 'worse'}; fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px "
+                       f"is not compared across lens families)")
         trail.append(ModelCandidate(name, base, fit.rms_px, hold.fit_outer_rms_px,
                                     hold.holdout_outer_rms_px, gain, accepted, reason))
         if accepted:

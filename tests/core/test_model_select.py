@@ -34,9 +34,9 @@ def _check_trail_consistency(selection):
             prev = next(p for p in selection.trail if p.model == base)
             rule = (c.fit_improvement_frac >= MIN_FIT_IMPROVEMENT
                     and c.holdout_outer_rms_px <= prev.holdout_outer_rms_px)
-            if c.model in ALTERNATIVES and current != base:  # ... and must be no worse than the ladder's choice
+            if c.model in ALTERNATIVES and current != base:  # ... and predict no worse than the ladder's choice
                 chosen = next(p for p in selection.trail if p.model == current)
-                rule = rule and c.fit_rms_px <= chosen.fit_rms_px and c.holdout_outer_rms_px <= chosen.holdout_outer_rms_px
+                rule = rule and c.holdout_outer_rms_px <= chosen.holdout_outer_rms_px
             assert c.accepted == rule
         if c.accepted:
             current = c.model
@@ -93,6 +93,22 @@ def test_auto_switches_to_fisheye_for_a_wide_lens():
     sel = select_model(s.object_points_per_view, s.image_points_per_view, size)
     assert sel.chosen == "fisheye"
     assert sel.trail[-1].model == "fisheye" and sel.trail[-1].accepted and sel.trail[-1].compared_to == "k1k2"
+    _check_trail_consistency(sel)
+
+
+def test_fisheye_beats_a_rational_model_that_fits_as_well_but_predicts_worse():
+    # 180 deg full-frame fisheye, seed 4 (measured): rational is the ladder's choice and fits the corners it
+    # was solved on as well as fisheye (0.2714 against 0.2715 px), but predicts the held-out outer ring at
+    # 0.61 px against fisheye's 0.27. A fit-RMS comparison across the two lens families chose rational.
+    from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session
+
+    size = (640, 640)
+    s = synthesize_fisheye_session(FisheyeCamera.from_fov(size, 180.0, circular=False), 15, seed=4)
+    sel = select_model(s.object_points_per_view, s.image_points_per_view, size)
+    trail = {c.model: c for c in sel.trail}
+    assert trail["rational"].accepted and sel.chosen == "fisheye"
+    assert trail["fisheye"].holdout_outer_rms_px < 0.5 * trail["rational"].holdout_outer_rms_px
+    assert "is not compared across lens families" in trail["fisheye"].reason
     _check_trail_consistency(sel)
 
 
