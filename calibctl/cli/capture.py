@@ -161,7 +161,9 @@ def capture(
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
     rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
-                                            "capture`).", show_default=False)] = None,
+                                            "capture`); the options of one camera (--serial, --image-circle, "
+                                            "--reference-*, --max-views, --duration) are refused.",
+                                            show_default=False)] = None,
     image_circle: ImageCircleOption = None,
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
@@ -185,10 +187,14 @@ def capture(
     if rig is not None:
         from calibctl.cli.rig import capture as capture_rig
 
-        if image_circle is not None:
-            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
-                             "capture the fisheye camera on its own with --serial")
-        capture_rig(ctx, rig, source, board, json_output=json_output)
+        one_camera = {"--serial": serial, "--image-circle": image_circle, "--reference-distance": reference_distance,
+                      "--reference-source": reference_source, "--max-views": max_views, "--duration": duration}
+        given = [flag for flag, value in one_camera.items() if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one camera, not to a "
+                             "rig (--rig)", "capture that camera on its own with --serial (its image circle, its "
+                             "distance gauge, a video or camera source)")
+        capture_rig(ctx, rig, source, board, station=station, operator=operator, json_output=json_output)
         return
     if serial is None:
         raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")

@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
+from calibctl.cli.capture import OperatorOption, StationOption
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
@@ -144,13 +145,16 @@ def capture(
                                               "last number in their names.")],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    station: StationOption = None,
+    operator: OperatorOption = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
     from calibctl.workflows import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
-    result = rigs.capture_rig(state(ctx).settings(), name, sources, board, min_shared_views)
+    result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator), name, sources, board,
+                              min_shared_views)
     s = result.session
     if wants_json(ctx, json_output):
         emit_json({"rig_session": s.model_dump(mode="json"),
