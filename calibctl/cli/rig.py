@@ -61,8 +61,10 @@ def render_run(doc: dict[str, Any]) -> None:
 @rig_app.command("solve-folders")
 def solve_folders(
     ctx: typer.Context,
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER, one per camera; the first is the root "
-                                              "unless --root. Photos pair up by the last number in their names.")],
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
+                                              "glob ('left*.jpg') or a list file as for capture; the first is the "
+                                              "root unless --root. Photos pair up by the last number in their "
+                                              "names.")],
     cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
     rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
     square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")],
@@ -141,8 +143,9 @@ def add(
 def capture(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER per member; images pair up by the "
-                                              "last number in their names.")],
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC per member, SRC a folder, a quoted glob "
+                                              "('left*.jpg') or a list file; images pair up by the last number in "
+                                              "their names.")],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
     station: StationOption = None,

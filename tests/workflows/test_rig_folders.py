@@ -5,6 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -47,6 +48,18 @@ def test_unmatched_photos_are_outcomes_not_errors(rig2, tmp_path):
     assert len(run.match.frames) == 7
 
 
+def test_an_odd_size_is_wrong_size_in_a_folder_and_refused_in_a_glob_as_at_capture(rig2, tmp_path):
+    right = tmp_path / "R"
+    shutil.copytree(rig2 / "CAM1", right)
+    odd = right / "CAM1_0003.png"
+    cv2.imwrite(str(odd), cv2.resize(cv2.imread(str(odd)), (320, 240)))
+    run = solve_rig_folders({"L": rig2 / "CAM0", "R": right}, BOARD, min_shared_views=5)
+    assert {o.status for o in run.outcomes["R"] if o.path == str(odd)} == {"wrong_size"}
+    with pytest.raises(InputError, match=r"camera R: --source .*\*\.png mixes image sizes \(640x480: .*; "
+                                         r"320x240: CAM1_0003.png\)"):
+        solve_rig_folders({"L": rig2 / "CAM0", "R": right / "*.png"}, BOARD, min_shared_views=5)
+
+
 def test_the_rig_gate_names_the_pair_short_of_views(rig2):
     run = solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, min_shared_views=20)
     assert not run.gate.passed and run.solution is None
@@ -80,8 +93,9 @@ def test_bad_sources_are_usage_errors(items, message):
 
 
 def test_a_missing_or_empty_folder_is_named(rig2, tmp_path):
-    with pytest.raises(InputError, match="camera B: .* is not a folder"):
+    with pytest.raises(InputError, match="camera B: --source .*nope does not exist") as missing:
         solve_rig_folders({"A": rig2 / "CAM0", "B": tmp_path / "nope"}, BOARD)
+    assert missing.value.hint == "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
     with pytest.raises(InputError, match="camera B: no images in"):
         solve_rig_folders({"A": rig2 / "CAM0", "B": tmp_path}, BOARD)
 
