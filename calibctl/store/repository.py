@@ -269,7 +269,8 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
             version = counters.next_value(s, "artifact", artifact.serial)
             if expect_version is not None and version != expect_version:
                 raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
-                                 f"of {artifact.serial} is {version}", "store it as the next version instead")
+                                 f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
+                                 "written", "run the command again")
             stored = artifact.model_copy(update={"version": version}).sealed()
             s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
             s.flush()

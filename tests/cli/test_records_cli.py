@@ -240,6 +240,41 @@ def test_solve_report_onto_a_file_exits_2_before_solving(run, tmp_path):
     assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
 
 
+def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path):
+    """It used to store (and activate) the new version first, then fail writing its page."""
+    page = tmp_path / f"{SERIAL}-v1-report.html"
+    page.write_text("an older store's page", encoding="utf-8")
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path))
+    assert result.exit_code == 2, result.output
+    assert f"{page} already exists" in " ".join(result.stderr.split())
+    assert "nothing was stored" in result.stderr
+    assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+    assert page.read_text(encoding="utf-8") == "an older store's page"
+
+
+def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(run, db, tmp_path, monkeypatch):
+    """The page checked is the one of the version about to be stored: a version stored meanwhile (another
+    station) makes the store refuse, rather than store a version whose page was never checked."""
+    from calibctl.workflows import solve as solve_workflow
+
+    build = solve_workflow.build_artifact
+
+    def with_an_interloper(session, request, settings):
+        art, outliers = build(session, request, settings)
+        with Store.open(db) as store:
+            store.add_artifact(art, activate=False, actor="other", station="other", reason="meanwhile")
+        return art, outliers
+
+    monkeypatch.setattr(solve_workflow, "build_artifact", with_an_interloper)
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path / "reports"))
+    assert result.exit_code == 2, result.output
+    assert f"{SERIAL}@1 cannot be stored: this store's next version of {SERIAL} is 2" in " ".join(result.stderr.split())
+    with Store.open(db) as store:
+        assert [a.version for a in store.list_artifacts(SERIAL)] == [1]  # the other one's, never activated:
+        assert store.active_version(SERIAL) is None  # the solve, which would have activated its own, stored nothing
+    assert list((tmp_path / "reports").iterdir()) == []
+
+
 def test_solve_report_with_rig_exits_2(run, tmp_path):
     result = run("solve", "--rig", "RIG-1", "--report", str(tmp_path))
     assert result.exit_code == 2 and "--report is not available with --rig" in result.stderr
