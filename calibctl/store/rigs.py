@@ -206,8 +206,13 @@ class RigStoreMixin:
             statuses = _statuses(s, rig)
             wanted = _active(s, rig) if version is None else version
             if wanted is None:
-                raise NotFoundError(f"rig {rig} has no active version; versions: {known_list(list(statuses))}",
-                                    f"ask for a version ({rig}@N) or roll back to an accepted one")
+                listing = known_list([f"{v} ({st})" for v, st in statuses.items()])
+                raise NotFoundError(
+                    f"rig {rig} has no active version; versions: {listing}",
+                    f"ask for a version ({rig}@N) or roll back to an accepted one"
+                    if "accepted" in statuses.values() else
+                    f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
+                    f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it")
             if wanted not in statuses:
                 raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {known_list(list(statuses))}",
                                     f"see `calibctl rig history {rig}`")
