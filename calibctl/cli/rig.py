@@ -297,10 +297,17 @@ def rollback(
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted rig version active again (appends an event). A newer version stored or
-    activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
+    activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it. A version
+    that is active already is a success that writes nothing."""
     from calibctl.workflows import rig_lint
 
     event = rig_lint.rollback(state(ctx).settings(), name, to, reason, expected_active=expect_active)
+    if event is None:
+        if wants_json(ctx, json_output):
+            emit_json({"rig": name, "version": to, "already_active": True})
+        else:
+            say(f"rig {name}: version {to} is already the active version; nothing written")
+        return
     if wants_json(ctx, json_output):
         emit_json(event)
         return

@@ -235,8 +235,9 @@ class RigStoreMixin:
         return self._run(lambda s: _active(s, rig))
 
     def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str,
-                     expected_active: int | None | object = UNCHECKED) -> RigActivation:
-        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event.
+                     expected_active: int | None | object = UNCHECKED) -> RigActivation | None:
+        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event (None when
+        it is the active version already: done, nothing written).
 
         Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
         caller decided on (None: nothing was active); when another writer moved it since (a solve, a
@@ -244,12 +245,14 @@ class RigStoreMixin:
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
-        def work(s: Session) -> RigActivation:
+        def work(s: Session) -> RigActivation | None:
             counters.lock(s, "rig", rig)
-            check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
-                           f"calibctl rig history {rig}")
+            already = check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
+                                     f"calibctl rig history {rig}")
             decode_calibration(s.scalars(select(RigCalibrationRow).where(
                 RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
+            if already:
+                return None
             return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)

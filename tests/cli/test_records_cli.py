@@ -89,6 +89,21 @@ def test_rollback_moves_active_version_and_is_logged(run):
     assert last["reason"] == "v2 drifted after the bracket swap"
 
 
+def test_rollback_to_the_active_version_is_a_success_that_writes_nothing(run):
+    _two_versions(run)
+    for extra in ((), ("--expect-active", "2")):
+        result = run("rollback", SERIAL, "--to", "2", "--reason", "make sure", *extra)
+        assert result.exit_code == 0, result.output
+        assert f"{SERIAL}: v2 is already the active version; nothing written" in result.stdout
+    done = run("rollback", SERIAL, "--to", "2", "--reason", "make sure", "--json")
+    assert done.exit_code == 0 and json.loads(done.stdout) == {"serial": SERIAL, "version": 2, "already_active": True}
+    hist = json.loads(run("history", SERIAL, "--json").stdout)
+    assert hist["active_version"] == 2 and [e["kind"] for e in hist["events"]] == ["activate", "activate"]
+    # compare-and-set first: a view of v1 is stale even when the target is what is active now
+    stale = run("rollback", SERIAL, "--to", "2", "--reason", "r", "--expect-active", "1")
+    assert stale.exit_code == 2 and "the active version changed underneath this rollback" in stale.stderr
+
+
 def test_rollback_to_unknown_version_exits_2_listing_versions(run):
     _two_versions(run)
     result = run("rollback", SERIAL, "--to", "9", "--reason", "x")
