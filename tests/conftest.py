@@ -37,11 +37,12 @@ def _isolated_calibctl_env(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.fixture(autouse=True)
 def _no_remembered_checks() -> None:
-    """core.camera_split remembers its last answers by the inputs' values; a test that patches its
-    constants or solver must not be handed an answer another test computed."""
-    split = sys.modules.get("calibctl.core.camera_split")
-    if split is not None:
-        split._RECENT.clear()  # type: ignore[attr-defined]
+    """core.camera_split and core.model_select remember their last answers by the inputs' values; a test
+    that patches their constants or solver must not be handed an answer another test computed."""
+    for name in ("calibctl.core.camera_split", "calibctl.core.model_select"):
+        module = sys.modules.get(name)
+        if module is not None:
+            module._RECENT.clear()  # type: ignore[attr-defined]
 
 
 @pytest.fixture

@@ -135,11 +135,18 @@ def rollback(
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted version active again (an append-only event; nothing is deleted). A newer
-    version activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
+    version activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it.
+    A version that is active already is a success that writes nothing."""
     from calibctl.cli.render import emit_json, stdout
     from calibctl.workflows import records
 
     event = records.rollback(state(ctx).settings(), serial, to, reason, expected_active=expect_active)
+    if event is None:
+        if wants_json(ctx, json_output):
+            emit_json({"serial": serial, "version": to, "already_active": True})
+        else:
+            stdout.print(f"{serial}: v{to} is already the active version; nothing written", markup=False)
+        return
     if wants_json(ctx, json_output):
         emit_json(event)
         return

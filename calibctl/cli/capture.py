@@ -101,8 +101,9 @@ def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
     return table
 
 
-def print_capture(result: capture_workflow.CaptureResult) -> None:
-    """The per-image outcome table, the gate table with hints, and the session id."""
+def print_capture(result: capture_workflow.CaptureResult, model: str | None = None) -> None:
+    """The per-image outcome table, the gate table with hints, and the session id; ``model``: the --model
+    given (the gauge line says which lens it judged through, and that auto chose it)."""
     session = result.session
     stdout.print(_outcome_table(result))
     counts = Counter(o.status for o in session.outcomes)
@@ -117,6 +118,9 @@ def print_capture(result: capture_workflow.CaptureResult) -> None:
     stdout.print(f"{result.images_stored} image(s) kept in {result.image_dir}")
     if result.distance is not None:
         print_distance(result.distance)
+        if result.gauge_lens is not None:
+            chosen = ", the model --model auto chooses for this session" if model == "auto" else ""
+            stdout.print(f"  gauged through {result.gauge_lens}{chosen}", markup=False, highlight=False)
     if session.status != "accepted":
         reasons = ", ".join(g.reason for g in session.gates if g.reason)
         stdout.print(f"[red]rejected[/red] ({reasons}); stored for the record. Follow the hints and capture again.")
@@ -138,14 +142,16 @@ def print_distance(d: DistanceCheck) -> None:
 ReferenceDistanceOption = Annotated[str | None, typer.Option(
     "--reference-distance", metavar="D+-S", show_default=False,
     help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm suffix), "
-         "e.g. 0.450+-0.0005; needs --reference-source.")]
+         "e.g. 0.450+-0.0005; needs --reference-source. Judged through the lens --model solves with (auto: the "
+         "model auto chooses for the session; k1k2 without --model).")]
 ReferenceSourceOption = Annotated[str | None, typer.Option(
     "--reference-source", show_default=False,
     help="Folder, glob or list of pictures taken with the board in that fixture.")]
 GaugeModelOption = Annotated[str | None, typer.Option(
     "--model", show_default=False,
     help="With --reference-distance: the lens model the gauge solves the session with, the one `solve --model` "
-         "will use (as there; default k1k2, and auto gauges with k1k2). A fisheye needs fisheye.")]
+         "will use (as there; default k1k2; auto gauges through the model auto chooses for the session). A "
+         "fisheye needs fisheye or auto.")]
 
 
 def capture(
@@ -161,7 +167,9 @@ def capture(
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
     rig: Annotated[str | None, typer.Option("--rig", help="Capture a registered rig instead (same as `calibctl rig "
-                                            "capture`).", show_default=False)] = None,
+                                            "capture`); the options of one camera (--serial, --image-circle, "
+                                            "--reference-*, --max-views, --duration) are refused.",
+                                            show_default=False)] = None,
     image_circle: ImageCircleOption = None,
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
@@ -185,10 +193,14 @@ def capture(
     if rig is not None:
         from calibctl.cli.rig import capture as capture_rig
 
-        if image_circle is not None:
-            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
-                             "capture the fisheye camera on its own with --serial")
-        capture_rig(ctx, rig, source, board, json_output=json_output)
+        one_camera = {"--serial": serial, "--image-circle": image_circle, "--reference-distance": reference_distance,
+                      "--reference-source": reference_source, "--max-views": max_views, "--duration": duration}
+        given = [flag for flag, value in one_camera.items() if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one camera, not to a "
+                             "rig (--rig)", "capture that camera on its own with --serial (its image circle, its "
+                             "distance gauge, a video or camera source)")
+        capture_rig(ctx, rig, source, board, station=station, operator=operator, json_output=json_output)
         return
     if serial is None:
         raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")
@@ -205,7 +217,7 @@ def capture(
     if as_json:
         emit_json(result.as_json())
     else:
-        print_capture(result)
+        print_capture(result, model)
     if not result.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
@@ -251,7 +263,7 @@ def calibrate(
         if solved is None or solved.artifact.status != "accepted":
             raise typer.Exit(EXIT_VERDICT_FAIL)
         return
-    print_capture(result.capture)
+    print_capture(result.capture, model)
     if solved is None:
         failed = "the distance gauge" if result.capture.session.status == "accepted" else "the capture gates"
         stdout.print(f"[red]not solved[/red]: {failed} failed")

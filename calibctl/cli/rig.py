@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
+from calibctl.cli.capture import OperatorOption, StationOption
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
@@ -60,8 +61,10 @@ def render_run(doc: dict[str, Any]) -> None:
 @rig_app.command("solve-folders")
 def solve_folders(
     ctx: typer.Context,
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER, one per camera; the first is the root "
-                                              "unless --root. Photos pair up by the last number in their names.")],
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
+                                              "glob ('left*.jpg') or a list file as for capture; the first is the "
+                                              "root unless --root. Photos pair up by the last number in their "
+                                              "names.")],
     cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
     rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
     square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")],
@@ -140,17 +143,21 @@ def add(
 def capture(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=FOLDER per member; images pair up by the "
-                                              "last number in their names.")],
+    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC per member, SRC a folder, a quoted glob "
+                                              "('left*.jpg') or a list file; images pair up by the last number in "
+                                              "their names.")],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    station: StationOption = None,
+    operator: OperatorOption = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
     from calibctl.workflows import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
-    result = rigs.capture_rig(state(ctx).settings(), name, sources, board, min_shared_views)
+    result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator), name, sources, board,
+                              min_shared_views)
     s = result.session
     if wants_json(ctx, json_output):
         emit_json({"rig_session": s.model_dump(mode="json"),
@@ -290,10 +297,17 @@ def rollback(
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted rig version active again (appends an event). A newer version stored or
-    activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it."""
+    activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it. A version
+    that is active already is a success that writes nothing."""
     from calibctl.workflows import rig_lint
 
     event = rig_lint.rollback(state(ctx).settings(), name, to, reason, expected_active=expect_active)
+    if event is None:
+        if wants_json(ctx, json_output):
+            emit_json({"rig": name, "version": to, "already_active": True})
+        else:
+            say(f"rig {name}: version {to} is already the active version; nothing written")
+        return
     if wants_json(ctx, json_output):
         emit_json(event)
         return

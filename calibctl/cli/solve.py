@@ -64,7 +64,9 @@ def solve(
     refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="With --rig: refine the members' "
                                                     "intrinsics jointly.")] = False,
     report_dir: Annotated[Path | None, typer.Option("--report", metavar="DIR", help="Also write the HTML report "
-                                                    "(SERIAL-vN-report.html) of the new version into DIR.",
+                                                    "(SERIAL-vN-report.html) of the new version into DIR; a "
+                                                    "page of that name already there is refused before "
+                                                    "anything is stored.",
                                                     show_default=False)] = None,
     image_circle: Annotated[str | None, typer.Option(
         "--image-circle", metavar="CX,CY,R", show_default=False,

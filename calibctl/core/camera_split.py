@@ -30,9 +30,6 @@ camera differing only by a principal-point shift of 20 px is largely absorbed by
 
 from __future__ import annotations
 
-import hashlib
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -42,6 +39,7 @@ import numpy as np
 
 from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.gates import GateResult
+from calibctl.core.recent_answers import RecentAnswers, values_digest
 from calibctl.core.solve import (
     IntrinsicsSolution,
     get_model,
@@ -140,21 +138,8 @@ def min_views_to_split(model: str = CAPTURE_MODEL) -> int:
     return 2 * max(MIN_GROUP_VIEWS, get_model(model).min_views + 1)
 
 
-def _inputs_key(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int], model: str,
-                threshold: float) -> bytes:
-    """A digest of everything check_one_camera's answer depends on (the values, not the array objects)."""
-    digest = hashlib.blake2b(repr((tuple(int(s) for s in image_size), model, float(threshold), len(obj))).encode(),
-                             digest_size=32)
-    for o, i in zip(obj, img, strict=True):
-        for a in (np.ascontiguousarray(o, np.float64), np.ascontiguousarray(i, np.float64)):
-            digest.update(repr(a.shape).encode())
-            digest.update(a.tobytes())
-    return digest.digest()
-
-
-_RECENT: OrderedDict[bytes, CameraSplit | None] = OrderedDict()
-_RECENT_LOCK = threading.Lock()
 RECENT_CHECKS = 4
+_RECENT: RecentAnswers[CameraSplit | None] = RecentAnswers(RECENT_CHECKS)
 
 
 def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
@@ -164,21 +149,14 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     split into two groups that can each be solved and validated.
 
     Shapes as in solve_intrinsics. The answer is a function of the values alone, so the last
-    RECENT_CHECKS answers are remembered by a digest of the inputs: ``calibrate`` asks twice (the capture
-    gate, then the solve) and, when the solve keeps every corner under the gate's model, the second
-    question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
+    RECENT_CHECKS answers are remembered by a digest of the inputs (core.recent_answers): ``calibrate``
+    asks twice (the capture gate, then the solve) and, when the solve keeps every corner under the gate's
+    model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
     """
-    key = _inputs_key(object_points_per_view, image_points_per_view, image_size, model, threshold)
-    with _RECENT_LOCK:
-        if key in _RECENT:
-            _RECENT.move_to_end(key)
-            return _RECENT[key]
-    split = _check_one_camera(object_points_per_view, image_points_per_view, image_size, model, threshold)
-    with _RECENT_LOCK:
-        _RECENT[key] = split
-        while len(_RECENT) > RECENT_CHECKS:
-            _RECENT.popitem(last=False)
-    return split
+    key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size), model,
+                        float(threshold))
+    return _RECENT.answer(key, lambda: _check_one_camera(object_points_per_view, image_points_per_view, image_size,
+                                                         model, threshold))
 
 
 def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.recent_answers import RecentAnswers, values_digest
 from calibctl.core.solve import IntrinsicsSolution, solve_intrinsics
 from calibctl.core.validation import HoldoutReport, validate_holdout
 from calibctl.errors import NumericalError
@@ -87,6 +88,10 @@ def _evaluate(model: str, obj: Sequence[np.ndarray], img: Sequence[np.ndarray],
     return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre)
 
 
+RECENT_SELECTIONS = 4
+_RECENT: RecentAnswers[ModelSelection] = RecentAnswers(RECENT_SELECTIONS)
+
+
 def select_model(
     object_points_per_view: Sequence[np.ndarray],
     image_points_per_view: Sequence[np.ndarray],
@@ -96,9 +101,21 @@ def select_model(
 ) -> ModelSelection:
     """Walk the ladder and return the chosen model (shapes as in solve_intrinsics).
 
+    The choice is a function of the values alone, so the last RECENT_SELECTIONS are remembered by a
+    digest of the inputs (core.recent_answers): ``calibrate --model auto --reference-distance`` asks at
+    capture (the gauge's lens) and again at the solve, on the same corners (about 1 s of ladder each).
+
     Raises:
         NumericalError: the first rung itself cannot be solved or validated.
     """
+    key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size),
+                        tuple(ladder), tuple(alternatives))
+    return _RECENT.answer(key, lambda: _select_model(object_points_per_view, image_points_per_view, image_size,
+                                                     ladder, alternatives))
+
+
+def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+                  image_size: tuple[int, int], ladder: Sequence[str], alternatives: Sequence[str]) -> ModelSelection:
     start = ladder[0]
     best_fit, best_hold = _evaluate(start, object_points_per_view, image_points_per_view, image_size, None)
     centre = (best_fit.cx, best_fit.cy)  # every rung uses the same rings, so the same corners

@@ -41,12 +41,13 @@ UNCHECKED = object()
 
 
 def check_rollback(label: str, to_version: int, statuses: dict[int, str], active: int | None,
-                   expected: int | None | object, history_command: str) -> None:
+                   expected: int | None | object, history_command: str) -> bool:
     """What every rollback (a camera's or a rig's) checks under its lock before it appends its event:
-    ``to_version`` is stored and accepted, the active version is still the one the caller decided on
-    (compare-and-set: ``expected``, None = nothing was active, UNCHECKED = not asked), and it is not
-    ``to_version`` already. ``label`` names the subject (``CAM-1``, ``rig R1``); ``history_command``
-    is the command that shows its versions."""
+    ``to_version`` is stored and accepted, and the active version is still the one the caller decided on
+    (compare-and-set: ``expected``, None = nothing was active, UNCHECKED = not asked). True when
+    ``to_version`` is the active version already: the rollback is done, and no event is appended.
+    ``label`` names the subject (``CAM-1``, ``rig R1``); ``history_command`` is the command that shows
+    its versions."""
     if to_version not in statuses:
         raise NotFoundError(f"{label} has no version {to_version}; versions: {known_list(list(statuses))}",
                             f"see `{history_command}`")
@@ -62,8 +63,7 @@ def check_rollback(label: str, to_version: int, statuses: dict[int, str], active
             f"nothing rolled back to v{to_version}",
             f"look at `{history_command}` and roll back again if v{to_version} is still what you want",
         )
-    if active == to_version:
-        raise UsageError(f"{label}@{to_version} is already the active version; nothing to roll back")
+    return active == to_version
 
 
 def statuses(s: Session, serial: str) -> dict[int, str]:

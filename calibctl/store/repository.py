@@ -269,7 +269,8 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
             version = counters.next_value(s, "artifact", artifact.serial)
             if expect_version is not None and version != expect_version:
                 raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
-                                 f"of {artifact.serial} is {version}", "store it as the next version instead")
+                                 f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
+                                 "written", "run the command again")
             stored = artifact.model_copy(update={"version": version}).sealed()
             s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
             s.flush()
@@ -407,19 +408,22 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
         return self._run(lambda s: (counters.peek(s, "artifact", serial) or 0) + 1)
 
     def rollback(self, serial: str, to_version: int, *, reason: str, actor: str, station: str,
-                 expected_active: int | None | object = history.UNCHECKED) -> ActivationEvent:
+                 expected_active: int | None | object = history.UNCHECKED) -> ActivationEvent | None:
         """Make ``to_version`` (accepted, intact) the active version of ``serial``; appends an event.
+        None when it is the active version already: done, nothing written.
 
         Compare-and-set: ``expected_active`` is the active version the caller decided on (None: nothing
         was active); when another writer moved it since, nothing is written (StaleActiveVersionError)."""
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
-        def work(s: Session) -> ActivationEvent:
+        def work(s: Session) -> ActivationEvent | None:
             counters.lock(s, "artifact", serial)
-            history.check_rollback(serial, to_version, history.statuses(s, serial), history.active_in(s, serial),
-                                   expected_active, f"calibctl history {serial}")
+            already = history.check_rollback(serial, to_version, history.statuses(s, serial),
+                                             history.active_in(s, serial), expected_active, f"calibctl history {serial}")
             codec.decode_artifact(history.artifact_row(s, serial, to_version), by_chain=True)  # never activate tampered bytes
+            if already:
+                return None
             return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)

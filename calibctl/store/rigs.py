@@ -206,8 +206,13 @@ class RigStoreMixin:
             statuses = _statuses(s, rig)
             wanted = _active(s, rig) if version is None else version
             if wanted is None:
-                raise NotFoundError(f"rig {rig} has no active version; versions: {known_list(list(statuses))}",
-                                    f"ask for a version ({rig}@N) or roll back to an accepted one")
+                listing = known_list([f"{v} ({st})" for v, st in statuses.items()])
+                raise NotFoundError(
+                    f"rig {rig} has no active version; versions: {listing}",
+                    f"ask for a version ({rig}@N) or roll back to an accepted one"
+                    if "accepted" in statuses.values() else
+                    f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
+                    f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it")
             if wanted not in statuses:
                 raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {known_list(list(statuses))}",
                                     f"see `calibctl rig history {rig}`")
@@ -230,8 +235,9 @@ class RigStoreMixin:
         return self._run(lambda s: _active(s, rig))
 
     def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str,
-                     expected_active: int | None | object = UNCHECKED) -> RigActivation:
-        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event.
+                     expected_active: int | None | object = UNCHECKED) -> RigActivation | None:
+        """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event (None when
+        it is the active version already: done, nothing written).
 
         Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
         caller decided on (None: nothing was active); when another writer moved it since (a solve, a
@@ -239,12 +245,14 @@ class RigStoreMixin:
         if not reason.strip():
             raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
 
-        def work(s: Session) -> RigActivation:
+        def work(s: Session) -> RigActivation | None:
             counters.lock(s, "rig", rig)
-            check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
-                           f"calibctl rig history {rig}")
+            already = check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
+                                     f"calibctl rig history {rig}")
             decode_calibration(s.scalars(select(RigCalibrationRow).where(
                 RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
+            if already:
+                return None
             return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
 
         return self._run(work, write=True)

@@ -66,7 +66,7 @@ from calibctl.core.image_circle import (
     detect_image_circle,
     half_size,
 )
-from calibctl.core.solve import DEFAULT_MODEL, get_model
+from calibctl.core.solve import DEFAULT_MODEL
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, UsageError
 from calibctl.files import file_errors
@@ -99,8 +99,8 @@ class CaptureRequest:
     image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
     reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
     reference_source: str | None = None
-    # The lens model the gauge solves the session with, a MODELS name: calibrate's --model (the lens the
-    # session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
+    # The lens model the gauge solves the session with, a MODELS name or "auto": calibrate's --model (the
+    # lens the session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
     gauge_model: str = DEFAULT_MODEL
 
 
@@ -113,6 +113,7 @@ class CaptureResult:
     image_dir: str
     ignored_files: tuple[str, ...] = ()
     distance: DistanceCheck | None = None  # --reference-distance: judged when the gates passed
+    gauge_lens: str | None = None  # the lens model the distance was judged through (auto: the one it chose)
 
     @property
     def passed(self) -> bool:
@@ -123,7 +124,8 @@ class CaptureResult:
                 "stop_reason": self.stop_reason, "interrupted": self.interrupted,
                 "images_stored": self.images_stored, "image_dir": self.image_dir,
                 "ignored_files": list(self.ignored_files),
-                "distance": None if self.distance is None else self.distance.model_dump(mode="json")}
+                "distance": None if self.distance is None else self.distance.model_dump(mode="json"),
+                "gauge_lens": self.gauge_lens}
 
 
 @dataclass(frozen=True)
@@ -178,7 +180,7 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
     if (request.reference_distance is None) != (request.reference_source is None):
         raise UsageError("--reference-distance and --reference-source go together",
                          "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
-    get_model(request.gauge_model)  # an unknown name is a usage error before anything is read
+    gauge_model(request.gauge_model)  # an unknown name is a usage error before anything is read
     try:
         return parse_board_ref(request.board)
     except ValueError as exc:
@@ -203,14 +205,14 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
-        distance = None
+        distance = lens = None
         if (request.reference_distance is not None and request.reference_source is not None
                 and session.status == "accepted" and session.image_size is not None):
-            distance = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
-                                     session.views, session.image_size, request.gauge_model)
+            distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
+                                           session.views, session.image_size, request.gauge_model)
         store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
-                             tuple(got.ignored), distance)
+                             tuple(got.ignored), distance, lens)
 
 
 def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:

@@ -10,7 +10,10 @@ fixture pictures' poses are fitted with those intrinsics), so a wrong scale is c
 is ever stored. Both go through one lens model: the stored calibration's at check, at capture the one
 ``calibrate --model`` asks for (``gauge_model``): a k1k2 lens fitted to a rendered 150 deg fisheye
 session put its fixture board 13.6 % too far away (tests/workflows/test_distance_gauge.py), so the
-wrong lens fails a correct board (or passes a wrong one).
+wrong lens fails a correct board (or passes a wrong one). ``--model auto`` gauges through the model
+auto chooses for the session: the solve chooses it on the same corners (core.model_select, every
+accepted view), so the capture runs that choice first; in one ``calibrate`` the solve's choice is then
+the remembered answer (core.recent_answers), not a second ladder.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.session import ViewCorners
 from calibctl.core import image_outcomes as outcomes_core
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.model_select import select_model
 from calibctl.core.recheck import distance_ratio
 from calibctl.core.solve import DEFAULT_MODEL, get_model, solve_intrinsics
 from calibctl.core.validation import refit_pose
@@ -62,12 +66,14 @@ def parse_reference_distance(text: str) -> ReferenceDistance:
     return ReferenceDistance(d, s)
 
 
-def gauge_model(model: str | None) -> str:
-    """The lens model the capture gauge solves with for a solve's ``--model`` (UsageError if unknown).
+AUTO = "auto"
 
-    ``auto`` is only chosen at the solve, after the capture, so it (and no model) gauges with DEFAULT_MODEL.
-    """
-    return DEFAULT_MODEL if model is None or model == "auto" else get_model(model).name
+
+def gauge_model(model: str | None) -> str:
+    """The lens model the capture gauge solves with for a solve's ``--model`` (UsageError if unknown):
+    a MODELS name, AUTO (the model auto chooses for the session, ``gauge_capture``), or DEFAULT_MODEL
+    without one (a plain capture)."""
+    return DEFAULT_MODEL if model is None else AUTO if model == AUTO else get_model(model).name
 
 
 def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[str]) -> DistanceCheck:
@@ -144,16 +150,21 @@ def board_distances_m(spec: BoardSpec, views: Sequence[outcomes_core.ImageOutcom
 
 
 def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_ref: str,
-                  views: Sequence[ViewCorners], image_size: tuple[int, int], model: str) -> DistanceCheck:
+                  views: Sequence[ViewCorners], image_size: tuple[int, int], model: str) -> tuple[DistanceCheck, str]:
     """The gauge at capture: solve the captured views with ``model`` (a MODELS name, the lens the session
-    will be solved with; not stored), then judge the board distance of the ``fixture`` pictures through
-    that lens. Raises CalibctlError (exit 2) when it cannot be judged (see ``judge_distance``,
+    will be solved with, or AUTO: the model ``--model auto`` chooses for them; not stored), then judge
+    the board distance of the ``fixture`` pictures through that lens. Returns the verdict and the lens.
+    Raises CalibctlError (exit 2) when it cannot be judged (see ``judge_distance``,
     ``detect_fixture_views``) or the session cannot be solved with ``model``."""
     obj = spec.object_points()
+    session_obj = [obj[np.asarray(v.corner_ids)] for v in views]
+    session_px = [np.asarray(v.corners_px, np.float64) for v in views]
     try:
-        fit = solve_intrinsics([obj[np.asarray(v.corner_ids)] for v in views],
-                               [np.asarray(v.corners_px, np.float64) for v in views], image_size, model,
-                               uncertainty=False)
+        if model == AUTO:  # the solve's own choice on these corners (workflows.solve): its fit, no uncertainty
+            chosen = select_model(session_obj, session_px, image_size)
+            lens, fit = chosen.chosen, chosen.solution
+        else:
+            lens, fit = model, solve_intrinsics(session_obj, session_px, image_size, model, uncertainty=False)
     except NumericalError as exc:
         raise NumericalError(
             f"the distance gauge cannot judge this session: its {len(views)} views do not solve with the {model} "
@@ -162,5 +173,5 @@ def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_r
             else "gauge with the model the lens needs (--model)") from exc
     fixture_views, _ = detect_fixture_views(spec, board_ref, sources.resolve_source(fixture), image_size,
                                             "this session")
-    distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, model)
-    return judge_distance(ref, distances, [v.name for v in fixture_views])
+    distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, lens)
+    return judge_distance(ref, distances, [v.name for v in fixture_views]), lens

@@ -190,9 +190,10 @@ def check_rollback_request(to_version: int, reason: str) -> None:
 
 
 def rollback(settings: Settings, serial: str, to_version: int, reason: str,
-             expected_active: int | None = None) -> ActivationEvent:
+             expected_active: int | None = None) -> ActivationEvent | None:
     """Roll back as a compare-and-set: against ``expected_active`` (what the technician saw) when given,
-    else against the active version read first; a change in between refuses the rollback."""
+    else against the active version read first; a change in between refuses the rollback. None when
+    ``to_version`` is the active version already (nothing written: a retried rollback is done)."""
     check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
         seen = store.active_version(serial) if expected_active is None else expected_active

@@ -20,7 +20,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core import report_maps
 from calibctl.core.solve import is_fisheye
-from calibctl.errors import FileSystemError, InputError, NotFoundError
+from calibctl.errors import AlreadyExistsError, FileSystemError, InputError, NotFoundError
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.records import open_store, parse_artifact_ref
 from calibctl.workflows.report_html import render_html
@@ -106,8 +106,13 @@ def gather(settings: Settings, ref: str) -> ReportData:
                       report_maps.distortion_curve(K, D, art.image_size, fisheye=is_fisheye(art.model.name)))
 
 
+def page_path(serial: str, version: int, folder: Path | None = None) -> Path:
+    """Where SERIAL@N's page goes by default: FOLDER (default: here)/SERIAL-vN-report.html."""
+    return (folder or Path.cwd()) / f"{serial}-v{version}-report.html"
+
+
 def default_path(art: CalibrationArtifact, folder: Path | None = None) -> Path:
-    return (folder or Path.cwd()) / f"{art.serial}-v{art.version}-report.html"
+    return page_path(art.serial, art.version, folder)
 
 
 def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool) -> tuple[Path, ReportData]:
@@ -130,3 +135,14 @@ def ready_folder(folder: Path) -> Path:
         os.close(fd)
         os.unlink(probe)
     return folder
+
+
+def ready_page(folder: Path, serial: str, version: int) -> Path:
+    """The page ``solve --report`` will write for the version it is about to store, in a folder that
+    ``ready_folder`` checked; one that exists already is refused up front (it is never overwritten),
+    so a solve is not stored and then left without its report."""
+    path = page_path(serial, version, folder)
+    if path.exists():
+        raise AlreadyExistsError(f"{path} already exists; nothing was stored",
+                                 "move it away, or give --report another folder (a solve never overwrites a report)")
+    return path

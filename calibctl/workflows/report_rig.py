@@ -61,7 +61,7 @@ def gather_rig(settings: Settings, ref: str) -> RigReportData:
     with open_store(settings) as store:
         store.get_rig(name)  # an unknown rig is named as such, with the known ones
         cal = store.get_rig_calibration(name, version)
-        active = store.get_rig_calibration(name, None).version == cal.version if version is not None else True
+        active = store.active_rig_version(name) == cal.version
         members = []
         for m in cal.members:
             try:

@@ -1,6 +1,7 @@
 """``calibctl rig solve-folders``: a camera rig solved from per-camera photo folders, no store needed.
 
-Steps: list each camera's photos; match them into synchronised frames by frame key (the last run of
+Steps: list each camera's photos (a folder, a quoted glob or a list file, resolved as ``capture --source``
+and ``rig capture`` resolve them: workflows.capture_sources); match them into synchronised frames by frame key (the last run of
 digits in the file name: core.extrinsics.rig_frames); detect and classify every photo with today's
 per-image outcomes; calibrate each camera on its own accepted photos (core.solve, full covariance)
 unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
@@ -33,12 +34,15 @@ from calibctl.core.extrinsics.rig_validation import (
 )
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.gates import GateResult
-from calibctl.core.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session, list_images
+from calibctl.core.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
 from calibctl.core.solve import get_model, solve_intrinsics
 from calibctl.core.views import BoardView
-from calibctl.errors import InputError, NumericalError, UsageError
+from calibctl.errors import CalibctlError, InputError, NumericalError, UsageError
+from calibctl.files import file_errors
+from calibctl.workflows import capture_sources
 
 USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
+SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
 
 
 @dataclass(frozen=True)
@@ -57,18 +61,31 @@ class RigFolderRun:
 
 
 def parse_sources(items: Sequence[str]) -> dict[str, Path]:
-    """['CAM=DIR', ...] -> {CAM: DIR}; UsageError on a malformed or repeated camera."""
+    """['CAM=SRC', ...] -> {CAM: SRC}; UsageError on a malformed or repeated camera."""
     out: dict[str, Path] = {}
     for item in items:
         name, sep, folder = item.partition("=")
         if not sep or not name or not folder:
-            raise UsageError(f"--source must look like SERIAL=FOLDER, got {item!r}")
+            raise UsageError(f"--source must look like SERIAL=FOLDER (or SERIAL='glob', SERIAL=list.txt), got {item!r}")
         if name in out:
             raise UsageError(f"camera {name} is given twice", hint="name each camera of the rig once")
         out[name] = Path(folder)
     if len(out) < 2:
         raise UsageError(f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera")
     return out
+
+
+def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, capture_sources.ImageSet]:
+    """One camera's photos: a folder, glob or list as ``capture --source`` reads it; errors name the camera."""
+    try:
+        spec = capture_sources.resolve_source(str(source))
+        if spec.kind not in capture_sources.IMAGE_SETS:
+            raise InputError(f"--source {source} is a {spec.kind}; a rig is solved from photos", SOURCE_HINT)
+        with file_errors(f"read the source {spec.kind}", spec.label):
+            return spec, capture_sources.select_images(spec)
+    except CalibctlError as exc:  # capture's hint for a missing source offers videos and cameras too
+        hint = SOURCE_HINT if exc.hint == capture_sources.SOURCE_HINT else exc.hint
+        raise type(exc)(f"camera {name}: {exc.message}", hint) from exc
 
 
 def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec, model: str) -> MemberIntrinsics:
@@ -107,23 +124,24 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
     """Run the folder flow (module docstring). The first source is the root camera.
 
     Raises:
-        InputError: a folder is missing or empty, or a camera's photos differ in size from its intrinsics.
+        InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
+            mixes image sizes, or a camera's photos differ in size from its intrinsics.
         NumericalError: a camera cannot be calibrated, or the rig solve fails.
     """
     cameras = tuple(sources)
-    photos: dict[str, list[Path]] = {}
-    for name, folder in sources.items():
-        if not folder.is_dir():
-            raise InputError(f"camera {name}: {folder} is not a folder", hint="give SERIAL=FOLDER with existing folders")
-        photos[name] = list_images(folder)
-        if not photos[name]:
-            raise InputError(f"camera {name}: no images in {folder}", hint="supported: png, jpg, bmp, tif, pgm, webp")
+    sets = {name: camera_photos(name, source) for name, source in sources.items()}
+    photos = {name: images.paths for name, (_, images) in sets.items()}
     match = match_frames(photos)
     if not match.frames:
         raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
                          hint="name the photos so that the last number in the name is the frame number or "
                               "timestamp, the same for photos taken together (left_0042.png / right_0042.png)")
     outcomes = {name: classify_session(photos[name], spec, workers=workers) for name in cameras}
+    for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
+        mixed = capture_sources.mixed_sizes_error(source, {n: o.image_size for n, o in zip(
+            images.names, outcomes[name], strict=True) if o.image_size})
+        if mixed is not None:
+            raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
     members = []
     for name in cameras:
         given = (intrinsics or {}).get(name)

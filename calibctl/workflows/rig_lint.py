@@ -123,10 +123,11 @@ def show(settings: Settings, ref: str) -> RigCalibration:
 
 
 def rollback(settings: Settings, rig: str, to_version: int, reason: str,
-             expected_active: int | None = None) -> RigActivation:
+             expected_active: int | None = None) -> RigActivation | None:
     """Roll the rig back as a compare-and-set, like a camera's (``records.rollback``): against
     ``expected_active`` (what the technician saw) when given, else against the active version read first;
-    a solve, hand-eye edge or rollback stored in between refuses it (exit 2) instead of being undone."""
+    a solve, hand-eye edge or rollback stored in between refuses it (exit 2) instead of being undone.
+    None when ``to_version`` is the active version already (nothing written)."""
     check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
         seen = store.active_rig_version(rig) if expected_active is None else expected_active

@@ -288,6 +288,7 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         from calibctl.workflows import report as report_workflow
 
         report_workflow.ready_folder(request.report_dir)
+    report_path = version = None
     with open_store(settings, write=True) as store:
         session = (
             store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
@@ -298,6 +299,9 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
                 f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
                 "capture again following the gate hints, then solve the new session",
             )
+        if request.report_dir is not None:  # the page of the version about to be stored must be free
+            version = store.next_version(session.serial)
+            report_path = report_workflow.ready_page(request.report_dir, session.serial, version)
         art, corner_outliers = build_artifact(session, request, settings)
         activate = request.activate and art.status == "accepted"
         stored = store.add_artifact(
@@ -306,12 +310,9 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
             actor=settings.operator,
             station=settings.station,
             reason=f"solve of session {session.session_id}",
+            expect_version=version,  # with --report: the version whose page was checked, or nothing stored
         )
         active = store.active_version(stored.serial) == stored.version
-    report_path = None
-    if request.report_dir is not None:
-        from calibctl.workflows import report as report_workflow
-
-        report_path, _ = report_workflow.write_report(
-            settings, stored.ref, report_workflow.default_path(stored, request.report_dir), force=False)
+    if report_path is not None:
+        report_workflow.write_report(settings, stored.ref, report_path, force=False)
     return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from calibctl.core import model_select
 from calibctl.errors import NotFoundError, NumericalError
 from calibctl.store.repository import Store
 from calibctl.workflows import distance_gauge
@@ -80,6 +81,29 @@ def test_calibrate_model_fisheye_gauges_a_fisheye_board_through_the_fisheye_lens
     assert out["capture"]["passed"] and distance["passed"]
     assert distance["ratio"] == pytest.approx(1.0, abs=0.003)
     assert out["calibration"]["model"]["name"] == "fisheye" and out["active"]
+
+
+def test_calibrate_model_auto_gauges_through_the_model_auto_chooses(
+        db: str, fisheye, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: F811
+    """auto used to gauge with k1k2, which fails this correct fisheye board (ratio 1.136): the session was
+    never solved. Now the gauge judges through the model the solve then chooses (one ladder for both)."""
+    ladders = []
+    walk = model_select._select_model
+    monkeypatch.setattr(model_select, "_select_model", lambda *a: ladders.append(a) or walk(*a))
+    session, fixture = fisheye
+    done = invoke(db, "calibrate", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                  "--model", "auto", *FISHEYE_GAUGE, "--reference-source", str(fixture), "--json")
+    assert done.exit_code in (0, 1), done.output  # 1: lint's verdict on the chosen model, not the gauge's
+    out = json.loads(done.stdout)
+    distance = out["capture"]["distance"]
+    assert out["capture"]["passed"] and distance["ratio"] == pytest.approx(1.0, abs=0.003)
+    assert out["calibration"] is not None  # solved: the gauge did not stop it
+    lens = out["capture"]["gauge_lens"]
+    assert lens != "k1k2" and lens == out["calibration"]["model"]["name"] and len(ladders) == 1
+    capture_only = invoke(db, "capture", "--serial", "FE-0007", "--board", "A17", "--source", str(session),
+                          *FISHEYE_GAUGE, "--reference-source", str(fixture), "--model", "auto")
+    assert capture_only.exit_code == 0, capture_only.output
+    assert f"gauged through {lens}, the model --model auto chooses for this session" in capture_only.stdout
 
 
 def test_capture_model_sets_the_gauge_lens_and_without_it_k1k2_fails_a_fisheye(db: str, fisheye) -> None:  # noqa: F811

@@ -89,6 +89,21 @@ def test_rollback_moves_active_version_and_is_logged(run):
     assert last["reason"] == "v2 drifted after the bracket swap"
 
 
+def test_rollback_to_the_active_version_is_a_success_that_writes_nothing(run):
+    _two_versions(run)
+    for extra in ((), ("--expect-active", "2")):
+        result = run("rollback", SERIAL, "--to", "2", "--reason", "make sure", *extra)
+        assert result.exit_code == 0, result.output
+        assert f"{SERIAL}: v2 is already the active version; nothing written" in result.stdout
+    done = run("rollback", SERIAL, "--to", "2", "--reason", "make sure", "--json")
+    assert done.exit_code == 0 and json.loads(done.stdout) == {"serial": SERIAL, "version": 2, "already_active": True}
+    hist = json.loads(run("history", SERIAL, "--json").stdout)
+    assert hist["active_version"] == 2 and [e["kind"] for e in hist["events"]] == ["activate", "activate"]
+    # compare-and-set first: a view of v1 is stale even when the target is what is active now
+    stale = run("rollback", SERIAL, "--to", "2", "--reason", "r", "--expect-active", "1")
+    assert stale.exit_code == 2 and "the active version changed underneath this rollback" in stale.stderr
+
+
 def test_rollback_to_unknown_version_exits_2_listing_versions(run):
     _two_versions(run)
     result = run("rollback", SERIAL, "--to", "9", "--reason", "x")
@@ -238,6 +253,41 @@ def test_solve_report_onto_a_file_exits_2_before_solving(run, tmp_path):
     result = run("solve", "--serial", SERIAL, "--report", str(not_a_folder))
     assert result.exit_code == 2 and "it is not a folder" in result.stderr
     assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+
+
+def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path):
+    """It used to store (and activate) the new version first, then fail writing its page."""
+    page = tmp_path / f"{SERIAL}-v1-report.html"
+    page.write_text("an older store's page", encoding="utf-8")
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path))
+    assert result.exit_code == 2, result.output
+    assert f"{page} already exists" in " ".join(result.stderr.split())
+    assert "nothing was stored" in result.stderr
+    assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+    assert page.read_text(encoding="utf-8") == "an older store's page"
+
+
+def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(run, db, tmp_path, monkeypatch):
+    """The page checked is the one of the version about to be stored: a version stored meanwhile (another
+    station) makes the store refuse, rather than store a version whose page was never checked."""
+    from calibctl.workflows import solve as solve_workflow
+
+    build = solve_workflow.build_artifact
+
+    def with_an_interloper(session, request, settings):
+        art, outliers = build(session, request, settings)
+        with Store.open(db) as store:
+            store.add_artifact(art, activate=False, actor="other", station="other", reason="meanwhile")
+        return art, outliers
+
+    monkeypatch.setattr(solve_workflow, "build_artifact", with_an_interloper)
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path / "reports"))
+    assert result.exit_code == 2, result.output
+    assert f"{SERIAL}@1 cannot be stored: this store's next version of {SERIAL} is 2" in " ".join(result.stderr.split())
+    with Store.open(db) as store:
+        assert [a.version for a in store.list_artifacts(SERIAL)] == [1]  # the other one's, never activated:
+        assert store.active_version(SERIAL) is None  # the solve, which would have activated its own, stored nothing
+    assert list((tmp_path / "reports").iterdir()) == []
 
 
 def test_solve_report_with_rig_exits_2(run, tmp_path):

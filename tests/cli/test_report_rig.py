@@ -107,3 +107,19 @@ def test_the_rig_page_renders_in_chromium(solved, tmp_path: Path) -> None:
     assert screenshot(page, png) == []
     # a blank page has ~0 ink; the rig page fills about a third of the 3800 px window (1.1 % ink measured)
     assert ink(png) > 0.005
+
+
+def test_a_version_of_a_rig_with_no_active_version_gets_its_page(solved, tmp_path: Path) -> None:
+    """R@N of a rig solved with --no-activate exited 2 "has no active version": the page asked for the active one."""
+    db, cal = solved
+    copy = tmp_path / "copy.db"
+    copy.write_bytes(Path(db.removeprefix("sqlite:///")).read_bytes())
+    url = f"sqlite:///{copy}"
+    with Store.open(url) as store:
+        store.add_rig(store.get_rig("R1").model_copy(update={"name": "R2"}))
+        store.add_rig_calibration(cal.model_copy(update={"rig": "R2"}), activate=False, **WHO)
+    out = tmp_path / "r2.html"
+    done = invoke(url, "report", "--rig", "R2@1", "-o", str(out))
+    assert done.exit_code == 0, done.output
+    assert "rig R2@1 (accepted): report written to" in done.stdout
+    assert "accepted</span></h1>" in out.read_text(encoding="utf-8")  # not followed by " (active)"

@@ -9,7 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from tests.workflows.rig_folders_data import rendered_rig, true_baseline_mm
+from tests.datasets import LEFT_RIGHT, needs_datasets
+from tests.workflows.rig_folders_data import rendered_rig, split_pairs, true_baseline_mm
 
 RUNNER = CliRunner()
 
@@ -60,6 +61,36 @@ def test_usage_errors_exit_2(rig2, extra, message):
     result = invoke("rig", "solve-folders", *_sources(rig2), *extra)
     assert result.exit_code == 2
     assert message in result.output and "Traceback" not in result.output
+
+
+@needs_datasets
+def test_solve_folders_takes_a_glob_and_a_list_file_like_rig_capture(tmp_path):
+    """opencv-left-right keeps both cameras in one folder: a glob per camera needs no copying."""
+    right_list = tmp_path / "right.txt"
+    right_list.write_text("".join(f"{p}\n" for p in sorted(LEFT_RIGHT.glob("right*.jpg"))))
+    board = ["--cols", "9", "--rows", "6", "--square-mm", "1"]  # square size unknown: baselines in squares
+    result = invoke("--json", "rig", "solve-folders", "--source", f"L={LEFT_RIGHT / 'left*.jpg'}",
+                    "--source", f"R={right_list}", *board)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    assert doc["frames"] == 13 and doc["unmatched"] == [] and doc["images"] == {"L": {"accepted": 13},
+                                                                                "R": {"accepted": 13}}
+    left, right = split_pairs(LEFT_RIGHT, tmp_path / "split", "left*.jpg", "right*.jpg")
+    folders = json.loads(invoke("--json", "rig", "solve-folders", "--source", f"L={left}", "--source", f"R={right}",
+                                *board).output)
+    assert doc["pairs"][0]["baseline_mm"] == pytest.approx(folders["pairs"][0]["baseline_mm"], rel=1e-9)
+
+
+def test_solve_folders_names_the_camera_of_a_source_it_cannot_use(rig2, tmp_path):
+    (tmp_path / "clip.avi").write_bytes(b"not a video")
+    board = ["--cols", "9", "--rows", "6", "--square-mm", "25"]
+    for source, message in ((f"{tmp_path}/right*.jpg", f"camera B: --source '{tmp_path}/right*.jpg' matches no "
+                                                       "image file"),
+                            (str(tmp_path / "clip.avi"), "camera B: --source " + str(tmp_path / "clip.avi")
+                             + " is a video; a rig is solved from photos")):
+        result = invoke("rig", "solve-folders", "--source", f"A={rig2 / 'CAM0'}", "--source", f"B={source}", *board)
+        assert result.exit_code == 2, result.output
+        assert message in " ".join(result.output.split()) and "Traceback" not in result.output
 
 
 def test_synth_rig_writes_folders_and_truth(tmp_path):

@@ -116,6 +116,35 @@ def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
     assert r.exit_code == 2 and "one camera takes one --source, got 2" in r.output
 
 
+@pytest.mark.parametrize(("args", "named"), [
+    (("--reference-distance", "0.45+-0.001", "--reference-source", "fixture"),
+     "--reference-distance, --reference-source apply to one camera"),
+    (("--reference-distance", "0.45+-0.001"), "--reference-distance applies to one camera"),
+    (("--serial", "CAM0"), "--serial applies to one camera"),
+    (("--max-views", "10", "--duration", "5"), "--max-views, --duration apply to one camera"),
+])
+def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
+    """They used to be dropped silently: a rig capture gauged nothing and said nothing."""
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM1'}", *args)
+    assert r.exit_code == 2, r.output
+    text = " ".join(r.output.split())
+    assert f"{named}, not to a rig (--rig)" in text and "capture that camera on its own with --serial" in text
+    with Store.open(db) as store:
+        assert store.list_sessions() == []
+
+
+def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "--json", "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM1'}", "--station", "line-7", "--operator", "ana")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.output)
+    assert (doc["rig_session"]["station"], doc["rig_session"]["operator"]) == ("line-7", "ana")
+    assert {(s["station"], s["operator"]) for s in doc["camera_sessions"].values()} == {("line-7", "ana")}
+
+
 def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_path, monkeypatch):
     """It used to let cv2.FileStorage open the file itself: a folder it could not write was a cv2.error traceback."""
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")

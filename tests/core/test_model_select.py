@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibctl.core import model_select
 from calibctl.core.model_select import ALTERNATIVES, LADDER, MIN_FIT_IMPROVEMENT, select_model
 from calibctl.core.synthetic_corners import synthesize_session
 from calibctl.errors import NumericalError
@@ -49,6 +50,23 @@ def test_a_two_coefficient_lens_keeps_k1k2():
     k3 = sel.trail[1]
     assert not k3.accepted and k3.fit_improvement_frac < 0.01
     assert "needs >= 10 %" in k3.reason
+
+
+def test_the_same_question_is_answered_once(monkeypatch):
+    """calibrate --model auto --reference-distance asks at capture (the gauge's lens) and at the solve, with
+    the same corners: the second answer is the first, found by the values; other corners are asked anew."""
+    obj, img = _session(800.0, [-0.2814, 0.0977, 0, 0, 0])
+    calls = []
+    real = model_select._select_model
+    monkeypatch.setattr(model_select, "_select_model", lambda *a: calls.append(a) or real(*a))
+    first = select_model(obj, img, SIZE)
+    again = select_model([o.copy() for o in obj], [np.array(i, dtype=np.float64) for i in img], SIZE)
+    assert again is first and len(calls) == 1
+    moved = [i.copy() for i in img]
+    moved[3][5, 1] += 1e-6
+    assert select_model(obj, moved, SIZE) is not first and len(calls) == 2
+    select_model(obj, img, SIZE, ladder=LADDER[:2])
+    assert len(calls) == 3
 
 
 def test_a_strong_k3_lens_earns_k3_and_nothing_more():

@@ -52,9 +52,22 @@ def test_rollback_and_rejected_versions(db_url: str):
         event = store.rollback_rig(RIG, 1, reason="drifted", actor="qa", station="st1")
         assert (event.version, event.previous_version, event.kind) == (1, 3, "rollback")
         assert store.active_rig_version(RIG) == 1
-        with pytest.raises(UsageError, match="already the active version"):
-            store.rollback_rig(RIG, 1, reason="again", actor="qa", station="st1")
+        assert store.rollback_rig(RIG, 1, reason="again", actor="qa", station="st1") is None  # already active
         assert [e.version for e in store.rig_events(RIG)] == [1, 3, 1]
+
+
+def test_a_rig_without_an_active_version_says_what_to_do(db_url: str):
+    with Store.open(db_url) as store:
+        store.add_rig_calibration(rig_calibration(status="rejected"), activate=False, **WHO)
+        with pytest.raises(NotFoundError, match=rf"rig {RIG} has no active version; versions: 1 \(rejected\)") as none:
+            store.get_rig_calibration(RIG)
+        # nothing accepted to roll back to: the hint must not propose a rollback
+        assert none.value.hint is not None and "roll back" not in none.value.hint
+        assert f"solve the rig again (`calibctl rig solve {RIG}`" in none.value.hint and none.value.exit_code == 2
+        store.add_rig_calibration(rig_calibration(), activate=False, **WHO)  # accepted, --no-activate
+        with pytest.raises(NotFoundError, match=r"versions: 1 \(rejected\), 2 \(accepted\)") as one:
+            store.get_rig_calibration(RIG)
+        assert one.value.hint == f"ask for a version ({RIG}@N) or roll back to an accepted one"
 
 
 def test_the_database_refuses_to_activate_a_rejected_rig_version(db_url: str):

@@ -2,7 +2,8 @@
 
 A session and fixture pictures are rendered through the SAME 150 deg equidistant fisheye, the board
 centre FISHEYE_FIXTURE_M from the camera: through the fisheye lens the gauge recovers that distance;
-through k1k2 (what the gauge used for every model before) the same board lands far outside 0.99-1.01.
+through k1k2 (what the gauge used for every model before) the same board lands far outside 0.99-1.01;
+``--model auto`` gauges through the model it chooses.
 """
 
 from __future__ import annotations
@@ -64,8 +65,11 @@ def test_a_fisheye_board_is_gauged_through_the_fisheye_lens_and_k1k2_would_fail_
     assert result.distance is not None and result.distance.passed and result.passed
     assert result.distance.ratio == pytest.approx(1.0, abs=RIGHT_LENS_TOL)
     # the old gauge: the same session and fixture through a k1k2 lens fail a correct board
-    k1k2 = gauge_capture(SURVEY, str(folders[1]), spec, session.board.ref, session.views, (640, 480), "k1k2")
-    assert not k1k2.passed and abs(k1k2.ratio - 1.0) > RATIO_LIMITS[1] - 1.0
+    k1k2, lens = gauge_capture(SURVEY, str(folders[1]), spec, session.board.ref, session.views, (640, 480), "k1k2")
+    assert lens == "k1k2" and not k1k2.passed and abs(k1k2.ratio - 1.0) > RATIO_LIMITS[1] - 1.0
+    # auto: through the model `solve --model auto` chooses on these corners (not k1k2), and the board passes
+    auto, lens = gauge_capture(SURVEY, str(folders[1]), spec, session.board.ref, session.views, (640, 480), "auto")
+    assert lens != "k1k2" and auto.passed
 
 
 def test_a_session_the_model_cannot_solve_exits_2_naming_the_gauge_and_the_model(
@@ -81,9 +85,9 @@ def test_a_session_the_model_cannot_solve_exits_2_naming_the_gauge_and_the_model
     assert raised.value.hint is not None and "--model" in raised.value.hint
 
 
-@pytest.mark.parametrize(("model", "lens"), [("fisheye", "fisheye"), ("rational", "rational"), ("auto", "k1k2"),
+@pytest.mark.parametrize(("model", "lens"), [("fisheye", "fisheye"), ("rational", "rational"), ("auto", "auto"),
                                              (None, "k1k2")])
-def test_the_gauge_solves_with_the_model_asked_for_and_auto_with_k1k2(model: str | None, lens: str) -> None:
+def test_the_gauge_solves_with_the_model_asked_for_and_k1k2_without_one(model: str | None, lens: str) -> None:
     assert gauge_model(model) == lens
 
 

@@ -4,6 +4,8 @@ rollback) is refused with exit 2 naming the newer version, and nothing is writte
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from typer.testing import CliRunner
 
@@ -77,8 +79,9 @@ def test_the_compare_comes_after_the_version_checks(three_versions: str):
             store.rollback_rig(RIG, 4, reason="r", expected_active=1, **WHO)
         with pytest.raises(Exception, match=rf"rig {RIG} has no version 9; versions: 1, 2, 3, 4"):
             store.rollback_rig(RIG, 9, reason="r", expected_active=1, **WHO)
-        with pytest.raises(UsageError, match=rf"rig {RIG}@3 is already the active version"):
-            store.rollback_rig(RIG, 3, reason="r", expected_active=3, **WHO)
+        with pytest.raises(StaleActiveVersionError, match="it saw v1, it is now v3"):  # stale, though 3 is active
+            store.rollback_rig(RIG, 3, reason="r", expected_active=1, **WHO)
+        assert store.rollback_rig(RIG, 3, reason="r", expected_active=3, **WHO) is None  # already active
 
 
 def _cli(url: str, *args: str):  # type: ignore[no-untyped-def]
@@ -94,6 +97,16 @@ def test_rig_rollback_expect_active_on_the_command_line(three_versions: str):
     done = _cli(three_versions, "--to", "1", "--reason", "bent mount", "--expect-active", "3")
     assert done.exit_code == 0 and "active version 3 -> 1" in done.stdout
     assert _events(three_versions)[-1] == (1, "rollback")
+
+
+def test_rig_rollback_to_the_active_version_is_a_success_that_writes_nothing(three_versions: str):
+    for extra in ((), ("--expect-active", "3")):
+        done = _cli(three_versions, "--to", "3", "--reason", "make sure", *extra)
+        assert done.exit_code == 0, done.output
+        assert f"rig {RIG}: version 3 is already the active version; nothing written" in done.stdout
+    doc = CliRunner().invoke(app, ["--db", three_versions, "--json", "rig", "rollback", RIG, "--to", "3", "--reason", "r"])
+    assert doc.exit_code == 0 and json.loads(doc.stdout) == {"rig": RIG, "version": 3, "already_active": True}
+    assert _events(three_versions) == [(1, "activate"), (2, "activate"), (3, "activate")]
 
 
 @pytest.mark.parametrize(("args", "message"), [
