@@ -159,8 +159,9 @@ def capture(
     board: BoardOption,
     source: Annotated[list[str], typer.Option(
         "--source", show_default=False,
-        help="A folder of images, a video file, or a camera (/dev/videoN or an index such as 0); with --rig, "
-             "SERIAL=SRC once per member.")],
+        help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list "
+             "file (.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a "
+             "video file; or a camera (/dev/videoN or an index such as 0). With --rig, SERIAL=SRC once per member.")],
     serial: Annotated[str | None, typer.Option("--serial", help="Camera serial number.", show_default=False)] = None,
     station: StationOption = None,
     operator: OperatorOption = None,

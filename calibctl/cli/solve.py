@@ -80,19 +80,33 @@ def solve(
     if rig is not None:
         from calibctl.cli.rig import solve as solve_rig
 
-        if image_circle is not None:
-            raise UsageError("--image-circle applies to one camera, not to a rig (--rig)",
-                             "solve the fisheye camera's own session")
         if report_dir is not None:
             raise UsageError("--report is not available with --rig yet", "run `calibctl solve --rig` without it")
+        # a rig solve keeps its members' calibrations: what shapes one camera's solve would be dropped silently
+        one_camera = {"--serial": serial, "--model": model if _given(ctx, "model") else None,
+                      "--drop-outliers": drop_outliers or None, "--image-circle": image_circle}
+        given = [flag for flag, value in one_camera.items() if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one camera, not to a "
+                             "rig (--rig)", "solve that camera's own session (`calibctl solve SESSION_ID` or "
+                             "--serial); the rig solve uses the members' active calibrations")
         solve_rig(ctx, rig, session_id, refine_intrinsics, activate, json_output)
         return
+    if refine_intrinsics:
+        raise UsageError("--refine-intrinsics applies to a rig solve (--rig RIG)",
+                         "leave it out to solve one camera's intrinsics")
 
     request = solve_workflow.SolveRequest(
         session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers,
         report_dir=report_dir, image_circle=parse_image_circle(image_circle))
     outcome = solve_workflow.solve(state(ctx).settings(), request)
     render_outcome(outcome, wants_json(ctx, json_output))
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """True when the option ``name`` was given (on the command line or in the environment), not defaulted."""
+    source = ctx.get_parameter_source(name)
+    return source is not None and source.name != "DEFAULT"
 
 
 def register(app: typer.Typer) -> None:

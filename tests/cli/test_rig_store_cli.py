@@ -135,6 +135,26 @@ def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
         assert store.list_sessions() == []
 
 
+@pytest.mark.parametrize(("args", "named"), [
+    (["--serial", "CAM0"], "--serial applies"), (["--model", "fisheye"], "--model applies"),
+    (["--model", "k1k2", "--drop-outliers"], "--model, --drop-outliers apply")])
+def test_solve_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
+    """They used to be dropped silently: the rig solve uses the members' active calibrations."""
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    assert _capture(db, rig2).exit_code == 0
+    r = invoke(db, "solve", "--rig", "R1", *args)
+    assert r.exit_code == 2, r.output
+    text = " ".join(r.output.split())
+    assert f"{named} to one camera, not to a rig (--rig)" in text and "solve that camera's own session" in text
+    assert invoke(db, "rig", "history", "R1").exit_code == 2  # nothing solved, nothing stored
+
+
+def test_refine_intrinsics_without_rig_is_refused(db):
+    r = invoke(db, "solve", "--serial", "CAM0", "--refine-intrinsics")
+    assert r.exit_code == 2, r.output
+    assert "--refine-intrinsics applies to a rig solve (--rig RIG)" in " ".join(r.output.split())
+
+
 def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
     r = invoke(db, "--json", "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
