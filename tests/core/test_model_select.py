@@ -114,6 +114,24 @@ def test_auto_switches_to_fisheye_for_a_wide_lens():
     _check_trail_consistency(sel)
 
 
+@pytest.mark.parametrize("seed", [1, 41])
+def test_non_square_pixels_earn_fx_and_fy_apart(seed):
+    # frames resized in one axis (fx/fy = 1.06, as measured on real phone-video frames): every other rung
+    # ties fx to fy; opencv-default frees them and passes the 10 % / held-out rule against the ladder.
+    # Fisheye frees them too and then competes on held-out error: seed 1 opencv-default predicts the outer
+    # ring 5 % better (measured 0.363 against 0.380 px) and stays; seed 41 is a tie (0.29107 against
+    # 0.29104 px) that either may win. Whichever is chosen solves fx and fy apart.
+    K = np.array([[848.0, 0.0, 321.3], [0.0, 800.0, 238.7], [0.0, 0.0, 1.0]])
+    ses = synthesize_session(K, np.array([-0.2814, 0.0977, 0, 0, 0]), SIZE, n_views=14, seed=seed,
+                             distance_m=(0.35, 0.6))
+    sel = select_model(ses.object_points_per_view, ses.image_points_per_view, SIZE)
+    assert next(c for c in sel.trail if c.model == "opencv-default").accepted
+    assert sel.chosen in ("opencv-default", "fisheye") and (seed != 1 or sel.chosen == "opencv-default")
+    fx, fy = sel.solution.camera_matrix[0, 0], sel.solution.camera_matrix[1, 1]
+    assert fx / fy == pytest.approx(1.06, abs=0.005)
+    _check_trail_consistency(sel)
+
+
 def test_fisheye_beats_a_rational_model_that_fits_as_well_but_predicts_worse():
     # 180 deg full-frame fisheye, seed 4 (measured): rational is the ladder's choice and fits the corners it
     # was solved on as well as fisheye (0.2714 against 0.2715 px), but predicts the held-out outer ring at
