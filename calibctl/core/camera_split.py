@@ -38,7 +38,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from calibctl.core.blas_threads import single_threaded_blas
-from calibctl.core.gates import GateResult
+from calibctl.core.gates import OBSERVABILITY_MIN, GateResult, observability, view_homography
 from calibctl.core.recent_answers import RecentAnswers, values_digest
 from calibctl.core.solve import (
     IntrinsicsSolution,
@@ -146,7 +146,8 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
                      image_size: tuple[int, int], model: str = "k1k2",
                      threshold: float = TWO_CAMERA_RATIO) -> CameraSplit | None:
     """The best two-camera split and its score (module docstring); None when the session is too small to
-    split into two groups that can each be solved and validated.
+    split into two groups that can each be solved and validated, or when a group of the best split cannot
+    observe its own intrinsics (the observability gate's measure below OBSERVABILITY_MIN).
 
     Shapes as in solve_intrinsics. The answer is a function of the values alone, so the last
     RECENT_CHECKS answers are remembered by a digest of the inputs (core.recent_answers): ``calibrate``
@@ -182,6 +183,8 @@ def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points
         return None
     in_a, sol_a, sol_b, rms_a, rms_b = best
     a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
+    if min(_observability(obj, img, group, image_size) for group in (a, b)) < OBSERVABILITY_MIN:
+        return None  # a group that cannot observe its own intrinsics is no camera to compare (see _observability)
     try:
         hold_a, hold_b = _pair(lambda group: validate_holdout(
             [obj[i] for i in group[0]], [img[i] for i in group[0]], image_size, model, fit=group[1],
@@ -193,6 +196,16 @@ def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points
     ratio = min(cross[0] / held[0], cross[1] / held[1])
     return CameraSplit(tuple(int(i) for i in a), tuple(int(i) for i in b), held, cross,
                        sol_a.camera_matrix, sol_b.camera_matrix, float(ratio), threshold)
+
+
+def _observability(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: Sequence[int],
+                   image_size: tuple[int, int]) -> float:
+    """The observability gate's sigma5 / sigma1 (core.gates) of one group's views. Near-frontal views that
+    group together fit any focal length: real 960x540 phone-video frames split into 6 tilted views (fx 1083)
+    and 8 near-frontal ones (fx 6806, observability 8.9e-6) that "predicted" each other 3.15x better, a
+    false two-camera verdict; the groups of the mixed opencv-left-right folder read 5.3e-4 and 5.6e-4."""
+    homographies = [view_homography(obj[i][:, :2], img[i]) for i in group]
+    return observability([H for H in homographies if H is not None], image_size)
 
 
 def _group_words(names: Sequence[str]) -> str:
@@ -243,7 +256,8 @@ def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_p
                                           [image_points_per_view[i] for i in picked], image_size, models, threshold)
     detail.update({f"ratio_{m}": r for m, r in ratios.items()})
     if split is None:
-        message = f"one camera: no split of the {len(picked)} views into two groups that can each be solved"
+        message = (f"one camera: no split of the {len(picked)} views into two groups that can each be solved "
+                   f"and observe their own intrinsics")
         return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
     a = [names[picked[i]] for i in split.group_a]
     b = [names[picked[i]] for i in split.group_b]

@@ -154,6 +154,24 @@ def test_baka_stereo_left_alone_is_not_flagged() -> None:
     assert gate.passed and gate.value < TWO_CAMERA_RATIO
 
 
+@pytest.mark.parametrize("seed", [1, 4])
+def test_near_frontal_views_that_fit_any_focal_length_are_no_second_camera(seed) -> None:
+    # one camera with non-square pixels (fx/fy 1.06: k1k2 cannot fit it), 6 views tilted 25-40 deg and 8
+    # within 3 deg of frontal: the frontal group "solves" at fx 21 000-29 000 px and predicted its own views
+    # 4.3x / 6.8x better than the tilted group's camera (measured, seeds 1 / 4): a two-camera verdict,
+    # as on real phone-video frames (ratio 3.15, the frontal group's fx 6806). That group cannot observe
+    # its own intrinsics (the observability gate's sigma5 / sigma1 < 1e-4), so the split is not judged.
+    K = np.array([[1060.0, 0.0, 480.0], [0.0, 1000.0, 270.0], [0.0, 0.0, 1.0]])
+    dist, size = np.array([0.05, -0.1, 0.0, 0.0, 0.0]), (960, 540)
+    tilted = synthesize_session(K, dist, size, 6, seed=seed, tilt_deg=(25.0, 40.0), distance_m=(0.45, 0.7))
+    frontal = synthesize_session(K, dist, size, 8, seed=100 + seed, tilt_deg=(0.0, 3.0), distance_m=(0.45, 0.7))
+    obj = [*tilted.object_points_per_view, *frontal.object_points_per_view]
+    img = [*tilted.image_points_per_view, *frontal.image_points_per_view]
+    assert check_one_camera(obj, img, size, "k1k2") is None
+    gate = one_camera_gate(obj, img, [f"v{i}" for i in range(len(obj))], size)
+    assert gate.passed and "observe their own intrinsics" in gate.message
+
+
 def test_a_split_that_does_not_settle_is_scored_on_the_groups_it_was_solved_from(monkeypatch) -> None:
     """Stopped after MAX_ROUNDS, the split handed to the held-out test must be the one the two solves
     were made from (it once handed over the next assignment: "the fit has 47 views but 48 were given")."""
