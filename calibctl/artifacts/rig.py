@@ -117,6 +117,10 @@ class RigMember(Document):
         description="K used by the rig solve, px")
     dist_coeffs: list[float] = Field(description="distortion used, OpenCV order")
     refined: bool = Field(description="true when the rig solve refined these intrinsics")
+    lens: Literal["pinhole", "fisheye"] = Field(
+        "pinhole", exclude_if=lambda lens: lens == "pinhole",
+        description="pinhole (OpenCV's distortion order) or fisheye (equidistant Kannala-Brandt, dist_coeffs k1..k4); "
+                    "written only for fisheye, so older documents and their hashes are unchanged")
 
 
 class RigEdge(Document):

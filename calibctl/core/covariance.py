@@ -56,8 +56,14 @@ class IntrinsicCovariance:
 
 
 def intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distortion: Sequence[str],
-                      aspect: float | None) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Columns of a cv2.projectPoints Jacobian for the free intrinsics, and their names (fy tied when aspect)."""
+                      aspect: float | None, distortion_order: Sequence[str] | None = None,
+                      ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Columns of a cv2.projectPoints Jacobian for the free intrinsics, and their names (fy tied when aspect).
+
+    ``distortion_order`` names J's distortion columns (from column 10) when they are not OpenCV's pinhole
+    order, e.g. a fisheye Jacobian rearranged as [rvec tvec fx fy cx cy k1 k2 k3 k4].
+    """
+    dist_column = _DIST_COLUMN if distortion_order is None else {n: i for i, n in enumerate(distortion_order)}
     cols, names = [], []
     for name in free_intrinsics:
         if name == "fx":
@@ -71,7 +77,7 @@ def intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distor
             cols.append(J[:, 8] if name == "cx" else J[:, 9])
             names.append(name)
     for name in free_distortion:
-        cols.append(J[:, 10 + _DIST_COLUMN[name]])
+        cols.append(J[:, 10 + dist_column[name]])
         names.append(name)
     return np.stack(cols, axis=1), tuple(names)
 

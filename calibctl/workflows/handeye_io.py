@@ -32,6 +32,7 @@ from calibctl.workflows import diagnostics_io as dio
 QUATERNION_NORM_TOL = 1e-3  # a CSV rounded to 6 decimals is ~1e-6 off; an unnormalised average is far more
 ORTHONORMAL_TOL = 1e-4
 UNIT_RATIO_MAX = 50.0  # rigidly attached sensors move about as far as each other; mm vs m is 1000x
+LEVER_ARM_MAX_M = 5.0  # no two sensors on one rigid body (arm, vehicle) are further apart than this
 ROBOT_REACH_MAX_M = 5.0  # a base->gripper translation beyond this is millimetres, not an arm
 TIME_COLUMNS = ("t_s", "a_t_s", "b_t_s")
 
@@ -125,17 +126,30 @@ def read_timestamps(table: dio.Table, max_skew_s: float) -> np.ndarray | None:
 
 
 def check_units(motions: Motions, path: Path, names: tuple[str, str] = ("a", "b")) -> None:
-    """Rigidly attached sensors move about equally far; a 1000x ratio is millimetres against metres."""
+    """Rigidly attached sensors move about equally far; a 1000x ratio is millimetres against metres.
+
+    Unless a lever arm explains it: with A X = X B, ``| |t_A| - |t_B| | <= 2 sin(theta/2) |t_X|`` for a
+    motion turning by theta, so a sensor turning about its own origin (a robot arm rotating about its
+    tool point: t_A ~ 0) moves far less than one on a lever arm. The verdict is millimetres only when
+    most moving motions differ by more than a lever arm of ``LEVER_ARM_MAX_M`` could make them.
+    """
     norm_a, norm_b = np.linalg.norm(motions.t_A_m, axis=1), np.linalg.norm(motions.t_B_m, axis=1)
     moving = (norm_a > 0) & (norm_b > 0)
     if not moving.any():
         return
     ratio = float(np.median(norm_a[moving] / norm_b[moving]))
-    if not 1.0 / UNIT_RATIO_MAX <= ratio <= UNIT_RATIO_MAX:
-        big = names[0] if ratio > 1 else names[1]
-        raise InputError(f"{path.name}: {names[0]}'s motions translate {ratio:.4g}x as far as {names[1]}'s "
-                         f"(median): {big}'s translations look like millimetres (or another unit), not metres",
-                         hint="convert every translation to metres")
+    if 1.0 / UNIT_RATIO_MAX <= ratio <= UNIT_RATIO_MAX:
+        return
+    theta = np.array([se3.rotation_angle_rad(R) for R in motions.R_A])
+    lever_arm_reach_m = 2.0 * np.sin(np.minimum(theta, np.pi) / 2.0) * LEVER_ARM_MAX_M
+    unexplained = np.abs(norm_a - norm_b) > lever_arm_reach_m
+    if np.count_nonzero(unexplained & moving) * 2 <= np.count_nonzero(moving):
+        return
+    big = names[0] if ratio > 1 else names[1]
+    raise InputError(f"{path.name}: {names[0]}'s motions translate {ratio:.4g}x as far as {names[1]}'s "
+                     f"(median), more than a lever arm of up to {LEVER_ARM_MAX_M:g} m explains: {big}'s "
+                     "translations look like millimetres (or another unit), not metres",
+                     hint="convert every translation to metres")
 
 
 def read_motions(path: Path, shape: str, max_skew_s: float) -> tuple[Motions, np.ndarray | None, dio.Table]:

@@ -6,7 +6,8 @@ camera = left, second = right) with ``R, T`` = T_right_left (x_right = R x_left 
 (CALIB_ZERO_DISPARITY, alpha -1): rectification R1/R2 and projections P1/P2, the right camera's
 P[0, 3] = Tx = -fx' * baseline_m, as ROS stereo_image_proc expects (a vertical pair is refused for
 ROS: stereo_image_proc assumes horizontal rectification). Kalibr: ``T_cn_cnm1`` maps camera n-1's
-frame into camera n's, cameras in tree order; pinhole + radtan (k1 k2 p1 p2) only.
+frame into camera n's, cameras in tree order; pinhole + radtan (k1 k2 p1 p2), or pinhole + equidistant
+(k1..k4) for a fisheye member (ROS: distortion_model equidistant).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def urdf_rpy(R: np.ndarray) -> list[float]:
 
 
 def _ros_info(m: MemberIntrinsics, R: np.ndarray, P: np.ndarray) -> dict[str, object]:
-    model, dist = distortion_for([float(v) for v in np.ravel(m.dist_coeffs)])
+    model, dist = distortion_for([float(v) for v in np.ravel(m.dist_coeffs)], "fisheye" if m.lens == "fisheye" else None)
     return {"image_width": int(m.image_size[0]), "image_height": int(m.image_size[1]), "camera_name": camera_name_for(m.name),
             "camera_matrix": {"rows": 3, "cols": 3, "data": np.asarray(m.camera_matrix, float).ravel().tolist()},
             "distortion_model": model, "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
@@ -112,12 +113,13 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
     for i, name in enumerate(tree.frames):
         m = by_name[name]
         dist = [float(v) for v in np.ravel(m.dist_coeffs)]
-        if len(dist) > 5 or (len(dist) == 5 and dist[4] != 0.0):
+        if m.lens != "fisheye" and (len(dist) > 5 or (len(dist) == 5 and dist[4] != 0.0)):
             raise InputError(f"camera {name}: Kalibr's radtan model has no k3 or rational terms",
                              hint="calibrate the members with --model k1k2 for a Kalibr export")
         K = np.asarray(m.camera_matrix, float)
         entry: dict[str, object] = {"camera_model": "pinhole", "intrinsics": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
-                                    "distortion_model": "radtan", "distortion_coeffs": dist[:4],
+                                    "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
+                                    "distortion_coeffs": dist[:4],
                                     "resolution": [int(m.image_size[0]), int(m.image_size[1])],
                                     "rostopic": f"/{name}/image_raw"}
         if previous is not None:

@@ -100,7 +100,7 @@ def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec
     sol = solve_intrinsics([points[ids] for ids, _ in views], [px for _, px in views], size, m)
     cov = sol.covariance.covariance if sol.covariance is not None else None
     return MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, size, m.free_intrinsics, m.free_distortion,
-                            sol.aspect_ratio, cov)
+                            sol.aspect_ratio, cov, m.kind)
 
 
 def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],

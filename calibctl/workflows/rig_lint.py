@@ -137,7 +137,7 @@ def rollback(settings: Settings, rig: str, to_version: int, reason: str,
 
 def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
     """Members, the cameras' tree (stereo formats) and the whole tree with hand-eye edges (tf, URDF)."""
-    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size)
+    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
                for m in cal.members]
     edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
     cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))

@@ -45,7 +45,7 @@ from calibctl.core.extrinsics.rig_frames import MIN_SHARED_VIEWS, match_frames, 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_holdout
-from calibctl.core.solve import MODELS
+from calibctl.core.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.core.views import BoardView
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows import rig_handeye
@@ -157,13 +157,15 @@ def member_intrinsics(art: CalibrationArtifact) -> MemberIntrinsics:
     model = MODELS.get(art.model.name)
     free_int = tuple(model.free_intrinsics) if model else ("fx", "fy", "cx", "cy")
     free_dist = tuple(model.free_distortion) if model else ()
+    lens = "fisheye" if model is not None and model.kind == "fisheye" else "pinhole"
     K = np.array(art.camera_matrix, dtype=np.float64)
     aspect = float(K[0, 0] / K[1, 1]) if (model is None or model.fx_tied_to_fy) else None
-    _, names = intrinsic_columns(np.zeros((2, 18)), free_int, free_dist, aspect)
+    _, names = intrinsic_columns(np.zeros((2, 18)), free_int, free_dist, aspect,
+                                 FISHEYE_DIST_NAMES if lens == "fisheye" else None)
     sig = art.stdev.sigma
     cov = np.diag([sig[n] ** 2 for n in names]) if all(n in sig for n in names) else None
     return MemberIntrinsics(art.serial, K, np.array(art.dist_coeffs, dtype=np.float64), art.image_size,
-                            free_int, free_dist, aspect, cov)
+                            free_int, free_dist, aspect, cov, lens)
 
 
 def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store: object) -> tuple[RigViews, dict]:
@@ -214,7 +216,8 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
             members=[RigMember(serial=c, version=arts[c].version, content_sha256=arts[c].content_sha256,
                                image_size=arts[c].image_size,
                                camera_matrix=tuple(map(tuple, np.asarray(m.camera_matrix).tolist())),
-                               dist_coeffs=np.asarray(m.dist_coeffs).tolist(), refined=refine_intrinsics)
+                               dist_coeffs=np.asarray(m.dist_coeffs).tolist(), refined=refine_intrinsics,
+                               lens="fisheye" if m.lens == "fisheye" else "pinhole")
                      for c, m in zip(order, solution.members, strict=True)],
             edges=[RigEdge(parent=e.parent, child=e.child, T_parent_child=tuple(map(tuple, e.T_parent_child.tolist())),
                            covariance=e.covariance.tolist(), translation_mm=e.translation_mm,

@@ -150,6 +150,41 @@ def test_millimetres_where_metres_are_expected(tmp_path: Path) -> None:
     _expect_input_error(handeye(bad), "a's translations look like millimetres")
 
 
+def _tool_point_log(path: Path) -> tuple[Path, np.ndarray]:
+    """Poses of an arm that mostly turns about its own tool point (a's translation unchanged), as the
+    real RWHE-Calib kuka_2 log does, with a camera 0.14 m off that point; b = a's pose times X (Y = I)."""
+    X = se3.transform(se3.rotation_from_rotvec(np.radians([3.0, -2.0, 88.0])), np.array([0.014, -0.108, -0.082]))
+    rng = np.random.default_rng(7)
+    T = se3.transform(np.eye(3), np.array([-0.57, 1.13, 0.61]))
+    poses = [T]
+    for i in range(18):
+        step = se3.transform(se3.rotation_from_rotvec(rng.normal(size=3) * np.radians(12.0)),
+                             rng.normal(size=3) * (0.06 if i % 3 == 2 else 2e-6))  # the controller's micrometres
+        T = T @ step
+        poses.append(T)
+    columns = ["a_qw", "a_qx", "a_qy", "a_qz", "a_tx_m", "a_ty_m", "a_tz_m",
+               "b_qw", "b_qx", "b_qy", "b_qz", "b_tx_m", "b_ty_m", "b_tz_m"]
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(columns)
+        for T_wa_a in poses:
+            T_wb_b = T_wa_a @ X
+            writer.writerow([repr(float(v)) for v in (*se3.quaternion_from_rotation(T_wa_a[:3, :3]),
+                                                      *T_wa_a[:3, 3],
+                                                      *se3.quaternion_from_rotation(T_wb_b[:3, :3]), *T_wb_b[:3, 3])])
+    return path, X
+
+
+def test_an_arm_turning_about_its_tool_point_is_not_taken_for_millimetres(tmp_path: Path) -> None:
+    # Two of three motions turn a about its own origin: a moves micrometres while b, on a 0.14 m lever
+    # arm, moves centimetres; the median translation ratio is ~1e-4, which is no unit error.
+    log, X = _tool_point_log(tmp_path / "tcp.csv")
+    result = handeye(log, "--json")
+    assert result.exit_code == 0, result.output
+    got = json.loads(result.stdout)["transform"]["translation_m"]
+    np.testing.assert_allclose(got, X[:3, 3], atol=1e-4)
+
+
 def test_rotation_vector_in_degrees(tmp_path: Path) -> None:
     def to_rotvec_deg(i, row):
         q = np.array([float(row.pop(f"b_q{c}")) for c in "wxyz"])

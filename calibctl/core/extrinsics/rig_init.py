@@ -1,6 +1,7 @@
 """Starting point of the joint rig solve: per-view PnP, then a spanning tree of the camera graph.
 
-Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics. A pair's relative
+Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics (core.solve.fit_pose:
+through the fisheye model for a fisheye member). A pair's relative
 pose is the chordal mean over the frames both saw (rotation matrices averaged and projected back onto
 SO(3), translations averaged). Cameras are reached from the root breadth-first along the pairs with
 the most shared frames, so a weakly linked pair is used only when nothing better connects.
@@ -10,27 +11,27 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import cv2
 import numpy as np
 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
+from calibctl.core.solve import DEFAULT_MODEL, fit_pose
 from calibctl.errors import NumericalError
 
 
 def view_poses(views: RigViews, members: Sequence[MemberIntrinsics]) -> dict[tuple[int, int], np.ndarray]:
-    """(frame, camera) -> (4, 4) T_cam_board from solvePnP with the member's intrinsics."""
+    """(frame, camera) -> (4, 4) T_cam_board from solvePnP (fit_pose) with the member's intrinsics."""
     out = {}
     for f, row in enumerate(views.views):
         for c, view in enumerate(row):
             if view is None:
                 continue
             m = members[c]
-            ok, rvec, tvec = cv2.solvePnP(view.object_points(views.model_points_m), view.corners_px,
-                                          m.camera_matrix, m.dist_coeffs, flags=cv2.SOLVEPNP_ITERATIVE)
-            if ok and np.isfinite(rvec).all() and np.isfinite(tvec).all():
-                out[(f, c)] = pose_to_T(np.concatenate([rvec.ravel(), tvec.ravel()]))
+            pose = fit_pose(view.object_points(views.model_points_m), view.corners_px, m.camera_matrix,
+                            m.dist_coeffs, "fisheye" if m.lens == "fisheye" else DEFAULT_MODEL)
+            if pose is not None:
+                out[(f, c)] = pose_to_T(np.concatenate([np.ravel(pose[0]), np.ravel(pose[1])]))
     return out
 
 

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.covariance import intrinsic_columns
-from calibctl.core.solve import DISTORTION_NAMES
+from calibctl.core.solve import DISTORTION_NAMES, FISHEYE_DIST_NAMES
 from calibctl.core.views import BoardView
 
 _K_INDEX = {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}
@@ -37,6 +37,8 @@ class MemberIntrinsics:
         aspect: fx / fy held fixed by the model, or None.
         covariance: (p, p) covariance of those free parameters in ``intrinsic_columns`` order (px^2,
             unitless^2), or None when unknown (then fixed intrinsics are treated as exact).
+        lens: "pinhole" (cv2.projectPoints, OpenCV's distortion order) or "fisheye" (the equidistant
+            Kannala-Brandt lens of cv2.fisheye: dist_coeffs are k1..k4).
     """
 
     name: str
@@ -47,6 +49,12 @@ class MemberIntrinsics:
     free_distortion: tuple[str, ...] = ("k1", "k2")
     aspect: float | None = 1.0
     covariance: np.ndarray | None = None
+    lens: str = "pinhole"
+
+    @property
+    def distortion_order(self) -> tuple[str, ...]:
+        """Names of dist_coeffs in order."""
+        return FISHEYE_DIST_NAMES if self.lens == "fisheye" else DISTORTION_NAMES
 
     @property
     def n_params(self) -> int:
@@ -67,10 +75,10 @@ class MemberIntrinsics:
                 K[_K_INDEX[name]] += delta[i]
             i += 1
         for name in self.free_distortion:
-            dist[DISTORTION_NAMES.index(name)] += delta[i]
+            dist[self.distortion_order.index(name)] += delta[i]
             i += 1
         return MemberIntrinsics(self.name, K, dist, self.image_size, self.free_intrinsics,
-                                self.free_distortion, self.aspect, self.covariance)
+                                self.free_distortion, self.aspect, self.covariance, self.lens)
 
 
 @dataclass(frozen=True)
@@ -144,6 +152,21 @@ class NormalEquations:
     residuals_px: dict[tuple[int, int], np.ndarray]  # (frame, camera) -> (N, 2) observed - projected
 
 
+def project_member(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, member: MemberIntrinsics
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 1, 2) px of (N, 3) board points at T_cam_board (rvec, tvec) through the member's lens, and the
+    (2N, 10 + d) Jacobian in cv2.projectPoints' column order [rvec tvec fx fy cx cy dist...], distortion
+    columns in ``member.distortion_order`` (cv2.fisheye.projectPoints' [fx fy cx cy k1..k4 rvec tvec alpha]
+    rearranged)."""
+    if member.lens != "fisheye":
+        proj, J = cv2.projectPoints(obj, rvec, tvec, member.camera_matrix, member.dist_coeffs)
+        return proj, J
+    D = np.asarray(member.dist_coeffs, np.float64).reshape(-1)[:4]
+    proj, J = cv2.fisheye.projectPoints(np.asarray(obj, np.float64).reshape(-1, 1, 3), np.asarray(rvec, np.float64).reshape(3, 1),
+                                        np.asarray(tvec, np.float64).reshape(3, 1), member.camera_matrix, D)
+    return proj, np.hstack([J[:, 8:14], J[:, 0:8]])
+
+
 def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose_root_board: np.ndarray,
                          member: MemberIntrinsics) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Projection of one (frame, camera) and its Jacobian blocks.
@@ -158,8 +181,9 @@ def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose
     else:
         rc, tc = pose_cam_root[:3].reshape(3, 1), pose_cam_root[3:].reshape(3, 1)
         r3, t3, dr3dr1, _, dr3dr2, _, dt3dr1, dt3dt1, dt3dr2, dt3dt2 = cv2.composeRT(rb, tb, rc, tc)
-    proj, J = cv2.projectPoints(obj, r3, t3, member.camera_matrix, member.dist_coeffs)
-    J_int, _ = intrinsic_columns(J, member.free_intrinsics, member.free_distortion, member.aspect)
+    proj, J = project_member(obj, r3, t3, member)
+    J_int, _ = intrinsic_columns(J, member.free_intrinsics, member.free_distortion, member.aspect,
+                                 member.distortion_order)
     if pose_cam_root is None:
         return proj.reshape(-1, 2), J[:, :6], None, J_int
     d_r3, d_t3 = J[:, :3], J[:, 3:6]

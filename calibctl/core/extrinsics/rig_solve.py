@@ -3,8 +3,12 @@
 Solvers
     Two cameras: cv2.stereoCalibrateExtended (CALIB_FIX_INTRINSIC, or the member's model flags with
     CALIB_USE_INTRINSIC_GUESS under ``refine_intrinsics``) on the frames both cameras saw, corners
-    restricted to the ids both detected. Three or more: calibctl's joint Levenberg-Marquardt over
-    every camera pose and board pose (rig_problem). cv2.calibrateMultiview exists in the OpenCV 5.0.0
+    restricted to the ids both detected. Three or more, or any fisheye member: calibctl's joint
+    Levenberg-Marquardt over every camera pose and board pose (rig_problem; a fisheye member projects
+    through cv2.fisheye.projectPoints). cv2.fisheye.stereoCalibrate (CALIB_FIX_INTRINSIC) on the real
+    sourishg fisheye pair with calibctl's intrinsics lands on the same baseline to 1e-9 mm, but gives
+    no covariance and cannot refine through calibctl's models; left to fit the lenses itself it
+    asserts in InitExtrinsics ("fabs(norm_u1) > 0") on that pair. cv2.calibrateMultiview exists in the OpenCV 5.0.0
     wheel but was not usable: it re-estimates the intrinsics even under CALIB_FIX_INTRINSIC,
     refuses CALIB_USE_INTRINSIC_GUESS ("camera matrix is not 3x3" for 3x3 inputs), and on a
     seeded 3-camera synthetic rig (0.2 px noise) missed a 2.9 deg rotation by 0.25 deg.
@@ -241,7 +245,8 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         raise NumericalError(f"only {len(views.frames)} frame(s) show the board to two cameras at once",
                              hint="capture views that at least two cameras see together")
     members = list(members)
-    use_opencv = solver == "opencv" or (solver == "auto" and len(views.cameras) == 2)
+    pinhole = all(m.lens != "fisheye" for m in members)  # cv2.stereoCalibrateExtended knows no fisheye lens
+    use_opencv = pinhole and (solver == "opencv" or (solver == "auto" and len(views.cameras) == 2))
     if use_opencv and len(views.cameras) == 2:
         cam_poses, board_poses, members = _stereo(views, members, refine_intrinsics, get_model(model).flags)
         name = "cv2.stereoCalibrateExtended"
