@@ -99,6 +99,10 @@ def import_profile(args: list[str], checkout: Path, cwd: Path) -> dict[str, floa
     return dict(per_package)
 
 
+# What `calibctl calibrate` must import whatever its own code does: OpenCV and numpy (as the plain script),
+# the store (sqlalchemy's ORM), the artifact contract (pydantic), the CLI (typer) and its output (rich).
+STACK_IMPORTS = "import cv2, numpy, sqlalchemy.orm, pydantic, typer, rich"
+
 CALIBRATE_STAGES = (  # (function, label): cumulative CPU of one profiled `calibctl calibrate`
     ("calibctl/__main__.py:1(<module>)", "whole process after interpreter start"),
     ("calibctl/cli/main.py:1(<module>)", "import of the CLI (typer, rich, command modules)"),
@@ -168,7 +172,8 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
     print("## `calibctl calibrate` of 20 images at 1280x960 against the plain OpenCV script\n")
     print(f"Load average before: {_load()}\n")
     print("| path | wall best / median ms | CPU best / median ms |\n|---|---|---|")
-    runs = [("plain OpenCV script, own process", plain, None, REPO)]
+    runs = [("plain OpenCV script, own process", plain, None, REPO),
+            (f"imports alone: `python -c '{STACK_IMPORTS}'`", ["-c", STACK_IMPORTS], None, REPO)]
     for name, checkout in checkouts.items():
         runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh, checkout),
                  (f"`calibctl --version` ({name}: start-up with cv2 and numpy)", ["-m", "calibctl", "--version"], None,
@@ -180,7 +185,9 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
         print(f"| {label} | {min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f} | "
               f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f} |")
     pw, pc = rows[runs[0][0]]
-    print()
+    sw, _ = rows[runs[1][0]]
+    print(f"\n- the imports calibrate cannot do without (the design fixes sqlalchemy, pydantic, typer and rich) take "
+          f"**{sw / pw:.2f}x** the plain script's whole wall time, before calibctl's own code runs")
     for name in checkouts:
         cw, cc = rows[f"`calibctl calibrate`, own process ({name})"]
         print(f"- calibctl ({name}) / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each)")

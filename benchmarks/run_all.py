@@ -51,6 +51,7 @@ BENCHES = (
     Bench("bench_tilt", "bench_tilt.py", ("--sessions", "20", "--render", "5"), ("--sessions", "5", "--render", "0")),
     Bench("bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")),
     Bench("bench_startup", "bench_startup.py", ("--repeats", "7"), ("--repeats", "2")),
+    Bench("bench_import_overlap", "bench_import_overlap.py", ("--repeats", "5"), ("--repeats", "1")),
     Bench("bench_store_scale", "bench_store_scale.py", (), ()),
     Bench("bench_report", "bench_report.py", ("--repeats", "5"), ("--repeats", "2")),
     Bench("bench_fisheye", "bench_fisheye.py", ("30",), ("6",)),
