@@ -344,7 +344,8 @@ def rollback(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
-    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf or kalibr.")] = "json",
+    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf (a <robot> ROS loads), "
+                                     "urdf-joints (the joints alone, to paste into your URDF) or kalibr.")] = "json",
     out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file.", show_default=False)] = None,
     pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
                                              "second member).", show_default=False)] = None,
@@ -356,7 +357,8 @@ def export(
 ) -> None:
     """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr.
 
-    tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
+    urdf is a complete <robot name="RIG"> (a link per frame, a fixed joint per edge) that check_urdf and
+    robot_state_publisher load; urdf-joints is the joints alone, as before. tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
     flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
     from calibctl.workflows import rig_lint
 

@@ -44,7 +44,7 @@ from calibctl.workflows import rig_handeye
 from calibctl.workflows.lint import LintResult, lint_artifact
 from calibctl.workflows.records import check_rollback_request, open_store
 
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "kalibr")
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr")
 
 
 def parse_rig_ref(ref: str) -> tuple[str, int | None]:
@@ -213,6 +213,8 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
     elif fmt == "tf":
         text = header + rig_exports.tf_static(full_tree)
     elif fmt == "urdf":
+        text = rig_exports.urdf_robot(full_tree, cal.rig, f"calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}")
+    elif fmt == "urdf-joints":
         text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
     elif fmt == "kalibr":
         text = header + rig_exports.kalibr_camchain(members, tree)

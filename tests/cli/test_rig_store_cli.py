@@ -15,6 +15,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.workflows.rig_folders_data import rendered_rig
 from tests.workflows.test_rig_store_flow import WHO, _truth_artifact
+from tests.workflows.urdf_check import loadable_urdf
 
 RUNNER = CliRunner()
 
@@ -65,6 +66,11 @@ def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
     assert r.exit_code == 0 and (tmp_path / "s.yaml").is_file()
     r = invoke(db, "rig", "export", "R1", "--format", "tf")
     assert r.exit_code == 0 and "child_frame_id: CAM1" in r.output
+    r = invoke(db, "rig", "export", "R1", "--format", "urdf")
+    assert r.exit_code == 0 and loadable_urdf(r.output)[:2] == ("R1", "CAM0")
+    assert r.output.startswith('<?xml version="1.0"?>\n<!-- calibctl rig R1@1 sha256 ')
+    r = invoke(db, "rig", "export", "R1", "--format", "urdf-joints")
+    assert r.exit_code == 0 and "<robot" not in r.output and '<joint name="CAM0_to_CAM1" type="fixed">' in r.output
 
 
 def test_a_stale_member_fails_rig_lint_with_exit_1(db, rig2):
