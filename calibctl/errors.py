@@ -74,6 +74,11 @@ class VerdictFailed(CalibctlError):
     exit_code = EXIT_VERDICT_FAIL
 
 
+class InconsistentDataError(VerdictFailed):
+    """The tool measured the input and found it contradicts itself (a rig's frames that no rigid,
+    synchronised set of cameras could have taken): a verdict on the data, exit 1, not a failure to run."""
+
+
 class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
 

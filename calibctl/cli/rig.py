@@ -36,8 +36,13 @@ def render_run(doc: dict[str, Any]) -> None:
     g = doc["gate"]
     say(f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
         + (f" -> {g['hint']}" if g["hint"] else ""))
-    if "tree" not in doc:
-        return
+    if "tree" in doc:
+        render_solution(doc)
+    render_verdict(doc)
+
+
+def render_solution(doc: dict[str, Any]) -> None:
+    """The tree, fit and held-out numbers of a solved ``rig_folders.run_json``."""
     say(f"tree from {doc['root']} ({doc['solver']}):")
     for e in doc["tree"]:
         say(f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
@@ -58,6 +63,15 @@ def render_run(doc: dict[str, Any]) -> None:
             f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}")
 
 
+def render_verdict(doc: dict[str, Any]) -> None:
+    """The verdict lines of ``rig_folders.run_json`` (after the gate, when the rig was solved or judged)."""
+    if "verdict" not in doc:
+        return
+    say(f"verdict: {doc['verdict']}")
+    for f in doc["lint"]:
+        say(f"  {f['severity']} {f['rule']}: {f['message']}" + (f" -> {f['fix']}" if f.get("fix") else ""))
+
+
 @rig_app.command("solve-folders")
 def solve_folders(
     ctx: typer.Context,
@@ -72,15 +86,21 @@ def solve_folders(
     model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = "k1k2",
     refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")] = False,
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
-    export_dir: Annotated[Path | None, typer.Option("--export-dir", help="Write the robot exports here.",
-                                                    show_default=False)] = None,
+    export_dir: Annotated[Path | None, typer.Option("--export-dir", help="Write the robot exports here (only when "
+                                                    "the verdict passes).", show_default=False)] = None,
+    allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Write the exports of a failed verdict "
+                                                 "too (to inspect them; a robot must not load them).")] = False,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
-    """Solve a rig from per-camera folders (no store): exit 0 solved, 1 rig gate failed, 2 could not solve.
+    """Solve a rig from per-camera folders (no store): exit 0 pass, 1 fail (rig gate, or the verdict a
+    stored rig solve would give), 2 could not solve.
 
     Each camera is first calibrated on its own photos; then the extrinsics (cv2.stereoCalibrateExtended
     for two cameras, calibctl's joint LM for more), their one-sigma, k-fold held-out epipolar error and
-    rectified rows per pair, and loop closure for three or more cameras.
+    rectified rows per pair, and loop closure for three or more cameras. The verdict: the rig lint rules
+    that need no store (epipolar, loop-closure; the station's limits), each camera's model-misfit (a
+    circular fisheye under the default k1k2: solve with --model fisheye), and rig-rigid (frames that no
+    rigid, synchronised rig could have taken).
     """
     from calibctl.core.board_spec import BoardSpec
     from calibctl.workflows import rig_folders
@@ -94,10 +114,13 @@ def solve_folders(
         spec = BoardSpec.chessboard(cols, rows, square_mm / 1e3)
     except ValueError as exc:
         raise UsageError(f"bad board: {exc}") from exc
-    run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views)
+    limits = state(ctx).settings().lint
+    run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views,
+                                        limits=limits)
     doc = rig_folders.run_json(run)
     exports: list[str] = []
-    if export_dir is not None and run.solution is not None:
+    withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected
+    if export_dir is not None and run.solution is not None and not withheld:
         from calibctl.workflows.rig_exports import write_exports
 
         exports = [str(p) for p in write_exports(run.solution, export_dir)]
@@ -108,7 +131,10 @@ def solve_folders(
         render_run(doc)
         for path in exports:
             say(f"  wrote {path}")
-    if not run.gate.passed:
+        if withheld:
+            say(f"  exports not written to {export_dir}: the verdict failed (--allow-rejected writes them to "
+                "inspect; a robot must not load them)")
+    if not run.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
@@ -318,7 +344,8 @@ def rollback(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
-    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf or kalibr.")] = "json",
+    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf (a <robot> ROS loads), "
+                                     "urdf-joints (the joints alone, to paste into your URDF) or kalibr.")] = "json",
     out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file.", show_default=False)] = None,
     pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
                                              "second member).", show_default=False)] = None,
@@ -330,7 +357,8 @@ def export(
 ) -> None:
     """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr.
 
-    tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
+    urdf is a complete <robot name="RIG"> (a link per frame, a fixed joint per edge) that check_urdf and
+    robot_state_publisher load; urdf-joints is the joints alone, as before. tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
     flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
     from calibctl.workflows import rig_lint
 

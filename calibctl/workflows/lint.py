@@ -205,7 +205,7 @@ def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | Non
 def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.fit_rms_px is None or facts.detector_rms_px is None or facts.model_name is None:
         return []  # only a calibctl solve records what the detector delivered
-    return _adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
+    return adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
                                                *facts.fit_ring_rms_px))
 
 
@@ -261,7 +261,7 @@ def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
     ]
 
 
-def _adopt(check: lens_checks.Finding) -> list[Finding]:
+def adopt(check: lens_checks.Finding) -> list[Finding]:
     """A failed core check becomes a finding; a passed one is not reported."""
     if check.passed:
         return []
@@ -279,7 +279,7 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
                 threshold=limits.outer_ring_ratio_max,
             )
         ]
-    return _adopt(
+    return adopt(
         lens_checks.check_outer_ring_holdout(
             facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max
         )
@@ -320,20 +320,20 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
             )
         ]
     K, size = facts.camera_matrix, facts.image_size
-    findings = _adopt(lens_checks.check_image_size(size, K))
+    findings = adopt(lens_checks.check_image_size(size, K))
     if size is not None and not findings:
-        findings += _adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
-    findings += _adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px,
+        findings += adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
+    findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px,
                                                   facts.fit_rms_px, facts.detector_rms_px))
     findings += _outer_ring_rule(facts, limits)
     findings += _provenance_rule(facts)
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
-    findings += _adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
+    findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
         foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
                     else lens_checks.check_distortion_foldover)
-        findings += _adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
+        findings += adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
     return findings
 
 

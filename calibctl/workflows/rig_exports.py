@@ -1,5 +1,5 @@
 """What a robot loads from a solved rig: ROS stereo camera_info pair, OpenCV stereo FileStorage,
-tf_static YAML, a URDF joint snippet and a Kalibr camchain.
+tf_static YAML, a URDF robot (or its joints alone, to paste into another URDF) and a Kalibr camchain.
 
 Frames and units: the tree's ``T_root_cam`` (metres). ROS and OpenCV files describe the pair (first
 camera = left, second = right) with ``R, T`` = T_right_left (x_right = R x_left + T) and cv2.stereoRectify
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import cv2
 import numpy as np
@@ -95,14 +96,24 @@ def tf_static(tree: RigTree) -> str:
 
 
 def urdf_joints(tree: RigTree) -> str:
-    """Fixed URDF joints, one per tree edge."""
+    """Fixed URDF joints, one per tree edge: a fragment to paste into a robot that declares the links."""
     lines = []
     for e in tree.edges:
         xyz = " ".join(f"{v:.9f}" for v in e.T_parent_child[:3, 3])
         rpy = " ".join(f"{v:.9f}" for v in urdf_rpy(e.T_parent_child[:3, :3]))
-        lines += [f'<joint name="{e.parent}_to_{e.child}" type="fixed">', f'  <parent link="{e.parent}"/>',
-                  f'  <child link="{e.child}"/>', f'  <origin xyz="{xyz}" rpy="{rpy}"/>', "</joint>"]
+        lines += [f"<joint name={quoteattr(f'{e.parent}_to_{e.child}')} type=\"fixed\">",
+                  f"  <parent link={quoteattr(e.parent)}/>", f"  <child link={quoteattr(e.child)}/>",
+                  f'  <origin xyz="{xyz}" rpy="{rpy}"/>', "</joint>"]
     return "\n".join(lines) + "\n"
+
+
+def urdf_robot(tree: RigTree, name: str, comment: str | None = None) -> str:
+    """A complete URDF document: ``<robot name>`` with a ``<link>`` per frame of the tree (its root the one
+    root link) and ``urdf_joints``' fixed joints, what check_urdf, urdf_parser_py and robot_state_publisher
+    load as they are. ``comment`` (no ``--``) goes after the XML declaration."""
+    header = '<?xml version="1.0"?>\n' + (f"<!-- {comment} -->\n" if comment else "")
+    links = "".join(f"<link name={quoteattr(frame)}/>\n" for frame in tree.frames)
+    return f"{header}<robot name={quoteattr(name)}>\n{links}{urdf_joints(tree)}</robot>\n"
 
 
 def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
@@ -130,8 +141,9 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
 
 
-def write_exports(solution: RigSolution, out: Path, force: bool = True) -> list[Path]:
-    """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera."""
+def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig") -> list[Path]:
+    """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera;
+    ``robot`` names the URDF robot."""
     with file_errors("create the export folder", out):
         out.mkdir(parents=True, exist_ok=True)
     members, tree = solution.members, solution.tree
@@ -139,7 +151,7 @@ def write_exports(solution: RigSolution, out: Path, force: bool = True) -> list[
     T_right_left = solution.T_a_b(1, 0)
     written = []
     texts = {f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
-             "tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_joints(tree),
+             "tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_robot(tree, robot),
              "camchain.yaml": kalibr_camchain(members, tree)}
     try:
         info_left, info_right = ros_stereo_pair(left, right, T_right_left)

@@ -6,16 +6,27 @@ digits in the file name: core.extrinsics.rig_frames); detect and classify every 
 per-image outcomes; calibrate each camera on its own accepted photos (core.solve, full covariance)
 unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
 held-out numbers and, for three or more cameras, pairwise loop closure.
+
+Then the verdict the stored path gives (``rig solve`` stores it as the version's lint): the rig lint
+rules that need no store (workflows.rig_lint.solved_rig_findings: ``epipolar``, ``loop-closure``), each
+self-calibrated member's ``model-misfit`` (core.model_fit, the rule lint applies to a stored member:
+fit RMS far above what the detector delivers), and ``rig-rigid`` when the frames contradict each other
+(core InconsistentDataError: not rigid or not synchronised). The stored path's other rules need the
+store (``rig-stale-member``, ``baseline-design`` against a registered design, a member's stored record).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from calibctl.artifacts.lint import Finding, has_errors
+from calibctl.artifacts.rig import RigLoop, RigPair
+from calibctl.config import LintThresholds
+from calibctl.core import model_fit
 from calibctl.core.board_spec import BoardSpec
 from calibctl.core.extrinsics.rig_frames import (
     MIN_SHARED_VIEWS,
@@ -37,17 +48,29 @@ from calibctl.core.gates import GateResult
 from calibctl.core.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
 from calibctl.core.solve import get_model, solve_intrinsics
 from calibctl.core.views import BoardView
-from calibctl.errors import CalibctlError, InputError, NumericalError, UsageError
+from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows import capture_sources
+from calibctl.workflows.lint import adopt
+from calibctl.workflows.rig_lint import member_finding, solved_rig_findings
 
 USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
 SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
 
 
 @dataclass(frozen=True)
+class MemberFit:
+    """How well a self-calibrated member's own lens model explains its corners (lint's ``model-misfit``)."""
+
+    model: str
+    fit_rms_px: float
+    detector_rms_px: float | None
+
+
+@dataclass(frozen=True)
 class RigFolderRun:
-    """Everything ``solve-folders`` found; ``solution`` etc. are None when the gate failed."""
+    """Everything ``solve-folders`` found; ``solution`` etc. are None when the gate failed or the frames
+    contradict each other (then ``findings`` holds ``rig-rigid``)."""
 
     cameras: tuple[str, ...]
     match: FrameMatch
@@ -58,6 +81,13 @@ class RigFolderRun:
     solution: RigSolution | None = None
     holdout: RigHoldout | None = None
     loops: tuple[LoopClosure, ...] = ()
+    fits: Mapping[str, MemberFit] | None = None
+    findings: tuple[Finding, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        """The rig gate passed and the verdict has no error (exit 0)."""
+        return self.gate.passed and not has_errors(list(self.findings))
 
 
 def parse_sources(items: Sequence[str]) -> dict[str, Path]:
@@ -88,19 +118,27 @@ def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, 
         raise type(exc)(f"camera {name}: {exc.message}", hint) from exc
 
 
-def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec, model: str) -> MemberIntrinsics:
-    """Calibrate one camera on its own accepted photos (core.solve), keeping the full covariance."""
+def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec,
+                    model: str) -> tuple[MemberIntrinsics, MemberFit]:
+    """Calibrate one camera on its own accepted photos (core.solve, full covariance), and how well it fits."""
     views = [(o.corner_ids, o.corners_px) for o in outcomes
              if o.accepted and o.corner_ids is not None and o.corners_px is not None]
     size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
     if size is None or not views:
         raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
     points = spec.object_points()
+    return calibrate_member(name, [points[ids] for ids, _ in views], [px for _, px in views], size, model)
+
+
+def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
+                     image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
+    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit."""
     m = get_model(model)
-    sol = solve_intrinsics([points[ids] for ids, _ in views], [px for _, px in views], size, m)
+    sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
     cov = sol.covariance.covariance if sol.covariance is not None else None
-    return MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, size, m.free_intrinsics, m.free_distortion,
-                            sol.aspect_ratio, cov, m.kind)
+    member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
+                              m.free_distortion, sol.aspect_ratio, cov, m.kind)
+    return member, MemberFit(m.name, sol.rms_px, model_fit.detector_rms_px(object_points, corners_px))
 
 
 def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
@@ -120,13 +158,15 @@ def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, 
 
 def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
                       intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
-                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int = 2) -> RigFolderRun:
-    """Run the folder flow (module docstring). The first source is the root camera.
+                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int = 2,
+                      limits: LintThresholds | None = None) -> RigFolderRun:
+    """Run the folder flow (module docstring). The first source is the root camera; ``limits`` are the
+    station's lint thresholds (default: LintThresholds()).
 
     Raises:
         InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
             mixes image sizes, or a camera's photos differ in size from its intrinsics.
-        NumericalError: a camera cannot be calibrated, or the rig solve fails.
+        NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
@@ -142,11 +182,12 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
             images.names, outcomes[name], strict=True) if o.image_size})
         if mixed is not None:
             raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
-    members = []
+    members, fits = [], {}
     for name in cameras:
         given = (intrinsics or {}).get(name)
         if given is None:
-            members.append(self_calibrated(name, outcomes[name], spec, model))
+            member, fits[name] = self_calibrated(name, outcomes[name], spec, model)
+            members.append(member)
             continue
         sizes = {o.image_size for o in outcomes[name] if o.image_size is not None}
         if sizes and sizes != {tuple(given.image_size)}:
@@ -157,13 +198,43 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
         members.append(given)
     views = rig_views(cameras, match, outcomes, spec)
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
-    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate)
+    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
     if not gate.passed:
         return run
-    solution = solve_rig(views, members, refine_intrinsics, model)
-    holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
-    loops = loop_closures(views, members, model) if len(cameras) >= 3 else ()
-    return RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, solution, holdout, loops)
+    return judged_solve(run, model, refine_intrinsics, limits or LintThresholds())
+
+
+def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,
+                 limits: LintThresholds | None = None) -> RigFolderRun:
+    """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring)."""
+    views, members, fits = run.views, list(run.members), run.fits or {}
+    limits = limits or LintThresholds()
+    lens = {name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
+            for name, fit in fits.items()}
+    misfit = [member_finding(name, f) for name, found in lens.items() for f in found]
+    try:
+        solution = solve_rig(views, members, refine_intrinsics, model)
+        holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
+        loops = loop_closures(views, members, model) if len(run.cameras) >= 3 else ()
+    except InconsistentDataError as exc:
+        rigid = Finding(rule="rig-rigid", severity="error", message=exc.message, fix=exc.hint)
+        return replace(run, findings=(rigid, *misfit))
+    rows = {m.name: m.image_size[1] for m in members}
+    bad_lens = {name for name, found in lens.items() if found}
+    findings = solved_rig_findings(rig_pairs(solution, holdout), rig_loops(loops), rows, (), limits, bad_lens)
+    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*findings, *misfit))
+
+
+def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair]:
+    """``pair_summary`` as the stored rig's pair records."""
+    return [RigPair(**{k: v for k, v in p.items() if k != "pair"}) for p in pair_summary(solution, holdout)]
+
+
+def rig_loops(loops: Sequence[LoopClosure]) -> list[RigLoop]:
+    """Loop closures as the stored rig's loop records."""
+    return [RigLoop(cycle=list(lc.cycle), rotation_deg=lc.rotation_deg, translation_mm=lc.translation_mm,
+                    sigma_rotation_deg=lc.sigma_rotation_deg, sigma_translation_mm=lc.sigma_translation_mm,
+                    mahalanobis=lc.mahalanobis) for lc in loops]
 
 
 def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict[str, object]]:
@@ -188,6 +259,12 @@ def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict
     return rows
 
 
+def _fit_json(fit: MemberFit | None) -> dict[str, object]:
+    if fit is None:  # intrinsics given, not self-calibrated
+        return {}
+    return {"model": fit.model, "fit_rms_px": fit.fit_rms_px, "detector_rms_px": fit.detector_rms_px}
+
+
 def run_json(run: RigFolderRun) -> dict[str, object]:
     """The run as plain JSON types (``--json``)."""
     g = run.gate
@@ -201,8 +278,12 @@ def run_json(run: RigFolderRun) -> dict[str, object]:
         "gate": {"gate": g.gate, "passed": g.passed, "value": g.value, "threshold": g.threshold, "message": g.message,
                  "hint": g.hint},
         "members": [{"name": m.name, "image_size": list(m.image_size), "K": np.asarray(m.camera_matrix).tolist(),
-                     "dist": np.asarray(m.dist_coeffs).tolist()} for m in run.members],
+                     "dist": np.asarray(m.dist_coeffs).tolist(), **_fit_json((run.fits or {}).get(m.name))}
+                    for m in run.members],
     }
+    if run.gate.passed:
+        out["verdict"] = "pass" if run.passed else "fail"
+        out["lint"] = [f.model_dump(mode="json", exclude_none=True) for f in run.findings]
     sol = run.solution
     if sol is None:
         return out

@@ -5,10 +5,14 @@ Rules (errors fail lint, exit 1):
   rig solve used (re-calibrated or rolled back since): the rig must be re-solved.
 - ``baseline-design``: a pair's solved baseline is outside the registered design value +- tolerance.
 - ``epipolar``: a pair's held-out epipolar RMS is above ``epipolar_max_px_at_720`` x rows / 720
-  (0.5 px at 720 rows by default, per station; DepthAI's factory flow gates at 0.5-0.6 px).
+  (0.5 px at 720 rows by default, per station; DepthAI's factory flow gates at 0.5-0.6 px). Its fix
+  names the lens model when a member of the pair fails ``model-misfit``.
 - ``loop-closure``: a cycle's residual has Mahalanobis distance above ``loop_closure_max_mahalanobis``
   (4.48 = sqrt of chi-square(6) at 99.7 %).
 - the camera rules for every member's active calibration (``member:<rule>``).
+``baseline-design``, ``epipolar`` and ``loop-closure`` read only the solve's numbers
+(``solved_rig_findings``): ``rig solve-folders`` applies them too, with each self-calibrated member's
+``model-misfit`` (workflows.rig_folders).
 - hand-eye edges (workflows.rig_handeye): ``handeye-gates`` (a gate of the stored result failed),
   ``handeye-stale-member`` (the camera whose calibration gave the board poses was re-calibrated since),
   ``handeye-uncertainty`` (an accepted edge without a one-sigma).
@@ -16,14 +20,21 @@ Rules (errors fail lint, exit 1):
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding
-from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition
+from calibctl.artifacts.rig import (
+    DesignBaseline,
+    RigActivation,
+    RigCalibration,
+    RigDefinition,
+    RigLoop,
+    RigPair,
+)
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
@@ -33,7 +44,7 @@ from calibctl.workflows import rig_handeye
 from calibctl.workflows.lint import LintResult, lint_artifact
 from calibctl.workflows.records import check_rollback_request, open_store
 
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "kalibr")
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr")
 
 
 def parse_rig_ref(ref: str) -> tuple[str, int | None]:
@@ -43,11 +54,58 @@ def parse_rig_ref(ref: str) -> tuple[str, int | None]:
     return name, int(version) if sep else None
 
 
+def solved_rig_findings(pairs: Sequence[RigPair], loops: Sequence[RigLoop], rows: Mapping[str, int],
+                        designs: Sequence[DesignBaseline], limits: LintThresholds,
+                        misfit: Collection[str] = ()) -> list[Finding]:
+    """The rules that read only the solve's own numbers, no store: ``baseline-design``, ``epipolar``,
+    ``loop-closure`` (``rig solve`` and ``rig lint`` on a stored version, ``rig solve-folders`` on its run).
+
+    Args:
+        rows: image height (px) per camera, which scales the epipolar limit.
+        misfit: cameras whose own lens model fails ``model-misfit``; an epipolar error of their pair then
+            names the lens model as its likely cause instead of the capture.
+    """
+    findings: list[Finding] = []
+    by_pair = {frozenset((p.a, p.b)): p for p in pairs}
+    for d in designs:
+        p = by_pair.get(frozenset((d.a, d.b)))
+        if p is not None and abs(p.baseline_mm - d.baseline_mm) > d.tolerance_mm:
+            findings.append(Finding(
+                rule="baseline-design", severity="error", value=p.baseline_mm, threshold=d.tolerance_mm,
+                message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
+                        f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
+                fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size"))
+    for p in pairs:
+        limit = limits.epipolar_max_px_at_720 * rows[p.a] / 720.0
+        if p.epipolar_rms_px is not None and p.epipolar_rms_px > limit:
+            lens = [c for c in (p.a, p.b) if c in misfit]
+            fix = (f"the lens model of {' and '.join(lens)} does not describe the lens (member:model-misfit), "
+                   "the likely cause: calibrate with the model that rule names (a circular fisheye: --model "
+                   "fisheye), then re-solve"
+                   if lens else "re-capture with a still board seen by both cameras, then re-solve")
+            findings.append(Finding(
+                rule="epipolar", severity="error", value=p.epipolar_rms_px, threshold=limit,
+                message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px", fix=fix))
+    for lc in loops:
+        if lc.mahalanobis > limits.loop_closure_max_mahalanobis:
+            findings.append(Finding(
+                rule="loop-closure", severity="error", value=lc.mahalanobis,
+                threshold=limits.loop_closure_max_mahalanobis,
+                message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
+                        f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
+                fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved"))
+    return findings
+
+
+def member_finding(camera: str, finding: Finding) -> Finding:
+    """A member camera's own finding as a rig finding (``member:<rule>``, the message names the camera)."""
+    return finding.model_copy(update={"rule": f"member:{finding.rule}", "message": f"{camera}: {finding.message}"})
+
+
 def rig_findings(cal: RigCalibration, rig: RigDefinition, active: Mapping[str, CalibrationArtifact | None],
                  limits: LintThresholds) -> list[Finding]:
     """Every rig rule on ``cal`` given the members' currently active calibrations."""
     findings: list[Finding] = []
-    sizes = {m.serial: m.image_size for m in cal.members}
     for m in cal.members:
         now = active.get(m.serial)
         if now is None or (now.version, now.content_sha256) != (m.version, m.content_sha256):
@@ -56,35 +114,11 @@ def rig_findings(cal: RigCalibration, rig: RigDefinition, active: Mapping[str, C
                 rule="rig-stale-member", severity="error",
                 message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
                 fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)"))
-    pairs = {frozenset((p.a, p.b)): p for p in cal.pairs}
-    for d in rig.design_baselines:
-        p = pairs.get(frozenset((d.a, d.b)))
-        if p is not None and abs(p.baseline_mm - d.baseline_mm) > d.tolerance_mm:
-            findings.append(Finding(
-                rule="baseline-design", severity="error", value=p.baseline_mm, threshold=d.tolerance_mm,
-                message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
-                        f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
-                fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size"))
-    for p in cal.pairs:
-        limit = limits.epipolar_max_px_at_720 * sizes[p.a][1] / 720.0
-        if p.epipolar_rms_px is not None and p.epipolar_rms_px > limit:
-            findings.append(Finding(
-                rule="epipolar", severity="error", value=p.epipolar_rms_px, threshold=limit,
-                message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px",
-                fix="re-capture with a still board seen by both cameras, then re-solve"))
-    for lc in cal.loops:
-        if lc.mahalanobis > limits.loop_closure_max_mahalanobis:
-            findings.append(Finding(
-                rule="loop-closure", severity="error", value=lc.mahalanobis,
-                threshold=limits.loop_closure_max_mahalanobis,
-                message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
-                        f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
-                fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved"))
-    for art in active.values():
-        if art is None:
-            continue
-        for f in lint_artifact(art, limits).findings:
-            findings.append(f.model_copy(update={"rule": f"member:{f.rule}", "message": f"{art.ref}: {f.message}"}))
+    members = [(art, lint_artifact(art, limits).findings) for art in active.values() if art is not None]
+    misfit = {art.serial for art, found in members if any(f.rule == "model-misfit" for f in found)}
+    findings += solved_rig_findings(cal.pairs, cal.loops, {m.serial: m.image_size[1] for m in cal.members},
+                                    rig.design_baselines, limits, misfit)
+    findings += [member_finding(art.ref, f) for art, found in members for f in found]
     return findings
 
 
@@ -179,6 +213,8 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
     elif fmt == "tf":
         text = header + rig_exports.tf_static(full_tree)
     elif fmt == "urdf":
+        text = rig_exports.urdf_robot(full_tree, cal.rig, f"calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}")
+    elif fmt == "urdf-joints":
         text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
     elif fmt == "kalibr":
         text = header + rig_exports.kalibr_camchain(members, tree)

@@ -33,9 +33,7 @@ from calibctl.artifacts.rig import (
     RigEdge,
     RigFrame,
     RigGate,
-    RigLoop,
     RigMember,
-    RigPair,
     RigSession,
     UnmatchedImage,
 )
@@ -51,7 +49,7 @@ from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows import rig_handeye
 from calibctl.workflows.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.records import open_store
-from calibctl.workflows.rig_folders import pair_summary
+from calibctl.workflows.rig_folders import rig_loops, rig_pairs
 from calibctl.workflows.rig_lint import rig_findings
 
 _DESIGN = re.compile(r"^(?P<a>[^:=]+):(?P<b>[^:=]+)=(?P<mm>[0-9.]+)(?:(?:\+-|\+/-|±)(?P<tol>[0-9.]+))?$")
@@ -223,10 +221,7 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
                            covariance=e.covariance.tolist(), translation_mm=e.translation_mm,
                            sigma_translation_mm=e.sigma_translation_mm, rotation_deg=e.rotation_deg,
                            sigma_rotation_deg=e.sigma_rotation_deg) for e in solution.tree.edges],
-            pairs=[RigPair(**_pair_fields(p)) for p in pair_summary(solution, holdout)],
-            loops=[RigLoop(cycle=list(lc.cycle), rotation_deg=lc.rotation_deg, translation_mm=lc.translation_mm,
-                           sigma_rotation_deg=lc.sigma_rotation_deg, sigma_translation_mm=lc.sigma_translation_mm,
-                           mahalanobis=lc.mahalanobis) for lc in loops],
+            pairs=rig_pairs(solution, holdout), loops=rig_loops(loops),
             fit_rms_px=dict(zip(order, solution.rms_px, strict=True)),
             held_out_rms_px=dict(zip(order, holdout.camera_rms_px, strict=True)), held_out_folds=holdout.n_folds,
             solver=solution.solver, refine_intrinsics=refine_intrinsics, gates=session.gates,
@@ -255,6 +250,3 @@ def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibr
     carried = cal.model_copy(update={"edges": [*cal.edges, *edges], "handeye": results, "lint": [*cal.lint, *dropped]})
     return carried, active.version
 
-
-def _pair_fields(p: Mapping[str, object]) -> dict[str, object]:
-    return {k: v for k, v in p.items() if k != "pair"}

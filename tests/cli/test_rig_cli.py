@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from tests.datasets import LEFT_RIGHT, needs_datasets
+from tests.datasets import BAKA_STEREO, LEFT_RIGHT, needs_datasets
 from tests.workflows.rig_folders_data import rendered_rig, split_pairs, true_baseline_mm
 
 RUNNER = CliRunner()
@@ -33,7 +33,7 @@ def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
     result = invoke("rig", "solve-folders", *_sources(rig2), "--export-dir", str(tmp_path / "out"))
     assert result.exit_code == 0, result.output
     assert "T_CAM0_CAM1: |t| = 75." in result.output and "gate rig-connected pass" in result.output
-    assert "held-out epipolar RMS" in result.output
+    assert "held-out epipolar RMS" in result.output and "verdict: pass" in result.output
     assert {p.name for p in (tmp_path / "out").iterdir()} == {
         "stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
         "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
@@ -75,10 +75,45 @@ def test_solve_folders_takes_a_glob_and_a_list_file_like_rig_capture(tmp_path):
     doc = json.loads(result.output)
     assert doc["frames"] == 13 and doc["unmatched"] == [] and doc["images"] == {"L": {"accepted": 13},
                                                                                 "R": {"accepted": 13}}
+    assert doc["verdict"] == "pass" and doc["lint"] == []  # k1k2 fits these lenses: the default model passes
     left, right = split_pairs(LEFT_RIGHT, tmp_path / "split", "left*.jpg", "right*.jpg")
     folders = json.loads(invoke("--json", "rig", "solve-folders", "--source", f"L={left}", "--source", f"R={right}",
                                 *board).output)
     assert doc["pairs"][0]["baseline_mm"] == pytest.approx(folders["pairs"][0]["baseline_mm"], rel=1e-9)
+
+
+def test_a_failed_verdict_exits_1_and_withholds_the_exports(rig2, tmp_path):
+    """The rig lint the stored path applies, with the station's limits (here an impossible epipolar one)."""
+    station = tmp_path / "station.yaml"
+    station.write_text("lint:\n  epipolar_max_px_at_720: 0.001\n")
+    out = tmp_path / "out"
+    result = invoke("--station-config", str(station), "rig", "solve-folders", *_sources(rig2), "--export-dir", str(out))
+    assert result.exit_code == 1, result.output
+    text = " ".join(result.output.split())
+    assert "verdict: fail" in text and "error epipolar: CAM0-CAM1: held-out epipolar RMS" in text
+    assert "exports not written" in text and not out.exists()
+    result = invoke("--station-config", str(station), "--json", "rig", "solve-folders", *_sources(rig2),
+                    "--export-dir", str(out), "--allow-rejected")
+    assert result.exit_code == 1
+    doc = json.loads(result.output)
+    assert doc["verdict"] == "fail" and [f["rule"] for f in doc["lint"]] == ["epipolar"] and len(doc["exports"]) == 6
+
+
+@needs_datasets
+def test_baka_stereo_is_a_verdict_exit_1_not_a_failure_to_run(tmp_path):
+    """It exited 2 ("the rig solve diverged") as if the tool had failed; every third pair keeps it fast."""
+    lists = {}
+    for side in ("left", "right"):
+        lists[side] = tmp_path / f"{side}.txt"
+        lists[side].write_text("".join(f"{p}\n" for p in sorted((BAKA_STEREO / side).glob("*.jpg"))[2::3]))
+    result = invoke("rig", "solve-folders", "--source", f"L={lists['left']}", "--source", f"R={lists['right']}",
+                    "--cols", "7", "--rows", "10", "--square-mm", "23")
+    assert result.exit_code == 1, result.output
+    text = " ".join(result.output.split())
+    assert "error rig-rigid: the rig's frames contradict each other, so the cameras were not rigid or not " \
+           "synchronised" in text
+    assert "L-R: per-frame baseline" in text and "the cameras must not move against each other" in text
+    assert "Traceback" not in result.output
 
 
 def test_solve_folders_names_the_camera_of_a_source_it_cannot_use(rig2, tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import json
+import shutil
 import tempfile
 
 import pytest
@@ -14,6 +15,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.workflows.rig_folders_data import rendered_rig
 from tests.workflows.test_rig_store_flow import WHO, _truth_artifact
+from tests.workflows.urdf_check import loadable_urdf
 
 RUNNER = CliRunner()
 
@@ -64,6 +66,11 @@ def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
     assert r.exit_code == 0 and (tmp_path / "s.yaml").is_file()
     r = invoke(db, "rig", "export", "R1", "--format", "tf")
     assert r.exit_code == 0 and "child_frame_id: CAM1" in r.output
+    r = invoke(db, "rig", "export", "R1", "--format", "urdf")
+    assert r.exit_code == 0 and loadable_urdf(r.output)[:2] == ("R1", "CAM0")
+    assert r.output.startswith('<?xml version="1.0"?>\n<!-- calibctl rig R1@1 sha256 ')
+    r = invoke(db, "rig", "export", "R1", "--format", "urdf-joints")
+    assert r.exit_code == 0 and "<robot" not in r.output and '<joint name="CAM0_to_CAM1" type="fixed">' in r.output
 
 
 def test_a_stale_member_fails_rig_lint_with_exit_1(db, rig2):
@@ -184,3 +191,23 @@ def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_pat
     r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "s.yaml"))
     assert r.exit_code == 2 and f"cannot write {tmp_path / 's.yaml'}: permission denied" in r.output
     assert isinstance(r.exception, SystemExit) and not (tmp_path / "s.yaml").exists()
+
+
+def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_stores_nothing(db, rig2, tmp_path):
+    """The right camera's frame numbers shifted by three (photos not taken together): exit 1, not 2."""
+    right = tmp_path / "CAM1"
+    right.mkdir()
+    photos = sorted((rig2 / "CAM1").iterdir())
+    for i, p in enumerate(photos):
+        shutil.copy(p, right / f"CAM1_{(i + 3) % len(photos):04d}.png")
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={right}")
+    assert r.exit_code == 0, r.output  # each camera's photos are fine on their own
+    r = invoke(db, "rig", "solve", "R1")
+    assert r.exit_code == 1, r.output
+    text = " ".join(r.output.split())
+    assert "the rig's frames contradict each other, so the cameras were not rigid or not synchronised" in text
+    assert "CAM0-CAM1: per-frame baseline" in text and "Traceback" not in r.output
+    r = invoke(db, "rig", "history", "R1")
+    assert r.exit_code == 2 and "rig R1 has no calibration yet" in r.output

@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibctl.core.extrinsics import rig_solve
 from calibctl.core.extrinsics.rig_problem import RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_holdout
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
-from calibctl.errors import NumericalError
+from calibctl.errors import InconsistentDataError, NumericalError
 from tests.core.rig_sessions import corner_session, true_members
 
 CHI_6DOF_997 = 4.48  # sqrt of the 99.7 % quantile of chi-square with 6 degrees of freedom
@@ -122,3 +123,35 @@ def test_too_few_shared_frames_are_refused():
     truth, views = corner_session(2, seed=36)
     with pytest.raises(NumericalError, match="frame"):
         solve_rig(views.subset([0]), true_members(truth))
+
+
+def _unsynchronised(views: RigViews) -> RigViews:
+    """Camera 1's views shifted by three frames: each pair of photos shows two different board poses."""
+    rows = [(r[0], views.views[(f + 3) % len(views.views)][1]) for f, r in enumerate(views.views)]
+    return RigViews(views.cameras, views.model_points_m, views.frames, tuple(rows))
+
+
+def test_frames_that_contradict_each_other_are_a_verdict_not_a_failure_to_run():
+    """baka-stereo's webcams (neither rigid nor synchronised) used to exit 2 as if the tool had failed."""
+    truth, views = corner_session(2, seed=37, n_frames=12)
+    with pytest.raises(InconsistentDataError) as verdict:
+        solve_rig(_unsynchronised(views), true_members(truth))
+    assert verdict.value.exit_code == 1 and not isinstance(verdict.value, NumericalError)
+    message = verdict.value.message
+    assert "not rigid or not synchronised" in message and "CAM0-CAM1: per-frame baseline" in message
+    assert "must not move against each other" in (verdict.value.hint or "")
+
+
+def test_a_solver_that_fails_on_frames_that_agree_still_cannot_run(monkeypatch):
+    truth, views = corner_session(2, seed=38, n_frames=12)
+    real = rig_solve._stereo
+
+    def turned(*args, **kwargs):  # a solver that returns camera 1 turned by 30 deg: not the data's fault
+        cam_poses, board, members = real(*args, **kwargs)
+        cam_poses[1, :3] += np.radians([0.0, 30.0, 0.0])
+        return cam_poses, board, members
+
+    monkeypatch.setattr(rig_solve, "_stereo", turned)
+    with pytest.raises(NumericalError, match="diverged: .* the frames agree with one rigid rig") as failed:
+        solve_rig(views, true_members(truth))
+    assert failed.value.exit_code == 2 and not isinstance(failed.value, InconsistentDataError)

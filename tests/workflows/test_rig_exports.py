@@ -17,9 +17,11 @@ from calibctl.workflows.rig_exports import (
     ros_stereo_pair,
     tf_static,
     urdf_joints,
+    urdf_robot,
     write_exports,
 )
 from tests.core.rig_sessions import corner_session, true_members
+from tests.workflows.urdf_check import loadable_urdf
 
 UNDISTORT_TOL_PX = 1e-3
 
@@ -110,6 +112,20 @@ def test_tf_static_and_urdf_give_back_the_tree(stereo):
     assert '<parent link="CAM0"/>' in urdf and '<child link="CAM1"/>' in urdf
 
 
+def test_the_urdf_is_a_robot_ros_loads_and_the_fragment_stays(stereo):
+    """It was a joints-only fragment: no <robot>, no <link>, so neither check_urdf nor robot_state_publisher
+    loaded it. The fragment is still there for URDFs that include it."""
+    text = urdf_robot(stereo.tree, "stereo-front")
+    name, root, joints = loadable_urdf(text)
+    assert (name, root, set(joints)) == ("stereo-front", "CAM0", {"CAM1"})
+    origin = joints["CAM1"].find("origin")
+    xyz = [float(v) for v in origin.get("xyz").split()]
+    assert np.allclose(xyz, stereo.tree.edges[0].T_parent_child[:3, 3], atol=1e-9)
+    fragment = urdf_joints(stereo.tree)
+    assert "<robot" not in fragment and fragment in text  # the same joints, inside a robot
+    assert loadable_urdf(urdf_robot(stereo.tree, 'a "quoted" & <odd> name'))[0] == 'a "quoted" & <odd> name'
+
+
 def test_kalibr_chain_maps_the_previous_camera_into_the_next(stereo):
     doc = yaml.safe_load(kalibr_camchain(stereo.members, stereo.tree))
     assert set(doc) == {"cam0", "cam1"} and "T_cn_cnm1" not in doc["cam0"]
@@ -127,6 +143,7 @@ def test_kalibr_refuses_a_k3_model(stereo):
 
 def test_write_exports_writes_every_file(stereo, tmp_path):
     names = {p.name for p in write_exports(stereo, tmp_path / "x")}
+    assert loadable_urdf((tmp_path / "x" / "rig.urdf.xml").read_text())[1] == "CAM0"
     assert names == {"stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
                      "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
     assert pose_to_T(np.zeros(6)).shape == (4, 4)

@@ -10,11 +10,22 @@ import numpy as np
 import pytest
 
 from benchmarks.plain_stereo import plain_stereo
+from calibctl.config import LintThresholds
 from calibctl.core.board_spec import BoardSpec
+from calibctl.core.extrinsics.rig_frames import FrameMatch, rig_connected_gate
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.image_outcomes import classify_file
-from calibctl.errors import InputError, NumericalError, UsageError
-from calibctl.workflows.rig_folders import parse_sources, run_json, solve_rig_folders
+from calibctl.errors import InputError, UsageError
+from calibctl.workflows.rig_folders import (
+    RigFolderRun,
+    calibrate_member,
+    judged_solve,
+    parse_sources,
+    run_json,
+    solve_rig_folders,
+)
+from tests.core.test_rig_fisheye import SIZE as FISHEYE_SIZE
+from tests.core.test_rig_fisheye import _session as fisheye_session
 from tests.datasets import BAKA_STEREO, LEFT_RIGHT, needs_datasets
 from tests.workflows.rig_folders_data import rendered_rig, split_pairs, true_baseline_mm
 
@@ -117,17 +128,80 @@ def test_opencv_left_right_matches_plain_opencv(tmp_path):
 
 
 @needs_datasets
-def test_baka_stereo_is_refused_like_plain_opencv_fails_it():
+def test_baka_stereo_is_a_failed_verdict_like_plain_opencv_fails_it():
     # Plain OpenCV's stereoCalibrate leaves an RMS of 24 px on these pairs: the per-frame relative
     # poses disagree (measured 2026-11-26: up to 7.89 deg off their mean, baselines 74-377 mm), so the
-    # two webcams were not a rigid, synchronised pair.
+    # two webcams were not a rigid, synchronised pair. That is what the tool found (exit 1), not a
+    # failure to run (it was NumericalError, exit 2).
     board = BoardSpec.chessboard(7, 10, 0.023)
     sources = {"left": BAKA_STEREO / "left", "right": BAKA_STEREO / "right"}
-    with pytest.raises(NumericalError, match=r"diverged: RMS .* left-right: per-frame baseline .* rotation up to"):
-        solve_rig_folders(sources, board)
+    run = solve_rig_folders(sources, board)
+    assert run.gate.passed and not run.passed and run.solution is None
+    rigid = [f for f in run.findings if f.rule == "rig-rigid"]
+    assert len(rigid) == 1 and "not rigid or not synchronised" in rigid[0].message
+    assert "left-right: per-frame baseline" in rigid[0].message and "rotation up to" in rigid[0].message
+    assert "must not move against each other" in (rigid[0].fix or "")
+    assert run_json(run)["verdict"] == "fail"
     # The frame the first rig release measured 18 deg off on shows a moving board: no rig frame now.
     for camera in ("left", "right"):
         blurred = classify_file(BAKA_STEREO / camera / f"{camera}_001772846782141.jpg", board)
         assert blurred.status == "blurred" and "board edges are" in blurred.reason
     plain = plain_stereo(sources["left"], sources["right"], 7, 10, 0.023)
     assert plain["stereo_rms_px"] > 10.0
+
+
+def test_photos_of_a_rendered_pair_not_taken_together_are_a_failed_verdict(rig2, tmp_path):
+    """The right camera's frame numbers shifted by three: every pair shows two board poses."""
+    right = tmp_path / "R"
+    right.mkdir()
+    photos = sorted((rig2 / "CAM1").iterdir())
+    for i, p in enumerate(photos):
+        shutil.copy(p, right / f"CAM1_{(i + 3) % len(photos):04d}.png")
+    run = solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": right}, BOARD, min_shared_views=5)
+    assert run.gate.passed and not run.passed
+    assert [f.rule for f in run.findings] == ["rig-rigid"]
+    assert "CAM0-CAM1: per-frame baseline" in run.findings[0].message
+
+
+def _fisheye_pair(model: str) -> RigFolderRun:
+    """The seeded 170/165 deg fisheye pair of tests/core/test_rig_fisheye.py (corner level), each camera
+    self-calibrated with ``model`` on its own views, as ``solve-folders`` does with photos."""
+    views, _ = fisheye_session(3)
+    members, fits = [], {}
+    for c, name in enumerate(views.cameras):
+        seen = [row[c] for row in views.views if row[c] is not None]
+        member, fits[name] = calibrate_member(name, [v.object_points(views.model_points_m) for v in seen],
+                                              [v.corners_px for v in seen], FISHEYE_SIZE, model)
+        members.append(member)
+    gate = rig_connected_gate(views.cameras, views.shared_view_counts(), 5)
+    run = RigFolderRun(views.cameras, FrameMatch((), ()), {n: () for n in views.cameras}, views, tuple(members), gate,
+                       fits=fits)
+    return judged_solve(run, model, limits=LintThresholds())
+
+
+def test_a_fisheye_pair_solved_as_pinholes_fails_naming_the_lens_model():
+    """The real sourishg pair under the default k1k2 exited 0: rotation 3.6 deg off, epipolar 2.1 px."""
+    run = _fisheye_pair("k1k2")
+    assert run.solution is not None and not run.passed
+    rules = {f.rule for f in run.findings}
+    assert {"epipolar", "member:model-misfit"} <= rules
+    epipolar = next(f for f in run.findings if f.rule == "epipolar")
+    assert "--model fisheye" in (epipolar.fix or "") and "model-misfit" in (epipolar.fix or "")
+    misfit = [f for f in run.findings if f.rule == "member:model-misfit"]
+    assert {f.message.split(":")[0] for f in misfit} == {"L", "R"} and "--model fisheye" in (misfit[0].fix or "")
+    doc = run_json(run)
+    assert doc["verdict"] == "fail" and doc["members"][0]["model"] == "k1k2"
+    assert doc["members"][0]["fit_rms_px"] > 2.5 * doc["members"][0]["detector_rms_px"]
+
+
+def test_the_same_fisheye_pair_solved_as_fisheyes_passes():
+    run = _fisheye_pair("fisheye")
+    assert run.solution is not None and run.findings == () and run.passed
+    assert run_json(run)["verdict"] == "pass"
+
+
+def test_the_verdict_uses_the_stations_epipolar_limit(rig2):
+    sources = {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}
+    strict = solve_rig_folders(sources, BOARD, min_shared_views=5, limits=LintThresholds(epipolar_max_px_at_720=0.001))
+    assert [f.rule for f in strict.findings] == ["epipolar"] and not strict.passed
+    assert "re-capture with a still board" in (strict.findings[0].fix or "")  # the lenses fit: not the model

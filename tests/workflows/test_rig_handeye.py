@@ -18,6 +18,7 @@ from calibctl.workflows import rig_handeye, rig_lint
 from calibctl.workflows.handeye import SynthRequest, run_handeye, run_synth_motions
 from tests.artifacts.factories import calibration
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
+from tests.workflows.urdf_check import loadable_urdf
 
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}
 ROOT, OTHER = "CAM-0001", "CAM-0002"
@@ -74,7 +75,9 @@ def test_an_accepted_edge_is_the_rigs_next_active_version_and_exports_in_the_tre
     assert set(tf) == {("flange", ROOT), (ROOT, OTHER)}
     assert np.allclose(tf[("flange", ROOT)], _X(result), atol=1e-9)
     urdf = rig_lint.export(settings, RIG, "urdf", None, force=False)
-    assert '<parent link="flange"/>' in urdf
+    name, root, joints = loadable_urdf(urdf)
+    assert (name, root, set(joints)) == (RIG, "flange", {ROOT, OTHER})
+    assert joints[ROOT].find("parent").get("link") == "flange"
 
 
 def test_an_edge_to_a_non_root_camera_hangs_below_it_inverted(settings, tmp_path):

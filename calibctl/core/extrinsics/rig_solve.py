@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.covariance import MIN_RCOND
-from calibctl.core.extrinsics.rig_init import initial_poses, pair_spread
+from calibctl.core.extrinsics.rig_init import initial_poses, pair_spreads
 from calibctl.core.extrinsics.rig_problem import (
     Layout,
     MemberIntrinsics,
@@ -44,7 +44,7 @@ from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_
 from calibctl.core.extrinsics.se3 import invert
 from calibctl.core.solve import MAX_RMS_PX, get_model, single_threaded_opencv
 from calibctl.core.views import BoardView
-from calibctl.errors import NumericalError
+from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
 
 MAX_LM_ITERATIONS = 100
 LM_RELATIVE_TOL = 1e-12  # stop when one accepted step lowers the residual sum by less than this share
@@ -226,6 +226,30 @@ def _tree(names: Sequence[str], cam_poses: np.ndarray, cov: np.ndarray) -> RigTr
     return RigTree(names[0], tuple(edges))
 
 
+RIGID_HINT = ("the cameras must not move against each other and the board must be still while a frame is taken; "
+              "check the sources are synchronised and each camera's calibration belongs to it")
+
+
+def diverged(views: RigViews, members: Sequence[MemberIntrinsics], worst_rms_px: float) -> CalibctlError:
+    """The error for a solve that leaves more than MAX_RMS_PX: InconsistentDataError (a verdict, exit 1)
+    when a pair's frames contradict each other whatever the solver does (no frame's own relative pose
+    carries the board into the other camera within MAX_RMS_PX: rig_init.pair_spreads); NumericalError
+    (could not run, exit 2) when they agree, or when too few frames fit their own camera to tell."""
+    spreads = pair_spreads(views, members)
+    words = "; ".join(s.words(views.cameras) for s in spreads)
+    apart = [s for s in spreads if not s.transfer_rms_px <= MAX_RMS_PX]
+    if apart:
+        pairs = ", ".join(f"{views.cameras[s.a]}-{views.cameras[s.b]}" for s in apart)
+        return InconsistentDataError(
+            f"the rig's frames contradict each other, so the cameras were not rigid or not synchronised: the solve "
+            f"leaves RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px) and no frame's own pose of {pairs} fits "
+            f"the other frames within {MAX_RMS_PX:.0f} px; {words}", hint=RIGID_HINT)
+    agree = f"; the frames agree with one rigid rig ({words})" if spreads else ""
+    return NumericalError(f"the rig solve diverged: RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px){agree}",
+                          hint=RIGID_HINT if not spreads else "the solver failed on frames that agree: check that "
+                          "each camera's calibration belongs to it, and report the photos if it does")
+
+
 def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,
               model: str = "k1k2", solver: str = "auto") -> RigSolution:
     """Solve the extrinsics of a rig (cameras[0] is the root).
@@ -238,7 +262,8 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         solver: "auto" (OpenCV stereo for two cameras, joint LM otherwise), "opencv" or "lm".
 
     Raises:
-        NumericalError: too few shared views, unobservable, or diverged.
+        NumericalError: too few shared views, unobservable, or diverged on frames that agree.
+        InconsistentDataError: diverged because the frames contradict each other (``diverged``).
     """
     views = shared_corners_only(views)
     if len(views.frames) < 2:
@@ -264,11 +289,7 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         rms.append(float(np.sqrt(np.mean(np.sum(np.vstack(res) ** 2, axis=1)))) if res else float("nan"))
     worst = max(r for r in rms if np.isfinite(r)) if any(np.isfinite(rms)) else float("nan")
     if not worst <= MAX_RMS_PX:
-        raise NumericalError(f"the rig solve diverged: RMS {worst:.2f} px (limit {MAX_RMS_PX:.0f} px); "
-                             f"{pair_spread(views, members)}",
-                             hint="the cameras must not move against each other and the board must be still "
-                                  "while a frame is taken; check the sources are synchronised and each camera's "
-                                  "calibration belongs to it")
+        raise diverged(views, members, worst)
     tree = _tree(views.cameras, cam_poses, cov)
     return RigSolution(views, tuple(members), cam_poses, board_poses, cov, tree, tuple(rms), name,
                        refine_intrinsics, s2)

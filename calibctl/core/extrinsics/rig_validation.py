@@ -29,7 +29,7 @@ from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only,
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, propagate, simple_cycles
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.core.validation import fold_assignment
-from calibctl.errors import NumericalError
+from calibctl.errors import InconsistentDataError, NumericalError
 
 MIN_TRAINING_FRAMES = 4
 POSE_FIT_ITERATIONS = 20
@@ -106,8 +106,8 @@ def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], r
         held = np.flatnonzero(folds == k)
         try:
             fit = solve_rig(views.subset(np.flatnonzero(folds != k).tolist()), members, refine_intrinsics, model, solver)
-        except NumericalError:
-            continue  # this fold's training frames do not connect the rig; the others still count
+        except (NumericalError, InconsistentDataError):
+            continue  # this fold's training frames do not solve the rig; the others still count
         solved += 1
         layout = Layout(n_cams, 1, tuple(m.n_params for m in fit.members))
         rectifications = {(a, b): rectify(fit.members[a], fit.members[b], fit.T_a_b(b, a))
