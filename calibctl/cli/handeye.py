@@ -22,7 +22,7 @@ def _render(outcome) -> None:
     stdout.print(f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} from {escape(r.provenance.input_file)} "
                  f"({r.provenance.input_shape}, {len(r.motions)} motions, method {r.method})")
     for g in r.gates:
-        stdout.print(f"  gate {g.gate:<15}{'pass' if g.passed else 'FAIL'}  {escape(g.message)}")
+        stdout.print(f"  gate {g.gate:<18}{'pass' if g.passed else 'FAIL'}  {escape(g.message)}")
     for s in r.skipped:
         stdout.print(f"  skipped: {escape(s)}")
     if r.transform is not None:
