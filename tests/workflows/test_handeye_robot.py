@@ -124,6 +124,20 @@ def test_a_camera_with_no_active_calibration_is_exit_2(scenes, settings) -> None
     assert result.exit_code == 2 and "CAM-0404" in result.stderr and "Traceback" not in result.output
 
 
+def test_a_camera_whose_capture_was_rejected_is_named_as_such_not_unknown(scenes, settings) -> None:
+    from tests.store.documents import capture_session
+
+    with Store.open(settings.db_url) as store:
+        store.add_session(capture_session("aaaaaaaaaaa1", serial="CAM-0002", status="rejected"))
+    d = scenes["in-hand"]
+    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(d / "poses.csv"), "--from", "gripper",
+                                      "--to", "camera", "--images", str(d), "--serial", "CAM-0002"], terminal_width=200)
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "unknown serial" not in result.stderr
+    assert "no calibration is stored for 'CAM-0002': its capture sessions were rejected at the gates" in result.stderr
+    assert "calibctl calibrate --serial CAM-0002" in result.stderr
+
+
 def test_robot_poses_in_millimetres_are_named(scenes, settings, tmp_path: Path) -> None:
     d = scenes["in-hand"]
     rows = list(csv.reader((d / "poses.csv").open()))
