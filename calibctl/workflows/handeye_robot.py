@@ -2,8 +2,9 @@
 
 The CSV has one row per arm pose: ``image`` (file name inside --images) and the gripper pose
 ``T_base_gripper`` as ``gripper_q*``/``gripper_r*_rad``/``gripper_r11..r33`` + ``gripper_t*_m`` (metres;
-see handeye_io). Each image is detected and solved with solvePnP on the camera's *active*
-calibration from the store. Then, with the board frame as b's world:
+see handeye_io). Each image is detected and its board pose fitted on the camera's *active*
+calibration from the store, through that calibration's lens model (solvePnP for pinhole models,
+the fisheye projection for ``--model fisheye``). Then, with the board frame as b's world:
 
 - eye-in-hand (camera on the gripper): a = gripper in the base frame, X = T_gripper_camera;
 - eye-to-hand (camera fixed, board on the gripper): a = base seen from the gripper (inverse robot
@@ -79,7 +80,7 @@ def _board_poses(table: dio.Table, images: Path, art: CalibrationArtifact, spec)
         hashes.append(hashlib.sha256(data).hexdigest())
         detection, reason = detect_board(gray, spec)
         T_cam_board, rms = (None, float("inf")) if detection is None else estimate_board_pose(
-            model[detection.corner_ids], detection.corners_px, K, dist)
+            model[detection.corner_ids], detection.corners_px, K, dist, art.model.name)
         if T_cam_board is None:
             skipped.append(f"{path.name} (line {int(line)}): {reason or 'no board pose'}")
         poses.append(T_cam_board)
