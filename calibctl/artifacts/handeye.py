@@ -50,10 +50,11 @@ class EdgeUncertainty(Document):
 class EdgeGate(Document):
     """An observability gate checked before any number is reported."""
 
-    gate: Literal["rotation", "lever-arm", "time-alignment", "consistency"] = Field(description="which gate")
+    gate: Literal["rotation", "lever-arm", "time-alignment", "consistency", "translation-scale"] = Field(
+        description="which gate")
     passed: bool = Field(description="true when the gate is satisfied")
     value: float = Field(description="rotation about a second axis (deg), sigma_min of stacked (R_A - I), "
-                         "mismatched fraction, or rotation residual RMS (deg)")
+                         "mismatched fraction, rotation residual RMS (deg), or the translation scale disagreement max(s, 1/s)")
     threshold: float = Field(description="the limit it was judged against")
     message: str = Field(description="what was measured, in words")
     hint: str | None = Field(None, description="what to do when it failed")
@@ -100,7 +101,7 @@ class HandEyeResult(Document):
         None, description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when rejected")
     uncertainty: EdgeUncertainty | None = Field(description="one-sigma; null when rejected or not estimable")
     uncertainty_refused_reason: str | None = Field(None, description="why no uncertainty is reported")
-    gates: list[EdgeGate] = Field(description="observability gates (before the solve) and the consistency gate (after)")
+    gates: list[EdgeGate] = Field(description="observability gates (before the solve), the consistency and translation-scale gates (after)")
     lever_arm_singular_values: tuple[float, float, float] = Field(description="singular values of stacked (R_A - I)")
     motions: list[MotionResidual] = Field(description="per-motion angles and residuals")
     outlier_motions: list[str] = Field(default_factory=list, description="labels of motions named as outliers")

@@ -22,7 +22,7 @@ def _render(outcome) -> None:
     stdout.print(f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} from {escape(r.provenance.input_file)} "
                  f"({r.provenance.input_shape}, {len(r.motions)} motions, method {r.method})")
     for g in r.gates:
-        stdout.print(f"  gate {g.gate:<15}{'pass' if g.passed else 'FAIL'}  {escape(g.message)}")
+        stdout.print(f"  gate {g.gate:<18}{'pass' if g.passed else 'FAIL'}  {escape(g.message)}")
     for s in r.skipped:
         stdout.print(f"  skipped: {escape(s)}")
     if r.transform is not None:
@@ -64,7 +64,9 @@ def _render(outcome) -> None:
 def handeye(
     ctx: typer.Context,
     motions: Annotated[Path, typer.Argument(metavar="MOTIONS.csv", help="Synchronised poses or motions "
-                                            "(docs/handeye.md); with --images: image + gripper pose per row.")],
+                                            "(docs/handeye.md); with --images: image + gripper pose per row, or a "
+                                            "file without header of 16 numbers per line (row-major 4x4 "
+                                            "T_base_gripper, metres; line i = i-th image by name).")],
     from_frame: Annotated[str, typer.Option("--from", help="Frame A (tf parent): X = T_A_B.")],
     to_frame: Annotated[str, typer.Option("--to", help="Frame B (tf child).")],
     input_shape: Annotated[str, typer.Option("--input", help="poses (one pose per sensor per row) or motions.")] = "poses",

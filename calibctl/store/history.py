@@ -17,7 +17,7 @@ from calibctl.artifacts.events import ActivationEvent
 from calibctl.errors import NotFoundError, StaleActiveVersionError, UsageError
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.models import ArtifactRow, EventRow
+from calibctl.store.models import ArtifactRow, EventRow, SessionRow
 
 
 def known_list(names: Sequence[object], limit: int = 20) -> str:
@@ -66,6 +66,25 @@ def check_rollback(label: str, to_version: int, statuses: dict[int, str], active
     return active == to_version
 
 
+def _no_calibration_yet(s: Session, serial: str) -> None:
+    """A serial with capture sessions but no calibration is known: say why nothing is stored (NotFoundError)."""
+    sessions = s.execute(select(SessionRow.session_id, SessionRow.status).where(SessionRow.serial == serial)
+                         .order_by(SessionRow.started_at, SessionRow.session_id)).all()
+    if not sessions:
+        return
+    listing = known_list([f"{sid} ({st})" for sid, st in sessions])
+    if all(st == "rejected" for _, st in sessions):
+        raise NotFoundError(
+            f"no calibration is stored for '{serial}': its capture sessions were rejected at the gates, so it has "
+            f"no accepted version ({listing})",
+            f"capture {serial} again with views the gates accept (the capture's gate messages name what was "
+            f"missing) with `calibctl calibrate --serial {serial} --board ... --source ...`, or relax a gate that "
+            "does not apply at this station in the station file (--station-config, `gates:`)")
+    raise NotFoundError(
+        f"no calibration is stored for '{serial}': it has capture sessions ({listing}) but none was solved",
+        f"solve it: `calibctl solve --serial {serial}`")
+
+
 def statuses(s: Session, serial: str) -> dict[int, str]:
     """version -> status of ``serial``; NotFoundError listing the known serials when there is none."""
     rows = s.execute(
@@ -73,6 +92,7 @@ def statuses(s: Session, serial: str) -> dict[int, str]:
     ).all()
     if rows:
         return {int(v): str(st) for v, st in rows}
+    _no_calibration_yet(s, serial)
     serials = list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial)))
     listing = f"known: {known_list(serials)}" if serials else "no calibrations are stored yet"
     raise NotFoundError(f"unknown serial '{serial}'; {listing}", "check the serial, or `calibctl history` another one")

@@ -3,7 +3,9 @@
 The observability gates (rotation axes, lever arm, time alignment) run on the motions before any
 solve; when one fails the result is ``rejected``, carries no transform, and the command exits 1.
 Otherwise the closed form (Park & Martin or Tsai-Lenz) is refined jointly; the consistency gate
-(rotation residual) decides whether it is reported, with its one-sigma. The document is written with ``-o`` and, only when accepted, as /tf_static YAML.
+(rotation residual) and the translation-scale gate (both sensors' translations in one unit) decide
+whether it is reported, with its one-sigma. The document is written with ``-o`` and, only when
+accepted, as /tf_static YAML.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from calibctl.core.extrinsics.handeye_gates import (
     consistency_gate,
     evaluate_handeye_gates,
     outlier_motions,
+    translation_scale_gate,
 )
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
@@ -140,6 +143,8 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
                              "check the motions for gross errors; one bad row can be found in the motions table")
     if fit is not None:
         gates = (*gates, consistency_gate(fit, th))
+        if gates[-1].passed:  # a rotation no single X explains leaves nothing to judge the translations by
+            gates = (*gates, translation_scale_gate(motions, fit, (parent_frame, child_frame)))
     accepted = all(g.passed for g in gates)
     rows, outliers = _motion_rows(motions, fit)
     transform = None

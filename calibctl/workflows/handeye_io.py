@@ -20,6 +20,7 @@ Every problem is an InputError (exit 2) naming the file and the line.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -171,6 +172,66 @@ def read_motions(path: Path, shape: str, max_skew_s: float) -> tuple[Motions, np
         motions = Motions.from_poses(T_a, T_b, tuple(str(int(line)) for line in table.lines), prefix="lines ")
     check_units(motions, path)
     return motions, times, table
+
+
+MATRIX_ROW_NUMBERS = 16  # a row-major 4x4 per line, as RWHE-Calib's RobotPosesVec.txt and many robot exports
+_SEPARATORS = re.compile(r"[\s,;]+")
+
+
+def _numbers(line: str) -> list[float] | None:
+    try:
+        return [float(v) for v in _SEPARATORS.split(line.strip()) if v]
+    except ValueError:
+        return None
+
+
+def read_matrix_rows(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """A robot pose file without a header: one row-major 4x4 ``T_base_gripper`` (16 numbers, metres) per line,
+    separated by whitespace, tabs, commas or semicolons; blank lines and ``#`` comments are skipped.
+
+    Returns:
+        ((n, 4, 4) transforms, (n,) file line numbers), or None when the first line is not all numbers
+        (a CSV with a header). Any other problem is an InputError naming the line.
+    """
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1) if line.strip() and not line.lstrip().startswith("#")]
+    if not rows or _numbers(rows[0][1]) is None:
+        return None
+    name = path.name
+    values = []
+    for line_no, line in rows:
+        numbers = _numbers(line)
+        if numbers is None:
+            raise InputError(f"{name} line {line_no}: not all numbers ({line.strip()[:60]!r})",
+                             hint="a pose file without a header has 16 numbers per line: a row-major 4x4 in metres")
+        if len(numbers) != MATRIX_ROW_NUMBERS:
+            raise InputError(f"{name} line {line_no}: {len(numbers)} numbers; a pose file without a header has "
+                             f"{MATRIX_ROW_NUMBERS} per line (a row-major 4x4 T_base_gripper, metres)",
+                             hint="or write the CSV with a header: image, gripper_r11..gripper_r33 (or gripper_q*), "
+                                  "gripper_tx_m, gripper_ty_m, gripper_tz_m")
+        values.append(numbers)
+    T = np.array(values, np.float64).reshape(-1, 4, 4)
+    lines = np.array([line_no for line_no, _ in rows], np.int64)
+    bad = ~np.isfinite(T).reshape(len(T), -1).all(axis=1)
+    if bad.any():
+        raise InputError(f"{name}: non-finite numbers (nan or inf) at {dio.lines_text(lines[bad])}",
+                         hint="export every pose in full")
+    bad = np.abs(T[:, 3, :] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > ORTHONORMAL_TOL
+    if bad.any():
+        raise InputError(f"{name}: the 4x4 does not end in 0 0 0 1 at {dio.lines_text(lines[bad])}",
+                         hint="each line is a row-major 4x4 T_base_gripper (a column-major export ends its "
+                              "lines with the translation; transpose it)")
+    error = np.array([se3.orthonormality_error(Ti[:3, :3]) for Ti in T])
+    bad = error > ORTHONORMAL_TOL
+    if bad.any():
+        raise InputError(f"{name}: rotation block not a rotation at {dio.lines_text(lines[bad])} "
+                         f"(|R^T R - I| or |det R - 1| up to {error.max():.2g})",
+                         hint="a rigid transform's 3x3 block has orthonormal rows and determinant +1; "
+                              "re-export it at full precision")
+    return T, lines
 
 
 def write_motion_log(path: Path, t_s: np.ndarray, T_first: np.ndarray, T_second: np.ndarray, *, force: bool) -> Path:

@@ -2,8 +2,10 @@
 
 The CSV has one row per arm pose: ``image`` (file name inside --images) and the gripper pose
 ``T_base_gripper`` as ``gripper_q*``/``gripper_r*_rad``/``gripper_r11..r33`` + ``gripper_t*_m`` (metres;
-see handeye_io). Each image is detected and solved with solvePnP on the camera's *active*
-calibration from the store. Then, with the board frame as b's world:
+see handeye_io). A file without a header, 16 numbers per line (a row-major 4x4, metres, as RWHE-Calib's
+RobotPosesVec.txt), is read too: its i-th line is the i-th image of --images in file-name order. Each image is detected and its board pose fitted on the camera's *active*
+calibration from the store, through that calibration's lens model (solvePnP for pinhole models,
+the fisheye projection for ``--model fisheye``). Then, with the board frame as b's world:
 
 - eye-in-hand (camera on the gripper): a = gripper in the base frame, X = T_gripper_camera;
 - eye-to-hand (camera fixed, board on the gripper): a = base seen from the gripper (inverse robot
@@ -28,6 +30,7 @@ from calibctl.core.detect import detect_board
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions
+from calibctl.core.image_outcomes import list_images
 from calibctl.errors import InputError, UsageError
 from calibctl.workflows import diagnostics_io as dio
 from calibctl.workflows import handeye_io
@@ -40,13 +43,33 @@ PREFIX = "gripper"
 MIN_POSES = 3
 
 
-def _read_robot_csv(path: Path) -> tuple[dio.Table, np.ndarray]:
-    table = dio.read_table(path, handeye_io.translation_columns(PREFIX),
-                           optional_numeric=handeye_io.all_pose_columns(PREFIX), optional_text=("image",),
-                           what="robot poses CSV")
-    if "image" not in table.text:
-        raise InputError(f"{path.name} has no image column", hint="one row per arm pose: image, gripper pose columns")
-    T_base_gripper = handeye_io.read_transforms(table, PREFIX)
+def _read_matrix_rows(path: Path, images: Path) -> tuple[dio.Table, np.ndarray] | None:
+    """A pose file without a header (handeye_io.read_matrix_rows): line i is the i-th image in name order."""
+    read = handeye_io.read_matrix_rows(path)
+    if read is None:
+        return None
+    T_base_gripper, lines = read
+    names = [p.name for p in list_images(images)]
+    if len(names) != len(lines):
+        raise InputError(f"{path.name} has {len(lines)} poses but {images} has {len(names)} images; a pose file "
+                         "without image names pairs its i-th pose with the i-th image in file-name order",
+                         hint="keep exactly the images the poses were recorded for in --images, or write the CSV "
+                              "with an image column")
+    return dio.Table(path, {}, {"image": np.array(names)}, lines), T_base_gripper
+
+
+def _read_robot_csv(path: Path, images: Path) -> tuple[dio.Table, np.ndarray]:
+    matrix_rows = _read_matrix_rows(path, images)
+    if matrix_rows is not None:
+        table, T_base_gripper = matrix_rows
+    else:
+        table = dio.read_table(path, handeye_io.translation_columns(PREFIX),
+                               optional_numeric=handeye_io.all_pose_columns(PREFIX), optional_text=("image",),
+                               what="robot poses CSV")
+        if "image" not in table.text:
+            raise InputError(f"{path.name} has no image column",
+                             hint="one row per arm pose: image, gripper pose columns")
+        T_base_gripper = handeye_io.read_transforms(table, PREFIX)
     reach = np.linalg.norm(T_base_gripper[:, :3, 3], axis=1)
     far = reach > handeye_io.ROBOT_REACH_MAX_M
     if far.any():
@@ -79,7 +102,7 @@ def _board_poses(table: dio.Table, images: Path, art: CalibrationArtifact, spec)
         hashes.append(hashlib.sha256(data).hexdigest())
         detection, reason = detect_board(gray, spec)
         T_cam_board, rms = (None, float("inf")) if detection is None else estimate_board_pose(
-            model[detection.corner_ids], detection.corners_px, K, dist)
+            model[detection.corner_ids], detection.corners_px, K, dist, art.model.name)
         if T_cam_board is None:
             skipped.append(f"{path.name} (line {int(line)}): {reason or 'no board pose'}")
         poses.append(T_cam_board)
@@ -107,7 +130,7 @@ def run_robot_handeye(settings: Settings, path: Path, images: Path | None, seria
         raise UsageError("the robot-arm case needs both --images DIR and --serial SERIAL")
     if not images.is_dir():
         raise InputError(f"--images {images} is not a folder")
-    table, T_base_gripper = _read_robot_csv(path)
+    table, T_base_gripper = _read_robot_csv(path, images)
     art, board = _load_camera(settings, serial, board_ref)
     poses, skipped, hashes = _board_poses(table, images, art, board_spec(board))
     keep = [i for i, T in enumerate(poses) if T is not None]

@@ -58,7 +58,7 @@ def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) 
     assert done.exit_code == 1, done.output
     assert "ratio 0.920" in done.stdout and "not solved: the distance gauge failed" in done.stdout
     # no calibration was stored
-    with Store.open(db) as store, pytest.raises(NotFoundError, match="unknown serial 'CAM-NEW'"):
+    with Store.open(db) as store, pytest.raises(NotFoundError, match="no calibration is stored for 'CAM-NEW'"):
         store.list_artifacts("CAM-NEW")
 
 

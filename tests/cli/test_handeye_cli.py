@@ -185,6 +185,27 @@ def test_an_arm_turning_about_its_tool_point_is_not_taken_for_millimetres(tmp_pa
     np.testing.assert_allclose(got, X[:3, 3], atol=1e-4)
 
 
+def test_millimetres_hidden_by_pure_rotations_are_refused_by_the_translation_scale_gate(tmp_path: Path) -> None:
+    # a's translations in mm: the arm's tool-point turns move it millimetres, the camera centimetres, so
+    # the median ratio looks like no unit error and the log was accepted with a lever arm of tens of
+    # metres. The translation half of A X = X B with a free scale on a gives 0.001: refused, unit named.
+    log, _ = _tool_point_log(tmp_path / "tcp.csv")
+
+    def to_mm(i, row):
+        row.update({c: repr(float(row[c]) * 1000) for c in ("a_tx_m", "a_ty_m", "a_tz_m")})
+
+    result = handeye(rewrite(log, tmp_path / "tcp_mm.csv", to_mm), "--json")
+    assert result.exit_code == 1, result.output
+    doc = HandEyeResult.model_validate(json.loads(result.stdout))
+    assert doc.status == "rejected" and doc.transform is None
+    failed = [g for g in doc.gates if not g.passed]
+    assert [g.gate for g in failed] == ["translation-scale"]
+    assert failed[0].value == pytest.approx(1000.0, rel=0.01)
+    assert "lidar's translations look like millimetres, not metres" in failed[0].message
+    clean = json.loads(handeye(log, "--json").stdout)["gates"]
+    assert next(g for g in clean if g["gate"] == "translation-scale")["value"] == pytest.approx(1.0, abs=1e-3)
+
+
 def test_rotation_vector_in_degrees(tmp_path: Path) -> None:
     def to_rotvec_deg(i, row):
         q = np.array([float(row.pop(f"b_q{c}")) for c in "wxyz"])

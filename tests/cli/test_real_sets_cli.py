@@ -65,7 +65,7 @@ def test_solve_report_into_a_folder_it_cannot_write_stores_nothing(db: str, tmp_
     assert f"cannot write reports to {reports}: permission denied" in r.stderr
     monkeypatch.undo()
     r = invoke(db, "history", "L1")
-    assert r.exit_code == 2 and "unknown serial 'L1'" in r.stderr  # no version was stored
+    assert r.exit_code == 2 and "no calibration is stored for 'L1'" in r.stderr  # no version was stored
 
 
 def test_the_tilt_hint_does_not_deny_the_directions_the_table_shows(db: str, tmp_path: Path) -> None:

@@ -252,7 +252,7 @@ def test_solve_report_onto_a_file_exits_2_before_solving(run, tmp_path):
     not_a_folder.write_text("x", encoding="utf-8")
     result = run("solve", "--serial", SERIAL, "--report", str(not_a_folder))
     assert result.exit_code == 2 and "it is not a folder" in result.stderr
-    assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+    assert "no calibration is stored for" in run("history", SERIAL).stderr  # nothing was stored
 
 
 def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path):
@@ -263,7 +263,7 @@ def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path
     assert result.exit_code == 2, result.output
     assert f"{page} already exists" in " ".join(result.stderr.split())
     assert "nothing was stored" in result.stderr
-    assert "unknown serial" in run("history", SERIAL).stderr  # nothing was stored
+    assert "no calibration is stored for" in run("history", SERIAL).stderr  # nothing was stored
     assert page.read_text(encoding="utf-8") == "an older store's page"
 
 

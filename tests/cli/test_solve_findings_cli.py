@@ -41,7 +41,7 @@ def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sql
     assert "one_camera" in result.stdout and "two cameras" in result.stdout
     assert "not solved: the capture gates failed" in result.stdout
     history = RUNNER.invoke(app, ["--db", sqlite_url, "history", "STEREO-MIX"])
-    assert history.exit_code == 2 and "unknown serial" in history.output  # no calibration was made
+    assert history.exit_code == 2 and "no calibration is stored for 'STEREO-MIX'" in history.output  # no calibration was made
     with Store.open(sqlite_url) as store:
         session = store.latest_session("STEREO-MIX", status=None)
         assert session.status == "rejected"

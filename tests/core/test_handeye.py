@@ -203,3 +203,51 @@ def test_thresholds_refuse_impossible_values():
         gates.HandEyeThresholds(mismatch_fraction_max=1.0)
     with pytest.raises(ValueError):
         gates.HandEyeThresholds(rotation_residual_max_deg=-1.0)
+
+
+def _scaled(log, scale_a: float, scale_b: float = 1.0) -> he.Motions:
+    T_a, T_b = log.T_first.copy(), log.T_second.copy()
+    T_a[:, :3, 3] *= scale_a
+    T_b[:, :3, 3] *= scale_b
+    return he.Motions.from_poses(T_a, T_b, tuple(str(i) for i in range(len(T_a))))
+
+
+@pytest.mark.parametrize("noise_m", [0.002, 0.02])
+def test_translation_scale_is_one_for_metric_logs_and_the_unit_factor_for_a_wrong_unit(noise_m):
+    # The translation half with a free scale on a: 1 when both are in metres (noise moves it < 2 % on
+    # these logs), 1/1000 when a is in mm, 100 when b is in cm: whatever lever arm the solve produced.
+    log = synthesize_pose_log(X_3D, 30, noise_translation_m=noise_m, seed=3)
+    for scale_a, scale_b, expected in ((1.0, 1.0, 1.0), (1000.0, 1.0, 1e-3), (1.0, 100.0, 100.0)):
+        motions = _scaled(log, scale_a, scale_b)
+        s, sigma = he.translation_scale(motions, fit_handeye(motions).T_a_b[:3, :3])
+        assert s == pytest.approx(expected, rel=0.05) and sigma < 0.05 * expected
+
+
+def test_translation_scale_gate_names_the_unit_and_the_sensor():
+    log = synthesize_pose_log(X_3D, 30, seed=3)
+    clean = _scaled(log, 1.0)
+    gate = gates.translation_scale_gate(clean, fit_handeye(clean), ("lidar", "camera"))
+    assert gate.passed and gate.value < 1.05 and gate.gate == "translation-scale"
+    for scale_a, scale_b, sensor, unit in ((1000.0, 1.0, "lidar", "millimetres"), (1.0, 100.0, "camera", "centimetres"),
+                                           (1 / 0.3048, 1.0, "lidar", "feet")):
+        motions = _scaled(log, scale_a, scale_b)
+        fit = fit_handeye(motions)
+        gate = gates.translation_scale_gate(motions, fit, ("lidar", "camera"))
+        assert not gate.passed and gate.reason == "translation_scale.unit"
+        assert f"{sensor}'s translations look like {unit}, not metres" in gate.message
+        assert gate.hint == f"convert {sensor}'s translations to metres"
+    motions = _scaled(log, 2.0)  # no unit: a scale-free odometry, a wrong square size
+    gate = gates.translation_scale_gate(motions, fit_handeye(motions), ("lidar", "camera"))
+    assert not gate.passed and gate.reason == "translation_scale.mismatch" and gate.value == pytest.approx(2.0, rel=0.05)
+
+
+def test_translation_scale_is_not_judged_when_a_never_translates():
+    # a turns about its own origin in every motion: its translations (and their unit) carry nothing
+    rotvecs = np.array([[0.6, 0.0, 0.0], [0.0, 0.7, 0.0], [0.0, 0.0, 0.8], [0.4, 0.4, 0.0]])
+    R_A = np.array([se3.rotation_from_rotvec(v) for v in rotvecs])
+    A = np.array([se3.transform(R, np.zeros(3)) for R in R_A])
+    B = np.array([se3.invert(X_3D) @ T @ X_3D for T in A])
+    motions = he.Motions.from_transforms(A, B, tuple(f"m{i}" for i in range(4)))
+    s, sigma = he.translation_scale(motions, X_3D[:3, :3])
+    assert sigma == np.inf
+    assert gates.translation_scale_gate(motions, fit_handeye(motions)).passed

@@ -53,3 +53,21 @@ def test_missing_sessions_name_what_exists(store: Store):
         store.latest_session("CAM-0001")
     with pytest.raises(NotFoundError, match="no accepted capture session for serial 'CAM-7'; serials with sessions: CAM-0001"):
         store.latest_session("CAM-7")
+
+
+def test_a_serial_with_sessions_but_no_calibration_is_not_called_unknown(store: Store):
+    # Its capture was rejected at the gates, so no calibration was ever stored: the serial is known.
+    store.add_session(capture_session("aaaaaaaaaaa1", status="rejected"))
+    with pytest.raises(NotFoundError) as info:
+        store.get_artifact("CAM-0001")
+    assert "unknown serial" not in info.value.message
+    assert info.value.message == ("no calibration is stored for 'CAM-0001': its capture sessions were rejected at "
+                                  "the gates, so it has no accepted version (aaaaaaaaaaa1 (rejected))")
+    assert info.value.hint is not None and "calibctl calibrate --serial CAM-0001" in info.value.hint
+    store.add_session(capture_session("aaaaaaaaaaa2", minutes_after=5))  # accepted, never solved
+    with pytest.raises(NotFoundError, match=r"it has capture sessions \(aaaaaaaaaaa1 \(rejected\), aaaaaaaaaaa2 "
+                                            r"\(accepted\)\) but none was solved") as info:
+        store.get_artifact("CAM-0001")
+    assert info.value.hint == "solve it: `calibctl solve --serial CAM-0001`"
+    with pytest.raises(NotFoundError, match="unknown serial 'CAM-7'"):  # no session either: still unknown
+        store.get_artifact("CAM-7")

@@ -124,6 +124,20 @@ def test_a_camera_with_no_active_calibration_is_exit_2(scenes, settings) -> None
     assert result.exit_code == 2 and "CAM-0404" in result.stderr and "Traceback" not in result.output
 
 
+def test_a_camera_whose_capture_was_rejected_is_named_as_such_not_unknown(scenes, settings) -> None:
+    from tests.store.documents import capture_session
+
+    with Store.open(settings.db_url) as store:
+        store.add_session(capture_session("aaaaaaaaaaa1", serial="CAM-0002", status="rejected"))
+    d = scenes["in-hand"]
+    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(d / "poses.csv"), "--from", "gripper",
+                                      "--to", "camera", "--images", str(d), "--serial", "CAM-0002"], terminal_width=200)
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "unknown serial" not in result.stderr
+    assert "no calibration is stored for 'CAM-0002': its capture sessions were rejected at the gates" in result.stderr
+    assert "calibctl calibrate --serial CAM-0002" in result.stderr
+
+
 def test_robot_poses_in_millimetres_are_named(scenes, settings, tmp_path: Path) -> None:
     d = scenes["in-hand"]
     rows = list(csv.reader((d / "poses.csv").open()))
@@ -198,3 +212,58 @@ def test_images_without_a_board_are_skipped_and_too_few_left_is_exit_2(scenes, s
         cv2.imwrite(str(p), blank)
     with pytest.raises(InputError, match="the board was found in 0 of 15 images"):
         run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera")
+
+
+def _pose_rows(d: Path) -> list[np.ndarray]:
+    """The scene's T_base_gripper per image, in image-name order, from its CSV."""
+    rows = list(csv.DictReader((d / "poses.csv").open()))
+    out = []
+    for row in sorted(rows, key=lambda r: r["image"]):
+        q = np.array([float(row[f"gripper_q{c}"]) for c in "wxyz"])
+        out.append(se3.transform(se3.rotation_from_quaternion(q), [float(row[f"gripper_t{c}_m"]) for c in "xyz"]))
+    return out
+
+
+def _write_vec(path: Path, poses: list[np.ndarray], sep: str = "\t") -> Path:
+    path.write_text("".join(sep.join(f"{v:.12f}" for v in T.ravel()) + "\n" for T in poses))
+    return path
+
+
+@pytest.mark.parametrize("sep", ["\t", ",", "  "])
+def test_a_headerless_file_of_16_numbers_per_line_is_read_in_image_order(scenes, settings, tmp_path, sep) -> None:
+    # RWHE-Calib's RobotPosesVec.txt layout: one row-major 4x4 T_base_gripper (metres) per image, no names
+    d = scenes["in-hand"]
+    vec = _write_vec(tmp_path / "RobotPosesVec.txt", _pose_rows(d), sep)
+    got = run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera").result
+    want = run_robot_handeye(settings, d / "poses.csv", d, "CAM-0001", "gripper", "camera").result
+    assert got.status == "accepted" and got.transform is not None and want.transform is not None
+    np.testing.assert_allclose(got.transform.translation_m, want.transform.translation_m, atol=1e-9)
+    assert [m.label for m in got.motions] == [m.label for m in want.motions]  # the same images, paired alike
+
+
+def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_path) -> None:
+    d = scenes["in-hand"]
+    poses = _pose_rows(d)
+    vec = tmp_path / "p.txt"
+    vec.write_text("".join(" ".join("1" for _ in range(12)) + "\n" for _ in poses))
+    with pytest.raises(InputError, match=r"p.txt line 1: 12 numbers; a pose file without a header has 16 per line"):
+        run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera")
+    bad = [T.copy() for T in poses]
+    bad[3][0, 3] = np.nan
+    with pytest.raises(InputError, match=r"p.txt: non-finite numbers \(nan or inf\) at line 4"):
+        run_robot_handeye(settings, _write_vec(vec, bad), d, "CAM-0001", "gripper", "camera")
+    bad = [T.copy() for T in poses]
+    bad[2][:3, :3] *= 1.01
+    with pytest.raises(InputError, match=r"p.txt: rotation block not a rotation at line 3"):
+        run_robot_handeye(settings, _write_vec(vec, bad), d, "CAM-0001", "gripper", "camera")
+    with pytest.raises(InputError, match=r"the 4x4 does not end in 0 0 0 1 at lines 1, 2"):
+        run_robot_handeye(settings, _write_vec(vec, [T.T for T in poses]), d, "CAM-0001", "gripper", "camera")
+    with pytest.raises(InputError, match=r"p.txt has 14 poses but .* has 15 images"):
+        run_robot_handeye(settings, _write_vec(vec, poses[:-1]), d, "CAM-0001", "gripper", "camera")
+    text = _write_vec(vec, poses).read_text().splitlines()
+    vec.write_text("\n".join([*text[:5], "1 2 three 4", *text[5:]]) + "\n")
+    with pytest.raises(InputError, match=r"p.txt line 6: not all numbers"):
+        run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera")
+    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(_write_vec(vec, poses[:-1])), "--from",
+                                      "gripper", "--to", "camera", "--images", str(d), "--serial", "CAM-0001"])
+    assert result.exit_code == 2 and "14 poses but" in result.stderr and "Traceback" not in result.output

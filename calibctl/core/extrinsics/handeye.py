@@ -109,6 +109,27 @@ def solve_translation(motions: Motions, R_X: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(lhs, rhs, rcond=None)[0]
 
 
+def translation_scale(motions: Motions, R_X: np.ndarray) -> tuple[float, float]:
+    """The scale s on a's translations that best fits the translation half, ``(R_A - I) t_X + s t_A = R_X t_B``.
+
+    With R_X known the equation is linear in (t_X, s), so one least-squares solve gives s and its
+    one-sigma (from the residual scatter, dof 3n - 4). Both sensors in metres: s = 1 within the noise;
+    a's translations in millimetres: s = 0.001 (b's: 1000), whatever the lever arm turned out to be.
+
+    Returns:
+        (s, sigma_s); sigma_s is inf when the motions do not determine s (a never translates).
+    """
+    lhs = np.concatenate([(motions.R_A - np.eye(3)).reshape(-1, 3), motions.t_A_m.reshape(-1, 1)], axis=1)
+    rhs = (motions.t_B_m @ R_X.T).reshape(-1)
+    solution, _, rank, _ = np.linalg.lstsq(lhs, rhs, rcond=None)
+    dof = lhs.shape[0] - lhs.shape[1]
+    if rank < lhs.shape[1] or dof <= 0:
+        return float(solution[3]), float("inf")
+    variance = float(np.sum((lhs @ solution - rhs) ** 2)) / dof
+    sigma = float(np.sqrt(max(variance, 0.0) * np.linalg.inv(lhs.T @ lhs)[3, 3]))
+    return float(solution[3]), sigma
+
+
 def lever_arm_sigma_m(R_A: np.ndarray, sigma_motion_translation_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Error propagation of the translation solve: lever-arm one-sigma along each excited direction.
 

@@ -18,6 +18,18 @@ After the solve, one more gate before the number is reported:
   given as gripper->base, mismatched rows) leave degrees, which an observability gate cannot see
   when the angles of A and B still agree.
 
+- translation-scale: the rotation residual cannot see a unit error in the translations, and on a
+  log dominated by pure rotation (an arm turning about its tool point moves it micrometres) the
+  translation norms cannot either (handeye_io.check_units). The translation half
+  ``(R_A - I) t_X = R_X t_B - t_A`` can: with R_X fixed it is linear in t_X and a scale s on a's
+  translations, and rigid sensors in one unit give s = 1. Measured (2026-11-26, real RWHE-Calib KUKA
+  logs, camera poses from the board): s = 0.998 (kuka_1) and 1.058 (kuka_2: the 15 mm board against
+  the robot's metres, 6 % apart); seeded pose/motion logs with 2-20 mm noise within 2 % of 1. The
+  same logs with a's translations in mm: s = 0.000998 / 0.001058 (lever arms of 1298 m / 406 m and
+  translation residuals of 220 m / 7.5 m accepted before this gate); in cm 0.0100 / 0.0106, in
+  inches 0.025 / 0.027, in feet 0.304 / 0.323. So a disagreement beyond 1.25x is refused; a factor
+  near 1000, 100, 39.4 or 3.28 is named as the unit.
+
 Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.
 """
 
@@ -28,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibctl.core.extrinsics.handeye import Motions
+from calibctl.core.extrinsics.handeye import Motions, translation_scale
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit
 from calibctl.core.gates import GateResult
 
@@ -41,6 +53,10 @@ OUTLIER_FACTOR = 4.0  # |r| / robust sigma: the 99.9 % point of a 3-D Gaussian's
 CHI3_MEDIAN = 1.5382  # median of the norm of a 3-D standard Gaussian
 MIN_MOTIONS_FOR_OUTLIERS = 5
 MAX_NAMED = 5
+TRANSLATION_SCALE_MAX = 1.25  # real logs 1.00-1.06, a wrong unit >= 3.1 (feet); see the module docstring
+SCALE_DETERMINED_SIGMAS = 3.0  # |s - 1| within 3 sigma_s: the motions do not pin the scale, nothing to judge
+UNIT_FACTORS = (("millimetres", 1000.0), ("centimetres", 100.0), ("inches", 1 / 0.0254), ("feet", 1 / 0.3048))
+UNIT_FACTOR_TOL = 0.15  # a board's square size or an odometry's scale can add a few per cent to the unit's factor
 
 
 @dataclass(frozen=True)
@@ -159,6 +175,43 @@ def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:
                       "consistency.rotation_residual",
                       "check the pose conventions (a robot arm: base->gripper poses, --eye-in-hand vs "
                       "--eye-to-hand), that each row pairs the same instant, and the outlier motions")
+
+
+def _unit_named(factor: float) -> str | None:
+    for unit, expected in UNIT_FACTORS:
+        if abs(factor / expected - 1.0) <= UNIT_FACTOR_TOL:
+            return unit
+    return None
+
+
+def translation_scale_gate(motions: Motions, fit: HandEyeFit, names: tuple[str, str] = ("a", "b")) -> GateResult:
+    """After the solve (and a passed consistency gate): are both sensors' translations in one unit?
+
+    Value: the disagreement factor max(|s|, 1/|s|) of the scale s on a's translations (see the module
+    docstring); a negative s (translations pointing against each other) fails whatever its size.
+    """
+    s, sigma = translation_scale(motions, fit.T_a_b[:3, :3])
+    size = max(abs(s), 1e-300)
+    factor = max(size, 1.0 / size)
+    determined = abs(s - 1.0) > SCALE_DETERMINED_SIGMAS * sigma
+    detail: dict[str, float | int | str | list[str]] = {
+        "scale_a": round(s, 9), "sigma_scale_a": round(sigma, 9) if math.isfinite(sigma) else "undetermined"}
+    message = (f"{names[0]}'s translations fit {names[1]}'s at scale {s:.4g} (+/- {sigma:.2g}; "
+               f"max disagreement {TRANSLATION_SCALE_MAX:g}x)")
+    if not determined or (s > 0 and factor <= TRANSLATION_SCALE_MAX):
+        return GateResult("translation-scale", True, factor, TRANSLATION_SCALE_MAX, message, detail=detail)
+    big = names[0] if abs(s) < 1 else names[1]
+    unit = _unit_named(factor) if s > 0 else None
+    if unit is not None:
+        return GateResult("translation-scale", False, factor, TRANSLATION_SCALE_MAX,
+                          f"translation units disagree: {message}: {big}'s translations look like {unit}, not metres",
+                          "translation_scale.unit", f"convert {big}'s translations to metres", detail)
+    return GateResult("translation-scale", False, factor, TRANSLATION_SCALE_MAX,
+                      f"translation scales disagree: {message}",
+                      "translation_scale.mismatch",
+                      "both logs must be metric and in metres: check the board's square size (it sets a camera's "
+                      "scale), that neither log is scale-free (monocular visual odometry) and the pose conventions",
+                      detail)
 
 
 def outlier_motions(fit: HandEyeFit) -> np.ndarray:
