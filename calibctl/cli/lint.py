@@ -8,8 +8,7 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stdout
-from calibctl.cli.report import print_findings
+from calibctl.cli.plain_text import emit_json, finding_lines, plain, terminal_paint
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 FORMATS = ("text", "json", "github")
@@ -61,10 +60,11 @@ def lint(
                 print(_github_line(r.source, f))
         print(f"calibctl lint: {sum(r.failed for r in results)} of {len(results)} calibration(s) failed")
     else:
-        for r in results:
-            verdict = "[red]FAIL[/red]" if r.failed else "[green]pass[/green]"
-            stdout.print(f"{r.source} ({r.kind}): {verdict}")
-            print_findings(r.findings)
+        for r in results:  # plain print: `lint FILE` starts without importing rich (calibctl.cli.plain_text)
+            verdict = terminal_paint("red", "FAIL") if r.failed else terminal_paint("green", "pass")
+            print(f"{plain(r.source)} ({r.kind}): {verdict}")
+            for line in finding_lines(r.findings, terminal_paint):
+                print(line)
     if failed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 

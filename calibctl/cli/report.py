@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 from rich import box
 from rich.table import Table
 
+from calibctl.cli.plain_text import finding_lines
 from calibctl.cli.render import fmt_px, shown, stdout
 
 if TYPE_CHECKING:
@@ -79,14 +80,8 @@ def print_gates(gates: list[GateResult]) -> None:
 
 
 def print_findings(findings: list[Finding]) -> None:
-    if not findings:
-        stdout.print("  lint: [green]clean[/green]")
-        return
-    for f in findings:
-        style = {"error": "red", "warning": "yellow"}.get(f.severity, "cyan")
-        stdout.print(f"  lint [{style}]{f.severity}[/{style}] {shown(f.rule)}: {shown(f.message)}")
-        if f.fix and f.severity != "info":
-            stdout.print(f"       fix: {shown(f.fix)}")
+    for line in finding_lines(findings, lambda colour, word: f"[{colour}]{word}[/{colour}]", shown):
+        stdout.print(line)
 
 
 def history_table(rows: list, serial: str) -> Table:

@@ -124,11 +124,14 @@ def test_a_ros_export_loads_yaml_to_write_it_and_nothing_else_a_read_does_not(st
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS) and m.split(".")[0] != "yaml") == []
 
 
-def test_linting_a_json_file_loads_numpy_but_no_yaml_store_or_crypto_module() -> None:
+def test_linting_a_json_file_loads_numpy_but_no_yaml_store_crypto_or_rich_module() -> None:
     # lint's rules (the distortion fold-over scan, the principal point, ...) compute with numpy: it stays.
-    loaded = _run_loading(["lint", str(REPO / "fixtures/camera_front.json")])
-    assert "numpy" in loaded and "calibctl.workflows.lint" in loaded
-    assert sorted(m for m in loaded if m.startswith(("yaml", "sqlalchemy", "calibctl.store", "cryptography"))) == []
+    # Its text prints through calibctl.cli.plain_text, so neither rich nor the rich renderers load.
+    for fmt in ("text", "json", "github"):
+        loaded = _run_loading(["lint", str(REPO / "fixtures/camera_front.json"), "--format", fmt])
+        assert "numpy" in loaded and "calibctl.workflows.lint" in loaded
+        assert sorted(m for m in loaded if m.startswith(("yaml", "sqlalchemy", "calibctl.store", "cryptography", "rich",
+                                                         "calibctl.cli.render", "calibctl.cli.report"))) == []
 
 
 NUMPY_BLAS_THREADS = """
