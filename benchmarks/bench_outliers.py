@@ -90,7 +90,7 @@ def run(size: tuple[int, int], sessions: int) -> list[str]:
     r = np.concatenate(ratios)
     return [f"| {size[0]}x{size[1]} | {sessions} | {views} | {old} ({100 * old / views:.1f} %) | "
             f"{new} ({100 * new / views:.1f} %) | {corners} | {np.quantile(r, 0.99):.2f} | {worst[0]:.2f} (seed {worst[1]}) "
-            f"| {max(split_ratios):.2f}, {suspected} suspected |"]
+            f"| {max(split_ratios):.2f}, {suspected} suspected, {len(split_ratios)} of {sessions} judged |"]
 
 
 def real_two_camera_rows() -> list[str]:
@@ -124,7 +124,7 @@ def main() -> None:
     print(f"# bench_outliers: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
           f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}\n")
     print("| size | sessions | views | views flagged, old rule | views flagged, calibctl | corners removed "
-          "| per-view RMS / median, p99 | max | two-camera ratio: max, sessions suspected |")
+          "| per-view RMS / median, p99 | max | two-camera ratio: max, sessions suspected, judged |")
     print("|---|---|---|---|---|---|---|---|---|")
     for size in sizes:
         print("\n".join(run((size[0], size[1]), args.sessions)), flush=True)
