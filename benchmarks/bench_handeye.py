@@ -37,7 +37,12 @@ from calibctl.core.detect import detect_board
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions, lever_arm_sigma_m
-from calibctl.core.extrinsics.handeye_gates import HandEyeThresholds, consistency_gate, evaluate_handeye_gates
+from calibctl.core.extrinsics.handeye_gates import (
+    HandEyeThresholds,
+    consistency_gate,
+    evaluate_handeye_gates,
+    translation_scale_gate,
+)
 from calibctl.core.extrinsics.handeye_refine import fit_handeye
 from calibctl.core.extrinsics.motion_synth import robot_arm_poses, synthesize_motions, synthesize_pose_log
 from calibctl.core.synth import PinholeCamera, render_view
@@ -80,8 +85,10 @@ def calibctl_solve(T_wa_a: np.ndarray, T_wb_b: np.ndarray, method: str = "park")
     motions = Motions.from_poses(T_wa_a, T_wb_b, tuple(str(i) for i in range(len(T_wa_a))))
     failed = [g.message for g in evaluate_handeye_gates(motions) if not g.passed]
     fit = None if failed else fit_handeye(motions, method)
-    if fit is not None and not (gate := consistency_gate(fit, HandEyeThresholds())).passed:
-        return None, [gate.message]
+    # the gates `calibctl handeye` applies after the solve, in its order (workflows.handeye)
+    for gate in () if fit is None else (consistency_gate(fit, HandEyeThresholds()), translation_scale_gate(motions, fit)):
+        if not gate.passed:
+            return None, [gate.message]
     return fit, failed
 
 
@@ -204,7 +211,7 @@ def section_speed(repeats: int, cv4: str | None) -> list[str]:
     logs = {n: synthesize_pose_log(X_TRUE, n, noise_rotation_deg=0.05, noise_translation_m=0.002, seed=1) for n in (15, 200)}
     res = run_cv4(cv4, {f"speed{n}": cv4_case(v.T_first, v.T_second) for n, v in logs.items()}, repeats)
     out = [f"## 6. Speed of one solve (best of {repeats} in-process calls, ms)", "",
-           "| poses | calibctl: gates + park + joint refinement + covariance + consistency gate | " +
+           "| poses | calibctl: gates + park + joint refinement + covariance + consistency and translation-scale gates | " +
            " | ".join(f"OpenCV {m}" for m in CV4_METHODS) + " |", "|---|---|" + "---|" * len(CV4_METHODS)]
     for n, log in logs.items():
         best = float("inf")
