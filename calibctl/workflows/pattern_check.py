@@ -160,9 +160,8 @@ def nothing_found_error(spec: BoardSpec, board_ref: str, board_name: str, where:
     found = _probe_near(samples, spec, patterns)
     # a board two or more corners off is not among the near patterns: name what SB sees, once the classic
     # detector confirms it
-    for size in seen_sizes(samples, spec):
-        if size not in found and size != (spec.cols, spec.rows):
-            found.update(probe(samples, spec, [size], classic_only=True))
+    seen = [size for size in seen_sizes(samples, spec) if size not in found and size != (spec.cols, spec.rows)]
+    found.update(probe(samples, spec, seen, classic_only=True))
     # a sub-board of the real one is found wherever the real one is: prefer the most hits, then the largest
     visible = sorted(((p, names) for p, names in found.items() if names),
                      key=lambda item: (len(item[1]), item[0][0] * item[0][1]), reverse=True)
