@@ -4,10 +4,10 @@ of a 2 px principal-point shift from 10 views, and the check's compute time agai
 Reference calibrations: the seed's camera (calibctl synth's lens, 640x480), "good" scenario poses, 20 views,
 solved with the production model (k1k2) plus calibctl's held-out validation (what `calibctl solve`
 stores). Check sessions: 10 fresh "good" views of the SAME camera (unchanged), or of the camera with
-fx and fy x1.005, or with cx + 2 px, checked with calibctl.core.recheck against the reference.
+fx and fy x1.005, or with cx + 2 px, checked with calibctl.core.check.recheck against the reference.
 
 Two sources of corners:
-  --mode renders: rendered board photos (calibctl.core.synth, random photometry per view) detected by
+  --mode renders: rendered board photos (calibctl.core.synth.pinhole, random photometry per view) detected by
       calibctl's detector - the real pipeline; sessions cached in benchmarks/out/check-sessions/.
   --mode corners: projected corners plus Gaussian noise (--noise-px per coordinate, default 0.03, what
       the renders leave: measured below), fast enough for thousands of sessions.
@@ -33,13 +33,13 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import cpu_model  # noqa: E402
 
-from calibctl.core.board_spec import BoardSpec  # noqa: E402
-from calibctl.core.detect import detect_board  # noqa: E402
-from calibctl.core.recheck import Reference, recheck  # noqa: E402
-from calibctl.core.solve import solve_intrinsics  # noqa: E402
-from calibctl.core.synth import Photometry, PinholeCamera, render_background, render_view  # noqa: E402
-from calibctl.core.synth_scenes import _cell_targets, _sample_pose, default_distance_range_m, scenario_poses  # noqa: E402
-from calibctl.core.validation import validate_holdout  # noqa: E402
+from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
+from calibctl.core.capture.detect import detect_board  # noqa: E402
+from calibctl.core.check.recheck import Reference, recheck  # noqa: E402
+from calibctl.core.intrinsics.solve import solve_intrinsics  # noqa: E402
+from calibctl.core.intrinsics.validation import validate_holdout  # noqa: E402
+from calibctl.core.synth.pinhole import Photometry, PinholeCamera, render_background, render_view  # noqa: E402
+from calibctl.core.synth.scenes import _cell_targets, _sample_pose, default_distance_range_m, scenario_poses  # noqa: E402
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 SIZE = (640, 480)

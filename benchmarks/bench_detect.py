@@ -41,11 +41,11 @@ import cv2
 import numpy as np
 from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
 
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import CLASSIC_FLAGS, detect_chessboard
-from calibctl.core.image_outcomes import classify_files, list_images
-from calibctl.core.synth import Photometry, PinholeCamera, render_view, true_corners_px
-from calibctl.core.synth_scenes import scenario_poses
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.detect import CLASSIC_FLAGS, detect_chessboard
+from calibctl.core.capture.image_outcomes import classify_files, list_images
+from calibctl.core.synth.pinhole import Photometry, PinholeCamera, render_view, true_corners_px
+from calibctl.core.synth.scenes import scenario_poses
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 N_IMAGES = 20

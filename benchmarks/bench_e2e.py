@@ -167,7 +167,7 @@ class CalibctlRig:
         import datetime as dt
 
         from calibctl.store.repository import Store
-        from calibctl.workflows.boards import BoardRegistration, build_board
+        from calibctl.workflows.board.boards import BoardRegistration, build_board
 
         self.work, self.model = work, model
         work.mkdir(parents=True, exist_ok=True)
@@ -189,7 +189,7 @@ class CalibctlRig:
 
     def run(self, folder: Path):
         """capture + solve in-process, the library call ``calibctl calibrate`` makes. Returns the artifact."""
-        from calibctl.workflows import capture as capture_workflow
+        from calibctl.workflows.camera import capture as capture_workflow
 
         request = capture_workflow.CaptureRequest(serial=SERIAL, board=BOARD_NAME, source=str(folder))
         result = capture_workflow.calibrate(self.settings(), request, model=self.model)
@@ -216,20 +216,20 @@ class CalibctlRig:
 # per-stage profile of one calibctl run ------------------------------------------------------------
 
 PROFILE_TARGETS = (  # (module, attribute, stage); a missing one is skipped
-    ("calibctl.core.image_outcomes", "classify_session", "detection (read, sha256, decode, detect, blur; 2 threads)"),
-    ("calibctl.workflows.capture", "evaluate_gates", "gates"),
-    ("calibctl.workflows.pattern_check", "larger_board_error", "board-size probe (is it a larger chessboard?)"),
+    ("calibctl.core.capture.image_outcomes", "classify_session", "detection (read, sha256, decode, detect, blur; 2 threads)"),
+    ("calibctl.workflows.camera.capture", "evaluate_gates", "gates"),
+    ("calibctl.workflows.camera.pattern_check", "larger_board_error", "board-size probe (is it a larger chessboard?)"),
     ("calibctl.store.repository:Store", "open", "store open (engine, schema check)"),
     ("calibctl.store.repository:Store", "get_board", "store reads (board, session)"),
     ("calibctl.store.repository:Store", "get_session", "store reads (board, session)"),
     ("calibctl.store.repository:Store", "put_image", "store write: images"),
     ("calibctl.store.repository:Store", "put_images", "store write: images"),  # folders, since 2026-11-22
     ("calibctl.store.repository:Store", "add_session", "store write: session + corners"),
-    ("calibctl.workflows.solve", "solve_intrinsics", "solve (calibrateCameraExtended + sigma)"),
-    ("calibctl.workflows.solve", "flag_outliers", "outlier flags"),
-    ("calibctl.workflows.solve", "validate_holdout", "held-out k-fold validation"),
-    ("calibctl.workflows.solve", "facts_from_document", "lint"),
-    ("calibctl.workflows.solve", "lint_facts", "lint"),
+    ("calibctl.workflows.camera.solve", "solve_intrinsics", "solve (calibrateCameraExtended + sigma)"),
+    ("calibctl.workflows.camera.solve", "flag_outliers", "outlier flags"),
+    ("calibctl.workflows.camera.solve", "validate_holdout", "held-out k-fold validation"),
+    ("calibctl.workflows.camera.solve", "facts_from_document", "lint"),
+    ("calibctl.workflows.camera.solve", "lint_facts", "lint"),
     ("calibctl.store.repository:Store", "add_artifact", "store write: artifact (seal, version, activate)"),
 )
 
@@ -345,8 +345,8 @@ def accuracy_row(name: str, model: str, r: dict, truth: dict, corner_err: float,
 
 
 def calibctl_solve_on(plain: dict, square: float, model: str) -> dict:
-    """calibctl's solver (core.solve.solve_intrinsics) on the plain script's corners: the solver alone."""
-    from calibctl.core.solve import solve_intrinsics
+    """calibctl's solver (core.intrinsics.solve.solve_intrinsics) on the plain script's corners: the solver alone."""
+    from calibctl.core.intrinsics.solve import solve_intrinsics
 
     grid = np.zeros((PATTERN[0] * PATTERN[1], 3))
     grid[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * square

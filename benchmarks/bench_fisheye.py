@@ -1,6 +1,6 @@
 """Fisheye (equidistant Kannala-Brandt): is calibctl's sigma honest, and how does plain cv2.fisheye do on the same corners?
 
-Sessions (calibctl.core.synth_fisheye, corner level): 1280x960, fields of view cycling 150 / 170 / 190 deg,
+Sessions (calibctl.core.synth.fisheye, corner level): 1280x960, fields of view cycling 150 / 170 / 190 deg,
 circular and full-frame alternating (full-frame at 150 and 170 only: a 190 deg full-frame lens puts most
 of the frame behind the camera plane), k = (0.02, -0.006, 0.001, -0.0002), principal point off-centre
 (+3.3, -2.1 px), 15-20 views (15 + i % 6) of a 9 x 6 board tilted 15-45 deg, every fourth view in the
@@ -40,9 +40,9 @@ from datetime import UTC, datetime
 import cv2
 import numpy as np
 
-from calibctl.core.fisheye_model import focal_guess_px
-from calibctl.core.solve import solve_intrinsics
-from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session
+from calibctl.core.intrinsics.fisheye_model import focal_guess_px
+from calibctl.core.intrinsics.solve import solve_intrinsics
+from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import cpu_model  # noqa: E402

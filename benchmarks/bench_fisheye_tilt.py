@@ -22,13 +22,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
-from calibctl.core.gates import evaluate_gates, view_geometries
-from calibctl.core.image_circle import ImageCircle
-from calibctl.core.tilt import distinct_directions
-from calibctl.core.views import BoardView
-from calibctl.workflows.synth import run_synth
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.views import BoardView
+from calibctl.core.capture.detect import detect_board
+from calibctl.core.capture.gates import evaluate_gates, view_geometries
+from calibctl.core.capture.image_circle import ImageCircle
+from calibctl.core.capture.tilt import distinct_directions
+from calibctl.workflows.synth.synth import run_synth
 
 SIZE = (640, 480)
 SPEC = BoardSpec.chessboard(9, 6, 0.025)

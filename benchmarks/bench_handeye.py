@@ -32,8 +32,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.detect import detect_board
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions, lever_arm_sigma_m
@@ -45,8 +45,8 @@ from calibctl.core.extrinsics.handeye_gates import (
 )
 from calibctl.core.extrinsics.handeye_refine import fit_handeye
 from calibctl.core.extrinsics.motion_synth import robot_arm_poses, synthesize_motions, synthesize_pose_log
-from calibctl.core.synth import PinholeCamera, render_view
-from calibctl.core.synth_scenes import scenario_poses
+from calibctl.core.synth.pinhole import PinholeCamera, render_view
+from calibctl.core.synth.scenes import scenario_poses
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import cpu_model  # noqa: E402
@@ -85,7 +85,7 @@ def calibctl_solve(T_wa_a: np.ndarray, T_wb_b: np.ndarray, method: str = "park")
     motions = Motions.from_poses(T_wa_a, T_wb_b, tuple(str(i) for i in range(len(T_wa_a))))
     failed = [g.message for g in evaluate_handeye_gates(motions) if not g.passed]
     fit = None if failed else fit_handeye(motions, method)
-    # the gates `calibctl handeye` applies after the solve, in its order (workflows.handeye)
+    # the gates `calibctl handeye` applies after the solve, in its order (workflows.handeye.handeye)
     for gate in () if fit is None else (consistency_gate(fit, HandEyeThresholds()), translation_scale_gate(motions, fit)):
         if not gate.passed:
             return None, [gate.message]

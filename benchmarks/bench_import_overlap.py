@@ -8,7 +8,7 @@ whole run). Detection needs only cv2, numpy and calibctl.core, and runs on worke
 the GIL inside OpenCV, so one might hide the imports behind it. Each run here is a fresh interpreter
 that imports cv2, numpy and calibctl.core, then either
 
-* ``sequential``: detects 20 rendered 1280x960 images (``core.image_outcomes.classify_files``, 2 workers)
+* ``sequential``: detects 20 rendered 1280x960 images (``core.capture.image_outcomes.classify_files``, 2 workers)
   and then imports the store, solve and capture workflows, or
 * ``overlap``: starts those imports on a thread and detects at the same time.
 
@@ -35,12 +35,12 @@ CHILD = r"""
 import json, os, sys, threading, time
 t0 = time.perf_counter()
 import cv2, numpy
-from calibctl.core import image_outcomes
-from calibctl.core.board_spec import BoardSpec
+from calibctl.core.capture import image_outcomes
+from calibctl.core.board.board_spec import BoardSpec
 mode, folder = sys.argv[1], sys.argv[2]
 paths = sorted(os.path.join(folder, p) for p in os.listdir(folder) if p.endswith(".png"))
 def store_imports():
-    import calibctl.store.repository, calibctl.workflows.solve, calibctl.workflows.capture  # noqa: F401
+    import calibctl.store.repository, calibctl.workflows.camera.solve, calibctl.workflows.camera.capture  # noqa: F401
 importer = threading.Thread(target=store_imports) if mode == "overlap" else None
 if importer:
     importer.start()

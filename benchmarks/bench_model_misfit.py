@@ -1,9 +1,9 @@
 """Model adequacy (lint rule model-misfit): fit RMS / detector RMS per model on real photos and renders.
 
-Real photos: opencv-left-right (left, right) and udacity-camcal, detected as tests/core/test_solve_real.py
+Real photos: opencv-left-right (left, right) and udacity-camcal, detected as tests/core/intrinsics/test_solve_real.py
 does (plain findChessboardCorners + cornerSubPix). Renders: the seed pinhole lens (0.2 px noise) and
-equidistant fisheye lenses (calibctl.core.synth_fisheye, 18 views, seed 2). Every solve runs the corner
-rule first (calibctl.core.outliers), as `calibctl solve` does.
+equidistant fisheye lenses (calibctl.core.synth.fisheye, 18 views, seed 2). Every solve runs the corner
+rule first (calibctl.core.intrinsics.outliers), as `calibctl solve` does.
 
 Run: python benchmarks/bench_model_misfit.py
 """
@@ -16,11 +16,11 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from calibctl.core.model_fit import MISFIT_RATIO, detector_rms_px  # noqa: E402
-from calibctl.core.outliers import solve_rejecting_corners  # noqa: E402
-from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session  # noqa: E402
-from calibctl.core.synthetic_corners import synthesize_session  # noqa: E402
-from tests.core.test_solve_real import _natural, detect_all, model_points  # noqa: E402
+from calibctl.core.intrinsics.model_fit import MISFIT_RATIO, detector_rms_px  # noqa: E402
+from calibctl.core.intrinsics.outliers import solve_rejecting_corners  # noqa: E402
+from calibctl.core.synth.corners import synthesize_session  # noqa: E402
+from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session  # noqa: E402
+from tests.core.intrinsics.test_solve_real import _natural, detect_all, model_points  # noqa: E402
 from tests.datasets import LEFT_RIGHT, UDACITY  # noqa: E402
 
 

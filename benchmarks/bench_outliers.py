@@ -4,8 +4,8 @@ Sessions: ``calibctl synth``'s "good" scenario (20 views, a random photometry pe
 command renders them: blur 0.55-0.85 px, gain, illumination slope), seeds 0..N-1, detected by calibctl's
 detector, solved with the production model (k1k2). Nothing in them is an outlier, so every flag is a false
 alarm. Reported per resolution: views flagged by the pre-issue-8 rule (RMS above max(median + 3 MAD-sigma,
-1.5 x median)) and by the current rule (calibctl.core.outliers), corners the corner rule removes, and
-the two-camera check's ratio (calibctl.core.camera_split; suspected from 1.4). Real photos:
+1.5 x median)) and by the current rule (calibctl.core.intrinsics.outliers), corners the corner rule removes, and
+the two-camera check's ratio (calibctl.core.capture.camera_split; suspected from 1.4). Real photos:
 opencv-left-right as one folder, left alone, right alone (calibctl's detector, model k1k2).
 Detected corners are cached in benchmarks/out/outlier-sessions/ (git-ignored), so a re-run only solves.
 
@@ -28,12 +28,12 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import cpu_model  # noqa: E402
 
-from calibctl.core.board_spec import BoardSpec  # noqa: E402
-from calibctl.core.camera_split import TWO_CAMERA_RATIO, check_one_camera  # noqa: E402
-from calibctl.core.detect import detect_board  # noqa: E402
-from calibctl.core.outliers import flag_outliers, solve_rejecting_corners  # noqa: E402
-from calibctl.core.synth import Photometry, PinholeCamera, render_background, render_view  # noqa: E402
-from calibctl.core.synth_scenes import scenario_poses  # noqa: E402
+from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
+from calibctl.core.capture.camera_split import TWO_CAMERA_RATIO, check_one_camera  # noqa: E402
+from calibctl.core.capture.detect import detect_board  # noqa: E402
+from calibctl.core.intrinsics.outliers import flag_outliers, solve_rejecting_corners  # noqa: E402
+from calibctl.core.synth.pinhole import Photometry, PinholeCamera, render_background, render_view  # noqa: E402
+from calibctl.core.synth.scenes import scenario_poses  # noqa: E402
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 REAL_BOARD = BoardSpec.chessboard(9, 6, 1.0)

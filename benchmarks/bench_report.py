@@ -2,7 +2,7 @@
 plain OpenCV's numbers on the same files.
 
 Set: ../shared/datasets/opencv-left-right, the 13 left images (640x480), calibrated by calibctl (board 9x6,
-25 mm, model k1k2). calibctl side: ``workflows.report.gather`` (store reads, residuals, uncertainty map) and
+25 mm, model k1k2). calibctl side: ``workflows.report.report.gather`` (store reads, residuals, uncertainty map) and
 ``render_html`` timed separately, best and median of N after a warm-up, report size, byte-identical check.
 Plain side on the same files: findChessboardCorners + cornerSubPix + cv2.calibrateCameraExtended with the
 same flags, its wall time, and its stdDeviationsIntrinsics for cx and cy, to set beside the report's
@@ -34,8 +34,8 @@ from machine import cpu_model  # noqa: E402
 
 from calibctl.cli.main import app  # noqa: E402
 from calibctl.config import load_settings  # noqa: E402
-from calibctl.workflows import report as report_workflow  # noqa: E402
-from calibctl.workflows.report_html import render_html  # noqa: E402
+from calibctl.workflows.report import report as report_workflow  # noqa: E402
+from calibctl.workflows.report.report_html import render_html  # noqa: E402
 
 DATASET = Path(os.environ.get("CALIBCTL_TEST_DATASETS", "/work/shared/datasets")) / "opencv-left-right"
 FLAGS = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_ASPECT_RATIO

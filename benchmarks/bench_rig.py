@@ -28,10 +28,10 @@ import numpy as np
 from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
 from plain_stereo import plain_stereo
 
-from calibctl.core.board_spec import BoardSpec
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.errors import CalibctlError
-from calibctl.workflows.rig_folders import solve_rig_folders
-from calibctl.workflows.synth_rig import run_synth_rig
+from calibctl.workflows.rig.rig_folders import solve_rig_folders
+from calibctl.workflows.synth.synth_rig import run_synth_rig
 
 DATASETS = Path(os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
 if not DATASETS.is_dir():

@@ -1,6 +1,6 @@
 """Is sigma(fx) = a * sigma(fy) right when CALIB_FIX_ASPECT_RATIO ties fx = a * fy?
 
-OpenCV reports 0 for sigma(fx) under CALIB_FIX_ASPECT_RATIO. calibctl.core.solve records
+OpenCV reports 0 for sigma(fx) under CALIB_FIX_ASPECT_RATIO. calibctl.core.intrinsics.solve records
 a * sigma(fy). This script checks that against a Monte-Carlo over the corner noise: one fixed
 synthetic geometry (18 views, 9x6 board, tilt 20-40 deg), TRIALS independent draws of 0.2 px
 Gaussian corner noise, each solved. The empirical std of fx_est across trials is the truth the
@@ -35,8 +35,8 @@ from datetime import date
 import cv2
 import numpy as np
 
-from calibctl.core.solve import DistortionModel, solve_intrinsics
-from calibctl.core.synthetic_corners import synthesize_session
+from calibctl.core.intrinsics.solve import DistortionModel, solve_intrinsics
+from calibctl.core.synth.corners import synthesize_session
 
 UNTIED = DistortionModel("k1k2-untied", cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
                          ("fx", "fy", "cx", "cy"), ("k1", "k2"), 5, 3, "k1k2 with fx, fy independent")

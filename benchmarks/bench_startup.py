@@ -106,14 +106,14 @@ STACK_IMPORTS = "import cv2, numpy, sqlalchemy.orm, pydantic, typer, rich"
 CALIBRATE_STAGES = (  # (function, label): cumulative CPU of one profiled `calibctl calibrate`
     ("calibctl/__main__.py:1(<module>)", "whole process after interpreter start"),
     ("calibctl/cli/main.py:1(<module>)", "import of the CLI (typer, rich, command modules)"),
-    ("calibctl/workflows/capture.py:1(<module>)", "import of the workflows (cv2, numpy, sqlalchemy, pydantic models)"),
-    ("calibctl/core/image_outcomes.py", "detection (read, hash, detect, blur; 2 threads)"),
+    ("calibctl/workflows/camera/capture.py:1(<module>)", "import of the workflows (cv2, numpy, sqlalchemy, pydantic models)"),
+    ("calibctl/core/capture/image_outcomes.py", "detection (read, hash, detect, blur; 2 threads)"),
     ("calibctl/store/images.py", "image files + rows (fsync each)"),
-    ("calibctl/core/gates.py", "capture gates (tilt, coverage)"),
-    ("calibctl/core/outliers.py", "solve with the corner rule (calibrateCameraExtended, sigma)"),
-    ("calibctl/core/validation.py", "held-out k-fold validation (5 folds on 2 threads)"),
-    ("calibctl/core/camera_split.py", "one-camera check (two-camera split, its folds)"),
-    ("calibctl/workflows/lint.py", "lint"),
+    ("calibctl/core/capture/gates.py", "capture gates (tilt, coverage)"),
+    ("calibctl/core/intrinsics/outliers.py", "solve with the corner rule (calibrateCameraExtended, sigma)"),
+    ("calibctl/core/intrinsics/validation.py", "held-out k-fold validation (5 folds on 2 threads)"),
+    ("calibctl/core/capture/camera_split.py", "one-camera check (two-camera split, its folds)"),
+    ("calibctl/workflows/lint/lint.py", "lint"),
     ("calibctl/store/repository.py", "store open, reads, session and artifact writes"),
 )
 

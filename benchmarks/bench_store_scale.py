@@ -37,8 +37,8 @@ from calibctl.signing import Signer, create_key, record_message  # noqa: E402
 from calibctl.store import chain, codec, counters, history  # noqa: E402
 from calibctl.store.models import ArtifactRow, EventRow  # noqa: E402
 from calibctl.store.repository import Store  # noqa: E402
-from calibctl.workflows import database, records  # noqa: E402
-from calibctl.workflows import lint as lint_workflow  # noqa: E402
+from calibctl.workflows.lint import lint as lint_workflow  # noqa: E402
+from calibctl.workflows.store_admin import database, records  # noqa: E402
 from tests.artifacts.factories import calibration  # noqa: E402
 
 SERIALS = 1000

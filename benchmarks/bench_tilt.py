@@ -4,10 +4,10 @@ plain OpenCV solve, on the same views.
 Views: ``synth_scenes.sweep_poses`` (tilt uniform 0-50 deg, any direction, board centre anywhere in the
 frame, edges included), 20 views per session, the seed lens (f = 800 px at 640x480, k1 = -0.28).
   * projected: true corners + 0.1 px Gaussian noise, N sessions at 1280x960 and at 640x480;
-  * rendered: ``--render S`` sessions rendered at 1280x960 (core/synth.py) and detected by calibctl's
+  * rendered: ``--render S`` sessions rendered at 1280x960 (core/synth/pinhole.py) and detected by calibctl's
     detector (slower: about 1 s per view).
 Readouts: "old" = the pre-issue-8 gates (homography, Zhang's f with c at the centre, lens ignored);
-"calibctl" = ``evaluate_gates`` now (calibctl.core.tilt); "plain OpenCV" = cv2.calibrateCamera with
+"calibctl" = ``evaluate_gates`` now (calibctl.core.capture.tilt); "plain OpenCV" = cv2.calibrateCamera with
 flags 0 on the session, tilt from its rvecs (what a user would do with the whole solve).
 
 Run: python benchmarks/bench_tilt.py [--sessions N] [--render S]   (default 20, 2)
@@ -28,13 +28,13 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import cpu_model  # noqa: E402
 
-from calibctl.core.board_spec import BoardSpec  # noqa: E402
-from calibctl.core.detect import detect_board  # noqa: E402
-from calibctl.core.gates import estimate_focal_px, evaluate_gates, view_homography, view_tilt  # noqa: E402
-from calibctl.core.synth import PinholeCamera, render_view, true_corners_px  # noqa: E402
-from calibctl.core.synth_scenes import sweep_poses  # noqa: E402
-from calibctl.core.tilt import normal_tilt_direction  # noqa: E402
-from calibctl.core.views import BoardView  # noqa: E402
+from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
+from calibctl.core.board.views import BoardView  # noqa: E402
+from calibctl.core.capture.detect import detect_board  # noqa: E402
+from calibctl.core.capture.gates import estimate_focal_px, evaluate_gates, view_homography, view_tilt  # noqa: E402
+from calibctl.core.capture.tilt import normal_tilt_direction  # noqa: E402
+from calibctl.core.synth.pinhole import PinholeCamera, render_view, true_corners_px  # noqa: E402
+from calibctl.core.synth.scenes import sweep_poses  # noqa: E402
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 NOISE_PX = 0.1

@@ -7,9 +7,9 @@ Generates a seeded buffer with the fault injector (time offset 18.4 ms in cam0, 
 features per keyframe), writes it as CSV, then times three stages separately, best and median of
 ``--repeats`` runs:
 
-    read      CSV -> validated numpy columns (calibctl.workflows.diagnostics_io.read_table)
+    read      CSV -> validated numpy columns (calibctl.workflows.diagnostics.diagnostics_io.read_table)
     triage    per-camera keyframe aggregation + joint and per-covariate fits (pure core)
-    end2end   calibctl.workflows.diagnostics.run_triage (read + validate + triage + JSON dict)
+    end2end   calibctl.workflows.diagnostics.diagnostics.run_triage (read + validate + triage + JSON dict)
 
 and prints rows/s, the machine (nproc, CPU model from /proc/cpuinfo), the date and the versions, so
 the numbers can go into BENCHMARKS.md as printed.
@@ -31,8 +31,8 @@ from machine import cpu_model  # benchmarks/machine.py (scripts run from benchma
 
 from calibctl.core.diagnostics.faults import DEFAULT_MAGNITUDE, synth_residual_buffer
 from calibctl.core.diagnostics.triage import triage_by_camera
-from calibctl.workflows.diagnostics import RESIDUAL_COLUMNS, run_triage
-from calibctl.workflows.diagnostics_io import read_table, write_table
+from calibctl.workflows.diagnostics.diagnostics import RESIDUAL_COLUMNS, run_triage
+from calibctl.workflows.diagnostics.diagnostics_io import read_table, write_table
 
 FEATURES_PER_KEYFRAME = 80
 CAMERAS = 2

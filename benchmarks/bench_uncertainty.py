@@ -22,8 +22,8 @@ from datetime import date
 import cv2
 import numpy as np
 
-from calibctl.core.solve import solve_intrinsics
-from calibctl.core.synthetic_corners import synthesize_session
+from calibctl.core.intrinsics.solve import solve_intrinsics
+from calibctl.core.synth.corners import synthesize_session
 
 K_TRUE = np.array([[800.0, 0.0, 321.3], [0.0, 800.0, 238.7], [0.0, 0.0, 1.0]])
 D_TRUE = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])

@@ -109,7 +109,7 @@ def test_an_oversized_csv_log_exits_2(tmp_path, monkeypatch):
     path = tmp_path / "residuals.csv"
     path.write_text("t_s,u_px,v_px\n" + "1,2,3\n" * 400_000)
     monkeypatch.setenv(bounded.MAX_INPUT_ENV, "1")
-    from calibctl.workflows import diagnostics_io
+    from calibctl.workflows.diagnostics import diagnostics_io
 
     with pytest.raises(InputError, match="over the 1 MiB input limit"):
         diagnostics_io.read_table(path, ("t_s",))

@@ -46,7 +46,7 @@ class DistortionModelInfo(Document):
 
 
 class ParameterCovariance(Document):
-    """Full covariance of the free intrinsics and distortion, board poses marginalised (core/covariance.py)."""
+    """Full covariance of the free intrinsics and distortion, board poses marginalised (core/intrinsics/covariance.py)."""
 
     parameters: list[str] = Field(
         min_length=1, description="names in matrix order, e.g. [fy, cx, cy, k1, k2]; under a fixed aspect ratio "

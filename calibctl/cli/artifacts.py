@@ -24,7 +24,7 @@ def history(
     """Versions of a camera's calibration, the active one, and every activation/rollback event."""
     from calibctl.cli.render import emit_json, plain, stdout
     from calibctl.cli.report import history_table
-    from calibctl.workflows import records
+    from calibctl.workflows.store_admin import records
 
     hist = records.history(state(ctx).settings(), serial)
     if wants_json(ctx, json_output):
@@ -56,7 +56,7 @@ def show(
     """One calibration in full: parameters with their one-sigma, held-out error, gates and lint."""
     from calibctl.cli.render import emit_json
     from calibctl.cli.report import print_calibration
-    from calibctl.workflows import records
+    from calibctl.workflows.store_admin import records
 
     art = records.show(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):
@@ -79,7 +79,7 @@ def export(
     ] = None,
 ) -> None:
     """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, or OpenCV FileStorage."""
-    from calibctl.workflows import records
+    from calibctl.workflows.store_admin import records
 
     text = records.export(
         state(ctx).settings(), ref, fmt, out, force=force, allow_rejected=allow_rejected, camera_name=camera_name
@@ -104,9 +104,11 @@ def import_(
     its numbers are linted with this store's rules, and the verdict and version are this store's."""
     from calibctl.cli.render import emit_json, stdout
     from calibctl.cli.report import print_findings
-    from calibctl.workflows import records
+    from calibctl.workflows.lint import (
+        imports,  # lint, numpy and the lens checks: not for history/show/export
+    )
 
-    outcome = records.import_file(state(ctx).settings(), path, activate=activate, keep_version=keep_version,
+    outcome = imports.import_file(state(ctx).settings(), path, activate=activate, keep_version=keep_version,
                                   require_signature=require_signature, trusted_keys=trusted_keys)
     art = outcome.artifact
     if wants_json(ctx, json_output):
@@ -138,7 +140,7 @@ def rollback(
     version activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it.
     A version that is active already is a success that writes nothing."""
     from calibctl.cli.render import emit_json, stdout
-    from calibctl.workflows import records
+    from calibctl.workflows.store_admin import records
 
     event = records.rollback(state(ctx).settings(), serial, to, reason, expected_active=expect_active)
     if event is None:

@@ -107,7 +107,7 @@ def add(
     --measured-on, optionally --evidence) and a second, independent one of the pattern's span (--span-mm,
     --span-uncertainty-mm, --span-instrument): a square size the span contradicts is refused. Both: measured;
     the square only: measured-single (lint warns); only --square-mm: nominal."""
-    from calibctl.workflows import boards
+    from calibctl.workflows.board import boards
 
     reg = boards.BoardRegistration(
         name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, uncertainty_mm=uncertainty_mm,
@@ -134,7 +134,7 @@ def add(
 @board_app.command("list")
 def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Every revision of every registered board."""
-    from calibctl.workflows import boards
+    from calibctl.workflows.board import boards
 
     all_boards = boards.list_boards(state(ctx).settings())
     if wants_json(ctx, json_output):
@@ -159,7 +159,7 @@ def show(
     json_output: JsonFlag = False,
 ) -> None:
     """One board revision with its measurement provenance."""
-    from calibctl.workflows import boards
+    from calibctl.workflows.board import boards
 
     board, revisions = boards.show_board(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):

@@ -12,6 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import OperatorOption, StationOption
 from calibctl.cli.render import emit_json, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, render_outcome
@@ -19,7 +20,7 @@ from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
     from calibctl.artifacts.check import DistanceCheck
-    from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.camera import capture as capture_workflow
 
 # The workflows (OpenCV, the store, SQLAlchemy, alembic) are imported inside the commands, so that
 # `calibctl --help`, `--version` and the other commands do not pay for them.
@@ -31,8 +32,6 @@ SourceOption = Annotated[str, typer.Option(
     help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list file "
          "(.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a video "
          "file; or a camera (/dev/videoN or an index such as 0).")]
-StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
-OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
 MaxViewsOption = Annotated[int | None, typer.Option(
     "--max-views", show_default=False,
     help="Video/camera: stop once the gates pass and this many views are kept (camera default: as soon as "
@@ -130,7 +129,7 @@ def print_capture(result: capture_workflow.CaptureResult, model: str | None = No
 
 def print_distance(d: DistanceCheck) -> None:
     """The gauge line (--reference-distance) and, when it failed, the seed's explanation."""
-    from calibctl.workflows.distance_gauge import distance_reason
+    from calibctl.workflows.camera.distance_gauge import distance_reason
 
     verdict = "pass" if d.passed else "[red]FAIL[/red]"
     stdout.print(f"distance {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
@@ -184,9 +183,9 @@ def capture(
     2 when the capture could not run (nothing is stored).
     """
     from calibctl.errors import UsageError
-    from calibctl.workflows import capture as capture_workflow
-    from calibctl.workflows.distance_gauge import gauge_model, parse_reference_distance
-    from calibctl.workflows.image_circles import parse_image_circle
+    from calibctl.workflows.camera import capture as capture_workflow
+    from calibctl.workflows.camera.distance_gauge import gauge_model, parse_reference_distance
+    from calibctl.workflows.camera.image_circles import parse_image_circle
 
     if model is not None and reference_distance is None:
         raise UsageError("--model on capture is the lens of the distance gauge; it needs --reference-distance",
@@ -245,9 +244,9 @@ def calibrate(
     Exit 0 when the gates pass and the calibration is accepted, 1 when a gate or lint rejects it, 2 when
     it could not run.
     """
-    from calibctl.workflows import capture as capture_workflow
-    from calibctl.workflows.distance_gauge import parse_reference_distance
-    from calibctl.workflows.image_circles import parse_image_circle
+    from calibctl.workflows.camera import capture as capture_workflow
+    from calibctl.workflows.camera.distance_gauge import parse_reference_distance
+    from calibctl.workflows.camera.image_circles import parse_image_circle
 
     as_json = wants_json(ctx, json_output)
     distance = None if reference_distance is None else parse_reference_distance(reference_distance)
@@ -279,7 +278,7 @@ def prune(
     json_output: JsonOption = False,
 ) -> None:
     """Delete stored images whose retention has expired. Corners, sessions and calibrations are never touched."""
-    from calibctl.workflows import capture as capture_workflow
+    from calibctl.workflows.camera import capture as capture_workflow
 
     when = capture_workflow.parse_now(now) if now is not None else None
     result = capture_workflow.prune(state(ctx).settings(), when)
@@ -331,10 +330,10 @@ def register_synth(app: typer.Typer) -> None:
         Scenarios: good (passes every gate), flat (tilt < 5 deg), centre (board only in the middle),
         one-direction (every tilt toward the right), video (an MJPG .avi of a hand-held sweep with pauses).
         """
-        from calibctl.workflows import synth as synth_workflow
+        from calibctl.workflows.synth import synth as synth_workflow
 
         if rig is not None:
-            from calibctl.workflows.synth_rig import run_synth_rig
+            from calibctl.workflows.synth.synth_rig import run_synth_rig
 
             rig_result = run_synth_rig(out, rig, seed, views, synth_workflow.parse_size(size), baseline_mm, force)
             if wants_json(ctx, json_output):

@@ -57,8 +57,8 @@ def check(
     directions catch a 0.5 % focal change or a 2 px principal-point shift (BENCHMARKS.md section 16).
     """
     from calibctl.errors import VerdictFailed
-    from calibctl.workflows import check as check_workflow
-    from calibctl.workflows.distance_gauge import parse_reference_distance
+    from calibctl.workflows.camera import check as check_workflow
+    from calibctl.workflows.camera.distance_gauge import parse_reference_distance
 
     distance = None if reference_distance is None else parse_reference_distance(reference_distance)
     settings = state(ctx).settings(station=station, operator=operator)

@@ -35,7 +35,7 @@ def _counts_text(counts: dict[str, int]) -> str:
 @db_app.command("upgrade")
 def upgrade(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Create the database at the newest schema, or migrate an older one keeping its data."""
-    from calibctl.workflows import database
+    from calibctl.workflows.store_admin import database
 
     result = database.upgrade(state(ctx).settings())
     if wants_json(ctx, json_output):
@@ -52,7 +52,7 @@ def upgrade(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 @db_app.command("current")
 def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Show the database's schema revision against this calibctl's (and what the store holds)."""
-    from calibctl.workflows import database
+    from calibctl.workflows.store_admin import database
 
     status = database.status(state(ctx).settings())
     if wants_json(ctx, json_output):
@@ -76,7 +76,7 @@ def verify(
     require_signature: Annotated[bool, typer.Option("--require-signature", help="An unsigned record is a finding.")] = False,
 ) -> None:
     """Check every hash chain, signature, version counter, activation event and stored hash. Exit 1 naming each problem."""
-    from calibctl.workflows import database
+    from calibctl.workflows.store_admin import database
 
     report = database.verify(
         state(ctx).settings(), trusted_keys=trusted_keys, require_signature=require_signature, since=since

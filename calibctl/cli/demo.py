@@ -12,7 +12,7 @@ from calibctl.cli.render import stdout
 from calibctl.cli.report import history_table, print_calibration, print_findings, print_gates
 
 if TYPE_CHECKING:
-    from calibctl.workflows import demo as demo_workflow
+    from calibctl.workflows.camera import demo as demo_workflow
 
 
 
@@ -59,7 +59,7 @@ def demo(
     ] = None,
 ) -> None:
     """Render a synthetic camera, register a measured board, capture, solve, lint, show history, export ROS YAML."""
-    from calibctl.workflows import demo as demo_workflow
+    from calibctl.workflows.camera import demo as demo_workflow
 
     st = state(ctx)
     out = out or demo_workflow.DEMO_DIR

@@ -1,6 +1,6 @@
 """calibctl diagnostics commands: triage, gauge, timeoffset, synth-residuals.
 
-Each command parses, calls one workflow in calibctl.workflows.diagnostics, renders (rich tables for
+Each command parses, calls one workflow in calibctl.workflows.diagnostics.diagnostics, renders (rich tables for
 people, the documented dict for --json) and exits 0 (pass), 1 (fault named, gauge alarm, time
 offset refused) or 2 (via the error boundary: the input could not support an answer).
 """
@@ -108,7 +108,7 @@ def triage(
     json_output: JsonFlag = False,
 ) -> None:
     """Name the calibration fault behind a residual buffer (exit 1 when one is named)."""
-    from calibctl.workflows import diagnostics as wf
+    from calibctl.workflows.diagnostics import diagnostics as wf
 
     result = wf.run_triage(residuals, focal_px=focal_px, camera=camera, t_min=t_min, min_effect_px=min_effect_px, plot_dir=plot)
     _finish(ctx, json_output, result, _render_triage)
@@ -142,7 +142,7 @@ def gauge(
     json_output: JsonFlag = False,
 ) -> None:
     """Metric-gauge watchdog: 60 s medians of wheel/VIO distance (exit 1 on alarm)."""
-    from calibctl.workflows import diagnostics as wf
+    from calibctl.workflows.diagnostics import diagnostics as wf
 
     _finish(ctx, json_output, wf.run_gauge(odometry, window_s=window_s, distances=distances, plot_dir=plot), _render_gauge)
 
@@ -181,7 +181,7 @@ def timeoffset(
     json_output: JsonFlag = False,
 ) -> None:
     """Camera-IMU time offset by cross-correlating angular rate (exit 1 when the motion cannot pin it)."""
-    from calibctl.workflows import diagnostics as wf
+    from calibctl.workflows.diagnostics import diagnostics as wf
 
     result = wf.run_timeoffset(gyro, camera, rate_hz=rate_hz, max_lag_s=max_lag_s, max_sigma_ms=max_sigma_ms,
                                window_s=window, plot_dir=plot)
@@ -214,7 +214,7 @@ def synth_residuals(
     json_output: JsonFlag = False,
 ) -> None:
     """Write a residual buffer with one injected fault, plus matching odometry and rate logs."""
-    from calibctl.workflows import diagnostics as wf
+    from calibctl.workflows.diagnostics import diagnostics as wf
 
     result = wf.run_synth(out, fault, magnitude=magnitude, noise_px=noise_px, seed=seed, keyframes=keyframes,
                           features=features, cameras=cameras, slip=slip, odometry_s=odometry_s, rate_log_s=rate_log_s,

@@ -87,16 +87,16 @@ def handeye(
     json_output: JsonFlag = False,
 ) -> None:
     """Extrinsics from motion, A X = X B, gated on observability (exit 1 when a gate rejects)."""
-    from calibctl.workflows import handeye as wf
+    from calibctl.workflows.handeye import handeye as wf
 
     settings = state(ctx).settings()
     if rig is not None:
-        from calibctl.workflows import rig_handeye
+        from calibctl.workflows.handeye import rig_handeye
 
         rig_handeye.check_target(settings, rig, from_frame, to_frame, serial)  # exit 2 before any solve
     outputs = wf.Outputs(out, tf_static, force)
     if images is not None or serial is not None:
-        from calibctl.workflows import handeye_robot
+        from calibctl.workflows.handeye import handeye_robot
 
         outcome = handeye_robot.run_robot_handeye(
             settings, motions, images, serial, from_frame, to_frame, board_ref=board, eye_to_hand=eye_to_hand,
@@ -140,7 +140,7 @@ def synth_motions(
     json_output: JsonFlag = False,
 ) -> None:
     """Write a motion log with a known X (truth beside it), chosen excitation, noise and time offset."""
-    from calibctl.workflows import handeye as wf
+    from calibctl.workflows.handeye import handeye as wf
 
     result = wf.run_synth_motions(wf.SynthRequest(
         out, shape, rows, excitation, amplitude_deg, noise_rotation_deg, noise_translation_mm / 1e3,

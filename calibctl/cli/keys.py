@@ -32,7 +32,7 @@ def _say(line: str) -> None:
 @keys_app.command("init")
 def init(ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, json_output: JsonFlag = False) -> None:
     """Create an Ed25519 key pair; the private key file gets mode 0600. Records written afterwards are signed."""
-    from calibctl.workflows import keys
+    from calibctl.workflows.store_admin import keys
 
     info = keys.init_key(state(ctx).settings(), key, force=force)
     if wants_json(ctx, json_output):
@@ -51,7 +51,7 @@ def export_public(
     json_output: JsonFlag = False,
 ) -> None:
     """Print (or write) the public key in PEM; its key id is the sha256 of the raw public key."""
-    from calibctl.workflows import keys
+    from calibctl.workflows.store_admin import keys
 
     info = keys.export_public(state(ctx).settings(), key, out, force=force)
     if wants_json(ctx, json_output):

@@ -37,7 +37,7 @@ def lint(
     from calibctl.core.blas_threads import blas_starts_on_one_thread
 
     with blas_starts_on_one_thread():  # lint computes on a few small arrays: no BLAS worker threads to start
-        from calibctl.workflows import lint as lint_workflow
+        from calibctl.workflows.lint import lint as lint_workflow
 
     if fmt not in FORMATS:
         raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")
@@ -48,7 +48,7 @@ def lint(
         st.settings(), files or [], serial, all_serials, require_signature=require_signature, trusted_keys=trusted_keys
     ) if (files or serial or all_serials or not rig) else []
     if rig:
-        from calibctl.workflows.rig_lint import lint_rig
+        from calibctl.workflows.rig.rig_lint import lint_rig
 
         results.append(lint_rig(st.settings(), rig))
     failed = any(r.failed for r in results)

@@ -25,7 +25,7 @@ from rich.table import Table
 from rich.text import Text
 
 from calibctl.cli.render import stderr
-from calibctl.workflows.capture import CaptureObserver, FrameDecision, SelectionProgress
+from calibctl.workflows.camera.capture import CaptureObserver, FrameDecision, SelectionProgress
 
 PROGRESS_EVERY_S = 5.0
 GAUGE_WIDTH = 24

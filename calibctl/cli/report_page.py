@@ -36,7 +36,7 @@ def report(
         raise UsageError("report needs one of SERIAL[@N] or --rig RIG[@N]",
                          "e.g. calibctl report CAM-0042, or calibctl report --rig stereo-front")
     if rig is not None:
-        from calibctl.workflows import report_rig
+        from calibctl.workflows.rig import report_rig
 
         rig_path, rig_data = report_rig.write_rig_report(state(ctx).settings(), rig, out, force=force)
         cal = rig_data.calibration
@@ -46,7 +46,7 @@ def report(
             return
         stdout.print(f"rig {cal.rig}@{cal.version} ({cal.status}): report written to {rig_path}")
         return
-    from calibctl.workflows import report as report_workflow
+    from calibctl.workflows.report import report as report_workflow
 
     assert ref is not None
     path, data = report_workflow.write_report(state(ctx).settings(), ref, out, force=force)

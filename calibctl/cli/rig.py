@@ -7,8 +7,8 @@ from typing import Annotated, Any
 
 import typer
 
-from calibctl.cli.capture import OperatorOption, StationOption
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import OperatorOption, StationOption
 from calibctl.cli.render import emit_json, stdout
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
@@ -102,8 +102,8 @@ def solve_folders(
     circular fisheye under the default k1k2: solve with --model fisheye), and rig-rigid (frames that no
     rigid, synchronised rig could have taken).
     """
-    from calibctl.core.board_spec import BoardSpec
-    from calibctl.workflows import rig_folders
+    from calibctl.core.board.board_spec import BoardSpec
+    from calibctl.workflows.rig import rig_folders
 
     sources = rig_folders.parse_sources(source)
     if root is not None:
@@ -121,7 +121,7 @@ def solve_folders(
     exports: list[str] = []
     withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected
     if export_dir is not None and run.solution is not None and not withheld:
-        from calibctl.workflows.rig_exports import write_exports
+        from calibctl.workflows.exports.rig_exports import write_exports
 
         exports = [str(p) for p in write_exports(run.solution, export_dir)]
         doc["exports"] = exports
@@ -154,7 +154,7 @@ def add(
     json_output: JsonFlag = False,
 ) -> None:
     """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
-    from calibctl.workflows import rigs
+    from calibctl.workflows.rig import rigs
 
     rig = rigs.add_rig(state(ctx).settings(), name, camera, root, design or [], frame or [])
     if wants_json(ctx, json_output):
@@ -179,7 +179,7 @@ def capture(
     json_output: JsonFlag = False,
 ) -> None:
     """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
-    from calibctl.workflows import rig_folders, rigs
+    from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
     result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator), name, sources, board,
@@ -246,7 +246,7 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
-    from calibctl.workflows import rigs
+    from calibctl.workflows.rig import rigs
 
     out = rigs.solve_rig_stored(state(ctx).settings(), name, session, refine_intrinsics, activate=activate)
     if wants_json(ctx, json_output):
@@ -264,7 +264,7 @@ def lint(
     json_output: JsonFlag = False,
 ) -> None:
     """Rig lint against the store as it is now (stale members, design baseline, epipolar, loops, members)."""
-    from calibctl.workflows import rig_lint
+    from calibctl.workflows.rig import rig_lint
 
     result = rig_lint.lint_rig(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):
@@ -279,7 +279,7 @@ def lint(
 @rig_app.command("history")
 def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG")], json_output: JsonFlag = False) -> None:
     """Every version of a rig, which one is active, and the activation log."""
-    from calibctl.workflows import rig_lint
+    from calibctl.workflows.rig import rig_lint
 
     cals, active, events = rig_lint.history(state(ctx).settings(), name)
     if wants_json(ctx, json_output):
@@ -302,7 +302,7 @@ def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG
 @rig_app.command("show")
 def show(ctx: typer.Context, ref: Annotated[str, typer.Argument(metavar="RIG[@N]")], json_output: JsonFlag = False) -> None:
     """One rig calibration in full."""
-    from calibctl.workflows import rig_lint
+    from calibctl.workflows.rig import rig_lint
 
     cal = rig_lint.show(state(ctx).settings(), ref)
     if wants_json(ctx, json_output):
@@ -325,7 +325,7 @@ def rollback(
     """Make an earlier accepted rig version active again (appends an event). A newer version stored or
     activated by someone else in the meantime makes it refuse (exit 2) instead of undoing it. A version
     that is active already is a success that writes nothing."""
-    from calibctl.workflows import rig_lint
+    from calibctl.workflows.rig import rig_lint
 
     event = rig_lint.rollback(state(ctx).settings(), name, to, reason, expected_active=expect_active)
     if event is None:
@@ -360,7 +360,7 @@ def export(
     urdf is a complete <robot name="RIG"> (a link per frame, a fixed joint per edge) that check_urdf and
     robot_state_publisher load; urdf-joints is the joints alone, as before. tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
     flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
-    from calibctl.workflows import rig_lint
+    from calibctl.workflows.rig import rig_lint
 
     text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
                            edge=edge)

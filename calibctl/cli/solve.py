@@ -13,7 +13,7 @@ from calibctl.cli.report import print_calibration
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 if TYPE_CHECKING:
-    from calibctl.workflows import solve as solve_workflow
+    from calibctl.workflows.camera import solve as solve_workflow
 
 ModelOption = Annotated[
     str,
@@ -74,8 +74,8 @@ def solve(
              "stops at it (default: the one the capture found or was given).")] = None,
 ) -> None:
     """Solve intrinsics from a capture session; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
-    from calibctl.workflows import solve as solve_workflow
-    from calibctl.workflows.image_circles import parse_image_circle
+    from calibctl.workflows.camera import solve as solve_workflow
+    from calibctl.workflows.camera.image_circles import parse_image_circle
 
     if rig is not None:
         from calibctl.cli.rig import solve as solve_rig

@@ -9,7 +9,7 @@ costs 22 ms wall but 44 ms CPU. Two Python threads solving held-out folds at onc
 that spinning thread for the 2 cores: the 5-fold held-out validation of 20 views at 1280x960 took
 200-350 ms on 2 threads against 150-180 ms on one. With OpenBLAS on one thread (OPENBLAS_NUM_THREADS=1
 before start-up) it took 87-90 ms on 2 threads and 117-163 ms on one, with results identical to the
-bit (tests/core/test_validation.py; at these sizes OpenBLAS computes on the calling thread whatever its
+bit (tests/core/intrinsics/test_validation.py; at these sizes OpenBLAS computes on the calling thread whatever its
 thread count, the count only decides who spins).
 
 The thread count is process-global, like cv2.setNumThreads: enter the block once around a whole thread

@@ -29,12 +29,6 @@ if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (
 TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
 
 
-def unreadable_datetime(value: object) -> IntegrityError:
-    """A stored date and time that does not parse: someone edited the database outside calibctl."""
-    return IntegrityError(f"a stored date and time ({str(value)[:40]!r}) is unreadable: the database was edited "
-                          "outside calibctl", "restore the database from a backup or the records from exports")
-
-
 def canonical_text(model: BaseModel, exclude: set[str] | None = None) -> str:
     return canonical_json_bytes(model.model_dump(mode="json", exclude=exclude)).decode("utf-8")
 

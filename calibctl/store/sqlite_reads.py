@@ -22,6 +22,7 @@ from types import SimpleNamespace
 from typing import TYPE_CHECKING, Protocol, TypeVar
 
 from calibctl.store import codec, migrate
+from calibctl.store.unreadable import unreadable_datetime
 
 if TYPE_CHECKING:
     from calibctl.artifacts.board import BoardRevision
@@ -58,7 +59,7 @@ def _utc(text: str | None) -> dt.datetime | None:
     try:
         return dt.datetime.fromisoformat(text).replace(tzinfo=dt.UTC)
     except (TypeError, ValueError) as exc:
-        raise codec.unreadable_datetime(text) from exc
+        raise unreadable_datetime(text) from exc
 
 
 def _decode_artifact(row: SimpleNamespace) -> CalibrationArtifact:

@@ -19,11 +19,11 @@ from typer.testing import CliRunner
 from calibctl.artifacts.common import utc_now
 from calibctl.cli.live_view import capture_observer, live_panel
 from calibctl.cli.main import app
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import Detection
-from calibctl.core.frame_select import FrameSelector
-from calibctl.core.synth import PinholeCamera, true_corners_px
-from calibctl.core.synth_scenes import place_board, tilt_rotation
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.detect import Detection
+from calibctl.core.capture.frame_select import FrameSelector
+from calibctl.core.synth.pinhole import PinholeCamera, true_corners_px
+from calibctl.core.synth.scenes import place_board, tilt_rotation
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.datasets import BAKA_STEREO, LEFT_RIGHT, UDACITY, needs_datasets, require_datasets
@@ -536,7 +536,7 @@ def test_a_list_file_naming_missing_files_exits_2_naming_them(db: str, tmp_path:
 
 
 def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, good: Path, monkeypatch) -> None:
-    from calibctl.core import image_outcomes
+    from calibctl.core.capture import image_outcomes
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

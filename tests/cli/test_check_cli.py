@@ -14,9 +14,9 @@ from sqlalchemy import text
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.synth import PinholeCamera, render_view
-from calibctl.core.synth_scenes import place_board, tilt_rotation
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.synth.pinhole import PinholeCamera, render_view
+from calibctl.core.synth.scenes import place_board, tilt_rotation
 from calibctl.store.engine import make_engine
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board

@@ -11,8 +11,8 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
-from calibctl.workflows.check import stored_covariance
-from calibctl.workflows.synth import run_synth
+from calibctl.workflows.camera.check import stored_covariance
+from calibctl.workflows.synth.synth import run_synth
 from tests.artifacts.factories import measured_board
 
 RUNNER = CliRunner()

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.workflows.diagnostics_io import write_table
+from calibctl.workflows.diagnostics.diagnostics_io import write_table
 
 runner = CliRunner()
 

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
-from calibctl.workflows import trace_header
+from calibctl.workflows.exports import trace_header
 from tests.artifacts.factories import calibration, measured_board
 from tests.workflows.sessions import synthetic_capture
 
@@ -206,7 +206,7 @@ def test_missing_model_and_bad_camera_name_are_warnings_like_in_ros(tmp_path):
 def test_equidistant_is_checked_as_a_fisheye_not_as_radial_tangential(tmp_path):
     import numpy as np
 
-    from calibctl.core.lens_checks import check_distortion_foldover
+    from calibctl.core.intrinsics.lens_checks import check_distortion_foldover
 
     K = [300.0, 0.0, 320.0, 0.0, 300.0, 240.0, 0.0, 0.0, 1.0]
     d = [0.0, 0.0, 0.5, 0.5]  # fisheye k3 = k4 = 0.5; read as k1 k2 p1 p2 it is a tangential fold-over

@@ -10,7 +10,7 @@ import sys
 
 from typer.testing import CliRunner
 
-import calibctl.workflows
+import calibctl.workflows.diagnostics
 from calibctl.cli.main import app
 
 runner = CliRunner()
@@ -39,8 +39,8 @@ def test_plot_without_matplotlib_names_the_plots_extra(monkeypatch, tmp_path):
     csv = tmp_path / "in.csv"
     assert runner.invoke(app, ["synth-residuals", str(csv), "--fault", "rotation", "--seed", "2"]).exit_code == 0
     _hide(monkeypatch, "matplotlib")
-    monkeypatch.delitem(sys.modules, "calibctl.workflows.diagnostics_plots", raising=False)
-    monkeypatch.delattr(calibctl.workflows, "diagnostics_plots", raising=False)  # re-import it
+    monkeypatch.delitem(sys.modules, "calibctl.workflows.diagnostics.diagnostics_plots", raising=False)
+    monkeypatch.delattr(calibctl.workflows.diagnostics, "diagnostics_plots", raising=False)  # re-import it
     res = runner.invoke(app, ["triage", str(csv), "--plot", str(tmp_path / "plots")])
     _assert_missing_extra(res, "plots", "matplotlib", "--plot")
     assert not list(tmp_path.glob("plots/*.png"))

@@ -177,7 +177,7 @@ def test_an_unreadable_lint_input_is_exit_2(tmp_path, monkeypatch):
 
 
 def test_any_file_system_error_elsewhere_is_one_line_but_a_bug_keeps_its_traceback(store_url, monkeypatch):
-    from calibctl.workflows import records
+    from calibctl.workflows.store_admin import records
 
     def denied(*_args, **_kwargs):
         raise PermissionError(errno.EACCES, "Permission denied", "/var/lib/calibctl/images")

@@ -1,6 +1,6 @@
 """Issue 10's Proof end to end through `calibctl calibrate` on rendered circular fisheyes (images rendered,
 board detected, circle found in the frames, gates, solve): fisheye sessions at 150-190 deg converge, every
-gate passes (the tilt gate read through the fitted fisheye lens, core.tilt), every rendered view is used,
+gate passes (the tilt gate read through the fitted fisheye lens, core.capture.tilt), every rendered view is used,
 and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.
 
 190 deg used to miss (|z| of fx 1.2-4.9, of k4 0.8-15.5 on seeds 2-6). The renderer was wrong, not the
@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
-from calibctl.workflows.synth import run_synth
+from calibctl.workflows.synth.synth import run_synth
 from tests.artifacts.factories import measured_board
 
 pytestmark = pytest.mark.slow  # four calibrations of rendered images: 21 s at load 5 on 2 cores
@@ -69,7 +69,7 @@ def test_150_and_170_deg_renders_recover_the_lens_within_3_sigma(tmp_path: Path,
 
 
 def test_a_190_deg_render_the_old_tilt_gate_refused_converges_with_every_view(tmp_path: Path) -> None:
-    doc, truth, rendered = _calibrate(tmp_path, 190.0, 5)  # seed 5: the tilt gate failed it before core.tilt's fix
+    doc, truth, rendered = _calibrate(tmp_path, 190.0, 5)  # seed 5: the tilt gate failed it before core.capture.tilt's fix
     _converged_and_every_view_used(doc, rendered)
     K, Kt = np.array(doc["camera_matrix"]), np.array(truth["K"])
     assert abs(K[0, 0] / Kt[0, 0] - 1.0) < 0.005 and np.all(np.abs(K[:2, 2] - Kt[:2, 2]) < 0.5)

@@ -1,6 +1,6 @@
 """The report's coverage map of a circular fisheye (issue 10): the image circle the coverage gate recorded
 is drawn, the cells outside it are marked not imaged (grey), and only cells inside it count as never
-reached; the residuals, projection uncertainty and distortion curve go through the fisheye lens. A pinhole page has no circle (its bytes are pinned by tests/workflows/test_report_workflow.py)."""
+reached; the residuals, projection uncertainty and distortion curve go through the fisheye lens. A pinhole page has no circle (its bytes are pinned by tests/workflows/report/test_report_workflow.py)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.core.image_circle import ImageCircle, cells_inside_mask
+from calibctl.core.capture.image_circle import ImageCircle, cells_inside_mask
 from calibctl.store.repository import Store
-from calibctl.workflows.report_html import COVERAGE_CELLS
-from calibctl.workflows.synth import run_synth
+from calibctl.workflows.report.report_html import COVERAGE_CELLS
+from calibctl.workflows.synth.synth import run_synth
 from tests.artifacts.factories import measured_board
 
 RUNNER = CliRunner()

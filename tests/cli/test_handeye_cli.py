@@ -300,7 +300,7 @@ def test_outputs_are_never_overwritten_without_force(tmp_path: Path) -> None:
 
 
 def test_a_diverged_refinement_is_exit_2_not_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from calibctl.workflows import handeye as wf
+    from calibctl.workflows.handeye import handeye as wf
 
     real = wf.fit_handeye
 

@@ -13,7 +13,7 @@ from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
-from tests.workflows.test_handeye_robot import _write_scene
+from tests.workflows.handeye.test_handeye_robot import _write_scene
 
 RUNNER = CliRunner()
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}

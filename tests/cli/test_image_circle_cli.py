@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
-from calibctl.workflows.lint import facts_from_document
-from calibctl.workflows.synth import run_synth
+from calibctl.workflows.lint.lint import facts_from_document
+from calibctl.workflows.synth.synth import run_synth
 from tests.artifacts.factories import measured_board
 from tests.workflows.synth_folders import rendered
 

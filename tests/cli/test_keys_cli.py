@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.config import load_settings
 from calibctl.store.repository import Store
-from calibctl.workflows.keys import signer_of
+from calibctl.workflows.store_admin.keys import signer_of
 from tests.artifacts.factories import calibration
 
 runner = CliRunner()

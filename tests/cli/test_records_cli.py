@@ -270,7 +270,7 @@ def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path
 def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(run, db, tmp_path, monkeypatch):
     """The page checked is the one of the version about to be stored: a version stored meanwhile (another
     station) makes the store refuse, rather than store a version whose page was never checked."""
-    from calibctl.workflows import solve as solve_workflow
+    from calibctl.workflows.camera import solve as solve_workflow
 
     build = solve_workflow.build_artifact
 

@@ -12,12 +12,12 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.config import load_settings
 from calibctl.store.repository import Store
-from calibctl.workflows import rigs
-from calibctl.workflows.report_html import num
-from calibctl.workflows.report_rig import compose_tree
+from calibctl.workflows.report.report_html import num
+from calibctl.workflows.rig import rigs
+from calibctl.workflows.rig.report_rig import compose_tree
 from tests.artifacts.factories import measured_board
+from tests.workflows.rig.test_rig_store_flow import WHO, _sources, _truth_artifact
 from tests.workflows.rig_folders_data import rendered_rig
-from tests.workflows.test_rig_store_flow import WHO, _sources, _truth_artifact
 
 RUNNER = CliRunner()
 

@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
+from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
 from tests.workflows.rig_folders_data import rendered_rig
-from tests.workflows.test_rig_store_flow import WHO, _truth_artifact
 from tests.workflows.urdf_check import loadable_urdf
 
 RUNNER = CliRunner()

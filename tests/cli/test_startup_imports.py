@@ -43,8 +43,8 @@ def test_the_help_loads_every_command_module_and_no_workflow_store_or_plotting_m
 
 
 def test_the_diagnostics_workflow_loads_matplotlib_only_to_draw() -> None:
-    loaded = _modules_after("import calibctl.workflows.diagnostics")
-    assert "calibctl.workflows.diagnostics" in loaded
+    loaded = _modules_after("import calibctl.workflows.diagnostics.diagnostics")
+    assert "calibctl.workflows.diagnostics.diagnostics" in loaded
     assert not any(m.split(".")[0] == "matplotlib" for m in loaded)
 
 
@@ -82,7 +82,7 @@ def test_read_commands_load_no_migration_image_plot_or_postgres_module(migrated_
 # not sqlalchemy (the ORM is for writes, PostgreSQL and the error paths), not numpy or the lens checks (only
 # lint computes on the numbers), not cryptography (only signing and verifying signatures), not the
 # whole-store audit (`db verify`) nor the rig models, not yaml (only a YAML file or export).
-NOT_FOR_STORE_READS = ("sqlalchemy", "calibctl.store.repository", "numpy", "cryptography", "calibctl.workflows.lint", "calibctl.store.audit",
+NOT_FOR_STORE_READS = ("sqlalchemy", "calibctl.store.repository", "numpy", "cryptography", "calibctl.workflows.lint.lint", "calibctl.store.audit",
                        "calibctl.artifacts.rig", "yaml")
 
 
@@ -129,7 +129,7 @@ def test_linting_a_json_file_loads_numpy_but_no_yaml_store_crypto_or_rich_module
     # Its text prints through calibctl.cli.plain_text, so neither rich nor the rich renderers load.
     for fmt in ("text", "json", "github"):
         loaded = _run_loading(["lint", str(REPO / "fixtures/camera_front.json"), "--format", fmt])
-        assert "numpy" in loaded and "calibctl.workflows.lint" in loaded
+        assert "numpy" in loaded and "calibctl.workflows.lint.lint" in loaded
         assert sorted(m for m in loaded if m.startswith(("yaml", "sqlalchemy", "calibctl.store", "cryptography", "rich",
                                                          "calibctl.cli.render", "calibctl.cli.report"))) == []
 
@@ -169,5 +169,5 @@ def test_lint_starts_numpys_openblas_on_one_thread_and_leaves_the_environment_an
         pytest.skip("OpenBLAS starts on one thread here anyway (one CPU), so lint's choice cannot show")
     assert _numpy_blas_threads_after(LINT_FILE) == ["1", "None"]  # one thread; the variable is gone again
     # The workflows imported any other way (as every solving command does) keep OpenBLAS's own count.
-    assert _numpy_blas_threads_after("import calibctl.workflows.lint, calibctl.workflows.solve") == [default, "None"]
+    assert _numpy_blas_threads_after("import calibctl.workflows.lint.lint, calibctl.workflows.camera.solve") == [default, "None"]
     assert _numpy_blas_threads_after(LINT_FILE, openblas_env=default) == [default, default]  # the user's count stays

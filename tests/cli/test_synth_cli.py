@@ -10,9 +10,9 @@ import numpy as np
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
-from calibctl.core.synth import PinholeCamera
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.detect import detect_board
+from calibctl.core.synth.pinhole import PinholeCamera
 
 RUNNER = CliRunner()
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibctl.core.board_spec import BoardSpec
-from calibctl.core.detect import detect_board
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.views import BoardView
+from calibctl.core.capture.detect import detect_board
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
-from calibctl.core.synth_rig import RigTruth, render_rig_frame, rig_corners, synthesize_rig
-from calibctl.core.views import BoardView
+from calibctl.core.synth.rig import RigTruth, render_rig_frame, rig_corners, synthesize_rig
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibctl.workflows.synth_rig import run_synth_rig
+from calibctl.workflows.synth.synth_rig import run_synth_rig
 
 _CACHE: dict[str, Path] = {}
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
-from calibctl.core.synthetic_corners import synthesize_session
+from calibctl.core.synth.corners import synthesize_session
 
 K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
 D_TRUE = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])
@@ -60,8 +60,8 @@ def synthetic_capture(
 
 def fisheye_capture(board: BoardRevision, fov_deg: float = 170.0, circular: bool = True, serial: str = "FE-0001",
                     session_id: str = "fe0123456789", n_views: int = 18, seed: int = 11) -> CaptureSession:
-    """A capture through a seeded equidistant fisheye (calibctl.core.synth_fisheye) at 1280x960."""
-    from calibctl.core.synth_fisheye import FisheyeCamera, synthesize_fisheye_session
+    """A capture through a seeded equidistant fisheye (calibctl.core.synth.fisheye) at 1280x960."""
+    from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
 
     camera = FisheyeCamera.from_fov((1280, 960), fov_deg, circular)
     syn = synthesize_fisheye_session(camera, n_views, seed, cols=board.cols, rows=board.rows,

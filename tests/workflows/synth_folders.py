@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from calibctl.workflows.synth import run_synth
+from calibctl.workflows.synth.synth import run_synth
 
 SEED = 1
 SIZES = {"video": (320, 240)}  # the video path only needs frames; 320x240 renders in 2/3 of the time
@@ -44,10 +44,10 @@ def fisheye_gauge_folders(factory: pytest.TempPathFactory) -> tuple[Path, Path]:
         import cv2
         import numpy as np
 
-        from calibctl.core.synth import render_view
-        from calibctl.core.synth_fisheye import FisheyeCamera
-        from calibctl.core.synth_scenes import tilt_rotation
-        from calibctl.workflows.synth import default_board
+        from calibctl.core.synth.fisheye import FisheyeCamera
+        from calibctl.core.synth.pinhole import render_view
+        from calibctl.core.synth.scenes import tilt_rotation
+        from calibctl.workflows.synth.synth import default_board
 
         root = factory.mktemp("fisheye-gauge")
         run_synth(root / "session", "good", seed=SEED, views=10, fisheye_fov_deg=FISHEYE_FOV_DEG)

@@ -2,7 +2,7 @@
 
 The hand-eye robot case turns every image into ``T_cam_board`` through the calibration's own lens
 model. A pinhole model: IPPE (planar targets) gives the closed form, Levenberg-Marquardt on the
-reprojection error polishes it. A fisheye model: ``core.solve.fit_pose`` (undistort through
+reprojection error polishes it. A fisheye model: ``core.intrinsics.solve.fit_pose`` (undistort through
 cv2.fisheye, then LM on the fisheye projection), as the rig solve does for its fisheye members; its
 four coefficients are k1..k4 of the equidistant model, and solvePnP would read them as k1 k2 p1 p2.
 """
@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.extrinsics import se3
-from calibctl.core.solve import DEFAULT_MODEL, fit_pose, is_fisheye, project_points
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL, fit_pose, is_fisheye, project_points
 
 MIN_CORNERS = 4
 
@@ -26,7 +26,7 @@ def estimate_board_pose(object_points_m: np.ndarray, corners_px: np.ndarray, cam
         object_points_m: (N, 3) float64 board-frame points, metres (z = 0).
         corners_px: (N, 2) float64 detected corners, pixels.
         camera_matrix: (3, 3) px; dist_coeffs: (n,) in the order of ``model`` (OpenCV's, or k1..k4 of a fisheye).
-        model: the calibration's model name (core.solve.MODELS); pinhole models all project alike.
+        model: the calibration's model name (core.intrinsics.solve.MODELS); pinhole models all project alike.
 
     Returns:
         ((4, 4) T_cam_board or None when no pose fits, reprojection RMS in px (inf without a pose)).

@@ -42,7 +42,7 @@ import numpy as np
 
 from calibctl.core.extrinsics.handeye import Motions, translation_scale
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit
-from calibctl.core.gates import GateResult
+from calibctl.core.gate import GateResult
 
 LEVER_ARM_SIGMA_MIN = 0.5
 SECOND_AXIS_MIN_DEG = 10.0

@@ -21,7 +21,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from calibctl.core.gates import GateResult
+from calibctl.core.gate import GateResult
 
 MIN_SHARED_VIEWS = 5
 _DIGITS = re.compile(r"\d+")

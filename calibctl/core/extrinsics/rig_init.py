@@ -1,6 +1,6 @@
 """Starting point of the joint rig solve: per-view PnP, then a spanning tree of the camera graph.
 
-Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics (core.solve.fit_pose:
+Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics (core.intrinsics.solve.fit_pose:
 through the fisheye model for a fisheye member). A pair's relative
 pose is the chordal mean over the frames both saw (rotation matrices averaged and projected back onto
 SO(3), translations averaged). Cameras are reached from the root breadth-first along the pairs with
@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.board.views import BoardView
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews, project_member
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
-from calibctl.core.solve import DEFAULT_MODEL, MAX_RMS_PX, fit_pose
-from calibctl.core.views import BoardView
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL, MAX_RMS_PX, fit_pose
 from calibctl.errors import NumericalError
 
 

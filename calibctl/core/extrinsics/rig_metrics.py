@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.fisheye_model import pixel_rays
+from calibctl.core.intrinsics.fisheye_model import pixel_rays
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from calibctl.core.covariance import intrinsic_columns
-from calibctl.core.solve import DISTORTION_NAMES, FISHEYE_DIST_NAMES
-from calibctl.core.views import BoardView
+from calibctl.core.board.views import BoardView
+from calibctl.core.intrinsics.covariance import intrinsic_columns
+from calibctl.core.intrinsics.solve import DISTORTION_NAMES, FISHEYE_DIST_NAMES
 
 _K_INDEX = {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}
 
@@ -33,7 +33,7 @@ class MemberIntrinsics:
         name: the camera's frame name (its serial).
         camera_matrix: (3, 3) float64 K, px. dist_coeffs: (n,) float64, OpenCV order.
         image_size: (width, height) px the corners are detected at.
-        free_intrinsics, free_distortion: the solve model's free parameter names (core.solve.MODELS).
+        free_intrinsics, free_distortion: the solve model's free parameter names (core.intrinsics.solve.MODELS).
         aspect: fx / fy held fixed by the model, or None.
         covariance: (p, p) covariance of those free parameters in ``intrinsic_columns`` order (px^2,
             unitless^2), or None when unknown (then fixed intrinsics are treated as exact).

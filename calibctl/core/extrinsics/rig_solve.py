@@ -13,14 +13,14 @@ Solvers
     refuses CALIB_USE_INTRINSIC_GUESS ("camera matrix is not 3x3" for 3x3 inputs), and on a
     seeded 3-camera synthetic rig (0.2 px noise) missed a 2.9 deg rotation by 0.25 deg.
 
-Uncertainty (calibctl's own, like core.covariance does for intrinsics)
+Uncertainty (calibctl's own, like core.intrinsics.covariance does for intrinsics)
     J at the solution over camera poses, board poses and (refined) intrinsics; covariance =
     s^2 (J^T J)^-1 with s^2 = residual sum / (residuals - free parameters), observability judged on
     the unit-diagonal matrix. With intrinsics held fixed, their own covariance (from each member's
     calibration) is carried into the extrinsics: x(theta) moves by A = -H_xx^-1 H_x,theta per unit of
     intrinsic error, so Cov_x = s^2 H_xx^-1 + A Cov_theta A^T. Over 30 seeded 2-camera sessions with
     members calibrated on 12 views each, the baseline's (est - true) / sigma has std 1.01 with that
-    term and 1.28 without it (tests/core/test_rig_honesty.py).
+    term and 1.28 without it (tests/core/extrinsics/test_rig_honesty.py).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from calibctl.core.covariance import MIN_RCOND
+from calibctl.core.board.views import BoardView
 from calibctl.core.extrinsics.rig_init import initial_poses, pair_spreads
 from calibctl.core.extrinsics.rig_problem import (
     Layout,
@@ -42,8 +42,8 @@ from calibctl.core.extrinsics.rig_problem import (
 )
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_T, propagate
 from calibctl.core.extrinsics.se3 import invert
-from calibctl.core.solve import MAX_RMS_PX, get_model, single_threaded_opencv
-from calibctl.core.views import BoardView
+from calibctl.core.intrinsics.covariance import MIN_RCOND
+from calibctl.core.intrinsics.solve import MAX_RMS_PX, get_model, single_threaded_opencv
 from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
 
 MAX_LM_ITERATIONS = 100
@@ -258,7 +258,7 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         views: synchronised views; frames seen by fewer than two cameras are left out.
         members: per camera intrinsics, same order as views.cameras.
         refine_intrinsics: free each member's model parameters too.
-        model: the members' solve model (core.solve.MODELS) whose flags a refining stereo solve uses.
+        model: the members' solve model (core.intrinsics.solve.MODELS) whose flags a refining stereo solve uses.
         solver: "auto" (OpenCV stereo for two cameras, joint LM otherwise), "opencv" or "lm".
 
     Raises:

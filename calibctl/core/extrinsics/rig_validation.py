@@ -1,6 +1,6 @@
 """Held-out validation of a rig solve (k-fold over synchronised frames) and loop closure.
 
-Held-out: frames go to folds by ``core.validation.fold_assignment`` (frame i -> fold i % k). For each
+Held-out: frames go to folds by ``core.intrinsics.validation.fold_assignment`` (frame i -> fold i % k). For each
 fold the rig is re-solved on the other frames; each held-out frame's board pose T_root_board is then
 fitted jointly to every camera's corners with the extrinsics and intrinsics frozen (Gauss-Newton on
 6 parameters), so a wrong extrinsic shows up as residual in some camera instead of being absorbed by a
@@ -28,7 +28,7 @@ from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigVi
 from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only, solve_rig
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, propagate, simple_cycles
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
-from calibctl.core.validation import fold_assignment
+from calibctl.core.intrinsics.validation import fold_assignment
 from calibctl.errors import InconsistentDataError, NumericalError
 
 MIN_TRAINING_FRAMES = 4

@@ -1,0 +1,11 @@
+"""Options that several command groups share (capture, calibrate, rig), defined once so that the
+command modules import this and never each other."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
+OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]

@@ -1,0 +1,507 @@
+"""``calibctl capture`` / ``calibrate`` / ``prune``: pictures -> a stored capture session with its gate verdict.
+
+A capture reads a folder of images (detected in parallel, every image gets an outcome) or a video /
+live camera (each frame detected in turn and offered to ``core.capture.frame_select.FrameSelector``, which
+keeps still frames that add coverage or tilt), checks that the registered board matches the board in
+the pictures (``pattern_check``), evaluates the capture gates (``core.capture.gates``, thresholds from the
+settings, so a station file can override them; then ``one_camera`` from ``core.capture.camera_split``, the
+solve's two-camera test) and stores the session.
+
+What is written, and when:
+  * images first into the content-addressed image store (``Store.put_images``, retention
+    ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
+    transaction, and every kept frame of a video or camera encoded as PNG, each in its own. A crash after this point leaves
+    only images, which are harmless (content-addressed, they expire);
+  * then the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
+    reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
+Nothing is written when the capture cannot run (exit 2): unknown board, unreadable source, no
+readable image, a pattern that matches nothing or only part of the board.
+
+Stopping a video or camera capture: when the gates pass and ``max_views`` views are kept (a camera
+without ``max_views`` stops as soon as the gates pass; a video file without it is read to the end), on
+``duration_s`` (video time for a file, wall time for a camera), at the end of the stream, or on Ctrl-C
+- KeyboardInterrupt finishes the session with the views kept so far and says so.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import re
+import secrets
+import threading
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from calibctl import __version__
+from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.check import DistanceCheck
+from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
+from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
+from calibctl.config import Settings
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.views import BoardView
+from calibctl.core.capture import image_outcomes as outcomes_core
+from calibctl.core.capture.camera_split import one_camera_gate
+from calibctl.core.capture.detect import FOUND_INCONSISTENT
+from calibctl.core.capture.frame_select import (
+    KEPT,
+    FrameDecision,
+    FrameSelector,
+    SelectionProgress,
+    SelectorSettings,
+    StreamDetector,
+)
+from calibctl.core.capture.gates import GateThresholds, evaluate_gates
+from calibctl.core.capture.image_circle import (
+    ImageCircle,
+    accumulate_max,
+    corners_inside,
+    detect_image_circle,
+    half_size,
+)
+from calibctl.core.gate import GateResult as CoreGateResult
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL
+from calibctl.errors import InputError, UsageError
+from calibctl.files import file_errors
+from calibctl.store.repository import Store
+from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.camera import capture_sources as sources
+from calibctl.workflows.camera import pattern_check
+from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
+from calibctl.workflows.camera.image_circles import checked_image_circle
+from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, solve
+
+MAX_WORKERS = 8
+SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
+# a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
+# circular fisheye can stop once the cells inside the circle are covered (the corners are never lit)
+CIRCLE_EVERY_FRAMES = 10
+IMAGE_BATCH = 16  # folder images per store transaction (one SQLite commit, one WAL fsync, per batch)
+_FRAME_STATUS = {KEPT: "accepted", "no_board": "no_board", "blurred": "blurred",
+                 "near_duplicate": "near_duplicate", "moving": "skipped", "adds_nothing": "skipped"}
+_SERIAL_HINT = "a serial is letters, digits and . _ : - (no spaces, no '@'), e.g. CAM-0001"
+
+
+@dataclass(frozen=True)
+class CaptureRequest:
+    serial: str
+    board: str
+    source: str
+    max_views: int | None = None
+    duration_s: float | None = None
+    workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
+    image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
+    reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
+    reference_source: str | None = None
+    # The lens model the gauge solves the session with, a MODELS name or "auto": calibrate's --model (the
+    # lens the session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
+    gauge_model: str = DEFAULT_MODEL
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    session: CaptureSession
+    stop_reason: str
+    interrupted: bool
+    images_stored: int
+    image_dir: str
+    ignored_files: tuple[str, ...] = ()
+    distance: DistanceCheck | None = None  # --reference-distance: judged when the gates passed
+    gauge_lens: str | None = None  # the lens model the distance was judged through (auto: the one it chose)
+
+    @property
+    def passed(self) -> bool:
+        return self.session.status == "accepted" and (self.distance is None or self.distance.passed)
+
+    def as_json(self) -> dict[str, object]:
+        return {"session": self.session.model_dump(mode="json"), "passed": self.passed,
+                "stop_reason": self.stop_reason, "interrupted": self.interrupted,
+                "images_stored": self.images_stored, "image_dir": self.image_dir,
+                "ignored_files": list(self.ignored_files),
+                "distance": None if self.distance is None else self.distance.model_dump(mode="json"),
+                "gauge_lens": self.gauge_lens}
+
+
+@dataclass(frozen=True)
+class CalibrateResult:
+    capture: CaptureResult
+    solve: SolveOutcome | None
+
+
+@dataclass(frozen=True)
+class PruneResult:
+    pruned: int
+    image_dir: str
+    now: dt.datetime
+
+
+class CaptureObserver:
+    """What a capture reports while it runs (the CLI draws a progress bar or a live view). No-ops here."""
+
+    def folder_started(self, total: int) -> None: ...
+
+    def image_done(self, done: int, total: int, name: str, status: str) -> None: ...
+
+    def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None: ...
+
+
+@dataclass
+class _Collected:
+    """What a source produced, before the gates: outcomes, views with their image hashes."""
+
+    outcomes: list[OutcomeRecord]
+    views: list[tuple[BoardView, str | None]]
+    image_size: tuple[int, int]
+    stop_reason: str
+    images_stored: int
+    interrupted: bool = False
+    ignored: list[str] = field(default_factory=list)
+    max_gray: np.ndarray | None = None  # per-pixel maximum of the frames, reduced (core.capture.image_circle)
+
+
+def core_thresholds(settings: Settings) -> GateThresholds:
+    """The settings' gate thresholds (defaults < station file) as the core dataclass."""
+    return GateThresholds(**settings.gates.model_dump())
+
+
+def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
+    if not re.fullmatch(SERIAL_PATTERN, request.serial):
+        raise UsageError(f"'{request.serial}' is not a camera serial", _SERIAL_HINT)
+    if request.max_views is not None and request.max_views < 1:
+        raise UsageError(f"--max-views must be 1 or more, got {request.max_views}")
+    if request.duration_s is not None and not request.duration_s > 0:
+        raise UsageError(f"--duration must be a positive number of seconds, got {request.duration_s:g}")
+    if (request.reference_distance is None) != (request.reference_source is None):
+        raise UsageError("--reference-distance and --reference-source go together",
+                         "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
+    gauge_model(request.gauge_model)  # an unknown name is a usage error before anything is read
+    try:
+        return parse_board_ref(request.board)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+
+
+def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None) -> CaptureResult:
+    """Run one capture and store its session (see the module docstring). Raises CalibctlError (exit 2)
+    when it cannot run; a session that fails the gates is stored as rejected and returned."""
+    observer = observer or CaptureObserver()
+    board_name, revision = _check_request(request)
+    source = sources.resolve_source(request.source)
+    if source.kind in sources.IMAGE_SETS and (request.max_views is not None or request.duration_s is not None):
+        raise UsageError(f"--max-views and --duration apply to video and camera sources, not to a {source.kind}",
+                         "a set of images is captured whole; leave out images you do not want")
+    started = utc_now()
+    with Store.open(settings.db_url) as store:
+        board = store.get_board(board_name, revision)
+        spec = board_spec(board)
+        if source.kind in sources.IMAGE_SETS:
+            got = _capture_images(store, settings, spec, board, source, request.workers, observer)
+        else:
+            got = _capture_stream(store, settings, spec, board, source, request, observer)
+        session = _build_session(settings, request, board, spec, source, got, started)
+        distance = lens = None
+        if (request.reference_distance is not None and request.reference_source is not None
+                and session.status == "accepted" and session.image_size is not None):
+            distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
+                                           session.views, session.image_size, request.gauge_model)
+        store.add_session(session)
+        return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
+                             tuple(got.ignored), distance, lens)
+
+
+def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:
+    return OutcomeRecord(name=o.name, status=o.status, reason=o.reason or None,
+                         sha256=o.sha256 or None, image_size=o.image_size,
+                         corners_found=0 if o.corner_ids is None else len(o.corner_ids))
+
+
+def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_check.Sample]:
+    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
+    samples = []
+    for name, path in picks:
+        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if gray is not None:
+            samples.append((name, gray))
+    return samples
+
+
+class _MaxPicture:
+    """The per-pixel maximum (``accumulate_max``) of a folder's images at half size, one per image size,
+    filled by the detection workers from the image they have just decoded: no second decode of every
+    file (it cost 175 ms of a 20-image 1280x960 PNG capture, on one thread). Half size is enough to
+    find an image circle."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._by_size: dict[tuple[int, int], np.ndarray] = {}
+
+    def add(self, gray: np.ndarray) -> None:
+        height, width = gray.shape[:2]
+        reduced = half_size(gray)
+        with self._lock:
+            self._by_size[(width, height)] = accumulate_max(self._by_size.get((width, height)), reduced)
+
+    def of_size(self, size: tuple[int, int]) -> np.ndarray | None:
+        return self._by_size.get(size)
+
+
+def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                    source: sources.SourceSpec, workers: int, observer: CaptureObserver) -> _Collected:
+    where = source.label
+    with file_errors(f"read the source {source.kind}", where):
+        images = sources.select_images(source)
+    observer.folder_started(len(images.paths))
+    picture = _MaxPicture()
+    with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
+        found = outcomes_core.classify_files(images.paths, spec, workers=workers, progress=lambda done, total, o:
+                                             observer.image_done(done, total, o.name, o.status),
+                                             on_decoded=picture.add)
+    found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
+    mixed = sources.mixed_sizes_error(source, {o.name: o.image_size for o in found if o.image_size is not None})
+    if mixed is not None:
+        raise mixed
+    results = outcomes_core.finalize_session(found)
+    readable = [o for o in results if o.status != outcomes_core.UNREADABLE]
+    if not readable:
+        problems = "\n".join(f"  {o.name}: {o.reason}" for o in results)
+        raise InputError(f"none of the {len(results)} image files in {where} could be read; nothing was stored:\n"
+                         f"{problems}", "re-copy the images from the camera; they are truncated or not images")
+    with_board = [o for o in readable if o.corner_ids is not None]
+    if not with_board:
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"images in {where}", len(readable),
+                                                _load_samples(readable))
+    accepted = [o for o in results if o.accepted]
+    # one view or none cannot show a larger board, the other images can: a 7x10 board registered as 9x6
+    # shows a 9x6 part of itself in a stray image and nothing in the rest
+    probed = next((group for group in (accepted, with_board) if len(group) >= pattern_check.LARGER_MIN_HITS),
+                  readable)
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, _load_samples(probed),
+                                              {o.name: o.corners_px for o in probed if o.corners_px is not None})
+    if larger is not None:
+        raise larger
+    stored = 0
+    for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
+        batch = readable[start:start + IMAGE_BATCH]
+        with file_errors("read the images in", where):
+            image_bytes = [Path(o.path).read_bytes() for o in batch]
+        shas = store.put_images(image_bytes,
+                                retention_days=settings.image_retention_days)
+        for o, sha in zip(batch, shas, strict=True):
+            if sha != o.sha256:
+                raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
+                                 "capture again from a folder nothing else writes to")
+        stored += len(batch)
+    size = outcomes_core.session_image_size(results)
+    assert size is not None  # there are readable images
+    views: list[tuple[BoardView, str | None]] = [
+        (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
+    return _Collected([_record(o) for o in results], views, size,
+                      f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
+                      f"({len(results)})", stored, ignored=images.ignored, max_gray=picture.of_size(size))
+
+
+class _StreamState:
+    """What a video or camera capture accumulates, frame by frame."""
+
+    def __init__(self, store: Store, settings: Settings, spec: BoardSpec,
+                 image_circle: tuple[float, float, float] | None = None) -> None:
+        self.store, self.settings, self.spec = store, settings, spec
+        self.image_circle = image_circle  # a given --image-circle, checked against the first frame
+        self.selector: FrameSelector | None = None
+        self.detector = StreamDetector(spec)
+        self.progress: SelectionProgress | None = None
+        self.outcomes: list[OutcomeRecord] = []
+        self.shas: dict[str, str] = {}
+        self.no_board_samples: deque[pattern_check.Sample] = deque(maxlen=pattern_check.PROBE_IMAGES)
+        self.kept_samples: list[pattern_check.Sample] = []
+        self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
+        self.boards_seen = self.stored = 0
+        self.max_gray: np.ndarray | None = None
+        self.frames_seen = 0
+
+    def _look_for_circle(self, size: tuple[int, int]) -> None:
+        """The circle the frames so far show (None: the corners were lit, no circle); the live gates count
+        coverage inside it from now on. It may grow as more of the scene is lit; the session's own circle
+        is found again from all the frames when it is stored."""
+        assert self.selector is not None and self.max_gray is not None
+        found = detect_image_circle(self.max_gray, size)
+        if found != self.selector.settings.image_circle:
+            self.selector.settings = replace(self.selector.settings, image_circle=found)
+            if self.selector.kept:
+                self.progress = self.selector.progress()
+
+    def take(self, frame: sources.Frame) -> FrameDecision | None:
+        """Detect, select and (when kept) store one frame; None when it has the wrong size."""
+        gray = sources.to_gray(frame.image)
+        size = (int(gray.shape[1]), int(gray.shape[0]))
+        if self.selector is None:
+            thresholds = core_thresholds(self.settings)
+            circle = None if self.image_circle is None else checked_image_circle(self.image_circle, size)
+            self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds, image_circle=circle))
+            self.progress = self.selector.progress()
+        if size != self.selector.image_size:
+            w, h = self.selector.image_size
+            self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
+                f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
+            return None
+        self.max_gray = accumulate_max(self.max_gray, half_size(gray))
+        self.frames_seen += 1
+        if self.image_circle is None and self.frames_seen % CIRCLE_EVERY_FRAMES == 0:
+            self._look_for_circle(size)
+        detection, why = self.detector.detect(gray)
+        if detection is None:
+            if frame.index % SAMPLE_EVERY_FRAMES == 0:
+                self.no_board_samples.append((frame.label, gray))
+        else:
+            self.boards_seen += 1
+        decision = self.selector.offer(frame.index, detection, frame.label)
+        sha = None
+        if decision.kept:
+            png = sources.encode_png(frame.image)
+            sha = self.store.put_image(png, retention_days=self.settings.image_retention_days)
+            self.shas[frame.label], self.stored = sha, self.stored + 1
+            if len(self.kept_samples) < pattern_check.PROBE_IMAGES:
+                self.kept_samples.append((frame.label, gray))
+                if detection is not None:  # always, a kept frame has a board
+                    self.kept_corners_px[frame.label] = detection.corners_px
+            self.progress = self.selector.progress()
+        status = "bad_grid" if detection is None and FOUND_INCONSISTENT in why else _FRAME_STATUS[decision.status]
+        self.outcomes.append(OutcomeRecord(
+            name=frame.label, status=status,
+            reason=None if decision.kept else (why or decision.reason), sha256=sha, image_size=size,
+            corners_found=0 if detection is None else len(detection.corner_ids)))
+        return decision
+
+
+def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                    source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
+    stream = sources.open_stream(source)
+    is_file = source.kind == sources.VIDEO
+    target = request.max_views if request.max_views is not None else (None if is_file else 0)
+    state = _StreamState(store, settings, spec, request.image_circle)
+    interrupted = False
+    stop = "end of the video" if is_file else "the camera stopped delivering frames"
+    try:
+        for frame in stream.frames():
+            if request.duration_s is not None and frame.t_s >= request.duration_s:
+                stop = f"--duration {request.duration_s:g} s reached"
+                break
+            decision = state.take(frame)
+            progress = state.progress
+            if decision is None or progress is None:
+                continue
+            observer.frame_done(decision, progress, frame.t_s)
+            if decision.kept and target is not None and progress.report.passed and progress.n_views >= target:
+                stop = f"the gates passed with {progress.n_views} views" + (
+                    f" (--max-views {target})" if request.max_views is not None else "")
+                break
+    except KeyboardInterrupt:
+        interrupted, stop = True, "interrupted (Ctrl-C)"
+    finally:
+        stream.close()
+    if state.selector is None:
+        raise InputError(f"no frame arrived from {source.label}; nothing was stored",
+                         "check that the camera streams (e.g. with another viewer) and try again")
+    if state.boards_seen == 0:
+        raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"frames of {source.label}",
+                                                len(state.outcomes), list(state.no_board_samples))
+    samples = state.kept_samples
+    if len(samples) < pattern_check.LARGER_MIN_HITS:  # as for a folder: look at the frames without the pattern
+        samples = [*samples, *state.no_board_samples]
+    larger = pattern_check.larger_board_error(spec, board.ref, board.name, samples, state.kept_corners_px)
+    if larger is not None:
+        raise larger
+    views = [(view, state.shas.get(view.name)) for view in state.selector.kept]
+    if interrupted:
+        stop += f"; the session was finished with the {len(views)} view(s) kept"
+    return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted,
+                      max_gray=state.max_gray)
+
+
+def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
+    return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
+
+
+def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
+                   source: sources.SourceSpec, got: _Collected, started: dt.datetime) -> CaptureSession:
+    board_views = [view for view, _ in got.views]
+    circle = session_image_circle(request.image_circle, got, board_views)
+    model_points = spec.object_points()
+    report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings),
+                            image_circle=circle)
+    # Same test as the solve's (lint rule one-camera), while the operator still holds the board.
+    two_cameras = one_camera_gate([model_points[np.asarray(v.corner_ids)] for v in board_views],
+                                  [np.asarray(v.corners_px, np.float64) for v in board_views],
+                                  [v.name for v in board_views], got.image_size)
+    gates = [*report.gates, two_cameras]
+    geometry = {g.name: g for g in report.views}
+    views = []
+    for view, sha in got.views:
+        g = geometry.get(view.name)
+        views.append(ViewCorners(
+            name=view.name, image_sha256=sha, corner_ids=[int(i) for i in view.corner_ids],
+            corners_px=[(float(u), float(v)) for u, v in np.asarray(view.corners_px, np.float64)],
+            tilt_deg=None if g is None else float(g.tilt_deg), tilt_direction=None if g is None else g.direction_name))
+    return CaptureSession(
+        session_id=secrets.token_hex(6), serial=request.serial, board=board,
+        source=source.recorded,
+        source_kind=source.kind,
+        station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
+        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        gates=_gate_records(gates), outcomes=got.outcomes, views=views,
+        calibctl_version=__version__, opencv_version=cv2.__version__)
+
+
+def session_image_circle(given: tuple[float, float, float] | None, got: _Collected,
+                         views: list[BoardView]) -> ImageCircle | None:
+    """The given circle (checked against the image and the board), else the one found in the frames."""
+    if given is None:
+        return None if got.max_gray is None else detect_image_circle(got.max_gray, got.image_size)
+    circle = checked_image_circle(given, got.image_size)
+    corners = [np.asarray(v.corners_px, np.float64).reshape(-1, 2) for v in views]
+    if corners and not any(corners_inside(px, circle).any() for px in corners):
+        nearest = min(float(np.hypot(px[:, 0] - circle.cx_px, px[:, 1] - circle.cy_px).min()) for px in corners)
+        raise InputError(f"the board never enters the image circle ({circle.describe()}): in {len(corners)} "
+                         f"view(s) the nearest corner is {nearest:.1f} px from its centre, "
+                         f"{nearest - circle.radius_px:.1f} px outside it; no session was stored",
+                         "check --image-circle against the frames (its centre and radius in pixels)")
+    return circle
+
+
+def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,
+              drop_outliers: bool = False, observer: CaptureObserver | None = None) -> CalibrateResult:
+    """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``)."""
+    if model not in MODEL_CHOICES:
+        raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    # the gauge at capture judges the board distance through the lens this session is solved with
+    captured = capture(settings, replace(request, gauge_model=gauge_model(model)), observer)
+    if not captured.passed:
+        return CalibrateResult(captured, None)
+    solved = solve(settings, SolveRequest(session_id=captured.session.session_id, model=model, activate=activate,
+                                          drop_outliers=drop_outliers))
+    return CalibrateResult(captured, solved)
+
+
+def parse_now(text: str) -> dt.datetime:
+    """ISO 8601 date or date-time; a value without a zone is UTC."""
+    try:
+        when = dt.datetime.fromisoformat(text.strip())
+    except ValueError as exc:
+        raise UsageError(f"--now '{text}' is not an ISO 8601 time", "e.g. 2026-04-30 or 2026-04-30T12:00:00Z") from exc
+    return when.replace(tzinfo=dt.UTC) if when.tzinfo is None else when.astimezone(dt.UTC)
+
+
+def prune(settings: Settings, now: dt.datetime | None = None) -> PruneResult:
+    """Delete images whose retention has expired (never corners, sessions or calibrations)."""
+    when = now or utc_now()
+    # Maintenance of an existing store: a mistyped --db is exit 2 naming the path, never a new empty store.
+    with Store.open(settings.db_url, create=False) as store:
+        return PruneResult(store.prune_images(when), str(store.image_dir), when)

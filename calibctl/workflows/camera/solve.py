@@ -1,0 +1,313 @@
+"""calibctl solve: stored corners -> an immutable, linted calibration artifact (the serial's next version).
+
+The numbers come from calibctl.core (cv2.calibrateCameraExtended with our own covariance, k-fold
+held-out validation, outlier flags, the --model auto rule); this module turns them into the artifact,
+runs lint on it, and writes it: ``accepted`` and active when lint passes (unless --no-activate),
+``rejected`` and never active otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from calibctl import __version__
+from calibctl.artifacts.calibration import (
+    UNSEALED,
+    CalibrationArtifact,
+    CameraConsistency,
+    DistortionModelInfo,
+    HeldOut,
+    ParameterCovariance,
+    Provenance,
+    RejectedCorner,
+    RingRms,
+    Uncertainty,
+    ViewResult,
+)
+from calibctl.artifacts.common import utc_now
+from calibctl.artifacts.lint import has_errors
+from calibctl.artifacts.session import CaptureSession
+from calibctl.config import Settings
+from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
+from calibctl.core.intrinsics import solve as core_solve
+from calibctl.core.intrinsics.model_fit import detector_rms_px
+from calibctl.core.intrinsics.model_select import select_model
+from calibctl.core.intrinsics.outliers import (
+    CornerRejection,
+    flag_outliers,
+    solve_dropping_outliers,
+    solve_rejecting_corners,
+)
+from calibctl.core.intrinsics.solve import IntrinsicsSolution, get_model
+from calibctl.core.intrinsics.validation import (
+    HoldoutReport,
+    ResidualBreakdown,
+    agree_with_folds,
+    validate_holdout,
+)
+from calibctl.errors import UsageError
+from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.camera.image_circles import checked_image_circle, with_circle
+from calibctl.workflows.lint.lint import facts_from_document, lint_facts
+from calibctl.workflows.store_admin.records import open_store
+
+MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
+_OCTANT_LABELS = tuple(f"octant {i}" for i in range(8))
+_FLAG_NAMES = (
+    "CALIB_USE_INTRINSIC_GUESS", "CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_PRINCIPAL_POINT", "CALIB_ZERO_TANGENT_DIST",
+    "CALIB_FIX_K1", "CALIB_FIX_K2", "CALIB_FIX_K3", "CALIB_FIX_K4", "CALIB_FIX_K5", "CALIB_FIX_K6",
+    "CALIB_RATIONAL_MODEL", "CALIB_RECOMPUTE_EXTRINSIC", "CALIB_FIX_SKEW",
+)
+
+
+@dataclass(frozen=True)
+class SolveRequest:
+    session_id: str | None = None
+    serial: str | None = None
+    model: str = "k1k2"
+    activate: bool = True
+    drop_outliers: bool = False
+    report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)
+    image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px, recorded for lint
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    artifact: CalibrationArtifact
+    active: bool
+    outlier_corners: list[dict[str, float | int | str]]
+    report_path: Path | None = None
+
+
+def flag_names(flags: int) -> list[str]:
+    return [name for name in _FLAG_NAMES if flags & int(getattr(cv2, name, None) or getattr(core_solve, name))]
+
+
+def _rings(fit: ResidualBreakdown, held: ResidualBreakdown, labels: Sequence[str], which: str) -> list[RingRms]:
+    fit_rms = fit.ring_rms_px if which == "ring" else fit.octant_rms_px
+    held_rms = held.ring_rms_px if which == "ring" else held.octant_rms_px
+    counts = fit.ring_counts if which == "ring" else fit.octant_counts
+    return [
+        RingRms(
+            label=label,
+            fit_rms_px=float(f) if np.isfinite(f) else None,
+            held_out_rms_px=float(h) if np.isfinite(h) else None,
+            count=int(c),
+        )
+        for label, f, h, c in zip(labels, fit_rms, held_rms, counts, strict=True)
+    ]
+
+
+def _held_out(report: HoldoutReport) -> HeldOut:
+    edges = report.fit.radius_edges_px
+    bounds = [0.0, *[float(e) for e in edges], None]
+    ring_labels = [
+        f"quintile {i + 1} (r {bounds[i]:.0f}-{bounds[i + 1]:.0f} px)" if bounds[i + 1] is not None
+        else f"quintile {i + 1} (r >= {bounds[i]:.0f} px)"
+        for i in range(5)
+    ]
+    finite = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
+    return HeldOut(
+        k_folds=report.n_folds,
+        rms_px=finite(report.holdout_rms_px),
+        outer_ring_rms_px=finite(report.holdout_outer_rms_px),
+        fit_outer_ring_rms_px=finite(report.fit_outer_rms_px),
+        by_radius=_rings(report.fit, report.holdout, ring_labels, "ring"),
+        by_octant=_rings(report.fit, report.holdout, _OCTANT_LABELS, "octant"),
+    )
+
+
+def _solve_numbers(session: CaptureSession, request: SolveRequest):
+    """Run the core solve pipeline on a session's corners. Returns everything the artifact records."""
+    size = session.image_size
+    if size is None or not session.views:
+        raise UsageError(f"session {session.session_id} has no accepted views to solve")
+    model_points = board_spec(session.board).object_points()
+    ids = [np.asarray(v.corner_ids, dtype=np.int64) for v in session.views]
+    obj = [model_points[i] for i in ids]
+    img = [np.asarray(v.corners_px, dtype=np.float64) for v in session.views]
+    trail: list[dict[str, float | str | bool]] = []
+    if request.model == "auto":
+        # the model is chosen on every corner; the corner rule then runs under the chosen model
+        selection = select_model(obj, img, size)
+        model_name = selection.chosen
+        trail = [
+            {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail
+        ]
+    else:
+        model_name = get_model(request.model).name
+    rejection = solve_rejecting_corners(obj, img, size, model_name, ids)
+    obj, img, solution = rejection.kept(obj), rejection.kept(img), rejection.solution
+    outliers = flag_outliers(solution, rejection.kept(ids))
+    first = solution  # every view's pose and RMS, including views --drop-outliers removes below
+    kept = list(range(len(obj)))
+    dropped: tuple[int, ...] = ()
+    if request.drop_outliers and outliers.outlier_views:
+        result = solve_dropping_outliers(obj, img, size, model_name)
+        solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
+    holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
+    # the fit RMS and the held-out RMS the artifact records must come from one minimum
+    solution, holdout = agree_with_folds([obj[i] for i in kept], [img[i] for i in kept], size, solution, holdout)
+    split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
+    consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
+    return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
+
+
+def _consistency(split: CameraSplit, names: list[str]) -> CameraConsistency:
+    Ka, Kb = split.camera_a, split.camera_b
+    return CameraConsistency(
+        group_a=[names[i] for i in split.group_a], group_b=[names[i] for i in split.group_b],
+        holdout_rms_px=split.holdout_rms_px, cross_rms_px=split.cross_rms_px,
+        fx_px=(float(Ka[0, 0]), float(Kb[0, 0])), cx_px=(float(Ka[0, 2]), float(Kb[0, 2])),
+        cy_px=(float(Ka[1, 2]), float(Kb[1, 2])), ratio=split.ratio, threshold=split.threshold,
+        two_cameras_suspected=split.suspected)
+
+
+def _views(session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers,
+           kept, dropped) -> list[ViewResult]:
+    """Per-view RMS and pose from the final solve; a dropped view keeps those of the solve that flagged it."""
+    out, pos = [], {v: i for i, v in enumerate(kept)}
+    outlier_views = set(outliers.outlier_views)
+    for i, view in enumerate(session.views):
+        src, j = (solution, pos[i]) if i in pos else (first, i)
+        res = src.residuals_px[j]
+        out.append(
+            ViewResult(
+                name=view.name,
+                rms_px=float(src.per_view_rms_px[j]),
+                rvec=(float(src.rvecs[j][0]), float(src.rvecs[j][1]), float(src.rvecs[j][2])),
+                tvec_m=(float(src.tvecs[j][0]), float(src.tvecs[j][1]), float(src.tvecs[j][2])),
+                outlier=i in outlier_views,
+                dropped=i in dropped,
+                worst_corner_px=float(np.linalg.norm(res, axis=1).max()) if len(res) else None,
+            )
+        )
+    return out
+
+
+def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
+    """The matrix behind sigma, stored so a report can propagate it (absent whenever sigma was refused)."""
+    cov = sol.covariance
+    if cov is None or cov.covariance is None or sol.sigma_refused_reason:
+        return None
+    return ParameterCovariance(parameters=list(cov.names), matrix=[[float(x) for x in row] for row in cov.covariance],
+                               aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
+
+
+def _gates(session: CaptureSession, request: SolveRequest) -> list:
+    """The session's gates; a --image-circle given to the solve is recorded in the coverage gate."""
+    if request.image_circle is None or session.image_size is None:
+        return list(session.gates)
+    return with_circle(list(session.gates), checked_image_circle(request.image_circle, session.image_size))
+
+
+def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
+    return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
+                           dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
+
+
+def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
+    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
+    model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
+        session, request)
+    model_points = board_spec(session.board).object_points()
+    detector_rms = detector_rms_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
+                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]))
+    model = get_model(model_name)
+    free = [p for p in model.free_intrinsics] + list(model.free_distortion)
+    art = CalibrationArtifact(
+        serial=session.serial,
+        version=1,
+        status="accepted",
+        image_size=session.image_size,
+        camera_matrix=tuple(tuple(float(x) for x in row) for row in sol.camera_matrix),
+        dist_coeffs=[float(x) for x in sol.dist_coeffs],
+        model=DistortionModelInfo(
+            name=model_name,
+            opencv_flags=int(model.flags),
+            flag_names=flag_names(int(model.flags)),
+            free_parameters=free,
+            selection=trail,
+        ),
+        stdev=Uncertainty(
+            sigma={k: float(v) for k, v in sol.sigma.items()},
+            refused_reason=sol.sigma_refused_reason,
+            residual_count=int(sol.n_residuals),
+            parameter_count=int(sol.n_parameters),
+            covariance=_covariance(sol),
+        ),
+        rms_px=float(sol.rms_px),
+        detector_rms_px=detector_rms,
+        held_out=_held_out(holdout),
+        gates=_gates(session, request),
+        board=session.board,
+        views=_views(session, sol, first, outliers, kept, dropped),
+        rejected_corners=_rejected_corners(session, rejection),
+        camera_consistency=consistency,
+        provenance=Provenance(
+            calibctl_version=__version__,
+            opencv_version=cv2.__version__,
+            station=settings.station,
+            operator=settings.operator,
+            created_at=utc_now(),
+            session_id=session.session_id,
+            input_image_sha256=sorted({v.image_sha256 for v in session.views if v.image_sha256}),
+        ),
+        content_sha256=UNSEALED,
+    )
+    findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
+    status = "rejected" if has_errors(findings) else "accepted"
+    corner_outliers = [
+        {
+            "view": session.views[c.view_index].name,
+            "corner_id": c.corner_id,
+            "residual_px": c.residual_px,
+        }
+        for c in outliers.outlier_corners
+    ]
+    return art.model_copy(update={"lint": findings, "status": status}), corner_outliers
+
+
+def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
+    if request.model not in MODEL_CHOICES:
+        raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    if not request.session_id and not request.serial:
+        raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
+    if request.report_dir is not None:
+        # only with --report: a plain solve does not load the HTML and SVG writers
+        from calibctl.workflows.report import report as report_workflow
+
+        report_workflow.ready_folder(request.report_dir)
+    report_path = version = None
+    with open_store(settings, write=True) as store:
+        session = (
+            store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
+        )
+        if session.status != "accepted":
+            failed = ", ".join(g.gate for g in session.gates if not g.passed) or "capture gates"
+            raise UsageError(
+                f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
+                "capture again following the gate hints, then solve the new session",
+            )
+        if request.report_dir is not None:  # the page of the version about to be stored must be free
+            version = store.next_version(session.serial)
+            report_path = report_workflow.ready_page(request.report_dir, session.serial, version)
+        art, corner_outliers = build_artifact(session, request, settings)
+        activate = request.activate and art.status == "accepted"
+        stored = store.add_artifact(
+            art,
+            activate=activate,
+            actor=settings.operator,
+            station=settings.station,
+            reason=f"solve of session {session.session_id}",
+            expect_version=version,  # with --report: the version whose page was checked, or nothing stored
+        )
+        active = store.active_version(stored.serial) == stored.version
+    if report_path is not None:
+        report_workflow.write_report(settings, stored.ref, report_path, force=False)
+    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)

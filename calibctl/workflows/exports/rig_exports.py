@@ -1,0 +1,165 @@
+"""What a robot loads from a solved rig: ROS stereo camera_info pair, OpenCV stereo FileStorage,
+tf_static YAML, a URDF robot (or its joints alone, to paste into another URDF) and a Kalibr camchain.
+
+Frames and units: the tree's ``T_root_cam`` (metres). ROS and OpenCV files describe the pair (first
+camera = left, second = right) with ``R, T`` = T_right_left (x_right = R x_left + T) and cv2.stereoRectify
+(CALIB_ZERO_DISPARITY, alpha -1): rectification R1/R2 and projections P1/P2, the right camera's
+P[0, 3] = Tx = -fx' * baseline_m, as ROS stereo_image_proc expects (a vertical pair is refused for
+ROS: stereo_image_proc assumes horizontal rectification). Kalibr: ``T_cn_cnm1`` maps camera n-1's
+frame into camera n's, cameras in tree order; pinhole + radtan (k1 k2 p1 p2), or pinhole + equidistant
+(k1..k4) for a fisheye member (ROS: distortion_model equidistant).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import cv2
+import numpy as np
+import yaml
+
+from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+from calibctl.core.extrinsics.rig_solve import RigSolution
+from calibctl.core.extrinsics.rig_tree import RigTree
+from calibctl.core.extrinsics.se3 import quaternion_xyzw
+from calibctl.errors import InputError
+from calibctl.files import file_errors, write_atomic
+from calibctl.workflows.exports.ros_camera_info import camera_name_for, distortion_for
+
+
+def urdf_rpy(R: np.ndarray) -> list[float]:
+    """(3, 3) rotation -> URDF [roll, pitch, yaw] (fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    pitch = float(np.arcsin(-np.clip(R[2, 0], -1.0, 1.0)))
+    if abs(np.cos(pitch)) > 1e-9:
+        return [float(np.arctan2(R[2, 1], R[2, 2])), pitch, float(np.arctan2(R[1, 0], R[0, 0]))]
+    return [float(np.arctan2(-R[1, 2], R[1, 1])), pitch, 0.0]
+
+
+def _ros_info(m: MemberIntrinsics, R: np.ndarray, P: np.ndarray) -> dict[str, object]:
+    model, dist = distortion_for([float(v) for v in np.ravel(m.dist_coeffs)], "fisheye" if m.lens == "fisheye" else None)
+    return {"image_width": int(m.image_size[0]), "image_height": int(m.image_size[1]), "camera_name": camera_name_for(m.name),
+            "camera_matrix": {"rows": 3, "cols": 3, "data": np.asarray(m.camera_matrix, float).ravel().tolist()},
+            "distortion_model": model, "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
+            "rectification_matrix": {"rows": 3, "cols": 3, "data": np.asarray(R, float).ravel().tolist()},
+            "projection_matrix": {"rows": 3, "cols": 4, "data": np.asarray(P, float).ravel().tolist()}}
+
+
+def ros_stereo_pair(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray) -> tuple[str, str]:
+    """camera_info YAML of the left and the right camera of a horizontal pair."""
+    rect = rectify(left, right, T_right_left)
+    if not rect.horizontal:
+        raise InputError(f"{left.name}-{right.name} is a vertical pair; ROS stereo_image_proc rectifies horizontally",
+                         hint="export the OpenCV stereo file instead, or order the cameras left to right")
+    return (yaml.safe_dump(_ros_info(left, rect.R1, rect.P1), sort_keys=False, default_flow_style=None),
+            yaml.safe_dump(_ros_info(right, rect.R2, rect.P2), sort_keys=False, default_flow_style=None))
+
+
+def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray) -> str:
+    """cv2.FileStorage YAML text with K1 D1 K2 D2, R T E F (T_right_left), R1 R2 P1 P2 Q and the image size.
+
+    Built in memory, so the caller writes it like every other export (write_atomic: --force, folder and
+    permission errors as exit 2); cv2.FileStorage opening the file itself raised a bare cv2.error."""
+    rect = rectify(left, right, T_right_left)
+    fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.write("image_width", int(left.image_size[0]))
+    fs.write("image_height", int(left.image_size[1]))
+    for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
+                       ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
+                       ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),
+                       ("E", essential_matrix(T_right_left)),
+                       ("F", fundamental_matrix(T_right_left, left.camera_matrix, right.camera_matrix)),
+                       ("R1", rect.R1), ("R2", rect.R2), ("P1", rect.P1), ("P2", rect.P2), ("Q", rect.Q)):
+        fs.write(key, np.asarray(value, dtype=np.float64))
+    return str(fs.releaseAndGetString())
+
+
+TfEdge = tuple[str, str, Sequence[float], Sequence[float]]  # parent, child, translation_m xyz, quaternion xyzw
+
+
+def tf_message(edges: Sequence[TfEdge]) -> str:
+    """tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints): one TransformStamped per edge,
+    parent = header.frame_id. The one tf writer of rig exports and hand-eye results."""
+    transforms = [{"header": {"frame_id": parent}, "child_frame_id": child,
+                   "transform": {"translation": dict(zip("xyz", map(float, t_m), strict=True)),
+                                 "rotation": dict(zip("xyzw", map(float, q_xyzw), strict=True))}}
+                  for parent, child, t_m, q_xyzw in edges]
+    return yaml.safe_dump({"transforms": transforms}, sort_keys=False)
+
+
+def tf_static(tree: RigTree) -> str:
+    """tf_static YAML of every tree edge."""
+    return tf_message([(e.parent, e.child, e.T_parent_child[:3, 3].tolist(), quaternion_xyzw(e.T_parent_child[:3, :3]))
+                       for e in tree.edges])
+
+
+def urdf_joints(tree: RigTree) -> str:
+    """Fixed URDF joints, one per tree edge: a fragment to paste into a robot that declares the links."""
+    lines = []
+    for e in tree.edges:
+        xyz = " ".join(f"{v:.9f}" for v in e.T_parent_child[:3, 3])
+        rpy = " ".join(f"{v:.9f}" for v in urdf_rpy(e.T_parent_child[:3, :3]))
+        lines += [f"<joint name={quoteattr(f'{e.parent}_to_{e.child}')} type=\"fixed\">",
+                  f"  <parent link={quoteattr(e.parent)}/>", f"  <child link={quoteattr(e.child)}/>",
+                  f'  <origin xyz="{xyz}" rpy="{rpy}"/>', "</joint>"]
+    return "\n".join(lines) + "\n"
+
+
+def urdf_robot(tree: RigTree, name: str, comment: str | None = None) -> str:
+    """A complete URDF document: ``<robot name>`` with a ``<link>`` per frame of the tree (its root the one
+    root link) and ``urdf_joints``' fixed joints, what check_urdf, urdf_parser_py and robot_state_publisher
+    load as they are. ``comment`` (no ``--``) goes after the XML declaration."""
+    header = '<?xml version="1.0"?>\n' + (f"<!-- {comment} -->\n" if comment else "")
+    links = "".join(f"<link name={quoteattr(frame)}/>\n" for frame in tree.frames)
+    return f"{header}<robot name={quoteattr(name)}>\n{links}{urdf_joints(tree)}</robot>\n"
+
+
+def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
+    """Kalibr camchain YAML, cameras in tree order (root first)."""
+    by_name = {m.name: m for m in members}
+    doc: dict[str, object] = {}
+    previous: str | None = None
+    for i, name in enumerate(tree.frames):
+        m = by_name[name]
+        dist = [float(v) for v in np.ravel(m.dist_coeffs)]
+        if m.lens != "fisheye" and (len(dist) > 5 or (len(dist) == 5 and dist[4] != 0.0)):
+            raise InputError(f"camera {name}: Kalibr's radtan model has no k3 or rational terms",
+                             hint="calibrate the members with --model k1k2 for a Kalibr export")
+        K = np.asarray(m.camera_matrix, float)
+        entry: dict[str, object] = {"camera_model": "pinhole", "intrinsics": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
+                                    "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
+                                    "distortion_coeffs": dist[:4],
+                                    "resolution": [int(m.image_size[0]), int(m.image_size[1])],
+                                    "rostopic": f"/{name}/image_raw"}
+        if previous is not None:
+            entry["T_cn_cnm1"] = tree.T(name, previous).tolist()
+            entry["cam_overlaps"] = [i - 1]
+        doc[f"cam{i}"] = entry
+        previous = name
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+
+
+def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig") -> list[Path]:
+    """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera;
+    ``robot`` names the URDF robot."""
+    with file_errors("create the export folder", out):
+        out.mkdir(parents=True, exist_ok=True)
+    members, tree = solution.members, solution.tree
+    left, right = members[0], members[1]
+    T_right_left = solution.T_a_b(1, 0)
+    written = []
+    texts = {f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
+             "tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_robot(tree, robot),
+             "camchain.yaml": kalibr_camchain(members, tree)}
+    try:
+        info_left, info_right = ros_stereo_pair(left, right, T_right_left)
+        texts[f"{left.name}_camera_info.yaml"] = info_left
+        texts[f"{right.name}_camera_info.yaml"] = info_right
+    except InputError:
+        pass  # a vertical pair has no ROS stereo export; the other files still describe it
+    for name, text in texts.items():
+        write_atomic(out / name, text, force=force)
+        written.append(out / name)
+    return written

@@ -1,0 +1,101 @@
+"""Import re-derives, never trusts: an artifact from another store gets this store's verdict and version.
+
+A file's ``status`` and ``lint`` are what *its* store decided, under *its* thresholds; anyone can write
+``"status": "accepted"`` and recompute the hash. So the numbers are linted again with this store's rules
+(the same ``lint_facts`` a solve runs), any capture gate the file records as failed rejects it too, and
+the result is this store's verdict. The source ``serial@version`` and its sha256 are kept in
+``provenance.imported_from``; the artifact gets this store's next version (``keep_version``: the source
+version, only when it is the next one) and a new hash. A rejected import is stored but never activated.
+
+Importing the same source artifact again (same serial@version and hash, whatever the file is called)
+returns the version it got the first time (no new version).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.lint import Finding, has_errors
+from calibctl.config import Settings
+from calibctl.errors import UsageError
+from calibctl.store.repository import Store
+from calibctl.workflows.lint.lint import facts_from_document, lint_facts
+from calibctl.workflows.store_admin import keys, records
+
+
+@dataclass(frozen=True)
+class ImportOutcome:
+    """What this store made of an imported file."""
+
+    artifact: CalibrationArtifact
+    source_ref: str
+    source_status: str
+    active: bool
+    already_imported: bool
+
+
+def source_label(art: CalibrationArtifact, path: Path) -> str:
+    """``CAM@7 sha256 ab12... from station st1 (file x.json)``: enough to find the original again."""
+    return (f"{art.ref} sha256 {art.content_sha256} from station {art.provenance.station} "
+            f"(file {path.name})")
+
+
+def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -> CalibrationArtifact:
+    """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` as provenance."""
+    findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.ref), settings.lint)
+    failed_gates = [g.gate for g in art.gates if not g.passed]
+    if failed_gates:
+        findings.append(Finding(
+            rule="gates", severity="error",
+            message=f"{art.ref} records failed capture gates ({', '.join(failed_gates)})",
+            fix="capture again and solve on this store",
+        ))
+    status = "rejected" if has_errors(findings) else "accepted"
+    provenance = art.provenance.model_copy(update={"imported_from": imported_from})
+    return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
+
+
+def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
+    """The version an earlier import of the same source artifact (same ref and hash, any file name) got."""
+    if source.serial not in store.serials():
+        return None
+    key = f"{source.ref} sha256 {source.content_sha256} "
+    return next((a for a in store.list_artifacts(source.serial)
+                 if (a.provenance.imported_from or "").startswith(key)), None)
+
+
+def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
+                    activate: bool, keep_version: bool = False) -> ImportOutcome:
+    """Store ``source`` (hash already checked) as this store's next version with this store's verdict."""
+    label = source_label(source, path)
+    previous = _previous_import(store, source)
+    if previous is not None:
+        active = store.active_version(source.serial) == previous.version
+        return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)
+    mine = rederive(source, settings, label)
+    if keep_version:
+        expected = store.next_version(source.serial)
+        if source.version != expected:
+            raise UsageError(
+                f"--keep-version: {source.ref} cannot keep its version here; this store's next version of "
+                f"{source.serial} is {expected}",
+                "import without --keep-version (the source version is kept in provenance.imported_from)",
+            )
+    do_activate = activate and mine.status == "accepted"
+    stored = store.add_artifact(mine, activate=do_activate, actor=settings.operator, station=settings.station,
+                                reason=f"imported {source.ref}", expect_version=source.version if keep_version else None)
+    return ImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False)
+
+
+def import_file(
+    settings: Settings, path: Path, *, activate: bool, keep_version: bool = False, require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> ImportOutcome:
+    """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
+    this store's verdict and version (see ``imports``)."""
+    art = records.read_artifact_file(path)
+    keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
+    with records.open_store(settings, create=True, write=True) as store:
+        return import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version)

@@ -1,0 +1,519 @@
+"""calibctl lint: the gate CI runs on every calibration file (seed chapter 1, 'the calibration lint').
+
+Inputs are every format ``calibctl export`` writes (artifact JSON/YAML, ROS camera_info, OpenCV
+FileStorage), camera_info files from ROS itself, and artifacts in the store. Each rule has an id, a
+severity, a message with the numbers and the fix. ROS and OpenCV exports are checked against their
+trace header (``trace_header``): an edited file is a ``content-hash`` error, a file without one is
+linted on its numbers and says it cannot be traced. Numeric rules live in
+``calibctl.core.intrinsics.lens_checks`` (pure numpy) so the solve applies exactly the same checks.
+
+A file that is not a calibration at all, or cannot be read, is an InputError (exit 2); a calibration
+that breaks a rule is a finding (exit 1 when any finding is an error).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.common import validation_message
+from calibctl.artifacts.lint import Finding, has_errors
+from calibctl.config import LintThresholds, Settings
+from calibctl.core.capture.image_circle import circle_from_detail
+from calibctl.core.intrinsics import lens_checks, model_fit
+from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
+from calibctl.signing import TrustedKeys
+from calibctl.workflows.exports import formats, ros_camera_info
+from calibctl.workflows.store_admin import keys
+
+
+@dataclass
+class CalibrationFacts:
+    """What lint needs, extracted the same way from every input format."""
+
+    source: str
+    kind: str  # "calibctl", "ros" or "opencv"
+    image_size: tuple[int, int] | None
+    camera_matrix: np.ndarray  # (3, 3)
+    dist_coeffs: np.ndarray  # (N,)
+    distortion_model: str = "brown-conrady"  # or "equidistant" (ROS fisheye: k1..k4)
+    sigma_fx_px: float | None = None
+    sigma_refused_reason: str | None = None
+    fit_outer_rms_px: float | None = None
+    held_out_outer_rms_px: float | None = None
+    square_size_status: str | None = None  # measured | nominal | None (not recorded)
+    square_size_m: float | None = None
+    camera_consistency: dict[str, Any] | None = None  # the solve's two-camera check, calibctl artifacts only
+    model_name: str | None = None  # calibctl artifacts only, as the three below
+    fit_rms_px: float | None = None
+    detector_rms_px: float | None = None
+    fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
+    image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
+    raw_numbers: list[float] = field(default_factory=list)
+
+
+@dataclass
+class LintResult:
+    source: str
+    kind: str
+    findings: list[Finding]
+
+    @property
+    def failed(self) -> bool:
+        return has_errors(self.findings)
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "kind": self.kind,
+            "verdict": "fail" if self.failed else "pass",
+            "errors": sum(f.severity == "error" for f in self.findings),
+            "warnings": sum(f.severity == "warning" for f in self.findings),
+            "findings": [f.model_dump(mode="json") for f in self.findings],
+        }
+
+
+def _numbers(obj: Any) -> list[float]:
+    if isinstance(obj, bool):
+        return []
+    if isinstance(obj, int | float):
+        return [float(obj)]
+    if isinstance(obj, dict):
+        return [x for v in obj.values() for x in _numbers(v)]
+    if isinstance(obj, list | tuple):
+        return [x for v in obj for x in _numbers(v)]
+    return []
+
+
+def _matrix(value: Any, shape: tuple[int, ...], source: str, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(shape)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{source}: {name} is not a {'x'.join(map(str, shape))} array of numbers") from exc
+    return arr
+
+
+def _with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
+    """What a trace header vouches for (sigma, held-out outer ring, square size) added to the numbers."""
+
+    def number(key: str) -> float | None:
+        value = evidence.get(key)
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
+
+    facts.sigma_fx_px = number("sigma_fx_px")
+    reason = evidence.get("sigma_refused_reason")
+    facts.sigma_refused_reason = reason if isinstance(reason, str) else None
+    facts.fit_outer_rms_px = number("fit_outer_ring_rms_px")
+    facts.held_out_outer_rms_px = number("held_out_outer_ring_rms_px")
+    status = evidence.get("square_size_status")
+    facts.square_size_status = status if isinstance(status, str) else None
+    facts.square_size_m = number("square_size_m")
+    return facts
+
+
+def _ros_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
+    return CalibrationFacts(
+        source=source,
+        kind="ros",
+        image_size=(data["image_width"], data["image_height"]),
+        camera_matrix=_matrix(data["camera_matrix"]["data"], (3, 3), source, "camera_matrix"),
+        dist_coeffs=_matrix(data["distortion_coefficients"]["data"], (-1,), source, "distortion"),
+        distortion_model=_distortion_model(data.get("distortion_model")),
+        raw_numbers=_numbers(data),
+    )
+
+
+def _distortion_model(name: Any) -> str:
+    """ROS/OpenCV ``distortion_model`` or a calibctl model name -> the lint's lens family."""
+    return "equidistant" if name in ("equidistant", "fisheye") else "brown-conrady"
+
+
+def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
+    if "camera_matrix" not in data:
+        raise InputError(f"{source}: an OpenCV FileStorage file without camera_matrix is not a calibration")
+    w, h = data.get("image_width"), data.get("image_height")
+    return CalibrationFacts(
+        source=source,
+        kind="opencv",
+        image_size=(w, h) if isinstance(w, int) and isinstance(h, int) else None,
+        camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
+        dist_coeffs=_matrix(data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"),
+        distortion_model=_distortion_model(data.get("distortion_model")),
+        raw_numbers=_numbers(data),
+    )
+
+
+FACT_FIELDS: dict[str, Any] = {
+    "image_size": True, "camera_matrix": True, "dist_coeffs": True, "model": {"name"}, "rms_px": True,
+    "detector_rms_px": True, "stdev": {"sigma", "refused_reason"}, "board": {"measurement"},
+    "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"}, "camera_consistency": True,
+}
+"""The parts of an artifact's dump ``facts_from_document`` reads (views, provenance, covariance are not)."""
+
+
+def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = False) -> CalibrationFacts:
+    """The facts of a calibctl artifact document (parsed JSON/YAML or a stored artifact's dump). A
+    ``validated`` document (parsed by the contract, which refuses NaN and infinity) skips the walk over
+    every number that the ``finite`` rule needs for files."""
+    size = data.get("image_size")
+    stdev = data.get("stdev") or {}
+    held = data.get("held_out") or {}
+    measurement = (data.get("board") or {}).get("measurement") or {}
+    sigma_fx = (stdev.get("sigma") or {}).get("fx")
+    return CalibrationFacts(
+        source=source,
+        kind="calibctl",
+        image_size=(int(size[0]), int(size[1])) if isinstance(size, list | tuple) and len(size) == 2 else None,
+        camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
+        dist_coeffs=_matrix(data.get("dist_coeffs", []), (-1,), source, "dist_coeffs"),
+        distortion_model=_distortion_model((data.get("model") or {}).get("name")),
+        sigma_fx_px=float(sigma_fx) if isinstance(sigma_fx, int | float) else None,
+        sigma_refused_reason=stdev.get("refused_reason"),
+        fit_outer_rms_px=held.get("fit_outer_ring_rms_px"),
+        held_out_outer_rms_px=held.get("outer_ring_rms_px"),
+        square_size_status=measurement.get("status"),
+        square_size_m=measurement.get("square_size_m"),
+        camera_consistency=data.get("camera_consistency"),
+        model_name=(data.get("model") or {}).get("name"),
+        fit_rms_px=data.get("rms_px"),
+        detector_rms_px=data.get("detector_rms_px"),
+        fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
+        image_circle=_recorded_circle(data.get("gates")),
+        raw_numbers=[] if validated else _numbers(data),
+    )
+
+
+def _recorded_circle(gates: Any) -> tuple[float, float, float] | None:
+    """The image circle an artifact's coverage gate records (core.capture.image_circle), or None."""
+    for gate in gates if isinstance(gates, list) else []:
+        if isinstance(gate, dict) and gate.get("gate") == "coverage" and isinstance(gate.get("detail"), dict):
+            circle = circle_from_detail(gate["detail"])
+            return None if circle is None else circle.as_tuple()
+    return None
+
+
+def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | None]:
+    fit = [r.get("fit_rms_px") for r in rings if isinstance(r, dict)]
+    return (fit[0], fit[-1]) if len(fit) >= 2 else (None, None)
+
+
+def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
+    if facts.fit_rms_px is None or facts.detector_rms_px is None or facts.model_name is None:
+        return []  # only a calibctl solve records what the detector delivered
+    return adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
+                                               *facts.fit_ring_rms_px))
+
+
+def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
+    """Schema and hash rules, calibctl artifacts only."""
+    try:
+        art = CalibrationArtifact.model_validate(data)
+    except ValidationError as exc:
+        return [
+            Finding(
+                rule="schema",
+                severity="error",
+                message=validation_message(exc, source),
+                fix="re-export the artifact from the store; never edit one by hand",
+            )
+        ]
+    actual = art.computed_sha256()
+    if actual != art.content_sha256:
+        return [
+            Finding(
+                rule="content-hash",
+                severity="error",
+                message=f"content sha256 is {actual[:12]} but the file records {art.content_sha256[:12]}: "
+                "it was changed after it was written",
+                fix="re-export it from the store",
+            )
+        ]
+    return []
+
+
+def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
+    if facts.square_size_status == "measured":
+        return []
+    if facts.square_size_status == "measured-single":
+        return [Finding(rule="square-size-single", severity="warning",
+                        message="the square size was measured once, with nothing independent to catch a wrong "
+                        "number (seed chapter 0: 23 mm typed for 25 mm leaves no residual)",
+                        fix="measure the pattern's span too: `calibctl board add NAME ... --span-mm ... "
+                        "--span-uncertainty-mm ... --span-instrument ...`")]
+    if facts.square_size_status == "nominal":
+        mm = f"{facts.square_size_m * 1000:.3f} mm " if facts.square_size_m else ""
+        message = f"square size {mm}is nominal (typed, never measured): every metric output scales with it"
+    else:
+        message = "no square-size provenance recorded: the metric gauge of this calibration cannot be audited"
+    return [
+        Finding(
+            rule="square-size-provenance",
+            severity="error",
+            message=message,
+            fix="measure the squares (calipers), `calibctl board add NAME --square-mm ... --uncertainty-mm ... "
+            "--instrument ... --measured-by ... --measured-on ...`, and recalibrate",
+        )
+    ]
+
+
+def adopt(check: lens_checks.Finding) -> list[Finding]:
+    """A failed core check becomes a finding; a passed one is not reported."""
+    if check.passed:
+        return []
+    return [Finding(rule=check.rule, severity=check.severity, message=check.message, fix=check.fix)]
+
+
+def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
+    if facts.fit_outer_rms_px is None or facts.held_out_outer_rms_px is None:
+        return [
+            Finding(
+                rule="outer-ring-holdout",
+                severity="error",
+                message="no held-out outer-ring error recorded: an over-fitted distortion model would pass unseen",
+                fix="recalibrate with calibctl solve (k-fold held-out validation)",
+                threshold=limits.outer_ring_ratio_max,
+            )
+        ]
+    return adopt(
+        lens_checks.check_outer_ring_holdout(
+            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max
+        )
+    )
+
+
+def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
+    check = facts.camera_consistency
+    if not check or not check.get("two_cameras_suspected"):
+        return []
+    a, b = check["group_a"], check["group_b"]
+    held, cross = check["holdout_rms_px"], check["cross_rms_px"]
+
+    def group(names: list[str], k: int) -> str:
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        return (f"{len(names)} views ({shown}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
+                f"cy {check['cy_px'][k]:.1f} px alone)")
+
+    return [Finding(
+        rule="one-camera", severity="error", value=check["ratio"], threshold=check["threshold"],
+        message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each group is "
+        f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's camera than by "
+        f"its own (held-out {held[0]:.3f} / {held[1]:.3f} px); this calibration is a blend",
+        fix="calibrate each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
+        "check that nothing moved (focus, zoom, lens) during the capture")]
+
+
+def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
+    """Every rule that applies to one calibration, in a stable order."""
+    bad = [x for x in facts.raw_numbers if not math.isfinite(x)]
+    if bad:
+        return [
+            Finding(
+                rule="finite",
+                severity="error",
+                message=f"{len(bad)} value(s) are NaN or infinite",
+                fix="this file does not describe a camera; recalibrate",
+            )
+        ]
+    K, size = facts.camera_matrix, facts.image_size
+    findings = adopt(lens_checks.check_image_size(size, K))
+    if size is not None and not findings:
+        findings += adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
+    findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px,
+                                                  facts.fit_rms_px, facts.detector_rms_px))
+    findings += _outer_ring_rule(facts, limits)
+    findings += _provenance_rule(facts)
+    findings += _one_camera_rule(facts)
+    findings += _misfit_rule(facts)
+    findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
+    if size is not None and facts.dist_coeffs.size:
+        foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
+                    else lens_checks.check_distortion_foldover)
+        findings += adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
+    return findings
+
+
+def _status_rule(status: Any, ref: str) -> list[Finding]:
+    if status != "rejected":
+        return []
+    return [
+        Finding(
+            rule="status",
+            severity="error",
+            message=f"{ref} is a rejected calibration (it failed its gates or lint when it was solved)",
+            fix="export an accepted version (calibctl history SERIAL), or recalibrate",
+        )
+    ]
+
+
+def _trace_rules(loaded: formats.CalibrationFile) -> tuple[list[Finding], dict[str, Any]]:
+    """Findings about a ROS/OpenCV export's header, and the evidence it vouches for (when intact)."""
+    header = loaded.header
+    if header is None:
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message="no calibctl header: this file cannot be traced to a stored calibration; "
+                "linted on its numbers only",
+                fix="export it with `calibctl export SERIAL --format ros|opencv`",
+            )
+        ], {}
+    if header.intact is None:
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message=f"the header names {header.ref} but records no file-sha256 (an older calibctl wrote it): "
+                "its numbers cannot be checked against that calibration",
+                fix=f"export {header.ref} again",
+            )
+        ], {}
+    if not header.intact:
+        return [
+            Finding(
+                rule="content-hash",
+                severity="error",
+                message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
+                f"{str(header.file_sha256)[:12]}: it was changed after `calibctl export` wrote {header.ref}",
+                fix=f"export {header.ref} again; never edit an export by hand",
+            )
+        ], {}
+    return _status_rule(header.status, header.ref), header.evidence
+
+
+def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintResult:
+    """Every rule for one calibration file (or stored artifact), whatever its format."""
+    data, source = loaded.data, loaded.source
+    if loaded.kind == "calibctl":
+        findings = _document_rules(data, source)
+        findings += _status_rule(data.get("status"), f"{data.get('serial')}@{data.get('version')}")
+        return LintResult(source, loaded.kind, findings + lint_facts(facts_from_document(data, source), limits))
+    findings, evidence = _trace_rules(loaded)
+    if loaded.kind == "ros":
+        structure = ros_camera_info.check_camera_info(data)
+        findings += structure
+        if has_errors(structure):  # ROS would not load it: its numbers describe no camera
+            return LintResult(source, loaded.kind, findings)
+        facts = _ros_facts(data, source)
+    else:
+        facts = _opencv_facts(data, source)
+    return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
+
+
+def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
+    """Every rule for a stored calibration (rig members use it too)."""
+    return _lint_stored(art, limits, None)
+
+
+def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
+    return [lint_file(formats.load_calibration(p), limits) for p in paths]
+
+
+def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
+    """A serial with nothing active is a finding: the camera has no calibration a robot may load."""
+    accepted = [v for v, st in statuses.items() if st == "accepted"]
+    listing = ", ".join(f"{v} ({st})" for v, st in statuses.items())
+    if accepted:
+        message, fix = (f"{serial} has no active version (versions: {listing})",
+                        f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'")
+    else:
+        message, fix = (f"{serial} has no accepted calibration (versions: {listing})",
+                        f"recalibrate it: calibctl calibrate --serial {serial} --board BOARD --source ...")
+    finding = Finding(rule="no-active-version", severity="error", message=message, fix=fix)
+    return LintResult(source=serial, kind="calibctl", findings=[finding])
+
+
+def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
+    """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
+    document rules (schema, content-hash) are not run again."""
+    data = art.model_dump(mode="json", include=FACT_FIELDS)  # the fact fields only: a third of the dump's cost
+    findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
+    result = LintResult(art.ref, "calibctl", findings)
+    if trusted is not None:
+        _signature_rule(result, art, trusted)
+    return result
+
+
+def lint_store(
+    settings: Settings, serial: str | None, all_serials: bool, trusted: TrustedKeys | None = None
+) -> list[LintResult]:
+    """Lint the active version of one serial, or of every serial in the store (an empty store is an error:
+    a CI job pointed at the wrong --db must not pass with nothing checked).
+
+    ``--all`` reads in bulk: every active version in one query, each checked by its record's chain hash
+    (sha256 over its stored bytes and columns; a mismatch is a ``content-hash`` error for that serial, the
+    others are still linted); ``--serial`` re-derives the content hash as every single read does."""
+    from calibctl.workflows.store_admin.records import open_store
+
+    with open_store(settings) as store:
+        if all_serials:
+            active, inactive = store.active_artifacts()
+        else:
+            versions: dict[int, str] = {a.version: a.status for a in store.list_artifacts(serial or "")}
+            found = store.get_artifact(serial or "", None) if store.active_version(serial or "") is not None else None
+            active, inactive = ({found.serial: found}, {}) if found else ({}, {serial or "": versions})
+        if not active and not inactive:
+            raise NotFoundError(f"nothing to lint: the store {store.url} holds no calibrations",
+                                "check --db / CALIBCTL_DB, or calibrate a camera first")
+    results = []
+    for name in sorted([*active, *inactive]):
+        found_or_error = active.get(name)
+        if found_or_error is None:
+            results.append(_no_active_version(name, inactive[name]))
+        elif isinstance(found_or_error, IntegrityError):
+            finding = Finding(rule="content-hash", severity="error", message=found_or_error.message,
+                              fix=found_or_error.hint)
+            results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
+        else:
+            results.append(_lint_stored(found_or_error, settings.lint, trusted))
+    return results
+
+
+def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+    """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
+    if isinstance(art, dict):
+        try:
+            art = CalibrationArtifact.model_validate(art)
+        except ValidationError:
+            problem: str | None = "cannot be checked: it is not a valid artifact"
+        else:
+            problem = keys.signature_problem(art, trusted)
+    else:
+        problem = keys.signature_problem(art, trusted)
+    if problem is not None:
+        fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
+        result.findings.append(Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix))
+
+
+def lint(
+    settings: Settings,
+    paths: list[Path],
+    serial: str | None,
+    all_serials: bool,
+    *,
+    require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> list[LintResult]:
+    """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
+    is a ``signature`` error (ROS and OpenCV exports carry no signature: lint the artifact export)."""
+    if not paths and not serial and not all_serials:
+        raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
+    trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
+    if trusted is not None and not trusted.keys:
+        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+    results = []
+    for path in paths:
+        loaded = formats.load_calibration(path)
+        result = lint_file(loaded, settings.lint)
+        if trusted is not None:
+            _signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
+        results.append(result)
+    if serial or all_serials:
+        results += lint_store(settings, serial, all_serials, trusted)
+    return results

@@ -1,0 +1,187 @@
+"""calibctl report --rig: one stored rig calibration -> one self-contained HTML page.
+
+Same shape and rules as the camera report (``report_html``): verdict and lint first, fixed decimals,
+no dates but the artifact's own, inline SVG, no script; numbers a test checks carry ``data-key``.
+It shows the baselines with sigma, the T_root_cam tree (edges and the composed transforms, drawn from
+above), the held-out epipolar RMS and rectified vertical disparity per pair, loop closure, and each
+member's calibration with its verdict and a link to its own report by serial@version.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from html import escape
+from pathlib import Path
+
+import numpy as np
+
+from calibctl.artifacts.rig import RigCalibration
+from calibctl.config import Settings
+from calibctl.errors import NotFoundError
+from calibctl.files import write_atomic
+from calibctl.workflows.report.report import default_path
+from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
+from calibctl.workflows.report.report_svg import Plot
+from calibctl.workflows.rig.rig_lint import parse_rig_ref
+from calibctl.workflows.store_admin.records import open_store
+
+
+@dataclass(frozen=True)
+class MemberVerdict:
+    """A member calibration as the rig used it, and what the store says about that version now."""
+
+    serial: str
+    version: int
+    status: str  # accepted / rejected, or "missing" when the version is not in this store
+    active: bool
+    held_out_rms_px: float | None
+    report_file: str  # the camera report's default file name, linked relatively
+
+
+@dataclass(frozen=True)
+class RigReportData:
+    calibration: RigCalibration
+    active: bool
+    members: list[MemberVerdict]
+    T_root_cam: dict[str, np.ndarray]  # serial -> (4, 4), metres, composed along the tree
+
+
+def compose_tree(cal: RigCalibration) -> dict[str, np.ndarray]:
+    """T_root_cam of every frame reachable from the root (edges are stored parents before children)."""
+    out = {cal.root: np.eye(4)}
+    for edge in cal.edges:
+        if edge.parent in out:
+            out[edge.child] = out[edge.parent] @ np.asarray(edge.T_parent_child, np.float64)
+    return out
+
+
+def gather_rig(settings: Settings, ref: str) -> RigReportData:
+    """Read RIG or RIG@N (default: active) and the members' calibrations. Unknown rig/version: exit 2."""
+    name, version = parse_rig_ref(ref)
+    with open_store(settings) as store:
+        store.get_rig(name)  # an unknown rig is named as such, with the known ones
+        cal = store.get_rig_calibration(name, version)
+        active = store.active_rig_version(name) == cal.version
+        members = []
+        for m in cal.members:
+            try:
+                art = store.get_artifact(m.serial, m.version)
+            except NotFoundError:
+                members.append(MemberVerdict(m.serial, m.version, "missing", False, None, ""))
+                continue
+            members.append(MemberVerdict(m.serial, m.version, art.status,
+                                         store.active_version(m.serial) == m.version, art.held_out.rms_px,
+                                         default_path(art, Path(".")).name))
+    return RigReportData(cal, active, members, compose_tree(cal))
+
+
+def _verdict(d: RigReportData) -> str:
+    cal = d.calibration
+    ref = f"{cal.rig}@{cal.version}"
+    lines = [f'<h1>rig {escape(ref)} <span class="badge {cal.status}" data-key="status">{cal.status}</span>'
+             f"{' (active)' if d.active else ''}</h1>"]
+    return "".join(lines) + lint_block(cal.lint)
+
+
+def _pairs(d: RigReportData) -> str:
+    rows = []
+    for p in d.calibration.pairs:
+        key = f"{p.a}-{p.b}"
+        rows.append(cell(key, cls="l") + cell(num(p.baseline_mm, 3), f"baseline_{key}")
+                    + cell(num(p.sigma_baseline_mm, 3), f"sigma_baseline_{key}") + cell(num(p.rotation_deg, 3))
+                    + cell(num(p.sigma_rotation_deg, 3)) + cell(str(p.shared_views))
+                    + cell(num(p.epipolar_rms_px), f"epipolar_{key}") + cell(num(p.epipolar_max_px))
+                    + cell(num(p.rectified_rms_px), f"vertical_{key}") + cell(num(p.rectified_max_px)))
+    return ("<h2>Pairs (one-sigma; held-out epipolar error and rectified vertical disparity)</h2>"
+            + table(["pair", "baseline mm", "sigma mm", "rotation deg", "sigma deg", "shared views",
+                     "epipolar RMS px", "max px", "vertical RMS px", "max px"], rows))
+
+
+def _tree(d: RigReportData) -> str:
+    cal = d.calibration
+    rows = [cell(f"{e.parent} -> {e.child}", cls="l") + cell(e.source, cls="l")
+            + cell(num(e.translation_mm, 3), f"edge_{e.parent}-{e.child}") + cell(num(e.sigma_translation_mm, 3))
+            + cell(num(e.rotation_deg, 3)) + cell(num(e.sigma_rotation_deg, 3)) for e in cal.edges]
+    poses = []
+    for serial, T in d.T_root_cam.items():
+        t_mm = T[:3, 3] * 1000
+        poses.append(cell(f"T_{cal.root}_{serial}", cls="l") + "".join(
+            cell(num(float(v), 2), f"t_{serial}_{axis}") for v, axis in zip(t_mm, "xyz", strict=True)))
+    return ("<h2>Tree (T_parent_child, root " + escape(cal.root) + ")</h2>"
+            + table(["edge", "source", "|t| mm", "sigma mm", "rotation deg", "sigma deg"], rows)
+            + "<p>Composed T_root_cam translations (root frame, mm):</p>"
+            + table(["transform", "x", "y", "z"], poses) + _top_view(d))
+
+
+def _top_view(d: RigReportData) -> str:
+    """The cameras seen from above (x right, z forward, root frame), each with its optical axis."""
+    xs = {s: T[:3, 3] * 1000 for s, T in d.T_root_cam.items()}
+    pts = np.array(list(xs.values()))
+    span = float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 2]), 50.0))
+    cx, cz = float(pts[:, 0].mean()), float(pts[:, 2].mean())
+    half = 0.7 * span
+    plot = Plot("cameras from above (root frame)", (cx - half, cx + half), (cz - half, cz + half), width=420,
+                height=420, x_label="x (mm)", y_label="z (mm)")
+    for serial, T in d.T_root_cam.items():
+        p = xs[serial]
+        axis = T[:3, 2] * 0.25 * span
+        plot.line(np.array([p[0], p[0] + axis[0]]), np.array([p[2], p[2] + axis[2]]), "#1565c0")
+        plot.dots(np.array([p[0]]), np.array([p[2]]), "#c62828", 4.0)
+        plot.text(float(p[0]), float(p[2]) - 0.06 * span, serial, size=10)
+    return plot.svg()
+
+
+def _loops(d: RigReportData) -> str:
+    loops = d.calibration.loops
+    if not loops:
+        return "<h2>Loop closure</h2><p>no loops (fewer than three cameras, or a tree without a cycle)</p>"
+    rows = [cell(" -> ".join(lp.cycle), cls="l") + cell(num(lp.rotation_deg, 4)) + cell(num(lp.sigma_rotation_deg, 4))
+            + cell(num(lp.translation_mm, 3), f"loop_{i}") + cell(num(lp.sigma_translation_mm, 3))
+            + cell(num(lp.mahalanobis, 2)) for i, lp in enumerate(loops)]
+    return "<h2>Loop closure</h2>" + table(["cycle", "rotation deg", "sigma deg", "translation mm", "sigma mm",
+                                             "Mahalanobis"], rows)
+
+
+def _members(d: RigReportData) -> str:
+    cal = d.calibration
+    rows = []
+    for m in d.members:
+        ref = f"{m.serial}@{m.version}"
+        link = f'<a href="{escape(m.report_file)}">{escape(ref)}</a>' if m.report_file else escape(ref)
+        rows.append(f'<td class="l">{link}</td>' + cell(m.status, f"member_{m.serial}", cls=f"l {m.status}")
+                    + cell("yes" if m.active else "no") + cell(num(m.held_out_rms_px), f"camera_held_out_{m.serial}")
+                    + cell(num(cal.held_out_rms_px.get(m.serial)), f"rig_held_out_{m.serial}")
+                    + cell(num(cal.fit_rms_px.get(m.serial))))
+    return ("<h2>Members</h2><p>Each member's calibration as this rig used it; the link opens its own report "
+            "(`calibctl report SERIAL@N`, written beside this page).</p>"
+            + table(["calibration", "verdict", "active", "camera held-out px", "rig held-out px", "rig fit px"], rows))
+
+
+def _provenance(d: RigReportData) -> str:
+    cal = d.calibration
+    p = cal.provenance
+    rows = [("solver", f"{cal.solver}, intrinsics {'refined' if cal.refine_intrinsics else 'held'}"),
+            ("held-out folds", str(cal.held_out_folds)), ("station / operator", f"{p.station} / {p.operator}"),
+            ("created", p.created_at.isoformat()), ("calibctl / OpenCV", f"{p.calibctl_version} / {p.opencv_version}"),
+            ("session", p.session_id or "n/a"), ("content sha256", cal.content_sha256)]
+    gates = "".join(f"<li>{escape(g.gate)}: {'pass' if g.passed else 'FAIL'} ({escape(g.message)})</li>"
+                    for g in cal.gates)
+    body = "".join(f"<tr><th class=\"l\">{escape(k)}</th>{cell(v, cls='l')}</tr>" for k, v in rows)
+    return f"<h2>Gates and provenance</h2><ul>{gates}</ul><table>{body}</table>"
+
+
+def render_rig_html(d: RigReportData) -> str:
+    """The whole rig page as one string: inline CSS and SVG, no script, nothing fetched."""
+    parts = [_verdict(d), _pairs(d), _tree(d), _loops(d), _members(d), _provenance(d)]
+    title = escape(f"calibctl rig report {d.calibration.rig}@{d.calibration.version}")
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+            f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n")
+
+
+def write_rig_report(settings: Settings, ref: str, out: Path | None, *, force: bool) -> tuple[Path, RigReportData]:
+    """Render RIG[@N] and write it atomically to ``out`` (default RIG-vN-rig-report.html here)."""
+    data = gather_rig(settings, ref)
+    cal = data.calibration
+    path = out if out is not None else Path.cwd() / f"{cal.rig}-v{cal.version}-rig-report.html"
+    write_atomic(path, render_rig_html(data), force=force)
+    return path, data

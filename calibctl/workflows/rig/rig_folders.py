@@ -1,0 +1,304 @@
+"""``calibctl rig solve-folders``: a camera rig solved from per-camera photo folders, no store needed.
+
+Steps: list each camera's photos (a folder, a quoted glob or a list file, resolved as ``capture --source``
+and ``rig capture`` resolve them: workflows.camera.capture_sources); match them into synchronised frames by frame key (the last run of
+digits in the file name: core.extrinsics.rig_frames); detect and classify every photo with today's
+per-image outcomes; calibrate each camera on its own accepted photos (core.intrinsics.solve, full covariance)
+unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
+held-out numbers and, for three or more cameras, pairwise loop closure.
+
+Then the verdict the stored path gives (``rig solve`` stores it as the version's lint): the rig lint
+rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``epipolar``, ``loop-closure``), each
+self-calibrated member's ``model-misfit`` (core.intrinsics.model_fit, the rule lint applies to a stored member:
+fit RMS far above what the detector delivers), and ``rig-rigid`` when the frames contradict each other
+(core InconsistentDataError: not rigid or not synchronised). The stored path's other rules need the
+store (``rig-stale-member``, ``baseline-design`` against a registered design, a member's stored record).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from calibctl.artifacts.lint import Finding, has_errors
+from calibctl.artifacts.rig import RigLoop, RigPair
+from calibctl.config import LintThresholds
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.views import BoardView
+from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
+from calibctl.core.extrinsics.rig_frames import (
+    MIN_SHARED_VIEWS,
+    FrameMatch,
+    match_frames,
+    rig_connected_gate,
+)
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
+from calibctl.core.extrinsics.rig_solve import RigSolution, solve_rig
+from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
+from calibctl.core.extrinsics.rig_validation import (
+    LoopClosure,
+    RigHoldout,
+    loop_closures,
+    validate_rig_holdout,
+)
+from calibctl.core.extrinsics.se3 import rotation_angle_deg
+from calibctl.core.gate import GateResult
+from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
+from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
+from calibctl.files import file_errors
+from calibctl.workflows.camera import capture_sources
+from calibctl.workflows.lint.lint import adopt
+from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
+
+USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
+SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
+
+
+@dataclass(frozen=True)
+class MemberFit:
+    """How well a self-calibrated member's own lens model explains its corners (lint's ``model-misfit``)."""
+
+    model: str
+    fit_rms_px: float
+    detector_rms_px: float | None
+
+
+@dataclass(frozen=True)
+class RigFolderRun:
+    """Everything ``solve-folders`` found; ``solution`` etc. are None when the gate failed or the frames
+    contradict each other (then ``findings`` holds ``rig-rigid``)."""
+
+    cameras: tuple[str, ...]
+    match: FrameMatch
+    outcomes: Mapping[str, Sequence[ImageOutcome]]
+    views: RigViews
+    members: tuple[MemberIntrinsics, ...]
+    gate: GateResult
+    solution: RigSolution | None = None
+    holdout: RigHoldout | None = None
+    loops: tuple[LoopClosure, ...] = ()
+    fits: Mapping[str, MemberFit] | None = None
+    findings: tuple[Finding, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        """The rig gate passed and the verdict has no error (exit 0)."""
+        return self.gate.passed and not has_errors(list(self.findings))
+
+
+def parse_sources(items: Sequence[str]) -> dict[str, Path]:
+    """['CAM=SRC', ...] -> {CAM: SRC}; UsageError on a malformed or repeated camera."""
+    out: dict[str, Path] = {}
+    for item in items:
+        name, sep, folder = item.partition("=")
+        if not sep or not name or not folder:
+            raise UsageError(f"--source must look like SERIAL=FOLDER (or SERIAL='glob', SERIAL=list.txt), got {item!r}")
+        if name in out:
+            raise UsageError(f"camera {name} is given twice", hint="name each camera of the rig once")
+        out[name] = Path(folder)
+    if len(out) < 2:
+        raise UsageError(f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera")
+    return out
+
+
+def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, capture_sources.ImageSet]:
+    """One camera's photos: a folder, glob or list as ``capture --source`` reads it; errors name the camera."""
+    try:
+        spec = capture_sources.resolve_source(str(source))
+        if spec.kind not in capture_sources.IMAGE_SETS:
+            raise InputError(f"--source {source} is a {spec.kind}; a rig is solved from photos", SOURCE_HINT)
+        with file_errors(f"read the source {spec.kind}", spec.label):
+            return spec, capture_sources.select_images(spec)
+    except CalibctlError as exc:  # capture's hint for a missing source offers videos and cameras too
+        hint = SOURCE_HINT if exc.hint == capture_sources.SOURCE_HINT else exc.hint
+        raise type(exc)(f"camera {name}: {exc.message}", hint) from exc
+
+
+def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec,
+                    model: str) -> tuple[MemberIntrinsics, MemberFit]:
+    """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well it fits."""
+    views = [(o.corner_ids, o.corners_px) for o in outcomes
+             if o.accepted and o.corner_ids is not None and o.corners_px is not None]
+    size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
+    if size is None or not views:
+        raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
+    points = spec.object_points()
+    return calibrate_member(name, [points[ids] for ids, _ in views], [px for _, px in views], size, model)
+
+
+def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
+                     image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
+    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit."""
+    m = get_model(model)
+    sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
+    cov = sol.covariance.covariance if sol.covariance is not None else None
+    member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
+                              m.free_distortion, sol.aspect_ratio, cov, m.kind)
+    return member, MemberFit(m.name, sol.rms_px, model_fit.detector_rms_px(object_points, corners_px))
+
+
+def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
+              spec: BoardSpec) -> RigViews:
+    by_path = {o.path: o for name in cameras for o in outcomes[name]}
+    rows, names = [], []
+    for key, photos in match.frames:
+        row: list[BoardView | None] = []
+        for name in cameras:
+            o = by_path.get(photos[name]) if name in photos else None
+            usable = o is not None and o.status in USABLE and o.corner_ids is not None and o.corners_px is not None
+            row.append(BoardView(Path(o.path).name, o.corner_ids, o.corners_px) if usable else None)  # type: ignore[arg-type,union-attr]
+        rows.append(tuple(row))
+        names.append(str(key))
+    return RigViews(tuple(cameras), spec.object_points(), tuple(names), tuple(rows))
+
+
+def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
+                      intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
+                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int = 2,
+                      limits: LintThresholds | None = None) -> RigFolderRun:
+    """Run the folder flow (module docstring). The first source is the root camera; ``limits`` are the
+    station's lint thresholds (default: LintThresholds()).
+
+    Raises:
+        InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
+            mixes image sizes, or a camera's photos differ in size from its intrinsics.
+        NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
+    """
+    cameras = tuple(sources)
+    sets = {name: camera_photos(name, source) for name, source in sources.items()}
+    photos = {name: images.paths for name, (_, images) in sets.items()}
+    match = match_frames(photos)
+    if not match.frames:
+        raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
+                         hint="name the photos so that the last number in the name is the frame number or "
+                              "timestamp, the same for photos taken together (left_0042.png / right_0042.png)")
+    outcomes = {name: classify_session(photos[name], spec, workers=workers) for name in cameras}
+    for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
+        mixed = capture_sources.mixed_sizes_error(source, {n: o.image_size for n, o in zip(
+            images.names, outcomes[name], strict=True) if o.image_size})
+        if mixed is not None:
+            raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
+    members, fits = [], {}
+    for name in cameras:
+        given = (intrinsics or {}).get(name)
+        if given is None:
+            member, fits[name] = self_calibrated(name, outcomes[name], spec, model)
+            members.append(member)
+            continue
+        sizes = {o.image_size for o in outcomes[name] if o.image_size is not None}
+        if sizes and sizes != {tuple(given.image_size)}:
+            found = ", ".join(f"{w}x{h}" for w, h in sorted(sizes))
+            raise InputError(f"camera {name}: photos are {found} but its calibration is "
+                             f"{given.image_size[0]}x{given.image_size[1]}",
+                             hint="use the calibration made at this resolution, or re-calibrate the camera")
+        members.append(given)
+    views = rig_views(cameras, match, outcomes, spec)
+    gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
+    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
+    if not gate.passed:
+        return run
+    return judged_solve(run, model, refine_intrinsics, limits or LintThresholds())
+
+
+def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,
+                 limits: LintThresholds | None = None) -> RigFolderRun:
+    """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring)."""
+    views, members, fits = run.views, list(run.members), run.fits or {}
+    limits = limits or LintThresholds()
+    lens = {name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
+            for name, fit in fits.items()}
+    misfit = [member_finding(name, f) for name, found in lens.items() for f in found]
+    try:
+        solution = solve_rig(views, members, refine_intrinsics, model)
+        holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
+        loops = loop_closures(views, members, model) if len(run.cameras) >= 3 else ()
+    except InconsistentDataError as exc:
+        rigid = Finding(rule="rig-rigid", severity="error", message=exc.message, fix=exc.hint)
+        return replace(run, findings=(rigid, *misfit))
+    rows = {m.name: m.image_size[1] for m in members}
+    bad_lens = {name for name, found in lens.items() if found}
+    findings = solved_rig_findings(rig_pairs(solution, holdout), rig_loops(loops), rows, (), limits, bad_lens)
+    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*findings, *misfit))
+
+
+def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair]:
+    """``pair_summary`` as the stored rig's pair records."""
+    return [RigPair(**{k: v for k, v in p.items() if k != "pair"}) for p in pair_summary(solution, holdout)]
+
+
+def rig_loops(loops: Sequence[LoopClosure]) -> list[RigLoop]:
+    """Loop closures as the stored rig's loop records."""
+    return [RigLoop(cycle=list(lc.cycle), rotation_deg=lc.rotation_deg, translation_mm=lc.translation_mm,
+                    sigma_rotation_deg=lc.sigma_rotation_deg, sigma_translation_mm=lc.sigma_translation_mm,
+                    mahalanobis=lc.mahalanobis) for lc in loops]
+
+
+def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict[str, object]]:
+    """Per pair (a < b): baseline mm and rotation deg with one-sigma, and the held-out numbers."""
+    rows = []
+    names = solution.views.cameras
+    held = {(p.a, p.b): p for p in (holdout.pairs if holdout else ())}
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            T = solution.T_a_b(b, a)
+            cov = solution.pair_covariance(b, a)
+            row: dict[str, object] = {
+                "pair": f"{names[a]}-{names[b]}", "a": names[a], "b": names[b], "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
+                "sigma_baseline_mm": sigma_translation_mm(cov, T[:3, 3]),
+                "rotation_deg": rotation_angle_deg(T[:3, :3]), "sigma_rotation_deg": sigma_rotation_deg(cov),
+                "shared_views": solution.views.shared_view_counts()[(a, b)]}
+            if (a, b) in held:
+                p = held[(a, b)]
+                row.update({"epipolar_rms_px": p.epipolar_rms_px, "epipolar_max_px": p.epipolar_max_px,
+                            "rectified_rms_px": p.rectified_rms_px, "rectified_max_px": p.rectified_max_px})
+            rows.append(row)
+    return rows
+
+
+def _fit_json(fit: MemberFit | None) -> dict[str, object]:
+    if fit is None:  # intrinsics given, not self-calibrated
+        return {}
+    return {"model": fit.model, "fit_rms_px": fit.fit_rms_px, "detector_rms_px": fit.detector_rms_px}
+
+
+def run_json(run: RigFolderRun) -> dict[str, object]:
+    """The run as plain JSON types (``--json``)."""
+    g = run.gate
+    out: dict[str, object] = {
+        "cameras": list(run.cameras),
+        "frames": len(run.match.frames),
+        "unmatched": [{"camera": u.camera, "file": Path(u.path).name, "reason": u.reason} for u in run.match.unmatched],
+        "images": {n: {s: sum(1 for o in run.outcomes[n] if o.status == s) for s in {o.status for o in run.outcomes[n]}}
+                   for n in run.cameras},
+        "shared_views": {f"{run.cameras[a]}-{run.cameras[b]}": n for (a, b), n in run.views.shared_view_counts().items()},
+        "gate": {"gate": g.gate, "passed": g.passed, "value": g.value, "threshold": g.threshold, "message": g.message,
+                 "hint": g.hint},
+        "members": [{"name": m.name, "image_size": list(m.image_size), "K": np.asarray(m.camera_matrix).tolist(),
+                     "dist": np.asarray(m.dist_coeffs).tolist(), **_fit_json((run.fits or {}).get(m.name))}
+                    for m in run.members],
+    }
+    if run.gate.passed:
+        out["verdict"] = "pass" if run.passed else "fail"
+        out["lint"] = [f.model_dump(mode="json", exclude_none=True) for f in run.findings]
+    sol = run.solution
+    if sol is None:
+        return out
+    out["solver"] = sol.solver
+    out["root"] = sol.tree.root
+    out["tree"] = [{"parent": e.parent, "child": e.child, "T_parent_child": e.T_parent_child.tolist(),
+                    "translation_mm": e.translation_mm, "sigma_translation_mm": e.sigma_translation_mm,
+                    "rotation_deg": e.rotation_deg, "sigma_rotation_deg": e.sigma_rotation_deg}
+                   for e in sol.tree.edges]
+    out["fit_rms_px"] = dict(zip(run.cameras, sol.rms_px, strict=True))
+    if run.holdout is not None:
+        out["held_out"] = {"folds": run.holdout.n_folds,
+                           "rms_px": dict(zip(run.cameras, run.holdout.camera_rms_px, strict=True))}
+    out["pairs"] = pair_summary(sol, run.holdout)
+    out["loops"] = [{"cycle": list(lc.cycle), "rotation_deg": lc.rotation_deg, "translation_mm": lc.translation_mm,
+                     "sigma_rotation_deg": lc.sigma_rotation_deg, "sigma_translation_mm": lc.sigma_translation_mm,
+                     "mahalanobis": lc.mahalanobis} for lc in run.loops]
+    return out

@@ -1,0 +1,225 @@
+"""Rig lint and the rig records: history, show, rollback, export.
+
+Rules (errors fail lint, exit 1):
+- ``rig-stale-member``: a member's active calibration is not the serial@version + content_sha256 the
+  rig solve used (re-calibrated or rolled back since): the rig must be re-solved.
+- ``baseline-design``: a pair's solved baseline is outside the registered design value +- tolerance.
+- ``epipolar``: a pair's held-out epipolar RMS is above ``epipolar_max_px_at_720`` x rows / 720
+  (0.5 px at 720 rows by default, per station; DepthAI's factory flow gates at 0.5-0.6 px). Its fix
+  names the lens model when a member of the pair fails ``model-misfit``.
+- ``loop-closure``: a cycle's residual has Mahalanobis distance above ``loop_closure_max_mahalanobis``
+  (4.48 = sqrt of chi-square(6) at 99.7 %).
+- the camera rules for every member's active calibration (``member:<rule>``).
+``baseline-design``, ``epipolar`` and ``loop-closure`` read only the solve's numbers
+(``solved_rig_findings``): ``rig solve-folders`` applies them too, with each self-calibrated member's
+``model-misfit`` (workflows.rig.rig_folders).
+- hand-eye edges (workflows.handeye.rig_handeye): ``handeye-gates`` (a gate of the stored result failed),
+  ``handeye-stale-member`` (the camera whose calibration gave the board poses was re-calibrated since),
+  ``handeye-uncertainty`` (an accepted edge without a one-sigma).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.lint import Finding
+from calibctl.artifacts.rig import (
+    DesignBaseline,
+    RigActivation,
+    RigCalibration,
+    RigDefinition,
+    RigLoop,
+    RigPair,
+)
+from calibctl.config import LintThresholds, Settings
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
+from calibctl.errors import NotFoundError, UsageError
+from calibctl.files import write_atomic
+from calibctl.workflows.handeye import rig_handeye
+from calibctl.workflows.lint.lint import LintResult, lint_artifact
+from calibctl.workflows.store_admin.records import check_rollback_request, open_store
+
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr")
+
+
+def parse_rig_ref(ref: str) -> tuple[str, int | None]:
+    name, sep, version = ref.strip().partition("@")
+    if not name or (sep and not version.isdigit()):
+        raise UsageError(f"'{ref}' is not RIG or RIG@N")
+    return name, int(version) if sep else None
+
+
+def solved_rig_findings(pairs: Sequence[RigPair], loops: Sequence[RigLoop], rows: Mapping[str, int],
+                        designs: Sequence[DesignBaseline], limits: LintThresholds,
+                        misfit: Collection[str] = ()) -> list[Finding]:
+    """The rules that read only the solve's own numbers, no store: ``baseline-design``, ``epipolar``,
+    ``loop-closure`` (``rig solve`` and ``rig lint`` on a stored version, ``rig solve-folders`` on its run).
+
+    Args:
+        rows: image height (px) per camera, which scales the epipolar limit.
+        misfit: cameras whose own lens model fails ``model-misfit``; an epipolar error of their pair then
+            names the lens model as its likely cause instead of the capture.
+    """
+    findings: list[Finding] = []
+    by_pair = {frozenset((p.a, p.b)): p for p in pairs}
+    for d in designs:
+        p = by_pair.get(frozenset((d.a, d.b)))
+        if p is not None and abs(p.baseline_mm - d.baseline_mm) > d.tolerance_mm:
+            findings.append(Finding(
+                rule="baseline-design", severity="error", value=p.baseline_mm, threshold=d.tolerance_mm,
+                message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
+                        f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
+                fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size"))
+    for p in pairs:
+        limit = limits.epipolar_max_px_at_720 * rows[p.a] / 720.0
+        if p.epipolar_rms_px is not None and p.epipolar_rms_px > limit:
+            lens = [c for c in (p.a, p.b) if c in misfit]
+            fix = (f"the lens model of {' and '.join(lens)} does not describe the lens (member:model-misfit), "
+                   "the likely cause: calibrate with the model that rule names (a circular fisheye: --model "
+                   "fisheye), then re-solve"
+                   if lens else "re-capture with a still board seen by both cameras, then re-solve")
+            findings.append(Finding(
+                rule="epipolar", severity="error", value=p.epipolar_rms_px, threshold=limit,
+                message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px", fix=fix))
+    for lc in loops:
+        if lc.mahalanobis > limits.loop_closure_max_mahalanobis:
+            findings.append(Finding(
+                rule="loop-closure", severity="error", value=lc.mahalanobis,
+                threshold=limits.loop_closure_max_mahalanobis,
+                message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
+                        f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
+                fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved"))
+    return findings
+
+
+def member_finding(camera: str, finding: Finding) -> Finding:
+    """A member camera's own finding as a rig finding (``member:<rule>``, the message names the camera)."""
+    return finding.model_copy(update={"rule": f"member:{finding.rule}", "message": f"{camera}: {finding.message}"})
+
+
+def rig_findings(cal: RigCalibration, rig: RigDefinition, active: Mapping[str, CalibrationArtifact | None],
+                 limits: LintThresholds) -> list[Finding]:
+    """Every rig rule on ``cal`` given the members' currently active calibrations."""
+    findings: list[Finding] = []
+    for m in cal.members:
+        now = active.get(m.serial)
+        if now is None or (now.version, now.content_sha256) != (m.version, m.content_sha256):
+            current = f"{now.serial}@{now.version}" if now is not None else "no active calibration"
+            findings.append(Finding(
+                rule="rig-stale-member", severity="error",
+                message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
+                fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)"))
+    members = [(art, lint_artifact(art, limits).findings) for art in active.values() if art is not None]
+    misfit = {art.serial for art, found in members if any(f.rule == "model-misfit" for f in found)}
+    findings += solved_rig_findings(cal.pairs, cal.loops, {m.serial: m.image_size[1] for m in cal.members},
+                                    rig.design_baselines, limits, misfit)
+    findings += [member_finding(art.ref, f) for art, found in members for f in found]
+    return findings
+
+
+def _active_members(store: object, cal: RigCalibration) -> dict[str, CalibrationArtifact | None]:
+    out: dict[str, CalibrationArtifact | None] = {}
+    for m in cal.members:
+        try:
+            out[m.serial] = store.get_artifact(m.serial, None)  # type: ignore[attr-defined]
+        except NotFoundError:
+            out[m.serial] = None
+    return out
+
+
+def lint_rig(settings: Settings, ref: str) -> LintResult:
+    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now."""
+    name, version = parse_rig_ref(ref)
+    with open_store(settings) as store:
+        rig = store.get_rig(name)
+        cal = store.get_rig_calibration(name, version)
+        findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
+        versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
+        findings += rig_handeye.handeye_findings(cal.handeye, versions)
+    return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
+
+
+def history(settings: Settings, rig: str) -> tuple[list[RigCalibration], int | None, list[RigActivation]]:
+    with open_store(settings) as store:
+        store.get_rig(rig)
+        return store.list_rig_calibrations(rig), store.active_rig_version(rig), store.rig_events(rig)
+
+
+def show(settings: Settings, ref: str) -> RigCalibration:
+    name, version = parse_rig_ref(ref)
+    with open_store(settings) as store:
+        return store.get_rig_calibration(name, version)
+
+
+def rollback(settings: Settings, rig: str, to_version: int, reason: str,
+             expected_active: int | None = None) -> RigActivation | None:
+    """Roll the rig back as a compare-and-set, like a camera's (``records.rollback``): against
+    ``expected_active`` (what the technician saw) when given, else against the active version read first;
+    a solve, hand-eye edge or rollback stored in between refuses it (exit 2) instead of being undone.
+    None when ``to_version`` is the active version already (nothing written)."""
+    check_rollback_request(to_version, reason)
+    with open_store(settings, write=True) as store:
+        seen = store.active_rig_version(rig) if expected_active is None else expected_active
+        return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station,
+                                  expected_active=seen)
+
+
+def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
+    """Members, the cameras' tree (stereo formats) and the whole tree with hand-eye edges (tf, URDF)."""
+    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
+               for m in cal.members]
+    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
+    cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))
+    return members, cameras, orient_tree(edges, cal.root)
+
+
+def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
+           allow_rejected: bool = False, edge: str | None = None) -> str:
+    """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
+    second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
+    to ``out`` when given)."""
+    from calibctl.workflows.exports import rig_exports
+
+    if fmt not in EXPORT_FORMATS:
+        raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
+    cal = show(settings, ref)
+    if cal.status != "accepted" and not allow_rejected:
+        raise UsageError(f"rig {cal.rig}@{cal.version} is {cal.status}: a robot must not load it",
+                         hint="export the active version, or pass --allow-rejected to inspect it")
+    if edge is not None:
+        text = rig_handeye.edge_export(cal, edge, fmt)
+        if out is not None:
+            write_atomic(out, text, force=force)
+        return text
+    members, tree, full_tree = _geometry(cal)
+    by_name = {m.name: m for m in members}
+    left = by_name[cal.root]
+    right_name = pair or next(m.name for m in members if m.name != cal.root)
+    if right_name not in by_name or right_name == cal.root:
+        raise UsageError(f"--pair {right_name} is not a non-root member of rig {cal.rig}")
+    right = by_name[right_name]
+    T_right_left = tree.T(right.name, left.name)
+    header = f"# calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
+    if fmt == "json":
+        text = cal.model_dump_json(indent=2) + "\n"
+    elif fmt == "ros":
+        info_l, info_r = rig_exports.ros_stereo_pair(left, right, T_right_left)
+        text = f"{header}# --- {left.name} (left)\n{info_l}---\n# --- {right.name} (right)\n{info_r}"
+    elif fmt == "tf":
+        text = header + rig_exports.tf_static(full_tree)
+    elif fmt == "urdf":
+        text = rig_exports.urdf_robot(full_tree, cal.rig, f"calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}")
+    elif fmt == "urdf-joints":
+        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
+    elif fmt == "kalibr":
+        text = header + rig_exports.kalibr_camchain(members, tree)
+    else:  # opencv
+        text = rig_exports.opencv_stereo(left, right, T_right_left)
+    if out is not None:
+        write_atomic(out, text, force=force)
+    return text
