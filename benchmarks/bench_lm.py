@@ -2,7 +2,8 @@
 
 Times, on the same seeded inputs, calibctl's fisheye intrinsics solve (the Schur path: 8 lens parameters
 + 6 per view), the joint rig LM (the dense path: 3 and 4 pinhole cameras, optionally with intrinsics
-refined) and the one-view fisheye pose refinement, and saves every answer to an .npz, so that two
+refined), the rig's held-out validation (a rig solve per fold, then each held-out frame's board pose) and
+the one-view fisheye pose refinement, and saves every answer to an .npz, so that two
 checkouts (before and after a solver change) can be compared number for number:
 
     PYTHONPATH=<tree A> python benchmarks/bench_lm.py --out a.npz
@@ -30,6 +31,7 @@ from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
+from calibctl.core.extrinsics.rig_validation import validate_rig_holdout
 from calibctl.core.intrinsics.fisheye_model import fisheye_pose, refine_fisheye_pose
 from calibctl.core.intrinsics.solve import solve_intrinsics
 from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
@@ -104,6 +106,12 @@ def rig_cases() -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
             return {"cam": sol.cam_poses, "board": sol.board_poses, "cov": sol.covariance,
                     "K": np.array([m.camera_matrix for m in sol.members])}
         cases.append((f"rig {n_cams} cams seed {seed}{' refine' if refine else ''}", run))
+        if n_cams == 3 and not refine:
+            def holdout(views=views, members=members) -> dict[str, np.ndarray]:
+                out = validate_rig_holdout(views, members, solver="lm")
+                return {"rms": np.array(out.camera_rms_px),
+                        "pairs": np.array([[p.epipolar_rms_px, p.rectified_rms_px] for p in out.pairs])}
+            cases.append((f"rig {n_cams} cams seed {seed} held-out (rig solves + board poses)", holdout))
     return cases
 
 

@@ -19,8 +19,9 @@ diagonal counts as 1e-12) and the caller's ``retract(params, delta)`` applies it
 Schedule (``Damping``): start at ``initial``; a step is accepted when the cost at the trial is finite and
 not higher, then lam /= ``decrease`` (not below ``floor``); otherwise, or when the damped system cannot
 be solved, lam *= ``increase``. Stops: an accepted step lowered the cost by less than
-``relative_tolerance`` of it (converged), lam passed ``ceiling`` (no step lowers the cost: the minimum to
-working precision, or stuck), or ``max_iterations`` tries (accepted or not).
+``relative_tolerance`` of it, or a step is smaller than ``step_tolerance`` (both: converged); lam passed
+``ceiling`` (no step lowers the cost: the minimum to working precision, or stuck); ``max_iterations``
+tries (accepted or not).
 
 Users: ``core.intrinsics.fisheye_solve`` (Schur), ``core.extrinsics.rig_solve`` (dense; its board poses
 are coupled to every camera that saw the frame, and its covariance needs the dense H anyway),
@@ -28,7 +29,7 @@ are coupled to every camera that saw the frame, and its covariance needs the den
 (dense, six pose parameters). Not users, each for a reason written in its own docstring:
 ``core.extrinsics.handeye_refine`` re-weights its residual groups every iteration (the cost being
 minimised changes from one iteration to the next, so an accept/reject rule on it means nothing) and
-takes SVD least-squares steps that stay finite where the data leave a direction unconstrained;
+takes SVD least-squares steps on J, not on the normal equations;
 ``core.check.recheck_delta`` takes one Gauss-Newton step as a score test and never applies it; the pinhole
 board pose (``core.extrinsics.board_pose``) and every pinhole intrinsic solve use OpenCV's own LM
 (cv2.solvePnPRefineLM, cv2.calibrateCamera).
@@ -127,8 +128,8 @@ System = DenseSystem | SchurSystem
 @dataclass(frozen=True)
 class LMResult(Generic[P]):
     """params: the last accepted point. cost: r^T r there. iterations: steps tried (accepted or not).
-    converged: the relative cost rule stopped it. stop: "cost", "damping" (lam passed the ceiling) or
-    "iterations"."""
+    converged: the relative cost or the step rule stopped it. stop: "cost", "step", "damping" (lam passed
+    the ceiling) or "iterations"."""
 
     params: P
     cost: float
@@ -163,7 +164,8 @@ def damped_step(system: System, lam: float) -> np.ndarray:
 
 def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np.ndarray], P], *,
              damping: Damping = Damping(), max_iterations: int = 100, relative_tolerance: float = 1e-12,
-             label: str = "the least-squares solve", hint: str | None = None) -> LMResult[P]:
+             step_tolerance: float = 0.0, label: str = "the least-squares solve", hint: str | None = None
+             ) -> LMResult[P]:
     """Minimise r^T r from ``start`` (module docstring).
 
     Args:
@@ -172,6 +174,8 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
         retract: (params, delta) -> params moved by delta (flat, the system's layout; e.g. params + delta).
         damping: the schedule. max_iterations: steps tried at most.
         relative_tolerance: stop once an accepted step lowers the cost by less than this share of it.
+        step_tolerance: stop once a computed step's largest element is below this, in the parameters'
+            units (0: off); the step is not applied (it only chases rounding).
         label, hint: name the problem in the error.
 
     Raises:
@@ -187,6 +191,8 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
             delta = damped_step(system, lam)
         except np.linalg.LinAlgError:
             delta = None
+        if delta is not None and np.isfinite(delta).all() and float(np.max(np.abs(delta), initial=0.0)) < step_tolerance:
+            return LMResult(params, system.cost, it, True, "step")
         trial_params = retract(params, delta) if delta is not None and np.isfinite(delta).all() else None
         trial = evaluate(trial_params) if trial_params is not None else None
         if trial is not None and trial.finite() and trial.cost <= system.cost:
@@ -195,6 +201,8 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
             lam = max(lam / damping.decrease, damping.floor)
             if gain < relative_tolerance:
                 return LMResult(params, system.cost, it, True, "cost")
+        elif trial is not None and trial.finite() and trial.cost - system.cost <= relative_tolerance * system.cost:
+            return LMResult(params, system.cost, it, True, "cost")  # not lower, but only by rounding: the minimum
         else:
             lam *= damping.increase
             if lam > damping.ceiling:

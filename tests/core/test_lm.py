@@ -171,3 +171,22 @@ def test_the_iteration_cap_is_reported() -> None:
     out = solve_lm(rosenbrock, np.array([-1.2, 1.0]), _add, max_iterations=3)
     assert (out.stop, out.converged, out.iterations) == ("iterations", False, 3)
     assert out.cost < rosenbrock(np.array([-1.2, 1.0])).cost
+
+
+def test_a_step_below_the_step_tolerance_stops_without_moving() -> None:
+    truth = np.array([3.0, -1.3, 0.5])
+    out = solve_lm(exponential, truth + 1e-14, _add, step_tolerance=1e-9)
+    assert (out.stop, out.converged, out.iterations) == ("step", True, 1)
+    np.testing.assert_array_equal(out.params, truth + 1e-14)
+
+
+def test_a_step_that_raises_the_cost_only_by_rounding_is_the_minimum() -> None:
+    """The cost rule works both ways: a trial worse by less than relative_tolerance stops, unapplied."""
+    def flat(x: np.ndarray) -> DenseSystem:  # the model says 'go right', the cost rises by 1e-15 of itself
+        return DenseSystem(1.0 + 1e-15 * abs(x[0]), np.eye(1), np.ones(1))
+
+    out = solve_lm(flat, np.array([0.0]), _add, relative_tolerance=1e-12)
+    assert (out.stop, out.converged, out.iterations) == ("cost", True, 1)
+    assert out.params[0] == 0.0
+    worse = solve_lm(flat, np.array([0.0]), _add, relative_tolerance=1e-17, damping=Damping(ceiling=1.0))
+    assert (worse.stop, worse.converged) == ("damping", False)

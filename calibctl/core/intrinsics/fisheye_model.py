@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from calibctl.core.lm import DenseSystem, solve_lm
+from calibctl.core.lm import Damping, DenseSystem, solve_lm
 
 # Corners within this angle of the axis set up the focal guess (tan() is steep beyond it).
 MAX_GUESS_THETA_RAD = np.deg2rad(75.0)
@@ -31,7 +31,10 @@ MAX_SOLVE_THETA_RAD = np.deg2rad(88.0)
 _GRID = 24
 GUESS_VIEWS = 10
 POSE_ITERATIONS = 10
-POSE_TOLERANCE = 1e-14  # relative fall of the squared residual sum below which a pose step only chases rounding
+POSE_TOLERANCE = 1e-12  # relative fall of the squared residual sum below which a pose step only chases rounding
+POSE_STEP = 1e-12  # rad / m: a smaller step only chases rounding
+# Gauss-Newton (which this replaced) while steps lower the cost; damping only when a step overshoots
+POSE_DAMPING = Damping(initial=1e-9)
 
 
 def distort_theta(theta: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -116,9 +119,9 @@ def refine_fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndar
                         ) -> tuple[np.ndarray, np.ndarray]:
     """One pose (lens frozen) minimising the pixel residuals; returns (rvec (3,), tvec (3,) m).
 
-    Levenberg-Marquardt on the six pose parameters (calibctl.core.lm, dense path, its default schedule),
+    Levenberg-Marquardt on the six pose parameters (calibctl.core.lm, dense path, POSE_DAMPING),
     at most ``iterations`` steps, stopping once a step lowers the squared residual sum by less than
-    POSE_TOLERANCE of it.
+    POSE_TOLERANCE of it or is smaller than POSE_STEP (the Gauss-Newton loop it replaced stopped there).
 
     Raises:
         NumericalError: the projection is NaN or infinite at the starting pose.
@@ -133,6 +136,7 @@ def refine_fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndar
 
     start = np.concatenate([np.ravel(rvec), np.ravel(tvec)]).astype(np.float64)
     pose = solve_lm(evaluate, start, lambda p, d: p + d, max_iterations=iterations, relative_tolerance=POSE_TOLERANCE,
+                    step_tolerance=POSE_STEP, damping=POSE_DAMPING,
                     label="the fisheye board pose").params
     return pose[:3].copy(), pose[3:].copy()
 
