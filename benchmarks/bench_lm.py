@@ -55,7 +55,7 @@ def _best(fn: Callable[[], dict[str, np.ndarray]], repeats: int) -> tuple[float,
 
 
 def fisheye_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
-    cases = []
+    cases: list[tuple[str, Callable[[], dict[str, np.ndarray]]]] = []
     for i in range(n):
         fov, circular = LENSES[i % len(LENSES)]
         s = synthesize_fisheye_session(FisheyeCamera.from_fov(SIZE, fov, circular), 15 + i % 6, seed=i, noise_px=0.2)
@@ -69,7 +69,7 @@ def fisheye_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndarray]]
 
 
 def fisheye_pose_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
-    cases = []
+    cases: list[tuple[str, Callable[[], dict[str, np.ndarray]]]] = []
     for i in range(n):
         fov, circular = LENSES[i % len(LENSES)]
         cam = FisheyeCamera.from_fov(SIZE, fov, circular)
@@ -88,8 +88,9 @@ def fisheye_pose_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndar
     return cases
 
 
-def rig_cases() -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
-    cases = []
+def rig_inputs() -> list[tuple[str, RigViews, list[MemberIntrinsics], bool]]:
+    """(name, views, true members, refine_intrinsics) of the seeded rigs."""
+    out = []
     for n_cams, seed, refine in ((3, 1, False), (4, 2, False), (3, 3, True)):
         rng = np.random.default_rng(seed)
         truth = synthesize_rig(n_cams, BOARD, 20, rng)
@@ -100,18 +101,24 @@ def rig_cases() -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
         views = RigViews(truth.names, BOARD.object_points(), tuple(f"f{f}" for f in range(len(corners))), rows)
         members = [MemberIntrinsics(nm, c.K, c.dist, c.image_size) for nm, c in zip(truth.names, truth.cameras,
                                                                                      strict=True)]
+        out.append((f"{n_cams} cams seed {seed}{' refine' if refine else ''}", views, members, refine))
+    return out
 
+
+def rig_cases() -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
+    cases: list[tuple[str, Callable[[], dict[str, np.ndarray]]]] = []
+    for name, views, members, refine in rig_inputs():
         def run(views=views, members=members, refine=refine) -> dict[str, np.ndarray]:
             sol = solve_rig(views, members, refine_intrinsics=refine, solver="lm")
             return {"cam": sol.cam_poses, "board": sol.board_poses, "cov": sol.covariance,
                     "K": np.array([m.camera_matrix for m in sol.members])}
-        cases.append((f"rig {n_cams} cams seed {seed}{' refine' if refine else ''}", run))
-        if n_cams == 3 and not refine:
+        cases.append((f"rig {name}", run))
+        if name == "3 cams seed 1":
             def holdout(views=views, members=members) -> dict[str, np.ndarray]:
                 out = validate_rig_holdout(views, members, solver="lm")
                 return {"rms": np.array(out.camera_rms_px),
                         "pairs": np.array([[p.epipolar_rms_px, p.rectified_rms_px] for p in out.pairs])}
-            cases.append((f"rig {n_cams} cams seed {seed} held-out (rig solves + board poses)", holdout))
+            cases.append((f"rig {name} held-out (rig solves + board poses)", holdout))
     return cases
 
 

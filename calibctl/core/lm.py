@@ -9,30 +9,33 @@ observed - predicted and ``J = d(predicted)/d(params)``; the step ``delta`` then
 ``(H + lam * diag(H)) delta = g`` (Marquardt's scaling: each parameter damped in its own units; a zero
 diagonal counts as 1e-12) and the caller's ``retract(params, delta)`` applies it. Two forms:
 
-- ``DenseSystem``: ``H`` (n, n) and ``g`` (n,) over every free parameter (the rig problem).
+- ``DenseSystem``: ``H`` (n, n) and ``g`` (n,) over every free parameter (a single pose).
 - ``SchurSystem``: shared parameters (p of them, first in ``delta``) and V blocks of k parameters that
-  touch only their own rows (one board pose per view: the fisheye problem). The blocks are eliminated
+  touch only their own rows (one board pose per view or frame: the fisheye and rig problems; built from
+  per-block Jacobians, or regrouped from dense normal equations by ``from_dense``). The blocks are eliminated
   (the Schur complement ``S = A - sum_v B_v C_v^-1 B_v^T``), the p shared parameters solved, the blocks
   back-substituted: V k x k solves and one p x p instead of one (p + Vk)^2 system. The damped Schur step
   equals the dense step of the same system (tests/core/test_lm.py holds them to 1e-10).
 
 Schedule (``Damping``): start at ``initial``; a step is accepted when the cost at the trial is finite and
 not higher, then lam /= ``decrease`` (not below ``floor``); otherwise, or when the damped system cannot
-be solved, lam *= ``increase``. Stops: an accepted step lowered the cost by less than
-``relative_tolerance`` of it, or a step is smaller than ``step_tolerance`` (both: converged); lam passed
-``ceiling`` (no step lowers the cost: the minimum to working precision, or stuck); ``max_iterations``
-tries (accepted or not).
+be solved, lam *= ``increase``. Stops: a trial changed the cost by less than ``relative_tolerance`` of
+it (lowered: the step is kept; raised: rounding at the minimum, the step is dropped), or a step is
+smaller than ``step_tolerance`` (all three: converged); lam passed ``ceiling`` (no step lowers the cost);
+``max_iterations`` tries (accepted or not). Each caller keeps the schedule and tolerances its own loop
+had before it moved here (fisheye: lam /3 and x4, floor 1e-9, ceiling 1e8; rig: x10 both ways), so its
+answers did not move beyond rounding.
 
-Users: ``core.intrinsics.fisheye_solve`` (Schur), ``core.extrinsics.rig_solve`` (dense; its board poses
-are coupled to every camera that saw the frame, and its covariance needs the dense H anyway),
+Users: ``core.intrinsics.fisheye_solve`` and ``core.extrinsics.rig_solve`` (Schur: 8 lens parameters,
+or the camera poses and intrinsics, shared; one 6-parameter board pose per view or frame),
 ``core.intrinsics.fisheye_model.refine_fisheye_pose`` and ``core.extrinsics.rig_validation.fit_board_pose``
 (dense, six pose parameters). Not users, each for a reason written in its own docstring:
 ``core.extrinsics.handeye_refine`` re-weights its residual groups every iteration (the cost being
 minimised changes from one iteration to the next, so an accept/reject rule on it means nothing) and
 takes SVD least-squares steps on J, not on the normal equations;
 ``core.check.recheck_delta`` takes one Gauss-Newton step as a score test and never applies it; the pinhole
-board pose (``core.extrinsics.board_pose``) and every pinhole intrinsic solve use OpenCV's own LM
-(cv2.solvePnPRefineLM, cv2.calibrateCamera).
+board pose (``core.extrinsics.board_pose``), every pinhole intrinsic solve and the two-camera pinhole rig
+use OpenCV's own LM (cv2.solvePnPRefineLM, cv2.calibrateCamera, cv2.stereoCalibrateExtended).
 """
 
 from __future__ import annotations
@@ -106,6 +109,16 @@ class SchurSystem:
                    np.array([Js.T @ Jb for Js, Jb in zip(J_s, J_b, strict=True)]),
                    np.array([Jb.T @ Jb for Jb in J_b]),
                    np.array([Jb.T @ r for Jb, r in zip(J_b, rs, strict=True)]))
+
+    @classmethod
+    def from_dense(cls, system: DenseSystem, shared: np.ndarray, blocks: np.ndarray) -> SchurSystem:
+        """Regroup dense normal equations: shared (p,) and blocks (V, k) index H's rows; every other
+        pair of blocks must be uncoupled in H (zero). delta[:p] then belongs to ``shared``, delta[p:] to
+        ``blocks.ravel()``."""
+        H, g = system.H, system.g
+        B = H[shared][:, blocks].transpose(1, 0, 2)  # (V, p, k)
+        C = H[blocks[:, :, None], blocks[:, None, :]]  # (V, k, k)
+        return cls(system.cost, H[np.ix_(shared, shared)], g[shared], B, C, g[blocks])
 
     def finite(self) -> bool:
         return math.isfinite(self.cost) and all(bool(np.isfinite(a).all()) for a in

@@ -190,3 +190,19 @@ def test_a_step_that_raises_the_cost_only_by_rounding_is_the_minimum() -> None:
     assert out.params[0] == 0.0
     worse = solve_lm(flat, np.array([0.0]), _add, relative_tolerance=1e-17, damping=Damping(ceiling=1.0))
     assert (worse.stop, worse.converged) == ("damping", False)
+
+
+def test_dense_equations_regrouped_by_block_give_the_dense_step() -> None:
+    """SchurSystem.from_dense on an interleaved layout (blocks between shared parameters, as the rig has it)."""
+    dense = block_dense(START)
+    order = np.array([2, 3, 0, 4, 5, 6, 7, 8, 9, 1])  # block 0, a, blocks 1-3, c
+    H, g = dense.H[np.ix_(order, order)], dense.g[order]
+    where = np.argsort(order)
+    shared = where[:2]
+    blocks = where[2:].reshape(-1, 2)
+    schur = SchurSystem.from_dense(DenseSystem(dense.cost, H, g), shared, blocks)
+    for lam in (1e-3, 10.0):
+        delta = damped_step(schur, lam)
+        step = np.zeros(10)
+        step[shared], step[blocks.ravel()] = delta[:2], delta[2:]
+        np.testing.assert_allclose(step, damped_step(DenseSystem(dense.cost, H, g), lam), rtol=0, atol=SCHUR_TOL)

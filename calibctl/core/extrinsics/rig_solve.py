@@ -5,8 +5,9 @@ Solvers
     CALIB_USE_INTRINSIC_GUESS under ``refine_intrinsics``) on the frames both cameras saw, corners
     restricted to the ids both detected. Three or more, or any fisheye member: calibctl's joint
     Levenberg-Marquardt over every camera pose and board pose (rig_problem; a fisheye member projects
-    through cv2.fisheye.projectPoints), run by the shared solver calibctl.core.lm on its dense path (the
-    covariance needs the dense H anyway) with this module's schedule (``LM_DAMPING``, ``LM_RELATIVE_TOL``).
+    through cv2.fisheye.projectPoints), run by the shared solver calibctl.core.lm with this module's
+    schedule (``LM_DAMPING``, ``LM_RELATIVE_TOL``), each frame's board pose eliminated by the Schur
+    complement (the same steps as the dense system to 1e-15 on the bench rigs; benchmarks/bench_lm.py).
     cv2.fisheye.stereoCalibrate (CALIB_FIX_INTRINSIC) on the real sourishg fisheye pair with calibctl's
     intrinsics lands on the same baseline to 1e-9 mm, but gives no covariance and cannot refine through
     calibctl's models; left to fit the lenses itself it asserts in InitExtrinsics ("fabs(norm_u1) > 0")
@@ -46,7 +47,7 @@ from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_
 from calibctl.core.extrinsics.se3 import invert
 from calibctl.core.intrinsics.covariance import MIN_RCOND
 from calibctl.core.intrinsics.solve import MAX_RMS_PX, get_model, single_threaded_opencv
-from calibctl.core.lm import Damping, DenseSystem, solve_lm
+from calibctl.core.lm import Damping, DenseSystem, SchurSystem, solve_lm
 from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
 
 MAX_LM_ITERATIONS = 100
@@ -152,18 +153,22 @@ def _stereo(views: RigViews, members: Sequence[MemberIntrinsics], refine: bool,
 
 def _lm(views: RigViews, members: list[MemberIntrinsics], cam_poses: np.ndarray, board_poses: np.ndarray,
         refine: bool) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
-    """calibctl.core.lm's dense path over the free parameters (camera poses, board poses, refined intrinsics)."""
+    """calibctl.core.lm over the free parameters, each frame's board pose eliminated (Schur path): a board
+    pose touches only its own frame's rows, so a frame's block couples only with the camera poses and
+    intrinsics, never with another frame's."""
     layout = Layout(len(views.cameras), len(views.frames), tuple(m.n_params for m in members))
-    free = np.arange(layout.board0 + 6 * layout.n_frames) if not refine else np.arange(layout.size)
+    board_idx = layout.board0 + np.arange(6 * layout.n_frames).reshape(-1, 6)
+    shared = np.concatenate([np.arange(layout.board0), np.arange(layout.board0 + 6 * layout.n_frames, layout.size)
+                             if refine else np.arange(0)])
     Params = tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]
 
-    def evaluate(params: Params) -> DenseSystem:
+    def evaluate(params: Params) -> SchurSystem:
         ne = normal_equations(views, params[2], params[0], params[1], layout)
-        return DenseSystem(ne.ssr, ne.H[np.ix_(free, free)], ne.g[free])
+        return SchurSystem.from_dense(DenseSystem(ne.ssr, ne.H, ne.g), shared, board_idx)
 
     def retract(params: Params, delta: np.ndarray) -> Params:
         step = np.zeros(layout.size)
-        step[free] = delta
+        step[shared], step[board_idx.ravel()] = delta[:shared.size], delta[shared.size:]
         cam = params[0].copy()
         cam[1:] += step[:layout.board0].reshape(-1, 6)
         board = params[1] + step[layout.board0:layout.board0 + 6 * layout.n_frames].reshape(-1, 6)
