@@ -186,7 +186,7 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
         start: the initial parameters, any type ``retract`` understands.
         retract: (params, delta) -> params moved by delta (flat, the system's layout; e.g. params + delta).
         damping: the schedule. max_iterations: steps tried at most.
-        relative_tolerance: stop once an accepted step lowers the cost by less than this share of it.
+        relative_tolerance: stop once a trial changes the cost by less than this share of it (either way).
         step_tolerance: stop once a computed step's largest element is below this, in the parameters'
             units (0: off); the step is not applied (it only chases rounding).
         label, hint: name the problem in the error.
@@ -201,12 +201,14 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
     lam, it = damping.initial, 0
     for it in range(1, max_iterations + 1):
         try:
-            delta = damped_step(system, lam)
+            delta: np.ndarray | None = damped_step(system, lam)
         except np.linalg.LinAlgError:
             delta = None
-        if delta is not None and np.isfinite(delta).all() and float(np.max(np.abs(delta), initial=0.0)) < step_tolerance:
+        if delta is not None and not np.isfinite(delta).all():
+            delta = None
+        if delta is not None and float(np.max(np.abs(delta), initial=0.0)) < step_tolerance:
             return LMResult(params, system.cost, it, True, "step")
-        trial_params = retract(params, delta) if delta is not None and np.isfinite(delta).all() else None
+        trial_params = retract(params, delta) if delta is not None else None
         trial = evaluate(trial_params) if trial_params is not None else None
         if trial is not None and trial.finite() and trial.cost <= system.cost:
             gain = (system.cost - trial.cost) / max(system.cost, 1e-300)
