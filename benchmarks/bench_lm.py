@@ -6,8 +6,8 @@ refined), the rig's held-out validation (a rig solve per fold, then each held-ou
 the one-view fisheye pose refinement, and saves every answer to an .npz, so that two
 checkouts (before and after a solver change) can be compared number for number:
 
-    PYTHONPATH=<tree A> python benchmarks/bench_lm.py --out a.npz
-    PYTHONPATH=<tree B> python benchmarks/bench_lm.py --out b.npz --compare a.npz
+    PYTHONPATH=<tree A> python <tree B>/benchmarks/bench_lm.py --out a.npz
+    PYTHONPATH=<tree B> python <tree B>/benchmarks/bench_lm.py --out b.npz --compare a.npz
 
 Inputs: fisheye sessions as bench_fisheye.py (1280x960, 150/170/190 deg, 15-20 views of a 9 x 6 board,
 0.2 px noise, seeds 0..N-1); rigs from calibctl.core.synth.rig (640x480, 20 frames, 0.2 px noise).
@@ -126,7 +126,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fisheye", type=int, default=6, help="fisheye sessions (seeds 0..N-1)")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", required=True, help=".npz to save every answer in")
+    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "bench_lm.npz"),
+                        help=".npz to save every answer in (default benchmarks/out/bench_lm.npz)")
     parser.add_argument("--compare", help=".npz of another checkout's answers")
     args = parser.parse_args()
     print(f"machine: {cpu_model()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}, Python "
@@ -147,6 +148,7 @@ def main() -> int:
         ref_ms = other.get(f"{name}/ms")
         was = f" (was {float(ref_ms):.1f})" if ref_ms is not None else ""
         print(f"| {name} | {1000 * seconds:.1f}{was} | {diff} |")
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     np.savez(args.out, **saved)  # type: ignore[arg-type]
     return 0
 
