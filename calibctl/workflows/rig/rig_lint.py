@@ -1,4 +1,4 @@
-"""Rig lint and the rig records: history, show, rollback, export.
+"""Rig lint and the rig records: history, show, rollback (export: workflows.rig.rig_export).
 
 Rules (errors fail lint, exit 1):
 - ``rig-stale-member``: a member's active calibration is not the serial@version + content_sha256 the
@@ -21,9 +21,6 @@ Rules (errors fail lint, exit 1):
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
-from pathlib import Path
-
-import numpy as np
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding
@@ -36,15 +33,10 @@ from calibctl.artifacts.rig import (
     RigPair,
 )
 from calibctl.config import LintThresholds, Settings
-from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import NotFoundError, UsageError
-from calibctl.files import write_atomic
 from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
-
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr")
 
 
 def parse_rig_ref(ref: str) -> tuple[str, int | None]:
@@ -167,59 +159,3 @@ def rollback(settings: Settings, rig: str, to_version: int, reason: str,
         seen = store.active_rig_version(rig) if expected_active is None else expected_active
         return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station,
                                   expected_active=seen)
-
-
-def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
-    """Members, the cameras' tree (stereo formats) and the whole tree with hand-eye edges (tf, URDF)."""
-    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
-               for m in cal.members]
-    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
-    cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))
-    return members, cameras, orient_tree(edges, cal.root)
-
-
-def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
-           allow_rejected: bool = False, edge: str | None = None) -> str:
-    """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
-    second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
-    to ``out`` when given)."""
-    from calibctl.workflows.exports import rig_exports
-
-    if fmt not in EXPORT_FORMATS:
-        raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
-    cal = show(settings, ref)
-    if cal.status != "accepted" and not allow_rejected:
-        raise UsageError(f"rig {cal.rig}@{cal.version} is {cal.status}: a robot must not load it",
-                         hint="export the active version, or pass --allow-rejected to inspect it")
-    if edge is not None:
-        text = rig_handeye.edge_export(cal, edge, fmt)
-        if out is not None:
-            write_atomic(out, text, force=force)
-        return text
-    members, tree, full_tree = _geometry(cal)
-    by_name = {m.name: m for m in members}
-    left = by_name[cal.root]
-    right_name = pair or next(m.name for m in members if m.name != cal.root)
-    if right_name not in by_name or right_name == cal.root:
-        raise UsageError(f"--pair {right_name} is not a non-root member of rig {cal.rig}")
-    right = by_name[right_name]
-    T_right_left = tree.T(right.name, left.name)
-    header = f"# calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
-    if fmt == "json":
-        text = cal.model_dump_json(indent=2) + "\n"
-    elif fmt == "ros":
-        info_l, info_r = rig_exports.ros_stereo_pair(left, right, T_right_left)
-        text = f"{header}# --- {left.name} (left)\n{info_l}---\n# --- {right.name} (right)\n{info_r}"
-    elif fmt == "tf":
-        text = header + rig_exports.tf_static(full_tree)
-    elif fmt == "urdf":
-        text = rig_exports.urdf_robot(full_tree, cal.rig, f"calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}")
-    elif fmt == "urdf-joints":
-        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
-    elif fmt == "kalibr":
-        text = header + rig_exports.kalibr_camchain(members, tree)
-    else:  # opencv
-        text = rig_exports.opencv_stereo(left, right, T_right_left)
-    if out is not None:
-        write_atomic(out, text, force=force)
-    return text
