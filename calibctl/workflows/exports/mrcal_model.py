@@ -40,7 +40,7 @@ def cameramodel(m: MemberIntrinsics, T_cam_ref: np.ndarray, comment: str) -> str
     extrinsics = [*map(float, rvec), *map(float, np.asarray(T_cam_ref, float)[:3, 3])]
 
     def floats(values: list[float]) -> str:
-        return ", ".join(repr(v) for v in values)
+        return ", ".join(repr(float(v)) for v in values)  # float(): numpy 2 reprs np.float64 as "np.float64(x)"
 
     return (f"# {comment}\n{{\n    'lensmodel': '{LENSMODELS[len(dist)]}',\n"
             f"    # fx, fy, cx, cy (px), then OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4]]]\n"
