@@ -37,7 +37,7 @@ def lint(
     from calibctl.core.blas_threads import blas_starts_on_one_thread
 
     with blas_starts_on_one_thread():  # lint computes on a few small arrays: no BLAS worker threads to start
-        from calibctl.workflows.lint import lint as lint_workflow
+        from calibctl.workflows.lint import run as lint_workflow
 
     if fmt not in FORMATS:
         raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")

@@ -14,6 +14,7 @@ evidence lint needs, and a hash of the file. ``load_calibration`` reads any of t
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,13 +86,24 @@ class CalibrationFile:
     kind: FileKind
     data: dict[str, Any]
     header: trace_header.TraceHeader | None
+    rig_header: trace_header.RigTraceHeader | None = None  # a camera's file of a rig export
+
+
+_OPENCV_XML = re.compile(r"^\s*(<\?xml[^>]*\?>\s*)?(<!--.*?-->\s*)*<opencv_storage>", re.DOTALL)
+_OPENCV_JSON_MATRIX = re.compile(r'"type_id"\s*:\s*"opencv-matrix"')
 
 
 def _is_opencv(text: str) -> bool:
-    return text.startswith("%YAML:") or (text.startswith("%YAML") and "!!opencv-matrix" in text)
+    """An OpenCV FileStorage by its content: YAML's ``%YAML:`` directive (or ``%YAML`` with an
+    !!opencv-matrix), XML's ``<opencv_storage>`` root, or JSON with an ``"type_id": "opencv-matrix"`` node."""
+    if text.startswith("%YAML:") or (text.startswith("%YAML") and "!!opencv-matrix" in text):
+        return True
+    if _OPENCV_XML.match(text):
+        return True
+    return text.lstrip().startswith("{") and bool(_OPENCV_JSON_MATRIX.search(text))
 
 
-def _opencv_data(text: str, source: str) -> dict[str, Any]:
+def opencv_data(text: str, source: str) -> dict[str, Any]:
     """Every top-level number, string and matrix OpenCV reads from ``text`` (matrices as nested lists)."""
     import cv2
 
@@ -132,16 +144,24 @@ def load_structured_file(path: Path) -> Any:
 def load_calibration(path: Path) -> CalibrationFile:
     """Read a calibctl artifact (JSON/YAML), a ROS camera_info or an OpenCV FileStorage export."""
     text = bounded.read_text(path)
-    header = trace_header.read(text)
-    source = str(path)
+    return calibration_from_text(text, str(path), path.suffix.lower() == ".json")
+
+
+def calibration_from_text(text: str, source: str, is_json: bool = False) -> CalibrationFile:
+    """``load_calibration`` on text already read (``source`` names it in messages)."""
+    header, rig_header = trace_header.read(text), trace_header.read_rig(text)
     if _is_opencv(text):
-        return CalibrationFile(source, "opencv", bounded.check_tree(_opencv_data(text, source), source), header)
-    data = bounded.parse_json(text, source) if path.suffix.lower() == ".json" else bounded.parse_yaml(text, source)
+        return CalibrationFile(source, "opencv", bounded.check_tree(opencv_data(text, source), source), header,
+                               rig_header)
+    data = bounded.parse_json(text, source) if is_json else bounded.parse_yaml(text, source)
     if looks_like_artifact(data):
         return CalibrationFile(source, "calibctl", data, header)
     if ros_camera_info.looks_like_camera_info(data):
-        return CalibrationFile(source, "ros", data, header)
+        return CalibrationFile(source, "ros", data, header, rig_header)
     raise InputError(
-        f"{path} is not a calibration (neither a calibctl artifact, ROS camera_info nor OpenCV FileStorage)",
-        "lint takes files written by `calibctl export` or ROS camera_calibration",
+        f"{source} is not a calibration: lint looked for a calibctl artifact (camera_matrix + content_sha256), "
+        "ROS camera_info (image_width, camera_matrix, ...), OpenCV FileStorage (%YAML:1.0, <opencv_storage>, "
+        "or JSON with opencv-matrix nodes) and the rig exports (bundle manifest.json, rig or hand-eye JSON, "
+        "tf_static, URDF, Kalibr camchain, OpenCV stereo)",
+        "lint takes files written by `calibctl export` / `calibctl rig export` or ROS camera_calibration",
     )

@@ -94,6 +94,8 @@ def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left:
     fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     fs.write("image_width", int(left.image_size[0]))
     fs.write("image_height", int(left.image_size[1]))
+    if left.lens == "fisheye" and right.lens == "fisheye":
+        fs.write("distortion_model", "equidistant")  # D1/D2 are cv2.fisheye's k1..k4, as the camera export says
     for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
                        ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
                        ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),

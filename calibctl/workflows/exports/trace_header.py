@@ -107,7 +107,7 @@ def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
     """``body`` (YAML, OpenCV YAML or XML) with a rig header: ``calibctl rig RIG@N STATUS sha256 S``, one
     ``calibctl member SERIAL@V sha256 S frame F`` line per camera the file describes, and the file hash.
     A leading ``%YAML`` directive or ``<?xml`` declaration stays first; XML gets the lines as comments."""
-    xml = body.startswith("<?xml")
+    xml = body.startswith("<")  # a URDF robot or its joints alone: XML comments
     open_, close = ("<!-- ", " -->") if xml else ("# ", "")
     lines = [f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"]
     lines += [f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"

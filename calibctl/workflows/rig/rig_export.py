@@ -207,7 +207,7 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
             doc["mrcal_missing"] = mrcal_model.missing_reason(m)
         else:
             doc["mrcal"] = f"{x.names.camera_name(m.name)}.cameramodel"
-            files[doc["mrcal"]] = model
+            files[doc["mrcal"]] = x.stamp(model, (m.name,))
         members.append(doc)
     manifest = {"rig": x.cal.rig, "version": x.cal.version, "status": x.cal.status,
                 "content_sha256": x.cal.content_sha256, "signature": None, "calibctl_version": __version__,
