@@ -23,7 +23,7 @@ def _github_line(source: str, f) -> str:
 
 def lint(
     ctx: typer.Context,
-    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (JSON/YAML artifact, ROS camera_info, OpenCV FileStorage) or a ROS camera_info file.")] = None,
+    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's manifest.json) or a ROS camera_info file.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
     all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
     rig: Annotated[str | None, typer.Option("--rig", help="Lint a rig's active version (RIG or RIG@N): stale members, "
