@@ -155,7 +155,7 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
         raise UsageError(f"--format {fmt} writes one file per camera, not one text", ROS_ONE_FILE_FIX
                          if fmt == "ros" else "pass -o DIR")
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
-    text = rig_handeye.edge_export(x.cal, edge, fmt) if edge is not None else _text(x, fmt)
+    text = rig_handeye.edge_export(x.cal, edge, fmt, x.names.frames) if edge is not None else _text(x, fmt)
     if out is not None:
         write_atomic(out, text, force=force)
     return text
