@@ -17,7 +17,7 @@ from calibctl.workflows.exports import trace_header
 from tests.artifacts.factories import calibration, measured_board
 from tests.workflows.sessions import synthetic_capture
 
-FORMATS = ("json", "yaml", "ros", "opencv")
+FORMATS = ("json", "yaml", "ros", "opencv", "kalibr", "mrcal")
 runner = CliRunner()
 
 
@@ -54,12 +54,12 @@ def test_exports_of_a_solved_calibration_pass_lint_in_every_format(sqlite_url: s
     assert cli("--db", sqlite_url, "solve", "--serial", "CAM-0001").exit_code == 0
     paths = []
     for fmt in FORMATS:
-        paths.append(tmp_path / f"cam.{fmt}.{'json' if fmt == 'json' else 'yaml'}")
+        paths.append(tmp_path / f"cam.{fmt}.{'json' if fmt == 'json' else 'cameramodel' if fmt == 'mrcal' else 'yaml'}")
         assert export(sqlite_url, "CAM-0001", fmt, paths[-1]).exit_code == 0
     result = cli("lint", *map(str, paths), "--json")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
-    assert [r["kind"] for r in report["results"]] == ["calibctl", "calibctl", "ros", "opencv"]
+    assert [r["kind"] for r in report["results"]] == ["calibctl", "calibctl", "ros", "opencv", "kalibr", "mrcal"]
     assert all(r["errors"] == 0 and r["warnings"] == 0 for r in report["results"]), report
 
 

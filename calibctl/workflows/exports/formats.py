@@ -2,12 +2,13 @@
 
 - ``json``/``yaml``: the full calibctl artifact (hash and status included; ``calibctl import`` reads it).
 - ``ros``: the camera_info YAML that ROS camera_calibration_parsers reads (see ``ros_camera_info``).
+- ``kalibr``: a one-camera Kalibr camchain; ``mrcal``: an mrcal .cameramodel (pinhole models only).
 - ``opencv``: a cv2.FileStorage YAML (camera_matrix, distortion_coefficients, image_width/height,
   status), written and read back by OpenCV itself. A fisheye calibration adds
   ``distortion_model: equidistant``: its distortion_coefficients are cv2.fisheye's k1..k4 (pass them to
   cv2.fisheye.*, not to cv2.undistort).
 
-ROS and OpenCV exports start with the trace header (``trace_header``): the version, its status, the
+ROS, OpenCV, Kalibr and mrcal exports start with the trace header (``trace_header``): the version, its status, the
 evidence lint needs, and a hash of the file. ``load_calibration`` reads any of the four back.
 """
 
@@ -25,8 +26,8 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.errors import InputError
 from calibctl.workflows.exports import ros_camera_info, trace_header
 
-ExportFormat = Literal["json", "yaml", "ros", "opencv"]
-EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv")
+ExportFormat = Literal["json", "yaml", "ros", "opencv", "kalibr", "mrcal"]
+EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv", "kalibr", "mrcal")
 FileKind = Literal["calibctl", "ros", "opencv"]
 
 
@@ -57,6 +58,26 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         return Path(path).read_text(encoding="utf-8")
 
 
+def _one_camera_text(art: CalibrationArtifact, fmt: str) -> str:
+    """A one-camera Kalibr camchain (cam0, no overlaps, topic /<frame base>/image_raw) or mrcal .cameramodel
+    (the camera is its own reference). mrcal has no Kannala-Brandt model: a fisheye is refused."""
+    import numpy as np
+
+    from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+    from calibctl.core.extrinsics.rig_tree import RigTree
+    from calibctl.workflows.exports import mrcal_model, rig_exports
+
+    member = MemberIntrinsics(art.serial, np.array(art.camera_matrix, dtype=np.float64),
+                              np.array(art.dist_coeffs, dtype=np.float64), art.image_size,
+                              lens="fisheye" if art.model.name == "fisheye" else "pinhole")
+    if fmt == "kalibr":
+        return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()))
+    model = mrcal_model.cameramodel(member, np.eye(4), f"calibctl {art.ref} {art.status}")
+    if model is None:
+        raise InputError(f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead")
+    return model
+
+
 def _yaml_text(data: Any, **style: Any) -> str:
     import yaml  # only the yaml and ros formats write YAML: a JSON export or a lint never imports it
 
@@ -75,6 +96,8 @@ def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None
         return trace_header.stamp(art, _yaml_text(info, default_flow_style=None))
     if fmt == "opencv":
         return trace_header.stamp(art, _opencv_text(art))
+    if fmt in ("kalibr", "mrcal"):
+        return trace_header.stamp(art, _one_camera_text(art, fmt))
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
 
 

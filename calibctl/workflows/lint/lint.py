@@ -99,7 +99,7 @@ def _matrix(value: Any, shape: tuple[int, ...], source: str, name: str) -> np.nd
     return arr
 
 
-def _with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
+def with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
     """What a trace header vouches for (sigma, held-out outer ring, square size) added to the numbers."""
 
     def number(key: str) -> float | None:
@@ -384,10 +384,15 @@ def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
 
 
 def _trace_rules(loaded: formats.CalibrationFile) -> tuple[list[Finding], dict[str, Any]]:
-    """Findings about a ROS/OpenCV export's header, and the evidence it vouches for (when intact)."""
-    header = loaded.header
-    if header is None and loaded.rig_header is not None:
-        return rig_trace_rules(loaded.rig_header), {}
+    return trace_rules(loaded.header, loaded.rig_header)
+
+
+def trace_rules(header: trace_header.TraceHeader | None,
+                rig_header: trace_header.RigTraceHeader | None = None) -> tuple[list[Finding], dict[str, Any]]:
+    """Findings about an export's header (a camera's, else a rig's), and the evidence it vouches for (when
+    intact; {} for a rig export or no header)."""
+    if header is None and rig_header is not None:
+        return rig_trace_rules(rig_header), {}
     if header is None:
         return [
             Finding(
@@ -437,8 +442,13 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
         facts = _ros_facts(data, source)
     else:
         facts = _opencv_facts(data, source)
-    trace = "header" if evidence else "rig" if loaded.header is None and loaded.rig_header is not None else "none"
-    return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits, trace))
+    return LintResult(source, loaded.kind, findings + lint_facts(with_evidence(facts, evidence), limits,
+                                                                 trace_of(evidence, loaded.header, loaded.rig_header)))
+
+
+def trace_of(evidence: dict[str, Any], header: object, rig_header: object) -> str:
+    """``lint_facts``' trace: a camera header's evidence, a rig export, or nothing."""
+    return "header" if evidence else "rig" if header is None and rig_header is not None else "none"
 
 
 def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:

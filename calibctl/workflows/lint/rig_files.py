@@ -17,6 +17,7 @@ import ast
 import math
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,15 @@ from calibctl.config import LintThresholds
 from calibctl.errors import InputError
 from calibctl.workflows.exports import bundle, formats, trace_header
 from calibctl.workflows.exports.frame_names import ROS_NAME
-from calibctl.workflows.lint.lint import CalibrationFacts, LintResult, lint_facts, lint_file, rig_trace_rules
+from calibctl.workflows.lint.lint import (
+    CalibrationFacts,
+    LintResult,
+    lint_facts,
+    lint_file,
+    trace_of,
+    trace_rules,
+    with_evidence,
+)
 
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
 _FIX_FRAME = "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
@@ -164,6 +173,17 @@ def _urdf(robot: ET.Element) -> list[Finding]:
     return findings + _tree(edges)
 
 
+@dataclass(frozen=True)
+class Trace:
+    """What vouches for a file's cameras (``lint.lint_facts``' trace) and the evidence of a camera header."""
+
+    kind: str
+    evidence: dict[str, Any]
+
+    def lint(self, facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
+        return lint_facts(with_evidence(facts, self.evidence), limits, self.kind)
+
+
 def _camera_facts(source: str, K: np.ndarray, dist: list[float], size: Any, equidistant: bool) -> CalibrationFacts:
     ok = isinstance(size, list | tuple) and len(size) == 2 and all(isinstance(v, int) for v in size)
     return CalibrationFacts(source=source, kind="rig", image_size=(int(size[0]), int(size[1])) if ok else None,
@@ -171,7 +191,7 @@ def _camera_facts(source: str, K: np.ndarray, dist: list[float], size: Any, equi
                             distortion_model="equidistant" if equidistant else "brown-conrady")
 
 
-def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: str) -> list[Finding]:
+def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     findings: list[Finding] = []
     fix = "export it again with `calibctl rig export RIG --format kalibr`"
     for name, cam in data.items():
@@ -193,11 +213,11 @@ def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: st
         K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1]], dtype=np.float64)
         facts = _camera_facts(f"{source}:{name}", K, dist if model == "equidistant" else [*dist, 0.0][:5],
                               cam.get("resolution"), model == "equidistant")
-        findings += [f.model_copy(update={"message": f"{name}: {f.message}"}) for f in lint_facts(facts, limits, trace)]
+        findings += [f.model_copy(update={"message": f"{name}: {f.message}"}) for f in trace.lint(facts, limits)]
     return findings
 
 
-def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: str) -> list[Finding]:
+def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     data = formats.opencv_data(text, source)
     findings: list[Finding] = []
     R, bad = _finite_matrix(data.get("R"), (3, 3), "R")
@@ -212,11 +232,11 @@ def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: str) -
             dist = list(np.ravel(data.get(f"D{cam}") or []))
             facts = _camera_facts(f"{source}:K{cam}", K, dist, size, data.get("distortion_model") == "equidistant")
             findings += [f.model_copy(update={"message": f"camera {cam}: {f.message}"})
-                         for f in lint_facts(facts, limits, trace)]
+                         for f in trace.lint(facts, limits)]
     return findings
 
 
-def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: str) -> list[Finding]:
+def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     lens, intr = str(model.get("lensmodel")), model.get("intrinsics")
     fix = "export it again with `calibctl rig export RIG --format bundle`"
     n = {"LENSMODEL_OPENCV4": 4, "LENSMODEL_OPENCV5": 5, "LENSMODEL_OPENCV8": 8, "LENSMODEL_OPENCV12": 12}.get(lens)
@@ -229,7 +249,7 @@ def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: st
     fx, fy, cx, cy = values[0, :4]
     facts = _camera_facts(source, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]]), list(values[0, 4:]),
                           model.get("imagersize"), False)
-    return bad_ext + lint_facts(facts, limits, trace)
+    return bad_ext + trace.lint(facts, limits)
 
 
 def _document(data: dict[str, Any], source: str, model: type[RigCalibration] | type[HandEyeResult]) -> list[Finding]:
@@ -263,18 +283,21 @@ def lint_rig_file(path: Path, limits: LintThresholds) -> list[LintResult] | None
         return [LintResult(source, kind, _document(data, source, RigCalibration))]
     if kind == "handeye-json":
         return [LintResult(source, kind, _document(data, source, HandEyeResult))]
-    header = trace_header.read_rig(text)
-    findings = rig_trace_rules(header) if header is not None else [_error(
-        "traceability", "no calibctl rig header: this file cannot be traced to a stored rig version; linted on its "
-        "numbers and frames only", "export it with `calibctl rig export RIG --format ...`", "warning")]
+    camera, rig = trace_header.read(text), trace_header.read_rig(text)
+    findings, evidence = trace_rules(camera, rig)
+    if camera is None and rig is None:
+        findings = [_error("traceability", "no calibctl header: this file cannot be traced to a stored version; "
+                           "linted on its numbers and frames only",
+                           "export it with `calibctl rig export RIG --format ...` or `calibctl export SERIAL`", "warning")]
+    trace = Trace(trace_of(evidence, camera, rig), evidence)
     if kind == "tf":
         findings += _tf(data)
     elif kind == "urdf":
         findings += _urdf(data)
     elif kind == "mrcal":
-        findings += _mrcal(data["mrcal"], source, limits, "none" if header is None else "rig")
+        findings += _mrcal(data["mrcal"], source, limits, trace)
     elif kind == "kalibr":
-        findings += _kalibr(data, source, limits, "none" if header is None else "rig")
+        findings += _kalibr(data, source, limits, trace)
     else:
-        findings += _opencv_stereo(text, source, limits, "none" if header is None else "rig")
+        findings += _opencv_stereo(text, source, limits, trace)
     return [LintResult(source, kind, findings)]
