@@ -49,8 +49,12 @@ def lint(
     ) if (files or serial or all_serials or not rig) else []
     if rig:
         from calibctl.workflows.rig.rig_lint import lint_rig
+        from calibctl.workflows.store_admin.keys import trusted_of
 
-        results.append(lint_rig(st.settings(), rig))
+        trusted = trusted_of(st.settings(), trusted_keys) if require_signature else None
+        if trusted is not None and not trusted.keys:
+            raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+        results.append(lint_rig(st.settings(), rig, trusted))
     failed = any(r.failed for r in results)
     if fmt == "json":
         emit_json({"verdict": "fail" if failed else "pass", "results": [r.as_json() for r in results]})

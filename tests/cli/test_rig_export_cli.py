@@ -157,3 +157,23 @@ def test_a_stale_rig_is_not_exported_unless_allowed(db, rig2, tmp_path):
     assert r.exit_code == 1 and not (tmp_path / "b").exists()
     r = invoke(db, "rig", "export", "R1", "--format", "tf", "--allow-stale")
     assert r.exit_code == 0 and "child_frame_id: cam1_optical_frame" in r.output
+
+
+def test_lint_rig_require_signature_names_the_unsigned_rig_and_each_unsigned_member(db, tmp_path):
+    """It used to report neither: a CI gate with --require-signature passed an unsigned rig."""
+    from calibctl.signing import create_key
+
+    key = create_key(tmp_path / "k.pem")
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    (trusted / "k.pub.pem").write_text(key.public_pem())
+    r = invoke(db, "--json", "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(trusted))
+    assert r.exit_code == 1, r.output
+    messages = [f["message"] for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature"]
+    assert messages == ["rig R1@1 is not signed (calibctl does not sign rig versions yet)",
+                        "member CAM0@1 is not signed", "member CAM1@1 is not signed"]
+    assert invoke(db, "lint", "--rig", "R1").exit_code == 0  # without --require-signature the rig passes
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = invoke(db, "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(empty))
+    assert r.exit_code == 2 and "--require-signature needs trusted keys" in r.output

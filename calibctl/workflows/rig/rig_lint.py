@@ -34,8 +34,10 @@ from calibctl.artifacts.rig import (
 )
 from calibctl.config import LintThresholds, Settings
 from calibctl.errors import NotFoundError, UsageError
+from calibctl.signing import TrustedKeys
 from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
+from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
 
 
@@ -124,8 +126,10 @@ def _active_members(store: object, cal: RigCalibration) -> dict[str, Calibration
     return out
 
 
-def lint_rig(settings: Settings, ref: str) -> LintResult:
-    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now."""
+def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -> LintResult:
+    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now.
+    ``trusted`` (``lint --require-signature``): every member version the rig used must be signed by a
+    trusted key, and the rig version itself (calibctl does not sign rig versions yet: always a finding)."""
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
         rig = store.get_rig(name)
@@ -133,7 +137,26 @@ def lint_rig(settings: Settings, ref: str) -> LintResult:
         findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
         versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
         findings += rig_handeye.handeye_findings(cal.handeye, versions)
+        if trusted is not None:
+            findings += _signature_findings(store, cal, trusted)
     return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
+
+
+def _signature_findings(store: object, cal: RigCalibration, trusted: TrustedKeys) -> list[Finding]:
+    fix = "a robot must load only signed calibrations: sign the store (`calibctl keys init`) and re-solve"
+    findings = [Finding(rule="signature", severity="error", fix=fix,
+                        message=f"rig {cal.rig}@{cal.version} is not signed (calibctl does not sign rig versions yet)")]
+    for m in cal.members:
+        try:
+            art = store.get_artifact(m.serial, m.version)  # type: ignore[attr-defined]
+        except NotFoundError:
+            problem: str | None = "is not in this store"
+        else:
+            problem = keys.signature_problem(art, trusted)
+        if problem is not None:
+            findings.append(Finding(rule="signature", severity="error", fix=fix,
+                                    message=f"member {m.serial}@{m.version} {problem}"))
+    return findings
 
 
 def history(settings: Settings, rig: str) -> tuple[list[RigCalibration], int | None, list[RigActivation]]:
