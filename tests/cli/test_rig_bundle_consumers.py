@@ -40,20 +40,21 @@ def _points_root(n=40, seed=3):
 class Truth:
     """calibctl's own projections of the stored rig (cv2.projectPoints on the members, rectify on the pair)."""
 
-    def __init__(self, cal: RigCalibration, X: np.ndarray) -> None:
+    def __init__(self, cal: RigCalibration, X: np.ndarray, left: str = "CAM0", right: str = "CAM1") -> None:
         m = {x.serial: x for x in cal.members}
         self.K = {s: np.array(x.camera_matrix) for s, x in m.items()}
         self.D = {s: np.array(x.dist_coeffs) for s, x in m.items()}
         T_left_right = np.array(cal.edges[0].T_parent_child)
         self.T_right_left = np.linalg.inv(T_left_right)
         R, t = self.T_right_left[:3, :3], self.T_right_left[:3, 3]
-        self.raw = {"CAM0": cv2.projectPoints(X, np.zeros(3), np.zeros(3), self.K["CAM0"], self.D["CAM0"])[0].reshape(-1, 2),
-                    "CAM1": cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, self.K["CAM1"], self.D["CAM1"])[0].reshape(-1, 2)}
-        members = [MemberIntrinsics(s, self.K[s], self.D[s], m[s].image_size, lens=m[s].lens) for s in ("CAM0", "CAM1")]
+        self.left, self.right = left, right
+        self.raw = {left: cv2.projectPoints(X, np.zeros(3), np.zeros(3), self.K[left], self.D[left])[0].reshape(-1, 2),
+                    right: cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, self.K[right], self.D[right])[0].reshape(-1, 2)}
+        members = [MemberIntrinsics(s, self.K[s], self.D[s], m[s].image_size, lens=m[s].lens) for s in (left, right)]
         self.rect = rectify(members[0], members[1], self.T_right_left)
         Xh = np.column_stack([(self.rect.R1 @ X.T).T, np.ones(len(X))])
-        self.rectified = {s: (P @ Xh.T).T[:, :2] / (P @ Xh.T).T[:, 2:] for s, P in (("CAM0", self.rect.P1),
-                                                                                   ("CAM1", self.rect.P2))}
+        self.rectified = {s: (P @ Xh.T).T[:, :2] / (P @ Xh.T).T[:, 2:] for s, P in ((left, self.rect.P1),
+                                                                                   (right, self.rect.P2))}
 
 
 @pytest.fixture
@@ -99,17 +100,18 @@ def _consumers(out: Path, X: np.ndarray, tmp_path: Path) -> dict:
     return json.loads(run.stdout)
 
 
-def test_ros_image_geometry_mrcal_and_debian_opencv_read_the_bundle_exactly(bundle, tmp_path):
-    out, cal = bundle
+def _check_consumers(out: Path, cal: RigCalibration, tmp_path: Path, left: str = "CAM0", right: str = "CAM1") -> None:
+    """Every consumer's projection of the points equals calibctl's to PROJECTION_TOL_PX, each camera its own."""
     X = _points_root()
-    truth = Truth(cal, X)
+    truth = Truth(cal, X, left, right)
     got = _consumers(out, X, tmp_path)
     skipped = [name for name in ("ros", "image_geometry", "mrcal") if got[name] is None]
+    assert (got["opencv"]["left"], got["opencv"]["right"]) == (left, right)
     for side in ("left", "right"):
         serial = got["opencv"][side]
         assert np.max(np.abs(np.array(got["opencv"][f"{side}_px"]) - truth.raw[serial])) < PROJECTION_TOL_PX, side
     if got["ros"] is not None:
-        for serial, R, P in (("CAM0", truth.rect.R1, truth.rect.P1), ("CAM1", truth.rect.R2, truth.rect.P2)):
+        for serial, R, P in ((left, truth.rect.R1, truth.rect.P1), (right, truth.rect.R2, truth.rect.P2)):
             info = got["ros"][serial]
             assert info["camera_name"] == serial.lower()
             assert np.allclose(np.reshape(info["K"], (3, 3)), truth.K[serial], rtol=1e-15, atol=0)
@@ -117,16 +119,52 @@ def test_ros_image_geometry_mrcal_and_debian_opencv_read_the_bundle_exactly(bund
             assert np.allclose(np.reshape(info["R"], (3, 3)), R, atol=1e-15)
             assert np.allclose(np.reshape(info["P"], (3, 4)), P, rtol=1e-15, atol=1e-12)
         geometry = got["image_geometry"]
-        for side, serial in (("left", "CAM0"), ("right", "CAM1")):
+        for side, serial in (("left", left), ("right", right)):
             assert np.max(np.abs(np.array(geometry[f"{side}_px"]) - truth.rectified[serial])) < PROJECTION_TOL_PX, side
         assert np.allclose(geometry["depth_m"], geometry["rect_z_m"], rtol=1e-9)
         assert geometry["baseline_m"] == pytest.approx(np.linalg.norm(truth.T_right_left[:3, 3]), rel=1e-9)
     if got["mrcal"] is not None:
-        for serial in ("CAM0", "CAM1"):
+        for serial in (left, right):
             assert np.max(np.abs(np.array(got["mrcal"][serial]) - truth.raw[serial])) < PROJECTION_TOL_PX, serial
+    assert np.min(np.abs(truth.raw[right][:, 0] - truth.raw[left][:, 0])) > 1.0  # a swap could not pass
     if skipped:
         pytest.skip(f"checked Debian OpenCV {got['opencv']['version']}; not installed: {', '.join(skipped)} "
                     "(make test-consumers)")
+
+
+def test_ros_image_geometry_mrcal_and_debian_opencv_read_the_bundle_exactly(bundle, tmp_path):
+    out, cal = bundle
+    _check_consumers(out, cal, tmp_path)
+
+
+@pytest.mark.slow
+def test_the_opencv_left_right_bundle_reads_the_same_in_every_consumer(tmp_path):
+    """Real photos (OpenCV's left01..14 / right01..14, not made by us): calibrate each camera, capture and solve
+    the rig through the store, export the bundle, read it with the consumers."""
+    from calibctl.store.repository import Store
+    from tests.artifacts.factories import measured_board
+    from tests.datasets import LEFT_RIGHT, require_datasets
+
+    require_datasets()
+    for side in ("left", "right"):
+        (tmp_path / side).mkdir()
+        for path in sorted(LEFT_RIGHT.glob(f"{side}*.jpg")):
+            shutil.copy(path, tmp_path / side / path.name)
+    url = f"sqlite:///{tmp_path / 's.db'}"
+    with Store.open(url) as store:
+        store.add_board(measured_board("A17", square_mm=25.0))
+    for serial, side in (("LEFT", "left"), ("RIGHT", "right")):
+        assert invoke(url, "calibrate", "--serial", serial, "--board", "A17", "--source", str(tmp_path / side)).exit_code == 0
+    assert invoke(url, "rig", "add", "LR", "--camera", "LEFT", "--camera", "RIGHT").exit_code == 0
+    assert invoke(url, "rig", "capture", "LR", "--board", "A17", "--source", f"LEFT={tmp_path / 'left'}",
+                  "--source", f"RIGHT={tmp_path / 'right'}").exit_code == 0
+    assert invoke(url, "rig", "solve", "LR").exit_code == 0
+    out = tmp_path / "bundle"
+    r = invoke(url, "rig", "export", "LR", "--format", "bundle", "-o", str(out))
+    assert r.exit_code == 0, r.output
+    cal = RigCalibration.model_validate_json((out / "rig.json").read_text())
+    assert invoke(url, "lint", str(out / "manifest.json")).exit_code == 0
+    _check_consumers(out, cal, tmp_path, "LEFT", "RIGHT")
 
 
 def test_check_urdf_loads_the_bundle_urdf(bundle):
