@@ -121,3 +121,47 @@ def test_an_unknown_layout_is_exit_2_naming_what_lint_looked_for(db, tmp_path): 
     assert r.exit_code == 2
     text = " ".join(r.output.split())
     assert "lint looked for a calibctl artifact" in text and "Kalibr camchain" in text and "bundle manifest.json" in text
+
+
+@pytest.mark.parametrize("lens", ["pinhole", "fisheye"])
+def test_every_format_of_a_pinhole_and_a_fisheye_rig_lints_clean(sqlite_url, tmp_path, lens):
+    """Stored rig documents (their members are not the store's active versions: --allow-stale)."""
+    from calibctl.store.repository import Store
+    from tests.store.rig_documents import RIG, rig_calibration, rig_definition
+
+    cal = rig_calibration()
+    if lens == "fisheye":
+        members = [m.model_copy(update={"lens": "fisheye", "dist_coeffs": [0.02, -0.004, 0.001, -0.0002]})
+                   for m in cal.members]
+        cal = cal.model_copy(update={"members": members})
+    with Store.open(sqlite_url) as store:
+        store.add_rig(rig_definition())
+        store.add_rig_calibration(cal, activate=True, actor="qa", station="st1", reason="test")
+    paths = []
+    for fmt in SINGLE_FILE_FORMATS:
+        paths.append(tmp_path / f"rig.{fmt}")
+        r = invoke(sqlite_url, "rig", "export", RIG, "--format", fmt, "-o", str(paths[-1]), "--allow-stale")
+        assert r.exit_code == 0, (fmt, r.output)
+    out = tmp_path / "bundle"
+    assert invoke(sqlite_url, "rig", "export", RIG, "--format", "bundle", "-o", str(out), "--allow-stale").exit_code == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    if lens == "fisheye":
+        assert all(m["mrcal"] is None and "Kannala-Brandt" in m["mrcal_missing"] for m in manifest["members"])
+        assert yaml.safe_load((out / "cam_0001.yaml").read_text())["distortion_model"] == "equidistant"
+    r, doc = _lint(sqlite_url, *paths, out / "manifest.json")
+    assert r.exit_code == 0, r.output
+    assert all(x["errors"] == 0 for x in doc["results"]), [x for x in doc["results"] if x["errors"]]
+
+
+def test_require_signature_refuses_a_rig_export_naming_the_stored_check(db, tmp_path):  # noqa: F811
+    from calibctl.signing import create_key
+
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    (trusted / "k.pub.pem").write_text(create_key(tmp_path / "k.pem").public_pem())
+    path = tmp_path / "tf.yaml"
+    invoke(db, "rig", "export", "R1", "--format", "tf", "-o", str(path))
+    r = invoke(db, "--json", "lint", str(path), "--require-signature", "--trusted-keys", str(trusted))
+    assert r.exit_code == 1
+    signature = next(f for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature")
+    assert "carries no signature" in signature["message"] and "lint --rig RIG --require-signature" in signature["fix"]

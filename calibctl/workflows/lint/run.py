@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from calibctl.artifacts.lint import Finding
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.workflows.exports import formats
@@ -35,7 +36,10 @@ def lint(
         if rig_results is not None:
             if trusted is not None:  # a rig export carries no signature yet: --require-signature cannot pass it
                 for result in rig_results:
-                    _signature_rule(result, {}, trusted)
+                    result.findings.append(Finding(
+                        rule="signature", severity="error",
+                        message=f"{result.source} carries no signature (rig exports are not signed yet)",
+                        fix="lint the stored rig and its members: `calibctl lint --rig RIG --require-signature`"))
             results += rig_results
             continue
         loaded = formats.load_calibration(path)
