@@ -481,7 +481,7 @@ def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: Trus
     findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:
-        _signature_rule(result, art, trusted)
+        signature_rule(result, art, trusted)
     return result
 
 
@@ -520,7 +520,7 @@ def lint_store(
     return results
 
 
-def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+def signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
     """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
     if isinstance(art, dict):
         try:

@@ -10,7 +10,7 @@ from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.workflows.exports import formats
 from calibctl.workflows.lint import rig_files
-from calibctl.workflows.lint.lint import LintResult, _signature_rule, lint_file, lint_store
+from calibctl.workflows.lint.lint import LintResult, lint_file, lint_store, signature_rule
 from calibctl.workflows.store_admin import keys
 
 
@@ -45,7 +45,7 @@ def lint(
         loaded = formats.load_calibration(path)
         result = lint_file(loaded, settings.lint)
         if trusted is not None:
-            _signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
+            signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
         results.append(result)
     if serial or all_serials:
         results += lint_store(settings, serial, all_serials, trusted)
