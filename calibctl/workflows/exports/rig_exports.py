@@ -7,7 +7,9 @@ camera = left, second = right) with ``R, T`` = T_right_left (x_right = R x_left 
 P[0, 3] = Tx = -fx' * baseline_m, as ROS stereo_image_proc expects (a vertical pair is refused for
 ROS: stereo_image_proc assumes horizontal rectification). Kalibr: ``T_cn_cnm1`` maps camera n-1's
 frame into camera n's, cameras in tree order; pinhole + radtan (k1 k2 p1 p2), or pinhole + equidistant
-(k1..k4) for a fisheye member (ROS: distortion_model equidistant).
+(k1..k4) for a fisheye member (ROS: distortion_model equidistant). The tree's frames are serials; the
+callers rename them to robot frames (``frame_names.FrameNames.tree``) before tf / URDF, and Kalibr topics
+and camera_info names come from the same ``FrameNames``.
 """
 
 from __future__ import annotations

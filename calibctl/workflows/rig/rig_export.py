@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from calibctl import __version__
+from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
-from calibctl.errors import NotFoundError, UsageError
+from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
@@ -78,6 +79,18 @@ class RigExport:
         return out
 
 
+def _refuse_unloadable(cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool) -> None:
+    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye camera) exit 1."""
+    ref = f"rig {cal.rig}@{cal.version}"
+    if cal.status != "accepted" and not allow_rejected:
+        raise UsageError(f"{ref} is {cal.status}: a robot must not load it",
+                         hint="export the active version, or pass --allow-rejected to inspect it")
+    stale = [f for f in findings if f.severity == "error" and f.rule in ("rig-stale-member", "handeye-stale-member")]
+    if stale and not (allow_stale or allow_rejected):
+        raise VerdictFailed(f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
+                            f"{stale[0].fix}; or pass --allow-stale to export it anyway (a robot must not load it)")
+
+
 def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], allow_rejected: bool,
              allow_stale: bool) -> RigExport:
     name, version = parse_rig_ref(ref)
@@ -98,16 +111,7 @@ def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], 
         findings = rig_findings(cal, rig, active, settings.lint)
         versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
         findings += rig_handeye.handeye_findings(cal.handeye, versions)
-    ref_text = f"rig {cal.rig}@{cal.version}"
-    if cal.status != "accepted" and not allow_rejected:
-        raise UsageError(f"{ref_text} is {cal.status}: a robot must not load it",
-                         hint="export the active version, or pass --allow-rejected to inspect it")
-    stale = [f for f in findings if f.severity == "error" and f.rule in ("rig-stale-member", "handeye-stale-member")]
-    if stale and not (allow_stale or allow_rejected):
-        from calibctl.errors import VerdictFailed
-
-        raise VerdictFailed(f"{ref_text} fails `calibctl rig lint` now: {stale[0].message}",
-                            f"{stale[0].fix}; or pass --allow-stale to export it anyway (a robot must not load it)")
+    _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
     members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
                for m in cal.members]
     edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
@@ -164,8 +168,7 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
 def _ros_paths(out: Path, x: RigExport) -> dict[str, Path]:
     """serial -> its camera_info path under ``-o DIR`` or ``-o 'DIR/{camera}.yaml'``."""
     if "{camera}" in str(out):
-        paths = {s: Path(str(out).replace("{camera}", x.names.camera_name(s))) for s in x.names.frames if s in
-                 {m.name for m in x.members}}
+        paths = {m.name: Path(str(out).replace("{camera}", x.names.camera_name(m.name))) for m in x.members}
     elif out.suffix.lower() in (".yaml", ".yml") and not out.is_dir():
         raise UsageError(f"-o {out}: a stereo rig is not one camera_info file", ROS_ONE_FILE_FIX)
     else:
@@ -227,8 +230,8 @@ def export_files(settings: Settings, ref: str, fmt: str, out: Path | None, *, fo
     if fmt == "bundle":
         files, manifest = _bundle_files(x)
         return bundle.write_bundle(out, files, manifest, force=force)
+    texts, _ = _camera_infos(x, mono_if_vertical=False)  # a vertical pair is refused before any folder is made
     paths = _ros_paths(out, x)
-    texts, _ = _camera_infos(x, mono_if_vertical=False)
     for serial, path in paths.items():
         if path.exists() and not force:  # check every target before writing any: nothing half-written
             write_atomic(path, texts[serial], force=False)
