@@ -64,6 +64,11 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
     r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "tf", "--allow-stale")
     assert r.exit_code == 0 and r.stdout.count("child_frame_id") == 1 and "frame_id: imu" in r.stdout
     assert "child_frame_id: cam_0002_optical_frame" in r.stdout  # the same robot frame names as the whole tree
+    edge_json = tmp_path / "edge.json"
+    assert invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "json", "--allow-stale",
+                  "-o", str(edge_json)).exit_code == 0
+    r = invoke(db, "--json", "lint", str(edge_json))  # lint reads the hand-eye result it wrote (it refused it)
+    assert r.exit_code == 0 and json.loads(r.stdout)["results"][0]["kind"] == "handeye-json", r.output
     r = invoke(db, "rig", "history", RIG)
     assert "hand-eye imu -> CAM-0002 accepted" in r.stdout
     for args, message in ((("--edge", "flange:CAM-0001"), "has no hand-eye edge flange -> CAM-0001 (it has: "
