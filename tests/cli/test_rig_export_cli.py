@@ -177,3 +177,22 @@ def test_lint_rig_require_signature_names_the_unsigned_rig_and_each_unsigned_mem
     empty.mkdir()
     r = invoke(db, "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(empty))
     assert r.exit_code == 2 and "--require-signature needs trusted keys" in r.output
+
+
+def test_a_bundle_that_fails_half_way_leaves_nothing_behind(db, tmp_path, monkeypatch):
+    import errno
+    from pathlib import Path
+
+    written = []
+    real_write = Path.write_bytes
+
+    def disk_full_on_the_third_file(self, data):
+        written.append(self.name)
+        if len(written) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", disk_full_on_the_third_file)
+    r = invoke(db, "rig", "export", "R1", "--format", "bundle", "-o", str(tmp_path / "bundle"))
+    assert r.exit_code == 2 and "no space left on the device" in _text(r), r.output
+    assert list(tmp_path.iterdir()) == []  # neither the bundle nor its temporary folder
