@@ -20,9 +20,12 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree
 from calibctl.errors import UsageError
+
+if TYPE_CHECKING:
+    from calibctl.core.extrinsics.rig_tree import RigTree
 
 ROS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
 OPTICAL_SUFFIX = "_optical_frame"
@@ -100,6 +103,8 @@ class FrameNames:
 
     def tree(self, tree: RigTree) -> RigTree:
         """``tree`` with every frame renamed (transforms unchanged)."""
+        from calibctl.core.extrinsics.rig_tree import Edge, RigTree  # cv2: not for `lint FILE` start-up
+
         rename = self.frames.get
         return RigTree(rename(tree.root) or tree.root,
                        tuple(Edge(rename(e.parent) or e.parent, rename(e.child) or e.child, e.T_parent_child, e.covariance)

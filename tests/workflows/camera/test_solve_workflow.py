@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibctl.config import load_settings
-from calibctl.errors import NotFoundError, UsageError
+from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.camera import solve as solve_workflow
 from tests.artifacts.factories import measured_board, nominal_board
@@ -172,6 +172,7 @@ def test_the_stored_covariance_is_the_one_sigma_comes_from(settings):
 
 def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tmp_path):
     from calibctl.workflows.exports import formats
+    from calibctl.workflows.lint import run as lint_run
     from calibctl.workflows.lint.lint import lint_files
     from tests.workflows.sessions import fisheye_capture
 
@@ -183,7 +184,15 @@ def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tm
     assert "CALIB_FIX_SKEW" in art.model.flag_names
     for fmt in formats.EXPORT_FORMATS:
         path = tmp_path / f"fe.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
+        if fmt == "mrcal":  # mrcal has no Kannala-Brandt model: refused, saying so
+            with pytest.raises(InputError, match="mrcal has no Kannala-Brandt"):
+                formats.render(art, fmt)
+            continue
         path.write_text(formats.render(art, fmt), encoding="utf-8")
+        if fmt == "kalibr":  # a one-camera camchain is linted as a rig export file
+            [result] = lint_run.lint(settings, [path], None, False)
+            assert not result.failed, (fmt, result.findings)
+            continue
         loaded = formats.load_calibration(path)
         [result] = lint_files([path], settings.lint)
         assert not result.failed, (fmt, result.findings)
