@@ -21,7 +21,7 @@ from calibctl.cli.examples import attach_examples
 
 COMMAND_MODULES: dict[str, str] = {
     "capture": "capture", "calibrate": "capture", "prune": "capture", "synth": "capture",
-    "solve": "solve", "check": "check", "lint": "lint",
+    "solve": "solve", "check": "check", "diff": "diff", "lint": "lint",
     "history": "artifacts", "show": "artifacts", "export": "artifacts", "import": "artifacts", "rollback": "artifacts",
     "report": "report_page",
     "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
