@@ -29,7 +29,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "check": ("calibctl check CAM-0042 --source ./eol-shots/",
               "calibctl check CAM-0042@3 --source 'eol/*.png' --reference-distance 0.600+-0.001 --json"),
     "diff": ("calibctl diff CAM-0042@3 CAM-0042@4", "calibctl diff CAM-0042@3 CAM-0042 --map diff.html --json",
-             "calibctl diff CAM-0042@3 CAM-0042-HALFRES@1 --scale 2"),
+             "calibctl diff CAM-0042@3 CAM-0042-HALFRES@1 --scale 2", "calibctl diff --rig stereo-7@1 stereo-7@2"),
     "report": ("calibctl report CAM-0042", "calibctl report CAM-0042@3 -o CAM-0042-v3.html --force",
                "calibctl report --rig stereo-front@2 -o stereo-front-v2.html"),
     "lint": ("calibctl lint camera_front.json camera_front_ros.yaml --format github",
