@@ -37,6 +37,7 @@ from calibctl.core.compare.lens import Lens, Projection, project, sample_pixels,
 ALPHA = 0.01  # false-flag probability of an unchanged camera (raw and fit at ALPHA / 2 each)
 UNEXPLAINED_LIMIT_PX = 0.1  # a difference outside both covariances' span, beyond what a detector resolves
 SPREAD_FLOOR_PX = 1e-3  # directions whose one-sigma pattern is below this RMS px are not tested (numerics)
+FOLD_TOLERANCE_RAD = 1e-6  # a pixel B maps back to another ray than the one projected is past B's fold-over
 DEFAULT_GRID = (40, 30)
 PERCENTILES = (50, 90, 99)
 _FIT_ITERATIONS = 20
@@ -193,8 +194,9 @@ def projection_diff(a: Lens, b: Lens, grid: tuple[int, int] = DEFAULT_GRID, rang
     rays, ok = unproject(a, pixels)
     points = rays * (range_m if math.isfinite(range_m) else 1.0)
     pb = project(b, points)
-    _, ok_b = unproject(b, np.where(np.isfinite(pb.q_px), pb.q_px, 0.0))
-    keep = ok & pb.valid & ok_b
+    back, ok_b = unproject(b, np.where(np.isfinite(pb.q_px), pb.q_px, 0.0))
+    same_ray = np.einsum("ij,ij->i", back, rays) > math.cos(FOLD_TOLERANCE_RAD)  # B's polynomial has not folded over
+    keep = ok & pb.valid & ok_b & same_ray
     if keep.sum() < 10:
         raise ValueError(f"only {int(keep.sum())} of {len(pixels)} samples are inside both lens models")
     pixels, points = pixels[keep], points[keep]

@@ -123,3 +123,15 @@ def _bump(lens_: Lens, name: str, h: float) -> Lens:
         D[["k1", "k2", "p1", "p2", "k3", "k4"].index(name) if not lens_.fisheye else
           ["k1", "k2", "k3", "k4"].index(name)] += h
     return dataclasses.replace(lens_, camera_matrix=K, dist_coeffs=D)
+
+
+def test_samples_past_a_lens_polynomial_fold_over_are_never_compared() -> None:
+    # x (1 + k1 r^2) with k1 = -0.5 peaks at r = 0.816: beyond it B's polynomial folds back, so the wide
+    # pinhole A's corner rays have no honest projection through B
+    K = np.array([[300.0, 0.0, 319.5], [0.0, 300.0, 239.5], [0.0, 0.0, 1.0]])
+    a = Lens(K, np.zeros(5), SIZE)
+    b = Lens(K, np.array([-0.5, 0.0, 0.0, 0.0, 0.0]), SIZE)
+    result = projection_diff(a, b, grid=(16, 12))
+    assert 0 < result.dropped < 16 * 12
+    radius = np.linalg.norm((result.pixels_px - K[:2, 2]) / 300.0, axis=1)
+    assert radius.max() < 1.0 and result.significant is None
