@@ -3,7 +3,6 @@ same, its focal length 0.3 % longer is different, and pixels beyond the image ci
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from calibctl.core.compare.lens import FISHEYE_MAX_DEG, lens_from_solution
