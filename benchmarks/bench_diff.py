@@ -4,7 +4,8 @@ focal change or a 1 px principal-point shift is caught, on seeded corner-level s
 Corners: tests/core/compare/sessions.py (the seed's focal length and k1, k2 at 640x480, 30 views, 0.03 px
 noise, solved k1k2); "misfit" solves the seed's full 5-term lens (p1 p2 k3 too) with the k1k2 model, so
 each solve's model error depends on its views. Real: opencv-left-right's 13 left photos detected by
-calibctl's detector, split at random into 7 + 6 views, each half solved k1k2 and diffed.
+calibctl's detector, split at random into 7 + 6 views, each half solved k1k2 and diffed; baka-stereo's left
+camera from its odd and its even frames, and left against right (all detected photos, k1k2).
 
 Run: python benchmarks/bench_diff.py [--pairs 100] [--splits 40]
 """
@@ -31,7 +32,7 @@ from calibctl.core.compare.projection_diff import projection_diff  # noqa: E402
 from calibctl.core.intrinsics.solve import solve_intrinsics  # noqa: E402
 from calibctl.core.synth.pinhole import PinholeCamera  # noqa: E402
 from tests.core.compare.sessions import SIZE, solve, true_K  # noqa: E402
-from tests.datasets import LEFT_RIGHT  # noqa: E402
+from tests.datasets import BAKA_STEREO, LEFT_RIGHT  # noqa: E402
 
 
 def corner_rates(pairs: int) -> None:
@@ -55,14 +56,36 @@ def corner_rates(pairs: int) -> None:
               flush=True)
 
 
-def real_splits(splits: int) -> None:
-    spec = BoardSpec.chessboard(9, 6, 0.025)
+def detected(paths: list, spec: BoardSpec) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(model points, corners) of every photo calibctl's detector finds the board in."""
     obj_all = spec.object_points()
     views = []
-    for path in sorted(LEFT_RIGHT.glob("left*.jpg")):
+    for path in paths:
         det, _ = detect_board(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), spec)
-        assert det is not None, path
-        views.append((obj_all[det.corner_ids], det.corners_px))
+        if det is not None:
+            views.append((obj_all[det.corner_ids], det.corners_px))
+    return views
+
+
+def lens_of(views: list, size: tuple[int, int]):
+    return lens_from_solution(solve_intrinsics([v[0] for v in views], [v[1] for v in views], size, "k1k2"))
+
+
+def baka(size: tuple[int, int] = (1280, 720)) -> None:
+    spec = BoardSpec.chessboard(7, 10, 0.023)
+    left = detected(sorted((BAKA_STEREO / "left").glob("*.jpg")), spec)
+    right = detected(sorted((BAKA_STEREO / "right").glob("*.jpg")), spec)
+    for name, a, b in (("left odd vs even frames", left[0::2], left[1::2]), ("left vs right", left, right)):
+        r = projection_diff(lens_of(a, size), lens_of(b, size))
+        assert r.raw.test is not None and r.fit.test is not None
+        print(f"baka-stereo {name} ({len(a)} and {len(b)} views): {'different' if r.significant else 'same'}; "
+              f"chi2 {r.raw.test.statistic:.1f} / {r.fit.test.statistic:.1f} vs {r.raw.test.threshold:.1f} "
+              f"({r.raw.test.dof} dof); |d| p50 {r.raw.percentiles_px['p50']:.2f} px as stored, "
+              f"{r.fit.percentiles_px['p50']:.2f} px after {r.rotation_fit_deg:.3f} deg", flush=True)
+
+
+def real_splits(splits: int) -> None:
+    views = detected(sorted(LEFT_RIGHT.glob("left*.jpg")), BoardSpec.chessboard(9, 6, 0.025))
     rng = np.random.default_rng(0)
     flagged, stats = 0, []
     for _ in range(splits):
@@ -86,8 +109,11 @@ def main() -> None:
     args = parser.parse_args()
     print(f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}")
     t = time.perf_counter()
-    corner_rates(args.pairs)
-    real_splits(args.splits)
+    if args.pairs:
+        corner_rates(args.pairs)
+    if args.splits:
+        real_splits(args.splits)
+    baka()
     print(f"{time.perf_counter() - t:.0f} s")
 
 
