@@ -77,6 +77,10 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                      "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+    "fleet": ("calibctl fleet add amr-017 --serial CAM-0042 --serial CAM-0043", "calibctl fleet status --json"),
+    "fleet add": ("calibctl fleet add amr-017 --serial CAM-0042 --rig stereo-7 --reason 'commissioned'",),
+    "fleet assign": ("calibctl fleet assign amr-017 CAM-0042@4 --reason 'recalibrated after the lens was knocked'",),
+    "fleet status": ("calibctl fleet status", "calibctl fleet status --json"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
 }
