@@ -41,7 +41,7 @@ def add(
     if wants_json(ctx, json_output):
         emit_json(event)
         return
-    _say(f"robot {shown(event.robot)} registered: {', '.join(map(shown, [*event.serials, *event.rigs]))}")
+    _say(f"robot {shown(event.subject)} registered: {', '.join(map(shown, [*event.serials, *event.rigs]))}")
 
 
 @fleet_app.command("assign")
@@ -59,7 +59,7 @@ def assign(
     if wants_json(ctx, json_output):
         emit_json(event)
         return
-    _say(f"robot {shown(event.robot)} runs {shown(event.serial)}@{event.version}")
+    _say(f"robot {shown(event.subject)} runs {shown(event.serial)}@{event.version}")
 
 
 @fleet_app.command("status")

@@ -327,13 +327,13 @@ class FleetEventRow(ChainColumns, Base):
     __tablename__ = "fleet_events"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
-    robot: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    subject: Mapped[str] = mapped_column(String(SERIAL_LEN))  # the robot, or the rollout of the rollout kinds
     kind: Mapped[str] = mapped_column(String(16))
     at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
-    __table_args__ = (Index(None, "robot", "id"), Index(None, "chain_seq", unique=True))
+    __table_args__ = (Index(None, "subject", "id"), Index(None, "chain_seq", unique=True))
 
 
 IMMUTABLE_TABLES = {

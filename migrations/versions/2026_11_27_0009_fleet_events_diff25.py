@@ -1,4 +1,4 @@
-"""fleet_events: the fleet's log (robots registered, calibration versions assigned), chained and append-only
+"""fleet_events: the fleet's log (robots, the versions they run, rollouts), chained and append-only
 
 Revision ID: 0009_fleet_diff25
 Revises: 0008_chain_rig_definitions
@@ -7,6 +7,7 @@ Create Date: 2026-11-27
 One table, one hash-chained stream for the store (``chain.STREAMS["fleet"]``, counter row ``version_counters``
 scope ``chain``, key ``fleet``, written by the first event). Rows are never updated or deleted: triggers refuse
 UPDATE and DELETE (and TRUNCATE on PostgreSQL, with 0001's calibctl_refuse_change()), as on every other table.
+``subject`` is the robot an event is about, or the rollout for the rollout kinds.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ def upgrade() -> None:
     op.create_table(
         TABLE,
         sa.Column("id", sa.Integer(), autoincrement=False, nullable=False),
-        sa.Column("robot", sa.String(128), nullable=False),
+        sa.Column("subject", sa.String(128), nullable=False),
         sa.Column("kind", sa.String(16), nullable=False),
         sa.Column("at", sa.DateTime(timezone=True), nullable=False),
         sa.Column("payload", sa.Text(), nullable=False),
@@ -41,7 +42,7 @@ def upgrade() -> None:
         sa.Column("key_id", sa.String(64), nullable=True),
         sa.PrimaryKeyConstraint("id", name="pk_fleet_events"),
     )
-    op.create_index("ix_fleet_events_robot_id", TABLE, ["robot", "id"])
+    op.create_index("ix_fleet_events_subject_id", TABLE, ["subject", "id"])
     op.create_index("ix_fleet_events_chain_seq", TABLE, ["chain_seq"], unique=True)
     dialect = op.get_context().dialect.name
     if dialect == "sqlite":
@@ -60,6 +61,6 @@ def upgrade() -> None:
 def downgrade() -> None:
     # Dropping a table drops its triggers; DROP does not fire row triggers on either backend.
     op.drop_index("ix_fleet_events_chain_seq", table_name=TABLE)
-    op.drop_index("ix_fleet_events_robot_id", table_name=TABLE)
+    op.drop_index("ix_fleet_events_subject_id", table_name=TABLE)
     op.drop_table(TABLE)
     op.execute("DELETE FROM version_counters WHERE scope = 'chain' AND key = 'fleet'")

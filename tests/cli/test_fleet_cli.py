@@ -48,7 +48,7 @@ def test_robots_their_versions_and_where_they_stand(db: str) -> None:
 
 @pytest.mark.parametrize(("args", "message"), [
     (["assign", "amr-9", "CAM-A@1", "--reason", "x"], "robot amr-9 is not registered"),
-    (["assign", "amr-1", "CAM-A@3", "--reason", "x"], "CAM-A@3 is rejected: a robot must not run it"),
+    (["assign", "amr-1", "CAM-A@3", "--reason", "x"], "CAM-A@3 is rejected: a robot must not run it, so it cannot be assigned"),
     (["assign", "amr-1", "CAM-A", "--reason", "x"], "'CAM-A' names no version"),
     (["assign", "amr-1", "CAM-C@1", "--reason", "x"], "does not carry CAM-C"),
     (["assign", "amr-1", "CAM-A@1"], "a fleet change needs a reason"),

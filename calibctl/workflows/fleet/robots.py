@@ -97,10 +97,10 @@ def status(settings: Settings) -> FleetStatus:
         running: dict[tuple[str, str], int] = {}
         for e in events:
             if e.kind == "register":
-                robots[e.robot] = RobotState(e.robot, list(e.rigs), registered_at=e.at.isoformat())
-                robots[e.robot].sensors = [SensorState(s, None, None) for s in e.serials]
-            elif e.serial is not None and e.version is not None:
-                running[(e.robot, e.serial)] = e.version
+                robots[e.subject] = RobotState(e.subject, list(e.rigs), registered_at=e.at.isoformat())
+                robots[e.subject].sensors = [SensorState(s, None, None) for s in e.serials]
+            elif e.kind == "assign" and e.serial is not None and e.version is not None:
+                running[(e.subject, e.serial)] = e.version
         serials = sorted({s.serial for r in robots.values() for s in r.sensors})
         active = {s: store.active_version(s) for s in serials}
     for r in robots.values():
