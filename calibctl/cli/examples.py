@@ -81,6 +81,12 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "fleet add": ("calibctl fleet add amr-017 --serial CAM-0042 --rig stereo-7 --reason 'commissioned'",),
     "fleet assign": ("calibctl fleet assign amr-017 CAM-0042@4 --reason 'recalibrated after the lens was knocked'",),
     "fleet status": ("calibctl fleet status", "calibctl fleet status --json"),
+    "fleet rollout": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --target CAM-0043@3 --canary amr-017 "
+                      "--reason 'new lens model'", "calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy'"),
+    "fleet rollout start": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --canary amr-017 "
+                            "--reason 'new lens model'",),
+    "fleet rollout promote": ("calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy for a week'",),
+    "fleet rollout rollback": ("calibctl fleet rollout rollback recal-2026-12 --reason 'canary checks fail'",),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
 }

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, shown, stdout
+
+if TYPE_CHECKING:
+    from calibctl.workflows.fleet.rollouts import Rollout
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
@@ -65,12 +68,14 @@ def assign(
 @fleet_app.command("status")
 def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     """Every robot, its sensors and the version each runs: current, behind or ahead of the active one."""
-    from calibctl.workflows.fleet import robots
+    from calibctl.workflows.fleet import rollouts
 
-    result = robots.status(state(ctx).settings())
+    result, staged = rollouts.fleet_status(state(ctx).settings())
     if wants_json(ctx, json_output):
-        emit_json(result.as_json())
+        emit_json({**result.as_json(), "rollouts": [r.as_json() for r in staged]})
         return
+    for rollout in staged:
+        _print_rollout(rollout)
     if not result.robots:
         _say("no robots registered (calibctl fleet add ROBOT --serial SERIAL)")
         return
@@ -81,6 +86,71 @@ def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
             running = "-" if s.running is None else f"@{s.running}"
             active = "-" if s.active is None else f"@{s.active}"
             _say(f"  {shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
+
+
+rollout_app = typer.Typer(
+    name="rollout",
+    help="A calibration change rolled out like a deploy: canary robots, a health gate, promote or roll back.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+fleet_app.add_typer(rollout_app, name="rollout")
+
+
+def _print_rollout(r: Rollout) -> None:
+    closed = f" ({r.closed})" if r.closed else ""
+    _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(f"{shown(s)}@{v}" for s, v in r.start.targets.items()))
+    for robot, st in sorted(r.state.items()):
+        _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}")
+
+
+@rollout_app.command("start")
+def rollout_start(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="Rollout name (letters, digits, . _ : -).")],
+    target: Annotated[list[str], typer.Option("--target", metavar="SERIAL@N", help="A new version (repeatable).",
+                                              show_default=False)],
+    canary: Annotated[list[str], typer.Option("--canary", metavar="ROBOT", help="A canary robot (repeatable).",
+                                              show_default=False)],
+    reason: ReasonOption = "",
+    json_output: JsonFlag = False,
+) -> None:
+    """Start a rollout: the canary robots run the new versions now, the rest wait for promote."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.start(state(ctx).settings(), name, target, canary, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
+@rollout_app.command("promote")
+def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
+                    reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+    """Promote to the rest of the fleet once every canary robot reports passing checks of the new version.
+
+    Exit 1 (held, nothing promoted) when a canary reports a failing check; 2 when one has not reported yet."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.promote(state(ctx).settings(), name, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
+@rollout_app.command("rollback")
+def rollout_rollback(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
+                     reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+    """Put every robot the rollout touched back on the version it ran before, in one transaction."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.rollback(state(ctx).settings(), name, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
 
 
 def register(app: typer.Typer) -> None:

@@ -60,3 +60,18 @@ def test_a_tampered_fleet_event_is_caught_on_read_and_by_verify(store_url: str) 
     assert any("fleet event 1" in p for p in problems)
     result = CliRunner().invoke(app, ["--db", store_url, "db", "verify"])
     assert result.exit_code == 1 and "fleet event 1" in result.stdout
+
+
+def test_a_batch_is_all_or_nothing_and_a_stale_one_is_refused(store_url: str) -> None:
+    from calibctl.errors import StaleActiveVersionError
+
+    good = fleet_event("assign", serial="CAM-0001", version=1)
+    bad = fleet_event("assign", serial="CAM-0001", version=2)  # rejected: refuses the whole batch
+    with Store.open(store_url) as store:
+        with pytest.raises(UsageError, match="CAM-0001@2 is rejected"):
+            store.append_fleet_events([good, bad], after=1)
+        assert len(store.fleet_events()) == 1
+        with pytest.raises(StaleActiveVersionError, match="the fleet log changed underneath this step"):
+            store.append_fleet_events([good], after=0)
+        assert store.append_fleet_events([good, good], after=1) == 3
+        assert store.verify().problems == []

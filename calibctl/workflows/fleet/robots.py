@@ -16,14 +16,14 @@ from calibctl.errors import UsageError
 from calibctl.workflows.store_admin import records
 
 
-def _event(**fields: Any) -> FleetEvent:
+def fleet_event(**fields: Any) -> FleetEvent:
     try:
         return FleetEvent(**fields)
     except ValidationError as exc:
         raise UsageError(validation_message(exc, "the fleet event"), "check the robot name and the serials") from None
 
 
-def _check_reason(reason: str) -> None:
+def check_reason(reason: str) -> None:
     if not reason.strip():
         raise UsageError("a fleet change needs a reason", "pass --reason 'why'")
     bounded.check_text(reason, "--reason", "the reason")
@@ -31,8 +31,8 @@ def _check_reason(reason: str) -> None:
 
 def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str], reason: str) -> FleetEvent:
     """Register ``robot`` carrying ``serials`` and ``rigs`` (AlreadyExistsError when it is registered)."""
-    _check_reason(reason)
-    event = _event(kind="register", robot=robot, serials=serials, rigs=rigs, actor=settings.operator,
+    check_reason(reason)
+    event = fleet_event(kind="register", robot=robot, serials=serials, rigs=rigs, actor=settings.operator,
                    station=settings.station, at=utc_now(), reason=reason)
     with records.open_store(settings, write=True) as store:
         store.add_fleet_event(event)
@@ -41,11 +41,11 @@ def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str
 
 def assign(settings: Settings, robot: str, ref: str, reason: str) -> FleetEvent:
     """Record that ``robot`` now runs ``SERIAL@N`` (an accepted, stored version of a serial it carries)."""
-    _check_reason(reason)
+    check_reason(reason)
     serial, version = records.parse_artifact_ref(ref)
     if version is None:
         raise UsageError(f"'{ref}' names no version", f"assign an explicit version, e.g. {serial}@3")
-    event = _event(kind="assign", robot=robot, serial=serial, version=version, actor=settings.operator,
+    event = fleet_event(kind="assign", robot=robot, serial=serial, version=version, actor=settings.operator,
                    station=settings.station, at=utc_now(), reason=reason)
     with records.open_store(settings, write=True) as store:
         store.add_fleet_event(event)
