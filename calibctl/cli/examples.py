@@ -77,6 +77,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                      "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+    "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
+                          "--square-mm 25.0 --export-dir out/",),
     "fleet": ("calibctl fleet add amr-017 --serial CAM-0042 --serial CAM-0043", "calibctl fleet status --json"),
     "fleet add": ("calibctl fleet add amr-017 --serial CAM-0042 --rig stereo-7 --reason 'commissioned'",),
     "fleet assign": ("calibctl fleet assign amr-017 CAM-0042@4 --reason 'recalibrated after the lens was knocked'",),
@@ -87,8 +89,6 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                             "--reason 'new lens model'",),
     "fleet rollout promote": ("calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy for a week'",),
     "fleet rollout rollback": ("calibctl fleet rollout rollback recal-2026-12 --reason 'canary checks fail'",),
-    "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
-                          "--square-mm 25.0 --export-dir out/",),
 }
 
 
