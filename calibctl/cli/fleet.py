@@ -102,6 +102,9 @@ def _print_rollout(r: Rollout) -> None:
     _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(f"{shown(s)}@{v}" for s, v in r.start.targets.items()))
     for robot, st in sorted(r.state.items()):
         _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}")
+    for serial, d in r.diffs.items():
+        numbers = f", p50 {d['p50_px']:.2f} px, max {d['max_px']:.2f} px" if "p50_px" in d else f" ({shown(d['why'])})"
+        _say(f"  diff {shown(serial)}@{d['from']} -> @{r.start.targets[serial]}: {d['verdict']}{numbers}")
 
 
 @rollout_app.command("start")

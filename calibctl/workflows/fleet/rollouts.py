@@ -2,7 +2,8 @@
 promote or roll back the fleet in one command.
 
 ``start``: new versions for a set of serials and a canary cohort; the canary robots' assignments are written
-with the rollout, in one transaction. ``promote``: the health gate, then every other robot carrying a target
+with the rollout, in one transaction; each target is diffed against the version its robot ran (``calibctl
+diff``), so the operator sees whether the change is beyond re-calibration noise. ``promote``: the health gate, then every other robot carrying a target
 serial gets its new version, in one transaction. ``rollback``: every robot the rollout touched is put back on
 the version it ran before, in one transaction. Each is appended with a compare-and-set on the log's length,
 so a step decided on a stale fleet writes nothing.
@@ -20,7 +21,8 @@ from typing import Any
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.config import Settings
-from calibctl.errors import NotFoundError, UsageError, VerdictFailed
+from calibctl.errors import CalibctlError, NotFoundError, UsageError, VerdictFailed
+from calibctl.workflows.compare.diff import DiffRequest, diff_cameras
 from calibctl.workflows.fleet.robots import FleetStatus, check_reason, fleet_event, status
 from calibctl.workflows.store_admin import records
 
@@ -30,6 +32,7 @@ class Rollout:
     """A rollout replayed from the log: its event, per robot its state, and whether it is open."""
 
     start: FleetEvent
+    diffs: dict[str, dict[str, Any]] = field(default_factory=dict)  # rollout start: target serial -> its diff
     # robot -> pending, canary (no health report yet), healthy, failed, promoted, rolled back, untouched
     state: dict[str, str] = field(default_factory=dict)
     closed: str | None = None  # "promoted" or "rolled back"
@@ -39,8 +42,9 @@ class Rollout:
         return self.start.subject
 
     def as_json(self) -> dict[str, Any]:
-        return {"rollout": self.name, "targets": self.start.targets, "canary": self.start.canary,
-                "closed": self.closed, "robots": self.state}
+        out = {"rollout": self.name, "targets": self.start.targets, "canary": self.start.canary,
+               "closed": self.closed, "robots": self.state}
+        return {**out, "diffs": self.diffs} if self.diffs else out
 
 
 @dataclass
@@ -124,7 +128,27 @@ def start(settings: Settings, name: str, targets: list[str], canary: list[str], 
     assigns = [_new("assign", settings, f"canary of rollout {name}", robot=robot, serial=s, version=wanted[s], rollout=name)
                for robot in canary for s in fleet.carries.get(robot, []) if s in wanted]
     _append(settings, [head, *assigns], fleet.length)
-    return replay_after(settings, name)
+    rollout = replay_after(settings, name)
+    rollout.diffs = _diffs(settings, fleet, wanted)
+    return rollout
+
+
+def _diffs(settings: Settings, fleet: Fleet, wanted: dict[str, int]) -> dict[str, dict[str, Any]]:
+    """Each target against the version its robot ran before (``calibctl diff``): is the change beyond noise?"""
+    out: dict[str, dict[str, Any]] = {}
+    before = {serial: version for (_, serial), version in fleet.running.items()}
+    for serial, version in sorted(wanted.items()):
+        old = before.get(serial)
+        if old is None or old == version:
+            continue
+        try:
+            d = diff_cameras(settings, DiffRequest(f"{serial}@{old}", f"{serial}@{version}"))
+        except CalibctlError as exc:
+            out[serial] = {"from": old, "verdict": "not compared", "why": exc.message}
+            continue
+        out[serial] = {"from": old, "verdict": d.verdict, "p50_px": d.result.raw.percentiles_px["p50"],
+                       "max_px": d.result.raw.percentiles_px["max"]}
+    return out
 
 
 def replay_after(settings: Settings, name: str) -> Rollout:
