@@ -16,6 +16,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.events import ActivationEvent
+from calibctl.artifacts.fleet import FleetEvent
 from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.artifacts.session import CaptureSession
@@ -31,6 +32,7 @@ DOCUMENTS: dict[str, type[BaseModel]] = {
     "rig-session": RigSession,
     "rig-calibration": RigCalibration,
     "rig-activation": RigActivation,
+    "fleet-event": FleetEvent,
 }
 
 
@@ -53,6 +55,7 @@ def expected_files() -> dict[str, str]:
         "rig-calibration": 1,
         "rig-activation": 1,
         "check-event": 1,
+        "fleet-event": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 

@@ -28,6 +28,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
               "calibctl solve 01f22921ea3f --model fisheye --image-circle 640,480,470"),
     "check": ("calibctl check CAM-0042 --source ./eol-shots/",
               "calibctl check CAM-0042@3 --source 'eol/*.png' --reference-distance 0.600+-0.001 --json"),
+    "diff": ("calibctl diff CAM-0042@3 CAM-0042@4", "calibctl diff CAM-0042@3 CAM-0042 --map diff.html --json",
+             "calibctl diff CAM-0042@3 CAM-0042-HALFRES@1 --scale 2", "calibctl diff --rig stereo-7@1 stereo-7@2"),
     "report": ("calibctl report CAM-0042", "calibctl report CAM-0042@3 -o CAM-0042-v3.html --force",
                "calibctl report --rig stereo-front@2 -o stereo-front-v2.html"),
     "lint": ("calibctl lint camera_front.json camera_front_ros.yaml --format github",
@@ -78,6 +80,16 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                    "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
+    "fleet": ("calibctl fleet add amr-017 --serial CAM-0042 --serial CAM-0043", "calibctl fleet status --json"),
+    "fleet add": ("calibctl fleet add amr-017 --serial CAM-0042 --rig stereo-7 --reason 'commissioned'",),
+    "fleet assign": ("calibctl fleet assign amr-017 CAM-0042@4 --reason 'recalibrated after the lens was knocked'",),
+    "fleet status": ("calibctl fleet status", "calibctl fleet status --json"),
+    "fleet rollout": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --target CAM-0043@3 --canary amr-017 "
+                      "--reason 'new lens model'", "calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy'"),
+    "fleet rollout start": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --canary amr-017 "
+                            "--reason 'new lens model'",),
+    "fleet rollout promote": ("calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy for a week'",),
+    "fleet rollout rollback": ("calibctl fleet rollout rollback recal-2026-12 --reason 'canary checks fail'",),
 }
 
 

@@ -21,12 +21,12 @@ from calibctl.cli.examples import attach_examples
 
 COMMAND_MODULES: dict[str, str] = {
     "capture": "capture", "calibrate": "capture", "prune": "capture", "synth": "capture",
-    "solve": "solve", "check": "check", "lint": "lint",
+    "solve": "solve", "check": "check", "diff": "diff", "lint": "lint",
     "history": "artifacts", "show": "artifacts", "export": "artifacts", "import": "artifacts", "rollback": "artifacts",
     "report": "report_page",
     "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
     "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
-    "board": "board", "rig": "rig", "db": "db", "keys": "keys",
+    "board": "board", "rig": "rig", "db": "db", "keys": "keys", "fleet": "fleet",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is
 the order in ``--help`` (tests/cli/test_cli_registry.py holds it to what the modules register)."""

@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec, rigs
+from calibctl.store import chain, codec, fleet, rigs
 from calibctl.store.models import (
     ArtifactRow,
     CounterRow,
@@ -42,7 +42,8 @@ from calibctl.store.models import (
 HEAD_PREFIX = "calibctl-head-v1"
 _DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
                                                  "rig": rigs.decode_calibration, "check": codec.decode_check,
-                                                 "rig_definition": rigs.decode_definition}
+                                                 "rig_definition": rigs.decode_definition,
+                                                 "fleet": fleet.decode_fleet_event}
 _VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 

@@ -57,6 +57,9 @@ SPECS: dict[str, StreamSpec] = {
     # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
     "rig_definition": StreamSpec("rig_definition", (), "payload_sha256", lambda r: f"rig definition {r['name']}",
                                  ("chain", "chain_seq")),
+    # revision 0009_fleet_diff25: the fleet's log (robots, the versions they run, rollouts), one stream.
+    "fleet": StreamSpec("fleet", (), "payload_sha256", lambda r: f"fleet event {r['id']} ({r['subject']}, {r['kind']})",
+                        ("chain", "chain_seq")),
 }
 """The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
 

@@ -69,6 +69,17 @@ def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
         )
 
 
+def decode_payload(model: type[BaseModel], payload: str, payload_sha256: str, what: str,
+                   columns: dict[str, object]) -> Any:
+    """A payload checked against its sha256, parsed as ``model``, and its filter ``columns`` against it."""
+    actual = sha256_hex(payload.encode("utf-8"))
+    if actual != payload_sha256:
+        raise _mismatch(what, payload_sha256, actual)
+    doc = _parse(model, payload, what)
+    _check_columns(what, {name: (value, getattr(doc, name)) for name, value in columns.items()})
+    return doc
+
+
 # boards -------------------------------------------------------------------------------------------
 
 

@@ -318,6 +318,24 @@ class CheckEventRow(ChainColumns, Base):
     )
 
 
+class FleetEventRow(ChainColumns, Base):
+    """One step of the fleet's log (revision 0009_fleet_diff25): a robot registered or assigned a version.
+
+    One chained stream for the store (``chain.STREAMS["fleet"]``); ``id`` is the position in it, given under
+    the stream's counter lock."""
+
+    __tablename__ = "fleet_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=False)
+    subject: Mapped[str] = mapped_column(String(SERIAL_LEN))  # the robot, or the rollout of the rollout kinds
+    kind: Mapped[str] = mapped_column(String(16))
+    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (Index(None, "subject", "id"), Index(None, "chain_seq", unique=True))
+
+
 IMMUTABLE_TABLES = {
     "board_revisions": "board revisions are immutable",
     "capture_sessions": "capture sessions are immutable",
@@ -328,5 +346,6 @@ IMMUTABLE_TABLES = {
     "rig_calibrations": "rig calibrations are immutable",
     "rig_activation_events": "rig activation events are append-only",
     "check_events": "check events are append-only",
+    "fleet_events": "fleet events are append-only",
 }
 """Table -> the message its UPDATE/DELETE trigger raises (the migrations create the triggers)."""

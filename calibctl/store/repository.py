@@ -44,6 +44,7 @@ from calibctl.store.engine import (
     sqlite_path,
 )
 from calibctl.store.engine import make_engine as _make_engine
+from calibctl.store.fleet import FleetStoreMixin
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
 from calibctl.store.rigs import RigStoreMixin
@@ -67,7 +68,7 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     )
 
 
-class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
+class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
     def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None) -> None:

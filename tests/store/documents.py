@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 
 from calibctl.artifacts.check import CheckEvent, RegionCheck
+from calibctl.artifacts.fleet import FleetEvent
 from calibctl.artifacts.session import CaptureSession, ImageOutcome, ViewCorners
 from tests.artifacts.factories import FIXED_TIME, measured_board
 
@@ -53,3 +54,9 @@ def check_event(serial: str, version: int, sha: str, n: int, passed: bool = True
     return CheckEvent(check_id=f"{n:012x}", serial=serial, version=version, calibration_sha256=sha, source="folder x",
                       station="st1", operator="qa", at=FIXED_TIME + dt.timedelta(minutes=n), image_size=(640, 480), images=3,
                       views=["a.png"], view_rms_px=[0.2], regions=[region], alpha=0.01, passed=passed)
+
+
+def fleet_event(kind: str, robot: str = "amr-001", **fields: object) -> FleetEvent:
+    """A fleet log step by qa at st1, FIXED_TIME: ``register`` (serials=, rigs=) or ``assign`` (serial=, version=)."""
+    return FleetEvent(kind=kind, robot=robot, actor="qa", station="st1", at=FIXED_TIME,  # type: ignore[arg-type]
+                      reason=f"test {kind}", **fields)  # type: ignore[arg-type]

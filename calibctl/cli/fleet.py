@@ -1,0 +1,160 @@
+"""calibctl fleet add | assign | status: robots, the calibration version each runs, and where they stand."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from calibctl.cli.context import state, wants_json
+from calibctl.cli.render import emit_json, shown, stdout
+
+if TYPE_CHECKING:
+    from calibctl.workflows.fleet.rollouts import Rollout
+
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
+ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
+
+fleet_app = typer.Typer(
+    name="fleet",
+    help="Robots, the calibration version each one runs, and where that stands against the active versions.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+
+def _say(line: str) -> None:
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
+@fleet_app.command("add")
+def add(
+    ctx: typer.Context,
+    robot: Annotated[str, typer.Argument(help="Robot name (letters, digits, . _ : -).")],
+    serial: Annotated[list[str] | None, typer.Option("--serial", help="A camera serial it carries (repeatable).",
+                                                     show_default=False)] = None,
+    rig: Annotated[list[str] | None, typer.Option("--rig", help="A rig it carries (repeatable).", show_default=False)] = None,
+    reason: ReasonOption = "registered",
+    json_output: JsonFlag = False,
+) -> None:
+    """Register a robot and the sensors it carries (once; the log keeps who, when and why)."""
+    from calibctl.workflows.fleet import robots
+
+    event = robots.add_robot(state(ctx).settings(), robot, serial or [], rig or [], reason)
+    if wants_json(ctx, json_output):
+        emit_json(event)
+        return
+    _say(f"robot {shown(event.subject)} registered: {', '.join(map(shown, [*event.serials, *event.rigs]))}")
+
+
+@fleet_app.command("assign")
+def assign(
+    ctx: typer.Context,
+    robot: Annotated[str, typer.Argument(help="A registered robot.")],
+    ref: Annotated[str, typer.Argument(metavar="SERIAL@N", help="The calibration version the robot now runs.")],
+    reason: ReasonOption = "",
+    json_output: JsonFlag = False,
+) -> None:
+    """Record that a robot now runs SERIAL@N (an accepted version of a serial it carries)."""
+    from calibctl.workflows.fleet import robots
+
+    event = robots.assign(state(ctx).settings(), robot, ref, reason)
+    if wants_json(ctx, json_output):
+        emit_json(event)
+        return
+    _say(f"robot {shown(event.subject)} runs {shown(event.serial)}@{event.version}")
+
+
+@fleet_app.command("status")
+def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
+    """Every robot, its sensors and the version each runs: current, behind or ahead of the active one."""
+    from calibctl.workflows.fleet import rollouts
+
+    result, staged = rollouts.fleet_status(state(ctx).settings())
+    if wants_json(ctx, json_output):
+        emit_json({**result.as_json(), "rollouts": [r.as_json() for r in staged]})
+        return
+    for rollout in staged:
+        _print_rollout(rollout)
+    if not result.robots:
+        _say("no robots registered (calibctl fleet add ROBOT --serial SERIAL)")
+        return
+    for r in result.robots:
+        rigs = f"  rigs: {', '.join(map(shown, r.rigs))}" if r.rigs else ""
+        _say(f"{shown(r.robot)}{rigs}")
+        for s in r.sensors:
+            running = "-" if s.running is None else f"@{s.running}"
+            active = "-" if s.active is None else f"@{s.active}"
+            _say(f"  {shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
+
+
+rollout_app = typer.Typer(
+    name="rollout",
+    help="A calibration change rolled out like a deploy: canary robots, a health gate, promote or roll back.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+fleet_app.add_typer(rollout_app, name="rollout")
+
+
+def _print_rollout(r: Rollout) -> None:
+    closed = f" ({r.closed})" if r.closed else ""
+    _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(f"{shown(s)}@{v}" for s, v in r.start.targets.items()))
+    for robot, st in sorted(r.state.items()):
+        _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}")
+    for serial, d in r.diffs.items():
+        numbers = f", p50 {d['p50_px']:.2f} px, max {d['max_px']:.2f} px" if "p50_px" in d else f" ({shown(d['why'])})"
+        _say(f"  diff {shown(serial)}@{d['from']} -> @{r.start.targets[serial]}: {d['verdict']}{numbers}")
+
+
+@rollout_app.command("start")
+def rollout_start(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="Rollout name (letters, digits, . _ : -).")],
+    target: Annotated[list[str], typer.Option("--target", metavar="SERIAL@N", help="A new version (repeatable).",
+                                              show_default=False)],
+    canary: Annotated[list[str], typer.Option("--canary", metavar="ROBOT", help="A canary robot (repeatable).",
+                                              show_default=False)],
+    reason: ReasonOption = "",
+    json_output: JsonFlag = False,
+) -> None:
+    """Start a rollout: the canary robots run the new versions now, the rest wait for promote."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.start(state(ctx).settings(), name, target, canary, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
+@rollout_app.command("promote")
+def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
+                    reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+    """Promote to the rest of the fleet once every canary robot reports passing checks of the new version.
+
+    Exit 1 (held, nothing promoted) when a canary reports a failing check; 2 when one has not reported yet."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.promote(state(ctx).settings(), name, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
+@rollout_app.command("rollback")
+def rollout_rollback(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
+                     reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+    """Put every robot the rollout touched back on the version it ran before, in one transaction."""
+    from calibctl.workflows.fleet import rollouts
+
+    r = rollouts.rollback(state(ctx).settings(), name, reason)
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(fleet_app, name="fleet")

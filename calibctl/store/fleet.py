@@ -1,0 +1,127 @@
+"""The fleet's log in the store (revision 0009_fleet_diff25): ``FleetEvent`` rows, one chained stream.
+
+The row keeps the canonical JSON of the event and its sha256 (re-checked on every read) plus copies of
+the fields queries filter on. UPDATE and DELETE are refused by the migration's triggers. What an event
+refers to is checked in the same transaction as its insert: a robot is registered once; an assignment
+names a registered robot, a serial it carries and a stored version of that serial.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import sha256_hex
+from calibctl.artifacts.fleet import FleetEvent
+from calibctl.errors import AlreadyExistsError, NotFoundError, StaleActiveVersionError, UsageError
+from calibctl.signing import Signer
+from calibctl.store import chain, codec, counters
+from calibctl.store.history import statuses
+from calibctl.store.models import FleetEventRow
+
+
+def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
+    what = f"fleet event {row.id} ({row.subject}, {row.kind})"
+    return codec.decode_payload(FleetEvent, row.payload, row.payload_sha256, what,
+                                {"subject": row.subject, "kind": row.kind})
+
+
+def _registration(s: Session, robot: str) -> FleetEvent | None:
+    row = s.scalars(select(FleetEventRow).where(FleetEventRow.subject == robot, FleetEventRow.kind == "register")
+                    .order_by(FleetEventRow.id).limit(1)).first()
+    return None if row is None else decode_fleet_event(row)
+
+
+class FleetStoreMixin:
+    """Fleet methods of ``Store`` (which provides ``_run``)."""
+
+    _run: Callable[..., Any]
+    signer: Signer | None
+
+    def add_fleet_event(self, event: FleetEvent) -> int:
+        """Append ``event`` to the fleet's log; its position (1, 2, ...). Refused, nothing written: a second
+        registration of a robot (AlreadyExistsError); an assignment to an unknown robot, of a serial the robot
+        does not carry (UsageError), or of an unknown serial or version (NotFoundError); a rejected version."""
+        return self.append_fleet_events([event])
+
+    def append_fleet_events(self, events: Sequence[FleetEvent], after: int | None = None) -> int:
+        """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the log's
+        length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole batch
+        (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet."""
+
+        def work(s: Session) -> int:
+            current = counters.peek(s, "chain", "fleet") or 0
+            if after is not None and current != after:
+                raise StaleActiveVersionError(
+                    f"the fleet log changed underneath this step ({current - after} event(s) since it was read); "
+                    "nothing written", "run the command again")
+            position = current
+            for event in events:
+                position = counters.next_value(s, "chain", "fleet")  # the stream's lock until commit
+                _check(s, event)
+                payload = codec.canonical_text(event)
+                row = FleetEventRow(id=position, subject=event.subject, kind=event.kind, at=event.at, payload=payload,
+                                    payload_sha256=sha256_hex(payload.encode("utf-8")))
+                chain.link(s, chain.STREAMS["fleet"], row, self.signer)
+                s.add(row)
+                s.flush()
+            return position
+
+        return self._run(work, write=True)
+
+    def fleet_events(self) -> list[FleetEvent]:
+        """The whole fleet log, oldest first."""
+        return self._run(lambda s: [decode_fleet_event(r) for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))])
+
+
+def _check(s: Session, event: FleetEvent) -> None:
+    """What the event refers to exists and may be used (see ``append_fleet_events``)."""
+    if event.kind == "register":
+        if _registration(s, event.subject) is not None:
+            raise AlreadyExistsError(f"robot {event.robot} is already registered",
+                                     "robots are registered once; `calibctl fleet status` lists them")
+    elif event.kind == "assign":
+        _check_assignment(s, event, _registration(s, event.subject))
+    elif event.kind == "rollout":
+        if _rollout(s, event.subject) is not None:
+            raise AlreadyExistsError(f"rollout {event.subject} exists already", "name the new rollout differently")
+        for serial, version in event.targets.items():
+            _check_version(s, serial, version, "roll out")
+        for robot in event.canary:
+            if _registration(s, robot) is None:
+                raise NotFoundError(f"canary robot {robot} is not registered",
+                                    f"register it first: calibctl fleet add {robot} --serial SERIAL ...")
+    elif _rollout(s, event.subject) is None:
+        raise NotFoundError(f"no rollout {event.subject}", "`calibctl fleet status` lists the rollouts")
+
+
+def _rollout(s: Session, name: str) -> FleetEvent | None:
+    row = s.scalars(select(FleetEventRow).where(FleetEventRow.subject == name, FleetEventRow.kind == "rollout")
+                    .limit(1)).first()
+    return None if row is None else decode_fleet_event(row)
+
+
+def _check_version(s: Session, serial: str, version: int, what: str) -> None:
+    known = statuses(s, serial)  # NotFoundError for an unknown serial
+    status = known.get(version)
+    if status is None:
+        raise NotFoundError(f"{serial} has no version {version}; versions: "
+                            f"{', '.join(str(v) for v in sorted(known))}", f"see `calibctl history {serial}`")
+    if status != "accepted":
+        raise UsageError(f"{serial}@{version} is {status}: a robot must not run it, so it cannot {what}",
+                         "name an accepted version (`calibctl history SERIAL`)")
+
+
+def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | None) -> None:
+    if registered is None:
+        raise NotFoundError(f"robot {event.robot} is not registered",
+                            f"register it first: calibctl fleet add {event.robot} --serial SERIAL ...")
+    assert event.serial is not None and event.version is not None  # the document's own validator
+    if event.serial not in registered.serials:
+        raise UsageError(f"robot {event.robot} does not carry {event.serial} (it carries "
+                         f"{', '.join(registered.serials) or 'no camera serials'})",
+                         "assign one of its own serials")
+    _check_version(s, event.serial, event.version, "be assigned")
