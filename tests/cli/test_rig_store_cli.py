@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import shutil
+import stat
 import tempfile
 
 import pytest
@@ -191,6 +193,22 @@ def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_pat
     r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "s.yaml"))
     assert r.exit_code == 2 and f"cannot write {tmp_path / 's.yaml'}: permission denied" in r.output
     assert isinstance(r.exception, SystemExit) and not (tmp_path / "s.yaml").exists()
+
+
+def test_rig_export_and_rig_report_never_replace_a_fifo_or_a_symlink(db, rig2, tmp_path):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    assert invoke(db, "rig", "solve", "R1").exit_code == 0
+    fifo, link, victim = tmp_path / "s.yaml", tmp_path / "r.html", tmp_path / "victim"
+    os.mkfifo(fifo)
+    victim.write_text("not ours\n")
+    os.symlink(victim, link)
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(fifo), "--force")
+    assert r.exit_code == 2 and f"cannot write {fifo}: it is a FIFO" in r.output
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    r = invoke(db, "report", "--rig", "R1", "-o", str(link), "--force")
+    assert r.exit_code == 2 and f"cannot write {link}: it is a symbolic link" in r.output, r.output
+    assert os.path.islink(link) and victim.read_text() == "not ours\n"
 
 
 def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_stores_nothing(db, rig2, tmp_path):
