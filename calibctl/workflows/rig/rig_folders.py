@@ -29,6 +29,7 @@ from calibctl.config import LintThresholds
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
+from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import (
     MIN_SHARED_VIEWS,
     FrameMatch,
@@ -171,6 +172,9 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
+    same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
+    identity.refuse([replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
+                     for f in identity.shared_images(same_files)], "rig solve-folders")  # before any detection
     match = match_frames(photos)
     if not match.frames:
         raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
@@ -197,6 +201,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
                              hint="use the calibration made at this resolution, or re-calibrate the camera")
         members.append(given)
     views = rig_views(cameras, match, outcomes, spec)
+    identity.refuse(identity.shared_images({n: [o.sha256 for o in outcomes[n] if o.corners_px is not None]
+                                            for n in cameras}) + identity.same_corners(views), "rig solve-folders")
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
     run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
     if not gate.passed:
@@ -221,8 +227,12 @@ def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool
         return replace(run, findings=(rigid, *misfit))
     rows = {m.name: m.image_size[1] for m in members}
     bad_lens = {name for name, found in lens.items() if found}
-    findings = solved_rig_findings(rig_pairs(solution, holdout), rig_loops(loops), rows, (), limits, bad_lens)
-    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*findings, *misfit))
+    pairs = rig_pairs(solution, holdout)
+    findings = solved_rig_findings(pairs, rig_loops(loops), rows, (), limits, bad_lens)
+    same = [Finding(rule="rig-identity", severity="error", message=f.message,
+                    fix="give each camera its own photos (was the same folder given twice?)")
+            for f in identity.zero_baselines(identity.pair_translations(solution))]
+    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*same, *findings, *misfit))
 
 
 def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair]:
