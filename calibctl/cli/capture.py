@@ -332,6 +332,11 @@ def register_synth(app: typer.Typer) -> None:
         """
         from calibctl.workflows.synth import synth as synth_workflow
 
+        if rig is None and baseline_mm is not None:
+            from calibctl.errors import UsageError
+
+            raise UsageError("--baseline-mm places the cameras of a rig; it needs --rig N",
+                             "e.g. calibctl synth OUT --rig 2 --baseline-mm 75")
         if rig is not None:
             from calibctl.workflows.synth.synth_rig import run_synth_rig
 

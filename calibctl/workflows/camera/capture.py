@@ -230,8 +230,8 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
     picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
     samples = []
     for name, path in picks:
-        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if gray is not None:
+        gray = outcomes_core.read_gray(str(path))
+        if gray is not None and min(gray.shape[:2]) >= outcomes_core.MIN_IMAGE_SIDE_PX:  # probes need a picture
             samples.append((name, gray))
     return samples
 
