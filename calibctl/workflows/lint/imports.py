@@ -7,8 +7,9 @@ the result is this store's verdict. The source ``serial@version`` and its sha256
 ``provenance.imported_from``; the artifact gets this store's next version (``keep_version``: the source
 version, only when it is the next one) and a new hash. A rejected import is stored but never activated.
 
-Importing the same source artifact again (same serial@version and hash, whatever the file is called)
-returns the version it got the first time (no new version).
+Importing the same content again is a no-op: this store's own export brought back (its content_sha256
+is a stored version's) or a source imported before (same serial@version and hash, whatever the file is
+called) returns the version it already has, and never activates anything (a rollback since stays).
 """
 
 from __future__ import annotations
@@ -58,12 +59,17 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -
 
 
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
-    """The version an earlier import of the same source artifact (same ref and hash, any file name) got."""
+    """The version this store already holds of the same content: the source itself (this store's own
+    export brought back: same content_sha256), or what an earlier import of it (same ref and hash, any
+    file name) got."""
     if source.serial not in store.serials():
         return None
+    stored = store.list_artifacts(source.serial)
+    own = next((a for a in stored if a.content_sha256 == source.content_sha256), None)
+    if own is not None:
+        return own
     key = f"{source.ref} sha256 {source.content_sha256} "
-    return next((a for a in store.list_artifacts(source.serial)
-                 if (a.provenance.imported_from or "").startswith(key)), None)
+    return next((a for a in stored if (a.provenance.imported_from or "").startswith(key)), None)
 
 
 def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
