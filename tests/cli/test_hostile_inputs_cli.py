@@ -130,3 +130,28 @@ def test_an_error_message_never_carries_a_raw_escape(sqlite_url, tmp_path):
         pass
     result = invoke("--db", sqlite_url, "show", "CAM\x1b[2J")
     assert result.exit_code == 2 and "\x1b" not in result.stderr and "\\x1b[2J" in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("value", ["-1", "0"])
+def test_a_rig_gate_that_links_nothing_is_refused(tmp_path, value):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    result = invoke("rig", "solve-folders", "--source", f"A={tmp_path / 'a'}", "--source", f"B={tmp_path / 'b'}",
+                    "--cols", "9", "--rows", "6", "--square-mm", "25", "--min-shared-views", value)
+    assert result.exit_code == 2 and f"--min-shared-views {value} is out of range (1 .. 10000)" in result.stderr
+
+
+def test_a_rollback_reason_of_100000_characters_is_refused_before_the_store_opens(sqlite_url):
+    result = invoke("--db", sqlite_url, "rollback", "CAM-0001", "--to", "1", "--reason", "x" * 100_000)
+    assert result.exit_code == 2 and "the reason is 100000 characters long (at most 2000)" in result.stderr
+
+
+@pytest.mark.parametrize(("text", "words"), [
+    ("gates:\n  min_views: 1000000000000000000000\n", "min_views"),
+    ("lint:\n  sigma_fx_max_px: .inf\n", "sigma_fx_max_px"),
+])
+def test_a_station_file_with_absurd_numbers_is_refused(sqlite_url, tmp_path, text, words):
+    station = tmp_path / "station.yaml"
+    station.write_text(text)
+    result = invoke("--db", sqlite_url, "--station-config", station, "history", "CAM-0001")
+    assert result.exit_code == 2 and words in result.stderr and "Traceback" not in result.output, result.output

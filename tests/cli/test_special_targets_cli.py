@@ -101,3 +101,19 @@ def test_a_regular_file_is_still_replaced_with_force_and_keeps_its_mode(store_ur
 
 def test_special_kinds_are_the_ones_the_writer_knows():
     assert set(SPECIAL_KINDS) >= {"symlink", "fifo", "folder", "device"}
+
+
+def test_triage_plots_never_replace_a_symlink(tmp_path):
+    pytest.importorskip("matplotlib", reason="the plots extra is not installed")
+    csv = tmp_path / "in.csv"
+    assert cli("synth-residuals", csv, "--fault", "rotation", "--seed", "2", "--keyframes", "60").exit_code == 0
+    plots = tmp_path / "plots"
+    assert cli("triage", csv, "--plot", plots).exit_code in (0, 1)
+    first = sorted(plots.glob("*.png"))[0]
+    victim = tmp_path / "victim.txt"
+    victim.write_text("not ours\n")
+    first.unlink()
+    os.symlink(victim, first)
+    result = cli("triage", csv, "--plot", plots)
+    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, result.output
+    assert victim.read_text() == "not ours\n" and first.is_symlink()

@@ -31,6 +31,7 @@ from calibctl.core.board.views import BoardView
 from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
 from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import (
+    MAX_MIN_SHARED_VIEWS,
     MIN_SHARED_VIEWS,
     FrameMatch,
     match_frames,
@@ -89,6 +90,13 @@ class RigFolderRun:
     def passed(self) -> bool:
         """The rig gate passed and the verdict has no error (exit 0)."""
         return self.gate.passed and not has_errors(list(self.findings))
+
+
+def check_min_shared_views(n: int) -> None:
+    """UsageError for a rig gate that links nothing (below 1) or nothing can meet."""
+    if not 1 <= n <= MAX_MIN_SHARED_VIEWS:
+        raise UsageError(f"--min-shared-views {n} is out of range (1 .. {MAX_MIN_SHARED_VIEWS})",
+                         f"the default is {MIN_SHARED_VIEWS} frames per linking pair")
 
 
 def parse_sources(items: Sequence[str]) -> dict[str, Path]:
@@ -169,6 +177,7 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
             mixes image sizes, or a camera's photos differ in size from its intrinsics.
         NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
+    check_min_shared_views(min_shared_views)
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}

@@ -50,7 +50,7 @@ from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.handeye import rig_handeye
-from calibctl.workflows.rig.rig_folders import rig_loops, rig_pairs
+from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -116,6 +116,7 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
 def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], board: str,
                 min_shared_views: int = MIN_SHARED_VIEWS) -> RigCaptureResult:
     """Capture every member, pair the images into frames, apply the rig gate; store the rig session."""
+    check_min_shared_views(min_shared_views)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
     extra = [c for c in sources if c not in rig.cameras]
