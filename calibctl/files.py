@@ -24,13 +24,15 @@ from pathlib import Path
 
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
+_FULL_HINT = ("free some space or write to another disk; no partial file was kept (images a capture had already "
+              "stored are removed by `calibctl prune` an hour later)")
 # errno -> (what happened, what to do). Anything not listed is reported with the system's own words.
 _REASONS: dict[int, tuple[str, str]] = {
     errno.EACCES: ("permission denied", "check the permissions of that path, or choose another one"),
     errno.EPERM: ("operation not permitted", "check the permissions of that path, or choose another one"),
     errno.EROFS: ("read-only file system", "write to a writable folder instead"),
-    errno.ENOSPC: ("no space left on the device", "free some space or write to another disk; nothing was written"),
-    errno.EDQUOT: ("disk quota exceeded", "free some space or write to another disk; nothing was written"),
+    errno.ENOSPC: ("no space left on the device", _FULL_HINT),
+    errno.EDQUOT: ("disk quota exceeded", _FULL_HINT),
     errno.EISDIR: ("it is a folder", "name a file (for example FOLDER/camera.yaml)"),
     errno.ENOTDIR: ("a part of the path is not a folder", "check the path"),
     errno.ENOENT: ("no such file or folder", "check the path"),

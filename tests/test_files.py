@@ -41,7 +41,8 @@ def test_new_files_follow_the_umask_and_overwrites_keep_their_mode(tmp_path):
 def test_messages_name_the_path_and_the_reason(tmp_path):
     assert str(os_error(OSError(errno.ENOSPC, "x"), "write", tmp_path / "f")) == (
         f"cannot write {tmp_path / 'f'}: no space left on the device (free some space or write to another disk; "
-        "nothing was written)")
+        "no partial file was kept (images a capture had already stored are removed by `calibctl prune` an hour "
+        "later))")
     unlisted = os_error(OSError(errno.ENXIO, os.strerror(errno.ENXIO), "/dev/x"), "open")
     assert unlisted.message == f"cannot open /dev/x: {os.strerror(errno.ENXIO)}"
     with pytest.raises(FileSystemError, match=r"cannot write .*: it is a folder"):

@@ -215,9 +215,13 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
             return DatabaseError(f"the store {shown} is read-only for this user; nothing was written",
                                  "read commands work on it; to write, run as a user who can write both the file "
                                  "and its folder (SQLite keeps its -wal and -shm files there)")
+        if "disk i/o error" in lowered:
+            return DatabaseError(f"the store {shown} could not write to its disk (disk I/O error); this transaction "
+                                 "was not stored", "the disk is most likely full (df -h); else check the device")
         if "database or disk is full" in lowered:
-            return DatabaseError(f"the disk of the store {shown} is full; nothing was written",
-                                 "free some space on that disk and run the command again")
+            return DatabaseError(f"the disk of the store {shown} is full; this transaction was not stored",
+                                 "free some space on that disk and run the command again (image files a failed "
+                                 "capture left are removed by `calibctl prune` an hour later)")
     elif isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) and _is_connect_failure(sqlstate(exc)):
         return DatabaseError(
             f"cannot connect to the database {shown}: {detail}",

@@ -155,3 +155,25 @@ def test_a_station_file_with_absurd_numbers_is_refused(sqlite_url, tmp_path, tex
     station.write_text(text)
     result = invoke("--db", sqlite_url, "--station-config", station, "history", "CAM-0001")
     assert result.exit_code == 2 and words in result.stderr and "Traceback" not in result.output, result.output
+
+
+def test_db_verify_names_and_prune_removes_the_files_a_failed_capture_left(sqlite_url, tmp_path):
+    import hashlib
+
+    from calibctl.store.images import ORPHAN_GRACE_S, image_file
+
+    with Store.open(sqlite_url) as store:
+        kept = store.put_image(b"kept image", retention_days=30)
+        image_dir = store.image_dir
+    data = b"written before the disk filled up"
+    orphan = image_file(image_dir, hashlib.sha256(data).hexdigest())
+    orphan.parent.mkdir(parents=True, exist_ok=True)
+    orphan.write_bytes(data)
+    old = orphan.stat().st_mtime - ORPHAN_GRACE_S - 60
+    os.utime(orphan, (old, old))
+    verified = invoke("--db", sqlite_url, "db", "verify")
+    assert verified.exit_code == 0 and "images: 1 file(s) no record refers to" in verified.stdout, verified.output
+    pruned = invoke("--db", sqlite_url, "prune")
+    assert pruned.exit_code == 0 and "pruned 1 " in pruned.stdout, pruned.output
+    assert not orphan.exists() and image_file(image_dir, kept).exists()
+    assert "no record refers to" not in invoke("--db", sqlite_url, "db", "verify").stdout
