@@ -194,3 +194,21 @@ def test_importing_the_stores_own_export_is_a_no_op_and_never_undoes_a_rollback(
         assert store.events(SERIAL) == events_before  # nothing written at all
     doc = json.loads(run(sqlite_url, "import", str(out), "--json").stdout)
     assert doc["already_imported"] is True and doc["active"] is False and doc["artifact"]["version"] == 2
+
+
+@pytest.mark.parametrize(("update", "words"), [
+    ({"camera_matrix": ((805.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0))}, "fx 805.000 and fy 800.000 differ"),
+    ("sigma", "sigma_fx 0.9 and sigma_fy 0.3 differ"),
+])
+def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_nothing_stored(run, sqlite_url, tmp_path,
+                                                                                           update, words):
+    """fx + 5 px on a model that ties fx to fy, hash re-sealed, unsigned: it imported as accepted and active."""
+    art = calibration(serial=SERIAL, version=7)
+    if update == "sigma":
+        update = {"stdev": art.stdev.model_copy(update={"sigma": {**art.stdev.sigma, "fx": 0.9, "fy": 0.3}})}
+    path = _write(tmp_path / "forged.json", art.model_copy(update=update).sealed())
+    result = run(sqlite_url, "import", str(path))
+    assert result.exit_code == 1, result.output
+    assert words in result.stderr and "ties fx to fy" in result.stderr and "nothing was stored" in result.stderr
+    with Store.open(sqlite_url) as store:
+        assert store.serials() == []

@@ -20,7 +20,7 @@ from pathlib import Path
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import Settings
-from calibctl.errors import UsageError
+from calibctl.errors import InconsistentDataError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 from calibctl.workflows.store_admin import keys, records
@@ -58,6 +58,32 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
+FIX_ASPECT_RATIO = 2  # cv2.CALIB_FIX_ASPECT_RATIO (no cv2 import for a number)
+TIED_REL_TOL = 1e-9
+
+
+def check_self_consistent(art: CalibrationArtifact) -> None:
+    """InconsistentDataError (exit 1, nothing stored) when the artifact contradicts the solve it names: a
+    pinhole solve with CALIB_FIX_ASPECT_RATIO from calibctl's unit start keeps fx / fy at exactly 1 (and
+    sigma_fx = sigma_fy), measured 0.0 on every model of the opencv-left-right cameras; a forged fx + 5 px
+    with its hash re-sealed imported as accepted and active."""
+    tied = art.model.opencv_flags & FIX_ASPECT_RATIO or "CALIB_FIX_ASPECT_RATIO" in art.model.flag_names
+    if art.model.name == "fisheye" or not tied:
+        return
+    fx, fy = art.camera_matrix[0][0], art.camera_matrix[1][1]
+    sigma = art.stdev.sigma
+    problems = []
+    if abs(fx / fy - 1.0) > TIED_REL_TOL:
+        problems.append(f"fx {fx:.3f} and fy {fy:.3f} differ")
+    if "fx" in sigma and "fy" in sigma and abs(sigma["fx"] - sigma["fy"]) > TIED_REL_TOL * max(sigma["fy"], 1e-12):
+        problems.append(f"sigma_fx {sigma['fx']:.4g} and sigma_fy {sigma['fy']:.4g} differ")
+    if problems:
+        raise InconsistentDataError(
+            f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
+            "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
+            "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not")
+
+
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
     """The version this store already holds of the same content: the source itself (this store's own
     export brought back: same content_sha256), or what an earlier import of it (same ref and hash, any
@@ -80,6 +106,7 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
     if previous is not None:
         active = store.active_version(source.serial) == previous.version
         return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)
+    check_self_consistent(source)
     mine = rederive(source, settings, label)
     if keep_version:
         expected = store.next_version(source.serial)
