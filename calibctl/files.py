@@ -68,6 +68,16 @@ def _umask() -> int:
     return current
 
 
+def new_file_mode(existing: Path | None = None) -> int:
+    """The mode of an overwritten file is kept; a new file gets 0666 minus the umask."""
+    if existing is not None:
+        try:
+            return existing.stat().st_mode & 0o7777
+        except FileNotFoundError:
+            pass
+    return 0o666 & ~_umask()
+
+
 def _kind(st_mode: int) -> str | None:
     """What a path is when it is not a regular file (None for a regular file)."""
     for test, name in ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
@@ -115,7 +125,7 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
         raise FileSystemError(f"cannot write {path}: folder {path.parent} does not exist", "create it first")
     payload = data.encode("utf-8") if isinstance(data, str) else data
     if mode is None:
-        mode = st.st_mode & 0o7777 if st is not None else 0o666 & ~_umask()
+        mode = st.st_mode & 0o7777 if st is not None else new_file_mode()
     with file_errors("write", path):
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:24]}.", suffix=".tmp")
         try:
