@@ -59,11 +59,13 @@ def test_capture_of_a_file_named_in_latin1_and_with_escapes_is_stored_with_a_pri
     os.rename(bytes(first), bytes(folder) + b"/view-\xff\xfe.png")  # cv2.imread segfaulted on this name
     second = sorted(folder.glob("view-*.png"))[0]
     second.rename(folder / "view-\x1b[2J.png")
+    sorted(folder.glob("view-0*.png"))[0].rename(folder / "view-[red]7.png")  # rich markup, not a colour
     cv2.imwrite(str(folder / "tiny.png"), np.zeros((1, 1), np.uint8))
     (folder / "huge.png").write_bytes(_png_header(100_000, 100_000))
     result = capture(db, folder)
     assert result.exit_code in (0, 1), result.output
     assert "Traceback" not in result.output and "\x1b[2J" not in result.output
+    assert "view-[red]7.png" in result.output and "view-\\x1b[2J.png" in result.output
     [session] = sessions(db)
     names = {o.name: o.status for o in session.outcomes}
     assert names["view-\\xff\\xfe.png"] == "accepted" and names["view-\\x1b[2J.png"] == "accepted"
