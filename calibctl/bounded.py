@@ -95,6 +95,29 @@ def check_tree(data: Any, source: str) -> Any:
     return data
 
 
+def printable(text: str) -> str:
+    """``text`` safe to print and to store as UTF-8: each control character (newline and tab kept) as
+    ``\\xNN``, and each byte of a file name that is not UTF-8 (Python's surrogate escapes) as ``\\xNN``,
+    so a name holding ESC sequences cannot drive the terminal and one in Latin-1 cannot end in a
+    UnicodeEncodeError when stored."""
+    if text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        code = ord(ch)
+        if ch in "\n\t":
+            out.append(ch)
+        elif 0xDC80 <= code <= 0xDCFF:  # os.fsdecode's escape of the raw byte code - 0xDC00
+            out.append(f"\\x{code - 0xDC00:02x}")
+        elif 0xD800 <= code <= 0xDFFF:
+            out.append(f"\\u{code:04x}")
+        elif code < 0x20 or code == 0x7F or 0x80 <= code < 0xA0:
+            out.append(f"\\x{code:02x}")
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
 def check_text(text: str, source: str, where: str) -> None:
     """InputError when ``text`` holds NUL or another control character (tab, newline, CR excepted)."""
     bad = next((c for c in text if c in _CONTROLS), None)

@@ -32,19 +32,19 @@ DEFAULT_STATION_FILE = Path("calibctl-station.yaml")
 class GateThresholds(BaseModel):
     """Capture-time gates (seed chapter 1: the capture rule and the sigma5/sigma1 gate)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     observability_min: float = Field(1e-4, gt=0, description="minimum sigma5/sigma1 of Zhang's V matrix")
     tilt_min_deg: float = Field(20.0, ge=0, description="a view counts as tilted from this angle")
     tilt_max_deg: float = Field(45.0, gt=0, description="above this the detector's accuracy collapses")
     tilt_directions_min: int = Field(3, ge=1, le=4, description="tilt directions at least 90 deg apart needed (at most 4 fit)")
-    min_views: int = Field(8, ge=3, description="fewest accepted views for a session to pass")
+    min_views: int = Field(8, ge=3, le=100_000, description="fewest accepted views for a session to pass")
 
 
 class LintThresholds(BaseModel):
     """Calibration lint (seed chapter 1: the three-line calibration lint)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     sigma_fx_max_px: float = Field(2.0, gt=0, description="one-sigma on fx above which fx is not observable")
     principal_point_max_frac: float = Field(0.1, gt=0, description="|cx - W/2| must be below this * W")
@@ -58,7 +58,7 @@ class LintThresholds(BaseModel):
 class HandEyeGates(BaseModel):
     """Hand-eye observability gates (seed chapter 2: the check nobody writes and everybody needs)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     lever_arm_sigma_min: float = Field(0.5, gt=0, description="minimum sigma_min of the stacked (R_A - I)")
     second_axis_min_deg: float = Field(10.0, gt=0, description="minimum rotation about a second axis (s2, deg)")
@@ -70,7 +70,7 @@ class HandEyeGates(BaseModel):
 class StationConfig(BaseModel):
     """The contents of a station file."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     station: str | None = None
     operator: str | None = None

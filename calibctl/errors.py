@@ -84,11 +84,20 @@ class IntegrityError(VerdictFailed):
 
 
 class MissingExtraError(CalibctlError):
-    """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``."""
+    """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``.
+
+    The hint names the packages themselves, as each installer adds them to an installed calibctl: pipx
+    and uv tool environments cannot take ``calibctl[extra]`` when calibctl was installed from a wheel
+    file or a private index (and ``pipx install 'calibctl[postgres]'`` would fetch whatever a public
+    index serves under that name)."""
+
+    PACKAGES = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}
 
     def __init__(self, extra: str, purpose: str, module: str | None) -> None:
+        package = self.PACKAGES.get(extra, extra)
         super().__init__(
             f"{purpose} needs the Python package {(module or extra).split('.')[0]}, which is not installed",
-            f"install calibctl's {extra} extra: pip install 'calibctl[{extra}]' "
-            f"(pipx: pipx install --force 'calibctl[{extra}]'; uv: uv tool install 'calibctl[{extra}]')",
+            f"install calibctl's {extra} extra into calibctl's own environment: pipx inject calibctl '{package}' "
+            f"(pipx), uv tool install --with '{package}' calibctl (uv; add the wheel path instead of calibctl "
+            f"if you installed from one), or pip install '{package}' in its virtualenv",
         )

@@ -3,7 +3,9 @@
 Every output file goes through ``write_atomic``: a temporary file in the target folder, then a rename,
 so a reader never sees half a file and a failed write leaves the old file as it was. The new file
 gets the mode the umask gives (0644 under the usual 022, so a robot's service user can read its
-calibration); overwriting keeps the existing file's mode.
+calibration); overwriting keeps the existing file's mode. Only regular files are ever replaced: a
+symlink, FIFO, device node, socket or folder at the target is refused, ``--force`` or not (run as root,
+``export -o /dev/sdX --force`` once replaced a disk's device node with a file).
 
 ``os_error`` turns an OSError (permission, read-only file system, disk full, is-a-directory, ...)
 into one ``FileSystemError`` line naming the path and what to do; the CLI boundary applies the same
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,13 +24,15 @@ from pathlib import Path
 
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
+_FULL_HINT = ("free some space or write to another disk; no partial file was kept (images a capture had already "
+              "stored are removed by `calibctl prune` an hour later)")
 # errno -> (what happened, what to do). Anything not listed is reported with the system's own words.
 _REASONS: dict[int, tuple[str, str]] = {
     errno.EACCES: ("permission denied", "check the permissions of that path, or choose another one"),
     errno.EPERM: ("operation not permitted", "check the permissions of that path, or choose another one"),
     errno.EROFS: ("read-only file system", "write to a writable folder instead"),
-    errno.ENOSPC: ("no space left on the device", "free some space or write to another disk; nothing was written"),
-    errno.EDQUOT: ("disk quota exceeded", "free some space or write to another disk; nothing was written"),
+    errno.ENOSPC: ("no space left on the device", _FULL_HINT),
+    errno.EDQUOT: ("disk quota exceeded", _FULL_HINT),
     errno.EISDIR: ("it is a folder", "name a file (for example FOLDER/camera.yaml)"),
     errno.ENOTDIR: ("a part of the path is not a folder", "check the path"),
     errno.ENOENT: ("no such file or folder", "check the path"),
@@ -73,13 +78,45 @@ def new_file_mode(existing: Path | None = None) -> int:
     return 0o666 & ~_umask()
 
 
-def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: bool = False) -> Path:
-    """Write ``data`` to ``path`` (temporary file + rename). Refuses to overwrite unless ``force``;
-    ``fsync`` makes the bytes durable before the rename (content-addressed stores need that)."""
-    path = Path(path)
-    if path.is_dir():
+def _kind(st_mode: int) -> str | None:
+    """What a path is when it is not a regular file (None for a regular file)."""
+    for test, name in ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(st_mode):
+            return name
+    return None if stat.S_ISREG(st_mode) else "not a regular file"
+
+
+def existing_target(path: Path) -> os.stat_result | None:
+    """``lstat`` of ``path`` (the link itself, never what it points to), or None when nothing is there.
+    A path that exists and is not a regular file is refused: calibctl replaces only regular files, so
+    ``--force`` never turns a symlink, a FIFO, a device node or a folder into a file of ours."""
+    try:
+        st = os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):  # nothing there (a parent that is a file is named by the caller)
+        return None
+    except OSError as exc:
+        raise os_error(exc, "write", path) from exc
+    kind = _kind(st.st_mode)
+    if kind is None:
+        return st
+    if kind == "a folder":
         raise os_error(IsADirectoryError(errno.EISDIR, "is a directory"), "write", path)
-    if path.exists() and not force:
+    raise FileSystemError(f"cannot write {path}: it is {kind}, not a regular file; calibctl replaces only regular "
+                          "files, --force included", "write to a regular file path (remove the special file yourself "
+                          "if it really is to be replaced)")
+
+
+def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: bool = False,
+                 mode: int | None = None) -> Path:
+    """Write ``data`` to ``path`` (temporary file + rename). Refuses to overwrite unless ``force``, and
+    refuses, ``force`` or not, anything there that is not a regular file (symlink, FIFO, device, folder);
+    an overwritten file keeps its mode. ``fsync`` makes the bytes durable before the rename
+    (content-addressed stores need that); ``mode`` fixes the mode (a private key: 0600)."""
+    path = Path(path)
+    st = existing_target(path)
+    if st is not None and not force:
         raise AlreadyExistsError(f"{path} already exists", "pass --force to overwrite it")
     if not path.parent.is_dir():
         if path.parent.exists():
@@ -87,7 +124,8 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
                                   "choose an output path inside a folder")
         raise FileSystemError(f"cannot write {path}: folder {path.parent} does not exist", "create it first")
     payload = data.encode("utf-8") if isinstance(data, str) else data
-    mode = new_file_mode(path if force else None)
+    if mode is None:
+        mode = st.st_mode & 0o7777 if st is not None else new_file_mode()
     with file_errors("write", path):
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:24]}.", suffix=".tmp")
         try:
@@ -97,6 +135,7 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
                 if fsync:
                     os.fsync(handle.fileno())
                 os.fchmod(handle.fileno(), mode)
+            existing_target(path)  # a special file put there while we wrote is still refused, not replaced
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import base64
 import hashlib
-import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
@@ -106,17 +105,12 @@ def create_key(path: Path, *, force: bool = False) -> Signer:
 
     key = Ed25519PrivateKey.generate()
     pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as out:
-            out.write(pem)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise FileSystemError(f"cannot write the signing key {path}: {exc.strerror}", "choose a writable folder") from exc
+    from calibctl.files import write_atomic
+
+    try:  # a symlink, FIFO or device at ``path`` is refused, never replaced
+        write_atomic(path, pem, force=True, fsync=True, mode=0o600)
+    except FileSystemError as exc:
+        raise FileSystemError(exc.message.replace("cannot write ", "cannot write the signing key ", 1), exc.hint) from exc
     return Signer(key, path)
 
 

@@ -20,6 +20,7 @@ from calibctl.artifacts.fleet import FleetEvent
 from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.artifacts.session import CaptureSession
+from calibctl.files import write_atomic
 
 DOCUMENTS: dict[str, type[BaseModel]] = {
     "board-revision": BoardRevision,
@@ -65,7 +66,7 @@ def write(out_dir: Path) -> list[Path]:
     written = []
     for name, text in expected_files().items():
         path = out_dir / name
-        path.write_text(text, encoding="utf-8")
+        write_atomic(path, text, force=True)
         written.append(path)
     return written
 

@@ -116,7 +116,7 @@ def import_(
                    "source_status": outcome.source_status, "active": outcome.active,
                    "already_imported": outcome.already_imported})
     else:
-        again = "already imported as" if outcome.already_imported else "imported"
+        again = "already stored as" if outcome.already_imported else "imported"
         state_word = "active" if outcome.active else "not active"
         stdout.print(f"{again} {art.serial}@{art.version} ({art.status} by this store's lint, {state_word}; "
                      f"source {outcome.source_ref} was {outcome.source_status}; sha256 {art.content_sha256[:12]})",

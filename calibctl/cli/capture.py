@@ -13,7 +13,7 @@ from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import OperatorOption, StationOption
-from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.cli.render import emit_json, shown, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, render_outcome
 from calibctl.errors import EXIT_VERDICT_FAIL
@@ -94,7 +94,7 @@ def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
             why = next((w[len(o.name) + 2:] for w in unread if w.startswith(f"{o.name}: ")), "")
             tilt, reason = "not read", reason or why
         style = "green" if o.status == "accepted" else "yellow"
-        table.add_row(o.name, f"[{style}]{o.status}[/{style}]",
+        table.add_row(shown(o.name), f"[{style}]{o.status}[/{style}]",
                       f"{o.image_size[0]}x{o.image_size[1]}" if o.image_size else "-",
                       str(o.corners_found), tilt, escape(reason))
     return table
@@ -332,6 +332,11 @@ def register_synth(app: typer.Typer) -> None:
         """
         from calibctl.workflows.synth import synth as synth_workflow
 
+        if rig is None and baseline_mm is not None:
+            from calibctl.errors import UsageError
+
+            raise UsageError("--baseline-mm places the cameras of a rig; it needs --rig N",
+                             "e.g. calibctl synth OUT --rig 2 --baseline-mm 75")
         if rig is not None:
             from calibctl.workflows.synth.synth_rig import run_synth_rig
 

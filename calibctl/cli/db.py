@@ -94,6 +94,9 @@ def verify(
         else:
             say(f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted key(s); "
                 f"{report.unsigned} unsigned record(s)")
+        if report.orphan_images:
+            say(f"images: {report.orphan_images} file(s) no record refers to (left by a failed capture; "
+                "`calibctl prune` removes them)")
         if head:
             say(f"head {report.head}")
     if not report.ok:

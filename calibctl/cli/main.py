@@ -14,6 +14,7 @@ from typer._click.core import Context as ClickContext  # noqa: PLC2701
 from typer.core import TyperGroup
 
 from calibctl import __version__
+from calibctl.bounded import printable
 from calibctl.cli.context import AppState
 from calibctl.cli.examples import epilog
 from calibctl.cli.registry import CommandsOnDemand
@@ -23,9 +24,9 @@ from calibctl.files import ENVIRONMENT_ERRNOS, os_error
 
 
 def _report(exc: CalibctlError) -> NoReturn:
-    print(f"Error: {exc.message}", file=sys.stderr)
+    print(f"Error: {printable(exc.message)}", file=sys.stderr)  # a hostile file name cannot drive the terminal
     if exc.hint:
-        print(f"Hint: {exc.hint}", file=sys.stderr)
+        print(f"Hint: {printable(exc.hint)}", file=sys.stderr)
     raise typer.Exit(exc.exit_code) from exc
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import math
 from collections.abc import Callable, Iterator, MutableMapping
 from typing import Any
 
@@ -18,6 +19,7 @@ import typer.main
 from typer._click.core import Command as ClickCommand  # noqa: PLC2701 - typer vendors its own click
 
 from calibctl.cli.examples import attach_examples
+from calibctl.errors import UsageError
 
 COMMAND_MODULES: dict[str, str] = {
     "capture": "capture", "calibrate": "capture", "prune": "capture", "synth": "capture",
@@ -56,8 +58,40 @@ def module_registry(module: str) -> typer.Typer:
     return registry
 
 
+MAX_ABS_OPTION = 1e12
+"""No float option of calibctl (mm, px, deg, s, Hz, ppm) means anything beyond this magnitude."""
+
+
+def _check_numbers(command: ClickCommand, values: dict[str, Any]) -> None:
+    """UsageError (exit 2) for a float option that is nan, inf or beyond ``MAX_ABS_OPTION``: typer
+    accepts 'nan' and 'inf' as floats (and inside a range: nan compares false), and nan amplitudes wrote nan
+    files with exit 0, inf ended in tracebacks."""
+    flags = {p.name: (p.opts[0] if getattr(p, "opts", None) else p.name) for p in command.params}
+    for name, value in values.items():
+        for v in value if isinstance(value, tuple | list) else (value,):
+            if isinstance(v, float) and not (math.isfinite(v) and abs(v) <= MAX_ABS_OPTION):
+                raise UsageError(f"{flags.get(name, name)} {v!r} is not a usable number",
+                                 f"give a finite value of at most {MAX_ABS_OPTION:g} in magnitude")
+
+
+def guard_numbers(command: ClickCommand) -> ClickCommand:
+    """``command`` (and every sub-command of a group) refusing non-finite float options before it runs."""
+    for sub in getattr(command, "commands", {}).values():
+        guard_numbers(sub)
+    inner = command.callback
+    if inner is not None and not getattr(inner, "_numbers_guarded", False):
+        @functools.wraps(inner)
+        def checked(*args: Any, **kwargs: Any) -> Any:
+            _check_numbers(command, kwargs)
+            return inner(*args, **kwargs)
+
+        checked._numbers_guarded = True  # type: ignore[attr-defined]
+        command.callback = checked
+    return command
+
+
 def _make(name: str, style: dict[str, Any]) -> ClickCommand:
-    return makers(module_registry(COMMAND_MODULES[name]), style)[name]()
+    return guard_numbers(makers(module_registry(COMMAND_MODULES[name]), style)[name]())
 
 
 class CommandsOnDemand(MutableMapping[str, ClickCommand]):

@@ -18,8 +18,11 @@ factory) run the same code and the same migrations. Differences are handled here
 
 from __future__ import annotations
 
+import functools
 import os
 import re
+import sqlite3
+import urllib.parse
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -107,8 +110,12 @@ def make_engine(url: str, *, lock_timeout: float | None = None) -> Engine:
     backend = parsed.get_backend_name()
     timeout_s = lock_timeout_s(backend=backend) if lock_timeout is None else lock_timeout
     if backend == "sqlite":
-        engine = create_engine(parsed, connect_args={"timeout": timeout_s})
-        _configure_sqlite(engine, timeout_s, in_memory=sqlite_path(parsed) is None)
+        path = sqlite_path(parsed)
+        if path is not None and read_only_file(path):
+            engine = create_engine(parsed, creator=functools.partial(_connect_read_only, path, timeout_s))
+        else:
+            engine = create_engine(parsed, connect_args={"timeout": timeout_s})
+        _configure_sqlite(engine, timeout_s, in_memory=path is None)
     else:
         connect_args: dict[str, Any] = {
             "connect_timeout": CONNECT_TIMEOUT_S,
@@ -121,6 +128,23 @@ def make_engine(url: str, *, lock_timeout: float | None = None) -> Engine:
     return engine.execution_options(**{LOCK_TIMEOUT_OPTION: timeout_s})
 
 
+def read_only_file(path: Path) -> bool:
+    """A SQLite file that exists but that this user cannot write, or whose folder it cannot write (SQLite
+    needs the folder for its -wal and -shm files): such a store is opened read-only."""
+    return path.is_file() and not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK))
+
+
+def _connect_read_only(path: Path, timeout_s: float) -> sqlite3.Connection:
+    """A read-only connection (``mode=ro``). With no -wal file beside it, nobody is writing (nobody can:
+    the folder or file is read-only), so ``immutable=1`` lets SQLite read a WAL-mode file without
+    creating its -shm (a plain ``mode=ro`` open of it fails "attempt to write a readonly database")."""
+    wal = path.with_name(path.name + "-wal")
+    uri = f"file:{urllib.parse.quote(str(path.resolve()))}?mode=ro" + ("" if wal.exists() else "&immutable=1")
+    connection = sqlite3.connect(uri, uri=True, timeout=timeout_s, check_same_thread=False)
+    connection.execute("PRAGMA query_only = ON")
+    return connection
+
+
 def _configure_sqlite(engine: Engine, timeout_s: float, *, in_memory: bool) -> None:
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_connection: Any, _record: Any) -> None:
@@ -129,7 +153,8 @@ def _configure_sqlite(engine: Engine, timeout_s: float, *, in_memory: bool) -> N
         cursor = dbapi_connection.cursor()
         cursor.execute(f"PRAGMA busy_timeout = {int(timeout_s * 1000)}")
         cursor.execute("PRAGMA foreign_keys = ON")
-        if not in_memory:
+        read_only = bool(cursor.execute("PRAGMA query_only").fetchone()[0])  # _connect_read_only's
+        if not in_memory and not read_only:  # a read-only store keeps the journal mode its writer set
             cursor.execute("PRAGMA journal_mode = WAL")
         cursor.close()
 
@@ -186,6 +211,17 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
             )
         if "file is not a database" in lowered:
             return DatabaseError(f"{shown} is not a SQLite database ({detail})", "pass the right --db")
+        if "readonly database" in lowered or "query_only" in lowered:
+            return DatabaseError(f"the store {shown} is read-only for this user; nothing was written",
+                                 "read commands work on it; to write, run as a user who can write both the file "
+                                 "and its folder (SQLite keeps its -wal and -shm files there)")
+        if "disk i/o error" in lowered:
+            return DatabaseError(f"the store {shown} could not write to its disk (disk I/O error); this transaction "
+                                 "was not stored", "the disk is most likely full (df -h); else check the device")
+        if "database or disk is full" in lowered:
+            return DatabaseError(f"the disk of the store {shown} is full; this transaction was not stored",
+                                 "free some space on that disk and run the command again (image files a failed "
+                                 "capture left are removed by `calibctl prune` an hour later)")
     elif isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) and _is_connect_failure(sqlstate(exc)):
         return DatabaseError(
             f"cannot connect to the database {shown}: {detail}",

@@ -44,6 +44,9 @@ def default_image_dir(url: URL, env: Mapping[str, str] | None = None) -> Path:
     return Path(IMAGE_DIR_NAME)
 
 
+ORPHAN_GRACE_S = 3600.0  # a capture writes its files moments before their rows commit; an hour is ample
+
+
 def image_file(image_dir: Path, sha256: str) -> Path:
     if len(sha256) != 64 or not set(sha256) <= _HEX:
         raise UsageError(f"'{sha256}' is not a sha256 (64 lower-case hex digits)")
@@ -176,6 +179,28 @@ class ImageStoreMixin:
         row = self._run(lambda s: s.get(ImageRow, sha256))
         return path if row is not None and path.exists() else None
 
+    def orphan_images(self, now: dt.datetime | None = None, grace_s: float = ORPHAN_GRACE_S) -> list[Path]:
+        """Image files with no row, last written more than ``grace_s`` before ``now``: what a capture that
+        failed after writing its images (disk full, a kill) left behind. The grace keeps a capture in
+        progress (files first, rows a moment later) out of it."""
+        if not self.image_dir.is_dir():
+            return []
+        cutoff = (now or utc_now()).timestamp() - grace_s
+        on_disk = {p.name: p for p in self.image_dir.glob("[0-9a-f][0-9a-f]/*")
+                   if len(p.name) == 64 and set(p.name) <= _HEX and p.is_file() and p.stat().st_mtime < cutoff}
+        if not on_disk:
+            return []
+        names = sorted(on_disk)
+
+        def work(s: Session) -> set[str]:
+            found: set[str] = set()
+            for start in range(0, len(names), 500):  # bounded IN lists (SQLite caps bound parameters)
+                found.update(s.scalars(select(ImageRow.sha256).where(ImageRow.sha256.in_(names[start:start + 500]))))
+            return found
+
+        known = self._run(work)
+        return [path for sha, path in sorted(on_disk.items()) if sha not in known]
+
     def prune_images(self, now: dt.datetime | None = None) -> int:
         """Delete image files (and their rows) whose retention has expired; returns how many.
         Never touches corners, sessions or artifacts."""
@@ -189,4 +214,8 @@ class ImageStoreMixin:
                     image_file(self.image_dir, sha).unlink(missing_ok=True)
             return len(expired)
 
-        return self._run(work, write=True)
+        pruned = int(self._run(work, write=True))
+        for path in self.orphan_images(when):  # a failed capture's files: no row refers to them
+            path.unlink(missing_ok=True)
+            pruned += 1
+        return pruned

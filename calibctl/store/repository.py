@@ -47,7 +47,7 @@ from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.fleet import FleetStoreMixin
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
-from calibctl.store.rigs import RigStoreMixin
+from calibctl.store.rigs import RigStoreMixin, rig_member_session_ids
 
 if TYPE_CHECKING:
     from calibctl.store import audit
@@ -224,10 +224,14 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
         return self._run(work)
 
     def latest_session(self, serial: str, status: str | None = "accepted") -> CaptureSession:
-        """The most recent session of ``serial`` (with ``status``, unless None)."""
+        """The most recent session of ``serial`` (with ``status``, unless None). Sessions taken as members
+        of a rig capture are never picked here: a single-camera solve uses them only when named."""
 
         def work(s: Session) -> CaptureSession:
+            members = rig_member_session_ids(s)
             query = select(SessionRow).where(SessionRow.serial == serial)
+            if members:
+                query = query.where(SessionRow.session_id.not_in(members))
             if status is not None:
                 query = query.where(SessionRow.status == status)
             row = s.scalars(query.order_by(SessionRow.finished_at.desc(), SessionRow.started_at.desc()).limit(1)).first()
@@ -238,8 +242,11 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
             ).all()
             what = f"no {status} capture session" if status else "no capture session"
             if theirs:
-                listing = history.known_list([f"{sid} ({st})" for sid, st in theirs])
-                raise NotFoundError(f"{what} for serial '{serial}'; its sessions: {listing}", "capture again")
+                listing = history.known_list([f"{sid} ({st}{', rig member' if sid in members else ''})"
+                                              for sid, st in theirs])
+                hint = ("capture again, or name a rig member's session: calibctl solve SESSION_ID"
+                        if any(sid in members for sid, _ in theirs) else "capture again")
+                raise NotFoundError(f"{what} for serial '{serial}'; its sessions: {listing}", hint)
             serials = list(s.scalars(select(SessionRow.serial).distinct().order_by(SessionRow.serial)))
             listing = f"serials with sessions: {history.known_list(serials)}" if serials else "no sessions are stored yet"
             raise NotFoundError(f"{what} for serial '{serial}'; {listing}", "run `calibctl capture` first")

@@ -9,7 +9,8 @@ sessions (docs/trust.md says why).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import json
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from sqlalchemy import select
@@ -26,10 +27,11 @@ from calibctl.errors import (
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
 from calibctl.store.history import UNCHECKED, check_rollback, known_list
-from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow
+from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow, SessionRow
 
 if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
     from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
+    from calibctl.artifacts.session import CaptureSession
 
 T = TypeVar("T")
 
@@ -138,12 +140,22 @@ class RigStoreMixin:
 
     # sessions ------------------------------------------------------------------------------------
 
-    def add_rig_session(self, session: RigSession) -> None:
+    def add_rig_session(self, session: RigSession, members: Sequence[CaptureSession] = ()) -> None:
+        """Store a rig session together with its ``members``' capture sessions, in one transaction: every
+        one of them or none (a rig capture that fails half-way leaves no member session behind)."""
         payload = codec.canonical_text(session)
-        self._run(lambda s: s.add(RigSessionRow(
-            rig_session_id=session.rig_session_id, rig=session.rig, status=session.status,
-            created_at=session.created_at, payload=payload, payload_sha256=sha256_hex(payload.encode("utf-8")))),
-            write=True)
+
+        def work(s: Session) -> None:
+            for member in members:
+                if s.get(SessionRow, member.session_id) is not None:
+                    raise AlreadyExistsError(f"capture session {member.session_id} is already stored")
+                s.add(codec.session_row(member))
+            s.add(RigSessionRow(
+                rig_session_id=session.rig_session_id, rig=session.rig, status=session.status,
+                created_at=session.created_at, payload=payload, payload_sha256=sha256_hex(payload.encode("utf-8"))))
+            s.flush()
+
+        self._run(work, write=True, retry_conflicts=True)
 
     def get_rig_session(self, rig: str, rig_session_id: str | None = None) -> RigSession:
         """A rig session by id, or the rig's latest accepted one."""
@@ -260,3 +272,15 @@ class RigStoreMixin:
     def rig_events(self, rig: str) -> list[RigActivation]:
         return self._run(lambda s: [_event(r) for r in s.scalars(
             select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))])
+
+
+def rig_member_session_ids(s: Session) -> set[str]:
+    """The capture sessions taken as members of a rig capture (every rig session's camera_sessions).
+    Read from the rig sessions themselves, so stores written before this rule keep working unchanged."""
+    ids: set[str] = set()
+    for payload in s.scalars(select(RigSessionRow.payload)):
+        try:
+            ids.update(str(v) for v in json.loads(payload).get("camera_sessions", {}).values())
+        except (ValueError, AttributeError):
+            continue  # a damaged row is verify's to report; it names no member here
+    return ids

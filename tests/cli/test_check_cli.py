@@ -31,7 +31,7 @@ def invoke(db: str, *args: str):
     return RUNNER.invoke(app, ["--db", db, *args], terminal_width=110)
 
 
-def _render_fixture(out: Path, size: tuple[int, int], n: int = 6) -> Path:
+def _render_fixture(out: Path, size: tuple[int, int], n: int = 10) -> Path:
     """Board held at FIXTURE_DISTANCE_M on the optical axis, tilted 25 deg toward n directions."""
     camera = PinholeCamera.seed_reference(size)
     out.mkdir(parents=True)
@@ -71,12 +71,12 @@ def test_an_unchanged_camera_passes_and_the_check_is_in_its_history(db: str, ass
     done = invoke(db, "check", "CAM-GOOD", "--source", str(assets["fixture"]), "--json")
     assert done.exit_code == 0, done.output
     event = json.loads(done.stdout)
-    assert event["passed"] and event["version"] == 1 and len(event["views"]) == 6
+    assert event["passed"] and event["version"] == 1 and len(event["views"]) == 10
     assert event["regions"][0]["region"] == "overall" and event["regions"][0]["tested"]
     hist = invoke(db, "history", "CAM-GOOD", "--json")
     assert [c["check_id"] for c in json.loads(hist.stdout)["checks"]] == [event["check_id"]]
     text_hist = invoke(db, "history", "CAM-GOOD")
-    assert "checks:" in text_hist.stdout and "check    v1  pass  6 views" in text_hist.stdout
+    assert "checks:" in text_hist.stdout and "check    v1  pass  10 views" in text_hist.stdout
 
 
 def test_the_23mm_typo_passes_the_residuals_and_is_caught_by_the_reference_distance(db: str, assets) -> None:
@@ -168,3 +168,18 @@ def test_a_video_source_is_refused(db: str, tmp_path: Path) -> None:
     video.write_bytes(b"not really a video")
     done = invoke(db, "check", "CAM-GOOD", "--source", str(video))
     assert done.exit_code == 2 and "check reads a folder, glob or list of images, not a video" in done.stderr
+
+
+@pytest.mark.parametrize("n", [1, 3, 9])
+def test_below_the_views_its_statistics_need_check_cannot_judge_and_stores_nothing(db: str, assets, tmp_path, n) -> None:
+    few = tmp_path / "few"
+    few.mkdir()
+    for path in sorted(Path(assets["fixture"]).glob("*.png"))[:n]:
+        shutil.copy(path, few / path.name)
+    done = invoke(db, "check", "CAM-GOOD", "--source", str(few))
+    assert done.exit_code == 2, done.output
+    assert (f"cannot judge CAM-GOOD@1 from {n} board view(s) in {n} image(s): the check's statistics need at "
+            "least 10; nothing was stored") in done.stderr
+    assert f"take {10 - n} more pictures" in done.stderr
+    with Store.open(db) as store:
+        assert store.checks("CAM-GOOD") == []  # no FAIL written into the camera's history

@@ -29,7 +29,7 @@ def fisheye_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     run_synth(root / "cal", seed=1, views=12, fisheye_fov_deg=150.0)
-    run_synth(root / "fresh", seed=2, views=6, fisheye_fov_deg=150.0)
+    run_synth(root / "fresh", seed=2, views=10, fisheye_fov_deg=150.0)
     done = invoke(url, "calibrate", "--serial", "FE-0001", "--board", "A17", "--source", str(root / "cal"),
                   "--model", "fisheye")
     assert done.exit_code == 0, done.output
@@ -41,7 +41,7 @@ def test_fresh_views_of_the_same_fisheye_pass_through_the_fisheye_model(fisheye_
     done = invoke(url, "check", "FE-0001", "--source", str(fresh), "--json")
     assert done.exit_code == 0, done.output
     event = json.loads(done.stdout)
-    assert event["passed"] and len(event["views"]) == 6
+    assert event["passed"] and len(event["views"]) == 10
     overall = event["regions"][0]
     assert overall["region"] == "overall" and 0.5 < overall["ratio"] < overall["limit"]
     assert max(event["view_rms_px"]) < 0.1  # a pinhole refit leaves pixels here, not hundredths

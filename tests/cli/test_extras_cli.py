@@ -26,7 +26,10 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
     assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output and res.stdout == ""
     assert f"Error: {purpose} needs the Python package {package}, which is not installed" in res.stderr
-    assert f"Hint: install calibctl's {extra} extra: pip install 'calibctl[{extra}]'" in res.stderr
+    package = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}[extra]
+    assert f"Hint: install calibctl's {extra} extra into calibctl's own environment: pipx inject calibctl " \
+           f"'{package}' (pipx), uv tool install --with '{package}' calibctl" in res.stderr
+    assert "calibctl[" not in res.stderr  # never a package name no index publishes as ours
 
 
 def test_a_postgresql_store_without_psycopg_names_the_postgres_extra(monkeypatch):
@@ -51,3 +54,15 @@ def test_without_extras_a_sqlite_store_still_works(monkeypatch, tmp_path):
     _hide(monkeypatch, "matplotlib")
     res = runner.invoke(app, ["--db", f"sqlite:///{tmp_path / 's.db'}", "db", "upgrade"])
     assert res.exit_code == 0, res.output
+
+
+def test_the_hinted_packages_are_the_extras_in_pyproject():
+    import tomllib
+    from pathlib import Path
+
+    from calibctl.errors import MissingExtraError
+
+    extras = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
+    assert {name: extras[name] for name in MissingExtraError.PACKAGES} == {
+        name: [package] for name, package in MissingExtraError.PACKAGES.items()}

@@ -72,7 +72,7 @@ def test_import_gets_the_next_version_and_a_second_import_is_the_same_version(ru
     renamed = tmp_path / "renamed.json"
     renamed.write_bytes(path.read_bytes())
     again = run(sqlite_url, "import", str(renamed))
-    assert again.exit_code == 0 and f"already imported as {SERIAL}@2" in again.stdout
+    assert again.exit_code == 0 and f"already stored as {SERIAL}@2" in again.stdout
     with Store.open(sqlite_url) as store:
         assert [a.version for a in store.list_artifacts(SERIAL)] == [1, 2]
         assert store.verify().problems == []
@@ -172,3 +172,43 @@ def test_a_nul_in_a_rollback_reason_or_operator_is_refused_before_the_database(r
     assert result.exit_code == 2 and "CALIBCTL_OPERATOR): its value holds control character \\x01" in result.stderr
     with Store.open(db_url) as store:
         assert store.active_version(SERIAL) == 3
+
+
+def test_importing_the_stores_own_export_is_a_no_op_and_never_undoes_a_rollback(run, sqlite_url, tmp_path):
+    with Store.open(sqlite_url) as store:
+        store.add_artifact(calibration(serial=SERIAL), activate=True, **WHO)
+        second = calibration(serial=SERIAL).model_copy(update={"camera_matrix": ((801.0, 0.0, 320.0), (0.0, 801.0, 240.0),
+                                                                                (0.0, 0.0, 1.0))})
+        store.add_artifact(second, activate=True, **WHO)
+    out = tmp_path / "v2.json"
+    assert run(sqlite_url, "export", f"{SERIAL}@2", "-o", str(out)).exit_code == 0
+    assert run(sqlite_url, "rollback", SERIAL, "--to", "1", "--reason", "v2 drifted").exit_code == 0
+    with Store.open(sqlite_url) as store:
+        events_before = store.events(SERIAL)
+    result = run(sqlite_url, "import", str(out))
+    assert result.exit_code == 0, result.output
+    assert f"already stored as {SERIAL}@2" in result.stdout and "not active" in result.stdout
+    with Store.open(sqlite_url) as store:
+        assert [a.version for a in store.list_artifacts(SERIAL)] == [1, 2]  # no duplicate version
+        assert store.active_version(SERIAL) == 1  # the rollback stands
+        assert store.events(SERIAL) == events_before  # nothing written at all
+    doc = json.loads(run(sqlite_url, "import", str(out), "--json").stdout)
+    assert doc["already_imported"] is True and doc["active"] is False and doc["artifact"]["version"] == 2
+
+
+@pytest.mark.parametrize(("update", "words"), [
+    ({"camera_matrix": ((805.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0))}, "fx 805.000 and fy 800.000 differ"),
+    ("sigma", "sigma_fx 0.9 and sigma_fy 0.3 differ"),
+])
+def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_nothing_stored(run, sqlite_url, tmp_path,
+                                                                                           update, words):
+    """fx + 5 px on a model that ties fx to fy, hash re-sealed, unsigned: it imported as accepted and active."""
+    art = calibration(serial=SERIAL, version=7)
+    if update == "sigma":
+        update = {"stdev": art.stdev.model_copy(update={"sigma": {**art.stdev.sigma, "fx": 0.9, "fy": 0.3}})}
+    path = _write(tmp_path / "forged.json", art.model_copy(update=update).sealed())
+    result = run(sqlite_url, "import", str(path))
+    assert result.exit_code == 1, result.output
+    assert words in result.stderr and "ties fx to fy" in result.stderr and "nothing was stored" in result.stderr
+    with Store.open(sqlite_url) as store:
+        assert store.serials() == []

@@ -267,6 +267,16 @@ def test_solve_report_onto_an_existing_page_exits_2_before_storing(run, tmp_path
     assert page.read_text(encoding="utf-8") == "an older store's page"
 
 
+def test_solve_report_onto_a_dangling_symlink_exits_2_before_storing(run, tmp_path):
+    """exists() is False for a dangling link: the solve was stored, then its page refused."""
+    page = tmp_path / f"{SERIAL}-v1-report.html"
+    page.symlink_to(tmp_path / "elsewhere.html")
+    result = run("solve", "--serial", SERIAL, "--report", str(tmp_path))
+    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, result.output
+    assert "no calibration is stored for" in run("history", SERIAL).stderr
+    assert page.is_symlink() and not (tmp_path / "elsewhere.html").exists()
+
+
 def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(run, db, tmp_path, monkeypatch):
     """The page checked is the one of the version about to be stored: a version stored meanwhile (another
     station) makes the store refuse, rather than store a version whose page was never checked."""

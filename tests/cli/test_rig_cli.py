@@ -142,3 +142,40 @@ def test_synth_rig_writes_folders_and_truth(tmp_path):
 def test_synth_rig_refuses_five_cameras(tmp_path):
     result = invoke("synth", str(tmp_path / "r"), "--rig", "5")
     assert result.exit_code == 2 and "--rig takes 2 to 4 cameras" in result.output
+
+
+def test_solve_folders_with_the_same_folder_twice_is_refused_before_detection(rig2):
+    result = invoke("rig", "solve-folders", "--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM0'}",
+                    "--cols", "9", "--rows", "6", "--square-mm", "25")
+    assert result.exit_code == 1, result.output
+    text = " ".join(result.output.split())
+    assert "rig solve-folders: the members are not distinct cameras: CAM0 and CAM1 hold 8 of the same files" in text
+    assert "Traceback" not in result.output
+
+
+@needs_datasets
+def test_the_real_left_folder_given_twice_as_a_copy_is_refused(tmp_path):
+    """The issue's case: opencv-left-right's left photos for both cameras (once as a byte copy)."""
+    left, _ = split_pairs(LEFT_RIGHT, tmp_path / "split", "left*.jpg", "right*.jpg")
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for p in left.iterdir():
+        (copy / p.name.replace("left", "right")).write_bytes(p.read_bytes())
+    result = invoke("rig", "solve-folders", "--source", f"L={left}", "--source", f"R={copy}",
+                    "--cols", "9", "--rows", "6", "--square-mm", "25")
+    assert result.exit_code == 1, result.output
+    assert "L and R hold" in result.output and "identical image(s)" in result.output
+
+
+def test_a_baseline_under_the_floor_fails_the_identity_rule(rig2, monkeypatch):
+    """(synth --rig --baseline-mm 0 still offsets the camera ~2 mm in depth, and the solve sees it at 3.9
+    sigma: no renderer makes a zero baseline, so this rig's 75 mm is read against a 100 mm floor.)"""
+    from calibctl.workflows.rig import rig_folders
+
+    real = rig_folders.identity.zero_baselines
+    monkeypatch.setattr(rig_folders.identity, "zero_baselines", lambda pairs: real(pairs, floor_mm=100.0))
+    result = invoke("--json", "rig", "solve-folders", *_sources(rig2))
+    assert result.exit_code == 1, result.output
+    doc = json.loads(result.output)
+    found = [f for f in doc["lint"] if f["rule"] == "rig-identity"]
+    assert doc["verdict"] == "fail" and "below the 100 mm floor" in found[0]["message"], doc["lint"]

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import shutil
+import stat
 import tempfile
 
 import pytest
@@ -194,6 +196,22 @@ def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_pat
     assert isinstance(r.exception, SystemExit) and not (tmp_path / "s.yaml").exists()
 
 
+def test_rig_export_and_rig_report_never_replace_a_fifo_or_a_symlink(db, rig2, tmp_path):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _capture(db, rig2)
+    assert invoke(db, "rig", "solve", "R1").exit_code == 0
+    fifo, link, victim = tmp_path / "s.yaml", tmp_path / "r.html", tmp_path / "victim"
+    os.mkfifo(fifo)
+    victim.write_text("not ours\n")
+    os.symlink(victim, link)
+    r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(fifo), "--force")
+    assert r.exit_code == 2 and f"cannot write {fifo}: it is a FIFO" in r.output
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    r = invoke(db, "report", "--rig", "R1", "-o", str(link), "--force")
+    assert r.exit_code == 2 and f"cannot write {link}: it is a symbolic link" in r.output, r.output
+    assert os.path.islink(link) and victim.read_text() == "not ours\n"
+
+
 def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_stores_nothing(db, rig2, tmp_path):
     """The right camera's frame numbers shifted by three (photos not taken together): exit 1, not 2."""
     right = tmp_path / "CAM1"
@@ -212,3 +230,111 @@ def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_store
     assert "CAM0-CAM1: per-frame baseline" in text and "Traceback" not in r.output
     r = invoke(db, "rig", "history", "R1")
     assert r.exit_code == 2 and "rig R1 has no calibration yet" in r.output
+
+
+def _stored(db) -> tuple[list, int, int]:
+    """(capture sessions, rig sessions, rig calibrations of R1) in the store."""
+    import sqlalchemy as sa
+
+    with Store.open(db) as store:
+        sessions = store.list_sessions()
+        with store._engine.connect() as conn:
+            rig_sessions = conn.execute(sa.text("SELECT count(*) FROM rig_sessions")).scalar_one()
+            solved = conn.execute(sa.text("SELECT count(*) FROM rig_calibrations")).scalar_one()
+        return sessions, rig_sessions, solved
+
+
+def test_the_same_folder_for_two_members_is_refused_and_nothing_is_stored(db, rig2, tmp_path):
+    """The operator's typo (the LEFT folder for both cameras), then a copy of it: exit 1 with the numbers."""
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={rig2 / 'CAM0'}")
+    assert r.exit_code == 1, r.output
+    text = " ".join(r.output.split())
+    assert "the members are not distinct cameras: CAM0 and CAM1 hold 8 identical image(s)" in text, text
+    assert "nothing was stored" in text and "Traceback" not in r.output
+    copy = tmp_path / "copy"
+    shutil.copytree(rig2 / "CAM0", copy)  # renamed files, same bytes
+    for p in copy.iterdir():
+        p.rename(copy / p.name.replace("CAM0", "CAM1"))
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}", "--source",
+               f"CAM1={copy}")
+    assert r.exit_code == 1 and "identical image(s)" in r.output
+    assert _stored(db) == ([], 0, 0)
+
+
+def test_a_re_encoded_copy_is_the_same_corners_and_is_refused(db, rig2, tmp_path):
+    import cv2
+
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for p in sorted((rig2 / "CAM0").iterdir()):  # new bytes (a PNG with another compression), the same pixels
+        cv2.imwrite(str(copy / p.name.replace("CAM0", "CAM1")), cv2.imread(str(p)), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={copy}")
+    assert r.exit_code == 1, r.output
+    assert "see the board at the same pixels" in " ".join(r.output.split())
+    assert _stored(db) == ([], 0, 0)
+
+
+def test_a_rig_capture_that_cannot_run_stores_no_member_session(db, rig2, tmp_path):
+    right = tmp_path / "CAM1"
+    right.mkdir()
+    for i, p in enumerate(sorted((rig2 / "CAM1").iterdir())):
+        shutil.copy(p, right / f"CAM1_{i + 100:04d}.png")  # no frame number in common
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+               "--source", f"CAM1={right}")
+    assert r.exit_code == 2 and "nothing pairs up" in r.output
+    assert _stored(db) == ([], 0, 0)
+
+
+def test_rig_member_sessions_are_not_picked_by_a_single_camera_solve_unless_named(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    assert _capture(db, rig2).exit_code == 0
+    sessions, rig_sessions, _ = _stored(db)
+    assert len(sessions) == 2 and rig_sessions == 1  # stored together
+    r = invoke(db, "solve", "--serial", "CAM1")
+    assert r.exit_code == 2, r.output
+    text = " ".join(r.output.split())
+    assert "no accepted capture session for serial 'CAM1'" in text and "rig member" in text
+    named = next(s for s in sessions if s.serial == "CAM1")
+    r = invoke(db, "solve", named.session_id)  # named, it is the session used (8 rig frames: too few alone)
+    assert r.exit_code == 2 and f"session {named.session_id} was rejected at capture" in r.output
+
+
+def test_a_session_stored_before_the_checks_existed_is_refused_at_solve(db, rig2, monkeypatch):
+    from calibctl.workflows.rig import rigs
+
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    with monkeypatch.context() as m:  # an older calibctl stored the typo without a word
+        m.setattr(rigs.identity, "refuse", lambda *a, **k: None)
+        assert invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
+                      "--source", f"CAM1={rig2 / 'CAM0'}").exit_code == 0
+    r = invoke(db, "rig", "solve", "R1")
+    assert r.exit_code == 1, r.output
+    assert "identical image(s)" in r.output and "nothing was stored" in " ".join(r.output.split())
+    assert _stored(db)[2] == 0
+
+
+def test_a_baseline_indistinguishable_from_zero_is_refused_before_storing(db, rig2, monkeypatch):
+    from calibctl.workflows.rig import rigs
+
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    assert _capture(db, rig2).exit_code == 0
+    real = rigs.identity.zero_baselines
+    monkeypatch.setattr(rigs.identity, "zero_baselines",  # this rig's 75 mm read against a 100 mm floor
+                        lambda pairs: real(pairs, floor_mm=100.0))
+    r = invoke(db, "rig", "solve", "R1")
+    assert r.exit_code == 1, r.output
+    assert "CAM0-CAM1 baseline 75." in r.output and "below the 100 mm floor" in " ".join(r.output.split())
+    assert _stored(db)[2] == 0
+
+
+def test_solve_of_a_session_under_another_serial_is_refused(db, rig2):
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    assert _capture(db, rig2).exit_code == 0
+    named = next(s for s in _stored(db)[0] if s.serial == "CAM1")
+    r = invoke(db, "solve", named.session_id, "--serial", "CAM0")
+    assert r.exit_code == 2 and f"session {named.session_id} is of camera CAM1, not CAM0" in r.output

@@ -113,3 +113,20 @@ def test_sqlite_writers_wait_longer_by_default_than_postgresql_row_locks():
     # SQLite's busy handler is not fair under many writers (see calibctl.store.engine); row locks are.
     assert lock_timeout_s({}, backend="sqlite") == 60.0 and lock_timeout_s({}, backend="postgresql") == 10.0
     assert lock_timeout_s({"CALIBCTL_DB_LOCK_TIMEOUT_S": "5"}, backend="sqlite") == 5.0
+
+
+@pytest.mark.parametrize(("driver_message", "words"), [
+    ("database or disk is full", "the disk of the store sqlite:///x.db is full; this transaction was not stored"),
+    ("disk I/O error", "could not write to its disk (disk I/O error)"),
+    ("attempt to write a readonly database", "is read-only for this user; nothing was written"),
+])
+def test_a_full_disk_and_a_read_only_store_are_named_as_such(driver_message, words):
+    import sqlite3
+
+    from sqlalchemy import exc as sa_exc
+
+    from calibctl.store.engine import make_engine, translate
+
+    engine = make_engine("sqlite:///x.db")
+    error = translate(sa_exc.OperationalError("INSERT", {}, sqlite3.OperationalError(driver_message)), engine)
+    assert words in error.message and error.hint and error.exit_code == 2

@@ -84,3 +84,29 @@ def test_several_images_are_stored_in_one_call_in_order(store: Store):
     assert store.image_path(shas[0]) is None and store.image_path(shas[1]) is not None
     with pytest.raises(UsageError, match="image retention must be 0 days or more, got -2"):
         store.put_images([PNG_A], retention_days=-2)
+
+
+def test_a_failed_captures_files_are_found_and_pruned_after_the_grace(store: Store, monkeypatch):
+    """Disk full (or a kill) between the files and their rows left files neither prune nor verify saw."""
+    from calibctl.errors import DatabaseError
+    from calibctl.store.images import ORPHAN_GRACE_S, image_file
+
+    kept = store.put_image(PNG_A, retention_days=30)
+    real_run = store._run
+
+    def full_disk(work, *, write=False, retry_conflicts=False):
+        if write:
+            raise DatabaseError("the disk of the store is full; nothing was written")
+        return real_run(work, write=write, retry_conflicts=retry_conflicts)
+
+    monkeypatch.setattr(store, "_run", full_disk)
+    with pytest.raises(DatabaseError):
+        store.put_images([PNG_B], retention_days=30)
+    monkeypatch.setattr(store, "_run", real_run)
+    orphan = image_file(store.image_dir, sha256_hex(PNG_B))
+    assert orphan.exists() and store.image_path(sha256_hex(PNG_B)) is None
+    assert store.orphan_images() == []  # within the grace: a capture may be about to commit its rows
+    later = utc_now() + dt.timedelta(seconds=ORPHAN_GRACE_S + 60)
+    assert store.orphan_images(later) == [orphan]
+    assert store.prune_images(later) == 1
+    assert not orphan.exists() and store.image_path(kept) is not None  # a kept image is never touched

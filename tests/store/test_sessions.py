@@ -71,3 +71,33 @@ def test_a_serial_with_sessions_but_no_calibration_is_not_called_unknown(store: 
     assert info.value.hint == "solve it: `calibctl solve --serial CAM-0001`"
     with pytest.raises(NotFoundError, match="unknown serial 'CAM-7'"):  # no session either: still unknown
         store.get_artifact("CAM-7")
+
+
+def test_a_rig_capture_stores_its_members_and_the_rig_session_together_or_not_at_all(store: Store):
+    from tests.store.rig_documents import rig_definition, rig_session
+
+    store.add_rig(rig_definition())
+    store.add_session(capture_session("0123456789ab", serial="CAM-0001"))
+    with pytest.raises(AlreadyExistsError, match="0123456789ab is already stored"):
+        store.add_rig_session(rig_session(), [capture_session("aaaaaaaaaaa9", serial="CAM-0002"),
+                                              capture_session("0123456789ab", serial="CAM-0001")])
+    assert [s.session_id for s in store.list_sessions()] == ["0123456789ab"]  # the first member rolled back too
+
+
+def test_latest_session_never_picks_a_rig_members_session(store: Store):
+    """A session taken for a rig (named in any rig session, old stores included) is solved only when named."""
+    from tests.store.rig_documents import rig_definition, rig_session
+
+    store.add_rig(rig_definition())
+    store.add_session(capture_session("aaaaaaaaaaa1", minutes_after=0))
+    member = rig_session()  # names 0123456789ab as CAM-0001's session
+    store.add_rig_session(member, [capture_session("0123456789ab", minutes_after=10)])
+    assert store.latest_session("CAM-0001").session_id == "aaaaaaaaaaa1"
+    assert store.get_session("0123456789ab").serial == "CAM-0001"  # named: still there
+    with pytest.raises(NotFoundError, match=r"no accepted capture session for serial 'CAM-0002'.*0123456789aa "
+                                            r"\(accepted, rig member\)") as info:
+        store.add_session(capture_session("0123456789aa", serial="CAM-0002", minutes_after=5))
+        store.add_rig_session(rig_session("fedcba987600").model_copy(
+            update={"camera_sessions": {"CAM-0001": "aaaaaaaaaaa1", "CAM-0002": "0123456789aa"}}))
+        store.latest_session("CAM-0002")
+    assert "name a rig member's session" in (info.value.hint or "")

@@ -238,6 +238,9 @@ def neighbour_correlation(gray: np.ndarray, stride: int = 4) -> float:
         x = lines.astype(np.float64)
         first, last = x[:, 0], x[:, -1]
         n = x.shape[0] * (x.shape[1] - 1)  # pairs (x[:, j], x[:, j + 1])
+        if n == 0:  # a one-pixel-wide image has no neighbours: nothing says it is noise
+            scores.append(1.0)
+            continue
         total, squares = float(x.sum()), float(np.einsum("ij,ij->", x, x))
         sum_a, sum_b = total - float(last.sum()), total - float(first.sum())
         var_a = squares - float(last @ last) - sum_a * sum_a / n

@@ -43,6 +43,7 @@ WRONG_SIZE = "wrong_size"
 UNREADABLE = "unreadable"
 STATUSES = (ACCEPTED, NO_BOARD, BAD_GRID, BLURRED, NEAR_DUPLICATE, WRONG_SIZE, UNREADABLE)
 
+MIN_IMAGE_SIDE_PX = 32  # a board of 2x2 inner corners needs more; 1x1 and 2x3 images divided by zero
 NEAR_DUPLICATE_FRAC = 0.01  # 8 px on a 640x480 image, 14.7 px on 1280x720
 DEFAULT_WORKERS = 2
 EXECUTORS = ("thread", "process")
@@ -95,6 +96,9 @@ def classify_array(name: str, path: str, gray: np.ndarray, sha256: str, spec: Bo
     """Detect and blur-check one decoded (H, W) uint8 image; the session decisions come later."""
     settings = settings or DetectorSettings()
     size = (int(gray.shape[1]), int(gray.shape[0]))
+    if min(size) < MIN_IMAGE_SIDE_PX:  # no board fits; the detectors' arithmetic assumes some pixels
+        return ImageOutcome(name, path, NO_BOARD, f"the image is only {size[0]}x{size[1]} px, too small to hold a "
+                            "board", size, sha256)
     start = time.perf_counter()
     detection, why = detect_board(gray, spec, settings)
     elapsed = time.perf_counter() - start
@@ -115,6 +119,27 @@ def _with_detection(outcome: ImageOutcome, detection: Detection) -> ImageOutcome
                    method=detection.method, edge_width_px=detection.edge_width_px)
 
 
+def decode_gray(data: bytes) -> np.ndarray | None:
+    """(H, W) uint8 from encoded image bytes; None when they are not a decodable image. Always from bytes
+    (never ``cv2.imread(path)``: a file name that is not UTF-8 crashed OpenCV with a segfault), and an
+    image over OpenCV's pixel limit (CV_IO_MAX_IMAGE_PIXELS) is None, not an exception."""
+    if not data:
+        return None
+    try:
+        gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    except cv2.error:
+        return None
+    return gray if gray is not None and gray.size > 0 else None
+
+
+def read_gray(path: str | Path) -> np.ndarray | None:
+    """``decode_gray`` of a file's bytes; None when it cannot be read or decoded."""
+    try:
+        return decode_gray(Path(path).read_bytes())
+    except OSError:
+        return None
+
+
 def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings | None = None,
                   on_decoded: DecodedCallback | None = None) -> ImageOutcome:
     """Read, hash, decode and detect one image file (safe to call in a worker process).
@@ -128,8 +153,8 @@ def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings 
     except OSError as exc:
         return ImageOutcome(path.name, str(path), UNREADABLE, f"cannot read the file: {exc.strerror}", None, "")
     digest = hashlib.sha256(data).hexdigest()
-    gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
-    if gray is None or gray.size == 0:
+    gray = decode_gray(data)
+    if gray is None:
         return ImageOutcome(path.name, str(path), UNREADABLE,
                             f"not a decodable image ({len(data)} bytes)", None, digest)
     if on_decoded is not None:

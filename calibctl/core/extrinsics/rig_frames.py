@@ -24,6 +24,7 @@ from pathlib import Path
 from calibctl.core.gate import GateResult
 
 MIN_SHARED_VIEWS = 5
+MAX_MIN_SHARED_VIEWS = 10_000
 _DIGITS = re.compile(r"\d+")
 
 
@@ -86,7 +87,10 @@ def _components(n: int, edges: Sequence[tuple[int, int]]) -> list[int]:
 
 def rig_connected_gate(cameras: Sequence[str], shared_views: Mapping[tuple[int, int], int],
                        min_shared_views: int = MIN_SHARED_VIEWS) -> GateResult:
-    """The ``rig-connected`` gate (module docstring). shared_views: (a, b) with a < b -> frames both saw."""
+    """The ``rig-connected`` gate (module docstring). shared_views: (a, b) with a < b -> frames both saw.
+    ValueError when ``min_shared_views`` is below 1 (a pair that shares no frame links nothing)."""
+    if not 1 <= min_shared_views <= MAX_MIN_SHARED_VIEWS:
+        raise ValueError(f"min_shared_views must be 1 to {MAX_MIN_SHARED_VIEWS}, got {min_shared_views}")
     edges = [p for p, n in shared_views.items() if n >= min_shared_views]
     comp = _components(len(cameras), edges)
     n_parts = len(set(comp))

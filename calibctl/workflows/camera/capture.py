@@ -188,9 +188,12 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
         raise UsageError(str(exc)) from exc
 
 
-def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None) -> CaptureResult:
+def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None, *,
+            store_session: bool = True) -> CaptureResult:
     """Run one capture and store its session (see the module docstring). Raises CalibctlError (exit 2)
-    when it cannot run; a session that fails the gates is stored as rejected and returned."""
+    when it cannot run; a session that fails the gates is stored as rejected and returned.
+    ``store_session=False``: the session is built and returned but not stored (a rig capture stores its
+    members' sessions together with the rig session, in one transaction); its images are stored."""
     observer = observer or CaptureObserver()
     board_name, revision = _check_request(request)
     source = sources.resolve_source(request.source)
@@ -211,7 +214,8 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
                 and session.status == "accepted" and session.image_size is not None):
             distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
                                            session.views, session.image_size, request.gauge_model)
-        store.add_session(session)
+        if store_session:
+            store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
                              tuple(got.ignored), distance, lens)
 
@@ -226,8 +230,8 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
     picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
     samples = []
     for name, path in picks:
-        gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if gray is not None:
+        gray = outcomes_core.read_gray(str(path))
+        if gray is not None and min(gray.shape[:2]) >= outcomes_core.MIN_IMAGE_SIDE_PX:  # probes need a picture
             samples.append((name, gray))
     return samples
 

@@ -95,6 +95,11 @@ class ImageSet:
     base: Path
     ignored: list[str]
 
+    def __post_init__(self) -> None:
+        # names are recorded and printed: a byte that is not UTF-8 or a control character becomes \xNN
+        object.__setattr__(self, "names", [bounded.printable(n) for n in self.names])
+        object.__setattr__(self, "ignored", [bounded.printable(n) for n in self.ignored])
+
 
 @dataclass(frozen=True)
 class Frame:

@@ -23,9 +23,9 @@ from calibctl.artifacts.check import CheckEvent, DistanceCheck, RegionCheck, Shi
 from calibctl.artifacts.common import utc_now
 from calibctl.config import Settings
 from calibctl.core.capture import image_outcomes as outcomes_core
-from calibctl.core.check.recheck import RecheckResult, Reference, recheck
+from calibctl.core.check.recheck import MIN_CHECK_VIEWS, RecheckResult, Reference, recheck
 from calibctl.core.intrinsics.validation import N_OCTANTS, N_RINGS
-from calibctl.errors import UsageError
+from calibctl.errors import InputError, UsageError
 from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera.distance_gauge import (
@@ -143,6 +143,11 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
             raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
                              "save a few board pictures from the camera and check those")
         views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref)
+        if len(views) < MIN_CHECK_VIEWS:  # refused before anything is stored: a FAIL here would be noise
+            raise InputError(f"cannot judge {art.ref} from {len(views)} board view(s) in {n_images} image(s): the "
+                             f"check's statistics need at least {MIN_CHECK_VIEWS}; nothing was stored",
+                             f"take {MIN_CHECK_VIEWS - len(views)} more pictures of the board (tilted, across the "
+                             "image) and check again")
         obj = spec.object_points()
         ids = [np.asarray(v.corner_ids) for v in views]
         result = recheck([obj[i] for i in ids], [np.asarray(v.corners_px) for v in views],

@@ -19,6 +19,7 @@ from typing import Any
 
 from calibctl.config import Settings
 from calibctl.errors import AlreadyExistsError
+from calibctl.files import write_atomic
 from calibctl.workflows.board import boards
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.camera.solve import SolveOutcome, SolveRequest, solve
@@ -69,7 +70,7 @@ def prepare_dir(out: Path) -> None:
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
-    (out / MARKER).write_text("made by calibctl demo; recreated on every run\n")
+    write_atomic(out / MARKER, "made by calibctl demo; recreated on every run\n")
 
 
 def run_demo(settings: Settings, out: Path, emit: Callable[[DemoStep], None]) -> SolveOutcome:

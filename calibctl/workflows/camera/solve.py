@@ -288,6 +288,9 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         session = (
             store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
         )
+        if request.session_id and request.serial and session.serial != request.serial:
+            raise UsageError(f"session {session.session_id} is of camera {session.serial}, not {request.serial}",
+                             "name the session alone, or the serial alone (its latest accepted session)")
         if session.status != "accepted":
             failed = ", ".join(g.gate for g in session.gates if not g.passed) or "capture gates"
             raise UsageError(

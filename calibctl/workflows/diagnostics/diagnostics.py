@@ -253,6 +253,31 @@ def sibling_paths(out_path: Path) -> dict[str, Path]:
             "gyro": parent / f"{stem}_gyro.csv", "camera": parent / f"{stem}_camera.csv"}
 
 
+MAX_SYNTH_ROWS = 5_000_000  # per file (~250 MB of CSV); --keyframes 10000000 grew to 21 GiB and was killed
+SYNTH_RATES_HZ = {"odometry": 50.0, "gyro": 200.0}  # the generators' sample rates (faults.synth_*)
+
+
+def check_synth_size(magnitude: float, noise_px: float, keyframes: int, features: int, cameras: int, slip: float,
+                     odometry_s: float, rate_log_s: float, drift_ppm: float) -> None:
+    """UsageError (exit 2) naming the limit, before anything is generated: every number finite, every
+    file at most ``MAX_SYNTH_ROWS`` rows."""
+    numbers = {"--magnitude": magnitude, "--noise-px": noise_px, "--slip": slip, "--odometry-s": odometry_s,
+               "--rate-log-s": rate_log_s, "--drift-ppm": drift_ppm}
+    bad = [f"{k} {v!r}" for k, v in numbers.items() if not (math.isfinite(v) and abs(v) <= 1e9)]
+    if bad:
+        raise UsageError(f"not a usable number: {', '.join(bad)}", "give finite values")
+    for name, value in {"--keyframes": keyframes, "--features": features, "--cameras": cameras}.items():
+        if value < 1:
+            raise UsageError(f"{name} must be 1 or more, got {value}")
+    sizes = {"residual rows (--keyframes x --features x --cameras)": keyframes * features * cameras,
+             "odometry rows (--odometry-s x 50 Hz)": odometry_s * SYNTH_RATES_HZ["odometry"],
+             "gyro rows (--rate-log-s x 200 Hz)": rate_log_s * SYNTH_RATES_HZ["gyro"]}
+    for what, rows in sizes.items():
+        if rows > MAX_SYNTH_ROWS:
+            raise UsageError(f"{what}: {rows:.0f} is over the limit of {MAX_SYNTH_ROWS} rows per file",
+                             "a synthetic buffer of a few hundred thousand rows shows every fault")
+
+
 def run_synth(out_path: Path, fault: str, magnitude: float | None = None, noise_px: float = 0.3, seed: int = 0,
               keyframes: int = 500, features: int = 80, cameras: int = 1, slip: float = 0.01,
               odometry_s: float = 600.0, rate_log_s: float = 20.0, drift_ppm: float = 0.0,
@@ -260,6 +285,7 @@ def run_synth(out_path: Path, fault: str, magnitude: float | None = None, noise_
     if fault not in faults.FAULTS:
         raise UsageError(f"unknown fault {fault!r}", hint=f"choose one of {', '.join(faults.FAULTS)}")
     mag = faults.DEFAULT_MAGNITUDE[fault] if magnitude is None else magnitude
+    check_synth_size(mag, noise_px, keyframes, features, cameras, slip, odometry_s, rate_log_s, drift_ppm)
     if fault == "gauge" and mag <= 0:
         raise UsageError("a gauge magnitude is a believed/true scale factor and must be positive (0.92 = 23/25 mm)")
     paths = sibling_paths(Path(out_path))

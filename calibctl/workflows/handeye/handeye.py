@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -215,6 +216,10 @@ def run_handeye(settings: Settings, path: Path, parent_frame: str, child_frame: 
     return write_outputs(result, outputs or Outputs())
 
 
+MAX_SYNTH_MOTION_ROWS = 100_000  # 1000x a real hand-eye log; --rows 10^9 had no bound
+MAX_SYNTH_NUMBER = 1e6  # deg, m, s, Hz: beyond this a synthetic log is nonsense (and 1e308 overflows)
+
+
 @dataclass(frozen=True)
 class SynthRequest:
     out: Path
@@ -238,6 +243,14 @@ def run_synth_motions(request: SynthRequest) -> dict:
         raise UsageError(f"unknown --shape '{request.shape}'", f"choose one of {', '.join(SHAPES)}")
     if request.excitation not in EXCITATIONS:
         raise UsageError(f"unknown --excitation '{request.excitation}'", f"choose one of {', '.join(EXCITATIONS)}")
+    if not 2 <= request.n <= MAX_SYNTH_MOTION_ROWS:
+        raise UsageError(f"--rows {request.n} is out of range (2 .. {MAX_SYNTH_MOTION_ROWS})",
+                         "a hand-eye log needs tens to hundreds of motions")
+    numbers = (request.amplitude_deg, request.noise_rotation_deg, request.noise_translation_m, request.time_offset_s,
+               request.rate_hz, *request.translation_m, *request.rotation_deg)
+    if not all(math.isfinite(v) and abs(v) <= MAX_SYNTH_NUMBER for v in numbers):
+        raise UsageError(f"synth-motions needs finite numbers of at most {MAX_SYNTH_NUMBER:g}, got "
+                         f"{', '.join(f'{v:g}' for v in numbers if not (math.isfinite(v) and abs(v) <= MAX_SYNTH_NUMBER))}")
     if request.time_offset_s and request.shape == "motions":
         raise UsageError("a time offset needs a pose log in time", "use --shape poses with --time-offset-ms")
     T_a_b = se3.transform(se3.rotation_from_rotvec(np.radians(request.rotation_deg)), np.array(request.translation_m))

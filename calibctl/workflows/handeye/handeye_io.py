@@ -37,6 +37,8 @@ LEVER_ARM_MAX_M = 5.0  # no two sensors on one rigid body (arm, vehicle) are fur
 ROBOT_REACH_MAX_M = 5.0  # a base->gripper translation beyond this is millimetres, not an arm
 TIME_COLUMNS = ("t_s", "a_t_s", "b_t_s")
 
+MAX_TRANSLATION_M = 1e8  # ECEF coordinates are ~6.4e6 m; nothing a robot logs is 100 000 km away
+
 
 def rotation_columns(prefix: str) -> dict[str, tuple[str, ...]]:
     return {
@@ -103,6 +105,11 @@ def read_transforms(table: dio.Table, prefix: str) -> np.ndarray:
     """(n, 4, 4) transforms of ``prefix``."""
     R = read_rotations(table, prefix)
     t = _stack(table, translation_columns(prefix))
+    bad = ~(np.abs(t) <= MAX_TRANSLATION_M).all(axis=1)
+    if bad.any():  # 1e308 passed the finite check, then overflowed the solve into an SVD traceback
+        raise InputError(f"{table.path.name}: {prefix} translation over {MAX_TRANSLATION_M:g} m at "
+                         f"{_bad_lines(table, bad)} (up to {np.abs(t).max():.3g} m)",
+                         hint="translations are in metres; is a column in another unit, or corrupt?")
     return np.array([se3.transform(Ri, ti) for Ri, ti in zip(R, t, strict=True)])
 
 

@@ -7,8 +7,9 @@ the result is this store's verdict. The source ``serial@version`` and its sha256
 ``provenance.imported_from``; the artifact gets this store's next version (``keep_version``: the source
 version, only when it is the next one) and a new hash. A rejected import is stored but never activated.
 
-Importing the same source artifact again (same serial@version and hash, whatever the file is called)
-returns the version it got the first time (no new version).
+Importing the same content again is a no-op: this store's own export brought back (its content_sha256
+is a stored version's) or a source imported before (same serial@version and hash, whatever the file is
+called) returns the version it already has, and never activates anything (a rollback since stays).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import Settings
-from calibctl.errors import UsageError
+from calibctl.errors import InconsistentDataError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 from calibctl.workflows.store_admin import keys, records
@@ -57,13 +58,44 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
+FIX_ASPECT_RATIO = 2  # cv2.CALIB_FIX_ASPECT_RATIO (no cv2 import for a number)
+TIED_REL_TOL = 1e-9
+
+
+def check_self_consistent(art: CalibrationArtifact) -> None:
+    """InconsistentDataError (exit 1, nothing stored) when the artifact contradicts the solve it names: a
+    pinhole solve with CALIB_FIX_ASPECT_RATIO from calibctl's unit start keeps fx / fy at exactly 1 (and
+    sigma_fx = sigma_fy), measured 0.0 on every model of the opencv-left-right cameras; a forged fx + 5 px
+    with its hash re-sealed imported as accepted and active."""
+    tied = art.model.opencv_flags & FIX_ASPECT_RATIO or "CALIB_FIX_ASPECT_RATIO" in art.model.flag_names
+    if art.model.name == "fisheye" or not tied:
+        return
+    fx, fy = art.camera_matrix[0][0], art.camera_matrix[1][1]
+    sigma = art.stdev.sigma
+    problems = []
+    if abs(fx / fy - 1.0) > TIED_REL_TOL:
+        problems.append(f"fx {fx:.3f} and fy {fy:.3f} differ")
+    if "fx" in sigma and "fy" in sigma and abs(sigma["fx"] - sigma["fy"]) > TIED_REL_TOL * max(sigma["fy"], 1e-12):
+        problems.append(f"sigma_fx {sigma['fx']:.4g} and sigma_fy {sigma['fy']:.4g} differ")
+    if problems:
+        raise InconsistentDataError(
+            f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
+            "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
+            "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not")
+
+
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
-    """The version an earlier import of the same source artifact (same ref and hash, any file name) got."""
+    """The version this store already holds of the same content: the source itself (this store's own
+    export brought back: same content_sha256), or what an earlier import of it (same ref and hash, any
+    file name) got."""
     if source.serial not in store.serials():
         return None
+    stored = store.list_artifacts(source.serial)
+    own = next((a for a in stored if a.content_sha256 == source.content_sha256), None)
+    if own is not None:
+        return own
     key = f"{source.ref} sha256 {source.content_sha256} "
-    return next((a for a in store.list_artifacts(source.serial)
-                 if (a.provenance.imported_from or "").startswith(key)), None)
+    return next((a for a in stored if (a.provenance.imported_from or "").startswith(key)), None)
 
 
 def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
@@ -74,6 +106,7 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
     if previous is not None:
         active = store.active_version(source.serial) == previous.version
         return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)
+    check_self_consistent(source)
     mine = rederive(source, settings, label)
     if keep_version:
         expected = store.next_version(source.serial)

@@ -20,7 +20,7 @@ from calibctl.config import Settings
 from calibctl.core.intrinsics import report_maps
 from calibctl.core.intrinsics.solve import is_fisheye
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError, NotFoundError
-from calibctl.files import file_errors, write_atomic
+from calibctl.files import existing_target, file_errors, write_atomic
 from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.report.report_data import ReportData, ViewCorners
 from calibctl.workflows.report.report_html import render_html
@@ -121,7 +121,7 @@ def ready_page(folder: Path, serial: str, version: int) -> Path:
     ``ready_folder`` checked; one that exists already is refused up front (it is never overwritten),
     so a solve is not stored and then left without its report."""
     path = page_path(serial, version, folder)
-    if path.exists():
+    if existing_target(path) is not None:  # a symlink, FIFO or device there is refused too, before any store
         raise AlreadyExistsError(f"{path} already exists; nothing was stored",
                                  "move it away, or give --report another folder (a solve never overwrites a report)")
     return path

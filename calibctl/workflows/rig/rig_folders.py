@@ -29,7 +29,9 @@ from calibctl.config import LintThresholds
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
+from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import (
+    MAX_MIN_SHARED_VIEWS,
     MIN_SHARED_VIEWS,
     FrameMatch,
     match_frames,
@@ -88,6 +90,13 @@ class RigFolderRun:
     def passed(self) -> bool:
         """The rig gate passed and the verdict has no error (exit 0)."""
         return self.gate.passed and not has_errors(list(self.findings))
+
+
+def check_min_shared_views(n: int) -> None:
+    """UsageError for a rig gate that links nothing (below 1) or nothing can meet."""
+    if not 1 <= n <= MAX_MIN_SHARED_VIEWS:
+        raise UsageError(f"--min-shared-views {n} is out of range (1 .. {MAX_MIN_SHARED_VIEWS})",
+                         f"the default is {MIN_SHARED_VIEWS} frames per linking pair")
 
 
 def parse_sources(items: Sequence[str]) -> dict[str, Path]:
@@ -168,9 +177,13 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
             mixes image sizes, or a camera's photos differ in size from its intrinsics.
         NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
+    check_min_shared_views(min_shared_views)
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
+    same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
+    identity.refuse([replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
+                     for f in identity.shared_images(same_files)], "rig solve-folders")  # before any detection
     match = match_frames(photos)
     if not match.frames:
         raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
@@ -197,6 +210,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
                              hint="use the calibration made at this resolution, or re-calibrate the camera")
         members.append(given)
     views = rig_views(cameras, match, outcomes, spec)
+    identity.refuse(identity.shared_images({n: [o.sha256 for o in outcomes[n] if o.corners_px is not None]
+                                            for n in cameras}) + identity.same_corners(views), "rig solve-folders")
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
     run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
     if not gate.passed:
@@ -221,8 +236,12 @@ def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool
         return replace(run, findings=(rigid, *misfit))
     rows = {m.name: m.image_size[1] for m in members}
     bad_lens = {name for name, found in lens.items() if found}
-    findings = solved_rig_findings(rig_pairs(solution, holdout), rig_loops(loops), rows, (), limits, bad_lens)
-    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*findings, *misfit))
+    pairs = rig_pairs(solution, holdout)
+    findings = solved_rig_findings(pairs, rig_loops(loops), rows, (), limits, bad_lens)
+    same = [Finding(rule="rig-identity", severity="error", message=f.message,
+                    fix="give each camera its own photos (was the same folder given twice?)")
+            for f in identity.zero_baselines(identity.pair_translations(solution))]
+    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*same, *findings, *misfit))
 
 
 def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair]:

@@ -37,8 +37,10 @@ from calibctl.artifacts.rig import (
     RigSession,
     UnmatchedImage,
 )
+from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.board.views import BoardView
+from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import MIN_SHARED_VIEWS, match_frames, rig_connected_gate
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
@@ -48,7 +50,7 @@ from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.handeye import rig_handeye
-from calibctl.workflows.rig.rig_folders import rig_loops, rig_pairs
+from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -114,6 +116,7 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
 def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], board: str,
                 min_shared_views: int = MIN_SHARED_VIEWS) -> RigCaptureResult:
     """Capture every member, pair the images into frames, apply the rig gate; store the rig session."""
+    check_min_shared_views(min_shared_views)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
     extra = [c for c in sources if c not in rig.cameras]
@@ -122,7 +125,10 @@ def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], b
         raise UsageError(f"rig {rig.name} has cameras {', '.join(rig.cameras)}; "
                          + (f"unknown: {', '.join(extra)}" if extra else f"no --source for {', '.join(missing)}"),
                          hint="pass one --source SERIAL=FOLDER per member")
-    results = {c: capture(settings, CaptureRequest(serial=c, board=board, source=sources[c])) for c in rig.cameras}
+    results = {c: capture(settings, CaptureRequest(serial=c, board=board, source=sources[c]), store_session=False)
+               for c in rig.cameras}
+    identity.refuse(identity.shared_images({c: [v.image_sha256 for v in r.session.views] for c, r in results.items()}),
+                    f"rig {rig.name} capture")
     names = {c: [o.name for o in r.session.outcomes] for c, r in results.items()}
     match = match_frames(names)
     if not match.frames:
@@ -145,8 +151,11 @@ def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], b
         shared_views={f"{cams[a]}-{cams[b]}": n for (a, b), n in counts.items()}, gates=[gate],
         status="accepted" if g.passed else "rejected", created_at=utc_now(), station=settings.station,
         operator=settings.operator)
-    with open_store(settings) as store:
-        store.add_rig_session(session)
+    identity.refuse(identity.same_corners(_session_views(list(rig.cameras), session,
+                                                        {c: r.session for c, r in results.items()})),
+                    f"rig {rig.name} capture")
+    with open_store(settings) as store:  # every member's session and the rig session, or none
+        store.add_rig_session(session, [results[c].session for c in rig.cameras])
     return RigCaptureResult(session, results)
 
 
@@ -166,10 +175,10 @@ def member_intrinsics(art: CalibrationArtifact) -> MemberIntrinsics:
                             free_int, free_dist, aspect, cov, lens)
 
 
-def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store: object) -> tuple[RigViews, dict]:
+def _session_views(order: Sequence[str], session: RigSession, cam_sessions: Mapping[str, CaptureSession]) -> RigViews:
+    """The rig session's frames as RigViews over the members' stored corners."""
     from calibctl.workflows.board.boards import board_spec
 
-    cam_sessions = {c: store.get_session(session.camera_sessions[c]) for c in order}  # type: ignore[attr-defined]
     spec = board_spec(cam_sessions[order[0]].board)
     by_name = {c: {v.name: v for v in s.views} for c, s in cam_sessions.items()}
     rows = []
@@ -179,8 +188,13 @@ def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store:
             v = by_name[c].get(frame.images.get(c, ""))
             row.append(BoardView(v.name, np.array(v.corner_ids), np.array(v.corners_px)) if v else None)
         rows.append(tuple(row))
-    views = RigViews(tuple(order), spec.object_points(), tuple(str(f.key) for f in session.frames), tuple(rows))
-    return views, cam_sessions
+    return RigViews(tuple(order), spec.object_points(), tuple(str(f.key) for f in session.frames), tuple(rows))
+
+
+def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store: object
+           ) -> tuple[RigViews, dict[str, CaptureSession]]:
+    cam_sessions = {c: store.get_session(session.camera_sessions[c]) for c in order}  # type: ignore[attr-defined]
+    return _session_views(order, session, cam_sessions), cam_sessions
 
 
 def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | None = None,
@@ -205,6 +219,9 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
                 raise InputError(f"rig member {c}: the capture is {size[0]}x{size[1]} but its calibration "
                                  f"{arts[c].ref} is {arts[c].image_size[0]}x{arts[c].image_size[1]}",
                                  hint="capture at the calibrated resolution, or re-calibrate the camera")
+        what = f"rig {rig.name} session {session.rig_session_id}"
+        identity.refuse(identity.shared_images({c: [v.image_sha256 for v in cam_sessions[c].views] for c in order})
+                        + identity.same_corners(views), what)  # a session stored before these checks existed
         members = [member_intrinsics(arts[c]) for c in order]
         solution = solve_rig(views, members, refine_intrinsics, model)
         holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
@@ -229,6 +246,7 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
                                   station=settings.station, operator=settings.operator, created_at=utc_now(),
                                   session_id=session.rig_session_id),
             content_sha256=UNSEALED)
+        identity.refuse(identity.zero_baselines(identity.pair_translations(solution)), what)
         findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint)
         cal = cal.model_copy(update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"})
         cal, base = _with_carried_handeye(cal, store)

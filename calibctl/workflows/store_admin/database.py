@@ -63,6 +63,7 @@ class VerifyReport:
     signatures_checked: int = 0
     unsigned: int = 0
     trusted_keys: int = 0
+    orphan_images: int = 0  # image files no row refers to (a failed capture's); `calibctl prune` removes them
 
     @property
     def ok(self) -> bool:
@@ -99,4 +100,5 @@ def verify(
         return VerifyReport(
             store.url, store.counts(), audit.problems, audit.head(), since, audit.records_checked,
             audit.signatures_checked, audit.unsigned, len(trusted.keys),
+            orphan_images=len(store.orphan_images()),
         )

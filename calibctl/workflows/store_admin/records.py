@@ -166,12 +166,18 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
     return art
 
 
+MAX_REASON_CHARS = 2000
+
+
 def check_rollback_request(to_version: int, reason: str) -> None:
     """What a rollback (camera or rig) refuses before it opens the store: no reason, a reason with
     control characters, a version out of range."""
     if not reason.strip():
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
     bounded.check_text(reason, "--reason", "the reason")
+    if len(reason) > MAX_REASON_CHARS:  # kept forever in the chained event log, printed in every history
+        raise UsageError(f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
+                         "say why in a sentence or two; put long notes in the ticket the reason names")
     if not 1 <= to_version <= MAX_VERSION:
         raise UsageError(f"version {to_version} is out of range", f"versions go from 1 to {MAX_VERSION}")
 

@@ -39,7 +39,7 @@ from calibctl.core.synth.pinhole import (
 )
 from calibctl.core.synth.scenes import SCENARIOS, scenario_poses, video_plan
 from calibctl.errors import AlreadyExistsError, InputError, UsageError
-from calibctl.files import file_errors, write_atomic
+from calibctl.files import existing_target, file_errors, write_atomic
 
 TRUTH_SCHEMA = "calibctl.synth.truth/1"
 DEFAULT_VIEWS = 12
@@ -88,10 +88,11 @@ def _prepare_out(out: Path, force: bool) -> None:
     if out.is_dir() and any(out.iterdir()):
         if not force:
             raise AlreadyExistsError(f"{out} is not empty", "choose an empty or new folder, or pass --force")
+        olds = list(out.glob("view-*.png")) + [out / VIDEO_FILE, out / TRUTH_FILE]
+        ours = [old for old in olds if existing_target(old) is not None]  # a symlink/FIFO there: refused, kept
         with file_errors("clear", out):
-            for old in list(out.glob("view-*.png")) + [out / VIDEO_FILE, out / TRUTH_FILE]:
-                if old.is_file():
-                    old.unlink()
+            for old in ours:
+                old.unlink()
     with file_errors("create", out):
         out.mkdir(parents=True, exist_ok=True)
 

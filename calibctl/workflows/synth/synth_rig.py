@@ -27,6 +27,7 @@ import numpy as np
 from calibctl import __version__
 from calibctl.core.synth.rig import render_rig_frame, synthesize_rig
 from calibctl.errors import InputError, UsageError
+from calibctl.files import write_atomic
 from calibctl.workflows.synth.synth import default_board
 
 RIG_TRUTH_SCHEMA = "calibctl.synth.rig_truth/1"
@@ -77,8 +78,10 @@ def run_synth_rig(out: Path, n_cameras: int, seed: int = 0, frames: int | None =
             if image is None:
                 continue
             path = out / truth.names[c] / f"{truth.names[c]}_{f:04d}.png"
-            if not cv2.imwrite(str(path), image):
-                raise InputError(f"cannot write {path}")
+            ok, png = cv2.imencode(".png", image)
+            if not ok:
+                raise InputError(f"cannot encode {path}")
+            write_atomic(path, png.tobytes(), force=True)
             counts[c] += 1
             seen.append(truth.names[c])
         frame_records.append({"frame": f, "T_root_board": truth.T_root_board[f].tolist(), "seen_by": seen})
@@ -94,5 +97,5 @@ def run_synth_rig(out: Path, n_cameras: int, seed: int = 0, frames: int | None =
         "frames": frame_records,
     }
     truth_path = out / RIG_TRUTH_FILE
-    truth_path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    write_atomic(truth_path, json.dumps(doc, indent=1) + "\n", force=True)
     return RigSynthResult(out, truth.names, n_frames, tuple(counts), truth_path)
