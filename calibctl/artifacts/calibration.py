@@ -178,9 +178,10 @@ class CalibrationArtifact(Document):
     rms_px: float = Field(ge=0, description="fit reprojection RMS (OpenCV's definition), pixels")
     detector_rms_px: float | None = Field(
         None, ge=0, exclude_if=lambda value: value is None,
-        description="what the corner detector delivers on this set, per-corner RMS from local quadratic fits of "
-        "4x4 corner blocks (no lens model), pixels; the model-misfit rule compares rms_px with it; absent in "
-        "artifacts made before the rule")
+        description="what the corners deliver on this set (the noise floor), per-corner RMS, pixels: the smaller "
+        "of local quadratic fits of 4x4 corner blocks (no lens model) and the best lens model's (fisheye, rational) "
+        "own residuals corrected for its degrees of freedom; the model-misfit rule compares rms_px with it; "
+        "absent in artifacts made before the rule")
     held_out: HeldOut = Field(description="held-out validation")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")

@@ -35,7 +35,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
 from calibctl.core.intrinsics import solve as core_solve
-from calibctl.core.intrinsics.model_fit import detector_rms_px
+from calibctl.core.intrinsics.model_fit import noise_floor_px
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.outliers import (
     CornerRejection,
@@ -216,8 +216,10 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
         session, request)
     model_points = board_spec(session.board).object_points()
-    detector_rms = detector_rms_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
-                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]))
+    # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
+    detector_rms = noise_floor_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
+                                  rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]),
+                                  session.image_size)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(

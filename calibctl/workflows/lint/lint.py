@@ -282,7 +282,8 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
         ]
     return adopt(
         lens_checks.check_outer_ring_holdout(
-            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max
+            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max,
+            model=facts.model_name,
         )
     )
 
@@ -332,10 +333,27 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings += _misfit_rule(facts)
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
-        foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
-                    else lens_checks.check_distortion_foldover)
-        findings += adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
-    return findings
+        if facts.distortion_model == "equidistant":
+            findings += adopt(lens_checks.check_equidistant_foldover(K, facts.dist_coeffs, size, facts.image_circle))
+        else:
+            findings += adopt(lens_checks.check_distortion_foldover(K, facts.dist_coeffs, size, facts.image_circle,
+                                                                    model=facts.model_name))
+    return _misfit_first(findings)
+
+
+# Rules whose fix assumes the lens model describes the lens: when model-misfit fails, their numbers are the
+# misfit's symptoms (k1k2 on a fisheye also scatters sigma, the outer ring and the view groups) and their
+# own fixes send the user the wrong way ("make the corners sharp", "two cameras").
+_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-foldover")
+
+
+def _misfit_first(findings: list[Finding]) -> list[Finding]:
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay)."""
+    misfit = next((f for f in findings if f.rule == "model-misfit"), None)
+    if misfit is None:
+        return findings
+    first = f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from the misfit"
+    return [f.model_copy(update={"fix": first}) if f.rule in _MISFIT_SYMPTOMS else f for f in findings]
 
 
 def _status_rule(status: Any, ref: str) -> list[Finding]:
