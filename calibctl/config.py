@@ -65,6 +65,9 @@ class HandEyeGates(BaseModel):
     angle_mismatch_max_deg: float = Field(1.0, gt=0, description="|angle(A) - angle(B)| above this names a motion")
     mismatch_fraction_max: float = Field(0.1, ge=0, lt=1, description="largest fraction of mismatched motions")
     rotation_residual_max_deg: float = Field(1.0, gt=0, description="largest rotation residual RMS after the solve")
+    translation_scale_tolerance: float = Field(
+        0.01, gt=0, lt=0.25, description="largest |s - 1| of the translation scale between the sensors (beyond its "
+        "3 sigma): the metric gauge's tolerance, a fraction")
 
 
 class StationConfig(BaseModel):

@@ -42,7 +42,7 @@ from calibctl import __version__
 from calibctl.artifacts.board import BoardRevision, parse_board_ref
 from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
-from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.artifacts.session import CaptureSession, GateResult, MetricGauge, ViewCorners
 from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
@@ -76,7 +76,7 @@ from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
 from calibctl.workflows.camera.image_circles import checked_image_circle
-from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, solve
+from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, checked_override, solve
 
 MAX_WORKERS = 8
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
@@ -211,6 +211,9 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
                 and session.status == "accepted" and session.image_size is not None):
             distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
                                            session.views, session.image_size, request.gauge_model)
+            # the session carries the verdict: a failed gauge stops its solve (workflows.camera.solve)
+            session = session.model_copy(update={"metric_gauge": MetricGauge(
+                distance=distance, lens_model=lens, reference_source=request.reference_source)})
         store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
                              tuple(got.ignored), distance, lens)
@@ -477,16 +480,24 @@ def session_image_circle(given: tuple[float, float, float] | None, got: _Collect
 
 
 def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,
-              drop_outliers: bool = False, observer: CaptureObserver | None = None) -> CalibrateResult:
-    """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``)."""
+              drop_outliers: bool = False, observer: CaptureObserver | None = None,
+              override_gauge: str | None = None) -> CalibrateResult:
+    """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``). A failed
+    distance gauge stops it too, unless ``override_gauge`` gives the reason (recorded in the calibration)."""
     if model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    checked_override(override_gauge)
+    if override_gauge is not None and request.reference_distance is None:
+        raise UsageError("--override-gauge overrides a failed distance gauge, and none is asked for",
+                         "give --reference-distance and --reference-source, or leave --override-gauge out")
     # the gauge at capture judges the board distance through the lens this session is solved with
     captured = capture(settings, replace(request, gauge_model=gauge_model(model)), observer)
-    if not captured.passed:
+    gauge_only = captured.session.status == "accepted" and override_gauge is not None
+    if not captured.passed and not gauge_only:
         return CalibrateResult(captured, None)
     solved = solve(settings, SolveRequest(session_id=captured.session.session_id, model=model, activate=activate,
-                                          drop_outliers=drop_outliers))
+                                          drop_outliers=drop_outliers,
+                                          override_gauge=None if captured.passed else override_gauge))
     return CalibrateResult(captured, solved)
 
 
