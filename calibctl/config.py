@@ -39,6 +39,12 @@ class GateThresholds(BaseModel):
     tilt_max_deg: float = Field(45.0, gt=0, description="above this the detector's accuracy collapses")
     tilt_directions_min: int = Field(3, ge=1, le=4, description="tilt directions at least 90 deg apart needed (at most 4 fit)")
     min_views: int = Field(8, ge=3, description="fewest accepted views for a session to pass")
+    projection_sigma_max_px: float = Field(
+        5.0, gt=0, allow_inf_nan=False,
+        description="the decisive gate: worst projection one-sigma over the region, pixels (core.capture.projection_gate)")
+    projection_region: str = Field(
+        "auto", min_length=1, description="where the robot looks: auto (the image circle when one is known, else the "
+        "image), image, circle, or a box U0,V0,U1,V1 in pixels")
 
 
 class LintThresholds(BaseModel):

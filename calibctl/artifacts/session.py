@@ -23,7 +23,8 @@ ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_dupli
 class GateResult(Document):
     """One capture-time gate: its value against its threshold, and what the operator should do."""
 
-    gate: Literal["observability", "tilt", "coverage", "views", "one_camera"] = Field(description="which gate")
+    gate: Literal["observability", "tilt", "coverage", "views", "one_camera", "projection"] = Field(
+        description="which gate")
     passed: bool = Field(description="true when the gate is satisfied")
     value: float = Field(description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)")
     threshold: float = Field(description="the value it had to reach")
@@ -32,6 +33,9 @@ class GateResult(Document):
     detail: dict[str, float | int | str | list[str]] = Field(
         default_factory=dict, description="gate-specific extras (missing cells, directions seen, ...)"
     )
+    advisory: bool = Field(
+        False, exclude_if=lambda advisory: not advisory,
+        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) did not")
 
 
 class ImageOutcome(Document):

@@ -66,9 +66,16 @@ from calibctl.core.capture.image_circle import (
     detect_image_circle,
     half_size,
 )
+from calibctl.core.capture.projection_gate import (
+    ADVISORY_GATES,
+    parse_region,
+    projection_gate,
+    session_passed,
+    solve_for_gate,
+)
 from calibctl.core.gate import GateResult as CoreGateResult
-from calibctl.core.intrinsics.solve import DEFAULT_MODEL
-from calibctl.errors import InputError, UsageError
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL, IntrinsicsSolution
+from calibctl.errors import InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows.board.boards import board_spec
@@ -103,6 +110,9 @@ class CaptureRequest:
     # The lens model the gauge solves the session with, a MODELS name or "auto": calibrate's --model (the
     # lens the session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
     gauge_model: str = DEFAULT_MODEL
+    # The lens model the projection gate solves with: calibrate's --model (None, and for auto: the better fit
+    # of k1k2 and fisheye, core.capture.projection_gate)
+    lens_model: str | None = None
 
 
 @dataclass(frozen=True)
@@ -168,7 +178,7 @@ class _Collected:
 
 def core_thresholds(settings: Settings) -> GateThresholds:
     """The settings' gate thresholds (defaults < station file) as the core dataclass."""
-    return GateThresholds(**settings.gates.model_dump())
+    return GateThresholds(**settings.gates.model_dump(exclude={"projection_sigma_max_px", "projection_region"}))
 
 
 def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
@@ -429,8 +439,28 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
 
 
 def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
+    decided = any(g.gate == "projection" for g in gates)  # then tilt and coverage are guidance
     return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
-                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail),
+                       advisory=decided and g.gate in ADVISORY_GATES) for g in gates]
+
+
+def _projection(settings: Settings, request: CaptureRequest, views: Sequence[BoardView], model_points: np.ndarray,
+                image_size: tuple[int, int], circle: ImageCircle | None) -> CoreGateResult:
+    """The decisive gate (core.capture.projection_gate) over the station's region; exit 2 for a bad region."""
+    try:
+        region = parse_region(settings.gates.projection_region, image_size,
+                              None if circle is None else circle.as_tuple())
+    except ValueError as exc:
+        raise UsageError(f"station setting gates.projection_region: {exc}",
+                         "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels") from exc
+    obj = [model_points[np.asarray(v.corner_ids)] for v in views]
+    px = [np.asarray(v.corners_px, np.float64) for v in views]
+    try:
+        solution: IntrinsicsSolution | NumericalError = solve_for_gate(obj, px, image_size, request.lens_model)
+    except NumericalError as exc:
+        solution = exc
+    return projection_gate(solution, image_size, region, settings.gates.projection_sigma_max_px)
 
 
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
@@ -445,6 +475,8 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
                                   [np.asarray(v.corners_px, np.float64) for v in board_views],
                                   [v.name for v in board_views], got.image_size)
     gates = [*report.gates, two_cameras]
+    if all(g.passed for g in gates if g.gate in ("observability", "views")):  # not hopeless: judge the prediction
+        gates.append(_projection(settings, request, board_views, model_points, got.image_size, circle))
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -458,7 +490,7 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
-        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        image_size=got.image_size, status="accepted" if session_passed(gates) else "rejected",
         gates=_gate_records(gates), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
 
@@ -491,7 +523,8 @@ def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", 
         raise UsageError("--override-gauge overrides a failed distance gauge, and none is asked for",
                          "give --reference-distance and --reference-source, or leave --override-gauge out")
     # the gauge at capture judges the board distance through the lens this session is solved with
-    captured = capture(settings, replace(request, gauge_model=gauge_model(model)), observer)
+    captured = capture(settings, replace(request, gauge_model=gauge_model(model),
+                                         lens_model=None if model == "auto" else model), observer)
     gauge_only = captured.session.status == "accepted" and override_gauge is not None
     if not captured.passed and not gauge_only:
         return CalibrateResult(captured, None)

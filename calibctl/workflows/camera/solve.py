@@ -222,7 +222,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
     detector_rms = noise_floor_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]),
-                                  session.image_size)
+                                  sol.image_size)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
