@@ -47,6 +47,7 @@ from calibctl.core.extrinsics.rig_validation import (
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.gate import GateResult
 from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
 from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
 from calibctl.files import file_errors
@@ -132,7 +133,10 @@ def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec
 
 def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
                      image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
-    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit."""
+    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit;
+    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select)."""
+    if model == "auto":
+        model = select_model(list(object_points), list(corners_px), image_size).chosen
     m = get_model(model)
     sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
     cov = sol.covariance.covariance if sol.covariance is not None else None
@@ -168,6 +172,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
             mixes image sizes, or a camera's photos differ in size from its intrinsics.
         NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
+    if model != "auto":
+        get_model(model)  # an unknown name is a usage error before any photo is read
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
@@ -196,12 +202,25 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
                              f"{given.image_size[0]}x{given.image_size[1]}",
                              hint="use the calibration made at this resolution, or re-calibrate the camera")
         members.append(given)
+    if model == "auto":
+        model = _auto_rig_model(fits, refine_intrinsics)
     views = rig_views(cameras, match, outcomes, spec)
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
     run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
     if not gate.passed:
         return run
     return judged_solve(run, model, refine_intrinsics, limits or LintThresholds())
+
+
+def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:
+    """The rig solve's model once auto chose each member's: it only sets the flags of a jointly refined
+    two-camera solve, so members that chose differently cannot be refined together (UsageError)."""
+    chosen = {name: fit.model for name, fit in fits.items()}
+    if refine_intrinsics and len(set(chosen.values())) > 1:
+        listed = ", ".join(f"{name}: {m}" for name, m in chosen.items())
+        raise UsageError(f"--model auto chose different lens models for the cameras ({listed}); their intrinsics "
+                         "cannot be refined jointly", "leave out --refine-intrinsics, or give one --model for all")
+    return next(iter(chosen.values()), "k1k2")
 
 
 def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,
