@@ -39,6 +39,12 @@ class GateThresholds(BaseModel):
     tilt_max_deg: float = Field(45.0, gt=0, description="above this the detector's accuracy collapses")
     tilt_directions_min: int = Field(3, ge=1, le=4, description="tilt directions at least 90 deg apart needed (at most 4 fit)")
     min_views: int = Field(8, ge=3, le=100_000, description="fewest accepted views for a session to pass")
+    projection_sigma_max_px: float = Field(
+        5.0, gt=0, allow_inf_nan=False,
+        description="the decisive gate: worst projection one-sigma over the region, pixels (core.capture.projection_gate)")
+    projection_region: str = Field(
+        "auto", min_length=1, description="where the robot looks: auto (the image circle when one is known, else the "
+        "image), image, circle, or a box U0,V0,U1,V1 in pixels")
 
 
 class LintThresholds(BaseModel):
@@ -65,6 +71,9 @@ class HandEyeGates(BaseModel):
     angle_mismatch_max_deg: float = Field(1.0, gt=0, description="|angle(A) - angle(B)| above this names a motion")
     mismatch_fraction_max: float = Field(0.1, ge=0, lt=1, description="largest fraction of mismatched motions")
     rotation_residual_max_deg: float = Field(1.0, gt=0, description="largest rotation residual RMS after the solve")
+    translation_scale_tolerance: float = Field(
+        0.01, gt=0, lt=0.25, description="largest |s - 1| of the translation scale between the sensors (beyond its "
+        "3 sigma): the metric gauge's tolerance, a fraction")
 
 
 class StationConfig(BaseModel):

@@ -25,7 +25,7 @@ from calibctl.artifacts.common import (
     content_hash,
 )
 from calibctl.artifacts.lint import Finding
-from calibctl.artifacts.session import GateResult
+from calibctl.artifacts.session import GateResult, MetricGauge
 
 CALIBRATION_SCHEMA_VERSION: Literal[1] = 1
 _COVARIANCE_PARAMETERS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
@@ -143,6 +143,10 @@ class Provenance(Document):
     session_id: str | None = Field(None, description="capture session the corners came from")
     input_image_sha256: list[Sha256Hex] = Field(default_factory=list, description="sha256 of every input image")
     imported_from: str | None = Field(None, description="set when the artifact came from another store/file")
+    gauge_override: str | None = Field(
+        None, exclude_if=lambda reason: reason is None,
+        description="--override-gauge: why a failed metric gauge was overridden, in the operator's words; absent "
+        "when nothing was overridden")
 
 
 class RecordSignature(Document):
@@ -178,9 +182,10 @@ class CalibrationArtifact(Document):
     rms_px: float = Field(ge=0, description="fit reprojection RMS (OpenCV's definition), pixels")
     detector_rms_px: float | None = Field(
         None, ge=0, exclude_if=lambda value: value is None,
-        description="what the corner detector delivers on this set, per-corner RMS from local quadratic fits of "
-        "4x4 corner blocks (no lens model), pixels; the model-misfit rule compares rms_px with it; absent in "
-        "artifacts made before the rule")
+        description="what the corners deliver on this set (the noise floor), per-corner RMS, pixels: the smaller "
+        "of local quadratic fits of 4x4 corner blocks (no lens model) and the best lens model's (fisheye, rational) "
+        "own residuals corrected for its degrees of freedom; the model-misfit rule compares rms_px with it; "
+        "absent in artifacts made before the rule")
     held_out: HeldOut = Field(description="held-out validation")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")
@@ -192,6 +197,10 @@ class CalibrationArtifact(Document):
         description="corners removed from the solve (residual beyond the corner rule), largest first; "
         "absent when none was removed, and in artifacts made before the rule removed corners",
     )
+    metric_gauge: MetricGauge | None = Field(
+        None, exclude_if=lambda gauge: gauge is None,
+        description="the capture session's metric gauge (--reference-distance), carried into the calibration; "
+        "absent when the session had none")
     camera_consistency: CameraConsistency | None = Field(
         None, exclude_if=lambda check: check is None,
         description="two-camera check of the solved views; absent when too few views to split, and in "

@@ -11,6 +11,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
 
 SESSION_SCHEMA_VERSION: Literal[1] = 1
@@ -22,7 +23,8 @@ ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_dupli
 class GateResult(Document):
     """One capture-time gate: its value against its threshold, and what the operator should do."""
 
-    gate: Literal["observability", "tilt", "coverage", "views", "one_camera"] = Field(description="which gate")
+    gate: Literal["observability", "tilt", "coverage", "views", "one_camera", "projection"] = Field(
+        description="which gate")
     passed: bool = Field(description="true when the gate is satisfied")
     value: float = Field(description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)")
     threshold: float = Field(description="the value it had to reach")
@@ -31,6 +33,9 @@ class GateResult(Document):
     detail: dict[str, float | int | str | list[str]] = Field(
         default_factory=dict, description="gate-specific extras (missing cells, directions seen, ...)"
     )
+    advisory: bool = Field(
+        False, exclude_if=lambda advisory: not advisory,
+        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) did not")
 
 
 class ImageOutcome(Document):
@@ -62,6 +67,15 @@ class ViewCorners(Document):
         return self
 
 
+class MetricGauge(Document):
+    """The distance gauge judged at capture (seed chapter 0): the board in a surveyed fixture, seen through the
+    lens the session is solved with. A failed gauge stops the calibration unless overridden with a reason."""
+
+    distance: DistanceCheck = Field(description="surveyed against recovered board distance and the verdict")
+    lens_model: str = Field(description="the lens model the fixture pictures' poses were fitted through")
+    reference_source: str = Field(description="the fixture pictures (folder, glob or list)")
+
+
 class CaptureSession(Document):
     """One capture run for one camera serial with one board revision."""
 
@@ -83,3 +97,7 @@ class CaptureSession(Document):
     views: list[ViewCorners] = Field(default_factory=list, description="accepted views with their corners")
     calibctl_version: str = Field(description="calibctl version that captured")
     opencv_version: str = Field(description="OpenCV version of the detector")
+    metric_gauge: MetricGauge | None = Field(
+        None, exclude_if=lambda gauge: gauge is None,
+        description="--reference-distance: the metric gauge judged at capture; absent without one (and in sessions "
+        "captured before it was recorded)")

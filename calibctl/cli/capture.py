@@ -15,7 +15,13 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import OperatorOption, StationOption
 from calibctl.cli.render import emit_json, shown, stderr, stdout
 from calibctl.cli.report import print_gates
-from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, render_outcome
+from calibctl.cli.solve import (
+    ActivateOption,
+    DropOutliersOption,
+    ModelOption,
+    OverrideGaugeOption,
+    render_outcome,
+)
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
@@ -135,7 +141,8 @@ def print_distance(d: DistanceCheck) -> None:
     stdout.print(f"distance {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
                  f"(needs {d.ratio_limits[0]}-{d.ratio_limits[1]}) {verdict}", highlight=False)
     if not d.passed:
-        stdout.print(f"-> {distance_reason(d)}; do not solve this session", markup=False, highlight=False)
+        stdout.print(f"-> {distance_reason(d)}; the session carries the failed gauge: its solve is rejected unless "
+                     "--override-gauge REASON says why it does not apply", markup=False, highlight=False)
 
 
 ReferenceDistanceOption = Annotated[str | None, typer.Option(
@@ -237,6 +244,7 @@ def calibrate(
     image_circle: ImageCircleOption = None,
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
+    override_gauge: OverrideGaugeOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -254,7 +262,8 @@ def calibrate(
                                               image_circle=parse_image_circle(image_circle),
                                               reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
-        settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
+        settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs,
+        override_gauge=override_gauge))
     solved = result.solve
     if as_json:
         emit_json({"capture": result.capture.as_json(),

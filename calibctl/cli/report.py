@@ -65,10 +65,11 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
 
 def print_gates(gates: list[GateResult]) -> None:
     for g in gates:
-        mark = "[green]pass[/green]" if g.passed else "[red]FAIL[/red]"
-        value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera") else f"{g.value:g}"
+        # a proxy the projection gate overruled is guidance: it says what to capture, it does not refuse
+        mark = "[green]pass[/green]" if g.passed else "[yellow]guide[/yellow]" if g.advisory else "[red]FAIL[/red]"
+        value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera", "projection") else f"{g.value:g}"
         value = "-" if g.gate == "one_camera" and g.value == 0.0 else value  # not checked, or no split found
-        needs = "two cameras from" if g.gate == "one_camera" else "needs"  # the one gate with an upper limit
+        needs = {"one_camera": "two cameras from", "projection": "at most"}.get(g.gate, "needs")  # upper limits
         line = f"  gate {g.gate:<13} {mark}  {value} ({needs} {g.threshold:g})"
         circle = [g.detail.get(k) for k in ("image_circle_cx_px", "image_circle_cy_px", "image_circle_radius_px")]
         if g.gate == "coverage" and all(isinstance(v, int | float) for v in circle):

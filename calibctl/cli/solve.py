@@ -29,6 +29,10 @@ ModelOption = Annotated[
 ActivateOption = Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")]
 DropOutliersOption = Annotated[bool, typer.Option(
     "--drop-outliers", help="Re-solve without outlier views (implausible corners are always removed).")]
+OverrideGaugeOption = Annotated[str | None, typer.Option(
+    "--override-gauge", metavar="REASON", show_default=False,
+    help="Solve a session whose metric gauge (--reference-distance) failed into a calibration lint can accept; "
+         "REASON is recorded in its provenance and the failed gauge stays a lint warning.")]
 
 
 def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
@@ -58,6 +62,7 @@ def solve(
     model: ModelOption = "k1k2",
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
+    override_gauge: OverrideGaugeOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Print the artifact as JSON.")] = False,
     rig: Annotated[str | None, typer.Option("--rig", help="Solve this rig instead (SESSION_ID is then a rig session; "
                                             "same as `calibctl rig solve`).", show_default=False)] = None,
@@ -84,7 +89,8 @@ def solve(
             raise UsageError("--report is not available with --rig yet", "run `calibctl solve --rig` without it")
         # a rig solve keeps its members' calibrations: what shapes one camera's solve would be dropped silently
         one_camera = {"--serial": serial, "--model": model if _given(ctx, "model") else None,
-                      "--drop-outliers": drop_outliers or None, "--image-circle": image_circle}
+                      "--drop-outliers": drop_outliers or None, "--image-circle": image_circle,
+                      "--override-gauge": override_gauge}
         given = [flag for flag, value in one_camera.items() if value is not None]
         if given:
             raise UsageError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one camera, not to a "
@@ -98,7 +104,7 @@ def solve(
 
     request = solve_workflow.SolveRequest(
         session_id=session_id, serial=serial, model=model, activate=activate, drop_outliers=drop_outliers,
-        report_dir=report_dir, image_circle=parse_image_circle(image_circle))
+        report_dir=report_dir, image_circle=parse_image_circle(image_circle), override_gauge=override_gauge)
     outcome = solve_workflow.solve(state(ctx).settings(), request)
     render_outcome(outcome, wants_json(ctx, json_output))
 

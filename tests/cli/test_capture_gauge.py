@@ -29,6 +29,57 @@ def test_a_board_registered_at_23mm_passes_the_gates_and_fails_the_gauge(db: str
     with Store.open(db) as store:
         (session,) = store.list_sessions("CAM-NEW")
     assert session.status == "accepted"  # every gate passed: only the gauge sees it
+    # ... and the session carries the failed gauge (issue 22: it used to be forgotten once stored)
+    assert session.metric_gauge is not None and not session.metric_gauge.distance.passed
+    assert session.metric_gauge.distance.ratio == pytest.approx(0.92, abs=0.004)
+    assert session.metric_gauge.lens_model == "k1k2"
+
+
+def test_a_session_whose_gauge_failed_solves_only_into_a_rejected_calibration(db: str, assets) -> None:  # noqa: F811
+    """Chapter 0: `solve --serial` of the 23 mm session used to store an accepted, ACTIVE calibration."""
+    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    done = invoke(db, "solve", "--serial", "CAM-NEW", "--json")
+    assert done.exit_code == 1, done.output
+    art = json.loads(done.stdout)
+    assert art["status"] == "rejected" and art["metric_gauge"]["distance"]["passed"] is False
+    (gauge,) = [f for f in art["lint"] if f["rule"] == "metric-gauge"]
+    assert gauge["severity"] == "error" and "0.920x the surveyed 0.4500 m" in gauge["message"]
+    assert "--override-gauge REASON" in gauge["fix"]
+    with Store.open(db) as store:
+        assert store.active_version("CAM-NEW") is None
+
+
+def test_an_override_with_a_reason_is_recorded_and_lint_keeps_a_warning(db: str, assets) -> None:  # noqa: F811
+    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    reason = "fixture bracket bent; surveyed distance invalid until re-survey"
+    done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", reason, "--json")
+    assert done.exit_code == 0, done.output
+    art = json.loads(done.stdout)
+    assert art["status"] == "accepted" and art["provenance"]["gauge_override"] == reason
+    (gauge,) = [f for f in art["lint"] if f["rule"] == "metric-gauge"]
+    assert gauge["severity"] == "warning" and gauge["message"].endswith(f"overridden: {reason}")
+    linted = invoke(db, "lint", "--serial", "CAM-NEW", "--json")  # the stored verdict is the solve's
+    assert linted.exit_code == 0, linted.output
+    assert "overridden: " in linted.stdout
+
+
+@pytest.mark.parametrize("reason", ["", "   "])
+def test_an_override_without_a_reason_exits_2_and_stores_nothing(db: str, assets, reason: str) -> None:  # noqa: F811
+    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", reason)
+    assert done.exit_code == 2, done.output
+    assert "--override-gauge needs a reason" in done.stderr
+    with Store.open(db) as store, pytest.raises(NotFoundError):
+        store.list_artifacts("CAM-NEW")
+
+
+def test_an_override_of_a_gauge_that_passed_or_was_never_taken_exits_2(db: str, assets) -> None:  # noqa: F811
+    assert _capture(db, assets, "A17", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 0
+    done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", "just because")
+    assert done.exit_code == 2 and "passed its metric gauge; there is nothing to override" in done.stderr
+    plain = invoke(db, "calibrate", "--serial", "CAM-NEW", "--board", "A17", "--source", str(assets["good"]),
+                   "--override-gauge", "just because")
+    assert plain.exit_code == 2 and "none is asked for" in plain.stderr
 
 
 def test_the_right_board_passes_the_gauge_and_says_so_in_json(db: str, assets) -> None:  # noqa: F811
@@ -60,6 +111,16 @@ def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) 
     # no calibration was stored
     with Store.open(db) as store, pytest.raises(NotFoundError, match="no calibration is stored for 'CAM-NEW'"):
         store.list_artifacts("CAM-NEW")
+
+
+def test_calibrate_with_an_override_solves_and_records_it(db: str, assets) -> None:  # noqa: F811
+    done = invoke(db, "calibrate", "--serial", "CAM-NEW", "--board", "TYPO", "--source", str(assets["good"]),
+                  *GAUGE, "--reference-source", str(assets["fixture"]), "--override-gauge", "gauge under repair",
+                  "--json")
+    assert done.exit_code == 0, done.output
+    out = json.loads(done.stdout)
+    assert out["calibration"]["provenance"]["gauge_override"] == "gauge under repair"
+    assert out["calibration"]["metric_gauge"]["distance"]["ratio"] == pytest.approx(0.92, abs=0.004)
 
 
 # A fisheye station: the gauge judges through the lens the session is solved with (--model).

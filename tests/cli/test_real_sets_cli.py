@@ -76,10 +76,13 @@ def test_the_tilt_hint_does_not_deny_the_directions_the_table_shows(db: str, tmp
     for path in sorted(LEFT_RIGHT.glob("left0*.jpg")):
         shutil.copy(path, shots / path.name)
     r = invoke(db, "--json", "capture", "--serial", "L1", "--board", "A17", "--source", str(shots))
-    assert r.exit_code == 1, r.output
+    # issue 22: these 9 views predict the whole image within the projection gate's 5 px, so the session is
+    # accepted and the failed tilt proxy is guidance (advisory); its hint must still be right
+    assert r.exit_code == 0, r.output
     session = json.loads(r.stdout)["session"]
     tilt = next(g for g in session["gates"] if g["gate"] == "tilt")
-    assert not tilt["passed"] and tilt["reason"] == "tilt.directions"
+    assert not tilt["passed"] and tilt["reason"] == "tilt.directions" and tilt["advisory"]
+    assert next(g for g in session["gates"] if g["gate"] == "projection")["passed"]
     shown = {v["tilt_direction"] for v in session["views"] if 20.0 <= v["tilt_deg"] <= 45.0}
     assert len(shown) > len(tilt["detail"]["directions"])  # the case: more names than distinct directions
     assert "all lean toward" not in tilt["hint"]

@@ -28,7 +28,12 @@ After the solve, one more gate before the number is reported:
   same logs with a's translations in mm: s = 0.000998 / 0.001058 (lever arms of 1298 m / 406 m and
   translation residuals of 220 m / 7.5 m accepted before this gate); in cm 0.0100 / 0.0106, in
   inches 0.025 / 0.027, in feet 0.304 / 0.323. So a disagreement beyond 1.25x is refused; a factor
-  near 1000, 100, 39.4 or 3.28 is named as the unit.
+  near 1000, 100, 39.4 or 3.28 is named as the unit. Below that, a scale that differs from 1 by more than
+  its own 3 sigma AND the station's tolerance (``translation_scale_tolerance``, 1 % by default: the
+  distance gauge's limits, 0.99-1.01) is a metric-gauge verdict (seed chapter 0): one sensor's metres are
+  not the other's, for a camera through the board's square size (23 mm typed for 25 mm: s = 0.920 on a
+  noise-free rendered arm log, 0.920 +/- 0.0007 on issue 22's, 120 sigma from 1, accepted before this rule).
+  kuka_2's 1.058 (the 15 mm board against the robot's metres) is refused by it unless its sigma exceeds 2 %.
 
 Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.
 """
@@ -55,6 +60,7 @@ MIN_MOTIONS_FOR_OUTLIERS = 5
 MAX_NAMED = 5
 TRANSLATION_SCALE_MAX = 1.25  # real logs 1.00-1.06, a wrong unit >= 3.1 (feet); see the module docstring
 SCALE_DETERMINED_SIGMAS = 3.0  # |s - 1| within 3 sigma_s: the motions do not pin the scale, nothing to judge
+TRANSLATION_SCALE_TOLERANCE = 0.01  # the distance gauge's limits (workflows.camera.distance_gauge, 0.99-1.01)
 UNIT_FACTORS = (("millimetres", 1000.0), ("centimetres", 100.0), ("inches", 1 / 0.0254), ("feet", 1 / 0.3048))
 UNIT_FACTOR_TOL = 0.15  # a board's square size or an odometry's scale can add a few per cent to the unit's factor
 
@@ -66,10 +72,11 @@ class HandEyeThresholds:
     angle_mismatch_max_deg: float = ANGLE_MISMATCH_MAX_DEG
     mismatch_fraction_max: float = MISMATCH_FRACTION_MAX
     rotation_residual_max_deg: float = ROTATION_RESIDUAL_MAX_DEG
+    translation_scale_tolerance: float = TRANSLATION_SCALE_TOLERANCE
 
     def __post_init__(self) -> None:
         positive = (self.lever_arm_sigma_min, self.second_axis_min_deg, self.angle_mismatch_max_deg,
-                    self.rotation_residual_max_deg)
+                    self.rotation_residual_max_deg, self.translation_scale_tolerance)
         if not all(v > 0 for v in positive):
             raise ValueError("hand-eye thresholds must be positive")
         if not 0 <= self.mismatch_fraction_max < 1:
@@ -184,29 +191,44 @@ def _unit_named(factor: float) -> str | None:
     return None
 
 
-def translation_scale_gate(motions: Motions, fit: HandEyeFit, names: tuple[str, str] = ("a", "b")) -> GateResult:
-    """After the solve (and a passed consistency gate): are both sensors' translations in one unit?
+def translation_scale_gate(motions: Motions, fit: HandEyeFit, names: tuple[str, str] = ("a", "b"),
+                           tolerance: float = TRANSLATION_SCALE_TOLERANCE) -> GateResult:
+    """After the solve (and a passed consistency gate): are both sensors' translations in one unit and one
+    metric scale?
 
     Value: the disagreement factor max(|s|, 1/|s|) of the scale s on a's translations (see the module
-    docstring); a negative s (translations pointing against each other) fails whatever its size.
+    docstring); a negative s (translations pointing against each other) fails whatever its size. It passes
+    while |s - 1| is within 3 sigma or within ``tolerance`` (the station's, a fraction).
     """
     s, sigma = translation_scale(motions, fit.T_a_b[:3, :3])
     size = max(abs(s), 1e-300)
     factor = max(size, 1.0 / size)
     determined = abs(s - 1.0) > SCALE_DETERMINED_SIGMAS * sigma
     detail: dict[str, float | int | str | list[str]] = {
-        "scale_a": round(s, 9), "sigma_scale_a": round(sigma, 9) if math.isfinite(sigma) else "undetermined"}
+        "scale_a": round(s, 9), "sigma_scale_a": round(sigma, 9) if math.isfinite(sigma) else "undetermined",
+        "tolerance": tolerance}
     message = (f"{names[0]}'s translations fit {names[1]}'s at scale {s:.4g} (+/- {sigma:.2g}; "
-               f"max disagreement {TRANSLATION_SCALE_MAX:g}x)")
-    if not determined or (s > 0 and factor <= TRANSLATION_SCALE_MAX):
-        return GateResult("translation-scale", True, factor, TRANSLATION_SCALE_MAX, message, detail=detail)
+               f"tolerance {100 * tolerance:g} %)")
+    if not determined or (s > 0 and abs(s - 1.0) <= tolerance):
+        return GateResult("translation-scale", True, factor, 1.0 + tolerance, message, detail=detail)
     big = names[0] if abs(s) < 1 else names[1]
     unit = _unit_named(factor) if s > 0 else None
     if unit is not None:
-        return GateResult("translation-scale", False, factor, TRANSLATION_SCALE_MAX,
+        return GateResult("translation-scale", False, factor, 1.0 + tolerance,
                           f"translation units disagree: {message}: {big}'s translations look like {unit}, not metres",
                           "translation_scale.unit", f"convert {big}'s translations to metres", detail)
-    return GateResult("translation-scale", False, factor, TRANSLATION_SCALE_MAX,
+    if s > 0 and factor <= TRANSLATION_SCALE_MAX:
+        n_sigma = abs(s - 1.0) / sigma if sigma > 0 else math.inf
+        return GateResult("translation-scale", False, factor, 1.0 + tolerance,
+                          f"the metric gauge disagrees: {message}, {n_sigma:.0f} sigma from 1: one sensor's metres are "
+                          f"not the other's (seed chapter 0: a camera's scale is its board's square size; 23 mm "
+                          f"typed for 25 mm gives 0.920)",
+                          "translation_scale.metric_gauge",
+                          "gauge the metric scale: measure the board's squares (calipers) and register them "
+                          "(`calibctl board add`), check the camera with `calibctl check --reference-distance`, "
+                          "then recalibrate and solve again; a robot's or a LiDAR's translations are metric by "
+                          "construction", detail)
+    return GateResult("translation-scale", False, factor, 1.0 + tolerance,
                       f"translation scales disagree: {message}",
                       "translation_scale.mismatch",
                       "both logs must be metric and in metres: check the board's square size (it sets a camera's "

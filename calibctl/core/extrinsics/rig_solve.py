@@ -138,6 +138,8 @@ def _stereo(views: RigViews, members: Sequence[MemberIntrinsics], refine: bool,
     flags = (model_flags | cv2.CALIB_USE_INTRINSIC_GUESS) if refine else cv2.CALIB_FIX_INTRINSIC
     start = [np.array(a, dtype=np.float64) for a in (m0.camera_matrix, m0.dist_coeffs,
                                                      m1.camera_matrix, m1.dist_coeffs)]
+    if max(start[1].size, start[3].size) >= 8:  # rational members: without the flag OpenCV drops k4..k6 (and
+        flags |= cv2.CALIB_RATIONAL_MODEL        # returns 5 coefficients the rig's Jacobian cannot index)
     with single_threaded_opencv():
         out = cv2.stereoCalibrateExtended(obj, img[0], img[1], start[0], start[1], start[2], start[3], m0.image_size,
                                           np.eye(3), np.zeros((3, 1)), flags=flags, criteria=STEREO_CRITERIA)

@@ -84,19 +84,29 @@ OUTER_RING_MIN_EXCESS_PX = 0.05
 
 
 def check_outer_ring_holdout(holdout_outer_rms_px: float, fit_outer_rms_px: float,
-                             max_ratio: float = 1.1, min_excess_px: float = OUTER_RING_MIN_EXCESS_PX) -> Finding:
+                             max_ratio: float = 1.1, min_excess_px: float = OUTER_RING_MIN_EXCESS_PX,
+                             model: str | None = None) -> Finding:
     """Held-out outer-ring RMS <= max_ratio * fit outer-ring RMS (no overfit distortion), unless the
-    held-out excess is under min_excess_px (an absolute floor: tiny RMS values make any ratio noisy)."""
+    held-out excess is under min_excess_px (an absolute floor: tiny RMS values make any ratio noisy).
+    ``model`` (the solve's model name, when known) picks the fix: never "fewer coefficients" to k1k2."""
     ratio = holdout_outer_rms_px / fit_outer_rms_px if fit_outer_rms_px > 0 else float("inf")
     excess = holdout_outer_rms_px - fit_outer_rms_px
     ok = math.isfinite(ratio) and (ratio <= max_ratio or excess < min_excess_px)
     msg = (f"held-out outer-ring RMS {holdout_outer_rms_px:.4f} px vs fit outer-ring RMS "
            f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f} "
            f"(counted only when {min_excess_px:.2f} px or more above the fit; here {excess:.4f} px)")
-    return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else
-                   "the model does not carry over to held-out outer-ring corners: with more than k1 k2, solve "
-                   "with fewer coefficients (--model k1k2 or auto); with k1k2 already, capture more views with "
-                   "corners near the image edges and check that the board is flat")
+    more_views = "capture more views with corners near the image edges and check that the board is flat"
+    if model == "k1k2":
+        fix = f"the model does not carry over to held-out outer-ring corners: {more_views}"
+    elif model == "fisheye":
+        fix = f"the fisheye model does not carry over to held-out outer-ring corners: {more_views}"
+    elif model is not None:
+        fix = (f"the model does not carry over to held-out outer-ring corners: {model} may over-fit them; solve "
+               f"with fewer coefficients (--model k1k2 or auto), or {more_views}")
+    else:
+        fix = ("the model does not carry over to held-out outer-ring corners: with more than k1 k2, solve "
+               "with fewer coefficients (--model k1k2 or auto); with k1k2 already, " + more_views)
+    return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else fix)
 
 
 def check_image_size(image_size: tuple[int, int] | None, camera_matrix: np.ndarray) -> Finding:
@@ -193,7 +203,8 @@ def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
 
 def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                               image_size: tuple[int, int],
-                              image_circle: tuple[float, float, float] | None = None) -> Finding:
+                              image_circle: tuple[float, float, float] | None = None,
+                              model: str | None = None) -> Finding:
     """The distortion is one-to-one out to the farthest image corner (with ``image_circle`` (cx, cy, r)
     px: out to the farthest point of the image inside the circle, where the lens forms an image).
 
@@ -202,10 +213,14 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     the distorted normalised radius of the farthest image corner (it must reach it at all).
     Full model incl. tangential and thin-prism terms: the Jacobian determinant of
     (x, y) -> (x_d, y_d) must be positive on a polar grid over that same disc of r_u.
+    ``model`` (the solve's model name, when known) picks the fix: never "fewer coefficients" to k1k2.
     """
     rule, fix = "distortion-foldover", ("the distortion polynomial turns back inside the image: "
                                         "re-solve with fewer coefficients (--model k1k2) or with "
                                         "corners captured out to the image corners")
+    if model == "k1k2":
+        fix = ("the distortion polynomial turns back inside the image: capture corners out to the image corners "
+               "(it is extrapolated beyond the last one), or --model fisheye for a wide or fisheye lens")
     rd_corner = _farthest_corner_rd(camera_matrix, image_size, image_circle)
     edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
     r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner

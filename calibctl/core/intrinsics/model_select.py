@@ -25,7 +25,11 @@ Each rung is compared with the currently accepted model and accepted only if BOT
 All rungs share the radius rings of the starting model's fit, so "outer ring" is the same corners
 for every candidate. A rejected rung does not end the search: the next rung is still compared with the accepted model,
 because e.g. a decentred lens can need the tangential terms while k3 alone buys nothing. A rung that
-cannot be solved (too few views for it, diverged) is recorded as rejected with the reason.
+cannot be solved (too few views for it, diverged, or a held-out fold it cannot explain) is recorded as
+rejected with the reason and is out of the comparison, not the run: when the starting rung itself is out
+(k1k2 on a strong fisheye: a real 1032x778 set failed one fold at 10.18 px, limit 10; a 185 deg render
+fails the full k1k2 solve at 10.9 px), the first rung that can be solved starts the comparison and the
+other lens family is compared with it. Only when no model at all can be solved is the run refused.
 
 Note: this is the issue's wording (enable only if >= 10 % AND not worse held-out). The seed's own
 sentence is the contrapositive of a weaker rule ("disable if < 10 % AND worse held-out"); the issue's
@@ -122,24 +126,34 @@ def select_model(
 
 def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
                   image_size: tuple[int, int], ladder: Sequence[str], alternatives: Sequence[str]) -> ModelSelection:
-    start = ladder[0]
-    best_fit, best_hold = _evaluate(start, object_points_per_view, image_points_per_view, image_size, None)
-    centre = (best_fit.cx, best_fit.cy)  # every rung uses the same rings, so the same corners
-    best = start
-    trail = [ModelCandidate(start, None, best_fit.rms_px, best_hold.fit_outer_rms_px,
-                            best_hold.holdout_outer_rms_px, None, True, "starting model")]
-    start_fit, start_hold = best_fit, best_hold
-    for name in (*ladder[1:], *alternatives):
-        family_change = name in alternatives
-        base, base_fit, base_hold = (start, start_fit, start_hold) if family_change else (best, best_fit, best_hold)
+    names = (*ladder, *alternatives)
+    trail: list[ModelCandidate] = []
+    start: tuple[str, IntrinsicsSolution, HoldoutReport] | None = None
+    centre: tuple[float, float] | None = None
+    best, best_fit, best_hold = "", None, None
+    for name in names:
         try:
             fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre)
         except NumericalError as exc:
-            trail.append(ModelCandidate(name, base, None, None, None, None, False,
+            # that rung is out, not the run (a k1k2 fold on a strong fisheye: 10.18 px, limit 10)
+            trail.append(ModelCandidate(name, None if start is None else (start[0] if name in alternatives else best),
+                                        None, None, None, None, False,
                                         f"not solvable: {exc.message}"))
             continue
+        if start is None:
+            centre = (fit.cx, fit.cy)  # every rung uses the same rings, so the same corners
+            best, best_fit, best_hold = name, fit, hold
+            start = (name, fit, hold)
+            out = [c.model for c in trail]
+            trail.append(ModelCandidate(name, None, fit.rms_px, hold.fit_outer_rms_px, hold.holdout_outer_rms_px,
+                                        None, True, "starting model" if not out else
+                                        f"starting model ({', '.join(out)} not solvable)"))
+            continue
+        assert best_fit is not None and best_hold is not None
+        family_change = name in alternatives
+        base, base_fit, base_hold = start if family_change else (best, best_fit, best_hold)
         accepted, gain, reason = _rule(base_fit, base_hold, fit, hold)
-        if family_change and accepted and best != start:
+        if family_change and accepted and best != start[0]:
             # it beat the ladder's start; it must also predict no worse than the ladder's choice (held-out:
             # fit RMS across lens families rewards the one with more coefficients, module docstring)
             accepted = hold.holdout_outer_rms_px <= best_hold.holdout_outer_rms_px
@@ -151,6 +165,13 @@ def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per
                                     hold.holdout_outer_rms_px, gain, accepted, reason))
         if accepted:
             best, best_fit, best_hold = name, fit, hold
+    if start is None:
+        raise NumericalError(
+            "no model can be solved and validated on these corners: "
+            + "; ".join(f"{c.model}: {c.reason.removeprefix('not solvable: ')}" for c in trail),
+            hint="capture more views tilted 20-40 deg in at least three directions, and check the corner order "
+                 "and that every view shows the declared board")
+    assert best_fit is not None and best_hold is not None
     return ModelSelection(best, best_fit, best_hold, tuple(trail))
 
 

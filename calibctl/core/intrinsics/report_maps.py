@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from calibctl.core.intrinsics.covariance import intrinsic_columns
+from calibctl.core.intrinsics.fisheye_model import MAX_SOLVE_THETA_RAD, pixel_rays
 
 _K_NAMES = ("fx", "fy", "cx", "cy")
 FISHEYE_CURVE_DEG = 75.0  # a fisheye's distortion curve stops here (the pinhole radius tan(theta) runs off)
@@ -77,7 +78,8 @@ def unproject(points_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.
 class UncertaintyMap:
     """Worst-direction one-sigma of projection across the image.
 
-    u_px: (C,) and v_px: (R,) grid pixel coordinates; sigma_px: (R, C) float64 pixels.
+    u_px: (C,) and v_px: (R,) grid pixel coordinates; sigma_px: (R, C) float64 pixels (nan for a fisheye
+    pixel beyond MAX_SOLVE_THETA_RAD off-axis, where cv2.fisheye has no projection).
     """
 
     u_px: np.ndarray
@@ -87,13 +89,18 @@ class UncertaintyMap:
 
 def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, covariance: np.ndarray,
                            parameters: Sequence[str], aspect: float | None, image_size: tuple[int, int],
-                           grid: tuple[int, int] = (32, 24), fisheye: bool = False) -> UncertaintyMap:
+                           grid: tuple[int, int] = (32, 24), fisheye: bool = False,
+                           rotation_fit: np.ndarray | None = None) -> UncertaintyMap:
     """Propagate the intrinsic covariance to the projection of the ray through each grid pixel.
 
     Args:
         camera_matrix (3, 3), dist_coeffs (n,): the solved model. covariance (p, p) over ``parameters``
         (calibctl's order: fy stands for the tied focal length when ``aspect`` = fx/fy is set).
         image_size [W, H]; grid (cols, rows) sample points, pixel centres of equal cells.
+        rotation_fit: (rows, cols) bool, or None. Given, each intrinsic perturbation's pixel shifts are
+            taken less the camera rotation that best explains them over those grid points (mrcal's
+            compensation in its rotation-only form: a shifted principal point the extrinsics absorb is not
+            an error of where a ray lands relative to the others). None: the module docstring's upper bound.
     """
     w, h = image_size
     cols, rows = grid
@@ -102,12 +109,19 @@ def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, c
     uu, vv = np.meshgrid(u, v)
     pixels = np.stack([uu.ravel(), vv.ravel()], axis=1)
     if fisheye:  # equidistant: cv2.fisheye's Jacobian columns are fx fy cx cy k1..k4, calibctl's order
-        rays = cv2.fisheye.undistortPoints(pixels.reshape(-1, 1, 2), camera_matrix, dist_coeffs).reshape(-1, 2)
-        points = np.concatenate([rays, np.ones((len(rays), 1))], axis=1).reshape(-1, 1, 3)
-        _, J = cv2.fisheye.projectPoints(points, np.zeros((3, 1)), np.zeros((3, 1)), camera_matrix, dist_coeffs)
         if list(parameters) != ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"]:
             raise ValueError(f"covariance parameters {list(parameters)} are not the fisheye model's")
-        return _worst_sigma(J[:, :8], np.asarray(covariance, dtype=np.float64), u, v)
+        # rays through the equidistant model itself (right beyond 90 deg); cv2.fisheye projects only rays in
+        # front of the camera plane, so pixels beyond MAX_SOLVE_THETA_RAD off-axis are nan (not known)
+        rays = pixel_rays(pixels, camera_matrix, np.asarray(dist_coeffs, np.float64).ravel()[:4])
+        known = np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]) < MAX_SOLVE_THETA_RAD
+        points = np.where(known[:, None], rays / np.where(known, rays[:, 2], 1.0)[:, None], [0.0, 0.0, 1.0])
+        _, J = cv2.fisheye.projectPoints(points.reshape(-1, 1, 3), np.zeros((3, 1)), np.zeros((3, 1)),
+                                         camera_matrix, dist_coeffs)
+        # columns: f (2), c (2), k (4), alpha, rvec (3), tvec (3)
+        J_int = _less_rotation(J[:, :8], J[:, 9:12], rotation_fit, known.reshape(len(v), len(u)))
+        umap = _worst_sigma(J_int, np.asarray(covariance, dtype=np.float64), u, v)
+        return UncertaintyMap(u, v, np.where(known.reshape(len(v), len(u)), umap.sigma_px, np.nan))
     rays = unproject(pixels, camera_matrix, dist_coeffs)
     points = np.concatenate([rays, np.ones((len(rays), 1))], axis=1)
     _, J = cv2.projectPoints(points, np.zeros(3), np.zeros(3), camera_matrix, dist_coeffs)
@@ -116,7 +130,21 @@ def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, c
     J_int, names = intrinsic_columns(J, free_k, free_d, aspect)
     if list(names) != list(parameters):
         raise ValueError(f"covariance parameters {list(parameters)} do not match the model's {list(names)}")
+    J_int = _less_rotation(J_int, J[:, :3], rotation_fit, np.isfinite(J_int).all(axis=1).reshape(-1, 2).all(axis=1)
+                           .reshape(len(v), len(u)))
     return _worst_sigma(J_int, np.asarray(covariance, dtype=np.float64), u, v)
+
+
+def _less_rotation(J_int: np.ndarray, J_rot: np.ndarray, fit: np.ndarray | None, usable: np.ndarray) -> np.ndarray:
+    """(2 R C, p) intrinsic columns less their least-squares fit by the (2 R C, 3) rotation columns over the
+    grid points ``fit & usable`` ((R, C) bool); unchanged when ``fit`` is None or selects nothing."""
+    if fit is None:
+        return J_int
+    rows = np.repeat((np.asarray(fit, bool) & usable).ravel(), 2)
+    if rows.sum() < 6:
+        return J_int
+    coef, *_ = np.linalg.lstsq(J_rot[rows], J_int[rows], rcond=None)
+    return J_int - J_rot @ coef
 
 
 def _worst_sigma(J_int: np.ndarray, covariance: np.ndarray, u: np.ndarray, v: np.ndarray) -> UncertaintyMap:

@@ -305,5 +305,7 @@ def agree_with_folds(
         raise NumericalError(
             f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "
             f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different minima",
-            hint="solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens")
+            hint=("capture more views tilted 20-40 deg covering the image, or --model fisheye for a wide lens"
+                  if fit.model == "k1k2" else  # never "fewer coefficients (k1k2)" to a k1k2 solve
+                  "solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens"))
     return fit, report

@@ -42,7 +42,7 @@ from calibctl import __version__
 from calibctl.artifacts.board import BoardRevision, parse_board_ref
 from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
-from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.artifacts.session import CaptureSession, GateResult, MetricGauge, ViewCorners
 from calibctl.artifacts.session import ImageOutcome as OutcomeRecord
 from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
@@ -66,9 +66,16 @@ from calibctl.core.capture.image_circle import (
     detect_image_circle,
     half_size,
 )
+from calibctl.core.capture.projection_gate import (
+    ADVISORY_GATES,
+    parse_region,
+    projection_gate,
+    session_passed,
+    solve_for_gate,
+)
 from calibctl.core.gate import GateResult as CoreGateResult
-from calibctl.core.intrinsics.solve import DEFAULT_MODEL
-from calibctl.errors import InputError, UsageError
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL, IntrinsicsSolution
+from calibctl.errors import InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows.board.boards import board_spec
@@ -76,7 +83,7 @@ from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
 from calibctl.workflows.camera.image_circles import checked_image_circle
-from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, solve
+from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, checked_override, solve
 
 MAX_WORKERS = 8
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
@@ -103,6 +110,9 @@ class CaptureRequest:
     # The lens model the gauge solves the session with, a MODELS name or "auto": calibrate's --model (the
     # lens the session will be solved with; see distance_gauge.gauge_model), k1k2 for a plain capture.
     gauge_model: str = DEFAULT_MODEL
+    # The lens model the projection gate solves with: calibrate's --model (None, and for auto: the better fit
+    # of k1k2 and fisheye, core.capture.projection_gate)
+    lens_model: str | None = None
 
 
 @dataclass(frozen=True)
@@ -168,7 +178,7 @@ class _Collected:
 
 def core_thresholds(settings: Settings) -> GateThresholds:
     """The settings' gate thresholds (defaults < station file) as the core dataclass."""
-    return GateThresholds(**settings.gates.model_dump())
+    return GateThresholds(**settings.gates.model_dump(exclude={"projection_sigma_max_px", "projection_region"}))
 
 
 def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
@@ -214,6 +224,9 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
                 and session.status == "accepted" and session.image_size is not None):
             distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
                                            session.views, session.image_size, request.gauge_model)
+            # the session carries the verdict: a failed gauge stops its solve (workflows.camera.solve)
+            session = session.model_copy(update={"metric_gauge": MetricGauge(
+                distance=distance, lens_model=lens, reference_source=request.reference_source)})
         if store_session:
             store.add_session(session)
         return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
@@ -430,8 +443,28 @@ def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: Bo
 
 
 def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
+    decided = any(g.gate == "projection" for g in gates)  # then tilt and coverage are guidance
     return [GateResult(gate=g.gate, passed=g.passed, value=float(g.value), threshold=float(g.threshold),
-                       reason=g.reason, hint=g.hint, detail=dict(g.detail)) for g in gates]
+                       reason=g.reason, hint=g.hint, detail=dict(g.detail),
+                       advisory=decided and g.gate in ADVISORY_GATES) for g in gates]
+
+
+def _projection(settings: Settings, request: CaptureRequest, views: Sequence[BoardView], model_points: np.ndarray,
+                image_size: tuple[int, int], circle: ImageCircle | None) -> CoreGateResult:
+    """The decisive gate (core.capture.projection_gate) over the station's region; exit 2 for a bad region."""
+    try:
+        region = parse_region(settings.gates.projection_region, image_size,
+                              None if circle is None else circle.as_tuple())
+    except ValueError as exc:
+        raise UsageError(f"station setting gates.projection_region: {exc}",
+                         "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels") from exc
+    obj = [model_points[np.asarray(v.corner_ids)] for v in views]
+    px = [np.asarray(v.corners_px, np.float64) for v in views]
+    try:
+        solution: IntrinsicsSolution | NumericalError = solve_for_gate(obj, px, image_size, request.lens_model)
+    except NumericalError as exc:
+        solution = exc
+    return projection_gate(solution, image_size, region, settings.gates.projection_sigma_max_px)
 
 
 def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
@@ -446,6 +479,8 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
                                   [np.asarray(v.corners_px, np.float64) for v in board_views],
                                   [v.name for v in board_views], got.image_size)
     gates = [*report.gates, two_cameras]
+    if all(g.passed for g in gates if g.gate in ("observability", "views")):  # not hopeless: judge the prediction
+        gates.append(_projection(settings, request, board_views, model_points, got.image_size, circle))
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:
@@ -459,7 +494,7 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
         source=source.recorded,
         source_kind=source.kind,
         station=settings.station, operator=settings.operator, started_at=started, finished_at=utc_now(),
-        image_size=got.image_size, status="accepted" if all(g.passed for g in gates) else "rejected",
+        image_size=got.image_size, status="accepted" if session_passed(gates) else "rejected",
         gates=_gate_records(gates), outcomes=got.outcomes, views=views,
         calibctl_version=__version__, opencv_version=cv2.__version__)
 
@@ -481,16 +516,25 @@ def session_image_circle(given: tuple[float, float, float] | None, got: _Collect
 
 
 def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,
-              drop_outliers: bool = False, observer: CaptureObserver | None = None) -> CalibrateResult:
-    """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``)."""
+              drop_outliers: bool = False, observer: CaptureObserver | None = None,
+              override_gauge: str | None = None) -> CalibrateResult:
+    """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``). A failed
+    distance gauge stops it too, unless ``override_gauge`` gives the reason (recorded in the calibration)."""
     if model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    checked_override(override_gauge)
+    if override_gauge is not None and request.reference_distance is None:
+        raise UsageError("--override-gauge overrides a failed distance gauge, and none is asked for",
+                         "give --reference-distance and --reference-source, or leave --override-gauge out")
     # the gauge at capture judges the board distance through the lens this session is solved with
-    captured = capture(settings, replace(request, gauge_model=gauge_model(model)), observer)
-    if not captured.passed:
+    captured = capture(settings, replace(request, gauge_model=gauge_model(model),
+                                         lens_model=None if model == "auto" else model), observer)
+    gauge_only = captured.session.status == "accepted" and override_gauge is not None
+    if not captured.passed and not gauge_only:
         return CalibrateResult(captured, None)
     solved = solve(settings, SolveRequest(session_id=captured.session.session_id, model=model, activate=activate,
-                                          drop_outliers=drop_outliers))
+                                          drop_outliers=drop_outliers,
+                                          override_gauge=None if captured.passed else override_gauge))
     return CalibrateResult(captured, solved)
 
 

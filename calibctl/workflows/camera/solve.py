@@ -9,7 +9,7 @@ runs lint on it, and writes it: ``accepted`` and active when lint passes (unless
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -35,7 +35,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
 from calibctl.core.intrinsics import solve as core_solve
-from calibctl.core.intrinsics.model_fit import detector_rms_px
+from calibctl.core.intrinsics.model_fit import noise_floor_px
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.outliers import (
     CornerRejection,
@@ -74,6 +74,9 @@ class SolveRequest:
     drop_outliers: bool = False
     report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)
     image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px, recorded for lint
+    # --override-gauge REASON: solve a session whose metric gauge failed into an artifact lint can accept; the
+    # reason is recorded in the provenance and lint keeps the failed gauge as a warning
+    override_gauge: str | None = None
 
 
 @dataclass(frozen=True)
@@ -216,8 +219,10 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
         session, request)
     model_points = board_spec(session.board).object_points()
-    detector_rms = detector_rms_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
-                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]))
+    # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
+    detector_rms = noise_floor_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
+                                  rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]),
+                                  sol.image_size)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -257,7 +262,9 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             created_at=utc_now(),
             session_id=session.session_id,
             input_image_sha256=sorted({v.image_sha256 for v in session.views if v.image_sha256}),
+            gauge_override=request.override_gauge,
         ),
+        metric_gauge=session.metric_gauge,
         content_sha256=UNSEALED,
     )
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
@@ -273,9 +280,29 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
     return art.model_copy(update={"lint": findings, "status": status}), corner_outliers
 
 
+def checked_override(reason: str | None) -> str | None:
+    """--override-gauge's reason, stripped (UsageError when it is given empty)."""
+    if reason is None:
+        return None
+    if not reason.strip():
+        raise UsageError("--override-gauge needs a reason", "say why the failed metric gauge does not apply, e.g. "
+                         "--override-gauge 'fixture moved; board re-measured 2026-11-27 (25.02 mm)'")
+    return reason.strip()
+
+
+def _check_gauge_override(session: CaptureSession, reason: str | None) -> None:
+    """An override must have a failed gauge to override: anything else is a usage error, nothing stored."""
+    gauge = session.metric_gauge
+    if reason is not None and (gauge is None or gauge.distance.passed):
+        what = "has no metric gauge" if gauge is None else "passed its metric gauge"
+        raise UsageError(f"--override-gauge: session {session.session_id} {what}; there is nothing to override",
+                         "leave --override-gauge out")
+
+
 def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
     if request.model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    request = replace(request, override_gauge=checked_override(request.override_gauge))
     if not request.session_id and not request.serial:
         raise UsageError("name a session", "pass SESSION_ID or --serial SERIAL")
     if request.report_dir is not None:
@@ -297,6 +324,7 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
                 f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
                 "capture again following the gate hints, then solve the new session",
             )
+        _check_gauge_override(session, request.override_gauge)
         if request.report_dir is not None:  # the page of the version about to be stored must be free
             version = store.next_version(session.serial)
             report_path = report_workflow.ready_page(request.report_dir, session.serial, version)

@@ -88,7 +88,7 @@ def thresholds(settings: Settings, lever_arm_sigma_min: float | None = None) -> 
     cfg = settings.handeye
     return HandEyeThresholds(lever_arm_sigma_min if lever_arm_sigma_min is not None else cfg.lever_arm_sigma_min,
                              cfg.second_axis_min_deg, cfg.angle_mismatch_max_deg, cfg.mismatch_fraction_max,
-                             cfg.rotation_residual_max_deg)
+                             cfg.rotation_residual_max_deg, cfg.translation_scale_tolerance)
 
 
 def check_frames(parent_frame: str, child_frame: str) -> None:
@@ -146,7 +146,8 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
     if fit is not None:
         gates = (*gates, consistency_gate(fit, th))
         if gates[-1].passed:  # a rotation no single X explains leaves nothing to judge the translations by
-            gates = (*gates, translation_scale_gate(motions, fit, (parent_frame, child_frame)))
+            gates = (*gates, translation_scale_gate(motions, fit, (parent_frame, child_frame),
+                                                    th.translation_scale_tolerance))
     accepted = all(g.passed for g in gates)
     rows, outliers = _motion_rows(motions, fit)
     transform = None

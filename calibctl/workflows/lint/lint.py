@@ -55,6 +55,8 @@ class CalibrationFacts:
     detector_rms_px: float | None = None
     fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
     image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
+    metric_gauge: dict[str, Any] | None = None  # the capture's distance gauge, calibctl only
+    gauge_override: str | None = None  # provenance.gauge_override: why a failed gauge was overridden
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -153,6 +155,7 @@ FACT_FIELDS: dict[str, Any] = {
     "image_size": True, "camera_matrix": True, "dist_coeffs": True, "model": {"name"}, "rms_px": True,
     "detector_rms_px": True, "stdev": {"sigma", "refused_reason"}, "board": {"measurement"},
     "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"}, "camera_consistency": True,
+    "metric_gauge": True, "provenance": {"gauge_override"},
 }
 """The parts of an artifact's dump ``facts_from_document`` reads (views, provenance, covariance are not)."""
 
@@ -185,6 +188,8 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         detector_rms_px=data.get("detector_rms_px"),
         fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
         image_circle=_recorded_circle(data.get("gates")),
+        metric_gauge=data.get("metric_gauge") if isinstance(data.get("metric_gauge"), dict) else None,
+        gauge_override=(data.get("provenance") or {}).get("gauge_override"),
         raw_numbers=[] if validated else _numbers(data),
     )
 
@@ -208,6 +213,27 @@ def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
         return []  # only a calibctl solve records what the detector delivered
     return adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
                                                *facts.fit_ring_rms_px))
+
+
+def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
+    """``metric-gauge``: a failed distance gauge at capture (seed chapter 0) fails the calibration; an override
+    with its reason (provenance.gauge_override) keeps it as a warning."""
+    gauge = facts.metric_gauge or {}
+    d = gauge.get("distance") or {}
+    if not d or d.get("passed", True):
+        return []
+    lo, hi = d.get("ratio_limits") or (0.99, 1.01)
+    message = (f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
+               f"{gauge.get('lens_model', '?')} lens, {d['ratio']:.3f}x the surveyed {d['reference_m']:.4f} m (needs "
+               f"{lo}-{hi}): every metric output (translations, baselines, hand-eye) is scaled by it; the "
+               "reprojection residual cannot show it (seed chapter 0)")
+    if facts.gauge_override:
+        return [Finding(rule="metric-gauge", severity="warning", value=d["ratio"],
+                        message=f"{message}; overridden: {facts.gauge_override}")]
+    return [Finding(rule="metric-gauge", severity="error", value=d["ratio"], message=message,
+                    fix="measure the board's squares (calipers) and register the measurement (`calibctl board add`), "
+                        "check the fixture's surveyed distance, then capture again; if the gauge, not the board, "
+                        "is wrong: solve with --override-gauge REASON (recorded in the calibration)")]
 
 
 def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
@@ -288,7 +314,8 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
         ]
     return adopt(
         lens_checks.check_outer_ring_holdout(
-            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max
+            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max,
+            model=facts.model_name,
         )
     )
 
@@ -343,14 +370,32 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
         findings += _outer_ring_rule(facts, limits)
     if trace != "rig":
         findings += _provenance_rule(facts, traced=trace == "header")
+    findings += _gauge_rule(facts)
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
-        foldover = (lens_checks.check_equidistant_foldover if facts.distortion_model == "equidistant"
-                    else lens_checks.check_distortion_foldover)
-        findings += adopt(foldover(K, facts.dist_coeffs, size, facts.image_circle))
-    return findings
+        if facts.distortion_model == "equidistant":
+            findings += adopt(lens_checks.check_equidistant_foldover(K, facts.dist_coeffs, size, facts.image_circle))
+        else:
+            findings += adopt(lens_checks.check_distortion_foldover(K, facts.dist_coeffs, size, facts.image_circle,
+                                                                    model=facts.model_name))
+    return _misfit_first(findings)
+
+
+# Rules whose fix assumes the lens model describes the lens: when model-misfit fails, their numbers are the
+# misfit's symptoms (k1k2 on a fisheye also scatters sigma, the outer ring and the view groups) and their
+# own fixes send the user the wrong way ("make the corners sharp", "two cameras").
+_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-foldover")
+
+
+def _misfit_first(findings: list[Finding]) -> list[Finding]:
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay)."""
+    misfit = next((f for f in findings if f.rule == "model-misfit"), None)
+    if misfit is None:
+        return findings
+    first = f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from the misfit"
+    return [f.model_copy(update={"fix": first}) if f.rule in _MISFIT_SYMPTOMS else f for f in findings]
 
 
 def _status_rule(status: Any, ref: str) -> list[Finding]:

@@ -235,9 +235,11 @@ def _uncertainty(d: ReportData) -> str:
         return ("<h2>Projection uncertainty</h2><p>not available: this version stores no covariance "
                 f"({escape(d.artifact.stdev.refused_reason or 'made before calibctl stored it')}).</p>")
     w, h = d.artifact.image_size
-    lo, hi = float(m.sigma_px.min()), float(m.sigma_px.max())
+    # nan: a fisheye pixel beyond 88 deg off-axis, where cv2.fisheye projects nothing (report_maps)
+    lo, hi = float(np.nanmin(m.sigma_px)), float(np.nanmax(m.sigma_px))
     plot = _image_plot(d, "projection one-sigma, worst direction (px)")
-    heat(plot, m.sigma_px, np.linspace(0, w, len(m.u_px) + 1), np.linspace(0, h, len(m.v_px) + 1), lo, hi)
+    heat(plot, m.sigma_px, np.linspace(0, w, len(m.u_px) + 1), np.linspace(0, h, len(m.v_px) + 1), lo, hi,
+         empty="#f2f2f2")
     if d.views:  # where the corners were: the uncertainty grows where they never reached
         pts = np.concatenate([v.corners_px for v in d.views])
         k = _stride(len(pts), MAX_DOTS // 2)

@@ -49,6 +49,7 @@ from calibctl.core.extrinsics.rig_validation import (
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.gate import GateResult
 from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
 from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
 from calibctl.files import file_errors
@@ -141,13 +142,16 @@ def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec
 
 def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
                      image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
-    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit."""
+    """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit;
+    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select)."""
+    if model == "auto":
+        model = select_model(list(object_points), list(corners_px), image_size).chosen
     m = get_model(model)
     sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
     cov = sol.covariance.covariance if sol.covariance is not None else None
     member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
                               m.free_distortion, sol.aspect_ratio, cov, m.kind)
-    return member, MemberFit(m.name, sol.rms_px, model_fit.detector_rms_px(object_points, corners_px))
+    return member, MemberFit(m.name, sol.rms_px, model_fit.noise_floor_px(object_points, corners_px, image_size))
 
 
 def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
@@ -178,6 +182,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
         NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
     check_min_shared_views(min_shared_views)
+    if model != "auto":
+        get_model(model)  # an unknown name is a usage error before any photo is read
     cameras = tuple(sources)
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
@@ -209,6 +215,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
                              f"{given.image_size[0]}x{given.image_size[1]}",
                              hint="use the calibration made at this resolution, or re-calibrate the camera")
         members.append(given)
+    if model == "auto":
+        model = _auto_rig_model(fits, refine_intrinsics)
     views = rig_views(cameras, match, outcomes, spec)
     identity.refuse(identity.shared_images({n: [o.sha256 for o in outcomes[n] if o.corners_px is not None]
                                             for n in cameras}) + identity.same_corners(views), "rig solve-folders")
@@ -217,6 +225,17 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
     if not gate.passed:
         return run
     return judged_solve(run, model, refine_intrinsics, limits or LintThresholds())
+
+
+def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:
+    """The rig solve's model once auto chose each member's: it only sets the flags of a jointly refined
+    two-camera solve, so members that chose differently cannot be refined together (UsageError)."""
+    chosen = {name: fit.model for name, fit in fits.items()}
+    if refine_intrinsics and len(set(chosen.values())) > 1:
+        listed = ", ".join(f"{name}: {m}" for name, m in chosen.items())
+        raise UsageError(f"--model auto chose different lens models for the cameras ({listed}); their intrinsics "
+                         "cannot be refined jointly", "leave out --refine-intrinsics, or give one --model for all")
+    return next(iter(chosen.values()), "k1k2")
 
 
 def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,

@@ -251,3 +251,23 @@ def test_translation_scale_is_not_judged_when_a_never_translates():
     s, sigma = he.translation_scale(motions, X_3D[:3, :3])
     assert sigma == np.inf
     assert gates.translation_scale_gate(motions, fit_handeye(motions)).passed
+
+
+def test_a_camera_scale_off_by_a_typed_square_size_is_a_metric_gauge_verdict():
+    # 23 mm typed for a 25 mm board scales every camera translation by 0.92: it used to pass (limit 1.25x)
+    log = synthesize_pose_log(X_3D, 30, seed=3)
+    typo = _scaled(log, 1.0, 0.92)
+    gate = gates.translation_scale_gate(typo, fit_handeye(typo), ("base", "camera"))
+    assert not gate.passed and gate.reason == "translation_scale.metric_gauge"
+    assert "the metric gauge disagrees" in gate.message and "tolerance 1 %" in gate.message
+    assert "calibctl check --reference-distance" in (gate.hint or "")
+    assert gate.value == pytest.approx(1 / 0.92, rel=0.01)
+    # within the station's tolerance it passes; a looser station tolerance lets 0.92 through
+    near = _scaled(log, 1.0, 0.995)
+    assert gates.translation_scale_gate(near, fit_handeye(near), ("base", "camera")).passed
+    assert gates.translation_scale_gate(typo, fit_handeye(typo), ("base", "camera"), tolerance=0.1).passed
+
+
+def test_a_translation_scale_tolerance_must_be_positive():
+    with pytest.raises(ValueError):
+        gates.HandEyeThresholds(translation_scale_tolerance=0.0)

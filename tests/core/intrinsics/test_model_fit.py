@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibctl.core.intrinsics.model_fit import MISFIT_RATIO, check_model_misfit, detector_rms_px
+from calibctl.core.intrinsics.model_fit import (
+    MISFIT_RATIO,
+    check_model_misfit,
+    detector_rms_px,
+    lens_floor_px,
+    misfit,
+    noise_floor_px,
+)
 from calibctl.core.intrinsics.outliers import solve_rejecting_corners
 from calibctl.core.synth.corners import synthesize_session
 from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
@@ -18,7 +25,49 @@ PER_CORNER = np.sqrt(2) * NOISE_PX  # per-corner (2-D) RMS of 0.2 px per coordin
 
 def _verdict(obj, img, size, model):
     r = solve_rejecting_corners(obj, img, size, model)
-    return check_model_misfit(r.solution.rms_px, detector_rms_px(r.kept(obj), r.kept(img)), model)
+    return check_model_misfit(r.solution.rms_px, noise_floor_px(r.kept(obj), r.kept(img), size), model)
+
+
+def _close_185_session():
+    """A 185 deg circular fisheye, 12 x 9 board held close (seed 1): the curved field the 4x4 patch over-reads."""
+    from calibctl.core.synth.fisheye import default_fisheye_distance_m
+
+    size = (1032, 778)
+    cam = FisheyeCamera.from_fov(size, 185.0, circular=True)
+    near, far = default_fisheye_distance_m(cam, 0.025)
+    s = synthesize_fisheye_session(cam, 12, seed=1, max_view_deg=80.0, cols=12, rows=9,
+                                   distance_m=(0.5 * near, 0.5 * far), noise_px=NOISE_PX)
+    return list(s.object_points_per_view), list(s.image_points_per_view), size
+
+
+def test_the_floor_holds_on_a_curved_field_where_the_patch_over_reads():
+    # measured: patch 1.681 px (5.9x the truth), lens floor 0.282 px (fisheye) for a per-corner 0.283 px
+    obj, img, size = _close_185_session()
+    assert detector_rms_px(obj, img) > 4 * PER_CORNER
+    floor, model = lens_floor_px(obj, img, size)
+    assert model == "fisheye" and floor == pytest.approx(PER_CORNER, rel=0.1)
+    assert noise_floor_px(obj, img, size) == floor
+    # the correct fisheye fit is not a misfit against it
+    assert _verdict(obj, img, size, "fisheye").passed
+
+
+@pytest.mark.parametrize(("fov_deg", "circular"), [(150.0, True), (185.0, True)])
+def test_k1k2_on_a_fisheye_is_judged_against_the_noise_not_the_curvature(fov_deg, circular):
+    # measured (1032x778, 15 views, seed 0): k1k2 fits 1.63 / 2.47 px, the patch reads 0.42 / 0.57 px
+    # (ratio 3.9 / 4.7), the floor 0.28 px (ratio 5.8 / 8.7)
+    size = (1032, 778)
+    s = synthesize_fisheye_session(FisheyeCamera.from_fov(size, fov_deg, circular), 15, seed=0)
+    obj, img = list(s.object_points_per_view), list(s.image_points_per_view)
+    r = solve_rejecting_corners(obj, img, size, "k1k2")
+    patch, floor = detector_rms_px(r.kept(obj), r.kept(img)), noise_floor_px(r.kept(obj), r.kept(img), size)
+    assert floor < 0.75 * patch and floor == pytest.approx(PER_CORNER, rel=0.1)
+    assert misfit(r.solution.rms_px, floor) and r.solution.rms_px / floor > 5.0
+
+
+def test_the_lens_floor_is_none_when_no_lens_model_can_be_solved():
+    obj, img, size = _close_185_session()
+    assert lens_floor_px(obj[:2], img[:2], size) is None  # two views: neither fisheye nor rational solves
+    assert noise_floor_px(obj[:2], img[:2], size) == detector_rms_px(obj[:2], img[:2])
 
 
 def test_detector_noise_is_read_without_a_lens_model():

@@ -168,3 +168,41 @@ def test_real_pinhole_photos_keep_k1k2_and_fisheye_is_judged_against_k1k2():
     fisheye = sel.trail[-1]
     assert fisheye.model == "fisheye" and not fisheye.accepted and fisheye.compared_to == "k1k2"
     _check_trail_consistency(sel)
+
+
+def _strong_fisheye_session():
+    """185 deg circular fisheye, 12 views of a 12 x 9 board held close (seed 1): k1k2 cannot explain it
+    (measured: full k1k2 solve RMS 10.9 px, over the 10 px limit of solve_intrinsics)."""
+    from calibctl.core.synth.fisheye import (
+        FisheyeCamera,
+        default_fisheye_distance_m,
+        synthesize_fisheye_session,
+    )
+
+    size = (1032, 778)
+    cam = FisheyeCamera.from_fov(size, 185.0, circular=True)
+    near, far = default_fisheye_distance_m(cam, 0.025)
+    s = synthesize_fisheye_session(cam, 12, seed=1, max_view_deg=80.0, cols=12, rows=9,
+                                   distance_m=(0.5 * near, 0.5 * far))
+    return s, size
+
+
+def test_a_rung_that_cannot_be_solved_is_out_and_auto_still_reaches_fisheye():
+    s, size = _strong_fisheye_session()
+    sel = select_model(s.object_points_per_view, s.image_points_per_view, size)
+    trail = {c.model: c for c in sel.trail}
+    assert [c.model for c in sel.trail] == [*LADDER, *ALTERNATIVES]  # every rung and the fisheye branch walked
+    assert not trail["k1k2"].accepted and trail["k1k2"].reason.startswith("not solvable: ")
+    assert "does not explain the corners" in trail["k1k2"].reason
+    start = next(c for c in sel.trail if c.compared_to is None and c.accepted)
+    assert start.model != "k1k2" and "k1k2 not solvable" in start.reason
+    assert sel.chosen == "fisheye" and trail["fisheye"].accepted and trail["fisheye"].compared_to == start.model
+    assert sel.solution.rms_px < 0.5  # the render's noise is 0.2 px per coordinate
+
+
+def test_no_model_at_all_is_an_error_naming_every_rung():
+    obj, img = _session(800.0, [-0.2814, 0.0977, 0, 0, 0], n_views=3)
+    with pytest.raises(NumericalError) as err:
+        select_model(obj, img, SIZE)
+    assert err.value.message.startswith("no model can be solved and validated on these corners: k1k2: ")
+    assert all(f"{m}: " in err.value.message for m in (*LADDER, *ALTERNATIVES))

@@ -68,8 +68,9 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
     assert (stored.station, stored.operator, stored.serial, stored.board.ref) == ("st-7", "op-ana", SERIAL, "A17@1")
     assert [o.name for o in stored.outcomes] == [v["file"] for v in truth["views"]]
     assert result.images_stored == len(stored.outcomes) == 12
+    # issue 22: a session that is not hopeless also carries the decisive projection gate
     assert {g.gate: g.passed for g in stored.gates} == {"observability": True, "tilt": True, "coverage": True,
-                                                       "views": True, "one_camera": True}
+                                                       "views": True, "one_camera": True, "projection": True}
     assert all(g.reason is None and g.hint is None for g in stored.gates)
     by_file = {v["file"]: np.array(v["corners_px"]) for v in truth["views"]}
     for view in stored.views:

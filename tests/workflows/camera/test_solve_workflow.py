@@ -222,3 +222,23 @@ def test_a_good_pinhole_session_records_its_detector_noise_and_passes_model_misf
     art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
     assert art.status == "accepted" and "model-misfit" not in [f.rule for f in art.lint]
     assert 0.5 * art.rms_px < art.detector_rms_px < 2.0 * art.rms_px
+
+
+def test_auto_on_a_lens_k1k2_cannot_explain_ends_in_fisheye_instead_of_exit_2(settings):
+    """issue 22: `solve --model auto` exited 2 ("the solve does not explain the corners") when the k1k2 rung
+    failed; a 185 deg circular render of a 12 x 9 board held close fails the k1k2 solve at 10.9 px."""
+    from calibctl.artifacts.session import ViewCorners
+    from tests.core.intrinsics.test_model_select import _strong_fisheye_session
+
+    s, size = _strong_fisheye_session()
+    board = measured_board().model_copy(update={"cols": 12, "rows": 9})
+    base = synthetic_capture(measured_board(), session_id="fe185fe185fe", n_views=2)
+    views = [ViewCorners(name=f"fisheye{i:02d}.png", corner_ids=list(range(12 * 9)),
+                         corners_px=[(float(u), float(v)) for u, v in img])
+             for i, img in enumerate(s.image_points_per_view)]
+    session = _store_session(settings, base.model_copy(update={"board": board, "views": views, "image_size": size}))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id,
+                                                                     model="auto")).artifact
+    trail = {c["model"]: c for c in art.model.selection}
+    assert art.model.name == "fisheye" and trail["k1k2"]["reason"].startswith("not solvable: ")
+    assert art.rms_px < 0.5 and "model-misfit" not in [f.rule for f in art.lint]

@@ -205,3 +205,22 @@ def test_the_verdict_uses_the_stations_epipolar_limit(rig2):
     strict = solve_rig_folders(sources, BOARD, min_shared_views=5, limits=LintThresholds(epipolar_max_px_at_720=0.001))
     assert [f.rule for f in strict.findings] == ["epipolar"] and not strict.passed
     assert "re-capture with a still board" in (strict.findings[0].fix or "")  # the lenses fit: not the model
+
+
+@pytest.mark.parametrize("model", ["rational", "auto"])
+def test_every_model_solves_a_rendered_pair(rig2, model):
+    """issue 22: rational crashed in the rig's Jacobian (stereoCalibrate returned 5 of its 8 coefficients);
+    auto was refused by a message that listed auto as valid."""
+    run = solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, model=model, min_shared_views=5)
+    assert run.solution is not None and run.gate.passed
+    edge = run.solution.tree.edges[0]
+    assert abs(edge.translation_mm - true_baseline_mm(rig2)) < 3 * edge.sigma_translation_mm
+    members = run_json(run)["members"]
+    assert all(m["model"] in ("k1k2", "k1k2k3", "k1k2p1p2k3", "opencv-default", "rational", "fisheye") for m in members)
+    if model == "rational":
+        assert all(len(m.dist_coeffs) == 8 for m in run.members)
+
+
+def test_an_unknown_rig_model_is_a_usage_error_before_any_photo_is_read(tmp_path):
+    with pytest.raises(UsageError, match="unknown distortion model 'fish'"):
+        solve_rig_folders({"A": tmp_path / "missing-a", "B": tmp_path / "missing-b"}, BOARD, model="fish")
