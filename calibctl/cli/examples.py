@@ -75,6 +75,15 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                      "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+    "lidar": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
+              "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box 1,-2.2,-0.8,3.6,1.6,0.6",),
+    "lidar solve": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
+                    "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --pattern-offset-mm 2,0 "
+                    "--box 1,-2.2,-0.8,3.6,1.6,0.6",
+                    "calibctl lidar solve --images shots/ --scans sweeps/ --serial CAM-0042 --cols 5 --rows 7 "
+                    "--square-mm 95 --backing-mm 610,850 --box 1,-2,-1,4,2,1 --json"),
+    "lidar synth": ("calibctl lidar synth lidar-set/ --poses 12 --seed 1",
+                    "calibctl lidar synth offset-set/ --range-offset-mm 30"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
 }
