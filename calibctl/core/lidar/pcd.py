@@ -246,8 +246,7 @@ def parse_array(data: bytes, source: str, is_npy: bool, max_points: int = MAX_PO
         if is_npy:
             arr = np.load(io.BytesIO(data), allow_pickle=False)
         else:
-            arr = np.loadtxt(io.BytesIO(data), dtype=np.float64, ndmin=2, comments="#",
-                             max_rows=max_points + 1)
+            arr = np.loadtxt(io.BytesIO(data), dtype=np.float64, ndmin=2, comments="#")  # size bounded by the caller
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(f"{source}: not an N x 3 or N x 4 array of numbers ({exc})") from None
     arr = np.asarray(arr)
