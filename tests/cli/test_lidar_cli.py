@@ -1,0 +1,133 @@
+"""calibctl lidar solve / synth: wiring, exit codes, one-line errors naming the file and the fix."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from calibctl.core.extrinsics import se3
+from calibctl.core.lidar import solve as ls
+from calibctl.core.lidar.target import BackingBoard
+from calibctl.workflows.lidar import lidar_solve as wf
+from tests.datasets import ACFR, require_acfr
+
+BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+BOX = ["--box", "1,-2.2,-0.8,3.6,1.6,0.6"]
+
+
+def invoke(args: list[str]):
+    return CliRunner().invoke(app, args, terminal_width=200)
+
+
+def acfr_subset(tmp_path: Path, poses: tuple[int, ...] = (1, 3, 5)) -> tuple[Path, Path]:
+    require_acfr()
+    img, pcd = tmp_path / "img", tmp_path / "pcd"
+    img.mkdir()
+    pcd.mkdir()
+    for i in poses:
+        (img / f"pose{i}.png").symlink_to(ACFR / "images" / f"pose{i}.png")
+        (pcd / f"pose{i}.pcd").symlink_to(ACFR / "pcd" / f"pose{i}_full.pcd")
+    return img, pcd
+
+
+def camera(tmp_path: Path) -> list[str]:
+    require_acfr()
+    return ["--camera-info", str(ACFR / "camera_info.yaml")]
+
+
+def test_a_malformed_box_is_exit_2(tmp_path: Path) -> None:
+    res = invoke(["lidar", "solve", "--images", str(tmp_path), "--scans", str(tmp_path), "--box", "1,2,3",
+                  "--camera-info", "x.yaml", *BOARD])
+    assert res.exit_code == 2 and "--box '1,2,3' is not xmin" in res.output
+
+
+def test_the_camera_is_given_exactly_once(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *BOARD])
+    assert res.exit_code == 2 and "exactly one of --camera-info FILE or --serial" in res.output
+
+
+def test_a_camera_without_an_active_calibration_is_exit_2(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    res = invoke(["--db", f"sqlite:///{tmp_path / 'c.db'}", "lidar", "solve", "--images", str(img), "--scans",
+                  str(pcd), "--serial", "CAM-NONE", *BOX, *BOARD])
+    assert res.exit_code == 2 and "Error:" in res.output and "Traceback" not in res.output
+
+
+def test_a_pattern_bigger_than_its_backing_board_is_exit_2(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
+                  "--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "400,850"])
+    assert res.exit_code == 2 and "does not fit on a 400 x 850 mm backing board" in res.output
+
+
+def test_duplicate_frame_numbers_are_exit_2_naming_both(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    (pcd / "pose1_copy.pcd").symlink_to(ACFR / "pcd" / "pose1_target.pcd")
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    assert res.exit_code == 2 and "two scans with frame number 1" in res.output
+
+
+def test_a_lying_pcd_header_is_exit_2_naming_the_file_and_field(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    text = (ACFR / "pcd" / "pose3_full.pcd").read_text().replace("POINTS 24262", "POINTS 24000")
+    (pcd / "pose3.pcd").unlink()
+    (pcd / "pose3.pcd").write_text(text)
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    assert res.exit_code == 2 and "pose3.pcd" in res.output and "WIDTH x HEIGHT" in res.output
+
+
+def test_no_board_in_the_box_and_unpaired_files_are_outcomes_and_exit_1(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path)
+    (img / "pose99.png").symlink_to(ACFR / "images" / "pose7.png")
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
+                  *camera(tmp_path), *BOARD, "--json"])
+    assert res.exit_code == 1
+    doc = json.loads(res.stdout)
+    outcomes = {(r["scan"] or r["image"]): r["outcome"] for r in doc["outcomes"]}
+    assert outcomes == {"pose1.pcd": "no_plane", "pose3.pcd": "no_plane", "pose5.pcd": "no_plane",
+                        "pose99.png": "not_paired"}
+    gate = doc["gates"][0]
+    assert gate["gate"] == "lidar-poses" and not gate["passed"] and "capture 6 more poses" in gate["hint"]
+    assert doc["transform"] is None
+
+
+def test_a_set_of_boards_facing_one_way_is_refused_with_the_direction(tmp_path: Path) -> None:
+    out = tmp_path / "oneway"
+    assert invoke(["lidar", "synth", str(out), "--poses", "6", "--seed", "4", "--one-way"]).exit_code == 0
+    truth = json.loads((out / "truth.json").read_text())
+    res = invoke(["lidar", "solve", "--images", str(out / "images"), "--scans", str(out / "scans"),
+                  "--box", truth["box"], "--camera-info", str(out / "camera_info.yaml"), *BOARD])
+    assert res.exit_code == 1
+    assert "gate lidar-observability FAIL" in res.output and "unobservable" in res.output
+    assert "hint: tilt the board" in res.output and "no transform reported" in res.output
+
+
+@pytest.mark.slow
+def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> None:
+    """The authors' numbers are T_lidar_cam (p_lidar = R p_cam + t, R = Rz(yaw) Ry(pitch) Rx(roll)):
+    src/optimiser.cpp's RotationTranslation * camera point and include/.../optimiser.h Rotation::toMat."""
+    require_acfr()
+    res = invoke(["lidar", "solve", "--images", str(ACFR / "images"), "--scans", str(ACFR / "pcd"),
+                  "--scan-pattern", "*_full.pcd", *BOX, *camera(tmp_path), *BOARD, "--json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.stdout)
+    assert len(doc["outcomes"]) == 20 and all(r["outcome"] for r in doc["outcomes"])
+    pub = np.loadtxt(ACFR / "published_calibration_quickstart.csv", delimiter=",", skiprows=1)
+    mean, sd = pub.mean(axis=0), pub.std(axis=0, ddof=1)
+    ours = np.array([*doc["transform"]["rpy_rad"], *doc["transform"]["translation_m"]])
+    assert np.all(np.abs(ours - mean) < 2 * sd), (ours - mean) / sd  # within two of their own sd
+    # two disjoint halves (odd / even position) agree within 3 combined sigma
+    req = wf.LidarRequest(ACFR / "images", ACFR / "pcd", BackingBoard(5, 7, 0.095, (0.61, 0.85), (0.002, 0.0)),
+                          wf.parse_box("1,-2.2,-0.8,3.6,1.6,0.6"), ACFR / "camera_info.yaml", scan_pattern="*_full.pcd")
+    poses, _ = wf.collect_poses(req, wf.load_lens(None, req.camera_info, None))  # type: ignore[arg-type]
+    a, b = ls.solve(poses[0::2], req.board), ls.solve(poses[1::2], req.board)
+    dt = a.T_lidar_cam[:3, 3] - b.T_lidar_cam[:3, 3]
+    dr = se3.rotvec_from_rotation(a.T_lidar_cam[:3, :3] @ b.T_lidar_cam[:3, :3].T)
+    assert np.all(np.abs(dt) < 3 * np.hypot(a.sigma_translation_m, b.sigma_translation_m))
+    assert np.all(np.abs(dr) < 3 * np.radians(np.hypot(a.sigma_rotation_deg, b.sigma_rotation_deg)))
