@@ -32,6 +32,10 @@ def _pair_mm(text: str, option: str) -> tuple[float, float]:
     return a / 1e3, b / 1e3
 
 
+def _num(value: float | None, spec: str = ".1f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
 def render_result(doc: dict[str, Any]) -> None:
     """Human report of ``lidar_solve.run_lidar_solve``'s result."""
     counts = ", ".join(f"{k} {v}" for k, v in sorted(doc["outcome_counts"].items()))
@@ -51,14 +55,15 @@ def render_result(doc: dict[str, Any]) -> None:
                                          zip("xyz", t["translation_m"], t["sigma_translation_mm"], strict=True)))
         say("  rotation    roll {:+.4f} pitch {:+.4f} yaw {:+.4f} rad (Rz Ry Rx)".format(*t["rpy_rad"])
             + "; sigma about x, y, z " + ", ".join(f"{v:.3f}" for v in t["sigma_rotation_deg"]) + " deg")
-        say(f"  point-to-plane RMS {m['plane_rms_mm']} mm (held-out {m['held_out_plane_rms_mm']} mm, "
-            f"{m['folds']}-fold), edge RMS {m['edge_rms_mm']} mm; board dimension error "
-            f"{m['dimension_error_mean_mm'][0]:+.1f}, {m['dimension_error_mean_mm'][1]:+.1f} mm")
-        say(f"  range offset the board sizes ask for {m['range_offset_from_dimensions_mm']:+.1f} +/- "
-            f"{m['range_offset_from_dimensions_sigma_mm']:.1f} mm"
+        say(f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
+            f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm ({_num(m['projected_edge_rms_px'])} px in "
+            f"the image); board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
+            f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm")
+        say(f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
+            f"{_num(m['range_offset_from_dimensions_sigma_mm'])} mm"
             + ("" if m["range_offset_estimated_mm"] is None else
-               f"; estimated in the solve {m['range_offset_estimated_mm']:+.1f} +/- "
-               f"{m['range_offset_estimated_sigma_mm']:.1f} mm"))
+               f"; estimated in the solve {_num(m['range_offset_estimated_mm'], '+.1f')} +/- "
+               f"{_num(m['range_offset_estimated_sigma_mm'])} mm"))
     if doc["status"] == "accepted":
         say("Result: ACCEPTED")
     else:

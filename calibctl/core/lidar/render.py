@@ -4,7 +4,7 @@ The LiDAR has 16 rings from -15 to +15 degrees (2 degree steps) and ``azimuth_st
 firings; each ray hitting the backing board returns its range plus Gaussian noise (``range_noise_m``),
 a per-laser bias (``laser_bias_m``, fixed per ring for the whole session, as a real unit's) and an
 optional ``range_offset_m`` (a mis-set range calibration: acfr's VLP-16 needed -30 mm). A post behind
-the board adds clutter inside the station box. The camera is a pinhole (f 1000 px, 1280 x 960); its
+the board adds clutter inside the station box; every other ray ends on a wall 8 m away (a full sweep). The camera is a pinhole (f 1000 px, 1280 x 960); its
 board pose comes from the projected inner corners plus ``corner_noise_px`` through the same
 ``estimate_board_pose`` the real images use, so its covariance is the one a real view gets.
 """
@@ -26,6 +26,7 @@ VLP16_ELEVATIONS_DEG = tuple(float(e) for e in np.arange(-15.0, 15.1, 2.0))
 K_RENDER = np.array([[1000.0, 0.0, 640.0], [0.0, 1000.0, 480.0], [0.0, 0.0, 1.0]])
 IMAGE_SIZE = (1280, 960)
 ACFR_BOARD = BackingBoard(cols=5, rows=7, square_m=0.095, backing_m=(0.61, 0.85), offset_m=(0.002, 0.0))
+WALL_M = 8.0
 RENDER_BOX = StationBox((0.8, -2.5, -1.2), (4.5, 2.5, 1.2))
 # camera looks along LiDAR x: cam z = lidar x, cam x = -lidar y, cam y = -lidar z
 R_LIDAR_CAM_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -97,7 +98,9 @@ def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Genera
     az_post = np.arctan2(post[1], post[0])
     on_post = (~on_board) & (np.abs(np.angle(np.exp(1j * (A.reshape(-1) - az_post)))) < 0.025 / r_post) & \
         (np.tan(E.reshape(-1)) * r_post < post[2] - 0.3)
-    r = np.where(on_board, r_board, np.where(on_post, r_post / np.maximum(np.cos(E.reshape(-1)), 1e-9), np.nan))
+    # every other ray ends on a round room's wall WALL_M away: a full ~29k-point sweep, outside the box
+    r_wall = WALL_M / np.maximum(np.cos(E.reshape(-1)), 1e-9)
+    r = np.where(on_board, r_board, np.where(on_post, r_post / np.maximum(np.cos(E.reshape(-1)), 1e-9), r_wall))
     keep = np.isfinite(r)
     r = r[keep] + rng.normal(0.0, range_noise_m, keep.sum()) + laser_bias_m[ring[keep]] - range_offset_m
     return PointCloud(rays[keep] * r[:, None], np.full(keep.sum(), 50.0), ring[keep])

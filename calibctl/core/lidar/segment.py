@@ -30,6 +30,7 @@ MIN_PLANE_POINTS = 30
 RUN_GAP_M = 0.10  # points of one ring farther apart than this on the plane are separate runs
 RING_LINK_M = 0.30  # runs of neighbouring rings closer than this belong to one object
 ELEVATION_GAP_DEG = 0.4  # rings without a ring field: elevation clusters separated by more than this
+EDGE_STEPS = 5  # spacing at a run's end: median of its last few steps
 DEFAULT_MIN_RINGS = 7  # acfr's README: a VLP-16 needs at least 7 rings on the board
 DEFAULT_MAX_DIMENSION_ERROR_M = 0.05
 
@@ -174,17 +175,17 @@ def _largest_object(points_m: np.ndarray, ring: np.ndarray, runs: list[np.ndarra
 
 
 def _edge_points(points_m: np.ndarray, ring: np.ndarray, runs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Both ends of each run of >= 2 points, moved outward by half the run's median spacing; their rings."""
+    """Both ends of each run of >= 2 points, moved outward by half the point spacing there; their rings."""
     out, rings = [], []
     for r in runs:
         if len(r) < 2:
             continue
         p = points_m[r]
         step = np.linalg.norm(np.diff(p, axis=0), axis=1)
-        half = 0.5 * float(np.median(step))
-        for end, inner in ((p[0], p[1]), (p[-1], p[-2])):
+        # the spacing near each end (a turned board spreads its far end's points wider than its near end's)
+        for end, inner, local in ((p[0], p[1], step[:EDGE_STEPS]), (p[-1], p[-2], step[-EDGE_STEPS:])):
             direction = (end - inner) / max(float(np.linalg.norm(end - inner)), 1e-12)
-            out.append(end + half * direction)
+            out.append(end + 0.5 * float(np.median(local)) * direction)
             rings.append(int(ring[r[0]]))
     return np.asarray(out).reshape(-1, 3), np.asarray(rings, np.int64)
 

@@ -302,11 +302,13 @@ def pose_excess(poses: Sequence[Pose], T_lidar_cam: np.ndarray, noise: NoiseMode
     spread of a (offset) and of b, c (tilt) over poses, less what the noise model predicts for them
     (the coefficients' covariance through the same whitening), is what neither sensor's own noise
     accounts for: lens-model error, board flatness. The points are first corrected by the solved per-laser
-    biases and range offset (those are modelled already; counting them twice overstated the rotation sigma
-    by ~40% on renders). It goes into each camera
-    pose's prior, so the answer's sigma carries it (tests/core/lidar/test_render_honesty.py).
+    biases and range offset (those are modelled already and must not be counted twice). It goes into
+    each camera pose's prior, so the answer's sigma carries it (tests/core/lidar/test_render_honesty.py).
     """
-    offs, tilts, v_off, v_tilt = [], [], [], []
+    offs: list[float] = []
+    tilts: list[float] = []
+    v_off: list[float] = []
+    v_tilt: list[float] = []
     for p in poses:
         T_bl = se3.invert(T_lidar_cam @ p.camera.T_cam_board)
         corr = range_offset_m + (0.0 if laser_bias_m is None else laser_bias_m[p.lidar.ring_of_point])
@@ -323,8 +325,8 @@ def pose_excess(poses: Sequence[Pose], T_lidar_cam: np.ndarray, noise: NoiseMode
         v_tilt.extend(np.diag(cov)[1:])
     n = len(poses)
     shrink = n / max(n - 3, 1)  # the solve itself absorbed part of the pose-level scatter
-    off2 = shrink * np.mean(offs) - np.mean(v_off)
-    tilt2 = shrink * np.mean(tilts) - np.mean(v_tilt)
+    off2 = float(shrink * np.mean(offs) - np.mean(v_off))
+    tilt2 = float(shrink * np.mean(tilts) - np.mean(v_tilt))
     return float(np.sqrt(max(off2, 0.0))), float(np.sqrt(max(tilt2, 0.0)))
 
 

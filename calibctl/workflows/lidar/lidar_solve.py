@@ -25,7 +25,12 @@ from calibctl.core.gate import GateResult
 from calibctl.core.lidar import gates
 from calibctl.core.lidar import solve as lsolve
 from calibctl.core.lidar.pcd import PointCloud
-from calibctl.core.lidar.segment import DEFAULT_MAX_DIMENSION_ERROR_M, DEFAULT_MIN_RINGS, StationBox, segment_board
+from calibctl.core.lidar.segment import (
+    DEFAULT_MAX_DIMENSION_ERROR_M,
+    DEFAULT_MIN_RINGS,
+    StationBox,
+    segment_board,
+)
 from calibctl.core.lidar.target import BackingBoard, CameraBoard, pose_covariance
 from calibctl.errors import InputError, UsageError
 from calibctl.workflows.lidar.camera import Lens, load_lens
@@ -136,6 +141,33 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
     return poses, rows
 
 
+def projected_edge_rms_px(sol: lsolve.LidarSolution, poses: list[lsolve.Pose], board: BackingBoard,
+                         lens: Lens) -> float:
+    """RMS pixel distance, in the image, between each LiDAR ring end point (through T_cam_lidar and the
+    lens) and the nearest point of the backing board's outline as the camera sees it."""
+    from calibctl.core.intrinsics.solve import project_points
+
+    dists = []
+    half = np.array(board.backing_m) / 2
+    centre = board.centre_in_pattern()[:2]
+    for p in poses:
+        T_board_lidar = se3.invert(sol.T_lidar_cam @ p.camera.T_cam_board)
+        e = p.lidar.edge_points_m @ T_board_lidar[:3, :3].T + T_board_lidar[:3, 3]
+        rel = e[:, :2] - centre
+        on = rel.copy()
+        nearest = np.argmin(np.abs(np.abs(rel) - half), axis=1)
+        rows = np.arange(len(rel))
+        on[rows, nearest] = np.sign(rel[rows, nearest]) * half[nearest]
+        outline = np.column_stack([on + centre, np.zeros(len(on))])
+        seen = np.column_stack([e[:, :2], np.zeros(len(e))])  # the end point, on the board's plane
+        rvec = se3.rotvec_from_rotation(p.camera.T_cam_board[:3, :3])
+        tvec = p.camera.T_cam_board[:3, 3].copy()
+        a = project_points(outline, rvec, tvec, lens.camera_matrix, lens.dist_coeffs, lens.model)
+        b = project_points(seen, rvec, tvec, lens.camera_matrix, lens.dist_coeffs, lens.model)
+        dists.append(np.linalg.norm(a - b, axis=1))
+    return float(np.sqrt(np.mean(np.concatenate(dists) ** 2)))
+
+
 def _transform_json(sol: lsolve.LidarSolution) -> dict[str, Any]:
     T = sol.T_lidar_cam
     roll, pitch, yaw = lsolve.rpy_from_rotation(T[:3, :3])
@@ -189,7 +221,9 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         "transform": _transform_json(sol),
         "metrics": {
             "poses": len(poses), "plane_rms_mm": round(sol.plane_rms_m * 1e3, 2),
-            "edge_rms_mm": round(sol.edge_rms_m * 1e3, 2), "held_out_plane_rms_mm": round(held_plane * 1e3, 2),
+            "edge_rms_mm": round(sol.edge_rms_m * 1e3, 2),
+            "projected_edge_rms_px": round(projected_edge_rms_px(sol, poses, req.board, lens), 2),
+            "held_out_plane_rms_mm": round(held_plane * 1e3, 2),
             "held_out_edge_rms_mm": round(held_edge * 1e3, 2), "folds": req.folds,
             "dimension_error_mean_mm": [round(float(v), 1) for v in dims.mean(axis=0)],
             "range_offset_from_dimensions_mm": round(dim_offset * 1e3, 1),
@@ -202,4 +236,15 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
             "pose_tilt_sigma_deg": round(float(np.degrees(sol.pose_tilt_sigma_rad)), 3),
         },
     }
-    return LidarOutcome(result, accepted, rows)
+    return LidarOutcome(_finite(result), accepted, rows)
+
+
+def _finite(doc: Any) -> Any:
+    """``doc`` with every NaN/inf number as None (JSON has no NaN; a metric that could not be computed)."""
+    if isinstance(doc, dict):
+        return {k: _finite(v) for k, v in doc.items()}
+    if isinstance(doc, list):
+        return [_finite(v) for v in doc]
+    if isinstance(doc, float) and not np.isfinite(doc):
+        return None
+    return doc
