@@ -79,13 +79,15 @@ def solve(
                                         "paired with images by the last number in the file name.")],
     box: Annotated[str, typer.Option("--box", help="Station box xmin,ymin,zmin,xmax,ymax,zmax, metres, "
                                      "LiDAR frame: where the board is held.")],
-    cols: Annotated[int, typer.Option("--cols", min=2, help="Chessboard inner corners per row.")],
-    rows: Annotated[int, typer.Option("--rows", min=2, help="Chessboard inner corners per column.")],
-    square_mm: Annotated[float, typer.Option("--square-mm", min=0.01, help="Square size, mm.")],
-    backing_mm: Annotated[str, typer.Option("--backing-mm", help="Backing board W,H mm (W along the pattern's rows of "
-                                            "--cols corners).")],
-    pattern_offset_mm: Annotated[str, typer.Option("--pattern-offset-mm", help="Pattern centre minus backing "
-                                                   "centre X,Y mm, pattern axes.")] = "0,0",
+    board_ref: Annotated[str | None, typer.Option("--board", help="Registered board NAME[@REV] with its backing "
+                                                  "board (board add ... --backing-mm).")] = None,
+    cols: Annotated[int | None, typer.Option("--cols", min=2, help="Without --board: inner corners per row.")] = None,
+    rows: Annotated[int | None, typer.Option("--rows", min=2, help="Without --board: inner corners per column.")] = None,
+    square_mm: Annotated[float | None, typer.Option("--square-mm", min=0.01, help="Without --board: square, mm.")] = None,
+    backing_mm: Annotated[str | None, typer.Option("--backing-mm", help="Without --board: backing board W,H mm (W "
+                                                   "along the rows of --cols corners).")] = None,
+    pattern_offset_mm: Annotated[str, typer.Option("--pattern-offset-mm", help="Without --board: pattern centre "
+                                                   "minus backing centre X,Y mm, pattern axes.")] = "0,0",
     camera_info: Annotated[Path | None, typer.Option("--camera-info", help="ROS camera_info YAML (fisheye or "
                                                      "plumb_bob).")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Use this camera's active calibration.")] = None,
@@ -113,12 +115,21 @@ def solve(
 
     if scan_units not in ("m", "mm"):
         raise UsageError(f"--scan-units {scan_units!r} is not m or mm")
-    board = BackingBoard(cols, rows, square_mm / 1e3, _pair_mm(backing_mm, "--backing-mm"),
-                         _pair_mm(pattern_offset_mm, "--pattern-offset-mm"))
+    settings = state(ctx).settings()
+    if board_ref is not None:
+        if any(v is not None for v in (cols, rows, square_mm, backing_mm)):
+            raise UsageError("give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both")
+        board = wf.board_from_store(settings, board_ref)
+    else:
+        if cols is None or rows is None or square_mm is None or backing_mm is None:
+            raise UsageError("the target needs --board NAME, or all of --cols, --rows, --square-mm and --backing-mm",
+                             "register it once: calibctl board add NAME ... --backing-mm W,H")
+        board = BackingBoard(cols, rows, square_mm / 1e3, _pair_mm(backing_mm, "--backing-mm"),
+                             _pair_mm(pattern_offset_mm, "--pattern-offset-mm"))
     req = wf.LidarRequest(images, scans, board, wf.parse_box(box), camera_info, serial, scan_pattern,
                           1e-3 if scan_units == "mm" else 1.0, range_offset_mm / 1e3, estimate_range_offset,
                           min_rings, max_dimension_error_mm / 1e3, min_poses, folds)
-    outcome = wf.run_lidar_solve(state(ctx).settings(), req)
+    outcome = wf.run_lidar_solve(settings, req)
     if out is not None:
         write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
     if wants_json(ctx, json_output):

@@ -132,3 +132,50 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     dr = se3.rotvec_from_rotation(a.T_lidar_cam[:3, :3] @ b.T_lidar_cam[:3, :3].T)
     assert np.all(np.abs(dt) < 3 * np.hypot(a.sigma_translation_m, b.sigma_translation_m))
     assert np.all(np.abs(dr) < 3 * np.radians(np.hypot(a.sigma_rotation_deg, b.sigma_rotation_deg)))
+
+
+@pytest.fixture
+def stored(sqlite_url: str, monkeypatch):
+    monkeypatch.setenv("CALIBCTL_OPERATOR", "tester")
+
+    def run(*args: str):
+        return CliRunner().invoke(app, ["--db", sqlite_url, *args], terminal_width=200)
+
+    return run
+
+
+def test_a_board_registered_with_its_backing_is_the_solve_target(stored, tmp_path: Path) -> None:
+    added = stored("board", "add", "L5", "--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850",
+                   "--pattern-offset-mm", "2,0")
+    assert added.exit_code == 0, added.output
+    shown = json.loads(stored("board", "show", "L5", "--json").stdout)
+    assert shown["backing"] == {"width_m": 0.61, "height_m": 0.85, "pattern_offset_m": [0.002, 0.0]}
+    assert "backing board 610" in stored("board", "show", "L5").output
+    img, pcd = acfr_subset(tmp_path)
+    res = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
+                 *camera(tmp_path), "--board", "L5", "--json")
+    assert res.exit_code == 1  # the target was read; the empty box is the verdict
+    assert json.loads(res.stdout)["outcome_counts"] == {"no_plane": 3}
+    both = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
+                  "--board", "L5", "--cols", "5")
+    assert both.exit_code == 2 and "not both" in both.output
+
+
+def test_a_board_without_backing_dimensions_is_exit_2_naming_the_fix(stored, tmp_path: Path) -> None:
+    assert stored("board", "add", "A17", "--cols", "5", "--rows", "7", "--square-mm", "95").exit_code == 0
+    img, pcd = acfr_subset(tmp_path)
+    res = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
+                 "--board", "A17")
+    assert res.exit_code == 2
+    assert "board A17@1 was registered without its backing board dimensions" in res.output
+    assert "--backing-mm W,H" in res.output
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--pattern-offset-mm", "2,0"], "--pattern-offset-mm needs --backing-mm"),
+    (["--backing-mm", "400,850"], "does not fit on a 400 x 850 mm backing board"),
+    (["--backing-mm", "610"], "is not two numbers"),
+])
+def test_bad_backing_options_of_board_add_are_exit_2(stored, args: list[str], message: str) -> None:
+    res = stored("board", "add", "B1", "--cols", "5", "--rows", "7", "--square-mm", "95", *args)
+    assert res.exit_code == 2 and message in res.output

@@ -78,6 +78,29 @@ def parse_box(text: str) -> StationBox:
     return StationBox((v[0], v[1], v[2]), (v[3], v[4], v[5]))
 
 
+def board_from_store(settings: Settings, ref: str) -> BackingBoard:
+    """The registered board ``NAME[@REV]`` as the solve's target; UsageError (exit 2) when it was
+    registered without its backing board."""
+    from calibctl.artifacts.board import parse_board_ref
+    from calibctl.workflows.store_admin.records import open_store
+
+    try:
+        name, revision = parse_board_ref(ref)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    with open_store(settings) as store:
+        board = store.get_board(name, revision)  # NotFoundError (exit 2) for an unknown board
+    if board.kind != "chessboard":
+        raise UsageError(f"board {board.ref} is a {board.kind}; the camera-LiDAR solve takes a chessboard")
+    if board.backing is None:
+        raise UsageError(f"board {board.ref} was registered without its backing board dimensions",
+                         f"register its next revision with them: calibctl board add {board.name} --cols {board.cols} "
+                         f"--rows {board.rows} --square-mm ... --backing-mm W,H [--pattern-offset-mm X,Y]")
+    b = board.backing
+    return BackingBoard(board.cols, board.rows, board.square_size_m, (b.width_m, b.height_m),
+                        (b.pattern_offset_m[0], b.pattern_offset_m[1]))
+
+
 def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
     bounded.check_size(path, "read image")
     with files.file_errors("read image", path):
