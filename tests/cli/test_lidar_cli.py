@@ -179,3 +179,34 @@ def test_a_board_without_backing_dimensions_is_exit_2_naming_the_fix(stored, tmp
 def test_bad_backing_options_of_board_add_are_exit_2(stored, args: list[str], message: str) -> None:
     res = stored("board", "add", "B1", "--cols", "5", "--rows", "7", "--square-mm", "95", *args)
     assert res.exit_code == 2 and message in res.output
+
+
+def _binary_pcd(points: np.ndarray) -> bytes:
+    n = len(points)
+    head = (f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
+            f"POINTS {n}\nDATA binary\n").encode()
+    return head + points.astype("<f4").tobytes()
+
+
+def test_nan_points_are_counted_and_millimetre_scans_need_their_unit(tmp_path: Path) -> None:
+    from calibctl.workflows.lidar.scans import read_scan
+
+    img, pcd = acfr_subset(tmp_path, (1, 3))
+    pts = read_scan(ACFR / "pcd" / "pose1_full.pcd").points_m
+    with_nan = np.vstack([pts, np.full((7, 3), np.nan)])
+    (pcd / "pose1.pcd").unlink()
+    (pcd / "pose1.pcd").write_bytes(_binary_pcd(with_nan))
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
+                  *camera(tmp_path), *BOARD, "--json"])
+    assert res.exit_code == 1
+    rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
+    assert rows["pose1.pcd"]["dropped_nonfinite"] == 7 and rows["pose3.pcd"]["dropped_nonfinite"] == 0
+    (pcd / "pose3.pcd").unlink()
+    np.savetxt(pcd / "pose3.txt", read_scan(ACFR / "pcd" / "pose3_full.pcd").points_m * 1000.0)
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    assert res.exit_code == 2 and "pose3.txt" in res.output and "millimetres" in res.output
+    assert "--scan-units mm" in res.output
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD,
+                  "--scan-units", "mm", "--json"])
+    rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
+    assert rows["pose3.txt"]["outcome"] == "accepted" and res.exit_code == 1  # 2 poses: too few for a solve
