@@ -17,7 +17,7 @@ numbers; a board ~1000x too big is named as millimetres).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -297,5 +297,4 @@ def _board_on_plane(pts: np.ndarray, ring: np.ndarray, inl: np.ndarray, backing_
 
 
 def _replace(result: BoardInScan, outcome: str, message: str) -> BoardInScan:
-    from dataclasses import replace
     return replace(result, outcome=outcome, message=message)

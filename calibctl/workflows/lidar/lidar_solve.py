@@ -22,7 +22,7 @@ from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.rig_frames import frame_key
 from calibctl.core.gate import GateResult
-from calibctl.core.lidar import gates
+from calibctl.core.lidar import gates, validation
 from calibctl.core.lidar import solve as lsolve
 from calibctl.core.lidar.pcd import PointCloud
 from calibctl.core.lidar.segment import (
@@ -193,7 +193,7 @@ def projected_edge_rms_px(sol: lsolve.LidarSolution, poses: list[lsolve.Pose], b
 
 def _transform_json(sol: lsolve.LidarSolution) -> dict[str, Any]:
     T = sol.T_lidar_cam
-    roll, pitch, yaw = lsolve.rpy_from_rotation(T[:3, :3])
+    roll, pitch, yaw = validation.rpy_from_rotation(T[:3, :3])
     return {
         "name": "T_lidar_cam", "convention": "p_lidar = R p_cam + t (camera frame into the LiDAR frame)",
         "matrix": [[round(float(v), 9) for v in row] for row in T],
@@ -232,9 +232,9 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         result |= {"status": "rejected", "gates": [_gate_json(g) for g in pre]}
         return LidarOutcome(result, False, rows)
     sol = lsolve.solve(poses, req.board, req.estimate_range_offset)
-    held_plane, held_edge = lsolve.held_out(poses, req.board, req.folds)
+    held_plane, held_edge = validation.held_out(poses, req.board, req.folds)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
-    dim_offset, dim_offset_sigma = lsolve.range_offset_from_dimensions([p.lidar for p in poses], req.board.backing_m)
+    dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions([p.lidar for p in poses], req.board.backing_m)
     post = [gates.plane_rms_gate(sol.plane_rms_m * 1e3), gates.dimension_gate(dims),
             gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3)]
     all_gates = pre + post

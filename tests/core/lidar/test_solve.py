@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibctl.core.extrinsics import se3
-from calibctl.core.lidar import gates, render
+from calibctl.core.lidar import gates, render, validation
 from calibctl.core.lidar import solve as ls
 from calibctl.core.lidar.segment import segment_board
 
@@ -23,10 +23,10 @@ def poses_of(session: render.RenderedSession) -> list[ls.Pose]:
 
 
 def test_rpy_matches_acfr_order() -> None:
-    R = ls.rotation_from_rpy(-1.6954, -0.0209, -1.4929)
-    np.testing.assert_allclose(ls.rpy_from_rotation(R), (-1.6954, -0.0209, -1.4929), atol=1e-12)
+    R = validation.rotation_from_rpy(-1.6954, -0.0209, -1.4929)
+    np.testing.assert_allclose(validation.rpy_from_rotation(R), (-1.6954, -0.0209, -1.4929), atol=1e-12)
     Rz = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
-    np.testing.assert_allclose(ls.rotation_from_rpy(0, 0, np.pi / 2), Rz, atol=1e-12)
+    np.testing.assert_allclose(validation.rotation_from_rpy(0, 0, np.pi / 2), Rz, atol=1e-12)
 
 
 def test_closed_form_and_joint_solve_recover_T_within_sigma() -> None:
