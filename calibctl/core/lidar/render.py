@@ -77,7 +77,7 @@ def board_pose(rng: np.random.Generator, one_way: bool) -> np.ndarray:
 
 
 def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Generator, azimuth_step_deg: float,
-           range_noise_m: float, laser_bias_m: np.ndarray, range_offset_m: float) -> PointCloud:
+           range_noise_m: float, laser_bias_m: np.ndarray, range_offset_m: float, clutter: bool = True) -> PointCloud:
     elev = np.radians(np.array(VLP16_ELEVATIONS_DEG))
     az = np.radians(np.arange(-180.0, 180.0, azimuth_step_deg)) + rng.uniform(0, np.radians(azimuth_step_deg))
     E, A = np.meshgrid(elev, az, indexing="ij")
@@ -96,7 +96,7 @@ def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Genera
     post = origin + 0.4 * n
     r_post = np.linalg.norm(post[:2])
     az_post = np.arctan2(post[1], post[0])
-    on_post = (~on_board) & (np.abs(np.angle(np.exp(1j * (A.reshape(-1) - az_post)))) < 0.025 / r_post) & \
+    on_post = clutter & (~on_board) & (np.abs(np.angle(np.exp(1j * (A.reshape(-1) - az_post)))) < 0.025 / r_post) & \
         (np.tan(E.reshape(-1)) * r_post < post[2] - 0.3)
     # every other ray ends on a round room's wall WALL_M away: a full ~29k-point sweep, outside the box
     r_wall = WALL_M / np.maximum(np.cos(E.reshape(-1)), 1e-9)
@@ -108,7 +108,7 @@ def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Genera
 
 def render_session(n_poses: int, seed: int, *, range_noise_m: float = 0.01, laser_bias_m: float = 0.005,
                    range_offset_m: float = 0.0, corner_noise_px: float = 0.2, azimuth_step_deg: float = 0.2,
-                   one_way: bool = False, board: BackingBoard = ACFR_BOARD) -> RenderedSession:
+                   one_way: bool = False, board: BackingBoard = ACFR_BOARD, clutter: bool = True) -> RenderedSession:
     """``n_poses`` seeded poses (module docstring); ``range_offset_m`` is the correction the LiDAR needs
     (its ranges are short by it), acfr's ``distance_offset_mm`` convention."""
     rng = np.random.default_rng(seed)
@@ -130,6 +130,6 @@ def render_session(n_poses: int, seed: int, *, range_noise_m: float = 0.01, lase
         if T_est is not None:
             cov, rms = pose_covariance(T_est, obj, px, K_RENDER, np.zeros(5), "k1k2")
             camera = CameraBoard(T_est, cov, rms)
-        cloud = _sweep(T_lidar_centre, board, rng, azimuth_step_deg, range_noise_m, biases, range_offset_m)
+        cloud = _sweep(T_lidar_centre, board, rng, azimuth_step_deg, range_noise_m, biases, range_offset_m, clutter)
         poses.append(RenderedPose(cloud, camera, T_lidar_board))
     return RenderedSession(T_lidar_cam, tuple(poses), board, RENDER_BOX, range_offset_m)
