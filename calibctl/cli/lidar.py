@@ -103,7 +103,10 @@ def solve(
     min_poses: Annotated[int, typer.Option("--min-poses", min=3, help="Accepted poses the solve needs.")] = 6,
     folds: Annotated[int, typer.Option("--folds", min=2, help="k of the k-fold held-out check.")] = 5,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
+    tf_static: Annotated[Path | None, typer.Option("--tf-static", help="Write T as /tf_static YAML (accepted only).")] = None,
+    lidar_frame: Annotated[str, typer.Option("--lidar-frame", help="tf parent frame name.")] = "lidar",
+    camera_frame: Annotated[str, typer.Option("--camera-frame", help="tf child frame name.")] = "camera",
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out / --tf-static.")] = False,
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
@@ -130,14 +133,22 @@ def solve(
                           1e-3 if scan_units == "mm" else 1.0, range_offset_mm / 1e3, estimate_range_offset,
                           min_rings, max_dimension_error_mm / 1e3, min_poses, folds)
     outcome = wf.run_lidar_solve(settings, req)
+    written = []
     if out is not None:
         write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
+        written.append(f"wrote {out}")
+    if tf_static is not None:
+        if outcome.accepted:
+            write_atomic(tf_static, wf.tf_static_yaml(outcome.result, lidar_frame, camera_frame), force=force)
+            written.append(f"wrote {tf_static}")
+        else:
+            written.append(f"not written: {tf_static} (rejected: no transform is published)")
     if wants_json(ctx, json_output):
         emit_json(outcome.result)
     else:
         render_result(outcome.result)
-        if out is not None:
-            say(f"wrote {out}")
+        for line in written:
+            say(line)
     if not outcome.accepted:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 

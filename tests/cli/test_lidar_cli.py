@@ -114,9 +114,11 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     src/optimiser.cpp's RotationTranslation * camera point and include/.../optimiser.h Rotation::toMat."""
     require_acfr()
     res = invoke(["lidar", "solve", "--images", str(ACFR / "images"), "--scans", str(ACFR / "pcd"),
-                  "--scan-pattern", "*_full.pcd", *BOX, *camera(tmp_path), *BOARD, "--json"])
+                  "--scan-pattern", "*_full.pcd", *BOX, *camera(tmp_path), *BOARD, "--json",
+                  "--tf-static", str(tmp_path / "tf.yaml")])
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
+    assert "child_frame_id: camera" in (tmp_path / "tf.yaml").read_text()
     assert len(doc["outcomes"]) == 20 and all(r["outcome"] for r in doc["outcomes"])
     pub = np.loadtxt(ACFR / "published_calibration_quickstart.csv", delimiter=",", skiprows=1)
     mean, sd = pub.mean(axis=0), pub.std(axis=0, ddof=1)
@@ -210,3 +212,20 @@ def test_nan_points_are_counted_and_millimetre_scans_need_their_unit(tmp_path: P
                   "--scan-units", "mm", "--json"])
     rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
     assert rows["pose3.txt"]["outcome"] == "accepted" and res.exit_code == 1  # 2 poses: too few for a solve
+
+
+def test_tf_static_is_written_only_for_an_accepted_transform(tmp_path: Path) -> None:
+    import yaml
+
+    img, pcd = acfr_subset(tmp_path, (1, 3))
+    target = tmp_path / "tf.yaml"
+    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
+                  *camera(tmp_path), *BOARD, "--tf-static", str(target)])
+    assert res.exit_code == 1 and "not written" in res.output and not target.exists()
+    accepted = {"status": "accepted", "images": "i", "scans": "s",
+                "transform": {"translation_m": [0.07, 0.009, -0.157], "quaternion_wxyz": [0.5, -0.5, 0.5, -0.5]}}
+    doc = yaml.safe_load(wf.tf_static_yaml(accepted, "velodyne", "camera_front"))
+    edge = doc["transforms"][0]
+    assert edge["header"]["frame_id"] == "velodyne" and edge["child_frame_id"] == "camera_front"
+    assert edge["transform"]["rotation"] == {"x": -0.5, "y": 0.5, "z": -0.5, "w": 0.5}
+    assert edge["transform"]["translation"]["z"] == -0.157

@@ -262,6 +262,19 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     return LidarOutcome(_finite(result), accepted, rows)
 
 
+def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:
+    """An accepted result's T_lidar_cam as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static`
+    prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the child's pose in the parent)."""
+    from calibctl.workflows.exports.rig_exports import tf_message
+
+    t = result.get("transform")
+    if result.get("status") != "accepted" or t is None:
+        raise UsageError("a rejected camera-LiDAR result has no transform to export")
+    w, x, y, z = t["quaternion_wxyz"]
+    header = f"# calibctl lidar solve T_{lidar_frame}_{camera_frame} (images {result['images']}, scans {result['scans']})\n"
+    return header + tf_message([(lidar_frame, camera_frame, t["translation_m"], (x, y, z, w))])
+
+
 def _finite(doc: Any) -> Any:
     """``doc`` with every NaN/inf number as None (JSON has no NaN; a metric that could not be computed)."""
     if isinstance(doc, dict):
