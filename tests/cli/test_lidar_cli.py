@@ -229,3 +229,16 @@ def test_tf_static_is_written_only_for_an_accepted_transform(tmp_path: Path) -> 
     assert edge["header"]["frame_id"] == "velodyne" and edge["child_frame_id"] == "camera_front"
     assert edge["transform"]["rotation"] == {"x": -0.5, "y": 0.5, "z": -0.5, "w": 0.5}
     assert edge["transform"]["translation"]["z"] == -0.157
+
+
+def test_synth_refuses_to_overwrite_a_rendered_set_without_force(tmp_path: Path) -> None:
+    from calibctl.workflows.lidar.scans import read_scan
+
+    out = tmp_path / "set"
+    first = invoke(["lidar", "synth", str(out), "--poses", "1", "--seed", "3", "--json"])
+    assert first.exit_code == 0
+    cloud = read_scan(out / "scans" / "pose1.pcd")
+    assert len(cloud.points_m) > 25_000 and cloud.ring is not None and set(np.unique(cloud.ring)) == set(range(16))
+    again = invoke(["lidar", "synth", str(out), "--poses", "1"])
+    assert again.exit_code == 2 and "already holds a rendered set" in again.output
+    assert invoke(["lidar", "synth", str(out), "--poses", "1", "--force"]).exit_code == 0
