@@ -75,7 +75,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig rollback": ("calibctl rig rollback stereo-7 --to 1 --reason 'v2 solved on a bent mount'",
                      "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
-                   "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+                   "calibctl rig export stereo-7@2 --format opencv -o stereo.yml",
+                   "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame"),
     "lidar": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
               "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box 1,-2.2,-0.8,3.6,1.6,0.6",),
     "lidar solve": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
