@@ -27,10 +27,12 @@ from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.extrinsics import se3
 from calibctl.core.lidar.segment import BoardInScan
 from calibctl.core.lidar.target import BackingBoard, CameraBoard, perturb, plane_in_camera
+from calibctl.core.lm import Damping, DenseSystem, solve_lm
 from calibctl.errors import NumericalError
 
 MAX_ITERATIONS = 30
-STEP_TOL = 1e-10
+STEP_TOL = 1e-10  # stop when a step lowers the cost by less than this share of it
+DAMPING = Damping(initial=1e-3, decrease=10.0, increase=10.0, floor=1e-9, ceiling=1e8)
 EDGE_SIGMA_START_M = 0.01
 CENTRE_WEIGHT = 0.2  # centres in the closed form: a weak pull, the planes lead
 
@@ -203,9 +205,10 @@ def estimate_noise(poses: Sequence[Pose], plane_resid: Sequence[np.ndarray], edg
 
 def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray, noise: NoiseModel,
                 estimate_range_offset: bool = False) -> LidarSolution:
-    """Gauss-Newton with Levenberg damping over T_lidar_cam, a range bias per laser (prior: the ring runs'
+    """Levenberg-Marquardt (core.lm, dense) over T_lidar_cam, a range bias per laser (prior: the ring runs'
     shared scatter, since a laser's bias is the same at every pose), every T_cam_board (prior: its image
-    covariance) and optionally one range offset for all lasers."""
+    covariance) and optionally one range offset for all lasers. The state is (T_lidar_cam, the biases and
+    offset, the (n, 6) camera-pose perturbations); T_lidar_cam is re-linearised at every step."""
     lasers = 1 + max(int(max(p.lidar.ring_of_point.max(), p.lidar.edge_ring.max(initial=0))) for p in poses)
     layout = _Layout(lasers, estimate_range_offset)
     n_g, n = layout.size, len(poses)
@@ -213,28 +216,24 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
     laser_prior[6:6 + lasers] = 1.0 / max(noise.run_bias_m, 1e-4)
     priors = [np.linalg.cholesky(np.linalg.inv(p.camera.covariance)).T for p in poses]
     runs = [_runs_of(p) for p in poses]
-    T0, xg, locals_ = T_start.copy(), np.zeros(n_g), np.zeros((n, 6))
+    State = tuple[np.ndarray, np.ndarray, np.ndarray]
 
-    def whitened(xg_: np.ndarray, i: int, loc: np.ndarray) -> np.ndarray:
-        return _whitened(xg_, layout, T0, poses[i], board, loc, noise, priors[i], runs[i])
-
-    def total(xg_: np.ndarray, loc: np.ndarray) -> float:
-        return sum(float(r @ r) for r in (whitened(xg_, i, loc[i]) for i in range(n))) + float(
-            np.sum((laser_prior * xg_) ** 2))
-
-    def build(xg_: np.ndarray, loc: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-        size = n_g + 6 * n
-        H, g = np.diag(laser_prior**2), np.zeros(size)
-        H = np.pad(H, (0, 6 * n))
+    def build(state: State) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """(H, J^T rho, rho^T rho, residual count) of the whitened residuals rho (predicted - observed)."""
+        T0, extra, loc = state
+        xg_ = np.concatenate([np.zeros(6), extra])
+        H = np.pad(np.diag(laser_prior**2), (0, 6 * n))
+        g = np.zeros(n_g + 6 * n)
         g[:n_g] = laser_prior**2 * xg_
         cost, m = float(np.sum((laser_prior * xg_) ** 2)), 0
         biases, offset = layout.split(xg_)
-        for i in range(n):
-            p = poses[i]
-            r0 = whitened(xg_, i, loc[i])
+        for i, p in enumerate(poses):
+            def whitened(xk: np.ndarray, lk: np.ndarray, i: int = i, p: Pose = p) -> np.ndarray:
+                return _whitened(xk, layout, T0, p, board, lk, noise, priors[i], runs[i])
+
+            r0 = whitened(xg_, loc[i])
             J = np.zeros((r0.size, n_g + 6))
-            dp, de = range_derivatives(perturb(T0, xg_[:6]), perturb(p.camera.T_cam_board, loc[i]), p, board,
-                                       offset, biases)
+            dp, de = range_derivatives(T0, perturb(p.camera.T_cam_board, loc[i]), p, board, offset, biases)
             n_p, n_e = len(dp), len(de)
             for k in range(6, n_g):  # range columns, exact: one laser's bias, or the shared offset
                 mask_p = np.ones(n_p) if k == 6 + lasers else (p.lidar.ring_of_point == k - 6).astype(float)
@@ -247,7 +246,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
                     xk[k] += 1e-7
                 else:
                     lk[k - n_g] += 1e-7
-                J[:, k] = (whitened(xk, i, lk) - r0) / 1e-7
+                J[:, k] = (whitened(xk, lk) - r0) / 1e-7
             cols = np.r_[np.arange(n_g), n_g + 6 * i + np.arange(6)]
             H[np.ix_(cols, cols)] += J.T @ J
             g[cols] += J.T @ r0
@@ -255,24 +254,19 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
             m += r0.size
         return H, g, cost, m
 
-    H, g, cost, m = build(xg, locals_)
-    lam, it = 1e-3, 0
-    for it in range(1, MAX_ITERATIONS + 1):  # noqa: B007 - the count is reported
-        step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), -g)
-        xg_new, loc_new = xg + step[:n_g], locals_ + step[n_g:].reshape(n, 6)
-        new_cost = total(xg_new, loc_new)
-        if new_cost < cost:
-            done = cost - new_cost < STEP_TOL * max(cost, 1.0)
-            xg, locals_, lam = xg_new, loc_new, max(lam / 10, 1e-9)
-            T0 = perturb(T0, xg[:6])  # re-linearise T_lidar_cam at the new estimate
-            xg[:6] = 0.0
-            H, g, cost, m = build(xg, locals_)
-            if done:
-                break
-        else:
-            lam *= 10
-            if lam > 1e8:
-                break
+    def evaluate(state: State) -> DenseSystem:
+        H, g, cost, _ = build(state)
+        return DenseSystem(cost, H, -g)  # core.lm's g is J^T (observed - predicted)
+
+    def retract(state: State, delta: np.ndarray) -> State:
+        T0, extra, loc = state
+        return perturb(T0, delta[:6]), extra + delta[6:n_g], loc + delta[n_g:].reshape(n, 6)
+
+    fit = solve_lm(evaluate, (T_start.copy(), np.zeros(n_g - 6), np.zeros((n, 6))), retract, damping=DAMPING,
+                   max_iterations=MAX_ITERATIONS, relative_tolerance=STEP_TOL, label="the camera-LiDAR solve",
+                   hint="check the station box and the camera's calibration")
+    T0, extra, locals_ = fit.params
+    H, _, cost, m = build(fit.params)
     dof = m - 6 * (n + 1) - int(estimate_range_offset)
     if dof <= 0 or not np.isfinite(cost):
         raise NumericalError(f"camera-LiDAR solve has {m} residuals for {n_g + 6 * n} unknowns",
@@ -281,7 +275,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
         cov_all = np.linalg.inv(H) * max(cost / dof, 1.0)
     except np.linalg.LinAlgError:
         raise NumericalError("camera-LiDAR normal equations are singular", "vary the board's tilt") from None
-    biases, offset = layout.split(xg)
+    biases, offset = layout.split(np.concatenate([np.zeros(6), extra]))
     plane_all, edge_all, per_pose = [], [], []
     for i, p in enumerate(poses):
         pr, er = pose_residuals(T0, perturb(p.camera.T_cam_board, locals_[i]), p, board, offset, biases)
@@ -291,7 +285,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
     return LidarSolution(
         T0, cov_all[:6, :6], offset, float(np.sqrt(cov_all[-1, -1])) if estimate_range_offset else None,
         float(np.sqrt(np.mean(np.concatenate(plane_all) ** 2))), float(np.sqrt(np.mean(np.concatenate(edge_all) ** 2))),
-        tuple(per_pose), noise, it, laser_bias_m=biases.copy())
+        tuple(per_pose), noise, fit.iterations, laser_bias_m=biases.copy())
 
 
 def pose_excess(poses: Sequence[Pose], T_lidar_cam: np.ndarray, noise: NoiseModel,
