@@ -104,9 +104,11 @@ def solve(
     folds: Annotated[int, typer.Option("--folds", min=2, help="k of the k-fold held-out check.")] = 5,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
     tf_static: Annotated[Path | None, typer.Option("--tf-static", help="Write T as /tf_static YAML (accepted only).")] = None,
+    overlay: Annotated[Path | None, typer.Option("--overlay", help="Folder for each accepted image with the LiDAR "
+                                                 "points drawn over it through the solved T.")] = None,
     lidar_frame: Annotated[str, typer.Option("--lidar-frame", help="tf parent frame name.")] = "lidar",
     camera_frame: Annotated[str, typer.Option("--camera-frame", help="tf child frame name.")] = "camera",
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out / --tf-static.")] = False,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out, --tf-static and --overlay files.")] = False,
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
@@ -131,9 +133,9 @@ def solve(
                              _pair_mm(pattern_offset_mm, "--pattern-offset-mm"))
     req = wf.LidarRequest(images, scans, board, wf.parse_box(box), camera_info, serial, scan_pattern,
                           1e-3 if scan_units == "mm" else 1.0, range_offset_mm / 1e3, estimate_range_offset,
-                          min_rings, max_dimension_error_mm / 1e3, min_poses, folds)
+                          min_rings, max_dimension_error_mm / 1e3, min_poses, folds, overlay, force)
     outcome = wf.run_lidar_solve(settings, req)
-    written = []
+    written = [f"wrote {path}" for path in outcome.result.get("overlays", [])]
     if out is not None:
         write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
         written.append(f"wrote {out}")

@@ -115,10 +115,11 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     require_acfr()
     res = invoke(["lidar", "solve", "--images", str(ACFR / "images"), "--scans", str(ACFR / "pcd"),
                   "--scan-pattern", "*_full.pcd", *BOX, *camera(tmp_path), *BOARD, "--json",
-                  "--tf-static", str(tmp_path / "tf.yaml")])
+                  "--tf-static", str(tmp_path / "tf.yaml"), "--overlay", str(tmp_path / "overlay")])
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
     assert "child_frame_id: camera" in (tmp_path / "tf.yaml").read_text()
+    assert len(doc["overlays"]) == 19 and (tmp_path / "overlay" / "pose1_lidar.png").stat().st_size > 0
     assert len(doc["outcomes"]) == 20 and all(r["outcome"] for r in doc["outcomes"])
     pub = np.loadtxt(ACFR / "published_calibration_quickstart.csv", delimiter=",", skiprows=1)
     mean, sd = pub.mean(axis=0), pub.std(axis=0, ddof=1)

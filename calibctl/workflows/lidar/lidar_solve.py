@@ -55,6 +55,8 @@ class LidarRequest:
     max_dimension_error_m: float = DEFAULT_MAX_DIMENSION_ERROR_M
     min_poses: int = gates.MIN_POSES
     folds: int = 5
+    overlay_dir: Path | None = None
+    force: bool = False
 
 
 @dataclass
@@ -259,6 +261,14 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
             "pose_tilt_sigma_deg": round(float(np.degrees(sol.pose_tilt_sigma_rad)), 3),
         },
     }
+    if req.overlay_dir is not None:
+        accepted_frames = {int(p.label) for p in poses}
+        pairs = [(img, scan) for key, img, scan in pair(req.images, req.scans, req.scan_pattern).pairs
+                 if key in accepted_frames]
+        from calibctl.workflows.lidar.lidar_overlay import write_overlays
+
+        result["overlays"] = write_overlays(req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m,
+                                            req.force)
     return LidarOutcome(_finite(result), accepted, rows)
 
 

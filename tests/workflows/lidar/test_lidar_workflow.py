@@ -63,3 +63,26 @@ def test_acfr_segmentation_matches_the_authors_crops() -> None:
         assert common / len(theirs) > 0.85, full.name
     assert len(outcomes) == 20
     assert sum(o == "accepted" for o in outcomes.values()) >= 18
+
+
+def test_overlay_draws_the_board_points_where_the_camera_sees_the_board() -> None:
+    from calibctl.core.lidar import render
+    from calibctl.core.lidar.segment import segment_board
+    from calibctl.workflows.lidar.camera import Lens
+    from calibctl.workflows.lidar.lidar_overlay import overlay_image
+
+    session = render.render_session(1, seed=4)
+    pose = session.poses[0]
+    lens = Lens(render.K_RENDER, np.zeros(5), render.IMAGE_SIZE, "k1k2", "render")
+    blank = np.zeros((render.IMAGE_SIZE[1], render.IMAGE_SIZE[0], 3), np.uint8)
+    board = segment_board(pose.cloud, session.box, session.board.backing_m).points_m
+    drawn = overlay_image(blank, board, session.T_lidar_cam, lens)
+    assert not blank.any()  # the input is left alone
+    T_cam_board = pose.camera.T_cam_board if pose.camera is not None else None
+    assert T_cam_board is not None
+    centre = T_cam_board[:3, :3] @ session.board.centre_in_pattern() + T_cam_board[:3, 3]
+    u, v = (centre[:2] / centre[2] * render.K_RENDER[0, 0] + render.K_RENDER[:2, 2]).round().astype(int)
+    assert drawn[v - 40:v + 40, u - 40:u + 40].any()  # dots around the board's centre in the image
+    wrong = session.T_lidar_cam.copy()
+    wrong[:3, 3] += [0.0, 3.0, 0.0]  # 3 m off: the dots land elsewhere
+    assert not overlay_image(blank, board, wrong, lens)[v - 40:v + 40, u - 40:u + 40].any()
