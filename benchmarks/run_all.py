@@ -59,6 +59,7 @@ BENCHES = (
     Bench("bench_verdicts", "bench_verdicts.py", (), ()),
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
     Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
+    Bench("bench_lidar", "bench_lidar.py", ("--repeats", "3"), ("--repeats", "1")),
 )
 
 

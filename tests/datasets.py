@@ -35,3 +35,16 @@ def require_datasets() -> None:
 
 
 needs_datasets = pytest.mark.usefixtures("_require_datasets")
+
+
+ACFR = DATASETS / "acfr-lidar-camera"
+
+
+def require_acfr() -> None:
+    """Call at the top of a test on the acfr camera + VLP-16 set (same rule as require_datasets)."""
+    if ACFR.is_dir():
+        return
+    message = f"acfr-lidar-camera not found at {ACFR} (set CALIBCTL_TEST_DATASETS)"
+    if os.environ.get("CI"):
+        pytest.fail(message)
+    pytest.skip(message)

@@ -69,6 +69,15 @@ class SquareMeasurement(Document):
         return self
 
 
+class BackingBoard(Document):
+    """The rigid board the pattern is mounted on, for targets another sensor sees by its outline (LiDAR)."""
+
+    width_m: float = Field(gt=0, lt=10.0, description="backing board edge along the pattern's x (the cols direction), metres")
+    height_m: float = Field(gt=0, lt=10.0, description="backing board edge along the pattern's y (the rows direction), metres")
+    pattern_offset_m: tuple[float, float] = Field(
+        (0.0, 0.0), description="pattern centre minus backing board centre along the pattern's x and y, metres")
+
+
 class BoardRevision(Document):
     """One immutable revision of a registered calibration board."""
 
@@ -84,6 +93,10 @@ class BoardRevision(Document):
     created_at: UtcDatetime = Field(description="when this revision was registered (UTC)")
     created_by: str = Field(min_length=1, description="who registered it")
     note: str | None = Field(None, description="free text, e.g. why it was re-measured")
+    # Left out of the document while absent, so boards sealed before it still verify.
+    backing: BackingBoard | None = Field(
+        None, exclude_if=lambda backing: backing is None,
+        description="the backing board's size and the pattern's place on it (camera-LiDAR targets)")
 
     @model_validator(mode="after")
     def _charuco_fields(self) -> BoardRevision:

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, plain, shown, stderr, stdout
+from calibctl.errors import UsageError
 
 if TYPE_CHECKING:
     from calibctl.artifacts.board import BoardRevision
@@ -71,11 +72,25 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
             say(f"  evidence      {m.evidence_name} sha256 {m.evidence_sha256}")
     if m.span is not None:
         say(f"  span          {_mm(m.span.span_m)} ± {_mm(m.span.uncertainty_m)} with {m.span.instrument}")
+    if board.backing is not None:
+        b = board.backing
+        say(f"  backing board {_mm(b.width_m)} x {_mm(b.height_m)}, pattern offset {_mm(b.pattern_offset_m[0])}, "
+            f"{_mm(b.pattern_offset_m[1])}")
     say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")
     if board.note:
         say(f"  note          {board.note}")
     if revisions and len(revisions) > 1:
         say(f"  revisions     {', '.join(str(r) for r in revisions)}")
+
+
+def _pair_mm(text: str | None, option: str) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise UsageError(f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850") from None
+    return a, b
 
 
 @board_app.command("add")
@@ -101,6 +116,10 @@ def add(
     span_instrument: Annotated[str | None, typer.Option("--span-instrument", help="What measured the span.")] = None,
     span_squares: Annotated[int | None, typer.Option(
         "--span-squares", help="Squares the span covers (default: inner corners along the long side - 1).")] = None,
+    backing_mm: Annotated[str | None, typer.Option(
+        "--backing-mm", help="Backing board W,H in mm (W along the rows of --cols corners); camera-LiDAR targets.")] = None,
+    pattern_offset_mm: Annotated[str | None, typer.Option(
+        "--pattern-offset-mm", help="Pattern centre minus backing centre X,Y in mm (pattern axes).")] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
@@ -114,6 +133,7 @@ def add(
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
         marker_mm=marker_mm, dictionary=dictionary, note=note, span_mm=span_mm,
         span_uncertainty_mm=span_uncertainty_mm, span_instrument=span_instrument, span_squares=span_squares,
+        backing_mm=_pair_mm(backing_mm, "--backing-mm"), pattern_offset_mm=_pair_mm(pattern_offset_mm, "--pattern-offset-mm"),
     )  # fmt: skip
     board = boards.add_board(state(ctx).settings(), reg)
     if board.measurement.status == "nominal":

@@ -48,7 +48,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "board": ("calibctl board list", "calibctl board show A17"),
     "board add": ("calibctl board add A17 --kind chessboard --cols 9 --rows 6 --square-mm 25.03 "
                   "--uncertainty-mm 0.02 --instrument 'Mitutoyo 500-196' --measured-by anna "
-                  "--measured-on 2026-03-11 --evidence calipers.jpg",),
+                  "--measured-on 2026-03-11 --evidence calipers.jpg",
+                  "calibctl board add L5 --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --pattern-offset-mm 2,0"),
     "board list": ("calibctl board list", "calibctl board list --json"),
     "board show": ("calibctl board show A17", "calibctl board show A17@2 --json"),
     "db": ("calibctl db upgrade", "calibctl --db postgresql://calib@factory-db/calibctl db verify"),
@@ -78,6 +79,15 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml",
                    "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame"),
+    "lidar": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
+              "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box 1,-2.2,-0.8,3.6,1.6,0.6",),
+    "lidar solve": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
+                    "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --pattern-offset-mm 2,0 "
+                    "--box 1,-2.2,-0.8,3.6,1.6,0.6",
+                    "calibctl lidar solve --images shots/ --scans sweeps/ --serial CAM-0042 --board L5 "
+                    "--box 1,-2,-1,4,2,1 --json"),
+    "lidar synth": ("calibctl lidar synth lidar-set/ --poses 12 --seed 1",
+                    "calibctl lidar synth offset-set/ --range-offset-mm 30"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
     "fleet": ("calibctl fleet add amr-017 --serial CAM-0042 --serial CAM-0043", "calibctl fleet status --json"),

@@ -28,7 +28,7 @@ COMMAND_MODULES: dict[str, str] = {
     "report": "report_page",
     "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
     "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
-    "board": "board", "rig": "rig", "db": "db", "keys": "keys", "fleet": "fleet",
+    "board": "board", "rig": "rig", "lidar": "lidar", "db": "db", "keys": "keys", "fleet": "fleet",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is
 the order in ``--help`` (tests/cli/test_cli_registry.py holds it to what the modules register)."""

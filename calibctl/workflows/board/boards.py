@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from calibctl.artifacts.board import (
     BOARD_NAME_PATTERN,
+    BackingBoard,
     BoardRevision,
     SpanMeasurement,
     SquareMeasurement,
@@ -69,6 +70,8 @@ class BoardRegistration:
     span_uncertainty_mm: float | None = None
     span_instrument: str | None = None
     span_squares: int | None = None
+    backing_mm: tuple[float, float] | None = None
+    pattern_offset_mm: tuple[float, float] | None = None
 
 
 def parse_measured_on(text: str, today: dt.date) -> dt.date:
@@ -195,6 +198,7 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
     except ValueError as exc:
         raise UsageError(f"board {reg.name}: {exc}") from exc
     measurement = _measurement(reg, now.date())
+    backing = _backing(reg)
     try:
         return BoardRevision(
             name=reg.name,
@@ -208,9 +212,28 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
             created_at=now,
             created_by=created_by,
             note=reg.note,
+            backing=backing,
         )
     except ValidationError as exc:
         raise UsageError(validation_message(exc, f"board {reg.name}")) from exc
+
+
+def _backing(reg: BoardRegistration) -> BackingBoard | None:
+    """The backing board of ``--backing-mm W,H`` / ``--pattern-offset-mm X,Y``, or None."""
+    if reg.backing_mm is None:
+        if reg.pattern_offset_mm is not None:
+            raise UsageError("--pattern-offset-mm needs --backing-mm W,H (the board it is offset on)")
+        return None
+    w, h = reg.backing_mm
+    if not (0 < w < 10000 and 0 < h < 10000):
+        raise UsageError(f"--backing-mm {w:g},{h:g} must be two positive lengths below 10000 mm")
+    ox, oy = reg.pattern_offset_mm or (0.0, 0.0)
+    pattern = ((reg.cols + 1) * reg.square_mm, (reg.rows + 1) * reg.square_mm)
+    if pattern[0] + 2 * abs(ox) > w or pattern[1] + 2 * abs(oy) > h:
+        raise UsageError(f"a {reg.cols + 1} x {reg.rows + 1}-square pattern ({pattern[0]:g} x {pattern[1]:g} mm, "
+                         f"offset {ox:g},{oy:g} mm) does not fit on a {w:g} x {h:g} mm backing board",
+                         "--backing-mm is W along the rows of --cols corners, H along the --rows direction")
+    return BackingBoard(width_m=w / 1000.0, height_m=h / 1000.0, pattern_offset_m=(ox / 1000.0, oy / 1000.0))
 
 
 def square_size_warning(board: BoardRevision) -> str | None:
