@@ -63,11 +63,14 @@ MAX_ABS_OPTION = 1e12
 
 
 def _check_numbers(command: ClickCommand, values: dict[str, Any]) -> None:
-    """UsageError (exit 2) for a float option that is nan, inf or beyond ``MAX_ABS_OPTION``: typer
+    """UsageError (exit 2) for a float option the user gave as nan, inf or beyond ``MAX_ABS_OPTION``: typer
     accepts 'nan' and 'inf' as floats (and inside a range: nan compares false), and nan amplitudes wrote nan
     files with exit 0, inf ended in tracebacks."""
     flags = {p.name: (p.opts[0] if getattr(p, "opts", None) else p.name) for p in command.params}
+    defaults = {p.name: p.default for p in command.params}
     for name, value in values.items():
+        if name in defaults and value == defaults[name]:  # calibctl's own default (e.g. --range-m inf = rays)
+            continue
         for v in value if isinstance(value, tuple | list) else (value,):
             if isinstance(v, float) and not (math.isfinite(v) and abs(v) <= MAX_ABS_OPTION):
                 raise UsageError(f"{flags.get(name, name)} {v!r} is not a usable number",

@@ -39,7 +39,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from calibctl.core.intrinsics.lens_checks import ERROR, Finding
-from calibctl.core.intrinsics.solve import solve_intrinsics
 from calibctl.errors import NumericalError
 
 BLOCK = 4  # corners per block side
@@ -96,6 +95,9 @@ def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per
                   image_size: tuple[int, int], models: Sequence[str] = FLOOR_MODELS) -> tuple[float, str] | None:
     """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on these
     corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px."""
+    # cv2 only here: `lint FILE` reads model_fit's rule without it
+    from calibctl.core.intrinsics.solve import solve_intrinsics
+
     best: tuple[float, str] | None = None
     for name in models:
         try:
