@@ -12,7 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.options import OperatorOption, StationOption
+from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import ActivateOption, DropOutliersOption, ModelOption, render_outcome
@@ -66,10 +66,11 @@ def register(app: typer.Typer) -> None:
     register_synth(app)
 
 
-def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run):
+def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run,
+                 jobs: int | None = None):
     from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
 
-    settings = state(ctx).settings(station=station, operator=operator)
+    settings = state(ctx).settings(station=station, operator=operator, jobs=jobs)
     with capture_observer(as_json, settings.gates.min_views, None) as observer:
         return settings, run(settings, observer)
 
@@ -174,6 +175,7 @@ def capture(
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
     model: GaugeModelOption = None,
+    jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
@@ -213,7 +215,7 @@ def capture(
                                               reference_distance=distance, reference_source=reference_source,
                                               gauge_model=gauge_model(model))
     _, result = _run_capture(ctx, as_json, station, operator,
-                             lambda settings, obs: capture_workflow.capture(settings, request, obs))
+                             lambda settings, obs: capture_workflow.capture(settings, request, obs), jobs)
     if as_json:
         emit_json(result.as_json())
     else:
@@ -237,6 +239,7 @@ def calibrate(
     image_circle: ImageCircleOption = None,
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
+    jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -254,7 +257,7 @@ def calibrate(
                                               image_circle=parse_image_circle(image_circle),
                                               reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
-        settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs))
+        settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs), jobs)
     solved = result.solve
     if as_json:
         emit_json({"capture": result.capture.as_json(),

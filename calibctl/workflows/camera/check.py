@@ -142,7 +142,7 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
         if source.kind not in sources.IMAGE_SETS:
             raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
                              "save a few board pictures from the camera and check those")
-        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref)
+        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref, settings.jobs)
         obj = spec.object_points()
         ids = [np.asarray(v.corner_ids) for v in views]
         result = recheck([obj[i] for i in ids], [np.asarray(v.corners_px) for v in views],

@@ -332,12 +332,46 @@ def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
         return real_detect(*args, **kwargs)
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    monkeypatch.setattr(image_outcomes, "PROCESS_MIN_FILES", 1000)  # threads: the patch reaches the workers
     try:
         with pytest.raises(KeyboardInterrupt):
-            capture(settings, CaptureRequest(SERIAL, "A17", str(folder), workers=workers))
+            capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=workers))
     finally:
         capture_returned.set()
     assert len(calls) <= 3 + workers  # of 60: the rest was cancelled
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == []
         assert store.counts()["images"] == 0
+
+
+@pytest.mark.parametrize("jobs", [2, 4])
+def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(settings, good: Path, tmp_path: Path,
+                                                                    jobs: int) -> None:
+    """Ctrl-C arrives in the capturing process (workers ignore SIGINT) while processes detect: it
+    propagates, no session and no image is stored, and the next capture on the warm pool works."""
+    folder = tmp_path / "large"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(40):  # enough for the process pool (image_outcomes.PROCESS_MIN_FILES)
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+
+    class CtrlC(capture_workflow.CaptureObserver):
+        def image_done(self, done: int, total: int, name: str, status: str) -> None:
+            if done == 5:
+                raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=jobs), CtrlC())
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == [] and store.counts()["images"] == 0
+    result = capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs))
+    assert result.session.status == "accepted"
+
+
+def test_a_capture_stores_the_same_session_at_every_job_count(settings, good: Path) -> None:
+    sessions = [capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs)).session for jobs in (1, 2, 4)]
+    first = sessions[0]
+    for other in sessions[1:]:
+        assert [o.model_dump() for o in other.outcomes] == [o.model_dump() for o in first.outcomes]
+        assert [v.model_dump() for v in other.views] == [v.model_dump() for v in first.views]  # corners as floats
+        assert [g.model_dump() for g in other.gates] == [g.model_dump() for g in first.gates]
