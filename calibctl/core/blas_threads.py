@@ -5,8 +5,9 @@ Every stage states the parallelism it really uses and holds the libraries under 
   * detection: N worker processes, each with one OpenCV and one BLAS thread (``limit_this_process``,
     ``core.capture.worker_pool``); on threads, OpenCV on one thread for the run;
   * solves, held-out validation folds, the rig and hand-eye LMs: OpenCV and BLAS on one thread
-    (``single_threaded_blas`` with ``single_threaded_opencv``), parallel only where the stage itself
-    runs folds or pairs on Python threads.
+    (``single_threaded``, which ``core.intrinsics.solution.single_threaded_opencv`` and every solve, the
+    capture gates' lens fit, ``solve_rig`` and ``fit_handeye`` enter), parallel only where the stage
+    itself runs folds or pairs on Python threads (validation folds, the one-camera test's pairs).
 
 The libraries are found and set by threadpoolctl (every loaded OpenBLAS, MKL, BLIS and OpenMP runtime:
 opencv-python's bundled OpenBLAS and numpy's scipy-openblas on the wheels we ship), not by hand.
@@ -31,9 +32,14 @@ spin before they sleep: ``import numpy`` took 180 ms of CPU with them and 110 wi
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from threadpoolctl import ThreadpoolController
 
 OPENBLAS_THREADS_ENV = "OPENBLAS_NUM_THREADS"
 
@@ -46,12 +52,19 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+@functools.cache
+def _controller() -> ThreadpoolController:
+    """The BLAS / OpenMP libraries of this process, found once (2 ms; a limit then costs 0.1 ms). Called
+    from code that has imported numpy and cv2, so their libraries are loaded by then."""
+    from threadpoolctl import ThreadpoolController  # here: lint and --help never load it
+
+    return ThreadpoolController()
+
+
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
     """Every loaded BLAS and OpenMP runtime on one thread inside the block, restored afterwards."""
-    from threadpoolctl import threadpool_limits  # here: lint and --help never load it
-
-    with threadpool_limits(limits=1):
+    with _controller().limit(limits=1):
         yield
 
 
@@ -78,10 +91,9 @@ def limit_this_process(threads: int) -> None:
     """OpenCV and every loaded BLAS / OpenMP runtime on ``threads`` threads for the rest of the process
     (a worker process's initializer)."""
     import cv2
-    from threadpoolctl import threadpool_limits
 
     cv2.setNumThreads(threads)
-    threadpool_limits(limits=threads)
+    _controller().limit(limits=threads)
 
 
 def thread_counts() -> dict[str, int]:

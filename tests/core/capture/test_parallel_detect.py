@@ -147,3 +147,25 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
 def test_the_default_job_count_is_the_cores_this_process_may_use() -> None:
     expected = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     assert available_cores() == expected
+
+
+def test_solve_stages_run_opencv_and_blas_on_one_thread_and_give_the_threads_back() -> None:
+    """solve_rig, fit_handeye, the solves and the capture gates enter ``single_threaded``: inside it
+    every library runs one thread, outside the counts are what they were."""
+    from threadpoolctl import threadpool_limits
+
+    from calibctl.core.blas_threads import single_threaded
+
+    with threadpool_limits(limits=2):
+        cv2.setNumThreads(2)
+        try:
+            before = thread_counts()
+            with single_threaded():
+                inside = thread_counts()
+                with single_threaded():
+                    pass
+                assert thread_counts() == inside  # a nested block gives nothing back early
+            assert set(inside.values()) == {1}
+            assert thread_counts() == before and before["opencv"] == 2
+        finally:
+            cv2.setNumThreads(-1)
