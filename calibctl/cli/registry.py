@@ -26,6 +26,7 @@ COMMAND_MODULES: dict[str, str] = {
     "report": "report_page",
     "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
     "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
+    "station": "station",
     "board": "board", "rig": "rig", "db": "db", "keys": "keys",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is

@@ -29,7 +29,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from calibctl.core.blas_threads import available_cores, limit_this_process
 
-__all__ = ["available_cores", "discard_if_broken", "process_pool", "shutdown_pool"]
+__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shutdown_pool", "warm"]
 
 _lock = threading.Lock()
 _pool: ProcessPoolExecutor | None = None
@@ -82,3 +82,21 @@ def shutdown_pool() -> None:
         pool, _pool = _pool, None
     if pool is not None:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def warm(workers: int) -> None:
+    """Start the pool's ``workers`` processes now and wait until each has run (a station's start-up), so
+    the first capture forks nothing."""
+    pool = process_pool(workers)
+    for future in [pool.submit(_ready) for _ in range(workers)]:
+        future.result()
+
+
+def is_warm(workers: int) -> bool:
+    """True when a pool of ``workers`` processes is running: detection on it costs no start-up."""
+    with _lock:
+        return _pool is not None and _pool_workers == workers
+
+
+def _ready() -> int:
+    return 1

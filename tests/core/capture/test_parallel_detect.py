@@ -90,9 +90,13 @@ def test_real_photos_get_the_same_outcomes_at_jobs_1_2_and_4() -> None:
     assert sum(o.accepted for o in runs["process x4"]) >= 20  # of 26: the set's boards are found
 
 
-def test_auto_runs_a_few_files_on_threads_and_many_on_processes() -> None:
+def test_auto_runs_a_few_files_on_threads_and_many_or_a_warm_pool_on_processes() -> None:
+    worker_pool.shutdown_pool()
     assert choose_executor("auto", 4, PROCESS_MIN_FILES) == "process"
     assert choose_executor("auto", 4, PROCESS_MIN_FILES - 1) == "thread"
+    worker_pool.warm(2)  # a station's start-up: the pool runs, so a few files go to it too
+    assert worker_pool.is_warm(2) and not worker_pool.is_warm(4)
+    assert choose_executor("auto", 2, 3) == "process" and choose_executor("auto", 4, 3) == "thread"
     assert choose_executor("auto", 1, 1000) == "thread"  # one worker: no pool at all
     assert choose_executor("thread", 4, 1000) == "thread" and choose_executor("process", 2, 3) == "process"
     with pytest.raises(ValueError, match="executor must be one of auto, thread, process"):
