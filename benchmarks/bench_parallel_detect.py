@@ -61,7 +61,7 @@ if __name__ == "__main__":
         obj = np.zeros((54, 3), np.float32)
         obj[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
         cv2.calibrateCameraExtended([obj] * len(views), views, found[0][1], None, None)
-    print(f"RESULT {t_detect:.4f} {len(views)}")
+    print(f"RESULT {t_detect:.4f} {len(views)} {time.perf_counter() - t:.4f}")
 '''
 
 CALIBCTL_DETECT = r'''
@@ -88,7 +88,7 @@ def run(cmd: list[str]) -> tuple[float, str]:
 
 def result_of(stdout: str) -> tuple[float, int]:
     line = next(line for line in stdout.splitlines() if line.startswith("RESULT "))
-    _, seconds, found = line.split()
+    _, seconds, found, *_ = line.split()
     return float(seconds), int(found)
 
 
