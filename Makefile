@@ -43,6 +43,13 @@ test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests (i
 		(sudo apt-get update && sudo apt-get install -y chromium)
 	$(PY) -m pytest -q -m slow
 
+CONSUMER_DEBS = python3-camera-calibration-parsers python3-image-geometry python3-mrcal python3-opencv liburdfdom-tools
+
+test-consumers: $(STAMP) ## the robot bundle read by ROS camera_calibration_parsers, image_geometry, mrcal, check_urdf (installs them)
+	/usr/bin/python3 -c 'import camera_calibration_parsers, image_geometry, mrcal, cv2' 2>/dev/null && command -v check_urdf >/dev/null || \
+		(apt-get update && apt-get install -y $(CONSUMER_DEBS)) || (sudo apt-get update && sudo apt-get install -y $(CONSUMER_DEBS))
+	$(PY) -m pytest -q -rs tests/cli/test_rig_bundle_consumers.py
+
 lint: $(STAMP) ## ruff, mypy and the import-layer contract
 	$(VENV)/bin/ruff check calibctl tests benchmarks
 	$(VENV)/bin/mypy calibctl
@@ -60,4 +67,4 @@ bench: $(STAMP) ## run the benchmarks (writes benchmarks/out/, numbers go into B
 clean: ## remove the virtualenv and caches
 	rm -rf $(VENV) $(FLOOR_VENV) .pytest_cache .mypy_cache .ruff_cache
 
-.PHONY: help install demo test test-floor test-slow lint schemas wheel bench clean
+.PHONY: help install demo test test-floor test-slow test-consumers lint schemas wheel bench clean

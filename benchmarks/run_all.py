@@ -57,6 +57,7 @@ BENCHES = (
     Bench("bench_fisheye", "bench_fisheye.py", ("30",), ("6",)),
     Bench("bench_model_misfit", "bench_model_misfit.py", (), ()),
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
+    Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
 )
 
 

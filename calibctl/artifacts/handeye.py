@@ -13,7 +13,15 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from calibctl.artifacts.common import Document, Sha256Hex, UtcDatetime, content_hash
+from calibctl.artifacts.common import (
+    CURRENT_HASH,
+    LEGACY_HASH,
+    Document,
+    HashAlgorithm,
+    Sha256Hex,
+    UtcDatetime,
+    content_hash,
+)
 
 HANDEYE_SCHEMA_VERSION: Literal[1] = 1
 FRAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_./-]{0,127}$"
@@ -107,6 +115,10 @@ class HandEyeResult(Document):
     outlier_motions: list[str] = Field(default_factory=list, description="labels of motions named as outliers")
     skipped: list[str] = Field(default_factory=list, description="inputs left out, each with its reason")
     provenance: EdgeProvenance = Field(description="how, where, when and from what it was made")
+    content_hash_algorithm: HashAlgorithm = Field(
+        LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
+        "other field, this one included; absent = sha256-python-json, the results written before it")
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
 
     @model_validator(mode="after")
@@ -120,7 +132,10 @@ class HandEyeResult(Document):
         return self
 
     def computed_sha256(self) -> str:
-        return content_hash(self)
+        """The hash under the result's own ``content_hash_algorithm`` (old results keep theirs)."""
+        return content_hash(self, None, self.content_hash_algorithm)
 
     def sealed(self) -> HandEyeResult:
-        return self.model_copy(update={"content_sha256": self.computed_sha256()})
+        """A copy hashed with the current algorithm (RFC 8785)."""
+        current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH})
+        return current.model_copy(update={"content_sha256": current.computed_sha256()})

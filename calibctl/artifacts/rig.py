@@ -15,7 +15,16 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.calibration import Provenance
-from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime, content_hash
+from calibctl.artifacts.common import (
+    CURRENT_HASH,
+    LEGACY_HASH,
+    SERIAL_PATTERN,
+    Document,
+    HashAlgorithm,
+    Sha256Hex,
+    UtcDatetime,
+    content_hash,
+)
 from calibctl.artifacts.handeye import FRAME_PATTERN, HandEyeResult
 from calibctl.artifacts.lint import Finding
 
@@ -188,13 +197,20 @@ class RigCalibration(Document):
         description="evidence of every hand-eye edge of this version (source 'hand-eye'), and for a version "
                     "rejected by a hand-eye gate, the rejected result (it adds no edge)")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
+    content_hash_algorithm: HashAlgorithm = Field(
+        LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
+        "other field, this one included; absent = sha256-python-json, the versions written before it")
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
 
     def computed_sha256(self) -> str:
-        return content_hash(self)
+        """The hash under the version's own ``content_hash_algorithm`` (old versions keep theirs)."""
+        return content_hash(self, None, self.content_hash_algorithm)
 
     def sealed(self) -> RigCalibration:
-        return self.model_copy(update={"content_sha256": self.computed_sha256()})
+        """A copy hashed with the current algorithm (RFC 8785)."""
+        current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH})
+        return current.model_copy(update={"content_sha256": current.computed_sha256()})
 
 
 class RigActivation(Document):

@@ -68,7 +68,7 @@ def show(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
-    fmt: Annotated[str, typer.Option("--format", "-f", help="json | yaml | ros | opencv")] = "json",
+    fmt: Annotated[str, typer.Option("--format", "-f", help="json | yaml | ros | opencv | kalibr | mrcal")] = "json",
     out: Annotated[Path | None, typer.Option("--output", "-o", help="Write here instead of stdout.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file (keeps its mode).")] = False,
     allow_rejected: Annotated[

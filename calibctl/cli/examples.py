@@ -76,7 +76,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig rollback": ("calibctl rig rollback stereo-7 --to 1 --reason 'v2 solved on a bent mount'",
                      "calibctl rig rollback stereo-7 --to 1 --expect-active 2 --reason 'v2 solved on a bent mount'"),
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
-                   "calibctl rig export stereo-7@2 --format opencv -o stereo.yml"),
+                   "calibctl rig export stereo-7@2 --format opencv -o stereo.yml",
+                   "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame"),
     "rig solve-folders": ("calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
                           "--square-mm 25.0 --export-dir out/",),
 }

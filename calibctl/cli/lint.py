@@ -23,7 +23,7 @@ def _github_line(source: str, f) -> str:
 
 def lint(
     ctx: typer.Context,
-    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (JSON/YAML artifact, ROS camera_info, OpenCV FileStorage) or a ROS camera_info file.")] = None,
+    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's manifest.json) or a ROS camera_info file.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
     all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
     rig: Annotated[str | None, typer.Option("--rig", help="Lint a rig's active version (RIG or RIG@N): stale members, "
@@ -37,7 +37,7 @@ def lint(
     from calibctl.core.blas_threads import blas_starts_on_one_thread
 
     with blas_starts_on_one_thread():  # lint computes on a few small arrays: no BLAS worker threads to start
-        from calibctl.workflows.lint import lint as lint_workflow
+        from calibctl.workflows.lint import run as lint_workflow
 
     if fmt not in FORMATS:
         raise UsageError(f"unknown --format '{fmt}'", f"choose one of {', '.join(FORMATS)}")
@@ -49,8 +49,12 @@ def lint(
     ) if (files or serial or all_serials or not rig) else []
     if rig:
         from calibctl.workflows.rig.rig_lint import lint_rig
+        from calibctl.workflows.store_admin.keys import trusted_of
 
-        results.append(lint_rig(st.settings(), rig))
+        trusted = trusted_of(st.settings(), trusted_keys) if require_signature else None
+        if trusted is not None and not trusted.keys:
+            raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+        results.append(lint_rig(st.settings(), rig, trusted))
     failed = any(r.failed for r in results)
     if fmt == "json":
         emit_json({"verdict": "fail" if failed else "pass", "results": [r.as_json() for r in results]})

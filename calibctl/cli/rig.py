@@ -344,26 +344,40 @@ def rollback(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
-    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros, tf, urdf (a <robot> ROS loads), "
-                                     "urdf-joints (the joints alone, to paste into your URDF) or kalibr.")] = "json",
-    out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file.", show_default=False)] = None,
+    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
+                                     "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
+                                     "URDF), kalibr, or bundle (all of them + manifest.json, -o DIR).")] = "json",
+    out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file (ros: a folder or "
+                                             "'DIR/{camera}.yaml'; bundle: a new folder).", show_default=False)] = None,
     pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
                                              "second member).", show_default=False)] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite -o.")] = False,
+    frame: Annotated[list[str] | None, typer.Option("--frame", help="SERIAL=ROS_FRAME: the robot's name of a frame "
+                                                    "(repeat), e.g. LEFT-01=front_left_camera_optical_frame; default "
+                                                    "left_01_optical_frame.", show_default=False)] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite -o (bundle: only a folder calibctl wrote).")] = False,
     allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Export a rejected version (to inspect "
                                                  "it; a robot must not load it).")] = False,
+    allow_stale: Annotated[bool, typer.Option("--allow-stale", help="Export a version `rig lint` fails for a stale "
+                                              "member (to inspect it; a robot must not load it).")] = False,
     edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye edge, its result document "
                                              "(json) or /tf_static (tf).", show_default=False)] = None,
 ) -> None:
-    """What a robot loads: OpenCV stereo FileStorage, ROS stereo camera_info pair, tf_static, URDF, Kalibr.
+    """What a robot loads: OpenCV stereo FileStorage, ROS camera_info per camera, tf_static, URDF, Kalibr, or the
+    whole bundle. Exit 1 when `rig lint` fails the version now for a stale member (unless --allow-stale).
 
-    urdf is a complete <robot name="RIG"> (a link per frame, a fixed joint per edge) that check_urdf and
-    robot_state_publisher load; urdf-joints is the joints alone, as before. tf and urdf carry the whole tree, hand-eye edges included (rooted at a hand-eye parent such as the
-    flange when it is the only frame without a parent); the stereo formats and Kalibr the cameras."""
-    from calibctl.workflows.rig import rig_lint
+    Frames are ROS names (REP 103 optical frames, docs/conventions.md): --frame maps a serial, the default
+    is derived from it (LEFT-01 -> left_01_optical_frame). urdf is a complete <robot name="RIG">; tf and urdf
+    carry the whole tree, hand-eye edges included; the stereo formats and Kalibr the cameras."""
+    from calibctl.workflows.rig import rig_export
 
-    text = rig_lint.export(state(ctx).settings(), ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
-                           edge=edge)
+    settings = state(ctx).settings()
+    if fmt in rig_export.FILE_FORMATS and edge is None:
+        for path in rig_export.export_files(settings, ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
+                                            allow_stale=allow_stale, frames=frame or []):
+            say(f"wrote {path}")
+        return
+    text = rig_export.export(settings, ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
+                             allow_stale=allow_stale, edge=edge, frames=frame or [])
     if out is None:
         print(text, end="")
     else:

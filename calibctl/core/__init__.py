@@ -2,5 +2,6 @@
 
 One room per capability, each importing only the rooms below it (docs/architecture.md):
 ``board`` <- ``intrinsics`` <- ``capture``, ``extrinsics`` <- ``check``, ``synth``; ``diagnostics`` stands
-alone. ``blas_threads`` (thread limits) and ``gate`` (the verdict type) are shared by every room.
+alone. ``blas_threads`` (thread limits), ``gate`` (the verdict type) and ``lm`` (the Levenberg-Marquardt
+solver of the fisheye, rig and board-pose fits) are shared by every room.
 """

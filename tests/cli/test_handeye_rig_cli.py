@@ -51,23 +51,31 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
     assert f"stored as rig {RIG}@2 (active)" in r.stdout
     r = invoke(db, "rig", "show", RIG)
     assert "T_imu_CAM-0002" in r.stdout and "(hand-eye)" in r.stdout and "hand-eye imu -> CAM-0002: accepted" in r.stdout
-    r = invoke(db, "rig", "export", RIG, "--format", "tf")
+    r = invoke(db, "rig", "export", RIG, "--format", "tf")  # the fixture's members are not the stored versions
+    assert r.exit_code == 1 and "fails `calibctl rig lint` now" in r.output
+    r = invoke(db, "rig", "export", RIG, "--format", "tf", "--allow-stale")
     assert r.exit_code == 0 and "child_frame_id: imu" in r.stdout
     r = invoke(db, "--json", "handeye", str(synth(tmp_path)), "--from", "imu", "--to", "CAM-0002", "--rig", RIG)
     doc = json.loads(r.stdout)
     assert r.exit_code == 0 and doc["stored"] == {**doc["stored"], "version": 3, "status": "accepted", "active": True}
     assert doc["result"]["kind"] == "handeye"
-    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "json")
+    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "json", "--allow-stale")
     assert r.exit_code == 0 and json.loads(r.stdout)["content_sha256"] == doc["result"]["content_sha256"]
-    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "tf")
+    r = invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "tf", "--allow-stale")
     assert r.exit_code == 0 and r.stdout.count("child_frame_id") == 1 and "frame_id: imu" in r.stdout
+    assert "child_frame_id: cam_0002_optical_frame" in r.stdout  # the same robot frame names as the whole tree
+    edge_json = tmp_path / "edge.json"
+    assert invoke(db, "rig", "export", RIG, "--edge", "imu:CAM-0002", "--format", "json", "--allow-stale",
+                  "-o", str(edge_json)).exit_code == 0
+    r = invoke(db, "--json", "lint", str(edge_json))  # lint reads the hand-eye result it wrote (it refused it)
+    assert r.exit_code == 0 and json.loads(r.stdout)["results"][0]["kind"] == "handeye-json", r.output
     r = invoke(db, "rig", "history", RIG)
     assert "hand-eye imu -> CAM-0002 accepted" in r.stdout
     for args, message in ((("--edge", "flange:CAM-0001"), "has no hand-eye edge flange -> CAM-0001 (it has: "
                                                            "imu:CAM-0002)"),
                           (("--edge", "imu"), "--edge must be FROM:TO"),
                           (("--edge", "imu:CAM-0002", "--format", "urdf"), "--edge exports json or tf")):
-        r = invoke(db, "rig", "export", RIG, *args)
+        r = invoke(db, "rig", "export", RIG, *args, "--allow-stale")
         assert r.exit_code == 2 and message in r.output
 
 

@@ -53,6 +53,7 @@ def test_the_real_report_agrees_with_plain_opencv_and_survives_pruning(store):
     # the same files through the plain recipe fit worse (no corner rule, coarser refinement), never better
     assert float(shown["rms_px"]) <= plain_rms
     assert int(shown["empty_cells"]) > 0  # the finding: the corners never reach the outer band
+    assert shown["active"] == "yes"  # the page says whether this is the version a robot loads now
     # prune every image: the report is drawn from stored corners, so the bytes do not change
     pruned = run(store, "prune", "--now", "2100-01-01T00:00:00Z", "--json")
     assert pruned.exit_code == 0 and json.loads(pruned.stdout)["pruned"] > 0, pruned.output

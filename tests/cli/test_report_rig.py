@@ -123,3 +123,28 @@ def test_a_version_of_a_rig_with_no_active_version_gets_its_page(solved, tmp_pat
     assert done.exit_code == 0, done.output
     assert "rig R2@1 (accepted): report written to" in done.stdout
     assert "accepted</span></h1>" in out.read_text(encoding="utf-8")  # not followed by " (active)"
+
+
+def test_the_rig_page_states_active_and_the_lint_of_now_beside_the_lint_at_solve_time(solved, tmp_path: Path,
+                                                                                    tmp_path_factory) -> None:
+    """It said "accepted (active)" while `lint --rig` failed the same rig for a stale member."""
+    import shutil
+
+    db, _ = solved
+    copy = tmp_path / "db" / "r.db"
+    copy.parent.mkdir()
+    shutil.copy(db.removeprefix("sqlite:///"), copy)
+    url = f"sqlite:///{copy}"
+    fresh = tmp_path / "fresh.html"
+    assert invoke(url, "report", "--rig", "R1", "-o", str(fresh)).exit_code == 0
+    html = fresh.read_text(encoding="utf-8")
+    assert (_keyed(html, "active"), _keyed(html, "lint_now"), _keyed(html, "lint_now_clean")) == ("yes", "pass",
+                                                                                                   "lint: clean")
+    with Store.open(url) as store:  # CAM0 re-calibrated after the rig solve: the rig is stale
+        store.add_artifact(_truth_artifact(rendered_rig(tmp_path_factory), "CAM0"), activate=True, **WHO)
+    stale = tmp_path / "stale.html"
+    assert invoke(url, "report", "--rig", "R1", "-o", str(stale)).exit_code == 0
+    html = stale.read_text(encoding="utf-8")
+    assert _keyed(html, "active") == "yes" and _keyed(html, "lint_now") == "FAIL"
+    assert "rig-stale-member" in html and "the active one is now CAM0@2" in html
+    assert _keyed(html, "lint") == "lint: clean"  # the lint stored at solve time, shown below it, unchanged

@@ -65,12 +65,13 @@ def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
     r = invoke(db, "rig", "export", "R1", "--format", "opencv", "-o", str(tmp_path / "s.yaml"))
     assert r.exit_code == 0 and (tmp_path / "s.yaml").is_file()
     r = invoke(db, "rig", "export", "R1", "--format", "tf")
-    assert r.exit_code == 0 and "child_frame_id: CAM1" in r.output
-    r = invoke(db, "rig", "export", "R1", "--format", "urdf")
-    assert r.exit_code == 0 and loadable_urdf(r.output)[:2] == ("R1", "CAM0")
-    assert r.output.startswith('<?xml version="1.0"?>\n<!-- calibctl rig R1@1 sha256 ')
+    assert r.exit_code == 0 and "child_frame_id: cam1_optical_frame" in r.output
+    r = invoke(db, "rig", "export", "R1", "--format", "urdf", "--frame", "CAM0=front/left_optical_frame")
+    assert r.exit_code == 0 and loadable_urdf(r.output)[:2] == ("R1", "front/left_optical_frame")
+    assert r.output.startswith('<?xml version="1.0"?>\n<!-- calibctl rig R1@1 accepted sha256 ')
     r = invoke(db, "rig", "export", "R1", "--format", "urdf-joints")
-    assert r.exit_code == 0 and "<robot" not in r.output and '<joint name="CAM0_to_CAM1" type="fixed">' in r.output
+    assert r.exit_code == 0 and "<robot" not in r.output
+    assert '<joint name="cam0_optical_frame_to_cam1_optical_frame" type="fixed">' in r.output
 
 
 def test_a_stale_member_fails_rig_lint_with_exit_1(db, rig2):

@@ -4,7 +4,8 @@ A focal change scales the image about the principal point, a principal-point shi
 tilted views a rigid board pose cannot absorb either completely. One weighted Gauss-Newton step of
 (focal scale, cx, cy, k1, k2) from the fresh residuals, with each view's six pose parameters projected
 out (Schur complement), measures what the pose could not absorb. The step is a score test of "the stored
-model is right": it is measured, never applied.
+model is right": it is measured, never applied, so there is no loop to share with the solver of the
+fits (calibctl.core.lm): no damping (it would bias the measured step towards zero) and no acceptance.
 
 Weights: each view's residuals are divided by that view's own noise (its mean square over its 2N - 6
 degrees of freedom), so a blurred or steep view with 2x the detector noise counts a quarter as much

@@ -2,9 +2,11 @@
 
 The hand-eye robot case turns every image into ``T_cam_board`` through the calibration's own lens
 model. A pinhole model: IPPE (planar targets) gives the closed form, Levenberg-Marquardt on the
-reprojection error polishes it. A fisheye model: ``core.intrinsics.solve.fit_pose`` (undistort through
-cv2.fisheye, then LM on the fisheye projection), as the rig solve does for its fisheye members; its
-four coefficients are k1..k4 of the equidistant model, and solvePnP would read them as k1 k2 p1 p2.
+reprojection error polishes it (OpenCV's own, cv2.solvePnPRefineLM: a solved problem in a well-kept
+library, so it does not go through calibctl.core.lm). A fisheye model: ``core.intrinsics.solve.fit_pose``
+(undistort through cv2.fisheye, then calibctl.core.lm on the fisheye projection:
+``fisheye_model.refine_fisheye_pose``), as the rig solve does for its fisheye members; its four
+coefficients are k1..k4 of the equidistant model, and solvePnP would read them as k1 k2 p1 p2.
 """
 
 from __future__ import annotations

@@ -13,6 +13,15 @@ Two residual models, chosen by what the data are:
 Gauss-Newton with a central-difference Jacobian; rotation and translation residuals are each
 weighted by 1 / their RMS (re-estimated every iteration, dof 3m - p per group), so the covariance
 (J^T J)^-1 is in the data's own units. Rotations are left perturbations exp(d) R, d in radians.
+
+Why this loop is not calibctl.core.lm (the shared solver of the fisheye, rig and board-pose problems):
+re-weighting every iteration makes the cost a moving target (the weighted sum of squares at one
+iterate is not comparable with the next one's), so LM's accept-a-step-that-lowers-the-cost rule has
+nothing fixed to judge by (the loop stops on the step size instead: CONVERGED_STEP); and the step is
+``lstsq`` on J (SVD, minimum-norm), which works at the condition number of J rather than of J^T J (the
+normal equations the shared solver takes) in a problem that mixes radians and metres, and stays finite
+where the motions leave a direction of X unconstrained (a planar robot) for the singular-information
+check below to name.
 """
 
 from __future__ import annotations

@@ -5,10 +5,13 @@ Solvers
     CALIB_USE_INTRINSIC_GUESS under ``refine_intrinsics``) on the frames both cameras saw, corners
     restricted to the ids both detected. Three or more, or any fisheye member: calibctl's joint
     Levenberg-Marquardt over every camera pose and board pose (rig_problem; a fisheye member projects
-    through cv2.fisheye.projectPoints). cv2.fisheye.stereoCalibrate (CALIB_FIX_INTRINSIC) on the real
-    sourishg fisheye pair with calibctl's intrinsics lands on the same baseline to 1e-9 mm, but gives
-    no covariance and cannot refine through calibctl's models; left to fit the lenses itself it
-    asserts in InitExtrinsics ("fabs(norm_u1) > 0") on that pair. cv2.calibrateMultiview exists in the OpenCV 5.0.0
+    through cv2.fisheye.projectPoints), run by the shared solver calibctl.core.lm with this module's
+    schedule (``LM_DAMPING``, ``LM_RELATIVE_TOL``), each frame's board pose eliminated by the Schur
+    complement (the same steps as the dense system to 1e-15 on the bench rigs; benchmarks/bench_lm.py).
+    cv2.fisheye.stereoCalibrate (CALIB_FIX_INTRINSIC) on the real sourishg fisheye pair with calibctl's
+    intrinsics lands on the same baseline to 1e-9 mm, but gives no covariance and cannot refine through
+    calibctl's models; left to fit the lenses itself it asserts in InitExtrinsics ("fabs(norm_u1) > 0")
+    on that pair. cv2.calibrateMultiview exists in the OpenCV 5.0.0
     wheel but was not usable: it re-estimates the intrinsics even under CALIB_FIX_INTRINSIC,
     refuses CALIB_USE_INTRINSIC_GUESS ("camera matrix is not 3x3" for 3x3 inputs), and on a
     seeded 3-camera synthetic rig (0.2 px noise) missed a 2.9 deg rotation by 0.25 deg.
@@ -45,10 +48,12 @@ from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_
 from calibctl.core.extrinsics.se3 import invert
 from calibctl.core.intrinsics.covariance import MIN_RCOND
 from calibctl.core.intrinsics.solve import MAX_RMS_PX, get_model, single_threaded_opencv
+from calibctl.core.lm import Damping, DenseSystem, SchurSystem, solve_lm
 from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
 
 MAX_LM_ITERATIONS = 100
 LM_RELATIVE_TOL = 1e-12  # stop when one accepted step lowers the residual sum by less than this share
+LM_DAMPING = Damping(initial=1e-3, decrease=10.0, increase=10.0, floor=1e-12, ceiling=1e12)
 MIN_SHARED_CORNERS = 4
 STEREO_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
 
@@ -149,36 +154,31 @@ def _stereo(views: RigViews, members: Sequence[MemberIntrinsics], refine: bool,
 
 def _lm(views: RigViews, members: list[MemberIntrinsics], cam_poses: np.ndarray, board_poses: np.ndarray,
         refine: bool) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
+    """calibctl.core.lm over the free parameters, each frame's board pose eliminated (Schur path): a board
+    pose touches only its own frame's rows, so a frame's block couples only with the camera poses and
+    intrinsics, never with another frame's."""
     layout = Layout(len(views.cameras), len(views.frames), tuple(m.n_params for m in members))
-    free = np.arange(layout.board0 + 6 * layout.n_frames) if not refine else np.arange(layout.size)
-    lam = 1e-3
-    ne = normal_equations(views, members, cam_poses, board_poses, layout)
-    for _ in range(MAX_LM_ITERATIONS):
-        H, g = ne.H[np.ix_(free, free)], ne.g[free]
-        D = np.maximum(np.diag(H), 1e-12)
-        try:
-            delta = np.linalg.solve(H + lam * np.diag(D), g)
-        except np.linalg.LinAlgError:
-            lam *= 10
-            continue
+    board_idx = layout.board0 + np.arange(6 * layout.n_frames).reshape(-1, 6)
+    shared = np.concatenate([np.arange(layout.board0), np.arange(layout.board0 + 6 * layout.n_frames, layout.size)
+                             if refine else np.arange(0)])
+    Params = tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]
+
+    def evaluate(params: Params) -> SchurSystem:
+        ne = normal_equations(views, params[2], params[0], params[1], layout)
+        return SchurSystem.from_dense(DenseSystem(ne.ssr, ne.H, ne.g), shared, board_idx)
+
+    def retract(params: Params, delta: np.ndarray) -> Params:
         step = np.zeros(layout.size)
-        step[free] = delta
-        trial_cam = cam_poses.copy()
-        trial_cam[1:] += step[:layout.board0].reshape(-1, 6)
-        trial_board = board_poses + step[layout.board0:layout.board0 + 6 * layout.n_frames].reshape(-1, 6)
-        trial_members = [m.stepped(step[layout.intrinsics(c)]) for c, m in enumerate(members)]
-        trial = normal_equations(views, trial_members, trial_cam, trial_board, layout)
-        if np.isfinite(trial.ssr) and trial.ssr <= ne.ssr:
-            gain = (ne.ssr - trial.ssr) / max(ne.ssr, 1e-300)
-            cam_poses, board_poses, members, ne = trial_cam, trial_board, trial_members, trial
-            lam = max(lam / 10, 1e-12)
-            if gain < LM_RELATIVE_TOL:
-                break
-        else:
-            lam *= 10
-            if lam > 1e12:
-                break
-    return cam_poses, board_poses, members
+        step[shared], step[board_idx.ravel()] = delta[:shared.size], delta[shared.size:]
+        cam = params[0].copy()
+        cam[1:] += step[:layout.board0].reshape(-1, 6)
+        board = params[1] + step[layout.board0:layout.board0 + 6 * layout.n_frames].reshape(-1, 6)
+        return cam, board, [m.stepped(step[layout.intrinsics(c)]) for c, m in enumerate(params[2])]
+
+    out = solve_lm(evaluate, (cam_poses, board_poses, members), retract, damping=LM_DAMPING,
+                   max_iterations=MAX_LM_ITERATIONS, relative_tolerance=LM_RELATIVE_TOL, label="the rig solve",
+                   hint="check that every camera's intrinsics belong to it and the board is right")
+    return out.params
 
 
 def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,

@@ -2,9 +2,9 @@
 
 Held-out: frames go to folds by ``core.intrinsics.validation.fold_assignment`` (frame i -> fold i % k). For each
 fold the rig is re-solved on the other frames; each held-out frame's board pose T_root_board is then
-fitted jointly to every camera's corners with the extrinsics and intrinsics frozen (Gauss-Newton on
-6 parameters), so a wrong extrinsic shows up as residual in some camera instead of being absorbed by a
-per-camera pose. Per camera: held-out reprojection RMS. Per pair: epipolar error and rectified
+fitted jointly to every camera's corners with the extrinsics and intrinsics frozen (Levenberg-Marquardt
+on 6 parameters, calibctl.core.lm), so a wrong extrinsic shows up as residual in some camera instead of
+being absorbed by a per-camera pose. Per camera: held-out reprojection RMS. Per pair: epipolar error and rectified
 cross-epipolar disparity (rig_metrics) of the held-out frames both cameras saw.
 
 Loop closure (3+ cameras): every pair with shared frames is solved on its own (a 2-camera solve);
@@ -29,10 +29,13 @@ from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only,
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, propagate, simple_cycles
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.core.intrinsics.validation import fold_assignment
+from calibctl.core.lm import DenseSystem, solve_lm
 from calibctl.errors import InconsistentDataError, NumericalError
 
 MIN_TRAINING_FRAMES = 4
 POSE_FIT_ITERATIONS = 20
+POSE_FIT_TOLERANCE = 1e-12  # relative fall of the residual sum below which a pose step only chases rounding
+POSE_FIT_STEP = 1e-12  # rad / m: a smaller step only chases rounding
 MIN_PAIR_FRAMES = 3  # a pair enters the loop-closure graph with at least this many shared frames
 
 
@@ -71,20 +74,21 @@ def _rms(x: np.ndarray) -> float:
 
 
 def fit_board_pose(views: RigViews, f: int, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray) -> np.ndarray:
-    """(6,) T_root_board of frame f fitted to every camera's corners, extrinsics frozen."""
+    """(6,) T_root_board of frame f fitted to every camera's corners, extrinsics frozen (calibctl.core.lm, dense)."""
     frame = views.subset([f])
     start = view_poses(frame, members)
     c, T_cam_board = next(iter((k[1], v) for k, v in start.items()))
-    pose = T_to_pose(invert(pose_to_T(cam_poses[c])) @ T_cam_board)[None, :]
+    pose = T_to_pose(invert(pose_to_T(cam_poses[c])) @ T_cam_board)
     layout = Layout(len(views.cameras), 1, tuple(m.n_params for m in members))
     idx = layout.board(0)
-    for _ in range(POSE_FIT_ITERATIONS):
-        ne = normal_equations(frame, members, cam_poses, pose, layout)
-        step = np.linalg.solve(ne.H[np.ix_(idx, idx)], ne.g[idx])
-        pose = pose + step[None, :]
-        if np.max(np.abs(step)) < 1e-12:
-            break
-    return np.asarray(pose[0])
+
+    def evaluate(pose: np.ndarray) -> DenseSystem:
+        ne = normal_equations(frame, members, cam_poses, pose[None, :], layout)
+        return DenseSystem(ne.ssr, ne.H[np.ix_(idx, idx)], ne.g[idx])
+
+    return solve_lm(evaluate, pose, lambda p, d: p + d, max_iterations=POSE_FIT_ITERATIONS,
+                    relative_tolerance=POSE_FIT_TOLERANCE, step_tolerance=POSE_FIT_STEP,
+                    label=f"the held-out board pose of frame {f}").params
 
 
 def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,

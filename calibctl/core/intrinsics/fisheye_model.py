@@ -22,12 +22,19 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from calibctl.core.lm import Damping, DenseSystem, solve_lm
+
 # Corners within this angle of the axis set up the focal guess (tan() is steep beyond it).
 MAX_GUESS_THETA_RAD = np.deg2rad(75.0)
 # cv2.fisheye's projection folds points with Z <= 0 onto the front; stay clear of 90 deg.
 MAX_SOLVE_THETA_RAD = np.deg2rad(88.0)
 _GRID = 24
 GUESS_VIEWS = 10
+POSE_ITERATIONS = 10
+POSE_TOLERANCE = 1e-12  # relative fall of the squared residual sum below which a pose step only chases rounding
+POSE_STEP = 1e-12  # rad / m: a smaller step only chases rounding
+# Gauss-Newton (which this replaced) while steps lower the cost; damping only when a step overshoots
+POSE_DAMPING = Damping(initial=1e-9)
 
 
 def distort_theta(theta: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -108,18 +115,29 @@ def fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, di
 
 
 def refine_fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                        rvec: np.ndarray, tvec: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Newton on one pose (lens frozen) minimising the pixel residuals; returns (rvec, tvec)."""
+                        rvec: np.ndarray, tvec: np.ndarray, iterations: int = POSE_ITERATIONS
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """One pose (lens frozen) minimising the pixel residuals; returns (rvec (3,), tvec (3,) m).
+
+    Levenberg-Marquardt on the six pose parameters (calibctl.core.lm, dense path, POSE_DAMPING),
+    at most ``iterations`` steps, stopping once a step lowers the squared residual sum by less than
+    POSE_TOLERANCE of it or is smaller than POSE_STEP (the Gauss-Newton loop it replaced stopped there).
+
+    Raises:
+        NumericalError: the projection is NaN or infinite at the starting pose.
+    """
     K = np.asarray(camera_matrix, np.float64)
     intr = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *np.asarray(dist_coeffs, np.float64).ravel()[:4]])
-    pose = np.concatenate([np.ravel(rvec), np.ravel(tvec)]).astype(np.float64)
-    for _ in range(iterations):
+    residual_px = np.asarray(img, np.float64).reshape(-1, 2)
+
+    def evaluate(pose: np.ndarray) -> DenseSystem:
         proj, J = project_with_jacobian(obj, pose[:3], pose[3:], intr)
-        r = (img - proj).reshape(-1)
-        step, *_ = np.linalg.lstsq(J[:, 8:14], r, rcond=None)
-        pose += step
-        if np.abs(step).max() < 1e-12:
-            break
+        return DenseSystem.from_jacobian(J[:, 8:14], (residual_px - proj).reshape(-1))
+
+    start = np.concatenate([np.ravel(rvec), np.ravel(tvec)]).astype(np.float64)
+    pose = solve_lm(evaluate, start, lambda p, d: p + d, max_iterations=iterations, relative_tolerance=POSE_TOLERANCE,
+                    step_tolerance=POSE_STEP, damping=POSE_DAMPING,
+                    label="the fisheye board pose").params
     return pose[:3].copy(), pose[3:].copy()
 
 

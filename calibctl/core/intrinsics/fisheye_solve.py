@@ -11,7 +11,8 @@ them jointly, so its stopping point is not the least-squares minimum the covaria
    be found is named;
 3. joint Levenberg-Marquardt over fx, fy, cx, cy, k1..k4 and every pose, with OpenCV's own
    projection and analytic Jacobian (cv2.fisheye.projectPoints), the poses eliminated per view by
-   the Schur complement (each view's pose touches only its own rows), Marquardt-scaled damping;
+   the Schur complement (each view's pose touches only its own rows), Marquardt-scaled damping: the
+   shared solver calibctl.core.lm with this module's schedule (``DAMPING``, ``COST_TOLERANCE``);
 4. covariance from the same Jacobian at the minimum (calibctl.core.intrinsics.covariance.schur_covariance).
 
 Skew is fixed at 0 (CALIB_FIX_SKEW), fx and fy are free (the fisheye module has no aspect flag).
@@ -40,12 +41,14 @@ from calibctl.core.intrinsics.solution import (
     readonly,
     single_threaded_opencv,
 )
+from calibctl.core.lm import Damping, SchurSystem, solve_lm
 from calibctl.errors import InputError, NumericalError
 
 FISHEYE_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4")
 MAX_ITERATIONS = 200
 # Stop when a step lowers the cost by less than this fraction (double precision leaves ~1e-16).
 COST_TOLERANCE = 1e-13
+DAMPING = Damping(initial=1e-3, decrease=3.0, increase=4.0, floor=1e-9, ceiling=1e8)
 
 
 def _initial(objs: list[np.ndarray], imgs: list[np.ndarray], size: tuple[int, int],
@@ -90,40 +93,21 @@ def _normal_equations(objs, imgs, intr, rv, tv):
 
 
 def _lm(objs, imgs, intr, rv, tv) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Joint Levenberg-Marquardt; returns the parameters and the iterations used."""
-    lam = 1e-3
-    blocks, cost = _normal_equations(objs, imgs, intr, rv, tv)
-    for it in range(1, MAX_ITERATIONS + 1):
-        S = np.zeros((8, 8))
-        rhs = np.zeros(8)
-        parts = []
-        for Ji, Jp, r in blocks:
-            A, C, B = Ji.T @ Ji, Jp.T @ Jp, Ji.T @ Jp
-            C = C + lam * np.diag(np.diag(C))
-            both = np.linalg.solve(C, np.column_stack([B.T, Jp.T @ r]))
-            Cinv_Bt, Cinv_gp = both[:, :8], both[:, 8]
-            S += A + lam * np.diag(np.diag(A)) - B @ Cinv_Bt
-            rhs += Ji.T @ r - B @ Cinv_gp
-            parts.append((Cinv_Bt, Cinv_gp))
-        try:
-            d_int = np.linalg.solve(S, rhs)
-        except np.linalg.LinAlgError:
-            lam *= 10.0
-            continue
-        d_pose = np.array([g - Cb @ d_int for Cb, g in parts])
-        new_intr, new_rv, new_tv = intr + d_int, rv + d_pose[:, :3], tv + d_pose[:, 3:]
-        new_blocks, new_cost = _normal_equations(objs, imgs, new_intr, new_rv, new_tv)
-        if math.isfinite(new_cost) and new_cost < cost:
-            done = (cost - new_cost) < COST_TOLERANCE * cost
-            intr, rv, tv, blocks, cost = new_intr, new_rv, new_tv, new_blocks, new_cost
-            lam = max(lam / 3.0, 1e-9)
-            if done:
-                return intr, rv, tv, it
-        else:
-            lam *= 4.0
-            if lam > 1e8:
-                return intr, rv, tv, it
-    return intr, rv, tv, MAX_ITERATIONS
+    """Joint Levenberg-Marquardt (calibctl.core.lm, Schur path); returns the parameters and the iterations used."""
+
+    def evaluate(params: tuple[np.ndarray, np.ndarray, np.ndarray]) -> SchurSystem:
+        blocks, _ = _normal_equations(objs, imgs, *params)
+        return SchurSystem.from_jacobians(blocks)
+
+    def retract(params: tuple[np.ndarray, np.ndarray, np.ndarray], delta: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d_pose = delta[8:].reshape(-1, 6)
+        return params[0] + delta[:8], params[1] + d_pose[:, :3], params[2] + d_pose[:, 3:]
+
+    out = solve_lm(evaluate, (intr, rv, tv), retract, damping=DAMPING, max_iterations=MAX_ITERATIONS,
+                   relative_tolerance=COST_TOLERANCE, label="the fisheye solve",
+                   hint="check the image size and the board geometry; drop views whose corners are mis-ordered")
+    return *out.params, out.iterations
 
 
 def solve_fisheye(

@@ -22,7 +22,7 @@ from calibctl.errors import AlreadyExistsError
 from calibctl.workflows.board import boards
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.camera.solve import SolveOutcome, SolveRequest, solve
-from calibctl.workflows.lint import lint
+from calibctl.workflows.lint import run
 from calibctl.workflows.store_admin import records
 from calibctl.workflows.synth.synth import TRUTH_FILE, run_synth
 
@@ -100,7 +100,7 @@ def run_demo(settings: Settings, out: Path, emit: Callable[[DemoStep], None]) ->
     solved = solve(settings, SolveRequest(session_id=accepted.session.session_id))
     emit(DemoStep("4. solve: every parameter with its one-sigma, held-out error and lint verdict", "solve", solved))
 
-    results = lint.lint(settings, [], SERIAL, False)
+    results = run.lint(settings, [], SERIAL, False)
     emit(DemoStep(f"5. calibctl lint --serial {SERIAL}", "lint", results))
 
     emit(DemoStep(f"6. calibctl history {SERIAL}", "history", records.history(settings, SERIAL)))

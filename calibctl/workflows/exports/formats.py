@@ -2,18 +2,20 @@
 
 - ``json``/``yaml``: the full calibctl artifact (hash and status included; ``calibctl import`` reads it).
 - ``ros``: the camera_info YAML that ROS camera_calibration_parsers reads (see ``ros_camera_info``).
+- ``kalibr``: a one-camera Kalibr camchain; ``mrcal``: an mrcal .cameramodel (pinhole models only).
 - ``opencv``: a cv2.FileStorage YAML (camera_matrix, distortion_coefficients, image_width/height,
   status), written and read back by OpenCV itself. A fisheye calibration adds
   ``distortion_model: equidistant``: its distortion_coefficients are cv2.fisheye's k1..k4 (pass them to
   cv2.fisheye.*, not to cv2.undistort).
 
-ROS and OpenCV exports start with the trace header (``trace_header``): the version, its status, the
+ROS, OpenCV, Kalibr and mrcal exports start with the trace header (``trace_header``): the version, its status, the
 evidence lint needs, and a hash of the file. ``load_calibration`` reads any of the four back.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +26,8 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.errors import InputError
 from calibctl.workflows.exports import ros_camera_info, trace_header
 
-ExportFormat = Literal["json", "yaml", "ros", "opencv"]
-EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv")
+ExportFormat = Literal["json", "yaml", "ros", "opencv", "kalibr", "mrcal"]
+EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv", "kalibr", "mrcal")
 FileKind = Literal["calibctl", "ros", "opencv"]
 
 
@@ -56,6 +58,26 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         return Path(path).read_text(encoding="utf-8")
 
 
+def _one_camera_text(art: CalibrationArtifact, fmt: str) -> str:
+    """A one-camera Kalibr camchain (cam0, no overlaps, topic /<frame base>/image_raw) or mrcal .cameramodel
+    (the camera is its own reference). mrcal has no Kannala-Brandt model: a fisheye is refused."""
+    import numpy as np
+
+    from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+    from calibctl.core.extrinsics.rig_tree import RigTree
+    from calibctl.workflows.exports import mrcal_model, rig_exports
+
+    member = MemberIntrinsics(art.serial, np.array(art.camera_matrix, dtype=np.float64),
+                              np.array(art.dist_coeffs, dtype=np.float64), art.image_size,
+                              lens="fisheye" if art.model.name == "fisheye" else "pinhole")
+    if fmt == "kalibr":
+        return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()))
+    model = mrcal_model.cameramodel(member, np.eye(4), f"calibctl {art.ref} {art.status}")
+    if model is None:
+        raise InputError(f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead")
+    return model
+
+
 def _yaml_text(data: Any, **style: Any) -> str:
     import yaml  # only the yaml and ros formats write YAML: a JSON export or a lint never imports it
 
@@ -74,6 +96,8 @@ def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None
         return trace_header.stamp(art, _yaml_text(info, default_flow_style=None))
     if fmt == "opencv":
         return trace_header.stamp(art, _opencv_text(art))
+    if fmt in ("kalibr", "mrcal"):
+        return trace_header.stamp(art, _one_camera_text(art, fmt))
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
 
 
@@ -85,13 +109,24 @@ class CalibrationFile:
     kind: FileKind
     data: dict[str, Any]
     header: trace_header.TraceHeader | None
+    rig_header: trace_header.RigTraceHeader | None = None  # a camera's file of a rig export
+
+
+_OPENCV_XML = re.compile(r"^\s*(<\?xml[^>]*\?>\s*)?(<!--.*?-->\s*)*<opencv_storage>", re.DOTALL)
+_OPENCV_JSON_MATRIX = re.compile(r'"type_id"\s*:\s*"opencv-matrix"')
 
 
 def _is_opencv(text: str) -> bool:
-    return text.startswith("%YAML:") or (text.startswith("%YAML") and "!!opencv-matrix" in text)
+    """An OpenCV FileStorage by its content: YAML's ``%YAML:`` directive (or ``%YAML`` with an
+    !!opencv-matrix), XML's ``<opencv_storage>`` root, or JSON with an ``"type_id": "opencv-matrix"`` node."""
+    if text.startswith("%YAML:") or (text.startswith("%YAML") and "!!opencv-matrix" in text):
+        return True
+    if _OPENCV_XML.match(text):
+        return True
+    return text.lstrip().startswith("{") and bool(_OPENCV_JSON_MATRIX.search(text))
 
 
-def _opencv_data(text: str, source: str) -> dict[str, Any]:
+def opencv_data(text: str, source: str) -> dict[str, Any]:
     """Every top-level number, string and matrix OpenCV reads from ``text`` (matrices as nested lists)."""
     import cv2
 
@@ -132,16 +167,24 @@ def load_structured_file(path: Path) -> Any:
 def load_calibration(path: Path) -> CalibrationFile:
     """Read a calibctl artifact (JSON/YAML), a ROS camera_info or an OpenCV FileStorage export."""
     text = bounded.read_text(path)
-    header = trace_header.read(text)
-    source = str(path)
+    return calibration_from_text(text, str(path), path.suffix.lower() == ".json")
+
+
+def calibration_from_text(text: str, source: str, is_json: bool = False) -> CalibrationFile:
+    """``load_calibration`` on text already read (``source`` names it in messages)."""
+    header, rig_header = trace_header.read(text), trace_header.read_rig(text)
     if _is_opencv(text):
-        return CalibrationFile(source, "opencv", bounded.check_tree(_opencv_data(text, source), source), header)
-    data = bounded.parse_json(text, source) if path.suffix.lower() == ".json" else bounded.parse_yaml(text, source)
+        return CalibrationFile(source, "opencv", bounded.check_tree(opencv_data(text, source), source), header,
+                               rig_header)
+    data = bounded.parse_json(text, source) if is_json else bounded.parse_yaml(text, source)
     if looks_like_artifact(data):
         return CalibrationFile(source, "calibctl", data, header)
     if ros_camera_info.looks_like_camera_info(data):
-        return CalibrationFile(source, "ros", data, header)
+        return CalibrationFile(source, "ros", data, header, rig_header)
     raise InputError(
-        f"{path} is not a calibration (neither a calibctl artifact, ROS camera_info nor OpenCV FileStorage)",
-        "lint takes files written by `calibctl export` or ROS camera_calibration",
+        f"{source} is not a calibration: lint looked for a calibctl artifact (camera_matrix + content_sha256), "
+        "ROS camera_info (image_width, camera_matrix, ...), OpenCV FileStorage (%YAML:1.0, <opencv_storage>, "
+        "or JSON with opencv-matrix nodes) and the rig exports (bundle manifest.json, rig or hand-eye JSON, "
+        "tf_static, URDF, Kalibr camchain, OpenCV stereo)",
+        "lint takes files written by `calibctl export` / `calibctl rig export` or ROS camera_calibration",
     )

@@ -7,12 +7,14 @@ camera = left, second = right) with ``R, T`` = T_right_left (x_right = R x_left 
 P[0, 3] = Tx = -fx' * baseline_m, as ROS stereo_image_proc expects (a vertical pair is refused for
 ROS: stereo_image_proc assumes horizontal rectification). Kalibr: ``T_cn_cnm1`` maps camera n-1's
 frame into camera n's, cameras in tree order; pinhole + radtan (k1 k2 p1 p2), or pinhole + equidistant
-(k1..k4) for a fisheye member (ROS: distortion_model equidistant).
+(k1..k4) for a fisheye member (ROS: distortion_model equidistant). The tree's frames are serials; the
+callers rename them to robot frames (``frame_names.FrameNames.tree``) before tf / URDF, and Kalibr topics
+and camera_info names come from the same ``FrameNames``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -27,6 +29,7 @@ from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.core.extrinsics.se3 import quaternion_xyzw
 from calibctl.errors import InputError
 from calibctl.files import file_errors, write_atomic
+from calibctl.workflows.exports.frame_names import FrameNames
 from calibctl.workflows.exports.ros_camera_info import camera_name_for, distortion_for
 
 
@@ -38,23 +41,50 @@ def urdf_rpy(R: np.ndarray) -> list[float]:
     return [float(np.arctan2(-R[1, 2], R[1, 1])), pitch, 0.0]
 
 
-def _ros_info(m: MemberIntrinsics, R: np.ndarray, P: np.ndarray) -> dict[str, object]:
+def ros_info(m: MemberIntrinsics, R: np.ndarray, P: np.ndarray, camera_name: str | None = None) -> dict[str, object]:
+    """The camera_info document of one camera: rectification ``R`` (3, 3) and projection ``P`` (3, 4), px."""
     model, dist = distortion_for([float(v) for v in np.ravel(m.dist_coeffs)], "fisheye" if m.lens == "fisheye" else None)
-    return {"image_width": int(m.image_size[0]), "image_height": int(m.image_size[1]), "camera_name": camera_name_for(m.name),
+    return {"image_width": int(m.image_size[0]), "image_height": int(m.image_size[1]),
+            "camera_name": camera_name or camera_name_for(m.name),
             "camera_matrix": {"rows": 3, "cols": 3, "data": np.asarray(m.camera_matrix, float).ravel().tolist()},
             "distortion_model": model, "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
             "rectification_matrix": {"rows": 3, "cols": 3, "data": np.asarray(R, float).ravel().tolist()},
             "projection_matrix": {"rows": 3, "cols": 4, "data": np.asarray(P, float).ravel().tolist()}}
 
 
-def ros_stereo_pair(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray) -> tuple[str, str]:
+def _yaml(doc: object) -> str:
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+
+
+def ros_stereo_pair(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray,
+                    names: FrameNames | None = None) -> tuple[str, str]:
     """camera_info YAML of the left and the right camera of a horizontal pair."""
     rect = rectify(left, right, T_right_left)
     if not rect.horizontal:
         raise InputError(f"{left.name}-{right.name} is a vertical pair; ROS stereo_image_proc rectifies horizontally",
                          hint="export the OpenCV stereo file instead, or order the cameras left to right")
-    return (yaml.safe_dump(_ros_info(left, rect.R1, rect.P1), sort_keys=False, default_flow_style=None),
-            yaml.safe_dump(_ros_info(right, rect.R2, rect.P2), sort_keys=False, default_flow_style=None))
+    name = (lambda m: names.camera_name(m.name)) if names is not None else (lambda m: None)
+    return (_yaml(ros_info(left, rect.R1, rect.P1, name(left))), _yaml(ros_info(right, rect.R2, rect.P2, name(right))))
+
+
+def ros_camera_infos(members: Sequence[MemberIntrinsics], left: str, right: str, T_right_left: np.ndarray,
+                     names: FrameNames, *, mono_if_vertical: bool = False) -> tuple[dict[str, str], bool]:
+    """One camera_info YAML per camera (serial -> text): the pair ``left``/``right`` with its rectified R/P,
+    every other camera as a monocular camera_info (R = I, P = [K | 0]). A vertical pair is an InputError,
+    or (``mono_if_vertical``) gets monocular files too; the flag says whether the pair was rectified."""
+    by_name = {m.name: m for m in members}
+    texts: dict[str, str] = {}
+    try:
+        texts[left], texts[right] = ros_stereo_pair(by_name[left], by_name[right], T_right_left, names)
+    except InputError:
+        if not mono_if_vertical:
+            raise
+    rectified = bool(texts)
+    for m in members:
+        if m.name not in texts:
+            K = np.asarray(m.camera_matrix, float)
+            texts[m.name] = _yaml(ros_info(m, np.eye(3), np.hstack([K, np.zeros((3, 1))]), names.camera_name(m.name)))
+    return {m.name: texts[m.name] for m in members}, rectified
 
 
 def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray) -> str:
@@ -66,6 +96,8 @@ def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left:
     fs = cv2.FileStorage(".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
     fs.write("image_width", int(left.image_size[0]))
     fs.write("image_height", int(left.image_size[1]))
+    if left.lens == "fisheye" and right.lens == "fisheye":
+        fs.write("distortion_model", "equidistant")  # D1/D2 are cv2.fisheye's k1..k4, as the camera export says
     for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
                        ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
                        ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),
@@ -116,9 +148,29 @@ def urdf_robot(tree: RigTree, name: str, comment: str | None = None) -> str:
     return f"{header}<robot name={quoteattr(name)}>\n{links}{urdf_joints(tree)}</robot>\n"
 
 
-def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
-    """Kalibr camchain YAML, cameras in tree order (root first)."""
+def tree_neighbours(tree: RigTree) -> dict[str, set[str]]:
+    """frame -> the frames joined to it by an edge (the default Kalibr ``cam_overlaps``)."""
+    out: dict[str, set[str]] = {f: set() for f in tree.frames}
+    for e in tree.edges:
+        out[e.parent].add(e.child)
+        out[e.child].add(e.parent)
+    return out
+
+
+def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree, names: FrameNames | None = None,
+                    overlaps: Mapping[str, Collection[str]] | None = None,
+                    T_cam_imu: Mapping[str, np.ndarray] | None = None) -> str:
+    """Kalibr camchain YAML, cameras in tree order (root first); ``tree`` names cameras by serial.
+
+    Every camera has ``cam_overlaps`` (indices of the cameras it shares views with: ``overlaps``, default its
+    tree neighbours), as Kalibr's ConfigReader ``getCamOverlaps`` requires; ``rostopic`` is the camera's
+    legal ROS topic (``names``). ``T_cam_imu`` (serial -> (4, 4), IMU points into the camera frame) adds
+    Kalibr's camchain-imucam fields ``T_cam_imu`` and ``timeshift_cam_imu`` (0.0: calibctl's hand-eye
+    estimates no time shift; its time-alignment gate checked the motions were synchronised)."""
     by_name = {m.name: m for m in members}
+    names = names or FrameNames.of([m.name for m in members])
+    index = {name: i for i, name in enumerate(tree.frames)}
+    near = overlaps if overlaps is not None else tree_neighbours(tree)
     doc: dict[str, object] = {}
     previous: str | None = None
     for i, name in enumerate(tree.frames):
@@ -132,13 +184,16 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree) -> str:
                                     "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
                                     "distortion_coeffs": dist[:4],
                                     "resolution": [int(m.image_size[0]), int(m.image_size[1])],
-                                    "rostopic": f"/{name}/image_raw"}
+                                    "rostopic": names.topic(name),
+                                    "cam_overlaps": sorted(index[o] for o in near.get(name, ()) if o in index and o != name)}
         if previous is not None:
             entry["T_cn_cnm1"] = tree.T(name, previous).tolist()
-            entry["cam_overlaps"] = [i - 1]
+        if T_cam_imu is not None and name in T_cam_imu:
+            entry["T_cam_imu"] = np.asarray(T_cam_imu[name], float).tolist()
+            entry["timeshift_cam_imu"] = 0.0
         doc[f"cam{i}"] = entry
         previous = name
-    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    return _yaml(doc)
 
 
 def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig") -> list[Path]:
@@ -147,14 +202,15 @@ def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: s
     with file_errors("create the export folder", out):
         out.mkdir(parents=True, exist_ok=True)
     members, tree = solution.members, solution.tree
+    names = FrameNames.of([m.name for m in members])
     left, right = members[0], members[1]
     T_right_left = solution.T_a_b(1, 0)
     written = []
     texts = {f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
-             "tf_static.yaml": tf_static(tree), "rig.urdf.xml": urdf_robot(tree, robot),
-             "camchain.yaml": kalibr_camchain(members, tree)}
+             "tf_static.yaml": tf_static(names.tree(tree)), "rig.urdf.xml": urdf_robot(names.tree(tree), robot),
+             "camchain.yaml": kalibr_camchain(members, tree, names)}
     try:
-        info_left, info_right = ros_stereo_pair(left, right, T_right_left)
+        info_left, info_right = ros_stereo_pair(left, right, T_right_left, names)
         texts[f"{left.name}_camera_info.yaml"] = info_left
         texts[f"{right.name}_camera_info.yaml"] = info_right
     except InputError:

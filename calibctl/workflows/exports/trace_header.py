@@ -29,7 +29,11 @@ from calibctl.errors import InputError
 _PREFIX = "# calibctl "
 _REF = re.compile(r"^# calibctl (?P<ref>\S+@\d+)(?: (?P<status>accepted|rejected))? sha256 (?P<sha>[0-9a-f]{64})\s*$")
 _EVIDENCE = re.compile(r"^# calibctl evidence (?P<json>\{.*\})\s*$")
-_FILE_SHA = re.compile(r"^# calibctl file-sha256 (?P<sha>[0-9a-f]{64})\s*$")
+_FILE_SHA = re.compile(r"^(?:# |<!-- )calibctl file-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
+_RIG_REF = re.compile(r"^(?:# |<!-- )calibctl rig (?P<ref>\S+@\d+) (?P<status>accepted|rejected) sha256 "
+                      r"(?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
+_MEMBER = re.compile(r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
+                     r"(?: frame (?P<frame>\S+))?(?: -->)?\s*$")
 HEADER_SCAN_LINES = 8
 
 
@@ -80,6 +84,52 @@ def stamp(art: CalibrationArtifact, body: str) -> str:
         directive = first + "\n"
     text = directive + "".join(lines) + rest
     return directive + "".join(lines) + f"{_PREFIX}file-sha256 {file_sha256(text)}\n" + rest
+
+
+@dataclass(frozen=True)
+class RigTraceHeader:
+    """The header of a rig export: the rig version (and, in a camera's file, the member) it was written from."""
+
+    ref: str
+    status: str
+    rig_sha256: str
+    members: tuple[tuple[str, str, str | None], ...]  # (SERIAL@VERSION, content_sha256, ROS frame)
+    file_sha256: str | None
+    actual_file_sha256: str | None
+
+    @property
+    def intact(self) -> bool | None:
+        return None if self.file_sha256 is None else self.file_sha256 == self.actual_file_sha256
+
+
+def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
+              members: tuple[tuple[str, str, str | None], ...] = ()) -> str:
+    """``body`` (YAML, OpenCV YAML or XML) with a rig header: ``calibctl rig RIG@N STATUS sha256 S``, one
+    ``calibctl member SERIAL@V sha256 S frame F`` line per camera the file describes, and the file hash.
+    A leading ``%YAML`` directive or ``<?xml`` declaration stays first; XML gets the lines as comments."""
+    xml = body.startswith("<")  # a URDF robot or its joints alone: XML comments
+    open_, close = ("<!-- ", " -->") if xml else ("# ", "")
+    lines = [f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"]
+    lines += [f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"
+              for m, sha, frame in members]
+    directive, rest = "", body
+    if body.startswith(("%YAML", "<?xml")):
+        first, _, rest = body.partition("\n")
+        directive = first + "\n"
+    text = directive + "".join(lines) + rest
+    return directive + "".join(lines) + f"{open_}calibctl file-sha256 {file_sha256(text)}{close}\n" + rest
+
+
+def read_rig(text: str) -> RigTraceHeader | None:
+    """The rig header of ``text``, or None (not a rig export, or one written before rig exports were hashed)."""
+    head = text.splitlines()[:HEADER_SCAN_LINES + 8]
+    ref = next((m for line in head if (m := _RIG_REF.match(line))), None)
+    if ref is None:
+        return None
+    members = tuple((m.group("ref"), m.group("sha"), m.group("frame")) for line in head if (m := _MEMBER.match(line)))
+    sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
+    return RigTraceHeader(ref.group("ref"), ref.group("status"), ref.group("sha"), members, sha,
+                          file_sha256(text) if sha else None)
 
 
 def read(text: str) -> TraceHeader | None:

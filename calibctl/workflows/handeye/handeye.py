@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -172,15 +173,18 @@ def solve_result(motions: Motions, parent_frame: str, child_frame: str, method: 
     return result.sealed()
 
 
-def tf_static_yaml(result: HandEyeResult) -> str:
-    """The edge as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints)."""
+def tf_static_yaml(result: HandEyeResult, frames: Mapping[str, str] | None = None) -> str:
+    """The edge as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints); ``frames`` renames
+    its two frames (a rig export's robot frame names, workflows.exports.frame_names)."""
     if result.transform is None:
         raise UsageError("a rejected hand-eye result has no transform to export")
     from calibctl.workflows.exports.rig_exports import tf_message
 
     w, x, y, z = result.transform.rotation_wxyz
     header = f"# calibctl handeye {result.parent_frame} -> {result.child_frame} sha256 {result.content_sha256}\n"
-    return header + tf_message([(result.parent_frame, result.child_frame, result.transform.translation_m,
+    name = (frames or {}).get
+    return header + tf_message([(name(result.parent_frame) or result.parent_frame,
+                                 name(result.child_frame) or result.child_frame, result.transform.translation_m,
                                  (x, y, z, w))])
 
 

@@ -229,8 +229,9 @@ def store_handeye(settings: Settings, rig_name: str, result: HandEyeResult) -> S
     return StoredEdge(stored, activate)
 
 
-def edge_export(cal: RigCalibration, edge: str, fmt: str) -> str:
-    """One hand-eye edge of a stored version, ``FROM:TO``: its result document (json) or /tf_static (tf)."""
+def edge_export(cal: RigCalibration, edge: str, fmt: str, frames: Mapping[str, str] | None = None) -> str:
+    """One hand-eye edge of a stored version, ``FROM:TO``: its result document (json) or /tf_static (tf, its
+    frames renamed by ``frames``: the rig export's robot frame names)."""
     from calibctl.workflows.handeye.handeye import tf_static_yaml
 
     parent, sep, child = edge.partition(":")
@@ -244,5 +245,5 @@ def edge_export(cal: RigCalibration, edge: str, fmt: str) -> str:
     if fmt == "json":
         return found.model_dump_json(indent=2) + "\n"
     if fmt == "tf":
-        return tf_static_yaml(found)
+        return tf_static_yaml(found, frames)
     raise UsageError(f"--edge exports json or tf, not {fmt}")

@@ -27,9 +27,9 @@ from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
-from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import InputError, IntegrityError, NotFoundError
 from calibctl.signing import TrustedKeys
-from calibctl.workflows.exports import formats, ros_camera_info
+from calibctl.workflows.exports import formats, ros_camera_info, trace_header
 from calibctl.workflows.store_admin import keys
 
 
@@ -99,7 +99,7 @@ def _matrix(value: Any, shape: tuple[int, ...], source: str, name: str) -> np.nd
     return arr
 
 
-def _with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
+def with_evidence(facts: CalibrationFacts, evidence: dict[str, Any]) -> CalibrationFacts:
     """What a trace header vouches for (sigma, held-out outer ring, square size) added to the numbers."""
 
     def number(key: str) -> float | None:
@@ -237,7 +237,13 @@ def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
     return []
 
 
-def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
+def _provenance_rule(facts: CalibrationFacts, traced: bool = True) -> list[Finding]:
+    if not traced:
+        return [Finding(rule="square-size-provenance", severity="error",
+                        message="no square-size provenance travels with this file (no calibctl header): the metric "
+                        "gauge of this calibration cannot be audited",
+                        fix="lint what it was made from: the calibctl export with its header (`calibctl export SERIAL "
+                        "--format ros`) or the stored version (`calibctl lint --serial SERIAL`)")]
     if facts.square_size_status == "measured":
         return []
     if facts.square_size_status == "measured-single":
@@ -308,8 +314,15 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
         "check that nothing moved (focus, zoom, lens) during the capture")]
 
 
-def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
-    """Every rule that applies to one calibration, in a stable order."""
+def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "header") -> list[Finding]:
+    """Every rule that applies to one calibration, in a stable order.
+
+    ``trace`` says what vouches for the evidence only the solve knew (sigma(fx), held-out outer ring, square
+    size): ``header`` (an artifact or a camera export's header: every rule runs), ``rig`` (a rig export's
+    camera: its member was linted when the rig was solved, ``calibctl lint --rig`` lints it now) or ``none``
+    (a ROS-rewritten camera_info, another tool's file). Without a header sigma(fx) and the outer ring are
+    not checked (the ``traceability`` warning names them) instead of errors whose fix is to capture again;
+    the square size's provenance stays an error (seed chapter 0: a gauge nobody can audit)."""
     bad = [x for x in facts.raw_numbers if not math.isfinite(x)]
     if bad:
         return [
@@ -324,10 +337,12 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]
     findings = adopt(lens_checks.check_image_size(size, K))
     if size is not None and not findings:
         findings += adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
-    findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason, limits.sigma_fx_max_px,
-                                                  facts.fit_rms_px, facts.detector_rms_px))
-    findings += _outer_ring_rule(facts, limits)
-    findings += _provenance_rule(facts)
+    if trace == "header":
+        findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason,
+                                                      limits.sigma_fx_max_px, facts.fit_rms_px, facts.detector_rms_px))
+        findings += _outer_ring_rule(facts, limits)
+    if trace != "rig":
+        findings += _provenance_rule(facts, traced=trace == "header")
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
@@ -351,16 +366,40 @@ def _status_rule(status: Any, ref: str) -> list[Finding]:
     ]
 
 
+UNCHECKED_WITHOUT_EVIDENCE = "sigma(fx) and the held-out outer ring"
+
+
+def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
+    """Findings about a rig export's header: edited (content-hash), unhashed (traceability), rejected (status)."""
+    if header.intact is None:
+        return [Finding(rule="traceability", severity="warning",
+                        message=f"the header names rig {header.ref} but records no file-sha256: it cannot be checked",
+                        fix=f"export rig {header.ref} again")]
+    if not header.intact:
+        return [Finding(rule="content-hash", severity="error",
+                        message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
+                        f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig {header.ref}",
+                        fix=f"export rig {header.ref} again; never edit an export by hand")]
+    return _status_rule(header.status, f"rig {header.ref}")
+
+
 def _trace_rules(loaded: formats.CalibrationFile) -> tuple[list[Finding], dict[str, Any]]:
-    """Findings about a ROS/OpenCV export's header, and the evidence it vouches for (when intact)."""
-    header = loaded.header
+    return trace_rules(loaded.header, loaded.rig_header)
+
+
+def trace_rules(header: trace_header.TraceHeader | None,
+                rig_header: trace_header.RigTraceHeader | None = None) -> tuple[list[Finding], dict[str, Any]]:
+    """Findings about an export's header (a camera's, else a rig's), and the evidence it vouches for (when
+    intact; {} for a rig export or no header)."""
+    if header is None and rig_header is not None:
+        return rig_trace_rules(rig_header), {}
     if header is None:
         return [
             Finding(
                 rule="traceability",
                 severity="warning",
                 message="no calibctl header: this file cannot be traced to a stored calibration; "
-                "linted on its numbers only",
+                f"linted on its numbers only ({UNCHECKED_WITHOUT_EVIDENCE} are not checked)",
                 fix="export it with `calibctl export SERIAL --format ros|opencv`",
             )
         ], {}
@@ -403,7 +442,13 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
         facts = _ros_facts(data, source)
     else:
         facts = _opencv_facts(data, source)
-    return LintResult(source, loaded.kind, findings + lint_facts(_with_evidence(facts, evidence), limits))
+    return LintResult(source, loaded.kind, findings + lint_facts(with_evidence(facts, evidence), limits,
+                                                                 trace_of(evidence, loaded.header, loaded.rig_header)))
+
+
+def trace_of(evidence: dict[str, Any], header: object, rig_header: object) -> str:
+    """``lint_facts``' trace: a camera header's evidence, a rig export, or nothing."""
+    return "header" if evidence else "rig" if header is None and rig_header is not None else "none"
 
 
 def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
@@ -436,7 +481,7 @@ def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: Trus
     findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:
-        _signature_rule(result, art, trusted)
+        signature_rule(result, art, trusted)
     return result
 
 
@@ -475,7 +520,7 @@ def lint_store(
     return results
 
 
-def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+def signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
     """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
     if isinstance(art, dict):
         try:
@@ -489,31 +534,3 @@ def _signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any
     if problem is not None:
         fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
         result.findings.append(Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix))
-
-
-def lint(
-    settings: Settings,
-    paths: list[Path],
-    serial: str | None,
-    all_serials: bool,
-    *,
-    require_signature: bool = False,
-    trusted_keys: Path | None = None,
-) -> list[LintResult]:
-    """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
-    is a ``signature`` error (ROS and OpenCV exports carry no signature: lint the artifact export)."""
-    if not paths and not serial and not all_serials:
-        raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
-    trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
-    if trusted is not None and not trusted.keys:
-        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
-    results = []
-    for path in paths:
-        loaded = formats.load_calibration(path)
-        result = lint_file(loaded, settings.lint)
-        if trusted is not None:
-            _signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
-        results.append(result)
-    if serial or all_serials:
-        results += lint_store(settings, serial, all_serials, trusted)
-    return results

@@ -59,7 +59,10 @@ def _verdict(d: ReportData) -> str:
     art = d.artifact
     active = " (active)" if d.active else ""
     lines = [f'<h1>{escape(art.ref)} <span class="badge {art.status}" data-key="status">{art.status}</span>'
-             f"{active}</h1>"]
+             f"{active}</h1>",
+             f'<p>active now (the version a robot loads by serial): <b data-key="active">{"yes" if d.active else "no"}'
+             f"</b>. Lint stored at solve time below; <code>calibctl lint --serial {escape(art.serial)}</code> lints "
+             "the active version against today's limits.</p>"]
     return "".join(lines) + lint_block(art.lint)
 
 

@@ -9,12 +9,13 @@ member's calibration with its verdict and a link to its own report by serial@ver
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from html import escape
 from pathlib import Path
 
 import numpy as np
 
+from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError
@@ -22,7 +23,7 @@ from calibctl.files import write_atomic
 from calibctl.workflows.report.report import default_path
 from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
 from calibctl.workflows.report.report_svg import Plot
-from calibctl.workflows.rig.rig_lint import parse_rig_ref
+from calibctl.workflows.rig.rig_lint import lint_rig, parse_rig_ref
 from calibctl.workflows.store_admin.records import open_store
 
 
@@ -44,6 +45,7 @@ class RigReportData:
     active: bool
     members: list[MemberVerdict]
     T_root_cam: dict[str, np.ndarray]  # serial -> (4, 4), metres, composed along the tree
+    lint_now: list[Finding] = field(default_factory=list)  # `calibctl lint --rig RIG@N` against the store today
 
 
 def compose_tree(cal: RigCalibration) -> dict[str, np.ndarray]:
@@ -72,14 +74,22 @@ def gather_rig(settings: Settings, ref: str) -> RigReportData:
             members.append(MemberVerdict(m.serial, m.version, art.status,
                                          store.active_version(m.serial) == m.version, art.held_out.rms_px,
                                          default_path(art, Path(".")).name))
-    return RigReportData(cal, active, members, compose_tree(cal))
+    lint_now = lint_rig(settings, f"{cal.rig}@{cal.version}").findings
+    return RigReportData(cal, active, members, compose_tree(cal), lint_now)
 
 
 def _verdict(d: RigReportData) -> str:
     cal = d.calibration
     ref = f"{cal.rig}@{cal.version}"
+    now = "FAIL" if has_errors(d.lint_now) else "pass"
     lines = [f'<h1>rig {escape(ref)} <span class="badge {cal.status}" data-key="status">{cal.status}</span>'
-             f"{' (active)' if d.active else ''}</h1>"]
+             f"{' (active)' if d.active else ''}</h1>",
+             f'<p>active now: <b data-key="active">{"yes" if d.active else "no"}</b>; lint now '
+             f'(<code>calibctl lint --rig {escape(ref)}</code>, the store as it is today: a member re-calibrated '
+             f'since the solve fails it): <b class="{"rejected" if now == "FAIL" else "accepted"}" '
+             f'data-key="lint_now">{now}</b></p>',
+             "<h2>Lint now</h2>", lint_block(d.lint_now).replace('data-key="lint"', 'data-key="lint_now_clean"'),
+             "<h2>Lint at solve time</h2>"]
     return "".join(lines) + lint_block(cal.lint)
 
 

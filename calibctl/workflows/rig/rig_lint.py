@@ -1,4 +1,4 @@
-"""Rig lint and the rig records: history, show, rollback, export.
+"""Rig lint and the rig records: history, show, rollback (export: workflows.rig.rig_export).
 
 Rules (errors fail lint, exit 1):
 - ``rig-stale-member``: a member's active calibration is not the serial@version + content_sha256 the
@@ -21,9 +21,6 @@ Rules (errors fail lint, exit 1):
 from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
-from pathlib import Path
-
-import numpy as np
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding
@@ -36,15 +33,12 @@ from calibctl.artifacts.rig import (
     RigPair,
 )
 from calibctl.config import LintThresholds, Settings
-from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import NotFoundError, UsageError
-from calibctl.files import write_atomic
+from calibctl.signing import TrustedKeys
 from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
+from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
-
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr")
 
 
 def parse_rig_ref(ref: str) -> tuple[str, int | None]:
@@ -132,8 +126,10 @@ def _active_members(store: object, cal: RigCalibration) -> dict[str, Calibration
     return out
 
 
-def lint_rig(settings: Settings, ref: str) -> LintResult:
-    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now."""
+def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -> LintResult:
+    """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now.
+    ``trusted`` (``lint --require-signature``): every member version the rig used must be signed by a
+    trusted key, and the rig version itself (calibctl does not sign rig versions yet: always a finding)."""
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
         rig = store.get_rig(name)
@@ -141,7 +137,26 @@ def lint_rig(settings: Settings, ref: str) -> LintResult:
         findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
         versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
         findings += rig_handeye.handeye_findings(cal.handeye, versions)
+        if trusted is not None:
+            findings += _signature_findings(store, cal, trusted)
     return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
+
+
+def _signature_findings(store: object, cal: RigCalibration, trusted: TrustedKeys) -> list[Finding]:
+    fix = "a robot must load only signed calibrations: sign the store (`calibctl keys init`) and re-solve"
+    findings = [Finding(rule="signature", severity="error", fix=fix,
+                        message=f"rig {cal.rig}@{cal.version} is not signed (calibctl does not sign rig versions yet)")]
+    for m in cal.members:
+        try:
+            art = store.get_artifact(m.serial, m.version)  # type: ignore[attr-defined]
+        except NotFoundError:
+            problem: str | None = "is not in this store"
+        else:
+            problem = keys.signature_problem(art, trusted)
+        if problem is not None:
+            findings.append(Finding(rule="signature", severity="error", fix=fix,
+                                    message=f"member {m.serial}@{m.version} {problem}"))
+    return findings
 
 
 def history(settings: Settings, rig: str) -> tuple[list[RigCalibration], int | None, list[RigActivation]]:
@@ -167,59 +182,3 @@ def rollback(settings: Settings, rig: str, to_version: int, reason: str,
         seen = store.active_rig_version(rig) if expected_active is None else expected_active
         return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station,
                                   expected_active=seen)
-
-
-def _geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
-    """Members, the cameras' tree (stereo formats) and the whole tree with hand-eye edges (tf, URDF)."""
-    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
-               for m in cal.members]
-    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
-    cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))
-    return members, cameras, orient_tree(edges, cal.root)
-
-
-def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
-           allow_rejected: bool = False, edge: str | None = None) -> str:
-    """A stored rig calibration as ``fmt`` (EXPORT_FORMATS); stereo formats use the root and ``pair`` (or the
-    second member); ``edge`` FROM:TO exports one hand-eye edge (json or tf). Returns the text (also written
-    to ``out`` when given)."""
-    from calibctl.workflows.exports import rig_exports
-
-    if fmt not in EXPORT_FORMATS:
-        raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
-    cal = show(settings, ref)
-    if cal.status != "accepted" and not allow_rejected:
-        raise UsageError(f"rig {cal.rig}@{cal.version} is {cal.status}: a robot must not load it",
-                         hint="export the active version, or pass --allow-rejected to inspect it")
-    if edge is not None:
-        text = rig_handeye.edge_export(cal, edge, fmt)
-        if out is not None:
-            write_atomic(out, text, force=force)
-        return text
-    members, tree, full_tree = _geometry(cal)
-    by_name = {m.name: m for m in members}
-    left = by_name[cal.root]
-    right_name = pair or next(m.name for m in members if m.name != cal.root)
-    if right_name not in by_name or right_name == cal.root:
-        raise UsageError(f"--pair {right_name} is not a non-root member of rig {cal.rig}")
-    right = by_name[right_name]
-    T_right_left = tree.T(right.name, left.name)
-    header = f"# calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
-    if fmt == "json":
-        text = cal.model_dump_json(indent=2) + "\n"
-    elif fmt == "ros":
-        info_l, info_r = rig_exports.ros_stereo_pair(left, right, T_right_left)
-        text = f"{header}# --- {left.name} (left)\n{info_l}---\n# --- {right.name} (right)\n{info_r}"
-    elif fmt == "tf":
-        text = header + rig_exports.tf_static(full_tree)
-    elif fmt == "urdf":
-        text = rig_exports.urdf_robot(full_tree, cal.rig, f"calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}")
-    elif fmt == "urdf-joints":
-        text = f"<!-- calibctl rig {cal.rig}@{cal.version} sha256 {cal.content_sha256} -->\n" + rig_exports.urdf_joints(full_tree)
-    elif fmt == "kalibr":
-        text = header + rig_exports.kalibr_camchain(members, tree)
-    else:  # opencv
-        text = rig_exports.opencv_stereo(left, right, T_right_left)
-    if out is not None:
-        write_atomic(out, text, force=force)
-    return text

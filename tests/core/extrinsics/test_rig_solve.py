@@ -3,6 +3,8 @@ loops close, bad input is refused with a message."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -117,6 +119,16 @@ def test_a_solve_that_explains_nothing_is_refused():
     rows = tuple((r[0], type(r[1])(r[1].name, rng.permutation(r[1].corner_ids), r[1].corners_px)) for r in views.views)
     with pytest.raises(NumericalError, match="diverged"):
         solve_rig(RigViews(views.cameras, views.model_points_m, views.frames, rows), true_members(truth))
+
+
+def test_intrinsics_that_project_to_nan_are_refused_before_the_solve():
+    """The shared solver (core.lm) refuses a start it cannot descend from, naming the rig solve."""
+    truth, views = corner_session(3, seed=39)
+    members = true_members(truth)
+    members[2] = replace(members[2], dist_coeffs=np.array([np.nan, 0.0, 0.0, 0.0, 0.0]))
+    with pytest.raises(NumericalError, match="the rig solve cannot start: .*NaN or infinite") as failed:
+        solve_rig(views, members, solver="lm")
+    assert failed.value.exit_code == 2 and "intrinsics belong to it" in (failed.value.hint or "")
 
 
 def test_too_few_shared_frames_are_refused():

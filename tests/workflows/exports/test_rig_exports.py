@@ -143,7 +143,7 @@ def test_kalibr_refuses_a_k3_model(stereo):
 
 def test_write_exports_writes_every_file(stereo, tmp_path):
     names = {p.name for p in write_exports(stereo, tmp_path / "x")}
-    assert loadable_urdf((tmp_path / "x" / "rig.urdf.xml").read_text())[1] == "CAM0"
+    assert loadable_urdf((tmp_path / "x" / "rig.urdf.xml").read_text())[1] == "cam0_optical_frame"
     assert names == {"stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
                      "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
     assert pose_to_T(np.zeros(6)).shape == (4, 4)

@@ -16,13 +16,14 @@ from calibctl.errors import NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
-from calibctl.workflows.rig import rig_lint
+from calibctl.workflows.rig import rig_export, rig_lint
 from tests.artifacts.factories import calibration
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 from tests.workflows.urdf_check import loadable_urdf
 
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}
 ROOT, OTHER = "CAM-0001", "CAM-0002"
+ROOT_FRAME, OTHER_FRAME = "cam_0001_optical_frame", "cam_0002_optical_frame"  # frame_names.default_frame
 
 
 @pytest.fixture
@@ -71,24 +72,27 @@ def test_an_accepted_edge_is_the_rigs_next_active_version_and_exports_in_the_tre
     assert np.allclose(np.array(edge.covariance)[3:, 3:], np.array(result.uncertainty.covariance)[3:, 3:], rtol=1e-6)
     with Store.open(settings.db_url) as store:
         assert store.active_rig_version(RIG) == 2
-    tf = _tf(rig_lint.export(settings, RIG, "tf", None, force=False))
+    tf = _tf(rig_export.export(settings, RIG, "tf", None, force=False, allow_stale=True))
     # the flange is nobody's child: it roots the tree, as the robot's tf needs (base -> ... -> flange)
-    assert set(tf) == {("flange", ROOT), (ROOT, OTHER)}
-    assert np.allclose(tf[("flange", ROOT)], _X(result), atol=1e-9)
-    urdf = rig_lint.export(settings, RIG, "urdf", None, force=False)
+    assert set(tf) == {("flange", ROOT_FRAME), (ROOT_FRAME, OTHER_FRAME)}
+    assert np.allclose(tf[("flange", ROOT_FRAME)], _X(result), atol=1e-9)
+    urdf = rig_export.export(settings, RIG, "urdf", None, force=False, allow_stale=True)
     name, root, joints = loadable_urdf(urdf)
-    assert (name, root, set(joints)) == (RIG, "flange", {ROOT, OTHER})
-    assert joints[ROOT].find("parent").get("link") == "flange"
+    assert (name, root, set(joints)) == (RIG, "flange", {ROOT_FRAME, OTHER_FRAME})
+    assert joints[ROOT_FRAME].find("parent").get("link") == "flange"
 
 
 def test_an_edge_to_a_non_root_camera_hangs_below_it_inverted(settings, tmp_path):
     result = _result(tmp_path, settings, "imu", OTHER)
     rig_handeye.store_handeye(settings, RIG, result)
-    tf = _tf(rig_lint.export(settings, RIG, "tf", None, force=False))
-    assert set(tf) == {(ROOT, OTHER), (OTHER, "imu")}
-    assert np.allclose(tf[(OTHER, "imu")], se3.invert(_X(result)), atol=1e-9)
-    # the stereo formats still see only the cameras
-    assert "imu" not in rig_lint.export(settings, RIG, "kalibr", None, force=False)
+    tf = _tf(rig_export.export(settings, RIG, "tf", None, force=False, allow_stale=True))
+    assert set(tf) == {(ROOT_FRAME, OTHER_FRAME), (OTHER_FRAME, "imu")}
+    assert np.allclose(tf[(OTHER_FRAME, "imu")], se3.invert(_X(result)), atol=1e-9)
+    # Kalibr still lists only the cameras, each with T_cam_imu (IMU points into the camera frame)
+    chain = yaml.safe_load(rig_export.export(settings, RIG, "kalibr", None, force=False, allow_stale=True))
+    assert list(chain) == ["cam0", "cam1"] and all(c["timeshift_cam_imu"] == 0.0 for c in chain.values())
+    assert np.allclose(chain["cam1"]["T_cam_imu"], se3.invert(_X(result)), atol=1e-9)
+    assert [c["rostopic"] for c in chain.values()] == ["/cam_0001/image_raw", "/cam_0002/image_raw"]
 
 
 def test_a_rejected_result_is_stored_rejected_never_active_and_carries_no_edge(settings, tmp_path):
@@ -105,8 +109,8 @@ def test_a_rejected_result_is_stored_rejected_never_active_and_carries_no_edge(s
     gates = [f for f in lint.findings if f.rule == "handeye-gates"]
     assert lint.failed and any("gate lever-arm failed" in f.message for f in gates)
     with pytest.raises(UsageError, match="rejected: a robot must not load it"):
-        rig_lint.export(settings, f"{RIG}@3", "tf", None, force=False)
-    assert "imu" not in rig_lint.export(settings, f"{RIG}@3", "tf", None, force=False, allow_rejected=True)
+        rig_export.export(settings, f"{RIG}@3", "tf", None, force=False, allow_stale=True)
+    assert "imu" not in rig_export.export(settings, f"{RIG}@3", "tf", None, force=False, allow_rejected=True, allow_stale=True)
     with pytest.raises(UsageError, match="can never become active"):
         rig_lint.rollback(settings, RIG, 3, "try")
 

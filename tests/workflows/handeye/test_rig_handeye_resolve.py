@@ -9,7 +9,7 @@ import yaml
 
 from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
-from calibctl.workflows.rig import rig_lint, rigs
+from calibctl.workflows.rig import rig_export, rig_lint, rigs
 from tests.workflows.rig.test_rig_store_flow import _sources, rig2, settings  # noqa: F401 (fixtures)
 
 
@@ -31,9 +31,10 @@ def test_a_hand_eye_edge_is_carried_through_a_rig_re_solve(settings, rig2, tmp_p
     assert [(e.parent, e.child, e.source) for e in again.edges] == [("CAM0", "CAM1", "rig-solve"),
                                                                      ("flange", "CAM0", "hand-eye")]
     assert not rig_lint.lint_rig(settings, "R1").failed
-    tf = yaml.safe_load("\n".join(x for x in rig_lint.export(settings, "R1", "tf", None, force=False).splitlines()
+    tf = yaml.safe_load("\n".join(x for x in rig_export.export(settings, "R1", "tf", None, force=False).splitlines()
                                   if not x.startswith("#")))["transforms"]
-    assert [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf] == [("flange", "CAM0"), ("CAM0", "CAM1")]
+    assert [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf] == [("flange", "cam0_optical_frame"),
+                                                                          ("cam0_optical_frame", "cam1_optical_frame")]
     assert np.isclose(tf[0]["transform"]["translation"]["z"], result.transform.translation_m[2])
 
 

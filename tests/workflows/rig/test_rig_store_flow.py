@@ -11,7 +11,7 @@ import pytest
 from calibctl.config import load_settings
 from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
 from calibctl.store.repository import Store
-from calibctl.workflows.rig import rig_lint, rigs
+from calibctl.workflows.rig import rig_export, rig_lint, rigs
 from tests.artifacts.factories import calibration, measured_board
 from tests.workflows.rig_folders_data import rendered_rig, true_baseline_mm
 
@@ -93,20 +93,23 @@ def test_exports_of_a_stored_rig(settings, rig2, tmp_path):
     rigs.add_rig(settings, "R1", ["CAM0", "CAM1"], None, [])
     rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
     rigs.solve_rig_stored(settings, "R1")
-    kalibr = yaml.safe_load(rig_lint.export(settings, "R1", "kalibr", None, force=False))
+    kalibr = yaml.safe_load(rig_export.export(settings, "R1", "kalibr", None, force=False))
     assert np.allclose(np.linalg.norm(np.array(kalibr["cam1"]["T_cn_cnm1"])[:3, 3]) * 1e3,
                        true_baseline_mm(rig2), atol=0.2)
     path = tmp_path / "stereo.yaml"
-    rig_lint.export(settings, "R1@1", "opencv", path, force=False)
+    rig_export.export(settings, "R1@1", "opencv", path, force=False)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     assert fs.getNode("P2").mat().shape == (3, 4)
     fs.release()
-    for fmt in ("ros", "tf", "urdf", "json"):
-        assert "CAM1" in rig_lint.export(settings, "R1", fmt, None, force=False)
+    for fmt in ("tf", "urdf"):
+        assert "cam1_optical_frame" in rig_export.export(settings, "R1", fmt, None, force=False)
+    assert "CAM1" in rig_export.export(settings, "R1", "json", None, force=False)
+    with pytest.raises(UsageError, match="ROS reads only the first YAML document"):
+        rig_export.export(settings, "R1", "ros", None, force=False)
     # the stereo FileStorage goes to stdout like every other format, byte for byte what -o wrote
-    assert rig_lint.export(settings, "R1@1", "opencv", None, force=False) == path.read_text(encoding="utf-8")
+    assert rig_export.export(settings, "R1@1", "opencv", None, force=False) == path.read_text(encoding="utf-8")
     with pytest.raises(AlreadyExistsError, match="already exists"):
-        rig_lint.export(settings, "R1@1", "opencv", path, force=False)
+        rig_export.export(settings, "R1@1", "opencv", path, force=False)
 
 
 def test_registry_refusals(settings):

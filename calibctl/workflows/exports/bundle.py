@@ -1,0 +1,121 @@
+"""A robot bundle: every file a robot loads from one stored rig version, in one folder, with a manifest.
+
+``write_bundle`` writes the files and ``manifest.json`` (each file's sha256 and byte count, plus what the
+caller describes: rig version, members, frames) into a temporary folder beside the target and renames it
+into place, so a reader sees the old bundle or the new one, never half of one. An existing target is
+refused unless ``force``, and ``force`` replaces only a folder whose manifest calibctl wrote (never a
+folder of someone else's files). ``check_bundle`` is the manifest's lint: every listed file present and
+unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+from calibctl import bounded
+from calibctl.artifacts.lint import Finding
+from calibctl.errors import AlreadyExistsError, FileSystemError, UsageError
+from calibctl.files import file_errors, new_file_mode
+
+MANIFEST = "manifest.json"
+BUNDLE_FORMAT = "calibctl-robot-bundle"
+BUNDLE_SCHEMA_VERSION = 1
+
+
+def sha256_of(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def is_manifest(data: Any) -> bool:
+    return isinstance(data, dict) and data.get("format") == BUNDLE_FORMAT
+
+
+def _is_bundle_folder(path: Path) -> bool:
+    try:
+        return is_manifest(json.loads((path / MANIFEST).read_text(encoding="utf-8")))
+    except (OSError, ValueError):
+        return False
+
+
+def _check_target(out: Path, force: bool) -> None:
+    if out.exists() or out.is_symlink():
+        if not force:
+            raise AlreadyExistsError(f"{out} already exists",
+                                     "choose a new folder, or pass --force to replace a bundle calibctl wrote there")
+        if out.is_symlink() or not out.is_dir() or not _is_bundle_folder(out):
+            raise UsageError(f"{out} is not a bundle calibctl wrote (no calibctl {MANIFEST} in it): --force replaces "
+                             "only a bundle folder", "choose a new folder")
+    if not out.parent.is_dir():
+        raise FileSystemError(f"cannot write {out}: folder {out.parent} does not exist", "create it first")
+
+
+def write_bundle(out: Path, files: Mapping[str, str], manifest: Mapping[str, Any], *, force: bool = False) -> list[Path]:
+    """Write ``files`` (relative name -> text) and the manifest (``manifest`` plus ``format``, its schema
+    version and ``files``: name, sha256, bytes) as the folder ``out``; returns the paths written."""
+    out = Path(out)
+    _check_target(out, force)
+    payloads = {name: text.encode("utf-8") for name, text in files.items()}
+    doc = {"format": BUNDLE_FORMAT, "schema_version": BUNDLE_SCHEMA_VERSION, **manifest,
+           "files": [{"path": name, "sha256": sha256_of(data), "bytes": len(data)} for name, data in payloads.items()]}
+    payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
+    file_mode = new_file_mode()
+    with file_errors("write the bundle", out):
+        tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name[:24]}.", suffix=".tmp"))
+        try:
+            for name, data in payloads.items():
+                (tmp / name).write_bytes(data)
+                os.chmod(tmp / name, file_mode)
+            os.chmod(tmp, file_mode | ((file_mode & 0o444) >> 2))  # a folder's x bits follow its r bits
+            if out.exists():
+                old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name[:24]}.", suffix=".old"))
+                os.replace(out, old / out.name)
+                os.replace(tmp, out)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(tmp, out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    return [out / name for name in payloads]
+
+
+def _finding(message: str, fix: str, severity: str = "error") -> Finding:
+    return Finding(rule="bundle", severity=severity, message=message, fix=fix)
+
+
+def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
+    """Every problem of a bundle: a listed file missing, changed (sha256) or outside the folder."""
+    folder = manifest_path.parent
+    ref = f"{data.get('rig')}@{data.get('version')}"
+    fix = f"export the bundle again (`calibctl rig export {ref} --format bundle -o DIR --force`); never edit it by hand"
+    listed = data.get("files")
+    if not isinstance(listed, list) or not listed:
+        return [_finding(f"{manifest_path}: the manifest lists no files", fix)]
+    findings: list[Finding] = []
+    for entry in listed:
+        name, sha = (entry.get("path"), entry.get("sha256")) if isinstance(entry, dict) else (None, None)
+        if not isinstance(name, str) or not isinstance(sha, str):
+            findings.append(_finding(f"{manifest_path}: an entry of 'files' has no path and sha256", fix))
+            continue
+        rel = PurePosixPath(name)
+        if rel.is_absolute() or ".." in rel.parts or not rel.parts:
+            findings.append(_finding(f"{manifest_path}: {name} is outside the bundle folder", fix))
+            continue
+        path = folder / rel
+        if not path.is_file():
+            findings.append(_finding(f"{path} is listed in the manifest but missing", fix))
+            continue
+        bounded.check_size(path)
+        with file_errors("read", path):
+            actual = sha256_of(path.read_bytes())
+        if actual != sha:
+            findings.append(_finding(f"{path} was changed after calibctl wrote it (sha256 {actual[:12]}, the manifest "
+                                     f"records {sha[:12]})", fix))
+    return findings

@@ -1,0 +1,303 @@
+"""Lint of the files ``calibctl rig export`` writes, recognised by their content: the bundle manifest (every
+listed file present and unchanged, each one linted), the rig and hand-eye JSON documents (schema, content
+hash), tf_static, URDF (a robot or its joints), the Kalibr camchain, mrcal .cameramodel and the OpenCV stereo FileStorage
+(parse, numbers, frames). Each checks the rig trace header first (an edited file is ``content-hash``).
+
+``rig_file_kind`` says which of these a text is (None: not a rig export; ``lint.lint_file`` takes the
+camera formats). Rules: ``frames`` (a frame or topic ROS would refuse, a tree that is not one),
+``transform`` (a rotation that is not one, a value that is not finite), ``kalibr`` (what Kalibr's
+ConfigReader needs: cam_overlaps on every camera, 4 intrinsics, known distortion), ``schema``,
+``content-hash``, ``bundle``; the cameras of Kalibr and OpenCV stereo files get the camera rules on their
+numbers (``lint_facts`` without evidence: the members' own rules are `calibctl lint --rig RIG`).
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from calibctl import bounded
+from calibctl.artifacts.common import validation_message
+from calibctl.artifacts.handeye import HandEyeResult
+from calibctl.artifacts.lint import Finding
+from calibctl.artifacts.rig import RigCalibration
+from calibctl.config import LintThresholds
+from calibctl.errors import InputError
+from calibctl.workflows.exports import bundle, formats, trace_header
+from calibctl.workflows.exports.frame_names import ROS_NAME
+from calibctl.workflows.lint.lint import (
+    CalibrationFacts,
+    LintResult,
+    lint_facts,
+    lint_file,
+    trace_of,
+    trace_rules,
+    with_evidence,
+)
+
+_KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
+_FIX_FRAME = "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
+
+
+def _error(rule: str, message: str, fix: str, severity: str = "error") -> Finding:
+    return Finding(rule=rule, severity=severity, message=message, fix=fix)
+
+
+_MRCAL = re.compile(r"^\s*(#[^\n]*\n\s*)*\{\s*(#[^\n]*\n\s*)*'lensmodel'")
+
+
+def _parse(text: str, source: str) -> Any:
+    if _MRCAL.match(text):  # a .cameramodel: a Python literal (mrcal reads it with ast.literal_eval too)
+        try:
+            return {"mrcal": ast.literal_eval(text)}
+        except (ValueError, SyntaxError, MemoryError, RecursionError) as exc:
+            raise InputError(f"{source}: not a readable mrcal .cameramodel ({exc})", "export it again") from exc
+    stripped = text.lstrip()
+    if stripped.startswith("<"):
+        body = stripped if stripped.startswith(("<?xml", "<robot")) else f"<robot name='joints'>{stripped}</robot>"
+        try:
+            return ET.fromstring(body.encode("utf-8"))
+        except ET.ParseError as exc:
+            raise InputError(f"{source}: not well-formed XML ({exc})", "export it again") from exc
+    if stripped.startswith("%YAML"):
+        return None  # OpenCV FileStorage: formats reads it
+    return bounded.parse_json(text, source) if stripped.startswith("{") else bounded.parse_yaml(text, source)
+
+
+def rig_file_kind(text: str, data: Any) -> str | None:
+    """bundle | rig-json | handeye-json | tf | urdf | kalibr | mrcal | opencv-stereo, or None."""
+    if isinstance(data, ET.Element):
+        return "urdf" if data.tag == "robot" else None
+    if text.startswith("%YAML"):
+        return "opencv-stereo" if all(f"\n{k}:" in text for k in ("K1", "K2", "R", "T")) else None
+    if not isinstance(data, dict):
+        return None
+    if bundle.is_manifest(data):
+        return "bundle"
+    if isinstance(data.get("mrcal"), dict):
+        return "mrcal"
+    if {"rig", "edges", "members", "content_sha256"} <= set(data):
+        return "rig-json"
+    if data.get("kind") == "handeye" and "content_sha256" in data:
+        return "handeye-json"
+    if isinstance(data.get("transforms"), list):
+        return "tf"
+    if data and all(k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()):
+        return "kalibr"
+    return None
+
+
+def _finite_matrix(value: Any, shape: tuple[int, int], what: str) -> tuple[np.ndarray | None, list[Finding]]:
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(shape)
+    except (TypeError, ValueError):
+        return None, [_error("transform", f"{what} is not a {shape[0]}x{shape[1]} matrix of numbers", "export it again")]
+    if not np.all(np.isfinite(arr)):
+        return None, [_error("finite", f"{what} has NaN or infinite values", "export it again")]
+    return arr, []
+
+
+def _rotation(R: np.ndarray, what: str) -> list[Finding]:
+    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or abs(np.linalg.det(R) - 1.0) > 1e-6:
+        return [_error("transform", f"{what} is not a rotation (R R^T != I or det != 1)", "export it again")]
+    return []
+
+
+def _frame(name: Any, what: str) -> list[Finding]:
+    if isinstance(name, str) and ROS_NAME.match(name):
+        return []
+    return [_error("frames", f"{what} '{name}' is not a legal ROS name", _FIX_FRAME)]
+
+
+def _tree(edges: list[tuple[str, str]]) -> list[Finding]:
+    parents: dict[str, str] = {}
+    for parent, child in edges:
+        if child in parents:
+            return [_error("frames", f"{child} has two parents ({parents[child]} and {parent}): not a tree", "export again")]
+        parents[child] = parent
+    roots = {p for p, _ in edges if p not in parents}
+    if edges and len(roots) != 1:
+        return [_error("frames", f"the frames form {len(roots)} trees or a loop, not one tree", "export again")]
+    return []
+
+
+def _tf(data: dict[str, Any]) -> list[Finding]:
+    findings: list[Finding] = []
+    edges = []
+    for i, tr in enumerate(data["transforms"]):
+        parent = (tr.get("header") or {}).get("frame_id") if isinstance(tr, dict) else None
+        child = tr.get("child_frame_id") if isinstance(tr, dict) else None
+        findings += _frame(parent, f"transform {i} frame_id") + _frame(child, f"transform {i} child_frame_id")
+        moved = (tr.get("transform") or {}) if isinstance(tr, dict) else {}
+        t, q = moved.get("translation") or {}, moved.get("rotation") or {}
+        values = [t.get(k) for k in "xyz"] + [q.get(k) for k in "xyzw"]
+        numbers = [float(v) for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
+        if len(numbers) != 7 or not all(math.isfinite(v) for v in numbers):
+            findings.append(_error("finite", f"transform {parent} -> {child} has a missing or non-finite number", "export again"))
+        elif abs(math.sqrt(sum(v * v for v in numbers[3:])) - 1.0) > 1e-6:
+            findings.append(_error("transform", f"transform {parent} -> {child}: the quaternion is not unit length",
+                                   "export again"))
+        edges.append((str(parent), str(child)))
+    return findings + _tree(edges)
+
+
+def _urdf(robot: ET.Element) -> list[Finding]:
+    links = [link.get("name") for link in robot.findall("link")]
+    findings = [f for name in links for f in _frame(name, "link")]
+    edges = []
+    for joint in robot.findall("joint"):
+        parent, child = (joint.find(k) for k in ("parent", "child"))
+        p, c = (None if e is None else e.get("link") for e in (parent, child))
+        if links and (p not in links or c not in links):
+            findings.append(_error("frames", f"joint {joint.get('name')} joins {p} -> {c}, not two declared links",
+                                   "export again"))
+        origin = joint.find("origin")
+        for attr in ("xyz", "rpy"):
+            text = "0 0 0" if origin is None else origin.get(attr, "0 0 0")
+            try:
+                values = [float(v) for v in text.split()]
+            except ValueError:
+                values = []
+            if len(values) != 3 or not all(math.isfinite(v) for v in values):
+                findings.append(_error("finite", f"joint {joint.get('name')} origin {attr}='{text}' is not 3 finite "
+                                       "numbers", "export again"))
+        edges.append((str(p), str(c)))
+    return findings + _tree(edges)
+
+
+@dataclass(frozen=True)
+class Trace:
+    """What vouches for a file's cameras (``lint.lint_facts``' trace) and the evidence of a camera header."""
+
+    kind: str
+    evidence: dict[str, Any]
+
+    def lint(self, facts: CalibrationFacts, limits: LintThresholds) -> list[Finding]:
+        return lint_facts(with_evidence(facts, self.evidence), limits, self.kind)
+
+
+def _camera_facts(source: str, K: np.ndarray, dist: list[float], size: Any, equidistant: bool) -> CalibrationFacts:
+    ok = isinstance(size, list | tuple) and len(size) == 2 and all(isinstance(v, int) for v in size)
+    return CalibrationFacts(source=source, kind="rig", image_size=(int(size[0]), int(size[1])) if ok else None,
+                            camera_matrix=K, dist_coeffs=np.asarray(dist, dtype=np.float64),
+                            distortion_model="equidistant" if equidistant else "brown-conrady")
+
+
+def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
+    findings: list[Finding] = []
+    fix = "export it again with `calibctl rig export RIG --format kalibr`"
+    for name, cam in data.items():
+        intr, model, dist = cam.get("intrinsics"), cam.get("distortion_model"), cam.get("distortion_coeffs") or []
+        if "cam_overlaps" not in cam:
+            findings.append(_error("kalibr", f"{name} has no cam_overlaps: Kalibr's getCamOverlaps fails", fix))
+        if model not in _KALIBR_DISTORTION or len(dist) != _KALIBR_DISTORTION.get(model, -1):
+            findings.append(_error("kalibr", f"{name}: distortion_model {model} with {len(dist)} coefficients is not "
+                                   "a Kalibr model (radtan 4, equidistant 4, fov 1, none 0)", fix))
+        if not (isinstance(intr, list) and len(intr) == 4):
+            findings.append(_error("kalibr", f"{name}: intrinsics must be [fu, fv, pu, pv]", fix))
+            continue
+        if cam.get("rostopic") is not None and not ROS_NAME.match(str(cam["rostopic"]).lstrip("/")):
+            findings.append(_error("frames", f"{name}: rostopic '{cam['rostopic']}' is not a legal ROS topic", _FIX_FRAME))
+        for key in ("T_cn_cnm1", "T_cam_imu"):
+            if key in cam:
+                T, bad = _finite_matrix(cam[key], (4, 4), f"{name}.{key}")
+                findings += bad + ([] if T is None else _rotation(T[:3, :3], f"{name}.{key}"))
+        K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1]], dtype=np.float64)
+        facts = _camera_facts(f"{source}:{name}", K, dist if model == "equidistant" else [*dist, 0.0][:5],
+                              cam.get("resolution"), model == "equidistant")
+        findings += [f.model_copy(update={"message": f"{name}: {f.message}"}) for f in trace.lint(facts, limits)]
+    return findings
+
+
+def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
+    data = formats.opencv_data(text, source)
+    findings: list[Finding] = []
+    R, bad = _finite_matrix(data.get("R"), (3, 3), "R")
+    findings += bad + ([] if R is None else _rotation(R, "R (T_right_left)"))
+    _, bad = _finite_matrix(data.get("T"), (3, 1), "T")
+    findings += bad
+    size = [data.get("image_width"), data.get("image_height")]
+    for cam in ("1", "2"):
+        K, bad = _finite_matrix(data.get(f"K{cam}"), (3, 3), f"K{cam}")
+        findings += bad
+        if K is not None:
+            dist = list(np.ravel(data.get(f"D{cam}") or []))
+            facts = _camera_facts(f"{source}:K{cam}", K, dist, size, data.get("distortion_model") == "equidistant")
+            findings += [f.model_copy(update={"message": f"camera {cam}: {f.message}"})
+                         for f in trace.lint(facts, limits)]
+    return findings
+
+
+def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
+    lens, intr = str(model.get("lensmodel")), model.get("intrinsics")
+    fix = "export it again with `calibctl rig export RIG --format bundle`"
+    n = {"LENSMODEL_OPENCV4": 4, "LENSMODEL_OPENCV5": 5, "LENSMODEL_OPENCV8": 8, "LENSMODEL_OPENCV12": 12}.get(lens)
+    if n is None:
+        return [_error("mrcal", f"lensmodel {lens} is not one calibctl writes (LENSMODEL_OPENCV4/5/8/12)", fix, "warning")]
+    values, bad = _finite_matrix(intr, (1, 4 + n), "intrinsics")
+    _, bad_ext = _finite_matrix(model.get("extrinsics"), (1, 6), "extrinsics")
+    if values is None:
+        return bad + bad_ext
+    fx, fy, cx, cy = values[0, :4]
+    facts = _camera_facts(source, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]]), list(values[0, 4:]),
+                          model.get("imagersize"), False)
+    return bad_ext + trace.lint(facts, limits)
+
+
+def _document(data: dict[str, Any], source: str, model: type[RigCalibration] | type[HandEyeResult]) -> list[Finding]:
+    try:
+        doc = model.model_validate(data)
+    except ValidationError as exc:
+        return [_error("schema", validation_message(exc, source), "re-export it from the store; never edit one by hand")]
+    if doc.computed_sha256() != doc.content_sha256:
+        return [_error("content-hash", f"content sha256 is {doc.computed_sha256()[:12]} but the file records "
+                       f"{doc.content_sha256[:12]}: it was changed after it was written", "re-export it from the store")]
+    return [] if doc.status == "accepted" else [_error("status", f"{source} is a {doc.status} version",
+                                                       "export an accepted version")]
+
+
+def lint_rig_file(path: Path, limits: LintThresholds) -> list[LintResult] | None:
+    """The lint of a rig export file (a bundle: its manifest's result, then one per listed file), or None
+    when ``path`` is not one."""
+    text, source = bounded.read_text(path), str(path)
+    data = _parse(text, source)
+    kind = rig_file_kind(text, data)
+    if kind is None:
+        return None
+    if kind == "bundle":
+        results = [LintResult(source, kind, bundle.check_bundle(path, data))]
+        for entry in data.get("files") or []:
+            listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
+            if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():
+                results += lint_rig_file(listed, limits) or [lint_file(formats.load_calibration(listed), limits)]
+        return results
+    if kind == "rig-json":
+        return [LintResult(source, kind, _document(data, source, RigCalibration))]
+    if kind == "handeye-json":
+        return [LintResult(source, kind, _document(data, source, HandEyeResult))]
+    camera, rig = trace_header.read(text), trace_header.read_rig(text)
+    findings, evidence = trace_rules(camera, rig)
+    if camera is None and rig is None:
+        findings = [_error("traceability", "no calibctl header: this file cannot be traced to a stored version; "
+                           "linted on its numbers and frames only",
+                           "export it with `calibctl rig export RIG --format ...` or `calibctl export SERIAL`", "warning")]
+    trace = Trace(trace_of(evidence, camera, rig), evidence)
+    if kind == "tf":
+        findings += _tf(data)
+    elif kind == "urdf":
+        findings += _urdf(data)
+    elif kind == "mrcal":
+        findings += _mrcal(data["mrcal"], source, limits, trace)
+    elif kind == "kalibr":
+        findings += _kalibr(data, source, limits, trace)
+    else:
+        findings += _opencv_stereo(text, source, limits, trace)
+    return [LintResult(source, kind, findings)]
