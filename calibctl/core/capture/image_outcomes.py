@@ -20,6 +20,7 @@ deterministic whatever order the workers finish in.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import time
 from collections import Counter
@@ -280,8 +281,10 @@ def _collect(pool: Executor, paths: list[Path], spec: BoardSpec, settings: Detec
              summarize: Summarize | None, finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
     futures: dict[Future[tuple[ImageOutcome, object]], int] = {}
     try:
-        for i, path in enumerate(paths):
-            futures[pool.submit(_classify_task, path, spec, settings, summarize)] = i
+        # a process pool launches its workers inside submit: never interrupted half-way (worker_pool.shielded)
+        with worker_pool.shielded() if isinstance(pool, ProcessPoolExecutor) else contextlib.nullcontext():
+            for i, path in enumerate(paths):
+                futures[pool.submit(_classify_task, path, spec, settings, summarize)] = i
         for done, future in enumerate(as_completed(futures), start=1):
             finished(futures[future], *future.result(), done)
     except BaseException:

@@ -13,9 +13,14 @@ from it start quickly and safely; it lives as long as the calibctl process. Like
 method it needs the ``if __name__ == "__main__":`` guard in scripts.
 
 Each worker runs OpenCV and its BLAS libraries on one thread (``blas_threads.limit_this_process``): N
-workers use N cores, never N x cores, and the corners are bit-identical to a one-thread run. Workers
-ignore SIGINT: Ctrl-C reaches the whole process group, and only the calibctl process decides what it
-means (cancel the queued files, keep the pool, store nothing).
+workers use N cores, never N x cores, and the corners are bit-identical to a one-thread run.
+
+Ctrl-C reaches the whole process group, and only the calibctl process decides what it means (cancel
+the queued files, keep the pool, store nothing). So the fork server is started with SIGINT
+ignored, which it and every worker it forks inherit from their first instruction on (a Ctrl-C that
+landed in a half-started fork server made the launch fail with "EOFError: unexpected EOF"), and the
+pool's processes are launched with Ctrl-C held back until the launch is done (``shielded``; one that
+landed inside ``submit`` left the pool with a dead fork server: "ConnectionRefusedError").
 """
 
 from __future__ import annotations
@@ -24,12 +29,14 @@ import contextlib
 import multiprocessing
 import signal
 import threading
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from types import FrameType
 
 from calibctl.core.blas_threads import available_cores, limit_this_process
 
-__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shutdown_pool", "warm"]
+__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shielded", "shutdown_pool", "warm"]
 
 _lock = threading.Lock()
 _pool: ProcessPoolExecutor | None = None
@@ -49,6 +56,42 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     return multiprocessing.get_context("spawn")
 
 
+@contextlib.contextmanager
+def shielded() -> Iterator[None]:
+    """Ctrl-C held back inside the block (a launch is never interrupted half-way) and acted on when it
+    ends: this thread's SIGINT handler records it, then the previous handler runs (KeyboardInterrupt for
+    Python's own; the station's may hold it). A no-op off the main thread, where handlers cannot be set."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[tuple[int, FrameType | None]] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: came.append((signum, frame)))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if came:
+            if callable(previous):
+                previous(*came[0])
+            elif previous != signal.SIG_IGN:
+                raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _started_ignoring_sigint() -> Iterator[None]:
+    """SIGINT ignored while the fork server and the resource tracker are started: an ignored signal stays
+    ignored across exec, so they start (and import OpenCV) immune to Ctrl-C, and the fork server hands the
+    ignored SIGINT on to every worker it forks. A Ctrl-C in these few milliseconds is lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """The process-wide pool of ``workers`` detection processes (a pool of another size is replaced)."""
     global _pool, _pool_workers
@@ -56,7 +99,13 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
         if _pool is None or _pool_workers != workers:
             if _pool is not None:
                 _pool.shutdown(wait=False, cancel_futures=True)
-            _pool = ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(), initializer=_init_worker)
+            ctx = _mp_context()
+            if ctx.get_start_method() == "forkserver":
+                from multiprocessing import forkserver
+
+                with _started_ignoring_sigint():
+                    forkserver.ensure_running()  # and the resource tracker
+            _pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker)
             _pool_workers = workers
         return _pool
 
@@ -88,7 +137,9 @@ def warm(workers: int) -> None:
     """Start the pool's ``workers`` processes now and wait until each has run (a station's start-up), so
     the first capture forks nothing."""
     pool = process_pool(workers)
-    for future in [pool.submit(_ready) for _ in range(workers)]:
+    with shielded():
+        futures = [pool.submit(_ready) for _ in range(workers)]
+    for future in futures:
         future.result()
 
 
