@@ -542,6 +542,7 @@ def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, go
         raise KeyboardInterrupt
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: False)  # threads: the patch reaches them
     result = capture(db, good)
     assert result.exit_code == 130, result.output
     assert "calibctl capture: examining 12 images" in result.stderr

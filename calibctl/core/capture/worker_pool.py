@@ -114,7 +114,7 @@ def discard_if_broken(pool: ProcessPoolExecutor) -> None:
     """Forget ``pool`` when a worker died under it (killed, out of memory): the next call starts a new one."""
     global _pool
     probe = None
-    with contextlib.suppress(BrokenProcessPool, RuntimeError):  # RuntimeError: shut down already
+    with shielded(), contextlib.suppress(BrokenProcessPool, RuntimeError):  # RuntimeError: shut down already
         probe = pool.submit(int)
     if probe is not None:
         probe.cancel()

@@ -40,6 +40,16 @@ def video(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
+def thread_workers(monkeypatch) -> None:
+    """Detection on threads whatever the file count or a pool warm from an earlier test: what a test
+    patches in this process reaches the workers."""
+    from calibctl.core.capture import image_outcomes
+
+    monkeypatch.setattr(image_outcomes, "PROCESS_MIN_FILES", 10**6)
+    monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: False)
+
+
+@pytest.fixture
 def settings(sqlite_url: str):
     with Store.open(sqlite_url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
@@ -79,8 +89,8 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
         assert 15.0 < view.tilt_deg < 45.0 and view.tilt_direction is not None  # the scene's tilts are 20-40 deg
 
 
-def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path,
-                                                                               monkeypatch) -> None:
+def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path, monkeypatch,
+                                                                               thread_workers) -> None:
     files = sorted(good.glob("*.png"))
     expected = None
     for path in files:  # what the capture kept before: a reduced decode of every file, then the maximum
@@ -92,7 +102,7 @@ def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum
     kept = {}
     real_collected = capture_workflow._Collected
     monkeypatch.setattr(capture_workflow, "_Collected", lambda *a, **k: kept.setdefault("got", real_collected(*a, **k)))
-    capture(settings, CaptureRequest(SERIAL, "A17", str(good)))
+    capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=2))
     assert len(decodes) == len(files)
     np.testing.assert_array_equal(kept["got"].max_gray, expected)
 
@@ -304,7 +314,7 @@ def test_a_video_without_the_registered_pattern_names_what_is_visible(settings, 
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
-        settings, good: Path, tmp_path: Path, monkeypatch, workers: int) -> None:
+        settings, good: Path, tmp_path: Path, monkeypatch, workers: int, thread_workers) -> None:
     """KeyboardInterrupt from the third detection: the queued images are never detected (only those
     already running finish), no session and no image is stored."""
     from calibctl.core.capture import image_outcomes
@@ -332,7 +342,6 @@ def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
         return real_detect(*args, **kwargs)
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
-    monkeypatch.setattr(image_outcomes, "PROCESS_MIN_FILES", 1000)  # threads: the patch reaches the workers
     try:
         with pytest.raises(KeyboardInterrupt):
             capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=workers))
