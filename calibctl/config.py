@@ -6,6 +6,7 @@ A station file is YAML (``--station-config FILE``, ``CALIBCTL_STATION_CONFIG``, 
     station: line3-cam-bench
     db: postgresql+psycopg://calib@factory-db/calibctl
     image_retention_days: 30
+    jobs: 8                                      # detection processes (default: the cores available)
     signing_key: /etc/calibctl/station-key.pem   # Ed25519, mode 0600: every record written is signed
     trusted_keys: /etc/calibctl/trusted-keys/    # public keys (*.pem) whose signatures are accepted
     gates: {observability_min: 1.0e-4, tilt_min_deg: 20}
@@ -87,6 +88,7 @@ class StationConfig(BaseModel):
     signing_key: str | None = Field(None, description="private Ed25519 key file (0600) records are signed with")
     trusted_keys: str | None = Field(None, description="folder of public keys (*.pem) whose signatures are trusted")
     image_retention_days: int = Field(30, ge=0)
+    jobs: int | None = Field(None, ge=1, description="detection workers (default: the cores this process may use)")
     gates: GateThresholds = Field(default_factory=GateThresholds)
     lint: LintThresholds = Field(default_factory=LintThresholds)
     handeye: HandEyeGates = Field(default_factory=HandEyeGates)
@@ -102,6 +104,7 @@ class Settings(BaseModel):
     signing_key: str | None = None
     trusted_keys: str | None = None
     image_retention_days: int
+    jobs: int = Field(1, ge=1, description="detection workers: --jobs > CALIBCTL_JOBS > station file > cores available")
     gates: GateThresholds
     lint: LintThresholds
     handeye: HandEyeGates = Field(default_factory=HandEyeGates)
@@ -125,6 +128,7 @@ def load_settings(
     station: str | None = None,
     operator: str | None = None,
     env: Mapping[str, str] | None = None,
+    jobs: int | None = None,
 ) -> Settings:
     """Resolve settings with the precedence CLI flag > environment > station file > default."""
     env = os.environ if env is None else env
@@ -140,10 +144,29 @@ def load_settings(
         signing_key=env.get("CALIBCTL_SIGNING_KEY") or file_cfg.signing_key,
         trusted_keys=env.get("CALIBCTL_TRUSTED_KEYS") or file_cfg.trusted_keys,
         image_retention_days=file_cfg.image_retention_days,
+        jobs=_jobs(jobs, env.get("CALIBCTL_JOBS"), file_cfg.jobs),
         gates=file_cfg.gates,
         lint=file_cfg.lint,
         handeye=file_cfg.handeye,
     ))
+
+
+def _jobs(flag: int | None, env_value: str | None, file_value: int | None) -> int:
+    """Detection workers: ``--jobs`` > CALIBCTL_JOBS > the station file's ``jobs`` > the cores available."""
+    if flag is not None:
+        if flag < 1:
+            raise UsageError(f"--jobs must be 1 or more, got {flag}", "leave it out to use every core available")
+        return flag
+    if env_value:
+        if not env_value.strip().isdigit() or int(env_value) < 1:
+            raise UsageError(f"CALIBCTL_JOBS must be a whole number of 1 or more, got '{env_value}'",
+                             "unset it to use every core available")
+        return int(env_value)
+    if file_value is not None:
+        return file_value
+    from calibctl.core.blas_threads import available_cores  # os only: no numpy or OpenCV is loaded
+
+    return available_cores()
 
 
 def _checked(settings: Settings) -> Settings:

@@ -117,3 +117,12 @@ def _require_datasets() -> None:
     from tests.datasets import require_datasets
 
     require_datasets()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _no_warm_detection_pool_across_modules():
+    """A module that warmed the detection process pool stops it when it ends: in another module, what a
+    test patches in this process (detect_board, imdecode) must reach the (thread) workers."""
+    yield
+    if "calibctl.core.capture.worker_pool" in sys.modules:
+        sys.modules["calibctl.core.capture.worker_pool"].shutdown_pool()

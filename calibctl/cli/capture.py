@@ -12,7 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.options import OperatorOption, StationOption
+from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, shown, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import (
@@ -72,10 +72,11 @@ def register(app: typer.Typer) -> None:
     register_synth(app)
 
 
-def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run):
+def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run,
+                 jobs: int | None = None):
     from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
 
-    settings = state(ctx).settings(station=station, operator=operator)
+    settings = state(ctx).settings(station=station, operator=operator, jobs=jobs)
     with capture_observer(as_json, settings.gates.min_views, None) as observer:
         return settings, run(settings, observer)
 
@@ -181,6 +182,7 @@ def capture(
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
     model: GaugeModelOption = None,
+    jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
@@ -220,7 +222,7 @@ def capture(
                                               reference_distance=distance, reference_source=reference_source,
                                               gauge_model=gauge_model(model))
     _, result = _run_capture(ctx, as_json, station, operator,
-                             lambda settings, obs: capture_workflow.capture(settings, request, obs))
+                             lambda settings, obs: capture_workflow.capture(settings, request, obs), jobs)
     if as_json:
         emit_json(result.as_json())
     else:
@@ -245,6 +247,7 @@ def calibrate(
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
     override_gauge: OverrideGaugeOption = None,
+    jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
     """Capture, then solve the new session when its gates pass: one command from pictures to a calibration.
@@ -263,7 +266,7 @@ def calibrate(
                                               reference_distance=distance, reference_source=reference_source)
     _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
         settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs,
-        override_gauge=override_gauge))
+        override_gauge=override_gauge), jobs)
     solved = result.solve
     if as_json:
         emit_json({"capture": result.capture.as_json(),

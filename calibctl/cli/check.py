@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import JobsOption
 from calibctl.cli.render import emit_json, stdout
 
 if TYPE_CHECKING:
@@ -47,6 +48,7 @@ def check(
         help="Surveyed camera-to-board-centre distance and one-sigma, metres (or mm suffix), e.g. 0.600+-0.001.")] = None,
     station: Annotated[str | None, typer.Option("--station", help="Station id (default from settings).")] = None,
     operator: Annotated[str | None, typer.Option("--operator", help="Who runs the check.")] = None,
+    jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
     """Re-test the active (or @N) calibration on fresh board images, without re-solving it.
@@ -61,7 +63,7 @@ def check(
     from calibctl.workflows.camera.distance_gauge import parse_reference_distance
 
     distance = None if reference_distance is None else parse_reference_distance(reference_distance)
-    settings = state(ctx).settings(station=station, operator=operator)
+    settings = state(ctx).settings(station=station, operator=operator, jobs=jobs)
     event = check_workflow.check(settings, check_workflow.CheckRequest(ref, source, distance))
     if wants_json(ctx, json_output):
         emit_json(event)

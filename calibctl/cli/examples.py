@@ -20,6 +20,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                 "--reference-source ./fixture/"),
     "calibrate": ("calibctl calibrate --serial CAM-0042 --board A17 --source /dev/video0",
                   "calibctl calibrate --serial CAM-0042 --board A17 --source sweep.mp4 --model auto"),
+    "station": ("calibctl station --board A17 --source-template /data/shots/{serial}",
+                "calibctl station --board A17 --source-template '/data/shots/{serial}/*.png' --serials lot-42.txt --json"),
     "prune": ("calibctl prune", "calibctl prune --now 2026-12-01T00:00:00Z --json"),
     "synth": ("calibctl synth ./shots --scenario good --seed 1",
               "calibctl synth ./sweep --scenario video --size 1280x960"),

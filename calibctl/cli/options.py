@@ -9,3 +9,7 @@ import typer
 
 StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
 OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
+JobsOption = Annotated[int | None, typer.Option(
+    "--jobs", "-j", min=1, show_default=False,
+    help="Detection processes (env CALIBCTL_JOBS, station file 'jobs'; default: every core this process may "
+         "use). The outcomes are the same at every count.")]

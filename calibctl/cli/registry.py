@@ -28,6 +28,7 @@ COMMAND_MODULES: dict[str, str] = {
     "report": "report_page",
     "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
     "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
+    "station": "station",
     "board": "board", "rig": "rig", "lidar": "lidar", "db": "db", "keys": "keys", "fleet": "fleet",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is

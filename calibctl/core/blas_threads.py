@@ -1,25 +1,32 @@
-"""OpenBLAS on one thread for a block of code: what lets Python threads solve in parallel.
+"""Thread budgets: the cores this process may use, and BLAS / OpenMP / OpenCV threads bounded per stage.
 
-opencv-python bundles its own OpenBLAS (opencv_python_headless.libs/libopenblasp-r0-*.so, 0.3.15,
-pthreads), which OpenCV's LAPACK calls inside calibrateCamera use; numpy bundles another
-(scipy-openblas). Measured on the bench machine (2 cores, OpenCV 5.0.0): OpenCV's OpenBLAS worker
-thread spins on the second core whenever a solve runs and for ~0.1 s after it, even with
-cv2.setNumThreads(1) and with matrices far too small to share out. One solve_intrinsics of 20 views
-costs 22 ms wall but 44 ms CPU. Two Python threads solving held-out folds at once then compete with
-that spinning thread for the 2 cores: the 5-fold held-out validation of 20 views at 1280x960 took
-200-350 ms on 2 threads against 150-180 ms on one. With OpenBLAS on one thread (OPENBLAS_NUM_THREADS=1
-before start-up) it took 87-90 ms on 2 threads and 117-163 ms on one, with results identical to the
-bit (tests/core/intrinsics/test_validation.py; at these sizes OpenBLAS computes on the calling thread whatever its
-thread count, the count only decides who spins).
+Every stage states the parallelism it really uses and holds the libraries under it, so that CPU time
+/ wall time never exceeds it:
+  * detection: N worker processes, each with one OpenCV and one BLAS thread (``limit_this_process``,
+    ``core.capture.worker_pool``); on threads, OpenCV on one thread for the run;
+  * solves, held-out validation folds, the rig and hand-eye LMs: OpenCV and BLAS on one thread
+    (``single_threaded``, which ``core.intrinsics.solution.single_threaded_opencv`` and every solve, the
+    capture gates' lens fit, ``solve_rig`` and ``fit_handeye`` enter), parallel only where the stage
+    itself runs folds or pairs on Python threads (validation folds, the one-camera test's pairs).
 
-The thread count is process-global, like cv2.setNumThreads: enter the block once around a whole thread
-pool, not in each task. An OpenBLAS that cannot be found (another wheel layout, another BLAS) is left
-alone: the block then changes nothing, and only the speed differs.
+The libraries are found and set by threadpoolctl (every loaded OpenBLAS, MKL, BLIS and OpenMP runtime:
+opencv-python's bundled OpenBLAS and numpy's scipy-openblas on the wheels we ship), not by hand.
 
-A command that never solves (``lint``) does better still: its OpenBLAS never starts the
-worker threads at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2). numpy's
-OpenBLAS starts one per core when it loads, and they spin before they sleep: ``import numpy`` took 180 ms
-of CPU with them and 110 with OPENBLAS_NUM_THREADS=1 (BENCHMARKS.md section 12).
+Why BLAS on one thread: opencv-python's OpenBLAS worker thread spins on a second core whenever a solve
+runs and for ~0.1 s after it, even with cv2.setNumThreads(1) and matrices far too small to share out
+(2 cores, OpenCV 5.0.0: one solve_intrinsics of 20 views cost 22 ms wall and 44 ms CPU; the 5-fold
+held-out validation of 20 views at 1280x960 took 200-350 ms on 2 threads against 87-90 ms with
+OpenBLAS on one thread, results identical to the bit: at these sizes OpenBLAS computes on the calling
+thread whatever its thread count, the count only decides who spins).
+
+The limits are process-global, like cv2.setNumThreads: enter a block once around a whole thread pool,
+not in each task.
+
+A command that never solves (``lint``) does better still: its OpenBLAS never starts the worker threads
+at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2); threadpoolctl can only
+change a library already loaded. numpy's OpenBLAS starts one thread per core when it loads, and they
+spin before they sleep: ``import numpy`` took 180 ms of CPU with them and 110 with OPENBLAS_NUM_THREADS=1
+(BENCHMARKS.md section 12).
 """
 
 from __future__ import annotations
@@ -27,72 +34,77 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-# (set, get) symbol pairs: numpy >= 2 wheels bundle scipy-openblas (64-bit ints, prefixed symbols);
-# opencv-python's copy and system builds export OpenBLAS's own names.
-_SYMBOLS = (("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
-            ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
-            ("openblas_set_num_threads", "openblas_get_num_threads"))
-_PACKAGES = ("cv2", "numpy")
-_WHEEL_LIB_DIRS = ("opencv_python_headless.libs", "opencv_python.libs", "opencv_contrib_python.libs",
-                   "opencv_contrib_python_headless.libs", "numpy.libs")
+if TYPE_CHECKING:
+    from threadpoolctl import ThreadpoolController
 
-Threads = tuple[Callable[[int], None], Callable[[], int]]  # (set, get)
+OPENBLAS_THREADS_ENV = "OPENBLAS_NUM_THREADS"
 
 
-def _candidates() -> list[Path]:
-    """Bundled OpenBLAS files of the opencv-python and numpy wheels (Linux/Windows: <pkg>.libs beside
-    the package; macOS: <pkg>/.dylibs)."""
-    from importlib.util import find_spec
-
-    found: list[Path] = []
-    for package in _PACKAGES:
-        spec = find_spec(package)
-        if spec is None or spec.origin is None:
-            continue
-        package_dir = Path(spec.origin).resolve().parent
-        for lib_dir in (*(package_dir.parent / name for name in _WHEEL_LIB_DIRS), package_dir / ".dylibs"):
-            found += sorted(lib_dir.glob("*openblas*"))
-    return list(dict.fromkeys(found))
+def available_cores() -> int:
+    """The CPUs this process may run on (its affinity mask: taskset, cgroup cpusets), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # macOS, Windows
+        return max(1, os.cpu_count() or 1)
 
 
 @functools.cache
-def _openblas_threads() -> tuple[Threads, ...]:
-    """(set, get) for every bundled OpenBLAS that can be found."""
-    import ctypes  # here, not at the top: blas_starts_on_one_thread runs before anything is loaded
+def _controller() -> ThreadpoolController:
+    """The BLAS / OpenMP libraries of this process, found once (2 ms; a limit then costs 0.1 ms). Called
+    from code that has imported numpy and cv2, so their libraries are loaded by then."""
+    from threadpoolctl import ThreadpoolController  # here: lint and --help never load it
 
-    out: list[Threads] = []
-    for path in _candidates():
-        try:
-            lib = ctypes.CDLL(str(path))  # already loaded by cv2 / numpy: this returns the same library
-        except OSError:
-            continue
-        for set_name, get_name in _SYMBOLS:
-            if hasattr(lib, set_name) and hasattr(lib, get_name):
-                setter, getter = getattr(lib, set_name), getattr(lib, get_name)
-                setter.argtypes, setter.restype = [ctypes.c_int], None
-                getter.argtypes, getter.restype = [], ctypes.c_int
-                out.append((setter, getter))
-                break
-    return tuple(out)
+    return ThreadpoolController()
 
 
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
-    """Run the bundled OpenBLAS copies on one thread inside the block, restore their counts afterwards."""
-    changed = [(setter, getter()) for setter, getter in _openblas_threads() if getter() != 1]
-    for setter, _ in changed:
-        setter(1)
-    try:
+    """Every loaded BLAS and OpenMP runtime on one thread inside the block, restored afterwards."""
+    with _controller().limit(limits=1):
         yield
+
+
+@contextlib.contextmanager
+def single_threaded() -> Iterator[None]:
+    """OpenCV and every loaded BLAS / OpenMP runtime on one thread inside the block, restored afterwards:
+    a stage that solves on the calling thread alone (the capture gates, a solve, an LM), with results
+    that do not depend on the machine's core count. OpenCV's count is left alone when it is 1 already,
+    so a nested block leaving never gives OpenCV its threads back under an enclosing one."""
+    import cv2
+
+    previous = cv2.getNumThreads()
+    if previous != 1:
+        cv2.setNumThreads(1)
+    try:
+        with single_threaded_blas():
+            yield
     finally:
-        for setter, previous in changed:
-            setter(previous)
+        if previous != 1:
+            cv2.setNumThreads(previous)
 
 
-OPENBLAS_THREADS_ENV = "OPENBLAS_NUM_THREADS"
+def limit_this_process(threads: int) -> None:
+    """OpenCV and every loaded BLAS / OpenMP runtime on ``threads`` threads for the rest of the process
+    (a worker process's initializer)."""
+    import cv2
+
+    cv2.setNumThreads(threads)
+    _controller().limit(limits=threads)
+
+
+def thread_counts() -> dict[str, int]:
+    """The thread count of OpenCV and of every loaded BLAS / OpenMP library, by file name (for checks and
+    benchmarks: what a stage really runs on)."""
+    import cv2
+    from threadpoolctl import threadpool_info
+
+    counts = {"opencv": int(cv2.getNumThreads())}
+    counts.update({Path(lib["filepath"]).name: int(lib["num_threads"]) for lib in threadpool_info()})
+    return counts
 
 
 @contextlib.contextmanager

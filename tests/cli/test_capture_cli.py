@@ -542,8 +542,29 @@ def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, go
         raise KeyboardInterrupt
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
+    monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: False)  # threads: the patch reaches them
     result = capture(db, good)
     assert result.exit_code == 130, result.output
     assert "calibctl capture: examining 12 images" in result.stderr
     assert "Interrupted; nothing half-written was kept." in result.stderr
     assert sessions(db) == []
+
+
+def test_capture_with_jobs_stores_the_same_session_as_one_job(db: str, good: Path) -> None:
+    runs = [invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--jobs", jobs, "--json")
+            for jobs in ("1", "2")]
+    assert [r.exit_code for r in runs] == [0, 0], [r.output for r in runs]
+    first, second = (json.loads(r.stdout)["session"] for r in runs)
+    assert [o for o in first["outcomes"] if o not in second["outcomes"]] == []
+    assert [v for v in first["views"] if v not in second["views"]] == []
+
+
+def test_jobs_below_one_and_a_bad_calibctl_jobs_exit_2_naming_them(db: str, good: Path, monkeypatch) -> None:
+    zero = invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--jobs", "0")
+    assert zero.exit_code == 2 and "--jobs" in zero.output
+    monkeypatch.setenv("CALIBCTL_JOBS", "many")
+    bad = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good))
+    assert bad.exit_code == 2
+    assert "CALIBCTL_JOBS must be a whole number of 1 or more, got 'many'" in bad.output
+    with Store.open(db) as store:
+        assert store.list_sessions() == []

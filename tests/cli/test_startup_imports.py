@@ -135,15 +135,10 @@ def test_linting_a_json_file_loads_numpy_but_no_yaml_store_crypto_or_rich_module
 
 
 NUMPY_BLAS_THREADS = """
-import ctypes, os
-from calibctl.core import blas_threads
+import os
+from threadpoolctl import threadpool_info
 def numpy_blas_threads():  # numpy's own OpenBLAS (cv2 bundles another)
-    for path in blas_threads._candidates():
-        lib = ctypes.CDLL(str(path)) if "numpy" in str(path) else None
-        for _set, get in blas_threads._SYMBOLS if lib is not None else ():
-            if hasattr(lib, get):
-                return getattr(lib, get)()
-    return None
+    return next((lib["num_threads"] for lib in threadpool_info() if "numpy" in lib["filepath"]), None)
 print(numpy_blas_threads(), os.environ.get("OPENBLAS_NUM_THREADS"))
 """
 

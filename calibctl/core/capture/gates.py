@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.image_circle import ImageCircle, cells_inside, circle_detail
 from calibctl.core.capture.tilt import (
@@ -298,7 +299,8 @@ def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_s
     the cells mostly inside it. None: every cell of the grid (a pinhole or full-frame lens).
     """
     th = thresholds or GateThresholds()
-    geo = view_geometries(views, model_points, image_size, focal_px)
+    with single_threaded():  # the lens fit behind the tilts: one thread, the same digits on any machine
+        geo = view_geometries(views, model_points, image_size, focal_px)
     unused_words = [f"{name}: {why}" for name, why in geo.unused]
     obs_detail: dict[str, float | int | str | list[str]] = {"views_used": len(geo.homographies)}
     if unused_words:

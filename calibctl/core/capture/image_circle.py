@@ -67,6 +67,11 @@ def half_size(gray: np.ndarray) -> np.ndarray:
     return cv2.resize(gray, (max(1, width // 2), max(1, height // 2)), interpolation=cv2.INTER_AREA)
 
 
+def sized_half(gray: np.ndarray) -> tuple[tuple[int, int], np.ndarray]:
+    """((W, H) of ``gray``, ``half_size(gray)``): what a detection worker hands back for the frames' maximum."""
+    return (int(gray.shape[1]), int(gray.shape[0])), half_size(gray)
+
+
 def accumulate_max(acc: np.ndarray | None, gray: np.ndarray) -> np.ndarray:
     """The per-pixel maximum of ``acc`` and ``gray`` ((H, W) uint8); ``gray`` itself when acc is None or
     of another shape (the first frame of a session)."""

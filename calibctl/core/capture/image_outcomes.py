@@ -12,19 +12,20 @@ Every image gets exactly one outcome, decided in this order:
                     shared corners) of an earlier accepted image: it adds no geometry
     accepted
 
-Detection runs per file, in parallel (``classify_files``); the size and near-duplicate decisions need the
+Detection runs per file, in parallel (``classify_files``: worker processes from ``core.capture.worker_pool``
+or threads, see ``choose_executor``); the size and near-duplicate decisions need the
 whole session and run afterwards, in file-name order (``finalize_session``), so results are
 deterministic whatever order the workers finish in.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
-import multiprocessing
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -32,7 +33,9 @@ import cv2
 import numpy as np
 
 from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture import worker_pool
 from calibctl.core.capture.detect import FOUND_INCONSISTENT, Detection, DetectorSettings, detect_board
+from calibctl.core.intrinsics.solution import single_threaded_opencv
 
 ACCEPTED = "accepted"
 NO_BOARD = "no_board"
@@ -45,13 +48,15 @@ STATUSES = (ACCEPTED, NO_BOARD, BAD_GRID, BLURRED, NEAR_DUPLICATE, WRONG_SIZE, U
 
 MIN_IMAGE_SIDE_PX = 32  # a board of 2x2 inner corners needs more; 1x1 and 2x3 images divided by zero
 NEAR_DUPLICATE_FRAC = 0.01  # 8 px on a 640x480 image, 14.7 px on 1280x720
-DEFAULT_WORKERS = 2
-EXECUTORS = ("thread", "process")
-DEFAULT_EXECUTOR = "thread"
+EXECUTORS = ("auto", "thread", "process")
+DEFAULT_EXECUTOR = "auto"
+PROCESS_MIN_FILES = 32  # "auto" detects this many files or more on processes (choose_executor)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
 ProgressCallback = Callable[[int, int, "ImageOutcome"], None]
 DecodedCallback = Callable[[np.ndarray], None]
+Summarize = Callable[[np.ndarray], object]  # applied to a decoded image in the worker; picklable
+SummaryCallback = Callable[[object], None]
 
 
 @dataclass(frozen=True)
@@ -220,82 +225,103 @@ def find_near_duplicate(outcome: ImageOutcome, kept: Sequence[ImageOutcome],
     return best
 
 
-def _init_worker() -> None:
-    cv2.setNumThreads(1)
+def _classify_task(path: Path, spec: BoardSpec, settings: DetectorSettings | None,
+                   summarize: Summarize | None) -> tuple[ImageOutcome, object]:
+    """``classify_file`` plus ``summarize(gray)`` of the decoded image, in a worker (thread or process)."""
+    summary: list[object] = []
+    hook = None if summarize is None else (lambda gray: summary.append(summarize(gray)))
+    outcome = classify_file(path, spec, settings, hook)
+    return outcome, (summary[0] if summary else None)
 
 
-def _mp_context() -> multiprocessing.context.BaseContext:
-    """forkserver where available, else spawn; never plain fork.
+def choose_executor(executor: str, workers: int, total: int) -> str:
+    """"thread" or "process" for a run of ``total`` files on ``workers`` workers (``executor`` "auto" decides).
 
-    Forking a process whose OpenCV thread pool has run (any earlier cv2 call in this process) copies
-    its locked mutexes and deadlocks the child. The fork server is a fresh process that only imports
-    this module, so workers forked from it start quickly and safely; it lives for the process.
-    Like every non-fork start method it needs the ``if __name__ == "__main__":`` guard in scripts.
-    """
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload([__name__])
-        return ctx
-    return multiprocessing.get_context("spawn")
-
-
-def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
-                   workers: int = DEFAULT_WORKERS, progress: ProgressCallback | None = None,
-                   executor: str = DEFAULT_EXECUTOR, on_decoded: DecodedCallback | None = None) -> list[ImageOutcome]:
-    """Per-file outcomes (no session rules) in the order of ``paths``, detected on ``workers`` workers.
-
-    ``executor`` is "thread" (default) or "process". OpenCV releases the GIL in decoding and
-    detection, so threads scale across cores without a pool start-up. benchmarks/bench_detect.py,
-    20 PNGs on 2 cores, 640x480 / 1280x960: 2 threads 95 / 201 ms, one worker 146 / 373 ms,
-    2 processes 146-158 / 294-496 ms (the first process run also starts the fork server). OpenCV's
-    own thread pool is set to one thread for the run (restored afterwards) so the workers do not
-    oversubscribe the cores.
-    ``on_decoded(gray)`` is called in the worker thread with each decoded image (it must be thread-safe;
-    threads only: a worker process cannot call back into this one).
-    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
-    KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
-    propagates; nothing is returned.
+    auto: processes from ``PROCESS_MIN_FILES`` files on, or whenever the pool is warm already (a
+    station, a second capture in one process: no start-up to pay), threads otherwise. Threads share one GIL, and the
+    Python side of each detection (grid checks, canonical order, sha256 of small files) then runs one at a
+    time: 96 renders at 1280x960 on 2 cores took 1.30 s on 2 threads and 0.83 s on 2 processes. A pool of
+    processes costs its start-up, ~0.3 s on 2 cores (20 renders: 0.22 s on 2 threads, 0.50 s on 2 fresh
+    processes), which a warm pool (``worker_pool``) pays once per calibctl process.
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
-    if on_decoded is not None and executor == "process":
-        raise ValueError("on_decoded needs the thread executor: a worker process cannot call back")
-    paths = [Path(p) for p in paths]
-    total = len(paths)
+    if executor != "auto":
+        return executor
+    if workers > 1 and (total >= PROCESS_MIN_FILES or worker_pool.is_warm(workers)):
+        return "process"
+    return "thread"
+
+
+def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
+                   workers: int | None = None, progress: ProgressCallback | None = None,
+                   executor: str = DEFAULT_EXECUTOR, summarize: Summarize | None = None,
+                   on_summary: SummaryCallback | None = None) -> list[ImageOutcome]:
+    """Per-file outcomes (no session rules) in the order of ``paths``, detected on ``workers`` workers.
+
+    ``workers``: default the cores this process may run on (``worker_pool.available_cores``). The
+    outcomes do not depend on it nor on ``executor`` ("auto", "thread" or "process", see
+    ``choose_executor``): every worker detects with one OpenCV and one BLAS thread, so corners are
+    bit-identical at every job count (tests/core/capture/test_parallel_detect.py).
+    ``summarize(gray)`` (a module-level function, so a worker process can run it) is applied in the
+    worker to each decoded (H, W) uint8 image, and ``on_summary(result)`` is called with it in the
+    calling thread: a caller that needs something of the pixels too does not decode the file again.
+    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
+    KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
+    propagates; nothing is returned. The process pool is kept warm for the next call.
+    """
+    files = [Path(p) for p in paths]
+    total = len(files)
     results: list[ImageOutcome | None] = [None] * total
-    workers = max(1, min(workers, total))
-    threads_before = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
+    workers = max(1, min(workers or worker_pool.available_cores(), total))
+    kind = choose_executor(executor, workers, total)
+
+    def finished(i: int, outcome: ImageOutcome, summary: object, done: int) -> None:
+        results[i] = outcome
+        if on_summary is not None and summary is not None:
+            on_summary(summary)
+        if progress:
+            progress(done, total, outcome)
+
+    with single_threaded_opencv():
         if workers == 1:
-            for i, path in enumerate(paths):
-                results[i] = classify_file(path, spec, settings, on_decoded)
-                if progress:
-                    progress(i + 1, total, results[i])  # type: ignore[arg-type]
-        else:
-            pool: Executor = (ThreadPoolExecutor(max_workers=workers) if executor == "thread" else
-                              ProcessPoolExecutor(max_workers=workers, mp_context=_mp_context(),
-                                                  initializer=_init_worker))
+            for i, path in enumerate(files):
+                finished(i, *_classify_task(path, spec, settings, summarize), i + 1)
+        elif kind == "thread":
+            pool = ThreadPoolExecutor(max_workers=workers)
             try:
-                futures = {pool.submit(classify_file, path, spec, settings, on_decoded): i
-                           for i, path in enumerate(paths)}
-                for done, future in enumerate(as_completed(futures), start=1):
-                    results[futures[future]] = future.result()
-                    if progress:
-                        progress(done, total, results[futures[future]])  # type: ignore[arg-type]
+                _collect(pool, files, spec, settings, summarize, finished)
             except BaseException:
                 # Ctrl-C (or a failure): drop the queued files at once; only the images being detected
                 # right now (one per worker) run to their end.
                 pool.shutdown(wait=False, cancel_futures=True)
                 raise
             pool.shutdown(wait=True)
-    finally:
-        cv2.setNumThreads(threads_before)
+        else:
+            _collect(worker_pool.process_pool(workers), files, spec, settings, summarize, finished)
     return [r for r in results if r is not None]
 
 
+def _collect(pool: Executor, paths: list[Path], spec: BoardSpec, settings: DetectorSettings | None,
+             summarize: Summarize | None, finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
+    futures: dict[Future[tuple[ImageOutcome, object]], int] = {}
+    try:
+        # a process pool launches its workers inside submit: never interrupted half-way (worker_pool.shielded)
+        with worker_pool.shielded() if isinstance(pool, ProcessPoolExecutor) else contextlib.nullcontext():
+            for i, path in enumerate(paths):
+                futures[pool.submit(_classify_task, path, spec, settings, summarize)] = i
+        for done, future in enumerate(as_completed(futures), start=1):
+            finished(futures[future], *future.result(), done)
+    except BaseException:
+        for future in futures:  # queued files never start; the pool itself stays usable
+            future.cancel()
+        if isinstance(pool, ProcessPoolExecutor):
+            worker_pool.discard_if_broken(pool)
+        raise
+
+
 def classify_session(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
-                     workers: int = DEFAULT_WORKERS, progress: ProgressCallback | None = None,
+                     workers: int | None = None, progress: ProgressCallback | None = None,
                      image_size: tuple[int, int] | None = None, executor: str = DEFAULT_EXECUTOR) -> list[ImageOutcome]:
     """Every image's final outcome: ``classify_files`` then ``finalize_session``, in the order of ``paths``."""
     return finalize_session(classify_files(paths, spec, settings, workers, progress, executor), image_size)

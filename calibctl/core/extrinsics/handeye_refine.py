@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.handeye import (
     METHODS,
@@ -167,9 +168,15 @@ def refine_poses(T_wa_a: np.ndarray, T_wb_b: np.ndarray, R_X0: np.ndarray, t_X0_
 
 def fit_handeye(motions: Motions, method: str = "park") -> HandEyeFit:
     """Closed form (``method``: park or tsai) + least-squares translation, then the joint refinement
-    on poses when the motions came from poses, on the motions otherwise."""
+    on poses when the motions came from poses, on the motions otherwise. BLAS on one thread: the
+    Gauss-Newton steps are small and serial, more threads only spin."""
     if method not in METHODS:
         raise ValueError(f"unknown hand-eye method {method!r}; expected one of {', '.join(METHODS)}")
+    with single_threaded():
+        return _fit_handeye(motions, method)
+
+
+def _fit_handeye(motions: Motions, method: str) -> HandEyeFit:
     a, b = motions.rotvec_A_rad, motions.rotvec_B_rad
     R_X0 = solve_rotation_park(a, b) if method == "park" else solve_rotation_tsai(a, b)
     t_X0 = solve_translation(motions, R_X0)

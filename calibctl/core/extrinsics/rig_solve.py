@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded
 from calibctl.core.board.views import BoardView
 from calibctl.core.extrinsics.rig_init import initial_poses, pair_spreads
 from calibctl.core.extrinsics.rig_problem import (
@@ -267,6 +268,12 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         NumericalError: too few shared views, unobservable, or diverged on frames that agree.
         InconsistentDataError: diverged because the frames contradict each other (``diverged``).
     """
+    with single_threaded():  # OpenCV and BLAS on one thread: the LM is serial, spare threads only spin
+        return _solve_rig(views, members, refine_intrinsics, model, solver)
+
+
+def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool, model: str,
+               solver: str) -> RigSolution:
     views = shared_corners_only(views)
     if len(views.frames) < 2:
         raise NumericalError(f"only {len(views.frames)} frame(s) show the board to two cameras at once",

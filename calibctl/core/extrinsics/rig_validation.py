@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded
 from calibctl.core.extrinsics.rig_init import view_poses
 from calibctl.core.extrinsics.rig_metrics import epipolar_distances_px, rectified_cross_disparity_px, rectify
 from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigViews, normal_equations
@@ -98,6 +99,12 @@ def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], r
     Raises:
         NumericalError: too few frames to hold any out, or no fold could be solved.
     """
+    with single_threaded():  # folds and board-pose fits run one after another: spare threads only spin
+        return _validate_rig_holdout(views, members, refine_intrinsics, model, solver)
+
+
+def _validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool,
+                          model: str, solver: str) -> RigHoldout:
     views = shared_corners_only(views)
     folds = fold_assignment(len(views.frames), MIN_TRAINING_FRAMES)
     n_cams = len(views.cameras)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from calibctl.core.blas_threads import single_threaded
 from calibctl.core.intrinsics.covariance import IntrinsicCovariance
 from calibctl.errors import InputError, NumericalError, UsageError
 
@@ -163,22 +164,16 @@ class IntrinsicsSolution:
 
 @contextlib.contextmanager
 def single_threaded_opencv() -> Iterator[None]:
-    """Run OpenCV single-threaded inside the block (bit-identical results), restore afterwards.
+    """Run OpenCV and the BLAS / OpenMP libraries single-threaded inside the block (bit-identical
+    results, no spinning BLAS threads), restore afterwards (``core.blas_threads.single_threaded``).
 
-    ``cv2.setNumThreads`` is process-global, so this is not a per-thread setting: code that solves on
-    several Python threads enters the block once around the whole pool (``validate_holdout``). Inside
-    it, nested blocks see 1 thread already and change nothing, so one thread leaving its block never
-    gives OpenCV its threads back while another thread's solve is running.
+    The counts are process-global, so this is not a per-thread setting: code that solves on several
+    Python threads enters the block once around the whole pool (``validate_holdout``). Inside it, nested
+    blocks see 1 thread already and change nothing, so one thread leaving its block never gives OpenCV
+    its threads back while another thread's solve is running.
     """
-    previous = cv2.getNumThreads()
-    if previous == 1:
+    with single_threaded():
         yield
-        return
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(previous)
 
 
 def readonly(a: np.ndarray) -> np.ndarray:

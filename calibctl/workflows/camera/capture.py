@@ -26,10 +26,8 @@ without ``max_views`` stops as soon as the gates pass; a video file without it i
 from __future__ import annotations
 
 import datetime as dt
-import os
 import re
 import secrets
-import threading
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -65,6 +63,7 @@ from calibctl.core.capture.image_circle import (
     corners_inside,
     detect_image_circle,
     half_size,
+    sized_half,
 )
 from calibctl.core.capture.projection_gate import (
     ADVISORY_GATES,
@@ -85,7 +84,6 @@ from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_ca
 from calibctl.workflows.camera.image_circles import checked_image_circle
 from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, checked_override, solve
 
-MAX_WORKERS = 8
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
 # a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
 # circular fisheye can stop once the cells inside the circle are covered (the corners are never lit)
@@ -103,7 +101,7 @@ class CaptureRequest:
     source: str
     max_views: int | None = None
     duration_s: float | None = None
-    workers: int = min(MAX_WORKERS, os.cpu_count() or 2)
+    jobs: int | None = None  # detection workers; None: settings.jobs (--jobs > CALIBCTL_JOBS > station file > cores)
     image_circle: tuple[float, float, float] | None = None  # --image-circle CX,CY,R px; None: found in the frames
     reference_distance: ReferenceDistance | None = None  # with reference_source: the gauge (distance_gauge)
     reference_source: str | None = None
@@ -215,7 +213,7 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
         if source.kind in sources.IMAGE_SETS:
-            got = _capture_images(store, settings, spec, board, source, request.workers, observer)
+            got = _capture_images(store, settings, spec, board, source, request.jobs or settings.jobs, observer)
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
@@ -223,7 +221,8 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         if (request.reference_distance is not None and request.reference_source is not None
                 and session.status == "accepted" and session.image_size is not None):
             distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
-                                           session.views, session.image_size, request.gauge_model)
+                                           session.views, session.image_size, request.gauge_model,
+                                           request.jobs or settings.jobs)
             # the session carries the verdict: a failed gauge stops its solve (workflows.camera.solve)
             session = session.model_copy(update={"metric_gauge": MetricGauge(
                 distance=distance, lens_model=lens, reference_source=request.reference_source)})
@@ -251,19 +250,18 @@ def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_ch
 
 class _MaxPicture:
     """The per-pixel maximum (``accumulate_max``) of a folder's images at half size, one per image size,
-    filled by the detection workers from the image they have just decoded: no second decode of every
-    file (it cost 175 ms of a 20-image 1280x960 PNG capture, on one thread). Half size is enough to
-    find an image circle."""
+    filled from the half-size copies the detection workers make of the image they have just decoded
+    (``sized_half``): no second decode of every file (it cost 175 ms of a 20-image 1280x960 PNG capture,
+    on one thread). Half size is enough to find an image circle."""
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
         self._by_size: dict[tuple[int, int], np.ndarray] = {}
 
-    def add(self, gray: np.ndarray) -> None:
-        height, width = gray.shape[:2]
-        reduced = half_size(gray)
-        with self._lock:
-            self._by_size[(width, height)] = accumulate_max(self._by_size.get((width, height)), reduced)
+    def add(self, summary: object) -> None:
+        """``summary``: ``sized_half`` of one decoded image (called in the capturing thread)."""
+        assert isinstance(summary, tuple)
+        size: tuple[int, int] = summary[0]
+        self._by_size[size] = accumulate_max(self._by_size.get(size), summary[1])
 
     def of_size(self, size: tuple[int, int]) -> np.ndarray | None:
         return self._by_size.get(size)
@@ -279,7 +277,7 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
     with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
         found = outcomes_core.classify_files(images.paths, spec, workers=workers, progress=lambda done, total, o:
                                              observer.image_done(done, total, o.name, o.status),
-                                             on_decoded=picture.add)
+                                             summarize=sized_half, on_summary=picture.add)
     found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
     mixed = sources.mixed_sizes_error(source, {o.name: o.image_size for o in found if o.image_size is not None})
     if mixed is not None:

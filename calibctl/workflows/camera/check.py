@@ -142,7 +142,7 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
         if source.kind not in sources.IMAGE_SETS:
             raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
                              "save a few board pictures from the camera and check those")
-        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref)
+        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref, settings.jobs)
         if len(views) < MIN_CHECK_VIEWS:  # refused before anything is stored: a FAIL here would be noise
             raise InputError(f"cannot judge {art.ref} from {len(views)} board view(s) in {n_images} image(s): the "
                              f"check's statistics need at least {MIN_CHECK_VIEWS}; nothing was stored",

@@ -109,10 +109,11 @@ def distance_reason(d: DistanceCheck) -> str:
 
 
 def detect_fixture_views(spec: BoardSpec, board_ref: str, source: sources.SourceSpec, image_size: tuple[int, int],
-                         calibrated: str) -> tuple[list[outcomes_core.ImageOutcome], int]:
+                         calibrated: str, jobs: int | None = None) -> tuple[list[outcomes_core.ImageOutcome], int]:
     """The accepted board views of an image source, all of ``image_size`` (InputError naming both sizes if not).
 
-    Returns (accepted views with corners, images examined). ``calibrated`` names what the size belongs to.
+    Returns (accepted views with corners, images examined). ``calibrated`` names what the size belongs to;
+    ``jobs``: detection workers (None: the cores available).
     """
     if source.kind not in sources.IMAGE_SETS:
         raise UsageError(f"the board pictures must be a folder, glob or list of images, not a {source.kind}",
@@ -120,7 +121,7 @@ def detect_fixture_views(spec: BoardSpec, board_ref: str, source: sources.Source
     with file_errors(f"read the source {source.kind}", source.label):
         images = sources.select_images(source)
         with sources.quiet_opencv():
-            found = outcomes_core.classify_files(images.paths, spec)
+            found = outcomes_core.classify_files(images.paths, spec, workers=jobs)
     found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
     w, h = image_size
     wrong = [o for o in found if o.image_size is not None and tuple(o.image_size) != (w, h)]
@@ -150,7 +151,8 @@ def board_distances_m(spec: BoardSpec, views: Sequence[outcomes_core.ImageOutcom
 
 
 def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_ref: str,
-                  views: Sequence[ViewCorners], image_size: tuple[int, int], model: str) -> tuple[DistanceCheck, str]:
+                  views: Sequence[ViewCorners], image_size: tuple[int, int], model: str,
+                  jobs: int | None = None) -> tuple[DistanceCheck, str]:
     """The gauge at capture: solve the captured views with ``model`` (a MODELS name, the lens the session
     will be solved with, or AUTO: the model ``--model auto`` chooses for them; not stored), then judge
     the board distance of the ``fixture`` pictures through that lens. Returns the verdict and the lens.
@@ -172,6 +174,6 @@ def gauge_capture(ref: ReferenceDistance, fixture: str, spec: BoardSpec, board_r
             f"{exc.hint}; or gauge with the model the lens needs (--model)" if exc.hint
             else "gauge with the model the lens needs (--model)") from exc
     fixture_views, _ = detect_fixture_views(spec, board_ref, sources.resolve_source(fixture), image_size,
-                                            "this session")
+                                            "this session", jobs)
     distances = board_distances_m(spec, fixture_views, fit.camera_matrix, fit.dist_coeffs, lens)
     return judge_distance(ref, distances, [v.name for v in fixture_views]), lens

@@ -171,7 +171,7 @@ def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, 
 
 def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
                       intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
-                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int = 2,
+                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int | None = None,
                       limits: LintThresholds | None = None) -> RigFolderRun:
     """Run the folder flow (module docstring). The first source is the root camera; ``limits`` are the
     station's lint thresholds (default: LintThresholds()).

@@ -23,6 +23,7 @@ from calibctl.core.capture.detect import (
     neighbour_correlation,
     search_levels,
 )
+from calibctl.core.capture.image_circle import half_size, sized_half
 from calibctl.core.capture.image_outcomes import (
     ACCEPTED,
     BAD_GRID,
@@ -143,20 +144,21 @@ def test_parallel_and_sequential_runs_agree_and_report_progress(tmp_path: Path, 
     for a, b in zip(processes, sequential[:3], strict=True):
         assert (a.name, a.status, a.sha256) == (b.name, b.status, b.sha256)
         np.testing.assert_array_equal(a.corners_px, b.corners_px)
-    with pytest.raises(ValueError, match="executor must be one of thread, process"):
+    with pytest.raises(ValueError, match="executor must be one of auto, thread, process"):
         classify_files(paths, BOARD, executor="cluster")
 
 
-def test_workers_hand_each_decoded_image_to_on_decoded_once(tmp_path: Path, good_views) -> None:
+@pytest.mark.parametrize("executor", ["thread", "process"])
+def test_workers_hand_a_summary_of_each_decoded_image_back_once(tmp_path: Path, good_views, executor: str) -> None:
     paths = [write(tmp_path / f"v{i}.png", img) for i, (img, _) in enumerate(good_views[:4])]
     (tmp_path / "broken.png").write_bytes(b"not a png")
-    seen: list[np.ndarray] = []
-    outcomes = classify_files([*paths, tmp_path / "broken.png"], BOARD, workers=2, on_decoded=seen.append)
+    seen: list[object] = []
+    outcomes = classify_files([*paths, tmp_path / "broken.png"], BOARD, workers=2, executor=executor,
+                              summarize=sized_half, on_summary=seen.append)
     assert [o.status for o in outcomes][-1] == UNREADABLE and len(seen) == 4  # the undecodable file is not passed on
-    by_bytes = {img.tobytes() for img, _ in good_views[:4]}
-    assert {gray.tobytes() for gray in seen} == by_bytes
-    with pytest.raises(ValueError, match="on_decoded needs the thread executor"):
-        classify_files(paths, BOARD, workers=2, executor="process", on_decoded=seen.append)
+    expected = {half_size(img).tobytes() for img, _ in good_views[:4]}
+    assert {reduced.tobytes() for (size, reduced) in seen} == expected  # type: ignore[misc]
+    assert {size for size, _ in seen} == {(640, 480)}  # type: ignore[misc]
 
 
 def test_a_missing_file_is_unreadable_not_a_crash(tmp_path: Path) -> None:

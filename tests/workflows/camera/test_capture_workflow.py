@@ -40,6 +40,16 @@ def video(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
+def thread_workers(monkeypatch) -> None:
+    """Detection on threads whatever the file count or a pool warm from an earlier test: what a test
+    patches in this process reaches the workers."""
+    from calibctl.core.capture import image_outcomes
+
+    monkeypatch.setattr(image_outcomes, "PROCESS_MIN_FILES", 10**6)
+    monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: False)
+
+
+@pytest.fixture
 def settings(sqlite_url: str):
     with Store.open(sqlite_url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
@@ -80,8 +90,8 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
         assert 15.0 < view.tilt_deg < 45.0 and view.tilt_direction is not None  # the scene's tilts are 20-40 deg
 
 
-def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path,
-                                                                               monkeypatch) -> None:
+def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path, monkeypatch,
+                                                                               thread_workers) -> None:
     files = sorted(good.glob("*.png"))
     expected = None
     for path in files:  # what the capture kept before: a reduced decode of every file, then the maximum
@@ -93,7 +103,7 @@ def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum
     kept = {}
     real_collected = capture_workflow._Collected
     monkeypatch.setattr(capture_workflow, "_Collected", lambda *a, **k: kept.setdefault("got", real_collected(*a, **k)))
-    capture(settings, CaptureRequest(SERIAL, "A17", str(good)))
+    capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=2))
     # each file once for detection, plus the pattern check's probe pictures (read as bytes too, since a
     # cv2.imread of a name that is not UTF-8 crashed: docs/hardening.md)
     assert len(decodes) == len(files) + pattern_check.PROBE_IMAGES
@@ -307,7 +317,7 @@ def test_a_video_without_the_registered_pattern_names_what_is_visible(settings, 
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
-        settings, good: Path, tmp_path: Path, monkeypatch, workers: int) -> None:
+        settings, good: Path, tmp_path: Path, monkeypatch, workers: int, thread_workers) -> None:
     """KeyboardInterrupt from the third detection: the queued images are never detected (only those
     already running finish), no session and no image is stored."""
     from calibctl.core.capture import image_outcomes
@@ -337,10 +347,43 @@ def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
     try:
         with pytest.raises(KeyboardInterrupt):
-            capture(settings, CaptureRequest(SERIAL, "A17", str(folder), workers=workers))
+            capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=workers))
     finally:
         capture_returned.set()
     assert len(calls) <= 3 + workers  # of 60: the rest was cancelled
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == []
         assert store.counts()["images"] == 0
+
+
+@pytest.mark.parametrize("jobs", [2, 4])
+def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(settings, good: Path, tmp_path: Path,
+                                                                    jobs: int) -> None:
+    """Ctrl-C arrives in the capturing process (workers ignore SIGINT) while processes detect: it
+    propagates, no session and no image is stored, and the next capture on the warm pool works."""
+    folder = tmp_path / "large"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(40):  # enough for the process pool (image_outcomes.PROCESS_MIN_FILES)
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+
+    class CtrlC(capture_workflow.CaptureObserver):
+        def image_done(self, done: int, total: int, name: str, status: str) -> None:
+            if done == 5:
+                raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=jobs), CtrlC())
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == [] and store.counts()["images"] == 0
+    result = capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs))
+    assert result.session.status == "accepted"
+
+
+def test_a_capture_stores_the_same_session_at_every_job_count(settings, good: Path) -> None:
+    sessions = [capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs)).session for jobs in (1, 2, 4)]
+    first = sessions[0]
+    for other in sessions[1:]:
+        assert [o.model_dump() for o in other.outcomes] == [o.model_dump() for o in first.outcomes]
+        assert [v.model_dump() for v in other.views] == [v.model_dump() for v in first.views]  # corners as floats
+        assert [g.model_dump() for g in other.gates] == [g.model_dump() for g in first.gates]

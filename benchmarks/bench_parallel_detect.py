@@ -1,0 +1,177 @@
+"""Detection and calibrate side by side with the plain OpenCV script, sequential and on a process pool.
+
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_parallel_detect.py RENDERED_96 REAL_FOLDER [--repeats 3]
+
+RENDERED_96: ``calibctl synth OUT --views 96 --size 1280x960`` (its first 20 views form the 20-view set);
+REAL_FOLDER: a real set with a 9x6 board (../shared/datasets/udacity-camcal). Every path runs in a fresh
+Python process, as a user runs it, the paths taking turns, ``--repeats`` rounds; best wall time:
+
+Detection (time measured inside the process, after its imports; a pool's start-up included):
+  * plain sequential: imread + findChessboardCorners (ADAPTIVE_THRESH | NORMALIZE_IMAGE) + cornerSubPix 11x11;
+  * plain pool: the same function on multiprocessing.Pool(jobs) (fork, Linux's default), pool start included;
+  * calibctl: ``classify_files`` at jobs 1 and 2 (the default: every core available), pool start included.
+End to end (interpreter start to exit, a fresh SQLite store with the board registered each run):
+  * ``calibctl capture`` and ``calibctl calibrate`` at jobs 1 and the default;
+  * the plain script: the detection above then calibrateCameraExtended, sequential and on a pool.
+Recall is printed beside every time: calibctl must find at least what the plain script finds.
+Prints a markdown report with machine, date and load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
+
+PLAIN = r'''
+import sys, time, glob, os
+t0 = time.perf_counter()
+import cv2, numpy as np
+folder, jobs, solve = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "solve"
+FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+CRIT = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
+def detect(path):
+    gray = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+    found, corners = cv2.findChessboardCorners(gray, (9, 6), flags=FLAGS)
+    if not found:
+        return None, gray.shape[::-1]
+    return cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), CRIT), gray.shape[::-1]
+if __name__ == "__main__":
+    paths = sorted(p for p in glob.glob(os.path.join(folder, "*")) if p.lower().endswith((".png", ".jpg")))
+    t = time.perf_counter()
+    if jobs == 1:
+        found = [detect(p) for p in paths]
+    else:
+        from multiprocessing import Pool
+        with Pool(jobs) as pool:
+            found = pool.map(detect, paths)
+    t_detect = time.perf_counter() - t
+    views = [c for c, _ in found if c is not None]
+    if solve:
+        obj = np.zeros((54, 3), np.float32)
+        obj[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
+        cv2.calibrateCameraExtended([obj] * len(views), views, found[0][1], None, None)
+    print(f"RESULT {t_detect:.4f} {len(views)} {time.perf_counter() - t:.4f}")
+'''
+
+CALIBCTL_DETECT = r'''
+import sys, time
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.image_outcomes import classify_files, list_images
+if __name__ == "__main__":
+    paths = list_images(sys.argv[1])
+    t = time.perf_counter()
+    out = classify_files(paths, BoardSpec.chessboard(9, 6, 0.025), workers=int(sys.argv[2]))
+    print(f"RESULT {time.perf_counter() - t:.4f} {sum(o.corners_px is not None for o in out)}")
+'''
+
+
+def run(cmd: list[str]) -> tuple[float, str]:
+    """(wall s from start to exit, stdout)."""
+    t = time.perf_counter()
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    if done.returncode not in (0, 1):
+        raise RuntimeError(f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+    return wall, done.stdout
+
+
+def result_of(stdout: str) -> tuple[float, int]:
+    line = next(line for line in stdout.splitlines() if line.startswith("RESULT "))
+    _, seconds, found, *_ = line.split()
+    return float(seconds), int(found)
+
+
+def boards_of(stdout: str) -> str:
+    """Images with a board in a ``capture --json`` / ``calibrate --json`` answer, and whether it solved."""
+    doc = json.loads(stdout)
+    session = doc["capture"]["session"] if "capture" in doc else doc["session"]
+    found = sum(o["corners_found"] > 0 for o in session["outcomes"])
+    solved = "" if "capture" not in doc else (", solved" if doc["calibration"] else ", not solved")
+    return f"{found} boards, session {session['status']}{solved}"
+
+
+def template_store(work: Path) -> Path:
+    from calibctl.store.repository import Store
+    from calibctl.workflows.board.boards import BoardRegistration, build_board
+
+    db = work / "template.db"
+    reg = BoardRegistration("BENCH", "chessboard", 9, 6, 25.0, uncertainty_mm=0.02, instrument="calipers",
+                            measured_by="bench", measured_on=dt.date.today().isoformat())
+    with Store.open(f"sqlite:///{db}") as store:
+        store.add_board(build_board(reg, created_by="bench"))
+    return db
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("rendered", type=Path)
+    parser.add_argument("real", type=Path)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    cores = len(os.sched_getaffinity(0))
+    py = sys.executable
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        r20 = work / "r20"
+        r20.mkdir()
+        for p in sorted(args.rendered.glob("*.png"))[:20]:
+            shutil.copy(p, r20 / p.name)
+        sets = [("rendered 1280x960, 96 views", args.rendered), ("rendered 1280x960, 20 views", r20),
+                (f"real: {args.real.name}", args.real)]
+        (work / "plain.py").write_text(PLAIN)
+        (work / "detect.py").write_text(CALIBCTL_DETECT)
+        template = template_store(work)
+        load = os.getloadavg()
+        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
+              f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
+              f"(a shared machine)\n")
+        for label, folder in sets:
+            det = {"plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
+                   f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
+                   "calibctl classify_files, jobs 1": [py, str(work / "detect.py"), str(folder), "1"],
+                   f"calibctl classify_files, jobs {cores} (default)": [py, str(work / "detect.py"), str(folder), str(cores)]}
+            db = work / "run.db"
+            url = f"sqlite:///{db}"
+            cli = [py, "-m", "calibctl", "--db", url]
+            e2e = {"plain script (detect + calibrateCameraExtended)": [py, str(work / "plain.py"), str(folder), "1", "solve"],
+                   f"plain script on Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "solve"],
+                   "calibctl capture --jobs 1": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
+                   "calibctl capture (default jobs)": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"],
+                   "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
+                   "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"]}
+            best: dict[str, tuple[float, str]] = {}
+            for _ in range(args.repeats):
+                for name, cmd in [*det.items(), *e2e.items()]:
+                    shutil.copyfile(template, db)
+                    shutil.rmtree(work / "calibctl-images", ignore_errors=True)
+                    wall, out = run(cmd)
+                    if name in det:
+                        seconds, found = result_of(out)
+                        note = f"{found} boards"
+                    elif name.startswith("plain"):
+                        seconds, note = wall, f"{result_of(out)[1]} boards"
+                    else:
+                        seconds, note = wall, boards_of(out)
+                    if name not in best or seconds < best[name][0]:
+                        best[name] = (seconds, note)
+            print(f"### {label}\n\n| path | best s | vs plain sequential | recall |\n|---|---|---|---|")
+            for group, ref in ((det, "plain sequential loop"), (e2e, "plain script (detect + calibrateCameraExtended)")):
+                for name in group:
+                    seconds, note = best[name]
+                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {note} |")
+            print(f"\nload average {os.getloadavg()[0]:.2f} after this set\n", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""The warm pool of detection processes: started once per calibctl process, reused by every capture.
+
+Why processes: OpenCV releases the GIL inside its calls, but the Python between them (grid checks,
+canonical order, blur profiles, hashing) does not, so threads stop scaling after two or three
+(``image_outcomes.choose_executor`` has the numbers). Why a warm pool: starting one costs ~0.3 s on 2
+cores (an interpreter that imports numpy and OpenCV); a station that captures unit after unit pays it
+once, and each later capture forks nothing.
+
+Start method: forkserver where available, else spawn; never plain fork. Forking a process whose OpenCV
+thread pool has run (any earlier cv2 call in this process) copies its locked mutexes and deadlocks the
+child. The fork server is a fresh process that only imports the detection modules, so workers forked
+from it start quickly and safely; it lives as long as the calibctl process. Like every non-fork start
+method it needs the ``if __name__ == "__main__":`` guard in scripts.
+
+Each worker runs OpenCV and its BLAS libraries on one thread (``blas_threads.limit_this_process``): N
+workers use N cores, never N x cores, and the corners are bit-identical to a one-thread run.
+
+Ctrl-C reaches the whole process group, and only the calibctl process decides what it means (cancel
+the queued files, keep the pool, store nothing). So the fork server is started with SIGINT
+ignored, which it and every worker it forks inherit from their first instruction on (a Ctrl-C that
+landed in a half-started fork server made the launch fail with "EOFError: unexpected EOF"), and the
+pool's processes are launched with Ctrl-C held back until the launch is done (``shielded``; one that
+landed inside ``submit`` left the pool with a dead fork server: "ConnectionRefusedError").
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import signal
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from types import FrameType
+
+from calibctl.core.blas_threads import available_cores, limit_this_process
+
+__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shielded", "shutdown_pool", "warm"]
+
+_lock = threading.Lock()
+_pool: ProcessPoolExecutor | None = None
+_pool_workers = 0
+
+
+def _init_worker() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    limit_this_process(1)
+
+
+def _mp_context() -> multiprocessing.context.BaseContext:
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["calibctl.core.capture.image_outcomes"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+@contextlib.contextmanager
+def shielded() -> Iterator[None]:
+    """Ctrl-C held back inside the block (a launch is never interrupted half-way) and acted on when it
+    ends: this thread's SIGINT handler records it, then the previous handler runs (KeyboardInterrupt for
+    Python's own; the station's may hold it). A no-op off the main thread, where handlers cannot be set."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[tuple[int, FrameType | None]] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: came.append((signum, frame)))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if came:
+            if callable(previous):
+                previous(*came[0])
+            elif previous != signal.SIG_IGN:
+                raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _started_ignoring_sigint() -> Iterator[None]:
+    """SIGINT ignored while the fork server and the resource tracker are started: an ignored signal stays
+    ignored across exec, so they start (and import OpenCV) immune to Ctrl-C, and the fork server hands the
+    ignored SIGINT on to every worker it forks. A Ctrl-C in these few milliseconds is lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """The process-wide pool of ``workers`` detection processes (a pool of another size is replaced)."""
+    global _pool, _pool_workers
+    with _lock:
+        if _pool is None or _pool_workers != workers:
+            if _pool is not None:
+                _pool.shutdown(wait=False, cancel_futures=True)
+            ctx = _mp_context()
+            if ctx.get_start_method() == "forkserver":
+                from multiprocessing import forkserver
+
+                with _started_ignoring_sigint():
+                    forkserver.ensure_running()  # and the resource tracker
+            _pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker)
+            _pool_workers = workers
+        return _pool
+
+
+def discard_if_broken(pool: ProcessPoolExecutor) -> None:
+    """Forget ``pool`` when a worker died under it (killed, out of memory): the next call starts a new one."""
+    global _pool
+    probe = None
+    with shielded(), contextlib.suppress(BrokenProcessPool, RuntimeError):  # RuntimeError: shut down already
+        probe = pool.submit(int)
+    if probe is not None:
+        probe.cancel()
+        return
+    with _lock:
+        if _pool is pool:
+            _pool = None
+
+
+def shutdown_pool() -> None:
+    """Stop the warm pool now (tests; a station at its end). The next capture starts a new one."""
+    global _pool
+    with _lock:
+        pool, _pool = _pool, None
+    if pool is not None:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def warm(workers: int) -> None:
+    """Start the pool's ``workers`` processes now and wait until each has run (a station's start-up), so
+    the first capture forks nothing."""
+    pool = process_pool(workers)
+    with shielded():
+        futures = [pool.submit(_ready) for _ in range(workers)]
+    for future in futures:
+        future.result()
+
+
+def is_warm(workers: int) -> bool:
+    """True when a pool of ``workers`` processes is running: detection on it costs no start-up."""
+    with _lock:
+        return _pool is not None and _pool_workers == workers
+
+
+def _ready() -> int:
+    return 1
