@@ -83,12 +83,25 @@ class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
 
 
+EXTRA_PACKAGES = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}
+"""Each extra's requirement, as pyproject.toml's optional-dependencies say (a test keeps them equal)."""
+
+
 class MissingExtraError(CalibctlError):
-    """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``."""
+    """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``.
+
+    The hint installs the extra's package into the environment calibctl runs in. It never names
+    ``calibctl[extra]`` for an index: calibctl is installed from its wheel and no index holds that name
+    (whoever published it would have their code installed)."""
 
     def __init__(self, extra: str, purpose: str, module: str | None) -> None:
+        from calibctl import __version__
+
+        spec = EXTRA_PACKAGES.get(extra, extra)
+        wheel = f"calibctl-{__version__}-py3-none-any.whl"
         super().__init__(
             f"{purpose} needs the Python package {(module or extra).split('.')[0]}, which is not installed",
-            f"install calibctl's {extra} extra: pip install 'calibctl[{extra}]' "
-            f"(pipx: pipx install --force 'calibctl[{extra}]'; uv: uv tool install 'calibctl[{extra}]')",
+            f"install it into calibctl's environment: pipx inject calibctl '{spec}' (pipx); "
+            f"uv tool install --with '{spec}' ./{wheel} (uv, from the wheel calibctl was installed from); "
+            f"python -m pip install '{spec}' (a virtualenv)",
         )
