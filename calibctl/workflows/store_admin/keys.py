@@ -29,6 +29,14 @@ def trusted_of(settings: Settings, folder: Path | None = None) -> TrustedKeys:
     return TrustedKeys.load(chosen, signer_of(settings))
 
 
+def read_trust(settings: Settings) -> TrustedKeys | None:
+    """The keys a read checks what it serves against (``store.served``): None when the store has no keys
+    configured (neither ``signing_key`` nor ``trusted_keys``), so a read checks each record's own hash only."""
+    if not settings.signing_key and not settings.trusted_keys:
+        return None
+    return trusted_of(settings)
+
+
 @dataclass(frozen=True)
 class KeyInfo:
     path: str
