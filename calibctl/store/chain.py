@@ -49,6 +49,7 @@ from calibctl.store.models import (
     RigCalibrationRow,
     RigEventRow,
     RigRow,
+    SessionRow,
 )
 
 __all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
@@ -68,7 +69,7 @@ class Stream(StreamSpec):
 
 _MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
                                   "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow,
-                                  "rig_definition": RigRow}
+                                  "rig_definition": RigRow, "session": SessionRow}
 STREAMS: dict[str, Stream] = {
     name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
 }

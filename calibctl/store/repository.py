@@ -215,10 +215,18 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
         def work(s: Session) -> None:
             if s.get(SessionRow, session.session_id) is not None:
                 raise AlreadyExistsError(f"capture session {session.session_id} is already stored")
-            s.add(codec.session_row(session))
+            s.add(self._session_linked(s, codec.session_row(session)))
             s.flush()
 
         self._run(work, write=True, retry_conflicts=True)
+
+    def _session_linked(self, s: Session, row: SessionRow) -> SessionRow:
+        """``row`` numbered and chained in its serial's session stream (revision 0009), under that stream's lock
+        (the ('session', serial) counter row); the id is the highest + 1 (a clash with another serial's
+        concurrent writer is a unique violation, retried by ``_run(retry_conflicts=True)``)."""
+        counters.next_value(s, "session", row.serial)
+        row.id = int(s.scalar(select(func.max(SessionRow.id))) or 0) + 1
+        return self._linked("session", s, row)
 
     def get_session(self, session_id: str) -> CaptureSession:
         def work(s: Session) -> CaptureSession:
@@ -229,7 +237,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
                 )
                 listing = f"recent: {history.known_list(recent)}" if recent else "no sessions are stored yet"
                 raise NotFoundError(f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`")
-            return codec.decode_session(row)
+            session = codec.decode_session(row)
+            self._served(s, "session", row)
+            return session
 
         return self._run(work)
 

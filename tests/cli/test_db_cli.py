@@ -12,7 +12,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.tamper import patch_stored_bytes
 
-HEAD = "0008_chain_rig_definitions"
+HEAD = "0009_chain_sessions_reads26"
 runner = CliRunner()
 
 
