@@ -7,7 +7,7 @@ A SQLite store made by ``calibctl demo`` (one board, one calibration) is signed 
 artifact is re-stored under ``--serials`` serials with a signing key (``calibctl keys init``), each
 activated. Then, each ``--repeats`` times:
 - ``show``, ``export --format ros`` and ``lint --serial`` of one serial in a fresh process, without keys and
-  with ``CALIBCTL_TRUSTED_KEYS`` (the station's public key): best and median wall time;
+  with ``CALIBCTL_TRUSTED_KEYS`` (the station's public key): best and median wall time (the two interleaved);
 - in-process: ``Store.get_artifact`` of the active version (300 reads) and ``active_artifacts`` of every
   serial (``lint --all``'s read), with and without ``trusted``: milliseconds per record.
 Nothing is asserted; the machine is shared, so the load average is printed first.
@@ -55,13 +55,18 @@ def _make_store(work: Path, serials: int) -> tuple[str, Path]:
     return db, keys
 
 
-def _time(argv: list[str], env: dict[str, str], repeats: int) -> list[float]:
-    subprocess.run(argv, env=env, check=True, capture_output=True)  # warm-up (file cache, .pyc)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+def _time_pair(argv: list[str], plain_env: dict[str, str], keyed_env: dict[str, str],
+               repeats: int) -> tuple[list[float], list[float]]:
+    """Wall times of ``argv`` without and with keys, the two interleaved so the shared machine's load falls
+    on both alike (after one warm-up each: file cache, .pyc)."""
+    times: tuple[list[float], list[float]] = ([], [])
+    for env in (plain_env, keyed_env):
         subprocess.run(argv, env=env, check=True, capture_output=True)
-        times.append(time.perf_counter() - t0)
+    for _ in range(repeats):
+        for out, env in zip(times, (plain_env, keyed_env), strict=True):
+            t0 = time.perf_counter()
+            subprocess.run(argv, env=env, check=True, capture_output=True)
+            out.append(time.perf_counter() - t0)
     return times
 
 
@@ -102,8 +107,7 @@ def main() -> None:
         for name, sub in (("show", ["show", SERIAL]), ("export --format ros", ["export", SERIAL, "--format", "ros"]),
                           ("lint --serial", ["lint", "--serial", SERIAL])):
             argv = [sys.executable, "-m", "calibctl", "--db", db, *sub]
-            plain = _time(argv, _env(), args.repeats)
-            keyed = _time(argv, _env({"CALIBCTL_TRUSTED_KEYS": str(keys)}), args.repeats)
+            plain, keyed = _time_pair(argv, _env(), _env({"CALIBCTL_TRUSTED_KEYS": str(keys)}), args.repeats)
             print(f"| {name} | {min(plain):.3f} / {statistics.median(plain):.3f} | "
                   f"{min(keyed):.3f} / {statistics.median(keyed):.3f} |")
         _per_record(work, db, keys, args.repeats)

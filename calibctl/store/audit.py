@@ -5,7 +5,8 @@ record's ``chain_prev`` equal to the hash of the record before it, its ``chain_h
 its columns, ids increasing along the chain (reads order events by id), versions strictly increasing,
 the version counter equal to the highest version, and the signature by a trusted key. The streams
 are camera artifacts, board revisions, activation events, (revision 0007) rig versions, rig
-activation events and check events, and (revision 0008) rig definitions. Activation
+activation events and check events, (revision 0008) rig definitions and (revision 0009) capture
+sessions. A counter whose records were all deleted is named too. Activation
 events must name an accepted artifact and the version that was active before them. Documents are
 re-hashed by ``codec`` (content hash re-derived, and column copies).
 

@@ -10,7 +10,8 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
 one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
-one stream, check events per serial; since 0008 rig definitions, one stream. Editing, deleting,
+one stream, check events per serial; since 0008 rig definitions, one stream; since 0009 capture
+sessions, per serial. Editing, deleting,
 inserting or reordering any record breaks the chain at the next record; rewriting a whole stream's
 tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
 (``db verify --head``).

@@ -3,7 +3,7 @@
 indexed point queries instead of a walk over its whole chain.
 
 For a served record (a calibration artifact, the activation event that makes it active, a rig version and
-its event) this checks:
+its event, a capture session) this checks:
 
 - its chain hash over its columns (``chain_hash.row_problem``);
 - its link: the record before it in its stream holds ``chain_prev`` and a lower id, the record after it

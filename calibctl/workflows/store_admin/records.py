@@ -88,7 +88,6 @@ def history(settings: Settings, serial: str) -> History:
         lambda store: (store.list_artifacts(serial), store.active_version(serial), store.events(serial),
                        store.checks(serial)),
         lambda: open_store(settings),
-        keys.read_trust(settings),
     )
     rows = [
         HistoryRow(
