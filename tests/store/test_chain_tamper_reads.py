@@ -223,3 +223,29 @@ def test_an_unsigned_store_with_keys_configured_is_still_served(db_url: str, tmp
 
 def test_the_served_tables_are_the_chained_ones():
     assert {name: stream.table.name for name, stream in chain.STREAMS.items()} == served.TABLES
+
+
+def test_a_signing_key_this_user_cannot_load_is_passed_over_when_a_trusted_folder_is_set(signed, tmp_path: Path,
+                                                                                        monkeypatch):
+    """Reads need only public keys: a station's private key kept for its service account does not stop `show`."""
+    url, _, _ = signed
+    _fx_plus_5(url)
+    loose = tmp_path / "loose.pem"
+    create_key(loose)
+    loose.chmod(0o644)  # refused by load_signer (readable by others), as an unreadable file would be
+    monkeypatch.setenv("CALIBCTL_SIGNING_KEY", str(loose))
+    _refused(["show", "CAM-1"], url, "CAM-1@2")  # still checked against the trusted folder
+    monkeypatch.delenv("CALIBCTL_TRUSTED_KEYS")
+    res = runner.invoke(app, ["--db", url, "show", "CAM-1"])  # nothing else to check against: the key's error
+    assert res.exit_code == 2 and "is readable by others" in res.stderr and res.stdout == ""
+
+
+def test_an_empty_trusted_folder_checks_links_not_signatures(signed, tmp_path: Path, monkeypatch):
+    url, _, _ = signed
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.setenv("CALIBCTL_TRUSTED_KEYS", str(empty))
+    assert runner.invoke(app, ["--db", url, "show", "CAM-1"]).exit_code == 0  # as db verify: nothing to check against
+    _events_reordered(url)
+    res = runner.invoke(app, ["--db", url, "show", "CAM-1"])
+    assert res.exit_code == 1 and "is out of order" in res.stderr
