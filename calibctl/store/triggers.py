@@ -36,19 +36,27 @@ def _sqlite_intact(name: str, table: str, sql: str) -> bool:
                                      f"BEGIN SELECT RAISE(ABORT, '{IMMUTABLE_TABLES.get(table, '')}'); END")
 
 
-def _sqlite(s: Session) -> dict[str, tuple[str, bool]]:
+def _sqlite(s: Session) -> dict[str, tuple[str, str | None]]:
     rows = s.execute(text("SELECT name, tbl_name, sql FROM sqlite_master WHERE type = 'trigger'")).all()
-    return {str(name): (str(table), _sqlite_intact(str(name), str(table), str(sql))) for name, table, sql in rows}
+    return {str(name): (str(table), None if _sqlite_intact(str(name), str(table), str(sql)) else "changed")
+            for name, table, sql in rows}
 
 
-def _postgresql(s: Session) -> dict[str, tuple[str, bool]]:
+_PG_FUNCTIONS = {"trg_activation_events_accepted_only": "calibctl_accepted_only",
+                 "trg_rig_activation_events_accepted_only": "calibctl_rig_accepted_only"}
+"""The function each PostgreSQL trigger calls (the immutability ones: ``calibctl_refuse_change``)."""
+
+
+def _postgresql(s: Session) -> dict[str, tuple[str, str | None]]:
     rows = s.execute(text(
         "SELECT t.tgname, c.relname, t.tgenabled <> 'D', p.proname, p.prosrc FROM pg_trigger t "
         "JOIN pg_class c ON c.oid = t.tgrelid JOIN pg_namespace n ON n.oid = c.relnamespace "
         "JOIN pg_proc p ON p.oid = t.tgfoid WHERE NOT t.tgisinternal AND n.nspname = current_schema()")).all()
-    functions = ("calibctl_refuse_change", "calibctl_accepted_only")
-    return {str(name): (str(table), bool(enabled) and str(func) in functions and "RAISE EXCEPTION" in str(src))
-            for name, table, enabled, func, src in rows}
+    found: dict[str, tuple[str, str | None]] = {}
+    for name, table, enabled, func, src in rows:
+        intact = str(func) == _PG_FUNCTIONS.get(str(name), "calibctl_refuse_change") and "RAISE EXCEPTION" in str(src)
+        found[str(name)] = (str(table), None if intact and enabled else "disabled" if intact else "changed")
+    return found
 
 
 def problems(s: Session) -> list[str]:
@@ -60,8 +68,7 @@ def problems(s: Session) -> list[str]:
         if name not in found or found[name][0] != table:
             out.append(f"the immutability trigger {name} on {table} is missing: the database no longer refuses "
                        "changes to that table")
-        elif not found[name][1]:
-            what = "disabled" if dialect == "postgresql" else "changed"
-            out.append(f"the immutability trigger {name} on {table} was {what}: the database no longer refuses "
-                       "changes to that table")
+        elif found[name][1] is not None:
+            out.append(f"the immutability trigger {name} on {table} was {found[name][1]}: the database no longer "
+                       "refuses changes to that table")
     return out
