@@ -127,8 +127,8 @@ class SessionRow(ChainColumns, Base):
     """One immutable capture session (corners are kept forever; images only for the retention time).
 
     Chained since revision 0009, one stream per serial (``chain.STREAMS["session"]``). ``id`` is given by
-    calibctl (the highest id + 1, under the serial's session counter lock; a concurrent writer of another
-    serial that took the same id is retried); the session id stays the primary key."""
+    calibctl (the store-wide ('id', 'capture_sessions') counter, after the serial's session counter lock);
+    the session id stays the primary key."""
 
     __tablename__ = "capture_sessions"
 

@@ -222,10 +222,13 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin):
 
     def _session_linked(self, s: Session, row: SessionRow) -> SessionRow:
         """``row`` numbered and chained in its serial's session stream (revision 0009), under that stream's lock
-        (the ('session', serial) counter row); the id is the highest + 1 (a clash with another serial's
-        concurrent writer is a unique violation, retried by ``_run(retry_conflicts=True)``)."""
+        (the ('session', serial) counter row). Its id comes from the store-wide ('id', 'capture_sessions')
+        counter, whose row is held only for this one insert (so stations capturing different cameras wait
+        milliseconds, never retry); a counter behind the stored ids (a store chained by 0009) catches up."""
         counters.next_value(s, "session", row.serial)
-        row.id = int(s.scalar(select(func.max(SessionRow.id))) or 0) + 1
+        candidate = counters.next_value(s, "id", "capture_sessions")
+        highest = int(s.scalar(select(func.max(SessionRow.id))) or 0)
+        row.id = candidate if candidate > highest else counters.raise_to(s, "id", "capture_sessions", highest + 1)
         return self._linked("session", s, row)
 
     def get_session(self, session_id: str) -> CaptureSession:

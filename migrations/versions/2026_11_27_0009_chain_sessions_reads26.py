@@ -9,7 +9,9 @@ payload_sha256 alone could be recomputed after an edit (issue 26: edited corners
 `db verify` mode), so like 0008: ``capture_sessions`` gets ``chain_seq``, ``chain_prev``, ``chain_hash``,
 ``signature``, ``key_id`` and an ``id`` (the session id stays the primary key the artifacts and rig sessions
 name). One stream per serial, counted in ``version_counters`` scope ``session``, key = serial (that row is
-the lock ``Store.add_session`` takes, so stations capturing different cameras never wait on each other).
+the lock ``Store.add_session`` takes, so stations capturing different cameras never wait on each other for
+long; the ids come from the store-wide counter scope ``id``, key ``capture_sessions``, which catches up
+with the ids given here on its first use).
 Rows already stored are numbered in (started_at, session_id) order and chained, unsigned, with the
 immutability triggers lifted for that one UPDATE and restored, so an old store keeps verifying. Unique
 indexes on ``id`` and on (serial, position) refuse a fork.
@@ -57,4 +59,5 @@ def downgrade() -> None:
     for column in COLUMNS:
         # SQLite >= 3.35 drops a column in place (a batch copy would lose the triggers).
         conn.execute(sa.text(f"ALTER TABLE {TABLE} DROP COLUMN {column}"))
-    conn.execute(sa.text("DELETE FROM version_counters WHERE scope = 'session'"))
+    conn.execute(sa.text("DELETE FROM version_counters WHERE scope = 'session' OR (scope = 'id' AND key = :key)"),
+                 {"key": TABLE})

@@ -4,6 +4,7 @@ corners with their payload hash recomputed are named by `db verify` and, with ke
 from __future__ import annotations
 
 import json
+import multiprocessing
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,7 @@ from calibctl.store import audit as audit_module
 from calibctl.store import codec, migrate
 from calibctl.store.engine import make_engine
 from calibctl.store.repository import Store
+from tests.store import workers
 from tests.store.documents import capture_session
 from tests.store.tamper import rechain, run_underneath
 from tests.store.test_chain_tamper import _select, problems_of
@@ -95,6 +97,8 @@ def test_0009_chains_the_sessions_stored_before_it(sessions: str):
         assert audit.problems == [] and audit.records_checked == 3
         store.add_session(capture_session("aaaaaaaaaaa3", minutes_after=9))  # the backfilled counter goes on
         assert store.verify().problems == []
+    # the id counter catches up with the ids the migration gave (it restarted at 1 after the downgrade)
+    assert _select(sessions, "SELECT id, chain_seq FROM capture_sessions WHERE session_id = 'aaaaaaaaaaa3'") == [(4, 3)]
     _move_a_corner(sessions, "ccccccccccc1")
     assert problems_of(sessions) == [
         "capture session ccccccccccc1 was changed after it was written (its chain hash no longer matches)"]
@@ -113,3 +117,22 @@ def test_a_head_printed_before_0009_checks_the_sessions_in_full(sessions: str):
         head = store.verify().head()
         store.add_session(capture_session("aaaaaaaaaaa3", minutes_after=9))
         assert store.verify(since=head).records_checked == 1  # only the new one
+
+
+def test_concurrent_capture_stations_chain_every_session(db_url: str):
+    """Four processes store sessions of two serials at once: every one is numbered, chained and verifies (a
+    clash on the next id between serials' writers is retried, not lost)."""
+    ctx = multiprocessing.get_context("spawn")
+    barrier, results = ctx.Barrier(4), ctx.Queue()
+    procs = [ctx.Process(target=workers.write_sessions, args=(db_url, 6, w, barrier, results)) for w in range(4)]
+    for p in procs:
+        p.start()
+    reports = [results.get(timeout=300) for _ in procs]  # a hang guard for a broken child, not a speed check
+    for p in procs:
+        p.join()
+    assert [err for _, _, err in reports if err] == []
+    ids = _select(db_url, "SELECT id FROM capture_sessions ORDER BY id")
+    assert [r[0] for r in ids] == list(range(1, 25))
+    assert sorted(_select(db_url, "SELECT serial, max(chain_seq) FROM capture_sessions GROUP BY serial")) == [
+        ("CAM-0", 12), ("CAM-1", 12)]
+    assert problems_of(db_url) == []
