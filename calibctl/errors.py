@@ -83,21 +83,25 @@ class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
 
 
+EXTRA_PACKAGES = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}
+"""Each extra's requirement, as pyproject.toml's optional-dependencies say (a test keeps them equal)."""
+
+
 class MissingExtraError(CalibctlError):
     """An optional part of calibctl is not installed: ``calibctl[postgres]`` or ``calibctl[plots]``.
 
-    The hint names the packages themselves, as each installer adds them to an installed calibctl: pipx
-    and uv tool environments cannot take ``calibctl[extra]`` when calibctl was installed from a wheel
-    file or a private index (and ``pipx install 'calibctl[postgres]'`` would fetch whatever a public
-    index serves under that name)."""
-
-    PACKAGES = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}
+    The hint installs the extra's package into the environment calibctl runs in. It never names
+    ``calibctl[extra]`` for an index: calibctl is installed from its wheel and no index holds that name
+    (whoever published it would have their code installed)."""
 
     def __init__(self, extra: str, purpose: str, module: str | None) -> None:
-        package = self.PACKAGES.get(extra, extra)
+        from calibctl import __version__
+
+        spec = EXTRA_PACKAGES.get(extra, extra)
+        wheel = f"calibctl-{__version__}-py3-none-any.whl"
         super().__init__(
             f"{purpose} needs the Python package {(module or extra).split('.')[0]}, which is not installed",
-            f"install calibctl's {extra} extra into calibctl's own environment: pipx inject calibctl '{package}' "
-            f"(pipx), uv tool install --with '{package}' calibctl (uv; add the wheel path instead of calibctl "
-            f"if you installed from one), or pip install '{package}' in its virtualenv",
+            f"install it into calibctl's environment: pipx inject calibctl '{spec}' (pipx); "
+            f"uv tool install --with '{spec}' ./{wheel} (uv, from the wheel calibctl was installed from); "
+            f"python -m pip install '{spec}' (a virtualenv)",
         )

@@ -10,7 +10,8 @@ BODY is every column of the row except ``id`` and the chain/signature columns, w
 value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table plus the columns
 that split it: calibration artifacts per serial, board revisions per board name, activation events
 one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
-one stream, check events per serial; since 0008 rig definitions, one stream. Editing, deleting,
+one stream, check events per serial; since 0008 rig definitions, one stream; since 0009 capture
+sessions, per serial. Editing, deleting,
 inserting or reordering any record breaks the chain at the next record; rewriting a whole stream's
 tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
 (``db verify --head``).
@@ -50,6 +51,7 @@ from calibctl.store.models import (
     RigCalibrationRow,
     RigEventRow,
     RigRow,
+    SessionRow,
 )
 
 __all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
@@ -69,7 +71,8 @@ class Stream(StreamSpec):
 
 _MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
                                   "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow,
-                                  "rig_definition": RigRow, "fleet": FleetEventRow}
+                                  "rig_definition": RigRow, "session": SessionRow,
+                                  "fleet": FleetEventRow}
 STREAMS: dict[str, Stream] = {
     name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
 }

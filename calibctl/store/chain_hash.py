@@ -57,7 +57,11 @@ SPECS: dict[str, StreamSpec] = {
     # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
     "rig_definition": StreamSpec("rig_definition", (), "payload_sha256", lambda r: f"rig definition {r['name']}",
                                  ("chain", "chain_seq")),
-    # revision 0009_fleet_diff25: the fleet's log (robots, the versions they run, rollouts), one stream.
+    # revision 0009: capture sessions (the corners every later solve, check and report reads), per serial like
+    # the checks; the ('session', serial) counter row is the lock and the count.
+    "session": StreamSpec("session", ("serial",), "payload_sha256", lambda r: f"capture session {r['session_id']}",
+                          ("session", "chain_seq")),
+    # revision 0010_fleet_diff25: the fleet's log (robots, the versions they run, rollouts), one stream.
     "fleet": StreamSpec("fleet", (), "payload_sha256", lambda r: f"fleet event {r['id']} ({r['subject']}, {r['kind']})",
                         ("chain", "chain_seq")),
 }

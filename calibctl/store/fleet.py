@@ -1,4 +1,4 @@
-"""The fleet's log in the store (revision 0009_fleet_diff25): ``FleetEvent`` rows, one chained stream.
+"""The fleet's log in the store (revision 0010_fleet_diff25): ``FleetEvent`` rows, one chained stream.
 
 The row keeps the canonical JSON of the event and its sha256 (re-checked on every read) plus copies of
 the fields queries filter on. UPDATE and DELETE are refused by the migration's triggers. What an event

@@ -102,6 +102,11 @@ def artifact_row(s: Session, serial: str, version: int) -> ArtifactRow:
     return s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial, ArtifactRow.version == version)).one()
 
 
+def active_event(s: Session, serial: str) -> EventRow | None:
+    """The serial's latest activation event (the one that makes its active version active)."""
+    return s.scalars(select(EventRow).where(EventRow.serial == serial).order_by(EventRow.id.desc()).limit(1)).first()
+
+
 def active_in(s: Session, serial: str) -> int | None:
     return s.scalar(select(EventRow.version).where(EventRow.serial == serial).order_by(EventRow.id.desc()).limit(1))
 

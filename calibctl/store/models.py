@@ -123,12 +123,17 @@ class BoardRow(ChainColumns, Base):
     )
 
 
-class SessionRow(Base):
-    """One immutable capture session (corners are kept forever; images only for the retention time)."""
+class SessionRow(ChainColumns, Base):
+    """One immutable capture session (corners are kept forever; images only for the retention time).
+
+    Chained since revision 0009, one stream per serial (``chain.STREAMS["session"]``). ``id`` is given by
+    calibctl (the store-wide ('id', 'capture_sessions') counter, after the serial's session counter lock);
+    the session id stays the primary key."""
 
     __tablename__ = "capture_sessions"
 
     session_id: Mapped[str] = mapped_column(String(SESSION_ID_LEN), primary_key=True)
+    id: Mapped[int | None] = mapped_column(Integer, nullable=True)
     serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
     board_ref: Mapped[str] = mapped_column(String(BOARD_REF_LEN))
     status: Mapped[str] = mapped_column(String(16))
@@ -139,7 +144,8 @@ class SessionRow(Base):
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
-    __table_args__ = (Index(None, "serial", "started_at"),)
+    __table_args__ = (Index(None, "serial", "started_at"), Index(None, "id", unique=True),
+                      Index(None, "serial", "chain_seq", unique=True))
 
 
 class ArtifactRow(ChainColumns, Base):
@@ -319,7 +325,7 @@ class CheckEventRow(ChainColumns, Base):
 
 
 class FleetEventRow(ChainColumns, Base):
-    """One step of the fleet's log (revision 0009_fleet_diff25): a robot registered or assigned a version.
+    """One step of the fleet's log (revision 0010_fleet_diff25): a robot registered or assigned a version.
 
     One chained stream for the store (``chain.STREAMS["fleet"]``); ``id`` is the position in it, given under
     the stream's counter lock."""

@@ -22,7 +22,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, TypeVar
 
-from sqlalchemy import Engine, func, select
+from sqlalchemy import Engine, func, select, text
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.orm import Session
 
@@ -33,7 +33,7 @@ from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
 from calibctl.signing import Signer, TrustedKeys
-from calibctl.store import chain, codec, counters, history, images, migrate
+from calibctl.store import chain, codec, counters, history, images, migrate, served
 from calibctl.store.checks import CheckStoreMixin
 from calibctl.store.engine import (
     WRITE_OPTION,
@@ -71,17 +71,22 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
 class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
-    def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None) -> None:
+    def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None,
+                 trusted: TrustedKeys | None = None) -> None:
         self._engine = engine
         self.signer = signer
+        self.trusted = trusted
         self._write_engine = engine.execution_options(**{WRITE_OPTION: True})
         self.image_dir = image_dir
 
     @classmethod
-    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None, signer: Signer | None = None) -> Store:
+    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None, signer: Signer | None = None,
+             trusted: TrustedKeys | None = None) -> Store:
         """Open the store at ``url``. A new (absent or empty) database is created at the newest schema
         revision when ``create``; an older revision is refused with DatabaseOutOfDateError. With a
-        ``signer`` every board revision, artifact and event written is signed."""
+        ``signer`` every board revision, artifact and event written is signed. With ``trusted`` (keys
+        configured), every artifact, rig version and activation event a read serves is checked as
+        ``db verify`` would check it (``served``: its link and signature) and refused when flagged."""
         engine = _make_engine(url)
         try:
             state = migrate.read_state(engine)
@@ -94,7 +99,7 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
         except BaseException:
             engine.dispose()
             raise
-        return cls(engine, image_dir or images.default_image_dir(engine.url), signer)
+        return cls(engine, image_dir or images.default_image_dir(engine.url), signer, trusted)
 
     @property
     def url(self) -> str:
@@ -131,6 +136,12 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
                     raise
                 raise mapped from exc
         raise DatabaseError(f"the database {self.url} kept refusing the transaction")  # pragma: no cover
+
+    def _served(self, s: Session, stream: str, row: Base | None) -> None:
+        """With keys configured, refuse ``row`` (a record a read serves) if ``db verify`` would flag it."""
+        if row is not None and self.trusted is not None:
+            served.check(stream, row, lambda sql, params: [dict(r) for r in s.execute(text(sql), params).mappings()],
+                         self.trusted)
 
     def _linked(self, stream: str, s: Session, row: R) -> R:
         """``row`` with its chain (and, with a key, signature) columns set; the caller holds the stream's lock."""
@@ -205,10 +216,21 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
         def work(s: Session) -> None:
             if s.get(SessionRow, session.session_id) is not None:
                 raise AlreadyExistsError(f"capture session {session.session_id} is already stored")
-            s.add(codec.session_row(session))
+            s.add(self._session_linked(s, codec.session_row(session)))
             s.flush()
 
         self._run(work, write=True, retry_conflicts=True)
+
+    def _session_linked(self, s: Session, row: SessionRow) -> SessionRow:
+        """``row`` numbered and chained in its serial's session stream (revision 0009), under that stream's lock
+        (the ('session', serial) counter row). Its id comes from the store-wide ('id', 'capture_sessions')
+        counter, whose row is held only for this one insert (so stations capturing different cameras wait
+        milliseconds, never retry); a counter behind the stored ids (a store chained by 0009) catches up."""
+        counters.next_value(s, "session", row.serial)
+        candidate = counters.next_value(s, "id", "capture_sessions")
+        highest = int(s.scalar(select(func.max(SessionRow.id))) or 0)
+        row.id = candidate if candidate > highest else counters.raise_to(s, "id", "capture_sessions", highest + 1)
+        return self._linked("session", s, row)
 
     def get_session(self, session_id: str) -> CaptureSession:
         def work(s: Session) -> CaptureSession:
@@ -219,7 +241,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
                 )
                 listing = f"recent: {history.known_list(recent)}" if recent else "no sessions are stored yet"
                 raise NotFoundError(f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`")
-            return codec.decode_session(row)
+            session = codec.decode_session(row)
+            self._served(s, "session", row)
+            return session
 
         return self._run(work)
 
@@ -357,7 +381,12 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
                 )
             else:
                 wanted = version
-            return codec.decode_artifact(history.artifact_row(s, serial, wanted), by_chain=True)
+            row = history.artifact_row(s, serial, wanted)
+            art = codec.decode_artifact(row, by_chain=True)
+            self._served(s, "artifact", row)
+            if version is None:  # the event that makes it active is served too
+                self._served(s, "event", history.active_event(s, serial))
+            return art
 
         return self._run(work)
 
@@ -385,9 +414,13 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
                 .execution_options(yield_per=1000)
             )
             found: dict[str, CalibrationArtifact | IntegrityError] = {}
+            events = ({} if self.trusted is None else
+                      {e.serial: e for e in s.scalars(select(EventRow).join(latest, EventRow.id == latest.c.id))})
             for row in rows:
                 try:
                     art = codec.decode_artifact(row, by_chain=True)
+                    self._served(s, "artifact", row)
+                    self._served(s, "event", events.get(row.serial))
                     if art.status != "accepted":
                         raise IntegrityError(f"the active version of {art.serial} is {art.ref}, which is not accepted: "
                                              "the activation log was changed outside calibctl", codec.TAMPER_HINT)

@@ -106,6 +106,7 @@ class RigStoreMixin:
     """Rig methods of ``Store`` (which provides ``_run``)."""
 
     _run: Callable[..., Any]
+    _served: Callable[[Session, str, Any], None]
     signer: Signer | None
 
     # definitions ---------------------------------------------------------------------------------
@@ -230,7 +231,12 @@ class RigStoreMixin:
                                     f"see `calibctl rig history {rig}`")
             row = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
                                                            RigCalibrationRow.version == wanted)).one()
-            return decode_calibration(row)
+            cal = decode_calibration(row)
+            self._served(s, "rig", row)
+            if version is None:  # the event that makes it active is served too
+                self._served(s, "rig_event", s.scalars(select(RigEventRow).where(RigEventRow.rig == rig)
+                                                       .order_by(RigEventRow.id.desc()).limit(1)).first())
+            return cal
 
         return self._run(work)
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Protocol, TypeVar
 
-from calibctl.store import codec, migrate
+from calibctl.store import codec, migrate, served
 from calibctl.store.unreadable import unreadable_datetime
 
 if TYPE_CHECKING:
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from calibctl.artifacts.calibration import CalibrationArtifact
     from calibctl.artifacts.check import CheckEvent
     from calibctl.artifacts.events import ActivationEvent
+    from calibctl.signing import TrustedKeys
 
 T = TypeVar("T")
 _PLAIN_SQLITE = re.compile(r"^sqlite:///(?P<path>[^?#%]+)$")
@@ -72,11 +73,18 @@ def _decode_artifact(row: SimpleNamespace) -> CalibrationArtifact:
 class SqliteReader:
     """Read-only reads of one SQLite store at this calibctl's schema head (see the module docstring)."""
 
-    def __init__(self, conn: sqlite3.Connection) -> None:
+    def __init__(self, conn: sqlite3.Connection, trusted: TrustedKeys | None = None) -> None:
         self._conn = conn
+        self._trusted = trusted
+
+    def _served(self, stream: str, row: SimpleNamespace | None) -> None:
+        """With keys configured, the check ``Store._served`` makes (``served``, same SQL)."""
+        if row is not None and self._trusted is not None:
+            served.check(stream, row, lambda sql, params: [vars(r) for r in self._rows(sql, params)], self._trusted)
 
     def _rows(self, sql: str, *params: object) -> list[SimpleNamespace]:
-        cursor = self._conn.execute(sql, params)
+        """``params``: positional values, or one dict of named ones."""
+        cursor = self._conn.execute(sql, params[0] if len(params) == 1 and isinstance(params[0], dict) else params)
         names = [c[0] for c in cursor.description]
         rows = []
         for values in cursor.fetchall():
@@ -118,7 +126,12 @@ class SqliteReader:
         if wanted not in statuses or (version is None and statuses[wanted] != "accepted"):
             raise Fallback  # nothing active, an active version that is not accepted, an unknown version
         rows = self._rows("SELECT * FROM calibration_artifacts WHERE serial = ? AND version = ?", serial, wanted)
-        return _decode_artifact(rows[0])
+        art = _decode_artifact(rows[0])
+        self._served("artifact", rows[0])
+        if version is None and self._trusted is not None:  # the event that makes it active is served too
+            event = self._rows("SELECT * FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial)
+            self._served("event", event[0])
+        return art
 
     def list_boards(self) -> list[BoardRevision]:
         return [codec.decode_board(r) for r in self._rows(  # type: ignore[arg-type]
@@ -127,7 +140,7 @@ class SqliteReader:
 
 
 @contextmanager
-def _open(url: str) -> Iterator[SqliteReader]:
+def _open(url: str, trusted: TrustedKeys | None = None) -> Iterator[SqliteReader]:
     match = _PLAIN_SQLITE.match(url.strip())
     path = Path(match["path"]) if match else None
     if path is None or str(path) == ":memory:" or not path.is_file() or os.environ.get(LOCK_TIMEOUT_ENV, "").strip():
@@ -141,15 +154,17 @@ def _open(url: str) -> Iterator[SqliteReader]:
         if revisions != [migrate.head_revision()]:
             raise Fallback  # out of date, unknown or several revisions: Store's messages
         conn.execute("BEGIN")  # one snapshot for every read of the command
-        yield SqliteReader(conn)
+        yield SqliteReader(conn, trusted)
     finally:
         conn.close()
 
 
-def read(url: str, work: Callable[[StoreReads], T], store: Callable[[], AbstractContextManager[StoreReads]]) -> T:
-    """``work`` on the sqlite3 reader when it can serve it, else on ``store()`` (a ``Store``)."""
+def read(url: str, work: Callable[[StoreReads], T], store: Callable[[], AbstractContextManager[StoreReads]],
+         trusted: TrustedKeys | None = None) -> T:
+    """``work`` on the sqlite3 reader when it can serve it, else on ``store()`` (a ``Store``, opened with the
+    same ``trusted`` keys: with keys, both check each served record's link and signature)."""
     try:
-        with _open(url) as reader:
+        with _open(url, trusted) as reader:
             return work(reader)
     except (Fallback, sqlite3.Error):
         pass

@@ -6,12 +6,16 @@ so the suite needs no second virtualenv to prove the message.
 
 from __future__ import annotations
 
+import shlex
 import sys
+import tomllib
+from pathlib import Path
 
 from typer.testing import CliRunner
 
 import calibctl.workflows.diagnostics
 from calibctl.cli.main import app
+from calibctl.errors import EXTRA_PACKAGES
 
 runner = CliRunner()
 
@@ -26,10 +30,19 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
     assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output and res.stdout == ""
     assert f"Error: {purpose} needs the Python package {package}, which is not installed" in res.stderr
-    package = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}[extra]
-    assert f"Hint: install calibctl's {extra} extra into calibctl's own environment: pipx inject calibctl " \
-           f"'{package}' (pipx), uv tool install --with '{package}' calibctl" in res.stderr
-    assert "calibctl[" not in res.stderr  # never a package name no index publishes as ours
+    hint = res.stderr[res.stderr.index("Hint:"):]
+    spec = EXTRA_PACKAGES[extra]
+    assert f"pipx inject calibctl '{spec}'" in hint
+    assert f"uv tool install --with '{spec}' ./calibctl-0.1.0-py3-none-any.whl" in hint
+    # never a package name no index holds (whoever published calibctl[...] would get their code installed)
+    assert "calibctl[" not in hint and "pipx install" not in hint
+
+
+def test_the_hints_name_what_pyproject_declares_and_parse_as_shell_words():
+    declared = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    for extra, spec in EXTRA_PACKAGES.items():
+        assert declared[extra] == [spec]
+        assert shlex.split(f"pipx inject calibctl '{spec}'") == ["pipx", "inject", "calibctl", spec]
 
 
 def test_a_postgresql_store_without_psycopg_names_the_postgres_extra(monkeypatch):

@@ -53,8 +53,10 @@ def forge_activation(url: str, serial: str, version: int) -> None:
     if path is not None:
         conn = sqlite3.connect(path, isolation_level=None)
         try:
+            (sql,) = conn.execute("SELECT sql FROM sqlite_master WHERE name = 'trg_activation_events_accepted_only'").fetchone()
             conn.execute("DROP TRIGGER trg_activation_events_accepted_only")
             conn.execute(insert)
+            conn.execute(sql)  # put back, as the PostgreSQL branch re-enables it
         finally:
             conn.close()
         return
@@ -64,17 +66,22 @@ def forge_activation(url: str, serial: str, version: int) -> None:
         pg.execute("ALTER TABLE activation_events ENABLE TRIGGER trg_activation_events_accepted_only")
 
 
-def run_underneath(url: str, *statements: str, params: tuple[object, ...] = ()) -> None:
+def run_underneath(url: str, *statements: str, params: tuple[object, ...] = (), keep_triggers_dropped: bool = False) -> None:
     """Run SQL the way someone with write access to the database would: SQLite with every calibctl
-    trigger dropped, PostgreSQL as a superuser with triggers (and foreign keys) switched off."""
+    trigger dropped (and, as a careful forger does, re-created afterwards unless ``keep_triggers_dropped``),
+    PostgreSQL as a superuser with triggers (and foreign keys) switched off for the session."""
     path = _sqlite_file(url)
     if path is not None:
         conn = sqlite3.connect(path, isolation_level=None)
         try:
-            for (name,) in conn.execute("SELECT name FROM sqlite_master WHERE type = 'trigger'").fetchall():
+            saved = conn.execute("SELECT name, sql FROM sqlite_master WHERE type = 'trigger'").fetchall()
+            for name, _ in saved:
                 conn.execute(f"DROP TRIGGER {name}")
             for statement in statements:
                 conn.execute(statement.replace("%s", "?"), params if "%s" in statement else ())
+            if not keep_triggers_dropped:
+                for _, sql in saved:
+                    conn.execute(sql)
         finally:
             conn.close()
         return
@@ -82,6 +89,15 @@ def run_underneath(url: str, *statements: str, params: tuple[object, ...] = ()) 
         pg.execute("SET session_replication_role = replica")
         for statement in statements:
             pg.execute(statement, params if "%s" in statement else ())  # type: ignore[arg-type]
+        if keep_triggers_dropped:
+            for table, name in _pg_triggers(pg):
+                pg.execute(f"DROP TRIGGER {name} ON {table}")
+
+
+def _pg_triggers(pg: psycopg.Connection) -> list[tuple[str, str]]:
+    rows = pg.execute("SELECT c.relname, t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
+                      "WHERE NOT t.tgisinternal AND t.tgname LIKE 'trg_%%'").fetchall()
+    return [(str(table), str(name)) for table, name in rows]
 
 
 def rechain(url: str) -> None:

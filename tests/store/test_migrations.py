@@ -20,7 +20,7 @@ from tests.artifacts.factories import calibration, measured_board
 from tests.store.documents import capture_session
 
 WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
-FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0009_fleet_diff25"
+FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0010_fleet_diff25"
 
 
 def _diff(url: str, metadata: MetaData) -> list:

@@ -57,3 +57,22 @@ def crash_after_insert(url: str, serial: str) -> None:
 
 if __name__ == "__main__":
     crash_after_insert(sys.argv[1], sys.argv[2])
+
+
+def write_sessions(url: str, count: int, worker: int, barrier: Any, results: Any) -> None:
+    """Wait for every worker, then store ``count`` capture sessions, alternating two serials (so writers of one
+    serial share its lock and writers of the other race them for the next id); report the session ids."""
+    from tests.store.documents import capture_session
+
+    try:
+        barrier.wait()
+        stored = []
+        with Store.open(url) as store:
+            for i in range(count):
+                session_id = f"{worker:06x}{i:06x}"
+                store.add_session(capture_session(session_id, serial=f"CAM-{i % 2}", minutes_after=i))
+                stored.append(session_id)
+        results.put((worker, stored, None))
+    except BaseException as exc:  # report, so the parent fails with the reason instead of hanging
+        results.put((worker, [], f"{type(exc).__name__}: {exc}"))
+        raise

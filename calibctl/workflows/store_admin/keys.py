@@ -11,7 +11,7 @@ from pathlib import Path
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.config import Settings
-from calibctl.errors import InputError, UsageError
+from calibctl.errors import FileSystemError, InputError, UsageError
 from calibctl.files import write_atomic
 from calibctl.signing import Signer, TrustedKeys, create_key, load_signer, record_message
 
@@ -27,6 +27,23 @@ def trusted_of(settings: Settings, folder: Path | None = None) -> TrustedKeys:
     """The configured key's public half plus every public key in ``folder`` (or the trusted_keys setting)."""
     chosen = folder or (Path(settings.trusted_keys) if settings.trusted_keys else None)
     return TrustedKeys.load(chosen, signer_of(settings))
+
+
+def read_trust(settings: Settings) -> TrustedKeys | None:
+    """The keys a read checks what it serves against (``store.served``): None when the store has no keys
+    configured (neither ``signing_key`` nor ``trusted_keys``), so a read checks each record's own hash only.
+    A private key this user cannot load (a station's key kept for its service account) is passed over when
+    the trusted-keys folder is set: a read needs only public keys."""
+    if not settings.signing_key and not settings.trusted_keys:
+        return None
+    folder = Path(settings.trusted_keys) if settings.trusted_keys else None
+    signer = None
+    try:
+        signer = signer_of(settings)
+    except (FileSystemError, InputError):
+        if folder is None:  # nothing else to check against: the key's own error (a read needs no private key
+            raise  # when the trusted folder holds its public half)
+    return TrustedKeys.load(folder, signer)
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,8 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
 
-    return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None)
+    return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None,
+                      trusted=None if write else keys.read_trust(settings))
 
 
 @dataclass
@@ -111,7 +112,7 @@ def history(settings: Settings, serial: str) -> History:
 def show(settings: Settings, ref: str) -> CalibrationArtifact:
     serial, version = parse_artifact_ref(ref)
     return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
-                             lambda: open_store(settings))
+                             lambda: open_store(settings), keys.read_trust(settings))
 
 
 def export(

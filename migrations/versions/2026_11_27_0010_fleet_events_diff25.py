@@ -1,7 +1,7 @@
 """fleet_events: the fleet's log (robots, the versions they run, rollouts), chained and append-only
 
-Revision ID: 0009_fleet_diff25
-Revises: 0008_chain_rig_definitions
+Revision ID: 0010_fleet_diff25
+Revises: 0009_chain_sessions_reads26
 Create Date: 2026-11-27
 
 One table, one hash-chained stream for the store (``chain.STREAMS["fleet"]``, counter row ``version_counters``
@@ -17,8 +17,8 @@ from collections.abc import Sequence
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = "0009_fleet_diff25"
-down_revision: str | Sequence[str] | None = "0008_chain_rig_definitions"
+revision: str = "0010_fleet_diff25"
+down_revision: str | Sequence[str] | None = "0009_chain_sessions_reads26"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
