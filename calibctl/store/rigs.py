@@ -107,6 +107,7 @@ class RigStoreMixin:
 
     _run: Callable[..., Any]
     _served: Callable[[Session, str, Any], None]
+    _session_linked: Callable[[Session, SessionRow], SessionRow]
     signer: Signer | None
 
     # definitions ---------------------------------------------------------------------------------
@@ -150,7 +151,7 @@ class RigStoreMixin:
             for member in members:
                 if s.get(SessionRow, member.session_id) is not None:
                     raise AlreadyExistsError(f"capture session {member.session_id} is already stored")
-                s.add(codec.session_row(member))
+                s.add(self._session_linked(s, codec.session_row(member)))  # chained like any session (0009)
             s.add(RigSessionRow(
                 rig_session_id=session.rig_session_id, rig=session.rig, status=session.status,
                 created_at=session.created_at, payload=payload, payload_sha256=sha256_hex(payload.encode("utf-8"))))

@@ -30,7 +30,7 @@ Query = Callable[[str, dict[str, Any]], list[Mapping[str, Any]]]
 
 TABLES = {"artifact": "calibration_artifacts", "board": "board_revisions", "event": "activation_events",
           "rig": "rig_calibrations", "rig_event": "rig_activation_events", "check": "check_events",
-          "rig_definition": "rig_definitions", "session": "capture_sessions"}
+          "rig_definition": "rig_definitions", "session": "capture_sessions", "fleet": "fleet_events"}
 """Each stream's table (a test keeps it equal to ``chain.STREAMS``)."""
 
 REFUSED_HINT = ("run `calibctl db verify` (with the same keys) to see every record affected; restore the store "

@@ -306,6 +306,16 @@ def test_rig_member_sessions_are_not_picked_by_a_single_camera_solve_unless_name
     assert art["serial"] == "CAM1" and art["provenance"]["session_id"] == named.session_id
 
 
+def test_a_rig_captures_member_sessions_are_chained_like_any_session(db, rig2):
+    """The rig capture stores its members in one transaction; each is numbered and chained in its serial's
+    session stream, so `db verify` finds nothing inserted outside calibctl."""
+    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    assert _capture(db, rig2).exit_code == 0
+    r = invoke(db, "--json", "db", "verify")
+    assert r.exit_code == 0, r.output
+    assert invoke(db, "solve", "--serial", "CAM0").exit_code == 2  # still never picked up unnamed
+
+
 def test_a_session_stored_before_the_checks_existed_is_refused_at_solve(db, rig2, monkeypatch):
     from calibctl.workflows.rig import rigs
 

@@ -45,7 +45,7 @@ def test_one_head_and_date_prefixed_file_names():
     scripts = migrate.script_directory()
     assert scripts.get_heads() == [HEAD]
     assert migrate.known_revisions() == [FIRST, SECOND, RIGS, "0005_chains_signatures", "0006_check_events",
-                                         "0007_chain_rigs_checks", "0008_chain_rig_definitions", HEAD]
+                                         "0007_chain_rigs_checks", "0008_chain_rig_definitions", "0009_chain_sessions_reads26", HEAD]
     for path in sorted(migrate.MIGRATIONS_DIR.joinpath("versions").glob("*.py")):
         assert re.fullmatch(r"\d{4}_\d{2}_\d{2}_\d{4}_[a-z0-9_]+\.py", path.name), path.name
 
