@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_import_overlap.py [--repeats 5] [--images DIR]
 
 ``calibctl calibrate`` must import sqlalchemy's ORM, pydantic's artifact models, typer and rich besides
-OpenCV and numpy (BENCHMARKS.md section 12: those imports alone take about 0.8x the plain OpenCV script's
+OpenCV and numpy (benchmarks/results/startup.md: those imports alone take about 0.8x the plain OpenCV script's
 whole run). Detection needs only cv2, numpy and calibctl.core, and runs on worker threads that release
 the GIL inside OpenCV, so one might hide the imports behind it. Each run here is a fresh interpreter
 that imports cv2, numpy and calibctl.core, then either

@@ -11,7 +11,7 @@ from calibctl.cli.context import state, wants_json
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 # render and report (rich) are imported by the commands that print with them: `export` prints the exported
-# text as it is, and does not pay rich's import (42-51 ms of import self time, BENCHMARKS.md section 12).
+# text as it is, and does not pay rich's import (42-51 ms of import self time, benchmarks/results/startup.md).
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 

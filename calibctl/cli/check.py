@@ -56,7 +56,7 @@ def check(
     Exit 0 when the fresh views agree with the stored model (and the surveyed distance), 1 when they
     do not (the check is stored either way, in the serial's history), 2 when the check could not run.
     Ten views with the board close (filling most of the frame) and tilted 20-35 deg in different
-    directions catch a 0.5 % focal change or a 2 px principal-point shift (BENCHMARKS.md section 16).
+    directions catch a 0.5 % focal change or a 2 px principal-point shift (benchmarks/results/check.md).
     """
     from calibctl.errors import VerdictFailed
     from calibctl.workflows.camera import check as check_workflow

@@ -1,7 +1,7 @@
 """Output that needs no rich: JSON, stored text made safe to print, and lint's finding lines.
 
 ``calibctl lint FILE`` and ``export`` print through here, so they start without importing rich (about
-20 ms of a 0.3 s start, BENCHMARKS.md section 12); ``cli.render`` re-exports these for every other command.
+20 ms of a 0.3 s start, benchmarks/results/startup.md); ``cli.render`` re-exports these for every other command.
 """
 
 from __future__ import annotations

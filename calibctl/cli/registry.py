@@ -1,7 +1,7 @@
 """The root's sub-commands on demand: import the one module that registers a command, make that command.
 
 typer makes every command of a group when it makes the group, reading each signature and its type
-hints (62-66 ms of CPU for calibctl's 37, BENCHMARKS.md section 12), and the CLI imported every command
+hints (62-66 ms of CPU for calibctl's 37, benchmarks/results/startup.md), and the CLI imported every command
 module to register them first. The root group looks a command up here instead; ``--help``, shell completion and a mistyped name still see every command.
 The commands made, their help and their order are typer's own.
 """

@@ -26,7 +26,7 @@ A command that never solves (``lint``) does better still: its OpenBLAS never sta
 at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2); threadpoolctl can only
 change a library already loaded. numpy's OpenBLAS starts one thread per core when it loads, and they
 spin before they sleep: ``import numpy`` took 180 ms of CPU with them and 110 with OPENBLAS_NUM_THREADS=1
-(BENCHMARKS.md section 12).
+(benchmarks/results/startup.md).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The read commands' reads of a SQLite store through the standard library's ``sqlite3``.
 
 Importing sqlalchemy and mapping the tables costs a read command about 0.3 s of CPU before it reads a
-byte (BENCHMARKS.md section 12). ``history``, ``show``, ``export`` and ``board list`` of a SQLite store
+byte (benchmarks/results/startup.md). ``history``, ``show``, ``export`` and ``board list`` of a SQLite store
 read here instead: the same rows in the same order, decoded and integrity-checked by the same ``codec``
 functions as ``Store``'s reads. Only the plain path is served here. Anything else - not a plain
 ``sqlite:///FILE`` URL, a file that does not exist, a schema revision other than this calibctl's head,

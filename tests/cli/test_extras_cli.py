@@ -67,15 +67,3 @@ def test_without_extras_a_sqlite_store_still_works(monkeypatch, tmp_path):
     _hide(monkeypatch, "matplotlib")
     res = runner.invoke(app, ["--db", f"sqlite:///{tmp_path / 's.db'}", "db", "upgrade"])
     assert res.exit_code == 0, res.output
-
-
-def test_the_hinted_packages_are_the_extras_in_pyproject():
-    import tomllib
-    from pathlib import Path
-
-    from calibctl.errors import MissingExtraError
-
-    extras = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())["project"][
-        "optional-dependencies"]
-    assert {name: extras[name] for name in MissingExtraError.PACKAGES} == {
-        name: [package] for name, package in MissingExtraError.PACKAGES.items()}

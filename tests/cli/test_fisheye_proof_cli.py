@@ -7,7 +7,7 @@ and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.
 detector: it traced X/Z rays and painted the background on every pixel past 89 deg off-axis, inside the
 95 deg image circle, so the outer squares and quiet zone of boards near the rim were cut off (30 of 60
 views at 190 deg, seeds 2-6) and their corners pulled off by up to 0.24 px RMS. It now traces unit rays
-(synth_fisheye.FisheyeCamera.ray_map); since then seeds 2-6 give max |z| 1.3-3.3 (BENCHMARKS.md section 7)."""
+(synth_fisheye.FisheyeCamera.ray_map); since then seeds 2-6 give max |z| 1.3-3.3 (benchmarks/results/capture-gates.md)."""
 
 from __future__ import annotations
 

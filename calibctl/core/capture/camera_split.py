@@ -19,7 +19,7 @@ It runs twice: at solve (under the solve's model; lint rule one-camera) and at c
 operator hears it while still holding the board. In one ``calibrate`` process the solve's question is
 usually the gate's (k1k2, every corner kept): ``check_one_camera`` remembers its last answers by the
 inputs' values, so it is answered once.
-Measured (tests/core/capture/test_camera_split.py, BENCHMARKS.md section 8): the real opencv-left-right folder
+Measured (tests/core/capture/test_camera_split.py, benchmarks/results/capture-gates.md): the real opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
 sessions at most 1.09. Limit: the score is a prediction error,

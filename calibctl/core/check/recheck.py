@@ -20,7 +20,7 @@ Two families of tests share the whole-check false-fail level ``alpha`` (Bonferro
    overall test plus each ring and octant with enough corners, Holm step-down over them. The other 20 %.
 
 A wrong metric scale (seed chapter 0) leaves no residual at all: only a known distance catches it
-(``distance_ratio``). BENCHMARKS.md section 16 has the measured false-fail and detection rates.
+(``distance_ratio``). benchmarks/results/check.md has the measured false-fail and detection rates.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ pool because cv2.setNumThreads is process-global), so each fold's result is bit-
 sequential run whatever the scheduling (tests/core/intrinsics/test_validation.py checks it). numpy's OpenBLAS is
 held to one thread around the pool too (``blas_threads``: its spinning worker thread otherwise takes the
 second core and 2 threads are slower than 1). 20 views at 1280x960 on the 2-core bench machine: 140-180
-ms sequential, 81-96 ms on 2 threads (benchmarks/bench_e2e.py stage profile: BENCHMARKS.md section 1).
+ms sequential, 81-96 ms on 2 threads (benchmarks/bench_e2e.py stage profile: benchmarks/results/end-to-end.md).
 
 Radius rings ("quintiles"): the radius of a corner is the distance of its OBSERVED pixel position
 from the principal point of the full-data fit. The ring edges are the 20/40/60/80 % quantiles of

@@ -1,5 +1,5 @@
 """core.check.recheck's error rates on seeded sessions whose views have unequal detector noise, as rendered
-photos do (blur, gain, tilt differ per view): few false fails, changes caught (BENCHMARKS.md section 16)."""
+photos do (blur, gain, tilt differ per view): few false fails, changes caught (benchmarks/results/check.md)."""
 
 from __future__ import annotations
 
@@ -70,5 +70,5 @@ def test_a_half_percent_focal_change_is_caught_from_10_views(reference):
 
 
 def test_a_4px_principal_point_shift_is_caught_from_10_views(reference):
-    # 2 px from the solve's own "good" views is caught about 70 % of the time (BENCHMARKS.md section 16)
+    # 2 px from the solve's own "good" views is caught about 70 % of the time (benchmarks/results/check.md)
     assert _fails(reference, _camera(dcx_px=4.0), 22_000) >= 18

@@ -1,7 +1,7 @@
 """Seeded corner-level sessions solved with the production k1k2 model, as core.compare.Lens (shared by the
 diff tests and benchmarks/bench_diff.py): the seed's focal length and k1, k2 at 640x480, 30 views tilted
 20-45 deg at 0.30-0.50 m, 0.03 px corner noise per coordinate (what the detector delivers on renders,
-BENCHMARKS.md section 16)."""
+benchmarks/results/check.md)."""
 
 from __future__ import annotations
 

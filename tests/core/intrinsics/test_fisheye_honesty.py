@@ -6,7 +6,7 @@ Sessions as benchmarks/bench_fisheye.py (150 / 170 / 190 deg, circular and full-
 regime where the solve is linear in the noise, z(-n) = -z(n), so (z(n) + z(-n)) / 2 is the estimator's
 bias in sigma units and whatever is left of mean z is the sampling of the noise.
 
-Measured (2026-11-23, BENCHMARKS section 14): the bias is below 0.001 sigma for every parameter (the
+Measured (2026-11-23, benchmarks/results/fisheye.md): the bias is below 0.001 sigma for every parameter (the
 largest single session 0.14 sigma, cx); mean z over seeds 0-89 is -0.31 for fx, over 0-299 -0.17 and
 over 0-599 -0.085 with std 0.99: the -0.31 once recorded as an expected failure was the noise of those
 90 seeds (90-seed blocks range from -0.31 to +0.11), not a bias of the solve.
