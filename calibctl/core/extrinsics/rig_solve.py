@@ -274,6 +274,10 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
 
 def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool, model: str,
                solver: str) -> RigSolution:
+    for m in members:  # refused up front: where NaN intrinsics would fail later depends on the OpenCV version
+        if not (np.isfinite(m.camera_matrix).all() and np.isfinite(m.dist_coeffs).all()):
+            raise NumericalError(f"the rig solve cannot start: camera {m.name}'s intrinsics are NaN or infinite",
+                                 hint="check that every camera's intrinsics belong to it (re-solve that camera)")
     views = shared_corners_only(views)
     if len(views.frames) < 2:
         raise NumericalError(f"only {len(views.frames)} frame(s) show the board to two cameras at once",
