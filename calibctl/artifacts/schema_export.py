@@ -18,6 +18,7 @@ from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.artifacts.handeye import HandEyeResult
+from calibctl.artifacts.health import HealthReport
 from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
 from calibctl.artifacts.session import CaptureSession
 from calibctl.files import write_atomic
@@ -34,6 +35,7 @@ DOCUMENTS: dict[str, type[BaseModel]] = {
     "rig-calibration": RigCalibration,
     "rig-activation": RigActivation,
     "fleet-event": FleetEvent,
+    "health-report": HealthReport,
 }
 
 
@@ -57,6 +59,7 @@ def expected_files() -> dict[str, str]:
         "rig-activation": 1,
         "check-event": 1,
         "fleet-event": 1,
+        "health-report": 1,
     }
     return {f"{name}.v{version[name]}.schema.json": schema_text(model) for name, model in DOCUMENTS.items()}
 

@@ -96,6 +96,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "fleet add": ("calibctl fleet add amr-017 --serial CAM-0042 --rig stereo-7 --reason 'commissioned'",),
     "fleet assign": ("calibctl fleet assign amr-017 CAM-0042@4 --reason 'recalibrated after the lens was knocked'",),
     "fleet status": ("calibctl fleet status", "calibctl fleet status --json"),
+    "fleet ingest": ("calibctl fleet ingest amr-017-2026-11-27.jsonl", "calibctl fleet ingest reports/*.jsonl --json"),
+    "fleet trends": ("calibctl fleet trends CAM-0042", "calibctl fleet trends CAM-0042 --json"),
     "fleet rollout": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --target CAM-0043@3 --canary amr-017 "
                       "--reason 'new lens model'", "calibctl fleet rollout promote recal-2026-12 --reason 'canary healthy'"),
     "fleet rollout start": ("calibctl fleet rollout start recal-2026-12 --target CAM-0042@4 --canary amr-017 "

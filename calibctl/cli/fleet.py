@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, shown, stdout
+from calibctl.cli.render import emit_json, shown, stderr, stdout
+from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
     from calibctl.workflows.fleet.rollouts import Rollout
+    from calibctl.workflows.fleet.trends import Trends
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
+
+MAX_SHOWN_LINES = 20  # refused lines named per file on stderr; --json carries every one
 
 fleet_app = typer.Typer(
     name="fleet",
@@ -86,6 +91,78 @@ def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
             running = "-" if s.running is None else f"@{s.running}"
             active = "-" if s.active is None else f"@{s.active}"
             _say(f"  {shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
+
+
+@fleet_app.command("ingest")
+def ingest(
+    ctx: typer.Context,
+    files: Annotated[list[Path], typer.Argument(metavar="FILE...", help="JSON-lines files, one health report a line.")],
+    json_output: JsonFlag = False,
+) -> None:
+    """Store the health reports robots send, all or nothing per file.
+
+    Exit 1 when a file had a refused line (malformed, from the future, a serial its robot does not carry, a
+    duplicate source id): that file wrote nothing, each refused line is named; the other files are stored."""
+    from calibctl.workflows.fleet import health
+
+    results = health.ingest(state(ctx).settings(), files)
+    refused = [r for r in results if r.refused]
+    if wants_json(ctx, json_output):
+        emit_json({"stored": sum(r.stored for r in results), "files": [r.as_json() for r in results]})
+    else:
+        for r in results:
+            _say(f"{shown(r.path)}: " + (f"{r.stored} report(s) stored" if not r.refused else
+                                         f"refused, nothing stored ({len(r.refused)} bad line(s))"))
+    for r in refused:
+        for line, why in r.refused[:MAX_SHOWN_LINES]:
+            stderr.print(f"{shown(r.path)}:{line}: {shown(why)}", soft_wrap=True, markup=False, highlight=False)
+        if len(r.refused) > MAX_SHOWN_LINES:
+            stderr.print(f"{shown(r.path)}: {len(r.refused) - MAX_SHOWN_LINES} more refused line(s) (--json lists all)",
+                         soft_wrap=True, markup=False, highlight=False)
+    if refused:
+        raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def _print_trends(t: Trends) -> None:
+    _say(f"{shown(t.serial)}: " + ", ".join(f"{n} {k}" for k, n in t.counts.items()))
+    s = t.rms_vs_temperature_px_per_c
+    if s is not None:
+        _say(f"  RMS vs temperature: {s.slope:+.4f} +- {s.sigma:.4f} px/degC (n {s.n})")
+    for b in t.rms_by_temperature:
+        _say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px")
+    if t.check_verdicts:
+        _say("  checks: " + ", ".join(f"{n} {v}" for v, n in t.check_verdicts.items()))
+    d = t.td_drift_ppm
+    if d is not None:
+        _say(f"  td vs time: {d.slope:+.2f} +- {d.sigma:.2f} ppm over {t.td_span_days:.1f} days (n {d.n})")
+    for b in t.td_by_temperature:
+        _say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} td mean {b['mean']:+.3f} ms")
+    if t.gauge is not None:
+        g = t.gauge
+        _say(f"  gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})")
+    if t.triage_verdicts:
+        _say("  triage: " + ", ".join(f"{n} {v}" for v, n in t.triage_verdicts.items()))
+    f = t.fleet
+    if f is not None:
+        ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
+        _say(f"  fleet: this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+             f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
+             f"px, max/min {ratio})")
+    for finding in t.findings:
+        _say(f"  ! {finding}")
+
+
+@fleet_app.command("trends")
+def trends(ctx: typer.Context, serial: Annotated[str, typer.Argument(help="A camera serial with health reports.")],
+           json_output: JsonFlag = False) -> None:
+    """A serial's health as conditionals: RMS vs temperature, td drift in ppm, gauge, its RMS against the fleet's."""
+    from calibctl.workflows.fleet import health
+
+    t = health.trends(state(ctx).settings(), serial)
+    if wants_json(ctx, json_output):
+        emit_json(t.as_json())
+    else:
+        _print_trends(t)
 
 
 rollout_app = typer.Typer(

@@ -342,6 +342,32 @@ class FleetEventRow(ChainColumns, Base):
     __table_args__ = (Index(None, "subject", "id"), Index(None, "chain_seq", unique=True))
 
 
+class HealthReportRow(Base):
+    """One health report a robot sent (revision 0011_health_reports_health25): the numbers as columns, the
+    document's canonical JSON and its sha256. Append-only; not chained (telemetry, see docs/fleet.md)."""
+
+    __tablename__ = "health_reports"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    source_id: Mapped[str] = mapped_column(String(SERIAL_LEN), unique=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    robot: Mapped[str] = mapped_column(String(SERIAL_LEN))
+    kind: Mapped[str] = mapped_column(String(16))
+    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    rms_px: Mapped[float | None] = mapped_column(Double, nullable=True)
+    verdict: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    ratio: Mapped[float | None] = mapped_column(Double, nullable=True)
+    sigma: Mapped[float | None] = mapped_column(Double, nullable=True)
+    td_ms: Mapped[float | None] = mapped_column(Double, nullable=True)
+    sigma_ms: Mapped[float | None] = mapped_column(Double, nullable=True)
+    temperature_c: Mapped[float | None] = mapped_column(Double, nullable=True)
+    ingested_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    payload: Mapped[str] = mapped_column(Text)
+    payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+    __table_args__ = (Index(None, "serial", "kind", "at"),)
+
+
 IMMUTABLE_TABLES = {
     "board_revisions": "board revisions are immutable",
     "capture_sessions": "capture sessions are immutable",
@@ -353,5 +379,6 @@ IMMUTABLE_TABLES = {
     "rig_activation_events": "rig activation events are append-only",
     "check_events": "check events are append-only",
     "fleet_events": "fleet events are append-only",
+    "health_reports": "health reports are append-only",
 }
 """Table -> the message its UPDATE/DELETE trigger raises (the migrations create the triggers)."""

@@ -45,6 +45,7 @@ from calibctl.store.engine import (
 )
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.fleet import FleetStoreMixin
+from calibctl.store.health import HealthStoreMixin
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
 from calibctl.store.rigs import RigStoreMixin, rig_member_session_ids
@@ -68,7 +69,7 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     )
 
 
-class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin):
+class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, HealthStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
     def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None,

@@ -6,6 +6,7 @@ import datetime as dt
 
 from calibctl.artifacts.check import CheckEvent, RegionCheck
 from calibctl.artifacts.fleet import FleetEvent
+from calibctl.artifacts.health import HealthReport
 from calibctl.artifacts.session import CaptureSession, ImageOutcome, ViewCorners
 from tests.artifacts.factories import FIXED_TIME, measured_board
 
@@ -60,3 +61,9 @@ def fleet_event(kind: str, robot: str = "amr-001", **fields: object) -> FleetEve
     """A fleet log step by qa at st1, FIXED_TIME: ``register`` (serials=, rigs=) or ``assign`` (serial=, version=)."""
     return FleetEvent(kind=kind, robot=robot, actor="qa", station="st1", at=FIXED_TIME,  # type: ignore[arg-type]
                       reason=f"test {kind}", **fields)  # type: ignore[arg-type]
+
+
+def health_report(serial: str, robot: str = "amr-001", source_id: str = "r-1", **fields: object) -> HealthReport:
+    """A passing check report of ``serial`` from ``robot`` at FIXED_TIME (override kind and numbers with fields)."""
+    numbers = fields or {"kind": "check", "rms_px": 0.3, "verdict": "pass", "temperature_c": 25.0}
+    return HealthReport(source_id=source_id, serial=serial, robot=robot, time=FIXED_TIME, **numbers)  # type: ignore[arg-type]

@@ -15,7 +15,7 @@ from calibctl.store.engine import make_engine
 from calibctl.store.models import IMMUTABLE_TABLES
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
-from tests.store.documents import capture_session, check_event, fleet_event
+from tests.store.documents import capture_session, check_event, fleet_event, health_report
 from tests.store.rig_documents import rig_calibration, rig_definition, rig_session
 from tests.store.tamper import forge_activation, patch_stored_bytes
 
@@ -32,6 +32,7 @@ ANY_COLUMN = {
     "rig_activation_events": "reason",
     "check_events": "passed",
     "fleet_events": "kind",
+    "health_reports": "rms_px",
 }
 
 
@@ -48,6 +49,7 @@ def filled(db_url: str) -> str:
         store.add_rig_calibration(rig_calibration(), activate=True, reason="solved", **WHO)
         store.add_fleet_event(fleet_event("register", serials=[active.serial]))
         store.add_fleet_event(fleet_event("assign", serial=active.serial, version=active.version))
+        assert store.add_health_reports([health_report(active.serial)]) == []
     return db_url
 
 
