@@ -25,7 +25,9 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> str:
     with Store.open(url, create=True) as s:
         s.add_board(measured_board("A17", square_mm=25.0))
     station = root / "station.yaml"
-    station.write_text("gates: {min_views: 6, tilt_directions_min: 2}\n", encoding="utf-8")
+    # the 7 real views' projection one-sigma is 6.8 px at the view-level sigma (issue 22, docs/verdicts.md): the
+    # station allows 10 px so that the halves are stored and can be diffed
+    station.write_text("gates: {min_views: 6, tilt_directions_min: 2, projection_sigma_max_px: 10}\n", encoding="utf-8")
     left, right = sorted(LEFT_RIGHT.glob("left*.jpg")), sorted(LEFT_RIGHT.glob("right*.jpg"))
     for serial, files, name in (("L", left[0::2], "even"), ("L", left[1::2], "odd"), ("R", right, "right")):
         folder = root / name
@@ -46,7 +48,8 @@ def _diff(url: str, a: str, b: str) -> tuple[int, dict]:
 def test_left_and_right_are_different_cameras(store: str) -> None:
     code, doc = _diff(store, "L@1", "R@1")
     assert code == 1 and doc["verdict"] == "different"
-    assert doc["raw"]["chi2"]["statistic"] > 20 * doc["raw"]["chi2"]["threshold"]
+    # 10x the threshold with the view-level covariances both members now store (was ~20x at the Jacobian ones)
+    assert doc["raw"]["chi2"]["statistic"] > 5 * doc["raw"]["chi2"]["threshold"]
     assert doc["raw"]["percentiles_px"]["p50"] > 10.0  # cx differs by about 16 px, cy by 16 px
 
 
