@@ -25,9 +25,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> str:
     with Store.open(url, create=True) as s:
         s.add_board(measured_board("A17", square_mm=25.0))
     station = root / "station.yaml"
-    # the 7 real views' projection one-sigma is 6.8 px at the view-level sigma (issue 22, docs/verdicts.md): the
-    # station allows 10 px so that the halves are stored and can be diffed
-    station.write_text("gates: {min_views: 6, tilt_directions_min: 2, projection_sigma_max_px: 10}\n", encoding="utf-8")
+    station.write_text("gates: {min_views: 6, tilt_directions_min: 2}\n", encoding="utf-8")
     left, right = sorted(LEFT_RIGHT.glob("left*.jpg")), sorted(LEFT_RIGHT.glob("right*.jpg"))
     for serial, files, name in (("L", left[0::2], "even"), ("L", left[1::2], "odd"), ("R", right, "right")):
         folder = root / name

@@ -79,6 +79,13 @@ class IntrinsicCovariance:
     inflated: bool = False
     n_views: int = 0
 
+    @property
+    def jacobian_covariance(self) -> np.ndarray | None:
+        """(p, p) the Jacobian covariance alone, whether or not the view-level rule inflated ``covariance``."""
+        if self.covariance is None or not self.inflated or not self.view_factor:
+            return self.covariance
+        return self.covariance / self.view_factor**2
+
 
 def intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distortion: Sequence[str],
                       aspect: float | None, distortion_order: Sequence[str] | None = None,

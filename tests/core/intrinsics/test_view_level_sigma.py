@@ -42,6 +42,7 @@ def test_per_corner_noise_is_left_alone(seed):
     cov = sol.covariance
     assert cov is not None and cov.view_factor is not None
     assert 0.5 < cov.view_factor < MAX_SIGMA_FACTOR and not cov.inflated
+    assert cov.jacobian_covariance is cov.covariance
 
 
 def test_per_view_errors_inflate_the_reported_sigma():
@@ -54,6 +55,8 @@ def test_per_view_errors_inflate_the_reported_sigma():
     assert warped.sigma["fy"] > 1.4 * jacobian_fy
     assert warped.sigma["fy"] > clean.sigma["fy"]
     assert np.allclose(np.sqrt(np.diag(cov.covariance)), [warped.sigma[n] for n in cov.names])
+    assert cov.jacobian_covariance is not None  # kept beside it (the capture projection gate judges it)
+    assert np.allclose(cov.jacobian_covariance * cov.view_factor**2, cov.covariance)
 
 
 def test_the_larger_sigma_covers_the_error_the_jacobian_misses():
