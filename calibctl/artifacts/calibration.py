@@ -68,6 +68,17 @@ class ParameterCovariance(Document):
         return self
 
 
+class ViewLevelSigma(Document):
+    """The view-level check beside the Jacobian sigma (core/intrinsics/covariance.py, issue 22)."""
+
+    sigma_factor: float = Field(ge=0, description="view-clustered (sandwich) sigma / Jacobian sigma, averaged over "
+                                "the whitened parameter directions; ~1 when every corner's error is independent")
+    views: int = Field(ge=0, description="views (clusters) the factor was computed from")
+    used: Literal["jacobian", "view-level"] = Field(
+        description="which covariance sigma and covariance are: view-level = the Jacobian one times sigma_factor^2")
+    rule: str = Field(description="when the view-level covariance replaces the Jacobian one")
+
+
 class Uncertainty(Document):
     """One-sigma per estimated intrinsic parameter (pixels for K, unitless for distortion)."""
 
@@ -79,6 +90,9 @@ class Uncertainty(Document):
     covariance: ParameterCovariance | None = Field(
         None, exclude_if=lambda cov: cov is None,
         description="full covariance behind sigma; absent when refused, and in artifacts made before it was stored")
+    view_level: ViewLevelSigma | None = Field(
+        None, exclude_if=lambda v: v is None,
+        description="per-view error check: which covariance is reported and why; absent in older artifacts")
 
 
 class RingRms(Document):

@@ -46,6 +46,10 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
             stdout.print(f"  {_with_sigma(name, value, sigma, '', 4)}")
     if art.stdev.refused_reason:
         stdout.print(f"  [yellow]no uncertainty: {shown(art.stdev.refused_reason)}[/yellow]")
+    vl = art.stdev.view_level
+    if vl is not None and vl.used == "view-level":
+        stdout.print(f"  [yellow]sigma x {vl.sigma_factor:.2f}: the {vl.views} views scatter more than their corner noise "
+                     "explains (per-view error: board warp, motion, sync), so the view-level sigma is reported[/yellow]")
     ho = art.held_out
     stdout.print(
         f"  RMS fit {fmt_px(art.rms_px)} px / held-out {fmt_px(ho.rms_px)} px ({ho.k_folds}-fold); "

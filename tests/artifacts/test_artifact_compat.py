@@ -14,6 +14,7 @@ from calibctl.artifacts.calibration import (
     CameraConsistency,
     ParameterCovariance,
     RejectedCorner,
+    ViewLevelSigma,
 )
 from calibctl.artifacts.common import canonical_json_bytes, parse_document, sha256_hex
 from tests.artifacts.factories import calibration
@@ -86,3 +87,24 @@ def test_the_covariance_is_covered_by_the_hash_and_checked_for_shape() -> None:
         ParameterCovariance(parameters=["fy", "cx"], matrix=[[0.04, 0.01]])
     with pytest.raises(ValidationError, match="distinct names"):
         ParameterCovariance(parameters=["fy", "zoom"], matrix=[[0.04, 0.01], [0.01, 0.09]])
+
+
+def test_an_artifact_written_before_the_view_level_check_reads_and_verifies() -> None:
+    old = _as_written_before_the_field(calibration())
+    assert "view_level" not in old["stdev"]  # left out while None
+    art = parse_document(CalibrationArtifact, old, "old.json")
+    assert art.stdev.view_level is None and art.computed_sha256() == old["content_sha256"]
+
+
+def test_the_view_level_check_round_trips_and_is_covered_by_the_hash() -> None:
+    check = ViewLevelSigma(sigma_factor=2.41, views=13, used="view-level", rule="sigma x sqrt(phi) when ...")
+    base = calibration()
+    art = base.model_copy(update={"stdev": base.stdev.model_copy(update={"view_level": check})}).sealed()
+    assert art.computed_sha256() == art.content_sha256 != base.content_sha256
+    again = parse_document(CalibrationArtifact, json.loads(art.model_dump_json()), "new.json")
+    assert again.stdev.view_level == check and again.computed_sha256() == art.content_sha256
+    flipped = art.model_copy(update={"stdev": art.stdev.model_copy(
+        update={"view_level": check.model_copy(update={"used": "jacobian"})})})
+    assert flipped.computed_sha256() != art.content_sha256
+    with pytest.raises(ValidationError, match="used"):
+        ViewLevelSigma(sigma_factor=1.0, views=13, used="bootstrap", rule="r")  # type: ignore[arg-type]

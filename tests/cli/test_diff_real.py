@@ -46,7 +46,8 @@ def _diff(url: str, a: str, b: str) -> tuple[int, dict]:
 def test_left_and_right_are_different_cameras(store: str) -> None:
     code, doc = _diff(store, "L@1", "R@1")
     assert code == 1 and doc["verdict"] == "different"
-    assert doc["raw"]["chi2"]["statistic"] > 20 * doc["raw"]["chi2"]["threshold"]
+    # 10x the threshold with the view-level covariances both members now store (was ~20x at the Jacobian ones)
+    assert doc["raw"]["chi2"]["statistic"] > 5 * doc["raw"]["chi2"]["threshold"]
     assert doc["raw"]["percentiles_px"]["p50"] > 10.0  # cx differs by about 16 px, cy by 16 px
 
 

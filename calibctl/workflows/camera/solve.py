@@ -27,6 +27,7 @@ from calibctl.artifacts.calibration import (
     RejectedCorner,
     RingRms,
     Uncertainty,
+    ViewLevelSigma,
     ViewResult,
 )
 from calibctl.artifacts.common import utc_now
@@ -35,6 +36,7 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
 from calibctl.core.intrinsics import solve as core_solve
+from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
 from calibctl.core.intrinsics.model_fit import noise_floor_px
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.outliers import (
@@ -202,6 +204,15 @@ def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
                                aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
 
 
+def _view_level(sol: IntrinsicsSolution) -> ViewLevelSigma | None:
+    """Which covariance sigma is and the factor that decided it (absent when no factor was computed)."""
+    cov = sol.covariance
+    if cov is None or cov.covariance is None or cov.view_factor is None or sol.sigma_refused_reason:
+        return None
+    return ViewLevelSigma(sigma_factor=float(cov.view_factor), views=int(cov.n_views),
+                          used="view-level" if cov.inflated else "jacobian", rule=VIEW_FACTOR_RULE)
+
+
 def _gates(session: CaptureSession, request: SolveRequest) -> list:
     """The session's gates; a --image-circle given to the solve is recorded in the coverage gate."""
     if request.image_circle is None or session.image_size is None:
@@ -245,6 +256,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
             residual_count=int(sol.n_residuals),
             parameter_count=int(sol.n_parameters),
             covariance=_covariance(sol),
+            view_level=_view_level(sol),
         ),
         rms_px=float(sol.rms_px),
         detector_rms_px=detector_rms,
