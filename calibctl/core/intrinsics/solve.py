@@ -51,70 +51,42 @@ from calibctl.core.intrinsics.covariance import IntrinsicCovariance, intrinsic_c
 from calibctl.core.intrinsics.fisheye_model import fisheye_pose, project_fisheye, refine_fisheye_pose
 from calibctl.core.intrinsics.fisheye_solve import solve_fisheye
 from calibctl.core.intrinsics.solution import (
-    CALIB_FIX_SKEW as CALIB_FIX_SKEW,
-)
-from calibctl.core.intrinsics.solution import (
-    CALIB_RECOMPUTE_EXTRINSIC as CALIB_RECOMPUTE_EXTRINSIC,
-)
-from calibctl.core.intrinsics.solution import (
-    DEFAULT_MODEL as DEFAULT_MODEL,
-)
-from calibctl.core.intrinsics.solution import (
-    DISTORTION_NAMES as DISTORTION_NAMES,
-)
-from calibctl.core.intrinsics.solution import (
-    FISHEYE_DIST_NAMES as FISHEYE_DIST_NAMES,
-)
-from calibctl.core.intrinsics.solution import (
-    MAX_RMS_PX as MAX_RMS_PX,
-)
-from calibctl.core.intrinsics.solution import (
-    MIN_CORNERS_PER_VIEW as MIN_CORNERS_PER_VIEW,
-)
-from calibctl.core.intrinsics.solution import (
-    MIN_FOCAL_FRAC as MIN_FOCAL_FRAC,
-)
-from calibctl.core.intrinsics.solution import (  # re-exported: the solve API callers import from here
-    MIN_SIGMA_DOF as MIN_SIGMA_DOF,
-)
-from calibctl.core.intrinsics.solution import (
-    MODELS as MODELS,
-)
-from calibctl.core.intrinsics.solution import (
-    NO_UNCERTAINTY as NO_UNCERTAINTY,
-)
-from calibctl.core.intrinsics.solution import (
-    DistortionModel as DistortionModel,
-)
-from calibctl.core.intrinsics.solution import (
-    IntrinsicsSolution as IntrinsicsSolution,
-)
-from calibctl.core.intrinsics.solution import (
-    check_inputs as check_inputs,
-)
-from calibctl.core.intrinsics.solution import (
-    check_output as check_output,
-)
-from calibctl.core.intrinsics.solution import (
-    get_model as get_model,
-)
-from calibctl.core.intrinsics.solution import (
-    parameter_count as parameter_count,
-)
-from calibctl.core.intrinsics.solution import (
-    readonly as readonly,
-)
-from calibctl.core.intrinsics.solution import (
-    residual_rms_px as residual_rms_px,
-)
-from calibctl.core.intrinsics.solution import (
-    single_threaded_opencv as single_threaded_opencv,
+    CALIB_FIX_SKEW,
+    CALIB_RECOMPUTE_EXTRINSIC,
+    DEFAULT_MODEL,
+    DISTORTION_NAMES,
+    FISHEYE_DIST_NAMES,
+    MAX_RMS_PX,
+    MIN_CORNERS_PER_VIEW,
+    MIN_FOCAL_FRAC,
+    MIN_SIGMA_DOF,
+    MODELS,
+    NO_UNCERTAINTY,
+    DistortionModel,
+    IntrinsicsSolution,
+    check_inputs,
+    check_output,
+    get_model,
+    parameter_count,
+    readonly,
+    residual_rms_px,
+    single_threaded_opencv,
 )
 from calibctl.errors import InputError, NumericalError
+
+# The solve API: the solver and its vocabulary from ``solution`` (callers import both from here).
+__all__ = [
+    "CALIB_FIX_SKEW", "CALIB_RECOMPUTE_EXTRINSIC", "DEFAULT_MODEL", "DISTORTION_NAMES", "DistortionModel",
+    "FISHEYE_DIST_NAMES", "IntrinsicsSolution", "MAX_RMS_PX", "MIN_CORNERS_PER_VIEW", "MIN_FOCAL_FRAC",
+    "MIN_SIGMA_DOF", "MODELS", "NO_UNCERTAINTY", "check_inputs", "check_output", "get_model",
+    "parameter_count", "readonly", "residual_rms_px", "single_threaded_opencv", "solve_intrinsics",
+    "is_fisheye", "project_points", "fit_pose",
+]
 
 # Index of each parameter in OpenCV's stdDeviationsIntrinsics (and in the distortion vector + 4).
 _STD_INDEX = {"fx": 0, "fy": 1, "cx": 2, "cy": 3, "k1": 4, "k2": 5, "p1": 6, "p2": 7, "k3": 8,
               "k4": 9, "k5": 10, "k6": 11}
+
 
 def _opencv_sigma(model: DistortionModel, std_intrinsics: np.ndarray) -> dict[str, float]:
     std = np.asarray(std_intrinsics, dtype=np.float64).ravel()
