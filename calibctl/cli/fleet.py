@@ -174,6 +174,14 @@ rollout_app = typer.Typer(
 fleet_app.add_typer(rollout_app, name="rollout")
 
 
+def _render_rollout(ctx: typer.Context, json_output: bool, r: Rollout) -> None:
+    """What start, promote and rollback print: the rollout as JSON, or its lines."""
+    if wants_json(ctx, json_output):
+        emit_json(r.as_json())
+    else:
+        _print_rollout(r)
+
+
 def _print_rollout(r: Rollout) -> None:
     closed = f" ({r.closed})" if r.closed else ""
     _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(f"{shown(s)}@{v}" for s, v in r.start.targets.items()))
@@ -199,10 +207,7 @@ def rollout_start(
     from calibctl.workflows.fleet import rollouts
 
     r = rollouts.start(state(ctx).settings(), name, target, canary, reason)
-    if wants_json(ctx, json_output):
-        emit_json(r.as_json())
-    else:
-        _print_rollout(r)
+    _render_rollout(ctx, json_output, r)
 
 
 @rollout_app.command("promote")
@@ -214,10 +219,7 @@ def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help
     from calibctl.workflows.fleet import rollouts
 
     r = rollouts.promote(state(ctx).settings(), name, reason)
-    if wants_json(ctx, json_output):
-        emit_json(r.as_json())
-    else:
-        _print_rollout(r)
+    _render_rollout(ctx, json_output, r)
 
 
 @rollout_app.command("rollback")
@@ -227,10 +229,7 @@ def rollout_rollback(ctx: typer.Context, name: Annotated[str, typer.Argument(hel
     from calibctl.workflows.fleet import rollouts
 
     r = rollouts.rollback(state(ctx).settings(), name, reason)
-    if wants_json(ctx, json_output):
-        emit_json(r.as_json())
-    else:
-        _print_rollout(r)
+    _render_rollout(ctx, json_output, r)
 
 
 def register(app: typer.Typer) -> None:
