@@ -56,6 +56,11 @@ class DatabaseError(CalibctlError):
     """The store is unreachable, locked for too long, or refused the operation."""
 
 
+class DatabaseUnreachableError(DatabaseError):
+    """The store cannot be reached at all (no server, network cut, file's folder missing): nothing was written
+    by the failed call. The station spools its units when it sees this (``workflows.station.spool``)."""
+
+
 class StaleActiveVersionError(DatabaseError):
     """A compare-and-set write (rollback) saw an active version that another writer has since changed."""
 

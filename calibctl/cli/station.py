@@ -17,9 +17,19 @@ if TYPE_CHECKING:
     from calibctl.workflows.station.station import UnitResult
 
 
+station_app = typer.Typer(
+    name="station",
+    invoke_without_command=True,
+    rich_markup_mode=None,
+)
+SpoolOption = Annotated[Path | None, typer.Option(
+    "--spool", show_default=False, help="The station's offline spool, a SQLite file (default: calibctl-spool.sqlite "
+    "in the station file's folder, else the SQLite store's, else the current folder).")]
+
+
 def register(app: typer.Typer) -> None:
     """Add this module's commands to the root app."""
-    app.command("station")(station)
+    app.add_typer(station_app, name="station")
 
 
 def _stdin_serials(prompt: bool) -> Iterator[str]:
@@ -52,13 +62,15 @@ def _say(result: UnitResult, as_json: bool) -> None:
         print(f"  hint: {result.hint}", flush=True)
 
 
+@station_app.callback(invoke_without_command=True)
 def station(
     ctx: typer.Context,
-    board: Annotated[str, typer.Option("--board", help="Registered board NAME or NAME@REV.", show_default=False)],
-    source_template: Annotated[str, typer.Option(
+    board: Annotated[str | None, typer.Option("--board", help="Registered board NAME or NAME@REV (required).",
+                                              show_default=False)] = None,
+    source_template: Annotated[str | None, typer.Option(
         "--source-template", show_default=False,
         help="Where each unit's pictures arrive, with {serial}: a folder (DIR/{serial}), a quoted glob or a list "
-             "file.")],
+             "file (required).")] = None,
     serials: Annotated[Path | None, typer.Option(
         "--serials", show_default=False, help="Read the serials from this file, one per line (default: stdin, "
         "where a barcode scanner types them).")] = None,
@@ -68,19 +80,29 @@ def station(
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="One JSON object per unit on stdout (for a line "
                                               "controller).")] = False,
+    spool: SpoolOption = None,
 ) -> None:
     """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial}, solve, store, print the
     verdict, wait for the next.
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
     "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are detected it
-    cancels that unit (nothing stored) and the station waits for the next serial. Exit 0 when the serials end;
-    2 when the station cannot start (bad template, serials file unreadable, database unavailable).
+    cancels that unit (nothing stored) and the station waits for the next serial. With the store unreachable each
+    unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
+    "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
+    serials file unreadable, another station's or store's spool).
     """
+    if ctx.invoked_subcommand is not None:
+        return
+    from calibctl.errors import UsageError
     from calibctl.workflows.station import station as station_workflow
 
+    if board is None or source_template is None:
+        raise UsageError("calibctl station needs --board and --source-template",
+                         "e.g. calibctl station --board A17 --source-template /data/shots/{serial}; or a sub-command: "
+                         "calibctl station status | sync")
     as_json = wants_json(ctx, json_output)
-    request = station_workflow.StationRequest(board, source_template, model)
+    request = station_workflow.StationRequest(board, source_template, model, spool)
     station_workflow.check_request(request)
     lines = _file_serials(serials) if serials is not None else _stdin_serials(sys.stdin.isatty() and not as_json)
     settings = state(ctx).settings(station=station_id, operator=operator, jobs=jobs)
@@ -88,3 +110,60 @@ def station(
     summary = station_workflow.run_station(settings, request, lines, lambda r: _say(r, as_json))
     if summary.interrupted:
         print(f"station stopped (Ctrl-C) after {len(summary.units)} unit(s)", file=sys.stderr, flush=True)
+
+
+@station_app.command("status")
+def status(
+    ctx: typer.Context,
+    spool: SpoolOption = None,
+    station_id: StationOption = None,
+    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
+) -> None:
+    """What the station's spool holds: the units queued while the store was away (oldest first, each checked
+    against its sha256) and how many were synced. Exit 0; 2 when the spool is missing or another station's."""
+    from calibctl.workflows.station import sync as sync_workflow
+
+    settings = state(ctx).settings(station=station_id)
+    with sync_workflow.open_spool(settings, spool, create=False) as opened:
+        found = sync_workflow.status(opened)
+    if wants_json(ctx, json_output):
+        print(json.dumps(found.as_json()), flush=True)
+        return
+    print(f"spool {found.path} (station {found.station}, store {found.store}): {len(found.queued)} queued, "
+          f"{found.synced} synced")
+    for q in found.queued:
+        mark = "" if q.intact else "  TAMPERED: does not match its sha256; sync stops here"
+        print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at}: {q.verdict}, {q.images} image(s){mark}")
+
+
+@station_app.command("sync")
+def sync_command(
+    ctx: typer.Context,
+    spool: SpoolOption = None,
+    station_id: StationOption = None,
+    json_output: Annotated[bool, typer.Option("--json", help="One JSON object per stored unit on stdout.")] = False,
+) -> None:
+    """Store the spool's queued units in the store, in the order they were calibrated, each getting the serial's
+    next version there (signed with the station's key when one is configured). Run again after a kill: nothing
+    is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones after it
+    stay queued); 2 when the store is still away, another process is syncing, or the spool is another
+    station's or store's."""
+    from calibctl.workflows.station import sync as sync_workflow
+
+    settings = state(ctx).settings(station=station_id)
+    as_json = wants_json(ctx, json_output)
+    with sync_workflow.open_spool(settings, spool, create=False) as opened:
+        done = sync_workflow.sync(settings, opened)
+    for unit in done.synced:
+        if as_json:
+            print(json.dumps(unit.as_json()), flush=True)
+        else:
+            what = "rejected capture session" if unit.version is None else (
+                f"v{unit.version} {unit.status}{', active' if unit.active else ''}")
+            print(f"{unit.serial}: spool record {unit.seq} stored as {what}"
+                  f"{' (it was in the store already)' if unit.already else ''}", flush=True)
+    if done.error is not None:
+        raise type(done.error)(f"{done.error.message} ({len(done.synced)} synced, {done.left} still queued)",
+                               done.error.hint)
+    if not as_json:
+        print(f"{len(done.synced)} unit(s) synced, {done.left} queued", file=sys.stderr, flush=True)

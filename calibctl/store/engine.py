@@ -32,7 +32,7 @@ from sqlalchemy import Engine, create_engine, event
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.engine import URL, make_url
 
-from calibctl.errors import DatabaseError, MissingExtraError, UsageError
+from calibctl.errors import DatabaseError, DatabaseUnreachableError, MissingExtraError, UsageError
 
 LOCK_TIMEOUT_ENV = "CALIBCTL_DB_LOCK_TIMEOUT_S"
 DEFAULT_LOCK_TIMEOUT_S = 10.0
@@ -205,7 +205,7 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
         )
     if engine.url.get_backend_name() == "sqlite":
         if "unable to open database file" in lowered:
-            return DatabaseError(
+            return DatabaseUnreachableError(
                 f"cannot open the SQLite database {shown}: unable to open database file",
                 "check that its directory exists and is writable, or pass another --db",
             )
@@ -223,7 +223,7 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
                                  "free some space on that disk and run the command again (image files a failed "
                                  "capture left are removed by `calibctl prune` an hour later)")
     elif isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) and _is_connect_failure(sqlstate(exc)):
-        return DatabaseError(
+        return DatabaseUnreachableError(
             f"cannot connect to the database {shown}: {detail}",
             "check --db / CALIBCTL_DB and that the server is running and reachable",
         )

@@ -297,21 +297,40 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         make it active. Activating a rejected artifact is refused before anything is written;
         ``expect_version``: refuse (nothing written) unless the next version is that one."""
         history.check_activation(artifact, activate, reason)
+        return self._run(lambda s: self._insert_artifact(s, artifact, activate, actor, station, reason, expect_version),
+                         write=True)
 
-        def work(s: Session) -> CalibrationArtifact:
-            version = counters.next_value(s, "artifact", artifact.serial)
-            if expect_version is not None and version != expect_version:
-                raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
-                                 f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
-                                 "written", "run the command again")
-            stored = artifact.model_copy(update={"version": version}).sealed()
-            s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
-            s.flush()
-            if activate:
-                history.append_event(s, artifact.serial, version, "activate", actor, station, reason, self.signer)
-            return stored
+    def add_artifact_once(self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str,
+                          reason: str) -> tuple[CalibrationArtifact, bool]:
+        """``add_artifact`` unless the serial already has a calibration solved from the same capture session
+        (``provenance.session_id``): then that one, and False. The look and the insert are one transaction
+        under the serial's version lock, so a sync run again after a crash never stores a calibration twice."""
+        history.check_activation(artifact, activate, reason)
+
+        def work(s: Session) -> tuple[CalibrationArtifact, bool]:
+            counters.lock(s, "artifact", artifact.serial)
+            row = s.scalars(select(ArtifactRow).where(
+                ArtifactRow.serial == artifact.serial, ArtifactRow.session_id == artifact.provenance.session_id,
+            ).order_by(ArtifactRow.version).limit(1)).first()
+            if row is not None:
+                return codec.decode_artifact(row, by_chain=True), False
+            return self._insert_artifact(s, artifact, activate, actor, station, reason, None), True
 
         return self._run(work, write=True)
+
+    def _insert_artifact(self, s: Session, artifact: CalibrationArtifact, activate: bool, actor: str, station: str,
+                         reason: str, expect_version: int | None) -> CalibrationArtifact:
+        version = counters.next_value(s, "artifact", artifact.serial)
+        if expect_version is not None and version != expect_version:
+            raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
+                             f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
+                             "written", "run the command again")
+        stored = artifact.model_copy(update={"version": version}).sealed()
+        s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
+        s.flush()
+        if activate:
+            history.append_event(s, artifact.serial, version, "activate", actor, station, reason, self.signer)
+        return stored
 
     def import_artifact(
         self, artifact: CalibrationArtifact, *, actor: str, station: str, activate: bool, reason: str | None = None

@@ -30,8 +30,10 @@ import re
 import secrets
 from collections import deque
 from collections.abc import Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -160,6 +162,21 @@ class CaptureObserver:
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None: ...
 
 
+class CaptureStore(Protocol):
+    """What a capture needs of a store: ``Store``, or the station's spool while the store is away
+    (``workflows.station.offline``)."""
+
+    image_dir: Path
+
+    def get_board(self, name: str, revision: int | None = None) -> BoardRevision: ...
+
+    def put_image(self, data: bytes, *, retention_days: int) -> str: ...
+
+    def put_images(self, images: Sequence[bytes], *, retention_days: int) -> list[str]: ...
+
+    def add_session(self, session: CaptureSession) -> None: ...
+
+
 @dataclass
 class _Collected:
     """What a source produced, before the gates: outcomes, views with their image hashes."""
@@ -197,11 +214,12 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
 
 
 def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None, *,
-            store_session: bool = True) -> CaptureResult:
+            store_session: bool = True, into: CaptureStore | None = None) -> CaptureResult:
     """Run one capture and store its session (see the module docstring). Raises CalibctlError (exit 2)
     when it cannot run; a session that fails the gates is stored as rejected and returned.
     ``store_session=False``: the session is built and returned but not stored (a rig capture stores its
-    members' sessions together with the rig session, in one transaction); its images are stored."""
+    members' sessions together with the rig session, in one transaction); its images are stored.
+    ``into``: board, images and session go there instead of the configured store."""
     observer = observer or CaptureObserver()
     board_name, revision = _check_request(request)
     source = sources.resolve_source(request.source)
@@ -209,7 +227,8 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         raise UsageError(f"--max-views and --duration apply to video and camera sources, not to a {source.kind}",
                          "a set of images is captured whole; leave out images you do not want")
     started = utc_now()
-    with Store.open(settings.db_url) as store:
+    opened: AbstractContextManager[CaptureStore] = Store.open(settings.db_url) if into is None else nullcontext(into)
+    with opened as store:
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
         if source.kind in sources.IMAGE_SETS:
@@ -267,7 +286,7 @@ class _MaxPicture:
         return self._by_size.get(size)
 
 
-def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
                     source: sources.SourceSpec, workers: int, observer: CaptureObserver) -> _Collected:
     where = source.label
     with file_errors(f"read the source {source.kind}", where):
@@ -325,7 +344,7 @@ def _capture_images(store: Store, settings: Settings, spec: BoardSpec, board: Bo
 class _StreamState:
     """What a video or camera capture accumulates, frame by frame."""
 
-    def __init__(self, store: Store, settings: Settings, spec: BoardSpec,
+    def __init__(self, store: CaptureStore, settings: Settings, spec: BoardSpec,
                  image_circle: tuple[float, float, float] | None = None) -> None:
         self.store, self.settings, self.spec = store, settings, spec
         self.image_circle = image_circle  # a given --image-circle, checked against the first frame
@@ -395,7 +414,7 @@ class _StreamState:
         return decision
 
 
-def _capture_stream(store: Store, settings: Settings, spec: BoardSpec, board: BoardRevision,
+def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
                     source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO

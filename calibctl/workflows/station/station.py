@@ -10,9 +10,15 @@ A unit that cannot run is a result line, never the end of the loop: a serial tha
 serial already done in this run, a missing folder, an unknown board, unreadable images (each with
 status "error" and the message and hint a one-shot command would print).
 
+The store away (``DatabaseUnreachableError``: no server, network cut): the unit is captured, gated and
+solved here and queued in the station's spool (``workflows.station.offline``); its line says "queued".
+Before each unit the station syncs what is queued (``workflows.station.sync``, one line "synced" per
+record stored, with its version); while anything stays queued, new units queue behind it, so a
+serial's versions keep the order its units were calibrated in.
+
 Ctrl-C (SIGINT):
   * while waiting for a serial: the station ends cleanly (``StationSummary.interrupted``; exit 0);
-  * while a unit's images are being detected: that unit is cancelled - nothing is stored, its line says
+  * while a unit's images are being detected (or the spool synced): that unit is cancelled - nothing is stored, its line says
     "cancelled" - and the station waits for the next serial;
   * once detection is over the unit's images, session and calibration are written and solved (a
     fraction of its time); a Ctrl-C then is held until the unit is complete, and ends the station after
@@ -21,6 +27,7 @@ Ctrl-C (SIGINT):
 
 from __future__ import annotations
 
+import contextlib
 import re
 import signal
 import time
@@ -30,15 +37,22 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
+from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
-from calibctl.errors import CalibctlError, UsageError
+from calibctl.errors import CalibctlError, DatabaseUnreachableError, UsageError
+from calibctl.store.spool import Spool, default_spool_path
 from calibctl.workflows.camera import capture_sources as sources
-from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, calibrate
-from calibctl.workflows.camera.solve import MODEL_CHOICES
+from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
+from calibctl.workflows.camera.distance_gauge import gauge_model
+from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve
+from calibctl.workflows.station.offline import Queued, queue_solved, queue_unit
+from calibctl.workflows.station.sync import SyncedUnit, open_spool, sync
 
-PASS, FAIL, ERROR, CANCELLED = "pass", "fail", "error", "cancelled"
+PASS, FAIL, ERROR, CANCELLED, QUEUED, SYNCED = "pass", "fail", "error", "cancelled", "queued", "synced"
 SERIAL_SLOT = "{serial}"
+_SYNC_HINT = "it is stored when the store is back: before the next unit, or by `calibctl station sync`"
 
 
 @dataclass(frozen=True)
@@ -46,6 +60,7 @@ class StationRequest:
     board: str
     source_template: str  # DIR/{serial}: the folder (or glob, list file) a unit's pictures arrive in
     model: str = "k1k2"
+    spool: Path | None = None  # None: store.spool.default_spool_path
 
 
 @dataclass(frozen=True)
@@ -53,7 +68,7 @@ class UnitResult:
     """One unit's line. ``unit_s``: serial read to verdict out, seconds."""
 
     serial: str
-    status: str  # pass | fail | error | cancelled
+    status: str  # pass | fail | error | cancelled | queued (in the spool) | synced (a queued one stored)
     message: str
     hint: str | None = None
     session_id: str | None = None
@@ -61,11 +76,14 @@ class UnitResult:
     rms_px: float | None = None
     views: int | None = None
     unit_s: float = 0.0
+    verdict: str | None = None  # queued / synced: pass or fail, as the unit's own line would have said
+    spool_record: int | None = None  # queued / synced: the record number, the order of the sync
 
     def as_json(self) -> dict[str, Any]:
         return {"serial": self.serial, "status": self.status, "message": self.message, "hint": self.hint,
                 "session_id": self.session_id, "version": self.version, "rms_px": self.rms_px,
-                "views": self.views, "unit_s": round(self.unit_s, 4)}
+                "views": self.views, "unit_s": round(self.unit_s, 4), "verdict": self.verdict,
+                "spool_record": self.spool_record}
 
 
 @dataclass
@@ -120,6 +138,7 @@ class _UnitObserver(CaptureObserver):
         self.interrupts, self.inner = interrupts, inner
 
     def folder_started(self, total: int) -> None:
+        self.interrupts.cancellable = True  # an offline capture after a failed online one starts from nothing
         self.inner.folder_started(total)
 
     def image_done(self, done: int, total: int, name: str, status: str) -> None:
@@ -128,7 +147,58 @@ class _UnitObserver(CaptureObserver):
         self.inner.image_done(done, total, name, status)
 
 
-def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver) -> UnitResult:
+class _Offline:
+    """The spool, opened when first needed (a station whose store never goes away writes one board list);
+    a spool file that exists is opened at start, so another station's or store's is refused then (exit 2)."""
+
+    def __init__(self, settings: Settings, path: Path | None) -> None:
+        self.settings = settings
+        self.path = path or default_spool_path(settings.station_file, settings.db_url)
+        self.boards: dict[str, BoardRevision] = {}  # served by the store in this run
+        self._spool = open_spool(settings, self.path) if self.path.exists() else None
+
+    def spool(self) -> Spool:
+        if self._spool is None:
+            self._spool = open_spool(self.settings, self.path)
+        return self._spool
+
+    def remember(self, board: BoardRevision) -> None:
+        """Keep the board the store served, for a later run that starts with the store away."""
+        if self.boards.get(board.name) != board:
+            self.boards[board.name] = board
+            # a cache: the unit itself is stored, and a spool that cannot be written says so when it is used
+            with contextlib.suppress(CalibctlError):
+                self.spool().remember_board(board)
+
+    def before_unit(self, report: Callable[[UnitResult], None]) -> str | None:
+        """Sync what is queued; why the next unit must be queued too (None: nothing is left queued)."""
+        if self._spool is None or not self._spool.records(pending_only=True):
+            return None
+        try:
+            done = sync(self.settings, self._spool)
+        except CalibctlError as exc:  # another process holds the sync lock
+            return exc.message
+        for unit in done.synced:
+            report(_synced_line(unit))
+        if done.error is not None:
+            return done.error.message
+        return None if done.left == 0 else f"{done.left} unit(s) are still queued"
+
+    def __enter__(self) -> _Offline:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._spool is not None:
+            self._spool.close()
+
+
+def _rejected(session: CaptureSession) -> str:
+    reasons = "; ".join(g.reason for g in session.gates if not g.passed and g.reason) or "the distance gauge failed"
+    return f"capture rejected: {reasons}"
+
+
+def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver, offline: _Offline,
+          why_queue: str | None) -> UnitResult:
     source = request.source_template.replace(SERIAL_SLOT, serial)
     if not any(ch in source for ch in "*?[") and not Path(source).exists():
         return UnitResult(serial, ERROR, f"no pictures for {serial}: {source} does not exist",
@@ -137,17 +207,53 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
     if kind not in sources.IMAGE_SETS:
         return UnitResult(serial, ERROR, f"{source} is a {kind}; the station reads a folder, glob or list per unit",
                           "point --source-template at the folder each unit's pictures are saved in")
-    done = calibrate(settings, CaptureRequest(serial, request.board, source, jobs=settings.jobs), model=request.model,
-                     observer=observer)
-    session = done.capture.session
-    if done.solve is None:
-        reasons = "; ".join(g.reason for g in session.gates if not g.passed and g.reason) or "the distance gauge failed"
-        return UnitResult(serial, FAIL, f"capture rejected: {reasons}", session_id=session.session_id,
+    # as `calibctl calibrate`: the gates judge through the lens model the session will be solved with
+    unit = CaptureRequest(serial, request.board, source, jobs=settings.jobs, gauge_model=gauge_model(request.model),
+                          lens_model=None if request.model == "auto" else request.model)
+    if why_queue is None:
+        try:
+            return _online_unit(settings, request, unit, observer, offline)
+        except DatabaseUnreachableError as exc:  # before its session was stored: captured again, into the spool
+            why_queue = exc.message
+    queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why_queue)
+    return _queued_line(queued, why_queue)
+
+
+def _online_unit(settings: Settings, request: StationRequest, unit: CaptureRequest, observer: CaptureObserver,
+                 offline: _Offline) -> UnitResult:
+    session = capture(settings, unit, observer).session
+    offline.remember(session.board)
+    if session.status != "accepted":
+        return UnitResult(unit.serial, FAIL, _rejected(session), session_id=session.session_id,
                           views=len(session.views))
-    art = done.solve.artifact
+    try:
+        art = solve(settings, SolveRequest(session_id=session.session_id, model=request.model)).artifact
+    except DatabaseUnreachableError as exc:  # the session is stored; its calibration is queued
+        return _queued_line(queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
+                            exc.message)
     status = PASS if art.status == "accepted" else FAIL
-    return UnitResult(serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
+    return UnitResult(unit.serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
                       version=art.version, rms_px=art.rms_px, views=len(session.views))
+
+
+def _queued_line(queued: Queued, why: str) -> UnitResult:
+    session, art = queued.session, queued.artifact
+    what = _rejected(session) if art is None else f"calibration {art.status}"
+    verdict = PASS if art is not None and art.status == "accepted" else FAIL
+    return UnitResult(session.serial, QUEUED, f"{what}; queued as spool record {queued.seq}, its version comes when "
+                      f"the store is back ({why})", _SYNC_HINT, session.session_id, None,
+                      None if art is None else art.rms_px, len(session.views), verdict=verdict, spool_record=queued.seq)
+
+
+def _synced_line(unit: SyncedUnit) -> UnitResult:
+    if unit.version is None:
+        what = "its rejected capture session stored"
+    else:
+        what = f"stored as v{unit.version} {unit.status}{', active' if unit.active else ''}"
+    already = " (it was in the store already)" if unit.already else ""
+    return UnitResult(unit.serial, SYNCED, f"spool record {unit.seq}: {what}{already}", session_id=unit.session_id,
+                      version=unit.version, rms_px=unit.rms_px, views=unit.views,
+                      verdict=PASS if unit.status == "accepted" else FAIL, spool_record=unit.seq)
 
 
 def run_station(settings: Settings, request: StationRequest, serials: Iterable[str],
@@ -161,8 +267,10 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
     check_request(request)
     summary = StationSummary()
     seen: dict[str, int] = {}
+    units = 0
     lines: Iterator[str] = iter(serials)
-    with _Interrupts() as interrupts:
+    offline = _Offline(settings, request.spool)
+    with offline, _Interrupts() as interrupts:
         while True:
             interrupts.cancellable, interrupts.pending = True, False
             try:
@@ -176,17 +284,19 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
             if not serial:
                 continue
             start = time.perf_counter()
+            units += 1
             result = _checked_serial(serial, seen)
             if result is None:
                 try:
-                    result = _unit(settings, request, serial, _UnitObserver(interrupts, observer()))
+                    why_queue = offline.before_unit(lambda r: (summary.units.append(r), report(r)))
+                    result = _unit(settings, request, serial, _UnitObserver(interrupts, observer()), offline, why_queue)
                 except KeyboardInterrupt:
                     result = UnitResult(serial, CANCELLED, "cancelled (Ctrl-C) while its images were detected; "
                                         "nothing was stored", "scan the serial again to calibrate it")
                 except CalibctlError as exc:
                     result = UnitResult(serial, ERROR, exc.message, exc.hint)
-                if result.status in (PASS, FAIL):
-                    seen[serial] = len(summary.units) + 1
+                if result.status in (PASS, FAIL, QUEUED):
+                    seen[serial] = units
             result = UnitResult(**{**result.__dict__, "unit_s": time.perf_counter() - start})
             summary.units.append(result)
             report(result)

@@ -1,0 +1,154 @@
+"""``calibctl station sync`` / ``status``: the spool's queued units into the central store, in order.
+
+Each record, oldest first, under the spool's sync lock (one syncer per spool):
+
+1. its sha256 and its images' are checked (a changed record stops the sync there: IntegrityError, exit 1);
+2. its images go into the store (content-addressed: storing one again changes nothing);
+3. its session is added unless the store has it already (the same content; another is IntegrityError);
+4. its calibration is stored as the serial's next version, signed with the station's key when one is
+   configured, and made active when accepted - unless the store already holds a calibration of that
+   session (``Store.add_artifact_once``: the look and the insert are one transaction under the serial's
+   version lock);
+5. the record is marked synced with its version.
+
+A kill between any two steps loses nothing and doubles nothing: the next sync redoes steps 2-4 as no-ops
+up to where it stopped. Versions come from the store's counter when the calibration is inserted, so a
+serial calibrated twice offline gets two consecutive versions in queue order, after whatever the store
+held; no version is skipped or reused. The sync stops at the first record it cannot store (store away
+again, a changed record) and leaves it and the ones after it queued.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from calibctl.config import Settings
+from calibctl.errors import AlreadyExistsError, CalibctlError, IntegrityError
+from calibctl.store.repository import Store
+from calibctl.store.spool import Spool, SpoolRecord, default_spool_path, store_identity
+from calibctl.workflows.camera.capture import IMAGE_BATCH
+from calibctl.workflows.store_admin.records import open_store
+
+
+@dataclass(frozen=True)
+class SyncedUnit:
+    seq: int
+    serial: str
+    session_id: str
+    version: int | None  # None: a capture the gates rejected (its session alone was queued)
+    status: str  # accepted | rejected | capture rejected
+    active: bool
+    already: bool  # the store held it already (a sync killed before it marked the record)
+    rms_px: float | None = None
+    views: int = 0
+
+    def as_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class SyncReport:
+    synced: list[SyncedUnit] = field(default_factory=list)
+    left: int = 0  # records still queued
+    error: CalibctlError | None = None  # what stopped the sync before the queue was empty
+
+
+def open_spool(settings: Settings, path: Path | None, *, create: bool = True) -> Spool:
+    """This station's spool for the configured store (exit 2 for another station's or another store's)."""
+    return Spool.open(path or default_spool_path(settings.station_file, settings.db_url), station=settings.station,
+                      store=store_identity(settings.db_url), create=create)
+
+
+def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord], None] | None = None) -> SyncReport:
+    """Sync the queued records in order (see the module docstring). ``after_store(record)`` runs after a
+    record is in the store and before it is marked synced (where a kill is worst; tests interrupt there)."""
+    report = SyncReport()
+    pending = spool.records(pending_only=True)
+    if not pending:
+        return report
+    with spool.sync_lock():
+        pending = spool.records(pending_only=True)  # what another syncer left, now that it is done
+        try:
+            with open_store(settings, write=True) as store:
+                for record in pending:
+                    report.synced.append(_sync_one(settings, spool, store, record))
+                    if after_store is not None:
+                        after_store(record)
+                    spool.mark_synced(record.seq, report.synced[-1].version)
+        except CalibctlError as exc:
+            report.error = exc
+        report.left = len(spool.records(pending_only=True))
+        spool.prune_images()
+    return report
+
+
+def _sync_one(settings: Settings, spool: Spool, store: Store, record: SpoolRecord) -> SyncedUnit:
+    session, artifact = spool.opened(record)
+    for start in range(0, len(record.image_shas), IMAGE_BATCH):
+        batch = [spool.image_bytes(record, sha) for sha in record.image_shas[start:start + IMAGE_BATCH]]
+        store.put_images(batch, retention_days=settings.image_retention_days)
+    try:
+        store.add_session(session)
+    except AlreadyExistsError:
+        held = store.get_session(session.session_id)
+        if held.model_dump(mode="json") != session.model_dump(mode="json"):
+            raise IntegrityError(f"the store holds another capture session under the id {session.session_id} of "
+                                 f"spool record {record.seq} ({record.serial}); it and the records after it were not "
+                                 "synced", f"compare `calibctl history {record.serial}` with the spool") from None
+    if artifact is None:
+        return SyncedUnit(record.seq, record.serial, record.session_id, None, "capture rejected", False, False,
+                          views=len(session.views))
+    accepted = artifact.status == "accepted"
+    stored, new = store.add_artifact_once(
+        artifact, activate=accepted, actor=artifact.provenance.operator, station=settings.station,
+        reason=f"solve of session {session.session_id} (queued offline, record {record.seq})")
+    active = store.active_version(stored.serial) == stored.version
+    return SyncedUnit(record.seq, record.serial, record.session_id, stored.version, stored.status, active, not new,
+                      stored.rms_px, len(session.views))
+
+
+@dataclass(frozen=True)
+class QueuedUnit:
+    seq: int
+    serial: str
+    session_id: str
+    queued_at: str
+    verdict: str  # accepted | rejected (the local solve's lint) | capture rejected
+    images: int
+    intact: bool  # its sha256 matches (a changed record is synced never)
+
+    def as_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class SpoolStatus:
+    path: str
+    station: str
+    store: str
+    queued: list[QueuedUnit]
+    synced: int
+
+    def as_json(self) -> dict[str, Any]:
+        return {"spool": self.path, "station": self.station, "store": self.store, "synced": self.synced,
+                "queued": [q.as_json() for q in self.queued]}
+
+
+def status(spool: Spool) -> SpoolStatus:
+    """What is queued (oldest first, each checked against its sha256) and how many records were synced."""
+    records = spool.records()
+    queued = []
+    for r in records:
+        if r.synced_at is not None:
+            continue
+        try:
+            spool.opened(r)
+            intact = True
+        except (IntegrityError, ValueError):
+            intact = False
+        queued.append(QueuedUnit(r.seq, r.serial, r.session_id, r.queued_at, r.verdict() if intact else "?",
+                                 len(r.image_shas), intact))
+    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, len(records) - len(queued))
