@@ -1,0 +1,108 @@
+"""What the spool tests share: a central store that can be taken away and brought back, a TCP proxy that
+cuts a PostgreSQL connection the same way, and the unit folders."""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from calibctl.store.repository import Store
+from tests.artifacts.factories import measured_board
+
+SERIALS = ("CAM-1", "CAM-2", "CAM-3")
+
+
+def unit_folders(good: Path, root: Path) -> Path:
+    """One folder of pictures per unit (CAM-1 .. CAM-3), as the station's watched folder holds them."""
+    for serial in SERIALS:
+        shutil.copytree(good, root / "shots" / serial, ignore=shutil.ignore_patterns("*.json"))
+    return root / "shots"
+
+
+def central_store(url: str) -> str:
+    with Store.open(url) as store:
+        store.add_board(measured_board("A17", square_mm=25.0))
+    return url
+
+
+@contextmanager
+def away(folder: Path) -> Iterator[None]:
+    """A SQLite store made unreachable: its folder is moved away (SQLite: "unable to open database file"),
+    then put back."""
+    hidden = folder.with_name(folder.name + "-away")
+    folder.rename(hidden)
+    try:
+        yield
+    finally:
+        hidden.rename(folder)
+
+
+class TcpProxy:
+    """127.0.0.1:<port> forwarded to ``target``; ``cut()`` closes the listener and every open connection (a
+    network cut: connects are refused, a connection in use breaks), ``restore()`` listens again on the same port.
+    The PostgreSQL server behind it, shared with other tests, is never touched."""
+
+    def __init__(self, target: tuple[str, int]) -> None:
+        self.target = target
+        probe = socket.socket()
+        probe.bind(("127.0.0.1", 0))
+        self.port = int(probe.getsockname()[1])
+        probe.close()
+        self._listener: socket.socket | None = None
+        self._open: list[socket.socket] = []
+        self._lock = threading.Lock()
+
+    def restore(self) -> None:
+        listener = socket.socket()
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind(("127.0.0.1", self.port))
+        listener.listen(16)
+        self._listener = listener
+        threading.Thread(target=self._accept, args=(listener,), daemon=True).start()
+
+    def cut(self) -> None:
+        assert self._listener is not None
+        self._listener.close()
+        self._listener = None
+        with self._lock:
+            for sock in self._open:
+                try:
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+                sock.close()
+            self._open.clear()
+
+    def _accept(self, listener: socket.socket) -> None:
+        while True:
+            try:
+                client, _ = listener.accept()
+            except OSError:
+                return  # cut
+            try:
+                upstream = socket.create_connection(self.target, timeout=5)
+            except OSError:
+                client.close()
+                continue
+            with self._lock:
+                self._open += [client, upstream]
+            for a, b in ((client, upstream), (upstream, client)):
+                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
+
+    @staticmethod
+    def _pump(src: socket.socket, dst: socket.socket) -> None:
+        try:
+            while data := src.recv(65536):
+                dst.sendall(data)
+        except OSError:
+            pass
+        finally:
+            for sock in (src, dst):
+                try:
+                    sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
