@@ -1,0 +1,119 @@
+"""`calibctl station` with the store away, `station status` and `station sync`: lines, JSON, exit codes."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from calibctl.store.repository import Store
+from calibctl.store.spool import Spool
+from tests.workflows.station.spool_setup import away, central_store, unit_folders
+from tests.workflows.synth_folders import rendered
+
+RUNNER = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return rendered(tmp_path_factory, "good")
+
+
+@pytest.fixture
+def central(tmp_path: Path) -> Path:
+    (tmp_path / "central").mkdir()
+    central_store(f"sqlite:///{tmp_path / 'central' / 'calibctl.db'}")
+    return tmp_path / "central"
+
+
+@pytest.fixture
+def queued(tmp_path: Path, good: Path, central: Path) -> tuple[str, Path]:
+    """CAM-1 stored online (the board remembered), then CAM-2 and CAM-3 queued with the store away."""
+    db, spool = f"sqlite:///{central / 'calibctl.db'}", tmp_path / "spool.sqlite"
+    shots = unit_folders(good, tmp_path)
+    first = station(db, "--board", "A17", "--source-template", f"{shots}/{{serial}}", "--spool", str(spool),
+                    input="CAM-1\n")
+    assert first.exit_code == 0, first.output
+    with away(central):
+        result = station(db, "--board", "A17", "--source-template", f"{shots}/{{serial}}", "--spool", str(spool),
+                         "--json", input="CAM-2\nCAM-3\n")
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [(d["serial"], d["status"], d["verdict"], d["spool_record"], d["version"]) for d in lines] == [
+        ("CAM-2", "queued", "pass", 1, None), ("CAM-3", "queued", "pass", 2, None)]
+    assert "queued as spool record 1" in lines[0]["message"] and "unable to open database file" in lines[0]["message"]
+    return db, spool
+
+
+def station(db: str, *args: str, input: str | None = None):
+    return RUNNER.invoke(app, ["--db", db, "station", *args], input=input, terminal_width=110)
+
+
+def test_status_lists_the_queue_and_sync_stores_it_in_order(queued: tuple[str, Path]) -> None:
+    db, spool = queued
+    status = station(db, "status", "--spool", str(spool), "--station", "line-3")
+    assert status.exit_code == 2 and "belongs to station" in status.output  # the spool is this host's station
+    status = station(db, "status", "--spool", str(spool))
+    assert status.exit_code == 0, status.output
+    out = status.stdout.splitlines()
+    assert out[0].startswith(f"spool {spool} (station ") and out[0].endswith(": 2 queued, 0 synced")
+    assert out[1].startswith("  #1 CAM-2 session ") and out[1].endswith(": accepted, 12 image(s)")
+    done = station(db, "sync", "--spool", str(spool), "--json")
+    assert done.exit_code == 0, done.output
+    synced = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [(d["seq"], d["serial"], d["version"], d["active"], d["already"]) for d in synced] == [
+        (1, "CAM-2", 1, True, False), (2, "CAM-3", 1, True, False)]
+    again = station(db, "sync", "--spool", str(spool))
+    assert again.exit_code == 0 and again.stdout == "" and "0 unit(s) synced, 0 queued" in again.stderr
+    listing = json.loads(station(db, "status", "--spool", str(spool), "--json").stdout)
+    assert listing["queued"] == [] and listing["synced"] == 2
+    with Store.open(db) as store:
+        assert store.serials() == ["CAM-1", "CAM-2", "CAM-3"] and len(store.list_sessions()) == 3
+
+
+def test_a_sync_with_the_store_still_away_exits_2_and_keeps_the_queue(queued: tuple[str, Path],
+                                                                      central: Path) -> None:
+    db, spool = queued
+    with away(central):
+        done = station(db, "sync", "--spool", str(spool))
+    assert done.exit_code == 2
+    assert "there is no calibctl database at" in done.output and "(0 synced, 2 still queued)" in done.output
+
+
+def test_a_changed_record_makes_sync_exit_1_naming_it(queued: tuple[str, Path]) -> None:
+    db, spool = queued
+    with sqlite3.connect(spool) as conn:
+        conn.execute("UPDATE units SET serial = 'CAM-9' WHERE seq = 2")
+    status = station(db, "status", "--spool", str(spool))
+    assert "#2 CAM-9" in status.stdout and "TAMPERED" in status.stdout
+    done = station(db, "sync", "--spool", str(spool))
+    assert done.exit_code == 1
+    assert "CAM-2: spool record 1 stored as v1 accepted, active" in done.stdout
+    assert "spool record 2 (CAM-9" in done.output and "(1 synced, 1 still queued)" in done.output
+    with Store.open(db) as store:
+        assert store.serials() == ["CAM-1", "CAM-2"]
+
+
+def test_another_store_a_missing_spool_and_a_held_lock_exit_2(queued: tuple[str, Path], tmp_path: Path) -> None:
+    db, spool = queued
+    other = station(f"sqlite:///{tmp_path / 'other.db'}", "sync", "--spool", str(spool))
+    assert other.exit_code == 2 and "queues units for the store" in other.output
+    missing = station(db, "status", "--spool", str(tmp_path / "none.sqlite"))
+    assert missing.exit_code == 2 and "there is no spool at" in missing.output
+    assert not (tmp_path / "none.sqlite").exists()
+    with Spool.open(spool, station=json.loads(station(db, "status", "--spool", str(spool), "--json").stdout)["station"],
+                    store=f"sqlite:///{tmp_path / 'central' / 'calibctl.db'}") as held, held.sync_lock():
+        locked = station(db, "sync", "--spool", str(spool))
+    assert locked.exit_code == 2 and "is syncing the spool" in locked.output
+    with Store.open(db) as store:
+        assert store.serials() == ["CAM-1"]
+
+
+def test_station_without_its_options_names_them(queued: tuple[str, Path]) -> None:
+    db, _ = queued
+    bare = station(db)
+    assert bare.exit_code == 2 and "needs --board and --source-template" in bare.output
