@@ -133,7 +133,7 @@ def status(
           f"{found.synced} synced")
     for q in found.queued:
         mark = "" if q.intact else "  TAMPERED: does not match its sha256; sync stops here"
-        print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at}: {q.verdict}, {q.images} image(s){mark}")
+        print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at[:19]}: {q.verdict}, {q.images} image(s){mark}")
 
 
 @station_app.command("sync")

@@ -288,7 +288,7 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
             result = _checked_serial(serial, seen)
             if result is None:
                 try:
-                    why_queue = offline.before_unit(lambda r: (summary.units.append(r), report(r)))
+                    why_queue = offline.before_unit(lambda synced: _keep(summary, report, synced))
                     result = _unit(settings, request, serial, _UnitObserver(interrupts, observer()), offline, why_queue)
                 except KeyboardInterrupt:
                     result = UnitResult(serial, CANCELLED, "cancelled (Ctrl-C) while its images were detected; "
@@ -304,6 +304,11 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
                 summary.interrupted = True
                 break
     return summary
+
+
+def _keep(summary: StationSummary, report: Callable[[UnitResult], None], line: UnitResult) -> None:
+    summary.units.append(line)
+    report(line)
 
 
 def _checked_serial(serial: str, seen: dict[str, int]) -> UnitResult | None:

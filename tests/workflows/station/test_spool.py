@@ -12,13 +12,27 @@ from pathlib import Path
 import pytest
 
 from calibctl.config import load_settings
-from calibctl.errors import DatabaseError, DatabaseUnreachableError, FileSystemError, IntegrityError, UsageError
+from calibctl.errors import (
+    DatabaseError,
+    DatabaseUnreachableError,
+    FileSystemError,
+    IntegrityError,
+    UsageError,
+)
 from calibctl.files import os_error
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool
 from calibctl.workflows.camera import solve as solve_workflow
 from calibctl.workflows.station import station as station_module
-from calibctl.workflows.station.station import ERROR, PASS, QUEUED, SYNCED, StationRequest, UnitResult, run_station
+from calibctl.workflows.station.station import (
+    ERROR,
+    PASS,
+    QUEUED,
+    SYNCED,
+    StationRequest,
+    UnitResult,
+    run_station,
+)
 from calibctl.workflows.station.sync import open_spool, status, sync
 from tests.workflows.station.spool_setup import away, central_store, unit_folders
 from tests.workflows.synth_folders import rendered
