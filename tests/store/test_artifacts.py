@@ -165,3 +165,18 @@ def test_import_of_a_tampered_artifact_is_an_integrity_error(store: Store):
         store.import_artifact(tampered, activate=True, **WHO)
     assert info.value.exit_code == 1
     assert store.serials() == []
+
+
+def test_add_artifact_once_stores_one_calibration_per_capture_session(store: Store):
+    """The spool's sync: the same session's calibration offered again (a sync run after a kill) is the stored
+    one, no new version; another session's gets the next version."""
+    def solved_from(session_id: str):
+        art = calibration()
+        return art.model_copy(update={"provenance": art.provenance.model_copy(update={"session_id": session_id})})
+
+    first, new = store.add_artifact_once(solved_from("aaaaaaaaaaaa"), activate=True, reason="synced", **WHO)
+    again, new_again = store.add_artifact_once(solved_from("aaaaaaaaaaaa"), activate=True, reason="synced", **WHO)
+    other, new_other = store.add_artifact_once(solved_from("bbbbbbbbbbbb"), activate=True, reason="synced", **WHO)
+    assert (first.version, new, again.version, new_again, other.version, new_other) == (1, True, 1, False, 2, True)
+    assert again == first and [a.version for a in store.list_artifacts("CAM-0001")] == [1, 2]
+    assert [e.version for e in store.events("CAM-0001")] == [1, 2]  # nothing activated twice
