@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -14,6 +15,8 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 
 if TYPE_CHECKING:
+    from calibctl.config import Settings
+    from calibctl.store.spool import Spool
     from calibctl.workflows.station.station import UnitResult
 
 
@@ -22,6 +25,7 @@ station_app = typer.Typer(
     invoke_without_command=True,
     rich_markup_mode=None,
 )
+JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 SpoolOption = Annotated[Path | None, typer.Option(
     "--spool", show_default=False, help="The station's offline spool, a SQLite file (default: calibctl-spool.sqlite "
     "in the station file's folder, else the SQLite store's, else the current folder).")]
@@ -112,20 +116,25 @@ def station(
         print(f"station stopped (Ctrl-C) after {len(summary.units)} unit(s)", file=sys.stderr, flush=True)
 
 
-@station_app.command("status")
-def status(
-    ctx: typer.Context,
-    spool: SpoolOption = None,
-    station_id: StationOption = None,
-    json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
-) -> None:
-    """What the station's spool holds: the units queued while the store was away (oldest first, each checked
-    against its sha256) and how many were synced. Exit 0; 2 when the spool is missing or another station's."""
+@contextmanager
+def _spool_of(ctx: typer.Context, spool: Path | None, station_id: str | None) -> Iterator[tuple[Settings, Spool]]:
+    """The settings and this station's existing spool (exit 2 when it is missing, another station's or store's)."""
     from calibctl.workflows.station import sync as sync_workflow
 
     settings = state(ctx).settings(station=station_id)
     with sync_workflow.open_spool(settings, spool, create=False) as opened:
-        found = sync_workflow.status(opened)
+        yield settings, opened
+
+
+@station_app.command("status")
+def status(ctx: typer.Context, spool: SpoolOption = None, station_id: StationOption = None,
+           json_output: JsonFlag = False) -> None:
+    """What the station's spool holds: the units queued while the store was away (oldest first, each checked
+    against its sha256) and how many were synced. Exit 0; 2 when the spool is missing or another station's."""
+    from calibctl.workflows.station.sync import status as spool_status
+
+    with _spool_of(ctx, spool, station_id) as (_, opened):
+        found = spool_status(opened)
     if wants_json(ctx, json_output):
         print(json.dumps(found.as_json()), flush=True)
         return
@@ -133,27 +142,23 @@ def status(
           f"{found.synced} synced")
     for q in found.queued:
         mark = "" if q.intact else "  TAMPERED: does not match its sha256; sync stops here"
-        print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at[:19]}: {q.verdict}, {q.images} image(s){mark}")
+        print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at[:19]}: {q.verdict}, "
+              f"{q.images} image(s){mark}")
 
 
 @station_app.command("sync")
-def sync_command(
-    ctx: typer.Context,
-    spool: SpoolOption = None,
-    station_id: StationOption = None,
-    json_output: Annotated[bool, typer.Option("--json", help="One JSON object per stored unit on stdout.")] = False,
-) -> None:
+def sync_command(ctx: typer.Context, spool: SpoolOption = None, station_id: StationOption = None,
+                 json_output: JsonFlag = False) -> None:
     """Store the spool's queued units in the store, in the order they were calibrated, each getting the serial's
     next version there (signed with the station's key when one is configured). Run again after a kill: nothing
     is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones after it
     stay queued); 2 when the store is still away, another process is syncing, or the spool is another
     station's or store's."""
-    from calibctl.workflows.station import sync as sync_workflow
+    from calibctl.workflows.station.sync import sync
 
-    settings = state(ctx).settings(station=station_id)
     as_json = wants_json(ctx, json_output)
-    with sync_workflow.open_spool(settings, spool, create=False) as opened:
-        done = sync_workflow.sync(settings, opened)
+    with _spool_of(ctx, spool, station_id) as (settings, opened):
+        done = sync(settings, opened)
     for unit in done.synced:
         if as_json:
             print(json.dumps(unit.as_json()), flush=True)

@@ -12,29 +12,17 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool
-from tests.workflows.station.spool_setup import away, central_store, unit_folders
-from tests.workflows.synth_folders import rendered
+from tests.workflows.station.spool_setup import away, central_folder, unit_folders
 
 RUNNER = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return rendered(tmp_path_factory, "good")
-
-
 @pytest.fixture
-def central(tmp_path: Path) -> Path:
-    (tmp_path / "central").mkdir()
-    central_store(f"sqlite:///{tmp_path / 'central' / 'calibctl.db'}")
-    return tmp_path / "central"
-
-
-@pytest.fixture
-def queued(tmp_path: Path, good: Path, central: Path) -> tuple[str, Path]:
+def queued(tmp_path: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     """CAM-1 stored online (the board remembered), then CAM-2 and CAM-3 queued with the store away."""
+    central = central_folder(tmp_path)
     db, spool = f"sqlite:///{central / 'calibctl.db'}", tmp_path / "spool.sqlite"
-    shots = unit_folders(good, tmp_path)
+    shots = unit_folders(tmp_path_factory, tmp_path)
     first = station(db, "--board", "A17", "--source-template", f"{shots}/{{serial}}", "--spool", str(spool),
                     input="CAM-1\n")
     assert first.exit_code == 0, first.output
@@ -76,9 +64,9 @@ def test_status_lists_the_queue_and_sync_stores_it_in_order(queued: tuple[str, P
 
 
 def test_a_sync_with_the_store_still_away_exits_2_and_keeps_the_queue(queued: tuple[str, Path],
-                                                                      central: Path) -> None:
+                                                                      tmp_path: Path) -> None:
     db, spool = queued
-    with away(central):
+    with away(tmp_path / "central"):
         done = station(db, "sync", "--spool", str(spool))
     assert done.exit_code == 2
     assert "there is no calibctl database at" in done.output and "(0 synced, 2 still queued)" in done.output

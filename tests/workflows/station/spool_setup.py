@@ -10,14 +10,25 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+import pytest
+
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
+from tests.workflows.synth_folders import rendered
 
 SERIALS = ("CAM-1", "CAM-2", "CAM-3")
 
 
-def unit_folders(good: Path, root: Path) -> Path:
-    """One folder of pictures per unit (CAM-1 .. CAM-3), as the station's watched folder holds them."""
+def central_folder(root: Path) -> Path:
+    """A central SQLite store's folder: root/central/calibctl.db with board A17 registered."""
+    (root / "central").mkdir()
+    central_store(f"sqlite:///{root / 'central' / 'calibctl.db'}")
+    return root / "central"
+
+
+def unit_folders(factory: pytest.TempPathFactory, root: Path) -> Path:
+    """One folder of 12 rendered views per unit (CAM-1 .. CAM-3), as the station's watched folder holds them."""
+    good = rendered(factory, "good")  # rendered once per process
     for serial in SERIALS:
         shutil.copytree(good, root / "shots" / serial, ignore=shutil.ignore_patterns("*.json"))
     return root / "shots"

@@ -34,21 +34,12 @@ from calibctl.workflows.station.station import (
     run_station,
 )
 from calibctl.workflows.station.sync import open_spool, status, sync
-from tests.workflows.station.spool_setup import away, central_store, unit_folders
-from tests.workflows.synth_folders import rendered
-
-
-@pytest.fixture(scope="module")
-def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return rendered(tmp_path_factory, "good")
+from tests.workflows.station.spool_setup import away, central_folder, unit_folders
 
 
 @pytest.fixture
 def central(tmp_path: Path) -> Path:
-    """The central store's folder (tmp/central/calibctl.db, board A17 registered)."""
-    (tmp_path / "central").mkdir()
-    central_store(f"sqlite:///{tmp_path / 'central' / 'calibctl.db'}")
-    return tmp_path / "central"
+    return central_folder(tmp_path)
 
 
 @pytest.fixture
@@ -58,8 +49,8 @@ def settings(central: Path):
 
 
 @pytest.fixture
-def shots(tmp_path: Path, good: Path) -> Path:
-    return unit_folders(good, tmp_path)
+def shots(tmp_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return unit_folders(tmp_path_factory, tmp_path)
 
 
 def run(settings, shots: Path, serials, spool: Path, board: str = "A17") -> list[UnitResult]:

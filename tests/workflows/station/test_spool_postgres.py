@@ -14,18 +14,12 @@ from calibctl.signing import TrustedKeys, create_key
 from calibctl.store.repository import Store
 from calibctl.workflows.station.station import PASS, QUEUED, SYNCED, StationRequest, UnitResult, run_station
 from tests.workflows.station.spool_setup import TcpProxy, central_store, unit_folders
-from tests.workflows.synth_folders import rendered
 
 pytestmark = pytest.mark.postgres
 
 
-@pytest.fixture(scope="module")
-def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return rendered(tmp_path_factory, "good")
-
-
 def test_units_while_postgresql_is_cut_off_are_stored_signed_and_in_order_once_it_is_back(
-        pg_url: str, good: Path, tmp_path: Path) -> None:
+        pg_url: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path) -> None:
     server = urllib.parse.urlsplit(pg_url)
     proxy = TcpProxy((server.hostname or "127.0.0.1", server.port or 5432))
     proxy.restore()
@@ -34,7 +28,7 @@ def test_units_while_postgresql_is_cut_off_are_stored_signed_and_in_order_once_i
     signer = create_key(tmp_path / "station.key")
     settings = load_settings(db=through_proxy, station="line-3", operator="op-ana", env={}, jobs=2).model_copy(
         update={"signing_key": str(tmp_path / "station.key")})
-    shots = unit_folders(good, tmp_path)
+    shots = unit_folders(tmp_path_factory, tmp_path)
     request = StationRequest("A17", f"{shots}/{{serial}}", spool=tmp_path / "spool.sqlite")
 
     def run(*serials: str) -> list[UnitResult]:
