@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import errno
 import json
+import os
+import signal
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -246,3 +250,43 @@ def test_the_store_lost_between_the_session_and_its_calibration_queues_the_calib
         assert len(store.list_sessions()) == 2
         assert [a.provenance.session_id for a in store.list_artifacts("CAM-1")] == [calls[0]]
         assert [a.version for a in store.list_artifacts("CAM-2")] == [1]
+
+
+_SYNC_THEN_DIE = """
+import os, signal, sys
+from pathlib import Path
+from calibctl.config import load_settings
+from calibctl.store.spool import Spool
+from calibctl.workflows.station.sync import open_spool, sync
+
+db, spool, dies_at = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
+settings = load_settings(db=db, station="line-3", operator="op-ana", env={})
+mark = Spool.mark_synced
+
+def die_before_marking(self, seq, version):
+    if seq == dies_at:  # stored in the store, not yet marked in the spool: SIGKILL, no cleanup of any kind
+        os.kill(os.getpid(), signal.SIGKILL)
+    mark(self, seq, version)
+
+Spool.mark_synced = die_before_marking
+with open_spool(settings, spool) as opened:
+    sync(settings, opened)
+"""
+
+
+def test_a_sync_process_killed_with_sigkill_leaves_no_lock_and_the_next_sync_finishes_it(
+        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    spool = tmp_path / "spool.sqlite"
+    queue_three(settings, shots, spool, central)
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
+    killed = subprocess.run([sys.executable, "-c", _SYNC_THEN_DIE, settings.db_url, str(spool), "2"], env=env,
+                            capture_output=True, text=True, check=False)
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    with open_spool(settings, spool) as opened:
+        assert [r.seq for r in opened.records(pending_only=True)] == [2, 3]
+        done = sync(settings, opened)  # the dead process's flock went with it
+    assert [(u.seq, u.version, u.already) for u in done.synced] == [(2, 1, True), (3, 3, False)]
+    with Store.open(settings.db_url) as store:
+        assert [a.version for a in store.list_artifacts("CAM-1")] == [1, 2, 3]
+        assert [a.version for a in store.list_artifacts("CAM-2")] == [1] and len(store.list_sessions()) == 4
+        assert store.verify().problems == []
