@@ -2,7 +2,7 @@
 
 The loop reads the next serial (a line of stdin - a barcode scanner is a keyboard - or of ``--serials
 FILE``), captures the folder ``source_template.format(serial=...)`` with the station's board, solves it
-(``workflows.camera.capture.calibrate``: the same gates, lint and store as ``calibctl calibrate``) and
+(``capture`` then ``solve``: the same gates, lint and store as ``calibctl calibrate``) and
 reports one ``UnitResult``; then it waits for the next serial. Imports, the store's migrations check and
 the detection worker processes are paid once, at start-up (``warm_up``), not per unit.
 
@@ -18,8 +18,8 @@ serial's versions keep the order its units were calibrated in.
 
 Ctrl-C (SIGINT):
   * while waiting for a serial: the station ends cleanly (``StationSummary.interrupted``; exit 0);
-  * while a unit's images are being detected (or the spool synced): that unit is cancelled - nothing is stored, its line says
-    "cancelled" - and the station waits for the next serial;
+  * while a unit's images are being detected (or the spool synced before it): that unit is cancelled -
+    nothing of it is stored, its line says "cancelled" - and the station waits for the next serial;
   * once detection is over the unit's images, session and calibration are written and solved (a
     fraction of its time); a Ctrl-C then is held until the unit is complete, and ends the station after
     its verdict, so no unit is ever half stored.
