@@ -194,10 +194,9 @@ class Spool:
 
     def prune_images(self, now_s: float | None = None) -> int:
         """Delete image files no queued record needs (synced ones, or a cancelled unit's after an hour)."""
-        needed = {sha for record in self.records(pending_only=True) for sha in record.image_shas}
+        needed, synced = self._image_shas(synced=False), self._image_shas(synced=True)
         cutoff = (time.time() if now_s is None else now_s) - ORPHAN_GRACE_S
         removed = 0
-        synced = {sha for record in self.records() if record.synced_at for sha in record.image_shas}
         for path in sorted(self.image_dir.glob("??/*")) if self.image_dir.is_dir() else []:
             if path.name in needed or (path.name not in synced and path.stat().st_mtime > cutoff):
                 continue
@@ -206,6 +205,16 @@ class Spool:
         return removed
 
     # reading -----------------------------------------------------------------------------------
+
+    def counts(self) -> tuple[int, int]:
+        """(queued, synced) records, without reading what they hold."""
+        row = self._conn.execute("SELECT COUNT(*) - COUNT(synced_at), COUNT(synced_at) FROM units").fetchone()
+        return int(row[0]), int(row[1])
+
+    def _image_shas(self, *, synced: bool) -> set[str]:
+        where = "synced_at IS NOT NULL" if synced else "synced_at IS NULL"
+        return {sha for (images,) in self._conn.execute(f"SELECT images FROM units WHERE {where}")
+                for sha in json.loads(images)}
 
     def records(self, *, pending_only: bool = False) -> list[SpoolRecord]:
         where = " WHERE synced_at IS NULL" if pending_only else ""

@@ -172,7 +172,7 @@ class _Offline:
 
     def before_unit(self, report: Callable[[UnitResult], None]) -> str | None:
         """Sync what is queued; why the next unit must be queued too (None: nothing is left queued)."""
-        if self._spool is None or not self._spool.records(pending_only=True):
+        if self._spool is None or self._spool.counts()[0] == 0:
             return None
         try:
             done = sync(self.settings, self._spool)

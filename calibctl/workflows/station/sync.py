@@ -66,8 +66,7 @@ def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord
     """Sync the queued records in order (see the module docstring). ``after_store(record)`` runs after a
     record is in the store and before it is marked synced (where a kill is worst; tests interrupt there)."""
     report = SyncReport()
-    pending = spool.records(pending_only=True)
-    if not pending:
+    if spool.counts()[0] == 0:
         return report
     with spool.sync_lock():
         pending = spool.records(pending_only=True)  # what another syncer left, now that it is done
@@ -80,7 +79,7 @@ def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord
                     spool.mark_synced(record.seq, report.synced[-1].version)
         except CalibctlError as exc:
             report.error = exc
-        report.left = len(spool.records(pending_only=True))
+        report.left = spool.counts()[0]
         spool.prune_images()
     return report
 
@@ -139,11 +138,8 @@ class SpoolStatus:
 
 def status(spool: Spool) -> SpoolStatus:
     """What is queued (oldest first, each checked against its sha256) and how many records were synced."""
-    records = spool.records()
     queued = []
-    for r in records:
-        if r.synced_at is not None:
-            continue
+    for r in spool.records(pending_only=True):
         try:
             spool.opened(r)
             intact = True
@@ -151,4 +147,4 @@ def status(spool: Spool) -> SpoolStatus:
             intact = False
         queued.append(QueuedUnit(r.seq, r.serial, r.session_id, r.queued_at, r.verdict() if intact else "?",
                                  len(r.image_shas), intact))
-    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, len(records) - len(queued))
+    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, spool.counts()[1])
