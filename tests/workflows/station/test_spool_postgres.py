@@ -20,17 +20,23 @@ from tests.workflows.station.spool_setup import TcpProxy, central_store, unit_fo
 pytestmark = pytest.mark.postgres
 
 
-def test_units_while_postgresql_is_cut_off_are_stored_signed_and_in_order_once_it_is_back(
-        pg_url: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path) -> None:
+@pytest.fixture
+def proxied(pg_url: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path):
+    """(proxy, the store's URL through it, the unit folders): a fresh database with board A17 behind a proxy."""
     server = urllib.parse.urlsplit(pg_url)
     proxy = TcpProxy((server.hostname or "127.0.0.1", server.port or 5432))
     proxy.restore()
     through_proxy = urllib.parse.urlunsplit(server._replace(netloc=f"{server.username}@127.0.0.1:{proxy.port}"))
     central_store(through_proxy)
+    return proxy, through_proxy, unit_folders(tmp_path_factory, tmp_path)
+
+
+def test_units_while_postgresql_is_cut_off_are_stored_signed_and_in_order_once_it_is_back(
+        pg_url: str, proxied, tmp_path: Path) -> None:
+    proxy, through_proxy, shots = proxied
     signer = create_key(tmp_path / "station.key")
     settings = load_settings(db=through_proxy, station="line-3", operator="op-ana", env={}, jobs=2).model_copy(
         update={"signing_key": str(tmp_path / "station.key")})
-    shots = unit_folders(tmp_path_factory, tmp_path)
     request = StationRequest("A17", f"{shots}/{{serial}}", spool=tmp_path / "spool.sqlite")
 
     def run(*serials: str) -> list[UnitResult]:
@@ -62,13 +68,8 @@ def test_units_while_postgresql_is_cut_off_are_stored_signed_and_in_order_once_i
 
 
 def test_two_stations_syncing_their_spools_at_once_get_consecutive_versions_of_one_serial(
-        pg_url: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path) -> None:
-    server = urllib.parse.urlsplit(pg_url)
-    proxy = TcpProxy((server.hostname or "127.0.0.1", server.port or 5432))
-    proxy.restore()
-    through_proxy = urllib.parse.urlunsplit(server._replace(netloc=f"{server.username}@127.0.0.1:{proxy.port}"))
-    central_store(through_proxy)
-    shots = unit_folders(tmp_path_factory, tmp_path)
+        pg_url: str, proxied, tmp_path: Path) -> None:
+    proxy, through_proxy, shots = proxied
     stations = {name: load_settings(db=through_proxy, station=name, operator="op", env={}, jobs=1)
                 for name in ("line-3", "line-4")}
     for name, settings in stations.items():  # each station calibrates CAM-1 online once: the board is remembered
