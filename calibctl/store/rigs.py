@@ -68,7 +68,7 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
         raise codec._mismatch(what, row.content_sha256, actual)
     codec._check_columns(what, {"rig": (row.rig, cal.rig), "version": (row.version, cal.version),
                                 "status": (row.status, cal.status)})
-    return codec.with_signature(cal, row, what)
+    return codec.with_signature(cal.model_copy(update={"signature": None}), row, what)  # the row's, never the payload's
 
 
 def _event(row: RigEventRow) -> RigActivation:

@@ -152,6 +152,16 @@ def test_a_rig_not_registered_here_is_exit_2(signed, tmp_path):  # noqa: F811
     assert r.exit_code == 2 and "unknown rig 'R1'" in _text(r) and "calibctl rig add" in _text(r)
 
 
+def test_a_rig_registered_here_with_another_layout_is_exit_2(signed, tmp_path):  # noqa: F811
+    source, _, _ = signed
+    path = _export_rig(source, tmp_path / "R1.json")
+    url = _target(source, tmp_path, register=False)
+    assert invoke(url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1", "--root", "CAM1").exit_code == 0
+    r = invoke(url, "rig", "import", str(path))
+    assert r.exit_code == 2 and "is not the rig R1 registered here" in _text(r) and "root CAM1" in _text(r)
+    assert _rig_versions(url) == []
+
+
 @pytest.mark.parametrize("content", ['{"hello": 1}', "not json"])
 def test_a_file_that_is_no_rig_export_is_exit_2(signed, tmp_path, content):  # noqa: F811
     source, _, _ = signed
