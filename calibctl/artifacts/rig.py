@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from calibctl.artifacts.calibration import Provenance
+from calibctl.artifacts.calibration import Provenance, RecordSignature
 from calibctl.artifacts.common import (
     CURRENT_HASH,
     LEGACY_HASH,
@@ -201,15 +201,23 @@ class RigCalibration(Document):
         LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
         description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
         "other field, this one included; absent = sha256-python-json, the versions written before it")
-    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
+    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field but signature")
+    signature: RecordSignature | None = Field(
+        None, exclude_if=lambda seal: seal is None,
+        description="the writing store's signature of this version's record, when it had a key (absent: "
+        "unsigned); not hashed, and absent from the stored document (the store keeps it in the row's columns)")
+
+    @property
+    def ref(self) -> str:
+        return f"{self.rig}@{self.version}"
 
     def computed_sha256(self) -> str:
         """The hash under the version's own ``content_hash_algorithm`` (old versions keep theirs)."""
-        return content_hash(self, None, self.content_hash_algorithm)
+        return content_hash(self, {"content_sha256", "signature"}, self.content_hash_algorithm)
 
     def sealed(self) -> RigCalibration:
-        """A copy hashed with the current algorithm (RFC 8785)."""
-        current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH})
+        """An unsigned copy hashed with the current algorithm (RFC 8785); the store signs what it writes."""
+        current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH, "signature": None})
         return current.model_copy(update={"content_sha256": current.computed_sha256()})
 
 

@@ -84,6 +84,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig export": ("calibctl rig export stereo-7 --format ros -o stereo/",
                    "calibctl rig export stereo-7@2 --format opencv -o stereo.yml",
                    "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame"),
+    "rig import": ("calibctl rig import stereo-7.json",
+                   "calibctl rig import robot/ --require-signature --trusted-keys trusted/"),
     "lidar": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
               "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box 1,-2.2,-0.8,3.6,1.6,0.6",),
     "lidar solve": ("calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "

@@ -9,7 +9,8 @@ import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import OperatorOption, StationOption
-from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.render import emit_json
+from calibctl.cli.rig_render import print_findings, render_run, say
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 rig_app = typer.Typer(
@@ -18,58 +19,6 @@ rig_app = typer.Typer(
     no_args_is_help=True,
     rich_markup_mode=None,
 )
-
-
-def say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
-
-
-def render_run(doc: dict[str, Any]) -> None:
-    """Human report of ``rig_folders.run_json``."""
-    unmatched = doc["unmatched"]
-    say(f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)")
-    for u in unmatched[:10]:
-        say(f"  unmatched {u['camera']} {u['file']}: {u['reason']}")
-    for name, counts in doc["images"].items():
-        say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
-    say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
-    g = doc["gate"]
-    say(f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
-        + (f" -> {g['hint']}" if g["hint"] else ""))
-    if "tree" in doc:
-        render_solution(doc)
-    render_verdict(doc)
-
-
-def render_solution(doc: dict[str, Any]) -> None:
-    """The tree, fit and held-out numbers of a solved ``rig_folders.run_json``."""
-    say(f"tree from {doc['root']} ({doc['solver']}):")
-    for e in doc["tree"]:
-        say(f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
-            f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg")
-    held = doc.get("held_out", {})
-    for name, rms in doc["fit_rms_px"].items():
-        say(f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
-            f"({held.get('folds', 0)}-fold)")
-    for p in doc["pairs"]:
-        line = (f"  pair {p['pair']}: baseline {p['baseline_mm']:.3f} +/- {p['sigma_baseline_mm']:.3f} mm, "
-                f"{p['shared_views']} shared views")
-        if "epipolar_rms_px" in p:
-            line += (f"; held-out epipolar RMS {p['epipolar_rms_px']:.3f} px (max {p['epipolar_max_px']:.3f}), "
-                     f"rectified rows RMS {p['rectified_rms_px']:.3f} px")
-        say(line)
-    for lc in doc["loops"]:
-        say(f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
-            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}")
-
-
-def render_verdict(doc: dict[str, Any]) -> None:
-    """The verdict lines of ``rig_folders.run_json`` (after the gate, when the rig was solved or judged)."""
-    if "verdict" not in doc:
-        return
-    say(f"verdict: {doc['verdict']}")
-    for f in doc["lint"]:
-        say(f"  {f['severity']} {f['rule']}: {f['message']}" + (f" -> {f['fix']}" if f.get("fix") else ""))
 
 
 @rig_app.command("solve-folders")
@@ -121,16 +70,20 @@ def solve_folders(
     exports: list[str] = []
     withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected
     if export_dir is not None and run.solution is not None and not withheld:
-        from calibctl.workflows.exports.rig_exports import write_exports
+        from calibctl.workflows.exports.rig_exports import solution_sha256, write_exports
 
-        exports = [str(p) for p in write_exports(run.solution, export_dir)]
+        exports = [str(p) for p in write_exports(run.solution, export_dir,
+                                                 status="accepted" if run.passed else "rejected")]
         doc["exports"] = exports
+        doc["solution_sha256"] = solution_sha256(run.solution)
     if wants_json(ctx, json_output):
         emit_json(doc)
     else:
         render_run(doc)
         for path in exports:
             say(f"  wrote {path}")
+        if exports:
+            say(f"  exports: not stored (no rig version), solution sha256 {doc['solution_sha256']}")
         if withheld:
             say(f"  exports not written to {export_dir}: the verdict failed (--allow-rejected writes them to "
                 "inspect; a robot must not load them)")
@@ -226,13 +179,6 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
         say(f"  loop {'-'.join(lc.cycle)}: {lc.rotation_deg:.4f} deg, {lc.translation_mm:.3f} mm, "
             f"Mahalanobis {lc.mahalanobis:.2f}")
     print_findings(cal.lint)
-
-
-def print_findings(findings: list[Any]) -> None:
-    if not findings:
-        say("  lint: clean")
-    for f in findings:
-        say(f"  {f.severity} {f.rule}: {f.message}" + (f" -> {f.fix}" if f.fix else ""))
 
 
 @rig_app.command("solve")
@@ -382,6 +328,41 @@ def export(
         print(text, end="")
     else:
         say(f"wrote {out}")
+
+
+@rig_app.command("import")
+def import_(
+    ctx: typer.Context,
+    path: Annotated[Path, typer.Argument(metavar="FILE", help="A rig version exported with `rig export --format json`, "
+                                         "or a bundle folder (or its manifest.json).")],
+    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it active (when this store accepts "
+                                           "it and every member is active here).")] = True,
+    require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a rig version not signed by a "
+                                                    "trusted key (exit 2).")] = False,
+    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public "
+                                                      "keys (*.pem); default: the trusted_keys setting.")] = None,
+    json_output: JsonFlag = False,
+) -> None:
+    """Bring a rig version exported by another store into this one: its hash (edited: exit 1) and signature are
+    checked, its members must be in this store (the same versions, or imports of them: `calibctl import` them
+    first), and its lint, verdict and version are this store's. A rejected or stale import is never active."""
+    from calibctl.workflows.rig import rig_import
+
+    out = rig_import.import_rig_file(state(ctx).settings(), path, activate=activate,
+                                     require_signature=require_signature, trusted_keys=trusted_keys)
+    cal = out.calibration
+    if wants_json(ctx, json_output):
+        emit_json({"calibration": cal.model_dump(mode="json"), "source": out.source_ref,
+                   "source_status": out.source_status, "active": out.active, "already_imported": out.already_imported,
+                   "stale": [f.model_dump(mode="json") for f in out.stale]})
+    else:
+        again = "already stored as" if out.already_imported else "imported as"
+        say(f"{again} {cal.ref} ({cal.status} by this store's lint, {'active' if out.active else 'not active'}; "
+            f"source {out.source_ref} was {out.source_status}; sha256 {cal.content_sha256[:12]})")
+        if not out.already_imported:
+            print_findings([f for f in [*cal.lint, *out.stale] if f.severity == "error"])
+    if activate and not out.already_imported and not out.active:  # asked to make it active; this store says no
+        raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def register(app: typer.Typer) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
@@ -26,6 +26,7 @@ from calibctl.errors import IntegrityError
 if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (sqlite_reads) uses them too
     from calibctl.store.models import ArtifactRow, BoardRow, CheckEventRow, EventRow, SessionRow
 
+SignedT = TypeVar("SignedT", bound=BaseModel)
 TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
 
 
@@ -204,13 +205,18 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
             "rms_px": (row.rms_px, artifact.rms_px),
         },
     )
-    if row.signature or row.key_id:
-        try:
-            seal = RecordSignature(key_id=row.key_id, record_sha256=row.chain_hash, value=row.signature)
-        except ValidationError as exc:
-            raise IntegrityError(f"{what} has an unreadable signature ({exc.errors()[0]['msg']})", TAMPER_HINT) from exc
-        artifact = artifact.model_copy(update={"signature": seal})
-    return artifact
+    return with_signature(artifact, row, what)
+
+
+def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
+    """``document`` (a camera artifact or rig version) carrying its row's signature, as exports show it."""
+    if not (row.signature or row.key_id):
+        return document
+    try:
+        seal = RecordSignature(key_id=row.key_id, record_sha256=row.chain_hash, value=row.signature)
+    except ValidationError as exc:
+        raise IntegrityError(f"{what} has an unreadable signature ({exc.errors()[0]['msg']})", TAMPER_HINT) from exc
+    return document.model_copy(update={"signature": seal})
 
 
 # events -------------------------------------------------------------------------------------------

@@ -68,7 +68,7 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
         raise codec._mismatch(what, row.content_sha256, actual)
     codec._check_columns(what, {"rig": (row.rig, cal.rig), "version": (row.version, cal.version),
                                 "status": (row.status, cal.status)})
-    return cal
+    return codec.with_signature(cal.model_copy(update={"signature": None}), row, what)  # the row's, never the payload's
 
 
 def _event(row: RigEventRow) -> RigActivation:
@@ -200,7 +200,7 @@ class RigStoreMixin:
                     f"rig {cal.rig}: the active version changed underneath this write (it was built on {seen}, "
                     f"the active version is now {cal.rig}@{active}); nothing stored",
                     f"look at `calibctl rig history {cal.rig}` and run the command again on {cal.rig}@{active}")
-            stored = cal.model_copy(update={"version": version}).sealed()
+            stored = cal.model_copy(update={"version": version}).sealed()  # sealed drops an imported signature
             row = RigCalibrationRow(rig=stored.rig, version=version, status=stored.status,
                                     created_at=stored.provenance.created_at, payload=codec.canonical_text(stored),
                                     content_sha256=stored.content_sha256)
@@ -209,7 +209,7 @@ class RigStoreMixin:
             s.flush()
             if activate:
                 _append(s, stored.rig, version, "activate", actor, station, reason, self.signer)
-            return stored
+            return codec.with_signature(stored, row, f"rig {stored.rig}@{version}")
 
         return self._run(work, write=True)
 

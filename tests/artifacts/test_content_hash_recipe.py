@@ -1,5 +1,6 @@
 """docs/content-hash.md's recipe, run word for word (with the independent PyPI rfc8785) on a signed camera
-export and on a rig export: the recipe a robot's developer copies must pass on what calibctl writes."""
+export and on a signed rig export (`rig export --format json` and a bundle's rig.json): the recipe a robot's
+developer copies must pass on what calibctl writes."""
 
 from __future__ import annotations
 
@@ -31,21 +32,25 @@ def _run_recipe_on(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     exec(compile(_recipe(), str(DOC), "exec"), {})  # its own assert decides
 
 
-def test_the_recipe_checks_a_signed_camera_export_and_a_rig_export(sqlite_url, tmp_path, monkeypatch):
+def test_the_recipe_checks_a_signed_camera_export_and_a_signed_rig_export(sqlite_url, tmp_path, monkeypatch):
     with Store.open(sqlite_url, signer=create_key(tmp_path / "k.pem")) as store:
         store.add_board(measured_board())
         store.add_artifact(calibration(), activate=True, **WHO)
         store.add_rig(rig_definition())
         store.add_rig_calibration(rig_calibration(), activate=True, **WHO)
-    for args in (["export", "CAM-0001"], ["rig", "export", RIG, "--format", "json", "--allow-stale"]):
-        folder = tmp_path / args[0] / args[1]
+    bundle = ["rig", "export", RIG, "--format", "bundle", "--allow-stale"]
+    for args in (["export", "CAM-0001"], ["rig", "export", RIG, "--format", "json", "--allow-stale"], bundle):
+        folder = tmp_path / args[0] / args[1] / args[-2]
         folder.mkdir(parents=True)
         out = folder / "export.json"
-        result = CliRunner().invoke(app, ["--db", sqlite_url, *args, "-o", str(out)])
+        target = folder / "bundle" if args is bundle else out
+        result = CliRunner().invoke(app, ["--db", sqlite_url, *args, "-o", str(target)])
         assert result.exit_code == 0, result.output
+        if args is bundle:
+            os.replace(target / "rig.json", out)
         doc = json.loads(out.read_text())
         assert doc["content_hash_algorithm"] == "sha256-rfc8785"
-        assert ("signature" in doc) == (args[0] == "export")  # the camera export is signed; rigs are not yet
+        assert doc["signature"]["algorithm"] == "ed25519"  # signed camera artifact and signed rig version alike
         _run_recipe_on(out, monkeypatch)
         doc["content_sha256"] = "0" * 64
         (folder / "CAM-0042.json").write_text(json.dumps(doc))

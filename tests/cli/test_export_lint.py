@@ -144,14 +144,11 @@ def test_a_file_without_header_is_linted_on_its_numbers_and_cannot_be_traced(sto
     assert "cannot be traced" in next(f["message"] for f in findings(result) if f["rule"] == "traceability")
     # ROS rewrites camera_info without comments (set_camera_info, the convert tool): what only the solve knew
     # (sigma, held-out outer ring, square size) is named as not checked, never an error whose fix is to re-capture
-    assert "sigma(fx) and the held-out outer ring are not checked" in " ".join(
-        f["message"] for f in findings(result) if f["rule"] == "traceability")
-    assert not {"sigma-fx", "outer-ring-holdout"} & set(rules)
-    # the square size's provenance does not travel with a bare file: still an error (seed chapter 0), whose fix
-    # is to lint what the file was made from, not to capture again
-    provenance = next(f for f in findings(result) if f["rule"] == "square-size-provenance")
-    assert "no calibctl header" in provenance["message"] and "calibctl lint --serial SERIAL" in provenance["fix"]
-    assert result.exit_code == 1
+    traced = next(f for f in findings(result) if f["rule"] == "traceability")
+    assert "sigma(fx), the held-out outer ring and the square size's provenance are not checked" in traced["message"]
+    assert "calibctl lint --serial SERIAL" in traced["fix"]  # the gauge is audited where it is kept: the store
+    assert rules == {"traceability": "warning"}  # good numbers: a warning only, the verdict passes
+    assert result.exit_code == 0, result.output
 
 
 def test_a_header_without_file_hash_says_it_cannot_be_checked(store_url, tmp_path):

@@ -39,6 +39,29 @@ def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
         "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
 
 
+def test_solve_folders_exports_carry_a_not_stored_trace_header_that_lint_reads(rig2, tmp_path):
+    """Like a stored rig's exports, each names what it came from: no rig version (not stored), the verdict and
+    the solution's sha256; lint checks each file's hash and passes them with a traceability warning."""
+    out = tmp_path / "out"
+    result = invoke("--json", "rig", "solve-folders", *_sources(rig2), "--export-dir", str(out))
+    assert result.exit_code == 0, result.output
+    sha = json.loads(result.output)["solution_sha256"]
+    line = f"calibctl rig not stored (rig solve-folders) accepted solution-sha256 {sha}"
+    paths = sorted(out.iterdir())
+    for path in paths:
+        head = path.read_text().splitlines()[:3]
+        assert any(text.strip("#<>!- ") == line for text in head), (path.name, head)
+    linted = invoke("--json", "lint", *map(str, paths))
+    assert linted.exit_code == 0, linted.output
+    results = json.loads(linted.output)["results"]
+    assert all({f["rule"] for f in r["findings"]} == {"traceability"} for r in results), results
+    assert all("not from a stored rig version" in r["findings"][0]["message"] for r in results)
+    edited = out / "tf_static.yaml"
+    edited.write_text(edited.read_text().replace("x: ", "x: 1", 1))
+    linted = invoke("--json", "lint", str(edited))
+    assert linted.exit_code == 1 and "content-hash" in linted.output
+
+
 def test_solve_folders_json_and_root(rig2):
     result = invoke("--json", "rig", "solve-folders", *_sources(rig2), "--root", "CAM1")
     assert result.exit_code == 0, result.output
@@ -97,6 +120,10 @@ def test_a_failed_verdict_exits_1_and_withholds_the_exports(rig2, tmp_path):
     assert result.exit_code == 1
     doc = json.loads(result.output)
     assert doc["verdict"] == "fail" and [f["rule"] for f in doc["lint"]] == ["epipolar"] and len(doc["exports"]) == 6
+    stereo = (out / "stereo_CAM0_CAM1.yaml").read_text()
+    assert f"# calibctl rig not stored (rig solve-folders) rejected solution-sha256 {doc['solution_sha256']}" in stereo
+    linted = invoke("--json", "lint", str(out / "stereo_CAM0_CAM1.yaml"))  # a rejected solve's file fails lint
+    assert linted.exit_code == 1 and "status" in {f["rule"] for f in json.loads(linted.output)["results"][0]["findings"]}
 
 
 @needs_datasets

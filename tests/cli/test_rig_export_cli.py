@@ -170,7 +170,7 @@ def test_lint_rig_require_signature_names_the_unsigned_rig_and_each_unsigned_mem
     r = invoke(db, "--json", "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(trusted))
     assert r.exit_code == 1, r.output
     messages = [f["message"] for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature"]
-    assert messages == ["rig R1@1 is not signed (calibctl does not sign rig versions yet)",
+    assert messages == ["rig R1@1 is not signed",
                         "member CAM0@1 is not signed", "member CAM1@1 is not signed"]
     assert invoke(db, "lint", "--rig", "R1").exit_code == 0  # without --require-signature the rig passes
     empty = tmp_path / "empty"

@@ -72,8 +72,8 @@ def test_a_ros_rewritten_camera_info_warns_traceability_and_asks_for_no_new_capt
     bare.write_text("".join(line + "\n" for line in text.splitlines() if not line.startswith("#")))
     r, doc = _lint(db, bare)
     result = doc["results"][0]
-    assert result["kind"] == "ros" and _rules(result)["traceability"] == "warning"
-    assert not {"sigma-fx", "outer-ring-holdout"} & set(_rules(result))
+    assert result["kind"] == "ros" and _rules(result) == {"traceability": "warning"}  # pass with a warning
+    assert r.exit_code == 0, r.output
     assert not any("capture more views" in (f["fix"] or "") for f in result["findings"])
 
 
@@ -153,7 +153,7 @@ def test_every_format_of_a_pinhole_and_a_fisheye_rig_lints_clean(sqlite_url, tmp
     assert all(x["errors"] == 0 for x in doc["results"]), [x for x in doc["results"] if x["errors"]]
 
 
-def test_require_signature_refuses_a_rig_export_naming_the_stored_check(db, tmp_path):  # noqa: F811
+def test_require_signature_refuses_an_unsigned_rig_export_naming_the_fix(db, tmp_path):  # noqa: F811
     from calibctl.signing import create_key
 
     trusted = tmp_path / "trusted"
@@ -164,4 +164,4 @@ def test_require_signature_refuses_a_rig_export_naming_the_stored_check(db, tmp_
     r = invoke(db, "--json", "lint", str(path), "--require-signature", "--trusted-keys", str(trusted))
     assert r.exit_code == 1
     signature = next(f for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature")
-    assert "carries no signature" in signature["message"] and "lint --rig RIG --require-signature" in signature["fix"]
+    assert signature["message"] == "rig R1@1 is not signed" and "calibctl keys init" in signature["fix"]

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 import yaml
 
+from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_solve import RigSolution
@@ -29,6 +30,7 @@ from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.core.extrinsics.se3 import quaternion_xyzw
 from calibctl.errors import InputError
 from calibctl.files import file_errors, write_atomic
+from calibctl.workflows.exports import trace_header
 from calibctl.workflows.exports.frame_names import FrameNames
 from calibctl.workflows.exports.ros_camera_info import camera_name_for, distortion_for
 
@@ -196,9 +198,24 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree, names: F
     return _yaml(doc)
 
 
-def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig") -> list[Path]:
+def solution_sha256(solution: RigSolution) -> str:
+    """sha256 of the RFC 8785 form of what every export of an unstored solve is derived from: per camera
+    (tree order) its name, image size, K, distortion and lens, and every tree edge's T_parent_child."""
+    by_name = {m.name: m for m in solution.members}
+    doc = {"members": [{"camera": name, "image_size": [int(v) for v in by_name[name].image_size],
+                        "camera_matrix": np.asarray(by_name[name].camera_matrix, float).tolist(),
+                        "dist_coeffs": [float(v) for v in np.ravel(by_name[name].dist_coeffs)],
+                        "lens": by_name[name].lens} for name in solution.tree.frames],
+           "edges": [{"parent": e.parent, "child": e.child, "T_parent_child": np.asarray(e.T_parent_child, float).tolist()}
+                     for e in solution.tree.edges]}
+    return sha256_hex(jcs_bytes(doc))
+
+
+def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig",
+                  status: str = "accepted") -> list[Path]:
     """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera;
-    ``robot`` names the URDF robot."""
+    ``robot`` names the URDF robot. Each file carries the rig trace header of a solve no store holds: ``not
+    stored``, the verdict ``status`` and ``solution_sha256`` (and its file-sha256, which ``calibctl lint`` checks)."""
     with file_errors("create the export folder", out):
         out.mkdir(parents=True, exist_ok=True)
     members, tree = solution.members, solution.tree
@@ -215,7 +232,8 @@ def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: s
         texts[f"{right.name}_camera_info.yaml"] = info_right
     except InputError:
         pass  # a vertical pair has no ROS stereo export; the other files still describe it
+    sha = solution_sha256(solution)
     for name, text in texts.items():
-        write_atomic(out / name, text, force=force)
+        write_atomic(out / name, trace_header.stamp_rig(trace_header.NOT_STORED, status, sha, text), force=force)
         written.append(out / name)
     return written

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from calibctl import bounded
-from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
 from calibctl.errors import InputError
 
 _PREFIX = "# calibctl "
@@ -32,6 +32,10 @@ _EVIDENCE = re.compile(r"^# calibctl evidence (?P<json>\{.*\})\s*$")
 _FILE_SHA = re.compile(r"^(?:# |<!-- )calibctl file-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
 _RIG_REF = re.compile(r"^(?:# |<!-- )calibctl rig (?P<ref>\S+@\d+) (?P<status>accepted|rejected) sha256 "
                       r"(?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
+_RIG_NOT_STORED = re.compile(r"^(?:# |<!-- )calibctl rig not stored \(rig solve-folders\) (?P<status>accepted|rejected) "
+                             r"solution-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
+_SIGNATURE = re.compile(r"^(?:# |<!-- )calibctl rig-signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
+                        r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)(?: -->)?\s*$")
 _MEMBER = re.compile(r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
                      r"(?: frame (?P<frame>\S+))?(?: -->)?\s*$")
 HEADER_SCAN_LINES = 8
@@ -90,26 +94,36 @@ def stamp(art: CalibrationArtifact, body: str) -> str:
 class RigTraceHeader:
     """The header of a rig export: the rig version (and, in a camera's file, the member) it was written from."""
 
-    ref: str
+    ref: str  # RIG@N, or NOT_STORED for `rig solve-folders --export-dir`
     status: str
-    rig_sha256: str
+    rig_sha256: str  # the rig version's content_sha256 (not stored: the solution's sha256)
     members: tuple[tuple[str, str, str | None], ...]  # (SERIAL@VERSION, content_sha256, ROS frame)
     file_sha256: str | None
     actual_file_sha256: str | None
+    signature: RecordSignature | None = None  # the rig version's store signature (over rig_sha256)
 
     @property
     def intact(self) -> bool | None:
         return None if self.file_sha256 is None else self.file_sha256 == self.actual_file_sha256
 
 
+NOT_STORED = "not-stored"
+
+
 def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
-              members: tuple[tuple[str, str, str | None], ...] = ()) -> str:
-    """``body`` (YAML, OpenCV YAML or XML) with a rig header: ``calibctl rig RIG@N STATUS sha256 S``, one
-    ``calibctl member SERIAL@V sha256 S frame F`` line per camera the file describes, and the file hash.
-    A leading ``%YAML`` directive or ``<?xml`` declaration stays first; XML gets the lines as comments."""
+              members: tuple[tuple[str, str, str | None], ...] = (), signature: RecordSignature | None = None) -> str:
+    """``body`` (YAML, OpenCV YAML or XML) with a rig header: ``calibctl rig RIG@N STATUS sha256 S`` (``ref``
+    NOT_STORED: ``calibctl rig not stored (rig solve-folders) STATUS solution-sha256 S``), the rig version's
+    ``calibctl rig-signature ...`` when it is signed, one ``calibctl member SERIAL@V sha256 S frame F`` line
+    per camera the file describes, and the file hash. A leading ``%YAML`` directive or ``<?xml`` declaration
+    stays first; XML gets the lines as comments."""
     xml = body.startswith("<")  # a URDF robot or its joints alone: XML comments
     open_, close = ("<!-- ", " -->") if xml else ("# ", "")
-    lines = [f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"]
+    lines = [f"{open_}calibctl rig not stored (rig solve-folders) {status} solution-sha256 {rig_sha256}{close}\n"
+             if ref == NOT_STORED else f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"]
+    if signature is not None:
+        lines.append(f"{open_}calibctl rig-signature {signature.algorithm} key_id {signature.key_id} record_sha256 "
+                     f"{signature.record_sha256} value {signature.value}{close}\n")
     lines += [f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"
               for m, sha, frame in members]
     directive, rest = "", body
@@ -123,13 +137,15 @@ def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
 def read_rig(text: str) -> RigTraceHeader | None:
     """The rig header of ``text``, or None (not a rig export, or one written before rig exports were hashed)."""
     head = text.splitlines()[:HEADER_SCAN_LINES + 8]
-    ref = next((m for line in head if (m := _RIG_REF.match(line))), None)
+    ref = next((m for line in head if (m := _RIG_REF.match(line) or _RIG_NOT_STORED.match(line))), None)
     if ref is None:
         return None
     members = tuple((m.group("ref"), m.group("sha"), m.group("frame")) for line in head if (m := _MEMBER.match(line)))
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
-    return RigTraceHeader(ref.group("ref"), ref.group("status"), ref.group("sha"), members, sha,
-                          file_sha256(text) if sha else None)
+    seal = next((RecordSignature(algorithm="ed25519", key_id=m.group("key_id"), record_sha256=m.group("record"),
+                                 value=m.group("value")) for line in head if (m := _SIGNATURE.match(line))), None)
+    return RigTraceHeader(ref.groupdict().get("ref") or NOT_STORED, ref.group("status"), ref.group("sha"), members,
+                          sha, file_sha256(text) if sha else None, seal)
 
 
 def read(text: str) -> TraceHeader | None:

@@ -263,13 +263,7 @@ def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
     return []
 
 
-def _provenance_rule(facts: CalibrationFacts, traced: bool = True) -> list[Finding]:
-    if not traced:
-        return [Finding(rule="square-size-provenance", severity="error",
-                        message="no square-size provenance travels with this file (no calibctl header): the metric "
-                        "gauge of this calibration cannot be audited",
-                        fix="lint what it was made from: the calibctl export with its header (`calibctl export SERIAL "
-                        "--format ros`) or the stored version (`calibctl lint --serial SERIAL`)")]
+def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.square_size_status == "measured":
         return []
     if facts.square_size_status == "measured-single":
@@ -347,9 +341,9 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
     ``trace`` says what vouches for the evidence only the solve knew (sigma(fx), held-out outer ring, square
     size): ``header`` (an artifact or a camera export's header: every rule runs), ``rig`` (a rig export's
     camera: its member was linted when the rig was solved, ``calibctl lint --rig`` lints it now) or ``none``
-    (a ROS-rewritten camera_info, another tool's file). Without a header sigma(fx) and the outer ring are
-    not checked (the ``traceability`` warning names them) instead of errors whose fix is to capture again;
-    the square size's provenance stays an error (seed chapter 0: a gauge nobody can audit)."""
+    (a ROS-rewritten camera_info, another tool's file). Without a header sigma(fx), the outer ring and the
+    square size's provenance are not checked (the ``traceability`` warning names them and says to lint the
+    stored version) instead of errors: a bare file carries none of them, and no new capture would add them."""
     bad = [x for x in facts.raw_numbers if not math.isfinite(x)]
     if bad:
         return [
@@ -368,8 +362,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
         findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason,
                                                       limits.sigma_fx_max_px, facts.fit_rms_px, facts.detector_rms_px))
         findings += _outer_ring_rule(facts, limits)
-    if trace != "rig":
-        findings += _provenance_rule(facts, traced=trace == "header")
+        findings += _provenance_rule(facts)
     findings += _gauge_rule(facts)
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
@@ -411,7 +404,7 @@ def _status_rule(status: Any, ref: str) -> list[Finding]:
     ]
 
 
-UNCHECKED_WITHOUT_EVIDENCE = "sigma(fx) and the held-out outer ring"
+UNCHECKED_WITHOUT_EVIDENCE = "sigma(fx), the held-out outer ring and the square size's provenance"
 
 
 def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
@@ -425,6 +418,12 @@ def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
                         message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
                         f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig {header.ref}",
                         fix=f"export rig {header.ref} again; never edit an export by hand")]
+    if header.ref == trace_header.NOT_STORED:
+        return [Finding(rule="traceability", severity="warning",
+                        message=f"written by `calibctl rig solve-folders` (solution sha256 {header.rig_sha256[:12]}), "
+                        "not from a stored rig version: no store can vouch for its cameras' evidence",
+                        fix="for a robot, store the rig (`calibctl rig capture` + `rig solve`) and export it")
+                ] + _status_rule(header.status, "this rig solve")
     return _status_rule(header.status, f"rig {header.ref}")
 
 
@@ -444,8 +443,10 @@ def trace_rules(header: trace_header.TraceHeader | None,
                 rule="traceability",
                 severity="warning",
                 message="no calibctl header: this file cannot be traced to a stored calibration; "
-                f"linted on its numbers only ({UNCHECKED_WITHOUT_EVIDENCE} are not checked)",
-                fix="export it with `calibctl export SERIAL --format ros|opencv`",
+                f"linted on its numbers only ({UNCHECKED_WITHOUT_EVIDENCE} are not checked: the metric gauge "
+                "of a bare file cannot be audited)",
+                fix="lint what it was made from: the stored version (`calibctl lint --serial SERIAL`) or its "
+                "export with the header (`calibctl export SERIAL --format ros|opencv`)",
             )
         ], {}
     if header.intact is None:

@@ -25,12 +25,14 @@ import numpy as np
 from pydantic import ValidationError
 
 from calibctl import bounded
+from calibctl.artifacts.calibration import RecordSignature
 from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import LintThresholds
 from calibctl.errors import InputError
+from calibctl.signing import TrustedKeys
 from calibctl.workflows.exports import bundle, formats, trace_header
 from calibctl.workflows.exports.frame_names import ROS_NAME
 from calibctl.workflows.lint.lint import (
@@ -38,10 +40,12 @@ from calibctl.workflows.lint.lint import (
     LintResult,
     lint_facts,
     lint_file,
+    signature_rule,
     trace_of,
     trace_rules,
     with_evidence,
 )
+from calibctl.workflows.store_admin import keys
 
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
 _FIX_FRAME = "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
@@ -264,27 +268,86 @@ def _document(data: dict[str, Any], source: str, model: type[RigCalibration] | t
                                                        "export an accepted version")]
 
 
-def lint_rig_file(path: Path, limits: LintThresholds) -> list[LintResult] | None:
+SIGNATURE_FIX = ("load only what a signing store exported: `calibctl keys init` on the store that solves the rig, "
+                 "then trust its public key (--trusted-keys DIR)")
+
+
+def _seal(what: str, seal: RecordSignature | None, content_sha256: str, trusted: TrustedKeys) -> list[Finding]:
+    problem = keys.seal_problem(seal, content_sha256, trusted)
+    return [] if problem is None else [_error("signature", f"{what} {problem}", SIGNATURE_FIX)]
+
+
+def _seal_of(value: Any) -> RecordSignature | None:
+    try:
+        return None if value is None else RecordSignature.model_validate(value)
+    except ValidationError:
+        return None
+
+
+def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
+    """The manifest's rig signature and each member's (a robot loads the members' numbers too)."""
+    findings = _seal(f"rig {data.get('rig')}@{data.get('version')}", _seal_of(data.get("signature")),
+                     str(data.get("content_sha256")), trusted)
+    for m in data.get("members") or []:
+        if isinstance(m, dict):
+            findings += _seal(f"member {m.get('serial')}@{m.get('version')}", _seal_of(m.get("signature")),
+                              str(m.get("content_sha256")), trusted)
+    return findings
+
+
+def _header_signature(header: trace_header.RigTraceHeader | None, trusted: TrustedKeys) -> list[Finding]:
+    """A rig export's header signature, over the rig version's content hash the header names."""
+    if header is None:
+        return [_error("signature", "no calibctl rig header: nothing vouches for this file", SIGNATURE_FIX)]
+    if header.ref == trace_header.NOT_STORED:
+        return [_error("signature", "written by `rig solve-folders` from no stored rig version: nothing signs it",
+                       "store the rig (`calibctl rig solve`) and export it from a signing store")]
+    return _seal(f"rig {header.ref}", header.signature, header.rig_sha256, trusted)
+
+
+def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> LintResult:
+    """A camera export, ROS or OpenCV file (a rig's camera_info too); with ``trusted`` its signature: the
+    artifact's, or the rig version's in a rig export's header."""
+    loaded = formats.load_calibration(path)
+    result = lint_file(loaded, limits)
+    if trusted is not None and loaded.rig_header is not None:
+        result.findings.extend(_header_signature(loaded.rig_header, trusted))
+    elif trusted is not None:
+        signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
+    return result
+
+
+def lint_rig_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> list[LintResult] | None:
     """The lint of a rig export file (a bundle: its manifest's result, then one per listed file), or None
-    when ``path`` is not one."""
+    when ``path`` is not one. ``trusted`` (``--require-signature``): the rig version's signature must be a
+    trusted key's (a bundle's members' too)."""
     text, source = bounded.read_text(path), str(path)
     data = _parse(text, source)
     kind = rig_file_kind(text, data)
     if kind is None:
         return None
     if kind == "bundle":
-        results = [LintResult(source, kind, bundle.check_bundle(path, data))]
+        signed = [] if trusted is None else _bundle_signatures(data, trusted)
+        results = [LintResult(source, kind, bundle.check_bundle(path, data) + signed)]
         for entry in data.get("files") or []:
             listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
             if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():
-                results += lint_rig_file(listed, limits) or [lint_file(formats.load_calibration(listed), limits)]
+                results += lint_rig_file(listed, limits, trusted) or [lint_camera_file(listed, limits, trusted)]
         return results
-    if kind == "rig-json":
-        return [LintResult(source, kind, _document(data, source, RigCalibration))]
-    if kind == "handeye-json":
-        return [LintResult(source, kind, _document(data, source, HandEyeResult))]
+    if kind in ("rig-json", "handeye-json"):
+        model = RigCalibration if kind == "rig-json" else HandEyeResult
+        findings = _document(data, source, model)
+        if trusted is not None and kind == "rig-json":
+            findings += _seal(f"rig {data.get('rig')}@{data.get('version')}", _seal_of(data.get("signature")),
+                              str(data.get("content_sha256")), trusted)
+        elif trusted is not None:
+            findings.append(_error("signature", "a hand-eye result is signed as part of its rig version, not alone",
+                                   "lint the rig version it belongs to: `calibctl rig export RIG --format json`"))
+        return [LintResult(source, kind, findings)]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
+    if trusted is not None:
+        findings += _header_signature(rig, trusted)
     if camera is None and rig is None:
         findings = [_error("traceability", "no calibctl header: this file cannot be traced to a stored version; "
                            "linted on its numbers and frames only",

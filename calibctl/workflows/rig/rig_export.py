@@ -60,7 +60,8 @@ class RigExport:
     def stamp(self, body: str, serials: tuple[str, ...] = ()) -> str:
         by = {m.serial: m for m in self.cal.members}
         members = tuple((f"{s}@{by[s].version}", by[s].content_sha256, self.names.frame(s)) for s in serials)
-        return trace_header.stamp_rig(self.ref, self.cal.status, self.cal.content_sha256, body, members)
+        return trace_header.stamp_rig(self.ref, self.cal.status, self.cal.content_sha256, body, members,
+                                      self.cal.signature)
 
     def imu_transforms(self) -> dict[str, np.ndarray] | None:
         """serial -> T_cam_imu when the tree has one IMU frame (a declared frame named ``*imu*``)."""
@@ -159,7 +160,11 @@ def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: b
         raise UsageError(f"--format {fmt} writes one file per camera, not one text", ROS_ONE_FILE_FIX
                          if fmt == "ros" else "pass -o DIR")
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
-    text = rig_handeye.edge_export(x.cal, edge, fmt, x.names.frames) if edge is not None else _text(x, fmt)
+    if edge is None:
+        text = _text(x, fmt)
+    else:  # one hand-eye edge: its tf carries the rig header (and signature) like every rig export
+        text = rig_handeye.edge_export(x.cal, edge, fmt, x.names.frames)
+        text = x.stamp(text) if fmt == "tf" else text
     if out is not None:
         write_atomic(out, text, force=force)
     return text
@@ -213,7 +218,9 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
             files[doc["mrcal"]] = x.stamp(model, (m.name,))
         members.append(doc)
     manifest = {"rig": x.cal.rig, "version": x.cal.version, "status": x.cal.status,
-                "content_sha256": x.cal.content_sha256, "signature": None, "calibctl_version": __version__,
+                "content_sha256": x.cal.content_sha256,
+                "signature": x.cal.signature.model_dump(mode="json") if x.cal.signature else None,
+                "calibctl_version": __version__,
                 "root_frame": x.names.frame(x.full_tree.root),
                 "frames": dict(x.names.frames), "members": members,
                 "stereo": {"left": x.left, "right": x.right, "rectified_camera_info": rectified},

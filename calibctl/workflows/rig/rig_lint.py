@@ -129,7 +129,7 @@ def _active_members(store: object, cal: RigCalibration) -> dict[str, Calibration
 def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -> LintResult:
     """Lint a stored rig calibration (the active version unless RIG@N) against the store as it is now.
     ``trusted`` (``lint --require-signature``): every member version the rig used must be signed by a
-    trusted key, and the rig version itself (calibctl does not sign rig versions yet: always a finding)."""
+    trusted key, and so must the rig version itself."""
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
         rig = store.get_rig(name)
@@ -144,8 +144,9 @@ def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -
 
 def _signature_findings(store: object, cal: RigCalibration, trusted: TrustedKeys) -> list[Finding]:
     fix = "a robot must load only signed calibrations: sign the store (`calibctl keys init`) and re-solve"
-    findings = [Finding(rule="signature", severity="error", fix=fix,
-                        message=f"rig {cal.rig}@{cal.version} is not signed (calibctl does not sign rig versions yet)")]
+    own = keys.signature_problem(cal, trusted)
+    findings = [] if own is None else [Finding(rule="signature", severity="error", fix=fix,
+                                               message=f"rig {cal.ref} {own}")]
     for m in cal.members:
         try:
             art = store.get_artifact(m.serial, m.version)  # type: ignore[attr-defined]

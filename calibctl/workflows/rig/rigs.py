@@ -94,7 +94,7 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
     root = root or cameras[0]
     if root not in cameras:
         raise UsageError(f"--root {root} is not one of the cameras ({', '.join(cameras)})")
-    with open_store(settings) as store:
+    with open_store(settings, write=True) as store:  # signed with the configured key, like every record
         known = set(store.serials())
         unknown = [c for c in cameras if c not in known]
         captured = [c for c in unknown if store.list_sessions(c)]
@@ -154,7 +154,7 @@ def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], b
     identity.refuse(identity.same_corners(_session_views(list(rig.cameras), session,
                                                         {c: r.session for c, r in results.items()})),
                     f"rig {rig.name} capture")
-    with open_store(settings) as store:  # every member's session and the rig session, or none
+    with open_store(settings, write=True) as store:  # every member's session and the rig session, or none; signed
         store.add_rig_session(session, [results[c].session for c in rig.cameras])
     return RigCaptureResult(session, results)
 

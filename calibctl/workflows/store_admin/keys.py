@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
-from calibctl.artifacts.calibration import CalibrationArtifact
+from calibctl.artifacts.calibration import RecordSignature
 from calibctl.config import Settings
 from calibctl.errors import FileSystemError, InputError, UsageError
 from calibctl.files import write_atomic
@@ -78,15 +79,33 @@ def export_public(settings: Settings, key: Path | None, out: Path | None, *, for
     return KeyInfo(str(signer.path), signer.key_id, signer.public_pem())
 
 
-def signature_problem(art: CalibrationArtifact, trusted: TrustedKeys) -> str | None:
-    """None when ``art`` carries a valid signature by a trusted key, else why not (``is not signed`` ...)."""
-    seal = art.signature
+class Sealed(Protocol):
+    """What a store signs and exports with its signature: a camera artifact or a rig version."""
+
+    @property
+    def signature(self) -> RecordSignature | None: ...
+
+    @property
+    def content_sha256(self) -> str: ...
+
+    @property
+    def ref(self) -> str: ...
+
+
+def seal_problem(seal: RecordSignature | None, content_sha256: str, trusted: TrustedKeys) -> str | None:
+    """None when ``seal`` is a valid signature by a trusted key of the record whose content hash is
+    ``content_sha256``, else why not (``is not signed`` ...)."""
     if seal is None:
         return "is not signed"
-    return trusted.check(seal.key_id, seal.value, record_message(seal.record_sha256, art.content_sha256))
+    return trusted.check(seal.key_id, seal.value, record_message(seal.record_sha256, content_sha256))
 
 
-def require_trusted(art: CalibrationArtifact, source: str, trusted: TrustedKeys, required: bool) -> None:
+def signature_problem(art: Sealed, trusted: TrustedKeys) -> str | None:
+    """None when ``art`` carries a valid signature by a trusted key, else why not (``is not signed`` ...)."""
+    return seal_problem(art.signature, art.content_sha256, trusted)
+
+
+def require_trusted(art: Sealed, source: str, trusted: TrustedKeys, required: bool) -> None:
     """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
     untrusted, and always when it is signed by a trusted key but the signature does not match."""
     problem = signature_problem(art, trusted)
@@ -95,4 +114,4 @@ def require_trusted(art: CalibrationArtifact, source: str, trusted: TrustedKeys,
     if required and not trusted.keys:
         raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
     raise InputError(f"{source} ({art.ref}) {problem}",
-                     "import only artifacts exported by a store whose public key is in --trusted-keys DIR")
+                     "import only what a store whose public key is in --trusted-keys DIR exported")

@@ -15,6 +15,7 @@ from calibctl.workflows.exports.rig_exports import (
     kalibr_camchain,
     opencv_stereo,
     ros_stereo_pair,
+    solution_sha256,
     tf_static,
     urdf_joints,
     urdf_robot,
@@ -147,6 +148,18 @@ def test_write_exports_writes_every_file(stereo, tmp_path):
     assert names == {"stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
                      "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
     assert pose_to_T(np.zeros(6)).shape == (4, 4)
+
+
+def test_solution_sha256_follows_the_numbers_the_exports_are_made_of(stereo):
+    from dataclasses import replace
+
+    sha = solution_sha256(stereo)
+    assert sha == solution_sha256(stereo) and len(sha) == 64
+    edge = stereo.tree.edges[0]
+    moved = edge.T_parent_child.copy()
+    moved[0, 3] += 1e-6  # a micrometre
+    tree = replace(stereo.tree, edges=(replace(edge, T_parent_child=moved),))
+    assert solution_sha256(replace(stereo, tree=tree)) != sha
 
 
 def test_an_export_folder_that_cannot_be_created_is_a_file_system_error(stereo, tmp_path):

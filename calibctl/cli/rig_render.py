@@ -1,0 +1,66 @@
+"""How the rig commands print: the solve-folders run, the solved tree, the verdict and findings."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from calibctl.cli.render import stdout
+
+
+def say(line: str) -> None:
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
+def render_run(doc: dict[str, Any]) -> None:
+    """Human report of ``rig_folders.run_json``."""
+    unmatched = doc["unmatched"]
+    say(f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)")
+    for u in unmatched[:10]:
+        say(f"  unmatched {u['camera']} {u['file']}: {u['reason']}")
+    for name, counts in doc["images"].items():
+        say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
+    say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
+    g = doc["gate"]
+    say(f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
+        + (f" -> {g['hint']}" if g["hint"] else ""))
+    if "tree" in doc:
+        render_solution(doc)
+    render_verdict(doc)
+
+
+def render_solution(doc: dict[str, Any]) -> None:
+    """The tree, fit and held-out numbers of a solved ``rig_folders.run_json``."""
+    say(f"tree from {doc['root']} ({doc['solver']}):")
+    for e in doc["tree"]:
+        say(f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
+            f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg")
+    held = doc.get("held_out", {})
+    for name, rms in doc["fit_rms_px"].items():
+        say(f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
+            f"({held.get('folds', 0)}-fold)")
+    for p in doc["pairs"]:
+        line = (f"  pair {p['pair']}: baseline {p['baseline_mm']:.3f} +/- {p['sigma_baseline_mm']:.3f} mm, "
+                f"{p['shared_views']} shared views")
+        if "epipolar_rms_px" in p:
+            line += (f"; held-out epipolar RMS {p['epipolar_rms_px']:.3f} px (max {p['epipolar_max_px']:.3f}), "
+                     f"rectified rows RMS {p['rectified_rms_px']:.3f} px")
+        say(line)
+    for lc in doc["loops"]:
+        say(f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
+            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}")
+
+
+def render_verdict(doc: dict[str, Any]) -> None:
+    """The verdict lines of ``rig_folders.run_json`` (after the gate, when the rig was solved or judged)."""
+    if "verdict" not in doc:
+        return
+    say(f"verdict: {doc['verdict']}")
+    for f in doc["lint"]:
+        say(f"  {f['severity']} {f['rule']}: {f['message']}" + (f" -> {f['fix']}" if f.get("fix") else ""))
+
+
+def print_findings(findings: list[Any]) -> None:
+    if not findings:
+        say("  lint: clean")
+    for f in findings:
+        say(f"  {f.severity} {f.rule}: {f.message}" + (f" -> {f.fix}" if f.fix else ""))
