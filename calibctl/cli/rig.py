@@ -149,8 +149,8 @@ def add(
     root: Annotated[str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)] = None,
     design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: design baseline "
                                                       "and tolerance, mm (repeat per pair).", show_default=False)] = None,
-    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu) a hand-eye edge "
-                                                    "may join to the tree (repeat).", show_default=False)] = None,
+    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu, lidar) a "
+                                                    "hand-eye or LiDAR edge may join to the tree (repeat).", show_default=False)] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
