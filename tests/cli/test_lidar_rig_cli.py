@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from calibctl.artifacts.rig import RigCalibration
@@ -26,6 +25,7 @@ from calibctl.store.repository import Store
 from calibctl.workflows.lidar.lidar_synth import run_lidar_synth
 from tests.artifacts.factories import calibration
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
+from tests.workflows.handeye.test_rig_handeye import _tf
 from tests.workflows.urdf_check import loadable_urdf
 
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}
@@ -94,15 +94,6 @@ def _cal(url: str, ref: str = RIG) -> RigCalibration:
     done = _cli(url, "rig", "show", ref, "--json")
     assert done.exit_code == 0, done.output
     return RigCalibration.model_validate_json(done.stdout)
-
-
-def _tf(text: str) -> dict[tuple[str, str], np.ndarray]:
-    out = {}
-    for tr in yaml.safe_load("\n".join(line for line in text.splitlines() if not line.startswith("#")))["transforms"]:
-        t, q = tr["transform"]["translation"], tr["transform"]["rotation"]
-        R = se3.rotation_from_quaternion(np.array([q["w"], q["x"], q["y"], q["z"]]))
-        out[(tr["header"]["frame_id"], tr["child_frame_id"])] = se3.transform(R, [t["x"], t["y"], t["z"]])
-    return out
 
 
 def _urdf_T(joint) -> np.ndarray:
