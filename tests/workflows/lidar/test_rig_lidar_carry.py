@@ -11,6 +11,7 @@ from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.lidar import LidarEdgeResult, LidarGate, LidarTransform
 from calibctl.core.extrinsics import se3
 from calibctl.store.repository import Store
+from calibctl.workflows.compare.rig_diff import diff_rigs
 from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
 from calibctl.workflows.lidar import rig_lidar
@@ -61,6 +62,9 @@ def test_a_lidar_edge_survives_a_hand_eye_write_and_a_rig_re_solve(solved, tmp_p
     second = _lidar(x_m=0.06)
     fifth = rig_lidar.store_lidar(solved, "R1", second).calibration
     assert fifth.lidar == [second] and [e.T_parent_child[0][3] for e in fifth.edges if e.source == "lidar-board"] == [0.06]
+    # `calibctl diff --rig` compares the LiDAR edge of two versions like a hand-eye edge
+    change = next(c for c in diff_rigs(solved, "R1@4", "R1@5").edges if (c.a, c.b) == ("lidar", "CAM0"))
+    assert change.translation_mm == pytest.approx(10.0, abs=1e-6) and change.significant
 
 
 def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2, tmp_path):  # noqa: F811
