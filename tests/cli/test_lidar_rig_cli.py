@@ -183,7 +183,7 @@ def test_a_camera_recalibrated_since_makes_the_lidar_edge_stale(url):
     assert refused.exit_code == 1 and "--allow-stale" in refused.output
 
 
-def test_a_rejected_set_is_a_rejected_version_with_no_edge(renders, url):
+def test_a_rejected_set_is_a_rejected_version_with_no_edge(renders, url, tmp_path):
     done = _cli(url, *_solve_args(renders["one-way"], "--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar"))
     assert done.exit_code == 1, done.output
     assert f"stored as rig {RIG}@3 (rejected, never active; no edge)" in done.stdout
@@ -194,6 +194,11 @@ def test_a_rejected_set_is_a_rejected_version_with_no_edge(renders, url):
     assert _cal(url).version == 2  # the accepted edge stays active
     lint = _cli(url, "rig", "lint", f"{RIG}@3")
     assert lint.exit_code == 1 and "lidar-gates: lidar -> CAM-0001: gate lidar-observability failed" in lint.stdout
+    page = tmp_path / "rejected.html"
+    _cli(url, "report", "--rig", f"{RIG}@3", "-o", str(page))
+    html = page.read_text()
+    assert 'data-key="lidar_status_lidar-CAM-0001">rejected' in html and "no accepted transform" in html
+    assert 'data-key="lidar_gate_lidar-CAM-0001_lidar-observability">FAIL' in html
 
 
 def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tmp_path):
@@ -214,6 +219,15 @@ def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tm
         image.write_bytes(original)
     html = page.read_text()
     assert "data:image/jpeg" not in html and "changed since the solve (sha256 differs)" in html
+    scan = renders["good"] / "scans" / "pose1.pcd"
+    scan.rename(tmp_path / "pose1.pcd")
+    try:
+        _cli(url, "report", "--rig", RIG, "-o", str(page), "--force")
+    finally:
+        (tmp_path / "pose1.pcd").rename(scan)
+    html = page.read_text()
+    assert "data:image/jpeg" not in html and "images and scans are not in the store" in html
+    assert 'data-key="lidar_overlay_missing_lidar-CAM-0001"' in html
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from calibctl import bounded
 from calibctl.artifacts.lidar import LidarEdgeResult
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
@@ -79,15 +80,20 @@ def report_overlay(settings: Settings, ev: LidarEdgeResult) -> tuple[str | None,
     solve read are used only when they are still where they were, byte for byte (sha256)."""
     src, t = ev.overlay, ev.transform
     if ev.status != "accepted" or src is None or t is None:
-        return None, "no accepted transform to draw through"
+        return None, "not drawn: no accepted transform to draw through"
     data: dict[str, bytes] = {}
     for kind, path, sha in (("image", src.image_path, src.image_sha256), ("scan", src.scan_path, src.scan_sha256)):
         p = Path(path)
-        try:
-            data[kind] = p.read_bytes()
-        except OSError:
+        if not p.is_file():
             return None, (f"not drawn: images and scans are not in the store, and the {kind} the solve read "
                           f"({path}) is not there any more")
+        try:
+            bounded.check_size(p, f"read {kind}")
+            data[kind] = p.read_bytes()
+        except CalibctlError as exc:
+            return None, f"not drawn: {exc.message}"
+        except OSError as exc:
+            return None, f"not drawn: {path}: {exc.strerror or exc}"
         if hashlib.sha256(data[kind]).hexdigest() != sha:
             return None, f"not drawn: the {kind} {path} changed since the solve (sha256 differs)"
     serial, _, version = ev.camera.rpartition("@")
