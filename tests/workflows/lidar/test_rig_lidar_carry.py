@@ -6,9 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
+from typer.testing import CliRunner
 
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.lidar import LidarEdgeResult, LidarGate, LidarTransform
+from calibctl.cli.main import app
+from calibctl.config import load_settings
 from calibctl.core.extrinsics import se3
 from calibctl.store.repository import Store
 from calibctl.workflows.compare.rig_diff import diff_rigs
@@ -16,6 +19,8 @@ from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.rig import rig_export, rig_lint, rigs
+from tests.artifacts.factories import calibration
+from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 from tests.workflows.rig.test_rig_store_flow import WHO, _sources, _truth_artifact, rig2, settings  # noqa: F401
 
 
@@ -81,3 +86,22 @@ def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2,
     nxt = rig_handeye.store_handeye(solved, "R1", run_handeye(solved, csv, "flange", "CAM1").result).calibration
     assert nxt.lidar == [] and not [e for e in nxt.edges if e.source == "lidar-board"]
     assert "lidar-dropped" in [f.rule for f in nxt.lint]
+
+
+def test_a_lidar_edge_is_sealed_chained_and_rolled_back_on_both_backends(db_url):
+    """SQLite and PostgreSQL: the version holding the LiDAR result reads back with its RFC 8785 hash intact,
+    `db verify` passes over the rig chain, and a rollback takes the edge out of the active tree."""
+    s = load_settings(db=db_url, station="st-test", operator="tester", env={})
+    with Store.open(s.db_url) as store:
+        store.add_rig(rig_definition().model_copy(update={"frames": ["lidar"]}))
+        store.add_rig_calibration(rig_calibration(), activate=True, **WHO)
+        store.add_artifact(calibration(serial="CAM-0001"), activate=True, **WHO)
+    ev = _lidar(camera="CAM-0001@1").model_copy(update={"child_frame": "CAM-0001"})
+    stored = rig_lidar.store_lidar(s, RIG, ev)
+    assert stored.active and stored.calibration.version == 2
+    back = rig_lint.show(s, RIG)
+    assert back.lidar == [ev] and back.computed_sha256() == back.content_sha256 == stored.calibration.content_sha256
+    verify = CliRunner().invoke(app, ["--db", db_url, "db", "verify"])
+    assert verify.exit_code == 0, verify.output
+    rig_lint.rollback(s, RIG, 1, "lidar edge looked off")
+    assert rig_lint.show(s, RIG).lidar == [] and rig_lint.show(s, f"{RIG}@2").lidar == [ev]
