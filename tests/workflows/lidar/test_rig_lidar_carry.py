@@ -1,5 +1,6 @@
 """A LiDAR edge in a real rig flow (rendered 75 mm pair): carried through a hand-eye write and a rig re-solve,
-dropped (named) once its camera is re-calibrated, replaced (not added) by a second LiDAR solve."""
+dropped (named) once its camera is re-calibrated, replaced (not added) by a second LiDAR solve, compared by
+`diff --rig`; and on SQLite and PostgreSQL, sealed, chained and rolled back."""
 
 from __future__ import annotations
 
