@@ -3,7 +3,8 @@
 A rig calibration stores its extrinsics as a tree of named frames with one root (``edges``: parent ->
 child with ``T_parent_child`` and a 6x6 covariance), never as a set of pairs, so every pairwise
 transform is derived and consistent. An edge's ``source`` says what produced it ("rig-solve" today;
-a hand-eye edge such as ``flange -> cam0`` is ``"hand-eye"``, with its evidence in ``handeye``). Each member is
+a hand-eye edge such as ``flange -> cam0`` is ``"hand-eye"``, with its evidence in ``handeye``; a camera-LiDAR
+edge ``lidar -> cam0`` is ``"lidar-board"``, with its evidence in ``lidar``). Each member is
 pinned by serial, version and content_sha256 of the camera calibration the solve used, so
 ``rig-stale-member`` can tell when a member was re-calibrated after the rig solve.
 """
@@ -26,6 +27,7 @@ from calibctl.artifacts.common import (
     content_hash,
 )
 from calibctl.artifacts.handeye import FRAME_PATTERN, HandEyeResult
+from calibctl.artifacts.lidar import LidarEdgeResult
 from calibctl.artifacts.lint import Finding
 
 RIG_SCHEMA_VERSION: Literal[1] = 1
@@ -143,7 +145,7 @@ class RigEdge(Document):
     sigma_translation_mm: float = Field(ge=0, description="one-sigma of |t|, mm")
     rotation_deg: float = Field(ge=0, description="rotation angle, degrees")
     sigma_rotation_deg: float = Field(ge=0, description="one-sigma of the rotation on its least certain axis, degrees")
-    source: Literal["rig-solve", "hand-eye"] = Field("rig-solve", description="what produced this edge")
+    source: Literal["rig-solve", "hand-eye", "lidar-board"] = Field("rig-solve", description="what produced this edge")
 
 
 class RigPair(Document):
@@ -196,6 +198,11 @@ class RigCalibration(Document):
         default_factory=list, exclude_if=lambda results: not results,
         description="evidence of every hand-eye edge of this version (source 'hand-eye'), and for a version "
                     "rejected by a hand-eye gate, the rejected result (it adds no edge)")
+    lidar: list[LidarEdgeResult] = Field(
+        default_factory=list, exclude_if=lambda results: not results,
+        description="evidence of every camera-LiDAR edge of this version (source 'lidar-board'), and for a version "
+                    "rejected by a LiDAR gate, the rejected result (it adds no edge); absent when empty, so older "
+                    "versions and their hashes are unchanged")
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(
         LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,

@@ -57,7 +57,8 @@ def render_result(doc: dict[str, Any]) -> None:
             + "; sigma about x, y, z " + ", ".join(f"{v:.3f}" for v in t["sigma_rotation_deg"]) + " deg")
         say(f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
             f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm ({_num(m['projected_edge_rms_px'])} px in "
-            f"the image); board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
+            f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, {_num(m['held_out_projected_edge_rms_px'])} px)"
+            f"; board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
             f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm")
         say(f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
             f"{_num(m['range_offset_from_dimensions_sigma_mm'])} mm"
@@ -109,6 +110,8 @@ def solve(
     lidar_frame: Annotated[str, typer.Option("--lidar-frame", help="tf parent frame name.")] = "lidar",
     camera_frame: Annotated[str, typer.Option("--camera-frame", help="tf child frame name.")] = "camera",
     force: Annotated[bool, typer.Option("--force", help="Overwrite --out, --tf-static and --overlay files.")] = False,
+    rig: Annotated[str | None, typer.Option("--rig", help="Store the result as the rig's next version: edge "
+                                            "LIDAR_FRAME -> SERIAL of its tree (rejected results never active).")] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
@@ -121,6 +124,13 @@ def solve(
     if scan_units not in ("m", "mm"):
         raise UsageError(f"--scan-units {scan_units!r} is not m or mm")
     settings = state(ctx).settings()
+    if rig is not None:
+        from calibctl.workflows.lidar import rig_lidar
+
+        if camera_info is not None:
+            raise UsageError("--rig takes the camera as --serial (its active calibration), not --camera-info",
+                             "the rig edge pins the calibration it was solved with")
+        rig_lidar.check_target(settings, rig, lidar_frame, serial)  # exit 2 before any scan is read
     if board_ref is not None:
         if any(v is not None for v in (cols, rows, square_mm, backing_mm)):
             raise UsageError("give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both")
@@ -135,6 +145,11 @@ def solve(
                           1e-3 if scan_units == "mm" else 1.0, range_offset_mm / 1e3, estimate_range_offset,
                           min_rings, max_dimension_error_mm / 1e3, min_poses, folds, overlay, force)
     outcome = wf.run_lidar_solve(settings, req)
+    stored = None
+    if rig is not None:
+        described = board_ref or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
+        ev = rig_lidar.evidence(outcome.result, req, lidar_frame, serial or "", described)
+        stored = rig_lidar.store_lidar(settings, rig, ev).calibration
     written = [f"wrote {path}" for path in outcome.result.get("overlays", [])]
     if out is not None:
         write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
@@ -145,13 +160,18 @@ def solve(
             written.append(f"wrote {tf_static}")
         else:
             written.append(f"not written: {tf_static} (rejected: no transform is published)")
+    if stored is not None:
+        outcome.result["stored"] = {"rig": stored.rig, "version": stored.version, "status": stored.status,
+                                    "active": stored.status == "accepted", "content_sha256": stored.content_sha256}
+        written.append(f"stored as rig {stored.rig}@{stored.version} "
+                       + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)"))
     if wants_json(ctx, json_output):
         emit_json(outcome.result)
     else:
         render_result(outcome.result)
         for line in written:
             say(line)
-    if not outcome.accepted:
+    if not outcome.accepted or (stored is not None and stored.status != "accepted"):
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 

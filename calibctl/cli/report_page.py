@@ -26,7 +26,8 @@ def report(
     and held-out RMS, projection uncertainty, distortion, gates and provenance. Works after images are pruned.
 
     With --rig: baselines with sigma, the T_root_cam tree, held-out epipolar RMS and vertical disparity,
-    loop closure, and the members' verdicts linked to their own reports.
+    loop closure, the members' verdicts linked to their own reports, and for a LiDAR edge T_lidar_cam with
+    sigma, gates, held-out figures and the sweep drawn over its image (when the solve's files are unchanged).
 
     Example: calibctl report CAM-0042@3 -o cam-0042-v3.html
     """

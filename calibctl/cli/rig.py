@@ -102,8 +102,8 @@ def add(
     root: Annotated[str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)] = None,
     design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: design baseline "
                                                       "and tolerance, mm (repeat per pair).", show_default=False)] = None,
-    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu) a hand-eye edge "
-                                                    "may join to the tree (repeat).", show_default=False)] = None,
+    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu, lidar) a "
+                                                    "hand-eye or LiDAR edge may join to the tree (repeat).", show_default=False)] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
@@ -172,6 +172,14 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
             + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
             + f", {len(h.motions)} motions from {h.provenance.input_file}"
             + (f", camera {h.provenance.camera}" if h.provenance.camera else ""))
+    for lr in cal.lidar:
+        failed = [g.gate for g in lr.gates if not g.passed]
+        m = lr.metrics
+        say(f"  lidar {lr.parent_frame} -> {lr.child_frame}: {lr.status}"
+            + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
+            + f", {sum(r.outcome == 'accepted' for r in lr.scans_outcomes)} of {len(lr.scans_outcomes)} scans accepted"
+            + (f", point-to-plane RMS {m.plane_rms_mm:.1f} mm (held-out {m.held_out_plane_rms_mm:.1f} mm)"
+               if m is not None and m.held_out_plane_rms_mm is not None else "") + f", camera {lr.camera}")
     for p in cal.pairs:
         epi = f"; held-out epipolar RMS {p.epipolar_rms_px:.3f} px" if p.epipolar_rms_px is not None else ""
         say(f"  pair {p.a}-{p.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm{epi}")
@@ -232,13 +240,15 @@ def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG
         emit_json({"rig": name, "active_version": active, "versions": [
             {"version": c.version, "status": c.status, "created_at": c.provenance.created_at,
              "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint),
-            "handeye": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.handeye]}
+            "handeye": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.handeye],
+            "lidar": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar]}
             for c in cals], "events": [e.model_dump(mode="json") for e in events]})
         return
     say(f"rig {name} history (active: {active if active is not None else 'none'})")
     for c in cals:
         base = ", ".join(f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs[:3])
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
+        hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
         say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
             f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}")
     for e in events:
@@ -305,7 +315,7 @@ def export(
                                                  "it; a robot must not load it).")] = False,
     allow_stale: Annotated[bool, typer.Option("--allow-stale", help="Export a version `rig lint` fails for a stale "
                                               "member (to inspect it; a robot must not load it).")] = False,
-    edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye edge, its result document "
+    edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye or LiDAR edge, its result document "
                                              "(json) or /tf_static (tf).", show_default=False)] = None,
 ) -> None:
     """What a robot loads: OpenCV stereo FileStorage, ROS camera_info per camera, tf_static, URDF, Kalibr, or the

@@ -71,7 +71,7 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
     assert r.exit_code == 0 and json.loads(r.stdout)["results"][0]["kind"] == "handeye-json", r.output
     r = invoke(db, "rig", "history", RIG)
     assert "hand-eye imu -> CAM-0002 accepted" in r.stdout
-    for args, message in ((("--edge", "flange:CAM-0001"), "has no hand-eye edge flange -> CAM-0001 (it has: "
+    for args, message in ((("--edge", "flange:CAM-0001"), "has no hand-eye or LiDAR edge flange -> CAM-0001 (it has: "
                                                            "imu:CAM-0002)"),
                           (("--edge", "imu"), "--edge must be FROM:TO"),
                           (("--edge", "imu:CAM-0002", "--format", "urdf"), "--edge exports json or tf")):

@@ -4,7 +4,7 @@ for, and the Euler angles other tools publish (acfr/cam_lidar_calibration's roll
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -13,9 +13,12 @@ from calibctl.core.lidar.solve import Pose, pose_residuals, solve
 from calibctl.core.lidar.target import BackingBoard
 
 
-def held_out(poses: Sequence[Pose], board: BackingBoard, folds: int = 5) -> tuple[float, float]:
-    """k-fold over poses: (point-to-plane RMS, edge RMS) in metres of each pose when it was left out."""
-    plane, edge = [], []
+def held_out(poses: Sequence[Pose], board: BackingBoard, folds: int = 5,
+             edge_px: Callable[[np.ndarray, Sequence[Pose]], np.ndarray] | None = None) -> tuple[float, float, float]:
+    """k-fold over poses: (point-to-plane RMS m, edge RMS m, edge RMS px) of each pose when it was left out.
+    ``edge_px(T_lidar_cam, poses)``: each ring end point's distance to the board's outline in the image, px
+    (the lens lives above core); without it the pixel figure is NaN."""
+    plane, edge, px = [], [], []
     for f in range(folds):
         test = [p for i, p in enumerate(poses) if i % folds == f]
         train = [p for i, p in enumerate(poses) if i % folds != f]
@@ -26,9 +29,13 @@ def held_out(poses: Sequence[Pose], board: BackingBoard, folds: int = 5) -> tupl
             pr, er = pose_residuals(sol.T_lidar_cam, p.camera.T_cam_board, p, board)
             plane.append(pr)
             edge.append(er)
+        if edge_px is not None:
+            px.append(edge_px(sol.T_lidar_cam, test))
     if not plane:
-        return float("nan"), float("nan")
-    return float(np.sqrt(np.mean(np.concatenate(plane) ** 2))), float(np.sqrt(np.mean(np.concatenate(edge) ** 2)))
+        return float("nan"), float("nan"), float("nan")
+    rms_px = float(np.sqrt(np.mean(np.concatenate(px) ** 2))) if px else float("nan")
+    return (float(np.sqrt(np.mean(np.concatenate(plane) ** 2))), float(np.sqrt(np.mean(np.concatenate(edge) ** 2))),
+            rms_px)
 
 
 def rpy_from_rotation(R: np.ndarray) -> tuple[float, float, float]:

@@ -1,8 +1,8 @@
 """``calibctl diff --rig A B``: two stored rig versions, pair by pair (core.compare.rig_diff does the numbers).
 
 Camera pairs get the rotation, translation and baseline change with sigma and the predicted depth-error
-change at 1, 2, 5, 10 m; hand-eye edges (a camera to a flange, IMU or LiDAR frame) the rotation and
-translation change with sigma. The members' intrinsics are the camera diff's job: when a member's
+change at 1, 2, 5, 10 m; hand-eye and camera-LiDAR edges (a camera to a flange, IMU or LiDAR frame) the
+rotation and translation change with sigma. The members' intrinsics are the camera diff's job: when a member's
 calibration version differs between the two, a note names the ``calibctl diff`` to run.
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.compare.rig_diff import ALPHA, PairChange, camera_pairs, pair_changes
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import UsageError
 from calibctl.workflows.store_admin import records
 
@@ -53,9 +53,10 @@ class RigDiff:
 
 
 def tree_of(cal: RigCalibration) -> RigTree:
-    """The stored tree (edges are stored parents first) as core's RigTree."""
-    return RigTree(cal.root, tuple(Edge(e.parent, e.child, np.array(e.T_parent_child, dtype=np.float64),
-                                        np.array(e.covariance, dtype=np.float64)) for e in cal.edges))
+    """The stored edges as core's RigTree. Hand-eye and LiDAR edges are stored as measured (``flange -> cam0``,
+    ``lidar -> cam0``), not from the root camera down: oriented as the exports do (rig_tree.orient_tree)."""
+    return orient_tree([Edge(e.parent, e.child, np.array(e.T_parent_child, dtype=np.float64),
+                             np.array(e.covariance, dtype=np.float64)) for e in cal.edges], cal.root)
 
 
 def _read(settings: Settings, ref: str) -> RigCalibration:
@@ -74,9 +75,10 @@ def diff_rigs(settings: Settings, ref_a: str, ref_b: str) -> RigDiff:
     cameras = [m.serial for m in a.members]
     pairs = camera_pairs(tree_a, tree_b, cameras)
     frames_b = {(e.parent, e.child) for e in b.edges}
-    edges = [(e.parent, e.child) for e in a.edges if e.source == "hand-eye" and (e.parent, e.child) in frames_b]
+    edges = [(e.parent, e.child) for e in a.edges if e.source in ("hand-eye", "lidar-board")
+             and (e.parent, e.child) in frames_b]
     if not pairs and not edges:
-        raise UsageError(f"{ref_a} and {ref_b} share no camera pair and no hand-eye edge",
+        raise UsageError(f"{ref_a} and {ref_b} share no camera pair and no hand-eye or LiDAR edge",
                          "compare two versions of one rig, or rigs with two cameras in common")
     changes = pair_changes(tree_a, tree_b, [*pairs, *edges], no_depth=edges)
     notes = [f"{ref} is a REJECTED rig calibration (compared as asked; a robot must not load it)"

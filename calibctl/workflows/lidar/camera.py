@@ -69,12 +69,12 @@ def lens_from_camera_info(path: Path) -> Lens:
     return Lens(K, D, size, model, source)
 
 
-def lens_from_store(settings: Settings, serial: str) -> Lens:
-    """The active calibration of ``serial`` (NotFoundError, exit 2, when it has none)."""
+def lens_from_store(settings: Settings, serial: str, version: int | None = None) -> Lens:
+    """The active calibration of ``serial`` (or ``version``; NotFoundError, exit 2, when there is none)."""
     from calibctl.workflows.store_admin.records import open_store
 
     with open_store(settings) as store:
-        art = store.get_artifact(serial)
+        art = store.get_artifact(serial, version)
     return Lens(np.array(art.camera_matrix, np.float64), np.array(art.dist_coeffs, np.float64),
                 (int(art.image_size[0]), int(art.image_size[1])), art.model.name, f"{art.ref}")
 

@@ -7,6 +7,7 @@ T (exit 1, no transform); the gates after it judge the transform. The result is 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -166,17 +167,17 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
     return poses, rows
 
 
-def projected_edge_rms_px(sol: lsolve.LidarSolution, poses: list[lsolve.Pose], board: BackingBoard,
-                         lens: Lens) -> float:
-    """RMS pixel distance, in the image, between each LiDAR ring end point (through T_cam_lidar and the
-    lens) and the nearest point of the backing board's outline as the camera sees it."""
+def projected_edge_px(T_lidar_cam: np.ndarray, poses: Sequence[lsolve.Pose], board: BackingBoard,
+                      lens: Lens) -> np.ndarray:
+    """Pixel distance, in the image, between each LiDAR ring end point (through T_cam_lidar and the lens)
+    and the nearest point of the backing board's outline as the camera sees it."""
     from calibctl.core.intrinsics.solve import project_points
 
     dists = []
     half = np.array(board.backing_m) / 2
     centre = board.centre_in_pattern()[:2]
     for p in poses:
-        T_board_lidar = se3.invert(sol.T_lidar_cam @ p.camera.T_cam_board)
+        T_board_lidar = se3.invert(T_lidar_cam @ p.camera.T_cam_board)
         e = p.lidar.edge_points_m @ T_board_lidar[:3, :3].T + T_board_lidar[:3, 3]
         rel = e[:, :2] - centre
         on = rel.copy()
@@ -190,7 +191,7 @@ def projected_edge_rms_px(sol: lsolve.LidarSolution, poses: list[lsolve.Pose], b
         a = project_points(outline, rvec, tvec, lens.camera_matrix, lens.dist_coeffs, lens.model)
         b = project_points(seen, rvec, tvec, lens.camera_matrix, lens.dist_coeffs, lens.model)
         dists.append(np.linalg.norm(a - b, axis=1))
-    return float(np.sqrt(np.mean(np.concatenate(dists) ** 2)))
+    return np.concatenate(dists) if dists else np.zeros(0)
 
 
 def _transform_json(sol: lsolve.LidarSolution) -> dict[str, Any]:
@@ -234,7 +235,9 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         result |= {"status": "rejected", "gates": [_gate_json(g) for g in pre]}
         return LidarOutcome(result, False, rows)
     sol = lsolve.solve(poses, req.board, req.estimate_range_offset)
-    held_plane, held_edge = validation.held_out(poses, req.board, req.folds)
+    held_plane, held_edge, held_px = validation.held_out(
+        poses, req.board, req.folds, lambda T, test: projected_edge_px(T, test, req.board, lens))
+    in_px = projected_edge_px(sol.T_lidar_cam, poses, req.board, lens)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
     dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions([p.lidar for p in poses], req.board.backing_m)
     post = [gates.plane_rms_gate(sol.plane_rms_m * 1e3), gates.dimension_gate(dims),
@@ -247,7 +250,8 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         "metrics": {
             "poses": len(poses), "plane_rms_mm": round(sol.plane_rms_m * 1e3, 2),
             "edge_rms_mm": round(sol.edge_rms_m * 1e3, 2),
-            "projected_edge_rms_px": round(projected_edge_rms_px(sol, poses, req.board, lens), 2),
+            "projected_edge_rms_px": round(float(np.sqrt(np.mean(in_px ** 2))), 2),
+            "held_out_projected_edge_rms_px": round(held_px, 2),
             "held_out_plane_rms_mm": round(held_plane * 1e3, 2),
             "held_out_edge_rms_mm": round(held_edge * 1e3, 2), "folds": req.folds,
             "dimension_error_mean_mm": [round(float(v), 1) for v in dims.mean(axis=0)],

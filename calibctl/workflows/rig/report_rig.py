@@ -4,7 +4,10 @@ Same shape and rules as the camera report (``report_html``): verdict and lint fi
 no dates but the artifact's own, inline SVG, no script; numbers a test checks carry ``data-key``.
 It shows the baselines with sigma, the T_root_cam tree (edges and the composed transforms, drawn from
 above), the held-out epipolar RMS and rectified vertical disparity per pair, loop closure, and each
-member's calibration with its verdict and a link to its own report by serial@version.
+member's calibration with its verdict and a link to its own report by serial@version. A rig with a
+camera-LiDAR edge gets a LiDAR section: T_lidar_cam with one-sigma, gates, fit and held-out figures, scan
+outcomes, and the sweep drawn over its image through the stored T when the solve's files are still where
+they were, unchanged (the store keeps neither; the page says so rather than drawing anything else).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError
 from calibctl.files import write_atomic
+from calibctl.workflows.lidar.lidar_overlay import report_overlay
 from calibctl.workflows.report.report import default_path
 from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
 from calibctl.workflows.report.report_svg import Plot
@@ -46,6 +50,7 @@ class RigReportData:
     members: list[MemberVerdict]
     T_root_cam: dict[str, np.ndarray]  # serial -> (4, 4), metres, composed along the tree
     lint_now: list[Finding] = field(default_factory=list)  # `calibctl lint --rig RIG@N` against the store today
+    lidar_overlays: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # "lidar:CAM" -> (uri, caption)
 
 
 def compose_tree(cal: RigCalibration) -> dict[str, np.ndarray]:
@@ -75,7 +80,8 @@ def gather_rig(settings: Settings, ref: str) -> RigReportData:
                                          store.active_version(m.serial) == m.version, art.held_out.rms_px,
                                          default_path(art, Path(".")).name))
     lint_now = lint_rig(settings, f"{cal.rig}@{cal.version}").findings
-    return RigReportData(cal, active, members, compose_tree(cal), lint_now)
+    overlays = {f"{ev.parent_frame}:{ev.child_frame}": report_overlay(settings, ev) for ev in cal.lidar}
+    return RigReportData(cal, active, members, compose_tree(cal), lint_now, overlays)
 
 
 def _verdict(d: RigReportData) -> str:
@@ -152,6 +158,54 @@ def _loops(d: RigReportData) -> str:
                                              "Mahalanobis"], rows)
 
 
+def _lidar(d: RigReportData) -> str:
+    """One block per camera-LiDAR result of this version (accepted edges and the rejected result alike)."""
+    out = []
+    for ev in d.calibration.lidar:
+        key = f"{ev.parent_frame}:{ev.child_frame}"
+        k = f"{ev.parent_frame}-{ev.child_frame}"
+        head = (f'<h3>{escape(ev.parent_frame)} -> {escape(ev.child_frame)} <span class="badge {ev.status}" '
+                f'data-key="lidar_status_{escape(k)}">{ev.status}</span></h3><p>camera {escape(ev.camera)}, board '
+                f"{escape(ev.board)}; scans {escape(ev.scans)}, images {escape(ev.images)}</p>")
+        t, m = ev.transform, ev.metrics
+        body = ""
+        if t is not None:
+            T = np.array(t.T_lidar_cam)
+            rows = [cell(f"{a}", cls="l") + cell(num(float(T[i, 3]) * 1e3, 1), f"lidar_t_{k}_{a}")
+                    + cell(num(t.sigma_translation_mm[i], 1), f"lidar_sigma_t_{k}_{a}")
+                    + cell(num(float(np.degrees(t.rpy_rad[i])), 3)) + cell(num(t.sigma_rotation_deg[i], 3),
+                                                                           f"lidar_sigma_r_{k}_{a}")
+                    for i, a in enumerate("xyz")]
+            body += ("<p>T_lidar_cam: p_lidar = R p_cam + t; rotation as roll, pitch, yaw (R = Rz Ry Rx) and "
+                     "one-sigma about LiDAR x, y, z" + ("" if ev.status == "accepted" else "; rejected: not an edge of "
+                                                        "the tree") + "</p>"
+                     + table(["axis", "t mm", "sigma mm", "roll/pitch/yaw deg", "sigma deg"], rows))
+        if m is not None:
+            figures = [("poses", "poses", str(m.poses)), ("point-to-plane RMS mm", "plane", num(m.plane_rms_mm, 2)),
+                       ("held-out point-to-plane RMS mm", "held_out_plane", num(m.held_out_plane_rms_mm, 2)),
+                       ("edge RMS mm", "edge", num(m.edge_rms_mm, 2)),
+                       ("held-out edge RMS mm", "held_out_edge", num(m.held_out_edge_rms_mm, 2)),
+                       ("edge RMS px (image)", "edge_px", num(m.projected_edge_rms_px, 2)),
+                       ("held-out edge RMS px (image)", "held_out_edge_px", num(m.held_out_projected_edge_rms_px, 2)),
+                       ("folds", "folds", str(m.folds)), ("board dimension error mm (width, height)", "dimension",
+                                                          ", ".join(num(v, 1) for v in m.dimension_error_mean_mm))]
+            body += table(["figure", "value"], [cell(a, cls="l") + cell(v, f"lidar_{name}_{k}")
+                                                for a, name, v in figures])
+        gates = [cell(g.gate, cls="l") + cell("pass" if g.passed else "FAIL", f"lidar_gate_{k}_{g.gate}")
+                 + cell(g.message, cls="l") + cell(g.hint or "", cls="l") for g in ev.gates]
+        counts: dict[str, int] = {}
+        for r in ev.scans_outcomes:
+            counts[r.outcome] = counts.get(r.outcome, 0) + 1
+        body += table(["gate", "verdict", "measured", "what to do"], gates) + "<p>scans: " + escape(", ".join(
+            f"{o} {n}" for o, n in sorted(counts.items()))) + "</p>"
+        uri, caption = d.lidar_overlays.get(key, (None, "not drawn"))
+        body += (f'<figure><img src="{uri}" alt="LiDAR over image" data-key="lidar_overlay_{escape(k)}" '
+                 f'style="max-width:100%"><figcaption>{escape(caption)}</figcaption></figure>' if uri else
+                 f'<p data-key="lidar_overlay_missing_{escape(k)}">Overlay {escape(caption)}</p>')
+        out.append(head + body)
+    return "<h2>LiDAR</h2>" + "".join(out) if out else ""
+
+
 def _members(d: RigReportData) -> str:
     cal = d.calibration
     rows = []
@@ -182,7 +236,7 @@ def _provenance(d: RigReportData) -> str:
 
 def render_rig_html(d: RigReportData) -> str:
     """The whole rig page as one string: inline CSS and SVG, no script, nothing fetched."""
-    parts = [_verdict(d), _pairs(d), _tree(d), _loops(d), _members(d), _provenance(d)]
+    parts = [_verdict(d), _pairs(d), _tree(d), _lidar(d), _loops(d), _members(d), _provenance(d)]
     title = escape(f"calibctl rig report {d.calibration.rig}@{d.calibration.version}")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
             f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n")

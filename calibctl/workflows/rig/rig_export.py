@@ -26,7 +26,7 @@ from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
-from calibctl.workflows.handeye import rig_handeye
+from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -44,7 +44,7 @@ class RigExport:
     cal: RigCalibration
     members: list[MemberIntrinsics]
     cameras: RigTree  # the rig-solve edges only, serials
-    full_tree: RigTree  # hand-eye edges included, serials and declared frames
+    full_tree: RigTree  # hand-eye and LiDAR edges included, serials and declared frames
     names: FrameNames
     left: str
     right: str
@@ -81,12 +81,12 @@ class RigExport:
 
 
 def _refuse_unloadable(cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool) -> None:
-    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye camera) exit 1."""
+    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye / LiDAR camera) exit 1."""
     ref = f"rig {cal.rig}@{cal.version}"
     if cal.status != "accepted" and not allow_rejected:
         raise UsageError(f"{ref} is {cal.status}: a robot must not load it",
                          hint="export the active version, or pass --allow-rejected to inspect it")
-    stale = [f for f in findings if f.severity == "error" and f.rule in ("rig-stale-member", "handeye-stale-member")]
+    stale = [f for f in findings if f.severity == "error" and f.rule in ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")]
     if stale and not (allow_stale or allow_rejected):
         raise VerdictFailed(f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
                             f"{stale[0].fix}; or pass --allow-stale to export it anyway (a robot must not load it)")
@@ -110,8 +110,7 @@ def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], 
             except NotFoundError:
                 active[m.serial] = None
         findings = rig_findings(cal, rig, active, settings.lint)
-        versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(cal.handeye))
-        findings += rig_handeye.handeye_findings(cal.handeye, versions)
+        findings += rig_edges.edge_findings(rig_edges.evidence_of(cal), rig_edges.cal_versions(store, cal))
     _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
     members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
                for m in cal.members]

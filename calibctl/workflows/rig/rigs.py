@@ -49,7 +49,7 @@ from calibctl.core.intrinsics.covariance import intrinsic_columns
 from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
-from calibctl.workflows.handeye import rig_handeye
+from calibctl.workflows.handeye import rig_edges
 from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin.records import open_store
@@ -257,14 +257,14 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
 
 
 def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibration, int | None]:
-    """Keep the active version's hand-eye edges (not the stale ones) in the re-solved tree; and that
+    """Keep the active version's hand-eye and LiDAR edges (not the stale ones) in the re-solved tree; and that
     version (None: nothing active), which the store compares-and-sets on (rig_handeye module docstring)."""
     try:
         active = store.get_rig_calibration(cal.rig, None)  # type: ignore[attr-defined]
     except NotFoundError:
         return cal, None
-    versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(active.handeye))
-    edges, results, dropped = rig_handeye.carried_forward(active, versions)
-    carried = cal.model_copy(update={"edges": [*cal.edges, *edges], "handeye": results, "lint": [*cal.lint, *dropped]})
+    kept = rig_edges.carried_forward(active, rig_edges.cal_versions(store, active))
+    carried = cal.model_copy(update={"edges": [*cal.edges, *kept.edges], "handeye": kept.handeye, "lidar": kept.lidar,
+                                     "lint": [*cal.lint, *kept.dropped]})
     return carried, active.version
 

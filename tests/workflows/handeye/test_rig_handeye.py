@@ -14,7 +14,7 @@ from calibctl.config import Settings, load_settings
 from calibctl.core.extrinsics import se3
 from calibctl.errors import NotFoundError, UsageError
 from calibctl.store.repository import Store
-from calibctl.workflows.handeye import rig_handeye
+from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
 from calibctl.workflows.rig import rig_export, rig_lint
 from tests.artifacts.factories import calibration
@@ -135,14 +135,14 @@ def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(setti
     assert not [f for f in rig_lint.lint_rig(settings, RIG).findings if f.rule.startswith("handeye-")]
     with Store.open(settings.db_url) as store:
         store.add_artifact(calibration(serial=ROOT), activate=True, **WHO)
-        versions = rig_handeye.active_versions(store, [ROOT])
+        versions = rig_edges.active_versions(store, [ROOT])
         active = store.get_rig_calibration(RIG)
     stale = [f for f in rig_lint.lint_rig(settings, RIG).findings if f.rule == "handeye-stale-member"]
     assert stale and f"{ROOT}@1" in stale[0].message and f"{ROOT}@2" in stale[0].message
     # a rig re-solve does not carry the stale edge; it names it
-    edges, results, dropped = rig_handeye.carried_forward(active, versions)
-    assert edges == [] and results == [] and dropped[0].rule == "handeye-dropped"
-    assert rig_handeye.carried_forward(active, {ROOT: 1})[1] == [robot]
+    kept = rig_edges.carried_forward(active, versions)
+    assert kept.edges == [] and kept.handeye == [] and kept.dropped[0].rule == "handeye-dropped"
+    assert rig_edges.carried_forward(active, {ROOT: 1}).handeye == [robot]
     # the next hand-eye on the rig drops the stale edge too (named), instead of being rejected for it
     nxt = rig_handeye.store_handeye(settings, RIG, _result(tmp_path, settings, "imu", OTHER)).calibration
     assert nxt.status == "accepted" and [h.parent_frame for h in nxt.handeye] == ["imu"]
