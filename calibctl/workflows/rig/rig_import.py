@@ -32,11 +32,11 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.exports import bundle
-from calibctl.workflows.handeye import rig_handeye
+from calibctl.workflows.handeye import rig_edges
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin import keys, records
 
-STALE_RULES = ("rig-stale-member", "handeye-stale-member")
+STALE_RULES = ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
 RIG_JSON = "rig.json"
 
 
@@ -155,8 +155,7 @@ def _rederive(store: Store, source: RigCalibration, rig: RigDefinition, settings
         except NotFoundError:
             active[serial] = None
     findings = rig_findings(mine, rig, active, settings.lint)
-    versions = rig_handeye.active_versions(store, rig_handeye.handeye_cameras(mine.handeye))
-    findings += rig_handeye.handeye_findings(mine.handeye, versions)
+    findings += rig_edges.edge_findings(rig_edges.evidence_of(mine), rig_edges.cal_versions(store, mine))
     stale = [f for f in findings if f.rule in STALE_RULES and f.severity == "error"]
     lint = [f for f in findings if f not in stale]
     status = "rejected" if has_errors(lint) else "accepted"
