@@ -131,26 +131,35 @@ def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, 
 def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec,
                     model: str) -> tuple[MemberIntrinsics, MemberFit]:
     """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well it fits."""
-    views = [(o.corner_ids, o.corners_px) for o in outcomes
+    views = [(Path(o.path).name, o.corner_ids, o.corners_px) for o in outcomes
              if o.accepted and o.corner_ids is not None and o.corners_px is not None]
     size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
     if size is None or not views:
         raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
     points = spec.object_points()
-    return calibrate_member(name, [points[ids] for ids, _ in views], [px for _, px in views], size, model)
+    return calibrate_member(name, [points[ids] for _, ids, _ in views], [px for _, _, px in views], size, model,
+                            [n for n, _, _ in views])
 
 
 def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
-                     image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
+                     image_size: tuple[int, int], model: str,
+                     view_names: Sequence[str] | None = None) -> tuple[MemberIntrinsics, MemberFit]:
     """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit;
-    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select)."""
+    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select).
+    ``view_names`` (the photos' file names, as the rig's views name them) let the rig's frame-level covariance
+    carry each photo's pull on these intrinsics (core.extrinsics.rig_uncertainty)."""
     if model == "auto":
         model = select_model(list(object_points), list(corners_px), image_size).chosen
     m = get_model(model)
     sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
-    cov = sol.covariance.covariance if sol.covariance is not None else None
+    ic = sol.covariance
+    cov = ic.covariance if ic is not None else None
+    pulls = None
+    if ic is not None and cov is not None and ic.view_influences is not None and view_names is not None:
+        pulls = dict(zip(view_names, ic.view_influences, strict=True))
     member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
-                              m.free_distortion, sol.aspect_ratio, cov, m.kind)
+                              m.free_distortion, sol.aspect_ratio, cov, m.kind,
+                              ic.jacobian_covariance if ic is not None and ic.inflated else None, pulls)
     return member, MemberFit(m.name, sol.rms_px, model_fit.noise_floor_px(object_points, corners_px, image_size))
 
 
