@@ -13,10 +13,11 @@ Frame level (issue 22)
     The Jacobian assumes every corner's error independent. Real rigs carry errors per frame (imperfect sync,
     a hand-held board moving, board warp) shared by all the corners of that frame in every camera, which no
     board pose absorbs. The sandwich with frames as clusters carries them: frame f pulls the solution by
-    IF_f = [H^-1 J_f^T r_f]_x + A IF_theta,f, its own corners through the rig solve plus, for a member
+    IF_f = [(S - S_f)^-1 g_f]_x + A IF_theta,f, its own corners through the rig solve plus, for a member
     calibrated on the same photos (MemberIntrinsics.view_influences), what that photo did to the member's
     intrinsics (IntrinsicCovariance.view_influences), carried through A. A member photo the rig does not use
-    is a cluster of its own. The rig's own term is the delete-one step (S - S_f)^-1 g_f rather than S^-1 g_f
+    is a cluster of its own. The rig's own term (S the reduced information of the camera poses, every board pose
+    eliminated, S_f and g_f frame f's share and score) is the delete-one step (S - S_f)^-1 g_f, not S^-1 g_f
     (the jackknife, CR3): with 6 pose parameters over ~15 frames a frame's leverage is ~0.4 and the plain
     sandwich reads 1.4x short (tests/core/extrinsics/test_rig_frame_sigma.py). Cov_frame = (n-1)/n sum
     (IF - mean)(IF - mean)^T over the n clusters (+ A Cov_theta A^T for members whose photos are unknown:
@@ -112,9 +113,10 @@ def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_pos
                 continue
             used = set()
             for f, row in enumerate(views.views):
-                if row[c] is not None and row[c].name in m.view_influences:
-                    theta_pulls[f, at] = m.view_influences[row[c].name]
-                    used.add(row[c].name)
+                view = row[c]
+                if view is not None and view.name in m.view_influences:
+                    theta_pulls[f, at] = m.view_influences[view.name]
+                    used.add(view.name)
             for name, pull in m.view_influences.items():
                 if name not in used:
                     one = np.zeros(fixed.size)
@@ -133,8 +135,8 @@ def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_pos
         return RigCovariance(jac, jac, None, n, ne, s2)
     centred = clusters - clusters.mean(axis=0)
     frame = _sym(((n - 1) / n * centred.T @ centred + cov_frame_add)[ext, ext])
-    f = np.maximum(1.0, np.sqrt(np.diag(frame) / np.diag(jac)))
-    return RigCovariance(_sym(jac * np.outer(f, f)), jac, frame, n, ne, s2)
+    scale = np.maximum(1.0, np.sqrt(np.diag(frame) / np.diag(jac)))
+    return RigCovariance(_sym(jac * np.outer(scale, scale)), jac, frame, n, ne, s2)
 
 
 def _frame_pulls(ne: NormalEquations, layout: Layout, H_inv: np.ndarray, refine: bool) -> np.ndarray:
