@@ -6,12 +6,14 @@ drawn photos (k1k2, as ``rig solve-folders``) and re-solves the rig; sd over the
 Renders: 2-camera 75 mm rigs rendered and detected (tests/core/rig_sessions), members calibrated on their own
 rendered views, z = (est - true) / sigma over seeds.
 
-    python benchmarks/bench_rig_sigma.py [--resamples 100] [--seeds 20]
+    python benchmarks/bench_rig_sigma.py [--resamples 100] [--seeds 30] [--only real|renders]
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import os
 import pickle
 import sys
 from dataclasses import replace
@@ -21,6 +23,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import cv2  # noqa: E402
+from machine import cpu_model  # noqa: E402  (benchmarks/machine.py)
 
 from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
 from calibctl.core.board.views import BoardView  # noqa: E402
@@ -144,9 +150,12 @@ def renders(seeds: int) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--resamples", type=int, default=100)
-    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--seeds", type=int, default=30)
     ap.add_argument("--only", choices=("real", "renders"), default=None)
     args = ap.parse_args()
+    print(f"# bench_rig_sigma {datetime.date.today()}: {cpu_model()}, {os.cpu_count()} cpus, load "
+          f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; Python {sys.version.split()[0]}, OpenCV "
+          f"{cv2.__version__}, numpy {np.__version__}")
     if args.only != "renders":
         for name in REAL:
             real(name, args.resamples)
