@@ -7,12 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibctl.config import LintThresholds
-from calibctl.core.intrinsics.lens_checks import (
-    OBSERVED_MARGIN,
-    check_distortion_foldover,
-    check_equidistant_foldover,
-    observed_region_px,
-)
+from calibctl.core.intrinsics import lens_checks
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 
 SIZE = (960, 600)
@@ -29,51 +24,52 @@ def _ring(K: np.ndarray, radius_px: float, n: int = 36) -> np.ndarray:
 
 
 def test_a_fisheye_folding_only_beyond_every_observed_corner_is_not_rejected():
-    assert not check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE).passed  # judged out to the image: 80 deg fold
-    hull = observed_region_px([_ring(K_FISH, 200.0)])  # theta_d 0.667: about 45 deg off-axis
-    f = check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=hull)
+    # judged out to the image, the 80 deg fold is found
+    assert not lens_checks.check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE).passed
+    hull = lens_checks.observed_region_px([_ring(K_FISH, 200.0)])  # theta_d 0.667: about 45 deg off-axis
+    f = lens_checks.check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=hull)
     assert f.passed, f.message
     assert "observed region" in f.message
 
 
 def test_a_fisheye_folding_inside_the_observed_region_is_rejected():
-    hull = observed_region_px([_ring(K_FISH, 290.0)])  # theta_d 0.967 * 1.1, beyond the fold's 0.931
-    f = check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=hull)
+    hull = lens_checks.observed_region_px([_ring(K_FISH, 290.0)])  # theta_d 0.967 * 1.1, beyond the fold's 0.931
+    f = lens_checks.check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=hull)
     assert not f.passed
     assert "stops increasing at 80.0 deg" in f.message and "folds over inside the observed region" in f.message
 
 
 def test_a_pinhole_model_is_judged_over_the_same_region():
-    inside = observed_region_px([_ring(K_WIDE, 800 * 0.5443 / (1 + OBSERVED_MARGIN) * 0.9)])
-    assert check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=inside).passed
-    beyond = observed_region_px([_ring(K_WIDE, 800 * 0.53)])  # grown 10 %: past the peak r_d 0.5443
-    f = check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=beyond)
+    inside = lens_checks.observed_region_px([_ring(K_WIDE, 800 * 0.5443 / (1 + lens_checks.OBSERVED_MARGIN) * 0.9)])
+    assert lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=inside).passed
+    beyond = lens_checks.observed_region_px([_ring(K_WIDE, 800 * 0.53)])  # grown 10 %: past the peak r_d 0.5443
+    f = lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=beyond)
     assert not f.passed and "observed region" in f.message
 
 
 def test_the_region_never_reaches_beyond_the_image():
-    everywhere = observed_region_px([_ring(K_WIDE, 2000.0)])  # a hull beyond the image judges the image
-    f = check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=everywhere)
+    everywhere = lens_checks.observed_region_px([_ring(K_WIDE, 2000.0)])  # a hull beyond the image judges the image
+    f = lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=everywhere)
     assert not f.passed and "farthest image corner" in f.message
 
 
 def test_observed_region_is_the_convex_hull():
     pts = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0], [5.0, 5.0]])
-    hull = observed_region_px([pts[:3], pts[3:]])
+    hull = lens_checks.observed_region_px([pts[:3], pts[3:]])
     assert hull is not None and len(hull) == 4 and [5.0, 5.0] not in hull.tolist()
-    assert observed_region_px([pts[:2]]) is None
+    assert lens_checks.observed_region_px([pts[:2]]) is None
 
 
 def _document(model: str, dist: np.ndarray, hull: np.ndarray | None) -> dict:
     doc = {"image_size": list(SIZE), "camera_matrix": K_FISH.tolist(), "dist_coeffs": dist.tolist(),
            "model": {"name": model}}
     if hull is not None:
-        doc["observed_region_px"] = hull.tolist()
+        doc["lens_checks.observed_region_px"] = hull.tolist()
     return doc
 
 
 def test_lint_reads_the_artifacts_observed_region():
-    hull = observed_region_px([_ring(K_FISH, 200.0)])
+    hull = lens_checks.observed_region_px([_ring(K_FISH, 200.0)])
     rule = "distortion-foldover"
     with_region = lint_facts(facts_from_document(_document("fisheye", D_FOLD_80, hull), "a"), LintThresholds())
     without = lint_facts(facts_from_document(_document("fisheye", D_FOLD_80, None), "b"), LintThresholds())
