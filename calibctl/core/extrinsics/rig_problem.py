@@ -205,12 +205,13 @@ def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose
 
 
 def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                     board_poses: np.ndarray, layout: Layout) -> NormalEquations:
-    """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6))."""
+                     board_poses: np.ndarray, layout: Layout, per_frame: bool = False) -> NormalEquations:
+    """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6)); ``per_frame``:
+    each frame's share of H over the non-board unknowns too (the frame-level covariance needs it, the LM not)."""
     H = np.zeros((layout.size, layout.size))
     g_f = np.zeros((layout.n_frames, layout.size))
     shared = layout.size - 6 * layout.n_frames
-    H_f = np.zeros((layout.n_frames, shared, shared))
+    H_f = np.zeros((layout.n_frames, shared, shared) if per_frame else (0, 0, 0))
     ssr, n_res = 0.0, 0
     residuals: dict[tuple[int, int], np.ndarray] = {}
     for f, row in enumerate(views.views):
@@ -230,10 +231,10 @@ def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_p
                 g_f[f, idx_a] += Ja.T @ r
                 for idx_b, Jb in blocks:
                     H[np.ix_(idx_a, idx_b)] += Ja.T @ Jb
-            own = [(layout.shared_index(i), J) for i, J in blocks[1:]]
+            own = [(layout.shared_index(i), J) for i, J in blocks[1:]] if per_frame else []
             for idx_a, Ja in own:
                 for idx_b, Jb in own:
                     H_f[f][np.ix_(idx_a, idx_b)] += Ja.T @ Jb
             ssr += float(r @ r)
             n_res += r.size
-    return NormalEquations(H, g_f.sum(axis=0), ssr, n_res, residuals, g_f, H_f)
+    return NormalEquations(H, g_f.sum(axis=0), ssr, n_res, residuals, g_f, H_f if per_frame else None)

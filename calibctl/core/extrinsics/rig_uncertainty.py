@@ -86,7 +86,7 @@ def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_pos
         NumericalError: fewer residuals than unknowns, a parameter without effect, or unobservable.
     """
     layout = Layout(len(views.cameras), len(views.frames), tuple(m.n_params for m in members))
-    ne = normal_equations(views, members, cam_poses, board_poses, layout)
+    ne = normal_equations(views, members, cam_poses, board_poses, layout, per_frame=True)
     n_free = layout.size if refine else layout.board0 + 6 * layout.n_frames
     free = np.arange(n_free)
     dof = ne.n_residuals - n_free
