@@ -57,6 +57,8 @@ BENCHES = (
     Bench("bench_fisheye", "bench_fisheye.py", ("30",), ("6",)),
     Bench("bench_model_misfit", "bench_model_misfit.py", (), ()),
     Bench("bench_verdicts", "bench_verdicts.py", (), ()),
+    Bench("bench_rig_sigma", "bench_rig_sigma.py", ("--resamples", "100", "--seeds", "30"),
+          ("--resamples", "10", "--seeds", "5")),
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
     Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
     Bench("bench_lidar", "bench_lidar.py", ("--repeats", "3"), ("--repeats", "1")),

@@ -215,6 +215,11 @@ class CalibrationArtifact(Document):
         None, exclude_if=lambda gauge: gauge is None,
         description="the capture session's metric gauge (--reference-distance), carried into the calibration; "
         "absent when the session had none")
+    observed_region_px: list[tuple[float, float]] | None = Field(
+        None, exclude_if=lambda hull: hull is None,
+        description="vertices of the convex hull of every corner the solve used, [u, v] pixels: where the "
+        "calibration is used; lint judges distortion-foldover out to it (grown 10 %), not beyond; absent in "
+        "artifacts made before the rule (then judged out to the image corner or circle)")
     camera_consistency: CameraConsistency | None = Field(
         None, exclude_if=lambda check: check is None,
         description="two-camera check of the solved views; absent when too few views to split, and in "

@@ -35,6 +35,9 @@ def solve_folders(
     model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = "k1k2",
     refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")] = False,
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: a pair's design "
+                                                     "baseline, mm (repeat per pair); a solved baseline outside it "
+                                                     "fails baseline-design.", show_default=False)] = None,
     export_dir: Annotated[Path | None, typer.Option("--export-dir", help="Write the robot exports here (only when "
                                                     "the verdict passes).", show_default=False)] = None,
     allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Write the exports of a failed verdict "
@@ -47,8 +50,9 @@ def solve_folders(
     Each camera is first calibrated on its own photos; then the extrinsics (cv2.stereoCalibrateExtended
     for two cameras, calibctl's joint LM for more), their one-sigma, k-fold held-out epipolar error and
     rectified rows per pair, and loop closure for three or more cameras. The verdict: the rig lint rules
-    that need no store (epipolar, loop-closure; the station's limits), each camera's model-misfit (a
-    circular fisheye under the default k1k2: solve with --model fisheye), and rig-rigid (frames that no
+    that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
+    as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
+    square size's provenance, which only a registered board carries), and rig-rigid (frames that no
     rigid, synchronised rig could have taken).
     """
     from calibctl.core.board.board_spec import BoardSpec
@@ -63,9 +67,11 @@ def solve_folders(
         spec = BoardSpec.chessboard(cols, rows, square_mm / 1e3)
     except ValueError as exc:
         raise UsageError(f"bad board: {exc}") from exc
-    limits = state(ctx).settings().lint
+    from calibctl.workflows.rig.rig_lint import parse_design
+
+    designs = [parse_design(d) for d in design or []]
     run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views,
-                                        limits=limits)
+                                        settings=state(ctx).settings(), designs=designs)
     doc = rig_folders.run_json(run)
     exports: list[str] = []
     withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected

@@ -12,8 +12,8 @@ equations are accumulated per observation block, so memory grows with parameters
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -39,6 +39,11 @@ class MemberIntrinsics:
             unitless^2), or None when unknown (then fixed intrinsics are treated as exact).
         lens: "pinhole" (cv2.projectPoints, OpenCV's distortion order) or "fisheye" (the equidistant
             Kannala-Brandt lens of cv2.fisheye: dist_coeffs are k1..k4).
+        jacobian_covariance: (p, p) the Jacobian covariance alone when ``covariance`` was inflated by the
+            view-level rule (core.intrinsics.covariance), else None (then ``covariance`` is it).
+        view_influences: view name -> (p,) that view's first-order pull on the free parameters
+            (IntrinsicCovariance.view_influences), when the member was calibrated on photos the rig also
+            uses; the rig's frame-level covariance then carries the member's error frame by frame.
     """
 
     name: str
@@ -50,6 +55,8 @@ class MemberIntrinsics:
     aspect: float | None = 1.0
     covariance: np.ndarray | None = None
     lens: str = "pinhole"
+    jacobian_covariance: np.ndarray | None = None
+    view_influences: Mapping[str, np.ndarray] | None = None
 
     @property
     def distortion_order(self) -> tuple[str, ...]:
@@ -77,8 +84,7 @@ class MemberIntrinsics:
         for name in self.free_distortion:
             dist[self.distortion_order.index(name)] += delta[i]
             i += 1
-        return MemberIntrinsics(self.name, K, dist, self.image_size, self.free_intrinsics,
-                                self.free_distortion, self.aspect, self.covariance, self.lens)
+        return replace(self, camera_matrix=K, dist_coeffs=dist)
 
 
 @dataclass(frozen=True)
@@ -140,6 +146,10 @@ class Layout:
     def intrinsics(self, c: int) -> np.ndarray:
         return np.arange(self.int0[c], self.int0[c] + self.intrinsic_sizes[c])
 
+    def shared_index(self, idx: np.ndarray) -> np.ndarray:
+        """Indices of camera-pose or intrinsic unknowns among the non-board ones (board poses left out)."""
+        return np.where(idx < self.board0, idx, idx - 6 * self.n_frames)
+
 
 @dataclass(frozen=True)
 class NormalEquations:
@@ -150,6 +160,8 @@ class NormalEquations:
     ssr: float
     n_residuals: int
     residuals_px: dict[tuple[int, int], np.ndarray]  # (frame, camera) -> (N, 2) observed - projected
+    frame_scores: np.ndarray | None = None  # (F, size) J_f^T r_f per frame: g is their sum
+    frame_shared_H: np.ndarray | None = None  # (F, n, n) frame f's share of H over the non-board unknowns
 
 
 def project_member(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, member: MemberIntrinsics
@@ -193,10 +205,13 @@ def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose
 
 
 def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                     board_poses: np.ndarray, layout: Layout) -> NormalEquations:
-    """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6))."""
+                     board_poses: np.ndarray, layout: Layout, per_frame: bool = False) -> NormalEquations:
+    """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6)); ``per_frame``:
+    each frame's share of H over the non-board unknowns too (the frame-level covariance needs it, the LM not)."""
     H = np.zeros((layout.size, layout.size))
-    g = np.zeros(layout.size)
+    g_f = np.zeros((layout.n_frames, layout.size))
+    shared = layout.size - 6 * layout.n_frames
+    H_f = np.zeros((layout.n_frames, shared, shared) if per_frame else (0, 0, 0))
     ssr, n_res = 0.0, 0
     residuals: dict[tuple[int, int], np.ndarray] = {}
     for f, row in enumerate(views.views):
@@ -213,9 +228,13 @@ def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_p
             if J_cam is not None:
                 blocks.append((layout.ext(c), J_cam))
             for idx_a, Ja in blocks:
-                g[idx_a] += Ja.T @ r
+                g_f[f, idx_a] += Ja.T @ r
                 for idx_b, Jb in blocks:
                     H[np.ix_(idx_a, idx_b)] += Ja.T @ Jb
+            own = [(layout.shared_index(i), J) for i, J in blocks[1:]] if per_frame else []
+            for idx_a, Ja in own:
+                for idx_b, Jb in own:
+                    H_f[f][np.ix_(idx_a, idx_b)] += Ja.T @ Jb
             ssr += float(r @ r)
             n_res += r.size
-    return NormalEquations(H, g, ssr, n_res, residuals)
+    return NormalEquations(H, g_f.sum(axis=0), ssr, n_res, residuals, g_f, H_f if per_frame else None)

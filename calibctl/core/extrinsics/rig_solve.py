@@ -17,13 +17,8 @@ Solvers
     seeded 3-camera synthetic rig (0.2 px noise) missed a 2.9 deg rotation by 0.25 deg.
 
 Uncertainty (calibctl's own, like core.intrinsics.covariance does for intrinsics)
-    J at the solution over camera poses, board poses and (refined) intrinsics; covariance =
-    s^2 (J^T J)^-1 with s^2 = residual sum / (residuals - free parameters), observability judged on
-    the unit-diagonal matrix. With intrinsics held fixed, their own covariance (from each member's
-    calibration) is carried into the extrinsics: x(theta) moves by A = -H_xx^-1 H_x,theta per unit of
-    intrinsic error, so Cov_x = s^2 H_xx^-1 + A Cov_theta A^T. Over 30 seeded 2-camera sessions with
-    members calibrated on 12 views each, the baseline's (est - true) / sigma has std 1.01 with that
-    term and 1.28 without it (tests/core/extrinsics/test_rig_honesty.py).
+    core.extrinsics.rig_uncertainty: the Jacobian covariance (with the members' own carried in when their
+    intrinsics are held fixed) and the frame-level (cluster-robust) one; per parameter the larger is reported.
 """
 
 from __future__ import annotations
@@ -37,16 +32,10 @@ import numpy as np
 from calibctl.core.blas_threads import single_threaded
 from calibctl.core.board.views import BoardView
 from calibctl.core.extrinsics.rig_init import initial_poses, pair_spreads
-from calibctl.core.extrinsics.rig_problem import (
-    Layout,
-    MemberIntrinsics,
-    NormalEquations,
-    RigViews,
-    normal_equations,
-)
+from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigViews, normal_equations
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_T, propagate
+from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert
-from calibctl.core.intrinsics.covariance import MIN_RCOND
 from calibctl.core.intrinsics.solve import MAX_RMS_PX, get_model, single_threaded_opencv
 from calibctl.core.lm import Damping, DenseSystem, SchurSystem, solve_lm
 from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
@@ -67,12 +56,16 @@ class RigSolution:
         members: each camera's intrinsics after the solve (unchanged unless refined).
         cam_poses: (C, 6) pose vectors of T_cam_root (row 0, the root, is zero).
         board_poses: (F, 6) pose vectors of T_root_board per frame.
-        covariance: (6(C-1), 6(C-1)) covariance of cam_poses[1:], flattened.
+        covariance: (6(C-1), 6(C-1)) covariance of cam_poses[1:], flattened: the reported one (per parameter
+            the larger of the Jacobian and the frame-level one, core.extrinsics.rig_uncertainty).
         tree: T_root_cam edges with each camera's 6x6 pose covariance.
         rms_px: per camera fit RMS (OpenCV's per-corner 2-D definition).
         solver: "cv2.stereoCalibrateExtended" or "calibctl joint LM".
         refine_intrinsics: whether intrinsics were free.
         residual_variance_px2: s^2 per coordinate.
+        jacobian_covariance: same shape, the Jacobian one alone (None: same as ``covariance``).
+        frame_factors: (6(C-1),) frame-level sigma / Jacobian sigma per parameter, None under
+            rig_uncertainty.MIN_FRAMES clusters. frame_clusters: the clusters it was summed over.
     """
 
     views: RigViews
@@ -85,6 +78,9 @@ class RigSolution:
     solver: str
     refine_intrinsics: bool
     residual_variance_px2: float
+    jacobian_covariance: np.ndarray | None = None
+    frame_factors: np.ndarray | None = None
+    frame_clusters: int = 0
 
     def T_cam_root(self, c: int) -> np.ndarray:
         return pose_to_T(self.cam_poses[c])
@@ -93,8 +89,9 @@ class RigSolution:
         """(4, 4) T_a_b between cameras a and b (indices)."""
         return self.T_cam_root(a) @ invert(self.T_cam_root(b))
 
-    def pair_covariance(self, a: int, b: int) -> np.ndarray:
-        """(6, 6) covariance of the pose vector of T_a_b (cross terms of the joint solve included)."""
+    def pair_covariance(self, a: int, b: int, jacobian: bool = False) -> np.ndarray:
+        """(6, 6) covariance of the pose vector of T_a_b (cross terms of the joint solve included); the
+        reported one, or the Jacobian one alone under ``jacobian``."""
         cams = [c for c in (a, b) if c > 0]
         idx = [6 * (c - 1) + k for c in cams for k in range(6)]
 
@@ -105,7 +102,8 @@ class RigSolution:
             return T_to_pose(Ta @ invert(Tb))
 
         x = np.concatenate([self.cam_poses[c] for c in cams])
-        return propagate(fn, x, self.covariance[np.ix_(idx, idx)])
+        full = self.jacobian_covariance if jacobian and self.jacobian_covariance is not None else self.covariance
+        return propagate(fn, x, full[np.ix_(idx, idx)])
 
 
 def shared_corners_only(views: RigViews) -> RigViews:
@@ -183,43 +181,6 @@ def _lm(views: RigViews, members: list[MemberIntrinsics], cam_poses: np.ndarray,
     return out.params
 
 
-def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                   board_poses: np.ndarray, refine: bool) -> tuple[np.ndarray, NormalEquations, float]:
-    """(6(C-1), 6(C-1)) covariance of the camera poses, the normal equations, and s^2."""
-    layout = Layout(len(views.cameras), len(views.frames), tuple(m.n_params for m in members))
-    ne = normal_equations(views, members, cam_poses, board_poses, layout)
-    n_free = layout.size if refine else layout.board0 + 6 * layout.n_frames
-    free = np.arange(n_free)
-    dof = ne.n_residuals - n_free
-    if dof <= 0:
-        raise NumericalError(f"the rig solve has {ne.n_residuals} residuals for {n_free} unknowns",
-                             hint="capture more synchronised views")
-    s2 = ne.ssr / dof
-    H = ne.H[np.ix_(free, free)]
-    d = np.sqrt(np.clip(np.diag(H), 0.0, None))
-    if not np.all(d > 0):
-        raise NumericalError("a rig parameter has no effect on the residuals",
-                             hint="every camera must share board views with the rest of the rig")
-    H_unit = H / np.outer(d, d)
-    eig = np.linalg.eigvalsh(H_unit)
-    if not eig[0] / eig[-1] >= MIN_RCOND:
-        raise NumericalError(f"the rig extrinsics are not observable from these views (reciprocal condition "
-                             f"{eig[0] / eig[-1]:.1e})", hint="capture views that two cameras see at once, "
-                             "tilted and spread over the image")
-    H_inv = np.linalg.inv(H_unit) / np.outer(d, d)
-    cov = s2 * H_inv
-    if not refine and all(m.covariance is not None for m in members):
-        fixed = np.arange(n_free, layout.size)
-        A = -H_inv @ ne.H[np.ix_(free, fixed)]
-        cov_theta = np.zeros((fixed.size, fixed.size))
-        for c, m in enumerate(members):
-            at = layout.intrinsics(c) - n_free
-            cov_theta[np.ix_(at, at)] = np.asarray(m.covariance)
-        cov = cov + A @ cov_theta @ A.T
-    ext = cov[:layout.board0, :layout.board0]
-    return 0.5 * (ext + ext.T), ne, s2
-
-
 def _tree(names: Sequence[str], cam_poses: np.ndarray, cov: np.ndarray) -> RigTree:
     edges = []
     for c in range(1, len(names)):
@@ -295,7 +256,8 @@ def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intr
     if not (np.isfinite(cam_poses).all() and np.isfinite(board_poses).all()):
         raise NumericalError("the rig solve returned NaN or infinite values",
                              hint="check that every camera's intrinsics belong to it and the board is right")
-    cov, ne, s2 = rig_covariance(views, members, cam_poses, board_poses, refine_intrinsics)
+    unc = rig_covariance(views, members, cam_poses, board_poses, refine_intrinsics)
+    cov, ne = unc.covariance, unc.normal_equations
     rms = []
     for c in range(len(views.cameras)):
         res = [r for (_, cc), r in ne.residuals_px.items() if cc == c]
@@ -305,4 +267,4 @@ def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intr
         raise diverged(views, members, worst)
     tree = _tree(views.cameras, cam_poses, cov)
     return RigSolution(views, tuple(members), cam_poses, board_poses, cov, tree, tuple(rms), name,
-                       refine_intrinsics, s2)
+                       refine_intrinsics, unc.residual_variance_px2, unc.jacobian, unc.factors, unc.clusters)

@@ -179,7 +179,9 @@ def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: s
         for a, b in hops:
             sol = pairs[(min(a, b), max(a, b))]
             T_lo_hi = invert(sol.T_cam_root(1))
-            cov = sol.tree.edges[0].covariance
+            # the Jacobian covariance: the pairs share frames, so their frame-level errors are correlated,
+            # which these independent blocks cannot say (the rule's 99.7 % limit was set on the Jacobian ones)
+            cov = sol.pair_covariance(0, 1, jacobian=True)
             if a < b:
                 poses.append(T_to_pose(T_lo_hi))
                 covs.append(cov)

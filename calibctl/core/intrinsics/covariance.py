@@ -68,6 +68,9 @@ class IntrinsicCovariance:
             None when not computed (refused, or fewer than 2 views).
         inflated: True when ``covariance`` is the Jacobian one times phi (VIEW_FACTOR_RULE fired).
         n_views: views (clusters) the factor was computed from.
+        view_influences: (V, p) S^-1 g_i, each view's first-order pull on the parameters (the terms whose
+            spread the view-level check measures), in ``names`` order; the rig solve sums them per frame with
+            its own (core.extrinsics.rig_solve) when a member was calibrated on the rig's photos.
     """
 
     names: tuple[str, ...]
@@ -78,6 +81,7 @@ class IntrinsicCovariance:
     view_factor: float | None = None
     inflated: bool = False
     n_views: int = 0
+    view_influences: np.ndarray | None = None
 
     @property
     def jacobian_covariance(self) -> np.ndarray | None:
@@ -198,7 +202,8 @@ def schur_covariance(
     if inflated:
         assert factor is not None
         cov = cov * factor**2
-    return IntrinsicCovariance(names, cov, rcond, s2, None, factor, inflated, n_views)
+    influences = np.stack(scores) / d @ S_unit_inv / d  # rows g_i^T S^-1 (S symmetric)
+    return IntrinsicCovariance(names, cov, rcond, s2, None, factor, inflated, n_views, influences)
 
 
 def view_sigma_factor(S_unit_inv: np.ndarray, d: np.ndarray, scores: Sequence[np.ndarray], s2: float) -> float | None:

@@ -9,9 +9,10 @@ provenance, schema, content hash) live with the artifacts, not here.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 ERROR = "error"
@@ -183,10 +184,26 @@ def _radial(r: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 CIRCLE_SAMPLES = 720  # points on the image circle when the farthest imaged point is looked for
 
 
+# Fold-over is judged where the calibration is used: the observed corners' region grown by this share of its
+# radius (a model is extrapolated a little beyond the last corner in use), never beyond the image (or circle).
+OBSERVED_MARGIN = 0.1
+
+
+def observed_region_px(corners_px: Sequence[np.ndarray]) -> np.ndarray | None:
+    """(K, 2) float64 vertices of the convex hull of every corner (V arrays (N_i, 2) px), or None without 3."""
+    pts = np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in corners_px]) if corners_px else None
+    if pts is None or len(pts) < 3:
+        return None
+    return np.asarray(cv2.convexHull(pts.astype(np.float32)), np.float64).reshape(-1, 2)
+
+
 def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
-                        image_circle: tuple[float, float, float] | None = None) -> float:
-    """Normalised distorted radius of the image point farthest from the principal point: an image corner,
-    or with ``image_circle`` (cx, cy, r px) the farthest point of the image that lies inside the circle."""
+                        image_circle: tuple[float, float, float] | None = None,
+                        observed_px: np.ndarray | None = None) -> tuple[float, str]:
+    """Normalised distorted radius out to which a model is judged, and its words: the image point farthest from
+    the principal point (an image corner, or with ``image_circle`` (cx, cy, r px) the farthest point of the image
+    inside the circle); with ``observed_px`` ((K, 2) px, the observed corners' hull) the farthest observed corner
+    grown by OBSERVED_MARGIN when that is nearer (the model is not used beyond it)."""
     w, h = image_size
     fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
@@ -198,15 +215,28 @@ def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
         a = np.linspace(0.0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
         cu, cv = np.clip(ccx + r * np.cos(a), -0.5, w - 0.5), np.clip(ccy + r * np.sin(a), -0.5, h - 0.5)
         u, v = np.concatenate([u[keep], cu]), np.concatenate([v[keep], cv])
-    return float(np.hypot((u - cx) / fx, (v - cy) / fy).max())
+    rd = float(np.hypot((u - cx) / fx, (v - cy) / fy).max())
+    edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
+    if observed_px is not None and len(observed_px):
+        obs = np.asarray(observed_px, np.float64).reshape(-1, 2)
+        rd_obs = float(np.hypot((obs[:, 0] - cx) / fx, (obs[:, 1] - cy) / fy).max()) * (1 + OBSERVED_MARGIN)
+        if rd_obs < rd:
+            return rd_obs, f"observed region (the farthest corner + {OBSERVED_MARGIN:.0%})"
+    return rd, edge
+
+
+def _inside(edge: str) -> str:
+    return "observed region" if edge.startswith("observed") else "image"
 
 
 def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                               image_size: tuple[int, int],
                               image_circle: tuple[float, float, float] | None = None,
-                              model: str | None = None) -> Finding:
+                              model: str | None = None, observed_px: np.ndarray | None = None) -> Finding:
     """The distortion is one-to-one out to the farthest image corner (with ``image_circle`` (cx, cy, r)
-    px: out to the farthest point of the image inside the circle, where the lens forms an image).
+    px: out to the farthest point of the image inside the circle, where the lens forms an image; with
+    ``observed_px`` (the observed corners' hull, px): no farther than the observed region grown by
+    OBSERVED_MARGIN, where the calibration is used, alike for every model).
 
     Radial part: r_d(r_u) = r_u * (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)
     must increase strictly, with a positive denominator, on a fine grid from 0 until it reaches
@@ -221,8 +251,7 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     if model == "k1k2":
         fix = ("the distortion polynomial turns back inside the image: capture corners out to the image corners "
                "(it is extrapolated beyond the last one), or --model fisheye for a wide or fisheye lens")
-    rd_corner = _farthest_corner_rd(camera_matrix, image_size, image_circle)
-    edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
+    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px)
     r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner
     steps = int(RADIAL_GRID_STEPS * RADIAL_SEARCH_MAX_FACTOR)
     radial_only = _padded(dist_coeffs)
@@ -249,7 +278,7 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
             where = f"never exceeds r_d = {rd[i]:.4f} (at r_u = {r[i]:.4f}, searched to r_u = {r_max:.3f})"
         return Finding(rule, ERROR, False,
                        f"radial distortion r_d(r_u) {where}, but the {edge} is at "
-                       f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the image", fix)
+                       f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the {_inside(edge)}", fix)
     r_reach = float(r[stop])
     radii = np.linspace(0.0, r_reach, POLAR_GRID[0])[1:]
     angles = np.linspace(0.0, 2 * np.pi, POLAR_GRID[1], endpoint=False)
@@ -277,7 +306,8 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
 
 def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                                image_size: tuple[int, int],
-                               image_circle: tuple[float, float, float] | None = None) -> Finding:
+                               image_circle: tuple[float, float, float] | None = None,
+                               observed_px: np.ndarray | None = None) -> Finding:
     """Equidistant (fisheye, k1..k4): theta_d(theta) = theta (1 + k1 t^2 + k2 t^4 + k3 t^6 + k4 t^8)
     must increase from theta = 0 until it reaches the farthest image corner's normalised radius.
 
@@ -285,32 +315,35 @@ def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarra
     the corner's radius describes a circular fisheye whose image corners are outside the image circle,
     where the lens forms no image: it is then checked out to 90 deg off-axis (a 180 deg field).
     With ``image_circle`` (cx, cy, r) px the farthest point of the image inside the circle replaces the
-    farthest image corner, and the model must reach it (the lens images the circle's edge).
+    farthest image corner, and the model must reach it (the lens images the circle's edge). With
+    ``observed_px`` the observed region grown by OBSERVED_MARGIN, when nearer, replaces both (and the model must
+    reach it: corners were imaged there): a fold beyond every observed corner is not judged.
     """
     rule = "distortion-foldover"
     fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"
     k1, k2, k3, k4 = (list(np.asarray(dist_coeffs, dtype=np.float64).ravel()) + [0.0] * 4)[:4]
-    rd_corner = _farthest_corner_rd(camera_matrix, image_size, image_circle)
-    edge = "farthest image corner" if image_circle is None else "farthest image point inside the image circle"
+    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px)
+    must_reach = image_circle is not None or edge.startswith("observed")
     theta = np.linspace(0.0, math.pi, RADIAL_GRID_STEPS + 1)
     t2 = theta * theta
     theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
     reach = np.flatnonzero(theta_d >= rd_corner)
     # without a circle, a model that never reaches the corner is a circular fisheye: checked to 90 deg; the
     # edge of a known circle is imaged, so the model must reach it
-    limit = len(theta) - 1 if image_circle is not None else int(np.searchsorted(theta, math.pi / 2))
+    limit = len(theta) - 1 if must_reach else int(np.searchsorted(theta, math.pi / 2))
     stop = int(reach[0]) if reach.size else limit
     falling = np.flatnonzero(np.diff(theta_d[: stop + 1]) <= 0)
-    if not falling.size and not reach.size and image_circle is not None:
+    if not falling.size and not reach.size and must_reach:
+        what = edge if edge.startswith("observed") else "circle's edge"
         return Finding(rule, ERROR, False,
                        f"fisheye theta_d(theta) never reaches the {edge} (theta_d = {rd_corner:.4f}; at most "
-                       f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the circle's edge", fix)
+                       f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the {what}", fix)
     if falling.size:
         i = int(falling[0])
         return Finding(rule, ERROR, False,
                        f"fisheye theta_d(theta) stops increasing at {math.degrees(theta[i]):.1f} deg off-axis "
                        f"(theta_d = {theta_d[i]:.4f}) before reaching the {edge} "
-                       f"(theta_d = {rd_corner:.4f}): the model folds over inside the image", fix)
+                       f"(theta_d = {rd_corner:.4f}): the model folds over inside the {_inside(edge)}", fix)
     return Finding(rule, ERROR, True,
                    f"fisheye theta_d(theta) increases out to {math.degrees(theta[stop]):.1f} deg off-axis "
                    f"({edge} at theta_d = {rd_corner:.4f})")

@@ -570,3 +570,32 @@ def prune(settings: Settings, now: dt.datetime | None = None) -> PruneResult:
     # Maintenance of an existing store: a mistyped --db is exit 2 naming the path, never a new empty store.
     with Store.open(settings.db_url, create=False) as store:
         return PruneResult(store.prune_images(when), str(store.image_dir), when)
+
+
+def classify_photos(paths: Sequence[str | Path], spec: BoardSpec, workers: int | None = None
+                    ) -> tuple[list[outcomes_core.ImageOutcome], np.ndarray | None]:
+    """Every photo's outcome as a folder capture classifies them (``finalize_session`` included), and the per-pixel
+    maximum of the photos at half size, which a circular fisheye's image circle is found in (None: no image)."""
+    picture = _MaxPicture()
+    with sources.quiet_opencv():
+        found = outcomes_core.classify_files(paths, spec, workers=workers, summarize=sized_half,
+                                             on_summary=picture.add)
+    results = outcomes_core.finalize_session(found)
+    size = outcomes_core.session_image_size(results)
+    return results, None if size is None else picture.of_size(size)
+
+
+def photos_session(settings: Settings, request: CaptureRequest, board: BoardRevision, spec: BoardSpec,
+                   source: sources.SourceSpec, outcomes: Sequence[outcomes_core.ImageOutcome],
+                   max_gray: np.ndarray | None = None) -> CaptureSession:
+    """The session a folder ``capture`` builds from photos already classified (``classify_photos``), its gates and
+    verdict included, in memory: nothing is stored. ``rig solve-folders`` judges each member by it."""
+    size = outcomes_core.session_image_size(list(outcomes))
+    if size is None:
+        raise InputError(f"none of the {len(outcomes)} photos of {source.label} could be read")
+    views: list[tuple[BoardView, str | None]] = [
+        (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256)  # type: ignore[arg-type]
+        for o in outcomes if o.accepted and o.corner_ids is not None]
+    got = _Collected([_record(o) for o in outcomes], views, size, f"every photo of {source.label} was examined",
+                     0, max_gray=max_gray)
+    return _build_session(settings, request, board, spec, source, got, utc_now())

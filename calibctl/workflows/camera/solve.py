@@ -37,6 +37,7 @@ from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
 from calibctl.core.intrinsics import solve as core_solve
 from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
+from calibctl.core.intrinsics.lens_checks import observed_region_px
 from calibctl.core.intrinsics.model_fit import noise_floor_px
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.outliers import (
@@ -195,6 +196,11 @@ def _views(session: CaptureSession, solution: IntrinsicsSolution, first: Intrins
     return out
 
 
+def _observed_region(corners_px: list[np.ndarray]) -> list[tuple[float, float]] | None:
+    hull = observed_region_px(corners_px)
+    return None if hull is None else [(float(u), float(v)) for u, v in hull]
+
+
 def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
     """The matrix behind sigma, stored so a report can propagate it (absent whenever sigma was refused)."""
     cov = sol.covariance
@@ -265,6 +271,8 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         board=session.board,
         views=_views(session, sol, first, outliers, kept, dropped),
         rejected_corners=_rejected_corners(session, rejection),
+        observed_region_px=_observed_region(rejection.kept([np.asarray(v.corners_px, np.float64)
+                                                            for v in session.views])),
         camera_consistency=consistency,
         provenance=Provenance(
             calibctl_version=__version__,

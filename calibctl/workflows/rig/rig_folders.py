@@ -8,11 +8,11 @@ unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core
 held-out numbers and, for three or more cameras, pairwise loop closure.
 
 Then the verdict the stored path gives (``rig solve`` stores it as the version's lint): the rig lint
-rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``epipolar``, ``loop-closure``), each
-self-calibrated member's ``model-misfit`` (core.intrinsics.model_fit, the rule lint applies to a stored member:
-fit RMS far above what the detector delivers), and ``rig-rigid`` when the frames contradict each other
-(core InconsistentDataError: not rigid or not synchronised). The stored path's other rules need the
-store (``rig-stale-member``, ``baseline-design`` against a registered design, a member's stored record).
+rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline-design`` against
+``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored path
+judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
+and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or not
+synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
 from __future__ import annotations
@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from calibctl.artifacts.lint import Finding, has_errors
-from calibctl.artifacts.rig import RigLoop, RigPair
-from calibctl.config import LintThresholds
+from calibctl.artifacts.rig import DesignBaseline, RigLoop, RigPair
+from calibctl.config import LintThresholds, Settings, load_settings
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.board.views import BoardView
-from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome, classify_session
+from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome
 from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import (
     MAX_MIN_SHARED_VIEWS,
@@ -54,8 +54,10 @@ from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
 from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
+from calibctl.workflows.camera.capture import classify_photos
 from calibctl.workflows.lint.lint import adopt
 from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
+from calibctl.workflows.rig.rig_members import member_findings
 
 USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
 SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
@@ -86,6 +88,8 @@ class RigFolderRun:
     loops: tuple[LoopClosure, ...] = ()
     fits: Mapping[str, MemberFit] | None = None
     findings: tuple[Finding, ...] = ()
+    member_verdicts: Mapping[str, tuple[Finding, ...]] | None = None  # rig_members; None: model-misfit only
+    designs: tuple[DesignBaseline, ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -131,26 +135,35 @@ def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, 
 def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec,
                     model: str) -> tuple[MemberIntrinsics, MemberFit]:
     """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well it fits."""
-    views = [(o.corner_ids, o.corners_px) for o in outcomes
+    views = [(Path(o.path).name, o.corner_ids, o.corners_px) for o in outcomes
              if o.accepted and o.corner_ids is not None and o.corners_px is not None]
     size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
     if size is None or not views:
         raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
     points = spec.object_points()
-    return calibrate_member(name, [points[ids] for ids, _ in views], [px for _, px in views], size, model)
+    return calibrate_member(name, [points[ids] for _, ids, _ in views], [px for _, _, px in views], size, model,
+                            [n for n, _, _ in views])
 
 
 def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
-                     image_size: tuple[int, int], model: str) -> tuple[MemberIntrinsics, MemberFit]:
+                     image_size: tuple[int, int], model: str,
+                     view_names: Sequence[str] | None = None) -> tuple[MemberIntrinsics, MemberFit]:
     """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit;
-    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select)."""
+    ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select).
+    ``view_names`` (the photos' file names, as the rig's views name them) let the rig's frame-level covariance
+    carry each photo's pull on these intrinsics (core.extrinsics.rig_uncertainty)."""
     if model == "auto":
         model = select_model(list(object_points), list(corners_px), image_size).chosen
     m = get_model(model)
     sol = solve_intrinsics(list(object_points), list(corners_px), image_size, m)
-    cov = sol.covariance.covariance if sol.covariance is not None else None
+    ic = sol.covariance
+    cov = ic.covariance if ic is not None else None
+    pulls = None
+    if ic is not None and cov is not None and ic.view_influences is not None and view_names is not None:
+        pulls = dict(zip(view_names, ic.view_influences, strict=True))
     member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
-                              m.free_distortion, sol.aspect_ratio, cov, m.kind)
+                              m.free_distortion, sol.aspect_ratio, cov, m.kind,
+                              ic.jacobian_covariance if ic is not None and ic.inflated else None, pulls)
     return member, MemberFit(m.name, sol.rms_px, model_fit.noise_floor_px(object_points, corners_px, image_size))
 
 
@@ -172,19 +185,29 @@ def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, 
 def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
                       intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
                       min_shared_views: int = MIN_SHARED_VIEWS, workers: int | None = None,
-                      limits: LintThresholds | None = None) -> RigFolderRun:
-    """Run the folder flow (module docstring). The first source is the root camera; ``limits`` are the
-    station's lint thresholds (default: LintThresholds()).
+                      limits: LintThresholds | None = None, settings: Settings | None = None,
+                      designs: Sequence[DesignBaseline] = ()) -> RigFolderRun:
+    """Run the folder flow (module docstring). The first source is the root camera; ``settings`` the station's
+    (gates and lint; default: ``load_settings()``), ``limits`` its lint thresholds when given apart; ``designs``
+    the pairs' design baselines (``baseline-design``).
 
     Raises:
         InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
-            mixes image sizes, or a camera's photos differ in size from its intrinsics.
+            mixes image sizes, a camera's photos differ in size from its intrinsics, or a design baseline
+            names a camera that is not in the rig.
         NumericalError: a camera cannot be calibrated, or the rig solve fails on frames that agree.
     """
     check_min_shared_views(min_shared_views)
     if model != "auto":
         get_model(model)  # an unknown name is a usage error before any photo is read
     cameras = tuple(sources)
+    for d in designs:
+        if d.a not in cameras or d.b not in cameras or d.a == d.b:
+            raise UsageError(f"--design-baseline-mm {d.a}:{d.b}: name two different cameras of the rig "
+                             f"({', '.join(cameras)})")
+    settings = settings or load_settings()
+    if limits is not None:
+        settings = settings.model_copy(update={"lint": limits})
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
     same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
@@ -195,7 +218,8 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
         raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
                          hint="name the photos so that the last number in the name is the frame number or "
                               "timestamp, the same for photos taken together (left_0042.png / right_0042.png)")
-    outcomes = {name: classify_session(photos[name], spec, workers=workers) for name in cameras}
+    classified = {name: classify_photos(photos[name], spec, workers=workers) for name in cameras}
+    outcomes = {name: found for name, (found, _) in classified.items()}
     for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
         mixed = capture_sources.mixed_sizes_error(source, {n: o.image_size for n, o in zip(
             images.names, outcomes[name], strict=True) if o.image_size})
@@ -215,16 +239,19 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
                              f"{given.image_size[0]}x{given.image_size[1]}",
                              hint="use the calibration made at this resolution, or re-calibrate the camera")
         members.append(given)
+    verdicts = {name: tuple(member_findings(settings, name, sets[name][0], outcomes[name], classified[name][1], spec,
+                                            model)) for name in fits}
     if model == "auto":
         model = _auto_rig_model(fits, refine_intrinsics)
     views = rig_views(cameras, match, outcomes, spec)
     identity.refuse(identity.shared_images({n: [o.sha256 for o in outcomes[n] if o.corners_px is not None]
                                             for n in cameras}) + identity.same_corners(views), "rig solve-folders")
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
-    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits)
+    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits, member_verdicts=verdicts,
+                       designs=tuple(designs))
     if not gate.passed:
         return run
-    return judged_solve(run, model, refine_intrinsics, limits or LintThresholds())
+    return judged_solve(run, model, refine_intrinsics, settings.lint)
 
 
 def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:
@@ -240,12 +267,19 @@ def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> s
 
 def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,
                  limits: LintThresholds | None = None) -> RigFolderRun:
-    """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring)."""
+    """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring). A run without
+    ``member_verdicts`` (corners without photos) holds its members to ``model-misfit`` alone."""
     views, members, fits = run.views, list(run.members), run.fits or {}
     limits = limits or LintThresholds()
-    lens = {name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
-            for name, fit in fits.items()}
-    misfit = [member_finding(name, f) for name, found in lens.items() for f in found]
+    if run.member_verdicts is not None:
+        misfit = [f for found in run.member_verdicts.values() for f in found]
+        bad_lens = {name for name, found in run.member_verdicts.items()
+                    if any(f.rule == "member:model-misfit" for f in found)}
+    else:
+        lens = {name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
+                for name, fit in fits.items()}
+        misfit = [member_finding(name, f) for name, found in lens.items() for f in found]
+        bad_lens = {name for name, found in lens.items() if found}
     try:
         solution = solve_rig(views, members, refine_intrinsics, model)
         holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
@@ -254,9 +288,8 @@ def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool
         rigid = Finding(rule="rig-rigid", severity="error", message=exc.message, fix=exc.hint)
         return replace(run, findings=(rigid, *misfit))
     rows = {m.name: m.image_size[1] for m in members}
-    bad_lens = {name for name, found in lens.items() if found}
     pairs = rig_pairs(solution, holdout)
-    findings = solved_rig_findings(pairs, rig_loops(loops), rows, (), limits, bad_lens)
+    findings = solved_rig_findings(pairs, rig_loops(loops), rows, run.designs, limits, bad_lens)
     same = [Finding(rule="rig-identity", severity="error", message=f.message,
                     fix="give each camera its own photos (was the same folder given twice?)")
             for f in identity.zero_baselines(identity.pair_translations(solution))]

@@ -24,6 +24,7 @@ Rules (errors fail lint, exit 1):
 
 from __future__ import annotations
 
+import re
 from collections.abc import Collection, Mapping, Sequence
 
 from calibctl.artifacts.calibration import CalibrationArtifact
@@ -43,6 +44,18 @@ from calibctl.workflows.handeye import rig_edges
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
 from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
+
+_DESIGN = re.compile(r"^(?P<a>[^:=]+):(?P<b>[^:=]+)=(?P<mm>[0-9.]+)(?:(?:\+-|\+/-|±)(?P<tol>[0-9.]+))?$")
+DEFAULT_DESIGN_TOL_MM = 0.5
+
+
+def parse_design(text: str) -> DesignBaseline:
+    """``A:B=75.0+-0.5`` (mm; tolerance defaults to 0.5 mm)."""
+    m = _DESIGN.match(text.strip())
+    if not m:
+        raise UsageError(f"--design-baseline-mm must look like A:B=75.0+-0.5, got {text!r}")
+    tol = float(m.group("tol")) if m.group("tol") else DEFAULT_DESIGN_TOL_MM
+    return DesignBaseline(a=m.group("a"), b=m.group("b"), baseline_mm=float(m.group("mm")), tolerance_mm=tol)
 
 
 def parse_rig_ref(ref: str) -> tuple[str, int | None]:

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import re
 import secrets
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -27,7 +26,6 @@ from calibctl.artifacts.common import parse_document, utc_now
 from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.rig import (
     UNSEALED,
-    DesignBaseline,
     RigCalibration,
     RigDefinition,
     RigEdge,
@@ -51,11 +49,8 @@ from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
 from calibctl.workflows.handeye import rig_edges
 from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
-from calibctl.workflows.rig.rig_lint import rig_findings
+from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
-
-_DESIGN = re.compile(r"^(?P<a>[^:=]+):(?P<b>[^:=]+)=(?P<mm>[0-9.]+)(?:(?:\+-|\+/-|±)(?P<tol>[0-9.]+))?$")
-DEFAULT_DESIGN_TOL_MM = 0.5
 
 
 @dataclass(frozen=True)
@@ -72,15 +67,6 @@ class RigCaptureResult:
 class RigSolveOutcome:
     calibration: RigCalibration
     active: bool
-
-
-def parse_design(text: str) -> DesignBaseline:
-    """``A:B=75.0+-0.5`` (mm; tolerance defaults to 0.5 mm)."""
-    m = _DESIGN.match(text.strip())
-    if not m:
-        raise UsageError(f"--design-baseline-mm must look like A:B=75.0+-0.5, got {text!r}")
-    tol = float(m.group("tol")) if m.group("tol") else DEFAULT_DESIGN_TOL_MM
-    return DesignBaseline(a=m.group("a"), b=m.group("b"), baseline_mm=float(m.group("mm")), tolerance_mm=tol)
 
 
 def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | None,
