@@ -61,7 +61,7 @@ def test_a_failing_canary_is_held_and_rolled_back_the_rest_never_touched(db: str
     # each target diffed against the version its robot runs: the factory's @1 and @2 are one lens without a
     # stored covariance, so the numbers are there and the verdict is not
     cam2 = doc["diffs"]["CAM-2"]
-    assert cam2["from"] == 1 and cam2["verdict"] == "unknown" and cam2["max_px"] < 1e-9
+    assert cam2["previous"] == 1 and cam2["verdict"] == "unknown" and cam2["max_px"] < 1e-9
     assert _running(db) == {"amr-1": 2, "amr-2": 1, "amr-3": 1}
     early = _run(db, "fleet", "rollout", "promote", "r1", "--reason", "hurry")
     assert early.exit_code == 2 and "amr-1 have no health report yet" in early.stderr
