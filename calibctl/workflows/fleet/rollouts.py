@@ -96,7 +96,8 @@ def start(settings: Settings, name: str, targets: list[str], canary: list[str], 
             raise UsageError(f"robot {robot} is already in the canary cohort of open rollout {busy[robot]}",
                              f"promote or roll back {busy[robot]} first")
         if robot in fleet.carries and not set(fleet.carries[robot]) & set(wanted):
-            raise UsageError(f"canary robot {robot} carries none of the target serials or rigs")
+            carried = ", ".join(label(t) for t in fleet.carries[robot])
+            raise UsageError(f"canary robot {robot} carries none of the target serials or rigs (it carries {carried})")
     for r in open_:
         for t in sorted(set(r.targets) & set(wanted)):
             raise UsageError(f"{ref(t, wanted[t])}: {label(t)} is a target of open rollout {r.name} already "
