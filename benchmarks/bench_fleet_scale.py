@@ -34,6 +34,7 @@ import psycopg
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from benchmarks import bench_store_scale  # noqa: E402
+from benchmarks.bench_fleet_health import timed_trends  # noqa: E402
 from benchmarks.machine import cpu_model  # noqa: E402
 from calibctl.artifacts.common import utc_now  # noqa: E402
 from calibctl.artifacts.fleet import FleetEvent  # noqa: E402
@@ -143,14 +144,7 @@ def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]
         spread_s = _timed(store.fleet_check_rms, 5)
     rows.append(("  active versions, one query per serial (the former pattern)", _ms(loop_s)))
     rows.append(("  active versions, one batched query (now)", _ms(batch_s)))
-    trends_s, slopes, drifts = [], [], []
-    for s in sample:
-        t3 = time.perf_counter()
-        t = health.trends(settings, s)
-        trends_s.append(time.perf_counter() - t3)
-        assert t.rms_vs_temperature_px_per_c is not None and t.td_drift_ppm is not None
-        slopes.append(t.rms_vs_temperature_px_per_c.slope)
-        drifts.append(t.td_drift_ppm.slope)
+    trends_s, slopes, drifts = timed_trends(settings, sample)
     rows.append((f"`fleet trends SERIAL` (workflow, {len(sample)} serials)", _ms(trends_s)))
     rows.append(("  its serial's rows (index serial, kind, at)", _ms(rows_s)))
     rows.append(("  the per-camera spread (mean check RMS of every serial)", _ms(spread_s)))

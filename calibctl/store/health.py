@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, insert, select
+from sqlalchemy import Table, func, insert, select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
@@ -24,6 +24,7 @@ from calibctl.store.fleet import _registration, decode_fleet_event
 from calibctl.store.models import CheckEventRow, FleetEventRow, HealthReportRow
 
 _CHUNK = 500  # source ids per IN (...) query: under SQLite's bound-parameter limit
+HEALTH_TABLE: Table = HealthReportRow.__table__  # type: ignore[assignment]  # a mapped class's Table
 NUMBERS = ("rms_px", "verdict", "ratio", "sigma", "td_ms", "sigma_ms", "temperature_c")
 
 
@@ -132,7 +133,7 @@ class HealthStoreMixin:
                              "payload_sha256": sha256_hex(payload.encode("utf-8"))})
             # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk path,
             # which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
-            s.connection().execute(insert(HealthReportRow.__table__), rows)
+            s.connection().execute(insert(HEALTH_TABLE), rows)
             return []
 
         return self._run(work, write=True)

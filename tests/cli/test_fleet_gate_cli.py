@@ -11,31 +11,17 @@ from datetime import timedelta
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
 from calibctl.artifacts.common import utc_now
-from calibctl.cli.main import app
-from calibctl.store.repository import Store
-from tests.artifacts.factories import calibration
+from tests.cli.fleet_store import run as _run
+from tests.cli.fleet_store import small_fleet
 
-WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
 ROBOTS = {"amr-1": "CAM-1", "amr-2": "CAM-2"}
 
 
 @pytest.fixture
 def db(sqlite_url: str) -> str:
-    with Store.open(sqlite_url, create=True) as store:
-        for serial in ROBOTS.values():
-            for _ in range(2):
-                store.add_artifact(calibration(serial=serial, status="accepted"), activate=True, **WHO)
-    for robot, serial in ROBOTS.items():
-        assert _run(sqlite_url, "fleet", "add", robot, "--serial", serial).exit_code == 0
-        assert _run(sqlite_url, "fleet", "assign", robot, f"{serial}@1", "--reason", "factory").exit_code == 0
-    return sqlite_url
-
-
-def _run(db: str, *args: str):
-    return CliRunner().invoke(app, ["--db", db, *args])
+    return small_fleet(sqlite_url, ROBOTS)
 
 
 def _events(db: str) -> int:

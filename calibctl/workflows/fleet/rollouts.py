@@ -17,6 +17,7 @@ No gate input yet for a canary target: exit 2, nothing promoted; a failing one: 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from calibctl.artifacts.common import utc_now
@@ -54,7 +55,8 @@ def _gated(store: Store, fleet: Fleet, name: str | None = None) -> None:
             r.state.update({robot: gate.state(robot) for robot, st in r.state.items() if st == "canary"})
 
 
-def _append(settings: Settings, events: list[FleetEvent], after: int, rig_steps: list[RigActivationStep] = ()) -> None:
+def _append(settings: Settings, events: list[FleetEvent], after: int,
+            rig_steps: Sequence[RigActivationStep] = ()) -> None:
     with records.open_store(settings, write=True) as store:
         store.append_fleet_events(events, after, rig_steps)
 
