@@ -147,7 +147,7 @@ def _print_trends(t: Trends) -> None:
     f = t.fleet
     if f is not None:
         ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
-        _say(f"  fleet: this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+        _say(f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
              f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
              f"px, max/min {ratio})")
     for finding in t.findings:

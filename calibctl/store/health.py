@@ -144,10 +144,12 @@ class HealthStoreMixin:
         return self._run(lambda s: [HealthRow(*row) for row in s.execute(
             select(*cols).where(HealthReportRow.serial == serial).order_by(HealthReportRow.at, HealthReportRow.id))])
 
-    def fleet_check_rms(self) -> dict[str, tuple[float, int]]:
-        """Serial -> (mean check RMS px, number of check reports), over every serial with check reports."""
+    def fleet_check_rms(self, since: datetime | None = None) -> dict[str, tuple[float, int]]:
+        """Serial -> (mean check RMS px, number of check reports), over every serial with check reports measured at
+        or after ``since`` (index kind, at, serial, rms_px: the window's rows only, not the whole table)."""
         stmt = (select(HealthReportRow.serial, func.avg(HealthReportRow.rms_px), func.count())
-                .where(HealthReportRow.kind == "check").group_by(HealthReportRow.serial))
+                .where(HealthReportRow.kind == "check", *([] if since is None else [HealthReportRow.at >= since]))
+                .group_by(HealthReportRow.serial))
         return self._run(lambda s: {str(serial): (float(mean), int(n)) for serial, mean, n in s.execute(stmt)})
 
     def gate_reports(self, robots: Sequence[str], serials: Sequence[str], since: datetime) -> list[GateReport]:
