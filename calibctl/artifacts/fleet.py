@@ -9,10 +9,10 @@ follow in the same transaction), ``promote`` gives the rest of the fleet theirs 
 healthy, ``rollback`` puts every robot the rollout touched back on the version it ran before.
 
 A target is a camera serial's version or a rig's (``rig_targets``; an ``assign`` names ``serial`` or ``rig``).
-A ``promote`` records what its health gate decided on (``gate``: each report's id and sha256, so the decision
-can be re-checked against the stored reports) and each target's diff against the version it replaces
-(``diffs``), and, for rigs it activated, the version that was active before (``restore``, what a rollback puts
-back).
+A ``rollout`` records each target's diff against the version its robots ran (``diffs``, ``rig_diffs``); a
+``promote`` records what its health gate decided on (``gate``: each report's id and sha256, so the decision can
+be re-checked against the stored reports) and, for rigs it activated, the version that was active before
+(``restore``, what a rollback puts back).
 """
 
 from __future__ import annotations
@@ -70,9 +70,9 @@ class FleetEvent(Document):
     rig_targets: dict[str, int] = Field(default_factory=dict, description="rollout: rig -> the new version")
     canary: list[str] = Field(default_factory=list, description="rollout: the robots that get it first")
     gate: list[GateEvidence] = Field(default_factory=list, description="promote: the reports its health gate read")
-    diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="promote: target -> its diff against the "
-                                         "version it replaces")
-    rig_diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="promote: rig target -> its diff")
+    diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="rollout: serial target -> its diff against "
+                                         "the version its robots ran")
+    rig_diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="rollout: rig target -> its diff")
     restore: dict[str, int] = Field(default_factory=dict, description="promote: rig -> its active version before the "
                                     "promote activated the target (a rollback restores it)")
     actor: str = Field(min_length=1, description="who did it")
@@ -118,6 +118,8 @@ class FleetEvent(Document):
         elif (self.serials or self.rigs or self.targets or self.rig_targets or self.canary or self.serial is not None
               or self.rig is not None):
             raise ValueError(f"{self.kind} names the rollout only")
-        if self.kind != "promote" and (self.gate or self.diffs or self.rig_diffs or self.restore):
-            raise ValueError("only a promote records its gate, diffs and restore versions")
+        if self.kind != "promote" and (self.gate or self.restore):
+            raise ValueError("only a promote records its gate and restore versions")
+        if self.kind != "rollout" and (self.diffs or self.rig_diffs):
+            raise ValueError("only a rollout records its targets' diffs")
         return self

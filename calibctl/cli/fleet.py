@@ -19,6 +19,7 @@ JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on
 ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
 
 MAX_SHOWN_LINES = 20  # refused lines named per file on stderr; --json carries every one
+MAX_SHOWN_DIFFS = 10  # a rollout's diffs listed one a line; above, counted by verdict
 
 fleet_app = typer.Typer(
     name="fleet",
@@ -192,13 +193,15 @@ def _print_rollout(r: Rollout) -> None:
     for robot, st in sorted(r.state.items()):
         why = "; ".join([*r.failing.get(robot, []), *(f"no report on {t}" for t in r.waiting.get(robot, []))])
         _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}")
-    recorded = {} if r.promote is None else {**{("serial", s): d for s, d in r.promote.diffs.items()},
-                                             **{("rig", g): d for g, d in r.promote.rig_diffs.items()}}
-    for t, d in (r.diffs or recorded).items():
+    diffs = r.diffs
+    if len(diffs) > MAX_SHOWN_DIFFS:
+        verdicts = [d.verdict for d in diffs.values()]
+        _say("  diffs: " + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts))) + " (--json lists each)")
+        diffs = {}
+    for t, d in diffs.items():
         numbers = f", p50 {d.p50_px:.2f} px, max {d.max_px:.2f} px" if d.p50_px is not None and d.max_px is not None \
             else f" ({shown(d.why)})" if d.why else ""
-        kept = " (recorded by the promote)" if not r.diffs else ""
-        _say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}{kept}")
+        _say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
     if r.promote is not None:
         _say(f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event")
 

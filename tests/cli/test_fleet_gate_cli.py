@@ -97,8 +97,9 @@ def test_passing_reports_promote_and_the_promote_records_them_and_the_diff(db: s
         ("a1/check", "check", "report", True), ("a1/gauge", "gauge", "report", True),
         ("a1/triage", "triage", "report", True)]
     assert all(len(g["sha256"]) == 64 for g in doc["gate"])
-    # each target against the version it replaces, recorded (the factory's @1 and @2 are one lens: 0 px)
-    assert doc["promote_diffs"]["CAM-2"]["previous"] == 1 and doc["promote_diffs"]["CAM-2"]["max_px"] < 1e-9
+    # each target against the version it replaces, recorded in the chained rollout event (the factory's @1 and @2
+    # are one lens: 0 px)
+    assert doc["diffs"]["CAM-2"]["previous"] == 1 and doc["diffs"]["CAM-2"]["max_px"] < 1e-9
     assert _running(db) == {"amr-1": 2, "amr-2": 2}
     assert "promoted on 3 health input(s)" in _run(db, "fleet", "status").stdout
     assert _run(db, "db", "verify").exit_code == 0

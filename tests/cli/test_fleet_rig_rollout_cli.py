@@ -75,7 +75,7 @@ def test_a_rig_rollout_promotes_and_rolls_back_with_the_rigs_active_versions(db:
     doc = json.loads(promoted.stdout)
     assert doc["robots"] == {"amr-1": "healthy", "amr-2": "promoted"}
     assert doc["gate"][0]["rig"] and doc["gate"][0]["target"] == "STEREO-1"
-    assert doc["promote_diffs"]["rig STEREO-2"] == {"previous": 1, "verdict": "different", "p50_px": None,
+    assert doc["diffs"]["rig STEREO-2"] == {"previous": 1, "verdict": "different", "p50_px": None,
                                                     "max_px": None, "why": None}  # 75 -> 76 mm, sigma 0.03 mm
     assert _state(db)[0] == {"amr-1": (2, 2), "amr-2": (2, 2)}
     assert _run(db, "db", "verify").exit_code == 0

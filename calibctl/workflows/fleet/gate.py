@@ -8,8 +8,9 @@ a gauge ratio (inside the station gauge's 0.99..1.01) and a triage verdict (ok).
 verdict and do not count. One failing input holds the canary; a target without any input yet blocks promote.
 
 The promote event records every input it decided on (id and sha256 of the stored row, so ``db verify`` can
-re-check the decision against the stored reports) and each target's ``calibctl diff`` against the version it
-replaces (verdict and px: recorded, not enforced, since a re-calibration is expected to differ).
+re-check the decision against the stored reports). The rollout event records each target's ``calibctl diff``
+against the version its robots ran (verdict and px: recorded, not enforced, since a re-calibration is expected
+to differ), computed once at the start from one store session.
 """
 
 from __future__ import annotations
@@ -22,9 +23,10 @@ from calibctl.artifacts.fleet import GateEvidence, TargetDiff
 from calibctl.config import Settings
 from calibctl.errors import CalibctlError
 from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS
-from calibctl.workflows.compare.diff import DiffRequest, diff_cameras
-from calibctl.workflows.compare.rig_diff import diff_rigs
+from calibctl.workflows.compare.diff import DiffRequest, compare_artifacts
+from calibctl.workflows.compare.rig_diff import compare_rig_calibrations
 from calibctl.workflows.fleet.ledger import Fleet, Rollout, Target
+from calibctl.workflows.store_admin import records
 
 if TYPE_CHECKING:
     from calibctl.store.health import GateReport
@@ -91,24 +93,27 @@ def previous_version(fleet: Fleet, name: str, t: Target) -> int | None:
     return seen.most_common(1)[0][0] if seen else None
 
 
-def target_diff(settings: Settings, t: Target, old: int, new: int) -> TargetDiff:
+def _compare(store: Store, t: Target, old: int, new: int) -> TargetDiff:
     """``calibctl diff`` (or ``diff --rig``) of ``t`` @old against @new; "not compared" with why when it cannot."""
     kind, name = t
+    a, b = f"{name}@{old}", f"{name}@{new}"
     try:
         if kind == "rig":
-            return TargetDiff(previous=old, verdict=diff_rigs(settings, f"{name}@{old}", f"{name}@{new}").verdict)
-        d = diff_cameras(settings, DiffRequest(f"{name}@{old}", f"{name}@{new}"))
+            rigs = store.get_rig_calibration(name, old), store.get_rig_calibration(name, new)
+            return TargetDiff(previous=old, verdict=compare_rig_calibrations(*rigs, a, b).verdict)
+        d = compare_artifacts(store.get_artifact(name, old), store.get_artifact(name, new), DiffRequest(a, b))
     except CalibctlError as exc:
         return TargetDiff(previous=old, verdict="not compared", why=exc.message[:500])
     return TargetDiff(previous=old, verdict=d.verdict, p50_px=d.result.raw.percentiles_px["p50"],
                       max_px=d.result.raw.percentiles_px["max"])
 
 
-def target_diffs(settings: Settings, fleet: Fleet, rollout: Rollout) -> dict[Target, TargetDiff]:
-    """Each target against the version its robots ran before the rollout (targets no robot ran before: none)."""
+def target_diffs(settings: Settings, fleet: Fleet, name: str, targets: dict[Target, int]) -> dict[Target, TargetDiff]:
+    """Each of rollout ``name``'s ``targets`` against the version its robots ran before it (none: not compared)."""
     out = {}
-    for t, version in sorted(rollout.targets.items()):
-        old = previous_version(fleet, rollout.name, t)
-        if old is not None and old != version:
-            out[t] = target_diff(settings, t, old, version)
+    with records.open_store(settings) as store:
+        for t, version in sorted(targets.items()):
+            old = previous_version(fleet, name, t)
+            if old is not None and old != version:
+                out[t] = _compare(store, t, old, version)
     return out

@@ -29,7 +29,6 @@ class Rollout:
     """A rollout replayed from the log: its event, per robot its state, and whether it is open."""
 
     start: FleetEvent
-    diffs: dict[Target, TargetDiff] = field(default_factory=dict)  # rollout start: target -> its diff (shown, not stored)
     # robot -> pending, canary (no health report yet), healthy, failed, promoted, rolled back, untouched
     state: dict[str, str] = field(default_factory=dict)
     closed: str | None = None  # "promoted" or "rolled back"
@@ -43,6 +42,12 @@ class Rollout:
         return self.start.subject
 
     @property
+    def diffs(self) -> dict[Target, TargetDiff]:
+        """Each target's diff against the version its robots ran, as the rollout event recorded it."""
+        return {**{("serial", s): d for s, d in self.start.diffs.items()},
+                **{("rig", r): d for r, d in self.start.rig_diffs.items()}}
+
+    @property
     def targets(self) -> dict[Target, int]:
         return {**{("serial", s): v for s, v in self.start.targets.items()},
                 **{("rig", r): v for r, v in self.start.rig_targets.items()}}
@@ -54,8 +59,6 @@ class Rollout:
             out["diffs"] = {label(t): d.model_dump(mode="json") for t, d in self.diffs.items()}
         if self.promote is not None:
             out["gate"] = [e.model_dump(mode="json") for e in self.promote.gate]
-            out["promote_diffs"] = {**{s: d.model_dump(mode="json") for s, d in self.promote.diffs.items()},
-                                    **{label(("rig", r)): d.model_dump(mode="json") for r, d in self.promote.rig_diffs.items()}}
         if self.waiting or self.failing:
             out["waiting"], out["failing"] = self.waiting, self.failing
         return out

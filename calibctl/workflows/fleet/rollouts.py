@@ -3,10 +3,11 @@ promote or roll back the fleet in one command.
 
 ``start``: new versions for a set of serials and rigs and a canary cohort; the canary robots' assignments are
 written with the rollout, in one transaction; each target is diffed against the version its robots ran
-(``calibctl diff``), so the operator sees whether the change is beyond re-calibration noise. ``promote``: the
+(``calibctl diff``, recorded in the rollout event), so the operator sees whether the change is beyond
+re-calibration noise. ``promote``: the
 health gate (``gate``: the canary robots' checks and health reports since the start), then every other robot
 carrying a target gets its new version and each rig target becomes its rig's active version, in one
-transaction; the promote event records the gate's inputs and the diffs. ``rollback``: every robot the rollout
+transaction; the promote event records the gate's inputs. ``rollback``: every robot the rollout
 touched is put back on the version it ran before and each rig the promote activated gets its previous active
 version back, in one transaction. Each is appended with a compare-and-set on the log's length (and on each
 rig's active version), so a step decided on a stale fleet writes nothing.
@@ -104,21 +105,21 @@ def start(settings: Settings, name: str, targets: list[str], canary: list[str], 
         for t in sorted(set(r.targets) & set(wanted)):
             raise UsageError(f"{ref(t, wanted[t])}: {label(t)} is a target of open rollout {r.name} already "
                              f"({ref(t, r.targets[t])}); nothing started", f"promote or roll back {r.name} first")
+    diffs = target_diffs(settings, fleet, name, wanted)
     head = _new("rollout", settings, reason, rollout=name, canary=canary,
                 targets={n: v for (k, n), v in wanted.items() if k == "serial"},
-                rig_targets={n: v for (k, n), v in wanted.items() if k == "rig"})
+                rig_targets={n: v for (k, n), v in wanted.items() if k == "rig"},
+                diffs={n: d for (k, n), d in diffs.items() if k == "serial"},
+                rig_diffs={n: d for (k, n), d in diffs.items() if k == "rig"})
     assigns = [_assign(settings, f"canary of rollout {name}", robot, t, wanted[t], name)
                for robot in canary for t in fleet.carries.get(robot, []) if t in wanted]
     _append(settings, [head, *assigns], fleet.length)
-    after, _ = _read(settings, name)
-    rollout = after.rollouts[name]
-    rollout.diffs = target_diffs(settings, after, rollout)
-    return rollout
+    return _read(settings, name)[0].rollouts[name]
 
 
 def promote(settings: Settings, name: str, reason: str) -> Rollout:
     """The health gate, then every other robot carrying a target gets its version and each rig target becomes its
-    rig's active version (one transaction); the promote event records the gate's inputs and the diffs."""
+    rig's active version (one transaction); the promote event records the gate's inputs."""
     check_reason(reason)
     fleet, rig_active = _read(settings, name)
     rollout = fleet.rollouts[name]
@@ -137,7 +138,6 @@ def promote(settings: Settings, name: str, reason: str) -> Rollout:
                          f"({named or 'no canary carries a target'}); nothing promoted",
                          "check the canary robots' cameras (`calibctl check`) or ingest their reports "
                          "(`calibctl fleet ingest`), then promote again")
-    diffs = target_diffs(settings, fleet, rollout)
     targets = rollout.targets
     assigns = [_assign(settings, f"promoted by rollout {name}", robot, t, targets[t], name)
                for robot, state in sorted(rollout.state.items()) if state == "pending"
@@ -145,8 +145,6 @@ def promote(settings: Settings, name: str, reason: str) -> Rollout:
     steps = [RigActivationStep(rig, v, "activate", rig_active.get(rig), f"promoted by rollout {name}: {reason}")
              for (kind, rig), v in sorted(targets.items()) if kind == "rig" and rig_active.get(rig) != v]
     event = _new("promote", settings, reason, rollout=name, gate=rollout.evidence,
-                 diffs={n: d for (k, n), d in diffs.items() if k == "serial"},
-                 rig_diffs={n: d for (k, n), d in diffs.items() if k == "rig"},
                  restore={s.rig: s.expected_active for s in steps if s.expected_active is not None})
     _append(settings, [*assigns, event], fleet.length, steps)
     return _read(settings, name)[0].rollouts[name]
