@@ -28,7 +28,7 @@ from machine import cpu_model  # noqa: E402
 
 from calibctl.artifacts.common import utc_now  # noqa: E402
 from calibctl.artifacts.fleet import FleetEvent  # noqa: E402
-from calibctl.config import load_settings  # noqa: E402
+from calibctl.config import Settings, load_settings  # noqa: E402
 from calibctl.store.repository import Store  # noqa: E402
 from calibctl.workflows.fleet import health  # noqa: E402
 
@@ -55,6 +55,19 @@ def _files(folder: Path, robots: int, days: int, seed: int = 0) -> list[Path]:
     return paths
 
 
+def timed_trends(settings: Settings, serials: list[str]) -> tuple[list[float], list[float], list[float]]:
+    """``fleet trends`` (the workflow) of each serial: its wall seconds, RMS slope (px/degC) and td drift (ppm)."""
+    latencies, slopes, drifts = [], [], []
+    for serial in serials:
+        t1 = time.perf_counter()
+        t = health.trends(settings, serial)
+        latencies.append(time.perf_counter() - t1)
+        assert t.rms_vs_temperature_px_per_c is not None and t.td_drift_ppm is not None
+        slopes.append(t.rms_vs_temperature_px_per_c.slope)
+        drifts.append(t.td_drift_ppm.slope)
+    return latencies, slopes, drifts
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", type=int, default=25, help="robots (4 serials each; 25 -> 100 serials)")
@@ -77,14 +90,7 @@ def main() -> None:
         stored = sum(r.stored for r in results)
         assert not any(r.refused for r in results), [r.refused[:3] for r in results if r.refused]
         serials = [f"CAM-{r:03d}-{c}" for r in range(args.robots) for c in range(4)][:: max(1, args.robots * 4 // args.samples)]
-        latencies, slopes, drifts = [], [], []
-        for serial in serials:
-            t1 = time.perf_counter()
-            t = health.trends(settings, serial)
-            latencies.append(time.perf_counter() - t1)
-            assert t.rms_vs_temperature_px_per_c is not None and t.td_drift_ppm is not None
-            slopes.append(t.rms_vs_temperature_px_per_c.slope)
-            drifts.append(t.td_drift_ppm.slope)
+        latencies, slopes, drifts = timed_trends(settings, serials)
     print(f"# fleet health: ingest and trends ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, "
           f"load {os.getloadavg()[0]:.1f}, {url.split(':')[0]})\n")
     print("| what | value |\n|---|---|")

@@ -32,7 +32,8 @@ class HealthReport(Document):
     schema_version: Literal[1] = Field(HEALTH_REPORT_SCHEMA_VERSION, description="version of this document's schema")
     source_id: str = Field(pattern=SOURCE_ID_PATTERN, description="the robot's own id for this report, unique in the "
                            "store: a report sent twice is refused the second time")
-    serial: str = Field(pattern=SERIAL_PATTERN, description="the camera serial the numbers are about")
+    serial: str = Field(pattern=SERIAL_PATTERN, description="the camera serial the numbers are about, or the rig's "
+                        "name for a rig-level report (a rig target's health gate reads those)")
     robot: str = Field(pattern=SERIAL_PATTERN, description="the registered robot that carries the serial and sent it")
     time: UtcDatetime = Field(description="UTC when the robot measured it; refused more than 5 minutes in the future")
     kind: HealthKind = Field(description="check: a re-check against the stored calibration; gauge: the scale "

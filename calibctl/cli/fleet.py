@@ -19,6 +19,7 @@ JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on
 ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
 
 MAX_SHOWN_LINES = 20  # refused lines named per file on stderr; --json carries every one
+MAX_SHOWN_DIFFS = 10  # a rollout's diffs listed one a line; above, counted by verdict
 
 fleet_app = typer.Typer(
     name="fleet",
@@ -58,16 +59,18 @@ def assign(
     robot: Annotated[str, typer.Argument(help="A registered robot.")],
     ref: Annotated[str, typer.Argument(metavar="SERIAL@N", help="The calibration version the robot now runs.")],
     reason: ReasonOption = "",
+    rig: Annotated[bool, typer.Option("--rig", help="REF is RIG@N, a rig's calibration version.")] = False,
     json_output: JsonFlag = False,
 ) -> None:
-    """Record that a robot now runs SERIAL@N (an accepted version of a serial it carries)."""
+    """Record that a robot now runs SERIAL@N (or, with --rig, RIG@N): an accepted version it carries."""
     from calibctl.workflows.fleet import robots
 
-    event = robots.assign(state(ctx).settings(), robot, ref, reason)
+    event = robots.assign(state(ctx).settings(), robot, ref, reason, rig=rig)
     if wants_json(ctx, json_output):
         emit_json(event)
         return
-    _say(f"robot {shown(event.subject)} runs {shown(event.serial)}@{event.version}")
+    what = shown(event.serial) if event.rig is None else f"rig {shown(event.rig)}"
+    _say(f"robot {shown(event.subject)} runs {what}@{event.version}")
 
 
 @fleet_app.command("status")
@@ -85,12 +88,12 @@ def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
         _say("no robots registered (calibctl fleet add ROBOT --serial SERIAL)")
         return
     for r in result.robots:
-        rigs = f"  rigs: {', '.join(map(shown, r.rigs))}" if r.rigs else ""
-        _say(f"{shown(r.robot)}{rigs}")
-        for s in r.sensors:
-            running = "-" if s.running is None else f"@{s.running}"
-            active = "-" if s.active is None else f"@{s.active}"
-            _say(f"  {shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
+        _say(shown(r.robot))
+        for prefix, sensors in (("", r.sensors), ("rig ", r.rigs)):
+            for s in sensors:
+                running = "-" if s.running is None else f"@{s.running}"
+                active = "-" if s.active is None else f"@{s.active}"
+                _say(f"  {prefix + shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
 
 
 @fleet_app.command("ingest")
@@ -145,7 +148,7 @@ def _print_trends(t: Trends) -> None:
     f = t.fleet
     if f is not None:
         ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
-        _say(f"  fleet: this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+        _say(f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
              f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
              f"px, max/min {ratio})")
     for finding in t.findings:
@@ -183,30 +186,43 @@ def _render_rollout(ctx: typer.Context, json_output: bool, r: Rollout) -> None:
 
 
 def _print_rollout(r: Rollout) -> None:
+    from calibctl.workflows.fleet.ledger import ref
+
     closed = f" ({r.closed})" if r.closed else ""
-    _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(f"{shown(s)}@{v}" for s, v in r.start.targets.items()))
+    _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(shown(ref(t, v)) for t, v in r.targets.items()))
     for robot, st in sorted(r.state.items()):
-        _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}")
-    for serial, d in r.diffs.items():
-        numbers = f", p50 {d['p50_px']:.2f} px, max {d['max_px']:.2f} px" if "p50_px" in d else f" ({shown(d['why'])})"
-        _say(f"  diff {shown(serial)}@{d['from']} -> @{r.start.targets[serial]}: {d['verdict']}{numbers}")
+        why = "; ".join([*r.failing.get(robot, []), *(f"no report on {t}" for t in r.waiting.get(robot, []))])
+        _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}")
+    diffs = r.diffs
+    if len(diffs) > MAX_SHOWN_DIFFS:
+        verdicts = [d.verdict for d in diffs.values()]
+        _say("  diffs: " + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts))) + " (--json lists each)")
+        diffs = {}
+    for t, d in diffs.items():
+        numbers = f", p50 {d.p50_px:.2f} px, max {d.max_px:.2f} px" if d.p50_px is not None and d.max_px is not None \
+            else f" ({shown(d.why)})" if d.why else ""
+        _say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
+    if r.promote is not None:
+        _say(f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event")
 
 
 @rollout_app.command("start")
 def rollout_start(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(help="Rollout name (letters, digits, . _ : -).")],
-    target: Annotated[list[str], typer.Option("--target", metavar="SERIAL@N", help="A new version (repeatable).",
-                                              show_default=False)],
-    canary: Annotated[list[str], typer.Option("--canary", metavar="ROBOT", help="A canary robot (repeatable).",
-                                              show_default=False)],
+    target: Annotated[list[str] | None, typer.Option("--target", metavar="SERIAL@N", help="A new camera version "
+                                                     "(repeatable).", show_default=False)] = None,
+    rig_target: Annotated[list[str] | None, typer.Option("--rig-target", metavar="RIG@N", help="A new rig version "
+                                                         "(repeatable).", show_default=False)] = None,
+    canary: Annotated[list[str] | None, typer.Option("--canary", metavar="ROBOT", help="A canary robot "
+                                                     "(repeatable).", show_default=False)] = None,
     reason: ReasonOption = "",
     json_output: JsonFlag = False,
 ) -> None:
     """Start a rollout: the canary robots run the new versions now, the rest wait for promote."""
     from calibctl.workflows.fleet import rollouts
 
-    r = rollouts.start(state(ctx).settings(), name, target, canary, reason)
+    r = rollouts.start(state(ctx).settings(), name, target or [], canary or [], reason, rig_target or [])
     _render_rollout(ctx, json_output, r)
 
 
@@ -215,7 +231,10 @@ def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help
                     reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
     """Promote to the rest of the fleet once every canary robot reports passing checks of the new version.
 
-    Exit 1 (held, nothing promoted) when a canary reports a failing check; 2 when one has not reported yet."""
+    The gate reads the canary robots' `calibctl check` events and their ingested health reports (check, gauge,
+    triage) since the start; the promote records them (with their sha256) and each target's diff. Rig targets
+    become their rigs' active versions. Exit 1 (held, nothing promoted) when a canary reports a failing one;
+    2 when one has not reported yet."""
     from calibctl.workflows.fleet import rollouts
 
     r = rollouts.promote(state(ctx).settings(), name, reason)

@@ -23,7 +23,8 @@ def report(
     json_output: Annotated[bool, typer.Option("--json", help="Print where it was written as JSON.")] = False,
 ) -> None:
     """Write the calibration report: verdict, lint, parameters with sigma, coverage, residuals, per-view
-    and held-out RMS, projection uncertainty, distortion, gates and provenance. Works after images are pruned.
+    and held-out RMS, projection uncertainty, distortion, the diff against the previous accepted version, the
+    robots' health trends (when they reported), gates and provenance. Works after images are pruned.
 
     With --rig: baselines with sigma, the T_root_cam tree, held-out epipolar RMS and vertical disparity,
     loop closure, the members' verdicts linked to their own reports, and for a LiDAR edge T_lidar_cam with
@@ -47,10 +48,10 @@ def report(
             return
         stdout.print(f"rig {cal.rig}@{cal.version} ({cal.status}): report written to {rig_path}")
         return
-    from calibctl.workflows.report import report as report_workflow
+    from calibctl.workflows.fleet import report_sections
 
     assert ref is not None
-    path, data = report_workflow.write_report(state(ctx).settings(), ref, out, force=force)
+    path, data = report_sections.write_report(state(ctx).settings(), ref, out, force=force)
     if wants_json(ctx, json_output):
         emit_json({"ref": data.artifact.ref, "status": data.artifact.status, "path": str(path),
                    "bytes": path.stat().st_size})

@@ -33,7 +33,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec, fleet, rigs, triggers
+from calibctl.store import chain, codec, fleet, health, rigs, triggers
 from calibctl.store.models import (
     ArtifactRow,
     CounterRow,
@@ -274,4 +274,5 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
                 decode(row)
             except IntegrityError as exc:
                 audit.problems.append(exc.message)
+    audit.problems.extend(health.gate_problems(s))
     return audit

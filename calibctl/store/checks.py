@@ -8,6 +8,7 @@ The table (``models.CheckEventRow``) is chained per serial (revision 0007, ``cha
 from __future__ import annotations
 
 from collections.abc import Callable
+from datetime import datetime
 from typing import Any
 
 from sqlalchemy import select
@@ -57,3 +58,14 @@ class CheckStoreMixin:
             return [codec.decode_check(r) for r in rows]
 
         return self._run(work)
+
+    def checks_since(self, serials: list[str], since: datetime) -> list[tuple[CheckEvent, str]]:
+        """Every check of ``serials`` stamped at or after ``since``, oldest first, each with its row's payload
+        sha256 (what a rollout's promote records as the evidence its gate read)."""
+
+        def work(s: Session) -> list[tuple[CheckEvent, str]]:
+            rows = s.scalars(select(CheckEventRow).where(CheckEventRow.serial.in_(serials), CheckEventRow.at >= since)
+                             .order_by(CheckEventRow.id))
+            return [(codec.decode_check(r), r.payload_sha256) for r in rows]
+
+        return self._run(work) if serials else []

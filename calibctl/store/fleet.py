@@ -9,9 +9,10 @@ names a registered robot, a serial it carries and a stored version of that seria
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex
@@ -19,8 +20,27 @@ from calibctl.artifacts.fleet import FleetEvent
 from calibctl.errors import AlreadyExistsError, NotFoundError, StaleActiveVersionError, UsageError
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import statuses
-from calibctl.store.models import FleetEventRow
+from calibctl.store.history import check_rollback, statuses
+from calibctl.store.models import EventRow, FleetEventRow, RigEventRow
+from calibctl.store.rigs import (
+    active_rig,
+    append_rig_event,
+    decode_calibration,
+    rig_calibration_row,
+    rig_statuses,
+)
+
+
+@dataclass(frozen=True)
+class RigActivationStep:
+    """A rig version a fleet step makes active in the same transaction (a promote, or a rollback restoring the
+    version a promote replaced): compare-and-set on ``expected_active``, the active version the step decided on."""
+
+    rig: str
+    version: int
+    kind: str  # "activate" (promote) or "rollback"
+    expected_active: int | None
+    reason: str
 
 
 def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
@@ -47,10 +67,13 @@ class FleetStoreMixin:
         does not carry (UsageError), or of an unknown serial or version (NotFoundError); a rejected version."""
         return self.append_fleet_events([event])
 
-    def append_fleet_events(self, events: Sequence[FleetEvent], after: int | None = None) -> int:
+    def append_fleet_events(self, events: Sequence[FleetEvent], after: int | None = None,
+                            rig_steps: Sequence[RigActivationStep] = ()) -> int:
         """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the log's
         length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole batch
-        (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet."""
+        (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
+        ``rig_steps`` are appended to the rigs' activation log in the same transaction (a rig whose active
+        version moved since the caller read it refuses the whole batch)."""
 
         def work(s: Session) -> int:
             current = counters.peek(s, "chain", "fleet") or 0
@@ -68,9 +91,25 @@ class FleetStoreMixin:
                 chain.link(s, chain.STREAMS["fleet"], row, self.signer)
                 s.add(row)
                 s.flush()
+            for step in rig_steps:
+                _activate_rig(s, step, events[-1], self.signer)
             return position
 
         return self._run(work, write=True)
+
+    def active_versions(self) -> tuple[dict[str, int], dict[str, int]]:
+        """Every serial's and every rig's active version (its latest activation event's), two queries in all:
+        ``fleet status`` reads them for the whole fleet at once, not one serial at a time."""
+
+        def work(s: Session) -> tuple[dict[str, int], dict[str, int]]:
+            out = []
+            for table, key in ((EventRow, EventRow.serial), (RigEventRow, RigEventRow.rig)):
+                latest = select(func.max(table.id).label("id")).group_by(key).subquery()
+                out.append({str(name): int(v) for name, v in s.execute(
+                    select(key, table.version).join(latest, table.id == latest.c.id))})
+            return out[0], out[1]
+
+        return self._run(work)
 
     def fleet_events(self) -> list[FleetEvent]:
         """The whole fleet log, oldest first."""
@@ -90,12 +129,23 @@ def _check(s: Session, event: FleetEvent) -> None:
             raise AlreadyExistsError(f"rollout {event.subject} exists already", "name the new rollout differently")
         for serial, version in event.targets.items():
             _check_version(s, serial, version, "roll out")
+        for rig, version in event.rig_targets.items():
+            _check_rig_version(s, rig, version, "roll out")
         for robot in event.canary:
             if _registration(s, robot) is None:
                 raise NotFoundError(f"canary robot {robot} is not registered",
                                     f"register it first: calibctl fleet add {robot} --serial SERIAL ...")
     elif _rollout(s, event.subject) is None:
         raise NotFoundError(f"no rollout {event.subject}", "`calibctl fleet status` lists the rollouts")
+
+
+def _activate_rig(s: Session, step: RigActivationStep, event: FleetEvent, signer: Signer | None) -> None:
+    counters.lock(s, "rig", step.rig)
+    already = check_rollback(f"rig {step.rig}", step.version, rig_statuses(s, step.rig), active_rig(s, step.rig),
+                             step.expected_active, f"calibctl rig history {step.rig}")
+    decode_calibration(rig_calibration_row(s, step.rig, step.version))  # never activate tampered bytes
+    if not already:
+        append_rig_event(s, step.rig, step.version, step.kind, event.actor, event.station, step.reason, signer)
 
 
 def _rollout(s: Session, name: str) -> FleetEvent | None:
@@ -115,11 +165,29 @@ def _check_version(s: Session, serial: str, version: int, what: str) -> None:
                          "name an accepted version (`calibctl history SERIAL`)")
 
 
+def _check_rig_version(s: Session, rig: str, version: int, what: str) -> None:
+    known = rig_statuses(s, rig)  # NotFoundError for a rig with no calibration
+    status = known.get(version)
+    if status is None:
+        raise NotFoundError(f"rig {rig} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
+                            f"see `calibctl rig history {rig}`")
+    if status != "accepted":
+        raise UsageError(f"rig {rig}@{version} is {status}: a robot must not run it, so it cannot {what}",
+                         "name an accepted version (`calibctl rig history RIG`)")
+
+
 def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | None) -> None:
     if registered is None:
         raise NotFoundError(f"robot {event.robot} is not registered",
                             f"register it first: calibctl fleet add {event.robot} --serial SERIAL ...")
-    assert event.serial is not None and event.version is not None  # the document's own validator
+    assert event.version is not None  # the document's own validator
+    if event.rig is not None:
+        if event.rig not in registered.rigs:
+            raise UsageError(f"robot {event.robot} does not carry rig {event.rig} (its rigs: "
+                             f"{', '.join(registered.rigs) or 'none'})", "assign one of its own rigs")
+        _check_rig_version(s, event.rig, event.version, "be assigned")
+        return
+    assert event.serial is not None
     if event.serial not in registered.serials:
         raise UsageError(f"robot {event.robot} does not carry {event.serial} (it carries "
                          f"{', '.join(registered.serials) or 'no camera serials'})",

@@ -365,7 +365,8 @@ class HealthReportRow(Base):
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
-    __table_args__ = (Index(None, "serial", "kind", "at"),)
+    __table_args__ = (Index(None, "serial", "kind", "at"),
+                      Index(None, "kind", "at", "serial", "rms_px"))  # 0014: the per-camera spread's window
 
 
 IMMUTABLE_TABLES = {

@@ -78,6 +78,11 @@ def _event(row: RigEventRow) -> RigActivation:
                          kind=row.kind, actor=row.actor, station=row.station, at=row.at, reason=row.reason)
 
 
+def rig_calibration_row(s: Session, rig: str, version: int) -> RigCalibrationRow:
+    return s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
+                                                     RigCalibrationRow.version == version)).one()
+
+
 def _active(s: Session, rig: str) -> int | None:
     return s.scalar(select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1))
 
@@ -268,8 +273,7 @@ class RigStoreMixin:
             counters.lock(s, "rig", rig)
             already = check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
                                      f"calibctl rig history {rig}")
-            decode_calibration(s.scalars(select(RigCalibrationRow).where(
-                RigCalibrationRow.rig == rig, RigCalibrationRow.version == to_version)).one())
+            decode_calibration(rig_calibration_row(s, rig, to_version))
             if already:
                 return None
             return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
@@ -279,6 +283,9 @@ class RigStoreMixin:
     def rig_events(self, rig: str) -> list[RigActivation]:
         return self._run(lambda s: [_event(r) for r in s.scalars(
             select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))])
+
+
+active_rig, append_rig_event, rig_statuses = _active, _append, _statuses  # for the fleet's rig steps (store.fleet)
 
 
 def rig_member_session_ids(s: Session) -> set[str]:

@@ -7,34 +7,24 @@ from __future__ import annotations
 import json
 
 import pytest
-from typer.testing import CliRunner
 
 from calibctl.artifacts.common import utc_now
-from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
+from tests.cli.fleet_store import WHO, small_fleet
+from tests.cli.fleet_store import run as _run
 from tests.store.documents import check_event
 
-WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
 ROBOTS = {"amr-1": "CAM-1", "amr-2": "CAM-2", "amr-3": "CAM-3"}
 
 
 @pytest.fixture
 def db(sqlite_url: str) -> str:
     """Three robots, one camera each: @1 runs everywhere, @2 is new (accepted), CAM-1@3 rejected."""
-    with Store.open(sqlite_url, create=True) as store:
-        for serial in ROBOTS.values():
-            for status in ("accepted", "accepted"):
-                store.add_artifact(calibration(serial=serial, status=status), activate=True, **WHO)
+    small_fleet(sqlite_url, ROBOTS)
+    with Store.open(sqlite_url) as store:
         store.add_artifact(calibration(serial="CAM-1", status="rejected"), activate=False, **WHO)
-    for robot, serial in ROBOTS.items():
-        assert _run(sqlite_url, "fleet", "add", robot, "--serial", serial).exit_code == 0
-        assert _run(sqlite_url, "fleet", "assign", robot, f"{serial}@1", "--reason", "factory").exit_code == 0
     return sqlite_url
-
-
-def _run(db: str, *args: str):
-    return CliRunner().invoke(app, ["--db", db, *args])
 
 
 def _start(db: str, name: str = "r1", canary: str = "amr-1"):
@@ -61,7 +51,7 @@ def test_a_failing_canary_is_held_and_rolled_back_the_rest_never_touched(db: str
     # each target diffed against the version its robot runs: the factory's @1 and @2 are one lens without a
     # stored covariance, so the numbers are there and the verdict is not
     cam2 = doc["diffs"]["CAM-2"]
-    assert cam2["from"] == 1 and cam2["verdict"] == "unknown" and cam2["max_px"] < 1e-9
+    assert cam2["previous"] == 1 and cam2["verdict"] == "unknown" and cam2["max_px"] < 1e-9
     assert _running(db) == {"amr-1": 2, "amr-2": 1, "amr-3": 1}
     early = _run(db, "fleet", "rollout", "promote", "r1", "--reason", "hurry")
     assert early.exit_code == 2 and "amr-1 have no health report yet" in early.stderr

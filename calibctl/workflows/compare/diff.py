@@ -136,7 +136,11 @@ def _pixel_frames(a: CalibrationArtifact, b: CalibrationArtifact, lens_b: Lens, 
 def diff_cameras(settings: Settings, request: DiffRequest) -> CameraDiff:
     """Compare two stored camera calibrations (``SERIAL[@N]`` each)."""
     check_request(request)
-    a, b = records.show(settings, request.ref_a), records.show(settings, request.ref_b)
+    return compare_artifacts(records.show(settings, request.ref_a), records.show(settings, request.ref_b), request)
+
+
+def compare_artifacts(a: CalibrationArtifact, b: CalibrationArtifact, request: DiffRequest) -> CameraDiff:
+    """``diff_cameras`` of two calibrations read already (a rollout reads all its targets in one store session)."""
     if a.serial == b.serial and a.version == b.version:
         raise UsageError(f"{request.ref_a} and {request.ref_b} are both {a.ref}: there is nothing to compare",
                          "name two different versions (e.g. CAM@3 CAM@4; `calibctl history SERIAL` lists them)")

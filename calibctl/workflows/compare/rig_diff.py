@@ -67,7 +67,11 @@ def _read(settings: Settings, ref: str) -> RigCalibration:
 
 def diff_rigs(settings: Settings, ref_a: str, ref_b: str) -> RigDiff:
     """Compare two stored rig calibrations (``RIG[@N]`` each)."""
-    a, b = _read(settings, ref_a), _read(settings, ref_b)
+    return compare_rig_calibrations(_read(settings, ref_a), _read(settings, ref_b), ref_a, ref_b)
+
+
+def compare_rig_calibrations(a: RigCalibration, b: RigCalibration, ref_a: str, ref_b: str) -> RigDiff:
+    """``diff_rigs`` of two rig calibrations read already (``ref_a``/``ref_b``: how the user named them)."""
     if a.rig == b.rig and a.version == b.version:
         raise UsageError(f"{ref_a} and {ref_b} are both {a.rig}@{a.version}: there is nothing to compare",
                          "name two different versions (`calibctl rig history RIG` lists them)")

@@ -10,6 +10,7 @@ RMS against the rest of the fleet's cameras, each with its n and sigma.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,9 @@ from calibctl.workflows.store_admin import records
 
 MAX_LINE_CHARS = 4096
 """A report is a few hundred characters; a longer line is not one."""
+SPREAD_WINDOW = timedelta(days=30)
+"""The per-camera spread compares the serials' check RMS over the 30 days up to this serial's newest report: the
+cameras as they are now (a camera repaired in spring is not the worst all year), and a bounded read at fleet size."""
 MAX_LINES = 200_000
 """Reports per file: a year of daily reports of 500 robots' sensors is 730k, sent as several files."""
 
@@ -89,6 +93,9 @@ def ingest(settings: Settings, paths: list[Path]) -> list[FileResult]:
 def trends(settings: Settings, serial: str) -> Trends:
     """``serial``'s trends from its stored reports, and its RMS against every other serial's (NotFoundError: none)."""
     with records.open_store(settings) as store:
-        rows = store.health_rows(serial)
-        fleet = store.fleet_check_rms() if rows else {}
-    return compute_trends(serial, rows, fleet)
+        rows = store.health_rows(serial)  # oldest first
+        fleet = store.fleet_check_rms(rows[-1].at - SPREAD_WINDOW) if rows else {}
+    t = compute_trends(serial, rows, fleet)
+    if t.fleet is not None:
+        t.fleet["window_days"] = SPREAD_WINDOW.days
+    return t

@@ -39,14 +39,15 @@ def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str
     return event
 
 
-def assign(settings: Settings, robot: str, ref: str, reason: str) -> FleetEvent:
-    """Record that ``robot`` now runs ``SERIAL@N`` (an accepted, stored version of a serial it carries)."""
+def assign(settings: Settings, robot: str, ref: str, reason: str, *, rig: bool = False) -> FleetEvent:
+    """Record that ``robot`` now runs ``SERIAL@N`` (``rig``: ``RIG@N``), an accepted, stored version of a serial
+    (rig) it carries."""
     check_reason(reason)
-    serial, version = records.parse_artifact_ref(ref)
+    name, version = records.parse_artifact_ref(ref)
     if version is None:
-        raise UsageError(f"'{ref}' names no version", f"assign an explicit version, e.g. {serial}@3")
-    event = fleet_event(kind="assign", robot=robot, serial=serial, version=version, actor=settings.operator,
-                   station=settings.station, at=utc_now(), reason=reason)
+        raise UsageError(f"'{ref}' names no version", f"assign an explicit version, e.g. {name}@3")
+    event = fleet_event(kind="assign", robot=robot, **({"rig": name} if rig else {"serial": name}), version=version,
+                        actor=settings.operator, station=settings.station, at=utc_now(), reason=reason)
     with records.open_store(settings, write=True) as store:
         store.add_fleet_event(event)
     return event
@@ -72,7 +73,7 @@ class SensorState:
 @dataclass
 class RobotState:
     robot: str
-    rigs: list[str]
+    rigs: list[SensorState]  # ``serial`` holds the rig's name
     sensors: list[SensorState] = field(default_factory=list)
     registered_at: str = ""
 
@@ -83,27 +84,34 @@ class FleetStatus:
     events: int
 
     def as_json(self) -> dict[str, Any]:
+        def one(s: SensorState, key: str) -> dict[str, Any]:
+            return {key: s.serial, "running": s.running, "active": s.active, "state": s.state}
+
         return {"events": self.events, "robots": [
-            {"robot": r.robot, "rigs": r.rigs, "registered_at": r.registered_at,
-             "sensors": [{"serial": s.serial, "running": s.running, "active": s.active, "state": s.state}
-                         for s in r.sensors]} for r in self.robots]}
+            {"robot": r.robot, "rigs": [one(s, "rig") for s in r.rigs], "registered_at": r.registered_at,
+             "sensors": [one(s, "serial") for s in r.sensors]} for r in self.robots]}
+
+
+def robot_states(events: list[FleetEvent], serial_active: dict[str, int], rig_active: dict[str, int]) -> FleetStatus:
+    """Replay the fleet log: each robot, its serials and rigs, the version each runs against the active one."""
+    robots: dict[str, RobotState] = {}
+    running: dict[tuple[str, tuple[str, str]], int] = {}
+    for e in events:
+        if e.kind == "register":
+            robots[e.subject] = RobotState(e.subject, [SensorState(r, None, None) for r in e.rigs],
+                                           [SensorState(s, None, None) for s in e.serials], e.at.isoformat())
+        elif e.kind == "assign" and e.version is not None:
+            running[(e.subject, e.target)] = e.version
+    for r in robots.values():
+        for kind, sensors, active in (("serial", r.sensors, serial_active), ("rig", r.rigs, rig_active)):
+            for s in sensors:
+                s.running, s.active = running.get((r.robot, (kind, s.serial))), active.get(s.serial)
+    return FleetStatus(sorted(robots.values(), key=lambda r: r.robot), len(events))
 
 
 def status(settings: Settings) -> FleetStatus:
-    """Replay the fleet log: each robot, its sensors, the version each runs against the active one."""
+    """``robot_states`` of the store's fleet log (three queries: the log, the serials' and the rigs' active versions)."""
     with records.open_store(settings) as store:
         events = store.fleet_events()
-        robots: dict[str, RobotState] = {}
-        running: dict[tuple[str, str], int] = {}
-        for e in events:
-            if e.kind == "register":
-                robots[e.subject] = RobotState(e.subject, list(e.rigs), registered_at=e.at.isoformat())
-                robots[e.subject].sensors = [SensorState(s, None, None) for s in e.serials]
-            elif e.kind == "assign" and e.serial is not None and e.version is not None:
-                running[(e.subject, e.serial)] = e.version
-        serials = sorted({s.serial for r in robots.values() for s in r.sensors})
-        active = {s: store.active_version(s) for s in serials}
-    for r in robots.values():
-        for s in r.sensors:
-            s.running, s.active = running.get((r.robot, s.serial)), active.get(s.serial)
-    return FleetStatus(sorted(robots.values(), key=lambda r: r.robot), len(events))
+        serial_active, rig_active = store.active_versions()
+    return robot_states(events, serial_active, rig_active)

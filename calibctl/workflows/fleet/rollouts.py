@@ -1,230 +1,184 @@
 """A calibration change rolled out like a deploy (seed chapter 6, prompt A point 6): canary, health gate,
 promote or roll back the fleet in one command.
 
-``start``: new versions for a set of serials and a canary cohort; the canary robots' assignments are written
-with the rollout, in one transaction; each target is diffed against the version its robot ran (``calibctl
-diff``), so the operator sees whether the change is beyond re-calibration noise. ``promote``: the health gate, then every other robot carrying a target
-serial gets its new version, in one transaction. ``rollback``: every robot the rollout touched is put back on
-the version it ran before, in one transaction. Each is appended with a compare-and-set on the log's length,
-so a step decided on a stale fleet writes nothing.
+``start``: new versions for a set of serials and rigs and a canary cohort; the canary robots' assignments are
+written with the rollout, in one transaction; each target is diffed against the version its robots ran
+(``calibctl diff``, recorded in the rollout event), so the operator sees whether the change is beyond
+re-calibration noise. ``promote``: the
+health gate (``gate``: the canary robots' checks and health reports since the start), then every other robot
+carrying a target gets its new version and each rig target becomes its rig's active version, in one
+transaction; the promote event records the gate's inputs. ``rollback``: every robot the rollout
+touched is put back on the version it ran before and each rig the promote activated gets its previous active
+version back, in one transaction. Each is appended with a compare-and-set on the log's length (and on each
+rig's active version), so a step decided on a stale fleet writes nothing.
 
-The health gate (this first step): every (canary robot, target serial) must have at least one stored
-``calibctl check`` of serial@new version since the rollout started, and all of them must pass. No report
-yet: exit 2, nothing promoted; a failing one: exit 1, the rollout is held (roll it back).
+No gate input yet for a canary target: exit 2, nothing promoted; a failing one: exit 1, the rollout is held
+(roll it back).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.config import Settings
-from calibctl.errors import CalibctlError, NotFoundError, UsageError, VerdictFailed
-from calibctl.workflows.compare.diff import DiffRequest, diff_cameras
-from calibctl.workflows.fleet.robots import FleetStatus, check_reason, fleet_event, status
+from calibctl.errors import NotFoundError, UsageError, VerdictFailed
+from calibctl.store.fleet import RigActivationStep
+from calibctl.workflows.fleet.gate import read_gate, target_diffs
+from calibctl.workflows.fleet.ledger import Fleet, Rollout, Target, label, ref, replay
+from calibctl.workflows.fleet.robots import FleetStatus, check_reason, fleet_event, robot_states
 from calibctl.workflows.store_admin import records
 
-
-@dataclass
-class Rollout:
-    """A rollout replayed from the log: its event, per robot its state, and whether it is open."""
-
-    start: FleetEvent
-    diffs: dict[str, dict[str, Any]] = field(default_factory=dict)  # rollout start: target serial -> its diff
-    # robot -> pending, canary (no health report yet), healthy, failed, promoted, rolled back, untouched
-    state: dict[str, str] = field(default_factory=dict)
-    closed: str | None = None  # "promoted" or "rolled back"
-
-    @property
-    def name(self) -> str:
-        return self.start.subject
-
-    def as_json(self) -> dict[str, Any]:
-        out = {"rollout": self.name, "targets": self.start.targets, "canary": self.start.canary,
-               "closed": self.closed, "robots": self.state}
-        return {**out, "diffs": self.diffs} if self.diffs else out
+if TYPE_CHECKING:
+    from calibctl.store.repository import Store
 
 
-@dataclass
-class Fleet:
-    """The log replayed: robots' serials, what each robot runs, rollouts, and the log's length."""
-
-    carries: dict[str, list[str]]
-    running: dict[tuple[str, str], int]
-    rollouts: dict[str, Rollout]
-    history: dict[tuple[str, str], list[tuple[int, str | None]]]  # (robot, serial) -> [(version, rollout)]
-    length: int
-
-
-def replay(events: list[FleetEvent]) -> Fleet:
-    fleet = Fleet({}, {}, {}, {}, len(events))
-    for e in events:
-        if e.kind == "register":
-            fleet.carries[e.subject] = list(e.serials)
-        elif e.kind == "assign" and e.serial is not None and e.version is not None:
-            fleet.running[(e.subject, e.serial)] = e.version
-            fleet.history.setdefault((e.subject, e.serial), []).append((e.version, e.rollout))
-        elif e.kind == "rollout":
-            fleet.rollouts[e.subject] = Rollout(e)
-        elif e.kind in ("promote", "rollback"):
-            fleet.rollouts[e.subject].closed = "promoted" if e.kind == "promote" else "rolled back"
-    for r in fleet.rollouts.values():
-        for robot, serials in fleet.carries.items():
-            touched = [s for s in serials if s in r.start.targets]
-            if not touched:
-                continue
-            assigned = any(ro == r.name for s in touched for _, ro in fleet.history.get((robot, s), []))
-            if r.closed == "rolled back":
-                r.state[robot] = "rolled back" if assigned else "untouched"
-            elif not assigned:
-                r.state[robot] = "pending"
-            elif robot in r.start.canary:
-                r.state[robot] = "healthy" if r.closed == "promoted" else "canary"
-            else:
-                r.state[robot] = "promoted"
-    return fleet
-
-
-def _read(settings: Settings) -> tuple[Fleet, dict[str, list]]:
+def _read(settings: Settings, name: str | None = None) -> tuple[Fleet, dict[str, int]]:
+    """The fleet replayed, each open rollout's canary states read from its gate (``name``: that rollout only,
+    NotFoundError when there is none), and the rigs' active versions."""
     with records.open_store(settings) as store:
-        events = store.fleet_events()
-        fleet = replay(events)
-        serials = {s for r in fleet.rollouts.values() for s in r.start.targets}
-        checks = {s: store.checks(s) for s in sorted(serials)}
-    return fleet, checks
+        fleet = replay(store.fleet_events())
+        if name is not None and name not in fleet.rollouts:
+            raise NotFoundError(f"no rollout {name}", "`calibctl fleet status` lists the rollouts")
+        _gated(store, fleet, name)
+        _, rig_active = store.active_versions()
+    return fleet, rig_active
 
 
-def _append(settings: Settings, events: list[FleetEvent], after: int) -> None:
+def _gated(store: Store, fleet: Fleet, name: str | None = None) -> None:
+    """Each open rollout's (``name``: that one's) canary robots' states from its health gate's inputs."""
+    for r in fleet.rollouts.values():
+        if r.closed is None and name in (None, r.name):
+            gate = read_gate(store, r, fleet)
+            r.evidence, r.waiting, r.failing = gate.evidence, gate.waiting, gate.failing
+            r.state.update({robot: gate.state(robot) for robot, st in r.state.items() if st == "canary"})
+
+
+def _append(settings: Settings, events: list[FleetEvent], after: int,
+            rig_steps: Sequence[RigActivationStep] = ()) -> None:
     with records.open_store(settings, write=True) as store:
-        store.append_fleet_events(events, after)
+        store.append_fleet_events(events, after, rig_steps)
 
 
 def _new(kind: str, settings: Settings, reason: str, **fields: Any) -> FleetEvent:
     return fleet_event(kind=kind, actor=settings.operator, station=settings.station, at=utc_now(), reason=reason, **fields)
 
 
-def start(settings: Settings, name: str, targets: list[str], canary: list[str], reason: str) -> Rollout:
-    """Start rollout ``name``: ``targets`` SERIAL@N each, ``canary`` robots get theirs now."""
+def _assign(settings: Settings, reason: str, robot: str, t: Target, version: int, name: str) -> FleetEvent:
+    return _new("assign", settings, reason, robot=robot, version=version, rollout=name,
+                **({"serial": t[1]} if t[0] == "serial" else {"rig": t[1]}))
+
+
+def _parse_targets(serial_refs: list[str], rig_refs: list[str]) -> dict[Target, int]:
+    wanted: dict[Target, int] = {}
+    for kind, refs in (("serial", serial_refs), ("rig", rig_refs)):
+        for text in refs:
+            name, version = records.parse_artifact_ref(text)
+            if version is None:
+                raise UsageError(f"target '{text}' names no version", f"e.g. {name}@4")
+            if (kind, name) in wanted:
+                raise UsageError(f"{label((kind, name))} is targeted twice")
+            wanted[(kind, name)] = version
+    if not wanted:
+        raise UsageError("a rollout needs a target", "pass --target SERIAL@N or --rig-target RIG@N")
+    return wanted
+
+
+def start(settings: Settings, name: str, targets: list[str], canary: list[str], reason: str,
+          rig_targets: list[str] | None = None) -> Rollout:
+    """Start rollout ``name``: ``targets`` SERIAL@N and ``rig_targets`` RIG@N, ``canary`` robots get theirs now."""
     check_reason(reason)
-    wanted: dict[str, int] = {}
-    for ref in targets:
-        serial, version = records.parse_artifact_ref(ref)
-        if version is None:
-            raise UsageError(f"target '{ref}' names no version", f"e.g. {serial}@4")
-        if serial in wanted:
-            raise UsageError(f"{serial} is targeted twice")
-        wanted[serial] = version
+    wanted = _parse_targets(targets, rig_targets or [])
     fleet, _ = _read(settings)
-    busy = {robot: r.name for r in fleet.rollouts.values() if r.closed is None for robot in r.start.canary}
+    open_ = [r for r in fleet.rollouts.values() if r.closed is None]
+    busy = {robot: r.name for r in open_ for robot in r.start.canary}
     for robot in canary:
         if robot in busy:
             raise UsageError(f"robot {robot} is already in the canary cohort of open rollout {busy[robot]}",
                              f"promote or roll back {busy[robot]} first")
         if robot in fleet.carries and not set(fleet.carries[robot]) & set(wanted):
-            raise UsageError(f"canary robot {robot} carries none of the target serials")
-    head = _new("rollout", settings, reason, rollout=name, targets=wanted, canary=canary)
-    assigns = [_new("assign", settings, f"canary of rollout {name}", robot=robot, serial=s, version=wanted[s], rollout=name)
-               for robot in canary for s in fleet.carries.get(robot, []) if s in wanted]
+            carried = ", ".join(label(t) for t in fleet.carries[robot])
+            raise UsageError(f"canary robot {robot} carries none of the target serials or rigs (it carries {carried})")
+    for r in open_:
+        for t in sorted(set(r.targets) & set(wanted)):
+            raise UsageError(f"{ref(t, wanted[t])}: {label(t)} is a target of open rollout {r.name} already "
+                             f"({ref(t, r.targets[t])}); nothing started", f"promote or roll back {r.name} first")
+    diffs = target_diffs(settings, fleet, name, wanted)
+    head = _new("rollout", settings, reason, rollout=name, canary=canary,
+                targets={n: v for (k, n), v in wanted.items() if k == "serial"},
+                rig_targets={n: v for (k, n), v in wanted.items() if k == "rig"},
+                diffs={n: d for (k, n), d in diffs.items() if k == "serial"},
+                rig_diffs={n: d for (k, n), d in diffs.items() if k == "rig"})
+    assigns = [_assign(settings, f"canary of rollout {name}", robot, t, wanted[t], name)
+               for robot in canary for t in fleet.carries.get(robot, []) if t in wanted]
     _append(settings, [head, *assigns], fleet.length)
-    rollout = replay_after(settings, name)
-    rollout.diffs = _diffs(settings, fleet, wanted)
-    return rollout
-
-
-def _diffs(settings: Settings, fleet: Fleet, wanted: dict[str, int]) -> dict[str, dict[str, Any]]:
-    """Each target against the version its robot ran before (``calibctl diff``): is the change beyond noise?"""
-    out: dict[str, dict[str, Any]] = {}
-    before = {serial: version for (_, serial), version in fleet.running.items()}
-    for serial, version in sorted(wanted.items()):
-        old = before.get(serial)
-        if old is None or old == version:
-            continue
-        try:
-            d = diff_cameras(settings, DiffRequest(f"{serial}@{old}", f"{serial}@{version}"))
-        except CalibctlError as exc:
-            out[serial] = {"from": old, "verdict": "not compared", "why": exc.message}
-            continue
-        out[serial] = {"from": old, "verdict": d.verdict, "p50_px": d.result.raw.percentiles_px["p50"],
-                       "max_px": d.result.raw.percentiles_px["max"]}
-    return out
-
-
-def replay_after(settings: Settings, name: str) -> Rollout:
-    fleet, checks = _read(settings)
-    if name not in fleet.rollouts:
-        raise NotFoundError(f"no rollout {name}", "`calibctl fleet status` lists the rollouts")
-    rollout = fleet.rollouts[name]
-    if rollout.closed is None:
-        for robot, state in list(rollout.state.items()):
-            if state == "canary":
-                rollout.state[robot] = _health(rollout, fleet, robot, checks)
-    return rollout
-
-
-def _health(rollout: Rollout, fleet: Fleet, robot: str, checks: dict[str, list]) -> str:
-    """canary (no report yet), healthy (every target serial checked since the start, all passed) or failed."""
-    verdicts = []
-    for serial in fleet.carries.get(robot, []):
-        version = rollout.start.targets.get(serial)
-        if version is None:
-            continue
-        seen = [c.passed for c in checks.get(serial, []) if c.version == version and c.at >= rollout.start.at]
-        verdicts.append(None if not seen else all(seen))
-    if any(v is False for v in verdicts):
-        return "failed"
-    return "healthy" if verdicts and all(v is True for v in verdicts) else "canary"
+    return _read(settings, name)[0].rollouts[name]
 
 
 def promote(settings: Settings, name: str, reason: str) -> Rollout:
-    """The health gate, then every other robot carrying a target serial gets its version (one transaction)."""
+    """The health gate, then every other robot carrying a target gets its version and each rig target becomes its
+    rig's active version (one transaction); the promote event records the gate's inputs."""
     check_reason(reason)
-    rollout = replay_after(settings, name)
+    fleet, rig_active = _read(settings, name)
+    rollout = fleet.rollouts[name]
     if rollout.closed is not None:
         raise UsageError(f"rollout {name} is {rollout.closed} already")
-    canary = {r: s for r, s in rollout.state.items() if r in rollout.start.canary}
-    failed = sorted(r for r, s in canary.items() if s == "failed")
-    if failed:
-        raise VerdictFailed(f"rollout {name} is held: canary robot(s) {', '.join(failed)} report failing checks; "
-                            "nothing promoted", f"roll it back: calibctl fleet rollout rollback {name} --reason ...")
-    waiting = sorted(r for r, s in canary.items() if s == "canary")
-    if waiting or not canary:
-        raise UsageError(f"rollout {name} cannot be promoted: canary robot(s) {', '.join(waiting) or '(none)'} have "
-                         "no health report yet (a `calibctl check` of the new version); nothing promoted",
-                         "check the canary robots' cameras, then promote again")
-    fleet, _ = _read(settings)
-    assigns = [_new("assign", settings, f"promoted by rollout {name}", robot=robot, serial=s,
-                    version=rollout.start.targets[s], rollout=name)
+    if rollout.failing:
+        named = "; ".join(f"{robot}: {', '.join(why)}" for robot, why in sorted(rollout.failing.items()))
+        raise VerdictFailed(f"rollout {name} is held: canary robot(s) {', '.join(sorted(rollout.failing))} report "
+                            f"failing checks ({named}); nothing promoted",
+                            f"roll it back: calibctl fleet rollout rollback {name} --reason ...")
+    canary = [r for r in rollout.start.canary if r in rollout.state]
+    if rollout.waiting or not canary:
+        named = "; ".join(f"{robot}: {', '.join(ts)}" for robot, ts in sorted(rollout.waiting.items()))
+        robots = ", ".join(sorted(rollout.waiting)) or "(none)"
+        raise UsageError(f"rollout {name} cannot be promoted: canary robot(s) {robots} have no health report yet "
+                         f"({named or 'no canary carries a target'}); nothing promoted",
+                         "check the canary robots' cameras (`calibctl check`) or ingest their reports "
+                         "(`calibctl fleet ingest`), then promote again")
+    targets = rollout.targets
+    assigns = [_assign(settings, f"promoted by rollout {name}", robot, t, targets[t], name)
                for robot, state in sorted(rollout.state.items()) if state == "pending"
-               for s in fleet.carries[robot] if s in rollout.start.targets]
-    _append(settings, [*assigns, _new("promote", settings, reason, rollout=name)], fleet.length)
-    return replay_after(settings, name)
+               for t in fleet.carries[robot] if t in targets]
+    steps = [RigActivationStep(rig, v, "activate", rig_active.get(rig), f"promoted by rollout {name}: {reason}")
+             for (kind, rig), v in sorted(targets.items()) if kind == "rig" and rig_active.get(rig) != v]
+    event = _new("promote", settings, reason, rollout=name, gate=rollout.evidence,
+                 restore={s.rig: s.expected_active for s in steps if s.expected_active is not None})
+    _append(settings, [*assigns, event], fleet.length, steps)
+    return _read(settings, name)[0].rollouts[name]
 
 
 def rollback(settings: Settings, name: str, reason: str) -> Rollout:
-    """Every robot the rollout assigned goes back to the version it ran before (one transaction); robots that
-    ran nothing before keep the record of the rollout's version and are listed as rolled back."""
+    """Every robot the rollout assigned goes back to the version it ran before and every rig its promote
+    activated gets its previous active version back (one transaction); robots that ran nothing before keep the
+    record of the rollout's version and are listed as rolled back."""
     check_reason(reason)
-    fleet, _ = _read(settings)
-    if name not in fleet.rollouts:
-        raise NotFoundError(f"no rollout {name}", "`calibctl fleet status` lists the rollouts")
-    if fleet.rollouts[name].closed == "rolled back":
+    fleet, rig_active = _read(settings, name)
+    rollout = fleet.rollouts[name]
+    if rollout.closed == "rolled back":
         raise UsageError(f"rollout {name} is rolled back already")
     assigns = []
-    for (robot, serial), steps in sorted(fleet.history.items()):
+    for (robot, t), steps in sorted(fleet.history.items()):
         mine = [i for i, (_, ro) in enumerate(steps) if ro == name]
         if mine and mine[0] > 0:
             previous = steps[mine[0] - 1][0]
-            if fleet.running[(robot, serial)] != previous:
-                assigns.append(_new("assign", settings, f"rolled back by rollout {name}", robot=robot, serial=serial,
-                                    version=previous, rollout=name))
-    _append(settings, [*assigns, _new("rollback", settings, reason, rollout=name)], fleet.length)
-    return replay_after(settings, name)
+            if fleet.running[(robot, t)] != previous:
+                assigns.append(_assign(settings, f"rolled back by rollout {name}", robot, t, previous, name))
+    restore = {} if rollout.promote is None else rollout.promote.restore
+    rig_steps = [RigActivationStep(rig, old, "rollback", rollout.start.rig_targets[rig],
+                                   f"rolled back by rollout {name}: {reason}") for rig, old in sorted(restore.items())
+                 if rig_active.get(rig) != old]  # put back by hand already: nothing to restore
+    _append(settings, [*assigns, _new("rollback", settings, reason, rollout=name)], fleet.length, rig_steps)
+    return _read(settings, name)[0].rollouts[name]
 
 
 def fleet_status(settings: Settings) -> tuple[FleetStatus, list[Rollout]]:
-    """``calibctl fleet status``: the robots (``robots.status``) and every rollout with each robot's state."""
-    robots_now = status(settings)
-    fleet, _ = _read(settings)
-    return robots_now, [replay_after(settings, name) for name in fleet.rollouts]
+    """``calibctl fleet status``: the robots and every rollout with each robot's state, read in one store session."""
+    with records.open_store(settings) as store:
+        events = store.fleet_events()
+        serial_active, rig_active = store.active_versions()
+        fleet = replay(events)
+        _gated(store, fleet)
+    return robot_states(events, serial_active, rig_active), list(fleet.rollouts.values())

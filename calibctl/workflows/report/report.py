@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -94,9 +95,13 @@ def default_path(art: CalibrationArtifact, folder: Path | None = None) -> Path:
     return page_path(art.serial, art.version, folder)
 
 
-def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool) -> tuple[Path, ReportData]:
-    """Render ``ref`` and write it atomically to ``out`` (default SERIAL-vN-report.html here)."""
+def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool,
+                 extend: Callable[[ReportData], ReportData] | None = None) -> tuple[Path, ReportData]:
+    """Render ``ref`` and write it atomically to ``out`` (default SERIAL-vN-report.html here). ``extend`` adds
+    what rooms above this one know (``calibctl report``: the diff against the previous version, the trends)."""
     data = gather(settings, ref)
+    if extend is not None:
+        data = extend(data)
     html = render_html(data)
     path = out if out is not None else default_path(data.artifact)
     write_atomic(path, html, force=force)

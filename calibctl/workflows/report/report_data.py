@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,19 @@ class ViewCorners:
 
 
 @dataclass(frozen=True)
+class DiffSection:
+    """``calibctl diff`` of the previous accepted version against this one (the compare room fills it)."""
+
+    previous_ref: str
+    verdict: str  # same, different, unknown (no covariance to judge by)
+    raw_px: dict[str, float]  # |difference| percentiles without re-fitting the camera frame
+    fit_px: dict[str, float]  # after fitting the implied rotation (mrcal's projection diff)
+    rotation_deg: float
+    expected_sigma_px: float | None  # the median expected one-sigma of the raw difference, from both covariances
+    reasons: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class ReportData:
     artifact: CalibrationArtifact
     active: bool
@@ -30,3 +44,6 @@ class ReportData:
     corners_note: str | None  # why there are no corners to draw, else None
     uncertainty: report_maps.UncertaintyMap | None
     distortion: tuple[np.ndarray, np.ndarray]
+    diff: DiffSection | None = None  # against the previous accepted version, when there is one
+    diff_note: str | None = None  # why there is no diff section
+    trends: dict[str, Any] | None = None  # ``fleet trends``' JSON, when robots reported on this serial

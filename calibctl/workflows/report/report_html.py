@@ -283,6 +283,57 @@ def _provenance(d: ReportData) -> str:
     return f"<h2>Provenance</h2><table>{body}</table>"
 
 
+def _diff(d: ReportData) -> str:
+    """``calibctl diff`` against the previous accepted version: has this calibration really changed?"""
+    x = d.diff
+    if x is None and d.diff_note is None:
+        return ""  # not asked (a solve's own report)
+    if x is None:
+        return f'<h2>Change from the previous version</h2><p class="note">{escape(d.diff_note or "not compared")}</p>'
+    keys = list(x.raw_px)
+    rows = [f"<th class=\"l\">{escape(name)}</th>" + "".join(cell(num(values[k], 3), f"diff_{tag}_{k}") for k in keys)
+            for name, tag, values in (("as stored", "raw", x.raw_px), ("after fitting the rotation", "fit", x.fit_px))]
+    sigma = "" if x.expected_sigma_px is None else (f"; the raw difference expected from the two covariances alone: "
+                                                    f"median one-sigma {num(x.expected_sigma_px, 3)} px")
+    why = "".join(f"<li>{escape(r)}</li>" for r in x.reasons)
+    return (f"<h2>Change from the previous version</h2><p><code>calibctl diff {escape(x.previous_ref)} "
+            f'{escape(d.artifact.ref)}</code>: <b data-key="diff_verdict">{escape(x.verdict)}</b>; implied rotation '
+            f"{num(x.rotation_deg, 4)} deg{sigma}.</p>" + table(["projection difference (px)", *keys], rows)
+            + (f"<ul>{why}</ul>" if why else ""))
+
+
+def _trends(d: ReportData) -> str:
+    """``calibctl fleet trends``: what the robots carrying this serial reported (conditionals, not aggregates)."""
+    t = d.trends
+    if t is None:
+        return ""
+    counts = ", ".join(f"{n} {k}" for k, n in t["counts"].items())
+    lines = []
+    s = t.get("rms_vs_temperature_px_per_c")
+    if s is not None:
+        lines.append(f"RMS vs temperature: {s['slope']:+.4f} +- {s['sigma']:.4f} px/degC (n {s['n']})")
+    drift = t.get("td_drift_ppm")
+    if drift is not None:
+        lines.append(f"time offset vs time: {drift['slope']:+.2f} +- {drift['sigma']:.2f} ppm over "
+                     f"{t['td_span_days']:.1f} days (n {drift['n']})")
+    if t.get("gauge"):
+        g = t["gauge"]
+        lines.append(f"gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})")
+    for name in ("check_verdicts", "triage_verdicts"):
+        if t.get(name):
+            lines.append(f"{name.split('_')[0]}: " + ", ".join(f"{n} {v}" for v, n in t[name].items()))
+    f = t.get("fleet")
+    if f is not None:
+        lines.append(f"this camera's mean check RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+                     f"serials (others' median {f['others_median_rms_px']:.3f} px)")
+    bins = [cell(f"{b['from_c']:g}..{b['to_c']:g}", cls="l") + cell(str(b["n"])) + cell(num(b["mean"])) + cell(num(b["max"]))
+            for b in t.get("rms_by_temperature", [])]
+    findings = "".join(f'<li class="warning">{escape(x)}</li>' for x in t.get("findings", []))
+    return (f'<h2>Field health (robots\' reports)</h2><p data-key="trends_counts">{escape(counts)}</p><ul>'
+            + "".join(f"<li>{escape(x)}</li>" for x in lines) + findings + "</ul>"
+            + (table(["temperature (degC)", "n", "RMS mean (px)", "RMS max (px)"], bins) if bins else ""))
+
+
 def render_html(d: ReportData) -> str:
     """The whole page as one string: inline CSS and SVG, no script, nothing fetched."""
     parts = [_verdict(d), _parameters(d), _gates(d)]
@@ -290,7 +341,8 @@ def render_html(d: ReportData) -> str:
         parts += [_coverage(d), _residual_field(d)]
     else:
         parts.append(f'<h2>Coverage and residuals</h2><p class="note">{escape(d.corners_note or "no corners")}</p>')
-    parts += [_per_view(d) if d.artifact.views else "", _held_out(d), _uncertainty(d), _distortion(d), _provenance(d)]
+    parts += [_per_view(d) if d.artifact.views else "", _held_out(d), _uncertainty(d), _distortion(d), _diff(d), _trends(d),
+              _provenance(d)]
     title = escape(f"calibctl report {d.artifact.ref}")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
             f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n")
