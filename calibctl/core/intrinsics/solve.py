@@ -37,6 +37,14 @@ Determinism
     OpenCV parallelises parts of the solve; with 2+ threads the summation order varies and the
     same input gives results differing around 1e-10 px. The solve runs with cv2.setNumThreads(1)
     (restored afterwards), which makes it bit-identical run to run.
+
+Solves asked twice
+    So a solve of the same corners, model and start is the same solve, and ``calibrate`` asks for it twice:
+    the capture's projection gate solves the session, then the solve's corner rule starts from the same
+    solve of the same corners (and ``--model auto`` asks its ladder again). The last RECENT_SOLVES solves
+    with uncertainty (and every fisheye solve, which always has it) are remembered by a digest of their
+    inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
+    one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
 from __future__ import annotations
@@ -50,6 +58,7 @@ import numpy as np
 from calibctl.core.intrinsics.covariance import IntrinsicCovariance, intrinsic_covariance
 from calibctl.core.intrinsics.fisheye_model import fisheye_pose, project_fisheye, refine_fisheye_pose
 from calibctl.core.intrinsics.fisheye_solve import solve_fisheye
+from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solution import (
     CALIB_FIX_SKEW,
     CALIB_RECOMPUTE_EXTRINSIC,
@@ -105,6 +114,10 @@ def _sigma_by_name(cov: IntrinsicCovariance, aspect: float | None) -> tuple[dict
     return sigma, None
 
 
+RECENT_SOLVES = 4  # remembered solves (module docstring); a 96-view k1k2 solve with its residuals is ~0.5 MB
+_RECENT: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_SOLVES)
+
+
 def solve_intrinsics(
     object_points_per_view: Sequence[np.ndarray],
     image_points_per_view: Sequence[np.ndarray],
@@ -134,8 +147,25 @@ def solve_intrinsics(
         UsageError: unknown model name.
     """
     m = get_model(model) if isinstance(model, str) else model
-    if m.kind == "fisheye":
+    fisheye = m.kind == "fisheye"
+    if (uncertainty or fisheye) and m is MODELS.get(m.name):  # a named model: its name says what it solves
+        try:
+            key = values_digest(object_points_per_view, image_points_per_view, tuple(int(v) for v in image_size),
+                                m.name, fisheye or uncertainty,
+                                None if initial is None else np.asarray(initial, np.float64).tobytes())
+        except (TypeError, ValueError):  # malformed input: the solve names the problem in its own words
+            key = None
+        if key is not None:
+            return _RECENT.answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
+                                                      initial, uncertainty))
+    return _solve(object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty)
 
+
+def _solve(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+           image_size: tuple[int, int], m: DistortionModel, initial: np.ndarray | None,
+           uncertainty: bool) -> IntrinsicsSolution:
+    """``solve_intrinsics`` of a resolved model, computed (never remembered)."""
+    if m.kind == "fisheye":
         return solve_fisheye(object_points_per_view, image_points_per_view, image_size, m, initial)
     if initial is None and m.flags & cv2.CALIB_RATIONAL_MODEL:
         initial = _k1k2_start(object_points_per_view, image_points_per_view, image_size)
