@@ -89,7 +89,7 @@ __all__ = [
     "FISHEYE_DIST_NAMES", "IntrinsicsSolution", "MAX_RMS_PX", "MIN_CORNERS_PER_VIEW", "MIN_FOCAL_FRAC",
     "MIN_SIGMA_DOF", "MODELS", "NO_UNCERTAINTY", "check_inputs", "check_output", "get_model",
     "parameter_count", "readonly", "residual_rms_px", "single_threaded_opencv", "solve_intrinsics",
-    "is_fisheye", "project_points", "fit_pose",
+    "is_fisheye", "project_points", "fit_pose", "forget_recent_solves",
 ]
 
 # Index of each parameter in OpenCV's stdDeviationsIntrinsics (and in the distortion vector + 4).
@@ -116,6 +116,11 @@ def _sigma_by_name(cov: IntrinsicCovariance, aspect: float | None) -> tuple[dict
 
 RECENT_SOLVES = 4  # remembered solves (module docstring); a 96-view k1k2 solve with its residuals is ~0.5 MB
 _RECENT: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_SOLVES)
+
+
+def forget_recent_solves() -> None:
+    """Forget the remembered solves: a benchmark that times the same solve again must compute it again."""
+    _RECENT.clear()
 
 
 def solve_intrinsics(

@@ -31,9 +31,9 @@ from calibctl.errors import InputError
 
 @pytest.fixture(autouse=True)
 def fresh_cache():
-    solve_module._RECENT.clear()
+    solve_module.forget_recent_solves()
     yield
-    solve_module._RECENT.clear()
+    solve_module.forget_recent_solves()
 
 
 @pytest.fixture
@@ -86,7 +86,7 @@ def test_a_solve_asked_twice_is_computed_once_and_is_the_solve_a_fresh_ask_compu
     again = solve_intrinsics([o.copy() for o in obj], [i.copy() for i in img], size, model)  # equal values hit
     assert again is first
     asked = len(computed)
-    solve_module._RECENT.clear()
+    solve_module.forget_recent_solves()
     assert_same_solution(solve_intrinsics(obj, img, size, model), first)
     assert len(computed) == 2 * asked  # the second ask computed nothing; the fresh one did
 

@@ -49,7 +49,7 @@ def _numbers(doc: object) -> object:
 def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tmp_path_factory, monkeypatch,
                                                                     scene, model):
     folder = rendered(tmp_path_factory, "good") if scene == "good" else fisheye_gauge_folders(tmp_path_factory)[0]
-    solve_module._RECENT.clear()
+    solve_module.forget_recent_solves()
     computed: list[str] = []  # the solves each run really computed
     real = solve_module._solve
     monkeypatch.setattr(solve_module, "_solve", lambda *a: computed.append(a[3].name) or real(*a))
