@@ -18,7 +18,10 @@ Recall is printed beside every time: calibctl must find at least what the plain 
 ``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its ``calibrate``
 runs as two more rows, taking turns with the others, so before and after meet the same load.
 Every process reads its bytecode from a cache the first (uncounted) round fills, as an installed calibctl
-does (``machine.run_env``). Prints a markdown report with machine, date and load: the 1-minute load average
+does (``machine.run_env``). CPU: user + system time of the process and of the children it waited for
+(getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure
+(a process pool's CPU counts where its workers were waited for: the plain Pool's are, calibctl's warm pool's
+workers belong to its fork server and may not be). Prints a markdown report with machine, date and load: the 1-minute load average
 at the start of each path's best run is printed beside it.
 """
 
@@ -29,6 +32,7 @@ import datetime as dt
 import json
 import os
 import platform
+import resource
 import shutil
 import subprocess
 import sys
@@ -81,14 +85,19 @@ if __name__ == "__main__":
 '''
 
 
-def run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, str]:
-    """(wall s from start to exit, stdout)."""
-    t = time.perf_counter()
+def children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float, str]:
+    """(wall s from start to exit, CPU s of the process and the children it waited for, stdout)."""
+    t, c = time.perf_counter(), children_cpu_s()
     done = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t
+    wall, cpu = time.perf_counter() - t, children_cpu_s() - c
     if done.returncode not in (0, 1):
         raise RuntimeError(f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
-    return wall, done.stdout
+    return wall, cpu, done.stdout
 
 
 def result_of(stdout: str) -> tuple[float, int]:
@@ -163,14 +172,16 @@ def main() -> None:
             env = run_env(work / "pycache")
             base_env = None if args.baseline is None else run_env(work / "pycache-before", args.baseline.resolve())
             best: dict[str, tuple[float, str, float]] = {}
+            least_cpu: dict[str, float] = {}
             for round_ in range(args.repeats + 1):  # round 0 fills the bytecode caches and is not counted
                 for name, cmd in [*det.items(), *e2e.items()]:
                     shutil.copyfile(template, db)
                     shutil.rmtree(work / "calibctl-images", ignore_errors=True)
                     load = load_1min()
-                    wall, out = run(cmd, base_env if name.startswith("before:") else env)
+                    wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env)
                     if round_ == 0:
                         continue
+                    least_cpu[name] = min(cpu, least_cpu.get(name, cpu))
                     if name in det:
                         seconds, found = result_of(out)
                         note = f"{found} boards"
@@ -180,11 +191,13 @@ def main() -> None:
                         seconds, note = wall, boards_of(out)
                     if name not in best or seconds < best[name][0]:
                         best[name] = (seconds, note, load)
-            print(f"### {label}\n\n| path | best s | vs plain sequential | recall | load |\n|---|---|---|---|---|")
+            print(f"### {label}\n\n| path | best s | vs plain sequential | process CPU s (least) | CPU vs plain | "
+                  "recall | load |\n|---|---|---|---|---|---|---|")
             for group, ref in ((det, "plain sequential loop"), (e2e, "plain script (detect + calibrateCameraExtended)")):
                 for name in group:
                     seconds, note, load = best[name]
-                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {note} | {load:.2f} |")
+                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {least_cpu[name]:.2f} | "
+                          f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} |")
             print(f"\nload average {os.getloadavg()[0]:.2f} after this set\n", flush=True)
 
 
