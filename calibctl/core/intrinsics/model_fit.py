@@ -29,8 +29,8 @@ the corner rule; table in docs/verdicts.md) -- fit RMS / floor (before: / patch 
 opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75); acfr-lidar-camera (a real
 1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
 The rule fails a calibration when the ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a
-sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views, 0.45 s of a
-20-view and 1.6 s of CPU of a 96-view 1280x960 ``calibrate`` (2026-11-27, the loaded 2-core VM). So it is read
+sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44 s of
+CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
 only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
 misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
 which is never below the full floor; the verdict is the same either way.
