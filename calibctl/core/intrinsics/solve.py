@@ -39,11 +39,12 @@ Determinism
     (restored afterwards), which makes it bit-identical run to run.
 
 Solves asked twice
-    So a solve of the same corners, model and start is the same solve, and ``calibrate`` asks for it twice:
+    A solve of the same corners, model and start is therefore the same solve, and ``calibrate`` asks for it twice:
     the capture's projection gate solves the session, then the solve's corner rule starts from the same
-    solve of the same corners (and ``--model auto`` asks its ladder again). The last RECENT_SOLVES solves
-    with uncertainty (and every fisheye solve, which always has it) are remembered by a digest of their
-    inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
+    solve of the same corners; ``--model auto`` asks its ladder again, its rational folds start from the
+    k1k2 fit of the same fold, and the chosen model's validation refits the folds the ladder fitted. The last
+    RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a digest
+    of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
     one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
@@ -114,13 +115,20 @@ def _sigma_by_name(cov: IntrinsicCovariance, aspect: float | None) -> tuple[dict
     return sigma, None
 
 
-RECENT_SOLVES = 4  # remembered solves (module docstring); a 96-view k1k2 solve with its residuals is ~0.5 MB
+# Remembered solves (module docstring), apart by kind so that folds never push out a session's solve: the
+# solves with uncertainty (a session's, once per model), and the fits without (folds, groups), enough for
+# --model auto's whole ladder between its k1k2 folds and the chosen model's validation of the same folds. An
+# 86-view k1k2 solution holds 79 KB of arrays (residuals, poses, covariance): ~6 MB at most at that size.
+RECENT_SOLVES = 8
+RECENT_FITS = 64
 _RECENT: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_SOLVES)
+_RECENT_FITS: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_FITS)
 
 
 def forget_recent_solves() -> None:
     """Forget the remembered solves: a benchmark that times the same solve again must compute it again."""
     _RECENT.clear()
+    _RECENT_FITS.clear()
 
 
 def solve_intrinsics(
@@ -153,15 +161,15 @@ def solve_intrinsics(
     """
     m = get_model(model) if isinstance(model, str) else model
     fisheye = m.kind == "fisheye"
-    if (uncertainty or fisheye) and m is MODELS.get(m.name):  # a named model: its name says what it solves
+    if m is MODELS.get(m.name):  # a named model: its name says what it solves
         try:
             key = values_digest(object_points_per_view, image_points_per_view, tuple(int(v) for v in image_size),
-                                m.name, fisheye or uncertainty,
+                                m.name, fisheye or uncertainty,  # a fisheye solve always has its uncertainty
                                 None if initial is None else np.asarray(initial, np.float64).tobytes())
         except (TypeError, ValueError):  # malformed input: the solve names the problem in its own words
             key = None
         if key is not None:
-            return _RECENT.answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
+            return (_RECENT if fisheye or uncertainty else _RECENT_FITS).answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
                                                       initial, uncertainty))
     return _solve(object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty)
 

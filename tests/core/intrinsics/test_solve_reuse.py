@@ -100,12 +100,22 @@ def test_another_question_is_solved_again(computed):
         solve_intrinsics(obj, moved, size, "k1k2"),  # one corner moved by 0.01 px
         solve_intrinsics(obj, img, size, "k1k2k3"),
         solve_intrinsics(obj, img, size, "k1k2", initial=np.array(base.camera_matrix)),
-        solve_intrinsics(obj, img, size, "k1k2", uncertainty=False),  # never remembered: folds differ each time
-        solve_intrinsics(obj, img, size, "k1k2", uncertainty=False),
+        solve_intrinsics(obj, img, size, "k1k2", uncertainty=False),  # a fit: remembered apart, asked again below
     ]
-    assert computed == ["k1k2", "k1k2", "k1k2k3", "k1k2", "k1k2", "k1k2"]
+    assert computed == ["k1k2", "k1k2", "k1k2k3", "k1k2", "k1k2"]
     assert all(o is not base for o in others)
-    assert others[0].rms_px != base.rms_px
+    assert others[0].rms_px != base.rms_px and others[3].covariance is None
+    assert solve_intrinsics(obj, img, size, "k1k2", uncertainty=False) is others[3] and len(computed) == 5
+
+
+def test_the_fits_of_folds_never_push_out_a_sessions_solve(computed):
+    obj, img, size = _pinhole()
+    session = solve_intrinsics(obj, img, size, "k1k2")
+    for k in range(solve_module.RECENT_FITS + 4):  # more distinct fits than are remembered
+        solve_intrinsics(obj[:-1], [i + k * 1e-4 for i in img[:-1]], size, "k1k2", uncertainty=False)
+    asked = len(computed)
+    assert asked == 1 + solve_module.RECENT_FITS + 4
+    assert solve_intrinsics(obj, img, size, "k1k2") is session and len(computed) == asked
 
 
 def test_bad_input_still_gets_the_solves_own_error():

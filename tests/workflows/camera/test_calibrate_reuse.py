@@ -2,10 +2,11 @@
 
 Each case runs the whole workflow (detection, capture gates, solve, validation, lint, store) twice on the same
 rendered folder: once the way it ran before (no solve remembered, the misfit floor's lens models always
-solved) and once as it runs now (the projection gate's solve reused by the solve, the lens models skipped
-where no floor can fail the fit). The session's gates and every number of the calibration are equal to
-the bit; the one number that may differ is the stored floor (``detector_rms_px``), which is then the
-lens-free estimate, never below the full floor, with the same model-misfit verdict.
+solved) and once as it runs now (the projection gate's solve reused by the solve, --model auto's fold fits
+reused, the lens models skipped where no floor can fail the fit). The session's gates and every number of
+the calibration are equal to the bit; the one number that may differ is the stored floor
+(``detector_rms_px``), which is then the lens-free estimate, never below the full floor, with the same
+model-misfit verdict.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tm
     monkeypatch.setattr(solve_module, "_solve", lambda *a: computed.append(a[3].name) or real(*a))
     with monkeypatch.context() as before:
         before.setattr(solve_module, "_RECENT", RecentAnswers(0))  # nothing remembered
+        before.setattr(solve_module, "_RECENT_FITS", RecentAnswers(0))
         before.setattr(model_fit, "can_misfit", lambda fit_rms_px: True)  # the lens models always solved
         old = _calibrate(tmp_path, "before", folder, model)
     solves_before = len(computed)
