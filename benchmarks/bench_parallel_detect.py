@@ -1,6 +1,7 @@
 """Detection and calibrate side by side with the plain OpenCV script, sequential and on a process pool.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_parallel_detect.py RENDERED_96 REAL_FOLDER [--repeats 3]
+        [--baseline DIR]
 
 RENDERED_96: ``calibctl synth OUT --views 96 --size 1280x960`` (its first 20 views form the 20-view set);
 REAL_FOLDER: a real set with a 9x6 board (../shared/datasets/udacity-camcal). Every path runs in a fresh
@@ -14,7 +15,14 @@ End to end (interpreter start to exit, a fresh SQLite store with the board regis
   * ``calibctl capture`` and ``calibctl calibrate`` at jobs 1 and the default;
   * the plain script: the detection above then calibrateCameraExtended, sequential and on a pool.
 Recall is printed beside every time: calibctl must find at least what the plain script finds.
-Prints a markdown report with machine, date and load.
+``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its ``calibrate``
+runs as two more rows, taking turns with the others, so before and after meet the same load.
+Every process reads its bytecode from a cache the first (uncounted) round fills, as an installed calibctl
+does (``machine.run_env``). CPU: user + system time of the process and of the children it waited for
+(getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure
+(a process pool's CPU counts where its workers were waited for: the plain Pool's are, calibctl's warm pool's
+workers belong to its fork server and may not be). Prints a markdown report with machine, date and load: the 1-minute load average
+at the start of each path's best run is printed beside it.
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import datetime as dt
 import json
 import os
 import platform
+import resource
 import shutil
 import subprocess
 import sys
@@ -31,7 +40,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
+from machine import cpu_model, load_1min, run_env  # benchmarks/machine.py (scripts run from benchmarks/)
 
 PLAIN = r'''
 import sys, time, glob, os
@@ -76,14 +85,19 @@ if __name__ == "__main__":
 '''
 
 
-def run(cmd: list[str]) -> tuple[float, str]:
-    """(wall s from start to exit, stdout)."""
-    t = time.perf_counter()
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    wall = time.perf_counter() - t
+def children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float, str]:
+    """(wall s from start to exit, CPU s of the process and the children it waited for, stdout)."""
+    t, c = time.perf_counter(), children_cpu_s()
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall, cpu = time.perf_counter() - t, children_cpu_s() - c
     if done.returncode not in (0, 1):
         raise RuntimeError(f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
-    return wall, done.stdout
+    return wall, cpu, done.stdout
 
 
 def result_of(stdout: str) -> tuple[float, int]:
@@ -118,6 +132,7 @@ def main() -> None:
     parser.add_argument("rendered", type=Path)
     parser.add_argument("real", type=Path)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
     args = parser.parse_args()
     cores = len(os.sched_getaffinity(0))
     py = sys.executable
@@ -135,7 +150,7 @@ def main() -> None:
         load = os.getloadavg()
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
               f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
-              f"(a shared machine)\n")
+              f"(a shared machine); best of {args.repeats} rounds after a bytecode-warming round\n")
         for label, folder in sets:
             det = {"plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
                    f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
@@ -150,12 +165,23 @@ def main() -> None:
                    "calibctl capture (default jobs)": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"],
                    "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
                    "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"]}
-            best: dict[str, tuple[float, str]] = {}
-            for _ in range(args.repeats):
+            if args.baseline is not None:
+                for jobs in ("1", "default"):
+                    e2e[f"before: calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"] = \
+                        e2e[f"calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"]
+            env = run_env(work / "pycache")
+            base_env = None if args.baseline is None else run_env(work / "pycache-before", args.baseline.resolve())
+            best: dict[str, tuple[float, str, float]] = {}
+            least_cpu: dict[str, float] = {}
+            for round_ in range(args.repeats + 1):  # round 0 fills the bytecode caches and is not counted
                 for name, cmd in [*det.items(), *e2e.items()]:
                     shutil.copyfile(template, db)
                     shutil.rmtree(work / "calibctl-images", ignore_errors=True)
-                    wall, out = run(cmd)
+                    load = load_1min()
+                    wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env)
+                    if round_ == 0:
+                        continue
+                    least_cpu[name] = min(cpu, least_cpu.get(name, cpu))
                     if name in det:
                         seconds, found = result_of(out)
                         note = f"{found} boards"
@@ -164,12 +190,14 @@ def main() -> None:
                     else:
                         seconds, note = wall, boards_of(out)
                     if name not in best or seconds < best[name][0]:
-                        best[name] = (seconds, note)
-            print(f"### {label}\n\n| path | best s | vs plain sequential | recall |\n|---|---|---|---|")
+                        best[name] = (seconds, note, load)
+            print(f"### {label}\n\n| path | best s | vs plain sequential | process CPU s (least) | CPU vs plain | "
+                  "recall | load |\n|---|---|---|---|---|---|---|")
             for group, ref in ((det, "plain sequential loop"), (e2e, "plain script (detect + calibrateCameraExtended)")):
                 for name in group:
-                    seconds, note = best[name]
-                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {note} |")
+                    seconds, note, load = best[name]
+                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {least_cpu[name]:.2f} | "
+                          f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} |")
             print(f"\nload average {os.getloadavg()[0]:.2f} after this set\n", flush=True)
 
 

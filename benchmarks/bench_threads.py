@@ -29,8 +29,9 @@ import cv2
 from machine import cpu_model  # benchmarks/machine.py (scripts run from benchmarks/)
 
 from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.camera_split import forget_recent_checks
 from calibctl.core.capture.image_outcomes import classify_session, list_images
-from calibctl.core.intrinsics.solve import solve_intrinsics
+from calibctl.core.intrinsics.solve import forget_recent_solves, solve_intrinsics
 from calibctl.core.intrinsics.validation import validate_holdout
 from calibctl.workflows.rig.rig_folders import solve_rig_folders
 
@@ -47,6 +48,8 @@ def timed(fn, repeats: int) -> tuple[float, float]:
     """(best wall s, CPU s of that run)."""
     best = (float("inf"), 0.0)
     for _ in range(repeats):
+        forget_recent_solves()  # every round computes: a remembered solve or check would time a digest
+        forget_recent_checks()
         c, t = cpu_s(), time.perf_counter()
         fn()
         wall, cpu = time.perf_counter() - t, cpu_s() - c

@@ -198,8 +198,9 @@ class CalibrationArtifact(Document):
         None, ge=0, exclude_if=lambda value: value is None,
         description="what the corners deliver on this set (the noise floor), per-corner RMS, pixels: the smaller "
         "of local quadratic fits of 4x4 corner blocks (no lens model) and the best lens model's (fisheye, rational) "
-        "own residuals corrected for its degrees of freedom; the model-misfit rule compares rms_px with it; "
-        "absent in artifacts made before the rule")
+        "own residuals corrected for its degrees of freedom, or the 4x4 fits alone when rms_px is at most 0.3 px (no "
+        "floor can make such a fit a misfit, so the lens models are not solved); the model-misfit rule compares "
+        "rms_px with it; absent in artifacts made before the rule")
     held_out: HeldOut = Field(description="held-out validation")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
     board: BoardRevision = Field(description="full snapshot of the board revision used")

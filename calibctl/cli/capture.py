@@ -209,7 +209,7 @@ def capture(
             raise UsageError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to one camera, not to a "
                              "rig (--rig)", "capture that camera on its own with --serial (its image circle, its "
                              "distance gauge, a video or camera source)")
-        capture_rig(ctx, rig, source, board, station=station, operator=operator, json_output=json_output)
+        capture_rig(ctx, rig, source, board, station=station, operator=operator, jobs=jobs, json_output=json_output)
         return
     if serial is None:
         raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.options import OperatorOption, StationOption
+from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json
 from calibctl.cli.rig_render import print_findings, render_run, say
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
@@ -42,6 +42,7 @@ def solve_folders(
                                                     "the verdict passes).", show_default=False)] = None,
     allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Write the exports of a failed verdict "
                                                  "too (to inspect them; a robot must not load them).")] = False,
+    jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
     """Solve a rig from per-camera folders (no store): exit 0 pass, 1 fail (rig gate, or the verdict a
@@ -70,8 +71,9 @@ def solve_folders(
     from calibctl.workflows.rig.rig_lint import parse_design
 
     designs = [parse_design(d) for d in design or []]
+    settings = state(ctx).settings(jobs=jobs)
     run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views,
-                                        settings=state(ctx).settings(), designs=designs)
+                                        workers=settings.jobs, settings=settings, designs=designs)
     doc = rig_folders.run_json(run)
     exports: list[str] = []
     withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected
@@ -135,13 +137,14 @@ def capture(
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
     station: StationOption = None,
     operator: OperatorOption = None,
+    jobs: JobsOption = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
     from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
-    result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator), name, sources, board,
+    result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator, jobs=jobs), name, sources, board,
                               min_shared_views)
     s = result.session
     if wants_json(ctx, json_output):

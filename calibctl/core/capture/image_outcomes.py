@@ -204,6 +204,11 @@ def finalize_session(outcomes: Sequence[ImageOutcome], image_size: tuple[int, in
 
 def mean_corner_motion_px(ids_a: np.ndarray, px_a: np.ndarray, ids_b: np.ndarray, px_b: np.ndarray) -> float | None:
     """Mean displacement over the corner ids two detections share; None when they share fewer than 4."""
+    if ids_a.shape == ids_b.shape and len(ids_a) >= 4 and np.array_equal(ids_a, ids_b) \
+            and bool(np.all(ids_a[1:] > ids_a[:-1])):
+        # the same ids in ascending order (a whole board, the usual case): the intersection below would
+        # pair row i with row i; this is that, bit for bit, without its sort (96 views: 4 560 pairs)
+        return float(np.linalg.norm(px_a - px_b, axis=1).mean())
     common, ia, ib = np.intersect1d(ids_a, ids_b, assume_unique=True, return_indices=True)
     if common.size < 4:
         return None

@@ -29,7 +29,11 @@ the corner rule; table in docs/verdicts.md) -- fit RMS / floor (before: / patch 
 opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75); acfr-lidar-camera (a real
 1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
 The rule fails a calibration when the ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a
-sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views.
+sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44 s of
+CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
+only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
+misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
+which is never below the full floor; the verdict is the same either way.
 """
 
 from __future__ import annotations
@@ -115,14 +119,23 @@ def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per
 
 
 def noise_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                   image_size: tuple[int, int]) -> float | None:
+                   image_size: tuple[int, int], fit_rms_px: float | None = None) -> float | None:
     """The model-misfit rule's floor, px per corner: the smaller of detector_rms_px and lens_floor_px (module
-    docstring); None when neither can be read."""
+    docstring); None when neither can be read. ``fit_rms_px``: the fit the floor will judge; when no floor can
+    make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and the
+    lens models are not solved."""
     reads = [detector_rms_px(object_points_per_view, image_points_per_view)]
+    if reads[0] is not None and fit_rms_px is not None and not can_misfit(fit_rms_px):
+        return reads[0]
     lens = lens_floor_px(object_points_per_view, image_points_per_view, image_size)
     reads.append(None if lens is None else lens[0])
     known = [r for r in reads if r is not None]
     return min(known) if known else None
+
+
+def can_misfit(fit_rms_px: float) -> bool:
+    """False when ``misfit`` is False for every floor >= 0: the excess fit - floor never exceeds MISFIT_MIN_PX."""
+    return not fit_rms_px <= MISFIT_MIN_PX  # NaN: may be anything, read the floor
 
 
 def misfit(fit_rms_px: float, detector_px: float) -> bool:

@@ -37,6 +37,15 @@ Determinism
     OpenCV parallelises parts of the solve; with 2+ threads the summation order varies and the
     same input gives results differing around 1e-10 px. The solve runs with cv2.setNumThreads(1)
     (restored afterwards), which makes it bit-identical run to run.
+
+Solves asked twice
+    A solve of the same corners, model and start is therefore the same solve, and ``calibrate`` asks for it twice:
+    the capture's projection gate solves the session, then the solve's corner rule starts from the same
+    solve of the same corners; ``--model auto`` asks its ladder again, its rational folds start from the
+    k1k2 fit of the same fold, and the chosen model's validation refits the folds the ladder fitted. The last
+    RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a digest
+    of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
+    one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
 from __future__ import annotations
@@ -50,6 +59,7 @@ import numpy as np
 from calibctl.core.intrinsics.covariance import IntrinsicCovariance, intrinsic_covariance
 from calibctl.core.intrinsics.fisheye_model import fisheye_pose, project_fisheye, refine_fisheye_pose
 from calibctl.core.intrinsics.fisheye_solve import solve_fisheye
+from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solution import (
     CALIB_FIX_SKEW,
     CALIB_RECOMPUTE_EXTRINSIC,
@@ -80,7 +90,7 @@ __all__ = [
     "FISHEYE_DIST_NAMES", "IntrinsicsSolution", "MAX_RMS_PX", "MIN_CORNERS_PER_VIEW", "MIN_FOCAL_FRAC",
     "MIN_SIGMA_DOF", "MODELS", "NO_UNCERTAINTY", "check_inputs", "check_output", "get_model",
     "parameter_count", "readonly", "residual_rms_px", "single_threaded_opencv", "solve_intrinsics",
-    "is_fisheye", "project_points", "fit_pose",
+    "is_fisheye", "project_points", "fit_pose", "forget_recent_solves",
 ]
 
 # Index of each parameter in OpenCV's stdDeviationsIntrinsics (and in the distortion vector + 4).
@@ -103,6 +113,22 @@ def _sigma_by_name(cov: IntrinsicCovariance, aspect: float | None) -> tuple[dict
     if bad:
         return {}, f"the covariance is not finite and positive for {', '.join(bad)}"
     return sigma, None
+
+
+# Remembered solves (module docstring), apart by kind so that folds never push out a session's solve: the
+# solves with uncertainty (a session's, once per model), and the fits without (folds, groups), enough for
+# --model auto's whole ladder between its k1k2 folds and the chosen model's validation of the same folds. An
+# 86-view k1k2 solution holds 79 KB of arrays (residuals, poses, covariance): ~6 MB at most at that size.
+RECENT_SOLVES = 8
+RECENT_FITS = 64
+_RECENT: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_SOLVES)
+_RECENT_FITS: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_FITS)
+
+
+def forget_recent_solves() -> None:
+    """Forget the remembered solves: a benchmark that times the same solve again must compute it again."""
+    _RECENT.clear()
+    _RECENT_FITS.clear()
 
 
 def solve_intrinsics(
@@ -134,8 +160,25 @@ def solve_intrinsics(
         UsageError: unknown model name.
     """
     m = get_model(model) if isinstance(model, str) else model
-    if m.kind == "fisheye":
+    fisheye = m.kind == "fisheye"
+    if m is MODELS.get(m.name):  # a named model: its name says what it solves
+        try:
+            key = values_digest(object_points_per_view, image_points_per_view, tuple(int(v) for v in image_size),
+                                m.name, fisheye or uncertainty,  # a fisheye solve always has its uncertainty
+                                None if initial is None else np.asarray(initial, np.float64).tobytes())
+        except (TypeError, ValueError):  # malformed input: the solve names the problem in its own words
+            key = None
+        if key is not None:
+            return (_RECENT if fisheye or uncertainty else _RECENT_FITS).answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
+                                                      initial, uncertainty))
+    return _solve(object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty)
 
+
+def _solve(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+           image_size: tuple[int, int], m: DistortionModel, initial: np.ndarray | None,
+           uncertainty: bool) -> IntrinsicsSolution:
+    """``solve_intrinsics`` of a resolved model, computed (never remembered)."""
+    if m.kind == "fisheye":
         return solve_fisheye(object_points_per_view, image_points_per_view, image_size, m, initial)
     if initial is None and m.flags & cv2.CALIB_RATIONAL_MODEL:
         initial = _k1k2_start(object_points_per_view, image_points_per_view, image_size)

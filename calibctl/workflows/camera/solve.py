@@ -237,9 +237,10 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         session, request)
     model_points = board_spec(session.board).object_points()
     # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
+    # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit)
     detector_rms = noise_floor_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
                                   rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]),
-                                  sol.image_size)
+                                  sol.image_size, float(sol.rms_px))
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(

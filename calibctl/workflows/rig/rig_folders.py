@@ -164,7 +164,8 @@ def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px:
     member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
                               m.free_distortion, sol.aspect_ratio, cov, m.kind,
                               ic.jacobian_covariance if ic is not None and ic.inflated else None, pulls)
-    return member, MemberFit(m.name, sol.rms_px, model_fit.noise_floor_px(object_points, corners_px, image_size))
+    floor = model_fit.noise_floor_px(object_points, corners_px, image_size, float(sol.rms_px))
+    return member, MemberFit(m.name, sol.rms_px, floor)
 
 
 def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
