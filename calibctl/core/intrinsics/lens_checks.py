@@ -12,7 +12,6 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 ERROR = "error"
@@ -194,6 +193,8 @@ def observed_region_px(corners_px: Sequence[np.ndarray]) -> np.ndarray | None:
     pts = np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in corners_px]) if corners_px else None
     if pts is None or len(pts) < 3:
         return None
+    import cv2  # here, not at the top: lint of a file (no solve) must not pay OpenCV's import
+
     return np.asarray(cv2.convexHull(pts.astype(np.float32)), np.float64).reshape(-1, 2)
 
 

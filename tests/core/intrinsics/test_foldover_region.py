@@ -64,7 +64,7 @@ def _document(model: str, dist: np.ndarray, hull: np.ndarray | None) -> dict:
     doc = {"image_size": list(SIZE), "camera_matrix": K_FISH.tolist(), "dist_coeffs": dist.tolist(),
            "model": {"name": model}}
     if hull is not None:
-        doc["lens_checks.observed_region_px"] = hull.tolist()
+        doc["observed_region_px"] = hull.tolist()
     return doc
 
 
