@@ -78,9 +78,35 @@ class RigCovariance:
         return np.sqrt(np.diag(self.frame_level) / np.diag(self.jacobian))
 
 
-def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                   board_poses: np.ndarray, refine: bool) -> RigCovariance:
-    """The camera poses' covariances at the solution (module docstring).
+@dataclass(frozen=True)
+class RigLinearisation:
+    """The joint problem linearised at the solution: what the covariances are read from (the rig's own here, a
+    loop's cross covariances between pair solves in core.extrinsics.rig_loop).
+
+    Attributes:
+        layout, normal_equations: of the joint problem (per frame).
+        H_inv: (n_free, n_free) inverse information of the free unknowns (camera poses, board poses, refined
+            intrinsics), unit noise: the Jacobian covariance is residual_variance_px2 * H_inv.
+        intrinsic_gain: (n_free, n_fixed) A = dx/dtheta of intrinsics held fixed with a known covariance, else None.
+        cov_theta_jacobian, cov_theta_unknown: (n_fixed, n_fixed) the members' Jacobian covariances, and the
+            covariances of members whose photos are unknown (independent data), None with intrinsic_gain.
+        pulls: cluster -> (n_free,) its pull on the solution: a frame name, or (camera, photo name) for a member
+            photo the rig does not use (module docstring).
+    """
+
+    layout: Layout
+    normal_equations: NormalEquations
+    H_inv: np.ndarray
+    residual_variance_px2: float
+    intrinsic_gain: np.ndarray | None
+    cov_theta_jacobian: np.ndarray | None
+    cov_theta_unknown: np.ndarray | None
+    pulls: dict[str | tuple[str, str], np.ndarray]
+
+
+def linearise(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray, board_poses: np.ndarray,
+              refine: bool) -> RigLinearisation:
+    """The joint problem linearised at the solution (RigLinearisation).
 
     Raises:
         NumericalError: fewer residuals than unknowns, a parameter without effect, or unobservable.
@@ -93,17 +119,15 @@ def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_pos
     if dof <= 0:
         raise NumericalError(f"the rig solve has {ne.n_residuals} residuals for {n_free} unknowns",
                              hint="capture more synchronised views")
-    s2 = ne.ssr / dof
     H_inv = _inverse(ne.H[np.ix_(free, free)])
-    cov_jac = s2 * H_inv
-    pulls = _frame_pulls(ne, layout, H_inv, refine)  # (F, n_free), zero on the board poses
-    extra = np.zeros((0, n_free))
-    cov_frame_add = np.zeros_like(cov_jac)
+    frame_pulls = _frame_pulls(ne, layout, H_inv, refine)  # (F, n_free), zero on the board poses
+    extra: dict[str | tuple[str, str], np.ndarray] = {}
+    A = cov_theta_jac = cov_theta_unknown = None
     if not refine and all(m.covariance is not None for m in members):
         fixed = np.arange(n_free, layout.size)
         A = -H_inv @ ne.H[np.ix_(free, fixed)]
         cov_theta_jac, cov_theta_unknown = np.zeros((2, fixed.size, fixed.size))
-        theta_pulls, extra_theta = np.zeros((layout.n_frames, fixed.size)), []
+        theta_pulls = np.zeros((layout.n_frames, fixed.size))
         for c, m in enumerate(members):
             at = layout.intrinsics(c) - n_free
             block = m.jacobian_covariance if m.jacobian_covariance is not None else m.covariance
@@ -121,22 +145,45 @@ def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_pos
                 if name not in used:
                     one = np.zeros(fixed.size)
                     one[at] = pull
-                    extra_theta.append(one)
-        cov_jac = cov_jac + A @ cov_theta_jac @ A.T
-        pulls = pulls + theta_pulls @ A.T
-        if extra_theta:
-            extra = np.stack(extra_theta) @ A.T
-        cov_frame_add = A @ cov_theta_unknown @ A.T
-    clusters = np.vstack([pulls, extra])
-    ext = slice(0, layout.board0)
+                    extra[(m.name, name)] = A @ one
+        frame_pulls = frame_pulls + theta_pulls @ A.T
+    pulls: dict[str | tuple[str, str], np.ndarray] = dict(zip(views.frames, frame_pulls, strict=True))
+    pulls.update(extra)
+    return RigLinearisation(layout, ne, H_inv, ne.ssr / dof, A, cov_theta_jac, cov_theta_unknown, pulls)
+
+
+def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
+                   board_poses: np.ndarray, refine: bool) -> RigCovariance:
+    """The camera poses' covariances at the solution (module docstring).
+
+    Raises:
+        NumericalError: fewer residuals than unknowns, a parameter without effect, or unobservable.
+    """
+    lin = linearise(views, members, cam_poses, board_poses, refine)
+    cov_jac = lin.residual_variance_px2 * lin.H_inv
+    cov_frame_add = np.zeros_like(cov_jac)
+    if lin.intrinsic_gain is not None:
+        assert lin.cov_theta_jacobian is not None and lin.cov_theta_unknown is not None
+        A = lin.intrinsic_gain
+        cov_jac = cov_jac + A @ lin.cov_theta_jacobian @ A.T
+        cov_frame_add = A @ lin.cov_theta_unknown @ A.T
+    ext = slice(0, lin.layout.board0)
     jac = _sym(cov_jac[ext, ext])
+    clusters = np.stack(list(lin.pulls.values()))
     n = clusters.shape[0]
+    ne, s2 = lin.normal_equations, lin.residual_variance_px2
     if n < MIN_FRAMES:
         return RigCovariance(jac, jac, None, n, ne, s2)
-    centred = clusters - clusters.mean(axis=0)
-    frame = _sym(((n - 1) / n * centred.T @ centred + cov_frame_add)[ext, ext])
+    frame = _sym(jackknife(clusters[:, ext]) + cov_frame_add[ext, ext])
     scale = np.maximum(1.0, np.sqrt(np.diag(frame) / np.diag(jac)))
     return RigCovariance(_sym(jac * np.outer(scale, scale)), jac, frame, n, ne, s2)
+
+
+def jackknife(pulls: np.ndarray) -> np.ndarray:
+    """(n-1)/n sum (pull - mean)(pull - mean)^T over the n clusters' pulls (n, d)."""
+    n = pulls.shape[0]
+    centred = pulls - pulls.mean(axis=0)
+    return (n - 1) / n * centred.T @ centred
 
 
 def _frame_pulls(ne: NormalEquations, layout: Layout, H_inv: np.ndarray, refine: bool) -> np.ndarray:

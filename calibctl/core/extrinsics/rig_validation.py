@@ -9,9 +9,9 @@ cross-epipolar disparity (rig_metrics) of the held-out frames both cameras saw.
 
 Loop closure (3+ cameras): every pair with shared frames is solved on its own (a 2-camera solve);
 around every simple cycle of that pair graph the composed transform should be identity. The residual
-(rotation deg, translation mm) is reported with its one-sigma, propagated from the pairs' covariances
-as if independent (pairs share a camera's corners, so this is approximate), and the Mahalanobis
-distance of the 6-vector. A joint solve closes its own loops by construction; the pairwise loop is
+(rotation deg, translation mm) is reported with its one-sigma and the Mahalanobis distance of the 6-vector,
+both from the loop's Jacobian covariance with the cross covariances of pairs that share a camera's corners
+(core.extrinsics.rig_loop; treated as independent they read the loop several times too wide). A joint solve closes its own loops by construction; the pairwise loop is
 the rig's health metric (seed ch. 6 prompt B).
 """
 
@@ -24,10 +24,11 @@ import numpy as np
 
 from calibctl.core.blas_threads import single_threaded
 from calibctl.core.extrinsics.rig_init import view_poses
+from calibctl.core.extrinsics.rig_loop import loop_covariance
 from calibctl.core.extrinsics.rig_metrics import epipolar_distances_px, rectified_cross_disparity_px, rectify
 from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigViews, normal_equations
 from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only, solve_rig
-from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, propagate, simple_cycles
+from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, simple_cycles
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.core.intrinsics.validation import fold_assignment
 from calibctl.core.lm import DenseSystem, solve_lm
@@ -168,39 +169,26 @@ def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], mod
 
 
 def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str = "k1k2") -> tuple[LoopClosure, ...]:
-    """Residual around every simple cycle of the pairwise-solved camera graph (empty for 2 cameras)."""
+    """Residual around every simple cycle of the pairwise-solved camera graph (empty for 2 cameras), judged by
+    the loop's covariance with the pairs' cross covariances (core.extrinsics.rig_loop)."""
     pairs = pairwise_solutions(views, members, model)
     edges = {frozenset(p) for p in pairs}
     out = []
     for cycle in simple_cycles(range(len(views.cameras)), edges):
         hops = list(zip(cycle, (*cycle[1:], cycle[0]), strict=True))
-        # T_a_b of each hop as a pose vector with its covariance; a pair solve gives T_b_a (root a)
-        poses, covs = [], []
-        for a, b in hops:
-            sol = pairs[(min(a, b), max(a, b))]
-            T_lo_hi = invert(sol.T_cam_root(1))
-            # the Jacobian covariance: the pairs share frames, so their frame-level errors are correlated,
-            # which these independent blocks cannot say (the rule's 99.7 % limit was set on the Jacobian ones)
-            cov = sol.pair_covariance(0, 1, jacobian=True)
-            if a < b:
-                poses.append(T_to_pose(T_lo_hi))
-                covs.append(cov)
-            else:
-                poses.append(T_to_pose(invert(T_lo_hi)))
-                covs.append(propagate(lambda p: T_to_pose(invert(pose_to_T(p))), T_to_pose(T_lo_hi), cov))
-        x = np.concatenate(poses)
-        cov_x = np.zeros((x.size, x.size))
-        for i, c in enumerate(covs):
-            cov_x[6 * i:6 * i + 6, 6 * i:6 * i + 6] = c
+        # x: each hop's pair estimate cam_poses[1], the pose of T_hi_lo; the hop a -> b reads T_a_b from it
+        solutions = [pairs[(min(a, b), max(a, b))] for a, b in hops]
+        x = np.concatenate([sol.cam_poses[1] for sol in solutions])
+        forward = [a < b for a, b in hops]
 
-        def around(v: np.ndarray, n_hops: int = len(hops)) -> np.ndarray:
+        def around(v: np.ndarray, forward: list[bool] = forward) -> np.ndarray:
             T = np.eye(4)
-            for p in np.split(v, n_hops):
-                T = T @ pose_to_T(p)
+            for p, fwd in zip(np.split(v, len(forward)), forward, strict=True):
+                T = T @ (invert(pose_to_T(p)) if fwd else pose_to_T(p))
             return T_to_pose(T)
 
         r = around(x)
-        cov_r = propagate(around, x, cov_x)
+        cov_r = loop_covariance(solutions, views, around, x).jacobian
         T = pose_to_T(r)
         out.append(LoopClosure(
             tuple(views.cameras[i] for i in cycle), rotation_angle_deg(T[:3, :3]), float(np.linalg.norm(r[3:]) * 1e3),
