@@ -221,6 +221,11 @@ class CalibrationArtifact(Document):
         description="vertices of the convex hull of every corner the solve used, [u, v] pixels: where the "
         "calibration is used; lint judges distortion-foldover out to it (grown 10 %), not beyond; absent in "
         "artifacts made before the rule (then judged out to the image corner or circle)")
+    required_region_px: list[tuple[float, float]] | None = Field(
+        None, exclude_if=lambda region: region is None,
+        description="the station's declared region (gates.projection_region when not auto) at the solve, as "
+        "[u, v] pixel vertices: where the robot will look; lint judges distortion-foldover over its union with "
+        "observed_region_px; absent when the station declared none, and in artifacts made before the rule")
     camera_consistency: CameraConsistency | None = Field(
         None, exclude_if=lambda check: check is None,
         description="two-camera check of the solved views; absent when too few views to split, and in "

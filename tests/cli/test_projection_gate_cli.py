@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
 from tests.cli.test_capture_cli import SERIAL, db, good, invoke  # noqa: F401 - the shared store and rendered folder
 from tests.datasets import DATASETS, needs_datasets
@@ -86,3 +87,37 @@ def test_a_real_fisheye_set_is_refused_for_the_corners_it_never_saw_and_accepted
     assert gate["passed"] and gate["detail"]["model"] == "fisheye"
     assert "the box (320, 200)-(1600, 1000)" in gate["detail"]["region"]
     assert band["calibration"] is not None and band["calibration"]["model"]["name"] == "fisheye"  # solved
+
+
+def test_the_solve_records_the_station_region_and_lint_judges_fold_over_there(db: str, good: Path,  # noqa: F811
+                                                                               tmp_path: Path) -> None:
+    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    station = _station(tmp_path, "projection_region: '100,50,540,430'")
+    r = invoke(db, "--station-config", str(station), "solve", "--serial", SERIAL, "--json")
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as store:
+        art = store.list_artifacts(SERIAL)[-1]
+    assert art.required_region_px == [(100.0, 50.0), (540.0, 50.0), (540.0, 430.0), (100.0, 430.0)]
+    assert art.observed_region_px is not None
+
+
+def test_the_default_region_records_none(db: str, good: Path) -> None:  # noqa: F811
+    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    assert invoke(db, "solve", "--serial", SERIAL).exit_code == 0
+    with Store.open(db) as store:
+        art = store.list_artifacts(SERIAL)[-1]
+    assert art.required_region_px is None and "required_region_px" not in art.model_dump(mode="json")
+
+
+@pytest.mark.parametrize(("region", "words"), [
+    ("'0,0,9999,100'", "is not a box inside the 640x480 image"), ("'0,0,nan,100'", "four finite numbers"),
+    ("circle", "needs an image circle")])
+def test_a_bad_station_region_at_the_solve_is_exit_2_and_stores_nothing(db: str, good: Path, tmp_path: Path,  # noqa: F811
+                                                                        region: str, words: str) -> None:
+    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    station = _station(tmp_path, f"projection_region: {region}")
+    r = invoke(db, "--station-config", str(station), "solve", "--serial", SERIAL)
+    assert r.exit_code == 2, r.output
+    assert "gates.projection_region" in r.stderr and words in r.stderr
+    with Store.open(db) as store, pytest.raises(NotFoundError, match="none was solved"):
+        store.list_artifacts(SERIAL)

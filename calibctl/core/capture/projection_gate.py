@@ -42,6 +42,7 @@ PROJECTION_SIGMA_MAX_PX = 5.0  # default station threshold; measured table in do
 ADVISORY_GATES = ("tilt", "coverage")  # guidance once the projection gate decides
 UNKNOWN_LENS_MODELS = ("k1k2", "fisheye")
 FISHEYE_GAIN = 0.10  # model_select.MIN_FIT_IMPROVEMENT
+CIRCLE_VERTICES = 72  # a circle region as a polygon (Region.vertices_px)
 UNKNOWN_SIGMA_PX = 1e6  # a grid pixel the model cannot unproject (value stays finite: artifacts refuse inf)
 
 
@@ -60,6 +61,21 @@ class Region:
         if self.kind == "box" and self.box_px is not None:
             return "the box ({:g}, {:g})-({:g}, {:g}) px".format(*self.box_px)
         return "the whole image"
+
+    def vertices_px(self, image_size: tuple[int, int]) -> np.ndarray:
+        """(K, 2) px points whose farthest one from any principal point bounds the region (lint's fold-over
+        reads the farthest): the box's or the image's corners, or the circle sampled (CIRCLE_VERTICES, grown so
+        the polygon contains the circle) and clipped to the image."""
+        w, h = image_size
+        if self.kind == "circle" and self.circle_px is not None:
+            cx, cy, r = self.circle_px
+            a = np.linspace(0.0, 2 * np.pi, CIRCLE_VERTICES, endpoint=False)
+            r_out = r / math.cos(math.pi / CIRCLE_VERTICES)
+            return np.column_stack([np.clip(cx + r_out * np.cos(a), -0.5, w - 0.5),
+                                    np.clip(cy + r_out * np.sin(a), -0.5, h - 0.5)])
+        u0, v0, u1, v1 = self.box_px if self.kind == "box" and self.box_px is not None else (-0.5, -0.5, w - 0.5,
+                                                                                                   h - 0.5)
+        return np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], np.float64)
 
     def mask(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(R, C) bool: the grid points (u (C,), v (R,) px) inside the region."""

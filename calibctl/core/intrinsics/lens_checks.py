@@ -200,11 +200,13 @@ def observed_region_px(corners_px: Sequence[np.ndarray]) -> np.ndarray | None:
 
 def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
                         image_circle: tuple[float, float, float] | None = None,
-                        observed_px: np.ndarray | None = None) -> tuple[float, str]:
+                        observed_px: np.ndarray | None = None,
+                        required_px: np.ndarray | None = None) -> tuple[float, str]:
     """Normalised distorted radius out to which a model is judged, and its words: the image point farthest from
     the principal point (an image corner, or with ``image_circle`` (cx, cy, r px) the farthest point of the image
     inside the circle); with ``observed_px`` ((K, 2) px, the observed corners' hull) the farthest observed corner
-    grown by OBSERVED_MARGIN when that is nearer (the model is not used beyond it)."""
+    grown by OBSERVED_MARGIN when that is nearer (the model is not used beyond it), or the farthest vertex of
+    ``required_px`` ((K, 2) px, the station's declared region) when that reaches farther: the union of both."""
     w, h = image_size
     fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
@@ -221,23 +223,34 @@ def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
     if observed_px is not None and len(observed_px):
         obs = np.asarray(observed_px, np.float64).reshape(-1, 2)
         rd_obs = float(np.hypot((obs[:, 0] - cx) / fx, (obs[:, 1] - cy) / fy).max()) * (1 + OBSERVED_MARGIN)
-        if rd_obs < rd:
+        req = np.asarray(required_px if required_px is not None else np.zeros((0, 2)), np.float64).reshape(-1, 2)
+        rd_req = float(np.hypot((req[:, 0] - cx) / fx, (req[:, 1] - cy) / fy).max()) if len(req) else 0.0
+        if max(rd_obs, rd_req) < rd:
+            if rd_req > rd_obs:
+                return rd_req, "station region (the farthest point of gates.projection_region)"
             return rd_obs, f"observed region (the farthest corner + {OBSERVED_MARGIN:.0%})"
     return rd, edge
 
 
+def _is_region(edge: str) -> bool:
+    """Whether the judged radius is a region's (observed or station-declared), not the image's edge."""
+    return edge.startswith(("observed", "station"))
+
+
 def _inside(edge: str) -> str:
-    return "observed region" if edge.startswith("observed") else "image"
+    return edge.split(" (")[0] if _is_region(edge) else "image"
 
 
 def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                               image_size: tuple[int, int],
                               image_circle: tuple[float, float, float] | None = None,
-                              model: str | None = None, observed_px: np.ndarray | None = None) -> Finding:
+                              model: str | None = None, observed_px: np.ndarray | None = None,
+                              required_px: np.ndarray | None = None) -> Finding:
     """The distortion is one-to-one out to the farthest image corner (with ``image_circle`` (cx, cy, r)
     px: out to the farthest point of the image inside the circle, where the lens forms an image; with
     ``observed_px`` (the observed corners' hull, px): no farther than the observed region grown by
-    OBSERVED_MARGIN, where the calibration is used, alike for every model).
+    OBSERVED_MARGIN, where the calibration is used, alike for every model; with ``required_px`` too, the station's
+    declared region where it reaches farther: a robot that looks there needs the model one-to-one there).
 
     Radial part: r_d(r_u) = r_u * (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)
     must increase strictly, with a positive denominator, on a fine grid from 0 until it reaches
@@ -252,7 +265,7 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     if model == "k1k2":
         fix = ("the distortion polynomial turns back inside the image: capture corners out to the image corners "
                "(it is extrapolated beyond the last one), or --model fisheye for a wide or fisheye lens")
-    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px)
+    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px, required_px)
     r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner
     steps = int(RADIAL_GRID_STEPS * RADIAL_SEARCH_MAX_FACTOR)
     radial_only = _padded(dist_coeffs)
@@ -308,7 +321,8 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
 def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                                image_size: tuple[int, int],
                                image_circle: tuple[float, float, float] | None = None,
-                               observed_px: np.ndarray | None = None) -> Finding:
+                               observed_px: np.ndarray | None = None,
+                               required_px: np.ndarray | None = None) -> Finding:
     """Equidistant (fisheye, k1..k4): theta_d(theta) = theta (1 + k1 t^2 + k2 t^4 + k3 t^6 + k4 t^8)
     must increase from theta = 0 until it reaches the farthest image corner's normalised radius.
 
@@ -318,13 +332,14 @@ def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarra
     With ``image_circle`` (cx, cy, r) px the farthest point of the image inside the circle replaces the
     farthest image corner, and the model must reach it (the lens images the circle's edge). With
     ``observed_px`` the observed region grown by OBSERVED_MARGIN, when nearer, replaces both (and the model must
-    reach it: corners were imaged there): a fold beyond every observed corner is not judged.
+    reach it: corners were imaged there): a fold beyond every observed corner is not judged. ``required_px`` (the
+    station's declared region) joins the observed one, as for check_distortion_foldover.
     """
     rule = "distortion-foldover"
     fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"
     k1, k2, k3, k4 = (list(np.asarray(dist_coeffs, dtype=np.float64).ravel()) + [0.0] * 4)[:4]
-    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px)
-    must_reach = image_circle is not None or edge.startswith("observed")
+    rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px, required_px)
+    must_reach = image_circle is not None or _is_region(edge)
     theta = np.linspace(0.0, math.pi, RADIAL_GRID_STEPS + 1)
     t2 = theta * theta
     theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
@@ -335,7 +350,7 @@ def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarra
     stop = int(reach[0]) if reach.size else limit
     falling = np.flatnonzero(np.diff(theta_d[: stop + 1]) <= 0)
     if not falling.size and not reach.size and must_reach:
-        what = edge if edge.startswith("observed") else "circle's edge"
+        what = edge if _is_region(edge) else "circle's edge"
         return Finding(rule, ERROR, False,
                        f"fisheye theta_d(theta) never reaches the {edge} (theta_d = {rd_corner:.4f}; at most "
                        f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the {what}", fix)

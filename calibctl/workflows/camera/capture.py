@@ -69,7 +69,6 @@ from calibctl.core.capture.image_circle import (
 )
 from calibctl.core.capture.projection_gate import (
     ADVISORY_GATES,
-    parse_region,
     projection_gate,
     session_passed,
     solve_for_gate,
@@ -84,7 +83,14 @@ from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
 from calibctl.workflows.camera.image_circles import checked_image_circle
-from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveOutcome, SolveRequest, checked_override, solve
+from calibctl.workflows.camera.solve import (
+    MODEL_CHOICES,
+    SolveOutcome,
+    SolveRequest,
+    checked_override,
+    solve,
+    station_region,
+)
 
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
 # a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
@@ -469,12 +475,7 @@ def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:
 def _projection(settings: Settings, request: CaptureRequest, views: Sequence[BoardView], model_points: np.ndarray,
                 image_size: tuple[int, int], circle: ImageCircle | None) -> CoreGateResult:
     """The decisive gate (core.capture.projection_gate) over the station's region; exit 2 for a bad region."""
-    try:
-        region = parse_region(settings.gates.projection_region, image_size,
-                              None if circle is None else circle.as_tuple())
-    except ValueError as exc:
-        raise UsageError(f"station setting gates.projection_region: {exc}",
-                         "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels") from exc
+    region = station_region(settings, image_size, None if circle is None else circle.as_tuple())
     obj = [model_points[np.asarray(v.corner_ids)] for v in views]
     px = [np.asarray(v.corners_px, np.float64) for v in views]
     try:

@@ -35,6 +35,7 @@ from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
+from calibctl.core.capture.projection_gate import Region, parse_region
 from calibctl.core.intrinsics import solve as core_solve
 from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
 from calibctl.core.intrinsics.lens_checks import observed_region_px
@@ -226,6 +227,29 @@ def _gates(session: CaptureSession, request: SolveRequest) -> list:
     return with_circle(list(session.gates), checked_image_circle(request.image_circle, session.image_size))
 
 
+def station_region(settings: Settings, image_size: tuple[int, int],
+                   circle_px: tuple[float, float, float] | None) -> Region:
+    """The station's gates.projection_region parsed (UsageError, exit 2, naming it when it is not a region of
+    this image)."""
+    try:
+        return parse_region(settings.gates.projection_region, image_size, circle_px)
+    except ValueError as exc:
+        raise UsageError(f"station setting gates.projection_region: {exc}",
+                         "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels") from exc
+
+
+def _with_required_region(art: CalibrationArtifact, settings: Settings) -> CalibrationArtifact:
+    """The station's declared region (gates.projection_region other than the default auto) recorded as px
+    vertices, so lint judges fold-over over it as well as over the observed corners (a robot that looks there
+    needs the model one-to-one there); a region that is not one of this image: UsageError naming it (exit 2)."""
+    if settings.gates.projection_region.strip().lower() == "auto" or art.image_size is None:
+        return art
+    size = (int(art.image_size[0]), int(art.image_size[1]))
+    circle = facts_from_document(art.model_dump(mode="json", include={"gates", "camera_matrix"}), art.serial).image_circle
+    vertices = station_region(settings, size, circle).vertices_px(size)
+    return art.model_copy(update={"required_region_px": [(float(u), float(v)) for u, v in vertices]})
+
+
 def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
     return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
                            dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
@@ -288,6 +312,7 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         metric_gauge=session.metric_gauge,
         content_sha256=UNSEALED,
     )
+    art = _with_required_region(art, settings)
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
     status = "rejected" if has_errors(findings) else "accepted"
     corner_outliers = [

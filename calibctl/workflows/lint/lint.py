@@ -56,6 +56,7 @@ class CalibrationFacts:
     fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
     image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
     observed_region_px: np.ndarray | None = None  # (K, 2) hull of the solve's corners, calibctl only
+    required_region_px: np.ndarray | None = None  # (K, 2) the station's declared region at the solve, calibctl only
     metric_gauge: dict[str, Any] | None = None  # the capture's distance gauge, calibctl only
     gauge_override: str | None = None  # provenance.gauge_override: why a failed gauge was overridden
     raw_numbers: list[float] = field(default_factory=list)
@@ -157,6 +158,7 @@ FACT_FIELDS: dict[str, Any] = {
     "detector_rms_px": True, "stdev": {"sigma", "refused_reason"}, "board": {"measurement"},
     "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"}, "camera_consistency": True,
     "metric_gauge": True, "provenance": {"gauge_override"}, "observed_region_px": True,
+    "required_region_px": True,
 }
 """The parts of an artifact's dump ``facts_from_document`` reads (views, provenance, covariance are not)."""
 
@@ -190,15 +192,16 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         fit_ring_rms_px=_inner_outer(held.get("by_radius") or []),
         image_circle=_recorded_circle(data.get("gates")),
         observed_region_px=_region(data.get("observed_region_px"), source),
+        required_region_px=_region(data.get("required_region_px"), source, "required_region_px"),
         metric_gauge=data.get("metric_gauge") if isinstance(data.get("metric_gauge"), dict) else None,
         gauge_override=(data.get("provenance") or {}).get("gauge_override"),
         raw_numbers=[] if validated else _numbers(data),
     )
 
 
-def _region(hull: Any, source: str) -> np.ndarray | None:
-    """The artifact's observed region, (K, 2) px, or None when it records none."""
-    return None if hull is None else _matrix(hull, (-1, 2), source, "observed_region_px")
+def _region(hull: Any, source: str, key: str = "observed_region_px") -> np.ndarray | None:
+    """The artifact's observed (or required) region, (K, 2) px, or None when it records none."""
+    return None if hull is None else _matrix(hull, (-1, 2), source, key)
 
 
 def _recorded_circle(gates: Any) -> tuple[float, float, float] | None:
@@ -377,11 +380,13 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
     if size is not None and facts.dist_coeffs.size:
         if facts.distortion_model == "equidistant":
             findings += adopt(lens_checks.check_equidistant_foldover(K, facts.dist_coeffs, size, facts.image_circle,
-                                                                     facts.observed_region_px))
+                                                                     facts.observed_region_px,
+                                                                     facts.required_region_px))
         else:
             findings += adopt(lens_checks.check_distortion_foldover(K, facts.dist_coeffs, size, facts.image_circle,
                                                                     model=facts.model_name,
-                                                                    observed_px=facts.observed_region_px))
+                                                                    observed_px=facts.observed_region_px,
+                                                                    required_px=facts.required_region_px))
     return _misfit_first(findings)
 
 

@@ -75,3 +75,38 @@ def test_lint_reads_the_artifacts_observed_region():
     without = lint_facts(facts_from_document(_document("fisheye", D_FOLD_80, None), "b"), LintThresholds())
     assert [f.severity for f in with_region if f.rule == rule] == []  # passed: no finding
     assert [f.severity for f in without if f.rule == rule] == ["error"]  # older artifacts: out to the image
+
+
+def _box(K: np.ndarray, half_w: float, half_h: float) -> np.ndarray:
+    cx, cy = K[0, 2], K[1, 2]
+    return np.array([[cx - half_w, cy - half_h], [cx + half_w, cy - half_h], [cx + half_w, cy + half_h],
+                     [cx - half_w, cy + half_h]])
+
+
+def test_a_station_region_beyond_the_observed_one_is_judged_too():
+    observed = lens_checks.observed_region_px([_ring(K_WIDE, 800 * 0.3)])  # well inside the peak r_d 0.5443
+    assert lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=observed).passed
+    # a robot that looks out to r_d 0.61 (a box 960 x 200 px): the model folds over there
+    wide = _box(K_WIDE, 480.0, 100.0)
+    f = lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=observed, required_px=wide)
+    assert not f.passed and "folds over inside the station region" in f.message
+    # a station region inside the observed one changes nothing: the union is the observed region
+    small = _box(K_WIDE, 100.0, 50.0)
+    f = lens_checks.check_distortion_foldover(K_WIDE, D_BARREL, (1280, 960), observed_px=observed, required_px=small)
+    assert f.passed and "observed region" in f.message
+
+
+def test_a_fisheye_is_judged_over_the_station_region_alike():
+    observed = lens_checks.observed_region_px([_ring(K_FISH, 200.0)])  # about 45 deg: the 80 deg fold not judged
+    assert lens_checks.check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=observed).passed
+    f = lens_checks.check_equidistant_foldover(K_FISH, D_FOLD_80, SIZE, observed_px=observed,
+                                               required_px=_box(K_FISH, 290.0, 20.0))
+    assert not f.passed and "station region" in f.message
+
+
+def test_lint_reads_the_artifacts_required_region():
+    hull = lens_checks.observed_region_px([_ring(K_FISH, 200.0)])
+    doc = _document("fisheye", D_FOLD_80, hull)
+    doc["required_region_px"] = _box(K_FISH, 290.0, 20.0).tolist()
+    found = lint_facts(facts_from_document(doc, "a"), LintThresholds())
+    assert [f.severity for f in found if f.rule == "distortion-foldover"] == ["error"]
