@@ -147,7 +147,16 @@ def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
                       "lever_arm.unobservable", hint, detail)
 
 
-def time_alignment_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
+STATIC_POSE_HINT = ("the poses were held still at each photo, so no time offset explains it: check that each row "
+                    "pairs a photo with the pose it was taken at (a pose file shifted or reordered against the "
+                    "images), the pose convention (base->gripper, not gripper->base) and the board detections of the "
+                    "mismatched motions")
+
+
+def time_alignment_gate(motions: Motions, th: HandEyeThresholds, static_poses: bool = False) -> GateResult:
+    """Both sensors turn by the same angle in every motion. The hint names the cause by the log: a time offset
+    for a log in time; for ``static_poses`` (a robot arm that stops for each photo) a time offset cannot turn
+    one sensor more than the other, so the pairing and the convention are."""
     mismatch = angle_mismatch_deg(motions)
     bad = np.flatnonzero(np.abs(mismatch) > th.angle_mismatch_max_deg)
     fraction = bad.size / max(motions.n, 1)
@@ -161,13 +170,15 @@ def time_alignment_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
     return GateResult("time-alignment", False, fraction, th.mismatch_fraction_max,
                       f"time alignment: {message}, e.g. {_named([motions.labels[i] for i in bad])}",
                       "time_alignment.angle_mismatch",
+                      STATIC_POSE_HINT if static_poses else
                       "a time offset between the sensors masquerades as an extrinsic error: estimate it "
                       "(calibctl timeoffset), re-synchronise the log and solve again", detail)
 
 
-def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None) -> tuple[GateResult, ...]:
+def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None,
+                           static_poses: bool = False) -> tuple[GateResult, ...]:
     th = th or HandEyeThresholds()
-    return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th)
+    return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th, static_poses)
 
 
 def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:

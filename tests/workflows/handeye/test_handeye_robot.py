@@ -267,3 +267,30 @@ def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_pa
     result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(_write_vec(vec, poses[:-1])), "--from",
                                       "gripper", "--to", "camera", "--images", str(d), "--serial", "CAM-0001"])
     assert result.exit_code == 2 and "14 poses but" in result.stderr and "Traceback" not in result.output
+
+
+def test_a_mismatch_on_a_static_pose_arm_does_not_send_the_user_to_timeoffset(scenes, settings) -> None:
+    """Issue 22: the arm stops for each photo, so a time offset cannot turn the camera more than the gripper;
+    the pose file shifted one row against the images is (the pairing, not the clock)."""
+    d = scenes["in-hand"]
+    rows = list(csv.reader((d / "poses.csv").open(newline="")))
+    header, body = rows[0], rows[1:]
+    shifted = [[body[i][0], *body[(i + 1) % len(body)][1:]] for i in range(len(body))]
+    path = d / "poses-shifted.csv"
+    with path.open("w", newline="") as handle:
+        csv.writer(handle).writerows([header, *shifted])
+    result = run_robot_handeye(settings, path, d, "CAM-0001", "gripper", "camera").result
+    gate = next(g for g in result.gates if g.gate == "time-alignment")
+    assert result.status == "rejected" and not gate.passed
+    assert "timeoffset" not in gate.hint and "held still" in gate.hint and "pairs a photo with the pose" in gate.hint
+
+
+def test_a_mismatch_in_a_log_in_time_still_names_the_time_offset() -> None:
+    from calibctl.core.extrinsics.handeye import Motions
+    from calibctl.core.extrinsics.handeye_gates import HandEyeThresholds, time_alignment_gate
+    from calibctl.core.extrinsics.motion_synth import synthesize_pose_log
+
+    log = synthesize_pose_log(X_GRIPPER_CAM, 30, time_offset_s=0.08, seed=5)
+    motions = Motions.from_poses(log.T_first, log.T_second, tuple(str(i) for i in range(len(log.T_first))))
+    assert "calibctl timeoffset" in time_alignment_gate(motions, HandEyeThresholds()).hint
+    assert "timeoffset" not in time_alignment_gate(motions, HandEyeThresholds(), static_poses=True).hint
