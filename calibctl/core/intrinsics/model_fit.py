@@ -57,6 +57,21 @@ RADIAL_GROWTH_RATIO = 2.0
 # (ynager/visual_odometry_pipeline, calibration_images/iphone6-*.png): fx/fy = 1.06 with the aspect free
 # (RMS 0.26 px), k1k2 left 1.27 px (10.1x the detector) with cx 134 px, and the hint named only fisheye.
 FREE_ASPECT_MODELS = ("fisheye", "opencv-default")
+# The fisheye model is a fix only for a wide lens: diagonal field (the equidistant reading, module below) from
+# this many degrees. A ~60 deg webcam reads ~85 deg; its misfit comes from corners no one lens explains
+# (intrinsics that drift: focus, zoom), which a fisheye model fits no better (issue 22).
+WIDE_FIELD_DEG = 100.0
+
+
+def diagonal_field_deg(camera_matrix: np.ndarray, image_size: tuple[int, int]) -> float:
+    """The lens's diagonal field read as equidistant: 2 x the farthest image corner's normalised radius, deg.
+    Exact for a fisheye, above a pinhole lens's 2 atan(r) (so a lens read narrow here is narrow)."""
+    w, h = image_size
+    fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
+    cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
+    u, v = np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5])
+    r = max(float(np.hypot((a - cx) / fx, (b - cy) / fy)) for a in u for b in v)
+    return float(np.degrees(2 * r))
 # The most flexible model of each lens family: the lens-model estimate of the noise floor (module docstring).
 FLOOR_MODELS = ("fisheye", "rational")
 
@@ -144,10 +159,17 @@ def misfit(fit_rms_px: float, detector_px: float) -> bool:
 
 
 def check_model_misfit(fit_rms_px: float, detector_px: float | None, model: str,
-                       inner_fit_rms_px: float | None = None, outer_fit_rms_px: float | None = None) -> Finding:
-    """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius."""
+                       inner_fit_rms_px: float | None = None, outer_fit_rms_px: float | None = None,
+                       field_deg: float | None = None) -> Finding:
+    """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius. ``field_deg``
+    (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of WIDE_FIELD_DEG or more."""
     fix = ("solve with --model fisheye (a wide or fisheye lens), or --model auto" if model != "fisheye" else
            "the fisheye model does not explain these corners either: check the board geometry and corner order")
+    if model != "fisheye" and field_deg is not None and field_deg < WIDE_FIELD_DEG:
+        fix = (f"a lens of about {field_deg:.0f} deg diagonal is not wide: no richer model is the cure; the corners "
+               "disagree with any one lens: check that focus, zoom and autofocus stayed fixed through the capture "
+               "(see one-camera), that the board is flat and rigid, and the corner order; --model auto tries the "
+               "richer models")
     if model not in FREE_ASPECT_MODELS:
         fix += (f"; if the pixels are not square (frames resized in one axis, binning), {model} ties fx to fy "
                 "and cannot fit them: --model opencv-default solves fx and fy apart")

@@ -218,11 +218,16 @@ def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | Non
     return (fit[0], fit[-1]) if len(fit) >= 2 else (None, None)
 
 
+def _field_deg(facts: CalibrationFacts) -> float | None:
+    """The lens's diagonal field (model_fit.diagonal_field_deg), None without an image size."""
+    return None if facts.image_size is None else model_fit.diagonal_field_deg(facts.camera_matrix, facts.image_size)
+
+
 def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.fit_rms_px is None or facts.detector_rms_px is None or facts.model_name is None:
         return []  # only a calibctl solve records what the detector delivered
     return adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
-                                               *facts.fit_ring_rms_px))
+                                               *facts.fit_ring_rms_px, field_deg=_field_deg(facts)))
 
 
 def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
@@ -387,7 +392,8 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
                                                                     model=facts.model_name,
                                                                     observed_px=facts.observed_region_px,
                                                                     required_px=facts.required_region_px))
-    return _misfit_first(findings)
+    field = _field_deg(facts)
+    return _misfit_first(findings, narrow=field is not None and field < model_fit.WIDE_FIELD_DEG)
 
 
 # Rules whose fix assumes the lens model describes the lens: when model-misfit fails, their numbers are the
@@ -396,11 +402,20 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
 _MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-foldover")
 
 
-def _misfit_first(findings: list[Finding]) -> list[Finding]:
-    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay)."""
+def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a ``narrow``
+    lens (below model_fit.WIDE_FIELD_DEG) with one-camera failed too, the misfit is the symptom: no lens model is
+    wrong there, the intrinsics changed during the capture (issue 22's drifting ~60 deg webcam), so model-misfit
+    and its symptoms point at one-camera's fix instead."""
     misfit = next((f for f in findings if f.rule == "model-misfit"), None)
     if misfit is None:
         return findings
+    drift = next((f for f in findings if f.rule == "one-camera"), None)
+    if narrow and drift is not None:
+        first = (f"first fix one-camera ({drift.fix}), then judge this rule again: a lens this narrow misfits when "
+                 "its intrinsics change during the capture")
+        return [f.model_copy(update={"fix": first}) if f.rule in ("model-misfit", *_MISFIT_SYMPTOMS)
+                and f is not drift else f for f in findings]
     first = f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from the misfit"
     return [f.model_copy(update={"fix": first}) if f.rule in _MISFIT_SYMPTOMS else f for f in findings]
 
