@@ -105,8 +105,8 @@ def _cross(p: _Pair, q: _Pair) -> tuple[np.ndarray, np.ndarray]:
         (A_p, cov_jac, cov_unknown), A_q = p.theta[cam], q.theta[cam][0]
         jac += A_p @ cov_jac @ A_q.T
         frame += A_p @ cov_unknown @ A_q.T
-    for key in set(p.pulls) & set(q.pulls):
-        frame += np.sqrt(p.jackknife_factor * q.jackknife_factor) * np.outer(p.pulls[key], q.pulls[key])
+    for cluster in set(p.pulls) & set(q.pulls):
+        frame += np.sqrt(p.jackknife_factor * q.jackknife_factor) * np.outer(p.pulls[cluster], q.pulls[cluster])
     return jac, frame
 
 
