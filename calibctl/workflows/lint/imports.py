@@ -28,6 +28,7 @@ from calibctl.config import Settings
 from calibctl.errors import InconsistentDataError, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.store.repository import Store
+from calibctl.workflows.lint import evidence
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 from calibctl.workflows.store_admin import keys, records
 
@@ -82,6 +83,7 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str,
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
+_EDITED_HINT = "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not"
 FIX_ASPECT_RATIO = 2  # cv2.CALIB_FIX_ASPECT_RATIO (no cv2 import for a number)
 TIED_REL_TOL = 1e-9
 
@@ -105,7 +107,17 @@ def check_self_consistent(art: CalibrationArtifact) -> None:
         raise InconsistentDataError(
             f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
             "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
-            "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not")
+            _EDITED_HINT)
+
+
+def check_evidence(art: CalibrationArtifact) -> None:
+    """InconsistentDataError (exit 1, nothing stored) naming every identity the artifact's own numbers break
+    (``evidence.evidence_problems``: RMS vs its views and bins, covariance vs sigmas, poses vs image)."""
+    problems = evidence.evidence_problems(art)
+    if problems:
+        raise InconsistentDataError(
+            f"{art.ref} does not reproduce its own evidence: {'; '.join(problems)}; nothing was stored",
+            _EDITED_HINT)
 
 
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
@@ -133,6 +145,7 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
         active = store.active_version(source.serial) == previous.version
         return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)
     check_self_consistent(source)
+    check_evidence(source)
     if trust is None:
         trust = SourceTrust(keys.signature_mark(source, TrustedKeys())[0], trusted=False, required=False)
     mine = rederive(source, settings, label, trust.mark)
