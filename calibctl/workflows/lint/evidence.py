@@ -43,9 +43,10 @@ def _binned(rows: list[RingRms], held: bool) -> tuple[float | None, int]:
     counted = [r for r in rows if r.count > 0]
     values = [r.held_out_rms_px if held else r.fit_rms_px for r in counted]
     total = sum(r.count for r in counted)
-    if total == 0 or any(v is None for v in values):
+    present = [v for v in values if v is not None]
+    if total == 0 or len(present) != len(values):
         return None, total
-    return math.sqrt(sum(r.count * v * v for r, v in zip(counted, values, strict=True)) / total), total
+    return math.sqrt(sum(r.count * v * v for r, v in zip(counted, present, strict=True)) / total), total
 
 
 def _view_problems(art: CalibrationArtifact) -> list[str]:
