@@ -24,6 +24,7 @@ from hostile_sweep import (
 )
 
 BAD_NUMBERS = ("nan", "inf", "-inf", "1e308")
+BOX = "-1,-1,0,1,1,3"
 DEEP_JSON = "[" * 200000 + "]" * 200000
 YAML_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
     f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=True))
@@ -250,9 +251,10 @@ def _admin() -> list[Case]:
         Case(g, "board add with the signing key a FIFO", [*add, "--square-mm", "25"], setup=fifo("k.pem"),
              env={"CALIBCTL_SIGNING_KEY": "k.pem"}),
         Case(g, "lidar solve scans hold a FIFO", ["lidar", "solve", "--images", "{w}/v", "--scans", "{w}/s", "--cols",
-                                                  "9", "--rows", "6", "--square-mm", "25"],
+                                                  "9", "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL],
              setup=both(views("v", 3), folder("s"), fifo("s/000.npy"))),
-        Case(g, "rig capture from a FIFO list", ["rig", "capture", "R9", "--source", "A={w}/t", "--source", "B={w}/t"],
+        Case(g, "rig capture (unknown rig) from a FIFO list", ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/t", "--source",
+                                                  "B={w}/t"],
              setup=fifo("t")),
         Case(g, "board show unknown", ["board", "show", "nope"]),
         Case(g, "rig solve-folders same folder twice",
@@ -266,7 +268,7 @@ def _admin() -> list[Case]:
         Case(g, "rig solve-folders --min-shared-views -1",
              ["rig", "solve-folders", "--source", "A={w}/v", "--source", "B={w}/w", "--cols", "9", "--rows", "6",
               "--square-mm", "25", "--min-shared-views", "-1"], setup=both(views("v", 3), views("w", 3))),
-        Case(g, "rig add unknown member", ["rig", "add", "R1", "--member", "NOPE", "--member", "NOPE2"]),
+        Case(g, "rig add unknown member", ["rig", "add", "R1", "--camera", "NOPE", "--camera", "NOPE2"]),
         Case(g, "rig solve unknown", ["rig", "solve", "R9"]),
         Case(g, "rig show unknown", ["rig", "show", "R9"]),
         Case(g, "rig history unknown", ["rig", "history", "R9"]),
@@ -274,11 +276,11 @@ def _admin() -> list[Case]:
         Case(g, "rig lint unknown", ["rig", "lint", "R9"]),
         Case(g, "rig export unknown -o FIFO", ["rig", "export", "R9", "-o", "{w}/t", "--force"], setup=fifo("t"),
              protect=["t"]),
-        Case(g, "rig capture missing folders", ["rig", "capture", "R9", "--source", "A={w}/no"]),
+        Case(g, "rig capture missing folders", ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/no"]),
         Case(g, "lidar solve missing", ["lidar", "solve", "--images", "{w}/no", "--scans", "{w}/no2", "--cols", "9",
-                                        "--rows", "6", "--square-mm", "25"]),
+                                        "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL]),
         Case(g, "lidar solve empty folders", ["lidar", "solve", "--images", "{w}/e", "--scans", "{w}/e", "--cols", "9",
-                                              "--rows", "6", "--square-mm", "25"], setup=folder("e")),
+                                              "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL], setup=folder("e")),
     ]
     return cases
 
@@ -309,13 +311,16 @@ def _store() -> list[Case]:
              env={"CALIBCTL_SIGNING_KEY": "k.pem"}),
         Case(g, "keys export-public --key a FIFO", ["keys", "export-public", "--key", "{w}/t"], setup=fifo("t")),
         Case(g, "fleet ingest a FIFO", ["fleet", "ingest", "{w}/t"], setup=fifo("t")),
-        Case(g, "fleet assign unknown robot", ["fleet", "assign", "R2D2", f"{SERIAL}@1"]),
+        Case(g, "fleet assign unknown robot", ["fleet", "assign", "R2D2", f"{SERIAL}@1", "--reason", "x"]),
         Case(g, "fleet ingest garbage", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", "garbage\n")),
         Case(g, "fleet ingest non-UTF-8", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", b"\xff\xfe\n")),
         Case(g, "fleet ingest NaN", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", '{"rms_px": NaN}\n')),
         Case(g, "fleet trends unknown", ["fleet", "trends", "NOPE"]),
-        Case(g, "fleet add ESC name", ["fleet", "add", "r\x1b[2J", "--sensor", f"cam={SERIAL}"]),
-        Case(g, "station missing file", ["station", "--plan", "{w}/no.yaml"]),
+        Case(g, "fleet add ESC name", ["fleet", "add", "r\x1b[2J", "--serial", SERIAL]),
+        Case(g, "station --serials missing file", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
+                                                     "--serials", "{w}/no.txt"]),
+        Case(g, "station --serials a FIFO", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
+                                             "--serials", "{w}/t"], setup=fifo("t")),
         Case(g, "demo --out a file", ["demo", "--out", "{w}/f"], setup=text("f", "mine"), protect=["f"]),
         Case(g, "demo --out a FIFO", ["demo", "--out", "{w}/t"], setup=fifo("t"), protect=["t"]),
     ]

@@ -207,12 +207,18 @@ def _fingerprint(path: Path) -> str:
     return f"type:{stat.S_IFMT(st.st_mode):o}"
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _run(case: Case, w: Path) -> tuple[int | None, str, str]:
     prefix = UNPRIVILEGED if case.unprivileged else []
     argv = [*prefix, sys.executable, "-m", "calibctl", "--db", f"sqlite:///{w / 'store.db'}", *case.args]
     argv = [a.replace("{w}", str(w)) for a in argv]
+    # a shell's background job starts with SIGINT ignored, and an ignored signal stays ignored across exec:
+    # give the command the default disposition, so that an interrupt case interrupts
     proc = subprocess.Popen(argv, cwd=w, env=_env(case.env), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            stdin=subprocess.DEVNULL)
+                            stdin=subprocess.DEVNULL, preexec_fn=_default_sigint)  # noqa: PLW1509 - it only resets one signal
     if case.interrupt_s is not None:
         time.sleep(case.interrupt_s)
         proc.send_signal(signal.SIGINT)

@@ -68,3 +68,50 @@ def test_every_reader_refuses_a_fifo_with_one_line_and_stores_nothing(tmp_path: 
                            env={k: v.replace("{fifo}", str(fifo)) for k, v in env.items()})
     one_line_error(result, what, "it is a FIFO (named pipe), not a regular file")
     assert not db.exists()
+
+
+@pytest.mark.parametrize(("args", "what"), [
+    (["fleet", "ingest", "{fifo}"], "cannot ingest"),
+    (["station", "--board", "A17", "--source-template", "{dir}/{serial}", "--serials", "{fifo}"],
+     "cannot read the serials file"),
+], ids=["fleet ingest", "station --serials"])
+def test_store_commands_refuse_a_fifo_input_and_store_nothing(tmp_path: Path, args, what):
+    from calibctl.store.repository import Store
+    from tests.artifacts.factories import measured_board
+
+    url = f"sqlite:///{tmp_path / 'store.db'}"
+    with Store.open(url) as store:
+        store.add_board(measured_board("A17"))
+    fifo = tmp_path / "t"
+    os.mkfifo(fifo)
+    argv = [a.replace("{fifo}", str(fifo)).replace("{dir}", str(tmp_path)) for a in args]
+    result = runner.invoke(app, ["--db", url, *argv])
+    one_line_error(result, what, "it is a FIFO (named pipe), not a regular file")
+    with Store.open(url) as store:
+        assert store.serials() == [] and store.verify().problems == []
+
+
+def test_ctrl_c_while_calibctl_starts_is_one_line_and_exit_130():
+    """SIGINT during start-up (imports, parsing) ended in a KeyboardInterrupt traceback (sweep: `solve`
+    interrupted at 0.3 s and 0.8 s). The signal is sent once the CLI package is imported, not after a delay."""
+    import signal
+    import subprocess
+    import sys
+
+    code = "import os, signal, calibctl.cli.main; os.kill(os.getpid(), signal.SIGINT); import time; time.sleep(30)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False, timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
+    assert done.returncode == 130 and done.stderr == "Interrupted before anything was done.\n"
+
+
+def test_a_running_command_gets_ctrl_c_as_keyboard_interrupt_again(tmp_path: Path):
+    import signal
+
+    from calibctl.cli import startup_interrupt
+
+    previous = signal.signal(signal.SIGINT, startup_interrupt)
+    try:
+        runner.invoke(app, ["--db", f"sqlite:///{tmp_path / 's.db'}", "history", "CAM"])
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the commands' cleanup relies on it
+    finally:
+        signal.signal(signal.SIGINT, previous)
