@@ -21,6 +21,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import BinaryIO
 
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
@@ -143,15 +144,31 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
     return path
 
 
+def open_regular(path: Path | str, what: str = "read") -> BinaryIO:
+    """``path`` opened for reading in binary, refused (FileSystemError) unless it is a regular file or a folder
+    (whose read error names it): opened non-blocking and checked with fstat, since a FIFO opened for reading
+    waits for a writer forever (`import x.json` on a FIFO hung) and a device can stream without end."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    kind = _kind(os.fstat(fd).st_mode)
+    if kind is not None and kind != "a folder":
+        os.close(fd)
+        raise FileSystemError(f"cannot {what} {path}: it is {kind}, not a regular file",
+                              "give the path of a regular file")
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "rb")
+
+
 def read_text(path: Path, what: str = "read", *, max_bytes: int | None = None) -> str:
-    """A UTF-8 text file; a missing, unreadable or undecodable file is a FileSystemError naming it.
-    ``max_bytes``: never read more (a file that grew past it while read is refused, not cut off)."""
+    """A UTF-8 text file; a missing, unreadable or undecodable file, or one that is not a regular file, is a
+    FileSystemError naming it. ``max_bytes``: never read more (a file that grew past it while read is refused,
+    not cut off)."""
     with file_errors(what, path):
         try:
             if max_bytes is None:
-                return Path(path).read_text(encoding="utf-8")
+                with open_regular(path, what) as handle:
+                    return handle.read().decode("utf-8")
             chunks, total = [], 0
-            with Path(path).open("rb") as handle:  # in chunks: read(max_bytes) would allocate all of it at once
+            with open_regular(path, what) as handle:  # in chunks: read(max_bytes) would allocate all of it at once
                 while total <= max_bytes and (chunk := handle.read(1 << 20)):
                     chunks.append(chunk)
                     total += len(chunk)

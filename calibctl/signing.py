@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # cryptography is imported by the functions that sign or verify: not by every store read
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
+from calibctl import files
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
 ALGORITHM = "ed25519"
@@ -68,7 +69,8 @@ class Signer:
 
 def _read(path: Path, what: str) -> bytes:
     try:
-        return path.read_bytes()
+        with files.open_regular(path, f"read the {what}") as handle:  # a FIFO is refused, not waited on
+            return handle.read()
     except FileNotFoundError as exc:
         raise FileSystemError(f"the {what} {path} does not exist", "create one with `calibctl keys init`, or fix "
                               "the signing_key setting (CALIBCTL_SIGNING_KEY / station file)") from exc
@@ -105,10 +107,9 @@ def create_key(path: Path, *, force: bool = False) -> Signer:
 
     key = Ed25519PrivateKey.generate()
     pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
-    from calibctl.files import write_atomic
 
     try:  # a symlink, FIFO or device at ``path`` is refused, never replaced
-        write_atomic(path, pem, force=True, fsync=True, mode=0o600)
+        files.write_atomic(path, pem, force=True, fsync=True, mode=0o600)
     except FileSystemError as exc:
         raise FileSystemError(exc.message.replace("cannot write ", "cannot write the signing key ", 1), exc.hint) from exc
     return Signer(key, path)

@@ -157,6 +157,11 @@ class Provenance(Document):
     session_id: str | None = Field(None, description="capture session the corners came from")
     input_image_sha256: list[Sha256Hex] = Field(default_factory=list, description="sha256 of every input image")
     imported_from: str | None = Field(None, description="set when the artifact came from another store/file")
+    import_signature: str | None = Field(
+        None, exclude_if=lambda mark: mark is None,
+        description="set on import: how the source file was signed as this store judged it ('trusted key <id>', "
+        "'untrusted key <id>', 'unsigned'); this store's own signature of the version says nothing about the "
+        "source's. Absent on versions not imported, and on imports made before it was recorded")
     gauge_override: str | None = Field(
         None, exclude_if=lambda reason: reason is None,
         description="--override-gauge: why a failed metric gauge was overridden, in the operator's words; absent "

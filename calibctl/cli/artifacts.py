@@ -93,7 +93,9 @@ def export(
 def import_(
     ctx: typer.Context,
     path: Annotated[Path, typer.Argument(metavar="FILE", help="An artifact exported with --format json.")],
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it active (when this store accepts it).")] = True,
+    activate: Annotated[bool | None, typer.Option(
+        "--activate/--no-activate", help="Make it active when this store accepts it. Default: active when accepted "
+        "and signed by a trusted key, or when this store has no keys; --activate overrides (recorded).")] = None,
     keep_version: Annotated[bool, typer.Option(
         "--keep-version", help="Keep the source version number (only when it is this store's next one).")] = False,
     require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")] = False,
@@ -114,16 +116,18 @@ def import_(
     if wants_json(ctx, json_output):
         emit_json({"artifact": art.model_dump(mode="json"), "source": outcome.source_ref,
                    "source_status": outcome.source_status, "active": outcome.active,
-                   "already_imported": outcome.already_imported})
+                   "already_imported": outcome.already_imported, "held_back": outcome.held_back})
     else:
         again = "already stored as" if outcome.already_imported else "imported"
         state_word = "active" if outcome.active else "not active"
         stdout.print(f"{again} {art.serial}@{art.version} ({art.status} by this store's lint, {state_word}; "
                      f"source {outcome.source_ref} was {outcome.source_status}; sha256 {art.content_sha256[:12]})",
                      markup=False)
+        if outcome.held_back:
+            stdout.print(outcome.held_back, markup=False)
         if art.status == "rejected":
             print_findings([f for f in art.lint if f.severity == "error"])
-    if activate and art.status == "rejected":  # asked to make it active; this store's verdict says no
+    if activate is not False and art.status == "rejected":  # asked to make it active; this store's verdict says no
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 

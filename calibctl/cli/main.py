@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import traceback
 from pathlib import Path
@@ -15,6 +16,7 @@ from typer.core import TyperGroup
 
 from calibctl import __version__
 from calibctl.bounded import printable
+from calibctl.cli import startup_interrupt
 from calibctl.cli.context import AppState
 from calibctl.cli.examples import epilog
 from calibctl.cli.registry import CommandsOnDemand
@@ -48,6 +50,8 @@ class CalibctlGroup(TyperGroup):
 
     def invoke(self, ctx: ClickContext) -> Any:
         make_output_safe()
+        if signal.getsignal(signal.SIGINT) is startup_interrupt:  # from here Ctrl-C is KeyboardInterrupt, below
+            signal.signal(signal.SIGINT, signal.default_int_handler)
         try:
             return super().invoke(ctx)
         except CalibctlError as exc:

@@ -76,13 +76,13 @@ def calibration(
         ),
         stdev=Uncertainty(
             sigma={"fx": 0.84, "fy": 0.84, "cx": 0.51, "cy": 0.47, "k1": 0.002, "k2": 0.006},
-            residual_count=2376,
-            parameter_count=137,
+            residual_count=108,  # one 9x6 view: 54 corners
+            parameter_count=11,
         ),
         rms_px=0.284,
         held_out=HeldOut(k_folds=5, rms_px=0.30, outer_ring_rms_px=0.31, fit_outer_ring_rms_px=0.29),
         board=board or measured_board(),
-        views=[ViewResult(name="img01.png", rms_px=0.25, rvec=(0.2, -0.3, 0.05), tvec_m=(0.02, -0.01, 0.6))],
+        views=[ViewResult(name="img01.png", rms_px=0.284, rvec=(0.2, -0.3, 0.05), tvec_m=(0.02, -0.01, 0.6))],
         provenance=Provenance(
             calibctl_version="0.1.0",
             opencv_version="5.0.0",

@@ -165,14 +165,14 @@ def test_a_folder_that_cannot_be_created_is_exit_2(tmp_path, monkeypatch):
 def test_an_unreadable_lint_input_is_exit_2(tmp_path, monkeypatch):
     path = tmp_path / "cam.yaml"
     path.write_text("x: 1\n")
-    real = Path.open
+    real = os.open
 
-    def open_(self, *args, **kwargs):  # the bounded reader opens the file itself (calibctl.bounded)
-        if self == path:
-            raise PermissionError(errno.EACCES, "Permission denied", str(self))
-        return real(self, *args, **kwargs)
+    def open_(target, *args, **kwargs):  # the bounded reader opens the file itself (calibctl.files.open_regular)
+        if Path(target) == path:
+            raise PermissionError(errno.EACCES, "Permission denied", str(target))
+        return real(target, *args, **kwargs)
 
-    monkeypatch.setattr(Path, "open", open_)
+    monkeypatch.setattr(os, "open", open_)
     one_line_error(cli("lint", path), f"cannot read {path}", "permission denied")
 
 

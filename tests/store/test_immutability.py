@@ -95,8 +95,8 @@ def test_the_database_refuses_to_activate_a_rejected_artifact(filled: str):
 
 
 def test_tampered_artifact_bytes_are_caught_on_read_and_by_verify(filled: str):
-    # The first view's rms_px 0.25 -> 0.35 in the stored JSON of CAM-0001@1, underneath calibctl.
-    patch_stored_bytes(filled, "calibration_artifacts", V1_VIEW + "0.25,", V1_VIEW + "0.35,")
+    # The first view's rms_px 0.284 -> 0.385 in the stored JSON of CAM-0001@1, underneath calibctl.
+    patch_stored_bytes(filled, "calibration_artifacts", V1_VIEW + "0.284,", V1_VIEW + "0.385,")
     with Store.open(filled) as store:
         # a read checks the record's chain hash (one sha256 over the stored bytes and columns)
         with pytest.raises(IntegrityError, match=r"CAM-0001@1 was changed after it was written \(its chain hash") as info:

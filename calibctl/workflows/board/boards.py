@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 from pydantic import ValidationError
 
+from calibctl import files
 from calibctl.artifacts.board import (
     BOARD_NAME_PATTERN,
     BackingBoard,
@@ -90,7 +91,8 @@ def parse_measured_on(text: str, today: dt.date) -> dt.date:
 def read_evidence(path: Path) -> tuple[str, str]:
     """(sha256, file name) of an evidence file (a photo of the calipers on the board, a lab report)."""
     try:
-        data = path.read_bytes()
+        with files.open_regular(path, "read the evidence file") as handle:  # a FIFO is refused, not waited on
+            data = handle.read()
     except OSError as exc:
         raise InputError(f"cannot read evidence file {path}: {exc.strerror or exc}") from exc
     if not data:

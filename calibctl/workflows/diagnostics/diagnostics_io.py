@@ -11,14 +11,14 @@ interrupted write never leaves half a CSV behind, and an existing file is never 
 from __future__ import annotations
 
 import csv
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from calibctl import bounded
+from calibctl import bounded, files
 from calibctl.errors import InputError
-from calibctl.files import write_atomic
 
 MAX_LISTED = 5
 
@@ -119,7 +119,7 @@ def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[st
     if path.is_file():
         bounded.check_size(path, f"read the {what}")
     try:
-        handle = path.open(newline="", encoding="utf-8-sig")
+        handle = io.TextIOWrapper(files.open_regular(path, f"read the {what}"), newline="", encoding="utf-8-sig")
     except FileNotFoundError:
         raise InputError(f"{what} {path} does not exist", hint="check the path") from None
     except OSError as exc:
@@ -200,5 +200,5 @@ def write_table(path: Path, columns: dict[str, np.ndarray], force: bool = False)
     """Write columns (each (n,)) as CSV, atomically. Refuses to overwrite unless ``force``."""
     formatted = [_format_column(np.asarray(v)) for v in columns.values()]
     lines = [",".join(columns)] + [",".join(cells) for cells in zip(*formatted, strict=True)]
-    write_atomic(Path(path), "\n".join(lines) + "\n", force=force)
+    files.write_atomic(Path(path), "\n".join(lines) + "\n", force=force)
     return path

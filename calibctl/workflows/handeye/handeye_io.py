@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calibctl import files
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.handeye import Motions
 from calibctl.errors import InputError
@@ -201,7 +202,8 @@ def read_matrix_rows(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
         (a CSV with a header). Any other problem is an InputError naming the line.
     """
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        with files.open_regular(path) as handle:  # a FIFO is refused, not waited on
+            text = handle.read().decode("utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
     rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1) if line.strip() and not line.lstrip().startswith("#")]

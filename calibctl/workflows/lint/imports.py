@@ -10,6 +10,11 @@ version, only when it is the next one) and a new hash. A rejected import is stor
 Importing the same content again is a no-op: this store's own export brought back (its content_sha256
 is a stored version's) or a source imported before (same serial@version and hash, whatever the file is
 called) returns the version it already has, and never activates anything (a rollback since stays).
+
+What signed the source is recorded (``provenance.import_signature``): this store signs the version it
+stores with its own key, which says nothing about the file's. A store that requires signatures (it has
+keys) never makes an unsigned or untrusted import active by default; ``--activate`` overrides, and the
+activation event's reason says so.
 """
 
 from __future__ import annotations
@@ -21,7 +26,9 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import Settings
 from calibctl.errors import InconsistentDataError, UsageError
+from calibctl.signing import TrustedKeys
 from calibctl.store.repository import Store
+from calibctl.workflows.lint import evidence
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 from calibctl.workflows.store_admin import keys, records
 
@@ -35,6 +42,21 @@ class ImportOutcome:
     source_status: str
     active: bool
     already_imported: bool
+    held_back: str | None = None  # why an accepted import was left inactive by the signature rule
+
+
+@dataclass(frozen=True)
+class SourceTrust:
+    """How the source file is signed (``signature_mark``) and whether this store requires signatures."""
+
+    mark: str
+    trusted: bool
+    required: bool
+
+    @property
+    def may_activate(self) -> bool:
+        return self.trusted or not self.required
+
 
 
 def source_label(art: CalibrationArtifact, path: Path) -> str:
@@ -43,8 +65,10 @@ def source_label(art: CalibrationArtifact, path: Path) -> str:
             f"(file {path.name})")
 
 
-def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -> CalibrationArtifact:
-    """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` as provenance."""
+def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str,
+             import_signature: str | None = None) -> CalibrationArtifact:
+    """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` (and how the source was
+    signed) as provenance."""
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.ref), settings.lint)
     failed_gates = [g.gate for g in art.gates if not g.passed]
     if failed_gates:
@@ -54,10 +78,12 @@ def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str) -
             fix="capture again and solve on this store",
         ))
     status = "rejected" if has_errors(findings) else "accepted"
-    provenance = art.provenance.model_copy(update={"imported_from": imported_from})
+    provenance = art.provenance.model_copy(update={"imported_from": imported_from,
+                                                   "import_signature": import_signature})
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
+_EDITED_HINT = "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not"
 FIX_ASPECT_RATIO = 2  # cv2.CALIB_FIX_ASPECT_RATIO (no cv2 import for a number)
 TIED_REL_TOL = 1e-9
 
@@ -81,7 +107,17 @@ def check_self_consistent(art: CalibrationArtifact) -> None:
         raise InconsistentDataError(
             f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
             "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
-            "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not")
+            _EDITED_HINT)
+
+
+def check_evidence(art: CalibrationArtifact) -> None:
+    """InconsistentDataError (exit 1, nothing stored) naming every identity the artifact's own numbers break
+    (``evidence.evidence_problems``: RMS vs its views and bins, covariance vs sigmas, poses vs image)."""
+    problems = evidence.evidence_problems(art)
+    if problems:
+        raise InconsistentDataError(
+            f"{art.ref} does not reproduce its own evidence: {'; '.join(problems)}; nothing was stored",
+            _EDITED_HINT)
 
 
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
@@ -99,15 +135,20 @@ def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationAr
 
 
 def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
-                    activate: bool, keep_version: bool = False) -> ImportOutcome:
-    """Store ``source`` (hash already checked) as this store's next version with this store's verdict."""
+                    activate: bool | None, keep_version: bool = False, trust: SourceTrust | None = None) -> ImportOutcome:
+    """Store ``source`` (hash already checked) as this store's next version with this store's verdict.
+    ``activate``: None = when accepted and ``trust.may_activate``; True = when accepted (an override of the
+    signature rule is recorded in the event's reason); False = never. ``trust`` None: a store without keys."""
     label = source_label(source, path)
     previous = _previous_import(store, source)
     if previous is not None:
         active = store.active_version(source.serial) == previous.version
         return ImportOutcome(previous, source.ref, source.status, active, already_imported=True)
     check_self_consistent(source)
-    mine = rederive(source, settings, label)
+    check_evidence(source)
+    if trust is None:
+        trust = SourceTrust(keys.signature_mark(source, TrustedKeys())[0], trusted=False, required=False)
+    mine = rederive(source, settings, label, trust.mark)
     if keep_version:
         expected = store.next_version(source.serial)
         if source.version != expected:
@@ -116,19 +157,34 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
                 f"{source.serial} is {expected}",
                 "import without --keep-version (the source version is kept in provenance.imported_from)",
             )
-    do_activate = activate and mine.status == "accepted"
+    accepted = mine.status == "accepted"
+    do_activate = accepted and (activate if activate is not None else trust.may_activate)
+    reason = f"imported {source.ref}"
+    if do_activate and not trust.may_activate:
+        reason += f" ({trust.mark}; activated with --activate although this store requires signatures)"
+    held_back = None
+    if accepted and activate is None and not trust.may_activate:
+        held_back = (f"imported {_signed_words(trust.mark)}, not active (this store requires signatures; "
+                     "--activate to override)")
     stored = store.add_artifact(mine, activate=do_activate, actor=settings.operator, station=settings.station,
-                                reason=f"imported {source.ref}", expect_version=source.version if keep_version else None)
-    return ImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False)
+                                reason=reason, expect_version=source.version if keep_version else None)
+    return ImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, held_back=held_back)
+
+
+def _signed_words(mark: str) -> str:
+    return "unsigned" if mark == "unsigned" else f"signed by a key this store does not trust ({mark.split()[-1][:16]})"
 
 
 def import_file(
-    settings: Settings, path: Path, *, activate: bool, keep_version: bool = False, require_signature: bool = False,
-    trusted_keys: Path | None = None,
+    settings: Settings, path: Path, *, activate: bool | None, keep_version: bool = False,
+    require_signature: bool = False, trusted_keys: Path | None = None,
 ) -> ImportOutcome:
     """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
     this store's verdict and version (see ``imports``)."""
     art = records.read_artifact_file(path)
-    keys.require_trusted(art, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
+    trusted = keys.trusted_of(settings, trusted_keys)
+    keys.require_trusted(art, str(path), trusted, require_signature)
+    mark, ok = keys.signature_mark(art, trusted)
+    trust = SourceTrust(mark, ok, keys.requires_signatures(settings, trusted_keys) or require_signature)
     with records.open_store(settings, create=True, write=True) as store:
-        return import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version)
+        return import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version, trust=trust)

@@ -105,6 +105,21 @@ def signature_problem(art: Sealed, trusted: TrustedKeys) -> str | None:
     return seal_problem(art.signature, art.content_sha256, trusted)
 
 
+def requires_signatures(settings: Settings, folder: Path | None = None) -> bool:
+    """Does this store require signatures? Yes once it has keys (a ``signing_key`` or ``trusted_keys``
+    configured, or a ``--trusted-keys`` folder given): the same rule by which reads check what they serve."""
+    return bool(settings.signing_key or settings.trusted_keys or folder is not None)
+
+
+def signature_mark(art: CalibrationArtifact, trusted: TrustedKeys) -> tuple[str, bool]:
+    """How ``art`` is signed as ``trusted`` judges it ('trusted key <id>', 'untrusted key <id>', 'unsigned'), and
+    whether that is a valid signature by a trusted key. A signature that does not match is refused before this."""
+    if art.signature is None:
+        return "unsigned", False
+    ok = signature_problem(art, trusted) is None
+    return f"{'trusted' if ok else 'untrusted'} key {art.signature.key_id}", ok
+
+
 def require_trusted(art: Sealed, source: str, trusted: TrustedKeys, required: bool) -> None:
     """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
     untrusted, and always when it is signed by a trusted key but the signature does not match."""
