@@ -354,8 +354,10 @@ def import_(
     ctx: typer.Context,
     path: Annotated[Path, typer.Argument(metavar="FILE", help="A rig version exported with `rig export --format json`, "
                                          "or a bundle folder (or its manifest.json).")],
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make it active (when this store accepts "
-                                           "it and every member is active here).")] = True,
+    activate: Annotated[bool | None, typer.Option(
+        "--activate/--no-activate", show_default=False,
+        help="Make it active (default: when this store accepts it, every member is active here and, in a store "
+             "with keys, a trusted key signed it; --activate overrides the signature rule, recorded).")] = None,
     require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a rig version not signed by a "
                                                     "trusted key (exit 2).")] = False,
     trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public "
@@ -373,14 +375,16 @@ def import_(
     if wants_json(ctx, json_output):
         emit_json({"calibration": cal.model_dump(mode="json"), "source": out.source_ref,
                    "source_status": out.source_status, "active": out.active, "already_imported": out.already_imported,
-                   "stale": [f.model_dump(mode="json") for f in out.stale]})
+                   "stale": [f.model_dump(mode="json") for f in out.stale], "held_back": out.held_back})
     else:
         again = "already stored as" if out.already_imported else "imported as"
         say(f"{again} {cal.ref} ({cal.status} by this store's lint, {'active' if out.active else 'not active'}; "
             f"source {out.source_ref} was {out.source_status}; sha256 {cal.content_sha256[:12]})")
         if not out.already_imported:
             print_findings([f for f in [*cal.lint, *out.stale] if f.severity == "error"])
-    if activate and not out.already_imported and not out.active:  # asked to make it active; this store says no
+        if out.held_back:
+            say(out.held_back)
+    if activate is not False and out.held_back is None and not out.already_imported and not out.active:  # asked to make it active; this store says no
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 

@@ -169,3 +169,24 @@ def test_a_file_that_is_no_rig_export_is_exit_2(signed, tmp_path, content):  # n
     path.write_text(content)
     r = invoke(source, "rig", "import", str(path))
     assert r.exit_code == 2, r.output
+
+
+def test_an_unsigned_rig_into_a_store_with_keys_is_stored_but_not_active_unless_asked(signed, db, tmp_path):  # noqa: F811
+    source, trusted, _ = signed
+    unsigned = _export_rig(db, tmp_path / "unsigned.json")  # the same rig solved by an unsigned store
+    url = _target(source, tmp_path)
+    r = invoke(url, "rig", "import", str(unsigned), "--trusted-keys", str(trusted))  # keys: signatures required
+    assert r.exit_code == 0, r.output
+    assert "imported unsigned, not active (this store requires signatures; --activate to override)" in _text(r)
+    with Store.open(url) as store:
+        assert store.active_rig_version("R1") is None
+    assert _rig_versions(url) == [(1, "accepted")]
+    other = tmp_path / "other"
+    other.mkdir()
+    url2 = _target(source, other)
+    r = invoke(url2, "--json", "rig", "import", str(unsigned), "--trusted-keys", str(trusted), "--activate")
+    assert r.exit_code == 0 and json.loads(r.stdout)["active"] is True and json.loads(r.stdout)["held_back"] is None
+    with Store.open(url2) as store:
+        assert store.active_rig_version("R1") == 1
+    events = json.loads(invoke(url2, "--json", "rig", "history", "R1").stdout)
+    assert "activated with --activate although this store requires signatures" in json.dumps(events)

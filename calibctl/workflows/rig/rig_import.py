@@ -50,6 +50,7 @@ class RigImportOutcome:
     active: bool
     already_imported: bool
     stale: list[Finding]  # why an accepted import is not active (a member not active here)
+    held_back: str | None = None  # why an accepted import was left inactive by the signature rule
 
 
 def _tampered(path: Path, message: str) -> IntegrityError:
@@ -163,11 +164,17 @@ def _rederive(store: Store, source: RigCalibration, rig: RigDefinition, settings
     return mine.model_copy(update={"lint": lint, "status": status, "provenance": provenance}), stale
 
 
-def import_rig_file(settings: Settings, path: Path, *, activate: bool, require_signature: bool = False,
+def import_rig_file(settings: Settings, path: Path, *, activate: bool | None, require_signature: bool = False,
                     trusted_keys: Path | None = None) -> RigImportOutcome:
-    """Check ``path``'s hash and signature, then store its rig version with this store's verdict and version."""
+    """Check ``path``'s hash and signature, then store its rig version with this store's verdict and version.
+
+    ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as the
+    camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False = never."""
     source = read_rig_file(path)
-    keys.require_trusted(source, str(path), keys.trusted_of(settings, trusted_keys), require_signature)
+    trusted = keys.trusted_of(settings, trusted_keys)
+    keys.require_trusted(source, str(path), trusted, require_signature)
+    mark, signed_ok = keys.signature_mark(source, trusted)
+    may_activate = signed_ok or not (keys.requires_signatures(settings, trusted_keys) or require_signature)
     label = f"{source.ref} sha256 {source.content_sha256} from station {source.provenance.station} (file {path.name})"
     with records.open_store(settings, write=True) as store:  # the rig must be registered: no new store
         rig = store.get_rig(source.rig)
@@ -177,7 +184,16 @@ def import_rig_file(settings: Settings, path: Path, *, activate: bool, require_s
             return RigImportOutcome(previous, source.ref, source.status, active, already_imported=True, stale=[])
         _check_layout(rig, source)
         mine, stale = _rederive(store, source, rig, settings, label)
-        do_activate = activate and mine.status == "accepted" and not stale
+        acceptable = mine.status == "accepted" and not stale
+        do_activate = acceptable and (activate if activate is not None else may_activate)
+        reason = f"imported rig {source.ref}"
+        if do_activate and not may_activate:
+            reason += f" ({mark}; activated with --activate although this store requires signatures)"
+        held_back = None
+        if acceptable and activate is None and not may_activate:
+            words = "unsigned" if mark == "unsigned" else f"signed by a key this store does not trust ({mark.split()[-1][:16]})"
+            held_back = f"imported {words}, not active (this store requires signatures; --activate to override)"
         stored = store.add_rig_calibration(mine, activate=do_activate, actor=settings.operator,
-                                           station=settings.station, reason=f"imported rig {source.ref}")
-    return RigImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, stale=stale)
+                                           station=settings.station, reason=reason)
+    return RigImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, stale=stale,
+                            held_back=held_back)
