@@ -61,7 +61,7 @@ def test_verify_exits_0_when_intact_and_1_naming_each_mismatch(db_url: str):
     clean = db(db_url, "verify", "--json")
     assert clean.exit_code == 0 and json.loads(clean.stdout)["ok"] is True
     stdev_b = '"serial":"CAM-B","status":"accepted","stdev":{"parameter_count":'
-    patch_stored_bytes(db_url, "calibration_artifacts", stdev_b + "137", stdev_b + "138")
+    patch_stored_bytes(db_url, "calibration_artifacts", stdev_b + "11", stdev_b + "12")
     result = db(db_url, "verify")
     assert result.exit_code == 1
     assert "PROBLEM CAM-B@1 does not match its recorded sha256" in result.stdout
