@@ -209,6 +209,11 @@ def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tm
     assert "<h2>LiDAR</h2>" in html and 'data-key="lidar_gate_lidar-CAM-0001_lidar-observability">pass' in html
     assert 'data-key="lidar_overlay_lidar-CAM-0001"' in html and 'src="data:image/jpeg;base64,' in html
     assert "pose1.pcd over pose1.png" in html
+    # the LiDAR is a frame of the composed table and the top-down view: met from its child, T_root_lidar = T^-1
+    stored = json.loads(_cli(url, "rig", "show", RIG, "--json").stdout)
+    T_lidar_cam = np.array(next(e for e in stored["edges"] if e["source"] == "lidar-board")["T_parent_child"])
+    x_mm = float(np.linalg.inv(T_lidar_cam)[0, 3] * 1000)
+    assert f'data-key="t_lidar_x">{x_mm:.2f}' in html and f"T_{stored['root']}_lidar" in html
     # the images are not in the store: with the solve's image changed the page says so and draws nothing
     image = renders["good"] / "images" / "pose1.png"
     original = image.read_bytes()

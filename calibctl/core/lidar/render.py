@@ -43,13 +43,15 @@ class RenderedPose:
 
 @dataclass(frozen=True)
 class RenderedSession:
-    """Truth and data: T_lidar_cam (4, 4), the poses, the board and the station box."""
+    """Truth and data: T_lidar_cam (4, 4), the poses, the board and the station box; ``laser_bias_m`` (rings,)
+    the bias added to each ring's ranges (metres)."""
 
     T_lidar_cam: np.ndarray
     poses: tuple[RenderedPose, ...]
     board: BackingBoard
     box: StationBox
     range_offset_m: float
+    laser_bias_m: np.ndarray
 
 
 def true_T_lidar_cam(rng: np.random.Generator) -> np.ndarray:
@@ -132,4 +134,4 @@ def render_session(n_poses: int, seed: int, *, range_noise_m: float = 0.01, lase
             camera = CameraBoard(T_est, cov, rms)
         cloud = _sweep(T_lidar_centre, board, rng, azimuth_step_deg, range_noise_m, biases, range_offset_m, clutter)
         poses.append(RenderedPose(cloud, camera, T_lidar_board))
-    return RenderedSession(T_lidar_cam, tuple(poses), board, RENDER_BOX, range_offset_m)
+    return RenderedSession(T_lidar_cam, tuple(poses), board, RENDER_BOX, range_offset_m, biases)

@@ -48,17 +48,26 @@ class RigReportData:
     calibration: RigCalibration
     active: bool
     members: list[MemberVerdict]
-    T_root_cam: dict[str, np.ndarray]  # serial -> (4, 4), metres, composed along the tree
+    T_root_cam: dict[str, np.ndarray]  # frame (camera serial or LiDAR) -> (4, 4), metres, composed along the tree
     lint_now: list[Finding] = field(default_factory=list)  # `calibctl lint --rig RIG@N` against the store today
     lidar_overlays: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # "lidar:CAM" -> (uri, caption)
 
 
 def compose_tree(cal: RigCalibration) -> dict[str, np.ndarray]:
-    """T_root_cam of every frame reachable from the root (edges are stored parents before children)."""
+    """T_root_frame of every frame connected to the root: cameras, and frames met from their child (a LiDAR
+    edge ``lidar -> CAM0`` hangs the LiDAR above the root camera: T_root_lidar = T_lidar_cam^-1)."""
     out = {cal.root: np.eye(4)}
-    for edge in cal.edges:
-        if edge.parent in out:
-            out[edge.child] = out[edge.parent] @ np.asarray(edge.T_parent_child, np.float64)
+    grew = True
+    while grew:
+        grew = False
+        for edge in cal.edges:
+            T = np.asarray(edge.T_parent_child, np.float64)
+            if edge.parent in out and edge.child not in out:
+                out[edge.child] = out[edge.parent] @ T
+                grew = True
+            elif edge.child in out and edge.parent not in out:
+                out[edge.parent] = out[edge.child] @ np.linalg.inv(T)
+                grew = True
     return out
 
 
@@ -125,24 +134,27 @@ def _tree(d: RigReportData) -> str:
             cell(num(float(v), 2), f"t_{serial}_{axis}") for v, axis in zip(t_mm, "xyz", strict=True)))
     return ("<h2>Tree (T_parent_child, root " + escape(cal.root) + ")</h2>"
             + table(["edge", "source", "|t| mm", "sigma mm", "rotation deg", "sigma deg"], rows)
-            + "<p>Composed T_root_cam translations (root frame, mm):</p>"
+            + "<p>Composed T_root_frame translations (root frame, mm; cameras and LiDARs):</p>"
             + table(["transform", "x", "y", "z"], poses) + _top_view(d))
 
 
 def _top_view(d: RigReportData) -> str:
-    """The cameras seen from above (x right, z forward, root frame), each with its optical axis."""
+    """The frames seen from above (x right, z forward, root frame): each camera with its optical axis (z),
+    each LiDAR (a frame of a lidar-board edge) in green with its forward axis (x)."""
     xs = {s: T[:3, 3] * 1000 for s, T in d.T_root_cam.items()}
     pts = np.array(list(xs.values()))
     span = float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 2]), 50.0))
     cx, cz = float(pts[:, 0].mean()), float(pts[:, 2].mean())
     half = 0.7 * span
-    plot = Plot("cameras from above (root frame)", (cx - half, cx + half), (cz - half, cz + half), width=420,
+    lidars = {e.parent_frame for e in d.calibration.lidar}
+    plot = Plot("frames from above (root frame)", (cx - half, cx + half), (cz - half, cz + half), width=420,
                 height=420, x_label="x (mm)", y_label="z (mm)")
     for serial, T in d.T_root_cam.items():
         p = xs[serial]
-        axis = T[:3, 2] * 0.25 * span
+        lidar = serial in lidars
+        axis = T[:3, 0 if lidar else 2] * 0.25 * span
         plot.line(np.array([p[0], p[0] + axis[0]]), np.array([p[2], p[2] + axis[2]]), "#1565c0")
-        plot.dots(np.array([p[0]]), np.array([p[2]]), "#c62828", 4.0)
+        plot.dots(np.array([p[0]]), np.array([p[2]]), "#2e7d32" if lidar else "#c62828", 4.0)
         plot.text(float(p[0]), float(p[2]) - 0.06 * span, serial, size=10)
     return plot.svg()
 
