@@ -25,6 +25,7 @@ from calibctl.workflows.camera import capture as capture_workflow
 from calibctl.workflows.camera.capture import CaptureRequest
 from calibctl.workflows.camera.verdict_lanes import verdict_lanes
 from tests.artifacts.factories import measured_board
+from tests.workflows.camera.test_calibrate_reuse import numbers_without
 from tests.workflows.synth_folders import rendered
 
 JOBS = (1, 2, 4)
@@ -100,11 +101,7 @@ def test_the_lens_floor_and_the_model_ladder_are_the_same_at_every_job_count(for
 
 
 def _numbers(doc: object) -> object:
-    if isinstance(doc, dict):
-        return {k: _numbers(v) for k, v in doc.items() if k not in VOLATILE}
-    if isinstance(doc, list):
-        return [_numbers(v) for v in doc]
-    return doc
+    return numbers_without(doc, VOLATILE)
 
 
 @pytest.mark.parametrize("model", ["k1k2", "auto"])
