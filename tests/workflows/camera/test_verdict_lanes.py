@@ -145,3 +145,27 @@ def test_a_failing_capture_gate_stage_leaves_no_solve_running(tmp_path, tmp_path
     assert not [t for t in threading.enumerate() if t.name.startswith("calibctl-verdicts")]
     with Store.open(url) as store:
         assert store.list_sessions("CAM-0042") == []
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_failing_fold_stops_the_solve_with_the_split_test_stopped_and_nothing_stored(
+        tmp_path, tmp_path_factory, monkeypatch, forget, jobs) -> None:
+    """The held-out folds fail while the split test runs beside them: the folds' error reaches the caller, at
+    every job count the same, after the split test has stopped; no calibration is stored."""
+    from calibctl.errors import NotFoundError, NumericalError
+    from calibctl.workflows.camera import solve as solve_workflow
+
+    def failing(*args, **kwargs):
+        raise NumericalError("held-out fold 0 (views [0, 5] held out): the solve diverged")
+
+    monkeypatch.setattr(solve_workflow, "validate_holdout", failing)
+    folder = rendered(tmp_path_factory, "good")
+    url = f"sqlite:///{tmp_path / 'fold'}.db"
+    with Store.open(url) as store:
+        store.add_board(measured_board("A17", square_mm=25.0))
+    settings = load_settings(db=url, station="st-7", operator="op", env={}, jobs=jobs)
+    with pytest.raises(NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): the solve diverged"):
+        capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder)), model="k1k2")
+    assert not [t for t in threading.enumerate() if t.name.startswith("calibctl-verdicts")]
+    with Store.open(url) as store, pytest.raises(NotFoundError, match="none was solved"):
+        store.list_artifacts("CAM-0042")
