@@ -34,6 +34,7 @@ import os
 import platform
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -133,6 +134,7 @@ def main() -> None:
     parser.add_argument("real", type=Path)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
+    parser.add_argument("--no-real", action="store_true", help="the rendered sets only")
     args = parser.parse_args()
     cores = len(os.sched_getaffinity(0))
     py = sys.executable
@@ -143,14 +145,14 @@ def main() -> None:
         for p in sorted(args.rendered.glob("*.png"))[:20]:
             shutil.copy(p, r20 / p.name)
         sets = [("rendered 1280x960, 96 views", args.rendered), ("rendered 1280x960, 20 views", r20),
-                (f"real: {args.real.name}", args.real)]
+                (f"real: {args.real.name}", args.real)][:2 if args.no_real else 3]
         (work / "plain.py").write_text(PLAIN)
         (work / "detect.py").write_text(CALIBCTL_DETECT)
         template = template_store(work)
         load = os.getloadavg()
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
               f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
-              f"(a shared machine); best of {args.repeats} rounds after a bytecode-warming round\n")
+              f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round\n")
         for label, folder in sets:
             det = {"plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
                    f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
@@ -173,6 +175,7 @@ def main() -> None:
             base_env = None if args.baseline is None else run_env(work / "pycache-before", args.baseline.resolve())
             best: dict[str, tuple[float, str, float]] = {}
             least_cpu: dict[str, float] = {}
+            every: dict[str, list[tuple[float, float]]] = {}  # (seconds, load) of every counted round
             for round_ in range(args.repeats + 1):  # round 0 fills the bytecode caches and is not counted
                 for name, cmd in [*det.items(), *e2e.items()]:
                     shutil.copyfile(template, db)
@@ -189,15 +192,21 @@ def main() -> None:
                         seconds, note = wall, f"{result_of(out)[1]} boards"
                     else:
                         seconds, note = wall, boards_of(out)
+                    every.setdefault(name, []).append((seconds, load))
                     if name not in best or seconds < best[name][0]:
                         best[name] = (seconds, note, load)
-            print(f"### {label}\n\n| path | best s | vs plain sequential | process CPU s (least) | CPU vs plain | "
-                  "recall | load |\n|---|---|---|---|---|---|---|")
+            print(f"### {label}\n\n| path | best s | vs plain sequential | median s | median vs plain | process CPU s "
+                  "(least) | CPU vs plain | recall | load at best | load range |\n|---|---|---|---|---|---|---|---|---|---|")
             for group, ref in ((det, "plain sequential loop"), (e2e, "plain script (detect + calibrateCameraExtended)")):
                 for name in group:
                     seconds, note, load = best[name]
-                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {least_cpu[name]:.2f} | "
-                          f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} |")
+                    median = statistics.median(t for t, _ in every[name])
+                    loads = [lo for _, lo in every[name]]
+                    ref_median = statistics.median(t for t, _ in every[ref])
+                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {median:.3f} | "
+                          f"{median / ref_median:.2f}x | {least_cpu[name]:.2f} | "
+                          f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} | "
+                          f"{min(loads):.2f}-{max(loads):.2f} |")
             print(f"\nload average {os.getloadavg()[0]:.2f} after this set\n", flush=True)
 
 

@@ -63,7 +63,8 @@ def main() -> None:
         for i, station_env in enumerate(stations.values()):  # one unit each fills the bytecode caches (not counted)
             shutil.copyfile(db, work / f"warm{i}.db")
             subprocess.run([py, "-m", "calibctl", "--db", f"sqlite:///{work / f'warm{i}.db'}", "station", "--board",
-                            "BENCH", "--source-template", f"{work / 'shots'}/{{serial}}", "--json"],
+                            "BENCH", "--source-template", f"{work / 'shots'}/{{serial}}", "--json",
+                            "--spool", str(work / f"warm{i}-spool.sqlite")],  # a spool per store
                            input=serials[0] + "\n", capture_output=True, text=True, cwd=work, env=station_env,
                            check=True)
         subprocess.run([py, str(work / "plain.py"), str(work / "shots" / serials[0]), "1", "solve"],
@@ -75,7 +76,8 @@ def main() -> None:
             walls[name] = time.perf_counter()
             procs[name] = subprocess.Popen(
                 [py, "-m", "calibctl", "--db", f"sqlite:///{store}", "station", "--board", "BENCH",
-                 "--source-template", f"{work / 'shots'}/{{serial}}", "--json"], stdin=subprocess.PIPE,
+                 "--source-template", f"{work / 'shots'}/{{serial}}", "--json",
+                 "--spool", str(work / f"{len(procs)}-spool.sqlite")], stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work, env=station_env)
         plain_inner, plain_wall, loads, statuses = [], [], [], set()
         for serial in serials:

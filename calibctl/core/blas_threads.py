@@ -6,8 +6,9 @@ Every stage states the parallelism it really uses and holds the libraries under 
     ``core.capture.worker_pool``); on threads, OpenCV on one thread for the run;
   * solves, held-out validation folds, the rig and hand-eye LMs: OpenCV and BLAS on one thread
     (``single_threaded``, which ``core.intrinsics.solution.single_threaded_opencv`` and every solve, the
-    capture gates' lens fit, ``solve_rig`` and ``fit_handeye`` enter), parallel only where the stage
-    itself runs folds or pairs on Python threads (validation folds, the one-camera test's pairs).
+    capture gates' lens fit, ``solve_rig`` and ``fit_handeye`` enter), parallel only on the verdict lanes
+    (``core.lanes``: the workflow's pool of ``--jobs`` - 1 threads and the caller, inside one block around the
+    pool: the held-out folds, the one-camera test beside the other gates and its groups, the lens floor).
 
 The libraries are found and set by threadpoolctl (every loaded OpenBLAS, MKL, BLIS and OpenMP runtime:
 opencv-python's bundled OpenBLAS and numpy's scipy-openblas on the wheels we ship), not by hand.
@@ -19,8 +20,9 @@ held-out validation of 20 views at 1280x960 took 200-350 ms on 2 threads against
 OpenBLAS on one thread, results identical to the bit: at these sizes OpenBLAS computes on the calling
 thread whatever its thread count, the count only decides who spins).
 
-The limits are process-global, like cv2.setNumThreads: enter a block once around a whole thread pool,
-not in each task.
+The limits are process-global, like cv2.setNumThreads: enter a block once around a whole thread pool, on the
+thread that owns the pool (an OpenBLAS limit set from another thread was seen not to take), not in each task;
+blocks opened inside it cost a counter (``_OneThreadBlas``).
 
 A command that never solves (``lint``) does better still: its OpenBLAS never starts the worker threads
 at all (``blas_starts_on_one_thread``, around the first import of numpy or cv2); threadpoolctl can only
@@ -34,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -61,11 +64,45 @@ def _controller() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+class _OneThreadBlas:
+    """The process-wide count of open ``single_threaded_blas`` blocks, on every thread: the first to open sets
+    the limit, the last to close restores it. Blocks nest under the workflow's (verdict_lanes) thousands of
+    times per ``calibrate`` (every pose refit enters one), and a threadpoolctl limit and restore costs ~0.1 ms
+    even when the libraries are at one thread already: 2711 of them were 0.3 s of CPU at 96 views."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._open = 0
+        self._limiter: contextlib.AbstractContextManager[object] | None = None
+
+    def enter(self) -> None:
+        with self._lock:
+            if self._open == 0:
+                limiter = _controller().limit(limits=1)
+                limiter.__enter__()
+                self._limiter = limiter
+            self._open += 1
+
+    def leave(self) -> None:
+        with self._lock:
+            self._open -= 1
+            if self._open == 0 and self._limiter is not None:
+                limiter, self._limiter = self._limiter, None
+                limiter.__exit__(None, None, None)
+
+
+_ONE_THREAD_BLAS = _OneThreadBlas()
+
+
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
-    """Every loaded BLAS and OpenMP runtime on one thread inside the block, restored afterwards."""
-    with _controller().limit(limits=1):
+    """Every loaded BLAS and OpenMP runtime on one thread inside the block, restored when the last open block
+    (on any thread) closes; a block inside another costs a counter, not a library call."""
+    _ONE_THREAD_BLAS.enter()
+    try:
         yield
+    finally:
+        _ONE_THREAD_BLAS.leave()
 
 
 @contextlib.contextmanager

@@ -31,13 +31,11 @@ camera differing only by a principal-point shift of 20 px is largely absorbed by
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
 
-from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.capture.gates import OBSERVABILITY_MIN, observability, view_homography
 from calibctl.core.gate import GateResult
 from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
@@ -49,6 +47,7 @@ from calibctl.core.intrinsics.solve import (
     solve_intrinsics,
 )
 from calibctl.core.intrinsics.validation import refit_pose_residuals, validate_holdout
+from calibctl.core.lanes import Lanes, lanes_map
 from calibctl.errors import NumericalError
 
 TWO_CAMERA_RATIO = 1.4
@@ -57,7 +56,6 @@ RANDOM_STARTS = 1
 MAX_ROUNDS = 8
 SPLIT_SEED = 0
 HOLDOUT_FOLDS = 3  # per group; the solve's own validation uses 5, this only has to separate 1.1 from 1.7
-PAIR_WORKERS = 2  # the two groups are solved, scored and validated at once; the result does not depend on it
 R = TypeVar("R")
 ONE_CAMERA_GATE = "one_camera"
 # Capture does not know the solve's model. k1k2 (cheap) first; a suspected split is confirmed under the
@@ -107,24 +105,25 @@ def _view_rms(sol: IntrinsicsSolution, obj: Sequence[np.ndarray], img: Sequence[
     return np.array(out)
 
 
-def _pair(work: Callable[[Any], R], for_a: Any, for_b: Any) -> tuple[R, R]:
-    """(work(for_a), work(for_b)) on PAIR_WORKERS threads; an error is raised as a sequential call would
-    (a's first). OpenCV and BLAS run single-threaded inside, so the numbers are those of a sequential run."""
-    with single_threaded_opencv(), single_threaded_blas(), ThreadPoolExecutor(max_workers=PAIR_WORKERS) as pool:
-        done_a, done_b = pool.submit(work, for_a), pool.submit(work, for_b)
-        return done_a.result(), done_b.result()
+def _pair(lanes: Lanes | None, work: Callable[[Any], R], for_a: Any, for_b: Any) -> tuple[R, R]:
+    """(work(for_a), work(for_b)), the two groups on two lanes when there are (core.lanes); an error is raised
+    as a sequential call would (a's first). OpenCV and BLAS run single-threaded inside, so the numbers are
+    those of a sequential run."""
+    with single_threaded_opencv():
+        done_a, done_b = lanes_map(lanes, work, [for_a, for_b])
+    return done_a, done_b
 
 
 def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarray], size: tuple[int, int],
-            model: str, min_group: int):
+            model: str, min_group: int, lanes: Lanes | None):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool; None when a group gets too small."""
     for round_ in range(MAX_ROUNDS):
         a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
         if len(a) < min_group or len(b) < min_group:
             return None
-        sol_a, sol_b = _pair(lambda g: solve_intrinsics([obj[i] for i in g], [img[i] for i in g], size, model,
+        sol_a, sol_b = _pair(lanes, lambda g: solve_intrinsics([obj[i] for i in g], [img[i] for i in g], size, model,
                                                         uncertainty=False), a, b)
-        rms_a, rms_b = _pair(lambda sol: _view_rms(sol, obj, img), sol_a, sol_b)
+        rms_a, rms_b = _pair(lanes, lambda sol: _view_rms(sol, obj, img), sol_a, sol_b)
         moved = rms_a < rms_b
         if np.array_equal(moved, in_a) or round_ == MAX_ROUNDS - 1:
             break  # not converged after MAX_ROUNDS: keep the split the two solves were made from
@@ -150,7 +149,7 @@ def forget_recent_checks() -> None:
 
 def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
                      image_size: tuple[int, int], model: str = "k1k2",
-                     threshold: float = TWO_CAMERA_RATIO) -> CameraSplit | None:
+                     threshold: float = TWO_CAMERA_RATIO, lanes: Lanes | None = None) -> CameraSplit | None:
     """The best two-camera split and its score (module docstring); None when the session is too small to
     split into two groups that can each be solved and validated, or when a group of the best split cannot
     observe its own intrinsics (the observability gate's measure below OBSERVABILITY_MIN).
@@ -159,15 +158,17 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     RECENT_CHECKS answers are remembered by a digest of the inputs (core.intrinsics.recent_answers): ``calibrate``
     asks twice (the capture gate, then the solve) and, when the solve keeps every corner under the gate's
     model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
+    ``lanes``: where the two groups are solved at once (core.lanes); the answer does not depend on it.
     """
     key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size), model,
                         float(threshold))
     return _RECENT.answer(key, lambda: _check_one_camera(object_points_per_view, image_points_per_view, image_size,
-                                                         model, threshold))
+                                                         model, threshold, lanes))
 
 
 def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                      image_size: tuple[int, int], model: str, threshold: float) -> CameraSplit | None:
+                      image_size: tuple[int, int], model: str, threshold: float,
+                      lanes: Lanes | None) -> CameraSplit | None:
     obj, img = list(object_points_per_view), list(image_points_per_view)
     n = len(obj)
     min_group = min_views_to_split(model) // 2
@@ -178,7 +179,7 @@ def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points
     best = None
     for start in starts:
         try:
-            found = _refine(start, obj, img, image_size, model, min_group)
+            found = _refine(start, obj, img, image_size, model, min_group, lanes)
         except NumericalError:
             continue
         if found is None:
@@ -192,9 +193,9 @@ def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points
     if min(_observability(obj, img, group, image_size) for group in (a, b)) < OBSERVABILITY_MIN:
         return None  # a group that cannot observe its own intrinsics is no camera to compare (see _observability)
     try:
-        hold_a, hold_b = _pair(lambda group: validate_holdout(
+        hold_a, hold_b = _pair(lanes, lambda group: validate_holdout(
             [obj[i] for i in group[0]], [img[i] for i in group[0]], image_size, model, fit=group[1],
-            max_folds=HOLDOUT_FOLDS, workers=1), (a, sol_a), (b, sol_b))
+            max_folds=HOLDOUT_FOLDS, lanes=lanes), (a, sol_a), (b, sol_b))
     except NumericalError:
         return None
     cross = (_rms(rms_b[a]), _rms(rms_a[b]))
@@ -220,14 +221,15 @@ def _group_words(names: Sequence[str]) -> str:
 
 
 def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int],
-                          models: Sequence[str], threshold: float) -> tuple[CameraSplit | None, dict[str, float]]:
+                          models: Sequence[str], threshold: float,
+                          lanes: Lanes | None) -> tuple[CameraSplit | None, dict[str, float]]:
     """(the split of the first of ``models`` under which the views are not two cameras, or of the first
     model when every one suspects two; None when a model finds no split at all), and each tried model's ratio."""
     first: CameraSplit | None = None
     ratios: dict[str, float] = {}
     for model in models:
         try:
-            split = check_one_camera(obj, img, image_size, model, threshold)
+            split = check_one_camera(obj, img, image_size, model, threshold, lanes)
         except NumericalError:  # this model cannot be solved on these views: it confirms nothing
             split = None
         if split is None:
@@ -241,7 +243,8 @@ def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], 
 
 def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
                     names: Sequence[str], image_size: tuple[int, int], models: Sequence[str] = CAPTURE_MODELS,
-                    threshold: float = TWO_CAMERA_RATIO, max_views: int = CAPTURE_MAX_VIEWS) -> GateResult:
+                    threshold: float = TWO_CAMERA_RATIO, max_views: int = CAPTURE_MAX_VIEWS,
+                    lanes: Lanes | None = None) -> GateResult:
     """The capture gate "one_camera": fails when the views look like two cameras (``check_one_camera``)
     under every one of ``models`` (see CAPTURE_MODELS: k1k2 alone misreads one wide-angle lens).
 
@@ -249,7 +252,7 @@ def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_p
     keeps both halves). It passes, with words saying so, when there are too few views to split or no
     split into two solvable groups exists (every view fits one camera). ``value`` is the smallest ratio
     of the models tried, which must stay below ``threshold``. Shapes as in solve_intrinsics; ``names``:
-    one per view.
+    one per view; ``lanes``: as check_one_camera.
     """
     n = len(image_points_per_view)
     picked = np.unique(np.linspace(0, n - 1, max_views).round().astype(int)).tolist() if n > max_views else list(range(n))
@@ -259,7 +262,7 @@ def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_p
         message = f"not checked: {len(picked)} views, {need} are needed to compare two groups"
         return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
     split, ratios = _first_model_to_clear([object_points_per_view[i] for i in picked],
-                                          [image_points_per_view[i] for i in picked], image_size, models, threshold)
+                                          [image_points_per_view[i] for i in picked], image_size, models, threshold, lanes)
     detail.update({f"ratio_{m}": r for m, r in ratios.items()})
     if split is None:
         message = (f"one camera: no split of the {len(picked)} views into two groups that can each be solved "

@@ -39,11 +39,16 @@ which is never below the full floor; the verdict is the same either way.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calibctl.core.intrinsics.lens_checks import ERROR, Finding
+from calibctl.core.lanes import Lanes, lanes_map
 from calibctl.errors import NumericalError
+
+if TYPE_CHECKING:
+    from calibctl.core.intrinsics.solution import IntrinsicsSolution
 
 BLOCK = 4  # corners per block side
 MIN_BLOCK_CORNERS = 12
@@ -111,19 +116,27 @@ def detector_rms_px(object_points_per_view: Sequence[np.ndarray], image_points_p
 
 
 def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                  image_size: tuple[int, int], models: Sequence[str] = FLOOR_MODELS) -> tuple[float, str] | None:
+                  image_size: tuple[int, int], models: Sequence[str] = FLOOR_MODELS,
+                  lanes: Lanes | None = None) -> tuple[float, str] | None:
     """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on these
-    corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px."""
+    corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px.
+    ``lanes``: where the models are solved at once (core.lanes); the answer does not depend on it."""
     # cv2 only here: `lint FILE` reads model_fit's rule without it
-    from calibctl.core.intrinsics.solve import solve_intrinsics
+    from calibctl.core.intrinsics.solve import single_threaded_opencv, solve_intrinsics
 
-    best: tuple[float, str] | None = None
-    for name in models:
+    def solved(name: str) -> IntrinsicsSolution | None:
         try:
-            sol = solve_intrinsics(list(object_points_per_view), list(image_points_per_view), image_size, name,
-                                   uncertainty=False)
+            return solve_intrinsics(list(object_points_per_view), list(image_points_per_view), image_size, name,
+                                    uncertainty=False)
         except NumericalError:
-            continue  # too few views for it, or it diverged: the other family (or the patch) still reads the floor
+            return None  # too few views for it, or it diverged: the other family (or the patch) still reads the floor
+
+    with single_threaded_opencv():
+        solutions = lanes_map(lanes, solved, list(models))
+    best: tuple[float, str] | None = None
+    for sol in solutions:
+        if sol is None:
+            continue
         dof = sol.n_residuals - sol.n_parameters
         if dof <= 0:
             continue
@@ -134,15 +147,16 @@ def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per
 
 
 def noise_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                   image_size: tuple[int, int], fit_rms_px: float | None = None) -> float | None:
+                   image_size: tuple[int, int], fit_rms_px: float | None = None,
+                   lanes: Lanes | None = None) -> float | None:
     """The model-misfit rule's floor, px per corner: the smaller of detector_rms_px and lens_floor_px (module
     docstring); None when neither can be read. ``fit_rms_px``: the fit the floor will judge; when no floor can
     make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and the
-    lens models are not solved."""
+    lens models are not solved. ``lanes``: as lens_floor_px."""
     reads = [detector_rms_px(object_points_per_view, image_points_per_view)]
     if reads[0] is not None and fit_rms_px is not None and not can_misfit(fit_rms_px):
         return reads[0]
-    lens = lens_floor_px(object_points_per_view, image_points_per_view, image_size)
+    lens = lens_floor_px(object_points_per_view, image_points_per_view, image_size, lanes=lanes)
     reads.append(None if lens is None else lens[0])
     known = [r for r in reads if r is not None]
     return min(known) if known else None

@@ -50,6 +50,7 @@ import numpy as np
 from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, solve_intrinsics
 from calibctl.core.intrinsics.validation import HoldoutReport, validate_holdout
+from calibctl.core.lanes import Lanes
 from calibctl.errors import NumericalError
 
 LADDER = ("k1k2", "k1k2k3", "k1k2p1p2k3", "opencv-default", "rational")
@@ -92,10 +93,10 @@ class ModelSelection:
 
 
 def _evaluate(model: str, obj: Sequence[np.ndarray], img: Sequence[np.ndarray],
-              image_size: tuple[int, int], centre: tuple[float, float] | None
+              image_size: tuple[int, int], centre: tuple[float, float] | None, lanes: Lanes | None
               ) -> tuple[IntrinsicsSolution, HoldoutReport]:
     fit = solve_intrinsics(obj, img, image_size, model, uncertainty=False)
-    return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre)
+    return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre, lanes=lanes)
 
 
 RECENT_SELECTIONS = 4
@@ -108,12 +109,14 @@ def select_model(
     image_size: tuple[int, int],
     ladder: Sequence[str] = LADDER,
     alternatives: Sequence[str] = ALTERNATIVES,
+    lanes: Lanes | None = None,
 ) -> ModelSelection:
     """Walk the ladder and return the chosen model (shapes as in solve_intrinsics).
 
     The choice is a function of the values alone, so the last RECENT_SELECTIONS are remembered by a
     digest of the inputs (core.intrinsics.recent_answers): ``calibrate --model auto --reference-distance`` asks at
     capture (the gauge's lens) and again at the solve, on the same corners (about 1 s of ladder each).
+    ``lanes``: where each rung's held-out folds are solved (core.lanes); the choice does not depend on it.
 
     Raises:
         NumericalError: the first rung itself cannot be solved or validated.
@@ -121,11 +124,12 @@ def select_model(
     key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size),
                         tuple(ladder), tuple(alternatives))
     return _RECENT.answer(key, lambda: _select_model(object_points_per_view, image_points_per_view, image_size,
-                                                     ladder, alternatives))
+                                                     ladder, alternatives, lanes))
 
 
 def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                  image_size: tuple[int, int], ladder: Sequence[str], alternatives: Sequence[str]) -> ModelSelection:
+                  image_size: tuple[int, int], ladder: Sequence[str], alternatives: Sequence[str],
+                  lanes: Lanes | None) -> ModelSelection:
     names = (*ladder, *alternatives)
     trail: list[ModelCandidate] = []
     start: tuple[str, IntrinsicsSolution, HoldoutReport] | None = None
@@ -133,7 +137,7 @@ def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per
     best, best_fit, best_hold = "", None, None
     for name in names:
         try:
-            fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre)
+            fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre, lanes)
         except NumericalError as exc:
             # that rung is out, not the run (a k1k2 fold on a strong fisheye: 10.18 px, limit 10)
             trail.append(ModelCandidate(name, None if start is None else (start[0] if name in alternatives else best),

@@ -9,13 +9,14 @@ re-fitted with cv2.solvePnP (SOLVEPNP_ITERATIVE) with K and distortion frozen, a
 collected. Held-out residuals are therefore honest about the intrinsics and optimistic only by the
 6 pose parameters fitted per view, exactly like the fit residuals of the same view.
 
-The folds are independent, so they are solved on ``HOLDOUT_WORKERS`` Python threads (cv2 releases the
-GIL). Every solve runs with OpenCV single-threaded (``single_threaded_opencv``, entered once around the
-pool because cv2.setNumThreads is process-global), so each fold's result is bit-identical to a
-sequential run whatever the scheduling (tests/core/intrinsics/test_validation.py checks it). numpy's OpenBLAS is
-held to one thread around the pool too (``blas_threads``: its spinning worker thread otherwise takes the
-second core and 2 threads are slower than 1). 20 views at 1280x960 on the 2-core bench machine: 140-180
-ms sequential, 81-96 ms on 2 threads (benchmarks/bench_e2e.py stage profile: benchmarks/results/end-to-end.md).
+The folds are independent, so they are solved on the caller's lanes (``core.lanes``: the workflow's pool,
+bounded by ``--jobs``; cv2 releases the GIL; no lanes: one after another). Every solve runs with OpenCV
+and BLAS single-threaded (``single_threaded_opencv``; the pool's owner enters it once around the pool
+because cv2.setNumThreads is process-global), so each fold's result is bit-identical to a sequential
+run whatever the scheduling (tests/core/intrinsics/test_validation.py checks it). numpy's OpenBLAS on
+one thread matters: its spinning worker thread otherwise takes the second core and 2 threads are slower
+than 1. 20 views at 1280x960 on the 2-core bench machine: 140-180 ms sequential, 81-96 ms on 2 threads
+(benchmarks/bench_e2e.py stage profile: benchmarks/results/end-to-end.md).
 
 Radius rings ("quintiles"): the radius of a corner is the distance of its OBSERVED pixel position
 from the principal point of the full-data fit. The ring edges are the 20/40/60/80 % quantiles of
@@ -35,12 +36,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from calibctl.core.blas_threads import single_threaded_blas
 from calibctl.core.intrinsics.solve import (
     IntrinsicsSolution,
     fit_pose,
@@ -50,10 +49,10 @@ from calibctl.core.intrinsics.solve import (
     single_threaded_opencv,
     solve_intrinsics,
 )
+from calibctl.core.lanes import Lanes, lanes_map
 from calibctl.errors import NumericalError
 
 MAX_FOLDS = 5
-HOLDOUT_WORKERS = 2  # the station PCs and the bench machine have 2 cores
 N_RINGS = 5
 N_OCTANTS = 8
 
@@ -216,7 +215,7 @@ def validate_holdout(
     initial: np.ndarray | None = None,
     max_folds: int = MAX_FOLDS,
     ring_centre_px: tuple[float, float] | None = None,
-    workers: int = HOLDOUT_WORKERS,
+    lanes: Lanes | None = None,
 ) -> HoldoutReport:
     """k-fold held-out validation over views.
 
@@ -226,7 +225,7 @@ def validate_holdout(
         max_folds: upper bound on k.
         ring_centre_px: centre of the radius rings; default the fit's principal point. Pass the
             same centre when comparing models so their outer rings hold the same corners.
-        workers: threads solving folds at once; the result does not depend on it (1 = sequential).
+        lanes: where the folds are solved (core.lanes); the result does not depend on it (None: sequentially).
 
     Raises:
         NumericalError: too few views to hold any out, or a fold's solve fails (names the fold).
@@ -255,9 +254,9 @@ def validate_holdout(
 
     holdout: list[np.ndarray] = [np.empty((0, 2))] * n_views
     fold_K = []
-    # map() yields in fold order, so a failure names the same (lowest) fold as a sequential loop would
-    with single_threaded_opencv(), single_threaded_blas(), ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-        for K, residuals in pool.map(solve_fold, range(int(folds.max()) + 1)):
+    # results come in fold order, so a failure names the same (lowest) fold as a sequential loop would
+    with single_threaded_opencv():
+        for K, residuals in lanes_map(lanes, solve_fold, range(int(folds.max()) + 1)):
             fold_K.append(K)
             for i, r in residuals.items():
                 holdout[i] = r
@@ -284,6 +283,7 @@ def agree_with_folds(
     image_size: tuple[int, int],
     fit: IntrinsicsSolution,
     report: HoldoutReport,
+    lanes: Lanes | None = None,
 ) -> tuple[IntrinsicsSolution, HoldoutReport]:
     """The full solve and its held-out numbers from the same minimum, or a NumericalError.
 
@@ -300,7 +300,7 @@ def agree_with_folds(
     if resolved.rms_px < fit.rms_px:
         fit = resolved
         report = validate_holdout(object_points_per_view, image_points_per_view, image_size, fit.model, fit=fit,
-                                  initial=start)
+                                  initial=start, lanes=lanes)
     if fit.rms_px > (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
         raise NumericalError(
             f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "

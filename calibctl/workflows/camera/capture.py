@@ -91,6 +91,7 @@ from calibctl.workflows.camera.solve import (
     solve,
     station_region,
 )
+from calibctl.workflows.camera.verdict_lanes import verdict_lanes
 
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
 # a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
@@ -490,15 +491,24 @@ def _build_session(settings: Settings, request: CaptureRequest, board: BoardRevi
     board_views = [view for view, _ in got.views]
     circle = session_image_circle(request.image_circle, got, board_views)
     model_points = spec.object_points()
-    report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings),
-                            image_circle=circle)
-    # Same test as the solve's (lint rule one-camera), while the operator still holds the board.
-    two_cameras = one_camera_gate([model_points[np.asarray(v.corner_ids)] for v in board_views],
-                                  [np.asarray(v.corners_px, np.float64) for v in board_views],
-                                  [v.name for v in board_views], got.image_size)
-    gates = [*report.gates, two_cameras]
-    if all(g.passed for g in gates if g.gate in ("observability", "views")):  # not hopeless: judge the prediction
-        gates.append(_projection(settings, request, board_views, model_points, got.image_size, circle))
+    with verdict_lanes(request.jobs or settings.jobs) as lanes:
+        # Same test as the solve's (lint rule one-camera), while the operator still holds the board; its solves
+        # are independent of the other gates', so it runs on another lane beside them (verdict_lanes)
+        two_cameras = lanes.start(lambda: one_camera_gate(
+            [model_points[np.asarray(v.corner_ids)] for v in board_views],
+            [np.asarray(v.corners_px, np.float64) for v in board_views], [v.name for v in board_views],
+            got.image_size, lanes=lanes))
+        try:
+            report = evaluate_gates(board_views, model_points, got.image_size, core_thresholds(settings),
+                                    image_circle=circle)
+            # not hopeless: judge the prediction
+            judge = all(g.passed for g in report.gates if g.gate in ("observability", "views"))
+            projection = _projection(settings, request, board_views, model_points, got.image_size, circle) \
+                if judge else None
+        except BaseException:
+            two_cameras.settle()
+            raise
+        gates = [*report.gates, two_cameras.result(), *([] if projection is None else [projection])]
     geometry = {g.name: g for g in report.views}
     views = []
     for view, sha in got.views:

@@ -54,9 +54,11 @@ from calibctl.core.intrinsics.validation import (
     agree_with_folds,
     validate_holdout,
 )
+from calibctl.core.lanes import Lanes
 from calibctl.errors import UsageError
 from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.camera.image_circles import checked_image_circle, with_circle
+from calibctl.workflows.camera.verdict_lanes import verdict_lanes
 from calibctl.workflows.lint.lint import facts_from_document, lint_facts
 from calibctl.workflows.store_admin.records import open_store
 
@@ -129,8 +131,12 @@ def _held_out(report: HoldoutReport) -> HeldOut:
     )
 
 
-def _solve_numbers(session: CaptureSession, request: SolveRequest):
-    """Run the core solve pipeline on a session's corners. Returns everything the artifact records."""
+def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes):
+    """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
+
+    The one-camera split test needs only the kept corners and the model, so it runs on another lane
+    (verdict_lanes) beside the held-out folds and the model-misfit floor; the folds and the floor's lens
+    models spread over the lanes too. The numbers are those of the sequential order."""
     size = session.image_size
     if size is None or not session.views:
         raise UsageError(f"session {session.session_id} has no accepted views to solve")
@@ -141,7 +147,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
     trail: list[dict[str, float | str | bool]] = []
     if request.model == "auto":
         # the model is chosen on every corner; the corner rule then runs under the chosen model
-        selection = select_model(obj, img, size)
+        selection = select_model(obj, img, size, lanes=lanes)
         model_name = selection.chosen
         trail = [
             {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail
@@ -157,12 +163,23 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest):
     if request.drop_outliers and outliers.outlier_views:
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
-    holdout = validate_holdout([obj[i] for i in kept], [img[i] for i in kept], size, model_name, fit=solution)
-    # the fit RMS and the held-out RMS the artifact records must come from one minimum
-    solution, holdout = agree_with_folds([obj[i] for i in kept], [img[i] for i in kept], size, solution, holdout)
-    split = check_one_camera([obj[i] for i in kept], [img[i] for i in kept], size, model_name)
-    consistency = None if split is None else _consistency(split, [session.views[i].name for i in kept])
-    return model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency
+    kept_obj, kept_img = [obj[i] for i in kept], [img[i] for i in kept]
+    split = lanes.start(lambda: check_one_camera(kept_obj, kept_img, size, model_name, lanes=lanes))
+    try:
+        holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
+        # the fit RMS and the held-out RMS the artifact records must come from one minimum
+        solution, holdout = agree_with_folds(kept_obj, kept_img, size, solution, holdout, lanes=lanes)
+        # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
+        # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit); on every
+        # corner the rule kept, the views --drop-outliers removes included
+        detector_rms = noise_floor_px(obj, img, size, float(solution.rms_px), lanes=lanes)
+    except BaseException:
+        split.settle()
+        raise
+    found = split.result()
+    consistency = None if found is None else _consistency(found, [session.views[i].name for i in kept])
+    return (model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency,
+            detector_rms)
 
 
 def _consistency(split: CameraSplit, names: list[str]) -> CameraConsistency:
@@ -257,14 +274,9 @@ def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> li
 
 def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
-    model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency = _solve_numbers(
-        session, request)
-    model_points = board_spec(session.board).object_points()
-    # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
-    # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit)
-    detector_rms = noise_floor_px(rejection.kept([model_points[v.corner_ids] for v in session.views]),
-                                  rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views]),
-                                  sol.image_size, float(sol.rms_px))
+    with verdict_lanes(settings.jobs) as lanes:
+        model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency, detector_rms = \
+            _solve_numbers(session, request, lanes)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(

@@ -27,7 +27,7 @@ NOISE_PX = 0.03  # per coordinate, about what calibctl's detector leaves on rend
 def calibrated():
     s = synthesize_session(K, D, SIZE, 20, seed=7, noise_px=NOISE_PX)
     fit = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2")
-    rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2", fit=fit, workers=1)
+    rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2", fit=fit)
     h = rep.holdout
     n = sum(len(p) for p in s.image_points_per_view)
     ref = Reference(rep.holdout_rms_px, n, 20, h.radius_edges_px, h.ring_rms_px, h.ring_counts,
@@ -125,7 +125,7 @@ def fisheye_calibrated():
     s = synthesize_fisheye_session(camera, 18, seed=11, noise_px=0.1)
     fit = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, camera.image_size, "fisheye")
     rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, camera.image_size, "fisheye",
-                           fit=fit, workers=1)
+                           fit=fit)
     h = rep.holdout
     ref = Reference(rep.holdout_rms_px, sum(len(p) for p in s.image_points_per_view), 18, h.radius_edges_px,
                     h.ring_rms_px, h.ring_counts, h.octant_rms_px, h.octant_counts)

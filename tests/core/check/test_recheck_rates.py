@@ -44,7 +44,7 @@ def _camera(focal_scale: float = 1.0, dcx_px: float = 0.0) -> PinholeCamera:
 def reference():
     obj, img = _views(_camera(), 20, np.random.default_rng(10_000))
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
-    h = validate_holdout(obj, img, SIZE, "k1k2", fit=fit, workers=1).holdout
+    h = validate_holdout(obj, img, SIZE, "k1k2", fit=fit).holdout
     ref = Reference(float(np.sqrt(np.nansum(h.ring_rms_px**2 * h.ring_counts) / h.ring_counts.sum())),
                     int(h.ring_counts.sum()), 20, h.radius_edges_px, h.ring_rms_px, h.ring_counts, h.octant_rms_px,
                     h.octant_counts)

@@ -15,6 +15,7 @@ from calibctl.core.intrinsics.validation import (
 )
 from calibctl.core.synth.corners import synthesize_session
 from calibctl.errors import EXIT_CANNOT_RUN, NumericalError
+from calibctl.workflows.camera.verdict_lanes import verdict_lanes
 
 K_TRUE = np.array([[800.0, 0.0, 321.3], [0.0, 800.0, 238.7], [0.0, 0.0, 1.0]])
 D_TRUE = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])
@@ -91,15 +92,18 @@ def test_holdout_is_deterministic(good):
                zip(again.holdout_residuals_px, report.holdout_residuals_px, strict=True))
 
 
+@pytest.mark.parametrize("jobs", [2, 4])
 @pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3"])
-def test_folds_solved_on_threads_equal_the_sequential_run_bit_for_bit(good, model):
-    """The folds run on 2 threads; every number must be exactly what one thread gives, and OpenCV's
+def test_folds_solved_on_lanes_equal_the_sequential_run_bit_for_bit(good, model, jobs):
+    """The folds run on 2 or 4 lanes; every number must be exactly what one thread gives, and OpenCV's
     process-global thread count must be what it was before."""
     ses, _ = good
     threads_before = cv2.getNumThreads()
     args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, model)
-    sequential = validate_holdout(*args, workers=1)
-    parallel = validate_holdout(*args, workers=2)
+    with verdict_lanes(1) as one:
+        sequential = validate_holdout(*args, lanes=one)
+    with verdict_lanes(jobs) as lanes:
+        parallel = validate_holdout(*args, lanes=lanes)
     assert cv2.getNumThreads() == threads_before
     assert np.array_equal(parallel.fold_of_view, sequential.fold_of_view)
     assert np.array_equal(parallel.fold_camera_matrices, sequential.fold_camera_matrices)
@@ -145,9 +149,10 @@ def test_a_fold_that_cannot_be_solved_names_the_fold():
     fit = solve_intrinsics(ses.object_points_per_view, ses.image_points_per_view, SIZE, "k1k2")
     obj, img = list(ses.object_points_per_view), list(ses.image_points_per_view)
     obj[4], img[4] = obj[4][:9], img[4][:9]
-    for workers in (1, 2):  # on threads too, the error names the first failing fold
-        with pytest.raises(NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"):
-            validate_holdout(obj, img, SIZE, "k1k2", fit=fit, workers=workers)
+    for jobs in (1, 2, 4):  # on lanes too, the error names the first failing fold
+        with verdict_lanes(jobs) as lanes, pytest.raises(
+                NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"):
+            validate_holdout(obj, img, SIZE, "k1k2", fit=fit, lanes=lanes)
 
 
 def test_blas_runs_on_one_thread_inside_the_block_and_gets_its_threads_back():

@@ -38,12 +38,17 @@ def _calibrate(tmp_path: Path, name: str, folder: Path, model: str) -> capture_w
     return capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder), jobs=1), model=model)
 
 
-def _numbers(doc: object) -> object:
+def numbers_without(doc: object, volatile: frozenset[str] | set[str]) -> object:
+    """A dumped artifact or session without the keys in ``volatile``, at every depth."""
     if isinstance(doc, dict):
-        return {k: _numbers(v) for k, v in doc.items() if k not in VOLATILE}
+        return {k: numbers_without(v, volatile) for k, v in doc.items() if k not in volatile}
     if isinstance(doc, list):
-        return [_numbers(v) for v in doc]
+        return [numbers_without(v, volatile) for v in doc]
     return doc
+
+
+def _numbers(doc: object) -> object:
+    return numbers_without(doc, VOLATILE)
 
 
 @pytest.mark.parametrize(("scene", "model"), [("good", "k1k2"), ("good", "auto"), ("fisheye", "fisheye")])
