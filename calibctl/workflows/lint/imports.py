@@ -45,19 +45,6 @@ class ImportOutcome:
     held_back: str | None = None  # why an accepted import was left inactive by the signature rule
 
 
-@dataclass(frozen=True)
-class SourceTrust:
-    """How the source file is signed (``signature_mark``) and whether this store requires signatures."""
-
-    mark: str
-    trusted: bool
-    required: bool
-
-    @property
-    def may_activate(self) -> bool:
-        return self.trusted or not self.required
-
-
 
 def source_label(art: CalibrationArtifact, path: Path) -> str:
     """``CAM@7 sha256 ab12... from station st1 (file x.json)``: enough to find the original again."""
@@ -135,7 +122,7 @@ def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationAr
 
 
 def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
-                    activate: bool | None, keep_version: bool = False, trust: SourceTrust | None = None) -> ImportOutcome:
+                    activate: bool | None, keep_version: bool = False, trust: keys.SourceTrust | None = None) -> ImportOutcome:
     """Store ``source`` (hash already checked) as this store's next version with this store's verdict.
     ``activate``: None = when accepted and ``trust.may_activate``; True = when accepted (an override of the
     signature rule is recorded in the event's reason); False = never. ``trust`` None: a store without keys."""
@@ -147,7 +134,7 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
     check_self_consistent(source)
     check_evidence(source)
     if trust is None:
-        trust = SourceTrust(keys.signature_mark(source, TrustedKeys())[0], trusted=False, required=False)
+        trust = keys.SourceTrust(keys.signature_mark(source, TrustedKeys())[0], trusted=False, required=False)
     mine = rederive(source, settings, label, trust.mark)
     if keep_version:
         expected = store.next_version(source.serial)
@@ -157,22 +144,11 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
                 f"{source.serial} is {expected}",
                 "import without --keep-version (the source version is kept in provenance.imported_from)",
             )
-    accepted = mine.status == "accepted"
-    do_activate = accepted and (activate if activate is not None else trust.may_activate)
-    reason = f"imported {source.ref}"
-    if do_activate and not trust.may_activate:
-        reason += f" ({trust.mark}; activated with --activate although this store requires signatures)"
-    held_back = None
-    if accepted and activate is None and not trust.may_activate:
-        held_back = (f"imported {_signed_words(trust.mark)}, not active (this store requires signatures; "
-                     "--activate to override)")
+    do_activate, override, held_back = trust.activation(mine.status == "accepted", activate)
     stored = store.add_artifact(mine, activate=do_activate, actor=settings.operator, station=settings.station,
-                                reason=reason, expect_version=source.version if keep_version else None)
+                                reason=f"imported {source.ref}{override}",
+                                expect_version=source.version if keep_version else None)
     return ImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, held_back=held_back)
-
-
-def _signed_words(mark: str) -> str:
-    return "unsigned" if mark == "unsigned" else f"signed by a key this store does not trust ({mark.split()[-1][:16]})"
 
 
 def import_file(
@@ -184,7 +160,6 @@ def import_file(
     art = records.read_artifact_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)
     keys.require_trusted(art, str(path), trusted, require_signature)
-    mark, ok = keys.signature_mark(art, trusted)
-    trust = SourceTrust(mark, ok, keys.requires_signatures(settings, trusted_keys) or require_signature)
+    trust = keys.source_trust(settings, art, trusted, trusted_keys, require_signature)
     with records.open_store(settings, create=True, write=True) as store:
         return import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version, trust=trust)

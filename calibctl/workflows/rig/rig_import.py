@@ -173,8 +173,7 @@ def import_rig_file(settings: Settings, path: Path, *, activate: bool | None, re
     source = read_rig_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)
     keys.require_trusted(source, str(path), trusted, require_signature)
-    mark, signed_ok = keys.signature_mark(source, trusted)
-    may_activate = signed_ok or not (keys.requires_signatures(settings, trusted_keys) or require_signature)
+    trust = keys.source_trust(settings, source, trusted, trusted_keys, require_signature)
     label = f"{source.ref} sha256 {source.content_sha256} from station {source.provenance.station} (file {path.name})"
     with records.open_store(settings, write=True) as store:  # the rig must be registered: no new store
         rig = store.get_rig(source.rig)
@@ -184,16 +183,8 @@ def import_rig_file(settings: Settings, path: Path, *, activate: bool | None, re
             return RigImportOutcome(previous, source.ref, source.status, active, already_imported=True, stale=[])
         _check_layout(rig, source)
         mine, stale = _rederive(store, source, rig, settings, label)
-        acceptable = mine.status == "accepted" and not stale
-        do_activate = acceptable and (activate if activate is not None else may_activate)
-        reason = f"imported rig {source.ref}"
-        if do_activate and not may_activate:
-            reason += f" ({mark}; activated with --activate although this store requires signatures)"
-        held_back = None
-        if acceptable and activate is None and not may_activate:
-            words = "unsigned" if mark == "unsigned" else f"signed by a key this store does not trust ({mark.split()[-1][:16]})"
-            held_back = f"imported {words}, not active (this store requires signatures; --activate to override)"
+        do_activate, override, held_back = trust.activation(mine.status == "accepted" and not stale, activate)
         stored = store.add_rig_calibration(mine, activate=do_activate, actor=settings.operator,
-                                           station=settings.station, reason=reason)
+                                           station=settings.station, reason=f"imported rig {source.ref}{override}")
     return RigImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, stale=stale,
                             held_back=held_back)

@@ -120,6 +120,40 @@ def signature_mark(art: Sealed, trusted: TrustedKeys) -> tuple[str, bool]:
     return f"{'trusted' if ok else 'untrusted'} key {art.signature.key_id}", ok
 
 
+@dataclass(frozen=True)
+class SourceTrust:
+    """How an imported file is signed (``signature_mark``) and whether this store requires signatures."""
+
+    mark: str
+    trusted: bool
+    required: bool
+
+    @property
+    def may_activate(self) -> bool:
+        return self.trusted or not self.required
+
+    def activation(self, acceptable: bool, activate: bool | None) -> tuple[bool, str, str | None]:
+        """The import's activation under the signature rule: (activate it, what the activation event's reason
+        adds, why an acceptable import is held back or None). ``activate``: None = by the rule; True = also
+        unsigned or untrusted (the override is recorded); False = never."""
+        do_activate = acceptable and (activate if activate is not None else self.may_activate)
+        override = (f" ({self.mark}; activated with --activate although this store requires signatures)"
+                    if do_activate and not self.may_activate else "")
+        held_back = None
+        if acceptable and activate is None and not self.may_activate:
+            words = ("unsigned" if self.mark == "unsigned" else
+                     f"signed by a key this store does not trust ({self.mark.split()[-1][:16]})")
+            held_back = f"imported {words}, not active (this store requires signatures; --activate to override)"
+        return do_activate, override, held_back
+
+
+def source_trust(settings: Settings, art: Sealed, trusted: TrustedKeys, trusted_keys: Path | None,
+                 require_signature: bool) -> SourceTrust:
+    """``art``'s signature as ``trusted`` judges it, and whether this store requires signatures."""
+    mark, ok = signature_mark(art, trusted)
+    return SourceTrust(mark, ok, requires_signatures(settings, trusted_keys) or require_signature)
+
+
 def require_trusted(art: Sealed, source: str, trusted: TrustedKeys, required: bool) -> None:
     """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
     untrusted, and always when it is signed by a trusted key but the signature does not match."""
