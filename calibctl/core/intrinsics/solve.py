@@ -169,8 +169,9 @@ def solve_intrinsics(
         except (TypeError, ValueError):  # malformed input: the solve names the problem in its own words
             key = None
         if key is not None:
-            return (_RECENT if fisheye or uncertainty else _RECENT_FITS).answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
-                                                      initial, uncertainty))
+            recent = _RECENT if fisheye or uncertainty else _RECENT_FITS
+            return recent.answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
+                                                     initial, uncertainty))
     return _solve(object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty)
 
 
