@@ -8,14 +8,10 @@ import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption
-from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.render import emit_json, say
 
 if TYPE_CHECKING:
     from calibctl.artifacts.check import CheckEvent
-
-
-def say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
 
 
 def print_check(event: CheckEvent) -> None:

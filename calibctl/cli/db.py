@@ -8,14 +8,8 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stderr, stdout
+from calibctl.cli.render import emit_json, say, stderr
 from calibctl.errors import EXIT_VERDICT_FAIL
-
-
-def say(line: str) -> None:
-    """One result line on stdout, never wrapped or interpreted as markup (it holds URLs and user text)."""
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
-
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 

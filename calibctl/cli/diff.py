@@ -10,16 +10,12 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, fmt_px, shown, stdout
+from calibctl.cli.render import emit_json, fmt_px, say, shown
 
 if TYPE_CHECKING:
     from calibctl.core.compare.projection_diff import DiffField
     from calibctl.workflows.compare.diff import CameraDiff
     from calibctl.workflows.compare.rig_diff import RigDiff
-
-
-def say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
 
 
 def _field_line(name: str, f: DiffField) -> str:

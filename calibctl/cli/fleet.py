@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, shown, stderr, stdout
+from calibctl.cli.render import emit_json, say, shown, stderr
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
@@ -29,10 +29,6 @@ fleet_app = typer.Typer(
 )
 
 
-def _say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
-
-
 @fleet_app.command("add")
 def add(
     ctx: typer.Context,
@@ -50,7 +46,7 @@ def add(
     if wants_json(ctx, json_output):
         emit_json(event)
         return
-    _say(f"robot {shown(event.subject)} registered: {', '.join(map(shown, [*event.serials, *event.rigs]))}")
+    say(f"robot {shown(event.subject)} registered: {', '.join(map(shown, [*event.serials, *event.rigs]))}")
 
 
 @fleet_app.command("assign")
@@ -70,7 +66,7 @@ def assign(
         emit_json(event)
         return
     what = shown(event.serial) if event.rig is None else f"rig {shown(event.rig)}"
-    _say(f"robot {shown(event.subject)} runs {what}@{event.version}")
+    say(f"robot {shown(event.subject)} runs {what}@{event.version}")
 
 
 @fleet_app.command("status")
@@ -85,15 +81,15 @@ def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     for rollout in staged:
         _print_rollout(rollout)
     if not result.robots:
-        _say("no robots registered (calibctl fleet add ROBOT --serial SERIAL)")
+        say("no robots registered (calibctl fleet add ROBOT --serial SERIAL)")
         return
     for r in result.robots:
-        _say(shown(r.robot))
+        say(shown(r.robot))
         for prefix, sensors in (("", r.sensors), ("rig ", r.rigs)):
             for s in sensors:
                 running = "-" if s.running is None else f"@{s.running}"
                 active = "-" if s.active is None else f"@{s.active}"
-                _say(f"  {prefix + shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
+                say(f"  {prefix + shown(s.serial):<20} runs {running:<6} active {active:<6} {s.state}")
 
 
 @fleet_app.command("ingest")
@@ -114,7 +110,7 @@ def ingest(
         emit_json({"stored": sum(r.stored for r in results), "files": [r.as_json() for r in results]})
     else:
         for r in results:
-            _say(f"{shown(r.path)}: " + (f"{r.stored} report(s) stored" if not r.refused else
+            say(f"{shown(r.path)}: " + (f"{r.stored} report(s) stored" if not r.refused else
                                          f"refused, nothing stored ({len(r.refused)} bad line(s))"))
     for r in refused:
         for line, why in r.refused[:MAX_SHOWN_LINES]:
@@ -127,32 +123,32 @@ def ingest(
 
 
 def _print_trends(t: Trends) -> None:
-    _say(f"{shown(t.serial)}: " + ", ".join(f"{n} {k}" for k, n in t.counts.items()))
+    say(f"{shown(t.serial)}: " + ", ".join(f"{n} {k}" for k, n in t.counts.items()))
     s = t.rms_vs_temperature_px_per_c
     if s is not None:
-        _say(f"  RMS vs temperature: {s.slope:+.4f} +- {s.sigma:.4f} px/degC (n {s.n})")
+        say(f"  RMS vs temperature: {s.slope:+.4f} +- {s.sigma:.4f} px/degC (n {s.n})")
     for b in t.rms_by_temperature:
-        _say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px")
+        say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px")
     if t.check_verdicts:
-        _say("  checks: " + ", ".join(f"{n} {v}" for v, n in t.check_verdicts.items()))
+        say("  checks: " + ", ".join(f"{n} {v}" for v, n in t.check_verdicts.items()))
     d = t.td_drift_ppm
     if d is not None:
-        _say(f"  td vs time: {d.slope:+.2f} +- {d.sigma:.2f} ppm over {t.td_span_days:.1f} days (n {d.n})")
+        say(f"  td vs time: {d.slope:+.2f} +- {d.sigma:.2f} ppm over {t.td_span_days:.1f} days (n {d.n})")
     for b in t.td_by_temperature:
-        _say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} td mean {b['mean']:+.3f} ms")
+        say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} td mean {b['mean']:+.3f} ms")
     if t.gauge is not None:
         g = t.gauge
-        _say(f"  gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})")
+        say(f"  gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})")
     if t.triage_verdicts:
-        _say("  triage: " + ", ".join(f"{n} {v}" for v, n in t.triage_verdicts.items()))
+        say("  triage: " + ", ".join(f"{n} {v}" for v, n in t.triage_verdicts.items()))
     f = t.fleet
     if f is not None:
         ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
-        _say(f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+        say(f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
              f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
              f"px, max/min {ratio})")
     for finding in t.findings:
-        _say(f"  ! {finding}")
+        say(f"  ! {finding}")
 
 
 @fleet_app.command("trends")
@@ -189,21 +185,21 @@ def _print_rollout(r: Rollout) -> None:
     from calibctl.workflows.fleet.ledger import ref
 
     closed = f" ({r.closed})" if r.closed else ""
-    _say(f"rollout {shown(r.name)}{closed}: " + ", ".join(shown(ref(t, v)) for t, v in r.targets.items()))
+    say(f"rollout {shown(r.name)}{closed}: " + ", ".join(shown(ref(t, v)) for t, v in r.targets.items()))
     for robot, st in sorted(r.state.items()):
         why = "; ".join([*r.failing.get(robot, []), *(f"no report on {t}" for t in r.waiting.get(robot, []))])
-        _say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}")
+        say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}")
     diffs = r.diffs
     if len(diffs) > MAX_SHOWN_DIFFS:
         verdicts = [d.verdict for d in diffs.values()]
-        _say("  diffs: " + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts))) + " (--json lists each)")
+        say("  diffs: " + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts))) + " (--json lists each)")
         diffs = {}
     for t, d in diffs.items():
         numbers = f", p50 {d.p50_px:.2f} px, max {d.max_px:.2f} px" if d.p50_px is not None and d.max_px is not None \
             else f" ({shown(d.why)})" if d.why else ""
-        _say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
+        say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
     if r.promote is not None:
-        _say(f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event")
+        say(f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event")
 
 
 @rollout_app.command("start")

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.render import emit_json, say
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 KeyOption = Annotated[
@@ -25,10 +25,6 @@ keys_app = typer.Typer(
 )
 
 
-def _say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
-
-
 @keys_app.command("init")
 def init(ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, json_output: JsonFlag = False) -> None:
     """Create an Ed25519 key pair; the private key file gets mode 0600. Records written afterwards are signed."""
@@ -38,8 +34,8 @@ def init(ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, js
     if wants_json(ctx, json_output):
         emit_json(info.as_json())
         return
-    _say(f"created signing key {info.path} (mode 0600), key id {info.key_id}")
-    _say("keep it out of the database and its backups; share the public key: calibctl keys export-public")
+    say(f"created signing key {info.path} (mode 0600), key id {info.key_id}")
+    say("keep it out of the database and its backups; share the public key: calibctl keys export-public")
 
 
 @keys_app.command("export-public")
@@ -59,7 +55,7 @@ def export_public(
     elif out is None:
         print(info.public_pem, end="")
     else:
-        _say(f"wrote {out} (key id {info.key_id})")
+        say(f"wrote {out} (key id {info.key_id})")
 
 
 def register(app: typer.Typer) -> None:

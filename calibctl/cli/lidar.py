@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.render import emit_json, stdout
+from calibctl.cli.render import emit_json, say
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 lidar_app = typer.Typer(
@@ -18,10 +18,6 @@ lidar_app = typer.Typer(
     rich_markup_mode=None,
 )
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
-
-
-def say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
 
 
 def _pair_mm(text: str, option: str) -> tuple[float, float]:

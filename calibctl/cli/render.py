@@ -55,6 +55,11 @@ stdout = _Console(highlight=False)
 stderr = _Console(highlight=False, stderr=True)
 
 
+def say(line: str) -> None:
+    """One result line on stdout, never wrapped or interpreted as markup (it holds URLs and user text)."""
+    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+
+
 def fmt_px(value: float | None, digits: int = 3) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "-"

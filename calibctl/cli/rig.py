@@ -9,8 +9,8 @@ import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
-from calibctl.cli.render import emit_json
-from calibctl.cli.rig_render import print_findings, render_run, say
+from calibctl.cli.render import emit_json, say
+from calibctl.cli.rig_render import print_findings, render_run
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 rig_app = typer.Typer(

@@ -4,11 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from calibctl.cli.render import stdout
-
-
-def say(line: str) -> None:
-    stdout.print(line, soft_wrap=True, markup=False, highlight=False)
+from calibctl.cli.render import say
 
 
 def render_run(doc: dict[str, Any]) -> None:
