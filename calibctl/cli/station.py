@@ -104,7 +104,7 @@ def station(
     if board is None or source_template is None:
         raise UsageError("calibctl station needs --board and --source-template",
                          "e.g. calibctl station --board A17 --source-template /data/shots/{serial}; or a sub-command: "
-                         "calibctl station status | sync")
+                         "calibctl station status | sync | set-aside")
     as_json = wants_json(ctx, json_output)
     request = station_workflow.StationRequest(board, source_template, model, spool)
     station_workflow.check_request(request)
@@ -117,12 +117,13 @@ def station(
 
 
 @contextmanager
-def _spool_of(ctx: typer.Context, spool: Path | None, station_id: str | None) -> Iterator[tuple[Settings, Spool]]:
+def _spool_of(ctx: typer.Context, spool: Path | None, station_id: str | None, *, operator: str | None = None,
+              sign: bool = True) -> Iterator[tuple[Settings, Spool]]:
     """The settings and this station's existing spool (exit 2 when it is missing, another station's or store's)."""
     from calibctl.workflows.station import sync as sync_workflow
 
-    settings = state(ctx).settings(station=station_id)
-    with sync_workflow.open_spool(settings, spool, create=False) as opened:
+    settings = state(ctx).settings(station=station_id, operator=operator)
+    with sync_workflow.open_spool(settings, spool, create=False, sign=sign) as opened:
         yield settings, opened
 
 
@@ -130,20 +131,25 @@ def _spool_of(ctx: typer.Context, spool: Path | None, station_id: str | None) ->
 def status(ctx: typer.Context, spool: SpoolOption = None, station_id: StationOption = None,
            json_output: JsonFlag = False) -> None:
     """What the station's spool holds: the units queued while the store was away (oldest first, each checked
-    against its sha256) and how many were synced. Exit 0; 2 when the spool is missing or another station's."""
+    as the sync checks it: its sha256, and its signature when the station has a signing key), the records set
+    aside and how many were synced. Exit 0; 2 when the spool is missing or another station's."""
     from calibctl.workflows.station.sync import status as spool_status
 
-    with _spool_of(ctx, spool, station_id) as (_, opened):
+    with _spool_of(ctx, spool, station_id, sign=False) as (_, opened):
         found = spool_status(opened)
     if wants_json(ctx, json_output):
         print(json.dumps(found.as_json()), flush=True)
         return
     print(f"spool {found.path} (station {found.station}, store {found.store}): {len(found.queued)} queued, "
-          f"{found.synced} synced")
+          f"{found.synced} synced, {len(found.set_aside)} set aside")
     for q in found.queued:
-        mark = "" if q.intact else "  TAMPERED: does not match its sha256; sync stops here"
+        mark = "" if q.intact else (f"\n    REFUSED: it {q.problem}; the sync stops here (calibctl station set-aside "
+                                    f"{q.seq} --reason TEXT lets the records after it sync)")
         print(f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at[:19]}: {q.verdict}, "
               f"{q.images} image(s){mark}")
+    for a in found.set_aside:
+        print(f"  #{a.seq} {a.serial} session {a.session_id} queued {a.queued_at[:19]}: SET ASIDE "
+              f"{a.set_aside_at[:19]} by {a.operator}: {a.reason} ({a.images} image(s) kept; never synced)")
 
 
 @station_app.command("sync")
@@ -172,3 +178,34 @@ def sync_command(ctx: typer.Context, spool: SpoolOption = None, station_id: Stat
                                done.error.hint)
     if not as_json:
         print(f"{len(done.synced)} unit(s) synced, {done.left} queued", file=sys.stderr, flush=True)
+
+
+@station_app.command("set-aside")
+def set_aside_command(
+    ctx: typer.Context,
+    record: Annotated[int, typer.Argument(help="The spool record's number (#N in calibctl station status).",
+                                          show_default=False)],
+    reason: Annotated[str, typer.Option("--reason", help="Why it is not synced; kept in the spool with the time "
+                                        "and the operator.", show_default=False)],
+    spool: SpoolOption = None,
+    station_id: StationOption = None,
+    operator: OperatorOption = None,
+    json_output: JsonFlag = False,
+) -> None:
+    """Set a queued spool record aside - one the sync refuses (changed, unsigned, an image changed), or a unit
+    scrapped - so the records behind it sync. It stays in the spool with its images, the reason, the time and
+    the operator (listed by calibctl station status), and is never synced: its unit gets no version. Exit 0; 2
+    for an unknown, synced or already set-aside record, no reason, or a sync running."""
+    from calibctl.workflows.station.sync import set_aside
+
+    with _spool_of(ctx, spool, station_id, operator=operator, sign=False) as (settings, opened):
+        done = set_aside(settings, opened, record, reason)
+        path = opened.path
+    if wants_json(ctx, json_output):
+        print(json.dumps(done.as_json()), flush=True)
+        return
+    unit = done.unit
+    print(f"{unit.serial}: spool record {unit.seq} (session {unit.session_id}) set aside by {unit.operator}: "
+          f"{unit.reason}", flush=True)
+    print(f"kept in {path} with its {unit.images} image(s), never synced; {done.queued} record(s) still queued "
+          "(calibctl station sync stores them)", file=sys.stderr, flush=True)

@@ -2,7 +2,8 @@
 
 Each record, oldest first, under the spool's sync lock (one syncer per spool):
 
-1. its sha256 and its images' are checked (a changed record stops the sync there: IntegrityError, exit 1);
+1. its sha256 and its images' are checked, and its signature when the station has a signing key (a changed
+   or, keyed, unsigned record stops the sync there: IntegrityError, exit 1);
 2. its images go into the store (content-addressed: storing one again changes nothing);
 3. its session is added unless the store has it already (the same content; another is IntegrityError);
 4. its calibration is stored as the serial's next version, signed with the station's key when one is
@@ -16,6 +17,10 @@ up to where it stopped. Versions come from the store's counter when the calibrat
 serial calibrated twice offline gets two consecutive versions in queue order, after whatever the store
 held; no version is skipped or reused. The sync stops at the first record it cannot store (store away
 again, a changed record) and leaves it and the ones after it queued.
+
+A record the operator sets aside (``set_aside``: one that the sync refuses, or a unit scrapped) stays in the
+spool with its images, reason, time and operator, and is never synced: the records behind it are, and its
+unit gets no version (the serial's later units take the next ones).
 """
 
 from __future__ import annotations
@@ -25,12 +30,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from calibctl import bounded
 from calibctl.config import Settings
-from calibctl.errors import AlreadyExistsError, CalibctlError, IntegrityError
+from calibctl.errors import AlreadyExistsError, CalibctlError, IntegrityError, UsageError
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, SpoolRecord, default_spool_path, store_identity
 from calibctl.workflows.camera.capture import IMAGE_BATCH
-from calibctl.workflows.store_admin.records import open_store
+from calibctl.workflows.store_admin.keys import read_trust, signer_of
+from calibctl.workflows.store_admin.records import MAX_REASON_CHARS, open_store
 
 
 @dataclass(frozen=True)
@@ -56,10 +63,15 @@ class SyncReport:
     error: CalibctlError | None = None  # what stopped the sync before the queue was empty
 
 
-def open_spool(settings: Settings, path: Path | None, *, create: bool = True) -> Spool:
-    """This station's spool for the configured store (exit 2 for another station's or another store's)."""
+def open_spool(settings: Settings, path: Path | None, *, create: bool = True, sign: bool = True) -> Spool:
+    """This station's spool for the configured store (exit 2 for another station's or another store's). Keyed
+    when the station has a signing key: records queued are signed with it (``sign``: a command that queues
+    nothing needs only the public keys) and records are checked against it and the trusted keys."""
+    keyed = bool(settings.signing_key)
     return Spool.open(path or default_spool_path(settings.station_file, settings.db_url), station=settings.station,
-                      store=store_identity(settings.db_url), create=create)
+                      store=store_identity(settings.db_url), create=create,
+                      signer=signer_of(settings) if keyed and sign else None,
+                      trusted=read_trust(settings) if keyed else None)
 
 
 def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord], None] | None = None) -> SyncReport:
@@ -117,10 +129,33 @@ class QueuedUnit:
     queued_at: str
     verdict: str  # accepted | rejected (the local solve's lint) | capture rejected
     images: int
-    intact: bool  # its sha256 matches (a changed record is synced never)
+    intact: bool  # its sha256 (keyed: its signature) matches; a record that does not is never synced
+    problem: str | None = None  # why the sync refuses it
 
     def as_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class SetAsideUnit:
+    """A record set aside: kept in the spool with its images, never synced."""
+
+    seq: int
+    serial: str
+    session_id: str
+    queued_at: str
+    set_aside_at: str
+    reason: str
+    operator: str
+    images: int
+
+    def as_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+    @classmethod
+    def of(cls, r: SpoolRecord) -> SetAsideUnit:
+        return cls(r.seq, r.serial, r.session_id, r.queued_at, r.set_aside_at or "", r.set_aside_reason or "",
+                   r.set_aside_by or "", len(r.image_shas))
 
 
 @dataclass
@@ -130,21 +165,48 @@ class SpoolStatus:
     store: str
     queued: list[QueuedUnit]
     synced: int
+    set_aside: list[SetAsideUnit] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
         return {"spool": self.path, "station": self.station, "store": self.store, "synced": self.synced,
-                "queued": [q.as_json() for q in self.queued]}
+                "queued": [q.as_json() for q in self.queued], "set_aside": [a.as_json() for a in self.set_aside]}
 
 
 def status(spool: Spool) -> SpoolStatus:
-    """What is queued (oldest first, each checked against its sha256) and how many records were synced."""
+    """What is queued (oldest first, each checked as the sync checks it), the records set aside and how many
+    records were synced."""
     queued = []
     for r in spool.records(pending_only=True):
-        try:
-            spool.opened(r)
-            intact = True
-        except (IntegrityError, ValueError):
-            intact = False
-        queued.append(QueuedUnit(r.seq, r.serial, r.session_id, r.queued_at, r.verdict() if intact else "?",
-                                 len(r.image_shas), intact))
-    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, spool.counts()[1])
+        problem = spool.problem(r)
+        if problem is None:
+            try:
+                spool.opened(r)
+            except IntegrityError as exc:  # content calibctl did not write, under a matching hash
+                problem = exc.message
+        queued.append(QueuedUnit(r.seq, r.serial, r.session_id, r.queued_at, "?" if problem else r.verdict(),
+                                 len(r.image_shas), problem is None, problem))
+    set_aside = [SetAsideUnit.of(r) for r in spool.records(set_aside_only=True)]
+    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, spool.counts()[1], set_aside)
+
+
+@dataclass(frozen=True)
+class SetAside:
+    unit: SetAsideUnit
+    queued: int  # records still queued behind and before it
+
+    def as_json(self) -> dict[str, Any]:
+        return {**self.unit.as_json(), "still_queued": self.queued}
+
+
+def set_aside(settings: Settings, spool: Spool, seq: int, reason: str) -> SetAside:
+    """Set queued record ``seq`` aside (kept, never synced) with ``reason`` and the operator, under the sync
+    lock (refused while a sync runs). Refused (exit 2): no reason, an unknown, synced or set-aside record."""
+    if not reason.strip():
+        raise UsageError("setting a spool record aside needs a reason", "pass --reason 'why it is not synced'")
+    bounded.check_text(reason, "--reason", "the reason")
+    if len(reason) > MAX_REASON_CHARS:
+        raise UsageError(f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
+                         "say why in a sentence or two; put long notes in the ticket the reason names")
+    with spool.sync_lock("set nothing aside"):
+        record = spool.set_aside(seq, reason=reason, operator=settings.operator)
+    return SetAside(SetAsideUnit.of(record), spool.counts()[0])

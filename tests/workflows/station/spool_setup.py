@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.store.repository import Store
+from calibctl.workflows.station.station import PASS, QUEUED, StationRequest, UnitResult, run_station
 from tests.artifacts.factories import measured_board
 from tests.workflows.synth_folders import rendered
 
@@ -38,6 +39,22 @@ def central_store(url: str) -> str:
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     return url
+
+
+def run(settings, shots: Path, serials, spool: Path, board: str = "A17") -> list[UnitResult]:
+    lines: list[UnitResult] = []
+    run_station(settings, StationRequest(board, f"{shots}/{{serial}}", spool=spool), serials, lines.append)
+    return lines
+
+
+def queue_three(settings, shots: Path, spool: Path, central: Path) -> None:
+    """CAM-1 online (v1, the board is remembered), then CAM-1 twice and CAM-2 once with the store away."""
+    assert [r.status for r in run(settings, shots, ["CAM-1"], spool)] == [PASS]
+    with away(central):
+        first = run(settings, shots, ["CAM-1", "CAM-2"], spool)
+        again = run(settings, shots, ["CAM-1"], spool)  # a new station run: the same unit calibrated twice offline
+    assert [(r.serial, r.status, r.verdict, r.spool_record, r.version) for r in first + again] == [
+        ("CAM-1", QUEUED, PASS, 1, None), ("CAM-2", QUEUED, PASS, 2, None), ("CAM-1", QUEUED, PASS, 3, None)]
 
 
 @contextmanager

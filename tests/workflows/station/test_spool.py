@@ -15,7 +15,6 @@ from pathlib import Path
 
 import pytest
 
-from calibctl.config import load_settings
 from calibctl.errors import (
     DatabaseError,
     DatabaseUnreachableError,
@@ -28,49 +27,9 @@ from calibctl.store.repository import Store
 from calibctl.store.spool import Spool
 from calibctl.workflows.camera import solve as solve_workflow
 from calibctl.workflows.station import station as station_module
-from calibctl.workflows.station.station import (
-    ERROR,
-    PASS,
-    QUEUED,
-    SYNCED,
-    StationRequest,
-    UnitResult,
-    run_station,
-)
+from calibctl.workflows.station.station import ERROR, PASS, QUEUED, SYNCED
 from calibctl.workflows.station.sync import open_spool, status, sync
-from tests.workflows.station.spool_setup import away, central_folder, unit_folders
-
-
-@pytest.fixture
-def central(tmp_path: Path) -> Path:
-    return central_folder(tmp_path)
-
-
-@pytest.fixture
-def settings(central: Path):
-    return load_settings(db=f"sqlite:///{central / 'calibctl.db'}", station="line-3", operator="op-ana", env={},
-                         jobs=2)
-
-
-@pytest.fixture
-def shots(tmp_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return unit_folders(tmp_path_factory, tmp_path)
-
-
-def run(settings, shots: Path, serials, spool: Path, board: str = "A17") -> list[UnitResult]:
-    lines: list[UnitResult] = []
-    run_station(settings, StationRequest(board, f"{shots}/{{serial}}", spool=spool), serials, lines.append)
-    return lines
-
-
-def queue_three(settings, shots: Path, spool: Path, central: Path) -> None:
-    """CAM-1 online (v1, the board is remembered), then CAM-1 twice and CAM-2 once with the store away."""
-    assert [r.status for r in run(settings, shots, ["CAM-1"], spool)] == [PASS]
-    with away(central):
-        first = run(settings, shots, ["CAM-1", "CAM-2"], spool)
-        again = run(settings, shots, ["CAM-1"], spool)  # a new station run: the same unit calibrated twice offline
-    assert [(r.serial, r.status, r.verdict, r.spool_record, r.version) for r in first + again] == [
-        ("CAM-1", QUEUED, PASS, 1, None), ("CAM-2", QUEUED, PASS, 2, None), ("CAM-1", QUEUED, PASS, 3, None)]
+from tests.workflows.station.spool_setup import away, queue_three, run
 
 
 def test_units_during_an_outage_are_queued_then_stored_in_order_before_the_next_unit(
