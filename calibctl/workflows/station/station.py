@@ -41,7 +41,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
-from calibctl.errors import CalibctlError, DatabaseUnreachableError, UsageError
+from calibctl.errors import CalibctlError, DatabaseUnreachableError, IntegrityError, UsageError
 from calibctl.store.spool import Spool, default_spool_path
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
@@ -170,19 +170,22 @@ class _Offline:
             with contextlib.suppress(CalibctlError):
                 self.spool().remember_board(board)
 
-    def before_unit(self, report: Callable[[UnitResult], None]) -> str | None:
-        """Sync what is queued; why the next unit must be queued too (None: nothing is left queued)."""
+    def before_unit(self, report: Callable[[UnitResult], None]) -> tuple[str, str] | None:
+        """Sync what is queued; why the next unit must be queued too and the hint its line gives (None: nothing
+        is left queued)."""
         if self._spool is None or self._spool.counts()[0] == 0:
             return None
         try:
             done = sync(self.settings, self._spool)
         except CalibctlError as exc:  # another process holds the sync lock
-            return exc.message
+            return exc.message, _SYNC_HINT
         for unit in done.synced:
             report(_synced_line(unit))
+        if isinstance(done.error, IntegrityError):  # a refused record: the operator sets it aside (its hint)
+            return done.error.message, done.error.hint or _SYNC_HINT
         if done.error is not None:
-            return done.error.message
-        return None if done.left == 0 else f"{done.left} unit(s) are still queued"
+            return done.error.message, _SYNC_HINT
+        return None if done.left == 0 else (f"{done.left} unit(s) are still queued", _SYNC_HINT)
 
     def __enter__(self) -> _Offline:
         return self
@@ -198,7 +201,7 @@ def _rejected(session: CaptureSession) -> str:
 
 
 def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver, offline: _Offline,
-          why_queue: str | None) -> UnitResult:
+          why_queue: tuple[str, str] | None) -> UnitResult:
     source = request.source_template.replace(SERIAL_SLOT, serial)
     if not any(ch in source for ch in "*?[") and not Path(source).exists():
         return UnitResult(serial, ERROR, f"no pictures for {serial}: {source} does not exist",
@@ -214,9 +217,10 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
         try:
             return _online_unit(settings, request, unit, observer, offline)
         except DatabaseUnreachableError as exc:  # before its session was stored: captured again, into the spool
-            why_queue = exc.message
-    queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why_queue)
-    return _queued_line(queued, why_queue)
+            why_queue = exc.message, _SYNC_HINT
+    why, hint = why_queue
+    queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why)
+    return _queued_line(queued, why, hint)
 
 
 def _online_unit(settings: Settings, request: StationRequest, unit: CaptureRequest, observer: CaptureObserver,
@@ -230,18 +234,18 @@ def _online_unit(settings: Settings, request: StationRequest, unit: CaptureReque
         art = solve(settings, SolveRequest(session_id=session.session_id, model=request.model)).artifact
     except DatabaseUnreachableError as exc:  # the session is stored; its calibration is queued
         return _queued_line(queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
-                            exc.message)
+                            exc.message, _SYNC_HINT)
     status = PASS if art.status == "accepted" else FAIL
     return UnitResult(unit.serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
                       version=art.version, rms_px=art.rms_px, views=len(session.views))
 
 
-def _queued_line(queued: Queued, why: str) -> UnitResult:
+def _queued_line(queued: Queued, why: str, hint: str) -> UnitResult:
     session, art = queued.session, queued.artifact
     what = _rejected(session) if art is None else f"calibration {art.status}"
     verdict = PASS if art is not None and art.status == "accepted" else FAIL
     return UnitResult(session.serial, QUEUED, f"{what}; queued as spool record {queued.seq}, its version comes when "
-                      f"the store is back ({why})", _SYNC_HINT, session.session_id, None,
+                      f"the store is back ({why})", hint, session.session_id, None,
                       None if art is None else art.rms_px, len(session.views), verdict=verdict, spool_record=queued.seq)
 
 

@@ -21,7 +21,7 @@ from calibctl.errors import (
 from calibctl.signing import TrustedKeys, create_key
 from calibctl.store.repository import Store
 from calibctl.store.spool import image_file
-from calibctl.workflows.station.station import PASS, SYNCED
+from calibctl.workflows.station.station import PASS, QUEUED, SYNCED
 from calibctl.workflows.station.sync import open_spool, set_aside, status, sync
 from tests.workflows.station.spool_setup import queue_three, run
 
@@ -52,9 +52,13 @@ def test_a_changed_record_set_aside_lets_the_queue_behind_it_sync_in_order_and_i
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)  # records 1 CAM-1, 2 CAM-2, 3 CAM-1 (CAM-1 v1 stored online)
     rewrite_rms(spool, 1, rehash=False)
+    blocked = run(settings, shots, ["CAM-3"], spool)  # the store is up: the station's sync stops at record 1
+    assert [(r.serial, r.status, r.spool_record) for r in blocked] == [("CAM-3", QUEUED, 4)]
+    assert "spool record 1 (CAM-1, session " in blocked[0].message and "does not match its sha256" in blocked[0].message
+    assert "calibctl station set-aside 1 --reason TEXT" in (blocked[0].hint or "")
     with open_spool(settings, spool) as opened:
         refused = sync(settings, opened)
-        assert refused.synced == [] and isinstance(refused.error, IntegrityError) and refused.left == 3
+        assert refused.synced == [] and isinstance(refused.error, IntegrityError) and refused.left == 4
         assert "spool record 1 (CAM-1" in refused.error.message
         assert "calibctl station set-aside 1 --reason TEXT" in (refused.error.hint or "")
         tampered, third = opened.records()[0], opened.records()[2]
@@ -68,22 +72,22 @@ def test_a_changed_record_set_aside_lets_the_queue_behind_it_sync_in_order_and_i
         assert opened.records()[0] == tampered  # nothing changed by the refusals
         done = set_aside(settings, opened, 1, "rms typed in by hand (ticket QA-7)")
     assert (done.unit.seq, done.unit.serial, done.unit.operator, done.unit.reason, done.queued) == (
-        1, "CAM-1", "op-ana", "rms typed in by hand (ticket QA-7)", 2)
-    lines = run(settings, shots, ["CAM-3"], spool)  # the station's own sync before the next unit goes on
+        1, "CAM-1", "op-ana", "rms typed in by hand (ticket QA-7)", 3)
+    lines = run(settings, shots, ["CAM-2"], spool)  # the station's own sync before the next unit goes on
     assert [(r.serial, r.status, r.version, r.spool_record) for r in lines] == [
-        ("CAM-2", SYNCED, 1, 2), ("CAM-1", SYNCED, 2, 3), ("CAM-3", PASS, 1, None)]
+        ("CAM-2", SYNCED, 1, 2), ("CAM-1", SYNCED, 2, 3), ("CAM-3", SYNCED, 1, 4), ("CAM-2", PASS, 2, None)]
     with Store.open(settings.db_url) as store:
         cam1 = store.list_artifacts("CAM-1")
         assert [a.version for a in cam1] == [1, 2]  # the set-aside unit is not a version: none skipped
         assert cam1[1].provenance.session_id == third.session_id
         sessions = {s.session_id for s in store.list_sessions()}
-        assert tampered.session_id not in sessions and len(sessions) == 4  # online, two synced, CAM-3
+        assert tampered.session_id not in sessions and len(sessions) == 5  # two online, three synced
         assert store.verify().problems == []
     with open_spool(settings, spool) as opened:
         again = sync(settings, opened)
         assert again.synced == [] and again.error is None and again.left == 0
         found = status(opened)
-        assert found.queued == [] and found.synced == 2
+        assert found.queued == [] and found.synced == 3
         assert [(a.seq, a.serial, a.operator, a.images) for a in found.set_aside] == [(1, "CAM-1", "op-ana", 12)]
         kept = opened.records()[0]
         assert kept.session_text == tampered.session_text and kept.artifact_text == tampered.artifact_text
@@ -92,8 +96,8 @@ def test_a_changed_record_set_aside_lets_the_queue_behind_it_sync_in_order_and_i
             set_aside(settings, opened, 1, "again")
         with pytest.raises(UsageError, match=r"spool record 2 \(CAM-2, .*\) was synced .* as v1"):
             set_aside(settings, opened, 2, "too late")
-        with pytest.raises(NotFoundError, match="there is no spool record 4"):
-            set_aside(settings, opened, 4, "no such record")
+        with pytest.raises(NotFoundError, match="there is no spool record 5"):
+            set_aside(settings, opened, 5, "no such record")
 
 
 def test_with_the_stations_key_a_record_rewritten_with_its_sha256_is_refused_naming_it(
