@@ -25,6 +25,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
                 "calibctl station status"),
     "station status": ("calibctl station status", "calibctl station status --spool /var/lib/calibctl/spool.sqlite --json"),
     "station sync": ("calibctl station sync", "calibctl --db postgresql://calib@factory-db/calibctl station sync --json"),
+    "station set-aside": ("calibctl station set-aside 3 --reason 'record edited by hand, ticket QA-7'",
+                          "calibctl station set-aside 3 --reason 'unit scrapped' --operator op-ana --json"),
     "prune": ("calibctl prune", "calibctl prune --now 2026-12-01T00:00:00Z --json"),
     "synth": ("calibctl synth ./shots --scenario good --seed 1",
               "calibctl synth ./sweep --scenario video --size 1280x960"),

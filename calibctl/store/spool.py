@@ -11,9 +11,9 @@ opening it as another station, or for another store, is refused. Every record ca
 what it queues (and the spool's station and store), so a record edited, or copied in from another spool,
 is found before it is synced. That hash has no key: whoever can write the file can recompute it. So when
 the station has a signing key, each record also carries the key's Ed25519 signature over its number and
-sha256 (``seal``), checked against the station's trusted keys before the record is synced (keyed); without
-a key the sha256 alone is checked (unkeyed). One process syncs a spool at a time (``sync_lock``, an
-``flock``).
+sha256 (``_seal_message``), checked against the station's trusted keys before the record is synced
+(keyed); without a key the sha256 alone is checked (unkeyed). One process syncs a spool at a time
+(``sync_lock``, an ``flock``).
 
 A record the sync refuses (changed, unsigned, a changed image) can be set aside by the operator
 (``set_aside``): kept in the file with its images, the reason, the time and the operator, never synced, so

@@ -124,3 +124,32 @@ def test_with_the_stations_key_a_record_rewritten_with_its_sha256_is_refused_nam
         assert all(a.signature is not None and a.signature.key_id == signer.key_id
                    for a in store.list_artifacts("CAM-1")[1:])
         assert store.verify(TrustedKeys.load(None, signer)).problems == []
+
+
+FORMAT_1_COLUMNS = ("seq, serial, session_id, queued_at, session, artifact, session_stored, images, record_sha256, "
+                    "synced_at, version")
+
+
+def test_a_spool_queued_by_the_previous_calibctl_is_upgraded_and_synced_in_order(
+        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    spool = tmp_path / "spool.sqlite"
+    queue_three(settings, shots, spool, central)
+    with sqlite3.connect(spool) as conn:  # the file as the format-1 code wrote it: its table, its format
+        conn.executescript(f"""
+            CREATE TABLE units_1 (
+                seq INTEGER PRIMARY KEY AUTOINCREMENT, serial TEXT NOT NULL, session_id TEXT NOT NULL UNIQUE,
+                queued_at TEXT NOT NULL, session TEXT NOT NULL, artifact TEXT, session_stored INTEGER NOT NULL,
+                images TEXT NOT NULL, record_sha256 TEXT NOT NULL, synced_at TEXT, version INTEGER);
+            INSERT INTO units_1 SELECT {FORMAT_1_COLUMNS} FROM units;
+            DROP TABLE units;
+            ALTER TABLE units_1 RENAME TO units;
+            UPDATE meta SET value = 'calibctl-spool-1' WHERE key = 'format';""")
+    conn.close()
+    with open_spool(settings, spool) as opened:
+        assert [q.intact for q in status(opened).queued] == [True, True, True]
+        done = sync(settings, opened)
+    assert [(u.seq, u.serial, u.version) for u in done.synced] == [(1, "CAM-1", 2), (2, "CAM-2", 1), (3, "CAM-1", 3)]
+    assert done.error is None and done.left == 0
+    with sqlite3.connect(spool) as conn:
+        assert conn.execute("SELECT value FROM meta WHERE key = 'format'").fetchone()[0] == "calibctl-spool-2"
+    conn.close()
