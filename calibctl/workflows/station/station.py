@@ -46,6 +46,7 @@ from calibctl.artifacts.board import BoardRevision, parse_board_ref
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
+from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.errors import CalibctlError, DatabaseUnreachableError, UsageError
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
@@ -215,19 +216,23 @@ def _rejected(session: CaptureSession) -> str:
     return f"capture rejected: {reasons}"
 
 
-def _watched(settings: Settings, request: StationRequest, source: str, offline: _Offline) -> Watched:
-    """Watch mode: the unit's pictures, detected as they land, with the board the capture will use."""
+def _watched(settings: Settings, request: StationRequest, source: str, offline: _Offline
+             ) -> tuple[Watched, str | None]:
+    """Watch mode: the unit's pictures, detected as they land, with the board the capture will use; and why
+    the unit goes to the spool (None: the store answered)."""
     assert request.watch is not None
     try:
         name, revision = parse_board_ref(request.board)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+    away = None
     try:
         with Store.open(settings.db_url) as store:
             board = store.get_board(name, revision)
     except DatabaseUnreachableError as exc:  # as the capture into the spool will find it
-        board = SpoolCapture(offline.spool(), offline.boards, exc.message).get_board(name, revision)
-    return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs)
+        away = exc.message
+        board = SpoolCapture(offline.spool(), offline.boards, away).get_board(name, revision)
+    return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs), away
 
 
 def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver, offline: _Offline,
@@ -238,7 +243,8 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
         if Path(source).exists() and not Path(source).is_dir():
             return UnitResult(serial, ERROR, f"{source} is not a folder; --watch watches a folder per unit",
                               "point --source-template at the folder the camera app saves each unit's pictures in")
-        watched = _watched(settings, request, source, offline)
+        watched, away = _watched(settings, request, source, offline)
+        why_queue = why_queue or away  # not a second connect timeout for the capture
     if not any(ch in source for ch in "*?[") and not Path(source).exists():
         return UnitResult(serial, ERROR, f"no pictures for {serial}: {source} does not exist",
                           "put the unit's pictures there (or check the serial), then scan it again")
@@ -252,7 +258,7 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
     detected = None if watched is None else watched.detected
     if why_queue is None:
         try:
-            result = _online_unit(settings, request, unit, observer, offline, watched)
+            result = _online_unit(settings, request, unit, observer, offline, detected)
         except DatabaseUnreachableError as exc:  # before its session was stored: captured again, into the spool
             why_queue = exc.message
     if why_queue is not None:
@@ -263,8 +269,8 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
 
 
 def _online_unit(settings: Settings, request: StationRequest, unit: CaptureRequest, observer: CaptureObserver,
-                 offline: _Offline, watched: Watched | None) -> UnitResult:
-    session = capture(settings, unit, observer, detected=None if watched is None else watched.detected).session
+                 offline: _Offline, detected: EarlyDetections | None) -> UnitResult:
+    session = capture(settings, unit, observer, detected=detected).session
     offline.remember(session.board)
     if session.status != "accepted":
         return UnitResult(unit.serial, FAIL, _rejected(session), session_id=session.session_id,

@@ -27,30 +27,25 @@ from calibctl.workflows.station.station import (
     CANCELLED,
     ERROR,
     PASS,
+    QUEUED,
     StationRequest,
     UnitResult,
     run_station,
 )
 from calibctl.workflows.station.watch import WatchRule, watch_unit
-from tests.artifacts.factories import measured_board
+from tests.workflows.station.spool_setup import away, central_folder, central_store, unit_folders
 from tests.workflows.synth_folders import rendered
 
 
-@pytest.fixture(scope="module")
-def good(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return rendered(tmp_path_factory, "good")
-
-
 @pytest.fixture
-def pictures(good: Path) -> list[Path]:
-    return sorted(good.glob("*.png"))
+def pictures(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """12 rendered views (rendered once per process; never written to)."""
+    return sorted(rendered(tmp_path_factory, "good").glob("*.png"))
 
 
 @pytest.fixture(params=[1, 2], ids=["jobs1", "jobs2"])
 def settings(request: pytest.FixtureRequest, sqlite_url: str):
-    with Store.open(sqlite_url) as store:
-        store.add_board(measured_board("A17", square_mm=25.0))
-    return load_settings(db=sqlite_url, station="line-3", operator="op-ana", env={}, jobs=request.param)
+    return load_settings(db=central_store(sqlite_url), station="line-3", env={}, jobs=request.param)
 
 
 def station(settings, shots: Path, serials: list[str], rule: WatchRule) -> list[UnitResult]:
@@ -249,3 +244,29 @@ def test_a_unit_path_that_is_a_file_is_an_error_line(settings, tmp_path: Path) -
     lines = station(settings, tmp_path, ["CAM-1"], WatchRule(views=3))
     assert [(r.status, r.message) for r in lines] == [
         (ERROR, f"{tmp_path}/CAM-1 is not a folder; --watch watches a folder per unit")]
+
+
+def test_with_the_store_away_a_watched_unit_is_queued_with_its_early_detections(
+        tmp_path: Path, tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    central = central_folder(tmp_path)
+    shots = unit_folders(tmp_path_factory, tmp_path)
+    settings = load_settings(db=f"sqlite:///{central / 'calibctl.db'}", station="line-3", env={}, jobs=1)
+    views = len(list((shots / "CAM-1").glob("*.png")))
+    rule, spool = WatchRule(views=views, settle_s=0.0), tmp_path / "spool.sqlite"
+    lines: list[UnitResult] = []
+    run_station(settings, StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule), ["CAM-1"],
+                lines.append)  # online: the spool remembers the board
+    detected: list[str] = []
+    real_classify = image_outcomes.classify_file
+
+    def counting(path, *args, **kwargs):
+        detected.append(Path(path).name)
+        return real_classify(path, *args, **kwargs)
+
+    monkeypatch.setattr(image_outcomes, "classify_file", counting)
+    with away(central):
+        run_station(settings, StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule), ["CAM-2"],
+                    lines.append)
+    assert [(r.serial, r.status, r.verdict) for r in lines] == [("CAM-1", PASS, None), ("CAM-2", QUEUED, PASS)]
+    assert lines[1].after_last_image_s is not None
+    assert len(detected) == views  # each picture once, as it landed; the capture into the spool reused them
