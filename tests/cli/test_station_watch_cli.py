@@ -36,10 +36,12 @@ def test_watch_lines_give_the_time_after_the_last_picture(db: str, tmp_path: Pat
     (tmp_path / "shots" / "CAM-2" / "DONE").write_text("")
     views = str(len(list(good.glob("*.png"))))
     as_json = invoke(db, "--source-template", f"{tmp_path}/shots/{{serial}}", "--watch", "--views", views,
-                     "--settle-s", "0", "--json", "--jobs", "1", input="CAM-1\n")
+                     "--settle-s", "0", "--json", "--jobs", "1", input="CAM-1\nCAM-1\n")
     assert as_json.exit_code == 0, as_json.output
-    [line] = [json.loads(x) for x in as_json.stdout.splitlines()]
+    line, twice = [json.loads(x) for x in as_json.stdout.splitlines()]
     assert line["status"] == "pass" and line["after_last_image_s"] >= 0
+    assert (twice["status"], twice["after_last_image_s"]) == ("error", None)  # a serial typed twice, as without --watch
+    assert "already calibrated in this run" in twice["message"]
     human = invoke(db, "--source-template", f"{tmp_path}/shots/{{serial}}", "--watch", "--done-file", "DONE",
                    "--jobs", "1", input="CAM-2\n")
     assert human.exit_code == 0, human.output
