@@ -276,8 +276,8 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
     propagates; nothing is returned. The process pool is kept warm for the next call.
     ``known(path)``: a file's ``(outcome, summary)`` detected earlier by ``start_file`` with the same
-    ``spec`` (a station watching its folder, ``core.capture.arrivals``), or None to detect it here; the
-    known ones are reported first.
+    ``spec``, ``settings`` and ``summarize`` (a station watching its folder, ``core.capture.arrivals``), or
+    None to detect it here; the known ones are reported first.
     """
     files = [Path(p) for p in paths]
     total = len(files)
