@@ -13,6 +13,16 @@ are fed one at a time on stdin and each unit is followed by one plain-script run
 ``--baseline DIR`` (the code before a change, ``git archive``d) runs a second station beside the first, fed
 the same serials in turn. Bytecode is cached as for an installed calibctl (``machine.run_env``). Prints a
 markdown table with machine, date and load.
+
+``--watch``: the line as it really runs - the unit's folders start empty, and after each serial a feeder (this
+script) renames the views into the folder one by one, a pause drawn uniformly from ``--pace-s LO,HI`` (seeded)
+before each, as a camera app saves the pictures while the operator moves the board; the station runs with
+``--watch --views N --settle-s 0`` and detects each as it lands (``--settle-s S`` above 0: the pictures are
+written in place, and the station takes one as complete once unchanged for S). Reported beside the plain
+script's detect + solve of the same folder (which can start only once the last picture is there): the
+station's ``after_last_image_s`` (last picture's ctime to verdict out), the same seen from here (last
+picture complete to the line read), ``unit_s``, and the CPU time (user + sys) of the station's process tree
+per unit, polling included, beside the plain script's whole-process CPU.
 """
 
 from __future__ import annotations
@@ -22,6 +32,7 @@ import datetime as dt
 import json
 import os
 import platform
+import random
 import shutil
 import statistics
 import subprocess
@@ -30,7 +41,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_parallel_detect import PLAIN, template_store
+from bench_parallel_detect import PLAIN, children_cpu_s, template_store
 from machine import cpu_model, load_1min, run_env
 
 
@@ -40,7 +51,15 @@ def main() -> None:
     parser.add_argument("--units", type=int, default=6)
     parser.add_argument("--views", type=int, default=20)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
+    parser.add_argument("--watch", action="store_true", help="pictures fed one by one into empty unit folders")
+    parser.add_argument("--pace-s", default="0.1,0.3", help="--watch: the pause before each picture, LO,HI s")
+    parser.add_argument("--settle-s", type=float, default=0.0,
+                        help="--watch: 0 renames each picture into place; above 0 writes it in place, the station "
+                             "judging it complete after this long unchanged")
     args = parser.parse_args()
+    if args.watch:
+        watch(args)
+        return
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -120,6 +139,114 @@ def main() -> None:
         print(f"\ncalibctl station whole run (start-up, {args.units} units, exit, the plain runs between units "
               f"included): {station_wall:.2f} s; verdicts: {', '.join(sorted(statuses))}; 1-minute load average "
               f"{min(loads):.2f}-{max(loads):.2f} at the units' starts, {load_1min():.2f} at the end")
+
+
+def tree_cpu_s(root: int) -> float:
+    """User + sys CPU seconds of ``root`` and every process below it (the fork server, the detection workers),
+    with the children they reaped."""
+    stats: dict[int, tuple[int, float]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            stats[int(entry.name)] = (int(fields[1]), sum(float(f) for f in fields[11:15]))
+    below, total = {root}, 0.0
+    for _ in range(8):  # the tree is three deep
+        below |= {pid for pid, (ppid, _) in stats.items() if ppid in below}
+    for pid in below:
+        total += stats.get(pid, (0, 0.0))[1]
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+def feed(folder: Path, views: list[Path], pace: tuple[float, float], rng: random.Random, in_place: bool) -> float:
+    """A camera app saving the unit's pictures: each written under a temporary name and renamed into place
+    (or, ``in_place``, written under its own name); returns the perf_counter time the last one was complete."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for p in views:
+        time.sleep(rng.uniform(*pace))
+        shutil.copyfile(p, folder / (p.name if in_place else f"{p.name}.part"))
+        if not in_place:
+            os.replace(folder / f"{p.name}.part", folder / p.name)
+    return time.perf_counter()
+
+
+def summary_row(name: str, values: list[float]) -> str:
+    return f"| {name} | {statistics.median(values):.3f} | {min(values):.3f} | {max(values):.3f} |"
+
+
+def watch(args: argparse.Namespace) -> None:
+    """The --watch run (see the module docstring)."""
+    py = sys.executable
+    lo, hi = (float(x) for x in args.pace_s.split(","))
+    rng = random.Random(24)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        views = sorted(args.rendered.glob("*.png"))[:args.views]
+        serials = [f"UNIT-{i:03d}" for i in range(args.units + 1)]  # the first one warms the bytecode cache
+        (work / "plain.py").write_text(PLAIN)
+        db = template_store(work)
+        load = os.getloadavg()
+        how = f"written in place (--settle-s {args.settle_s:g})" if args.settle_s > 0 else "renamed"
+        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+              f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
+              f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views, each picture "
+              f"{how} into the "
+              f"unit's folder after a pause of {lo:g}-{hi:g} s (uniform, seeded)\n")
+        env = run_env(work / "pycache")
+        command = [py, "-m", "calibctl", "--db", f"sqlite:///{work / 'station.db'}", "station", "--board", "BENCH",
+                   "--source-template", f"{work / 'shots'}/{{serial}}", "--json", "--spool",
+                   str(work / "spool.sqlite"), "--watch", "--views", str(len(views)), "--settle-s", str(args.settle_s)]
+        shutil.copyfile(db, work / "station.db")
+        proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, cwd=work, env=env)
+        assert proc.stdin is not None and proc.stdout is not None
+        rows: dict[str, list[float]] = {k: [] for k in ("after", "seen", "unit", "cpu", "plain", "plain_wall",
+                                                        "plain_cpu")}
+        loads, statuses = [], set()
+        for n, serial in enumerate(serials):
+            loads.append(load_1min())
+            cpu = tree_cpu_s(proc.pid)
+            proc.stdin.write(serial + "\n")
+            proc.stdin.flush()
+            last_in = feed(work / "shots" / serial, views, (lo, hi), rng, args.settle_s > 0)
+            line = proc.stdout.readline()
+            seen = time.perf_counter() - last_in
+            if not line.startswith("{"):
+                raise SystemExit(f"the station stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}")
+            unit = json.loads(line)
+            statuses.add(unit["status"])
+            cpu = tree_cpu_s(proc.pid) - cpu
+            t, c = time.perf_counter(), children_cpu_s()
+            out = subprocess.run([py, str(work / "plain.py"), str(work / "shots" / serial), "1", "solve"],
+                                 capture_output=True, text=True, check=True, env=env).stdout
+            if n == 0:
+                continue
+            rows["plain_wall"].append(time.perf_counter() - t)
+            rows["plain_cpu"].append(children_cpu_s() - c)
+            rows["plain"].append(float(out.split()[-1]))
+            for key, value in (("after", unit["after_last_image_s"]), ("seen", seen), ("unit", unit["unit_s"]),
+                               ("cpu", cpu)):
+                rows[key].append(value)
+        proc.communicate("")
+        if proc.returncode != 0:
+            raise SystemExit(f"the station exited {proc.returncode}")
+        print("| per unit (units 2..; the first warmed the caches) | median s | min s | max s |\n|---|---|---|---|")
+        print(summary_row("station --watch: after_last_image_s (last picture's ctime to verdict out)", rows["after"]))
+        print(summary_row("station --watch: last picture complete (renamed or written) to the verdict line read here", rows["seen"]))
+        print(summary_row("plain script, detect + solve after its imports (starts after the last picture)",
+                          rows["plain"]))
+        print(summary_row("plain script, whole process", rows["plain_wall"]))
+        print(summary_row("station --watch: unit_s (serial to verdict, the feed included)", rows["unit"]))
+        print(summary_row("station --watch: CPU s (user+sys, its process tree, polling included)", rows["cpu"]))
+        print(summary_row("plain script: CPU s (user+sys, whole process)", rows["plain_cpu"]))
+        ratio = statistics.median(rows["after"]) / statistics.median(rows["plain"])
+        paired = statistics.median(a / p for a, p in zip(rows["after"], rows["plain"], strict=True))
+        print(f"\nafter_last_image_s / plain detect + solve: {ratio:.2f} (medians), {paired:.2f} (median of the "
+              f"units' own ratios, each unit beside the plain run that followed it); verdicts: "
+              f"{', '.join(sorted(statuses))}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
+              f"starts, {load_1min():.2f} at the end")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from calibctl.config import Settings
     from calibctl.store.spool import Spool
     from calibctl.workflows.station.station import UnitResult
+    from calibctl.workflows.station.watch import WatchRule
 
 
 station_app = typer.Typer(
@@ -61,7 +62,9 @@ def _say(result: UnitResult, as_json: bool) -> None:
         print(json.dumps(result.as_json()), flush=True)
         return
     numbers = "" if result.rms_px is None else f", RMS {result.rms_px:.3f} px, {result.views} views"
-    print(f"{result.serial}: {result.status.upper()} - {result.message}{numbers} ({result.unit_s:.2f} s)", flush=True)
+    after = "" if result.after_last_image_s is None else f", {result.after_last_image_s:.2f} s after the last picture"
+    print(f"{result.serial}: {result.status.upper()} - {result.message}{numbers} ({result.unit_s:.2f} s{after})",
+          flush=True)
     if result.hint and result.status not in ("pass",):
         print(f"  hint: {result.hint}", flush=True)
 
@@ -85,13 +88,30 @@ def station(
     json_output: Annotated[bool, typer.Option("--json", help="One JSON object per unit on stdout (for a line "
                                               "controller).")] = False,
     spool: SpoolOption = None,
+    watch: Annotated[bool, typer.Option(
+        "--watch", help="After each serial, wait for the unit's pictures in its folder and detect each as it lands "
+        "(needs --views and/or --done-file).")] = False,
+    views: Annotated[int | None, typer.Option(
+        "--views", show_default=False, help="--watch: the unit is complete with this many pictures.")] = None,
+    done_file: Annotated[str | None, typer.Option(
+        "--done-file", show_default=False, help="--watch: the unit is complete when the camera app writes this file "
+        "into its folder (after the last picture).")] = None,
+    settle_s: Annotated[float, typer.Option(
+        "--settle-s", help="--watch: a picture is complete when its size has not changed for this long; 0 when the "
+        "camera app renames each picture into place.")] = 0.25,
+    unit_timeout_s: Annotated[float, typer.Option(
+        "--unit-timeout-s", help="--watch: a unit with no new picture for this long is an error line; nothing "
+        "stored.")] = 120.0,
 ) -> None:
     """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial}, solve, store, print the
     verdict, wait for the next.
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
     "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are detected it
-    cancels that unit (nothing stored) and the station waits for the next serial. With the store unreachable each
+    cancels that unit (nothing stored) and the station waits for the next serial. With --watch the station waits,
+    after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands (complete: renamed into
+    place, or its size unchanged for --settle-s); the unit is captured when --views pictures are there or the
+    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With the store unreachable each
     unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
     "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
     serials file unreadable, another station's or store's spool).
@@ -106,7 +126,8 @@ def station(
                          "e.g. calibctl station --board A17 --source-template /data/shots/{serial}; or a sub-command: "
                          "calibctl station status | sync | set-aside")
     as_json = wants_json(ctx, json_output)
-    request = station_workflow.StationRequest(board, source_template, model, spool)
+    watching = _watch_rule(watch, views, done_file, settle_s, unit_timeout_s)
+    request = station_workflow.StationRequest(board, source_template, model, spool, watching)
     station_workflow.check_request(request)
     lines = _file_serials(serials) if serials is not None else _stdin_serials(sys.stdin.isatty() and not as_json)
     settings = state(ctx).settings(station=station_id, operator=operator, jobs=jobs)
@@ -114,6 +135,19 @@ def station(
     summary = station_workflow.run_station(settings, request, lines, lambda r: _say(r, as_json))
     if summary.interrupted:
         print(f"station stopped (Ctrl-C) after {len(summary.units)} unit(s)", file=sys.stderr, flush=True)
+
+
+def _watch_rule(watch: bool, views: int | None, done_file: str | None, settle_s: float,
+                unit_timeout_s: float) -> WatchRule | None:
+    from calibctl.errors import UsageError
+    from calibctl.workflows.station.watch import WatchRule
+
+    if watch:
+        return WatchRule(views, done_file, settle_s, unit_timeout_s)
+    if views is not None or done_file is not None:
+        raise UsageError("--views and --done-file say when a watched unit is complete; they need --watch",
+                         "add --watch, or leave them out to capture each unit's folder as it is when the serial is read")
+    return None
 
 
 @contextmanager

@@ -57,6 +57,7 @@ ProgressCallback = Callable[[int, int, "ImageOutcome"], None]
 DecodedCallback = Callable[[np.ndarray], None]
 Summarize = Callable[[np.ndarray], object]  # applied to a decoded image in the worker; picklable
 SummaryCallback = Callable[[object], None]
+KnownCallback = Callable[[Path], "tuple[ImageOutcome, object] | None"]  # an outcome detected earlier, or None
 
 
 @dataclass(frozen=True)
@@ -261,7 +262,7 @@ def choose_executor(executor: str, workers: int, total: int) -> str:
 def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
                    workers: int | None = None, progress: ProgressCallback | None = None,
                    executor: str = DEFAULT_EXECUTOR, summarize: Summarize | None = None,
-                   on_summary: SummaryCallback | None = None) -> list[ImageOutcome]:
+                   on_summary: SummaryCallback | None = None, known: KnownCallback | None = None) -> list[ImageOutcome]:
     """Per-file outcomes (no session rules) in the order of ``paths``, detected on ``workers`` workers.
 
     ``workers``: default the cores this process may run on (``worker_pool.available_cores``). The
@@ -274,28 +275,50 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
     KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
     propagates; nothing is returned. The process pool is kept warm for the next call.
+    ``known(path)``: a file's ``(outcome, summary)`` detected earlier by ``start_file`` with the same
+    ``spec``, ``settings`` and ``summarize`` (a station watching its folder, ``core.capture.arrivals``), or
+    None to detect it here; the known ones are reported first.
     """
     files = [Path(p) for p in paths]
     total = len(files)
     results: list[ImageOutcome | None] = [None] * total
-    workers = max(1, min(workers or worker_pool.available_cores(), total))
-    kind = choose_executor(executor, workers, total)
+    counted = 0
 
     def finished(i: int, outcome: ImageOutcome, summary: object, done: int) -> None:
         results[i] = outcome
         if on_summary is not None and summary is not None:
             on_summary(summary)
         if progress:
-            progress(done, total, outcome)
+            progress(counted + done, total, outcome)
 
+    todo = list(range(total))
+    if known is not None:
+        early = {i: known(files[i]) for i in todo}
+        for i, found in early.items():
+            if found is not None:
+                counted += 1
+                finished(i, *found, 0)
+        todo = [i for i in todo if early[i] is None]
+    _detect(files, todo, spec, settings, workers, executor, summarize, finished)
+    return [r for r in results if r is not None]
+
+
+def _detect(files: list[Path], todo: list[int], spec: BoardSpec, settings: DetectorSettings | None,
+            workers: int | None, executor: str, summarize: Summarize | None,
+            finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
+    """``classify_files``' detection of the files numbered ``todo``."""
+    if not todo:
+        return
+    workers = max(1, min(workers or worker_pool.available_cores(), len(todo)))
+    kind = choose_executor(executor, workers, len(todo))
     with single_threaded_opencv():
         if workers == 1:
-            for i, path in enumerate(files):
-                finished(i, *_classify_task(path, spec, settings, summarize), i + 1)
+            for done, i in enumerate(todo, start=1):
+                finished(i, *_classify_task(files[i], spec, settings, summarize), done)
         elif kind == "thread":
             pool = ThreadPoolExecutor(max_workers=workers)
             try:
-                _collect(pool, files, spec, settings, summarize, finished)
+                _collect(pool, files, todo, spec, settings, summarize, finished)
             except BaseException:
                 # Ctrl-C (or a failure): drop the queued files at once; only the images being detected
                 # right now (one per worker) run to their end.
@@ -303,18 +326,31 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
                 raise
             pool.shutdown(wait=True)
         else:
-            _collect(worker_pool.process_pool(workers), files, spec, settings, summarize, finished)
-    return [r for r in results if r is not None]
+            _collect(worker_pool.process_pool(workers), files, todo, spec, settings, summarize, finished)
 
 
-def _collect(pool: Executor, paths: list[Path], spec: BoardSpec, settings: DetectorSettings | None,
+def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSettings | None = None,
+               summarize: Summarize | None = None) -> Future[tuple[ImageOutcome, object]]:
+    """One file's ``classify_files`` task, started now: on the warm process pool when ``workers`` > 1, else
+    run in this thread before returning (single-threaded OpenCV either way, so the outcome is the one
+    ``classify_files`` gives the file at any job count)."""
+    if workers > 1:
+        with worker_pool.shielded():
+            return worker_pool.process_pool(workers).submit(_classify_task, path, spec, settings, summarize)
+    future: Future[tuple[ImageOutcome, object]] = Future()
+    with single_threaded_opencv():
+        future.set_result(_classify_task(path, spec, settings, summarize))
+    return future
+
+
+def _collect(pool: Executor, paths: list[Path], todo: list[int], spec: BoardSpec, settings: DetectorSettings | None,
              summarize: Summarize | None, finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
     futures: dict[Future[tuple[ImageOutcome, object]], int] = {}
     try:
         # a process pool launches its workers inside submit: never interrupted half-way (worker_pool.shielded)
         with worker_pool.shielded() if isinstance(pool, ProcessPoolExecutor) else contextlib.nullcontext():
-            for i, path in enumerate(paths):
-                futures[pool.submit(_classify_task, path, spec, settings, summarize)] = i
+            for i in todo:
+                futures[pool.submit(_classify_task, paths[i], spec, settings, summarize)] = i
         for done, future in enumerate(as_completed(futures), start=1):
             finished(futures[future], *future.result(), done)
     except BaseException:

@@ -48,6 +48,7 @@ from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture import image_outcomes as outcomes_core
+from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.core.capture.camera_split import one_camera_gate
 from calibctl.core.capture.detect import FOUND_INCONSISTENT
 from calibctl.core.capture.frame_select import (
@@ -221,12 +222,15 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
 
 
 def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None, *,
-            store_session: bool = True, into: CaptureStore | None = None) -> CaptureResult:
+            store_session: bool = True, into: CaptureStore | None = None,
+            detected: EarlyDetections | None = None) -> CaptureResult:
     """Run one capture and store its session (see the module docstring). Raises CalibctlError (exit 2)
     when it cannot run; a session that fails the gates is stored as rejected and returned.
     ``store_session=False``: the session is built and returned but not stored (a rig capture stores its
     members' sessions together with the rig session, in one transaction); its images are stored.
-    ``into``: board, images and session go there instead of the configured store."""
+    ``into``: board, images and session go there instead of the configured store.
+    ``detected``: a folder's images detected as they landed (the station's watch mode); each one still as it
+    was then, with the same board, is not detected again (``classify_files(known=...)``)."""
     observer = observer or CaptureObserver()
     board_name, revision = _check_request(request)
     source = sources.resolve_source(request.source)
@@ -239,7 +243,8 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
         if source.kind in sources.IMAGE_SETS:
-            got = _capture_images(store, settings, spec, board, source, request.jobs or settings.jobs, observer)
+            got = _capture_images(store, settings, spec, board, source, request.jobs or settings.jobs, observer,
+                                  None if detected is None else detected.for_spec(spec, sized_half))
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
         session = _build_session(settings, request, board, spec, source, got, started)
@@ -294,7 +299,8 @@ class _MaxPicture:
 
 
 def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
-                    source: sources.SourceSpec, workers: int, observer: CaptureObserver) -> _Collected:
+                    source: sources.SourceSpec, workers: int, observer: CaptureObserver,
+                    known: outcomes_core.KnownCallback | None = None) -> _Collected:
     where = source.label
     with file_errors(f"read the source {source.kind}", where):
         images = sources.select_images(source)
@@ -303,7 +309,7 @@ def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
     with sources.quiet_opencv():  # a truncated file is reported as an outcome, not as a decoder warning
         found = outcomes_core.classify_files(images.paths, spec, workers=workers, progress=lambda done, total, o:
                                              observer.image_done(done, total, o.name, o.status),
-                                             summarize=sized_half, on_summary=picture.add)
+                                             summarize=sized_half, on_summary=picture.add, known=known)
     found = [replace(o, name=name) for o, name in zip(found, images.names, strict=True)]
     mixed = sources.mixed_sizes_error(source, {o.name: o.image_size for o in found if o.image_size is not None})
     if mixed is not None:

@@ -17,6 +17,7 @@ from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
+from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.errors import NotFoundError
 from calibctl.store.spool import Spool
 from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
@@ -62,10 +63,11 @@ class SpoolCapture:
 
 
 def queue_unit(settings: Settings, spool: Spool, boards: dict[str, BoardRevision], request: CaptureRequest,
-               model: str, observer: CaptureObserver, why: str) -> Queued:
-    """Capture, gate and solve one unit into the spool (``why``: what made the station go offline)."""
+               model: str, observer: CaptureObserver, why: str, detected: EarlyDetections | None = None) -> Queued:
+    """Capture, gate and solve one unit into the spool (``why``: what made the station go offline;
+    ``detected``: its pictures detected as they landed, watch mode)."""
     sink = SpoolCapture(spool, boards, why)
-    captured = capture(settings, request, observer, into=sink)
+    captured = capture(settings, request, observer, into=sink, detected=detected)
     return queue_solved(settings, spool, captured.session, model, session_stored=False,
                         passed=captured.passed)
 

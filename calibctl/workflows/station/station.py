@@ -16,8 +16,13 @@ Before each unit the station syncs what is queued (``workflows.station.sync``, o
 record stored, with its version); while anything stays queued, new units queue behind it, so a
 serial's versions keep the order its units were calibrated in.
 
+Watch mode (``StationRequest.watch``, ``workflows.station.watch``): after the serial the station waits for
+the unit's pictures in its folder and detects each as it lands; once the unit is complete the capture runs
+with those outcomes. The line adds ``after_last_image_s``, from the last picture landing to the verdict.
+
 Ctrl-C (SIGINT):
   * while waiting for a serial: the station ends cleanly (``StationSummary.interrupted``; exit 0);
+  * while waiting for a unit's pictures (watch mode): that unit is cancelled, as below;
   * while a unit's images are being detected (or the spool synced before it): that unit is cancelled -
     nothing of it is stored, its line says "cancelled" - and the station waits for the next serial;
   * once detection is over the unit's images, session and calibration are written and solved (a
@@ -32,23 +37,27 @@ import re
 import signal
 import time
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from calibctl.artifacts.board import BoardRevision
+from calibctl.artifacts.board import BoardRevision, parse_board_ref
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
+from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.errors import CalibctlError, DatabaseUnreachableError, IntegrityError, UsageError
+from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
+from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
 from calibctl.workflows.camera.distance_gauge import gauge_model
 from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve
-from calibctl.workflows.station.offline import Queued, queue_solved, queue_unit
+from calibctl.workflows.station.offline import Queued, SpoolCapture, queue_solved, queue_unit
 from calibctl.workflows.station.sync import SyncedUnit, open_spool, sync
+from calibctl.workflows.station.watch import Watched, WatchRule, check_rule, watch_unit
 
 PASS, FAIL, ERROR, CANCELLED, QUEUED, SYNCED = "pass", "fail", "error", "cancelled", "queued", "synced"
 SERIAL_SLOT = "{serial}"
@@ -61,11 +70,13 @@ class StationRequest:
     source_template: str  # DIR/{serial}: the folder (or glob, list file) a unit's pictures arrive in
     model: str = "k1k2"
     spool: Path | None = None  # None: store.spool.default_spool_path
+    watch: WatchRule | None = None  # watch mode: wait for each unit's pictures, detect them as they land
 
 
 @dataclass(frozen=True)
 class UnitResult:
-    """One unit's line. ``unit_s``: serial read to verdict out, seconds."""
+    """One unit's line. ``unit_s``: serial read to verdict out, seconds; ``after_last_image_s`` (watch mode): the
+    unit's last picture landing in its folder (its ctime) to verdict out, seconds."""
 
     serial: str
     status: str  # pass | fail | error | cancelled | queued (in the spool) | synced (a queued one stored)
@@ -78,12 +89,15 @@ class UnitResult:
     unit_s: float = 0.0
     verdict: str | None = None  # queued / synced: pass or fail, as the unit's own line would have said
     spool_record: int | None = None  # queued / synced: the record number, the order of the sync
+    after_last_image_s: float | None = None
+    last_image_at: float | None = field(default=None, repr=False)  # epoch s; after_last_image_s is measured from it
 
     def as_json(self) -> dict[str, Any]:
         return {"serial": self.serial, "status": self.status, "message": self.message, "hint": self.hint,
                 "session_id": self.session_id, "version": self.version, "rms_px": self.rms_px,
                 "views": self.views, "unit_s": round(self.unit_s, 4), "verdict": self.verdict,
-                "spool_record": self.spool_record}
+                "spool_record": self.spool_record,
+                "after_last_image_s": None if self.after_last_image_s is None else round(self.after_last_image_s, 4)}
 
 
 @dataclass
@@ -99,6 +113,11 @@ def check_request(request: StationRequest) -> None:
                          "name the folder each unit's pictures arrive in, e.g. /data/shots/{serial}")
     if request.model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    if request.watch is not None:
+        check_rule(request.watch)
+        if any(ch in request.source_template for ch in "*?["):
+            raise UsageError(f"--watch watches a folder per unit; --source-template '{request.source_template}' "
+                             "is a glob", "give the folder the camera app saves each unit's pictures in: DIR/{serial}")
 
 
 def warm_up(settings: Settings) -> None:
@@ -200,9 +219,36 @@ def _rejected(session: CaptureSession) -> str:
     return f"capture rejected: {reasons}"
 
 
+def _watched(settings: Settings, request: StationRequest, source: str, offline: _Offline
+             ) -> tuple[Watched, str | None]:
+    """Watch mode: the unit's pictures, detected as they land, with the board the capture will use; and why
+    the unit goes to the spool (None: the store answered)."""
+    assert request.watch is not None
+    try:
+        name, revision = parse_board_ref(request.board)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+    away = None
+    try:
+        with Store.open(settings.db_url) as store:
+            board = store.get_board(name, revision)
+    except DatabaseUnreachableError as exc:  # as the capture into the spool will find it
+        away = exc.message
+        board = SpoolCapture(offline.spool(), offline.boards, away).get_board(name, revision)
+    return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs), away
+
+
 def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver, offline: _Offline,
           why_queue: tuple[str, str] | None) -> UnitResult:
     source = request.source_template.replace(SERIAL_SLOT, serial)
+    watched = None
+    if request.watch is not None:
+        if Path(source).exists() and not Path(source).is_dir():
+            return UnitResult(serial, ERROR, f"{source} is not a folder; --watch watches a folder per unit",
+                              "point --source-template at the folder the camera app saves each unit's pictures in")
+        watched, away = _watched(settings, request, source, offline)
+        if why_queue is None and away is not None:  # not a second connect timeout for the capture
+            why_queue = away, _SYNC_HINT
     if not any(ch in source for ch in "*?[") and not Path(source).exists():
         return UnitResult(serial, ERROR, f"no pictures for {serial}: {source} does not exist",
                           "put the unit's pictures there (or check the serial), then scan it again")
@@ -213,19 +259,22 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: Ca
     # as `calibctl calibrate`: the gates judge through the lens model the session will be solved with
     unit = CaptureRequest(serial, request.board, source, jobs=settings.jobs, gauge_model=gauge_model(request.model),
                           lens_model=None if request.model == "auto" else request.model)
+    detected = None if watched is None else watched.detected
     if why_queue is None:
         try:
-            return _online_unit(settings, request, unit, observer, offline)
+            result = _online_unit(settings, request, unit, observer, offline, detected)
         except DatabaseUnreachableError as exc:  # before its session was stored: captured again, into the spool
             why_queue = exc.message, _SYNC_HINT
-    why, hint = why_queue
-    queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why)
-    return _queued_line(queued, why, hint)
+    if why_queue is not None:
+        why, hint = why_queue
+        queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why, detected)
+        result = _queued_line(queued, why, hint)
+    return result if watched is None else replace(result, last_image_at=watched.last_in_s)
 
 
 def _online_unit(settings: Settings, request: StationRequest, unit: CaptureRequest, observer: CaptureObserver,
-                 offline: _Offline) -> UnitResult:
-    session = capture(settings, unit, observer).session
+                 offline: _Offline, detected: EarlyDetections | None) -> UnitResult:
+    session = capture(settings, unit, observer, detected=detected).session
     offline.remember(session.board)
     if session.status != "accepted":
         return UnitResult(unit.serial, FAIL, _rejected(session), session_id=session.session_id,
@@ -295,13 +344,15 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
                     why_queue = offline.before_unit(lambda synced: _keep(summary, report, synced))
                     result = _unit(settings, request, serial, _UnitObserver(interrupts, observer()), offline, why_queue)
                 except KeyboardInterrupt:
-                    result = UnitResult(serial, CANCELLED, "cancelled (Ctrl-C) while its images were detected; "
+                    during = "awaited or detected" if request.watch is not None else "detected"
+                    result = UnitResult(serial, CANCELLED, f"cancelled (Ctrl-C) while its images were {during}; "
                                         "nothing was stored", "scan the serial again to calibrate it")
                 except CalibctlError as exc:
                     result = UnitResult(serial, ERROR, exc.message, exc.hint)
                 if result.status in (PASS, FAIL, QUEUED):
                     seen[serial] = units
-            result = UnitResult(**{**result.__dict__, "unit_s": time.perf_counter() - start})
+            after = None if result.last_image_at is None else time.time() - result.last_image_at
+            result = replace(result, unit_s=time.perf_counter() - start, after_last_image_s=after)
             summary.units.append(result)
             report(result)
             if interrupts.pending:
