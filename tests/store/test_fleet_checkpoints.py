@@ -22,7 +22,7 @@ from calibctl.artifacts.common import sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.cli.main import app
 from calibctl.config import load_settings
-from calibctl.errors import NotFoundError
+from calibctl.errors import IntegrityError, NotFoundError
 from calibctl.store import fleet_checkpoints
 from calibctl.store.fleet_ledger import Fleet, replay, to_state
 from calibctl.store.models import FleetCheckpointRow
@@ -32,6 +32,7 @@ from calibctl.workflows.fleet.robots import robot_states
 from tests.artifacts.factories import calibration
 from tests.store.documents import FIXED_TIME
 from tests.store.rig_documents import rig_calibration, rig_definition
+from tests.store.tamper import patch_stored_bytes
 
 CARRIES = {"amr-1": (["CAM-0001"], ["STEREO-1"]), "amr-2": (["CAM-0002"], []), "amr-3": (["CAM-0003"], ["STEREO-1"])}
 VERSIONS = {"serial": 3, "rig": 2}  # accepted versions of each serial and of the rig
@@ -255,3 +256,24 @@ def test_checkpoints_are_written_by_the_fleet_writer_only(checkpointed: str, mon
         assert _positions(store) == kept and len(store.fleet_events()) == length
         store.append_fleet_events([_event("assign", robot="amr-2", serial="CAM-0002", version=2)])
         assert _positions(store) == [*kept[1:], length + 1]
+
+
+def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(db_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Reads no longer decode the events before the checkpoint (that is the point); `db verify` still walks and
+    decodes them all, names the changed event, and says it could not re-derive the checkpoints after it."""
+    monkeypatch.setattr(fleet_checkpoints, "EVERY", 1)
+    _fill(db_url)
+    with Store.open(db_url) as store:
+        store.append_fleet_events([FleetEvent(kind="assign", robot="amr-2", serial="CAM-0002", version=1,
+                                              at=FIXED_TIME, actor="qa", station="st1", reason="old reason")])
+        store.append_fleet_events([_event("assign", robot="amr-2", serial="CAM-0002", version=2)])
+        assert _positions(store) == [3, 4, 5]
+    patch_stored_bytes(db_url, "fleet_events", '"reason":"old reason"', '"reason":"odd reason"')
+    with Store.open(db_url) as store:
+        loaded = store.fleet()
+        assert loaded.since == 5 and loaded.fleet.running[("amr-2", ("serial", "CAM-0002"))] == 2
+        with pytest.raises(IntegrityError, match=r"fleet event 4 \(amr-2, assign\) does not match"):
+            store.fleet_events()
+        problems = store.verify().problems
+    assert any(p.startswith("fleet event 4 (amr-2, assign)") for p in problems)
+    assert "fleet checkpoint(s) at event(s) 4, 5 not checked: the log before them does not decode" in problems
