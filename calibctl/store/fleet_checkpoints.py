@@ -70,7 +70,7 @@ def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool) -> Fleet | s
         else:
             rows = s.scalars(select(FleetEventRow).where(FleetEventRow.id.in_(positions))).all() if positions else []
             fleet = from_state(state, {r.id: decode_fleet_event(r) for r in rows})
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, RecursionError) as exc:  # RecursionError: JSON nested too deep
         return f"{at} does not hold a fleet state ({type(exc).__name__}: {str(exc)[:200]})"
     if fleet.length != row.position:
         return f"{at} holds the state of event {fleet.length}"
@@ -142,7 +142,7 @@ def _compare(row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet) -> lis
         return [f"{at} was changed after it was written (its state no longer matches its sha256; reads ignore it)"]
     try:
         same = json.loads(row.state) == to_state(fleet)
-    except ValueError:
+    except (ValueError, RecursionError):
         same = False
-    return [] if same else [f"{at} is not the log replayed up to event {row.position} (reads would use it: "
-                            "delete it, or restore the store)"]
+    return [] if same else [f"{at} is not the log replayed up to event {row.position} (derived data: delete "
+                            "the row, or restore the store)"]

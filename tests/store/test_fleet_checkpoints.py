@@ -209,8 +209,8 @@ def test_a_forged_checkpoint_is_used_by_reads_but_named_by_db_verify(checkpointe
         assert store.fleet().since == newest
     result = CliRunner().invoke(app, ["--db", checkpointed, "db", "verify"])
     assert result.exit_code == 1
-    assert (f"PROBLEM fleet checkpoint at event {newest} is not the log replayed up to event {newest} (reads would "
-            "use it:") in result.stdout
+    assert (f"PROBLEM fleet checkpoint at event {newest} is not the log replayed up to event {newest} (derived "
+            "data: delete the row, or restore the store)") in result.stdout
     assert "1 problem(s) in the stored history" in result.stderr
 
 
@@ -277,3 +277,17 @@ def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(db_url: str
         problems = store.verify().problems
     assert any(p.startswith("fleet event 4 (amr-2, assign)") for p in problems)
     assert "fleet checkpoint(s) at event(s) 4, 5 not checked: the log before them does not decode" in problems
+
+
+@pytest.mark.parametrize("state", ["not json", "[]", '{"format": 1}', "[" * 100_000 + "]" * 100_000])
+def test_a_checkpoint_that_holds_no_fleet_state_is_ignored_and_flagged(checkpointed: str, state: str) -> None:
+    """Written with a matching sha256 (by hand, or by a broken writer): reads fall back, `db verify` names it."""
+    with Store.open(checkpointed) as store:
+        _sql(store, "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = 13", s=state,
+             h=sha256_hex(state.encode()))
+        loaded = store.fleet()
+        assert loaded.since == 9 and "fleet checkpoint at event 13 does not hold a fleet state (" in loaded.ignored[0]
+        assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
+        assert [p for p in store.verify().problems if "checkpoint" in p] == [
+            "fleet checkpoint at event 13 is not the log replayed up to event 13 (derived data: delete the row, or "
+            "restore the store)"]
