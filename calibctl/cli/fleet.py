@@ -182,7 +182,7 @@ def _render_rollout(ctx: typer.Context, json_output: bool, r: Rollout) -> None:
 
 
 def _print_rollout(r: Rollout) -> None:
-    from calibctl.workflows.fleet.ledger import ref
+    from calibctl.store.fleet_ledger import ref
 
     closed = f" ({r.closed})" if r.closed else ""
     say(f"rollout {shown(r.name)}{closed}: " + ", ".join(shown(ref(t, v)) for t, v in r.targets.items()))

@@ -18,7 +18,8 @@ after it by *position* (``_after``: past its stream's head position, in a new st
 position, or with a higher id - a forged row given a low id is not skipped), and looks for positions
 held twice anywhere; of the older activation events only each name's last one is read, to check the
 new events against what was active. When the heads no longer hash to HEAD, every row is checked.
-Every mode also checks that the immutability triggers are in place (``triggers``).
+Every mode also checks that the immutability triggers are in place (``triggers``) and that each fleet
+checkpoint is the fleet log replayed up to its event (``fleet_checkpoints.problems``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec, fleet, health, rigs, triggers
+from calibctl.store import chain, codec, fleet, fleet_checkpoints, health, rigs, triggers
 from calibctl.store.models import (
     ArtifactRow,
     CounterRow,
@@ -275,4 +276,5 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
             except IntegrityError as exc:
                 audit.problems.append(exc.message)
     audit.problems.extend(health.gate_problems(s))
+    audit.problems.extend(fleet_checkpoints.problems(s))
     return audit

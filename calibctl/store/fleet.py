@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -29,6 +29,9 @@ from calibctl.store.rigs import (
     rig_calibration_row,
     rig_statuses,
 )
+
+if TYPE_CHECKING:
+    from calibctl.store.fleet_checkpoints import Loaded
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,10 @@ class FleetStoreMixin:
                 s.flush()
             for step in rig_steps:
                 _activate_rig(s, step, events[-1], self.signer)
+            if position > current:
+                from calibctl.store import fleet_checkpoints  # it imports this module
+
+                fleet_checkpoints.write_if_due(s, position)
             return position
 
         return self._run(work, write=True)
@@ -108,6 +115,18 @@ class FleetStoreMixin:
                 out.append({str(name): int(v) for name, v in s.execute(
                     select(key, table.version).join(latest, table.id == latest.c.id))})
             return out[0], out[1]
+
+        return self._run(work)
+
+    def fleet(self) -> Loaded:
+        """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the events
+        after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
+        from calibctl.store import fleet_checkpoints  # it imports this module
+
+        def work(s: Session) -> Loaded:
+            loaded = fleet_checkpoints.load(s)
+            loaded.fleet.settle()
+            return loaded
 
         return self._run(work)
 

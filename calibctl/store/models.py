@@ -342,6 +342,22 @@ class FleetEventRow(ChainColumns, Base):
     __table_args__ = (Index(None, "subject", "id"), Index(None, "chain_seq", unique=True))
 
 
+class FleetCheckpointRow(Base):
+    """The fleet log replayed up to event ``position`` (revision 0015_checkpoints_fleet_ckpt): derived data, never
+    the source of truth. ``chain_hash`` is event ``position``'s, so a checkpoint of a log that was rewritten is
+    ignored; ``state`` is ``fleet_ledger.to_state``'s JSON with its sha256. Not immutable: old ones are pruned."""
+
+    __tablename__ = "fleet_checkpoints"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    position: Mapped[int] = mapped_column(Integer, unique=True)
+    chain_hash: Mapped[str] = mapped_column(String(SHA256_LEN))
+    format: Mapped[int] = mapped_column(Integer)
+    written_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
+    state: Mapped[str] = mapped_column(Text)
+    state_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+
+
 class HealthReportRow(Base):
     """One health report a robot sent (revision 0011_health_reports_health25): the numbers as columns, the
     document's canonical JSON and its sha256. Append-only; not chained (telemetry, see docs/fleet.md)."""

@@ -86,9 +86,9 @@ def test_0008_chains_the_definitions_stored_before_it(rigs: str):
 
     engine = make_engine(rigs)
     try:
-        assert migrate.downgrade(engine, "0007_chain_rigs_checks") == ("0014_health_window_fleet25",
+        assert migrate.downgrade(engine, "0007_chain_rigs_checks") == ("0015_checkpoints_fleet_ckpt",
                                                                        "0007_chain_rigs_checks")
-        assert migrate.upgrade(engine) == ("0007_chain_rigs_checks", "0014_health_window_fleet25")
+        assert migrate.upgrade(engine) == ("0007_chain_rigs_checks", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
     assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [(RIG, 1, 1), (OTHER, 2, 2)]

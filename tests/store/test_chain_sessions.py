@@ -85,9 +85,9 @@ def test_signed_sessions_a_rechained_edit_is_refused_by_verify_and_by_reads(db_u
 def test_0009_chains_the_sessions_stored_before_it(sessions: str):
     engine = make_engine(sessions)
     try:
-        assert migrate.downgrade(engine, "0008_chain_rig_definitions") == ("0014_health_window_fleet25",
+        assert migrate.downgrade(engine, "0008_chain_rig_definitions") == ("0015_checkpoints_fleet_ckpt",
                                                                            "0008_chain_rig_definitions")
-        assert migrate.upgrade(engine) == ("0008_chain_rig_definitions", "0014_health_window_fleet25")
+        assert migrate.upgrade(engine) == ("0008_chain_rig_definitions", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
     assert _select(sessions, "SELECT session_id, id, chain_seq FROM capture_sessions ORDER BY id") == [

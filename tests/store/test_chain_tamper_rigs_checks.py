@@ -177,8 +177,8 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
 
     engine = make_engine(history)
     try:
-        assert migrate.downgrade(engine, "0006_check_events") == ("0014_health_window_fleet25", "0006_check_events")
-        assert migrate.upgrade(engine) == ("0006_check_events", "0014_health_window_fleet25")
+        assert migrate.downgrade(engine, "0006_check_events") == ("0015_checkpoints_fleet_ckpt", "0006_check_events")
+        assert migrate.upgrade(engine) == ("0006_check_events", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
     with Store.open(history) as store:

@@ -20,7 +20,7 @@ from tests.artifacts.factories import calibration, measured_board
 from tests.store.documents import capture_session
 
 WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
-FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0014_health_window_fleet25"
+FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0015_checkpoints_fleet_ckpt"
 
 
 def _diff(url: str, metadata: MetaData) -> list:
@@ -46,7 +46,7 @@ def test_one_head_and_date_prefixed_file_names():
     assert scripts.get_heads() == [HEAD]
     assert migrate.known_revisions() == [FIRST, SECOND, RIGS, "0005_chains_signatures", "0006_check_events",
                                          "0007_chain_rigs_checks", "0008_chain_rig_definitions", "0009_chain_sessions_reads26", "0010_fleet_diff25",
-                                         "0011_health_reports_health25", HEAD]
+                                         "0011_health_reports_health25", "0014_health_window_fleet25", HEAD]
     for path in sorted(migrate.MIGRATIONS_DIR.joinpath("versions").glob("*.py")):
         assert re.fullmatch(r"\d{4}_\d{2}_\d{2}_\d{4}_[a-z0-9_]+\.py", path.name), path.name
 

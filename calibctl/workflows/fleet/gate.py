@@ -22,10 +22,10 @@ from typing import TYPE_CHECKING
 from calibctl.artifacts.fleet import GateEvidence, TargetDiff
 from calibctl.config import Settings
 from calibctl.errors import CalibctlError
+from calibctl.store.fleet_ledger import Fleet, Rollout, Target
 from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS
 from calibctl.workflows.compare.diff import DiffRequest, compare_artifacts
 from calibctl.workflows.compare.rig_diff import compare_rig_calibrations
-from calibctl.workflows.fleet.ledger import Fleet, Rollout, Target
 from calibctl.workflows.store_admin import records
 
 if TYPE_CHECKING:
@@ -82,14 +82,14 @@ def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
 def previous_version(fleet: Fleet, name: str, t: Target) -> int | None:
     """The version ``t`` ran on its robots before rollout ``name`` (the most common one), None when none ran one."""
     seen: Counter[int] = Counter()
-    for (_, target), steps in fleet.history.items():
+    for (robot, target), running in fleet.running.items():
         if target != t:
             continue
-        mine = [i for i, (_, ro) in enumerate(steps) if ro == name]
-        if not mine:
-            seen[steps[-1][0]] += 1
-        elif mine[0] > 0:
-            seen[steps[mine[0] - 1][0]] += 1
+        found = fleet.found[(robot, target)]
+        if name not in found:
+            seen[running] += 1
+        elif (before := found[name]) is not None:
+            seen[before] += 1
     return seen.most_common(1)[0][0] if seen else None
 
 

@@ -4,7 +4,7 @@ stands against the store's active versions. Every step is a ``FleetEvent`` in th
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
@@ -14,6 +14,9 @@ from calibctl.artifacts.fleet import FleetEvent
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.workflows.store_admin import records
+
+if TYPE_CHECKING:
+    from calibctl.store.fleet_ledger import Fleet
 
 
 def fleet_event(**fields: Any) -> FleetEvent:
@@ -92,26 +95,12 @@ class FleetStatus:
              "sensors": [one(s, "serial") for s in r.sensors]} for r in self.robots]}
 
 
-def robot_states(events: list[FleetEvent], serial_active: dict[str, int], rig_active: dict[str, int]) -> FleetStatus:
-    """Replay the fleet log: each robot, its serials and rigs, the version each runs against the active one."""
-    robots: dict[str, RobotState] = {}
-    running: dict[tuple[str, tuple[str, str]], int] = {}
-    for e in events:
-        if e.kind == "register":
-            robots[e.subject] = RobotState(e.subject, [SensorState(r, None, None) for r in e.rigs],
-                                           [SensorState(s, None, None) for s in e.serials], e.at.isoformat())
-        elif e.kind == "assign" and e.version is not None:
-            running[(e.subject, e.target)] = e.version
-    for r in robots.values():
-        for kind, sensors, active in (("serial", r.sensors, serial_active), ("rig", r.rigs, rig_active)):
-            for s in sensors:
-                s.running, s.active = running.get((r.robot, (kind, s.serial))), active.get(s.serial)
-    return FleetStatus(sorted(robots.values(), key=lambda r: r.robot), len(events))
-
-
-def status(settings: Settings) -> FleetStatus:
-    """``robot_states`` of the store's fleet log (three queries: the log, the serials' and the rigs' active versions)."""
-    with records.open_store(settings) as store:
-        events = store.fleet_events()
-        serial_active, rig_active = store.active_versions()
-    return robot_states(events, serial_active, rig_active)
+def robot_states(fleet: Fleet, serial_active: dict[str, int], rig_active: dict[str, int]) -> FleetStatus:
+    """Each robot of the replayed log, its serials and rigs, the version each runs against the active one."""
+    robots = []
+    for robot, carried in fleet.carries.items():
+        states = {kind: [SensorState(name, fleet.running.get((robot, (kind, name))), active.get(name))
+                         for k, name in carried if k == kind]
+                  for kind, active in (("serial", serial_active), ("rig", rig_active))}
+        robots.append(RobotState(robot, states["rig"], states["serial"], fleet.registered_at[robot]))
+    return FleetStatus(sorted(robots, key=lambda r: r.robot), fleet.length)

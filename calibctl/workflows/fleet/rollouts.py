@@ -26,8 +26,8 @@ from calibctl.artifacts.fleet import FleetEvent
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.store.fleet import RigActivationStep
+from calibctl.store.fleet_ledger import Fleet, Rollout, Target, label, ref
 from calibctl.workflows.fleet.gate import read_gate, target_diffs
-from calibctl.workflows.fleet.ledger import Fleet, Rollout, Target, label, ref, replay
 from calibctl.workflows.fleet.robots import FleetStatus, check_reason, fleet_event, robot_states
 from calibctl.workflows.store_admin import records
 
@@ -39,7 +39,7 @@ def _read(settings: Settings, name: str | None = None) -> tuple[Fleet, dict[str,
     """The fleet replayed, each open rollout's canary states read from its gate (``name``: that rollout only,
     NotFoundError when there is none), and the rigs' active versions."""
     with records.open_store(settings) as store:
-        fleet = replay(store.fleet_events())
+        fleet = store.fleet().fleet
         if name is not None and name not in fleet.rollouts:
             raise NotFoundError(f"no rollout {name}", "`calibctl fleet status` lists the rollouts")
         _gated(store, fleet, name)
@@ -160,12 +160,10 @@ def rollback(settings: Settings, name: str, reason: str) -> Rollout:
     if rollout.closed == "rolled back":
         raise UsageError(f"rollout {name} is rolled back already")
     assigns = []
-    for (robot, t), steps in sorted(fleet.history.items()):
-        mine = [i for i, (_, ro) in enumerate(steps) if ro == name]
-        if mine and mine[0] > 0:
-            previous = steps[mine[0] - 1][0]
-            if fleet.running[(robot, t)] != previous:
-                assigns.append(_assign(settings, f"rolled back by rollout {name}", robot, t, previous, name))
+    for (robot, t), found in sorted(fleet.found.items()):
+        previous = found.get(name)  # None: the rollout did not assign it, or it ran nothing before
+        if previous is not None and fleet.running[(robot, t)] != previous:
+            assigns.append(_assign(settings, f"rolled back by rollout {name}", robot, t, previous, name))
     restore = {} if rollout.promote is None else rollout.promote.restore
     rig_steps = [RigActivationStep(rig, old, "rollback", rollout.start.rig_targets[rig],
                                    f"rolled back by rollout {name}: {reason}") for rig, old in sorted(restore.items())
@@ -177,8 +175,8 @@ def rollback(settings: Settings, name: str, reason: str) -> Rollout:
 def fleet_status(settings: Settings) -> tuple[FleetStatus, list[Rollout]]:
     """``calibctl fleet status``: the robots and every rollout with each robot's state, read in one store session."""
     with records.open_store(settings) as store:
-        events = store.fleet_events()
+        fleet = store.fleet().fleet  # from the newest checkpoint that matches the log
         serial_active, rig_active = store.active_versions()
-        fleet = replay(events)
+        robots = robot_states(fleet, serial_active, rig_active)
         _gated(store, fleet)
-    return robot_states(events, serial_active, rig_active), list(fleet.rollouts.values())
+    return robots, list(fleet.rollouts.values())

@@ -1,0 +1,148 @@
+"""Fleet checkpoints (revision 0015_checkpoints_fleet_ckpt): the fleet log replayed up to event N, so a read
+replays only the events after the newest one instead of the whole log.
+
+Derived data, never the source of truth. A checkpoint is used only when event N's chain hash is still the one it
+recorded, its state still matches its sha256 and is of this calibctl's format; otherwise the next older one is
+tried, then the whole log. ``db verify`` re-derives every checkpoint from the log (``problems``).
+
+Written by the fleet writer (``append_fleet_events``), in the same transaction as the events, once the log is
+``EVERY`` events past the newest checkpoint: the writer holds the fleet's lock, so the state is of exactly the
+log it wrote, and read commands (``fleet status`` on a read-only copy of the store included) never write.
+The cost, a replay of at most ``EVERY`` events from the previous checkpoint, is paid once per ``EVERY`` events;
+a store migrated with a long log gets its first one at the next fleet write.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+from sqlalchemy import delete, func, select
+from sqlalchemy.orm import Session
+
+from calibctl.artifacts.common import sha256_hex, utc_now
+from calibctl.errors import IntegrityError
+from calibctl.store.fleet import decode_fleet_event
+from calibctl.store.fleet_ledger import STATE_FORMAT, Fleet, from_state, rollout_positions, to_state
+from calibctl.store.models import FleetCheckpointRow, FleetEventRow
+
+EVERY = 1000
+"""Events between checkpoints: a read replays at most this many past the newest (20-80 ms of CPU for 1 000 events,
+benchmarks/bench_fleet_checkpoint.py); writing one costs the writer a replay of as many, once."""
+
+KEEP = 3
+"""Checkpoints kept (newest first): a read falls back to an older one when the newest does not match the log."""
+
+
+@dataclass
+class Loaded:
+    """The log replayed (not settled): from the checkpoint at ``since`` (0: none), then the events after it."""
+
+    fleet: Fleet
+    since: int = 0
+    last_hash: str | None = None  # the chain hash of event ``fleet.length``
+    ignored: list[str] = field(default_factory=list)  # why newer checkpoints were not used
+
+
+def _state_text(fleet: Fleet) -> str:
+    return json.dumps(to_state(fleet), separators=(",", ":"), ensure_ascii=False)
+
+
+def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool) -> Fleet | str:
+    """The checkpoint's fleet, or why it cannot be used (``rollouts``: with its rollouts' events read from the log;
+    else stand-ins, see ``from_state``)."""
+    at = f"fleet checkpoint at event {row.position}"
+    if row.format != STATE_FORMAT:
+        return f"{at} is of state format {row.format}, not {STATE_FORMAT} (written by another calibctl)"
+    log_hash = s.scalar(select(FleetEventRow.chain_hash).where(FleetEventRow.id == row.position))
+    if log_hash != row.chain_hash:
+        why = "no such event" if log_hash is None else "the log was rewritten or the checkpoint forged"
+        return f"{at} does not match the log's chain hash there ({why})"
+    if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
+        return f"{at} was changed after it was written (its state no longer matches its sha256)"
+    try:
+        state = json.loads(row.state)
+        positions = rollout_positions(state)
+        if any(not 0 < p <= row.position for p in positions):
+            raise ValueError("a rollout event past the checkpoint")
+        if not rollouts:
+            fleet = from_state(state, None)
+        else:
+            rows = s.scalars(select(FleetEventRow).where(FleetEventRow.id.in_(positions))).all() if positions else []
+            fleet = from_state(state, {r.id: decode_fleet_event(r) for r in rows})
+    except (KeyError, TypeError, ValueError, RecursionError) as exc:  # RecursionError: JSON nested too deep
+        return f"{at} does not hold a fleet state ({type(exc).__name__}: {str(exc)[:200]})"
+    if fleet.length != row.position:
+        return f"{at} holds the state of event {fleet.length}"
+    return fleet
+
+
+def load(s: Session, *, rollouts: bool = True) -> Loaded:
+    """The log replayed from the newest usable checkpoint (an undecodable event raises IntegrityError, as a full
+    replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state`` only)."""
+    loaded = Loaded(Fleet())
+    for row in s.scalars(select(FleetCheckpointRow).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)):
+        usable = _usable(s, row, rollouts=rollouts)
+        if isinstance(usable, str):
+            loaded.ignored.append(usable)
+            continue
+        loaded.fleet, loaded.since, loaded.last_hash = usable, row.position, row.chain_hash
+        break
+    tail = select(FleetEventRow).where(FleetEventRow.id > loaded.fleet.length).order_by(FleetEventRow.id)
+    for r in s.scalars(tail.execution_options(yield_per=1000)):
+        loaded.fleet.apply(decode_fleet_event(r))
+        loaded.last_hash = r.chain_hash
+    return loaded
+
+
+def write_if_due(s: Session, length: int) -> None:
+    """After the fleet writer appended up to event ``length`` (it holds the fleet's lock): a checkpoint there when
+    the log is ``EVERY`` events past the newest one; all but the newest ``KEEP`` are deleted."""
+    newest = s.scalar(select(func.max(FleetCheckpointRow.position))) or 0
+    if length - newest < EVERY:
+        return
+    loaded = load(s, rollouts=False)  # decoding every rollout with its diffs was 2/3 of a read at 100k events
+    if loaded.last_hash is None or loaded.fleet.length != length:  # pragma: no cover - the writer's own rows
+        return
+    text = _state_text(loaded.fleet)
+    s.add(FleetCheckpointRow(position=length, chain_hash=loaded.last_hash, format=STATE_FORMAT, written_at=utc_now(),
+                             state=text, state_sha256=sha256_hex(text.encode("utf-8"))))
+    s.flush()
+    kept = select(FleetCheckpointRow.position).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)
+    s.execute(delete(FleetCheckpointRow).where(FleetCheckpointRow.position.not_in(kept.scalar_subquery())))
+
+
+def problems(s: Session) -> list[str]:
+    """``db verify``: each checkpoint of this format against the log: event N's chain hash, its sha256, and its
+    state against a replay of the log up to N (one pass over the log)."""
+    rows = {r.position: r for r in s.scalars(select(FleetCheckpointRow).where(FleetCheckpointRow.format == STATE_FORMAT))}
+    if not rows:
+        return []
+    found: list[str] = []
+    fleet = Fleet()
+    events = select(FleetEventRow).where(FleetEventRow.id <= max(rows)).order_by(FleetEventRow.id)
+    try:
+        for r in s.scalars(events.execution_options(yield_per=1000)):
+            fleet.apply(decode_fleet_event(r))
+            row = rows.pop(fleet.length, None)
+            if row is not None:
+                found += _compare(row, r.chain_hash, fleet)
+    except IntegrityError:  # the audit names the event itself
+        return [*found, f"fleet checkpoint(s) at event(s) {', '.join(map(str, sorted(rows)))} not checked: the log "
+                "before them does not decode"]
+    found += [f"fleet checkpoint at event {p} is past the end of the log ({fleet.length} events)" for p in sorted(rows)]
+    return found
+
+
+def _compare(row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet) -> list[str]:
+    at = f"fleet checkpoint at event {row.position}"
+    if row.chain_hash != log_hash:
+        return [f"{at} does not match the log's chain hash there (stale or forged; reads ignore it)"]
+    if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
+        return [f"{at} was changed after it was written (its state no longer matches its sha256; reads ignore it)"]
+    try:
+        same = json.loads(row.state) == to_state(fleet)
+    except (ValueError, RecursionError):
+        same = False
+    return [] if same else [f"{at} is not the log replayed up to event {row.position} (derived data: delete "
+                            "the row, or restore the store)"]
