@@ -16,7 +16,9 @@ End to end (interpreter start to exit, a fresh SQLite store with the board regis
   * the plain script: the detection above then calibrateCameraExtended, sequential and on a pool.
 Recall is printed beside every time: calibctl must find at least what the plain script finds.
 ``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its ``calibrate``
-runs as two more rows, taking turns with the others, so before and after meet the same load.
+runs as two more rows, taking turns with the others, so before and after meet the same load. Every process
+runs in the temporary work folder: ``python -m`` puts the current folder first on sys.path, so a run started
+from a checkout measured that checkout's calibctl in the baseline rows too (before 2026-11-27 07:00 UTC).
 Every process reads its bytecode from a cache the first (uncounted) round fills, as an installed calibctl
 does (``machine.run_env``). CPU: user + system time of the process and of the children it waited for
 (getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure
@@ -91,10 +93,11 @@ def children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float, str]:
-    """(wall s from start to exit, CPU s of the process and the children it waited for, stdout)."""
+def run(cmd: list[str], env: dict[str, str] | None, cwd: Path) -> tuple[float, float, str]:
+    """(wall s from start to exit, CPU s of the process and the children it waited for, stdout). ``cwd``: a
+    folder without a calibctl package, so ``-m calibctl`` imports the one ``env``'s PYTHONPATH names."""
     t, c = time.perf_counter(), children_cpu_s()
-    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
     wall, cpu = time.perf_counter() - t, children_cpu_s() - c
     if done.returncode not in (0, 1):
         raise RuntimeError(f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
@@ -136,6 +139,7 @@ def main() -> None:
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
     parser.add_argument("--no-real", action="store_true", help="the rendered sets only")
     args = parser.parse_args()
+    args.rendered, args.real = args.rendered.resolve(), args.real.resolve()  # the processes run in the work folder
     cores = len(os.sched_getaffinity(0))
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
@@ -181,7 +185,7 @@ def main() -> None:
                     shutil.copyfile(template, db)
                     shutil.rmtree(work / "calibctl-images", ignore_errors=True)
                     load = load_1min()
-                    wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env)
+                    wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env, work)
                     if round_ == 0:
                         continue
                     least_cpu[name] = min(cpu, least_cpu.get(name, cpu))

@@ -63,7 +63,9 @@ def file_errors(action: str, path: Path | str | None = None) -> Iterator[None]:
 
 def _umask() -> int:
     # The only portable way to read the umask is to set it and restore it at once; calibctl writes its
-    # output files from the main thread only, so no other thread creates a file in between.
+    # output files from the main thread only, so no other thread creates a file in between. (A capture's
+    # image writer thread, workflows.camera.image_writes, may read it here too: meanwhile the main thread
+    # computes the capture gates and creates no file.)
     current = os.umask(0o022)
     os.umask(current)
     return current

@@ -136,7 +136,9 @@ class RejectedCorner(Document):
 class CameraConsistency(Document):
     """Do all views come from one camera? The best two-camera split, scored on held-out views."""
 
-    group_a: list[str] = Field(description="views of the first group (the one holding the first view)")
+    group_a: list[str] = Field(description="views of the first group (the one holding the first view); the two "
+                               "groups name the views checked: every kept view, or 60 spread evenly over more "
+                               "(core.capture.camera_split.spread_views)")
     group_b: list[str] = Field(description="views of the second group")
     holdout_rms_px: tuple[float, float] = Field(description="each group's k-fold held-out RMS under its own camera")
     cross_rms_px: tuple[float, float] = Field(description="each group's RMS under the other group's camera")

@@ -13,6 +13,7 @@ import stat
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from typer.testing import CliRunner
@@ -212,3 +213,29 @@ def test_an_input_that_is_not_utf8_is_exit_2(tmp_path):
     path = tmp_path / "cam.yaml"
     path.write_bytes("camera_name: caméra\n".encode("latin-1"))
     one_line_error(cli("lint", path), f"cannot read {path}", "it is not UTF-8 text")
+
+
+@pytest.mark.parametrize(("code", "words"), [(errno.ENOSPC, "no space left on the device"),
+                                             (errno.EACCES, "permission denied")])
+def test_an_image_store_that_cannot_be_written_is_exit_2_and_stores_no_session(sqlite_url, tmp_path_factory,
+                                                                              monkeypatch, code, words):
+    """The images are stored beside the capture gates (workflows.camera.image_writes): a full disk or an image
+    folder the process may not write is still one line, exit 2, and no session."""
+    from calibctl.store import images
+    from tests.workflows.synth_folders import rendered
+
+    good = rendered(tmp_path_factory, "good")
+    with Store.open(sqlite_url) as store:
+        store.add_board(measured_board())
+
+    def refused(path, data):
+        raise OSError(code, os.strerror(code), str(path.parent))
+
+    monkeypatch.setattr(images, "_link_anonymous", refused)
+    result = cli("--db", sqlite_url, "capture", "--serial", "CAM-1", "--board", "A17", "--source", good)
+    progress, _, rest = result.stderr.partition("\n")  # the capture's first line says what it examines
+    assert progress.startswith("calibctl capture: examining 12 images")
+    one_line_error(SimpleNamespace(exit_code=result.exit_code, output=result.output, stderr=rest),
+                   "cannot write the image", words)
+    with Store.open(sqlite_url) as store:
+        assert store.list_sessions() == [] and store.counts()["images"] == 0

@@ -16,9 +16,10 @@ The test (``check_one_camera``):
   3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
 It runs twice: at solve (under the solve's model; lint rule one-camera) and at capture, as the gate
 ``one_camera`` (``one_camera_gate``: k1k2, a suspected split confirmed under the fisheye model), so the
-operator hears it while still holding the board. In one ``calibrate`` process the solve's question is
-usually the gate's (k1k2, every corner kept): ``check_one_camera`` remembers its last answers by the
-inputs' values, so it is answered once.
+operator hears it while still holding the board. Both ask it of the same views: at most
+``CAPTURE_MAX_VIEWS``, spread evenly over the session (``spread_views``), which bounds its cost. In one
+``calibrate`` process the solve's question is therefore usually the gate's (k1k2, every corner kept):
+``check_one_camera`` remembers its last answers by the inputs' values, so it is answered once.
 Measured (tests/core/capture/test_camera_split.py, benchmarks/results/capture-gates.md): the real opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
@@ -63,7 +64,7 @@ ONE_CAMERA_GATE = "one_camera"
 # read 1.38-1.47 (2 of 3 over the threshold), the fisheye model 1.01; opencv-left-right mixed reads 1.65 / 1.58.
 CAPTURE_MODELS = ("k1k2", "fisheye")
 CAPTURE_MODEL = CAPTURE_MODELS[0]
-CAPTURE_MAX_VIEWS = 60  # views checked at capture (spread evenly over the session), bounding its cost
+CAPTURE_MAX_VIEWS = 60  # views checked at capture and at the solve (spread_views), bounding its cost
 
 
 @dataclass(frozen=True)
@@ -131,6 +132,16 @@ def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarra
     if not in_a[0]:  # name the group holding view 0 "a", so a split reads the same from every start
         in_a, sol_a, sol_b, rms_a, rms_b = ~in_a, sol_b, sol_a, rms_b, rms_a
     return in_a, sol_a, sol_b, rms_a, rms_b
+
+
+def spread_views(n_views: int, max_views: int = CAPTURE_MAX_VIEWS) -> list[int]:
+    """The indices (ascending) of at most ``max_views`` of ``n_views`` views, spread evenly, first and last
+    included: the views the test is asked about, at capture and at the solve. One picking rule for both
+    keeps their questions equal (answered once, ``check_one_camera``), and an even spread keeps both halves
+    of a folder of left* then right* images."""
+    if n_views <= max_views:
+        return list(range(n_views))
+    return np.unique(np.linspace(0, n_views - 1, max_views).round().astype(int)).tolist()
 
 
 def min_views_to_split(model: str = CAPTURE_MODEL) -> int:
@@ -254,8 +265,7 @@ def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_p
     of the models tried, which must stay below ``threshold``. Shapes as in solve_intrinsics; ``names``:
     one per view; ``lanes``: as check_one_camera.
     """
-    n = len(image_points_per_view)
-    picked = np.unique(np.linspace(0, n - 1, max_views).round().astype(int)).tolist() if n > max_views else list(range(n))
+    picked = spread_views(len(image_points_per_view), max_views)
     need = max(min_views_to_split(m) for m in models)
     detail: dict[str, float | int | str | list[str]] = {"views_checked": int(len(picked))}
     if len(picked) < need:

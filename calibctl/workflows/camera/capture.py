@@ -10,9 +10,10 @@ solve's two-camera test) and stores the session.
 What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
     ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
-    transaction, and every kept frame of a video or camera encoded as PNG, each in its own. A crash after this point leaves
-    only images, which are harmless (content-addressed, they expire);
-  * then the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
+    transaction, on a thread of their own while the gates run (``image_writes``), and every kept frame of
+    a video or camera encoded as PNG, each in its own. A crash after this point leaves only images, which
+    are harmless (content-addressed, they expire);
+  * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
     reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
 Nothing is written when the capture cannot run (exit 2): unknown board, unreadable source, no
 readable image, a pattern that matches nothing or only part of the board.
@@ -28,8 +29,10 @@ from __future__ import annotations
 import datetime as dt
 import re
 import secrets
+import threading
 from collections import deque
 from collections.abc import Sequence
+from concurrent.futures import Executor, ThreadPoolExecutor
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -84,6 +87,7 @@ from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
 from calibctl.workflows.camera.image_circles import checked_image_circle
+from calibctl.workflows.camera.image_writes import ImageWrites
 from calibctl.workflows.camera.solve import (
     MODEL_CHOICES,
     SolveOutcome,
@@ -197,6 +201,11 @@ class _Collected:
     interrupted: bool = False
     ignored: list[str] = field(default_factory=list)
     max_gray: np.ndarray | None = None  # per-pixel maximum of the frames, reduced (core.capture.image_circle)
+    writes: ImageWrites | None = None  # a folder's images, being stored beside the gates
+
+    def images_durable(self) -> int:
+        """Wait until every image is stored (the writes' error raised); how many were."""
+        return self.images_stored + (0 if self.writes is None else self.writes.stored())
 
 
 def core_thresholds(settings: Settings) -> GateThresholds:
@@ -239,27 +248,34 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
                          "a set of images is captured whole; leave out images you do not want")
     started = utc_now()
     opened: AbstractContextManager[CaptureStore] = Store.open(settings.db_url) if into is None else nullcontext(into)
-    with opened as store:
+    # the pool's exit joins its thread: however capture() ends, no image write outlives it
+    with opened as store, ThreadPoolExecutor(max_workers=1, thread_name_prefix="calibctl-image-writes") as writer:
         board = store.get_board(board_name, revision)
         spec = board_spec(board)
         if source.kind in sources.IMAGE_SETS:
             got = _capture_images(store, settings, spec, board, source, request.jobs or settings.jobs, observer,
-                                  None if detected is None else detected.for_spec(spec, sized_half))
+                                  writer, None if detected is None else detected.for_spec(spec, sized_half))
         else:
             got = _capture_stream(store, settings, spec, board, source, request, observer)
-        session = _build_session(settings, request, board, spec, source, got, started)
-        distance = lens = None
-        if (request.reference_distance is not None and request.reference_source is not None
-                and session.status == "accepted" and session.image_size is not None):
-            distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec, board.ref,
-                                           session.views, session.image_size, request.gauge_model,
-                                           request.jobs or settings.jobs)
-            # the session carries the verdict: a failed gauge stops its solve (workflows.camera.solve)
-            session = session.model_copy(update={"metric_gauge": MetricGauge(
-                distance=distance, lens_model=lens, reference_source=request.reference_source)})
+        try:
+            session = _build_session(settings, request, board, spec, source, got, started)
+            distance = lens = None
+            if (request.reference_distance is not None and request.reference_source is not None
+                    and session.status == "accepted" and session.image_size is not None):
+                distance, lens = gauge_capture(request.reference_distance, request.reference_source, spec,
+                                               board.ref, session.views, session.image_size, request.gauge_model,
+                                               request.jobs or settings.jobs)
+                # the session carries the verdict: a failed gauge stops its solve (workflows.camera.solve)
+                session = session.model_copy(update={"metric_gauge": MetricGauge(
+                    distance=distance, lens_model=lens, reference_source=request.reference_source)})
+        except BaseException as failure:
+            if got.writes is not None:
+                got.writes.after(failure)  # a failure of the writes, met first in the sequential order, wins
+            raise
+        stored = got.images_durable()  # before anything names the images
         if store_session:
             store.add_session(session)
-        return CaptureResult(session, got.stop_reason, got.interrupted, got.images_stored, str(store.image_dir),
+        return CaptureResult(session, got.stop_reason, got.interrupted, stored, str(store.image_dir),
                              tuple(got.ignored), distance, lens)
 
 
@@ -300,7 +316,9 @@ class _MaxPicture:
 
 def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
                     source: sources.SourceSpec, workers: int, observer: CaptureObserver,
-                    known: outcomes_core.KnownCallback | None = None) -> _Collected:
+                    writer: Executor, known: outcomes_core.KnownCallback | None = None) -> _Collected:
+    """Detect a folder's images (``known``: outcomes detected earlier, e.g. by a station's watch) and start
+    storing the readable ones on ``writer`` (``image_writes``)."""
     where = source.label
     with file_errors(f"read the source {source.kind}", where):
         images = sources.select_images(source)
@@ -333,8 +351,24 @@ def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
                                               {o.name: o.corners_px for o in probed if o.corners_px is not None})
     if larger is not None:
         raise larger
+    writes = ImageWrites(writer, lambda stop: _store_images(store, settings, readable, where, stop))
+    size = outcomes_core.session_image_size(results)
+    assert size is not None  # there are readable images
+    views: list[tuple[BoardView, str | None]] = [
+        (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
+    return _Collected([_record(o) for o in results], views, size,
+                      f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
+                      f"({len(results)})", 0, ignored=images.ignored, max_gray=picture.of_size(size), writes=writes)
+
+
+def _store_images(store: CaptureStore, settings: Settings, readable: list[outcomes_core.ImageOutcome], where: str,
+                  stop: threading.Event) -> int:
+    """Store ``readable``'s files, ``IMAGE_BATCH`` per transaction, until done or ``stop`` is set between two
+    batches; how many were stored. Runs on the capture's writer thread (``image_writes``)."""
     stored = 0
     for start in range(0, len(readable), IMAGE_BATCH):  # one transaction per batch, a bounded batch in memory
+        if stop.is_set():
+            break
         batch = readable[start:start + IMAGE_BATCH]
         with file_errors("read the images in", where):
             image_bytes = [Path(o.path).read_bytes() for o in batch]
@@ -345,13 +379,7 @@ def _capture_images(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
                 raise InputError(f"{o.path} changed while it was being captured; nothing was stored",
                                  "capture again from a folder nothing else writes to")
         stored += len(batch)
-    size = outcomes_core.session_image_size(results)
-    assert size is not None  # there are readable images
-    views: list[tuple[BoardView, str | None]] = [
-        (BoardView(o.name, o.corner_ids, o.corners_px), o.sha256) for o in accepted]  # type: ignore[arg-type]
-    return _Collected([_record(o) for o in results], views, size,
-                      f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
-                      f"({len(results)})", stored, ignored=images.ignored, max_gray=picture.of_size(size))
+    return stored
 
 
 class _StreamState:

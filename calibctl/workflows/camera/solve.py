@@ -34,7 +34,7 @@ from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.lint import has_errors
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
-from calibctl.core.capture.camera_split import CameraSplit, check_one_camera
+from calibctl.core.capture.camera_split import CameraSplit, check_one_camera, spread_views
 from calibctl.core.capture.projection_gate import Region, parse_region
 from calibctl.core.intrinsics import solve as core_solve
 from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
@@ -134,7 +134,8 @@ def _held_out(report: HoldoutReport) -> HeldOut:
 def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes):
     """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
 
-    The one-camera split test needs only the kept corners and the model, so it runs on another lane
+    The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly, as
+    at capture) and the model, so it runs on another lane
     (verdict_lanes) beside the held-out folds and the model-misfit floor; the folds and the floor's lens
     models spread over the lanes too. The numbers are those of the sequential order."""
     size = session.image_size
@@ -164,7 +165,10 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         result = solve_dropping_outliers(obj, img, size, model_name)
         solution, dropped, kept = result.solution, result.dropped_views, list(result.kept_views)
     kept_obj, kept_img = [obj[i] for i in kept], [img[i] for i in kept]
-    split = lanes.start(lambda: check_one_camera(kept_obj, kept_img, size, model_name, lanes=lanes))
+    # the capture gate's views (spread_views): with the gate's corners and model, the gate's answer
+    checked = [kept[i] for i in spread_views(len(kept))]
+    split = lanes.start(lambda: check_one_camera([obj[i] for i in checked], [img[i] for i in checked], size,
+                                                 model_name, lanes=lanes))
     try:
         holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
@@ -177,7 +181,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         split.settle()
         raise
     found = split.result()
-    consistency = None if found is None else _consistency(found, [session.views[i].name for i in kept])
+    consistency = None if found is None else _consistency(found, [session.views[i].name for i in checked])
     return (model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency,
             detector_rms)
 

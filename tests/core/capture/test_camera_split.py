@@ -9,10 +9,12 @@ import pytest
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture import camera_split
 from calibctl.core.capture.camera_split import (
+    CAPTURE_MAX_VIEWS,
     TWO_CAMERA_RATIO,
     check_one_camera,
     min_views_to_split,
     one_camera_gate,
+    spread_views,
 )
 from calibctl.core.capture.detect import detect_board
 from calibctl.core.intrinsics.solve import solve_intrinsics
@@ -117,6 +119,13 @@ def test_the_capture_gate_spreads_its_views_over_a_long_session(stereo_folder):
     names, obj, img = stereo_folder
     capped = one_camera_gate(obj, img, names, (640, 480), max_views=16)
     assert capped.detail["views_checked"] == 16 and not capped.passed
+
+
+def test_the_views_checked_are_spread_evenly_first_and_last_included() -> None:
+    assert spread_views(12, 16) == list(range(12))
+    picked = spread_views(96)
+    assert len(picked) == CAPTURE_MAX_VIEWS and picked[0] == 0 and picked[-1] == 95
+    assert picked == sorted(set(picked)) and max(np.diff(picked)) <= 2  # no gap wider than the even step
 
 
 def test_the_capture_gate_passes_a_session_too_small_to_check_and_says_so() -> None:

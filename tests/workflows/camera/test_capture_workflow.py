@@ -125,11 +125,15 @@ def test_station_file_overrides_the_gate_thresholds(sqlite_url: str, good: Path,
     assert gates["coverage"].passed and gates["tilt"].passed
 
 
-def test_a_failure_before_the_session_write_leaves_no_session(settings, good: Path, monkeypatch) -> None:
+def _gates_raise(monkeypatch, error: BaseException) -> None:
     def broken(*args, **kwargs):
-        raise RuntimeError("power cut")
+        raise error
 
     monkeypatch.setattr(capture_workflow, "evaluate_gates", broken)
+
+
+def test_a_failure_before_the_session_write_leaves_no_session(settings, good: Path, monkeypatch) -> None:
+    _gates_raise(monkeypatch, RuntimeError("power cut"))
     with pytest.raises(RuntimeError, match="power cut"):
         capture(settings, CaptureRequest(SERIAL, "A17", str(good)))
     with Store.open(settings.db_url) as store:
@@ -387,3 +391,103 @@ def test_a_capture_stores_the_same_session_at_every_job_count(settings, good: Pa
         assert [o.model_dump() for o in other.outcomes] == [o.model_dump() for o in first.outcomes]
         assert [v.model_dump() for v in other.views] == [v.model_dump() for v in first.views]  # corners as floats
         assert [g.model_dump() for g in other.gates] == [g.model_dump() for g in first.gates]
+
+
+# the images stored beside the gates (workflows.camera.image_writes) ------------------------------------------
+
+
+def test_a_folders_images_are_stored_beside_the_gates_and_durable_before_its_session(settings, good: Path,
+                                                                                   monkeypatch) -> None:
+    """The writes run on their own thread while the gates run (they wait here until the gates have started:
+    a capture that stored its images before the gates would time out below), and every image has its row
+    and its file when the session is stored."""
+    gates_started = threading.Event()
+    writers, waited = [], []
+    real_put, real_gates, real_add = Store.put_images, capture_workflow.evaluate_gates, Store.add_session
+
+    def put_images(self, images, **kwargs):
+        writers.append(threading.current_thread().name)
+        waited.append(gates_started.wait(timeout=30))  # a deadlock guard, not a time limit on the test
+        return real_put(self, images, **kwargs)
+
+    def evaluate_gates(*args, **kwargs):
+        gates_started.set()
+        return real_gates(*args, **kwargs)
+
+    def add_session(self, session):
+        missing = [o.name for o in session.outcomes if o.sha256 and self.image_path(o.sha256) is None]
+        assert missing == [], f"session stored before its images: {missing}"
+        return real_add(self, session)
+
+    monkeypatch.setattr(Store, "put_images", put_images)
+    monkeypatch.setattr(capture_workflow, "evaluate_gates", evaluate_gates)
+    monkeypatch.setattr(Store, "add_session", add_session)
+    result = capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=1))
+    assert waited == [True] and writers[0].startswith("calibctl-image-writes")
+    assert result.images_stored == 12 and result.session.status == "accepted"
+    with Store.open(settings.db_url) as store:
+        assert [s.session_id for s in store.list_sessions()] == [result.session.session_id]
+
+
+def _image_store_full(monkeypatch) -> None:
+    """Every image file write fails the way a full disk fails it (store.images, under file_errors)."""
+    import errno
+    import os
+
+    from calibctl.store import images
+
+    def full(path, data):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(images, "_link_anonymous", full)
+
+
+@pytest.mark.parametrize("gates_fail", [False, True])
+def test_a_full_image_store_is_the_error_and_no_session_is_stored(settings, good: Path, monkeypatch,
+                                                                  gates_fail: bool) -> None:
+    """As when the images were stored before the gates: the writes' failure is the one raised, even when
+    the gates then fail too (their error comes second in that order)."""
+    from calibctl.errors import FileSystemError
+
+    _image_store_full(monkeypatch)
+    if gates_fail:
+        _gates_raise(monkeypatch, InputError("the gates broke"))
+    with pytest.raises(FileSystemError, match="no space left on the device"):
+        capture(settings, CaptureRequest(SERIAL, "A17", str(good)))
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == [] and store.counts()["images"] == 0
+
+
+def test_ctrl_c_during_the_gates_stops_the_writes_after_the_batch_in_progress(settings, good: Path, tmp_path: Path,
+                                                                             monkeypatch) -> None:
+    """24 images, two batches: Ctrl-C in the gates while the first batch is being written. That batch
+    commits whole (one transaction), the second is never written, no session is stored, and every row has
+    its file."""
+    folder = tmp_path / "two-batches"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(2 * len(views)):
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+    stops: list[threading.Event] = []
+    batches: list[int] = []
+    real_store, real_put = capture_workflow._store_images, Store.put_images
+
+    def store_images(store, settings, readable, where, stop):
+        stops.append(stop)
+        return real_store(store, settings, readable, where, stop)
+
+    def put_images(self, images, **kwargs):
+        stops[0].wait(timeout=30)  # until Ctrl-C has reached the writes (a deadlock guard, not a time limit)
+        batches.append(len(set(images)))
+        return real_put(self, images, **kwargs)
+
+    monkeypatch.setattr(capture_workflow, "_store_images", store_images)
+    monkeypatch.setattr(Store, "put_images", put_images)
+    _gates_raise(monkeypatch, KeyboardInterrupt())
+    with pytest.raises(KeyboardInterrupt):
+        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=1))
+    assert stops[0].is_set() and len(batches) == 1 and capture_workflow.IMAGE_BATCH < 24
+    with Store.open(settings.db_url) as store:
+        files = [p.name for p in store.image_dir.rglob("*") if p.is_file()]
+        assert store.list_sessions() == [] and store.counts()["images"] == len(files) == batches[0]
+        assert all(store.image_path(name) is not None for name in files)

@@ -5,9 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibctl.artifacts.session import CaptureSession
 from calibctl.config import load_settings
+from calibctl.core.capture import camera_split
+from calibctl.core.capture.camera_split import CAPTURE_MAX_VIEWS, spread_views
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.store.repository import Store
+from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.camera import solve as solve_workflow
 from tests.artifacts.factories import measured_board, nominal_board
 from tests.workflows.sessions import K_TRUE, synthetic_capture
@@ -154,6 +158,52 @@ def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
     assert finding.severity == "error" and "two cameras" in finding.message
     assert "its own images" in finding.fix and finding.value == pytest.approx(check.ratio)
     assert art.content_sha256 == art.computed_sha256()
+
+
+def _two_camera_session(n_each: int) -> CaptureSession:
+    """``n_each`` views of K_TRUE then ``n_each`` of a camera with a focal length 4 % longer (names right-*)."""
+    left = synthetic_capture(measured_board(), n_views=n_each, seed=1, noise_px=0.1)
+    K_other = K_TRUE.copy()
+    K_other[0, 0] = K_other[1, 1] = 1.04 * K_TRUE[0, 0]
+    right = synthetic_capture(measured_board(), n_views=n_each, seed=2, noise_px=0.1, camera_matrix=K_other)
+    return left.model_copy(update={"views": [*left.views, *(v.model_copy(update={"name": "right-" + v.name})
+                                                            for v in right.views)]})
+
+
+def test_above_the_capture_cap_the_solve_checks_the_gates_spread_views_and_still_finds_two_cameras(settings):
+    """72 views, more than CAPTURE_MAX_VIEWS: the split test runs on the gate's 60 spread views, the groups name
+    them, and a second camera among them is still found (lint one-camera) while one camera is not flagged."""
+    session = _store_session(settings, _two_camera_session(36))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    check = art.camera_consistency
+    assert check is not None and check.two_cameras_suspected and art.status == "rejected"
+    checked = [session.views[i].name for i in spread_views(72)]
+    assert len(checked) == CAPTURE_MAX_VIEWS and sorted(check.group_a + check.group_b) == sorted(checked)
+    assert sorted(check.group_b) == sorted(n for n in checked if n.startswith("right-"))
+    assert any(f.rule == "one-camera" and f.severity == "error" for f in art.lint)
+    one = synthetic_capture(measured_board(), serial="CAM-0002", session_id="0123456789cd", n_views=72, seed=5,
+                            noise_px=0.1)
+    _store_session(settings, one)
+    clean = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=one.session_id)).artifact
+    assert clean.camera_consistency is not None and not clean.camera_consistency.two_cameras_suspected
+    assert len(clean.camera_consistency.group_a) + len(clean.camera_consistency.group_b) == CAPTURE_MAX_VIEWS
+    assert clean.status == "accepted" and not any(f.rule == "one-camera" for f in clean.lint)
+
+
+def test_the_solve_asks_the_capture_gates_question_so_it_is_answered_once(settings, monkeypatch):
+    """calibrate: the capture gate, then the solve of the same corners under k1k2 (72 views): one split test."""
+    session = _store_session(settings, synthetic_capture(measured_board(), n_views=72, seed=5, noise_px=0.1))
+    points = board_spec(session.board).object_points()
+    camera_split.forget_recent_checks()
+    computed = []
+    real = camera_split._check_one_camera
+    monkeypatch.setattr(camera_split, "_check_one_camera", lambda *a: computed.append(len(a[0])) or real(*a))
+    gate = camera_split.one_camera_gate([points[np.asarray(v.corner_ids)] for v in session.views],
+                                        [np.asarray(v.corners_px, np.float64) for v in session.views],
+                                        [v.name for v in session.views], (640, 480))
+    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
+    assert gate.passed and computed == [CAPTURE_MAX_VIEWS]  # the gate computed it, the solve remembered it
+    assert art.camera_consistency is not None and art.camera_consistency.ratio == gate.value
 
 
 def test_the_stored_covariance_is_the_one_sigma_comes_from(settings):
