@@ -17,7 +17,6 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store import sqlite_reads
-from calibctl.workflows.exports import formats
 from calibctl.workflows.store_admin import keys
 
 if TYPE_CHECKING:
@@ -131,6 +130,8 @@ def export(
     command could not do what was asked; there is no verdict to report). Every export names the
     version's status: a field in json/yaml, the trace header in ros/opencv.
     """
+    from calibctl.workflows.exports import formats  # the writers: not for history or show
+
     if fmt not in formats.EXPORT_FORMATS:
         raise UsageError(f"unknown export format '{fmt}'", f"choose one of {', '.join(formats.EXPORT_FORMATS)}")
     if camera_name is not None and fmt != "ros":
@@ -150,6 +151,8 @@ def export(
 
 def read_artifact_file(path: Path) -> CalibrationArtifact:
     """Parse an exported artifact (JSON or YAML) and check its hash; a tampered file is IntegrityError."""
+    from calibctl.workflows.exports import formats
+
     loaded = formats.load_calibration(path)
     if loaded.kind != "calibctl":
         raise InputError(
