@@ -125,7 +125,7 @@ def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_rig_or_yaml_module(st
 # read builds the models of what it reads. The calibration models (with the session and check ones they use)
 # are not for boards; the writers' modules (formats, the trace header, ROS camera_info) are not for history or
 # show, and a JSON export, the default, stamps no trace header; the served-record check (signing's chain
-# specs) runs with trusted keys only.
+# specs) runs with trusted keys only, and history reads no keys.
 CALIBRATION_MODELS = ("calibctl.artifacts.calibration", "calibctl.artifacts.session", "calibctl.artifacts.check")
 EXPORT_WRITERS = ("calibctl.workflows.exports.formats", "calibctl.workflows.exports.trace_header",
                   "calibctl.workflows.exports.ros_camera_info")
@@ -143,6 +143,8 @@ def test_history_and_show_load_no_export_writer_and_without_keys_no_served_recor
     loaded, printed = _run(["--db", store_with_a_calibration, *args])
     assert "CAM-1" in printed and "calibctl.artifacts.calibration" in loaded
     assert sorted(m for m in loaded if m in (*EXPORT_WRITERS, "calibctl.store.served")) == []
+    if args[0] == "history":  # nor the keys (show reads the trusted ones: without any, none is loaded)
+        assert sorted(m for m in loaded if m in ("calibctl.workflows.store_admin.keys", "calibctl.signing")) == []
 
 
 def test_a_json_export_loads_formats_but_no_trace_header_or_ros_writer(store_with_a_calibration) -> None:

@@ -17,7 +17,6 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store import sqlite_reads
-from calibctl.workflows.store_admin import keys
 
 if TYPE_CHECKING:
     from calibctl.store.repository import Store
@@ -42,6 +41,7 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
+    from calibctl.workflows.store_admin import keys
 
     return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None,
                       trusted=None if write else keys.read_trust(settings))
@@ -109,6 +109,8 @@ def history(settings: Settings, serial: str) -> History:
 
 
 def show(settings: Settings, ref: str) -> CalibrationArtifact:
+    from calibctl.workflows.store_admin import keys  # the trusted keys: `history` reads without them
+
     serial, version = parse_artifact_ref(ref)
     return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
                              lambda: open_store(settings), keys.read_trust(settings))
