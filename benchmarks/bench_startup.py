@@ -7,8 +7,9 @@ interpreter against a small SQLite store holding one board and one calibration (
 best and median wall and CPU time are reported, and each command's best wall time over the best of
 ``python -c 'import cv2, numpy'`` (the issue's reference: a plain OpenCV script's imports). A bare typer app
 with calibctl's root options and one command (``FLOOR_APP``) is the floor a typer CLI starts from:
-typer 0.29 coerces every option through a pydantic TypeAdapter, so it imports pydantic. ``--before DIR`` also times the calibctl checkout in DIR
-(e.g. a worktree of main) in the same run, so before/after share the machine's load. Then
+typer 0.29 coerces every option through a pydantic TypeAdapter, so it imports pydantic. ``--before DIR``
+also times the calibctl checkout in DIR (e.g. a worktree of main) in the same run, one run of each in turn,
+so before/after share the machine's load. Then
 ``python -X importtime`` of each command is summed per top-level package (self time), which says
 where the rest of the time goes. ``--calibrate`` also times ``calibctl calibrate`` of 20 rendered
 1280x960 images against the plain OpenCV script (``bench_e2e.py --plain-only``: sequential
@@ -91,11 +92,11 @@ def _env(checkout: Path) -> dict[str, str]:
 
 
 def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
-              setup: Callable[[], None] | None = None) -> tuple[list[float], list[float]]:
-    """Wall and CPU (user + system) seconds of each run. On a loaded machine the CPU time is the
-    steadier figure: it does not count the time spent waiting for a core."""
+              setup: Callable[[], None] | None = None, warm_up: bool = True) -> tuple[list[float], list[float]]:
+    """Wall and CPU (user + system) seconds of each run (after one untimed run when ``warm_up``). On a
+    loaded machine the CPU time is the steadier figure: it does not count the time spent waiting for a core."""
     wall, cpu = [], []
-    for i in range(repeats + 1):
+    for i in range(repeats + warm_up):
         if setup:
             setup()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -104,7 +105,7 @@ def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
                        stderr=subprocess.DEVNULL, check=False)
         t1 = time.perf_counter()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        if i:  # the first run only warms the file cache
+        if i or not warm_up:  # the first run only warms the file cache
             wall.append(t1 - t0)
             cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     return wall, cpu
@@ -258,8 +259,14 @@ def main() -> int:
     reference = 0.0
     for label, args in commands(db, artifact, floor_app).items():
         cells = []
-        for checkout in checkouts.values():
-            wall, cpu = run_times(args, checkout, opts.repeats, work)
+        runs = checkouts if label.startswith("calibctl") else dict(list(checkouts.items())[:1])
+        times = {name: ([], []) for name in runs}
+        for i in range(opts.repeats):  # the checkouts in turn, so a change in the machine's load hits both
+            for name, checkout in runs.items():
+                wall, cpu = run_times(args, checkout, 1, work, warm_up=i == 0)
+                times[name][0].extend(wall)
+                times[name][1].extend(cpu)
+        for wall, cpu in times.values():
             reference = min(wall) if label == REFERENCE else reference
             cells += [f"{min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f}",
                       f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}",
