@@ -73,6 +73,8 @@ def commands(db: str, artifact: Path, floor_app: Path) -> dict[str, list[str]]:
         "floor: bare typer app, 1 command": [str(floor_app), "history", SERIAL],
         "python -c 'import typer, pydantic, rich.console, rich.table'": [
             "-c", "import typer.main, pydantic.main, rich.console, rich.table"],
+        "python -c '... and calibctl.artifacts.calibration'": [  # the models history/show/export validate
+            "-c", "import typer.main, pydantic.main, rich.console, rich.table, calibctl.artifacts.calibration"],
         "calibctl --help": [*calibctl, "--help"],
         "calibctl --version": [*calibctl, "--version"],
         "calibctl board list": [*calibctl, "board", "list"],
