@@ -1,11 +1,15 @@
-"""Start-up of each read command in a fresh process, against `python -c 'import cv2'`.
+"""Start-up of each read command in a fresh process, against `python -c 'import cv2, numpy'`.
 
     .venv/bin/python benchmarks/bench_startup.py [--repeats 7] [--before DIR] [--calibrate]
 
 Each command runs ``--repeats`` times (after one warm-up, so the OS file cache is warm) in a new
 interpreter against a small SQLite store holding one board and one calibration (``calibctl demo``);
-best and median wall and CPU time are reported. ``--before DIR`` also times the calibctl checkout in DIR
-(e.g. a worktree of main) in the same run, so before/after share the machine's load. Then
+best and median wall and CPU time are reported, and each command's best wall time over the best of
+``python -c 'import cv2, numpy'`` (the issue's reference: a plain OpenCV script's imports). A bare typer app
+with calibctl's root options and one command (``FLOOR_APP``) is the floor a typer CLI starts from:
+typer 0.29 coerces every option through a pydantic TypeAdapter, so it imports pydantic. ``--before DIR``
+also times the calibctl checkout in DIR (e.g. a worktree of main) in the same run, one run of each in turn,
+so before/after share the machine's load. Then
 ``python -X importtime`` of each command is summed per top-level package (self time), which says
 where the rest of the time goes. ``--calibrate`` also times ``calibctl calibrate`` of 20 rendered
 1280x960 images against the plain OpenCV script (``bench_e2e.py --plain-only``: sequential
@@ -42,12 +46,35 @@ SERIAL = "DEMO-CAM-0001"
 PYCACHE = Path(tempfile.mkdtemp(prefix="calibctl-pycache-"))
 
 
-def commands(db: str, artifact: Path) -> dict[str, list[str]]:
+REFERENCE = "python -c 'import cv2, numpy'"
+FLOOR_APP = """from pathlib import Path
+from typing import Annotated
+import typer
+app = typer.Typer(rich_markup_mode=None, pretty_exceptions_enable=False)
+@app.callback()
+def main(db: Annotated[str | None, typer.Option("--db")] = None,
+         station_config: Annotated[Path | None, typer.Option("--station-config")] = None,
+         json_output: Annotated[bool, typer.Option("--json")] = False) -> None:
+    pass
+@app.command()
+def history(serial: str) -> None:
+    print(serial)
+app()
+"""
+
+
+def commands(db: str, artifact: Path, floor_app: Path) -> dict[str, list[str]]:
     calibctl = ["-m", "calibctl", "--db", db]
     return {
         "python -c pass": ["-c", "pass"],
         "python -c 'import numpy'": ["-c", "import numpy"],
         "python -c 'import cv2'": ["-c", "import cv2"],
+        REFERENCE: ["-c", "import cv2, numpy"],
+        "floor: bare typer app, 1 command": [str(floor_app), "history", SERIAL],
+        "python -c 'import typer, pydantic, rich.console, rich.table'": [
+            "-c", "import typer.main, pydantic.main, rich.console, rich.table"],
+        "python -c '... and calibctl.artifacts.calibration'": [  # the models history/show/export validate
+            "-c", "import typer.main, pydantic.main, rich.console, rich.table, calibctl.artifacts.calibration"],
         "calibctl --help": [*calibctl, "--help"],
         "calibctl --version": [*calibctl, "--version"],
         "calibctl board list": [*calibctl, "board", "list"],
@@ -67,11 +94,11 @@ def _env(checkout: Path) -> dict[str, str]:
 
 
 def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
-              setup: Callable[[], None] | None = None) -> tuple[list[float], list[float]]:
-    """Wall and CPU (user + system) seconds of each run. On a loaded machine the CPU time is the
-    steadier figure: it does not count the time spent waiting for a core."""
+              setup: Callable[[], None] | None = None, warm_up: bool = True) -> tuple[list[float], list[float]]:
+    """Wall and CPU (user + system) seconds of each run (after one untimed run when ``warm_up``). On a
+    loaded machine the CPU time is the steadier figure: it does not count the time spent waiting for a core."""
     wall, cpu = [], []
-    for i in range(repeats + 1):
+    for i in range(repeats + warm_up):
         if setup:
             setup()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -80,7 +107,7 @@ def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
                        stderr=subprocess.DEVNULL, check=False)
         t1 = time.perf_counter()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        if i:  # the first run only warms the file cache
+        if i or not warm_up:  # the first run only warms the file cache
             wall.append(t1 - t0)
             cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
     return wall, cpu
@@ -222,26 +249,37 @@ def main() -> int:
     artifact = work / "artifact.json"
     artifact.write_bytes(subprocess.run([sys.executable, "-m", "calibctl", "--db", db, "export", SERIAL],
                                         cwd=work, env=_env(REPO), capture_output=True, check=True).stdout)
+    floor_app = work / "floor_app.py"
+    floor_app.write_text(FLOOR_APP)
     checkouts = {"this checkout": REPO, **({"before": opts.before.resolve()} if opts.before else {})}
     print(f"# calibctl start-up per command ({dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC)\n")
     print(f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
           f"best / median of {opts.repeats} runs after a warm-up, ms.\n")
     print(f"Load average before: {_load()}\n")
-    print("| command | " + " | ".join(f"{c}: wall | {c}: CPU" for c in checkouts) + " |")
-    print("|---|" + "---|" * 2 * len(checkouts))
-    for label, args in commands(db, artifact).items():
+    print("| command | " + " | ".join(f"{c}: wall | {c}: CPU | {c}: x cv2+numpy" for c in checkouts) + " |")
+    print("|---|" + "---|" * 3 * len(checkouts))
+    reference = 0.0
+    for label, args in commands(db, artifact, floor_app).items():
         cells = []
-        for checkout in checkouts.values():
-            wall, cpu = run_times(args, checkout, opts.repeats, work)
+        runs = checkouts if label.startswith("calibctl") else dict(list(checkouts.items())[:1])
+        times = {name: ([], []) for name in runs}
+        for i in range(opts.repeats):  # the checkouts in turn, so a change in the machine's load hits both
+            for name, checkout in runs.items():
+                wall, cpu = run_times(args, checkout, 1, work, warm_up=i == 0)
+                times[name][0].extend(wall)
+                times[name][1].extend(cpu)
+        for wall, cpu in times.values():
+            reference = min(wall) if label == REFERENCE else reference
             cells += [f"{min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f}",
-                      f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}"]
-            if label.startswith("python"):
+                      f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}",
+                      f"{min(wall) / reference:.2f}" if reference else "-"]
+            if not label.startswith("calibctl"):
                 cells = cells * len(checkouts)  # no calibctl involved: one measurement
                 break
         print(f"| `{label}` | " + " | ".join(cells) + " |")
     print(f"\nLoad average after: {_load()}\n")
     print("## Import self time per top-level package (ms, one `python -X importtime` run, this checkout)\n")
-    profiles = {label: import_profile(args, REPO, work) for label, args in commands(db, artifact).items()
+    profiles = {label: import_profile(args, REPO, work) for label, args in commands(db, artifact, floor_app).items()
                 if label.startswith("calibctl")}
     peak: dict[str, float] = defaultdict(float)
     for prof in profiles.values():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import traceback
@@ -133,7 +134,14 @@ def main(
     ctx.obj = AppState(db=db, station_config=station_config, json_output=json_output)
 
 
+PYDANTIC_PLUGINS_ENV = "PYDANTIC_DISABLE_PLUGINS"
+"""calibctl's models use no pydantic plugin. Unset, pydantic reads the entry points of every installed
+distribution when the first model is built (2-3 ms of each read command's start, benchmarks/results/startup.md);
+the command line sets it to ``__all__`` unless the user set it (``""`` or a list of names turns plugins back on)."""
+
+
 def run() -> None:
+    os.environ.setdefault(PYDANTIC_PLUGINS_ENV, "__all__")
     try:
         app()
     finally:

@@ -15,16 +15,19 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
-from calibctl.artifacts.board import BoardRevision
-from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
-from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex, validation_message
-from calibctl.artifacts.events import ActivationEvent
-from calibctl.artifacts.session import CaptureSession
 from calibctl.errors import IntegrityError
 
 if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (sqlite_reads) uses them too
+    from calibctl.artifacts.board import BoardRevision
+    from calibctl.artifacts.calibration import CalibrationArtifact
+    from calibctl.artifacts.check import CheckEvent
+    from calibctl.artifacts.events import ActivationEvent
+    from calibctl.artifacts.session import CaptureSession
     from calibctl.store.models import ArtifactRow, BoardRow, CheckEventRow, EventRow, SessionRow
+
+# Each decoder imports the one model it parses: building the pydantic models is most of a read command's
+# own import time, and `board list` (boards only) need not build the calibration, session and check models.
 
 SignedT = TypeVar("SignedT", bound=BaseModel)
 TAMPER_HINT = "run `calibctl db verify`; restore the affected record from an export or a backup"
@@ -101,6 +104,8 @@ def board_row(board: BoardRevision) -> BoardRow:
 
 
 def decode_board(row: BoardRow) -> BoardRevision:
+    from calibctl.artifacts.board import BoardRevision
+
     what = f"board {row.name}@{row.revision}"
     board: BoardRevision = _decode_hashed(BoardRevision, row, what)
     _check_columns(
@@ -137,6 +142,8 @@ def session_row(session: CaptureSession) -> SessionRow:
 
 
 def decode_session(row: SessionRow) -> CaptureSession:
+    from calibctl.artifacts.session import CaptureSession
+
     what = f"capture session {row.session_id}"
     session: CaptureSession = _decode_hashed(CaptureSession, row, what)
     _check_columns(
@@ -178,6 +185,8 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
     """The stored artifact after its integrity check: its content hash re-derived from the parsed content
     (default; ``db verify``), or, ``by_chain``, the row's chain hash over its stored bytes and columns (0.19
     vs 0.93 ms CPU for a 10 kB artifact; what every Store read uses)."""
+    from calibctl.artifacts.calibration import CalibrationArtifact
+
     what = f"{row.serial}@{row.version}"
     if by_chain:
         from calibctl.store import chain_hash
@@ -212,6 +221,8 @@ def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
     """``document`` (a camera artifact or rig version) carrying its row's signature, as exports show it."""
     if not (row.signature or row.key_id):
         return document
+    from calibctl.artifacts.calibration import RecordSignature
+
     try:
         seal = RecordSignature(key_id=row.key_id, record_sha256=row.chain_hash, value=row.signature)
     except ValidationError as exc:
@@ -223,6 +234,8 @@ def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
 
 
 def decode_event(row: EventRow) -> ActivationEvent:
+    from calibctl.artifacts.events import ActivationEvent
+
     return ActivationEvent(
         event_id=row.id,
         serial=row.serial,
@@ -240,6 +253,8 @@ def decode_event(row: EventRow) -> ActivationEvent:
 
 
 def decode_check(row: CheckEventRow) -> CheckEvent:
+    from calibctl.artifacts.check import CheckEvent
+
     what = f"check {row.check_id} of {row.serial}@{row.version}"
     actual = sha256_hex(row.payload.encode("utf-8"))
     if actual != row.payload_sha256:

@@ -21,7 +21,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Protocol, TypeVar
 
-from calibctl.store import codec, migrate, served
+from calibctl.store import codec, migrate
 from calibctl.store.unreadable import unreadable_datetime
 
 if TYPE_CHECKING:
@@ -80,6 +80,8 @@ class SqliteReader:
     def _served(self, stream: str, row: SimpleNamespace | None) -> None:
         """With keys configured, the check ``Store._served`` makes (``served``, same SQL)."""
         if row is not None and self._trusted is not None:
+            from calibctl.store import served  # signing and the chain specs: only with keys configured
+
             served.check(stream, row, lambda sql, params: [vars(r) for r in self._rows(sql, params)], self._trusted)
 
     def _rows(self, sql: str, *params: object) -> list[SimpleNamespace]:

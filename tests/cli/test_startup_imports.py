@@ -89,18 +89,27 @@ NOT_FOR_STORE_READS = ("sqlalchemy", "calibctl.store.repository", "numpy", "cryp
 @pytest.fixture(scope="module")
 def store_with_a_calibration(migrated_store) -> str:
     from calibctl.store.repository import Store
-    from tests.artifacts.factories import calibration
+    from tests.artifacts.factories import calibration, measured_board
 
     with Store.open(migrated_store) as store:
+        store.add_board(measured_board())  # `board list` reads a row
         store.add_artifact(calibration(serial="CAM-1"), activate=True, actor="qa", station="st1", reason="solved")
     return migrated_store
 
 
 def _run_loading(args: list[str]) -> set[str]:
+    return _run(args)[0]
+
+
+def _run(args: list[str]) -> tuple[set[str], str]:
+    """The modules loaded by running ``calibctl ARGS`` in a fresh interpreter, and what it printed."""
     code = ("import typer.main\nfrom calibctl.cli.main import app\n"
             f"try:\n    typer.main.get_command(app).main({args!r}, "
-            "standalone_mode=False)\nexcept BaseException as exc:\n    raise SystemExit(f'failed: {exc!r}')")
-    return _modules_after(code)
+            "standalone_mode=False)\nexcept BaseException as exc:\n    raise SystemExit(f'failed: {exc!r}')"
+            "\nimport sys, json; print(json.dumps(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    printed, _, modules = out.rstrip("\n").rpartition("\n")
+    return set(json.loads(modules)), printed
 
 
 @pytest.mark.parametrize("args", [
@@ -110,6 +119,47 @@ def test_sqlite_store_reads_load_no_orm_numpy_crypto_audit_rig_or_yaml_module(st
     loaded = _run_loading(["--db", store_with_a_calibration, *args])
     assert "calibctl.store.sqlite_reads" in loaded
     assert sorted(m for m in loaded if m.startswith(NOT_FOR_STORE_READS)) == []
+
+
+# Building the pydantic models is most of a read command's own start-up (benchmarks/results/startup.md): each
+# read builds the models of what it reads. The calibration models (with the session and check ones they use)
+# are not for boards; the writers' modules (formats, the trace header, ROS camera_info) are not for history or
+# show, and a JSON export, the default, stamps no trace header; the served-record check (signing's chain
+# specs) runs with trusted keys only, and history reads no keys.
+CALIBRATION_MODELS = ("calibctl.artifacts.calibration", "calibctl.artifacts.session", "calibctl.artifacts.check")
+EXPORT_WRITERS = ("calibctl.workflows.exports.formats", "calibctl.workflows.exports.trace_header",
+                  "calibctl.workflows.exports.ros_camera_info")
+
+
+def test_board_list_builds_the_board_model_and_no_calibration_session_or_check_model(store_with_a_calibration) -> None:
+    loaded, printed = _run(["--db", store_with_a_calibration, "board", "list"])
+    assert "A17" in printed and "calibctl.artifacts.board" in loaded and "calibctl.store.sqlite_reads" in loaded
+    assert sorted(m for m in loaded if m in CALIBRATION_MODELS) == []
+
+
+@pytest.mark.parametrize("args", [["history", "CAM-1"], ["show", "CAM-1"], ["show", "CAM-1", "--json"]])
+def test_history_and_show_load_no_export_writer_and_without_keys_no_served_record_check(store_with_a_calibration,
+                                                                                         args) -> None:
+    loaded, printed = _run(["--db", store_with_a_calibration, *args])
+    assert "CAM-1" in printed and "calibctl.artifacts.calibration" in loaded
+    assert sorted(m for m in loaded if m in (*EXPORT_WRITERS, "calibctl.store.served")) == []
+    if args[0] == "history":  # nor the keys (show reads the trusted ones: without any, none is loaded)
+        assert sorted(m for m in loaded if m in ("calibctl.workflows.store_admin.keys", "calibctl.signing")) == []
+
+
+def test_a_json_export_loads_formats_but_no_trace_header_or_ros_writer(store_with_a_calibration) -> None:
+    loaded, printed = _run(["--db", store_with_a_calibration, "export", "CAM-1"])
+    assert json.loads(printed)["serial"] == "CAM-1" and "calibctl.workflows.exports.formats" in loaded
+    assert sorted(m for m in loaded if m in EXPORT_WRITERS[1:]) == []
+    loaded, printed = _run(["--db", store_with_a_calibration, "export", "CAM-1", "--format", "ros"])
+    assert "camera_matrix" in printed and set(EXPORT_WRITERS) <= loaded
+
+
+def test_linting_a_camera_file_builds_no_rig_hand_eye_or_lidar_model() -> None:
+    loaded, printed = _run(["lint", str(REPO / "fixtures/camera_front.json")])
+    assert "pass" in printed and "calibctl.workflows.lint.rig_files" in loaded
+    assert sorted(m for m in loaded if m.startswith(("calibctl.artifacts.rig", "calibctl.artifacts.handeye",
+                                                     "calibctl.artifacts.lidar"))) == []
 
 
 def test_an_export_prints_its_text_without_loading_rich(store_with_a_calibration) -> None:
@@ -166,3 +216,34 @@ def test_lint_starts_numpys_openblas_on_one_thread_and_leaves_the_environment_an
     # The workflows imported any other way (as every solving command does) keep OpenBLAS's own count.
     assert _numpy_blas_threads_after("import calibctl.workflows.lint.lint, calibctl.workflows.camera.solve") == [default, "None"]
     assert _numpy_blas_threads_after(LINT_FILE, openblas_env=default) == [default, default]  # the user's count stays
+
+
+PLUGIN_SCANS = """
+import importlib.metadata, os, sys
+groups = []
+entry_points = importlib.metadata.entry_points
+def counting(**selection):
+    groups.append(selection.get("group"))
+    return entry_points(**selection)
+importlib.metadata.entry_points = counting  # before pydantic's plugin loader imports it
+sys.argv = ["calibctl", *sys.argv[1:]]
+from calibctl.cli.main import run
+try:
+    run()
+except SystemExit as exc:
+    assert exc.code == 0, exc.code
+print(groups.count("pydantic"), repr(os.environ.get("PYDANTIC_DISABLE_PLUGINS")))
+"""
+
+
+@pytest.mark.parametrize(("user_value", "scans", "value"), [(None, "0", "'__all__'"), ("", "1", "''")])
+def test_the_command_line_skips_pydantics_plugin_scan_unless_the_user_set_the_variable(
+        store_with_a_calibration, user_value, scans, value) -> None:
+    # calibctl's models use no pydantic plugin: the scan reads every installed distribution's entry points.
+    env = {k: v for k, v in os.environ.items() if k != "PYDANTIC_DISABLE_PLUGINS"}
+    if user_value is not None:
+        env["PYDANTIC_DISABLE_PLUGINS"] = user_value  # "" turns plugins back on: pydantic scans
+    out = subprocess.run([sys.executable, "-c", PLUGIN_SCANS, "--db", store_with_a_calibration, "history", "CAM-1"],
+                         capture_output=True, text=True, check=True, env=env).stdout
+    assert "CAM-1" in out
+    assert out.strip().splitlines()[-1].split() == [scans, value]

@@ -19,12 +19,14 @@ import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.errors import InputError
-from calibctl.workflows.exports import ros_camera_info, trace_header
+
+if TYPE_CHECKING:  # the stamped formats' modules: a JSON export (the default) prints without them
+    from calibctl.workflows.exports import trace_header
 
 ExportFormat = Literal["json", "yaml", "ros", "opencv", "kalibr", "mrcal"]
 EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv", "kalibr", "mrcal")
@@ -91,6 +93,8 @@ def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None
         return json.dumps(document, indent=2, allow_nan=False) + "\n"
     if fmt == "yaml":
         return _yaml_text(document)
+    from calibctl.workflows.exports import ros_camera_info, trace_header
+
     if fmt == "ros":
         info = ros_camera_info.camera_info(art, camera_name)
         return trace_header.stamp(art, _yaml_text(info, default_flow_style=None))
@@ -172,6 +176,8 @@ def load_calibration(path: Path) -> CalibrationFile:
 
 def calibration_from_text(text: str, source: str, is_json: bool = False) -> CalibrationFile:
     """``load_calibration`` on text already read (``source`` names it in messages)."""
+    from calibctl.workflows.exports import ros_camera_info, trace_header
+
     header, rig_header = trace_header.read(text), trace_header.read_rig(text)
     if _is_opencv(text):
         return CalibrationFile(source, "opencv", bounded.check_tree(opencv_data(text, source), source), header,

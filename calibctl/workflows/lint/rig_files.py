@@ -19,7 +19,7 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -27,9 +27,7 @@ from pydantic import ValidationError
 from calibctl import bounded
 from calibctl.artifacts.calibration import RecordSignature
 from calibctl.artifacts.common import validation_message
-from calibctl.artifacts.handeye import HandEyeResult
 from calibctl.artifacts.lint import Finding
-from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import LintThresholds
 from calibctl.errors import InputError
 from calibctl.signing import TrustedKeys
@@ -46,6 +44,10 @@ from calibctl.workflows.lint.lint import (
     with_evidence,
 )
 from calibctl.workflows.store_admin import keys
+
+if TYPE_CHECKING:  # the rig and hand-eye models are built when such a document is linted, not for a camera file
+    from calibctl.artifacts.handeye import HandEyeResult
+    from calibctl.artifacts.rig import RigCalibration
 
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
 _FIX_FRAME = "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
@@ -335,6 +337,9 @@ def lint_rig_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | Non
                 results += lint_rig_file(listed, limits, trusted) or [lint_camera_file(listed, limits, trusted)]
         return results
     if kind in ("rig-json", "handeye-json"):
+        from calibctl.artifacts.handeye import HandEyeResult
+        from calibctl.artifacts.rig import RigCalibration
+
         model = RigCalibration if kind == "rig-json" else HandEyeResult
         findings = _document(data, source, model)
         if trusted is not None and kind == "rig-json":

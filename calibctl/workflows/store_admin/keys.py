@@ -8,13 +8,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-from calibctl.artifacts.calibration import RecordSignature
 from calibctl.config import Settings
 from calibctl.errors import FileSystemError, InputError, UsageError
 from calibctl.files import write_atomic
 from calibctl.signing import Signer, TrustedKeys, create_key, load_signer, record_message
+
+if TYPE_CHECKING:  # annotations only: `board list` need not build the calibration models
+    from calibctl.artifacts.calibration import RecordSignature
 
 _NO_KEY_HINT = "set CALIBCTL_SIGNING_KEY or signing_key in the station file, or pass --key FILE"
 

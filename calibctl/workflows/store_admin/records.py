@@ -17,8 +17,6 @@ from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, UsageError
 from calibctl.files import write_atomic
 from calibctl.store import sqlite_reads
-from calibctl.workflows.exports import formats
-from calibctl.workflows.store_admin import keys
 
 if TYPE_CHECKING:
     from calibctl.store.repository import Store
@@ -43,6 +41,7 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
+    from calibctl.workflows.store_admin import keys
 
     return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None,
                       trusted=None if write else keys.read_trust(settings))
@@ -110,6 +109,8 @@ def history(settings: Settings, serial: str) -> History:
 
 
 def show(settings: Settings, ref: str) -> CalibrationArtifact:
+    from calibctl.workflows.store_admin import keys  # the trusted keys: `history` reads without them
+
     serial, version = parse_artifact_ref(ref)
     return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
                              lambda: open_store(settings), keys.read_trust(settings))
@@ -131,6 +132,8 @@ def export(
     command could not do what was asked; there is no verdict to report). Every export names the
     version's status: a field in json/yaml, the trace header in ros/opencv.
     """
+    from calibctl.workflows.exports import formats  # the writers: not for history or show
+
     if fmt not in formats.EXPORT_FORMATS:
         raise UsageError(f"unknown export format '{fmt}'", f"choose one of {', '.join(formats.EXPORT_FORMATS)}")
     if camera_name is not None and fmt != "ros":
@@ -150,6 +153,8 @@ def export(
 
 def read_artifact_file(path: Path) -> CalibrationArtifact:
     """Parse an exported artifact (JSON or YAML) and check its hash; a tampered file is IntegrityError."""
+    from calibctl.workflows.exports import formats
+
     loaded = formats.load_calibration(path)
     if loaded.kind != "calibctl":
         raise InputError(
