@@ -34,7 +34,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.errors import IntegrityError, UsageError
 from calibctl.signing import TrustedKeys, record_message
-from calibctl.store import chain, codec, fleet, fleet_checkpoints, health, rigs, triggers
+from calibctl.store import chain, codec, fleet_checkpoints, health, rigs, triggers
 from calibctl.store.models import (
     ArtifactRow,
     CounterRow,
@@ -48,7 +48,7 @@ _DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifa
                                                  "rig": rigs.decode_calibration, "check": codec.decode_check,
                                                  "rig_definition": rigs.decode_definition,
                                                  "session": codec.decode_session,
-                                                 "fleet": fleet.decode_fleet_event}
+                                                 "fleet": codec.decode_fleet_event}
 _VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 

@@ -23,8 +23,16 @@ if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (
     from calibctl.artifacts.calibration import CalibrationArtifact
     from calibctl.artifacts.check import CheckEvent
     from calibctl.artifacts.events import ActivationEvent
+    from calibctl.artifacts.fleet import FleetEvent
     from calibctl.artifacts.session import CaptureSession
-    from calibctl.store.models import ArtifactRow, BoardRow, CheckEventRow, EventRow, SessionRow
+    from calibctl.store.models import (
+        ArtifactRow,
+        BoardRow,
+        CheckEventRow,
+        EventRow,
+        FleetEventRow,
+        SessionRow,
+    )
 
 # Each decoder imports the one model it parses: building the pydantic models is most of a read command's
 # own import time, and `board list` (boards only) need not build the calibration, session and check models.
@@ -263,3 +271,12 @@ def decode_check(row: CheckEventRow) -> CheckEvent:
     _check_columns(what, {"serial": (row.serial, event.serial), "version": (row.version, event.version),
                           "passed": (row.passed, event.passed)})
     return event
+
+
+def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
+    """A fleet log row's event, its payload checked against its sha256 (here, not in store.fleet, so the
+    fleet writer and its checkpoints both read events without importing each other)."""
+    from calibctl.artifacts.fleet import FleetEvent
+
+    what = f"fleet event {row.id} ({row.subject}, {row.kind})"
+    return decode_payload(FleetEvent, row.payload, row.payload_sha256, what, {"subject": row.subject, "kind": row.kind})

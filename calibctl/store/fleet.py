@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -19,7 +19,9 @@ from calibctl.artifacts.common import sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.errors import AlreadyExistsError, NotFoundError, StaleActiveVersionError, UsageError
 from calibctl.signing import Signer
-from calibctl.store import chain, codec, counters
+from calibctl.store import chain, codec, counters, fleet_checkpoints
+from calibctl.store.codec import decode_fleet_event
+from calibctl.store.fleet_checkpoints import Loaded
 from calibctl.store.history import check_rollback, statuses
 from calibctl.store.models import EventRow, FleetEventRow, RigEventRow
 from calibctl.store.rigs import (
@@ -29,9 +31,6 @@ from calibctl.store.rigs import (
     rig_calibration_row,
     rig_statuses,
 )
-
-if TYPE_CHECKING:
-    from calibctl.store.fleet_checkpoints import Loaded
 
 
 @dataclass(frozen=True)
@@ -44,12 +43,6 @@ class RigActivationStep:
     kind: str  # "activate" (promote) or "rollback"
     expected_active: int | None
     reason: str
-
-
-def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
-    what = f"fleet event {row.id} ({row.subject}, {row.kind})"
-    return codec.decode_payload(FleetEvent, row.payload, row.payload_sha256, what,
-                                {"subject": row.subject, "kind": row.kind})
 
 
 def _registration(s: Session, robot: str) -> FleetEvent | None:
@@ -97,7 +90,6 @@ class FleetStoreMixin:
             for step in rig_steps:
                 _activate_rig(s, step, events[-1], self.signer)
             if position > current:
-                from calibctl.store import fleet_checkpoints  # it imports this module
 
                 fleet_checkpoints.write_if_due(s, position)
             return position
@@ -121,7 +113,6 @@ class FleetStoreMixin:
     def fleet(self) -> Loaded:
         """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the events
         after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
-        from calibctl.store import fleet_checkpoints  # it imports this module
 
         def work(s: Session) -> Loaded:
             loaded = fleet_checkpoints.load(s)

@@ -22,7 +22,7 @@ from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.errors import IntegrityError
-from calibctl.store.fleet import decode_fleet_event
+from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet_ledger import STATE_FORMAT, Fleet, from_state, rollout_positions, to_state
 from calibctl.store.models import FleetCheckpointRow, FleetEventRow
 

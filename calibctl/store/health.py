@@ -20,7 +20,8 @@ from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.artifacts.health import HealthReport
 from calibctl.errors import IntegrityError
 from calibctl.store import codec
-from calibctl.store.fleet import _registration, decode_fleet_event
+from calibctl.store.codec import decode_fleet_event
+from calibctl.store.fleet import _registration
 from calibctl.store.models import CheckEventRow, FleetEventRow, HealthReportRow
 
 _CHUNK = 500  # source ids per IN (...) query: under SQLite's bound-parameter limit
