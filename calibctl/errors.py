@@ -44,6 +44,10 @@ class FileSystemError(CalibctlError):
     """A file or folder cannot be read or written: permission, read-only, disk full, is-a-directory."""
 
 
+class WorkerDiedError(CalibctlError):
+    """A worker process died under the work (killed, out of memory, a crash in a native library)."""
+
+
 class NotFoundError(CalibctlError):
     """An unknown serial, board, revision, version or session."""
 

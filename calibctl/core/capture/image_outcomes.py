@@ -26,6 +26,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture import worker_pool
 from calibctl.core.capture.detect import FOUND_INCONSISTENT, Detection, DetectorSettings, detect_board
 from calibctl.core.intrinsics.solution import single_threaded_opencv
+from calibctl.errors import WorkerDiedError
 
 ACCEPTED = "accepted"
 NO_BOARD = "no_board"
@@ -353,12 +355,30 @@ def _collect(pool: Executor, paths: list[Path], todo: list[int], spec: BoardSpec
                 futures[pool.submit(_classify_task, paths[i], spec, settings, summarize)] = i
         for done, future in enumerate(as_completed(futures), start=1):
             finished(futures[future], *future.result(), done)
-    except BaseException:
+    except BaseException as exc:
         for future in futures:  # queued files never start; the pool itself stays usable
             future.cancel()
         if isinstance(pool, ProcessPoolExecutor):
             worker_pool.discard_if_broken(pool)
+        if isinstance(exc, BrokenProcessPool):
+            raise _worker_died([paths[i] for f, i in futures.items() if not _succeeded(f)]) from exc
         raise
+
+
+def _succeeded(future: Future[tuple[ImageOutcome, object]]) -> bool:
+    return future.done() and not future.cancelled() and future.exception() is None
+
+
+def _worker_died(unfinished: Sequence[Path]) -> WorkerDiedError:
+    """A detection process that died (the kernel's out-of-memory killer, a crash in a decoder) breaks the whole
+    pool: the files it had not finished are named, the pool is started afresh by the next capture."""
+    names = [path.name for path in unfinished]
+    shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return WorkerDiedError(
+        f"a detection worker process died (killed, out of memory, or a crash decoding an image) with "
+        f"{len(names)} image(s) not yet detected: {shown}; nothing was stored",
+        "run it again (the workers are started afresh); if it dies again, check the machine's free memory "
+        "(dmesg names the out-of-memory killer) or leave the first image named above out")
 
 
 def classify_session(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,

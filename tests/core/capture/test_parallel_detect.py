@@ -132,6 +132,8 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
     import time
     from concurrent.futures.process import BrokenProcessPool
 
+    from calibctl.errors import WorkerDiedError
+
     pool = worker_pool.process_pool(2)
     os.kill(pool.submit(os.getpid).result(timeout=120), signal.SIGKILL)
     deadline = time.monotonic() + 60
@@ -141,8 +143,11 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
         except BrokenProcessPool:
             break
         time.sleep(0.01)
-    with pytest.raises(BrokenProcessPool):
+    with pytest.raises(WorkerDiedError, match=r"a detection worker process died .* not yet detected: .*nothing was "
+                       r"stored") as died:
         classify_files(rendered, BOARD, workers=2, executor="process")
+    assert isinstance(died.value.__cause__, BrokenProcessPool) and died.value.exit_code == 2
+    assert "free memory" in (died.value.hint or "")
     assert worker_pool.process_pool(2) is not pool  # forgotten: the next run starts a new pool
     outcomes = classify_files(rendered, BOARD, workers=2, executor="process")
     assert sum(o.status == "accepted" for o in outcomes) >= 10

@@ -491,3 +491,34 @@ def test_ctrl_c_during_the_gates_stops_the_writes_after_the_batch_in_progress(se
         files = [p.name for p in store.image_dir.rglob("*") if p.is_file()]
         assert store.list_sessions() == [] and store.counts()["images"] == len(files) == batches[0]
         assert all(store.image_path(name) is not None for name in files)
+
+
+def test_a_detection_worker_killed_mid_capture_is_a_clear_error_and_stores_nothing(settings, good: Path,
+                                                                                   tmp_path: Path) -> None:
+    """The out-of-memory killer (or a crash in a decoder) takes a worker process while the pool detects: the
+    capture ends with WorkerDiedError (exit 2) naming the images not detected, nothing is stored, and the next
+    capture gets a fresh pool."""
+    import os
+    import signal
+
+    from calibctl.core.capture import worker_pool
+    from calibctl.errors import WorkerDiedError
+
+    folder = tmp_path / "large"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(40):  # enough for the process pool (image_outcomes.PROCESS_MIN_FILES)
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+
+    class KillWorkers(capture_workflow.CaptureObserver):
+        def image_done(self, done: int, total: int, name: str, status: str) -> None:
+            if done == 5:
+                for pid in list(worker_pool.process_pool(2)._processes):  # noqa: SLF001 - the test's stand-in for the OOM killer
+                    os.kill(pid, signal.SIGKILL)
+
+    with pytest.raises(WorkerDiedError, match=r"worker process died .* not yet detected: img-\d{3}\.png") as died:
+        capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=2), KillWorkers())
+    assert died.value.exit_code == 2
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == [] and store.counts()["images"] == 0
+    assert capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=2)).session.status == "accepted"
