@@ -360,16 +360,22 @@ def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
         assert store.counts()["images"] == 0
 
 
+def _pool_sized_folder(good: Path, tmp_path: Path) -> Path:
+    """40 copies of the good views: enough for the process pool (image_outcomes.PROCESS_MIN_FILES)."""
+    folder = tmp_path / "large"
+    folder.mkdir()
+    views = sorted(good.glob("*.png"))
+    for i in range(40):
+        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+    return folder
+
+
 @pytest.mark.parametrize("jobs", [2, 4])
 def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(settings, good: Path, tmp_path: Path,
                                                                     jobs: int) -> None:
     """Ctrl-C arrives in the capturing process (workers ignore SIGINT) while processes detect: it
     propagates, no session and no image is stored, and the next capture on the warm pool works."""
-    folder = tmp_path / "large"
-    folder.mkdir()
-    views = sorted(good.glob("*.png"))
-    for i in range(40):  # enough for the process pool (image_outcomes.PROCESS_MIN_FILES)
-        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+    folder = _pool_sized_folder(good, tmp_path)
 
     class CtrlC(capture_workflow.CaptureObserver):
         def image_done(self, done: int, total: int, name: str, status: str) -> None:
@@ -504,11 +510,7 @@ def test_a_detection_worker_killed_mid_capture_is_a_clear_error_and_stores_nothi
     from calibctl.core.capture import worker_pool
     from calibctl.errors import WorkerDiedError
 
-    folder = tmp_path / "large"
-    folder.mkdir()
-    views = sorted(good.glob("*.png"))
-    for i in range(40):  # enough for the process pool (image_outcomes.PROCESS_MIN_FILES)
-        shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
+    folder = _pool_sized_folder(good, tmp_path)
 
     class KillWorkers(capture_workflow.CaptureObserver):
         def image_done(self, done: int, total: int, name: str, status: str) -> None:
