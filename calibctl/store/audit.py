@@ -276,5 +276,5 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
             except IntegrityError as exc:
                 audit.problems.append(exc.message)
     audit.problems.extend(health.gate_problems(s))
-    audit.problems.extend(fleet_checkpoints.problems(s))
+    audit.problems.extend(fleet_checkpoints.problems(s, trusted))
     return audit

@@ -18,7 +18,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.errors import AlreadyExistsError, NotFoundError, StaleActiveVersionError, UsageError
-from calibctl.signing import Signer
+from calibctl.signing import Signer, TrustedKeys
 from calibctl.store import chain, codec, counters, fleet_checkpoints
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet_checkpoints import Loaded
@@ -56,6 +56,7 @@ class FleetStoreMixin:
 
     _run: Callable[..., Any]
     signer: Signer | None
+    trusted: TrustedKeys | None
 
     def add_fleet_event(self, event: FleetEvent) -> int:
         """Append ``event`` to the fleet's log; its position (1, 2, ...). Refused, nothing written: a second
@@ -91,7 +92,7 @@ class FleetStoreMixin:
                 _activate_rig(s, step, events[-1], self.signer)
             if position > current:
 
-                fleet_checkpoints.write_if_due(s, position)
+                fleet_checkpoints.write_if_due(s, position, self.signer)
             return position
 
         return self._run(work, write=True)
@@ -115,7 +116,7 @@ class FleetStoreMixin:
         after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
 
         def work(s: Session) -> Loaded:
-            loaded = fleet_checkpoints.load(s)
+            loaded = fleet_checkpoints.load(s, trusted=self.trusted)
             loaded.fleet.settle()
             return loaded
 

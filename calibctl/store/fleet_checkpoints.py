@@ -10,6 +10,11 @@ Written by the fleet writer (``append_fleet_events``), in the same transaction a
 log it wrote, and read commands (``fleet status`` on a read-only copy of the store included) never write.
 The cost, a replay of at most ``EVERY`` events from the previous checkpoint, is paid once per ``EVERY`` events;
 a store migrated with a long log gets its first one at the next fleet write.
+
+Signed: with a station key the writer signs each checkpoint (its position, event N's chain hash and the state's
+sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so rewriting a
+checkpoint together with its sha256 is no longer a way to change what ``fleet status`` serves (``db verify``
+replays the log and catches it either way). A store without keys checks the chain hash and the sha256 only.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.errors import IntegrityError
+from calibctl.signing import Signer, TrustedKeys, record_message
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet_ledger import STATE_FORMAT, Fleet, from_state, rollout_positions, to_state
 from calibctl.store.models import FleetCheckpointRow, FleetEventRow
@@ -44,11 +50,16 @@ class Loaded:
     ignored: list[str] = field(default_factory=list)  # why newer checkpoints were not used
 
 
+def _message(position: int, chain_hash: str, state_sha256: str) -> bytes:
+    """The bytes a checkpoint's signature is taken over."""
+    return record_message(state_sha256, f"fleet-checkpoint {position} {chain_hash}")
+
+
 def _state_text(fleet: Fleet) -> str:
     return json.dumps(to_state(fleet), separators=(",", ":"), ensure_ascii=False)
 
 
-def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool) -> Fleet | str:
+def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: TrustedKeys | None) -> Fleet | str:
     """The checkpoint's fleet, or why it cannot be used (``rollouts``: with its rollouts' events read from the log;
     else stand-ins, see ``from_state``)."""
     at = f"fleet checkpoint at event {row.position}"
@@ -60,6 +71,10 @@ def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool) -> Fleet | s
         return f"{at} does not match the log's chain hash there ({why})"
     if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
         return f"{at} was changed after it was written (its state no longer matches its sha256)"
+    if trusted is not None:
+        unsigned = trusted.check(row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256))
+        if unsigned is not None:
+            return f"{at} {unsigned} (a store with keys uses only checkpoints signed by a trusted key)"
     try:
         state = json.loads(row.state)
         positions = rollout_positions(state)
@@ -77,12 +92,13 @@ def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool) -> Fleet | s
     return fleet
 
 
-def load(s: Session, *, rollouts: bool = True) -> Loaded:
+def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = None) -> Loaded:
     """The log replayed from the newest usable checkpoint (an undecodable event raises IntegrityError, as a full
-    replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state`` only)."""
+    replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state`` only).
+    ``trusted``: the store's keys; with them only a checkpoint signed by one of them is used."""
     loaded = Loaded(Fleet())
     for row in s.scalars(select(FleetCheckpointRow).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)):
-        usable = _usable(s, row, rollouts=rollouts)
+        usable = _usable(s, row, rollouts=rollouts, trusted=trusted)
         if isinstance(usable, str):
             loaded.ignored.append(usable)
             continue
@@ -95,9 +111,10 @@ def load(s: Session, *, rollouts: bool = True) -> Loaded:
     return loaded
 
 
-def write_if_due(s: Session, length: int) -> None:
+def write_if_due(s: Session, length: int, signer: Signer | None = None) -> None:
     """After the fleet writer appended up to event ``length`` (it holds the fleet's lock): a checkpoint there when
-    the log is ``EVERY`` events past the newest one; all but the newest ``KEEP`` are deleted."""
+    the log is ``EVERY`` events past the newest one, signed with ``signer`` when there is one; all but the newest
+    ``KEEP`` are deleted."""
     newest = s.scalar(select(func.max(FleetCheckpointRow.position))) or 0
     if length - newest < EVERY:
         return
@@ -105,16 +122,21 @@ def write_if_due(s: Session, length: int) -> None:
     if loaded.last_hash is None or loaded.fleet.length != length:  # pragma: no cover - the writer's own rows
         return
     text = _state_text(loaded.fleet)
+    digest = sha256_hex(text.encode("utf-8"))
+    signature = None if signer is None else signer.sign(_message(length, loaded.last_hash, digest))
     s.add(FleetCheckpointRow(position=length, chain_hash=loaded.last_hash, format=STATE_FORMAT, written_at=utc_now(),
-                             state=text, state_sha256=sha256_hex(text.encode("utf-8"))))
+                             state=text, state_sha256=digest, signature=signature,
+                             key_id=None if signer is None else signer.key_id))
     s.flush()
     kept = select(FleetCheckpointRow.position).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)
     s.execute(delete(FleetCheckpointRow).where(FleetCheckpointRow.position.not_in(kept.scalar_subquery())))
 
 
-def problems(s: Session) -> list[str]:
-    """``db verify``: each checkpoint of this format against the log: event N's chain hash, its sha256, and its
-    state against a replay of the log up to N (one pass over the log)."""
+def problems(s: Session, trusted: TrustedKeys | None = None) -> list[str]:
+    """``db verify``: each checkpoint of this format against the log: event N's chain hash, its sha256, its
+    signature when it has one and keys are given, and its state against a replay of the log up to N (one pass
+    over the log). An unsigned checkpoint is no finding (one written before the store had keys is legitimate;
+    a store with keys only skips it on reads)."""
     rows = {r.position: r for r in s.scalars(select(FleetCheckpointRow).where(FleetCheckpointRow.format == STATE_FORMAT))}
     if not rows:
         return []
@@ -126,7 +148,7 @@ def problems(s: Session) -> list[str]:
             fleet.apply(decode_fleet_event(r))
             row = rows.pop(fleet.length, None)
             if row is not None:
-                found += _compare(row, r.chain_hash, fleet)
+                found += _compare(row, r.chain_hash, fleet, trusted)
     except IntegrityError:  # the audit names the event itself
         return [*found, f"fleet checkpoint(s) at event(s) {', '.join(map(str, sorted(rows)))} not checked: the log "
                 "before them does not decode"]
@@ -134,12 +156,16 @@ def problems(s: Session) -> list[str]:
     return found
 
 
-def _compare(row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet) -> list[str]:
+def _compare(row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet, trusted: TrustedKeys | None) -> list[str]:
     at = f"fleet checkpoint at event {row.position}"
     if row.chain_hash != log_hash:
         return [f"{at} does not match the log's chain hash there (stale or forged; reads ignore it)"]
     if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
         return [f"{at} was changed after it was written (its state no longer matches its sha256; reads ignore it)"]
+    if row.signature is not None and trusted is not None and trusted.keys:
+        why = trusted.check(row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256))
+        if why is not None:
+            return [f"{at} {why} (reads with keys ignore it)"]
     try:
         same = json.loads(row.state) == to_state(fleet)
     except (ValueError, RecursionError):

@@ -356,6 +356,8 @@ class FleetCheckpointRow(Base):
     written_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
     state: Mapped[str] = mapped_column(Text)
     state_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
+    signature: Mapped[str | None] = mapped_column(Text, nullable=True)  # with a station key (store.fleet_checkpoints)
+    key_id: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
 
 
 class HealthReportRow(Base):

@@ -6,7 +6,9 @@ Create Date: 2026-11-27
 
 Derived data, never the source of truth (``store/fleet_checkpoints.py``): each row is the replayed state at log
 position ``position`` with that event's chain hash, checked on use and by ``db verify``. No immutability triggers:
-a write prunes all but the newest few, and deleting every row only costs the next read a full replay.
+a write prunes all but the newest few, and deleting every row only costs the next read a full replay. With a
+station key a checkpoint is signed (``signature``, ``key_id``): a store with keys uses only checkpoints signed by a
+trusted key.
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ def upgrade() -> None:
         sa.Column("written_at", sa.DateTime(timezone=True), nullable=False),
         sa.Column("state", sa.Text(), nullable=False),
         sa.Column("state_sha256", sa.String(64), nullable=False),
+        sa.Column("signature", sa.Text(), nullable=True),
+        sa.Column("key_id", sa.String(64), nullable=True),
         sa.PrimaryKeyConstraint("id", name="pk_fleet_checkpoints"),
         sa.UniqueConstraint("position", name="uq_fleet_checkpoints_position"),
     )

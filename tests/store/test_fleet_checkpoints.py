@@ -23,6 +23,7 @@ from calibctl.artifacts.fleet import FleetEvent
 from calibctl.cli.main import app
 from calibctl.config import load_settings
 from calibctl.errors import IntegrityError, NotFoundError
+from calibctl.signing import Signer, TrustedKeys, create_key
 from calibctl.store import fleet_checkpoints
 from calibctl.store.fleet_ledger import Fleet, replay, to_state
 from calibctl.store.models import FleetCheckpointRow
@@ -95,9 +96,11 @@ def _view(fleet: Fleet) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, 
     return to_state(fleet), robot_states(fleet, {}, {}).as_json(), [r.as_json() for r in fleet.rollouts.values()]
 
 
-def _play(url: str, ops: list[Op], every: int) -> None:
-    """Append each op's step; after each, the store's checkpointed read must equal the whole log replayed."""
-    with pytest.MonkeyPatch.context() as mp, Store.open(url) as store:
+def _play(url: str, ops: list[Op], every: int, signer: Signer | None = None) -> None:
+    """Append each op's step; after each, the store's checkpointed read must equal the whole log replayed (with
+    ``signer``: the store signs what it writes and trusts that key)."""
+    trusted = None if signer is None else TrustedKeys.load(None, signer)
+    with pytest.MonkeyPatch.context() as mp, Store.open(url, signer=signer, trusted=trusted) as store:
         mp.setattr(fleet_checkpoints, "EVERY", every)
         for op in ops:
             batch = _batch(replay(store.fleet_events()), op)
@@ -108,7 +111,7 @@ def _play(url: str, ops: list[Op], every: int) -> None:
             assert _view(loaded.fleet) == _view(replay(store.fleet_events())), (op, loaded.since)
         positions = _positions(store)
         assert store.fleet().since == (positions[-1] if positions else 0)
-        assert store.verify().problems == []
+        assert store.verify(trusted).problems == []
 
 
 def _positions(store: Store) -> list[int]:
@@ -196,22 +199,64 @@ def test_a_checkpoint_past_the_end_of_the_log_is_ignored_and_flagged(checkpointe
 
 
 def test_a_forged_checkpoint_is_used_by_reads_but_named_by_db_verify(checkpointed: str) -> None:
-    """Its state rewritten with a matching sha256: reads cannot tell (they would have to replay the log), `db verify`
-    replays the log and exits 1 naming it."""
+    """Its state rewritten with a matching sha256, in a store without keys: reads cannot tell (they would have to
+    replay the log), `db verify` replays the log and exits 1 naming it (with keys: the next test)."""
     with Store.open(checkpointed) as store:
-        newest = _newest(store)
-        with Session(store._engine) as s:  # noqa: SLF001
-            state = json.loads(s.scalar(select(FleetCheckpointRow.state).where(FleetCheckpointRow.position == newest)))
-        state["running"][0][3] = 3  # amr-1 runs a version it never got
-        forged = json.dumps(state)
-        _sql(store, "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = :p", s=forged,
-             h=sha256_hex(forged.encode()), p=newest)
+        newest = _forge_newest(store)
         assert store.fleet().since == newest
     result = CliRunner().invoke(app, ["--db", checkpointed, "db", "verify"])
     assert result.exit_code == 1
     assert (f"PROBLEM fleet checkpoint at event {newest} is not the log replayed up to event {newest} (derived "
             "data: delete the row, or restore the store)") in result.stdout
     assert "1 problem(s) in the stored history" in result.stderr
+
+
+def _forge_newest(store: Store) -> int:
+    """The newest checkpoint's state rewritten (amr-1 runs a version it never got) with a matching sha256."""
+    newest = _newest(store)
+    with Session(store._engine) as s:  # noqa: SLF001
+        state = json.loads(s.scalar(select(FleetCheckpointRow.state).where(FleetCheckpointRow.position == newest)))
+    state["running"][0][3] = 3
+    forged = json.dumps(state)
+    _sql(store, "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = :p", s=forged,
+         h=sha256_hex(forged.encode()), p=newest)
+    return newest
+
+
+def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url: str, tmp_path: Path) -> None:
+    """A station key signs each checkpoint; a store with keys reads only checkpoints a trusted key signed, so the
+    forgery reads cannot see without keys (state and sha256 rewritten together) is skipped, and db verify names
+    its signature."""
+    signer = create_key(tmp_path / "station.pem")
+    trusted = TrustedKeys.load(None, signer)
+    _play(_fill(db_url), [("assign", 0, 0, 1), ("assign", 1, 0, 1), ("assign", 2, 1, 1), ("start", 31, 1, 2),
+                          ("promote", 0, 0, 0)], every=2, signer=signer)
+    with Store.open(db_url, signer=signer, trusted=trusted) as store:
+        positions = _positions(store)
+        with Session(store._engine) as s:  # noqa: SLF001
+            keys = set(s.scalars(select(FleetCheckpointRow.key_id)))
+        assert keys == {signer.key_id}
+        newest = _forge_newest(store)
+        loaded = store.fleet()
+        assert loaded.since == positions[-2]
+        assert "has a signature by key" in loaded.ignored[0] and "does not match its content" in loaded.ignored[0]
+        assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
+        problems = store.verify(trusted).problems
+    assert any(f"fleet checkpoint at event {newest} has a signature by key" in p for p in problems)
+    with Store.open(db_url) as store:  # no keys: the sha256 matches, so a read serves it (db verify still names it)
+        assert store.fleet().since == newest
+
+
+def test_a_store_with_keys_skips_unsigned_checkpoints(checkpointed: str, tmp_path: Path) -> None:
+    """Checkpoints written before the store had keys: reads with keys replay past them (no finding for db verify:
+    they are legitimate, only unproven)."""
+    signer = create_key(tmp_path / "station.pem")
+    trusted = TrustedKeys.load(None, signer)
+    with Store.open(checkpointed, signer=signer, trusted=trusted) as store:
+        loaded = store.fleet()
+        assert loaded.since == 0 and all("is not signed" in why for why in loaded.ignored)
+        assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
+        assert [p for p in store.verify(trusted).problems if "fleet checkpoint" in p] == []
 
 
 def test_a_checkpoint_of_another_format_is_ignored_without_a_finding(checkpointed: str) -> None:
