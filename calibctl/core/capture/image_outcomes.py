@@ -337,8 +337,15 @@ def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSett
     run in this thread before returning (single-threaded OpenCV either way, so the outcome is the one
     ``classify_files`` gives the file at any job count)."""
     if workers > 1:
-        with worker_pool.shielded():
-            return worker_pool.process_pool(workers).submit(_classify_task, path, spec, settings, summarize)
+        for attempt in range(2):  # a pool a dead worker broke is replaced once (its earlier files get detected again)
+            pool = worker_pool.process_pool(workers)
+            try:
+                with worker_pool.shielded():
+                    return pool.submit(_classify_task, path, spec, settings, summarize)
+            except BrokenProcessPool as exc:
+                worker_pool.discard_if_broken(pool)
+                if attempt:
+                    raise _worker_died([path]) from exc
     future: Future[tuple[ImageOutcome, object]] = Future()
     with single_threaded_opencv():
         future.set_result(_classify_task(path, spec, settings, summarize))

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import shutil
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import cv2
@@ -127,12 +129,11 @@ def test_ctrl_c_cancels_the_queued_files_and_leaves_the_warm_pool_usable(rendere
                  "one": classify_files(rendered, BOARD, workers=1)})
 
 
-def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: list[Path]) -> None:
+def _broken_pool() -> ProcessPoolExecutor:
+    """The warm pool of 2 with one worker killed (the stand-in for the out-of-memory killer), once the pool's
+    manager thread has noticed."""
     import signal
     import time
-    from concurrent.futures.process import BrokenProcessPool
-
-    from calibctl.errors import WorkerDiedError
 
     pool = worker_pool.process_pool(2)
     os.kill(pool.submit(os.getpid).result(timeout=120), signal.SIGKILL)
@@ -143,6 +144,13 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
         except BrokenProcessPool:
             break
         time.sleep(0.01)
+    return pool
+
+
+def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: list[Path]) -> None:
+    from calibctl.errors import WorkerDiedError
+
+    pool = _broken_pool()
     with pytest.raises(WorkerDiedError, match=r"a detection worker process died .* not yet detected: .*nothing was "
                        r"stored") as died:
         classify_files(rendered, BOARD, workers=2, executor="process")
@@ -151,6 +159,17 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
     assert worker_pool.process_pool(2) is not pool  # forgotten: the next run starts a new pool
     outcomes = classify_files(rendered, BOARD, workers=2, executor="process")
     assert sum(o.status == "accepted" for o in outcomes) >= 10
+
+
+def test_a_file_started_on_a_broken_pool_is_detected_on_a_fresh_one(rendered: list[Path]) -> None:
+    """A station watching its folder starts each picture as it lands: a pool a dead worker broke in between is
+    replaced, and the picture's outcome is the one a sequential run gives."""
+    from calibctl.core.capture.image_outcomes import start_file
+
+    pool = _broken_pool()
+    outcome, _ = start_file(rendered[0], BOARD, 2).result(timeout=120)
+    assert worker_pool.process_pool(2) is not pool
+    assert_same({"fresh pool": [outcome], "one": classify_files(rendered[:1], BOARD, workers=1)})
 
 
 def test_the_default_job_count_is_the_cores_this_process_may_use() -> None:
