@@ -79,7 +79,7 @@ def test_ingest_then_trends_in_text_and_json(db: str, tmp_path: Path) -> None:
     (_report(9, verdict="maybe"), "verdict is pass or fail"),
     (_report(9, td_ms=3.0), "a check report carries rms_px, verdict, temperature_c, not td_ms"),
     ("x" * 5000, "longer than a report"),
-])
+], ids=lambda value: value if isinstance(value, str) and len(value) < 80 and not value.startswith("{") else None)
 def test_a_refused_line_is_named_exits_1_and_its_file_writes_nothing(db: str, tmp_path: Path, bad: object,
                                                                       message: str) -> None:
     bad_file = _write(tmp_path / "bad.jsonl", [_report(0), _report(1), bad])  # type: ignore[list-item]
