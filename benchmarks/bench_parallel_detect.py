@@ -119,11 +119,20 @@ def boards_of(stdout: str) -> str:
     return f"{found} boards, session {session['status']}{solved}"
 
 
-def template_store(work: Path) -> Path:
+def template_store(work: Path, code: Path | None = None) -> Path:
+    """A store holding board BENCH, made by the code in ``code`` (None: this process's): an older calibctl
+    refuses a store a newer one migrated, so a ``--baseline`` gets a template of its own."""
+    db = work / ("template.db" if code is None else "template-baseline.db")
+    if code is not None:
+        subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{db}", "board", "add", "BENCH", "--cols",
+                        "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument",
+                        "calipers", "--measured-by", "bench", "--measured-on", dt.date.today().isoformat()],
+                       cwd=work, env={**os.environ, "PYTHONPATH": str(code.resolve())}, check=True,
+                       capture_output=True)
+        return db
     from calibctl.store.repository import Store
     from calibctl.workflows.board.boards import BoardRegistration, build_board
 
-    db = work / "template.db"
     reg = BoardRegistration("BENCH", "chessboard", 9, 6, 25.0, uncertainty_mm=0.02, instrument="calipers",
                             measured_by="bench", measured_on=dt.date.today().isoformat())
     with Store.open(f"sqlite:///{db}") as store:
@@ -153,6 +162,7 @@ def main() -> None:
         (work / "plain.py").write_text(PLAIN)
         (work / "detect.py").write_text(CALIBCTL_DETECT)
         template = template_store(work)
+        template_before = None if args.baseline is None else template_store(work, args.baseline)
         load = os.getloadavg()
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
               f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
@@ -182,7 +192,7 @@ def main() -> None:
             every: dict[str, list[tuple[float, float]]] = {}  # (seconds, load) of every counted round
             for round_ in range(args.repeats + 1):  # round 0 fills the bytecode caches and is not counted
                 for name, cmd in [*det.items(), *e2e.items()]:
-                    shutil.copyfile(template, db)
+                    shutil.copyfile(template_before if name.startswith("before:") and template_before else template, db)
                     shutil.rmtree(work / "calibctl-images", ignore_errors=True)
                     load = load_1min()
                     wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env, work)

@@ -86,6 +86,18 @@ def commands(db: str, artifact: Path, floor_app: Path) -> dict[str, list[str]]:
     }
 
 
+def demo_store(folder: Path, checkout: Path) -> tuple[str, Path]:
+    """(db URL, an exported artifact file) of ``calibctl demo`` run by ``checkout``'s code in ``folder``."""
+    folder.mkdir(parents=True)
+    db = f"sqlite:///{folder / 'demo-out/calibctl-demo.db'}"
+    subprocess.run([sys.executable, "-m", "calibctl", "demo"], cwd=folder, env=_env(checkout), check=True,
+                   stdout=subprocess.DEVNULL)
+    artifact = folder / "artifact.json"
+    artifact.write_bytes(subprocess.run([sys.executable, "-m", "calibctl", "--db", db, "export", SERIAL],
+                                        cwd=folder, env=_env(checkout), capture_output=True, check=True).stdout)
+    return db, artifact
+
+
 def _env(checkout: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("CALIBCTL_") and k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(checkout)
@@ -103,9 +115,12 @@ def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
             setup()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, *args], cwd=cwd, env=_env(checkout), stdout=subprocess.DEVNULL,
-                       stderr=subprocess.DEVNULL, check=False)
+        done = subprocess.run([sys.executable, *args], cwd=cwd, env=_env(checkout), stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, check=False)
         t1 = time.perf_counter()
+        if done.returncode not in (0, 1):  # 2: it could not do its job, and timing an error means nothing
+            raise SystemExit(f"{' '.join(args[:6])} ({checkout}) exited {done.returncode}:\n"
+                             f"{done.stderr.decode(errors='replace')[-1500:]}")
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if i or not warm_up:  # the first run only warms the file cache
             wall.append(t1 - t0)
@@ -183,15 +198,20 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
     subprocess.run([sys.executable, "-m", "calibctl", "synth", str(images), "--scenario", "good", "--views", "20",
                     "--size", "1280x960", "--seed", "1"], cwd=work, env=_env(REPO), check=True,
                    stdout=subprocess.DEVNULL)
-    template, db = work / "calibrate-template.db", work / "calibrate.db"
-    subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{template}", "board", "add", "BENCH",
-                    "--cols", "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument", "calipers",
-                    "--measured-by", "bench", "--measured-on", "2026-11-23"], cwd=work, env=_env(REPO), check=True,
-                   stdout=subprocess.DEVNULL)
+    db = work / "calibrate.db"
+    templates = {}  # one per checkout: an older calibctl refuses a store a newer one migrated
+    for i, (name, checkout) in enumerate(checkouts.items()):
+        templates[name] = work / f"calibrate-template-{i}.db"
+        subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{templates[name]}", "board", "add",
+                        "BENCH", "--cols", "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02",
+                        "--instrument", "calipers", "--measured-by", "bench", "--measured-on", "2026-11-23"], cwd=work,
+                       env=_env(checkout), check=True, stdout=subprocess.DEVNULL)
 
-    def fresh() -> None:
-        shutil.rmtree(work / "calibctl-images", ignore_errors=True)
-        shutil.copyfile(template, db)
+    def fresh(name: str = "this checkout") -> Callable[[], None]:
+        def setup() -> None:
+            shutil.rmtree(work / "calibctl-images", ignore_errors=True)
+            shutil.copyfile(templates[name], db)
+        return setup
 
     calibrate = ["-m", "calibctl", "--db", f"sqlite:///{db}", "calibrate", "--serial", "BENCH-0001", "--board",
                  "BENCH", "--source", str(images), "--station", "bench", "--operator", "bench"]
@@ -202,7 +222,7 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
     runs = [("plain OpenCV script, own process", plain, None, REPO),
             (f"imports alone: `python -c '{STACK_IMPORTS}'`", ["-c", STACK_IMPORTS], None, REPO)]
     for name, checkout in checkouts.items():
-        runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh, checkout),
+        runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh(name), checkout),
                  (f"`calibctl --version` ({name}: start-up with cv2 and numpy)", ["-m", "calibctl", "--version"], None,
                   checkout)]
     rows = {}
@@ -219,7 +239,7 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
         cw, cc = rows[f"`calibctl calibrate`, own process ({name})"]
         print(f"- calibctl ({name}) / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each)")
     print(f"\nLoad average after: {_load()}\n")
-    fresh()
+    fresh()()
     out = work / "calibrate.prof"
     subprocess.run([sys.executable, "-c", PROFILE_CODE, "-", *calibrate[2:]], cwd=work,
                    env={**_env(REPO), "PROFILE_OUT": str(out)}, check=False, stdout=subprocess.DEVNULL,
@@ -243,15 +263,12 @@ def main() -> int:
     parser.add_argument("--calibrate", action="store_true", help="also time `calibctl calibrate` against the plain script")
     opts = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="calibctl-startup-"))
-    db = f"sqlite:///{work / 'demo-out/calibctl-demo.db'}"
-    subprocess.run([sys.executable, "-m", "calibctl", "demo"], cwd=work, env=_env(REPO), check=True,
-                   stdout=subprocess.DEVNULL)
-    artifact = work / "artifact.json"
-    artifact.write_bytes(subprocess.run([sys.executable, "-m", "calibctl", "--db", db, "export", SERIAL],
-                                        cwd=work, env=_env(REPO), capture_output=True, check=True).stdout)
     floor_app = work / "floor_app.py"
     floor_app.write_text(FLOOR_APP)
     checkouts = {"this checkout": REPO, **({"before": opts.before.resolve()} if opts.before else {})}
+    # each checkout reads a store its own code made: an older calibctl refuses one a newer one migrated
+    per_checkout = {name: commands(*demo_store(work / f"store-{i}", checkout), floor_app)
+                    for i, (name, checkout) in enumerate(checkouts.items())}
     print(f"# calibctl start-up per command ({dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC)\n")
     print(f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
           f"best / median of {opts.repeats} runs after a warm-up, ms.\n")
@@ -259,13 +276,13 @@ def main() -> int:
     print("| command | " + " | ".join(f"{c}: wall | {c}: CPU | {c}: x cv2+numpy" for c in checkouts) + " |")
     print("|---|" + "---|" * 3 * len(checkouts))
     reference = 0.0
-    for label, args in commands(db, artifact, floor_app).items():
+    for label in per_checkout["this checkout"]:
         cells = []
         runs = checkouts if label.startswith("calibctl") else dict(list(checkouts.items())[:1])
         times = {name: ([], []) for name in runs}
         for i in range(opts.repeats):  # the checkouts in turn, so a change in the machine's load hits both
             for name, checkout in runs.items():
-                wall, cpu = run_times(args, checkout, 1, work, warm_up=i == 0)
+                wall, cpu = run_times(per_checkout[name][label], checkout, 1, work, warm_up=i == 0)
                 times[name][0].extend(wall)
                 times[name][1].extend(cpu)
         for wall, cpu in times.values():
@@ -279,7 +296,7 @@ def main() -> int:
         print(f"| `{label}` | " + " | ".join(cells) + " |")
     print(f"\nLoad average after: {_load()}\n")
     print("## Import self time per top-level package (ms, one `python -X importtime` run, this checkout)\n")
-    profiles = {label: import_profile(args, REPO, work) for label, args in commands(db, artifact, floor_app).items()
+    profiles = {label: import_profile(args, REPO, work) for label, args in per_checkout["this checkout"].items()
                 if label.startswith("calibctl")}
     peak: dict[str, float] = defaultdict(float)
     for prof in profiles.values():

@@ -71,6 +71,9 @@ def main() -> None:
                 shutil.copy(p, work / "shots" / serial / p.name)
         (work / "plain.py").write_text(PLAIN)
         db = template_store(work)
+        templates = {"calibctl station": db}
+        if args.baseline is not None:  # its own store: an older calibctl refuses one a newer one migrated
+            templates["before: calibctl station"] = template_store(work, args.baseline)
         load = os.getloadavg()
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
               f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
@@ -79,8 +82,8 @@ def main() -> None:
         stations = {"calibctl station": env}
         if args.baseline is not None:
             stations["before: calibctl station"] = run_env(work / "pycache-before", args.baseline.resolve())
-        for i, station_env in enumerate(stations.values()):  # one unit each fills the bytecode caches (not counted)
-            shutil.copyfile(db, work / f"warm{i}.db")
+        for i, (name, station_env) in enumerate(stations.items()):  # one unit each fills the bytecode caches
+            shutil.copyfile(templates[name], work / f"warm{i}.db")
             subprocess.run([py, "-m", "calibctl", "--db", f"sqlite:///{work / f'warm{i}.db'}", "station", "--board",
                             "BENCH", "--source-template", f"{work / 'shots'}/{{serial}}", "--json",
                             "--spool", str(work / f"warm{i}-spool.sqlite")],  # a spool per store
@@ -91,7 +94,7 @@ def main() -> None:
         procs, walls, unit_times = {}, {}, {name: [] for name in stations}
         for name, station_env in stations.items():
             store = work / f"{len(procs)}.db"
-            shutil.copyfile(db, store)
+            shutil.copyfile(templates[name], store)
             walls[name] = time.perf_counter()
             procs[name] = subprocess.Popen(
                 [py, "-m", "calibctl", "--db", f"sqlite:///{store}", "station", "--board", "BENCH",
@@ -109,6 +112,8 @@ def main() -> None:
                 if not line.startswith("{"):
                     raise SystemExit(f"{name} stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}")
                 unit = json.loads(line)
+                if unit["status"] not in ("pass", "fail"):  # an error line's unit_s times nothing
+                    raise SystemExit(f"{name}: unit {serial} {unit['status']}: {unit['message']}")
                 unit_times[name].append(unit["unit_s"])
                 statuses.add(unit["status"])
             t = time.perf_counter()
@@ -187,6 +192,9 @@ def watch(args: argparse.Namespace) -> None:
         serials = [f"UNIT-{i:03d}" for i in range(args.units + 1)]  # the first one warms the bytecode cache
         (work / "plain.py").write_text(PLAIN)
         db = template_store(work)
+        templates = {"calibctl station": db}
+        if args.baseline is not None:  # its own store: an older calibctl refuses one a newer one migrated
+            templates["before: calibctl station"] = template_store(work, args.baseline)
         load = os.getloadavg()
         how = f"written in place (--settle-s {args.settle_s:g})" if args.settle_s > 0 else "renamed"
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
