@@ -192,9 +192,6 @@ def watch(args: argparse.Namespace) -> None:
         serials = [f"UNIT-{i:03d}" for i in range(args.units + 1)]  # the first one warms the bytecode cache
         (work / "plain.py").write_text(PLAIN)
         db = template_store(work)
-        templates = {"calibctl station": db}
-        if args.baseline is not None:  # its own store: an older calibctl refuses one a newer one migrated
-            templates["before: calibctl station"] = template_store(work, args.baseline)
         load = os.getloadavg()
         how = f"written in place (--settle-s {args.settle_s:g})" if args.settle_s > 0 else "renamed"
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
