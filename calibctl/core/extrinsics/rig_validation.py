@@ -171,6 +171,11 @@ def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], mod
 def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str = "k1k2") -> tuple[LoopClosure, ...]:
     """Residual around every simple cycle of the pairwise-solved camera graph (empty for 2 cameras), judged by
     the loop's covariance with the pairs' cross covariances (core.extrinsics.rig_loop)."""
+    with single_threaded():  # pair solves and loop covariances run one after another: spare threads only spin
+        return _loop_closures(views, members, model)
+
+
+def _loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str) -> tuple[LoopClosure, ...]:
     pairs = pairwise_solutions(views, members, model)
     edges = {frozenset(p) for p in pairs}
     out = []

@@ -82,3 +82,25 @@ def test_clean_loops_close_and_broken_loops_are_seen():
 
     d = {shift: max(loop.mahalanobis for loop in loop_closures(broken(shift), members)) for shift in (3.0, 1.0)}
     assert d[3.0] > CHI_6DOF_997 and d[1.0] > CHI_6DOF_997, d
+
+
+def test_the_loop_closures_run_every_library_on_one_thread(monkeypatch) -> None:
+    """The pair solves and loop covariances run one after another: spare BLAS threads would only spin (a 4-camera
+    rig's solve-folders spent 5-8 % more CPU at the same wall before this block, benchmarks/results/station.md)."""
+    from threadpoolctl import threadpool_limits
+
+    import calibctl.core.extrinsics.rig_validation as rig_validation
+    from calibctl.core.blas_threads import thread_counts
+
+    seen: list[dict[str, int]] = []
+    real = rig_validation.pairwise_solutions
+
+    def recording(*args, **kwargs):
+        seen.append(thread_counts())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(rig_validation, "pairwise_solutions", recording)
+    truth, views = corner_session(3, seed=41)
+    with threadpool_limits(limits=2):
+        loop_closures(views, true_members(truth))
+    assert seen and all(set(counts.values()) == {1} for counts in seen)
