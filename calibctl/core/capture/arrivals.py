@@ -19,7 +19,6 @@ again, so early outcomes are exactly what a batch capture of the folder gives.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -58,12 +57,9 @@ class Arrivals:
     def poll(self, now_s: float) -> list[tuple[Path, Signature]]:
         """The files that became complete since the last poll, in name order (``now_s``: a monotonic clock)."""
         try:
-            entries = sorted((e for e in os.scandir(self.folder)
-                              if e.is_file() and Path(e.name).suffix.lower() in outcomes_core.IMAGE_SUFFIXES),
-                             key=lambda e: e.name)
+            listed = set(outcomes_core.list_images(self.folder))  # the files a folder capture will read
         except FileNotFoundError:  # the camera app has not made the unit's folder yet
-            entries = []
-        listed = {Path(e.path) for e in entries}
+            listed = set()
         for gone in set(self._files) - listed:
             del self._files[gone]
         newly = []
