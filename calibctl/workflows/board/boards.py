@@ -266,12 +266,18 @@ def list_boards(settings: Settings) -> list[BoardRevision]:
     return sqlite_reads.read(settings.db_url, lambda store: store.list_boards(), full_store)
 
 
-def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
-    """``NAME`` (latest) or ``NAME@REV`` -> that revision, and every revision number of the board."""
+def board_ref(ref: str) -> tuple[str, int | None]:
+    """``NAME`` or ``NAME@REV`` as given on a command line -> (name, revision or None for the latest); a
+    malformed reference is a UsageError (exit 2) naming it."""
     try:
-        name, revision = parse_board_ref(ref)
+        return parse_board_ref(ref)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+
+
+def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
+    """``NAME`` (latest) or ``NAME@REV`` -> that revision, and every revision number of the board."""
+    name, revision = board_ref(ref)
     from calibctl.store.repository import Store
 
     with Store.open(settings.db_url, create=False) as store:

@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 
 from calibctl import __version__
-from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.check import DistanceCheck
 from calibctl.artifacts.common import SERIAL_PATTERN, utc_now
 from calibctl.artifacts.session import CaptureSession, GateResult, MetricGauge, ViewCorners
@@ -82,7 +82,7 @@ from calibctl.core.intrinsics.solve import DEFAULT_MODEL, IntrinsicsSolution
 from calibctl.errors import InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
-from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.board.boards import board_ref, board_spec
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
@@ -224,10 +224,7 @@ def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
         raise UsageError("--reference-distance and --reference-source go together",
                          "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
     gauge_model(request.gauge_model)  # an unknown name is a usage error before anything is read
-    try:
-        return parse_board_ref(request.board)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from exc
+    return board_ref(request.board)
 
 
 def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserver | None = None, *,

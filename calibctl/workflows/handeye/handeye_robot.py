@@ -23,7 +23,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibctl.artifacts.board import parse_board_ref
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.config import Settings
 from calibctl.core.capture.detect import detect_board
@@ -32,7 +31,7 @@ from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions
 from calibctl.errors import InputError, UsageError
-from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.board.boards import board_ref, board_spec
 from calibctl.workflows.diagnostics import diagnostics_io as dio
 from calibctl.workflows.handeye import handeye_io
 from calibctl.workflows.handeye.handeye import (
@@ -116,16 +115,12 @@ def _board_poses(table: dio.Table, images: Path, art: CalibrationArtifact, spec)
     return poses, skipped, hashes
 
 
-def _load_camera(settings: Settings, serial: str, board_ref: str | None):
+def _load_camera(settings: Settings, serial: str, board: str | None):
     with open_store(settings) as store:
         art = store.get_artifact(serial)  # NotFoundError (exit 2) without an active calibration
-        if board_ref is None:
+        if board is None:
             return art, art.board
-        try:
-            name, revision = parse_board_ref(board_ref)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
-        return art, store.get_board(name, revision)
+        return art, store.get_board(*board_ref(board))
 
 
 def run_robot_handeye(settings: Settings, path: Path, images: Path | None, serial: str | None, parent_frame: str,

@@ -84,13 +84,10 @@ def parse_box(text: str) -> StationBox:
 def board_from_store(settings: Settings, ref: str) -> BackingBoard:
     """The registered board ``NAME[@REV]`` as the solve's target; UsageError (exit 2) when it was
     registered without its backing board."""
-    from calibctl.artifacts.board import parse_board_ref
+    from calibctl.workflows.board.boards import board_ref
     from calibctl.workflows.store_admin.records import open_store
 
-    try:
-        name, revision = parse_board_ref(ref)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    name, revision = board_ref(ref)
     with open_store(settings) as store:
         board = store.get_board(name, revision)  # NotFoundError (exit 2) for an unknown board
     if board.kind != "chessboard":

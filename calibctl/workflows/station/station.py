@@ -42,7 +42,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from calibctl.artifacts.board import BoardRevision, parse_board_ref
+from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
@@ -50,7 +50,7 @@ from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.errors import CalibctlError, DatabaseUnreachableError, IntegrityError, UsageError
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
-from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.board.boards import board_ref, board_spec
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
 from calibctl.workflows.camera.distance_gauge import gauge_model
@@ -224,10 +224,7 @@ def _watched(settings: Settings, request: StationRequest, source: str, offline: 
     """Watch mode: the unit's pictures, detected as they land, with the board the capture will use; and why
     the unit goes to the spool (None: the store answered)."""
     assert request.watch is not None
-    try:
-        name, revision = parse_board_ref(request.board)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from exc
+    name, revision = board_ref(request.board)
     away = None
     try:
         with Store.open(settings.db_url) as store:
