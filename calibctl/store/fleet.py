@@ -91,7 +91,6 @@ class FleetStoreMixin:
             for step in rig_steps:
                 _activate_rig(s, step, events[-1], self.signer)
             if position > current:
-
                 fleet_checkpoints.write_if_due(s, position, self.signer)
             return position
 
