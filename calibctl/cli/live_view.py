@@ -87,8 +87,11 @@ def observability_gauge(value: float, threshold: float, width: int = GAUGE_WIDTH
     return text
 
 
+CTRL_C_KEEPS = "Ctrl-C: stop and keep what was captured"
+
+
 def live_panel(progress: SelectionProgress, last: FrameDecision | None, frames: int, t_s: float,
-               min_views: int, max_views: int | None) -> RenderableType:
+               min_views: int, max_views: int | None, ctrl_c: str = CTRL_C_KEEPS) -> RenderableType:
     """The live view's content for one moment of the capture."""
     top = Table.grid(padding=(0, 4))
     for _ in range(3):
@@ -108,15 +111,16 @@ def live_panel(progress: SelectionProgress, last: FrameDecision | None, frames: 
     if last is not None:
         parts.append(Text(f"last: {last.name} {last.status}: {last.reason}", style="green" if last.kept else "dim",
                           overflow="ellipsis", no_wrap=True))
-    return Panel(Group(*parts), title="calibctl capture", subtitle="Ctrl-C: stop and keep what was captured")
+    return Panel(Group(*parts), title="calibctl capture", subtitle=ctrl_c)
 
 
 class TerminalObserver(CaptureObserver):
     """Draws the folder progress bar or the stream live view on stderr; use as a context manager."""
 
-    def __init__(self, min_views: int, max_views: int | None) -> None:
+    def __init__(self, min_views: int, max_views: int | None, ctrl_c: str = CTRL_C_KEEPS) -> None:
         self.min_views = min_views
         self.max_views = max_views
+        self.ctrl_c = ctrl_c
         self._progress: Progress | None = None
         self._task: TaskID | None = None
         self._live: Live | None = None
@@ -134,7 +138,7 @@ class TerminalObserver(CaptureObserver):
 
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
         self._frames += 1
-        panel = live_panel(progress, decision, self._frames, t_s, self.min_views, self.max_views)
+        panel = live_panel(progress, decision, self._frames, t_s, self.min_views, self.max_views, self.ctrl_c)
         if self._live is None:
             self._live = Live(panel, console=stderr, refresh_per_second=8, transient=False)
             self._live.start()
@@ -189,6 +193,9 @@ class LogObserver(CaptureObserver):
 
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
         self._frames += 1
+        if self._frames == 1:  # the stream is open and delivering: said once, as a folder's start is
+            self._line(f"frames arriving, {progress.n_views} views kept of {self.min_views} needed (a progress line "
+                       f"every {self.every_s:g} s)")
         elapsed = self._due()
         if elapsed is not None:
             missing = f"; missing: {progress.missing[0]}" if progress.missing else "; every gate passes"
@@ -203,8 +210,10 @@ class LogObserver(CaptureObserver):
         return None
 
 
-def capture_observer(as_json: bool, min_views: int, max_views: int | None) -> TerminalObserver | LogObserver:
-    """The live terminal observer when stderr is a terminal and the output is not JSON, else progress lines."""
+def capture_observer(as_json: bool, min_views: int, max_views: int | None,
+                     ctrl_c: str = CTRL_C_KEEPS) -> TerminalObserver | LogObserver:
+    """The live terminal observer when stderr is a terminal and the output is not JSON, else progress lines.
+    ``ctrl_c``: what the live view says Ctrl-C does (the station cancels the unit)."""
     if as_json or not stderr.is_terminal:
         return LogObserver(min_views)
-    return TerminalObserver(min_views, max_views)
+    return TerminalObserver(min_views, max_views, ctrl_c)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -17,7 +17,8 @@ from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 if TYPE_CHECKING:
     from calibctl.config import Settings
     from calibctl.store.spool import Spool
-    from calibctl.workflows.station.station import UnitResult
+    from calibctl.workflows.camera.capture import CaptureObserver
+    from calibctl.workflows.station.station import LiveCamera, UnitResult
     from calibctl.workflows.station.watch import WatchRule
 
 
@@ -77,7 +78,18 @@ def station(
     source_template: Annotated[str | None, typer.Option(
         "--source-template", show_default=False,
         help="Where each unit's pictures arrive, with {serial}: a folder (DIR/{serial}), a quoted glob or a list "
-             "file (required).")] = None,
+             "file (this or --camera).")] = None,
+    camera: Annotated[str | None, typer.Option(
+        "--camera", show_default=False,
+        help="Capture each unit live from this camera (/dev/videoN or an index such as 0): the unit's own camera, "
+             "plugged into the station (this or --source-template).")] = None,
+    max_views: Annotated[int | None, typer.Option(
+        "--max-views", show_default=False,
+        help="--camera: a unit's capture stops once the gates pass and this many views are kept (default: as soon "
+             "as the gates pass).")] = None,
+    duration: Annotated[float | None, typer.Option(
+        "--duration", show_default=False,
+        help="--camera: a unit's capture stops after S seconds and is judged with the views kept.")] = None,
     serials: Annotated[Path | None, typer.Option(
         "--serials", show_default=False, help="Read the serials from this file, one per line (default: stdin, "
         "where a barcode scanner types them).")] = None,
@@ -103,15 +115,18 @@ def station(
         "--unit-timeout-s", help="--watch: a unit with no new picture for this long is an error line; nothing "
         "stored.")] = 120.0,
 ) -> None:
-    """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial}, solve, store, print the
-    verdict, wait for the next.
+    """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial} (or the unit's camera,
+    live, with --camera), solve, store, print the verdict, wait for the next.
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
     "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are detected it
     cancels that unit (nothing stored) and the station waits for the next serial. With --watch the station waits,
     after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands (complete: renamed into
     place, or its size unchanged for --settle-s); the unit is captured when --views pictures are there or the
-    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With the store unreachable each
+    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With --camera
+    each unit is captured live (the live view on stderr says what the gates still need) until the gates pass, and
+    stored whole once its stream is over; a camera that cannot be opened or is unplugged mid-unit is an error line,
+    nothing stored. With the store unreachable each
     unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
     "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
     serials file unreadable, another station's or store's spool).
@@ -121,20 +136,46 @@ def station(
     from calibctl.errors import UsageError
     from calibctl.workflows.station import station as station_workflow
 
-    if board is None or source_template is None:
-        raise UsageError("calibctl station needs --board and --source-template",
-                         "e.g. calibctl station --board A17 --source-template /data/shots/{serial}; or a sub-command: "
-                         "calibctl station status | sync | set-aside")
+    if board is None or (source_template is None and camera is None):
+        raise UsageError("calibctl station needs --board and --source-template (or --camera)",
+                         "e.g. calibctl station --board A17 --source-template /data/shots/{serial}, or --camera "
+                         "/dev/video0; or a sub-command: calibctl station status | sync | set-aside")
     as_json = wants_json(ctx, json_output)
     watching = _watch_rule(watch, views, done_file, settle_s, unit_timeout_s)
-    request = station_workflow.StationRequest(board, source_template, model, spool, watching)
+    live = _live_camera(camera, max_views, duration)
+    request = station_workflow.StationRequest(board, source_template, model, spool, watching, live)
     station_workflow.check_request(request)
     lines = _file_serials(serials) if serials is not None else _stdin_serials(sys.stdin.isatty() and not as_json)
     settings = state(ctx).settings(station=station_id, operator=operator, jobs=jobs)
-    station_workflow.warm_up(settings)
-    summary = station_workflow.run_station(settings, request, lines, lambda r: _say(r, as_json))
+    station_workflow.warm_up(settings, request)
+    summary = station_workflow.run_station(settings, request, lines, lambda r: _say(r, as_json),
+                                           _unit_display(live, as_json, settings.gates.min_views))
     if summary.interrupted:
         print(f"station stopped (Ctrl-C) after {len(summary.units)} unit(s)", file=sys.stderr, flush=True)
+
+
+def _live_camera(camera: str | None, max_views: int | None, duration: float | None) -> LiveCamera | None:
+    from calibctl.errors import UsageError
+    from calibctl.workflows.station.station import LiveCamera
+
+    if camera is not None:
+        return LiveCamera(camera, max_views, duration)
+    if max_views is not None or duration is not None:
+        raise UsageError("--max-views and --duration say when a unit's live capture stops; they need --camera",
+                         "add --camera DEVICE, or leave them out to capture each unit's folder")
+    return None
+
+
+def _unit_display(live: LiveCamera | None, as_json: bool, min_views: int) -> Callable[[], CaptureObserver]:
+    """What each unit shows while it runs: the live view of a camera unit (what the gates still need), nothing
+    for a folder (its line comes within seconds)."""
+    from calibctl.cli.live_view import capture_observer
+    from calibctl.workflows.camera.capture import CaptureObserver
+
+    if live is None:
+        return CaptureObserver
+    return lambda: capture_observer(as_json, min_views, live.max_views,
+                                    "Ctrl-C: cancel this unit, nothing stored")
 
 
 def _watch_rule(watch: bool, views: int | None, done_file: str | None, settle_s: float,

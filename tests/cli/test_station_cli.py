@@ -68,3 +68,38 @@ def test_a_template_without_serial_and_a_missing_serials_file_exit_2(db: str, sh
     assert missing.exit_code == 2 and "none.txt" in missing.output
     with Store.open(db) as store:
         assert store.list_sessions() == []
+
+
+# --camera: each unit live from the station's camera -------------------------------------------------------------
+
+def test_a_camera_station_gives_a_line_per_unit_and_progress_on_stderr(db: str, tmp_path_factory, monkeypatch) -> None:
+    from calibctl.workflows.camera import capture_sources as sources
+
+    video = rendered(tmp_path_factory, "video") / "video.avi"
+    monkeypatch.setattr(sources, "open_stream", lambda spec: sources.VideoFileSource(video))  # the unit's camera
+    result = invoke(db, "--camera", "/dev/video7", "--json", input="CAM-1\n")
+    assert result.exit_code == 0, result.output
+    (line,) = [json.loads(text) for text in result.stdout.splitlines()]
+    assert (line["serial"], line["status"], line["version"], line["views"]) == ("CAM-1", "pass", 1, 8)
+    assert "calibctl capture: " in result.stderr  # the live capture's progress, plain lines off a terminal
+
+
+def test_a_missing_camera_is_an_error_line_and_the_station_ends_at_the_input_end(db: str) -> None:
+    if Path("/dev/video987").exists():
+        pytest.skip("/dev/video987 exists on this machine: a test never opens a real device")
+    result = invoke(db, "--camera", "/dev/video987", input="CAM-1\n")
+    assert result.exit_code == 0, result.output
+    assert result.stdout.startswith("CAM-1: ERROR - cannot open camera /dev/video987: /dev/video987 does not exist")
+    assert "hint: plug the camera in" in result.stdout
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--camera", "."], "--camera . is not a camera"),
+    (["--camera", "/dev/video7", "--source-template", "shots/{serial}"], "the station takes one source"),
+    (["--source-template", "shots/{serial}", "--max-views", "5"], "--max-views and --duration say when"),
+    (["--camera", "/dev/video7", "--duration", "-1"], "--duration must be a positive number of seconds"),
+    (["--camera", "/dev/video7", "--watch", "--views", "3"], "--watch waits for pictures in a folder"),
+], ids=["a-folder", "both-sources", "max-views-without-camera", "negative-duration", "watch"])
+def test_a_camera_station_that_cannot_start_exits_2(db: str, args: list[str], message: str) -> None:
+    result = invoke(db, *args, input="CAM-1\n")
+    assert result.exit_code == 2 and message in result.output

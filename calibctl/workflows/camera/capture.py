@@ -20,8 +20,11 @@ readable image, a pattern that matches nothing or only part of the board.
 
 Stopping a video or camera capture: when the gates pass and ``max_views`` views are kept (a camera
 without ``max_views`` stops as soon as the gates pass; a video file without it is read to the end), on
-``duration_s`` (video time for a file, wall time for a camera), at the end of the stream, or on Ctrl-C
-- KeyboardInterrupt finishes the session with the views kept so far and says so.
+``duration_s`` (video time for a file, wall time for a camera), at the end of a video file, or on Ctrl-C
+- KeyboardInterrupt finishes the session with the views kept so far and says so (``cancel_on_interrupt``: the
+station's unit is cancelled instead). A camera that stops delivering frames before one of these (unplugged, no
+frame for ``capture_sources.CAMERA_FRAME_WAIT_S``) is an error naming the frames and views it gave (exit 2): its
+views are no verdict on the lens, so no session is stored.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from concurrent.futures import Executor, ThreadPoolExecutor
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import TracebackType
 from typing import Protocol
 
 import cv2
@@ -125,6 +129,9 @@ class CaptureRequest:
     # The lens model the projection gate solves with: calibrate's --model (None, and for auto: the better fit
     # of k1k2 and fisheye, core.capture.projection_gate)
     lens_model: str | None = None
+    # Ctrl-C during a video or camera stream: False finishes the session with the views kept (calibctl capture);
+    # True lets the KeyboardInterrupt through, nothing of the stream kept (the station cancels the unit)
+    cancel_on_interrupt: bool = False
 
 
 @dataclass(frozen=True)
@@ -172,6 +179,13 @@ class CaptureObserver:
     def image_done(self, done: int, total: int, name: str, status: str) -> None: ...
 
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None: ...
+
+    def __enter__(self) -> CaptureObserver:  # a display to close when the capture ends (cli.live_view)
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        return None
 
 
 class CaptureStore(Protocol):
@@ -459,7 +473,7 @@ def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
     target = request.max_views if request.max_views is not None else (None if is_file else 0)
     state = _StreamState(store, settings, spec, request.image_circle)
     interrupted = False
-    stop = "end of the video" if is_file else "the camera stopped delivering frames"
+    stop = "end of the video" if is_file else None  # a camera ends by a stop rule, never by itself
     try:
         for frame in stream.frames():
             if request.duration_s is not None and frame.t_s >= request.duration_s:
@@ -475,12 +489,16 @@ def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
                     f" (--max-views {target})" if request.max_views is not None else "")
                 break
     except KeyboardInterrupt:
+        if request.cancel_on_interrupt:
+            raise
         interrupted, stop = True, "interrupted (Ctrl-C)"
     finally:
         stream.close()
     if state.selector is None:
         raise InputError(f"no frame arrived from {source.label}; nothing was stored",
                          "check that the camera streams (e.g. with another viewer) and try again")
+    if stop is None:
+        raise _camera_lost(source, state, request)
     if state.boards_seen == 0:
         raise pattern_check.nothing_found_error(spec, board.ref, board.name, f"frames of {source.label}",
                                                 len(state.outcomes), list(state.no_board_samples))
@@ -495,6 +513,20 @@ def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
         stop += f"; the session was finished with the {len(views)} view(s) kept"
     return _Collected(state.outcomes, views, state.selector.image_size, stop, state.stored, interrupted,
                       max_gray=state.max_gray)
+
+
+def _camera_lost(source: sources.SourceSpec, state: _StreamState, request: CaptureRequest) -> InputError:
+    """A camera that stopped before a stop rule (unplugged, its driver gone, no frame for
+    ``CAMERA_FRAME_WAIT_S``): the views it left are no verdict on the lens, so no session is made."""
+    kept = 0 if state.selector is None else len(state.selector.kept)
+    progress = state.progress
+    if progress is not None and not progress.report.passed:
+        short = "the gates had not passed"
+    else:
+        short = f"{kept} of the {request.max_views} views asked for"
+    return InputError(f"{source.label} stopped delivering frames after {len(state.outcomes)} frame(s), {kept} view(s) "
+                      f"kept ({short}): unplugged, or taken by another program?; no session was stored",
+                      "check the camera's cable and that nothing else holds the device, then capture again")
 
 
 def _gate_records(gates: Sequence[CoreGateResult]) -> list[GateResult]:

@@ -16,6 +16,13 @@ Before each unit the station syncs what is queued (``workflows.station.sync``, o
 record stored, with its version); while anything stays queued, new units queue behind it, so a
 serial's versions keep the order its units were calibrated in.
 
+Camera mode (``StationRequest.camera``, ``LiveCamera``): the unit's own camera is plugged into the station's port
+and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates), until the
+gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory (``workflows.station.held``)
+until its stream and gates are over, then stored - or queued - whole: a camera that cannot be opened or stops
+delivering frames mid-unit (unplugged) is an error line with nothing stored, and a store that goes away does not
+make the operator capture the unit again.
+
 Watch mode (``StationRequest.watch``, ``workflows.station.watch``): after the serial the station waits for
 the unit's pictures in its folder and detects each as it lands; once the unit is complete the capture runs
 with those outcomes. The line adds ``after_last_image_s``, from the last picture landing to the verdict.
@@ -23,11 +30,11 @@ with those outcomes. The line adds ``after_last_image_s``, from the last picture
 Ctrl-C (SIGINT):
   * while waiting for a serial: the station ends cleanly (``StationSummary.interrupted``; exit 0);
   * while waiting for a unit's pictures (watch mode): that unit is cancelled, as below;
-  * while a unit's images are being detected (or the spool synced before it): that unit is cancelled -
-    nothing of it is stored, its line says "cancelled" - and the station waits for the next serial;
-  * once detection is over the unit's images, session and calibration are written and solved (a
-    fraction of its time); a Ctrl-C then is held until the unit is complete, and ends the station after
-    its verdict, so no unit is ever half stored.
+  * while a unit's images are being detected, or its camera streams (or the spool synced before it): that unit
+    is cancelled - nothing of it is stored, its line says "cancelled" - and the station waits for the next serial;
+  * once detection is over (a camera unit: its stream and gates) the unit's images, session and calibration are
+    written and solved (a fraction of its time); a Ctrl-C then is held until the unit is complete, and ends the
+    station after its verdict, so no unit is ever half stored.
 """
 
 from __future__ import annotations
@@ -52,9 +59,16 @@ from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
 from calibctl.workflows.board.boards import board_ref, board_spec
 from calibctl.workflows.camera import capture_sources as sources
-from calibctl.workflows.camera.capture import CaptureObserver, CaptureRequest, capture
+from calibctl.workflows.camera.capture import (
+    CaptureObserver,
+    CaptureRequest,
+    FrameDecision,
+    SelectionProgress,
+    capture,
+)
 from calibctl.workflows.camera.distance_gauge import gauge_model
 from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve
+from calibctl.workflows.station.held import HeldCapture, spool_images, write_to_store
 from calibctl.workflows.station.offline import Queued, SpoolCapture, queue_solved, queue_unit
 from calibctl.workflows.station.sync import SyncedUnit, open_spool, sync
 from calibctl.workflows.station.watch import Watched, WatchRule, check_rule, watch_unit
@@ -65,12 +79,23 @@ _SYNC_HINT = "it is stored when the store is back: before the next unit, or by `
 
 
 @dataclass(frozen=True)
+class LiveCamera:
+    """The station's camera port: each unit is captured live from ``device`` (the unit's own camera, plugged in),
+    until the gates pass with ``max_views`` views (None: as soon as they pass) or ``duration_s`` is up."""
+
+    device: str  # /dev/videoN or an index, as `calibctl capture --source` names a camera
+    max_views: int | None = None
+    duration_s: float | None = None
+
+
+@dataclass(frozen=True)
 class StationRequest:
     board: str
-    source_template: str  # DIR/{serial}: the folder (or glob, list file) a unit's pictures arrive in
+    source_template: str | None  # DIR/{serial}: the folder (or glob, list file) a unit's pictures arrive in
     model: str = "k1k2"
     spool: Path | None = None  # None: store.spool.default_spool_path
     watch: WatchRule | None = None  # watch mode: wait for each unit's pictures, detect them as they land
+    camera: LiveCamera | None = None  # instead of source_template: each unit live from the station's camera
 
 
 @dataclass(frozen=True)
@@ -108,11 +133,19 @@ class StationSummary:
 
 def check_request(request: StationRequest) -> None:
     """What is wrong with the whole station run is a usage error (exit 2) before the first unit."""
+    if (request.source_template is None) == (request.camera is None):
+        raise UsageError("the station takes one source: --source-template (each unit's pictures in a folder) or "
+                         "--camera (each unit live from the station's camera)",
+                         "e.g. --source-template /data/shots/{serial}, or --camera /dev/video0")
+    if request.model not in MODEL_CHOICES:
+        raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
+    if request.camera is not None:
+        _check_camera(request.camera, request.watch)
+        return
+    assert request.source_template is not None
     if SERIAL_SLOT not in request.source_template:
         raise UsageError(f"--source-template '{request.source_template}' has no {SERIAL_SLOT}",
                          "name the folder each unit's pictures arrive in, e.g. /data/shots/{serial}")
-    if request.model not in MODEL_CHOICES:
-        raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if request.watch is not None:
         check_rule(request.watch)
         if any(ch in request.source_template for ch in "*?["):
@@ -120,11 +153,30 @@ def check_request(request: StationRequest) -> None:
                              "is a glob", "give the folder the camera app saves each unit's pictures in: DIR/{serial}")
 
 
-def warm_up(settings: Settings) -> None:
-    """Pay the start-up once: the detection worker processes (``core.capture.worker_pool``)."""
+def _check_camera(camera: LiveCamera, watch: WatchRule | None) -> None:
+    if watch is not None:
+        raise UsageError("--watch waits for pictures in a folder; --camera captures each unit live",
+                         "leave out --watch (and --views, --done-file) with --camera")
+    try:
+        kind: str | None = sources.resolve_source(camera.device).kind
+    except CalibctlError:  # an empty or missing path: worded for --source
+        kind = None
+    if kind != sources.CAMERA:
+        raise UsageError(f"--camera {camera.device} is not a camera",
+                         "give the device the unit's camera appears as: /dev/videoN or an index such as 0 (a folder "
+                         "of pictures per unit is --source-template DIR/{serial})")
+    if camera.max_views is not None and camera.max_views < 1:
+        raise UsageError(f"--max-views must be 1 or more, got {camera.max_views}")
+    if camera.duration_s is not None and not camera.duration_s > 0:
+        raise UsageError(f"--duration must be a positive number of seconds, got {camera.duration_s:g}")
+
+
+def warm_up(settings: Settings, request: StationRequest) -> None:
+    """Pay the start-up once: the detection worker processes (``core.capture.worker_pool``) of folder units (a
+    camera's frames are detected one by one as they arrive, in this process)."""
     from calibctl.core.capture import worker_pool
 
-    if settings.jobs > 1:
+    if settings.jobs > 1 and request.camera is None:
         worker_pool.warm(settings.jobs)
 
 
@@ -151,7 +203,8 @@ class _Interrupts:
 
 
 class _UnitObserver(CaptureObserver):
-    """Detection may be cancelled; from the last image's outcome on, the unit runs to its end."""
+    """Detection may be cancelled; from the last image's outcome on (a camera unit: from the end of its stream
+    and gates, ``unit_complete``), the unit runs to its end."""
 
     def __init__(self, interrupts: _Interrupts, inner: CaptureObserver) -> None:
         self.interrupts, self.inner = interrupts, inner
@@ -164,6 +217,12 @@ class _UnitObserver(CaptureObserver):
         if done == total:
             self.interrupts.cancellable = False
         self.inner.image_done(done, total, name, status)
+
+    def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
+        self.inner.frame_done(decision, progress, t_s)
+
+    def unit_complete(self) -> None:
+        self.interrupts.cancellable = False
 
 
 class _Offline:
@@ -219,24 +278,62 @@ def _rejected(session: CaptureSession) -> str:
     return f"capture rejected: {reasons}"
 
 
+def _unit_board(settings: Settings, request: StationRequest, offline: _Offline) -> tuple[BoardRevision, str | None]:
+    """The unit's board from the store, else (the store away) from the spool as the capture into it will find it;
+    and why the unit goes to the spool (None: the store answered)."""
+    name, revision = board_ref(request.board)
+    try:
+        with Store.open(settings.db_url) as store:
+            board = store.get_board(name, revision)
+    except DatabaseUnreachableError as exc:
+        return SpoolCapture(offline.spool(), offline.boards, exc.message).get_board(name, revision), exc.message
+    offline.remember(board)
+    return board, None
+
+
 def _watched(settings: Settings, request: StationRequest, source: str, offline: _Offline
              ) -> tuple[Watched, str | None]:
     """Watch mode: the unit's pictures, detected as they land, with the board the capture will use; and why
     the unit goes to the spool (None: the store answered)."""
     assert request.watch is not None
-    name, revision = board_ref(request.board)
-    away = None
-    try:
-        with Store.open(settings.db_url) as store:
-            board = store.get_board(name, revision)
-    except DatabaseUnreachableError as exc:  # as the capture into the spool will find it
-        away = exc.message
-        board = SpoolCapture(offline.spool(), offline.boards, away).get_board(name, revision)
+    board, away = _unit_board(settings, request, offline)
     return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs), away
 
 
-def _unit(settings: Settings, request: StationRequest, serial: str, observer: CaptureObserver, offline: _Offline,
+def _camera_unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver,
+                 offline: _Offline, why_queue: tuple[str, str] | None) -> UnitResult:
+    """One unit live from the station's camera, held in memory until its stream and gates are over
+    (``workflows.station.held``), then stored whole, or queued whole when the store is away."""
+    assert request.camera is not None
+    board, away = _unit_board(settings, request, offline)
+    if why_queue is None and away is not None:
+        why_queue = away, _SYNC_HINT
+    unit = CaptureRequest(serial, request.board, request.camera.device, max_views=request.camera.max_views,
+                          duration_s=request.camera.duration_s, jobs=settings.jobs,
+                          gauge_model=gauge_model(request.model),
+                          lens_model=None if request.model == "auto" else request.model, cancel_on_interrupt=True)
+    held = HeldCapture(board)
+    captured = capture(settings, unit, observer, into=held)
+    observer.unit_complete()  # from here the unit is written whole: a Ctrl-C waits for its verdict
+    session = captured.session
+    if why_queue is None:
+        try:
+            write_to_store(settings, held)
+        except DatabaseUnreachableError as exc:
+            why_queue = exc.message, _SYNC_HINT
+        else:
+            return _solved_unit(settings, request, session, offline)
+    spool = offline.spool()
+    spool_images(spool, held)
+    return _queued_line(queue_solved(settings, spool, session, request.model, session_stored=False,
+                                     passed=captured.passed), *why_queue)
+
+
+def _unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver, offline: _Offline,
           why_queue: tuple[str, str] | None) -> UnitResult:
+    if request.camera is not None:
+        return _camera_unit(settings, request, serial, observer, offline, why_queue)
+    assert request.source_template is not None
     source = request.source_template.replace(SERIAL_SLOT, serial)
     watched = None
     if request.watch is not None:
@@ -273,8 +370,15 @@ def _online_unit(settings: Settings, request: StationRequest, unit: CaptureReque
                  offline: _Offline, detected: EarlyDetections | None) -> UnitResult:
     session = capture(settings, unit, observer, detected=detected).session
     offline.remember(session.board)
+    return _solved_unit(settings, request, session, offline)
+
+
+def _solved_unit(settings: Settings, request: StationRequest, session: CaptureSession, offline: _Offline
+                 ) -> UnitResult:
+    """A stored session's line: rejected, or solved and stored (its calibration queued when the store went away
+    after the session)."""
     if session.status != "accepted":
-        return UnitResult(unit.serial, FAIL, _rejected(session), session_id=session.session_id,
+        return UnitResult(session.serial, FAIL, _rejected(session), session_id=session.session_id,
                           views=len(session.views))
     try:
         art = solve(settings, SolveRequest(session_id=session.session_id, model=request.model)).artifact
@@ -282,7 +386,7 @@ def _online_unit(settings: Settings, request: StationRequest, unit: CaptureReque
         return _queued_line(queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
                             exc.message, _SYNC_HINT)
     status = PASS if art.status == "accepted" else FAIL
-    return UnitResult(unit.serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
+    return UnitResult(session.serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
                       version=art.version, rms_px=art.rms_px, views=len(session.views))
 
 
@@ -339,9 +443,12 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
             if result is None:
                 try:
                     why_queue = offline.before_unit(lambda synced: _keep(summary, report, synced))
-                    result = _unit(settings, request, serial, _UnitObserver(interrupts, observer()), offline, why_queue)
+                    with observer() as display:
+                        result = _unit(settings, request, serial, _UnitObserver(interrupts, display), offline,
+                                       why_queue)
                 except KeyboardInterrupt:
-                    during = "awaited or detected" if request.watch is not None else "detected"
+                    during = ("captured from the camera" if request.camera is not None else
+                              "awaited or detected" if request.watch is not None else "detected")
                     result = UnitResult(serial, CANCELLED, f"cancelled (Ctrl-C) while its images were {during}; "
                                         "nothing was stored", "scan the serial again to calibrate it")
                 except CalibctlError as exc:

@@ -213,6 +213,29 @@ def test_camera_reader_thread_yields_newest_frames_in_order_and_ends(video: Path
     assert indices[-1] <= 73
 
 
+def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(settings, video: Path, tmp_path,
+                                                                             monkeypatch) -> None:
+    """The real reader thread on a clip of the first 12 frames (one key pose: the gates cannot pass): its reads
+    fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the views."""
+    clip = tmp_path / "clip.avi"
+    reader = cv2.VideoCapture(str(video))
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (320, 240))
+    for _ in range(12):
+        ok, frame = reader.read()
+        assert ok
+        writer.write(frame)
+    reader.release()
+    writer.release()
+    monkeypatch.setattr(sources, "open_stream", lambda spec: sources.CameraSource(str(clip), spec.label))
+    with pytest.raises(InputError) as caught:
+        capture(settings, CaptureRequest(SERIAL, "A17", "/dev/video5"))  # never opened: open_stream is the clip
+    assert caught.value.message.startswith("camera /dev/video5 stopped delivering frames after ")
+    assert "(the gates had not passed): unplugged, or taken by another program?; no session was stored" in \
+        caught.value.message
+    with Store.open(settings.db_url) as store:
+        assert store.list_sessions() == []
+
+
 @pytest.mark.parametrize(("text", "kind"), [("/dev/video3", "camera"), ("0", "camera"), ("12", "camera")])
 def test_cameras_are_recognised(text: str, kind: str) -> None:
     spec = sources.resolve_source(text)
