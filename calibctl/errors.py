@@ -9,9 +9,14 @@ Exit codes:
     0  success; the check passed
     1  the tool worked and the verdict is "fail" (gate, lint, verify, tampered import)
     2  the tool could not do its job (usage, unreadable input, unknown serial/board/version, database)
+
+``named_list`` is the one "a, b, c and 4 more" of the messages that name a few of many things (files,
+lines, versions, labels); it lives here because every layer, core included, already imports this module.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 EXIT_OK = 0
 EXIT_VERDICT_FAIL = 1
@@ -114,3 +119,10 @@ class MissingExtraError(CalibctlError):
             f"uv tool install --with '{spec}' ./{wheel} (uv, from the wheel calibctl was installed from); "
             f"python -m pip install '{spec}' (a virtualenv)",
         )
+
+
+def named_list(items: Sequence[object], limit: int, sep: str = ", ") -> str:
+    """The first ``limit`` of ``items`` and how many more: ``a, b, c and 4 more`` (all of them when they fit).
+    Only the items shown are turned into text."""
+    shown = sep.join(str(item) for item in items[:limit])
+    return shown + (f" and {len(items) - limit} more" if len(items) > limit else "")

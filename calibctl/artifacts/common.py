@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
-from calibctl.errors import InputError
+from calibctl.errors import InputError, named_list
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -141,12 +141,8 @@ def content_hash(model: BaseModel, exclude: set[str] | None = None, algorithm: H
 
 def validation_message(exc: ValidationError, source: str) -> str:
     """One line naming the first offending field path, e.g. ``camera_matrix.1.2: Input should be finite``."""
-    parts = []
-    for err in exc.errors()[:3]:
-        where = ".".join(str(p) for p in err["loc"]) or "(document)"
-        parts.append(f"{where}: {err['msg']}")
-    more = f" (+{exc.error_count() - 3} more)" if exc.error_count() > 3 else ""
-    return f"{source} is not a valid document: " + "; ".join(parts) + more
+    parts = [f"{'.'.join(str(p) for p in err['loc']) or '(document)'}: {err['msg']}" for err in exc.errors()]
+    return f"{source} is not a valid document: {named_list(parts, 3, sep='; ')}"
 
 
 def parse_document(model: type[T], data: Any, source: str) -> T:

@@ -9,6 +9,7 @@ from rich.table import Table
 
 from calibctl.cli.plain_text import finding_lines
 from calibctl.cli.render import fmt_px, shown, stdout
+from calibctl.errors import named_list
 
 if TYPE_CHECKING:
     from calibctl.artifacts.calibration import CalibrationArtifact
@@ -17,6 +18,7 @@ if TYPE_CHECKING:
 
 _K_NAMES = (("fx", 0, 0), ("fy", 1, 1), ("cx", 0, 2), ("cy", 1, 2))
 _DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+REJECTED_CORNERS_SHOWN = 5
 
 
 def _with_sigma(name: str, value: float, sigma: dict[str, float], unit: str, digits: int) -> str:
@@ -59,9 +61,9 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     n_drop = sum(v.dropped for v in art.views)
     stdout.print(f"  views {len(art.views)} ({n_out} outlier, {n_drop} dropped)")
     if art.rejected_corners:
-        listed = ", ".join(f"{shown(c.view)} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners[:5])
-        more = f" and {len(art.rejected_corners) - 5} more" if len(art.rejected_corners) > 5 else ""
-        stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {listed}{more}")
+        listed = named_list([f"{shown(c.view)} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners],
+                            REJECTED_CORNERS_SHOWN)
+        stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {listed}")
     if art.gates:
         print_gates(art.gates)
     print_findings(art.lint)

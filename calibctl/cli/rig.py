@@ -11,7 +11,7 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run
-from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
+from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 
 rig_app = typer.Typer(
     name="rig",
@@ -255,7 +255,7 @@ def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG
         return
     say(f"rig {name} history (active: {active if active is not None else 'none'})")
     for c in cals:
-        base = ", ".join(f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs[:3])
+        base = named_list([f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs], 3)
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
         say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "

@@ -6,24 +6,18 @@ the version of its latest activation event; events are only ever appended.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
-from calibctl.errors import NotFoundError, StaleActiveVersionError, UsageError
+from calibctl.errors import NotFoundError, StaleActiveVersionError, UsageError, named_list
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
 from calibctl.store.models import ArtifactRow, EventRow, SessionRow
 
-
-def known_list(names: Sequence[object], limit: int = 20) -> str:
-    """``A, B, C`` (and N more)."""
-    shown = ", ".join(str(n) for n in names[:limit])
-    return shown + (f" (and {len(names) - limit} more)" if len(names) > limit else "")
+KNOWN_SHOWN = 20  # versions, serials, sessions or boards named in a "not found" message
 
 
 def check_activation(artifact: CalibrationArtifact, activate: bool, reason: str) -> None:
@@ -49,11 +43,11 @@ def check_rollback(label: str, to_version: int, statuses: dict[int, str], active
     ``label`` names the subject (``CAM-1``, ``rig R1``); ``history_command`` is the command that shows
     its versions."""
     if to_version not in statuses:
-        raise NotFoundError(f"{label} has no version {to_version}; versions: {known_list(list(statuses))}",
+        raise NotFoundError(f"{label} has no version {to_version}; versions: {named_list(list(statuses), KNOWN_SHOWN)}",
                             f"see `{history_command}`")
     if statuses[to_version] != "accepted":
         accepted = [v for v, st in statuses.items() if st == "accepted"]
-        listing = f"accepted versions: {known_list(accepted)}" if accepted else "no version is accepted"
+        listing = f"accepted versions: {named_list(accepted, KNOWN_SHOWN)}" if accepted else "no version is accepted"
         raise UsageError(f"{label}@{to_version} is rejected and can never become active; {listing}")
     if expected is not UNCHECKED and expected != active:
         seen = f"v{expected}" if expected is not None else "no active version"
@@ -72,7 +66,7 @@ def _no_calibration_yet(s: Session, serial: str) -> None:
                          .order_by(SessionRow.started_at, SessionRow.session_id)).all()
     if not sessions:
         return
-    listing = known_list([f"{sid} ({st})" for sid, st in sessions])
+    listing = named_list([f"{sid} ({st})" for sid, st in sessions], KNOWN_SHOWN)
     if all(st == "rejected" for _, st in sessions):
         raise NotFoundError(
             f"no calibration is stored for '{serial}': its capture sessions were rejected at the gates, so it has "
@@ -94,7 +88,7 @@ def statuses(s: Session, serial: str) -> dict[int, str]:
         return {int(v): str(st) for v, st in rows}
     _no_calibration_yet(s, serial)
     serials = list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial)))
-    listing = f"known: {known_list(serials)}" if serials else "no calibrations are stored yet"
+    listing = f"known: {named_list(serials, KNOWN_SHOWN)}" if serials else "no calibrations are stored yet"
     raise NotFoundError(f"unknown serial '{serial}'; {listing}", "check the serial, or `calibctl history` another one")
 
 

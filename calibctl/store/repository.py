@@ -31,7 +31,14 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
 from calibctl.artifacts.session import CaptureSession
-from calibctl.errors import AlreadyExistsError, DatabaseError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import (
+    AlreadyExistsError,
+    DatabaseError,
+    IntegrityError,
+    NotFoundError,
+    UsageError,
+    named_list,
+)
 from calibctl.signing import Signer, TrustedKeys
 from calibctl.store import chain, codec, counters, history, images, migrate, served
 from calibctl.store.checks import CheckStoreMixin
@@ -185,11 +192,11 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                 names = list(s.scalars(select(BoardRow.name).distinct().order_by(BoardRow.name)))
                 if not names:
                     raise NotFoundError(f"unknown board '{name}'; no boards are registered yet", "add one with `calibctl board add`")
-                raise NotFoundError(f"unknown board '{name}'; known: {history.known_list(names)}", "see `calibctl board list`")
+                raise NotFoundError(f"unknown board '{name}'; known: {named_list(names, history.KNOWN_SHOWN)}", "see `calibctl board list`")
             wanted = revisions[-1] if revision is None else revision
             if wanted not in revisions:
                 raise NotFoundError(
-                    f"board {name} has no revision {revision}; revisions: {history.known_list(revisions)}",
+                    f"board {name} has no revision {revision}; revisions: {named_list(revisions, history.KNOWN_SHOWN)}",
                     f"see `calibctl board show {name}`",
                 )
             row = s.scalars(select(BoardRow).where(BoardRow.name == name, BoardRow.revision == wanted)).one()
@@ -240,7 +247,7 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                 recent = list(
                     s.scalars(select(SessionRow.session_id).order_by(SessionRow.started_at.desc()).limit(10))
                 )
-                listing = f"recent: {history.known_list(recent)}" if recent else "no sessions are stored yet"
+                listing = f"recent: {named_list(recent, history.KNOWN_SHOWN)}" if recent else "no sessions are stored yet"
                 raise NotFoundError(f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`")
             session = codec.decode_session(row)
             self._served(s, "session", row)
@@ -267,13 +274,13 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
             ).all()
             what = f"no {status} capture session" if status else "no capture session"
             if theirs:
-                listing = history.known_list([f"{sid} ({st}{', rig member' if sid in members else ''})"
-                                              for sid, st in theirs])
+                listing = named_list([f"{sid} ({st}{', rig member' if sid in members else ''})"
+                                              for sid, st in theirs], history.KNOWN_SHOWN)
                 hint = ("capture again, or name a rig member's session: calibctl solve SESSION_ID"
                         if any(sid in members for sid, _ in theirs) else "capture again")
                 raise NotFoundError(f"{what} for serial '{serial}'; its sessions: {listing}", hint)
             serials = list(s.scalars(select(SessionRow.serial).distinct().order_by(SessionRow.serial)))
-            listing = f"serials with sessions: {history.known_list(serials)}" if serials else "no sessions are stored yet"
+            listing = f"serials with sessions: {named_list(serials, history.KNOWN_SHOWN)}" if serials else "no sessions are stored yet"
             raise NotFoundError(f"{what} for serial '{serial}'; {listing}", "run `calibctl capture` first")
 
         return self._run(work)
@@ -380,7 +387,7 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
             if version is None:
                 wanted = history.active_in(s, serial)
                 if wanted is None:
-                    listing = history.known_list([f"{v} ({st})" for v, st in statuses.items()])
+                    listing = named_list([f"{v} ({st})" for v, st in statuses.items()], history.KNOWN_SHOWN)
                     raise NotFoundError(
                         f"{serial} has no active version; versions: {listing}",
                         f"ask for a version ({serial}@N) or roll back to an accepted one"
@@ -396,7 +403,7 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                     )
             elif version not in statuses:
                 raise NotFoundError(
-                    f"{serial} has no version {version}; versions: {history.known_list(list(statuses))}",
+                    f"{serial} has no version {version}; versions: {named_list(list(statuses), history.KNOWN_SHOWN)}",
                     f"see `calibctl history {serial}`",
                 )
             else:

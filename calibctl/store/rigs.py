@@ -23,10 +23,11 @@ from calibctl.errors import (
     NotFoundError,
     StaleActiveVersionError,
     UsageError,
+    named_list,
 )
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import UNCHECKED, check_rollback, known_list
+from calibctl.store.history import KNOWN_SHOWN, UNCHECKED, check_rollback
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow, SessionRow
 
 if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
@@ -139,7 +140,7 @@ class RigStoreMixin:
             row = s.get(RigRow, name)
             if row is None:
                 known = list(s.scalars(select(RigRow.name).order_by(RigRow.name)))
-                listing = f"known: {known_list(known)}" if known else "no rig is registered yet"
+                listing = f"known: {named_list(known, KNOWN_SHOWN)}" if known else "no rig is registered yet"
                 raise NotFoundError(f"unknown rig '{name}'; {listing}", "register it with `calibctl rig add`")
             return decode_definition(row, by_chain=True)
 
@@ -225,7 +226,7 @@ class RigStoreMixin:
             statuses = _statuses(s, rig)
             wanted = _active(s, rig) if version is None else version
             if wanted is None:
-                listing = known_list([f"{v} ({st})" for v, st in statuses.items()])
+                listing = named_list([f"{v} ({st})" for v, st in statuses.items()], KNOWN_SHOWN)
                 raise NotFoundError(
                     f"rig {rig} has no active version; versions: {listing}",
                     f"ask for a version ({rig}@N) or roll back to an accepted one"
@@ -233,7 +234,7 @@ class RigStoreMixin:
                     f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
                     f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it")
             if wanted not in statuses:
-                raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {known_list(list(statuses))}",
+                raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {named_list(list(statuses), KNOWN_SHOWN)}",
                                     f"see `calibctl rig history {rig}`")
             row = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
                                                            RigCalibrationRow.version == wanted)).one()

@@ -39,6 +39,18 @@ def test_unknown_fields_are_refused_with_their_path():
         parse_document(CalibrationArtifact, data, "cam.json")
 
 
+def test_many_field_errors_name_the_first_three_and_count_the_rest():
+    data = calibration().model_dump(mode="json")
+    for typo in ("stattion", "operater", "hostt", "clock", "site"):
+        data["provenance"][typo] = "typo"
+    with pytest.raises(InputError) as bad:
+        parse_document(CalibrationArtifact, data, "cam.json")
+    message = bad.value.message
+    assert message.startswith("cam.json is not a valid document: provenance.")
+    assert message.count("Extra inputs are not permitted") == 3 and message.endswith(" and 2 more")
+    assert bad.value.exit_code == 2
+
+
 def test_camera_matrix_must_be_a_camera_matrix():
     data = calibration().model_dump(mode="json")
     data["camera_matrix"][2] = [0.0, 0.0, 2.0]

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from calibctl.artifacts.board import BoardRevision, SquareMeasurement
 from calibctl.errors import NotFoundError, UsageError
+from calibctl.store.history import KNOWN_SHOWN
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board, nominal_board
 
@@ -59,6 +60,16 @@ def test_unknown_board_and_revision_name_what_exists(store: Store):
     assert info.value.exit_code == 2
     with pytest.raises(NotFoundError, match="board A17 has no revision 5; revisions: 1, 2"):
         store.get_board("A17", 5)
+
+
+def test_a_long_list_of_what_exists_names_the_first_and_counts_the_rest(store: Store):
+    for _ in range(KNOWN_SHOWN + 2):
+        store.add_board(measured_board(name="A17"))
+    with pytest.raises(NotFoundError) as missing:
+        store.get_board("A17", 99)
+    first = ", ".join(str(r) for r in range(1, KNOWN_SHOWN + 1))
+    assert f"board A17 has no revision 99; revisions: {first} and 2 more" in missing.value.message
+    assert missing.value.exit_code == 2
 
 
 UNIQUE = itertools.count(1)

@@ -49,7 +49,7 @@ from calibctl.core.intrinsics.solve import (
 )
 from calibctl.core.intrinsics.validation import refit_pose_residuals, validate_holdout
 from calibctl.core.lanes import Lanes, lanes_map
-from calibctl.errors import NumericalError
+from calibctl.errors import NumericalError, named_list
 
 TWO_CAMERA_RATIO = 1.4
 MIN_GROUP_VIEWS = 5
@@ -227,8 +227,7 @@ def _observability(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: 
 
 
 def _group_words(names: Sequence[str]) -> str:
-    shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
-    return f"{len(names)} views ({shown})"
+    return f"{len(names)} views ({named_list(names, 3)})"
 
 
 def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int],

@@ -37,7 +37,7 @@ from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture import worker_pool
 from calibctl.core.capture.detect import FOUND_INCONSISTENT, Detection, DetectorSettings, detect_board
 from calibctl.core.intrinsics.solution import single_threaded_opencv
-from calibctl.errors import WorkerDiedError
+from calibctl.errors import WorkerDiedError, named_list
 
 ACCEPTED = "accepted"
 NO_BOARD = "no_board"
@@ -380,10 +380,9 @@ def _worker_died(unfinished: Sequence[Path]) -> WorkerDiedError:
     """A detection process that died (the kernel's out-of-memory killer, a crash in a decoder) breaks the whole
     pool: the files it had not finished are named, the pool is started afresh by the next capture."""
     names = [path.name for path in unfinished]
-    shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
     return WorkerDiedError(
         f"a detection worker process died (killed, out of memory, or a crash decoding an image) with "
-        f"{len(names)} image(s) not yet detected: {shown}; nothing was stored",
+        f"{len(names)} image(s) not yet detected: {named_list(names, 3)}; nothing was stored",
         "run it again (the workers are started afresh); if it dies again, check the machine's free memory "
         "(dmesg names the out-of-memory killer) or leave the first image named above out")
 

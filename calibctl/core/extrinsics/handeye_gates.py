@@ -48,6 +48,7 @@ import numpy as np
 from calibctl.core.extrinsics.handeye import Motions, translation_scale
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit
 from calibctl.core.gate import GateResult
+from calibctl.errors import named_list
 
 LEVER_ARM_SIGMA_MIN = 0.5
 SECOND_AXIS_MIN_DEG = 10.0
@@ -110,11 +111,6 @@ def angle_mismatch_deg(motions: Motions) -> np.ndarray:
     return np.degrees(np.linalg.norm(motions.rotvec_A_rad, axis=1) - np.linalg.norm(motions.rotvec_B_rad, axis=1))
 
 
-def _named(labels: list[str]) -> str:
-    more = f" and {len(labels) - MAX_NAMED} more" if len(labels) > MAX_NAMED else ""
-    return ", ".join(labels[:MAX_NAMED]) + more
-
-
 def rotation_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
     second, spread = rotation_excitation_deg(motions.rotvec_A_rad)
     ok = second >= th.second_axis_min_deg
@@ -168,7 +164,7 @@ def time_alignment_gate(motions: Motions, th: HandEyeThresholds, static_poses: b
     if ok:
         return GateResult("time-alignment", True, fraction, th.mismatch_fraction_max, message, detail=detail)
     return GateResult("time-alignment", False, fraction, th.mismatch_fraction_max,
-                      f"time alignment: {message}, e.g. {_named([motions.labels[i] for i in bad])}",
+                      f"time alignment: {message}, e.g. {named_list([motions.labels[i] for i in bad], MAX_NAMED)}",
                       "time_alignment.angle_mismatch",
                       STATIC_POSE_HINT if static_poses else
                       "a time offset between the sensors masquerades as an extrinsic error: estimate it "

@@ -44,7 +44,7 @@ import numpy as np
 
 from calibctl import bounded
 from calibctl.core.capture.image_outcomes import IMAGE_SUFFIXES, list_images
-from calibctl.errors import FileSystemError, InputError, UsageError
+from calibctl.errors import FileSystemError, InputError, UsageError, named_list
 
 FOLDER = "folder"
 GLOB = "glob"
@@ -161,11 +161,6 @@ def ignored_files(folder: Path) -> list[str]:
                   if p.is_file() and not p.name.startswith(".") and p.suffix.lower() not in IMAGE_SUFFIXES)
 
 
-def _names(items: list[str]) -> str:
-    more = f" and {len(items) - NAMES_SHOWN} more" if len(items) > NAMES_SHOWN else ""
-    return ", ".join(items[:NAMES_SHOWN]) + more
-
-
 def _glob_base(pattern: str) -> Path:
     """The pattern's leading folders without wildcards ('shots/left*.jpg' -> shots)."""
     fixed = []
@@ -184,7 +179,7 @@ def _folder_images(folder: Path) -> ImageSet:
     paths = list_images(folder)
     ignored = ignored_files(folder)
     if not paths:
-        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {_names(ignored)}" if ignored else ""
+        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {named_list(ignored, NAMES_SHOWN)}" if ignored else ""
         raise InputError(f"no images in {folder}{also}",
                          f"put the session's images ({', '.join(IMAGE_SUFFIXES)}) in the folder")
     return _image_set(paths, folder, ignored)
@@ -197,7 +192,7 @@ def _glob_images(pattern: str) -> ImageSet:
     base = _glob_base(pattern)
     ignored = [os.path.relpath(p, base) for p in files if p.suffix.lower() not in IMAGE_SUFFIXES]
     if not paths:
-        also = f" ({len(files)} file(s), none an image by its suffix: {_names(ignored)})" if files else ""
+        also = f" ({len(files)} file(s), none an image by its suffix: {named_list(ignored, NAMES_SHOWN)})" if files else ""
         raise InputError(f"--source '{pattern}' matches no image file{also}; nothing was stored",
                          "check the pattern (it is relative to the working directory) and quote it so the shell "
                          "passes it on unexpanded")
@@ -228,7 +223,7 @@ def _listed_images(list_file: Path) -> ImageSet:
             names.append(str(path) if given.is_absolute() else os.path.relpath(path, base))
     if problems:
         raise InputError(f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
-                         f"stored: {_names(problems)}",
+                         f"stored: {named_list(problems, NAMES_SHOWN)}",
                          f"paths in a list file are relative to its folder ({base}); fix or remove those lines")
     if not paths:
         raise InputError(f"the list file {list_file} names no image", "put one image path per line")
@@ -254,7 +249,7 @@ def mixed_sizes_error(spec: SourceSpec, sizes: dict[str, tuple[int, int]]) -> In
     for name, size in sizes.items():
         by_size.setdefault(size, []).append(name)
     groups = sorted(by_size.items(), key=lambda item: -len(item[1]))
-    listing = "; ".join(f"{w}x{h}: {_names(names)}" for (w, h), names in groups)
+    listing = "; ".join(f"{w}x{h}: {named_list(names, NAMES_SHOWN)}" for (w, h), names in groups)
     return InputError(f"--source {spec.text} mixes image sizes ({listing}); nothing was stored",
                       "one session is one camera at one resolution: narrow the glob or list to one camera's images")
 

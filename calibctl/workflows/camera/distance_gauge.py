@@ -33,7 +33,7 @@ from calibctl.core.check.recheck import distance_ratio
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.solve import DEFAULT_MODEL, get_model, solve_intrinsics
 from calibctl.core.intrinsics.validation import refit_pose
-from calibctl.errors import InputError, NumericalError, UsageError
+from calibctl.errors import InputError, NumericalError, UsageError, named_list
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources as sources
 
@@ -126,7 +126,7 @@ def detect_fixture_views(spec: BoardSpec, board_ref: str, source: sources.Source
     w, h = image_size
     wrong = [o for o in found if o.image_size is not None and tuple(o.image_size) != (w, h)]
     if wrong:
-        listed = ", ".join(f"{o.name} ({o.image_size[0]}x{o.image_size[1]})" for o in wrong[:5])  # type: ignore[index]
+        listed = named_list([f"{o.name} ({o.image_size[0]}x{o.image_size[1]})" for o in wrong], 5)  # type: ignore[index]
         raise InputError(f"{len(wrong)} image(s) are not {w}x{h}, the size {calibrated} was calibrated at: {listed}",
                          "use images straight from the camera at its calibrated resolution; calibctl never rescales")
     final = outcomes_core.finalize_session(found, (w, h))

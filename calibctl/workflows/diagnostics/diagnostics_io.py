@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from calibctl import bounded, files
-from calibctl.errors import InputError
+from calibctl.errors import InputError, named_list
 
 MAX_LISTED = 5
 
@@ -42,25 +42,23 @@ class Table:
 
 
 def lines_text(lines: np.ndarray) -> str:
-    shown = ", ".join(str(int(v)) for v in lines[:MAX_LISTED])
-    more = f" and {lines.size - MAX_LISTED} more" if lines.size > MAX_LISTED else ""
-    return f"line{'s' if lines.size > 1 else ''} {shown}{more}"
+    return f"line{'s' if lines.size > 1 else ''} {named_list(lines.tolist(), MAX_LISTED)}"
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
 
 
 def _parse_numeric(name: str, cells: list[str], lines: np.ndarray, path: Path) -> np.ndarray:
     try:
         values = np.array(cells, dtype=np.float64)
     except ValueError:
-        bad = []
-        for i, cell in enumerate(cells):
-            try:
-                float(cell)
-            except ValueError:
-                bad.append(i)
-                if len(bad) > MAX_LISTED:
-                    break
-        shown = ", ".join(f"line {int(lines[i])} ({cells[i]!r})" for i in bad[:MAX_LISTED])
-        raise InputError(f"{path.name}: column {name} has non-numeric cells: {shown}",
+        bad = [f"line {int(lines[i])} ({cell!r})" for i, cell in enumerate(cells) if not _is_number(cell)]
+        raise InputError(f"{path.name}: column {name} has non-numeric cells: {named_list(bad, MAX_LISTED)}",
                          hint="every cell of a numeric column must be a number") from None
     finite = np.isfinite(values)
     if not finite.all():

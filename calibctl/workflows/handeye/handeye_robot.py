@@ -30,7 +30,7 @@ from calibctl.core.capture.image_outcomes import list_images
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions
-from calibctl.errors import InputError, UsageError
+from calibctl.errors import InputError, UsageError, named_list
 from calibctl.workflows.board.boards import board_ref, board_spec
 from calibctl.workflows.diagnostics import diagnostics_io as dio
 from calibctl.workflows.handeye import handeye_io
@@ -138,7 +138,7 @@ def run_robot_handeye(settings: Settings, path: Path, images: Path | None, seria
     keep = [i for i, T in enumerate(poses) if T is not None]
     if len(keep) < MIN_POSES:
         raise InputError(f"{path.name}: the board was found in {len(keep)} of {len(poses)} images; hand-eye needs "
-                         f"at least {MIN_POSES} poses", hint="; ".join(skipped[:3]) or None)
+                         f"at least {MIN_POSES} poses", hint=named_list(skipped, 3, sep='; ') or None)
     T_wa_a = T_base_gripper[keep] if not eye_to_hand else np.array([se3.invert(T) for T in T_base_gripper[keep]])
     T_board_cam = np.array([se3.invert(poses[i]) for i in keep])
     labels = tuple(str(table.text["image"][i]) for i in keep)

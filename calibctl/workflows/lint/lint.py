@@ -27,7 +27,7 @@ from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
-from calibctl.errors import InputError, IntegrityError, NotFoundError
+from calibctl.errors import InputError, IntegrityError, NotFoundError, named_list
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.exports import formats, ros_camera_info, trace_header
 from calibctl.workflows.store_admin import keys
@@ -337,8 +337,7 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
     held, cross = check["holdout_rms_px"], check["cross_rms_px"]
 
     def group(names: list[str], k: int) -> str:
-        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
-        return (f"{len(names)} views ({shown}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
+        return (f"{len(names)} views ({named_list(names, 3)}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
                 f"cy {check['cy_px'][k]:.1f} px alone)")
 
     return [Finding(

@@ -41,6 +41,15 @@ def test_non_numeric_cells_are_reported_by_line(tmp_path):
         read_table(_write(tmp_path, "a,b\n1,2\n1,abc\n1,3\n1,\n"), REQ)
 
 
+def test_many_non_numeric_cells_name_the_first_and_count_the_rest(tmp_path):
+    rows = "".join(f"1,x{i}\n" for i in range(8))  # lines 2..9, every one bad
+    with pytest.raises(InputError) as bad:
+        read_table(_write(tmp_path, "a,b\n" + rows), REQ)
+    assert "column b has non-numeric cells: line 2 ('x0'), line 3 ('x1'), line 4 ('x2'), line 5 ('x3'), " \
+           "line 6 ('x4') and 3 more" in bad.value.message
+    assert bad.value.exit_code == 2
+
+
 def test_non_finite_cells_are_reported_by_line(tmp_path):
     with pytest.raises(InputError, match=r"column a has non-finite values \(nan/inf\) at lines 2, 4"):
         read_table(_write(tmp_path, "a,b\nnan,2\n1,3\ninf,4\n"), REQ)
