@@ -108,12 +108,13 @@ def station(
     done_file: Annotated[str | None, typer.Option(
         "--done-file", show_default=False, help="--watch: the unit is complete when the camera app writes this file "
         "into its folder (after the last picture).")] = None,
-    settle_s: Annotated[float, typer.Option(
-        "--settle-s", help="--watch: a picture is complete when its size has not changed for this long; 0 when the "
-        "camera app renames each picture into place.")] = 0.25,
-    unit_timeout_s: Annotated[float, typer.Option(
-        "--unit-timeout-s", help="--watch: a unit with no new picture for this long is an error line; nothing "
-        "stored.")] = 120.0,
+    # None: the watch rule's own default (WatchRule), which the help names (a test keeps the two equal)
+    settle_s: Annotated[float | None, typer.Option(
+        "--settle-s", show_default=False, help="--watch: a picture is complete when its size has not changed for "
+        "this long (default 0.25 s); 0 when the camera app renames each picture into place.")] = None,
+    unit_timeout_s: Annotated[float | None, typer.Option(
+        "--unit-timeout-s", show_default=False, help="--watch: a unit with no new picture for this long is an "
+        "error line; nothing stored (default 120 s).")] = None,
 ) -> None:
     """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial} (or the unit's camera,
     live, with --camera), solve, store, print the verdict, wait for the next.
@@ -178,16 +179,21 @@ def _unit_display(live: LiveCamera | None, as_json: bool, min_views: int) -> Cal
                                     "Ctrl-C: cancel this unit, nothing stored")
 
 
-def _watch_rule(watch: bool, views: int | None, done_file: str | None, settle_s: float,
-                unit_timeout_s: float) -> WatchRule | None:
+def _watch_rule(watch: bool, views: int | None, done_file: str | None, settle_s: float | None,
+                unit_timeout_s: float | None) -> WatchRule | None:
     from calibctl.errors import UsageError
     from calibctl.workflows.station.watch import WatchRule
 
+    waits = {name: value for name, value in (("settle_s", settle_s), ("unit_timeout_s", unit_timeout_s))
+             if value is not None}
     if watch:
-        return WatchRule(views, done_file, settle_s, unit_timeout_s)
+        return WatchRule(views, done_file, **waits)
     if views is not None or done_file is not None:
         raise UsageError("--views and --done-file say when a watched unit is complete; they need --watch",
                          "add --watch, or leave them out to capture each unit's folder as it is when the serial is read")
+    if waits:
+        raise UsageError("--settle-s and --unit-timeout-s say how long a watched unit's pictures are waited for; "
+                         "they need --watch", "add --watch and --views N or --done-file NAME, or leave them out")
     return None
 
 

@@ -53,6 +53,9 @@ def test_watch_lines_give_the_time_after_the_last_picture(db: str, tmp_path: Pat
     (["--views", "12"], "--views and --done-file say when a watched unit is complete; they need --watch"),
     (["--watch"], "--watch needs --views N or --done-file NAME"),
     (["--watch", "--views", "12", "--unit-timeout-s", "-3"], "--unit-timeout-s must be a positive number"),
+    (["--settle-s", "0"], "--settle-s and --unit-timeout-s say how long a watched unit's pictures are waited for; "
+                          "they need --watch"),
+    (["--unit-timeout-s", "30"], "they need --watch"),
 ])
 def test_watch_options_that_cannot_work_exit_2_before_any_unit(db: str, tmp_path: Path, args: list[str],
                                                                 message: str) -> None:

@@ -606,7 +606,7 @@ def session_image_circle(given: tuple[float, float, float] | None, got: _Collect
     return circle
 
 
-def calibrate(settings: Settings, request: CaptureRequest, model: str = "k1k2", activate: bool = True,
+def calibrate(settings: Settings, request: CaptureRequest, model: str = DEFAULT_MODEL, activate: bool = True,
               drop_outliers: bool = False, observer: CaptureObserver | None = None,
               override_gauge: str | None = None) -> CalibrateResult:
     """Capture, then - when the gates pass - solve the new session (``workflows.camera.solve``). A failed

@@ -75,7 +75,7 @@ _FLAG_NAMES = (
 class SolveRequest:
     session_id: str | None = None
     serial: str | None = None
-    model: str = "k1k2"
+    model: str = core_solve.DEFAULT_MODEL
     activate: bool = True
     drop_outliers: bool = False
     report_dir: Path | None = None  # write SERIAL-vN-report.html here for the new version (accepted or not)

@@ -54,6 +54,7 @@ from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.arrivals import EarlyDetections
+from calibctl.core.intrinsics.solve import DEFAULT_MODEL
 from calibctl.errors import CalibctlError, DatabaseUnreachableError, IntegrityError, UsageError
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
@@ -92,7 +93,7 @@ class LiveCamera:
 class StationRequest:
     board: str
     source_template: str | None  # DIR/{serial}: the folder (or glob, list file) a unit's pictures arrive in
-    model: str = "k1k2"
+    model: str = DEFAULT_MODEL
     spool: Path | None = None  # None: store.spool.default_spool_path
     watch: WatchRule | None = None  # watch mode: wait for each unit's pictures, detect them as they land
     camera: LiveCamera | None = None  # instead of source_template: each unit live from the station's camera
