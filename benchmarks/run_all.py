@@ -62,6 +62,7 @@ BENCHES = (
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
     Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
     Bench("bench_lidar", "bench_lidar.py", ("--repeats", "3"), ("--repeats", "1")),
+    Bench("bench_stream", "bench_stream.py", ("--repeats", "3"), ("--repeats", "1", "--size", "640x480")),
     Bench("bench_fleet_health", "bench_fleet_health.py", ("--robots", "25", "--days", "365"), ("--robots", "5", "--days", "90")),
     Bench("bench_fleet_checkpoint", "bench_fleet_checkpoint.py", (), ("--robots", "50", "--sizes", "2500", "6000")),
 )

@@ -208,9 +208,45 @@ class FrameSelector:
                                  tuple(report.hints), report)
 
 
+@dataclass(frozen=True)
+class Probe:
+    """What ``probe_frame`` found in one frame: the full search's answer (``searched``), or only that the quick
+    check saw nothing chessboard-like (``searched`` False, ``detection`` None)."""
+
+    searched: bool
+    detection: Detection | None
+    why: str
+
+
+def probe_frame(gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None, search: bool) -> Probe:
+    """One frame's detection as far as it can be decided without the previous frame: the full search when
+    ``search`` (the frame is due whatever came before), a ChArUco board (no quick check), or the quick check
+    passes; else the quick check's "nothing here". Pure, so it runs ahead on another worker
+    (``StreamDetector.settle`` finishes it in frame order)."""
+    if not search and spec.kind != CHARUCO and _quick_reject(gray, spec):
+        return Probe(False, None, f"no {spec.cols}x{spec.rows} chessboard: nothing chessboard-like at a quick look")
+    detection, why = detect_board(gray, spec, settings)
+    return Probe(True, detection, why)
+
+
+def _quick_reject(gray: np.ndarray, spec: BoardSpec) -> bool:
+    height, width = gray.shape[:2]
+    k = max(1, -(-max(width, height) // STREAM_CHECK_SIDE_PX))
+    small = gray if k == 1 else cv2.resize(gray, (width // k, height // k), interpolation=cv2.INTER_AREA)
+    return not cv2.checkChessboard(small, (spec.cols, spec.rows))
+
+
 class StreamDetector:
     """``detect_board`` for consecutive frames of one stream, with the quick check in front (see the
-    module docstring). Pure logic: no I/O, no clocks."""
+    module docstring). Pure logic: no I/O, no clocks.
+
+    In one thread: ``detect(gray)`` per frame, in order. Ahead on workers, with the same answers: per frame in
+    order ``forced = next_forced()``, then ``probe_frame(gray, spec, settings, forced)`` anywhere, then
+    ``settle(gray, forced, probe)`` in order. A frame is due for the full search when it is forced (every
+    ``full_every``-th) or the previous frame had a board; a probe run ahead knows only the first, so a due frame
+    whose quick check said "nothing" is searched in ``settle`` - the search the one-thread detector would have
+    run, hence the same answer for every frame whatever ran ahead.
+    """
 
     def __init__(self, spec: BoardSpec, settings: DetectorSettings | None = None,
                  full_every: int = STREAM_FULL_SEARCH_EVERY) -> None:
@@ -219,20 +255,28 @@ class StreamDetector:
         self.full_every = full_every
         self._frames = 0
         self._previous_found = False
+        self.settled_searches = 0  # due frames searched in settle: the work a probe run ahead could not know of
 
-    def _quick_reject(self, gray: np.ndarray) -> bool:
-        height, width = gray.shape[:2]
-        k = max(1, -(-max(width, height) // STREAM_CHECK_SIDE_PX))
-        small = gray if k == 1 else cv2.resize(gray, (width // k, height // k), interpolation=cv2.INTER_AREA)
-        return not cv2.checkChessboard(small, (self.spec.cols, self.spec.rows))
+    def next_forced(self) -> bool:
+        """Count the next frame; whether it gets the full search whatever the previous frame showed."""
+        self._frames += 1
+        return self.full_every <= 1 or self._frames % self.full_every == 1
+
+    def settle(self, gray: np.ndarray, forced: bool, probe: Probe) -> tuple[Detection | None, str]:
+        """The frame's (Detection, "") or (None, why), in frame order, from its probe."""
+        if probe.searched:
+            detection, why = probe.detection, probe.why
+        elif forced or self._previous_found:
+            detection, why = detect_board(gray, self.spec, self.settings)
+            self.settled_searches += 1
+        else:
+            self._previous_found = False
+            return None, (f"{probe.why} (a full search runs on every {self.full_every}th frame and after each board)")
+        self._previous_found = detection is not None
+        return detection, why
 
     def detect(self, gray: np.ndarray) -> tuple[Detection | None, str]:
         """(Detection, "") or (None, why) for the next frame, (H, W) uint8."""
-        self._frames += 1
-        due = self._previous_found or self._frames % self.full_every == 1 or self.full_every <= 1
-        if not due and self.spec.kind != CHARUCO and self._quick_reject(gray):
-            return None, (f"no {self.spec.cols}x{self.spec.rows} chessboard: nothing chessboard-like at a quick look "
-                          f"(a full search runs on every {self.full_every}th frame and after each board)")
-        detection, why = detect_board(gray, self.spec, self.settings)
-        self._previous_found = detection is not None
-        return detection, why
+        forced = self.next_forced()
+        probe = probe_frame(gray, self.spec, self.settings, search=forced or self._previous_found)
+        return self.settle(gray, forced, probe)

@@ -29,13 +29,14 @@ views are no verdict on the lens, so no session is stored.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import re
 import secrets
 import threading
 from collections import deque
-from collections.abc import Sequence
-from concurrent.futures import Executor, ThreadPoolExecutor
+from collections.abc import Generator, Iterator, Sequence
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -57,14 +58,16 @@ from calibctl.core.board.views import BoardView
 from calibctl.core.capture import image_outcomes as outcomes_core
 from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.core.capture.camera_split import one_camera_gate
-from calibctl.core.capture.detect import FOUND_INCONSISTENT
+from calibctl.core.capture.detect import FOUND_INCONSISTENT, Detection, DetectorSettings
 from calibctl.core.capture.frame_select import (
     KEPT,
     FrameDecision,
     FrameSelector,
+    Probe,
     SelectionProgress,
     SelectorSettings,
     StreamDetector,
+    probe_frame,
 )
 from calibctl.core.capture.gates import GateThresholds, evaluate_gates
 from calibctl.core.capture.image_circle import (
@@ -106,6 +109,7 @@ SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no boa
 # a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
 # circular fisheye can stop once the cells inside the circle are covered (the corners are never lit)
 CIRCLE_EVERY_FRAMES = 10
+STREAM_AHEAD_PER_JOB = 2  # a stream's frames read and detected ahead of the one being selected, per job
 IMAGE_BATCH = 16  # folder images per store transaction (one SQLite commit, one WAL fsync, per batch)
 _FRAME_STATUS = {KEPT: "accepted", "no_board": "no_board", "blurred": "blurred",
                  "near_duplicate": "near_duplicate", "moving": "skipped", "adds_nothing": "skipped"}
@@ -423,8 +427,9 @@ class _StreamState:
             if self.selector.kept:
                 self.progress = self.selector.progress()
 
-    def take(self, frame: sources.Frame) -> FrameDecision | None:
-        """Detect, select and (when kept) store one frame; None when it has the wrong size."""
+    def begin(self, frame: sources.Frame) -> tuple[np.ndarray, tuple[int, int], bool]:
+        """A frame's gray image and size, and whether it has the stream's size (the first frame sets it). Called in
+        frame order, possibly ahead of ``finish`` of the frames before it."""
         gray = sources.to_gray(frame.image)
         size = (int(gray.shape[1]), int(gray.shape[0]))
         if self.selector is None:
@@ -432,16 +437,28 @@ class _StreamState:
             circle = None if self.image_circle is None else checked_image_circle(self.image_circle, size)
             self.selector = FrameSelector(self.spec, size, SelectorSettings(thresholds=thresholds, image_circle=circle))
             self.progress = self.selector.progress()
-        if size != self.selector.image_size:
+        return gray, size, size == self.selector.image_size
+
+    def take(self, frame: sources.Frame) -> FrameDecision | None:
+        """Detect, select and (when kept) store one frame; None when it has the wrong size."""
+        gray, size, right_size = self.begin(frame)
+        return self.finish(frame, gray, size, self.detector.detect(gray) if right_size else None)
+
+    def finish(self, frame: sources.Frame, gray: np.ndarray, size: tuple[int, int],
+               found: tuple[Detection | None, str] | None, half: np.ndarray | None = None) -> FrameDecision | None:
+        """Select and (when kept) store one frame, in frame order, given its detection (``found``: None for a
+        frame of the wrong size) and ``half_size(gray)`` when a worker made it; None when it has the wrong size."""
+        assert self.selector is not None  # begin() ran
+        if found is None:
             w, h = self.selector.image_size
             self.outcomes.append(OutcomeRecord(name=frame.label, status="wrong_size", image_size=size, reason=(
                 f"frame is {size[0]}x{size[1]} but the stream's frames are {w}x{h}")))
             return None
-        self.max_gray = accumulate_max(self.max_gray, half_size(gray))
+        self.max_gray = accumulate_max(self.max_gray, half_size(gray) if half is None else half)
         self.frames_seen += 1
         if self.image_circle is None and self.frames_seen % CIRCLE_EVERY_FRAMES == 0:
             self._look_for_circle(size)
-        detection, why = self.detector.detect(gray)
+        detection, why = found
         if detection is None:
             if frame.index % SAMPLE_EVERY_FRAMES == 0:
                 self.no_board_samples.append((frame.label, gray))
@@ -466,6 +483,57 @@ class _StreamState:
         return decision
 
 
+def _probe_and_half(gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None, forced: bool
+                    ) -> tuple[Probe, np.ndarray]:
+    """A stream frame's work that does not depend on the frames before it, for a worker thread."""
+    return probe_frame(gray, spec, settings, forced), half_size(gray)
+
+
+def _detected_frames(state: _StreamState, frames: Iterator[sources.Frame], jobs: int
+                     ) -> Generator[tuple[sources.Frame, FrameDecision | None], None, None]:
+    """Each frame with its decision, in order (``state.take``), detected on ``jobs`` threads.
+
+    With more than one job the frames are detected ahead: up to ``STREAM_AHEAD_PER_JOB`` x jobs frames are read
+    and probed on the threads (``frame_select.probe_frame`` and the half-size copy for the frames' maximum:
+    OpenCV releases the GIL) while the frames before them are settled and offered in order
+    (``StreamDetector.settle``, ``finish``), so every frame gets the detection, and the session the decisions, of
+    the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never read
+    them.
+    """
+    if jobs <= 1:
+        for frame in frames:
+            yield frame, state.take(frame)
+        return
+    pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="calibctl-stream-detect")
+    ahead: deque[tuple[sources.Frame, np.ndarray, tuple[int, int], bool,
+                       Future[tuple[Probe, np.ndarray]] | None]] = deque()
+    more = True
+    try:
+        while True:
+            while more and len(ahead) < STREAM_AHEAD_PER_JOB * jobs:
+                read = next(frames, None)
+                if read is None:
+                    more = False
+                    break
+                gray, size, right_size = state.begin(read)
+                if not right_size:
+                    ahead.append((read, gray, size, False, None))
+                    continue
+                forced = state.detector.next_forced()
+                ahead.append((read, gray, size, forced,
+                              pool.submit(_probe_and_half, gray, state.spec, state.detector.settings, forced)))
+            if not ahead:
+                return
+            frame, gray, size, forced, work = ahead.popleft()
+            if work is None:  # the wrong size: no detection
+                yield frame, state.finish(frame, gray, size, None)
+                continue
+            probe, half = work.result()
+            yield frame, state.finish(frame, gray, size, state.detector.settle(gray, forced, probe), half)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
                     source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
     stream = sources.open_stream(source)
@@ -474,20 +542,34 @@ def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
     state = _StreamState(store, settings, spec, request.image_circle)
     interrupted = False
     stop = "end of the video" if is_file else None  # a camera ends by a stop rule, never by itself
-    try:
-        for frame in stream.frames():
+    reached: list[bool] = []  # the frames from --duration on are not read further, nor detected
+
+    def until_duration(frames: Iterator[sources.Frame]) -> Iterator[sources.Frame]:
+        for frame in frames:
             if request.duration_s is not None and frame.t_s >= request.duration_s:
-                stop = f"--duration {request.duration_s:g} s reached"
-                break
-            decision = state.take(frame)
-            progress = state.progress
-            if decision is None or progress is None:
-                continue
-            observer.frame_done(decision, progress, frame.t_s)
-            if decision.kept and target is not None and progress.report.passed and progress.n_views >= target:
-                stop = f"the gates passed with {progress.n_views} views" + (
-                    f" (--max-views {target})" if request.max_views is not None else "")
-                break
+                reached.append(True)
+                return
+            yield frame
+
+    jobs = request.jobs or settings.jobs
+    # a video file's frames are decoded on a thread of their own beside the detection (a camera's already are)
+    read: AbstractContextManager[Iterator[sources.Frame]] = \
+        sources.read_ahead(stream.frames(), STREAM_AHEAD_PER_JOB * jobs) if is_file and jobs > 1 else \
+        nullcontext(stream.frames())
+    try:
+        with read as frames, contextlib.closing(_detected_frames(state, until_duration(frames), jobs)) as decided:
+            for frame, decision in decided:
+                progress = state.progress
+                if decision is None or progress is None:
+                    continue
+                observer.frame_done(decision, progress, frame.t_s)
+                if decision.kept and target is not None and progress.report.passed and progress.n_views >= target:
+                    stop = f"the gates passed with {progress.n_views} views" + (
+                        f" (--max-views {target})" if request.max_views is not None else "")
+                    break
+            else:
+                if reached:
+                    stop = f"--duration {request.duration_s:g} s reached"
     except KeyboardInterrupt:
         if request.cancel_on_interrupt:
             raise

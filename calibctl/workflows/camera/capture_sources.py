@@ -38,6 +38,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from queue import Full, Queue
 
 import cv2
 import numpy as np
@@ -349,6 +350,48 @@ class CameraSource:
         self._stop.set()
         self._thread.join(timeout=2.0)
         self._capture.release()
+
+
+@contextlib.contextmanager
+def read_ahead(frames: Iterator[Frame], depth: int) -> Iterator[Iterator[Frame]]:
+    """``frames`` read on a thread of their own, at most ``depth`` ahead of the consumer, in order; an exception
+    of the reader (a decode error) is raised where the consumer would have met it. Leaving the block stops the
+    reader (the frames it read ahead are dropped)."""
+    queue: Queue[tuple[Frame | None, BaseException | None]] = Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+
+    def offer(item: tuple[Frame | None, BaseException | None]) -> bool:
+        while not stop.is_set():
+            with contextlib.suppress(Full):
+                queue.put(item, timeout=0.05)
+                return True
+        return False
+
+    def read() -> None:
+        try:
+            for frame in frames:
+                if not offer((frame, None)):
+                    return
+            offer((None, None))
+        except BaseException as exc:  # noqa: BLE001 - whatever ends the reader is raised in the consumer
+            offer((None, exc))
+
+    def consume() -> Iterator[Frame]:
+        while True:
+            frame, error = queue.get()
+            if error is not None:
+                raise error
+            if frame is None:
+                return
+            yield frame
+
+    reader = threading.Thread(target=read, name="calibctl-read-ahead", daemon=True)
+    reader.start()
+    try:
+        yield consume()
+    finally:
+        stop.set()
+        reader.join()
 
 
 def open_stream(spec: SourceSpec) -> VideoFileSource | CameraSource:

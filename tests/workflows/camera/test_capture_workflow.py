@@ -172,6 +172,23 @@ def test_max_views_and_duration_stop_a_video(settings, video: Path) -> None:
     assert [v.name for v in capped.session.views] == [v.name for v in full.session.views]
 
 
+def _session_numbers(result) -> tuple:
+    session = result.session
+    return (result.stop_reason, session.status, [o.model_dump() for o in session.outcomes],
+            [(v.name, v.corner_ids, v.corners_px, v.image_sha256) for v in session.views],
+            [(g.gate, g.passed, g.value) for g in session.gates])
+
+
+@pytest.mark.parametrize("stop", [{}, {"max_views": 6}, {"duration_s": 4.2}], ids=["whole", "max-views", "duration"])
+def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path, stop: dict) -> None:
+    """Frames are detected ahead on threads from 2 jobs on (``_detected_frames``) and settled in order: every frame
+    gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4 jobs."""
+    runs = {jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=jobs, **stop)) for jobs in (1, 2, 4)}
+    one = _session_numbers(runs[1])
+    assert one[2] and one[3]  # frames examined and views kept
+    assert _session_numbers(runs[2]) == one and _session_numbers(runs[4]) == one
+
+
 class _InterruptedVideo:
     """A video source that raises KeyboardInterrupt (Ctrl-C) when frame ``at`` is due."""
 
@@ -191,9 +208,9 @@ class _InterruptedVideo:
 
 def test_ctrl_c_finishes_the_session_with_the_views_kept(settings, video: Path, monkeypatch) -> None:
     at = 35
-    reference = capture(settings, CaptureRequest(SERIAL, "A17", str(video), duration_s=at / 10.0))
+    reference = capture(settings, CaptureRequest(SERIAL, "A17", str(video), duration_s=at / 10.0, jobs=1))
     monkeypatch.setattr(sources, "open_stream", lambda spec: _InterruptedVideo(video, at))
-    result = capture(settings, CaptureRequest(SERIAL, "A17", str(video)))
+    result = capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=1))
     assert result.interrupted
     n = len(reference.session.views)
     assert result.stop_reason == f"interrupted (Ctrl-C); the session was finished with the {n} view(s) kept"
@@ -201,6 +218,22 @@ def test_ctrl_c_finishes_the_session_with_the_views_kept(settings, video: Path, 
     assert len(result.session.outcomes) == at
     with Store.open(settings.db_url) as store:
         assert store.get_session(result.session.session_id).status == result.session.status
+
+
+def test_ctrl_c_with_frames_detected_ahead_keeps_the_frames_selected_before_it(settings, video: Path,
+                                                                             monkeypatch) -> None:
+    """At 2 jobs up to 4 frames are read and detected ahead of the one being selected; Ctrl-C drops those (as
+    a Ctrl-C a moment earlier would have) and finishes the session with the frames selected before them."""
+    at = 35
+    reference = capture(settings, CaptureRequest(SERIAL, "A17", str(video), duration_s=at / 10.0, jobs=1))
+    monkeypatch.setattr(sources, "open_stream", lambda spec: _InterruptedVideo(video, at))
+    result = capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=2))
+    assert result.interrupted and result.stop_reason.startswith("interrupted (Ctrl-C); the session was finished")
+    outcomes = [o.model_dump() for o in result.session.outcomes]
+    assert at - 2 * 2 <= len(outcomes) < at
+    assert outcomes == [o.model_dump() for o in reference.session.outcomes][:len(outcomes)]
+    kept = {o["name"] for o in outcomes}
+    assert [v.name for v in result.session.views] == [v.name for v in reference.session.views if v.name in kept]
 
 
 def test_camera_reader_thread_yields_newest_frames_in_order_and_ends(video: Path) -> None:
