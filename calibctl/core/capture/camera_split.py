@@ -133,7 +133,7 @@ def _settled(in_a: np.ndarray, rms_a: np.ndarray, rms_b: np.ndarray, n_corners: 
     The alternation is a descent on the sum of squared residuals (each view under its group's camera). Of one
     camera the two solves differ by their estimation noise and each round swaps views whose two predictions
     differ by that noise: rendered 60-view sessions took 4-8 rounds to settle (ratio 1.05-1.07), a round lowering
-    the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 from the second round on.
+    the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round (1.09 later).
     A real second camera is told apart by both figures, never by one round: a shuffled or alternating
     two-camera session starts from two blends whose cameras agree within their uncertainty (first
     reassignment 1.3-17 %, where one real camera's 13 views gained 2.5 %), and it can then drift for rounds
