@@ -225,3 +225,55 @@ def test_the_same_question_is_answered_once(monkeypatch) -> None:
     assert len(camera_split._RECENT) == camera_split.RECENT_CHECKS
     check_one_camera(obj, img, (640, 480))
     assert len(calls) == 5 + camera_split.RECENT_CHECKS
+
+
+def _rounds_with_and_without_settling(monkeypatch, obj, img, size):
+    """(split with the early stop, split with it off): the memo is forgotten between the two, its key not
+    holding the module's constants."""
+    camera_split.forget_recent_checks()
+    settled = check_one_camera(obj, img, size)
+    monkeypatch.setattr(camera_split, "SETTLED_GAIN", 0.0)  # no reassignment gains less than nothing: never settled
+    camera_split.forget_recent_checks()
+    full = check_one_camera(obj, img, size)
+    camera_split.forget_recent_checks()
+    assert settled is not None and full is not None
+    return settled, full
+
+
+def test_one_camera_stops_alternating_once_only_noise_would_move(monkeypatch) -> None:
+    """One camera's views swap between two near-identical cameras: without the stop this session takes
+    several rounds to settle; with it the alternation ends after its second round (the first is never
+    judged) on a split that is still one camera."""
+    same = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 24, seed=30, noise_px=0.1)
+    settled, full = _rounds_with_and_without_settling(monkeypatch, same.object_points_per_view,
+                                                      same.image_points_per_view, (640, 480))
+    assert full.rounds > settled.rounds >= 2
+    assert not settled.suspected and not full.suspected
+    assert sorted(settled.group_a + settled.group_b) == list(range(24))
+
+
+def test_two_cameras_drifting_apart_slowly_are_not_stopped(monkeypatch) -> None:
+    """Alternating views of two cameras 4 % apart in f start from two blends and drift for rounds that gain
+    little before they separate: the stop must not end that drift, so the split, its ratio and its rounds
+    are those of the alternation run to its end."""
+    n = 30
+    one = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), n, seed=60, noise_px=0.1)
+    other = synthesize_session(K(832.0, 321.3, 238.7), D, (640, 480), n, seed=70, noise_px=0.1)
+    order = [k for pair in zip(range(n), range(n, 2 * n), strict=True) for k in pair]  # a0 b0 a1 b1 ...
+    obj = [[*one.object_points_per_view, *other.object_points_per_view][k] for k in order]
+    img = [[*one.image_points_per_view, *other.image_points_per_view][k] for k in order]
+    settled, full = _rounds_with_and_without_settling(monkeypatch, obj, img, (640, 480))
+    assert full.suspected and full.rounds >= 3
+    assert (settled.group_a, settled.rounds, settled.ratio) == (full.group_a, full.rounds, full.ratio)
+    assert len({order[i] < n for i in settled.group_a}) == 1 and len(settled.group_a) == n  # one camera, all of it
+
+
+def test_a_split_with_no_residual_or_a_non_finite_one_never_settles() -> None:
+    in_a = np.arange(10) < 5
+    corners = np.full(10, 54.0)
+    assert not camera_split._settled(in_a, np.zeros(10), np.zeros(10), corners, TWO_CAMERA_RATIO)
+    nan = np.full(10, 0.1)
+    nan[3] = np.nan
+    assert not camera_split._settled(in_a, nan, np.full(10, 0.1), corners, TWO_CAMERA_RATIO)
+    # the same figures without the defect settle: what refused above was the guard
+    assert camera_split._settled(in_a, np.full(10, 0.1), np.full(10, 0.1), corners, TWO_CAMERA_RATIO)
