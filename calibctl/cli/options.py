@@ -11,6 +11,7 @@ StationOption = Annotated[str | None, typer.Option("--station", help="Station id
 OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
 JobsOption = Annotated[int | None, typer.Option(
     "--jobs", "-j", min=1, show_default=False,
-    help="Detection processes, and threads for the verdict solves of capture and solve (env CALIBCTL_JOBS, "
+    help="Detection workers (a folder's images, a video's or camera's frames), and threads "
+         "for the verdict solves of capture and solve (env CALIBCTL_JOBS, "
          "station file 'jobs'; default: every core this process may use). The outcomes are the same at every "
          "count.")]
