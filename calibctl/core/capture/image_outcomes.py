@@ -360,8 +360,10 @@ def task_chunks(todo: Sequence[int], workers: int) -> list[list[int]]:
     """``todo`` cut into consecutive runs, one process-pool task each, for ``workers`` workers.
 
     Why: each task costs the calling process ~0.6 ms of CPU (submit, the executor's manager and queue-feeder
-    threads, the result's wake-up), about 1/30 of a 1280x960 detection, taken from the cores the workers
-    detect on (96 renders on 2 workers: 0.057 s of the caller's CPU one file a task, 0.014 s in these runs).
+    threads, the result's wake-up), 1/30 of a 1280x960 detection (~17 ms in a worker), taken from the cores
+    the workers detect on. 96 renders on a warm pool of 2 (benchmarks/bench_pool_tasks.py, 2026-11-27, shared
+    2-core host at load 3.3): the caller's CPU 0.056 s one file a task, 0.015 s in these tasks; the workers'
+    1.58 and 1.54 s; wall 0.893 -> 0.812 s (benchmarks/results/station.md).
     How big: a run takes 1/(``CHUNK_SHARE`` x workers) of the files still left, at most ``CHUNK_MAX_FILES``
     (progress and Ctrl-C come between tasks), so the runs shrink to single files at the end and no worker sits
     idle while another finishes a long run (``multiprocessing.Pool.map``'s fixed n/(4 x workers) can leave
