@@ -15,15 +15,17 @@ End to end (interpreter start to exit, a fresh SQLite store with the board regis
   * ``calibctl capture`` and ``calibctl calibrate`` at jobs 1 and the default;
   * the plain script: the detection above then calibrateCameraExtended, sequential and on a pool.
 Recall is printed beside every time: calibctl must find at least what the plain script finds.
-``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its ``calibrate``
-runs as two more rows, taking turns with the others, so before and after meet the same load. Every process
+``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its
+``classify_files`` at the default jobs and its ``calibrate`` run as three more rows, taking turns with the
+others, so before and after meet the same load. Every process
 runs in the temporary work folder: ``python -m`` puts the current folder first on sys.path, so a run started
 from a checkout measured that checkout's calibctl in the baseline rows too (before 2026-11-27 07:00 UTC).
 Every process reads its bytecode from a cache the first (uncounted) round fills, as an installed calibctl
 does (``machine.run_env``). CPU: user + system time of the process and of the children it waited for
-(getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure
-(a process pool's CPU counts where its workers were waited for: the plain Pool's are, calibctl's warm pool's
-workers belong to its fork server and may not be). Prints a markdown report with machine, date and load: the 1-minute load average
+(getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure.
+The plain Pool's workers are waited for, so counted; calibctl's warm pool's workers belong to its fork server
+and are not: the classify_files rows add the fork server's and its workers' CPU as the script read it from
+/proc at the end (since 2026-11-27; the capture and calibrate rows still leave it out). Prints a markdown report with machine, date and load: the 1-minute load average
 at the start of each path's best run is printed beside it.
 """
 
@@ -77,14 +79,28 @@ if __name__ == "__main__":
 '''
 
 CALIBCTL_DETECT = r'''
-import sys, time
+import os, sys, time
 from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture import worker_pool
 from calibctl.core.capture.image_outcomes import classify_files, list_images
+def pool_cpu_s(jobs):
+    """CPU of the warm pool's fork server and of its live workers (Linux /proc): they are the fork server's
+    children, never waited for by this process, so getrusage(RUSAGE_CHILDREN) does not count them."""
+    if not worker_pool.is_warm(jobs):
+        return 0.0
+    from multiprocessing import forkserver
+    pids = [forkserver._forkserver._forkserver_pid, *worker_pool.process_pool(jobs)._processes]
+    ticks = 0
+    for pid in pids:
+        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+        ticks += int(fields[11]) + int(fields[12])  # utime, stime
+    return ticks / os.sysconf("SC_CLK_TCK")
 if __name__ == "__main__":
     paths = list_images(sys.argv[1])
     t = time.perf_counter()
     out = classify_files(paths, BoardSpec.chessboard(9, 6, 0.025), workers=int(sys.argv[2]))
-    print(f"RESULT {time.perf_counter() - t:.4f} {sum(o.corners_px is not None for o in out)}")
+    seconds = time.perf_counter() - t
+    print(f"RESULT {seconds:.4f} {sum(o.corners_px is not None for o in out)} {pool_cpu_s(int(sys.argv[2])):.4f}")
 '''
 
 
@@ -108,6 +124,12 @@ def result_of(stdout: str) -> tuple[float, int]:
     line = next(line for line in stdout.splitlines() if line.startswith("RESULT "))
     _, seconds, found, *_ = line.split()
     return float(seconds), int(found)
+
+
+def pool_cpu_of(stdout: str) -> float:
+    """The warm pool's CPU a ``CALIBCTL_DETECT`` run printed (its fourth RESULT field), else 0."""
+    fields = next(line for line in stdout.splitlines() if line.startswith("RESULT ")).split()
+    return float(fields[3]) if len(fields) > 3 else 0.0
 
 
 def boards_of(stdout: str) -> str:
@@ -182,6 +204,8 @@ def main() -> None:
                    "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
                    "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"]}
             if args.baseline is not None:
+                det[f"before: calibctl classify_files, jobs {cores} (default)"] = \
+                    det[f"calibctl classify_files, jobs {cores} (default)"]
                 for jobs in ("1", "default"):
                     e2e[f"before: calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"] = \
                         e2e[f"calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"]
@@ -198,6 +222,8 @@ def main() -> None:
                     wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env, work)
                     if round_ == 0:
                         continue
+                    if name in det:
+                        cpu += pool_cpu_of(out)
                     least_cpu[name] = min(cpu, least_cpu.get(name, cpu))
                     if name in det:
                         seconds, found = result_of(out)
