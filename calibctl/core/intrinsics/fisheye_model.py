@@ -17,7 +17,7 @@ planar board fit a homography. ``focal_guess_px`` scores candidates by the pixel
 Scores asked again: the grid depends on the image size alone and every fisheye solve of one session (the
 tilt lens, the projection gate, each held-out fold, the one-camera groups, ``--model auto``'s rung) picks its
 guess views from the same corners, so most of a calibrate's view scores are asked before (96 views at
---model fisheye: 12880 asked, 5206 different). A view's score at f is a function of its corners, f and the
+--model fisheye: 12880 asked, 5013 different). A view's score at f is a function of its corners, f and the
 image centre alone; the last RECENT_VIEW_SCORES are remembered by a digest of those values
 (``core.intrinsics.recent_answers``), and a score asked again is the first one, number for number.
 """
@@ -45,7 +45,7 @@ POSE_STEP = 1e-12  # rad / m: a smaller step only chases rounding
 # Gauss-Newton (which this replaced) while steps lower the cost; damping only when a step overshoots
 POSE_DAMPING = Damping(initial=1e-9)
 # view scores remembered (module docstring): ~100 bytes each, so ~2 MB at most; a 96-view --model fisheye
-# calibrate asks 5206 different ones
+# calibrate asks 5013 different ones
 RECENT_VIEW_SCORES = 16384
 _RECENT_SCORES: RecentAnswers[float] = RecentAnswers(RECENT_VIEW_SCORES)
 
