@@ -15,9 +15,10 @@ End to end (interpreter start to exit, a fresh SQLite store with the board regis
   * ``calibctl capture`` and ``calibctl calibrate`` at jobs 1 and the default;
   * the plain script: the detection above then calibrateCameraExtended, sequential and on a pool.
 Recall is printed beside every time: calibctl must find at least what the plain script finds.
-``--baseline DIR``: the code before a change (``git archive BRANCH_POINT | tar -x -C DIR``); its
-``classify_files`` at the default jobs and its ``calibrate`` run as three more rows, taking turns with the
-others, so before and after meet the same load. Every process
+``--model M``: calibrate's lens model (default k1k2; the plain script is always calibrateCameraExtended, so
+its ratio is then only the before/after rows' reference). ``--baseline DIR``: the code before a change
+(``git archive BRANCH_POINT | tar -x -C DIR``); its ``classify_files`` at the default jobs and its ``calibrate``
+run as three more rows, taking turns with the others, so before and after meet the same load. Every process
 runs in the temporary work folder: ``python -m`` puts the current folder first on sys.path, so a run started
 from a checkout measured that checkout's calibctl in the baseline rows too (before 2026-11-27 07:00 UTC).
 Every process reads its bytecode from a cache the first (uncounted) round fills, as an installed calibctl
@@ -169,6 +170,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
     parser.add_argument("--no-real", action="store_true", help="the rendered sets only")
+    parser.add_argument("--model", default="k1k2",
+                        help="calibrate's --model (the plain script stays calibrateCameraExtended)")
     args = parser.parse_args()
     args.rendered, args.real = args.rendered.resolve(), args.real.resolve()  # the processes run in the work folder
     cores = len(os.sched_getaffinity(0))
@@ -188,7 +191,8 @@ def main() -> None:
         load = os.getloadavg()
         print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
               f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
-              f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round\n")
+              f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round; "
+              f"calibrate --model {args.model}\n")
         for label, folder in sets:
             det = {"plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
                    f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
@@ -201,8 +205,8 @@ def main() -> None:
                    f"plain script on Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "solve"],
                    "calibctl capture --jobs 1": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
                    "calibctl capture (default jobs)": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"],
-                   "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
-                   "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"]}
+                   "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--model", args.model, "--json"],
+                   "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--model", args.model, "--json"]}
             if args.baseline is not None:
                 det[f"before: calibctl classify_files, jobs {cores} (default)"] = \
                     det[f"calibctl classify_files, jobs {cores} (default)"]

@@ -201,15 +201,16 @@ _Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
 def _fit_fisheye(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
                  image_size: tuple[int, int]) -> _Fit | None:
     """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.intrinsics.fisheye_solve), or None
-    when it cannot be initialised, fails or lands off the image."""
-    from calibctl.core.intrinsics.fisheye_solve import (
-        solve_fisheye,  # only for sessions the small model cannot explain
+    when it cannot be initialised, fails or lands off the image. Asked through ``solve_intrinsics``, which
+    remembers it: the projection gate solves the same views with the same fisheye model when the session is
+    solved as fisheye or its lens is unknown (--model auto, a plain capture), and gets this solve."""
+    from calibctl.core.intrinsics.solve import (
+        solve_intrinsics,  # only for sessions the small model cannot explain
     )
-    from calibctl.core.intrinsics.solve import MODELS
     from calibctl.errors import CalibctlError
 
     try:
-        sol = solve_fisheye(object_points, image_points, image_size, MODELS["fisheye"])
+        sol = solve_intrinsics(object_points, image_points, image_size, "fisheye")
     except (CalibctlError, cv2.error, np.linalg.LinAlgError):
         return None
     K = np.asarray(sol.camera_matrix, np.float64)

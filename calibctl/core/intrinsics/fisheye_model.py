@@ -13,15 +13,24 @@ Focal guess (cv2.fisheye diverges without one): with k = 0 and the principal poi
 a candidate f maps every corner to a pinhole ray tan(r_px / f); only at the right f do the rays of one
 planar board fit a homography. ``focal_guess_px`` scores candidates by the pixel RMS of that fit
 (median over views, so one broken view does not move it) on a log grid, then refines the minimum.
+
+Scores asked again: the grid depends on the image size alone and every fisheye solve of one session (the
+tilt lens, the projection gate, each held-out fold, the one-camera groups, ``--model auto``'s rung) picks its
+guess views from the same corners, so most of a calibrate's view scores are asked before (96 views at
+--model fisheye: 12880 asked, 5013 different). A view's score at f is a function of its corners, f and the
+image centre alone; the last RECENT_VIEW_SCORES are remembered by a digest of those values
+(``core.intrinsics.recent_answers``), and a score asked again is the first one, number for number.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 
 import cv2
 import numpy as np
 
+from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.lm import Damping, DenseSystem, solve_lm
 
 # Corners within this angle of the axis set up the focal guess (tan() is steep beyond it).
@@ -35,6 +44,10 @@ POSE_TOLERANCE = 1e-12  # relative fall of the squared residual sum below which 
 POSE_STEP = 1e-12  # rad / m: a smaller step only chases rounding
 # Gauss-Newton (which this replaced) while steps lower the cost; damping only when a step overshoots
 POSE_DAMPING = Damping(initial=1e-9)
+# view scores remembered (module docstring): ~100 bytes each, so ~2 MB at most; a 96-view --model fisheye
+# calibrate asks 5013 different ones
+RECENT_VIEW_SCORES = 16384
+_RECENT_SCORES: RecentAnswers[float] = RecentAnswers(RECENT_VIEW_SCORES)
 
 
 def distort_theta(theta: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -160,13 +173,31 @@ def _homography_rms_px(obj_xy: np.ndarray, img: np.ndarray, f: float, centre: np
     return float(np.sqrt(np.mean(np.sum((back - d[use]) ** 2, axis=1))))
 
 
+class _ViewScores:
+    """The views' homography RMS at any focal f, each view's digest taken once (the scores remembered by it)."""
+
+    def __init__(self, object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
+                 image_size: tuple[int, int]) -> None:
+        self.centre = np.array([(image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0])
+        self.views = [(np.asarray(o, np.float64).reshape(-1, 3)[:, :2], np.asarray(i, np.float64).reshape(-1, 2))
+                      for o, i in zip(object_points_per_view, image_points_per_view, strict=True)]
+        self.keys = [values_digest([o], [i], self.centre.tobytes()) for o, i in self.views]
+
+    def at(self, f: float) -> np.ndarray:
+        f_bytes = np.float64(f).tobytes()  # the exact f: a score is remembered for that f only
+        return np.array([_RECENT_SCORES.answer(key + f_bytes, partial(_homography_rms_px, o, i, f, self.centre))
+                         for key, (o, i) in zip(self.keys, self.views, strict=True)])
+
+
 def view_guess_rms_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
                       image_size: tuple[int, int], f: float) -> np.ndarray:
     """(V,) each view's homography RMS at focal f (nan: fewer than 6 corners inside MAX_GUESS_THETA_RAD)."""
-    centre = np.array([(image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0])
-    return np.array([_homography_rms_px(np.asarray(o, np.float64).reshape(-1, 3)[:, :2],
-                                        np.asarray(i, np.float64).reshape(-1, 2), f, centre)
-                     for o, i in zip(object_points_per_view, image_points_per_view, strict=True)])
+    return _ViewScores(object_points_per_view, image_points_per_view, image_size).at(f)
+
+
+def forget_view_scores() -> None:
+    """Forget the remembered view scores: a benchmark that times the focal guess again must compute it again."""
+    _RECENT_SCORES.clear()
 
 
 def focal_guess_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
@@ -179,14 +210,14 @@ def focal_guess_px(object_points_per_view: Sequence[np.ndarray], image_points_pe
     # a dozen views pin one number down; spread over the capture, they keep the guess cheap
     pick = np.unique(np.linspace(0, len(image_points_per_view) - 1, min(GUESS_VIEWS, len(image_points_per_view)))
                      .round().astype(int)).tolist()
-    objs = [object_points_per_view[i] for i in pick]
-    imgs = [image_points_per_view[i] for i in pick]
+    views = _ViewScores([object_points_per_view[i] for i in pick], [image_points_per_view[i] for i in pick],
+                        image_size)
 
     def score(f: float) -> float:
-        rms = view_guess_rms_px(objs, imgs, image_size, f)
+        rms = views.at(f)
         rms = rms[np.isfinite(rms)]
         # fewer usable views at a small f must not win by dropping the hard ones
-        return float(np.median(rms)) if rms.size >= max(1, len(imgs) // 2) else float("inf")
+        return float(np.median(rms)) if rms.size >= max(1, len(views.views) // 2) else float("inf")
 
     grid = np.geomspace(size / 8.0, 2.0 * size, _GRID)
     scores = np.array([score(f) for f in grid])

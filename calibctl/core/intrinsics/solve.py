@@ -41,7 +41,8 @@ Determinism
 Solves asked twice
     A solve of the same corners, model and start is therefore the same solve, and ``calibrate`` asks for it twice:
     the capture's projection gate solves the session, then the solve's corner rule starts from the same
-    solve of the same corners; ``--model auto`` asks its ladder again, its rational folds start from the
+    solve of the same corners (on a lens the tilt's small model cannot explain, the tilt lens is the same
+    fisheye solve the gate asks for, core.capture.tilt); ``--model auto`` asks its ladder again, its rational folds start from the
     k1k2 fit of the same fold, and the chosen model's validation refits the folds the ladder fitted. The last
     RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a digest
     of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
@@ -57,7 +58,12 @@ import cv2
 import numpy as np
 
 from calibctl.core.intrinsics.covariance import IntrinsicCovariance, intrinsic_covariance
-from calibctl.core.intrinsics.fisheye_model import fisheye_pose, project_fisheye, refine_fisheye_pose
+from calibctl.core.intrinsics.fisheye_model import (
+    fisheye_pose,
+    forget_view_scores,
+    project_fisheye,
+    refine_fisheye_pose,
+)
 from calibctl.core.intrinsics.fisheye_solve import solve_fisheye
 from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solution import (
@@ -126,9 +132,11 @@ _RECENT_FITS: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_FITS)
 
 
 def forget_recent_solves() -> None:
-    """Forget the remembered solves: a benchmark that times the same solve again must compute it again."""
+    """Forget the remembered solves (and the fisheye focal guess's view scores, core.intrinsics.fisheye_model): a
+    benchmark that times the same solve again must compute it again."""
     _RECENT.clear()
     _RECENT_FITS.clear()
+    forget_view_scores()
 
 
 def solve_intrinsics(

@@ -185,3 +185,38 @@ def test_every_direction_asked_for_raises_the_count_when_one_can(seed: int) -> N
         reachable = max(len(distinct_directions([*have, c])) for c in COMPASS_DEG)
         assert len(distinct_directions([*have, asked])) == reachable
         have.append(asked)
+
+
+def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
+    """A session the small lens cannot explain reads tilt through its fisheye solve; the projection gate, solving
+    the same views as fisheye (--model fisheye, or a lens not known), gets that solve instead of solving again."""
+    from calibctl.core.board.board_spec import chessboard_object_points
+    from calibctl.core.board.views import BoardView
+    from calibctl.core.capture.gates import evaluate_gates
+    from calibctl.core.capture.projection_gate import solve_for_gate
+    from calibctl.core.intrinsics import solve as solve_module
+    from calibctl.core.intrinsics.recent_answers import RecentAnswers
+    from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
+
+    cam = FisheyeCamera.from_fov((640, 480), 150.0, circular=True)
+    s = synthesize_fisheye_session(cam, 10, seed=1)
+    model = chessboard_object_points(9, 6, 0.025)
+    views = [BoardView(f"v{i}", np.arange(len(model)), np.asarray(p, np.float64))
+             for i, p in enumerate(s.image_points_per_view)]
+    obj, px = [model[v.corner_ids] for v in views], [v.corners_px for v in views]
+    solve_module.forget_recent_solves()
+    computed: list[str] = []
+    real = solve_module._solve
+    monkeypatch.setattr(solve_module, "_solve", lambda *a: computed.append(a[3].name) or real(*a))
+    with monkeypatch.context() as before:
+        before.setattr(solve_module, "_RECENT", RecentAnswers(0))  # nothing remembered
+        old = evaluate_gates(views, model, cam.image_size)
+        old_gate = solve_for_gate(obj, px, cam.image_size, "fisheye")
+    assert old.lens is not None and old.lens.fisheye and computed == ["fisheye", "fisheye"]
+    report = evaluate_gates(views, model, cam.image_size)
+    gate = solve_for_gate(obj, px, cam.image_size, "fisheye")
+    assert computed == ["fisheye"] * 3  # the tilt's; the gate's was that one
+    assert (report.gates, report.views) == (old.gates, old.views)  # the tilts read through the same lens
+    assert np.array_equal(gate.camera_matrix, old_gate.camera_matrix) and gate.sigma == old_gate.sigma
+    assert np.array_equal(report.lens.camera_matrix, gate.camera_matrix)
+    solve_module.forget_recent_solves()

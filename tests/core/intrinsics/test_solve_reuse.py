@@ -3,7 +3,9 @@
 * a solve asked again with the same corners, model and start is answered from the first ask (the capture's
   projection gate, then the solve's corner rule) - the very numbers a fresh solve computes;
 * the model-misfit floor solves its lens models only when the fit could be a misfit; when it cannot, the
-  lens-free floor is returned, never below the full floor, and the rule's verdict is the same.
+  lens-free floor is returned, never below the full floor, and the rule's verdict is the same;
+* the fisheye focal guess scores a view at a focal length once: the folds' guesses, and their solves, are
+  those computed with nothing remembered.
 """
 
 from __future__ import annotations
@@ -14,8 +16,9 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
-from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics import fisheye_model, model_fit
 from calibctl.core.intrinsics import solve as solve_module
+from calibctl.core.intrinsics.fisheye_model import focal_guess_px, view_guess_rms_px
 from calibctl.core.intrinsics.model_fit import (
     MISFIT_MIN_PX,
     can_misfit,
@@ -23,6 +26,7 @@ from calibctl.core.intrinsics.model_fit import (
     detector_rms_px,
     noise_floor_px,
 )
+from calibctl.core.intrinsics.recent_answers import RecentAnswers
 from calibctl.core.intrinsics.solve import solve_intrinsics
 from calibctl.core.synth.corners import synthesize_session
 from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
@@ -157,3 +161,64 @@ def test_a_fit_that_could_be_a_misfit_reads_the_full_floor():
     floor = noise_floor_px(obj, img, size, fit)
     assert floor == noise_floor_px(obj, img, size) < detector_rms_px(obj, img)
     assert not check_model_misfit(fit, floor, "k1k2").passed
+
+
+@pytest.fixture
+def scored(monkeypatch) -> list[float]:
+    """The focal length of every fisheye focal-guess view score really computed (a remembered one is not)."""
+    seen: list[float] = []
+    real = fisheye_model._homography_rms_px
+
+    def spy(obj_xy, img, f, centre):
+        seen.append(float(f))
+        return real(obj_xy, img, f, centre)
+
+    monkeypatch.setattr(fisheye_model, "_homography_rms_px", spy)
+    return seen
+
+
+def _wide_fisheye(views: int = 15):
+    cam = FisheyeCamera.from_fov((1280, 960), 170.0, circular=False)
+    s = synthesize_fisheye_session(cam, views, seed=4)
+    return list(s.object_points_per_view), list(s.image_points_per_view), cam.image_size
+
+
+def test_a_focal_guess_asked_again_scores_no_view_again_and_guesses_the_same(scored, monkeypatch):
+    obj, img, size = _wide_fisheye()
+    folds = [[i for i in range(len(obj)) if i % 5 != k] for k in range(5)]  # validate_holdout's training sets
+    with monkeypatch.context() as before:
+        before.setattr(fisheye_model, "_RECENT_SCORES", RecentAnswers(0))  # nothing remembered
+        fresh = [focal_guess_px([obj[i] for i in train], [img[i] for i in train], size) for train in folds]
+    computed_fresh = len(scored)
+    again = [focal_guess_px([obj[i] for i in train], [img[i] for i in train], size) for train in folds]
+    assert again == fresh  # the very floats
+    # the folds share most of their guess views, and the grid depends on the image size alone
+    assert len(scored) - computed_fresh < computed_fresh / 2
+    whole = focal_guess_px([o.copy() for o in obj], [i.copy() for i in img], size)
+    asked = len(scored)
+    assert focal_guess_px(obj, img, size) == whole and len(scored) == asked  # equal values hit
+
+
+def test_a_view_score_is_remembered_for_its_exact_corners_and_focal_length_only(scored):
+    obj, img, size = _wide_fisheye(4)
+    first = view_guess_rms_px(obj, img, size, 500.0)
+    assert len(scored) == 4
+    moved = [i.copy() for i in img]
+    moved[0][0, 0] += 1e-9
+    scores = [view_guess_rms_px(obj, moved, size, 500.0), view_guess_rms_px(obj, img, size, np.nextafter(500.0, 1e3)),
+              view_guess_rms_px(obj, img, (1281, 960), 500.0)]  # another image centre
+    assert len(scored) == 4 + 1 + 4 + 4
+    assert np.array_equal(scores[0][1:], first[1:]) and not np.array_equal(scores[2], first)
+    solve_module.forget_recent_solves()  # a benchmark's fresh round computes the scores again
+    assert np.array_equal(view_guess_rms_px(obj, img, size, 500.0), first) and len(scored) == 17
+
+
+def test_the_fisheye_solves_of_the_folds_are_those_computed_without_remembered_scores(monkeypatch):
+    obj, img, size = _wide_fisheye()
+    train = [i for i in range(len(obj)) if i % 5 != 0]
+    solve_intrinsics(obj, img, size, "fisheye")  # the session's solve scores most of the fold's guess views
+    fold = solve_intrinsics([obj[i] for i in train], [img[i] for i in train], size, "fisheye", uncertainty=False)
+    solve_module.forget_recent_solves()
+    monkeypatch.setattr(fisheye_model, "_RECENT_SCORES", RecentAnswers(0))
+    assert_same_solution(solve_intrinsics([obj[i] for i in train], [img[i] for i in train], size, "fisheye",
+                                          uncertainty=False), fold)

@@ -1,9 +1,10 @@
 """``calibrate`` with the hot path cut stores what it stored before, number for number.
 
 Each case runs the whole workflow (detection, capture gates, solve, validation, lint, store) twice on the same
-rendered folder: once the way it ran before (no solve remembered, the misfit floor's lens models always
-solved) and once as it runs now (the projection gate's solve reused by the solve, --model auto's fold fits
-reused, the lens models skipped where no floor can fail the fit). The session's gates and every number of
+rendered folder: once the way it ran before (no solve or fisheye focal-guess score remembered, the misfit
+floor's lens models always solved) and once as it runs now (the projection gate's solve reused by the solve,
+--model auto's fold fits reused, the lens models skipped where no floor can fail the fit, the tilt lens's
+fisheye solve reused by the projection gate, each view's focal-guess score computed once per focal length). The session's gates and every number of
 the calibration are equal to the bit; the one number that may differ is the stored floor
 (``detector_rms_px``), which is then the lens-free estimate, never below the full floor, with the same
 model-misfit verdict.
@@ -16,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.config import load_settings
-from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics import fisheye_model, model_fit
 from calibctl.core.intrinsics import solve as solve_module
 from calibctl.core.intrinsics.recent_answers import RecentAnswers
 from calibctl.store.repository import Store
@@ -51,7 +52,8 @@ def _numbers(doc: object) -> object:
     return numbers_without(doc, VOLATILE)
 
 
-@pytest.mark.parametrize(("scene", "model"), [("good", "k1k2"), ("good", "auto"), ("fisheye", "fisheye")])
+@pytest.mark.parametrize(("scene", "model"), [("good", "k1k2"), ("good", "auto"), ("fisheye", "fisheye"),
+                                              ("fisheye", "auto")])
 def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tmp_path_factory, monkeypatch,
                                                                     scene, model):
     folder = rendered(tmp_path_factory, "good") if scene == "good" else fisheye_gauge_folders(tmp_path_factory)[0]
@@ -59,14 +61,22 @@ def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tm
     computed: list[str] = []  # the solves each run really computed
     real = solve_module._solve
     monkeypatch.setattr(solve_module, "_solve", lambda *a: computed.append(a[3].name) or real(*a))
+    scored: list[float] = []  # the fisheye focal-guess view scores each run really computed
+    real_score = fisheye_model._homography_rms_px
+    monkeypatch.setattr(fisheye_model, "_homography_rms_px", lambda *a: scored.append(a[2]) or real_score(*a))
     with monkeypatch.context() as before:
         before.setattr(solve_module, "_RECENT", RecentAnswers(0))  # nothing remembered
         before.setattr(solve_module, "_RECENT_FITS", RecentAnswers(0))
+        before.setattr(fisheye_model, "_RECENT_SCORES", RecentAnswers(0))
         before.setattr(model_fit, "can_misfit", lambda fit_rms_px: True)  # the lens models always solved
         old = _calibrate(tmp_path, "before", folder, model)
-    solves_before = len(computed)
+    solves_before, scores_before = len(computed), len(scored)
+    fisheye_before = computed.count("fisheye")
     new = _calibrate(tmp_path, "after", folder, model)
     assert len(computed) - solves_before <= solves_before - 3  # the gate's solve again, rational and fisheye
+    if scene == "fisheye":  # the tilt lens is the fisheye solve the gate asks for; most guess scores are asked before
+        assert computed[solves_before:].count("fisheye") <= fisheye_before - 2
+        assert len(scored) - scores_before < scores_before / 2
     assert old.solve is not None and new.solve is not None
     assert _numbers(new.capture.session.model_dump(mode="json")) == _numbers(old.capture.session.model_dump(mode="json"))
     a, b = old.solve.artifact, new.solve.artifact
