@@ -189,6 +189,27 @@ def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path
     assert _session_numbers(runs[2]) == one and _session_numbers(runs[4]) == one
 
 
+@needs_datasets
+def test_a_video_of_real_photos_gives_the_same_session_at_every_job_count(settings, tmp_path: Path) -> None:
+    """opencv-left-right's 13 left photos (not made by us), each held still for 6 frames of an MJPG video, as an
+    operator pausing the board would: the threads' look-ahead keeps the one-thread session, frame for frame."""
+    from tests.datasets import LEFT_RIGHT
+
+    photos = sorted(LEFT_RIGHT.glob("left*.jpg"))
+    first = cv2.imread(str(photos[0]))
+    clip = tmp_path / "left.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (first.shape[1], first.shape[0]))
+    for photo in photos:
+        image = cv2.imread(str(photo))
+        for _ in range(6):
+            writer.write(image)
+    writer.release()
+    runs = {jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(clip), jobs=jobs)) for jobs in (1, 2, 4)}
+    one = _session_numbers(runs[1])
+    assert len(one[2]) == 6 * len(photos) and len(one[3]) >= 8  # every frame judged; most poses kept
+    assert _session_numbers(runs[2]) == one and _session_numbers(runs[4]) == one
+
+
 class _InterruptedVideo:
     """A video source that raises KeyboardInterrupt (Ctrl-C) when frame ``at`` is due."""
 
