@@ -217,6 +217,10 @@ def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
     gate = solve_for_gate(obj, px, cam.image_size, "fisheye")
     assert computed == ["fisheye"] * 3  # the tilt's; the gate's was that one
     assert (report.gates, report.views) == (old.gates, old.views)  # the tilts read through the same lens
-    assert np.array_equal(gate.camera_matrix, old_gate.camera_matrix) and gate.sigma == old_gate.sigma
-    assert np.array_equal(report.lens.camera_matrix, gate.camera_matrix)
+    assert np.array_equal(report.lens.camera_matrix, gate.camera_matrix)  # the very solve, reused
+    # and the gate's own solve of before, to rounding: two solves of one input need not agree to the bit (on the
+    # oldest numpy / OpenCV pyproject.toml allows, sigma(cx) differed in the 10th digit)
+    assert np.allclose(gate.camera_matrix, old_gate.camera_matrix, rtol=1e-9, atol=0.0)
+    assert gate.sigma.keys() == old_gate.sigma.keys()
+    assert all(np.isclose(gate.sigma[k], old_gate.sigma[k], rtol=1e-6, atol=0.0) for k in gate.sigma)
     solve_module.forget_recent_solves()
