@@ -102,7 +102,8 @@ class StationRequest:
 @dataclass(frozen=True)
 class UnitResult:
     """One unit's line. ``unit_s``: serial read to verdict out, seconds; ``after_last_image_s`` (watch mode): the
-    unit's last picture landing in its folder (its ctime) to verdict out, seconds."""
+    unit's last picture landing in its folder (its ctime) to verdict out, seconds (camera mode: the last frame
+    selected, the one that stopped the stream, to verdict out)."""
 
     serial: str
     status: str  # pass | fail | error | cancelled | queued (in the spool) | synced (a queued one stored)
@@ -209,6 +210,7 @@ class _UnitObserver(CaptureObserver):
 
     def __init__(self, interrupts: _Interrupts, inner: CaptureObserver) -> None:
         self.interrupts, self.inner = interrupts, inner
+        self.last_frame_at: float | None = None  # epoch s: a stream's last frame selected (a camera unit's stop)
 
     def folder_started(self, total: int) -> None:
         self.interrupts.cancellable = True  # an offline capture after a failed online one starts from nothing
@@ -220,6 +222,7 @@ class _UnitObserver(CaptureObserver):
         self.inner.image_done(done, total, name, status)
 
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
+        self.last_frame_at = time.time()
         self.inner.frame_done(decision, progress, t_s)
 
     def unit_complete(self) -> None:
@@ -323,11 +326,13 @@ def _camera_unit(settings: Settings, request: StationRequest, serial: str, obser
         except DatabaseUnreachableError as exc:
             why_queue = exc.message, _SYNC_HINT
         else:
-            return _solved_unit(settings, request, session, offline)
-    spool = offline.spool()
-    spool_images(spool, held)
-    return _queued_line(queue_solved(settings, spool, session, request.model, session_stored=False,
-                                     passed=captured.passed), *why_queue)
+            result = _solved_unit(settings, request, session, offline)
+    if why_queue is not None:
+        spool = offline.spool()
+        spool_images(spool, held)
+        result = _queued_line(queue_solved(settings, spool, session, request.model, session_stored=False,
+                                           passed=captured.passed), *why_queue)
+    return replace(result, last_image_at=observer.last_frame_at)
 
 
 def _unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver, offline: _Offline,
