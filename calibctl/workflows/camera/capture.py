@@ -11,7 +11,8 @@ What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
     ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
     transaction, on a thread of their own while the gates run (``image_writes``), and every kept frame of
-    a video or camera encoded as PNG, each in its own. A crash after this point leaves only images, which
+    a video or camera encoded as PNG (on a thread of its own beside the selection from 2 jobs on) and stored,
+    ``IMAGE_BATCH`` per transaction, once the stream is over. A crash after this point leaves only images, which
     are harmless (content-addressed, they expire);
   * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
     reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
@@ -413,6 +414,8 @@ class _StreamState:
         self.kept_samples: list[pattern_check.Sample] = []
         self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
+        self.encoder: Executor | None = None  # encodes the kept frames as PNG beside the selection (jobs > 1)
+        self._kept_png: list[tuple[str, int, Future[bytes] | bytes]] = []  # (label, outcome index, PNG) to store
         self.max_gray: np.ndarray | None = None
         self.frames_seen = 0
 
@@ -465,11 +468,10 @@ class _StreamState:
         else:
             self.boards_seen += 1
         decision = self.selector.offer(frame.index, detection, frame.label)
-        sha = None
-        if decision.kept:
-            png = sources.encode_png(frame.image)
-            sha = self.store.put_image(png, retention_days=self.settings.image_retention_days)
-            self.shas[frame.label], self.stored = sha, self.stored + 1
+        if decision.kept:  # its PNG is stored with the others once the stream is over (store_kept)
+            png = sources.encode_png(frame.image) if self.encoder is None else \
+                self.encoder.submit(sources.encode_png, frame.image)
+            self._kept_png.append((frame.label, len(self.outcomes), png))
             if len(self.kept_samples) < pattern_check.PROBE_IMAGES:
                 self.kept_samples.append((frame.label, gray))
                 if detection is not None:  # always, a kept frame has a board
@@ -478,9 +480,21 @@ class _StreamState:
         status = "bad_grid" if detection is None and FOUND_INCONSISTENT in why else _FRAME_STATUS[decision.status]
         self.outcomes.append(OutcomeRecord(
             name=frame.label, status=status,
-            reason=None if decision.kept else (why or decision.reason), sha256=sha, image_size=size,
+            reason=None if decision.kept else (why or decision.reason), image_size=size,
             corners_found=0 if detection is None else len(detection.corner_ids)))
         return decision
+
+    def store_kept(self) -> None:
+        """Store the kept frames' PNGs, ``IMAGE_BATCH`` per transaction, and name them in their outcomes."""
+        for start in range(0, len(self._kept_png), IMAGE_BATCH):
+            batch = self._kept_png[start:start + IMAGE_BATCH]
+            pngs = [png if isinstance(png, bytes) else png.result() for _, _, png in batch]
+            shas = self.store.put_images(pngs, retention_days=self.settings.image_retention_days)
+            for (label, index, _), sha in zip(batch, shas, strict=True):
+                self.shas[label] = sha
+                self.outcomes[index] = self.outcomes[index].model_copy(update={"sha256": sha})
+            self.stored += len(batch)
+        self._kept_png = []
 
 
 def _probe_and_half(gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None, forced: bool
@@ -534,12 +548,34 @@ def _detected_frames(state: _StreamState, frames: Iterator[sources.Frame], jobs:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+@contextlib.contextmanager
+def _frame_encoder(jobs: int) -> Iterator[Executor | None]:
+    """A thread that encodes the kept frames as PNG beside the selection (None: on the selecting thread, one job).
+    On a failure the frames not yet encoded are dropped with the capture."""
+    if jobs <= 1:
+        yield None
+        return
+    encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="calibctl-frame-png")
+    try:
+        yield encoder
+    finally:
+        encoder.shutdown(wait=True, cancel_futures=True)
+
+
 def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
                     source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
+    with _frame_encoder(request.jobs or settings.jobs) as encoder:
+        return _stream_collected(store, settings, spec, board, source, request, observer, encoder)
+
+
+def _stream_collected(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
+                      source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver,
+                      encoder: Executor | None) -> _Collected:
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO
     target = request.max_views if request.max_views is not None else (None if is_file else 0)
     state = _StreamState(store, settings, spec, request.image_circle)
+    state.encoder = encoder
     interrupted = False
     stop = "end of the video" if is_file else None  # a camera ends by a stop rule, never by itself
     reached: list[bool] = []  # the frames from --duration on are not read further, nor detected
@@ -590,6 +626,7 @@ def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, bo
     larger = pattern_check.larger_board_error(spec, board.ref, board.name, samples, state.kept_corners_px)
     if larger is not None:
         raise larger
+    state.store_kept()  # the kept frames' images, before anything names them
     views = [(view, state.shas.get(view.name)) for view in state.selector.kept]
     if interrupted:
         stop += f"; the session was finished with the {len(views)} view(s) kept"
