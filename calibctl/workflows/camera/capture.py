@@ -11,7 +11,7 @@ What is written, and when:
   * images first into the content-addressed image store (``Store.put_images``, retention
     ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
     transaction, on a thread of their own while the gates run (``image_writes``), and every kept frame of
-    a video or camera encoded as PNG (on a thread of its own beside the selection from 2 jobs on) and stored,
+    a video or camera encoded as PNG (from 2 jobs on, on the writer thread beside the selection) and stored,
     ``IMAGE_BATCH`` per transaction, once the stream is over. A crash after this point leaves only images, which
     are harmless (content-addressed, they expire);
   * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
@@ -232,13 +232,18 @@ def core_thresholds(settings: Settings) -> GateThresholds:
     return GateThresholds(**settings.gates.model_dump(exclude={"projection_sigma_max_px", "projection_region"}))
 
 
+def check_stream_stops(max_views: int | None, duration_s: float | None) -> None:
+    """A video's or camera's stop rule (``--max-views``, ``--duration``) that cannot be met: a usage error."""
+    if max_views is not None and max_views < 1:
+        raise UsageError(f"--max-views must be 1 or more, got {max_views}")
+    if duration_s is not None and not duration_s > 0:
+        raise UsageError(f"--duration must be a positive number of seconds, got {duration_s:g}")
+
+
 def _check_request(request: CaptureRequest) -> tuple[str, int | None]:
     if not re.fullmatch(SERIAL_PATTERN, request.serial):
         raise UsageError(f"'{request.serial}' is not a camera serial", _SERIAL_HINT)
-    if request.max_views is not None and request.max_views < 1:
-        raise UsageError(f"--max-views must be 1 or more, got {request.max_views}")
-    if request.duration_s is not None and not request.duration_s > 0:
-        raise UsageError(f"--duration must be a positive number of seconds, got {request.duration_s:g}")
+    check_stream_stops(request.max_views, request.duration_s)
     if (request.reference_distance is None) != (request.reference_source is None):
         raise UsageError("--reference-distance and --reference-source go together",
                          "give the surveyed distance D+-S and the pictures taken with the board in that fixture")
@@ -272,7 +277,7 @@ def capture(settings: Settings, request: CaptureRequest, observer: CaptureObserv
             got = _capture_images(store, settings, spec, board, source, request.jobs or settings.jobs, observer,
                                   writer, None if detected is None else detected.for_spec(spec, sized_half))
         else:
-            got = _capture_stream(store, settings, spec, board, source, request, observer)
+            got = _capture_stream(store, settings, spec, board, source, request, observer, writer)
         try:
             session = _build_session(settings, request, board, spec, source, got, started)
             distance = lens = None
@@ -402,8 +407,9 @@ class _StreamState:
     """What a video or camera capture accumulates, frame by frame."""
 
     def __init__(self, store: CaptureStore, settings: Settings, spec: BoardSpec,
-                 image_circle: tuple[float, float, float] | None = None) -> None:
+                 image_circle: tuple[float, float, float] | None = None, encoder: Executor | None = None) -> None:
         self.store, self.settings, self.spec = store, settings, spec
+        self.encoder = encoder  # encodes the kept frames as PNG beside the selection (None: in the selecting thread)
         self.image_circle = image_circle  # a given --image-circle, checked against the first frame
         self.selector: FrameSelector | None = None
         self.detector = StreamDetector(spec)
@@ -414,7 +420,6 @@ class _StreamState:
         self.kept_samples: list[pattern_check.Sample] = []
         self.kept_corners_px: dict[str, np.ndarray] = {}  # detected corners of the kept samples, by label
         self.boards_seen = self.stored = 0
-        self.encoder: Executor | None = None  # encodes the kept frames as PNG beside the selection (jobs > 1)
         self._kept_png: list[tuple[str, int, Future[bytes] | bytes]] = []  # (label, outcome index, PNG) to store
         self.max_gray: np.ndarray | None = None
         self.frames_seen = 0
@@ -548,34 +553,16 @@ def _detected_frames(state: _StreamState, frames: Iterator[sources.Frame], jobs:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-@contextlib.contextmanager
-def _frame_encoder(jobs: int) -> Iterator[Executor | None]:
-    """A thread that encodes the kept frames as PNG beside the selection (None: on the selecting thread, one job).
-    On a failure the frames not yet encoded are dropped with the capture."""
-    if jobs <= 1:
-        yield None
-        return
-    encoder = ThreadPoolExecutor(max_workers=1, thread_name_prefix="calibctl-frame-png")
-    try:
-        yield encoder
-    finally:
-        encoder.shutdown(wait=True, cancel_futures=True)
-
-
 def _capture_stream(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
-                    source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver) -> _Collected:
-    with _frame_encoder(request.jobs or settings.jobs) as encoder:
-        return _stream_collected(store, settings, spec, board, source, request, observer, encoder)
-
-
-def _stream_collected(store: CaptureStore, settings: Settings, spec: BoardSpec, board: BoardRevision,
-                      source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver,
-                      encoder: Executor | None) -> _Collected:
+                    source: sources.SourceSpec, request: CaptureRequest, observer: CaptureObserver,
+                    writer: Executor) -> _Collected:
+    """A video's or camera's frames selected into views; from 2 jobs on the kept frames are encoded as PNG on the
+    capture's ``writer`` thread (the one a folder's images are stored on) beside the selection."""
+    jobs = request.jobs or settings.jobs
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO
     target = request.max_views if request.max_views is not None else (None if is_file else 0)
-    state = _StreamState(store, settings, spec, request.image_circle)
-    state.encoder = encoder
+    state = _StreamState(store, settings, spec, request.image_circle, writer if jobs > 1 else None)
     interrupted = False
     stop = "end of the video" if is_file else None  # a camera ends by a stop rule, never by itself
     reached: list[bool] = []  # the frames from --duration on are not read further, nor detected
@@ -587,7 +574,6 @@ def _stream_collected(store: CaptureStore, settings: Settings, spec: BoardSpec, 
                 return
             yield frame
 
-    jobs = request.jobs or settings.jobs
     # a video file's frames are decoded on a thread of their own beside the detection (a camera's already are)
     read: AbstractContextManager[Iterator[sources.Frame]] = \
         sources.read_ahead(stream.frames(), STREAM_AHEAD_PER_JOB * jobs) if is_file and jobs > 1 else \

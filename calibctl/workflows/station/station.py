@@ -66,6 +66,7 @@ from calibctl.workflows.camera.capture import (
     FrameDecision,
     SelectionProgress,
     capture,
+    check_stream_stops,
 )
 from calibctl.workflows.camera.distance_gauge import gauge_model
 from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve
@@ -167,10 +168,7 @@ def _check_camera(camera: LiveCamera, watch: WatchRule | None) -> None:
         raise UsageError(f"--camera {camera.device} is not a camera",
                          "give the device the unit's camera appears as: /dev/videoN or an index such as 0 (a folder "
                          "of pictures per unit is --source-template DIR/{serial})")
-    if camera.max_views is not None and camera.max_views < 1:
-        raise UsageError(f"--max-views must be 1 or more, got {camera.max_views}")
-    if camera.duration_s is not None and not camera.duration_s > 0:
-        raise UsageError(f"--duration must be a positive number of seconds, got {camera.duration_s:g}")
+    check_stream_stops(camera.max_views, camera.duration_s)
 
 
 def warm_up(settings: Settings, request: StationRequest) -> None:
@@ -304,6 +302,17 @@ def _watched(settings: Settings, request: StationRequest, source: str, offline: 
     return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs), away
 
 
+def _capture_request(settings: Settings, request: StationRequest, serial: str, source: str,
+                     camera: LiveCamera | None = None) -> CaptureRequest:
+    """A unit's capture (``camera``: live, with its stop rule, and Ctrl-C cancels it). As `calibctl calibrate`: the
+    gates judge through the lens model the session will be solved with."""
+    return CaptureRequest(serial, request.board, source, jobs=settings.jobs, gauge_model=gauge_model(request.model),
+                          lens_model=None if request.model == "auto" else request.model,
+                          max_views=None if camera is None else camera.max_views,
+                          duration_s=None if camera is None else camera.duration_s,
+                          cancel_on_interrupt=camera is not None)
+
+
 def _camera_unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver,
                  offline: _Offline, why_queue: tuple[str, str] | None) -> UnitResult:
     """One unit live from the station's camera, held in memory until its stream and gates are over
@@ -312,10 +321,7 @@ def _camera_unit(settings: Settings, request: StationRequest, serial: str, obser
     board, away = _unit_board(settings, request, offline)
     if why_queue is None and away is not None:
         why_queue = away, _SYNC_HINT
-    unit = CaptureRequest(serial, request.board, request.camera.device, max_views=request.camera.max_views,
-                          duration_s=request.camera.duration_s, jobs=settings.jobs,
-                          gauge_model=gauge_model(request.model),
-                          lens_model=None if request.model == "auto" else request.model, cancel_on_interrupt=True)
+    unit = _capture_request(settings, request, serial, request.camera.device, request.camera)
     held = HeldCapture(board)
     captured = capture(settings, unit, observer, into=held)
     observer.unit_complete()  # from here the unit is written whole: a Ctrl-C waits for its verdict
@@ -356,9 +362,7 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: _U
     if kind not in sources.IMAGE_SETS:
         return UnitResult(serial, ERROR, f"{source} is a {kind}; the station reads a folder, glob or list per unit",
                           "point --source-template at the folder each unit's pictures are saved in")
-    # as `calibctl calibrate`: the gates judge through the lens model the session will be solved with
-    unit = CaptureRequest(serial, request.board, source, jobs=settings.jobs, gauge_model=gauge_model(request.model),
-                          lens_model=None if request.model == "auto" else request.model)
+    unit = _capture_request(settings, request, serial, source)
     detected = None if watched is None else watched.detected
     if why_queue is None:
         try:
