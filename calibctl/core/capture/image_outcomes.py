@@ -341,7 +341,7 @@ def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSett
             pool = worker_pool.process_pool(workers)
             try:
                 with worker_pool.shielded():
-                    return pool.submit(_classify_task, path, spec, settings, summarize)
+                    return worker_pool.submit(pool, _classify_task, path, spec, settings, summarize)
             except BrokenProcessPool as exc:
                 worker_pool.discard_if_broken(pool)
                 if attempt:
@@ -359,7 +359,7 @@ def _collect(pool: Executor, paths: list[Path], todo: list[int], spec: BoardSpec
         # a process pool launches its workers inside submit: never interrupted half-way (worker_pool.shielded)
         with worker_pool.shielded() if isinstance(pool, ProcessPoolExecutor) else contextlib.nullcontext():
             for i in todo:
-                futures[pool.submit(_classify_task, paths[i], spec, settings, summarize)] = i
+                futures[_submit(pool, paths[i], spec, settings, summarize)] = i
         for done, future in enumerate(as_completed(futures), start=1):
             finished(futures[future], *future.result(), done)
     except BaseException as exc:
@@ -370,6 +370,13 @@ def _collect(pool: Executor, paths: list[Path], todo: list[int], spec: BoardSpec
         if isinstance(exc, BrokenProcessPool):
             raise _worker_died([paths[i] for f, i in futures.items() if not _succeeded(f)]) from exc
         raise
+
+
+def _submit(pool: Executor, path: Path, spec: BoardSpec, settings: DetectorSettings | None,
+            summarize: Summarize | None) -> Future[tuple[ImageOutcome, object]]:
+    if isinstance(pool, ProcessPoolExecutor):  # the result through a file (worker_pool.submit says why)
+        return worker_pool.submit(pool, _classify_task, path, spec, settings, summarize)
+    return pool.submit(_classify_task, path, spec, settings, summarize)
 
 
 def _succeeded(future: Future[tuple[ImageOutcome, object]]) -> bool:

@@ -21,26 +21,46 @@ ignored, which it and every worker it forks inherit from their first instruction
 landed in a half-started fork server made the launch fail with "EOFError: unexpected EOF"), and the
 pool's processes are launched with Ctrl-C held back until the launch is done (``shielded``; one that
 landed inside ``submit`` left the pool with a dead fork server: "ConnectionRefusedError").
+
+Results come back through a file, not the pool's pipe (``submit``). ProcessPoolExecutor's manager thread
+reads a result once the pipe has data and then blocks until the whole message is there: a worker killed
+(out-of-memory killer) half-way through writing a result hangs the caller for good instead of raising
+BrokenProcessPool. A detection result carries the half-size picture (~300 KB at 1280x960), larger than
+the pipe's buffer; killing a worker at random moments of such a stream hung 18 of 30 runs (CPython
+3.11, ``benchmarks/stress_pool_kill.py``). So a worker writes its pickled result into a private
+folder and sends only the file's name, a message far below PIPE_BUF, which the kernel writes whole or
+not at all; unpickling that name in the caller reads the file back (``_load_result``), so every
+``Future`` holds the real result.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import multiprocessing
+import os
+import pickle
+import shutil
 import signal
+import tempfile
 import threading
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from types import FrameType
+from typing import Any, TypeVar
 
 from calibctl.core.blas_threads import available_cores, limit_this_process
 
-__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shielded", "shutdown_pool", "warm"]
+__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shielded", "shutdown_pool", "submit",
+           "warm"]
+
+R = TypeVar("R")
 
 _lock = threading.Lock()
 _pool: ProcessPoolExecutor | None = None
 _pool_workers = 0
+_results_dir: str | None = None  # this process's folder of results in flight, removed at exit
 
 
 def _init_worker() -> None:
@@ -110,6 +130,64 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
         return _pool
 
 
+def submit(pool: ProcessPoolExecutor, fn: Callable[..., R], *args: Any) -> Future[R]:
+    """``pool.submit(fn, *args)`` with the result handed back through a file (the module docstring says why)."""
+    return pool.submit(_run_to_file, _results_folder(), fn, *args)
+
+
+def _results_folder() -> str:
+    """The folder this process's workers write results into: in memory (/dev/shm) where there is one."""
+    global _results_dir
+    with _lock:
+        if _results_dir is None or not os.path.isdir(_results_dir):
+            shm = "/dev/shm"
+            where = shm if os.path.isdir(shm) and os.access(shm, os.W_OK | os.X_OK) else None
+            _results_dir = tempfile.mkdtemp(prefix="calibctl-results-", dir=where)
+            atexit.register(shutil.rmtree, _results_dir, True)  # and what a killed worker left half-written
+        return _results_dir
+
+
+class _ResultFile:
+    """A worker's result written to ``path``: pickles as a call that reads it back (and removes the file)."""
+
+    __slots__ = ("path",)
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def __reduce__(self) -> tuple[Callable[[str], Any], tuple[str]]:
+        return _load_result, (self.path,)
+
+
+def _run_to_file(folder: str, fn: Callable[..., Any], *args: Any) -> Any:
+    """In a worker: ``fn(*args)`` pickled into ``folder``; the result itself when that cannot be written
+    (no space, the folder gone): through the pipe as ProcessPoolExecutor sends it."""
+    result = fn(*args)
+    try:
+        fd, path = tempfile.mkstemp(dir=folder, suffix=".pickle")
+    except OSError:
+        return result
+    try:
+        with os.fdopen(fd, "wb") as f:
+            pickle.dump(result, f, protocol=pickle.HIGHEST_PROTOCOL)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        return result
+    return _ResultFile(path)
+
+
+def _load_result(path: str) -> Any:
+    """In the caller, as the pool's manager thread unpickles a ``_ResultFile``: the result, file removed. A
+    file that cannot be read raises there, which the pool reports as BrokenProcessPool."""
+    try:
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+
+
 def discard_if_broken(pool: ProcessPoolExecutor) -> None:
     """Forget ``pool`` when a worker died under it (killed, out of memory): the next call starts a new one."""
     global _pool
@@ -138,7 +216,7 @@ def warm(workers: int) -> None:
     the first capture forks nothing."""
     pool = process_pool(workers)
     with shielded():
-        futures = [pool.submit(_ready) for _ in range(workers)]
+        futures = [submit(pool, _ready) for _ in range(workers)]
     for future in futures:
         future.result()
 
