@@ -10,7 +10,7 @@ import typer
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
-from calibctl.cli.rig_render import print_findings, render_run
+from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 
 rig_app = typer.Typer(
@@ -156,8 +156,7 @@ def capture(
         for c, r in result.cameras.items():
             gates = ", ".join(f"{g.gate} {'pass' if g.passed else 'FAIL'}" for g in r.session.gates)
             say(f"  {c}: session {r.session.session_id}, {len(r.session.views)} views ({gates})")
-        for u in s.unmatched[:10]:
-            say(f"  unmatched {u.camera} {Path(u.name).name}: {u.reason}")
+        render_unmatched([(u.camera, Path(u.name).name, u.reason) for u in s.unmatched])
         say("  shared views: " + ", ".join(f"{p} {n}" for p, n in s.shared_views.items()))
         for g in s.gates:
             say(f"  gate {g.gate} {'pass' if g.passed else 'FAIL'}  {g.message}" + (f" -> {g.hint}" if g.hint else ""))

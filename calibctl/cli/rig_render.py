@@ -6,13 +6,14 @@ from typing import Any
 
 from calibctl.cli.render import say
 
+MAX_UNMATCHED_ROWS = 10  # unmatched photos listed; --json has them all
+
 
 def render_run(doc: dict[str, Any]) -> None:
     """Human report of ``rig_folders.run_json``."""
     unmatched = doc["unmatched"]
     say(f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)")
-    for u in unmatched[:10]:
-        say(f"  unmatched {u['camera']} {u['file']}: {u['reason']}")
+    render_unmatched([(u["camera"], u["file"], u["reason"]) for u in unmatched])
     for name, counts in doc["images"].items():
         say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
@@ -22,6 +23,14 @@ def render_run(doc: dict[str, Any]) -> None:
     if "tree" in doc:
         render_solution(doc)
     render_verdict(doc)
+
+
+def render_unmatched(rows: list[tuple[str, str, str]]) -> None:
+    """(camera, file, reason) of the photos no frame took, the first MAX_UNMATCHED_ROWS, then how many more."""
+    for camera, file, reason in rows[:MAX_UNMATCHED_ROWS]:
+        say(f"  unmatched {camera} {file}: {reason}")
+    if len(rows) > MAX_UNMATCHED_ROWS:
+        say(f"  ... {len(rows) - MAX_UNMATCHED_ROWS} more unmatched (see --json)")
 
 
 def render_solution(doc: dict[str, Any]) -> None:

@@ -35,6 +35,18 @@ OverrideGaugeOption = Annotated[str | None, typer.Option(
          "REASON is recorded in its provenance and the failed gauge stays a lint warning.")]
 
 
+MAX_OUTLIER_ROWS = 10  # kept outlier corners listed; --json has them all
+
+
+def render_outlier_corners(corners: list[dict[str, float | int | str]]) -> None:
+    """The outlier corners a solve kept, the first MAX_OUTLIER_ROWS, then how many more."""
+    for c in corners[:MAX_OUTLIER_ROWS]:
+        stdout.print(f"  outlier corner kept (its view has too few corners to lose it): {c['view']} "
+                     f"id {c['corner_id']} residual {float(c['residual_px']):.2f} px")
+    if len(corners) > MAX_OUTLIER_ROWS:
+        stdout.print(f"  ... {len(corners) - MAX_OUTLIER_ROWS} more outlier corners kept (see --json)")
+
+
 def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
     art = outcome.artifact
     if as_json:
@@ -43,9 +55,7 @@ def render_outcome(outcome: solve_workflow.SolveOutcome, as_json: bool) -> None:
         print_calibration(art, active=outcome.active)
         if outcome.report_path is not None:
             stdout.print(f"  report: {outcome.report_path}")
-        for c in outcome.outlier_corners[:10]:
-            stdout.print(f"  outlier corner kept (its view has too few corners to lose it): {c['view']} "
-                         f"id {c['corner_id']} residual {c['residual_px']:.2f} px")
+        render_outlier_corners(outcome.outlier_corners)
         if art.status == "accepted":
             state_word = "active" if outcome.active else "stored, not activated (--no-activate)"
             stdout.print(f"[green]{art.serial}@{art.version} accepted[/green] and {state_word}")
