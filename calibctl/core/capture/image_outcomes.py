@@ -12,10 +12,10 @@ Every image gets exactly one outcome, decided in this order:
                     shared corners) of an earlier accepted image: it adds no geometry
     accepted
 
-Detection runs per file, in parallel (``classify_files``: worker processes from ``core.capture.worker_pool``
-or threads, see ``choose_executor``); the size and near-duplicate decisions need the
-whole session and run afterwards, in file-name order (``finalize_session``), so results are
-deterministic whatever order the workers finish in.
+Detection runs per file, in parallel (``classify_files``: worker processes from ``core.capture.worker_pool``,
+handed a few files per task (``task_chunks``), or threads, see ``choose_executor``); the size and
+near-duplicate decisions need the whole session and run afterwards, in file-name order
+(``finalize_session``), so results are deterministic whatever order the workers finish in.
 """
 
 from __future__ import annotations
@@ -53,6 +53,8 @@ NEAR_DUPLICATE_FRAC = 0.01  # 8 px on a 640x480 image, 14.7 px on 1280x720
 EXECUTORS = ("auto", "thread", "process")
 DEFAULT_EXECUTOR = "auto"
 PROCESS_MIN_FILES = 32  # "auto" detects this many files or more on processes (choose_executor)
+CHUNK_MAX_FILES = 8  # files per process-pool task at most (task_chunks): 8 x ~17 ms at 1280x960 between reports
+CHUNK_SHARE = 2  # a task takes at most 1/(CHUNK_SHARE x workers) of the files left, so the last tasks are single files
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
 ProgressCallback = Callable[[int, int, "ImageOutcome"], None]
@@ -274,9 +276,10 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     ``summarize(gray)`` (a module-level function, so a worker process can run it) is applied in the
     worker to each decoded (H, W) uint8 image, and ``on_summary(result)`` is called with it in the
     calling thread: a caller that needs something of the pixels too does not decode the file again.
-    ``progress(done, total, outcome)`` is called in the calling thread as each file finishes. On
-    KeyboardInterrupt (or any exception) the files not yet started are cancelled and the exception
-    propagates; nothing is returned. The process pool is kept warm for the next call.
+    ``progress(done, total, outcome)`` is called in the calling thread for each file, as its task finishes (on
+    processes a task is a few consecutive files, ``task_chunks``). On KeyboardInterrupt (or any exception) the
+    tasks not yet started are cancelled and the exception propagates at once; nothing is returned. The process
+    pool is kept warm for the next call (a task already running finishes its files there, unreported).
     ``known(path)``: a file's ``(outcome, summary)`` detected earlier by ``start_file`` with the same
     ``spec``, ``settings`` and ``summarize`` (a station watching its folder, ``core.capture.arrivals``), or
     None to detect it here; the known ones are reported first.
@@ -320,7 +323,7 @@ def _detect(files: list[Path], todo: list[int], spec: BoardSpec, settings: Detec
         elif kind == "thread":
             pool = ThreadPoolExecutor(max_workers=workers)
             try:
-                _collect(pool, files, todo, spec, settings, summarize, finished)
+                _collect(pool, files, [[i] for i in todo], spec, settings, summarize, finished)
             except BaseException:
                 # Ctrl-C (or a failure): drop the queued files at once; only the images being detected
                 # right now (one per worker) run to their end.
@@ -328,7 +331,8 @@ def _detect(files: list[Path], todo: list[int], spec: BoardSpec, settings: Detec
                 raise
             pool.shutdown(wait=True)
         else:
-            _collect(worker_pool.process_pool(workers), files, todo, spec, settings, summarize, finished)
+            _collect(worker_pool.process_pool(workers), files, task_chunks(todo, workers), spec, settings, summarize,
+                     finished)
 
 
 def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSettings | None = None,
@@ -352,34 +356,69 @@ def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSett
     return future
 
 
-def _collect(pool: Executor, paths: list[Path], todo: list[int], spec: BoardSpec, settings: DetectorSettings | None,
-             summarize: Summarize | None, finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
-    futures: dict[Future[tuple[ImageOutcome, object]], int] = {}
+def task_chunks(todo: Sequence[int], workers: int) -> list[list[int]]:
+    """``todo`` cut into consecutive runs, one process-pool task each, for ``workers`` workers.
+
+    Why: each task costs the calling process ~0.6 ms of CPU (submit, the executor's manager and queue-feeder
+    threads, the result's wake-up), 1/30 of a 1280x960 detection (~17 ms in a worker), taken from the cores
+    the workers detect on. 96 renders on a warm pool of 2 (benchmarks/bench_pool_tasks.py, 2026-11-27, shared
+    2-core host at load 3.3): the caller's CPU 0.056 s one file a task, 0.015 s in these tasks; the workers'
+    1.58 and 1.54 s; wall 0.893 -> 0.812 s (benchmarks/results/station.md).
+    How big: a run takes 1/(``CHUNK_SHARE`` x workers) of the files still left, at most ``CHUNK_MAX_FILES``
+    (progress and Ctrl-C come between tasks), so the runs shrink to single files at the end and no worker sits
+    idle while another finishes a long run (``multiprocessing.Pool.map``'s fixed n/(4 x workers) can leave
+    one waiting for a whole run at the end). Every index once, in order: outcomes do not depend on it.
+    """
+    chunks: list[list[int]] = []
+    start = 0
+    while start < len(todo):
+        size = max(1, min(CHUNK_MAX_FILES, (len(todo) - start) // (CHUNK_SHARE * max(1, workers))))
+        chunks.append(list(todo[start:start + size]))
+        start += size
+    return chunks
+
+
+def _classify_chunk(paths: Sequence[Path], spec: BoardSpec, settings: DetectorSettings | None,
+                    summarize: Summarize | None) -> list[tuple[ImageOutcome, object]]:
+    """``_classify_task`` of each of ``paths`` in turn: one process-pool task (``task_chunks``)."""
+    return [_classify_task(path, spec, settings, summarize) for path in paths]
+
+
+def _collect(pool: Executor, paths: list[Path], chunks: list[list[int]], spec: BoardSpec,
+             settings: DetectorSettings | None, summarize: Summarize | None,
+             finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
+    """Detect each chunk of file numbers as one task of ``pool``; ``finished`` is called per file, in the
+    chunk's order, as each task ends."""
+    futures: dict[Future[list[tuple[ImageOutcome, object]]], list[int]] = {}
     try:
         # a process pool launches its workers inside submit: never interrupted half-way (worker_pool.shielded)
         with worker_pool.shielded() if isinstance(pool, ProcessPoolExecutor) else contextlib.nullcontext():
-            for i in todo:
-                futures[_submit(pool, paths[i], spec, settings, summarize)] = i
-        for done, future in enumerate(as_completed(futures), start=1):
-            finished(futures[future], *future.result(), done)
+            for chunk in chunks:
+                futures[_submit(pool, [paths[i] for i in chunk], spec, settings, summarize)] = chunk
+        done = 0
+        for future in as_completed(futures):
+            for i, result in zip(futures[future], future.result(), strict=True):
+                done += 1
+                finished(i, *result, done)
     except BaseException as exc:
         for future in futures:  # queued files never start; the pool itself stays usable
             future.cancel()
         if isinstance(pool, ProcessPoolExecutor):
             worker_pool.discard_if_broken(pool)
         if isinstance(exc, BrokenProcessPool):
-            raise _worker_died([paths[i] for f, i in futures.items() if not _succeeded(f)]) from exc
+            raise _worker_died([paths[i] for future, chunk in futures.items() if not _succeeded(future)
+                                for i in chunk]) from exc
         raise
 
 
-def _submit(pool: Executor, path: Path, spec: BoardSpec, settings: DetectorSettings | None,
-            summarize: Summarize | None) -> Future[tuple[ImageOutcome, object]]:
-    if isinstance(pool, ProcessPoolExecutor):  # the result through a file (worker_pool.submit says why)
-        return worker_pool.submit(pool, _classify_task, path, spec, settings, summarize)
-    return pool.submit(_classify_task, path, spec, settings, summarize)
+def _submit(pool: Executor, paths: list[Path], spec: BoardSpec, settings: DetectorSettings | None,
+            summarize: Summarize | None) -> Future[list[tuple[ImageOutcome, object]]]:
+    if isinstance(pool, ProcessPoolExecutor):  # the results through a file (worker_pool.submit says why)
+        return worker_pool.submit(pool, _classify_chunk, paths, spec, settings, summarize)
+    return pool.submit(_classify_chunk, paths, spec, settings, summarize)
 
 
-def _succeeded(future: Future[tuple[ImageOutcome, object]]) -> bool:
+def _succeeded(future: Future[list[tuple[ImageOutcome, object]]]) -> bool:
     return future.done() and not future.cancelled() and future.exception() is None
 
 

@@ -1,6 +1,7 @@
 """Detection on N workers gives the outcomes of one: same status, reason and hash, bit-identical corners,
-at jobs 1, 2 and 4, on threads and on the warm process pool, on renders and on real photos; Ctrl-C
-cancels the queued files and leaves the pool usable; each worker runs OpenCV and BLAS on one thread."""
+at jobs 1, 2 and 4, on threads and on the warm process pool (a few files a task), on renders and on real
+photos; Ctrl-C cancels the queued files and leaves the pool usable; a worker killed mid-task names every file
+of its task; each worker runs OpenCV and BLAS on one thread."""
 
 from __future__ import annotations
 
@@ -18,12 +19,14 @@ from calibctl.core.blas_threads import available_cores, thread_counts
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture import worker_pool
 from calibctl.core.capture.image_outcomes import (
+    CHUNK_MAX_FILES,
     PROCESS_MIN_FILES,
     ImageOutcome,
     choose_executor,
     classify_files,
     classify_session,
     list_images,
+    task_chunks,
 )
 from calibctl.core.synth.pinhole import Photometry, PinholeCamera, render_view
 from calibctl.core.synth.scenes import scenario_poses
@@ -50,6 +53,20 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     assert cv2.imwrite(str(folder / "y-big.png"), cv2.resize(cv2.imread(str(folder / "v01.png")), (800, 600)))
     (folder / "z-broken.png").write_bytes(b"not a png")
     return list_images(folder)
+
+
+@pytest.fixture(scope="module")
+def tripled(rendered: list[Path], tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """The rendered set three times over (a-, b-, c- copies): 45 files, not a multiple of any task size, with
+    z-broken.png (index 14) and y-big.png (index 12) inside the second 2-worker task, not at its start."""
+    folder = tmp_path_factory.mktemp("tripled")
+    for prefix in "abc":
+        for path in rendered:
+            shutil.copy(path, folder / f"{prefix}-{path.name}")
+    paths = list_images(folder)
+    second = task_chunks(range(len(paths)), 2)[1]
+    assert len(paths) == 45 and second[0] < 12 < 14 <= second[-1]  # what the tests below rely on
+    return paths
 
 
 def assert_same(runs: dict[str, list[ImageOutcome]]) -> None:
@@ -197,3 +214,60 @@ def test_solve_stages_run_opencv_and_blas_on_one_thread_and_give_the_threads_bac
             assert thread_counts() == before and before["opencv"] == 2
         finally:
             cv2.setNumThreads(-1)
+
+
+@pytest.mark.parametrize(("n", "workers"), [(0, 2), (1, 2), (7, 2), (15, 2), (45, 2), (96, 2), (97, 4), (96, 16),
+                                            (1000, 1)])
+def test_task_chunks_cover_every_file_once_in_order_and_shrink_to_single_files(n: int, workers: int) -> None:
+    todo = list(range(0, 3 * n, 3))  # any file numbers: those a station detected early are left out
+    chunks = task_chunks(todo, workers)
+    assert [i for chunk in chunks for i in chunk] == todo
+    sizes = [len(chunk) for chunk in chunks]
+    assert all(1 <= size <= CHUNK_MAX_FILES for size in sizes)
+    assert sizes == sorted(sizes, reverse=True)  # the long tasks first, the single files last
+    if n:
+        assert sizes[-1] == 1
+    if n >= 96 and workers == 2:
+        assert len(chunks) <= n // 3  # the point: a few files per round trip to a worker
+
+
+@pytest.mark.parametrize("jobs", [2, 4])
+def test_files_in_tasks_report_in_order_once_each_with_an_unreadable_file_inside_a_task(tripled: list[Path],
+                                                                                         jobs: int) -> None:
+    reported: list[tuple[int, int, str]] = []
+    outcomes = classify_files(tripled, BOARD, workers=jobs, executor="process",
+                              progress=lambda done, total, o: reported.append((done, total, o.name)))
+    assert [done for done, _, _ in reported] == list(range(1, 46)) and {total for _, total, _ in reported} == {45}
+    assert sorted(name for _, _, name in reported) == [p.name for p in tripled]  # each file once
+    assert [o.name for o in outcomes] == [p.name for p in tripled]
+    assert outcomes[14].status == "unreadable" and outcomes[13].status == "no_board" and outcomes[15].accepted
+    assert_same({f"process x{jobs}": outcomes, "one": classify_files(tripled, BOARD, workers=1)})
+
+
+def kill_own_worker_at_the_800x600_file(gray: np.ndarray) -> None:
+    """A ``summarize`` that kills the detection worker running it (the stand-in for the out-of-memory killer)
+    when handed y-big.png, the one 800x600 file."""
+    import signal
+
+    if gray.shape == (600, 800):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_worker_killed_mid_task_names_every_file_of_its_task(tripled: list[Path]) -> None:
+    """The worker dies at a-y-big.png, the 5th file of its task: the 4 files it had detected before were never
+    reported, so they are named with it, and nothing reported is named."""
+    from calibctl.errors import WorkerDiedError
+
+    pool = worker_pool.process_pool(2)
+    reported: list[str] = []
+    with pytest.raises(WorkerDiedError, match=r"a detection worker process died") as died:
+        classify_files(tripled, BOARD, workers=2, executor="process", summarize=kill_own_worker_at_the_800x600_file,
+                       progress=lambda done, total, o: reported.append(o.name))
+    assert died.value.exit_code == 2 and isinstance(died.value.__cause__, BrokenProcessPool)
+    tasks = task_chunks(range(len(tripled)), 2)
+    assert not {tripled[i].name for i in tasks[1]} & set(reported)  # the killed task: none of it reported
+    named = int(str(died.value).split(" with ")[1].split(" image(s)")[0])
+    assert len(tasks[1]) <= named <= len(tripled) - len(reported)
+    first = str(died.value).split("not yet detected: ")[1].split(",")[0]
+    assert first not in reported and first in {tripled[task[0]].name for task in tasks[:2]}  # a whole task named
+    assert worker_pool.process_pool(2) is not pool  # forgotten: the next run starts a new pool
