@@ -25,7 +25,14 @@ from calibctl.cli.solve import (
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+    from typing import TypeVar
+
     from calibctl.artifacts.check import DistanceCheck
+    from calibctl.config import Settings
+    from calibctl.workflows.camera.capture import CaptureObserver
+
+    R = TypeVar("R")
     from calibctl.workflows.camera import capture as capture_workflow
 
 # The workflows (OpenCV, the store, SQLAlchemy, alembic) are imported inside the commands, so that
@@ -72,13 +79,22 @@ def register(app: typer.Typer) -> None:
     register_synth(app)
 
 
-def _run_capture(ctx: typer.Context, as_json: bool, station: str | None, operator: str | None, run,
-                 jobs: int | None = None):
-    from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
+def _early_settings(ctx: typer.Context, source: str, station: str | None, operator: str | None,
+                    jobs: int | None) -> Settings:
+    """The settings, and the detection pool's fork server started when ``source`` will need it: before the caller
+    imports the capture workflow (its store, models), so the server's imports overlap with those."""
+    from calibctl.workflows.camera.capture_sources import start_detection_early
 
     settings = state(ctx).settings(station=station, operator=operator, jobs=jobs)
+    start_detection_early(source, settings.jobs)
+    return settings
+
+
+def _run_capture(settings: Settings, as_json: bool, run: Callable[[Settings, CaptureObserver], R]) -> R:
+    from calibctl.cli.live_view import capture_observer  # subclasses the capture workflow's observer
+
     with capture_observer(as_json, settings.gates.min_views, None) as observer:
-        return settings, run(settings, observer)
+        return run(settings, observer)
 
 
 def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
@@ -192,9 +208,6 @@ def capture(
     2 when the capture could not run (nothing is stored).
     """
     from calibctl.errors import UsageError
-    from calibctl.workflows.camera import capture as capture_workflow
-    from calibctl.workflows.camera.distance_gauge import gauge_model, parse_reference_distance
-    from calibctl.workflows.camera.image_circles import parse_image_circle
 
     if model is not None and reference_distance is None:
         raise UsageError("--model on capture is the lens of the distance gauge; it needs --reference-distance",
@@ -215,14 +228,18 @@ def capture(
         raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")
     if len(source) != 1:
         raise UsageError(f"one camera takes one --source, got {len(source)}", hint="capture a rig with --rig RIG")
+    settings = _early_settings(ctx, source[0], station, operator, jobs)
+    from calibctl.workflows.camera import capture as capture_workflow
+    from calibctl.workflows.camera.distance_gauge import gauge_model, parse_reference_distance
+    from calibctl.workflows.camera.image_circles import parse_image_circle
+
     as_json = wants_json(ctx, json_output)
     distance = None if reference_distance is None else parse_reference_distance(reference_distance)
     request = capture_workflow.CaptureRequest(serial, board, source[0], max_views, duration,
                                               image_circle=parse_image_circle(image_circle),
                                               reference_distance=distance, reference_source=reference_source,
                                               gauge_model=gauge_model(model))
-    _, result = _run_capture(ctx, as_json, station, operator,
-                             lambda settings, obs: capture_workflow.capture(settings, request, obs), jobs)
+    result = _run_capture(settings, as_json, lambda settings, obs: capture_workflow.capture(settings, request, obs))
     if as_json:
         emit_json(result.as_json())
     else:
@@ -255,6 +272,7 @@ def calibrate(
     Exit 0 when the gates pass and the calibration is accepted, 1 when a gate or lint rejects it, 2 when
     it could not run.
     """
+    settings = _early_settings(ctx, source, station, operator, jobs)
     from calibctl.workflows.camera import capture as capture_workflow
     from calibctl.workflows.camera.distance_gauge import parse_reference_distance
     from calibctl.workflows.camera.image_circles import parse_image_circle
@@ -264,9 +282,9 @@ def calibrate(
     request = capture_workflow.CaptureRequest(serial, board, source, max_views, duration,
                                               image_circle=parse_image_circle(image_circle),
                                               reference_distance=distance, reference_source=reference_source)
-    _, result = _run_capture(ctx, as_json, station, operator, lambda settings, obs: capture_workflow.calibrate(
+    result = _run_capture(settings, as_json, lambda settings, obs: capture_workflow.calibrate(
         settings, request, model=model, activate=activate, drop_outliers=drop_outliers, observer=obs,
-        override_gauge=override_gauge), jobs)
+        override_gauge=override_gauge))
     solved = result.solve
     if as_json:
         emit_json({"capture": result.capture.as_json(),

@@ -44,8 +44,14 @@ import cv2
 import numpy as np
 
 from calibctl import bounded
-from calibctl.core.capture.image_outcomes import IMAGE_SUFFIXES, list_images
-from calibctl.errors import FileSystemError, InputError, UsageError, named_list
+from calibctl.core.capture import worker_pool
+from calibctl.core.capture.image_outcomes import (
+    DEFAULT_EXECUTOR,
+    IMAGE_SUFFIXES,
+    choose_executor,
+    list_images,
+)
+from calibctl.errors import CalibctlError, FileSystemError, InputError, UsageError, named_list
 
 FOLDER = "folder"
 GLOB = "glob"
@@ -240,6 +246,24 @@ def select_images(spec: SourceSpec) -> ImageSet:
     if spec.kind == LIST:
         return _listed_images(Path(spec.target))  # type: ignore[arg-type]
     raise ValueError(f"not an image-set source: {spec.kind}")
+
+
+def start_detection_early(source: str, jobs: int) -> None:
+    """Start the detection pool's fork server now when ``source`` will be detected on processes (a folder, glob or
+    list of images that ``choose_executor`` sends to the pool at ``jobs``), before the caller imports its store
+    and workflow: the server's imports run on another core meanwhile (a fresh 96-image capture waited ~0.2 s for
+    them, benchmarks/results/station.md). A source that cannot be read is left to the capture to report."""
+    if jobs <= 1:
+        return
+    try:
+        spec = resolve_source(source)
+        if spec.kind not in (FOLDER, GLOB, LIST):
+            return
+        count = len(select_images(spec).paths)
+    except (CalibctlError, OSError):
+        return
+    if choose_executor(DEFAULT_EXECUTOR, jobs, count) == "process":
+        worker_pool.start_server()
 
 
 def mixed_sizes_error(spec: SourceSpec, sizes: dict[str, tuple[int, int]]) -> InputError | None:

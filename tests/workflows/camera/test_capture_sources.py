@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from calibctl.core.capture.image_outcomes import PROCESS_MIN_FILES
 from calibctl.errors import EXIT_CANNOT_RUN, InputError
 from calibctl.workflows.camera import capture_sources as sources
 
@@ -94,3 +95,53 @@ def test_long_listings_are_cut(shots: Path) -> None:
         sources.select_images(sources.resolve_source(str(listing)))
     assert "line 10: gone09.jpg (missing) and 15 more" in bad.value.message
     assert os.sep + "many.txt" in bad.value.message
+
+
+@pytest.fixture
+def server_starts(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Calls of worker_pool.start_server by start_detection_early (the server itself is not started)."""
+    calls: list[int] = []
+    monkeypatch.setattr(sources.worker_pool, "start_server", lambda: calls.append(1))
+    monkeypatch.setattr(sources.worker_pool, "is_warm", lambda workers: False)
+    return calls
+
+
+def _pngs(folder: Path, n: int) -> Path:
+    folder.mkdir()
+    for i in range(n):
+        (folder / f"img-{i:03d}.png").write_bytes(b"")  # only counted, never decoded
+    return folder
+
+
+@pytest.mark.parametrize(("images", "jobs", "started"), [
+    (PROCESS_MIN_FILES, 2, True), (PROCESS_MIN_FILES - 1, 2, False), (PROCESS_MIN_FILES, 1, False)])
+def test_the_fork_server_starts_early_only_for_a_capture_the_pool_will_detect(tmp_path: Path, server_starts: list[int],
+                                                                             images: int, jobs: int,
+                                                                             started: bool) -> None:
+    folder = _pngs(tmp_path / "shots", images)
+    sources.start_detection_early(str(folder), jobs)
+    sources.start_detection_early(str(folder / "*.png"), jobs)  # the same files as a glob
+    assert len(server_starts) == (2 if started else 0)
+
+
+@pytest.mark.parametrize("source", ["missing-folder", "/dev/video7", "empty", "clip.mp4"])
+def test_a_source_the_pool_will_not_detect_starts_nothing_and_raises_nothing(tmp_path: Path, server_starts: list[int],
+                                                                            monkeypatch: pytest.MonkeyPatch,
+                                                                            source: str) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "clip.mp4").write_bytes(b"\0" * 64)
+    sources.start_detection_early(source, 4)  # the capture itself reports a bad source, with its exit code
+    assert server_starts == []
+
+
+def test_start_server_returns_and_the_pool_forks_from_that_server() -> None:
+    from multiprocessing import forkserver
+
+    from calibctl.core.capture import worker_pool
+
+    worker_pool.start_server()
+    pid = forkserver._forkserver._forkserver_pid  # noqa: SLF001 - which server the pool uses
+    assert pid is not None
+    worker_pool.warm(2)
+    assert forkserver._forkserver._forkserver_pid == pid  # noqa: SLF001 - the same server: not started twice
