@@ -22,6 +22,7 @@ from calibctl.cli.solve import (
     OverrideGaugeOption,
     render_outcome,
 )
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 if TYPE_CHECKING:
@@ -257,7 +258,7 @@ def calibrate(
     operator: OperatorOption = None,
     max_views: MaxViewsOption = None,
     duration: DurationOption = None,
-    model: ModelOption = "k1k2",
+    model: ModelOption = DEFAULT_MODEL,
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
     image_circle: ImageCircleOption = None,

@@ -11,6 +11,7 @@ from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 
 rig_app = typer.Typer(
@@ -32,7 +33,7 @@ def solve_folders(
     rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
     square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")],
     root: Annotated[str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)] = None,
-    model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = "k1k2",
+    model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = DEFAULT_MODEL,
     refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")] = False,
     min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
     design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: a pair's design "

@@ -10,6 +10,7 @@ import typer
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import print_calibration
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
 if TYPE_CHECKING:
@@ -69,7 +70,7 @@ def solve(
     ctx: typer.Context,
     session_id: Annotated[str | None, typer.Argument(metavar="[SESSION_ID]", help="Capture session to solve.")] = None,
     serial: Annotated[str | None, typer.Option("--serial", help="Solve this serial's latest accepted session.")] = None,
-    model: ModelOption = "k1k2",
+    model: ModelOption = DEFAULT_MODEL,
     activate: ActivateOption = True,
     drop_outliers: DropOutliersOption = False,
     override_gauge: OverrideGaugeOption = None,

@@ -13,6 +13,7 @@ import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 
 if TYPE_CHECKING:
     from calibctl.config import Settings
@@ -93,7 +94,7 @@ def station(
     serials: Annotated[Path | None, typer.Option(
         "--serials", show_default=False, help="Read the serials from this file, one per line (default: stdin, "
         "where a barcode scanner types them).")] = None,
-    model: Annotated[str, typer.Option("--model", help="Lens model of every unit's solve.")] = "k1k2",
+    model: Annotated[str, typer.Option("--model", help="Lens model of every unit's solve.")] = DEFAULT_MODEL,
     station_id: StationOption = None,
     operator: OperatorOption = None,
     jobs: JobsOption = None,

@@ -41,6 +41,7 @@ import numpy as np
 
 from calibctl.core.capture.gates import OBSERVABILITY_MIN, observability, view_homography
 from calibctl.core.gate import GateResult
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solve import (
     IntrinsicsSolution,
@@ -203,7 +204,7 @@ def forget_recent_checks() -> None:
 
 
 def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                     image_size: tuple[int, int], model: str = "k1k2",
+                     image_size: tuple[int, int], model: str = DEFAULT_MODEL,
                      threshold: float = TWO_CAMERA_RATIO, lanes: Lanes | None = None) -> CameraSplit | None:
     """The best two-camera split and its score (module docstring); None when the session is too small to
     split into two groups that can each be solved and validated, or when a group of the best split cannot

@@ -34,6 +34,7 @@ import numpy as np
 
 from calibctl.core.check.recheck_delta import ParameterShift, intrinsic_shifts, stored_delta_covariance
 from calibctl.core.extrinsics.se3 import rotation_from_rotvec
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import residual_rms_px
 from calibctl.core.intrinsics.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown
 
@@ -174,7 +175,7 @@ def holm_levels(p_values: Sequence[float], alpha: float) -> list[float]:
 def recheck(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
             camera_matrix: np.ndarray, dist_coeffs: np.ndarray, image_size: tuple[int, int],
             reference: Reference, stored_sigma: dict[str, float], alpha: float = DEFAULT_ALPHA,
-            model: str = "k1k2", stored_covariance: np.ndarray | None = None) -> RecheckResult:
+            model: str = DEFAULT_MODEL, stored_covariance: np.ndarray | None = None) -> RecheckResult:
     """Fit each fresh view's pose with the stored model and test its residuals against ``reference``.
 
     Args:

@@ -26,6 +26,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import project_points
 
 SHIFT_NAMES = ("focal", "cx", "cy")  # tested; k1 and k2 are estimated alongside as nuisance parameters
@@ -98,7 +99,7 @@ def view_jacobians(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
 def intrinsic_shifts(object_points_per_view: Sequence[np.ndarray], camera_matrix: np.ndarray,
                      dist_coeffs: np.ndarray, rvecs: Sequence[np.ndarray], tvecs: Sequence[np.ndarray],
                      residuals_px: Sequence[np.ndarray], stored_covariance: np.ndarray, alpha: float,
-                     model: str = "k1k2") -> tuple[ParameterShift, ...]:
+                     model: str = DEFAULT_MODEL) -> tuple[ParameterShift, ...]:
     """The delta step and its test (see module docstring). Empty when the views do not constrain it.
 
     Args:

@@ -36,6 +36,7 @@ from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigVi
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, T_to_pose, pose_to_T, propagate
 from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import MAX_RMS_PX, get_model, single_threaded_opencv
 from calibctl.core.lm import Damping, DenseSystem, SchurSystem, solve_lm
 from calibctl.errors import CalibctlError, InconsistentDataError, NumericalError
@@ -215,7 +216,7 @@ def diverged(views: RigViews, members: Sequence[MemberIntrinsics], worst_rms_px:
 
 
 def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,
-              model: str = "k1k2", solver: str = "auto") -> RigSolution:
+              model: str = DEFAULT_MODEL, solver: str = "auto") -> RigSolution:
     """Solve the extrinsics of a rig (cameras[0] is the root).
 
     Args:

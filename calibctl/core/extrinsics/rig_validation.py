@@ -30,6 +30,7 @@ from calibctl.core.extrinsics.rig_problem import Layout, MemberIntrinsics, RigVi
 from calibctl.core.extrinsics.rig_solve import RigSolution, shared_corners_only, solve_rig
 from calibctl.core.extrinsics.rig_tree import T_to_pose, pose_to_T, simple_cycles
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.validation import fold_assignment
 from calibctl.core.lm import DenseSystem, solve_lm
 from calibctl.errors import InconsistentDataError, NumericalError
@@ -94,7 +95,7 @@ def fit_board_pose(views: RigViews, f: int, members: Sequence[MemberIntrinsics],
 
 
 def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,
-                         model: str = "k1k2", solver: str = "auto") -> RigHoldout:
+                         model: str = DEFAULT_MODEL, solver: str = "auto") -> RigHoldout:
     """k-fold held-out numbers (see module docstring).
 
     Raises:
@@ -153,7 +154,7 @@ def _validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], 
     return RigHoldout(solved, camera_rms, tuple(pairs))
 
 
-def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], model: str = "k1k2",
+def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], model: str = DEFAULT_MODEL,
                        min_frames: int = MIN_PAIR_FRAMES) -> dict[tuple[int, int], RigSolution]:
     """Independent 2-camera solves of every pair (a < b) with at least ``min_frames`` shared frames."""
     out = {}
@@ -168,7 +169,7 @@ def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], mod
     return out
 
 
-def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str = "k1k2") -> tuple[LoopClosure, ...]:
+def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str = DEFAULT_MODEL) -> tuple[LoopClosure, ...]:
     """Residual around every simple cycle of the pairwise-solved camera graph (empty for 2 cameras), judged by
     the loop's covariance with the pairs' cross covariances (core.extrinsics.rig_loop)."""
     with single_threaded():  # pair solves and loop covariances run one after another: spare threads only spin

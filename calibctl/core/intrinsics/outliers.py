@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import (
     MIN_CORNERS_PER_VIEW,
     IntrinsicsSolution,
@@ -174,7 +175,7 @@ def solve_dropping_outliers(
     object_points_per_view: Sequence[np.ndarray],
     image_points_per_view: Sequence[np.ndarray],
     image_size: tuple[int, int],
-    model: str = "k1k2",
+    model: str = DEFAULT_MODEL,
     initial: np.ndarray | None = None,
 ) -> DropOutliersResult:
     """Solve, drop the outlier views (one pass, not iterated), solve again on the rest.
@@ -231,7 +232,7 @@ def solve_rejecting_corners(
     object_points_per_view: Sequence[np.ndarray],
     image_points_per_view: Sequence[np.ndarray],
     image_size: tuple[int, int],
-    model: str = "k1k2",
+    model: str = DEFAULT_MODEL,
     corner_ids_per_view: Sequence[np.ndarray] | None = None,
 ) -> CornerRejection:
     """Solve, remove the corners the corner rule flags, solve again until none is flagged.

@@ -15,6 +15,9 @@ import numpy as np
 
 from calibctl.core.blas_threads import single_threaded
 from calibctl.core.intrinsics.covariance import IntrinsicCovariance
+from calibctl.core.intrinsics.model_names import (
+    DEFAULT_MODEL as DEFAULT_MODEL,  # the solve's default, re-exported
+)
 from calibctl.errors import InputError, NumericalError, UsageError
 
 # Below this many degrees of freedom (residuals - parameters) the residual variance that scales
@@ -84,7 +87,6 @@ MODELS: Mapping[str, DistortionModel] = {
                         kind="fisheye"),
     )
 }
-DEFAULT_MODEL = "k1k2"
 
 
 def get_model(name: str) -> DistortionModel:

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import (
     IntrinsicsSolution,
     fit_pose,
@@ -77,7 +78,7 @@ def fold_assignment(n_views: int, min_training_views: int, max_folds: int = MAX_
 
 
 def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
-                         camera_matrix: np.ndarray, dist_coeffs: np.ndarray, model: str = "k1k2") -> np.ndarray:
+                         camera_matrix: np.ndarray, dist_coeffs: np.ndarray, model: str = DEFAULT_MODEL) -> np.ndarray:
     """Residuals of one view with intrinsics frozen and the board pose re-fitted.
 
     Args:
@@ -92,7 +93,7 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
 
 
 def refit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
-               dist_coeffs: np.ndarray, model: str = "k1k2") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               dist_coeffs: np.ndarray, model: str = DEFAULT_MODEL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,) m)."""
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)

@@ -49,6 +49,7 @@ from calibctl.core.extrinsics.rig_validation import (
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.gate import GateResult
 from calibctl.core.intrinsics import model_fit
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
 from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
@@ -183,7 +184,7 @@ def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, 
     return RigViews(tuple(cameras), spec.object_points(), tuple(names), tuple(rows))
 
 
-def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = "k1k2",
+def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = DEFAULT_MODEL,
                       intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
                       min_shared_views: int = MIN_SHARED_VIEWS, workers: int | None = None,
                       limits: LintThresholds | None = None, settings: Settings | None = None,
@@ -263,10 +264,10 @@ def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> s
         listed = ", ".join(f"{name}: {m}" for name, m in chosen.items())
         raise UsageError(f"--model auto chose different lens models for the cameras ({listed}); their intrinsics "
                          "cannot be refined jointly", "leave out --refine-intrinsics, or give one --model for all")
-    return next(iter(chosen.values()), "k1k2")
+    return next(iter(chosen.values()), DEFAULT_MODEL)
 
 
-def judged_solve(run: RigFolderRun, model: str = "k1k2", refine_intrinsics: bool = False,
+def judged_solve(run: RigFolderRun, model: str = DEFAULT_MODEL, refine_intrinsics: bool = False,
                  limits: LintThresholds | None = None) -> RigFolderRun:
     """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring). A run without
     ``member_verdicts`` (corners without photos) holds its members to ``model-misfit`` alone."""

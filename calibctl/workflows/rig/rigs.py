@@ -44,6 +44,7 @@ from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_validation import loop_closures, validate_rig_holdout
 from calibctl.core.intrinsics.covariance import intrinsic_columns
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
@@ -184,7 +185,7 @@ def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store:
 
 
 def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | None = None,
-                     refine_intrinsics: bool = False, model: str = "k1k2", activate: bool = True) -> RigSolveOutcome:
+                     refine_intrinsics: bool = False, model: str = DEFAULT_MODEL, activate: bool = True) -> RigSolveOutcome:
     """Solve a stored rig session into the rig's next version (see module docstring)."""
     with open_store(settings, write=True) as store:
         rig = store.get_rig(rig_name)
