@@ -31,10 +31,10 @@ if TYPE_CHECKING:
 
     from calibctl.artifacts.check import DistanceCheck
     from calibctl.config import Settings
+    from calibctl.workflows.camera import capture as capture_workflow
     from calibctl.workflows.camera.capture import CaptureObserver
 
     R = TypeVar("R")
-    from calibctl.workflows.camera import capture as capture_workflow
 
 # The workflows (OpenCV, the store, SQLAlchemy, alembic) are imported inside the commands, so that
 # `calibctl --help`, `--version` and the other commands do not pay for them.

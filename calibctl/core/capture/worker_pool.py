@@ -26,7 +26,7 @@ Results come back through a file, not the pool's pipe (``submit``). ProcessPoolE
 reads a result once the pipe has data and then blocks until the whole message is there: a worker killed
 (out-of-memory killer) half-way through writing a result hangs the caller for good instead of raising
 BrokenProcessPool. A detection result carries the half-size picture (~300 KB at 1280x960), larger than
-the pipe's buffer; killing a worker at random moments of such a stream hung 18 of 30 runs (CPython
+the pipe's buffer; killing a worker at random moments of such a stream hung 12 to 18 of 30 runs (CPython
 3.11, ``benchmarks/stress_pool_kill.py``). So a worker writes its pickled result into a private
 folder and sends only the file's name, a message far below PIPE_BUF, which the kernel writes whole or
 not at all; unpickling that name in the caller reads the file back (``_load_result``), so every

@@ -257,7 +257,7 @@ def start_detection_early(source: str, jobs: int) -> None:
         return
     try:
         spec = resolve_source(source)
-        if spec.kind not in (FOLDER, GLOB, LIST):
+        if spec.kind not in IMAGE_SETS:
             return
         count = len(select_images(spec).paths)
     except (CalibctlError, OSError):
