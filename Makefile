@@ -52,6 +52,7 @@ test-consumers: $(STAMP) ## the robot bundle read by ROS camera_calibration_pars
 
 lint: $(STAMP) ## ruff, mypy and the import-layer contract
 	$(VENV)/bin/ruff check calibctl tests benchmarks
+	$(VENV)/bin/ruff format --check calibctl tests benchmarks migrations
 	$(VENV)/bin/mypy calibctl
 	$(VENV)/bin/lint-imports
 

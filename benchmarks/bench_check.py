@@ -64,14 +64,30 @@ def near_poses(camera: PinholeCamera, n_views: int, rng: np.random.Generator) ->
     """The check protocol's views: the board close (85-100 % of the width), tilted 20-35 deg, directions around."""
     near = default_distance_range_m(camera, BOARD, (0.85, 1.0))
     targets = _cell_targets(camera, n_views)
-    return [_sample_pose(camera, BOARD, rng, targets[i], np.deg2rad(rng.uniform(20.0, 35.0)),
-                         2 * np.pi * i / 8 + rng.uniform(-0.2, 0.2), near) for i in range(n_views)]
+    return [
+        _sample_pose(
+            camera,
+            BOARD,
+            rng,
+            targets[i],
+            np.deg2rad(rng.uniform(20.0, 35.0)),
+            2 * np.pi * i / 8 + rng.uniform(-0.2, 0.2),
+            near,
+        )
+        for i in range(n_views)
+    ]
 
 
-def session(case: str, seed: int, n_views: int, mode: str, noise_px: float, poses_kind: str = "good") -> Views:
+def session(
+    case: str, seed: int, n_views: int, mode: str, noise_px: float, poses_kind: str = "good"
+) -> Views:
     camera = camera_for(case)
     rng = np.random.default_rng(seed)
-    poses = scenario_poses("good", camera, BOARD, n_views, rng) if poses_kind == "good" else near_poses(camera, n_views, rng)
+    poses = (
+        scenario_poses("good", camera, BOARD, n_views, rng)
+        if poses_kind == "good"
+        else near_poses(camera, n_views, rng)
+    )
     if mode == "corners":
         obj = BOARD.object_points()
         img = []
@@ -95,21 +111,32 @@ def session(case: str, seed: int, n_views: int, mode: str, noise_px: float, pose
     return objs, imgs
 
 
-def reference(seed: int, mode: str, noise_px: float, n_views: int = REF_VIEWS
-              ) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
+def reference(
+    seed: int, mode: str, noise_px: float, n_views: int = REF_VIEWS
+) -> tuple[np.ndarray, np.ndarray, Reference, dict, float]:
     obj, img = session("unchanged", seed, n_views, mode, noise_px)
     t0 = time.perf_counter()
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
     rep = validate_holdout(obj, img, SIZE, "k1k2", fit=fit)
     solve_s = time.perf_counter() - t0
     h = rep.holdout
-    ref = Reference(rep.holdout_rms_px, sum(len(p) for p in img), len(img), h.radius_edges_px, h.ring_rms_px,
-                    h.ring_counts, h.octant_rms_px, h.octant_counts)
+    ref = Reference(
+        rep.holdout_rms_px,
+        sum(len(p) for p in img),
+        len(img),
+        h.radius_edges_px,
+        h.ring_rms_px,
+        h.ring_counts,
+        h.octant_rms_px,
+        h.octant_counts,
+    )
     sigma = {"focal": fit.sigma["fx"] / fit.camera_matrix[0, 0], "cx": fit.sigma["cx"], "cy": fit.sigma["cy"]}
     return fit.camera_matrix, fit.dist_coeffs, ref, sigma, solve_s
 
 
-def plain_fails(obj: list[np.ndarray], img: list[np.ndarray], K: np.ndarray, D: np.ndarray, ref_rms: float) -> bool:
+def plain_fails(
+    obj: list[np.ndarray], img: list[np.ndarray], K: np.ndarray, D: np.ndarray, ref_rms: float
+) -> bool:
     """The plain OpenCV re-test: solvePnP with the stored model, overall RMS above 1.1x the held-out RMS."""
     sq, n = 0.0, 0
     for o, i in zip(obj, img, strict=True):
@@ -124,35 +151,61 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mode", choices=("renders", "corners"), default="corners")
     parser.add_argument("--sessions", type=int, default=200, help="check sessions per case")
-    parser.add_argument("--refs", type=int, default=5, help="reference calibrations the sessions are spread over")
+    parser.add_argument(
+        "--refs", type=int, default=5, help="reference calibrations the sessions are spread over"
+    )
     parser.add_argument("--noise-px", type=float, default=0.03)
-    parser.add_argument("--ref-views", type=int, default=REF_VIEWS, help="views of each reference calibration")
-    parser.add_argument("--check-poses", choices=("good", "near"), default="good",
-                        help="check views: the solve's 'good' scenario, or the check protocol's near tilted views")
-    parser.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of: {', '.join(CASES)}")
+    parser.add_argument(
+        "--ref-views", type=int, default=REF_VIEWS, help="views of each reference calibration"
+    )
+    parser.add_argument(
+        "--check-poses",
+        choices=("good", "near"),
+        default="good",
+        help="check views: the solve's 'good' scenario, or the check protocol's near tilted views",
+    )
+    parser.add_argument(
+        "--cases", default=",".join(CASES), help=f"comma-separated subset of: {', '.join(CASES)}"
+    )
     args = parser.parse_args()
     refs = [reference(10_000 + r, args.mode, args.noise_px, args.ref_views) for r in range(args.refs)]
-    print(f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
-          f"mode {args.mode}, {args.ref_views}-view references, check poses {args.check_poses}" + (f" (noise {args.noise_px} px)" if args.mode == "corners" else ""))
-    print(f"reference held-out RMS {np.mean([r[2].rms_px for r in refs]):.4f} px (mean of {args.refs}), "
-          f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median")
-    print("| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |")
+    print(
+        f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
+        f"mode {args.mode}, {args.ref_views}-view references, check poses {args.check_poses}"
+        + (f" (noise {args.noise_px} px)" if args.mode == "corners" else "")
+    )
+    print(
+        f"reference held-out RMS {np.mean([r[2].rms_px for r in refs]):.4f} px (mean of {args.refs}), "
+        f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median"
+    )
+    print(
+        "| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |"
+    )
     print("|---|---|---|---|---|")
     for case in args.cases.split(","):
         fails = plain = 0
         times = []
         for i in range(args.sessions):
             K, D, ref, sigma, _ = refs[i % args.refs]
-            obj, img = session(case, 20_000 + 1000 * list(CASES).index(case) + i, CHECK_VIEWS, args.mode, args.noise_px,
-                               args.check_poses)
+            obj, img = session(
+                case,
+                20_000 + 1000 * list(CASES).index(case) + i,
+                CHECK_VIEWS,
+                args.mode,
+                args.noise_px,
+                args.check_poses,
+            )
             t0 = time.perf_counter()
             result = recheck(obj, img, K, D, SIZE, ref, sigma)
             times.append(time.perf_counter() - t0)
             fails += not result.passed
             plain += plain_fails(obj, img, K, D, ref.rms_px)
         n = args.sessions
-        print(f"| {case} | {n} | {fails} ({100 * fails / n:.1f} %) | {plain} ({100 * plain / n:.1f} %) | "
-              f"{np.median(times) * 1000:.1f} ms |", flush=True)
+        print(
+            f"| {case} | {n} | {fails} ({100 * fails / n:.1f} %) | {plain} ({100 * plain / n:.1f} %) | "
+            f"{np.median(times) * 1000:.1f} ms |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

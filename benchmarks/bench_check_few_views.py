@@ -43,8 +43,20 @@ def main() -> None:
         store.add_board(measured_board("LR", square_mm=25.0))
     print(f"minimum in calibctl: {recheck.MIN_CHECK_VIEWS} views; {args.trials} subsets per k per camera")
     for cam in ("left", "right"):
-        done = runner.invoke(app, ["--db", url, "calibrate", "--serial", cam.upper(), "--board", "LR", "--source",
-                                   f"{LEFT_RIGHT}/{cam}*.jpg"])
+        done = runner.invoke(
+            app,
+            [
+                "--db",
+                url,
+                "calibrate",
+                "--serial",
+                cam.upper(),
+                "--board",
+                "LR",
+                "--source",
+                f"{LEFT_RIGHT}/{cam}*.jpg",
+            ],
+        )
         assert done.exit_code == 0, done.output  # noqa: S101
         photos = sorted(LEFT_RIGHT.glob(f"{cam}*.jpg"))
         rng = random.Random(0)
@@ -55,7 +67,9 @@ def main() -> None:
                 listed.write_text("".join(f"{p}\n" for p in rng.sample(photos, k)))
                 result = runner.invoke(app, ["--db", url, "check", cam.upper(), "--source", str(listed)])
                 fails += result.exit_code == 1
-            print(f"{cam:5s} {k:2d} views: {fails} of {args.trials} checks FAIL an unchanged camera", flush=True)
+            print(
+                f"{cam:5s} {k:2d} views: {fails} of {args.trials} checks FAIL an unchanged camera", flush=True
+            )
 
 
 if __name__ == "__main__":

@@ -57,8 +57,13 @@ UDACITY_NO_BOARD = DATASETS / "udacity-camcal" / "calibration1.jpg"
 REAL_SETS = (  # name, files, board
     ("opencv-left-right (real)", lambda: list_images(DATASETS / "opencv-left-right"), BOARD),
     ("udacity-camcal (real)", lambda: list_images(DATASETS / "udacity-camcal"), BOARD),
-    ("baka-stereo left+right (real)", lambda: list_images(DATASETS / "baka-stereo" / "left")
-     + list_images(DATASETS / "baka-stereo" / "right"), BoardSpec.chessboard(7, 10, 0.023)),
+    (
+        "baka-stereo left+right (real)",
+        lambda: (
+            list_images(DATASETS / "baka-stereo" / "left") + list_images(DATASETS / "baka-stereo" / "right")
+        ),
+        BoardSpec.chessboard(7, 10, 0.023),
+    ),
 )
 
 
@@ -89,11 +94,14 @@ def plain_classic_else_sb(gray: np.ndarray, pattern: tuple[int, int]) -> np.ndar
     return corners if corners is not None else plain_sb(gray, pattern)
 
 
-def plain_loop(detector: Callable[[np.ndarray, tuple[int, int]], np.ndarray | None], paths: list[Path],
-               board: BoardSpec) -> int:
+def plain_loop(
+    detector: Callable[[np.ndarray, tuple[int, int]], np.ndarray | None], paths: list[Path], board: BoardSpec
+) -> int:
     """Boards found by a sequential imread + detector loop."""
-    return sum(detector(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (board.cols, board.rows)) is not None
-               for p in paths)
+    return sum(
+        detector(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (board.cols, board.rows)) is not None
+        for p in paths
+    )
 
 
 def calibctl_found(paths: list[Path], board: BoardSpec, workers: int) -> int:
@@ -132,9 +140,11 @@ def throughput_rows(name: str, paths: list[Path], board: BoardSpec, repeats: int
     reference_s, reference_cpu_s = best["plain classic loop"][:2]
     rows = []
     for label, (wall, cpu, found, load) in best.items():
-        rows.append(f"| {name} | {label} | {found}/{len(paths)} | {wall * 1e3:.0f} ms | {cpu * 1e3:.0f} ms | "
-                    f"{cpu / wall:.2f} | {cpu / len(paths) * 1e3:.1f} ms | {len(paths) / wall:.1f} | "
-                    f"{reference_s / wall:.2f}x | {reference_cpu_s / cpu:.2f}x | {load:.1f} |")
+        rows.append(
+            f"| {name} | {label} | {found}/{len(paths)} | {wall * 1e3:.0f} ms | {cpu * 1e3:.0f} ms | "
+            f"{cpu / wall:.2f} | {cpu / len(paths) * 1e3:.1f} ms | {len(paths) / wall:.1f} | "
+            f"{reference_s / wall:.2f}x | {reference_cpu_s / cpu:.2f}x | {load:.1f} |"
+        )
     return rows
 
 
@@ -142,18 +152,24 @@ def no_board_frames() -> dict[str, np.ndarray]:
     width, height = NO_BOARD_SIZE
     rng = np.random.default_rng(0)
     noise = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    frames = {"sensor noise": noise, "sensor noise, Gaussian blur sigma 1 px": cv2.GaussianBlur(noise, (0, 0), 1.0)}
+    frames = {
+        "sensor noise": noise,
+        "sensor noise, Gaussian blur sigma 1 px": cv2.GaussianBlur(noise, (0, 0), 1.0),
+    }
     clutter = np.full((height, width), 128, np.uint8)
     for _ in range(3000):
         x, y = (int(v) for v in rng.integers(0, (width, height)))
         w, h = (int(v) for v in rng.integers(20, 200, 2))
         cv2.rectangle(clutter, (x, y), (x + w, y + h), int(rng.integers(0, 256)), -1)
     frames["3000 random rectangles"] = clutter
-    frames["39x29 chessboard (wrong size)"] = (np.kron(np.indices((30, 40)).sum(0) % 2, np.ones((100, 100)))
-                                               * 255).astype(np.uint8)[:height, :width]
+    frames["39x29 chessboard (wrong size)"] = (
+        np.kron(np.indices((30, 40)).sum(0) % 2, np.ones((100, 100))) * 255
+    ).astype(np.uint8)[:height, :width]
     if UDACITY_NO_BOARD.is_file():
         photo = cv2.imread(str(UDACITY_NO_BOARD), cv2.IMREAD_GRAYSCALE)
-        frames["udacity calibration1 upscaled"] = cv2.resize(photo, NO_BOARD_SIZE, interpolation=cv2.INTER_CUBIC)
+        frames["udacity calibration1 upscaled"] = cv2.resize(
+            photo, NO_BOARD_SIZE, interpolation=cv2.INTER_CUBIC
+        )
     return frames
 
 
@@ -168,10 +184,12 @@ def raw_detectors() -> dict[str, Callable[[np.ndarray], np.ndarray | None]]:
         det, _ = detect_chessboard(gray, BOARD.cols, BOARD.rows)
         return None if det is None else det.corners_px
 
-    return {"findChessboardCorners + cornerSubPix 11x11 (plain)": lambda g: plain_classic(g, pattern),
-            "findChessboardCornersSB": lambda g: plain_sb(g, pattern),
-            "findChessboardCornersSB + ACCURACY": sb_accuracy,
-            "calibctl detect_chessboard": ours}
+    return {
+        "findChessboardCorners + cornerSubPix 11x11 (plain)": lambda g: plain_classic(g, pattern),
+        "findChessboardCornersSB": lambda g: plain_sb(g, pattern),
+        "findChessboardCornersSB + ACCURACY": sb_accuracy,
+        "calibctl detect_chessboard": ours,
+    }
 
 
 def accuracy(paths: list[Path], truths: list[np.ndarray]) -> list[tuple[str, int, float, float, float]]:
@@ -189,7 +207,9 @@ def accuracy(paths: list[Path], truths: list[np.ndarray]) -> list[tuple[str, int
             e1, e2 = np.linalg.norm(c - truth, axis=1), np.linalg.norm(c[::-1] - truth, axis=1)
             errors.append(e1 if e1.mean() <= e2.mean() else e2)  # raw OpenCV order is not canonical
         err = np.concatenate(errors) if errors else np.array([np.nan])
-        rows.append((name, len(errors), float(err.mean()), float(np.percentile(err, 95)), statistics.mean(times)))
+        rows.append(
+            (name, len(errors), float(err.mean()), float(np.percentile(err, 95)), statistics.mean(times))
+        )
     return rows
 
 
@@ -203,38 +223,61 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "out" / "bench_detect.md")
     args = parser.parse_args()
     started = dt.datetime.now(dt.UTC)
-    lines = [f"## Detection benchmark ({started.isoformat(timespec='minutes')})", "",
-             f"Machine: {os.cpu_count()} CPUs ({cpu_model()}), Python {platform.python_version()}, "
-             f"OpenCV {cv2.__version__}, numpy {np.__version__}. Load average at the start (1 / 5 / 15 min): "
-             f"{load_average()}. Timings are the best of {args.repeats} runs.", ""]
+    lines = [
+        f"## Detection benchmark ({started.isoformat(timespec='minutes')})",
+        "",
+        f"Machine: {os.cpu_count()} CPUs ({cpu_model()}), Python {platform.python_version()}, "
+        f"OpenCV {cv2.__version__}, numpy {np.__version__}. Load average at the start (1 / 5 / 15 min): "
+        f"{load_average()}. Timings are the best of {args.repeats} runs.",
+        "",
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         rendered = {size: render_set(Path(tmp), size, seed=20 + i) for i, size in enumerate(SIZES)}
-        lines += ["### 1. Recall and throughput per detector path", "",
-                  "| set | path | found | wall | CPU | cores used (CPU/wall) | CPU/image | images/s | "
-                  "vs plain classic loop (wall) | (CPU) | load 1 min |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "### 1. Recall and throughput per detector path",
+            "",
+            "| set | path | found | wall | CPU | cores used (CPU/wall) | CPU/image | images/s | "
+            "vs plain classic loop (wall) | (CPU) | load 1 min |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
         for size, (paths, _) in rendered.items():
             lines += throughput_rows(f"rendered {size[0]}x{size[1]}", paths, BOARD, args.repeats)
         for name, files, board in REAL_SETS:
             paths = files() if DATASETS.is_dir() else []
             if paths:
                 lines += throughput_rows(name, paths, board, args.repeats)
-        lines += ["", f"Load average after section 1: {load_average()}.", "",
-                  f"### 2. Worst case: {NO_BOARD_SIZE[0]}x{NO_BOARD_SIZE[1]} frame without a board (one thread)", "",
-                  "| frame | wall | CPU | reason |", "|---|---|---|---|"]
+        lines += [
+            "",
+            f"Load average after section 1: {load_average()}.",
+            "",
+            f"### 2. Worst case: {NO_BOARD_SIZE[0]}x{NO_BOARD_SIZE[1]} frame without a board (one thread)",
+            "",
+            "| frame | wall | CPU | reason |",
+            "|---|---|---|---|",
+        ]
         cv2.setNumThreads(1)
         worst = 0.0
         for name, frame in no_board_frames().items():
-            wall, cpu, (det, why) = best_run(lambda f=frame: detect_chessboard(f, BOARD.cols, BOARD.rows),  # type: ignore[misc]
-                                             args.repeats)
+            wall, cpu, (det, why) = best_run(
+                lambda f=frame: detect_chessboard(f, BOARD.cols, BOARD.rows),  # type: ignore[misc]
+                args.repeats,
+            )
             worst = max(worst, wall)
             lines.append(f"| {name} | {wall * 1e3:.0f} ms | {cpu * 1e3:.0f} ms | {'FOUND' if det else why} |")
-        lines += ["", f"Worst: {worst * 1e3:.0f} ms wall (target < 1000 ms).", "",
-                  "### 3. Accuracy against truth (rendered, seed lens k1 = -0.28)", "",
-                  "| size | detector | found | mean err px | p95 err px | ms/image |", "|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"Worst: {worst * 1e3:.0f} ms wall (target < 1000 ms).",
+            "",
+            "### 3. Accuracy against truth (rendered, seed lens k1 = -0.28)",
+            "",
+            "| size | detector | found | mean err px | p95 err px | ms/image |",
+            "|---|---|---|---|---|---|",
+        ]
         for size, (paths, truths) in rendered.items():
             for name, n, mean, p95, t in accuracy(paths, truths):
-                lines.append(f"| {size[0]}x{size[1]} | {name} | {n}/20 | {mean:.4f} | {p95:.4f} | {t * 1e3:.0f} |")
+                lines.append(
+                    f"| {size[0]}x{size[1]} | {name} | {n}/20 | {mean:.4f} | {p95:.4f} | {t * 1e3:.0f} |"
+                )
     lines += ["", f"Load average at the end: {load_average()}."]
     report = "\n".join(lines) + "\n"
     print(report)

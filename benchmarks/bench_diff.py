@@ -37,23 +37,31 @@ from tests.datasets import BAKA_STEREO, LEFT_RIGHT  # noqa: E402
 
 def corner_rates(pairs: int) -> None:
     full = np.array(PinholeCamera.seed_reference(SIZE).dist, dtype=np.float64)
-    cases = [("unchanged", true_K(), None), ("focal +0.3 %", true_K(focal_scale=1.003), None),
-             ("cx +1 px", true_K(dcx_px=1.0), None), ("unchanged, k1k2 misfit", true_K(), full),
-             ("focal +0.3 %, k1k2 misfit", true_K(focal_scale=1.003), full),
-             ("cx +1 px, k1k2 misfit", true_K(dcx_px=1.0), full)]
+    cases = [
+        ("unchanged", true_K(), None),
+        ("focal +0.3 %", true_K(focal_scale=1.003), None),
+        ("cx +1 px", true_K(dcx_px=1.0), None),
+        ("unchanged, k1k2 misfit", true_K(), full),
+        ("focal +0.3 %, k1k2 misfit", true_K(focal_scale=1.003), full),
+        ("cx +1 px, k1k2 misfit", true_K(dcx_px=1.0), full),
+    ]
     print("| case | flagged | median chi2 (dof) |\n|---|---|---|")
     for name, K_b, dist in cases:
         kw = {} if dist is None else {"dist": dist}
         flagged, stats, dof = 0, [], 0
         for i in range(pairs):
-            r = projection_diff(lens_from_solution(solve(true_K(), 1000 + i, **kw)),
-                                lens_from_solution(solve(K_b, 50_000 + i, **kw)))
+            r = projection_diff(
+                lens_from_solution(solve(true_K(), 1000 + i, **kw)),
+                lens_from_solution(solve(K_b, 50_000 + i, **kw)),
+            )
             flagged += bool(r.significant)
             assert r.raw.test is not None
             stats.append(r.raw.test.statistic)
             dof = r.raw.test.dof
-        print(f"| {name} | {flagged} / {pairs} ({100 * flagged / pairs:.1f} %) | {np.median(stats):.1f} ({dof}) |",
-              flush=True)
+        print(
+            f"| {name} | {flagged} / {pairs} ({100 * flagged / pairs:.1f} %) | {np.median(stats):.1f} ({dof}) |",
+            flush=True,
+        )
 
 
 def detected(paths: list, spec: BoardSpec) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -78,10 +86,13 @@ def baka(size: tuple[int, int] = (1280, 720)) -> None:
     for name, a, b in (("left odd vs even frames", left[0::2], left[1::2]), ("left vs right", left, right)):
         r = projection_diff(lens_of(a, size), lens_of(b, size))
         assert r.raw.test is not None and r.fit.test is not None
-        print(f"baka-stereo {name} ({len(a)} and {len(b)} views): {'different' if r.significant else 'same'}; "
-              f"chi2 {r.raw.test.statistic:.1f} / {r.fit.test.statistic:.1f} vs {r.raw.test.threshold:.1f} "
-              f"({r.raw.test.dof} dof); |d| p50 {r.raw.percentiles_px['p50']:.2f} px as stored, "
-              f"{r.fit.percentiles_px['p50']:.2f} px after {r.rotation_fit_deg:.3f} deg", flush=True)
+        print(
+            f"baka-stereo {name} ({len(a)} and {len(b)} views): {'different' if r.significant else 'same'}; "
+            f"chi2 {r.raw.test.statistic:.1f} / {r.fit.test.statistic:.1f} vs {r.raw.test.threshold:.1f} "
+            f"({r.raw.test.dof} dof); |d| p50 {r.raw.percentiles_px['p50']:.2f} px as stored, "
+            f"{r.fit.percentiles_px['p50']:.2f} px after {r.rotation_fit_deg:.3f} deg",
+            flush=True,
+        )
 
 
 def real_splits(splits: int) -> None:
@@ -91,15 +102,21 @@ def real_splits(splits: int) -> None:
     for _ in range(splits):
         idx = rng.permutation(len(views))
         halves = [idx[:7], idx[7:]]
-        lenses = [lens_from_solution(solve_intrinsics([views[i][0] for i in h], [views[i][1] for i in h],
-                                                      (640, 480), "k1k2")) for h in halves]
+        lenses = [
+            lens_from_solution(
+                solve_intrinsics([views[i][0] for i in h], [views[i][1] for i in h], (640, 480), "k1k2")
+            )
+            for h in halves
+        ]
         r = projection_diff(*lenses)
         assert r.raw.test is not None
         flagged += bool(r.significant)
         stats.append(r.raw.test.statistic)
-    print(f"opencv-left-right left, random 7 + 6 splits: {flagged} / {splits} flagged; chi2 median "
-          f"{np.median(stats):.1f}, quartiles {np.percentile(stats, 25):.1f} / {np.percentile(stats, 75):.1f} "
-          f"(5 dof: median 4.35 if the covariances were honest)")
+    print(
+        f"opencv-left-right left, random 7 + 6 splits: {flagged} / {splits} flagged; chi2 median "
+        f"{np.median(stats):.1f}, quartiles {np.percentile(stats, 25):.1f} / {np.percentile(stats, 75):.1f} "
+        f"(5 dof: median 4.35 if the covariances were honest)"
+    )
 
 
 def main() -> None:

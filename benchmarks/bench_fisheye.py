@@ -91,19 +91,43 @@ def run_mrcal(cam: FisheyeCamera, s, focal_px: float, work: str) -> dict:
         rows += [f"view-{k:03d}.png {x:.6f} {y:.6f} 0" for x, y in px]
     with open(vnl, "w", encoding="utf-8") as fh:
         fh.write("\n".join(rows) + "\n")
-    args = [MRCAL_TOOL, "--corners-cache", vnl, "--imagersize", str(SIZE[0]), str(SIZE[1]),
-            "--lensmodel", MRCAL_SPLINE.format(fov=cam.fov_deg), "--focal", f"{focal_px:.0f}",
-            "--object-spacing", "0.025", "--object-width-n", "9", "--object-height-n", "6",
-            "--skip-calobject-warp-solve", "--outdir", work, "view-*.png"]
+    args = [
+        MRCAL_TOOL,
+        "--corners-cache",
+        vnl,
+        "--imagersize",
+        str(SIZE[0]),
+        str(SIZE[1]),
+        "--lensmodel",
+        MRCAL_SPLINE.format(fov=cam.fov_deg),
+        "--focal",
+        f"{focal_px:.0f}",
+        "--object-spacing",
+        "0.025",
+        "--object-width-n",
+        "9",
+        "--object-height-n",
+        "6",
+        "--skip-calobject-warp-solve",
+        "--outdir",
+        work,
+        "view-*.png",
+    ]
     cpu = children_cpu_s()
     done = subprocess.run(args, cwd=work, capture_output=True, text=True)
     cpu = children_cpu_s() - cpu
     if done.returncode != 0:
-        return {"outcome": f"exit {done.returncode}: {(done.stderr.strip().splitlines() or ['?'])[-1][-70:]}",
-                "cpu_s": cpu}
+        return {
+            "outcome": f"exit {done.returncode}: {(done.stderr.strip().splitlines() or ['?'])[-1][-70:]}",
+            "cpu_s": cpu,
+        }
     helper = os.path.join(os.path.dirname(os.path.abspath(__file__)), "mrcal_solve.py")
-    out = subprocess.run([MRCAL_PY, helper, "evaluate", os.path.join(work, "camera-0.cameramodel")],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [MRCAL_PY, helper, "evaluate", os.path.join(work, "camera-0.cameramodel")],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return {"outcome": "solved", "cpu_s": cpu, **json.loads(out.stdout.strip().splitlines()[-1])}
 
 
@@ -113,8 +137,10 @@ def mrcal_table(n_mrcal: int, seed_base: int) -> None:
         print(f"mrcal: not run ({MRCAL_PY} cannot import mrcal: {why})")
         return
     print(f"mrcal {MRCAL_SPLINE.format(fov=0).replace('=0', '=FOV')} vs calibctl on the same corners:\n")
-    print("| seed | fov deg | lens | calibctl RMS px | calibctl CPU s | mrcal | mrcal RMS px (inliers) | outliers "
-          "| mrcal CPU s | mrcal core fx / true fx |\n|---|---|---|---|---|---|---|---|---|---|")
+    print(
+        "| seed | fov deg | lens | calibctl RMS px | calibctl CPU s | mrcal | mrcal RMS px (inliers) | outliers "
+        "| mrcal CPU s | mrcal core fx / true fx |\n|---|---|---|---|---|---|---|---|---|---|"
+    )
     for i in range(n_mrcal):
         cam, s = session(i, seed_base)
         cpu = time.process_time()
@@ -124,10 +150,12 @@ def mrcal_table(n_mrcal: int, seed_base: int) -> None:
         with tempfile.TemporaryDirectory(prefix="bench-fisheye-mrcal-") as work:
             m = run_mrcal(cam, s, focal, work)
         solved = m["outcome"] == "solved"
-        print(f"| {seed_base + i} | {cam.fov_deg:.0f} | {'circular' if cam.circle_radius_px else 'full-frame'} "
-              f"| {sol.rms_px:.3f} | {cpu:.2f} | {m['outcome']} | {m['rms_px'] if solved else float('nan'):.3f} "
-              f"| {m.get('n_outliers', '-')} | {m['cpu_s']:.2f} | "
-              f"{(str(round(m['fx'], 1)) + ' / ' + str(round(cam.K[0, 0], 1))) if solved else '-'} |")
+        print(
+            f"| {seed_base + i} | {cam.fov_deg:.0f} | {'circular' if cam.circle_radius_px else 'full-frame'} "
+            f"| {sol.rms_px:.3f} | {cpu:.2f} | {m['outcome']} | {m['rms_px'] if solved else float('nan'):.3f} "
+            f"| {m.get('n_outliers', '-')} | {m['cpu_s']:.2f} | "
+            f"{(str(round(m['fx'], 1)) + ' / ' + str(round(cam.K[0, 0], 1))) if solved else '-'} |"
+        )
 
 
 def z_scores(cam: FisheyeCamera, sol) -> dict[str, float]:
@@ -149,7 +177,9 @@ def plain_opencv(s, guess_px: float | None = None) -> tuple[str, float | None, f
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     t = time.perf_counter()
     try:
-        rms, K, _D, _r, _t = cv2.fisheye.calibrate(obj, img, SIZE, K0, np.zeros((4, 1)), flags=flags, criteria=criteria)
+        rms, K, _D, _r, _t = cv2.fisheye.calibrate(
+            obj, img, SIZE, K0, np.zeros((4, 1)), flags=flags, criteria=criteria
+        )
     except cv2.error as exc:
         return f"error: {str(exc).strip().splitlines()[-1][-60:]}", None, None, time.perf_counter() - t
     return "returned", float(K[0, 0]), float(rms), time.perf_counter() - t
@@ -168,38 +198,68 @@ def main(n: int = 30, seed_base: int = 0, n_mrcal: int = 6) -> None:
         twins.append([twin[p] for p in PARAMS])
         outcome, fx_cv, rms_cv, t_cv = plain_opencv(s)
         plain.append((outcome, fx_cv, rms_cv, t_cv))
-        guided.append(plain_opencv(s, focal_guess_px(s.object_points_per_view, s.image_points_per_view, SIZE)))
-        rows.append((i, cam.fov_deg, "circular" if cam.circle_radius_px else "full-frame", len(s.image_points_per_view),
-                     cam.K[0, 0], sol.fx, sol.sigma["fx"], sol.rms_px, outcome, fx_cv, rms_cv))
+        guided.append(
+            plain_opencv(s, focal_guess_px(s.object_points_per_view, s.image_points_per_view, SIZE))
+        )
+        rows.append(
+            (
+                i,
+                cam.fov_deg,
+                "circular" if cam.circle_radius_px else "full-frame",
+                len(s.image_points_per_view),
+                cam.K[0, 0],
+                sol.fx,
+                sol.sigma["fx"],
+                sol.rms_px,
+                outcome,
+                fx_cv,
+                rms_cv,
+            )
+        )
     Z, bias = np.array(zs), (np.array(zs) + np.array(twins)) / 2
-    print(f"machine: {cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
-          f"OpenCV {cv2.__version__}; {datetime.now(UTC):%Y-%m-%d %H:%M} UTC; load {os.getloadavg()[0]:.1f}\n")
-    print("| parameter | mean z | std z | max abs z | bar (abs mean <= 0.3, 0.7 <= std <= 1.5) | bias (antithetic) |\n"
-          "|---|---|---|---|---|---|")
+    print(
+        f"machine: {cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
+        f"OpenCV {cv2.__version__}; {datetime.now(UTC):%Y-%m-%d %H:%M} UTC; load {os.getloadavg()[0]:.1f}\n"
+    )
+    print(
+        "| parameter | mean z | std z | max abs z | bar (abs mean <= 0.3, 0.7 <= std <= 1.5) | bias (antithetic) |\n"
+        "|---|---|---|---|---|---|"
+    )
     for k, p in enumerate(PARAMS):
         m, sd = Z[:, k].mean(), Z[:, k].std(ddof=1)
-        print(f"| {p} | {m:+.3f} | {sd:.3f} | {np.abs(Z[:, k]).max():.2f} | "
-              f"{'pass' if abs(m) <= 0.3 and 0.7 <= sd <= 1.5 else 'FAIL'} | {bias[:, k].mean():+.4f} |")
+        print(
+            f"| {p} | {m:+.3f} | {sd:.3f} | {np.abs(Z[:, k]).max():.2f} | "
+            f"{'pass' if abs(m) <= 0.3 and 0.7 <= sd <= 1.5 else 'FAIL'} | {bias[:, k].mean():+.4f} |"
+        )
     ok = [p for p in plain if p[0] == "returned"]
     err_cv = [abs(r[9] - r[4]) for r in rows if r[9] is not None]
     err_us = [abs(r[5] - r[4]) for r in rows]
-    print(f"\ncalibctl: {n}/{n} solved, median |fx error| {np.median(err_us):.3f} px, "
-          f"{1000 * np.median(times):.0f} ms median per solve")
-    print(f"plain cv2.fisheye.calibrate: {len(ok)}/{n} returned, median |fx error| "
-          f"{np.median(err_cv) if err_cv else float('nan'):.3f} px, max {max(err_cv) if err_cv else float('nan'):.2f} px, "
-          f"{1000 * np.median([p[3] for p in plain]):.0f} ms median per call")
+    print(
+        f"\ncalibctl: {n}/{n} solved, median |fx error| {np.median(err_us):.3f} px, "
+        f"{1000 * np.median(times):.0f} ms median per solve"
+    )
+    print(
+        f"plain cv2.fisheye.calibrate: {len(ok)}/{n} returned, median |fx error| "
+        f"{np.median(err_cv) if err_cv else float('nan'):.3f} px, max {max(err_cv) if err_cv else float('nan'):.2f} px, "
+        f"{1000 * np.median([p[3] for p in plain]):.0f} ms median per call"
+    )
     good = [g for g in guided if g[0] == "returned" and g[2] is not None and g[2] < 1.0]
-    print(f"cv2.fisheye.calibrate from calibctl's focal guess: {len(good)}/{n} reached RMS < 1 px, median RMS "
-          f"{np.median([g[2] for g in guided if g[2] is not None]):.3f} px, "
-          f"{1000 * np.median([g[3] for g in guided]):.0f} ms median per call\n")
-    print("| seed | fov deg | lens | views | true fx | calibctl fx | sigma fx | calibctl RMS | cv2.fisheye | cv2 fx | cv2 RMS |")
+    print(
+        f"cv2.fisheye.calibrate from calibctl's focal guess: {len(good)}/{n} reached RMS < 1 px, median RMS "
+        f"{np.median([g[2] for g in guided if g[2] is not None]):.3f} px, "
+        f"{1000 * np.median([g[3] for g in guided]):.0f} ms median per call\n"
+    )
+    print(
+        "| seed | fov deg | lens | views | true fx | calibctl fx | sigma fx | calibctl RMS | cv2.fisheye | cv2 fx | cv2 RMS |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         cv_fx = f"{r[9]:.2f}" if r[9] is not None else "-"
         cv_rms = f"{r[10]:.3f}" if r[10] is not None else "-"
-        print(f"| {r[0] + seed_base} | {r[1]:.0f} | {r[2]} | {r[3]} | {r[4]:.2f} | {r[5]:.2f} | {r[6]:.3f} | {r[7]:.3f} "
-              f"| {r[8]} | {cv_fx} | {cv_rms} |")
-
+        print(
+            f"| {r[0] + seed_base} | {r[1]:.0f} | {r[2]} | {r[3]} | {r[4]:.2f} | {r[5]:.2f} | {r[6]:.3f} | {r[7]:.3f} "
+            f"| {r[8]} | {cv_fx} | {cv_rms} |"
+        )
 
     print()
     mrcal_table(min(n, n_mrcal), seed_base)

@@ -55,8 +55,10 @@ def main() -> None:
     parser.add_argument("--renders", type=Path, default=Path(tempfile.gettempdir()) / "bench_fisheye_tilt")
     args = parser.parse_args()
     print(f"# bench_fisheye_tilt: load {os.getloadavg()[0]:.2f}; {args.seeds} seeds per field of view")
-    print("| fov deg | sessions | gate passes | truly 3 directions | gate = truth | views | median / p90 / max "
-          "abs tilt error deg | CPU s per session (median) |")
+    print(
+        "| fov deg | sessions | gate passes | truly 3 directions | gate = truth | views | median / p90 / max "
+        "abs tilt error deg | CPU s per session (median) |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for fov in args.fov:
         passes = truly = agree = 0
@@ -65,19 +67,33 @@ def main() -> None:
         for seed in range(args.seeds):
             views, truth, circle = session(args.renders, fov, seed)
             by_file = {v["file"]: v for v in truth["views"]}
-            passed = evaluate_gates(views, SPEC.object_points(), SIZE, image_circle=circle).gate("tilt").passed
+            passed = (
+                evaluate_gates(views, SPEC.object_points(), SIZE, image_circle=circle).gate("tilt").passed
+            )
             t0 = time.process_time()
             geo = view_geometries(views, SPEC.object_points(), SIZE)
             cpu.append(time.process_time() - t0)
             errors += [abs(g.tilt_deg - by_file[g.name]["tilt_deg"]) for g in geo.views]
-            true_pass = len(distinct_directions([by_file[v.name]["direction_deg"] for v in views
-                                                 if 20.0 <= by_file[v.name]["tilt_deg"] <= 45.0])) >= 3
+            true_pass = (
+                len(
+                    distinct_directions(
+                        [
+                            by_file[v.name]["direction_deg"]
+                            for v in views
+                            if 20.0 <= by_file[v.name]["tilt_deg"] <= 45.0
+                        ]
+                    )
+                )
+                >= 3
+            )
             passes += passed
             truly += true_pass
             agree += passed == true_pass
         e = np.array(errors)
-        print(f"| {fov:.0f} | {args.seeds} | {passes} | {truly} | {agree} | {len(e)} | {np.median(e):.2f} / "
-              f"{np.percentile(e, 90):.2f} / {e.max():.2f} | {np.median(cpu):.3f} |")
+        print(
+            f"| {fov:.0f} | {args.seeds} | {passes} | {truly} | {agree} | {len(e)} | {np.median(e):.2f} / "
+            f"{np.percentile(e, 90):.2f} / {e.max():.2f} | {np.median(cpu):.3f} |"
+        )
 
 
 if __name__ == "__main__":

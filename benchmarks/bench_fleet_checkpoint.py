@@ -68,25 +68,48 @@ def _events(robots: int) -> Iterator[FleetEvent]:
             yield FleetEvent(kind="assign", robot=robot, serial=s, version=1, at=at(), **who)
     for k in range(1, 10**6):
         name, new = f"r{k:04d}", k + 1
-        canary = names[(k * CANARY) % robots:][:CANARY]
+        canary = names[(k * CANARY) % robots :][:CANARY]
         everyone = [s for robot in names for s in serials[robot]]
-        yield FleetEvent(kind="rollout", rollout=name, targets=dict.fromkeys(everyone, new), canary=canary, at=at(),
-                         diffs={s: TargetDiff(previous=k, verdict="same", p50_px=0.01, max_px=0.03) for s in everyone},
-                         **who)
+        yield FleetEvent(
+            kind="rollout",
+            rollout=name,
+            targets=dict.fromkeys(everyone, new),
+            canary=canary,
+            at=at(),
+            diffs={s: TargetDiff(previous=k, verdict="same", p50_px=0.01, max_px=0.03) for s in everyone},
+            **who,
+        )
         for robot in canary:
             for s in serials[robot]:
-                yield FleetEvent(kind="assign", robot=robot, serial=s, version=new, rollout=name, at=at(), **who)
+                yield FleetEvent(
+                    kind="assign", robot=robot, serial=s, version=new, rollout=name, at=at(), **who
+                )
         for robot in names:  # the promote's transaction: the other robots' assignments, then the promote
             if robot not in canary:
                 for s in serials[robot]:
-                    yield FleetEvent(kind="assign", robot=robot, serial=s, version=new, rollout=name, at=at(), **who)
-        gate = [GateEvidence(robot=robot, target=s, source="report", id=f"{name}/{s}", sha256="0" * 64, kind="check",
-                             passed=True) for robot in canary for s in serials[robot]]
+                    yield FleetEvent(
+                        kind="assign", robot=robot, serial=s, version=new, rollout=name, at=at(), **who
+                    )
+        gate = [
+            GateEvidence(
+                robot=robot,
+                target=s,
+                source="report",
+                id=f"{name}/{s}",
+                sha256="0" * 64,
+                kind="check",
+                passed=True,
+            )
+            for robot in canary
+            for s in serials[robot]
+        ]
         yield FleetEvent(kind="promote", rollout=name, gate=gate, at=at(), **who)
         if k % 10 == 0:
             for robot in names:
                 for s in serials[robot]:
-                    yield FleetEvent(kind="assign", robot=robot, serial=s, version=k, rollout=name, at=at(), **who)
+                    yield FleetEvent(
+                        kind="assign", robot=robot, serial=s, version=k, rollout=name, at=at(), **who
+                    )
             yield FleetEvent(kind="rollback", rollout=name, at=at(), **who)
 
 
@@ -104,9 +127,16 @@ class Log:
             e = next(self.events)
             self.length += 1
             payload = codec.canonical_text(e)
-            row: dict[str, Any] = {"id": self.length, "subject": e.subject, "kind": e.kind, "at": e.at,
-                                   "payload": payload, "payload_sha256": sha256_hex(payload.encode("utf-8")),
-                                   "chain_seq": self.length, "chain_prev": self.prev}
+            row: dict[str, Any] = {
+                "id": self.length,
+                "subject": e.subject,
+                "kind": e.kind,
+                "at": e.at,
+                "payload": payload,
+                "payload_sha256": sha256_hex(payload.encode("utf-8")),
+                "chain_seq": self.length,
+                "chain_prev": self.prev,
+            }
             row["chain_hash"] = chain.record_hash(self.stream, (), self.length, self.prev, chain.body(row))
             row["signature"] = row["key_id"] = None
             self.prev = row["chain_hash"]
@@ -164,29 +194,60 @@ def run(url: str, robots: int, sizes: list[int], repeats: int) -> list[list[str]
             best = _timed(lambda: rollouts.fleet_status(settings), repeats)
             assert _checkpoints(store)[-1] == log.length == status.events, (_checkpoints(store), log.length)
             with Session(store._write_engine) as s, s.begin():  # noqa: SLF001
-                state_bytes = s.scalar(select(func.length(FleetCheckpointRow.state))
-                                       .where(FleetCheckpointRow.position == log.length))
-                kept = [(r.position, r.chain_hash, r.format, r.written_at, r.state, r.state_sha256)
-                        for r in s.scalars(select(FleetCheckpointRow))]
+                state_bytes = s.scalar(
+                    select(func.length(FleetCheckpointRow.state)).where(
+                        FleetCheckpointRow.position == log.length
+                    )
+                )
+                kept = [
+                    (r.position, r.chain_hash, r.format, r.written_at, r.state, r.state_sha256)
+                    for r in s.scalars(select(FleetCheckpointRow))
+                ]
                 s.execute(delete(FleetCheckpointRow))
             before = _timed(lambda: rollouts.fleet_status(settings), repeats)
             again, staged_again = rollouts.fleet_status(settings)
-            assert again.as_json() == status.as_json() and [r.as_json() for r in staged_again] == \
-                [r.as_json() for r in staged], "a checkpoint changed what status says"
+            assert again.as_json() == status.as_json() and [r.as_json() for r in staged_again] == [
+                r.as_json() for r in staged
+            ], "a checkpoint changed what status says"
             with Session(store._write_engine) as s, s.begin():  # noqa: SLF001
-                s.execute(insert(FleetCheckpointRow), [dict(zip(("position", "chain_hash", "format", "written_at",
-                                                                 "state", "state_sha256"), k, strict=True)) for k in kept])
-            table.append([f"{log.length:,}", f"{len(staged)}", _fmt(before), _fmt(worst), _fmt(best), _fmt(first),
-                          _fmt(later), f"{(state_bytes or 0) / 1e6:.1f} MB"])
+                s.execute(
+                    insert(FleetCheckpointRow),
+                    [
+                        dict(
+                            zip(
+                                ("position", "chain_hash", "format", "written_at", "state", "state_sha256"),
+                                k,
+                                strict=True,
+                            )
+                        )
+                        for k in kept
+                    ],
+                )
+            table.append(
+                [
+                    f"{log.length:,}",
+                    f"{len(staged)}",
+                    _fmt(before),
+                    _fmt(worst),
+                    _fmt(best),
+                    _fmt(first),
+                    _fmt(later),
+                    f"{(state_bytes or 0) / 1e6:.1f} MB",
+                ]
+            )
     return table
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", type=int, default=500, help="robots (4 serials each)")
-    ap.add_argument("--sizes", type=int, nargs="+", default=[2500, 25_000, 250_000], help="log lengths (events)")
+    ap.add_argument(
+        "--sizes", type=int, nargs="+", default=[2500, 25_000, 250_000], help="log lengths (events)"
+    )
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--pg", action="store_true", help="PostgreSQL (a database created and dropped) instead of SQLite")
+    ap.add_argument(
+        "--pg", action="store_true", help="PostgreSQL (a database created and dropped) instead of SQLite"
+    )
     args = ap.parse_args()
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
@@ -205,12 +266,16 @@ def main() -> None:
                 with psycopg.connect(ADMIN_URL, autocommit=True) as admin:
                     admin.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
     load1 = os.getloadavg()
-    print(f"# fleet status with checkpoints ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} "
-          f"CPUs, load (1/5/15 min) {load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at the start and "
-          f"{load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at the end, {'PostgreSQL' if args.pg else 'SQLite'}, "
-          f"{args.robots} robots x 4 serials, EVERY {fleet_checkpoints.EVERY}, median of {args.repeats})\n")
-    print(f"| events | rollouts | status, whole log replayed (before) | status, {fleet_checkpoints.EVERY:,} events past "
-          "a checkpoint | status at a checkpoint | first checkpoint (whole log) | next checkpoint | checkpoint size |")
+    print(
+        f"# fleet status with checkpoints ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} "
+        f"CPUs, load (1/5/15 min) {load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at the start and "
+        f"{load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at the end, {'PostgreSQL' if args.pg else 'SQLite'}, "
+        f"{args.robots} robots x 4 serials, EVERY {fleet_checkpoints.EVERY}, median of {args.repeats})\n"
+    )
+    print(
+        f"| events | rollouts | status, whole log replayed (before) | status, {fleet_checkpoints.EVERY:,} events past "
+        "a checkpoint | status at a checkpoint | first checkpoint (whole log) | next checkpoint | checkpoint size |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for row in table:
         print("| " + " | ".join(row) + " |")

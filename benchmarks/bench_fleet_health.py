@@ -45,10 +45,26 @@ def _files(folder: Path, robots: int, days: int, seed: int = 0) -> list[Path]:
                 at = (start + timedelta(days=d)).isoformat()
                 temp = 20 + 15 * math.sin(2 * math.pi * d / 365) + rng.normal(0, 2)
                 common = {"serial": serial, "robot": f"amr-{r:03d}", "time": at}
-                lines.append({**common, "source_id": f"{serial}/{d}/c", "kind": "check", "verdict": "pass",
-                              "rms_px": base + 0.004 * temp + rng.normal(0, 0.01), "temperature_c": temp})
-                lines.append({**common, "source_id": f"{serial}/{d}/t", "kind": "timeoffset", "sigma_ms": 0.5,
-                              "td_ms": 3.0 + 20e-3 * 86400 * d / 10 + rng.normal(0, 0.5), "temperature_c": temp})
+                lines.append(
+                    {
+                        **common,
+                        "source_id": f"{serial}/{d}/c",
+                        "kind": "check",
+                        "verdict": "pass",
+                        "rms_px": base + 0.004 * temp + rng.normal(0, 0.01),
+                        "temperature_c": temp,
+                    }
+                )
+                lines.append(
+                    {
+                        **common,
+                        "source_id": f"{serial}/{d}/t",
+                        "kind": "timeoffset",
+                        "sigma_ms": 0.5,
+                        "td_ms": 3.0 + 20e-3 * 86400 * d / 10 + rng.normal(0, 0.5),
+                        "temperature_c": temp,
+                    }
+                )
         path = folder / f"amr-{r:03d}.jsonl"
         path.write_text("".join(json.dumps(line) + "\n" for line in lines))
         paths.append(path)
@@ -72,7 +88,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", type=int, default=25, help="robots (4 serials each; 25 -> 100 serials)")
     ap.add_argument("--days", type=int, default=365)
-    ap.add_argument("--db", default=None, help="store URL (default: a fresh SQLite file in a temporary folder)")
+    ap.add_argument(
+        "--db", default=None, help="store URL (default: a fresh SQLite file in a temporary folder)"
+    )
     ap.add_argument("--samples", type=int, default=20, help="serials timed for trends")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -80,8 +98,17 @@ def main() -> None:
         url = args.db or f"sqlite:///{folder / 'fleet.db'}"
         with Store.open(url, create=True) as store:
             for r in range(args.robots):
-                store.add_fleet_event(FleetEvent(kind="register", robot=f"amr-{r:03d}", serials=[
-                    f"CAM-{r:03d}-{c}" for c in range(4)], actor="bench", station="bench", at=utc_now(), reason="bench"))
+                store.add_fleet_event(
+                    FleetEvent(
+                        kind="register",
+                        robot=f"amr-{r:03d}",
+                        serials=[f"CAM-{r:03d}-{c}" for c in range(4)],
+                        actor="bench",
+                        station="bench",
+                        at=utc_now(),
+                        reason="bench",
+                    )
+                )
         paths = _files(folder, args.robots, args.days)
         settings = load_settings(db=url, station="bench", operator="bench", env={})
         t0 = time.perf_counter()
@@ -89,15 +116,23 @@ def main() -> None:
         ingest_s = time.perf_counter() - t0
         stored = sum(r.stored for r in results)
         assert not any(r.refused for r in results), [r.refused[:3] for r in results if r.refused]
-        serials = [f"CAM-{r:03d}-{c}" for r in range(args.robots) for c in range(4)][:: max(1, args.robots * 4 // args.samples)]
+        serials = [f"CAM-{r:03d}-{c}" for r in range(args.robots) for c in range(4)][
+            :: max(1, args.robots * 4 // args.samples)
+        ]
         latencies, slopes, drifts = timed_trends(settings, serials)
-    print(f"# fleet health: ingest and trends ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, "
-          f"load {os.getloadavg()[0]:.1f}, {url.split(':')[0]})\n")
+    print(
+        f"# fleet health: ingest and trends ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, "
+        f"load {os.getloadavg()[0]:.1f}, {url.split(':')[0]})\n"
+    )
     print("| what | value |\n|---|---|")
-    print(f"| reports ingested | {stored} ({args.robots * 4} serials x {args.days} days x 2 kinds, {len(paths)} files) |")
+    print(
+        f"| reports ingested | {stored} ({args.robots * 4} serials x {args.days} days x 2 kinds, {len(paths)} files) |"
+    )
     print(f"| ingest wall | {ingest_s:.1f} s = {stored / ingest_s:,.0f} reports/s |")
-    print(f"| `fleet trends` latency (workflow, {len(latencies)} serials) | median {statistics.median(latencies) * 1e3:.0f} ms, "
-          f"max {max(latencies) * 1e3:.0f} ms |")
+    print(
+        f"| `fleet trends` latency (workflow, {len(latencies)} serials) | median {statistics.median(latencies) * 1e3:.0f} ms, "
+        f"max {max(latencies) * 1e3:.0f} ms |"
+    )
     print(f"| recovered RMS slope (true 0.004 px/degC) | median {statistics.median(slopes):.4f} |")
     print(f"| recovered td drift (true 2 ppm) | median {statistics.median(drifts):.2f} ppm |")
 

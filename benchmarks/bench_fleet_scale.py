@@ -66,14 +66,31 @@ def _files(folder: Path, robots: int, days: int, seed: int = 0) -> list[Path]:
             serial, base = serial_of(r, c), 0.25 + 0.05 * rng.random()
             for d in range(days):
                 temp = 20 + 15 * math.sin(2 * math.pi * d / 365) + rng.normal(0, 2)
-                common = {"serial": serial, "robot": f"amr-{r:03d}", "time": (start + timedelta(days=d)).isoformat(),
-                          "source_id": f"{serial}/{d}", "temperature_c": temp}
+                common = {
+                    "serial": serial,
+                    "robot": f"amr-{r:03d}",
+                    "time": (start + timedelta(days=d)).isoformat(),
+                    "source_id": f"{serial}/{d}",
+                    "temperature_c": temp,
+                }
                 if d % 2 == 0:
-                    lines.append({**common, "kind": "check", "verdict": "pass",
-                                  "rms_px": base + 0.004 * temp + rng.normal(0, 0.01)})
+                    lines.append(
+                        {
+                            **common,
+                            "kind": "check",
+                            "verdict": "pass",
+                            "rms_px": base + 0.004 * temp + rng.normal(0, 0.01),
+                        }
+                    )
                 else:
-                    lines.append({**common, "kind": "timeoffset", "sigma_ms": 0.5,
-                                  "td_ms": 3.0 + 2 * 86.4 * d + rng.normal(0, 0.5)})
+                    lines.append(
+                        {
+                            **common,
+                            "kind": "timeoffset",
+                            "sigma_ms": 0.5,
+                            "td_ms": 3.0 + 2 * 86.4 * d + rng.normal(0, 0.5),
+                        }
+                    )
         path = folder / f"amr-{r:03d}.jsonl"
         path.write_text("".join(json.dumps(line) + "\n" for line in lines))
         paths.append(path)
@@ -90,7 +107,9 @@ def _timed(fn: Callable[[], object], repeats: int) -> list[float]:
 
 
 def _ms(values: list[float]) -> str:
-    return f"median {statistics.median(values) * 1e3:.0f} ms, max {max(values) * 1e3:.0f} ms (n {len(values)})"
+    return (
+        f"median {statistics.median(values) * 1e3:.0f} ms, max {max(values) * 1e3:.0f} ms (n {len(values)})"
+    )
 
 
 def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]:
@@ -99,20 +118,40 @@ def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]
     t0 = time.perf_counter()
     Store.open(url, create=True).close()
     bench_store_scale.SERIALS = len(serials)
-    bench_store_scale.fill(url, 2 * len(serials), create_key(folder / "bench.key"))  # @1 and @2 of each, @2 active
+    bench_store_scale.fill(
+        url, 2 * len(serials), create_key(folder / "bench.key")
+    )  # @1 and @2 of each, @2 active
     with Store.open(url) as store:
-        store.append_fleet_events([_event(kind="register", robot=f"amr-{r:03d}", serials=[serial_of(r, c) for c in range(4)])
-                                   for r in range(robots)])
-        store.append_fleet_events([_event(kind="assign", robot=f"amr-{r:03d}", serial=serial_of(r, c), version=1)
-                                   for r in range(robots) for c in range(4)])
-    rows.append(("setup (fill, register, assign)", f"{time.perf_counter() - t0:.1f} s: {len(serials)} serials x 2 "
-                 f"versions, {robots * 5} fleet events"))
+        store.append_fleet_events(
+            [
+                _event(kind="register", robot=f"amr-{r:03d}", serials=[serial_of(r, c) for c in range(4)])
+                for r in range(robots)
+            ]
+        )
+        store.append_fleet_events(
+            [
+                _event(kind="assign", robot=f"amr-{r:03d}", serial=serial_of(r, c), version=1)
+                for r in range(robots)
+                for c in range(4)
+            ]
+        )
+    rows.append(
+        (
+            "setup (fill, register, assign)",
+            f"{time.perf_counter() - t0:.1f} s: {len(serials)} serials x 2 "
+            f"versions, {robots * 5} fleet events",
+        )
+    )
     settings = load_settings(db=url, station="bench", operator="bench", env={})
     canary = [f"amr-{r:03d}" for r in range(min(5, robots))]
     t1 = time.perf_counter()
     rollouts.start(settings, "bench", [f"{s}@2" for s in serials], canary, "bench")
-    rows.append((f"`fleet rollout start` of every serial's @2 ({len(serials)} targets, {len(canary)} canary robots)",
-                 f"{time.perf_counter() - t1:.1f} s (a `calibctl diff` per target, recorded in the rollout event)"))
+    rows.append(
+        (
+            f"`fleet rollout start` of every serial's @2 ({len(serials)} targets, {len(canary)} canary robots)",
+            f"{time.perf_counter() - t1:.1f} s (a `calibctl diff` per target, recorded in the rollout event)",
+        )
+    )
     t2 = time.perf_counter()
     paths = _files(folder, robots, days)
     gen_s = time.perf_counter() - t2
@@ -121,12 +160,29 @@ def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]
     ingest_s = time.perf_counter() - t3
     stored = sum(r.stored for r in results)
     assert not any(r.refused for r in results), [r.refused[:3] for r in results if r.refused]
-    rows.append(("reports ingested", f"{stored:,} ({len(serials)} serials x {days} days, {len(paths)} files; "
-                 f"written in {gen_s:.0f} s)"))
+    rows.append(
+        (
+            "reports ingested",
+            f"{stored:,} ({len(serials)} serials x {days} days, {len(paths)} files; "
+            f"written in {gen_s:.0f} s)",
+        )
+    )
     rows.append(("ingest wall", f"{ingest_s:.1f} s = {stored / ingest_s:,.0f} reports/s"))
-    canary_lines = [json.dumps({"source_id": f"canary/{serial_of(r, c)}", "serial": serial_of(r, c),
-                                "robot": f"amr-{r:03d}", "time": utc_now().isoformat(), "kind": "check",
-                                "rms_px": 0.3, "verdict": "pass"}) for r in range(len(canary)) for c in range(4)]
+    canary_lines = [
+        json.dumps(
+            {
+                "source_id": f"canary/{serial_of(r, c)}",
+                "serial": serial_of(r, c),
+                "robot": f"amr-{r:03d}",
+                "time": utc_now().isoformat(),
+                "kind": "check",
+                "rms_px": 0.3,
+                "verdict": "pass",
+            }
+        )
+        for r in range(len(canary))
+        for c in range(4)
+    ]
     (folder / "canary.jsonl").write_text("\n".join(canary_lines) + "\n")
     assert not health.ingest(settings, [folder / "canary.jsonl"])[0].refused
     status_s = _timed(lambda: rollouts.fleet_status(settings), 5)
@@ -140,9 +196,14 @@ def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]
     rows.append(("  active versions, one batched query (now)", _ms(batch_s)))
     t4 = time.perf_counter()
     promoted = rollouts.promote(settings, "bench", "bench")
-    rows.append((f"`fleet rollout promote` to the other {robots - len(canary)} robots", f"{time.perf_counter() - t4:.1f} s "
-                 f"({len(promoted.promote.gate) if promoted.promote else 0} gate inputs recorded; "
-                 f"{(robots - len(canary)) * 4} assign events, one transaction)"))
+    rows.append(
+        (
+            f"`fleet rollout promote` to the other {robots - len(canary)} robots",
+            f"{time.perf_counter() - t4:.1f} s "
+            f"({len(promoted.promote.gate) if promoted.promote else 0} gate inputs recorded; "
+            f"{(robots - len(canary)) * 4} assign events, one transaction)",
+        )
+    )
     sample = serials[:: max(1, len(serials) // 20)]
     trends_s, slopes, drifts = timed_trends(settings, sample)
     with Store.open(url, create=False) as store:
@@ -152,7 +213,12 @@ def run(url: str, robots: int, days: int, folder: Path) -> list[tuple[str, str]]
         whole_s = _timed(store.fleet_check_rms, 3)
     rows.append((f"`fleet trends SERIAL` (workflow, {len(sample)} serials)", _ms(trends_s)))
     rows.append(("  its serial's rows (index serial, kind, at)", _ms(rows_s)))
-    rows.append((f"  the per-camera spread over {SPREAD_WINDOW.days} days (now; index kind, at, serial, rms_px)", _ms(spread_s)))
+    rows.append(
+        (
+            f"  the per-camera spread over {SPREAD_WINDOW.days} days (now; index kind, at, serial, rms_px)",
+            _ms(spread_s),
+        )
+    )
     rows.append(("  the per-camera spread over the whole table (the former query)", _ms(whole_s)))
     rows.append(("recovered RMS slope (true 0.004 px/degC)", f"median {statistics.median(slopes):.4f}"))
     rows.append(("recovered td drift (true 2 ppm)", f"median {statistics.median(drifts):.2f} ppm"))
@@ -163,7 +229,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", type=int, default=500, help="robots (4 serials each)")
     ap.add_argument("--days", type=int, default=365)
-    ap.add_argument("--database", default="calibctl_bench_fleet", help="the database created (and dropped) for it")
+    ap.add_argument(
+        "--database", default="calibctl_bench_fleet", help="the database created (and dropped) for it"
+    )
     ap.add_argument("--keep", action="store_true", help="leave the database for a look afterwards")
     args = ap.parse_args()
     name = args.database
@@ -179,8 +247,10 @@ def main() -> None:
         if not args.keep:
             with psycopg.connect(ADMIN_URL, autocommit=True) as admin:
                 admin.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
-    print(f"# fleet at scale ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs, "
-          f"load {load:.1f} at the start and {os.getloadavg()[0]:.1f} at the end, PostgreSQL)\n")
+    print(
+        f"# fleet at scale ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs, "
+        f"load {load:.1f} at the start and {os.getloadavg()[0]:.1f} at the end, PostgreSQL)\n"
+    )
     print("| what | value |\n|---|---|")
     for what, value in rows:
         print(f"| {what} | {value} |")

@@ -59,24 +59,51 @@ print(json.dumps({"detect_s": t2 - t1, "total_s": t3 - t0, "cpu_s": time.process
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--images", type=Path, help="a folder of 9x6 board PNGs (default: render 20 at 1280x960)")
+    parser.add_argument(
+        "--images", type=Path, help="a folder of 9x6 board PNGs (default: render 20 at 1280x960)"
+    )
     opts = parser.parse_args()
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(REPO)
     images = opts.images
     if images is None:
         images = Path(tempfile.mkdtemp(prefix="calibctl-overlap-")) / "synth-1280"
-        subprocess.run([sys.executable, "-m", "calibctl", "synth", str(images), "--scenario", "good", "--views", "20",
-                        "--size", "1280x960", "--seed", "1"], env=env, check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "calibctl",
+                "synth",
+                str(images),
+                "--scenario",
+                "good",
+                "--views",
+                "20",
+                "--size",
+                "1280x960",
+                "--seed",
+                "1",
+            ],
+            env=env,
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
     runs: dict[str, list[dict[str, float]]] = {"sequential": [], "overlap": []}
     for i in range(opts.repeats + 1):
         for mode in runs:
-            done = subprocess.run([sys.executable, "-c", CHILD, mode, str(images)], env=env, capture_output=True,
-                                  text=True, check=True)
+            done = subprocess.run(
+                [sys.executable, "-c", CHILD, mode, str(images)],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             if i:  # the first round warms the file cache
                 runs[mode].append(json.loads(done.stdout.strip().splitlines()[-1]))
-    print(f"{cpu_model()}, {os.cpu_count()} CPUs, load average {', '.join(f'{v:.2f}' for v in os.getloadavg())}; "
-          f"best / median of {opts.repeats}, ms\n")
+    print(
+        f"{cpu_model()}, {os.cpu_count()} CPUs, load average {', '.join(f'{v:.2f}' for v in os.getloadavg())}; "
+        f"best / median of {opts.repeats}, ms\n"
+    )
     print("| order | detection wall | whole run wall | process CPU |\n|---|---|---|---|")
     for mode, rows in runs.items():
         cells = []

@@ -68,22 +68,33 @@ def main() -> None:
     args = ap.parse_args()
     sweeps = [read_scan(p) for p in sorted((ACFR / "pcd").glob("*_full.pcd"))]
     synth = render.render_session(1, seed=0, azimuth_step_deg=0.19).poses[0].cloud
-    print(f"## camera-LiDAR (median CPU s of {args.repeats}; {len(sweeps)} acfr sweeps, "
-          f"{int(np.mean([len(s.points_m) for s in sweeps]))} points on average; rendered sweep {len(synth.points_m)} points)\n")
+    print(
+        f"## camera-LiDAR (median CPU s of {args.repeats}; {len(sweeps)} acfr sweeps, "
+        f"{int(np.mean([len(s.points_m) for s in sweeps]))} points on average; rendered sweep {len(synth.points_m)} points)\n"
+    )
     print("| step | calibctl | plain numpy |\n|---|---|---|")
     ours = timed(lambda: [segment_board(s, BOX, BOARD.backing_m) for s in sweeps], args.repeats) / len(sweeps)
-    plain = timed(lambda: [plain_segment(s.points_m, BOX, np.random.default_rng(0)) for s in sweeps],
-                  args.repeats) / len(sweeps)
+    plain = timed(
+        lambda: [plain_segment(s.points_m, BOX, np.random.default_rng(0)) for s in sweeps], args.repeats
+    ) / len(sweeps)
     print(f"| segmentation, one acfr sweep | {ours * 1e3:.1f} ms | {plain * 1e3:.1f} ms |")
     ours = timed(lambda: segment_board(synth, render.RENDER_BOX, BOARD.backing_m), args.repeats)
-    plain = timed(lambda: plain_segment(synth.points_m, render.RENDER_BOX, np.random.default_rng(0)), args.repeats)
-    print(f"| segmentation, rendered {len(synth.points_m)}-point sweep | {ours * 1e3:.1f} ms | {plain * 1e3:.1f} ms |")
-    req = wf.LidarRequest(ACFR / "images", ACFR / "pcd", BOARD, BOX, ACFR / "camera_info.yaml", scan_pattern="*_full.pcd")
+    plain = timed(
+        lambda: plain_segment(synth.points_m, render.RENDER_BOX, np.random.default_rng(0)), args.repeats
+    )
+    print(
+        f"| segmentation, rendered {len(synth.points_m)}-point sweep | {ours * 1e3:.1f} ms | {plain * 1e3:.1f} ms |"
+    )
+    req = wf.LidarRequest(
+        ACFR / "images", ACFR / "pcd", BOARD, BOX, ACFR / "camera_info.yaml", scan_pattern="*_full.pcd"
+    )
     poses, _ = wf.collect_poses(req, wf.load_lens(None, req.camera_info, None))  # type: ignore[arg-type]
     ours = timed(lambda: ls.solve(poses, BOARD), args.repeats)
     plain = timed(lambda: ls.closed_form(poses, BOARD), args.repeats)
-    print(f"| solve of {len(poses)} acfr poses (calibctl: joint LS + covariance; plain: closed form only) | "
-          f"{ours:.2f} s | {plain * 1e3:.1f} ms |")
+    print(
+        f"| solve of {len(poses)} acfr poses (calibctl: joint LS + covariance; plain: closed form only) | "
+        f"{ours:.2f} s | {plain * 1e3:.1f} ms |"
+    )
 
 
 if __name__ == "__main__":

@@ -38,7 +38,9 @@ def z_scores(seed: int, biases: str) -> tuple[np.ndarray, np.ndarray]:
         if biases != "as-drawn":  # the render added bias[ring] to each range: take it out once, or twice
             unit = cloud.points_m / np.linalg.norm(cloud.points_m, axis=1, keepdims=True)
             times = 1.0 if biases == "removed" else 2.0
-            cloud = PointCloud(cloud.points_m - times * bias[cloud.ring][:, None] * unit, cloud.intensity, cloud.ring)
+            cloud = PointCloud(
+                cloud.points_m - times * bias[cloud.ring][:, None] * unit, cloud.intensity, cloud.ring
+            )
         found = segment_board(cloud, session.box, session.board.backing_m)
         if found.accepted and p.camera is not None:
             poses.append(ls.Pose(str(i), p.camera, found))
@@ -53,8 +55,12 @@ def z_scores(seed: int, biases: str) -> tuple[np.ndarray, np.ndarray]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-119", help="FIRST-LAST, inclusive")
-    ap.add_argument("--biases", choices=("as-drawn", "removed", "negated"), default="as-drawn",
-                    help="the render's per-laser biases as drawn, taken out of the sweep, or negated")
+    ap.add_argument(
+        "--biases",
+        choices=("as-drawn", "removed", "negated"),
+        default="as-drawn",
+        help="the render's per-laser biases as drawn, taken out of the sweep, or negated",
+    )
     args = ap.parse_args()
     first, last = (int(v) for v in args.seeds.split("-"))
     rows = [z_scores(seed, args.biases) for seed in range(first, last + 1)]

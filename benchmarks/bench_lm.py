@@ -59,12 +59,21 @@ def fisheye_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndarray]]
     cases: list[tuple[str, Callable[[], dict[str, np.ndarray]]]] = []
     for i in range(n):
         fov, circular = LENSES[i % len(LENSES)]
-        s = synthesize_fisheye_session(FisheyeCamera.from_fov(SIZE, fov, circular), 15 + i % 6, seed=i, noise_px=0.2)
+        s = synthesize_fisheye_session(
+            FisheyeCamera.from_fov(SIZE, fov, circular), 15 + i % 6, seed=i, noise_px=0.2
+        )
 
         def run(s=s) -> dict[str, np.ndarray]:
             sol = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, "fisheye")
-            return {"K": sol.camera_matrix, "D": sol.dist_coeffs, "rvecs": sol.rvecs, "tvecs": sol.tvecs,
-                    "rms": np.array(sol.rms_px), "sigma": np.array(list(sol.sigma.values()))}
+            return {
+                "K": sol.camera_matrix,
+                "D": sol.dist_coeffs,
+                "rvecs": sol.rvecs,
+                "tvecs": sol.tvecs,
+                "rms": np.array(sol.rms_px),
+                "sigma": np.array(list(sol.sigma.values())),
+            }
+
         cases.append((f"fisheye seed {i} ({fov:.0f} deg, {len(s.image_points_per_view)} views)", run))
     return cases
 
@@ -85,6 +94,7 @@ def fisheye_pose_cases(n: int) -> list[tuple[str, Callable[[], dict[str, np.ndar
                 assert start is not None
                 out.append(np.concatenate(refine_fisheye_pose(o, p, cam.K, D, *start)))
             return {"poses": np.array(out)}
+
         cases.append((f"fisheye pose x{len(s.image_points_per_view)} seed {i}", run))
     return cases
 
@@ -97,11 +107,17 @@ def rig_inputs() -> list[tuple[str, RigViews, list[MemberIntrinsics], bool]]:
         truth = synthesize_rig(n_cams, BOARD, 20, rng)
         corners = rig_corners(truth, BOARD, 0.2, rng)
         ids = np.arange(BOARD.n_corners)
-        rows = tuple(tuple(BoardView(f"f{f}", ids, c) if c is not None else None for c in row)
-                     for f, row in enumerate(corners))
-        views = RigViews(truth.names, BOARD.object_points(), tuple(f"f{f}" for f in range(len(corners))), rows)
-        members = [MemberIntrinsics(nm, c.K, c.dist, c.image_size) for nm, c in zip(truth.names, truth.cameras,
-                                                                                     strict=True)]
+        rows = tuple(
+            tuple(BoardView(f"f{f}", ids, c) if c is not None else None for c in row)
+            for f, row in enumerate(corners)
+        )
+        views = RigViews(
+            truth.names, BOARD.object_points(), tuple(f"f{f}" for f in range(len(corners))), rows
+        )
+        members = [
+            MemberIntrinsics(nm, c.K, c.dist, c.image_size)
+            for nm, c in zip(truth.names, truth.cameras, strict=True)
+        ]
         out.append((f"{n_cams} cams seed {seed}{' refine' if refine else ''}", views, members, refine))
     return out
 
@@ -109,16 +125,26 @@ def rig_inputs() -> list[tuple[str, RigViews, list[MemberIntrinsics], bool]]:
 def rig_cases() -> list[tuple[str, Callable[[], dict[str, np.ndarray]]]]:
     cases: list[tuple[str, Callable[[], dict[str, np.ndarray]]]] = []
     for name, views, members, refine in rig_inputs():
+
         def run(views=views, members=members, refine=refine) -> dict[str, np.ndarray]:
             sol = solve_rig(views, members, refine_intrinsics=refine, solver="lm")
-            return {"cam": sol.cam_poses, "board": sol.board_poses, "cov": sol.covariance,
-                    "K": np.array([m.camera_matrix for m in sol.members])}
+            return {
+                "cam": sol.cam_poses,
+                "board": sol.board_poses,
+                "cov": sol.covariance,
+                "K": np.array([m.camera_matrix for m in sol.members]),
+            }
+
         cases.append((f"rig {name}", run))
         if name == "3 cams seed 1":
+
             def holdout(views=views, members=members) -> dict[str, np.ndarray]:
                 out = validate_rig_holdout(views, members, solver="lm")
-                return {"rms": np.array(out.camera_rms_px),
-                        "pairs": np.array([[p.epipolar_rms_px, p.rectified_rms_px] for p in out.pairs])}
+                return {
+                    "rms": np.array(out.camera_rms_px),
+                    "pairs": np.array([[p.epipolar_rms_px, p.rectified_rms_px] for p in out.pairs]),
+                }
+
             cases.append((f"rig {name} held-out (rig solves + board poses)", holdout))
     return cases
 
@@ -127,12 +153,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fisheye", type=int, default=6, help="fisheye sessions (seeds 0..N-1)")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "bench_lm.npz"),
-                        help=".npz to save every answer in (default benchmarks/out/bench_lm.npz)")
+    parser.add_argument(
+        "--out",
+        default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "out", "bench_lm.npz"),
+        help=".npz to save every answer in (default benchmarks/out/bench_lm.npz)",
+    )
     parser.add_argument("--compare", help=".npz of another checkout's answers")
     args = parser.parse_args()
-    print(f"machine: {cpu_model()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}, Python "
-          f"{platform.python_version()}, OpenCV {cv2.__version__}")
+    print(
+        f"machine: {cpu_model()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}, Python "
+        f"{platform.python_version()}, OpenCV {cv2.__version__}"
+    )
     saved: dict[str, np.ndarray] = {}
     other = dict(np.load(args.compare)) if args.compare else {}
     print(f"| input | best of {args.repeats}, ms | max relative difference |\n|---|---|---|")
@@ -143,7 +174,9 @@ def main() -> int:
             saved[f"{name}/{key}"] = np.asarray(value, np.float64)
             ref = other.get(f"{name}/{key}")
             if ref is not None:
-                diffs.append(float(np.max(np.abs(np.asarray(value) - ref)) / max(float(np.max(np.abs(ref))), 1e-300)))
+                diffs.append(
+                    float(np.max(np.abs(np.asarray(value) - ref)) / max(float(np.max(np.abs(ref))), 1e-300))
+                )
         diff = f"{max(diffs):.1e}" if diffs else "-"
         saved[f"{name}/ms"] = np.array(1000 * seconds)
         ref_ms = other.get(f"{name}/ms")

@@ -41,7 +41,9 @@ VIEWS = 20
 CACHE = Path(__file__).resolve().parent / "out" / "outlier-sessions"
 
 
-def detected_session(size: tuple[int, int], seed: int) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+def detected_session(
+    size: tuple[int, int], seed: int
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """(object points, corners, ids) per detected view of one rendered session, cached on disk."""
     path = CACHE / f"{size[0]}x{size[1]}-{seed}.pkl"
     if path.exists():
@@ -88,9 +90,11 @@ def run(size: tuple[int, int], sessions: int) -> list[str]:
         ratios.append(ratio)
         worst = max(worst, (float(ratio.max()), seed))
     r = np.concatenate(ratios)
-    return [f"| {size[0]}x{size[1]} | {sessions} | {views} | {old} ({100 * old / views:.1f} %) | "
-            f"{new} ({100 * new / views:.1f} %) | {corners} | {np.quantile(r, 0.99):.2f} | {worst[0]:.2f} (seed {worst[1]}) "
-            f"| {max(split_ratios):.2f}, {suspected} suspected, {len(split_ratios)} of {sessions} judged |"]
+    return [
+        f"| {size[0]}x{size[1]} | {sessions} | {views} | {old} ({100 * old / views:.1f} %) | "
+        f"{new} ({100 * new / views:.1f} %) | {corners} | {np.quantile(r, 0.99):.2f} | {worst[0]:.2f} (seed {worst[1]}) "
+        f"| {max(split_ratios):.2f}, {suspected} suspected, {len(split_ratios)} of {sessions} judged |"
+    ]
 
 
 def real_two_camera_rows() -> list[str]:
@@ -98,8 +102,11 @@ def real_two_camera_rows() -> list[str]:
     from tests.datasets import LEFT_RIGHT
 
     rows = []
-    for label, pattern in (("left + right in one folder", "*.jpg"), ("left alone", "left*.jpg"),
-                           ("right alone", "right*.jpg")):
+    for label, pattern in (
+        ("left + right in one folder", "*.jpg"),
+        ("left alone", "left*.jpg"),
+        ("right alone", "right*.jpg"),
+    ):
         obj, img = [], []
         for path in sorted(LEFT_RIGHT.glob(pattern)):
             det, _ = detect_board(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), REAL_BOARD)
@@ -109,9 +116,11 @@ def real_two_camera_rows() -> list[str]:
         split = check_one_camera(obj, img, (640, 480), "k1k2")
         assert split is not None
         groups = f"{len(split.group_a)} / {len(split.group_b)}"
-        rows.append(f"| {label} | {len(obj)} | {groups} | {split.holdout_rms_px[0]:.3f} / {split.holdout_rms_px[1]:.3f} | "
-                    f"{split.cross_rms_px[0]:.3f} / {split.cross_rms_px[1]:.3f} | {split.ratio:.2f} | "
-                    f"{'two cameras' if split.suspected else 'one camera'} |")
+        rows.append(
+            f"| {label} | {len(obj)} | {groups} | {split.holdout_rms_px[0]:.3f} / {split.holdout_rms_px[1]:.3f} | "
+            f"{split.cross_rms_px[0]:.3f} / {split.cross_rms_px[1]:.3f} | {split.ratio:.2f} | "
+            f"{'two cameras' if split.suspected else 'one camera'} |"
+        )
     return rows
 
 
@@ -121,14 +130,20 @@ def main() -> None:
     parser.add_argument("--sizes", default="640x480,1280x960")
     args = parser.parse_args()
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    print(f"# bench_outliers: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
-          f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}\n")
-    print("| size | sessions | views | views flagged, old rule | views flagged, calibctl | corners removed "
-          "| per-view RMS / median, p99 | max | two-camera ratio: max, sessions suspected, judged |")
+    print(
+        f"# bench_outliers: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
+        f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}\n"
+    )
+    print(
+        "| size | sessions | views | views flagged, old rule | views flagged, calibctl | corners removed "
+        "| per-view RMS / median, p99 | max | two-camera ratio: max, sessions suspected, judged |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for size in sizes:
         print("\n".join(run((size[0], size[1]), args.sessions)), flush=True)
-    print(f"\nTwo-camera check on real photos (opencv-left-right; suspected from ratio {TWO_CAMERA_RATIO}):\n")
+    print(
+        f"\nTwo-camera check on real photos (opencv-left-right; suspected from ratio {TWO_CAMERA_RATIO}):\n"
+    )
     print("| folder | views | split | held-out RMS a / b, px | cross RMS a / b, px | ratio | verdict |")
     print("|---|---|---|---|---|---|---|")
     print("\n".join(real_two_camera_rows()))

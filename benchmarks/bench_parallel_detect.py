@@ -48,7 +48,7 @@ from pathlib import Path
 
 from machine import cpu_model, load_1min, run_env  # benchmarks/machine.py (scripts run from benchmarks/)
 
-PLAIN = r'''
+PLAIN = r"""
 import sys, time, glob, os
 t0 = time.perf_counter()
 import cv2, numpy as np
@@ -77,7 +77,7 @@ if __name__ == "__main__":
         obj[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
         cv2.calibrateCameraExtended([obj] * len(views), views, found[0][1], None, None)
     print(f"RESULT {t_detect:.4f} {len(views)} {time.perf_counter() - t:.4f}")
-'''
+"""
 
 CALIBCTL_DETECT = r'''
 import os, sys, time
@@ -117,7 +117,9 @@ def run(cmd: list[str], env: dict[str, str] | None, cwd: Path) -> tuple[float, f
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
     wall, cpu = time.perf_counter() - t, children_cpu_s() - c
     if done.returncode not in (0, 1):
-        raise RuntimeError(f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+        raise RuntimeError(
+            f"{' '.join(cmd[:6])} exited {done.returncode}:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
+        )
     return wall, cpu, done.stdout
 
 
@@ -147,17 +149,51 @@ def template_store(work: Path, code: Path | None = None) -> Path:
     refuses a store a newer one migrated, so a ``--baseline`` gets a template of its own."""
     db = work / ("template.db" if code is None else "template-baseline.db")
     if code is not None:
-        subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{db}", "board", "add", "BENCH", "--cols",
-                        "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument",
-                        "calipers", "--measured-by", "bench", "--measured-on", dt.date.today().isoformat()],
-                       cwd=work, env={**os.environ, "PYTHONPATH": str(code.resolve())}, check=True,
-                       capture_output=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "calibctl",
+                "--db",
+                f"sqlite:///{db}",
+                "board",
+                "add",
+                "BENCH",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--uncertainty-mm",
+                "0.02",
+                "--instrument",
+                "calipers",
+                "--measured-by",
+                "bench",
+                "--measured-on",
+                dt.date.today().isoformat(),
+            ],
+            cwd=work,
+            env={**os.environ, "PYTHONPATH": str(code.resolve())},
+            check=True,
+            capture_output=True,
+        )
         return db
     from calibctl.store.repository import Store
     from calibctl.workflows.board.boards import BoardRegistration, build_board
 
-    reg = BoardRegistration("BENCH", "chessboard", 9, 6, 25.0, uncertainty_mm=0.02, instrument="calipers",
-                            measured_by="bench", measured_on=dt.date.today().isoformat())
+    reg = BoardRegistration(
+        "BENCH",
+        "chessboard",
+        9,
+        6,
+        25.0,
+        uncertainty_mm=0.02,
+        instrument="calipers",
+        measured_by="bench",
+        measured_on=dt.date.today().isoformat(),
+    )
     with Store.open(f"sqlite:///{db}") as store:
         store.add_board(build_board(reg, created_by="bench"))
     return db
@@ -170,10 +206,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
     parser.add_argument("--no-real", action="store_true", help="the rendered sets only")
-    parser.add_argument("--model", default="k1k2",
-                        help="calibrate's --model (the plain script stays calibrateCameraExtended)")
+    parser.add_argument(
+        "--model", default="k1k2", help="calibrate's --model (the plain script stays calibrateCameraExtended)"
+    )
     args = parser.parse_args()
-    args.rendered, args.real = args.rendered.resolve(), args.real.resolve()  # the processes run in the work folder
+    args.rendered, args.real = (
+        args.rendered.resolve(),
+        args.real.resolve(),
+    )  # the processes run in the work folder
     cores = len(os.sched_getaffinity(0))
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
@@ -182,45 +222,125 @@ def main() -> None:
         r20.mkdir()
         for p in sorted(args.rendered.glob("*.png"))[:20]:
             shutil.copy(p, r20 / p.name)
-        sets = [("rendered 1280x960, 96 views", args.rendered), ("rendered 1280x960, 20 views", r20),
-                (f"real: {args.real.name}", args.real)][:2 if args.no_real else 3]
+        sets = [
+            ("rendered 1280x960, 96 views", args.rendered),
+            ("rendered 1280x960, 20 views", r20),
+            (f"real: {args.real.name}", args.real),
+        ][: 2 if args.no_real else 3]
         (work / "plain.py").write_text(PLAIN)
         (work / "detect.py").write_text(CALIBCTL_DETECT)
         template = template_store(work)
         template_before = None if args.baseline is None else template_store(work, args.baseline)
         load = os.getloadavg()
-        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
-              f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
-              f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round; "
-              f"calibrate --model {args.model}\n")
+        print(
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
+            f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
+            f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round; "
+            f"calibrate --model {args.model}\n"
+        )
         for label, folder in sets:
-            det = {"plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
-                   f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
-                   "calibctl classify_files, jobs 1": [py, str(work / "detect.py"), str(folder), "1"],
-                   f"calibctl classify_files, jobs {cores} (default)": [py, str(work / "detect.py"), str(folder), str(cores)]}
+            det = {
+                "plain sequential loop": [py, str(work / "plain.py"), str(folder), "1", "detect"],
+                f"plain Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "detect"],
+                "calibctl classify_files, jobs 1": [py, str(work / "detect.py"), str(folder), "1"],
+                f"calibctl classify_files, jobs {cores} (default)": [
+                    py,
+                    str(work / "detect.py"),
+                    str(folder),
+                    str(cores),
+                ],
+            }
             db = work / "run.db"
             url = f"sqlite:///{db}"
             cli = [py, "-m", "calibctl", "--db", url]
-            e2e = {"plain script (detect + calibrateCameraExtended)": [py, str(work / "plain.py"), str(folder), "1", "solve"],
-                   f"plain script on Pool({cores})": [py, str(work / "plain.py"), str(folder), str(cores), "solve"],
-                   "calibctl capture --jobs 1": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--json"],
-                   "calibctl capture (default jobs)": [*cli, "capture", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--json"],
-                   "calibctl calibrate --jobs 1": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--jobs", "1", "--model", args.model, "--json"],
-                   "calibctl calibrate (default jobs)": [*cli, "calibrate", "--serial", "B-1", "--board", "BENCH", "--source", str(folder), "--model", args.model, "--json"]}
+            e2e = {
+                "plain script (detect + calibrateCameraExtended)": [
+                    py,
+                    str(work / "plain.py"),
+                    str(folder),
+                    "1",
+                    "solve",
+                ],
+                f"plain script on Pool({cores})": [
+                    py,
+                    str(work / "plain.py"),
+                    str(folder),
+                    str(cores),
+                    "solve",
+                ],
+                "calibctl capture --jobs 1": [
+                    *cli,
+                    "capture",
+                    "--serial",
+                    "B-1",
+                    "--board",
+                    "BENCH",
+                    "--source",
+                    str(folder),
+                    "--jobs",
+                    "1",
+                    "--json",
+                ],
+                "calibctl capture (default jobs)": [
+                    *cli,
+                    "capture",
+                    "--serial",
+                    "B-1",
+                    "--board",
+                    "BENCH",
+                    "--source",
+                    str(folder),
+                    "--json",
+                ],
+                "calibctl calibrate --jobs 1": [
+                    *cli,
+                    "calibrate",
+                    "--serial",
+                    "B-1",
+                    "--board",
+                    "BENCH",
+                    "--source",
+                    str(folder),
+                    "--jobs",
+                    "1",
+                    "--model",
+                    args.model,
+                    "--json",
+                ],
+                "calibctl calibrate (default jobs)": [
+                    *cli,
+                    "calibrate",
+                    "--serial",
+                    "B-1",
+                    "--board",
+                    "BENCH",
+                    "--source",
+                    str(folder),
+                    "--model",
+                    args.model,
+                    "--json",
+                ],
+            }
             if args.baseline is not None:
-                det[f"before: calibctl classify_files, jobs {cores} (default)"] = \
-                    det[f"calibctl classify_files, jobs {cores} (default)"]
+                det[f"before: calibctl classify_files, jobs {cores} (default)"] = det[
+                    f"calibctl classify_files, jobs {cores} (default)"
+                ]
                 for jobs in ("1", "default"):
-                    e2e[f"before: calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"] = \
+                    e2e[f"before: calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"] = (
                         e2e[f"calibctl calibrate {'--jobs 1' if jobs == '1' else '(default jobs)'}"]
+                    )
             env = run_env(work / "pycache")
-            base_env = None if args.baseline is None else run_env(work / "pycache-before", args.baseline.resolve())
+            base_env = (
+                None if args.baseline is None else run_env(work / "pycache-before", args.baseline.resolve())
+            )
             best: dict[str, tuple[float, str, float]] = {}
             least_cpu: dict[str, float] = {}
             every: dict[str, list[tuple[float, float]]] = {}  # (seconds, load) of every counted round
             for round_ in range(args.repeats + 1):  # round 0 fills the bytecode caches and is not counted
                 for name, cmd in [*det.items(), *e2e.items()]:
-                    shutil.copyfile(template_before if name.startswith("before:") and template_before else template, db)
+                    shutil.copyfile(
+                        template_before if name.startswith("before:") and template_before else template, db
+                    )
                     shutil.rmtree(work / "calibctl-images", ignore_errors=True)
                     load = load_1min()
                     wall, cpu, out = run(cmd, base_env if name.startswith("before:") else env, work)
@@ -239,18 +359,25 @@ def main() -> None:
                     every.setdefault(name, []).append((seconds, load))
                     if name not in best or seconds < best[name][0]:
                         best[name] = (seconds, note, load)
-            print(f"### {label}\n\n| path | best s | vs plain sequential | median s | median vs plain | process CPU s "
-                  "(least) | CPU vs plain | recall | load at best | load range |\n|---|---|---|---|---|---|---|---|---|---|")
-            for group, ref in ((det, "plain sequential loop"), (e2e, "plain script (detect + calibrateCameraExtended)")):
+            print(
+                f"### {label}\n\n| path | best s | vs plain sequential | median s | median vs plain | process CPU s "
+                "(least) | CPU vs plain | recall | load at best | load range |\n|---|---|---|---|---|---|---|---|---|---|"
+            )
+            for group, ref in (
+                (det, "plain sequential loop"),
+                (e2e, "plain script (detect + calibrateCameraExtended)"),
+            ):
                 for name in group:
                     seconds, note, load = best[name]
                     median = statistics.median(t for t, _ in every[name])
                     loads = [lo for _, lo in every[name]]
                     ref_median = statistics.median(t for t, _ in every[ref])
-                    print(f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {median:.3f} | "
-                          f"{median / ref_median:.2f}x | {least_cpu[name]:.2f} | "
-                          f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} | "
-                          f"{min(loads):.2f}-{max(loads):.2f} |")
+                    print(
+                        f"| {name} | {seconds:.3f} | {seconds / best[ref][0]:.2f}x | {median:.3f} | "
+                        f"{median / ref_median:.2f}x | {least_cpu[name]:.2f} | "
+                        f"{least_cpu[name] / least_cpu[ref]:.2f}x | {note} | {load:.2f} | "
+                        f"{min(loads):.2f}-{max(loads):.2f} |"
+                    )
             print(f"\nload average {os.getloadavg()[0]:.2f} after this set\n", flush=True)
 
 

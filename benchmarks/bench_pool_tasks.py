@@ -68,12 +68,16 @@ def main() -> None:
     pool = worker_pool.process_pool(2)
     chunked = image_outcomes.task_chunks
     policies: dict[str, Callable[[list[int], int], list[list[int]]]] = {
-        "one file a task (before)": lambda todo, workers: [[i] for i in todo], "task_chunks": chunked}
+        "one file a task (before)": lambda todo, workers: [[i] for i in todo],
+        "task_chunks": chunked,
+    }
     load = os.getloadavg()
-    print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
-          f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
-          f"{load[2]:.2f} at start; {len(paths)} images, warm pool of 2, {args.rounds} rounds alternating, "
-          f"summarize={'sized_half' if args.summarize else 'None'}\n")
+    print(
+        f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+        f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
+        f"{load[2]:.2f} at start; {len(paths)} images, warm pool of 2, {args.rounds} rounds alternating, "
+        f"summarize={'sized_half' if args.summarize else 'None'}\n"
+    )
     runs: dict[str, list[tuple[float, float, float]]] = {}
     reference = None
     for _ in range(args.rounds):
@@ -81,9 +85,14 @@ def main() -> None:
             image_outcomes.task_chunks = policy  # type: ignore[assignment]
             pids = list(pool._processes)  # noqa: SLF001 - the workers' CPU is read from /proc
             workers0, caller0, t0 = sum(map(proc_cpu_s, pids)), time.process_time(), time.perf_counter()
-            out = image_outcomes.classify_files(paths, BOARD, workers=2, executor="process",
-                                                summarize=sized_half if args.summarize else None,
-                                                on_summary=(lambda summary: None) if args.summarize else None)
+            out = image_outcomes.classify_files(
+                paths,
+                BOARD,
+                workers=2,
+                executor="process",
+                summarize=sized_half if args.summarize else None,
+                on_summary=(lambda summary: None) if args.summarize else None,
+            )
             wall, caller = time.perf_counter() - t0, time.process_time() - caller0
             runs.setdefault(name, []).append((wall, caller, sum(map(proc_cpu_s, pids)) - workers0))
             key = [(o.name, o.status, None if o.corners_px is None else o.corners_px.tobytes()) for o in out]
@@ -94,14 +103,19 @@ def main() -> None:
         with get_context("fork").Pool(2) as plain:  # as the plain script's Pool (Linux's default)
             plain.map(plain_detect, [str(p) for p in paths])
         runs.setdefault("plain Pool(2).map (fork, its start included)", []).append(
-            (time.perf_counter() - t0, time.process_time() - caller0, children_cpu_s() - children0))
-    print("| path | wall s least | wall s median | caller CPU s least | median | workers CPU s least | median "
-          "| workers CPU per image ms |\n|---|---|---|---|---|---|---|---|")
+            (time.perf_counter() - t0, time.process_time() - caller0, children_cpu_s() - children0)
+        )
+    print(
+        "| path | wall s least | wall s median | caller CPU s least | median | workers CPU s least | median "
+        "| workers CPU per image ms |\n|---|---|---|---|---|---|---|---|"
+    )
     for name, rows in runs.items():
         walls, callers, workers = zip(*rows, strict=True)
-        print(f"| {name} | {min(walls):.3f} | {statistics.median(walls):.3f} | {min(callers):.3f} | "
-              f"{statistics.median(callers):.3f} | {min(workers):.2f} | {statistics.median(workers):.2f} | "
-              f"{1000 * statistics.median(workers) / len(paths):.1f} |")
+        print(
+            f"| {name} | {min(walls):.3f} | {statistics.median(walls):.3f} | {min(callers):.3f} | "
+            f"{statistics.median(callers):.3f} | {min(workers):.2f} | {statistics.median(workers):.2f} | "
+            f"{1000 * statistics.median(workers) / len(paths):.1f} |"
+        )
     print(f"\nload average {os.getloadavg()[0]:.2f} at the end")
     worker_pool.shutdown_pool()
 

@@ -58,10 +58,30 @@ def calibctl_store(root: Path) -> str:
         shutil.copy(path, left / path.name)
     url = f"sqlite:///{root / 'store.db'}"
     runner = CliRunner()
-    for args in (["board", "add", "A17", "--kind", "chessboard", "--cols", "9", "--rows", "6", "--square-mm", "25",
-                  "--uncertainty-mm", "0.02", "--instrument", "calipers", "--measured-by", "bench",
-                  "--measured-on", "2026-11-23"],
-                 ["calibrate", "--serial", "LEFT-01", "--board", "A17", "--source", str(left)]):
+    for args in (
+        [
+            "board",
+            "add",
+            "A17",
+            "--kind",
+            "chessboard",
+            "--cols",
+            "9",
+            "--rows",
+            "6",
+            "--square-mm",
+            "25",
+            "--uncertainty-mm",
+            "0.02",
+            "--instrument",
+            "calipers",
+            "--measured-by",
+            "bench",
+            "--measured-on",
+            "2026-11-23",
+        ],
+        ["calibrate", "--serial", "LEFT-01", "--board", "A17", "--source", str(left)],
+    ):
         done = runner.invoke(app, ["--db", url, *args])
         if done.exit_code != 0:
             raise SystemExit(done.output)
@@ -76,12 +96,15 @@ def plain(repeats: int) -> tuple[float, float, float, float]:
         points = []
         for path in sorted(DATASET.glob("left*.jpg")):
             gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-            ok, corners = cv2.findChessboardCorners(gray, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH
-                                                    | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            ok, corners = cv2.findChessboardCorners(
+                gray, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+            )
             if ok:
                 criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
                 points.append(cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), criteria))
-        return cv2.calibrateCameraExtended([obj] * len(points), points, (640, 480), np.eye(3), None, flags=FLAGS)
+        return cv2.calibrateCameraExtended(
+            [obj] * len(points), points, (640, 480), np.eye(3), None, flags=FLAGS
+        )
 
     best, median, out = timed(run, repeats)
     std = out[5].ravel()
@@ -92,8 +115,10 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    print(f"# bench_report: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
-          f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}\n")
+    print(
+        f"# bench_report: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
+        f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}\n"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         url = calibctl_store(Path(tmp))
         settings = load_settings(db=url, env={})
@@ -107,15 +132,23 @@ def main() -> None:
     corners = sum(len(v.corners_px) for v in data.views)
     print("| side | what | best s | median s | result |")
     print("|---|---|---|---|---|")
-    print(f"| calibctl | report: gather (store, residuals, uncertainty map) | {g_best:.3f} | {g_med:.3f} | "
-          f"{len(data.views)} views, {corners} corners |")
-    print(f"| calibctl | report: render HTML | {r_best:.3f} | {r_med:.3f} | {len(html.encode()):,} bytes, "
-          f"byte-identical on regeneration: {html == again} |")
-    print(f"| plain OpenCV | detect + calibrateCameraExtended | {p_best:.3f} | {p_med:.3f} | "
-          f"sigma cx {p_cx:.3f} px, sigma cy {p_cy:.3f} px |")
-    print(f"\ncalibctl: sigma cx {art.stdev.sigma['cx']:.3f} px, sigma cy {art.stdev.sigma['cy']:.3f} px; "
-          f"projection one-sigma at the image centre {centre:.3f} px, worst {float(m.sigma_px.max()):.3f} px; "
-          f"fit RMS {art.rms_px:.3f} px")
+    print(
+        f"| calibctl | report: gather (store, residuals, uncertainty map) | {g_best:.3f} | {g_med:.3f} | "
+        f"{len(data.views)} views, {corners} corners |"
+    )
+    print(
+        f"| calibctl | report: render HTML | {r_best:.3f} | {r_med:.3f} | {len(html.encode()):,} bytes, "
+        f"byte-identical on regeneration: {html == again} |"
+    )
+    print(
+        f"| plain OpenCV | detect + calibrateCameraExtended | {p_best:.3f} | {p_med:.3f} | "
+        f"sigma cx {p_cx:.3f} px, sigma cy {p_cy:.3f} px |"
+    )
+    print(
+        f"\ncalibctl: sigma cx {art.stdev.sigma['cx']:.3f} px, sigma cy {art.stdev.sigma['cy']:.3f} px; "
+        f"projection one-sigma at the image centre {centre:.3f} px, worst {float(m.sigma_px.max()):.3f} px; "
+        f"fit RMS {art.rms_px:.3f} px"
+    )
 
 
 if __name__ == "__main__":

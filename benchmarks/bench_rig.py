@@ -33,7 +33,9 @@ from calibctl.errors import CalibctlError
 from calibctl.workflows.rig.rig_folders import solve_rig_folders
 from calibctl.workflows.synth.synth_rig import run_synth_rig
 
-DATASETS = Path(os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
+DATASETS = Path(
+    os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
+)
 if not DATASETS.is_dir():
     DATASETS = Path("/work/shared/datasets")
 
@@ -47,10 +49,16 @@ def _calibctl(left: Path, right: Path, board: BoardSpec) -> dict[str, object]:
     elapsed = time.perf_counter() - start
     assert run.solution is not None and run.holdout is not None
     edge, pair = run.solution.tree.edges[0], run.holdout.pairs[0]
-    return {"baseline_mm": edge.translation_mm, "sigma_mm": edge.sigma_translation_mm, "rotation_deg": edge.rotation_deg,
-            "sigma_deg": edge.sigma_rotation_deg,
-            "epipolar_rms_px": pair.epipolar_rms_px, "rectified_rms_px": pair.rectified_rms_px,
-            "pairs": len(run.solution.views.frames), "time_s": elapsed}
+    return {
+        "baseline_mm": edge.translation_mm,
+        "sigma_mm": edge.sigma_translation_mm,
+        "rotation_deg": edge.rotation_deg,
+        "sigma_deg": edge.sigma_rotation_deg,
+        "epipolar_rms_px": pair.epipolar_rms_px,
+        "rectified_rms_px": pair.rectified_rms_px,
+        "pairs": len(run.solution.views.frames),
+        "time_s": elapsed,
+    }
 
 
 def _best(fn, repeats: int) -> dict[str, object]:
@@ -74,30 +82,57 @@ def main() -> int:
             for p in (DATASETS / "opencv-left-right").glob(f"{side}*.jpg"):
                 (olr / side / p.name).write_bytes(p.read_bytes())
         sets = [
-            (f"rendered 75 mm pair (truth {true_mm:.3f} mm, {true_deg:.4f} deg)", synth / "CAM0", synth / "CAM1", 9, 6, 0.025),
+            (
+                f"rendered 75 mm pair (truth {true_mm:.3f} mm, {true_deg:.4f} deg)",
+                synth / "CAM0",
+                synth / "CAM1",
+                9,
+                6,
+                0.025,
+            ),
             ("opencv-left-right (1 square = 1 m)", olr / "left", olr / "right", 9, 6, 1.0),
-            ("baka-stereo (23 mm nominal)", DATASETS / "baka-stereo" / "left", DATASETS / "baka-stereo" / "right",
-             7, 10, 0.023),
+            (
+                "baka-stereo (23 mm nominal)",
+                DATASETS / "baka-stereo" / "left",
+                DATASETS / "baka-stereo" / "right",
+                7,
+                10,
+                0.023,
+            ),
         ]
         print(f"## Rig benchmark {dt.datetime.now().astimezone().isoformat(timespec='seconds')}\n")
-        print(f"{cpu_model()}, nproc {len(os.sched_getaffinity(0))}, load average before "
-              f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; OpenCV {cv2.__version__}; best of {args.repeats}\n")
-        print("| set | tool | pairs | baseline mm | rotation deg | epipolar RMS px | rectified rows RMS px | time s |")
+        print(
+            f"{cpu_model()}, nproc {len(os.sched_getaffinity(0))}, load average before "
+            f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; OpenCV {cv2.__version__}; best of {args.repeats}\n"
+        )
+        print(
+            "| set | tool | pairs | baseline mm | rotation deg | epipolar RMS px | rectified rows RMS px | time s |"
+        )
         print("|---|---|---|---|---|---|---|---|")
         for name, left, right, cols, rows, square in sets:
             board = BoardSpec.chessboard(cols, rows, square)
-            mine = _best(lambda left=left, right=right, board=board: _calibctl(left, right, board), args.repeats)
-            plain = _best(lambda left=left, right=right, c=cols, r=rows, s=square: plain_stereo(left, right, c, r, s),
-                          args.repeats)
+            mine = _best(
+                lambda left=left, right=right, board=board: _calibctl(left, right, board), args.repeats
+            )
+            plain = _best(
+                lambda left=left, right=right, c=cols, r=rows, s=square: plain_stereo(left, right, c, r, s),
+                args.repeats,
+            )
             if "refused" in mine:
-                print(f"| {name} | calibctl | - | refused (exit 2): {mine['refused']} | - | - | - | {mine['time_s']:.2f} |")
+                print(
+                    f"| {name} | calibctl | - | refused (exit 2): {mine['refused']} | - | - | - | {mine['time_s']:.2f} |"
+                )
             else:
-                print(f"| {name} | calibctl | {mine['pairs']} | {mine['baseline_mm']:.3f} +/- {mine['sigma_mm']:.3f} | "
-                      f"{mine['rotation_deg']:.4f} +/- {mine['sigma_deg']:.4f} | {mine['epipolar_rms_px']:.3f} (held-out) | "
-                      f"{mine['rectified_rms_px']:.3f} (held-out) | {mine['time_s']:.2f} |")
-            print(f"| {name} | plain OpenCV | {plain['pairs']} | {plain['baseline_m'] * 1e3:.3f} | "
-                  f"{plain['rotation_deg']:.4f} | {plain['epipolar_rms_px']:.3f} (fit; stereo RMS "
-                  f"{plain['stereo_rms_px']:.3f}) | - | {plain['time_s']:.2f} |")
+                print(
+                    f"| {name} | calibctl | {mine['pairs']} | {mine['baseline_mm']:.3f} +/- {mine['sigma_mm']:.3f} | "
+                    f"{mine['rotation_deg']:.4f} +/- {mine['sigma_deg']:.4f} | {mine['epipolar_rms_px']:.3f} (held-out) | "
+                    f"{mine['rectified_rms_px']:.3f} (held-out) | {mine['time_s']:.2f} |"
+                )
+            print(
+                f"| {name} | plain OpenCV | {plain['pairs']} | {plain['baseline_m'] * 1e3:.3f} | "
+                f"{plain['rotation_deg']:.4f} | {plain['epipolar_rms_px']:.3f} (fit; stereo RMS "
+                f"{plain['stereo_rms_px']:.3f}) | - | {plain['time_s']:.2f} |"
+            )
     return 0
 
 

@@ -61,13 +61,23 @@ def distances(views: RigViews, members) -> list[dict[str, float]]:
         cov = loop_covariance(sols, views, around, x)
         block = np.zeros((x.size, x.size))
         for i, s in enumerate(sols):
-            block[6 * i:6 * i + 6, 6 * i:6 * i + 6] = s.jacobian_covariance if s.jacobian_covariance is not None \
-                else s.covariance
-        covs = {"independent": propagate(around, x, block), "joint Jacobian": cov.jacobian,
-                "joint frame-level": cov.frame_level, "joint Jacobian x frame factor": None if cov.frame_level is None
-                else cov.jacobian * max(1.0, np.trace(np.linalg.solve(cov.jacobian, cov.frame_level)) / 6)}
-        out.append({k: (float(np.sqrt(r @ np.linalg.solve(c, r))) if c is not None else float("nan"))
-                    for k, c in covs.items()})
+            block[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = (
+                s.jacobian_covariance if s.jacobian_covariance is not None else s.covariance
+            )
+        covs = {
+            "independent": propagate(around, x, block),
+            "joint Jacobian": cov.jacobian,
+            "joint frame-level": cov.frame_level,
+            "joint Jacobian x frame factor": None
+            if cov.frame_level is None
+            else cov.jacobian * max(1.0, np.trace(np.linalg.solve(cov.jacobian, cov.frame_level)) / 6),
+        }
+        out.append(
+            {
+                k: (float(np.sqrt(r @ np.linalg.solve(c, r))) if c is not None else float("nan"))
+                for k, c in covs.items()
+            }
+        )
     return out
 
 
@@ -100,8 +110,10 @@ def summary(label: str, ds: list[dict[str, float]]) -> None:
         d = d[np.isfinite(d)]
         if d.size == 0:
             continue
-        print(f"| {label} | {k} | {d.size} | {np.mean(d ** 2):.2f} | {np.median(d):.2f} | {np.max(d):.2f} | "
-              f"{np.mean(d > LIMIT):.3f} |")
+        print(
+            f"| {label} | {k} | {d.size} | {np.mean(d**2):.2f} | {np.median(d):.2f} | {np.max(d):.2f} | "
+            f"{np.mean(d > LIMIT):.3f} |"
+        )
 
 
 def main() -> None:
@@ -115,24 +127,36 @@ def main() -> None:
     for n in (3, 4):
         ds = []
         for seed in range(args.seeds):
-            truth, views = cached(f"r{n}_{seed}", lambda n=n, seed=seed: rendered_session(
-                n, seed=3000 + 100 * n + seed, n_frames=12, min_cameras=3))
+            truth, views = cached(
+                f"r{n}_{seed}",
+                lambda n=n, seed=seed: rendered_session(
+                    n, seed=3000 + 100 * n + seed, n_frames=12, min_cameras=3
+                ),
+            )
             ds += distances(views, true_members(truth))
         summary(f"clean renders, {n} cameras", ds)
     corner = [corner_session(3, seed=2300 + s) for s in range(args.seeds)]
     summary("clean corner-level, 3 cameras", [d for t, v in corner for d in distances(v, true_members(t))])
-    renders = [cached(f"b3_{s}", lambda s=s: rendered_session(3, seed=5300 + s, n_frames=16))
-               for s in range(args.seeds)]
-    summary("clean renders with pair-only frames, 3 cameras",
-            [d for t, v in renders for d in distances(v, true_members(t))])
+    renders = [
+        cached(f"b3_{s}", lambda s=s: rendered_session(3, seed=5300 + s, n_frames=16))
+        for s in range(args.seeds)
+    ]
+    summary(
+        "clean renders with pair-only frames, 3 cameras",
+        [d for t, v in renders for d in distances(v, true_members(t))],
+    )
     # broken: only the seeds with frames to shift, and only the loop 0-1-2 (a 3-camera rig has no other)
     corner = [(t, v) for t, v in corner if breakable(v)]
     renders = [(t, v) for t, v in renders if breakable(v)]
     for shift in args.shifts:
-        summary(f"broken {shift:g} px, corner-level ({len(corner)} seeds)",
-                [d for t, v in corner for d in distances(broken(v, shift), true_members(t))])
-        summary(f"broken {shift:g} px, renders ({len(renders)} seeds)",
-                [d for t, v in renders for d in distances(broken(v, shift), true_members(t))])
+        summary(
+            f"broken {shift:g} px, corner-level ({len(corner)} seeds)",
+            [d for t, v in corner for d in distances(broken(v, shift), true_members(t))],
+        )
+        summary(
+            f"broken {shift:g} px, renders ({len(renders)} seeds)",
+            [d for t, v in renders for d in distances(broken(v, shift), true_members(t))],
+        )
 
 
 if __name__ == "__main__":

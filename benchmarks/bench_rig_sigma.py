@@ -39,8 +39,10 @@ from calibctl.errors import CalibctlError  # noqa: E402
 from calibctl.workflows.rig.rig_folders import calibrate_member  # noqa: E402
 
 DATA = Path("/work/shared/datasets")
-REAL = {"opencv-left-right": (BoardSpec.chessboard(9, 6, 0.025), "left*.jpg", "right*.jpg"),
-        "baka-stereo": (BoardSpec.chessboard(7, 10, 0.023), "left/left_*.jpg", "right/right_*.jpg")}
+REAL = {
+    "opencv-left-right": (BoardSpec.chessboard(9, 6, 0.025), "left*.jpg", "right*.jpg"),
+    "baka-stereo": (BoardSpec.chessboard(7, 10, 0.023), "left/left_*.jpg", "right/right_*.jpg"),
+}
 
 
 def _key(name: str) -> str:
@@ -54,8 +56,11 @@ def detect(name: str) -> tuple[BoardSpec, dict[str, dict[str, BoardView]], tuple
     for cam, pattern in zip(("left", "right"), globs, strict=True):
         paths = sorted(str(p) for p in (DATA / name).glob(pattern))
         out = classify_session(paths, spec)
-        per_cam[cam] = {_key(o.path): BoardView(Path(o.path).name, o.corner_ids, o.corners_px)
-                        for o in out if o.accepted and o.corners_px is not None}
+        per_cam[cam] = {
+            _key(o.path): BoardView(Path(o.path).name, o.corner_ids, o.corners_px)
+            for o in out
+            if o.accepted and o.corners_px is not None
+        }
         size = next(o.image_size for o in out if o.image_size)
     return spec, per_cam, size
 
@@ -64,9 +69,16 @@ def solve(spec, per_cam, size, keys, names=True):
     members = []
     for cam, views in per_cam.items():
         vs = [views[k] for k in keys if k in views]
-        members.append(calibrate_member(cam, [spec.object_points()[v.corner_ids] for v in vs],
-                                        [v.corners_px for v in vs], size, "k1k2",
-                                        [v.name for v in vs] if names else None)[0])
+        members.append(
+            calibrate_member(
+                cam,
+                [spec.object_points()[v.corner_ids] for v in vs],
+                [v.corners_px for v in vs],
+                size,
+                "k1k2",
+                [v.name for v in vs] if names else None,
+            )[0]
+        )
     rows = tuple((per_cam["left"].get(k), per_cam["right"].get(k)) for k in keys)
     views = RigViews(("left", "right"), spec.object_points(), tuple(f"{i}" for i in range(len(keys))), rows)
     return solve_rig(views, members)
@@ -74,7 +86,10 @@ def solve(spec, per_cam, size, keys, names=True):
 
 def numbers(sol):
     T = sol.T_a_b(1, 0)
-    out = {"baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3), "rotation_deg": rotation_angle_deg(T[:3, :3])}
+    out = {
+        "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
+        "rotation_deg": rotation_angle_deg(T[:3, :3]),
+    }
     for tag, jac in (("", False), ("jac_", True)):
         cov = sol.pair_covariance(1, 0, jacobian=jac)
         out[f"{tag}sigma_baseline_mm"] = sigma_translation_mm(cov, T[:3, 3])
@@ -100,14 +115,20 @@ def real(name: str, resamples: int) -> None:
             print(f"  resample skipped: {exc}")
     b = np.array([[n["baseline_mm"], n["rotation_deg"]] for n in boot])
     sd = b.std(axis=0, ddof=1)
-    print(f"{name}: {len(keys)} frame keys, {len(boot)} resamples; baseline {full['baseline_mm']:.3f} mm, "
-          f"rotation {full['rotation_deg']:.3f} deg")
-    print(f"  baseline sigma jacobian {full['jac_sigma_baseline_mm']:.4f} reported {full['sigma_baseline_mm']:.4f} "
-          f"bootstrap sd {sd[0]:.4f} -> sd/reported {sd[0] / full['sigma_baseline_mm']:.2f} "
-          f"(sd/jacobian {sd[0] / full['jac_sigma_baseline_mm']:.2f})")
-    print(f"  rotation sigma jacobian {full['jac_sigma_rotation_deg']:.4f} reported {full['sigma_rotation_deg']:.4f} "
-          f"bootstrap sd {sd[1]:.4f} -> sd/reported {sd[1] / full['sigma_rotation_deg']:.2f} "
-          f"(sd/jacobian {sd[1] / full['jac_sigma_rotation_deg']:.2f})")
+    print(
+        f"{name}: {len(keys)} frame keys, {len(boot)} resamples; baseline {full['baseline_mm']:.3f} mm, "
+        f"rotation {full['rotation_deg']:.3f} deg"
+    )
+    print(
+        f"  baseline sigma jacobian {full['jac_sigma_baseline_mm']:.4f} reported {full['sigma_baseline_mm']:.4f} "
+        f"bootstrap sd {sd[0]:.4f} -> sd/reported {sd[0] / full['sigma_baseline_mm']:.2f} "
+        f"(sd/jacobian {sd[0] / full['jac_sigma_baseline_mm']:.2f})"
+    )
+    print(
+        f"  rotation sigma jacobian {full['jac_sigma_rotation_deg']:.4f} reported {full['sigma_rotation_deg']:.4f} "
+        f"bootstrap sd {sd[1]:.4f} -> sd/reported {sd[1] / full['sigma_rotation_deg']:.2f} "
+        f"(sd/jacobian {sd[1] / full['jac_sigma_rotation_deg']:.2f})"
+    )
 
 
 def _z_at(sol, truth, threshold: float) -> tuple[float, float]:
@@ -134,17 +155,24 @@ def renders(seeds: int) -> None:
             sessions[seed] = rendered_session(2, seed=7500 + seed, n_frames=14, baselines_m=(0.075,))
             cache.write_bytes(pickle.dumps(sessions))
         truth, views = sessions[seed]
-        per_cam = {cam: {f"{f}": BoardView(f"{cam}{f}", row[c].corner_ids, row[c].corners_px)
-                         for f, row in enumerate(views.views) if row[c] is not None}
-                   for c, cam in enumerate(("left", "right"))}  # unique photo names, as real folders have
+        per_cam = {
+            cam: {
+                f"{f}": BoardView(f"{cam}{f}", row[c].corner_ids, row[c].corners_px)
+                for f, row in enumerate(views.views)
+                if row[c] is not None
+            }
+            for c, cam in enumerate(("left", "right"))
+        }  # unique photo names, as real folders have
         keys = sorted(set(per_cam["left"]) | set(per_cam["right"]), key=int)
         sols.append((solve(BOARD, per_cam, truth.cameras[0].image_size, keys), truth))
     for threshold in (1.0, 1.3, 1.5):
         zs = np.array([_z_at(sol, truth, threshold) for sol, truth in sols])
         zj = np.array([_z_at(sol, truth, np.inf)[0] for sol, truth in sols])
-        print(f"renders: {seeds} seeds, frame-level used above x{threshold}: baseline z sd {zs[:, 0].std(ddof=1):.2f} "
-              f"(jacobian alone {zj.std(ddof=1):.2f}), z mean {zs[:, 0].mean():+.2f}; reported / jacobian sigma "
-              f"median {np.median(zs[:, 1]):.2f} max {zs[:, 1].max():.2f}")
+        print(
+            f"renders: {seeds} seeds, frame-level used above x{threshold}: baseline z sd {zs[:, 0].std(ddof=1):.2f} "
+            f"(jacobian alone {zj.std(ddof=1):.2f}), z mean {zs[:, 0].mean():+.2f}; reported / jacobian sigma "
+            f"median {np.median(zs[:, 1]):.2f} max {zs[:, 1].max():.2f}"
+        )
 
 
 def main() -> None:
@@ -153,9 +181,11 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=30)
     ap.add_argument("--only", choices=("real", "renders"), default=None)
     args = ap.parse_args()
-    print(f"# bench_rig_sigma {datetime.date.today()}: {cpu_model()}, {os.cpu_count()} cpus, load "
-          f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; Python {sys.version.split()[0]}, OpenCV "
-          f"{cv2.__version__}, numpy {np.__version__}")
+    print(
+        f"# bench_rig_sigma {datetime.date.today()}: {cpu_model()}, {os.cpu_count()} cpus, load "
+        f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; Python {sys.version.split()[0]}, OpenCV "
+        f"{cv2.__version__}, numpy {np.__version__}"
+    )
     if args.only != "renders":
         for name in REAL:
             real(name, args.resamples)

@@ -41,7 +41,9 @@ def _make_store(work: Path, serials: int) -> tuple[str, Path]:
     from calibctl.signing import create_key
     from calibctl.store.repository import Store
 
-    subprocess.run([sys.executable, "-m", "calibctl", "demo"], cwd=work, env=_env(), check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "calibctl", "demo"], cwd=work, env=_env(), check=True, capture_output=True
+    )
     db = f"sqlite:///{work / 'demo-out/calibctl-demo.db'}"
     signer = create_key(work / "station.pem")
     keys = work / "trusted"
@@ -51,13 +53,19 @@ def _make_store(work: Path, serials: int) -> tuple[str, Path]:
         art = store.get_artifact(SERIAL)
         store.add_artifact(art, activate=True, reason="signed copy", actor="bench", station="bench")
         for i in range(1, serials):
-            store.add_artifact(art.model_copy(update={"serial": f"CAM-{i:05d}"}), activate=True, reason="bench",
-                               actor="bench", station="bench")
+            store.add_artifact(
+                art.model_copy(update={"serial": f"CAM-{i:05d}"}),
+                activate=True,
+                reason="bench",
+                actor="bench",
+                station="bench",
+            )
     return db, keys
 
 
-def _time_pair(argv: list[str], plain_env: dict[str, str], keyed_env: dict[str, str],
-               repeats: int) -> tuple[list[float], list[float]]:
+def _time_pair(
+    argv: list[str], plain_env: dict[str, str], keyed_env: dict[str, str], repeats: int
+) -> tuple[list[float], list[float]]:
     """CPU times (user + system) of ``argv`` without and with keys, the two interleaved so the shared machine's
     load falls on both alike (after one warm-up each: file cache, .pyc); wall time on a loaded machine mostly
     measures the load."""
@@ -78,7 +86,9 @@ def _per_record(work: Path, db: str, keys: Path, repeats: int) -> None:
     from calibctl.store.repository import Store
 
     trusted = TrustedKeys.load(keys)
-    print("\n| in-process read | records | without keys, ms/record | with keys, ms/record |\n|---|---:|---:|---:|")
+    print(
+        "\n| in-process read | records | without keys, ms/record | with keys, ms/record |\n|---|---:|---:|---:|"
+    )
     for label, n, work_fn in (
         ("Store.get_artifact (active)", 300, lambda store: [store.get_artifact(SERIAL) for _ in range(300)]),
         ("Store.active_artifacts (lint --all)", None, lambda store: store.active_artifacts()),
@@ -98,7 +108,9 @@ def _per_record(work: Path, db: str, keys: Path, repeats: int) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--serials", type=int, default=200)
     args = parser.parse_args()
@@ -106,13 +118,20 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         db, keys = _make_store(work, args.serials)
-        print("\n| command (fresh process) | without keys, CPU s best / median | with keys, CPU s best / median |\n|---|---:|---:|")
-        for name, sub in (("show", ["show", SERIAL]), ("export --format ros", ["export", SERIAL, "--format", "ros"]),
-                          ("lint --serial", ["lint", "--serial", SERIAL])):
+        print(
+            "\n| command (fresh process) | without keys, CPU s best / median | with keys, CPU s best / median |\n|---|---:|---:|"
+        )
+        for name, sub in (
+            ("show", ["show", SERIAL]),
+            ("export --format ros", ["export", SERIAL, "--format", "ros"]),
+            ("lint --serial", ["lint", "--serial", SERIAL]),
+        ):
             argv = [sys.executable, "-m", "calibctl", "--db", db, *sub]
             plain, keyed = _time_pair(argv, _env(), _env({"CALIBCTL_TRUSTED_KEYS": str(keys)}), args.repeats)
-            print(f"| {name} | {min(plain):.3f} / {statistics.median(plain):.3f} | "
-                  f"{min(keyed):.3f} / {statistics.median(keyed):.3f} |")
+            print(
+                f"| {name} | {min(plain):.3f} / {statistics.median(plain):.3f} | "
+                f"{min(keyed):.3f} / {statistics.median(keyed):.3f} |"
+            )
         _per_record(work, db, keys, args.repeats)
 
 

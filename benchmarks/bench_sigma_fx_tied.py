@@ -38,8 +38,15 @@ import numpy as np
 from calibctl.core.intrinsics.solve import DistortionModel, solve_intrinsics
 from calibctl.core.synth.corners import synthesize_session
 
-UNTIED = DistortionModel("k1k2-untied", cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
-                         ("fx", "fy", "cx", "cy"), ("k1", "k2"), 5, 3, "k1k2 with fx, fy independent")
+UNTIED = DistortionModel(
+    "k1k2-untied",
+    cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+    ("fx", "fy", "cx", "cy"),
+    ("k1", "k2"),
+    5,
+    3,
+    "k1k2 with fx, fy independent",
+)
 
 
 def run(aspect: float, trials: int, seed: int = 7) -> dict[str, float]:
@@ -76,17 +83,23 @@ def main() -> None:
     trials = int(sys.argv[1]) if len(sys.argv) > 1 else 400
     t0 = time.perf_counter()
     rows = [run(1.0, trials), run(1.03, trials)]
-    print(f"# sigma(fx) under CALIB_FIX_ASPECT_RATIO — {trials} trials, {date.today()}, "
-          f"{platform.node()} {platform.machine()}, OpenCV {cv2.__version__}, "
-          f"numpy {np.__version__}, {time.perf_counter() - t0:.1f} s\n")
-    print("| true fx/fy | MC std fx (tied) | mean reported a*sigma(fy) | ratio | MC std fx (untied) "
-          "| mean reported sigma(fx) untied | ratio | mean fx bias (tied) | MC rel. error of a std | max abs(fx/fy - a) |")
+    print(
+        f"# sigma(fx) under CALIB_FIX_ASPECT_RATIO — {trials} trials, {date.today()}, "
+        f"{platform.node()} {platform.machine()}, OpenCV {cv2.__version__}, "
+        f"numpy {np.__version__}, {time.perf_counter() - t0:.1f} s\n"
+    )
+    print(
+        "| true fx/fy | MC std fx (tied) | mean reported a*sigma(fy) | ratio | MC std fx (untied) "
+        "| mean reported sigma(fx) untied | ratio | mean fx bias (tied) | MC rel. error of a std | max abs(fx/fy - a) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['aspect']:.2f} | {r['emp_std_fx_tied']:.4f} | {r['mean_reported_tied']:.4f} "
-              f"| {r['mean_reported_tied'] / r['emp_std_fx_tied']:.3f} | {r['emp_std_fx_untied']:.4f} "
-              f"| {r['mean_reported_untied']:.4f} | {r['mean_reported_untied'] / r['emp_std_fx_untied']:.3f} "
-              f"| {r['mean_bias_tied']:+.4f} | {r['mc_rel_err']:.3f} | {r['max_ratio_err']:.1e} |")
+        print(
+            f"| {r['aspect']:.2f} | {r['emp_std_fx_tied']:.4f} | {r['mean_reported_tied']:.4f} "
+            f"| {r['mean_reported_tied'] / r['emp_std_fx_tied']:.3f} | {r['emp_std_fx_untied']:.4f} "
+            f"| {r['mean_reported_untied']:.4f} | {r['mean_reported_untied'] / r['emp_std_fx_untied']:.3f} "
+            f"| {r['mean_bias_tied']:+.4f} | {r['mc_rel_err']:.3f} | {r['max_ratio_err']:.1e} |"
+        )
 
 
 if __name__ == "__main__":

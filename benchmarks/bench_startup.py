@@ -72,9 +72,13 @@ def commands(db: str, artifact: Path, floor_app: Path) -> dict[str, list[str]]:
         REFERENCE: ["-c", "import cv2, numpy"],
         "floor: bare typer app, 1 command": [str(floor_app), "history", SERIAL],
         "python -c 'import typer, pydantic, rich.console, rich.table'": [
-            "-c", "import typer.main, pydantic.main, rich.console, rich.table"],
+            "-c",
+            "import typer.main, pydantic.main, rich.console, rich.table",
+        ],
         "python -c '... and calibctl.artifacts.calibration'": [  # the models history/show/export validate
-            "-c", "import typer.main, pydantic.main, rich.console, rich.table, calibctl.artifacts.calibration"],
+            "-c",
+            "import typer.main, pydantic.main, rich.console, rich.table, calibctl.artifacts.calibration",
+        ],
         "calibctl --help": [*calibctl, "--help"],
         "calibctl --version": [*calibctl, "--version"],
         "calibctl board list": [*calibctl, "board", "list"],
@@ -90,23 +94,45 @@ def demo_store(folder: Path, checkout: Path) -> tuple[str, Path]:
     """(db URL, an exported artifact file) of ``calibctl demo`` run by ``checkout``'s code in ``folder``."""
     folder.mkdir(parents=True)
     db = f"sqlite:///{folder / 'demo-out/calibctl-demo.db'}"
-    subprocess.run([sys.executable, "-m", "calibctl", "demo"], cwd=folder, env=_env(checkout), check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "calibctl", "demo"],
+        cwd=folder,
+        env=_env(checkout),
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
     artifact = folder / "artifact.json"
-    artifact.write_bytes(subprocess.run([sys.executable, "-m", "calibctl", "--db", db, "export", SERIAL],
-                                        cwd=folder, env=_env(checkout), capture_output=True, check=True).stdout)
+    artifact.write_bytes(
+        subprocess.run(
+            [sys.executable, "-m", "calibctl", "--db", db, "export", SERIAL],
+            cwd=folder,
+            env=_env(checkout),
+            capture_output=True,
+            check=True,
+        ).stdout
+    )
     return db, artifact
 
 
 def _env(checkout: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("CALIBCTL_") and k != "PYTHONDONTWRITEBYTECODE"}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith("CALIBCTL_") and k != "PYTHONDONTWRITEBYTECODE"
+    }
     env["PYTHONPATH"] = str(checkout)
     env["PYTHONPYCACHEPREFIX"] = str(PYCACHE / checkout.name)
     return env
 
 
-def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
-              setup: Callable[[], None] | None = None, warm_up: bool = True) -> tuple[list[float], list[float]]:
+def run_times(
+    args: list[str],
+    checkout: Path,
+    repeats: int,
+    cwd: Path,
+    setup: Callable[[], None] | None = None,
+    warm_up: bool = True,
+) -> tuple[list[float], list[float]]:
     """Wall and CPU (user + system) seconds of each run (after one untimed run when ``warm_up``). On a
     loaded machine the CPU time is the steadier figure: it does not count the time spent waiting for a core."""
     wall, cpu = [], []
@@ -115,12 +141,20 @@ def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
             setup()
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, *args], cwd=cwd, env=_env(checkout), stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, check=False)
+        done = subprocess.run(
+            [sys.executable, *args],
+            cwd=cwd,
+            env=_env(checkout),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            check=False,
+        )
         t1 = time.perf_counter()
         if done.returncode not in (0, 1):  # 2: it could not do its job, and timing an error means nothing
-            raise SystemExit(f"{' '.join(args[:6])} ({checkout}) exited {done.returncode}:\n"
-                             f"{done.stderr.decode(errors='replace')[-1500:]}")
+            raise SystemExit(
+                f"{' '.join(args[:6])} ({checkout}) exited {done.returncode}:\n"
+                f"{done.stderr.decode(errors='replace')[-1500:]}"
+            )
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if i or not warm_up:  # the first run only warms the file cache
             wall.append(t1 - t0)
@@ -130,8 +164,14 @@ def run_times(args: list[str], checkout: Path, repeats: int, cwd: Path,
 
 def import_profile(args: list[str], checkout: Path, cwd: Path) -> dict[str, float]:
     """Self time of every imported module, summed per top-level package (ms)."""
-    done = subprocess.run([sys.executable, "-X", "importtime", *args], cwd=cwd, env=_env(checkout),
-                          capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", *args],
+        cwd=cwd,
+        env=_env(checkout),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     per_package: dict[str, float] = defaultdict(float)
     for line in done.stderr.splitlines():
         if not line.startswith("import time:") or "self [us]" in line:
@@ -148,7 +188,10 @@ STACK_IMPORTS = "import cv2, numpy, sqlalchemy.orm, pydantic, typer, rich"
 CALIBRATE_STAGES = (  # (function, label): cumulative CPU of one profiled `calibctl calibrate`
     ("calibctl/__main__.py:1(<module>)", "whole process after interpreter start"),
     ("calibctl/cli/main.py:1(<module>)", "import of the CLI (typer, rich, command modules)"),
-    ("calibctl/workflows/camera/capture.py:1(<module>)", "import of the workflows (cv2, numpy, sqlalchemy, pydantic models)"),
+    (
+        "calibctl/workflows/camera/capture.py:1(<module>)",
+        "import of the workflows (cv2, numpy, sqlalchemy, pydantic models)",
+    ),
     ("calibctl/core/capture/image_outcomes.py", "detection (read, hash, detect, blur; 2 threads)"),
     ("calibctl/store/images.py", "image files + rows (fsync each)"),
     ("calibctl/core/capture/gates.py", "capture gates (tilt, coverage)"),
@@ -195,57 +238,136 @@ def _stage_cpu(stats_path: Path) -> dict[str, float]:
 def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> None:
     """``calibctl calibrate`` of 20 rendered 1280x960 images against the plain OpenCV script, same run."""
     images = work / "synth-1280"
-    subprocess.run([sys.executable, "-m", "calibctl", "synth", str(images), "--scenario", "good", "--views", "20",
-                    "--size", "1280x960", "--seed", "1"], cwd=work, env=_env(REPO), check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "calibctl",
+            "synth",
+            str(images),
+            "--scenario",
+            "good",
+            "--views",
+            "20",
+            "--size",
+            "1280x960",
+            "--seed",
+            "1",
+        ],
+        cwd=work,
+        env=_env(REPO),
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
     db = work / "calibrate.db"
     templates = {}  # one per checkout: an older calibctl refuses a store a newer one migrated
     for i, (name, checkout) in enumerate(checkouts.items()):
         templates[name] = work / f"calibrate-template-{i}.db"
-        subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{templates[name]}", "board", "add",
-                        "BENCH", "--cols", "9", "--rows", "6", "--square-mm", "25", "--uncertainty-mm", "0.02",
-                        "--instrument", "calipers", "--measured-by", "bench", "--measured-on", "2026-11-23"], cwd=work,
-                       env=_env(checkout), check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "calibctl",
+                "--db",
+                f"sqlite:///{templates[name]}",
+                "board",
+                "add",
+                "BENCH",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--uncertainty-mm",
+                "0.02",
+                "--instrument",
+                "calipers",
+                "--measured-by",
+                "bench",
+                "--measured-on",
+                "2026-11-23",
+            ],
+            cwd=work,
+            env=_env(checkout),
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
 
     def fresh(name: str = "this checkout") -> Callable[[], None]:
         def setup() -> None:
             shutil.rmtree(work / "calibctl-images", ignore_errors=True)
             shutil.copyfile(templates[name], db)
+
         return setup
 
-    calibrate = ["-m", "calibctl", "--db", f"sqlite:///{db}", "calibrate", "--serial", "BENCH-0001", "--board",
-                 "BENCH", "--source", str(images), "--station", "bench", "--operator", "bench"]
+    calibrate = [
+        "-m",
+        "calibctl",
+        "--db",
+        f"sqlite:///{db}",
+        "calibrate",
+        "--serial",
+        "BENCH-0001",
+        "--board",
+        "BENCH",
+        "--source",
+        str(images),
+        "--station",
+        "bench",
+        "--operator",
+        "bench",
+    ]
     plain = [str(REPO / "benchmarks/bench_e2e.py"), "--plain-only", str(images), "--square", "0.025"]
     print("## `calibctl calibrate` of 20 images at 1280x960 against the plain OpenCV script\n")
     print(f"Load average before: {_load()}\n")
     print("| path | wall best / median ms | CPU best / median ms |\n|---|---|---|")
-    runs = [("plain OpenCV script, own process", plain, None, REPO),
-            (f"imports alone: `python -c '{STACK_IMPORTS}'`", ["-c", STACK_IMPORTS], None, REPO)]
+    runs = [
+        ("plain OpenCV script, own process", plain, None, REPO),
+        (f"imports alone: `python -c '{STACK_IMPORTS}'`", ["-c", STACK_IMPORTS], None, REPO),
+    ]
     for name, checkout in checkouts.items():
-        runs += [(f"`calibctl calibrate`, own process ({name})", calibrate, fresh(name), checkout),
-                 (f"`calibctl --version` ({name}: start-up with cv2 and numpy)", ["-m", "calibctl", "--version"], None,
-                  checkout)]
+        runs += [
+            (f"`calibctl calibrate`, own process ({name})", calibrate, fresh(name), checkout),
+            (
+                f"`calibctl --version` ({name}: start-up with cv2 and numpy)",
+                ["-m", "calibctl", "--version"],
+                None,
+                checkout,
+            ),
+        ]
     rows = {}
     for label, args, setup, checkout in runs:
         wall, cpu = run_times(args, checkout, repeats, work, setup)
         rows[label] = (min(wall), min(cpu))
-        print(f"| {label} | {min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f} | "
-              f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f} |")
+        print(
+            f"| {label} | {min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f} | "
+            f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f} |"
+        )
     pw, pc = rows[runs[0][0]]
     sw, _ = rows[runs[1][0]]
-    print(f"\n- the imports calibrate cannot do without (the design fixes sqlalchemy, pydantic, typer and rich) take "
-          f"**{sw / pw:.2f}x** the plain script's whole wall time, before calibctl's own code runs")
+    print(
+        f"\n- the imports calibrate cannot do without (the design fixes sqlalchemy, pydantic, typer and rich) take "
+        f"**{sw / pw:.2f}x** the plain script's whole wall time, before calibctl's own code runs"
+    )
     for name in checkouts:
         cw, cc = rows[f"`calibctl calibrate`, own process ({name})"]
         print(f"- calibctl ({name}) / plain: **{cw / pw:.2f}x wall, {cc / pc:.2f}x CPU** (best of each)")
     print(f"\nLoad average after: {_load()}\n")
     fresh()()
     out = work / "calibrate.prof"
-    subprocess.run([sys.executable, "-c", PROFILE_CODE, "-", *calibrate[2:]], cwd=work,
-                   env={**_env(REPO), "PROFILE_OUT": str(out)}, check=False, stdout=subprocess.DEVNULL,
-                   stderr=subprocess.DEVNULL)
-    print("Where one `calibctl calibrate` spends its CPU (cProfile with a CPU-time clock, cumulative, largest "
-          "call of the stage's functions; the profiler inflates Python-heavy stages such as imports):\n")
+    subprocess.run(
+        [sys.executable, "-c", PROFILE_CODE, "-", *calibrate[2:]],
+        cwd=work,
+        env={**_env(REPO), "PROFILE_OUT": str(out)},
+        check=False,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    print(
+        "Where one `calibctl calibrate` spends its CPU (cProfile with a CPU-time clock, cumulative, largest "
+        "call of the stage's functions; the profiler inflates Python-heavy stages such as imports):\n"
+    )
     print("| stage | CPU ms |\n|---|---|")
     for label, seconds in _stage_cpu(out).items():
         print(f"| {label} | {seconds * 1000:.0f} |")
@@ -260,18 +382,24 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--before", type=Path, help="another calibctl checkout to time in the same run")
-    parser.add_argument("--calibrate", action="store_true", help="also time `calibctl calibrate` against the plain script")
+    parser.add_argument(
+        "--calibrate", action="store_true", help="also time `calibctl calibrate` against the plain script"
+    )
     opts = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="calibctl-startup-"))
     floor_app = work / "floor_app.py"
     floor_app.write_text(FLOOR_APP)
     checkouts = {"this checkout": REPO, **({"before": opts.before.resolve()} if opts.before else {})}
     # each checkout reads a store its own code made: an older calibctl refuses one a newer one migrated
-    per_checkout = {name: commands(*demo_store(work / f"store-{i}", checkout), floor_app)
-                    for i, (name, checkout) in enumerate(checkouts.items())}
+    per_checkout = {
+        name: commands(*demo_store(work / f"store-{i}", checkout), floor_app)
+        for i, (name, checkout) in enumerate(checkouts.items())
+    }
     print(f"# calibctl start-up per command ({dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC)\n")
-    print(f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
-          f"best / median of {opts.repeats} runs after a warm-up, ms.\n")
+    print(
+        f"{cpu_model()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
+        f"best / median of {opts.repeats} runs after a warm-up, ms.\n"
+    )
     print(f"Load average before: {_load()}\n")
     print("| command | " + " | ".join(f"{c}: wall | {c}: CPU | {c}: x cv2+numpy" for c in checkouts) + " |")
     print("|---|" + "---|" * 3 * len(checkouts))
@@ -287,17 +415,22 @@ def main() -> int:
                 times[name][1].extend(cpu)
         for wall, cpu in times.values():
             reference = min(wall) if label == REFERENCE else reference
-            cells += [f"{min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f}",
-                      f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}",
-                      f"{min(wall) / reference:.2f}" if reference else "-"]
+            cells += [
+                f"{min(wall) * 1000:.0f} / {statistics.median(wall) * 1000:.0f}",
+                f"{min(cpu) * 1000:.0f} / {statistics.median(cpu) * 1000:.0f}",
+                f"{min(wall) / reference:.2f}" if reference else "-",
+            ]
             if not label.startswith("calibctl"):
                 cells = cells * len(checkouts)  # no calibctl involved: one measurement
                 break
         print(f"| `{label}` | " + " | ".join(cells) + " |")
     print(f"\nLoad average after: {_load()}\n")
     print("## Import self time per top-level package (ms, one `python -X importtime` run, this checkout)\n")
-    profiles = {label: import_profile(args, REPO, work) for label, args in per_checkout["this checkout"].items()
-                if label.startswith("calibctl")}
+    profiles = {
+        label: import_profile(args, REPO, work)
+        for label, args in per_checkout["this checkout"].items()
+        if label.startswith("calibctl")
+    }
     peak: dict[str, float] = defaultdict(float)
     for prof in profiles.values():
         for package, ms in prof.items():

@@ -51,11 +51,17 @@ def main() -> None:
     parser.add_argument("--units", type=int, default=6)
     parser.add_argument("--views", type=int, default=20)
     parser.add_argument("--baseline", type=Path, help="a checkout of the code before the change")
-    parser.add_argument("--watch", action="store_true", help="pictures fed one by one into empty unit folders")
+    parser.add_argument(
+        "--watch", action="store_true", help="pictures fed one by one into empty unit folders"
+    )
     parser.add_argument("--pace-s", default="0.1,0.3", help="--watch: the pause before each picture, LO,HI s")
-    parser.add_argument("--settle-s", type=float, default=0.0,
-                        help="--watch: 0 renames each picture into place; above 0 writes it in place, the station "
-                             "judging it complete after this long unchanged")
+    parser.add_argument(
+        "--settle-s",
+        type=float,
+        default=0.0,
+        help="--watch: 0 renames each picture into place; above 0 writes it in place, the station "
+        "judging it complete after this long unchanged",
+    )
     args = parser.parse_args()
     if args.watch:
         watch(args)
@@ -63,7 +69,7 @@ def main() -> None:
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        views = sorted(args.rendered.glob("*.png"))[:args.views]
+        views = sorted(args.rendered.glob("*.png"))[: args.views]
         serials = [f"UNIT-{i:03d}" for i in range(args.units)]
         for serial in serials:
             (work / "shots" / serial).mkdir(parents=True)
@@ -75,32 +81,74 @@ def main() -> None:
         if args.baseline is not None:  # its own store: an older calibctl refuses one a newer one migrated
             templates["before: calibctl station"] = template_store(work, args.baseline)
         load = os.getloadavg()
-        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
-              f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
-              f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views\n")
+        print(
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+            f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
+            f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views\n"
+        )
         env = run_env(work / "pycache")
         stations = {"calibctl station": env}
         if args.baseline is not None:
             stations["before: calibctl station"] = run_env(work / "pycache-before", args.baseline.resolve())
         for i, (name, station_env) in enumerate(stations.items()):  # one unit each fills the bytecode caches
             shutil.copyfile(templates[name], work / f"warm{i}.db")
-            subprocess.run([py, "-m", "calibctl", "--db", f"sqlite:///{work / f'warm{i}.db'}", "station", "--board",
-                            "BENCH", "--source-template", f"{work / 'shots'}/{{serial}}", "--json",
-                            "--spool", str(work / f"warm{i}-spool.sqlite")],  # a spool per store
-                           input=serials[0] + "\n", capture_output=True, text=True, cwd=work, env=station_env,
-                           check=True)
-        subprocess.run([py, str(work / "plain.py"), str(work / "shots" / serials[0]), "1", "solve"],
-                       capture_output=True, env=env, check=True)
+            subprocess.run(
+                [
+                    py,
+                    "-m",
+                    "calibctl",
+                    "--db",
+                    f"sqlite:///{work / f'warm{i}.db'}",
+                    "station",
+                    "--board",
+                    "BENCH",
+                    "--source-template",
+                    f"{work / 'shots'}/{{serial}}",
+                    "--json",
+                    "--spool",
+                    str(work / f"warm{i}-spool.sqlite"),
+                ],  # a spool per store
+                input=serials[0] + "\n",
+                capture_output=True,
+                text=True,
+                cwd=work,
+                env=station_env,
+                check=True,
+            )
+        subprocess.run(
+            [py, str(work / "plain.py"), str(work / "shots" / serials[0]), "1", "solve"],
+            capture_output=True,
+            env=env,
+            check=True,
+        )
         procs, walls, unit_times = {}, {}, {name: [] for name in stations}
         for name, station_env in stations.items():
             store = work / f"{len(procs)}.db"
             shutil.copyfile(templates[name], store)
             walls[name] = time.perf_counter()
             procs[name] = subprocess.Popen(
-                [py, "-m", "calibctl", "--db", f"sqlite:///{store}", "station", "--board", "BENCH",
-                 "--source-template", f"{work / 'shots'}/{{serial}}", "--json",
-                 "--spool", str(work / f"{len(procs)}-spool.sqlite")], stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work, env=station_env)
+                [
+                    py,
+                    "-m",
+                    "calibctl",
+                    "--db",
+                    f"sqlite:///{store}",
+                    "station",
+                    "--board",
+                    "BENCH",
+                    "--source-template",
+                    f"{work / 'shots'}/{{serial}}",
+                    "--json",
+                    "--spool",
+                    str(work / f"{len(procs)}-spool.sqlite"),
+                ],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                cwd=work,
+                env=station_env,
+            )
         plain_inner, plain_wall, loads, statuses = [], [], [], set()
         for serial in serials:
             loads.append(load_1min())
@@ -110,15 +158,22 @@ def main() -> None:
                 proc.stdin.flush()
                 line = proc.stdout.readline()
                 if not line.startswith("{"):
-                    raise SystemExit(f"{name} stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}")
+                    raise SystemExit(
+                        f"{name} stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
+                    )
                 unit = json.loads(line)
                 if unit["status"] not in ("pass", "fail"):  # an error line's unit_s times nothing
                     raise SystemExit(f"{name}: unit {serial} {unit['status']}: {unit['message']}")
                 unit_times[name].append(unit["unit_s"])
                 statuses.add(unit["status"])
             t = time.perf_counter()
-            out = subprocess.run([py, str(work / "plain.py"), str(work / "shots" / serial), "1", "solve"],
-                                 capture_output=True, text=True, check=True, env=env).stdout
+            out = subprocess.run(
+                [py, str(work / "plain.py"), str(work / "shots" / serial), "1", "solve"],
+                capture_output=True,
+                text=True,
+                check=True,
+                env=env,
+            ).stdout
             plain_wall.append(time.perf_counter() - t)
             plain_inner.append(float(out.split()[-1]))
         for name, proc in procs.items():
@@ -130,20 +185,30 @@ def main() -> None:
         station_wall = walls["calibctl station"]
         unit_s = [u["unit_s"] for u in units]
         print("| path | per unit, median s | min s | max s |\n|---|---|---|---|")
-        print(f"| calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(unit_s[1:]):.3f} | "
-              f"{min(unit_s[1:]):.3f} | {max(unit_s[1:]):.3f} |")
+        print(
+            f"| calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(unit_s[1:]):.3f} | "
+            f"{min(unit_s[1:]):.3f} | {max(unit_s[1:]):.3f} |"
+        )
         print(f"| calibctl station, first unit | {unit_s[0]:.3f} | | |")
         if args.baseline is not None:
             before = unit_times["before: calibctl station"]
-            print(f"| before: calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(before[1:]):.3f} "
-                  f"| {min(before[1:]):.3f} | {max(before[1:]):.3f} |")
-        print(f"| plain script, detect + solve after its imports | {statistics.median(plain_inner):.3f} | "
-              f"{min(plain_inner):.3f} | {max(plain_inner):.3f} |")
-        print(f"| plain script, whole process | {statistics.median(plain_wall):.3f} | {min(plain_wall):.3f} | "
-              f"{max(plain_wall):.3f} |")
-        print(f"\ncalibctl station whole run (start-up, {args.units} units, exit, the plain runs between units "
-              f"included): {station_wall:.2f} s; verdicts: {', '.join(sorted(statuses))}; 1-minute load average "
-              f"{min(loads):.2f}-{max(loads):.2f} at the units' starts, {load_1min():.2f} at the end")
+            print(
+                f"| before: calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(before[1:]):.3f} "
+                f"| {min(before[1:]):.3f} | {max(before[1:]):.3f} |"
+            )
+        print(
+            f"| plain script, detect + solve after its imports | {statistics.median(plain_inner):.3f} | "
+            f"{min(plain_inner):.3f} | {max(plain_inner):.3f} |"
+        )
+        print(
+            f"| plain script, whole process | {statistics.median(plain_wall):.3f} | {min(plain_wall):.3f} | "
+            f"{max(plain_wall):.3f} |"
+        )
+        print(
+            f"\ncalibctl station whole run (start-up, {args.units} units, exit, the plain runs between units "
+            f"included): {station_wall:.2f} s; verdicts: {', '.join(sorted(statuses))}; 1-minute load average "
+            f"{min(loads):.2f}-{max(loads):.2f} at the units' starts, {load_1min():.2f} at the end"
+        )
 
 
 def tree_cpu_s(root: int) -> float:
@@ -165,7 +230,9 @@ def tree_cpu_s(root: int) -> float:
     return total / os.sysconf("SC_CLK_TCK")
 
 
-def feed(folder: Path, views: list[Path], pace: tuple[float, float], rng: random.Random, in_place: bool) -> float:
+def feed(
+    folder: Path, views: list[Path], pace: tuple[float, float], rng: random.Random, in_place: bool
+) -> float:
     """A camera app saving the unit's pictures: each written under a temporary name and renamed into place
     (or, ``in_place``, written under its own name); returns the perf_counter time the last one was complete."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -188,27 +255,54 @@ def watch(args: argparse.Namespace) -> None:
     rng = random.Random(24)
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        views = sorted(args.rendered.glob("*.png"))[:args.views]
+        views = sorted(args.rendered.glob("*.png"))[: args.views]
         serials = [f"UNIT-{i:03d}" for i in range(args.units + 1)]  # the first one warms the bytecode cache
         (work / "plain.py").write_text(PLAIN)
         db = template_store(work)
         load = os.getloadavg()
         how = f"written in place (--settle-s {args.settle_s:g})" if args.settle_s > 0 else "renamed"
-        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
-              f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
-              f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views, each picture "
-              f"{how} into the "
-              f"unit's folder after a pause of {lo:g}-{hi:g} s (uniform, seeded)\n")
+        print(
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+            f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
+            f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views, each picture "
+            f"{how} into the "
+            f"unit's folder after a pause of {lo:g}-{hi:g} s (uniform, seeded)\n"
+        )
         env = run_env(work / "pycache")
-        command = [py, "-m", "calibctl", "--db", f"sqlite:///{work / 'station.db'}", "station", "--board", "BENCH",
-                   "--source-template", f"{work / 'shots'}/{{serial}}", "--json", "--spool",
-                   str(work / "spool.sqlite"), "--watch", "--views", str(len(views)), "--settle-s", str(args.settle_s)]
+        command = [
+            py,
+            "-m",
+            "calibctl",
+            "--db",
+            f"sqlite:///{work / 'station.db'}",
+            "station",
+            "--board",
+            "BENCH",
+            "--source-template",
+            f"{work / 'shots'}/{{serial}}",
+            "--json",
+            "--spool",
+            str(work / "spool.sqlite"),
+            "--watch",
+            "--views",
+            str(len(views)),
+            "--settle-s",
+            str(args.settle_s),
+        ]
         shutil.copyfile(db, work / "station.db")
-        proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, cwd=work, env=env)
+        proc = subprocess.Popen(
+            command,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=work,
+            env=env,
+        )
         assert proc.stdin is not None and proc.stdout is not None
-        rows: dict[str, list[float]] = {k: [] for k in ("after", "seen", "unit", "cpu", "plain", "plain_wall",
-                                                        "plain_cpu")}
+        rows: dict[str, list[float]] = {
+            k: [] for k in ("after", "seen", "unit", "cpu", "plain", "plain_wall", "plain_cpu")
+        }
         loads, statuses = [], set()
         for n, serial in enumerate(serials):
             loads.append(load_1min())
@@ -219,39 +313,69 @@ def watch(args: argparse.Namespace) -> None:
             line = proc.stdout.readline()
             seen = time.perf_counter() - last_in
             if not line.startswith("{"):
-                raise SystemExit(f"the station stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}")
+                raise SystemExit(
+                    f"the station stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
+                )
             unit = json.loads(line)
             statuses.add(unit["status"])
             cpu = tree_cpu_s(proc.pid) - cpu
             t, c = time.perf_counter(), children_cpu_s()
-            out = subprocess.run([py, str(work / "plain.py"), str(work / "shots" / serial), "1", "solve"],
-                                 capture_output=True, text=True, check=True, env=env).stdout
+            out = subprocess.run(
+                [py, str(work / "plain.py"), str(work / "shots" / serial), "1", "solve"],
+                capture_output=True,
+                text=True,
+                check=True,
+                env=env,
+            ).stdout
             if n == 0:
                 continue
             rows["plain_wall"].append(time.perf_counter() - t)
             rows["plain_cpu"].append(children_cpu_s() - c)
             rows["plain"].append(float(out.split()[-1]))
-            for key, value in (("after", unit["after_last_image_s"]), ("seen", seen), ("unit", unit["unit_s"]),
-                               ("cpu", cpu)):
+            for key, value in (
+                ("after", unit["after_last_image_s"]),
+                ("seen", seen),
+                ("unit", unit["unit_s"]),
+                ("cpu", cpu),
+            ):
                 rows[key].append(value)
         proc.communicate("")
         if proc.returncode != 0:
             raise SystemExit(f"the station exited {proc.returncode}")
-        print("| per unit (units 2..; the first warmed the caches) | median s | min s | max s |\n|---|---|---|---|")
-        print(summary_row("station --watch: after_last_image_s (last picture's ctime to verdict out)", rows["after"]))
-        print(summary_row("station --watch: last picture complete (renamed or written) to the verdict line read here", rows["seen"]))
-        print(summary_row("plain script, detect + solve after its imports (starts after the last picture)",
-                          rows["plain"]))
+        print(
+            "| per unit (units 2..; the first warmed the caches) | median s | min s | max s |\n|---|---|---|---|"
+        )
+        print(
+            summary_row(
+                "station --watch: after_last_image_s (last picture's ctime to verdict out)", rows["after"]
+            )
+        )
+        print(
+            summary_row(
+                "station --watch: last picture complete (renamed or written) to the verdict line read here",
+                rows["seen"],
+            )
+        )
+        print(
+            summary_row(
+                "plain script, detect + solve after its imports (starts after the last picture)",
+                rows["plain"],
+            )
+        )
         print(summary_row("plain script, whole process", rows["plain_wall"]))
         print(summary_row("station --watch: unit_s (serial to verdict, the feed included)", rows["unit"]))
-        print(summary_row("station --watch: CPU s (user+sys, its process tree, polling included)", rows["cpu"]))
+        print(
+            summary_row("station --watch: CPU s (user+sys, its process tree, polling included)", rows["cpu"])
+        )
         print(summary_row("plain script: CPU s (user+sys, whole process)", rows["plain_cpu"]))
         ratio = statistics.median(rows["after"]) / statistics.median(rows["plain"])
         paired = statistics.median(a / p for a, p in zip(rows["after"], rows["plain"], strict=True))
-        print(f"\nafter_last_image_s / plain detect + solve: {ratio:.2f} (medians), {paired:.2f} (median of the "
-              f"units' own ratios, each unit beside the plain run that followed it); verdicts: "
-              f"{', '.join(sorted(statuses))}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
-              f"starts, {load_1min():.2f} at the end")
+        print(
+            f"\nafter_last_image_s / plain detect + solve: {ratio:.2f} (medians), {paired:.2f} (median of the "
+            f"units' own ratios, each unit beside the plain run that followed it); verdicts: "
+            f"{', '.join(sorted(statuses))}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
+            f"starts, {load_1min():.2f} at the end"
+        )
 
 
 if __name__ == "__main__":

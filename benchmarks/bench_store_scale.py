@@ -49,8 +49,11 @@ def _heads(s: Session) -> tuple[dict[str, tuple[int, int, str]], tuple[int, str 
     """serial -> (last version, last seq, last hash) and the event log's (seq, hash), as stored now."""
     t = ArtifactRow.__table__
     latest = select(t.c.serial, func.max(t.c.chain_seq).label("seq")).group_by(t.c.serial).subquery()
-    rows = s.execute(select(t.c.serial, t.c.version, t.c.chain_seq, t.c.chain_hash)
-                     .join(latest, (t.c.serial == latest.c.serial) & (t.c.chain_seq == latest.c.seq)))
+    rows = s.execute(
+        select(t.c.serial, t.c.version, t.c.chain_seq, t.c.chain_hash).join(
+            latest, (t.c.serial == latest.c.serial) & (t.c.chain_seq == latest.c.seq)
+        )
+    )
     serials = {r[0]: (int(r[1]), int(r[2]), str(r[3])) for r in rows}
     head = chain.head_of(s, chain.STREAMS["event"], ())
     return serials, (head if head is not None else (0, None))
@@ -82,12 +85,25 @@ def fill(url: str, total: int, signer: Signer) -> None:
                 row["key_id"] = signer.key_id
                 arts.append(row)
                 serials[serial] = (version + 1, seq + 1, row["chain_hash"])
-                event = {"serial": serial, "version": version + 1, "previous_version": version or None,
-                         "kind": "activate", "actor": "bench", "station": "bench", "at": utc_now(), "reason": "fill"}
+                event = {
+                    "serial": serial,
+                    "version": version + 1,
+                    "previous_version": version or None,
+                    "kind": "activate",
+                    "actor": "bench",
+                    "station": "bench",
+                    "at": utc_now(),
+                    "reason": "fill",
+                }
                 event_seq += 1
                 event["chain_seq"], event["chain_prev"] = event_seq, event_prev
-                event["chain_hash"] = chain.record_hash(event_stream, (), event_seq, event_prev, chain.body(event))
-                event["signature"], event["key_id"] = signer.sign(record_message(event["chain_hash"], None)), signer.key_id
+                event["chain_hash"] = chain.record_hash(
+                    event_stream, (), event_seq, event_prev, chain.body(event)
+                )
+                event["signature"], event["key_id"] = (
+                    signer.sign(record_message(event["chain_hash"], None)),
+                    signer.key_id,
+                )
                 event_prev = event["chain_hash"]
                 events.append({c: event.get(c) for c in event_columns})
             with Session(engine) as s, s.begin():
@@ -104,7 +120,9 @@ def plain_loop(url: str) -> float:
         t0 = time.perf_counter()
         for serial in s.scalars(select(ArtifactRow.serial).distinct()):
             version = history.active_in(s, serial)
-            row = s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial, ArtifactRow.version == version)).one()
+            row = s.scalars(
+                select(ArtifactRow).where(ArtifactRow.serial == serial, ArtifactRow.version == version)
+            ).one()
             json.loads(row.payload)
             hashlib.sha256(row.payload.encode()).hexdigest()
         return time.perf_counter() - t0
@@ -129,7 +147,10 @@ def reads(settings: Settings, url: str) -> dict[str, float]:
     calls = {
         "history": (lambda: records.history(settings, serial), ["history", serial]),
         "show": (lambda: records.show(settings, serial), ["show", serial]),
-        "export": (lambda: records.export(settings, serial, "ros", None, force=False), ["export", serial, "--format", "ros"]),
+        "export": (
+            lambda: records.export(settings, serial, "ros", None, force=False),
+            ["export", serial, "--format", "ros"],
+        ),
     }
     out: dict[str, float] = {}
     for name, (call, argv) in calls.items():
@@ -140,8 +161,12 @@ def reads(settings: Settings, url: str) -> dict[str, float]:
             best = min(best, time.process_time() - c0)
         out[name] = 1000 * best
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        subprocess.run([sys.executable, "-m", "calibctl", "--db", url, *argv], check=True, capture_output=True,
-                       env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)})
+        subprocess.run(
+            [sys.executable, "-m", "calibctl", "--db", url, *argv],
+            check=True,
+            capture_output=True,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)},
+        )
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         out[name + "_cli"] = 1000 * (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
     return out
@@ -159,8 +184,17 @@ def measure(url: str, total: int, key: Path) -> dict[str, float]:
     fill(url, SERIALS, signer)  # one more version per serial: what a "night" adds
     t_since, since = timed(lambda: database.verify(settings, since=report.head), "since")  # type: ignore[attr-defined]
     assert since.ok and since.records_checked == 2 * SERIALS, since.problems[:3]  # type: ignore[attr-defined]
-    return {"fill": t_fill, "lint_all": t_lint, "plain": plain_loop(url), "verify": t_verify, "since": t_since,
-            "lint_cpu": CPU["lint_all"], "verify_cpu": CPU["verify"], "since_cpu": CPU["since"], **read_ms}
+    return {
+        "fill": t_fill,
+        "lint_all": t_lint,
+        "plain": plain_loop(url),
+        "verify": t_verify,
+        "since": t_since,
+        "lint_cpu": CPU["lint_all"],
+        "verify_cpu": CPU["verify"],
+        "since_cpu": CPU["since"],
+        **read_ms,
+    }
 
 
 def _pg_url() -> tuple[str, str]:
@@ -187,11 +221,15 @@ def main() -> None:
     parser.add_argument("--pg", action="store_true", help="also on the local PostgreSQL")
     args = parser.parse_args()
     sizes = args.sizes or ([1000, 10_000, 100_000] if args.large else [1000])
-    print(f"# store scale: {cpu_model()}, nproc {os.cpu_count()}, load {os.getloadavg()[0]:.2f}, {utc_now():%Y-%m-%d %H:%M} UTC\n")
+    print(
+        f"# store scale: {cpu_model()}, nproc {os.cpu_count()}, load {os.getloadavg()[0]:.2f}, {utc_now():%Y-%m-%d %H:%M} UTC\n"
+    )
     print("wall seconds, with this process's CPU seconds in brackets (the 2 cores were shared)\n")
-    print("| backend | artifacts | lint --all s | lint ms/serial (CPU) | plain loop s | db verify s | "
-          "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | history / show / export CPU ms "
-          "in-process | same, CLI process CPU ms | fill s |")
+    print(
+        "| backend | artifacts | lint --all s | lint ms/serial (CPU) | plain loop s | db verify s | "
+        "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | history / show / export CPU ms "
+        "in-process | same, CLI process CPU ms | fill s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     backends = ["sqlite"] + (["postgresql"] if args.pg else [])
     for backend in backends:
@@ -209,11 +247,14 @@ def main() -> None:
                     if name:
                         _pg_drop(admin, name)
             records = 2 * total  # artifacts + events, each chained and signed
-            print(f"| {backend} | {total} | {m['lint_all']:.2f} | {1000 * m['lint_all'] / SERIALS:.2f} "
-                  f"({1000 * m['lint_cpu'] / SERIALS:.2f}) | {m['plain']:.2f} | {m['verify']:.1f} | "
-                  f"{1000 * m['verify'] / (records / 1000):.0f} ({1000 * m['verify_cpu'] / (records / 1000):.0f}) | "
-                  f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['history']:.0f} / {m['show']:.0f} / {m['export']:.0f} | "
-                  f"{m['history_cli']:.0f} / {m['show_cli']:.0f} / {m['export_cli']:.0f} | {m['fill']:.0f} |", flush=True)
+            print(
+                f"| {backend} | {total} | {m['lint_all']:.2f} | {1000 * m['lint_all'] / SERIALS:.2f} "
+                f"({1000 * m['lint_cpu'] / SERIALS:.2f}) | {m['plain']:.2f} | {m['verify']:.1f} | "
+                f"{1000 * m['verify'] / (records / 1000):.0f} ({1000 * m['verify_cpu'] / (records / 1000):.0f}) | "
+                f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['history']:.0f} / {m['show']:.0f} / {m['export']:.0f} | "
+                f"{m['history_cli']:.0f} / {m['show_cli']:.0f} / {m['export_cli']:.0f} | {m['fill']:.0f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

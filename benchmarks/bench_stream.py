@@ -90,18 +90,22 @@ def main() -> None:
             store.add_board(measured_board("A17", square_mm=25.0))
         settings = load_settings(db=url, env={})
         load = os.getloadavg()
-        print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
-              f"{platform.python_version()}, OpenCV {cv2.__version__}, load average {load[0]:.2f} / {load[1]:.2f} / "
-              f"{load[2]:.2f} at start; video {width}x{height}, best of {args.repeats}\n")
+        print(
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
+            f"{platform.python_version()}, OpenCV {cv2.__version__}, load average {load[0]:.2f} / {load[1]:.2f} / "
+            f"{load[2]:.2f} at start; video {width}x{height}, best of {args.repeats}\n"
+        )
 
         def calibctl(jobs: int) -> str:
             result = capture(settings, CaptureRequest("BENCH-1", "A17", str(video), jobs=jobs))
             return f"{len(result.session.outcomes)} frames, {len(result.session.views)} views kept"
 
-        paths = {"calibctl capture, jobs 1": lambda: calibctl(1),
-                 f"calibctl capture, jobs {cores}": lambda: calibctl(cores),
-                 "plain loop, sequential": lambda: f"{plain(video, 1)} boards",
-                 f"plain loop, Pool({cores})": lambda: f"{plain(video, cores)} boards"}
+        paths = {
+            "calibctl capture, jobs 1": lambda: calibctl(1),
+            f"calibctl capture, jobs {cores}": lambda: calibctl(cores),
+            "plain loop, sequential": lambda: f"{plain(video, 1)} boards",
+            f"plain loop, Pool({cores})": lambda: f"{plain(video, cores)} boards",
+        }
         best: dict[str, tuple[float, float, float, str, float]] = {}
         for _ in range(args.repeats):
             for name, path in paths.items():
@@ -110,9 +114,13 @@ def main() -> None:
                 what = path()
                 wall, cpu, main_cpu = time.perf_counter() - t, cpu_s() - c, time.thread_time() - m
                 old = best.get(name)
-                best[name] = (min(wall, old[0]) if old else wall, min(cpu, old[1]) if old else cpu,
-                              min(main_cpu, old[2]) if old else main_cpu, what,
-                              load_now if old is None or wall < old[0] else old[4])
+                best[name] = (
+                    min(wall, old[0]) if old else wall,
+                    min(cpu, old[1]) if old else cpu,
+                    min(main_cpu, old[2]) if old else main_cpu,
+                    what,
+                    load_now if old is None or wall < old[0] else old[4],
+                )
         if best["calibctl capture, jobs 1"][3] != best[f"calibctl capture, jobs {cores}"][3]:
             raise SystemExit("calibctl's outcomes differ between job counts")
         base = best["plain loop, sequential"][0]
@@ -120,7 +128,9 @@ def main() -> None:
         print("|---|---|---|---|---|---|---|")
         for name, (wall, cpu, main_cpu, what, load_at) in best.items():
             main_text = f"{main_cpu:.3f}" if name.startswith("calibctl") else "-"
-            print(f"| {name} | {wall:.3f} | {wall / base:.2f}x | {cpu:.3f} | {main_text} | {what} | {load_at:.1f} |")
+            print(
+                f"| {name} | {wall:.3f} | {wall / base:.2f}x | {cpu:.3f} | {main_text} | {what} | {load_at:.1f} |"
+            )
 
 
 if __name__ == "__main__":

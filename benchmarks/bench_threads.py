@@ -63,7 +63,9 @@ def main() -> None:
     parser.add_argument("rig", type=Path)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    outcomes = [o for o in classify_session(list_images(args.rendered), BOARD, workers=1) if o.accepted][:N_VIEWS]
+    outcomes = [o for o in classify_session(list_images(args.rendered), BOARD, workers=1) if o.accepted][
+        :N_VIEWS
+    ]
     obj = [BOARD.object_points()[o.corner_ids] for o in outcomes]
     img = [o.corners_px for o in outcomes]
     size = outcomes[0].image_size
@@ -72,14 +74,19 @@ def main() -> None:
     stages = [
         (f"solve_intrinsics, {len(obj)} views", lambda: solve_intrinsics(obj, img, size, "k1k2"), 1),
         (f"validate_holdout, {len(obj)} views", lambda: validate_holdout(obj, img, size, "k1k2", fit=fit), 2),
-        (f"solve_rig_folders, {len(cams)} cameras (detection on 1 worker)",
-         lambda: solve_rig_folders({p.name: p for p in cams}, BOARD, workers=1), 1),
+        (
+            f"solve_rig_folders, {len(cams)} cameras (detection on 1 worker)",
+            lambda: solve_rig_folders({p.name: p for p in cams}, BOARD, workers=1),
+            1,
+        ),
     ]
     load = os.getloadavg()
-    print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs "
-          f"({len(os.sched_getaffinity(0))} available), Python {platform.python_version()}, OpenCV {cv2.__version__}, "
-          f"load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start; code from "
-          f"{Path(sys.modules['calibctl'].__file__).parent.parent}\n")
+    print(
+        f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs "
+        f"({len(os.sched_getaffinity(0))} available), Python {platform.python_version()}, OpenCV {cv2.__version__}, "
+        f"load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start; code from "
+        f"{Path(sys.modules['calibctl'].__file__).parent.parent}\n"
+    )
     print("| stage | parallelism used | wall s (best) | CPU s | CPU / wall |\n|---|---|---|---|---|")
     for name, fn, parallel in stages:
         wall, cpu = timed(fn, args.repeats)

@@ -84,12 +84,18 @@ def summary(name: str, errors: np.ndarray, truth: np.ndarray) -> str:
     e, t = errors[ok], truth[ok]
     flat = t < 4.0
     flat_max = f"{(t[flat] + e[flat]).max():.1f}" if flat.any() else "-"
-    return (f"| {name} | {ok.sum()} | {e.mean():+.2f} | {e.std():.2f} | {np.abs(e).max():.2f} | "
-            f"{100 * np.mean(np.abs(e) > 2.0):.0f} % | {flat.sum()} | {flat_max} |")
+    return (
+        f"| {name} | {ok.sum()} | {e.mean():+.2f} | {e.std():.2f} | {np.abs(e).max():.2f} | "
+        f"{100 * np.mean(np.abs(e) > 2.0):.0f} % | {flat.sum()} | {flat_max} |"
+    )
 
 
 def run(size: tuple[int, int], seeds: range, render: bool) -> list[str]:
-    rows = {"old gates (homography, lens ignored)": [], "calibctl gates": [], "plain OpenCV calibrateCamera": []}
+    rows = {
+        "old gates (homography, lens ignored)": [],
+        "calibctl gates": [],
+        "plain OpenCV calibrateCamera": [],
+    }
     truths = []
     for seed in seeds:
         views, truth = session(size, seed, render)
@@ -98,10 +104,12 @@ def run(size: tuple[int, int], seeds: range, render: bool) -> list[str]:
             rows[name].append(np.array(fn(views, size)) - truth)
     truth_all = np.concatenate(truths)
     kind = "rendered + detected" if render else f"projected + {NOISE_PX} px noise"
-    out = [f"\n{size[0]}x{size[1]}, {kind}, {len(seeds)} sessions x {VIEWS} views (seeds {seeds.start}-"
-           f"{seeds.stop - 1}); tilt error = read - true, deg\n",
-           "| readout | views | mean | sd | max abs | > 2 deg off | views truly < 4 deg | max read on them |",
-           "|---|---|---|---|---|---|---|---|"]
+    out = [
+        f"\n{size[0]}x{size[1]}, {kind}, {len(seeds)} sessions x {VIEWS} views (seeds {seeds.start}-"
+        f"{seeds.stop - 1}); tilt error = read - true, deg\n",
+        "| readout | views | mean | sd | max abs | > 2 deg off | views truly < 4 deg | max read on them |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     out += [summary(name, np.concatenate(err), truth_all) for name, err in rows.items()]
     return out
 
@@ -111,8 +119,10 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, default=20)
     parser.add_argument("--render", type=int, default=2)
     args = parser.parse_args()
-    print(f"# bench_tilt: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
-          f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}")
+    print(
+        f"# bench_tilt: {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} cores ({cpu_model()}), "
+        f"load {os.getloadavg()[0]:.1f}; Python {platform.python_version()}, OpenCV {cv2.__version__}"
+    )
     lines = run((1280, 960), range(args.sessions), False) + run((640, 480), range(args.sessions), False)
     if args.render:
         lines += run((1280, 960), range(1000, 1000 + args.render), True)

@@ -68,29 +68,39 @@ def main() -> None:
     z_fx = np.array([r.z_fx for r in results])
     z_cx = np.array([r.z_cx for r in results])
     print(f"# Uncertainty honesty — {n} sessions, seeds {base}..{base + n - 1}\n")
-    print(f"{date.today()}, {platform.node()} {platform.machine()}, {platform.python_version()}, "
-          f"OpenCV {cv2.__version__}, numpy {np.__version__}; {elapsed:.1f} s "
-          f"({1000 * elapsed / n:.0f} ms per session)\n")
+    print(
+        f"{date.today()}, {platform.node()} {platform.machine()}, {platform.python_version()}, "
+        f"OpenCV {cv2.__version__}, numpy {np.__version__}; {elapsed:.1f} s "
+        f"({1000 * elapsed / n:.0f} ms per session)\n"
+    )
     print("| quantity | mean z | std z | max abs z | bar |")
     print("|---|---|---|---|---|")
     for name, z in (("fx", z_fx), ("cx", z_cx)):
         ok = abs(z.mean()) <= 0.3 and 0.7 <= z.std(ddof=1) <= 1.5
-        print(f"| {name} | {z.mean():+.3f} | {z.std(ddof=1):.3f} | {np.abs(z).max():.2f} | "
-              f"{'pass' if ok else 'FAIL'} |")
+        print(
+            f"| {name} | {z.mean():+.3f} | {z.std(ddof=1):.3f} | {np.abs(z).max():.2f} | "
+            f"{'pass' if ok else 'FAIL'} |"
+        )
     if n >= 60:
-        print("\nBlocks of 30 consecutive sessions (how much a 30-session mean moves by chance; "
-              "its standard error is 1/sqrt(30) = 0.18):\n")
+        print(
+            "\nBlocks of 30 consecutive sessions (how much a 30-session mean moves by chance; "
+            "its standard error is 1/sqrt(30) = 0.18):\n"
+        )
         print("| block | mean z fx | std z fx | mean z cx | std z cx |")
         print("|---|---|---|---|---|")
         for b in range(n // 30):
-            zf, zc = z_fx[30 * b: 30 * b + 30], z_cx[30 * b: 30 * b + 30]
-            print(f"| {base + 30 * b}..{base + 30 * b + 29} | {zf.mean():+.3f} | {zf.std(ddof=1):.3f} "
-                  f"| {zc.mean():+.3f} | {zc.std(ddof=1):.3f} |")
+            zf, zc = z_fx[30 * b : 30 * b + 30], z_cx[30 * b : 30 * b + 30]
+            print(
+                f"| {base + 30 * b}..{base + 30 * b + 29} | {zf.mean():+.3f} | {zf.std(ddof=1):.3f} "
+                f"| {zc.mean():+.3f} | {zc.std(ddof=1):.3f} |"
+            )
     print("\n| seed | views | fx px | sigma fx px | z fx | cx px | sigma cx px | z cx | RMS px |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in results:
-        print(f"| {r.seed} | {r.n_views} | {r.fx:.3f} | {r.sigma_fx:.3f} | {r.z_fx:+.2f} | {r.cx:.3f} "
-              f"| {r.sigma_cx:.3f} | {r.z_cx:+.2f} | {r.rms_px:.4f} |")
+        print(
+            f"| {r.seed} | {r.n_views} | {r.fx:.3f} | {r.sigma_fx:.3f} | {r.z_fx:+.2f} | {r.cx:.3f} "
+            f"| {r.sigma_cx:.3f} | {r.z_cx:+.2f} | {r.rms_px:.4f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -52,15 +52,21 @@ def _project(sol: IntrinsicsSolution, rays: np.ndarray) -> tuple[np.ndarray, np.
     """(N, 2) px of (N, 3) rays in front of the camera and the (2N, 3) Jacobian on a camera rotation."""
     r = rays / rays[:, 2:3]
     if sol.model == "fisheye":
-        p, J = cv2.fisheye.projectPoints(r.reshape(-1, 1, 3), np.zeros((3, 1)), np.zeros((3, 1)), sol.camera_matrix,
-                                         sol.dist_coeffs.reshape(4))
+        p, J = cv2.fisheye.projectPoints(
+            r.reshape(-1, 1, 3),
+            np.zeros((3, 1)),
+            np.zeros((3, 1)),
+            sol.camera_matrix,
+            sol.dist_coeffs.reshape(4),
+        )
         return p.reshape(-1, 2), J[:, 9:12]
     p, J = cv2.projectPoints(r, np.zeros(3), np.zeros(3), sol.camera_matrix, sol.dist_coeffs)
     return p.reshape(-1, 2), J[:, :3]
 
 
-def _compensated_max(sol: IntrinsicsSolution, rays: np.ndarray, q: np.ndarray,
-                     projected: np.ndarray | None = None) -> float:
+def _compensated_max(
+    sol: IntrinsicsSolution, rays: np.ndarray, q: np.ndarray, projected: np.ndarray | None = None
+) -> float:
     keep = rays[:, 2] > 1e-3
     rays, q = rays[keep], q[keep]
     p, J_rot = _project(sol, rays)
@@ -88,7 +94,9 @@ def halves_error_px(obj, img, size: tuple[int, int], model: str, region: Region)
     b = solve_intrinsics(obj[1::2], img[1::2], size, model, uncertainty=False)
     q = _grid(size, region)
     if model == "fisheye":
-        xy = cv2.fisheye.undistortPoints(q.reshape(-1, 1, 2), a.camera_matrix, a.dist_coeffs.reshape(4)).reshape(-1, 2)
+        xy = cv2.fisheye.undistortPoints(
+            q.reshape(-1, 1, 2), a.camera_matrix, a.dist_coeffs.reshape(4)
+        ).reshape(-1, 2)
     else:
         xy = unproject(q, a.camera_matrix, a.dist_coeffs)
     return _compensated_max(b, np.concatenate([xy, np.ones((len(xy), 1))], axis=1), q) / 2.0
@@ -106,33 +114,67 @@ def judge(name: str, obj, img, size, model: str, truth=None, circle=None) -> dic
     if isinstance(sol, NumericalError):
         err = float("inf")
     else:
-        err = true_error_px(sol, truth, size, region) if truth else halves_error_px(obj, img, size, sol.model, region)
-    return {"name": name, "views": len(obj), "model": model, "sigma": gate.value if gate.value > 0 else float("inf"),
-            "err": err, "truth": "render truth" if truth else "halves / 2",
-            "old": all(g.passed for g in report.gates), "failed": [g.gate for g in report.gates if not g.passed],
-            "hopeless": not all(g.passed for g in report.gates if g.gate in ("observability", "views"))}
+        err = (
+            true_error_px(sol, truth, size, region)
+            if truth
+            else halves_error_px(obj, img, size, sol.model, region)
+        )
+    return {
+        "name": name,
+        "views": len(obj),
+        "model": model,
+        "sigma": gate.value if gate.value > 0 else float("inf"),
+        "err": err,
+        "truth": "render truth" if truth else "halves / 2",
+        "old": all(g.passed for g in report.gates),
+        "failed": [g.gate for g in report.gates if not g.passed],
+        "hopeless": not all(g.passed for g in report.gates if g.gate in ("observability", "views")),
+    }
 
 
 def renders() -> list[dict]:
     rows = []
-    for label, kw in (("pinhole tilt 20-40", {}), ("pinhole tilted-only 50-70", {"tilt_deg": (50.0, 70.0)}),
-                      ("pinhole small tilt 5-15", {"tilt_deg": (5.0, 15.0)}),
-                      ("pinhole board far 1.2-1.6 m", {"distance_m": (1.2, 1.6)})):
+    for label, kw in (
+        ("pinhole tilt 20-40", {}),
+        ("pinhole tilted-only 50-70", {"tilt_deg": (50.0, 70.0)}),
+        ("pinhole small tilt 5-15", {"tilt_deg": (5.0, 15.0)}),
+        ("pinhole board far 1.2-1.6 m", {"distance_m": (1.2, 1.6)}),
+    ):
         for seed in (1, 2):
             for n in (8, 15):
                 s = synthesize_session(K_PIN, D_PIN, (640, 480), n, seed, **kw)
-                rows.append(judge(f"{label} seed {seed}", list(s.object_points_per_view),
-                                  list(s.image_points_per_view), (640, 480), "k1k2", ("pinhole", K_PIN, D_PIN)))
+                rows.append(
+                    judge(
+                        f"{label} seed {seed}",
+                        list(s.object_points_per_view),
+                        list(s.image_points_per_view),
+                        (640, 480),
+                        "k1k2",
+                        ("pinhole", K_PIN, D_PIN),
+                    )
+                )
     for fov, circular in ((150.0, True), (185.0, True), (120.0, False)):
         for seed in (1, 2):
             for tilt in ((15.0, 45.0), (55.0, 74.0)):
                 cam = FisheyeCamera.from_fov((1032, 778), fov, circular=circular)
                 s = synthesize_fisheye_session(cam, 15, seed, tilt_deg=tilt)
-                circle = (float(cam.K[0, 2]), float(cam.K[1, 2]), float(cam.circle_radius_px)) if circular else None
-                rows.append(judge(f"fisheye {fov:.0f} {'circular' if circular else 'full-frame'} tilt "
-                                  f"{tilt[0]:.0f}-{tilt[1]:.0f} seed {seed}", list(s.object_points_per_view),
-                                  list(s.image_points_per_view), (1032, 778), "fisheye", ("fisheye", cam.K, cam.dist),
-                                  circle))
+                circle = (
+                    (float(cam.K[0, 2]), float(cam.K[1, 2]), float(cam.circle_radius_px))
+                    if circular
+                    else None
+                )
+                rows.append(
+                    judge(
+                        f"fisheye {fov:.0f} {'circular' if circular else 'full-frame'} tilt "
+                        f"{tilt[0]:.0f}-{tilt[1]:.0f} seed {seed}",
+                        list(s.object_points_per_view),
+                        list(s.image_points_per_view),
+                        (1032, 778),
+                        "fisheye",
+                        ("fisheye", cam.K, cam.dist),
+                        circle,
+                    )
+                )
     return rows
 
 
@@ -148,17 +190,20 @@ def _detected(paths, spec: BoardSpec) -> tuple[list, list]:
 
 def real_sets() -> list[dict]:
     rows = []
-    for name, paths, size in (("opencv-left-right left", sorted(LEFT_RIGHT.glob("left*.jpg"), key=_natural), (640, 480)),
-                              ("opencv-left-right right", sorted(LEFT_RIGHT.glob("right*.jpg"), key=_natural), (640, 480)),
-                              ("udacity-camcal", sorted(UDACITY.glob("calibration*.jpg"), key=_natural), (1280, 720))):
+    for name, paths, size in (
+        ("opencv-left-right left", sorted(LEFT_RIGHT.glob("left*.jpg"), key=_natural), (640, 480)),
+        ("opencv-left-right right", sorted(LEFT_RIGHT.glob("right*.jpg"), key=_natural), (640, 480)),
+        ("udacity-camcal", sorted(UDACITY.glob("calibration*.jpg"), key=_natural), (1280, 720)),
+    ):
         views = detect_all(paths)
         rows.append(judge(name, [model_points()] * len(views), [c for _, c, _ in views], size, "k1k2"))
     baka = BoardSpec.chessboard(7, 10, 0.023)
     for side in ("left", "right"):
         obj, img = _detected(sorted((BAKA_STEREO / side).glob("*.jpg")), baka)
         rows.append(judge(f"baka-stereo {side}", obj, img, (1280, 720), "k1k2"))
-    obj, img = _detected(sorted((DATASETS / "acfr-lidar-camera" / "images").glob("*.png")),
-                         BoardSpec.chessboard(5, 7, 0.095))
+    obj, img = _detected(
+        sorted((DATASETS / "acfr-lidar-camera" / "images").glob("*.png")), BoardSpec.chessboard(5, 7, 0.095)
+    )
     rows.append(judge("acfr-lidar-camera (fisheye lens)", obj, img, (1920, 1208), "fisheye"))
     return rows
 
@@ -178,17 +223,23 @@ def main(thresholds: list[float]) -> None:
         new = [not r["hopeless"] and r["sigma"] <= T for r in rows]
         old = [r["old"] for r in rows]
         n_good, n_bad = sum(good), len(rows) - sum(good)
-        print(f"T = {T:g} px ({n_good} good, {n_bad} bad): old rule false-reject {_rejects(good, old)}/{n_good}, "
-              f"false-accept {_accepts(good, old)}/{n_bad}; new rule false-reject {_rejects(good, new)}/{n_good}, "
-              f"false-accept {_accepts(good, new)}/{n_bad}")
+        print(
+            f"T = {T:g} px ({n_good} good, {n_bad} bad): old rule false-reject {_rejects(good, old)}/{n_good}, "
+            f"false-accept {_accepts(good, old)}/{n_bad}; new rule false-reject {_rejects(good, new)}/{n_good}, "
+            f"false-accept {_accepts(good, new)}/{n_bad}"
+        )
     T = thresholds[-1]
-    print(f"\n| set | views | model | worst sigma px | max error px | truth | at {T:g} px | old rule | new rule |")
+    print(
+        f"\n| set | views | model | worst sigma px | max error px | truth | at {T:g} px | old rule | new rule |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         old = "accept" if r["old"] else f"refuse ({', '.join(r['failed'])})"
         new = "accept" if not r["hopeless"] and r["sigma"] <= T else "refuse"
-        print(f"| {r['name']} | {r['views']} | {r['model']} | {r['sigma']:.2f} | {r['err']:.2f} | {r['truth']} | "
-              f"{'good' if r['err'] <= T else 'bad'} | {old} | {new} |")
+        print(
+            f"| {r['name']} | {r['views']} | {r['model']} | {r['sigma']:.2f} | {r['err']:.2f} | {r['truth']} | "
+            f"{'good' if r['err'] <= T else 'bad'} | {old} | {new} |"
+        )
 
 
 if __name__ == "__main__":

@@ -34,8 +34,14 @@ SIZE = (640, 480)
 
 
 def _values(sol: IntrinsicsSolution) -> dict[str, float]:
-    return {"fx": sol.fx, "fy": sol.fy, "cx": sol.cx, "cy": sol.cy,
-            "k1": float(sol.dist_coeffs[0]), "k2": float(sol.dist_coeffs[1])}
+    return {
+        "fx": sol.fx,
+        "fy": sol.fy,
+        "cx": sol.cx,
+        "cy": sol.cy,
+        "k1": float(sol.dist_coeffs[0]),
+        "k2": float(sol.dist_coeffs[1]),
+    }
 
 
 def _solve(views: list) -> IntrinsicsSolution:
@@ -44,8 +50,14 @@ def _solve(views: list) -> IntrinsicsSolution:
 
 def renders(n_sessions: int) -> None:
     cam = PinholeCamera.seed_reference(SIZE)
-    truth = {"fx": cam.K[0, 0], "fy": cam.K[1, 1], "cx": cam.K[0, 2], "cy": cam.K[1, 2],
-             "k1": cam.dist[0], "k2": cam.dist[1]}
+    truth = {
+        "fx": cam.K[0, 0],
+        "fy": cam.K[1, 1],
+        "cx": cam.K[0, 2],
+        "cy": cam.K[1, 2],
+        "k1": cam.dist[0],
+        "k2": cam.dist[1],
+    }
     obj_all = BOARD.object_points()
     z_before: dict[str, list[float]] = {k: [] for k in truth}
     z_after: dict[str, list[float]] = {k: [] for k in truth}
@@ -66,8 +78,10 @@ def renders(n_sessions: int) -> None:
         for k, v in _values(sol).items():
             z_after[k].append((v - truth[k]) / sol.sigma[k])
             z_before[k].append((v - truth[k]) / (sol.sigma[k] / scale))
-    print(f"renders ({n_sessions} sessions): sigma_factor median {np.median(factors):.2f}, max {max(factors):.2f}; "
-          f"rule fired (> {MAX_SIGMA_FACTOR}) in {fired}")
+    print(
+        f"renders ({n_sessions} sessions): sigma_factor median {np.median(factors):.2f}, max {max(factors):.2f}; "
+        f"rule fired (> {MAX_SIGMA_FACTOR}) in {fired}"
+    )
     for k in truth:
         print(f"  {k}: z sd before {np.std(z_before[k], ddof=1):.2f}, after {np.std(z_after[k], ddof=1):.2f}")
 
@@ -78,12 +92,16 @@ def real_left() -> None:
     cov = sol.covariance
     assert cov is not None and cov.view_factor is not None and cov.covariance is not None
     jacobian = np.sqrt(np.diag(cov.covariance)) / (cov.view_factor if cov.inflated else 1.0)
-    est = np.array([[_values(_solve(views[:i] + views[i + 1:]))[n] for n in cov.names] for i in range(len(views))])
+    est = np.array(
+        [[_values(_solve(views[:i] + views[i + 1 :]))[n] for n in cov.names] for i in range(len(views))]
+    )
     n = len(views)
     jackknife = np.sqrt((n - 1) / n * np.sum((est - est.mean(0)) ** 2, axis=0))
     ratios = ", ".join(f"{name} {r:.2f}" for name, r in zip(cov.names, jackknife / jacobian, strict=True))
-    print(f"opencv-left-right left ({n} views): sigma_factor {cov.view_factor:.2f}, fired {cov.inflated}; "
-          f"jackknife / Jacobian sigma: {ratios}")
+    print(
+        f"opencv-left-right left ({n} views): sigma_factor {cov.view_factor:.2f}, fired {cov.inflated}; "
+        f"jackknife / Jacobian sigma: {ratios}"
+    )
     rng = np.random.default_rng(0)
     halves = []
     for _ in range(40):
@@ -92,8 +110,10 @@ def real_left() -> None:
             c = _solve([views[i] for i in h]).covariance
             assert c is not None and c.view_factor is not None
             halves.append(c.view_factor)
-    print(f"  40 random 7 + 6 splits: sigma_factor median {np.median(halves):.2f}, min {min(halves):.2f}; "
-          f"fired in {sum(f > MAX_SIGMA_FACTOR for f in halves)} / {len(halves)} halves")
+    print(
+        f"  40 random 7 + 6 splits: sigma_factor median {np.median(halves):.2f}, min {min(halves):.2f}; "
+        f"fired in {sum(f > MAX_SIGMA_FACTOR for f in halves)} / {len(halves)} halves"
+    )
 
 
 if __name__ == "__main__":

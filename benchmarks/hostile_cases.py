@@ -27,20 +27,39 @@ BAD_NUMBERS = ("nan", "inf", "-inf", "1e308")
 BOX = "-1,-1,0,1,1,3"
 DEEP_JSON = "[" * 200000 + "]" * 200000
 YAML_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
-    f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=True))
+    f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n"
+    for p, c in zip("abcdefgh", "bcdefghi", strict=True)
+)
 
 
 def _out_targets(group: str, argv: list[str], out_flag: str | None = "-o") -> list[Case]:
     """A writer aimed at a FIFO, a symlink, a dangling symlink and a folder, with --force: nothing replaced."""
     at = (lambda p: [out_flag, p]) if out_flag else (lambda p: [p])
     return [
-        Case(group, f"{' '.join(argv[:2])} onto a FIFO --force", [*argv, *at("{w}/t"), "--force"], setup=fifo("t"),
-             protect=["t"]),
-        Case(group, f"{' '.join(argv[:2])} onto a symlink --force", [*argv, *at("{w}/t"), "--force"],
-             setup=symlink("t"), protect=["t", "victim.txt"]),
-        Case(group, f"{' '.join(argv[:2])} onto a dangling symlink", [*argv, *at("{w}/t"), "--force"],
-             setup=lambda w: (w / "t").symlink_to(w / "nowhere"), protect=["t"]),
-        Case(group, f"{' '.join(argv[:2])} onto a folder", [*argv, *at("{w}/d"), "--force"], setup=folder("d")),
+        Case(
+            group,
+            f"{' '.join(argv[:2])} onto a FIFO --force",
+            [*argv, *at("{w}/t"), "--force"],
+            setup=fifo("t"),
+            protect=["t"],
+        ),
+        Case(
+            group,
+            f"{' '.join(argv[:2])} onto a symlink --force",
+            [*argv, *at("{w}/t"), "--force"],
+            setup=symlink("t"),
+            protect=["t", "victim.txt"],
+        ),
+        Case(
+            group,
+            f"{' '.join(argv[:2])} onto a dangling symlink",
+            [*argv, *at("{w}/t"), "--force"],
+            setup=lambda w: (w / "t").symlink_to(w / "nowhere"),
+            protect=["t"],
+        ),
+        Case(
+            group, f"{' '.join(argv[:2])} onto a folder", [*argv, *at("{w}/d"), "--force"], setup=folder("d")
+        ),
     ]
 
 
@@ -52,32 +71,70 @@ def _capture() -> list[Case]:
         Case(g, "empty folder", [*base, "{w}/empty"], setup=folder("empty")),
         Case(g, "text renamed .png", [*base, "{w}/f"], setup=folder("f", {"a.png": b"hello", "b.png": b""})),
         Case(g, "1x1 image", [*base, "{w}/tiny"], setup=tiny_png),
-        Case(g, "non-UTF-8 names", [*base, "{w}/v"], setup=views("v", 3, lambda i: b"view-\xff\xfe%d.png" % i)),
+        Case(
+            g, "non-UTF-8 names", [*base, "{w}/v"], setup=views("v", 3, lambda i: b"view-\xff\xfe%d.png" % i)
+        ),
         Case(g, "ESC in names", [*base, "{w}/v"], setup=views("v", 3, lambda i: b"v\x1b[2J%d.png" % i)),
         Case(g, "FIFO among images", [*base, "{w}/v"], setup=both(views("v", 2), fifo("v/z.png"))),
-        Case(g, "symlink loop among images", [*base, "{w}/v"],
-             setup=both(views("v", 2), lambda w: (w / "v" / "loop.png").symlink_to(w / "v" / "loop.png"))),
-        Case(g, "unknown board", ["capture", "--serial", "HOSTILE-1", "--board", "nope", "--source", "{w}/v"],
-             setup=views("v", 3)),
-        Case(g, "serial with a slash", ["capture", "--serial", "a/b", "--board", BOARD, "--source", "{w}/v"],
-             setup=views("v", 3)),
-        Case(g, "serial with ESC", ["capture", "--serial", "a\x1b[2Jb", "--board", BOARD, "--source", "{w}/v"],
-             setup=views("v", 3)),
+        Case(
+            g,
+            "symlink loop among images",
+            [*base, "{w}/v"],
+            setup=both(views("v", 2), lambda w: (w / "v" / "loop.png").symlink_to(w / "v" / "loop.png")),
+        ),
+        Case(
+            g,
+            "unknown board",
+            ["capture", "--serial", "HOSTILE-1", "--board", "nope", "--source", "{w}/v"],
+            setup=views("v", 3),
+        ),
+        Case(
+            g,
+            "serial with a slash",
+            ["capture", "--serial", "a/b", "--board", BOARD, "--source", "{w}/v"],
+            setup=views("v", 3),
+        ),
+        Case(
+            g,
+            "serial with ESC",
+            ["capture", "--serial", "a\x1b[2Jb", "--board", BOARD, "--source", "{w}/v"],
+            setup=views("v", 3),
+        ),
         Case(g, "--max-views 0", [*base, "{w}/v", "--max-views", "0"], setup=views("v", 3)),
         Case(g, "--max-views -1", [*base, "{w}/v", "--max-views", "-1"], setup=views("v", 3)),
         Case(g, "--max-views 10^30", [*base, "{w}/v", "--max-views", str(10**30)], setup=views("v", 3)),
         Case(g, "few views (gates fail)", [*base, "{w}/v"], setup=views("v", 3)),
         Case(g, "read-only store", [*base, "{w}/v"], setup=both(views("v", 3), read_only_store)),
-        Case(g, "read-only store, unprivileged", [*base, "{w}/v"], setup=both(views("v", 3), read_only_store),
-             unprivileged=True),
+        Case(
+            g,
+            "read-only store, unprivileged",
+            [*base, "{w}/v"],
+            setup=both(views("v", 3), read_only_store),
+            unprivileged=True,
+        ),
         Case(g, "source is a FIFO list file", [*base, "{w}/t"], setup=fifo("t")),
-        Case(g, "calibrate on an empty folder", ["calibrate", "--serial", "H", "--board", BOARD, "--source", "{w}/e"],
-             setup=folder("e")),
+        Case(
+            g,
+            "calibrate on an empty folder",
+            ["calibrate", "--serial", "H", "--board", BOARD, "--source", "{w}/e"],
+            setup=folder("e"),
+        ),
         Case(g, "prune on a read-only store", ["prune"], setup=read_only_store, unprivileged=True),
-        *[Case(g, f"capture interrupted at {t} s", [*base, "{w}/demo/good-session"], expect="any", interrupt_s=t)
-          for t in (0.3, 0.8, 1.2)],
+        *[
+            Case(
+                g,
+                f"capture interrupted at {t} s",
+                [*base, "{w}/demo/good-session"],
+                expect="any",
+                interrupt_s=t,
+            )
+            for t in (0.3, 0.8, 1.2)
+        ],
     ]
-    cases += [Case(g, f"--duration {v}", [*base, "{w}/v", "--duration", v], setup=views("v", 3)) for v in BAD_NUMBERS]
+    cases += [
+        Case(g, f"--duration {v}", [*base, "{w}/v", "--duration", v], setup=views("v", 3))
+        for v in BAD_NUMBERS
+    ]
     return cases
 
 
@@ -94,24 +151,55 @@ def _synth() -> list[Case]:
         Case(g, "--rig 99", ["synth", "{w}/s", "--rig", "99"]),
         Case(g, "out is a file", ["synth", "{w}/f"], setup=text("f", "mine"), protect=["f"]),
         Case(g, "out is a FIFO --force", ["synth", "{w}/t", "--force"], setup=fifo("t"), protect=["t"]),
-        Case(g, "out is a symlink --force", ["synth", "{w}/t", "--force"], setup=symlink("t"),
-             protect=["t", "victim.txt"]),
-        Case(g, "out holds a stranger's file --force", ["synth", "{w}/s", "--force"], expect="ok",
-             setup=text("s/notes.txt", "keep me"), protect=["s/notes.txt"]),
-        Case(g, "synth-residuals --keyframes 10^7", ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--keyframes", "10000000"]),
+        Case(
+            g,
+            "out is a symlink --force",
+            ["synth", "{w}/t", "--force"],
+            setup=symlink("t"),
+            protect=["t", "victim.txt"],
+        ),
+        Case(
+            g,
+            "out holds a stranger's file --force",
+            ["synth", "{w}/s", "--force"],
+            expect="ok",
+            setup=text("s/notes.txt", "keep me"),
+            protect=["s/notes.txt"],
+        ),
+        Case(
+            g,
+            "synth-residuals --keyframes 10^7",
+            ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--keyframes", "10000000"],
+        ),
         Case(g, "synth-residuals --fault bogus", ["synth-residuals", "{w}/r.csv", "--fault", "bogus"]),
         Case(g, "synth-motions --rows 10^9", ["synth-motions", "{w}/m.csv", "--rows", str(10**9)]),
         Case(g, "synth-motions --rows 0", ["synth-motions", "{w}/m.csv", "--rows", "0"]),
         Case(g, "lidar synth out is a FIFO", ["lidar", "synth", "{w}/t"], setup=fifo("t"), protect=["t"]),
     ]
-    cases += [Case(g, f"synth-residuals --magnitude {v}", ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--magnitude", v])
-              for v in BAD_NUMBERS]
-    cases += [Case(g, f"synth-residuals --drift-ppm {v}", ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--drift-ppm", v])
-              for v in BAD_NUMBERS[:2]]
-    cases += [Case(g, f"synth-motions --time-offset-ms {v}", ["synth-motions", "{w}/m.csv", "--time-offset-ms", v])
-              for v in BAD_NUMBERS]
-    cases += [Case(g, f"lidar synth --range-offset-mm {v}", ["lidar", "synth", "{w}/l", "--range-offset-mm", v])
-              for v in BAD_NUMBERS[:2]]
+    cases += [
+        Case(
+            g,
+            f"synth-residuals --magnitude {v}",
+            ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--magnitude", v],
+        )
+        for v in BAD_NUMBERS
+    ]
+    cases += [
+        Case(
+            g,
+            f"synth-residuals --drift-ppm {v}",
+            ["synth-residuals", "{w}/r.csv", "--fault", "focal", "--drift-ppm", v],
+        )
+        for v in BAD_NUMBERS[:2]
+    ]
+    cases += [
+        Case(g, f"synth-motions --time-offset-ms {v}", ["synth-motions", "{w}/m.csv", "--time-offset-ms", v])
+        for v in BAD_NUMBERS
+    ]
+    cases += [
+        Case(g, f"lidar synth --range-offset-mm {v}", ["lidar", "synth", "{w}/l", "--range-offset-mm", v])
+        for v in BAD_NUMBERS[:2]
+    ]
     cases += _out_targets(g, ["synth-motions"], out_flag=None)[:2]
     cases += _out_targets(g, ["synth-residuals", "--fault", "focal"], out_flag=None)[:2]
     return cases
@@ -123,49 +211,109 @@ def _solve_check() -> list[Case]:
         Case(g, "solve unknown session", ["solve", "nope"]),
         Case(g, "solve unknown serial", ["solve", "--serial", "NOPE"]),
         Case(g, "solve --model bogus", ["solve", "--serial", SERIAL, "--model", "bogus"]),
-        Case(g, "solve on a read-only store", ["solve", "--serial", SERIAL], setup=read_only_store, unprivileged=True),
-        Case(g, "solve --report onto a FIFO", ["solve", "--serial", SERIAL, "--report", "{w}/t"], setup=fifo("t"),
-             protect=["t"]),
-        Case(g, "solve --report onto a symlink", ["solve", "--serial", SERIAL, "--report", "{w}/t"],
-             setup=symlink("t"), protect=["t", "victim.txt"]),
-        *[Case(g, f"solve interrupted at {t} s", ["solve", "--serial", SERIAL], expect="any", interrupt_s=t)
-          for t in (0.3, 0.8, 1.2)],
+        Case(
+            g,
+            "solve on a read-only store",
+            ["solve", "--serial", SERIAL],
+            setup=read_only_store,
+            unprivileged=True,
+        ),
+        Case(
+            g,
+            "solve --report onto a FIFO",
+            ["solve", "--serial", SERIAL, "--report", "{w}/t"],
+            setup=fifo("t"),
+            protect=["t"],
+        ),
+        Case(
+            g,
+            "solve --report onto a symlink",
+            ["solve", "--serial", SERIAL, "--report", "{w}/t"],
+            setup=symlink("t"),
+            protect=["t", "victim.txt"],
+        ),
+        *[
+            Case(g, f"solve interrupted at {t} s", ["solve", "--serial", SERIAL], expect="any", interrupt_s=t)
+            for t in (0.3, 0.8, 1.2)
+        ],
         Case(g, "check unknown serial", ["check", "NOPE", "--source", "{w}/v"], setup=views("v", 3)),
         Case(g, "check empty folder", ["check", SERIAL, "--source", "{w}/e"], setup=folder("e")),
         Case(g, "check from a FIFO list file", ["check", SERIAL, "--source", "{w}/t"], setup=fifo("t")),
         Case(g, "check 3 views", ["check", SERIAL, "--source", "{w}/v"], setup=views("v", 3)),
         Case(g, "check @99", ["check", f"{SERIAL}@99", "--source", "{w}/v"], setup=views("v", 3)),
-        Case(g, "check non-UTF-8 names", ["check", SERIAL, "--source", "{w}/v"],
-             setup=views("v", 3, lambda i: b"\xff%d.png" % i)),
+        Case(
+            g,
+            "check non-UTF-8 names",
+            ["check", SERIAL, "--source", "{w}/v"],
+            setup=views("v", 3, lambda i: b"\xff%d.png" % i),
+        ),
         Case(g, "diff unknown", ["diff", "NOPE@1", "NOPE@2"]),
         Case(g, "diff @0", ["diff", f"{SERIAL}@0", f"{SERIAL}@1"]),
-        *[Case(g, f"diff --scale {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--scale", v])
-          for v in (*BAD_NUMBERS, "0", "-1")],
-        *[Case(g, f"diff --range-m {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--range-m", v])
-          for v in ("nan", "-1", "0")],
+        *[
+            Case(g, f"diff --scale {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--scale", v])
+            for v in (*BAD_NUMBERS, "0", "-1")
+        ],
+        *[
+            Case(g, f"diff --range-m {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--range-m", v])
+            for v in ("nan", "-1", "0")
+        ],
     ]
 
 
 def _records() -> list[Case]:
     g = "history/show/export"
-    ok_reads = [["history", SERIAL], ["show", SERIAL], ["export", SERIAL], ["lint", "--serial", SERIAL],
-                ["db", "verify"], ["board", "list"]]
+    ok_reads = [
+        ["history", SERIAL],
+        ["show", SERIAL],
+        ["export", SERIAL],
+        ["lint", "--serial", SERIAL],
+        ["db", "verify"],
+        ["board", "list"],
+    ]
     cases = [
-        *[Case(g, f"{' '.join(a[:2])} on a read-only file", a, expect="ok", setup=read_only_file,
-               unprivileged=True) for a in ok_reads],
-        *[Case(g, f"{' '.join(a[:2])} in a read-only folder", a, expect="ok", setup=read_only_store,
-               unprivileged=True) for a in ok_reads[:3]],
+        *[
+            Case(
+                g,
+                f"{' '.join(a[:2])} on a read-only file",
+                a,
+                expect="ok",
+                setup=read_only_file,
+                unprivileged=True,
+            )
+            for a in ok_reads
+        ],
+        *[
+            Case(
+                g,
+                f"{' '.join(a[:2])} in a read-only folder",
+                a,
+                expect="ok",
+                setup=read_only_store,
+                unprivileged=True,
+            )
+            for a in ok_reads[:3]
+        ],
         Case(g, "show unknown", ["show", "NOPE"]),
         Case(g, "show CAM@x", ["show", f"{SERIAL}@x"]),
         Case(g, "show CAM@-1", ["show", f"{SERIAL}@-1"]),
         Case(g, "show CAM@10^20", ["show", f"{SERIAL}@{10**20}"]),
         Case(g, "history ESC serial", ["history", "A\x1b[2J"]),
         Case(g, "export --format bogus", ["export", SERIAL, "--format", "bogus"]),
-        Case(g, "export onto an existing file", ["export", SERIAL, "-o", "{w}/f"], setup=text("f", "mine"),
-             protect=["f"]),
+        Case(
+            g,
+            "export onto an existing file",
+            ["export", SERIAL, "-o", "{w}/f"],
+            setup=text("f", "mine"),
+            protect=["f"],
+        ),
         Case(g, "export -o into a missing folder", ["export", SERIAL, "-o", "{w}/no/such/x.json"]),
-        Case(g, "export -o read-only folder", ["export", SERIAL, "-o", "{w}/ro/x.json"],
-             setup=lambda w: (w / "ro").mkdir(mode=0o555), unprivileged=True),
+        Case(
+            g,
+            "export -o read-only folder",
+            ["export", SERIAL, "-o", "{w}/ro/x.json"],
+            setup=lambda w: (w / "ro").mkdir(mode=0o555),
+            unprivileged=True,
+        ),
         *_out_targets(g, ["export", SERIAL]),
         *_out_targets(g, ["export", SERIAL, "--format", "ros"]),
         *_out_targets(g, ["report", SERIAL]),
@@ -175,34 +323,56 @@ def _records() -> list[Case]:
         Case(g, "rollback --to 10^30", ["rollback", SERIAL, "--to", str(10**30), "--reason", "x"]),
         Case(g, "rollback 100k reason", ["rollback", SERIAL, "--to", "1", "--reason", "x" * 100000]),
         Case(g, "rollback empty reason", ["rollback", SERIAL, "--to", "1", "--reason", ""]),
-        Case(g, "rollback on a read-only store", ["rollback", SERIAL, "--to", "1", "--reason", "x"],
-             setup=read_only_store, unprivileged=True),
+        Case(
+            g,
+            "rollback on a read-only store",
+            ["rollback", SERIAL, "--to", "1", "--reason", "x"],
+            setup=read_only_store,
+            unprivileged=True,
+        ),
     ]
     return cases
 
 
 def _imports() -> list[Case]:
     g = "import/lint"
+
     def doc_edit(key: str, value: object) -> Callable[[dict], None]:
         return lambda doc: doc.__setitem__(key, value)
+
     files = {
-        "garbage": text("x.json", "not json"), "empty": text("x.json", ""), "truncated": text("x.json", '{"serial": "A'),
-        "non-UTF-8": text("x.json", b"\xff\xfe{}"), "deep nesting": text("x.json", DEEP_JSON),
-        "NaN literal": text("x.json", '{"rms_px": NaN}'), "1e400": text("x.json", '{"rms_px": 1e400}'),
-        "YAML bomb": text("x.json", YAML_BOMB), "a folder": folder("x.json"),
+        "garbage": text("x.json", "not json"),
+        "empty": text("x.json", ""),
+        "truncated": text("x.json", '{"serial": "A'),
+        "non-UTF-8": text("x.json", b"\xff\xfe{}"),
+        "deep nesting": text("x.json", DEEP_JSON),
+        "NaN literal": text("x.json", '{"rms_px": NaN}'),
+        "1e400": text("x.json", '{"rms_px": 1e400}'),
+        "YAML bomb": text("x.json", YAML_BOMB),
+        "a folder": folder("x.json"),
         "a FIFO": fifo("x.json"),
         "hash mismatch": exported("x.json", doc_edit("rms_px", 0.01)),
         "schema_version 99": exported("x.json", doc_edit("schema_version", 99)),
         "fx edited": exported("x.json", lambda d: d["camera_matrix"][0].__setitem__(0, 900.0)),
     }
-    cases = [Case(g, f"import {name}", ["import", "{w}/x.json"], setup=setup) for name, setup in files.items()]
-    cases += [Case(g, f"lint {name}", ["lint", "{w}/x.json"], setup=setup) for name, setup in files.items()
-              if name != "a FIFO"]
+    cases = [
+        Case(g, f"import {name}", ["import", "{w}/x.json"], setup=setup) for name, setup in files.items()
+    ]
+    cases += [
+        Case(g, f"lint {name}", ["lint", "{w}/x.json"], setup=setup)
+        for name, setup in files.items()
+        if name != "a FIFO"
+    ]
     cases += [
         Case(g, "import own export (no-op)", ["import", "{w}/x.json"], expect="ok", setup=exported("x.json")),
-        Case(g, "import own export into a read-only store (a no-op)", ["import", "{w}/x.json"], expect="ok",
-             setup=both(exported("x.json"), read_only_store),
-             unprivileged=True),
+        Case(
+            g,
+            "import own export into a read-only store (a no-op)",
+            ["import", "{w}/x.json"],
+            expect="ok",
+            setup=both(exported("x.json"), read_only_store),
+            unprivileged=True,
+        ),
         Case(g, "lint --serial unknown", ["lint", "--serial", "NOPE"]),
         Case(g, "lint missing file", ["lint", "{w}/nope.json"]),
     ]
@@ -214,22 +384,54 @@ def _diagnostics() -> list[Case]:
     cases = []
     for cmd in ("triage", "gauge", "handeye"):
         extra = ["--from", "base", "--to", "cam"] if cmd == "handeye" else []
-        for name, setup in (("missing", None), ("empty", text("x.csv", "")), ("garbage", text("x.csv", "a,b\n1,2\n")),
-                            ("binary", text("x.csv", bytes(range(256)) * 8)), ("a folder", folder("x.csv"))):
+        for name, setup in (
+            ("missing", None),
+            ("empty", text("x.csv", "")),
+            ("garbage", text("x.csv", "a,b\n1,2\n")),
+            ("binary", text("x.csv", bytes(range(256)) * 8)),
+            ("a folder", folder("x.csv")),
+        ):
             cases.append(Case(g, f"{cmd} {name}", [cmd, "{w}/x.csv", *extra], setup=setup))
     for v in ("nan", "inf", "1e308", "abc"):
-        cases.append(Case(g, f"triage {v} residual", ["triage", "{w}/x.csv"],
-                          setup=residuals("x.csv", second_data_line(v))))
-        cases.append(Case(g, f"handeye {v} in a pose", ["handeye", "{w}/x.csv", "--from", "base", "--to", "cam"],
-                          setup=motions("x.csv", second_data_line(v))))
+        cases.append(
+            Case(
+                g,
+                f"triage {v} residual",
+                ["triage", "{w}/x.csv"],
+                setup=residuals("x.csv", second_data_line(v)),
+            )
+        )
+        cases.append(
+            Case(
+                g,
+                f"handeye {v} in a pose",
+                ["handeye", "{w}/x.csv", "--from", "base", "--to", "cam"],
+                setup=motions("x.csv", second_data_line(v)),
+            )
+        )
     cases += [
-        Case(g, "handeye 3 rows", ["handeye", "{w}/x.csv", "--from", "base", "--to", "cam"],
-             setup=motions("x.csv", rows=3)),
-        Case(g, "handeye --method bogus", ["handeye", "{w}/x.csv", "--from", "b", "--to", "c", "--method", "x"],
-             setup=motions("x.csv")),
+        Case(
+            g,
+            "handeye 3 rows",
+            ["handeye", "{w}/x.csv", "--from", "base", "--to", "cam"],
+            setup=motions("x.csv", rows=3),
+        ),
+        Case(
+            g,
+            "handeye --method bogus",
+            ["handeye", "{w}/x.csv", "--from", "b", "--to", "c", "--method", "x"],
+            setup=motions("x.csv"),
+        ),
         *_out_targets(g, ["handeye", "{w}/x.csv", "--from", "base", "--to", "cam"])[:2],
-        *[Case(g, f"{cmd} a FIFO", [cmd, "{w}/t", *extra], setup=fifo("t")) for cmd, extra in (
-            ("triage", []), ("gauge", []), ("handeye", ["--from", "base", "--to", "cam"]), ("timeoffset", ["{w}/t"]))],
+        *[
+            Case(g, f"{cmd} a FIFO", [cmd, "{w}/t", *extra], setup=fifo("t"))
+            for cmd, extra in (
+                ("triage", []),
+                ("gauge", []),
+                ("handeye", ["--from", "base", "--to", "cam"]),
+                ("timeoffset", ["{w}/t"]),
+            )
+        ],
         Case(g, "timeoffset missing", ["timeoffset", "{w}/g.csv", "{w}/c.csv"]),
         Case(g, "timeoffset garbage", ["timeoffset", "{w}/g.csv", "{w}/g.csv"], setup=text("g.csv", "x\n")),
     ]
@@ -238,49 +440,235 @@ def _diagnostics() -> list[Case]:
 
 def _admin() -> list[Case]:
     g = "board/rig/lidar"
-    add = ["board", "add", "B2", "--kind", "chessboard", "--cols", "9", "--rows", "6", "--uncertainty-mm", "0.02",
-           "--instrument", "calipers", "--measured-by", "qa", "--measured-on", "2026-03-11"]
-    cases = [Case(g, f"board add --square-mm {v}", [*add, "--square-mm", v]) for v in (*BAD_NUMBERS, "0", "-1")]
+    add = [
+        "board",
+        "add",
+        "B2",
+        "--kind",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--uncertainty-mm",
+        "0.02",
+        "--instrument",
+        "calipers",
+        "--measured-by",
+        "qa",
+        "--measured-on",
+        "2026-03-11",
+    ]
+    cases = [
+        Case(g, f"board add --square-mm {v}", [*add, "--square-mm", v]) for v in (*BAD_NUMBERS, "0", "-1")
+    ]
     cases += [
-        Case(g, "board add --cols 0", [*add[:5], "--cols", "0", "--rows", "6", *add[9:], "--square-mm", "25"]),
-        Case(g, "board add --cols 10^9", [*add[:5], "--cols", str(10**9), "--rows", "6", *add[9:], "--square-mm", "25"]),
+        Case(
+            g, "board add --cols 0", [*add[:5], "--cols", "0", "--rows", "6", *add[9:], "--square-mm", "25"]
+        ),
+        Case(
+            g,
+            "board add --cols 10^9",
+            [*add[:5], "--cols", str(10**9), "--rows", "6", *add[9:], "--square-mm", "25"],
+        ),
         Case(g, "board add bad date", [*add[:-1], "yesterday", "--square-mm", "25"]),
-        Case(g, "board add a second time (a new revision)", ["board", "add", BOARD, *add[3:], "--square-mm", "25"],
-             expect="ok"),
-        Case(g, "board add --evidence a FIFO", [*add, "--square-mm", "25", "--evidence", "{w}/t"], setup=fifo("t")),
-        Case(g, "board add with the signing key a FIFO", [*add, "--square-mm", "25"], setup=fifo("k.pem"),
-             env={"CALIBCTL_SIGNING_KEY": "k.pem"}),
-        Case(g, "lidar solve scans hold a FIFO", ["lidar", "solve", "--images", "{w}/v", "--scans", "{w}/s", "--cols",
-                                                  "9", "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL],
-             setup=both(views("v", 3), folder("s"), fifo("s/000.npy"))),
-        Case(g, "rig capture (unknown rig) from a FIFO list", ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/t", "--source",
-                                                  "B={w}/t"],
-             setup=fifo("t")),
+        Case(
+            g,
+            "board add a second time (a new revision)",
+            ["board", "add", BOARD, *add[3:], "--square-mm", "25"],
+            expect="ok",
+        ),
+        Case(
+            g,
+            "board add --evidence a FIFO",
+            [*add, "--square-mm", "25", "--evidence", "{w}/t"],
+            setup=fifo("t"),
+        ),
+        Case(
+            g,
+            "board add with the signing key a FIFO",
+            [*add, "--square-mm", "25"],
+            setup=fifo("k.pem"),
+            env={"CALIBCTL_SIGNING_KEY": "k.pem"},
+        ),
+        Case(
+            g,
+            "lidar solve scans hold a FIFO",
+            [
+                "lidar",
+                "solve",
+                "--images",
+                "{w}/v",
+                "--scans",
+                "{w}/s",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--box",
+                BOX,
+                "--backing-mm",
+                "300,220",
+                "--serial",
+                SERIAL,
+            ],
+            setup=both(views("v", 3), folder("s"), fifo("s/000.npy")),
+        ),
+        Case(
+            g,
+            "rig capture (unknown rig) from a FIFO list",
+            ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/t", "--source", "B={w}/t"],
+            setup=fifo("t"),
+        ),
         Case(g, "board show unknown", ["board", "show", "nope"]),
-        Case(g, "rig solve-folders same folder twice",
-             ["rig", "solve-folders", "--source", "A={w}/demo/good-session", "--source", "B={w}/demo/good-session",
-              "--cols", "9", "--rows", "6", "--square-mm", "25"]),
-        Case(g, "rig solve-folders missing", ["rig", "solve-folders", "--source", "A={w}/no", "--source", "B={w}/no2",
-                                              "--cols", "9", "--rows", "6", "--square-mm", "25"]),
-        *[Case(g, f"rig solve-folders --square-mm {v}",
-               ["rig", "solve-folders", "--source", "A={w}/v", "--source", "B={w}/v", "--cols", "9", "--rows", "6",
-                "--square-mm", v], setup=views("v", 3)) for v in ("nan", "inf")],
-        Case(g, "rig solve-folders --min-shared-views -1",
-             ["rig", "solve-folders", "--source", "A={w}/v", "--source", "B={w}/w", "--cols", "9", "--rows", "6",
-              "--square-mm", "25", "--min-shared-views", "-1"], setup=both(views("v", 3), views("w", 3))),
+        Case(
+            g,
+            "rig solve-folders same folder twice",
+            [
+                "rig",
+                "solve-folders",
+                "--source",
+                "A={w}/demo/good-session",
+                "--source",
+                "B={w}/demo/good-session",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+            ],
+        ),
+        Case(
+            g,
+            "rig solve-folders missing",
+            [
+                "rig",
+                "solve-folders",
+                "--source",
+                "A={w}/no",
+                "--source",
+                "B={w}/no2",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+            ],
+        ),
+        *[
+            Case(
+                g,
+                f"rig solve-folders --square-mm {v}",
+                [
+                    "rig",
+                    "solve-folders",
+                    "--source",
+                    "A={w}/v",
+                    "--source",
+                    "B={w}/v",
+                    "--cols",
+                    "9",
+                    "--rows",
+                    "6",
+                    "--square-mm",
+                    v,
+                ],
+                setup=views("v", 3),
+            )
+            for v in ("nan", "inf")
+        ],
+        Case(
+            g,
+            "rig solve-folders --min-shared-views -1",
+            [
+                "rig",
+                "solve-folders",
+                "--source",
+                "A={w}/v",
+                "--source",
+                "B={w}/w",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--min-shared-views",
+                "-1",
+            ],
+            setup=both(views("v", 3), views("w", 3)),
+        ),
         Case(g, "rig add unknown member", ["rig", "add", "R1", "--camera", "NOPE", "--camera", "NOPE2"]),
         Case(g, "rig solve unknown", ["rig", "solve", "R9"]),
         Case(g, "rig show unknown", ["rig", "show", "R9"]),
         Case(g, "rig history unknown", ["rig", "history", "R9"]),
         Case(g, "rig rollback unknown", ["rig", "rollback", "R9", "--to", "1", "--reason", "x"]),
         Case(g, "rig lint unknown", ["rig", "lint", "R9"]),
-        Case(g, "rig export unknown -o FIFO", ["rig", "export", "R9", "-o", "{w}/t", "--force"], setup=fifo("t"),
-             protect=["t"]),
-        Case(g, "rig capture missing folders", ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/no"]),
-        Case(g, "lidar solve missing", ["lidar", "solve", "--images", "{w}/no", "--scans", "{w}/no2", "--cols", "9",
-                                        "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL]),
-        Case(g, "lidar solve empty folders", ["lidar", "solve", "--images", "{w}/e", "--scans", "{w}/e", "--cols", "9",
-                                              "--rows", "6", "--square-mm", "25", "--box", BOX, "--backing-mm", "300,220", "--serial", SERIAL], setup=folder("e")),
+        Case(
+            g,
+            "rig export unknown -o FIFO",
+            ["rig", "export", "R9", "-o", "{w}/t", "--force"],
+            setup=fifo("t"),
+            protect=["t"],
+        ),
+        Case(
+            g,
+            "rig capture missing folders",
+            ["rig", "capture", "R9", "--board", BOARD, "--source", "A={w}/no"],
+        ),
+        Case(
+            g,
+            "lidar solve missing",
+            [
+                "lidar",
+                "solve",
+                "--images",
+                "{w}/no",
+                "--scans",
+                "{w}/no2",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--box",
+                BOX,
+                "--backing-mm",
+                "300,220",
+                "--serial",
+                SERIAL,
+            ],
+        ),
+        Case(
+            g,
+            "lidar solve empty folders",
+            [
+                "lidar",
+                "solve",
+                "--images",
+                "{w}/e",
+                "--scans",
+                "{w}/e",
+                "--cols",
+                "9",
+                "--rows",
+                "6",
+                "--square-mm",
+                "25",
+                "--box",
+                BOX,
+                "--backing-mm",
+                "300,220",
+                "--serial",
+                SERIAL,
+            ],
+            setup=folder("e"),
+        ),
     ]
     return cases
 
@@ -290,72 +678,211 @@ def _store() -> list[Case]:
     cases = [
         Case(g, "db verify --since garbage", ["db", "verify", "--since", "HEAD"]),
         Case(g, "--db is a folder", ["--db", "sqlite:///{w}", "history", SERIAL]),
-        Case(g, "--db is a text file", ["--db", "sqlite:///{w}/t.db", "history", SERIAL], setup=text("t.db", "hello"),
-             protect=["t.db"]),
-        Case(g, "--db is an empty file", ["--db", "sqlite:///{w}/t.db", "db", "verify"], setup=text("t.db", "")),
-        Case(g, "db upgrade on a text file", ["--db", "sqlite:///{w}/t.db", "db", "upgrade"],
-             setup=text("t.db", "hello"), protect=["t.db"]),
-        Case(g, "--db postgres on a closed port", ["--db", "postgresql://x@127.0.0.1:9/none", "history", SERIAL]),
+        Case(
+            g,
+            "--db is a text file",
+            ["--db", "sqlite:///{w}/t.db", "history", SERIAL],
+            setup=text("t.db", "hello"),
+            protect=["t.db"],
+        ),
+        Case(
+            g, "--db is an empty file", ["--db", "sqlite:///{w}/t.db", "db", "verify"], setup=text("t.db", "")
+        ),
+        Case(
+            g,
+            "db upgrade on a text file",
+            ["--db", "sqlite:///{w}/t.db", "db", "upgrade"],
+            setup=text("t.db", "hello"),
+            protect=["t.db"],
+        ),
+        Case(
+            g,
+            "--db postgres on a closed port",
+            ["--db", "postgresql://x@127.0.0.1:9/none", "history", SERIAL],
+        ),
         Case(g, "--station-config missing", ["--station-config", "{w}/no.yaml", "history", SERIAL]),
-        Case(g, "station file YAML bomb", ["--station-config", "{w}/s.yaml", "history", SERIAL],
-             setup=text("s.yaml", YAML_BOMB)),
-        Case(g, "station file min_views 1e21", ["--station-config", "{w}/s.yaml", "history", SERIAL],
-             setup=text("s.yaml", "gates:\n  min_views: 1000000000000000000000\n")),
+        Case(
+            g,
+            "station file YAML bomb",
+            ["--station-config", "{w}/s.yaml", "history", SERIAL],
+            setup=text("s.yaml", YAML_BOMB),
+        ),
+        Case(
+            g,
+            "station file min_views 1e21",
+            ["--station-config", "{w}/s.yaml", "history", SERIAL],
+            setup=text("s.yaml", "gates:\n  min_views: 1000000000000000000000\n"),
+        ),
         Case(g, "CALIBCTL_JOBS=nan", ["history", SERIAL], env={"CALIBCTL_JOBS": "nan"}),
-        Case(g, "keys init onto a FIFO", ["keys", "init", "--key", "{w}/t", "--force"], setup=fifo("t"), protect=["t"]),
-        Case(g, "keys init onto a symlink", ["keys", "init", "--key", "{w}/t", "--force"], setup=symlink("t"),
-             protect=["t", "victim.txt"]),
+        Case(
+            g,
+            "keys init onto a FIFO",
+            ["keys", "init", "--key", "{w}/t", "--force"],
+            setup=fifo("t"),
+            protect=["t"],
+        ),
+        Case(
+            g,
+            "keys init onto a symlink",
+            ["keys", "init", "--key", "{w}/t", "--force"],
+            setup=symlink("t"),
+            protect=["t", "victim.txt"],
+        ),
         Case(g, "keys init in a missing folder", ["keys", "init", "--key", "{w}/no/k.pem"]),
         Case(g, "keys export-public missing key", ["keys", "export-public", "--key", "{w}/no.pem"]),
-        Case(g, "signing key is a FIFO (a read needs no key)", ["history", SERIAL], expect="ok", setup=fifo("k.pem"),
-             env={"CALIBCTL_SIGNING_KEY": "k.pem"}),
-        Case(g, "keys export-public --key a FIFO", ["keys", "export-public", "--key", "{w}/t"], setup=fifo("t")),
+        Case(
+            g,
+            "signing key is a FIFO (a read needs no key)",
+            ["history", SERIAL],
+            expect="ok",
+            setup=fifo("k.pem"),
+            env={"CALIBCTL_SIGNING_KEY": "k.pem"},
+        ),
+        Case(
+            g, "keys export-public --key a FIFO", ["keys", "export-public", "--key", "{w}/t"], setup=fifo("t")
+        ),
         Case(g, "fleet ingest a FIFO", ["fleet", "ingest", "{w}/t"], setup=fifo("t")),
         Case(g, "fleet assign unknown robot", ["fleet", "assign", "R2D2", f"{SERIAL}@1", "--reason", "x"]),
-        Case(g, "fleet ingest garbage", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", "garbage\n")),
-        Case(g, "fleet ingest non-UTF-8", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", b"\xff\xfe\n")),
-        Case(g, "fleet ingest NaN", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", '{"rms_px": NaN}\n')),
+        Case(
+            g, "fleet ingest garbage", ["fleet", "ingest", "{w}/h.jsonl"], setup=text("h.jsonl", "garbage\n")
+        ),
+        Case(
+            g,
+            "fleet ingest non-UTF-8",
+            ["fleet", "ingest", "{w}/h.jsonl"],
+            setup=text("h.jsonl", b"\xff\xfe\n"),
+        ),
+        Case(
+            g,
+            "fleet ingest NaN",
+            ["fleet", "ingest", "{w}/h.jsonl"],
+            setup=text("h.jsonl", '{"rms_px": NaN}\n'),
+        ),
         Case(g, "fleet trends unknown", ["fleet", "trends", "NOPE"]),
         Case(g, "fleet add ESC name", ["fleet", "add", "r\x1b[2J", "--serial", SERIAL]),
-        Case(g, "station --serials missing file", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
-                                                     "--serials", "{w}/no.txt"]),
-        Case(g, "station --serials a FIFO", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
-                                             "--serials", "{w}/t"], setup=fifo("t")),
-        Case(g, "station --watch --views 0", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
-                                              "--watch", "--views", "0"]),
-        Case(g, "station --views without --watch", ["station", "--board", BOARD, "--source-template",
-                                                    "{w}/{serial}", "--views", "5"]),
-        Case(g, "station --watch --settle-s -1", ["station", "--board", BOARD, "--source-template", "{w}/{serial}",
-                                                  "--watch", "--views", "5", "--settle-s", "-1"]),
-        Case(g, "station --watch --unit-timeout-s nan", ["station", "--board", BOARD, "--source-template",
-                                                         "{w}/{serial}", "--watch", "--views", "5",
-                                                         "--unit-timeout-s", "nan"]),
-        Case(g, "station --watch --done-file ../x", ["station", "--board", BOARD, "--source-template",
-                                                     "{w}/{serial}", "--watch", "--done-file", "../x"]),
+        Case(
+            g,
+            "station --serials missing file",
+            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--serials", "{w}/no.txt"],
+        ),
+        Case(
+            g,
+            "station --serials a FIFO",
+            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--serials", "{w}/t"],
+            setup=fifo("t"),
+        ),
+        Case(
+            g,
+            "station --watch --views 0",
+            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--watch", "--views", "0"],
+        ),
+        Case(
+            g,
+            "station --views without --watch",
+            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--views", "5"],
+        ),
+        Case(
+            g,
+            "station --watch --settle-s -1",
+            [
+                "station",
+                "--board",
+                BOARD,
+                "--source-template",
+                "{w}/{serial}",
+                "--watch",
+                "--views",
+                "5",
+                "--settle-s",
+                "-1",
+            ],
+        ),
+        Case(
+            g,
+            "station --watch --unit-timeout-s nan",
+            [
+                "station",
+                "--board",
+                BOARD,
+                "--source-template",
+                "{w}/{serial}",
+                "--watch",
+                "--views",
+                "5",
+                "--unit-timeout-s",
+                "nan",
+            ],
+        ),
+        Case(
+            g,
+            "station --watch --done-file ../x",
+            [
+                "station",
+                "--board",
+                BOARD,
+                "--source-template",
+                "{w}/{serial}",
+                "--watch",
+                "--done-file",
+                "../x",
+            ],
+        ),
         Case(g, "station --camera a folder", ["station", "--board", BOARD, "--camera", "{w}"]),
         Case(g, "station --camera empty", ["station", "--board", BOARD, "--camera", ""]),
         Case(g, "station --camera ESC", ["station", "--board", BOARD, "--camera", "/dev/video0\x1b[2J"]),
-        Case(g, "station --camera and --source-template", ["station", "--board", BOARD, "--camera", "/dev/video987",
-                                                           "--source-template", "{w}/{serial}"]),
-        Case(g, "station --camera --watch", ["station", "--board", BOARD, "--camera", "/dev/video987", "--watch",
-                                             "--views", "5"]),
-        Case(g, "station --camera --max-views 0", ["station", "--board", BOARD, "--camera", "/dev/video987",
-                                                   "--max-views", "0"]),
-        Case(g, "station --camera --duration nan", ["station", "--board", BOARD, "--camera", "/dev/video987",
-                                                    "--duration", "nan"]),
-        Case(g, "station --max-views without --camera", ["station", "--board", BOARD, "--source-template",
-                                                         "{w}/{serial}", "--max-views", "5"]),
-        Case(g, "station --camera absent, no serials", ["station", "--board", BOARD, "--camera", "/dev/video987"],
-             expect="ok"),
-        Case(g, "station set-aside, no spool", ["station", "set-aside", "1", "--reason", "x", "--spool",
-                                                "{w}/no-spool.sqlite"]),
+        Case(
+            g,
+            "station --camera and --source-template",
+            ["station", "--board", BOARD, "--camera", "/dev/video987", "--source-template", "{w}/{serial}"],
+        ),
+        Case(
+            g,
+            "station --camera --watch",
+            ["station", "--board", BOARD, "--camera", "/dev/video987", "--watch", "--views", "5"],
+        ),
+        Case(
+            g,
+            "station --camera --max-views 0",
+            ["station", "--board", BOARD, "--camera", "/dev/video987", "--max-views", "0"],
+        ),
+        Case(
+            g,
+            "station --camera --duration nan",
+            ["station", "--board", BOARD, "--camera", "/dev/video987", "--duration", "nan"],
+        ),
+        Case(
+            g,
+            "station --max-views without --camera",
+            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--max-views", "5"],
+        ),
+        Case(
+            g,
+            "station --camera absent, no serials",
+            ["station", "--board", BOARD, "--camera", "/dev/video987"],
+            expect="ok",
+        ),
+        Case(
+            g,
+            "station set-aside, no spool",
+            ["station", "set-aside", "1", "--reason", "x", "--spool", "{w}/no-spool.sqlite"],
+        ),
         Case(g, "station set-aside not a number", ["station", "set-aside", "one", "--reason", "x"]),
         Case(g, "station set-aside empty reason", ["station", "set-aside", "1", "--reason", ""]),
         Case(g, "station set-aside ESC reason", ["station", "set-aside", "1", "--reason", "x\x1b[2J"]),
-        Case(g, "station set-aside --spool a FIFO", ["station", "set-aside", "1", "--reason", "x", "--spool", "{w}/t"],
-             setup=fifo("t"), protect=["t"]),
-        Case(g, "station set-aside --spool not ours", ["station", "set-aside", "1", "--reason", "x", "--spool",
-                                                       "{w}/f"], setup=text("f", "mine"), protect=["f"]),
+        Case(
+            g,
+            "station set-aside --spool a FIFO",
+            ["station", "set-aside", "1", "--reason", "x", "--spool", "{w}/t"],
+            setup=fifo("t"),
+            protect=["t"],
+        ),
+        Case(
+            g,
+            "station set-aside --spool not ours",
+            ["station", "set-aside", "1", "--reason", "x", "--spool", "{w}/f"],
+            setup=text("f", "mine"),
+            protect=["f"],
+        ),
         Case(g, "demo --out a file", ["demo", "--out", "{w}/f"], setup=text("f", "mine"), protect=["f"]),
         Case(g, "demo --out a FIFO", ["demo", "--out", "{w}/t"], setup=fifo("t"), protect=["t"]),
     ]
@@ -363,4 +890,13 @@ def _store() -> list[Case]:
 
 
 def cases() -> list[Case]:
-    return [*_capture(), *_synth(), *_solve_check(), *_records(), *_imports(), *_diagnostics(), *_admin(), *_store()]
+    return [
+        *_capture(),
+        *_synth(),
+        *_solve_check(),
+        *_records(),
+        *_imports(),
+        *_diagnostics(),
+        *_admin(),
+        *_store(),
+    ]

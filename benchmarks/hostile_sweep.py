@@ -51,7 +51,9 @@ class Case:
     group: str
     name: str
     args: list[str]
-    expect: str = "refuse"  # "ok": a valid input the command should take; "any": either (an interrupted command)
+    expect: str = (
+        "refuse"  # "ok": a valid input the command should take; "any": either (an interrupted command)
+    )
     setup: Callable[[Path], None] | None = None
     protect: list[str] = field(default_factory=list)  # paths under the case folder that must stay as they are
     unprivileged: bool = False
@@ -61,6 +63,7 @@ class Case:
 
 # ---- setup helpers (each takes the case folder) -------------------------------------------------------------
 
+
 def fifo(name: str) -> Callable[[Path], None]:
     return lambda w: os.mkfifo(w / name)
 
@@ -69,6 +72,7 @@ def symlink(name: str, target: str = "victim.txt") -> Callable[[Path], None]:
     def make(w: Path) -> None:
         (w / target).write_text("not calibctl's\n")
         (w / name).symlink_to(w / target)
+
     return make
 
 
@@ -77,6 +81,7 @@ def text(name: str, content: str | bytes) -> Callable[[Path], None]:
         path = w / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(content if isinstance(content, bytes) else content.encode())
+
     return make
 
 
@@ -85,17 +90,20 @@ def folder(name: str, files: dict[str, bytes] | None = None) -> Callable[[Path],
         (w / name).mkdir(parents=True, exist_ok=True)
         for file_name, data in (files or {}).items():
             (w / name / file_name).write_bytes(data)
+
     return make
 
 
 def views(name: str, count: int = 3, rename: Callable[[int], bytes] | None = None) -> Callable[[Path], None]:
     """``count`` of the demo's rendered views copied into ``name`` (optionally under hostile byte names)."""
+
     def make(w: Path) -> None:
         dest = w / name
         dest.mkdir(parents=True, exist_ok=True)
         for i, src in enumerate(sorted((w / "demo" / "good-session").glob("view-*.png"))[:count]):
             target = os.path.join(os.fsencode(dest), rename(i)) if rename else os.fsencode(dest / src.name)
             shutil.copyfile(src, target)
+
     return make
 
 
@@ -103,6 +111,7 @@ def both(*steps: Callable[[Path], None]) -> Callable[[Path], None]:
     def make(w: Path) -> None:
         for step in steps:
             step(w)
+
     return make
 
 
@@ -125,12 +134,14 @@ def tiny_png(w: Path, name: str = "tiny/one.png", size: tuple[int, int] = (1, 1)
 
 def exported(name: str, edit: Callable[[dict], None] | None = None) -> Callable[[Path], None]:
     """The demo camera's JSON export (optionally edited, not re-sealed) at ``name``."""
+
     def make(w: Path) -> None:
         calibctl(w, ["export", SERIAL, "-o", str(w / name)])
         if edit is not None:
             doc = json.loads((w / name).read_text())
             edit(doc)
             (w / name).write_text(json.dumps(doc))
+
     return make
 
 
@@ -139,19 +150,24 @@ def motions(name: str, mangle: Callable[[str], str] | None = None, rows: int = 4
         calibctl(w, ["synth-motions", str(w / name), "--rows", str(rows)])
         if mangle is not None:
             (w / name).write_text(mangle((w / name).read_text()))
+
     return make
 
 
 def residuals(name: str, mangle: Callable[[str], str] | None = None) -> Callable[[Path], None]:
     def make(w: Path) -> None:
-        calibctl(w, ["synth-residuals", str(w / name), "--fault", "focal", "--keyframes", "20", "--features", "10"])
+        calibctl(
+            w, ["synth-residuals", str(w / name), "--fault", "focal", "--keyframes", "20", "--features", "10"]
+        )
         if mangle is not None:
             (w / name).write_text(mangle((w / name).read_text()))
+
     return make
 
 
 def second_data_line(value: str) -> Callable[[str], str]:
     """Replace the first field of the second data line by ``value``."""
+
     def mangle(body: str) -> str:
         lines = body.splitlines()
         data = [i for i, line in enumerate(lines) if line and not line.startswith("#")]
@@ -159,22 +175,38 @@ def second_data_line(value: str) -> Callable[[str], str]:
         row[1] = value
         lines[data[2]] = ",".join(row)
         return "\n".join(lines) + "\n"
+
     return mangle
 
 
 def calibctl(w: Path, args: list[str]) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "calibctl", "--db", f"sqlite:///{w / 'store.db'}", *args],
-                          cwd=w, env=_env(), capture_output=True, text=True, timeout=CASE_TIMEOUT_S, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "calibctl", "--db", f"sqlite:///{w / 'store.db'}", *args],
+        cwd=w,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=CASE_TIMEOUT_S,
+        check=False,
+    )
 
 
 def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("CALIBCTL_")}
-    env.update({"PYTHONPATH": str(SOURCE[0]), "CALIBCTL_OPERATOR": "sweep", "CALIBCTL_STATION": "sweep",
-                "COLUMNS": "120", **(extra or {})})
+    env.update(
+        {
+            "PYTHONPATH": str(SOURCE[0]),
+            "CALIBCTL_OPERATOR": "sweep",
+            "CALIBCTL_STATION": "sweep",
+            "COLUMNS": "120",
+            **(extra or {}),
+        }
+    )
     return env
 
 
 # ---- the cases ----------------------------------------------------------------------------------------------
+
 
 def _cases() -> list[Case]:
     from hostile_cases import cases  # the list itself, by command group (benchmarks/ is on sys.path)
@@ -183,6 +215,7 @@ def _cases() -> list[Case]:
 
 
 # ---- running and judging ------------------------------------------------------------------------------------
+
 
 def _rows(db: Path) -> dict[str, int]:
     if not db.exists():
@@ -217,8 +250,15 @@ def _run(case: Case, w: Path) -> tuple[int | None, str, str]:
     argv = [a.replace("{w}", str(w)) for a in argv]
     # a shell's background job starts with SIGINT ignored, and an ignored signal stays ignored across exec:
     # give the command the default disposition, so that an interrupt case interrupts
-    proc = subprocess.Popen(argv, cwd=w, env=_env(case.env), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            stdin=subprocess.DEVNULL, preexec_fn=_default_sigint)  # noqa: PLW1509 - it only resets one signal
+    proc = subprocess.Popen(
+        argv,
+        cwd=w,
+        env=_env(case.env),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        preexec_fn=_default_sigint,
+    )  # noqa: PLW1509 - it only resets one signal
     if case.interrupt_s is not None:
         time.sleep(case.interrupt_s)
         proc.send_signal(signal.SIGINT)
@@ -231,8 +271,16 @@ def _run(case: Case, w: Path) -> tuple[int | None, str, str]:
     return proc.returncode, out.decode(errors="replace"), err.decode(errors="replace")
 
 
-def judge(case: Case, code: int | None, out: str, err: str, before: dict[str, int], after: dict[str, int],
-          changed: list[str], verified: bool) -> tuple[str, str]:
+def judge(
+    case: Case,
+    code: int | None,
+    out: str,
+    err: str,
+    before: dict[str, int],
+    after: dict[str, int],
+    changed: list[str],
+    verified: bool,
+) -> tuple[str, str]:
     """(category, why) for one case's outcome."""
     if code is None:
         return "crash", f"no answer within {CASE_TIMEOUT_S} s"
@@ -266,7 +314,13 @@ def run_case(case: Case, base: Path, root: Path) -> dict[str, object]:
         try:
             case.setup(w)
         except Exception as exc:  # noqa: BLE001 - the sweep's own fault, reported as such, not a finding
-            return {"group": case.group, "case": case.name, "exit": None, "category": "setup", "why": repr(exc)}
+            return {
+                "group": case.group,
+                "case": case.name,
+                "exit": None,
+                "category": "setup",
+                "why": repr(exc),
+            }
     guarded = [*case.protect, "store.db"]
     prints = {p: _fingerprint(w / p) for p in guarded}
     before = _rows(w / "store.db")
@@ -286,8 +340,14 @@ def run_case(case: Case, base: Path, root: Path) -> dict[str, object]:
 def make_base(root: Path) -> Path:
     base = root / "base"
     base.mkdir()
-    done = subprocess.run([sys.executable, "-m", "calibctl", "demo", "--out", str(base / "demo")], cwd=base,
-                          env=_env(), capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "calibctl", "demo", "--out", str(base / "demo")],
+        cwd=base,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     if done.returncode != 0:
         raise SystemExit(f"demo failed: {done.stderr[-400:]}")
     shutil.copyfile(base / "demo" / "calibctl-demo.db", base / "store.db")
@@ -299,7 +359,9 @@ def main() -> None:
     parser.add_argument("--only", help="run only this command group")
     parser.add_argument("--json", type=Path, help="write every case's result here")
     parser.add_argument("--workers", type=int, default=2, help="cases run at once")
-    parser.add_argument("--source", type=Path, default=REPO, help="the calibctl tree to run (default: this one)")
+    parser.add_argument(
+        "--source", type=Path, default=REPO, help="the calibctl tree to run (default: this one)"
+    )
     options = parser.parse_args()
     SOURCE[0] = options.source.resolve()
     cases = [c for c in _cases() if options.only in (None, c.group)]

@@ -81,18 +81,29 @@ def main() -> int:
         return 2
     command = sys.argv[1]
     if command == "version":
-        package = subprocess.run(["dpkg-query", "-W", "-f=${Version}", "python3-mrcal"], capture_output=True,
-                                 text=True).stdout.strip()
-        print(json.dumps({"mrcal": getattr(mrcal, "__version__", None) or f"{package or '?'} (Debian python3-mrcal)",
-                          "python": platform.python_version(), "numpy": np.__version__}))
+        package = subprocess.run(
+            ["dpkg-query", "-W", "-f=${Version}", "python3-mrcal"], capture_output=True, text=True
+        ).stdout.strip()
+        print(
+            json.dumps(
+                {
+                    "mrcal": getattr(mrcal, "__version__", None)
+                    or f"{package or '?'} (Debian python3-mrcal)",
+                    "python": platform.python_version(),
+                    "numpy": np.__version__,
+                }
+            )
+        )
     elif command == "evaluate":
         print(json.dumps(evaluate(sys.argv[2])))
     elif command == "time":
         repeats = int(sys.argv[2])
-        args = sys.argv[sys.argv.index("--") + 1:]
+        args = sys.argv[sys.argv.index("--") + 1 :]
         warmup, _ = run_tool_once(args)
         runs = [run_tool_once(args) for _ in range(repeats)]
-        print(json.dumps({"warmup_s": warmup, "times_s": [w for w, _ in runs], "cpu_s": [c for _, c in runs]}))
+        print(
+            json.dumps({"warmup_s": warmup, "times_s": [w for w, _ in runs], "cpu_s": [c for _, c in runs]})
+        )
     else:
         print(f"unknown command {command!r}", file=sys.stderr)
         return 2

@@ -17,8 +17,13 @@ import time
 import cv2
 import numpy as np
 
-METHODS = {"TSAI": cv2.CALIB_HAND_EYE_TSAI, "PARK": cv2.CALIB_HAND_EYE_PARK, "HORAUD": cv2.CALIB_HAND_EYE_HORAUD,
-           "ANDREFF": cv2.CALIB_HAND_EYE_ANDREFF, "DANIILIDIS": cv2.CALIB_HAND_EYE_DANIILIDIS}
+METHODS = {
+    "TSAI": cv2.CALIB_HAND_EYE_TSAI,
+    "PARK": cv2.CALIB_HAND_EYE_PARK,
+    "HORAUD": cv2.CALIB_HAND_EYE_HORAUD,
+    "ANDREFF": cv2.CALIB_HAND_EYE_ANDREFF,
+    "DANIILIDIS": cv2.CALIB_HAND_EYE_DANIILIDIS,
+}
 
 
 def main() -> None:
@@ -27,7 +32,10 @@ def main() -> None:
     names = sorted({k.rsplit("/", 1)[0] for k in cases.files})
     out = {"opencv_version": cv2.__version__, "numpy_version": np.__version__, "cases": {}}
     for name in names:
-        args = [list(cases[f"{name}/{k}"]) for k in ("R_gripper2base", "t_gripper2base", "R_target2cam", "t_target2cam")]
+        args = [
+            list(cases[f"{name}/{k}"])
+            for k in ("R_gripper2base", "t_gripper2base", "R_target2cam", "t_target2cam")
+        ]
         per = {}
         for method, flag in METHODS.items():
             best = float("inf")

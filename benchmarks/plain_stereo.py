@@ -25,7 +25,9 @@ def _key(path: Path) -> int:
 
 def detect(path: Path, pattern: tuple[int, int]) -> tuple[np.ndarray | None, tuple[int, int]]:
     gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    ok, corners = cv2.findChessboardCorners(gray, pattern, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    ok, corners = cv2.findChessboardCorners(
+        gray, pattern, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    )
     size = (gray.shape[1], gray.shape[0])
     if not ok:
         return None, size
@@ -53,8 +55,16 @@ def plain_stereo(left: Path, right: Path, cols: int, rows: int, square_m: float)
         Ds.append(D)
     keys = sorted(set(found[0]) & set(found[1]))
     rms, _, _, _, _, R, T, E, F = cv2.stereoCalibrate(
-        [obj] * len(keys), [found[0][k] for k in keys], [found[1][k] for k in keys], Ks[0], Ds[0], Ks[1], Ds[1],
-        sizes[0], flags=cv2.CALIB_FIX_INTRINSIC)
+        [obj] * len(keys),
+        [found[0][k] for k in keys],
+        [found[1][k] for k in keys],
+        Ks[0],
+        Ds[0],
+        Ks[1],
+        Ds[1],
+        sizes[0],
+        flags=cv2.CALIB_FIX_INTRINSIC,
+    )
     elapsed = time.perf_counter() - start
     d = []
     for k in keys:
@@ -64,9 +74,16 @@ def plain_stereo(left: Path, right: Path, cols: int, rows: int, square_m: float)
         lb = cv2.computeCorrespondEpilines(b.reshape(-1, 1, 2), 2, F).reshape(-1, 3)
         d += list(np.abs(np.sum(la[:, :2] * b, axis=1) + la[:, 2]))
         d += list(np.abs(np.sum(lb[:, :2] * a, axis=1) + lb[:, 2]))
-    return {"pairs": len(keys), "left": len(found[0]), "right": len(found[1]), "baseline_m": float(np.linalg.norm(T)),
-            "rotation_deg": float(np.rad2deg(np.linalg.norm(cv2.Rodrigues(R)[0]))), "stereo_rms_px": float(rms),
-            "epipolar_rms_px": float(np.sqrt(np.mean(np.square(d)))), "time_s": elapsed}
+    return {
+        "pairs": len(keys),
+        "left": len(found[0]),
+        "right": len(found[1]),
+        "baseline_m": float(np.linalg.norm(T)),
+        "rotation_deg": float(np.rad2deg(np.linalg.norm(cv2.Rodrigues(R)[0]))),
+        "stereo_rms_px": float(rms),
+        "epipolar_rms_px": float(np.sqrt(np.mean(np.square(d)))),
+        "time_s": elapsed,
+    }
 
 
 if __name__ == "__main__":

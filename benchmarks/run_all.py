@@ -42,14 +42,27 @@ BENCHES = (
     Bench("bench_uncertainty_30", "bench_uncertainty.py", ("30",), ("30",)),
     Bench("bench_uncertainty_100", "bench_uncertainty.py", ("100",), ("100",)),
     Bench("bench_sigma_fx_tied", "bench_sigma_fx_tied.py", ("400",), ("100",)),
-    Bench("bench_triage", "bench_triage.py", ("--repeats", "3"), ("--repeats", "1", "--rows", "200000"), False),
+    Bench(
+        "bench_triage", "bench_triage.py", ("--repeats", "3"), ("--repeats", "1", "--rows", "200000"), False
+    ),
     Bench("bench_triage_accuracy", "bench_triage.py", ("--accuracy", "20"), ("--accuracy", "5"), False),
     Bench("bench_e2e", "bench_e2e.py", ("--repeats", "3"), ("--quick",)),
-    Bench("bench_handeye", "bench_handeye.py", ("--seeds", "50", "--scenes", "5"),
-          ("--seeds", "10", "--scenes", "2", "--repeats", "5")),
+    Bench(
+        "bench_handeye",
+        "bench_handeye.py",
+        ("--seeds", "50", "--scenes", "5"),
+        ("--seeds", "10", "--scenes", "2", "--repeats", "5"),
+    ),
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
-    Bench("bench_tilt", "bench_tilt.py", ("--sessions", "20", "--render", "5"), ("--sessions", "5", "--render", "0")),
-    Bench("bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")),
+    Bench(
+        "bench_tilt",
+        "bench_tilt.py",
+        ("--sessions", "20", "--render", "5"),
+        ("--sessions", "5", "--render", "0"),
+    ),
+    Bench(
+        "bench_outliers", "bench_outliers.py", ("--sessions", "30"), ("--sessions", "5", "--sizes", "640x480")
+    ),
     Bench("bench_startup", "bench_startup.py", ("--repeats", "7"), ("--repeats", "2")),
     Bench("bench_import_overlap", "bench_import_overlap.py", ("--repeats", "5"), ("--repeats", "1")),
     Bench("bench_store_scale", "bench_store_scale.py", (), ()),
@@ -57,14 +70,28 @@ BENCHES = (
     Bench("bench_fisheye", "bench_fisheye.py", ("30",), ("6",)),
     Bench("bench_model_misfit", "bench_model_misfit.py", (), ()),
     Bench("bench_verdicts", "bench_verdicts.py", (), ()),
-    Bench("bench_rig_sigma", "bench_rig_sigma.py", ("--resamples", "100", "--seeds", "30"),
-          ("--resamples", "10", "--seeds", "5")),
+    Bench(
+        "bench_rig_sigma",
+        "bench_rig_sigma.py",
+        ("--resamples", "100", "--seeds", "30"),
+        ("--resamples", "10", "--seeds", "5"),
+    ),
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
     Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
     Bench("bench_lidar", "bench_lidar.py", ("--repeats", "3"), ("--repeats", "1")),
     Bench("bench_stream", "bench_stream.py", ("--repeats", "3"), ("--repeats", "1", "--size", "640x480")),
-    Bench("bench_fleet_health", "bench_fleet_health.py", ("--robots", "25", "--days", "365"), ("--robots", "5", "--days", "90")),
-    Bench("bench_fleet_checkpoint", "bench_fleet_checkpoint.py", (), ("--robots", "50", "--sizes", "2500", "6000")),
+    Bench(
+        "bench_fleet_health",
+        "bench_fleet_health.py",
+        ("--robots", "25", "--days", "365"),
+        ("--robots", "5", "--days", "90"),
+    ),
+    Bench(
+        "bench_fleet_checkpoint",
+        "bench_fleet_checkpoint.py",
+        (),
+        ("--robots", "50", "--sizes", "2500", "6000"),
+    ),
 )
 
 
@@ -79,12 +106,15 @@ def run_one(bench: Bench, quick: bool) -> tuple[int, float, str]:
         args += ["--out", str(OUT / f"{bench.name}.md")]
     load = load_average()
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, str(HERE / bench.script), *args], capture_output=True, text=True,
-                          cwd=HERE.parent)
+    done = subprocess.run(
+        [sys.executable, str(HERE / bench.script), *args], capture_output=True, text=True, cwd=HERE.parent
+    )
     elapsed = time.perf_counter() - start
     body = done.stdout if bench.markdown else f"```text\n{done.stdout}```\n"
-    header = (f"<!-- {bench.script} {' '.join(args)}; {dt.datetime.now().astimezone().isoformat(timespec='seconds')};"
-              f" {elapsed:.1f} s; load average before: {load} -->\n\n")
+    header = (
+        f"<!-- {bench.script} {' '.join(args)}; {dt.datetime.now().astimezone().isoformat(timespec='seconds')};"
+        f" {elapsed:.1f} s; load average before: {load} -->\n\n"
+    )
     if done.returncode != 0:
         body += f"\n**exit code {done.returncode}**\n\n```text\n{done.stderr[-4000:]}```\n"
     (OUT / f"{bench.name}.md").write_text(header + body, encoding="utf-8")
@@ -112,15 +142,26 @@ def main() -> int:
     for bench in chosen:
         print(f"running {bench.name} ...", file=sys.stderr, flush=True)
         code, elapsed, load = run_one(bench, args.quick)
-        rows.append(f"| {bench.name} | {'ok' if code == 0 else f'FAILED ({code})'} | {elapsed:.1f} | {load} | "
-                    f"benchmarks/out/{bench.name}.md |")
-    summary = "\n".join([
-        f"## Benchmark run {dt.datetime.now().astimezone().isoformat(timespec='seconds')}"
-        f"{' (--quick)' if args.quick else ''}", "",
-        f"nproc {len(os.sched_getaffinity(0))}; total {time.perf_counter() - t0:.0f} s; "
-        f"load average now {load_average()}", "",
-        "| benchmark | status | wall s | load average before (1/5/15 min) | output |", "|---|---|---|---|---|",
-        *rows]) + "\n"
+        rows.append(
+            f"| {bench.name} | {'ok' if code == 0 else f'FAILED ({code})'} | {elapsed:.1f} | {load} | "
+            f"benchmarks/out/{bench.name}.md |"
+        )
+    summary = (
+        "\n".join(
+            [
+                f"## Benchmark run {dt.datetime.now().astimezone().isoformat(timespec='seconds')}"
+                f"{' (--quick)' if args.quick else ''}",
+                "",
+                f"nproc {len(os.sched_getaffinity(0))}; total {time.perf_counter() - t0:.0f} s; "
+                f"load average now {load_average()}",
+                "",
+                "| benchmark | status | wall s | load average before (1/5/15 min) | output |",
+                "|---|---|---|---|---|",
+                *rows,
+            ]
+        )
+        + "\n"
+    )
     (OUT / "SUMMARY.md").write_text(summary, encoding="utf-8")
     print(summary)
     return 0 if all("| ok |" in r for r in rows) else 1

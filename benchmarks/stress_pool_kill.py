@@ -58,16 +58,20 @@ def one_round(path: str, size: int, rng: random.Random) -> bool:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--rounds", type=int, default=30)
     parser.add_argument("--result-kb", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = random.Random(args.seed)
     size = args.result_kb * 1024
-    print(f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs, "
-          f"Python {platform.python_version()}, load {load_1min():.2f}; {args.rounds} rounds per path, "
-          f"{TASKS} results of {args.result_kb} KB, one worker of 2 killed 0-50 ms in")
+    print(
+        f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs, "
+        f"Python {platform.python_version()}, load {load_1min():.2f}; {args.rounds} rounds per path, "
+        f"{TASKS} results of {args.result_kb} KB, one worker of 2 killed 0-50 ms in"
+    )
     hung = {"pipe": 0, "file": 0}
     for _ in range(args.rounds):
         for path in hung:

@@ -56,23 +56,29 @@ def check_size(path: Path, what: str = "read") -> int:
     with files.file_errors(what, path):
         size = Path(path).stat().st_size
     if size > limit:
-        raise InputError(f"{path} is {size / 2**20:.1f} MiB, over the {limit / 2**20:g} MiB input limit",
-                         f"no calibration file is that large; if this one really is, raise {MAX_INPUT_ENV}")
+        raise InputError(
+            f"{path} is {size / 2**20:.1f} MiB, over the {limit / 2**20:g} MiB input limit",
+            f"no calibration file is that large; if this one really is, raise {MAX_INPUT_ENV}",
+        )
     return size
 
 
 def _check_int(text: str, source: str) -> str:
     digits = text.lstrip("+-").replace("_", "")
     if len(digits) > MAX_INT_DIGITS:
-        raise InputError(f"{source}: an integer of {len(digits)} digits (at most {MAX_INT_DIGITS} are accepted)",
-                         "no calibration number needs that many digits; is this the right file?")
+        raise InputError(
+            f"{source}: an integer of {len(digits)} digits (at most {MAX_INT_DIGITS} are accepted)",
+            "no calibration number needs that many digits; is this the right file?",
+        )
     return text
 
 
 def _check_float(text: str, source: str) -> str:
     if len(text) > MAX_NUMBER_CHARS:
-        raise InputError(f"{source}: a number written with {len(text)} characters (at most {MAX_NUMBER_CHARS})",
-                         "is this the right file?")
+        raise InputError(
+            f"{source}: a number written with {len(text)} characters (at most {MAX_NUMBER_CHARS})",
+            "is this the right file?",
+        )
     return text
 
 
@@ -82,8 +88,10 @@ def check_tree(data: Any, source: str) -> Any:
     while stack:
         node, depth, where = stack.pop()
         if depth > MAX_DEPTH:
-            raise InputError(f"{source}: nested more than {MAX_DEPTH} levels deep (at {where or 'the top'})",
-                             "real calibration files nest a few levels; is this the right file?")
+            raise InputError(
+                f"{source}: nested more than {MAX_DEPTH} levels deep (at {where or 'the top'})",
+                "real calibration files nest a few levels; is this the right file?",
+            )
         if isinstance(node, str):
             check_text(node, source, where)
         elif isinstance(node, dict):
@@ -122,19 +130,32 @@ def check_text(text: str, source: str, where: str) -> None:
     """InputError when ``text`` holds NUL or another control character (tab, newline, CR excepted)."""
     bad = next((c for c in text if c in _CONTROLS), None)
     if bad is not None:
-        name = "a NUL character" if bad == "\x00" else f"control character {bad.encode('unicode_escape').decode()}"
-        raise InputError(f"{source}: {where or 'a key'} holds {name}", "text fields may not hold control characters")
+        name = (
+            "a NUL character"
+            if bad == "\x00"
+            else f"control character {bad.encode('unicode_escape').decode()}"
+        )
+        raise InputError(
+            f"{source}: {where or 'a key'} holds {name}", "text fields may not hold control characters"
+        )
 
 
 def parse_json(text: str, source: str) -> Any:
     """JSON with bounded numbers, depth and text."""
     try:
-        data = json.loads(text, parse_int=lambda s: int(_check_int(s, source)),
-                          parse_float=lambda s: float(_check_float(s, source)))
+        data = json.loads(
+            text,
+            parse_int=lambda s: int(_check_int(s, source)),
+            parse_float=lambda s: float(_check_float(s, source)),
+        )
     except json.JSONDecodeError as exc:
-        raise InputError(f"{source}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from exc
+        raise InputError(
+            f"{source}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from exc
     except RecursionError:
-        raise InputError(f"{source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?") from None
+        raise InputError(
+            f"{source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?"
+        ) from None
     return check_tree(data, source)
 
 
@@ -150,10 +171,15 @@ def _loader_class() -> Any:
         def compose_node(self, parent: Any, index: Any) -> Any:
             if self.check_event(yaml.AliasEvent):
                 event = self.peek_event()
-                raise InputError(f"{self.source}: YAML alias *{event.anchor} at line {event.start_mark.line + 1}: "
-                                 "aliases are not accepted", "write the values out; calibration files use no anchors")
+                raise InputError(
+                    f"{self.source}: YAML alias *{event.anchor} at line {event.start_mark.line + 1}: "
+                    "aliases are not accepted",
+                    "write the values out; calibration files use no anchors",
+                )
             if getattr(self, "_depth", 0) >= MAX_DEPTH:
-                raise InputError(f"{self.source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?")
+                raise InputError(
+                    f"{self.source}: nested more than {MAX_DEPTH} levels deep", "is this the right file?"
+                )
             self._depth = getattr(self, "_depth", 0) + 1
             try:
                 return super().compose_node(parent, index)
@@ -199,4 +225,6 @@ def read_text(path: Path, what: str = "read") -> str:
 def load_file(path: Path, what: str = "read") -> Any:
     """A JSON (``.json``) or YAML file, bounded in every way above."""
     text = read_text(path, what)
-    return parse_json(text, str(path)) if Path(path).suffix.lower() == ".json" else parse_yaml(text, str(path))
+    return (
+        parse_json(text, str(path)) if Path(path).suffix.lower() == ".json" else parse_yaml(text, str(path))
+    )

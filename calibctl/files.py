@@ -25,8 +25,10 @@ from typing import BinaryIO
 
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
-_FULL_HINT = ("free some space or write to another disk; no partial file was kept (images a capture had already "
-              "stored are removed by `calibctl prune` an hour later)")
+_FULL_HINT = (
+    "free some space or write to another disk; no partial file was kept (images a capture had already "
+    "stored are removed by `calibctl prune` an hour later)"
+)
 # errno -> (what happened, what to do). Anything not listed is reported with the system's own words.
 _REASONS: dict[int, tuple[str, str]] = {
     errno.EACCES: ("permission denied", "check the permissions of that path, or choose another one"),
@@ -83,9 +85,14 @@ def new_file_mode(existing: Path | None = None) -> int:
 
 def _kind(st_mode: int) -> str | None:
     """What a path is when it is not a regular file (None for a regular file)."""
-    for test, name in ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket")):
+    for test, name in (
+        (stat.S_ISLNK, "a symbolic link"),
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
         if test(st_mode):
             return name
     return None if stat.S_ISREG(st_mode) else "not a regular file"
@@ -97,7 +104,10 @@ def existing_target(path: Path) -> os.stat_result | None:
     ``--force`` never turns a symlink, a FIFO, a device node or a folder into a file of ours."""
     try:
         st = os.lstat(path)
-    except (FileNotFoundError, NotADirectoryError):  # nothing there (a parent that is a file is named by the caller)
+    except (
+        FileNotFoundError,
+        NotADirectoryError,
+    ):  # nothing there (a parent that is a file is named by the caller)
         return None
     except OSError as exc:
         raise os_error(exc, "write", path) from exc
@@ -106,13 +116,16 @@ def existing_target(path: Path) -> os.stat_result | None:
         return st
     if kind == "a folder":
         raise os_error(IsADirectoryError(errno.EISDIR, "is a directory"), "write", path)
-    raise FileSystemError(f"cannot write {path}: it is {kind}, not a regular file; calibctl replaces only regular "
-                          "files, --force included", "write to a regular file path (remove the special file yourself "
-                          "if it really is to be replaced)")
+    raise FileSystemError(
+        f"cannot write {path}: it is {kind}, not a regular file; calibctl replaces only regular "
+        "files, --force included",
+        "write to a regular file path (remove the special file yourself if it really is to be replaced)",
+    )
 
 
-def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: bool = False,
-                 mode: int | None = None) -> Path:
+def write_atomic(
+    path: Path, data: str | bytes, *, force: bool = False, fsync: bool = False, mode: int | None = None
+) -> Path:
     """Write ``data`` to ``path`` (temporary file + rename). Refuses to overwrite unless ``force``, and
     refuses, ``force`` or not, anything there that is not a regular file (symlink, FIFO, device, folder);
     an overwritten file keeps its mode. ``fsync`` makes the bytes durable before the rename
@@ -123,8 +136,10 @@ def write_atomic(path: Path, data: str | bytes, *, force: bool = False, fsync: b
         raise AlreadyExistsError(f"{path} already exists", "pass --force to overwrite it")
     if not path.parent.is_dir():
         if path.parent.exists():
-            raise FileSystemError(f"cannot write {path}: {path.parent} is a file, not a folder",
-                                  "choose an output path inside a folder")
+            raise FileSystemError(
+                f"cannot write {path}: {path.parent} is a file, not a folder",
+                "choose an output path inside a folder",
+            )
         raise FileSystemError(f"cannot write {path}: folder {path.parent} does not exist", "create it first")
     payload = data.encode("utf-8") if isinstance(data, str) else data
     if mode is None:
@@ -154,8 +169,9 @@ def open_regular(path: Path | str, what: str = "read") -> BinaryIO:
     kind = _kind(os.fstat(fd).st_mode)
     if kind is not None and kind != "a folder":
         os.close(fd)
-        raise FileSystemError(f"cannot {what} {path}: it is {kind}, not a regular file",
-                              "give the path of a regular file")
+        raise FileSystemError(
+            f"cannot {what} {path}: it is {kind}, not a regular file", "give the path of a regular file"
+        )
     os.set_blocking(fd, True)
     return os.fdopen(fd, "rb")
 
@@ -170,15 +186,21 @@ def read_text(path: Path, what: str = "read", *, max_bytes: int | None = None) -
                 with open_regular(path, what) as handle:
                     return handle.read().decode("utf-8")
             chunks, total = [], 0
-            with open_regular(path, what) as handle:  # in chunks: read(max_bytes) would allocate all of it at once
+            with open_regular(
+                path, what
+            ) as handle:  # in chunks: read(max_bytes) would allocate all of it at once
                 while total <= max_bytes and (chunk := handle.read(1 << 20)):
                     chunks.append(chunk)
                     total += len(chunk)
             data = b"".join(chunks)
             if total > max_bytes:
-                raise InputError(f"{path} is over the {max_bytes / 2**20:g} MiB input limit",
-                                 "raise CALIBCTL_MAX_INPUT_MB if such a file is real")
+                raise InputError(
+                    f"{path} is over the {max_bytes / 2**20:g} MiB input limit",
+                    "raise CALIBCTL_MAX_INPUT_MB if such a file is real",
+                )
             return data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise FileSystemError(f"cannot {what} {path}: it is not UTF-8 text ({exc.reason} at byte {exc.start})",
-                                  "is this the right file?") from exc
+            raise FileSystemError(
+                f"cannot {what} {path}: it is not UTF-8 text ({exc.reason} at byte {exc.start})",
+                "is this the right file?",
+            ) from exc

@@ -63,7 +63,9 @@ class Signer:
     def public_pem(self) -> str:
         from cryptography.hazmat.primitives import serialization
 
-        pem = self.public.public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo)
+        pem = self.public.public_bytes(
+            serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo
+        )
         return pem.decode("ascii")
 
 
@@ -72,10 +74,15 @@ def _read(path: Path, what: str) -> bytes:
         with files.open_regular(path, f"read the {what}") as handle:  # a FIFO is refused, not waited on
             return handle.read()
     except FileNotFoundError as exc:
-        raise FileSystemError(f"the {what} {path} does not exist", "create one with `calibctl keys init`, or fix "
-                              "the signing_key setting (CALIBCTL_SIGNING_KEY / station file)") from exc
+        raise FileSystemError(
+            f"the {what} {path} does not exist",
+            "create one with `calibctl keys init`, or fix "
+            "the signing_key setting (CALIBCTL_SIGNING_KEY / station file)",
+        ) from exc
     except OSError as exc:
-        raise FileSystemError(f"cannot read the {what} {path}: {exc.strerror}", "check the path and its permissions") from exc
+        raise FileSystemError(
+            f"cannot read the {what} {path}: {exc.strerror}", "check the path and its permissions"
+        ) from exc
 
 
 def load_signer(path: Path) -> Signer:
@@ -86,32 +93,43 @@ def load_signer(path: Path) -> Signer:
     data = _read(path, "signing key")
     mode = path.stat().st_mode
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise InputError(f"the signing key {path} is readable by others (mode {stat.S_IMODE(mode):o})",
-                         f"chmod 600 {path}")
+        raise InputError(
+            f"the signing key {path} is readable by others (mode {stat.S_IMODE(mode):o})", f"chmod 600 {path}"
+        )
     try:
         key = serialization.load_pem_private_key(data, password=None)
     except (ValueError, TypeError) as exc:
-        raise InputError(f"{path} is not an unencrypted PEM private key", "create one with `calibctl keys init`") from exc
+        raise InputError(
+            f"{path} is not an unencrypted PEM private key", "create one with `calibctl keys init`"
+        ) from exc
     if not isinstance(key, Ed25519PrivateKey):
-        raise InputError(f"{path} holds a {type(key).__name__}, not an Ed25519 key", "create one with `calibctl keys init`")
+        raise InputError(
+            f"{path} holds a {type(key).__name__}, not an Ed25519 key", "create one with `calibctl keys init`"
+        )
     return Signer(key, path)
 
 
 def create_key(path: Path, *, force: bool = False) -> Signer:
     """Generate a key pair and write the private key to ``path`` with mode 0600 (never wider)."""
     if path.exists() and not force:
-        raise AlreadyExistsError(f"{path} exists; a signing key is never overwritten by accident",
-                                 "pass --force to replace it (keep its public key trusted: old signatures use it)")
+        raise AlreadyExistsError(
+            f"{path} exists; a signing key is never overwritten by accident",
+            "pass --force to replace it (keep its public key trusted: old signatures use it)",
+        )
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
     key = Ed25519PrivateKey.generate()
-    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+    pem = key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
 
     try:  # a symlink, FIFO or device at ``path`` is refused, never replaced
         files.write_atomic(path, pem, force=True, fsync=True, mode=0o600)
     except FileSystemError as exc:
-        raise FileSystemError(exc.message.replace("cannot write ", "cannot write the signing key ", 1), exc.hint) from exc
+        raise FileSystemError(
+            exc.message.replace("cannot write ", "cannot write the signing key ", 1), exc.hint
+        ) from exc
     return Signer(key, path)
 
 
@@ -130,13 +148,17 @@ class TrustedKeys:
         from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
 
         if not folder.is_dir():
-            raise FileSystemError(f"the trusted-keys folder {folder} does not exist or is not a folder",
-                                  "pass --trusted-keys DIR holding the public keys (`calibctl keys export-public`)")
+            raise FileSystemError(
+                f"the trusted-keys folder {folder} does not exist or is not a folder",
+                "pass --trusted-keys DIR holding the public keys (`calibctl keys export-public`)",
+            )
         for path in sorted(folder.glob("*.pem")):
             try:
                 key = serialization.load_pem_public_key(_read(path, "public key"))
             except ValueError as exc:
-                raise InputError(f"{path} is not a PEM public key", "export it with `calibctl keys export-public`") from exc
+                raise InputError(
+                    f"{path} is not a PEM public key", "export it with `calibctl keys export-public`"
+                ) from exc
             if not isinstance(key, Ed25519PublicKey):
                 raise InputError(f"{path} holds a {type(key).__name__}, not an Ed25519 public key")
             trusted.keys[key_id_of(key)] = key

@@ -23,7 +23,9 @@ target_metadata = Base.metadata
 
 def _url() -> str:
     x_args = context.get_x_argument(as_dictionary=True)
-    return normalise_url(x_args.get("db") or os.environ.get("CALIBCTL_DB") or config.get_main_option("sqlalchemy.url"))
+    return normalise_url(
+        x_args.get("db") or os.environ.get("CALIBCTL_DB") or config.get_main_option("sqlalchemy.url")
+    )
 
 
 def _run(connection: Connection) -> None:

@@ -37,7 +37,10 @@ def hostile_files(tmp: Path) -> dict[str, tuple[Path, str]]:
         "laughs.yaml": (BILLION_LAUGHS, "aliases are not accepted"),
         "deep.json": ("[" * DEEP + "]" * DEEP, "nested more than"),
         "deep.yaml": ("[" * DEEP + "]" * DEEP, "nested more than"),
-        "deepmap.yaml": ("".join(f"{' ' * i}k:\n" for i in range(200)) + " " * 200 + "k: 1\n", "nested more than"),
+        "deepmap.yaml": (
+            "".join(f"{' ' * i}k:\n" for i in range(200)) + " " * 200 + "k: 1\n",
+            "nested more than",
+        ),
         "bigint.json": (big_int, "an integer of 5000 digits"),
         "bigint.yaml": ("version: " + "9" * 5000 + "\n", "an integer of 5000 digits"),
         "nul.json": (json.dumps(nul), "a NUL character"),
@@ -56,8 +59,19 @@ def hostile(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     return hostile_files(tmp_path)
 
 
-@pytest.mark.parametrize("name", ["laughs.yaml", "deep.json", "deep.yaml", "deepmap.yaml", "bigint.json",
-                                  "bigint.yaml", "nul.json", "escape.json"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "laughs.yaml",
+        "deep.json",
+        "deep.yaml",
+        "deepmap.yaml",
+        "bigint.json",
+        "bigint.yaml",
+        "nul.json",
+        "escape.json",
+    ],
+)
 def test_each_hostile_file_is_an_input_error_in_bounded_memory(hostile, name):
     path, words = hostile[name]
     tracemalloc.start()
@@ -72,7 +86,9 @@ def test_each_hostile_file_is_an_input_error_in_bounded_memory(hostile, name):
 
 
 @pytest.mark.parametrize("command", ["lint", "import"])
-@pytest.mark.parametrize("name", ["laughs.yaml", "deep.json", "deep.yaml", "bigint.json", "nul.json", "escape.json"])
+@pytest.mark.parametrize(
+    "name", ["laughs.yaml", "deep.json", "deep.yaml", "bigint.json", "nul.json", "escape.json"]
+)
 def test_lint_and_import_answer_hostile_files_with_exit_2(hostile, sqlite_url, command, name):
     path, words = hostile[name]
     result = CliRunner().invoke(app, ["--db", sqlite_url, command, str(path)])
@@ -100,8 +116,9 @@ def test_a_bad_size_setting_is_a_usage_error(monkeypatch, tmp_path):
 @pytest.mark.parametrize("name", ["laughs.yaml", "deep.yaml", "bigint.yaml"])
 def test_a_hostile_station_file_exits_2(hostile, tmp_path, name):
     path, words = hostile[name]
-    result = CliRunner().invoke(app, ["--station-config", str(path), "--db", f"sqlite:///{tmp_path / 'x.db'}",
-                                      "history", "CAM"])
+    result = CliRunner().invoke(
+        app, ["--station-config", str(path), "--db", f"sqlite:///{tmp_path / 'x.db'}", "history", "CAM"]
+    )
     assert result.exit_code == 2 and words in result.stderr
 
 

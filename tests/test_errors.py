@@ -17,7 +17,10 @@ def test_items_past_the_limit_are_counted() -> None:
 
 
 def test_a_separator_for_items_that_hold_commas() -> None:
-    assert named_list(["x: bad, very", "y: worse", "z: gone"], 2, sep="; ") == "x: bad, very; y: worse and 1 more"
+    assert (
+        named_list(["x: bad, very", "y: worse", "z: gone"], 2, sep="; ")
+        == "x: bad, very; y: worse and 1 more"
+    )
 
 
 def test_only_the_items_shown_are_turned_into_text() -> None:

@@ -42,7 +42,8 @@ def test_messages_name_the_path_and_the_reason(tmp_path):
     assert str(os_error(OSError(errno.ENOSPC, "x"), "write", tmp_path / "f")) == (
         f"cannot write {tmp_path / 'f'}: no space left on the device (free some space or write to another disk; "
         "no partial file was kept (images a capture had already stored are removed by `calibctl prune` an hour "
-        "later))")
+        "later))"
+    )
     unlisted = os_error(OSError(errno.ENXIO, os.strerror(errno.ENXIO), "/dev/x"), "open")
     assert unlisted.message == f"cannot open /dev/x: {os.strerror(errno.ENXIO)}"
     with pytest.raises(FileSystemError, match=r"cannot write .*: it is a folder"):
@@ -50,10 +51,15 @@ def test_messages_name_the_path_and_the_reason(tmp_path):
     with pytest.raises(FileSystemError, match="folder .* does not exist"):
         write_atomic(tmp_path / "no" / "f", "x")
     (tmp_path / "plain").write_text("x")
-    with pytest.raises(FileSystemError, match=r"cannot write .*plain/f: .*plain is a file, not a folder") as file_parent:
+    with pytest.raises(
+        FileSystemError, match=r"cannot write .*plain/f: .*plain is a file, not a folder"
+    ) as file_parent:
         write_atomic(tmp_path / "plain" / "f", "x")
     assert file_parent.value.exit_code == 2 and "inside a folder" in (file_parent.value.hint or "")
-    with pytest.raises(FileSystemError, match="cannot list .*: permission denied"), file_errors("list", tmp_path):
+    with (
+        pytest.raises(FileSystemError, match="cannot list .*: permission denied"),
+        file_errors("list", tmp_path),
+    ):
         raise PermissionError(errno.EACCES, "Permission denied")
     assert errno.EROFS in ENVIRONMENT_ERRNOS and errno.EINVAL not in ENVIRONMENT_ERRNOS
 

@@ -15,8 +15,12 @@ from calibctl.signing import TrustedKeys, create_key, load_signer, record_messag
 def _ec_pem(private: bool) -> bytes:
     key = generate_private_key(SECP256R1())
     if private:
-        return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
-    return key.public_key().public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo)
+        return key.private_bytes(
+            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+        )
+    return key.public_key().public_bytes(
+        serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo
+    )
 
 
 def _private_file(path: Path, data: bytes) -> Path:
@@ -32,7 +36,9 @@ def test_a_signature_verifies_only_for_its_message_and_key(tmp_path: Path):
     signature = signer.sign(message)
     trusted = TrustedKeys({signer.key_id: signer.public})
     assert trusted.check(signer.key_id, signature, message) is None
-    assert "does not match" in (trusted.check(signer.key_id, signature, record_message("a" * 64, "c" * 64)) or "")
+    assert "does not match" in (
+        trusted.check(signer.key_id, signature, record_message("a" * 64, "c" * 64)) or ""
+    )
     assert "not trusted" in (trusted.check(other.key_id, other.sign(message), message) or "")
     assert trusted.check(None, None, message) == "is not signed"
     assert "does not match" in (trusted.check(signer.key_id, "not base64!", message) or "")

@@ -27,7 +27,9 @@ class SpanMeasurement(Document):
     corners along the long side (``squares`` squares), with its own instrument (seed chapter 0: only a
     second measurement of a distance catches a gauge error)."""
 
-    span_m: float = Field(gt=0, lt=10.0, description="outermost inner corner to outermost inner corner, metres")
+    span_m: float = Field(
+        gt=0, lt=10.0, description="outermost inner corner to outermost inner corner, metres"
+    )
     squares: int = Field(ge=1, description="squares the span covers (inner corners along the long side - 1)")
     uncertainty_m: float = Field(gt=0, description="one-sigma uncertainty of span_m, metres")
     instrument: str = Field(min_length=1, description="what measured it, e.g. 'steel rule 300 mm'")
@@ -41,18 +43,27 @@ class SquareMeasurement(Document):
     registered before the span existed read as ``measured`` without a span."""
 
     status: Literal["measured", "measured-single", "nominal"] = Field(
-        description="measured twice (square size and span agree), measured-single, or nominal (typed)")
+        description="measured twice (square size and span agree), measured-single, or nominal (typed)"
+    )
     square_size_m: float = Field(gt=0, lt=1.0, description="edge of one printed square, metres")
-    uncertainty_m: float | None = Field(None, gt=0, description="one-sigma uncertainty of square_size_m, metres")
-    instrument: str | None = Field(None, min_length=1, description="what measured it, e.g. 'Mitutoyo 500-196 calipers'")
+    uncertainty_m: float | None = Field(
+        None, gt=0, description="one-sigma uncertainty of square_size_m, metres"
+    )
+    instrument: str | None = Field(
+        None, min_length=1, description="what measured it, e.g. 'Mitutoyo 500-196 calipers'"
+    )
     measured_by: str | None = Field(None, min_length=1, description="who measured it")
     measured_on: dt.date | None = Field(None, description="date of the measurement")
-    evidence_sha256: Sha256Hex | None = Field(None, description="sha256 of the evidence file (photo of the calipers)")
+    evidence_sha256: Sha256Hex | None = Field(
+        None, description="sha256 of the evidence file (photo of the calipers)"
+    )
     evidence_name: str | None = Field(None, description="file name of the evidence when it was registered")
     # Left out of the document while absent, so boards (and calibrations) sealed before it still verify.
     span: SpanMeasurement | None = Field(
-        None, exclude_if=lambda span: span is None,
-        description="the independent span measurement; present exactly when status is measured (new boards)")
+        None,
+        exclude_if=lambda span: span is None,
+        description="the independent span measurement; present exactly when status is measured (new boards)",
+    )
 
     @model_validator(mode="after")
     def _provenance_complete(self) -> SquareMeasurement:
@@ -72,10 +83,16 @@ class SquareMeasurement(Document):
 class BackingBoard(Document):
     """The rigid board the pattern is mounted on, for targets another sensor sees by its outline (LiDAR)."""
 
-    width_m: float = Field(gt=0, lt=10.0, description="backing board edge along the pattern's x (the cols direction), metres")
-    height_m: float = Field(gt=0, lt=10.0, description="backing board edge along the pattern's y (the rows direction), metres")
+    width_m: float = Field(
+        gt=0, lt=10.0, description="backing board edge along the pattern's x (the cols direction), metres"
+    )
+    height_m: float = Field(
+        gt=0, lt=10.0, description="backing board edge along the pattern's y (the rows direction), metres"
+    )
     pattern_offset_m: tuple[float, float] = Field(
-        (0.0, 0.0), description="pattern centre minus backing board centre along the pattern's x and y, metres")
+        (0.0, 0.0),
+        description="pattern centre minus backing board centre along the pattern's x and y, metres",
+    )
 
 
 class BoardRevision(Document):
@@ -88,15 +105,19 @@ class BoardRevision(Document):
     cols: int = Field(ge=2, le=200, description="inner corners per row (OpenCV patternSize width)")
     rows: int = Field(ge=2, le=200, description="inner corners per column (OpenCV patternSize height)")
     marker_size_m: float | None = Field(None, gt=0, description="ChArUco only: marker edge, metres")
-    dictionary: str | None = Field(None, description="ChArUco only: cv2.aruco dictionary name, e.g. DICT_5X5_100")
+    dictionary: str | None = Field(
+        None, description="ChArUco only: cv2.aruco dictionary name, e.g. DICT_5X5_100"
+    )
     measurement: SquareMeasurement = Field(description="the square size and where it came from")
     created_at: UtcDatetime = Field(description="when this revision was registered (UTC)")
     created_by: str = Field(min_length=1, description="who registered it")
     note: str | None = Field(None, description="free text, e.g. why it was re-measured")
     # Left out of the document while absent, so boards sealed before it still verify.
     backing: BackingBoard | None = Field(
-        None, exclude_if=lambda backing: backing is None,
-        description="the backing board's size and the pattern's place on it (camera-LiDAR targets)")
+        None,
+        exclude_if=lambda backing: backing is None,
+        description="the backing board's size and the pattern's place on it (camera-LiDAR targets)",
+    )
 
     @model_validator(mode="after")
     def _charuco_fields(self) -> BoardRevision:

@@ -20,7 +20,9 @@ class RegionCheck(Document):
 
     region: str = Field(description="overall, ring 1..5 (inner to outer) or octant 0..7")
     check_rms_px: float | None = Field(None, ge=0, description="RMS of the fresh residuals, pixels")
-    reference_rms_px: float | None = Field(None, ge=0, description="the calibration's held-out RMS there, pixels")
+    reference_rms_px: float | None = Field(
+        None, ge=0, description="the calibration's held-out RMS there, pixels"
+    )
     ratio: float | None = Field(None, ge=0, description="check / reference; absent when not tested")
     limit: float = Field(gt=0, description="largest ratio that passes")
     corners: int = Field(ge=0, description="fresh corners in the region")
@@ -67,7 +69,9 @@ class CheckEvent(Document):
     views: list[str] = Field(description="images whose board was detected and used")
     view_rms_px: list[float] = Field(description="per-view RMS under the stored model, pixels")
     regions: list[RegionCheck] = Field(description="overall first, then radius rings, then octants")
-    shifts: list[ShiftCheck] = Field(default_factory=list, description="focal, cx, cy pulls; empty if unconstrained")
+    shifts: list[ShiftCheck] = Field(
+        default_factory=list, description="focal, cx, cy pulls; empty if unconstrained"
+    )
     distance: DistanceCheck | None = Field(None, description="present with --reference-distance")
     alpha: float = Field(gt=0, lt=1, description="false-fail probability the limits are set for")
     passed: bool = Field(description="every test passed")

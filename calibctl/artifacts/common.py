@@ -52,9 +52,9 @@ def canonical_json_bytes(data: dict[str, Any]) -> bytes:
     Python's float repr is the shortest string that round-trips a float64, so a document survives
     JSON -> store -> JSON bit-for-bit.
     """
-    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode(
-        "utf-8"
-    )
+    return json.dumps(
+        data, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False
+    ).encode("utf-8")
 
 
 MAX_EXACT_INT = 2**53 - 1  # Number.MAX_SAFE_INTEGER
@@ -133,7 +133,9 @@ CURRENT_HASH: HashAlgorithm = "sha256-rfc8785"
 LEGACY_HASH: HashAlgorithm = "sha256-python-json"
 
 
-def content_hash(model: BaseModel, exclude: set[str] | None = None, algorithm: HashAlgorithm = LEGACY_HASH) -> str:
+def content_hash(
+    model: BaseModel, exclude: set[str] | None = None, algorithm: HashAlgorithm = LEGACY_HASH
+) -> str:
     """sha256 of the canonical JSON of ``model`` without the fields in ``exclude``."""
     data = model.model_dump(mode="json", exclude=exclude or {"content_sha256"})
     return sha256_hex(jcs_bytes(data) if algorithm == CURRENT_HASH else canonical_json_bytes(data))
@@ -150,4 +152,6 @@ def parse_document(model: type[T], data: Any, source: str) -> T:
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        raise InputError(validation_message(exc, source), "fix the named field or re-export the file") from exc
+        raise InputError(
+            validation_message(exc, source), "fix the named field or re-export the file"
+        ) from exc

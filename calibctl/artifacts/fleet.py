@@ -33,8 +33,10 @@ class GateEvidence(Document):
     robot: str = Field(pattern=ROBOT_PATTERN, description="the canary robot it is about")
     target: str = Field(pattern=SERIAL_PATTERN, description="the target serial or rig it is about")
     rig: bool = Field(False, description="target names a rig")
-    source: Literal["check", "report"] = Field(description="check: a stored check event (check_events); report: a "
-                                               "robot's health report (health_reports)")
+    source: Literal["check", "report"] = Field(
+        description="check: a stored check event (check_events); report: a "
+        "robot's health report (health_reports)"
+    )
     id: str = Field(min_length=1, max_length=128, description="the check id or the report's source id")
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="the stored row's payload sha256")
     kind: str = Field(min_length=1, max_length=16, description="check, gauge or triage")
@@ -54,27 +56,46 @@ class TargetDiff(Document):
 class FleetEvent(Document):
     """One step of the fleet's log. Never updated, never deleted."""
 
-    schema_version: Literal[1] = Field(FLEET_EVENT_SCHEMA_VERSION, description="version of this document's schema")
+    schema_version: Literal[1] = Field(
+        FLEET_EVENT_SCHEMA_VERSION, description="version of this document's schema"
+    )
     kind: Literal["register", "assign", "rollout", "promote", "rollback"] = Field(
-        description="register a robot; assign it a calibration version; start, promote or roll back a rollout")
-    robot: str | None = Field(None, pattern=ROBOT_PATTERN, description="register, assign: the robot (letters, "
-                              "digits, . _ : -)")
+        description="register a robot; assign it a calibration version; start, promote or roll back a rollout"
+    )
+    robot: str | None = Field(
+        None, pattern=ROBOT_PATTERN, description="register, assign: the robot (letters, digits, . _ : -)"
+    )
     serials: list[str] = Field(default_factory=list, description="register: camera serials the robot carries")
     rigs: list[str] = Field(default_factory=list, description="register: rigs the robot carries")
     serial: str | None = Field(None, pattern=SERIAL_PATTERN, description="assign: the camera serial")
     rig: str | None = Field(None, pattern=SERIAL_PATTERN, description="assign: the rig (instead of a serial)")
-    version: int | None = Field(None, ge=1, le=MAX_VERSION, description="assign: the calibration version it now runs")
-    rollout: str | None = Field(None, pattern=ROBOT_PATTERN, description="rollout, promote, rollback: the rollout's "
-                                "name; assign: the rollout that made it, if any")
+    version: int | None = Field(
+        None, ge=1, le=MAX_VERSION, description="assign: the calibration version it now runs"
+    )
+    rollout: str | None = Field(
+        None,
+        pattern=ROBOT_PATTERN,
+        description="rollout, promote, rollback: the rollout's "
+        "name; assign: the rollout that made it, if any",
+    )
     targets: dict[str, int] = Field(default_factory=dict, description="rollout: serial -> the new version")
     rig_targets: dict[str, int] = Field(default_factory=dict, description="rollout: rig -> the new version")
     canary: list[str] = Field(default_factory=list, description="rollout: the robots that get it first")
-    gate: list[GateEvidence] = Field(default_factory=list, description="promote: the reports its health gate read")
-    diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="rollout: serial target -> its diff against "
-                                         "the version its robots ran")
-    rig_diffs: dict[str, TargetDiff] = Field(default_factory=dict, description="rollout: rig target -> its diff")
-    restore: dict[str, int] = Field(default_factory=dict, description="promote: rig -> its active version before the "
-                                    "promote activated the target (a rollback restores it)")
+    gate: list[GateEvidence] = Field(
+        default_factory=list, description="promote: the reports its health gate read"
+    )
+    diffs: dict[str, TargetDiff] = Field(
+        default_factory=dict,
+        description="rollout: serial target -> its diff against the version its robots ran",
+    )
+    rig_diffs: dict[str, TargetDiff] = Field(
+        default_factory=dict, description="rollout: rig target -> its diff"
+    )
+    restore: dict[str, int] = Field(
+        default_factory=dict,
+        description="promote: rig -> its active version before the "
+        "promote activated the target (a rollback restores it)",
+    )
     actor: str = Field(min_length=1, description="who did it")
     station: str = Field(min_length=1, description="where it was done")
     at: UtcDatetime = Field(description="UTC")
@@ -95,28 +116,49 @@ class FleetEvent(Document):
     @model_validator(mode="after")
     def _shape(self) -> FleetEvent:
         if (self.robot is None) == (self.kind in ("register", "assign")):
-            raise ValueError("register and assign name a robot; the rollout kinds name a rollout and no robot")
+            raise ValueError(
+                "register and assign name a robot; the rollout kinds name a rollout and no robot"
+            )
         if self.kind not in ("register", "assign") and self.rollout is None:
             raise ValueError(f"{self.kind} names its rollout")
         if self.kind == "register":
             if not (self.serials or self.rigs):
                 raise ValueError("a robot carries at least one camera serial or rig")
-            if self.serial is not None or self.rig is not None or self.version is not None or self.rollout is not None:
+            if (
+                self.serial is not None
+                or self.rig is not None
+                or self.version is not None
+                or self.rollout is not None
+            ):
                 raise ValueError("register names serials and rigs, not one serial@version")
             for names in (self.serials, self.rigs):
                 if len(set(names)) != len(names):
                     raise ValueError("a serial or rig is listed twice")
         elif self.kind == "assign":
-            if ((self.serial is None) == (self.rig is None) or self.version is None or self.serials or self.rigs
-                    or self.targets or self.rig_targets or self.canary):
+            if (
+                (self.serial is None) == (self.rig is None)
+                or self.version is None
+                or self.serials
+                or self.rigs
+                or self.targets
+                or self.rig_targets
+                or self.canary
+            ):
                 raise ValueError("assign names one serial or one rig and its version, nothing else")
         elif self.kind == "rollout":
             if not (self.targets or self.rig_targets) or not self.canary:
                 raise ValueError("a rollout names target versions and a canary cohort")
             if len(set(self.canary)) != len(self.canary):
                 raise ValueError("a canary robot is listed twice")
-        elif (self.serials or self.rigs or self.targets or self.rig_targets or self.canary or self.serial is not None
-              or self.rig is not None):
+        elif (
+            self.serials
+            or self.rigs
+            or self.targets
+            or self.rig_targets
+            or self.canary
+            or self.serial is not None
+            or self.rig is not None
+        ):
             raise ValueError(f"{self.kind} names the rollout only")
         if self.kind != "promote" and (self.gate or self.restore):
             raise ValueError("only a promote records its gate and restore versions")

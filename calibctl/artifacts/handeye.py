@@ -33,7 +33,8 @@ class RigidTransform(Document):
 
     translation_m: tuple[float, float, float] = Field(description="child origin in the parent frame, metres")
     rotation_wxyz: tuple[float, float, float, float] = Field(
-        description="unit quaternion (w, x, y, z), Hamilton, rotating child coordinates into the parent frame")
+        description="unit quaternion (w, x, y, z), Hamilton, rotating child coordinates into the parent frame"
+    )
 
     @field_validator("rotation_wxyz")
     @classmethod
@@ -47,22 +48,34 @@ class RigidTransform(Document):
 class EdgeUncertainty(Document):
     """One-sigma of the transform from the residual covariance of the joint refinement."""
 
-    sigma_rotation_deg: tuple[float, float, float] = Field(description="about the parent's x, y, z axes, degrees")
-    sigma_translation_mm: tuple[float, float, float] = Field(description="along the parent's x, y, z axes, mm")
+    sigma_rotation_deg: tuple[float, float, float] = Field(
+        description="about the parent's x, y, z axes, degrees"
+    )
+    sigma_translation_mm: tuple[float, float, float] = Field(
+        description="along the parent's x, y, z axes, mm"
+    )
     covariance: list[list[float]] = Field(
-        description="6x6 over (rotation perturbation in the parent frame, rad; translation, m)")
-    residual_rotation_deg: float = Field(ge=0, description="RMS rotation residual component of the refinement, degrees")
-    residual_translation_mm: float = Field(ge=0, description="RMS translation residual component of the refinement, mm")
+        description="6x6 over (rotation perturbation in the parent frame, rad; translation, m)"
+    )
+    residual_rotation_deg: float = Field(
+        ge=0, description="RMS rotation residual component of the refinement, degrees"
+    )
+    residual_translation_mm: float = Field(
+        ge=0, description="RMS translation residual component of the refinement, mm"
+    )
 
 
 class EdgeGate(Document):
     """An observability gate checked before any number is reported."""
 
     gate: Literal["rotation", "lever-arm", "time-alignment", "consistency", "translation-scale"] = Field(
-        description="which gate")
+        description="which gate"
+    )
     passed: bool = Field(description="true when the gate is satisfied")
-    value: float = Field(description="rotation about a second axis (deg), sigma_min of stacked (R_A - I), "
-                         "mismatched fraction, rotation residual RMS (deg), or the translation scale disagreement max(s, 1/s)")
+    value: float = Field(
+        description="rotation about a second axis (deg), sigma_min of stacked (R_A - I), "
+        "mismatched fraction, rotation residual RMS (deg), or the translation scale disagreement max(s, 1/s)"
+    )
     threshold: float = Field(description="the limit it was judged against")
     message: str = Field(description="what was measured, in words")
     hint: str | None = Field(None, description="what to do when it failed")
@@ -75,9 +88,15 @@ class MotionResidual(Document):
     label: str = Field(description="which rows or images the motion spans")
     angle_parent_deg: float = Field(ge=0, description="rotation angle of the parent sensor's motion, degrees")
     angle_child_deg: float = Field(ge=0, description="rotation angle of the child sensor's motion, degrees")
-    angle_mismatch_deg: float = Field(description="parent angle - child angle (0 for a synchronised pair), degrees")
-    residual_rotation_deg: float | None = Field(None, ge=0, description="|rotation misfit| of A X = X B, degrees")
-    residual_translation_mm: float | None = Field(None, ge=0, description="|translation misfit| of A X = X B, mm")
+    angle_mismatch_deg: float = Field(
+        description="parent angle - child angle (0 for a synchronised pair), degrees"
+    )
+    residual_rotation_deg: float | None = Field(
+        None, ge=0, description="|rotation misfit| of A X = X B, degrees"
+    )
+    residual_translation_mm: float | None = Field(
+        None, ge=0, description="|translation misfit| of A X = X B, mm"
+    )
     outlier: bool = Field(False, description="residual above 4 robust sigmas")
 
 
@@ -90,15 +109,21 @@ class EdgeProvenance(Document):
     input_file: str = Field(description="name of the motions/poses CSV")
     input_sha256: Sha256Hex = Field(description="sha256 of that CSV")
     input_shape: InputShape = Field(description="poses, motions, robot-eye-in-hand or robot-eye-to-hand")
-    camera: str | None = Field(None, description="SERIAL@VERSION whose intrinsics gave the board poses (robot case)")
+    camera: str | None = Field(
+        None, description="SERIAL@VERSION whose intrinsics gave the board poses (robot case)"
+    )
     board: str | None = Field(None, description="NAME@REVISION of the board (robot case)")
-    input_image_sha256: list[Sha256Hex] = Field(default_factory=list, description="sha256 of every image used")
+    input_image_sha256: list[Sha256Hex] = Field(
+        default_factory=list, description="sha256 of every image used"
+    )
 
 
 class HandEyeResult(Document):
     """One hand-eye solve of the edge parent_frame -> child_frame."""
 
-    schema_version: Literal[1] = Field(HANDEYE_SCHEMA_VERSION, description="version of this document's schema")
+    schema_version: Literal[1] = Field(
+        HANDEYE_SCHEMA_VERSION, description="version of this document's schema"
+    )
     kind: Literal["handeye"] = Field("handeye", description="document kind")
     parent_frame: str = Field(pattern=FRAME_PATTERN, description="frame A of A X = X B (the tf parent)")
     child_frame: str = Field(pattern=FRAME_PATTERN, description="frame B of A X = X B (the tf child)")
@@ -106,19 +131,29 @@ class HandEyeResult(Document):
     method: Literal["park", "tsai"] = Field(description="closed-form start before the joint refinement")
     transform: RigidTransform | None = Field(description="T_parent_child; null when rejected")
     refinement: Literal["motions", "poses"] | None = Field(
-        None, description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when rejected")
+        None,
+        description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when rejected",
+    )
     uncertainty: EdgeUncertainty | None = Field(description="one-sigma; null when rejected or not estimable")
     uncertainty_refused_reason: str | None = Field(None, description="why no uncertainty is reported")
-    gates: list[EdgeGate] = Field(description="observability gates (before the solve), the consistency and translation-scale gates (after)")
-    lever_arm_singular_values: tuple[float, float, float] = Field(description="singular values of stacked (R_A - I)")
+    gates: list[EdgeGate] = Field(
+        description="observability gates (before the solve), the consistency and translation-scale gates (after)"
+    )
+    lever_arm_singular_values: tuple[float, float, float] = Field(
+        description="singular values of stacked (R_A - I)"
+    )
     motions: list[MotionResidual] = Field(description="per-motion angles and residuals")
-    outlier_motions: list[str] = Field(default_factory=list, description="labels of motions named as outliers")
+    outlier_motions: list[str] = Field(
+        default_factory=list, description="labels of motions named as outliers"
+    )
     skipped: list[str] = Field(default_factory=list, description="inputs left out, each with its reason")
     provenance: EdgeProvenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(
-        LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
+        LEGACY_HASH,
+        exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
         description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
-        "other field, this one included; absent = sha256-python-json, the results written before it")
+        "other field, this one included; absent = sha256-python-json, the results written before it",
+    )
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")
 
     @model_validator(mode="after")

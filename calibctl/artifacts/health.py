@@ -20,43 +20,83 @@ MAX_FUTURE = timedelta(minutes=5)
 """A report stamped further ahead than this is refused: the robot's clock is wrong, so is its time axis."""
 SOURCE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:/@-]{0,127}$"
 HealthKind = Literal["check", "gauge", "triage", "timeoffset"]
-_NUMBERS: dict[str, tuple[str, ...]] = {"check": ("rms_px", "verdict"), "gauge": ("ratio", "sigma"),
-                                        "triage": ("verdict",), "timeoffset": ("td_ms", "sigma_ms", "temperature_c")}
-_OPTIONAL = {"check": ("temperature_c",), "gauge": ("temperature_c",), "triage": ("temperature_c",),
-             "timeoffset": ()}
+_NUMBERS: dict[str, tuple[str, ...]] = {
+    "check": ("rms_px", "verdict"),
+    "gauge": ("ratio", "sigma"),
+    "triage": ("verdict",),
+    "timeoffset": ("td_ms", "sigma_ms", "temperature_c"),
+}
+_OPTIONAL = {
+    "check": ("temperature_c",),
+    "gauge": ("temperature_c",),
+    "triage": ("temperature_c",),
+    "timeoffset": (),
+}
 
 
 class HealthReport(Document):
     """One robot's report on one serial at one time. Never updated, never deleted."""
 
-    schema_version: Literal[1] = Field(HEALTH_REPORT_SCHEMA_VERSION, description="version of this document's schema")
-    source_id: str = Field(pattern=SOURCE_ID_PATTERN, description="the robot's own id for this report, unique in the "
-                           "store: a report sent twice is refused the second time")
-    serial: str = Field(pattern=SERIAL_PATTERN, description="the camera serial the numbers are about, or the rig's "
-                        "name for a rig-level report (a rig target's health gate reads those)")
-    robot: str = Field(pattern=SERIAL_PATTERN, description="the registered robot that carries the serial and sent it")
-    time: UtcDatetime = Field(description="UTC when the robot measured it; refused more than 5 minutes in the future")
-    kind: HealthKind = Field(description="check: a re-check against the stored calibration; gauge: the scale "
-                             "gauge's measured/true ratio; triage: the field triage verdict; timeoffset: the "
-                             "camera-to-clock time offset estimate")
-    rms_px: float | None = Field(None, ge=0, le=1e4, description="check: reprojection RMS of the re-check, px")
-    verdict: str | None = Field(None, pattern=r"^[a-z][a-z0-9_-]{0,31}$", description="check: pass | fail; triage: "
-                                "the verdict's name (e.g. ok, intrinsics, extrinsics, time)")
-    ratio: float | None = Field(None, gt=0, le=100, description="gauge: measured over true length, dimensionless")
+    schema_version: Literal[1] = Field(
+        HEALTH_REPORT_SCHEMA_VERSION, description="version of this document's schema"
+    )
+    source_id: str = Field(
+        pattern=SOURCE_ID_PATTERN,
+        description="the robot's own id for this report, unique in the "
+        "store: a report sent twice is refused the second time",
+    )
+    serial: str = Field(
+        pattern=SERIAL_PATTERN,
+        description="the camera serial the numbers are about, or the rig's "
+        "name for a rig-level report (a rig target's health gate reads those)",
+    )
+    robot: str = Field(
+        pattern=SERIAL_PATTERN, description="the registered robot that carries the serial and sent it"
+    )
+    time: UtcDatetime = Field(
+        description="UTC when the robot measured it; refused more than 5 minutes in the future"
+    )
+    kind: HealthKind = Field(
+        description="check: a re-check against the stored calibration; gauge: the scale "
+        "gauge's measured/true ratio; triage: the field triage verdict; timeoffset: the "
+        "camera-to-clock time offset estimate"
+    )
+    rms_px: float | None = Field(
+        None, ge=0, le=1e4, description="check: reprojection RMS of the re-check, px"
+    )
+    verdict: str | None = Field(
+        None,
+        pattern=r"^[a-z][a-z0-9_-]{0,31}$",
+        description="check: pass | fail; triage: the verdict's name (e.g. ok, intrinsics, extrinsics, time)",
+    )
+    ratio: float | None = Field(
+        None, gt=0, le=100, description="gauge: measured over true length, dimensionless"
+    )
     sigma: float | None = Field(None, ge=0, le=100, description="gauge: 1-sigma of ratio, dimensionless")
-    td_ms: float | None = Field(None, ge=-1e6, le=1e6, description="timeoffset: camera time minus clock time, ms")
+    td_ms: float | None = Field(
+        None, ge=-1e6, le=1e6, description="timeoffset: camera time minus clock time, ms"
+    )
     sigma_ms: float | None = Field(None, ge=0, le=1e6, description="timeoffset: 1-sigma of td_ms, ms")
-    temperature_c: float | None = Field(None, ge=-100, le=200, description="the camera's temperature when measured, "
-                                        "degC (required for timeoffset, optional otherwise)")
+    temperature_c: float | None = Field(
+        None,
+        ge=-100,
+        le=200,
+        description="the camera's temperature when measured, "
+        "degC (required for timeoffset, optional otherwise)",
+    )
 
     @model_validator(mode="after")
     def _shape(self) -> HealthReport:
         if self.time > utc_now() + MAX_FUTURE:
-            raise ValueError(f"time {self.time.isoformat()} is more than 5 minutes in the future (robot clock?)")
+            raise ValueError(
+                f"time {self.time.isoformat()} is more than 5 minutes in the future (robot clock?)"
+            )
         allowed = _NUMBERS[self.kind] + _OPTIONAL[self.kind]
         missing = [name for name in _NUMBERS[self.kind] if getattr(self, name) is None]
         if missing:
-            raise ValueError(f"a {self.kind} report needs {', '.join(_NUMBERS[self.kind])}; missing: {', '.join(missing)}")
+            raise ValueError(
+                f"a {self.kind} report needs {', '.join(_NUMBERS[self.kind])}; missing: {', '.join(missing)}"
+            )
         for name in ("rms_px", "verdict", "ratio", "sigma", "td_ms", "sigma_ms", "temperature_c"):
             if getattr(self, name) is not None and name not in allowed:
                 raise ValueError(f"a {self.kind} report carries {', '.join(allowed)}, not {name}")

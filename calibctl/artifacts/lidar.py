@@ -16,17 +16,23 @@ from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDa
 from calibctl.artifacts.handeye import FRAME_PATTERN
 
 LIDAR_SCHEMA_VERSION: Literal[1] = 1
-ScanOutcome = Literal["accepted", "no_plane", "too_few_rings", "dimension_mismatch", "no_board_in_image", "not_paired"]
+ScanOutcome = Literal[
+    "accepted", "no_plane", "too_few_rings", "dimension_mismatch", "no_board_in_image", "not_paired"
+]
 Matrix4 = tuple[tuple[float, float, float, float], ...]
 
 
 class LidarGate(Document):
     """One gate of the camera-LiDAR solve (core.lidar.gates), before or after the solve."""
 
-    gate: str = Field(description="lidar-poses, lidar-observability, lidar-range-spread, lidar-plane-rms, "
-                                  "lidar-dimension or lidar-held-out")
+    gate: str = Field(
+        description="lidar-poses, lidar-observability, lidar-range-spread, lidar-plane-rms, "
+        "lidar-dimension or lidar-held-out"
+    )
     passed: bool = Field(description="true when satisfied")
-    value: float | None = Field(description="what was measured (unit in the message); none when not computable")
+    value: float | None = Field(
+        description="what was measured (unit in the message); none when not computable"
+    )
     threshold: float = Field(description="the limit it was judged against")
     message: str = Field(description="the verdict in words")
     hint: str | None = Field(None, description="what to capture or check next when it failed")
@@ -46,12 +52,18 @@ class LidarTransform(Document):
     """T_lidar_cam: p_lidar = R p_cam + t, with its one-sigma."""
 
     T_lidar_cam: Matrix4 = Field(description="4x4, maps camera-frame points into the LiDAR frame, metres")
-    quaternion_wxyz: tuple[float, float, float, float] = Field(description="rotation of T_lidar_cam (w, x, y, z)")
-    rpy_rad: tuple[float, float, float] = Field(description="roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll)")
+    quaternion_wxyz: tuple[float, float, float, float] = Field(
+        description="rotation of T_lidar_cam (w, x, y, z)"
+    )
+    rpy_rad: tuple[float, float, float] = Field(
+        description="roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll)"
+    )
     sigma_translation_mm: tuple[float, float, float] = Field(description="along LiDAR x, y, z, mm")
     sigma_rotation_deg: tuple[float, float, float] = Field(description="about LiDAR x, y, z, degrees")
-    covariance: list[list[float]] = Field(description="6x6 over rotation about LiDAR x, y, z (rad; left "
-                                                      "perturbation) and translation x, y, z (m)")
+    covariance: list[list[float]] = Field(
+        description="6x6 over rotation about LiDAR x, y, z (rad; left "
+        "perturbation) and translation x, y, z (m)"
+    )
 
 
 class LidarMetrics(Document):
@@ -63,10 +75,14 @@ class LidarMetrics(Document):
     projected_edge_rms_px: float | None = Field(description="that edge error in the image, RMS px")
     held_out_plane_rms_mm: float | None = Field(description="k-fold held-out point-to-plane RMS, mm")
     held_out_edge_rms_mm: float | None = Field(description="k-fold held-out edge RMS, mm")
-    held_out_projected_edge_rms_px: float | None = Field(None, description="k-fold held-out edge RMS in the image, px")
+    held_out_projected_edge_rms_px: float | None = Field(
+        None, description="k-fold held-out edge RMS in the image, px"
+    )
     folds: int = Field(ge=0, description="k of the k-fold")
     dimension_error_mean_mm: tuple[float, float] = Field(description="mean board width, height error, mm")
-    range_offset_from_dimensions_mm: float | None = Field(description="range offset the board sizes ask for, mm")
+    range_offset_from_dimensions_mm: float | None = Field(
+        description="range offset the board sizes ask for, mm"
+    )
 
 
 class LidarOverlaySource(Document):
@@ -84,16 +100,22 @@ class LidarEdgeResult(Document):
 
     schema_version: Literal[1] = Field(LIDAR_SCHEMA_VERSION, description="version of this document's schema")
     kind: Literal["lidar"] = Field("lidar", description="document kind")
-    parent_frame: str = Field(pattern=FRAME_PATTERN, description="the LiDAR frame (a ROS name declared in the rig)")
+    parent_frame: str = Field(
+        pattern=FRAME_PATTERN, description="the LiDAR frame (a ROS name declared in the rig)"
+    )
     child_frame: str = Field(pattern=SERIAL_PATTERN, description="the camera: a rig member's serial")
     status: Literal["accepted", "rejected"] = Field(description="accepted when every gate passed")
     camera: str = Field(description="SERIAL@VERSION whose calibration gave the board poses")
     board: str = Field(description="NAME@REVISION of the board, or the dimensions given on the command line")
     images: str = Field(description="the images folder as given")
     scans: str = Field(description="the scans folder as given")
-    box: tuple[float, float, float, float, float, float] = Field(description="station box, metres, LiDAR frame")
+    box: tuple[float, float, float, float, float, float] = Field(
+        description="station box, metres, LiDAR frame"
+    )
     range_offset_applied_mm: float = Field(description="--range-offset-mm applied before segmentation")
-    transform: LidarTransform | None = Field(description="the estimate (none when a gate refused the set first)")
+    transform: LidarTransform | None = Field(
+        description="the estimate (none when a gate refused the set first)"
+    )
     metrics: LidarMetrics | None = Field(description="fit and held-out figures (none without a transform)")
     gates: list[LidarGate] = Field(description="every gate, in order")
     scans_outcomes: list[LidarScan] = Field(description="one outcome per scan or unpaired image")

@@ -55,8 +55,10 @@ class RigDefinition(Document):
     root: str = Field(description="the tree's root camera")
     design_baselines: list[DesignBaseline] = Field(default_factory=list, description="design distances")
     frames: list[Annotated[str, Field(pattern=FRAME_PATTERN)]] = Field(
-        default_factory=list, exclude_if=lambda frames: not frames,
-        description="non-camera frames (flange, imu, lidar) that hand-eye edges may join to the tree")
+        default_factory=list,
+        exclude_if=lambda frames: not frames,
+        description="non-camera frames (flange, imu, lidar) that hand-eye edges may join to the tree",
+    )
     created_at: UtcDatetime = Field(description="UTC time of registration")
     created_by: str = Field(description="who registered it")
     station: str = Field(description="where")
@@ -67,7 +69,9 @@ class RigDefinition(Document):
             raise ValueError("a camera is listed twice")
         if self.root not in self.cameras:
             raise ValueError(f"root {self.root} is not a member")
-        clash = sorted(set(self.frames) & set(self.cameras)) or [f for i, f in enumerate(self.frames) if f in self.frames[:i]]
+        clash = sorted(set(self.frames) & set(self.cameras)) or [
+            f for i, f in enumerate(self.frames) if f in self.frames[:i]
+        ]
         if clash:
             raise ValueError(f"frame {clash[0]} is listed twice (frames and cameras share one name space)")
         for d in self.design_baselines:
@@ -86,7 +90,9 @@ class RigFrame(Document):
 class UnmatchedImage(Document):
     camera: str = Field(description="camera serial")
     name: str = Field(description="image name")
-    reason: Literal["no-frame-key", "duplicate-frame-key", "no-partner"] = Field(description="why it is unmatched")
+    reason: Literal["no-frame-key", "duplicate-frame-key", "no-partner"] = Field(
+        description="why it is unmatched"
+    )
 
 
 class RigGate(Document):
@@ -94,7 +100,9 @@ class RigGate(Document):
 
     gate: Literal["rig-connected"] = Field(description="which gate")
     passed: bool = Field(description="true when satisfied")
-    value: float = Field(description="shared views of the weakest linking pair (or of the best pair across a split)")
+    value: float = Field(
+        description="shared views of the weakest linking pair (or of the best pair across a split)"
+    )
     threshold: float = Field(description="views a linking pair needs")
     message: str = Field(description="the verdict in words")
     hint: str | None = Field(None, description="what the operator should do next, naming the pair")
@@ -111,7 +119,9 @@ class RigSession(Document):
     unmatched: list[UnmatchedImage] = Field(default_factory=list, description="images that pair with nothing")
     shared_views: dict[str, int] = Field(description="'A-B' -> frames in which both cameras saw the board")
     gates: list[RigGate] = Field(description="rig-level gates")
-    status: Literal["accepted", "rejected"] = Field(description="accepted when every camera's and the rig's gates pass")
+    status: Literal["accepted", "rejected"] = Field(
+        description="accepted when every camera's and the rig's gates pass"
+    )
     created_at: UtcDatetime = Field(description="UTC")
     station: str = Field(description="station id")
     operator: str = Field(description="who")
@@ -124,14 +134,17 @@ class RigMember(Document):
     version: int = Field(ge=1, description="its calibration version")
     content_sha256: Sha256Hex = Field(description="that calibration's content hash")
     image_size: tuple[int, int] = Field(description="[W, H] pixels")
-    camera_matrix: tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]] = Field(
-        description="K used by the rig solve, px")
+    camera_matrix: tuple[
+        tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]
+    ] = Field(description="K used by the rig solve, px")
     dist_coeffs: list[float] = Field(description="distortion used, OpenCV order")
     refined: bool = Field(description="true when the rig solve refined these intrinsics")
     lens: Literal["pinhole", "fisheye"] = Field(
-        "pinhole", exclude_if=lambda lens: lens == "pinhole",
+        "pinhole",
+        exclude_if=lambda lens: lens == "pinhole",
         description="pinhole (OpenCV's distortion order) or fisheye (equidistant Kannala-Brandt, dist_coeffs k1..k4); "
-                    "written only for fisheye, so older documents and their hashes are unchanged")
+        "written only for fisheye, so older documents and their hashes are unchanged",
+    )
 
 
 class RigEdge(Document):
@@ -139,13 +152,21 @@ class RigEdge(Document):
 
     parent: str = Field(description="parent frame")
     child: str = Field(description="child frame")
-    T_parent_child: Matrix4 = Field(description="4x4 transform mapping child-frame points into the parent frame, metres")
-    covariance: list[list[float]] = Field(description="6x6 covariance of (rvec rad, tvec m) of T_parent_child")
+    T_parent_child: Matrix4 = Field(
+        description="4x4 transform mapping child-frame points into the parent frame, metres"
+    )
+    covariance: list[list[float]] = Field(
+        description="6x6 covariance of (rvec rad, tvec m) of T_parent_child"
+    )
     translation_mm: float = Field(ge=0, description="|t|, mm")
     sigma_translation_mm: float = Field(ge=0, description="one-sigma of |t|, mm")
     rotation_deg: float = Field(ge=0, description="rotation angle, degrees")
-    sigma_rotation_deg: float = Field(ge=0, description="one-sigma of the rotation on its least certain axis, degrees")
-    source: Literal["rig-solve", "hand-eye", "lidar-board"] = Field("rig-solve", description="what produced this edge")
+    sigma_rotation_deg: float = Field(
+        ge=0, description="one-sigma of the rotation on its least certain axis, degrees"
+    )
+    source: Literal["rig-solve", "hand-eye", "lidar-board"] = Field(
+        "rig-solve", description="what produced this edge"
+    )
 
 
 class RigPair(Document):
@@ -160,7 +181,9 @@ class RigPair(Document):
     shared_views: int = Field(ge=0, description="frames both cameras saw the board in")
     epipolar_rms_px: float | None = Field(None, ge=0, description="held-out epipolar error RMS, px")
     epipolar_max_px: float | None = Field(None, ge=0, description="held-out epipolar error max, px")
-    rectified_rms_px: float | None = Field(None, ge=0, description="held-out rectified cross-epipolar disparity RMS, px")
+    rectified_rms_px: float | None = Field(
+        None, ge=0, description="held-out rectified cross-epipolar disparity RMS, px"
+    )
     rectified_max_px: float | None = Field(None, ge=0, description="its max, px")
 
 
@@ -193,26 +216,38 @@ class RigCalibration(Document):
     solver: str = Field(description="cv2.stereoCalibrateExtended or calibctl joint LM")
     refine_intrinsics: bool = Field(description="whether the members' intrinsics were refined")
     gates: list[RigGate] = Field(default_factory=list, description="rig gates of the capture")
-    lint: list[Finding] = Field(default_factory=list, description="rig lint findings at the time of the solve")
+    lint: list[Finding] = Field(
+        default_factory=list, description="rig lint findings at the time of the solve"
+    )
     handeye: list[HandEyeResult] = Field(
-        default_factory=list, exclude_if=lambda results: not results,
+        default_factory=list,
+        exclude_if=lambda results: not results,
         description="evidence of every hand-eye edge of this version (source 'hand-eye'), and for a version "
-                    "rejected by a hand-eye gate, the rejected result (it adds no edge)")
+        "rejected by a hand-eye gate, the rejected result (it adds no edge)",
+    )
     lidar: list[LidarEdgeResult] = Field(
-        default_factory=list, exclude_if=lambda results: not results,
+        default_factory=list,
+        exclude_if=lambda results: not results,
         description="evidence of every camera-LiDAR edge of this version (source 'lidar-board'), and for a version "
-                    "rejected by a LiDAR gate, the rejected result (it adds no edge); absent when empty, so older "
-                    "versions and their hashes are unchanged")
+        "rejected by a LiDAR gate, the rejected result (it adds no edge); absent when empty, so older "
+        "versions and their hashes are unchanged",
+    )
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(
-        LEGACY_HASH, exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
+        LEGACY_HASH,
+        exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
         description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
-        "other field, this one included; absent = sha256-python-json, the versions written before it")
-    content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field but signature")
+        "other field, this one included; absent = sha256-python-json, the versions written before it",
+    )
+    content_sha256: Sha256Hex = Field(
+        description="sha256 of the canonical JSON of every other field but signature"
+    )
     signature: RecordSignature | None = Field(
-        None, exclude_if=lambda seal: seal is None,
+        None,
+        exclude_if=lambda seal: seal is None,
         description="the writing store's signature of this version's record, when it had a key (absent: "
-        "unsigned); not hashed, and absent from the stored document (the store keeps it in the row's columns)")
+        "unsigned); not hashed, and absent from the stored document (the store keeps it in the row's columns)",
+    )
 
     @property
     def ref(self) -> str:

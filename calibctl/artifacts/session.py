@@ -16,33 +16,43 @@ from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDa
 
 SESSION_SCHEMA_VERSION: Literal[1] = 1
 
-ImageStatus = Literal["accepted", "no_board", "bad_grid", "blurred", "near_duplicate", "wrong_size", "unreadable",
-                      "skipped"]
+ImageStatus = Literal[
+    "accepted", "no_board", "bad_grid", "blurred", "near_duplicate", "wrong_size", "unreadable", "skipped"
+]
 
 
 class GateResult(Document):
     """One capture-time gate: its value against its threshold, and what the operator should do."""
 
     gate: Literal["observability", "tilt", "coverage", "views", "one_camera", "projection"] = Field(
-        description="which gate")
+        description="which gate"
+    )
     passed: bool = Field(description="true when the gate is satisfied")
-    value: float = Field(description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)")
+    value: float = Field(
+        description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)"
+    )
     threshold: float = Field(description="the value it had to reach")
-    reason: str | None = Field(None, description="machine-readable reason code when it failed, e.g. tilt.directions")
+    reason: str | None = Field(
+        None, description="machine-readable reason code when it failed, e.g. tilt.directions"
+    )
     hint: str | None = Field(None, description="what the operator should do next, in words")
     detail: dict[str, float | int | str | list[str]] = Field(
         default_factory=dict, description="gate-specific extras (missing cells, directions seen, ...)"
     )
     advisory: bool = Field(
-        False, exclude_if=lambda advisory: not advisory,
-        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) did not")
+        False,
+        exclude_if=lambda advisory: not advisory,
+        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) did not",
+    )
 
 
 class ImageOutcome(Document):
     """What happened to one input image or video frame."""
 
-    name: str = Field(description="file name (folder), path relative to the list file's or the glob's folder, "
-                      "or frame label")
+    name: str = Field(
+        description="file name (folder), path relative to the list file's or the glob's folder, "
+        "or frame label"
+    )
     status: ImageStatus = Field(description="accepted, or why not")
     reason: str | None = Field(None, description="why it was not accepted, in words")
     sha256: Sha256Hex | None = Field(None, description="sha256 of the image bytes (None when unreadable)")
@@ -79,13 +89,18 @@ class MetricGauge(Document):
 class CaptureSession(Document):
     """One capture run for one camera serial with one board revision."""
 
-    schema_version: Literal[1] = Field(SESSION_SCHEMA_VERSION, description="version of this document's schema")
+    schema_version: Literal[1] = Field(
+        SESSION_SCHEMA_VERSION, description="version of this document's schema"
+    )
     session_id: str = Field(pattern=r"^[0-9a-f]{12}$", description="12 hex digits, printed by capture")
     serial: str = Field(pattern=SERIAL_PATTERN, description="camera serial number (letters, digits, . _ : -)")
     board: BoardRevision = Field(description="snapshot of the board revision used")
-    source: str = Field(description="folder, glob pattern, list file, video file or camera the images came from")
+    source: str = Field(
+        description="folder, glob pattern, list file, video file or camera the images came from"
+    )
     source_kind: Literal["folder", "glob", "list", "video", "camera", "synthetic"] = Field(
-        description="kind of source")
+        description="kind of source"
+    )
     station: str = Field(description="station id")
     operator: str = Field(description="who ran the capture")
     started_at: UtcDatetime = Field(description="UTC")
@@ -93,11 +108,15 @@ class CaptureSession(Document):
     image_size: tuple[int, int] | None = Field(None, description="[W, H] shared by every accepted view")
     status: Literal["accepted", "rejected"] = Field(description="accepted when every gate passed")
     gates: list[GateResult] = Field(default_factory=list, description="capture-time gate values")
-    outcomes: list[ImageOutcome] = Field(default_factory=list, description="one per input image or frame examined")
+    outcomes: list[ImageOutcome] = Field(
+        default_factory=list, description="one per input image or frame examined"
+    )
     views: list[ViewCorners] = Field(default_factory=list, description="accepted views with their corners")
     calibctl_version: str = Field(description="calibctl version that captured")
     opencv_version: str = Field(description="OpenCV version of the detector")
     metric_gauge: MetricGauge | None = Field(
-        None, exclude_if=lambda gauge: gauge is None,
+        None,
+        exclude_if=lambda gauge: gauge is None,
         description="--reference-distance: the metric gauge judged at capture; absent without one (and in sessions "
-        "captured before it was recorded)")
+        "captured before it was recorded)",
+    )

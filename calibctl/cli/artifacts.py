@@ -37,20 +37,28 @@ def history(
             prev = f" (was {e.previous_version})" if e.previous_version else ""
             stdout.print(
                 f"  {e.at.isoformat()[:19].replace('T', ' ')}  {e.kind:<8} -> v{e.version}{prev}  "
-                f"by {plain(e.actor)} at {plain(e.station)}: {plain(e.reason)}", markup=False, soft_wrap=True
+                f"by {plain(e.actor)} at {plain(e.station)}: {plain(e.reason)}",
+                markup=False,
+                soft_wrap=True,
             )
     if hist.checks:
         stdout.print("checks:")
         for c in hist.checks:
-            stdout.print(f"  {c.at.isoformat()[:19].replace('T', ' ')}  check    v{c.version}  "
-                         f"{'pass' if c.passed else 'FAIL'}  {len(c.views)} views, RMS "
-                         f"{c.regions[0].check_rms_px or 0:.3f} px  by {c.operator} at {c.station}"
-                         + (f": {c.reasons[0]}" if c.reasons else ""), markup=False, highlight=False)
+            stdout.print(
+                f"  {c.at.isoformat()[:19].replace('T', ' ')}  check    v{c.version}  "
+                f"{'pass' if c.passed else 'FAIL'}  {len(c.views)} views, RMS "
+                f"{c.regions[0].check_rms_px or 0:.3f} px  by {c.operator} at {c.station}"
+                + (f": {c.reasons[0]}" if c.reasons else ""),
+                markup=False,
+                highlight=False,
+            )
 
 
 def show(
     ctx: typer.Context,
-    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
+    ref: Annotated[
+        str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")
+    ],
     json_output: JsonFlag = False,
 ) -> None:
     """One calibration in full: parameters with their one-sigma, held-out error, gates and lint."""
@@ -67,10 +75,16 @@ def show(
 
 def export(
     ctx: typer.Context,
-    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
-    fmt: Annotated[str, typer.Option("--format", "-f", help="json | yaml | ros | opencv | kalibr | mrcal")] = "json",
+    ref: Annotated[
+        str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")
+    ],
+    fmt: Annotated[
+        str, typer.Option("--format", "-f", help="json | yaml | ros | opencv | kalibr | mrcal")
+    ] = "json",
     out: Annotated[Path | None, typer.Option("--output", "-o", help="Write here instead of stdout.")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file (keeps its mode).")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite an existing --output file (keeps its mode).")
+    ] = False,
     allow_rejected: Annotated[
         bool, typer.Option("--allow-rejected", help="Export a rejected version too (marked rejected).")
     ] = False,
@@ -82,7 +96,13 @@ def export(
     from calibctl.workflows.store_admin import records
 
     text = records.export(
-        state(ctx).settings(), ref, fmt, out, force=force, allow_rejected=allow_rejected, camera_name=camera_name
+        state(ctx).settings(),
+        ref,
+        fmt,
+        out,
+        force=force,
+        allow_rejected=allow_rejected,
+        camera_name=camera_name,
     )
     if out is None:
         print(text, end="")
@@ -93,13 +113,31 @@ def export(
 def import_(
     ctx: typer.Context,
     path: Annotated[Path, typer.Argument(metavar="FILE", help="An artifact exported with --format json.")],
-    activate: Annotated[bool | None, typer.Option(
-        "--activate/--no-activate", help="Make it active when this store accepts it. Default: active when accepted "
-        "and signed by a trusted key, or when this store has no keys; --activate overrides (recorded).")] = None,
-    keep_version: Annotated[bool, typer.Option(
-        "--keep-version", help="Keep the source version number (only when it is this store's next one).")] = False,
-    require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")] = False,
-    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
+    activate: Annotated[
+        bool | None,
+        typer.Option(
+            "--activate/--no-activate",
+            help="Make it active when this store accepts it. Default: active when accepted "
+            "and signed by a trusted key, or when this store has no keys; --activate overrides (recorded).",
+        ),
+    ] = None,
+    keep_version: Annotated[
+        bool,
+        typer.Option(
+            "--keep-version", help="Keep the source version number (only when it is this store's next one)."
+        ),
+    ] = False,
+    require_signature: Annotated[
+        bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")
+    ] = False,
+    trusted_keys: Annotated[
+        Path | None,
+        typer.Option(
+            "--trusted-keys",
+            metavar="DIR",
+            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Bring an exported artifact into this store: its hash and signature are checked (tampered files exit 1),
@@ -110,24 +148,41 @@ def import_(
         imports,  # lint, numpy and the lens checks: not for history/show/export
     )
 
-    outcome = imports.import_file(state(ctx).settings(), path, activate=activate, keep_version=keep_version,
-                                  require_signature=require_signature, trusted_keys=trusted_keys)
+    outcome = imports.import_file(
+        state(ctx).settings(),
+        path,
+        activate=activate,
+        keep_version=keep_version,
+        require_signature=require_signature,
+        trusted_keys=trusted_keys,
+    )
     art = outcome.artifact
     if wants_json(ctx, json_output):
-        emit_json({"artifact": art.model_dump(mode="json"), "source": outcome.source_ref,
-                   "source_status": outcome.source_status, "active": outcome.active,
-                   "already_imported": outcome.already_imported, "held_back": outcome.held_back})
+        emit_json(
+            {
+                "artifact": art.model_dump(mode="json"),
+                "source": outcome.source_ref,
+                "source_status": outcome.source_status,
+                "active": outcome.active,
+                "already_imported": outcome.already_imported,
+                "held_back": outcome.held_back,
+            }
+        )
     else:
         again = "already stored as" if outcome.already_imported else "imported"
         state_word = "active" if outcome.active else "not active"
-        stdout.print(f"{again} {art.serial}@{art.version} ({art.status} by this store's lint, {state_word}; "
-                     f"source {outcome.source_ref} was {outcome.source_status}; sha256 {art.content_sha256[:12]})",
-                     markup=False)
+        stdout.print(
+            f"{again} {art.serial}@{art.version} ({art.status} by this store's lint, {state_word}; "
+            f"source {outcome.source_ref} was {outcome.source_status}; sha256 {art.content_sha256[:12]})",
+            markup=False,
+        )
         if outcome.held_back:
             stdout.print(outcome.held_back, markup=False)
         if art.status == "rejected":
             print_findings([f for f in art.lint if f.severity == "error"])
-    if activate is not False and art.status == "rejected":  # asked to make it active; this store's verdict says no
+    if (
+        activate is not False and art.status == "rejected"
+    ):  # asked to make it active; this store's verdict says no
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
@@ -136,8 +191,12 @@ def rollback(
     serial: Annotated[str, typer.Argument(help="Camera serial number.")],
     to: Annotated[int, typer.Option("--to", help="Version to make active.")],
     reason: Annotated[str, typer.Option("--reason", help="Why; kept forever in the event log.")],
-    expect_active: Annotated[int | None, typer.Option(
-        "--expect-active", help="The active version you decided on; refused if it has changed since.")] = None,
+    expect_active: Annotated[
+        int | None,
+        typer.Option(
+            "--expect-active", help="The active version you decided on; refused if it has changed since."
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted version active again (an append-only event; nothing is deleted). A newer

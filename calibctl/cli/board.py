@@ -74,8 +74,10 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
         say(f"  span          {_mm(m.span.span_m)} ± {_mm(m.span.uncertainty_m)} with {m.span.instrument}")
     if board.backing is not None:
         b = board.backing
-        say(f"  backing board {_mm(b.width_m)} x {_mm(b.height_m)}, pattern offset {_mm(b.pattern_offset_m[0])}, "
-            f"{_mm(b.pattern_offset_m[1])}")
+        say(
+            f"  backing board {_mm(b.width_m)} x {_mm(b.height_m)}, pattern offset {_mm(b.pattern_offset_m[0])}, "
+            f"{_mm(b.pattern_offset_m[1])}"
+        )
     say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")
     if board.note:
         say(f"  note          {board.note}")
@@ -89,37 +91,76 @@ def _pair_mm(text: str | None, option: str) -> tuple[float, float] | None:
     try:
         a, b = (float(v) for v in text.split(","))
     except ValueError:
-        raise UsageError(f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850") from None
+        raise UsageError(
+            f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850"
+        ) from None
     return a, b
 
 
 @board_app.command("add")
 def add(
     ctx: typer.Context,
-    name: Annotated[str, typer.Argument(metavar="NAME", help="Board name, e.g. A17 (an existing name gets its next revision).")],
+    name: Annotated[
+        str,
+        typer.Argument(
+            metavar="NAME", help="Board name, e.g. A17 (an existing name gets its next revision)."
+        ),
+    ],
     cols: Annotated[int, typer.Option("--cols", help="Inner corners per row (OpenCV patternSize width).")],
     rows: Annotated[int, typer.Option("--rows", help="Inner corners per column.")],
     square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge in millimetres.")],
     kind: Annotated[BoardKind, typer.Option("--kind", help="Pattern type.")] = BoardKind.chessboard,
-    uncertainty_mm: Annotated[float | None, typer.Option("--uncertainty-mm", help="One-sigma of the square size, mm.")] = None,
-    instrument: Annotated[str | None, typer.Option("--instrument", help="What measured it, e.g. 'Mitutoyo calipers'.")] = None,
+    uncertainty_mm: Annotated[
+        float | None, typer.Option("--uncertainty-mm", help="One-sigma of the square size, mm.")
+    ] = None,
+    instrument: Annotated[
+        str | None, typer.Option("--instrument", help="What measured it, e.g. 'Mitutoyo calipers'.")
+    ] = None,
     measured_by: Annotated[str | None, typer.Option("--measured-by", help="Who measured it.")] = None,
     measured_on: Annotated[str | None, typer.Option("--measured-on", help="When, YYYY-MM-DD.")] = None,
-    evidence: Annotated[Path | None, typer.Option("--evidence", help="Evidence file (photo, report); its sha256 is kept.")] = None,
+    evidence: Annotated[
+        Path | None, typer.Option("--evidence", help="Evidence file (photo, report); its sha256 is kept.")
+    ] = None,
     marker_mm: Annotated[float | None, typer.Option("--marker-mm", help="ChArUco marker edge, mm.")] = None,
-    dictionary: Annotated[str | None, typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_5X5_100.")] = None,
-    note: Annotated[str | None, typer.Option("--note", help="Free text, e.g. why it was re-measured.")] = None,
-    span_mm: Annotated[float | None, typer.Option(
-        "--span-mm", help="Second measurement: outermost inner corner to outermost inner corner along the long "
-                          "side, mm.")] = None,
-    span_uncertainty_mm: Annotated[float | None, typer.Option("--span-uncertainty-mm", help="One-sigma of the span, mm.")] = None,
-    span_instrument: Annotated[str | None, typer.Option("--span-instrument", help="What measured the span.")] = None,
-    span_squares: Annotated[int | None, typer.Option(
-        "--span-squares", help="Squares the span covers (default: inner corners along the long side - 1).")] = None,
-    backing_mm: Annotated[str | None, typer.Option(
-        "--backing-mm", help="Backing board W,H in mm (W along the rows of --cols corners); camera-LiDAR targets.")] = None,
-    pattern_offset_mm: Annotated[str | None, typer.Option(
-        "--pattern-offset-mm", help="Pattern centre minus backing centre X,Y in mm (pattern axes).")] = None,
+    dictionary: Annotated[
+        str | None, typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_5X5_100.")
+    ] = None,
+    note: Annotated[
+        str | None, typer.Option("--note", help="Free text, e.g. why it was re-measured.")
+    ] = None,
+    span_mm: Annotated[
+        float | None,
+        typer.Option(
+            "--span-mm",
+            help="Second measurement: outermost inner corner to outermost inner corner along the long "
+            "side, mm.",
+        ),
+    ] = None,
+    span_uncertainty_mm: Annotated[
+        float | None, typer.Option("--span-uncertainty-mm", help="One-sigma of the span, mm.")
+    ] = None,
+    span_instrument: Annotated[
+        str | None, typer.Option("--span-instrument", help="What measured the span.")
+    ] = None,
+    span_squares: Annotated[
+        int | None,
+        typer.Option(
+            "--span-squares", help="Squares the span covers (default: inner corners along the long side - 1)."
+        ),
+    ] = None,
+    backing_mm: Annotated[
+        str | None,
+        typer.Option(
+            "--backing-mm",
+            help="Backing board W,H in mm (W along the rows of --cols corners); camera-LiDAR targets.",
+        ),
+    ] = None,
+    pattern_offset_mm: Annotated[
+        str | None,
+        typer.Option(
+            "--pattern-offset-mm", help="Pattern centre minus backing centre X,Y in mm (pattern axes)."
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
@@ -167,15 +208,22 @@ def list_(ctx: typer.Context, json_output: JsonFlag = False) -> None:
     for b in all_boards:
         m = b.measurement
         measured = f"{m.measured_on} by {m.measured_by}" if m.status != "nominal" else "-"
-        table.add_row(shown(b.ref), shown(pattern_text(b)), shown(square_text(b)), shown(measured),
-                      b.created_at.date().isoformat())
+        table.add_row(
+            shown(b.ref),
+            shown(pattern_text(b)),
+            shown(square_text(b)),
+            shown(measured),
+            b.created_at.date().isoformat(),
+        )
     stdout.print(table)
 
 
 @board_app.command("show")
 def show(
     ctx: typer.Context,
-    ref: Annotated[str, typer.Argument(metavar="NAME[@REV]", help="Board name, optionally @revision (default: latest).")],
+    ref: Annotated[
+        str, typer.Argument(metavar="NAME[@REV]", help="Board name, optionally @revision (default: latest).")
+    ],
     json_output: JsonFlag = False,
 ) -> None:
     """One board revision with its measurement provenance."""

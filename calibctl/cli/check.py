@@ -16,33 +16,55 @@ if TYPE_CHECKING:
 
 def print_check(event: CheckEvent) -> None:
     verdict = "pass" if event.passed else "FAIL"
-    say(f"check {event.check_id} of {event.serial}@{event.version}: {verdict}  "
-        f"({len(event.views)} views of {event.images} images, {event.image_size[0]}x{event.image_size[1]})")
+    say(
+        f"check {event.check_id} of {event.serial}@{event.version}: {verdict}  "
+        f"({len(event.views)} views of {event.images} images, {event.image_size[0]}x{event.image_size[1]})"
+    )
     for r in event.regions:
         if r.tested:
-            say(f"  {r.region:<9} RMS {r.check_rms_px:.3f} px vs held-out {r.reference_rms_px:.3f} px: "
-                f"x{r.ratio:.2f} (limit x{r.limit:.2f}) {'pass' if r.passed else 'FAIL'}")
+            say(
+                f"  {r.region:<9} RMS {r.check_rms_px:.3f} px vs held-out {r.reference_rms_px:.3f} px: "
+                f"x{r.ratio:.2f} (limit x{r.limit:.2f}) {'pass' if r.passed else 'FAIL'}"
+            )
     for p in event.shifts:
         amount = f"{p.shift * 100:+.3f} %" if p.parameter == "focal" else f"{p.shift:+.2f} px"
-        say(f"  {p.parameter:<9} pull {amount} ({p.shift / p.sigma:+.1f} sigma, limit {p.z_limit:.1f}) "
-            f"{'pass' if p.passed else 'FAIL'}")
+        say(
+            f"  {p.parameter:<9} pull {amount} ({p.shift / p.sigma:+.1f} sigma, limit {p.z_limit:.1f}) "
+            f"{'pass' if p.passed else 'FAIL'}"
+        )
     if event.distance is not None:
         d = event.distance
-        say(f"  distance  {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
-            f"(needs {d.ratio_limits[0]}-{d.ratio_limits[1]}) {'pass' if d.passed else 'FAIL'}")
+        say(
+            f"  distance  {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
+            f"(needs {d.ratio_limits[0]}-{d.ratio_limits[1]}) {'pass' if d.passed else 'FAIL'}"
+        )
     for reason in event.reasons:
         say(f"  -> {reason}")
 
 
 def check(
     ctx: typer.Context,
-    ref: Annotated[str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")],
-    source: Annotated[str, typer.Option("--source", help="A folder, quoted glob or list file of fresh board images.",
-                                        show_default=False)],
-    reference_distance: Annotated[str | None, typer.Option(
-        "--reference-distance", metavar="D+-S", show_default=False,
-        help="Surveyed camera-to-board-centre distance and one-sigma, metres (or mm suffix), e.g. 0.600+-0.001.")] = None,
-    station: Annotated[str | None, typer.Option("--station", help="Station id (default from settings).")] = None,
+    ref: Annotated[
+        str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")
+    ],
+    source: Annotated[
+        str,
+        typer.Option(
+            "--source", help="A folder, quoted glob or list file of fresh board images.", show_default=False
+        ),
+    ],
+    reference_distance: Annotated[
+        str | None,
+        typer.Option(
+            "--reference-distance",
+            metavar="D+-S",
+            show_default=False,
+            help="Surveyed camera-to-board-centre distance and one-sigma, metres (or mm suffix), e.g. 0.600+-0.001.",
+        ),
+    ] = None,
+    station: Annotated[
+        str | None, typer.Option("--station", help="Station id (default from settings).")
+    ] = None,
     operator: Annotated[str | None, typer.Option("--operator", help="Who runs the check.")] = None,
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,

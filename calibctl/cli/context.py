@@ -18,11 +18,14 @@ class AppState:
     station_config: Path | None = None
     json_output: bool = False
 
-    def settings(self, station: str | None = None, operator: str | None = None, jobs: int | None = None) -> Settings:
+    def settings(
+        self, station: str | None = None, operator: str | None = None, jobs: int | None = None
+    ) -> Settings:
         from calibctl.config import load_settings  # pydantic + yaml: not needed for --help or --version
 
-        return load_settings(db=self.db, station_config=self.station_config, station=station, operator=operator,
-                             jobs=jobs)
+        return load_settings(
+            db=self.db, station_config=self.station_config, station=station, operator=operator, jobs=jobs
+        )
 
 
 def state(ctx: typer.Context) -> AppState:

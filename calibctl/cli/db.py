@@ -64,10 +64,28 @@ def current(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 def verify(
     ctx: typer.Context,
     json_output: JsonFlag = False,
-    head: Annotated[bool, typer.Option("--head", help="Print the chain head (keep it: --since HEAD resumes from it).")] = False,
-    since: Annotated[str | None, typer.Option("--since", metavar="HEAD", help="Check only what was written after this chain head (after proving the head unchanged).")] = None,
-    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
-    require_signature: Annotated[bool, typer.Option("--require-signature", help="An unsigned record is a finding.")] = False,
+    head: Annotated[
+        bool, typer.Option("--head", help="Print the chain head (keep it: --since HEAD resumes from it).")
+    ] = False,
+    since: Annotated[
+        str | None,
+        typer.Option(
+            "--since",
+            metavar="HEAD",
+            help="Check only what was written after this chain head (after proving the head unchanged).",
+        ),
+    ] = None,
+    trusted_keys: Annotated[
+        Path | None,
+        typer.Option(
+            "--trusted-keys",
+            metavar="DIR",
+            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
+        ),
+    ] = None,
+    require_signature: Annotated[
+        bool, typer.Option("--require-signature", help="An unsigned record is a finding.")
+    ] = False,
 ) -> None:
     """Check every hash chain, signature, version counter, activation event and stored hash. Exit 1 naming each problem."""
     from calibctl.workflows.store_admin import database
@@ -81,16 +99,26 @@ def verify(
         for line in report.problems:
             say(f"PROBLEM {line}")
         verdict = "all intact" if report.ok else f"{len(report.problems)} problem(s)"
-        scope = f"{report.records_checked} chained records since the given head" if since else _counts_text(report.counts)
+        scope = (
+            f"{report.records_checked} chained records since the given head"
+            if since
+            else _counts_text(report.counts)
+        )
         say(f"verified {scope} in {report.url}: {verdict}")
         if not report.trusted_keys:
-            say(f"signatures: not checked (no signing key or trusted keys configured); {report.unsigned} unsigned record(s)")
+            say(
+                f"signatures: not checked (no signing key or trusted keys configured); {report.unsigned} unsigned record(s)"
+            )
         else:
-            say(f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted key(s); "
-                f"{report.unsigned} unsigned record(s)")
+            say(
+                f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted key(s); "
+                f"{report.unsigned} unsigned record(s)"
+            )
         if report.orphan_images:
-            say(f"images: {report.orphan_images} file(s) no record refers to (left by a failed capture; "
-                "`calibctl prune` removes them)")
+            say(
+                f"images: {report.orphan_images} file(s) no record refers to (left by a failed capture; "
+                "`calibctl prune` removes them)"
+            )
         if head:
             say(f"head {report.head}")
     if not report.ok:

@@ -15,7 +15,6 @@ if TYPE_CHECKING:
     from calibctl.workflows.camera import demo as demo_workflow
 
 
-
 def _render(step: demo_workflow.DemoStep) -> None:
     stdout.rule(step.title, align="left")
     p = step.payload
@@ -32,7 +31,9 @@ def _render(step: demo_workflow.DemoStep) -> None:
             counts[o.status] = counts.get(o.status, 0) + 1
         summary = ", ".join(f"{n} {k}" for k, n in sorted(counts.items()))
         verdict = "[green]accepted[/green]" if s.status == "accepted" else "[red]rejected[/red] (exit 1)"
-        stdout.print(f"session {s.session_id}: {len(s.outcomes)} images ({summary}); {len(s.views)} views; {verdict}")
+        stdout.print(
+            f"session {s.session_id}: {len(s.outcomes)} images ({summary}); {len(s.views)} views; {verdict}"
+        )
         print_gates(s.gates)
     elif step.kind == "solve":
         print_calibration(p.artifact, active=p.active)
@@ -47,15 +48,23 @@ def _render(step: demo_workflow.DemoStep) -> None:
     elif step.kind == "truth":
         z_fx = f" = {p.z_fx:+.2f} sigma" if p.z_fx is not None else ""
         z_cx = f" = {p.z_cx:+.2f} sigma" if p.z_cx is not None else ""
-        stdout.print(f"fx: true {p.fx_true:.2f}, solved {p.fx_est:.2f}, error {p.fx_est - p.fx_true:+.2f} px{z_fx}")
-        stdout.print(f"cx: true {p.cx_true:.2f}, solved {p.cx_est:.2f}, error {p.cx_est - p.cx_true:+.2f} px{z_cx}")
+        stdout.print(
+            f"fx: true {p.fx_true:.2f}, solved {p.fx_est:.2f}, error {p.fx_est - p.fx_true:+.2f} px{z_fx}"
+        )
+        stdout.print(
+            f"cx: true {p.cx_true:.2f}, solved {p.cx_est:.2f}, error {p.cx_est - p.cx_true:+.2f} px{z_cx}"
+        )
 
 
 def demo(
     ctx: typer.Context,
     out: Annotated[
         Path | None,
-        typer.Option("--out", help="Folder for the demo's images, store and export [default: demo-out].", show_default=False),
+        typer.Option(
+            "--out",
+            help="Folder for the demo's images, store and export [default: demo-out].",
+            show_default=False,
+        ),
     ] = None,
 ) -> None:
     """Render a synthetic camera, register a measured board, capture, solve, lint, show history, export ROS YAML."""

@@ -16,7 +16,9 @@ if TYPE_CHECKING:
     from calibctl.workflows.fleet.trends import Trends
 
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
-ReasonOption = Annotated[str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)]
+ReasonOption = Annotated[
+    str, typer.Option("--reason", help="Why (kept in the fleet's log).", show_default=False)
+]
 
 MAX_SHOWN_LINES = 20  # refused lines named per file on stderr; --json carries every one
 MAX_SHOWN_DIFFS = 10  # a rollout's diffs listed one a line; above, counted by verdict
@@ -33,9 +35,13 @@ fleet_app = typer.Typer(
 def add(
     ctx: typer.Context,
     robot: Annotated[str, typer.Argument(help="Robot name (letters, digits, . _ : -).")],
-    serial: Annotated[list[str] | None, typer.Option("--serial", help="A camera serial it carries (repeatable).",
-                                                     show_default=False)] = None,
-    rig: Annotated[list[str] | None, typer.Option("--rig", help="A rig it carries (repeatable).", show_default=False)] = None,
+    serial: Annotated[
+        list[str] | None,
+        typer.Option("--serial", help="A camera serial it carries (repeatable).", show_default=False),
+    ] = None,
+    rig: Annotated[
+        list[str] | None, typer.Option("--rig", help="A rig it carries (repeatable).", show_default=False)
+    ] = None,
     reason: ReasonOption = "registered",
     json_output: JsonFlag = False,
 ) -> None:
@@ -53,7 +59,9 @@ def add(
 def assign(
     ctx: typer.Context,
     robot: Annotated[str, typer.Argument(help="A registered robot.")],
-    ref: Annotated[str, typer.Argument(metavar="SERIAL@N", help="The calibration version the robot now runs.")],
+    ref: Annotated[
+        str, typer.Argument(metavar="SERIAL@N", help="The calibration version the robot now runs.")
+    ],
     reason: ReasonOption = "",
     rig: Annotated[bool, typer.Option("--rig", help="REF is RIG@N, a rig's calibration version.")] = False,
     json_output: JsonFlag = False,
@@ -95,7 +103,9 @@ def status(ctx: typer.Context, json_output: JsonFlag = False) -> None:
 @fleet_app.command("ingest")
 def ingest(
     ctx: typer.Context,
-    files: Annotated[list[Path], typer.Argument(metavar="FILE...", help="JSON-lines files, one health report a line.")],
+    files: Annotated[
+        list[Path], typer.Argument(metavar="FILE...", help="JSON-lines files, one health report a line.")
+    ],
     json_output: JsonFlag = False,
 ) -> None:
     """Store the health reports robots send, all or nothing per file.
@@ -110,14 +120,26 @@ def ingest(
         emit_json({"stored": sum(r.stored for r in results), "files": [r.as_json() for r in results]})
     else:
         for r in results:
-            say(f"{shown(r.path)}: " + (f"{r.stored} report(s) stored" if not r.refused else
-                                         f"refused, nothing stored ({len(r.refused)} bad line(s))"))
+            say(
+                f"{shown(r.path)}: "
+                + (
+                    f"{r.stored} report(s) stored"
+                    if not r.refused
+                    else f"refused, nothing stored ({len(r.refused)} bad line(s))"
+                )
+            )
     for r in refused:
         for line, why in r.refused[:MAX_SHOWN_LINES]:
-            stderr.print(f"{shown(r.path)}:{line}: {shown(why)}", soft_wrap=True, markup=False, highlight=False)
+            stderr.print(
+                f"{shown(r.path)}:{line}: {shown(why)}", soft_wrap=True, markup=False, highlight=False
+            )
         if len(r.refused) > MAX_SHOWN_LINES:
-            stderr.print(f"{shown(r.path)}: {len(r.refused) - MAX_SHOWN_LINES} more refused line(s) (--json lists all)",
-                         soft_wrap=True, markup=False, highlight=False)
+            stderr.print(
+                f"{shown(r.path)}: {len(r.refused) - MAX_SHOWN_LINES} more refused line(s) (--json lists all)",
+                soft_wrap=True,
+                markup=False,
+                highlight=False,
+            )
     if refused:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
@@ -128,7 +150,9 @@ def _print_trends(t: Trends) -> None:
     if s is not None:
         say(f"  RMS vs temperature: {s.slope:+.4f} +- {s.sigma:.4f} px/degC (n {s.n})")
     for b in t.rms_by_temperature:
-        say(f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px")
+        say(
+            f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px"
+        )
     if t.check_verdicts:
         say("  checks: " + ", ".join(f"{n} {v}" for v, n in t.check_verdicts.items()))
     d = t.td_drift_ppm
@@ -144,16 +168,21 @@ def _print_trends(t: Trends) -> None:
     f = t.fleet
     if f is not None:
         ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
-        say(f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
-             f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
-             f"px, max/min {ratio})")
+        say(
+            f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+            f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
+            f"px, max/min {ratio})"
+        )
     for finding in t.findings:
         say(f"  ! {finding}")
 
 
 @fleet_app.command("trends")
-def trends(ctx: typer.Context, serial: Annotated[str, typer.Argument(help="A camera serial with health reports.")],
-           json_output: JsonFlag = False) -> None:
+def trends(
+    ctx: typer.Context,
+    serial: Annotated[str, typer.Argument(help="A camera serial with health reports.")],
+    json_output: JsonFlag = False,
+) -> None:
     """A serial's health as conditionals: RMS vs temperature, td drift in ppm, gauge, its RMS against the fleet's."""
     from calibctl.workflows.fleet import health
 
@@ -188,30 +217,53 @@ def _print_rollout(r: Rollout) -> None:
     say(f"rollout {shown(r.name)}{closed}: " + ", ".join(shown(ref(t, v)) for t, v in r.targets.items()))
     for robot, st in sorted(r.state.items()):
         why = "; ".join([*r.failing.get(robot, []), *(f"no report on {t}" for t in r.waiting.get(robot, []))])
-        say(f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}")
+        say(
+            f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}"
+        )
     diffs = r.diffs
     if len(diffs) > MAX_SHOWN_DIFFS:
         verdicts = [d.verdict for d in diffs.values()]
-        say("  diffs: " + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts))) + " (--json lists each)")
+        say(
+            "  diffs: "
+            + ", ".join(f"{verdicts.count(v)} {v}" for v in sorted(set(verdicts)))
+            + " (--json lists each)"
+        )
         diffs = {}
     for t, d in diffs.items():
-        numbers = f", p50 {d.p50_px:.2f} px, max {d.max_px:.2f} px" if d.p50_px is not None and d.max_px is not None \
-            else f" ({shown(d.why)})" if d.why else ""
+        numbers = (
+            f", p50 {d.p50_px:.2f} px, max {d.max_px:.2f} px"
+            if d.p50_px is not None and d.max_px is not None
+            else f" ({shown(d.why)})"
+            if d.why
+            else ""
+        )
         say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
     if r.promote is not None:
-        say(f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event")
+        say(
+            f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event"
+        )
 
 
 @rollout_app.command("start")
 def rollout_start(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(help="Rollout name (letters, digits, . _ : -).")],
-    target: Annotated[list[str] | None, typer.Option("--target", metavar="SERIAL@N", help="A new camera version "
-                                                     "(repeatable).", show_default=False)] = None,
-    rig_target: Annotated[list[str] | None, typer.Option("--rig-target", metavar="RIG@N", help="A new rig version "
-                                                         "(repeatable).", show_default=False)] = None,
-    canary: Annotated[list[str] | None, typer.Option("--canary", metavar="ROBOT", help="A canary robot "
-                                                     "(repeatable).", show_default=False)] = None,
+    target: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--target", metavar="SERIAL@N", help="A new camera version (repeatable).", show_default=False
+        ),
+    ] = None,
+    rig_target: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--rig-target", metavar="RIG@N", help="A new rig version (repeatable).", show_default=False
+        ),
+    ] = None,
+    canary: Annotated[
+        list[str] | None,
+        typer.Option("--canary", metavar="ROBOT", help="A canary robot (repeatable).", show_default=False),
+    ] = None,
     reason: ReasonOption = "",
     json_output: JsonFlag = False,
 ) -> None:
@@ -223,8 +275,12 @@ def rollout_start(
 
 
 @rollout_app.command("promote")
-def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
-                    reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+def rollout_promote(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="The rollout.")],
+    reason: ReasonOption = "",
+    json_output: JsonFlag = False,
+) -> None:
     """Promote to the rest of the fleet once every canary robot reports passing checks of the new version.
 
     The gate reads the canary robots' `calibctl check` events and their ingested health reports (check, gauge,
@@ -238,8 +294,12 @@ def rollout_promote(ctx: typer.Context, name: Annotated[str, typer.Argument(help
 
 
 @rollout_app.command("rollback")
-def rollout_rollback(ctx: typer.Context, name: Annotated[str, typer.Argument(help="The rollout.")],
-                     reason: ReasonOption = "", json_output: JsonFlag = False) -> None:
+def rollout_rollback(
+    ctx: typer.Context,
+    name: Annotated[str, typer.Argument(help="The rollout.")],
+    reason: ReasonOption = "",
+    json_output: JsonFlag = False,
+) -> None:
     """Put every robot the rollout touched back on the version it ran before, in one transaction."""
     from calibctl.workflows.fleet import rollouts
 

@@ -13,7 +13,11 @@ from calibctl.cli.render import emit_json, say
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 KeyOption = Annotated[
     Path | None,
-    typer.Option("--key", metavar="FILE", help="Private key file (default: the signing_key setting, CALIBCTL_SIGNING_KEY)."),
+    typer.Option(
+        "--key",
+        metavar="FILE",
+        help="Private key file (default: the signing_key setting, CALIBCTL_SIGNING_KEY).",
+    ),
 ]
 ForceFlag = Annotated[bool, typer.Option("--force", help="Replace an existing file.")]
 
@@ -26,7 +30,9 @@ keys_app = typer.Typer(
 
 
 @keys_app.command("init")
-def init(ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, json_output: JsonFlag = False) -> None:
+def init(
+    ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, json_output: JsonFlag = False
+) -> None:
     """Create an Ed25519 key pair; the private key file gets mode 0600. Records written afterwards are signed."""
     from calibctl.workflows.store_admin import keys
 
@@ -42,7 +48,10 @@ def init(ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, js
 def export_public(
     ctx: typer.Context,
     key: KeyOption = None,
-    out: Annotated[Path | None, typer.Option("--output", "-o", help="Write the PEM here (e.g. into a trusted-keys folder).")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="Write the PEM here (e.g. into a trusted-keys folder)."),
+    ] = None,
     force: ForceFlag = False,
     json_output: JsonFlag = False,
 ) -> None:

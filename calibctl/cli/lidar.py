@@ -24,7 +24,9 @@ def _pair_mm(text: str, option: str) -> tuple[float, float]:
     try:
         a, b = (float(v) for v in text.split(","))
     except ValueError:
-        raise UsageError(f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850") from None
+        raise UsageError(
+            f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850"
+        ) from None
     return a / 1e3, b / 1e3
 
 
@@ -38,7 +40,9 @@ def render_result(doc: dict[str, Any]) -> None:
     say(f"lidar solve: lens {doc['lens']} ({doc['lens_model']}); scans: {counts}")
     for r in doc["outcomes"]:
         name = r["scan"] or r["image"]
-        say(f"  {str(r['frame']) if r['frame'] is not None else '-':>5} {name:<24} {r['outcome']:<19} {r['message']}")
+        say(
+            f"  {str(r['frame']) if r['frame'] is not None else '-':>5} {name:<24} {r['outcome']:<19} {r['message']}"
+        )
     for g in doc["gates"]:
         say(f"  gate {g['gate']:<20}{'pass' if g['passed'] else 'FAIL'}  {g['message']}")
         if not g["passed"] and g["hint"]:
@@ -47,20 +51,36 @@ def render_result(doc: dict[str, Any]) -> None:
     if t is not None:
         m = doc["metrics"]
         say(f"{t['name']} ({t['convention']}):")
-        say("  translation " + ", ".join(f"{a} {v * 1e3:+.1f} +/- {s:.1f} mm" for a, v, s in
-                                         zip("xyz", t["translation_m"], t["sigma_translation_mm"], strict=True)))
-        say("  rotation    roll {:+.4f} pitch {:+.4f} yaw {:+.4f} rad (Rz Ry Rx)".format(*t["rpy_rad"])
-            + "; sigma about x, y, z " + ", ".join(f"{v:.3f}" for v in t["sigma_rotation_deg"]) + " deg")
-        say(f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
+        say(
+            "  translation "
+            + ", ".join(
+                f"{a} {v * 1e3:+.1f} +/- {s:.1f} mm"
+                for a, v, s in zip("xyz", t["translation_m"], t["sigma_translation_mm"], strict=True)
+            )
+        )
+        say(
+            "  rotation    roll {:+.4f} pitch {:+.4f} yaw {:+.4f} rad (Rz Ry Rx)".format(*t["rpy_rad"])
+            + "; sigma about x, y, z "
+            + ", ".join(f"{v:.3f}" for v in t["sigma_rotation_deg"])
+            + " deg"
+        )
+        say(
+            f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
             f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm ({_num(m['projected_edge_rms_px'])} px in "
             f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, {_num(m['held_out_projected_edge_rms_px'])} px)"
             f"; board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
-            f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm")
-        say(f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
+            f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm"
+        )
+        say(
+            f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
             f"{_num(m['range_offset_from_dimensions_sigma_mm'])} mm"
-            + ("" if m["range_offset_estimated_mm"] is None else
-               f"; estimated in the solve {_num(m['range_offset_estimated_mm'], '+.1f')} +/- "
-               f"{_num(m['range_offset_estimated_sigma_mm'])} mm"))
+            + (
+                ""
+                if m["range_offset_estimated_mm"] is None
+                else f"; estimated in the solve {_num(m['range_offset_estimated_mm'], '+.1f')} +/- "
+                f"{_num(m['range_offset_estimated_sigma_mm'])} mm"
+            )
+        )
     if doc["status"] == "accepted":
         say("Result: ACCEPTED")
     else:
@@ -72,42 +92,96 @@ def render_result(doc: dict[str, Any]) -> None:
 def solve(
     ctx: typer.Context,
     images: Annotated[Path, typer.Option("--images", help="Folder of the camera's images of the board.")],
-    scans: Annotated[Path, typer.Option("--scans", help="Folder of LiDAR sweeps (.pcd, .npy, N x 3/4 text); "
-                                        "paired with images by the last number in the file name.")],
-    box: Annotated[str, typer.Option("--box", help="Station box xmin,ymin,zmin,xmax,ymax,zmax, metres, "
-                                     "LiDAR frame: where the board is held.")],
-    board_ref: Annotated[str | None, typer.Option("--board", help="Registered board NAME[@REV] with its backing "
-                                                  "board (board add ... --backing-mm).")] = None,
-    cols: Annotated[int | None, typer.Option("--cols", min=2, help="Without --board: inner corners per row.")] = None,
-    rows: Annotated[int | None, typer.Option("--rows", min=2, help="Without --board: inner corners per column.")] = None,
-    square_mm: Annotated[float | None, typer.Option("--square-mm", min=0.01, help="Without --board: square, mm.")] = None,
-    backing_mm: Annotated[str | None, typer.Option("--backing-mm", help="Without --board: backing board W,H mm (W "
-                                                   "along the rows of --cols corners).")] = None,
-    pattern_offset_mm: Annotated[str, typer.Option("--pattern-offset-mm", help="Without --board: pattern centre "
-                                                   "minus backing centre X,Y mm, pattern axes.")] = "0,0",
-    camera_info: Annotated[Path | None, typer.Option("--camera-info", help="ROS camera_info YAML (fisheye or "
-                                                     "plumb_bob).")] = None,
-    serial: Annotated[str | None, typer.Option("--serial", help="Use this camera's active calibration.")] = None,
+    scans: Annotated[
+        Path,
+        typer.Option(
+            "--scans",
+            help="Folder of LiDAR sweeps (.pcd, .npy, N x 3/4 text); "
+            "paired with images by the last number in the file name.",
+        ),
+    ],
+    box: Annotated[
+        str,
+        typer.Option(
+            "--box",
+            help="Station box xmin,ymin,zmin,xmax,ymax,zmax, metres, LiDAR frame: where the board is held.",
+        ),
+    ],
+    board_ref: Annotated[
+        str | None,
+        typer.Option(
+            "--board", help="Registered board NAME[@REV] with its backing board (board add ... --backing-mm)."
+        ),
+    ] = None,
+    cols: Annotated[
+        int | None, typer.Option("--cols", min=2, help="Without --board: inner corners per row.")
+    ] = None,
+    rows: Annotated[
+        int | None, typer.Option("--rows", min=2, help="Without --board: inner corners per column.")
+    ] = None,
+    square_mm: Annotated[
+        float | None, typer.Option("--square-mm", min=0.01, help="Without --board: square, mm.")
+    ] = None,
+    backing_mm: Annotated[
+        str | None,
+        typer.Option(
+            "--backing-mm", help="Without --board: backing board W,H mm (W along the rows of --cols corners)."
+        ),
+    ] = None,
+    pattern_offset_mm: Annotated[
+        str,
+        typer.Option(
+            "--pattern-offset-mm",
+            help="Without --board: pattern centre minus backing centre X,Y mm, pattern axes.",
+        ),
+    ] = "0,0",
+    camera_info: Annotated[
+        Path | None, typer.Option("--camera-info", help="ROS camera_info YAML (fisheye or plumb_bob).")
+    ] = None,
+    serial: Annotated[
+        str | None, typer.Option("--serial", help="Use this camera's active calibration.")
+    ] = None,
     scan_pattern: Annotated[str, typer.Option("--scan-pattern", help="Glob of the sweeps in --scans.")] = "*",
-    scan_units: Annotated[str, typer.Option("--scan-units", help="m or mm: the unit the sweeps are written in.")] = "m",
-    range_offset_mm: Annotated[float, typer.Option("--range-offset-mm", help="Add this to every range first "
-                                                   "(acfr's distance_offset_mm).")] = 0.0,
-    estimate_range_offset: Annotated[bool, typer.Option("--estimate-range-offset",
-                                                        help="Solve for one range offset too.")] = False,
+    scan_units: Annotated[
+        str, typer.Option("--scan-units", help="m or mm: the unit the sweeps are written in.")
+    ] = "m",
+    range_offset_mm: Annotated[
+        float,
+        typer.Option("--range-offset-mm", help="Add this to every range first (acfr's distance_offset_mm)."),
+    ] = 0.0,
+    estimate_range_offset: Annotated[
+        bool, typer.Option("--estimate-range-offset", help="Solve for one range offset too.")
+    ] = False,
     min_rings: Annotated[int, typer.Option("--min-rings", min=2, help="Rings the board must span.")] = 7,
-    max_dimension_error_mm: Annotated[float, typer.Option("--max-dimension-error-mm", min=1.0,
-                                                          help="Per scan: accepted board size error.")] = 50.0,
+    max_dimension_error_mm: Annotated[
+        float, typer.Option("--max-dimension-error-mm", min=1.0, help="Per scan: accepted board size error.")
+    ] = 50.0,
     min_poses: Annotated[int, typer.Option("--min-poses", min=3, help="Accepted poses the solve needs.")] = 6,
     folds: Annotated[int, typer.Option("--folds", min=2, help="k of the k-fold held-out check.")] = 5,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
-    tf_static: Annotated[Path | None, typer.Option("--tf-static", help="Write T as /tf_static YAML (accepted only).")] = None,
-    overlay: Annotated[Path | None, typer.Option("--overlay", help="Folder for each accepted image with the LiDAR "
-                                                 "points drawn over it through the solved T.")] = None,
+    tf_static: Annotated[
+        Path | None, typer.Option("--tf-static", help="Write T as /tf_static YAML (accepted only).")
+    ] = None,
+    overlay: Annotated[
+        Path | None,
+        typer.Option(
+            "--overlay",
+            help="Folder for each accepted image with the LiDAR points drawn over it through the solved T.",
+        ),
+    ] = None,
     lidar_frame: Annotated[str, typer.Option("--lidar-frame", help="tf parent frame name.")] = "lidar",
     camera_frame: Annotated[str, typer.Option("--camera-frame", help="tf child frame name.")] = "camera",
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out, --tf-static and --overlay files.")] = False,
-    rig: Annotated[str | None, typer.Option("--rig", help="Store the result as the rig's next version: edge "
-                                            "LIDAR_FRAME -> SERIAL of its tree (rejected results never active).")] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite --out, --tf-static and --overlay files.")
+    ] = False,
+    rig: Annotated[
+        str | None,
+        typer.Option(
+            "--rig",
+            help="Store the result as the rig's next version: edge "
+            "LIDAR_FRAME -> SERIAL of its tree (rejected results never active).",
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
@@ -124,26 +198,55 @@ def solve(
         from calibctl.workflows.lidar import rig_lidar
 
         if camera_info is not None:
-            raise UsageError("--rig takes the camera as --serial (its active calibration), not --camera-info",
-                             "the rig edge pins the calibration it was solved with")
+            raise UsageError(
+                "--rig takes the camera as --serial (its active calibration), not --camera-info",
+                "the rig edge pins the calibration it was solved with",
+            )
         rig_lidar.check_target(settings, rig, lidar_frame, serial)  # exit 2 before any scan is read
     if board_ref is not None:
         if any(v is not None for v in (cols, rows, square_mm, backing_mm)):
-            raise UsageError("give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both")
+            raise UsageError(
+                "give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both"
+            )
         board = wf.board_from_store(settings, board_ref)
     else:
         if cols is None or rows is None or square_mm is None or backing_mm is None:
-            raise UsageError("the target needs --board NAME, or all of --cols, --rows, --square-mm and --backing-mm",
-                             "register it once: calibctl board add NAME ... --backing-mm W,H")
-        board = BackingBoard(cols, rows, square_mm / 1e3, _pair_mm(backing_mm, "--backing-mm"),
-                             _pair_mm(pattern_offset_mm, "--pattern-offset-mm"))
-    req = wf.LidarRequest(images, scans, board, wf.parse_box(box), camera_info, serial, scan_pattern,
-                          1e-3 if scan_units == "mm" else 1.0, range_offset_mm / 1e3, estimate_range_offset,
-                          min_rings, max_dimension_error_mm / 1e3, min_poses, folds, overlay, force)
+            raise UsageError(
+                "the target needs --board NAME, or all of --cols, --rows, --square-mm and --backing-mm",
+                "register it once: calibctl board add NAME ... --backing-mm W,H",
+            )
+        board = BackingBoard(
+            cols,
+            rows,
+            square_mm / 1e3,
+            _pair_mm(backing_mm, "--backing-mm"),
+            _pair_mm(pattern_offset_mm, "--pattern-offset-mm"),
+        )
+    req = wf.LidarRequest(
+        images,
+        scans,
+        board,
+        wf.parse_box(box),
+        camera_info,
+        serial,
+        scan_pattern,
+        1e-3 if scan_units == "mm" else 1.0,
+        range_offset_mm / 1e3,
+        estimate_range_offset,
+        min_rings,
+        max_dimension_error_mm / 1e3,
+        min_poses,
+        folds,
+        overlay,
+        force,
+    )
     outcome = wf.run_lidar_solve(settings, req)
     stored = None
     if rig is not None:
-        described = board_ref or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
+        described = (
+            board_ref
+            or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
+        )
         ev = rig_lidar.evidence(outcome.result, req, lidar_frame, serial or "", described)
         stored = rig_lidar.store_lidar(settings, rig, ev).calibration
     written = [f"wrote {path}" for path in outcome.result.get("overlays", [])]
@@ -157,10 +260,17 @@ def solve(
         else:
             written.append(f"not written: {tf_static} (rejected: no transform is published)")
     if stored is not None:
-        outcome.result["stored"] = {"rig": stored.rig, "version": stored.version, "status": stored.status,
-                                    "active": stored.status == "accepted", "content_sha256": stored.content_sha256}
-        written.append(f"stored as rig {stored.rig}@{stored.version} "
-                       + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)"))
+        outcome.result["stored"] = {
+            "rig": stored.rig,
+            "version": stored.version,
+            "status": stored.status,
+            "active": stored.status == "accepted",
+            "content_sha256": stored.content_sha256,
+        }
+        written.append(
+            f"stored as rig {stored.rig}@{stored.version} "
+            + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)")
+        )
     if wants_json(ctx, json_output):
         emit_json(outcome.result)
     else:

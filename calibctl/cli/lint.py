@@ -23,15 +23,42 @@ def _github_line(source: str, f) -> str:
 
 def lint(
     ctx: typer.Context,
-    files: Annotated[list[Path] | None, typer.Argument(metavar="[FILE...]", help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's manifest.json) or a ROS camera_info file.")] = None,
-    serial: Annotated[str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")] = None,
-    all_serials: Annotated[bool, typer.Option("--all", help="Lint the active version of every serial in the store.")] = False,
-    rig: Annotated[str | None, typer.Option("--rig", help="Lint a rig's active version (RIG or RIG@N): stale members, "
-                                            "design baseline, epipolar, loop closure, members.")] = None,
-    fmt: Annotated[str, typer.Option("--format", help="text | json | github (workflow annotations)")] = "text",
+    files: Annotated[
+        list[Path] | None,
+        typer.Argument(
+            metavar="[FILE...]",
+            help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's manifest.json) or a ROS camera_info file.",
+        ),
+    ] = None,
+    serial: Annotated[
+        str | None, typer.Option("--serial", help="Lint this serial's active version in the store.")
+    ] = None,
+    all_serials: Annotated[
+        bool, typer.Option("--all", help="Lint the active version of every serial in the store.")
+    ] = False,
+    rig: Annotated[
+        str | None,
+        typer.Option(
+            "--rig",
+            help="Lint a rig's active version (RIG or RIG@N): stale members, "
+            "design baseline, epipolar, loop closure, members.",
+        ),
+    ] = None,
+    fmt: Annotated[
+        str, typer.Option("--format", help="text | json | github (workflow annotations)")
+    ] = "text",
     json_output: Annotated[bool, typer.Option("--json", help="Same as --format json.")] = False,
-    require_signature: Annotated[bool, typer.Option("--require-signature", help="Anything not signed by a trusted key is an error.")] = False,
-    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.")] = None,
+    require_signature: Annotated[
+        bool, typer.Option("--require-signature", help="Anything not signed by a trusted key is an error.")
+    ] = False,
+    trusted_keys: Annotated[
+        Path | None,
+        typer.Option(
+            "--trusted-keys",
+            metavar="DIR",
+            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
+        ),
+    ] = None,
 ) -> None:
     """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
     from calibctl.core.blas_threads import blas_starts_on_one_thread
@@ -44,16 +71,27 @@ def lint(
     if wants_json(ctx, json_output):
         fmt = "json"
     st = state(ctx)
-    results = lint_workflow.lint(
-        st.settings(), files or [], serial, all_serials, require_signature=require_signature, trusted_keys=trusted_keys
-    ) if (files or serial or all_serials or not rig) else []
+    results = (
+        lint_workflow.lint(
+            st.settings(),
+            files or [],
+            serial,
+            all_serials,
+            require_signature=require_signature,
+            trusted_keys=trusted_keys,
+        )
+        if (files or serial or all_serials or not rig)
+        else []
+    )
     if rig:
         from calibctl.workflows.rig.rig_lint import lint_rig
         from calibctl.workflows.store_admin.keys import trusted_of
 
         trusted = trusted_of(st.settings(), trusted_keys) if require_signature else None
         if trusted is not None and not trusted.keys:
-            raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+            raise UsageError(
+                "--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys"
+            )
         results.append(lint_rig(st.settings(), rig, trusted))
     failed = any(r.failed for r in results)
     if fmt == "json":

@@ -32,8 +32,16 @@ GAUGE_WIDTH = 24
 GAUGE_DECADES_BELOW = 2.0  # the gauge spans threshold / 100 .. threshold * 10
 GAUGE_DECADES_ABOVE = 1.0
 # (row, col) of each tilt direction on a 3x3 compass, and its arrow
-_COMPASS = {"top left": (0, 0, "↖"), "top": (0, 1, "↑"), "top right": (0, 2, "↗"), "left": (1, 0, "←"),
-            "right": (1, 2, "→"), "bottom left": (2, 0, "↙"), "bottom": (2, 1, "↓"), "bottom right": (2, 2, "↘")}
+_COMPASS = {
+    "top left": (0, 0, "↖"),
+    "top": (0, 1, "↑"),
+    "top right": (0, 2, "↗"),
+    "left": (1, 0, "←"),
+    "right": (1, 2, "→"),
+    "bottom left": (2, 0, "↙"),
+    "bottom": (2, 1, "↓"),
+    "bottom right": (2, 2, "↘"),
+}
 
 
 def coverage_grid(covered: tuple[tuple[bool, ...], ...]) -> Text:
@@ -90,16 +98,29 @@ def observability_gauge(value: float, threshold: float, width: int = GAUGE_WIDTH
 CTRL_C_KEEPS = "Ctrl-C: stop and keep what was captured"
 
 
-def live_panel(progress: SelectionProgress, last: FrameDecision | None, frames: int, t_s: float,
-               min_views: int, max_views: int | None, ctrl_c: str = CTRL_C_KEEPS) -> RenderableType:
+def live_panel(
+    progress: SelectionProgress,
+    last: FrameDecision | None,
+    frames: int,
+    t_s: float,
+    min_views: int,
+    max_views: int | None,
+    ctrl_c: str = CTRL_C_KEEPS,
+) -> RenderableType:
     """The live view's content for one moment of the capture."""
     top = Table.grid(padding=(0, 4))
     for _ in range(3):
         top.add_column()
-    top.add_row(Text("coverage", style="bold"), Text("tilt directions", style="bold"),
-                Text("observability", style="bold"))
-    top.add_row(coverage_grid(progress.covered), direction_compass(progress.directions),
-                observability_gauge(progress.observability, progress.observability_min))
+    top.add_row(
+        Text("coverage", style="bold"),
+        Text("tilt directions", style="bold"),
+        Text("observability", style="bold"),
+    )
+    top.add_row(
+        coverage_grid(progress.covered),
+        direction_compass(progress.directions),
+        observability_gauge(progress.observability, progress.observability_min),
+    )
     target = f" (stop at {max_views})" if max_views is not None else ""
     status = Text(f"views {progress.n_views}, need {min_views}{target}   frames {frames}   {t_s:.1f} s")
     parts: list[RenderableType] = [top, status]
@@ -109,8 +130,14 @@ def live_panel(progress: SelectionProgress, last: FrameDecision | None, frames: 
     else:
         parts.append(Text("every gate passes", style="green"))
     if last is not None:
-        parts.append(Text(f"last: {last.name} {last.status}: {last.reason}", style="green" if last.kept else "dim",
-                          overflow="ellipsis", no_wrap=True))
+        parts.append(
+            Text(
+                f"last: {last.name} {last.status}: {last.reason}",
+                style="green" if last.kept else "dim",
+                overflow="ellipsis",
+                no_wrap=True,
+            )
+        )
     return Panel(Group(*parts), title="calibctl capture", subtitle=ctrl_c)
 
 
@@ -127,8 +154,15 @@ class TerminalObserver(CaptureObserver):
         self._frames = 0
 
     def folder_started(self, total: int) -> None:
-        self._progress = Progress(TextColumn("detecting"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                  TextColumn("{task.fields[name]}"), console=stderr, transient=True)
+        self._progress = Progress(
+            TextColumn("detecting"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.fields[name]}"),
+            console=stderr,
+            transient=True,
+        )
         self._task = self._progress.add_task("detect", total=total, name="")
         self._progress.start()
 
@@ -148,8 +182,9 @@ class TerminalObserver(CaptureObserver):
     def __enter__(self) -> TerminalObserver:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         if self._progress is not None:
             self._progress.stop()
         if self._live is not None:
@@ -159,8 +194,9 @@ class TerminalObserver(CaptureObserver):
 class LogObserver(CaptureObserver):
     """Plain progress lines on stderr for logs and pipes: at the start, then at most every ``every_s``."""
 
-    def __init__(self, min_views: int, every_s: float = PROGRESS_EVERY_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self, min_views: int, every_s: float = PROGRESS_EVERY_S, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self.min_views = min_views
         self.every_s = every_s
         self._clock = clock
@@ -181,8 +217,10 @@ class LogObserver(CaptureObserver):
         print(f"calibctl capture: {text}", file=sys.stderr, flush=True)
 
     def folder_started(self, total: int) -> None:
-        self._line(f"examining {total} images (a progress line every {self.every_s:g} s; Ctrl-C stops, "
-                   "nothing is stored)")
+        self._line(
+            f"examining {total} images (a progress line every {self.every_s:g} s; Ctrl-C stops, "
+            "nothing is stored)"
+        )
 
     def image_done(self, done: int, total: int, name: str, status: str) -> None:
         self._statuses[status] += 1
@@ -194,24 +232,30 @@ class LogObserver(CaptureObserver):
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None:
         self._frames += 1
         if self._frames == 1:  # the stream is open and delivering: said once, as a folder's start is
-            self._line(f"frames arriving, {progress.n_views} views kept of {self.min_views} needed (a progress line "
-                       f"every {self.every_s:g} s)")
+            self._line(
+                f"frames arriving, {progress.n_views} views kept of {self.min_views} needed (a progress line "
+                f"every {self.every_s:g} s)"
+            )
         elapsed = self._due()
         if elapsed is not None:
             missing = f"; missing: {progress.missing[0]}" if progress.missing else "; every gate passes"
-            self._line(f"{self._frames} frames, {progress.n_views} views kept (need {self.min_views}), "
-                       f"stream time {t_s:.1f} s{missing}")
+            self._line(
+                f"{self._frames} frames, {progress.n_views} views kept (need {self.min_views}), "
+                f"stream time {t_s:.1f} s{missing}"
+            )
 
     def __enter__(self) -> LogObserver:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         return None
 
 
-def capture_observer(as_json: bool, min_views: int, max_views: int | None,
-                     ctrl_c: str = CTRL_C_KEEPS) -> TerminalObserver | LogObserver:
+def capture_observer(
+    as_json: bool, min_views: int, max_views: int | None, ctrl_c: str = CTRL_C_KEEPS
+) -> TerminalObserver | LogObserver:
     """The live terminal observer when stderr is a terminal and the output is not JSON, else progress lines.
     ``ctrl_c``: what the live view says Ctrl-C does (the station cancels the unit)."""
     if as_json or not stderr.is_terminal:

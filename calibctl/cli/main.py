@@ -27,7 +27,9 @@ from calibctl.files import ENVIRONMENT_ERRNOS, os_error
 
 
 def _report(exc: CalibctlError) -> NoReturn:
-    print(f"Error: {printable(exc.message)}", file=sys.stderr)  # a hostile file name cannot drive the terminal
+    print(
+        f"Error: {printable(exc.message)}", file=sys.stderr
+    )  # a hostile file name cannot drive the terminal
     if exc.hint:
         print(f"Hint: {printable(exc.hint)}", file=sys.stderr)
     raise typer.Exit(exc.exit_code) from exc
@@ -42,16 +44,22 @@ class CalibctlGroup(TyperGroup):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self.commands = CommandsOnDemand({"pretty_exceptions_short": app.pretty_exceptions_short,
-                                          "rich_markup_mode": self.rich_markup_mode,
-                                          "suggest_commands": self.suggest_commands})
+        self.commands = CommandsOnDemand(
+            {
+                "pretty_exceptions_short": app.pretty_exceptions_short,
+                "rich_markup_mode": self.rich_markup_mode,
+                "suggest_commands": self.suggest_commands,
+            }
+        )
 
     def list_commands(self, ctx: ClickContext) -> list[str]:
         return list(self.commands)  # TyperGroup's walks the items, which would make every command
 
     def invoke(self, ctx: ClickContext) -> Any:
         make_output_safe()
-        if signal.getsignal(signal.SIGINT) is startup_interrupt:  # from here Ctrl-C is KeyboardInterrupt, below
+        if (
+            signal.getsignal(signal.SIGINT) is startup_interrupt
+        ):  # from here Ctrl-C is KeyboardInterrupt, below
             signal.signal(signal.SIGINT, signal.default_int_handler)
         try:
             return super().invoke(ctx)
@@ -77,8 +85,9 @@ class CalibctlGroup(TyperGroup):
             traceback.print_exc()
             raise typer.Exit(EXIT_CANNOT_RUN) from None
 
-    def make_context(self, info_name: str | None, args: list[str], parent: ClickContext | None = None,
-                     **extra: Any) -> ClickContext:
+    def make_context(
+        self, info_name: str | None, args: list[str], parent: ClickContext | None = None, **extra: Any
+    ) -> ClickContext:
         # The root's --help and --version are written while parsing, before invoke.
         try:
             return super().make_context(info_name, args, parent, **extra)
@@ -98,6 +107,7 @@ app = typer.Typer(  # the root: global options; each sub-command's module regist
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
+
 def version_line() -> str:
     """calibctl's version and the OpenCV and numpy it runs on (cv2 is imported only for this)."""
     import platform
@@ -105,8 +115,10 @@ def version_line() -> str:
     import cv2
     import numpy
 
-    return (f"calibctl {__version__} (OpenCV {cv2.__version__}, numpy {numpy.__version__}, "
-            f"Python {platform.python_version()})")
+    return (
+        f"calibctl {__version__} (OpenCV {cv2.__version__}, numpy {numpy.__version__}, "
+        f"Python {platform.python_version()})"
+    )
 
 
 def _version(value: bool) -> None:
@@ -120,15 +132,25 @@ def main(
     ctx: typer.Context,
     db: Annotated[
         str | None,
-        typer.Option("--db", help="Store URL (default sqlite:///calibctl.db; env CALIBCTL_DB).", show_default=False),
+        typer.Option(
+            "--db", help="Store URL (default sqlite:///calibctl.db; env CALIBCTL_DB).", show_default=False
+        ),
     ] = None,
     station_config: Annotated[
         Path | None,
-        typer.Option("--station-config", help="Station YAML with gate/lint overrides (env CALIBCTL_STATION_CONFIG)."),
+        typer.Option(
+            "--station-config", help="Station YAML with gate/lint overrides (env CALIBCTL_STATION_CONFIG)."
+        ),
     ] = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
     version: Annotated[
-        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print calibctl's version, the OpenCV and numpy it uses, and exit.")
+        bool,
+        typer.Option(
+            "--version",
+            callback=_version,
+            is_eager=True,
+            help="Print calibctl's version, the OpenCV and numpy it uses, and exit.",
+        ),
     ] = False,
 ) -> None:
     ctx.obj = AppState(db=db, station_config=station_config, json_output=json_output)

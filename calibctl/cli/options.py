@@ -8,10 +8,19 @@ from typing import Annotated
 import typer
 
 StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
-OperatorOption = Annotated[str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")]
-JobsOption = Annotated[int | None, typer.Option(
-    "--jobs", "-j", min=1, show_default=False,
-    help="Detection workers (a folder's images, a video's or camera's frames), and threads "
-         "for the verdict solves of capture and solve (env CALIBCTL_JOBS, "
-         "station file 'jobs'; default: every core this process may use). The outcomes are the same at every "
-         "count.")]
+OperatorOption = Annotated[
+    str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")
+]
+JobsOption = Annotated[
+    int | None,
+    typer.Option(
+        "--jobs",
+        "-j",
+        min=1,
+        show_default=False,
+        help="Detection workers (a folder's images, a video's or camera's frames), and threads "
+        "for the verdict solves of capture and solve (env CALIBCTL_JOBS, "
+        "station file 'jobs'; default: every core this process may use). The outcomes are the same at every "
+        "count.",
+    ),
+]

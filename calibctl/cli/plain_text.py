@@ -39,7 +39,14 @@ def emit_json(obj: Any) -> None:
 
 # C0 and C1 control characters, DEL, and the Unicode bidi/line-separator controls that can make a terminal
 # show something other than what is stored (a reason that clears the screen or fakes a history line).
-_CONTROL = {*range(0x00, 0x20), *range(0x7F, 0xA0), 0x2028, 0x2029, *range(0x202A, 0x202F), *range(0x2066, 0x206A)}
+_CONTROL = {
+    *range(0x00, 0x20),
+    *range(0x7F, 0xA0),
+    0x2028,
+    0x2029,
+    *range(0x202A, 0x202F),
+    *range(0x2066, 0x206A),
+}
 _ESCAPES = {c: (f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}") for c in _CONTROL}
 
 
@@ -59,16 +66,21 @@ def terminal_paint(colour: str, text: str) -> str:
     return f"\x1b[{_ANSI[colour]}m{text}\x1b[0m"
 
 
-def finding_lines(findings: Sequence[Finding], paint: Callable[[str, str], str] = no_paint,
-                  text: Callable[[object], str] = plain) -> list[str]:
+def finding_lines(
+    findings: Sequence[Finding],
+    paint: Callable[[str, str], str] = no_paint,
+    text: Callable[[object], str] = plain,
+) -> list[str]:
     """The lines that show lint findings under a calibration ("  lint error rule: message", "fix: ...").
     ``paint(colour, word)`` colours the severity; ``text`` makes stored text printable (rich escapes markup too)."""
     if not findings:
         return [f"  lint: {paint('green', 'clean')}"]
     lines = []
     for f in findings:
-        lines.append(f"  lint {paint(SEVERITY_COLOURS.get(f.severity, 'cyan'), f.severity)} {text(f.rule)}: "
-                     f"{text(f.message)}")
+        lines.append(
+            f"  lint {paint(SEVERITY_COLOURS.get(f.severity, 'cyan'), f.severity)} {text(f.rule)}: "
+            f"{text(f.message)}"
+        )
         if f.fix and f.severity != "info":
             lines.append(f"       fix: {text(f.fix)}")
     return lines

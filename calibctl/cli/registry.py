@@ -22,14 +22,34 @@ from calibctl.cli.examples import attach_examples
 from calibctl.errors import UsageError
 
 COMMAND_MODULES: dict[str, str] = {
-    "capture": "capture", "calibrate": "capture", "prune": "capture", "synth": "capture",
-    "solve": "solve", "check": "check", "diff": "diff", "lint": "lint",
-    "history": "artifacts", "show": "artifacts", "export": "artifacts", "import": "artifacts", "rollback": "artifacts",
+    "capture": "capture",
+    "calibrate": "capture",
+    "prune": "capture",
+    "synth": "capture",
+    "solve": "solve",
+    "check": "check",
+    "diff": "diff",
+    "lint": "lint",
+    "history": "artifacts",
+    "show": "artifacts",
+    "export": "artifacts",
+    "import": "artifacts",
+    "rollback": "artifacts",
     "report": "report_page",
-    "triage": "diagnostics", "gauge": "diagnostics", "timeoffset": "diagnostics", "synth-residuals": "diagnostics",
-    "handeye": "handeye", "synth-motions": "handeye", "demo": "demo",
+    "triage": "diagnostics",
+    "gauge": "diagnostics",
+    "timeoffset": "diagnostics",
+    "synth-residuals": "diagnostics",
+    "handeye": "handeye",
+    "synth-motions": "handeye",
+    "demo": "demo",
     "station": "station",
-    "board": "board", "rig": "rig", "lidar": "lidar", "db": "db", "keys": "keys", "fleet": "fleet",
+    "board": "board",
+    "rig": "rig",
+    "lidar": "lidar",
+    "db": "db",
+    "keys": "keys",
+    "fleet": "fleet",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is
 the order in ``--help`` (tests/cli/test_cli_registry.py holds it to what the modules register)."""
@@ -74,8 +94,10 @@ def _check_numbers(command: ClickCommand, values: dict[str, Any]) -> None:
             continue
         for v in value if isinstance(value, tuple | list) else (value,):
             if isinstance(v, float) and not (math.isfinite(v) and abs(v) <= MAX_ABS_OPTION):
-                raise UsageError(f"{flags.get(name, name)} {v!r} is not a usable number",
-                                 f"give a finite value of at most {MAX_ABS_OPTION:g} in magnitude")
+                raise UsageError(
+                    f"{flags.get(name, name)} {v!r} is not a usable number",
+                    f"give a finite value of at most {MAX_ABS_OPTION:g} in magnitude",
+                )
 
 
 def guard_numbers(command: ClickCommand) -> ClickCommand:
@@ -84,6 +106,7 @@ def guard_numbers(command: ClickCommand) -> ClickCommand:
         guard_numbers(sub)
     inner = command.callback
     if inner is not None and not getattr(inner, "_numbers_guarded", False):
+
         @functools.wraps(inner)
         def checked(*args: Any, **kwargs: Any) -> Any:
             _check_numbers(command, kwargs)
@@ -103,7 +126,8 @@ class CommandsOnDemand(MutableMapping[str, ClickCommand]):
 
     def __init__(self, style: dict[str, Any]) -> None:
         self._makers: dict[str, Callable[[], ClickCommand]] = {
-            name: functools.partial(_make, name, style) for name in COMMAND_MODULES}
+            name: functools.partial(_make, name, style) for name in COMMAND_MODULES
+        }
         self._made: dict[str, ClickCommand] = {}
 
     def __getitem__(self, name: str) -> ClickCommand:

@@ -50,8 +50,10 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
         stdout.print(f"  [yellow]no uncertainty: {shown(art.stdev.refused_reason)}[/yellow]")
     vl = art.stdev.view_level
     if vl is not None and vl.used == "view-level":
-        stdout.print(f"  [yellow]sigma x {vl.sigma_factor:.2f}: the {vl.views} views scatter more than their corner noise "
-                     "explains (per-view error: board warp, motion, sync), so the view-level sigma is reported[/yellow]")
+        stdout.print(
+            f"  [yellow]sigma x {vl.sigma_factor:.2f}: the {vl.views} views scatter more than their corner noise "
+            "explains (per-view error: board warp, motion, sync), so the view-level sigma is reported[/yellow]"
+        )
     ho = art.held_out
     stdout.print(
         f"  RMS fit {fmt_px(art.rms_px)} px / held-out {fmt_px(ho.rms_px)} px ({ho.k_folds}-fold); "
@@ -61,8 +63,10 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     n_drop = sum(v.dropped for v in art.views)
     stdout.print(f"  views {len(art.views)} ({n_out} outlier, {n_drop} dropped)")
     if art.rejected_corners:
-        listed = named_list([f"{shown(c.view)} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners],
-                            REJECTED_CORNERS_SHOWN)
+        listed = named_list(
+            [f"{shown(c.view)} id {c.corner_id} ({c.residual_px:.1f} px)" for c in art.rejected_corners],
+            REJECTED_CORNERS_SHOWN,
+        )
         stdout.print(f"  corners removed from the solve: {len(art.rejected_corners)}: {listed}")
     if art.gates:
         print_gates(art.gates)
@@ -72,15 +76,29 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
 def print_gates(gates: list[GateResult]) -> None:
     for g in gates:
         # a proxy the projection gate overruled is guidance: it says what to capture, it does not refuse
-        mark = "[green]pass[/green]" if g.passed else "[yellow]guide[/yellow]" if g.advisory else "[red]FAIL[/red]"
-        value = f"{g.value:.3g}" if g.gate in ("observability", "one_camera", "projection") else f"{g.value:g}"
+        mark = (
+            "[green]pass[/green]"
+            if g.passed
+            else "[yellow]guide[/yellow]"
+            if g.advisory
+            else "[red]FAIL[/red]"
+        )
+        value = (
+            f"{g.value:.3g}" if g.gate in ("observability", "one_camera", "projection") else f"{g.value:g}"
+        )
         value = "-" if g.gate == "one_camera" and g.value == 0.0 else value  # not checked, or no split found
-        needs = {"one_camera": "two cameras from", "projection": "at most"}.get(g.gate, "needs")  # upper limits
+        needs = {"one_camera": "two cameras from", "projection": "at most"}.get(
+            g.gate, "needs"
+        )  # upper limits
         line = f"  gate {g.gate:<13} {mark}  {value} ({needs} {g.threshold:g})"
-        circle = [g.detail.get(k) for k in ("image_circle_cx_px", "image_circle_cy_px", "image_circle_radius_px")]
+        circle = [
+            g.detail.get(k) for k in ("image_circle_cx_px", "image_circle_cy_px", "image_circle_radius_px")
+        ]
         if g.gate == "coverage" and all(isinstance(v, int | float) for v in circle):
-            line += (f" cells inside the image circle ({circle[0]:.1f}, {circle[1]:.1f}) r {circle[2]:.1f} px, "
-                     f"{shown(str(g.detail.get('image_circle_source', 'given')))}")
+            line += (
+                f" cells inside the image circle ({circle[0]:.1f}, {circle[1]:.1f}) r {circle[2]:.1f} px, "
+                f"{shown(str(g.detail.get('image_circle_source', 'given')))}"
+            )
         if not g.passed and g.hint:
             line += f" -> {shown(g.hint)}"
         stdout.print(line)

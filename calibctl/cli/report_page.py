@@ -13,12 +13,30 @@ from calibctl.cli.render import emit_json, stdout
 
 def report(
     ctx: typer.Context,
-    ref: Annotated[str | None, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: "
-                                              "active).", show_default=False)] = None,
-    rig: Annotated[str | None, typer.Option("--rig", metavar="RIG[@N]", show_default=False,
-                                            help="Report a rig calibration instead (default: its active version).")] = None,
-    out: Annotated[Path | None, typer.Option("--output", "-o", help="HTML file to write (default "
-                                             "SERIAL-vN-report.html here).", show_default=False)] = None,
+    ref: Annotated[
+        str | None,
+        typer.Argument(
+            metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).", show_default=False
+        ),
+    ] = None,
+    rig: Annotated[
+        str | None,
+        typer.Option(
+            "--rig",
+            metavar="RIG[@N]",
+            show_default=False,
+            help="Report a rig calibration instead (default: its active version).",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--output",
+            "-o",
+            help="HTML file to write (default SERIAL-vN-report.html here).",
+            show_default=False,
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing --output file.")] = False,
     json_output: Annotated[bool, typer.Option("--json", help="Print where it was written as JSON.")] = False,
 ) -> None:
@@ -35,16 +53,24 @@ def report(
     from calibctl.errors import UsageError
 
     if (ref is None) == (rig is None):
-        raise UsageError("report needs one of SERIAL[@N] or --rig RIG[@N]",
-                         "e.g. calibctl report CAM-0042, or calibctl report --rig stereo-front")
+        raise UsageError(
+            "report needs one of SERIAL[@N] or --rig RIG[@N]",
+            "e.g. calibctl report CAM-0042, or calibctl report --rig stereo-front",
+        )
     if rig is not None:
         from calibctl.workflows.rig import report_rig
 
         rig_path, rig_data = report_rig.write_rig_report(state(ctx).settings(), rig, out, force=force)
         cal = rig_data.calibration
         if wants_json(ctx, json_output):
-            emit_json({"ref": f"{cal.rig}@{cal.version}", "status": cal.status, "path": str(rig_path),
-                       "bytes": rig_path.stat().st_size})
+            emit_json(
+                {
+                    "ref": f"{cal.rig}@{cal.version}",
+                    "status": cal.status,
+                    "path": str(rig_path),
+                    "bytes": rig_path.stat().st_size,
+                }
+            )
             return
         stdout.print(f"rig {cal.rig}@{cal.version} ({cal.status}): report written to {rig_path}")
         return
@@ -53,8 +79,14 @@ def report(
     assert ref is not None
     path, data = report_sections.write_report(state(ctx).settings(), ref, out, force=force)
     if wants_json(ctx, json_output):
-        emit_json({"ref": data.artifact.ref, "status": data.artifact.status, "path": str(path),
-                   "bytes": path.stat().st_size})
+        emit_json(
+            {
+                "ref": data.artifact.ref,
+                "status": data.artifact.status,
+                "path": str(path),
+                "bytes": path.stat().st_size,
+            }
+        )
         return
     stdout.print(f"{data.artifact.ref} ({data.artifact.status}): report written to {path}")
 

@@ -25,24 +25,58 @@ rig_app = typer.Typer(
 @rig_app.command("solve-folders")
 def solve_folders(
     ctx: typer.Context,
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
-                                              "glob ('left*.jpg') or a list file as for capture; the first is the "
-                                              "root unless --root. Photos pair up by the last number in their "
-                                              "names.")],
+    source: Annotated[
+        list[str],
+        typer.Option(
+            "--source",
+            help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
+            "glob ('left*.jpg') or a list file as for capture; the first is the "
+            "root unless --root. Photos pair up by the last number in their "
+            "names.",
+        ),
+    ],
     cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
     rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
-    square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")],
-    root: Annotated[str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)] = None,
-    model: Annotated[str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")] = DEFAULT_MODEL,
-    refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")] = False,
-    min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
-    design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: a pair's design "
-                                                     "baseline, mm (repeat per pair); a solved baseline outside it "
-                                                     "fails baseline-design.", show_default=False)] = None,
-    export_dir: Annotated[Path | None, typer.Option("--export-dir", help="Write the robot exports here (only when "
-                                                    "the verdict passes).", show_default=False)] = None,
-    allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Write the exports of a failed verdict "
-                                                 "too (to inspect them; a robot must not load them).")] = False,
+    square_mm: Annotated[
+        float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")
+    ],
+    root: Annotated[
+        str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
+    ] = None,
+    model: Annotated[
+        str, typer.Option("--model", help="Each camera's intrinsic model (core solve models).")
+    ] = DEFAULT_MODEL,
+    refine_intrinsics: Annotated[
+        bool, typer.Option("--refine-intrinsics", help="Refine intrinsics jointly.")
+    ] = False,
+    min_shared_views: Annotated[
+        int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
+    ] = 5,
+    design: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--design-baseline-mm",
+            help="A:B=75.0+-0.5: a pair's design "
+            "baseline, mm (repeat per pair); a solved baseline outside it "
+            "fails baseline-design.",
+            show_default=False,
+        ),
+    ] = None,
+    export_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--export-dir",
+            help="Write the robot exports here (only when the verdict passes).",
+            show_default=False,
+        ),
+    ] = None,
+    allow_rejected: Annotated[
+        bool,
+        typer.Option(
+            "--allow-rejected",
+            help="Write the exports of a failed verdict too (to inspect them; a robot must not load them).",
+        ),
+    ] = False,
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
@@ -73,16 +107,27 @@ def solve_folders(
 
     designs = [parse_design(d) for d in design or []]
     settings = state(ctx).settings(jobs=jobs)
-    run = rig_folders.solve_rig_folders(sources, spec, model, None, refine_intrinsics, min_shared_views,
-                                        workers=settings.jobs, settings=settings, designs=designs)
+    run = rig_folders.solve_rig_folders(
+        sources,
+        spec,
+        model,
+        None,
+        refine_intrinsics,
+        min_shared_views,
+        workers=settings.jobs,
+        settings=settings,
+        designs=designs,
+    )
     doc = rig_folders.run_json(run)
     exports: list[str] = []
     withheld = export_dir is not None and run.solution is not None and not run.passed and not allow_rejected
     if export_dir is not None and run.solution is not None and not withheld:
         from calibctl.workflows.exports.rig_exports import solution_sha256, write_exports
 
-        exports = [str(p) for p in write_exports(run.solution, export_dir,
-                                                 status="accepted" if run.passed else "rejected")]
+        exports = [
+            str(p)
+            for p in write_exports(run.solution, export_dir, status="accepted" if run.passed else "rejected")
+        ]
         doc["exports"] = exports
         doc["solution_sha256"] = solution_sha256(run.solution)
     if wants_json(ctx, json_output):
@@ -94,8 +139,10 @@ def solve_folders(
         if exports:
             say(f"  exports: not stored (no rig version), solution sha256 {doc['solution_sha256']}")
         if withheld:
-            say(f"  exports not written to {export_dir}: the verdict failed (--allow-rejected writes them to "
-                "inspect; a robot must not load them)")
+            say(
+                f"  exports not written to {export_dir}: the verdict failed (--allow-rejected writes them to "
+                "inspect; a robot must not load them)"
+            )
     if not run.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
@@ -108,11 +155,26 @@ def add(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Rig name.")],
     camera: Annotated[list[str], typer.Option("--camera", help="Member camera serial (repeat; 2 or more).")],
-    root: Annotated[str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)] = None,
-    design: Annotated[list[str] | None, typer.Option("--design-baseline-mm", help="A:B=75.0+-0.5: design baseline "
-                                                      "and tolerance, mm (repeat per pair).", show_default=False)] = None,
-    frame: Annotated[list[str] | None, typer.Option("--frame", help="Non-camera frame (flange, imu, lidar) a "
-                                                    "hand-eye or LiDAR edge may join to the tree (repeat).", show_default=False)] = None,
+    root: Annotated[
+        str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)
+    ] = None,
+    design: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--design-baseline-mm",
+            help="A:B=75.0+-0.5: design baseline and tolerance, mm (repeat per pair).",
+            show_default=False,
+        ),
+    ] = None,
+    frame: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--frame",
+            help="Non-camera frame (flange, imu, lidar) a "
+            "hand-eye or LiDAR edge may join to the tree (repeat).",
+            show_default=False,
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
@@ -122,20 +184,33 @@ def add(
     if wants_json(ctx, json_output):
         emit_json(rig)
         return
-    say(f"rig {rig.name}: cameras {', '.join(rig.cameras)}, root {rig.root}"
-        + "".join(f"; design {d.a}-{d.b} {d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm" for d in rig.design_baselines)
-        + (f"; frames {', '.join(rig.frames)}" if rig.frames else ""))
+    say(
+        f"rig {rig.name}: cameras {', '.join(rig.cameras)}, root {rig.root}"
+        + "".join(
+            f"; design {d.a}-{d.b} {d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm"
+            for d in rig.design_baselines
+        )
+        + (f"; frames {', '.join(rig.frames)}" if rig.frames else "")
+    )
 
 
 @rig_app.command("capture")
 def capture(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
-    source: Annotated[list[str], typer.Option("--source", help="SERIAL=SRC per member, SRC a folder, a quoted glob "
-                                              "('left*.jpg') or a list file; images pair up by the last number in "
-                                              "their names.")],
+    source: Annotated[
+        list[str],
+        typer.Option(
+            "--source",
+            help="SERIAL=SRC per member, SRC a folder, a quoted glob "
+            "('left*.jpg') or a list file; images pair up by the last number in "
+            "their names.",
+        ),
+    ],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
-    min_shared_views: Annotated[int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")] = 5,
+    min_shared_views: Annotated[
+        int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
+    ] = 5,
     station: StationOption = None,
     operator: OperatorOption = None,
     jobs: JobsOption = None,
@@ -145,56 +220,86 @@ def capture(
     from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
-    result = rigs.capture_rig(state(ctx).settings(station=station, operator=operator, jobs=jobs), name, sources, board,
-                              min_shared_views)
+    result = rigs.capture_rig(
+        state(ctx).settings(station=station, operator=operator, jobs=jobs),
+        name,
+        sources,
+        board,
+        min_shared_views,
+    )
     s = result.session
     if wants_json(ctx, json_output):
-        emit_json({"rig_session": s.model_dump(mode="json"),
-                   "camera_sessions": {c: r.session.model_dump(mode="json") for c, r in result.cameras.items()}})
+        emit_json(
+            {
+                "rig_session": s.model_dump(mode="json"),
+                "camera_sessions": {c: r.session.model_dump(mode="json") for c, r in result.cameras.items()},
+            }
+        )
     else:
-        say(f"rig session {s.rig_session_id} of {s.rig}: {len(s.frames)} synchronised frames, "
-            f"{len(s.unmatched)} unmatched image(s); {s.status}")
+        say(
+            f"rig session {s.rig_session_id} of {s.rig}: {len(s.frames)} synchronised frames, "
+            f"{len(s.unmatched)} unmatched image(s); {s.status}"
+        )
         for c, r in result.cameras.items():
             gates = ", ".join(f"{g.gate} {'pass' if g.passed else 'FAIL'}" for g in r.session.gates)
             say(f"  {c}: session {r.session.session_id}, {len(r.session.views)} views ({gates})")
         render_unmatched([(u.camera, Path(u.name).name, u.reason) for u in s.unmatched])
         say("  shared views: " + ", ".join(f"{p} {n}" for p, n in s.shared_views.items()))
         for g in s.gates:
-            say(f"  gate {g.gate} {'pass' if g.passed else 'FAIL'}  {g.message}" + (f" -> {g.hint}" if g.hint else ""))
+            say(
+                f"  gate {g.gate} {'pass' if g.passed else 'FAIL'}  {g.message}"
+                + (f" -> {g.hint}" if g.hint else "")
+            )
     if not result.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def print_rig_calibration(cal: Any, active: bool) -> None:
-    say(f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root {cal.root}  "
-        f"{cal.solver}")
+    say(
+        f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root {cal.root}  "
+        f"{cal.solver}"
+    )
     for m in cal.members:
-        say(f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx {m.camera_matrix[0][0]:.2f}"
+        say(
+            f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx {m.camera_matrix[0][0]:.2f}"
             f"{' (refined)' if m.refined else ''}: RMS fit {cal.fit_rms_px[m.serial]:.3f} px / held-out "
-            f"{cal.held_out_rms_px[m.serial]:.3f} px")
+            f"{cal.held_out_rms_px[m.serial]:.3f} px"
+        )
     for e in cal.edges:
-        say(f"  T_{e.parent}_{e.child}: |t| = {e.translation_mm:.3f} +/- {e.sigma_translation_mm:.3f} mm, "
-            f"rotation {e.rotation_deg:.4f} +/- {e.sigma_rotation_deg:.4f} deg ({e.source})")
+        say(
+            f"  T_{e.parent}_{e.child}: |t| = {e.translation_mm:.3f} +/- {e.sigma_translation_mm:.3f} mm, "
+            f"rotation {e.rotation_deg:.4f} +/- {e.sigma_rotation_deg:.4f} deg ({e.source})"
+        )
     for h in cal.handeye:
         failed = [g.gate for g in h.gates if not g.passed]
-        say(f"  hand-eye {h.parent_frame} -> {h.child_frame}: {h.status}"
+        say(
+            f"  hand-eye {h.parent_frame} -> {h.child_frame}: {h.status}"
             + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
             + f", {len(h.motions)} motions from {h.provenance.input_file}"
-            + (f", camera {h.provenance.camera}" if h.provenance.camera else ""))
+            + (f", camera {h.provenance.camera}" if h.provenance.camera else "")
+        )
     for lr in cal.lidar:
         failed = [g.gate for g in lr.gates if not g.passed]
         m = lr.metrics
-        say(f"  lidar {lr.parent_frame} -> {lr.child_frame}: {lr.status}"
+        say(
+            f"  lidar {lr.parent_frame} -> {lr.child_frame}: {lr.status}"
             + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
             + f", {sum(r.outcome == 'accepted' for r in lr.scans_outcomes)} of {len(lr.scans_outcomes)} scans accepted"
-            + (f", point-to-plane RMS {m.plane_rms_mm:.1f} mm (held-out {m.held_out_plane_rms_mm:.1f} mm)"
-               if m is not None and m.held_out_plane_rms_mm is not None else "") + f", camera {lr.camera}")
+            + (
+                f", point-to-plane RMS {m.plane_rms_mm:.1f} mm (held-out {m.held_out_plane_rms_mm:.1f} mm)"
+                if m is not None and m.held_out_plane_rms_mm is not None
+                else ""
+            )
+            + f", camera {lr.camera}"
+        )
     for p in cal.pairs:
         epi = f"; held-out epipolar RMS {p.epipolar_rms_px:.3f} px" if p.epipolar_rms_px is not None else ""
         say(f"  pair {p.a}-{p.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm{epi}")
     for lc in cal.loops:
-        say(f"  loop {'-'.join(lc.cycle)}: {lc.rotation_deg:.4f} deg, {lc.translation_mm:.3f} mm, "
-            f"Mahalanobis {lc.mahalanobis:.2f}")
+        say(
+            f"  loop {'-'.join(lc.cycle)}: {lc.rotation_deg:.4f} deg, {lc.translation_mm:.3f} mm, "
+            f"Mahalanobis {lc.mahalanobis:.2f}"
+        )
     print_findings(cal.lint)
 
 
@@ -202,10 +307,15 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
 def solve(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Registered rig.")],
-    session: Annotated[str | None, typer.Argument(metavar="[RIG_SESSION]", help="Rig session (default: latest "
-                                                  "accepted).")] = None,
-    refine_intrinsics: Annotated[bool, typer.Option("--refine-intrinsics", help="Refine members' intrinsics.")] = False,
-    activate: Annotated[bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")] = True,
+    session: Annotated[
+        str | None, typer.Argument(metavar="[RIG_SESSION]", help="Rig session (default: latest accepted).")
+    ] = None,
+    refine_intrinsics: Annotated[
+        bool, typer.Option("--refine-intrinsics", help="Refine members' intrinsics.")
+    ] = False,
+    activate: Annotated[
+        bool, typer.Option("--activate/--no-activate", help="Make an accepted result active.")
+    ] = True,
     json_output: JsonFlag = False,
 ) -> None:
     """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
@@ -240,32 +350,56 @@ def lint(
 
 
 @rig_app.command("history")
-def history(ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG")], json_output: JsonFlag = False) -> None:
+def history(
+    ctx: typer.Context, name: Annotated[str, typer.Argument(metavar="RIG")], json_output: JsonFlag = False
+) -> None:
     """Every version of a rig, which one is active, and the activation log."""
     from calibctl.workflows.rig import rig_lint
 
     cals, active, events = rig_lint.history(state(ctx).settings(), name)
     if wants_json(ctx, json_output):
-        emit_json({"rig": name, "active_version": active, "versions": [
-            {"version": c.version, "status": c.status, "created_at": c.provenance.created_at,
-             "content_sha256": c.content_sha256, "lint_errors": sum(f.severity == "error" for f in c.lint),
-            "handeye": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.handeye],
-            "lidar": [{"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar]}
-            for c in cals], "events": [e.model_dump(mode="json") for e in events]})
+        emit_json(
+            {
+                "rig": name,
+                "active_version": active,
+                "versions": [
+                    {
+                        "version": c.version,
+                        "status": c.status,
+                        "created_at": c.provenance.created_at,
+                        "content_sha256": c.content_sha256,
+                        "lint_errors": sum(f.severity == "error" for f in c.lint),
+                        "handeye": [
+                            {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status}
+                            for h in c.handeye
+                        ],
+                        "lidar": [
+                            {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar
+                        ],
+                    }
+                    for c in cals
+                ],
+                "events": [e.model_dump(mode="json") for e in events],
+            }
+        )
         return
     say(f"rig {name} history (active: {active if active is not None else 'none'})")
     for c in cals:
         base = named_list([f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs], 3)
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
-        say(f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
-            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}")
+        say(
+            f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
+            f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}"
+        )
     for e in events:
         say(f"  event {e.event_id}: {e.kind} -> {e.version} by {e.actor} at {e.station}: {e.reason}")
 
 
 @rig_app.command("show")
-def show(ctx: typer.Context, ref: Annotated[str, typer.Argument(metavar="RIG[@N]")], json_output: JsonFlag = False) -> None:
+def show(
+    ctx: typer.Context, ref: Annotated[str, typer.Argument(metavar="RIG[@N]")], json_output: JsonFlag = False
+) -> None:
     """One rig calibration in full."""
     from calibctl.workflows.rig import rig_lint
 
@@ -283,8 +417,12 @@ def rollback(
     name: Annotated[str, typer.Argument(metavar="RIG")],
     to: Annotated[int, typer.Option("--to", help="Accepted version to make active.")],
     reason: Annotated[str, typer.Option("--reason", help="Why.")],
-    expect_active: Annotated[int | None, typer.Option(
-        "--expect-active", help="The active rig version you decided on; refused if it has changed since.")] = None,
+    expect_active: Annotated[
+        int | None,
+        typer.Option(
+            "--expect-active", help="The active rig version you decided on; refused if it has changed since."
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Make an earlier accepted rig version active again (appends an event). A newer version stored or
@@ -309,23 +447,67 @@ def rollback(
 def export(
     ctx: typer.Context,
     ref: Annotated[str, typer.Argument(metavar="RIG[@N]")],
-    fmt: Annotated[str, typer.Option("--format", help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
-                                     "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
-                                     "URDF), kalibr, or bundle (all of them + manifest.json, -o DIR).")] = "json",
-    out: Annotated[Path | None, typer.Option("-o", "--output", help="Write to this file (ros: a folder or "
-                                             "'DIR/{camera}.yaml'; bundle: a new folder).", show_default=False)] = None,
-    pair: Annotated[str | None, typer.Option("--pair", help="Stereo formats: the right camera (default: the "
-                                             "second member).", show_default=False)] = None,
-    frame: Annotated[list[str] | None, typer.Option("--frame", help="SERIAL=ROS_FRAME: the robot's name of a frame "
-                                                    "(repeat), e.g. LEFT-01=front_left_camera_optical_frame; default "
-                                                    "left_01_optical_frame.", show_default=False)] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite -o (bundle: only a folder calibctl wrote).")] = False,
-    allow_rejected: Annotated[bool, typer.Option("--allow-rejected", help="Export a rejected version (to inspect "
-                                                 "it; a robot must not load it).")] = False,
-    allow_stale: Annotated[bool, typer.Option("--allow-stale", help="Export a version `rig lint` fails for a stale "
-                                              "member (to inspect it; a robot must not load it).")] = False,
-    edge: Annotated[str | None, typer.Option("--edge", help="FROM:TO: one hand-eye or LiDAR edge, its result document "
-                                             "(json) or /tf_static (tf).", show_default=False)] = None,
+    fmt: Annotated[
+        str,
+        typer.Option(
+            "--format",
+            help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
+            "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
+            "URDF), kalibr, or bundle (all of them + manifest.json, -o DIR).",
+        ),
+    ] = "json",
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Write to this file (ros: a folder or 'DIR/{camera}.yaml'; bundle: a new folder).",
+            show_default=False,
+        ),
+    ] = None,
+    pair: Annotated[
+        str | None,
+        typer.Option(
+            "--pair",
+            help="Stereo formats: the right camera (default: the second member).",
+            show_default=False,
+        ),
+    ] = None,
+    frame: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--frame",
+            help="SERIAL=ROS_FRAME: the robot's name of a frame "
+            "(repeat), e.g. LEFT-01=front_left_camera_optical_frame; default "
+            "left_01_optical_frame.",
+            show_default=False,
+        ),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite -o (bundle: only a folder calibctl wrote).")
+    ] = False,
+    allow_rejected: Annotated[
+        bool,
+        typer.Option(
+            "--allow-rejected", help="Export a rejected version (to inspect it; a robot must not load it)."
+        ),
+    ] = False,
+    allow_stale: Annotated[
+        bool,
+        typer.Option(
+            "--allow-stale",
+            help="Export a version `rig lint` fails for a stale "
+            "member (to inspect it; a robot must not load it).",
+        ),
+    ] = False,
+    edge: Annotated[
+        str | None,
+        typer.Option(
+            "--edge",
+            help="FROM:TO: one hand-eye or LiDAR edge, its result document (json) or /tf_static (tf).",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """What a robot loads: OpenCV stereo FileStorage, ROS camera_info per camera, tf_static, URDF, Kalibr, or the
     whole bundle. Exit 1 when `rig lint` fails the version now for a stale member (unless --allow-stale).
@@ -337,12 +519,31 @@ def export(
 
     settings = state(ctx).settings()
     if fmt in rig_export.FILE_FORMATS and edge is None:
-        for path in rig_export.export_files(settings, ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
-                                            allow_stale=allow_stale, frames=frame or []):
+        for path in rig_export.export_files(
+            settings,
+            ref,
+            fmt,
+            out,
+            force=force,
+            pair=pair,
+            allow_rejected=allow_rejected,
+            allow_stale=allow_stale,
+            frames=frame or [],
+        ):
             say(f"wrote {path}")
         return
-    text = rig_export.export(settings, ref, fmt, out, force=force, pair=pair, allow_rejected=allow_rejected,
-                             allow_stale=allow_stale, edge=edge, frames=frame or [])
+    text = rig_export.export(
+        settings,
+        ref,
+        fmt,
+        out,
+        force=force,
+        pair=pair,
+        allow_rejected=allow_rejected,
+        allow_stale=allow_stale,
+        edge=edge,
+        frames=frame or [],
+    )
     if out is None:
         print(text, end="")
     else:
@@ -352,16 +553,37 @@ def export(
 @rig_app.command("import")
 def import_(
     ctx: typer.Context,
-    path: Annotated[Path, typer.Argument(metavar="FILE", help="A rig version exported with `rig export --format json`, "
-                                         "or a bundle folder (or its manifest.json).")],
-    activate: Annotated[bool | None, typer.Option(
-        "--activate/--no-activate", show_default=False,
-        help="Make it active (default: when this store accepts it, every member is active here and, in a store "
-             "with keys, a trusted key signed it; --activate overrides the signature rule, recorded).")] = None,
-    require_signature: Annotated[bool, typer.Option("--require-signature", help="Refuse a rig version not signed by a "
-                                                    "trusted key (exit 2).")] = False,
-    trusted_keys: Annotated[Path | None, typer.Option("--trusted-keys", metavar="DIR", help="Folder of trusted public "
-                                                      "keys (*.pem); default: the trusted_keys setting.")] = None,
+    path: Annotated[
+        Path,
+        typer.Argument(
+            metavar="FILE",
+            help="A rig version exported with `rig export --format json`, "
+            "or a bundle folder (or its manifest.json).",
+        ),
+    ],
+    activate: Annotated[
+        bool | None,
+        typer.Option(
+            "--activate/--no-activate",
+            show_default=False,
+            help="Make it active (default: when this store accepts it, every member is active here and, in a store "
+            "with keys, a trusted key signed it; --activate overrides the signature rule, recorded).",
+        ),
+    ] = None,
+    require_signature: Annotated[
+        bool,
+        typer.Option(
+            "--require-signature", help="Refuse a rig version not signed by a trusted key (exit 2)."
+        ),
+    ] = False,
+    trusted_keys: Annotated[
+        Path | None,
+        typer.Option(
+            "--trusted-keys",
+            metavar="DIR",
+            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Bring a rig version exported by another store into this one: its hash (edited: exit 1) and signature are
@@ -369,22 +591,39 @@ def import_(
     first), and its lint, verdict and version are this store's. A rejected or stale import is never active."""
     from calibctl.workflows.rig import rig_import
 
-    out = rig_import.import_rig_file(state(ctx).settings(), path, activate=activate,
-                                     require_signature=require_signature, trusted_keys=trusted_keys)
+    out = rig_import.import_rig_file(
+        state(ctx).settings(),
+        path,
+        activate=activate,
+        require_signature=require_signature,
+        trusted_keys=trusted_keys,
+    )
     cal = out.calibration
     if wants_json(ctx, json_output):
-        emit_json({"calibration": cal.model_dump(mode="json"), "source": out.source_ref,
-                   "source_status": out.source_status, "active": out.active, "already_imported": out.already_imported,
-                   "stale": [f.model_dump(mode="json") for f in out.stale], "held_back": out.held_back})
+        emit_json(
+            {
+                "calibration": cal.model_dump(mode="json"),
+                "source": out.source_ref,
+                "source_status": out.source_status,
+                "active": out.active,
+                "already_imported": out.already_imported,
+                "stale": [f.model_dump(mode="json") for f in out.stale],
+                "held_back": out.held_back,
+            }
+        )
     else:
         again = "already stored as" if out.already_imported else "imported as"
-        say(f"{again} {cal.ref} ({cal.status} by this store's lint, {'active' if out.active else 'not active'}; "
-            f"source {out.source_ref} was {out.source_status}; sha256 {cal.content_sha256[:12]})")
+        say(
+            f"{again} {cal.ref} ({cal.status} by this store's lint, {'active' if out.active else 'not active'}; "
+            f"source {out.source_ref} was {out.source_status}; sha256 {cal.content_sha256[:12]})"
+        )
         if not out.already_imported:
             print_findings([f for f in [*cal.lint, *out.stale] if f.severity == "error"])
         if out.held_back:
             say(out.held_back)
-    if activate is not False and out.held_back is None and not out.already_imported and not out.active:  # asked to make it active; this store says no
+    if (
+        activate is not False and out.held_back is None and not out.already_imported and not out.active
+    ):  # asked to make it active; this store says no
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 

@@ -12,14 +12,18 @@ MAX_UNMATCHED_ROWS = 10  # unmatched photos listed; --json has them all
 def render_run(doc: dict[str, Any]) -> None:
     """Human report of ``rig_folders.run_json``."""
     unmatched = doc["unmatched"]
-    say(f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)")
+    say(
+        f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)"
+    )
     render_unmatched([(u["camera"], u["file"], u["reason"]) for u in unmatched])
     for name, counts in doc["images"].items():
         say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
     g = doc["gate"]
-    say(f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
-        + (f" -> {g['hint']}" if g["hint"] else ""))
+    say(
+        f"  gate rig-connected {'pass' if g['passed'] else 'FAIL'}  {g['message']}"
+        + (f" -> {g['hint']}" if g["hint"] else "")
+    )
     if "tree" in doc:
         render_solution(doc)
     render_verdict(doc)
@@ -37,22 +41,32 @@ def render_solution(doc: dict[str, Any]) -> None:
     """The tree, fit and held-out numbers of a solved ``rig_folders.run_json``."""
     say(f"tree from {doc['root']} ({doc['solver']}):")
     for e in doc["tree"]:
-        say(f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
-            f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg")
+        say(
+            f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
+            f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg"
+        )
     held = doc.get("held_out", {})
     for name, rms in doc["fit_rms_px"].items():
-        say(f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
-            f"({held.get('folds', 0)}-fold)")
+        say(
+            f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
+            f"({held.get('folds', 0)}-fold)"
+        )
     for p in doc["pairs"]:
-        line = (f"  pair {p['pair']}: baseline {p['baseline_mm']:.3f} +/- {p['sigma_baseline_mm']:.3f} mm, "
-                f"{p['shared_views']} shared views")
+        line = (
+            f"  pair {p['pair']}: baseline {p['baseline_mm']:.3f} +/- {p['sigma_baseline_mm']:.3f} mm, "
+            f"{p['shared_views']} shared views"
+        )
         if "epipolar_rms_px" in p:
-            line += (f"; held-out epipolar RMS {p['epipolar_rms_px']:.3f} px (max {p['epipolar_max_px']:.3f}), "
-                     f"rectified rows RMS {p['rectified_rms_px']:.3f} px")
+            line += (
+                f"; held-out epipolar RMS {p['epipolar_rms_px']:.3f} px (max {p['epipolar_max_px']:.3f}), "
+                f"rectified rows RMS {p['rectified_rms_px']:.3f} px"
+            )
         say(line)
     for lc in doc["loops"]:
-        say(f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
-            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}")
+        say(
+            f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
+            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}"
+        )
 
 
 def render_verdict(doc: dict[str, Any]) -> None:

@@ -66,7 +66,7 @@ class Lanes:
             for deferred in rest:
                 out.append(deferred.result())
         except BaseException:
-            for deferred in rest[len(out):]:
+            for deferred in rest[len(out) :]:
                 deferred.settle()
             raise
         return out

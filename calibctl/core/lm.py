@@ -103,12 +103,14 @@ class SchurSystem:
         J_s = [b[0] for b in blocks]
         J_b = [b[1] for b in blocks]
         rs = [b[2] for b in blocks]
-        return cls(float(sum(float(r @ r) for r in rs)),
-                   sum((J.T @ J for J in J_s), np.zeros((J_s[0].shape[1],) * 2)),
-                   sum((J.T @ r for J, r in zip(J_s, rs, strict=True)), np.zeros(J_s[0].shape[1])),
-                   np.array([Js.T @ Jb for Js, Jb in zip(J_s, J_b, strict=True)]),
-                   np.array([Jb.T @ Jb for Jb in J_b]),
-                   np.array([Jb.T @ r for Jb, r in zip(J_b, rs, strict=True)]))
+        return cls(
+            float(sum(float(r @ r) for r in rs)),
+            sum((J.T @ J for J in J_s), np.zeros((J_s[0].shape[1],) * 2)),
+            sum((J.T @ r for J, r in zip(J_s, rs, strict=True)), np.zeros(J_s[0].shape[1])),
+            np.array([Js.T @ Jb for Js, Jb in zip(J_s, J_b, strict=True)]),
+            np.array([Jb.T @ Jb for Jb in J_b]),
+            np.array([Jb.T @ r for Jb, r in zip(J_b, rs, strict=True)]),
+        )
 
     @classmethod
     def from_dense(cls, system: DenseSystem, shared: np.ndarray, blocks: np.ndarray) -> SchurSystem:
@@ -121,8 +123,9 @@ class SchurSystem:
         return cls(system.cost, H[np.ix_(shared, shared)], g[shared], B, C, g[blocks])
 
     def finite(self) -> bool:
-        return math.isfinite(self.cost) and all(bool(np.isfinite(a).all()) for a in
-                                                (self.A, self.g_shared, self.B, self.C, self.g_blocks))
+        return math.isfinite(self.cost) and all(
+            bool(np.isfinite(a).all()) for a in (self.A, self.g_shared, self.B, self.C, self.g_blocks)
+        )
 
     def dense(self) -> DenseSystem:
         """The same equations as one (p + Vk) system (for tests and small problems)."""
@@ -167,7 +170,9 @@ def damped_step(system: System, lam: float) -> np.ndarray:
     A, B, C = system.A, system.B, system.C
     p, k = A.shape[0], C.shape[1]
     C_damped = C + _damp(np.diagonal(C, axis1=1, axis2=2), lam)[:, :, None] * np.eye(k)
-    both = np.linalg.solve(C_damped, np.concatenate([B.transpose(0, 2, 1), system.g_blocks[:, :, None]], axis=2))
+    both = np.linalg.solve(
+        C_damped, np.concatenate([B.transpose(0, 2, 1), system.g_blocks[:, :, None]], axis=2)
+    )
     Cinv_Bt, Cinv_g = both[:, :, :p], both[:, :, p]
     S = A + np.diag(_damp(np.diag(A), lam)) - np.einsum("vpk,vkq->pq", B, Cinv_Bt)
     d_shared = np.linalg.solve(S, system.g_shared - np.einsum("vpk,vk->p", B, Cinv_g))
@@ -175,10 +180,18 @@ def damped_step(system: System, lam: float) -> np.ndarray:
     return np.concatenate([d_shared, d_blocks.ravel()])
 
 
-def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np.ndarray], P], *,
-             damping: Damping = Damping(), max_iterations: int = 100, relative_tolerance: float = 1e-12,
-             step_tolerance: float = 0.0, label: str = "the least-squares solve", hint: str | None = None
-             ) -> LMResult[P]:
+def solve_lm(
+    evaluate: Callable[[P], System],
+    start: P,
+    retract: Callable[[P, np.ndarray], P],
+    *,
+    damping: Damping = Damping(),
+    max_iterations: int = 100,
+    relative_tolerance: float = 1e-12,
+    step_tolerance: float = 0.0,
+    label: str = "the least-squares solve",
+    hint: str | None = None,
+) -> LMResult[P]:
     """Minimise r^T r from ``start`` (module docstring).
 
     Args:
@@ -196,8 +209,11 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
     """
     params, system = start, evaluate(start)
     if not system.finite():
-        raise NumericalError(f"{label} cannot start: its residuals or their derivatives are NaN or infinite at "
-                             "the initial values", hint=hint or "check the inputs and the initial values")
+        raise NumericalError(
+            f"{label} cannot start: its residuals or their derivatives are NaN or infinite at "
+            "the initial values",
+            hint=hint or "check the inputs and the initial values",
+        )
     lam, it = damping.initial, 0
     for it in range(1, max_iterations + 1):
         try:
@@ -216,8 +232,14 @@ def solve_lm(evaluate: Callable[[P], System], start: P, retract: Callable[[P, np
             lam = max(lam / damping.decrease, damping.floor)
             if gain < relative_tolerance:
                 return LMResult(params, system.cost, it, True, "cost")
-        elif trial is not None and trial.finite() and trial.cost - system.cost <= relative_tolerance * system.cost:
-            return LMResult(params, system.cost, it, True, "cost")  # not lower, but only by rounding: the minimum
+        elif (
+            trial is not None
+            and trial.finite()
+            and trial.cost - system.cost <= relative_tolerance * system.cost
+        ):
+            return LMResult(
+                params, system.cost, it, True, "cost"
+            )  # not lower, but only by rounding: the minimum
         else:
             lam *= damping.increase
             if lam > damping.ceiling:

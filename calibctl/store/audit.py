@@ -44,11 +44,15 @@ from calibctl.store.models import (
 )
 
 HEAD_PREFIX = "calibctl-head-v1"
-_DECODERS: dict[str, Callable[[Any], object]] = {"artifact": codec.decode_artifact, "board": codec.decode_board,
-                                                 "rig": rigs.decode_calibration, "check": codec.decode_check,
-                                                 "rig_definition": rigs.decode_definition,
-                                                 "session": codec.decode_session,
-                                                 "fleet": codec.decode_fleet_event}
+_DECODERS: dict[str, Callable[[Any], object]] = {
+    "artifact": codec.decode_artifact,
+    "board": codec.decode_board,
+    "rig": rigs.decode_calibration,
+    "check": codec.decode_check,
+    "rig_definition": rigs.decode_definition,
+    "session": codec.decode_session,
+    "fleet": codec.decode_fleet_event,
+}
 _VERSION = {"artifact": "version", "board": "revision", "rig": "version"}
 
 
@@ -66,7 +70,11 @@ class Audit:
 
 
 def _digest(heads: dict[str, dict[tuple[Any, ...], tuple[int, str]]]) -> str:
-    flat = sorted([name, list(key), seq, digest] for name, by_key in heads.items() for key, (seq, digest) in by_key.items())
+    flat = sorted(
+        [name, list(key), seq, digest]
+        for name, by_key in heads.items()
+        for key, (seq, digest) in by_key.items()
+    )
     return sha256_hex(jcs_bytes(flat))
 
 
@@ -80,7 +88,12 @@ def parse_head(text: str) -> tuple[dict[str, int], str]:
     ones count from id 0, so their records are checked in full (they were not part of its digest)."""
     parts = text.strip().split(":")
     ids = parts[1].split(".") if len(parts) == 3 else []
-    if len(parts) != 3 or parts[0] != HEAD_PREFIX or not 3 <= len(ids) <= len(chain.STREAMS) or not all(i.isdigit() for i in ids):
+    if (
+        len(parts) != 3
+        or parts[0] != HEAD_PREFIX
+        or not 3 <= len(ids) <= len(chain.STREAMS)
+        or not all(i.isdigit() for i in ids)
+    ):
         raise UsageError(f"'{text}' is not a chain head", "pass what `calibctl db verify --head` printed")
     ids += ["0"] * (len(chain.STREAMS) - len(ids))
     return dict(zip(chain.STREAMS, (int(i) for i in ids), strict=True)), parts[2]
@@ -90,7 +103,12 @@ def _heads_at(s: Session, stream: chain.Stream, last_id: int) -> dict[tuple[Any,
     """The last (seq, hash) of each stream among rows with id <= last_id (one grouped query)."""
     t = stream.table
     keys = [t.c[k] for k in stream.key]
-    latest = select(*keys, func.max(t.c.chain_seq).label("seq")).where(t.c.id <= last_id).group_by(*keys).subquery()
+    latest = (
+        select(*keys, func.max(t.c.chain_seq).label("seq"))
+        .where(t.c.id <= last_id)
+        .group_by(*keys)
+        .subquery()
+    )
     joined = and_(*(t.c[k] == latest.c[k] for k in stream.key), t.c.chain_seq == latest.c.seq)
     rows = s.execute(select(*keys, t.c.chain_seq, t.c.chain_hash).join(latest, joined)).all()
     return {tuple(r[: len(keys)]): (int(r[-2]), str(r[-1])) for r in rows if r[-2] is not None}
@@ -124,10 +142,17 @@ def _after(stream: chain.Stream, since: int | None) -> tuple[FromClause, ColumnE
     if since is None:
         return t, true()
     keys = [t.c[k] for k in stream.key]
-    latest = select(*keys, func.max(t.c.chain_seq).label("seq")).where(t.c.id <= since).group_by(*keys).subquery()
+    latest = (
+        select(*keys, func.max(t.c.chain_seq).label("seq")).where(t.c.id <= since).group_by(*keys).subquery()
+    )
     on = and_(*(t.c[k] == latest.c[k] for k in stream.key)) if stream.key else true()
-    newer = or_(t.c.id > since, t.c.id.is_(None), t.c.chain_seq.is_(None), latest.c.seq.is_(None),
-                t.c.chain_seq > latest.c.seq)
+    newer = or_(
+        t.c.id > since,
+        t.c.id.is_(None),
+        t.c.chain_seq.is_(None),
+        latest.c.seq.is_(None),
+        t.c.chain_seq > latest.c.seq,
+    )
     return t.outerjoin(latest, on), newer
 
 
@@ -136,11 +161,17 @@ def _duplicates(s: Session, audit: Audit, stream: chain.Stream) -> None:
     added at an old position below the head's ids is found here, not by the walk."""
     t = stream.table
     keys = [t.c[k] for k in stream.key]
-    for row in s.execute(select(*keys, t.c.chain_seq).where(t.c.chain_seq.is_not(None))
-                         .group_by(*keys, t.c.chain_seq).having(func.count() > 1)):
+    for row in s.execute(
+        select(*keys, t.c.chain_seq)
+        .where(t.c.chain_seq.is_not(None))
+        .group_by(*keys, t.c.chain_seq)
+        .having(func.count() > 1)
+    ):
         of = f" of {' '.join(str(v) for v in row[:-1])}" if stream.key else ""
-        audit.problems.append(f"position {row[-1]} of the {stream.name} chain{of} is held by more than one record: "
-                              "one was added outside calibctl")
+        audit.problems.append(
+            f"position {row[-1]} of the {stream.name} chain{of} is held by more than one record: "
+            "one was added outside calibctl"
+        )
 
 
 def _signed_before(s: Session, stream: chain.Stream, key: tuple[Any, ...], seq: int) -> bool:
@@ -148,11 +179,23 @@ def _signed_before(s: Session, stream: chain.Stream, key: tuple[Any, ...], seq: 
     after the head, and an unsigned record after a signed one before it is still a finding)."""
     t = stream.table
     where = [t.c[k] == v for k, v in zip(stream.key, key, strict=True)]
-    return s.execute(select(t.c.id).where(*where, t.c.chain_seq <= seq, t.c.signature.is_not(None)).limit(1)).first() is not None
+    return (
+        s.execute(
+            select(t.c.id).where(*where, t.c.chain_seq <= seq, t.c.signature.is_not(None)).limit(1)
+        ).first()
+        is not None
+    )
 
 
-def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int | None, start: dict[tuple[Any, ...], tuple[int, str]],
-          trusted: TrustedKeys, require: bool) -> None:
+def _walk(
+    s: Session,
+    audit: Audit,
+    stream: chain.Stream,
+    since: int | None,
+    start: dict[tuple[Any, ...], tuple[int, str]],
+    trusted: TrustedKeys,
+    require: bool,
+) -> None:
     """Check one chained table's rows written after ``since`` (``_after``), stream by stream, in chain order."""
     t = stream.table
     order = [t.c[k] for k in stream.key] + [t.c.chain_seq, t.c.id]
@@ -176,19 +219,27 @@ def _walk(s: Session, audit: Audit, stream: chain.Stream, since: int | None, sta
         if row["chain_seq"] == seq:
             audit.problems.append(f"{label} duplicates position {seq} of its chain")
         elif row["chain_seq"] != seq + 1:
-            audit.problems.append(f"{label} is at chain position {row['chain_seq']} but {seq + 1} was expected: "
-                                  "records before it are missing")
+            audit.problems.append(
+                f"{label} is at chain position {row['chain_seq']} but {seq + 1} was expected: "
+                "records before it are missing"
+            )
         elif row["chain_prev"] != prev:
-            audit.problems.append(f"{label} does not follow the record before it: a record was deleted, inserted "
-                                  "or rewritten there")
+            audit.problems.append(
+                f"{label} does not follow the record before it: a record was deleted, inserted "
+                "or rewritten there"
+            )
         actual = chain.record_hash(stream, key, int(row["chain_seq"]), row["chain_prev"], chain.body(row))
         if actual != row["chain_hash"]:
-            audit.problems.append(f"{label} was changed after it was written (its chain hash no longer matches)")
+            audit.problems.append(
+                f"{label} was changed after it was written (its chain hash no longer matches)"
+            )
         if int(row["id"] or 0) <= last_id:
             audit.problems.append(f"{label} is out of order (its id is lower than the record before it)")
         if version_col is not None:
             if int(row[version_col]) <= last_version:
-                audit.problems.append(f"{label}: {version_col} {row[version_col]} repeats or goes back along the chain")
+                audit.problems.append(
+                    f"{label}: {version_col} {row[version_col]} repeats or goes back along the chain"
+                )
             last_version = int(row[version_col])
         _check_signature(audit, stream, row, trusted, require, signed)
         signed = signed or bool(row["signature"])
@@ -200,36 +251,63 @@ def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
     scope, column = stream.counter
     t = stream.table
     keys = [t.c[k] for k in stream.key]
-    highest = {tuple(r[:-1]): int(r[-1]) for r in s.execute(select(*keys, func.max(t.c[column])).group_by(*keys)) if r[-1]}
-    counters = {str(k): int(v) for k, v in s.execute(select(CounterRow.key, CounterRow.last_value).where(CounterRow.scope == scope))}
+    highest = {
+        tuple(r[:-1]): int(r[-1])
+        for r in s.execute(select(*keys, func.max(t.c[column])).group_by(*keys))
+        if r[-1]
+    }
+    counters = {
+        str(k): int(v)
+        for k, v in s.execute(select(CounterRow.key, CounterRow.last_value).where(CounterRow.scope == scope))
+    }
     for key, value in highest.items():
         name = stream.counter_key(key)
         if counters.get(name) != value:
-            audit.problems.append(f"the {scope} counter of {name} is {counters.get(name)} but the highest {column} "
-                                  f"stored is {value}: the counter or the records were changed")
+            audit.problems.append(
+                f"the {scope} counter of {name} is {counters.get(name)} but the highest {column} "
+                f"stored is {value}: the counter or the records were changed"
+            )
     # a counter with no record left: every record of that stream was deleted (the scope 'chain' is shared by
     # the key-less streams, each counted under its own name)
     mine = {stream.counter_key(k) for k in highest}
     for name, value in counters.items():
         if name not in mine and (stream.key or name == stream.name) and value > 0:
-            audit.problems.append(f"the {scope} counter of {name} is {value} but no record of it is stored: "
-                                  "its records were deleted")
+            audit.problems.append(
+                f"the {scope} counter of {name} is {value} but no record of it is stored: "
+                "its records were deleted"
+            )
 
 
 def _check_events(s: Session, audit: Audit, since: int | None, stream: str = "event") -> None:
     """Every activation event (camera, or with ``stream="rig_event"`` rig) written after ``since`` (``_after``)
     names a stored, accepted version and the version that was active before it."""
-    events, versions, key = (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
+    events, versions, key = (
+        (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
+    )
     ev, ver = events.__table__.c, versions.__table__.c
     joined, newer = _after(chain.STREAMS[stream], since)
     named = select(ev[key]).select_from(joined).where(newer)  # only the names the checked events name
-    status = {(name, int(v)): st for name, v, st in s.execute(select(ver[key], ver.version, ver.status)
-                                                                .where(ver[key].in_(named)))}
+    status = {
+        (name, int(v)): st
+        for name, v, st in s.execute(select(ver[key], ver.version, ver.status).where(ver[key].in_(named)))
+    }
     # what was active at the head: each name's last event before it, in one grouped query
-    last = select(ev[key], func.max(ev.id).label("id")).select_from(joined).where(not_(newer)).group_by(ev[key]).subquery()
-    active: dict[str, int] = {n: int(v) for n, v in s.execute(select(ev[key], ev.version).join(last, ev.id == last.c.id))}
-    rows = s.execute(select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind).select_from(joined).where(newer)
-                     .order_by(ev.id)).mappings()
+    last = (
+        select(ev[key], func.max(ev.id).label("id"))
+        .select_from(joined)
+        .where(not_(newer))
+        .group_by(ev[key])
+        .subquery()
+    )
+    active: dict[str, int] = {
+        n: int(v) for n, v in s.execute(select(ev[key], ev.version).join(last, ev.id == last.c.id))
+    }
+    rows = s.execute(
+        select(ev.id, ev[key], ev.version, ev.previous_version, ev.kind)
+        .select_from(joined)
+        .where(newer)
+        .order_by(ev.id)
+    ).mappings()
     prefix = "" if stream == "event" else "rig "
     for row in rows:
         name, version = row[key], int(row["version"])
@@ -239,12 +317,16 @@ def _check_events(s: Session, audit: Audit, since: int | None, stream: str = "ev
         elif status[(name, version)] != "accepted":
             audit.problems.append(f"{label} activates {prefix}{name}@{version}, which is not accepted")
         if row["previous_version"] != active.get(name):
-            audit.problems.append(f"{label} says {row['previous_version']} was active before it, but the log "
-                                  f"says {active.get(name)}")
+            audit.problems.append(
+                f"{label} says {row['previous_version']} was active before it, but the log "
+                f"says {active.get(name)}"
+            )
         active[name] = version
 
 
-def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, since: str | None = None) -> Audit:
+def run(
+    s: Session, trusted: TrustedKeys, *, require_signature: bool = False, since: str | None = None
+) -> Audit:
     """The whole audit (or, with ``since``, the part written after that chain head)."""
     audit = Audit(problems=triggers.problems(s))
     last_ids = {name: 0 for name in chain.STREAMS}
@@ -255,8 +337,10 @@ def run(s: Session, trusted: TrustedKeys, *, require_signature: bool = False, si
         after = {name: last_ids[name] for name in chain.STREAMS}
         starts = {name: _heads_at(s, stream, last_ids[name]) for name, stream in chain.STREAMS.items()}
         if _digest(starts) != digest:  # then nothing before it can be taken as checked: check every row
-            audit.problems.append("the history up to the given chain head was rewritten or truncated: its stream "
-                                  "heads no longer hash to it")
+            audit.problems.append(
+                "the history up to the given chain head was rewritten or truncated: its stream "
+                "heads no longer hash to it"
+            )
             last_ids, after = {name: 0 for name in chain.STREAMS}, dict.fromkeys(chain.STREAMS)
             starts = {name: {} for name in chain.STREAMS}
     audit.last_ids = dict(last_ids)

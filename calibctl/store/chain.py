@@ -54,8 +54,20 @@ from calibctl.store.models import (
     SessionRow,
 )
 
-__all__ = ["CHAIN_COLUMNS", "STREAMS", "UNHASHED", "Stream", "backfill", "backfill_without_triggers", "body",
-           "head_of", "link", "new_columns", "record_hash", "row_problem"]
+__all__ = [
+    "CHAIN_COLUMNS",
+    "STREAMS",
+    "UNHASHED",
+    "Stream",
+    "backfill",
+    "backfill_without_triggers",
+    "body",
+    "head_of",
+    "link",
+    "new_columns",
+    "record_hash",
+    "row_problem",
+]
 
 
 @dataclass(frozen=True)
@@ -69,12 +81,20 @@ class Stream(StreamSpec):
         return self.model.__table__  # type: ignore[return-value]
 
 
-_MODELS: dict[str, type[Base]] = {"artifact": ArtifactRow, "board": BoardRow, "event": EventRow,
-                                  "rig": RigCalibrationRow, "rig_event": RigEventRow, "check": CheckEventRow,
-                                  "rig_definition": RigRow, "session": SessionRow,
-                                  "fleet": FleetEventRow}
+_MODELS: dict[str, type[Base]] = {
+    "artifact": ArtifactRow,
+    "board": BoardRow,
+    "event": EventRow,
+    "rig": RigCalibrationRow,
+    "rig_event": RigEventRow,
+    "check": CheckEventRow,
+    "rig_definition": RigRow,
+    "session": SessionRow,
+    "fleet": FleetEventRow,
+}
 STREAMS: dict[str, Stream] = {
-    name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name]) for name, spec in SPECS.items()
+    name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name])
+    for name, spec in SPECS.items()
 }
 """``chain_hash.SPECS`` with their tables, in the same order (the order of the row ids in a chain head)."""
 
@@ -83,7 +103,9 @@ def head_of(s: Session, stream: Stream, key: tuple[Any, ...]) -> tuple[int, str]
     """(seq, hash) of the last record of one stream, or None when it is empty."""
     t = stream.table
     where = [t.c[k] == v for k, v in zip(stream.key, key, strict=True)]
-    row = s.execute(select(t.c.chain_seq, t.c.chain_hash).where(*where).order_by(t.c.chain_seq.desc()).limit(1)).first()
+    row = s.execute(
+        select(t.c.chain_seq, t.c.chain_hash).where(*where).order_by(t.c.chain_seq.desc()).limit(1)
+    ).first()
     return None if row is None else (int(row[0]), str(row[1]))
 
 
@@ -113,7 +135,11 @@ def backfill(conn: Connection, names: tuple[str, ...]) -> None:
             key = stream.key_of(row)
             seq, prev = heads.get(key, (0, None))
             digest = record_hash(stream, key, seq + 1, prev, body(row))
-            conn.execute(t.update().where(t.c.id == row["id"]).values(chain_seq=seq + 1, chain_prev=prev, chain_hash=digest))
+            conn.execute(
+                t.update()
+                .where(t.c.id == row["id"])
+                .values(chain_seq=seq + 1, chain_prev=prev, chain_hash=digest)
+            )
             heads[key] = (seq + 1, digest)
         if stream.counter[1] == "chain_seq" and heads:  # its position is counted in version_counters
             counters = Table("version_counters", meta, autoload_with=conn)
@@ -127,19 +153,29 @@ def backfill(conn: Connection, names: tuple[str, ...]) -> None:
                 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 
                 insert = sqlite_insert(counters)
-            conn.execute(insert, [{"scope": stream.counter[0], "key": stream.counter_key(key), "last_value": seq}
-                                  for key, (seq, _) in heads.items()])
+            conn.execute(
+                insert,
+                [
+                    {"scope": stream.counter[0], "key": stream.counter_key(key), "last_value": seq}
+                    for key, (seq, _) in heads.items()
+                ],
+            )
 
 
 def new_columns() -> list[Column[Any]]:
     """The chain columns a migration adds to a table joining the chains (0005, 0007)."""
-    return [Column("chain_seq", Integer(), nullable=True), Column("chain_prev", String(64), nullable=True),
-            Column("chain_hash", String(64), nullable=True), Column("signature", Text(), nullable=True),
-            Column("key_id", String(64), nullable=True)]
+    return [
+        Column("chain_seq", Integer(), nullable=True),
+        Column("chain_prev", String(64), nullable=True),
+        Column("chain_hash", String(64), nullable=True),
+        Column("signature", Text(), nullable=True),
+        Column("key_id", String(64), nullable=True),
+    ]
 
 
-def backfill_without_triggers(conn: Connection, names: tuple[str, ...],
-                              prepare: Callable[[Connection], None] | None = None) -> None:
+def backfill_without_triggers(
+    conn: Connection, names: tuple[str, ...], prepare: Callable[[Connection], None] | None = None
+) -> None:
     """``backfill`` with the tables' immutability triggers lifted for that one UPDATE and restored;
     ``prepare`` runs first, inside the same window (0008 numbers the rig definitions there)."""
 
@@ -151,7 +187,9 @@ def backfill_without_triggers(conn: Connection, names: tuple[str, ...],
     tables = [STREAMS[n].table.name for n in names]
     if conn.dialect.name == "sqlite":
         listed = ", ".join(f"'trg_{t}_no_update'" for t in tables)
-        saved = conn.execute(text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")).all()
+        saved = conn.execute(
+            text(f"SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND name IN ({listed})")
+        ).all()
         for name, _ in saved:
             conn.execute(text(f"DROP TRIGGER {name}"))
         work()

@@ -36,34 +36,74 @@ class StreamSpec:
 
 
 SPECS: dict[str, StreamSpec] = {
-    "artifact": StreamSpec("artifact", ("serial",), "content_sha256", lambda r: f"{r['serial']}@{r['version']}",
-                           ("artifact", "version")),
-    "board": StreamSpec("board", ("name",), "payload_sha256", lambda r: f"board {r['name']}@{r['revision']}",
-                        ("board", "revision")),
-    "event": StreamSpec("event", (), None,
-                        lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
-                        ("chain", "chain_seq")),
+    "artifact": StreamSpec(
+        "artifact",
+        ("serial",),
+        "content_sha256",
+        lambda r: f"{r['serial']}@{r['version']}",
+        ("artifact", "version"),
+    ),
+    "board": StreamSpec(
+        "board",
+        ("name",),
+        "payload_sha256",
+        lambda r: f"board {r['name']}@{r['revision']}",
+        ("board", "revision"),
+    ),
+    "event": StreamSpec(
+        "event",
+        (),
+        None,
+        lambda r: f"activation event {r['id']} ({r['serial']}@{r['version']}, {r['kind']})",
+        ("chain", "chain_seq"),
+    ),
     # revision 0007: rig versions per rig (hand-eye edges are part of the version that adds them), rig
     # activation events one stream like the cameras' (their counter row is the lock), check events per
     # serial (a serial's re-tests are read and audited with its history; stations checking different
     # cameras never wait for each other; the ('check', serial) counter row is the lock and the count).
-    "rig": StreamSpec("rig", ("rig",), "content_sha256", lambda r: f"rig {r['rig']}@{r['version']}", ("rig", "version")),
-    "rig_event": StreamSpec("rig_event", (), None,
-                            lambda r: f"rig activation event {r['id']} ({r['rig']}@{r['version']}, {r['kind']})",
-                            ("chain", "chain_seq")),
-    "check": StreamSpec("check", ("serial",), "payload_sha256",
-                        lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}", ("check", "chain_seq")),
+    "rig": StreamSpec(
+        "rig", ("rig",), "content_sha256", lambda r: f"rig {r['rig']}@{r['version']}", ("rig", "version")
+    ),
+    "rig_event": StreamSpec(
+        "rig_event",
+        (),
+        None,
+        lambda r: f"rig activation event {r['id']} ({r['rig']}@{r['version']}, {r['kind']})",
+        ("chain", "chain_seq"),
+    ),
+    "check": StreamSpec(
+        "check",
+        ("serial",),
+        "payload_sha256",
+        lambda r: f"check {r['check_id']} of {r['serial']}@{r['version']}",
+        ("check", "chain_seq"),
+    ),
     # revision 0008: rig definitions (members, root, design baselines and their tolerances, which rig lint
     # and every later rig solve read), one stream for the store, so that deleting one is a gap too.
-    "rig_definition": StreamSpec("rig_definition", (), "payload_sha256", lambda r: f"rig definition {r['name']}",
-                                 ("chain", "chain_seq")),
+    "rig_definition": StreamSpec(
+        "rig_definition",
+        (),
+        "payload_sha256",
+        lambda r: f"rig definition {r['name']}",
+        ("chain", "chain_seq"),
+    ),
     # revision 0009: capture sessions (the corners every later solve, check and report reads), per serial like
     # the checks; the ('session', serial) counter row is the lock and the count.
-    "session": StreamSpec("session", ("serial",), "payload_sha256", lambda r: f"capture session {r['session_id']}",
-                          ("session", "chain_seq")),
+    "session": StreamSpec(
+        "session",
+        ("serial",),
+        "payload_sha256",
+        lambda r: f"capture session {r['session_id']}",
+        ("session", "chain_seq"),
+    ),
     # revision 0010_fleet_diff25: the fleet's log (robots, the versions they run, rollouts), one stream.
-    "fleet": StreamSpec("fleet", (), "payload_sha256", lambda r: f"fleet event {r['id']} ({r['subject']}, {r['kind']})",
-                        ("chain", "chain_seq")),
+    "fleet": StreamSpec(
+        "fleet",
+        (),
+        "payload_sha256",
+        lambda r: f"fleet event {r['id']} ({r['subject']}, {r['kind']})",
+        ("chain", "chain_seq"),
+    ),
 }
 """The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
 
@@ -81,7 +121,9 @@ def body(values: Mapping[Any, Any]) -> dict[str, Any]:
     return {n: _jsonable(v) for n, v in values.items() if n not in UNHASHED and v is not None}
 
 
-def record_hash(stream: StreamSpec, key: tuple[Any, ...], seq: int, prev: str | None, record: dict[str, Any]) -> str:
+def record_hash(
+    stream: StreamSpec, key: tuple[Any, ...], seq: int, prev: str | None, record: dict[str, Any]
+) -> str:
     envelope = {"v": 1, "stream": stream.name, "key": list(key), "seq": seq, "prev": prev, "record": record}
     return sha256_hex(jcs_bytes(envelope))
 
@@ -100,7 +142,9 @@ def row_problem(stream: StreamSpec, row: Any) -> str | None:
     values = row_values(row)
     if values.get("chain_hash") is None or values.get("chain_seq") is None:
         return f"{stream.label(values)} has no chain hash: it was inserted outside calibctl"
-    actual = record_hash(stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values))
+    actual = record_hash(
+        stream, stream.key_of(values), values["chain_seq"], values["chain_prev"], body(values)
+    )
     if actual != values["chain_hash"]:
         return f"{stream.label(values)} was changed after it was written (its chain hash no longer matches)"
     return None

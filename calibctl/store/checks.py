@@ -40,9 +40,15 @@ class CheckStoreMixin:
             if s.scalar(select(CheckEventRow.id).where(CheckEventRow.check_id == event.check_id)) is not None:
                 raise AlreadyExistsError(f"check {event.check_id} is already stored")
             counters.next_value(s, "check", event.serial)  # the serial's check chain: its lock and its length
-            row = CheckEventRow(check_id=event.check_id, serial=event.serial, version=event.version,
-                                passed=event.passed, at=event.at, payload=payload,
-                                payload_sha256=sha256_hex(payload.encode("utf-8")))
+            row = CheckEventRow(
+                check_id=event.check_id,
+                serial=event.serial,
+                version=event.version,
+                passed=event.passed,
+                at=event.at,
+                payload=payload,
+                payload_sha256=sha256_hex(payload.encode("utf-8")),
+            )
             chain.link(s, chain.STREAMS["check"], row, self.signer)
             s.add(row)
             s.flush()
@@ -54,7 +60,9 @@ class CheckStoreMixin:
         """Every check of ``serial``, oldest first."""
 
         def work(s: Session) -> list[CheckEvent]:
-            rows = s.scalars(select(CheckEventRow).where(CheckEventRow.serial == serial).order_by(CheckEventRow.id))
+            rows = s.scalars(
+                select(CheckEventRow).where(CheckEventRow.serial == serial).order_by(CheckEventRow.id)
+            )
             return [codec.decode_check(r) for r in rows]
 
         return self._run(work)
@@ -64,8 +72,11 @@ class CheckStoreMixin:
         sha256 (what a rollout's promote records as the evidence its gate read)."""
 
         def work(s: Session) -> list[tuple[CheckEvent, str]]:
-            rows = s.scalars(select(CheckEventRow).where(CheckEventRow.serial.in_(serials), CheckEventRow.at >= since)
-                             .order_by(CheckEventRow.id))
+            rows = s.scalars(
+                select(CheckEventRow)
+                .where(CheckEventRow.serial.in_(serials), CheckEventRow.at >= since)
+                .order_by(CheckEventRow.id)
+            )
             return [(codec.decode_check(r), r.payload_sha256) for r in rows]
 
         return self._run(work) if serials else []

@@ -81,8 +81,9 @@ def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
         )
 
 
-def decode_payload(model: type[BaseModel], payload: str, payload_sha256: str, what: str,
-                   columns: dict[str, object]) -> Any:
+def decode_payload(
+    model: type[BaseModel], payload: str, payload_sha256: str, what: str, columns: dict[str, object]
+) -> Any:
     """A payload checked against its sha256, parsed as ``model``, and its filter ``columns`` against it."""
     actual = sha256_hex(payload.encode("utf-8"))
     if actual != payload_sha256:
@@ -205,8 +206,9 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
         try:
             artifact = CalibrationArtifact.model_validate_json(row.payload)
         except ValidationError as exc:
-            raise IntegrityError(f"{what} is stored as an unreadable document ({validation_message(exc, what)})",
-                                 TAMPER_HINT) from exc
+            raise IntegrityError(
+                f"{what} is stored as an unreadable document ({validation_message(exc, what)})", TAMPER_HINT
+            ) from exc
     else:
         artifact = _parse(CalibrationArtifact, row.payload, what)
         actual = artifact.computed_sha256()
@@ -234,7 +236,9 @@ def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
     try:
         seal = RecordSignature(key_id=row.key_id, record_sha256=row.chain_hash, value=row.signature)
     except ValidationError as exc:
-        raise IntegrityError(f"{what} has an unreadable signature ({exc.errors()[0]['msg']})", TAMPER_HINT) from exc
+        raise IntegrityError(
+            f"{what} has an unreadable signature ({exc.errors()[0]['msg']})", TAMPER_HINT
+        ) from exc
     return document.model_copy(update={"signature": seal})
 
 
@@ -268,8 +272,14 @@ def decode_check(row: CheckEventRow) -> CheckEvent:
     if actual != row.payload_sha256:
         raise _mismatch(what, row.payload_sha256, actual)
     event: CheckEvent = _parse(CheckEvent, row.payload, what)
-    _check_columns(what, {"serial": (row.serial, event.serial), "version": (row.version, event.version),
-                          "passed": (row.passed, event.passed)})
+    _check_columns(
+        what,
+        {
+            "serial": (row.serial, event.serial),
+            "version": (row.version, event.version),
+            "passed": (row.passed, event.passed),
+        },
+    )
     return event
 
 
@@ -279,4 +289,6 @@ def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
     from calibctl.artifacts.fleet import FleetEvent
 
     what = f"fleet event {row.id} ({row.subject}, {row.kind})"
-    return decode_payload(FleetEvent, row.payload, row.payload_sha256, what, {"subject": row.subject, "kind": row.kind})
+    return decode_payload(
+        FleetEvent, row.payload, row.payload_sha256, what, {"subject": row.subject, "kind": row.kind}
+    )

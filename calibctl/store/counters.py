@@ -49,8 +49,10 @@ def next_value(session: Session, scope: str, key: str) -> int:
     largest value a version column holds on both backends) it refuses instead of overflowing."""
     last = peek(session, scope, key)
     if last is not None and last >= MAX_VERSION:
-        raise UsageError(f"{scope} {key} has reached version {last}, the largest a store holds ({MAX_VERSION})",
-                         "use a new serial/name; versions are never reused")
+        raise UsageError(
+            f"{scope} {key} has reached version {last}, the largest a store holds ({MAX_VERSION})",
+            "use a new serial/name; versions are never reused",
+        )
     stmt = _insert(session).values(scope=scope, key=key, last_value=1)
     stmt = stmt.on_conflict_do_update(
         index_elements=[_counters.c.scope, _counters.c.key],

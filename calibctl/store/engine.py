@@ -124,7 +124,9 @@ def make_engine(url: str, *, lock_timeout: float | None = None) -> Engine:
         try:
             engine = create_engine(parsed, connect_args=connect_args)
         except ModuleNotFoundError as exc:  # psycopg is the optional calibctl[postgres]
-            raise MissingExtraError("postgres", f"the PostgreSQL store {display_url(parsed)}", exc.name) from exc
+            raise MissingExtraError(
+                "postgres", f"the PostgreSQL store {display_url(parsed)}", exc.name
+            ) from exc
     return engine.execution_options(**{LOCK_TIMEOUT_OPTION: timeout_s})
 
 
@@ -198,7 +200,11 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
     detail = _first_line(exc, engine.url.password if isinstance(engine.url.password, str) else None)
     timeout_s = engine.get_execution_options().get(LOCK_TIMEOUT_OPTION, DEFAULT_LOCK_TIMEOUT_S)
     lowered = detail.lower()
-    if "database is locked" in lowered or "database table is locked" in lowered or sqlstate(exc) in _LOCK_SQLSTATES:
+    if (
+        "database is locked" in lowered
+        or "database table is locked" in lowered
+        or sqlstate(exc) in _LOCK_SQLSTATES
+    ):
         return DatabaseError(
             f"the database {shown} is locked by another writer; gave up after {timeout_s:g} s",
             f"another calibctl is writing to it: retry, or allow a longer wait with {LOCK_TIMEOUT_ENV}",
@@ -212,17 +218,26 @@ def translate(exc: sa_exc.DBAPIError | sa_exc.ArgumentError, engine: Engine) -> 
         if "file is not a database" in lowered:
             return DatabaseError(f"{shown} is not a SQLite database ({detail})", "pass the right --db")
         if "readonly database" in lowered or "query_only" in lowered:
-            return DatabaseError(f"the store {shown} is read-only for this user; nothing was written",
-                                 "read commands work on it; to write, run as a user who can write both the file "
-                                 "and its folder (SQLite keeps its -wal and -shm files there)")
+            return DatabaseError(
+                f"the store {shown} is read-only for this user; nothing was written",
+                "read commands work on it; to write, run as a user who can write both the file "
+                "and its folder (SQLite keeps its -wal and -shm files there)",
+            )
         if "disk i/o error" in lowered:
-            return DatabaseError(f"the store {shown} could not write to its disk (disk I/O error); this transaction "
-                                 "was not stored", "the disk is most likely full (df -h); else check the device")
+            return DatabaseError(
+                f"the store {shown} could not write to its disk (disk I/O error); this transaction "
+                "was not stored",
+                "the disk is most likely full (df -h); else check the device",
+            )
         if "database or disk is full" in lowered:
-            return DatabaseError(f"the disk of the store {shown} is full; this transaction was not stored",
-                                 "free some space on that disk and run the command again (image files a failed "
-                                 "capture left are removed by `calibctl prune` an hour later)")
-    elif isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) and _is_connect_failure(sqlstate(exc)):
+            return DatabaseError(
+                f"the disk of the store {shown} is full; this transaction was not stored",
+                "free some space on that disk and run the command again (image files a failed "
+                "capture left are removed by `calibctl prune` an hour later)",
+            )
+    elif isinstance(exc, sa_exc.OperationalError | sa_exc.InterfaceError) and _is_connect_failure(
+        sqlstate(exc)
+    ):
         return DatabaseUnreachableError(
             f"cannot connect to the database {shown}: {detail}",
             "check --db / CALIBCTL_DB and that the server is running and reachable",

@@ -46,8 +46,12 @@ class RigActivationStep:
 
 
 def _registration(s: Session, robot: str) -> FleetEvent | None:
-    row = s.scalars(select(FleetEventRow).where(FleetEventRow.subject == robot, FleetEventRow.kind == "register")
-                    .order_by(FleetEventRow.id).limit(1)).first()
+    row = s.scalars(
+        select(FleetEventRow)
+        .where(FleetEventRow.subject == robot, FleetEventRow.kind == "register")
+        .order_by(FleetEventRow.id)
+        .limit(1)
+    ).first()
     return None if row is None else decode_fleet_event(row)
 
 
@@ -64,8 +68,12 @@ class FleetStoreMixin:
         does not carry (UsageError), or of an unknown serial or version (NotFoundError); a rejected version."""
         return self.append_fleet_events([event])
 
-    def append_fleet_events(self, events: Sequence[FleetEvent], after: int | None = None,
-                            rig_steps: Sequence[RigActivationStep] = ()) -> int:
+    def append_fleet_events(
+        self,
+        events: Sequence[FleetEvent],
+        after: int | None = None,
+        rig_steps: Sequence[RigActivationStep] = (),
+    ) -> int:
         """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the log's
         length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole batch
         (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
@@ -77,14 +85,22 @@ class FleetStoreMixin:
             if after is not None and current != after:
                 raise StaleActiveVersionError(
                     f"the fleet log changed underneath this step ({current - after} event(s) since it was read); "
-                    "nothing written", "run the command again")
+                    "nothing written",
+                    "run the command again",
+                )
             position = current
             for event in events:
                 position = counters.next_value(s, "chain", "fleet")  # the stream's lock until commit
                 _check(s, event)
                 payload = codec.canonical_text(event)
-                row = FleetEventRow(id=position, subject=event.subject, kind=event.kind, at=event.at, payload=payload,
-                                    payload_sha256=sha256_hex(payload.encode("utf-8")))
+                row = FleetEventRow(
+                    id=position,
+                    subject=event.subject,
+                    kind=event.kind,
+                    at=event.at,
+                    payload=payload,
+                    payload_sha256=sha256_hex(payload.encode("utf-8")),
+                )
                 chain.link(s, chain.STREAMS["fleet"], row, self.signer)
                 s.add(row)
                 s.flush()
@@ -104,8 +120,14 @@ class FleetStoreMixin:
             out = []
             for table, key in ((EventRow, EventRow.serial), (RigEventRow, RigEventRow.rig)):
                 latest = select(func.max(table.id).label("id")).group_by(key).subquery()
-                out.append({str(name): int(v) for name, v in s.execute(
-                    select(key, table.version).join(latest, table.id == latest.c.id))})
+                out.append(
+                    {
+                        str(name): int(v)
+                        for name, v in s.execute(
+                            select(key, table.version).join(latest, table.id == latest.c.id)
+                        )
+                    }
+                )
             return out[0], out[1]
 
         return self._run(work)
@@ -123,44 +145,63 @@ class FleetStoreMixin:
 
     def fleet_events(self) -> list[FleetEvent]:
         """The whole fleet log, oldest first."""
-        return self._run(lambda s: [decode_fleet_event(r) for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))])
+        return self._run(
+            lambda s: [
+                decode_fleet_event(r) for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))
+            ]
+        )
 
 
 def _check(s: Session, event: FleetEvent) -> None:
     """What the event refers to exists and may be used (see ``append_fleet_events``)."""
     if event.kind == "register":
         if _registration(s, event.subject) is not None:
-            raise AlreadyExistsError(f"robot {event.robot} is already registered",
-                                     "robots are registered once; `calibctl fleet status` lists them")
+            raise AlreadyExistsError(
+                f"robot {event.robot} is already registered",
+                "robots are registered once; `calibctl fleet status` lists them",
+            )
     elif event.kind == "assign":
         _check_assignment(s, event, _registration(s, event.subject))
     elif event.kind == "rollout":
         if _rollout(s, event.subject) is not None:
-            raise AlreadyExistsError(f"rollout {event.subject} exists already", "name the new rollout differently")
+            raise AlreadyExistsError(
+                f"rollout {event.subject} exists already", "name the new rollout differently"
+            )
         for serial, version in event.targets.items():
             _check_version(s, serial, version, "roll out")
         for rig, version in event.rig_targets.items():
             _check_rig_version(s, rig, version, "roll out")
         for robot in event.canary:
             if _registration(s, robot) is None:
-                raise NotFoundError(f"canary robot {robot} is not registered",
-                                    f"register it first: calibctl fleet add {robot} --serial SERIAL ...")
+                raise NotFoundError(
+                    f"canary robot {robot} is not registered",
+                    f"register it first: calibctl fleet add {robot} --serial SERIAL ...",
+                )
     elif _rollout(s, event.subject) is None:
         raise NotFoundError(f"no rollout {event.subject}", "`calibctl fleet status` lists the rollouts")
 
 
 def _activate_rig(s: Session, step: RigActivationStep, event: FleetEvent, signer: Signer | None) -> None:
     counters.lock(s, "rig", step.rig)
-    already = check_rollback(f"rig {step.rig}", step.version, rig_statuses(s, step.rig), active_rig(s, step.rig),
-                             step.expected_active, f"calibctl rig history {step.rig}")
+    already = check_rollback(
+        f"rig {step.rig}",
+        step.version,
+        rig_statuses(s, step.rig),
+        active_rig(s, step.rig),
+        step.expected_active,
+        f"calibctl rig history {step.rig}",
+    )
     decode_calibration(rig_calibration_row(s, step.rig, step.version))  # never activate tampered bytes
     if not already:
-        append_rig_event(s, step.rig, step.version, step.kind, event.actor, event.station, step.reason, signer)
+        append_rig_event(
+            s, step.rig, step.version, step.kind, event.actor, event.station, step.reason, signer
+        )
 
 
 def _rollout(s: Session, name: str) -> FleetEvent | None:
-    row = s.scalars(select(FleetEventRow).where(FleetEventRow.subject == name, FleetEventRow.kind == "rollout")
-                    .limit(1)).first()
+    row = s.scalars(
+        select(FleetEventRow).where(FleetEventRow.subject == name, FleetEventRow.kind == "rollout").limit(1)
+    ).first()
     return None if row is None else decode_fleet_event(row)
 
 
@@ -168,38 +209,53 @@ def _check_version(s: Session, serial: str, version: int, what: str) -> None:
     known = statuses(s, serial)  # NotFoundError for an unknown serial
     status = known.get(version)
     if status is None:
-        raise NotFoundError(f"{serial} has no version {version}; versions: "
-                            f"{', '.join(str(v) for v in sorted(known))}", f"see `calibctl history {serial}`")
+        raise NotFoundError(
+            f"{serial} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
+            f"see `calibctl history {serial}`",
+        )
     if status != "accepted":
-        raise UsageError(f"{serial}@{version} is {status}: a robot must not run it, so it cannot {what}",
-                         "name an accepted version (`calibctl history SERIAL`)")
+        raise UsageError(
+            f"{serial}@{version} is {status}: a robot must not run it, so it cannot {what}",
+            "name an accepted version (`calibctl history SERIAL`)",
+        )
 
 
 def _check_rig_version(s: Session, rig: str, version: int, what: str) -> None:
     known = rig_statuses(s, rig)  # NotFoundError for a rig with no calibration
     status = known.get(version)
     if status is None:
-        raise NotFoundError(f"rig {rig} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
-                            f"see `calibctl rig history {rig}`")
+        raise NotFoundError(
+            f"rig {rig} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
+            f"see `calibctl rig history {rig}`",
+        )
     if status != "accepted":
-        raise UsageError(f"rig {rig}@{version} is {status}: a robot must not run it, so it cannot {what}",
-                         "name an accepted version (`calibctl rig history RIG`)")
+        raise UsageError(
+            f"rig {rig}@{version} is {status}: a robot must not run it, so it cannot {what}",
+            "name an accepted version (`calibctl rig history RIG`)",
+        )
 
 
 def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | None) -> None:
     if registered is None:
-        raise NotFoundError(f"robot {event.robot} is not registered",
-                            f"register it first: calibctl fleet add {event.robot} --serial SERIAL ...")
+        raise NotFoundError(
+            f"robot {event.robot} is not registered",
+            f"register it first: calibctl fleet add {event.robot} --serial SERIAL ...",
+        )
     assert event.version is not None  # the document's own validator
     if event.rig is not None:
         if event.rig not in registered.rigs:
-            raise UsageError(f"robot {event.robot} does not carry rig {event.rig} (its rigs: "
-                             f"{', '.join(registered.rigs) or 'none'})", "assign one of its own rigs")
+            raise UsageError(
+                f"robot {event.robot} does not carry rig {event.rig} (its rigs: "
+                f"{', '.join(registered.rigs) or 'none'})",
+                "assign one of its own rigs",
+            )
         _check_rig_version(s, event.rig, event.version, "be assigned")
         return
     assert event.serial is not None
     if event.serial not in registered.serials:
-        raise UsageError(f"robot {event.robot} does not carry {event.serial} (it carries "
-                         f"{', '.join(registered.serials) or 'no camera serials'})",
-                         "assign one of its own serials")
+        raise UsageError(
+            f"robot {event.robot} does not carry {event.serial} (it carries "
+            f"{', '.join(registered.serials) or 'no camera serials'})",
+            "assign one of its own serials",
+        )
     _check_version(s, event.serial, event.version, "be assigned")

@@ -59,7 +59,9 @@ def _state_text(fleet: Fleet) -> str:
     return json.dumps(to_state(fleet), separators=(",", ":"), ensure_ascii=False)
 
 
-def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: TrustedKeys | None) -> Fleet | str:
+def _usable(
+    s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: TrustedKeys | None
+) -> Fleet | str:
     """The checkpoint's fleet, or why it cannot be used (``rollouts``: with its rollouts' events read from the log;
     else stand-ins, see ``from_state``)."""
     at = f"fleet checkpoint at event {row.position}"
@@ -72,7 +74,9 @@ def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: Tru
     if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
         return f"{at} was changed after it was written (its state no longer matches its sha256)"
     if trusted is not None:
-        unsigned = trusted.check(row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256))
+        unsigned = trusted.check(
+            row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256)
+        )
         if unsigned is not None:
             return f"{at} {unsigned} (a store with keys uses only checkpoints signed by a trusted key)"
     try:
@@ -83,7 +87,11 @@ def _usable(s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: Tru
         if not rollouts:
             fleet = from_state(state, None)
         else:
-            rows = s.scalars(select(FleetEventRow).where(FleetEventRow.id.in_(positions))).all() if positions else []
+            rows = (
+                s.scalars(select(FleetEventRow).where(FleetEventRow.id.in_(positions))).all()
+                if positions
+                else []
+            )
             fleet = from_state(state, {r.id: decode_fleet_event(r) for r in rows})
     except (KeyError, TypeError, ValueError, RecursionError) as exc:  # RecursionError: JSON nested too deep
         return f"{at} does not hold a fleet state ({type(exc).__name__}: {str(exc)[:200]})"
@@ -124,9 +132,18 @@ def write_if_due(s: Session, length: int, signer: Signer | None = None) -> None:
     text = _state_text(loaded.fleet)
     digest = sha256_hex(text.encode("utf-8"))
     signature = None if signer is None else signer.sign(_message(length, loaded.last_hash, digest))
-    s.add(FleetCheckpointRow(position=length, chain_hash=loaded.last_hash, format=STATE_FORMAT, written_at=utc_now(),
-                             state=text, state_sha256=digest, signature=signature,
-                             key_id=None if signer is None else signer.key_id))
+    s.add(
+        FleetCheckpointRow(
+            position=length,
+            chain_hash=loaded.last_hash,
+            format=STATE_FORMAT,
+            written_at=utc_now(),
+            state=text,
+            state_sha256=digest,
+            signature=signature,
+            key_id=None if signer is None else signer.key_id,
+        )
+    )
     s.flush()
     kept = select(FleetCheckpointRow.position).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)
     s.execute(delete(FleetCheckpointRow).where(FleetCheckpointRow.position.not_in(kept.scalar_subquery())))
@@ -137,7 +154,10 @@ def problems(s: Session, trusted: TrustedKeys | None = None) -> list[str]:
     signature when it has one and keys are given, and its state against a replay of the log up to N (one pass
     over the log). An unsigned checkpoint is no finding (one written before the store had keys is legitimate;
     a store with keys only skips it on reads)."""
-    rows = {r.position: r for r in s.scalars(select(FleetCheckpointRow).where(FleetCheckpointRow.format == STATE_FORMAT))}
+    rows = {
+        r.position: r
+        for r in s.scalars(select(FleetCheckpointRow).where(FleetCheckpointRow.format == STATE_FORMAT))
+    }
     if not rows:
         return []
     found: list[str] = []
@@ -150,25 +170,43 @@ def problems(s: Session, trusted: TrustedKeys | None = None) -> list[str]:
             if row is not None:
                 found += _compare(row, r.chain_hash, fleet, trusted)
     except IntegrityError:  # the audit names the event itself
-        return [*found, f"fleet checkpoint(s) at event(s) {', '.join(map(str, sorted(rows)))} not checked: the log "
-                "before them does not decode"]
-    found += [f"fleet checkpoint at event {p} is past the end of the log ({fleet.length} events)" for p in sorted(rows)]
+        return [
+            *found,
+            f"fleet checkpoint(s) at event(s) {', '.join(map(str, sorted(rows)))} not checked: the log "
+            "before them does not decode",
+        ]
+    found += [
+        f"fleet checkpoint at event {p} is past the end of the log ({fleet.length} events)"
+        for p in sorted(rows)
+    ]
     return found
 
 
-def _compare(row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet, trusted: TrustedKeys | None) -> list[str]:
+def _compare(
+    row: FleetCheckpointRow, log_hash: str | None, fleet: Fleet, trusted: TrustedKeys | None
+) -> list[str]:
     at = f"fleet checkpoint at event {row.position}"
     if row.chain_hash != log_hash:
         return [f"{at} does not match the log's chain hash there (stale or forged; reads ignore it)"]
     if sha256_hex(row.state.encode("utf-8")) != row.state_sha256:
-        return [f"{at} was changed after it was written (its state no longer matches its sha256; reads ignore it)"]
+        return [
+            f"{at} was changed after it was written (its state no longer matches its sha256; reads ignore it)"
+        ]
     if row.signature is not None and trusted is not None and trusted.keys:
-        why = trusted.check(row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256))
+        why = trusted.check(
+            row.key_id, row.signature, _message(row.position, row.chain_hash, row.state_sha256)
+        )
         if why is not None:
             return [f"{at} {why} (reads with keys ignore it)"]
     try:
         same = json.loads(row.state) == to_state(fleet)
     except (ValueError, RecursionError):
         same = False
-    return [] if same else [f"{at} is not the log replayed up to event {row.position} (derived data: delete "
-                            "the row, or restore the store)"]
+    return (
+        []
+        if same
+        else [
+            f"{at} is not the log replayed up to event {row.position} (derived data: delete "
+            "the row, or restore the store)"
+        ]
+    )

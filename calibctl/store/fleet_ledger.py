@@ -40,7 +40,9 @@ class Rollout:
     closed: str | None = None  # "promoted" or "rolled back"
     promote: FleetEvent | None = None  # its promote event: the gate inputs and diffs it recorded
     evidence: list[GateEvidence] = field(default_factory=list)  # open: the gate inputs read so far
-    waiting: dict[str, list[str]] = field(default_factory=dict)  # open: canary robot -> targets with no report
+    waiting: dict[str, list[str]] = field(
+        default_factory=dict
+    )  # open: canary robot -> targets with no report
     failing: dict[str, list[str]] = field(default_factory=dict)  # open: canary robot -> its failing inputs
 
     @property
@@ -50,17 +52,27 @@ class Rollout:
     @property
     def diffs(self) -> dict[Target, TargetDiff]:
         """Each target's diff against the version its robots ran, as the rollout event recorded it."""
-        return {**{("serial", s): d for s, d in self.start.diffs.items()},
-                **{("rig", r): d for r, d in self.start.rig_diffs.items()}}
+        return {
+            **{("serial", s): d for s, d in self.start.diffs.items()},
+            **{("rig", r): d for r, d in self.start.rig_diffs.items()},
+        }
 
     @property
     def targets(self) -> dict[Target, int]:
-        return {**{("serial", s): v for s, v in self.start.targets.items()},
-                **{("rig", r): v for r, v in self.start.rig_targets.items()}}
+        return {
+            **{("serial", s): v for s, v in self.start.targets.items()},
+            **{("rig", r): v for r, v in self.start.rig_targets.items()},
+        }
 
     def as_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"rollout": self.name, "targets": self.start.targets, "rig_targets": self.start.rig_targets,
-                               "canary": self.start.canary, "closed": self.closed, "robots": self.state}
+        out: dict[str, Any] = {
+            "rollout": self.name,
+            "targets": self.start.targets,
+            "rig_targets": self.start.rig_targets,
+            "canary": self.start.canary,
+            "closed": self.closed,
+            "robots": self.state,
+        }
         if self.diffs:
             out["diffs"] = {label(t): d.model_dump(mode="json") for t, d in self.diffs.items()}
         if self.promote is not None:
@@ -84,8 +96,12 @@ class Fleet:
     rollouts: dict[str, Rollout] = field(default_factory=dict)
     found: dict[tuple[str, Target], dict[str, int | None]] = field(default_factory=dict)
     length: int = 0
-    registered_at: dict[str, str] = field(default_factory=dict)  # robot -> its register event's time, ISO 8601
-    positions: dict[str, tuple[int, int | None]] = field(default_factory=dict)  # rollout -> (start, promote) events
+    registered_at: dict[str, str] = field(
+        default_factory=dict
+    )  # robot -> its register event's time, ISO 8601
+    positions: dict[str, tuple[int, int | None]] = field(
+        default_factory=dict
+    )  # rollout -> (start, promote) events
 
     def apply(self, e: FleetEvent) -> None:
         """Event ``length + 1`` of the log."""
@@ -123,7 +139,9 @@ class Fleet:
                 elif not assigned:
                     r.state[robot] = "pending"
                 elif robot in r.start.canary:
-                    r.state[robot] = "healthy" if r.closed == "promoted" or r.promote is not None else "canary"
+                    r.state[robot] = (
+                        "healthy" if r.closed == "promoted" or r.promote is not None else "canary"
+                    )
                 else:
                     r.state[robot] = "promoted"
         return self
@@ -144,12 +162,17 @@ STATE_FORMAT = 1
 def to_state(fleet: Fleet) -> dict[str, Any]:
     """The replayed log as plain JSON (insertion order kept: it is the order status lists robots and rollouts in).
     Rollouts are named by the positions of their start and promote events, which are read back from the log."""
-    return {"format": STATE_FORMAT, "length": fleet.length,
-            "robots": [[robot, fleet.registered_at[robot], [list(t) for t in carried]]
-                       for robot, carried in fleet.carries.items()],
-            "running": [[robot, t[0], t[1], v] for (robot, t), v in fleet.running.items()],
-            "found": [[robot, t[0], t[1], found] for (robot, t), found in fleet.found.items()],
-            "rollouts": [[name, r.closed, *fleet.positions[name]] for name, r in fleet.rollouts.items()]}
+    return {
+        "format": STATE_FORMAT,
+        "length": fleet.length,
+        "robots": [
+            [robot, fleet.registered_at[robot], [list(t) for t in carried]]
+            for robot, carried in fleet.carries.items()
+        ],
+        "running": [[robot, t[0], t[1], v] for (robot, t), v in fleet.running.items()],
+        "found": [[robot, t[0], t[1], found] for (robot, t), found in fleet.found.items()],
+        "rollouts": [[name, r.closed, *fleet.positions[name]] for name, r in fleet.rollouts.items()],
+    }
 
 
 def rollout_positions(state: dict[str, Any]) -> list[int]:
@@ -172,12 +195,19 @@ def from_state(state: dict[str, Any], events: dict[int, FleetEvent] | None) -> F
     fleet.found = {(robot, (kind, name)): dict(found) for robot, kind, name, found in state["found"]}
     for name, closed, start, promote in state["rollouts"]:
         if events is None:  # the writer's stand-in: no validation, never settled nor shown
-            stand_in = FleetEvent.model_construct(kind="rollout", rollout=str(name), actor="", station="", reason="",
-                                                  at=datetime.min)
+            stand_in = FleetEvent.model_construct(
+                kind="rollout", rollout=str(name), actor="", station="", reason="", at=datetime.min
+            )
             r = Rollout(stand_in, closed=closed)
         else:
             r = Rollout(events[start], closed=closed, promote=None if promote is None else events[promote])
-            if r.name != name or r.start.kind != "rollout" or (r.promote is not None and r.promote.kind != "promote"):
-                raise ValueError(f"rollout {name}: the events at {start}, {promote} are not its start and promote")
+            if (
+                r.name != name
+                or r.start.kind != "rollout"
+                or (r.promote is not None and r.promote.kind != "promote")
+            ):
+                raise ValueError(
+                    f"rollout {name}: the events at {start}, {promote} are not its start and promote"
+                )
         fleet.rollouts[name], fleet.positions[name] = r, (start, promote)
     return fleet

@@ -67,21 +67,28 @@ def gate_problems(s: Session) -> list[str]:
     """``db verify``: every report a promote's gate decided on (recorded in the chained promote event) is still
     stored with the sha256 the promote recorded, and its payload still hashes to it."""
     out = []
-    for row in s.scalars(select(FleetEventRow).where(FleetEventRow.kind == "promote").order_by(FleetEventRow.id)):
+    for row in s.scalars(
+        select(FleetEventRow).where(FleetEventRow.kind == "promote").order_by(FleetEventRow.id)
+    ):
         try:
             event = decode_fleet_event(row)
         except IntegrityError:  # a damaged promote is the chain walk's to report
             continue
         for e in event.gate:
-            table, key = (HealthReportRow, HealthReportRow.source_id) if e.source == "report" else \
-                (CheckEventRow, CheckEventRow.check_id)
+            table, key = (
+                (HealthReportRow, HealthReportRow.source_id)
+                if e.source == "report"
+                else (CheckEventRow, CheckEventRow.check_id)
+            )
             stored = s.execute(select(table.payload, table.payload_sha256).where(key == e.id)).first()
             where = f"promote of rollout {event.subject}: its gate read {e.source} {e.id}"
             if stored is None:
                 out.append(f"{where}, which is not stored")
             elif stored[1] != e.sha256 or sha256_hex(stored[0].encode("utf-8")) != e.sha256:
-                out.append(f"{where} with sha256 {e.sha256[:12]}, the stored one differs: it was changed after the "
-                           "promote decided on it")
+                out.append(
+                    f"{where} with sha256 {e.sha256[:12]}, the stored one differs: it was changed after the "
+                    "promote decided on it"
+                )
     return out
 
 
@@ -94,7 +101,11 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
     ids = [r.source_id for r in reports]
     stored: set[str] = set()
     for i in range(0, len(ids), _CHUNK):
-        stored.update(s.scalars(select(HealthReportRow.source_id).where(HealthReportRow.source_id.in_(ids[i:i + _CHUNK]))))
+        stored.update(
+            s.scalars(
+                select(HealthReportRow.source_id).where(HealthReportRow.source_id.in_(ids[i : i + _CHUNK]))
+            )
+        )
     seen: set[str] = set()
     out = []
     for i, r in enumerate(reports):
@@ -102,7 +113,12 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
         if serials is None:
             out.append((i, f"robot {r.robot} is not registered"))
         elif r.serial not in serials:
-            out.append((i, f"unknown serial {r.serial}: robot {r.robot} carries {', '.join(sorted(serials)) or 'none'}"))
+            out.append(
+                (
+                    i,
+                    f"unknown serial {r.serial}: robot {r.robot} carries {', '.join(sorted(serials)) or 'none'}",
+                )
+            )
         elif r.source_id in stored:
             out.append((i, f"duplicate report: source id {r.source_id} is stored already"))
         elif r.source_id in seen:
@@ -129,9 +145,19 @@ class HealthStoreMixin:
             rows = []
             for r in reports:
                 payload = codec.canonical_text(r)
-                rows.append({"source_id": r.source_id, "serial": r.serial, "robot": r.robot, "kind": r.kind, "at": r.time,
-                             **{n: getattr(r, n) for n in NUMBERS}, "ingested_at": now, "payload": payload,
-                             "payload_sha256": sha256_hex(payload.encode("utf-8"))})
+                rows.append(
+                    {
+                        "source_id": r.source_id,
+                        "serial": r.serial,
+                        "robot": r.robot,
+                        "kind": r.kind,
+                        "at": r.time,
+                        **{n: getattr(r, n) for n in NUMBERS},
+                        "ingested_at": now,
+                        "payload": payload,
+                        "payload_sha256": sha256_hex(payload.encode("utf-8")),
+                    }
+                )
             # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk path,
             # which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
             s.connection().execute(insert(HEALTH_TABLE), rows)
@@ -142,25 +168,54 @@ class HealthStoreMixin:
     def health_rows(self, serial: str) -> list[HealthRow]:
         """Every stored report on ``serial``, oldest first."""
         cols = [getattr(HealthReportRow, n) for n in ("serial", "kind", "at", *NUMBERS)]
-        return self._run(lambda s: [HealthRow(*row) for row in s.execute(
-            select(*cols).where(HealthReportRow.serial == serial).order_by(HealthReportRow.at, HealthReportRow.id))])
+        return self._run(
+            lambda s: [
+                HealthRow(*row)
+                for row in s.execute(
+                    select(*cols)
+                    .where(HealthReportRow.serial == serial)
+                    .order_by(HealthReportRow.at, HealthReportRow.id)
+                )
+            ]
+        )
 
     def fleet_check_rms(self, since: datetime | None = None) -> dict[str, tuple[float, int]]:
         """Serial -> (mean check RMS px, number of check reports), over every serial with check reports measured at
         or after ``since`` (index kind, at, serial, rms_px: the window's rows only, not the whole table)."""
-        stmt = (select(HealthReportRow.serial, func.avg(HealthReportRow.rms_px), func.count())
-                .where(HealthReportRow.kind == "check", *([] if since is None else [HealthReportRow.at >= since]))
-                .group_by(HealthReportRow.serial))
-        return self._run(lambda s: {str(serial): (float(mean), int(n)) for serial, mean, n in s.execute(stmt)})
+        stmt = (
+            select(HealthReportRow.serial, func.avg(HealthReportRow.rms_px), func.count())
+            .where(HealthReportRow.kind == "check", *([] if since is None else [HealthReportRow.at >= since]))
+            .group_by(HealthReportRow.serial)
+        )
+        return self._run(
+            lambda s: {str(serial): (float(mean), int(n)) for serial, mean, n in s.execute(stmt)}
+        )
 
-    def gate_reports(self, robots: Sequence[str], serials: Sequence[str], since: datetime) -> list[GateReport]:
+    def gate_reports(
+        self, robots: Sequence[str], serials: Sequence[str], since: datetime
+    ) -> list[GateReport]:
         """Reports with a verdict (check, gauge, triage) from ``robots`` on ``serials`` (serials or rigs) measured
         at or after ``since``, oldest first: a rollout's health gate inputs."""
-        cols = [HealthReportRow.source_id, HealthReportRow.payload_sha256, HealthReportRow.robot, HealthReportRow.serial,
-                HealthReportRow.kind, HealthReportRow.at, HealthReportRow.verdict, HealthReportRow.ratio]
-        stmt = (select(*cols).where(HealthReportRow.serial.in_(list(serials)), HealthReportRow.kind.in_(GATE_KINDS),
-                                    HealthReportRow.at >= since, HealthReportRow.robot.in_(list(robots)))
-                .order_by(HealthReportRow.at, HealthReportRow.id))
+        cols = [
+            HealthReportRow.source_id,
+            HealthReportRow.payload_sha256,
+            HealthReportRow.robot,
+            HealthReportRow.serial,
+            HealthReportRow.kind,
+            HealthReportRow.at,
+            HealthReportRow.verdict,
+            HealthReportRow.ratio,
+        ]
+        stmt = (
+            select(*cols)
+            .where(
+                HealthReportRow.serial.in_(list(serials)),
+                HealthReportRow.kind.in_(GATE_KINDS),
+                HealthReportRow.at >= since,
+                HealthReportRow.robot.in_(list(robots)),
+            )
+            .order_by(HealthReportRow.at, HealthReportRow.id)
+        )
         if not robots or not serials:
             return []
         return self._run(lambda s: [GateReport(*row) for row in s.execute(stmt)])

@@ -89,7 +89,7 @@ def _link_anonymous(path: Path, data: bytes) -> bool:
     try:
         view = memoryview(data)
         while view:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         os.fsync(fd)
         try:
             # A dir fd makes CPython call linkat(..., AT_SYMLINK_FOLLOW): it links the file the /proc
@@ -152,13 +152,19 @@ class ImageStoreMixin:
         expires = now + dt.timedelta(days=retention_days)
 
         def missing() -> list[str]:
-            return [sha for sha in sorted(by_sha) if not _has_file(image_file(self.image_dir, sha), len(by_sha[sha]))]
+            return [
+                sha
+                for sha in sorted(by_sha)
+                if not _has_file(image_file(self.image_dir, sha), len(by_sha[sha]))
+            ]
 
         def work(s: Session) -> None:
             for sha in sorted(by_sha):  # one lock order for every writer (PostgreSQL FOR UPDATE)
                 row = s.get(ImageRow, sha, with_for_update=True)
                 if row is None:
-                    s.add(ImageRow(sha256=sha, size_bytes=len(by_sha[sha]), stored_at=now, expires_at=expires))
+                    s.add(
+                        ImageRow(sha256=sha, size_bytes=len(by_sha[sha]), stored_at=now, expires_at=expires)
+                    )
                 elif row.expires_at < expires:
                     row.expires_at = expires
             # A prune that committed between the writes below and these locks may have deleted a file we
@@ -186,8 +192,11 @@ class ImageStoreMixin:
         if not self.image_dir.is_dir():
             return []
         cutoff = (now or utc_now()).timestamp() - grace_s
-        on_disk = {p.name: p for p in self.image_dir.glob("[0-9a-f][0-9a-f]/*")
-                   if len(p.name) == 64 and set(p.name) <= _HEX and p.is_file() and p.stat().st_mtime < cutoff}
+        on_disk = {
+            p.name: p
+            for p in self.image_dir.glob("[0-9a-f][0-9a-f]/*")
+            if len(p.name) == 64 and set(p.name) <= _HEX and p.is_file() and p.stat().st_mtime < cutoff
+        }
         if not on_disk:
             return []
         names = sorted(on_disk)
@@ -195,7 +204,9 @@ class ImageStoreMixin:
         def work(s: Session) -> set[str]:
             found: set[str] = set()
             for start in range(0, len(names), 500):  # bounded IN lists (SQLite caps bound parameters)
-                found.update(s.scalars(select(ImageRow.sha256).where(ImageRow.sha256.in_(names[start:start + 500]))))
+                found.update(
+                    s.scalars(select(ImageRow.sha256).where(ImageRow.sha256.in_(names[start : start + 500])))
+                )
             return found
 
         known = self._run(work)
@@ -207,7 +218,9 @@ class ImageStoreMixin:
         when = now or utc_now()
 
         def work(s: Session) -> int:
-            expired = list(s.scalars(select(ImageRow.sha256).where(ImageRow.expires_at <= when).with_for_update()))
+            expired = list(
+                s.scalars(select(ImageRow.sha256).where(ImageRow.expires_at <= when).with_for_update())
+            )
             if expired:
                 s.execute(delete(ImageRow).where(ImageRow.sha256.in_(expired)))
                 for sha in expired:

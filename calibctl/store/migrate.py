@@ -82,7 +82,9 @@ def head_revision() -> str:
     graph = _revision_graph()
     heads = sorted(set(graph) - {d for downs in graph.values() for d in downs})
     if len(heads) != 1:  # pragma: no cover - the repository always has exactly one head
-        raise DatabaseError(f"{len(heads)} migration heads in {MIGRATIONS_DIR} ({', '.join(heads)}); expected one")
+        raise DatabaseError(
+            f"{len(heads)} migration heads in {MIGRATIONS_DIR} ({', '.join(heads)}); expected one"
+        )
     return heads[0]
 
 
@@ -132,8 +134,10 @@ def _current_revision(conn: Connection) -> str | None:
         return None
     rows = conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all()
     if len(rows) > 1:
-        raise DatabaseError(f"the database is at several schema revisions at once ({', '.join(rows)})",
-                            "it was migrated by something other than calibctl; restore it from a backup")
+        raise DatabaseError(
+            f"the database is at several schema revisions at once ({', '.join(rows)})",
+            "it was migrated by something other than calibctl; restore it from a backup",
+        )
     return rows[0] if rows else None
 
 

@@ -81,6 +81,7 @@ class UtcDateTime(TypeDecorator[dt.datetime]):
                 return process(value)
             except (TypeError, ValueError) as exc:
                 raise unreadable_datetime(value) from exc
+
         return checked
 
 
@@ -144,8 +145,11 @@ class SessionRow(ChainColumns, Base):
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
-    __table_args__ = (Index(None, "serial", "started_at"), Index(None, "id", unique=True),
-                      Index(None, "serial", "chain_seq", unique=True))
+    __table_args__ = (
+        Index(None, "serial", "started_at"),
+        Index(None, "id", unique=True),
+        Index(None, "serial", "chain_seq", unique=True),
+    )
 
 
 class ArtifactRow(ChainColumns, Base):
@@ -318,7 +322,9 @@ class CheckEventRow(ChainColumns, Base):
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
     __table_args__ = (
-        ForeignKeyConstraint(["serial", "version"], ["calibration_artifacts.serial", "calibration_artifacts.version"]),
+        ForeignKeyConstraint(
+            ["serial", "version"], ["calibration_artifacts.serial", "calibration_artifacts.version"]
+        ),
         Index(None, "serial", "id"),
         Index(None, "serial", "chain_seq", unique=True),
     )
@@ -356,7 +362,9 @@ class FleetCheckpointRow(Base):
     written_at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
     state: Mapped[str] = mapped_column(Text)
     state_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
-    signature: Mapped[str | None] = mapped_column(Text, nullable=True)  # with a station key (store.fleet_checkpoints)
+    signature: Mapped[str | None] = mapped_column(
+        Text, nullable=True
+    )  # with a station key (store.fleet_checkpoints)
     key_id: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
 
 
@@ -383,8 +391,10 @@ class HealthReportRow(Base):
     payload: Mapped[str] = mapped_column(Text)
     payload_sha256: Mapped[str] = mapped_column(String(SHA256_LEN))
 
-    __table_args__ = (Index(None, "serial", "kind", "at"),
-                      Index(None, "kind", "at", "serial", "rms_px"))  # 0014: the per-camera spread's window
+    __table_args__ = (
+        Index(None, "serial", "kind", "at"),
+        Index(None, "kind", "at", "serial", "rms_px"),
+    )  # 0014: the per-camera spread's window
 
 
 IMMUTABLE_TABLES = {

@@ -68,7 +68,11 @@ _GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
 
 def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     """A read of a store that does not exist: name what was looked for, never create it by looking."""
-    what = f"{path.resolve()} does not exist" if status == "absent" and path is not None else "it has no calibctl tables"
+    what = (
+        f"{path.resolve()} does not exist"
+        if status == "absent" and path is not None
+        else "it has no calibctl tables"
+    )
     return NotFoundError(
         f"there is no calibctl database at {url} ({what})",
         "check --db / CALIBCTL_DB for a typo; a new store is created by `calibctl db upgrade` "
@@ -79,8 +83,13 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
 class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, HealthStoreMixin):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
-    def __init__(self, engine: Engine, image_dir: Path, signer: Signer | None = None,
-                 trusted: TrustedKeys | None = None) -> None:
+    def __init__(
+        self,
+        engine: Engine,
+        image_dir: Path,
+        signer: Signer | None = None,
+        trusted: TrustedKeys | None = None,
+    ) -> None:
         self._engine = engine
         self.signer = signer
         self.trusted = trusted
@@ -88,8 +97,15 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         self.image_dir = image_dir
 
     @classmethod
-    def open(cls, url: str, *, create: bool = True, image_dir: Path | None = None, signer: Signer | None = None,
-             trusted: TrustedKeys | None = None) -> Store:
+    def open(
+        cls,
+        url: str,
+        *,
+        create: bool = True,
+        image_dir: Path | None = None,
+        signer: Signer | None = None,
+        trusted: TrustedKeys | None = None,
+    ) -> Store:
         """Open the store at ``url``. A new (absent or empty) database is created at the newest schema
         revision when ``create``; an older revision is refused with DatabaseOutOfDateError. With a
         ``signer`` every board revision, artifact and event written is signed. With ``trusted`` (keys
@@ -124,7 +140,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
     def __enter__(self) -> Store:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close()
 
     def _run(self, work: Callable[[Session], T], *, write: bool = False, retry_conflicts: bool = False) -> T:
@@ -148,8 +166,12 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
     def _served(self, s: Session, stream: str, row: Base | None) -> None:
         """With keys configured, refuse ``row`` (a record a read serves) if ``db verify`` would flag it."""
         if row is not None and self.trusted is not None:
-            served.check(stream, row, lambda sql, params: [dict(r) for r in s.execute(text(sql), params).mappings()],
-                         self.trusted)
+            served.check(
+                stream,
+                row,
+                lambda sql, params: [dict(r) for r in s.execute(text(sql), params).mappings()],
+                self.trusted,
+            )
 
     def _linked(self, stream: str, s: Session, row: R) -> R:
         """``row`` with its chain (and, with a key, signature) columns set; the caller holds the stream's lock."""
@@ -165,7 +187,10 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         def work(s: Session) -> BoardRevision:
             revision = counters.next_value(s, "board", board.name)
             latest = s.scalars(
-                select(BoardRow).where(BoardRow.name == board.name).order_by(BoardRow.revision.desc()).limit(1)
+                select(BoardRow)
+                .where(BoardRow.name == board.name)
+                .order_by(BoardRow.revision.desc())
+                .limit(1)
             ).first()
             if latest is not None:
                 previous = codec.decode_board(latest)
@@ -187,12 +212,20 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         """Revision ``revision`` of board ``name`` (None: the latest)."""
 
         def work(s: Session) -> BoardRevision:
-            revisions = list(s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision)))
+            revisions = list(
+                s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision))
+            )
             if not revisions:
                 names = list(s.scalars(select(BoardRow.name).distinct().order_by(BoardRow.name)))
                 if not names:
-                    raise NotFoundError(f"unknown board '{name}'; no boards are registered yet", "add one with `calibctl board add`")
-                raise NotFoundError(f"unknown board '{name}'; known: {named_list(names, history.KNOWN_SHOWN)}", "see `calibctl board list`")
+                    raise NotFoundError(
+                        f"unknown board '{name}'; no boards are registered yet",
+                        "add one with `calibctl board add`",
+                    )
+                raise NotFoundError(
+                    f"unknown board '{name}'; known: {named_list(names, history.KNOWN_SHOWN)}",
+                    "see `calibctl board list`",
+                )
             wanted = revisions[-1] if revision is None else revision
             if wanted not in revisions:
                 raise NotFoundError(
@@ -207,13 +240,18 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
     def board_revisions(self, name: str) -> list[int]:
         """The revision numbers of board ``name`` (empty when it is unknown)."""
         return self._run(
-            lambda s: list(s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision)))
+            lambda s: list(
+                s.scalars(select(BoardRow.revision).where(BoardRow.name == name).order_by(BoardRow.revision))
+            )
         )
 
     def list_boards(self) -> list[BoardRevision]:
         """Every revision of every board, by name then revision."""
         return self._run(
-            lambda s: [codec.decode_board(r) for r in s.scalars(select(BoardRow).order_by(BoardRow.name, BoardRow.revision))]
+            lambda s: [
+                codec.decode_board(r)
+                for r in s.scalars(select(BoardRow).order_by(BoardRow.name, BoardRow.revision))
+            ]
         )
 
     # capture sessions ----------------------------------------------------------------------------
@@ -237,7 +275,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         counters.next_value(s, "session", row.serial)
         candidate = counters.next_value(s, "id", "capture_sessions")
         highest = int(s.scalar(select(func.max(SessionRow.id))) or 0)
-        row.id = candidate if candidate > highest else counters.raise_to(s, "id", "capture_sessions", highest + 1)
+        row.id = (
+            candidate if candidate > highest else counters.raise_to(s, "id", "capture_sessions", highest + 1)
+        )
         return self._linked("session", s, row)
 
     def get_session(self, session_id: str) -> CaptureSession:
@@ -247,8 +287,14 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                 recent = list(
                     s.scalars(select(SessionRow.session_id).order_by(SessionRow.started_at.desc()).limit(10))
                 )
-                listing = f"recent: {named_list(recent, history.KNOWN_SHOWN)}" if recent else "no sessions are stored yet"
-                raise NotFoundError(f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`")
+                listing = (
+                    f"recent: {named_list(recent, history.KNOWN_SHOWN)}"
+                    if recent
+                    else "no sessions are stored yet"
+                )
+                raise NotFoundError(
+                    f"unknown capture session '{session_id}'; {listing}", "run `calibctl capture`"
+                )
             session = codec.decode_session(row)
             self._served(s, "session", row)
             return session
@@ -266,21 +312,34 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                 query = query.where(SessionRow.session_id.not_in(members))
             if status is not None:
                 query = query.where(SessionRow.status == status)
-            row = s.scalars(query.order_by(SessionRow.finished_at.desc(), SessionRow.started_at.desc()).limit(1)).first()
+            row = s.scalars(
+                query.order_by(SessionRow.finished_at.desc(), SessionRow.started_at.desc()).limit(1)
+            ).first()
             if row is not None:
                 return codec.decode_session(row)
             theirs = s.execute(
-                select(SessionRow.session_id, SessionRow.status).where(SessionRow.serial == serial).order_by(SessionRow.started_at)
+                select(SessionRow.session_id, SessionRow.status)
+                .where(SessionRow.serial == serial)
+                .order_by(SessionRow.started_at)
             ).all()
             what = f"no {status} capture session" if status else "no capture session"
             if theirs:
-                listing = named_list([f"{sid} ({st}{', rig member' if sid in members else ''})"
-                                              for sid, st in theirs], history.KNOWN_SHOWN)
-                hint = ("capture again, or name a rig member's session: calibctl solve SESSION_ID"
-                        if any(sid in members for sid, _ in theirs) else "capture again")
+                listing = named_list(
+                    [f"{sid} ({st}{', rig member' if sid in members else ''})" for sid, st in theirs],
+                    history.KNOWN_SHOWN,
+                )
+                hint = (
+                    "capture again, or name a rig member's session: calibctl solve SESSION_ID"
+                    if any(sid in members for sid, _ in theirs)
+                    else "capture again"
+                )
                 raise NotFoundError(f"{what} for serial '{serial}'; its sessions: {listing}", hint)
             serials = list(s.scalars(select(SessionRow.serial).distinct().order_by(SessionRow.serial)))
-            listing = f"serials with sessions: {named_list(serials, history.KNOWN_SHOWN)}" if serials else "no sessions are stored yet"
+            listing = (
+                f"serials with sessions: {named_list(serials, history.KNOWN_SHOWN)}"
+                if serials
+                else "no sessions are stored yet"
+            )
             raise NotFoundError(f"{what} for serial '{serial}'; {listing}", "run `calibctl capture` first")
 
         return self._run(work)
@@ -297,18 +356,27 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
     # calibration artifacts -----------------------------------------------------------------------
 
     def add_artifact(
-        self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str,
+        self,
+        artifact: CalibrationArtifact,
+        *,
+        activate: bool,
+        actor: str,
+        station: str,
+        reason: str,
         expect_version: int | None = None,
     ) -> CalibrationArtifact:
         """Store ``artifact`` as the serial's next version (sealing its hash) and, when ``activate``,
         make it active. Activating a rejected artifact is refused before anything is written;
         ``expect_version``: refuse (nothing written) unless the next version is that one."""
         history.check_activation(artifact, activate, reason)
-        return self._run(lambda s: self._insert_artifact(s, artifact, activate, actor, station, reason, expect_version),
-                         write=True)
+        return self._run(
+            lambda s: self._insert_artifact(s, artifact, activate, actor, station, reason, expect_version),
+            write=True,
+        )
 
-    def add_artifact_once(self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str,
-                          reason: str) -> tuple[CalibrationArtifact, bool]:
+    def add_artifact_once(
+        self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str
+    ) -> tuple[CalibrationArtifact, bool]:
         """``add_artifact`` unless the serial already has a calibration solved from the same capture session
         (``provenance.session_id``): then that one, and False. The look and the insert are one transaction
         under the serial's version lock, so a sync run again after a crash never stores a calibration twice."""
@@ -316,22 +384,39 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
 
         def work(s: Session) -> tuple[CalibrationArtifact, bool]:
             counters.lock(s, "artifact", artifact.serial)
-            row = s.scalars(select(ArtifactRow).where(
-                ArtifactRow.serial == artifact.serial, ArtifactRow.session_id == artifact.provenance.session_id,
-            ).order_by(ArtifactRow.version).limit(1)).first()
+            row = s.scalars(
+                select(ArtifactRow)
+                .where(
+                    ArtifactRow.serial == artifact.serial,
+                    ArtifactRow.session_id == artifact.provenance.session_id,
+                )
+                .order_by(ArtifactRow.version)
+                .limit(1)
+            ).first()
             if row is not None:
                 return codec.decode_artifact(row, by_chain=True), False
             return self._insert_artifact(s, artifact, activate, actor, station, reason, None), True
 
         return self._run(work, write=True)
 
-    def _insert_artifact(self, s: Session, artifact: CalibrationArtifact, activate: bool, actor: str, station: str,
-                         reason: str, expect_version: int | None) -> CalibrationArtifact:
+    def _insert_artifact(
+        self,
+        s: Session,
+        artifact: CalibrationArtifact,
+        activate: bool,
+        actor: str,
+        station: str,
+        reason: str,
+        expect_version: int | None,
+    ) -> CalibrationArtifact:
         version = counters.next_value(s, "artifact", artifact.serial)
         if expect_version is not None and version != expect_version:
-            raise UsageError(f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
-                             f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
-                             "written", "run the command again")
+            raise UsageError(
+                f"{artifact.serial}@{expect_version} cannot be stored: this store's next version "
+                f"of {artifact.serial} is {version} (another was stored meanwhile); nothing was "
+                "written",
+                "run the command again",
+            )
         stored = artifact.model_copy(update={"version": version}).sealed()
         s.add(self._linked("artifact", s, codec.artifact_row(stored, utc_now())))
         s.flush()
@@ -340,7 +425,13 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         return stored
 
     def import_artifact(
-        self, artifact: CalibrationArtifact, *, actor: str, station: str, activate: bool, reason: str | None = None
+        self,
+        artifact: CalibrationArtifact,
+        *,
+        actor: str,
+        station: str,
+        activate: bool,
+        reason: str | None = None,
     ) -> CalibrationArtifact:
         """Store an artifact made elsewhere under its own serial@version after checking its hash.
         The same serial@version with the same hash again is a no-op (plus activation when asked)."""
@@ -357,7 +448,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         def work(s: Session) -> CalibrationArtifact:
             counters.raise_to(s, "artifact", artifact.serial, artifact.version)
             row = s.scalars(
-                select(ArtifactRow).where(ArtifactRow.serial == artifact.serial, ArtifactRow.version == artifact.version)
+                select(ArtifactRow).where(
+                    ArtifactRow.serial == artifact.serial, ArtifactRow.version == artifact.version
+                )
             ).first()
             if row is not None:
                 if row.content_sha256 != artifact.content_sha256:
@@ -372,7 +465,9 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                 s.flush()
                 stored = artifact
             if activate and history.active_in(s, artifact.serial) != artifact.version:
-                history.append_event(s, artifact.serial, artifact.version, "activate", actor, station, why, self.signer)
+                history.append_event(
+                    s, artifact.serial, artifact.version, "activate", actor, station, why, self.signer
+                )
             return stored
 
         return self._run(work, write=True, retry_conflicts=True)
@@ -391,8 +486,8 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
                     raise NotFoundError(
                         f"{serial} has no active version; versions: {listing}",
                         f"ask for a version ({serial}@N) or roll back to an accepted one"
-                        if "accepted" in statuses.values() else
-                        f"none is accepted: recalibrate it (`calibctl calibrate --serial {serial} ...`), or ask for "
+                        if "accepted" in statuses.values()
+                        else f"none is accepted: recalibrate it (`calibctl calibrate --serial {serial} ...`), or ask for "
                         f"a version ({serial}@N) to inspect it",
                     )
                 if statuses.get(wanted) != "accepted":  # only possible if the event log was forged
@@ -422,35 +517,58 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
 
         def work(s: Session) -> list[CalibrationArtifact]:
             history.statuses(s, serial)
-            rows = s.scalars(select(ArtifactRow).where(ArtifactRow.serial == serial).order_by(ArtifactRow.version))
+            rows = s.scalars(
+                select(ArtifactRow).where(ArtifactRow.serial == serial).order_by(ArtifactRow.version)
+            )
             return [codec.decode_artifact(r, by_chain=True) for r in rows]
 
         return self._run(work)
 
-    def active_artifacts(self) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+    def active_artifacts(
+        self,
+    ) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
         """The active version of every serial in three bulk queries (no per-serial round trip), each checked
         by its chain hash (an IntegrityError in its place when that fails), and version -> status of
         every serial with nothing active."""
 
-        def work(s: Session) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
-            latest = select(EventRow.serial, func.max(EventRow.id).label("id")).group_by(EventRow.serial).subquery()
-            active = select(EventRow.serial, EventRow.version).join(latest, EventRow.id == latest.c.id).subquery()
+        def work(
+            s: Session,
+        ) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+            latest = (
+                select(EventRow.serial, func.max(EventRow.id).label("id"))
+                .group_by(EventRow.serial)
+                .subquery()
+            )
+            active = (
+                select(EventRow.serial, EventRow.version).join(latest, EventRow.id == latest.c.id).subquery()
+            )
             rows = s.scalars(
                 select(ArtifactRow)
-                .join(active, (ArtifactRow.serial == active.c.serial) & (ArtifactRow.version == active.c.version))
+                .join(
+                    active,
+                    (ArtifactRow.serial == active.c.serial) & (ArtifactRow.version == active.c.version),
+                )
                 .execution_options(yield_per=1000)
             )
             found: dict[str, CalibrationArtifact | IntegrityError] = {}
-            events = ({} if self.trusted is None else
-                      {e.serial: e for e in s.scalars(select(EventRow).join(latest, EventRow.id == latest.c.id))})
+            events = (
+                {}
+                if self.trusted is None
+                else {
+                    e.serial: e for e in s.scalars(select(EventRow).join(latest, EventRow.id == latest.c.id))
+                }
+            )
             for row in rows:
                 try:
                     art = codec.decode_artifact(row, by_chain=True)
                     self._served(s, "artifact", row)
                     self._served(s, "event", events.get(row.serial))
                     if art.status != "accepted":
-                        raise IntegrityError(f"the active version of {art.serial} is {art.ref}, which is not accepted: "
-                                             "the activation log was changed outside calibctl", codec.TAMPER_HINT)
+                        raise IntegrityError(
+                            f"the active version of {art.serial} is {art.ref}, which is not accepted: "
+                            "the activation log was changed outside calibctl",
+                            codec.TAMPER_HINT,
+                        )
                     found[row.serial] = art
                 except IntegrityError as exc:
                     found[row.serial] = exc
@@ -458,14 +576,18 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
             listing = select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status).order_by(
                 ArtifactRow.serial, ArtifactRow.version
             )
-            for serial, version, status in s.execute(listing.where(ArtifactRow.serial.not_in(select(active.c.serial)))):
+            for serial, version, status in s.execute(
+                listing.where(ArtifactRow.serial.not_in(select(active.c.serial)))
+            ):
                 inactive.setdefault(serial, {})[int(version)] = str(status)
             return found, inactive
 
         return self._run(work)
 
     def serials(self) -> list[str]:
-        return self._run(lambda s: list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial))))
+        return self._run(
+            lambda s: list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial)))
+        )
 
     def active_version(self, serial: str) -> int | None:
         """The version of the serial's latest activation event; None when nothing was ever activated."""
@@ -475,8 +597,16 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         """The version the next artifact of ``serial`` would get (nothing is allocated)."""
         return self._run(lambda s: (counters.peek(s, "artifact", serial) or 0) + 1)
 
-    def rollback(self, serial: str, to_version: int, *, reason: str, actor: str, station: str,
-                 expected_active: int | None | object = history.UNCHECKED) -> ActivationEvent | None:
+    def rollback(
+        self,
+        serial: str,
+        to_version: int,
+        *,
+        reason: str,
+        actor: str,
+        station: str,
+        expected_active: int | None | object = history.UNCHECKED,
+    ) -> ActivationEvent | None:
         """Make ``to_version`` (accepted, intact) the active version of ``serial``; appends an event.
         None when it is the active version already: done, nothing written.
 
@@ -487,12 +617,22 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
 
         def work(s: Session) -> ActivationEvent | None:
             counters.lock(s, "artifact", serial)
-            already = history.check_rollback(serial, to_version, history.statuses(s, serial),
-                                             history.active_in(s, serial), expected_active, f"calibctl history {serial}")
-            codec.decode_artifact(history.artifact_row(s, serial, to_version), by_chain=True)  # never activate tampered bytes
+            already = history.check_rollback(
+                serial,
+                to_version,
+                history.statuses(s, serial),
+                history.active_in(s, serial),
+                expected_active,
+                f"calibctl history {serial}",
+            )
+            codec.decode_artifact(
+                history.artifact_row(s, serial, to_version), by_chain=True
+            )  # never activate tampered bytes
             if already:
                 return None
-            return history.append_event(s, serial, to_version, "rollback", actor, station, reason, self.signer)
+            return history.append_event(
+                s, serial, to_version, "rollback", actor, station, reason, self.signer
+            )
 
         return self._run(work, write=True)
 
@@ -500,7 +640,8 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
         """The serial's activation events, oldest first."""
         return self._run(
             lambda s: [
-                codec.decode_event(r) for r in s.scalars(select(EventRow).where(EventRow.serial == serial).order_by(EventRow.id))
+                codec.decode_event(r)
+                for r in s.scalars(select(EventRow).where(EventRow.serial == serial).order_by(EventRow.id))
             ]
         )
 
@@ -508,16 +649,29 @@ class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, He
 
     def counts(self) -> dict[str, int]:
         def work(s: Session) -> dict[str, int]:
-            tables = {"artifacts": ArtifactRow, "boards": BoardRow, "sessions": SessionRow, "events": EventRow, "images": ImageRow}
-            result = {name: int(s.scalar(select(func.count()).select_from(model)) or 0) for name, model in tables.items()}
+            tables = {
+                "artifacts": ArtifactRow,
+                "boards": BoardRow,
+                "sessions": SessionRow,
+                "events": EventRow,
+                "images": ImageRow,
+            }
+            result = {
+                name: int(s.scalar(select(func.count()).select_from(model)) or 0)
+                for name, model in tables.items()
+            }
             result["serials"] = int(s.scalar(select(func.count(ArtifactRow.serial.distinct()))) or 0)
             return result
 
         return self._run(work)
 
-    def verify(self, trusted: TrustedKeys | None = None, *, require_signature: bool = False, since: str | None = None) -> audit.Audit:
+    def verify(
+        self, trusted: TrustedKeys | None = None, *, require_signature: bool = False, since: str | None = None
+    ) -> audit.Audit:
         """Every chain, signature, counter, event and stored hash (see ``store.audit``); with ``since``
         (a chain head) only what was written after it, once the head is proven unchanged."""
         from calibctl.store import audit  # the whole-store audit: only `db verify` and its callers
 
-        return self._run(lambda s: audit.run(s, trusted or TrustedKeys(), require_signature=require_signature, since=since))
+        return self._run(
+            lambda s: audit.run(s, trusted or TrustedKeys(), require_signature=require_signature, since=since)
+        )

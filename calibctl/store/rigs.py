@@ -55,7 +55,9 @@ def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
             raise IntegrityError(problem, codec.TAMPER_HINT)
     rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {row.name}")
     if rig.name != row.name:
-        raise IntegrityError(f"rig {row.name}: the stored name disagrees with the stored document", codec.TAMPER_HINT)
+        raise IntegrityError(
+            f"rig {row.name}: the stored name disagrees with the stored document", codec.TAMPER_HINT
+        )
     return rig
 
 
@@ -67,33 +69,69 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
     actual = cal.computed_sha256()
     if actual != row.content_sha256:
         raise codec._mismatch(what, row.content_sha256, actual)
-    codec._check_columns(what, {"rig": (row.rig, cal.rig), "version": (row.version, cal.version),
-                                "status": (row.status, cal.status)})
-    return codec.with_signature(cal.model_copy(update={"signature": None}), row, what)  # the row's, never the payload's
+    codec._check_columns(
+        what,
+        {
+            "rig": (row.rig, cal.rig),
+            "version": (row.version, cal.version),
+            "status": (row.status, cal.status),
+        },
+    )
+    return codec.with_signature(
+        cal.model_copy(update={"signature": None}), row, what
+    )  # the row's, never the payload's
 
 
 def _event(row: RigEventRow) -> RigActivation:
     from calibctl.artifacts.rig import RigActivation
 
-    return RigActivation(event_id=row.id, rig=row.rig, version=row.version, previous_version=row.previous_version,
-                         kind=row.kind, actor=row.actor, station=row.station, at=row.at, reason=row.reason)
+    return RigActivation(
+        event_id=row.id,
+        rig=row.rig,
+        version=row.version,
+        previous_version=row.previous_version,
+        kind=row.kind,
+        actor=row.actor,
+        station=row.station,
+        at=row.at,
+        reason=row.reason,
+    )
 
 
 def rig_calibration_row(s: Session, rig: str, version: int) -> RigCalibrationRow:
-    return s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
-                                                     RigCalibrationRow.version == version)).one()
+    return s.scalars(
+        select(RigCalibrationRow).where(RigCalibrationRow.rig == rig, RigCalibrationRow.version == version)
+    ).one()
 
 
 def _active(s: Session, rig: str) -> int | None:
-    return s.scalar(select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1))
+    return s.scalar(
+        select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1)
+    )
 
 
-def _append(s: Session, rig: str, version: int, kind: str, actor: str, station: str, reason: str,
-            signer: Signer | None) -> RigActivation:
+def _append(
+    s: Session,
+    rig: str,
+    version: int,
+    kind: str,
+    actor: str,
+    station: str,
+    reason: str,
+    signer: Signer | None,
+) -> RigActivation:
     """Append one event to the store's rig event log (one hash chain; its counter row is the chain's lock)."""
     counters.next_value(s, "chain", "rig_event")
-    row = RigEventRow(rig=rig, version=version, previous_version=_active(s, rig), kind=kind, actor=actor,
-                      station=station, at=utc_now(), reason=reason)
+    row = RigEventRow(
+        rig=rig,
+        version=version,
+        previous_version=_active(s, rig),
+        kind=kind,
+        actor=actor,
+        station=station,
+        at=utc_now(),
+        reason=reason,
+    )
     chain.link(s, chain.STREAMS["rig_event"], row, signer)
     s.add(row)
     s.flush()
@@ -101,11 +139,16 @@ def _append(s: Session, rig: str, version: int, kind: str, actor: str, station: 
 
 
 def _statuses(s: Session, rig: str) -> dict[int, str]:
-    rows = s.execute(select(RigCalibrationRow.version, RigCalibrationRow.status)
-                     .where(RigCalibrationRow.rig == rig).order_by(RigCalibrationRow.version)).all()
+    rows = s.execute(
+        select(RigCalibrationRow.version, RigCalibrationRow.status)
+        .where(RigCalibrationRow.rig == rig)
+        .order_by(RigCalibrationRow.version)
+    ).all()
     if rows:
         return {int(v): str(st) for v, st in rows}
-    raise NotFoundError(f"rig {rig} has no calibration yet", f"run `calibctl rig solve {rig}` after a rig capture")
+    raise NotFoundError(
+        f"rig {rig} has no calibration yet", f"run `calibctl rig solve {rig}` after a rig capture"
+    )
 
 
 class RigStoreMixin:
@@ -125,10 +168,17 @@ class RigStoreMixin:
         def work(s: Session) -> RigDefinition:
             position = counters.next_value(s, "chain", "rig_definition")  # the stream's lock until commit
             if s.get(RigRow, rig.name) is not None:
-                raise AlreadyExistsError(f"rig {rig.name} is already registered",
-                                         "rig definitions are immutable: register the new layout under a new name")
-            row = RigRow(name=rig.name, id=position, created_at=rig.created_at, payload=payload,
-                         payload_sha256=sha256_hex(payload.encode("utf-8")))
+                raise AlreadyExistsError(
+                    f"rig {rig.name} is already registered",
+                    "rig definitions are immutable: register the new layout under a new name",
+                )
+            row = RigRow(
+                name=rig.name,
+                id=position,
+                created_at=rig.created_at,
+                payload=payload,
+                payload_sha256=sha256_hex(payload.encode("utf-8")),
+            )
             chain.link(s, chain.STREAMS["rig_definition"], row, self.signer)
             s.add(row)
             return rig
@@ -158,9 +208,16 @@ class RigStoreMixin:
                 if s.get(SessionRow, member.session_id) is not None:
                     raise AlreadyExistsError(f"capture session {member.session_id} is already stored")
                 s.add(self._session_linked(s, codec.session_row(member)))  # chained like any session (0009)
-            s.add(RigSessionRow(
-                rig_session_id=session.rig_session_id, rig=session.rig, status=session.status,
-                created_at=session.created_at, payload=payload, payload_sha256=sha256_hex(payload.encode("utf-8"))))
+            s.add(
+                RigSessionRow(
+                    rig_session_id=session.rig_session_id,
+                    rig=session.rig,
+                    status=session.status,
+                    created_at=session.created_at,
+                    payload=payload,
+                    payload_sha256=sha256_hex(payload.encode("utf-8")),
+                )
+            )
             s.flush()
 
         self._run(work, write=True, retry_conflicts=True)
@@ -178,17 +235,28 @@ class RigStoreMixin:
             row = s.scalars(q.order_by(RigSessionRow.created_at.desc()).limit(1)).first()
             if row is None:
                 what = f"rig session {rig_session_id}" if rig_session_id else "an accepted rig session"
-                raise NotFoundError(f"rig {rig} has no {what}", f"run `calibctl rig capture {rig} --source ...` first")
-            out: RigSession = _decode_hashed(RigSession, row.payload, row.payload_sha256,
-                                             f"rig session {row.rig_session_id}")
+                raise NotFoundError(
+                    f"rig {rig} has no {what}", f"run `calibctl rig capture {rig} --source ...` first"
+                )
+            out: RigSession = _decode_hashed(
+                RigSession, row.payload, row.payload_sha256, f"rig session {row.rig_session_id}"
+            )
             return out
 
         return self._run(work)
 
     # calibrations --------------------------------------------------------------------------------
 
-    def add_rig_calibration(self, cal: RigCalibration, *, activate: bool, actor: str, station: str,
-                            reason: str, based_on: int | None | object = UNCHECKED) -> RigCalibration:
+    def add_rig_calibration(
+        self,
+        cal: RigCalibration,
+        *,
+        activate: bool,
+        actor: str,
+        station: str,
+        reason: str,
+        based_on: int | None | object = UNCHECKED,
+    ) -> RigCalibration:
         """Store as the rig's next version (sealed) and activate when asked (accepted only).
 
         Compare-and-set: ``based_on`` is the active version ``cal`` was derived from (a hand-eye edge
@@ -205,11 +273,19 @@ class RigStoreMixin:
                 raise StaleActiveVersionError(
                     f"rig {cal.rig}: the active version changed underneath this write (it was built on {seen}, "
                     f"the active version is now {cal.rig}@{active}); nothing stored",
-                    f"look at `calibctl rig history {cal.rig}` and run the command again on {cal.rig}@{active}")
-            stored = cal.model_copy(update={"version": version}).sealed()  # sealed drops an imported signature
-            row = RigCalibrationRow(rig=stored.rig, version=version, status=stored.status,
-                                    created_at=stored.provenance.created_at, payload=codec.canonical_text(stored),
-                                    content_sha256=stored.content_sha256)
+                    f"look at `calibctl rig history {cal.rig}` and run the command again on {cal.rig}@{active}",
+                )
+            stored = cal.model_copy(
+                update={"version": version}
+            ).sealed()  # sealed drops an imported signature
+            row = RigCalibrationRow(
+                rig=stored.rig,
+                version=version,
+                status=stored.status,
+                created_at=stored.provenance.created_at,
+                payload=codec.canonical_text(stored),
+                content_sha256=stored.content_sha256,
+            )
             chain.link(s, chain.STREAMS["rig"], row, self.signer)
             s.add(row)
             s.flush()
@@ -230,19 +306,33 @@ class RigStoreMixin:
                 raise NotFoundError(
                     f"rig {rig} has no active version; versions: {listing}",
                     f"ask for a version ({rig}@N) or roll back to an accepted one"
-                    if "accepted" in statuses.values() else
-                    f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
-                    f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it")
+                    if "accepted" in statuses.values()
+                    else f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
+                    f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it",
+                )
             if wanted not in statuses:
-                raise NotFoundError(f"rig {rig} has no version {wanted}; versions: {named_list(list(statuses), KNOWN_SHOWN)}",
-                                    f"see `calibctl rig history {rig}`")
-            row = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig,
-                                                           RigCalibrationRow.version == wanted)).one()
+                raise NotFoundError(
+                    f"rig {rig} has no version {wanted}; versions: {named_list(list(statuses), KNOWN_SHOWN)}",
+                    f"see `calibctl rig history {rig}`",
+                )
+            row = s.scalars(
+                select(RigCalibrationRow).where(
+                    RigCalibrationRow.rig == rig, RigCalibrationRow.version == wanted
+                )
+            ).one()
             cal = decode_calibration(row)
             self._served(s, "rig", row)
             if version is None:  # the event that makes it active is served too
-                self._served(s, "rig_event", s.scalars(select(RigEventRow).where(RigEventRow.rig == rig)
-                                                       .order_by(RigEventRow.id.desc()).limit(1)).first())
+                self._served(
+                    s,
+                    "rig_event",
+                    s.scalars(
+                        select(RigEventRow)
+                        .where(RigEventRow.rig == rig)
+                        .order_by(RigEventRow.id.desc())
+                        .limit(1)
+                    ).first(),
+                )
             return cal
 
         return self._run(work)
@@ -250,8 +340,11 @@ class RigStoreMixin:
     def list_rig_calibrations(self, rig: str) -> list[RigCalibration]:
         def work(s: Session) -> list[RigCalibration]:
             _statuses(s, rig)
-            rows = s.scalars(select(RigCalibrationRow).where(RigCalibrationRow.rig == rig)
-                             .order_by(RigCalibrationRow.version))
+            rows = s.scalars(
+                select(RigCalibrationRow)
+                .where(RigCalibrationRow.rig == rig)
+                .order_by(RigCalibrationRow.version)
+            )
             return [decode_calibration(r) for r in rows]
 
         return self._run(work)
@@ -259,8 +352,16 @@ class RigStoreMixin:
     def active_rig_version(self, rig: str) -> int | None:
         return self._run(lambda s: _active(s, rig))
 
-    def rollback_rig(self, rig: str, to_version: int, *, reason: str, actor: str, station: str,
-                     expected_active: int | None | object = UNCHECKED) -> RigActivation | None:
+    def rollback_rig(
+        self,
+        rig: str,
+        to_version: int,
+        *,
+        reason: str,
+        actor: str,
+        station: str,
+        expected_active: int | None | object = UNCHECKED,
+    ) -> RigActivation | None:
         """Make ``rig@to_version`` (accepted, intact) the rig's active version; appends an event (None when
         it is the active version already: done, nothing written).
 
@@ -272,8 +373,14 @@ class RigStoreMixin:
 
         def work(s: Session) -> RigActivation | None:
             counters.lock(s, "rig", rig)
-            already = check_rollback(f"rig {rig}", to_version, _statuses(s, rig), _active(s, rig), expected_active,
-                                     f"calibctl rig history {rig}")
+            already = check_rollback(
+                f"rig {rig}",
+                to_version,
+                _statuses(s, rig),
+                _active(s, rig),
+                expected_active,
+                f"calibctl rig history {rig}",
+            )
             decode_calibration(rig_calibration_row(s, rig, to_version))
             if already:
                 return None
@@ -282,11 +389,19 @@ class RigStoreMixin:
         return self._run(work, write=True)
 
     def rig_events(self, rig: str) -> list[RigActivation]:
-        return self._run(lambda s: [_event(r) for r in s.scalars(
-            select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))])
+        return self._run(
+            lambda s: [
+                _event(r)
+                for r in s.scalars(select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))
+            ]
+        )
 
 
-active_rig, append_rig_event, rig_statuses = _active, _append, _statuses  # for the fleet's rig steps (store.fleet)
+active_rig, append_rig_event, rig_statuses = (
+    _active,
+    _append,
+    _statuses,
+)  # for the fleet's rig steps (store.fleet)
 
 
 def rig_member_session_ids(s: Session) -> set[str]:

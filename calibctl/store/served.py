@@ -28,13 +28,23 @@ from calibctl.store.chain_hash import SPECS, StreamSpec, row_problem, row_values
 Query = Callable[[str, dict[str, Any]], list[Mapping[str, Any]]]
 """Run one SELECT with named parameters; rows as mappings of column name to value."""
 
-TABLES = {"artifact": "calibration_artifacts", "board": "board_revisions", "event": "activation_events",
-          "rig": "rig_calibrations", "rig_event": "rig_activation_events", "check": "check_events",
-          "rig_definition": "rig_definitions", "session": "capture_sessions", "fleet": "fleet_events"}
+TABLES = {
+    "artifact": "calibration_artifacts",
+    "board": "board_revisions",
+    "event": "activation_events",
+    "rig": "rig_calibrations",
+    "rig_event": "rig_activation_events",
+    "check": "check_events",
+    "rig_definition": "rig_definitions",
+    "session": "capture_sessions",
+    "fleet": "fleet_events",
+}
 """Each stream's table (a test keeps it equal to ``chain.STREAMS``)."""
 
-REFUSED_HINT = ("run `calibctl db verify` (with the same keys) to see every record affected; restore the store "
-                "from a backup or re-import the record from a signed export")
+REFUSED_HINT = (
+    "run `calibctl db verify` (with the same keys) to see every record affected; restore the store "
+    "from a backup or re-import the record from a signed export"
+)
 
 
 def _key_filter(spec: StreamSpec, values: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -46,8 +56,11 @@ def _link_problem(spec: StreamSpec, values: Mapping[str, Any], query: Query) -> 
     table, label = TABLES[spec.name], spec.label(values)
     where, params = _key_filter(spec, values)
     seq, row_id = int(values["chain_seq"]), values["id"]
-    near = query(f"SELECT id, chain_seq, chain_prev, chain_hash FROM {table} WHERE {where}"
-                 "chain_seq >= :lo AND chain_seq <= :hi", {**params, "lo": seq - 1, "hi": seq + 1})
+    near = query(
+        f"SELECT id, chain_seq, chain_prev, chain_hash FROM {table} WHERE {where}"
+        "chain_seq >= :lo AND chain_seq <= :hi",
+        {**params, "lo": seq - 1, "hi": seq + 1},
+    )
     at: dict[int, list[Mapping[str, Any]]] = {}
     for r in near:
         at.setdefault(int(r["chain_seq"]), []).append(r)
@@ -57,7 +70,9 @@ def _link_problem(spec: StreamSpec, values: Mapping[str, Any], query: Query) -> 
     if seq > 1 and before is None:
         return f"{label} is at chain position {seq} but the record before it is missing"
     if (before["chain_hash"] if before else None) != values["chain_prev"]:
-        return f"{label} does not follow the record before it: a record was deleted, inserted or rewritten there"
+        return (
+            f"{label} does not follow the record before it: a record was deleted, inserted or rewritten there"
+        )
     if before is not None and row_id is not None and int(before["id"] or 0) >= int(row_id):
         return f"{label} is out of order (its id is lower than the record before it)"
     if after is not None:
@@ -67,27 +82,37 @@ def _link_problem(spec: StreamSpec, values: Mapping[str, Any], query: Query) -> 
             return f"{label} is out of order (its id is higher than the record after it)"
         return None
     scope, column = spec.counter
-    counted = query("SELECT last_value FROM version_counters WHERE scope = :scope AND key = :key",
-                    {"scope": scope, "key": spec.counter_key(spec.key_of(values))})
+    counted = query(
+        "SELECT last_value FROM version_counters WHERE scope = :scope AND key = :key",
+        {"scope": scope, "key": spec.counter_key(spec.key_of(values))},
+    )
     last = int(counted[0]["last_value"]) if counted else None
     if last != int(values[column]):
-        return (f"{label} is the last record of its chain but the {scope} counter says {column} {last}: "
-                "records after it were removed")
+        return (
+            f"{label} is the last record of its chain but the {scope} counter says {column} {last}: "
+            "records after it were removed"
+        )
     return None
 
 
-def _signature_problem(spec: StreamSpec, values: Mapping[str, Any], query: Query, trusted: TrustedKeys) -> str | None:
+def _signature_problem(
+    spec: StreamSpec, values: Mapping[str, Any], query: Query, trusted: TrustedKeys
+) -> str | None:
     label = spec.label(values)
     if values.get("signature") or values.get("key_id"):
         if not trusted.keys:
             return None  # nothing to check it against (as db verify: its report says signatures were not checked)
         subject = values[spec.subject] if spec.subject else None
-        problem = trusted.check(values.get("key_id"), values.get("signature"),
-                                record_message(str(values["chain_hash"]), subject))
+        problem = trusted.check(
+            values.get("key_id"), values.get("signature"), record_message(str(values["chain_hash"]), subject)
+        )
         return None if problem is None else f"{label} {problem}"
     where, params = _key_filter(spec, values)
-    signed = query(f"SELECT 1 AS signed FROM {TABLES[spec.name]} WHERE {where}chain_seq < :seq "
-                   "AND signature IS NOT NULL LIMIT 1", {**params, "seq": int(values["chain_seq"])})
+    signed = query(
+        f"SELECT 1 AS signed FROM {TABLES[spec.name]} WHERE {where}chain_seq < :seq "
+        "AND signature IS NOT NULL LIMIT 1",
+        {**params, "seq": int(values["chain_seq"])},
+    )
     return f"{label} is not signed, but records before it in its chain are" if signed else None
 
 
@@ -96,8 +121,11 @@ def problem(stream: str, row: Any, query: Query, trusted: TrustedKeys) -> str | 
     every column) for its hash, link or signature; else what it would say."""
     spec = SPECS[stream]
     values = row_values(row)
-    return (row_problem(spec, row) or _link_problem(spec, values, query)
-            or _signature_problem(spec, values, query, trusted))
+    return (
+        row_problem(spec, row)
+        or _link_problem(spec, values, query)
+        or _signature_problem(spec, values, query, trusted)
+    )
 
 
 def check(stream: str, row: Any, query: Query, trusted: TrustedKeys | None) -> None:

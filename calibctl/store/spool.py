@@ -59,10 +59,18 @@ from calibctl.store.images import image_file, write_durably
 
 SPOOL_FORMAT = "calibctl-spool-2"  # 2: set-aside and signed records; an older calibctl refuses it (exit 2)
 _FORMER_FORMATS = ("calibctl-spool-1",)  # upgraded on open
-_RECORD_DOMAIN = "calibctl-spool-1"  # the first line a record's sha256 covers: kept, so format-1 records still match
+_RECORD_DOMAIN = (
+    "calibctl-spool-1"  # the first line a record's sha256 covers: kept, so format-1 records still match
+)
 LOCK_WAIT_S = 10.0  # sqlite3's busy wait: the station queueing while a sync marks records
 ORPHAN_GRACE_S = 3600.0  # image files written for a unit that was never queued (cancelled) go after an hour
-_FORMAT_2_COLUMNS = ("set_aside_at", "set_aside_reason", "set_aside_by", "key_id", "signature")  # TEXT, NULL allowed
+_FORMAT_2_COLUMNS = (
+    "set_aside_at",
+    "set_aside_reason",
+    "set_aside_by",
+    "key_id",
+    "signature",
+)  # TEXT, NULL allowed
 _SCHEMA = f"""
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS boards (ref TEXT PRIMARY KEY, name TEXT NOT NULL, revision INTEGER NOT NULL,
@@ -73,10 +81,14 @@ CREATE TABLE IF NOT EXISTS units (
     images TEXT NOT NULL, record_sha256 TEXT NOT NULL, synced_at TEXT, version INTEGER,
     {", ".join(f"{column} TEXT" for column in _FORMAT_2_COLUMNS)});
 """
-_UNITS_COLUMNS = ("seq, serial, session_id, queued_at, session, artifact, session_stored, images, record_sha256, "
-                  "synced_at, version, " + ", ".join(_FORMAT_2_COLUMNS))
-_FULL_HINT = ("free space on the spool's disk (or pass --spool on another disk), then scan the serial again: "
-              "the unit's pictures are still where they arrived")
+_UNITS_COLUMNS = (
+    "seq, serial, session_id, queued_at, session, artifact, session_stored, images, record_sha256, "
+    "synced_at, version, " + ", ".join(_FORMAT_2_COLUMNS)
+)
+_FULL_HINT = (
+    "free space on the spool's disk (or pass --spool on another disk), then scan the serial again: "
+    "the unit's pictures are still where they arrived"
+)
 
 
 def store_identity(db_url: str) -> str:
@@ -107,7 +119,9 @@ class SpoolRecord:
     set_aside_at: str | None = None  # set aside by the operator: kept, never synced
     set_aside_reason: str | None = None
     set_aside_by: str | None = None
-    key_id: str | None = None  # the station key's signature over the record's number and sha256 (None: unkeyed)
+    key_id: str | None = (
+        None  # the station key's signature over the record's number and sha256 (None: unkeyed)
+    )
     signature: str | None = None
 
     def verdict(self) -> str:
@@ -120,15 +134,31 @@ class Spool:
     """An open spool file. ``Spool.open`` checks (or, new, records) its station and store. ``signer``: the key
     records queued are signed with; ``trusted``: the keys records are checked against (None: unkeyed)."""
 
-    def __init__(self, path: Path, conn: sqlite3.Connection, station: str, store: str, *,
-                 signer: Signer | None = None, trusted: TrustedKeys | None = None) -> None:
+    def __init__(
+        self,
+        path: Path,
+        conn: sqlite3.Connection,
+        station: str,
+        store: str,
+        *,
+        signer: Signer | None = None,
+        trusted: TrustedKeys | None = None,
+    ) -> None:
         self.path, self._conn, self.station, self.store = path, conn, station, store
         self.signer, self.trusted = signer, trusted
         self.image_dir = path.with_name(path.name + "-images")
 
     @classmethod
-    def open(cls, path: Path, *, station: str, store: str, create: bool = True, signer: Signer | None = None,
-             trusted: TrustedKeys | None = None) -> Spool:
+    def open(
+        cls,
+        path: Path,
+        *,
+        station: str,
+        store: str,
+        create: bool = True,
+        signer: Signer | None = None,
+        trusted: TrustedKeys | None = None,
+    ) -> Spool:
         if not path.exists() and not create:
             raise InputError(f"there is no spool at {path}", "pass the --spool the station ran with")
         with file_errors("open the spool", path.parent):
@@ -142,14 +172,19 @@ class Spool:
             conn.execute("PRAGMA journal_mode = WAL")
             conn.executescript(_SCHEMA)
             with _tx(conn, path):
-                conn.execute("INSERT OR IGNORE INTO meta VALUES ('format', ?), ('station', ?), ('store', ?), "
-                             "('created_at', ?)", (SPOOL_FORMAT, station, store, utc_now().isoformat()))
+                conn.execute(
+                    "INSERT OR IGNORE INTO meta VALUES ('format', ?), ('station', ?), ('store', ?), "
+                    "('created_at', ?)",
+                    (SPOOL_FORMAT, station, store, utc_now().isoformat()),
+                )
             meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
         except sqlite3.Error as exc:
             if conn is not None:
                 conn.close()
             raise _spool_error(exc, path, "open") from exc
-        spool = cls(path, conn, meta.get("station", ""), meta.get("store", ""), signer=signer, trusted=trusted)
+        spool = cls(
+            path, conn, meta.get("station", ""), meta.get("store", ""), signer=signer, trusted=trusted
+        )
         try:
             spool._check(meta, station, store)
             spool._upgrade(meta)
@@ -160,23 +195,31 @@ class Spool:
 
     def _check(self, meta: dict[str, str], station: str, store: str) -> None:
         if meta.get("format") not in (SPOOL_FORMAT, *_FORMER_FORMATS):
-            raise InputError(f"{self.path} is not a calibctl spool (format {meta.get('format')!r})",
-                             "pass the --spool file the station writes")
+            raise InputError(
+                f"{self.path} is not a calibctl spool (format {meta.get('format')!r})",
+                "pass the --spool file the station writes",
+            )
         if self.station != station:
-            raise UsageError(f"the spool {self.path} belongs to station '{self.station}', not '{station}'; "
-                             "nothing was queued or synced", f"run as that station (--station {self.station}) or "
-                             "pass this station's own --spool")
+            raise UsageError(
+                f"the spool {self.path} belongs to station '{self.station}', not '{station}'; "
+                "nothing was queued or synced",
+                f"run as that station (--station {self.station}) or pass this station's own --spool",
+            )
         if self.store != store:
-            raise UsageError(f"the spool {self.path} queues units for the store {self.store}, not {store}; "
-                             "nothing was queued or synced", f"sync it with --db {self.store} (or pass the --spool "
-                             "of this store)")
+            raise UsageError(
+                f"the spool {self.path} queues units for the store {self.store}, not {store}; "
+                "nothing was queued or synced",
+                f"sync it with --db {self.store} (or pass the --spool of this store)",
+            )
 
     def _upgrade(self, meta: dict[str, str]) -> None:
         """Format 1 -> 2: add the set-aside and signature columns (after the station and store were checked, so
         another station's spool is left as it is)."""
         if meta.get("format") == SPOOL_FORMAT:
             return
-        with _tx(self._conn, self.path):  # under the write lock: two processes opening an old spool upgrade it once
+        with _tx(
+            self._conn, self.path
+        ):  # under the write lock: two processes opening an old spool upgrade it once
             have = {row[1] for row in self._conn.execute("PRAGMA table_info(units)")}
             for column in _FORMAT_2_COLUMNS:
                 if column not in have:
@@ -204,39 +247,74 @@ class Spool:
                     write_durably(path, data)
         return shas
 
-    def queue(self, session: CaptureSession, artifact: CalibrationArtifact | None, *, session_stored: bool) -> int:
+    def queue(
+        self, session: CaptureSession, artifact: CalibrationArtifact | None, *, session_stored: bool
+    ) -> int:
         """Queue one unit (its images are in already); its record number, the order it will be synced in."""
-        images = tuple(sorted({v.image_sha256 for v in session.views if v.image_sha256} |
-                              {o.sha256 for o in session.outcomes if o.sha256})) if not session_stored else ()
+        images = (
+            tuple(
+                sorted(
+                    {v.image_sha256 for v in session.views if v.image_sha256}
+                    | {o.sha256 for o in session.outcomes if o.sha256}
+                )
+            )
+            if not session_stored
+            else ()
+        )
         missing = [sha for sha in images if not image_file(self.image_dir, sha).exists()]
         if missing:  # the capture copies every readable image in before the session exists
-            raise FileSystemError(f"{len(missing)} image(s) of session {session.session_id} are not in the spool "
-                                  f"({self.image_dir}); the unit was not queued", "scan the serial again")
+            raise FileSystemError(
+                f"{len(missing)} image(s) of session {session.session_id} are not in the spool "
+                f"({self.image_dir}); the unit was not queued",
+                "scan the serial again",
+            )
         session_text = canonical_text(session)
         artifact_text = None if artifact is None else canonical_text(artifact)
-        record = self._record_sha256(session.serial, session.session_id, session_text, artifact_text,
-                                     session_stored, images)
+        record = self._record_sha256(
+            session.serial, session.session_id, session_text, artifact_text, session_stored, images
+        )
         with _tx(self._conn, self.path):
-            self._conn.execute("INSERT OR IGNORE INTO boards VALUES (?, ?, ?, ?)",
-                               (session.board.ref, session.board.name, session.board.revision,
-                                canonical_text(session.board)))
+            self._conn.execute(
+                "INSERT OR IGNORE INTO boards VALUES (?, ?, ?, ?)",
+                (
+                    session.board.ref,
+                    session.board.name,
+                    session.board.revision,
+                    canonical_text(session.board),
+                ),
+            )
             cursor = self._conn.execute(
                 "INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, images, "
                 "record_sha256) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (session.serial, session.session_id, utc_now().isoformat(), session_text, artifact_text,
-                 int(session_stored), json.dumps(list(images)), record))
+                (
+                    session.serial,
+                    session.session_id,
+                    utc_now().isoformat(),
+                    session_text,
+                    artifact_text,
+                    int(session_stored),
+                    json.dumps(list(images)),
+                    record,
+                ),
+            )
             assert cursor.lastrowid is not None
             seq = int(cursor.lastrowid)
-            if self.signer is not None:  # the number is the sync order: signed with it, in the same transaction
-                self._conn.execute("UPDATE units SET key_id = ?, signature = ? WHERE seq = ?",
-                                   (self.signer.key_id, self.signer.sign(_seal_message(seq, record)), seq))
+            if (
+                self.signer is not None
+            ):  # the number is the sync order: signed with it, in the same transaction
+                self._conn.execute(
+                    "UPDATE units SET key_id = ?, signature = ? WHERE seq = ?",
+                    (self.signer.key_id, self.signer.sign(_seal_message(seq, record)), seq),
+                )
         return seq
 
     def remember_board(self, board: BoardRevision) -> None:
         """Keep a board revision the store served, for a station that later starts with the store away."""
         with _tx(self._conn, self.path):
-            self._conn.execute("INSERT OR IGNORE INTO boards VALUES (?, ?, ?, ?)",
-                               (board.ref, board.name, board.revision, canonical_text(board)))
+            self._conn.execute(
+                "INSERT OR IGNORE INTO boards VALUES (?, ?, ?, ?)",
+                (board.ref, board.name, board.revision, canonical_text(board)),
+            )
 
     def set_aside(self, seq: int, *, reason: str, operator: str) -> SpoolRecord:
         """Set a queued record aside: kept with its images, never synced (call under ``sync_lock``, so no sync is
@@ -245,23 +323,31 @@ class Spool:
             record = self._record(seq)
             if record.synced_at is not None:
                 stored = "a rejected capture session" if record.version is None else f"v{record.version}"
-                raise UsageError(f"spool record {seq} ({record.serial}, session {record.session_id}) was synced "
-                                 f"{record.synced_at[:19]} as {stored}; a stored record is not set aside",
-                                 f"to stop using the calibration, roll back: calibctl rollback {record.serial} "
-                                 "--to N --reason TEXT")
+                raise UsageError(
+                    f"spool record {seq} ({record.serial}, session {record.session_id}) was synced "
+                    f"{record.synced_at[:19]} as {stored}; a stored record is not set aside",
+                    f"to stop using the calibration, roll back: calibctl rollback {record.serial} "
+                    "--to N --reason TEXT",
+                )
             if record.set_aside_at is not None:
-                raise AlreadyExistsError(f"spool record {seq} ({record.serial}, session {record.session_id}) was set "
-                                         f"aside {record.set_aside_at[:19]} by {record.set_aside_by}: "
-                                         f"{record.set_aside_reason}; nothing changed",
-                                         "calibctl station status lists the records set aside")
-            self._conn.execute("UPDATE units SET set_aside_at = ?, set_aside_reason = ?, set_aside_by = ? WHERE seq = ?",
-                               (utc_now().isoformat(), reason, operator, seq))
+                raise AlreadyExistsError(
+                    f"spool record {seq} ({record.serial}, session {record.session_id}) was set "
+                    f"aside {record.set_aside_at[:19]} by {record.set_aside_by}: "
+                    f"{record.set_aside_reason}; nothing changed",
+                    "calibctl station status lists the records set aside",
+                )
+            self._conn.execute(
+                "UPDATE units SET set_aside_at = ?, set_aside_reason = ?, set_aside_by = ? WHERE seq = ?",
+                (utc_now().isoformat(), reason, operator, seq),
+            )
             return self._record(seq)
 
     def mark_synced(self, seq: int, version: int | None) -> None:
         with _tx(self._conn, self.path):
-            self._conn.execute("UPDATE units SET synced_at = ?, version = ? WHERE seq = ? AND synced_at IS NULL",
-                               (utc_now().isoformat(), version, seq))
+            self._conn.execute(
+                "UPDATE units SET synced_at = ?, version = ? WHERE seq = ? AND synced_at IS NULL",
+                (utc_now().isoformat(), version, seq),
+            )
 
     def prune_images(self, now_s: float | None = None) -> int:
         """Delete image files no queued record needs (synced ones, or a cancelled unit's after an hour)."""
@@ -279,19 +365,31 @@ class Spool:
 
     def counts(self) -> tuple[int, int, int]:
         """(queued, synced, set aside) records, without reading what they hold."""
-        row = self._conn.execute("SELECT COUNT(*) - COUNT(synced_at) - COUNT(set_aside_at), COUNT(synced_at), "
-                                 "COUNT(set_aside_at) FROM units").fetchone()
+        row = self._conn.execute(
+            "SELECT COUNT(*) - COUNT(synced_at) - COUNT(set_aside_at), COUNT(synced_at), "
+            "COUNT(set_aside_at) FROM units"
+        ).fetchone()
         return int(row[0]), int(row[1]), int(row[2])
 
     def _image_shas(self, *, synced: bool) -> set[str]:
-        where = "synced_at IS NOT NULL" if synced else "synced_at IS NULL"  # a set-aside record's images are kept
-        return {sha for (images,) in self._conn.execute(f"SELECT images FROM units WHERE {where}")
-                for sha in json.loads(images)}
+        where = (
+            "synced_at IS NOT NULL" if synced else "synced_at IS NULL"
+        )  # a set-aside record's images are kept
+        return {
+            sha
+            for (images,) in self._conn.execute(f"SELECT images FROM units WHERE {where}")
+            for sha in json.loads(images)
+        }
 
     def records(self, *, pending_only: bool = False, set_aside_only: bool = False) -> list[SpoolRecord]:
         """Every record, oldest first; ``pending_only``: those a sync stores (neither synced nor set aside)."""
-        where = (" WHERE synced_at IS NULL AND set_aside_at IS NULL" if pending_only else
-                 " WHERE set_aside_at IS NOT NULL" if set_aside_only else "")
+        where = (
+            " WHERE synced_at IS NULL AND set_aside_at IS NULL"
+            if pending_only
+            else " WHERE set_aside_at IS NOT NULL"
+            if set_aside_only
+            else ""
+        )
         try:
             rows = self._conn.execute(f"SELECT {_UNITS_COLUMNS} FROM units{where} ORDER BY seq").fetchall()
         except sqlite3.Error as exc:
@@ -301,33 +399,53 @@ class Spool:
     def _record(self, seq: int) -> SpoolRecord:
         row = self._conn.execute(f"SELECT {_UNITS_COLUMNS} FROM units WHERE seq = ?", (seq,)).fetchone()
         if row is None:
-            raise NotFoundError(f"there is no spool record {seq} in {self.path}",
-                                "calibctl station status lists the records by number (#N)")
+            raise NotFoundError(
+                f"there is no spool record {seq} in {self.path}",
+                "calibctl station status lists the records by number (#N)",
+            )
         return _record_of(row)
 
     def board(self, name: str, revision: int | None) -> BoardRevision | None:
         """The newest remembered revision of ``name`` (or that revision); None when the spool never saw it."""
-        query = "SELECT document FROM boards WHERE name = ?" + (" AND revision = ?" if revision is not None else "")
+        query = "SELECT document FROM boards WHERE name = ?" + (
+            " AND revision = ?" if revision is not None else ""
+        )
         params: tuple[object, ...] = (name,) if revision is None else (name, revision)
         row = self._conn.execute(query + " ORDER BY revision DESC LIMIT 1", params).fetchone()
         return None if row is None else BoardRevision.model_validate_json(row[0])
 
     def problem(self, record: SpoolRecord) -> str | None:
         """Why a sync refuses ``record`` (its sha256; keyed: its signature), or None."""
-        expected = self._record_sha256(record.serial, record.session_id, record.session_text, record.artifact_text,
-                                       record.session_stored, record.image_shas)
+        expected = self._record_sha256(
+            record.serial,
+            record.session_id,
+            record.session_text,
+            record.artifact_text,
+            record.session_stored,
+            record.image_shas,
+        )
         if expected != record.record_sha256:
-            return (f"does not match its sha256 (recorded {record.record_sha256[:12]}, content hashes to "
-                    f"{expected[:12]}): it was changed after it was queued, or copied from another spool")
+            return (
+                f"does not match its sha256 (recorded {record.record_sha256[:12]}, content hashes to "
+                f"{expected[:12]}): it was changed after it was queued, or copied from another spool"
+            )
         if self.trusted is None:
             return None  # unkeyed: a record's signature, if any, is not checked
-        found = self.trusted.check(record.key_id, record.signature, _seal_message(record.seq, record.record_sha256))
+        found = self.trusted.check(
+            record.key_id, record.signature, _seal_message(record.seq, record.record_sha256)
+        )
         if found == "is not signed":
-            return ("is not signed, and this station signs its spool: it was queued by a station without the key, or "
-                    "rewritten with its signature taken off")
+            return (
+                "is not signed, and this station signs its spool: it was queued by a station without the key, or "
+                "rewritten with its signature taken off"
+            )
         if found is not None and "does not match" in found:
             return f"{found}: it was rewritten (content and sha256, or its number) after it was queued"
-        return None if found is None else f"{found}: neither this station's key nor one in its trusted_keys folder"
+        return (
+            None
+            if found is None
+            else f"{found}: neither this station's key nor one in its trusted_keys folder"
+        )
 
     def opened(self, record: SpoolRecord) -> tuple[CaptureSession, CalibrationArtifact | None]:
         """The record's session and calibration, after checking its sha256 and, keyed, its signature
@@ -336,22 +454,34 @@ class Spool:
         if problem is not None:
             raise IntegrityError(
                 f"spool record {record.seq} ({record.serial}, session {record.session_id}) {problem}; it and the "
-                f"records after it were not synced", self._restore_hint(record))
+                f"records after it were not synced",
+                self._restore_hint(record),
+            )
         try:
             session = CaptureSession.model_validate_json(record.session_text)
-            artifact = (None if record.artifact_text is None
-                        else CalibrationArtifact.model_validate_json(record.artifact_text))
+            artifact = (
+                None
+                if record.artifact_text is None
+                else CalibrationArtifact.model_validate_json(record.artifact_text)
+            )
         except ValueError as exc:  # pydantic's ValidationError: a record rewritten with its hash
-            raise IntegrityError(f"spool record {record.seq} ({record.serial}) is not a session and calibration "
-                                 f"calibctl wrote: {str(exc).splitlines()[0]}", self._restore_hint(record)) from exc
+            raise IntegrityError(
+                f"spool record {record.seq} ({record.serial}) is not a session and calibration "
+                f"calibctl wrote: {str(exc).splitlines()[0]}",
+                self._restore_hint(record),
+            ) from exc
         if session.session_id != record.session_id or session.serial != record.serial:
-            raise IntegrityError(f"spool record {record.seq} names session {record.session_id} but holds "
-                                 f"{session.session_id}", self._restore_hint(record))
+            raise IntegrityError(
+                f"spool record {record.seq} names session {record.session_id} but holds {session.session_id}",
+                self._restore_hint(record),
+            )
         return session, artifact
 
     def _restore_hint(self, record: SpoolRecord, fix: str = "") -> str:
-        return (f"{fix or f'restore {self.path} from a backup'}; or set it aside (calibctl station set-aside "
-                f"{record.seq} --reason TEXT) so the records after it sync, and recalibrate {record.serial}")
+        return (
+            f"{fix or f'restore {self.path} from a backup'}; or set it aside (calibctl station set-aside "
+            f"{record.seq} --reason TEXT) so the records after it sync, and recalibrate {record.serial}"
+        )
 
     def image_bytes(self, record: SpoolRecord, sha: str) -> bytes:
         """A queued image, checked against its sha256 (IntegrityError when missing or changed)."""
@@ -361,16 +491,38 @@ class Spool:
         except FileNotFoundError:
             data = None
         if data is None or sha256_hex(data) != sha:
-            what = "is missing" if data is None else f"does not match its sha256 (it hashes to {sha256_hex(data)[:12]})"
-            raise IntegrityError(f"image {sha[:12]} of spool record {record.seq} ({record.serial}) {what}: {path}; "
-                                 "it and the records after it were not synced",
-                                 self._restore_hint(record, "put the original file back"))
+            what = (
+                "is missing"
+                if data is None
+                else f"does not match its sha256 (it hashes to {sha256_hex(data)[:12]})"
+            )
+            raise IntegrityError(
+                f"image {sha[:12]} of spool record {record.seq} ({record.serial}) {what}: {path}; "
+                "it and the records after it were not synced",
+                self._restore_hint(record, "put the original file back"),
+            )
         return data
 
-    def _record_sha256(self, serial: str, session_id: str, session_text: str, artifact_text: str | None,
-                       session_stored: bool, images: Sequence[str]) -> str:
-        parts = [_RECORD_DOMAIN, self.station, self.store, serial, session_id, session_text, artifact_text or "",
-                 str(int(session_stored)), ",".join(images)]
+    def _record_sha256(
+        self,
+        serial: str,
+        session_id: str,
+        session_text: str,
+        artifact_text: str | None,
+        session_stored: bool,
+        images: Sequence[str],
+    ) -> str:
+        parts = [
+            _RECORD_DOMAIN,
+            self.station,
+            self.store,
+            serial,
+            session_id,
+            session_text,
+            artifact_text or "",
+            str(int(session_stored)),
+            ",".join(images),
+        ]
         return sha256_hex("\n".join(parts).encode("utf-8"))
 
     # one syncer at a time -------------------------------------------------------------------------
@@ -388,8 +540,11 @@ class Spool:
                 if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                     raise
                 holder = os.pread(fd, 64, 0).decode("ascii", "replace").strip() or "?"
-                raise DatabaseError(f"another process (pid {holder}) is syncing the spool {self.path}; this one "
-                                    f"{nothing_done}", "let it finish (calibctl station status shows what is left)") from exc
+                raise DatabaseError(
+                    f"another process (pid {holder}) is syncing the spool {self.path}; this one "
+                    f"{nothing_done}",
+                    "let it finish (calibctl station status shows what is left)",
+                ) from exc
             os.ftruncate(fd, 0)
             os.pwrite(fd, str(os.getpid()).encode("ascii"), 0)
             yield
@@ -399,8 +554,24 @@ class Spool:
 
 def _record_of(r: tuple[Any, ...]) -> SpoolRecord:
     """A ``units`` row, its columns in ``_UNITS_COLUMNS`` order."""
-    return SpoolRecord(int(r[0]), r[1], r[2], r[3], r[4], r[5], bool(r[6]), tuple(json.loads(r[7])), r[8], r[9], r[10],
-                       r[11], r[12], r[13], r[14], r[15])
+    return SpoolRecord(
+        int(r[0]),
+        r[1],
+        r[2],
+        r[3],
+        r[4],
+        r[5],
+        bool(r[6]),
+        tuple(json.loads(r[7])),
+        r[8],
+        r[9],
+        r[10],
+        r[11],
+        r[12],
+        r[13],
+        r[14],
+        r[15],
+    )
 
 
 def _seal_message(seq: int, record_sha256: str) -> bytes:
@@ -435,15 +606,19 @@ def _full_disk(path: Path) -> Iterator[None]:
     try:
         yield
     except FileSystemError as exc:
-        raise FileSystemError(f"the spool {path} cannot take the unit: {exc.message}; the unit was not queued",
-                              _FULL_HINT) from exc
+        raise FileSystemError(
+            f"the spool {path} cannot take the unit: {exc.message}; the unit was not queued", _FULL_HINT
+        ) from exc
 
 
 def _spool_error(exc: sqlite3.Error, path: Path, action: str) -> FileSystemError | InputError:
     text = str(exc).lower()
     if "full" in text or "disk i/o" in text:
-        return FileSystemError(f"the disk of the spool {path} is full ({exc}); nothing was written to it", _FULL_HINT)
+        return FileSystemError(
+            f"the disk of the spool {path} is full ({exc}); nothing was written to it", _FULL_HINT
+        )
     if "not a database" in text or "no such table" in text:
-        return InputError(f"{path} is not a calibctl spool ({exc})", "pass the --spool file the station writes")
+        return InputError(
+            f"{path} is not a calibctl spool ({exc})", "pass the --spool file the station writes"
+        )
     return FileSystemError(f"cannot {action} the spool {path}: {exc}", "check the path and its disk")
-

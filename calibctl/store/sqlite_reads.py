@@ -34,7 +34,9 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 _PLAIN_SQLITE = re.compile(r"^sqlite:///(?P<path>[^?#%]+)$")
 _DATETIME_COLUMNS = ("created_at", "stored_at", "at")
-LOCK_TIMEOUT_S = 60.0  # engine.DEFAULT_SQLITE_LOCK_TIMEOUT_S (a test keeps them equal); engine imports sqlalchemy
+LOCK_TIMEOUT_S = (
+    60.0  # engine.DEFAULT_SQLITE_LOCK_TIMEOUT_S (a test keeps them equal); engine imports sqlalchemy
+)
 LOCK_TIMEOUT_ENV = "CALIBCTL_DB_LOCK_TIMEOUT_S"  # set: Store reads, applying (and checking) it
 
 
@@ -82,11 +84,15 @@ class SqliteReader:
         if row is not None and self._trusted is not None:
             from calibctl.store import served  # signing and the chain specs: only with keys configured
 
-            served.check(stream, row, lambda sql, params: [vars(r) for r in self._rows(sql, params)], self._trusted)
+            served.check(
+                stream, row, lambda sql, params: [vars(r) for r in self._rows(sql, params)], self._trusted
+            )
 
     def _rows(self, sql: str, *params: object) -> list[SimpleNamespace]:
         """``params``: positional values, or one dict of named ones."""
-        cursor = self._conn.execute(sql, params[0] if len(params) == 1 and isinstance(params[0], dict) else params)
+        cursor = self._conn.execute(
+            sql, params[0] if len(params) == 1 and isinstance(params[0], dict) else params
+        )
         names = [c[0] for c in cursor.description]
         rows = []
         for values in cursor.fetchall():
@@ -98,54 +104,85 @@ class SqliteReader:
         return rows
 
     def _statuses(self, serial: str) -> dict[int, str]:
-        rows = self._rows("SELECT version, status FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial)
+        rows = self._rows(
+            "SELECT version, status FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial
+        )
         if not rows:
             raise Fallback  # unknown serial: Store names the known ones
         return {int(r.version): str(r.status) for r in rows}
 
     def list_artifacts(self, serial: str) -> list[CalibrationArtifact]:
         self._statuses(serial)
-        return [_decode_artifact(r) for r in self._rows(
-            "SELECT * FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial)]
+        return [
+            _decode_artifact(r)
+            for r in self._rows(
+                "SELECT * FROM calibration_artifacts WHERE serial = ? ORDER BY version", serial
+            )
+        ]
 
     def active_version(self, serial: str) -> int | None:
-        rows = self._rows("SELECT version FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial)
+        rows = self._rows(
+            "SELECT version FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial
+        )
         return int(rows[0].version) if rows else None
 
     def events(self, serial: str) -> list[ActivationEvent]:
-        return [codec.decode_event(r) for r in self._rows(  # type: ignore[arg-type]
-            "SELECT id, serial, version, previous_version, kind, actor, station, at, reason FROM activation_events "
-            "WHERE serial = ? ORDER BY id", serial)]
+        return [
+            codec.decode_event(r)  # type: ignore[arg-type]
+            for r in self._rows(
+                "SELECT id, serial, version, previous_version, kind, actor, station, at, reason FROM activation_events "
+                "WHERE serial = ? ORDER BY id",
+                serial,
+            )
+        ]
 
     def checks(self, serial: str) -> list[CheckEvent]:
-        return [codec.decode_check(r) for r in self._rows(  # type: ignore[arg-type]
-            "SELECT check_id, serial, version, passed, payload, payload_sha256 FROM check_events "
-            "WHERE serial = ? ORDER BY id", serial)]
+        return [
+            codec.decode_check(r)  # type: ignore[arg-type]
+            for r in self._rows(
+                "SELECT check_id, serial, version, passed, payload, payload_sha256 FROM check_events "
+                "WHERE serial = ? ORDER BY id",
+                serial,
+            )
+        ]
 
     def get_artifact(self, serial: str, version: int | None = None) -> CalibrationArtifact:
         statuses = self._statuses(serial)
         wanted = self.active_version(serial) if version is None else version
         if wanted not in statuses or (version is None and statuses[wanted] != "accepted"):
             raise Fallback  # nothing active, an active version that is not accepted, an unknown version
-        rows = self._rows("SELECT * FROM calibration_artifacts WHERE serial = ? AND version = ?", serial, wanted)
+        rows = self._rows(
+            "SELECT * FROM calibration_artifacts WHERE serial = ? AND version = ?", serial, wanted
+        )
         art = _decode_artifact(rows[0])
         self._served("artifact", rows[0])
         if version is None and self._trusted is not None:  # the event that makes it active is served too
-            event = self._rows("SELECT * FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial)
+            event = self._rows(
+                "SELECT * FROM activation_events WHERE serial = ? ORDER BY id DESC LIMIT 1", serial
+            )
             self._served("event", event[0])
         return art
 
     def list_boards(self) -> list[BoardRevision]:
-        return [codec.decode_board(r) for r in self._rows(  # type: ignore[arg-type]
-            "SELECT name, revision, kind, measurement_status, payload, payload_sha256 FROM board_revisions "
-            "ORDER BY name, revision")]
+        return [
+            codec.decode_board(r)  # type: ignore[arg-type]
+            for r in self._rows(
+                "SELECT name, revision, kind, measurement_status, payload, payload_sha256 FROM board_revisions "
+                "ORDER BY name, revision"
+            )
+        ]
 
 
 @contextmanager
 def _open(url: str, trusted: TrustedKeys | None = None) -> Iterator[SqliteReader]:
     match = _PLAIN_SQLITE.match(url.strip())
     path = Path(match["path"]) if match else None
-    if path is None or str(path) == ":memory:" or not path.is_file() or os.environ.get(LOCK_TIMEOUT_ENV, "").strip():
+    if (
+        path is None
+        or str(path) == ":memory:"
+        or not path.is_file()
+        or os.environ.get(LOCK_TIMEOUT_ENV, "").strip()
+    ):
         raise Fallback  # another backend or URL form, no file, a lock timeout to apply: Store does it
     # mode=rw never creates the file; as the last connection of a WAL store closing, it removes the -wal and
     # -shm files as the ORM's connection does (mode=ro would leave them). query_only: this connection never writes.
@@ -161,8 +198,12 @@ def _open(url: str, trusted: TrustedKeys | None = None) -> Iterator[SqliteReader
         conn.close()
 
 
-def read(url: str, work: Callable[[StoreReads], T], store: Callable[[], AbstractContextManager[StoreReads]],
-         trusted: TrustedKeys | None = None) -> T:
+def read(
+    url: str,
+    work: Callable[[StoreReads], T],
+    store: Callable[[], AbstractContextManager[StoreReads]],
+    trusted: TrustedKeys | None = None,
+) -> T:
     """``work`` on the sqlite3 reader when it can serve it, else on ``store()`` (a ``Store``, opened with the
     same ``trusted`` keys: with keys, both check each served record's link and signature)."""
     try:

@@ -8,5 +8,8 @@ from calibctl.errors import IntegrityError
 
 def unreadable_datetime(value: object) -> IntegrityError:
     """A stored date and time that does not parse: someone edited the database outside calibctl."""
-    return IntegrityError(f"a stored date and time ({str(value)[:40]!r}) is unreadable: the database was edited "
-                          "outside calibctl", "restore the database from a backup or the records from exports")
+    return IntegrityError(
+        f"a stored date and time ({str(value)[:40]!r}) is unreadable: the database was edited "
+        "outside calibctl",
+        "restore the database from a backup or the records from exports",
+    )

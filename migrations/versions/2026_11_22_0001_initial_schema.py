@@ -80,7 +80,9 @@ def _create_tables() -> None:
         sa.PrimaryKeyConstraint("id", name="pk_calibration_artifacts"),
         sa.UniqueConstraint("serial", "version", name="uq_calibration_artifacts_serial_version"),
         sa.CheckConstraint("version >= 1", name="ck_calibration_artifacts_version_positive"),
-        sa.CheckConstraint("status IN ('accepted', 'rejected')", name="ck_calibration_artifacts_status_known"),
+        sa.CheckConstraint(
+            "status IN ('accepted', 'rejected')", name="ck_calibration_artifacts_status_known"
+        ),
     )
     op.create_index("ix_calibration_artifacts_status", "calibration_artifacts", ["status"])
     op.create_table(

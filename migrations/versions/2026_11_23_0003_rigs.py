@@ -76,8 +76,11 @@ def _create_tables() -> None:
         sa.Column("at", sa.DateTime(timezone=True), nullable=False),
         sa.Column("reason", sa.Text(), nullable=False),
         sa.PrimaryKeyConstraint("id", name="pk_rig_activation_events"),
-        sa.ForeignKeyConstraint(["rig", "version"], ["rig_calibrations.rig", "rig_calibrations.version"],
-                                name="fk_rig_activation_events_rig_version_rig_calibrations"),
+        sa.ForeignKeyConstraint(
+            ["rig", "version"],
+            ["rig_calibrations.rig", "rig_calibrations.version"],
+            name="fk_rig_activation_events_rig_version_rig_calibrations",
+        ),
         sa.CheckConstraint("kind IN ('activate', 'rollback')", name="ck_rig_activation_events_kind_known"),
     )
     op.create_index("ix_rig_activation_events_rig_id", "rig_activation_events", ["rig", "id"])

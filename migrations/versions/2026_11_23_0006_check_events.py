@@ -37,20 +37,29 @@ def upgrade() -> None:
         sa.Column("payload_sha256", sa.String(64), nullable=False),
         sa.PrimaryKeyConstraint("id", name="pk_check_events"),
         sa.UniqueConstraint("check_id", name="uq_check_events_check_id"),
-        sa.ForeignKeyConstraint(["serial", "version"], ["calibration_artifacts.serial", "calibration_artifacts.version"],
-                                name="fk_check_events_serial_version_calibration_artifacts"),
+        sa.ForeignKeyConstraint(
+            ["serial", "version"],
+            ["calibration_artifacts.serial", "calibration_artifacts.version"],
+            name="fk_check_events_serial_version_calibration_artifacts",
+        ),
     )
     op.create_index("ix_check_events_serial_id", TABLE, ["serial", "id"])
     dialect = op.get_context().dialect.name
     if dialect == "sqlite":
         for action in ("UPDATE", "DELETE"):
-            op.execute(f"CREATE TRIGGER trg_{TABLE}_no_{action.lower()} BEFORE {action} ON {TABLE} "
-                       f"BEGIN SELECT RAISE(ABORT, '{MESSAGE}'); END")
+            op.execute(
+                f"CREATE TRIGGER trg_{TABLE}_no_{action.lower()} BEFORE {action} ON {TABLE} "
+                f"BEGIN SELECT RAISE(ABORT, '{MESSAGE}'); END"
+            )
     elif dialect == "postgresql":
-        op.execute(f"CREATE TRIGGER trg_{TABLE}_immutable BEFORE UPDATE OR DELETE ON {TABLE} "
-                   f"FOR EACH ROW EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')")
-        op.execute(f"CREATE TRIGGER trg_{TABLE}_no_truncate BEFORE TRUNCATE ON {TABLE} "
-                   f"FOR EACH STATEMENT EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')")
+        op.execute(
+            f"CREATE TRIGGER trg_{TABLE}_immutable BEFORE UPDATE OR DELETE ON {TABLE} "
+            f"FOR EACH ROW EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')"
+        )
+        op.execute(
+            f"CREATE TRIGGER trg_{TABLE}_no_truncate BEFORE TRUNCATE ON {TABLE} "
+            f"FOR EACH STATEMENT EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')"
+        )
     else:  # pragma: no cover - calibctl refuses other URLs before it gets here
         raise RuntimeError(f"calibctl migrations support sqlite and postgresql, not {dialect}")
 

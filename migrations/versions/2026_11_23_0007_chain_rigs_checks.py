@@ -53,4 +53,8 @@ def downgrade() -> None:
         for column in COLUMNS:
             # SQLite >= 3.35 drops a column in place (a batch copy would lose the triggers).
             conn.execute(sa.text(f"ALTER TABLE {table} DROP COLUMN {column}"))
-    conn.execute(sa.text("DELETE FROM version_counters WHERE scope = 'check' OR (scope = 'chain' AND key = 'rig_event')"))
+    conn.execute(
+        sa.text(
+            "DELETE FROM version_counters WHERE scope = 'check' OR (scope = 'chain' AND key = 'rig_event')"
+        )
+    )

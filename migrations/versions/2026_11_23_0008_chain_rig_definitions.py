@@ -37,7 +37,9 @@ COLUMNS = ("id", "chain_seq", "chain_prev", "chain_hash", "signature", "key_id")
 def _number(conn: sa.Connection) -> None:
     names = conn.execute(sa.text(f"SELECT name FROM {TABLE} ORDER BY created_at, name")).scalars().all()
     for position, name in enumerate(names, start=1):
-        conn.execute(sa.text(f"UPDATE {TABLE} SET id = :id WHERE name = :name"), {"id": position, "name": name})
+        conn.execute(
+            sa.text(f"UPDATE {TABLE} SET id = :id WHERE name = :name"), {"id": position, "name": name}
+        )
 
 
 def upgrade() -> None:

@@ -37,9 +37,16 @@ COLUMNS = ("id", "chain_seq", "chain_prev", "chain_hash", "signature", "key_id")
 
 
 def _number(conn: sa.Connection) -> None:
-    ids = conn.execute(sa.text(f"SELECT session_id FROM {TABLE} ORDER BY started_at, session_id")).scalars().all()
+    ids = (
+        conn.execute(sa.text(f"SELECT session_id FROM {TABLE} ORDER BY started_at, session_id"))
+        .scalars()
+        .all()
+    )
     for position, session_id in enumerate(ids, start=1):
-        conn.execute(sa.text(f"UPDATE {TABLE} SET id = :id WHERE session_id = :sid"), {"id": position, "sid": session_id})
+        conn.execute(
+            sa.text(f"UPDATE {TABLE} SET id = :id WHERE session_id = :sid"),
+            {"id": position, "sid": session_id},
+        )
 
 
 def upgrade() -> None:
@@ -59,5 +66,7 @@ def downgrade() -> None:
     for column in COLUMNS:
         # SQLite >= 3.35 drops a column in place (a batch copy would lose the triggers).
         conn.execute(sa.text(f"ALTER TABLE {TABLE} DROP COLUMN {column}"))
-    conn.execute(sa.text("DELETE FROM version_counters WHERE scope = 'session' OR (scope = 'id' AND key = :key)"),
-                 {"key": TABLE})
+    conn.execute(
+        sa.text("DELETE FROM version_counters WHERE scope = 'session' OR (scope = 'id' AND key = :key)"),
+        {"key": TABLE},
+    )

@@ -47,13 +47,19 @@ def upgrade() -> None:
     dialect = op.get_context().dialect.name
     if dialect == "sqlite":
         for action in ("UPDATE", "DELETE"):
-            op.execute(f"CREATE TRIGGER trg_{TABLE}_no_{action.lower()} BEFORE {action} ON {TABLE} "
-                       f"BEGIN SELECT RAISE(ABORT, '{MESSAGE}'); END")
+            op.execute(
+                f"CREATE TRIGGER trg_{TABLE}_no_{action.lower()} BEFORE {action} ON {TABLE} "
+                f"BEGIN SELECT RAISE(ABORT, '{MESSAGE}'); END"
+            )
     elif dialect == "postgresql":
-        op.execute(f"CREATE TRIGGER trg_{TABLE}_immutable BEFORE UPDATE OR DELETE ON {TABLE} "
-                   f"FOR EACH ROW EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')")
-        op.execute(f"CREATE TRIGGER trg_{TABLE}_no_truncate BEFORE TRUNCATE ON {TABLE} "
-                   f"FOR EACH STATEMENT EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')")
+        op.execute(
+            f"CREATE TRIGGER trg_{TABLE}_immutable BEFORE UPDATE OR DELETE ON {TABLE} "
+            f"FOR EACH ROW EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')"
+        )
+        op.execute(
+            f"CREATE TRIGGER trg_{TABLE}_no_truncate BEFORE TRUNCATE ON {TABLE} "
+            f"FOR EACH STATEMENT EXECUTE FUNCTION calibctl_refuse_change('{MESSAGE}')"
+        )
     else:  # pragma: no cover - calibctl refuses other URLs before it gets here
         raise RuntimeError(f"calibctl migrations support sqlite and postgresql, not {dialect}")
 

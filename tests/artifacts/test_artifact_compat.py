@@ -59,12 +59,23 @@ def test_rejected_corners_are_covered_by_the_hash() -> None:
 
 
 def test_the_two_camera_check_is_covered_by_the_hash() -> None:
-    check = CameraConsistency(group_a=["left01.jpg"], group_b=["right01.jpg"], holdout_rms_px=(0.19, 0.19),
-                              cross_rms_px=(0.32, 0.33), fx_px=(533.0, 537.0), cx_px=(342.0, 326.0),
-                              cy_px=(234.0, 249.0), ratio=1.68, threshold=1.4, two_cameras_suspected=True)
+    check = CameraConsistency(
+        group_a=["left01.jpg"],
+        group_b=["right01.jpg"],
+        holdout_rms_px=(0.19, 0.19),
+        cross_rms_px=(0.32, 0.33),
+        fx_px=(533.0, 537.0),
+        cx_px=(342.0, 326.0),
+        cy_px=(234.0, 249.0),
+        ratio=1.68,
+        threshold=1.4,
+        two_cameras_suspected=True,
+    )
     art = calibration().model_copy(update={"camera_consistency": check}).sealed()
     assert art.computed_sha256() == art.content_sha256 != calibration().content_sha256
-    flipped = art.model_copy(update={"camera_consistency": check.model_copy(update={"two_cameras_suspected": False})})
+    flipped = art.model_copy(
+        update={"camera_consistency": check.model_copy(update={"two_cameras_suspected": False})}
+    )
     assert flipped.computed_sha256() != art.content_sha256
 
 
@@ -103,8 +114,13 @@ def test_the_view_level_check_round_trips_and_is_covered_by_the_hash() -> None:
     assert art.computed_sha256() == art.content_sha256 != base.content_sha256
     again = parse_document(CalibrationArtifact, json.loads(art.model_dump_json()), "new.json")
     assert again.stdev.view_level == check and again.computed_sha256() == art.content_sha256
-    flipped = art.model_copy(update={"stdev": art.stdev.model_copy(
-        update={"view_level": check.model_copy(update={"used": "jacobian"})})})
+    flipped = art.model_copy(
+        update={
+            "stdev": art.stdev.model_copy(
+                update={"view_level": check.model_copy(update={"used": "jacobian"})}
+            )
+        }
+    )
     assert flipped.computed_sha256() != art.content_sha256
     with pytest.raises(ValidationError, match="used"):
         ViewLevelSigma(sigma_factor=1.0, views=13, used="bootstrap", rule="r")  # type: ignore[arg-type]

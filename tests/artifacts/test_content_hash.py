@@ -22,9 +22,14 @@ from tests.artifacts.factories import calibration
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
 
 json_values = st.recursive(
-    st.none() | st.booleans() | st.floats(allow_nan=False, allow_infinity=False)
-    | st.integers(min_value=-(2**53 - 1), max_value=2**53 - 1) | st.text(),
-    lambda children: st.lists(children, max_size=5) | st.dictionaries(st.text(max_size=8), children, max_size=5),
+    st.none()
+    | st.booleans()
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.integers(min_value=-(2**53 - 1), max_value=2**53 - 1)
+    | st.text(),
+    lambda children: (
+        st.lists(children, max_size=5) | st.dictionaries(st.text(max_size=8), children, max_size=5)
+    ),
     max_leaves=20,
 )
 
@@ -43,8 +48,19 @@ def test_numbers_use_ecmascript_formatting(x):
 
 def test_rfc8785_number_examples():
     # RFC 8785 appendix B style cases: integral floats lose ".0", small and large numbers switch to exponents
-    cases = {1.0: b"1", -0.0: b"0", 1e-7: b"1e-7", 1e-6: b"0.000001", 1e21: b"1e+21", 1e20: b"100000000000000000000",
-             5e-324: b"5e-324", 9007199254740994.0: b"9007199254740994", 1.2345678901234568e20: b"123456789012345680000", 0.1 + 0.2: b"0.30000000000000004", 333333333.3333333: b"333333333.3333333"}
+    cases = {
+        1.0: b"1",
+        -0.0: b"0",
+        1e-7: b"1e-7",
+        1e-6: b"0.000001",
+        1e21: b"1e+21",
+        1e20: b"100000000000000000000",
+        5e-324: b"5e-324",
+        9007199254740994.0: b"9007199254740994",
+        1.2345678901234568e20: b"123456789012345680000",
+        0.1 + 0.2: b"0.30000000000000004",
+        333333333.3333333: b"333333333.3333333",
+    }
     assert {x: jcs_bytes(x) for x in cases} == cases
     with pytest.raises(ValueError, match="not exactly representable"):
         jcs_bytes(2**53)  # beyond Number.MAX_SAFE_INTEGER: another language would read another number
@@ -68,8 +84,10 @@ def test_the_legacy_golden_fixture_still_verifies():
     art = CalibrationArtifact.model_validate(doc)
     assert art.content_hash_algorithm == LEGACY_HASH
     assert art.computed_sha256() == art.content_sha256
-    assert hashlib.sha256(rfc8785.dumps({k: v for k, v in doc.items() if k != "content_sha256"})).hexdigest() \
-        != art.content_sha256  # the old form really is another hash
+    assert (
+        hashlib.sha256(rfc8785.dumps({k: v for k, v in doc.items() if k != "content_sha256"})).hexdigest()
+        != art.content_sha256
+    )  # the old form really is another hash
 
 
 def test_a_legacy_artifact_cannot_be_relabelled_without_failing(tmp_path):
@@ -85,7 +103,9 @@ def test_a_legacy_artifact_cannot_be_relabelled_without_failing(tmp_path):
 
 def test_legacy_artifacts_import_verified_and_their_hash_is_kept_as_provenance(tmp_path):
     robot = f"sqlite:///{tmp_path / 'robot.db'}"
-    result = CliRunner().invoke(app, ["--db", robot, "import", str(FIXTURES / "camera_front.json"), "--no-activate"])
+    result = CliRunner().invoke(
+        app, ["--db", robot, "import", str(FIXTURES / "camera_front.json"), "--no-activate"]
+    )
     assert result.exit_code == 0, result.output
     with Store.open(robot) as store:
         serial = store.serials()[0]

@@ -50,7 +50,9 @@ def test_the_recipe_checks_a_signed_camera_export_and_a_signed_rig_export(sqlite
             os.replace(target / "rig.json", out)
         doc = json.loads(out.read_text())
         assert doc["content_hash_algorithm"] == "sha256-rfc8785"
-        assert doc["signature"]["algorithm"] == "ed25519"  # signed camera artifact and signed rig version alike
+        assert (
+            doc["signature"]["algorithm"] == "ed25519"
+        )  # signed camera artifact and signed rig version alike
         _run_recipe_on(out, monkeypatch)
         doc["content_sha256"] = "0" * 64
         (folder / "CAM-0042.json").write_text(json.dumps(doc))

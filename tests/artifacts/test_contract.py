@@ -127,8 +127,12 @@ def test_rig_hand_eye_fields_are_absent_while_empty_and_frames_are_checked() -> 
     from tests.store.rig_documents import rig_calibration, rig_definition
 
     cal = rig_calibration().sealed()
-    assert "handeye" not in cal.model_dump(mode="json") and "frames" not in rig_definition().model_dump(mode="json")
-    assert rig_definition().model_copy(update={"frames": ["imu"]}).model_dump(mode="json")["frames"] == ["imu"]
+    assert "handeye" not in cal.model_dump(mode="json") and "frames" not in rig_definition().model_dump(
+        mode="json"
+    )
+    assert rig_definition().model_copy(update={"frames": ["imu"]}).model_dump(mode="json")["frames"] == [
+        "imu"
+    ]
     data = rig_definition().model_dump(mode="json")
     for frames in (["CAM-0001"], ["imu", "imu"]):
         with pytest.raises(pydantic.ValidationError, match="listed twice"):

@@ -14,14 +14,25 @@ UNSEALED = "0" * 64
 
 def _result(**changes) -> HandEyeResult:
     data = {
-        "parent_frame": "lidar", "child_frame": "camera", "status": "accepted", "method": "park",
+        "parent_frame": "lidar",
+        "child_frame": "camera",
+        "status": "accepted",
+        "method": "park",
         "transform": RigidTransform(translation_m=(0.3, 0.1, 0.0), rotation_wxyz=(1.0, 0.0, 0.0, 0.0)),
         "uncertainty": None,
         "gates": [EdgeGate(gate="lever-arm", passed=True, value=1.2, threshold=0.5, message="ok")],
-        "lever_arm_singular_values": (2.0, 1.5, 1.2), "motions": [],
-        "provenance": EdgeProvenance(calibctl_version="0.1.0", opencv_version="5.0.0", station="s", operator="o",
-                                     created_at=dt.datetime(2026, 11, 23, tzinfo=dt.UTC), input_file="m.csv",
-                                     input_sha256="a" * 64, input_shape="poses"),
+        "lever_arm_singular_values": (2.0, 1.5, 1.2),
+        "motions": [],
+        "provenance": EdgeProvenance(
+            calibctl_version="0.1.0",
+            opencv_version="5.0.0",
+            station="s",
+            operator="o",
+            created_at=dt.datetime(2026, 11, 23, tzinfo=dt.UTC),
+            input_file="m.csv",
+            input_sha256="a" * 64,
+            input_shape="poses",
+        ),
         "content_sha256": UNSEALED,
     }
     data.update(changes)
@@ -35,13 +46,24 @@ def test_sealed_result_hash_detects_a_change():
     assert HandEyeResult.model_validate_json(doc.model_dump_json()) == doc
 
 
-@pytest.mark.parametrize(("changes", "message"), [
-    ({"transform": None}, "an accepted result needs a transform and every gate passed"),
-    ({"gates": [EdgeGate(gate="lever-arm", passed=False, value=0.03, threshold=0.5, message="unobservable")]},
-     "an accepted result needs a transform and every gate passed"),
-    ({"status": "rejected"}, "a rejected result carries no transform"),
-    ({"child_frame": "lidar"}, "parent_frame and child_frame must differ"),
-])
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"transform": None}, "an accepted result needs a transform and every gate passed"),
+        (
+            {
+                "gates": [
+                    EdgeGate(
+                        gate="lever-arm", passed=False, value=0.03, threshold=0.5, message="unobservable"
+                    )
+                ]
+            },
+            "an accepted result needs a transform and every gate passed",
+        ),
+        ({"status": "rejected"}, "a rejected result carries no transform"),
+        ({"child_frame": "lidar"}, "parent_frame and child_frame must differ"),
+    ],
+)
 def test_inconsistent_documents_are_refused(changes, message):
     with pytest.raises(ValidationError, match=message):
         _result(**changes)

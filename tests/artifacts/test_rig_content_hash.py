@@ -45,8 +45,13 @@ def _legacy(model: RigCalibration | HandEyeResult) -> dict:
 def test_versions_hashed_the_old_way_still_verify_and_cannot_be_relabelled():
     old_result = _legacy(_result().sealed())
     loaded = HandEyeResult.model_validate(old_result)
-    assert loaded.content_hash_algorithm == LEGACY_HASH and loaded.computed_sha256() == old_result["content_sha256"]
-    assert "content_hash_algorithm" not in json.loads(loaded.model_dump_json())  # its dump, and hash, unchanged
+    assert (
+        loaded.content_hash_algorithm == LEGACY_HASH
+        and loaded.computed_sha256() == old_result["content_sha256"]
+    )
+    assert "content_hash_algorithm" not in json.loads(
+        loaded.model_dump_json()
+    )  # its dump, and hash, unchanged
     old_rig = _legacy(rig_calibration().model_copy(update={"handeye": [loaded]}).sealed())
     rig = RigCalibration.model_validate(old_rig)
     assert rig.content_hash_algorithm == LEGACY_HASH and rig.computed_sha256() == old_rig["content_sha256"]

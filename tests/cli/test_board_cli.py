@@ -12,7 +12,16 @@ from typer.testing import CliRunner
 from calibctl.artifacts.common import sha256_hex
 from calibctl.cli.main import app
 
-MEASURED = ["--uncertainty-mm", "0.02", "--instrument", "Mitutoyo 500-196", "--measured-by", "qa-anna", "--measured-on", "2026-03-11"]
+MEASURED = [
+    "--uncertainty-mm",
+    "0.02",
+    "--instrument",
+    "Mitutoyo 500-196",
+    "--measured-by",
+    "qa-anna",
+    "--measured-on",
+    "2026-03-11",
+]
 CHESS = ["--cols", "9", "--rows", "6", "--square-mm", "25.03"]
 
 
@@ -33,10 +42,20 @@ def test_measured_board_is_registered_with_its_provenance(run, tmp_path: Path):
     result = run("board", "add", "A17", *CHESS, *MEASURED, "--evidence", str(evidence), "--json")
     assert result.exit_code == 0, result.output
     board = json.loads(result.stdout)
-    assert (board["name"], board["revision"], board["kind"], board["cols"], board["rows"]) == ("A17", 1, "chessboard", 9, 6)
+    assert (board["name"], board["revision"], board["kind"], board["cols"], board["rows"]) == (
+        "A17",
+        1,
+        "chessboard",
+        9,
+        6,
+    )
     m = board["measurement"]
     assert m["status"] == "measured-single" and m["square_size_m"] == 0.02503 and m["uncertainty_m"] == 2e-05
-    assert (m["instrument"], m["measured_by"], m["measured_on"]) == ("Mitutoyo 500-196", "qa-anna", "2026-03-11")
+    assert (m["instrument"], m["measured_by"], m["measured_on"]) == (
+        "Mitutoyo 500-196",
+        "qa-anna",
+        "2026-03-11",
+    )
     assert m["evidence_sha256"] == sha256_hex(evidence.read_bytes()) and m["evidence_name"] == "calipers.jpg"
     assert board["created_by"] == "tester"
     assert "NOMINAL" not in result.stderr
@@ -53,7 +72,9 @@ def test_board_without_a_measurement_is_nominal_and_warned_about(run):
     result = run("board", "add", "N1", *CHESS)
     assert result.exit_code == 0, result.output
     assert "registered board N1@1: chessboard 9x6 inner corners, square 25.030 mm NOMINAL" in result.stdout
-    assert "warning: N1@1 has a NOMINAL square size; every calibration made with it fails lint" in result.stderr
+    assert (
+        "warning: N1@1 has a NOMINAL square size; every calibration made with it fails lint" in result.stderr
+    )
     shown = json.loads(run("board", "show", "N1", "--json").stdout)
     assert shown["measurement"] == {
         "status": "nominal", "square_size_m": 0.02503, "uncertainty_m": None, "instrument": None,
@@ -63,7 +84,20 @@ def test_board_without_a_measurement_is_nominal_and_warned_about(run):
 
 def test_re_measuring_creates_revision_2_and_name_at_rev_selects(run):
     assert run("board", "add", "A17", *CHESS).exit_code == 0
-    second = run("board", "add", "A17", "--cols", "9", "--rows", "6", "--square-mm", "25.01", *MEASURED, "--note", "re-measured")
+    second = run(
+        "board",
+        "add",
+        "A17",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25.01",
+        *MEASURED,
+        "--note",
+        "re-measured",
+    )
     assert second.exit_code == 0 and "registered board A17@2" in second.stdout
     assert "NOMINAL" in run("board", "show", "A17@1").stdout
     latest = run("board", "show", "A17")
@@ -87,17 +121,44 @@ def test_charuco_board_records_marker_and_dictionary(run):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        ([*CHESS, "--instrument", "calipers"], "a measured square size needs --uncertainty-mm, --instrument, --measured-by, --measured-on; missing: --uncertainty-mm, --measured-by, --measured-on"),
-        ([*CHESS, *MEASURED[:6], "--measured-on", "11/03/2026"], "--measured-on '11/03/2026' is not a date; use YYYY-MM-DD"),
-        ([*CHESS, *MEASURED[:6], "--measured-on", "2026-02-30"], "--measured-on '2026-02-30' is not a date: day is out of range for month"),
-        ([*CHESS, *MEASURED[:6], "--measured-on", (dt.date.today() + dt.timedelta(days=30)).isoformat()], "is in the future"),
-        ([*CHESS, "--evidence", "/no/such/photo.jpg", *MEASURED], "cannot read evidence file /no/such/photo.jpg: No such file or directory"),
-        (["--cols", "9", "--rows", "6", "--square-mm", "0"], "--square-mm 0 must be a positive length below 1000 mm"),
-        ([*CHESS, "--uncertainty-mm", "30", *MEASURED[2:]], "--uncertainty-mm 30 must be positive and smaller than the square"),
+        (
+            [*CHESS, "--instrument", "calipers"],
+            "a measured square size needs --uncertainty-mm, --instrument, --measured-by, --measured-on; missing: --uncertainty-mm, --measured-by, --measured-on",
+        ),
+        (
+            [*CHESS, *MEASURED[:6], "--measured-on", "11/03/2026"],
+            "--measured-on '11/03/2026' is not a date; use YYYY-MM-DD",
+        ),
+        (
+            [*CHESS, *MEASURED[:6], "--measured-on", "2026-02-30"],
+            "--measured-on '2026-02-30' is not a date: day is out of range for month",
+        ),
+        (
+            [*CHESS, *MEASURED[:6], "--measured-on", (dt.date.today() + dt.timedelta(days=30)).isoformat()],
+            "is in the future",
+        ),
+        (
+            [*CHESS, "--evidence", "/no/such/photo.jpg", *MEASURED],
+            "cannot read evidence file /no/such/photo.jpg: No such file or directory",
+        ),
+        (
+            ["--cols", "9", "--rows", "6", "--square-mm", "0"],
+            "--square-mm 0 must be a positive length below 1000 mm",
+        ),
+        (
+            [*CHESS, "--uncertainty-mm", "30", *MEASURED[2:]],
+            "--uncertainty-mm 30 must be positive and smaller than the square",
+        ),
         ([*CHESS, "--marker-mm", "20"], "--marker-mm and --dictionary apply to ChArUco boards only"),
         (["--kind", "charuco", *CHESS], "a ChArUco board needs --marker-mm and --dictionary"),
-        (["--kind", "charuco", *CHESS, "--marker-mm", "20", "--dictionary", "DICT_NOPE"], "unknown ArUco dictionary 'DICT_NOPE'"),
-        (["--kind", "charuco", *CHESS, "--marker-mm", "26", "--dictionary", "DICT_5X5_100"], "0 < marker_size_m < square_size_m"),
+        (
+            ["--kind", "charuco", *CHESS, "--marker-mm", "20", "--dictionary", "DICT_NOPE"],
+            "unknown ArUco dictionary 'DICT_NOPE'",
+        ),
+        (
+            ["--kind", "charuco", *CHESS, "--marker-mm", "26", "--dictionary", "DICT_5X5_100"],
+            "0 < marker_size_m < square_size_m",
+        ),
         (["--cols", "1", "--rows", "6", "--square-mm", "25"], "at least 2x2 inner corners"),
     ],
 )
@@ -134,7 +195,10 @@ def test_changing_the_pattern_of_an_existing_name_is_refused(run):
     run("board", "add", "A17", *CHESS)
     result = run("board", "add", "A17", "--cols", "8", "--rows", "6", "--square-mm", "25")
     assert result.exit_code == 2
-    assert "board A17@1 is a 9x6 chessboard; a new revision may only re-measure it, but cols differ" in result.stderr
+    assert (
+        "board A17@1 is a 9x6 chessboard; a new revision may only re-measure it, but cols differ"
+        in result.stderr
+    )
 
 
 def test_empty_registry_lists_nothing(run):
@@ -145,8 +209,20 @@ def test_empty_registry_lists_nothing(run):
 
 def test_a_square_size_given_in_metres_is_registered_but_warned_about(run):
     """0.025 typed for 25 mm: intrinsics do not notice, every distance is 1000x off; say so at once."""
-    result = run("board", "add", "M1", "--cols", "9", "--rows", "6", "--square-mm", "0.025", "--uncertainty-mm",
-                 "0.0001", *MEASURED[2:])
+    result = run(
+        "board",
+        "add",
+        "M1",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "0.025",
+        "--uncertainty-mm",
+        "0.0001",
+        *MEASURED[2:],
+    )
     assert result.exit_code == 0, result.output
     assert "warning: M1@1 has a 0.025 mm square: --square-mm takes millimetres" in result.stderr
     assert "register it again with --square-mm 25;" in result.stderr

@@ -14,13 +14,25 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 
 RUNNER = CliRunner()
-MEASURED = ["--uncertainty-mm", "0.02", "--instrument", "calipers", "--measured-by", "anna", "--measured-on", "2026-03-11"]
+MEASURED = [
+    "--uncertainty-mm",
+    "0.02",
+    "--instrument",
+    "calipers",
+    "--measured-by",
+    "anna",
+    "--measured-on",
+    "2026-03-11",
+]
 SPAN = ["--span-uncertainty-mm", "0.1", "--span-instrument", "steel rule"]
 
 
 def add(db: str, square: str, *extra: str):
-    return RUNNER.invoke(app, ["--db", db, "board", "add", "A17", "--cols", "9", "--rows", "6", "--square-mm", square,
-                               *extra], terminal_width=120)
+    return RUNNER.invoke(
+        app,
+        ["--db", db, "board", "add", "A17", "--cols", "9", "--rows", "6", "--square-mm", square, *extra],
+        terminal_width=120,
+    )
 
 
 def test_a_square_size_the_span_confirms_is_measured(sqlite_url: str) -> None:
@@ -49,11 +61,14 @@ def test_a_span_in_the_wrong_units_is_named_as_such(sqlite_url: str, span: str, 
     assert f"is {slip} that: wrong units" in done.stderr
 
 
-@pytest.mark.parametrize(("extra", "message"), [
-    (["--span-mm", "200"], "a span measurement needs --span-uncertainty-mm, --span-instrument"),
-    (["--span-instrument", "rule"], "give --span-mm too"),
-    (["--span-mm", "200", *SPAN, "--span-squares", "9"], "--span-squares 9 must be between 1 and 8"),
-])
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--span-mm", "200"], "a span measurement needs --span-uncertainty-mm, --span-instrument"),
+        (["--span-instrument", "rule"], "give --span-mm too"),
+        (["--span-mm", "200", *SPAN, "--span-squares", "9"], "--span-squares 9 must be between 1 and 8"),
+    ],
+)
 def test_an_incomplete_span_is_a_usage_error(sqlite_url: str, extra: list[str], message: str) -> None:
     done = add(sqlite_url, "25.0", *MEASURED, *extra)
     assert done.exit_code == 2 and message in done.stderr
@@ -70,10 +85,15 @@ def test_one_measurement_is_measured_single_and_lint_warns(sqlite_url: str, tmp_
     art = calibration()
     single = art.board.measurement.model_copy(update={"status": "measured-single"})
     path = tmp_path / "single.json"
-    path.write_text(art.model_copy(update={"board": art.board.model_copy(update={"measurement": single})})
-                    .sealed().model_dump_json())
+    path.write_text(
+        art.model_copy(update={"board": art.board.model_copy(update={"measurement": single})})
+        .sealed()
+        .model_dump_json()
+    )
     linted = RUNNER.invoke(app, ["lint", str(path), "--format", "json"])
-    findings = [f for f in json.loads(linted.stdout)["results"][0]["findings"] if f["rule"].startswith("square-size")]
+    findings = [
+        f for f in json.loads(linted.stdout)["results"][0]["findings"] if f["rule"].startswith("square-size")
+    ]
     assert [(f["rule"], f["severity"]) for f in findings] == [("square-size-single", "warning")]
     assert linted.exit_code == 0, linted.output  # a warning, not an error
 

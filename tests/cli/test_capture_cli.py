@@ -79,7 +79,9 @@ def test_opencv_left_images_every_outcome_and_the_gates(db: str, left: Path) -> 
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
     session = doc["session"]
-    assert {o["name"]: o["status"] for o in session["outcomes"]} == {p.name: "accepted" for p in left.glob("*.jpg")}
+    assert {o["name"]: o["status"] for o in session["outcomes"]} == {
+        p.name: "accepted" for p in left.glob("*.jpg")
+    }
     assert all(o["corners_found"] == 54 and o["image_size"] == [640, 480] for o in session["outcomes"])
     gates = {g["gate"]: g for g in session["gates"]}
     # measured: sigma5/sigma1 5.3e-4, 6 tilt directions at 20-45 deg, 9 of 9 cells, 13 views
@@ -120,25 +122,35 @@ def test_udacity_calibrate_rejects_on_sigma_fx_and_names_the_corner_scatter(db: 
     assert art["status"] == "rejected" and art["rms_px"] > 0.5
     sigma = next(f for f in art["lint"] if f["rule"] == "sigma-fx")
     assert sigma["severity"] == "error" and sigma["message"].endswith("limit 2.000 px")
-    assert f"this fit leaves {art['rms_px']:.3f} px" in sigma["fix"] and "board flat and rigid" in sigma["fix"]
+    assert (
+        f"this fit leaves {art['rms_px']:.3f} px" in sigma["fix"] and "board flat and rigid" in sigma["fix"]
+    )
 
 
 def test_a_board_registered_one_column_short_is_refused(db: str, left: Path) -> None:
     result = capture(db, left, board="B8x6")
     assert result.exit_code == 2, result.output
-    assert "the pictures show a larger board than B8x6@1 (8x6 inner corners): a 9x6 chessboard" in result.stderr
+    assert (
+        "the pictures show a larger board than B8x6@1 (8x6 inner corners): a 9x6 chessboard" in result.stderr
+    )
     assert "calibctl board show B8x6" in result.stderr and "registered as 9x6" in result.stderr
     assert sessions(db) == []
 
 
 @needs_datasets
-def test_a_board_registered_far_too_small_is_refused_even_when_it_is_found_only_once(db: str, tmp_path: Path) -> None:
+def test_a_board_registered_far_too_small_is_refused_even_when_it_is_found_only_once(
+    db: str, tmp_path: Path
+) -> None:
     # baka-stereo is a 7x10 board. Registered as 9x6 (A17), OpenCV 5.0 finds a 9x6 part of it in one left
     # image (marked blurred) and nothing in the rest: one view cannot be probed for a larger board, so this
     # capture was stored as rejected with tilt and coverage hints. Now the images without the pattern are
     # probed and show the 10x7 board. (OpenCV 4.10 finds no 9x6 part: "no 9x6 chessboard", also naming 10x7.)
-    names = ["left_001772846904048.jpg", "left_001772846782141.jpg", "left_001772847170203.jpg",
-             "left_001772859893197.jpg"]
+    names = [
+        "left_001772846904048.jpg",
+        "left_001772846782141.jpg",
+        "left_001772847170203.jpg",
+        "left_001772859893197.jpg",
+    ]
     listing = tmp_path / "baka-left.txt"
     listing.write_text("".join(f"{BAKA_STEREO / 'left' / name}\n" for name in names))
     result = capture(db, listing)
@@ -188,7 +200,9 @@ def test_centre_scenario_exits_1_with_the_coverage_hint(db: str, tmp_path_factor
     doc = json.loads(result.stdout)
     coverage = next(g for g in doc["session"]["gates"] if g["gate"] == "coverage")
     assert not coverage["passed"] and coverage["reason"] == "coverage.missing_cells"
-    assert coverage["hint"].startswith("cover the top-left corner") and "bottom-right corner" in coverage["hint"]
+    assert (
+        coverage["hint"].startswith("cover the top-left corner") and "bottom-right corner" in coverage["hint"]
+    )
     assert sessions(db)[0].status == "rejected"
 
 
@@ -208,8 +222,18 @@ def test_video_scenario_selects_frames_automatically(db: str, tmp_path_factory) 
 def test_station_file_override_is_used(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("gates: {observability_min: 1.0e-3}\n", encoding="utf-8")
-    result = invoke(db, "--station-config", str(station), "capture", "--serial", SERIAL, "--board", "A17",
-                    "--source", str(good))
+    result = invoke(
+        db,
+        "--station-config",
+        str(station),
+        "capture",
+        "--serial",
+        SERIAL,
+        "--board",
+        "A17",
+        "--source",
+        str(good),
+    )
     assert result.exit_code == 1, result.output
     assert "gate observability FAIL" in result.stdout and "(needs 0.001)" in result.stdout
 
@@ -229,8 +253,16 @@ def test_calibrate_good_scenario_recovers_fx_within_3_sigma(db: str, good: Path)
 
 
 def test_calibrate_does_not_solve_a_rejected_capture(db: str, tmp_path_factory) -> None:
-    result = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source",
-                    str(rendered(tmp_path_factory, "flat")))
+    result = invoke(
+        db,
+        "calibrate",
+        "--serial",
+        SERIAL,
+        "--board",
+        "A17",
+        "--source",
+        str(rendered(tmp_path_factory, "flat")),
+    )
     assert result.exit_code == 1, result.output
     assert "not solved" in result.stdout
     with Store.open(db) as store:
@@ -238,7 +270,9 @@ def test_calibrate_does_not_solve_a_rejected_capture(db: str, tmp_path_factory) 
 
 
 def test_calibrate_unknown_model_exits_2_before_capturing(db: str, good: Path) -> None:
-    result = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--model", "k9")
+    result = invoke(
+        db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--model", "k9"
+    )
     assert result.exit_code == 2 and "unknown model 'k9'" in result.stderr
     assert sessions(db) == []
 
@@ -249,8 +283,19 @@ def test_calibrate_unknown_model_exits_2_before_capturing(db: str, good: Path) -
 def test_prune_deletes_expired_images_only(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("image_retention_days: 5\n", encoding="utf-8")
-    done = invoke(db, "--station-config", str(station), "calibrate", "--serial", SERIAL, "--board", "A17",
-                  "--source", str(good), "--json")
+    done = invoke(
+        db,
+        "--station-config",
+        str(station),
+        "calibrate",
+        "--serial",
+        SERIAL,
+        "--board",
+        "A17",
+        "--source",
+        str(good),
+        "--json",
+    )
     assert done.exit_code == 0, done.output
     session_id = json.loads(done.stdout)["capture"]["session"]["session_id"]
     with Store.open(db) as store:
@@ -307,14 +352,18 @@ def test_folder_of_unreadable_images_lists_each_and_exits_2(db: str, tmp_path: P
     result = capture(db, folder)
     assert result.exit_code == 2, result.output
     assert "none of the 3 image files" in result.stderr and "nothing was stored" in result.stderr
-    for line in ("a.png: not a decodable image (3000 bytes)", "b.jpg: not a decodable image (10 bytes)",
-                 "c.png: not a decodable image (0 bytes)"):
+    for line in (
+        "a.png: not a decodable image (3000 bytes)",
+        "b.jpg: not a decodable image (10 bytes)",
+        "c.png: not a decodable image (0 bytes)",
+    ):
         assert line in result.stderr
     assert sessions(db) == []
 
 
-def test_an_unreadable_file_among_good_images_is_an_outcome_not_an_error(db: str, tmp_path: Path,
-                                                                         good: Path) -> None:
+def test_an_unreadable_file_among_good_images_is_an_outcome_not_an_error(
+    db: str, tmp_path: Path, good: Path
+) -> None:
     folder = tmp_path / "mixed"
     shutil.copytree(good, folder)
     (folder / "view-012.png").write_bytes((good / "view-000.png").read_bytes()[:5000])
@@ -333,10 +382,13 @@ def test_undecodable_video_exits_2(db: str, tmp_path: Path) -> None:
     assert sessions(db) == []
 
 
-@pytest.mark.parametrize(("source", "message"), [
-    ("/dev/video99", "cannot open camera /dev/video99: /dev/video99 does not exist"),
-    ("99", "cannot open camera 99: OpenCV could not open the device"),
-])
+@pytest.mark.parametrize(
+    ("source", "message"),
+    [
+        ("/dev/video99", "cannot open camera /dev/video99: /dev/video99 does not exist"),
+        ("99", "cannot open camera 99: OpenCV could not open the device"),
+    ],
+)
 def test_camera_that_cannot_be_opened_exits_2(db: str, source: str, message: str) -> None:
     result = capture(db, source)
     assert result.exit_code == 2 and message in result.stderr
@@ -373,7 +425,10 @@ def test_pattern_far_from_the_pictures_names_the_board_they_show(db: str, tmp_pa
     shutil.copy(good / "view-000.png", one / "view-000.png")
     result = capture(db, one, board="B16x12")
     assert result.exit_code == 2, result.output
-    assert "no 16x12 chessboard" in result.stderr and "a 9x6 chessboard is visible in view-000.png" in result.stderr
+    assert (
+        "no 16x12 chessboard" in result.stderr
+        and "a 9x6 chessboard is visible in view-000.png" in result.stderr
+    )
     assert "registered as 9x6" in result.stderr
 
 
@@ -387,13 +442,19 @@ def test_pattern_with_no_board_in_the_pictures_says_so(db: str, tmp_path: Path) 
     assert "are not visible either (probed 1 of them)" in result.stderr and sessions(db) == []
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--source", "/nonexistent/folder"], "--source /nonexistent/folder does not exist"),
-    (["--source", "{good}/view-000.png"], "is a single image"),
-    (["--source", "{good}", "--max-views", "10"], "--max-views and --duration apply to video and camera sources"),
-    (["--source", "{good}", "--serial", "CAM 7"], "'CAM 7' is not a camera serial"),
-    (["--source", "{good}", "--board", "A17@x"], "is not a board reference"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--source", "/nonexistent/folder"], "--source /nonexistent/folder does not exist"),
+        (["--source", "{good}/view-000.png"], "is a single image"),
+        (
+            ["--source", "{good}", "--max-views", "10"],
+            "--max-views and --duration apply to video and camera sources",
+        ),
+        (["--source", "{good}", "--serial", "CAM 7"], "'CAM 7' is not a camera serial"),
+        (["--source", "{good}", "--board", "A17@x"], "is not a board reference"),
+    ],
+)
 def test_bad_arguments_exit_2(db: str, good: Path, args: list[str], message: str) -> None:
     args = [a.replace("{good}", str(good)) for a in args]
     base = {"--serial": SERIAL, "--board": "A17"}
@@ -408,8 +469,18 @@ def test_bad_arguments_exit_2(db: str, good: Path, args: list[str], message: str
 def test_impossible_station_threshold_exits_2(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("gates: {tilt_directions_min: 9}\n", encoding="utf-8")
-    result = invoke(db, "--station-config", str(station), "capture", "--serial", SERIAL, "--board", "A17",
-                    "--source", str(good))
+    result = invoke(
+        db,
+        "--station-config",
+        str(station),
+        "capture",
+        "--serial",
+        SERIAL,
+        "--board",
+        "A17",
+        "--source",
+        str(good),
+    )
     assert result.exit_code == 2 and "gates.tilt_directions_min" in result.stderr
 
 
@@ -439,7 +510,9 @@ def test_live_view_on_terminals_progress_lines_elsewhere_and_with_json(monkeypat
     from calibctl.cli import live_view
 
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO(), force_terminal=True))
-    assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.TerminalObserver)
+    assert isinstance(
+        capture_observer(as_json=False, min_views=8, max_views=None), live_view.TerminalObserver
+    )
     assert isinstance(capture_observer(as_json=True, min_views=8, max_views=None), live_view.LogObserver)
     monkeypatch.setattr(live_view, "stderr", Console(file=io.StringIO()))  # a pipe or a log file
     assert isinstance(capture_observer(as_json=False, min_views=8, max_views=None), live_view.LogObserver)
@@ -455,10 +528,13 @@ def test_progress_lines_come_at_the_start_and_then_every_few_seconds(capsys) -> 
         now[0] += 0.5  # an image every half second: 20 s in all
         observer.image_done(done, 40, f"v{done:02d}.png", "accepted" if done % 4 else "no_board")
     lines = capsys.readouterr().err.splitlines()
-    assert lines[0] == ("calibctl capture: examining 40 images (a progress line every 5 s; Ctrl-C stops, "
-                        "nothing is stored)")
-    assert lines[1:] == [f"calibctl capture: {n} of 40 images examined ({n - n // 4} accepted, {n // 4} no_board), "
-                         f"{n // 2} s" for n in (10, 20, 30, 40)]
+    assert lines[0] == (
+        "calibctl capture: examining 40 images (a progress line every 5 s; Ctrl-C stops, nothing is stored)"
+    )
+    assert lines[1:] == [
+        f"calibctl capture: {n} of 40 images examined ({n - n // 4} accepted, {n // 4} no_board), {n // 2} s"
+        for n in (10, 20, 30, 40)
+    ]
 
 
 # --source as a glob or a list file -----------------------------------------------------------------
@@ -497,8 +573,10 @@ def test_a_folder_holding_both_cameras_is_rejected_at_capture_with_the_hint(db: 
 def test_a_list_file_captures_exactly_the_files_it_names(db: str, tmp_path: Path) -> None:
     listing = tmp_path / "right-camera.txt"
     right = sorted(LEFT_RIGHT.glob("right*.jpg"))
-    listing.write_text("# the right camera of the stereo sample\n" +
-                       "".join(f"{os.path.relpath(p, tmp_path)}\n" for p in right))
+    listing.write_text(
+        "# the right camera of the stereo sample\n"
+        + "".join(f"{os.path.relpath(p, tmp_path)}\n" for p in right)
+    )
     result = capture(db, listing, "--json")
     assert result.exit_code == 0, result.output
     session = json.loads(result.stdout)["session"]
@@ -512,7 +590,9 @@ def test_a_glob_over_mixed_image_sizes_exits_2_naming_them_and_stores_nothing(db
     result = capture(db, f"{UDACITY}/calibration*.jpg")
     assert result.exit_code == 2, result.output
     assert "mixes image sizes (1280x720: " in result.stderr
-    assert "1281x721: calibration15.jpg, calibration7.jpg); nothing was stored" in " ".join(result.stderr.split())
+    assert "1281x721: calibration15.jpg, calibration7.jpg); nothing was stored" in " ".join(
+        result.stderr.split()
+    )
     assert sessions(db) == []
     with Store.open(db) as store:
         assert not store.image_dir.exists() or not any(p.is_file() for p in store.image_dir.rglob("*"))
@@ -530,19 +610,25 @@ def test_a_list_file_naming_missing_files_exits_2_naming_them(db: str, tmp_path:
     listing.write_text(f"{good / 'view-000.png'}\nview-404.png\n")
     result = capture(db, listing)
     assert result.exit_code == 2, result.output
-    assert "names 1 file(s) that cannot be used; nothing was stored: line 2: view-404.png (missing)" \
+    assert (
+        "names 1 file(s) that cannot be used; nothing was stored: line 2: view-404.png (missing)"
         in " ".join(result.stderr.split())
+    )
     assert sessions(db) == []
 
 
-def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, good: Path, monkeypatch) -> None:
+def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(
+    db: str, good: Path, monkeypatch
+) -> None:
     from calibctl.core.capture import image_outcomes
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(image_outcomes, "detect_board", interrupted)
-    monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: False)  # threads: the patch reaches them
+    monkeypatch.setattr(
+        image_outcomes.worker_pool, "is_warm", lambda workers: False
+    )  # threads: the patch reaches them
     result = capture(db, good)
     assert result.exit_code == 130, result.output
     assert "calibctl capture: examining 12 images" in result.stderr
@@ -551,8 +637,22 @@ def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(db: str, go
 
 
 def test_capture_with_jobs_stores_the_same_session_as_one_job(db: str, good: Path) -> None:
-    runs = [invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--jobs", jobs, "--json")
-            for jobs in ("1", "2")]
+    runs = [
+        invoke(
+            db,
+            "capture",
+            "--serial",
+            SERIAL,
+            "--board",
+            "A17",
+            "--source",
+            str(good),
+            "--jobs",
+            jobs,
+            "--json",
+        )
+        for jobs in ("1", "2")
+    ]
     assert [r.exit_code for r in runs] == [0, 0], [r.output for r in runs]
     first, second = (json.loads(r.stdout)["session"] for r in runs)
     assert [o for o in first["outcomes"] if o not in second["outcomes"]] == []

@@ -37,7 +37,8 @@ def group_pids(pgid: int) -> set[int]:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process group from /proc (Linux)")
 def test_sigint_to_the_process_group_during_parallel_detection_stores_nothing(
-        sqlite_url: str, good: Path, tmp_path: Path) -> None:
+    sqlite_url: str, good: Path, tmp_path: Path
+) -> None:
     with Store.open(sqlite_url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     folder = tmp_path / "many"
@@ -45,9 +46,28 @@ def test_sigint_to_the_process_group_during_parallel_detection_stores_nothing(
     views = sorted(good.glob("*.png"))
     for i in range(400):  # far more than the workers finish before the signal
         shutil.copy(views[i % len(views)], folder / f"img-{i:03d}.png")
-    proc = subprocess.Popen([sys.executable, "-m", "calibctl", "--db", sqlite_url, "capture", "--serial", "CAM-1",
-                             "--board", "A17", "--source", str(folder), "--jobs", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "calibctl",
+            "--db",
+            sqlite_url,
+            "capture",
+            "--serial",
+            "CAM-1",
+            "--board",
+            "A17",
+            "--source",
+            str(folder),
+            "--jobs",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 120
         # calibctl, the resource tracker, the fork server and a worker: detection is running

@@ -56,9 +56,12 @@ def assets(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path | str]:
     for serial, board in (("CAM-GOOD", "A17"), ("CAM-TYPO", "TYPO")):
         done = invoke(url, "calibrate", "--serial", serial, "--board", board, "--source", str(good))
         assert done.exit_code == 0, done.output
-    return {"db": root / "calibctl.db", "good": good,
-            "fixture": _render_fixture(root / "fixture", (640, 480)),
-            "small": _render_fixture(root / "small", (320, 240), n=2)}
+    return {
+        "db": root / "calibctl.db",
+        "good": good,
+        "fixture": _render_fixture(root / "fixture", (640, 480)),
+        "small": _render_fixture(root / "small", (320, 240), n=2),
+    }
 
 
 @pytest.fixture
@@ -82,11 +85,15 @@ def test_an_unchanged_camera_passes_and_the_check_is_in_its_history(db: str, ass
 def test_the_23mm_typo_passes_the_residuals_and_is_caught_by_the_reference_distance(db: str, assets) -> None:
     plain = invoke(db, "check", "CAM-TYPO", "--source", str(assets["fixture"]))
     assert plain.exit_code == 0, plain.output  # the seed's point: no residual can see a gauge error
-    done = invoke(db, "check", "CAM-TYPO", "--source", str(assets["fixture"]), "--reference-distance", "0.450+-0.0005")
+    done = invoke(
+        db, "check", "CAM-TYPO", "--source", str(assets["fixture"]), "--reference-distance", "0.450+-0.0005"
+    )
     assert done.exit_code == 1, done.output
     assert "ratio 0.920" in done.stdout
     assert "the metric scale is wrong (board square size?); the residual cannot show it" in done.stdout
-    good = invoke(db, "check", "CAM-GOOD", "--source", str(assets["fixture"]), "--reference-distance", "450+-0.5mm")
+    good = invoke(
+        db, "check", "CAM-GOOD", "--source", str(assets["fixture"]), "--reference-distance", "450+-0.5mm"
+    )
     assert good.exit_code == 0, good.output
     assert "distance  0.45" in good.stdout and "ratio 1.00" in good.stdout
 
@@ -95,7 +102,11 @@ def test_a_stored_failed_check_records_its_reason(db: str, assets) -> None:
     invoke(db, "check", "CAM-TYPO", "--source", str(assets["fixture"]), "--reference-distance", "0.45+-0.001")
     with Store.open(db) as store:
         (event,) = store.checks("CAM-TYPO")
-    assert not event.passed and event.distance is not None and event.distance.ratio == pytest.approx(0.92, abs=0.004)
+    assert (
+        not event.passed
+        and event.distance is not None
+        and event.distance.ratio == pytest.approx(0.92, abs=0.004)
+    )
     assert "metric scale is wrong" in event.reasons[0]
 
 
@@ -108,27 +119,37 @@ def test_images_of_another_size_exit_2_naming_both_sizes(db: str, assets) -> Non
         assert store.checks("CAM-GOOD") == []
 
 
-@pytest.mark.parametrize(("value", "message"), [
-    ("450+-0.5", "off by a factor of 1000 (mm for m?)"),
-    ("4.5+-0.001", "off by a factor of 10"),
-    ("1.2+-0.001", "nowhere near the surveyed 1.200 m"),
-])
-def test_a_reference_distance_the_board_never_matches_exits_2(db: str, assets, value: str, message: str) -> None:
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("450+-0.5", "off by a factor of 1000 (mm for m?)"),
+        ("4.5+-0.001", "off by a factor of 10"),
+        ("1.2+-0.001", "nowhere near the surveyed 1.200 m"),
+    ],
+)
+def test_a_reference_distance_the_board_never_matches_exits_2(
+    db: str, assets, value: str, message: str
+) -> None:
     done = invoke(db, "check", "CAM-GOOD", "--source", str(assets["fixture"]), "--reference-distance", value)
     assert done.exit_code == 2, done.output
     assert message in done.stderr and "Hint:" in done.stderr
 
 
 def test_views_at_several_distances_cannot_match_one_reference(db: str, assets) -> None:
-    done = invoke(db, "check", "CAM-GOOD", "--source", str(assets["good"]), "--reference-distance", "0.45+-0.001")
+    done = invoke(
+        db, "check", "CAM-GOOD", "--source", str(assets["good"]), "--reference-distance", "0.45+-0.001"
+    )
     assert done.exit_code == 2
     assert "the board was not held at one distance" in done.stderr
 
 
-@pytest.mark.parametrize(("value", "message"), [
-    ("far", "is not D+-S"),
-    ("0.45+-0.01", "cannot judge a 1 % scale error"),
-])
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("far", "is not D+-S"),
+        ("0.45+-0.01", "cannot judge a 1 % scale error"),
+    ],
+)
 def test_an_unusable_reference_distance_is_a_usage_error(db: str, assets, value: str, message: str) -> None:
     done = invoke(db, "check", "CAM-GOOD", "--source", str(assets["fixture"]), "--reference-distance", value)
     assert done.exit_code == 2 and message in done.stderr
@@ -146,7 +167,10 @@ def test_check_events_are_immutable_in_the_database(db: str, assets) -> None:
     engine = make_engine(db)
     try:
         for statement in ("UPDATE check_events SET passed = 0", "DELETE FROM check_events"):
-            with pytest.raises(sa_exc.DBAPIError, match="check events are append-only"), engine.begin() as conn:
+            with (
+                pytest.raises(sa_exc.DBAPIError, match="check events are append-only"),
+                engine.begin() as conn,
+            ):
                 conn.execute(text(statement))
     finally:
         engine.dispose()
@@ -171,15 +195,19 @@ def test_a_video_source_is_refused(db: str, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("n", [1, 3, 9])
-def test_below_the_views_its_statistics_need_check_cannot_judge_and_stores_nothing(db: str, assets, tmp_path, n) -> None:
+def test_below_the_views_its_statistics_need_check_cannot_judge_and_stores_nothing(
+    db: str, assets, tmp_path, n
+) -> None:
     few = tmp_path / "few"
     few.mkdir()
     for path in sorted(Path(assets["fixture"]).glob("*.png"))[:n]:
         shutil.copy(path, few / path.name)
     done = invoke(db, "check", "CAM-GOOD", "--source", str(few))
     assert done.exit_code == 2, done.output
-    assert (f"cannot judge CAM-GOOD@1 from {n} board view(s) in {n} image(s): the check's statistics need at "
-            "least 10; nothing was stored") in done.stderr
+    assert (
+        f"cannot judge CAM-GOOD@1 from {n} board view(s) in {n} image(s): the check's statistics need at "
+        "least 10; nothing was stored"
+    ) in done.stderr
     assert f"take {10 - n} more pictures" in done.stderr
     with Store.open(db) as store:
         assert store.checks("CAM-GOOD") == []  # no FAIL written into the camera's history

@@ -30,8 +30,18 @@ def fisheye_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
         store.add_board(measured_board("A17", square_mm=25.0))
     run_synth(root / "cal", seed=1, views=12, fisheye_fov_deg=150.0)
     run_synth(root / "fresh", seed=2, views=10, fisheye_fov_deg=150.0)
-    done = invoke(url, "calibrate", "--serial", "FE-0001", "--board", "A17", "--source", str(root / "cal"),
-                  "--model", "fisheye")
+    done = invoke(
+        url,
+        "calibrate",
+        "--serial",
+        "FE-0001",
+        "--board",
+        "A17",
+        "--source",
+        str(root / "cal"),
+        "--model",
+        "fisheye",
+    )
     assert done.exit_code == 0, done.output
     return url, root / "fresh"
 

@@ -29,7 +29,9 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> str:
     url = f"sqlite:///{tmp_path_factory.mktemp('real-check') / 'calibctl.db'}"
     with Store.open(url) as store:
         store.add_board(measured_board("LR", square_mm=25.0))
-    done = invoke(url, "calibrate", "--serial", "LEFT", "--board", "LR", "--source", f"{LEFT_RIGHT}/left*.jpg")
+    done = invoke(
+        url, "calibrate", "--serial", "LEFT", "--board", "LR", "--source", f"{LEFT_RIGHT}/left*.jpg"
+    )
     assert done.exit_code == 0, done.output
     return url
 
@@ -44,8 +46,9 @@ def _plain_opencv_rms(paths: list[Path], K: np.ndarray, D: np.ndarray) -> dict[s
         found, corners = cv2.findChessboardCorners(gray, (9, 6))
         if not found:
             continue
-        corners = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1),
-                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001))
+        corners = cv2.cornerSubPix(
+            gray, corners, (11, 11), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
+        )
         _, rvec, tvec = cv2.solvePnP(obj, corners, K, D)
         proj, _ = cv2.projectPoints(obj, rvec, tvec, K, D)
         residuals = corners.reshape(-1, 2) - proj.reshape(-1, 2)
@@ -69,8 +72,9 @@ def test_the_residuals_agree_with_a_plain_opencv_reprojection(db: str) -> None:
     done = invoke(db, "check", "LEFT", "--source", f"{LEFT_RIGHT}/right*.jpg", "--json")
     event = json.loads(done.stdout)
     ours = dict(zip(event["views"], event["view_rms_px"], strict=True))
-    plain = _plain_opencv_rms(sorted(LEFT_RIGHT.glob("right*.jpg")), np.array(art.camera_matrix),
-                              np.array(art.dist_coeffs))
+    plain = _plain_opencv_rms(
+        sorted(LEFT_RIGHT.glob("right*.jpg")), np.array(art.camera_matrix), np.array(art.dist_coeffs)
+    )
     common = sorted(set(ours) & set(plain))
     assert len(common) >= 10
     diffs = np.array([ours[n] - plain[n] for n in common])

@@ -44,7 +44,9 @@ def test_the_station_help_names_the_watch_rules_own_waits() -> None:
 
 def test_waits_left_out_are_the_watch_rules_and_given_ones_are_kept() -> None:
     assert _watch_rule(True, 12, None, None, None) == WatchRule(12)
-    assert _watch_rule(True, None, "DONE", 0.0, 30.0) == WatchRule(None, "DONE", settle_s=0.0, unit_timeout_s=30.0)
+    assert _watch_rule(True, None, "DONE", 0.0, 30.0) == WatchRule(
+        None, "DONE", settle_s=0.0, unit_timeout_s=30.0
+    )
     assert _watch_rule(False, None, None, None, None) is None
 
 

@@ -62,7 +62,10 @@ def test_shell_completion_is_on():
     env = {"_CALIBCTL_COMPLETE": "complete_bash", "COMP_WORDS": "calibctl his", "COMP_CWORD": "1"}
     assert runner.invoke(app, [], prog_name="calibctl", env=env).stdout.split() == ["history"]
     env = {"_CALIBCTL_COMPLETE": "complete_bash", "COMP_WORDS": "calibctl export X --fo", "COMP_CWORD": "3"}
-    assert set(runner.invoke(app, [], prog_name="calibctl", env=env).stdout.split()) == {"--format", "--force"}
+    assert set(runner.invoke(app, [], prog_name="calibctl", env=env).stdout.split()) == {
+        "--format",
+        "--force",
+    }
 
 
 def test_version_names_calibctl_opencv_and_numpy():
@@ -74,10 +77,31 @@ def test_version_names_calibctl_opencv_and_numpy():
 
 def test_long_lines_are_never_broken_when_the_output_is_not_a_terminal(sqlite_url):
     instrument = "Mitutoyo 500-196 digital calipers, " * 6  # about 210 characters
-    res = runner.invoke(app, ["--db", sqlite_url, "board", "add", "A17", "--cols", "9", "--rows", "6",
-                              "--square-mm", "25.03", "--uncertainty-mm", "0.02", "--instrument", instrument,
-                              "--measured-by", "anna-from-the-metrology-lab-" * 4, "--measured-on", "2026-03-11"],
-                        terminal_width=80)
+    res = runner.invoke(
+        app,
+        [
+            "--db",
+            sqlite_url,
+            "board",
+            "add",
+            "A17",
+            "--cols",
+            "9",
+            "--rows",
+            "6",
+            "--square-mm",
+            "25.03",
+            "--uncertainty-mm",
+            "0.02",
+            "--instrument",
+            instrument,
+            "--measured-by",
+            "anna-from-the-metrology-lab-" * 4,
+            "--measured-on",
+            "2026-03-11",
+        ],
+        terminal_width=80,
+    )
     assert res.exit_code == 0, res.output
     listed = runner.invoke(app, ["--db", sqlite_url, "board", "list"], terminal_width=80).stdout
     row = next(line for line in listed.splitlines() if "A17@1" in line)

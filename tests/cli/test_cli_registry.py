@@ -12,8 +12,11 @@ from calibctl.cli.examples import attach_examples
 from calibctl.cli.main import app
 from calibctl.cli.registry import COMMAND_MODULES, makers
 
-STYLE = {"pretty_exceptions_short": app.pretty_exceptions_short, "rich_markup_mode": app.rich_markup_mode,
-         "suggest_commands": app.suggest_commands}
+STYLE = {
+    "pretty_exceptions_short": app.pretty_exceptions_short,
+    "rich_markup_mode": app.rich_markup_mode,
+    "suggest_commands": app.suggest_commands,
+}
 
 
 def test_the_table_names_each_command_by_the_module_that_registers_it() -> None:
@@ -27,8 +30,13 @@ def test_the_table_names_each_command_by_the_module_that_registers_it() -> None:
 
 def _described(command) -> tuple:
     subs = getattr(command, "commands", {})
-    return (command.name, command.help, command.epilog, [(p.name, p.opts, p.default) for p in command.params],
-            {name: _described(sub) for name, sub in subs.items()})
+    return (
+        command.name,
+        command.help,
+        command.epilog,
+        [(p.name, p.opts, p.default) for p in command.params],
+        {name: _described(sub) for name, sub in subs.items()},
+    )
 
 
 def test_the_root_lists_every_command_in_the_tables_order_and_makes_what_typer_makes() -> None:

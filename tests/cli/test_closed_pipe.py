@@ -24,7 +24,9 @@ REPO = Path(__file__).resolve().parents[2]
 def stored(tmp_path_factory) -> str:
     url = f"sqlite:///{tmp_path_factory.mktemp('pipe') / 'store.db'}"
     with Store.open(url) as store:
-        store.add_artifact(calibration(serial="CAM-0001"), activate=True, actor="qa", station="st1", reason="solved")
+        store.add_artifact(
+            calibration(serial="CAM-0001"), activate=True, actor="qa", station="st1", reason="solved"
+        )
     return url
 
 
@@ -33,21 +35,30 @@ def _into_closed_pipe(*args: str) -> subprocess.CompletedProcess[str]:
     os.close(read_end)
     try:
         env = {**os.environ, "PYTHONPATH": str(REPO)}
-        return subprocess.run([sys.executable, "-m", "calibctl", *args], stdout=write_end, stderr=subprocess.PIPE,
-                              text=True, env=env, check=False)
+        return subprocess.run(
+            [sys.executable, "-m", "calibctl", *args],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+            check=False,
+        )
     finally:
         os.close(write_end)
 
 
-@pytest.mark.parametrize("args", [
-    ["export", "CAM-0001"],                     # print() of a JSON document
-    ["export", "CAM-0001", "--format", "ros"],
-    ["history", "CAM-0001"],                    # a rich table
-    ["history", "CAM-0001", "--json"],
-    ["board", "list"],
-    ["--help"],                                 # written while parsing, before any command runs
-    ["export", "--help"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["export", "CAM-0001"],  # print() of a JSON document
+        ["export", "CAM-0001", "--format", "ros"],
+        ["history", "CAM-0001"],  # a rich table
+        ["history", "CAM-0001", "--json"],
+        ["board", "list"],
+        ["--help"],  # written while parsing, before any command runs
+        ["export", "--help"],
+    ],
+)
 def test_a_closed_stdout_ends_with_141_and_nothing_on_stderr(stored: str, args: list[str]) -> None:
     done = _into_closed_pipe("--db", stored, *args)
     assert done.returncode == EXIT_CLOSED_PIPE == 141
@@ -55,6 +66,11 @@ def test_a_closed_stdout_ends_with_141_and_nothing_on_stderr(stored: str, args: 
 
 
 def test_with_an_open_pipe_the_same_command_exits_0(stored: str) -> None:
-    done = subprocess.run([sys.executable, "-m", "calibctl", "--db", stored, "export", "CAM-0001"], capture_output=True,
-                          text=True, env={**os.environ, "PYTHONPATH": str(REPO)}, check=False)
+    done = subprocess.run(
+        [sys.executable, "-m", "calibctl", "--db", stored, "export", "CAM-0001"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        check=False,
+    )
     assert done.returncode == 0 and done.stdout.startswith("{") and done.stderr == ""

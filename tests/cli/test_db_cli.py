@@ -25,8 +25,15 @@ def test_current_on_a_missing_sqlite_file_reports_it_without_creating_it(sqlite_
     assert result.exit_code == 0, result.output
     assert "no database yet; it is created at head on first use" in result.stdout
     assert f"head      {HEAD}" in result.stdout
-    report = json.loads(runner.invoke(app, ["--db", sqlite_url, "--json", "db", "current"]).stdout)  # global --json
-    assert (report["status"], report["current"], report["head"], report["up_to_date"]) == ("absent", None, HEAD, False)
+    report = json.loads(
+        runner.invoke(app, ["--db", sqlite_url, "--json", "db", "current"]).stdout
+    )  # global --json
+    assert (report["status"], report["current"], report["head"], report["up_to_date"]) == (
+        "absent",
+        None,
+        HEAD,
+        False,
+    )
     assert not (tmp_path / "calibctl.db").exists()
 
 
@@ -56,8 +63,12 @@ def test_current_reports_revision_and_contents(db_url: str):
 
 def test_verify_exits_0_when_intact_and_1_naming_each_mismatch(db_url: str):
     with Store.open(db_url) as store:
-        store.add_artifact(calibration(serial="CAM-A"), activate=True, actor="qa", station="st1", reason="solved")
-        store.add_artifact(calibration(serial="CAM-B"), activate=True, actor="qa", station="st1", reason="solved")
+        store.add_artifact(
+            calibration(serial="CAM-A"), activate=True, actor="qa", station="st1", reason="solved"
+        )
+        store.add_artifact(
+            calibration(serial="CAM-B"), activate=True, actor="qa", station="st1", reason="solved"
+        )
     clean = db(db_url, "verify", "--json")
     assert clean.exit_code == 0 and json.loads(clean.stdout)["ok"] is True
     stdev_b = '"serial":"CAM-B","status":"accepted","stdev":{"parameter_count":'
@@ -74,14 +85,21 @@ def test_verify_of_a_missing_database_exits_2(sqlite_url: str):
     result = db(sqlite_url, "verify")
     assert result.exit_code == 2
     assert "Error: there is no calibctl database at sqlite:///" in result.stderr
-    assert "does not exist" in result.stderr and "Hint:" in result.stderr and "calibctl db upgrade" in result.stderr
+    assert (
+        "does not exist" in result.stderr
+        and "Hint:" in result.stderr
+        and "calibctl db upgrade" in result.stderr
+    )
 
 
 def test_db_commands_exit_2_when_the_server_is_unreachable():
     for command in ("current", "upgrade", "verify"):
         result = db("postgresql://postgres@127.0.0.1:1/calibctl", command)
         assert result.exit_code == 2, (command, result.output)
-        assert "Error: cannot connect to the database postgresql://postgres@127.0.0.1:1/calibctl" in result.stderr
+        assert (
+            "Error: cannot connect to the database postgresql://postgres@127.0.0.1:1/calibctl"
+            in result.stderr
+        )
 
 
 def test_a_bad_lock_timeout_setting_exits_2(sqlite_url: str, monkeypatch):

@@ -24,17 +24,31 @@ def run(*args: str):
 def logs(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("diag")
     for fault in ("time-offset", "gauge", "rotation"):
-        res = run("synth-residuals", d / f"{fault}.csv", "--fault", fault, "--seed", "2", "--keyframes", "150",
-                  "--cameras", "2" if fault == "rotation" else "1")
+        res = run(
+            "synth-residuals",
+            d / f"{fault}.csv",
+            "--fault",
+            fault,
+            "--seed",
+            "2",
+            "--keyframes",
+            "150",
+            "--cameras",
+            "2" if fault == "rotation" else "1",
+        )
         assert res.exit_code == 0, res.output
     return d
 
 
 def _residual_csv(path: Path, n_rows: int = 40, **overrides) -> Path:
     rng = np.random.default_rng(0)
-    cols = {"residual_px": rng.normal(0, 0.3, n_rows), "radius_px": rng.uniform(10, 500, n_rows),
-            "image_speed_px_s": rng.uniform(50, 500, n_rows), "inv_range_per_m": rng.uniform(0.02, 1, n_rows),
-            "row": rng.integers(0, 960, n_rows)}
+    cols = {
+        "residual_px": rng.normal(0, 0.3, n_rows),
+        "radius_px": rng.uniform(10, 500, n_rows),
+        "image_speed_px_s": rng.uniform(50, 500, n_rows),
+        "inv_range_per_m": rng.uniform(0.02, 1, n_rows),
+        "row": rng.integers(0, 960, n_rows),
+    }
     cols.update(overrides)
     write_table(path, cols, force=True)
     return path
@@ -57,7 +71,10 @@ def test_triage_names_a_time_offset_and_exits_1(logs):
 
 
 def test_triage_json_is_the_documented_dict(logs):
-    for args in (("triage", logs / "time-offset.csv", "--json"), ("--json", "triage", logs / "time-offset.csv")):
+    for args in (
+        ("triage", logs / "time-offset.csv", "--json"),
+        ("--json", "triage", logs / "time-offset.csv"),
+    ):
         res = run(*args)
         assert res.exit_code == 1
         out = json.loads(res.stdout)
@@ -91,7 +108,9 @@ def test_gauge_passes_on_slip_only(logs):
 
 
 def test_timeoffset_measures_td_with_its_uncertainty(logs, tmp_path):
-    res = run("timeoffset", logs / "time-offset_gyro.csv", logs / "time-offset_camera.csv", "--plot", tmp_path)
+    res = run(
+        "timeoffset", logs / "time-offset_gyro.csv", logs / "time-offset_camera.csv", "--plot", tmp_path
+    )
     assert res.exit_code == 0, res.output
     td_ms = float(re.search(r"td = ([+-][0-9.]+) ms \+/- ([0-9.]+) ms", res.stdout).group(1))
     assert td_ms == pytest.approx(18.4, abs=0.2) and "jackknife" in res.stdout
@@ -160,8 +179,11 @@ def test_negative_covariates_are_rejected(tmp_path):
 
 
 def test_camera_filter_errors(logs):
-    _fails(run("triage", logs / "rotation.csv", "--camera", "cam9"), "camera 'cam9' is not in rotation.csv",
-           "cameras present: cam0, cam1")
+    _fails(
+        run("triage", logs / "rotation.csv", "--camera", "cam9"),
+        "camera 'cam9' is not in rotation.csv",
+        "cameras present: cam0, cam1",
+    )
 
 
 def test_camera_filter_without_camera_column(tmp_path):
@@ -181,39 +203,58 @@ def test_gauge_log_too_short_and_bad_mode(tmp_path):
     d = np.cumsum(np.full(t.size, 0.4))
     write_table(tmp_path / "o.csv", {"t_s": t, "wheel_distance_m": d, "vio_distance_m": d})
     _fails(run("gauge", tmp_path / "o.csv"), "covers 19.5 s; one 60 s window needs at least 60 s")
-    _fails(run("gauge", tmp_path / "o.csv", "--distances", "odd"), "--distances must be auto, cumulative or per-sample")
+    _fails(
+        run("gauge", tmp_path / "o.csv", "--distances", "odd"),
+        "--distances must be auto, cumulative or per-sample",
+    )
 
 
 def test_timeoffset_logs_that_do_not_overlap(logs, tmp_path):
     gyro = (logs / "time-offset_gyro.csv").read_text().splitlines()
-    shifted = [gyro[0]] + [f"{float(line.split(',')[0]) + 1000:.6f},{line.split(',')[1]}" for line in gyro[1:]]
+    shifted = [gyro[0]] + [
+        f"{float(line.split(',')[0]) + 1000:.6f},{line.split(',')[1]}" for line in gyro[1:]
+    ]
     (tmp_path / "late.csv").write_text("\n".join(shifted) + "\n")
-    _fails(run("timeoffset", tmp_path / "late.csv", logs / "time-offset_camera.csv"), "the logs do not overlap in time")
+    _fails(
+        run("timeoffset", tmp_path / "late.csv", logs / "time-offset_camera.csv"),
+        "the logs do not overlap in time",
+    )
 
 
 def test_timeoffset_too_few_rows_and_unsorted_stamps(tmp_path):
     write_table(tmp_path / "few.csv", {"t_s": np.arange(5.0), "rate_rad_s": np.zeros(5)})
-    _fails(run("timeoffset", tmp_path / "few.csv", tmp_path / "few.csv"), "has 5 data rows; a time-offset estimate needs at least 10")
+    _fails(
+        run("timeoffset", tmp_path / "few.csv", tmp_path / "few.csv"),
+        "has 5 data rows; a time-offset estimate needs at least 10",
+    )
     write_table(tmp_path / "uns.csv", {"t_s": np.r_[np.arange(10.0), 3.0], "rate_rad_s": np.zeros(11)})
     _fails(run("timeoffset", tmp_path / "uns.csv", tmp_path / "uns.csv"), "t_s does not increase at line 12")
 
 
 def test_timeoffset_window_too_long_for_a_drift_fit(logs):
-    _fails(run("timeoffset", logs / "time-offset_gyro.csv", logs / "time-offset_camera.csv", "--window", "8"),
-           "which gives 2 window(s) of 8 s; a drift fit needs at least 3")
+    _fails(
+        run("timeoffset", logs / "time-offset_gyro.csv", logs / "time-offset_camera.csv", "--window", "8"),
+        "which gives 2 window(s) of 8 s; a drift fit needs at least 3",
+    )
 
 
 def test_synth_errors_and_nothing_overwritten(logs):
     before = (logs / "gauge.csv").read_bytes()
     _fails(run("synth-residuals", logs / "gauge.csv", "--fault", "gauge"), "already exist", "--force")
     assert (logs / "gauge.csv").read_bytes() == before
-    _fails(run("synth-residuals", logs / "x.csv", "--fault", "skew"), "unknown fault 'skew'", "choose one of focal")
+    _fails(
+        run("synth-residuals", logs / "x.csv", "--fault", "skew"),
+        "unknown fault 'skew'",
+        "choose one of focal",
+    )
     _fails(run("synth-residuals", logs / "x.csv", "--fault", "gauge", "--magnitude", "0"), "must be positive")
 
 
 def test_plot_dir_that_is_a_file(logs, tmp_path):
     (tmp_path / "f").write_text("x")
-    _fails(run("gauge", logs / "gauge_odometry.csv", "--plot", tmp_path / "f"), "exists and is not a directory")
+    _fails(
+        run("gauge", logs / "gauge_odometry.csv", "--plot", tmp_path / "f"), "exists and is not a directory"
+    )
 
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "diagnostics"
@@ -222,8 +263,20 @@ FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "diagnostics"
 @pytest.mark.parametrize(("stem", "fault"), [("time_offset", "time-offset"), ("gauge", "gauge")])
 def test_fixtures_are_reproducible_from_their_readme_command(stem, fault, tmp_path):
     readme = (FIXTURES / "README.md").read_text()
-    args = ("--fault", fault, "--seed", "1", "--keyframes", "40", "--features", "10", "--odometry-s", "130",
-            "--rate-log-s", "6")
+    args = (
+        "--fault",
+        fault,
+        "--seed",
+        "1",
+        "--keyframes",
+        "40",
+        "--features",
+        "10",
+        "--odometry-s",
+        "130",
+        "--rate-log-s",
+        "6",
+    )
     assert f"fixtures/diagnostics/{stem}.csv {' '.join(args)} --force" in readme
     assert run("synth-residuals", tmp_path / f"{stem}.csv", *args).exit_code == 0
     for suffix in ("", "_odometry", "_gyro", "_camera"):
@@ -236,7 +289,11 @@ def test_fixture_answers_match_the_readme():
     assert run("triage", FIXTURES / "gauge.csv").exit_code == 0
     assert run("gauge", FIXTURES / "gauge_odometry.csv").exit_code == 1
     assert run("gauge", FIXTURES / "time_offset_odometry.csv").exit_code == 0
-    out = json.loads(run("timeoffset", FIXTURES / "time_offset_gyro.csv", FIXTURES / "time_offset_camera.csv", "--json").stdout)
+    out = json.loads(
+        run(
+            "timeoffset", FIXTURES / "time_offset_gyro.csv", FIXTURES / "time_offset_camera.csv", "--json"
+        ).stdout
+    )
     assert out["td_ms"] == pytest.approx(18.4, abs=0.3)
 
 

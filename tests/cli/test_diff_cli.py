@@ -17,31 +17,52 @@ from tests.artifacts.factories import calibration
 from tests.core.compare.sessions import solve, true_K
 
 
-def _artifact(serial: str, fit: IntrinsicsSolution, status: str = "accepted", scale: float = 1.0,
-              model: str = "k1k2") -> CalibrationArtifact:
+def _artifact(
+    serial: str, fit: IntrinsicsSolution, status: str = "accepted", scale: float = 1.0, model: str = "k1k2"
+) -> CalibrationArtifact:
     """A stored calibration carrying ``fit``'s lens and covariance (``scale``: read out that much smaller)."""
     cov = fit.covariance
     assert cov is not None and cov.covariance is not None
     K = np.array(fit.camera_matrix)
     K[:2, :] *= scale
-    K[0, 2], K[1, 2] = scale * (fit.camera_matrix[0, 2] + 0.5) - 0.5, scale * (fit.camera_matrix[1, 2] + 0.5) - 0.5
+    K[0, 2], K[1, 2] = (
+        scale * (fit.camera_matrix[0, 2] + 0.5) - 0.5,
+        scale * (fit.camera_matrix[1, 2] + 0.5) - 0.5,
+    )
     t = np.array([scale if n in ("fx", "fy", "cx", "cy") else 1.0 for n in cov.names])
-    base = calibration(serial=serial, status=status,
-                       image_size=(round(fit.image_size[0] * scale), round(fit.image_size[1] * scale)))
-    stdev = Uncertainty(sigma=dict(fit.sigma), residual_count=fit.n_residuals, parameter_count=fit.n_parameters,
-                        covariance=ParameterCovariance(parameters=list(cov.names),
-                                                       matrix=(cov.covariance * np.outer(t, t)).tolist(),
-                                                       aspect_ratio=fit.aspect_ratio))
-    return base.model_copy(update={
-        "camera_matrix": tuple(tuple(float(v) for v in row) for row in K),
-        "dist_coeffs": [float(v) for v in fit.dist_coeffs], "stdev": stdev,
-        "model": base.model.model_copy(update={"name": model})})
+    base = calibration(
+        serial=serial,
+        status=status,
+        image_size=(round(fit.image_size[0] * scale), round(fit.image_size[1] * scale)),
+    )
+    stdev = Uncertainty(
+        sigma=dict(fit.sigma),
+        residual_count=fit.n_residuals,
+        parameter_count=fit.n_parameters,
+        covariance=ParameterCovariance(
+            parameters=list(cov.names),
+            matrix=(cov.covariance * np.outer(t, t)).tolist(),
+            aspect_ratio=fit.aspect_ratio,
+        ),
+    )
+    return base.model_copy(
+        update={
+            "camera_matrix": tuple(tuple(float(v) for v in row) for row in K),
+            "dist_coeffs": [float(v) for v in fit.dist_coeffs],
+            "stdev": stdev,
+            "model": base.model.model_copy(update={"name": model}),
+        }
+    )
 
 
 @pytest.fixture(scope="module")
 def fits() -> dict[str, IntrinsicsSolution]:
-    return {"a": solve(true_K(), 11), "b": solve(true_K(), 12), "focal": solve(true_K(focal_scale=1.003), 13),
-            "k3": solve(true_K(), 12, model="k1k2k3")}
+    return {
+        "a": solve(true_K(), 11),
+        "b": solve(true_K(), 12),
+        "focal": solve(true_K(focal_scale=1.003), 13),
+        "k3": solve(true_K(), 12, model="k1k2k3"),
+    }
 
 
 @pytest.fixture
@@ -49,6 +70,7 @@ def db(sqlite_url: str, fits: dict[str, IntrinsicsSolution]) -> str:
     """CAM@1 and CAM@2: one camera twice; CAM@3 its focal 0.3 % longer (active); CAM@4 rejected;
     HALF@1 CAM@1 read out at half resolution; OLD@1 without a covariance; K3@1 a k1k2k3 solve."""
     with Store.open(sqlite_url, create=True) as store:
+
         def add(art: CalibrationArtifact, activate: bool = True) -> None:
             store.add_artifact(art, activate=activate, actor="op", station="st1", reason="test")
 
@@ -139,23 +161,31 @@ def test_a_calibration_without_covariance_gives_numbers_and_exits_2(db: str) -> 
     assert "OLD@1 stores no covariance" in result.stderr and "re-solve" in result.stderr
 
 
-@pytest.mark.parametrize(("a", "b", "message"), [
-    ("CAM@2", "CAM@2", "are both CAM@2: there is nothing to compare"),
-    ("CAM", "CAM@3", "are both CAM@3: there is nothing to compare"),
-    ("NOPE", "CAM@1", "NOPE"),
-    ("CAM@1", "CAM@9", "CAM has no version 9"),
-    ("CAM@99999999999", "CAM@1", "out of range"),
-])
+@pytest.mark.parametrize(
+    ("a", "b", "message"),
+    [
+        ("CAM@2", "CAM@2", "are both CAM@2: there is nothing to compare"),
+        ("CAM", "CAM@3", "are both CAM@3: there is nothing to compare"),
+        ("NOPE", "CAM@1", "NOPE"),
+        ("CAM@1", "CAM@9", "CAM has no version 9"),
+        ("CAM@99999999999", "CAM@1", "out of range"),
+    ],
+)
 def test_bad_refs_exit_2_naming_them(db: str, a: str, b: str, message: str) -> None:
     result = _run(db, a, b)
     assert result.exit_code == 2, result.output
     assert message in result.stderr and "Traceback" not in result.output
 
 
-@pytest.mark.parametrize(("option", "message"), [
-    (["--grid", "40by30"], "is not COLSxROWS"), (["--grid", "2x2"], "out of range"),
-    (["--range-m", "-1"], "--range-m must be positive"), (["--scale", "0"], "--scale must be a positive number"),
-])
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--grid", "40by30"], "is not COLSxROWS"),
+        (["--grid", "2x2"], "out of range"),
+        (["--range-m", "-1"], "--range-m must be positive"),
+        (["--scale", "0"], "--scale must be a positive number"),
+    ],
+)
 def test_bad_options_exit_2(db: str, option: list[str], message: str) -> None:
     result = _run(db, "CAM@1", "CAM@2", *option)
     assert result.exit_code == 2 and message in result.stderr

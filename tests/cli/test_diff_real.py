@@ -32,8 +32,22 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> str:
         folder.mkdir()
         for path in files:
             shutil.copy(path, folder / path.name)
-        done = CliRunner().invoke(app, ["--db", url, "--station-config", str(station), "calibrate", "--serial",
-                                        serial, "--board", "A17", "--source", str(folder)])
+        done = CliRunner().invoke(
+            app,
+            [
+                "--db",
+                url,
+                "--station-config",
+                str(station),
+                "calibrate",
+                "--serial",
+                serial,
+                "--board",
+                "A17",
+                "--source",
+                str(folder),
+            ],
+        )
         assert re.search(rf"{serial}@\d+ (accepted|rejected)", done.stdout), done.output
     return url
 

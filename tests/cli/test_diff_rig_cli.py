@@ -17,9 +17,19 @@ def db(sqlite_url: str) -> str:
     """STEREO-1 @1 and @2 at 75 mm, @3 at 76 mm (sigma 0.03 mm), @4 rejected at 75 mm."""
     with Store.open(sqlite_url, create=True) as store:
         store.add_rig(rig_definition())
-        for baseline_m, status in ((0.075, "accepted"), (0.075, "accepted"), (0.076, "accepted"), (0.075, "rejected")):
-            store.add_rig_calibration(rig_calibration(status, baseline_m), activate=status == "accepted",
-                                      actor="op", station="st1", reason="test")
+        for baseline_m, status in (
+            (0.075, "accepted"),
+            (0.075, "accepted"),
+            (0.076, "accepted"),
+            (0.075, "rejected"),
+        ):
+            store.add_rig_calibration(
+                rig_calibration(status, baseline_m),
+                activate=status == "accepted",
+                actor="op",
+                station="st1",
+                reason="test",
+            )
     return sqlite_url
 
 
@@ -54,13 +64,16 @@ def test_a_rejected_rig_version_is_compared_and_labelled(db: str) -> None:
     assert f"{RIG}@4 is a REJECTED rig calibration" in result.stdout
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    ([f"{RIG}@2", f"{RIG}@2"], "there is nothing to compare"),
-    ([f"{RIG}@1", f"{RIG}@9"], "9"),
-    (["NOPE@1", f"{RIG}@1"], "NOPE"),
-    ([f"{RIG}@1", f"{RIG}@2", "--scale", "2"], "--scale applies to camera diffs, not to --rig"),
-    ([f"{RIG}@1", f"{RIG}@2", "--map", "x.html"], "--map applies to camera diffs"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([f"{RIG}@2", f"{RIG}@2"], "there is nothing to compare"),
+        ([f"{RIG}@1", f"{RIG}@9"], "9"),
+        (["NOPE@1", f"{RIG}@1"], "NOPE"),
+        ([f"{RIG}@1", f"{RIG}@2", "--scale", "2"], "--scale applies to camera diffs, not to --rig"),
+        ([f"{RIG}@1", f"{RIG}@2", "--map", "x.html"], "--map applies to camera diffs"),
+    ],
+)
 def test_bad_rig_input_exits_2(db: str, args: list[str], message: str) -> None:
     result = _run(db, *args)
     assert result.exit_code == 2, result.output

@@ -38,8 +38,13 @@ def store_url(sqlite_url: str) -> str:
     """CAM-0001@1 accepted and active; BAD-7@1 rejected (never active)."""
     with Store.open(sqlite_url) as store:
         store.add_artifact(calibration(), activate=True, actor="qa", station="st1", reason="solved")
-        store.add_artifact(calibration(serial="BAD-7", status="rejected", cx=420.0), activate=False, actor="qa",
-                           station="st1", reason="solved")
+        store.add_artifact(
+            calibration(serial="BAD-7", status="rejected", cx=420.0),
+            activate=False,
+            actor="qa",
+            station="st1",
+            reason="solved",
+        )
     return sqlite_url
 
 
@@ -54,17 +59,28 @@ def test_exports_of_a_solved_calibration_pass_lint_in_every_format(sqlite_url: s
     assert cli("--db", sqlite_url, "solve", "--serial", "CAM-0001").exit_code == 0
     paths = []
     for fmt in FORMATS:
-        paths.append(tmp_path / f"cam.{fmt}.{'json' if fmt == 'json' else 'cameramodel' if fmt == 'mrcal' else 'yaml'}")
+        paths.append(
+            tmp_path / f"cam.{fmt}.{'json' if fmt == 'json' else 'cameramodel' if fmt == 'mrcal' else 'yaml'}"
+        )
         assert export(sqlite_url, "CAM-0001", fmt, paths[-1]).exit_code == 0
     result = cli("lint", *map(str, paths), "--json")
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
-    assert [r["kind"] for r in report["results"]] == ["calibctl", "calibctl", "ros", "opencv", "kalibr", "mrcal"]
+    assert [r["kind"] for r in report["results"]] == [
+        "calibctl",
+        "calibctl",
+        "ros",
+        "opencv",
+        "kalibr",
+        "mrcal",
+    ]
     assert all(r["errors"] == 0 and r["warnings"] == 0 for r in report["results"]), report
 
 
-@pytest.mark.parametrize(("fmt", "old", "new"), [("ros", "image_height: 480", "image_height: 482"),
-                                                 ("opencv", "image_height: 480", "image_height: 482")])
+@pytest.mark.parametrize(
+    ("fmt", "old", "new"),
+    [("ros", "image_height: 480", "image_height: 482"), ("opencv", "image_height: 480", "image_height: 482")],
+)
 def test_an_edited_ros_or_opencv_export_fails_the_content_hash(store_url, tmp_path, fmt, old, new):
     out = tmp_path / "cam.yaml"
     assert export(store_url, "CAM-0001", fmt, out).exit_code == 0
@@ -82,8 +98,12 @@ def test_the_file_hash_is_reproducible_with_grep_and_sha256(store_url, tmp_path)
     out = tmp_path / "cam.yaml"
     export(store_url, "CAM-0001", "ros", out)
     text = out.read_text()
-    body = "".join(line for line in text.splitlines(keepends=True) if not line.startswith("# calibctl file-sha256 "))
-    recorded = next(line.split()[-1] for line in text.splitlines() if line.startswith("# calibctl file-sha256 "))
+    body = "".join(
+        line for line in text.splitlines(keepends=True) if not line.startswith("# calibctl file-sha256 ")
+    )
+    recorded = next(
+        line.split()[-1] for line in text.splitlines() if line.startswith("# calibctl file-sha256 ")
+    )
     assert hashlib.sha256(body.encode()).hexdigest() == recorded
 
 
@@ -99,10 +119,13 @@ def test_ros_export_is_what_ros_reads_with_a_valid_camera_name(store_url, tmp_pa
     assert cli("lint", str(named)).exit_code == 0
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (("--format", "ros", "--camera-name", "front-left"), "'front-left' is not a valid ROS camera name"),
-    (("--format", "json", "--camera-name", "front"), "--camera-name applies to --format ros only"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("--format", "ros", "--camera-name", "front-left"), "'front-left' is not a valid ROS camera name"),
+        (("--format", "json", "--camera-name", "front"), "--camera-name applies to --format ros only"),
+    ],
+)
 def test_bad_camera_name_exits_2(store_url, args, message):
     result = cli("--db", store_url, "export", "CAM-0001", *args)
     assert result.exit_code == 2 and message in result.stderr
@@ -145,8 +168,13 @@ def test_a_file_without_header_is_linted_on_its_numbers_and_cannot_be_traced(sto
     # ROS rewrites camera_info without comments (set_camera_info, the convert tool): what only the solve knew
     # (sigma, held-out outer ring, square size) is named as not checked, never an error whose fix is to re-capture
     traced = next(f for f in findings(result) if f["rule"] == "traceability")
-    assert "sigma(fx), the held-out outer ring and the square size's provenance are not checked" in traced["message"]
-    assert "calibctl lint --serial SERIAL" in traced["fix"]  # the gauge is audited where it is kept: the store
+    assert (
+        "sigma(fx), the held-out outer ring and the square size's provenance are not checked"
+        in traced["message"]
+    )
+    assert (
+        "calibctl lint --serial SERIAL" in traced["fix"]
+    )  # the gauge is audited where it is kept: the store
     assert rules == {"traceability": "warning"}  # good numbers: a warning only, the verdict passes
     assert result.exit_code == 0, result.output
 
@@ -154,8 +182,11 @@ def test_a_file_without_header_is_linted_on_its_numbers_and_cannot_be_traced(sto
 def test_a_header_without_file_hash_says_it_cannot_be_checked(store_url, tmp_path):
     out = tmp_path / "cam.yaml"
     export(store_url, "CAM-0001", "ros", out)
-    old = "".join(line + "\n" for line in out.read_text().splitlines()
-                  if not line.startswith(("# calibctl evidence", "# calibctl file-sha256")))
+    old = "".join(
+        line + "\n"
+        for line in out.read_text().splitlines()
+        if not line.startswith(("# calibctl evidence", "# calibctl file-sha256"))
+    )
     out.write_text(old.replace(" accepted sha256 ", " sha256 "))  # the header calibctl 0.1 wrote
     header = trace_header.read(out.read_text())
     assert header is not None and header.intact is None and header.status is None
@@ -164,13 +195,18 @@ def test_a_header_without_file_hash_says_it_cannot_be_checked(store_url, tmp_pat
 
 
 ROS_OK = {
-    "image_width": 640, "image_height": 480, "camera_name": "front",
+    "image_width": 640,
+    "image_height": 480,
+    "camera_name": "front",
     "camera_matrix": {"rows": 3, "cols": 3, "data": [800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0]},
     "distortion_model": "plumb_bob",
     "distortion_coefficients": {"rows": 1, "cols": 5, "data": [-0.05, 0.01, 0.0, 0.0, 0.0]},
     "rectification_matrix": {"rows": 3, "cols": 3, "data": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]},
-    "projection_matrix": {"rows": 3, "cols": 4, "data": [800.0, 0.0, 320.0, 0.0, 0.0, 800.0, 240.0, 0.0,
-                                                         0.0, 0.0, 1.0, 0.0]},
+    "projection_matrix": {
+        "rows": 3,
+        "cols": 4,
+        "data": [800.0, 0.0, 320.0, 0.0, 0.0, 800.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+    },
 }
 
 
@@ -181,18 +217,27 @@ def _ros_file(tmp_path: Path, **changes) -> Path:
     return path
 
 
-@pytest.mark.parametrize(("changes", "rule", "message"), [
-    ({"projection_matrix": None}, "ros-camera-info", "projection_matrix is missing"),
-    ({"rectification_matrix": None}, "ros-camera-info", "rectification_matrix is missing"),
-    ({"image_height": None}, "ros-camera-info", "image_height is missing"),
-    ({"camera_matrix": None}, "ros-camera-info", "camera_matrix is missing"),
-    ({"camera_matrix": {"rows": 3, "cols": 3, "data": [800.0, 0.0, 320.0]}}, "ros-camera-info",
-     "camera_matrix says 3x3 but has 3 numbers"),
-    ({"projection_matrix": {"rows": 3, "cols": 3, "data": [1.0] * 9}}, "ros-camera-info",
-     "projection_matrix is 3x3, ROS reads it as 3x4"),
-    ({"distortion_model": "kannala_brandt"}, "ros-distortion-model", "'kannala_brandt' is unknown"),
-    ({"distortion_model": "rational_polynomial"}, "ros-distortion-model", "rational_polynomial takes 8"),
-])
+@pytest.mark.parametrize(
+    ("changes", "rule", "message"),
+    [
+        ({"projection_matrix": None}, "ros-camera-info", "projection_matrix is missing"),
+        ({"rectification_matrix": None}, "ros-camera-info", "rectification_matrix is missing"),
+        ({"image_height": None}, "ros-camera-info", "image_height is missing"),
+        ({"camera_matrix": None}, "ros-camera-info", "camera_matrix is missing"),
+        (
+            {"camera_matrix": {"rows": 3, "cols": 3, "data": [800.0, 0.0, 320.0]}},
+            "ros-camera-info",
+            "camera_matrix says 3x3 but has 3 numbers",
+        ),
+        (
+            {"projection_matrix": {"rows": 3, "cols": 3, "data": [1.0] * 9}},
+            "ros-camera-info",
+            "projection_matrix is 3x3, ROS reads it as 3x4",
+        ),
+        ({"distortion_model": "kannala_brandt"}, "ros-distortion-model", "'kannala_brandt' is unknown"),
+        ({"distortion_model": "rational_polynomial"}, "ros-distortion-model", "rational_polynomial takes 8"),
+    ],
+)
 def test_a_file_ros_would_refuse_fails_lint(tmp_path, changes, rule, message):
     result = cli("lint", str(_ros_file(tmp_path, **changes)), "--json")
     assert result.exit_code == 1, result.output
@@ -215,19 +260,27 @@ def test_equidistant_is_checked_as_a_fisheye_not_as_radial_tangential(tmp_path):
     K = [300.0, 0.0, 320.0, 0.0, 300.0, 240.0, 0.0, 0.0, 1.0]
     d = [0.0, 0.0, 0.5, 0.5]  # fisheye k3 = k4 = 0.5; read as k1 k2 p1 p2 it is a tangential fold-over
     assert not check_distortion_foldover(np.reshape(K, (3, 3)), np.array(d), (640, 480)).passed
-    fisheye = {"distortion_model": "equidistant", "distortion_coefficients": {"rows": 1, "cols": 4, "data": d},
-               "camera_matrix": {"rows": 3, "cols": 3, "data": K}}
+    fisheye = {
+        "distortion_model": "equidistant",
+        "distortion_coefficients": {"rows": 1, "cols": 4, "data": d},
+        "camera_matrix": {"rows": 3, "cols": 3, "data": K},
+    }
     result = cli("lint", str(_ros_file(tmp_path, **fisheye)), "--json")
-    assert not {"ros-distortion-model", "ros-camera-info", "distortion-foldover"} & errors(result), findings(result)
+    assert not {"ros-distortion-model", "ros-camera-info", "distortion-foldover"} & errors(result), findings(
+        result
+    )
     folding = {**fisheye, "distortion_coefficients": {"rows": 1, "cols": 4, "data": [-0.3, 0.0, 0.0, 0.0]}}
     result = cli("lint", str(_ros_file(tmp_path, **folding)), "--json")
     assert "distortion-foldover" in errors(result)
     assert "fisheye theta_d(theta) stops increasing" in next(
-        f["message"] for f in findings(result) if f["rule"] == "distortion-foldover")
+        f["message"] for f in findings(result) if f["rule"] == "distortion-foldover"
+    )
     five = {**fisheye, "distortion_coefficients": {"rows": 1, "cols": 5, "data": [*d, 0.0]}}
     assert "equidistant takes 4" in next(
-        f["message"] for f in findings(cli("lint", str(_ros_file(tmp_path, **five)), "--json"))
-        if f["rule"] == "ros-distortion-model")
+        f["message"]
+        for f in findings(cli("lint", str(_ros_file(tmp_path, **five)), "--json"))
+        if f["rule"] == "ros-distortion-model"
+    )
 
 
 @pytest.mark.parametrize("fmt", ["ros", "opencv"])
@@ -243,11 +296,14 @@ OPENCV_HEAD = "%YAML:1.0\n---\n"
 OPENCV_K = "camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
 
 
-@pytest.mark.parametrize(("body", "message"), [
-    (OPENCV_K + "   rows: [\n", "OpenCV cannot read this FileStorage file"),
-    (OPENCV_K + "   data: [ 500., 0., 320. ]\n", "camera_matrix is not a matrix OpenCV can read"),
-    ("image_width: 640\n", "an OpenCV FileStorage file without camera_matrix is not a calibration"),
-])
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (OPENCV_K + "   rows: [\n", "OpenCV cannot read this FileStorage file"),
+        (OPENCV_K + "   data: [ 500., 0., 320. ]\n", "camera_matrix is not a matrix OpenCV can read"),
+        ("image_width: 640\n", "an OpenCV FileStorage file without camera_matrix is not a calibration"),
+    ],
+)
 def test_an_opencv_file_opencv_cannot_read_is_exit_2(tmp_path, body, message):
     path = tmp_path / "cam.yml"
     path.write_text(OPENCV_HEAD + body)
@@ -257,8 +313,12 @@ def test_an_opencv_file_opencv_cannot_read_is_exit_2(tmp_path, body, message):
 
 def test_an_opencv_calibration_from_another_tool_is_linted_on_its_numbers(tmp_path):
     path = tmp_path / "cam.yml"
-    path.write_text(OPENCV_HEAD + "notes:\n   by: someone\nviews: [1, 2]\n" + OPENCV_K
-                    + "   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]\nimage_width: 640\nimage_height: 480\n")
+    path.write_text(
+        OPENCV_HEAD
+        + "notes:\n   by: someone\nviews: [1, 2]\n"
+        + OPENCV_K
+        + "   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]\nimage_width: 640\nimage_height: 480\n"
+    )
     result = cli("lint", str(path), "--json")
     rules = {f["rule"]: f["severity"] for f in findings(result)}
     assert json.loads(result.stdout)["results"][0]["kind"] == "opencv"

@@ -28,15 +28,18 @@ def exports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     out = {}
     for fmt in ("json", "yaml", "ros", "opencv"):
         out[fmt] = root / f"{SERIAL}.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
-        assert runner.invoke(app, ["--db", url, "export", SERIAL, "-f", fmt, "-o", str(out[fmt])]).exit_code == 0
+        assert (
+            runner.invoke(app, ["--db", url, "export", SERIAL, "-f", fmt, "-o", str(out[fmt])]).exit_code == 0
+        )
     return out
 
 
 def plain_opencv_fx(images: list[Path]) -> float:
     """cv2.calibrateCamera on corners from findChessboardCorners + cornerSubPix, calibctl's default flags."""
     points = plain_opencv_corners(images)
-    _, K, _, _, _ = cv2.calibrateCamera([BOARD_9X6_M] * len(points), points, (640, 480), np.eye(3), None,
-                                        flags=PLAIN_FLAGS)
+    _, K, _, _, _ = cv2.calibrateCamera(
+        [BOARD_9X6_M] * len(points), points, (640, 480), np.eye(3), None, flags=PLAIN_FLAGS
+    )
     return float(K[0, 0])
 
 

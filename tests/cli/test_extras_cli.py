@@ -30,7 +30,7 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
     assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output and res.stdout == ""
     assert f"Error: {purpose} needs the Python package {package}, which is not installed" in res.stderr
-    hint = res.stderr[res.stderr.index("Hint:"):]
+    hint = res.stderr[res.stderr.index("Hint:") :]
     spec = EXTRA_PACKAGES[extra]
     assert f"pipx inject calibctl '{spec}'" in hint
     assert f"uv tool install --with '{spec}' ./calibctl-0.1.0-py3-none-any.whl" in hint
@@ -39,7 +39,9 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
 
 
 def test_the_hints_name_what_pyproject_declares_and_parse_as_shell_words():
-    declared = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    declared = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"
+    ]
     for extra, spec in EXTRA_PACKAGES.items():
         assert declared[extra] == [spec]
         assert shlex.split(f"pipx inject calibctl '{spec}'") == ["pipx", "inject", "calibctl", spec]
@@ -48,12 +50,16 @@ def test_the_hints_name_what_pyproject_declares_and_parse_as_shell_words():
 def test_a_postgresql_store_without_psycopg_names_the_postgres_extra(monkeypatch):
     _hide(monkeypatch, "psycopg")
     res = runner.invoke(app, ["--db", "postgresql://calib:secret@factory-db/calibctl", "db", "current"])
-    _assert_missing_extra(res, "postgres", "psycopg", "the PostgreSQL store postgresql://calib:***@factory-db/calibctl")
+    _assert_missing_extra(
+        res, "postgres", "psycopg", "the PostgreSQL store postgresql://calib:***@factory-db/calibctl"
+    )
 
 
 def test_plot_without_matplotlib_names_the_plots_extra(monkeypatch, tmp_path):
     csv = tmp_path / "in.csv"
-    assert runner.invoke(app, ["synth-residuals", str(csv), "--fault", "rotation", "--seed", "2"]).exit_code == 0
+    assert (
+        runner.invoke(app, ["synth-residuals", str(csv), "--fault", "rotation", "--seed", "2"]).exit_code == 0
+    )
     _hide(monkeypatch, "matplotlib")
     monkeypatch.delitem(sys.modules, "calibctl.workflows.diagnostics.diagnostics_plots", raising=False)
     monkeypatch.delattr(calibctl.workflows.diagnostics, "diagnostics_plots", raising=False)  # re-import it

@@ -65,8 +65,9 @@ def test_export_onto_a_folder_with_force_is_exit_2(store_url, tmp_path):
     one_line_error(result, f"cannot write {folder}", "it is a folder")
 
 
-@pytest.mark.parametrize(("code", "words"), [(errno.EROFS, "read-only file system"),
-                                             (errno.EACCES, "permission denied")])
+@pytest.mark.parametrize(
+    ("code", "words"), [(errno.EROFS, "read-only file system"), (errno.EACCES, "permission denied")]
+)
 def test_export_into_a_read_only_or_forbidden_folder_is_exit_2(store_url, tmp_path, monkeypatch, code, words):
     fail_in(monkeypatch, tmp_path, code)
     result = cli("--db", store_url, "export", "CAM-0001", "-o", tmp_path / "cam.json")
@@ -94,7 +95,8 @@ def test_disk_full_keeps_the_old_file_and_leaves_no_temporary(store_url, tmp_pat
     result = cli("--db", store_url, "export", "CAM-0001", "-o", out, "--force")
     one_line_error(result, f"cannot write {out}", "no space left on the device")
     assert out.read_text() == "old\n" and [p.name for p in tmp_path.iterdir()] == sorted(
-        p.name for p in tmp_path.iterdir() if not p.name.startswith(".cam.json."))
+        p.name for p in tmp_path.iterdir() if not p.name.startswith(".cam.json.")
+    )
 
 
 def test_exports_honour_the_umask_and_force_keeps_the_mode(store_url, tmp_path):
@@ -108,7 +110,9 @@ def test_exports_honour_the_umask_and_force_keeps_the_mode(store_url, tmp_path):
         assert cli("--db", store_url, "export", "CAM-0001", "-f", "ros", "-o", shared).exit_code == 0
         assert stat.S_IMODE(shared.stat().st_mode) == 0o644
         shared.chmod(0o664)
-        assert cli("--db", store_url, "export", "CAM-0001", "-f", "ros", "-o", shared, "--force").exit_code == 0
+        assert (
+            cli("--db", store_url, "export", "CAM-0001", "-f", "ros", "-o", shared, "--force").exit_code == 0
+        )
         assert stat.S_IMODE(shared.stat().st_mode) == 0o664
     finally:
         os.umask(old)
@@ -147,7 +151,11 @@ def test_synth_into_a_read_only_folder_is_exit_2(tmp_path, monkeypatch, command)
     out = tmp_path / "out"
     out.mkdir()
     fail_in(monkeypatch, out, errno.EROFS)
-    args = (out, "--views", "2", "--size", "320x240") if command == "synth" else (out / "k1.csv", "--fault", "k1")
+    args = (
+        (out, "--views", "2", "--size", "320x240")
+        if command == "synth"
+        else (out / "k1.csv", "--fault", "k1")
+    )
     one_line_error(cli(command, *args), f"cannot write {out}", "read-only file system")
 
 
@@ -160,7 +168,9 @@ def test_a_folder_that_cannot_be_created_is_exit_2(tmp_path, monkeypatch):
         return real(self, *args, **kwargs)
 
     monkeypatch.setattr(Path, "mkdir", mkdir)
-    one_line_error(cli("synth", tmp_path / "new", "--views", "1"), f"cannot create {tmp_path / 'new'}", "read-only")
+    one_line_error(
+        cli("synth", tmp_path / "new", "--views", "1"), f"cannot create {tmp_path / 'new'}", "read-only"
+    )
 
 
 def test_an_unreadable_lint_input_is_exit_2(tmp_path, monkeypatch):
@@ -168,7 +178,9 @@ def test_an_unreadable_lint_input_is_exit_2(tmp_path, monkeypatch):
     path.write_text("x: 1\n")
     real = os.open
 
-    def open_(target, *args, **kwargs):  # the bounded reader opens the file itself (calibctl.files.open_regular)
+    def open_(
+        target, *args, **kwargs
+    ):  # the bounded reader opens the file itself (calibctl.files.open_regular)
         if Path(target) == path:
             raise PermissionError(errno.EACCES, "Permission denied", str(target))
         return real(target, *args, **kwargs)
@@ -184,8 +196,11 @@ def test_any_file_system_error_elsewhere_is_one_line_but_a_bug_keeps_its_traceba
         raise PermissionError(errno.EACCES, "Permission denied", "/var/lib/calibctl/images")
 
     monkeypatch.setattr(records, "show", denied)
-    one_line_error(cli("--db", store_url, "show", "CAM-0001"), "cannot access /var/lib/calibctl/images",
-                   "permission denied")
+    one_line_error(
+        cli("--db", store_url, "show", "CAM-0001"),
+        "cannot access /var/lib/calibctl/images",
+        "permission denied",
+    )
 
     def bug(*_args, **_kwargs):
         raise OSError("an OSError without errno is calibctl's own mistake")
@@ -201,8 +216,21 @@ def test_plus_minus_under_an_ascii_locale_is_spelled_out(sqlite_url, tmp_path):
     env = {**os.environ, "PYTHONIOENCODING": "ascii", "LC_ALL": "C", "PYTHONPATH": str(REPO)}
     env = {k: v for k, v in env.items() if not k.startswith("CALIBCTL_")}
     done = subprocess.run(
-        [sys.executable, "-c", "from calibctl.cli.main import run; run()", "--db", sqlite_url, "board", "show", "A17"],
-        capture_output=True, text=True, env=env, cwd=tmp_path, check=False,
+        [
+            sys.executable,
+            "-c",
+            "from calibctl.cli.main import run; run()",
+            "--db",
+            sqlite_url,
+            "board",
+            "show",
+            "A17",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
@@ -215,10 +243,12 @@ def test_an_input_that_is_not_utf8_is_exit_2(tmp_path):
     one_line_error(cli("lint", path), f"cannot read {path}", "it is not UTF-8 text")
 
 
-@pytest.mark.parametrize(("code", "words"), [(errno.ENOSPC, "no space left on the device"),
-                                             (errno.EACCES, "permission denied")])
-def test_an_image_store_that_cannot_be_written_is_exit_2_and_stores_no_session(sqlite_url, tmp_path_factory,
-                                                                              monkeypatch, code, words):
+@pytest.mark.parametrize(
+    ("code", "words"), [(errno.ENOSPC, "no space left on the device"), (errno.EACCES, "permission denied")]
+)
+def test_an_image_store_that_cannot_be_written_is_exit_2_and_stores_no_session(
+    sqlite_url, tmp_path_factory, monkeypatch, code, words
+):
     """The images are stored beside the capture gates (workflows.camera.image_writes): a full disk or an image
     folder the process may not write is still one line, exit 2, and no session."""
     from calibctl.store import images
@@ -235,7 +265,10 @@ def test_an_image_store_that_cannot_be_written_is_exit_2_and_stores_no_session(s
     result = cli("--db", sqlite_url, "capture", "--serial", "CAM-1", "--board", "A17", "--source", good)
     progress, _, rest = result.stderr.partition("\n")  # the capture's first line says what it examines
     assert progress.startswith("calibctl capture: examining 12 images")
-    one_line_error(SimpleNamespace(exit_code=result.exit_code, output=result.output, stderr=rest),
-                   "cannot write the image", words)
+    one_line_error(
+        SimpleNamespace(exit_code=result.exit_code, output=result.output, stderr=rest),
+        "cannot write the image",
+        words,
+    )
     with Store.open(sqlite_url) as store:
         assert store.list_sessions() == [] and store.counts()["images"] == 0

@@ -37,10 +37,29 @@ def _calibrate(root: Path, fov_deg: float, seed: int) -> tuple[dict, dict, int]:
         store.add_board(measured_board("A17", square_mm=25.0))
     out = root / f"r{fov_deg:.0f}-{seed}"
     run_synth(out, "good", seed=seed, views=12, image_size=(640, 480), fisheye_fov_deg=fov_deg)
-    result = RUNNER.invoke(app, ["--db", url, "calibrate", "--serial", f"FE-{fov_deg:.0f}", "--board", "A17",
-                                 "--source", str(out), "--model", "fisheye", "--json"])
+    result = RUNNER.invoke(
+        app,
+        [
+            "--db",
+            url,
+            "calibrate",
+            "--serial",
+            f"FE-{fov_deg:.0f}",
+            "--board",
+            "A17",
+            "--source",
+            str(out),
+            "--model",
+            "fisheye",
+            "--json",
+        ],
+    )
     assert result.exit_code == 0, result.output
-    return json.loads(result.stdout)["calibration"], json.loads((out / "truth.json").read_text())["camera"], 12
+    return (
+        json.loads(result.stdout)["calibration"],
+        json.loads((out / "truth.json").read_text())["camera"],
+        12,
+    )
 
 
 def _z(doc: dict, truth: dict) -> dict[str, float]:
@@ -61,7 +80,9 @@ def _converged_and_every_view_used(doc: dict, rendered: int) -> None:
 
 
 @pytest.mark.parametrize(("fov_deg", "seed"), [(150.0, 6), (170.0, 6)])
-def test_150_and_170_deg_renders_recover_the_lens_within_3_sigma(tmp_path: Path, fov_deg: float, seed: int) -> None:
+def test_150_and_170_deg_renders_recover_the_lens_within_3_sigma(
+    tmp_path: Path, fov_deg: float, seed: int
+) -> None:
     doc, truth, rendered = _calibrate(tmp_path, fov_deg, seed)
     _converged_and_every_view_used(doc, rendered)
     z = _z(doc, truth)
@@ -69,7 +90,9 @@ def test_150_and_170_deg_renders_recover_the_lens_within_3_sigma(tmp_path: Path,
 
 
 def test_a_190_deg_render_the_old_tilt_gate_refused_converges_with_every_view(tmp_path: Path) -> None:
-    doc, truth, rendered = _calibrate(tmp_path, 190.0, 5)  # seed 5: the tilt gate failed it before core.capture.tilt's fix
+    doc, truth, rendered = _calibrate(
+        tmp_path, 190.0, 5
+    )  # seed 5: the tilt gate failed it before core.capture.tilt's fix
     _converged_and_every_view_used(doc, rendered)
     K, Kt = np.array(doc["camera_matrix"]), np.array(truth["K"])
     assert abs(K[0, 0] / Kt[0, 0] - 1.0) < 0.005 and np.all(np.abs(K[:2, 2] - Kt[:2, 2]) < 0.5)

@@ -33,12 +33,29 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     run_synth(root / "r190", "good", seed=6, views=12, image_size=(640, 480), fisheye_fov_deg=190.0)
-    result = RUNNER.invoke(app, ["--db", url, "calibrate", "--serial", "FE-0190", "--board", "A17", "--source",
-                                 str(root / "r190"), "--model", "fisheye", "--image-circle", "322.8,237.4,236"])
+    result = RUNNER.invoke(
+        app,
+        [
+            "--db",
+            url,
+            "calibrate",
+            "--serial",
+            "FE-0190",
+            "--board",
+            "A17",
+            "--source",
+            str(root / "r190"),
+            "--model",
+            "fisheye",
+            "--image-circle",
+            "322.8,237.4,236",
+        ],
+    )
     assert result.exit_code == 0, result.output
     run_synth(root / "pin", "good", seed=1, views=12, image_size=(640, 480))
-    result = RUNNER.invoke(app, ["--db", url, "calibrate", "--serial", "PIN-1", "--board", "A17", "--source",
-                                 str(root / "pin")])
+    result = RUNNER.invoke(
+        app, ["--db", url, "calibrate", "--serial", "PIN-1", "--board", "A17", "--source", str(root / "pin")]
+    )
     assert result.exit_code in (0, 1), result.output
     return url, root
 
@@ -50,7 +67,10 @@ def test_a_circular_fisheye_report_draws_its_circle_and_greys_the_cells_outside(
     html = out.read_text(encoding="utf-8")
     values = shown(html)
     imaged = cells_inside_mask(ImageCircle(*CIRCLE, source="given"), (640, 480), COVERAGE_CELLS)
-    assert "Image circle (given): centre (322.8, 237.4) px" in html and values["image_circle_radius_px"] == "236.0"
+    assert (
+        "Image circle (given): centre (322.8, 237.4) px" in html
+        and values["image_circle_radius_px"] == "236.0"
+    )
     assert int(values["not_imaged_cells"]) == int((~imaged).sum()) > 0
     assert html.count('fill="#dddddd"') == int((~imaged).sum())  # one grey cell per cell outside the circle
     # the never-reached count is over the cells inside the circle only
@@ -59,7 +79,10 @@ def test_a_circular_fisheye_report_draws_its_circle_and_greys_the_cells_outside(
     # the circle itself: a closed polyline through (cx + r, cy) in the plot's coordinates
     assert re.search(r'<polyline points="[^"]*" fill="none" stroke="#555555"', html)
     # the rest of the page reads the fisheye lens (it exited 2 on the stored fisheye covariance before)
-    assert float(values["rms_px"]) < 0.2 and float(values["uncertainty_max"]) >= float(values["uncertainty_centre"]) > 0
+    assert (
+        float(values["rms_px"]) < 0.2
+        and float(values["uncertainty_max"]) >= float(values["uncertainty_centre"]) > 0
+    )
 
 
 def test_a_pinhole_report_has_no_circle_and_no_grey_cells(db: tuple[str, Path]) -> None:

@@ -18,8 +18,15 @@ WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
 def db(sqlite_url: str) -> str:
     """CAM-A @1 and @2 accepted (@2 active), @3 rejected; CAM-B @1 active."""
     with Store.open(sqlite_url, create=True) as store:
-        for serial, status in (("CAM-A", "accepted"), ("CAM-A", "accepted"), ("CAM-A", "rejected"), ("CAM-B", "accepted")):
-            store.add_artifact(calibration(serial=serial, status=status), activate=status == "accepted", **WHO)
+        for serial, status in (
+            ("CAM-A", "accepted"),
+            ("CAM-A", "accepted"),
+            ("CAM-A", "rejected"),
+            ("CAM-B", "accepted"),
+        ):
+            store.add_artifact(
+                calibration(serial=serial, status=status), activate=status == "accepted", **WHO
+            )
     return sqlite_url
 
 
@@ -46,16 +53,22 @@ def test_robots_their_versions_and_where_they_stand(db: str) -> None:
     assert verify.exit_code == 0, verify.output
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["assign", "amr-9", "CAM-A@1", "--reason", "x"], "robot amr-9 is not registered"),
-    (["assign", "amr-1", "CAM-A@3", "--reason", "x"], "CAM-A@3 is rejected: a robot must not run it, so it cannot be assigned"),
-    (["assign", "amr-1", "CAM-A", "--reason", "x"], "'CAM-A' names no version"),
-    (["assign", "amr-1", "CAM-C@1", "--reason", "x"], "does not carry CAM-C"),
-    (["assign", "amr-1", "CAM-A@1"], "a fleet change needs a reason"),
-    (["add", "amr-1", "--serial", "CAM-A"], "robot amr-1 is already registered"),
-    (["add", "amr-2"], "at least one camera serial or rig"),
-    (["add", "bad name!", "--serial", "CAM-A"], "robot"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["assign", "amr-9", "CAM-A@1", "--reason", "x"], "robot amr-9 is not registered"),
+        (
+            ["assign", "amr-1", "CAM-A@3", "--reason", "x"],
+            "CAM-A@3 is rejected: a robot must not run it, so it cannot be assigned",
+        ),
+        (["assign", "amr-1", "CAM-A", "--reason", "x"], "'CAM-A' names no version"),
+        (["assign", "amr-1", "CAM-C@1", "--reason", "x"], "does not carry CAM-C"),
+        (["assign", "amr-1", "CAM-A@1"], "a fleet change needs a reason"),
+        (["add", "amr-1", "--serial", "CAM-A"], "robot amr-1 is already registered"),
+        (["add", "amr-2"], "at least one camera serial or rig"),
+        (["add", "bad name!", "--serial", "CAM-A"], "robot"),
+    ],
+)
 def test_refused_steps_exit_2_and_write_nothing(db: str, args: list[str], message: str) -> None:
     assert _run(db, "add", "amr-1", "--serial", "CAM-A").exit_code == 0
     result = _run(db, *args)

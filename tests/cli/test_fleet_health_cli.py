@@ -18,9 +18,16 @@ NOW = datetime.now(UTC).replace(microsecond=0)
 
 
 def _report(i: int, **fields: object) -> dict:
-    doc = {"source_id": f"amr-1/{i}", "serial": "CAM-A", "robot": "amr-1", "kind": "check",
-           "time": (NOW - timedelta(days=30 - i)).isoformat(), "rms_px": 0.30 + 0.01 * i, "verdict": "pass",
-           "temperature_c": 15.0 + 2 * i}
+    doc = {
+        "source_id": f"amr-1/{i}",
+        "serial": "CAM-A",
+        "robot": "amr-1",
+        "kind": "check",
+        "time": (NOW - timedelta(days=30 - i)).isoformat(),
+        "rms_px": 0.30 + 0.01 * i,
+        "verdict": "pass",
+        "temperature_c": 15.0 + 2 * i,
+    }
     return {**doc, **fields}
 
 
@@ -48,8 +55,18 @@ def _stored(db: str) -> int:
 
 def test_ingest_then_trends_in_text_and_json(db: str, tmp_path: Path) -> None:
     reports = [_report(i) for i in range(10)]
-    reports += [_report(i, source_id=f"amr-1/td{i}", kind="timeoffset", rms_px=None, verdict=None,
-                        td_ms=1.0 + 0.864 * i, sigma_ms=0.1) for i in range(10)]
+    reports += [
+        _report(
+            i,
+            source_id=f"amr-1/td{i}",
+            kind="timeoffset",
+            rms_px=None,
+            verdict=None,
+            td_ms=1.0 + 0.864 * i,
+            sigma_ms=0.1,
+        )
+        for i in range(10)
+    ]
     reports += [_report(0, source_id="amr-2/0", serial="CAM-B", robot="amr-2", rms_px=0.9, verdict="fail")]
     result = _run(db, "ingest", str(_write(tmp_path / "day.jsonl", reports)))
     assert result.exit_code == 0, result.output
@@ -67,28 +84,37 @@ def test_ingest_then_trends_in_text_and_json(db: str, tmp_path: Path) -> None:
     assert CliRunner().invoke(app, ["--db", db, "db", "verify"]).exit_code == 0
 
 
-@pytest.mark.parametrize(("bad", "message"), [
-    ("{not json", "malformed JSON"),
-    (json.dumps(_report(9, rms_px=float("nan"))), "rms_px"),
-    (json.dumps(_report(9, td_ms=float("inf"))), "td_ms"),
-    (_report(9, time=(NOW + timedelta(minutes=30)).isoformat()), "more than 5 minutes in the future"),
-    (_report(9, serial="CAM-B"), "unknown serial CAM-B: robot amr-1 carries CAM-A"),
-    (_report(9, robot="amr-9"), "robot amr-9 is not registered"),
-    (_report(1), "source id amr-1/1 appears twice in this batch"),
-    (_report(9, kind="gauge"), "a gauge report needs ratio, sigma"),
-    (_report(9, verdict="maybe"), "verdict is pass or fail"),
-    (_report(9, td_ms=3.0), "a check report carries rms_px, verdict, temperature_c, not td_ms"),
-    ("x" * 5000, "longer than a report"),
-], ids=lambda value: value if isinstance(value, str) and len(value) < 80 and not value.startswith("{") else None)
-def test_a_refused_line_is_named_exits_1_and_its_file_writes_nothing(db: str, tmp_path: Path, bad: object,
-                                                                      message: str) -> None:
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ("{not json", "malformed JSON"),
+        (json.dumps(_report(9, rms_px=float("nan"))), "rms_px"),
+        (json.dumps(_report(9, td_ms=float("inf"))), "td_ms"),
+        (_report(9, time=(NOW + timedelta(minutes=30)).isoformat()), "more than 5 minutes in the future"),
+        (_report(9, serial="CAM-B"), "unknown serial CAM-B: robot amr-1 carries CAM-A"),
+        (_report(9, robot="amr-9"), "robot amr-9 is not registered"),
+        (_report(1), "source id amr-1/1 appears twice in this batch"),
+        (_report(9, kind="gauge"), "a gauge report needs ratio, sigma"),
+        (_report(9, verdict="maybe"), "verdict is pass or fail"),
+        (_report(9, td_ms=3.0), "a check report carries rms_px, verdict, temperature_c, not td_ms"),
+        ("x" * 5000, "longer than a report"),
+    ],
+    ids=lambda value: (
+        value if isinstance(value, str) and len(value) < 80 and not value.startswith("{") else None
+    ),
+)
+def test_a_refused_line_is_named_exits_1_and_its_file_writes_nothing(
+    db: str, tmp_path: Path, bad: object, message: str
+) -> None:
     bad_file = _write(tmp_path / "bad.jsonl", [_report(0), _report(1), bad])  # type: ignore[list-item]
     good_file = _write(tmp_path / "good.jsonl", [_report(5), _report(6)])
     result = _run(db, "ingest", str(bad_file), str(good_file))
     assert result.exit_code == 1, result.output
     assert "bad.jsonl:3: " in result.stderr and message in result.stderr, result.stderr
     assert "bad.jsonl:1" not in result.stderr and "Traceback" not in result.output
-    assert "refused, nothing stored (1 bad line(s))" in result.stdout and "2 report(s) stored" in result.stdout
+    assert (
+        "refused, nothing stored (1 bad line(s))" in result.stdout and "2 report(s) stored" in result.stdout
+    )
     assert _stored(db) == 2  # the good file only
 
 
@@ -99,7 +125,9 @@ def test_a_report_sent_twice_is_refused_the_second_time(db: str, tmp_path: Path)
     assert again.exit_code == 1
     doc = json.loads(again.stdout)
     assert doc["stored"] == 0 and doc["files"][0]["refused"][1] == {
-        "line": 2, "why": "duplicate report: source id amr-1/1 is stored already"}
+        "line": 2,
+        "why": "duplicate report: source id amr-1/1 is stored already",
+    }
     assert _stored(db) == 2
 
 
@@ -118,8 +146,12 @@ def test_store_refuses_bad_batches_whole_on_both_backends(db_url: str) -> None:
     with Store.open(db_url, create=True) as store:
         store.add_fleet_event(fleet_event("register", robot="amr-1", serials=["CAM-A"]))
         assert store.add_health_reports([health_report("CAM-A", robot="amr-1", source_id="a")]) == []
-        problems = store.add_health_reports([health_report("CAM-A", robot="amr-1", source_id="b"),
-                                             health_report("CAM-A", robot="amr-1", source_id="a")])
+        problems = store.add_health_reports(
+            [
+                health_report("CAM-A", robot="amr-1", source_id="b"),
+                health_report("CAM-A", robot="amr-1", source_id="a"),
+            ]
+        )
         assert problems == [(1, "duplicate report: source id a is stored already")]
         assert store.health_report_count() == 1
         rows = store.health_rows("CAM-A")

@@ -56,7 +56,9 @@ def test_synth_then_solve_recovers_x_within_its_sigma_and_writes_json_and_tf_sta
     assert "Result: ACCEPTED" in result.stdout and "T_lidar_camera:" in result.stdout
     doc = HandEyeResult.model_validate_json((tmp_path / "r.json").read_text())
     assert doc.status == "accepted" and doc.content_sha256 == doc.computed_sha256()
-    assert doc.parent_frame == "lidar" and doc.child_frame == "camera" and doc.provenance.input_shape == "poses"
+    assert (
+        doc.parent_frame == "lidar" and doc.child_frame == "camera" and doc.provenance.input_shape == "poses"
+    )
     assert doc.refinement == "poses"
     assert doc.transform is not None and doc.uncertainty is not None
     error_mm = (np.array(doc.transform.translation_m) - TRUTH_T_M) * 1e3
@@ -92,8 +94,10 @@ def test_corridor_is_refused_with_the_seed_message_and_no_transform(tmp_path: Pa
     doc = HandEyeResult.model_validate_json((tmp_path / "r.json").read_text())
     assert doc.status == "rejected" and doc.transform is None and doc.uncertainty is None
     lever = next(g for g in doc.gates if g.gate == "lever-arm")
-    assert lever.message == ("lever arm unobservable: sigma_min 0.008 (about 0.5 deg of rotation); "
-                             "rotate at least 30 deg about two non-parallel axes")
+    assert lever.message == (
+        "lever arm unobservable: sigma_min 0.008 (about 0.5 deg of rotation); "
+        "rotate at least 30 deg about two non-parallel axes"
+    )
     assert "lever arm unobservable: " in result.stdout
     assert not (tmp_path / "tf.yaml").exists() and "not written" in result.stdout
 
@@ -153,25 +157,51 @@ def test_millimetres_where_metres_are_expected(tmp_path: Path) -> None:
 def _tool_point_log(path: Path) -> tuple[Path, np.ndarray]:
     """Poses of an arm that mostly turns about its own tool point (a's translation unchanged), as the
     real RWHE-Calib kuka_2 log does, with a camera 0.14 m off that point; b = a's pose times X (Y = I)."""
-    X = se3.transform(se3.rotation_from_rotvec(np.radians([3.0, -2.0, 88.0])), np.array([0.014, -0.108, -0.082]))
+    X = se3.transform(
+        se3.rotation_from_rotvec(np.radians([3.0, -2.0, 88.0])), np.array([0.014, -0.108, -0.082])
+    )
     rng = np.random.default_rng(7)
     T = se3.transform(np.eye(3), np.array([-0.57, 1.13, 0.61]))
     poses = [T]
     for i in range(18):
-        step = se3.transform(se3.rotation_from_rotvec(rng.normal(size=3) * np.radians(12.0)),
-                             rng.normal(size=3) * (0.06 if i % 3 == 2 else 2e-6))  # the controller's micrometres
+        step = se3.transform(
+            se3.rotation_from_rotvec(rng.normal(size=3) * np.radians(12.0)),
+            rng.normal(size=3) * (0.06 if i % 3 == 2 else 2e-6),
+        )  # the controller's micrometres
         T = T @ step
         poses.append(T)
-    columns = ["a_qw", "a_qx", "a_qy", "a_qz", "a_tx_m", "a_ty_m", "a_tz_m",
-               "b_qw", "b_qx", "b_qy", "b_qz", "b_tx_m", "b_ty_m", "b_tz_m"]
+    columns = [
+        "a_qw",
+        "a_qx",
+        "a_qy",
+        "a_qz",
+        "a_tx_m",
+        "a_ty_m",
+        "a_tz_m",
+        "b_qw",
+        "b_qx",
+        "b_qy",
+        "b_qz",
+        "b_tx_m",
+        "b_ty_m",
+        "b_tz_m",
+    ]
     with path.open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(columns)
         for T_wa_a in poses:
             T_wb_b = T_wa_a @ X
-            writer.writerow([repr(float(v)) for v in (*se3.quaternion_from_rotation(T_wa_a[:3, :3]),
-                                                      *T_wa_a[:3, 3],
-                                                      *se3.quaternion_from_rotation(T_wb_b[:3, :3]), *T_wb_b[:3, 3])])
+            writer.writerow(
+                [
+                    repr(float(v))
+                    for v in (
+                        *se3.quaternion_from_rotation(T_wa_a[:3, :3]),
+                        *T_wa_a[:3, 3],
+                        *se3.quaternion_from_rotation(T_wb_b[:3, :3]),
+                        *T_wb_b[:3, 3],
+                    )
+                ]
+            )
     return path, X
 
 
@@ -185,7 +215,9 @@ def test_an_arm_turning_about_its_tool_point_is_not_taken_for_millimetres(tmp_pa
     np.testing.assert_allclose(got, X[:3, 3], atol=1e-4)
 
 
-def test_millimetres_hidden_by_pure_rotations_are_refused_by_the_translation_scale_gate(tmp_path: Path) -> None:
+def test_millimetres_hidden_by_pure_rotations_are_refused_by_the_translation_scale_gate(
+    tmp_path: Path,
+) -> None:
     # a's translations in mm: the arm's tool-point turns move it millimetres, the camera centimetres, so
     # the median ratio looks like no unit error and the log was accepted with a lever arm of tens of
     # metres. The translation half of A X = X B with a free scale on a gives 0.001: refused, unit named.
@@ -235,26 +267,35 @@ def test_too_few_poses(tmp_path: Path) -> None:
 
 
 def test_missing_rotation_and_missing_file(tmp_path: Path) -> None:
-    bad = rewrite(synth(tmp_path / "m.csv"), tmp_path / "norot.csv",
-                  lambda i, row: [row.pop(f"a_q{c}") for c in "wxyz"])
+    bad = rewrite(
+        synth(tmp_path / "m.csv"), tmp_path / "norot.csv", lambda i, row: [row.pop(f"a_q{c}") for c in "wxyz"]
+    )
     _expect_input_error(handeye(bad), "no complete rotation for a")
     _expect_input_error(handeye(tmp_path / "absent.csv"), "does not exist")
 
 
 def test_usage_errors(tmp_path: Path) -> None:
     log = synth(tmp_path / "m.csv")
-    _expect_input_error(invoke("handeye", str(log), "--from", "cam", "--to", "cam"), "--from and --to are both 'cam'")
+    _expect_input_error(
+        invoke("handeye", str(log), "--from", "cam", "--to", "cam"), "--from and --to are both 'cam'"
+    )
     _expect_input_error(handeye(log, "--method", "horaud"), "unknown method 'horaud'")
     _expect_input_error(handeye(log, "--input", "twists"), "unknown --input 'twists'")
-    _expect_input_error(invoke("handeye", str(log), "--from", "bad frame", "--to", "cam"), "'bad frame' is not a frame name")
+    _expect_input_error(
+        invoke("handeye", str(log), "--from", "bad frame", "--to", "cam"), "'bad frame' is not a frame name"
+    )
 
 
 def test_synth_motions_refuses_to_overwrite_and_bad_options(tmp_path: Path) -> None:
     log = synth(tmp_path / "m.csv")
     _expect_input_error(invoke("synth-motions", str(log)), "exists")
-    _expect_input_error(invoke("synth-motions", str(tmp_path / "x.csv"), "--excitation", "zigzag"), "unknown --excitation")
-    _expect_input_error(invoke("synth-motions", str(tmp_path / "y.csv"), "--shape", "motions", "--time-offset-ms", "5"),
-                        "a time offset needs a pose log")
+    _expect_input_error(
+        invoke("synth-motions", str(tmp_path / "x.csv"), "--excitation", "zigzag"), "unknown --excitation"
+    )
+    _expect_input_error(
+        invoke("synth-motions", str(tmp_path / "y.csv"), "--shape", "motions", "--time-offset-ms", "5"),
+        "a time offset needs a pose log",
+    )
 
 
 def test_same_seed_same_bytes(tmp_path: Path) -> None:
@@ -280,7 +321,9 @@ def test_half_a_timestamp_pair_and_unsorted_times(tmp_path: Path) -> None:
         if i == 6:
             row["t_s"] = "0.1"
 
-    _expect_input_error(handeye(rewrite(src, tmp_path / "unsorted.csv", swap)), "t_s does not increase at line 8")
+    _expect_input_error(
+        handeye(rewrite(src, tmp_path / "unsorted.csv", swap)), "t_s does not increase at line 8"
+    )
 
 
 def test_one_relative_motion_is_too_few(tmp_path: Path) -> None:
@@ -299,7 +342,9 @@ def test_outputs_are_never_overwritten_without_force(tmp_path: Path) -> None:
     _expect_input_error(handeye(log, "-o", str(tmp_path / "no-such-dir" / "r.json")), "does not exist")
 
 
-def test_a_diverged_refinement_is_exit_2_not_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_diverged_refinement_is_exit_2_not_a_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from calibctl.workflows.handeye import handeye as wf
 
     real = wf.fit_handeye
@@ -315,7 +360,9 @@ def test_a_diverged_refinement_is_exit_2_not_a_traceback(tmp_path: Path, monkeyp
 def test_poses_given_the_wrong_way_round_are_rejected_as_inconsistent(tmp_path: Path) -> None:
     def invert_b(i, row):
         q = np.array([float(row[f"b_q{c}"]) for c in "wxyz"])
-        T = se3.invert(se3.transform(se3.rotation_from_quaternion(q), np.array([float(row[f"b_t{c}_m"]) for c in "xyz"])))
+        T = se3.invert(
+            se3.transform(se3.rotation_from_quaternion(q), np.array([float(row[f"b_t{c}_m"]) for c in "xyz"]))
+        )
         q_inv = se3.quaternion_from_rotation(T[:3, :3])
         row.update({f"b_q{c}": repr(float(v)) for c, v in zip("wxyz", q_inv, strict=True)})
         row.update({f"b_t{c}_m": repr(float(v)) for c, v in zip("xyz", T[:3, 3], strict=True)})

@@ -30,10 +30,21 @@ def invoke(*args: object):
 
 def _png_header(width: int, height: int) -> bytes:
     """A PNG that claims ``width`` x ``height`` (an over-size picture's header, without its pixels)."""
+
     def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(b"\x00" * 64)) + chunk(b"IEND", b""))
+        return (
+            struct.pack(">I", len(data))
+            + kind
+            + data
+            + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+        )
+
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(b"\x00" * 64))
+        + chunk(b"IEND", b"")
+    )
 
 
 def test_printable_escapes_controls_and_bytes_that_are_not_utf8():
@@ -52,7 +63,9 @@ def test_tiny_and_over_size_images_are_outcomes_not_crashes(tmp_path):
     assert read_gray(tmp_path / "huge.png") is None and read_gray(tmp_path / "missing.png") is None
 
 
-def test_capture_of_a_file_named_in_latin1_and_with_escapes_is_stored_with_a_printable_name(db, good, tmp_path):  # noqa: F811
+def test_capture_of_a_file_named_in_latin1_and_with_escapes_is_stored_with_a_printable_name(
+    db, good, tmp_path
+):
     folder = tmp_path / "views"
     shutil.copytree(good, folder)
     first = sorted(folder.glob("view-*.png"))[0]
@@ -72,7 +85,7 @@ def test_capture_of_a_file_named_in_latin1_and_with_escapes_is_stored_with_a_pri
     assert names["tiny.png"] == "wrong_size" and names["huge.png"] == "unreadable"  # in a folder of 640x480
 
 
-def test_a_folder_of_nothing_but_1x1_images_is_exit_2_with_a_message(db, tmp_path):  # noqa: F811
+def test_a_folder_of_nothing_but_1x1_images_is_exit_2_with_a_message(db, tmp_path):
     for i in range(3):
         cv2.imwrite(str(tmp_path / f"t{i}.png"), np.zeros((1, 1 + i), np.uint8))
     result = capture(db, tmp_path)
@@ -80,13 +93,16 @@ def test_a_folder_of_nothing_but_1x1_images_is_exit_2_with_a_message(db, tmp_pat
     assert sessions(db) == []
 
 
-@pytest.mark.parametrize("args", [
-    ("synth-motions", "{out}", "--amplitude-deg", "inf"),
-    ("synth-motions", "{out}", "--time-offset-ms", "nan"),
-    ("synth-motions", "{out}", "--translation-m", "1e308", "0", "0"),
-    ("synth-residuals", "{out}", "--fault", "focal", "--magnitude", "nan"),
-    ("synth-residuals", "{out}", "--fault", "focal", "--drift-ppm", "-inf"),
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("synth-motions", "{out}", "--amplitude-deg", "inf"),
+        ("synth-motions", "{out}", "--time-offset-ms", "nan"),
+        ("synth-motions", "{out}", "--translation-m", "1e308", "0", "0"),
+        ("synth-residuals", "{out}", "--fault", "focal", "--magnitude", "nan"),
+        ("synth-residuals", "{out}", "--fault", "focal", "--drift-ppm", "-inf"),
+    ],
+)
 def test_non_finite_options_are_exit_2_naming_the_option(tmp_path, args):
     out = tmp_path / "out.csv"
     result = invoke(*[a.format(out=out) for a in args])
@@ -96,12 +112,20 @@ def test_non_finite_options_are_exit_2_naming_the_option(tmp_path, args):
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 
-@pytest.mark.parametrize(("args", "words"), [
-    (("synth-residuals", "{out}", "--fault", "focal", "--keyframes", "10000000"),
-     "800000000 is over the limit of 5000000 rows per file"),
-    (("synth-residuals", "{out}", "--fault", "focal", "--odometry-s", "1e9"), "over the limit of 5000000 rows"),
-    (("synth-motions", "{out}", "--rows", str(10**9)), "--rows 1000000000 is out of range (2 .. 100000)"),
-])
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (
+            ("synth-residuals", "{out}", "--fault", "focal", "--keyframes", "10000000"),
+            "800000000 is over the limit of 5000000 rows per file",
+        ),
+        (
+            ("synth-residuals", "{out}", "--fault", "focal", "--odometry-s", "1e9"),
+            "over the limit of 5000000 rows",
+        ),
+        (("synth-motions", "{out}", "--rows", str(10**9)), "--rows 1000000000 is out of range (2 .. 100000)"),
+    ],
+)
 def test_generators_are_bounded_before_they_allocate(tmp_path, args, words):
     out = tmp_path / "out.csv"
     result = invoke(*[a.format(out=out) for a in args])
@@ -123,7 +147,10 @@ def test_a_hand_eye_translation_of_1e308_is_exit_2_naming_the_line(tmp_path):
 
 def test_synth_baseline_without_rig_is_refused(tmp_path):
     result = invoke("synth", tmp_path / "o", "--baseline-mm", "75")
-    assert result.exit_code == 2 and "--baseline-mm places the cameras of a rig; it needs --rig N" in result.stderr
+    assert (
+        result.exit_code == 2
+        and "--baseline-mm places the cameras of a rig; it needs --rig N" in result.stderr
+    )
     assert not (tmp_path / "o").exists()
 
 
@@ -131,16 +158,34 @@ def test_an_error_message_never_carries_a_raw_escape(sqlite_url, tmp_path):
     with Store.open(sqlite_url):
         pass
     result = invoke("--db", sqlite_url, "show", "CAM\x1b[2J")
-    assert result.exit_code == 2 and "\x1b" not in result.stderr and "\\x1b[2J" in result.stderr, result.stderr
+    assert result.exit_code == 2 and "\x1b" not in result.stderr and "\\x1b[2J" in result.stderr, (
+        result.stderr
+    )
 
 
 @pytest.mark.parametrize("value", ["-1", "0"])
 def test_a_rig_gate_that_links_nothing_is_refused(tmp_path, value):
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    result = invoke("rig", "solve-folders", "--source", f"A={tmp_path / 'a'}", "--source", f"B={tmp_path / 'b'}",
-                    "--cols", "9", "--rows", "6", "--square-mm", "25", "--min-shared-views", value)
-    assert result.exit_code == 2 and f"--min-shared-views {value} is out of range (1 .. 10000)" in result.stderr
+    result = invoke(
+        "rig",
+        "solve-folders",
+        "--source",
+        f"A={tmp_path / 'a'}",
+        "--source",
+        f"B={tmp_path / 'b'}",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+        "--min-shared-views",
+        value,
+    )
+    assert (
+        result.exit_code == 2 and f"--min-shared-views {value} is out of range (1 .. 10000)" in result.stderr
+    )
 
 
 def test_a_rollback_reason_of_100000_characters_is_refused_before_the_store_opens(sqlite_url):
@@ -148,15 +193,20 @@ def test_a_rollback_reason_of_100000_characters_is_refused_before_the_store_open
     assert result.exit_code == 2 and "the reason is 100000 characters long (at most 2000)" in result.stderr
 
 
-@pytest.mark.parametrize(("text", "words"), [
-    ("gates:\n  min_views: 1000000000000000000000\n", "min_views"),
-    ("lint:\n  sigma_fx_max_px: .inf\n", "sigma_fx_max_px"),
-])
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("gates:\n  min_views: 1000000000000000000000\n", "min_views"),
+        ("lint:\n  sigma_fx_max_px: .inf\n", "sigma_fx_max_px"),
+    ],
+)
 def test_a_station_file_with_absurd_numbers_is_refused(sqlite_url, tmp_path, text, words):
     station = tmp_path / "station.yaml"
     station.write_text(text)
     result = invoke("--db", sqlite_url, "--station-config", station, "history", "CAM-0001")
-    assert result.exit_code == 2 and words in result.stderr and "Traceback" not in result.output, result.output
+    assert result.exit_code == 2 and words in result.stderr and "Traceback" not in result.output, (
+        result.output
+    )
 
 
 def test_db_verify_names_and_prune_removes_the_files_a_failed_capture_left(sqlite_url, tmp_path):
@@ -174,7 +224,9 @@ def test_db_verify_names_and_prune_removes_the_files_a_failed_capture_left(sqlit
     old = orphan.stat().st_mtime - ORPHAN_GRACE_S - 60
     os.utime(orphan, (old, old))
     verified = invoke("--db", sqlite_url, "db", "verify")
-    assert verified.exit_code == 0 and "images: 1 file(s) no record refers to" in verified.stdout, verified.output
+    assert verified.exit_code == 0 and "images: 1 file(s) no record refers to" in verified.stdout, (
+        verified.output
+    )
     pruned = invoke("--db", sqlite_url, "prune")
     assert pruned.exit_code == 0 and "pruned 1 " in pruned.stdout, pruned.output
     assert not orphan.exists() and image_file(image_dir, kept).exists()

@@ -33,12 +33,25 @@ def world(tmp_path: Path) -> dict[str, Path]:
     paths["trusted"].mkdir()
     for name in ("source_key", "stranger_key", "own_key"):
         assert run("keys", "init", "--key", str(paths[name])).exit_code == 0
-    assert run("keys", "export-public", "--key", str(paths["source_key"]), "-o",
-               str(paths["trusted"] / "source.pem")).exit_code == 0
+    assert (
+        run(
+            "keys",
+            "export-public",
+            "--key",
+            str(paths["source_key"]),
+            "-o",
+            str(paths["trusted"] / "source.pem"),
+        ).exit_code
+        == 0
+    )
     for name, key in (("signed", "source_key"), ("stranger", "stranger_key")):
         url = f"sqlite:///{tmp_path / (name + '.db')}"
-        with Store.open(url, signer=signer_of(load_settings(env={"CALIBCTL_SIGNING_KEY": str(paths[key])}))) as store:
-            store.add_artifact(calibration(serial=SERIAL), activate=True, reason="solved", actor="qa", station="st1")
+        with Store.open(
+            url, signer=signer_of(load_settings(env={"CALIBCTL_SIGNING_KEY": str(paths[key])}))
+        ) as store:
+            store.add_artifact(
+                calibration(serial=SERIAL), activate=True, reason="solved", actor="qa", station="st1"
+            )
         paths[name] = tmp_path / f"{name}.json"
         assert run("--db", url, "export", SERIAL, "-o", str(paths[name])).exit_code == 0
     data = json.loads(paths["signed"].read_text())
@@ -65,7 +78,10 @@ def test_signed_by_a_trusted_key_is_active_and_marked(world):
     assert "active;" in result.stdout and "not active" not in result.stdout
     art, active, events = _stored(world)
     assert active == 1 and len(events) == 1
-    assert art.provenance.import_signature == f"trusted key {json.loads(world['signed'].read_text())['signature']['key_id']}"
+    assert (
+        art.provenance.import_signature
+        == f"trusted key {json.loads(world['signed'].read_text())['signature']['key_id']}"
+    )
 
 
 @pytest.mark.parametrize("source", ["unsigned", "stranger"])
@@ -91,33 +107,53 @@ def test_the_held_back_line_is_printed(world):
 
 
 def test_a_signing_key_alone_makes_the_store_require_signatures(world):
-    result = run("--db", str(world["target"]), "import", str(world["unsigned"]),
-                 env={"CALIBCTL_SIGNING_KEY": str(world["own_key"])})
+    result = run(
+        "--db",
+        str(world["target"]),
+        "import",
+        str(world["unsigned"]),
+        env={"CALIBCTL_SIGNING_KEY": str(world["own_key"])},
+    )
     assert result.exit_code == 0 and HELD in result.stdout
     art, active, _ = _stored(world)
-    assert active is None and art.signature is not None  # this store signed its version; the mark says the source was not
+    assert (
+        active is None and art.signature is not None
+    )  # this store signed its version; the mark says the source was not
     assert art.provenance.import_signature == "unsigned"
 
 
 def test_explicit_activate_overrides_and_the_event_records_it(world):
-    result = run("--db", str(world["target"]), "import", str(world["unsigned"]), "--activate", env=_keyed(world))
+    result = run(
+        "--db", str(world["target"]), "import", str(world["unsigned"]), "--activate", env=_keyed(world)
+    )
     assert result.exit_code == 0, result.output
     assert "active;" in result.stdout and HELD not in result.stdout
     art, active, (event,) = _stored(world)
     assert active == 1
-    assert event.reason == f"imported {SERIAL}@1 (unsigned; activated with --activate although this store requires signatures)"
+    assert (
+        event.reason
+        == f"imported {SERIAL}@1 (unsigned; activated with --activate although this store requires signatures)"
+    )
 
 
 def test_a_store_without_keys_activates_an_unsigned_import_as_before(world):
     result = run("--db", str(world["target"]), "import", str(world["unsigned"]))
     assert result.exit_code == 0 and HELD not in result.stdout
     art, active, (event,) = _stored(world)
-    assert active == 1 and event.reason == f"imported {SERIAL}@1" and art.provenance.import_signature == "unsigned"
+    assert (
+        active == 1
+        and event.reason == f"imported {SERIAL}@1"
+        and art.provenance.import_signature == "unsigned"
+    )
 
 
 def test_no_activate_keeps_a_trusted_import_inactive_without_the_signature_line(world):
-    result = run("--db", str(world["target"]), "import", str(world["signed"]), "--no-activate", env=_keyed(world))
-    assert result.exit_code == 0 and "not active" in result.stdout and "requires signatures" not in result.stdout
+    result = run(
+        "--db", str(world["target"]), "import", str(world["signed"]), "--no-activate", env=_keyed(world)
+    )
+    assert (
+        result.exit_code == 0 and "not active" in result.stdout and "requires signatures" not in result.stdout
+    )
     assert _stored(world)[1] is None
 
 

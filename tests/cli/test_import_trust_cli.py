@@ -38,19 +38,26 @@ def _forged(**update) -> CalibrationArtifact:
     return art.model_copy(update=update).sealed()
 
 
-def test_forged_accepted_file_that_fails_lint_is_imported_rejected_and_never_activated(run, sqlite_url, tmp_path):
+def test_forged_accepted_file_that_fails_lint_is_imported_rejected_and_never_activated(
+    run, sqlite_url, tmp_path
+):
     bad_sigma = calibration(serial=SERIAL).stdev.model_copy(update={"sigma": {"fx": 9.0, "fy": 9.0}})
     path = _write(tmp_path / "forged.json", _forged(stdev=bad_sigma, lint=[]))
     result = run(sqlite_url, "import", str(path))
     assert result.exit_code == 1, result.output
-    assert f"imported {SERIAL}@1 (rejected by this store's lint, not active; source {SERIAL}@7 was accepted" in result.stdout
+    assert (
+        f"imported {SERIAL}@1 (rejected by this store's lint, not active; source {SERIAL}@7 was accepted"
+        in result.stdout
+    )
     assert "sigma" in result.stdout  # the finding that rejects it is shown
     with Store.open(sqlite_url) as store:
         assert store.active_version(SERIAL) is None and store.events(SERIAL) == []
         (stored,) = store.list_artifacts(SERIAL)
     assert stored.status == "rejected" and stored.version == 1
     assert any(f.severity == "error" for f in stored.lint)
-    assert stored.provenance.imported_from is not None and stored.provenance.imported_from.startswith(f"{SERIAL}@7 ")
+    assert stored.provenance.imported_from is not None and stored.provenance.imported_from.startswith(
+        f"{SERIAL}@7 "
+    )
 
 
 def test_forged_file_recording_a_failed_gate_is_rejected(run, sqlite_url, tmp_path):
@@ -81,7 +88,10 @@ def test_import_gets_the_next_version_and_a_second_import_is_the_same_version(ru
 def test_keep_version_only_when_it_is_the_next_one(run, sqlite_url, tmp_path):
     refused = run(sqlite_url, "import", "--keep-version", str(_write(tmp_path / "a.json", _forged())))
     assert refused.exit_code == 2
-    assert f"{SERIAL}@7 cannot keep its version here; this store's next version of {SERIAL} is 1" in refused.stderr
+    assert (
+        f"{SERIAL}@7 cannot keep its version here; this store's next version of {SERIAL} is 1"
+        in refused.stderr
+    )
     kept = run(sqlite_url, "import", "--keep-version", str(_write(tmp_path / "b.json", _forged(version=1))))
     assert kept.exit_code == 0 and f"imported {SERIAL}@1 " in kept.stdout
 
@@ -167,9 +177,15 @@ def test_a_nul_in_a_rollback_reason_or_operator_is_refused_before_the_database(r
     _three_versions(db_url)
     result = run(db_url, "rollback", SERIAL, "--to", "1", "--reason", "bad\x00reason")
     assert result.exit_code == 2 and "--reason: the reason holds a NUL character" in result.stderr
-    result = CliRunner().invoke(app, ["--db", db_url, "rollback", SERIAL, "--to", "1", "--reason", "r"],
-                                env={"CALIBCTL_OPERATOR": "o\x01p"})
-    assert result.exit_code == 2 and "CALIBCTL_OPERATOR): its value holds control character \\x01" in result.stderr
+    result = CliRunner().invoke(
+        app,
+        ["--db", db_url, "rollback", SERIAL, "--to", "1", "--reason", "r"],
+        env={"CALIBCTL_OPERATOR": "o\x01p"},
+    )
+    assert (
+        result.exit_code == 2
+        and "CALIBCTL_OPERATOR): its value holds control character \\x01" in result.stderr
+    )
     with Store.open(db_url) as store:
         assert store.active_version(SERIAL) == 3
 
@@ -177,8 +193,9 @@ def test_a_nul_in_a_rollback_reason_or_operator_is_refused_before_the_database(r
 def test_importing_the_stores_own_export_is_a_no_op_and_never_undoes_a_rollback(run, sqlite_url, tmp_path):
     with Store.open(sqlite_url) as store:
         store.add_artifact(calibration(serial=SERIAL), activate=True, **WHO)
-        second = calibration(serial=SERIAL).model_copy(update={"camera_matrix": ((801.0, 0.0, 320.0), (0.0, 801.0, 240.0),
-                                                                                (0.0, 0.0, 1.0))})
+        second = calibration(serial=SERIAL).model_copy(
+            update={"camera_matrix": ((801.0, 0.0, 320.0), (0.0, 801.0, 240.0), (0.0, 0.0, 1.0))}
+        )
         store.add_artifact(second, activate=True, **WHO)
     out = tmp_path / "v2.json"
     assert run(sqlite_url, "export", f"{SERIAL}@2", "-o", str(out)).exit_code == 0
@@ -196,12 +213,19 @@ def test_importing_the_stores_own_export_is_a_no_op_and_never_undoes_a_rollback(
     assert doc["already_imported"] is True and doc["active"] is False and doc["artifact"]["version"] == 2
 
 
-@pytest.mark.parametrize(("update", "words"), [
-    ({"camera_matrix": ((805.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0))}, "fx 805.000 and fy 800.000 differ"),
-    ("sigma", "sigma_fx 0.9 and sigma_fy 0.3 differ"),
-])
-def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_nothing_stored(run, sqlite_url, tmp_path,
-                                                                                           update, words):
+@pytest.mark.parametrize(
+    ("update", "words"),
+    [
+        (
+            {"camera_matrix": ((805.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0))},
+            "fx 805.000 and fy 800.000 differ",
+        ),
+        ("sigma", "sigma_fx 0.9 and sigma_fy 0.3 differ"),
+    ],
+)
+def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_nothing_stored(
+    run, sqlite_url, tmp_path, update, words
+):
     """fx + 5 px on a model that ties fx to fy, hash re-sealed, unsigned: it imported as accepted and active."""
     art = calibration(serial=SERIAL, version=7)
     if update == "sigma":
@@ -209,6 +233,8 @@ def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_noth
     path = _write(tmp_path / "forged.json", art.model_copy(update=update).sealed())
     result = run(sqlite_url, "import", str(path))
     assert result.exit_code == 1, result.output
-    assert words in result.stderr and "ties fx to fy" in result.stderr and "nothing was stored" in result.stderr
+    assert (
+        words in result.stderr and "ties fx to fy" in result.stderr and "nothing was stored" in result.stderr
+    )
     with Store.open(sqlite_url) as store:
         assert store.serials() == []

@@ -26,14 +26,28 @@ def run(*args: str, env: dict[str, str] | None = None):
 @pytest.fixture
 def keys(tmp_path: Path) -> dict[str, Path]:
     """A station key, its public key in a trusted folder, and a stranger's key in another folder."""
-    paths = {"key": tmp_path / "station.pem", "trusted": tmp_path / "trusted", "stranger": tmp_path / "stranger.pem",
-             "untrusted": tmp_path / "untrusted"}
+    paths = {
+        "key": tmp_path / "station.pem",
+        "trusted": tmp_path / "trusted",
+        "stranger": tmp_path / "stranger.pem",
+        "untrusted": tmp_path / "untrusted",
+    }
     paths["trusted"].mkdir()
     paths["untrusted"].mkdir()
     assert run("keys", "init", "--key", str(paths["key"])).exit_code == 0
-    assert run("keys", "export-public", "--key", str(paths["key"]), "-o", str(paths["trusted"] / "station.pem")).exit_code == 0
+    assert (
+        run(
+            "keys", "export-public", "--key", str(paths["key"]), "-o", str(paths["trusted"] / "station.pem")
+        ).exit_code
+        == 0
+    )
     assert run("keys", "init", "--key", str(paths["stranger"])).exit_code == 0
-    assert run("keys", "export-public", "--key", str(paths["stranger"]), "-o", str(paths["untrusted"] / "s.pem")).exit_code == 0
+    assert (
+        run(
+            "keys", "export-public", "--key", str(paths["stranger"]), "-o", str(paths["untrusted"] / "s.pem")
+        ).exit_code
+        == 0
+    )
     return paths
 
 
@@ -58,9 +72,30 @@ def test_init_writes_a_0600_key_and_never_overwrites_it(tmp_path: Path):
 
 
 def test_a_missing_or_loose_key_file_is_exit_2_and_nothing_is_written(sqlite_url: str, tmp_path: Path):
-    missing = run("--db", sqlite_url, "board", "add", "A17", "--kind", "chessboard", "--cols", "9", "--rows", "6",
-                  "--square-mm", "25", "--uncertainty-mm", "0.02", "--instrument", "calipers", "--measured-by", "qa",
-                  "--measured-on", "2026-03-11", env={"CALIBCTL_SIGNING_KEY": str(tmp_path / "nope.pem")})
+    missing = run(
+        "--db",
+        sqlite_url,
+        "board",
+        "add",
+        "A17",
+        "--kind",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+        "--uncertainty-mm",
+        "0.02",
+        "--instrument",
+        "calipers",
+        "--measured-by",
+        "qa",
+        "--measured-on",
+        "2026-03-11",
+        env={"CALIBCTL_SIGNING_KEY": str(tmp_path / "nope.pem")},
+    )
     assert missing.exit_code == 2 and "nope.pem does not exist" in missing.stderr
     assert not Path(sqlite_url.removeprefix("sqlite:///")).exists()
     loose = tmp_path / "loose.pem"
@@ -71,14 +106,24 @@ def test_a_missing_or_loose_key_file_is_exit_2_and_nothing_is_written(sqlite_url
     assert run("keys", "export-public").exit_code == 2  # no key configured at all
 
 
-def test_export_carries_the_signature_and_import_requires_a_trusted_one(keys: dict[str, Path], tmp_path: Path):
+def test_export_carries_the_signature_and_import_requires_a_trusted_one(
+    keys: dict[str, Path], tmp_path: Path
+):
     source = f"sqlite:///{tmp_path / 'source.db'}"
     target = f"sqlite:///{tmp_path / 'target.db'}"
     exported = _signed_export(source, keys["key"], tmp_path / "cam.json")
     seal = json.loads(exported.read_text())["signature"]
     assert seal["algorithm"] == "ed25519" and len(seal["key_id"]) == 64
 
-    untrusted = run("--db", target, "import", str(exported), "--require-signature", "--trusted-keys", str(keys["untrusted"]))
+    untrusted = run(
+        "--db",
+        target,
+        "import",
+        str(exported),
+        "--require-signature",
+        "--trusted-keys",
+        str(keys["untrusted"]),
+    )
     assert untrusted.exit_code == 2 and "which is not trusted" in untrusted.stderr
     assert not (tmp_path / "target.db").exists()  # nothing written
 
@@ -86,21 +131,36 @@ def test_export_carries_the_signature_and_import_requires_a_trusted_one(keys: di
     data = json.loads(exported.read_text())
     del data["signature"]
     unsigned.write_text(json.dumps(data))
-    refused = run("--db", target, "import", str(unsigned), "--require-signature", "--trusted-keys", str(keys["trusted"]))
+    refused = run(
+        "--db", target, "import", str(unsigned), "--require-signature", "--trusted-keys", str(keys["trusted"])
+    )
     assert refused.exit_code == 2 and "is not signed" in refused.stderr
 
-    ok = run("--db", target, "import", str(exported), "--require-signature", "--trusted-keys", str(keys["trusted"]))
+    ok = run(
+        "--db", target, "import", str(exported), "--require-signature", "--trusted-keys", str(keys["trusted"])
+    )
     assert ok.exit_code == 0, ok.output
 
 
-def test_a_signature_moved_to_other_content_is_refused_even_without_require(keys: dict[str, Path], tmp_path: Path):
+def test_a_signature_moved_to_other_content_is_refused_even_without_require(
+    keys: dict[str, Path], tmp_path: Path
+):
     exported = _signed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
-    other = json.loads(_signed_export(f"sqlite:///{tmp_path / 'o.db'}", keys["key"], tmp_path / "o.json").read_text())
+    other = json.loads(
+        _signed_export(f"sqlite:///{tmp_path / 'o.db'}", keys["key"], tmp_path / "o.json").read_text()
+    )
     data = json.loads(exported.read_text())
     data["signature"] = {**other["signature"], "record_sha256": "0" * 64}
     forged = tmp_path / "forged.json"
     forged.write_text(json.dumps(data))
-    result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(forged), "--trusted-keys", str(keys["trusted"]))
+    result = run(
+        "--db",
+        f"sqlite:///{tmp_path / 't.db'}",
+        "import",
+        str(forged),
+        "--trusted-keys",
+        str(keys["trusted"]),
+    )
     assert result.exit_code == 2 and "does not match its content" in result.stderr
 
 
@@ -113,7 +173,9 @@ def test_lint_require_signature(keys: dict[str, Path], tmp_path: Path):
     def signature_findings(*args: str) -> tuple[int, list[str]]:
         result = run("--db", url, "lint", *args, "--require-signature", "--format", "json")
         report = json.loads(result.stdout)
-        return result.exit_code, [f["message"] for r in report["results"] for f in r["findings"] if f["rule"] == "signature"]
+        return result.exit_code, [
+            f["message"] for r in report["results"] for f in r["findings"] if f["rule"] == "signature"
+        ]
 
     assert signature_findings(str(exported), "--trusted-keys", str(keys["trusted"])) == (0, [])
     code, messages = signature_findings(str(exported), "--trusted-keys", str(keys["untrusted"]))
@@ -128,7 +190,9 @@ def test_lint_require_signature(keys: dict[str, Path], tmp_path: Path):
 def test_db_verify_with_trusted_keys_and_head(keys: dict[str, Path], tmp_path: Path):
     url = f"sqlite:///{tmp_path / 's.db'}"
     _signed_export(url, keys["key"], tmp_path / "cam.json")
-    result = run("--db", url, "db", "verify", "--trusted-keys", str(keys["trusted"]), "--require-signature", "--head")
+    result = run(
+        "--db", url, "db", "verify", "--trusted-keys", str(keys["trusted"]), "--require-signature", "--head"
+    )
     assert result.exit_code == 0, result.output
     assert "signatures: 2 checked against 1 trusted key(s); 0 unsigned record(s)" in result.stdout
     head = result.stdout.split("head ")[-1].strip()
@@ -157,8 +221,19 @@ def test_rig_rollback_through_the_cli_is_signed_with_the_station_key(sqlite_url:
         store.add_rig_calibration(rig_calibration(baseline_m=0.076), activate=True, reason="rig solve", **WHO)
     rolled = run("--db", sqlite_url, "rig", "rollback", RIG, "--to", "1", "--reason", "bent mount", env=env)
     assert rolled.exit_code == 0, rolled.output
-    checked = run("--db", sqlite_url, "db", "verify", "--require-signature", "--trusted-keys", str(keys["trusted"]),
-                  "--json", env=env)
+    checked = run(
+        "--db",
+        sqlite_url,
+        "db",
+        "verify",
+        "--require-signature",
+        "--trusted-keys",
+        str(keys["trusted"]),
+        "--json",
+        env=env,
+    )
     assert checked.exit_code == 0, checked.output
     report = json.loads(checked.stdout)
-    assert report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3 + 1  # rig versions, rig events, definition
+    assert (
+        report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3 + 1
+    )  # rig versions, rig events, definition

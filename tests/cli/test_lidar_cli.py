@@ -16,7 +16,18 @@ from calibctl.core.lidar.target import BackingBoard
 from calibctl.workflows.lidar import lidar_solve as wf
 from tests.datasets import ACFR, require_acfr
 
-BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+BOARD = [
+    "--cols",
+    "5",
+    "--rows",
+    "7",
+    "--square-mm",
+    "95",
+    "--backing-mm",
+    "610,850",
+    "--pattern-offset-mm",
+    "2,0",
+]
 BOX = ["--box", "1,-2.2,-0.8,3.6,1.6,0.6"]
 
 
@@ -41,8 +52,21 @@ def camera(tmp_path: Path) -> list[str]:
 
 
 def test_a_malformed_box_is_exit_2(tmp_path: Path) -> None:
-    res = invoke(["lidar", "solve", "--images", str(tmp_path), "--scans", str(tmp_path), "--box", "1,2,3",
-                  "--camera-info", "x.yaml", *BOARD])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(tmp_path),
+            "--scans",
+            str(tmp_path),
+            "--box",
+            "1,2,3",
+            "--camera-info",
+            "x.yaml",
+            *BOARD,
+        ]
+    )
     assert res.exit_code == 2 and "--box '1,2,3' is not xmin" in res.output
 
 
@@ -54,22 +78,56 @@ def test_the_camera_is_given_exactly_once(tmp_path: Path) -> None:
 
 def test_a_camera_without_an_active_calibration_is_exit_2(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
-    res = invoke(["--db", f"sqlite:///{tmp_path / 'c.db'}", "lidar", "solve", "--images", str(img), "--scans",
-                  str(pcd), "--serial", "CAM-NONE", *BOX, *BOARD])
+    res = invoke(
+        [
+            "--db",
+            f"sqlite:///{tmp_path / 'c.db'}",
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            "--serial",
+            "CAM-NONE",
+            *BOX,
+            *BOARD,
+        ]
+    )
     assert res.exit_code == 2 and "Error:" in res.output and "Traceback" not in res.output
 
 
 def test_a_pattern_bigger_than_its_backing_board_is_exit_2(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
-                  "--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "400,850"])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            *BOX,
+            *camera(tmp_path),
+            "--cols",
+            "5",
+            "--rows",
+            "7",
+            "--square-mm",
+            "95",
+            "--backing-mm",
+            "400,850",
+        ]
+    )
     assert res.exit_code == 2 and "does not fit on a 400 x 850 mm backing board" in res.output
 
 
 def test_duplicate_frame_numbers_are_exit_2_naming_both(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
     (pcd / "pose1_copy.pcd").symlink_to(ACFR / "pcd" / "pose1_target.pcd")
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    res = invoke(
+        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
+    )
     assert res.exit_code == 2 and "two scans with frame number 1" in res.output
 
 
@@ -78,20 +136,39 @@ def test_a_lying_pcd_header_is_exit_2_naming_the_file_and_field(tmp_path: Path) 
     text = (ACFR / "pcd" / "pose3_full.pcd").read_text().replace("POINTS 24262", "POINTS 24000")
     (pcd / "pose3.pcd").unlink()
     (pcd / "pose3.pcd").write_text(text)
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    res = invoke(
+        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
+    )
     assert res.exit_code == 2 and "pose3.pcd" in res.output and "WIDTH x HEIGHT" in res.output
 
 
 def test_no_board_in_the_box_and_unpaired_files_are_outcomes_and_exit_1(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
     (img / "pose99.png").symlink_to(ACFR / "images" / "pose7.png")
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
-                  *camera(tmp_path), *BOARD, "--json"])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            "--box",
+            "-5,-5,-1,-4,-4,1",
+            *camera(tmp_path),
+            *BOARD,
+            "--json",
+        ]
+    )
     assert res.exit_code == 1
     doc = json.loads(res.stdout)
     outcomes = {(r["scan"] or r["image"]): r["outcome"] for r in doc["outcomes"]}
-    assert outcomes == {"pose1.pcd": "no_plane", "pose3.pcd": "no_plane", "pose5.pcd": "no_plane",
-                        "pose99.png": "not_paired"}
+    assert outcomes == {
+        "pose1.pcd": "no_plane",
+        "pose3.pcd": "no_plane",
+        "pose5.pcd": "no_plane",
+        "pose99.png": "not_paired",
+    }
     gate = doc["gates"][0]
     assert gate["gate"] == "lidar-poses" and not gate["passed"] and "capture 6 more poses" in gate["hint"]
     assert doc["transform"] is None
@@ -101,8 +178,21 @@ def test_a_set_of_boards_facing_one_way_is_refused_with_the_direction(tmp_path: 
     out = tmp_path / "oneway"
     assert invoke(["lidar", "synth", str(out), "--poses", "6", "--seed", "4", "--one-way"]).exit_code == 0
     truth = json.loads((out / "truth.json").read_text())
-    res = invoke(["lidar", "solve", "--images", str(out / "images"), "--scans", str(out / "scans"),
-                  "--box", truth["box"], "--camera-info", str(out / "camera_info.yaml"), *BOARD])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(out / "images"),
+            "--scans",
+            str(out / "scans"),
+            "--box",
+            truth["box"],
+            "--camera-info",
+            str(out / "camera_info.yaml"),
+            *BOARD,
+        ]
+    )
     assert res.exit_code == 1
     assert "gate lidar-observability FAIL" in res.output and "unobservable" in res.output
     assert "hint: tilt the board" in res.output and "no transform reported" in res.output
@@ -113,9 +203,26 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     """The authors' numbers are T_lidar_cam (p_lidar = R p_cam + t, R = Rz(yaw) Ry(pitch) Rx(roll)):
     src/optimiser.cpp's RotationTranslation * camera point and include/.../optimiser.h Rotation::toMat."""
     require_acfr()
-    res = invoke(["lidar", "solve", "--images", str(ACFR / "images"), "--scans", str(ACFR / "pcd"),
-                  "--scan-pattern", "*_full.pcd", *BOX, *camera(tmp_path), *BOARD, "--json",
-                  "--tf-static", str(tmp_path / "tf.yaml"), "--overlay", str(tmp_path / "overlay")])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(ACFR / "images"),
+            "--scans",
+            str(ACFR / "pcd"),
+            "--scan-pattern",
+            "*_full.pcd",
+            *BOX,
+            *camera(tmp_path),
+            *BOARD,
+            "--json",
+            "--tf-static",
+            str(tmp_path / "tf.yaml"),
+            "--overlay",
+            str(tmp_path / "overlay"),
+        ]
+    )
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
     assert "child_frame_id: camera" in (tmp_path / "tf.yaml").read_text()
@@ -127,8 +234,14 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     # measured (docs/lidar.md): roll -1.40, pitch -0.30, yaw -0.36, x +1.83, y +0.29, z +1.32 of their sd
     assert np.all(np.abs(ours - mean) < 2.5 * sd), (ours - mean) / sd
     # two disjoint halves (odd / even position) agree within 3 combined sigma
-    req = wf.LidarRequest(ACFR / "images", ACFR / "pcd", BackingBoard(5, 7, 0.095, (0.61, 0.85), (0.002, 0.0)),
-                          wf.parse_box("1,-2.2,-0.8,3.6,1.6,0.6"), ACFR / "camera_info.yaml", scan_pattern="*_full.pcd")
+    req = wf.LidarRequest(
+        ACFR / "images",
+        ACFR / "pcd",
+        BackingBoard(5, 7, 0.095, (0.61, 0.85), (0.002, 0.0)),
+        wf.parse_box("1,-2.2,-0.8,3.6,1.6,0.6"),
+        ACFR / "camera_info.yaml",
+        scan_pattern="*_full.pcd",
+    )
     poses, _ = wf.collect_poses(req, wf.load_lens(None, req.camera_info, None))  # type: ignore[arg-type]
     a, b = ls.solve(poses[0::2], req.board), ls.solve(poses[1::2], req.board)
     dt = a.T_lidar_cam[:3, 3] - b.T_lidar_cam[:3, 3]
@@ -148,37 +261,78 @@ def stored(sqlite_url: str, monkeypatch):
 
 
 def test_a_board_registered_with_its_backing_is_the_solve_target(stored, tmp_path: Path) -> None:
-    added = stored("board", "add", "L5", "--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850",
-                   "--pattern-offset-mm", "2,0")
+    added = stored(
+        "board",
+        "add",
+        "L5",
+        "--cols",
+        "5",
+        "--rows",
+        "7",
+        "--square-mm",
+        "95",
+        "--backing-mm",
+        "610,850",
+        "--pattern-offset-mm",
+        "2,0",
+    )
     assert added.exit_code == 0, added.output
     shown = json.loads(stored("board", "show", "L5", "--json").stdout)
     assert shown["backing"] == {"width_m": 0.61, "height_m": 0.85, "pattern_offset_m": [0.002, 0.0]}
     assert "backing board 610" in stored("board", "show", "L5").output
     img, pcd = acfr_subset(tmp_path)
-    res = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
-                 *camera(tmp_path), "--board", "L5", "--json")
+    res = stored(
+        "lidar",
+        "solve",
+        "--images",
+        str(img),
+        "--scans",
+        str(pcd),
+        "--box",
+        "-5,-5,-1,-4,-4,1",
+        *camera(tmp_path),
+        "--board",
+        "L5",
+        "--json",
+    )
     assert res.exit_code == 1  # the target was read; the empty box is the verdict
     assert json.loads(res.stdout)["outcome_counts"] == {"no_plane": 3}
-    both = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
-                  "--board", "L5", "--cols", "5")
+    both = stored(
+        "lidar",
+        "solve",
+        "--images",
+        str(img),
+        "--scans",
+        str(pcd),
+        *BOX,
+        *camera(tmp_path),
+        "--board",
+        "L5",
+        "--cols",
+        "5",
+    )
     assert both.exit_code == 2 and "not both" in both.output
 
 
 def test_a_board_without_backing_dimensions_is_exit_2_naming_the_fix(stored, tmp_path: Path) -> None:
     assert stored("board", "add", "A17", "--cols", "5", "--rows", "7", "--square-mm", "95").exit_code == 0
     img, pcd = acfr_subset(tmp_path)
-    res = stored("lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path),
-                 "--board", "A17")
+    res = stored(
+        "lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), "--board", "A17"
+    )
     assert res.exit_code == 2
     assert "board A17@1 was registered without its backing board dimensions" in res.output
     assert "--backing-mm W,H" in res.output
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--pattern-offset-mm", "2,0"], "--pattern-offset-mm needs --backing-mm"),
-    (["--backing-mm", "400,850"], "does not fit on a 400 x 850 mm backing board"),
-    (["--backing-mm", "610"], "is not two numbers"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--pattern-offset-mm", "2,0"], "--pattern-offset-mm needs --backing-mm"),
+        (["--backing-mm", "400,850"], "does not fit on a 400 x 850 mm backing board"),
+        (["--backing-mm", "610"], "is not two numbers"),
+    ],
+)
 def test_bad_backing_options_of_board_add_are_exit_2(stored, args: list[str], message: str) -> None:
     res = stored("board", "add", "B1", "--cols", "5", "--rows", "7", "--square-mm", "95", *args)
     assert res.exit_code == 2 and message in res.output
@@ -186,8 +340,10 @@ def test_bad_backing_options_of_board_add_are_exit_2(stored, args: list[str], me
 
 def _binary_pcd(points: np.ndarray) -> bytes:
     n = len(points)
-    head = (f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
-            f"POINTS {n}\nDATA binary\n").encode()
+    head = (
+        f"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
+        f"POINTS {n}\nDATA binary\n"
+    ).encode()
     return head + points.astype("<f4").tobytes()
 
 
@@ -199,18 +355,47 @@ def test_nan_points_are_counted_and_millimetre_scans_need_their_unit(tmp_path: P
     with_nan = np.vstack([pts, np.full((7, 3), np.nan)])
     (pcd / "pose1.pcd").unlink()
     (pcd / "pose1.pcd").write_bytes(_binary_pcd(with_nan))
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
-                  *camera(tmp_path), *BOARD, "--json"])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            "--box",
+            "-5,-5,-1,-4,-4,1",
+            *camera(tmp_path),
+            *BOARD,
+            "--json",
+        ]
+    )
     assert res.exit_code == 1
     rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
     assert rows["pose1.pcd"]["dropped_nonfinite"] == 7 and rows["pose3.pcd"]["dropped_nonfinite"] == 0
     (pcd / "pose3.pcd").unlink()
     np.savetxt(pcd / "pose3.txt", read_scan(ACFR / "pcd" / "pose3_full.pcd").points_m * 1000.0)
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD])
+    res = invoke(
+        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
+    )
     assert res.exit_code == 2 and "pose3.txt" in res.output and "millimetres" in res.output
     assert "--scan-units mm" in res.output
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD,
-                  "--scan-units", "mm", "--json"])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            *BOX,
+            *camera(tmp_path),
+            *BOARD,
+            "--scan-units",
+            "mm",
+            "--json",
+        ]
+    )
     rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
     assert rows["pose3.txt"]["outcome"] == "accepted" and res.exit_code == 1  # 2 poses: too few for a solve
 
@@ -220,11 +405,29 @@ def test_tf_static_is_written_only_for_an_accepted_transform(tmp_path: Path) -> 
 
     img, pcd = acfr_subset(tmp_path, (1, 3))
     target = tmp_path / "tf.yaml"
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), "--box", "-5,-5,-1,-4,-4,1",
-                  *camera(tmp_path), *BOARD, "--tf-static", str(target)])
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            "--box",
+            "-5,-5,-1,-4,-4,1",
+            *camera(tmp_path),
+            *BOARD,
+            "--tf-static",
+            str(target),
+        ]
+    )
     assert res.exit_code == 1 and "not written" in res.output and not target.exists()
-    accepted = {"status": "accepted", "images": "i", "scans": "s",
-                "transform": {"translation_m": [0.07, 0.009, -0.157], "quaternion_wxyz": [0.5, -0.5, 0.5, -0.5]}}
+    accepted = {
+        "status": "accepted",
+        "images": "i",
+        "scans": "s",
+        "transform": {"translation_m": [0.07, 0.009, -0.157], "quaternion_wxyz": [0.5, -0.5, 0.5, -0.5]},
+    }
     doc = yaml.safe_load(wf.tf_static_yaml(accepted, "velodyne", "camera_front"))
     edge = doc["transforms"][0]
     assert edge["header"]["frame_id"] == "velodyne" and edge["child_frame_id"] == "camera_front"
@@ -239,7 +442,11 @@ def test_synth_refuses_to_overwrite_a_rendered_set_without_force(tmp_path: Path)
     first = invoke(["lidar", "synth", str(out), "--poses", "1", "--seed", "3", "--json"])
     assert first.exit_code == 0
     cloud = read_scan(out / "scans" / "pose1.pcd")
-    assert len(cloud.points_m) > 25_000 and cloud.ring is not None and set(np.unique(cloud.ring)) == set(range(16))
+    assert (
+        len(cloud.points_m) > 25_000
+        and cloud.ring is not None
+        and set(np.unique(cloud.ring)) == set(range(16))
+    )
     again = invoke(["lidar", "synth", str(out), "--poses", "1"])
     assert again.exit_code == 2 and "already holds a rendered set" in again.output
     assert invoke(["lidar", "synth", str(out), "--poses", "1", "--force"]).exit_code == 0

@@ -31,7 +31,18 @@ from tests.workflows.urdf_check import loadable_urdf
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}
 CAM, OTHER = "CAM-0001", "CAM-0002"
 CAM_FRAME = "cam_0001_optical_frame"
-BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+BOARD = [
+    "--cols",
+    "5",
+    "--rows",
+    "7",
+    "--square-mm",
+    "95",
+    "--backing-mm",
+    "610,850",
+    "--pattern-offset-mm",
+    "2,0",
+]
 RUNNER = CliRunner()
 
 
@@ -39,13 +50,23 @@ def _store(url: str, other_calibrated: bool = True) -> None:
     """Rig STEREO-1 (frames lidar, flange) at version 1 over CAM-0001 with the renders' lens (1280x960,
     f 1000 px, no distortion) and CAM-0002 alike; members pinned to the stored calibrations (lint clean)."""
     with Store.open(url) as store:
-        arts = [store.add_artifact(_lens(serial), activate=True, **WHO)
-                for serial in ((CAM, OTHER) if other_calibrated else (CAM,))]
+        arts = [
+            store.add_artifact(_lens(serial), activate=True, **WHO)
+            for serial in ((CAM, OTHER) if other_calibrated else (CAM,))
+        ]
         store.add_rig(rig_definition().model_copy(update={"frames": ["lidar", "flange"]}))
         base = rig_calibration()
-        members = [m.model_copy(update={"content_sha256": a.content_sha256, "image_size": a.image_size,
-                                        "camera_matrix": a.camera_matrix, "dist_coeffs": a.dist_coeffs})
-                   for m, a in zip(base.members, arts, strict=False)] + base.members[len(arts):]
+        members = [
+            m.model_copy(
+                update={
+                    "content_sha256": a.content_sha256,
+                    "image_size": a.image_size,
+                    "camera_matrix": a.camera_matrix,
+                    "dist_coeffs": a.dist_coeffs,
+                }
+            )
+            for m, a in zip(base.members, arts, strict=False)
+        ] + base.members[len(arts) :]
         store.add_rig_calibration(base.model_copy(update={"members": members}), activate=True, **WHO)
 
 
@@ -60,8 +81,18 @@ def _cli(url: str, *args: str):
 
 def _solve_args(folder: Path, *extra: str) -> list[str]:
     box = json.loads((folder / "truth.json").read_text())["box"]
-    return ["lidar", "solve", "--images", str(folder / "images"), "--scans", str(folder / "scans"), *BOARD,
-            "--box", box, *extra]
+    return [
+        "lidar",
+        "solve",
+        "--images",
+        str(folder / "images"),
+        "--scans",
+        str(folder / "scans"),
+        *BOARD,
+        "--box",
+        box,
+        *extra,
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +109,9 @@ def solved(renders, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
     db = tmp_path_factory.mktemp("lidar-store") / "solved.db"
     url = f"sqlite:///{db}"
     _store(url)
-    done = _cli(url, *_solve_args(renders["good"], "--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar", "--json"))
+    done = _cli(
+        url, *_solve_args(renders["good"], "--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar", "--json")
+    )
     assert done.exit_code == 0, done.output
     return db, json.loads(done.stdout)
 
@@ -105,8 +138,13 @@ def _urdf_T(joint) -> np.ndarray:
 
 def test_an_accepted_set_is_the_rigs_next_active_version_with_the_lidar_edge(solved, url, renders):
     result = solved[1]
-    assert result["stored"] == {"rig": RIG, "version": 2, "status": "accepted", "active": True,
-                                "content_sha256": result["stored"]["content_sha256"]}
+    assert result["stored"] == {
+        "rig": RIG,
+        "version": 2,
+        "status": "accepted",
+        "active": True,
+        "content_sha256": result["stored"]["content_sha256"],
+    }
     T = np.array(result["transform"]["matrix"])
     cal = _cal(url)
     assert cal.version == 2 and cal.status == "accepted" and cal.lint == []
@@ -118,10 +156,21 @@ def test_an_accepted_set_is_the_rigs_next_active_version_with_the_lidar_edge(sol
     # the evidence is sealed with the version: T, 6x6 covariance, gates, outcomes, held-out figures
     ev = cal.lidar[0]
     assert (ev.parent_frame, ev.child_frame, ev.status, ev.camera) == ("lidar", CAM, "accepted", f"{CAM}@1")
-    assert ev.transform is not None and np.allclose(np.array(ev.transform.covariance), result["transform"]["covariance"])
-    assert [g.gate for g in ev.gates] == [g["gate"] for g in result["gates"]] and all(g.passed for g in ev.gates)
-    assert len(ev.scans_outcomes) == 10 and ev.metrics is not None and ev.metrics.held_out_plane_rms_mm is not None
-    assert ev.metrics.held_out_projected_edge_rms_px is not None and ev.metrics.held_out_projected_edge_rms_px > 0
+    assert ev.transform is not None and np.allclose(
+        np.array(ev.transform.covariance), result["transform"]["covariance"]
+    )
+    assert [g.gate for g in ev.gates] == [g["gate"] for g in result["gates"]] and all(
+        g.passed for g in ev.gates
+    )
+    assert (
+        len(ev.scans_outcomes) == 10
+        and ev.metrics is not None
+        and ev.metrics.held_out_plane_rms_mm is not None
+    )
+    assert (
+        ev.metrics.held_out_projected_edge_rms_px is not None
+        and ev.metrics.held_out_projected_edge_rms_px > 0
+    )
     assert cal.content_hash_algorithm == "sha256-rfc8785" and cal.computed_sha256() == cal.content_sha256
     assert cal.model_copy(update={"lidar": []}).computed_sha256() != cal.content_sha256
     covariance = [[v * 2 for v in row] for row in ev.transform.covariance]
@@ -139,7 +188,10 @@ def test_an_accepted_set_is_the_rigs_next_active_version_with_the_lidar_edge(sol
 def test_tf_urdf_and_bundle_carry_the_lidar_frame_with_the_solved_T(solved, url, tmp_path):
     T = np.array(solved[1]["transform"]["matrix"])
     tf = _tf(_cli(url, "rig", "export", RIG, "--format", "tf").stdout)
-    assert set(tf) == {("lidar", CAM_FRAME), (CAM_FRAME, "cam_0002_optical_frame")}  # the LiDAR roots the tree
+    assert set(tf) == {
+        ("lidar", CAM_FRAME),
+        (CAM_FRAME, "cam_0002_optical_frame"),
+    }  # the LiDAR roots the tree
     assert np.allclose(tf[("lidar", CAM_FRAME)], T, atol=1e-8)
     urdf = _cli(url, "rig", "export", RIG, "--format", "urdf").stdout
     name, root, joints = loadable_urdf(urdf)
@@ -156,7 +208,9 @@ def test_tf_urdf_and_bundle_carry_the_lidar_frame_with_the_solved_T(solved, url,
     linted = _cli(url, "lint", str(bundle / "manifest.json"))
     assert linted.exit_code == 0, linted.output
     if shutil.which("check_urdf") is not None:  # urdfdom's own parser (liburdfdom-tools), when installed
-        run = subprocess.run(["check_urdf", str(bundle / "rig.urdf")], capture_output=True, text=True, check=False)
+        run = subprocess.run(
+            ["check_urdf", str(bundle / "rig.urdf")], capture_output=True, text=True, check=False
+        )
         assert run.returncode == 0, run.stdout + run.stderr
         assert "root Link: lidar has 1 child(ren)" in run.stdout
     edge = _tf(_cli(url, "rig", "export", RIG, "--format", "tf", "--edge", f"lidar:{CAM}").stdout)
@@ -177,14 +231,19 @@ def test_a_camera_recalibrated_since_makes_the_lidar_edge_stale(url):
         store.add_artifact(_lens(CAM, 1001.0), activate=True, **WHO)
     lint = _cli(url, "rig", "lint", RIG)
     assert lint.exit_code == 1
-    assert f"lidar-stale-member: lidar -> {CAM}: solved with {CAM}@1, the active one is now {CAM}@2" in lint.stdout
+    assert (
+        f"lidar-stale-member: lidar -> {CAM}: solved with {CAM}@1, the active one is now {CAM}@2"
+        in lint.stdout
+    )
     assert "calibctl lidar solve ... --rig" in lint.stdout
     refused = _cli(url, "rig", "export", RIG, "--format", "tf")  # (the rig's own member is stale too)
     assert refused.exit_code == 1 and "--allow-stale" in refused.output
 
 
 def test_a_rejected_set_is_a_rejected_version_with_no_edge(renders, url, tmp_path):
-    done = _cli(url, *_solve_args(renders["one-way"], "--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar"))
+    done = _cli(
+        url, *_solve_args(renders["one-way"], "--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar")
+    )
     assert done.exit_code == 1, done.output
     assert f"stored as rig {RIG}@3 (rejected, never active; no edge)" in done.stdout
     rejected = _cal(url, f"{RIG}@3")
@@ -193,7 +252,10 @@ def test_a_rejected_set_is_a_rejected_version_with_no_edge(renders, url, tmp_pat
     assert [g.gate for g in rejected.lidar[0].gates if not g.passed] == ["lidar-observability"]
     assert _cal(url).version == 2  # the accepted edge stays active
     lint = _cli(url, "rig", "lint", f"{RIG}@3")
-    assert lint.exit_code == 1 and "lidar-gates: lidar -> CAM-0001: gate lidar-observability failed" in lint.stdout
+    assert (
+        lint.exit_code == 1
+        and "lidar-gates: lidar -> CAM-0001: gate lidar-observability failed" in lint.stdout
+    )
     page = tmp_path / "rejected.html"
     _cli(url, "report", "--rig", f"{RIG}@3", "-o", str(page))
     html = page.read_text()
@@ -206,7 +268,9 @@ def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tm
     done = _cli(url, "report", "--rig", RIG, "-o", str(page))
     assert done.exit_code == 0, done.output
     html = page.read_text()
-    assert "<h2>LiDAR</h2>" in html and 'data-key="lidar_gate_lidar-CAM-0001_lidar-observability">pass' in html
+    assert (
+        "<h2>LiDAR</h2>" in html and 'data-key="lidar_gate_lidar-CAM-0001_lidar-observability">pass' in html
+    )
     assert 'data-key="lidar_overlay_lidar-CAM-0001"' in html and 'src="data:image/jpeg;base64,' in html
     assert "pose1.pcd over pose1.png" in html
     # the LiDAR is a frame of the composed table and the top-down view: met from its child, T_root_lidar = T^-1
@@ -235,15 +299,30 @@ def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tm
     assert 'data-key="lidar_overlay_missing_lidar-CAM-0001"' in html
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--serial", CAM, "--rig", "NO-SUCH-RIG", "--lidar-frame", "lidar"], "NO-SUCH-RIG"),
-    (["--serial", "CAM-0009", "--rig", RIG, "--lidar-frame", "lidar"], "camera CAM-0009 is not a member of rig"),
-    (["--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar-top"], "'lidar-top' is not a legal ROS frame name"),
-    (["--serial", CAM, "--rig", RIG, "--lidar-frame", "velodyne"], "frame 'velodyne' is not in rig"),
-    (["--serial", OTHER, "--rig", RIG, "--lidar-frame", "lidar"], "camera CAM-0002 has no active calibration"),
-    (["--rig", RIG, "--lidar-frame", "lidar", "--camera-info", "x.yaml"], "--rig takes the camera as --serial"),
-    (["--rig", RIG, "--lidar-frame", "lidar"], "--rig needs --serial CAMERA"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--serial", CAM, "--rig", "NO-SUCH-RIG", "--lidar-frame", "lidar"], "NO-SUCH-RIG"),
+        (
+            ["--serial", "CAM-0009", "--rig", RIG, "--lidar-frame", "lidar"],
+            "camera CAM-0009 is not a member of rig",
+        ),
+        (
+            ["--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar-top"],
+            "'lidar-top' is not a legal ROS frame name",
+        ),
+        (["--serial", CAM, "--rig", RIG, "--lidar-frame", "velodyne"], "frame 'velodyne' is not in rig"),
+        (
+            ["--serial", OTHER, "--rig", RIG, "--lidar-frame", "lidar"],
+            "camera CAM-0002 has no active calibration",
+        ),
+        (
+            ["--rig", RIG, "--lidar-frame", "lidar", "--camera-info", "x.yaml"],
+            "--rig takes the camera as --serial",
+        ),
+        (["--rig", RIG, "--lidar-frame", "lidar"], "--rig needs --serial CAMERA"),
+    ],
+)
 def test_bad_rig_inputs_exit_2_and_store_nothing(renders, tmp_path, args, message):
     url = f"sqlite:///{tmp_path / 'calibctl.db'}"
     _store(url, other_calibrated=False)
@@ -251,4 +330,6 @@ def test_bad_rig_inputs_exit_2_and_store_nothing(renders, tmp_path, args, messag
     assert done.exit_code == 2, done.output
     assert message in done.output and "Traceback" not in done.output
     with Store.open(url) as store:
-        assert [c.version for c in store.list_rig_calibrations(RIG)] == [1] and store.active_rig_version(RIG) == 1
+        assert [c.version for c in store.list_rig_calibrations(RIG)] == [1] and store.active_rig_version(
+            RIG
+        ) == 1

@@ -41,7 +41,9 @@ def test_github_format_prints_workflow_annotations():
     result = lint(str(FIXTURES / "camera_front.json"), "--format", "github")
     assert result.exit_code == 1
     lines = result.stdout.splitlines()
-    assert any(line.startswith("::error file=") and "title=calibctl principal-point::" in line for line in lines)
+    assert any(
+        line.startswith("::error file=") and "title=calibctl principal-point::" in line for line in lines
+    )
     assert lines[-1] == "calibctl lint: 1 of 1 calibration(s) failed"
 
 
@@ -72,7 +74,9 @@ def test_sigma_fx_limit_comes_from_the_station_file(sqlite_url, tmp_path):
     runner.invoke(app, ["--db", sqlite_url, "solve", "--serial", "CAM-0001"])
     station = tmp_path / "station.yaml"
     station.write_text("lint:\n  sigma_fx_max_px: 0.01\n")
-    result = runner.invoke(app, ["--db", sqlite_url, "--station-config", str(station), "lint", "--serial", "CAM-0001", "--json"])
+    result = runner.invoke(
+        app, ["--db", sqlite_url, "--station-config", str(station), "lint", "--serial", "CAM-0001", "--json"]
+    )
     assert result.exit_code == 1
     finding = next(f for f in json.loads(result.stdout)["results"][0]["findings"] if f["rule"] == "sigma-fx")
     assert "limit 0.010 px" in finding["message"]
@@ -83,7 +87,9 @@ def test_nan_in_a_file_is_a_finite_error(tmp_path):
     path.write_text((FIXTURES / "camera_front_ros.yaml").read_text().replace("800.14", ".nan"))
     result = lint(str(path), "--json")
     assert result.exit_code == 1
-    errors = [f["rule"] for f in json.loads(result.stdout)["results"][0]["findings"] if f["severity"] == "error"]
+    errors = [
+        f["rule"] for f in json.loads(result.stdout)["results"][0]["findings"] if f["severity"] == "error"
+    ]
     assert errors == ["finite"]
 
 

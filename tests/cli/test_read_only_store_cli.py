@@ -22,8 +22,13 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
 
 REPO = Path(__file__).resolve().parents[2]
-READS = [("history", "CAM-0001"), ("show", "CAM-0001"), ("export", "CAM-0001"), ("lint", "--serial", "CAM-0001"),
-         ("db", "verify")]
+READS = [
+    ("history", "CAM-0001"),
+    ("show", "CAM-0001"),
+    ("export", "CAM-0001"),
+    ("lint", "--serial", "CAM-0001"),
+    ("db", "verify"),
+]
 
 
 @pytest.fixture
@@ -43,8 +48,14 @@ def _unprivileged(args: list[str]) -> subprocess.CompletedProcess:
             pytest.skip("running as root without setpriv: cannot drop the override of file permissions")
         prefix = [setpriv, "--bounding-set=-dac_override,-dac_read_search,-fowner", "--"]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run([*prefix, sys.executable, "-m", "calibctl", *args], capture_output=True, text=True,
-                          env=env, check=False, timeout=300)
+    return subprocess.run(
+        [*prefix, sys.executable, "-m", "calibctl", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
+        timeout=300,
+    )
 
 
 @pytest.mark.parametrize("what", ["file", "folder"])
@@ -59,7 +70,10 @@ def test_read_commands_work_on_a_read_only_store_and_a_write_says_read_only(stor
             assert done.returncode == 0, (args, done.stderr)
         done = _unprivileged(["--db", url, "rollback", "CAM-0001", "--to", "1", "--reason", "x"])
         assert done.returncode == 2, done.stderr
-        assert "is read-only for this user; nothing was written" in done.stderr and "Traceback" not in done.stderr
+        assert (
+            "is read-only for this user; nothing was written" in done.stderr
+            and "Traceback" not in done.stderr
+        )
     finally:
         target.chmod(0o755 if what == "folder" else 0o644)
     assert store.read_bytes() == before  # (SQLite may leave its own -wal/-shm beside a read-only file)
@@ -67,7 +81,9 @@ def test_read_commands_work_on_a_read_only_store_and_a_write_says_read_only(stor
 
 def test_a_store_this_user_cannot_write_is_opened_read_only(store, monkeypatch):
     real = os.access
-    monkeypatch.setattr(engine_module.os, "access", lambda p, mode: False if mode == os.W_OK else real(p, mode))
+    monkeypatch.setattr(
+        engine_module.os, "access", lambda p, mode: False if mode == os.W_OK else real(p, mode)
+    )
     assert engine_module.read_only_file(store)
     runner = CliRunner()
     url = f"sqlite:///{store}"

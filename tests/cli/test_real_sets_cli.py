@@ -48,7 +48,9 @@ def test_a_list_file_of_absolute_paths_names_the_views_as_written(db: str, tmp_p
     assert not any(".." in o["name"] for o in session["outcomes"])
 
 
-def test_solve_report_into_a_folder_it_cannot_write_stores_nothing(db: str, tmp_path: Path, monkeypatch) -> None:
+def test_solve_report_into_a_folder_it_cannot_write_stores_nothing(
+    db: str, tmp_path: Path, monkeypatch
+) -> None:
     """The report folder was checked for existence only: a read-only one gave exit 2 *after* the new version
     was stored and activated (a rig pinned to the old one went stale without the user knowing)."""
     r = invoke(db, "capture", "--serial", "L1", "--board", "A17", "--source", str(LEFT_RIGHT / "left*.jpg"))

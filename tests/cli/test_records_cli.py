@@ -96,7 +96,11 @@ def test_rollback_to_the_active_version_is_a_success_that_writes_nothing(run):
         assert result.exit_code == 0, result.output
         assert f"{SERIAL}: v2 is already the active version; nothing written" in result.stdout
     done = run("rollback", SERIAL, "--to", "2", "--reason", "make sure", "--json")
-    assert done.exit_code == 0 and json.loads(done.stdout) == {"serial": SERIAL, "version": 2, "already_active": True}
+    assert done.exit_code == 0 and json.loads(done.stdout) == {
+        "serial": SERIAL,
+        "version": 2,
+        "already_active": True,
+    }
     hist = json.loads(run("history", SERIAL, "--json").stdout)
     assert hist["active_version"] == 2 and [e["kind"] for e in hist["events"]] == ["activate", "activate"]
     # compare-and-set first: a view of v1 is stale even when the target is what is active now
@@ -167,7 +171,9 @@ def test_export_unknown_format_exits_2(run):
     assert result.exit_code == 2 and "unknown export format 'xml'" in result.stderr
 
 
-def test_import_into_another_store_gets_its_next_version_and_keeps_the_source_as_provenance(run, tmp_path: Path):
+def test_import_into_another_store_gets_its_next_version_and_keeps_the_source_as_provenance(
+    run, tmp_path: Path
+):
     _two_versions(run)
     exported = tmp_path / "cam.json"
     assert run("export", f"{SERIAL}@2", "-o", str(exported)).exit_code == 0
@@ -217,7 +223,9 @@ def test_import_schema_violation_names_the_field(run, tmp_path: Path):
     assert result.exit_code == 2 and "held_out.k_folds" in result.stderr
 
 
-@pytest.mark.parametrize(("views", "model", "message"), [(4, "rational", "model rational needs at least 5 board views, got 4")])
+@pytest.mark.parametrize(
+    ("views", "model", "message"), [(4, "rational", "model rational needs at least 5 board views, got 4")]
+)
 def test_too_few_views_for_the_model_exits_2_and_writes_nothing(sqlite_url, views, model, message):
     with Store.open(sqlite_url) as store:
         board = store.add_board(measured_board())
@@ -237,14 +245,18 @@ def test_show_json_exposes_the_full_covariance(run):
     stdev = json.loads(result.stdout)["stdev"]
     names, matrix = stdev["covariance"]["parameters"], stdev["covariance"]["matrix"]
     assert len(matrix) == len(names) and "cx" in names
-    assert matrix[names.index("cx")][names.index("cx")] ** 0.5 == pytest.approx(stdev["sigma"]["cx"], rel=1e-12)
+    assert matrix[names.index("cx")][names.index("cx")] ** 0.5 == pytest.approx(
+        stdev["sigma"]["cx"], rel=1e-12
+    )
 
 
 def test_solve_report_writes_the_new_versions_page(run, tmp_path):
     result = run("solve", "--serial", SERIAL, "--report", str(tmp_path / "reports"))
     assert result.exit_code == 0, result.output
     page = tmp_path / "reports" / f"{SERIAL}-v1-report.html"
-    assert f"report: {page}" in " ".join(result.stdout.split()) and "CAM-0001@1" in page.read_text(encoding="utf-8")
+    assert f"report: {page}" in " ".join(result.stdout.split()) and "CAM-0001@1" in page.read_text(
+        encoding="utf-8"
+    )
 
 
 def test_solve_report_onto_a_file_exits_2_before_solving(run, tmp_path):
@@ -272,12 +284,16 @@ def test_solve_report_onto_a_dangling_symlink_exits_2_before_storing(run, tmp_pa
     page = tmp_path / f"{SERIAL}-v1-report.html"
     page.symlink_to(tmp_path / "elsewhere.html")
     result = run("solve", "--serial", SERIAL, "--report", str(tmp_path))
-    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, result.output
+    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, (
+        result.output
+    )
     assert "no calibration is stored for" in run("history", SERIAL).stderr
     assert page.is_symlink() and not (tmp_path / "elsewhere.html").exists()
 
 
-def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(run, db, tmp_path, monkeypatch):
+def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(
+    run, db, tmp_path, monkeypatch
+):
     """The page checked is the one of the version about to be stored: a version stored meanwhile (another
     station) makes the store refuse, rather than store a version whose page was never checked."""
     from calibctl.workflows.camera import solve as solve_workflow
@@ -293,10 +309,14 @@ def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(r
     monkeypatch.setattr(solve_workflow, "build_artifact", with_an_interloper)
     result = run("solve", "--serial", SERIAL, "--report", str(tmp_path / "reports"))
     assert result.exit_code == 2, result.output
-    assert f"{SERIAL}@1 cannot be stored: this store's next version of {SERIAL} is 2" in " ".join(result.stderr.split())
+    assert f"{SERIAL}@1 cannot be stored: this store's next version of {SERIAL} is 2" in " ".join(
+        result.stderr.split()
+    )
     with Store.open(db) as store:
         assert [a.version for a in store.list_artifacts(SERIAL)] == [1]  # the other one's, never activated:
-        assert store.active_version(SERIAL) is None  # the solve, which would have activated its own, stored nothing
+        assert (
+            store.active_version(SERIAL) is None
+        )  # the solve, which would have activated its own, stored nothing
     assert list((tmp_path / "reports").iterdir()) == []
 
 

@@ -34,10 +34,24 @@ def chromium() -> str:
 def screenshot(page: Path, png: Path) -> list[str]:
     """Render ``page`` into ``png``; the browser's console messages (console.* and script errors)."""
     done = subprocess.run(
-        [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr",
-         "--v=0", f"--user-data-dir={png.parent / 'chromium-profile'}", "--window-size=1100,3800",
-         f"--screenshot={png}", page.resolve().as_uri()],
-        capture_output=True, text=True, timeout=300, check=False)
+        [
+            chromium(),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            "--enable-logging=stderr",
+            "--v=0",
+            f"--user-data-dir={png.parent / 'chromium-profile'}",
+            "--window-size=1100,3800",
+            f"--screenshot={png}",
+            page.resolve().as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0 and png.is_file(), done.stderr[-2000:]
     return [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
 
@@ -49,7 +63,9 @@ def ink(png: Path) -> float:
 
 def test_the_console_check_catches_a_script_error(tmp_path):
     page = tmp_path / "broken.html"
-    page.write_text('<html><body><script>console.error("report-test")</script></body></html>', encoding="utf-8")
+    page.write_text(
+        '<html><body><script>console.error("report-test")</script></body></html>', encoding="utf-8"
+    )
     messages = screenshot(page, tmp_path / "broken.png")
     assert any("report-test" in m for m in messages)
     assert ink(tmp_path / "broken.png") < INK_FRACTION

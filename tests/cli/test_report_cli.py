@@ -16,7 +16,9 @@ from calibctl.cli.main import app
 from tests.cli.real_left import BOARD_9X6_M, PLAIN_FLAGS, calibrated_left_store, plain_opencv_corners
 
 SERIAL = "LEFT-01"
-EDGE_TOLERANCE_PX = 2.0  # calibctl's sub-pixel refinement differs from the plain recipe by a fraction of a pixel
+EDGE_TOLERANCE_PX = (
+    2.0  # calibctl's sub-pixel refinement differs from the plain recipe by a fraction of a pixel
+)
 
 
 @pytest.fixture(scope="module")
@@ -33,8 +35,9 @@ def run(store: dict, *args: str):
 def plain_opencv(images: list[Path]) -> tuple[np.ndarray, float]:
     """Every corner of the plain OpenCV recipe, and cv2.calibrateCamera's RMS on them."""
     points = plain_opencv_corners(images)
-    rms, *_ = cv2.calibrateCamera([BOARD_9X6_M] * len(points), points, (640, 480), np.eye(3), None,
-                                  flags=PLAIN_FLAGS)
+    rms, *_ = cv2.calibrateCamera(
+        [BOARD_9X6_M] * len(points), points, (640, 480), np.eye(3), None, flags=PLAIN_FLAGS
+    )
     return np.concatenate(points).reshape(-1, 2), float(rms)
 
 
@@ -46,8 +49,12 @@ def test_the_real_report_agrees_with_plain_opencv_and_survives_pruning(store):
     html = out.read_text(encoding="utf-8")
     shown = dict(re.findall(r'data-key="([^"]+)">([^<]*)<', html))
     corners, plain_rms = plain_opencv(store["images"])
-    plain_gaps = {"left": corners[:, 0].min(), "right": 639 - corners[:, 0].max(),
-                  "top": corners[:, 1].min(), "bottom": 479 - corners[:, 1].max()}
+    plain_gaps = {
+        "left": corners[:, 0].min(),
+        "right": 639 - corners[:, 0].max(),
+        "top": corners[:, 1].min(),
+        "bottom": 479 - corners[:, 1].max(),
+    }
     for side, gap in plain_gaps.items():
         assert abs(float(shown[f"gap_{side}"]) - gap) <= EDGE_TOLERANCE_PX, side
     # the same files through the plain recipe fit worse (no corner rule, coarser refinement), never better

@@ -23,10 +23,19 @@ WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
 def db(sqlite_url: str) -> str:
     """CAM-1: @1 and @2 one lens, @3 rejected, @4 fx + 8 px; CAM-2: @1 640x480, @2 1280x960."""
     with Store.open(sqlite_url, create=True) as store:
-        for status, fx in (("accepted", 800.0), ("accepted", 800.0), ("rejected", 800.0), ("accepted", 808.0)):
-            store.add_artifact(calibration(serial="CAM-1", status=status, fx=fx), activate=status == "accepted", **WHO)
+        for status, fx in (
+            ("accepted", 800.0),
+            ("accepted", 800.0),
+            ("rejected", 800.0),
+            ("accepted", 808.0),
+        ):
+            store.add_artifact(
+                calibration(serial="CAM-1", status=status, fx=fx), activate=status == "accepted", **WHO
+            )
         store.add_artifact(calibration(serial="CAM-2"), activate=True, **WHO)
-        store.add_artifact(calibration(serial="CAM-2", image_size=(1280, 960), cx=640.0, cy=480.0), activate=True, **WHO)
+        store.add_artifact(
+            calibration(serial="CAM-2", image_size=(1280, 960), cx=640.0, cy=480.0), activate=True, **WHO
+        )
     return sqlite_url
 
 
@@ -66,9 +75,19 @@ def test_the_trends_section_when_robots_reported(db: str, tmp_path: Path) -> Non
     runner = CliRunner()
     assert runner.invoke(app, ["--db", db, "fleet", "add", "amr-1", "--serial", "CAM-1"]).exit_code == 0
     now = utc_now()
-    lines = [{"source_id": f"c/{d}", "serial": "CAM-1", "robot": "amr-1", "kind": "check", "verdict": "pass",
-              "time": (now - timedelta(days=d)).isoformat(), "rms_px": 0.2 + 0.01 * d, "temperature_c": 10.0 + 3 * d}
-             for d in range(6)]
+    lines = [
+        {
+            "source_id": f"c/{d}",
+            "serial": "CAM-1",
+            "robot": "amr-1",
+            "kind": "check",
+            "verdict": "pass",
+            "time": (now - timedelta(days=d)).isoformat(),
+            "rms_px": 0.2 + 0.01 * d,
+            "temperature_c": 10.0 + 3 * d,
+        }
+        for d in range(6)
+    ]
     path = tmp_path / "r.jsonl"
     path.write_text("\n".join(json.dumps(line) for line in lines))
     assert runner.invoke(app, ["--db", db, "fleet", "ingest", str(path)]).exit_code == 0

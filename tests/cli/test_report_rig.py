@@ -125,8 +125,9 @@ def test_a_version_of_a_rig_with_no_active_version_gets_its_page(solved, tmp_pat
     assert "accepted</span></h1>" in out.read_text(encoding="utf-8")  # not followed by " (active)"
 
 
-def test_the_rig_page_states_active_and_the_lint_of_now_beside_the_lint_at_solve_time(solved, tmp_path: Path,
-                                                                                    tmp_path_factory) -> None:
+def test_the_rig_page_states_active_and_the_lint_of_now_beside_the_lint_at_solve_time(
+    solved, tmp_path: Path, tmp_path_factory
+) -> None:
     """It said "accepted (active)" while `lint --rig` failed the same rig for a stale member."""
     import shutil
 
@@ -138,8 +139,11 @@ def test_the_rig_page_states_active_and_the_lint_of_now_beside_the_lint_at_solve
     fresh = tmp_path / "fresh.html"
     assert invoke(url, "report", "--rig", "R1", "-o", str(fresh)).exit_code == 0
     html = fresh.read_text(encoding="utf-8")
-    assert (_keyed(html, "active"), _keyed(html, "lint_now"), _keyed(html, "lint_now_clean")) == ("yes", "pass",
-                                                                                                   "lint: clean")
+    assert (_keyed(html, "active"), _keyed(html, "lint_now"), _keyed(html, "lint_now_clean")) == (
+        "yes",
+        "pass",
+        "lint: clean",
+    )
     with Store.open(url) as store:  # CAM0 re-calibrated after the rig solve: the rig is stale
         store.add_artifact(_truth_artifact(rendered_rig(tmp_path_factory), "CAM0"), activate=True, **WHO)
     stale = tmp_path / "stale.html"

@@ -48,17 +48,27 @@ class Truth:
         self.T_right_left = np.linalg.inv(T_left_right)
         R, t = self.T_right_left[:3, :3], self.T_right_left[:3, 3]
         self.left, self.right = left, right
-        self.raw = {left: cv2.projectPoints(X, np.zeros(3), np.zeros(3), self.K[left], self.D[left])[0].reshape(-1, 2),
-                    right: cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, self.K[right], self.D[right])[0].reshape(-1, 2)}
-        members = [MemberIntrinsics(s, self.K[s], self.D[s], m[s].image_size, lens=m[s].lens) for s in (left, right)]
+        self.raw = {
+            left: cv2.projectPoints(X, np.zeros(3), np.zeros(3), self.K[left], self.D[left])[0].reshape(
+                -1, 2
+            ),
+            right: cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, self.K[right], self.D[right])[0].reshape(
+                -1, 2
+            ),
+        }
+        members = [
+            MemberIntrinsics(s, self.K[s], self.D[s], m[s].image_size, lens=m[s].lens) for s in (left, right)
+        ]
         self.rect = rectify(members[0], members[1], self.T_right_left)
         Xh = np.column_stack([(self.rect.R1 @ X.T).T, np.ones(len(X))])
-        self.rectified = {s: (P @ Xh.T).T[:, :2] / (P @ Xh.T).T[:, 2:] for s, P in ((left, self.rect.P1),
-                                                                                   (right, self.rect.P2))}
+        self.rectified = {
+            s: (P @ Xh.T).T[:, :2] / (P @ Xh.T).T[:, 2:]
+            for s, P in ((left, self.rect.P1), (right, self.rect.P2))
+        }
 
 
 @pytest.fixture
-def bundle(db, tmp_path):  # noqa: F811
+def bundle(db, tmp_path):
     out = tmp_path / "bundle"
     r = invoke(db, "rig", "export", "R1", "--format", "bundle", "-o", str(out))
     assert r.exit_code == 0, r.output
@@ -77,12 +87,20 @@ def test_the_bundle_reads_right_with_the_projects_own_opencv_and_urdf_rules(bund
     fs.release()
     right = cv2.projectPoints(X, cv2.Rodrigues(R)[0], T, K2, D2)[0].reshape(-1, 2)
     assert np.max(np.abs(right - truth.raw["CAM1"])) < PROJECTION_TOL_PX
-    assert np.max(np.abs(cv2.projectPoints(X, np.zeros(3), np.zeros(3), K1, D1)[0].reshape(-1, 2) - truth.raw["CAM0"])) \
+    assert (
+        np.max(
+            np.abs(
+                cv2.projectPoints(X, np.zeros(3), np.zeros(3), K1, D1)[0].reshape(-1, 2) - truth.raw["CAM0"]
+            )
+        )
         < PROJECTION_TOL_PX
+    )
     assert np.min(np.abs(truth.raw["CAM1"][:, 0] - truth.raw["CAM0"][:, 0])) > 1.0  # a swap could not pass
     for serial, name in (("CAM0", "cam0.yaml"), ("CAM1", "cam1.yaml")):
         info = yaml.safe_load((out / name).read_text())
-        assert np.allclose(np.reshape(info["camera_matrix"]["data"], (3, 3)), truth.K[serial], rtol=1e-15, atol=0)
+        assert np.allclose(
+            np.reshape(info["camera_matrix"]["data"], (3, 3)), truth.K[serial], rtol=1e-15, atol=0
+        )
     _, root, joints = loadable_urdf((out / "rig.urdf").read_text())
     assert root == "cam0_optical_frame" and set(joints) == {"cam1_optical_frame"}
 
@@ -92,15 +110,23 @@ def _consumers(out: Path, X: np.ndarray, tmp_path: Path) -> dict:
         pytest.skip("no /usr/bin/python3: the Debian consumers are not installed (make test-consumers)")
     points = tmp_path / "points.json"
     points.write_text(json.dumps({"root_points_m": X.tolist()}))
-    run = subprocess.run([str(SYSTEM_PYTHON), str(CONSUMERS), str(out), str(points)], capture_output=True, text=True,
-                         check=False)
-    if run.returncode != 0 and ("No module named 'numpy'" in run.stderr or "No module named 'cv2'" in run.stderr):
+    run = subprocess.run(
+        [str(SYSTEM_PYTHON), str(CONSUMERS), str(out), str(points)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if run.returncode != 0 and (
+        "No module named 'numpy'" in run.stderr or "No module named 'cv2'" in run.stderr
+    ):
         pytest.skip("the system python has no numpy / cv2 (make test-consumers installs python3-opencv)")
     assert run.returncode == 0, run.stderr
     return json.loads(run.stdout)
 
 
-def _check_consumers(out: Path, cal: RigCalibration, tmp_path: Path, left: str = "CAM0", right: str = "CAM1") -> None:
+def _check_consumers(
+    out: Path, cal: RigCalibration, tmp_path: Path, left: str = "CAM0", right: str = "CAM1"
+) -> None:
     """Every consumer's projection of the points equals calibctl's to PROJECTION_TOL_PX, each camera its own."""
     X = _points_root()
     truth = Truth(cal, X, left, right)
@@ -109,7 +135,9 @@ def _check_consumers(out: Path, cal: RigCalibration, tmp_path: Path, left: str =
     assert (got["opencv"]["left"], got["opencv"]["right"]) == (left, right)
     for side in ("left", "right"):
         serial = got["opencv"][side]
-        assert np.max(np.abs(np.array(got["opencv"][f"{side}_px"]) - truth.raw[serial])) < PROJECTION_TOL_PX, side
+        assert (
+            np.max(np.abs(np.array(got["opencv"][f"{side}_px"]) - truth.raw[serial])) < PROJECTION_TOL_PX
+        ), side
     if got["ros"] is not None:
         for serial, R, P in ((left, truth.rect.R1, truth.rect.P1), (right, truth.rect.R2, truth.rect.P2)):
             info = got["ros"][serial]
@@ -120,16 +148,22 @@ def _check_consumers(out: Path, cal: RigCalibration, tmp_path: Path, left: str =
             assert np.allclose(np.reshape(info["P"], (3, 4)), P, rtol=1e-15, atol=1e-12)
         geometry = got["image_geometry"]
         for side, serial in (("left", left), ("right", right)):
-            assert np.max(np.abs(np.array(geometry[f"{side}_px"]) - truth.rectified[serial])) < PROJECTION_TOL_PX, side
+            assert (
+                np.max(np.abs(np.array(geometry[f"{side}_px"]) - truth.rectified[serial])) < PROJECTION_TOL_PX
+            ), side
         assert np.allclose(geometry["depth_m"], geometry["rect_z_m"], rtol=1e-9)
         assert geometry["baseline_m"] == pytest.approx(np.linalg.norm(truth.T_right_left[:3, 3]), rel=1e-9)
     if got["mrcal"] is not None:
         for serial in (left, right):
-            assert np.max(np.abs(np.array(got["mrcal"][serial]) - truth.raw[serial])) < PROJECTION_TOL_PX, serial
+            assert np.max(np.abs(np.array(got["mrcal"][serial]) - truth.raw[serial])) < PROJECTION_TOL_PX, (
+                serial
+            )
     assert np.min(np.abs(truth.raw[right][:, 0] - truth.raw[left][:, 0])) > 1.0  # a swap could not pass
     if skipped:
-        pytest.skip(f"checked Debian OpenCV {got['opencv']['version']}; not installed: {', '.join(skipped)} "
-                    "(make test-consumers)")
+        pytest.skip(
+            f"checked Debian OpenCV {got['opencv']['version']}; not installed: {', '.join(skipped)} "
+            "(make test-consumers)"
+        )
 
 
 def test_ros_image_geometry_mrcal_and_debian_opencv_read_the_bundle_exactly(bundle, tmp_path):
@@ -154,10 +188,28 @@ def test_the_opencv_left_right_bundle_reads_the_same_in_every_consumer(tmp_path)
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     for serial, side in (("LEFT", "left"), ("RIGHT", "right")):
-        assert invoke(url, "calibrate", "--serial", serial, "--board", "A17", "--source", str(tmp_path / side)).exit_code == 0
+        assert (
+            invoke(
+                url, "calibrate", "--serial", serial, "--board", "A17", "--source", str(tmp_path / side)
+            ).exit_code
+            == 0
+        )
     assert invoke(url, "rig", "add", "LR", "--camera", "LEFT", "--camera", "RIGHT").exit_code == 0
-    assert invoke(url, "rig", "capture", "LR", "--board", "A17", "--source", f"LEFT={tmp_path / 'left'}",
-                  "--source", f"RIGHT={tmp_path / 'right'}").exit_code == 0
+    assert (
+        invoke(
+            url,
+            "rig",
+            "capture",
+            "LR",
+            "--board",
+            "A17",
+            "--source",
+            f"LEFT={tmp_path / 'left'}",
+            "--source",
+            f"RIGHT={tmp_path / 'right'}",
+        ).exit_code
+        == 0
+    )
     assert invoke(url, "rig", "solve", "LR").exit_code == 0
     out = tmp_path / "bundle"
     r = invoke(url, "rig", "export", "LR", "--format", "bundle", "-o", str(out))
@@ -173,4 +225,6 @@ def test_check_urdf_loads_the_bundle_urdf(bundle):
         pytest.skip("check_urdf (liburdfdom-tools) is not installed (make test-consumers)")
     run = subprocess.run(["check_urdf", str(out / "rig.urdf")], capture_output=True, text=True, check=False)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert "robot name is: R1" in run.stdout and "root Link: cam0_optical_frame has 1 child(ren)" in run.stdout
+    assert (
+        "robot name is: R1" in run.stdout and "root Link: cam0_optical_frame has 1 child(ren)" in run.stdout
+    )

@@ -36,7 +36,12 @@ def _store(path, rig2) -> str:
         store.add_board(measured_board(square_mm=25.0))
         for name in ("CAM0", "CAM1"):
             store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
-    assert RUNNER.invoke(app, ["--db", url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1"]).exit_code == 0
+    assert (
+        RUNNER.invoke(
+            app, ["--db", url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1"]
+        ).exit_code
+        == 0
+    )
     return url
 
 
@@ -55,17 +60,37 @@ def workers_seen(monkeypatch) -> list[int | None]:
 
 
 def _rig_capture(url: str, rig2, *extra: str) -> dict:
-    r = RUNNER.invoke(app, ["--db", url, "--json", "rig", "capture", "R1", "--board", "A17",
-                            "--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}", *extra])
+    r = RUNNER.invoke(
+        app,
+        [
+            "--db",
+            url,
+            "--json",
+            "rig",
+            "capture",
+            "R1",
+            "--board",
+            "A17",
+            "--source",
+            f"CAM0={rig2 / 'CAM0'}",
+            "--source",
+            f"CAM1={rig2 / 'CAM1'}",
+            *extra,
+        ],
+    )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
-    return {"rig": {k: doc["rig_session"][k] for k in RIG_KEYS},
-            "cameras": {c: {k: s[k] for k in SESSION_KEYS} for c, s in doc["camera_sessions"].items()}}
+    return {
+        "rig": {k: doc["rig_session"][k] for k in RIG_KEYS},
+        "cameras": {c: {k: s[k] for k in SESSION_KEYS} for c, s in doc["camera_sessions"].items()},
+    }
 
 
 def test_rig_capture_stores_the_same_sessions_at_jobs_1_2_and_4(tmp_path, rig2, workers_seen, monkeypatch):
-    runs = {f"jobs {jobs}": _rig_capture(_store(tmp_path / f"j{jobs}.db", rig2), rig2, "--jobs", str(jobs))
-            for jobs in (1, 2, 4)}
+    runs = {
+        f"jobs {jobs}": _rig_capture(_store(tmp_path / f"j{jobs}.db", rig2), rig2, "--jobs", str(jobs))
+        for jobs in (1, 2, 4)
+    }
     assert workers_seen == [1, 1, 2, 2, 4, 4]  # each member, at the count asked for
     # 8 images per member run on threads; the warm pool's processes give the same sessions too
     monkeypatch.setattr(image_outcomes.worker_pool, "is_warm", lambda workers: True)
@@ -82,19 +107,63 @@ def test_rig_capture_stores_the_same_sessions_at_jobs_1_2_and_4(tmp_path, rig2, 
 
 def test_capture_rig_and_solve_folders_take_jobs(tmp_path, rig2, workers_seen):
     url = _store(tmp_path / "c.db", rig2)
-    r = RUNNER.invoke(app, ["--db", url, "capture", "--rig", "R1", "--board", "A17", "--source",
-                            f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}", "--jobs", "2"])
+    r = RUNNER.invoke(
+        app,
+        [
+            "--db",
+            url,
+            "capture",
+            "--rig",
+            "R1",
+            "--board",
+            "A17",
+            "--source",
+            f"CAM0={rig2 / 'CAM0'}",
+            "--source",
+            f"CAM1={rig2 / 'CAM1'}",
+            "--jobs",
+            "2",
+        ],
+    )
     assert r.exit_code == 0, r.output
-    r = RUNNER.invoke(app, ["rig", "solve-folders", "--source", f"CAM0={rig2 / 'CAM0'}", "--source",
-                            f"CAM1={rig2 / 'CAM1'}", "--cols", "9", "--rows", "6", "--square-mm", "25", "--jobs", "3"])
+    r = RUNNER.invoke(
+        app,
+        [
+            "rig",
+            "solve-folders",
+            "--source",
+            f"CAM0={rig2 / 'CAM0'}",
+            "--source",
+            f"CAM1={rig2 / 'CAM1'}",
+            "--cols",
+            "9",
+            "--rows",
+            "6",
+            "--square-mm",
+            "25",
+            "--jobs",
+            "3",
+        ],
+    )
     assert r.exit_code in (0, 1), r.output  # the verdict is not this test's business; the detection is
     assert workers_seen == [2, 2, 3, 3]
 
 
 def test_rig_capture_refuses_jobs_below_one_and_stores_nothing(tmp_path, rig2, monkeypatch):
     url = _store(tmp_path / "c.db", rig2)
-    args = ["--db", url, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-            "--source", f"CAM1={rig2 / 'CAM1'}"]
+    args = [
+        "--db",
+        url,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+    ]
     zero = RUNNER.invoke(app, [*args, "--jobs", "0"])
     assert zero.exit_code == 2 and "--jobs" in zero.output
     monkeypatch.setenv("CALIBCTL_JOBS", "0")

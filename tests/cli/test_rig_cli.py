@@ -25,8 +25,18 @@ def rig2(tmp_path_factory):
 
 
 def _sources(rig2: Path) -> list[str]:
-    return ["--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}",
-            "--cols", "9", "--rows", "6", "--square-mm", "25"]
+    return [
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+    ]
 
 
 def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
@@ -35,8 +45,13 @@ def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
     assert "T_CAM0_CAM1: |t| = 75." in result.output and "gate rig-connected pass" in result.output
     assert "held-out epipolar RMS" in result.output and "verdict: pass" in result.output
     assert {p.name for p in (tmp_path / "out").iterdir()} == {
-        "stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
-        "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
+        "stereo_CAM0_CAM1.yaml",
+        "tf_static.yaml",
+        "rig.urdf.xml",
+        "camchain.yaml",
+        "CAM0_camera_info.yaml",
+        "CAM1_camera_info.yaml",
+    }
 
 
 def test_solve_folders_exports_carry_a_not_stored_trace_header_that_lint_reads(rig2, tmp_path):
@@ -67,7 +82,10 @@ def test_solve_folders_json_and_root(rig2):
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)
     assert doc["root"] == "CAM1" and doc["tree"][0]["child"] == "CAM0"
-    assert abs(doc["tree"][0]["translation_mm"] - true_baseline_mm(rig2)) < 3 * doc["tree"][0]["sigma_translation_mm"]
+    assert (
+        abs(doc["tree"][0]["translation_mm"] - true_baseline_mm(rig2))
+        < 3 * doc["tree"][0]["sigma_translation_mm"]
+    )
 
 
 def test_a_failed_rig_gate_exits_1_naming_the_pair(rig2):
@@ -76,10 +94,13 @@ def test_a_failed_rig_gate_exits_1_naming_the_pair(rig2):
     assert "gate rig-connected FAIL" in result.output and "CAM0-CAM1 shares 8 view(s)" in result.output
 
 
-@pytest.mark.parametrize(("extra", "message"), [
-    (["--source", "CAM0=/x"], "camera CAM0 is given twice"),
-    (["--root", "CAM9"], "--root CAM9 is not one of the cameras"),
-])
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--source", "CAM0=/x"], "camera CAM0 is given twice"),
+        (["--root", "CAM9"], "--root CAM9 is not one of the cameras"),
+    ],
+)
 def test_usage_errors_exit_2(rig2, extra, message):
     result = invoke("rig", "solve-folders", *_sources(rig2), *extra)
     assert result.exit_code == 2
@@ -92,16 +113,30 @@ def test_solve_folders_takes_a_glob_and_a_list_file_like_rig_capture(tmp_path):
     right_list = tmp_path / "right.txt"
     right_list.write_text("".join(f"{p}\n" for p in sorted(LEFT_RIGHT.glob("right*.jpg"))))
     board = ["--cols", "9", "--rows", "6", "--square-mm", "1"]  # square size unknown: baselines in squares
-    result = invoke("--json", "rig", "solve-folders", "--source", f"L={LEFT_RIGHT / 'left*.jpg'}",
-                    "--source", f"R={right_list}", *board)
+    result = invoke(
+        "--json",
+        "rig",
+        "solve-folders",
+        "--source",
+        f"L={LEFT_RIGHT / 'left*.jpg'}",
+        "--source",
+        f"R={right_list}",
+        *board,
+    )
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)
-    assert doc["frames"] == 13 and doc["unmatched"] == [] and doc["images"] == {"L": {"accepted": 13},
-                                                                                "R": {"accepted": 13}}
+    assert (
+        doc["frames"] == 13
+        and doc["unmatched"] == []
+        and doc["images"] == {"L": {"accepted": 13}, "R": {"accepted": 13}}
+    )
     assert doc["verdict"] == "pass" and doc["lint"] == []  # k1k2 fits these lenses: the default model passes
     left, right = split_pairs(LEFT_RIGHT, tmp_path / "split", "left*.jpg", "right*.jpg")
-    folders = json.loads(invoke("--json", "rig", "solve-folders", "--source", f"L={left}", "--source", f"R={right}",
-                                *board).output)
+    folders = json.loads(
+        invoke(
+            "--json", "rig", "solve-folders", "--source", f"L={left}", "--source", f"R={right}", *board
+        ).output
+    )
     assert doc["pairs"][0]["baseline_mm"] == pytest.approx(folders["pairs"][0]["baseline_mm"], rel=1e-9)
 
 
@@ -110,20 +145,42 @@ def test_a_failed_verdict_exits_1_and_withholds_the_exports(rig2, tmp_path):
     station = tmp_path / "station.yaml"
     station.write_text("lint:\n  epipolar_max_px_at_720: 0.001\n")
     out = tmp_path / "out"
-    result = invoke("--station-config", str(station), "rig", "solve-folders", *_sources(rig2), "--export-dir", str(out))
+    result = invoke(
+        "--station-config", str(station), "rig", "solve-folders", *_sources(rig2), "--export-dir", str(out)
+    )
     assert result.exit_code == 1, result.output
     text = " ".join(result.output.split())
     assert "verdict: fail" in text and "error epipolar: CAM0-CAM1: held-out epipolar RMS" in text
     assert "exports not written" in text and not out.exists()
-    result = invoke("--station-config", str(station), "--json", "rig", "solve-folders", *_sources(rig2),
-                    "--export-dir", str(out), "--allow-rejected")
+    result = invoke(
+        "--station-config",
+        str(station),
+        "--json",
+        "rig",
+        "solve-folders",
+        *_sources(rig2),
+        "--export-dir",
+        str(out),
+        "--allow-rejected",
+    )
     assert result.exit_code == 1
     doc = json.loads(result.output)
-    assert doc["verdict"] == "fail" and [f["rule"] for f in doc["lint"]] == ["epipolar"] and len(doc["exports"]) == 6
+    assert (
+        doc["verdict"] == "fail"
+        and [f["rule"] for f in doc["lint"]] == ["epipolar"]
+        and len(doc["exports"]) == 6
+    )
     stereo = (out / "stereo_CAM0_CAM1.yaml").read_text()
-    assert f"# calibctl rig not stored (rig solve-folders) rejected solution-sha256 {doc['solution_sha256']}" in stereo
-    linted = invoke("--json", "lint", str(out / "stereo_CAM0_CAM1.yaml"))  # a rejected solve's file fails lint
-    assert linted.exit_code == 1 and "status" in {f["rule"] for f in json.loads(linted.output)["results"][0]["findings"]}
+    assert (
+        f"# calibctl rig not stored (rig solve-folders) rejected solution-sha256 {doc['solution_sha256']}"
+        in stereo
+    )
+    linted = invoke(
+        "--json", "lint", str(out / "stereo_CAM0_CAM1.yaml")
+    )  # a rejected solve's file fails lint
+    assert linted.exit_code == 1 and "status" in {
+        f["rule"] for f in json.loads(linted.output)["results"][0]["findings"]
+    }
 
 
 @needs_datasets
@@ -133,12 +190,26 @@ def test_baka_stereo_is_a_verdict_exit_1_not_a_failure_to_run(tmp_path):
     for side in ("left", "right"):
         lists[side] = tmp_path / f"{side}.txt"
         lists[side].write_text("".join(f"{p}\n" for p in sorted((BAKA_STEREO / side).glob("*.jpg"))[2::3]))
-    result = invoke("rig", "solve-folders", "--source", f"L={lists['left']}", "--source", f"R={lists['right']}",
-                    "--cols", "7", "--rows", "10", "--square-mm", "23")
+    result = invoke(
+        "rig",
+        "solve-folders",
+        "--source",
+        f"L={lists['left']}",
+        "--source",
+        f"R={lists['right']}",
+        "--cols",
+        "7",
+        "--rows",
+        "10",
+        "--square-mm",
+        "23",
+    )
     assert result.exit_code == 1, result.output
     text = " ".join(result.output.split())
-    assert "error rig-rigid: the rig's frames contradict each other, so the cameras were not rigid or not " \
-           "synchronised" in text
+    assert (
+        "error rig-rigid: the rig's frames contradict each other, so the cameras were not rigid or not "
+        "synchronised" in text
+    )
     assert "L-R: per-frame baseline" in text and "the cameras must not move against each other" in text
     assert "Traceback" not in result.output
 
@@ -146,11 +217,16 @@ def test_baka_stereo_is_a_verdict_exit_1_not_a_failure_to_run(tmp_path):
 def test_solve_folders_names_the_camera_of_a_source_it_cannot_use(rig2, tmp_path):
     (tmp_path / "clip.avi").write_bytes(b"not a video")
     board = ["--cols", "9", "--rows", "6", "--square-mm", "25"]
-    for source, message in ((f"{tmp_path}/right*.jpg", f"camera B: --source '{tmp_path}/right*.jpg' matches no "
-                                                       "image file"),
-                            (str(tmp_path / "clip.avi"), "camera B: --source " + str(tmp_path / "clip.avi")
-                             + " is a video; a rig is solved from photos")):
-        result = invoke("rig", "solve-folders", "--source", f"A={rig2 / 'CAM0'}", "--source", f"B={source}", *board)
+    for source, message in (
+        (f"{tmp_path}/right*.jpg", f"camera B: --source '{tmp_path}/right*.jpg' matches no image file"),
+        (
+            str(tmp_path / "clip.avi"),
+            "camera B: --source " + str(tmp_path / "clip.avi") + " is a video; a rig is solved from photos",
+        ),
+    ):
+        result = invoke(
+            "rig", "solve-folders", "--source", f"A={rig2 / 'CAM0'}", "--source", f"B={source}", *board
+        )
         assert result.exit_code == 2, result.output
         assert message in " ".join(result.output.split()) and "Traceback" not in result.output
 
@@ -172,11 +248,26 @@ def test_synth_rig_refuses_five_cameras(tmp_path):
 
 
 def test_solve_folders_with_the_same_folder_twice_is_refused_before_detection(rig2):
-    result = invoke("rig", "solve-folders", "--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM0'}",
-                    "--cols", "9", "--rows", "6", "--square-mm", "25")
+    result = invoke(
+        "rig",
+        "solve-folders",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM0'}",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+    )
     assert result.exit_code == 1, result.output
     text = " ".join(result.output.split())
-    assert "rig solve-folders: the members are not distinct cameras: CAM0 and CAM1 hold 8 of the same files" in text
+    assert (
+        "rig solve-folders: the members are not distinct cameras: CAM0 and CAM1 hold 8 of the same files"
+        in text
+    )
     assert "Traceback" not in result.output
 
 
@@ -188,8 +279,20 @@ def test_the_real_left_folder_given_twice_as_a_copy_is_refused(tmp_path):
     copy.mkdir()
     for p in left.iterdir():
         (copy / p.name.replace("left", "right")).write_bytes(p.read_bytes())
-    result = invoke("rig", "solve-folders", "--source", f"L={left}", "--source", f"R={copy}",
-                    "--cols", "9", "--rows", "6", "--square-mm", "25")
+    result = invoke(
+        "rig",
+        "solve-folders",
+        "--source",
+        f"L={left}",
+        "--source",
+        f"R={copy}",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+    )
     assert result.exit_code == 1, result.output
     assert "L and R hold" in result.output and "identical image(s)" in result.output
 

@@ -64,17 +64,34 @@ def test_ros_writes_one_camera_info_per_camera_each_one_document(db, tmp_path):
     assert [len(d) for d in docs] == [1, 1]  # ROS reads the first document only: there is no second one
     info_l, info_r = docs[0][0], docs[1][0]
     assert (info_l["camera_name"], info_r["camera_name"]) == ("cam0", "cam1")
-    assert info_l["projection_matrix"]["data"][3] == 0.0 and info_r["projection_matrix"]["data"][3] < 0.0  # Tx = -fx'B
+    assert (
+        info_l["projection_matrix"]["data"][3] == 0.0 and info_r["projection_matrix"]["data"][3] < 0.0
+    )  # Tx = -fx'B
     header = trace_header.read_rig(right)
     assert header is not None and header.ref == "R1@1" and header.intact
     assert [(m[0], m[2]) for m in header.members] == [("CAM1@1", "cam1_optical_frame")]
 
 
 def test_ros_takes_a_file_template(db, tmp_path):
-    r = invoke(db, "rig", "export", "R1", "--format", "ros", "-o", str(tmp_path / "{camera}_info.yaml"),
-               "--frame", "CAM0=front_left_optical_frame", "--frame", "CAM1=front_right_optical_frame")
+    r = invoke(
+        db,
+        "rig",
+        "export",
+        "R1",
+        "--format",
+        "ros",
+        "-o",
+        str(tmp_path / "{camera}_info.yaml"),
+        "--frame",
+        "CAM0=front_left_optical_frame",
+        "--frame",
+        "CAM1=front_right_optical_frame",
+    )
     assert r.exit_code == 0, r.output
-    assert sorted(p.name for p in tmp_path.glob("*_info.yaml")) == ["front_left_info.yaml", "front_right_info.yaml"]
+    assert sorted(p.name for p in tmp_path.glob("*_info.yaml")) == [
+        "front_left_info.yaml",
+        "front_right_info.yaml",
+    ]
     r = invoke(db, "rig", "export", "R1", "--format", "ros", "-o", str(tmp_path / "{camera}_info.yaml"))
     assert r.exit_code == 0  # other names: new files, nothing overwritten
     r = invoke(db, "rig", "export", "R1", "--format", "ros", "-o", str(tmp_path / "{camera}_info.yaml"))
@@ -90,15 +107,18 @@ def test_ros_into_one_file_is_refused_naming_the_fix(db, tmp_path, target):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize(("frame", "message"), [
-    (["CAM0=front-left"], "'front-left' is not a legal ROS frame name"),
-    (["CAM0=/front"], "'/front' is not a legal ROS frame name"),
-    (["CAM0=9cam"], "'9cam' is not a legal ROS frame name"),
-    (["CAM0=a", "CAM0=b"], "--frame maps CAM0 twice (a and b)"),
-    (["CAM0=a", "CAM1=a"], "--frame gives CAM0 and CAM1 the same frame a"),
-    (["CAM7=a"], "CAM7 is not a frame of this rig"),
-    (["CAM0"], "--frame 'CAM0' is not SERIAL=NAME"),
-])
+@pytest.mark.parametrize(
+    ("frame", "message"),
+    [
+        (["CAM0=front-left"], "'front-left' is not a legal ROS frame name"),
+        (["CAM0=/front"], "'/front' is not a legal ROS frame name"),
+        (["CAM0=9cam"], "'9cam' is not a legal ROS frame name"),
+        (["CAM0=a", "CAM0=b"], "--frame maps CAM0 twice (a and b)"),
+        (["CAM0=a", "CAM1=a"], "--frame gives CAM0 and CAM1 the same frame a"),
+        (["CAM7=a"], "CAM7 is not a frame of this rig"),
+        (["CAM0"], "--frame 'CAM0' is not SERIAL=NAME"),
+    ],
+)
 def test_a_bad_frame_map_is_exit_2_naming_it(db, tmp_path, frame, message):
     args = [x for f in frame for x in ("--frame", f)]
     r = invoke(db, "rig", "export", "R1", "--format", "bundle", "-o", str(tmp_path / "b"), *args)
@@ -108,23 +128,47 @@ def test_a_bad_frame_map_is_exit_2_naming_it(db, tmp_path, frame, message):
 
 def test_bundle_writes_every_file_with_a_manifest(db, tmp_path):
     out = tmp_path / "bundle"
-    r = invoke(db, "rig", "export", "R1", "--format", "bundle", "-o", str(out), "--frame", "CAM0=front_left_optical_frame")
+    r = invoke(
+        db,
+        "rig",
+        "export",
+        "R1",
+        "--format",
+        "bundle",
+        "-o",
+        str(out),
+        "--frame",
+        "CAM0=front_left_optical_frame",
+    )
     assert r.exit_code == 0, r.output
     manifest = json.loads((out / "manifest.json").read_text())
     listed = {f["path"] for f in manifest["files"]}
-    assert listed == {"front_left.yaml", "cam1.yaml", "stereo_front_left_cam1.yaml", "tf_static.yaml", "rig.urdf",
-                      "camchain.yaml", "rig.json", "front_left.cameramodel", "cam1.cameramodel"}
+    assert listed == {
+        "front_left.yaml",
+        "cam1.yaml",
+        "stereo_front_left_cam1.yaml",
+        "tf_static.yaml",
+        "rig.urdf",
+        "camchain.yaml",
+        "rig.json",
+        "front_left.cameramodel",
+        "cam1.cameramodel",
+    }
     assert {p.name for p in out.iterdir()} == listed | {"manifest.json"}
     assert (manifest["rig"], manifest["version"], manifest["status"]) == ("R1", 1, "accepted")
     members = {m["serial"]: m for m in manifest["members"]}
-    assert members["CAM0"]["frame_id"] == "front_left_optical_frame" and members["CAM1"]["rostopic"] == "/cam1/image_raw"
+    assert (
+        members["CAM0"]["frame_id"] == "front_left_optical_frame"
+        and members["CAM1"]["rostopic"] == "/cam1/image_raw"
+    )
     assert all(len(m["content_sha256"]) == 64 and m["version"] == 1 for m in members.values())
     chain = yaml.safe_load((out / "camchain.yaml").read_text())
     assert [c["cam_overlaps"] for c in chain.values()] == [[1], [0]]
     assert [c["rostopic"] for c in chain.values()] == ["/front_left/image_raw", "/cam1/image_raw"]
     tf = yaml.safe_load((out / "tf_static.yaml").read_text())["transforms"]
-    assert [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf] == [("front_left_optical_frame",
-                                                                               "cam1_optical_frame")]
+    assert [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf] == [
+        ("front_left_optical_frame", "cam1_optical_frame")
+    ]
     baseline_m = np.linalg.norm([tf[0]["transform"]["translation"][k] for k in "xyz"])
     assert baseline_m == pytest.approx(0.075, abs=2e-4)
 
@@ -169,9 +213,14 @@ def test_lint_rig_require_signature_names_the_unsigned_rig_and_each_unsigned_mem
     (trusted / "k.pub.pem").write_text(key.public_pem())
     r = invoke(db, "--json", "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(trusted))
     assert r.exit_code == 1, r.output
-    messages = [f["message"] for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature"]
-    assert messages == ["rig R1@1 is not signed",
-                        "member CAM0@1 is not signed", "member CAM1@1 is not signed"]
+    messages = [
+        f["message"] for f in json.loads(r.stdout)["results"][0]["findings"] if f["rule"] == "signature"
+    ]
+    assert messages == [
+        "rig R1@1 is not signed",
+        "member CAM0@1 is not signed",
+        "member CAM1@1 is not signed",
+    ]
     assert invoke(db, "lint", "--rig", "R1").exit_code == 0  # without --require-signature the rig passes
     empty = tmp_path / "empty"
     empty.mkdir()

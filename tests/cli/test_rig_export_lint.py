@@ -15,7 +15,7 @@ from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401
 SINGLE_FILE_FORMATS = ("json", "opencv", "tf", "urdf", "urdf-joints", "kalibr")
 
 
-def _lint(db, *paths):  # noqa: F811
+def _lint(db, *paths):
     r = invoke(db, "--json", "lint", *map(str, paths))
     doc = json.loads(r.stdout) if r.exit_code in (0, 1) else None
     return r, doc
@@ -25,7 +25,7 @@ def _rules(result_doc):
     return {f["rule"]: f["severity"] for f in result_doc["findings"]}
 
 
-def test_every_rig_export_format_lints_clean(db, tmp_path):  # noqa: F811
+def test_every_rig_export_format_lints_clean(db, tmp_path):
     paths = []
     for fmt in SINGLE_FILE_FORMATS:
         path = tmp_path / f"rig.{fmt}"
@@ -40,13 +40,15 @@ def test_every_rig_export_format_lints_clean(db, tmp_path):  # noqa: F811
     assert all(x["errors"] == 0 and x["warnings"] == 0 for x in doc["results"]), doc
 
 
-def test_the_bundle_manifest_lints_every_file_and_names_an_edited_or_missing_one(db, tmp_path):  # noqa: F811
+def test_the_bundle_manifest_lints_every_file_and_names_an_edited_or_missing_one(db, tmp_path):
     out = tmp_path / "bundle"
     assert invoke(db, "rig", "export", "R1", "--format", "bundle", "-o", str(out)).exit_code == 0
     r, doc = _lint(db, out / "manifest.json")
     assert r.exit_code == 0, r.output
     assert doc["results"][0]["kind"] == "bundle" and len(doc["results"]) == 1 + 9
-    (out / "cam1.yaml").write_text((out / "cam1.yaml").read_text().replace("camera_name: cam1", "camera_name: cam0"))
+    (out / "cam1.yaml").write_text(
+        (out / "cam1.yaml").read_text().replace("camera_name: cam1", "camera_name: cam0")
+    )
     (out / "rig.urdf").unlink()
     r, doc = _lint(db, out / "manifest.json")
     assert r.exit_code == 1
@@ -57,15 +59,17 @@ def test_the_bundle_manifest_lints_every_file_and_names_an_edited_or_missing_one
     assert _rules(edited)["content-hash"] == "error"  # its own header says so too
 
 
-def test_an_edited_rig_export_is_a_content_hash_error(db, tmp_path):  # noqa: F811
+def test_an_edited_rig_export_is_a_content_hash_error(db, tmp_path):
     path = tmp_path / "tf.yaml"
     invoke(db, "rig", "export", "R1", "--format", "tf", "-o", str(path))
-    path.write_text(path.read_text().replace("child_frame_id: cam1_optical_frame", "child_frame_id: cam9_optical_frame"))
+    path.write_text(
+        path.read_text().replace("child_frame_id: cam1_optical_frame", "child_frame_id: cam9_optical_frame")
+    )
     r, doc = _lint(db, path)
     assert r.exit_code == 1 and _rules(doc["results"][0])["content-hash"] == "error"
 
 
-def test_a_ros_rewritten_camera_info_warns_traceability_and_asks_for_no_new_capture(db, tmp_path):  # noqa: F811
+def test_a_ros_rewritten_camera_info_warns_traceability_and_asks_for_no_new_capture(db, tmp_path):
     invoke(db, "rig", "export", "R1", "--format", "ros", "-o", str(tmp_path / "ros"))
     text = (tmp_path / "ros" / "cam1.yaml").read_text()
     bare = tmp_path / "rewritten.yaml"  # what set_camera_info / the convert tool leave: no comments
@@ -78,7 +82,7 @@ def test_a_ros_rewritten_camera_info_warns_traceability_and_asks_for_no_new_capt
 
 
 @pytest.mark.parametrize("ext", [".yaml", ".xml", ".json"])
-def test_opencv_filestorage_in_yaml_xml_and_json_is_read_by_content(db, tmp_path, ext):  # noqa: F811
+def test_opencv_filestorage_in_yaml_xml_and_json_is_read_by_content(db, tmp_path, ext):
     path = tmp_path / f"cam{ext}"
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
     fs.write("image_width", 640)
@@ -93,10 +97,17 @@ def test_opencv_filestorage_in_yaml_xml_and_json_is_read_by_content(db, tmp_path
     assert not any(f["rule"].startswith("ros") for f in result["findings"])
 
 
-def test_another_tools_kalibr_and_tf_are_linted_on_numbers_and_frames(db, tmp_path):  # noqa: F811
-    chain = {"cam0": {"camera_model": "pinhole", "intrinsics": [500.0, 500.0, 320.0, 240.0],
-                      "distortion_model": "radtan", "distortion_coeffs": [0.0, 0.0, 0.0, 0.0],
-                      "resolution": [640, 480], "rostopic": "/LEFT-01/image_raw"}}
+def test_another_tools_kalibr_and_tf_are_linted_on_numbers_and_frames(db, tmp_path):
+    chain = {
+        "cam0": {
+            "camera_model": "pinhole",
+            "intrinsics": [500.0, 500.0, 320.0, 240.0],
+            "distortion_model": "radtan",
+            "distortion_coeffs": [0.0, 0.0, 0.0, 0.0],
+            "resolution": [640, 480],
+            "rostopic": "/LEFT-01/image_raw",
+        }
+    }
     path = tmp_path / "camchain.yaml"
     path.write_text(yaml.safe_dump(chain))
     r, doc = _lint(db, path)
@@ -104,9 +115,18 @@ def test_another_tools_kalibr_and_tf_are_linted_on_numbers_and_frames(db, tmp_pa
     assert r.exit_code == 1 and doc["results"][0]["kind"] == "kalibr"
     assert "cam0 has no cam_overlaps: Kalibr's getCamOverlaps fails" in messages["kalibr"]
     assert "rostopic '/LEFT-01/image_raw' is not a legal ROS topic" in messages["frames"]
-    tf = {"transforms": [{"header": {"frame_id": "base"}, "child_frame_id": "LEFT-01",
-                          "transform": {"translation": {"x": 0, "y": 0, "z": 0},
-                                        "rotation": {"x": 0, "y": 0, "z": 0, "w": 2.0}}}]}
+    tf = {
+        "transforms": [
+            {
+                "header": {"frame_id": "base"},
+                "child_frame_id": "LEFT-01",
+                "transform": {
+                    "translation": {"x": 0, "y": 0, "z": 0},
+                    "rotation": {"x": 0, "y": 0, "z": 0, "w": 2.0},
+                },
+            }
+        ]
+    }
     path = tmp_path / "tf.yaml"
     path.write_text(yaml.safe_dump(tf))
     r, doc = _lint(db, path)
@@ -114,13 +134,17 @@ def test_another_tools_kalibr_and_tf_are_linted_on_numbers_and_frames(db, tmp_pa
     assert r.exit_code == 1 and rules["frames"] == "error" and rules["transform"] == "error"
 
 
-def test_an_unknown_layout_is_exit_2_naming_what_lint_looked_for(db, tmp_path):  # noqa: F811
+def test_an_unknown_layout_is_exit_2_naming_what_lint_looked_for(db, tmp_path):
     path = tmp_path / "x.yaml"
     path.write_text("hello: 1\nworld: 2\n")
     r = invoke(db, "lint", str(path))
     assert r.exit_code == 2
     text = " ".join(r.output.split())
-    assert "lint looked for a calibctl artifact" in text and "Kalibr camchain" in text and "bundle manifest.json" in text
+    assert (
+        "lint looked for a calibctl artifact" in text
+        and "Kalibr camchain" in text
+        and "bundle manifest.json" in text
+    )
 
 
 @pytest.mark.parametrize("lens", ["pinhole", "fisheye"])
@@ -131,8 +155,10 @@ def test_every_format_of_a_pinhole_and_a_fisheye_rig_lints_clean(sqlite_url, tmp
 
     cal = rig_calibration()
     if lens == "fisheye":
-        members = [m.model_copy(update={"lens": "fisheye", "dist_coeffs": [0.02, -0.004, 0.001, -0.0002]})
-                   for m in cal.members]
+        members = [
+            m.model_copy(update={"lens": "fisheye", "dist_coeffs": [0.02, -0.004, 0.001, -0.0002]})
+            for m in cal.members
+        ]
         cal = cal.model_copy(update={"members": members})
     with Store.open(sqlite_url) as store:
         store.add_rig(rig_definition())
@@ -143,7 +169,12 @@ def test_every_format_of_a_pinhole_and_a_fisheye_rig_lints_clean(sqlite_url, tmp
         r = invoke(sqlite_url, "rig", "export", RIG, "--format", fmt, "-o", str(paths[-1]), "--allow-stale")
         assert r.exit_code == 0, (fmt, r.output)
     out = tmp_path / "bundle"
-    assert invoke(sqlite_url, "rig", "export", RIG, "--format", "bundle", "-o", str(out), "--allow-stale").exit_code == 0
+    assert (
+        invoke(
+            sqlite_url, "rig", "export", RIG, "--format", "bundle", "-o", str(out), "--allow-stale"
+        ).exit_code
+        == 0
+    )
     manifest = json.loads((out / "manifest.json").read_text())
     if lens == "fisheye":
         assert all(m["mrcal"] is None and "Kannala-Brandt" in m["mrcal_missing"] for m in manifest["members"])
@@ -153,7 +184,7 @@ def test_every_format_of_a_pinhole_and_a_fisheye_rig_lints_clean(sqlite_url, tmp
     assert all(x["errors"] == 0 for x in doc["results"]), [x for x in doc["results"] if x["errors"]]
 
 
-def test_require_signature_refuses_an_unsigned_rig_export_naming_the_fix(db, tmp_path):  # noqa: F811
+def test_require_signature_refuses_an_unsigned_rig_export_naming_the_fix(db, tmp_path):
     from calibctl.signing import create_key
 
     trusted = tmp_path / "trusted"

@@ -32,7 +32,18 @@ def rig2(tmp_path_factory):
 
 
 def _sources(cam0, cam1) -> list[str]:
-    return ["--source", f"CAM0={cam0}", "--source", f"CAM1={cam1}", "--cols", "9", "--rows", "6", "--square-mm", "25"]
+    return [
+        "--source",
+        f"CAM0={cam0}",
+        "--source",
+        f"CAM1={cam1}",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square-mm",
+        "25",
+    ]
 
 
 def test_a_member_the_stored_path_refuses_at_capture_is_refused_by_the_same_gate(rig2, tmp_path):
@@ -44,14 +55,22 @@ def test_a_member_the_stored_path_refuses_at_capture_is_refused_by_the_same_gate
     url = f"sqlite:///{tmp_path / 'c.db'}"
     with Store.open(url) as store:
         store.add_board(measured_board(square_mm=25.0))
-    stored = RUNNER.invoke(app, ["--db", url, "--json", "capture", "--serial", "CAM1", "--board", "A17",
-                                 "--source", str(cam1)], terminal_width=110)
+    stored = RUNNER.invoke(
+        app,
+        ["--db", url, "--json", "capture", "--serial", "CAM1", "--board", "A17", "--source", str(cam1)],
+        terminal_width=110,
+    )
     assert stored.exit_code == 1, stored.output
-    refused_by = {g["gate"] for g in json.loads(stored.stdout)["session"]["gates"]
-                  if not g["passed"] and not g.get("advisory")}
+    refused_by = {
+        g["gate"]
+        for g in json.loads(stored.stdout)["session"]["gates"]
+        if not g["passed"] and not g.get("advisory")
+    }
     assert "views" in refused_by  # with views failed there is no projection gate: coverage decides too
 
-    result = invoke("--json", "rig", "solve-folders", *_sources(rig2 / "CAM0", cam1), "--min-shared-views", "5")
+    result = invoke(
+        "--json", "rig", "solve-folders", *_sources(rig2 / "CAM0", cam1), "--min-shared-views", "5"
+    )
     assert result.exit_code == 1, result.output
     doc = json.loads(result.stdout)
     member = {(f["rule"], f["message"].split(":")[0]) for f in doc["lint"] if f["rule"].startswith("member:")}
@@ -61,8 +80,12 @@ def test_a_member_the_stored_path_refuses_at_capture_is_refused_by_the_same_gate
 
 def test_a_member_lint_rule_applies_with_the_stations_limits(rig2):
     """The stored path lints every member's calibration (member:<rule>); so does solve-folders, same limits."""
-    run = solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, min_shared_views=5,
-                            limits=LintThresholds(sigma_fx_max_px=1e-6))
+    run = solve_rig_folders(
+        {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"},
+        BOARD,
+        min_shared_views=5,
+        limits=LintThresholds(sigma_fx_max_px=1e-6),
+    )
     rules = sorted((f.rule, f.message.split(":")[0]) for f in run.findings)
     assert rules == [("member:sigma-fx", "CAM0"), ("member:sigma-fx", "CAM1")]
     assert not run.passed
@@ -72,21 +95,46 @@ def test_a_member_lint_rule_applies_with_the_stations_limits(rig2):
 
 def test_a_baseline_far_from_its_design_fails_baseline_design(rig2):
     true_mm = true_baseline_mm(rig2)
-    far = invoke("rig", "solve-folders", *_sources(rig2 / "CAM0", rig2 / "CAM1"), "--min-shared-views", "5",
-                 "--design-baseline-mm", f"CAM0:CAM1={true_mm - 5:.1f}+-1")
+    far = invoke(
+        "rig",
+        "solve-folders",
+        *_sources(rig2 / "CAM0", rig2 / "CAM1"),
+        "--min-shared-views",
+        "5",
+        "--design-baseline-mm",
+        f"CAM0:CAM1={true_mm - 5:.1f}+-1",
+    )
     assert far.exit_code == 1, far.output
     assert "error baseline-design: CAM0-CAM1: baseline 75." in far.output and "check the mount" in far.output
-    near = invoke("rig", "solve-folders", *_sources(rig2 / "CAM0", rig2 / "CAM1"), "--min-shared-views", "5",
-                  "--design-baseline-mm", f"CAM0:CAM1={true_mm:.1f}+-1")
+    near = invoke(
+        "rig",
+        "solve-folders",
+        *_sources(rig2 / "CAM0", rig2 / "CAM1"),
+        "--min-shared-views",
+        "5",
+        "--design-baseline-mm",
+        f"CAM0:CAM1={true_mm:.1f}+-1",
+    )
     assert near.exit_code == 0, near.output
 
 
-@pytest.mark.parametrize(("design", "message"), [
-    ("CAM0:CAM9=75+-1", "--design-baseline-mm CAM0:CAM9: name two different cameras of the rig (CAM0, CAM1)"),
-    ("CAM0-CAM1=75", "--design-baseline-mm must look like A:B=75.0+-0.5"),
-])
+@pytest.mark.parametrize(
+    ("design", "message"),
+    [
+        (
+            "CAM0:CAM9=75+-1",
+            "--design-baseline-mm CAM0:CAM9: name two different cameras of the rig (CAM0, CAM1)",
+        ),
+        ("CAM0-CAM1=75", "--design-baseline-mm must look like A:B=75.0+-0.5"),
+    ],
+)
 def test_a_bad_design_baseline_exits_2_before_any_photo_is_read(tmp_path, design, message):
-    result = invoke("rig", "solve-folders", *_sources(tmp_path / "none0", tmp_path / "none1"),
-                    "--design-baseline-mm", design)
+    result = invoke(
+        "rig",
+        "solve-folders",
+        *_sources(tmp_path / "none0", tmp_path / "none1"),
+        "--design-baseline-mm",
+        design,
+    )
     assert result.exit_code == 2, result.output
     assert message in result.output

@@ -24,7 +24,7 @@ SINGLE_FILE_FORMATS = ("json", "opencv", "tf", "urdf", "urdf-joints", "kalibr")
 
 
 @pytest.fixture(scope="module")
-def signed_solved(tmp_path_factory, rig2):  # noqa: F811
+def signed_solved(tmp_path_factory, rig2):
     """A store whose every record (cameras, rig R1@1) is signed by k.pem; trusted/ holds its public key."""
     folder = tmp_path_factory.mktemp("signed")
     key = create_key(folder / "k.pem")
@@ -93,8 +93,16 @@ def test_every_rig_export_carries_the_signature_and_lints_signed(signed, tmp_pat
         header = trace_header.read_rig(path.read_text())
         assert header is not None and header.signature is not None, path
         assert header.signature.model_dump(mode="json") == manifest["signature"], path
-    r = invoke(url, "--json", "lint", *map(str, paths), str(out / "manifest.json"),
-               "--require-signature", "--trusted-keys", str(trusted))
+    r = invoke(
+        url,
+        "--json",
+        "lint",
+        *map(str, paths),
+        str(out / "manifest.json"),
+        "--require-signature",
+        "--trusted-keys",
+        str(trusted),
+    )
     assert r.exit_code == 0, r.output
     assert _findings(r) == []
 
@@ -107,9 +115,13 @@ def test_a_stranger_key_or_an_edited_signature_line_is_a_signature_error(signed,
     assert r.exit_code == 1 and _findings(r)[0]["message"].startswith("rig R1@1 is signed by key ")
     assert "which is not trusted" in _findings(r)[0]["message"]
     text = path.read_text()
-    value = next(line for line in text.splitlines() if line.startswith("# calibctl rig-signature ")).rsplit(" ", 1)[1]
+    value = next(line for line in text.splitlines() if line.startswith("# calibctl rig-signature ")).rsplit(
+        " ", 1
+    )[1]
     text = text.replace(value, ("B" if value[0] != "B" else "C") + value[1:])  # a changed signature ...
-    text = text.replace(trace_header.read_rig(text).file_sha256, trace_header.file_sha256(text))  # ... re-hashed
+    text = text.replace(
+        trace_header.read_rig(text).file_sha256, trace_header.file_sha256(text)
+    )  # ... re-hashed
     path.write_text(text)
     r = invoke(url, "--json", "lint", str(path), "--require-signature", "--trusted-keys", str(trusted))
     assert r.exit_code == 1 and "does not match its content" in _findings(r)[0]["message"]
@@ -122,11 +134,15 @@ def test_lint_rig_require_signature_passes_a_signed_rig_and_names_an_untrusted_o
     r = invoke(url, "--json", "lint", "--rig", "R1", "--require-signature", "--trusted-keys", str(other))
     assert r.exit_code == 1
     messages = [f["message"] for f in _findings(r)]
-    assert [m.split(" is signed by key ")[0] for m in messages] == ["rig R1@1", "member CAM0@1", "member CAM1@1"]
+    assert [m.split(" is signed by key ")[0] for m in messages] == [
+        "rig R1@1",
+        "member CAM0@1",
+        "member CAM1@1",
+    ]
     assert all("which is not trusted" in m for m in messages)
 
 
-def test_db_verify_require_signature_covers_rig_versions(signed, db, tmp_path):  # noqa: F811
+def test_db_verify_require_signature_covers_rig_versions(signed, db, tmp_path):
     """The signed store passes: `rig add` and `rig capture` sign their records too (they wrote them unsigned
     with a key configured, so a signed store's rig definition and rig capture sessions failed this check)."""
     url, trusted, _ = signed

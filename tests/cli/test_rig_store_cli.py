@@ -42,12 +42,33 @@ def invoke(db, *args):
 
 
 def _capture(db, rig2):
-    return invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-                  "--source", f"CAM1={rig2 / 'CAM1'}")
+    return invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+    )
 
 
 def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
-    r = invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1", "--design-baseline-mm", "CAM0:CAM1=75+-0.5")
+    r = invoke(
+        db,
+        "rig",
+        "add",
+        "R1",
+        "--camera",
+        "CAM0",
+        "--camera",
+        "CAM1",
+        "--design-baseline-mm",
+        "CAM0:CAM1=75+-0.5",
+    )
     assert r.exit_code == 0 and "design CAM0-CAM1 75.000 +/- 0.500 mm" in r.output
     r = _capture(db, rig2)
     assert r.exit_code == 0, r.output
@@ -96,8 +117,20 @@ def test_refusals_exit_2_with_a_message(db, rig2):
     assert r.exit_code == 2 and "unknown rig export format 'nope'" in r.output
     r = invoke(db, "rig", "export", "R1", "--format", "tf")
     assert r.exit_code == 2 and "rig R1 has no calibration yet" in r.output
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={rig2 / 'CAM1'}", "--min-shared-views", "9")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+        "--min-shared-views",
+        "9",
+    )
     assert r.exit_code == 1 and "CAM0-CAM1 shares 8 view(s) (needs 9)" in r.output
     assert "Traceback" not in r.output
 
@@ -116,8 +149,18 @@ def test_solve_and_lint_take_rig(db, rig2):
 
 def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={rig2 / 'CAM1'}")
+    r = invoke(
+        db,
+        "capture",
+        "--rig",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+    )
     assert r.exit_code == 0, r.output
     assert "8 synchronised frames" in r.output
     r = invoke(db, "capture", "--board", "A17", "--source", str(rig2 / "CAM0"))
@@ -126,18 +169,34 @@ def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
     assert r.exit_code == 2 and "one camera takes one --source, got 2" in r.output
 
 
-@pytest.mark.parametrize(("args", "named"), [
-    (("--reference-distance", "0.45+-0.001", "--reference-source", "fixture"),
-     "--reference-distance, --reference-source apply to one camera"),
-    (("--reference-distance", "0.45+-0.001"), "--reference-distance applies to one camera"),
-    (("--serial", "CAM0"), "--serial applies to one camera"),
-    (("--max-views", "10", "--duration", "5"), "--max-views, --duration apply to one camera"),
-])
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (
+            ("--reference-distance", "0.45+-0.001", "--reference-source", "fixture"),
+            "--reference-distance, --reference-source apply to one camera",
+        ),
+        (("--reference-distance", "0.45+-0.001"), "--reference-distance applies to one camera"),
+        (("--serial", "CAM0"), "--serial applies to one camera"),
+        (("--max-views", "10", "--duration", "5"), "--max-views, --duration apply to one camera"),
+    ],
+)
 def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
     """They used to be dropped silently: a rig capture gauged nothing and said nothing."""
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={rig2 / 'CAM1'}", *args)
+    r = invoke(
+        db,
+        "capture",
+        "--rig",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+        *args,
+    )
     assert r.exit_code == 2, r.output
     text = " ".join(r.output.split())
     assert f"{named}, not to a rig (--rig)" in text and "capture that camera on its own with --serial" in text
@@ -145,9 +204,14 @@ def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
         assert store.list_sessions() == []
 
 
-@pytest.mark.parametrize(("args", "named"), [
-    (["--serial", "CAM0"], "--serial applies"), (["--model", "fisheye"], "--model applies"),
-    (["--model", "k1k2", "--drop-outliers"], "--model, --drop-outliers apply")])
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["--serial", "CAM0"], "--serial applies"),
+        (["--model", "fisheye"], "--model applies"),
+        (["--model", "k1k2", "--drop-outliers"], "--model, --drop-outliers apply"),
+    ],
+)
 def test_solve_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
     """They used to be dropped silently: the rig solve uses the members' active calibrations."""
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
@@ -155,7 +219,9 @@ def test_solve_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
     r = invoke(db, "solve", "--rig", "R1", *args)
     assert r.exit_code == 2, r.output
     text = " ".join(r.output.split())
-    assert f"{named} to one camera, not to a rig (--rig)" in text and "solve that camera's own session" in text
+    assert (
+        f"{named} to one camera, not to a rig (--rig)" in text and "solve that camera's own session" in text
+    )
     assert invoke(db, "rig", "history", "R1").exit_code == 2  # nothing solved, nothing stored
 
 
@@ -167,8 +233,23 @@ def test_refine_intrinsics_without_rig_is_refused(db):
 
 def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "--json", "capture", "--rig", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={rig2 / 'CAM1'}", "--station", "line-7", "--operator", "ana")
+    r = invoke(
+        db,
+        "--json",
+        "capture",
+        "--rig",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM1'}",
+        "--station",
+        "line-7",
+        "--operator",
+        "ana",
+    )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.output)
     assert (doc["rig_session"]["station"], doc["rig_session"]["operator"]) == ("line-7", "ana")
@@ -220,8 +301,18 @@ def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_store
     for i, p in enumerate(photos):
         shutil.copy(p, right / f"CAM1_{(i + 3) % len(photos):04d}.png")
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={right}")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={right}",
+    )
     assert r.exit_code == 0, r.output  # each camera's photos are fine on their own
     r = invoke(db, "rig", "solve", "R1")
     assert r.exit_code == 1, r.output
@@ -247,8 +338,18 @@ def _stored(db) -> tuple[list, int, int]:
 def test_the_same_folder_for_two_members_is_refused_and_nothing_is_stored(db, rig2, tmp_path):
     """The operator's typo (the LEFT folder for both cameras), then a copy of it: exit 1 with the numbers."""
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={rig2 / 'CAM0'}")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={rig2 / 'CAM0'}",
+    )
     assert r.exit_code == 1, r.output
     text = " ".join(r.output.split())
     assert "the members are not distinct cameras: CAM0 and CAM1 hold 8 identical image(s)" in text, text
@@ -257,8 +358,18 @@ def test_the_same_folder_for_two_members_is_refused_and_nothing_is_stored(db, ri
     shutil.copytree(rig2 / "CAM0", copy)  # renamed files, same bytes
     for p in copy.iterdir():
         p.rename(copy / p.name.replace("CAM0", "CAM1"))
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}", "--source",
-               f"CAM1={copy}")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={copy}",
+    )
     assert r.exit_code == 1 and "identical image(s)" in r.output
     assert _stored(db) == ([], 0, 0)
 
@@ -269,10 +380,22 @@ def test_a_re_encoded_copy_is_the_same_corners_and_is_refused(db, rig2, tmp_path
     copy = tmp_path / "copy"
     copy.mkdir()
     for p in sorted((rig2 / "CAM0").iterdir()):  # new bytes (a PNG with another compression), the same pixels
-        cv2.imwrite(str(copy / p.name.replace("CAM0", "CAM1")), cv2.imread(str(p)), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        cv2.imwrite(
+            str(copy / p.name.replace("CAM0", "CAM1")), cv2.imread(str(p)), [cv2.IMWRITE_PNG_COMPRESSION, 1]
+        )
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={copy}")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={copy}",
+    )
     assert r.exit_code == 1, r.output
     assert "see the board at the same pixels" in " ".join(r.output.split())
     assert _stored(db) == ([], 0, 0)
@@ -284,8 +407,18 @@ def test_a_rig_capture_that_cannot_run_stores_no_member_session(db, rig2, tmp_pa
     for i, p in enumerate(sorted((rig2 / "CAM1").iterdir())):
         shutil.copy(p, right / f"CAM1_{i + 100:04d}.png")  # no frame number in common
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-               "--source", f"CAM1={right}")
+    r = invoke(
+        db,
+        "rig",
+        "capture",
+        "R1",
+        "--board",
+        "A17",
+        "--source",
+        f"CAM0={rig2 / 'CAM0'}",
+        "--source",
+        f"CAM1={right}",
+    )
     assert r.exit_code == 2 and "nothing pairs up" in r.output
     assert _stored(db) == ([], 0, 0)
 
@@ -322,8 +455,21 @@ def test_a_session_stored_before_the_checks_existed_is_refused_at_solve(db, rig2
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
     with monkeypatch.context() as m:  # an older calibctl stored the typo without a word
         m.setattr(rigs.identity, "refuse", lambda *a, **k: None)
-        assert invoke(db, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}",
-                      "--source", f"CAM1={rig2 / 'CAM0'}").exit_code == 0
+        assert (
+            invoke(
+                db,
+                "rig",
+                "capture",
+                "R1",
+                "--board",
+                "A17",
+                "--source",
+                f"CAM0={rig2 / 'CAM0'}",
+                "--source",
+                f"CAM1={rig2 / 'CAM0'}",
+            ).exit_code
+            == 0
+        )
     r = invoke(db, "rig", "solve", "R1")
     assert r.exit_code == 1, r.output
     assert "identical image(s)" in r.output and "nothing was stored" in " ".join(r.output.split())
@@ -336,8 +482,11 @@ def test_a_baseline_indistinguishable_from_zero_is_refused_before_storing(db, ri
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
     assert _capture(db, rig2).exit_code == 0
     real = rigs.identity.zero_baselines
-    monkeypatch.setattr(rigs.identity, "zero_baselines",  # this rig's 75 mm read against a 100 mm floor
-                        lambda pairs: real(pairs, floor_mm=100.0))
+    monkeypatch.setattr(
+        rigs.identity,
+        "zero_baselines",  # this rig's 75 mm read against a 100 mm floor
+        lambda pairs: real(pairs, floor_mm=100.0),
+    )
     r = invoke(db, "rig", "solve", "R1")
     assert r.exit_code == 1, r.output
     assert "CAM0-CAM1 baseline 75." in r.output and "below the 100 mm floor" in " ".join(r.output.split())

@@ -30,8 +30,11 @@ def folder(tmp_path: Path, pattern: str) -> Path:
 def calibrate(db: str, source: Path, serial: str):
     with Store.open(db) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
-    return RUNNER.invoke(app, ["--db", db, "calibrate", "--serial", serial, "--board", "A17", "--source", str(source)],
-                         terminal_width=110)
+    return RUNNER.invoke(
+        app,
+        ["--db", db, "calibrate", "--serial", serial, "--board", "A17", "--source", str(source)],
+        terminal_width=110,
+    )
 
 
 def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sqlite_url: str) -> None:
@@ -41,7 +44,9 @@ def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sql
     assert "one_camera" in result.stdout and "two cameras" in result.stdout
     assert "not solved: the capture gates failed" in result.stdout
     history = RUNNER.invoke(app, ["--db", sqlite_url, "history", "STEREO-MIX"])
-    assert history.exit_code == 2 and "no calibration is stored for 'STEREO-MIX'" in history.output  # no calibration was made
+    assert (
+        history.exit_code == 2 and "no calibration is stored for 'STEREO-MIX'" in history.output
+    )  # no calibration was made
     with Store.open(sqlite_url) as store:
         session = store.latest_session("STEREO-MIX", status=None)
         assert session.status == "rejected"
@@ -51,7 +56,9 @@ def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sql
         store.add_session(blended)
     solved = RUNNER.invoke(app, ["--db", sqlite_url, "solve", blended.session_id], terminal_width=110)
     assert solved.exit_code == 1, solved.output
-    assert "one-camera" in solved.output and "two cameras" in solved.output and "rejected" in solved.output, solved.output
+    assert "one-camera" in solved.output and "two cameras" in solved.output and "rejected" in solved.output, (
+        solved.output
+    )
     with Store.open(sqlite_url) as store:
         art = store.get_artifact("STEREO-MIX", 1)
     assert art.status == "rejected" and art.camera_consistency is not None

@@ -45,17 +45,43 @@ WRITERS: dict[str, Callable[[Path, Path, str], list[object]]] = {
     "export": lambda out, tmp, db: ["--db", db, "export", "CAM-0001", "-o", out, "--force"],
     "export ros": lambda out, tmp, db: ["--db", db, "export", "CAM-0001", "-f", "ros", "-o", out, "--force"],
     "report": lambda out, tmp, db: ["--db", db, "report", "CAM-0001", "-o", out, "--force"],
-    "handeye -o": lambda out, tmp, db: ["handeye", _motions(tmp), "--from", "lidar", "--to", "camera", "-o", out,
-                                        "--force"],
-    "handeye --tf-static": lambda out, tmp, db: ["handeye", _motions(tmp), "--from", "lidar", "--to", "camera",
-                                                 "--tf-static", out, "--force"],
+    "handeye -o": lambda out, tmp, db: [
+        "handeye",
+        _motions(tmp),
+        "--from",
+        "lidar",
+        "--to",
+        "camera",
+        "-o",
+        out,
+        "--force",
+    ],
+    "handeye --tf-static": lambda out, tmp, db: [
+        "handeye",
+        _motions(tmp),
+        "--from",
+        "lidar",
+        "--to",
+        "camera",
+        "--tf-static",
+        out,
+        "--force",
+    ],
     "synth-motions": lambda out, tmp, db: ["synth-motions", out, "--seed", "1", "--force"],
-    "synth-residuals": lambda out, tmp, db: ["synth-residuals", out, "--fault", "focal", "--keyframes", "5",
-                                             "--force"],
+    "synth-residuals": lambda out, tmp, db: [
+        "synth-residuals",
+        out,
+        "--fault",
+        "focal",
+        "--keyframes",
+        "5",
+        "--force",
+    ],
     "keys init": lambda out, tmp, db: ["keys", "init", "--key", out, "--force"],
     "keys export-public": lambda out, tmp, db: (
-        cli("keys", "init", "--key", tmp / "k.pem") and ["keys", "export-public", "--key", tmp / "k.pem", "-o", out,
-                                                         "--force"]),
+        cli("keys", "init", "--key", tmp / "k.pem")
+        and ["keys", "export-public", "--key", tmp / "k.pem", "-o", out, "--force"]
+    ),
 }
 
 
@@ -106,7 +132,9 @@ def test_special_kinds_are_the_ones_the_writer_knows():
 def test_triage_plots_never_replace_a_symlink(tmp_path):
     pytest.importorskip("matplotlib", reason="the plots extra is not installed")
     csv = tmp_path / "in.csv"
-    assert cli("synth-residuals", csv, "--fault", "rotation", "--seed", "2", "--keyframes", "60").exit_code == 0
+    assert (
+        cli("synth-residuals", csv, "--fault", "rotation", "--seed", "2", "--keyframes", "60").exit_code == 0
+    )
     plots = tmp_path / "plots"
     assert cli("triage", csv, "--plot", plots).exit_code in (0, 1)
     first = sorted(plots.glob("*.png"))[0]
@@ -115,5 +143,7 @@ def test_triage_plots_never_replace_a_symlink(tmp_path):
     first.unlink()
     os.symlink(victim, first)
     result = cli("triage", csv, "--plot", plots)
-    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, result.output
+    assert result.exit_code == 2 and "it is a symbolic link, not a regular file" in result.stderr, (
+        result.output
+    )
     assert victim.read_text() == "not ours\n" and first.is_symlink()

@@ -37,16 +37,22 @@ def shots(tmp_path: Path, good: Path) -> Path:
 
 
 def invoke(db: str, *args: str, input: str | None = None):
-    return RUNNER.invoke(app, ["--db", db, "station", "--board", "A17", *args], input=input, terminal_width=110)
+    return RUNNER.invoke(
+        app, ["--db", db, "station", "--board", "A17", *args], input=input, terminal_width=110
+    )
 
 
 def test_stdin_serials_give_one_json_line_per_unit_and_exit_0(db: str, shots: Path) -> None:
-    result = invoke(db, "--source-template", f"{shots}/{{serial}}", "--json", "--jobs", "2",
-                    input="CAM-1\nCAM-1\nCAM-2\n")
+    result = invoke(
+        db, "--source-template", f"{shots}/{{serial}}", "--json", "--jobs", "2", input="CAM-1\nCAM-1\nCAM-2\n"
+    )
     assert result.exit_code == 0, result.output
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     assert [(d["serial"], d["status"], d["version"]) for d in lines] == [
-        ("CAM-1", "pass", 1), ("CAM-1", "error", None), ("CAM-2", "pass", 1)]
+        ("CAM-1", "pass", 1),
+        ("CAM-1", "error", None),
+        ("CAM-2", "pass", 1),
+    ]
     assert "already calibrated in this run" in lines[1]["message"]
 
 
@@ -61,7 +67,9 @@ def test_a_serials_file_gives_human_lines(db: str, shots: Path, tmp_path: Path) 
     assert out[2].startswith("  hint: put the unit's pictures there")
 
 
-def test_a_template_without_serial_and_a_missing_serials_file_exit_2(db: str, shots: Path, tmp_path: Path) -> None:
+def test_a_template_without_serial_and_a_missing_serials_file_exit_2(
+    db: str, shots: Path, tmp_path: Path
+) -> None:
     no_slot = invoke(db, "--source-template", str(shots), input="CAM-1\n")
     assert no_slot.exit_code == 2 and "has no {serial}" in no_slot.output
     missing = invoke(db, "--source-template", f"{shots}/{{serial}}", "--serials", str(tmp_path / "none.txt"))
@@ -72,11 +80,16 @@ def test_a_template_without_serial_and_a_missing_serials_file_exit_2(db: str, sh
 
 # --camera: each unit live from the station's camera -------------------------------------------------------------
 
-def test_a_camera_station_gives_a_line_per_unit_and_progress_on_stderr(db: str, tmp_path_factory, monkeypatch) -> None:
+
+def test_a_camera_station_gives_a_line_per_unit_and_progress_on_stderr(
+    db: str, tmp_path_factory, monkeypatch
+) -> None:
     from calibctl.workflows.camera import capture_sources as sources
 
     video = rendered(tmp_path_factory, "video") / "video.avi"
-    monkeypatch.setattr(sources, "open_stream", lambda spec: sources.VideoFileSource(video))  # the unit's camera
+    monkeypatch.setattr(
+        sources, "open_stream", lambda spec: sources.VideoFileSource(video)
+    )  # the unit's camera
     result = invoke(db, "--camera", "/dev/video7", "--json", input="CAM-1\n")
     assert result.exit_code == 0, result.output
     (line,) = [json.loads(text) for text in result.stdout.splitlines()]
@@ -89,17 +102,23 @@ def test_a_missing_camera_is_an_error_line_and_the_station_ends_at_the_input_end
         pytest.skip("/dev/video987 exists on this machine: a test never opens a real device")
     result = invoke(db, "--camera", "/dev/video987", input="CAM-1\n")
     assert result.exit_code == 0, result.output
-    assert result.stdout.startswith("CAM-1: ERROR - cannot open camera /dev/video987: /dev/video987 does not exist")
+    assert result.stdout.startswith(
+        "CAM-1: ERROR - cannot open camera /dev/video987: /dev/video987 does not exist"
+    )
     assert "hint: plug the camera in" in result.stdout
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--camera", "."], "--camera . is not a camera"),
-    (["--camera", "/dev/video7", "--source-template", "shots/{serial}"], "the station takes one source"),
-    (["--source-template", "shots/{serial}", "--max-views", "5"], "--max-views and --duration say when"),
-    (["--camera", "/dev/video7", "--duration", "-1"], "--duration must be a positive number of seconds"),
-    (["--camera", "/dev/video7", "--watch", "--views", "3"], "--watch waits for pictures in a folder"),
-], ids=["a-folder", "both-sources", "max-views-without-camera", "negative-duration", "watch"])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--camera", "."], "--camera . is not a camera"),
+        (["--camera", "/dev/video7", "--source-template", "shots/{serial}"], "the station takes one source"),
+        (["--source-template", "shots/{serial}", "--max-views", "5"], "--max-views and --duration say when"),
+        (["--camera", "/dev/video7", "--duration", "-1"], "--duration must be a positive number of seconds"),
+        (["--camera", "/dev/video7", "--watch", "--views", "3"], "--watch waits for pictures in a folder"),
+    ],
+    ids=["a-folder", "both-sources", "max-views-without-camera", "negative-duration", "watch"],
+)
 def test_a_camera_station_that_cannot_start_exits_2(db: str, args: list[str], message: str) -> None:
     result = invoke(db, *args, input="CAM-1\n")
     assert result.exit_code == 2 and message in result.output

@@ -41,7 +41,12 @@ def test_good_scenario_writes_images_and_truth(tmp_path: Path) -> None:
 
 def test_same_seed_same_bytes(tmp_path: Path) -> None:
     for name in ("a", "b"):
-        assert invoke("synth", str(tmp_path / name), "--views", "2", "--seed", "9", "--size", "320x240").exit_code == 0
+        assert (
+            invoke(
+                "synth", str(tmp_path / name), "--views", "2", "--seed", "9", "--size", "320x240"
+            ).exit_code
+            == 0
+        )
     assert (tmp_path / "a" / "view-001.png").read_bytes() == (tmp_path / "b" / "view-001.png").read_bytes()
 
 
@@ -119,7 +124,9 @@ def test_a_scenario_that_cannot_be_staged_exits_2(tmp_path: Path) -> None:
 
 def test_fisheye_renders_an_image_circle_with_truth_the_detector_agrees_with(tmp_path: Path) -> None:
     out = tmp_path / "fisheye"
-    result = invoke("synth", str(out), "--fisheye", "185", "--views", "3", "--seed", "1", "--size", "1024x768")
+    result = invoke(
+        "synth", str(out), "--fisheye", "185", "--views", "3", "--seed", "1", "--size", "1024x768"
+    )
     assert result.exit_code == 0, result.output
     truth = json.loads((out / "truth.json").read_text())
     cam = truth["camera"]
@@ -131,7 +138,9 @@ def test_fisheye_renders_an_image_circle_with_truth_the_detector_agrees_with(tmp
     for view in truth["views"]:
         det, why = detect_board(cv2.imread(str(out / view["file"]), cv2.IMREAD_GRAYSCALE), spec)
         assert det is not None, why
-        errors.append(np.linalg.norm(det.corners_px - np.array(view["corners_px"])[det.corner_ids], axis=1).mean())
+        errors.append(
+            np.linalg.norm(det.corners_px - np.array(view["corners_px"])[det.corner_ids], axis=1).mean()
+        )
     assert max(errors) < 0.15
 
 

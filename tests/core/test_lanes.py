@@ -15,8 +15,11 @@ def test_without_a_pool_it_is_the_sequential_loop_on_the_calling_thread() -> Non
     seen: list[tuple[int, str]] = []
     out = Lanes().map(lambda i: seen.append((i, threading.current_thread().name)) or i * i, [3, 1, 2])
     assert out == [9, 1, 4]
-    assert seen == [(3, threading.current_thread().name), (1, threading.current_thread().name),
-                    (2, threading.current_thread().name)]
+    assert seen == [
+        (3, threading.current_thread().name),
+        (1, threading.current_thread().name),
+        (2, threading.current_thread().name),
+    ]
     assert lanes_map(None, str, [1, 2]) == ["1", "2"]
 
 

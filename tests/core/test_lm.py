@@ -60,8 +60,10 @@ def test_noisy_exponential_fit_lands_where_the_gradient_vanishes() -> None:
 # A block problem: shared (a, c), per block v (b_v, d_v): y_v(t) = a exp(b_v t) + c + d_v t.
 TRUE_SHARED = np.array([2.0, 0.3])
 TRUE_BLOCKS = np.array([[-0.8, 0.1], [-1.5, -0.2], [-0.4, 0.05], [-2.0, 0.3]])
-OBSERVED = [TRUE_SHARED[0] * np.exp(b * T_S) + TRUE_SHARED[1] + d * T_S + 0.01 * np.sin(7 * T_S + v)
-            for v, (b, d) in enumerate(TRUE_BLOCKS)]
+OBSERVED = [
+    TRUE_SHARED[0] * np.exp(b * T_S) + TRUE_SHARED[1] + d * T_S + 0.01 * np.sin(7 * T_S + v)
+    for v, (b, d) in enumerate(TRUE_BLOCKS)
+]
 
 
 def _block_jacobians(params: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -84,8 +86,8 @@ def block_dense(params: np.ndarray) -> DenseSystem:
     n_b = len(blocks)
     J = np.zeros((n_b * T_S.size, 2 + 2 * n_b))
     for v, (J_s, J_b, _) in enumerate(blocks):
-        J[v * T_S.size:(v + 1) * T_S.size, :2] = J_s
-        J[v * T_S.size:(v + 1) * T_S.size, 2 + 2 * v:4 + 2 * v] = J_b
+        J[v * T_S.size : (v + 1) * T_S.size, :2] = J_s
+        J[v * T_S.size : (v + 1) * T_S.size, 2 + 2 * v : 4 + 2 * v] = J_b
     return DenseSystem.from_jacobian(J, np.concatenate([b[2] for b in blocks]))
 
 
@@ -147,6 +149,7 @@ def test_a_step_into_non_finite_residuals_is_rejected_and_damped() -> None:
 
 def test_a_direction_the_residuals_do_not_see_stays_put() -> None:
     """A singular J^T J (parameter 2 has no effect): damping keeps the step finite; that parameter never moves."""
+
     def blind(x: np.ndarray) -> DenseSystem:
         system = exponential(x[:3])
         H = np.zeros((4, 4))
@@ -182,6 +185,7 @@ def test_a_step_below_the_step_tolerance_stops_without_moving() -> None:
 
 def test_a_step_that_raises_the_cost_only_by_rounding_is_the_minimum() -> None:
     """The cost rule works both ways: a trial worse by less than relative_tolerance stops, unapplied."""
+
     def flat(x: np.ndarray) -> DenseSystem:  # the model says 'go right', the cost rises by 1e-15 of itself
         return DenseSystem(1.0 + 1e-15 * abs(x[0]), np.eye(1), np.ones(1))
 
@@ -205,4 +209,6 @@ def test_dense_equations_regrouped_by_block_give_the_dense_step() -> None:
         delta = damped_step(schur, lam)
         step = np.zeros(10)
         step[shared], step[blocks.ravel()] = delta[:2], delta[2:]
-        np.testing.assert_allclose(step, damped_step(DenseSystem(dense.cost, H, g), lam), rtol=0, atol=SCHUR_TOL)
+        np.testing.assert_allclose(
+            step, damped_step(DenseSystem(dense.cost, H, g), lam), rtol=0, atol=SCHUR_TOL
+        )

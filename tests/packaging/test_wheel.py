@@ -28,8 +28,9 @@ def _env() -> dict[str, str]:
 
 
 def _run(*args: object, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([str(a) for a in args], cwd=cwd, env=_env(), capture_output=True, text=True,
-                          check=False)
+    return subprocess.run(
+        [str(a) for a in args], cwd=cwd, env=_env(), capture_output=True, text=True, check=False
+    )
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +50,17 @@ def venv_bin(tmp_path_factory) -> Path:
     (wheel,) = (root / "dist").glob("calibctl-*.whl")
     created = _run(sys.executable, "-m", "venv", root / "venv", cwd=root)
     assert created.returncode == 0, created.stderr
-    installed = _run(root / "venv/bin/python", "-m", "pip", "install", "--quiet",
-                     "-c", REPO / "constraints/lock.txt", wheel, cwd=root)
+    installed = _run(
+        root / "venv/bin/python",
+        "-m",
+        "pip",
+        "install",
+        "--quiet",
+        "-c",
+        REPO / "constraints/lock.txt",
+        wheel,
+        cwd=root,
+    )
     assert installed.returncode == 0, installed.stderr
     return root / "venv/bin"
 
@@ -63,7 +73,8 @@ def test_the_installed_wheel_is_what_runs_and_ships_its_migrations(venv_bin):
     site = venv_bin.parent / "lib"
     assert Path(module_file).is_relative_to(site) and Path(migrations).is_relative_to(site)
     assert sorted(p.name for p in Path(migrations, "versions").glob("*.py")) == sorted(
-        p.name for p in (REPO / "migrations/versions").glob("*.py"))
+        p.name for p in (REPO / "migrations/versions").glob("*.py")
+    )
 
 
 def test_the_extras_are_not_installed_by_default(venv_bin):

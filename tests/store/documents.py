@@ -31,7 +31,9 @@ def capture_session(
         image_size=(640, 480),
         status=status,  # type: ignore[arg-type]
         outcomes=[
-            ImageOutcome(name="img01.png", status="accepted", sha256="ab" * 32, image_size=(640, 480), corners_found=4),
+            ImageOutcome(
+                name="img01.png", status="accepted", sha256="ab" * 32, image_size=(640, 480), corners_found=4
+            ),
             ImageOutcome(name="img02.png", status="no_board", reason="no chessboard found"),
         ],
         views=[
@@ -50,20 +52,51 @@ def capture_session(
 
 
 def check_event(serial: str, version: int, sha: str, n: int, passed: bool = True) -> CheckEvent:
-    region = RegionCheck(region="overall", check_rms_px=0.2, reference_rms_px=0.2, ratio=1.0, limit=1.5, corners=40,
-                         tested=True, passed=passed)
-    return CheckEvent(check_id=f"{n:012x}", serial=serial, version=version, calibration_sha256=sha, source="folder x",
-                      station="st1", operator="qa", at=FIXED_TIME + dt.timedelta(minutes=n), image_size=(640, 480), images=3,
-                      views=["a.png"], view_rms_px=[0.2], regions=[region], alpha=0.01, passed=passed)
+    region = RegionCheck(
+        region="overall",
+        check_rms_px=0.2,
+        reference_rms_px=0.2,
+        ratio=1.0,
+        limit=1.5,
+        corners=40,
+        tested=True,
+        passed=passed,
+    )
+    return CheckEvent(
+        check_id=f"{n:012x}",
+        serial=serial,
+        version=version,
+        calibration_sha256=sha,
+        source="folder x",
+        station="st1",
+        operator="qa",
+        at=FIXED_TIME + dt.timedelta(minutes=n),
+        image_size=(640, 480),
+        images=3,
+        views=["a.png"],
+        view_rms_px=[0.2],
+        regions=[region],
+        alpha=0.01,
+        passed=passed,
+    )
 
 
 def fleet_event(kind: str, robot: str = "amr-001", **fields: object) -> FleetEvent:
     """A fleet log step by qa at st1, FIXED_TIME: ``register`` (serials=, rigs=) or ``assign`` (serial=, version=)."""
-    return FleetEvent(kind=kind, robot=robot, actor="qa", station="st1", at=FIXED_TIME,  # type: ignore[arg-type]
-                      reason=f"test {kind}", **fields)  # type: ignore[arg-type]
+    return FleetEvent(
+        kind=kind,
+        robot=robot,
+        actor="qa",
+        station="st1",
+        at=FIXED_TIME,  # type: ignore[arg-type]
+        reason=f"test {kind}",
+        **fields,
+    )  # type: ignore[arg-type]
 
 
-def health_report(serial: str, robot: str = "amr-001", source_id: str = "r-1", **fields: object) -> HealthReport:
+def health_report(
+    serial: str, robot: str = "amr-001", source_id: str = "r-1", **fields: object
+) -> HealthReport:
     """A passing check report of ``serial`` from ``robot`` at FIXED_TIME (override kind and numbers with fields)."""
     numbers = fields or {"kind": "check", "rms_px": 0.3, "verdict": "pass", "temperature_c": 25.0}
     return HealthReport(source_id=source_id, serial=serial, robot=robot, time=FIXED_TIME, **numbers)  # type: ignore[arg-type]

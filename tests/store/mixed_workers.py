@@ -17,8 +17,11 @@ def station(url: str, serial: str, count: int, worker: int, barrier: Any, result
         for i in range(count):
             try:
                 art = calibration(serial=serial, fx=800.0 + worker + i / 100)
-                versions.append(store.add_artifact(art, activate=True, actor=f"w{worker}", station=f"st{worker}",
-                                                   reason="load").version)
+                versions.append(
+                    store.add_artifact(
+                        art, activate=True, actor=f"w{worker}", station=f"st{worker}", reason="load"
+                    ).version
+                )
             except CalibctlError as exc:
                 gave_up += "gave up" in exc.message
                 errors.append(exc.message)
@@ -42,8 +45,14 @@ def technician(url: str, serial: str, count: int, worker: int, barrier: Any, res
                 seen = store.active_version(serial)
                 target = 1 if seen != 1 else 2
                 try:
-                    store.rollback(serial, target, reason=f"r{worker}.{i}", actor=f"t{worker}", station="van",
-                                   expected_active=seen)
+                    store.rollback(
+                        serial,
+                        target,
+                        reason=f"r{worker}.{i}",
+                        actor=f"t{worker}",
+                        station="van",
+                        expected_active=seen,
+                    )
                     done += 1
                     break
                 except StaleActiveVersionError:

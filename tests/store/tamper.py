@@ -29,7 +29,9 @@ def patch_stored_bytes(url: str, table: str, old: str, new: str) -> None:
     path = _sqlite_file(url)
     if path is not None:
         wal = path.with_name(path.name + "-wal")
-        assert not wal.exists() or wal.stat().st_size == 0, "close the store first (its WAL is not checkpointed)"
+        assert not wal.exists() or wal.stat().st_size == 0, (
+            "close the store first (its WAL is not checkpointed)"
+        )
         data = path.read_bytes()
         assert data.count(old.encode()) == 1, f"{old!r} occurs {data.count(old.encode())} times in {path}"
         path.write_bytes(data.replace(old.encode(), new.encode()))
@@ -37,7 +39,8 @@ def patch_stored_bytes(url: str, table: str, old: str, new: str) -> None:
     with psycopg.connect(_libpq(url), autocommit=True) as conn:
         conn.execute(f"ALTER TABLE {table} DISABLE TRIGGER trg_{table}_immutable")
         changed = conn.execute(
-            f"UPDATE {table} SET payload = replace(payload, %s, %s) WHERE strpos(payload, %s) > 0", (old, new, old)
+            f"UPDATE {table} SET payload = replace(payload, %s, %s) WHERE strpos(payload, %s) > 0",
+            (old, new, old),
         ).rowcount
         conn.execute(f"ALTER TABLE {table} ENABLE TRIGGER trg_{table}_immutable")
     assert changed == 1, f"{old!r} found in {changed} rows of {table}"
@@ -53,7 +56,9 @@ def forge_activation(url: str, serial: str, version: int) -> None:
     if path is not None:
         conn = sqlite3.connect(path, isolation_level=None)
         try:
-            (sql,) = conn.execute("SELECT sql FROM sqlite_master WHERE name = 'trg_activation_events_accepted_only'").fetchone()
+            (sql,) = conn.execute(
+                "SELECT sql FROM sqlite_master WHERE name = 'trg_activation_events_accepted_only'"
+            ).fetchone()
             conn.execute("DROP TRIGGER trg_activation_events_accepted_only")
             conn.execute(insert)
             conn.execute(sql)  # put back, as the PostgreSQL branch re-enables it
@@ -66,7 +71,9 @@ def forge_activation(url: str, serial: str, version: int) -> None:
         pg.execute("ALTER TABLE activation_events ENABLE TRIGGER trg_activation_events_accepted_only")
 
 
-def run_underneath(url: str, *statements: str, params: tuple[object, ...] = (), keep_triggers_dropped: bool = False) -> None:
+def run_underneath(
+    url: str, *statements: str, params: tuple[object, ...] = (), keep_triggers_dropped: bool = False
+) -> None:
     """Run SQL the way someone with write access to the database would: SQLite with every calibctl
     trigger dropped (and, as a careful forger does, re-created afterwards unless ``keep_triggers_dropped``),
     PostgreSQL as a superuser with triggers (and foreign keys) switched off for the session."""
@@ -95,8 +102,10 @@ def run_underneath(url: str, *statements: str, params: tuple[object, ...] = (), 
 
 
 def _pg_triggers(pg: psycopg.Connection) -> list[tuple[str, str]]:
-    rows = pg.execute("SELECT c.relname, t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
-                      "WHERE NOT t.tgisinternal AND t.tgname LIKE 'trg_%%'").fetchall()
+    rows = pg.execute(
+        "SELECT c.relname, t.tgname FROM pg_trigger t JOIN pg_class c ON c.oid = t.tgrelid "
+        "WHERE NOT t.tgisinternal AND t.tgname LIKE 'trg_%%'"
+    ).fetchall()
     return [(str(table), str(name)) for table, name in rows]
 
 
@@ -115,7 +124,11 @@ def rechain(url: str) -> None:
             for stream in chain.STREAMS.values():
                 t = stream.table
                 prev, key = None, None
-                rows = conn.execute(select(t).order_by(*[t.c[k] for k in stream.key], t.c.chain_seq)).mappings().all()
+                rows = (
+                    conn.execute(select(t).order_by(*[t.c[k] for k in stream.key], t.c.chain_seq))
+                    .mappings()
+                    .all()
+                )
                 for row in rows:
                     if stream.key_of(row) != key:
                         key, prev = stream.key_of(row), None
@@ -125,4 +138,8 @@ def rechain(url: str) -> None:
     finally:
         engine.dispose()
     for table, prev, digest, row_id in updates:
-        run_underneath(url, f"UPDATE {table} SET chain_prev = %s, chain_hash = %s WHERE id = %s", params=(prev, digest, row_id))
+        run_underneath(
+            url,
+            f"UPDATE {table} SET chain_prev = %s, chain_hash = %s WHERE id = %s",
+            params=(prev, digest, row_id),
+        )

@@ -57,7 +57,12 @@ def test_any_artifact_survives_the_store_bit_for_bit(store: Store, fx, rms_px, s
 
 
 def test_versions_count_up_per_serial(store: Store):
-    versions = [add(store, "A").version, add(store, "B").version, add(store, "A").version, add(store, "A").version]
+    versions = [
+        add(store, "A").version,
+        add(store, "B").version,
+        add(store, "A").version,
+        add(store, "A").version,
+    ]
     assert versions == [1, 1, 2, 3]
     assert store.serials() == ["A", "B"]
     assert [a.version for a in store.list_artifacts("A")] == [1, 2, 3]
@@ -99,7 +104,9 @@ def test_rollback_moves_the_active_version_and_appends_an_event(store: Store):
 def test_rollback_to_a_rejected_version_is_refused(store: Store):
     add(store)
     add(store, status="rejected")
-    with pytest.raises(UsageError, match=r"CAM-0001@2 is rejected and can never become active; accepted versions: 1"):
+    with pytest.raises(
+        UsageError, match=r"CAM-0001@2 is rejected and can never become active; accepted versions: 1"
+    ):
         store.rollback("CAM-0001", 2, reason="try", **WHO)
     assert store.active_version("CAM-0001") == 1
     assert len(store.events("CAM-0001")) == 1
@@ -133,7 +140,9 @@ def test_unknown_serial_and_version_name_what_exists(store: Store):
 
 def test_serial_without_an_active_version_says_so(store: Store):
     add(store, status="rejected")
-    with pytest.raises(NotFoundError, match=r"CAM-0001 has no active version; versions: 1 \(rejected\)") as none:
+    with pytest.raises(
+        NotFoundError, match=r"CAM-0001 has no active version; versions: 1 \(rejected\)"
+    ) as none:
         store.get_artifact("CAM-0001")
     assert store.active_version("CAM-0001") is None
     # no accepted version to roll back to (udacity-camcal, every solve rejected): the hint must not say "roll back"
@@ -170,13 +179,27 @@ def test_import_of_a_tampered_artifact_is_an_integrity_error(store: Store):
 def test_add_artifact_once_stores_one_calibration_per_capture_session(store: Store):
     """The spool's sync: the same session's calibration offered again (a sync run after a kill) is the stored
     one, no new version; another session's gets the next version."""
+
     def solved_from(session_id: str):
         art = calibration()
-        return art.model_copy(update={"provenance": art.provenance.model_copy(update={"session_id": session_id})})
+        return art.model_copy(
+            update={"provenance": art.provenance.model_copy(update={"session_id": session_id})}
+        )
 
     first, new = store.add_artifact_once(solved_from("aaaaaaaaaaaa"), activate=True, reason="synced", **WHO)
-    again, new_again = store.add_artifact_once(solved_from("aaaaaaaaaaaa"), activate=True, reason="synced", **WHO)
-    other, new_other = store.add_artifact_once(solved_from("bbbbbbbbbbbb"), activate=True, reason="synced", **WHO)
-    assert (first.version, new, again.version, new_again, other.version, new_other) == (1, True, 1, False, 2, True)
+    again, new_again = store.add_artifact_once(
+        solved_from("aaaaaaaaaaaa"), activate=True, reason="synced", **WHO
+    )
+    other, new_other = store.add_artifact_once(
+        solved_from("bbbbbbbbbbbb"), activate=True, reason="synced", **WHO
+    )
+    assert (first.version, new, again.version, new_again, other.version, new_other) == (
+        1,
+        True,
+        1,
+        False,
+        2,
+        True,
+    )
     assert again == first and [a.version for a in store.list_artifacts("CAM-0001")] == [1, 2]
     assert [e.version for e in store.events("CAM-0001")] == [1, 2]  # nothing activated twice

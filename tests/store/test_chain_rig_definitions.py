@@ -40,12 +40,18 @@ def _widen_tolerance(url: str, name: str = RIG) -> None:
     doc = json.loads(payload)
     doc["design_baselines"][0]["tolerance_mm"] = 50.0
     forged = codec.canonical_text(RigDefinition.model_validate(doc))
-    run_underneath(url, "UPDATE rig_definitions SET payload = %s, payload_sha256 = %s WHERE name = %s",
-                   params=(forged, codec.sha256_hex(forged.encode()), name))
+    run_underneath(
+        url,
+        "UPDATE rig_definitions SET payload = %s, payload_sha256 = %s WHERE name = %s",
+        params=(forged, codec.sha256_hex(forged.encode()), name),
+    )
 
 
 def test_definitions_are_one_chain_for_the_store(rigs: str):
-    assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [(RIG, 1, 1), (OTHER, 2, 2)]
+    assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [
+        (RIG, 1, 1),
+        (OTHER, 2, 2),
+    ]
     (prev,) = _select(rigs, f"SELECT chain_prev FROM rig_definitions WHERE name = '{OTHER}'")[0]
     assert prev == _select(rigs, f"SELECT chain_hash FROM rig_definitions WHERE name = '{RIG}'")[0][0]
 
@@ -64,21 +70,31 @@ def test_a_widened_tolerance_with_its_hash_recomputed_is_named_and_refused_on_re
 def test_a_deleted_definition_breaks_the_chain(rigs: str):
     run_underneath(rigs, f"DELETE FROM rig_definitions WHERE name = '{RIG}'")
     assert problems_of(rigs) == [
-        f"rig definition {OTHER} is at chain position 2 but 1 was expected: records before it are missing"]
+        f"rig definition {OTHER} is at chain position 2 but 1 was expected: records before it are missing"
+    ]
 
 
 def test_the_last_definition_deleted_is_a_counter_mismatch(rigs: str):
     run_underneath(rigs, f"DELETE FROM rig_definitions WHERE name = '{OTHER}'")
-    assert problems_of(rigs) == ["the chain counter of rig_definition is 2 but the highest chain_seq stored is 1: "
-                                 "the counter or the records were changed"]
+    assert problems_of(rigs) == [
+        "the chain counter of rig_definition is 2 but the highest chain_seq stored is 1: "
+        "the counter or the records were changed"
+    ]
 
 
 def test_a_definition_inserted_outside_calibctl_is_named(rigs: str):
-    (payload, created) = _select(rigs, f"SELECT payload, created_at FROM rig_definitions WHERE name = '{OTHER}'")[0]
+    (payload, created) = _select(
+        rigs, f"SELECT payload, created_at FROM rig_definitions WHERE name = '{OTHER}'"
+    )[0]
     forged = payload.replace(OTHER, "STEREO-9")
-    run_underneath(rigs, "INSERT INTO rig_definitions (name, created_at, payload, payload_sha256) VALUES (%s, %s, %s, %s)",
-                   params=("STEREO-9", created, forged, codec.sha256_hex(forged.encode())))
-    assert problems_of(rigs) == ["rig definition STEREO-9 has no chain hash: it was inserted outside calibctl"]
+    run_underneath(
+        rigs,
+        "INSERT INTO rig_definitions (name, created_at, payload, payload_sha256) VALUES (%s, %s, %s, %s)",
+        params=("STEREO-9", created, forged, codec.sha256_hex(forged.encode())),
+    )
+    assert problems_of(rigs) == [
+        "rig definition STEREO-9 has no chain hash: it was inserted outside calibctl"
+    ]
 
 
 def test_0008_chains_the_definitions_stored_before_it(rigs: str):
@@ -86,19 +102,26 @@ def test_0008_chains_the_definitions_stored_before_it(rigs: str):
 
     engine = make_engine(rigs)
     try:
-        assert migrate.downgrade(engine, "0007_chain_rigs_checks") == ("0015_checkpoints_fleet_ckpt",
-                                                                       "0007_chain_rigs_checks")
+        assert migrate.downgrade(engine, "0007_chain_rigs_checks") == (
+            "0015_checkpoints_fleet_ckpt",
+            "0007_chain_rigs_checks",
+        )
         assert migrate.upgrade(engine) == ("0007_chain_rigs_checks", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
-    assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [(RIG, 1, 1), (OTHER, 2, 2)]
+    assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [
+        (RIG, 1, 1),
+        (OTHER, 2, 2),
+    ]
     assert problems_of(rigs) == []
     with Store.open(rigs) as store:  # the backfilled counter goes on from there
         store.add_rig(rig_definition("STEREO-3"))
     assert _select(rigs, "SELECT id, chain_seq FROM rig_definitions WHERE name = 'STEREO-3'") == [(3, 3)]
     run_underneath(rigs, "DELETE FROM rig_definitions WHERE name = 'STEREO-3'")
-    assert problems_of(rigs) == ["the chain counter of rig_definition is 3 but the highest chain_seq stored is 2: "
-                                 "the counter or the records were changed"]
+    assert problems_of(rigs) == [
+        "the chain counter of rig_definition is 3 but the highest chain_seq stored is 2: "
+        "the counter or the records were changed"
+    ]
 
 
 def test_a_rechained_definition_forgery_is_caught_by_the_signature(db_url: str, tmp_path):  # type: ignore[no-untyped-def]
@@ -138,7 +161,8 @@ def test_a_head_printed_before_0008_checks_the_definitions_in_full(rigs: str):
     _widen_tolerance(rigs)
     with Store.open(rigs) as store:
         assert store.verify(since=head).problems == [
-            f"rig definition {RIG} was changed after it was written (its chain hash no longer matches)"]
+            f"rig definition {RIG} was changed after it was written (its chain hash no longer matches)"
+        ]
 
 
 def test_the_command_line_refuses_a_changed_definition_with_exit_1(rigs: str):

@@ -39,28 +39,40 @@ def _move_a_corner(url: str, session_id: str) -> None:
     data = json.loads(payload)
     data["views"][0]["corners_px"][0][0] += 0.5
     forged = codec.canonical_text(CaptureSession.model_validate(data))
-    run_underneath(url, "UPDATE capture_sessions SET payload = %s, payload_sha256 = %s WHERE session_id = %s",
-                   params=(forged, codec.sha256_hex(forged.encode()), session_id))
+    run_underneath(
+        url,
+        "UPDATE capture_sessions SET payload = %s, payload_sha256 = %s WHERE session_id = %s",
+        params=(forged, codec.sha256_hex(forged.encode()), session_id),
+    )
 
 
 def test_sessions_are_chained_per_serial(sessions: str):
     assert _select(sessions, "SELECT session_id, id, chain_seq FROM capture_sessions ORDER BY id") == [
-        ("aaaaaaaaaaa1", 1, 1), ("aaaaaaaaaaa2", 2, 2), ("ccccccccccc1", 3, 1)]
+        ("aaaaaaaaaaa1", 1, 1),
+        ("aaaaaaaaaaa2", 2, 2),
+        ("ccccccccccc1", 3, 1),
+    ]
 
 
 def test_edited_corners_with_the_payload_hash_recomputed_are_named(sessions: str):
     _move_a_corner(sessions, "aaaaaaaaaaa1")
     assert problems_of(sessions) == [
-        "capture session aaaaaaaaaaa1 was changed after it was written (its chain hash no longer matches)"]
+        "capture session aaaaaaaaaaa1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_a_deleted_session_breaks_its_serials_chain(sessions: str):
     run_underneath(sessions, "DELETE FROM capture_sessions WHERE session_id = 'aaaaaaaaaaa1'")
     assert problems_of(sessions) == [
-        "capture session aaaaaaaaaaa2 is at chain position 2 but 1 was expected: records before it are missing"]
-    run_underneath(sessions, "DELETE FROM capture_sessions WHERE session_id = 'ccccccccccc1'")  # a whole serial's
-    assert "the session counter of CAM-0002 is 1 but no record of it is stored: its records were deleted" \
+        "capture session aaaaaaaaaaa2 is at chain position 2 but 1 was expected: records before it are missing"
+    ]
+    run_underneath(
+        sessions, "DELETE FROM capture_sessions WHERE session_id = 'ccccccccccc1'"
+    )  # a whole serial's
+    assert (
+        "the session counter of CAM-0002 is 1 but no record of it is stored: its records were deleted"
         in problems_of(sessions)
+    )
 
 
 def test_signed_sessions_a_rechained_edit_is_refused_by_verify_and_by_reads(db_url: str, tmp_path: Path):
@@ -76,32 +88,44 @@ def test_signed_sessions_a_rechained_edit_is_refused_by_verify_and_by_reads(db_u
     with Store.open(db_url) as store:
         assert store.verify().problems == []  # self-consistent without the key
         assert store.verify(trusted).problems == [
-            f"capture session aaaaaaaaaaa1 has a signature by key {signer.key_id[:16]} that does not match its content"]
+            f"capture session aaaaaaaaaaa1 has a signature by key {signer.key_id[:16]} that does not match its content"
+        ]
         store.get_session("aaaaaaaaaaa1")  # without keys a read serves it ...
-    with Store.open(db_url, trusted=trusted) as store, pytest.raises(IntegrityError, match="refusing to serve it"):
+    with (
+        Store.open(db_url, trusted=trusted) as store,
+        pytest.raises(IntegrityError, match="refusing to serve it"),
+    ):
         store.get_session("aaaaaaaaaaa1")  # ... with keys it does not (report, solve's evidence)
 
 
 def test_0009_chains_the_sessions_stored_before_it(sessions: str):
     engine = make_engine(sessions)
     try:
-        assert migrate.downgrade(engine, "0008_chain_rig_definitions") == ("0015_checkpoints_fleet_ckpt",
-                                                                           "0008_chain_rig_definitions")
+        assert migrate.downgrade(engine, "0008_chain_rig_definitions") == (
+            "0015_checkpoints_fleet_ckpt",
+            "0008_chain_rig_definitions",
+        )
         assert migrate.upgrade(engine) == ("0008_chain_rig_definitions", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
     assert _select(sessions, "SELECT session_id, id, chain_seq FROM capture_sessions ORDER BY id") == [
-        ("aaaaaaaaaaa1", 1, 1), ("ccccccccccc1", 2, 1), ("aaaaaaaaaaa2", 3, 2)]  # numbered by started_at
+        ("aaaaaaaaaaa1", 1, 1),
+        ("ccccccccccc1", 2, 1),
+        ("aaaaaaaaaaa2", 3, 2),
+    ]  # numbered by started_at
     with Store.open(sessions) as store:
         audit = store.verify()
         assert audit.problems == [] and audit.records_checked == 3
         store.add_session(capture_session("aaaaaaaaaaa3", minutes_after=9))  # the backfilled counter goes on
         assert store.verify().problems == []
     # the id counter catches up with the ids the migration gave (it restarted at 1 after the downgrade)
-    assert _select(sessions, "SELECT id, chain_seq FROM capture_sessions WHERE session_id = 'aaaaaaaaaaa3'") == [(4, 3)]
+    assert _select(
+        sessions, "SELECT id, chain_seq FROM capture_sessions WHERE session_id = 'aaaaaaaaaaa3'"
+    ) == [(4, 3)]
     _move_a_corner(sessions, "ccccccccccc1")
     assert problems_of(sessions) == [
-        "capture session ccccccccccc1 was changed after it was written (its chain hash no longer matches)"]
+        "capture session ccccccccccc1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_a_head_printed_before_0009_checks_the_sessions_in_full(sessions: str):
@@ -124,7 +148,9 @@ def test_concurrent_capture_stations_chain_every_session(db_url: str):
     clash on the next id between serials' writers is retried, not lost)."""
     ctx = multiprocessing.get_context("spawn")
     barrier, results = ctx.Barrier(4), ctx.Queue()
-    procs = [ctx.Process(target=workers.write_sessions, args=(db_url, 6, w, barrier, results)) for w in range(4)]
+    procs = [
+        ctx.Process(target=workers.write_sessions, args=(db_url, 6, w, barrier, results)) for w in range(4)
+    ]
     for p in procs:
         p.start()
     reports = [results.get(timeout=300) for _ in procs]  # a hang guard for a broken child, not a speed check
@@ -134,5 +160,7 @@ def test_concurrent_capture_stations_chain_every_session(db_url: str):
     ids = _select(db_url, "SELECT id FROM capture_sessions ORDER BY id")
     assert [r[0] for r in ids] == list(range(1, 25))
     assert sorted(_select(db_url, "SELECT serial, max(chain_seq) FROM capture_sessions GROUP BY serial")) == [
-        ("CAM-0", 12), ("CAM-1", 12)]
+        ("CAM-0", 12),
+        ("CAM-1", 12),
+    ]
     assert problems_of(db_url) == []

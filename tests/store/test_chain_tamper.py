@@ -27,7 +27,9 @@ def history(db_url: str) -> str:
     with Store.open(db_url) as store:
         store.add_board(measured_board())
         store.add_artifact(calibration(serial="CAM-1"), activate=True, reason="solved", **WHO)
-        store.add_artifact(calibration(serial="CAM-1", status="rejected"), activate=False, reason="solved", **WHO)
+        store.add_artifact(
+            calibration(serial="CAM-1", status="rejected"), activate=False, reason="solved", **WHO
+        )
         store.add_artifact(calibration(serial="CAM-1", fx=801.0), activate=True, reason="solved", **WHO)
         store.add_artifact(calibration(serial="CAM-2"), activate=True, reason="solved", **WHO)
         store.rollback("CAM-1", 1, reason="v3 drifts", **WHO)
@@ -51,7 +53,9 @@ def _select(url: str, sql: str) -> list[tuple]:
 
 def _reseal_artifact(url: str, serial: str, version: int, **changes: object) -> None:
     """Change fields of a stored artifact and recompute its content_sha256, as a careful forger would."""
-    (payload,) = _select(url, f"SELECT payload FROM calibration_artifacts WHERE serial = '{serial}' AND version = {version}")[0]
+    (payload,) = _select(
+        url, f"SELECT payload FROM calibration_artifacts WHERE serial = '{serial}' AND version = {version}"
+    )[0]
     data = json.loads(payload)
     data.update(changes)
     forged = CalibrationArtifact.model_validate(data).sealed()
@@ -63,11 +67,15 @@ def _reseal_artifact(url: str, serial: str, version: int, **changes: object) -> 
 
 
 def test_payload_changed_with_its_content_hash_recomputed(history: str):
-    (payload,) = _select(history, "SELECT payload FROM calibration_artifacts WHERE serial = 'CAM-1' AND version = 1")[0]
+    (payload,) = _select(
+        history, "SELECT payload FROM calibration_artifacts WHERE serial = 'CAM-1' AND version = 1"
+    )[0]
     k = json.loads(payload)["camera_matrix"]
     k[0][0] += 5.0  # fx + 5 px
     _reseal_artifact(history, "CAM-1", 1, camera_matrix=k)
-    assert problems_of(history) == ["CAM-1@1 was changed after it was written (its chain hash no longer matches)"]
+    assert problems_of(history) == [
+        "CAM-1@1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_rejected_version_turned_accepted_with_a_forged_rollback(history: str):
@@ -93,13 +101,18 @@ def test_board_square_size_scaled_with_its_hash_recomputed(history: str):
         "UPDATE board_revisions SET payload = %s, payload_sha256 = %s, square_size_m = square_size_m * 1.01",
         params=(forged, digest),
     )
-    assert problems_of(history) == ["board A17@1 was changed after it was written (its chain hash no longer matches)"]
+    assert problems_of(history) == [
+        "board A17@1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_deleted_activation_event(history: str):
     run_underneath(history, "DELETE FROM activation_events WHERE id = 2")
     problems = problems_of(history)
-    assert any(p.startswith("activation event 3 (CAM-2@1, activate) is at chain position 3 but 2 was expected") for p in problems)
+    assert any(
+        p.startswith("activation event 3 (CAM-2@1, activate) is at chain position 3 but 2 was expected")
+        for p in problems
+    )
 
 
 def test_deleted_last_activation_event(history: str):
@@ -132,7 +145,10 @@ def test_forged_rollback_by_a_plain_insert(history: str):
 
 
 def test_actor_reason_and_time_rewritten_on_every_event(history: str):
-    run_underneath(history, "UPDATE activation_events SET actor = 'mallory', reason = 'routine', at = '2026-01-01 00:00:00'")
+    run_underneath(
+        history,
+        "UPDATE activation_events SET actor = 'mallory', reason = 'routine', at = '2026-01-01 00:00:00'",
+    )
     problems = problems_of(history)
     assert len(problems) == 4 and all("was changed after it was written" in p for p in problems)
 
@@ -149,7 +165,9 @@ def test_deleted_artifact_row(history: str, with_events: bool):
 
 def test_deleted_rejected_version(history: str):
     run_underneath(history, "DELETE FROM calibration_artifacts WHERE serial = 'CAM-1' AND version = 2")
-    assert problems_of(history) == ["CAM-1@3 is at chain position 3 but 2 was expected: records before it are missing"]
+    assert problems_of(history) == [
+        "CAM-1@3 is at chain position 3 but 2 was expected: records before it are missing"
+    ]
 
 
 def test_deleted_last_version(history: str):
@@ -159,15 +177,22 @@ def test_deleted_last_version(history: str):
 
 
 def test_version_counter_lowered(history: str):
-    run_underneath(history, "UPDATE version_counters SET last_value = 1 WHERE scope = 'artifact' AND key = 'CAM-1'")
+    run_underneath(
+        history, "UPDATE version_counters SET last_value = 1 WHERE scope = 'artifact' AND key = 'CAM-1'"
+    )
     assert problems_of(history) == [
         "the artifact counter of CAM-1 is 1 but the highest version stored is 3: the counter or the records were changed"
     ]
 
 
 def test_station_and_operator_columns_changed(history: str):
-    run_underneath(history, "UPDATE calibration_artifacts SET station = 'line9', operator = 'nobody' WHERE serial = 'CAM-2'")
-    assert problems_of(history) == ["CAM-2@1 was changed after it was written (its chain hash no longer matches)"]
+    run_underneath(
+        history,
+        "UPDATE calibration_artifacts SET station = 'line9', operator = 'nobody' WHERE serial = 'CAM-2'",
+    )
+    assert problems_of(history) == [
+        "CAM-2@1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_cli_names_the_record_and_exits_1(history: str):

@@ -54,7 +54,9 @@ def signed(db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tupl
 
 def _fx_plus_5(url: str, serial: str = "CAM-1", version: int = 2) -> None:
     """fx + 5 px with content_sha256 and every chain hash recomputed: only the signature shows it."""
-    (payload,) = _select(url, f"SELECT payload FROM calibration_artifacts WHERE serial = '{serial}' AND version = {version}")[0]
+    (payload,) = _select(
+        url, f"SELECT payload FROM calibration_artifacts WHERE serial = '{serial}' AND version = {version}"
+    )[0]
     k = json.loads(payload)["camera_matrix"]
     k[0][0] += 5.0
     _reseal_artifact(url, serial, version, camera_matrix=k)
@@ -110,7 +112,9 @@ def test_lint_all_names_the_forged_serial_and_lints_the_others(signed):
 
 def test_rig_export_refuses_a_rechained_rig_forgery(signed):
     url, _, _ = signed
-    _reseal_rig(url, 1, lambda cal: cal.model_copy(update={"fit_rms_px": {"CAM-0001": 0.01, "CAM-0002": 0.01}}))
+    _reseal_rig(
+        url, 1, lambda cal: cal.model_copy(update={"fit_rms_px": {"CAM-0001": 0.01, "CAM-0002": 0.01}})
+    )
     rechain(url)
     for fmt in ("json", "tf"):
         _refused(["rig", "export", RIG, "--format", fmt], url, f"rig {RIG}@1")
@@ -133,11 +137,17 @@ def test_without_keys_the_same_forgery_is_served(signed, monkeypatch):
 
 def _forged_rollback(url: str) -> None:
     """A rollback of CAM-1 to v1 appended with a correct chain link, unsigned (the forger has no key)."""
-    run_underneath(url, "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, at, "
-                        "reason) VALUES ('CAM-1', 1, 2, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'routine')")
+    run_underneath(
+        url,
+        "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, at, "
+        "reason) VALUES ('CAM-1', 1, 2, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'routine')",
+    )
     (count,) = _select(url, "SELECT count(*) FROM activation_events")[0]
-    run_underneath(url, f"UPDATE activation_events SET chain_seq = {count} WHERE chain_seq IS NULL",
-                   f"UPDATE version_counters SET last_value = {count} WHERE scope = 'chain' AND key = 'event'")
+    run_underneath(
+        url,
+        f"UPDATE activation_events SET chain_seq = {count} WHERE chain_seq IS NULL",
+        f"UPDATE version_counters SET last_value = {count} WHERE scope = 'chain' AND key = 'event'",
+    )
     rechain(url)
 
 
@@ -149,31 +159,47 @@ def _newest_event_deleted(url: str) -> None:
 def _signature_replayed(url: str) -> None:
     """v1's signature copied onto a v2 whose numbers were changed and re-chained."""
     _fx_plus_5(url)
-    (sig, key) = _select(url, "SELECT signature, key_id FROM calibration_artifacts WHERE serial = 'CAM-1' AND version = 1")[0]
-    run_underneath(url, "UPDATE calibration_artifacts SET signature = %s, key_id = %s WHERE serial = 'CAM-1' AND "
-                        "version = 2", params=(sig, key))
+    (sig, key) = _select(
+        url, "SELECT signature, key_id FROM calibration_artifacts WHERE serial = 'CAM-1' AND version = 1"
+    )[0]
+    run_underneath(
+        url,
+        "UPDATE calibration_artifacts SET signature = %s, key_id = %s WHERE serial = 'CAM-1' AND version = 2",
+        params=(sig, key),
+    )
 
 
 def _signature_stripped(url: str) -> None:
     _fx_plus_5(url)
-    run_underneath(url, "UPDATE calibration_artifacts SET signature = NULL, key_id = NULL WHERE serial = 'CAM-1' AND "
-                        "version = 2")
+    run_underneath(
+        url,
+        "UPDATE calibration_artifacts SET signature = NULL, key_id = NULL WHERE serial = 'CAM-1' AND "
+        "version = 2",
+    )
 
 
 def _events_reordered(url: str) -> None:
     """CAM-1's two activation events swap ids: the older one (v1) becomes the latest, so v1 would be active."""
     ids = [r[0] for r in _select(url, "SELECT id FROM activation_events WHERE serial = 'CAM-1' ORDER BY id")]
-    run_underneath(url, f"UPDATE activation_events SET id = 1000 WHERE id = {ids[0]}",
-                   f"UPDATE activation_events SET id = {ids[0]} WHERE id = {ids[1]}",
-                   f"UPDATE activation_events SET id = {ids[1]} WHERE id = 1000")
+    run_underneath(
+        url,
+        f"UPDATE activation_events SET id = 1000 WHERE id = {ids[0]}",
+        f"UPDATE activation_events SET id = {ids[0]} WHERE id = {ids[1]}",
+        f"UPDATE activation_events SET id = {ids[1]} WHERE id = 1000",
+    )
 
 
 MATRIX = {
     "fx + 5, re-sealed and re-chained": (_fx_plus_5, "CAM-1@2 has a signature by key"),
     "signature replayed from another record": (_signature_replayed, "CAM-1@2 has a signature by key"),
-    "signature stripped after a re-chained edit": (_signature_stripped,
-                                                   "CAM-1@2 is not signed, but records before it in its chain are"),
-    "forged rollback, chained, unsigned": (_forged_rollback, "is not signed, but records before it in its chain are"),
+    "signature stripped after a re-chained edit": (
+        _signature_stripped,
+        "CAM-1@2 is not signed, but records before it in its chain are",
+    ),
+    "forged rollback, chained, unsigned": (
+        _forged_rollback,
+        "is not signed, but records before it in its chain are",
+    ),
     "activation events reordered": (_events_reordered, "is out of order"),
 }
 
@@ -185,10 +211,15 @@ def test_matrix_verify_names_it_and_no_read_serves_it(signed, scenario: str):
     forge(url)
     with Store.open(url) as store:
         assert store.verify(trusted).problems or store.verify(trusted, since=head).problems
-    with Store.open(url, trusted=trusted) as store, pytest.raises(IntegrityError, match="refusing to serve it") as exc:
+    with (
+        Store.open(url, trusted=trusted) as store,
+        pytest.raises(IntegrityError, match="refusing to serve it") as exc,
+    ):
         store.get_artifact("CAM-1")
     assert message in exc.value.message
-    res = runner.invoke(app, ["--db", url, "show", "CAM-1"])  # the sqlite3 read path on SQLite: the same refusal
+    res = runner.invoke(
+        app, ["--db", url, "show", "CAM-1"]
+    )  # the sqlite3 read path on SQLite: the same refusal
     assert res.exit_code == 1 and message in res.stderr and res.stdout == ""
 
 
@@ -207,7 +238,9 @@ def test_an_untampered_signed_store_is_served_with_keys(signed):
     with Store.open(url, trusted=trusted) as store:
         assert store.get_artifact("CAM-1").version == 2 and store.get_rig_calibration(RIG).version == 1
         found, _ = store.active_artifacts()
-        assert sorted(found) == ["CAM-1", "CAM-2"] and not any(isinstance(v, IntegrityError) for v in found.values())
+        assert sorted(found) == ["CAM-1", "CAM-2"] and not any(
+            isinstance(v, IntegrityError) for v in found.values()
+        )
     res = runner.invoke(app, ["--db", url, "export", "CAM-1", "--format", "json"])
     assert res.exit_code == 0 and json.loads(res.stdout)["version"] == 2
 
@@ -225,8 +258,9 @@ def test_the_served_tables_are_the_chained_ones():
     assert {name: stream.table.name for name, stream in chain.STREAMS.items()} == served.TABLES
 
 
-def test_a_signing_key_this_user_cannot_load_is_passed_over_when_a_trusted_folder_is_set(signed, tmp_path: Path,
-                                                                                        monkeypatch):
+def test_a_signing_key_this_user_cannot_load_is_passed_over_when_a_trusted_folder_is_set(
+    signed, tmp_path: Path, monkeypatch
+):
     """Reads need only public keys: a station's private key kept for its service account does not stop `show`."""
     url, _, _ = signed
     _fx_plus_5(url)
@@ -245,7 +279,9 @@ def test_an_empty_trusted_folder_checks_links_not_signatures(signed, tmp_path: P
     empty = tmp_path / "empty"
     empty.mkdir()
     monkeypatch.setenv("CALIBCTL_TRUSTED_KEYS", str(empty))
-    assert runner.invoke(app, ["--db", url, "show", "CAM-1"]).exit_code == 0  # as db verify: nothing to check against
+    assert (
+        runner.invoke(app, ["--db", url, "show", "CAM-1"]).exit_code == 0
+    )  # as db verify: nothing to check against
     _events_reordered(url)
     res = runner.invoke(app, ["--db", url, "show", "CAM-1"])
     assert res.exit_code == 1 and "is out of order" in res.stderr

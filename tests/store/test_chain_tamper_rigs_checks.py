@@ -29,9 +29,17 @@ AT = dt.datetime(2026, 11, 23, 9, 0, tzinfo=dt.UTC)
 def with_handeye_edge(cal: RigCalibration) -> RigCalibration:
     T = np.eye(4)
     T[2, 3] = 0.1
-    edge = RigEdge(parent="CAM-0001", child="flange", T_parent_child=tuple(map(tuple, T.tolist())),
-                   covariance=(np.eye(6) * 1e-8).tolist(), translation_mm=100.0, sigma_translation_mm=0.1,
-                   rotation_deg=0.0, sigma_rotation_deg=0.01, source="hand-eye")
+    edge = RigEdge(
+        parent="CAM-0001",
+        child="flange",
+        T_parent_child=tuple(map(tuple, T.tolist())),
+        covariance=(np.eye(6) * 1e-8).tolist(),
+        translation_mm=100.0,
+        sigma_translation_mm=0.1,
+        rotation_deg=0.0,
+        sigma_rotation_deg=0.01,
+        source="hand-eye",
+    )
     return cal.model_copy(update={"edges": [*cal.edges, edge]})
 
 
@@ -45,8 +53,12 @@ def history(db_url: str) -> str:
         cam2 = store.add_artifact(calibration(serial="CAM-2"), activate=True, reason="solved", **WHO)
         store.add_rig(rig_definition())
         store.add_rig_calibration(rig_calibration(), activate=True, reason="rig solve", **WHO)
-        store.add_rig_calibration(rig_calibration(status="rejected"), activate=False, reason="rig solve", **WHO)
-        store.add_rig_calibration(with_handeye_edge(rig_calibration()), activate=True, reason="hand-eye", **WHO)
+        store.add_rig_calibration(
+            rig_calibration(status="rejected"), activate=False, reason="rig solve", **WHO
+        )
+        store.add_rig_calibration(
+            with_handeye_edge(rig_calibration()), activate=True, reason="hand-eye", **WHO
+        )
         store.rollback_rig(RIG, 1, reason="v3 drifts", **WHO)
         store.add_check(check_event("CAM-1", 1, cam1.content_sha256, 1))
         store.add_check(check_event("CAM-1", 1, cam1.content_sha256, 2, passed=False))
@@ -59,16 +71,26 @@ def _reseal_rig(url: str, version: int, change) -> None:  # type: ignore[no-unty
     """Change a stored rig version and recompute its content_sha256, as a careful forger would."""
     (payload,) = _select(url, f"SELECT payload FROM rig_calibrations WHERE version = {version}")[0]
     forged = change(RigCalibration.model_validate(json.loads(payload))).sealed()
-    run_underneath(url, "UPDATE rig_calibrations SET payload = %s, content_sha256 = %s, status = %s WHERE version = %s",
-                   params=(codec.canonical_text(forged), forged.content_sha256, forged.status, version))
+    run_underneath(
+        url,
+        "UPDATE rig_calibrations SET payload = %s, content_sha256 = %s, status = %s WHERE version = %s",
+        params=(codec.canonical_text(forged), forged.content_sha256, forged.status, version),
+    )
 
 
 def test_the_new_streams_are_chained(history: str):
     rows = _select(history, "SELECT version, chain_seq FROM rig_calibrations ORDER BY id")
     assert rows == [(1, 1), (2, 2), (3, 3)]
     assert _select(history, "SELECT serial, chain_seq FROM check_events ORDER BY id") == [
-        ("CAM-1", 1), ("CAM-1", 2), ("CAM-2", 1)]
-    assert [r[0] for r in _select(history, "SELECT chain_seq FROM rig_activation_events ORDER BY id")] == [1, 2, 3]
+        ("CAM-1", 1),
+        ("CAM-1", 2),
+        ("CAM-2", 1),
+    ]
+    assert [r[0] for r in _select(history, "SELECT chain_seq FROM rig_activation_events ORDER BY id")] == [
+        1,
+        2,
+        3,
+    ]
 
 
 def test_rig_version_payload_changed_with_its_hash_recomputed(history: str):
@@ -80,7 +102,9 @@ def test_rig_version_payload_changed_with_its_hash_recomputed(history: str):
         return cal.model_copy(update={"edges": [moved, *cal.edges[1:]]})
 
     _reseal_rig(history, 1, longer_baseline)
-    assert problems_of(history) == [f"rig {RIG}@1 was changed after it was written (its chain hash no longer matches)"]
+    assert problems_of(history) == [
+        f"rig {RIG}@1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_rig_version_payload_changed_and_the_chain_rewritten(history: str):
@@ -97,60 +121,86 @@ def test_rig_version_payload_changed_and_the_chain_rewritten(history: str):
 
 
 def test_hand_eye_edge_deleted_from_its_version(history: str):
-    _reseal_rig(history, 3, lambda cal: cal.model_copy(update={"edges": [e for e in cal.edges if e.source != "hand-eye"]}))
-    assert problems_of(history) == [f"rig {RIG}@3 was changed after it was written (its chain hash no longer matches)"]
+    _reseal_rig(
+        history,
+        3,
+        lambda cal: cal.model_copy(update={"edges": [e for e in cal.edges if e.source != "hand-eye"]}),
+    )
+    assert problems_of(history) == [
+        f"rig {RIG}@3 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_hand_eye_version_deleted(history: str):
-    run_underneath(history, "DELETE FROM rig_activation_events WHERE version = 3",
-                   "DELETE FROM rig_calibrations WHERE version = 3")
+    run_underneath(
+        history,
+        "DELETE FROM rig_activation_events WHERE version = 3",
+        "DELETE FROM rig_calibrations WHERE version = 3",
+    )
     problems = problems_of(history)
-    assert f"the rig counter of {RIG} is 3 but the highest version stored is 2: the counter or the records were changed" \
+    assert (
+        f"the rig counter of {RIG} is 3 but the highest version stored is 2: the counter or the records were changed"
         in problems
-    assert any(p.startswith(f"rig activation event 3 ({RIG}@1, rollback) is at chain position 3 but 2 was expected")
-               for p in problems)
+    )
+    assert any(
+        p.startswith(f"rig activation event 3 ({RIG}@1, rollback) is at chain position 3 but 2 was expected")
+        for p in problems
+    )
 
 
 def test_rejected_rig_version_deleted(history: str):
     run_underneath(history, "DELETE FROM rig_calibrations WHERE version = 2")
     assert problems_of(history) == [
-        f"rig {RIG}@3 is at chain position 3 but 2 was expected: records before it are missing"]
+        f"rig {RIG}@3 is at chain position 3 but 2 was expected: records before it are missing"
+    ]
 
 
 def test_rig_activation_event_deleted(history: str):
     run_underneath(history, "DELETE FROM rig_activation_events WHERE id = 2")
     problems = problems_of(history)
-    assert any(p.startswith(f"rig activation event 3 ({RIG}@1, rollback) is at chain position 3 but 2 was expected")
-               for p in problems)
+    assert any(
+        p.startswith(f"rig activation event 3 ({RIG}@1, rollback) is at chain position 3 but 2 was expected")
+        for p in problems
+    )
 
 
 def test_rig_activation_event_forged_by_a_plain_insert(history: str):
-    run_underneath(history, "INSERT INTO rig_activation_events (rig, version, previous_version, kind, actor, station, at, "
-                            f"reason) VALUES ('{RIG}', 3, 1, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')")
+    run_underneath(
+        history,
+        "INSERT INTO rig_activation_events (rig, version, previous_version, kind, actor, station, at, "
+        f"reason) VALUES ('{RIG}', 3, 1, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')",
+    )
     assert problems_of(history) == [
-        f"rig activation event 4 ({RIG}@3, rollback) has no chain hash: it was inserted outside calibctl"]
+        f"rig activation event 4 ({RIG}@3, rollback) has no chain hash: it was inserted outside calibctl"
+    ]
 
 
 @pytest.mark.parametrize(("table", "first"), [("rig_activation_events", 2), ("check_events", 1)])
 def test_events_reordered(history: str, table: str, first: int):
     second = first + 1
-    run_underneath(history, f"UPDATE {table} SET id = 100 WHERE id = {first}",
-                   f"UPDATE {table} SET id = {first} WHERE id = {second}",
-                   f"UPDATE {table} SET id = {second} WHERE id = 100")
+    run_underneath(
+        history,
+        f"UPDATE {table} SET id = 100 WHERE id = {first}",
+        f"UPDATE {table} SET id = {first} WHERE id = {second}",
+        f"UPDATE {table} SET id = {second} WHERE id = 100",
+    )
     assert any("is out of order" in p for p in problems_of(history))
 
 
 def test_check_event_deleted(history: str):
     run_underneath(history, "DELETE FROM check_events WHERE id = 1")
     problems = problems_of(history)
-    assert problems == [f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"]
+    assert problems == [
+        f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"
+    ]
 
 
 def test_last_check_event_of_a_serial_deleted(history: str):
     """A failed check hidden by deleting it: the serial's check counter still counts it."""
     run_underneath(history, "DELETE FROM check_events WHERE id = 2")
     assert problems_of(history) == [
-        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"]
+        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"
+    ]
 
 
 def test_failed_check_turned_passed_with_its_hash_recomputed(history: str):
@@ -158,16 +208,24 @@ def test_failed_check_turned_passed_with_its_hash_recomputed(history: str):
     data = json.loads(payload)
     data["passed"] = True
     forged = codec.canonical_text(CheckEvent.model_validate(data))
-    run_underneath(history, "UPDATE check_events SET payload = %s, payload_sha256 = %s, passed = %s WHERE id = 2",
-                   params=(forged, codec.sha256_hex(forged.encode()), True))
-    assert problems_of(history) == [f"check {2:012x} of CAM-1@1 was changed after it was written (its chain hash no longer matches)"]
+    run_underneath(
+        history,
+        "UPDATE check_events SET payload = %s, payload_sha256 = %s, passed = %s WHERE id = 2",
+        params=(forged, codec.sha256_hex(forged.encode()), True),
+    )
+    assert problems_of(history) == [
+        f"check {2:012x} of CAM-1@1 was changed after it was written (its chain hash no longer matches)"
+    ]
 
 
 def test_check_event_inserted_outside_calibctl(history: str):
     (payload, digest) = _select(history, "SELECT payload, payload_sha256 FROM check_events WHERE id = 3")[0]
-    run_underneath(history, "INSERT INTO check_events (check_id, serial, version, passed, at, payload, payload_sha256) "
-                            "VALUES ('ffffffffffff', 'CAM-2', 1, %s, '2026-11-23 10:00:00', %s, %s)",
-                   params=(True, payload, digest))
+    run_underneath(
+        history,
+        "INSERT INTO check_events (check_id, serial, version, passed, at, payload, payload_sha256) "
+        "VALUES ('ffffffffffff', 'CAM-2', 1, %s, '2026-11-23 10:00:00', %s, %s)",
+        params=(True, payload, digest),
+    )
     problems = problems_of(history)
     assert "check ffffffffffff of CAM-2@1 has no chain hash: it was inserted outside calibctl" in problems
 
@@ -177,7 +235,10 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
 
     engine = make_engine(history)
     try:
-        assert migrate.downgrade(engine, "0006_check_events") == ("0015_checkpoints_fleet_ckpt", "0006_check_events")
+        assert migrate.downgrade(engine, "0006_check_events") == (
+            "0015_checkpoints_fleet_ckpt",
+            "0006_check_events",
+        )
         assert migrate.upgrade(engine) == ("0006_check_events", "0015_checkpoints_fleet_ckpt")
     finally:
         engine.dispose()
@@ -185,10 +246,14 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
         audit = store.verify()
         assert audit.problems == [] and audit.records_checked == 15  # the rig definition too (0008)
     assert _select(history, "SELECT serial, chain_seq FROM check_events ORDER BY id") == [
-        ("CAM-1", 1), ("CAM-1", 2), ("CAM-2", 1)]
+        ("CAM-1", 1),
+        ("CAM-1", 2),
+        ("CAM-2", 1),
+    ]
     run_underneath(history, "DELETE FROM check_events WHERE id = 2")  # the backfilled counters count them
     assert problems_of(history) == [
-        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"]
+        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"
+    ]
 
 
 def _signed_history(url: str, key_path) -> TrustedKeys:  # type: ignore[no-untyped-def]
@@ -197,7 +262,9 @@ def _signed_history(url: str, key_path) -> TrustedKeys:  # type: ignore[no-untyp
         art = store.add_artifact(calibration(serial="CAM-1"), activate=True, reason="solved", **WHO)
         store.add_rig(rig_definition())
         store.add_rig_calibration(rig_calibration(), activate=True, reason="rig solve", **WHO)
-        store.add_rig_calibration(with_handeye_edge(rig_calibration()), activate=True, reason="hand-eye", **WHO)
+        store.add_rig_calibration(
+            with_handeye_edge(rig_calibration()), activate=True, reason="hand-eye", **WHO
+        )
         store.add_check(check_event("CAM-1", 1, art.content_sha256, 1, passed=False))
     return TrustedKeys({signer.key_id: signer.public})
 
@@ -215,8 +282,11 @@ def test_a_rechained_check_forgery_is_caught_by_the_signature(db_url: str, tmp_p
     trusted = _signed_history(db_url, tmp_path / "k.pem")
     (payload,) = _select(db_url, "SELECT payload FROM check_events")[0]
     forged = codec.canonical_text(CheckEvent.model_validate({**json.loads(payload), "passed": True}))
-    run_underneath(db_url, "UPDATE check_events SET payload = %s, payload_sha256 = %s, passed = %s",
-                   params=(forged, codec.sha256_hex(forged.encode()), True))
+    run_underneath(
+        db_url,
+        "UPDATE check_events SET payload = %s, payload_sha256 = %s, passed = %s",
+        params=(forged, codec.sha256_hex(forged.encode()), True),
+    )
     rechain(db_url)
     with Store.open(db_url) as reader:
         assert reader.verify().problems == []  # self-consistent without the key ...
@@ -247,12 +317,16 @@ def test_a_head_printed_before_0007_checks_the_new_streams_in_full(history: str)
     run_underneath(history, "DELETE FROM check_events WHERE id = 1")
     with Store.open(history) as store:
         assert store.verify(since=head).problems == [
-            f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"]
+            f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"
+        ]
 
 
 def test_a_forged_rig_event_activating_a_rejected_version_is_named(history: str):
-    run_underneath(history, "INSERT INTO rig_activation_events (rig, version, previous_version, kind, actor, station, at, "
-                            f"reason) VALUES ('{RIG}', 2, 3, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')")
+    run_underneath(
+        history,
+        "INSERT INTO rig_activation_events (rig, version, previous_version, kind, actor, station, at, "
+        f"reason) VALUES ('{RIG}', 2, 3, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')",
+    )
     assert problems_of(history) == [
         f"rig activation event 4 ({RIG}@2, rollback) has no chain hash: it was inserted outside calibctl",
         f"rig activation event 4 ({RIG}@2, rollback) activates rig {RIG}@2, which is not accepted",
@@ -266,9 +340,14 @@ def test_since_head_checks_new_events_against_what_was_active_at_the_head(histor
         head = store.verify().head()
         store.add_artifact(calibration(serial="CAM-1", fx=802.0), activate=True, reason="solved", **WHO)
         assert store.verify(since=head).problems == []
-    run_underneath(history, "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, "
-                            "at, reason) VALUES ('CAM-2', 1, 7, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')")
+    run_underneath(
+        history,
+        "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, "
+        "at, reason) VALUES ('CAM-2', 1, 7, 'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'forged')",
+    )
     with Store.open(history) as store:
         problems = store.verify(since=head).problems
-    assert problems == ["activation event 4 (CAM-2@1, rollback) has no chain hash: it was inserted outside calibctl",
-                        "activation event 4 (CAM-2@1, rollback) says 7 was active before it, but the log says 1"]
+    assert problems == [
+        "activation event 4 (CAM-2@1, rollback) has no chain hash: it was inserted outside calibctl",
+        "activation event 4 (CAM-2@1, rollback) says 7 was active before it, but the log says 1",
+    ]

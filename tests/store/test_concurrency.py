@@ -102,7 +102,9 @@ def test_a_locked_sqlite_database_waits_a_bounded_time_then_says_so(sqlite_url: 
         blocker.execute("BEGIN IMMEDIATE")  # another writer holds the write lock
         try:
             started = time.monotonic()
-            with pytest.raises(DatabaseError, match=r"is locked by another writer; gave up after 0.5 s") as info:
+            with pytest.raises(
+                DatabaseError, match=r"is locked by another writer; gave up after 0.5 s"
+            ) as info:
                 store.add_board(measured_board())
             waited_s = time.monotonic() - started
             assert info.value.exit_code == 2 and "CALIBCTL_DB_LOCK_TIMEOUT_S" in (info.value.hint or "")

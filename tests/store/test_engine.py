@@ -58,7 +58,10 @@ def test_sqlite_connections_use_wal_foreign_keys_and_a_bounded_busy_wait(sqlite_
     engine = make_engine(sqlite_url)
     try:
         with engine.connect() as conn:
-            pragmas = {name: conn.execute(text(f"PRAGMA {name}")).scalar_one() for name in ("journal_mode", "foreign_keys", "busy_timeout")}
+            pragmas = {
+                name: conn.execute(text(f"PRAGMA {name}")).scalar_one()
+                for name in ("journal_mode", "foreign_keys", "busy_timeout")
+            }
     finally:
         engine.dispose()
     assert pragmas == {"journal_mode": "wal", "foreign_keys": 1, "busy_timeout": 2500}
@@ -76,13 +79,17 @@ def test_an_unreachable_postgresql_is_a_clear_database_error():
 def test_the_cli_exits_2_when_the_database_is_unreachable():
     result = CliRunner().invoke(app, ["--db", UNREACHABLE, "board", "list"])
     assert result.exit_code == 2
-    assert "Error: cannot connect to the database postgresql://calib:***@127.0.0.1:1/calibctl" in result.stderr
+    assert (
+        "Error: cannot connect to the database postgresql://calib:***@127.0.0.1:1/calibctl" in result.stderr
+    )
     assert "s3cret" not in result.output and "Traceback" not in result.output
 
 
 def test_a_sqlite_file_in_a_missing_directory_is_a_clear_database_error(tmp_path: Path):
     url = f"sqlite:///{tmp_path / 'no' / 'such' / 'dir' / 'calibctl.db'}"
-    with pytest.raises(DatabaseError, match="cannot open the SQLite database sqlite:///.*/no/such/dir/calibctl.db"):
+    with pytest.raises(
+        DatabaseError, match="cannot open the SQLite database sqlite:///.*/no/such/dir/calibctl.db"
+    ):
         Store.open(url)
 
 
@@ -105,7 +112,10 @@ def test_store_url_hides_the_password(pg_url: str):
 @pytest.mark.postgres
 def test_a_missing_postgresql_database_is_a_clear_database_error(pg_server: str):
     url = pg_server.rsplit("/", 1)[0] + "/calibctl_no_such_database"
-    with pytest.raises(DatabaseError, match=r'cannot connect to the database .*/calibctl_no_such_database: .*"calibctl_no_such_database" does not exist'):
+    with pytest.raises(
+        DatabaseError,
+        match=r'cannot connect to the database .*/calibctl_no_such_database: .*"calibctl_no_such_database" does not exist',
+    ):
         Store.open(url)
 
 
@@ -115,11 +125,17 @@ def test_sqlite_writers_wait_longer_by_default_than_postgresql_row_locks():
     assert lock_timeout_s({"CALIBCTL_DB_LOCK_TIMEOUT_S": "5"}, backend="sqlite") == 5.0
 
 
-@pytest.mark.parametrize(("driver_message", "words"), [
-    ("database or disk is full", "the disk of the store sqlite:///x.db is full; this transaction was not stored"),
-    ("disk I/O error", "could not write to its disk (disk I/O error)"),
-    ("attempt to write a readonly database", "is read-only for this user; nothing was written"),
-])
+@pytest.mark.parametrize(
+    ("driver_message", "words"),
+    [
+        (
+            "database or disk is full",
+            "the disk of the store sqlite:///x.db is full; this transaction was not stored",
+        ),
+        ("disk I/O error", "could not write to its disk (disk I/O error)"),
+        ("attempt to write a readonly database", "is read-only for this user; nothing was written"),
+    ],
+)
 def test_a_full_disk_and_a_read_only_store_are_named_as_such(driver_message, words):
     import sqlite3
 

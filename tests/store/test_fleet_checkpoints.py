@@ -35,7 +35,11 @@ from tests.store.documents import FIXED_TIME
 from tests.store.rig_documents import rig_calibration, rig_definition
 from tests.store.tamper import patch_stored_bytes
 
-CARRIES = {"amr-1": (["CAM-0001"], ["STEREO-1"]), "amr-2": (["CAM-0002"], []), "amr-3": (["CAM-0003"], ["STEREO-1"])}
+CARRIES = {
+    "amr-1": (["CAM-0001"], ["STEREO-1"]),
+    "amr-2": (["CAM-0002"], []),
+    "amr-3": (["CAM-0003"], ["STEREO-1"]),
+}
 VERSIONS = {"serial": 3, "rig": 2}  # accepted versions of each serial and of the rig
 WHO = {"actor": "qa", "station": "st1", "reason": "test"}
 Op = tuple[str, int, int, int]
@@ -53,9 +57,15 @@ def _fill(url: str) -> str:
                 store.add_artifact(calibration(serial=f"CAM-000{n}", version=v), activate=True, **WHO)
         store.add_rig(rig_definition("STEREO-1"))
         for _ in range(VERSIONS["rig"]):
-            store.add_rig_calibration(rig_calibration().model_copy(update={"rig": "STEREO-1"}), activate=True, **WHO)
-        store.append_fleet_events([_event("register", robot=robot, serials=serials, rigs=rigs)
-                                   for robot, (serials, rigs) in CARRIES.items()])
+            store.add_rig_calibration(
+                rig_calibration().model_copy(update={"rig": "STEREO-1"}), activate=True, **WHO
+            )
+        store.append_fleet_events(
+            [
+                _event("register", robot=robot, serials=serials, rigs=rigs)
+                for robot, (serials, rigs) in CARRIES.items()
+            ]
+        )
     return url
 
 
@@ -73,27 +83,56 @@ def _batch(fleet: Fleet, op: Op) -> list[FleetEvent]:
         canary = [r for i, r in enumerate(robots) if b >> i & 1] or robots[:1]
         name = f"r{len(fleet.rollouts) + 1}"
         wanted = {t: min(v, VERSIONS[t[0]]) for t in targets}
-        head = _event("rollout", rollout=name, canary=canary, targets={n: x for (k, n), x in wanted.items() if k == "serial"},
-                      rig_targets={n: x for (k, n), x in wanted.items() if k == "rig"})
-        return [head, *(_event("assign", robot=r, version=wanted[t], rollout=name, **{t[0]: t[1]})
-                        for r in canary for t in fleet.carries[r] if t in wanted)]
-    closing = [r for r in fleet.rollouts.values() if (r.closed is None if kind == "promote" else r.closed != "rolled back")]
+        head = _event(
+            "rollout",
+            rollout=name,
+            canary=canary,
+            targets={n: x for (k, n), x in wanted.items() if k == "serial"},
+            rig_targets={n: x for (k, n), x in wanted.items() if k == "rig"},
+        )
+        return [
+            head,
+            *(
+                _event("assign", robot=r, version=wanted[t], rollout=name, **{t[0]: t[1]})
+                for r in canary
+                for t in fleet.carries[r]
+                if t in wanted
+            ),
+        ]
+    closing = [
+        r
+        for r in fleet.rollouts.values()
+        if (r.closed is None if kind == "promote" else r.closed != "rolled back")
+    ]
     if not closing:
         return []
     r = closing[a % len(closing)]
     if kind == "promote":
-        return [*(_event("assign", robot=robot, version=r.targets[t], rollout=r.name, **{t[0]: t[1]})
-                  for robot, state in r.state.items() if state == "pending" for t in fleet.carries[robot] if t in r.targets),
-                _event("promote", rollout=r.name)]
-    back = [_event("assign", robot=robot, version=prev, rollout=r.name, **{t[0]: t[1]})
-            for (robot, t), found in sorted(fleet.found.items())
-            if (prev := found.get(r.name)) is not None and fleet.running[(robot, t)] != prev]
+        return [
+            *(
+                _event("assign", robot=robot, version=r.targets[t], rollout=r.name, **{t[0]: t[1]})
+                for robot, state in r.state.items()
+                if state == "pending"
+                for t in fleet.carries[robot]
+                if t in r.targets
+            ),
+            _event("promote", rollout=r.name),
+        ]
+    back = [
+        _event("assign", robot=robot, version=prev, rollout=r.name, **{t[0]: t[1]})
+        for (robot, t), found in sorted(fleet.found.items())
+        if (prev := found.get(r.name)) is not None and fleet.running[(robot, t)] != prev
+    ]
     return [*back, _event("rollback", rollout=r.name)]
 
 
 def _view(fleet: Fleet) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
     """Everything `fleet status` and the rollout steps read of a replayed log."""
-    return to_state(fleet), robot_states(fleet, {}, {}).as_json(), [r.as_json() for r in fleet.rollouts.values()]
+    return (
+        to_state(fleet),
+        robot_states(fleet, {}, {}).as_json(),
+        [r.as_json() for r in fleet.rollouts.values()],
+    )
 
 
 def _play(url: str, ops: list[Op], every: int, signer: Signer | None = None) -> None:
@@ -125,8 +164,16 @@ def _sql(store: Store, sql: str, **params: object) -> None:
         s.execute(text(sql), params)
 
 
-OPS = st.lists(st.tuples(st.sampled_from(["assign", "start", "start", "promote", "rollback"]),
-                         st.integers(0, 31), st.integers(0, 7), st.integers(1, 3)), min_size=1, max_size=14)
+OPS = st.lists(
+    st.tuples(
+        st.sampled_from(["assign", "start", "start", "promote", "rollback"]),
+        st.integers(0, 31),
+        st.integers(0, 7),
+        st.integers(1, 3),
+    ),
+    min_size=1,
+    max_size=14,
+)
 
 
 @pytest.fixture(scope="module")
@@ -138,8 +185,9 @@ def template(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(ops=OPS, every=st.integers(1, 4))
-def test_a_read_from_a_checkpoint_says_what_the_whole_replay_says(template: Path, tmp_path: Path, ops: list[Op],
-                                                                  every: int) -> None:
+def test_a_read_from_a_checkpoint_says_what_the_whole_replay_says(
+    template: Path, tmp_path: Path, ops: list[Op], every: int
+) -> None:
     db = tmp_path / f"{random.getrandbits(64):x}.db"
     shutil.copy(template, db)
     _play(f"sqlite:///{db}", ops, every)
@@ -148,8 +196,15 @@ def test_a_read_from_a_checkpoint_says_what_the_whole_replay_says(template: Path
 @pytest.mark.parametrize("seed", [1, 2])
 def test_the_same_on_both_backends(db_url: str, seed: int) -> None:
     rng = random.Random(seed)
-    ops = [(rng.choice(["assign", "start", "promote", "rollback"]), rng.randrange(32), rng.randrange(8),
-            rng.randrange(1, 4)) for _ in range(12)]
+    ops = [
+        (
+            rng.choice(["assign", "start", "promote", "rollback"]),
+            rng.randrange(32),
+            rng.randrange(8),
+            rng.randrange(1, 4),
+        )
+        for _ in range(12)
+    ]
     _play(_fill(db_url), ops, every=2)
 
 
@@ -157,8 +212,17 @@ def test_the_same_on_both_backends(db_url: str, seed: int) -> None:
 def checkpointed(db_url: str) -> str:
     """Each robot assigned, then rollout r1 of every target @2 (canary amr-1) started and promoted, with
     checkpoints written every 2 events: at 4, 6, 9 and 13 (the log's end), the oldest pruned."""
-    _play(_fill(db_url), [("assign", 0, 0, 1), ("assign", 1, 0, 1), ("assign", 2, 1, 1), ("start", 31, 1, 2),
-                          ("promote", 0, 0, 0)], every=2)
+    _play(
+        _fill(db_url),
+        [
+            ("assign", 0, 0, 1),
+            ("assign", 1, 0, 1),
+            ("assign", 2, 1, 1),
+            ("start", 31, 1, 2),
+            ("promote", 0, 0, 0),
+        ],
+        every=2,
+    )
     with Store.open(db_url) as store:
         assert _positions(store) == [6, 9, 13] and len(store.fleet_events()) == 13
     return db_url
@@ -168,14 +232,24 @@ def _newest(store: Store) -> int:
     return _positions(store)[-1]
 
 
-@pytest.mark.parametrize(("tamper", "ignored", "flagged"), [
-    ("UPDATE fleet_checkpoints SET state = state || ' ' WHERE position = :p",
-     "was changed after it was written", "was changed after it was written"),
-    ("UPDATE fleet_checkpoints SET chain_hash = :zero WHERE position = :p",
-     "does not match the log's chain hash there (the log was rewritten", "does not match the log's chain hash there"),
-])
-def test_a_tampered_or_stale_checkpoint_is_ignored_and_flagged(checkpointed: str, tamper: str, ignored: str,
-                                                               flagged: str) -> None:
+@pytest.mark.parametrize(
+    ("tamper", "ignored", "flagged"),
+    [
+        (
+            "UPDATE fleet_checkpoints SET state = state || ' ' WHERE position = :p",
+            "was changed after it was written",
+            "was changed after it was written",
+        ),
+        (
+            "UPDATE fleet_checkpoints SET chain_hash = :zero WHERE position = :p",
+            "does not match the log's chain hash there (the log was rewritten",
+            "does not match the log's chain hash there",
+        ),
+    ],
+)
+def test_a_tampered_or_stale_checkpoint_is_ignored_and_flagged(
+    checkpointed: str, tamper: str, ignored: str, flagged: str
+) -> None:
     with Store.open(checkpointed) as store:
         newest = _newest(store)
         _sql(store, tamper, p=newest, zero="0" * 64)
@@ -189,13 +263,19 @@ def test_a_tampered_or_stale_checkpoint_is_ignored_and_flagged(checkpointed: str
 def test_a_checkpoint_past_the_end_of_the_log_is_ignored_and_flagged(checkpointed: str) -> None:
     with Store.open(checkpointed) as store:
         newest = _newest(store)
-        _sql(store, "INSERT INTO fleet_checkpoints (position, chain_hash, format, written_at, state, state_sha256) "
-             "SELECT position + 5, chain_hash, format, written_at, state, state_sha256 FROM fleet_checkpoints "
-             "WHERE position = :p", p=newest)
+        _sql(
+            store,
+            "INSERT INTO fleet_checkpoints (position, chain_hash, format, written_at, state, state_sha256) "
+            "SELECT position + 5, chain_hash, format, written_at, state, state_sha256 FROM fleet_checkpoints "
+            "WHERE position = :p",
+            p=newest,
+        )
         loaded = store.fleet()
         assert loaded.since == newest and "no such event" in loaded.ignored[0]
         problems = store.verify().problems
-    assert problems == [f"fleet checkpoint at event {newest + 5} is past the end of the log ({newest} events)"]
+    assert problems == [
+        f"fleet checkpoint at event {newest + 5} is past the end of the log ({newest} events)"
+    ]
 
 
 def test_a_forged_checkpoint_is_used_by_reads_but_named_by_db_verify(checkpointed: str) -> None:
@@ -206,8 +286,10 @@ def test_a_forged_checkpoint_is_used_by_reads_but_named_by_db_verify(checkpointe
         assert store.fleet().since == newest
     result = CliRunner().invoke(app, ["--db", checkpointed, "db", "verify"])
     assert result.exit_code == 1
-    assert (f"PROBLEM fleet checkpoint at event {newest} is not the log replayed up to event {newest} (derived "
-            "data: delete the row, or restore the store)") in result.stdout
+    assert (
+        f"PROBLEM fleet checkpoint at event {newest} is not the log replayed up to event {newest} (derived "
+        "data: delete the row, or restore the store)"
+    ) in result.stdout
     assert "1 problem(s) in the stored history" in result.stderr
 
 
@@ -215,11 +297,18 @@ def _forge_newest(store: Store) -> int:
     """The newest checkpoint's state rewritten (amr-1 runs a version it never got) with a matching sha256."""
     newest = _newest(store)
     with Session(store._engine) as s:  # noqa: SLF001
-        state = json.loads(s.scalar(select(FleetCheckpointRow.state).where(FleetCheckpointRow.position == newest)))
+        state = json.loads(
+            s.scalar(select(FleetCheckpointRow.state).where(FleetCheckpointRow.position == newest))
+        )
     state["running"][0][3] = 3
     forged = json.dumps(state)
-    _sql(store, "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = :p", s=forged,
-         h=sha256_hex(forged.encode()), p=newest)
+    _sql(
+        store,
+        "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = :p",
+        s=forged,
+        h=sha256_hex(forged.encode()),
+        p=newest,
+    )
     return newest
 
 
@@ -229,8 +318,18 @@ def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url:
     its signature."""
     signer = create_key(tmp_path / "station.pem")
     trusted = TrustedKeys.load(None, signer)
-    _play(_fill(db_url), [("assign", 0, 0, 1), ("assign", 1, 0, 1), ("assign", 2, 1, 1), ("start", 31, 1, 2),
-                          ("promote", 0, 0, 0)], every=2, signer=signer)
+    _play(
+        _fill(db_url),
+        [
+            ("assign", 0, 0, 1),
+            ("assign", 1, 0, 1),
+            ("assign", 2, 1, 1),
+            ("start", 31, 1, 2),
+            ("promote", 0, 0, 0),
+        ],
+        every=2,
+        signer=signer,
+    )
     with Store.open(db_url, signer=signer, trusted=trusted) as store:
         positions = _positions(store)
         with Session(store._engine) as s:  # noqa: SLF001
@@ -239,11 +338,16 @@ def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url:
         newest = _forge_newest(store)
         loaded = store.fleet()
         assert loaded.since == positions[-2]
-        assert "has a signature by key" in loaded.ignored[0] and "does not match its content" in loaded.ignored[0]
+        assert (
+            "has a signature by key" in loaded.ignored[0]
+            and "does not match its content" in loaded.ignored[0]
+        )
         assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
         problems = store.verify(trusted).problems
     assert any(f"fleet checkpoint at event {newest} has a signature by key" in p for p in problems)
-    with Store.open(db_url) as store:  # no keys: the sha256 matches, so a read serves it (db verify still names it)
+    with Store.open(
+        db_url
+    ) as store:  # no keys: the sha256 matches, so a read serves it (db verify still names it)
         assert store.fleet().since == newest
 
 
@@ -280,14 +384,23 @@ def test_a_rollback_after_the_checkpoint_puts_back_what_the_robots_ran(checkpoin
     assert rolled.closed == "rolled back"
     robots, staged = rollouts.fleet_status(settings)
     running = {(r.robot, s.serial): s.running for r in robots.robots for s in [*r.sensors, *r.rigs]}
-    assert running == {("amr-1", "CAM-0001"): 1, ("amr-1", "STEREO-1"): 2, ("amr-2", "CAM-0002"): 1,
-                       ("amr-3", "CAM-0003"): 2, ("amr-3", "STEREO-1"): 1}
+    assert running == {
+        ("amr-1", "CAM-0001"): 1,
+        ("amr-1", "STEREO-1"): 2,
+        ("amr-2", "CAM-0002"): 1,
+        ("amr-3", "CAM-0003"): 2,
+        ("amr-3", "STEREO-1"): 1,
+    }
     with Store.open(checkpointed) as store:
         assert _view(store.fleet().fleet) == _view(replay(store.fleet_events()))
-        assert [r.as_json() for r in staged] == [r.as_json() for r in replay(store.fleet_events()).rollouts.values()]
+        assert [r.as_json() for r in staged] == [
+            r.as_json() for r in replay(store.fleet_events()).rollouts.values()
+        ]
 
 
-def test_checkpoints_are_written_by_the_fleet_writer_only(checkpointed: str, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_checkpoints_are_written_by_the_fleet_writer_only(
+    checkpointed: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A refused step writes none (same transaction); `fleet status` writes none (reads never write)."""
     monkeypatch.setattr(fleet_checkpoints, "EVERY", 1)
     settings = load_settings(db=checkpointed, station="st1", operator="qa", env={})
@@ -295,22 +408,40 @@ def test_checkpoints_are_written_by_the_fleet_writer_only(checkpointed: str, mon
         kept = _positions(store)
         length = len(store.fleet_events())
         with pytest.raises(NotFoundError):
-            store.append_fleet_events([_event("assign", robot="amr-2", serial="CAM-0002", version=1),
-                                       _event("promote", rollout="no-such")])
+            store.append_fleet_events(
+                [
+                    _event("assign", robot="amr-2", serial="CAM-0002", version=1),
+                    _event("promote", rollout="no-such"),
+                ]
+            )
         rollouts.fleet_status(settings)
         assert _positions(store) == kept and len(store.fleet_events()) == length
         store.append_fleet_events([_event("assign", robot="amr-2", serial="CAM-0002", version=2)])
         assert _positions(store) == [*kept[1:], length + 1]
 
 
-def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(db_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(
+    db_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Reads no longer decode the events before the checkpoint (that is the point); `db verify` still walks and
     decodes them all, names the changed event, and says it could not re-derive the checkpoints after it."""
     monkeypatch.setattr(fleet_checkpoints, "EVERY", 1)
     _fill(db_url)
     with Store.open(db_url) as store:
-        store.append_fleet_events([FleetEvent(kind="assign", robot="amr-2", serial="CAM-0002", version=1,
-                                              at=FIXED_TIME, actor="qa", station="st1", reason="old reason")])
+        store.append_fleet_events(
+            [
+                FleetEvent(
+                    kind="assign",
+                    robot="amr-2",
+                    serial="CAM-0002",
+                    version=1,
+                    at=FIXED_TIME,
+                    actor="qa",
+                    station="st1",
+                    reason="old reason",
+                )
+            ]
+        )
         store.append_fleet_events([_event("assign", robot="amr-2", serial="CAM-0002", version=2)])
         assert _positions(store) == [3, 4, 5]
     patch_stored_bytes(db_url, "fleet_events", '"reason":"old reason"', '"reason":"odd reason"')
@@ -328,11 +459,19 @@ def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(db_url: str
 def test_a_checkpoint_that_holds_no_fleet_state_is_ignored_and_flagged(checkpointed: str, state: str) -> None:
     """Written with a matching sha256 (by hand, or by a broken writer): reads fall back, `db verify` names it."""
     with Store.open(checkpointed) as store:
-        _sql(store, "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = 13", s=state,
-             h=sha256_hex(state.encode()))
+        _sql(
+            store,
+            "UPDATE fleet_checkpoints SET state = :s, state_sha256 = :h WHERE position = 13",
+            s=state,
+            h=sha256_hex(state.encode()),
+        )
         loaded = store.fleet()
-        assert loaded.since == 9 and "fleet checkpoint at event 13 does not hold a fleet state (" in loaded.ignored[0]
+        assert (
+            loaded.since == 9
+            and "fleet checkpoint at event 13 does not hold a fleet state (" in loaded.ignored[0]
+        )
         assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
         assert [p for p in store.verify().problems if "checkpoint" in p] == [
             "fleet checkpoint at event 13 is not the log replayed up to event 13 (derived data: delete the row, or "
-            "restore the store)"]
+            "restore the store)"
+        ]

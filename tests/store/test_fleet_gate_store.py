@@ -33,15 +33,23 @@ def store_url(db_url: str) -> str:
 
 def test_gate_reports_by_robot_target_and_time(store_url: str) -> None:
     later = FIXED_TIME + timedelta(days=1)
-    reports = [health_report("CAM-0001", source_id="early"),
-               health_report("CAM-0001", source_id="late").model_copy(update={"time": later}),
-               health_report("STEREO-1", source_id="rig", kind="triage", verdict="ok").model_copy(update={"time": later}),
-               health_report("CAM-0001", source_id="td", kind="timeoffset", td_ms=1.0, sigma_ms=0.1,
-                             temperature_c=20.0).model_copy(update={"time": later})]
+    reports = [
+        health_report("CAM-0001", source_id="early"),
+        health_report("CAM-0001", source_id="late").model_copy(update={"time": later}),
+        health_report("STEREO-1", source_id="rig", kind="triage", verdict="ok").model_copy(
+            update={"time": later}
+        ),
+        health_report(
+            "CAM-0001", source_id="td", kind="timeoffset", td_ms=1.0, sigma_ms=0.1, temperature_c=20.0
+        ).model_copy(update={"time": later}),
+    ]
     with Store.open(store_url) as store:
         assert store.add_health_reports(reports) == []
         got = store.gate_reports(["amr-001"], ["CAM-0001", "STEREO-1"], later)
-        assert [(r.source_id, r.kind, r.verdict) for r in got] == [("late", "check", "pass"), ("rig", "triage", "ok")]
+        assert [(r.source_id, r.kind, r.verdict) for r in got] == [
+            ("late", "check", "pass"),
+            ("rig", "triage", "ok"),
+        ]
         assert all(len(r.payload_sha256) == 64 for r in got)
         assert store.gate_reports(["amr-002"], ["CAM-0001"], FIXED_TIME) == []
         assert store.fleet_check_rms(later) == {"CAM-0001": (pytest.approx(0.3), 1)}

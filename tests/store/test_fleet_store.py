@@ -36,13 +36,24 @@ def test_register_and_assign_are_read_back_in_order_and_verify(store_url: str) -
     assert audit.problems == [] and audit.heads["fleet"][()][0] == 2
 
 
-@pytest.mark.parametrize(("event", "error", "message"), [
-    (fleet_event("register", serials=["CAM-0009"]), AlreadyExistsError, "robot amr-001 is already registered"),
-    (fleet_event("assign", robot="amr-404", serial="CAM-0001", version=1), NotFoundError, "amr-404 is not registered"),
-    (fleet_event("assign", serial="CAM-0002", version=1), UsageError, "does not carry CAM-0002"),
-    (fleet_event("assign", serial="CAM-0001", version=7), NotFoundError, "CAM-0001 has no version 7"),
-    (fleet_event("assign", serial="CAM-0001", version=2), UsageError, "CAM-0001@2 is rejected"),
-])
+@pytest.mark.parametrize(
+    ("event", "error", "message"),
+    [
+        (
+            fleet_event("register", serials=["CAM-0009"]),
+            AlreadyExistsError,
+            "robot amr-001 is already registered",
+        ),
+        (
+            fleet_event("assign", robot="amr-404", serial="CAM-0001", version=1),
+            NotFoundError,
+            "amr-404 is not registered",
+        ),
+        (fleet_event("assign", serial="CAM-0002", version=1), UsageError, "does not carry CAM-0002"),
+        (fleet_event("assign", serial="CAM-0001", version=7), NotFoundError, "CAM-0001 has no version 7"),
+        (fleet_event("assign", serial="CAM-0001", version=2), UsageError, "CAM-0001@2 is rejected"),
+    ],
+)
 def test_a_refused_step_writes_nothing(store_url: str, event, error, message: str) -> None:
     with Store.open(store_url) as store:
         with pytest.raises(error, match=message):

@@ -73,8 +73,13 @@ def test_a_kill_at_any_point_of_a_capture_leaves_no_row_without_its_file(db_url:
     killed = 0
     for kill_at in range(1, MAX_POINTS + 1):
         tag = f"k{kill_at}"
-        done = subprocess.run([sys.executable, "-m", "tests.store.image_kill", db_url, str(kill_at), tag],
-                              cwd=REPO_ROOT, capture_output=True, text=True, check=False)
+        done = subprocess.run(
+            [sys.executable, "-m", "tests.store.image_kill", db_url, str(kill_at), tag],
+            cwd=REPO_ROOT,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
         with Store.open(db_url) as store:
             rows = _check_no_row_without_its_file(store)
         shas = {sha256_hex(d) for d in image_kill.images(tag)}

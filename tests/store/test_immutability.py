@@ -99,7 +99,9 @@ def test_tampered_artifact_bytes_are_caught_on_read_and_by_verify(filled: str):
     patch_stored_bytes(filled, "calibration_artifacts", V1_VIEW + "0.284,", V1_VIEW + "0.385,")
     with Store.open(filled) as store:
         # a read checks the record's chain hash (one sha256 over the stored bytes and columns)
-        with pytest.raises(IntegrityError, match=r"CAM-0001@1 was changed after it was written \(its chain hash") as info:
+        with pytest.raises(
+            IntegrityError, match=r"CAM-0001@1 was changed after it was written \(its chain hash"
+        ) as info:
             store.get_artifact("CAM-0001", 1)
         assert info.value.exit_code == 1
         with pytest.raises(IntegrityError, match="CAM-0001@1"):
@@ -127,7 +129,10 @@ def test_tampered_board_revision_is_caught_on_read_and_by_verify(db_url: str):
             store.get_board("A17")
         assert store.get_board("B2").name == "B2"
         problems = store.verify().problems
-    assert sorted(p.split(" was changed")[0].split(" does not")[0] for p in problems) == ["board A17@1", "board A17@1"]
+    assert sorted(p.split(" was changed")[0].split(" does not")[0] for p in problems) == [
+        "board A17@1",
+        "board A17@1",
+    ]
 
 
 def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
@@ -138,14 +143,22 @@ def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
         with pytest.raises(IntegrityError, match="capture session 0123456789ab does not match"):
             store.get_session("0123456789ab")
         problems = store.verify().problems  # the payload hash, and since 0009 the session's chain hash
-    assert problems == ["capture session 0123456789ab was changed after it was written (its chain hash no longer matches)",
-                        *[p for p in problems if "does not match its recorded sha256" in p]] and len(problems) == 2
+    assert (
+        problems
+        == [
+            "capture session 0123456789ab was changed after it was written (its chain hash no longer matches)",
+            *[p for p in problems if "does not match its recorded sha256" in p],
+        ]
+        and len(problems) == 2
+    )
 
 
 def test_forged_activation_of_a_rejected_version_is_caught(filled: str):
     forge_activation(filled, "CAM-0001", 2)
     with Store.open(filled) as store:
-        with pytest.raises(IntegrityError, match="active version of CAM-0001 is CAM-0001@2, which is not accepted"):
+        with pytest.raises(
+            IntegrityError, match="active version of CAM-0001 is CAM-0001@2, which is not accepted"
+        ):
             store.get_artifact("CAM-0001")
         problems = store.verify().problems
     assert problems == [

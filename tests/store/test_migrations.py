@@ -44,9 +44,20 @@ def _fill(url: str) -> dict:
 def test_one_head_and_date_prefixed_file_names():
     scripts = migrate.script_directory()
     assert scripts.get_heads() == [HEAD]
-    assert migrate.known_revisions() == [FIRST, SECOND, RIGS, "0005_chains_signatures", "0006_check_events",
-                                         "0007_chain_rigs_checks", "0008_chain_rig_definitions", "0009_chain_sessions_reads26", "0010_fleet_diff25",
-                                         "0011_health_reports_health25", "0014_health_window_fleet25", HEAD]
+    assert migrate.known_revisions() == [
+        FIRST,
+        SECOND,
+        RIGS,
+        "0005_chains_signatures",
+        "0006_check_events",
+        "0007_chain_rigs_checks",
+        "0008_chain_rig_definitions",
+        "0009_chain_sessions_reads26",
+        "0010_fleet_diff25",
+        "0011_health_reports_health25",
+        "0014_health_window_fleet25",
+        HEAD,
+    ]
     for path in sorted(migrate.MIGRATIONS_DIR.joinpath("versions").glob("*.py")):
         assert re.fullmatch(r"\d{4}_\d{2}_\d{2}_\d{4}_[a-z0-9_]+\.py", path.name), path.name
 
@@ -124,7 +135,9 @@ def test_a_database_from_a_newer_calibctl_is_refused(db_url: str):
     with engine.begin() as conn:
         conn.execute(text("UPDATE alembic_version SET version_num = '0099_from_the_future'"))
     engine.dispose()
-    with pytest.raises(DatabaseError, match="at revision 0099_from_the_future, which this calibctl does not know"):
+    with pytest.raises(
+        DatabaseError, match="at revision 0099_from_the_future, which this calibctl does not know"
+    ):
         Store.open(db_url)
     result = CliRunner().invoke(app, ["--db", db_url, "db", "upgrade"])
     assert result.exit_code == 2 and "which this calibctl does not know" in result.stderr

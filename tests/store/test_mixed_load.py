@@ -23,15 +23,24 @@ def test_16_writers_and_8_rollbacks_lose_nothing_and_nobody_gives_up(db_url: str
     with Store.open(db_url) as store:
         for serial in SERIALS:
             for fx in (800.0, 801.0):
-                store.add_artifact(calibration(serial=serial, fx=fx), activate=True, actor="qa", station="s",
-                                   reason="seed")
+                store.add_artifact(
+                    calibration(serial=serial, fx=fx), activate=True, actor="qa", station="s", reason="seed"
+                )
     ctx = multiprocessing.get_context("spawn")
     barrier = ctx.Barrier(WRITERS + TECHNICIANS)
     results = ctx.Queue()
-    procs = [ctx.Process(target=mixed_workers.station, args=(db_url, SERIALS[w % 4], PER_PROCESS, w, barrier, results))
-             for w in range(WRITERS)]
-    procs += [ctx.Process(target=mixed_workers.technician, args=(db_url, SERIALS[t % 4], PER_PROCESS, t, barrier,
-                                                                 results)) for t in range(TECHNICIANS)]
+    procs = [
+        ctx.Process(
+            target=mixed_workers.station, args=(db_url, SERIALS[w % 4], PER_PROCESS, w, barrier, results)
+        )
+        for w in range(WRITERS)
+    ]
+    procs += [
+        ctx.Process(
+            target=mixed_workers.technician, args=(db_url, SERIALS[t % 4], PER_PROCESS, t, barrier, results)
+        )
+        for t in range(TECHNICIANS)
+    ]
     for p in procs:
         p.start()
     reports = [results.get(timeout=CHILD_REPORT_WAIT_S) for _ in procs]
@@ -41,11 +50,14 @@ def test_16_writers_and_8_rollbacks_lose_nothing_and_nobody_gives_up(db_url: str
     assert [r for r in reports if r[4]] == []  # no errors at all, so none gave up
     assert sum(r[3] for r in reports) == 0
     rollbacks_done = sum(r[2][0] for r in reports if r[0] == "rollback")
-    assert rollbacks_done == TECHNICIANS * PER_PROCESS  # each decided again on a fresh read when refused stale
+    assert (
+        rollbacks_done == TECHNICIANS * PER_PROCESS
+    )  # each decided again on a fresh read when refused stale
     with Store.open(db_url) as store:
         for serial in SERIALS:
-            written = sorted(v for kind, s, versions, _, _ in reports if kind == "write" and s == serial
-                             for v in versions)
+            written = sorted(
+                v for kind, s, versions, _, _ in reports if kind == "write" and s == serial for v in versions
+            )
             per_serial = PER_PROCESS * WRITERS // len(SERIALS)
             assert written == list(range(3, 3 + per_serial))  # distinct, gap-free: nothing lost or doubled
             assert [a.version for a in store.list_artifacts(serial)] == list(range(1, 3 + per_serial))

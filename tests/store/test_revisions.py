@@ -19,8 +19,11 @@ def test_head_and_known_revisions_match_alembics_script_directory():
 def test_the_revision_lines_of_alembics_own_template_are_read(tmp_path, monkeypatch):
     versions = tmp_path / "versions"
     versions.mkdir()
-    (versions / "a.py").write_text('"""first\n\nRevision ID: r1\nRevises:\n"""\nrevision: str = "r1"\n'
-                                   "down_revision: str | Sequence[str] | None = None\n", encoding="utf-8")
+    (versions / "a.py").write_text(
+        '"""first\n\nRevision ID: r1\nRevises:\n"""\nrevision: str = "r1"\n'
+        "down_revision: str | Sequence[str] | None = None\n",
+        encoding="utf-8",
+    )
     (versions / "b.py").write_text("revision = 'r2'\ndown_revision = ('r1',)\n", encoding="utf-8")
     monkeypatch.setattr(migrate, "MIGRATIONS_DIR", tmp_path)
     migrate._revision_graph.cache_clear()

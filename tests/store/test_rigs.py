@@ -59,11 +59,16 @@ def test_rollback_and_rejected_versions(db_url: str):
 def test_a_rig_without_an_active_version_says_what_to_do(db_url: str):
     with Store.open(db_url) as store:
         store.add_rig_calibration(rig_calibration(status="rejected"), activate=False, **WHO)
-        with pytest.raises(NotFoundError, match=rf"rig {RIG} has no active version; versions: 1 \(rejected\)") as none:
+        with pytest.raises(
+            NotFoundError, match=rf"rig {RIG} has no active version; versions: 1 \(rejected\)"
+        ) as none:
             store.get_rig_calibration(RIG)
         # nothing accepted to roll back to: the hint must not propose a rollback
         assert none.value.hint is not None and "roll back" not in none.value.hint
-        assert f"solve the rig again (`calibctl rig solve {RIG}`" in none.value.hint and none.value.exit_code == 2
+        assert (
+            f"solve the rig again (`calibctl rig solve {RIG}`" in none.value.hint
+            and none.value.exit_code == 2
+        )
         store.add_rig_calibration(rig_calibration(), activate=False, **WHO)  # accepted, --no-activate
         with pytest.raises(NotFoundError, match=r"versions: 1 \(rejected\), 2 \(accepted\)") as one:
             store.get_rig_calibration(RIG)
@@ -75,10 +80,16 @@ def test_the_database_refuses_to_activate_a_rejected_rig_version(db_url: str):
         store.add_rig_calibration(rig_calibration(status="rejected"), activate=False, **WHO)
     engine = make_engine(db_url)
     try:
-        with pytest.raises(Exception, match="only an accepted rig calibration can become active"), \
-                engine.begin() as conn:
-            conn.execute(text("INSERT INTO rig_activation_events (rig, version, kind, actor, station, at, reason) "
-                              "VALUES ('STEREO-1', 1, 'activate', 'x', 'y', CURRENT_TIMESTAMP, 'forged')"))
+        with (
+            pytest.raises(Exception, match="only an accepted rig calibration can become active"),
+            engine.begin() as conn,
+        ):
+            conn.execute(
+                text(
+                    "INSERT INTO rig_activation_events (rig, version, kind, actor, station, at, reason) "
+                    "VALUES ('STEREO-1', 1, 'activate', 'x', 'y', CURRENT_TIMESTAMP, 'forged')"
+                )
+            )
     finally:
         engine.dispose()
 
@@ -112,7 +123,10 @@ def test_0003_downgrades_with_rig_rows_in_it_and_upgrades_again(db_url: str):
         store.add_rig_calibration(rig_calibration(), activate=True, **WHO)
     engine = make_engine(db_url)
     try:
-        assert migrate.downgrade(engine, "0002_image_retention") == (migrate.head_revision(), "0002_image_retention")
+        assert migrate.downgrade(engine, "0002_image_retention") == (
+            migrate.head_revision(),
+            "0002_image_retention",
+        )
         assert "rig_calibrations" not in inspect(engine).get_table_names()
         assert migrate.upgrade(engine) == ("0002_image_retention", migrate.head_revision())
     finally:

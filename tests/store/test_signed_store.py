@@ -46,16 +46,22 @@ def test_a_rechained_forgery_is_caught_by_the_signatures(db_url: str, tmp_path: 
     with Store.open(db_url) as reader:
         assert reader.verify().problems == []  # without keys the forged chain is self-consistent ...
         problems = reader.verify(trusted).problems  # ... with the key it is not
-    assert problems == ["activation event 3 (CAM-1@1, rollback) has a signature by key "
-                        f"{store.signer.key_id[:16]} that does not match its content"]  # type: ignore[union-attr]
+    assert problems == [
+        "activation event 3 (CAM-1@1, rollback) has a signature by key "
+        f"{store.signer.key_id[:16]} that does not match its content"
+    ]  # type: ignore[union-attr]
 
 
 def test_an_unsigned_record_after_signed_ones_is_a_finding(db_url: str, tmp_path: Path):
     _fill(db_url, tmp_path / "k.pem")
-    with Store.open(db_url) as unsigned_writer:  # a writer without the key (or a forger using calibctl's code)
+    with Store.open(
+        db_url
+    ) as unsigned_writer:  # a writer without the key (or a forger using calibctl's code)
         unsigned_writer.rollback("CAM-1", 2, reason="back again", **WHO)
         problems = unsigned_writer.verify().problems
-    assert problems == ["activation event 4 (CAM-1@2, rollback) is not signed, but records before it in its chain are"]
+    assert problems == [
+        "activation event 4 (CAM-1@2, rollback) is not signed, but records before it in its chain are"
+    ]
 
 
 def test_rotation_keeps_old_signatures_verifiable(db_url: str, tmp_path: Path):
@@ -77,15 +83,24 @@ def test_since_head_checks_only_what_came_after_and_catches_a_rewritten_past(db_
         resumed = store.verify(since=head)
         # CAM-2@1 and its event; the event written without the key follows signed ones (before the head)
         assert resumed.records_checked == 2
-        assert resumed.problems == ["activation event 4 (CAM-2@1, activate) is not signed, but records before it in "
-                                    "its chain are"] == store.verify().problems
+        assert (
+            resumed.problems
+            == [
+                "activation event 4 (CAM-2@1, activate) is not signed, but records before it in its chain are"
+            ]
+            == store.verify().problems
+        )
         assert store.verify().head() == resumed.head()  # resuming ends at the same head as a full run
-    run_underneath(db_url, "UPDATE calibration_artifacts SET operator = 'nobody' WHERE serial = 'CAM-1' AND version = 1")
+    run_underneath(
+        db_url, "UPDATE calibration_artifacts SET operator = 'nobody' WHERE serial = 'CAM-1' AND version = 1"
+    )
     rechain(db_url)
     with Store.open(db_url) as store:
         problems = store.verify(since=head).problems
-    assert problems[0] == ("the history up to the given chain head was rewritten or truncated: its stream heads no "
-                           "longer hash to it")
+    assert problems[0] == (
+        "the history up to the given chain head was rewritten or truncated: its stream heads no "
+        "longer hash to it"
+    )
 
 
 def test_since_head_catches_a_truncated_history(db_url: str, tmp_path: Path):

@@ -30,8 +30,9 @@ CREATE TABLE units (
 """
 
 
-def opened(path: Path, signer: Signer | None = None, trusted: TrustedKeys | None = None,
-           station: str = "line-3") -> Spool:
+def opened(
+    path: Path, signer: Signer | None = None, trusted: TrustedKeys | None = None, station: str = "line-3"
+) -> Spool:
     return Spool.open(path, station=station, store=STORE, signer=signer, trusted=trusted)
 
 
@@ -57,12 +58,20 @@ def write_format_1(path: Path) -> str:
     sha = hashlib.sha256("\n".join(parts).encode("utf-8")).hexdigest()
     with sqlite3.connect(path) as conn:
         conn.executescript(FORMAT_1_SCHEMA)
-        conn.executemany("INSERT INTO meta VALUES (?, ?)", [
-            ("format", "calibctl-spool-1"), ("station", "line-3"), ("store", STORE),
-            ("created_at", "2026-11-26T08:00:00+00:00")])
-        conn.execute("INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, images, "
-                     "record_sha256) VALUES ('CAM-0001', '0123456789ab', '2026-11-26T08:01:00+00:00', ?, ?, 1, '[]', ?)",
-                     (session_text, art_text, sha))
+        conn.executemany(
+            "INSERT INTO meta VALUES (?, ?)",
+            [
+                ("format", "calibctl-spool-1"),
+                ("station", "line-3"),
+                ("store", STORE),
+                ("created_at", "2026-11-26T08:00:00+00:00"),
+            ],
+        )
+        conn.execute(
+            "INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, images, "
+            "record_sha256) VALUES ('CAM-0001', '0123456789ab', '2026-11-26T08:01:00+00:00', ?, ?, 1, '[]', ?)",
+            (session_text, art_text, sha),
+        )
     conn.close()
     return sha
 
@@ -97,45 +106,66 @@ def test_a_format_1_spool_opens_upgraded_with_its_record_intact_and_can_be_set_a
         assert again.counts() == (0, 0, 1) and [r.seq for r in again.records(set_aside_only=True)] == [1]
 
 
-def test_a_record_set_aside_is_kept_and_unknown_synced_or_set_aside_records_are_refused(tmp_path: Path) -> None:
+def test_a_record_set_aside_is_kept_and_unknown_synced_or_set_aside_records_are_refused(
+    tmp_path: Path,
+) -> None:
     with opened(tmp_path / "spool.sqlite") as spool:
         queue(spool, "aaaaaaaaaaa1", "aaaaaaaaaaa2", "aaaaaaaaaaa3")
         spool.mark_synced(1, 2)
         before = spool.records()
         with pytest.raises(NotFoundError, match=r"there is no spool record 9 in .*spool.sqlite"):
             spool.set_aside(9, reason="r", operator="op")
-        with pytest.raises(UsageError, match=r"spool record 1 \(CAM-0001, session aaaaaaaaaaa1\) was synced .* as v2; "
-                                             "a stored record is not set aside"):
+        with pytest.raises(
+            UsageError,
+            match=r"spool record 1 \(CAM-0001, session aaaaaaaaaaa1\) was synced .* as v2; "
+            "a stored record is not set aside",
+        ):
             spool.set_aside(1, reason="r", operator="op")
         assert spool.records() == before
         aside = spool.set_aside(2, reason="lens cracked", operator="op-ana")
         assert aside.set_aside_at is not None and aside.synced_at is None
-        with pytest.raises(AlreadyExistsError, match=r"spool record 2 \(CAM-0001, session aaaaaaaaaaa2\) was set "
-                                                     r"aside .* by op-ana: lens cracked; nothing changed"):
+        with pytest.raises(
+            AlreadyExistsError,
+            match=r"spool record 2 \(CAM-0001, session aaaaaaaaaaa2\) was set "
+            r"aside .* by op-ana: lens cracked; nothing changed",
+        ):
             spool.set_aside(2, reason="again", operator="op-bo")
         assert [r.seq for r in spool.records(pending_only=True)] == [3]
-        assert [(r.seq, r.set_aside_reason) for r in spool.records(set_aside_only=True)] == [(2, "lens cracked")]
+        assert [(r.seq, r.set_aside_reason) for r in spool.records(set_aside_only=True)] == [
+            (2, "lens cracked")
+        ]
         assert [r.seq for r in spool.records()] == [1, 2, 3]  # kept: nothing is deleted
         assert spool.counts() == (1, 1, 1)
 
 
 def test_keyed_records_are_signed_and_a_rewrite_a_renumbering_or_a_removed_signature_is_refused(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     signer = create_key(tmp_path / "station.key")
     path = tmp_path / "spool.sqlite"
     with keyed(path, signer) as spool:
         queue(spool, "bbbbbbbbbbb1", "bbbbbbbbbbb2", "bbbbbbbbbbb3", "bbbbbbbbbbb4")
-        assert {r.key_id for r in spool.records()} == {signer.key_id} and all(r.signature for r in spool.records())
+        assert {r.key_id for r in spool.records()} == {signer.key_id} and all(
+            r.signature for r in spool.records()
+        )
         assert problems(spool) == {1: None, 2: None, 3: None, 4: None}
         record = spool.records()[0]
         doc = json.loads(record.artifact_text or "")
         doc["rms_px"] = 0.01  # a better number, and the sha256 recomputed as calibctl computes it
         text = json.dumps(doc)
-        rehashed = spool._record_sha256(record.serial, record.session_id, record.session_text, text,
-                                        record.session_stored, record.image_shas)
+        rehashed = spool._record_sha256(
+            record.serial,
+            record.session_id,
+            record.session_text,
+            text,
+            record.session_stored,
+            record.image_shas,
+        )
     with sqlite3.connect(path) as conn:
         conn.execute("UPDATE units SET artifact = ?, record_sha256 = ? WHERE seq = 1", (text, rehashed))
-        conn.execute("UPDATE units SET seq = 99 WHERE seq = 2")  # records 2 and 3 swapped: the sync order changed
+        conn.execute(
+            "UPDATE units SET seq = 99 WHERE seq = 2"
+        )  # records 2 and 3 swapped: the sync order changed
         conn.execute("UPDATE units SET seq = 2 WHERE seq = 3")
         conn.execute("UPDATE units SET seq = 3 WHERE seq = 99")
         conn.execute("UPDATE units SET key_id = NULL, signature = NULL WHERE seq = 4")
@@ -144,13 +174,17 @@ def test_keyed_records_are_signed_and_a_rewrite_a_renumbering_or_a_removed_signa
         assert problems(unkeyed) == {1: None, 2: None, 3: None, 4: None}
     with keyed(path, signer) as spool:
         found = problems(spool)
-        mismatch = f"has a signature by key {signer.key_id[:16]} that does not match its content: it was rewritten"
+        mismatch = (
+            f"has a signature by key {signer.key_id[:16]} that does not match its content: it was rewritten"
+        )
         assert all((found[seq] or "").startswith(mismatch) for seq in (1, 2, 3))
         assert (found[4] or "").startswith("is not signed, and this station signs its spool")
         with pytest.raises(IntegrityError) as refused:
             spool.opened(spool.records()[0])
     assert refused.value.exit_code == 1
-    assert refused.value.message.startswith("spool record 1 (CAM-0001, session bbbbbbbbbbb1) has a signature by key")
+    assert refused.value.message.startswith(
+        "spool record 1 (CAM-0001, session bbbbbbbbbbb1) has a signature by key"
+    )
     assert "calibctl station set-aside 1 --reason TEXT" in (refused.value.hint or "")
 
 
@@ -165,8 +199,10 @@ def test_another_key_an_unkeyed_spool_read_with_a_key_and_a_keyed_one_read_witho
         queue(spool, "ccccccccccc3")
         found = problems(spool)
     assert (found[1] or "").startswith("is not signed")  # queued before the station had its key: refused
-    assert found[2] == (f"is signed by key {other_key.key_id[:16]}, which is not trusted: neither this station's key "
-                        "nor one in its trusted_keys folder")
+    assert found[2] == (
+        f"is signed by key {other_key.key_id[:16]}, which is not trusted: neither this station's key "
+        "nor one in its trusted_keys folder"
+    )
     assert found[3] is None
     (tmp_path / "trusted").mkdir()
     (tmp_path / "trusted" / "other.pem").write_text(other_key.public_pem())  # a rotated key, kept trusted

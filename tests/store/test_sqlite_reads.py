@@ -20,12 +20,33 @@ SERIAL = "CAM-0001"
 
 
 def _check(art, passed: bool) -> CheckEvent:
-    region = RegionCheck(region="overall", check_rms_px=0.2, reference_rms_px=0.19, ratio=1.05, limit=1.3,
-                         corners=540, tested=True, passed=passed)
-    return CheckEvent(check_id=("a" if passed else "b") * 12, serial=art.serial, version=art.version,
-                      calibration_sha256=art.content_sha256, source="folder /tmp/x", station="st1", operator="qa",
-                      at=utc_now(), image_size=art.image_size, images=10, views=["v0.png"], view_rms_px=[0.2],
-                      regions=[region], alpha=0.01, passed=passed)
+    region = RegionCheck(
+        region="overall",
+        check_rms_px=0.2,
+        reference_rms_px=0.19,
+        ratio=1.05,
+        limit=1.3,
+        corners=540,
+        tested=True,
+        passed=passed,
+    )
+    return CheckEvent(
+        check_id=("a" if passed else "b") * 12,
+        serial=art.serial,
+        version=art.version,
+        calibration_sha256=art.content_sha256,
+        source="folder /tmp/x",
+        station="st1",
+        operator="qa",
+        at=utc_now(),
+        image_size=art.image_size,
+        images=10,
+        views=["v0.png"],
+        view_rms_px=[0.2],
+        regions=[region],
+        alpha=0.01,
+        passed=passed,
+    )
 
 
 @pytest.fixture
@@ -37,16 +58,29 @@ def store_url(tmp_path: Path) -> str:
         store.add_board(measured_board("A17"))
         store.add_board(measured_board("A17", square_mm=25.05))
         store.add_board(measured_board("B2"))
-        v1 = store.add_artifact(calibration(serial=SERIAL), activate=True, actor="qa", station="st1", reason="solved")
-        store.add_artifact(calibration(serial=SERIAL, version=2, status="rejected"), activate=False, actor="qa",
-                           station="st1", reason="solved")
-        store.add_artifact(calibration(serial=SERIAL, version=3), activate=True, actor="qa", station="st1",
-                           reason="solved")
+        v1 = store.add_artifact(
+            calibration(serial=SERIAL), activate=True, actor="qa", station="st1", reason="solved"
+        )
+        store.add_artifact(
+            calibration(serial=SERIAL, version=2, status="rejected"),
+            activate=False,
+            actor="qa",
+            station="st1",
+            reason="solved",
+        )
+        store.add_artifact(
+            calibration(serial=SERIAL, version=3), activate=True, actor="qa", station="st1", reason="solved"
+        )
         store.rollback(SERIAL, 1, reason="v3 drifted", actor="qa", station="st1")
         store.add_check(_check(v1, True))
         store.add_check(_check(v1, False))
-        store.add_artifact(calibration(serial="CAM-IDLE", status="rejected"), activate=False, actor="qa",
-                           station="st1", reason="solved")
+        store.add_artifact(
+            calibration(serial="CAM-IDLE", status="rejected"),
+            activate=False,
+            actor="qa",
+            station="st1",
+            reason="solved",
+        )
     return url
 
 
@@ -86,11 +120,14 @@ def _error_of(work) -> CalibctlError:
     return exc.value
 
 
-@pytest.mark.parametrize("work", [
-    lambda s: s.list_artifacts("CAM-UNKNOWN"),
-    lambda s: s.get_artifact(SERIAL, 9),
-    lambda s: s.get_artifact("CAM-IDLE"),  # nothing active
-])
+@pytest.mark.parametrize(
+    "work",
+    [
+        lambda s: s.list_artifacts("CAM-UNKNOWN"),
+        lambda s: s.get_artifact(SERIAL, 9),
+        lambda s: s.get_artifact("CAM-IDLE"),  # nothing active
+    ],
+)
 def test_what_sqlite3_does_not_serve_is_read_by_the_store_with_its_errors(store_url: str, work) -> None:
     def via_store():
         with Store.open(store_url, create=False) as store:
@@ -105,17 +142,23 @@ def test_what_sqlite3_does_not_serve_is_read_by_the_store_with_its_errors(store_
 def test_a_tampered_artifact_is_refused_by_the_sqlite3_path_too(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'one.db'}"
     with Store.open(url) as store:
-        store.add_artifact(calibration(serial=SERIAL), activate=True, actor="qa", station="st1", reason="solved")
+        store.add_artifact(
+            calibration(serial=SERIAL), activate=True, actor="qa", station="st1", reason="solved"
+        )
     patch_stored_bytes(url, "calibration_artifacts", '"operator":"op"', '"operator":"OP"')
     with pytest.raises(IntegrityError) as exc:
         sqlite_reads.read(url, lambda s: s.list_artifacts(SERIAL), _no_fallback)
-    assert exc.value.message == f"{SERIAL}@1 was changed after it was written (its chain hash no longer matches)"
+    assert (
+        exc.value.message == f"{SERIAL}@1 was changed after it was written (its chain hash no longer matches)"
+    )
 
 
 def test_a_forged_activation_of_a_rejected_version_is_left_to_the_store(store_url: str) -> None:
     forge_activation(store_url, SERIAL, 2)
     with pytest.raises(IntegrityError) as exc:
-        sqlite_reads.read(store_url, lambda s: s.get_artifact(SERIAL), lambda: Store.open(store_url, create=False))
+        sqlite_reads.read(
+            store_url, lambda s: s.get_artifact(SERIAL), lambda: Store.open(store_url, create=False)
+        )
     assert "which is not accepted" in exc.value.message
 
 
@@ -128,8 +171,16 @@ def test_an_out_of_date_store_is_left_to_the_store(store_url: str) -> None:
         sqlite_reads.read(store_url, lambda s: s.list_boards(), lambda: Store.open(store_url, create=False))
 
 
-@pytest.mark.parametrize("url", ["sqlite://", "sqlite:///:memory:", "postgresql://u@h/db", "sqlite:///{}?mode=ro",
-                                 "sqlite:///{}/absent.db"])
+@pytest.mark.parametrize(
+    "url",
+    [
+        "sqlite://",
+        "sqlite:///:memory:",
+        "postgresql://u@h/db",
+        "sqlite:///{}?mode=ro",
+        "sqlite:///{}/absent.db",
+    ],
+)
 def test_other_urls_and_absent_files_are_not_served(tmp_path: Path, url: str) -> None:
     used = []
 
@@ -148,7 +199,9 @@ def test_other_urls_and_absent_files_are_not_served(tmp_path: Path, url: str) ->
     assert used == [True] and not (tmp_path / "absent.db").exists()
 
 
-def test_a_lock_timeout_setting_is_left_to_the_store_which_applies_and_checks_it(store_url: str, monkeypatch) -> None:
+def test_a_lock_timeout_setting_is_left_to_the_store_which_applies_and_checks_it(
+    store_url: str, monkeypatch
+) -> None:
     from calibctl.errors import UsageError
     from calibctl.store import engine
 
@@ -169,8 +222,8 @@ def test_a_read_leaves_the_store_folder_as_it_found_it(store_url: str, tmp_path:
 EDITS_UNDERNEATH = {
     "station": "UPDATE calibration_artifacts SET station = 'elsewhere' WHERE version = 3",
     "stored_at": "UPDATE calibration_artifacts SET stored_at = '2020-01-01 00:00:00.000000' WHERE version = 3",
-    "payload": "UPDATE calibration_artifacts SET payload = replace(payload, '\"operator\":\"op\"', '\"operator\":\"OP\"') "
-               "WHERE version = 3",
+    "payload": 'UPDATE calibration_artifacts SET payload = replace(payload, \'"operator":"op"\', \'"operator":"OP"\') '
+    "WHERE version = 3",
     "content_sha256": "UPDATE calibration_artifacts SET content_sha256 = substr(content_sha256, 2) || '0' WHERE version = 3",
     "chain_hash cleared": "UPDATE calibration_artifacts SET chain_hash = NULL WHERE version = 3",
 }
@@ -185,7 +238,9 @@ def _outcome(work):
 
 @pytest.mark.parametrize("edit", EDITS_UNDERNEATH)
 @pytest.mark.parametrize("read", ["get_artifact", "list_artifacts"])
-def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str, edit: str, read: str) -> None:
+def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(
+    store_url: str, edit: str, read: str
+) -> None:
     """A tripwire: whatever check Store's reads make on a calibration row (the record's chain hash over every
     column, then the columns against the document), the sqlite3 path must make too."""
     from tests.store.tamper import run_underneath
@@ -197,7 +252,10 @@ def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(store_u
 
 def _same_on_both_paths(store_url: str, read: str):
     """The outcome of reading version 3 through the sqlite3 path, checked equal to Store's."""
-    work = {"get_artifact": lambda s: s.get_artifact(SERIAL, 3), "list_artifacts": lambda s: s.list_artifacts(SERIAL)}[read]
+    work = {
+        "get_artifact": lambda s: s.get_artifact(SERIAL, 3),
+        "list_artifacts": lambda s: s.list_artifacts(SERIAL),
+    }[read]
 
     def via_store():
         with Store.open(store_url, create=False) as store:
@@ -211,8 +269,11 @@ def _same_on_both_paths(store_url: str, read: str):
 def test_a_check_event_edited_underneath_gets_the_same_answer_from_both_paths(store_url: str) -> None:
     from tests.store.tamper import run_underneath
 
-    run_underneath(store_url, "UPDATE check_events SET payload = replace(payload, '\"station\":\"st1\"', "
-                              "'\"station\":\"st9\"') WHERE passed = 0")
+    run_underneath(
+        store_url,
+        'UPDATE check_events SET payload = replace(payload, \'"station":"st1"\', '
+        '\'"station":"st9"\') WHERE passed = 0',
+    )
 
     def via_store():
         with Store.open(store_url, create=False) as store:
@@ -238,14 +299,17 @@ def test_the_sqlite3_rows_of_calibrations_hold_the_columns_the_store_hashes(stor
 @pytest.mark.parametrize("garbage", ["'garbage'", "12345"])
 @pytest.mark.parametrize("read", ["get_artifact", "list_artifacts"])
 def test_an_unparseable_date_edited_underneath_is_a_tampered_record_on_both_paths(
-        store_url: str, garbage: str, read: str) -> None:
+    store_url: str, garbage: str, read: str
+) -> None:
     """SQLite keeps date-times as text: one edited into something that is no date fails in SQLAlchemy's own
     parser, before any check of calibctl's; it must still be an IntegrityError (exit 1), never a traceback."""
     from tests.store.tamper import run_underneath
 
     run_underneath(store_url, f"UPDATE calibration_artifacts SET stored_at = {garbage} WHERE version = 3")
     served = _same_on_both_paths(store_url, read)
-    assert served[0] is IntegrityError and "is unreadable: the database was edited outside calibctl" in served[1]
+    assert (
+        served[0] is IntegrityError and "is unreadable: the database was edited outside calibctl" in served[1]
+    )
 
 
 def test_an_unparseable_date_fails_db_verify_and_history_with_a_message(store_url: str) -> None:

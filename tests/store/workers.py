@@ -22,7 +22,9 @@ def write_artifacts(url: str, serial: str, count: int, worker: int, barrier: Any
         with Store.open(url) as store:
             for i in range(count):
                 art = calibration(serial=serial, fx=800.0 + worker + i / 100)
-                stored = store.add_artifact(art, activate=True, actor=f"w{worker}", station=f"st{worker}", reason="load")
+                stored = store.add_artifact(
+                    art, activate=True, actor=f"w{worker}", station=f"st{worker}", reason="load"
+                )
                 versions.append(stored.version)
         results.put((worker, versions, None))
     except BaseException as exc:  # report, so the parent fails with the reason instead of hanging
@@ -51,7 +53,9 @@ def crash_after_insert(url: str, serial: str) -> None:
     store = Store.open(url)
     event.listen(Engine, "before_cursor_execute", watch)
     event.listen(Engine, "commit", die_before_commit)
-    store.add_artifact(calibration(serial=serial, fx=900.0), activate=True, actor="x", station="x", reason="crash")
+    store.add_artifact(
+        calibration(serial=serial, fx=900.0), activate=True, actor="x", station="x", reason="crash"
+    )
     raise SystemExit("the process should have been killed before the commit")
 
 

@@ -27,8 +27,16 @@ def synthetic_capture(
     noise_px: float = 0.2,
 ) -> CaptureSession:
     syn = synthesize_session(
-        camera_matrix, D_TRUE, (640, 480), n_views, seed, noise_px=noise_px, tilt_deg=tilt_deg,
-        cols=board.cols, rows=board.rows, square_size_m=board.measurement.square_size_m,
+        camera_matrix,
+        D_TRUE,
+        (640, 480),
+        n_views,
+        seed,
+        noise_px=noise_px,
+        tilt_deg=tilt_deg,
+        cols=board.cols,
+        rows=board.rows,
+        square_size_m=board.measurement.square_size_m,
     )
     views = [
         ViewCorners(
@@ -58,16 +66,29 @@ def synthetic_capture(
     )
 
 
-def fisheye_capture(board: BoardRevision, fov_deg: float = 170.0, circular: bool = True, serial: str = "FE-0001",
-                    session_id: str = "fe0123456789", n_views: int = 18, seed: int = 11) -> CaptureSession:
+def fisheye_capture(
+    board: BoardRevision,
+    fov_deg: float = 170.0,
+    circular: bool = True,
+    serial: str = "FE-0001",
+    session_id: str = "fe0123456789",
+    n_views: int = 18,
+    seed: int = 11,
+) -> CaptureSession:
     """A capture through a seeded equidistant fisheye (calibctl.core.synth.fisheye) at 1280x960."""
     from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
 
     camera = FisheyeCamera.from_fov((1280, 960), fov_deg, circular)
-    syn = synthesize_fisheye_session(camera, n_views, seed, cols=board.cols, rows=board.rows,
-                                     square_size_m=board.measurement.square_size_m)
+    syn = synthesize_fisheye_session(
+        camera, n_views, seed, cols=board.cols, rows=board.rows, square_size_m=board.measurement.square_size_m
+    )
     base = synthetic_capture(board, serial=serial, session_id=session_id, n_views=2)
-    views = [ViewCorners(name=f"fisheye{i:02d}.png", corner_ids=list(range(board.cols * board.rows)),
-                         corners_px=[(float(u), float(v)) for u, v in img])
-             for i, img in enumerate(syn.image_points_per_view)]
+    views = [
+        ViewCorners(
+            name=f"fisheye{i:02d}.png",
+            corner_ids=list(range(board.cols * board.rows)),
+            corners_px=[(float(u), float(v)) for u, v in img],
+        )
+        for i, img in enumerate(syn.image_points_per_view)
+    ]
     return base.model_copy(update={"views": views, "image_size": (1280, 960)})

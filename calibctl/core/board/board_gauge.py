@@ -32,7 +32,9 @@ class SpanVerdict:
         return self.unit_factor is None and abs(self.difference_m) <= K_SIGMA * self.combined_sigma_m
 
 
-def compare_span(square_m: float, square_sigma_m: float, squares: int, span_m: float, span_sigma_m: float) -> SpanVerdict:
+def compare_span(
+    square_m: float, square_sigma_m: float, squares: int, span_m: float, span_sigma_m: float
+) -> SpanVerdict:
     """Compare ``squares * square_m`` with ``span_m`` (every length in metres, sigmas one-sigma)."""
     implied = squares * square_m
     # The square's uncertainty scales with the count when it is one measured square repeated.

@@ -93,13 +93,17 @@ class Arrivals:
 class EarlyDetections:
     """Each complete file's detection, started as it lands; the ``known`` answer of ``classify_files``."""
 
-    def __init__(self, spec: BoardSpec, workers: int,
-                 summarize: outcomes_core.Summarize | None = None) -> None:
+    def __init__(
+        self, spec: BoardSpec, workers: int, summarize: outcomes_core.Summarize | None = None
+    ) -> None:
         self.spec, self.workers, self.summarize = spec, workers, summarize
         self._started: dict[Path, tuple[Signature, Future[Detected]]] = {}
 
     def start(self, path: Path, sig: Signature) -> None:
-        self._started[path] = (sig, outcomes_core.start_file(path, self.spec, self.workers, summarize=self.summarize))
+        self._started[path] = (
+            sig,
+            outcomes_core.start_file(path, self.spec, self.workers, summarize=self.summarize),
+        )
 
     def futures(self) -> list[Future[Detected]]:
         return [future for _, future in self._started.values()]
@@ -119,8 +123,9 @@ class EarlyDetections:
             return None
         return future.result()
 
-    def for_spec(self, spec: BoardSpec, summarize: outcomes_core.Summarize | None
-                 ) -> Callable[[Path], Detected | None] | None:
+    def for_spec(
+        self, spec: BoardSpec, summarize: outcomes_core.Summarize | None
+    ) -> Callable[[Path], Detected | None] | None:
         """``known`` when detection used ``spec`` (the capture's board) and ``summarize``, else None: detect
         it all again."""
         return self.known if spec == self.spec and summarize is self.summarize else None

@@ -64,17 +64,24 @@ class SideScore:
     maybe: bool
 
 
-def _sample_means(gray: np.ndarray, H_img_board: np.ndarray, centres_sq: np.ndarray,
-                  half_span_sq: tuple[float, float]) -> np.ndarray:
+def _sample_means(
+    gray: np.ndarray, H_img_board: np.ndarray, centres_sq: np.ndarray, half_span_sq: tuple[float, float]
+) -> np.ndarray:
     """Mean intensity of 3 x 3 points around each (M, 2) centre (board squares; +/- half_span_sq = (x, y))
     -> (M,) float64, NaN where a point falls outside the image."""
-    dx, dy = np.meshgrid(np.linspace(-half_span_sq[0], half_span_sq[0], 3),
-                         np.linspace(-half_span_sq[1], half_span_sq[1], 3))
+    dx, dy = np.meshgrid(
+        np.linspace(-half_span_sq[0], half_span_sq[0], 3), np.linspace(-half_span_sq[1], half_span_sq[1], 3)
+    )
     pts = (centres_sq[:, None, :] + np.column_stack([dx.ravel(), dy.ravel()])[None]).reshape(-1, 1, 2)
     img = cv2.perspectiveTransform(pts.astype(np.float64), H_img_board).reshape(len(centres_sq), -1, 2)
     height, width = gray.shape[:2]
-    inside = np.all(np.isfinite(img), axis=2) & (img[..., 0] >= 0) & (img[..., 1] >= 0) \
-        & (img[..., 0] <= width - 1) & (img[..., 1] <= height - 1)
+    inside = (
+        np.all(np.isfinite(img), axis=2)
+        & (img[..., 0] >= 0)
+        & (img[..., 1] >= 0)
+        & (img[..., 0] <= width - 1)
+        & (img[..., 1] <= height - 1)
+    )
     safe = np.where(np.isfinite(img), img, -1.0).astype(np.float32)
     values = cv2.remap(gray, safe[..., 0], safe[..., 1], cv2.INTER_LINEAR).astype(np.float64)
     return np.where(inside.all(axis=1), values.mean(axis=1), np.nan)
@@ -120,14 +127,27 @@ def score_sides(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: int) 
     model_sq = np.column_stack([j, i]).astype(np.float64)
     interior_sq = model_sq[(j < cols - 1) & (i < rows - 1)] + 0.5
     H_all = _fit(model_sq, corners_px)
-    interior = None if H_all is None else _alternation(
-        _sample_means(gray, H_all, interior_sq, (INTERIOR_HALF_SPAN_SQ, INTERIOR_HALF_SPAN_SQ)), interior_sq)
-    near = {"top": i < FIT_LINES, "bottom": i >= rows - FIT_LINES,
-            "left": j < FIT_LINES, "right": j >= cols - FIT_LINES}
+    interior = (
+        None
+        if H_all is None
+        else _alternation(
+            _sample_means(gray, H_all, interior_sq, (INTERIOR_HALF_SPAN_SQ, INTERIOR_HALF_SPAN_SQ)),
+            interior_sq,
+        )
+    )
+    near = {
+        "top": i < FIT_LINES,
+        "bottom": i >= rows - FIT_LINES,
+        "left": j < FIT_LINES,
+        "right": j >= cols - FIT_LINES,
+    }
     scores = []
     for side in SIDES:
-        H = _fit(model_sq[near[side]], corners_px[near[side]]) if near[side].sum() >= 4 and not near[side].all() \
+        H = (
+            _fit(model_sq[near[side]], corners_px[near[side]])
+            if near[side].sum() >= 4 and not near[side].all()
             else H_all
+        )
         ring = outer = None
         if H is not None and interior:
             ring_sq, ring_span = _side_row(side, cols, rows, RING_AT_SQ)
@@ -138,7 +158,9 @@ def score_sides(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: int) 
             scores.append(SideScore(side, None, None, True))
             continue
         ring_frac, outer_frac = ring / interior, outer / interior
-        scores.append(SideScore(side, ring_frac, outer_frac, ring_frac < RING_MIN_FRAC or outer_frac >= OUTER_MAX_FRAC))
+        scores.append(
+            SideScore(side, ring_frac, outer_frac, ring_frac < RING_MIN_FRAC or outer_frac >= OUTER_MAX_FRAC)
+        )
     return scores
 
 

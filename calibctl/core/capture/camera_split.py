@@ -125,8 +125,9 @@ def _pair(lanes: Lanes | None, work: Callable[[Any], R], for_a: Any, for_b: Any)
     return done_a, done_b
 
 
-def _settled(in_a: np.ndarray, rms_a: np.ndarray, rms_b: np.ndarray, n_corners: np.ndarray,
-             threshold: float) -> bool:
+def _settled(
+    in_a: np.ndarray, rms_a: np.ndarray, rms_b: np.ndarray, n_corners: np.ndarray, threshold: float
+) -> bool:
     """True when the split ``in_a``, solved into the per-view RMS ``rms_a`` / ``rms_b``, is one camera's views
     re-sorted by noise, so that further rounds would not change the verdict: _refine stops on it (from its
     second round on).
@@ -154,8 +155,16 @@ def _settled(in_a: np.ndarray, rms_a: np.ndarray, rms_b: np.ndarray, n_corners: 
     return (sse - sse_moved) / sse < SETTLED_GAIN and bool(in_sample < min(SETTLED_RATIO, threshold))
 
 
-def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarray], size: tuple[int, int],
-            model: str, min_group: int, threshold: float, lanes: Lanes | None):
+def _refine(
+    in_a: np.ndarray,
+    obj: Sequence[np.ndarray],
+    img: Sequence[np.ndarray],
+    size: tuple[int, int],
+    model: str,
+    min_group: int,
+    threshold: float,
+    lanes: Lanes | None,
+):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool, until nothing moves, ``_settled`` or
     MAX_ROUNDS; (split, solve a, solve b, per-view RMS under a, under b, rounds run), or None when a group gets
     too small."""
@@ -165,13 +174,22 @@ def _refine(in_a: np.ndarray, obj: Sequence[np.ndarray], img: Sequence[np.ndarra
         a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
         if len(a) < min_group or len(b) < min_group:
             return None
-        sol_a, sol_b = _pair(lanes, lambda g: solve_intrinsics([obj[i] for i in g], [img[i] for i in g], size, model,
-                                                        uncertainty=False), a, b)
+        sol_a, sol_b = _pair(
+            lanes,
+            lambda g: solve_intrinsics(
+                [obj[i] for i in g], [img[i] for i in g], size, model, uncertainty=False
+            ),
+            a,
+            b,
+        )
         rms_a, rms_b = _pair(lanes, lambda sol: _view_rms(sol, obj, img), sol_a, sol_b)
         rounds = round_ + 1
         moved = rms_a < rms_b
-        if (np.array_equal(moved, in_a) or round_ == MAX_ROUNDS - 1
-                or (round_ >= 1 and _settled(in_a, rms_a, rms_b, n_corners, threshold))):  # see _settled: not round 1
+        if (
+            np.array_equal(moved, in_a)
+            or round_ == MAX_ROUNDS - 1
+            or (round_ >= 1 and _settled(in_a, rms_a, rms_b, n_corners, threshold))
+        ):  # see _settled: not round 1
             break  # settled or not converged: keep the split the two solves were made from
         in_a = moved
     if not in_a[0]:  # name the group holding view 0 "a", so a split reads the same from every start
@@ -203,9 +221,14 @@ def forget_recent_checks() -> None:
     _RECENT.clear()
 
 
-def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                     image_size: tuple[int, int], model: str = DEFAULT_MODEL,
-                     threshold: float = TWO_CAMERA_RATIO, lanes: Lanes | None = None) -> CameraSplit | None:
+def check_one_camera(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    model: str = DEFAULT_MODEL,
+    threshold: float = TWO_CAMERA_RATIO,
+    lanes: Lanes | None = None,
+) -> CameraSplit | None:
     """The best two-camera split and its score (module docstring); None when the session is too small to
     split into two groups that can each be solved and validated, or when a group of the best split cannot
     observe its own intrinsics (the observability gate's measure below OBSERVABILITY_MIN).
@@ -216,15 +239,29 @@ def check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_
     model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
     ``lanes``: where the two groups are solved at once (core.lanes); the answer does not depend on it.
     """
-    key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size), model,
-                        float(threshold))
-    return _RECENT.answer(key, lambda: _check_one_camera(object_points_per_view, image_points_per_view, image_size,
-                                                         model, threshold, lanes))
+    key = values_digest(
+        object_points_per_view,
+        image_points_per_view,
+        tuple(int(s) for s in image_size),
+        model,
+        float(threshold),
+    )
+    return _RECENT.answer(
+        key,
+        lambda: _check_one_camera(
+            object_points_per_view, image_points_per_view, image_size, model, threshold, lanes
+        ),
+    )
 
 
-def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                      image_size: tuple[int, int], model: str, threshold: float,
-                      lanes: Lanes | None) -> CameraSplit | None:
+def _check_one_camera(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    model: str,
+    threshold: float,
+    lanes: Lanes | None,
+) -> CameraSplit | None:
     obj, img = list(object_points_per_view), list(image_points_per_view)
     n = len(obj)
     min_group = min_views_to_split(model) // 2
@@ -249,20 +286,41 @@ def _check_one_camera(object_points_per_view: Sequence[np.ndarray], image_points
     if min(_observability(obj, img, group, image_size) for group in (a, b)) < OBSERVABILITY_MIN:
         return None  # a group that cannot observe its own intrinsics is no camera to compare (see _observability)
     try:
-        hold_a, hold_b = _pair(lanes, lambda group: validate_holdout(
-            [obj[i] for i in group[0]], [img[i] for i in group[0]], image_size, model, fit=group[1],
-            max_folds=HOLDOUT_FOLDS, lanes=lanes), (a, sol_a), (b, sol_b))
+        hold_a, hold_b = _pair(
+            lanes,
+            lambda group: validate_holdout(
+                [obj[i] for i in group[0]],
+                [img[i] for i in group[0]],
+                image_size,
+                model,
+                fit=group[1],
+                max_folds=HOLDOUT_FOLDS,
+                lanes=lanes,
+            ),
+            (a, sol_a),
+            (b, sol_b),
+        )
     except NumericalError:
         return None
     cross = (_rms(rms_b[a]), _rms(rms_a[b]))
     held = (hold_a.holdout_rms_px, hold_b.holdout_rms_px)
     ratio = min(cross[0] / held[0], cross[1] / held[1])
-    return CameraSplit(tuple(int(i) for i in a), tuple(int(i) for i in b), held, cross,
-                       sol_a.camera_matrix, sol_b.camera_matrix, float(ratio), threshold, rounds)
+    return CameraSplit(
+        tuple(int(i) for i in a),
+        tuple(int(i) for i in b),
+        held,
+        cross,
+        sol_a.camera_matrix,
+        sol_b.camera_matrix,
+        float(ratio),
+        threshold,
+        rounds,
+    )
 
 
-def _observability(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: Sequence[int],
-                   image_size: tuple[int, int]) -> float:
+def _observability(
+    obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: Sequence[int], image_size: tuple[int, int]
+) -> float:
     """The observability gate's sigma5 / sigma1 (core.capture.gates) of one group's views. Near-frontal views that
     group together fit any focal length: real 960x540 phone-video frames split into 6 tilted views (fx 1083)
     and 8 near-frontal ones (fx 6806, observability 8.9e-6) that "predicted" each other 3.15x better, a
@@ -275,9 +333,14 @@ def _group_words(names: Sequence[str]) -> str:
     return f"{len(names)} views ({named_list(names, 3)})"
 
 
-def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], image_size: tuple[int, int],
-                          models: Sequence[str], threshold: float,
-                          lanes: Lanes | None) -> tuple[CameraSplit | None, dict[str, float]]:
+def _first_model_to_clear(
+    obj: Sequence[np.ndarray],
+    img: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    models: Sequence[str],
+    threshold: float,
+    lanes: Lanes | None,
+) -> tuple[CameraSplit | None, dict[str, float]]:
     """(the split of the first of ``models`` under which the views are not two cameras, or of the first
     model when every one suspects two; None when a model finds no split at all), and each tried model's ratio."""
     first: CameraSplit | None = None
@@ -296,10 +359,16 @@ def _first_model_to_clear(obj: Sequence[np.ndarray], img: Sequence[np.ndarray], 
     return first, ratios
 
 
-def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                    names: Sequence[str], image_size: tuple[int, int], models: Sequence[str] = CAPTURE_MODELS,
-                    threshold: float = TWO_CAMERA_RATIO, max_views: int = CAPTURE_MAX_VIEWS,
-                    lanes: Lanes | None = None) -> GateResult:
+def one_camera_gate(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    names: Sequence[str],
+    image_size: tuple[int, int],
+    models: Sequence[str] = CAPTURE_MODELS,
+    threshold: float = TWO_CAMERA_RATIO,
+    max_views: int = CAPTURE_MAX_VIEWS,
+    lanes: Lanes | None = None,
+) -> GateResult:
     """The capture gate "one_camera": fails when the views look like two cameras (``check_one_camera``)
     under every one of ``models`` (see CAPTURE_MODELS: k1k2 alone misreads one wide-angle lens).
 
@@ -314,32 +383,57 @@ def one_camera_gate(object_points_per_view: Sequence[np.ndarray], image_points_p
     detail: dict[str, float | int | str | list[str]] = {"views_checked": int(len(picked))}
     if len(picked) < need:
         message = f"not checked: {len(picked)} views, {need} are needed to compare two groups"
-        return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
-    split, ratios = _first_model_to_clear([object_points_per_view[i] for i in picked],
-                                          [image_points_per_view[i] for i in picked], image_size, models, threshold, lanes)
+        return GateResult(
+            ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message}
+        )
+    split, ratios = _first_model_to_clear(
+        [object_points_per_view[i] for i in picked],
+        [image_points_per_view[i] for i in picked],
+        image_size,
+        models,
+        threshold,
+        lanes,
+    )
     detail.update({f"ratio_{m}": r for m, r in ratios.items()})
     if split is None:
-        message = (f"one camera: no split of the {len(picked)} views into two groups that can each be solved "
-                   f"and observe their own intrinsics")
-        return GateResult(ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message})
+        message = (
+            f"one camera: no split of the {len(picked)} views into two groups that can each be solved "
+            f"and observe their own intrinsics"
+        )
+        return GateResult(
+            ONE_CAMERA_GATE, True, 0.0, threshold, message, detail={**detail, "summary": message}
+        )
     a = [names[picked[i]] for i in split.group_a]
     b = [names[picked[i]] for i in split.group_b]
     held, cross = split.holdout_rms_px, split.cross_rms_px
     ratio = min(ratios.values())
-    detail.update(group_a=a, group_b=b, fx_a_px=float(split.camera_a[0, 0]), fx_b_px=float(split.camera_b[0, 0]),
-                  cx_a_px=float(split.camera_a[0, 2]), cx_b_px=float(split.camera_b[0, 2]))
-    message = (f"best two-camera split {_group_words(a)} / {_group_words(b)}: each group predicted "
-               f"{cross[0] / held[0]:.2f}x / {cross[1] / held[1]:.2f}x worse by the other's camera than by its own "
-               f"(held-out {held[0]:.3f} / {held[1]:.3f} px); ratio {ratio:.2f} "
-               f"({', '.join(f'{m} {r:.2f}' for m, r in ratios.items())}), two cameras from {threshold:g}")
+    detail.update(
+        group_a=a,
+        group_b=b,
+        fx_a_px=float(split.camera_a[0, 0]),
+        fx_b_px=float(split.camera_b[0, 0]),
+        cx_a_px=float(split.camera_a[0, 2]),
+        cx_b_px=float(split.camera_b[0, 2]),
+    )
+    message = (
+        f"best two-camera split {_group_words(a)} / {_group_words(b)}: each group predicted "
+        f"{cross[0] / held[0]:.2f}x / {cross[1] / held[1]:.2f}x worse by the other's camera than by its own "
+        f"(held-out {held[0]:.3f} / {held[1]:.3f} px); ratio {ratio:.2f} "
+        f"({', '.join(f'{m} {r:.2f}' for m, r in ratios.items())}), two cameras from {threshold:g}"
+    )
     detail["summary"] = message
     if ratio < threshold:
         return GateResult(ONE_CAMERA_GATE, True, ratio, threshold, message, detail=detail)
     return GateResult(
-        ONE_CAMERA_GATE, False, ratio, threshold, "the views look like two cameras: " + message,
+        ONE_CAMERA_GATE,
+        False,
+        ratio,
+        threshold,
+        "the views look like two cameras: " + message,
         "one_camera.two_cameras",
         f"these views come from two cameras: {_group_words(a)} fx {split.camera_a[0, 0]:.0f} cx "
         f"{split.camera_a[0, 2]:.0f} px, {_group_words(b)} fx {split.camera_b[0, 0]:.0f} cx {split.camera_b[0, 2]:.0f} "
         f"px; capture each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, check "
         f"that focus, zoom and lens did not change",
-        detail)
+        detail,
+    )

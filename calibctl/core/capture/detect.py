@@ -64,7 +64,9 @@ SUBPIX_HALF_WINDOW_PX = (2, 12)
 SUBPIX_FALLBACK_HALF_WINDOWS_PX = (5, 3)  # OpenCV's usual 11x11, then 7x7
 BLUR_MAX_EDGE_PX = 8.0
 CHARUCO_MIN_CORNERS = 6
-FOUND_INCONSISTENT = "was found but its corners do not form a consistent grid"  # in the reason: a board, not none
+FOUND_INCONSISTENT = (
+    "was found but its corners do not form a consistent grid"  # in the reason: a board, not none
+)
 GRID_TOL_FRAC = 0.3
 CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 40, 0.001)
@@ -119,8 +121,9 @@ def _grid_min_edge_px(corners_px: np.ndarray, cols: int, rows: int) -> float:
     return float(min(along, across))
 
 
-def refine_corners(gray: np.ndarray, corners_px: np.ndarray, min_edge_px: float,
-                   half_window_px: int | None = None) -> np.ndarray:
+def refine_corners(
+    gray: np.ndarray, corners_px: np.ndarray, min_edge_px: float, half_window_px: int | None = None
+) -> np.ndarray:
     """cornerSubPix, by default with a half-window of SUBPIX_WINDOW_FRAC x the shortest grid edge
     (clamped to SUBPIX_HALF_WINDOW_PX). (N, 2) float64 in and out."""
     lo, hi = SUBPIX_HALF_WINDOW_PX
@@ -135,7 +138,7 @@ def _patch_mean(gray: np.ndarray, point: np.ndarray, radius: int) -> float | Non
     height, width = gray.shape[:2]
     if not (radius <= x < width - radius and radius <= y < height - radius):
         return None
-    return float(gray[y - radius:y + radius + 1, x - radius:x + radius + 1].mean())
+    return float(gray[y - radius : y + radius + 1, x - radius : x + radius + 1].mean())
 
 
 def canonical_order(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: int) -> np.ndarray:
@@ -155,7 +158,7 @@ def canonical_order(gray: np.ndarray, corners_px: np.ndarray, cols: int, rows: i
     radius = max(1, int(0.15 * _grid_min_edge_px(grid.reshape(-1, 2), cols, rows)))
     first = _patch_mean(gray, grid[:2, :2].reshape(-1, 2).mean(axis=0), radius)
     r, c = neighbour
-    beside = _patch_mean(gray, grid[r:r + 2, c:c + 2].reshape(-1, 2).mean(axis=0), radius)
+    beside = _patch_mean(gray, grid[r : r + 2, c : c + 2].reshape(-1, 2).mean(axis=0), radius)
     if first is not None and beside is not None and first > beside:
         grid = grid[::-1, ::-1]
     return grid.reshape(-1, 2)
@@ -198,12 +201,15 @@ def grid_is_consistent(corners_px: np.ndarray, cols: int, rows: int, tol_frac: f
     """
     g = np.asarray(corners_px, np.float64).reshape(rows, cols, 2)
     residual = np.linalg.norm(g[:-1, :-1] + g[1:, 1:] - g[:-1, 1:] - g[1:, :-1], axis=2)
-    edge = 0.5 * (np.linalg.norm(g[:-1, 1:] - g[:-1, :-1], axis=2) + np.linalg.norm(g[1:, :-1] - g[:-1, :-1], axis=2))
+    edge = 0.5 * (
+        np.linalg.norm(g[:-1, 1:] - g[:-1, :-1], axis=2) + np.linalg.norm(g[1:, :-1] - g[:-1, :-1], axis=2)
+    )
     return bool(np.all(residual < tol_frac * edge))
 
 
-def _refined(gray: np.ndarray, image: np.ndarray, factor: int, corners: np.ndarray, cols: int,
-             rows: int) -> np.ndarray | None:
+def _refined(
+    gray: np.ndarray, image: np.ndarray, factor: int, corners: np.ndarray, cols: int, rows: int
+) -> np.ndarray | None:
     """Refine corners found on ``image`` (a 1/factor copy) at its scale, then at full resolution.
 
     A wide window can catch the board's outer edge at an outer corner and drag it off (opencv
@@ -279,8 +285,9 @@ def search_levels(gray: np.ndarray, settings: DetectorSettings) -> list[tuple[st
     return levels
 
 
-def detect_chessboard(gray: np.ndarray, cols: int, rows: int,
-                      settings: DetectorSettings | None = None) -> tuple[Detection | None, str]:
+def detect_chessboard(
+    gray: np.ndarray, cols: int, rows: int, settings: DetectorSettings | None = None
+) -> tuple[Detection | None, str]:
     """Find a full cols x rows inner-corner chessboard in an 8-bit grey image.
 
     Search order (``search_levels``): classic on a half-size copy of the search copy; classic on the
@@ -312,7 +319,9 @@ def detect_chessboard(gray: np.ndarray, cols: int, rows: int,
         return None, (f"a {cols}x{rows} chessboard {FOUND_INCONSISTENT} (blurred, bent or partly hidden?)")
     methods = {method for method, _, _ in levels}
     if "classic" not in methods:
-        tried = "SB detector; the classic one skipped, the image is noise-like" if methods else "no detector run"
+        tried = (
+            "SB detector; the classic one skipped, the image is noise-like" if methods else "no detector run"
+        )
         return None, f"no {cols}x{rows} chessboard found ({tried})"
     tried = "classic and SB detectors" if "sb" in methods else "classic detector"
     return None, f"no {cols}x{rows} chessboard found ({tried}); is the whole board in the frame?"
@@ -335,8 +344,9 @@ def _charuco_detector(spec: BoardSpec) -> cv2.aruco.CharucoDetector:
 _CHARUCO_SHIFT_PX = 0.5 if tuple(int(p) for p in cv2.__version__.split(".")[:2]) < (4, 14) else 0.0
 
 
-def detect_charuco(gray: np.ndarray, spec: BoardSpec,
-                   settings: DetectorSettings | None = None) -> tuple[Detection | None, str]:
+def detect_charuco(
+    gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None = None
+) -> tuple[Detection | None, str]:
     """Find ChArUco corners (partial views allowed) with cv2.aruco.CharucoDetector.
 
     A view counts when it has at least ``charuco_min_corners`` corners spanning two rows and two
@@ -348,8 +358,9 @@ def detect_charuco(gray: np.ndarray, spec: BoardSpec,
     n_markers = 0 if marker_ids is None else len(marker_ids)
     if ids is None or len(ids) < settings.charuco_min_corners:
         n = 0 if ids is None else len(ids)
-        return None, (f"no ChArUco board: {n} corners from {n_markers} markers "
-                      f"(need {settings.charuco_min_corners})")
+        return None, (
+            f"no ChArUco board: {n} corners from {n_markers} markers (need {settings.charuco_min_corners})"
+        )
     ids = ids.reshape(-1).astype(np.int64)
     order = np.argsort(ids)
     ids, corners_px = ids[order], corners.reshape(-1, 2).astype(np.float64)[order] - _CHARUCO_SHIFT_PX
@@ -364,8 +375,9 @@ def detect_charuco(gray: np.ndarray, spec: BoardSpec,
     return Detection(ids, corners_px, "charuco", None), ""
 
 
-def detect_board(gray: np.ndarray, spec: BoardSpec,
-                 settings: DetectorSettings | None = None) -> tuple[Detection | None, str]:
+def detect_board(
+    gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None = None
+) -> tuple[Detection | None, str]:
     """Dispatch on the board kind. ``gray``: (H, W) uint8."""
     if spec.kind == CHARUCO:
         return detect_charuco(gray, spec, settings)

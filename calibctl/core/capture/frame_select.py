@@ -121,8 +121,13 @@ def tilt_band(tilt_deg: float) -> int:
 class FrameSelector:
     """Stateful, pure-logic frame selector (no I/O, no clocks)."""
 
-    def __init__(self, spec: BoardSpec, image_size: tuple[int, int], settings: SelectorSettings | None = None,
-                 focal_px: float | None = None) -> None:
+    def __init__(
+        self,
+        spec: BoardSpec,
+        image_size: tuple[int, int],
+        settings: SelectorSettings | None = None,
+        focal_px: float | None = None,
+    ) -> None:
         self.spec = spec
         self.image_size = image_size
         self.settings = settings or SelectorSettings()
@@ -140,7 +145,9 @@ class FrameSelector:
     def _focal(self) -> float:
         if self.focal_px is not None:
             return self.focal_px
-        estimate = estimate_focal_px(self._homographies, self.image_size) if len(self._homographies) >= 2 else None
+        estimate = (
+            estimate_focal_px(self._homographies, self.image_size) if len(self._homographies) >= 2 else None
+        )
         return estimate if estimate is not None else self.diag_px
 
     def offer(self, index: int, detection: Detection | None, name: str | None = None) -> FrameDecision:
@@ -151,30 +158,49 @@ class FrameSelector:
         self.decisions.append(decision)
         return decision
 
-    def _decide(self, index: int, name: str, det: Detection | None, previous: Detection | None) -> FrameDecision:
+    def _decide(
+        self, index: int, name: str, det: Detection | None, previous: Detection | None
+    ) -> FrameDecision:
         s = self.settings
         if det is None:
             return FrameDecision(index, name, NO_BOARD, "no board in the frame")
         if det.edge_width_px is not None and det.edge_width_px > s.blur_max_edge_px:
             return FrameDecision(index, name, BLURRED, f"board edges {det.edge_width_px:.1f} px wide")
-        motion = None if previous is None else mean_corner_motion_px(
-            det.corner_ids, det.corners_px, previous.corner_ids, previous.corners_px)
+        motion = (
+            None
+            if previous is None
+            else mean_corner_motion_px(
+                det.corner_ids, det.corners_px, previous.corner_ids, previous.corners_px
+            )
+        )
         still_px = s.still_frac * self.diag_px
         if motion is None or motion >= still_px:
-            why = "board not seen in the previous frame" if motion is None else (
-                f"board moving: {motion:.1f} px since the previous frame (still is under {still_px:.1f} px)")
+            why = (
+                "board not seen in the previous frame"
+                if motion is None
+                else (
+                    f"board moving: {motion:.1f} px since the previous frame (still is under {still_px:.1f} px)"
+                )
+            )
             return FrameDecision(index, name, MOVING, why, motion_px=motion)
         dup_px = s.near_duplicate_frac * self.diag_px
         for view in self.kept:
             moved = mean_corner_motion_px(det.corner_ids, det.corners_px, view.corner_ids, view.corners_px)
             if moved is not None and moved < dup_px:
-                return FrameDecision(index, name, NEAR_DUPLICATE, f"same view as {view.name} ({moved:.1f} px)",
-                                     motion_px=motion)
+                return FrameDecision(
+                    index,
+                    name,
+                    NEAR_DUPLICATE,
+                    f"same view as {view.name} ({moved:.1f} px)",
+                    motion_px=motion,
+                )
         H = view_homography(self.model[det.corner_ids, :2], det.corners_px)
         tilt = direction = None
         pose_bin = None
         if H is not None and len(det.corner_ids) >= MIN_TILT_CORNERS:
-            lens = self._lens or SessionLens(nominal_camera(self.image_size, self._focal()), np.zeros(5), "pinhole")
+            lens = self._lens or SessionLens(
+                nominal_camera(self.image_size, self._focal()), np.zeros(5), "pinhole"
+            )
             rvec, _ = best_pose(self.model[det.corner_ids], det.corners_px, lens)
             tilt, direction_deg = normal_tilt_direction(rvec)
             bin_ = direction_bin(direction_deg) if tilt >= 1.0 else -1
@@ -187,8 +213,15 @@ class FrameSelector:
         if not adds and len(self.kept) < s.thresholds.min_views:
             adds.append(f"view {len(self.kept) + 1} of the {s.thresholds.min_views} needed")
         if not adds:
-            return FrameDecision(index, name, ADDS_NOTHING, "adds no coverage or tilt the session lacks",
-                                 motion_px=motion, tilt_deg=tilt, direction_name=direction)
+            return FrameDecision(
+                index,
+                name,
+                ADDS_NOTHING,
+                "adds no coverage or tilt the session lacks",
+                motion_px=motion,
+                tilt_deg=tilt,
+                direction_name=direction,
+            )
         self.kept.append(BoardView(name, det.corner_ids, det.corners_px))
         self._cells |= cells
         if pose_bin is not None:
@@ -199,13 +232,28 @@ class FrameSelector:
 
     def progress(self) -> SelectionProgress:
         """Gates on the kept views, for the live view."""
-        report = evaluate_gates(self.kept, self.model, self.image_size, self.settings.thresholds, self.focal_px,
-                                image_circle=self.settings.image_circle)
+        report = evaluate_gates(
+            self.kept,
+            self.model,
+            self.image_size,
+            self.settings.thresholds,
+            self.focal_px,
+            image_circle=self.settings.image_circle,
+        )
         self._lens = report.lens
-        covered = tuple(tuple((r, c) in self._cells for c in range(COVERAGE_GRID)) for r in range(COVERAGE_GRID))
+        covered = tuple(
+            tuple((r, c) in self._cells for c in range(COVERAGE_GRID)) for r in range(COVERAGE_GRID)
+        )
         obs = report.gate("observability")
-        return SelectionProgress(len(self.kept), covered, report.tilt_directions, obs.value, obs.threshold,
-                                 tuple(report.hints), report)
+        return SelectionProgress(
+            len(self.kept),
+            covered,
+            report.tilt_directions,
+            obs.value,
+            obs.threshold,
+            tuple(report.hints),
+            report,
+        )
 
 
 @dataclass(frozen=True)
@@ -224,7 +272,9 @@ def probe_frame(gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | 
     passes; else the quick check's "nothing here". Pure, so it runs ahead on another worker
     (``StreamDetector.settle`` finishes it in frame order)."""
     if not search and spec.kind != CHARUCO and _quick_reject(gray, spec):
-        return Probe(False, None, f"no {spec.cols}x{spec.rows} chessboard: nothing chessboard-like at a quick look")
+        return Probe(
+            False, None, f"no {spec.cols}x{spec.rows} chessboard: nothing chessboard-like at a quick look"
+        )
     detection, why = detect_board(gray, spec, settings)
     return Probe(True, detection, why)
 
@@ -248,14 +298,20 @@ class StreamDetector:
     run, hence the same answer for every frame whatever ran ahead.
     """
 
-    def __init__(self, spec: BoardSpec, settings: DetectorSettings | None = None,
-                 full_every: int = STREAM_FULL_SEARCH_EVERY) -> None:
+    def __init__(
+        self,
+        spec: BoardSpec,
+        settings: DetectorSettings | None = None,
+        full_every: int = STREAM_FULL_SEARCH_EVERY,
+    ) -> None:
         self.spec = spec
         self.settings = settings
         self.full_every = full_every
         self._frames = 0
         self._previous_found = False
-        self.settled_searches = 0  # due frames searched in settle: the work a probe run ahead could not know of
+        self.settled_searches = (
+            0  # due frames searched in settle: the work a probe run ahead could not know of
+        )
 
     def next_forced(self) -> bool:
         """Count the next frame; whether it gets the full search whatever the previous frame showed."""
@@ -271,7 +327,9 @@ class StreamDetector:
             self.settled_searches += 1
         else:
             self._previous_found = False
-            return None, (f"{probe.why} (a full search runs on every {self.full_every}th frame and after each board)")
+            return None, (
+                f"{probe.why} (a full search runs on every {self.full_every}th frame and after each board)"
+            )
         self._previous_found = detection is not None
         return detection, why
 

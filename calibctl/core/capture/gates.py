@@ -61,9 +61,11 @@ COVERAGE_GRID = 3
 MAX_DISTINCT_DIRECTIONS = int(360 // DISTINCT_DIRECTION_DEG)
 
 DIRECTION_NAMES = ("right", "bottom right", "bottom", "bottom left", "left", "top left", "top", "top right")
-CELL_NAMES = (("top-left corner", "top edge", "top-right corner"),
-              ("left edge", "centre", "right edge"),
-              ("bottom-left corner", "bottom edge", "bottom-right corner"))
+CELL_NAMES = (
+    ("top-left corner", "top edge", "top-right corner"),
+    ("left edge", "centre", "right edge"),
+    ("bottom-left corner", "bottom edge", "bottom-right corner"),
+)
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,9 @@ class GateThresholds:
     def __post_init__(self) -> None:
         # Distinct directions are >= 90 deg apart, so at most 4 fit around the circle.
         if not 1 <= self.tilt_directions_min <= MAX_DISTINCT_DIRECTIONS:
-            raise ValueError(f"tilt_directions_min must be 1-{MAX_DISTINCT_DIRECTIONS}, got {self.tilt_directions_min}")
+            raise ValueError(
+                f"tilt_directions_min must be 1-{MAX_DISTINCT_DIRECTIONS}, got {self.tilt_directions_min}"
+            )
 
 
 @dataclass(frozen=True)
@@ -146,9 +150,16 @@ def view_homography(model_xy: np.ndarray, corners_px: np.ndarray) -> np.ndarray 
 
 
 def _v_row(H: np.ndarray, i: int, j: int) -> np.ndarray:
-    return np.array([H[0, i] * H[0, j], H[0, i] * H[1, j] + H[1, i] * H[0, j], H[1, i] * H[1, j],
-                     H[2, i] * H[0, j] + H[0, i] * H[2, j], H[2, i] * H[1, j] + H[1, i] * H[2, j],
-                     H[2, i] * H[2, j]])
+    return np.array(
+        [
+            H[0, i] * H[0, j],
+            H[0, i] * H[1, j] + H[1, i] * H[0, j],
+            H[1, i] * H[1, j],
+            H[2, i] * H[0, j] + H[0, i] * H[2, j],
+            H[2, i] * H[1, j] + H[1, i] * H[2, j],
+            H[2, i] * H[2, j],
+        ]
+    )
 
 
 def zhang_v(homographies: Sequence[np.ndarray], image_size: tuple[int, int]) -> np.ndarray:
@@ -185,11 +196,13 @@ def estimate_focal_px(homographies: Sequence[np.ndarray], image_size: tuple[int,
         Hc = C @ H
         Hc = Hc / np.linalg.norm(Hc[:2, :2])
         h1, h2 = Hc[:, 0], Hc[:, 1]
-        for a, b in ((h1[0] * h2[0] + h1[1] * h2[1], h1[2] * h2[2]),
-                     (h1[0] ** 2 + h1[1] ** 2 - h2[0] ** 2 - h2[1] ** 2, h1[2] ** 2 - h2[2] ** 2)):
+        for a, b in (
+            (h1[0] * h2[0] + h1[1] * h2[1], h1[2] * h2[2]),
+            (h1[0] ** 2 + h1[1] ** 2 - h2[0] ** 2 - h2[1] ** 2, h1[2] ** 2 - h2[2] ** 2),
+        ):
             num -= a * b
             den += b * b
-    if den * diag ** 4 < 1e-6 or num <= 0:
+    if den * diag**4 < 1e-6 or num <= 0:
         return None
     f = math.sqrt(num / den)
     return f if 0.2 * diag <= f <= 5 * diag else None
@@ -250,12 +263,18 @@ def _undistorted(corners_px: np.ndarray, lens: SessionLens | None) -> np.ndarray
         return corners_px
     K = lens.camera_matrix
     if lens.fisheye:
-        return cv2.fisheye.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(-1, 2)
+        return cv2.fisheye.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(
+            -1, 2
+        )
     return cv2.undistortPoints(corners_px.reshape(-1, 1, 2), K, lens.dist_coeffs, P=K).reshape(-1, 2)
 
 
-def view_geometries(views: Sequence[BoardView], model_points: np.ndarray, image_size: tuple[int, int],
-                    focal_px: float | None = None) -> SessionGeometry:
+def view_geometries(
+    views: Sequence[BoardView],
+    model_points: np.ndarray,
+    image_size: tuple[int, int],
+    focal_px: float | None = None,
+) -> SessionGeometry:
     """Tilt and direction of every view that can give one (calibctl.core.capture.tilt), and their homographies.
 
     Args:
@@ -268,31 +287,54 @@ def view_geometries(views: Sequence[BoardView], model_points: np.ndarray, image_
     model3 = np.column_stack([model, np.zeros(len(model))])
     source = "given"
     if focal_px is None:
-        raw = [H for v in views if len(v.corner_ids) >= MIN_TILT_CORNERS
-               and (H := view_homography(model[v.corner_ids], v.corners_px)) is not None]
+        raw = [
+            H
+            for v in views
+            if len(v.corner_ids) >= MIN_TILT_CORNERS
+            and (H := view_homography(model[v.corner_ids], v.corners_px)) is not None
+        ]
         focal_px, source = estimate_focal_px(raw, image_size), "session"
         if focal_px is None:
             focal_px, source = math.hypot(*image_size), "nominal"
-    tilts, lens = session_tilts([model3[v.corner_ids] for v in views], [v.corners_px for v in views],
-                                image_size, focal_px, source)
+    tilts, lens = session_tilts(
+        [model3[v.corner_ids] for v in views], [v.corners_px for v in views], image_size, focal_px, source
+    )
     geometries, homographies, unused = [], [], []
     for view, t in zip(views, tilts, strict=True):
-        H = None if not t.used else view_homography(model[view.corner_ids], _undistorted(view.corners_px, lens))
+        H = (
+            None
+            if not t.used
+            else view_homography(model[view.corner_ids], _undistorted(view.corners_px, lens))
+        )
         if H is None or t.tilt_deg is None or t.direction_deg is None:
             unused.append((view.name, t.unused_reason or "no homography"))
             continue
         name = DIRECTION_NAMES[direction_bin(t.direction_deg)] if t.tilt_deg >= 1.0 else None
-        geometries.append(ViewGeometry(view.name, t.tilt_deg, t.direction_deg, name, len(view.corner_ids),
-                                       float(t.sigma_deg or 0.0)))
+        geometries.append(
+            ViewGeometry(
+                view.name, t.tilt_deg, t.direction_deg, name, len(view.corner_ids), float(t.sigma_deg or 0.0)
+            )
+        )
         homographies.append(H)
     focal = lens.focal_px if lens is not None else float(focal_px)
-    return SessionGeometry(geometries, homographies, unused, focal,
-                           source if lens is None or lens.source != "pinhole" else f"{source} (pinhole)", lens)
+    return SessionGeometry(
+        geometries,
+        homographies,
+        unused,
+        focal,
+        source if lens is None or lens.source != "pinhole" else f"{source} (pinhole)",
+        lens,
+    )
 
 
-def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_size: tuple[int, int],
-                   thresholds: GateThresholds | None = None, focal_px: float | None = None,
-                   image_circle: ImageCircle | None = None) -> GateReport:
+def evaluate_gates(
+    views: Sequence[BoardView],
+    model_points: np.ndarray,
+    image_size: tuple[int, int],
+    thresholds: GateThresholds | None = None,
+    focal_px: float | None = None,
+    image_circle: ImageCircle | None = None,
+) -> GateReport:
     """All capture gates for one session's accepted views (see the module docstring for the maths).
 
     ``image_circle``: the disc a circular fisheye images (core.capture.image_circle); coverage then counts only
@@ -305,62 +347,104 @@ def evaluate_gates(views: Sequence[BoardView], model_points: np.ndarray, image_s
     obs_detail: dict[str, float | int | str | list[str]] = {"views_used": len(geo.homographies)}
     if unused_words:
         obs_detail["views_not_used"] = unused_words
-    results = [replace(_observability_gate(observability(geo.homographies, image_size), th), detail=obs_detail)]
+    results = [
+        replace(_observability_gate(observability(geo.homographies, image_size), th), detail=obs_detail)
+    ]
 
     qualifying = [g.direction_deg for g in geo.views if th.tilt_min_deg <= g.tilt_deg <= th.tilt_max_deg]
     distinct = distinct_directions(qualifying)
     results.append(_tilt_gate(distinct, qualifying, geo, th))
 
     cells = cells_covered([v.corners_px for v in views], image_size)
-    results.append(_coverage_gate(cells) if image_circle is None else _circle_coverage_gate(
-        cells, image_circle, cells_inside(image_circle, image_size, COVERAGE_GRID)))
+    results.append(
+        _coverage_gate(cells)
+        if image_circle is None
+        else _circle_coverage_gate(cells, image_circle, cells_inside(image_circle, image_size, COVERAGE_GRID))
+    )
 
     n = len(views)
-    results.append(GateResult(
-        "views", n >= th.min_views, float(n), float(th.min_views),
-        f"{n} accepted views (need {th.min_views})",
-        None if n >= th.min_views else "views.too_few",
-        None if n >= th.min_views else f"capture {th.min_views - n} more view{'s' if th.min_views - n > 1 else ''}"))
+    results.append(
+        GateResult(
+            "views",
+            n >= th.min_views,
+            float(n),
+            float(th.min_views),
+            f"{n} accepted views (need {th.min_views})",
+            None if n >= th.min_views else "views.too_few",
+            None
+            if n >= th.min_views
+            else f"capture {th.min_views - n} more view{'s' if th.min_views - n > 1 else ''}",
+        )
+    )
 
-    covered = tuple(CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) in cells)
-    return GateReport(tuple(results), tuple(geo.views), covered,
-                      tuple(DIRECTION_NAMES[direction_bin(d)] for d in distinct), geo.focal_px, geo.focal_source,
-                      tuple(geo.unused), geo.lens)
+    covered = tuple(
+        CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) in cells
+    )
+    return GateReport(
+        tuple(results),
+        tuple(geo.views),
+        covered,
+        tuple(DIRECTION_NAMES[direction_bin(d)] for d in distinct),
+        geo.focal_px,
+        geo.focal_source,
+        tuple(geo.unused),
+        geo.lens,
+    )
 
 
 def _observability_gate(value: float, th: GateThresholds) -> GateResult:
     ok = value >= th.observability_min
     return GateResult(
-        "observability", ok, value, th.observability_min,
+        "observability",
+        ok,
+        value,
+        th.observability_min,
         f"sigma5/sigma1 of Zhang's V = {value:.2e} (threshold {th.observability_min:.1e})",
         None if ok else "observability.low",
-        None if ok else (f"tilt the board {th.tilt_min_deg:.0f}-{min(40.0, th.tilt_max_deg):.0f} degrees away from "
-                         f"square-on, toward at least {th.tilt_directions_min} different sides; the intrinsics "
-                         f"are not observable from these poses (the gauge grows with the square of the tilt)"))
+        None
+        if ok
+        else (
+            f"tilt the board {th.tilt_min_deg:.0f}-{min(40.0, th.tilt_max_deg):.0f} degrees away from "
+            f"square-on, toward at least {th.tilt_directions_min} different sides; the intrinsics "
+            f"are not observable from these poses (the gauge grows with the square of the tilt)"
+        ),
+    )
 
 
-def _tilt_gate(distinct: Sequence[float], qualifying: Sequence[float], geo: SessionGeometry,
-               th: GateThresholds) -> GateResult:
+def _tilt_gate(
+    distinct: Sequence[float], qualifying: Sequence[float], geo: SessionGeometry, th: GateThresholds
+) -> GateResult:
     ok = len(distinct) >= th.tilt_directions_min
     too_flat = sum(g.tilt_deg < th.tilt_min_deg for g in geo.views)
     too_steep = sum(g.tilt_deg > th.tilt_max_deg for g in geo.views)
-    message = (f"{len(distinct)} tilt direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} degrees apart with views at "
-               f"{th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees (need {th.tilt_directions_min}); "
-               f"{too_flat} view(s) flatter, {too_steep} steeper")
+    message = (
+        f"{len(distinct)} tilt direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} degrees apart with views at "
+        f"{th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees (need {th.tilt_directions_min}); "
+        f"{too_flat} view(s) flatter, {too_steep} steeper"
+    )
     if geo.unused:
         message += f"; {len(geo.unused)} view(s) too small or too sparse to read tilt"
     have = [DIRECTION_NAMES[direction_bin(d)] for d in distinct]
     detail: dict[str, float | int | str | list[str]] = {
-        "directions": have, "views_flatter": too_flat,
-        "views_steeper": too_steep, "views_not_used": [name for name, _ in geo.unused]}
+        "directions": have,
+        "views_flatter": too_flat,
+        "views_steeper": too_steep,
+        "views_not_used": [name for name, _ in geo.unused],
+    }
     if ok:
-        return GateResult("tilt", True, float(len(distinct)), float(th.tilt_directions_min), message, detail=detail)
+        return GateResult(
+            "tilt", True, float(len(distinct)), float(th.tilt_directions_min), message, detail=detail
+        )
     compass = [45.0 * b for b in range(len(DIRECTION_NAMES))]
-    wanted = [DIRECTION_NAMES[direction_bin(d)]
-              for d in directions_to_add(qualifying, compass, th.tilt_directions_min - len(distinct))]
+    wanted = [
+        DIRECTION_NAMES[direction_bin(d)]
+        for d in directions_to_add(qualifying, compass, th.tilt_directions_min - len(distinct))
+    ]
     detail["missing_directions"] = wanted
-    hint = (f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees, "
-            f"that side of the board farther from the camera)")
+    hint = (
+        f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees, "
+        f"that side of the board farther from the camera)"
+    )
     # every 20-45 degree view's compass name: the per-image table shows them, so the hint must not deny them
     named = list(dict.fromkeys(DIRECTION_NAMES[direction_bin(d)] for d in sorted(qualifying)))
     within = [n for n in named if n not in have]
@@ -368,36 +452,70 @@ def _tilt_gate(distinct: Sequence[float], qualifying: Sequence[float], geo: Sess
         hint += f"; the tilted views so far all lean toward the {join_words(have)} (directions count as "
         hint += f"different only {DISTINCT_DIRECTION_DEG:.0f} degrees apart)"
     elif have:
-        hint += (f"; the tilted views so far give {len(have)} direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} "
-                 f"degrees apart ({join_words(have)}); those toward the {join_words(within)} are within "
-                 f"{DISTINCT_DIRECTION_DEG:.0f} degrees of them")
-    return GateResult("tilt", False, float(len(distinct)), float(th.tilt_directions_min), message,
-                      "tilt.directions", hint, detail)
+        hint += (
+            f"; the tilted views so far give {len(have)} direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} "
+            f"degrees apart ({join_words(have)}); those toward the {join_words(within)} are within "
+            f"{DISTINCT_DIRECTION_DEG:.0f} degrees of them"
+        )
+    return GateResult(
+        "tilt",
+        False,
+        float(len(distinct)),
+        float(th.tilt_directions_min),
+        message,
+        "tilt.directions",
+        hint,
+        detail,
+    )
 
 
 def _coverage_gate(cells: set[tuple[int, int]]) -> GateResult:
     total = COVERAGE_GRID * COVERAGE_GRID
-    missing = [CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) not in cells]
+    missing = [
+        CELL_NAMES[r][c] for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID) if (r, c) not in cells
+    ]
     message = f"corners reach {len(cells)} of {total} cells of a 3x3 grid over the image"
     detail: dict[str, float | int | str | list[str]] = {"missing_cells": missing}
     if not missing:
         return GateResult("coverage", True, float(len(cells)), float(total), message, detail=detail)
-    return GateResult("coverage", False, float(len(cells)), float(total), message, "coverage.missing_cells",
-                      f"cover the {join_words(missing)}", detail)
+    return GateResult(
+        "coverage",
+        False,
+        float(len(cells)),
+        float(total),
+        message,
+        "coverage.missing_cells",
+        f"cover the {join_words(missing)}",
+        detail,
+    )
 
 
-def _circle_coverage_gate(cells: set[tuple[int, int]], circle: ImageCircle,
-                          inside: set[tuple[int, int]]) -> GateResult:
+def _circle_coverage_gate(
+    cells: set[tuple[int, int]], circle: ImageCircle, inside: set[tuple[int, int]]
+) -> GateResult:
     """Coverage over the cells mostly inside the image circle; the circle is recorded in the detail."""
     reached = cells & inside
     grid = [(r, c) for r in range(COVERAGE_GRID) for c in range(COVERAGE_GRID)]
     missing = [CELL_NAMES[r][c] for r, c in grid if (r, c) in inside and (r, c) not in cells]
     outside = [CELL_NAMES[r][c] for r, c in grid if (r, c) not in inside]
-    message = (f"corners reach {len(reached)} of the {len(inside)} cells of a 3x3 grid over the image that lie "
-               f"mostly inside the {circle.describe()}")
+    message = (
+        f"corners reach {len(reached)} of the {len(inside)} cells of a 3x3 grid over the image that lie "
+        f"mostly inside the {circle.describe()}"
+    )
     detail: dict[str, float | int | str | list[str]] = {
-        "missing_cells": missing, "cells_outside_circle": outside, **circle_detail(circle)}
+        "missing_cells": missing,
+        "cells_outside_circle": outside,
+        **circle_detail(circle),
+    }
     if not missing:
         return GateResult("coverage", True, float(len(reached)), float(len(inside)), message, detail=detail)
-    return GateResult("coverage", False, float(len(reached)), float(len(inside)), message, "coverage.missing_cells",
-                      f"cover the {join_words(missing)} (inside the image circle)", detail)
+    return GateResult(
+        "coverage",
+        False,
+        float(len(reached)),
+        float(len(inside)),
+        message,
+        "coverage.missing_cells",
+        f"cover the {join_words(missing)} (inside the image circle)",
+        detail,
+    )

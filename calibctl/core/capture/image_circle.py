@@ -99,8 +99,11 @@ def detect_image_circle(max_gray: np.ndarray, image_size: tuple[int, int]) -> Im
         return None  # nothing is well lit: no way to tell a circle from a dark scene
     lit = picture > threshold
     patch = max(2, int(round(CORNER_PATCH_FRAC * min(h, w))))
-    if any(lit[rows, cols].any() for rows in (slice(0, patch), slice(h - patch, h))
-           for cols in (slice(0, patch), slice(w - patch, w))):
+    if any(
+        lit[rows, cols].any()
+        for rows in (slice(0, patch), slice(h - patch, h))
+        for cols in (slice(0, patch), slice(w - patch, w))
+    ):
         return None
     fitted = _fit_boundary(lit)
     if fitted is None:
@@ -165,11 +168,15 @@ def circle_problem(circle: tuple[float, float, float], image_size: tuple[int, in
     if r <= 0:
         return f"the image circle's radius must be positive, got {r:g} px"
     if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
-        return (f"the image circle's centre ({cx:g}, {cy:g}) px lies outside the {w}x{h} image "
-                f"(x -0.5..{w - 0.5:g}, y -0.5..{h - 0.5:g})")
+        return (
+            f"the image circle's centre ({cx:g}, {cy:g}) px lies outside the {w}x{h} image "
+            f"(x -0.5..{w - 0.5:g}, y -0.5..{h - 0.5:g})"
+        )
     if not cells_inside(ImageCircle(cx, cy, r, "given"), image_size, 3):
-        return (f"the image circle (centre ({cx:g}, {cy:g}) px, radius {r:g} px) covers no cell of the 3x3 "
-                f"coverage grid over the {w}x{h} image by more than half")
+        return (
+            f"the image circle (centre ({cx:g}, {cy:g}) px, radius {r:g} px) covers no cell of the 3x3 "
+            f"coverage grid over the {w}x{h} image by more than half"
+        )
     return None
 
 
@@ -202,7 +209,11 @@ def corners_inside(corners_px: np.ndarray, circle: ImageCircle) -> np.ndarray:
     return np.hypot(px[:, 0] - circle.cx_px, px[:, 1] - circle.cy_px) <= circle.radius_px
 
 
-CIRCLE_KEYS = ("image_circle_cx_px", "image_circle_cy_px", "image_circle_radius_px")  # in the coverage gate's detail
+CIRCLE_KEYS = (
+    "image_circle_cx_px",
+    "image_circle_cy_px",
+    "image_circle_radius_px",
+)  # in the coverage gate's detail
 
 
 def circle_detail(circle: ImageCircle) -> dict[str, float | str]:

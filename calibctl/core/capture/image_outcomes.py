@@ -53,8 +53,12 @@ NEAR_DUPLICATE_FRAC = 0.01  # 8 px on a 640x480 image, 14.7 px on 1280x720
 EXECUTORS = ("auto", "thread", "process")
 DEFAULT_EXECUTOR = "auto"
 PROCESS_MIN_FILES = 32  # "auto" detects this many files or more on processes (choose_executor)
-CHUNK_MAX_FILES = 8  # files per process-pool task at most (task_chunks): 8 x ~17 ms at 1280x960 between reports
-CHUNK_SHARE = 2  # a task takes at most 1/(CHUNK_SHARE x workers) of the files left, so the last tasks are single files
+CHUNK_MAX_FILES = (
+    8  # files per process-pool task at most (task_chunks): 8 x ~17 ms at 1280x960 between reports
+)
+CHUNK_SHARE = (
+    2  # a task takes at most 1/(CHUNK_SHARE x workers) of the files left, so the last tasks are single files
+)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
 ProgressCallback = Callable[[int, int, "ImageOutcome"], None]
@@ -97,18 +101,32 @@ class ImageOutcome:
 
 def list_images(folder: Path) -> list[Path]:
     """Image files directly in ``folder``, in file-name order."""
-    return sorted((p for p in Path(folder).iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
-                  key=lambda p: p.name)
+    return sorted(
+        (p for p in Path(folder).iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+        key=lambda p: p.name,
+    )
 
 
-def classify_array(name: str, path: str, gray: np.ndarray, sha256: str, spec: BoardSpec,
-                   settings: DetectorSettings | None = None) -> ImageOutcome:
+def classify_array(
+    name: str,
+    path: str,
+    gray: np.ndarray,
+    sha256: str,
+    spec: BoardSpec,
+    settings: DetectorSettings | None = None,
+) -> ImageOutcome:
     """Detect and blur-check one decoded (H, W) uint8 image; the session decisions come later."""
     settings = settings or DetectorSettings()
     size = (int(gray.shape[1]), int(gray.shape[0]))
     if min(size) < MIN_IMAGE_SIDE_PX:  # no board fits; the detectors' arithmetic assumes some pixels
-        return ImageOutcome(name, path, NO_BOARD, f"the image is only {size[0]}x{size[1]} px, too small to hold a "
-                            "board", size, sha256)
+        return ImageOutcome(
+            name,
+            path,
+            NO_BOARD,
+            f"the image is only {size[0]}x{size[1]} px, too small to hold a board",
+            size,
+            sha256,
+        )
     start = time.perf_counter()
     detection, why = detect_board(gray, spec, settings)
     elapsed = time.perf_counter() - start
@@ -119,14 +137,23 @@ def classify_array(name: str, path: str, gray: np.ndarray, sha256: str, spec: Bo
     width = detection.edge_width_px
     if width is not None and width > settings.blur_max_edge_px:
         status = BLURRED
-        reason = (f"board edges are {width:.1f} px wide (limit {settings.blur_max_edge_px:.1f} px): "
-                  f"out of focus or moving")
-    return _with_detection(ImageOutcome(name, path, status, reason, size, sha256, elapsed_s=elapsed), detection)
+        reason = (
+            f"board edges are {width:.1f} px wide (limit {settings.blur_max_edge_px:.1f} px): "
+            f"out of focus or moving"
+        )
+    return _with_detection(
+        ImageOutcome(name, path, status, reason, size, sha256, elapsed_s=elapsed), detection
+    )
 
 
 def _with_detection(outcome: ImageOutcome, detection: Detection) -> ImageOutcome:
-    return replace(outcome, corner_ids=detection.corner_ids, corners_px=detection.corners_px,
-                   method=detection.method, edge_width_px=detection.edge_width_px)
+    return replace(
+        outcome,
+        corner_ids=detection.corner_ids,
+        corners_px=detection.corners_px,
+        method=detection.method,
+        edge_width_px=detection.edge_width_px,
+    )
 
 
 def decode_gray(data: bytes) -> np.ndarray | None:
@@ -150,8 +177,12 @@ def read_gray(path: str | Path) -> np.ndarray | None:
         return None
 
 
-def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings | None = None,
-                  on_decoded: DecodedCallback | None = None) -> ImageOutcome:
+def classify_file(
+    path: str | Path,
+    spec: BoardSpec,
+    settings: DetectorSettings | None = None,
+    on_decoded: DecodedCallback | None = None,
+) -> ImageOutcome:
     """Read, hash, decode and detect one image file (safe to call in a worker process).
 
     ``on_decoded(gray)`` is called with the decoded (H, W) uint8 image before detection, so a caller
@@ -161,12 +192,15 @@ def classify_file(path: str | Path, spec: BoardSpec, settings: DetectorSettings 
     try:
         data = path.read_bytes()
     except OSError as exc:
-        return ImageOutcome(path.name, str(path), UNREADABLE, f"cannot read the file: {exc.strerror}", None, "")
+        return ImageOutcome(
+            path.name, str(path), UNREADABLE, f"cannot read the file: {exc.strerror}", None, ""
+        )
     digest = hashlib.sha256(data).hexdigest()
     gray = decode_gray(data)
     if gray is None:
-        return ImageOutcome(path.name, str(path), UNREADABLE,
-                            f"not a decodable image ({len(data)} bytes)", None, digest)
+        return ImageOutcome(
+            path.name, str(path), UNREADABLE, f"not a decodable image ({len(data)} bytes)", None, digest
+        )
     if on_decoded is not None:
         on_decoded(gray)
     return classify_array(path.name, str(path), gray, digest, spec, settings)
@@ -182,35 +216,58 @@ def session_image_size(outcomes: Sequence[ImageOutcome]) -> tuple[int, int] | No
     return next(s for s in sizes if counts[s] == best)
 
 
-def finalize_session(outcomes: Sequence[ImageOutcome], image_size: tuple[int, int] | None = None,
-                     near_duplicate_frac: float = NEAR_DUPLICATE_FRAC) -> list[ImageOutcome]:
+def finalize_session(
+    outcomes: Sequence[ImageOutcome],
+    image_size: tuple[int, int] | None = None,
+    near_duplicate_frac: float = NEAR_DUPLICATE_FRAC,
+) -> list[ImageOutcome]:
     """Apply the session-wide rules (size, near-duplicates) to per-file outcomes, in the given order."""
     size = image_size or session_image_size(outcomes)
     final: list[ImageOutcome] = []
     kept: list[ImageOutcome] = []
     for outcome in outcomes:
         if outcome.image_size is not None and size is not None and outcome.image_size != size:
-            final.append(replace(outcome, status=WRONG_SIZE, reason=(
-                f"image is {outcome.image_size[0]}x{outcome.image_size[1]} but the session's images are "
-                f"{size[0]}x{size[1]}")))
+            final.append(
+                replace(
+                    outcome,
+                    status=WRONG_SIZE,
+                    reason=(
+                        f"image is {outcome.image_size[0]}x{outcome.image_size[1]} but the session's images are "
+                        f"{size[0]}x{size[1]}"
+                    ),
+                )
+            )
             continue
         if outcome.status == ACCEPTED:
             twin = find_near_duplicate(outcome, kept, near_duplicate_frac)
             if twin is not None:
                 other, moved = twin
                 limit = near_duplicate_frac * float(np.hypot(*outcome.image_size))  # type: ignore[misc]
-                final.append(replace(outcome, status=NEAR_DUPLICATE, reason=(
-                    f"same view as {other.name}: corners moved {moved:.1f} px on average (limit {limit:.1f} px)")))
+                final.append(
+                    replace(
+                        outcome,
+                        status=NEAR_DUPLICATE,
+                        reason=(
+                            f"same view as {other.name}: corners moved {moved:.1f} px on average (limit {limit:.1f} px)"
+                        ),
+                    )
+                )
                 continue
             kept.append(outcome)
         final.append(outcome)
     return final
 
 
-def mean_corner_motion_px(ids_a: np.ndarray, px_a: np.ndarray, ids_b: np.ndarray, px_b: np.ndarray) -> float | None:
+def mean_corner_motion_px(
+    ids_a: np.ndarray, px_a: np.ndarray, ids_b: np.ndarray, px_b: np.ndarray
+) -> float | None:
     """Mean displacement over the corner ids two detections share; None when they share fewer than 4."""
-    if ids_a.shape == ids_b.shape and len(ids_a) >= 4 and np.array_equal(ids_a, ids_b) \
-            and bool(np.all(ids_a[1:] > ids_a[:-1])):
+    if (
+        ids_a.shape == ids_b.shape
+        and len(ids_a) >= 4
+        and np.array_equal(ids_a, ids_b)
+        and bool(np.all(ids_a[1:] > ids_a[:-1]))
+    ):
         # the same ids in ascending order (a whole board, the usual case): the intersection below would
         # pair row i with row i; this is that, bit for bit, without its sort (96 views: 4 560 pairs)
         return float(np.linalg.norm(px_a - px_b, axis=1).mean())
@@ -220,23 +277,29 @@ def mean_corner_motion_px(ids_a: np.ndarray, px_a: np.ndarray, ids_b: np.ndarray
     return float(np.linalg.norm(px_a[ia] - px_b[ib], axis=1).mean())
 
 
-def find_near_duplicate(outcome: ImageOutcome, kept: Sequence[ImageOutcome],
-                        frac: float = NEAR_DUPLICATE_FRAC) -> tuple[ImageOutcome, float] | None:
+def find_near_duplicate(
+    outcome: ImageOutcome, kept: Sequence[ImageOutcome], frac: float = NEAR_DUPLICATE_FRAC
+) -> tuple[ImageOutcome, float] | None:
     """The closest earlier kept view within the near-duplicate limit, with its mean corner motion."""
-    assert outcome.corner_ids is not None and outcome.corners_px is not None and outcome.image_size is not None
+    assert (
+        outcome.corner_ids is not None and outcome.corners_px is not None and outcome.image_size is not None
+    )
     limit = frac * float(np.hypot(*outcome.image_size))
     best: tuple[ImageOutcome, float] | None = None
     for other in kept:
         if other.corner_ids is None or other.corners_px is None:
             continue
-        moved = mean_corner_motion_px(outcome.corner_ids, outcome.corners_px, other.corner_ids, other.corners_px)
+        moved = mean_corner_motion_px(
+            outcome.corner_ids, outcome.corners_px, other.corner_ids, other.corners_px
+        )
         if moved is not None and moved < limit and (best is None or moved < best[1]):
             best = (other, moved)
     return best
 
 
-def _classify_task(path: Path, spec: BoardSpec, settings: DetectorSettings | None,
-                   summarize: Summarize | None) -> tuple[ImageOutcome, object]:
+def _classify_task(
+    path: Path, spec: BoardSpec, settings: DetectorSettings | None, summarize: Summarize | None
+) -> tuple[ImageOutcome, object]:
     """``classify_file`` plus ``summarize(gray)`` of the decoded image, in a worker (thread or process)."""
     summary: list[object] = []
     hook = None if summarize is None else (lambda gray: summary.append(summarize(gray)))
@@ -245,7 +308,7 @@ def _classify_task(path: Path, spec: BoardSpec, settings: DetectorSettings | Non
 
 
 def choose_executor(executor: str, workers: int, total: int) -> str:
-    """"thread" or "process" for a run of ``total`` files on ``workers`` workers (``executor`` "auto" decides).
+    """ "thread" or "process" for a run of ``total`` files on ``workers`` workers (``executor`` "auto" decides).
 
     auto: processes from ``PROCESS_MIN_FILES`` files on, or whenever the pool is warm already (a
     station, a second capture in one process: no start-up to pay), threads otherwise. Threads share one GIL, and the
@@ -263,10 +326,17 @@ def choose_executor(executor: str, workers: int, total: int) -> str:
     return "thread"
 
 
-def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
-                   workers: int | None = None, progress: ProgressCallback | None = None,
-                   executor: str = DEFAULT_EXECUTOR, summarize: Summarize | None = None,
-                   on_summary: SummaryCallback | None = None, known: KnownCallback | None = None) -> list[ImageOutcome]:
+def classify_files(
+    paths: Sequence[str | Path],
+    spec: BoardSpec,
+    settings: DetectorSettings | None = None,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+    executor: str = DEFAULT_EXECUTOR,
+    summarize: Summarize | None = None,
+    on_summary: SummaryCallback | None = None,
+    known: KnownCallback | None = None,
+) -> list[ImageOutcome]:
     """Per-file outcomes (no session rules) in the order of ``paths``, detected on ``workers`` workers.
 
     ``workers``: default the cores this process may run on (``worker_pool.available_cores``). The
@@ -308,9 +378,16 @@ def classify_files(paths: Sequence[str | Path], spec: BoardSpec, settings: Detec
     return [r for r in results if r is not None]
 
 
-def _detect(files: list[Path], todo: list[int], spec: BoardSpec, settings: DetectorSettings | None,
-            workers: int | None, executor: str, summarize: Summarize | None,
-            finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
+def _detect(
+    files: list[Path],
+    todo: list[int],
+    spec: BoardSpec,
+    settings: DetectorSettings | None,
+    workers: int | None,
+    executor: str,
+    summarize: Summarize | None,
+    finished: Callable[[int, ImageOutcome, object, int], None],
+) -> None:
     """``classify_files``' detection of the files numbered ``todo``."""
     if not todo:
         return
@@ -331,17 +408,31 @@ def _detect(files: list[Path], todo: list[int], spec: BoardSpec, settings: Detec
                 raise
             pool.shutdown(wait=True)
         else:
-            _collect(worker_pool.process_pool(workers), files, task_chunks(todo, workers), spec, settings, summarize,
-                     finished)
+            _collect(
+                worker_pool.process_pool(workers),
+                files,
+                task_chunks(todo, workers),
+                spec,
+                settings,
+                summarize,
+                finished,
+            )
 
 
-def start_file(path: Path, spec: BoardSpec, workers: int, settings: DetectorSettings | None = None,
-               summarize: Summarize | None = None) -> Future[tuple[ImageOutcome, object]]:
+def start_file(
+    path: Path,
+    spec: BoardSpec,
+    workers: int,
+    settings: DetectorSettings | None = None,
+    summarize: Summarize | None = None,
+) -> Future[tuple[ImageOutcome, object]]:
     """One file's ``classify_files`` task, started now: on the warm process pool when ``workers`` > 1, else
     run in this thread before returning (single-threaded OpenCV either way, so the outcome is the one
     ``classify_files`` gives the file at any job count)."""
     if workers > 1:
-        for attempt in range(2):  # a pool a dead worker broke is replaced once (its earlier files get detected again)
+        for attempt in range(
+            2
+        ):  # a pool a dead worker broke is replaced once (its earlier files get detected again)
             pool = worker_pool.process_pool(workers)
             try:
                 with worker_pool.shielded():
@@ -373,20 +464,27 @@ def task_chunks(todo: Sequence[int], workers: int) -> list[list[int]]:
     start = 0
     while start < len(todo):
         size = max(1, min(CHUNK_MAX_FILES, (len(todo) - start) // (CHUNK_SHARE * max(1, workers))))
-        chunks.append(list(todo[start:start + size]))
+        chunks.append(list(todo[start : start + size]))
         start += size
     return chunks
 
 
-def _classify_chunk(paths: Sequence[Path], spec: BoardSpec, settings: DetectorSettings | None,
-                    summarize: Summarize | None) -> list[tuple[ImageOutcome, object]]:
+def _classify_chunk(
+    paths: Sequence[Path], spec: BoardSpec, settings: DetectorSettings | None, summarize: Summarize | None
+) -> list[tuple[ImageOutcome, object]]:
     """``_classify_task`` of each of ``paths`` in turn: one process-pool task (``task_chunks``)."""
     return [_classify_task(path, spec, settings, summarize) for path in paths]
 
 
-def _collect(pool: Executor, paths: list[Path], chunks: list[list[int]], spec: BoardSpec,
-             settings: DetectorSettings | None, summarize: Summarize | None,
-             finished: Callable[[int, ImageOutcome, object, int], None]) -> None:
+def _collect(
+    pool: Executor,
+    paths: list[Path],
+    chunks: list[list[int]],
+    spec: BoardSpec,
+    settings: DetectorSettings | None,
+    summarize: Summarize | None,
+    finished: Callable[[int, ImageOutcome, object, int], None],
+) -> None:
     """Detect each chunk of file numbers as one task of ``pool``; ``finished`` is called per file, in the
     chunk's order, as each task ends."""
     futures: dict[Future[list[tuple[ImageOutcome, object]]], list[int]] = {}
@@ -406,13 +504,19 @@ def _collect(pool: Executor, paths: list[Path], chunks: list[list[int]], spec: B
         if isinstance(pool, ProcessPoolExecutor):
             worker_pool.discard_if_broken(pool)
         if isinstance(exc, BrokenProcessPool):
-            raise _worker_died([paths[i] for future, chunk in futures.items() if not _succeeded(future)
-                                for i in chunk]) from exc
+            raise _worker_died(
+                [paths[i] for future, chunk in futures.items() if not _succeeded(future) for i in chunk]
+            ) from exc
         raise
 
 
-def _submit(pool: Executor, paths: list[Path], spec: BoardSpec, settings: DetectorSettings | None,
-            summarize: Summarize | None) -> Future[list[tuple[ImageOutcome, object]]]:
+def _submit(
+    pool: Executor,
+    paths: list[Path],
+    spec: BoardSpec,
+    settings: DetectorSettings | None,
+    summarize: Summarize | None,
+) -> Future[list[tuple[ImageOutcome, object]]]:
     if isinstance(pool, ProcessPoolExecutor):  # the results through a file (worker_pool.submit says why)
         return worker_pool.submit(pool, _classify_chunk, paths, spec, settings, summarize)
     return pool.submit(_classify_chunk, paths, spec, settings, summarize)
@@ -430,11 +534,18 @@ def _worker_died(unfinished: Sequence[Path]) -> WorkerDiedError:
         f"a detection worker process died (killed, out of memory, or a crash decoding an image) with "
         f"{len(names)} image(s) not yet detected: {named_list(names, 3)}; nothing was stored",
         "run it again (the workers are started afresh); if it dies again, check the machine's free memory "
-        "(dmesg names the out-of-memory killer) or leave the first image named above out")
+        "(dmesg names the out-of-memory killer) or leave the first image named above out",
+    )
 
 
-def classify_session(paths: Sequence[str | Path], spec: BoardSpec, settings: DetectorSettings | None = None,
-                     workers: int | None = None, progress: ProgressCallback | None = None,
-                     image_size: tuple[int, int] | None = None, executor: str = DEFAULT_EXECUTOR) -> list[ImageOutcome]:
+def classify_session(
+    paths: Sequence[str | Path],
+    spec: BoardSpec,
+    settings: DetectorSettings | None = None,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+    image_size: tuple[int, int] | None = None,
+    executor: str = DEFAULT_EXECUTOR,
+) -> list[ImageOutcome]:
     """Every image's final outcome: ``classify_files`` then ``finalize_session``, in the order of ``paths``."""
     return finalize_session(classify_files(paths, spec, settings, workers, progress, executor), image_size)

@@ -71,10 +71,15 @@ class Region:
             cx, cy, r = self.circle_px
             a = np.linspace(0.0, 2 * np.pi, CIRCLE_VERTICES, endpoint=False)
             r_out = r / math.cos(math.pi / CIRCLE_VERTICES)
-            return np.column_stack([np.clip(cx + r_out * np.cos(a), -0.5, w - 0.5),
-                                    np.clip(cy + r_out * np.sin(a), -0.5, h - 0.5)])
-        u0, v0, u1, v1 = self.box_px if self.kind == "box" and self.box_px is not None else (-0.5, -0.5, w - 0.5,
-                                                                                                   h - 0.5)
+            return np.column_stack(
+                [
+                    np.clip(cx + r_out * np.cos(a), -0.5, w - 0.5),
+                    np.clip(cy + r_out * np.sin(a), -0.5, h - 0.5),
+                ]
+            )
+        u0, v0, u1, v1 = (
+            self.box_px if self.kind == "box" and self.box_px is not None else (-0.5, -0.5, w - 0.5, h - 0.5)
+        )
         return np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], np.float64)
 
     def mask(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -89,8 +94,9 @@ class Region:
         return np.ones(uu.shape, dtype=bool)
 
 
-def parse_region(text: str, image_size: tuple[int, int],
-                 circle_px: tuple[float, float, float] | None) -> Region:
+def parse_region(
+    text: str, image_size: tuple[int, int], circle_px: tuple[float, float, float] | None
+) -> Region:
     """A station's region text -> Region. ``auto``: the circle when one is known, else the image.
 
     Raises:
@@ -105,7 +111,9 @@ def parse_region(text: str, image_size: tuple[int, int],
         return Region("image")
     if word == "circle":
         if circle_px is None:
-            raise ValueError("projection region 'circle' needs an image circle, and none is known for this session")
+            raise ValueError(
+                "projection region 'circle' needs an image circle, and none is known for this session"
+            )
         return Region("circle", circle_px=circle_px)
     try:
         box = tuple(float(x) for x in word.split(","))
@@ -115,8 +123,9 @@ def parse_region(text: str, image_size: tuple[int, int],
         raise ValueError(f"projection region '{text}' is not four finite numbers U0,V0,U1,V1")
     u0, v0, u1, v1 = box
     if not (0 <= u0 < u1 <= w and 0 <= v0 < v1 <= h):
-        raise ValueError(f"projection region ({u0:g}, {v0:g})-({u1:g}, {v1:g}) px is not a box inside the "
-                         f"{w}x{h} image")
+        raise ValueError(
+            f"projection region ({u0:g}, {v0:g})-({u1:g}, {v1:g}) px is not a box inside the {w}x{h} image"
+        )
     return Region("box", box_px=(u0, v0, u1, v1))
 
 
@@ -127,8 +136,12 @@ def check_threshold(threshold_px: float) -> float:
     return float(threshold_px)
 
 
-def solve_for_gate(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
-                   image_size: tuple[int, int], model: str | None) -> IntrinsicsSolution:
+def solve_for_gate(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    model: str | None,
+) -> IntrinsicsSolution:
     """The session solved with ``model`` (with uncertainty). None (a capture that does not know the lens):
     k1k2, or fisheye when it fits at least FISHEYE_GAIN better (--model auto's 10 % rule, core.intrinsics.
     model_select): a fisheye fitted to a pinhole lens fits its corners as well and extrapolates to the image
@@ -154,23 +167,40 @@ def solve_for_gate(object_points: Sequence[np.ndarray], image_points: Sequence[n
     return pinhole
 
 
-def projection_gate(solution: IntrinsicsSolution | NumericalError, image_size: tuple[int, int], region: Region,
-                    threshold_px: float) -> GateResult:
+def projection_gate(
+    solution: IntrinsicsSolution | NumericalError,
+    image_size: tuple[int, int],
+    region: Region,
+    threshold_px: float,
+) -> GateResult:
     """The gate (module docstring) from a solve with uncertainty, or the error that stopped it (value 0 then:
     nothing was measured; the reason says so)."""
     limit = check_threshold(threshold_px)
     where = region.describe()
     if isinstance(solution, NumericalError):
-        return GateResult("projection", False, 0.0, limit, f"the session cannot be solved: {solution.message}",
-                          "projection.unsolvable", solution.hint or "capture views tilted 20-40 deg in at least "
-                          "three directions covering the image", {"region": where})
+        return GateResult(
+            "projection",
+            False,
+            0.0,
+            limit,
+            f"the session cannot be solved: {solution.message}",
+            "projection.unsolvable",
+            solution.hint or "capture views tilted 20-40 deg in at least three directions covering the image",
+            {"region": where},
+        )
     cov = solution.covariance
     if cov is None or cov.covariance is None or solution.sigma_refused_reason:
         reason = solution.sigma_refused_reason or "no covariance"
-        return GateResult("projection", False, 0.0, limit,
-                          f"the {solution.model} solve has no uncertainty to propagate: {reason}",
-                          "projection.no_covariance", "capture views tilted 20-40 deg in at least three directions",
-                          {"region": where, "model": solution.model})
+        return GateResult(
+            "projection",
+            False,
+            0.0,
+            limit,
+            f"the {solution.model} solve has no uncertainty to propagate: {reason}",
+            "projection.no_covariance",
+            "capture views tilted 20-40 deg in at least three directions",
+            {"region": where, "model": solution.model},
+        )
     w, h = image_size
     grid = (max(MIN_GRID[0], round(w / GRID_STEP_PX)), max(MIN_GRID[1], round(h / GRID_STEP_PX)))
     u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
@@ -179,9 +209,17 @@ def projection_gate(solution: IntrinsicsSolution | NumericalError, image_size: t
     # (issue 22, "Sigmas that hold on real data") is stored and reported, not yet judged here
     jacobian = cov.jacobian_covariance
     assert jacobian is not None
-    umap = projection_uncertainty(solution.camera_matrix, solution.dist_coeffs, jacobian, cov.names,
-                                  solution.aspect_ratio, image_size, grid, fisheye=solution.model == "fisheye",
-                                  rotation_fit=region.mask(u, v))
+    umap = projection_uncertainty(
+        solution.camera_matrix,
+        solution.dist_coeffs,
+        jacobian,
+        cov.names,
+        solution.aspect_ratio,
+        image_size,
+        grid,
+        fisheye=solution.model == "fisheye",
+        rotation_fit=region.mask(u, v),
+    )
     inside = region.mask(umap.u_px, umap.v_px)
     beyond = inside & np.isnan(umap.sigma_px)  # a fisheye's rays past 88 deg off-axis: no projection to judge
     inside &= ~beyond
@@ -192,18 +230,28 @@ def projection_gate(solution: IntrinsicsSolution | NumericalError, image_size: t
     if beyond.any():
         detail["not_judged_beyond_88_deg"] = int(beyond.sum())
     over = _cells_over(sigma, umap.u_px, umap.v_px, image_size, limit)
-    message = (f"worst projection one-sigma over {where}: {worst:.3g} px ({solution.model} lens; limit {limit:g} px)")
+    message = (
+        f"worst projection one-sigma over {where}: {worst:.3g} px ({solution.model} lens; limit {limit:g} px)"
+    )
     if worst <= limit:
         return GateResult("projection", True, worst, limit, message, detail=detail)
     detail["uncertain_cells"] = over
-    return GateResult("projection", False, worst, limit, f"{message}; uncertain at the {', '.join(over)}",
-                      "projection.uncertain",
-                      f"capture views with the board in the {', '.join(over)} (tilted 20-40 deg), where the "
-                      "calibration does not yet predict the lens", detail)
+    return GateResult(
+        "projection",
+        False,
+        worst,
+        limit,
+        f"{message}; uncertain at the {', '.join(over)}",
+        "projection.uncertain",
+        f"capture views with the board in the {', '.join(over)} (tilted 20-40 deg), where the "
+        "calibration does not yet predict the lens",
+        detail,
+    )
 
 
-def _cells_over(sigma: np.ndarray, u: np.ndarray, v: np.ndarray, image_size: tuple[int, int],
-                limit: float) -> list[str]:
+def _cells_over(
+    sigma: np.ndarray, u: np.ndarray, v: np.ndarray, image_size: tuple[int, int], limit: float
+) -> list[str]:
     """Names of the 3 x 3 cells holding a grid point over ``limit``, worst first."""
     w, h = image_size
     ci = np.clip((u / w * COVERAGE_GRID).astype(int), 0, COVERAGE_GRID - 1)

@@ -51,8 +51,13 @@ MIN_TILT_CORNERS = 8
 TILT_NOISE_FLOOR_PX = 0.2  # corner noise assumed at least this, even when the session fits better
 TILT_SIGMA_MAX_DEG = 2.0
 DISTINCT_DIRECTION_DEG = 90.0
-_LENS_FLAGS = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
-               | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
+_LENS_FLAGS = (
+    cv2.CALIB_USE_INTRINSIC_GUESS
+    | cv2.CALIB_FIX_PRINCIPAL_POINT
+    | cv2.CALIB_FIX_ASPECT_RATIO
+    | cv2.CALIB_ZERO_TANGENT_DIST
+    | cv2.CALIB_FIX_K3
+)
 _MAX_CENTRE_SHIFT_FRAC = 0.2  # a principal point farther off the centre than this is a failed fit
 _MAX_LENS_RMS_PX = 10.0  # above this the small lens model explains nothing; fall back to a pinhole
 # above this fit RMS the small model is tried against the equidistant fisheye lens, the better one kept
@@ -112,7 +117,9 @@ def normal_tilt_direction(rvec: np.ndarray) -> tuple[float, float]:
     return tilt, math.degrees(math.atan2(m[1], m[0])) % 360.0
 
 
-def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, lens: SessionLens) -> float:
+def normal_sigma_deg(
+    object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, lens: SessionLens
+) -> float:
     """One-sigma (deg) of the board normal of one view: pose covariance from the Jacobian, intrinsics held.
 
     Args:
@@ -122,7 +129,7 @@ def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarr
     info = J.T @ J
     if not np.isfinite(info).all() or np.linalg.cond(info) > 1e15:
         return math.inf
-    cov_r = lens.noise_px ** 2 * np.linalg.inv(info)[:3, :3]
+    cov_r = lens.noise_px**2 * np.linalg.inv(info)[:3, :3]
     r0 = np.asarray(rvec, np.float64).reshape(3)
     n0 = cv2.Rodrigues(r0)[0][:, 2]
     eps = 1e-7
@@ -130,8 +137,9 @@ def normal_sigma_deg(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarr
     return math.degrees(math.sqrt(max(0.0, float(np.trace(Jn @ cov_r @ Jn.T)))))
 
 
-def _project(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, lens: SessionLens
-             ) -> tuple[np.ndarray, np.ndarray]:
+def _project(
+    object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, lens: SessionLens
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2) px of the board points through ``lens`` and the (2N, 6) Jacobian on [rvec tvec]."""
     obj = np.asarray(object_points, np.float64).reshape(-1, 1, 3)
     r = np.asarray(rvec, np.float64).reshape(3, 1)
@@ -149,9 +157,13 @@ def nominal_camera(image_size: tuple[int, int], focal_px: float) -> np.ndarray:
     return np.array([[focal_px, 0.0, (width - 1) / 2], [0.0, focal_px, (height - 1) / 2], [0.0, 0.0, 1.0]])
 
 
-def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
-                     image_size: tuple[int, int], focal_px: float | None, focal_source: str
-                     ) -> tuple[SessionLens, list[np.ndarray], list[np.ndarray]]:
+def fit_session_lens(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    focal_px: float | None,
+    focal_source: str,
+) -> tuple[SessionLens, list[np.ndarray], list[np.ndarray]]:
     """The session's small lens model and every view's pose through it (see the module docstring).
 
     Args:
@@ -166,23 +178,37 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
     fit = None
     if focal_source == "session":
         # c free; kept only when it is significantly off the centre (else a weak session lets c wander)
-        fit = _calibrate(object_points, image_points, image_size, K0, _LENS_FLAGS & ~cv2.CALIB_FIX_PRINCIPAL_POINT)
-        if fit is not None and np.all(np.abs(fit[1][:2, 2] - K0[:2, 2])
-                                      < _CENTRE_SIGNIFICANT_SIGMA * _centre_sigma_px(object_points, image_points, fit)):
+        fit = _calibrate(
+            object_points, image_points, image_size, K0, _LENS_FLAGS & ~cv2.CALIB_FIX_PRINCIPAL_POINT
+        )
+        if fit is not None and np.all(
+            np.abs(fit[1][:2, 2] - K0[:2, 2])
+            < _CENTRE_SIGNIFICANT_SIGMA * _centre_sigma_px(object_points, image_points, fit)
+        ):
             fit = None
     if fit is None:
-        fit = _calibrate(object_points, image_points, image_size, K0,
-                         _LENS_FLAGS | (0 if focal_source == "session" else cv2.CALIB_FIX_FOCAL_LENGTH))
+        fit = _calibrate(
+            object_points,
+            image_points,
+            image_size,
+            K0,
+            _LENS_FLAGS | (0 if focal_source == "session" else cv2.CALIB_FIX_FOCAL_LENGTH),
+        )
     plausible = fit is not None and (
-        fit[0] < _MAX_LENS_RMS_PX and 0.2 * diag <= fit[1][0, 0] <= 5 * diag and abs(fit[2][0]) < 2.0
-        and bool(np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size))))
+        fit[0] < _MAX_LENS_RMS_PX
+        and 0.2 * diag <= fit[1][0, 0] <= 5 * diag
+        and abs(fit[2][0]) < 2.0
+        and bool(np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)))
+    )
     if not plausible or (fit is not None and fit[0] > FISHEYE_TRY_RMS_PX):
         fisheye = _fit_fisheye(object_points, image_points, image_size)
         if fisheye is not None and (not plausible or (fit is not None and fisheye[0] < fit[0])):
             rms, K, D, rvecs, tvecs = fisheye
             lens = SessionLens(K, D, "fisheye", max(TILT_NOISE_FLOOR_PX, rms / math.sqrt(2.0)))
-            poses = [best_pose(o, i, lens, r, t)
-                     for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)]
+            poses = [
+                best_pose(o, i, lens, r, t)
+                for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)
+            ]
             return lens, [r for r, _ in poses], [t for _, t in poses]
     if not plausible:  # neither lens model fitted: read tilt through a pinhole
         lens = SessionLens(K0, np.zeros(5), "pinhole", TILT_NOISE_FLOOR_PX)
@@ -191,15 +217,19 @@ def fit_session_lens(object_points: Sequence[np.ndarray], image_points: Sequence
     assert fit is not None
     rms, K, D, rvecs, tvecs = fit
     lens = SessionLens(K, D, focal_source, max(TILT_NOISE_FLOOR_PX, rms / math.sqrt(2.0)))
-    poses = [best_pose(o, i, lens, r, t) for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)]
+    poses = [
+        best_pose(o, i, lens, r, t)
+        for o, i, r, t in zip(object_points, image_points, rvecs, tvecs, strict=True)
+    ]
     return lens, [r for r, _ in poses], [t for _, t in poses]
 
 
 _Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
 
 
-def _fit_fisheye(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
-                 image_size: tuple[int, int]) -> _Fit | None:
+def _fit_fisheye(
+    object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], image_size: tuple[int, int]
+) -> _Fit | None:
     """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.intrinsics.fisheye_solve), or None
     when it cannot be initialised, fails or lands off the image. Asked through ``solve_intrinsics``, which
     remembers it: the projection gate solves the same views with the same fisheye model when the session is
@@ -214,21 +244,43 @@ def _fit_fisheye(object_points: Sequence[np.ndarray], image_points: Sequence[np.
     except (CalibctlError, cv2.error, np.linalg.LinAlgError):
         return None
     K = np.asarray(sol.camera_matrix, np.float64)
-    if not (math.isfinite(sol.rms_px) and sol.rms_px < _MAX_LENS_RMS_PX and bool(np.all(
-            np.abs(K[:2, 2] - nominal_camera(image_size, 1.0)[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)))):
+    if not (
+        math.isfinite(sol.rms_px)
+        and sol.rms_px < _MAX_LENS_RMS_PX
+        and bool(
+            np.all(
+                np.abs(K[:2, 2] - nominal_camera(image_size, 1.0)[:2, 2])
+                <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)
+            )
+        )
+    ):
         return None
-    return (float(sol.rms_px), K, np.asarray(sol.dist_coeffs, np.float64).copy(),
-            [np.ravel(r) for r in sol.rvecs], [np.ravel(t) for t in sol.tvecs])
+    return (
+        float(sol.rms_px),
+        K,
+        np.asarray(sol.dist_coeffs, np.float64).copy(),
+        [np.ravel(r) for r in sol.rvecs],
+        [np.ravel(t) for t in sol.tvecs],
+    )
 
 
-def _calibrate(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
-               image_size: tuple[int, int], K0: np.ndarray, flags: int) -> _Fit | None:
+def _calibrate(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    K0: np.ndarray,
+    flags: int,
+) -> _Fit | None:
     """(rms px, K, dist (5,), rvecs, tvecs) of cv2.calibrateCamera, or None when it fails or is not finite."""
     try:
         rms, K, D, rvecs, tvecs = cv2.calibrateCamera(
             [np.asarray(o, np.float32).reshape(-1, 3) for o in object_points],
             [np.asarray(i, np.float32).reshape(-1, 2) for i in image_points],
-            (int(image_size[0]), int(image_size[1])), K0.copy(), np.zeros(5), flags=flags)
+            (int(image_size[0]), int(image_size[1])),
+            K0.copy(),
+            np.zeros(5),
+            flags=flags,
+        )
     except cv2.error:
         return None
     K, D = np.asarray(K, np.float64), np.asarray(D, np.float64).ravel()[:5]
@@ -237,23 +289,42 @@ def _calibrate(object_points: Sequence[np.ndarray], image_points: Sequence[np.nd
     return float(rms), K, D, [np.ravel(r) for r in rvecs], [np.ravel(t) for t in tvecs]
 
 
-def _centre_sigma_px(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], fit: _Fit) -> np.ndarray:
+def _centre_sigma_px(
+    object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], fit: _Fit
+) -> np.ndarray:
     """(2,) one-sigma of (cx, cy) of a c-free fit, poses eliminated (calibctl.core.intrinsics.covariance): linear in the
     view count, where OpenCV's calibrateCameraExtended inverts every pose too (5 s at 100 views)."""
     _, K, D, rvecs, tvecs = fit
     objs = [np.asarray(o, np.float64).reshape(-1, 3) for o in object_points]
-    residuals = [np.asarray(i, np.float64).reshape(-1, 2) - cv2.projectPoints(o, r, t, K, D)[0].reshape(-1, 2)
-                 for o, i, r, t in zip(objs, image_points, rvecs, tvecs, strict=True)]
+    residuals = [
+        np.asarray(i, np.float64).reshape(-1, 2) - cv2.projectPoints(o, r, t, K, D)[0].reshape(-1, 2)
+        for o, i, r, t in zip(objs, image_points, rvecs, tvecs, strict=True)
+    ]
     dof = 2 * sum(len(o) for o in objs) - 6 * len(objs) - 5
-    cov = intrinsic_covariance(objs, np.array(rvecs), np.array(tvecs), K, D, residuals, ("fx", "fy", "cx", "cy"),
-                               ("k1", "k2"), float(K[0, 0] / K[1, 1]), max(dof, 1))
+    cov = intrinsic_covariance(
+        objs,
+        np.array(rvecs),
+        np.array(tvecs),
+        K,
+        D,
+        residuals,
+        ("fx", "fy", "cx", "cy"),
+        ("k1", "k2"),
+        float(K[0, 0] / K[1, 1]),
+        max(dof, 1),
+    )
     if cov.covariance is None:
         return np.full(2, np.inf)
     return np.sqrt(np.diag(cov.covariance))[[cov.names.index("cx"), cov.names.index("cy")]]
 
 
-def best_pose(object_points: np.ndarray, image_points: np.ndarray, lens: SessionLens,
-              rvec: np.ndarray | None = None, tvec: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def best_pose(
+    object_points: np.ndarray,
+    image_points: np.ndarray,
+    lens: SessionLens,
+    rvec: np.ndarray | None = None,
+    tvec: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The view's pose through ``lens`` with the lowest reprojection error: both planar IPPE solutions
     and the given one. A plain LM from a homography start can settle in the mirrored local minimum (a
     27 deg view read 10 deg); IPPE returns both branches of the planar ambiguity."""
@@ -263,11 +334,13 @@ def best_pose(object_points: np.ndarray, image_points: np.ndarray, lens: Session
     with contextlib.suppress(cv2.error):
         if lens.fisheye:  # IPPE on the corners turned into pinhole rays (normalised, K = I)
             rays = cv2.fisheye.undistortPoints(img.reshape(-1, 1, 2), lens.camera_matrix, lens.dist_coeffs)
-            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, rays.reshape(-1, 2), np.eye(3), None,
-                                                     flags=cv2.SOLVEPNP_IPPE)
+            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+                obj, rays.reshape(-1, 2), np.eye(3), None, flags=cv2.SOLVEPNP_IPPE
+            )
         else:
-            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, lens.camera_matrix, lens.dist_coeffs,
-                                                     flags=cv2.SOLVEPNP_IPPE)
+            _, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+                obj, img, lens.camera_matrix, lens.dist_coeffs, flags=cv2.SOLVEPNP_IPPE
+            )
         candidates += [(np.ravel(r), np.ravel(t)) for r, t in zip(rvecs, tvecs, strict=True)]
     if not candidates and lens.fisheye:
         pose = fisheye_pose(obj, img, lens.camera_matrix, lens.dist_coeffs)
@@ -286,27 +359,43 @@ def best_pose(object_points: np.ndarray, image_points: np.ndarray, lens: Session
     return np.asarray(r, np.float64).ravel(), np.asarray(t, np.float64).ravel()
 
 
-def session_tilts(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
-                  image_size: tuple[int, int], focal_px: float | None, focal_source: str
-                  ) -> tuple[list[ViewTilt], SessionLens | None]:
+def session_tilts(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    focal_px: float | None,
+    focal_source: str,
+) -> tuple[list[ViewTilt], SessionLens | None]:
     """Tilt, direction and one-sigma of every view (None + reason for a view that cannot give one).
 
     Args and focal_source as ``fit_session_lens``. Returns (per-view tilts, the lens; None when no view
     has enough corners).
     """
     enough = [i for i, o in enumerate(object_points) if len(o) >= MIN_TILT_CORNERS]
-    tilts = [ViewTilt(None, None, None, f"too few corners ({len(o)}, need {MIN_TILT_CORNERS})")
-             for o in object_points]
+    tilts = [
+        ViewTilt(None, None, None, f"too few corners ({len(o)}, need {MIN_TILT_CORNERS})")
+        for o in object_points
+    ]
     if not enough:
         return tilts, None
-    lens, rvecs, tvecs = fit_session_lens([object_points[i] for i in enough], [image_points[i] for i in enough],
-                                          image_size, focal_px, focal_source)
+    lens, rvecs, tvecs = fit_session_lens(
+        [object_points[i] for i in enough],
+        [image_points[i] for i in enough],
+        image_size,
+        focal_px,
+        focal_source,
+    )
     for i, rvec, tvec in zip(enough, rvecs, tvecs, strict=True):
         sigma = normal_sigma_deg(object_points[i], rvec, tvec, lens)
         if sigma > TILT_SIGMA_MAX_DEG:
             shown = "unbounded" if not math.isfinite(sigma) else f"+/- {sigma:.1f} deg"
-            tilts[i] = ViewTilt(None, None, None, f"corners span too small an area to read tilt ({shown} at "
-                                f"{lens.noise_px:.2f} px corner noise, limit {TILT_SIGMA_MAX_DEG:.0f} deg)")
+            tilts[i] = ViewTilt(
+                None,
+                None,
+                None,
+                f"corners span too small an area to read tilt ({shown} at "
+                f"{lens.noise_px:.2f} px corner noise, limit {TILT_SIGMA_MAX_DEG:.0f} deg)",
+            )
             continue
         tilt, direction = normal_tilt_direction(rvec)
         tilts[i] = ViewTilt(tilt, direction, sigma)
@@ -319,7 +408,9 @@ def angular_gap_deg(a: float, b: float) -> float:
     return min(d, 360.0 - d)
 
 
-def distinct_directions(directions_deg: Sequence[float], min_gap_deg: float = DISTINCT_DIRECTION_DEG) -> list[float]:
+def distinct_directions(
+    directions_deg: Sequence[float], min_gap_deg: float = DISTINCT_DIRECTION_DEG
+) -> list[float]:
     """The largest subset of directions that are pairwise at least ``min_gap_deg`` apart (ascending).
 
     On a circle, for a fixed first element the greedy "next one at least min_gap further" chain is the
@@ -352,8 +443,14 @@ def directions_to_add(have_deg: Sequence[float], candidates_deg: Sequence[float]
         free = [c for c in candidates_deg if c not in chosen]
         if not free:
             break
-        best = max(free, key=lambda c: (len(distinct_directions([*taken, c])),
-                                        min((angular_gap_deg(c, t) for t in taken), default=180.0), -c))
+        best = max(
+            free,
+            key=lambda c: (
+                len(distinct_directions([*taken, c])),
+                min((angular_gap_deg(c, t) for t in taken), default=180.0),
+                -c,
+            ),
+        )
         chosen.append(best)
         taken.append(best)
     return chosen

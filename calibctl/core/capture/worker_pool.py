@@ -52,8 +52,17 @@ from typing import Any, TypeVar
 
 from calibctl.core.blas_threads import available_cores, limit_this_process
 
-__all__ = ["available_cores", "discard_if_broken", "is_warm", "process_pool", "shielded", "shutdown_pool",
-           "start_server", "submit", "warm"]
+__all__ = [
+    "available_cores",
+    "discard_if_broken",
+    "is_warm",
+    "process_pool",
+    "shielded",
+    "shutdown_pool",
+    "start_server",
+    "submit",
+    "warm",
+]
 
 R = TypeVar("R")
 

@@ -39,7 +39,9 @@ from calibctl.core.intrinsics.solve import residual_rms_px
 from calibctl.core.intrinsics.validation import N_OCTANTS, N_RINGS, refit_pose, residual_breakdown
 
 DEFAULT_ALPHA = 0.005  # whole-check false-fail probability under the noise model (target <= 1 %)
-SHIFT_SHARE = 0.8  # of alpha for the delta model (what a focal or principal-point change does); the rest: regions
+SHIFT_SHARE = (
+    0.8  # of alpha for the delta model (what a focal or principal-point change does); the rest: regions
+)
 MIN_REGION_CORNERS = 30  # fewer corners in a region (fresh or stored) and it is reported, not tested
 POSE_PARAMETERS = 6
 MIN_CHECK_VIEWS = 10
@@ -172,10 +174,18 @@ def holm_levels(p_values: Sequence[float], alpha: float) -> list[float]:
     return levels
 
 
-def recheck(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-            camera_matrix: np.ndarray, dist_coeffs: np.ndarray, image_size: tuple[int, int],
-            reference: Reference, stored_sigma: dict[str, float], alpha: float = DEFAULT_ALPHA,
-            model: str = DEFAULT_MODEL, stored_covariance: np.ndarray | None = None) -> RecheckResult:
+def recheck(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    reference: Reference,
+    stored_sigma: dict[str, float],
+    alpha: float = DEFAULT_ALPHA,
+    model: str = DEFAULT_MODEL,
+    stored_covariance: np.ndarray | None = None,
+) -> RecheckResult:
     """Fit each fresh view's pose with the stored model and test its residuals against ``reference``.
 
     Args:
@@ -201,19 +211,40 @@ def recheck(object_points_per_view: Sequence[np.ndarray], image_points_per_view:
         rvecs.append(rvec)
         tvecs.append(tvec)
         R = rotation_from_rotvec(rvec)
-        distances.append(float(np.linalg.norm(R @ np.asarray(obj, np.float64).reshape(-1, 3).mean(axis=0) + tvec)))
-    regions = _region_tests(image_points_per_view, residuals, (float(K[0, 2]), float(K[1, 2])), image_size,
-                            reference, alpha * (1 - SHIFT_SHARE))
+        distances.append(
+            float(np.linalg.norm(R @ np.asarray(obj, np.float64).reshape(-1, 3).mean(axis=0) + tvec))
+        )
+    regions = _region_tests(
+        image_points_per_view,
+        residuals,
+        (float(K[0, 2]), float(K[1, 2])),
+        image_size,
+        reference,
+        alpha * (1 - SHIFT_SHARE),
+    )
     covariance = stored_delta_covariance(stored_sigma) if stored_covariance is None else stored_covariance
-    shifts = intrinsic_shifts(object_points_per_view, K, D, rvecs, tvecs, residuals, covariance,
-                              alpha * SHIFT_SHARE, model)
-    return RecheckResult(np.array([residual_rms_px(r) for r in residuals]), np.array(rvecs), np.array(tvecs),
-                         np.array(distances), tuple(regions), shifts, alpha)
+    shifts = intrinsic_shifts(
+        object_points_per_view, K, D, rvecs, tvecs, residuals, covariance, alpha * SHIFT_SHARE, model
+    )
+    return RecheckResult(
+        np.array([residual_rms_px(r) for r in residuals]),
+        np.array(rvecs),
+        np.array(tvecs),
+        np.array(distances),
+        tuple(regions),
+        shifts,
+        alpha,
+    )
 
 
-def _region_tests(image_points_per_view: Sequence[np.ndarray], residuals: list[np.ndarray],
-                  principal_point_px: tuple[float, float], image_size: tuple[int, int], reference: Reference,
-                  alpha: float) -> list[RegionVerdict]:
+def _region_tests(
+    image_points_per_view: Sequence[np.ndarray],
+    residuals: list[np.ndarray],
+    principal_point_px: tuple[float, float],
+    image_size: tuple[int, int],
+    reference: Reference,
+    alpha: float,
+) -> list[RegionVerdict]:
     """Overall, ring and octant variance-ratio tests, dispersion-corrected, Holm over the testable ones."""
     n_views = len(residuals)
     all_res = np.concatenate(residuals)
@@ -221,10 +252,26 @@ def _region_tests(image_points_per_view: Sequence[np.ndarray], residuals: list[n
     parts = residual_breakdown(image_points_per_view, residuals, principal_point_px, image_size, edges)
     candidates = [("overall", residual_rms_px(all_res), reference.rms_px, len(all_res), reference.n_corners)]
     if reference.ring_edges_px is not None:
-        candidates += [(f"ring {i + 1}", float(parts.ring_rms_px[i]), float(reference.ring_rms_px[i]),
-                        int(parts.ring_counts[i]), int(reference.ring_counts[i])) for i in range(N_RINGS)]
-    candidates += [(f"octant {i}", float(parts.octant_rms_px[i]), float(reference.octant_rms_px[i]),
-                    int(parts.octant_counts[i]), int(reference.octant_counts[i])) for i in range(N_OCTANTS)]
+        candidates += [
+            (
+                f"ring {i + 1}",
+                float(parts.ring_rms_px[i]),
+                float(reference.ring_rms_px[i]),
+                int(parts.ring_counts[i]),
+                int(reference.ring_counts[i]),
+            )
+            for i in range(N_RINGS)
+        ]
+    candidates += [
+        (
+            f"octant {i}",
+            float(parts.octant_rms_px[i]),
+            float(reference.octant_rms_px[i]),
+            int(parts.octant_counts[i]),
+            int(reference.octant_counts[i]),
+        )
+        for i in range(N_OCTANTS)
+    ]
     phi = view_dispersion(residuals)
     share_check = n_views / max(len(all_res), 1)  # pose parameters charged per corner
     share_ref = reference.n_views / max(reference.n_corners, 1)
@@ -249,8 +296,13 @@ def _region_tests(image_points_per_view: Sequence[np.ndarray], residuals: list[n
 
 def _testable(c: tuple[str, float, float, int, int]) -> bool:
     _, rms, ref_rms, n, n_ref = c
-    return (n >= MIN_REGION_CORNERS and n_ref >= MIN_REGION_CORNERS
-            and math.isfinite(rms) and math.isfinite(ref_rms) and ref_rms > 0)
+    return (
+        n >= MIN_REGION_CORNERS
+        and n_ref >= MIN_REGION_CORNERS
+        and math.isfinite(rms)
+        and math.isfinite(ref_rms)
+        and ref_rms > 0
+    )
 
 
 def distance_ratio(board_distance_m: np.ndarray, reference_m: float) -> tuple[float, float]:

@@ -57,7 +57,9 @@ class ParameterShift:
         return abs(self.z) <= self.z_limit
 
 
-def _perturbed(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, k: int, h: float) -> tuple[np.ndarray, np.ndarray]:
+def _perturbed(
+    camera_matrix: np.ndarray, dist_coeffs: np.ndarray, k: int, h: float
+) -> tuple[np.ndarray, np.ndarray]:
     K = camera_matrix.copy()
     D = dist_coeffs.copy()
     if k == 0:
@@ -70,8 +72,14 @@ def _perturbed(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, k: int, h: fl
     return K, D
 
 
-def view_jacobians(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, camera_matrix: np.ndarray,
-                   dist_coeffs: np.ndarray, model: str) -> tuple[np.ndarray, np.ndarray]:
+def view_jacobians(
+    object_points: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str,
+) -> tuple[np.ndarray, np.ndarray]:
     """(2N, 6) d(projection)/d(rvec, tvec) and (2N, 5) d/d(focal scale, cx, cy, k1, k2), rows u0, v0, u1, ...
 
     Args:
@@ -96,10 +104,17 @@ def view_jacobians(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
     return J_pose, J_int
 
 
-def intrinsic_shifts(object_points_per_view: Sequence[np.ndarray], camera_matrix: np.ndarray,
-                     dist_coeffs: np.ndarray, rvecs: Sequence[np.ndarray], tvecs: Sequence[np.ndarray],
-                     residuals_px: Sequence[np.ndarray], stored_covariance: np.ndarray, alpha: float,
-                     model: str = DEFAULT_MODEL) -> tuple[ParameterShift, ...]:
+def intrinsic_shifts(
+    object_points_per_view: Sequence[np.ndarray],
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    rvecs: Sequence[np.ndarray],
+    tvecs: Sequence[np.ndarray],
+    residuals_px: Sequence[np.ndarray],
+    stored_covariance: np.ndarray,
+    alpha: float,
+    model: str = DEFAULT_MODEL,
+) -> tuple[ParameterShift, ...]:
     """The delta step and its test (see module docstring). Empty when the views do not constrain it.
 
     Args:
@@ -134,8 +149,10 @@ def intrinsic_shifts(object_points_per_view: Sequence[np.ndarray], camera_matrix
     except np.linalg.LinAlgError:
         return ()  # the fresh views do not constrain the intrinsics at all (e.g. one square-on view)
     z_limit = NormalDist().inv_cdf(1.0 - alpha / (2 * len(SHIFT_NAMES)))
-    return tuple(ParameterShift(name, float(step[i]), math.sqrt(max(float(cov[i, i]), 1e-30)), z_limit)
-                 for i, name in enumerate(SHIFT_NAMES))
+    return tuple(
+        ParameterShift(name, float(step[i]), math.sqrt(max(float(cov[i, i]), 1e-30)), z_limit)
+        for i, name in enumerate(SHIFT_NAMES)
+    )
 
 
 def stored_delta_covariance(sigma: dict[str, float]) -> np.ndarray:

@@ -83,8 +83,12 @@ class Projection:
     valid: np.ndarray
 
 
-def project(lens: Lens, points: np.ndarray, rvec: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
-            tvec: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0)) -> Projection:
+def project(
+    lens: Lens,
+    points: np.ndarray,
+    rvec: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+    tvec: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0),
+) -> Projection:
     """Project (M, 3) camera-frame points moved by (rvec, tvec) first: q = proj(R p + t)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     r = np.asarray(rvec, dtype=np.float64).reshape(3, 1)
@@ -106,11 +110,15 @@ def project(lens: Lens, points: np.ndarray, rvec: Sequence[float] | np.ndarray =
         J_pose = J[:, :6]
         J_int = None
         if lens.covariance is not None:
-            free_k = (["fx"] if lens.aspect is not None else []) + [n for n in lens.parameters if n in _K_NAMES]
+            free_k = (["fx"] if lens.aspect is not None else []) + [
+                n for n in lens.parameters if n in _K_NAMES
+            ]
             free_d = [n for n in lens.parameters if n not in _K_NAMES]
             J_int, names = intrinsic_columns(J, free_k, free_d, lens.aspect)
             if list(names) != list(lens.parameters):
-                raise ValueError(f"covariance parameters {list(lens.parameters)} do not match the model's {list(names)}")
+                raise ValueError(
+                    f"covariance parameters {list(lens.parameters)} do not match the model's {list(names)}"
+                )
         valid = moved[:, 2] > 0
     m = len(pts)
     J_pose = J_pose.reshape(m, 2, 6)
@@ -155,6 +163,13 @@ def lens_from_solution(solution: IntrinsicsSolution) -> Lens:
     """The Lens of an intrinsic solve (tests and benchmarks compare solves without a store)."""
     cov = solution.covariance
     matrix = None if cov is None or cov.covariance is None else np.asarray(cov.covariance, dtype=np.float64)
-    return Lens(np.asarray(solution.camera_matrix, dtype=np.float64), np.asarray(solution.dist_coeffs, dtype=np.float64),
-                (int(solution.image_size[0]), int(solution.image_size[1])), is_fisheye(solution.model), matrix,
-                tuple(cov.names) if matrix is not None and cov is not None else (), solution.aspect_ratio, solution.model)
+    return Lens(
+        np.asarray(solution.camera_matrix, dtype=np.float64),
+        np.asarray(solution.dist_coeffs, dtype=np.float64),
+        (int(solution.image_size[0]), int(solution.image_size[1])),
+        is_fisheye(solution.model),
+        matrix,
+        tuple(cov.names) if matrix is not None and cov is not None else (),
+        solution.aspect_ratio,
+        solution.model,
+    )

@@ -118,10 +118,19 @@ def _chi_square(d: np.ndarray, G: np.ndarray, alpha: float) -> ChiSquare:
     rest = (flat_d - Uk @ c).reshape(m, 2)
     rest_mag = np.linalg.norm(rest, axis=1)
     if dof == 0:
-        return ChiSquare(stat, 0, 1.0, 0.0, False, float(rest_mag.max()), float(np.sqrt(np.mean(rest_mag**2))))
+        return ChiSquare(
+            stat, 0, 1.0, 0.0, False, float(rest_mag.max()), float(np.sqrt(np.mean(rest_mag**2)))
+        )
     p = chi2_sf(stat, dof)
-    return ChiSquare(stat, dof, p, chi2_quantile(1.0 - alpha, dof), p < alpha, float(rest_mag.max()),
-                     float(np.sqrt(np.mean(rest_mag**2))))
+    return ChiSquare(
+        stat,
+        dof,
+        p,
+        chi2_quantile(1.0 - alpha, dof),
+        p < alpha,
+        float(rest_mag.max()),
+        float(np.sqrt(np.mean(rest_mag**2))),
+    )
 
 
 def _per_sample(d: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -129,13 +138,15 @@ def _per_sample(d: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     C = np.einsum("mik,mjk->mij", G, G)
     w, V = np.linalg.eigh(C)
     sigma = np.sqrt(np.clip(w[:, -1], 0.0, None))
-    floor = (SPREAD_FLOOR_PX ** 2) + 1e-12 * w[:, -1:]
+    floor = (SPREAD_FLOOR_PX**2) + 1e-12 * w[:, -1:]
     coords = np.einsum("mji,mj->mi", V, d)
     z = np.sqrt(np.sum(coords**2 / np.maximum(w, floor), axis=1))
     return sigma, z
 
 
-def _fit_motion(b: Lens, points: np.ndarray, target_px: np.ndarray, translate: bool) -> tuple[np.ndarray, Projection]:
+def _fit_motion(
+    b: Lens, points: np.ndarray, target_px: np.ndarray, translate: bool
+) -> tuple[np.ndarray, Projection]:
     """Gauss-Newton on B's pose (rvec, and tvec when ``translate``) minimising |q_B - target|^2."""
     x = np.zeros(6)
     cols = slice(0, 6) if translate else slice(0, 3)
@@ -178,8 +189,9 @@ def _field(d: np.ndarray, G: np.ndarray | None, alpha: float) -> DiffField:
     return DiffField(d, sigma, z, _percentiles(d), _chi_square(d, G, alpha))
 
 
-def projection_diff(a: Lens, b: Lens, grid: tuple[int, int] = DEFAULT_GRID, range_m: float = math.inf,
-                    alpha: float = ALPHA) -> ProjectionDiff:
+def projection_diff(
+    a: Lens, b: Lens, grid: tuple[int, int] = DEFAULT_GRID, range_m: float = math.inf, alpha: float = ALPHA
+) -> ProjectionDiff:
     """Compare lens B against lens A (same pixel frame: scale one first with ``Lens.scaled``).
 
     Args: grid (cols, rows) samples over A's imager; range_m: distance of the compared points along
@@ -195,7 +207,9 @@ def projection_diff(a: Lens, b: Lens, grid: tuple[int, int] = DEFAULT_GRID, rang
     points = rays * (range_m if math.isfinite(range_m) else 1.0)
     pb = project(b, points)
     back, ok_b = unproject(b, np.where(np.isfinite(pb.q_px), pb.q_px, 0.0))
-    same_ray = np.einsum("ij,ij->i", back, rays) > math.cos(FOLD_TOLERANCE_RAD)  # B's polynomial has not folded over
+    same_ray = np.einsum("ij,ij->i", back, rays) > math.cos(
+        FOLD_TOLERANCE_RAD
+    )  # B's polynomial has not folded over
     keep = ok & pb.valid & ok_b & same_ray
     if keep.sum() < 10:
         raise ValueError(f"only {int(keep.sum())} of {len(pixels)} samples are inside both lens models")
@@ -214,7 +228,9 @@ def projection_diff(a: Lens, b: Lens, grid: tuple[int, int] = DEFAULT_GRID, rang
         G_fit = flat.reshape(G.shape)
     raw, fit = _field(d_raw, G, alpha / 2), _field(d_fit, G_fit, alpha / 2)
     significant, reasons = _verdict(raw, fit)
-    return ProjectionDiff(pixels, grid, int((~keep).sum()), range_m, raw, fit, x[:3], x[3:], significant, reasons)
+    return ProjectionDiff(
+        pixels, grid, int((~keep).sum()), range_m, raw, fit, x[:3], x[3:], significant, reasons
+    )
 
 
 def _verdict(raw: DiffField, fit: DiffField) -> tuple[bool | None, tuple[str, ...]]:
@@ -225,12 +241,18 @@ def _verdict(raw: DiffField, fit: DiffField) -> tuple[bool | None, tuple[str, ..
         t = f.test
         assert t is not None
         if t.significant:
-            reasons.append(f"{name}: chi2 {t.statistic:.1f} > {t.threshold:.1f} ({t.dof} dof, p = {t.p_value:.2g})")
+            reasons.append(
+                f"{name}: chi2 {t.statistic:.1f} > {t.threshold:.1f} ({t.dof} dof, p = {t.p_value:.2g})"
+            )
     unexplained = raw.test.unexplained_max_px
     if unexplained > UNEXPLAINED_LIMIT_PX:
-        reasons.append(f"{unexplained:.2f} px of the difference is outside what either calibration's noise can "
-                       f"produce (limit {UNEXPLAINED_LIMIT_PX} px): the lens models disagree in shape")
+        reasons.append(
+            f"{unexplained:.2f} px of the difference is outside what either calibration's noise can "
+            f"produce (limit {UNEXPLAINED_LIMIT_PX} px): the lens models disagree in shape"
+        )
     if reasons:
         return True, tuple(reasons)
-    return False, (f"within noise: chi2 {raw.test.statistic:.1f} <= {raw.test.threshold:.1f} as stored, "
-                   f"{fit.test.statistic:.1f} <= {fit.test.threshold:.1f} after the fitted rotation",)
+    return False, (
+        f"within noise: chi2 {raw.test.statistic:.1f} <= {raw.test.threshold:.1f} as stored, "
+        f"{fit.test.statistic:.1f} <= {fit.test.threshold:.1f} after the fitted rotation",
+    )

@@ -70,13 +70,18 @@ def _stack(tree: RigTree) -> tuple[np.ndarray, np.ndarray]:
     poses = np.concatenate([T_to_pose(e.T_parent_child) for e in tree.edges])
     cov = np.zeros((len(poses), len(poses)))
     for i, e in enumerate(tree.edges):
-        cov[6 * i:6 * i + 6, 6 * i:6 * i + 6] = e.covariance
+        cov[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = e.covariance
     return poses, cov
 
 
 def _rebuilt(tree: RigTree, poses: np.ndarray) -> RigTree:
-    return RigTree(tree.root, tuple(Edge(e.parent, e.child, pose_to_T(poses[6 * i:6 * i + 6]), e.covariance)
-                                    for i, e in enumerate(tree.edges)))
+    return RigTree(
+        tree.root,
+        tuple(
+            Edge(e.parent, e.child, pose_to_T(poses[6 * i : 6 * i + 6]), e.covariance)
+            for i, e in enumerate(tree.edges)
+        ),
+    )
 
 
 def _depth_m(T_a_b_truth: np.ndarray, T_a_b_used: np.ndarray, depth_m: float) -> float:
@@ -102,11 +107,17 @@ def _depth_m(T_a_b_truth: np.ndarray, T_a_b_used: np.ndarray, depth_m: float) ->
 def camera_pairs(tree_a: RigTree, tree_b: RigTree, cameras: Sequence[str]) -> list[tuple[str, str]]:
     """Every pair of ``cameras`` present in both trees, in that order (a before b)."""
     common = [c for c in cameras if c in tree_a.frames and c in tree_b.frames]
-    return [(a, b) for i, a in enumerate(common) for b in common[i + 1:]]
+    return [(a, b) for i, a in enumerate(common) for b in common[i + 1 :]]
 
 
-def pair_changes(tree_a: RigTree, tree_b: RigTree, pairs: Sequence[tuple[str, str]], alpha: float = ALPHA,
-                 depths_m: Sequence[float] = DEPTHS_M, no_depth: Sequence[tuple[str, str]] = ()) -> list[PairChange]:
+def pair_changes(
+    tree_a: RigTree,
+    tree_b: RigTree,
+    pairs: Sequence[tuple[str, str]],
+    alpha: float = ALPHA,
+    depths_m: Sequence[float] = DEPTHS_M,
+    no_depth: Sequence[tuple[str, str]] = (),
+) -> list[PairChange]:
     """The change of T_a_b for each (a, b) of ``pairs`` (frames of both trees); the depth error is left out
     for the pairs in ``no_depth`` (a hand-eye edge joins a camera to a flange, not a stereo pair).
     Each pair is tested at alpha / len(pairs)."""
@@ -114,12 +125,13 @@ def pair_changes(tree_a: RigTree, tree_b: RigTree, pairs: Sequence[tuple[str, st
     pb, cb = _stack(tree_b)
     x = np.concatenate([pa, pb])
     cov = np.zeros((len(x), len(x)))
-    cov[:len(pa), :len(pa)], cov[len(pa):, len(pa):] = ca, cb
+    cov[: len(pa), : len(pa)], cov[len(pa) :, len(pa) :] = ca, cb
     level = alpha / max(len(pairs), 1)
     out = []
     for a, b in pairs:
+
         def T_pair(v: np.ndarray, a: str = a, b: str = b) -> tuple[np.ndarray, np.ndarray]:
-            return _rebuilt(tree_a, v[:len(pa)]).T(a, b), _rebuilt(tree_b, v[len(pa):]).T(a, b)
+            return _rebuilt(tree_a, v[: len(pa)]).T(a, b), _rebuilt(tree_b, v[len(pa) :]).T(a, b)
 
         def change(v: np.ndarray) -> np.ndarray:
             Ta, Tb = T_pair(v)
@@ -140,15 +152,33 @@ def pair_changes(tree_a: RigTree, tree_b: RigTree, pairs: Sequence[tuple[str, st
         sig_t = float(np.sqrt(max(g @ C[3:, 3:] @ g, 0.0)))
         sig_base = float(np.sqrt(propagate(baseline, x, cov)[0, 0]))
         depth = []
-        for z in (() if (a, b) in no_depth else depths_m):
+        for z in () if (a, b) in no_depth else depths_m:
+
             def dz(v: np.ndarray, z: float = z) -> np.ndarray:
                 Ta_v, Tb_v = T_pair(v)
                 return np.array([_depth_m(Tb_v, Ta_v, z) - z])
 
-            depth.append(DepthChange(z, float(dz(x)[0]), float(math.sqrt(max(propagate(dz, x, cov)[0, 0], 0.0)))))
+            depth.append(
+                DepthChange(z, float(dz(x)[0]), float(math.sqrt(max(propagate(dz, x, cov)[0, 0], 0.0))))
+            )
         p = chi2_sf(stat, 6)
-        out.append(PairChange(a, b, float(np.linalg.norm(Ta[:3, 3]) * 1e3), float(np.linalg.norm(Tb[:3, 3]) * 1e3),
-                              float(baseline(x)[0] * 1e3), sig_base * 1e3, rot_deg, sig_rot, t_norm * 1e3, sig_t * 1e3,
-                              stat, p, chi2_quantile(1.0 - level, 6), p < level, tuple(depth)))
+        out.append(
+            PairChange(
+                a,
+                b,
+                float(np.linalg.norm(Ta[:3, 3]) * 1e3),
+                float(np.linalg.norm(Tb[:3, 3]) * 1e3),
+                float(baseline(x)[0] * 1e3),
+                sig_base * 1e3,
+                rot_deg,
+                sig_rot,
+                t_norm * 1e3,
+                sig_t * 1e3,
+                stat,
+                p,
+                chi2_quantile(1.0 - level, 6),
+                p < level,
+                tuple(depth),
+            )
+        )
     return out
-

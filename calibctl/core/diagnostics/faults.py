@@ -36,19 +36,47 @@ STRUCTURE_RADIUS_PX = np.array([80.0, 160.0, 240.0, 320.0, 400.0, 460.0])
 STRUCTURE_YAW_RATE_RAD_S = np.array([0.300, 0.575, 0.275, 0.225, 0.575, 0.300])
 
 KEYFRAME_CORR = 0.05  # seed chapter 4: intra-keyframe correlation rho of residuals sharing one pose
-FAULTS = ("focal", "k1", "principal-point", "rotation", "translation", "time-offset", "rolling-shutter", "gauge")
+FAULTS = (
+    "focal",
+    "k1",
+    "principal-point",
+    "rotation",
+    "translation",
+    "time-offset",
+    "rolling-shutter",
+    "gauge",
+)
 DEFAULT_MAGNITUDE = {
-    "focal": 0.02, "k1": 0.02, "principal-point": 10.0, "rotation": 1.0, "translation": 0.02,
-    "time-offset": 0.0184, "rolling-shutter": 20e-6, "gauge": 23.0 / 25.0,
+    "focal": 0.02,
+    "k1": 0.02,
+    "principal-point": 10.0,
+    "rotation": 1.0,
+    "translation": 0.02,
+    "time-offset": 0.0184,
+    "rolling-shutter": 20e-6,
+    "gauge": 23.0 / 25.0,
 }
 MAGNITUDE_UNIT = {
-    "focal": "df/f", "k1": "k1", "principal-point": "px", "rotation": "deg", "translation": "m",
-    "time-offset": "s", "rolling-shutter": "s/row", "gauge": "believed/true scale",
+    "focal": "df/f",
+    "k1": "k1",
+    "principal-point": "px",
+    "rotation": "deg",
+    "translation": "m",
+    "time-offset": "s",
+    "rolling-shutter": "s/row",
+    "gauge": "believed/true scale",
 }
 
 
-def fault_residual_px(fault: str, magnitude: float, radius_px: np.ndarray, inv_range_per_m: np.ndarray,
-                      image_speed_px_s: np.ndarray, row: np.ndarray, focal_px: float = FOCAL_PX) -> np.ndarray:
+def fault_residual_px(
+    fault: str,
+    magnitude: float,
+    radius_px: np.ndarray,
+    inv_range_per_m: np.ndarray,
+    image_speed_px_s: np.ndarray,
+    row: np.ndarray,
+    focal_px: float = FOCAL_PX,
+) -> np.ndarray:
     """Noise-free residual (px) that ``fault`` of size ``magnitude`` leaves on each feature; arrays (n,)."""
     r = np.asarray(radius_px, dtype=np.float64)
     zeros = np.zeros_like(r)
@@ -71,10 +99,17 @@ def fault_residual_px(fault: str, magnitude: float, radius_px: np.ndarray, inv_r
     raise ValueError(f"unknown fault {fault!r}; expected one of {', '.join(FAULTS)}")
 
 
-def synth_residual_buffer(fault: str, magnitude: float, noise_px: float = 0.3, seed: int = 0,
-                          n_keyframes: int = 500, features_per_keyframe: int = 80,
-                          keyframe_corr: float = KEYFRAME_CORR, n_cameras: int = 1,
-                          focal_px: float = FOCAL_PX) -> dict[str, np.ndarray]:
+def synth_residual_buffer(
+    fault: str,
+    magnitude: float,
+    noise_px: float = 0.3,
+    seed: int = 0,
+    n_keyframes: int = 500,
+    features_per_keyframe: int = 80,
+    keyframe_corr: float = KEYFRAME_CORR,
+    n_cameras: int = 1,
+    focal_px: float = FOCAL_PX,
+) -> dict[str, np.ndarray]:
     """A residual buffer in the triage format. The fault is injected into camera "cam0" only.
 
     Each keyframe sees one of the six structures (features cluster on the structure in view), its
@@ -94,15 +129,20 @@ def synth_residual_buffer(fault: str, magnitude: float, noise_px: float = 0.3, s
         for k in range(n_keyframes):
             slalom = max(0.15, 1.0 + 0.6 * math.sin(2.0 * math.pi * k / 23.0 + phase) + rng.normal(0.0, 0.1))
             s = int(rng.integers(STRUCTURE_RANGE_M.size))
-            r = np.clip(STRUCTURE_RADIUS_PX[s] + rng.uniform(-60.0, 60.0) + rng.normal(0.0, 20.0, m), 5.0, 600.0)
+            r = np.clip(
+                STRUCTURE_RADIUS_PX[s] + rng.uniform(-60.0, 60.0) + rng.normal(0.0, 20.0, m), 5.0, 600.0
+            )
             inv_z = 1.0 / (STRUCTURE_RANGE_M[s] * np.exp(rng.normal(0.0, 0.05, m)))
             speed = focal_px * STRUCTURE_YAW_RATE_RAD_S[s] * slalom * (1.0 + rng.normal(0.0, 0.03, m))
             row = np.clip(np.rint(rng.uniform(60.0, 900.0) + rng.normal(0.0, 40.0, m)), 0, IMAGE_ROWS - 1)
-            res = rng.normal(0.0, noise_px, m) * math.sqrt(1.0 - keyframe_corr) + rng.normal(0.0, shared_sigma)
+            res = rng.normal(0.0, noise_px, m) * math.sqrt(1.0 - keyframe_corr) + rng.normal(
+                0.0, shared_sigma
+            )
             if cam == 0:
                 res = res + fault_residual_px(fault, magnitude, r, inv_z, speed, row, focal_px)
-            for name, val in zip(names, (res, r, speed, inv_z, row, np.full(m, k), np.full(m, f"cam{cam}")),
-                                 strict=True):
+            for name, val in zip(
+                names, (res, r, speed, inv_z, row, np.full(m, k), np.full(m, f"cam{cam}")), strict=True
+            ):
                 cols[name].append(val)
     out = {name: np.concatenate(parts) for name, parts in cols.items()}
     out["row"] = out["row"].astype(np.int64)
@@ -110,8 +150,14 @@ def synth_residual_buffer(fault: str, magnitude: float, noise_px: float = 0.3, s
     return out
 
 
-def synth_odometry(gauge_scale: float = 1.0, slip_std: float = 0.01, duration_s: float = 600.0,
-                   rate_hz: float = 50.0, vio_noise_std: float = 0.002, seed: int = 0) -> dict[str, np.ndarray]:
+def synth_odometry(
+    gauge_scale: float = 1.0,
+    slip_std: float = 0.01,
+    duration_s: float = 600.0,
+    rate_hz: float = 50.0,
+    vio_noise_std: float = 0.002,
+    seed: int = 0,
+) -> dict[str, np.ndarray]:
     """Wheel and VIO per-sample distances (m) for a robot driving 0.3..1.5 m/s with stops.
 
     ``gauge_scale`` multiplies every VIO distance (a 23 mm board believed to be 25 mm gives 0.92, so
@@ -145,9 +191,17 @@ def synth_rate_signal(t_s: np.ndarray, seed: int = 0, profile: str = "slalom") -
     return np.sum(amps * np.sin(2.0 * math.pi * freqs * t + phases), axis=1)
 
 
-def synth_rate_logs(td_s: float = 0.0184, duration_s: float = 3.0, gyro_hz: float = 200.0, camera_hz: float = 200.0,
-                    noise_frac: float = 0.01, drift_ppm: float = 0.0, camera_gain: float = 1.0,
-                    profile: str = "dance", seed: int = 0) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def synth_rate_logs(
+    td_s: float = 0.0184,
+    duration_s: float = 3.0,
+    gyro_hz: float = 200.0,
+    camera_hz: float = 200.0,
+    noise_frac: float = 0.01,
+    drift_ppm: float = 0.0,
+    camera_gain: float = 1.0,
+    profile: str = "dance",
+    seed: int = 0,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Gyro and camera-derived yaw-rate logs of one motion, the camera clock offset by ``td_s``.
 
     Convention (the one calibctl timeoffset reports): the camera sample stamped t measured the rate
@@ -160,5 +214,7 @@ def synth_rate_logs(td_s: float = 0.0184, duration_s: float = 3.0, gyro_hz: floa
     scale = float(np.std(synth_rate_signal(t_gyro, seed, profile)))
     gyro = synth_rate_signal(t_gyro, seed, profile) + rng.normal(0.0, noise_frac * scale, t_gyro.size)
     td = td_s + drift_ppm * 1e-6 * t_cam
-    cam = camera_gain * synth_rate_signal(t_cam + td, seed, profile) + rng.normal(0.0, noise_frac * scale, t_cam.size)
+    cam = camera_gain * synth_rate_signal(t_cam + td, seed, profile) + rng.normal(
+        0.0, noise_frac * scale, t_cam.size
+    )
     return {"t_s": t_gyro, "rate_rad_s": gyro}, {"t_s": t_cam, "rate_rad_s": cam}

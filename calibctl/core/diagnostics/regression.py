@@ -102,7 +102,9 @@ def fit_line(x: np.ndarray, y: np.ndarray, intercept: bool = True) -> LinearFit:
     return fit_ols(x[:, None], y, ("slope",))
 
 
-def aggregate_by_group(group: np.ndarray, columns: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+def aggregate_by_group(
+    group: np.ndarray, columns: dict[str, np.ndarray]
+) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
     """Mean of each column within each group.
 
     group: (n,) labels (any dtype). Returns (labels (g,), {name: (g,) means}, counts (g,) int).
@@ -110,8 +112,10 @@ def aggregate_by_group(group: np.ndarray, columns: dict[str, np.ndarray]) -> tup
     """
     labels, inverse = np.unique(np.asarray(group), return_inverse=True)
     counts = np.bincount(inverse, minlength=labels.size)
-    means = {name: np.bincount(inverse, weights=np.asarray(col, dtype=np.float64), minlength=labels.size) / counts
-             for name, col in columns.items()}
+    means = {
+        name: np.bincount(inverse, weights=np.asarray(col, dtype=np.float64), minlength=labels.size) / counts
+        for name, col in columns.items()
+    }
     return labels, means, counts
 
 
@@ -144,7 +148,9 @@ def variance_inflation(X: np.ndarray) -> np.ndarray:
     return np.diag(np.linalg.inv(corr)).copy()
 
 
-def fit_radial_orders(radius_px: np.ndarray, residual_px: np.ndarray, radius_max_px: float | None = None) -> tuple[LinearFit, float]:
+def fit_radial_orders(
+    radius_px: np.ndarray, residual_px: np.ndarray, radius_max_px: float | None = None
+) -> tuple[LinearFit, float]:
     """Through-origin fit residual = b3 rho^3 + b5 rho^5 with rho = r / r_max (seed chapter 4).
 
     No intercept: radial distortion is zero at the principal point. The coefficients are pixels of

@@ -48,6 +48,7 @@ class OffsetConfig:
 JACKKNIFE_BLOCKS = 10
 MIN_BLOCK_S = 0.25
 
+
 @dataclass
 class OffsetEstimate:
     td_s: float | None
@@ -76,7 +77,9 @@ def parabolic_vertex(y0: float, y1: float, y2: float) -> float:
     return (y0 - y2) / (2.0 * (y0 - 2.0 * y1 + y2))
 
 
-def _lag_block_sums(a: np.ndarray, b: np.ndarray, max_lag: int, n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+def _lag_block_sums(
+    a: np.ndarray, b: np.ndarray, max_lag: int, n_blocks: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-lag, per-block sums (n, Sx, Sy, Sxx, Syy, Sxy) of the pairs (a[i], b[i + L]); shape (lags, blocks, 6).
 
     Blocks partition the index i of ``a`` (the camera), so deleting a block removes the same camera
@@ -88,7 +91,7 @@ def _lag_block_sums(a: np.ndarray, b: np.ndarray, max_lag: int, n_blocks: int) -
     sums = np.zeros((lags.size, n_blocks, 6))
     for j, lag in enumerate(lags.tolist()):
         lo, hi = max(0, -lag), n - max(0, lag)
-        x, y = a[lo:hi], b[lo + lag: hi + lag]
+        x, y = a[lo:hi], b[lo + lag : hi + lag]
         starts = np.clip(edges[:-1], lo, hi) - lo
         for q, terms in enumerate((np.ones_like(x), x, y, x * x, y * y, x * y)):
             cs = np.concatenate([[0.0], np.cumsum(terms)])
@@ -124,7 +127,8 @@ def overlap_of(t_gyro: np.ndarray, t_cam: np.ndarray) -> tuple[float, float]:
         raise InputError(
             f"the logs do not overlap in time: gyro covers {t_gyro[0]:.3f}..{t_gyro[-1]:.3f} s, "
             f"camera covers {t_cam[0]:.3f}..{t_cam[-1]:.3f} s",
-            hint="both logs must be stamped on clocks that roughly agree (same epoch, seconds)")
+            hint="both logs must be stamped on clocks that roughly agree (same epoch, seconds)",
+        )
     return t0, t1
 
 
@@ -142,7 +146,9 @@ def _jackknife_sigma(sums: np.ndarray, lags: np.ndarray, rate_hz: float) -> floa
     return float(np.sqrt((k - 1) / k * np.sum((est_arr - est_arr.mean()) ** 2)))
 
 
-def estimate_time_offset(t_gyro, rate_gyro, t_cam, rate_cam, cfg: OffsetConfig = OffsetConfig()) -> OffsetEstimate:
+def estimate_time_offset(
+    t_gyro, rate_gyro, t_cam, rate_cam, cfg: OffsetConfig = OffsetConfig()
+) -> OffsetEstimate:
     """td (s) such that t_gyro = t_camera + td. Arrays (n,) and (m,) float64, times increasing (s)."""
     tg, g = np.asarray(t_gyro, dtype=np.float64), np.asarray(rate_gyro, dtype=np.float64)
     tc, c = np.asarray(t_cam, dtype=np.float64), np.asarray(rate_cam, dtype=np.float64)
@@ -150,14 +156,19 @@ def estimate_time_offset(t_gyro, rate_gyro, t_cam, rate_cam, cfg: OffsetConfig =
     rate = cfg.rate_hz or max(median_rate_hz(tg), median_rate_hz(tc))
     need = max(1.0, 4.0 * cfg.max_lag_s)
     if t1 - t0 < need:
-        raise InputError(f"the logs overlap for {t1 - t0:.3f} s; a +/-{cfg.max_lag_s:g} s search needs at least "
-                         f"{need:g} s of overlap", hint="record a longer motion, or pass a smaller --max-lag-s")
+        raise InputError(
+            f"the logs overlap for {t1 - t0:.3f} s; a +/-{cfg.max_lag_s:g} s search needs at least "
+            f"{need:g} s of overlap",
+            hint="record a longer motion, or pass a smaller --max-lag-s",
+        )
     grid = t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate
     a, b = np.interp(grid, tc, c), np.interp(grid, tg, g)
     est = OffsetEstimate(None, None, None, rate, (t0, t1), int(grid.size), rate_std=float(np.std(b)))
     if est.rate_std < cfg.min_rate_std:
-        est.refused = (f"the gyro rate varies by only {est.rate_std:.4f} rad/s (std) over the overlap; at least "
-                       f"{cfg.min_rate_std:g} rad/s of variation is needed to pin td - excite with turns and reversals")
+        est.refused = (
+            f"the gyro rate varies by only {est.rate_std:.4f} rad/s (std) over the overlap; at least "
+            f"{cfg.min_rate_std:g} rad/s of variation is needed to pin td - excite with turns and reversals"
+        )
         return est
     max_lag = max(1, int(round(cfg.max_lag_s * rate)))
     est.n_blocks = int(np.clip(np.floor((t1 - t0) / MIN_BLOCK_S), 3, JACKKNIFE_BLOCKS))
@@ -167,12 +178,16 @@ def estimate_time_offset(t_gyro, rate_gyro, t_cam, rate_cam, cfg: OffsetConfig =
     k = int(np.argmax(ncc))
     est.integer_lag, est.peak_ncc = int(lags[k]), float(ncc[k])
     if k == 0 or k == lags.size - 1:
-        est.refused = (f"the correlation peak sits on the edge of the +/-{cfg.max_lag_s:g} s search window; the "
-                       "offset may be larger - re-run with a larger --max-lag-s")
+        est.refused = (
+            f"the correlation peak sits on the edge of the +/-{cfg.max_lag_s:g} s search window; the "
+            "offset may be larger - re-run with a larger --max-lag-s"
+        )
         return est
     if est.peak_ncc < cfg.min_peak_ncc:
-        est.refused = (f"the two rate signals barely correlate (peak NCC {est.peak_ncc:.3f} < {cfg.min_peak_ncc}); "
-                       "are they the same axis, and did the robot move?")
+        est.refused = (
+            f"the two rate signals barely correlate (peak NCC {est.peak_ncc:.3f} < {cfg.min_peak_ncc}); "
+            "are they the same axis, and did the robot move?"
+        )
         return est
     lag = _refine_peak(lags, ncc)
     if lag is None:
@@ -184,8 +199,10 @@ def estimate_time_offset(t_gyro, rate_gyro, t_cam, rate_cam, cfg: OffsetConfig =
     half = t_critical(0.95, est.n_blocks - 1) * est.sigma_s
     est.ci_s = (est.td_s - half, est.td_s + half)
     if not est.sigma_s <= cfg.max_sigma_s:
-        est.refused = (f"td = {est.td_s * 1e3:.3f} ms but its standard error is {est.sigma_s * 1e3:.3f} ms, above the "
-                       f"{cfg.max_sigma_s * 1e3:g} ms gate; the motion does not pin td - add rate reversals")
+        est.refused = (
+            f"td = {est.td_s * 1e3:.3f} ms but its standard error is {est.sigma_s * 1e3:.3f} ms, above the "
+            f"{cfg.max_sigma_s * 1e3:g} ms gate; the motion does not pin td - add rate reversals"
+        )
     return est
 
 
@@ -199,27 +216,42 @@ class DriftEstimate:
     refused: str | None
 
 
-def estimate_drift(t_gyro, rate_gyro, t_cam, rate_cam, window_s: float, cfg: OffsetConfig = OffsetConfig()) -> DriftEstimate:
+def estimate_drift(
+    t_gyro, rate_gyro, t_cam, rate_cam, window_s: float, cfg: OffsetConfig = OffsetConfig()
+) -> DriftEstimate:
     """td in consecutive ``window_s`` windows, then td(t) = td0 + drift * t by OLS; drift in ppm (1e-6 s/s)."""
     tg, g = np.asarray(t_gyro, dtype=np.float64), np.asarray(rate_gyro, dtype=np.float64)
     tc, c = np.asarray(t_cam, dtype=np.float64), np.asarray(rate_cam, dtype=np.float64)
     t0, t1 = overlap_of(tg, tc)
     n_win = int(np.floor((t1 - t0) / window_s + 1e-9))
     if n_win < 3:
-        raise InputError(f"the logs overlap for {t1 - t0:.1f} s, which gives {n_win} window(s) of {window_s:g} s; a "
-                         "drift fit needs at least 3", hint="use a longer log or a shorter --window")
+        raise InputError(
+            f"the logs overlap for {t1 - t0:.1f} s, which gives {n_win} window(s) of {window_s:g} s; a "
+            "drift fit needs at least 3",
+            hint="use a longer log or a shorter --window",
+        )
     windows = []
     for k in range(n_win):
         w0, w1 = t0 + k * window_s, t0 + (k + 1) * window_s
         mg, mc = (tg >= w0) & (tg <= w1), (tc >= w0) & (tc <= w1)
         if mg.sum() < 4 or mc.sum() < 4:
-            raise InputError(f"window {w0:.1f}..{w1:.1f} s has fewer than 4 samples in one of the logs",
-                             hint="the logs have a gap; use a longer --window")
+            raise InputError(
+                f"window {w0:.1f}..{w1:.1f} s has fewer than 4 samples in one of the logs",
+                hint="the logs have a gap; use a longer --window",
+            )
         windows.append((0.5 * (w0 + w1), estimate_time_offset(tg[mg], g[mg], tc[mc], c[mc], cfg)))
     good = [(tm, e) for tm, e in windows if e.refused is None]
     if len(good) < 3:
-        return DriftEstimate(windows, None, None, None, None,
-                             f"only {len(good)} of {n_win} windows pinned td; a drift fit needs at least 3")
+        return DriftEstimate(
+            windows,
+            None,
+            None,
+            None,
+            None,
+            f"only {len(good)} of {n_win} windows pinned td; a drift fit needs at least 3",
+        )
     fit = fit_line(np.array([tm for tm, _ in good]), np.array([e.td_s for _, e in good]))
     ci = fit.interval()[1] * 1e6
-    return DriftEstimate(windows, fit, float(fit.coef[1] * 1e6), float(fit.se[1] * 1e6), (float(ci[0]), float(ci[1])), None)
+    return DriftEstimate(
+        windows, fit, float(fit.coef[1] * 1e6), float(fit.se[1] * 1e6), (float(ci[0]), float(ci[1])), None
+    )

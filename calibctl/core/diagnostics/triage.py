@@ -37,9 +37,11 @@ from calibctl.core.diagnostics.student_t import t_quantile
 from calibctl.errors import InputError
 
 DEGENERACY_NOTE = "extrinsic rotation or principal point, these cannot be separated from this data"
-GAUGE_POINTER = ("no residual signature: the geometry is self-consistent. If the robot is still wrong, "
-                 "suspect a metric gauge (board square size, wheel radius, stereo baseline): "
-                 "run `calibctl gauge` on a wheel/VIO odometry log")
+GAUGE_POINTER = (
+    "no residual signature: the geometry is self-consistent. If the robot is still wrong, "
+    "suspect a metric gauge (board square size, wheel radius, stereo baseline): "
+    "run `calibctl gauge` on a wheel/VIO odometry log"
+)
 
 
 @dataclass(frozen=True)
@@ -144,8 +146,12 @@ def _aggregate(keyframe, columns: dict[str, np.ndarray]) -> tuple[dict[str, np.n
 
 def _collinear_groups(names: list[str], X: np.ndarray, cfg: TriageConfig):
     corr = column_correlations(X)
-    pairs = [(names[i], names[j], float(corr[i, j])) for i in range(len(names)) for j in range(i + 1, len(names))
-             if abs(corr[i, j]) >= cfg.collinear_corr]
+    pairs = [
+        (names[i], names[j], float(corr[i, j]))
+        for i in range(len(names))
+        for j in range(i + 1, len(names))
+        if abs(corr[i, j]) >= cfg.collinear_corr
+    ]
     vif = variance_inflation(X) if len(names) > 1 else np.ones(1)
     high = [names[i] for i in range(len(names)) if vif[i] >= cfg.collinear_vif]
     groups: list[list[str]] = []
@@ -156,7 +162,9 @@ def _collinear_groups(names: list[str], X: np.ndarray, cfg: TriageConfig):
     leftover = [c for c in high if not any(c in g for g in groups)]
     if len(leftover) > 1:
         groups.append(leftover)
-    corr_map = {(names[i], names[j]): float(corr[i, j]) for i in range(len(names)) for j in range(i + 1, len(names))}
+    corr_map = {
+        (names[i], names[j]): float(corr[i, j]) for i in range(len(names)) for j in range(i + 1, len(names))
+    }
     return groups, pairs, corr_map
 
 
@@ -166,8 +174,12 @@ def _p99_abs(col: np.ndarray) -> float:
 
 def _marginals(agg: dict[str, np.ndarray]) -> list[MarginalFit]:
     out = []
-    for cov, resp, unit in (("r", "residual_px", "px/px"), ("u", "residual_px", "s"),
-                            ("1/Z", "residual_px", "px*m"), ("row", "residual_over_speed_s", "s/row")):
+    for cov, resp, unit in (
+        ("r", "residual_px", "px/px"),
+        ("u", "residual_px", "s"),
+        ("1/Z", "residual_px", "px*m"),
+        ("row", "residual_over_speed_s", "s/row"),
+    ):
         x, y = agg[cov], agg[resp]
         if np.ptp(x) <= 1e-12 * max(float(np.max(np.abs(x))), 1e-300):
             continue  # the covariate never varied: no information, no slope
@@ -190,11 +202,21 @@ def _radial_order(agg, kept: list[str], t_crit: float) -> dict:
     elif sig3 and sig5:
         reading = "both r^3 and r^5 terms are present"
     else:
-        reading = (f"radial residual present but its order cannot be attributed over this radius coverage "
-                   f"(corr(rho^3, rho^5) = {corr:.4f})")
-    return {"b3_px_at_rmax": float(fit.coef[i3]), "se3": float(fit.se[i3]), "t3": float(fit.t[i3]),
-            "b5_px_at_rmax": float(fit.coef[i5]), "se5": float(fit.se[i5]), "t5": float(fit.t[i5]),
-            "corr": corr, "dof": fit.dof, "reading": reading}
+        reading = (
+            f"radial residual present but its order cannot be attributed over this radius coverage "
+            f"(corr(rho^3, rho^5) = {corr:.4f})"
+        )
+    return {
+        "b3_px_at_rmax": float(fit.coef[i3]),
+        "se3": float(fit.se[i3]),
+        "t3": float(fit.t[i3]),
+        "b5_px_at_rmax": float(fit.coef[i5]),
+        "se5": float(fit.se[i5]),
+        "t5": float(fit.t[i5]),
+        "corr": corr,
+        "dof": fit.dof,
+        "reading": reading,
+    }
 
 
 def _thermal(residual, keyframe, temperature, t_crit: float, cfg: TriageConfig) -> dict | None:
@@ -208,13 +230,28 @@ def _thermal(residual, keyframe, temperature, t_crit: float, cfg: TriageConfig) 
     fit = fit_line(temp, rms)
     slope, t = float(fit.coef[1]), float(fit.t[1])
     found = abs(t) >= t_crit and abs(slope) > cfg.thermal_slope_px_per_k
-    return {"status": "fault" if found else "not significant", "slope_px_per_k": slope, "se": float(fit.se[1]),
-            "t": t, "ci": [float(v) for v in fit.interval()[1]], "dof": fit.dof,
-            "threshold_px_per_k": cfg.thermal_slope_px_per_k}
+    return {
+        "status": "fault" if found else "not significant",
+        "slope_px_per_k": slope,
+        "se": float(fit.se[1]),
+        "t": t,
+        "ci": [float(v) for v in fit.interval()[1]],
+        "dof": fit.dof,
+        "threshold_px_per_k": cfg.thermal_slope_px_per_k,
+    }
 
 
-def triage_camera(residual_px, radius_px, image_speed_px_s, inv_range_per_m, row, keyframe=None,
-                  temperature_c=None, camera: str = "all", cfg: TriageConfig = TriageConfig()) -> CameraTriage:
+def triage_camera(
+    residual_px,
+    radius_px,
+    image_speed_px_s,
+    inv_range_per_m,
+    row,
+    keyframe=None,
+    temperature_c=None,
+    camera: str = "all",
+    cfg: TriageConfig = TriageConfig(),
+) -> CameraTriage:
     """Triage one camera's residuals. Every array is (n,) float64 (keyframe: (n,) labels or None)."""
     y = np.asarray(residual_px, dtype=np.float64)
     r = np.asarray(radius_px, dtype=np.float64)
@@ -223,16 +260,26 @@ def triage_camera(residual_px, radius_px, image_speed_px_s, inv_range_per_m, row
     rows = np.asarray(row, dtype=np.float64)
     cols = _design_columns(r, inv_z, u, rows)
     r_max = float(np.max(r)) if r.size else 1.0
-    raw = dict(cols, residual_px=y, row=rows, residual_over_speed_s=y / np.maximum(u, cfg.min_speed_px_s),
-               **{"rho^3": (r / r_max) ** 3, "rho^5": (r / r_max) ** 5})
+    raw = dict(
+        cols,
+        residual_px=y,
+        row=rows,
+        residual_over_speed_s=y / np.maximum(u, cfg.min_speed_px_s),
+        **{"rho^3": (r / r_max) ** 3, "rho^5": (r / r_max) ** 5},
+    )
     agg, n_kf = _aggregate(keyframe, raw)
     unit = "keyframes" if keyframe is not None else "rows"
     if n_kf < cfg.min_keyframes:
-        raise InputError(f"camera {camera}: {n_kf} {unit}; the joint fit of {len(CHANNELS)} columns needs at "
-                         f"least {cfg.min_keyframes}",
-                         hint="log more keyframes before triaging, or triage the other cameras with --camera")
-    informative = [c.column for c in CHANNELS[1:] if np.std(agg[c.column]) > 1e-9 * max(
-        float(np.sqrt(np.mean(agg[c.column] ** 2))), 1e-300)]
+        raise InputError(
+            f"camera {camera}: {n_kf} {unit}; the joint fit of {len(CHANNELS)} columns needs at "
+            f"least {cfg.min_keyframes}",
+            hint="log more keyframes before triaging, or triage the other cameras with --camera",
+        )
+    informative = [
+        c.column
+        for c in CHANNELS[1:]
+        if np.std(agg[c.column]) > 1e-9 * max(float(np.sqrt(np.mean(agg[c.column] ** 2))), 1e-300)
+    ]
     X_all = np.column_stack([agg[c] for c in informative]) if informative else np.zeros((n_kf, 0))
     groups, pairs, corr_map = _collinear_groups(informative, X_all, cfg) if informative else ([], [], {})
     dropped = {c: g[0] for g in groups for c in g[1:]}
@@ -248,27 +295,53 @@ def triage_camera(residual_px, radius_px, image_speed_px_s, inv_range_per_m, row
             continue
         if spec.column in dropped:
             rep = dropped[spec.column]
-            channels.append(ChannelResult(spec, "collinear", note=f"fitted together with {rep}: cannot be told apart"))
+            channels.append(
+                ChannelResult(spec, "collinear", note=f"fitted together with {rep}: cannot be told apart")
+            )
             continue
         i = kept.index(spec.column)
         coef, se, t = float(joint.coef[i]), float(joint.se[i]), float(joint.t[i])
         effect = abs(coef) * (1.0 if spec.column == "1" else _p99_abs(cols[spec.column]))
         group = next((g for g in groups if g[0] == spec.column), None)
         significant = abs(t) >= t_crit
-        status = "fault" if significant and effect >= cfg.min_effect_px else (
-            "below effect floor" if significant else "not significant")
-        res = ChannelResult(spec, status, coef, se, t, float(joint.p_value[i]), (float(ci[i, 0]), float(ci[i, 1])),
-                            effect_px=effect)
+        status = (
+            "fault"
+            if significant and effect >= cfg.min_effect_px
+            else ("below effect floor" if significant else "not significant")
+        )
+        res = ChannelResult(
+            spec,
+            status,
+            coef,
+            se,
+            t,
+            float(joint.p_value[i]),
+            (float(ci[i, 0]), float(ci[i, 1])),
+            effect_px=effect,
+        )
         if group:
-            corr_txt = ", ".join(f"corr({a}, {b}) = {c:+.4f}" for a, b, c in pairs if a in group and b in group)
+            corr_txt = ", ".join(
+                f"corr({a}, {b}) = {c:+.4f}" for a, b, c in pairs if a in group and b in group
+            )
             res.note = f"columns {', '.join(group)} are collinear ({corr_txt or 'VIF >= ' + str(cfg.collinear_vif)}): refusing to attribute"
         else:
             res.value = to_channel_units(spec.key, coef, cfg.focal_px)
             lo, hi = sorted(to_channel_units(spec.key, float(v), cfg.focal_px) for v in ci[i])
             res.value_ci = (lo, hi)
         channels.append(res)
-    out = CameraTriage(camera, int(y.size), n_kf, keyframe is not None, float(np.sqrt(np.mean(y**2))), t_crit,
-                       joint, channels, _marginals(agg), corr_map, pairs)
+    out = CameraTriage(
+        camera,
+        int(y.size),
+        n_kf,
+        keyframe is not None,
+        float(np.sqrt(np.mean(y**2))),
+        t_crit,
+        joint,
+        channels,
+        _marginals(agg),
+        corr_map,
+        pairs,
+    )
     out.faults = sorted((c for c in channels if c.status == "fault"), key=lambda c: -abs(c.t or 0.0))
     k1 = next(c for c in channels if c.spec.key == "k1")
     if k1.status == "fault" and not k1.note and "r^3" in kept:
@@ -305,8 +378,17 @@ CAMERA_RMS_WARN = 1.5
 CAMERA_RMS_ALARM = 2.0
 
 
-def triage_by_camera(residual_px, radius_px, image_speed_px_s, inv_range_per_m, row, camera=None, keyframe=None,
-                     temperature_c=None, cfg: TriageConfig = TriageConfig()) -> TriageSummary:
+def triage_by_camera(
+    residual_px,
+    radius_px,
+    image_speed_px_s,
+    inv_range_per_m,
+    row,
+    camera=None,
+    keyframe=None,
+    temperature_c=None,
+    cfg: TriageConfig = TriageConfig(),
+) -> TriageSummary:
     """Split the buffer per camera (calibration faults are per camera), triage each, compare their RMS."""
     arrays = [np.asarray(a) for a in (residual_px, radius_px, image_speed_px_s, inv_range_per_m, row)]
     extra = [None if a is None else np.asarray(a) for a in (keyframe, temperature_c)]
@@ -320,8 +402,9 @@ def triage_by_camera(residual_px, radius_px, image_speed_px_s, inv_range_per_m, 
     for name, mask in zip(names, masks, strict=True):
         res, rad, speed, inv_z, rows = (a[mask] for a in arrays)
         kf, temp = (None if a is None else a[mask] for a in extra)
-        results.append(triage_camera(res, rad, speed, inv_z, rows, keyframe=kf, temperature_c=temp, camera=name,
-                                     cfg=cfg))
+        results.append(
+            triage_camera(res, rad, speed, inv_z, rows, keyframe=kf, temperature_c=temp, camera=name, cfg=cfg)
+        )
     ratio, level = None, "n/a"
     if len(results) > 1:
         rms = [c.rms_px for c in results]

@@ -20,8 +20,13 @@ from calibctl.core.intrinsics.solve import DEFAULT_MODEL, fit_pose, is_fisheye, 
 MIN_CORNERS = 4
 
 
-def estimate_board_pose(object_points_m: np.ndarray, corners_px: np.ndarray, camera_matrix: np.ndarray,
-                        dist_coeffs: np.ndarray, model: str = DEFAULT_MODEL) -> tuple[np.ndarray | None, float]:
+def estimate_board_pose(
+    object_points_m: np.ndarray,
+    corners_px: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str = DEFAULT_MODEL,
+) -> tuple[np.ndarray | None, float]:
     """Board pose from matched corners.
 
     Args:
@@ -44,7 +49,10 @@ def estimate_board_pose(object_points_m: np.ndarray, corners_px: np.ndarray, cam
         pose = fit_pose(obj, img, K, dist, model)
         if pose is None:
             return None, float("inf")
-        rvec, tvec = np.asarray(pose[0], np.float64).reshape(3, 1), np.asarray(pose[1], np.float64).reshape(3, 1)
+        rvec, tvec = (
+            np.asarray(pose[0], np.float64).reshape(3, 1),
+            np.asarray(pose[1], np.float64).reshape(3, 1),
+        )
     else:
         ok, rvec0, tvec0 = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE)
         if not ok or not (np.isfinite(rvec0).all() and np.isfinite(tvec0).all()):

@@ -53,16 +53,29 @@ class Motions:
         return cls(A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], labels)
 
     @classmethod
-    def from_poses(cls, T_wa_a: np.ndarray, T_wb_b: np.ndarray, labels: tuple[str, ...], prefix: str = "") -> Motions:
+    def from_poses(
+        cls, T_wa_a: np.ndarray, T_wb_b: np.ndarray, labels: tuple[str, ...], prefix: str = ""
+    ) -> Motions:
         """(n, 4, 4) poses of a in a fixed world wa and of b in a fixed world wb -> n-1 consecutive motions.
 
         ``labels`` names the poses; motion i is labelled "<label i>-<label i+1>" (with ``prefix`` before it).
         """
-        A = np.array([se3.relative(T_wa_a[i], T_wa_a[i + 1]) for i in range(len(T_wa_a) - 1)]).reshape(-1, 4, 4)
-        B = np.array([se3.relative(T_wb_b[i], T_wb_b[i + 1]) for i in range(len(T_wb_b) - 1)]).reshape(-1, 4, 4)
+        A = np.array([se3.relative(T_wa_a[i], T_wa_a[i + 1]) for i in range(len(T_wa_a) - 1)]).reshape(
+            -1, 4, 4
+        )
+        B = np.array([se3.relative(T_wb_b[i], T_wb_b[i + 1]) for i in range(len(T_wb_b) - 1)]).reshape(
+            -1, 4, 4
+        )
         names = tuple(f"{prefix}{labels[i]}-{labels[i + 1]}" for i in range(len(labels) - 1))
-        return cls(A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], names,
-                   np.asarray(T_wa_a, np.float64), np.asarray(T_wb_b, np.float64))
+        return cls(
+            A[:, :3, :3],
+            A[:, :3, 3],
+            B[:, :3, :3],
+            B[:, :3, 3],
+            names,
+            np.asarray(T_wa_a, np.float64),
+            np.asarray(T_wb_b, np.float64),
+        )
 
     @property
     def rotvec_A_rad(self) -> np.ndarray:
@@ -87,6 +100,7 @@ def solve_rotation_tsai(rotvec_A_rad: np.ndarray, rotvec_B_rad: np.ndarray) -> n
 
     Not defined for a 180 deg R_X (p' is tan(theta_X/2) n_X).
     """
+
     def modified(rotvec: np.ndarray) -> np.ndarray:
         angle = np.linalg.norm(rotvec, axis=1, keepdims=True)
         return np.where(angle > 0, 2.0 * np.sin(angle / 2.0) / np.where(angle > 0, angle, 1.0), 1.0) * rotvec

@@ -63,7 +63,9 @@ TRANSLATION_SCALE_MAX = 1.25  # real logs 1.00-1.06, a wrong unit >= 3.1 (feet);
 SCALE_DETERMINED_SIGMAS = 3.0  # |s - 1| within 3 sigma_s: the motions do not pin the scale, nothing to judge
 TRANSLATION_SCALE_TOLERANCE = 0.01  # the distance gauge's limits (workflows.camera.distance_gauge, 0.99-1.01)
 UNIT_FACTORS = (("millimetres", 1000.0), ("centimetres", 100.0), ("inches", 1 / 0.0254), ("feet", 1 / 0.3048))
-UNIT_FACTOR_TOL = 0.15  # a board's square size or an odometry's scale can add a few per cent to the unit's factor
+UNIT_FACTOR_TOL = (
+    0.15  # a board's square size or an odometry's scale can add a few per cent to the unit's factor
+)
 
 
 @dataclass(frozen=True)
@@ -76,8 +78,13 @@ class HandEyeThresholds:
     translation_scale_tolerance: float = TRANSLATION_SCALE_TOLERANCE
 
     def __post_init__(self) -> None:
-        positive = (self.lever_arm_sigma_min, self.second_axis_min_deg, self.angle_mismatch_max_deg,
-                    self.rotation_residual_max_deg, self.translation_scale_tolerance)
+        positive = (
+            self.lever_arm_sigma_min,
+            self.second_axis_min_deg,
+            self.angle_mismatch_max_deg,
+            self.rotation_residual_max_deg,
+            self.translation_scale_tolerance,
+        )
         if not all(v > 0 for v in positive):
             raise ValueError("hand-eye thresholds must be positive")
         if not 0 <= self.mismatch_fraction_max < 1:
@@ -108,21 +115,31 @@ def rotation_excitation_deg(rotvec_A_rad: np.ndarray) -> tuple[float, float]:
 
 def angle_mismatch_deg(motions: Motions) -> np.ndarray:
     """(n,) |angle(A_i)| - |angle(B_i)| in degrees (signed)."""
-    return np.degrees(np.linalg.norm(motions.rotvec_A_rad, axis=1) - np.linalg.norm(motions.rotvec_B_rad, axis=1))
+    return np.degrees(
+        np.linalg.norm(motions.rotvec_A_rad, axis=1) - np.linalg.norm(motions.rotvec_B_rad, axis=1)
+    )
 
 
 def rotation_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
     second, spread = rotation_excitation_deg(motions.rotvec_A_rad)
     ok = second >= th.second_axis_min_deg
-    message = (f"{second:.1f} deg of rotation about a second axis (needs {th.second_axis_min_deg:g}; "
-               f"axes spread {spread:.0f} deg)")
+    message = (
+        f"{second:.1f} deg of rotation about a second axis (needs {th.second_axis_min_deg:g}; "
+        f"axes spread {spread:.0f} deg)"
+    )
     detail: dict[str, float | int | str | list[str]] = {"axis_spread_deg": round(spread, 3)}
     if ok:
         return GateResult("rotation", True, second, th.second_axis_min_deg, message, detail=detail)
-    return GateResult("rotation", False, second, th.second_axis_min_deg,
-                      f"rotation unobservable: only {message}; the motions turn about one axis (or hardly at all)",
-                      "rotation.one_axis", f"rotate at least {th.second_axis_min_deg:g} deg about a second, "
-                      "non-parallel axis", detail)
+    return GateResult(
+        "rotation",
+        False,
+        second,
+        th.second_axis_min_deg,
+        f"rotation unobservable: only {message}; the motions turn about one axis (or hardly at all)",
+        "rotation.one_axis",
+        f"rotate at least {th.second_axis_min_deg:g} deg about a second, non-parallel axis",
+        detail,
+    )
 
 
 def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
@@ -132,21 +149,37 @@ def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
     needed = 5.0 * math.ceil(equivalent_rotation_deg(th.lever_arm_sigma_min) / 5.0 - 1e-9)
     hint = f"rotate at least {needed:.0f} deg about two non-parallel axes"
     detail: dict[str, float | int | str | list[str]] = {
-        "weakest_direction_a": [f"{v:+.3f}" for v in weakest], "equivalent_rotation_deg": round(about, 3)}
+        "weakest_direction_a": [f"{v:+.3f}" for v in weakest],
+        "equivalent_rotation_deg": round(about, 3),
+    }
     if ok:
-        return GateResult("lever-arm", True, sigma_min, th.lever_arm_sigma_min,
-                          f"sigma_min of stacked (R_A - I) {sigma_min:.3f} (needs {th.lever_arm_sigma_min:g})",
-                          detail=detail)
-    return GateResult("lever-arm", False, sigma_min, th.lever_arm_sigma_min,
-                      f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} deg of "
-                      f"rotation); {hint}",
-                      "lever_arm.unobservable", hint, detail)
+        return GateResult(
+            "lever-arm",
+            True,
+            sigma_min,
+            th.lever_arm_sigma_min,
+            f"sigma_min of stacked (R_A - I) {sigma_min:.3f} (needs {th.lever_arm_sigma_min:g})",
+            detail=detail,
+        )
+    return GateResult(
+        "lever-arm",
+        False,
+        sigma_min,
+        th.lever_arm_sigma_min,
+        f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} deg of "
+        f"rotation); {hint}",
+        "lever_arm.unobservable",
+        hint,
+        detail,
+    )
 
 
-STATIC_POSE_HINT = ("the poses were held still at each photo, so no time offset explains it: check that each row "
-                    "pairs a photo with the pose it was taken at (a pose file shifted or reordered against the "
-                    "images), the pose convention (base->gripper, not gripper->base) and the board detections of the "
-                    "mismatched motions")
+STATIC_POSE_HINT = (
+    "the poses were held still at each photo, so no time offset explains it: check that each row "
+    "pairs a photo with the pose it was taken at (a pose file shifted or reordered against the "
+    "images), the pose convention (base->gripper, not gripper->base) and the board detections of the "
+    "mismatched motions"
+)
 
 
 def time_alignment_gate(motions: Motions, th: HandEyeThresholds, static_poses: bool = False) -> GateResult:
@@ -158,23 +191,39 @@ def time_alignment_gate(motions: Motions, th: HandEyeThresholds, static_poses: b
     fraction = bad.size / max(motions.n, 1)
     ok = fraction <= th.mismatch_fraction_max
     worst = int(np.argmax(np.abs(mismatch)))
-    message = (f"{bad.size} of {motions.n} motions turn by a different angle in a and b "
-               f"(> {th.angle_mismatch_max_deg:g} deg; worst {mismatch[worst]:+.2f} deg at {motions.labels[worst]})")
-    detail: dict[str, float | int | str | list[str]] = {"mismatched_motions": [motions.labels[i] for i in bad]}
+    message = (
+        f"{bad.size} of {motions.n} motions turn by a different angle in a and b "
+        f"(> {th.angle_mismatch_max_deg:g} deg; worst {mismatch[worst]:+.2f} deg at {motions.labels[worst]})"
+    )
+    detail: dict[str, float | int | str | list[str]] = {
+        "mismatched_motions": [motions.labels[i] for i in bad]
+    }
     if ok:
         return GateResult("time-alignment", True, fraction, th.mismatch_fraction_max, message, detail=detail)
-    return GateResult("time-alignment", False, fraction, th.mismatch_fraction_max,
-                      f"time alignment: {message}, e.g. {named_list([motions.labels[i] for i in bad], MAX_NAMED)}",
-                      "time_alignment.angle_mismatch",
-                      STATIC_POSE_HINT if static_poses else
-                      "a time offset between the sensors masquerades as an extrinsic error: estimate it "
-                      "(calibctl timeoffset), re-synchronise the log and solve again", detail)
+    return GateResult(
+        "time-alignment",
+        False,
+        fraction,
+        th.mismatch_fraction_max,
+        f"time alignment: {message}, e.g. {named_list([motions.labels[i] for i in bad], MAX_NAMED)}",
+        "time_alignment.angle_mismatch",
+        STATIC_POSE_HINT
+        if static_poses
+        else "a time offset between the sensors masquerades as an extrinsic error: estimate it "
+        "(calibctl timeoffset), re-synchronise the log and solve again",
+        detail,
+    )
 
 
-def evaluate_handeye_gates(motions: Motions, th: HandEyeThresholds | None = None,
-                           static_poses: bool = False) -> tuple[GateResult, ...]:
+def evaluate_handeye_gates(
+    motions: Motions, th: HandEyeThresholds | None = None, static_poses: bool = False
+) -> tuple[GateResult, ...]:
     th = th or HandEyeThresholds()
-    return rotation_gate(motions, th), lever_arm_gate(motions, th), time_alignment_gate(motions, th, static_poses)
+    return (
+        rotation_gate(motions, th),
+        lever_arm_gate(motions, th),
+        time_alignment_gate(motions, th, static_poses),
+    )
 
 
 def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:
@@ -184,11 +233,16 @@ def consistency_gate(fit: HandEyeFit, th: HandEyeThresholds) -> GateResult:
     message = f"rotation residual RMS {rms_deg:.3f} deg per component (max {th.rotation_residual_max_deg:g})"
     if ok:
         return GateResult("consistency", True, rms_deg, th.rotation_residual_max_deg, message)
-    return GateResult("consistency", False, rms_deg, th.rotation_residual_max_deg,
-                      f"motions inconsistent with one rigid transform: {message}",
-                      "consistency.rotation_residual",
-                      "check the pose conventions (a robot arm: base->gripper poses, --eye-in-hand vs "
-                      "--eye-to-hand), that each row pairs the same instant, and the outlier motions")
+    return GateResult(
+        "consistency",
+        False,
+        rms_deg,
+        th.rotation_residual_max_deg,
+        f"motions inconsistent with one rigid transform: {message}",
+        "consistency.rotation_residual",
+        "check the pose conventions (a robot arm: base->gripper poses, --eye-in-hand vs "
+        "--eye-to-hand), that each row pairs the same instant, and the outlier motions",
+    )
 
 
 def _unit_named(factor: float) -> str | None:
@@ -198,8 +252,12 @@ def _unit_named(factor: float) -> str | None:
     return None
 
 
-def translation_scale_gate(motions: Motions, fit: HandEyeFit, names: tuple[str, str] = ("a", "b"),
-                           tolerance: float = TRANSLATION_SCALE_TOLERANCE) -> GateResult:
+def translation_scale_gate(
+    motions: Motions,
+    fit: HandEyeFit,
+    names: tuple[str, str] = ("a", "b"),
+    tolerance: float = TRANSLATION_SCALE_TOLERANCE,
+) -> GateResult:
     """After the solve (and a passed consistency gate): are both sensors' translations in one unit and one
     metric scale?
 
@@ -212,35 +270,57 @@ def translation_scale_gate(motions: Motions, fit: HandEyeFit, names: tuple[str, 
     factor = max(size, 1.0 / size)
     determined = abs(s - 1.0) > SCALE_DETERMINED_SIGMAS * sigma
     detail: dict[str, float | int | str | list[str]] = {
-        "scale_a": round(s, 9), "sigma_scale_a": round(sigma, 9) if math.isfinite(sigma) else "undetermined",
-        "tolerance": tolerance}
-    message = (f"{names[0]}'s translations fit {names[1]}'s at scale {s:.4g} (+/- {sigma:.2g}; "
-               f"tolerance {100 * tolerance:g} %)")
+        "scale_a": round(s, 9),
+        "sigma_scale_a": round(sigma, 9) if math.isfinite(sigma) else "undetermined",
+        "tolerance": tolerance,
+    }
+    message = (
+        f"{names[0]}'s translations fit {names[1]}'s at scale {s:.4g} (+/- {sigma:.2g}; "
+        f"tolerance {100 * tolerance:g} %)"
+    )
     if not determined or (s > 0 and abs(s - 1.0) <= tolerance):
         return GateResult("translation-scale", True, factor, 1.0 + tolerance, message, detail=detail)
     big = names[0] if abs(s) < 1 else names[1]
     unit = _unit_named(factor) if s > 0 else None
     if unit is not None:
-        return GateResult("translation-scale", False, factor, 1.0 + tolerance,
-                          f"translation units disagree: {message}: {big}'s translations look like {unit}, not metres",
-                          "translation_scale.unit", f"convert {big}'s translations to metres", detail)
+        return GateResult(
+            "translation-scale",
+            False,
+            factor,
+            1.0 + tolerance,
+            f"translation units disagree: {message}: {big}'s translations look like {unit}, not metres",
+            "translation_scale.unit",
+            f"convert {big}'s translations to metres",
+            detail,
+        )
     if s > 0 and factor <= TRANSLATION_SCALE_MAX:
         n_sigma = abs(s - 1.0) / sigma if sigma > 0 else math.inf
-        return GateResult("translation-scale", False, factor, 1.0 + tolerance,
-                          f"the metric gauge disagrees: {message}, {n_sigma:.0f} sigma from 1: one sensor's metres are "
-                          f"not the other's (seed chapter 0: a camera's scale is its board's square size; 23 mm "
-                          f"typed for 25 mm gives 0.920)",
-                          "translation_scale.metric_gauge",
-                          "gauge the metric scale: measure the board's squares (calipers) and register them "
-                          "(`calibctl board add`), check the camera with `calibctl check --reference-distance`, "
-                          "then recalibrate and solve again; a robot's or a LiDAR's translations are metric by "
-                          "construction", detail)
-    return GateResult("translation-scale", False, factor, 1.0 + tolerance,
-                      f"translation scales disagree: {message}",
-                      "translation_scale.mismatch",
-                      "both logs must be metric and in metres: check the board's square size (it sets a camera's "
-                      "scale), that neither log is scale-free (monocular visual odometry) and the pose conventions",
-                      detail)
+        return GateResult(
+            "translation-scale",
+            False,
+            factor,
+            1.0 + tolerance,
+            f"the metric gauge disagrees: {message}, {n_sigma:.0f} sigma from 1: one sensor's metres are "
+            f"not the other's (seed chapter 0: a camera's scale is its board's square size; 23 mm "
+            f"typed for 25 mm gives 0.920)",
+            "translation_scale.metric_gauge",
+            "gauge the metric scale: measure the board's squares (calipers) and register them "
+            "(`calibctl board add`), check the camera with `calibctl check --reference-distance`, "
+            "then recalibrate and solve again; a robot's or a LiDAR's translations are metric by "
+            "construction",
+            detail,
+        )
+    return GateResult(
+        "translation-scale",
+        False,
+        factor,
+        1.0 + tolerance,
+        f"translation scales disagree: {message}",
+        "translation_scale.mismatch",
+        "both logs must be metric and in metres: check the board's square size (it sets a camera's "
+        "scale), that neither log is scale-free (monocular visual odometry) and the pose conventions",
+        detail,
+    )
 
 
 def outlier_motions(fit: HandEyeFit) -> np.ndarray:

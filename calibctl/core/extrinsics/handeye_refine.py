@@ -105,8 +105,13 @@ def _jacobian(residuals: Residuals, params: np.ndarray, w_rot: float, w_t: float
     for k in range(params.size):
         step = np.zeros(params.size)
         step[k] = JACOBIAN_STEP
-        cols.append((_weighted(residuals, params + step, w_rot, w_t)
-                     - _weighted(residuals, params - step, w_rot, w_t)) / (2 * JACOBIAN_STEP))
+        cols.append(
+            (
+                _weighted(residuals, params + step, w_rot, w_t)
+                - _weighted(residuals, params - step, w_rot, w_t)
+            )
+            / (2 * JACOBIAN_STEP)
+        )
     return np.column_stack(cols)
 
 
@@ -116,8 +121,9 @@ def _gauss_newton(residuals: Residuals, params0: np.ndarray, dof: int) -> _Solut
     for it in range(1, MAX_ITERATIONS + 1):  # noqa: B007 - the count is reported
         rot, trans = residuals(params)
         w_rot, w_t = 1.0 / _group_sigma(rot, dof), 1.0 / _group_sigma(trans, dof)
-        step = np.linalg.lstsq(_jacobian(residuals, params, w_rot, w_t),
-                               -_weighted(residuals, params, w_rot, w_t), rcond=None)[0]
+        step = np.linalg.lstsq(
+            _jacobian(residuals, params, w_rot, w_t), -_weighted(residuals, params, w_rot, w_t), rcond=None
+        )[0]
         params = params + step
         if np.max(np.abs(step)) < CONVERGED_STEP:
             break
@@ -192,5 +198,15 @@ def _fit_handeye(motions: Motions, method: str) -> HandEyeFit:
     elif motions.n < 2:
         reason = "one motion has no redundancy: no residual scatter to scale an uncertainty with"
     covariance = None if reason or sol.covariance is None else sol.covariance[:6, :6]
-    return HandEyeFit(se3.transform(R_X, t_X), method, model, rot, trans, sol.sigma_rot, sol.sigma_t, covariance,
-                      reason, sol.iterations)
+    return HandEyeFit(
+        se3.transform(R_X, t_X),
+        method,
+        model,
+        rot,
+        trans,
+        sol.sigma_rot,
+        sol.sigma_t,
+        covariance,
+        reason,
+        sol.iterations,
+    )

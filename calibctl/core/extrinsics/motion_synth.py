@@ -62,8 +62,11 @@ def trajectory_pose(t_s: float, excitation: str, amplitude_deg: float) -> np.nda
         lap = 2 * np.pi * t_s / 20.0
         z = 0.0 if excitation == "planar" else 0.3 * np.sin(3 * lap)
         position = np.array([2.0 * np.cos(lap), 2.0 * np.sin(lap), z])
-    R = (se3.rotation_from_rotvec([0, 0, angles[2]]) @ se3.rotation_from_rotvec([0, angles[1], 0])
-         @ se3.rotation_from_rotvec([angles[0], 0, 0]))
+    R = (
+        se3.rotation_from_rotvec([0, 0, angles[2]])
+        @ se3.rotation_from_rotvec([0, angles[1], 0])
+        @ se3.rotation_from_rotvec([angles[0], 0, 0])
+    )
     return se3.transform(R, position)
 
 
@@ -72,24 +75,52 @@ def _noisy(T: np.ndarray, rng: np.random.Generator, rot_deg: float, trans_m: flo
     return se3.transform(R, T[:3, 3] + rng.normal(0.0, trans_m, 3))
 
 
-def synthesize_pose_log(T_a_b: np.ndarray, n_poses: int, *, excitation: str = "3d", amplitude_deg: float = 45.0,
-                        rate_hz: float = 2.0, noise_rotation_deg: float = 0.0, noise_translation_m: float = 0.0,
-                        time_offset_s: float = 0.0, seed: int = 0) -> MotionLog:
+def synthesize_pose_log(
+    T_a_b: np.ndarray,
+    n_poses: int,
+    *,
+    excitation: str = "3d",
+    amplitude_deg: float = 45.0,
+    rate_hz: float = 2.0,
+    noise_rotation_deg: float = 0.0,
+    noise_translation_m: float = 0.0,
+    time_offset_s: float = 0.0,
+    seed: int = 0,
+) -> MotionLog:
     """Keyframe poses of a (T_wa_a) and of b (T_wb_b, wb = b's first pose, sampled ``time_offset_s`` late)."""
     _check(excitation, n_poses)
     rng = np.random.default_rng(seed)
     t = np.arange(n_poses) / rate_hz
     T_wa_b0 = trajectory_pose(time_offset_s, excitation, amplitude_deg) @ T_a_b
     T_wb_wa = se3.invert(T_wa_b0)
-    first = [_noisy(trajectory_pose(ti, excitation, amplitude_deg), rng, noise_rotation_deg, noise_translation_m)
-             for ti in t]
-    second = [_noisy(T_wb_wa @ trajectory_pose(ti + time_offset_s, excitation, amplitude_deg) @ T_a_b, rng,
-                     noise_rotation_deg, noise_translation_m) for ti in t]
-    return MotionLog(t, np.array(first), np.array(second), np.asarray(T_a_b, np.float64), "poses", time_offset_s)
+    first = [
+        _noisy(trajectory_pose(ti, excitation, amplitude_deg), rng, noise_rotation_deg, noise_translation_m)
+        for ti in t
+    ]
+    second = [
+        _noisy(
+            T_wb_wa @ trajectory_pose(ti + time_offset_s, excitation, amplitude_deg) @ T_a_b,
+            rng,
+            noise_rotation_deg,
+            noise_translation_m,
+        )
+        for ti in t
+    ]
+    return MotionLog(
+        t, np.array(first), np.array(second), np.asarray(T_a_b, np.float64), "poses", time_offset_s
+    )
 
 
-def synthesize_motions(T_a_b: np.ndarray, n_motions: int, *, excitation: str = "3d", amplitude_deg: float = 60.0,
-                       noise_rotation_deg: float = 0.0, noise_translation_m: float = 0.0, seed: int = 0) -> MotionLog:
+def synthesize_motions(
+    T_a_b: np.ndarray,
+    n_motions: int,
+    *,
+    excitation: str = "3d",
+    amplitude_deg: float = 60.0,
+    noise_rotation_deg: float = 0.0,
+    noise_translation_m: float = 0.0,
+    seed: int = 0,
+) -> MotionLog:
     """Independent relative motions (A_i, B_i = X^-1 A_i X), noise on A's motion only."""
     _check(excitation, n_motions)
     rng = np.random.default_rng(seed)
@@ -98,8 +129,11 @@ def synthesize_motions(T_a_b: np.ndarray, n_motions: int, *, excitation: str = "
     first, second = [], []
     for _ in range(n_motions):
         angle = np.radians(rng.uniform(amplitude_deg / 2.0, amplitude_deg))
-        axis = {"3d": rng.standard_normal(3), "planar": np.array([0.0, 0.0, 1.0]),
-                "corridor": np.array([0.0, 0.0, 1.0])}[excitation]
+        axis = {
+            "3d": rng.standard_normal(3),
+            "planar": np.array([0.0, 0.0, 1.0]),
+            "corridor": np.array([0.0, 0.0, 1.0]),
+        }[excitation]
         if excitation == "corridor":
             angle = np.radians(rng.uniform(-CORRIDOR_YAW_DEG, CORRIDOR_YAW_DEG))
         t = rng.normal(0.0, MOTION_TRANSLATION_SIGMA_M, 3)
@@ -108,18 +142,29 @@ def synthesize_motions(T_a_b: np.ndarray, n_motions: int, *, excitation: str = "
         A = se3.transform(se3.rotation_from_rotvec(axis / np.linalg.norm(axis) * angle), t)
         second.append(X_inv @ A @ X)
         first.append(_noisy(A, rng, noise_rotation_deg, noise_translation_m))
-    return MotionLog(np.arange(n_motions, dtype=np.float64), np.array(first), np.array(second), X, "motions", 0.0)
+    return MotionLog(
+        np.arange(n_motions, dtype=np.float64), np.array(first), np.array(second), X, "motions", 0.0
+    )
 
 
-def robot_arm_poses(T_cam_board: list[np.ndarray], X: np.ndarray, *, eye_in_hand: bool = True,
-                    T_fixed: np.ndarray | None = None) -> np.ndarray:
+def robot_arm_poses(
+    T_cam_board: list[np.ndarray],
+    X: np.ndarray,
+    *,
+    eye_in_hand: bool = True,
+    T_fixed: np.ndarray | None = None,
+) -> np.ndarray:
     """(n, 4, 4) T_base_gripper that put the board at each wanted ``T_cam_board`` (from synth_scenes).
 
     Eye-in-hand: X = T_gripper_cam, the board fixed at ``T_fixed`` = T_base_board.
     Eye-to-hand: X = T_base_cam, the board fixed on the gripper at ``T_fixed`` = T_gripper_board.
     """
     if T_fixed is None:
-        T_fixed = se3.transform(se3.rotation_from_rotvec(np.array([np.pi, 0.0, 0.0])), np.array([0.6, 0.0, 0.0]))
+        T_fixed = se3.transform(
+            se3.rotation_from_rotvec(np.array([np.pi, 0.0, 0.0])), np.array([0.6, 0.0, 0.0])
+        )
     if eye_in_hand:  # T_base_board = T_base_gripper X T_cam_board
         return np.array([T_fixed @ se3.invert(T) @ se3.invert(X) for T in T_cam_board])
-    return np.array([X @ T @ se3.invert(T_fixed) for T in T_cam_board])  # T_base_cam T_cam_board = T_base_gripper T_gripper_board
+    return np.array(
+        [X @ T @ se3.invert(T_fixed) for T in T_cam_board]
+    )  # T_base_cam T_cam_board = T_base_gripper T_gripper_board

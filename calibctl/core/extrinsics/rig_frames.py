@@ -85,8 +85,11 @@ def _components(n: int, edges: Sequence[tuple[int, int]]) -> list[int]:
     return [find(i) for i in range(n)]
 
 
-def rig_connected_gate(cameras: Sequence[str], shared_views: Mapping[tuple[int, int], int],
-                       min_shared_views: int = MIN_SHARED_VIEWS) -> GateResult:
+def rig_connected_gate(
+    cameras: Sequence[str],
+    shared_views: Mapping[tuple[int, int], int],
+    min_shared_views: int = MIN_SHARED_VIEWS,
+) -> GateResult:
     """The ``rig-connected`` gate (module docstring). shared_views: (a, b) with a < b -> frames both saw.
     ValueError when ``min_shared_views`` is below 1 (a pair that shares no frame links nothing)."""
     if not 1 <= min_shared_views <= MAX_MIN_SHARED_VIEWS:
@@ -96,15 +99,24 @@ def rig_connected_gate(cameras: Sequence[str], shared_views: Mapping[tuple[int, 
     n_parts = len(set(comp))
     if n_parts == 1:
         weakest = min((n for p, n in shared_views.items() if p in edges), default=0)
-        return GateResult("rig-connected", True, float(weakest), float(min_shared_views),
-                          f"every camera is linked by pairs with >= {min_shared_views} shared views")
+        return GateResult(
+            "rig-connected",
+            True,
+            float(weakest),
+            float(min_shared_views),
+            f"every camera is linked by pairs with >= {min_shared_views} shared views",
+        )
     across = [(n, p) for p, n in shared_views.items() if comp[p[0]] != comp[p[1]]]
     n, (a, b) = max(across, key=lambda x: (x[0], -x[1][0], -x[1][1]))
     pair = f"{cameras[a]}-{cameras[b]}"
     return GateResult(
-        "rig-connected", False, float(n), float(min_shared_views),
+        "rig-connected",
+        False,
+        float(n),
+        float(min_shared_views),
         f"the rig falls apart into {n_parts} groups; pair {pair} shares {n} view(s) (needs {min_shared_views})",
         reason="rig-not-connected",
         hint=f"capture at least {min_shared_views - n} more frame(s) with the board seen by both {cameras[a]} "
-             f"and {cameras[b]}",
-        detail={"pair": pair, "shared_views": n})
+        f"and {cameras[b]}",
+        detail={"pair": pair, "shared_views": n},
+    )

@@ -53,11 +53,17 @@ def shared_images(shas_by_camera: Mapping[str, Collection[str | None]]) -> list[
     sets = {n: {s for s in shas_by_camera[n] if s} for n in names}
     found = []
     for i, a in enumerate(names):
-        for b in names[i + 1:]:
+        for b in names[i + 1 :]:
             common = sets[a] & sets[b]
             if common:
-                found.append(IdentityFinding(a, b, f"{a} and {b} hold {len(common)} identical image(s) (same sha256; "
-                                                   f"{len(sets[a])} and {len(sets[b])} images)"))
+                found.append(
+                    IdentityFinding(
+                        a,
+                        b,
+                        f"{a} and {b} hold {len(common)} identical image(s) (same sha256; "
+                        f"{len(sets[a])} and {len(sets[b])} images)",
+                    )
+                )
     return found
 
 
@@ -70,26 +76,37 @@ def _same_view(va: BoardView, vb: BoardView, tol_px: float) -> bool:
     return bool(np.max(np.abs(pa - pb)) <= tol_px)
 
 
-def same_corners(views: RigViews, tol_px: float = SAME_CORNERS_PX,
-                 share: float = SAME_FRAME_SHARE) -> list[IdentityFinding]:
+def same_corners(
+    views: RigViews, tol_px: float = SAME_CORNERS_PX, share: float = SAME_FRAME_SHARE
+) -> list[IdentityFinding]:
     """Pairs of members whose corners coincide (every shared corner within ``tol_px`` px) in at least
     ``share`` of the frames both saw the board in."""
     found = []
     n = len(views.cameras)
     for a in range(n):
         for b in range(a + 1, n):
-            both = [(va, vb) for row in views.views if (va := row[a]) is not None and (vb := row[b]) is not None]
+            both = [
+                (va, vb) for row in views.views if (va := row[a]) is not None and (vb := row[b]) is not None
+            ]
             same = sum(1 for va, vb in both if _same_view(va, vb, tol_px))
             if both and same >= max(1, share * len(both)):
-                found.append(IdentityFinding(views.cameras[a], views.cameras[b],
-                                             f"{views.cameras[a]} and {views.cameras[b]} see the board at the same "
-                                             f"pixels (every corner within {tol_px:g} px) in {same} of {len(both)} "
-                                             "shared frames"))
+                found.append(
+                    IdentityFinding(
+                        views.cameras[a],
+                        views.cameras[b],
+                        f"{views.cameras[a]} and {views.cameras[b]} see the board at the same "
+                        f"pixels (every corner within {tol_px:g} px) in {same} of {len(both)} "
+                        "shared frames",
+                    )
+                )
     return found
 
 
-def zero_baselines(pairs: Sequence[tuple[str, str, np.ndarray, np.ndarray]], floor_mm: float = MIN_BASELINE_MM,
-                   chi2_limit: float = CHI2_3DOF) -> list[IdentityFinding]:
+def zero_baselines(
+    pairs: Sequence[tuple[str, str, np.ndarray, np.ndarray]],
+    floor_mm: float = MIN_BASELINE_MM,
+    chi2_limit: float = CHI2_3DOF,
+) -> list[IdentityFinding]:
     """Pairs whose translation cannot be told from zero. ``pairs``: (a, b, t_mm (3,), cov_t_mm2 (3, 3)),
     the translation of T_a_b or T_b_a in mm with its covariance. Refused: |t| below ``floor_mm``, or
     t^T cov^-1 t below ``chi2_limit`` (zero is inside the 99.7 % ellipsoid: the norm of a zero baseline
@@ -105,8 +122,11 @@ def zero_baselines(pairs: Sequence[tuple[str, str, np.ndarray, np.ndarray]], flo
         d2 = float(t @ np.linalg.pinv(cov) @ t) if np.all(np.isfinite(cov)) and np.any(cov) else float("inf")
         sigma = float(np.sqrt(t @ cov @ t) / norm) if norm > 0 and np.all(np.isfinite(cov)) else float("nan")
         if d2 < chi2_limit or norm < floor_mm:
-            why = (f"indistinguishable from zero (Mahalanobis {np.sqrt(d2):.2f} < {np.sqrt(chi2_limit):.2f})"
-                   if d2 < chi2_limit else f"below the {floor_mm:g} mm floor")
+            why = (
+                f"indistinguishable from zero (Mahalanobis {np.sqrt(d2):.2f} < {np.sqrt(chi2_limit):.2f})"
+                if d2 < chi2_limit
+                else f"below the {floor_mm:g} mm floor"
+            )
             found.append(IdentityFinding(a, b, f"{a}-{b} baseline {norm:.3f} +/- {sigma:.3f} mm is {why}"))
     return found
 
@@ -118,8 +138,14 @@ def pair_translations(solution: RigSolution) -> list[tuple[str, str, np.ndarray,
     out = []
     for a in range(len(names)):
         for b in range(a + 1, len(names)):
-            out.append((names[a], names[b], solution.T_a_b(b, a)[:3, 3] * 1e3,
-                        solution.pair_covariance(b, a)[3:, 3:] * 1e6))
+            out.append(
+                (
+                    names[a],
+                    names[b],
+                    solution.T_a_b(b, a)[:3, 3] * 1e3,
+                    solution.pair_covariance(b, a)[3:, 3:] * 1e6,
+                )
+            )
     return out
 
 
@@ -130,4 +156,5 @@ def refuse(findings: Sequence[IdentityFinding], what: str) -> None:
     raise InconsistentDataError(
         f"{what}: the members are not distinct cameras: " + "; ".join(f.message for f in findings),
         "give each camera its own photos (was the same folder given twice, or a folder copied?); "
-        "nothing was stored")
+        "nothing was stored",
+    )

@@ -34,8 +34,13 @@ def view_poses(views: RigViews, members: Sequence[MemberIntrinsics]) -> dict[tup
             if view is None:
                 continue
             m = members[c]
-            pose = fit_pose(view.object_points(views.model_points_m), view.corners_px, m.camera_matrix,
-                            m.dist_coeffs, "fisheye" if m.lens == "fisheye" else DEFAULT_MODEL)
+            pose = fit_pose(
+                view.object_points(views.model_points_m),
+                view.corners_px,
+                m.camera_matrix,
+                m.dist_coeffs,
+                "fisheye" if m.lens == "fisheye" else DEFAULT_MODEL,
+            )
             if pose is not None:
                 out[(f, c)] = pose_to_T(np.concatenate([np.ravel(pose[0]), np.ravel(pose[1])]))
     return out
@@ -72,8 +77,10 @@ def initial_poses(views: RigViews, members: Sequence[MemberIntrinsics]) -> tuple
                     best = (a, b, shared)
         if best is None:
             missing = [views.cameras[c] for c in range(n_cams) if c not in T_cam_root]
-            raise NumericalError(f"camera(s) {', '.join(missing)} share no board view with the rest of the rig",
-                                 hint="capture frames in which the board is seen by both cameras of a pair")
+            raise NumericalError(
+                f"camera(s) {', '.join(missing)} share no board view with the rest of the rig",
+                hint="capture frames in which the board is seen by both cameras of a pair",
+            )
         a, b, shared = best
         T_b_a = mean_transform([poses[(f, b)] @ invert(poses[(f, a)]) for f in shared])
         T_cam_root[b] = T_b_a @ T_cam_root[a]
@@ -84,8 +91,9 @@ def initial_poses(views: RigViews, members: Sequence[MemberIntrinsics]) -> tuple
     for f in range(n_frames):
         estimates = [invert(T_cam_root[c]) @ poses[(f, c)] for c in range(n_cams) if (f, c) in poses]
         if not estimates:
-            raise NumericalError(f"frame {views.frames[f]}: no camera's board pose could be fitted",
-                                 hint="drop that frame")
+            raise NumericalError(
+                f"frame {views.frames[f]}: no camera's board pose could be fitted", hint="drop that frame"
+            )
         board_poses[f] = T_to_pose(mean_transform(estimates))
     return cam_poses, board_poses
 
@@ -113,13 +121,17 @@ class PairSpread:
     transfer_frame: str
 
     def words(self, cameras: Sequence[str]) -> str:
-        return (f"{cameras[self.a]}-{cameras[self.b]}: per-frame baseline {self.baseline_mm[0]:.1f}-"
-                f"{self.baseline_mm[1]:.1f} mm, rotation up to {self.rotation_deg:.2f} deg off the mean (frame "
-                f"{self.rotation_frame}); the best frame's pose ({self.transfer_frame}) carries the board into "
-                f"{cameras[self.b]} at {self.transfer_rms_px:.2f} px RMS over the {self.n_frames} frames")
+        return (
+            f"{cameras[self.a]}-{cameras[self.b]}: per-frame baseline {self.baseline_mm[0]:.1f}-"
+            f"{self.baseline_mm[1]:.1f} mm, rotation up to {self.rotation_deg:.2f} deg off the mean (frame "
+            f"{self.rotation_frame}); the best frame's pose ({self.transfer_frame}) carries the board into "
+            f"{cameras[self.b]} at {self.transfer_rms_px:.2f} px RMS over the {self.n_frames} frames"
+        )
 
 
-def _fit_rms_px(view: BoardView, model_points_m: np.ndarray, member: MemberIntrinsics, T_cam_board: np.ndarray) -> float:
+def _fit_rms_px(
+    view: BoardView, model_points_m: np.ndarray, member: MemberIntrinsics, T_cam_board: np.ndarray
+) -> float:
     """Per-corner RMS (px) of ``view``'s corners against the board at T_cam_board through the member's lens."""
     pose = T_to_pose(T_cam_board)
     proj, _ = project_member(view.object_points(model_points_m), pose[:3], pose[3:], member)
@@ -136,8 +148,12 @@ def pair_spreads(views: RigViews, members: Sequence[MemberIntrinsics]) -> list[P
     webcams, neither rigid nor synchronised, 60.3 px.
     """
     poses = view_poses(views, members)
-    good = {k for k, T in poses.items()
-            if _fit_rms_px(views.views[k[0]][k[1]], views.model_points_m, members[k[1]], T) <= MAX_RMS_PX}  # type: ignore[arg-type]
+    good = {
+        k
+        for k, T in poses.items()
+        if _fit_rms_px(views.views[k[0]][k[1]], views.model_points_m, members[k[1]], T)  # type: ignore[arg-type]
+        <= MAX_RMS_PX
+    }
     out = []
     n = len(views.cameras)
     for a in range(n):
@@ -149,12 +165,38 @@ def pair_spreads(views: RigViews, members: Sequence[MemberIntrinsics]) -> list[P
             mean = mean_transform(rel)
             base_mm = [float(np.linalg.norm(T[:3, 3]) * 1e3) for T in rel]
             rot_deg = [rotation_angle_deg(T[:3, :3] @ mean[:3, :3].T) for T in rel]
-            transfer = [float(np.sqrt(np.mean([_fit_rms_px(views.views[g][b], views.model_points_m, members[b],  # type: ignore[arg-type]
-                                                           T_b_a @ poses[(g, a)]) ** 2 for g in frames])))
-                        for T_b_a in rel]
+            transfer = [
+                float(
+                    np.sqrt(
+                        np.mean(
+                            [
+                                _fit_rms_px(
+                                    views.views[g][b],  # type: ignore[arg-type]
+                                    views.model_points_m,
+                                    members[b],
+                                    T_b_a @ poses[(g, a)],
+                                )
+                                ** 2
+                                for g in frames
+                            ]
+                        )
+                    )
+                )
+                for T_b_a in rel
+            ]
             worst, best = int(np.argmax(rot_deg)), int(np.argmin(transfer))
-            out.append(PairSpread(a, b, len(frames), (min(base_mm), max(base_mm)), rot_deg[worst],
-                                  views.frames[frames[worst]], transfer[best], views.frames[frames[best]]))
+            out.append(
+                PairSpread(
+                    a,
+                    b,
+                    len(frames),
+                    (min(base_mm), max(base_mm)),
+                    rot_deg[worst],
+                    views.frames[frames[worst]],
+                    transfer[best],
+                    views.frames[frames[best]],
+                )
+            )
     return out
 
 

@@ -45,7 +45,9 @@ class _Pair:
     gains: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]]  # (frame, camera) -> ids (N,), s G (6, N, 2)
     pulls: dict[Cluster, np.ndarray]  # cluster -> (6,), centred on the pair's mean
     jackknife_factor: float  # (n - 1) / n
-    theta: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]  # camera -> A (6, p), Cov_jac (p, p), Cov_unknown
+    theta: dict[
+        str, tuple[np.ndarray, np.ndarray, np.ndarray]
+    ]  # camera -> A (6, p), Cov_jac (p, p), Cov_unknown
 
 
 @dataclass(frozen=True)
@@ -69,14 +71,22 @@ def _linearised_pair(sol: RigSolution, full: RigViews) -> _Pair:
             if view is None:
                 continue
             obj = view.object_points(views.model_points_m)
-            _, J_board, J_cam, _ = observation_jacobian(obj, sol.cam_poses[c] if c > 0 else None, sol.board_poses[f],
-                                                        members[c])
-            cols, J = (layout.board(f), J_board) if J_cam is None else (
-                np.concatenate([layout.ext(c), layout.board(f)]), np.hstack([J_cam, J_board]))
+            _, J_board, J_cam, _ = observation_jacobian(
+                obj, sol.cam_poses[c] if c > 0 else None, sol.board_poses[f], members[c]
+            )
+            cols, J = (
+                (layout.board(f), J_board)
+                if J_cam is None
+                else (np.concatenate([layout.ext(c), layout.board(f)]), np.hstack([J_cam, J_board]))
+            )
             G = s * lin.H_inv[np.ix_(x, cols)] @ J.T
             gains[(views.frames[f], views.cameras[c])] = (np.asarray(view.corner_ids), G.reshape(6, -1, 2))
-    photo_frame = {(full.cameras[c], v.name): full.frames[f] for f, row in enumerate(full.views)
-                   for c, v in enumerate(row) if v is not None}
+    photo_frame = {
+        (full.cameras[c], v.name): full.frames[f]
+        for f, row in enumerate(full.views)
+        for c, v in enumerate(row)
+        if v is not None
+    }
     keyed = {(photo_frame.get(k, k) if isinstance(k, tuple) else k): p[:6] for k, p in lin.pulls.items()}
     mean = np.mean(list(keyed.values()), axis=0)
     n = len(keyed)
@@ -86,10 +96,18 @@ def _linearised_pair(sol: RigSolution, full: RigViews) -> _Pair:
         fixed0 = layout.board0 + 6 * layout.n_frames
         for c, name in enumerate(views.cameras):
             at = layout.intrinsics(c) - fixed0
-            theta[name] = (lin.intrinsic_gain[np.ix_(x, at)], lin.cov_theta_jacobian[np.ix_(at, at)],
-                           lin.cov_theta_unknown[np.ix_(at, at)])
-    return _Pair((views.cameras[0], views.cameras[1]), gains, {k: p - mean for k, p in keyed.items()},
-                 (n - 1) / n if n >= MIN_FRAMES else float("nan"), theta)
+            theta[name] = (
+                lin.intrinsic_gain[np.ix_(x, at)],
+                lin.cov_theta_jacobian[np.ix_(at, at)],
+                lin.cov_theta_unknown[np.ix_(at, at)],
+            )
+    return _Pair(
+        (views.cameras[0], views.cameras[1]),
+        gains,
+        {k: p - mean for k, p in keyed.items()},
+        (n - 1) / n if n >= MIN_FRAMES else float("nan"),
+        theta,
+    )
 
 
 def _cross(p: _Pair, q: _Pair) -> tuple[np.ndarray, np.ndarray]:
@@ -106,12 +124,18 @@ def _cross(p: _Pair, q: _Pair) -> tuple[np.ndarray, np.ndarray]:
         jac += A_p @ cov_jac @ A_q.T
         frame += A_p @ cov_unknown @ A_q.T
     for cluster in set(p.pulls) & set(q.pulls):
-        frame += np.sqrt(p.jackknife_factor * q.jackknife_factor) * np.outer(p.pulls[cluster], q.pulls[cluster])
+        frame += np.sqrt(p.jackknife_factor * q.jackknife_factor) * np.outer(
+            p.pulls[cluster], q.pulls[cluster]
+        )
     return jac, frame
 
 
-def loop_covariance(pair_solutions: Sequence[RigSolution], full: RigViews, around: Callable[[np.ndarray], np.ndarray],
-                    x: np.ndarray) -> LoopCovariance:
+def loop_covariance(
+    pair_solutions: Sequence[RigSolution],
+    full: RigViews,
+    around: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+) -> LoopCovariance:
     """Covariances of ``around(x)``, x the stacked cam_poses[1] of ``pair_solutions`` (2-camera RigSolutions of
     the rig ``full``), with every cross covariance between the pairs (module docstring)."""
     pairs = [_linearised_pair(sol, full) for sol in pair_solutions]
@@ -120,8 +144,11 @@ def loop_covariance(pair_solutions: Sequence[RigSolution], full: RigViews, aroun
     for i, p in enumerate(pairs):
         for j in range(i, k):
             cj, cf = _cross(p, pairs[j])
-            jac[6 * i:6 * i + 6, 6 * j:6 * j + 6], frame[6 * i:6 * i + 6, 6 * j:6 * j + 6] = cj, cf
-            jac[6 * j:6 * j + 6, 6 * i:6 * i + 6], frame[6 * j:6 * j + 6, 6 * i:6 * i + 6] = cj.T, cf.T
+            jac[6 * i : 6 * i + 6, 6 * j : 6 * j + 6], frame[6 * i : 6 * i + 6, 6 * j : 6 * j + 6] = cj, cf
+            jac[6 * j : 6 * j + 6, 6 * i : 6 * i + 6], frame[6 * j : 6 * j + 6, 6 * i : 6 * i + 6] = (
+                cj.T,
+                cf.T,
+            )
     cov_jac = propagate(around, x, jac)
     if not all(np.isfinite(p.jackknife_factor) for p in pairs):
         return LoopCovariance(cov_jac, None)

@@ -50,15 +50,17 @@ def essential_matrix(T_b_a: np.ndarray) -> np.ndarray:
     return np.asarray(skew(T_b_a[:3, 3]) @ T_b_a[:3, :3])
 
 
-def undistort(points_px: np.ndarray, member: MemberIntrinsics, R: np.ndarray | None = None,
-              P: np.ndarray | None = None) -> np.ndarray:
+def undistort(
+    points_px: np.ndarray, member: MemberIntrinsics, R: np.ndarray | None = None, P: np.ndarray | None = None
+) -> np.ndarray:
     """(N, 2) distorted px -> (N, 2) through the member's lens (cv2.undistortPoints, or cv2.fisheye's for a
     fisheye member), then R and P as OpenCV applies them."""
     pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 1, 2)
     if member.lens == "fisheye":
         D = np.asarray(member.dist_coeffs, np.float64).reshape(-1)[:4]
-        out = cv2.fisheye.undistortPoints(pts, member.camera_matrix, D, R=np.eye(3) if R is None else R,
-                                          P=np.eye(3) if P is None else P)
+        out = cv2.fisheye.undistortPoints(
+            pts, member.camera_matrix, D, R=np.eye(3) if R is None else R, P=np.eye(3) if P is None else P
+        )
     else:
         out = cv2.undistortPoints(pts, member.camera_matrix, member.dist_coeffs, R=R, P=P)
     return np.asarray(out).reshape(-1, 2)
@@ -81,8 +83,9 @@ def _focal_px(member: MemberIntrinsics) -> float:
     return float(np.sqrt(member.camera_matrix[0, 0] * member.camera_matrix[1, 1]))
 
 
-def epipolar_distances_px(pts_a: np.ndarray, pts_b: np.ndarray, a: MemberIntrinsics, b: MemberIntrinsics,
-                          T_b_a: np.ndarray) -> np.ndarray:
+def epipolar_distances_px(
+    pts_a: np.ndarray, pts_b: np.ndarray, a: MemberIntrinsics, b: MemberIntrinsics, T_b_a: np.ndarray
+) -> np.ndarray:
     """(2N,) distances of each corner to its partner's epipolar line (image b then image a), px.
 
     With a fisheye member: the angle of each ray to its partner's epipolar plane times the camera's
@@ -117,14 +120,16 @@ def rectify(a: MemberIntrinsics, b: MemberIntrinsics, T_b_a: np.ndarray) -> Rect
     R, t = np.ascontiguousarray(T_b_a[:3, :3]), np.ascontiguousarray(T_b_a[:3, 3].reshape(3, 1))
     pinhole = a.lens != "fisheye" and b.lens != "fisheye"
     Da, Db = (m.dist_coeffs if pinhole else np.zeros(5) for m in (a, b))
-    R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(a.camera_matrix, Da, b.camera_matrix, Db, tuple(a.image_size),
-                                                R, t, flags=cv2.CALIB_ZERO_DISPARITY)
+    R1, R2, P1, P2, Q, _, _ = cv2.stereoRectify(
+        a.camera_matrix, Da, b.camera_matrix, Db, tuple(a.image_size), R, t, flags=cv2.CALIB_ZERO_DISPARITY
+    )
     horizontal = abs(P2[0, 3]) >= abs(P2[1, 3])
     return Rectification(R1, R2, P1, P2, Q, bool(horizontal))
 
 
-def rectified_cross_disparity_px(pts_a: np.ndarray, pts_b: np.ndarray, a: MemberIntrinsics, b: MemberIntrinsics,
-                                 rect: Rectification) -> np.ndarray:
+def rectified_cross_disparity_px(
+    pts_a: np.ndarray, pts_b: np.ndarray, a: MemberIntrinsics, b: MemberIntrinsics, rect: Rectification
+) -> np.ndarray:
     """(N,) disparity across the epipolar direction after rectification (0 for a perfect pair), px.
 
     With a fisheye member: the rectified rays' angles about the baseline (the epipolar plane each lies in)

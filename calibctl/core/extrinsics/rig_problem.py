@@ -105,14 +105,21 @@ class RigViews:
 
     def subset(self, frame_indices: Sequence[int]) -> RigViews:
         idx = list(frame_indices)
-        return RigViews(self.cameras, self.model_points_m, tuple(self.frames[i] for i in idx),
-                        tuple(self.views[i] for i in idx))
+        return RigViews(
+            self.cameras,
+            self.model_points_m,
+            tuple(self.frames[i] for i in idx),
+            tuple(self.views[i] for i in idx),
+        )
 
     def shared_view_counts(self) -> dict[tuple[int, int], int]:
         """Frames in which both cameras of each pair (a < b) saw the board."""
         n = len(self.cameras)
-        return {(a, b): sum(1 for row in self.views if row[a] is not None and row[b] is not None)
-                for a in range(n) for b in range(a + 1, n)}
+        return {
+            (a, b): sum(1 for row in self.views if row[a] is not None and row[b] is not None)
+            for a in range(n)
+            for b in range(a + 1, n)
+        }
 
 
 @dataclass
@@ -164,8 +171,9 @@ class NormalEquations:
     frame_shared_H: np.ndarray | None = None  # (F, n, n) frame f's share of H over the non-board unknowns
 
 
-def project_member(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, member: MemberIntrinsics
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def project_member(
+    obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, member: MemberIntrinsics
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, 1, 2) px of (N, 3) board points at T_cam_board (rvec, tvec) through the member's lens, and the
     (2N, 10 + d) Jacobian in cv2.projectPoints' column order [rvec tvec fx fy cx cy dist...], distortion
     columns in ``member.distortion_order`` (cv2.fisheye.projectPoints' [fx fy cx cy k1..k4 rvec tvec alpha]
@@ -174,13 +182,19 @@ def project_member(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, member: 
         proj, J = cv2.projectPoints(obj, rvec, tvec, member.camera_matrix, member.dist_coeffs)
         return proj, J
     D = np.asarray(member.dist_coeffs, np.float64).reshape(-1)[:4]
-    proj, J = cv2.fisheye.projectPoints(np.asarray(obj, np.float64).reshape(-1, 1, 3), np.asarray(rvec, np.float64).reshape(3, 1),
-                                        np.asarray(tvec, np.float64).reshape(3, 1), member.camera_matrix, D)
+    proj, J = cv2.fisheye.projectPoints(
+        np.asarray(obj, np.float64).reshape(-1, 1, 3),
+        np.asarray(rvec, np.float64).reshape(3, 1),
+        np.asarray(tvec, np.float64).reshape(3, 1),
+        member.camera_matrix,
+        D,
+    )
     return proj, np.hstack([J[:, 8:14], J[:, 0:8]])
 
 
-def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose_root_board: np.ndarray,
-                         member: MemberIntrinsics) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+def observation_jacobian(
+    obj: np.ndarray, pose_cam_root: np.ndarray | None, pose_root_board: np.ndarray, member: MemberIntrinsics
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Projection of one (frame, camera) and its Jacobian blocks.
 
     Returns:
@@ -194,8 +208,9 @@ def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose
         rc, tc = pose_cam_root[:3].reshape(3, 1), pose_cam_root[3:].reshape(3, 1)
         r3, t3, dr3dr1, _, dr3dr2, _, dt3dr1, dt3dt1, dt3dr2, dt3dt2 = cv2.composeRT(rb, tb, rc, tc)
     proj, J = project_member(obj, r3, t3, member)
-    J_int, _ = intrinsic_columns(J, member.free_intrinsics, member.free_distortion, member.aspect,
-                                 member.distortion_order)
+    J_int, _ = intrinsic_columns(
+        J, member.free_intrinsics, member.free_distortion, member.aspect, member.distortion_order
+    )
     if pose_cam_root is None:
         return proj.reshape(-1, 2), J[:, :6], None, J_int
     d_r3, d_t3 = J[:, :3], J[:, 3:6]
@@ -204,8 +219,14 @@ def observation_jacobian(obj: np.ndarray, pose_cam_root: np.ndarray | None, pose
     return proj.reshape(-1, 2), J_board, J_cam, J_int
 
 
-def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                     board_poses: np.ndarray, layout: Layout, per_frame: bool = False) -> NormalEquations:
+def normal_equations(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    cam_poses: np.ndarray,
+    board_poses: np.ndarray,
+    layout: Layout,
+    per_frame: bool = False,
+) -> NormalEquations:
     """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6)); ``per_frame``:
     each frame's share of H over the non-board unknowns too (the frame-level covariance needs it, the LM not)."""
     H = np.zeros((layout.size, layout.size))
@@ -220,7 +241,8 @@ def normal_equations(views: RigViews, members: Sequence[MemberIntrinsics], cam_p
                 continue
             obj = view.object_points(views.model_points_m)
             proj, J_board, J_cam, J_int = observation_jacobian(
-                obj, cam_poses[c] if c > 0 else None, board_poses[f], members[c])
+                obj, cam_poses[c] if c > 0 else None, board_poses[f], members[c]
+            )
             res = view.corners_px - proj
             residuals[(f, c)] = res
             r = res.reshape(-1)

@@ -103,7 +103,9 @@ class RigSolution:
             return T_to_pose(Ta @ invert(Tb))
 
         x = np.concatenate([self.cam_poses[c] for c in cams])
-        full = self.jacobian_covariance if jacobian and self.jacobian_covariance is not None else self.covariance
+        full = (
+            self.jacobian_covariance if jacobian and self.jacobian_covariance is not None else self.covariance
+        )
         return propagate(fn, x, full[np.ix_(idx, idx)])
 
 
@@ -129,39 +131,65 @@ def _select(view: BoardView, ids: np.ndarray) -> BoardView:
     return BoardView(view.name, ids, view.corners_px[[order[int(i)] for i in ids]])
 
 
-def _stereo(views: RigViews, members: Sequence[MemberIntrinsics], refine: bool,
-            model_flags: int) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
+def _stereo(
+    views: RigViews, members: Sequence[MemberIntrinsics], refine: bool, model_flags: int
+) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
     pairs = [(v[0], v[1]) for v in views.views if v[0] is not None and v[1] is not None]
     obj = [va.object_points(views.model_points_m).astype(np.float32) for va, _ in pairs]
     img = [[pair[c].corners_px.astype(np.float32) for pair in pairs] for c in (0, 1)]
     m0, m1 = members
     flags = (model_flags | cv2.CALIB_USE_INTRINSIC_GUESS) if refine else cv2.CALIB_FIX_INTRINSIC
-    start = [np.array(a, dtype=np.float64) for a in (m0.camera_matrix, m0.dist_coeffs,
-                                                     m1.camera_matrix, m1.dist_coeffs)]
+    start = [
+        np.array(a, dtype=np.float64)
+        for a in (m0.camera_matrix, m0.dist_coeffs, m1.camera_matrix, m1.dist_coeffs)
+    ]
     if max(start[1].size, start[3].size) >= 8:  # rational members: without the flag OpenCV drops k4..k6 (and
-        flags |= cv2.CALIB_RATIONAL_MODEL        # returns 5 coefficients the rig's Jacobian cannot index)
+        flags |= cv2.CALIB_RATIONAL_MODEL  # returns 5 coefficients the rig's Jacobian cannot index)
     with single_threaded_opencv():
-        out = cv2.stereoCalibrateExtended(obj, img[0], img[1], start[0], start[1], start[2], start[3], m0.image_size,
-                                          np.eye(3), np.zeros((3, 1)), flags=flags, criteria=STEREO_CRITERIA)
+        out = cv2.stereoCalibrateExtended(
+            obj,
+            img[0],
+            img[1],
+            start[0],
+            start[1],
+            start[2],
+            start[3],
+            m0.image_size,
+            np.eye(3),
+            np.zeros((3, 1)),
+            flags=flags,
+            criteria=STEREO_CRITERIA,
+        )
     K1, D1, K2, D2, R, T = out[1:7]
     rvecs, tvecs = out[9], out[10]
     cam_poses = np.zeros((2, 6))
     cam_poses[1] = np.concatenate([cv2.Rodrigues(R)[0].ravel(), np.asarray(T).ravel()])
     board = np.array([np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
-    new = [replace(m, camera_matrix=np.asarray(K), dist_coeffs=np.asarray(D).ravel())
-           for m, K, D in ((m0, K1, D1), (m1, K2, D2))]
+    new = [
+        replace(m, camera_matrix=np.asarray(K), dist_coeffs=np.asarray(D).ravel())
+        for m, K, D in ((m0, K1, D1), (m1, K2, D2))
+    ]
     return cam_poses, board, new
 
 
-def _lm(views: RigViews, members: list[MemberIntrinsics], cam_poses: np.ndarray, board_poses: np.ndarray,
-        refine: bool) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
+def _lm(
+    views: RigViews,
+    members: list[MemberIntrinsics],
+    cam_poses: np.ndarray,
+    board_poses: np.ndarray,
+    refine: bool,
+) -> tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]:
     """calibctl.core.lm over the free parameters, each frame's board pose eliminated (Schur path): a board
     pose touches only its own frame's rows, so a frame's block couples only with the camera poses and
     intrinsics, never with another frame's."""
     layout = Layout(len(views.cameras), len(views.frames), tuple(m.n_params for m in members))
     board_idx = layout.board0 + np.arange(6 * layout.n_frames).reshape(-1, 6)
-    shared = np.concatenate([np.arange(layout.board0), np.arange(layout.board0 + 6 * layout.n_frames, layout.size)
-                             if refine else np.arange(0)])
+    shared = np.concatenate(
+        [
+            np.arange(layout.board0),
+            np.arange(layout.board0 + 6 * layout.n_frames, layout.size) if refine else np.arange(0),
+        ]
+    )
     Params = tuple[np.ndarray, np.ndarray, list[MemberIntrinsics]]
 
     def evaluate(params: Params) -> SchurSystem:
@@ -170,29 +198,38 @@ def _lm(views: RigViews, members: list[MemberIntrinsics], cam_poses: np.ndarray,
 
     def retract(params: Params, delta: np.ndarray) -> Params:
         step = np.zeros(layout.size)
-        step[shared], step[board_idx.ravel()] = delta[:shared.size], delta[shared.size:]
+        step[shared], step[board_idx.ravel()] = delta[: shared.size], delta[shared.size :]
         cam = params[0].copy()
-        cam[1:] += step[:layout.board0].reshape(-1, 6)
-        board = params[1] + step[layout.board0:layout.board0 + 6 * layout.n_frames].reshape(-1, 6)
+        cam[1:] += step[: layout.board0].reshape(-1, 6)
+        board = params[1] + step[layout.board0 : layout.board0 + 6 * layout.n_frames].reshape(-1, 6)
         return cam, board, [m.stepped(step[layout.intrinsics(c)]) for c, m in enumerate(params[2])]
 
-    out = solve_lm(evaluate, (cam_poses, board_poses, members), retract, damping=LM_DAMPING,
-                   max_iterations=MAX_LM_ITERATIONS, relative_tolerance=LM_RELATIVE_TOL, label="the rig solve",
-                   hint="check that every camera's intrinsics belong to it and the board is right")
+    out = solve_lm(
+        evaluate,
+        (cam_poses, board_poses, members),
+        retract,
+        damping=LM_DAMPING,
+        max_iterations=MAX_LM_ITERATIONS,
+        relative_tolerance=LM_RELATIVE_TOL,
+        label="the rig solve",
+        hint="check that every camera's intrinsics belong to it and the board is right",
+    )
     return out.params
 
 
 def _tree(names: Sequence[str], cam_poses: np.ndarray, cov: np.ndarray) -> RigTree:
     edges = []
     for c in range(1, len(names)):
-        block = cov[6 * (c - 1):6 * c, 6 * (c - 1):6 * c]
+        block = cov[6 * (c - 1) : 6 * c, 6 * (c - 1) : 6 * c]
         edge_cov = propagate(lambda p: T_to_pose(invert(pose_to_T(p))), cam_poses[c], block)
         edges.append(Edge(names[0], names[c], invert(pose_to_T(cam_poses[c])), edge_cov))
     return RigTree(names[0], tuple(edges))
 
 
-RIGID_HINT = ("the cameras must not move against each other and the board must be still while a frame is taken; "
-              "check the sources are synchronised and each camera's calibration belongs to it")
+RIGID_HINT = (
+    "the cameras must not move against each other and the board must be still while a frame is taken; "
+    "check the sources are synchronised and each camera's calibration belongs to it"
+)
 
 
 def diverged(views: RigViews, members: Sequence[MemberIntrinsics], worst_rms_px: float) -> CalibctlError:
@@ -208,15 +245,26 @@ def diverged(views: RigViews, members: Sequence[MemberIntrinsics], worst_rms_px:
         return InconsistentDataError(
             f"the rig's frames contradict each other, so the cameras were not rigid or not synchronised: the solve "
             f"leaves RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px) and no frame's own pose of {pairs} fits "
-            f"the other frames within {MAX_RMS_PX:.0f} px; {words}", hint=RIGID_HINT)
+            f"the other frames within {MAX_RMS_PX:.0f} px; {words}",
+            hint=RIGID_HINT,
+        )
     agree = f"; the frames agree with one rigid rig ({words})" if spreads else ""
-    return NumericalError(f"the rig solve diverged: RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px){agree}",
-                          hint=RIGID_HINT if not spreads else "the solver failed on frames that agree: check that "
-                          "each camera's calibration belongs to it, and report the photos if it does")
+    return NumericalError(
+        f"the rig solve diverged: RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px){agree}",
+        hint=RIGID_HINT
+        if not spreads
+        else "the solver failed on frames that agree: check that "
+        "each camera's calibration belongs to it, and report the photos if it does",
+    )
 
 
-def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,
-              model: str = DEFAULT_MODEL, solver: str = "auto") -> RigSolution:
+def solve_rig(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    refine_intrinsics: bool = False,
+    model: str = DEFAULT_MODEL,
+    solver: str = "auto",
+) -> RigSolution:
     """Solve the extrinsics of a rig (cameras[0] is the root).
 
     Args:
@@ -234,16 +282,21 @@ def solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intri
         return _solve_rig(views, members, refine_intrinsics, model, solver)
 
 
-def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool, model: str,
-               solver: str) -> RigSolution:
+def _solve_rig(
+    views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool, model: str, solver: str
+) -> RigSolution:
     for m in members:  # refused up front: where NaN intrinsics would fail later depends on the OpenCV version
         if not (np.isfinite(m.camera_matrix).all() and np.isfinite(m.dist_coeffs).all()):
-            raise NumericalError(f"the rig solve cannot start: camera {m.name}'s intrinsics are NaN or infinite",
-                                 hint="check that every camera's intrinsics belong to it (re-solve that camera)")
+            raise NumericalError(
+                f"the rig solve cannot start: camera {m.name}'s intrinsics are NaN or infinite",
+                hint="check that every camera's intrinsics belong to it (re-solve that camera)",
+            )
     views = shared_corners_only(views)
     if len(views.frames) < 2:
-        raise NumericalError(f"only {len(views.frames)} frame(s) show the board to two cameras at once",
-                             hint="capture views that at least two cameras see together")
+        raise NumericalError(
+            f"only {len(views.frames)} frame(s) show the board to two cameras at once",
+            hint="capture views that at least two cameras see together",
+        )
     members = list(members)
     pinhole = all(m.lens != "fisheye" for m in members)  # cv2.stereoCalibrateExtended knows no fisheye lens
     use_opencv = pinhole and (solver == "opencv" or (solver == "auto" and len(views.cameras) == 2))
@@ -255,8 +308,10 @@ def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intr
         cam_poses, board_poses, members = _lm(views, members, cam_poses, board_poses, refine_intrinsics)
         name = "calibctl joint LM"
     if not (np.isfinite(cam_poses).all() and np.isfinite(board_poses).all()):
-        raise NumericalError("the rig solve returned NaN or infinite values",
-                             hint="check that every camera's intrinsics belong to it and the board is right")
+        raise NumericalError(
+            "the rig solve returned NaN or infinite values",
+            hint="check that every camera's intrinsics belong to it and the board is right",
+        )
     unc = rig_covariance(views, members, cam_poses, board_poses, refine_intrinsics)
     cov, ne = unc.covariance, unc.normal_equations
     rms = []
@@ -267,5 +322,18 @@ def _solve_rig(views: RigViews, members: Sequence[MemberIntrinsics], refine_intr
     if not worst <= MAX_RMS_PX:
         raise diverged(views, members, worst)
     tree = _tree(views.cameras, cam_poses, cov)
-    return RigSolution(views, tuple(members), cam_poses, board_poses, cov, tree, tuple(rms), name,
-                       refine_intrinsics, unc.residual_variance_px2, unc.jacobian, unc.factors, unc.clusters)
+    return RigSolution(
+        views,
+        tuple(members),
+        cam_poses,
+        board_poses,
+        cov,
+        tree,
+        tuple(rms),
+        name,
+        refine_intrinsics,
+        unc.residual_variance_px2,
+        unc.jacobian,
+        unc.factors,
+        unc.clusters,
+    )

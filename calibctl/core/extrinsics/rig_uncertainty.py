@@ -48,8 +48,10 @@ from calibctl.core.intrinsics.covariance import MIN_RCOND, MIN_VIEWS_FOR_FACTOR
 from calibctl.errors import NumericalError
 
 MIN_FRAMES = MIN_VIEWS_FOR_FACTOR  # under 6 clusters the sandwich is too uncertain to act on (as for views)
-FRAME_LEVEL_RULE = (f"per parameter the larger of the Jacobian and the frame-clustered (sandwich) sigma, with >= "
-                    f"{MIN_FRAMES} frames")
+FRAME_LEVEL_RULE = (
+    f"per parameter the larger of the Jacobian and the frame-clustered (sandwich) sigma, with >= "
+    f"{MIN_FRAMES} frames"
+)
 
 
 @dataclass(frozen=True)
@@ -104,8 +106,13 @@ class RigLinearisation:
     pulls: dict[str | tuple[str, str], np.ndarray]
 
 
-def linearise(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray, board_poses: np.ndarray,
-              refine: bool) -> RigLinearisation:
+def linearise(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    cam_poses: np.ndarray,
+    board_poses: np.ndarray,
+    refine: bool,
+) -> RigLinearisation:
     """The joint problem linearised at the solution (RigLinearisation).
 
     Raises:
@@ -117,8 +124,10 @@ def linearise(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: n
     free = np.arange(n_free)
     dof = ne.n_residuals - n_free
     if dof <= 0:
-        raise NumericalError(f"the rig solve has {ne.n_residuals} residuals for {n_free} unknowns",
-                             hint="capture more synchronised views")
+        raise NumericalError(
+            f"the rig solve has {ne.n_residuals} residuals for {n_free} unknowns",
+            hint="capture more synchronised views",
+        )
     H_inv = _inverse(ne.H[np.ix_(free, free)])
     frame_pulls = _frame_pulls(ne, layout, H_inv, refine)  # (F, n_free), zero on the board poses
     extra: dict[str | tuple[str, str], np.ndarray] = {}
@@ -152,8 +161,13 @@ def linearise(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: n
     return RigLinearisation(layout, ne, H_inv, ne.ssr / dof, A, cov_theta_jac, cov_theta_unknown, pulls)
 
 
-def rig_covariance(views: RigViews, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray,
-                   board_poses: np.ndarray, refine: bool) -> RigCovariance:
+def rig_covariance(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    cam_poses: np.ndarray,
+    board_poses: np.ndarray,
+    refine: bool,
+) -> RigCovariance:
     """The camera poses' covariances at the solution (module docstring).
 
     Raises:
@@ -193,9 +207,18 @@ def _frame_pulls(ne: NormalEquations, layout: Layout, H_inv: np.ndarray, refine:
     than most leaves small residuals behind, and only the leverage-corrected step shows what it holds up."""
     assert ne.frame_scores is not None and ne.frame_shared_H is not None
     n_free = H_inv.shape[0]
-    s_full = np.concatenate([np.arange(layout.board0), layout.board0 + 6 * layout.n_frames
-                             + np.arange(layout.size - layout.board0 - 6 * layout.n_frames)]) if refine \
+    s_full = (
+        np.concatenate(
+            [
+                np.arange(layout.board0),
+                layout.board0
+                + 6 * layout.n_frames
+                + np.arange(layout.size - layout.board0 - 6 * layout.n_frames),
+            ]
+        )
+        if refine
         else np.arange(layout.board0)
+    )
     s_own = layout.shared_index(s_full)
     S = np.linalg.inv(H_inv[np.ix_(s_full, s_full)])
     out = np.zeros((layout.n_frames, n_free))
@@ -216,14 +239,18 @@ def _inverse(H: np.ndarray) -> np.ndarray:
     """H^-1 through the unit-diagonal matrix, whose conditioning decides observability."""
     d = np.sqrt(np.clip(np.diag(H), 0.0, None))
     if not np.all(d > 0):
-        raise NumericalError("a rig parameter has no effect on the residuals",
-                             hint="every camera must share board views with the rest of the rig")
+        raise NumericalError(
+            "a rig parameter has no effect on the residuals",
+            hint="every camera must share board views with the rest of the rig",
+        )
     H_unit = H / np.outer(d, d)
     eig = np.linalg.eigvalsh(H_unit)
     if not eig[0] / eig[-1] >= MIN_RCOND:
-        raise NumericalError(f"the rig extrinsics are not observable from these views (reciprocal condition "
-                             f"{eig[0] / eig[-1]:.1e})", hint="capture views that two cameras see at once, "
-                             "tilted and spread over the image")
+        raise NumericalError(
+            f"the rig extrinsics are not observable from these views (reciprocal condition "
+            f"{eig[0] / eig[-1]:.1e})",
+            hint="capture views that two cameras see at once, tilted and spread over the image",
+        )
     return np.linalg.inv(H_unit) / np.outer(d, d)
 
 

@@ -73,10 +73,12 @@ class LoopClosure:
 
 
 def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
 
 
-def fit_board_pose(views: RigViews, f: int, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray) -> np.ndarray:
+def fit_board_pose(
+    views: RigViews, f: int, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray
+) -> np.ndarray:
     """(6,) T_root_board of frame f fitted to every camera's corners, extrinsics frozen (calibctl.core.lm, dense)."""
     frame = views.subset([f])
     start = view_poses(frame, members)
@@ -89,13 +91,24 @@ def fit_board_pose(views: RigViews, f: int, members: Sequence[MemberIntrinsics],
         ne = normal_equations(frame, members, cam_poses, pose[None, :], layout)
         return DenseSystem(ne.ssr, ne.H[np.ix_(idx, idx)], ne.g[idx])
 
-    return solve_lm(evaluate, pose, lambda p, d: p + d, max_iterations=POSE_FIT_ITERATIONS,
-                    relative_tolerance=POSE_FIT_TOLERANCE, step_tolerance=POSE_FIT_STEP,
-                    label=f"the held-out board pose of frame {f}").params
+    return solve_lm(
+        evaluate,
+        pose,
+        lambda p, d: p + d,
+        max_iterations=POSE_FIT_ITERATIONS,
+        relative_tolerance=POSE_FIT_TOLERANCE,
+        step_tolerance=POSE_FIT_STEP,
+        label=f"the held-out board pose of frame {f}",
+    ).params
 
 
-def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool = False,
-                         model: str = DEFAULT_MODEL, solver: str = "auto") -> RigHoldout:
+def validate_rig_holdout(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    refine_intrinsics: bool = False,
+    model: str = DEFAULT_MODEL,
+    solver: str = "auto",
+) -> RigHoldout:
     """k-fold held-out numbers (see module docstring).
 
     Raises:
@@ -105,8 +118,9 @@ def validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], r
         return _validate_rig_holdout(views, members, refine_intrinsics, model, solver)
 
 
-def _validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool,
-                          model: str, solver: str) -> RigHoldout:
+def _validate_rig_holdout(
+    views: RigViews, members: Sequence[MemberIntrinsics], refine_intrinsics: bool, model: str, solver: str
+) -> RigHoldout:
     views = shared_corners_only(views)
     folds = fold_assignment(len(views.frames), MIN_TRAINING_FRAMES)
     n_cams = len(views.cameras)
@@ -118,18 +132,23 @@ def _validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], 
     for k in range(int(folds.max()) + 1):
         held = np.flatnonzero(folds == k)
         try:
-            fit = solve_rig(views.subset(np.flatnonzero(folds != k).tolist()), members, refine_intrinsics, model, solver)
+            fit = solve_rig(
+                views.subset(np.flatnonzero(folds != k).tolist()), members, refine_intrinsics, model, solver
+            )
         except (NumericalError, InconsistentDataError):
             continue  # this fold's training frames do not solve the rig; the others still count
         solved += 1
         layout = Layout(n_cams, 1, tuple(m.n_params for m in fit.members))
-        rectifications = {(a, b): rectify(fit.members[a], fit.members[b], fit.T_a_b(b, a))
-                          for a in range(n_cams) for b in range(a + 1, n_cams)}
+        rectifications = {
+            (a, b): rectify(fit.members[a], fit.members[b], fit.T_a_b(b, a))
+            for a in range(n_cams)
+            for b in range(a + 1, n_cams)
+        }
         for f in held:
             pose = fit_board_pose(views, int(f), fit.members, fit.cam_poses)
             ne = normal_equations(views.subset([int(f)]), fit.members, fit.cam_poses, pose[None, :], layout)
             for (_, c), res in ne.residuals_px.items():
-                cam_res[c].append(np.sum(res ** 2, axis=1))
+                cam_res[c].append(np.sum(res**2, axis=1))
             row = views.views[int(f)]
             for (a, b), rectification in rectifications.items():
                 va, vb = row[a], row[b]
@@ -141,42 +160,59 @@ def _validate_rig_holdout(views: RigViews, members: Sequence[MemberIntrinsics], 
                 pa, pb = va.corners_px[ia], vb.corners_px[ib]
                 ma, mb = fit.members[a], fit.members[b]
                 epi.setdefault((a, b), []).append(epipolar_distances_px(pa, pb, ma, mb, fit.T_a_b(b, a)))
-                rect.setdefault((a, b), []).append(rectified_cross_disparity_px(pa, pb, ma, mb, rectification))
+                rect.setdefault((a, b), []).append(
+                    rectified_cross_disparity_px(pa, pb, ma, mb, rectification)
+                )
                 frames_of[(a, b)] = frames_of.get((a, b), 0) + 1
     if solved == 0:
-        raise NumericalError("no held-out fold could be solved: the rig is not connected without the held-out frames",
-                             hint="capture more frames that pairs of cameras see together")
+        raise NumericalError(
+            "no held-out fold could be solved: the rig is not connected without the held-out frames",
+            hint="capture more frames that pairs of cameras see together",
+        )
     camera_rms = tuple(float(np.sqrt(np.mean(np.concatenate(r)))) if r else float("nan") for r in cam_res)
     pairs = []
     for (a, b), d in sorted(epi.items()):
         e, r = np.concatenate(d), np.concatenate(rect[(a, b)])
-        pairs.append(PairHoldout(a, b, frames_of[(a, b)], _rms(e), float(np.max(e)), _rms(r), float(np.max(np.abs(r)))))
+        pairs.append(
+            PairHoldout(a, b, frames_of[(a, b)], _rms(e), float(np.max(e)), _rms(r), float(np.max(np.abs(r))))
+        )
     return RigHoldout(solved, camera_rms, tuple(pairs))
 
 
-def pairwise_solutions(views: RigViews, members: Sequence[MemberIntrinsics], model: str = DEFAULT_MODEL,
-                       min_frames: int = MIN_PAIR_FRAMES) -> dict[tuple[int, int], RigSolution]:
+def pairwise_solutions(
+    views: RigViews,
+    members: Sequence[MemberIntrinsics],
+    model: str = DEFAULT_MODEL,
+    min_frames: int = MIN_PAIR_FRAMES,
+) -> dict[tuple[int, int], RigSolution]:
     """Independent 2-camera solves of every pair (a < b) with at least ``min_frames`` shared frames."""
     out = {}
     for (a, b), count in views.shared_view_counts().items():
         if count < min_frames:
             continue
         frames = [i for i, row in enumerate(views.views) if row[a] is not None and row[b] is not None]
-        pair = RigViews((views.cameras[a], views.cameras[b]), views.model_points_m,
-                        tuple(views.frames[i] for i in frames),
-                        tuple((views.views[i][a], views.views[i][b]) for i in frames))
+        pair = RigViews(
+            (views.cameras[a], views.cameras[b]),
+            views.model_points_m,
+            tuple(views.frames[i] for i in frames),
+            tuple((views.views[i][a], views.views[i][b]) for i in frames),
+        )
         out[(a, b)] = solve_rig(pair, (members[a], members[b]), model=model)
     return out
 
 
-def loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str = DEFAULT_MODEL) -> tuple[LoopClosure, ...]:
+def loop_closures(
+    views: RigViews, members: Sequence[MemberIntrinsics], model: str = DEFAULT_MODEL
+) -> tuple[LoopClosure, ...]:
     """Residual around every simple cycle of the pairwise-solved camera graph (empty for 2 cameras), judged by
     the loop's covariance with the pairs' cross covariances (core.extrinsics.rig_loop)."""
     with single_threaded():  # pair solves and loop covariances run one after another: spare threads only spin
         return _loop_closures(views, members, model)
 
 
-def _loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: str) -> tuple[LoopClosure, ...]:
+def _loop_closures(
+    views: RigViews, members: Sequence[MemberIntrinsics], model: str
+) -> tuple[LoopClosure, ...]:
     pairs = pairwise_solutions(views, members, model)
     edges = {frozenset(p) for p in pairs}
     out = []
@@ -196,8 +232,14 @@ def _loop_closures(views: RigViews, members: Sequence[MemberIntrinsics], model: 
         r = around(x)
         cov_r = loop_covariance(solutions, views, around, x).jacobian
         T = pose_to_T(r)
-        out.append(LoopClosure(
-            tuple(views.cameras[i] for i in cycle), rotation_angle_deg(T[:3, :3]), float(np.linalg.norm(r[3:]) * 1e3),
-            float(np.rad2deg(np.sqrt(np.trace(cov_r[:3, :3])))), float(np.sqrt(np.trace(cov_r[3:, 3:])) * 1e3),
-            float(np.sqrt(r @ np.linalg.solve(cov_r, r)))))
+        out.append(
+            LoopClosure(
+                tuple(views.cameras[i] for i in cycle),
+                rotation_angle_deg(T[:3, :3]),
+                float(np.linalg.norm(r[3:]) * 1e3),
+                float(np.rad2deg(np.sqrt(np.trace(cov_r[:3, :3])))),
+                float(np.sqrt(np.trace(cov_r[3:, 3:])) * 1e3),
+                float(np.sqrt(r @ np.linalg.solve(cov_r, r))),
+            )
+        )
     return tuple(out)

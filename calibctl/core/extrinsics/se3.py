@@ -42,11 +42,13 @@ def rotation_angle_deg(R: np.ndarray) -> float:
 def rotation_from_quaternion(q_wxyz: np.ndarray) -> np.ndarray:
     """(4,) unit quaternion (w, x, y, z) -> (3, 3) rotation. The caller checks the norm."""
     w, x, y, z = (float(c) for c in np.asarray(q_wxyz, np.float64).reshape(4))
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def quaternion_from_rotation(R: np.ndarray) -> np.ndarray:

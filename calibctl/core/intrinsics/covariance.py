@@ -49,8 +49,10 @@ MIN_RCOND = 1e-12
 # 6 views the factor itself is too uncertain to act on.
 MAX_SIGMA_FACTOR = 1.5
 MIN_VIEWS_FOR_FACTOR = 6
-VIEW_FACTOR_RULE = (f"sigma x sqrt(phi) when sqrt(phi) > {MAX_SIGMA_FACTOR} with >= {MIN_VIEWS_FOR_FACTOR} views; "
-                    "phi = tr(S^-1 M) / (p s^2), M the view-clustered score covariance")
+VIEW_FACTOR_RULE = (
+    f"sigma x sqrt(phi) when sqrt(phi) > {MAX_SIGMA_FACTOR} with >= {MIN_VIEWS_FOR_FACTOR} views; "
+    "phi = tr(S^-1 M) / (p s^2), M the view-clustered score covariance"
+)
 _DIST_COLUMN = {"k1": 0, "k2": 1, "p1": 2, "p2": 3, "k3": 4, "k4": 5, "k5": 6, "k6": 7}
 
 
@@ -91,9 +93,13 @@ class IntrinsicCovariance:
         return self.covariance / self.view_factor**2
 
 
-def intrinsic_columns(J: np.ndarray, free_intrinsics: Sequence[str], free_distortion: Sequence[str],
-                      aspect: float | None, distortion_order: Sequence[str] | None = None,
-                      ) -> tuple[np.ndarray, tuple[str, ...]]:
+def intrinsic_columns(
+    J: np.ndarray,
+    free_intrinsics: Sequence[str],
+    free_distortion: Sequence[str],
+    aspect: float | None,
+    distortion_order: Sequence[str] | None = None,
+) -> tuple[np.ndarray, tuple[str, ...]]:
     """Columns of a cv2.projectPoints Jacobian for the free intrinsics, and their names (fy tied when aspect).
 
     ``distortion_order`` names J's distortion columns (from column 10) when they are not OpenCV's pinhole
@@ -139,6 +145,7 @@ def intrinsic_covariance(
         free_intrinsics, free_distortion: names (see solve.MODELS). aspect: fx/fy when tied.
         dof: residual count - free parameter count (> 0).
     """
+
     def blocks():
         for obj, r, t in zip(object_points_per_view, rvecs, tvecs, strict=True):
             _, J = cv2.projectPoints(np.asarray(obj, dtype=np.float64), r, t, camera_matrix, dist_coeffs)
@@ -170,8 +177,9 @@ def schur_covariance(
         try:
             CinvBt = np.linalg.solve(C, B.T)
         except np.linalg.LinAlgError:
-            return IntrinsicCovariance(names, None, 0.0, float("nan"),
-                                       "a view's board pose is not determined by its corners")
+            return IntrinsicCovariance(
+                names, None, 0.0, float("nan"), "a view's board pose is not determined by its corners"
+            )
         block = J_int.T @ J_int - B @ CinvBt
         # rows of a projectPoints Jacobian are (u0, v0, u1, v1, ...), the order of a raveled (N, 2) residual
         scores.append((J_int - J_pose @ CinvBt).T @ np.asarray(res, dtype=np.float64).reshape(-1))
@@ -190,9 +198,13 @@ def schur_covariance(
         weakest = np.linalg.eigh(S_unit)[1][:, 0]
         main = [names[i] for i in np.argsort(-np.abs(weakest))[:2]]
         return IntrinsicCovariance(
-            names, None, rcond, s2,
+            names,
+            None,
+            rcond,
+            s2,
             f"the intrinsics are not observable from these views (reciprocal condition {rcond:.1e} "
-            f"< {MIN_RCOND:.0e}; weakest combination mainly {' and '.join(main)})")
+            f"< {MIN_RCOND:.0e}; weakest combination mainly {' and '.join(main)})",
+        )
     S_unit_inv = np.linalg.inv(S_unit)
     cov = S_unit_inv / np.outer(d, d) * s2
     cov = 0.5 * (cov + cov.T)
@@ -206,7 +218,9 @@ def schur_covariance(
     return IntrinsicCovariance(names, cov, rcond, s2, None, factor, inflated, n_views, influences)
 
 
-def view_sigma_factor(S_unit_inv: np.ndarray, d: np.ndarray, scores: Sequence[np.ndarray], s2: float) -> float | None:
+def view_sigma_factor(
+    S_unit_inv: np.ndarray, d: np.ndarray, scores: Sequence[np.ndarray], s2: float
+) -> float | None:
     """sqrt(phi): the view-clustered (sandwich) sigma over the Jacobian sigma, averaged over whitened directions.
 
     Args:

@@ -40,7 +40,9 @@ MAX_SOLVE_THETA_RAD = np.deg2rad(88.0)
 _GRID = 24
 GUESS_VIEWS = 10
 POSE_ITERATIONS = 10
-POSE_TOLERANCE = 1e-12  # relative fall of the squared residual sum below which a pose step only chases rounding
+POSE_TOLERANCE = (
+    1e-12  # relative fall of the squared residual sum below which a pose step only chases rounding
+)
 POSE_STEP = 1e-12  # rad / m: a smaller step only chases rounding
 # Gauss-Newton (which this replaced) while steps lower the cost; damping only when a step overshoots
 POSE_DAMPING = Damping(initial=1e-9)
@@ -62,7 +64,9 @@ def project_equidistant(points_cam: np.ndarray, K: np.ndarray, dist: np.ndarray)
     p = np.asarray(points_cam, np.float64).reshape(-1, 3)
     r = np.hypot(p[:, 0], p[:, 1])
     theta = np.arctan2(r, p[:, 2])
-    scale = np.where(r > 1e-15, distort_theta(theta, dist) / np.maximum(r, 1e-300), 1.0 / np.maximum(p[:, 2], 1e-300))
+    scale = np.where(
+        r > 1e-15, distort_theta(theta, dist) / np.maximum(r, 1e-300), 1.0 / np.maximum(p[:, 2], 1e-300)
+    )
     return np.stack([K[0, 0] * p[:, 0] * scale + K[0, 2], K[1, 1] * p[:, 1] * scale + K[1, 2]], axis=1)
 
 
@@ -90,23 +94,31 @@ def pixel_rays(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarra
     return np.stack([a * s, b * s, np.cos(theta)], axis=1)
 
 
-def project_with_jacobian(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, intr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def project_with_jacobian(
+    obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, intr: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2) px and the (2N, 14) Jacobian [fx fy cx cy k1..k4 | rvec tvec] of one view."""
     K = np.array([[intr[0], 0.0, intr[2]], [0.0, intr[1], intr[3]], [0.0, 0.0, 1.0]])
-    px, J = cv2.fisheye.projectPoints(obj.reshape(-1, 1, 3), rvec.reshape(3, 1), tvec.reshape(3, 1), K, intr[4:8])
+    px, J = cv2.fisheye.projectPoints(
+        obj.reshape(-1, 1, 3), rvec.reshape(3, 1), tvec.reshape(3, 1), K, intr[4:8]
+    )
     return px.reshape(-1, 2), J[:, :14]
 
 
-def project_fisheye(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, camera_matrix: np.ndarray,
-                    dist_coeffs: np.ndarray) -> np.ndarray:
+def project_fisheye(
+    obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray
+) -> np.ndarray:
     """(N, 3) board points -> (N, 2) float64 px through the fisheye model (cv2.fisheye, theta < 90 deg)."""
     K = np.asarray(camera_matrix, np.float64)
     intr = np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *np.asarray(dist_coeffs, np.float64).ravel()[:4]])
-    return project_with_jacobian(np.asarray(obj, np.float64), np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), intr)[0]
+    return project_with_jacobian(
+        np.asarray(obj, np.float64), np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), intr
+    )[0]
 
 
-def fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray] | None:
+def fisheye_pose(
+    obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
     """T_cam_board (rvec, tvec) of one view with the lens frozen; None when the corners give no pose.
 
     obj: (N, 3) board m, img: (N, 2) px. Uses the corners within MAX_GUESS_THETA_RAD of the axis
@@ -127,9 +139,15 @@ def fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, di
     return rvec.ravel(), tvec.ravel()
 
 
-def refine_fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                        rvec: np.ndarray, tvec: np.ndarray, iterations: int = POSE_ITERATIONS
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def refine_fisheye_pose(
+    obj: np.ndarray,
+    img: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    iterations: int = POSE_ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray]:
     """One pose (lens frozen) minimising the pixel residuals; returns (rvec (3,), tvec (3,) m).
 
     Levenberg-Marquardt on the six pose parameters (calibctl.core.lm, dense path, POSE_DAMPING),
@@ -148,9 +166,16 @@ def refine_fisheye_pose(obj: np.ndarray, img: np.ndarray, camera_matrix: np.ndar
         return DenseSystem.from_jacobian(J[:, 8:14], (residual_px - proj).reshape(-1))
 
     start = np.concatenate([np.ravel(rvec), np.ravel(tvec)]).astype(np.float64)
-    pose = solve_lm(evaluate, start, lambda p, d: p + d, max_iterations=iterations, relative_tolerance=POSE_TOLERANCE,
-                    step_tolerance=POSE_STEP, damping=POSE_DAMPING,
-                    label="the fisheye board pose").params
+    pose = solve_lm(
+        evaluate,
+        start,
+        lambda p, d: p + d,
+        max_iterations=iterations,
+        relative_tolerance=POSE_TOLERANCE,
+        step_tolerance=POSE_STEP,
+        damping=POSE_DAMPING,
+        label="the fisheye board pose",
+    ).params
     return pose[:3].copy(), pose[3:].copy()
 
 
@@ -176,21 +201,35 @@ def _homography_rms_px(obj_xy: np.ndarray, img: np.ndarray, f: float, centre: np
 class _ViewScores:
     """The views' homography RMS at any focal f, each view's digest taken once (the scores remembered by it)."""
 
-    def __init__(self, object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                 image_size: tuple[int, int]) -> None:
+    def __init__(
+        self,
+        object_points_per_view: Sequence[np.ndarray],
+        image_points_per_view: Sequence[np.ndarray],
+        image_size: tuple[int, int],
+    ) -> None:
         self.centre = np.array([(image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0])
-        self.views = [(np.asarray(o, np.float64).reshape(-1, 3)[:, :2], np.asarray(i, np.float64).reshape(-1, 2))
-                      for o, i in zip(object_points_per_view, image_points_per_view, strict=True)]
+        self.views = [
+            (np.asarray(o, np.float64).reshape(-1, 3)[:, :2], np.asarray(i, np.float64).reshape(-1, 2))
+            for o, i in zip(object_points_per_view, image_points_per_view, strict=True)
+        ]
         self.keys = [values_digest([o], [i], self.centre.tobytes()) for o, i in self.views]
 
     def at(self, f: float) -> np.ndarray:
         f_bytes = np.float64(f).tobytes()  # the exact f: a score is remembered for that f only
-        return np.array([_RECENT_SCORES.answer(key + f_bytes, partial(_homography_rms_px, o, i, f, self.centre))
-                         for key, (o, i) in zip(self.keys, self.views, strict=True)])
+        return np.array(
+            [
+                _RECENT_SCORES.answer(key + f_bytes, partial(_homography_rms_px, o, i, f, self.centre))
+                for key, (o, i) in zip(self.keys, self.views, strict=True)
+            ]
+        )
 
 
-def view_guess_rms_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                      image_size: tuple[int, int], f: float) -> np.ndarray:
+def view_guess_rms_px(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    f: float,
+) -> np.ndarray:
     """(V,) each view's homography RMS at focal f (nan: fewer than 6 corners inside MAX_GUESS_THETA_RAD)."""
     return _ViewScores(object_points_per_view, image_points_per_view, image_size).at(f)
 
@@ -200,18 +239,25 @@ def forget_view_scores() -> None:
     _RECENT_SCORES.clear()
 
 
-def focal_guess_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                   image_size: tuple[int, int]) -> float | None:
+def focal_guess_px(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+) -> float | None:
     """Equidistant focal length (px) whose rays best fit one homography per view; None when no f works.
 
     Searches f over [max(W, H) / 8, 2 max(W, H)] (fields of view from ~400 deg down to ~30 deg).
     """
     size = float(max(image_size))
     # a dozen views pin one number down; spread over the capture, they keep the guess cheap
-    pick = np.unique(np.linspace(0, len(image_points_per_view) - 1, min(GUESS_VIEWS, len(image_points_per_view)))
-                     .round().astype(int)).tolist()
-    views = _ViewScores([object_points_per_view[i] for i in pick], [image_points_per_view[i] for i in pick],
-                        image_size)
+    pick = np.unique(
+        np.linspace(0, len(image_points_per_view) - 1, min(GUESS_VIEWS, len(image_points_per_view)))
+        .round()
+        .astype(int)
+    ).tolist()
+    views = _ViewScores(
+        [object_points_per_view[i] for i in pick], [image_points_per_view[i] for i in pick], image_size
+    )
 
     def score(f: float) -> float:
         rms = views.at(f)

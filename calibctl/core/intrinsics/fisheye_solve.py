@@ -51,8 +51,9 @@ COST_TOLERANCE = 1e-13
 DAMPING = Damping(initial=1e-3, decrease=3.0, increase=4.0, floor=1e-9, ceiling=1e8)
 
 
-def _initial(objs: list[np.ndarray], imgs: list[np.ndarray], size: tuple[int, int],
-             initial: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _initial(
+    objs: list[np.ndarray], imgs: list[np.ndarray], size: tuple[int, int], initial: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if initial is not None:
         K0 = np.asarray(initial, np.float64).reshape(3, 3)
         if not (np.isfinite(K0).all() and K0[0, 0] > 0 and K0[1, 1] > 0):
@@ -66,16 +67,19 @@ def _initial(objs: list[np.ndarray], imgs: list[np.ndarray], size: tuple[int, in
             raise NumericalError(
                 "the fisheye solve cannot be initialised: no focal length makes the views' corners fit planar boards"
                 + (f" (views {bad} have fewer than 6 corners within 75 deg of the axis)" if bad else ""),
-                hint="check the image size and the board geometry; capture views with the board nearer the centre")
+                hint="check the image size and the board geometry; capture views with the board nearer the centre",
+            )
         intr = np.array([f, f, (size[0] - 1) / 2.0, (size[1] - 1) / 2.0, 0.0, 0.0, 0.0, 0.0])
     K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1.0]])
     rv, tv = [], []
     for i, (o, p) in enumerate(zip(objs, imgs, strict=True)):
         pose = fisheye_pose(o, p, K, intr[4:])
         if pose is None:
-            raise NumericalError(f"the fisheye solve cannot be initialised: view {i}'s board pose is not determined "
-                                 f"by its corners at the initial focal length {intr[0]:.1f} px",
-                                 hint=f"drop view {i} (its corners may be collinear or mis-ordered)")
+            raise NumericalError(
+                f"the fisheye solve cannot be initialised: view {i}'s board pose is not determined "
+                f"by its corners at the initial focal length {intr[0]:.1f} px",
+                hint=f"drop view {i} (its corners may be collinear or mis-ordered)",
+            )
         rv.append(pose[0])
         tv.append(pose[1])
     return intr, np.array(rv), np.array(tv)
@@ -99,14 +103,22 @@ def _lm(objs, imgs, intr, rv, tv) -> tuple[np.ndarray, np.ndarray, np.ndarray, i
         blocks, _ = _normal_equations(objs, imgs, *params)
         return SchurSystem.from_jacobians(blocks)
 
-    def retract(params: tuple[np.ndarray, np.ndarray, np.ndarray], delta: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def retract(
+        params: tuple[np.ndarray, np.ndarray, np.ndarray], delta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d_pose = delta[8:].reshape(-1, 6)
         return params[0] + delta[:8], params[1] + d_pose[:, :3], params[2] + d_pose[:, 3:]
 
-    out = solve_lm(evaluate, (intr, rv, tv), retract, damping=DAMPING, max_iterations=MAX_ITERATIONS,
-                   relative_tolerance=COST_TOLERANCE, label="the fisheye solve",
-                   hint="check the image size and the board geometry; drop views whose corners are mis-ordered")
+    out = solve_lm(
+        evaluate,
+        (intr, rv, tv),
+        retract,
+        damping=DAMPING,
+        max_iterations=MAX_ITERATIONS,
+        relative_tolerance=COST_TOLERANCE,
+        label="the fisheye solve",
+        hint="check the image size and the board geometry; drop views whose corners are mis-ordered",
+    )
     return *out.params, out.iterations
 
 
@@ -141,13 +153,22 @@ def solve_fisheye(
         check_output(K, D, rms, rv, tv, size)
     except NumericalError as exc:
         worst = int(np.nanargmax(per_view)) if np.isfinite(per_view).any() else 0
-        raise NumericalError(f"{exc.message}; the worst view is view {worst} (RMS {per_view[worst]:.2f} px)",
-                             hint=f"drop view {worst}, or check its corners; {exc.hint}") from exc
+        raise NumericalError(
+            f"{exc.message}; the worst view is view {worst} (RMS {per_view[worst]:.2f} px)",
+            hint=f"drop view {worst}, or check its corners; {exc.hint}",
+        ) from exc
     n_res, n_par = 2 * n_corners, model.n_free_intrinsic_params + 6 * len(objs)
     if n_res - n_par < MIN_SIGMA_DOF:
-        cov = IntrinsicCovariance((), None, float("nan"), float("nan"), (
-            f"only {n_res - n_par} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
-            f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"))
+        cov = IntrinsicCovariance(
+            (),
+            None,
+            float("nan"),
+            float("nan"),
+            (
+                f"only {n_res - n_par} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
+                f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"
+            ),
+        )
     else:
         cov = schur_covariance(((Ji, Jp, FISHEYE_NAMES) for Ji, Jp, _ in blocks), residuals, n_res - n_par)
     sigma: dict[str, float] = {}
@@ -155,7 +176,19 @@ def solve_fisheye(
     if cov.covariance is not None:
         sigma = dict(zip(cov.names, np.sqrt(np.diag(cov.covariance)).tolist(), strict=True))
     return IntrinsicsSolution(
-        model=model.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D), rms_px=rms,
-        per_view_rms_px=readonly(per_view), rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
-        sigma=sigma, sigma_refused_reason=reason, n_residuals=n_res, n_parameters=n_par, aspect_ratio=None,
-        covariance=cov)
+        model=model.name,
+        image_size=size,
+        camera_matrix=readonly(K),
+        dist_coeffs=readonly(D),
+        rms_px=rms,
+        per_view_rms_px=readonly(per_view),
+        rvecs=readonly(rv),
+        tvecs=readonly(tv),
+        residuals_px=tuple(residuals),
+        sigma=sigma,
+        sigma_refused_reason=reason,
+        n_residuals=n_res,
+        n_parameters=n_par,
+        aspect_ratio=None,
+        covariance=cov,
+    )

@@ -32,18 +32,28 @@ class Finding:
     fix: str | None = None
 
 
-def check_principal_point(camera_matrix: np.ndarray, image_size: tuple[int, int],
-                          max_frac: float = 0.1) -> Finding:
+def check_principal_point(
+    camera_matrix: np.ndarray, image_size: tuple[int, int], max_frac: float = 0.1
+) -> Finding:
     """|cx - W/2| < max_frac * W and |cy - H/2| < max_frac * H. camera_matrix: (3, 3) px."""
     w, h = image_size
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
     dx, dy = abs(cx - w / 2), abs(cy - h / 2)
     ok = dx < max_frac * w and dy < max_frac * h
-    msg = (f"principal point ({cx:.2f}, {cy:.2f}) is ({dx:.1f}, {dy:.1f}) px from the centre of the "
-           f"declared {w}x{h} image; limit ({max_frac * w:.1f}, {max_frac * h:.1f}) px")
-    return Finding("principal-point", ERROR, ok, msg, None if ok else
-                   "check that the image size is the resolution the corners were detected at "
-                   "(a K fitted at another resolution scales with it); if it is, recalibrate with tilted views")
+    msg = (
+        f"principal point ({cx:.2f}, {cy:.2f}) is ({dx:.1f}, {dy:.1f}) px from the centre of the "
+        f"declared {w}x{h} image; limit ({max_frac * w:.1f}, {max_frac * h:.1f}) px"
+    )
+    return Finding(
+        "principal-point",
+        ERROR,
+        ok,
+        msg,
+        None
+        if ok
+        else "check that the image size is the resolution the corners were detected at "
+        "(a K fitted at another resolution scales with it); if it is, recalibrate with tilted views",
+    )
 
 
 # sigma(fx) is linear in the corner scatter (seed chapter 1: 20.21 / 13.53 / 6.77 px at 0.3 / 0.2 / 0.1 px of
@@ -54,25 +64,33 @@ SCATTERED_FIT_RMS_PX = 0.5
 SHARP_CORNERS_PX = "0.2-0.3"
 
 
-def check_sigma_fx(sigma_fx_px: float | None, refused_reason: str | None = None,
-                   max_px: float = 2.0, fit_rms_px: float | None = None,
-                   detector_rms_px: float | None = None) -> Finding:
+def check_sigma_fx(
+    sigma_fx_px: float | None,
+    refused_reason: str | None = None,
+    max_px: float = 2.0,
+    fit_rms_px: float | None = None,
+    detector_rms_px: float | None = None,
+) -> Finding:
     """sigma(fx) must exist, be finite and stay under max_px (fx observable). ``fit_rms_px`` (the solve's
     per-corner RMS) and ``detector_rms_px`` (the corners' own scatter, ``model_fit.detector_rms_px``), when
     known, pick the fix: above SCATTERED_FIT_RMS_PX the corners, not the poses, are what to improve."""
     fix = "capture more views tilted 20-40 deg in at least three directions"
     if fit_rms_px is not None and math.isfinite(fit_rms_px) and fit_rms_px > SCATTERED_FIT_RMS_PX:
         alone = "" if detector_rms_px is None else f" (the corners alone scatter {detector_rms_px:.3f} px)"
-        fix = (f"sigma(fx) grows linearly with the corner scatter: this fit leaves {fit_rms_px:.3f} px{alone}, "
-               f"against {SHARP_CORNERS_PX} px for sharp corners on a flat board; first make the corners sharp "
-               f"(focus, no motion blur, even light) and the board flat and rigid (a printed sheet bends), then "
-               f"{fix}")
+        fix = (
+            f"sigma(fx) grows linearly with the corner scatter: this fit leaves {fit_rms_px:.3f} px{alone}, "
+            f"against {SHARP_CORNERS_PX} px for sharp corners on a flat board; first make the corners sharp "
+            f"(focus, no motion blur, even light) and the board flat and rigid (a printed sheet bends), then "
+            f"{fix}"
+        )
     if sigma_fx_px is None:
-        return Finding("sigma-fx", ERROR, False,
-                       f"sigma(fx) is not available: {refused_reason or 'not recorded'}", fix)
+        return Finding(
+            "sigma-fx", ERROR, False, f"sigma(fx) is not available: {refused_reason or 'not recorded'}", fix
+        )
     ok = math.isfinite(sigma_fx_px) and sigma_fx_px < max_px
-    return Finding("sigma-fx", ERROR, ok, f"sigma(fx) = {sigma_fx_px:.3f} px; limit {max_px:.3f} px",
-                   None if ok else fix)
+    return Finding(
+        "sigma-fx", ERROR, ok, f"sigma(fx) = {sigma_fx_px:.3f} px; limit {max_px:.3f} px", None if ok else fix
+    )
 
 
 # The ratio only counts when the held-out outer ring is also this many px worse than the fit's. Measured
@@ -83,57 +101,85 @@ def check_sigma_fx(sigma_fx_px: float | None, refused_reason: str | None = None,
 OUTER_RING_MIN_EXCESS_PX = 0.05
 
 
-def check_outer_ring_holdout(holdout_outer_rms_px: float, fit_outer_rms_px: float,
-                             max_ratio: float = 1.1, min_excess_px: float = OUTER_RING_MIN_EXCESS_PX,
-                             model: str | None = None) -> Finding:
+def check_outer_ring_holdout(
+    holdout_outer_rms_px: float,
+    fit_outer_rms_px: float,
+    max_ratio: float = 1.1,
+    min_excess_px: float = OUTER_RING_MIN_EXCESS_PX,
+    model: str | None = None,
+) -> Finding:
     """Held-out outer-ring RMS <= max_ratio * fit outer-ring RMS (no overfit distortion), unless the
     held-out excess is under min_excess_px (an absolute floor: tiny RMS values make any ratio noisy).
     ``model`` (the solve's model name, when known) picks the fix: never "fewer coefficients" to k1k2."""
     ratio = holdout_outer_rms_px / fit_outer_rms_px if fit_outer_rms_px > 0 else float("inf")
     excess = holdout_outer_rms_px - fit_outer_rms_px
     ok = math.isfinite(ratio) and (ratio <= max_ratio or excess < min_excess_px)
-    msg = (f"held-out outer-ring RMS {holdout_outer_rms_px:.4f} px vs fit outer-ring RMS "
-           f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f} "
-           f"(counted only when {min_excess_px:.2f} px or more above the fit; here {excess:.4f} px)")
+    msg = (
+        f"held-out outer-ring RMS {holdout_outer_rms_px:.4f} px vs fit outer-ring RMS "
+        f"{fit_outer_rms_px:.4f} px: ratio {ratio:.3f}, limit {max_ratio:.2f} "
+        f"(counted only when {min_excess_px:.2f} px or more above the fit; here {excess:.4f} px)"
+    )
     more_views = "capture more views with corners near the image edges and check that the board is flat"
     if model == "k1k2":
         fix = f"the model does not carry over to held-out outer-ring corners: {more_views}"
     elif model == "fisheye":
         fix = f"the fisheye model does not carry over to held-out outer-ring corners: {more_views}"
     elif model is not None:
-        fix = (f"the model does not carry over to held-out outer-ring corners: {model} may over-fit them; solve "
-               f"with fewer coefficients (--model k1k2 or auto), or {more_views}")
+        fix = (
+            f"the model does not carry over to held-out outer-ring corners: {model} may over-fit them; solve "
+            f"with fewer coefficients (--model k1k2 or auto), or {more_views}"
+        )
     else:
-        fix = ("the model does not carry over to held-out outer-ring corners: with more than k1 k2, solve "
-               "with fewer coefficients (--model k1k2 or auto); with k1k2 already, " + more_views)
+        fix = (
+            "the model does not carry over to held-out outer-ring corners: with more than k1 k2, solve "
+            "with fewer coefficients (--model k1k2 or auto); with k1k2 already, " + more_views
+        )
     return Finding("outer-ring-holdout", ERROR, ok, msg, None if ok else fix)
 
 
 def check_image_size(image_size: tuple[int, int] | None, camera_matrix: np.ndarray) -> Finding:
     """The image size is recorded, positive, and the principal point lies inside it."""
     if image_size is None:
-        return Finding("image-size", ERROR, False, "no image size is recorded with the calibration",
-                       "record the resolution the corners were detected at")
+        return Finding(
+            "image-size",
+            ERROR,
+            False,
+            "no image size is recorded with the calibration",
+            "record the resolution the corners were detected at",
+        )
     w, h = image_size
     if not (int(w) == w and int(h) == h and w > 0 and h > 0):
-        return Finding("image-size", ERROR, False, f"image size {image_size} is not two positive integers",
-                       "record the resolution the corners were detected at")
+        return Finding(
+            "image-size",
+            ERROR,
+            False,
+            f"image size {image_size} is not two positive integers",
+            "record the resolution the corners were detected at",
+        )
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
     ok = 0 < cx < w and 0 < cy < h
-    return Finding("image-size", ERROR, ok,
-                   f"principal point ({cx:.2f}, {cy:.2f}) {'lies' if ok else 'does not lie'} inside the "
-                   f"recorded {w}x{h} image", None if ok else
-                   "the recorded image size does not belong to this K; record the detection resolution")
+    return Finding(
+        "image-size",
+        ERROR,
+        ok,
+        f"principal point ({cx:.2f}, {cy:.2f}) {'lies' if ok else 'does not lie'} inside the "
+        f"recorded {w}x{h} image",
+        None if ok else "the recorded image size does not belong to this K; record the detection resolution",
+    )
 
 
 def check_finite(values: Mapping[str, object]) -> Finding:
     """Every named number or array is finite. values: name -> float or array."""
-    bad = [name for name, v in values.items()
-           if not np.isfinite(np.asarray(v, dtype=np.float64)).all()]
-    return Finding("finite", ERROR, not bad,
-                   f"non-finite values in: {', '.join(bad)}" if bad else
-                   f"all {len(values)} recorded quantities are finite",
-                   "re-solve; a calibration with NaN or infinity cannot be used" if bad else None)
+    bad = [name for name, v in values.items() if not np.isfinite(np.asarray(v, dtype=np.float64)).all()]
+    return Finding(
+        "finite",
+        ERROR,
+        not bad,
+        f"non-finite values in: {', '.join(bad)}"
+        if bad
+        else f"all {len(values)} recorded quantities are finite",
+        "re-solve; a calibration with NaN or infinity cannot be used" if bad else None,
+    )
 
 
 def check_aspect_ratio(camera_matrix: np.ndarray, max_frac: float = 0.01) -> Finding:
@@ -141,10 +187,16 @@ def check_aspect_ratio(camera_matrix: np.ndarray, max_frac: float = 0.01) -> Fin
     fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
     dev = abs(fx / fy - 1.0)
     ok = dev <= max_frac
-    return Finding("aspect-ratio", WARNING, ok,
-                   f"fx/fy = {fx / fy:.5f} ({100 * dev:.2f} % from 1; limit {100 * max_frac:.2f} %)",
-                   None if ok else "unusual for square pixels: check for one-axis binning or an "
-                                   "anamorphic lens, or a poorly tilted capture")
+    return Finding(
+        "aspect-ratio",
+        WARNING,
+        ok,
+        f"fx/fy = {fx / fy:.5f} ({100 * dev:.2f} % from 1; limit {100 * max_frac:.2f} %)",
+        None
+        if ok
+        else "unusual for square pixels: check for one-axis binning or an "
+        "anamorphic lens, or a poorly tilted capture",
+    )
 
 
 def _padded(dist_coeffs: np.ndarray) -> np.ndarray:
@@ -190,7 +242,9 @@ OBSERVED_MARGIN = 0.1
 
 def observed_region_px(corners_px: Sequence[np.ndarray]) -> np.ndarray | None:
     """(K, 2) float64 vertices of the convex hull of every corner (V arrays (N_i, 2) px), or None without 3."""
-    pts = np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in corners_px]) if corners_px else None
+    pts = (
+        np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in corners_px]) if corners_px else None
+    )
     if pts is None or len(pts) < 3:
         return None
     import cv2  # here, not at the top: lint of a file (no solve) must not pay OpenCV's import
@@ -198,10 +252,13 @@ def observed_region_px(corners_px: Sequence[np.ndarray]) -> np.ndarray | None:
     return np.asarray(cv2.convexHull(pts.astype(np.float32)), np.float64).reshape(-1, 2)
 
 
-def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
-                        image_circle: tuple[float, float, float] | None = None,
-                        observed_px: np.ndarray | None = None,
-                        required_px: np.ndarray | None = None) -> tuple[float, str]:
+def _farthest_corner_rd(
+    camera_matrix: np.ndarray,
+    image_size: tuple[int, int],
+    image_circle: tuple[float, float, float] | None = None,
+    observed_px: np.ndarray | None = None,
+    required_px: np.ndarray | None = None,
+) -> tuple[float, str]:
     """Normalised distorted radius out to which a model is judged, and its words: the image point farthest from
     the principal point (an image corner, or with ``image_circle`` (cx, cy, r px) the farthest point of the image
     inside the circle); with ``observed_px`` ((K, 2) px, the observed corners' hull) the farthest observed corner
@@ -223,7 +280,9 @@ def _farthest_corner_rd(camera_matrix: np.ndarray, image_size: tuple[int, int],
     if observed_px is not None and len(observed_px):
         obs = np.asarray(observed_px, np.float64).reshape(-1, 2)
         rd_obs = float(np.hypot((obs[:, 0] - cx) / fx, (obs[:, 1] - cy) / fy).max()) * (1 + OBSERVED_MARGIN)
-        req = np.asarray(required_px if required_px is not None else np.zeros((0, 2)), np.float64).reshape(-1, 2)
+        req = np.asarray(required_px if required_px is not None else np.zeros((0, 2)), np.float64).reshape(
+            -1, 2
+        )
         rd_req = float(np.hypot((req[:, 0] - cx) / fx, (req[:, 1] - cy) / fy).max()) if len(req) else 0.0
         if max(rd_obs, rd_req) < rd:
             if rd_req > rd_obs:
@@ -241,11 +300,15 @@ def _inside(edge: str) -> str:
     return edge.split(" (")[0] if _is_region(edge) else "image"
 
 
-def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                              image_size: tuple[int, int],
-                              image_circle: tuple[float, float, float] | None = None,
-                              model: str | None = None, observed_px: np.ndarray | None = None,
-                              required_px: np.ndarray | None = None) -> Finding:
+def check_distortion_foldover(
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    image_circle: tuple[float, float, float] | None = None,
+    model: str | None = None,
+    observed_px: np.ndarray | None = None,
+    required_px: np.ndarray | None = None,
+) -> Finding:
     """The distortion is one-to-one out to the farthest image corner (with ``image_circle`` (cx, cy, r)
     px: out to the farthest point of the image inside the circle, where the lens forms an image; with
     ``observed_px`` (the observed corners' hull, px): no farther than the observed region grown by
@@ -259,12 +322,19 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     (x, y) -> (x_d, y_d) must be positive on a polar grid over that same disc of r_u.
     ``model`` (the solve's model name, when known) picks the fix: never "fewer coefficients" to k1k2.
     """
-    rule, fix = "distortion-foldover", ("the distortion polynomial turns back inside the image: "
-                                        "re-solve with fewer coefficients (--model k1k2) or with "
-                                        "corners captured out to the image corners")
+    rule, fix = (
+        "distortion-foldover",
+        (
+            "the distortion polynomial turns back inside the image: "
+            "re-solve with fewer coefficients (--model k1k2) or with "
+            "corners captured out to the image corners"
+        ),
+    )
     if model == "k1k2":
-        fix = ("the distortion polynomial turns back inside the image: capture corners out to the image corners "
-               "(it is extrapolated beyond the last one), or --model fisheye for a wide or fisheye lens")
+        fix = (
+            "the distortion polynomial turns back inside the image: capture corners out to the image corners "
+            "(it is extrapolated beyond the last one), or --model fisheye for a wide or fisheye lens"
+        )
     rd_corner, edge = _farthest_corner_rd(camera_matrix, image_size, image_circle, observed_px, required_px)
     r_max = RADIAL_SEARCH_MAX_FACTOR * rd_corner
     steps = int(RADIAL_GRID_STEPS * RADIAL_SEARCH_MAX_FACTOR)
@@ -290,9 +360,14 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
         else:
             i = int(np.argmax(rd))
             where = f"never exceeds r_d = {rd[i]:.4f} (at r_u = {r[i]:.4f}, searched to r_u = {r_max:.3f})"
-        return Finding(rule, ERROR, False,
-                       f"radial distortion r_d(r_u) {where}, but the {edge} is at "
-                       f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the {_inside(edge)}", fix)
+        return Finding(
+            rule,
+            ERROR,
+            False,
+            f"radial distortion r_d(r_u) {where}, but the {edge} is at "
+            f"r_d = {rd_corner:.4f} (normalised): the model folds over inside the {_inside(edge)}",
+            fix,
+        )
     r_reach = float(r[stop])
     radii = np.linspace(0.0, r_reach, POLAR_GRID[0])[1:]
     angles = np.linspace(0.0, 2 * np.pi, POLAR_GRID[1], endpoint=False)
@@ -303,26 +378,39 @@ def check_distortion_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray
     step = 1e-6
     # the four central-difference stencils in one call: the same element-wise arithmetic, a quarter of
     # numpy's per-call overhead
-    xs, ys, _ = distort_normalised(np.stack([x + step, x - step, x, x]), np.stack([y, y, y + step, y - step]),
-                                   dist_coeffs)
+    xs, ys, _ = distort_normalised(
+        np.stack([x + step, x - step, x, x]), np.stack([y, y, y + step, y - step]), dist_coeffs
+    )
     (xp, xm, xq, xn), (yp, ym, yq, yn) = xs, ys
     det = ((xp - xm) * (yq - yn) - (xq - xn) * (yp - ym)) / (4 * step * step)
     worst = np.unravel_index(int(np.argmin(det)), det.shape)
     if not det[worst] > 0:
-        return Finding(rule, ERROR, False,
-                       f"the distortion (incl. tangential terms) folds over: Jacobian determinant "
-                       f"{det[worst]:.3g} at r_u = {rr[worst]:.4f}, angle {np.rad2deg(aa[worst]):.0f} deg, "
-                       f"inside the disc reaching the {edge} (r_u = {r_reach:.4f})", fix)
-    return Finding(rule, ERROR, True,
-                   f"distortion is one-to-one out to the {edge} (r_d = {rd_corner:.4f}, "
-                   f"r_u = {r_reach:.4f}); smallest Jacobian determinant {det[worst]:.3f}")
+        return Finding(
+            rule,
+            ERROR,
+            False,
+            f"the distortion (incl. tangential terms) folds over: Jacobian determinant "
+            f"{det[worst]:.3g} at r_u = {rr[worst]:.4f}, angle {np.rad2deg(aa[worst]):.0f} deg, "
+            f"inside the disc reaching the {edge} (r_u = {r_reach:.4f})",
+            fix,
+        )
+    return Finding(
+        rule,
+        ERROR,
+        True,
+        f"distortion is one-to-one out to the {edge} (r_d = {rd_corner:.4f}, "
+        f"r_u = {r_reach:.4f}); smallest Jacobian determinant {det[worst]:.3f}",
+    )
 
 
-def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                               image_size: tuple[int, int],
-                               image_circle: tuple[float, float, float] | None = None,
-                               observed_px: np.ndarray | None = None,
-                               required_px: np.ndarray | None = None) -> Finding:
+def check_equidistant_foldover(
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    image_circle: tuple[float, float, float] | None = None,
+    observed_px: np.ndarray | None = None,
+    required_px: np.ndarray | None = None,
+) -> Finding:
     """Equidistant (fisheye, k1..k4): theta_d(theta) = theta (1 + k1 t^2 + k2 t^4 + k3 t^6 + k4 t^8)
     must increase from theta = 0 until it reaches the farthest image corner's normalised radius.
 
@@ -351,15 +439,29 @@ def check_equidistant_foldover(camera_matrix: np.ndarray, dist_coeffs: np.ndarra
     falling = np.flatnonzero(np.diff(theta_d[: stop + 1]) <= 0)
     if not falling.size and not reach.size and must_reach:
         what = edge if _is_region(edge) else "circle's edge"
-        return Finding(rule, ERROR, False,
-                       f"fisheye theta_d(theta) never reaches the {edge} (theta_d = {rd_corner:.4f}; at most "
-                       f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the {what}", fix)
+        return Finding(
+            rule,
+            ERROR,
+            False,
+            f"fisheye theta_d(theta) never reaches the {edge} (theta_d = {rd_corner:.4f}; at most "
+            f"{theta_d.max():.4f} out to 180 deg off-axis): the model cannot image the {what}",
+            fix,
+        )
     if falling.size:
         i = int(falling[0])
-        return Finding(rule, ERROR, False,
-                       f"fisheye theta_d(theta) stops increasing at {math.degrees(theta[i]):.1f} deg off-axis "
-                       f"(theta_d = {theta_d[i]:.4f}) before reaching the {edge} "
-                       f"(theta_d = {rd_corner:.4f}): the model folds over inside the {_inside(edge)}", fix)
-    return Finding(rule, ERROR, True,
-                   f"fisheye theta_d(theta) increases out to {math.degrees(theta[stop]):.1f} deg off-axis "
-                   f"({edge} at theta_d = {rd_corner:.4f})")
+        return Finding(
+            rule,
+            ERROR,
+            False,
+            f"fisheye theta_d(theta) stops increasing at {math.degrees(theta[i]):.1f} deg off-axis "
+            f"(theta_d = {theta_d[i]:.4f}) before reaching the {edge} "
+            f"(theta_d = {rd_corner:.4f}): the model folds over inside the {_inside(edge)}",
+            fix,
+        )
+    return Finding(
+        rule,
+        ERROR,
+        True,
+        f"fisheye theta_d(theta) increases out to {math.degrees(theta[stop]):.1f} deg off-axis "
+        f"({edge} at theta_d = {rd_corner:.4f})",
+    )

@@ -77,6 +77,8 @@ def diagonal_field_deg(camera_matrix: np.ndarray, image_size: tuple[int, int]) -
     u, v = np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5])
     r = max(float(np.hypot((a - cx) / fx, (b - cy) / fy)) for a in u for b in v)
     return float(np.degrees(2 * r))
+
+
 # The most flexible model of each lens family: the lens-model estimate of the noise floor (module docstring).
 FLOOR_MODELS = ("fisheye", "rational")
 
@@ -87,7 +89,9 @@ def _grid_index(values: np.ndarray) -> np.ndarray:
     return np.searchsorted(distinct, np.round(values, 9))
 
 
-def detector_rms_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray]) -> float | None:
+def detector_rms_px(
+    object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray]
+) -> float | None:
     """Per-corner RMS (px) of the detector, from local quadratic fits; None when no 4 x 4 block has enough corners.
 
     Args:
@@ -115,9 +119,13 @@ def detector_rms_px(object_points_per_view: Sequence[np.ndarray], image_points_p
     return float(np.sqrt(2.0 * ssr / dof))
 
 
-def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                  image_size: tuple[int, int], models: Sequence[str] = FLOOR_MODELS,
-                  lanes: Lanes | None = None) -> tuple[float, str] | None:
+def lens_floor_px(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    models: Sequence[str] = FLOOR_MODELS,
+    lanes: Lanes | None = None,
+) -> tuple[float, str] | None:
     """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on these
     corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px.
     ``lanes``: where the models are solved at once (core.lanes); the answer does not depend on it."""
@@ -126,8 +134,9 @@ def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per
 
     def solved(name: str) -> IntrinsicsSolution | None:
         try:
-            return solve_intrinsics(list(object_points_per_view), list(image_points_per_view), image_size, name,
-                                    uncertainty=False)
+            return solve_intrinsics(
+                list(object_points_per_view), list(image_points_per_view), image_size, name, uncertainty=False
+            )
         except NumericalError:
             return None  # too few views for it, or it diverged: the other family (or the patch) still reads the floor
 
@@ -146,9 +155,13 @@ def lens_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per
     return best
 
 
-def noise_floor_px(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                   image_size: tuple[int, int], fit_rms_px: float | None = None,
-                   lanes: Lanes | None = None) -> float | None:
+def noise_floor_px(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    fit_rms_px: float | None = None,
+    lanes: Lanes | None = None,
+) -> float | None:
     """The model-misfit rule's floor, px per corner: the smaller of detector_rms_px and lens_floor_px (module
     docstring); None when neither can be read. ``fit_rms_px``: the fit the floor will judge; when no floor can
     make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and the
@@ -172,31 +185,57 @@ def misfit(fit_rms_px: float, detector_px: float) -> bool:
     return fit_rms_px > MISFIT_RATIO * detector_px and fit_rms_px - detector_px > MISFIT_MIN_PX
 
 
-def check_model_misfit(fit_rms_px: float, detector_px: float | None, model: str,
-                       inner_fit_rms_px: float | None = None, outer_fit_rms_px: float | None = None,
-                       field_deg: float | None = None) -> Finding:
+def check_model_misfit(
+    fit_rms_px: float,
+    detector_px: float | None,
+    model: str,
+    inner_fit_rms_px: float | None = None,
+    outer_fit_rms_px: float | None = None,
+    field_deg: float | None = None,
+) -> Finding:
     """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius. ``field_deg``
     (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of WIDE_FIELD_DEG or more."""
-    fix = ("solve with --model fisheye (a wide or fisheye lens), or --model auto" if model != "fisheye" else
-           "the fisheye model does not explain these corners either: check the board geometry and corner order")
+    fix = (
+        "solve with --model fisheye (a wide or fisheye lens), or --model auto"
+        if model != "fisheye"
+        else "the fisheye model does not explain these corners either: check the board geometry and corner order"
+    )
     if model != "fisheye" and field_deg is not None and field_deg < WIDE_FIELD_DEG:
-        fix = (f"a lens of about {field_deg:.0f} deg diagonal is not wide: no richer model is the cure; the corners "
-               "disagree with any one lens: check that focus, zoom and autofocus stayed fixed through the capture "
-               "(see one-camera), that the board is flat and rigid, and the corner order; --model auto tries the "
-               "richer models")
+        fix = (
+            f"a lens of about {field_deg:.0f} deg diagonal is not wide: no richer model is the cure; the corners "
+            "disagree with any one lens: check that focus, zoom and autofocus stayed fixed through the capture "
+            "(see one-camera), that the board is flat and rigid, and the corner order; --model auto tries the "
+            "richer models"
+        )
     if model not in FREE_ASPECT_MODELS:
-        fix += (f"; if the pixels are not square (frames resized in one axis, binning), {model} ties fx to fy "
-                "and cannot fit them: --model opencv-default solves fx and fy apart")
+        fix += (
+            f"; if the pixels are not square (frames resized in one axis, binning), {model} ties fx to fy "
+            "and cannot fit them: --model opencv-default solves fx and fy apart"
+        )
     if detector_px is None:
         return Finding("model-misfit", ERROR, True, "no detector noise recorded: model adequacy not checked")
     if misfit(fit_rms_px, detector_px):
-        return Finding("model-misfit", ERROR, False,
-                       f"model {model} leaves fit RMS {fit_rms_px:.3f} px where the corner detector delivers "
-                       f"{detector_px:.3f} px on this set ({fit_rms_px / detector_px:.1f}x, limit {MISFIT_RATIO:.1f}x): "
-                       "the model cannot describe this lens", fix)
-    if inner_fit_rms_px and outer_fit_rms_px and outer_fit_rms_px > RADIAL_GROWTH_RATIO * inner_fit_rms_px \
-            and outer_fit_rms_px - inner_fit_rms_px > MISFIT_MIN_PX:
-        return Finding("model-misfit", ERROR, False,
-                       f"residuals grow with radius under model {model}: outer-ring fit RMS {outer_fit_rms_px:.3f} px vs "
-                       f"inner {inner_fit_rms_px:.3f} px (limit {RADIAL_GROWTH_RATIO:.1f}x)", fix)
+        return Finding(
+            "model-misfit",
+            ERROR,
+            False,
+            f"model {model} leaves fit RMS {fit_rms_px:.3f} px where the corner detector delivers "
+            f"{detector_px:.3f} px on this set ({fit_rms_px / detector_px:.1f}x, limit {MISFIT_RATIO:.1f}x): "
+            "the model cannot describe this lens",
+            fix,
+        )
+    if (
+        inner_fit_rms_px
+        and outer_fit_rms_px
+        and outer_fit_rms_px > RADIAL_GROWTH_RATIO * inner_fit_rms_px
+        and outer_fit_rms_px - inner_fit_rms_px > MISFIT_MIN_PX
+    ):
+        return Finding(
+            "model-misfit",
+            ERROR,
+            False,
+            f"residuals grow with radius under model {model}: outer-ring fit RMS {outer_fit_rms_px:.3f} px vs "
+            f"inner {inner_fit_rms_px:.3f} px (limit {RADIAL_GROWTH_RATIO:.1f}x)",
+            fix,
+        )
     return Finding("model-misfit", ERROR, True, f"fit RMS {fit_rms_px:.3f} px, detector {detector_px:.3f} px")

@@ -92,9 +92,14 @@ class ModelSelection:
     trail: tuple[ModelCandidate, ...]
 
 
-def _evaluate(model: str, obj: Sequence[np.ndarray], img: Sequence[np.ndarray],
-              image_size: tuple[int, int], centre: tuple[float, float] | None, lanes: Lanes | None
-              ) -> tuple[IntrinsicsSolution, HoldoutReport]:
+def _evaluate(
+    model: str,
+    obj: Sequence[np.ndarray],
+    img: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    centre: tuple[float, float] | None,
+    lanes: Lanes | None,
+) -> tuple[IntrinsicsSolution, HoldoutReport]:
     fit = solve_intrinsics(obj, img, image_size, model, uncertainty=False)
     return fit, validate_holdout(obj, img, image_size, model, fit=fit, ring_centre_px=centre, lanes=lanes)
 
@@ -121,15 +126,29 @@ def select_model(
     Raises:
         NumericalError: the first rung itself cannot be solved or validated.
     """
-    key = values_digest(object_points_per_view, image_points_per_view, tuple(int(s) for s in image_size),
-                        tuple(ladder), tuple(alternatives))
-    return _RECENT.answer(key, lambda: _select_model(object_points_per_view, image_points_per_view, image_size,
-                                                     ladder, alternatives, lanes))
+    key = values_digest(
+        object_points_per_view,
+        image_points_per_view,
+        tuple(int(s) for s in image_size),
+        tuple(ladder),
+        tuple(alternatives),
+    )
+    return _RECENT.answer(
+        key,
+        lambda: _select_model(
+            object_points_per_view, image_points_per_view, image_size, ladder, alternatives, lanes
+        ),
+    )
 
 
-def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                  image_size: tuple[int, int], ladder: Sequence[str], alternatives: Sequence[str],
-                  lanes: Lanes | None) -> ModelSelection:
+def _select_model(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    ladder: Sequence[str],
+    alternatives: Sequence[str],
+    lanes: Lanes | None,
+) -> ModelSelection:
     names = (*ladder, *alternatives)
     trail: list[ModelCandidate] = []
     start: tuple[str, IntrinsicsSolution, HoldoutReport] | None = None
@@ -137,21 +156,41 @@ def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per
     best, best_fit, best_hold = "", None, None
     for name in names:
         try:
-            fit, hold = _evaluate(name, object_points_per_view, image_points_per_view, image_size, centre, lanes)
+            fit, hold = _evaluate(
+                name, object_points_per_view, image_points_per_view, image_size, centre, lanes
+            )
         except NumericalError as exc:
             # that rung is out, not the run (a k1k2 fold on a strong fisheye: 10.18 px, limit 10)
-            trail.append(ModelCandidate(name, None if start is None else (start[0] if name in alternatives else best),
-                                        None, None, None, None, False,
-                                        f"not solvable: {exc.message}"))
+            trail.append(
+                ModelCandidate(
+                    name,
+                    None if start is None else (start[0] if name in alternatives else best),
+                    None,
+                    None,
+                    None,
+                    None,
+                    False,
+                    f"not solvable: {exc.message}",
+                )
+            )
             continue
         if start is None:
             centre = (fit.cx, fit.cy)  # every rung uses the same rings, so the same corners
             best, best_fit, best_hold = name, fit, hold
             start = (name, fit, hold)
             out = [c.model for c in trail]
-            trail.append(ModelCandidate(name, None, fit.rms_px, hold.fit_outer_rms_px, hold.holdout_outer_rms_px,
-                                        None, True, "starting model" if not out else
-                                        f"starting model ({', '.join(out)} not solvable)"))
+            trail.append(
+                ModelCandidate(
+                    name,
+                    None,
+                    fit.rms_px,
+                    hold.fit_outer_rms_px,
+                    hold.holdout_outer_rms_px,
+                    None,
+                    True,
+                    "starting model" if not out else f"starting model ({', '.join(out)} not solvable)",
+                )
+            )
             continue
         assert best_fit is not None and best_hold is not None
         family_change = name in alternatives
@@ -161,12 +200,24 @@ def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per
             # it beat the ladder's start; it must also predict no worse than the ladder's choice (held-out:
             # fit RMS across lens families rewards the one with more coefficients, module docstring)
             accepted = hold.holdout_outer_rms_px <= best_hold.holdout_outer_rms_px
-            reason += (f"; against {best} (the ladder's choice): held-out outer-ring RMS "
-                       f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px "
-                       f"({'not worse' if accepted else 'worse'}; fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px "
-                       f"is not compared across lens families)")
-        trail.append(ModelCandidate(name, base, fit.rms_px, hold.fit_outer_rms_px,
-                                    hold.holdout_outer_rms_px, gain, accepted, reason))
+            reason += (
+                f"; against {best} (the ladder's choice): held-out outer-ring RMS "
+                f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px "
+                f"({'not worse' if accepted else 'worse'}; fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px "
+                f"is not compared across lens families)"
+            )
+        trail.append(
+            ModelCandidate(
+                name,
+                base,
+                fit.rms_px,
+                hold.fit_outer_rms_px,
+                hold.holdout_outer_rms_px,
+                gain,
+                accepted,
+                reason,
+            )
+        )
         if accepted:
             best, best_fit, best_hold = name, fit, hold
     if start is None:
@@ -174,18 +225,22 @@ def _select_model(object_points_per_view: Sequence[np.ndarray], image_points_per
             "no model can be solved and validated on these corners: "
             + "; ".join(f"{c.model}: {c.reason.removeprefix('not solvable: ')}" for c in trail),
             hint="capture more views tilted 20-40 deg in at least three directions, and check the corner order "
-                 "and that every view shows the declared board")
+            "and that every view shows the declared board",
+        )
     assert best_fit is not None and best_hold is not None
     return ModelSelection(best, best_fit, best_hold, tuple(trail))
 
 
-def _rule(base_fit: IntrinsicsSolution, base_hold: HoldoutReport, fit: IntrinsicsSolution,
-          hold: HoldoutReport) -> tuple[bool, float, str]:
+def _rule(
+    base_fit: IntrinsicsSolution, base_hold: HoldoutReport, fit: IntrinsicsSolution, hold: HoldoutReport
+) -> tuple[bool, float, str]:
     """(accepted, fit improvement, reason) of a candidate against a base by the 10 % / outer-ring rule."""
     gain = (base_fit.rms_px - fit.rms_px) / base_fit.rms_px
     worse = hold.holdout_outer_rms_px > base_hold.holdout_outer_rms_px
-    reason = (f"fit RMS {base_fit.rms_px:.4f} -> {fit.rms_px:.4f} px ({100 * gain:+.1f} %, "
-              f"needs >= {100 * MIN_FIT_IMPROVEMENT:.0f} %); held-out outer-ring RMS "
-              f"{base_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px"
-              f" ({'worse' if worse else 'not worse'})")
+    reason = (
+        f"fit RMS {base_fit.rms_px:.4f} -> {fit.rms_px:.4f} px ({100 * gain:+.1f} %, "
+        f"needs >= {100 * MIN_FIT_IMPROVEMENT:.0f} %); held-out outer-ring RMS "
+        f"{base_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px"
+        f" ({'worse' if worse else 'not worse'})"
+    )
     return gain >= MIN_FIT_IMPROVEMENT and not worse, gain, reason

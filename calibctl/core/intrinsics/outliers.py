@@ -91,19 +91,30 @@ def view_outlier_threshold_px(per_view_rms_px: np.ndarray) -> float:
 
 def corner_outlier_threshold_px(residuals_px_per_view: Sequence[np.ndarray]) -> tuple[float, float]:
     """(threshold_px, sigma_robust_px) of the corner rule from V arrays (N_i, 2) float64 residuals."""
-    lengths = np.concatenate([np.linalg.norm(np.asarray(r).reshape(-1, 2), axis=1)
-                              for r in residuals_px_per_view])
+    lengths = np.concatenate(
+        [np.linalg.norm(np.asarray(r).reshape(-1, 2), axis=1) for r in residuals_px_per_view]
+    )
     sigma_robust = float(np.median(lengths)) / _RAYLEIGH_MEDIAN
     return min(CORNER_ABS_PX, max(CORNER_K * sigma_robust, CORNER_MIN_PX)), sigma_robust
 
 
-def view_corner_thresholds_px(residuals_px_per_view: Sequence[np.ndarray], session_threshold_px: float) -> np.ndarray:
+def view_corner_thresholds_px(
+    residuals_px_per_view: Sequence[np.ndarray], session_threshold_px: float
+) -> np.ndarray:
     """(V,) the corner threshold per view: the session's, raised to CORNER_K x the view's own robust sigma
     (capped at CORNER_ABS_PX). A view that is noisy throughout is a view problem (the view rule's), not
     a set of bad corners: at 5x the session's noise, most of its corners pass the session threshold."""
-    own = np.array([np.median(np.linalg.norm(np.asarray(r).reshape(-1, 2), axis=1)) / _RAYLEIGH_MEDIAN
-                    if len(r) else 0.0 for r in residuals_px_per_view])
-    return np.minimum(np.maximum(CORNER_K * own, session_threshold_px), max(CORNER_ABS_PX, session_threshold_px))
+    own = np.array(
+        [
+            np.median(np.linalg.norm(np.asarray(r).reshape(-1, 2), axis=1)) / _RAYLEIGH_MEDIAN
+            if len(r)
+            else 0.0
+            for r in residuals_px_per_view
+        ]
+    )
+    return np.minimum(
+        np.maximum(CORNER_K * own, session_threshold_px), max(CORNER_ABS_PX, session_threshold_px)
+    )
 
 
 def find_corner_outliers(
@@ -125,8 +136,11 @@ def find_corner_outliers(
     limits = np.broadcast_to(np.asarray(threshold_px, dtype=np.float64), (len(residuals_px_per_view),))
     for k, res in enumerate(residuals_px_per_view):
         res = np.asarray(res, dtype=np.float64).reshape(-1, 2)
-        ids = (np.arange(len(res)) if corner_ids_per_view is None
-               else np.asarray(corner_ids_per_view[k], dtype=np.int64).ravel())
+        ids = (
+            np.arange(len(res))
+            if corner_ids_per_view is None
+            else np.asarray(corner_ids_per_view[k], dtype=np.int64).ravel()
+        )
         view = k if view_indices is None else int(view_indices[k])
         norm = np.linalg.norm(res, axis=1)
         for j in np.flatnonzero(norm > limits[k]):
@@ -195,9 +209,16 @@ def solve_dropping_outliers(
     if len(kept) < m.min_views:
         raise NumericalError(
             f"dropping {len(dropped)} outlier views leaves {len(kept)}, fewer than the "
-            f"{m.min_views} model {m.name} needs", hint="capture more views, or solve without --drop-outliers")
-    second = solve_intrinsics([object_points_per_view[i] for i in kept],
-                              [image_points_per_view[i] for i in kept], image_size, model, initial)
+            f"{m.min_views} model {m.name} needs",
+            hint="capture more views, or solve without --drop-outliers",
+        )
+    second = solve_intrinsics(
+        [object_points_per_view[i] for i in kept],
+        [image_points_per_view[i] for i in kept],
+        image_size,
+        model,
+        initial,
+    )
     return DropOutliersResult(second, first, dropped, kept)
 
 
@@ -240,8 +261,10 @@ def solve_rejecting_corners(
     Shapes as in solve_intrinsics; corner_ids_per_view as in find_corner_outliers.
     """
     masks = [np.ones(len(np.asarray(p).reshape(-1, 2)), dtype=bool) for p in image_points_per_view]
-    ids = [np.arange(len(m)) if corner_ids_per_view is None else np.asarray(corner_ids_per_view[k]).ravel()
-           for k, m in enumerate(masks)]
+    ids = [
+        np.arange(len(m)) if corner_ids_per_view is None else np.asarray(corner_ids_per_view[k]).ravel()
+        for k, m in enumerate(masks)
+    ]
     rounds = 0
     while True:
         rounds += 1
@@ -249,26 +272,42 @@ def solve_rejecting_corners(
         img = [np.asarray(p).reshape(-1, 2)[m] for p, m in zip(image_points_per_view, masks, strict=True)]
         solution = solve_intrinsics(obj, img, image_size, model)
         threshold, _ = corner_outlier_threshold_px(solution.residuals_px)
-        flagged = find_corner_outliers(solution.residuals_px, view_corner_thresholds_px(solution.residuals_px, threshold),
-                                       [i[m] for i, m in zip(ids, masks, strict=True)])
+        flagged = find_corner_outliers(
+            solution.residuals_px,
+            view_corner_thresholds_px(solution.residuals_px, threshold),
+            [i[m] for i, m in zip(ids, masks, strict=True)],
+        )
         removed = 0
         done_views: set[int] = set()
         for c in flagged:  # largest first: only each view's worst goes, as it drags its neighbours
             mask = masks[c.view_index]
-            if rounds > MAX_REJECTION_ROUNDS or mask.sum() <= MIN_CORNERS_PER_VIEW or c.view_index in done_views:
+            if (
+                rounds > MAX_REJECTION_ROUNDS
+                or mask.sum() <= MIN_CORNERS_PER_VIEW
+                or c.view_index in done_views
+            ):
                 continue
             mask[np.flatnonzero(ids[c.view_index] == c.corner_id)] = False
             done_views.add(c.view_index)
             removed += 1
         if removed == 0:
             break
-    return CornerRejection(solution, tuple(masks), _rejected_residuals(
-        object_points_per_view, image_points_per_view, ids, masks, solution), threshold, rounds)
+    return CornerRejection(
+        solution,
+        tuple(masks),
+        _rejected_residuals(object_points_per_view, image_points_per_view, ids, masks, solution),
+        threshold,
+        rounds,
+    )
 
 
-def _rejected_residuals(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                        ids: Sequence[np.ndarray], masks: Sequence[np.ndarray],
-                        solution: IntrinsicsSolution) -> tuple[CornerOutlier, ...]:
+def _rejected_residuals(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    ids: Sequence[np.ndarray],
+    masks: Sequence[np.ndarray],
+    solution: IntrinsicsSolution,
+) -> tuple[CornerOutlier, ...]:
     """Residual (observed - projected) of every removed corner under the final solve."""
     out = []
     for k, mask in enumerate(masks):
@@ -276,10 +315,18 @@ def _rejected_residuals(object_points_per_view: Sequence[np.ndarray], image_poin
             continue
         obj = np.asarray(object_points_per_view[k], np.float64).reshape(-1, 3)[~mask]
         img = np.asarray(image_points_per_view[k], np.float64).reshape(-1, 2)[~mask]
-        proj = project_points(obj, solution.rvecs[k], solution.tvecs[k], solution.camera_matrix,
-                              solution.dist_coeffs, solution.model)
+        proj = project_points(
+            obj,
+            solution.rvecs[k],
+            solution.tvecs[k],
+            solution.camera_matrix,
+            solution.dist_coeffs,
+            solution.model,
+        )
         res = img - proj
-        out += [CornerOutlier(k, int(i), float(np.hypot(*r)), float(r[0]), float(r[1]))
-                for i, r in zip(ids[k][~mask], res, strict=True)]
+        out += [
+            CornerOutlier(k, int(i), float(np.hypot(*r)), float(r[0]), float(r[1]))
+            for i, r in zip(ids[k][~mask], res, strict=True)
+        ]
     out.sort(key=lambda c: (-c.residual_px, c.view_index, c.corner_id))
     return tuple(out)

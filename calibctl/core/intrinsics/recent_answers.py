@@ -20,8 +20,9 @@ import numpy as np
 T = TypeVar("T")
 
 
-def values_digest(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                  *params: object) -> bytes:
+def values_digest(
+    object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray], *params: object
+) -> bytes:
     """A digest of corners (per view: (N, 3) and (N, 2), taken as float64) and ``params`` (repr-able)."""
     digest = hashlib.blake2b(repr((params, len(object_points_per_view))).encode(), digest_size=32)
     for o, i in zip(object_points_per_view, image_points_per_view, strict=True):

@@ -24,16 +24,25 @@ FISHEYE_CURVE_DEG = 75.0  # a fisheye's distortion curve stops here (the pinhole
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 
 
-def reprojection_residuals(object_points: np.ndarray, corners_px: np.ndarray, rvec: Sequence[float],
-                           tvec_m: Sequence[float], camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
-                           fisheye: bool = False) -> np.ndarray:
+def reprojection_residuals(
+    object_points: np.ndarray,
+    corners_px: np.ndarray,
+    rvec: Sequence[float],
+    tvec_m: Sequence[float],
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    fisheye: bool = False,
+) -> np.ndarray:
     """observed - projected for one view under a stored pose and model (``fisheye``: cv2.fisheye's lens).
 
     Args: object_points (N, 3) float64 board frame, metres; corners_px (N, 2) float64; rvec, tvec_m:
     T_cam_board; camera_matrix (3, 3); dist_coeffs (n,). Returns (N, 2) float64 pixels.
     """
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 1, 3)
-    r, t = np.asarray(rvec, dtype=np.float64).reshape(3, 1), np.asarray(tvec_m, dtype=np.float64).reshape(3, 1)
+    r, t = (
+        np.asarray(rvec, dtype=np.float64).reshape(3, 1),
+        np.asarray(tvec_m, dtype=np.float64).reshape(3, 1),
+    )
     if fisheye:
         projected, _ = cv2.fisheye.projectPoints(obj, r, t, camera_matrix, dist_coeffs)
     else:
@@ -60,18 +69,24 @@ def edge_gaps_px(corners_px: np.ndarray, image_size: tuple[int, int]) -> dict[st
     """Distance from each image edge to the nearest corner, pixels (left, right, top, bottom)."""
     pts = np.asarray(corners_px, dtype=np.float64).reshape(-1, 2)
     w, h = image_size
-    return {"left": float(pts[:, 0].min()), "right": float(w - 1 - pts[:, 0].max()),
-            "top": float(pts[:, 1].min()), "bottom": float(h - 1 - pts[:, 1].max())}
+    return {
+        "left": float(pts[:, 0].min()),
+        "right": float(w - 1 - pts[:, 0].max()),
+        "top": float(pts[:, 1].min()),
+        "bottom": float(h - 1 - pts[:, 1].max()),
+    }
 
 
 def unproject(points_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray) -> np.ndarray:
     """Pixels (N, 2) -> normalised ray coordinates (N, 2) (x/z, y/z) through the distortion model."""
     pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 1, 2)
     if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x: the iteration criteria live in their own call
-        return cv2.undistortPointsIter(pts, camera_matrix, dist_coeffs, None, None,
-                                       _UNDISTORT_CRITERIA).reshape(-1, 2)
-    return cv2.undistortPoints(pts, camera_matrix, dist_coeffs, R=None, P=None,
-                               criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
+        return cv2.undistortPointsIter(
+            pts, camera_matrix, dist_coeffs, None, None, _UNDISTORT_CRITERIA
+        ).reshape(-1, 2)
+    return cv2.undistortPoints(
+        pts, camera_matrix, dist_coeffs, R=None, P=None, criteria=_UNDISTORT_CRITERIA
+    ).reshape(-1, 2)
 
 
 @dataclass(frozen=True)
@@ -87,10 +102,17 @@ class UncertaintyMap:
     sigma_px: np.ndarray
 
 
-def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, covariance: np.ndarray,
-                           parameters: Sequence[str], aspect: float | None, image_size: tuple[int, int],
-                           grid: tuple[int, int] = (32, 24), fisheye: bool = False,
-                           rotation_fit: np.ndarray | None = None) -> UncertaintyMap:
+def projection_uncertainty(
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    covariance: np.ndarray,
+    parameters: Sequence[str],
+    aspect: float | None,
+    image_size: tuple[int, int],
+    grid: tuple[int, int] = (32, 24),
+    fisheye: bool = False,
+    rotation_fit: np.ndarray | None = None,
+) -> UncertaintyMap:
     """Propagate the intrinsic covariance to the projection of the ray through each grid pixel.
 
     Args:
@@ -116,8 +138,9 @@ def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, c
         rays = pixel_rays(pixels, camera_matrix, np.asarray(dist_coeffs, np.float64).ravel()[:4])
         known = np.arctan2(np.hypot(rays[:, 0], rays[:, 1]), rays[:, 2]) < MAX_SOLVE_THETA_RAD
         points = np.where(known[:, None], rays / np.where(known, rays[:, 2], 1.0)[:, None], [0.0, 0.0, 1.0])
-        _, J = cv2.fisheye.projectPoints(points.reshape(-1, 1, 3), np.zeros((3, 1)), np.zeros((3, 1)),
-                                         camera_matrix, dist_coeffs)
+        _, J = cv2.fisheye.projectPoints(
+            points.reshape(-1, 1, 3), np.zeros((3, 1)), np.zeros((3, 1)), camera_matrix, dist_coeffs
+        )
         # columns: f (2), c (2), k (4), alpha, rvec (3), tvec (3)
         J_int = _less_rotation(J[:, :8], J[:, 9:12], rotation_fit, known.reshape(len(v), len(u)))
         umap = _worst_sigma(J_int, np.asarray(covariance, dtype=np.float64), u, v)
@@ -130,12 +153,18 @@ def projection_uncertainty(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, c
     J_int, names = intrinsic_columns(J, free_k, free_d, aspect)
     if list(names) != list(parameters):
         raise ValueError(f"covariance parameters {list(parameters)} do not match the model's {list(names)}")
-    J_int = _less_rotation(J_int, J[:, :3], rotation_fit, np.isfinite(J_int).all(axis=1).reshape(-1, 2).all(axis=1)
-                           .reshape(len(v), len(u)))
+    J_int = _less_rotation(
+        J_int,
+        J[:, :3],
+        rotation_fit,
+        np.isfinite(J_int).all(axis=1).reshape(-1, 2).all(axis=1).reshape(len(v), len(u)),
+    )
     return _worst_sigma(J_int, np.asarray(covariance, dtype=np.float64), u, v)
 
 
-def _less_rotation(J_int: np.ndarray, J_rot: np.ndarray, fit: np.ndarray | None, usable: np.ndarray) -> np.ndarray:
+def _less_rotation(
+    J_int: np.ndarray, J_rot: np.ndarray, fit: np.ndarray | None, usable: np.ndarray
+) -> np.ndarray:
     """(2 R C, p) intrinsic columns less their least-squares fit by the (2 R C, 3) rotation columns over the
     grid points ``fit & usable`` ((R, C) bool); unchanged when ``fit`` is None or selects nothing."""
     if fit is None:
@@ -155,8 +184,13 @@ def _worst_sigma(J_int: np.ndarray, covariance: np.ndarray, u: np.ndarray, v: np
     return UncertaintyMap(u, v, np.sqrt(np.clip(worst, 0.0, None)).reshape(len(v), len(u)))
 
 
-def distortion_curve(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, image_size: tuple[int, int],
-                     samples: int = 64, fisheye: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def distortion_curve(
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    image_size: tuple[int, int],
+    samples: int = 64,
+    fisheye: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
     """Radial displacement by the lens along the ray to the farthest image corner.
 
     Returns (r_px, displacement_px), each (samples,) float64: r_px the distorted distance from the
@@ -175,8 +209,13 @@ def distortion_curve(camera_matrix: np.ndarray, dist_coeffs: np.ndarray, image_s
     ray_end = unproject(far[None, :], camera_matrix, dist_coeffs)[0]
     t = np.linspace(0.0, 1.0, samples)
     xy = t[:, None] * ray_end[None, :]
-    projected, _ = cv2.projectPoints(np.concatenate([xy, np.ones((samples, 1))], axis=1), np.zeros(3), np.zeros(3),
-                                     camera_matrix, dist_coeffs)
+    projected, _ = cv2.projectPoints(
+        np.concatenate([xy, np.ones((samples, 1))], axis=1),
+        np.zeros(3),
+        np.zeros(3),
+        camera_matrix,
+        dist_coeffs,
+    )
     pinhole = xy * np.array([camera_matrix[0, 0], camera_matrix[1, 1]])
     r_px = np.linalg.norm(projected.reshape(-1, 2) - c, axis=1)
     return r_px, r_px - np.linalg.norm(pinhole, axis=1)

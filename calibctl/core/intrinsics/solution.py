@@ -43,6 +43,7 @@ FISHEYE_DIST_NAMES = ("k1", "k2", "k3", "k4")
 CALIB_RECOMPUTE_EXTRINSIC = int(getattr(cv2, "CALIB_RECOMPUTE_EXTRINSIC", 1 << 23))
 CALIB_FIX_SKEW = int(getattr(cv2, "CALIB_FIX_SKEW", 1 << 25))
 
+
 @dataclass(frozen=True)
 class DistortionModel:
     """One row of the model table: OpenCV flags and which parameters they leave free."""
@@ -54,7 +55,9 @@ class DistortionModel:
     n_coeffs: int  # length of the recorded distortion vector (5 or 8)
     min_views: int
     description: str
-    kind: str = "pinhole"  # "fisheye": equidistant Kannala-Brandt, solved by calibctl.core.intrinsics.fisheye_solve
+    kind: str = (
+        "pinhole"  # "fisheye": equidistant Kannala-Brandt, solved by calibctl.core.intrinsics.fisheye_solve
+    )
 
     @property
     def fx_tied_to_fy(self) -> bool:
@@ -71,20 +74,61 @@ _FOCAL = ("fx", "fy", "cx", "cy")
 MODELS: Mapping[str, DistortionModel] = {
     m.name: m
     for m in (
-        DistortionModel("k1k2", cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST | _ASPECT, _FOCAL,
-                        ("k1", "k2"), 5, 3, "production default (seed ch.1): fx=fy*a, k1 k2 free"),
-        DistortionModel("k1k2k3", cv2.CALIB_ZERO_TANGENT_DIST | _ASPECT, _FOCAL,
-                        ("k1", "k2", "k3"), 5, 3, "k3 free, no tangential, fx=fy*a"),
-        DistortionModel("k1k2p1p2k3", _ASPECT, _FOCAL,
-                        ("k1", "k2", "p1", "p2", "k3"), 5, 4, "full 5-term Brown-Conrady, fx=fy*a"),
-        DistortionModel("rational", cv2.CALIB_RATIONAL_MODEL | _ASPECT, _FOCAL,
-                        DISTORTION_NAMES, 8, 5, "OpenCV rational 8-term model, fx=fy*a"),
-        DistortionModel("opencv-default", 0, _FOCAL, ("k1", "k2", "p1", "p2", "k3"), 5, 3,
-                        "plain OpenCV flags=0: fx and fy independent; for reference reproduction"),
-        DistortionModel("fisheye", cv2.CALIB_USE_INTRINSIC_GUESS | CALIB_RECOMPUTE_EXTRINSIC | CALIB_FIX_SKEW,
-                        _FOCAL, FISHEYE_DIST_NAMES, 4, 3,
-                        "equidistant Kannala-Brandt (cv2.fisheye, ROS equidistant): fx fy cx cy k1..k4, skew 0",
-                        kind="fisheye"),
+        DistortionModel(
+            "k1k2",
+            cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST | _ASPECT,
+            _FOCAL,
+            ("k1", "k2"),
+            5,
+            3,
+            "production default (seed ch.1): fx=fy*a, k1 k2 free",
+        ),
+        DistortionModel(
+            "k1k2k3",
+            cv2.CALIB_ZERO_TANGENT_DIST | _ASPECT,
+            _FOCAL,
+            ("k1", "k2", "k3"),
+            5,
+            3,
+            "k3 free, no tangential, fx=fy*a",
+        ),
+        DistortionModel(
+            "k1k2p1p2k3",
+            _ASPECT,
+            _FOCAL,
+            ("k1", "k2", "p1", "p2", "k3"),
+            5,
+            4,
+            "full 5-term Brown-Conrady, fx=fy*a",
+        ),
+        DistortionModel(
+            "rational",
+            cv2.CALIB_RATIONAL_MODEL | _ASPECT,
+            _FOCAL,
+            DISTORTION_NAMES,
+            8,
+            5,
+            "OpenCV rational 8-term model, fx=fy*a",
+        ),
+        DistortionModel(
+            "opencv-default",
+            0,
+            _FOCAL,
+            ("k1", "k2", "p1", "p2", "k3"),
+            5,
+            3,
+            "plain OpenCV flags=0: fx and fy independent; for reference reproduction",
+        ),
+        DistortionModel(
+            "fisheye",
+            cv2.CALIB_USE_INTRINSIC_GUESS | CALIB_RECOMPUTE_EXTRINSIC | CALIB_FIX_SKEW,
+            _FOCAL,
+            FISHEYE_DIST_NAMES,
+            4,
+            3,
+            "equidistant Kannala-Brandt (cv2.fisheye, ROS equidistant): fx fy cx cy k1..k4, skew 0",
+            kind="fisheye",
+        ),
     )
 }
 
@@ -94,8 +138,9 @@ def get_model(name: str) -> DistortionModel:
     try:
         return MODELS[name]
     except KeyError:
-        raise UsageError(f"unknown distortion model {name!r}",
-                         hint=f"choose one of: {', '.join(MODELS)} (or 'auto')") from None
+        raise UsageError(
+            f"unknown distortion model {name!r}", hint=f"choose one of: {', '.join(MODELS)} (or 'auto')"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -201,7 +246,8 @@ def check_inputs(
         raise NumericalError(
             f"model {model.name} needs at least {model.min_views} board views, got {n_views}",
             hint="capture more views tilted 20-40 deg in at least three directions, "
-                 "or ask for a model with fewer coefficients (--model k1k2)")
+            "or ask for a model with fewer coefficients (--model k1k2)",
+        )
     objs, imgs = [], []
     for i, (obj, img) in enumerate(zip(object_points, image_points, strict=True)):
         obj = np.asarray(obj, dtype=np.float64).reshape(-1, 3)
@@ -209,17 +255,22 @@ def check_inputs(
         if obj.shape[0] != img.shape[0]:
             raise InputError(f"view {i}: {obj.shape[0]} model points but {img.shape[0]} corners")
         if not (np.isfinite(obj).all() and np.isfinite(img).all()):
-            raise InputError(f"view {i}: corners or model points contain NaN or infinity",
-                             hint="re-run detection for this view or drop it")
+            raise InputError(
+                f"view {i}: corners or model points contain NaN or infinity",
+                hint="re-run detection for this view or drop it",
+            )
         if obj.shape[0] < MIN_CORNERS_PER_VIEW:
-            raise NumericalError(f"view {i} has {obj.shape[0]} corners; at least "
-                                 f"{MIN_CORNERS_PER_VIEW} are needed per view", hint="drop that view")
+            raise NumericalError(
+                f"view {i} has {obj.shape[0]} corners; at least {MIN_CORNERS_PER_VIEW} are needed per view",
+                hint="drop that view",
+            )
         outside = (img[:, 0] < -1) | (img[:, 0] > width) | (img[:, 1] < -1) | (img[:, 1] > height)
         if outside.any():
             u, v = img[np.argmax(outside)]
             raise InputError(
                 f"view {i}: corner ({u:.1f}, {v:.1f}) lies outside the {width}x{height} image",
-                hint="the image size must be the resolution the corners were detected at")
+                hint="the image size must be the resolution the corners were detected at",
+            )
         objs.append(obj.astype(np.float32))
         imgs.append(img.astype(np.float32))
     return objs, imgs
@@ -237,13 +288,26 @@ def parameter_count(model: DistortionModel, n_views: int) -> int:
     return model.n_free_intrinsic_params + 6 * n_views
 
 
-def check_output(K: np.ndarray, dist: np.ndarray, rms: float, rvecs: np.ndarray, tvecs: np.ndarray,
-                  image_size: tuple[int, int]) -> None:
-    if not (np.isfinite(K).all() and np.isfinite(dist).all() and math.isfinite(rms)
-            and np.isfinite(rvecs).all() and np.isfinite(tvecs).all()):
-        raise NumericalError("the solve returned NaN or infinite values",
-                             hint="the views do not constrain the model; capture tilted views "
-                                  "or use a model with fewer coefficients")
+def check_output(
+    K: np.ndarray,
+    dist: np.ndarray,
+    rms: float,
+    rvecs: np.ndarray,
+    tvecs: np.ndarray,
+    image_size: tuple[int, int],
+) -> None:
+    if not (
+        np.isfinite(K).all()
+        and np.isfinite(dist).all()
+        and math.isfinite(rms)
+        and np.isfinite(rvecs).all()
+        and np.isfinite(tvecs).all()
+    ):
+        raise NumericalError(
+            "the solve returned NaN or infinite values",
+            hint="the views do not constrain the model; capture tilted views "
+            "or use a model with fewer coefficients",
+        )
     width, height = image_size
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     min_f = MIN_FOCAL_FRAC * max(width, height)
@@ -252,8 +316,10 @@ def check_output(K: np.ndarray, dist: np.ndarray, rms: float, rvecs: np.ndarray,
             f"the solve diverged: fx={fx:.4g} fy={fy:.4g} cx={cx:.4g} cy={cy:.4g} px "
             f"for a {width}x{height} image (focal length must be at least {min_f:.4g} px, "
             "principal point within one image size of the image)",
-            hint="capture views tilted 20-40 deg in at least three directions covering the image")
+            hint="capture views tilted 20-40 deg in at least three directions covering the image",
+        )
     if rms > MAX_RMS_PX:
         raise NumericalError(
             f"the solve does not explain the corners: RMS {rms:.2f} px (limit {MAX_RMS_PX:.0f} px)",
-            hint="check the corner order and that every view shows the declared board")
+            hint="check the corner order and that every view shows the declared board",
+        )

@@ -92,16 +92,48 @@ from calibctl.errors import InputError, NumericalError
 
 # The solve API: the solver and its vocabulary from ``solution`` (callers import both from here).
 __all__ = [
-    "CALIB_FIX_SKEW", "CALIB_RECOMPUTE_EXTRINSIC", "DEFAULT_MODEL", "DISTORTION_NAMES", "DistortionModel",
-    "FISHEYE_DIST_NAMES", "IntrinsicsSolution", "MAX_RMS_PX", "MIN_CORNERS_PER_VIEW", "MIN_FOCAL_FRAC",
-    "MIN_SIGMA_DOF", "MODELS", "NO_UNCERTAINTY", "check_inputs", "check_output", "get_model",
-    "parameter_count", "readonly", "residual_rms_px", "single_threaded_opencv", "solve_intrinsics",
-    "is_fisheye", "project_points", "fit_pose", "forget_recent_solves",
+    "CALIB_FIX_SKEW",
+    "CALIB_RECOMPUTE_EXTRINSIC",
+    "DEFAULT_MODEL",
+    "DISTORTION_NAMES",
+    "DistortionModel",
+    "FISHEYE_DIST_NAMES",
+    "IntrinsicsSolution",
+    "MAX_RMS_PX",
+    "MIN_CORNERS_PER_VIEW",
+    "MIN_FOCAL_FRAC",
+    "MIN_SIGMA_DOF",
+    "MODELS",
+    "NO_UNCERTAINTY",
+    "check_inputs",
+    "check_output",
+    "get_model",
+    "parameter_count",
+    "readonly",
+    "residual_rms_px",
+    "single_threaded_opencv",
+    "solve_intrinsics",
+    "is_fisheye",
+    "project_points",
+    "fit_pose",
+    "forget_recent_solves",
 ]
 
 # Index of each parameter in OpenCV's stdDeviationsIntrinsics (and in the distortion vector + 4).
-_STD_INDEX = {"fx": 0, "fy": 1, "cx": 2, "cy": 3, "k1": 4, "k2": 5, "p1": 6, "p2": 7, "k3": 8,
-              "k4": 9, "k5": 10, "k6": 11}
+_STD_INDEX = {
+    "fx": 0,
+    "fy": 1,
+    "cx": 2,
+    "cy": 3,
+    "k1": 4,
+    "k2": 5,
+    "p1": 6,
+    "p2": 7,
+    "k3": 8,
+    "k4": 9,
+    "k5": 10,
+    "k6": 11,
+}
 
 
 def _opencv_sigma(model: DistortionModel, std_intrinsics: np.ndarray) -> dict[str, float]:
@@ -171,21 +203,35 @@ def solve_intrinsics(
     fisheye = m.kind == "fisheye"
     if m is MODELS.get(m.name):  # a named model: its name says what it solves
         try:
-            key = values_digest(object_points_per_view, image_points_per_view, tuple(int(v) for v in image_size),
-                                m.name, fisheye or uncertainty,  # a fisheye solve always has its uncertainty
-                                None if initial is None else np.asarray(initial, np.float64).tobytes())
+            key = values_digest(
+                object_points_per_view,
+                image_points_per_view,
+                tuple(int(v) for v in image_size),
+                m.name,
+                fisheye or uncertainty,  # a fisheye solve always has its uncertainty
+                None if initial is None else np.asarray(initial, np.float64).tobytes(),
+            )
         except (TypeError, ValueError):  # malformed input: the solve names the problem in its own words
             key = None
         if key is not None:
             recent = _RECENT if fisheye or uncertainty else _RECENT_FITS
-            return recent.answer(key, lambda: _solve(object_points_per_view, image_points_per_view, image_size, m,
-                                                     initial, uncertainty))
+            return recent.answer(
+                key,
+                lambda: _solve(
+                    object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty
+                ),
+            )
     return _solve(object_points_per_view, image_points_per_view, image_size, m, initial, uncertainty)
 
 
-def _solve(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-           image_size: tuple[int, int], m: DistortionModel, initial: np.ndarray | None,
-           uncertainty: bool) -> IntrinsicsSolution:
+def _solve(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    m: DistortionModel,
+    initial: np.ndarray | None,
+    uncertainty: bool,
+) -> IntrinsicsSolution:
     """``solve_intrinsics`` of a resolved model, computed (never remembered)."""
     if m.kind == "fisheye":
         return solve_fisheye(object_points_per_view, image_points_per_view, image_size, m, initial)
@@ -206,13 +252,18 @@ def _solve(object_points_per_view: Sequence[np.ndarray], image_points_per_view: 
         with single_threaded_opencv():
             if uncertainty:
                 rms, K, D, rvecs, tvecs, std_int, _std_ext, per_view = cv2.calibrateCameraExtended(
-                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags)
+                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags
+                )
             else:
-                rms, K, D, rvecs, tvecs = cv2.calibrateCamera(objs, imgs, size, K0.copy(), D0.copy(), flags=flags)
+                rms, K, D, rvecs, tvecs = cv2.calibrateCamera(
+                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags
+                )
     except cv2.error as exc:
         detail = str(exc).strip().splitlines()[-1].split(" error: ")[-1]
-        raise NumericalError(f"OpenCV could not solve model {m.name}: {detail}",
-                             hint="check that every view is a planar board with distinct corners") from exc
+        raise NumericalError(
+            f"OpenCV could not solve model {m.name}: {detail}",
+            hint="check that every view is a planar board with distinct corners",
+        ) from exc
     K = np.asarray(K, dtype=np.float64)
     D_full = np.asarray(D, dtype=np.float64).ravel()
     D = np.zeros(m.n_coeffs)
@@ -231,33 +282,77 @@ def _solve(object_points_per_view: Sequence[np.ndarray], image_points_per_view: 
     dof = n_res - n_par
     if not uncertainty:  # OpenCV's per-view RMS, from the same residuals
         return IntrinsicsSolution(
-            model=m.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D), rms_px=float(rms),
+            model=m.name,
+            image_size=size,
+            camera_matrix=readonly(K),
+            dist_coeffs=readonly(D),
+            rms_px=float(rms),
             per_view_rms_px=readonly(np.array([residual_rms_px(r) for r in residuals])),
-            rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
-            sigma_refused_reason=NO_UNCERTAINTY, n_residuals=n_res, n_parameters=n_par, aspect_ratio=aspect)
+            rvecs=readonly(rv),
+            tvecs=readonly(tv),
+            residuals_px=tuple(residuals),
+            sigma_refused_reason=NO_UNCERTAINTY,
+            n_residuals=n_res,
+            n_parameters=n_par,
+            aspect_ratio=aspect,
+        )
     if dof < MIN_SIGMA_DOF:
-        cov = IntrinsicCovariance((), None, float("nan"), float("nan"), (
-            f"only {dof} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
-            f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"))
+        cov = IntrinsicCovariance(
+            (),
+            None,
+            float("nan"),
+            float("nan"),
+            (
+                f"only {dof} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
+                f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"
+            ),
+        )
     else:
-        cov = intrinsic_covariance([o.astype(np.float64) for o in objs], rv, tv, K, D, residuals,
-                                   m.free_intrinsics, m.free_distortion, aspect, dof)
+        cov = intrinsic_covariance(
+            [o.astype(np.float64) for o in objs],
+            rv,
+            tv,
+            K,
+            D,
+            residuals,
+            m.free_intrinsics,
+            m.free_distortion,
+            aspect,
+            dof,
+        )
     sigma, reason = _sigma_by_name(cov, aspect)
     return IntrinsicsSolution(
-        model=m.name, image_size=size, camera_matrix=readonly(K), dist_coeffs=readonly(D),
-        rms_px=float(rms), per_view_rms_px=readonly(np.asarray(per_view).ravel()),
-        rvecs=readonly(rv), tvecs=readonly(tv), residuals_px=tuple(residuals),
-        sigma=sigma, sigma_refused_reason=reason, n_residuals=n_res, n_parameters=n_par,
-        aspect_ratio=aspect, covariance=cov, sigma_opencv=_opencv_sigma(m, std_int),
+        model=m.name,
+        image_size=size,
+        camera_matrix=readonly(K),
+        dist_coeffs=readonly(D),
+        rms_px=float(rms),
+        per_view_rms_px=readonly(np.asarray(per_view).ravel()),
+        rvecs=readonly(rv),
+        tvecs=readonly(tv),
+        residuals_px=tuple(residuals),
+        sigma=sigma,
+        sigma_refused_reason=reason,
+        n_residuals=n_res,
+        n_parameters=n_par,
+        aspect_ratio=aspect,
+        covariance=cov,
+        sigma_opencv=_opencv_sigma(m, std_int),
     )
 
 
-def _k1k2_start(object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray],
-                image_size: tuple[int, int]) -> np.ndarray | None:
+def _k1k2_start(
+    object_points_per_view: Sequence[np.ndarray],
+    image_points_per_view: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+) -> np.ndarray | None:
     """(3, 3) K of the k1k2 solve of the same corners, the rational model's start; None when k1k2 fails."""
     try:
-        return np.array(solve_intrinsics(object_points_per_view, image_points_per_view, image_size,
-                                         DEFAULT_MODEL, uncertainty=False).camera_matrix)
+        return np.array(
+            solve_intrinsics(
+                object_points_per_view, image_points_per_view, image_size, DEFAULT_MODEL, uncertainty=False
+            ).camera_matrix
+        )
     except (InputError, NumericalError):  # the rational solve names the problem in its own words
         return None
 
@@ -267,18 +362,34 @@ def is_fisheye(model: str) -> bool:
     return model in MODELS and MODELS[model].kind == "fisheye"
 
 
-def project_points(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, camera_matrix: np.ndarray,
-                   dist_coeffs: np.ndarray, model: str) -> np.ndarray:
+def project_points(
+    object_points: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str,
+) -> np.ndarray:
     """(N, 3) board points -> (N, 2) float64 px through ``model``'s lens (pinhole or fisheye)."""
     obj = np.asarray(object_points, np.float64).reshape(-1, 3)
     if is_fisheye(model):
         return project_fisheye(obj, rvec, tvec, camera_matrix, dist_coeffs)
-    return cv2.projectPoints(obj, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
-                             np.asarray(camera_matrix, np.float64), np.asarray(dist_coeffs, np.float64))[0].reshape(-1, 2)
+    return cv2.projectPoints(
+        obj,
+        np.asarray(rvec, np.float64),
+        np.asarray(tvec, np.float64),
+        np.asarray(camera_matrix, np.float64),
+        np.asarray(dist_coeffs, np.float64),
+    )[0].reshape(-1, 2)
 
 
-def fit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
-             dist_coeffs: np.ndarray, model: str) -> tuple[np.ndarray, np.ndarray] | None:
+def fit_pose(
+    object_points: np.ndarray,
+    image_points: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """T_cam_board (rvec, tvec) of one view with the lens frozen, minimising pixel residuals; None if none."""
     obj = np.asarray(object_points, np.float64).reshape(-1, 3)
     img = np.asarray(image_points, np.float64).reshape(-1, 2)

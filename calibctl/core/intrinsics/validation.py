@@ -70,15 +70,21 @@ def fold_assignment(n_views: int, min_training_views: int, max_folds: int = MAX_
     if n_views < min_training_views + 1:
         raise NumericalError(
             f"held-out validation needs at least {min_training_views + 1} views, got {n_views}",
-            hint="capture more views")
+            hint="capture more views",
+        )
     k = min(max_folds, n_views)
     while n_views - math.ceil(n_views / k) < min_training_views:
         k += 1  # more folds -> smaller held-out sets -> larger training sets; k = V is leave-one-out
     return np.arange(n_views, dtype=np.int64) % k
 
 
-def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
-                         camera_matrix: np.ndarray, dist_coeffs: np.ndarray, model: str = DEFAULT_MODEL) -> np.ndarray:
+def refit_pose_residuals(
+    object_points: np.ndarray,
+    image_points: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str = DEFAULT_MODEL,
+) -> np.ndarray:
     """Residuals of one view with intrinsics frozen and the board pose re-fitted.
 
     Args:
@@ -92,8 +98,13 @@ def refit_pose_residuals(object_points: np.ndarray, image_points: np.ndarray,
     return refit_pose(object_points, image_points, camera_matrix, dist_coeffs, model)[0]
 
 
-def refit_pose(object_points: np.ndarray, image_points: np.ndarray, camera_matrix: np.ndarray,
-               dist_coeffs: np.ndarray, model: str = DEFAULT_MODEL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def refit_pose(
+    object_points: np.ndarray,
+    image_points: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str = DEFAULT_MODEL,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,) m)."""
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
@@ -126,8 +137,9 @@ class ResidualBreakdown:
         return float(self.ring_rms_px[-1])
 
 
-def radius_ring_edges_px(image_points_per_view: Sequence[np.ndarray],
-                         principal_point_px: tuple[float, float]) -> np.ndarray:
+def radius_ring_edges_px(
+    image_points_per_view: Sequence[np.ndarray], principal_point_px: tuple[float, float]
+) -> np.ndarray:
     """(4,) float64 radii (px from the principal point) splitting the corners into five equal rings."""
     pts = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in image_points_per_view])
     radius = np.hypot(pts[:, 0] - principal_point_px[0], pts[:, 1] - principal_point_px[1])
@@ -160,8 +172,11 @@ def residual_breakdown(
     octant_rms = np.array([residual_rms_px(res[octant == i]) for i in range(N_OCTANTS)])
     return ResidualBreakdown(
         radius_edges_px=np.asarray(radius_edges_px, dtype=np.float64).copy(),
-        ring_rms_px=ring_rms, ring_counts=np.bincount(ring, minlength=N_RINGS),
-        octant_rms_px=octant_rms, octant_counts=np.bincount(octant, minlength=N_OCTANTS))
+        ring_rms_px=ring_rms,
+        ring_counts=np.bincount(ring, minlength=N_RINGS),
+        octant_rms_px=octant_rms,
+        octant_counts=np.bincount(octant, minlength=N_OCTANTS),
+    )
 
 
 @dataclass(frozen=True)
@@ -244,14 +259,28 @@ def validate_holdout(
         train = np.flatnonzero(folds != f).tolist()
         held = np.flatnonzero(folds == f).tolist()
         try:
-            sol = solve_intrinsics([object_points_per_view[i] for i in train],
-                                   [image_points_per_view[i] for i in train], image_size, m.name, initial,
-                                   uncertainty=False)
+            sol = solve_intrinsics(
+                [object_points_per_view[i] for i in train],
+                [image_points_per_view[i] for i in train],
+                image_size,
+                m.name,
+                initial,
+                uncertainty=False,
+            )
         except NumericalError as exc:
-            raise NumericalError(f"held-out fold {f} (views {held} held out): {exc.message}",
-                                 hint=exc.hint) from exc
-        return sol.camera_matrix, {i: refit_pose_residuals(object_points_per_view[i], image_points_per_view[i],
-                                                           sol.camera_matrix, sol.dist_coeffs, m.name) for i in held}
+            raise NumericalError(
+                f"held-out fold {f} (views {held} held out): {exc.message}", hint=exc.hint
+            ) from exc
+        return sol.camera_matrix, {
+            i: refit_pose_residuals(
+                object_points_per_view[i],
+                image_points_per_view[i],
+                sol.camera_matrix,
+                sol.dist_coeffs,
+                m.name,
+            )
+            for i in held
+        }
 
     holdout: list[np.ndarray] = [np.empty((0, 2))] * n_views
     fold_K = []
@@ -265,10 +294,13 @@ def validate_holdout(
     edges = radius_ring_edges_px(image_points_per_view, pp)
     all_holdout = np.concatenate(holdout)
     return HoldoutReport(
-        model=m.name, fold_of_view=folds, fold_camera_matrices=np.stack(fold_K),
+        model=m.name,
+        fold_of_view=folds,
+        fold_camera_matrices=np.stack(fold_K),
         holdout_residuals_px=tuple(holdout),
         holdout_per_view_rms_px=np.array([residual_rms_px(r) for r in holdout]),
-        holdout_rms_px=residual_rms_px(all_holdout), fit_rms_px=fit.rms_px,
+        holdout_rms_px=residual_rms_px(all_holdout),
+        fit_rms_px=fit.rms_px,
         holdout=residual_breakdown(image_points_per_view, holdout, pp, image_size, edges),
         fit=residual_breakdown(image_points_per_view, fit.residuals_px, pp, image_size, edges),
     )
@@ -300,13 +332,24 @@ def agree_with_folds(
     resolved = solve_intrinsics(object_points_per_view, image_points_per_view, image_size, fit.model, start)
     if resolved.rms_px < fit.rms_px:
         fit = resolved
-        report = validate_holdout(object_points_per_view, image_points_per_view, image_size, fit.model, fit=fit,
-                                  initial=start, lanes=lanes)
+        report = validate_holdout(
+            object_points_per_view,
+            image_points_per_view,
+            image_size,
+            fit.model,
+            fit=fit,
+            initial=start,
+            lanes=lanes,
+        )
     if fit.rms_px > (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
         raise NumericalError(
             f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "
             f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different minima",
-            hint=("capture more views tilted 20-40 deg covering the image, or --model fisheye for a wide lens"
-                  if fit.model == "k1k2" else  # never "fewer coefficients (k1k2)" to a k1k2 solve
-                  "solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens"))
+            hint=(
+                "capture more views tilted 20-40 deg covering the image, or --model fisheye for a wide lens"
+                if fit.model == "k1k2"
+                # never "fewer coefficients (k1k2)" to a k1k2 solve
+                else "solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens"
+            ),
+        )
     return fit, report

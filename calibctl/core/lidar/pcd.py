@@ -21,8 +21,18 @@ from calibctl.errors import InputError
 
 MAX_POINTS = 5_000_000  # a 128-beam sweep is ~260k points; 20x that is no sweep
 HEADER_LINES_MAX = 64
-_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "<i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8",
-          ("U", 1): "<u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8"}
+_TYPES = {
+    ("F", 4): "<f4",
+    ("F", 8): "<f8",
+    ("I", 1): "<i1",
+    ("I", 2): "<i2",
+    ("I", 4): "<i4",
+    ("I", 8): "<i8",
+    ("U", 1): "<u1",
+    ("U", 2): "<u2",
+    ("U", 4): "<u4",
+    ("U", 8): "<u8",
+}
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 
 
@@ -44,10 +54,17 @@ class PointCloud:
 
     def select(self, mask: np.ndarray) -> PointCloud:
         """The points where ``mask`` ((N,) bool) is true, with their fields."""
+
         def pick(a: np.ndarray | None) -> np.ndarray | None:
             return None if a is None else a[mask]
-        return PointCloud(self.points_m[mask], pick(self.intensity), pick(self.ring), pick(self.time_s),
-                          self.dropped_nonfinite)
+
+        return PointCloud(
+            self.points_m[mask],
+            pick(self.intensity),
+            pick(self.ring),
+            pick(self.time_s),
+            self.dropped_nonfinite,
+        )
 
 
 def lzf_decompress(data: bytes, raw_size: int) -> bytes:
@@ -61,7 +78,7 @@ def lzf_decompress(data: bytes, raw_size: int) -> bytes:
             run = ctrl + 1
             if i + run > n:
                 raise InputError("LZF literal run past the end of the compressed block")
-            out += data[i:i + run]
+            out += data[i : i + run]
             i += run
             continue
         length = ctrl >> 5
@@ -127,20 +144,28 @@ def _layout(fields: dict[str, list[str]], source: str) -> tuple[list[str], list[
     counts = fields.get("COUNT", ["1"] * len(names))
     for key, vals in (("SIZE", sizes), ("TYPE", types), ("COUNT", counts)):
         if len(vals) != len(names):
-            raise InputError(f"{source}: PCD header {key} lists {len(vals)} entries for {len(names)} FIELDS",
-                             "the header disagrees with itself; re-export the cloud")
+            raise InputError(
+                f"{source}: PCD header {key} lists {len(vals)} entries for {len(names)} FIELDS",
+                "the header disagrees with itself; re-export the cloud",
+            )
     try:
         count_list = [int(c) for c in counts]
         dtypes = [np.dtype(_TYPES[(t.upper(), int(s))]) for t, s in zip(types, sizes, strict=True)]
     except (KeyError, ValueError):
-        raise InputError(f"{source}: PCD header SIZE/TYPE {sizes}/{types} is not a type PCD defines") from None
+        raise InputError(
+            f"{source}: PCD header SIZE/TYPE {sizes}/{types} is not a type PCD defines"
+        ) from None
     if any(c < 1 or c > 1024 for c in count_list):
         raise InputError(f"{source}: PCD header COUNT {counts} out of range (1..1024)")
     for axis in "xyz":
         if axis not in names:
             raise InputError(f"{source}: PCD FIELDS {' '.join(names)} has no {axis}", "a sweep needs x y z")
-    dtype = np.dtype([(f"{n}_{i}" if n == "_" else n, dt, (c,)) if c > 1 else (f"{n}_{i}" if n == "_" else n, dt)
-                      for i, (n, dt, c) in enumerate(zip(names, dtypes, count_list, strict=True))])
+    dtype = np.dtype(
+        [
+            (f"{n}_{i}" if n == "_" else n, dt, (c,)) if c > 1 else (f"{n}_{i}" if n == "_" else n, dt)
+            for i, (n, dt, c) in enumerate(zip(names, dtypes, count_list, strict=True))
+        ]
+    )
     return names, count_list, dtype
 
 
@@ -153,11 +178,15 @@ def parse_pcd(data: bytes, source: str, max_points: int = MAX_POINTS) -> PointCl
     if n < 0:
         n = width * height
     if width * height != n:
-        raise InputError(f"{source}: PCD header WIDTH x HEIGHT = {width} x {height} but POINTS says {n}",
-                         "the header disagrees with itself; re-export the cloud")
+        raise InputError(
+            f"{source}: PCD header WIDTH x HEIGHT = {width} x {height} but POINTS says {n}",
+            "the header disagrees with itself; re-export the cloud",
+        )
     if n > max_points:
-        raise InputError(f"{source}: PCD header POINTS says {n} points, over the limit of {max_points}",
-                         "no sweep is that large; is this the right file?")
+        raise InputError(
+            f"{source}: PCD header POINTS says {n} points, over the limit of {max_points}",
+            "no sweep is that large; is this the right file?",
+        )
     kind = (fields["DATA"] or [""])[0].lower()
     body = data[offset:]
     if kind == "ascii":
@@ -166,12 +195,15 @@ def parse_pcd(data: bytes, source: str, max_points: int = MAX_POINTS) -> PointCl
         record = {}
         col = 0
         for name, c in zip(dtype.names or (), counts, strict=True):
-            record[name] = flat[col] if c == 1 else table[:, col:col + c]
+            record[name] = flat[col] if c == 1 else table[:, col : col + c]
             col += c
     elif kind == "binary":
         if len(body) < n * dtype.itemsize:
-            raise InputError(f"{source}: PCD header POINTS says {n} but the binary data holds "
-                             f"{len(body) // dtype.itemsize} points", "the file is cut short or the header lies")
+            raise InputError(
+                f"{source}: PCD header POINTS says {n} but the binary data holds "
+                f"{len(body) // dtype.itemsize} points",
+                "the file is cut short or the header lies",
+            )
         rows = np.frombuffer(body, dtype, count=n)
         record = {name: rows[name] for name in dtype.names or ()}
     elif kind == "binary_compressed":
@@ -184,16 +216,26 @@ def parse_pcd(data: bytes, source: str, max_points: int = MAX_POINTS) -> PointCl
 def _ascii_rows(body: bytes, n: int, width: int, source: str) -> np.ndarray:
     lines = [ln for ln in body.split(b"\n") if ln.strip()]
     if len(lines) != n:
-        raise InputError(f"{source}: PCD header POINTS says {n} but the ascii data holds {len(lines)} rows",
-                         "the file is cut short or the header lies; fix POINTS/WIDTH or re-export")
+        raise InputError(
+            f"{source}: PCD header POINTS says {n} but the ascii data holds {len(lines)} rows",
+            "the file is cut short or the header lies; fix POINTS/WIDTH or re-export",
+        )
     try:
-        table = np.loadtxt(io.BytesIO(b"\n".join(lines)), dtype=np.float64, ndmin=2) if n else np.zeros((0, width))
+        table = (
+            np.loadtxt(io.BytesIO(b"\n".join(lines)), dtype=np.float64, ndmin=2)
+            if n
+            else np.zeros((0, width))
+        )
     except ValueError as exc:
-        raise InputError(f"{source}: PCD ascii data is not {width} numbers per row ({exc})",
-                         "the header's FIELDS/COUNT disagree with the data") from None
+        raise InputError(
+            f"{source}: PCD ascii data is not {width} numbers per row ({exc})",
+            "the header's FIELDS/COUNT disagree with the data",
+        ) from None
     if table.shape[1] != width:
-        raise InputError(f"{source}: PCD header FIELDS/COUNT say {width} values per point, the data has "
-                         f"{table.shape[1]}", "the header disagrees with the data; re-export the cloud")
+        raise InputError(
+            f"{source}: PCD header FIELDS/COUNT say {width} values per point, the data has {table.shape[1]}",
+            "the header disagrees with the data; re-export the cloud",
+        )
     return table
 
 
@@ -202,19 +244,24 @@ def _compressed_rows(body: bytes, n: int, dtype: np.dtype, source: str) -> dict[
         raise InputError(f"{source}: PCD binary_compressed data shorter than its 8-byte size header")
     packed, raw = (int(v) for v in np.frombuffer(body[:8], "<u4"))
     if raw != n * dtype.itemsize:
-        raise InputError(f"{source}: PCD header POINTS says {n} ({n * dtype.itemsize} bytes) but the compressed "
-                         f"block holds {raw} bytes", "the header lies or the file is damaged")
+        raise InputError(
+            f"{source}: PCD header POINTS says {n} ({n * dtype.itemsize} bytes) but the compressed "
+            f"block holds {raw} bytes",
+            "the header lies or the file is damaged",
+        )
     if packed > len(body) - 8:
         raise InputError(f"{source}: PCD compressed block says {packed} bytes, the file has {len(body) - 8}")
     try:
-        flat = lzf_decompress(body[8:8 + packed], raw)
+        flat = lzf_decompress(body[8 : 8 + packed], raw)
     except InputError as exc:
         raise InputError(f"{source}: {exc.message}", "the file is damaged; re-export the cloud") from None
     record, pos = {}, 0
     for name in dtype.names or ():
         sub = dtype.fields[name][0] if dtype.fields else dtype
         size = sub.itemsize * n
-        record[name] = np.frombuffer(flat[pos:pos + size], sub.base, count=n * max(1, sub.itemsize // sub.base.itemsize))
+        record[name] = np.frombuffer(
+            flat[pos : pos + size], sub.base, count=n * max(1, sub.itemsize // sub.base.itemsize)
+        )
         if sub.shape:
             record[name] = record[name].reshape(n, *sub.shape)
         pos += size
@@ -232,12 +279,19 @@ def _cloud(record: dict[str, np.ndarray], source: str) -> PointCloud:
 
     ring = opt("ring", np.float64)
     if ring is not None and (not np.isfinite(ring).all() or (ring < 0).any() or (ring > 1023).any()):
-        raise InputError(f"{source}: PCD field ring holds values outside 0..1023", "is ring really the laser index?")
+        raise InputError(
+            f"{source}: PCD field ring holds values outside 0..1023", "is ring really the laser index?"
+        )
     time = opt("time", np.float64)
     if time is None:
         time = opt("t", np.float64)
-    return PointCloud(xyz[finite], opt("intensity", np.float64), None if ring is None else ring.astype(np.int64),
-                      time, int((~finite).sum()))
+    return PointCloud(
+        xyz[finite],
+        opt("intensity", np.float64),
+        None if ring is None else ring.astype(np.int64),
+        time,
+        int((~finite).sum()),
+    )
 
 
 def parse_array(data: bytes, source: str, is_npy: bool, max_points: int = MAX_POINTS) -> PointCloud:
@@ -246,15 +300,22 @@ def parse_array(data: bytes, source: str, is_npy: bool, max_points: int = MAX_PO
         if is_npy:
             arr = np.load(io.BytesIO(data), allow_pickle=False)
         else:
-            arr = np.loadtxt(io.BytesIO(data), dtype=np.float64, ndmin=2, comments="#")  # size bounded by the caller
+            arr = np.loadtxt(
+                io.BytesIO(data), dtype=np.float64, ndmin=2, comments="#"
+            )  # size bounded by the caller
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(f"{source}: not an N x 3 or N x 4 array of numbers ({exc})") from None
     arr = np.asarray(arr)
     if arr.ndim != 2 or arr.shape[1] not in (3, 4) or not np.issubdtype(arr.dtype, np.number):
-        raise InputError(f"{source}: array of shape {arr.shape}, expected N x 3 (x y z) or N x 4 (x y z intensity)")
+        raise InputError(
+            f"{source}: array of shape {arr.shape}, expected N x 3 (x y z) or N x 4 (x y z intensity)"
+        )
     if arr.shape[0] > max_points:
-        raise InputError(f"{source}: more than {max_points} points", "no sweep is that large; is this the right file?")
+        raise InputError(
+            f"{source}: more than {max_points} points", "no sweep is that large; is this the right file?"
+        )
     arr = arr.astype(np.float64)
     finite = np.isfinite(arr[:, :3]).all(axis=1)
-    return PointCloud(arr[finite, :3], arr[finite, 3] if arr.shape[1] == 4 else None,
-                      dropped_nonfinite=int((~finite).sum()))
+    return PointCloud(
+        arr[finite, :3], arr[finite, 3] if arr.shape[1] == 4 else None, dropped_nonfinite=int((~finite).sum())
+    )

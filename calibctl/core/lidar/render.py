@@ -73,13 +73,22 @@ def board_pose(rng: np.random.Generator, one_way: bool) -> np.ndarray:
     if one_way:
         R_tilt = np.eye(3)
     else:
-        R_tilt = se3.rotation_from_rotvec([0.0, rng.uniform(-0.45, 0.45), 0.0]) @ \
-            se3.rotation_from_rotvec([0.0, 0.0, rng.uniform(-0.6, 0.6)])  # pitch about y, turn about z (LiDAR)
+        R_tilt = se3.rotation_from_rotvec([0.0, rng.uniform(-0.45, 0.45), 0.0]) @ se3.rotation_from_rotvec(
+            [0.0, 0.0, rng.uniform(-0.6, 0.6)]
+        )  # pitch about y, turn about z (LiDAR)
     return se3.transform(R_tilt @ R0 @ R_spin, centre)
 
 
-def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Generator, azimuth_step_deg: float,
-           range_noise_m: float, laser_bias_m: np.ndarray, range_offset_m: float, clutter: bool = True) -> PointCloud:
+def _sweep(
+    T_lidar_board: np.ndarray,
+    board: BackingBoard,
+    rng: np.random.Generator,
+    azimuth_step_deg: float,
+    range_noise_m: float,
+    laser_bias_m: np.ndarray,
+    range_offset_m: float,
+    clutter: bool = True,
+) -> PointCloud:
     elev = np.radians(np.array(VLP16_ELEVATIONS_DEG))
     az = np.radians(np.arange(-180.0, 180.0, azimuth_step_deg)) + rng.uniform(0, np.radians(azimuth_step_deg))
     E, A = np.meshgrid(elev, az, indexing="ij")
@@ -92,31 +101,53 @@ def _sweep(T_lidar_board: np.ndarray, board: BackingBoard, rng: np.random.Genera
         r_board = (centre @ n) / denom
     hit_pts = rays * r_board[:, None]
     local = (hit_pts - centre) @ T_lidar_board[:3, :3]
-    on_board = (r_board > 0) & (np.abs(local[:, 0]) <= board.backing_m[0] / 2) & \
-        (np.abs(local[:, 1]) <= board.backing_m[1] / 2)
+    on_board = (
+        (r_board > 0)
+        & (np.abs(local[:, 0]) <= board.backing_m[0] / 2)
+        & (np.abs(local[:, 1]) <= board.backing_m[1] / 2)
+    )
     # a post 0.4 m behind the board's centre, 5 cm wide, from the floor to the board: clutter in the box
     post = origin + 0.4 * n
     r_post = np.linalg.norm(post[:2])
     az_post = np.arctan2(post[1], post[0])
-    on_post = clutter & (~on_board) & (np.abs(np.angle(np.exp(1j * (A.reshape(-1) - az_post)))) < 0.025 / r_post) & \
-        (np.tan(E.reshape(-1)) * r_post < post[2] - 0.3)
+    on_post = (
+        clutter
+        & (~on_board)
+        & (np.abs(np.angle(np.exp(1j * (A.reshape(-1) - az_post)))) < 0.025 / r_post)
+        & (np.tan(E.reshape(-1)) * r_post < post[2] - 0.3)
+    )
     # every other ray ends on a round room's wall WALL_M away: a full ~29k-point sweep, outside the box
     r_wall = WALL_M / np.maximum(np.cos(E.reshape(-1)), 1e-9)
-    r = np.where(on_board, r_board, np.where(on_post, r_post / np.maximum(np.cos(E.reshape(-1)), 1e-9), r_wall))
+    r = np.where(
+        on_board, r_board, np.where(on_post, r_post / np.maximum(np.cos(E.reshape(-1)), 1e-9), r_wall)
+    )
     keep = np.isfinite(r)
     r = r[keep] + rng.normal(0.0, range_noise_m, keep.sum()) + laser_bias_m[ring[keep]] - range_offset_m
     return PointCloud(rays[keep] * r[:, None], np.full(keep.sum(), 50.0), ring[keep])
 
 
-def render_session(n_poses: int, seed: int, *, range_noise_m: float = 0.01, laser_bias_m: float = 0.005,
-                   range_offset_m: float = 0.0, corner_noise_px: float = 0.2, azimuth_step_deg: float = 0.2,
-                   one_way: bool = False, board: BackingBoard = ACFR_BOARD, clutter: bool = True) -> RenderedSession:
+def render_session(
+    n_poses: int,
+    seed: int,
+    *,
+    range_noise_m: float = 0.01,
+    laser_bias_m: float = 0.005,
+    range_offset_m: float = 0.0,
+    corner_noise_px: float = 0.2,
+    azimuth_step_deg: float = 0.2,
+    one_way: bool = False,
+    board: BackingBoard = ACFR_BOARD,
+    clutter: bool = True,
+) -> RenderedSession:
     """``n_poses`` seeded poses (module docstring); ``range_offset_m`` is the correction the LiDAR needs
     (its ranges are short by it), acfr's ``distance_offset_mm`` convention."""
     rng = np.random.default_rng(seed)
     T_lidar_cam = true_T_lidar_cam(rng)
-    biases = rng.normal(0.0, laser_bias_m, len(VLP16_ELEVATIONS_DEG)) if laser_bias_m > 0 else \
-        np.zeros(len(VLP16_ELEVATIONS_DEG))
+    biases = (
+        rng.normal(0.0, laser_bias_m, len(VLP16_ELEVATIONS_DEG))
+        if laser_bias_m > 0
+        else np.zeros(len(VLP16_ELEVATIONS_DEG))
+    )
     obj = chessboard_object_points(board.cols, board.rows, board.square_m)
     poses = []
     for _ in range(n_poses):
@@ -132,6 +163,8 @@ def render_session(n_poses: int, seed: int, *, range_noise_m: float = 0.01, lase
         if T_est is not None:
             cov, rms = pose_covariance(T_est, obj, px, K_RENDER, np.zeros(5), "k1k2")
             camera = CameraBoard(T_est, cov, rms)
-        cloud = _sweep(T_lidar_centre, board, rng, azimuth_step_deg, range_noise_m, biases, range_offset_m, clutter)
+        cloud = _sweep(
+            T_lidar_centre, board, rng, azimuth_step_deg, range_noise_m, biases, range_offset_m, clutter
+        )
         poses.append(RenderedPose(cloud, camera, T_lidar_board))
     return RenderedSession(T_lidar_cam, tuple(poses), board, RENDER_BOX, range_offset_m, biases)

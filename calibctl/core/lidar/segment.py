@@ -96,8 +96,12 @@ def rings_from_elevation(points_m: np.ndarray, gap_deg: float = ELEVATION_GAP_DE
     return ring
 
 
-def ransac_plane(points_m: np.ndarray, rng: np.random.Generator, threshold_m: float = PLANE_THRESHOLD_M,
-                 iterations: int = RANSAC_ITERATIONS) -> np.ndarray:
+def ransac_plane(
+    points_m: np.ndarray,
+    rng: np.random.Generator,
+    threshold_m: float = PLANE_THRESHOLD_M,
+    iterations: int = RANSAC_ITERATIONS,
+) -> np.ndarray:
     """(N, 3) -> (N,) bool inliers of the plane with most points within ``threshold_m``."""
     n = len(points_m)
     best = np.zeros(n, bool)
@@ -110,7 +114,7 @@ def ransac_plane(points_m: np.ndarray, rng: np.random.Generator, threshold_m: fl
     good = norms > 1e-9
     normals, a = normals[good] / norms[good, None], a[good]
     for chunk in range(0, len(normals), 64):  # (64, N) distances at a time
-        nn, aa = normals[chunk:chunk + 64], a[chunk:chunk + 64]
+        nn, aa = normals[chunk : chunk + 64], a[chunk : chunk + 64]
         dist = np.abs(points_m @ nn.T - np.sum(nn * aa, axis=1))
         counts = (dist < threshold_m).sum(axis=0)
         k = int(np.argmax(counts))
@@ -174,7 +178,9 @@ def _largest_object(points_m: np.ndarray, ring: np.ndarray, runs: list[np.ndarra
     return max(groups.values(), key=lambda g: sum(len(r) for r in g))
 
 
-def _edge_points(points_m: np.ndarray, ring: np.ndarray, runs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _edge_points(
+    points_m: np.ndarray, ring: np.ndarray, runs: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Both ends of each run of >= 2 points, moved outward by half the point spacing there; their rings."""
     out, rings = [], []
     for r in runs:
@@ -196,6 +202,7 @@ def fit_rectangle(edge_uv: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     Returns:
         (angle rad of its first side to u, (2,) centre uv, (2,) side lengths along its own axes), metres.
     """
+
     def sides(theta: float) -> tuple[float, np.ndarray, np.ndarray]:
         c, s = np.cos(theta), np.sin(theta)
         ab = edge_uv @ np.array([[c, -s], [s, c]])
@@ -220,16 +227,25 @@ def fit_rectangle(edge_uv: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     return theta, np.array([[c, -s], [s, c]]) @ centre_ab, hi - lo
 
 
-def segment_board(cloud: PointCloud, box: StationBox, backing_m: tuple[float, float], *,
-                  min_rings: int = DEFAULT_MIN_RINGS, max_dimension_error_m: float = DEFAULT_MAX_DIMENSION_ERROR_M,
-                  seed: int = 0) -> BoardInScan:
+def segment_board(
+    cloud: PointCloud,
+    box: StationBox,
+    backing_m: tuple[float, float],
+    *,
+    min_rings: int = DEFAULT_MIN_RINGS,
+    max_dimension_error_m: float = DEFAULT_MAX_DIMENSION_ERROR_M,
+    seed: int = 0,
+) -> BoardInScan:
     """Find the board of ``backing_m`` = (width, height) metres in ``cloud`` inside ``box`` (module docstring)."""
     inside = box.contains(cloud.points_m)
     pts = cloud.points_m[inside]
     n_box = len(pts)
     if n_box < MIN_PLANE_POINTS:
-        return BoardInScan("no_plane", f"{n_box} points inside the station box (need {MIN_PLANE_POINTS})",
-                           points_in_box=n_box)
+        return BoardInScan(
+            "no_plane",
+            f"{n_box} points inside the station box (need {MIN_PLANE_POINTS})",
+            points_in_box=n_box,
+        )
     ring = cloud.ring[inside] if cloud.ring is not None else rings_from_elevation(pts)
     rng = np.random.default_rng(seed)
     remaining = np.ones(n_box, bool)
@@ -246,12 +262,22 @@ def segment_board(cloud: PointCloud, box: StationBox, backing_m: tuple[float, fl
         if result.accepted:
             return result
         first = first or result
-    return first or BoardInScan("no_plane", f"no plane of >= {MIN_PLANE_POINTS} points among the {n_box} "
-                                f"points inside the station box", points_in_box=n_box)
+    return first or BoardInScan(
+        "no_plane",
+        f"no plane of >= {MIN_PLANE_POINTS} points among the {n_box} points inside the station box",
+        points_in_box=n_box,
+    )
 
 
-def _board_on_plane(pts: np.ndarray, ring: np.ndarray, inl: np.ndarray, backing_m: tuple[float, float],
-                    min_rings: int, max_err_m: float, n_box: int) -> BoardInScan:
+def _board_on_plane(
+    pts: np.ndarray,
+    ring: np.ndarray,
+    inl: np.ndarray,
+    backing_m: tuple[float, float],
+    min_rings: int,
+    max_err_m: float,
+    n_box: int,
+) -> BoardInScan:
     normal, dist = fit_plane(pts[inl])
     close = np.flatnonzero(np.abs(pts @ normal - dist) < PLANE_THRESHOLD_M)
     group = _largest_object(pts[close], ring[close], _runs(pts[close], ring[close]))
@@ -260,8 +286,15 @@ def _board_on_plane(pts: np.ndarray, ring: np.ndarray, inl: np.ndarray, backing_
     board, board_ring = pts[board_idx], ring[board_idx]
     rings = len(np.unique(board_ring))
     rms = float(np.sqrt(np.mean((board @ normal - dist) ** 2)))
-    base = {"normal": normal, "distance_m": dist, "points_m": board, "ring_of_point": board_ring,
-            "rings": rings, "plane_rms_m": rms, "points_in_box": n_box}
+    base = {
+        "normal": normal,
+        "distance_m": dist,
+        "points_m": board,
+        "ring_of_point": board_ring,
+        "rings": rings,
+        "plane_rms_m": rms,
+        "points_in_box": n_box,
+    }
     if rings < min_rings:
         return BoardInScan("too_few_rings", f"{rings} rings on the board plane (need {min_rings})", **base)
     local_runs = _runs(board, board_ring)
@@ -273,26 +306,48 @@ def _board_on_plane(pts: np.ndarray, ring: np.ndarray, inl: np.ndarray, backing_
     c, s = np.cos(theta), np.sin(theta)
     axes = np.array([[c, s], [-s, c]]) @ basis  # the rectangle's own axes in 3D, (2, 3)
     centre = origin + centre_uv @ basis
-    corners = np.array([centre + sx * sides[0] / 2 * axes[0] + sy * sides[1] / 2 * axes[1]
-                        for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    corners = np.array(
+        [
+            centre + sx * sides[0] / 2 * axes[0] + sy * sides[1] / 2 * axes[1]
+            for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+        ]
+    )
     measured = np.sort(sides)
     registered = np.array(backing_m) if backing_m[0] <= backing_m[1] else np.array(backing_m[::-1])
     error = measured - registered
     if backing_m[0] > backing_m[1]:
         measured, error = measured[::-1], error[::-1]
-    result = BoardInScan("accepted", "", edge_points_m=edges, edge_ring=edge_ring, centre_m=centre, corners_m=corners,
-                         width_m=float(measured[0]), height_m=float(measured[1]),
-                         dimension_error_m=(float(error[0]), float(error[1])),
-                         range_m=float(np.linalg.norm(centre)), **base)
-    text = (f"board measures {measured[0] * 1e3:.0f} x {measured[1] * 1e3:.0f} mm, registered "
-            f"{backing_m[0] * 1e3:.0f} x {backing_m[1] * 1e3:.0f} mm")
+    result = BoardInScan(
+        "accepted",
+        "",
+        edge_points_m=edges,
+        edge_ring=edge_ring,
+        centre_m=centre,
+        corners_m=corners,
+        width_m=float(measured[0]),
+        height_m=float(measured[1]),
+        dimension_error_m=(float(error[0]), float(error[1])),
+        range_m=float(np.linalg.norm(centre)),
+        **base,
+    )
+    text = (
+        f"board measures {measured[0] * 1e3:.0f} x {measured[1] * 1e3:.0f} mm, registered "
+        f"{backing_m[0] * 1e3:.0f} x {backing_m[1] * 1e3:.0f} mm"
+    )
     ratio = float(np.mean(measured / np.array(backing_m)))
     if 300 < ratio < 3000:
-        return _replace(result, "dimension_mismatch", f"{text}: ~{ratio:.0f}x too big, the points look like "
-                        "millimetres (give the scans in metres)")
+        return _replace(
+            result,
+            "dimension_mismatch",
+            f"{text}: ~{ratio:.0f}x too big, the points look like millimetres (give the scans in metres)",
+        )
     if np.max(np.abs(error)) > max_err_m:
-        return _replace(result, "dimension_mismatch", f"{text}: error {error[0] * 1e3:+.0f}, {error[1] * 1e3:+.0f} mm "
-                        f"(allowed +/-{max_err_m * 1e3:.0f} mm)")
+        return _replace(
+            result,
+            "dimension_mismatch",
+            f"{text}: error {error[0] * 1e3:+.0f}, {error[1] * 1e3:+.0f} mm "
+            f"(allowed +/-{max_err_m * 1e3:.0f} mm)",
+        )
     return _replace(result, "accepted", f"{text} ({rings} rings, plane RMS {rms * 1e3:.1f} mm)")
 
 

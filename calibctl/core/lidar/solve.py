@@ -123,9 +123,14 @@ def _corrected(points_m: np.ndarray, correction_m: np.ndarray | float) -> np.nda
     return points_m + np.reshape(correction_m, (-1, 1)) * unit
 
 
-def pose_residuals(T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, pose: Pose, board: BackingBoard,
-                   range_correction_m: float = 0.0, laser_bias_m: np.ndarray | None = None,
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def pose_residuals(
+    T_lidar_cam: np.ndarray,
+    T_cam_board: np.ndarray,
+    pose: Pose,
+    board: BackingBoard,
+    range_correction_m: float = 0.0,
+    laser_bias_m: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Raw residuals of one pose, metres: ((M,) board points to the camera's plane, (E,) edge points to
     the backing board's outline, both in the pattern frame). ``laser_bias_m``: a correction per ring index."""
     T_board_lidar = se3.invert(T_lidar_cam @ T_cam_board)
@@ -143,9 +148,14 @@ def pose_residuals(T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, pose: Pose,
     return pts[:, 2], gaps[np.arange(len(gaps)), nearest]
 
 
-def range_derivatives(T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, pose: Pose, board: BackingBoard,
-                      range_correction_m: float = 0.0, laser_bias_m: np.ndarray | None = None,
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def range_derivatives(
+    T_lidar_cam: np.ndarray,
+    T_cam_board: np.ndarray,
+    pose: Pose,
+    board: BackingBoard,
+    range_correction_m: float = 0.0,
+    laser_bias_m: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """d(residual)/d(range correction) of each board point (M,) and edge point (E,): the ray direction in
     the pattern frame (z for the plane, the nearest side's axis for an edge). Residuals are linear in a
     range correction along a fixed ray, so this is exact, and spares the solve a finite difference per laser."""
@@ -176,11 +186,20 @@ class _Layout:
         return 6 + self.lasers + int(self.with_offset)
 
     def split(self, xg: np.ndarray) -> tuple[np.ndarray, float]:
-        return xg[6:6 + self.lasers], float(xg[-1]) if self.with_offset else 0.0
+        return xg[6 : 6 + self.lasers], float(xg[-1]) if self.with_offset else 0.0
 
 
-def _whitened(xg: np.ndarray, layout: _Layout, T0: np.ndarray, pose: Pose, board: BackingBoard,
-              local: np.ndarray, noise: NoiseModel, prior_sqrt: np.ndarray, runs: list[np.ndarray]) -> np.ndarray:
+def _whitened(
+    xg: np.ndarray,
+    layout: _Layout,
+    T0: np.ndarray,
+    pose: Pose,
+    board: BackingBoard,
+    local: np.ndarray,
+    noise: NoiseModel,
+    prior_sqrt: np.ndarray,
+    runs: list[np.ndarray],
+) -> np.ndarray:
     T = perturb(T0, xg[:6])
     T_cb = perturb(pose.camera.T_cam_board, local)
     biases, offset = layout.split(xg)
@@ -203,8 +222,13 @@ def estimate_noise(poses: Sequence[Pose], plane_resid: Sequence[np.ndarray], edg
     return NoiseModel(max(white, 1e-4), float(np.sqrt(max(bias2, (0.1 * white) ** 2))), max(edge_m, 1e-4))
 
 
-def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray, noise: NoiseModel,
-                estimate_range_offset: bool = False) -> LidarSolution:
+def joint_solve(
+    poses: Sequence[Pose],
+    board: BackingBoard,
+    T_start: np.ndarray,
+    noise: NoiseModel,
+    estimate_range_offset: bool = False,
+) -> LidarSolution:
     """Levenberg-Marquardt (core.lm, dense) over T_lidar_cam, a range bias per laser (prior: the ring runs'
     shared scatter, since a laser's bias is the same at every pose), every T_cam_board (prior: its image
     covariance) and optionally one range offset for all lasers. The state is (T_lidar_cam, the biases and
@@ -213,7 +237,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
     layout = _Layout(lasers, estimate_range_offset)
     n_g, n = layout.size, len(poses)
     laser_prior = np.zeros(n_g)
-    laser_prior[6:6 + lasers] = 1.0 / max(noise.run_bias_m, 1e-4)
+    laser_prior[6 : 6 + lasers] = 1.0 / max(noise.run_bias_m, 1e-4)
     priors = [np.linalg.cholesky(np.linalg.inv(p.camera.covariance)).T for p in poses]
     runs = [_runs_of(p) for p in poses]
     State = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -228,6 +252,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
         cost, m = float(np.sum((laser_prior * xg_) ** 2)), 0
         biases, offset = layout.split(xg_)
         for i, p in enumerate(poses):
+
             def whitened(xk: np.ndarray, lk: np.ndarray, i: int = i, p: Pose = p) -> np.ndarray:
                 return _whitened(xk, layout, T0, p, board, lk, noise, priors[i], runs[i])
 
@@ -239,7 +264,7 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
                 mask_p = np.ones(n_p) if k == 6 + lasers else (p.lidar.ring_of_point == k - 6).astype(float)
                 mask_e = np.ones(n_e) if k == 6 + lasers else (p.lidar.edge_ring == k - 6).astype(float)
                 J[:n_p, k] = _whiten(dp * mask_p, runs[i], noise)
-                J[n_p:n_p + n_e, k] = de * mask_e / noise.edge_m
+                J[n_p : n_p + n_e, k] = de * mask_e / noise.edge_m
             for k in [*range(6), *range(n_g, n_g + 6)]:
                 xk, lk = xg_.copy(), loc[i].copy()
                 if k < n_g:
@@ -262,15 +287,23 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
         T0, extra, loc = state
         return perturb(T0, delta[:6]), extra + delta[6:n_g], loc + delta[n_g:].reshape(n, 6)
 
-    fit = solve_lm(evaluate, (T_start.copy(), np.zeros(n_g - 6), np.zeros((n, 6))), retract, damping=DAMPING,
-                   max_iterations=MAX_ITERATIONS, relative_tolerance=STEP_TOL, label="the camera-LiDAR solve",
-                   hint="check the station box and the camera's calibration")
+    fit = solve_lm(
+        evaluate,
+        (T_start.copy(), np.zeros(n_g - 6), np.zeros((n, 6))),
+        retract,
+        damping=DAMPING,
+        max_iterations=MAX_ITERATIONS,
+        relative_tolerance=STEP_TOL,
+        label="the camera-LiDAR solve",
+        hint="check the station box and the camera's calibration",
+    )
     T0, extra, locals_ = fit.params
     H, _, cost, m = build(fit.params)
     dof = m - 6 * (n + 1) - int(estimate_range_offset)
     if dof <= 0 or not np.isfinite(cost):
-        raise NumericalError(f"camera-LiDAR solve has {m} residuals for {n_g + 6 * n} unknowns",
-                             "capture more poses")
+        raise NumericalError(
+            f"camera-LiDAR solve has {m} residuals for {n_g + 6 * n} unknowns", "capture more poses"
+        )
     try:
         cov_all = np.linalg.inv(H) * max(cost / dof, 1.0)
     except np.linalg.LinAlgError:
@@ -283,13 +316,26 @@ def joint_solve(poses: Sequence[Pose], board: BackingBoard, T_start: np.ndarray,
         edge_all.append(er)
         per_pose.append(float(np.sqrt(np.mean(pr**2))))
     return LidarSolution(
-        T0, cov_all[:6, :6], offset, float(np.sqrt(cov_all[-1, -1])) if estimate_range_offset else None,
-        float(np.sqrt(np.mean(np.concatenate(plane_all) ** 2))), float(np.sqrt(np.mean(np.concatenate(edge_all) ** 2))),
-        tuple(per_pose), noise, fit.iterations, laser_bias_m=biases.copy())
+        T0,
+        cov_all[:6, :6],
+        offset,
+        float(np.sqrt(cov_all[-1, -1])) if estimate_range_offset else None,
+        float(np.sqrt(np.mean(np.concatenate(plane_all) ** 2))),
+        float(np.sqrt(np.mean(np.concatenate(edge_all) ** 2))),
+        tuple(per_pose),
+        noise,
+        fit.iterations,
+        laser_bias_m=biases.copy(),
+    )
 
 
-def pose_excess(poses: Sequence[Pose], T_lidar_cam: np.ndarray, noise: NoiseModel,
-                laser_bias_m: np.ndarray | None = None, range_offset_m: float = 0.0) -> tuple[float, float]:
+def pose_excess(
+    poses: Sequence[Pose],
+    T_lidar_cam: np.ndarray,
+    noise: NoiseModel,
+    laser_bias_m: np.ndarray | None = None,
+    range_offset_m: float = 0.0,
+) -> tuple[float, float]:
     """Pose-level scatter the point noise does not explain: (offset sigma m, tilt sigma rad).
 
     Per pose, the board points in the camera-seen board frame are fitted with z = a + b x + c y; the
@@ -353,12 +399,19 @@ def _solve(poses: Sequence[Pose], board: BackingBoard, estimate_range_offset: bo
     own = [p.lidar.points_m @ p.lidar.normal - p.lidar.distance_m for p in poses]
     noise = estimate_noise(poses, own, EDGE_SIGMA_START_M)
     first = joint_solve(poses, board, T, noise, estimate_range_offset)
-    plane, edge = zip(*(pose_residuals(first.T_lidar_cam, p.camera.T_cam_board, p, board, first.range_offset_m)
-                        for p in poses), strict=True)
+    plane, edge = zip(
+        *(
+            pose_residuals(first.T_lidar_cam, p.camera.T_cam_board, p, board, first.range_offset_m)
+            for p in poses
+        ),
+        strict=True,
+    )
     edges = np.concatenate(edge)
     # robust scale of the edge residuals: a few end points near a corner sit on the wrong side
     noise = estimate_noise(poses, list(plane), float(1.4826 * np.median(np.abs(edges - np.median(edges)))))
-    offset_m, tilt_rad = pose_excess(poses, first.T_lidar_cam, noise, first.laser_bias_m, first.range_offset_m)
+    offset_m, tilt_rad = pose_excess(
+        poses, first.T_lidar_cam, noise, first.laser_bias_m, first.range_offset_m
+    )
     widened = [inflate_camera(p, board, offset_m, tilt_rad) for p in poses]
     final = joint_solve(widened, board, first.T_lidar_cam, noise, estimate_range_offset)
     return replace(final, pose_offset_sigma_m=offset_m, pose_tilt_sigma_rad=tilt_rad)

@@ -32,8 +32,13 @@ class BackingBoard:
 
     def centre_in_pattern(self) -> np.ndarray:
         """(3,) the backing board's centre in the pattern frame."""
-        return np.array([(self.cols - 1) * self.square_m / 2 - self.offset_m[0],
-                         (self.rows - 1) * self.square_m / 2 - self.offset_m[1], 0.0])
+        return np.array(
+            [
+                (self.cols - 1) * self.square_m / 2 - self.offset_m[0],
+                (self.rows - 1) * self.square_m / 2 - self.offset_m[1],
+                0.0,
+            ]
+        )
 
     def corners_in_pattern(self) -> np.ndarray:
         """(4, 3) the backing board's corners in the pattern frame."""
@@ -46,9 +51,11 @@ class BackingBoard:
         pattern = np.array([(self.cols + 1) * self.square_m, (self.rows + 1) * self.square_m])
         room = np.array(self.backing_m) - pattern - 2 * np.abs(np.array(self.offset_m))
         if (room < -1e-9).any():
-            return (f"a {self.cols + 1} x {self.rows + 1}-square pattern ({pattern[0] * 1e3:.0f} x "
-                    f"{pattern[1] * 1e3:.0f} mm) does not fit on a {self.backing_m[0] * 1e3:.0f} x "
-                    f"{self.backing_m[1] * 1e3:.0f} mm backing board")
+            return (
+                f"a {self.cols + 1} x {self.rows + 1}-square pattern ({pattern[0] * 1e3:.0f} x "
+                f"{pattern[1] * 1e3:.0f} mm) does not fit on a {self.backing_m[0] * 1e3:.0f} x "
+                f"{self.backing_m[1] * 1e3:.0f} mm backing board"
+            )
         return None
 
 
@@ -70,8 +77,14 @@ def perturb(T: np.ndarray, delta: np.ndarray) -> np.ndarray:
     return out
 
 
-def pose_covariance(T_cam_board: np.ndarray, object_points_m: np.ndarray, corners_px: np.ndarray,
-                    camera_matrix: np.ndarray, dist_coeffs: np.ndarray, model: str) -> tuple[np.ndarray, float]:
+def pose_covariance(
+    T_cam_board: np.ndarray,
+    object_points_m: np.ndarray,
+    corners_px: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    model: str,
+) -> tuple[np.ndarray, float]:
     """(6, 6) covariance of (dphi, dt) from the corner residuals, and their RMS in px.
 
     Args:

@@ -13,8 +13,12 @@ from calibctl.core.lidar.solve import Pose, pose_residuals, solve
 from calibctl.core.lidar.target import BackingBoard
 
 
-def held_out(poses: Sequence[Pose], board: BackingBoard, folds: int = 5,
-             edge_px: Callable[[np.ndarray, Sequence[Pose]], np.ndarray] | None = None) -> tuple[float, float, float]:
+def held_out(
+    poses: Sequence[Pose],
+    board: BackingBoard,
+    folds: int = 5,
+    edge_px: Callable[[np.ndarray, Sequence[Pose]], np.ndarray] | None = None,
+) -> tuple[float, float, float]:
     """k-fold over poses: (point-to-plane RMS m, edge RMS m, edge RMS px) of each pose when it was left out.
     ``edge_px(T_lidar_cam, poses)``: each ring end point's distance to the board's outline in the image, px
     (the lens lives above core); without it the pixel figure is NaN."""
@@ -34,26 +38,41 @@ def held_out(poses: Sequence[Pose], board: BackingBoard, folds: int = 5,
     if not plane:
         return float("nan"), float("nan"), float("nan")
     rms_px = float(np.sqrt(np.mean(np.concatenate(px) ** 2))) if px else float("nan")
-    return (float(np.sqrt(np.mean(np.concatenate(plane) ** 2))), float(np.sqrt(np.mean(np.concatenate(edge) ** 2))),
-            rms_px)
+    return (
+        float(np.sqrt(np.mean(np.concatenate(plane) ** 2))),
+        float(np.sqrt(np.mean(np.concatenate(edge) ** 2))),
+        rms_px,
+    )
 
 
 def rpy_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     """(roll, pitch, yaw) rad with R = Rz(yaw) Ry(pitch) Rx(roll) (acfr's Rotation::toMat, tf's setRPY)."""
-    return (float(np.arctan2(R[2, 1], R[2, 2])), float(-np.arcsin(np.clip(R[2, 0], -1, 1))),
-            float(np.arctan2(R[1, 0], R[0, 0])))
+    return (
+        float(np.arctan2(R[2, 1], R[2, 2])),
+        float(-np.arcsin(np.clip(R[2, 0], -1, 1))),
+        float(np.arctan2(R[1, 0], R[0, 0])),
+    )
 
 
 def rotation_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
     Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
     return Rz @ Ry @ Rx
 
 
-def range_offset_from_dimensions(boards: Sequence[BoardInScan], backing_m: tuple[float, float]) -> tuple[float, float]:
+def range_offset_from_dimensions(
+    boards: Sequence[BoardInScan], backing_m: tuple[float, float]
+) -> tuple[float, float]:
     """The range correction (added to every range, acfr's ``distance_offset_mm``) the board sizes ask for:
     ranges long by dr scale a board at range r by (r + dr) / r, so the correction is -error / size * r;
     (mean, sigma) m."""

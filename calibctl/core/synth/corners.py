@@ -45,9 +45,15 @@ class SyntheticSession:
     tilt_deg: np.ndarray
 
 
-def _draw_pose(rng: np.random.Generator, K: np.ndarray, board_centre_m: np.ndarray,
-               image_size: tuple[int, int], tilt_deg: tuple[float, float],
-               distance_m: tuple[float, float], centre_spread: float) -> tuple[np.ndarray, np.ndarray, float]:
+def _draw_pose(
+    rng: np.random.Generator,
+    K: np.ndarray,
+    board_centre_m: np.ndarray,
+    image_size: tuple[int, int],
+    tilt_deg: tuple[float, float],
+    distance_m: tuple[float, float],
+    centre_spread: float,
+) -> tuple[np.ndarray, np.ndarray, float]:
     azimuth = rng.uniform(0.0, 2 * np.pi)
     tilt = np.deg2rad(rng.uniform(*tilt_deg))
     R_tilt, _ = cv2.Rodrigues(np.array([np.cos(azimuth), np.sin(azimuth), 0.0]) * tilt)
@@ -101,8 +107,12 @@ def synthesize_session(
             rvec, tvec, tilt = _draw_pose(rng, K, centre, image_size, tilt_deg, distance_m, centre_spread)
             proj, _ = cv2.projectPoints(obj, rvec, tvec, K, D)
             proj = proj.reshape(-1, 2)
-            inside = ((proj[:, 0] >= margin_px) & (proj[:, 0] <= w - 1 - margin_px)
-                      & (proj[:, 1] >= margin_px) & (proj[:, 1] <= h - 1 - margin_px))
+            inside = (
+                (proj[:, 0] >= margin_px)
+                & (proj[:, 0] <= w - 1 - margin_px)
+                & (proj[:, 1] >= margin_px)
+                & (proj[:, 1] <= h - 1 - margin_px)
+            )
             if inside.all():
                 break
         else:
@@ -113,5 +123,14 @@ def synthesize_session(
         rvecs.append(rvec)
         tvecs.append(tvec)
         tilts.append(tilt)
-    return SyntheticSession(tuple(objs), tuple(noisy), tuple(clean), K.copy(), D.copy(),
-                            (int(w), int(h)), np.array(rvecs), np.array(tvecs), np.array(tilts))
+    return SyntheticSession(
+        tuple(objs),
+        tuple(noisy),
+        tuple(clean),
+        K.copy(),
+        D.copy(),
+        (int(w), int(h)),
+        np.array(rvecs),
+        np.array(tvecs),
+        np.array(tilts),
+    )

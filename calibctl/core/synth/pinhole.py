@@ -62,14 +62,23 @@ class PinholeCamera:
         return cls(K, np.array(SEED_DIST, dtype=np.float64), (int(width), int(height)))
 
     def key(self) -> tuple[float, ...]:
-        return (*np.asarray(self.K, float).ravel().tolist(), *np.asarray(self.dist, float).tolist(),
-                float(self.image_size[0]), float(self.image_size[1]))
+        return (
+            *np.asarray(self.K, float).ravel().tolist(),
+            *np.asarray(self.dist, float).tolist(),
+            float(self.image_size[0]),
+            float(self.image_size[1]),
+        )
 
     def project(self, points_board_m: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
         """(N, 3) board points -> (N, 2) float64 distorted pixels (cv2.projectPoints)."""
         rvec, tvec = rvec_tvec(T_cam_board)
-        px, _ = cv2.projectPoints(np.asarray(points_board_m, np.float64).reshape(-1, 1, 3), rvec, tvec,
-                                  np.asarray(self.K, np.float64), np.asarray(self.dist, np.float64))
+        px, _ = cv2.projectPoints(
+            np.asarray(points_board_m, np.float64).reshape(-1, 1, 3),
+            rvec,
+            tvec,
+            np.asarray(self.K, np.float64),
+            np.asarray(self.dist, np.float64),
+        )
         return px.reshape(-1, 2)
 
 
@@ -87,8 +96,9 @@ def transform_from(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
     return T
 
 
-def undistort_normalised(xd: np.ndarray, yd: np.ndarray, dist: np.ndarray,
-                         iterations: int = 100, tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+def undistort_normalised(
+    xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int = 100, tol: float = 1e-12
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse Brown-Conrady by fixed-point iteration. Arrays of distorted normalised coords -> ideal."""
     k1, k2, p1, p2, k3 = (float(v) for v in dist)
     x, y = xd.copy(), yd.copy()
@@ -110,8 +120,10 @@ def distort_normalised(x: np.ndarray, y: np.ndarray, dist: np.ndarray) -> tuple[
     k1, k2, p1, p2, k3 = (float(v) for v in dist)
     r2 = x * x + y * y
     radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    return (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+    return (
+        x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+    )
 
 
 @lru_cache(maxsize=4)
@@ -120,7 +132,9 @@ def _ray_map(key: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     K = np.array(key[:9]).reshape(3, 3)
     dist = np.array(key[9:14])
     width, height = int(key[14]), int(key[15])
-    u, v = np.meshgrid(np.arange(-1, width + 1, dtype=np.float64), np.arange(-1, height + 1, dtype=np.float64))
+    u, v = np.meshgrid(
+        np.arange(-1, width + 1, dtype=np.float64), np.arange(-1, height + 1, dtype=np.float64)
+    )
     yd = (v - K[1, 2]) / K[1, 1]
     xd = (u - K[0, 2] - K[0, 1] * yd) / K[0, 0]
     x, y = undistort_normalised(xd, yd, dist)
@@ -142,8 +156,9 @@ def padded_ray_map(x: np.ndarray, y: np.ndarray, z: np.ndarray, valid: np.ndarra
     return x[crop], y[crop], z[crop], *derivatives, valid
 
 
-def _board_coords(G: np.ndarray, x: np.ndarray, y: np.ndarray,
-                  z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _board_coords(
+    G: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rays (x, y, z), any positive scale, so also behind the camera plane (z <= 0, a fisheye past 90 deg)
     -> board-plane coords (square units) and a front-facing mask. G: inverse plane map."""
     w = G[2, 0] * x + G[2, 1] * y + G[2, 2] * z
@@ -164,8 +179,9 @@ class _Pattern:
             pps = CHARUCO_TEXTURE_PX_PER_SQUARE
             sx, sy = board.squares
             img = make_charuco_board(board).generateImage((sx * pps, sy * pps), marginSize=0, borderBits=1)
-            self.texture = (BLACK_REFLECTANCE + (WHITE_REFLECTANCE - BLACK_REFLECTANCE)
-                            * img.astype(np.float32) / 255.0)
+            self.texture = (
+                BLACK_REFLECTANCE + (WHITE_REFLECTANCE - BLACK_REFLECTANCE) * img.astype(np.float32) / 255.0
+            )
 
     def inside(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
         return (bx >= self.lo_x) & (bx < self.hi_x) & (by >= self.lo_y) & (by < self.hi_y)
@@ -181,21 +197,34 @@ class _Pattern:
             pps = CHARUCO_TEXTURE_PX_PER_SQUARE
             n, width = bx.size, 4096  # cv2.remap wants maps under 32767 rows: sample in 4096-wide rows
             pad = (-n) % width
-            maps = [np.pad(((v.ravel() + 1.0) * pps - 0.5).clip(-2, 1e6).astype(np.float32), (0, pad))
-                    .reshape(-1, width) for v in (bx, by)]
-            inner = cv2.remap(self.texture, maps[0], maps[1], cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REPLICATE).ravel()[:n].reshape(bx.shape)
+            maps = [
+                np.pad(((v.ravel() + 1.0) * pps - 0.5).clip(-2, 1e6).astype(np.float32), (0, pad)).reshape(
+                    -1, width
+                )
+                for v in (bx, by)
+            ]
+            inner = (
+                cv2.remap(self.texture, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                .ravel()[:n]
+                .reshape(bx.shape)
+            )
         return np.where(in_pattern, inner, WHITE_REFLECTANCE)
 
-    def needs_supersampling(self, bx: np.ndarray, by: np.ndarray, foot_x: np.ndarray,
-                            foot_y: np.ndarray) -> np.ndarray:
+    def needs_supersampling(
+        self, bx: np.ndarray, by: np.ndarray, foot_x: np.ndarray, foot_y: np.ndarray
+    ) -> np.ndarray:
         """Pixels whose footprint may cross an edge of the pattern or of the outline."""
-        near_outline = ((bx >= self.lo_x - foot_x) & (bx < self.hi_x + foot_x)
-                        & (by >= self.lo_y - foot_y) & (by < self.hi_y + foot_y))
+        near_outline = (
+            (bx >= self.lo_x - foot_x)
+            & (bx < self.hi_x + foot_x)
+            & (by >= self.lo_y - foot_y)
+            & (by < self.hi_y + foot_y)
+        )
         if self.texture is not None:  # markers have edges everywhere: supersample the whole board
             return near_outline
         margin_edge = (np.abs(bx - np.round(bx - self.lo_x) - self.lo_x) < foot_x) | (
-            np.abs(by - np.round(by - self.lo_y) - self.lo_y) < foot_y)
+            np.abs(by - np.round(by - self.lo_y) - self.lo_y) < foot_y
+        )
         grid_edge = (np.abs(bx - np.round(bx)) < foot_x) | (np.abs(by - np.round(by)) < foot_y)
         return near_outline & (grid_edge | margin_edge)
 
@@ -212,9 +241,11 @@ class Photometry:
 
     @classmethod
     def random(cls, rng: np.random.Generator) -> Photometry:
-        return cls(gain=float(rng.uniform(200.0, 245.0)),
-                   illumination_slope=(float(rng.uniform(-0.12, 0.12)), float(rng.uniform(-0.12, 0.12))),
-                   blur_sigma_px=float(rng.uniform(0.55, 0.85)))
+        return cls(
+            gain=float(rng.uniform(200.0, 245.0)),
+            illumination_slope=(float(rng.uniform(-0.12, 0.12)), float(rng.uniform(-0.12, 0.12))),
+            blur_sigma_px=float(rng.uniform(0.55, 0.85)),
+        )
 
 
 def _rook_offsets(supersample: int) -> tuple[np.ndarray, np.ndarray]:
@@ -253,9 +284,16 @@ class ProjectingCamera(Protocol):
     def project(self, points_board_m: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray: ...
 
 
-def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board: np.ndarray, rng: np.random.Generator,
-                photometry: Photometry | None = None, background: np.ndarray | None = None,
-                supersample: int = 6, margin_squares: float = 1.0) -> np.ndarray:
+def render_view(
+    camera: PinholeCamera | RayCamera,
+    board: BoardSpec,
+    T_cam_board: np.ndarray,
+    rng: np.random.Generator,
+    photometry: Photometry | None = None,
+    background: np.ndarray | None = None,
+    supersample: int = 6,
+    margin_squares: float = 1.0,
+) -> np.ndarray:
     """Render one board photo.
 
     Args:
@@ -306,11 +344,13 @@ def render_view(camera: PinholeCamera | RayCamera, board: BoardSpec, T_cam_board
     radiance = (photometry.gain * refl * np.where(hit, lambert, np.float32(1.0)) * light).astype(np.float32)
     if photometry.blur_sigma_px > 0:
         radiance = np.asarray(cv2.GaussianBlur(radiance, (0, 0), photometry.blur_sigma_px), np.float32)
-    sigma = np.sqrt(photometry.read_noise_dn ** 2 + photometry.shot_noise_gain * np.maximum(radiance, 0))
+    sigma = np.sqrt(photometry.read_noise_dn**2 + photometry.shot_noise_gain * np.maximum(radiance, 0))
     noisy = radiance + sigma * rng.standard_normal(radiance.shape).astype(np.float32)
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
-def true_corners_px(camera: PinholeCamera | ProjectingCamera, board: BoardSpec, T_cam_board: np.ndarray) -> np.ndarray:
+def true_corners_px(
+    camera: PinholeCamera | ProjectingCamera, board: BoardSpec, T_cam_board: np.ndarray
+) -> np.ndarray:
     """(cols * rows, 2) float64 true inner-corner pixels, row-major ids."""
     return camera.project(board.object_points(), T_cam_board)

@@ -49,9 +49,13 @@ class RigTruth:
         return fits_in_frame(self.cameras[c], board, self.T_cam_board(c, f))
 
 
-def rig_cameras(n_cameras: int, rng: np.random.Generator, image_size: tuple[int, int] = (640, 480),
-                baselines_m: tuple[float, ...] | None = None,
-                max_rotation_deg: float = 4.0) -> tuple[tuple[PinholeCamera, ...], tuple[np.ndarray, ...]]:
+def rig_cameras(
+    n_cameras: int,
+    rng: np.random.Generator,
+    image_size: tuple[int, int] = (640, 480),
+    baselines_m: tuple[float, ...] | None = None,
+    max_rotation_deg: float = 4.0,
+) -> tuple[tuple[PinholeCamera, ...], tuple[np.ndarray, ...]]:
     """Intrinsics and T_root_cam of ``n_cameras`` cameras in a row (see module docstring)."""
     if not 2 <= n_cameras <= 4:
         raise ValueError(f"a synthetic rig has 2-4 cameras, got {n_cameras}")
@@ -63,8 +67,13 @@ def rig_cameras(n_cameras: int, rng: np.random.Generator, image_size: tuple[int,
     x = 0.0
     for c in range(n_cameras):
         f = width / 640.0 * float(rng.uniform(760.0, 840.0))
-        K = np.array([[f, 0.0, (width - 1) / 2 + rng.uniform(-8, 8)], [0.0, f, (height - 1) / 2 + rng.uniform(-8, 8)],
-                      [0.0, 0.0, 1.0]])
+        K = np.array(
+            [
+                [f, 0.0, (width - 1) / 2 + rng.uniform(-8, 8)],
+                [0.0, f, (height - 1) / 2 + rng.uniform(-8, 8)],
+                [0.0, 0.0, 1.0],
+            ]
+        )
         cams.append(PinholeCamera(K, np.array(RIG_DIST), (int(width), int(height))))
         T = np.eye(4)
         if c > 0:
@@ -76,15 +85,23 @@ def rig_cameras(n_cameras: int, rng: np.random.Generator, image_size: tuple[int,
     return tuple(cams), tuple(poses)
 
 
-def _virtual_camera(cams: tuple[PinholeCamera, ...], T_root_cam: tuple[np.ndarray, ...]) -> tuple[PinholeCamera, np.ndarray]:
+def _virtual_camera(
+    cams: tuple[PinholeCamera, ...], T_root_cam: tuple[np.ndarray, ...]
+) -> tuple[PinholeCamera, np.ndarray]:
     T = np.eye(4)
     T[:3, 3] = np.mean([p[:3, 3] for p in T_root_cam], axis=0)
     return cams[0], T
 
 
-def synthesize_rig(n_cameras: int, board: BoardSpec, n_frames: int, rng: np.random.Generator,
-                   image_size: tuple[int, int] = (640, 480), baselines_m: tuple[float, ...] | None = None,
-                   min_cameras: int | None = None) -> RigTruth:
+def synthesize_rig(
+    n_cameras: int,
+    board: BoardSpec,
+    n_frames: int,
+    rng: np.random.Generator,
+    image_size: tuple[int, int] = (640, 480),
+    baselines_m: tuple[float, ...] | None = None,
+    min_cameras: int | None = None,
+) -> RigTruth:
     """A seeded rig and ``n_frames`` board poses seen by at least ``min_cameras`` (default all) cameras."""
     cams, T_root_cam = rig_cameras(n_cameras, rng, image_size, baselines_m)
     need = n_cameras if min_cameras is None else min_cameras
@@ -97,8 +114,11 @@ def synthesize_rig(n_cameras: int, board: BoardSpec, n_frames: int, rng: np.rand
         for _ in range(MAX_POSE_DRAWS):
             cell = rng.uniform(-0.28, 0.28, 2)
             target = ((0.5 + cell[0]) * width, (0.5 + cell[1]) * height)
-            R = tilt_rotation(np.deg2rad(rng.uniform(20.0, 38.0)), 2 * np.pi * i / 8 + rng.uniform(-0.3, 0.3),
-                              float(rng.uniform(-0.2, 0.2)))
+            R = tilt_rotation(
+                np.deg2rad(rng.uniform(20.0, 38.0)),
+                2 * np.pi * i / 8 + rng.uniform(-0.3, 0.3),
+                float(rng.uniform(-0.2, 0.2)),
+            )
             T_root_board = T_root_virtual @ place_board(virtual, board, R, target, float(rng.uniform(*near)))
             candidate = RigTruth(truth.names, cams, T_root_cam, (T_root_board,))
             if sum(candidate.sees(board, c, 0) for c in range(n_cameras)) >= need:
@@ -109,8 +129,9 @@ def synthesize_rig(n_cameras: int, board: BoardSpec, n_frames: int, rng: np.rand
     return RigTruth(truth.names, cams, T_root_cam, tuple(frames))
 
 
-def rig_corners(truth: RigTruth, board: BoardSpec, noise_px: float,
-                rng: np.random.Generator) -> list[list[np.ndarray | None]]:
+def rig_corners(
+    truth: RigTruth, board: BoardSpec, noise_px: float, rng: np.random.Generator
+) -> list[list[np.ndarray | None]]:
     """Per frame, per camera: (N, 2) noisy true corners (Gaussian per coordinate) or None when not seen."""
     out = []
     for f in range(len(truth.T_root_board)):
@@ -125,9 +146,14 @@ def rig_corners(truth: RigTruth, board: BoardSpec, noise_px: float,
     return out
 
 
-def render_rig_frame(truth: RigTruth, board: BoardSpec, f: int, rng: np.random.Generator,
-                     supersample: int = 6) -> list[np.ndarray | None]:
+def render_rig_frame(
+    truth: RigTruth, board: BoardSpec, f: int, rng: np.random.Generator, supersample: int = 6
+) -> list[np.ndarray | None]:
     """Per camera (H, W) uint8 photo of frame ``f`` (None where the camera does not see the whole board)."""
     photometry = Photometry.random(rng)
-    return [render_view(cam, board, truth.T_cam_board(c, f), rng, photometry, supersample=supersample)
-            if truth.sees(board, c, f) else None for c, cam in enumerate(truth.cameras)]
+    return [
+        render_view(cam, board, truth.T_cam_board(c, f), rng, photometry, supersample=supersample)
+        if truth.sees(board, c, f)
+        else None
+        for c, cam in enumerate(truth.cameras)
+    ]

@@ -47,8 +47,9 @@ def tilt_rotation(tilt_rad: float, direction_rad: float, spin_rad: float) -> np.
     return cv2.Rodrigues(axis * tilt_rad)[0] @ spin
 
 
-def place_board(camera: PinholeCamera, board: BoardSpec, R: np.ndarray, target_px: tuple[float, float],
-                distance_m: float) -> np.ndarray:
+def place_board(
+    camera: PinholeCamera, board: BoardSpec, R: np.ndarray, target_px: tuple[float, float], distance_m: float
+) -> np.ndarray:
     """(4, 4) T_cam_board with the board centre on the ray through ``target_px`` at depth ``distance_m``."""
     K = camera.K
     yd = (target_px[1] - K[1, 2]) / K[1, 1]
@@ -79,12 +80,16 @@ def fits_in_frame(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarr
     width, height = camera.image_size
     pad = IMAGE_MARGIN_PX_FRAC * max(width, height)
     px = camera.project(outline, T_cam_board)
-    inside = (px[:, 0] >= pad) & (px[:, 0] <= width - 1 - pad) & (px[:, 1] >= pad) & (px[:, 1] <= height - 1 - pad)
+    inside = (
+        (px[:, 0] >= pad) & (px[:, 0] <= width - 1 - pad) & (px[:, 1] >= pad) & (px[:, 1] <= height - 1 - pad)
+    )
     if not np.all(inside):
         return False
     corners = camera.project(board.object_points(), T_cam_board).reshape(board.rows, board.cols, 2)
-    edge_px = min(np.linalg.norm(np.diff(corners, axis=1), axis=2).min(),
-                  np.linalg.norm(np.diff(corners, axis=0), axis=2).min())
+    edge_px = min(
+        np.linalg.norm(np.diff(corners, axis=1), axis=2).min(),
+        np.linalg.norm(np.diff(corners, axis=0), axis=2).min(),
+    )
     return bool(edge_px >= max(MIN_SQUARE_PX, MIN_SQUARE_PX_AT_640 * width / 640.0))
 
 
@@ -92,12 +97,21 @@ def _cell_targets(camera: PinholeCamera, n: int) -> list[tuple[float, float]]:
     """Board-centre targets cycling through the 3x3 cells, corners first (they are the hard ones)."""
     width, height = camera.image_size
     order = [(0, 0), (2, 2), (2, 0), (0, 2), (1, 1), (1, 0), (1, 2), (0, 1), (2, 1)]
-    return [((0.5 + 0.42 * (cx - 1)) * width, (0.5 + 0.42 * (cy - 1)) * height)
-            for cx, cy in (order[i % len(order)] for i in range(n))]
+    return [
+        ((0.5 + 0.42 * (cx - 1)) * width, (0.5 + 0.42 * (cy - 1)) * height)
+        for cx, cy in (order[i % len(order)] for i in range(n))
+    ]
 
 
-def _sample_pose(camera: PinholeCamera, board: BoardSpec, rng: np.random.Generator, target: tuple[float, float],
-                 tilt_rad: float, direction_rad: float, distance_range_m: tuple[float, float]) -> np.ndarray:
+def _sample_pose(
+    camera: PinholeCamera,
+    board: BoardSpec,
+    rng: np.random.Generator,
+    target: tuple[float, float],
+    tilt_rad: float,
+    direction_rad: float,
+    distance_range_m: tuple[float, float],
+) -> np.ndarray:
     """Place the board as close to ``target`` as fits: pull the target toward the centre until it does."""
     width, height = camera.image_size
     centre = np.array([(width - 1) / 2, (height - 1) / 2])
@@ -106,13 +120,17 @@ def _sample_pose(camera: PinholeCamera, board: BoardSpec, rng: np.random.Generat
         pull = min(1.0, attempt / 60.0)
         tgt = np.array(target) + (centre - np.array(target)) * pull
         distance = float(rng.uniform(*distance_range_m)) * (1.0 + 0.01 * max(0, attempt - 60))
-        T = place_board(camera, board, tilt_rotation(tilt_rad, direction_rad, spin), (tgt[0], tgt[1]), distance)
+        T = place_board(
+            camera, board, tilt_rotation(tilt_rad, direction_rad, spin), (tgt[0], tgt[1]), distance
+        )
         if fits_in_frame(camera, board, T):
             return T
     raise ValueError("cannot place the board inside the frame; use a smaller board or a wider image")
 
 
-def default_distance_range_m(camera: PinholeCamera, board: BoardSpec, fill: tuple[float, float]) -> tuple[float, float]:
+def default_distance_range_m(
+    camera: PinholeCamera, board: BoardSpec, fill: tuple[float, float]
+) -> tuple[float, float]:
     """Distances at which the board spans ``fill`` (fractions) of the image width."""
     width = camera.image_size[0]
     board_w_m = (board.cols + 3) * board.square_size_m
@@ -120,8 +138,9 @@ def default_distance_range_m(camera: PinholeCamera, board: BoardSpec, fill: tupl
     return f * board_w_m / (fill[1] * width), f * board_w_m / (fill[0] * width)
 
 
-def scenario_poses(scenario: str, camera: PinholeCamera, board: BoardSpec, n_views: int,
-                   rng: np.random.Generator) -> list[np.ndarray]:
+def scenario_poses(
+    scenario: str, camera: PinholeCamera, board: BoardSpec, n_views: int, rng: np.random.Generator
+) -> list[np.ndarray]:
     """(4, 4) T_cam_board per view for a still-image scenario (everything but ``video``)."""
     if scenario not in SCENARIOS or scenario == "video":
         raise ValueError(f"unknown still scenario {scenario!r}")
@@ -145,8 +164,13 @@ def scenario_poses(scenario: str, camera: PinholeCamera, board: BoardSpec, n_vie
     return poses
 
 
-def sweep_poses(camera: PinholeCamera, board: BoardSpec, n_views: int, rng: np.random.Generator,
-                tilt_deg: tuple[float, float] = (0.0, 50.0)) -> tuple[list[np.ndarray], list[float]]:
+def sweep_poses(
+    camera: PinholeCamera,
+    board: BoardSpec,
+    n_views: int,
+    rng: np.random.Generator,
+    tilt_deg: tuple[float, float] = (0.0, 50.0),
+) -> tuple[list[np.ndarray], list[float]]:
     """Poses for measuring tilt readout: tilt uniform in ``tilt_deg``, any direction, the board centre
     aimed anywhere in the frame (edges included) at 30-70 % fill. Returns (T_cam_board list, true tilts)."""
     width, height = camera.image_size
@@ -155,7 +179,9 @@ def sweep_poses(camera: PinholeCamera, board: BoardSpec, n_views: int, rng: np.r
     for _ in range(n_views):
         tilt = float(rng.uniform(*tilt_deg))
         target = (float(rng.uniform(0.03, 0.97)) * width, float(rng.uniform(0.03, 0.97)) * height)
-        T = _sample_pose(camera, board, rng, target, np.deg2rad(tilt), float(rng.uniform(0, 2 * np.pi)), dist_range)
+        T = _sample_pose(
+            camera, board, rng, target, np.deg2rad(tilt), float(rng.uniform(0, 2 * np.pi)), dist_range
+        )
         poses.append(T)
         tilts.append(float(np.degrees(np.arccos(min(1.0, abs(T[2, 2]))))))
     return poses, tilts
@@ -170,8 +196,15 @@ def _interpolate(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     return T
 
 
-def video_plan(camera: PinholeCamera, board: BoardSpec, n_keys: int, rng: np.random.Generator,
-               still_frames: int = 4, move_frames: int = 6, tremor_m: float = 2e-5) -> VideoPlan:
+def video_plan(
+    camera: PinholeCamera,
+    board: BoardSpec,
+    n_keys: int,
+    rng: np.random.Generator,
+    still_frames: int = 4,
+    move_frames: int = 6,
+    tremor_m: float = 2e-5,
+) -> VideoPlan:
     """A hand-held sweep: ``still_frames`` nearly still frames at each key pose, ``move_frames`` between."""
     keys = scenario_poses("good", camera, board, n_keys, rng)
     poses: list[np.ndarray] = []

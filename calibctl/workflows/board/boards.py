@@ -84,7 +84,9 @@ def parse_measured_on(text: str, today: dt.date) -> dt.date:
     except ValueError as exc:
         raise UsageError(f"--measured-on '{text}' is not a date: {exc}") from exc
     if day > today + FUTURE_SLACK:
-        raise UsageError(f"--measured-on {day} is in the future (today is {today})", "give the day it was measured")
+        raise UsageError(
+            f"--measured-on {day} is in the future (today is {today})", "give the day it was measured"
+        )
     return day
 
 
@@ -105,9 +107,11 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     given = {flag for field, flag in _MEASUREMENT_FLAGS.items() if getattr(reg, field) is not None}
     if not given and reg.evidence is None:
         if reg.span_mm is not None:
-            raise UsageError("--span-mm checks a measured square size; this one is nominal",
-                             "give the square's measurement too (--uncertainty-mm, --instrument, --measured-by, "
-                             "--measured-on)")
+            raise UsageError(
+                "--span-mm checks a measured square size; this one is nominal",
+                "give the square's measurement too (--uncertainty-mm, --instrument, --measured-by, "
+                "--measured-on)",
+            )
         return SquareMeasurement(status="nominal", square_size_m=square_m)
     missing = [flag for flag in _MEASUREMENT_FLAGS.values() if flag not in given]
     if missing:
@@ -117,7 +121,9 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
         )
     assert reg.uncertainty_mm is not None and reg.measured_on is not None
     if not 0 < reg.uncertainty_mm < reg.square_mm:
-        raise UsageError(f"--uncertainty-mm {reg.uncertainty_mm:g} must be positive and smaller than the square")
+        raise UsageError(
+            f"--uncertainty-mm {reg.uncertainty_mm:g} must be positive and smaller than the square"
+        )
     evidence_sha, evidence_name = read_evidence(reg.evidence) if reg.evidence is not None else (None, None)
     day = parse_measured_on(reg.measured_on, today)
     span = _span(reg, day)
@@ -140,39 +146,68 @@ _SPAN_FLAGS = {"span_uncertainty_mm": "--span-uncertainty-mm", "span_instrument"
 def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
     """The span measurement, refused when the square size disagrees with it (seed chapter 0's typo)."""
     if reg.span_mm is None:
-        extra = [flag for name, flag in {**_SPAN_FLAGS, "span_squares": "--span-squares"}.items()
-                 if getattr(reg, name) is not None]
+        extra = [
+            flag
+            for name, flag in {**_SPAN_FLAGS, "span_squares": "--span-squares"}.items()
+            if getattr(reg, name) is not None
+        ]
         if extra:
             raise UsageError(f"{', '.join(extra)} describe a span measurement: give --span-mm too")
         return None
     missing = [flag for name, flag in _SPAN_FLAGS.items() if getattr(reg, name) is None]
     if missing:
-        raise UsageError(f"a span measurement needs {', '.join(missing)}",
-                         "the span's own instrument and one-sigma, e.g. --span-uncertainty-mm 0.1 --span-instrument "
-                         "'steel rule'")
-    assert reg.span_uncertainty_mm is not None and reg.span_instrument is not None and reg.uncertainty_mm is not None
+        raise UsageError(
+            f"a span measurement needs {', '.join(missing)}",
+            "the span's own instrument and one-sigma, e.g. --span-uncertainty-mm 0.1 --span-instrument "
+            "'steel rule'",
+        )
+    assert (
+        reg.span_uncertainty_mm is not None
+        and reg.span_instrument is not None
+        and reg.uncertainty_mm is not None
+    )
     squares = reg.span_squares if reg.span_squares is not None else max(reg.cols, reg.rows) - 1
     if not 0 < squares < max(reg.cols, reg.rows):
-        raise UsageError(f"--span-squares {squares} must be between 1 and {max(reg.cols, reg.rows) - 1} "
-                         f"(a {reg.cols}x{reg.rows} board)")
+        raise UsageError(
+            f"--span-squares {squares} must be between 1 and {max(reg.cols, reg.rows) - 1} "
+            f"(a {reg.cols}x{reg.rows} board)"
+        )
     if not 0 < reg.span_uncertainty_mm < reg.span_mm:
-        raise UsageError(f"--span-uncertainty-mm {reg.span_uncertainty_mm:g} must be positive and smaller than the span")
-    verdict = compare_span(reg.square_mm / 1000, reg.uncertainty_mm / 1000, squares, reg.span_mm / 1000,
-                           reg.span_uncertainty_mm / 1000)
-    said = (f"--square-mm {reg.square_mm:g} x {squares} squares = {verdict.implied_m * 1000:.2f} mm, but --span-mm "
-            f"{reg.span_mm:g}")
+        raise UsageError(
+            f"--span-uncertainty-mm {reg.span_uncertainty_mm:g} must be positive and smaller than the span"
+        )
+    verdict = compare_span(
+        reg.square_mm / 1000,
+        reg.uncertainty_mm / 1000,
+        squares,
+        reg.span_mm / 1000,
+        reg.span_uncertainty_mm / 1000,
+    )
+    said = (
+        f"--square-mm {reg.square_mm:g} x {squares} squares = {verdict.implied_m * 1000:.2f} mm, but --span-mm "
+        f"{reg.span_mm:g}"
+    )
     if verdict.unit_factor is not None:
         slip = verdict.unit_factor if verdict.unit_factor >= 1 else 1 / verdict.unit_factor
-        raise UsageError(f"{said} is {verdict.unit_factor:g}x that: wrong units ({UNIT_SLIPS[slip]}?), not a "
-                         "measurement", "give both lengths in millimetres")
+        raise UsageError(
+            f"{said} is {verdict.unit_factor:g}x that: wrong units ({UNIT_SLIPS[slip]}?), not a measurement",
+            "give both lengths in millimetres",
+        )
     if not verdict.consistent:
         raise UsageError(
             f"{said}: they differ by {verdict.difference_m * 1000:+.2f} mm, more than {K_SIGMA:g} combined sigma "
             f"({verdict.combined_sigma_m * 1000:.2f} mm); the square size or the span is wrong",
             f"re-measure; the span implies {reg.span_mm / squares:.3f} mm squares. A wrong square size scales "
-            "every distance the robot reports and leaves no residual")
-    return SpanMeasurement(span_m=reg.span_mm / 1000.0, squares=squares, uncertainty_m=reg.span_uncertainty_mm / 1000.0,
-                           instrument=reg.span_instrument, measured_by=reg.measured_by or "", measured_on=day)
+            "every distance the robot reports and leaves no residual",
+        )
+    return SpanMeasurement(
+        span_m=reg.span_mm / 1000.0,
+        squares=squares,
+        uncertainty_m=reg.span_uncertainty_mm / 1000.0,
+        instrument=reg.span_instrument,
+        measured_by=reg.measured_by or "",
+        measured_on=day,
+    )
 
 
 def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:
@@ -232,9 +267,11 @@ def _backing(reg: BoardRegistration) -> BackingBoard | None:
     ox, oy = reg.pattern_offset_mm or (0.0, 0.0)
     pattern = ((reg.cols + 1) * reg.square_mm, (reg.rows + 1) * reg.square_mm)
     if pattern[0] + 2 * abs(ox) > w or pattern[1] + 2 * abs(oy) > h:
-        raise UsageError(f"a {reg.cols + 1} x {reg.rows + 1}-square pattern ({pattern[0]:g} x {pattern[1]:g} mm, "
-                         f"offset {ox:g},{oy:g} mm) does not fit on a {w:g} x {h:g} mm backing board",
-                         "--backing-mm is W along the rows of --cols corners, H along the --rows direction")
+        raise UsageError(
+            f"a {reg.cols + 1} x {reg.rows + 1}-square pattern ({pattern[0]:g} x {pattern[1]:g} mm, "
+            f"offset {ox:g},{oy:g} mm) does not fit on a {w:g} x {h:g} mm backing board",
+            "--backing-mm is W along the rows of --cols corners, H along the --rows direction",
+        )
     return BackingBoard(width_m=w / 1000.0, height_m=h / 1000.0, pattern_offset_m=(ox / 1000.0, oy / 1000.0))
 
 
@@ -243,9 +280,11 @@ def square_size_warning(board: BoardRevision) -> str | None:
     square_mm = board.measurement.square_size_m * 1000.0
     if square_mm >= SMALLEST_LIKELY_SQUARE_MM:
         return None
-    return (f"{board.ref} has a {square_mm:g} mm square: --square-mm takes millimetres. If {square_mm:g} was metres, "
-            f"register it again with --square-mm {square_mm * 1000:g}; a wrong square size scales every distance "
-            "and rig baseline and leaves no residual")
+    return (
+        f"{board.ref} has a {square_mm:g} mm square: --square-mm takes millimetres. If {square_mm:g} was metres, "
+        f"register it again with --square-mm {square_mm * 1000:g}; a wrong square size scales every distance "
+        "and rig baseline and leaves no residual"
+    )
 
 
 def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
@@ -290,5 +329,7 @@ def board_spec(board: BoardRevision) -> BoardSpec:
 
     m = board.measurement
     if board.kind == "charuco":
-        return BoardSpec("charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary)
+        return BoardSpec(
+            "charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary
+        )
     return BoardSpec.chessboard(board.cols, board.rows, m.square_size_m)

@@ -64,8 +64,10 @@ DEFAULT_FPS = 30.0
 CAMERA_READ_FAILURES_MAX = 30  # consecutive failed reads before a camera counts as gone
 CAMERA_FRAME_WAIT_S = 5.0  # no new frame for this long: the camera stalled
 _DEVICE = re.compile(r"^/dev/video[0-9]+$")
-SOURCE_HINT = ("pass a folder of images, a quoted glob ('shots/left*.jpg'), a list file (.txt), a video file, "
-               "or a camera (/dev/video0 or an index such as 0)")
+SOURCE_HINT = (
+    "pass a folder of images, a quoted glob ('shots/left*.jpg'), a list file (.txt), a video file, "
+    "or a camera (/dev/video0 or an index such as 0)"
+)
 NAMES_SHOWN = 10  # file names listed in an error before "and N more"
 _GLOB_MAGIC = re.compile(r"[*?\[]")
 
@@ -134,8 +136,10 @@ def resolve_source(text: str) -> SourceSpec:
         return SourceSpec(FOLDER, text, path)
     if path.is_file():
         if path.suffix.lower() in IMAGE_SUFFIXES:
-            raise UsageError(f"--source {text} is a single image; a capture session is a folder of images",
-                             f"pass the folder that holds it ({path.parent}), or a quoted glob")
+            raise UsageError(
+                f"--source {text} is a single image; a capture session is a folder of images",
+                f"pass the folder that holds it ({path.parent}), or a quoted glob",
+            )
         return SourceSpec(LIST if path.suffix.lower() in LIST_SUFFIXES else VIDEO, text, path)
     if path.exists():
         raise InputError(f"--source {text} is neither a folder, a regular file nor a camera", SOURCE_HINT)
@@ -164,8 +168,11 @@ def quiet_opencv() -> Iterator[None]:
 
 def ignored_files(folder: Path) -> list[str]:
     """Visible regular files in ``folder`` that are not images by their suffix (reported, not read)."""
-    return sorted(p.name for p in folder.iterdir()
-                  if p.is_file() and not p.name.startswith(".") and p.suffix.lower() not in IMAGE_SUFFIXES)
+    return sorted(
+        p.name
+        for p in folder.iterdir()
+        if p.is_file() and not p.name.startswith(".") and p.suffix.lower() not in IMAGE_SUFFIXES
+    )
 
 
 def _glob_base(pattern: str) -> Path:
@@ -186,9 +193,15 @@ def _folder_images(folder: Path) -> ImageSet:
     paths = list_images(folder)
     ignored = ignored_files(folder)
     if not paths:
-        also = f"; {len(ignored)} other file(s) ignored, not images by their suffix: {named_list(ignored, NAMES_SHOWN)}" if ignored else ""
-        raise InputError(f"no images in {folder}{also}",
-                         f"put the session's images ({', '.join(IMAGE_SUFFIXES)}) in the folder")
+        also = (
+            f"; {len(ignored)} other file(s) ignored, not images by their suffix: {named_list(ignored, NAMES_SHOWN)}"
+            if ignored
+            else ""
+        )
+        raise InputError(
+            f"no images in {folder}{also}",
+            f"put the session's images ({', '.join(IMAGE_SUFFIXES)}) in the folder",
+        )
     return _image_set(paths, folder, ignored)
 
 
@@ -199,10 +212,16 @@ def _glob_images(pattern: str) -> ImageSet:
     base = _glob_base(pattern)
     ignored = [os.path.relpath(p, base) for p in files if p.suffix.lower() not in IMAGE_SUFFIXES]
     if not paths:
-        also = f" ({len(files)} file(s), none an image by its suffix: {named_list(ignored, NAMES_SHOWN)})" if files else ""
-        raise InputError(f"--source '{pattern}' matches no image file{also}; nothing was stored",
-                         "check the pattern (it is relative to the working directory) and quote it so the shell "
-                         "passes it on unexpanded")
+        also = (
+            f" ({len(files)} file(s), none an image by its suffix: {named_list(ignored, NAMES_SHOWN)})"
+            if files
+            else ""
+        )
+        raise InputError(
+            f"--source '{pattern}' matches no image file{also}; nothing was stored",
+            "check the pattern (it is relative to the working directory) and quote it so the shell "
+            "passes it on unexpanded",
+        )
     return _image_set(paths, base, ignored)
 
 
@@ -229,9 +248,11 @@ def _listed_images(list_file: Path) -> ImageSet:
             paths.append(path)
             names.append(str(path) if given.is_absolute() else os.path.relpath(path, base))
     if problems:
-        raise InputError(f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
-                         f"stored: {named_list(problems, NAMES_SHOWN)}",
-                         f"paths in a list file are relative to its folder ({base}); fix or remove those lines")
+        raise InputError(
+            f"the list file {list_file} names {len(problems)} file(s) that cannot be used; nothing was "
+            f"stored: {named_list(problems, NAMES_SHOWN)}",
+            f"paths in a list file are relative to its folder ({base}); fix or remove those lines",
+        )
     if not paths:
         raise InputError(f"the list file {list_file} names no image", "put one image path per line")
     return ImageSet(paths, names, base, [])
@@ -275,8 +296,10 @@ def mixed_sizes_error(spec: SourceSpec, sizes: dict[str, tuple[int, int]]) -> In
         by_size.setdefault(size, []).append(name)
     groups = sorted(by_size.items(), key=lambda item: -len(item[1]))
     listing = "; ".join(f"{w}x{h}: {named_list(names, NAMES_SHOWN)}" for (w, h), names in groups)
-    return InputError(f"--source {spec.text} mixes image sizes ({listing}); nothing was stored",
-                      "one session is one camera at one resolution: narrow the glob or list to one camera's images")
+    return InputError(
+        f"--source {spec.text} mixes image sizes ({listing}); nothing was stored",
+        "one session is one camera at one resolution: narrow the glob or list to one camera's images",
+    )
 
 
 class VideoFileSource:
@@ -288,8 +311,10 @@ class VideoFileSource:
             self._capture = cv2.VideoCapture(str(path))
         if not self._capture.isOpened():
             self._capture.release()
-            raise InputError(f"cannot decode the video {path}: OpenCV cannot open it",
-                             "is it a video? If so, convert it (e.g. ffmpeg -i IN -c:v mjpeg OUT.avi) and retry")
+            raise InputError(
+                f"cannot decode the video {path}: OpenCV cannot open it",
+                "is it a video? If so, convert it (e.g. ffmpeg -i IN -c:v mjpeg OUT.avi) and retry",
+            )
         fps = float(self._capture.get(cv2.CAP_PROP_FPS) or 0.0)
         self.fps = fps if math.isfinite(fps) and fps > 0 else DEFAULT_FPS
         self.frame_count = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
@@ -304,8 +329,10 @@ class VideoFileSource:
             yield Frame(index, image, index / self.fps)
             index += 1
         if index == 0:
-            raise InputError(f"cannot decode the video {self.path}: not a single frame could be read",
-                             "the file is truncated or uses a codec this OpenCV lacks")
+            raise InputError(
+                f"cannot decode the video {self.path}: not a single frame could be read",
+                "the file is truncated or uses a codec this OpenCV lacks",
+            )
 
     def close(self) -> None:
         self._capture.release()
@@ -319,14 +346,18 @@ class CameraSource:
         if isinstance(target, str) and not Path(target).exists():
             present = sorted(str(p) for p in Path("/dev").glob("video*"))
             listing = ", ".join(present) if present else "none"
-            raise InputError(f"cannot open {label}: {target} does not exist (video devices present: {listing})",
-                             "plug the camera in, or pass the device it appears as")
+            raise InputError(
+                f"cannot open {label}: {target} does not exist (video devices present: {listing})",
+                "plug the camera in, or pass the device it appears as",
+            )
         with quiet_opencv():
             self._capture = cv2.VideoCapture(target)
         if not self._capture.isOpened():
             self._capture.release()
-            raise InputError(f"cannot open {label}: OpenCV could not open the device",
-                             "check the index or /dev/videoN, its permissions, and that no other program uses it")
+            raise InputError(
+                f"cannot open {label}: OpenCV could not open the device",
+                "check the index or /dev/videoN, its permissions, and that no other program uses it",
+            )
         self._cond = threading.Condition()
         self._latest: tuple[int, np.ndarray, float] | None = None
         self._ended = False

@@ -50,17 +50,24 @@ def reference_of(art: CalibrationArtifact) -> Reference:
     """The calibration's held-out numbers as ``core.check.recheck`` reads them (ring edges from the ring labels)."""
     held = art.held_out
     if held.rms_px is None or held.k_folds == 0:
-        raise UsageError(f"{art.ref} has no held-out RMS to compare with (too few views when it was solved)",
-                         "check a version solved from enough views, or recalibrate")
+        raise UsageError(
+            f"{art.ref} has no held-out RMS to compare with (too few views when it was solved)",
+            "check a version solved from enough views, or recalibrate",
+        )
     edges = [_RING_EDGE.search(r.label) for r in held.by_radius[: N_RINGS - 1]]
-    ring_edges = (np.array([float(m.group("hi")) for m in edges if m is not None])
-                  if len(held.by_radius) == N_RINGS and all(edges) else None)
+    ring_edges = (
+        np.array([float(m.group("hi")) for m in edges if m is not None])
+        if len(held.by_radius) == N_RINGS and all(edges)
+        else None
+    )
 
     def column(rings: list, n: int) -> tuple[np.ndarray, np.ndarray]:
         if len(rings) != n:
             return np.full(n, np.nan), np.zeros(n, np.int64)
-        return (np.array([np.nan if r.held_out_rms_px is None else r.held_out_rms_px for r in rings]),
-                np.array([r.count for r in rings], np.int64))
+        return (
+            np.array([np.nan if r.held_out_rms_px is None else r.held_out_rms_px for r in rings]),
+            np.array([r.count for r in rings], np.int64),
+        )
 
     ring_rms, ring_counts = column(held.by_radius, N_RINGS)
     oct_rms, oct_counts = column(held.by_octant, N_OCTANTS)
@@ -80,7 +87,11 @@ def stored_covariance(art: CalibrationArtifact) -> np.ndarray | None:
         return None
     names = list(cov.parameters)
     G = np.zeros((3, len(names)))
-    focal = [(name, value) for name, value in (("fx", art.camera_matrix[0][0]), ("fy", art.camera_matrix[1][1])) if name in names]
+    focal = [
+        (name, value)
+        for name, value in (("fx", art.camera_matrix[0][0]), ("fy", art.camera_matrix[1][1]))
+        if name in names
+    ]
     for name, value in focal:
         G[0, names.index(name)] = 1.0 / (value * len(focal))
     for row, name in ((1, "cx"), (2, "cy")):
@@ -97,26 +108,63 @@ def stored_sigma(art: CalibrationArtifact) -> dict[str, float]:
     return out
 
 
-def _event(art: CalibrationArtifact, settings: Settings, source: sources.SourceSpec, n_images: int,
-           views: list[outcomes_core.ImageOutcome], result: RecheckResult, distance: DistanceCheck | None) -> CheckEvent:
-    reasons = [f"{r.region}: RMS {r.check_rms_px:.3f} px is {r.ratio:.2f}x the calibration's held-out "
-               f"{r.reference_rms_px:.3f} px (limit {r.limit:.2f}x)" for r in result.failed_regions]
-    reasons += [f"{p.name} moved {_shift_text(p.name, p.shift)} ({p.z:+.1f} sigma, limit {p.z_limit:.1f})"
-                for p in result.failed_shifts]
+def _event(
+    art: CalibrationArtifact,
+    settings: Settings,
+    source: sources.SourceSpec,
+    n_images: int,
+    views: list[outcomes_core.ImageOutcome],
+    result: RecheckResult,
+    distance: DistanceCheck | None,
+) -> CheckEvent:
+    reasons = [
+        f"{r.region}: RMS {r.check_rms_px:.3f} px is {r.ratio:.2f}x the calibration's held-out "
+        f"{r.reference_rms_px:.3f} px (limit {r.limit:.2f}x)"
+        for r in result.failed_regions
+    ]
+    reasons += [
+        f"{p.name} moved {_shift_text(p.name, p.shift)} ({p.z:+.1f} sigma, limit {p.z_limit:.1f})"
+        for p in result.failed_shifts
+    ]
     if distance is not None and not distance.passed:
         reasons.append(distance_reason(distance))
-    regions = [RegionCheck(region=r.region, check_rms_px=_finite(r.check_rms_px),
-                           reference_rms_px=_finite(r.reference_rms_px),
-                           ratio=r.ratio if r.tested else None, limit=r.limit, corners=r.n_corners,
-                           tested=r.tested, passed=r.passed) for r in result.regions]
-    shifts = [ShiftCheck(parameter=p.name, shift=p.shift, sigma=p.sigma, z_limit=p.z_limit,
-                         passed=p.passed) for p in result.shifts]
-    return CheckEvent(check_id=secrets.token_hex(6), serial=art.serial, version=art.version,
-                      calibration_sha256=art.content_sha256, source=source.recorded, station=settings.station,
-                      operator=settings.operator, at=utc_now(), image_size=art.image_size, images=n_images,
-                      views=[v.name for v in views], view_rms_px=[float(x) for x in result.view_rms_px],
-                      regions=regions, shifts=shifts, distance=distance, alpha=result.alpha,
-                      passed=result.passed and (distance is None or distance.passed), reasons=reasons)
+    regions = [
+        RegionCheck(
+            region=r.region,
+            check_rms_px=_finite(r.check_rms_px),
+            reference_rms_px=_finite(r.reference_rms_px),
+            ratio=r.ratio if r.tested else None,
+            limit=r.limit,
+            corners=r.n_corners,
+            tested=r.tested,
+            passed=r.passed,
+        )
+        for r in result.regions
+    ]
+    shifts = [
+        ShiftCheck(parameter=p.name, shift=p.shift, sigma=p.sigma, z_limit=p.z_limit, passed=p.passed)
+        for p in result.shifts
+    ]
+    return CheckEvent(
+        check_id=secrets.token_hex(6),
+        serial=art.serial,
+        version=art.version,
+        calibration_sha256=art.content_sha256,
+        source=source.recorded,
+        station=settings.station,
+        operator=settings.operator,
+        at=utc_now(),
+        image_size=art.image_size,
+        images=n_images,
+        views=[v.name for v in views],
+        view_rms_px=[float(x) for x in result.view_rms_px],
+        regions=regions,
+        shifts=shifts,
+        distance=distance,
+        alpha=result.alpha,
+        passed=result.passed and (distance is None or distance.passed),
+        reasons=reasons,
+    )
 
 
 def _finite(value: float) -> float | None:
@@ -140,22 +188,37 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
         reference = reference_of(art)
         spec = board_spec(art.board)
         if source.kind not in sources.IMAGE_SETS:
-            raise UsageError(f"check reads a folder, glob or list of images, not a {source.kind}",
-                             "save a few board pictures from the camera and check those")
-        views, n_images = detect_fixture_views(spec, art.board.ref, source, art.image_size, art.ref, settings.jobs)
+            raise UsageError(
+                f"check reads a folder, glob or list of images, not a {source.kind}",
+                "save a few board pictures from the camera and check those",
+            )
+        views, n_images = detect_fixture_views(
+            spec, art.board.ref, source, art.image_size, art.ref, settings.jobs
+        )
         if len(views) < MIN_CHECK_VIEWS:  # refused before anything is stored: a FAIL here would be noise
-            raise InputError(f"cannot judge {art.ref} from {len(views)} board view(s) in {n_images} image(s): the "
-                             f"check's statistics need at least {MIN_CHECK_VIEWS}; nothing was stored",
-                             f"take {MIN_CHECK_VIEWS - len(views)} more pictures of the board (tilted, across the "
-                             "image) and check again")
+            raise InputError(
+                f"cannot judge {art.ref} from {len(views)} board view(s) in {n_images} image(s): the "
+                f"check's statistics need at least {MIN_CHECK_VIEWS}; nothing was stored",
+                f"take {MIN_CHECK_VIEWS - len(views)} more pictures of the board (tilted, across the "
+                "image) and check again",
+            )
         obj = spec.object_points()
         ids = [np.asarray(v.corner_ids) for v in views]
-        result = recheck([obj[i] for i in ids], [np.asarray(v.corners_px) for v in views],
-                         np.array(art.camera_matrix), np.array(art.dist_coeffs), art.image_size,
-                         reference, stored_sigma(art), model=art.model.name,
-                         stored_covariance=stored_covariance(art))
+        result = recheck(
+            [obj[i] for i in ids],
+            [np.asarray(v.corners_px) for v in views],
+            np.array(art.camera_matrix),
+            np.array(art.dist_coeffs),
+            art.image_size,
+            reference,
+            stored_sigma(art),
+            model=art.model.name,
+            stored_covariance=stored_covariance(art),
+        )
         distance = None
         if request.reference_distance is not None:
-            distance = judge_distance(request.reference_distance, result.board_distance_m, [v.name for v in views])
+            distance = judge_distance(
+                request.reference_distance, result.board_distance_m, [v.name for v in views]
+            )
         event = _event(art, settings, source, n_images, views, result, distance)
         return store.add_check(event)

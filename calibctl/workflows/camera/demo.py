@@ -66,7 +66,9 @@ class TruthComparison:
 def prepare_dir(out: Path) -> None:
     """(Re)create the demo folder; refuse to wipe a folder the demo did not make."""
     if out.exists() and any(out.iterdir()) and not (out / MARKER).exists():
-        raise AlreadyExistsError(f"{out} exists and was not made by calibctl demo", "pass --out to another folder")
+        raise AlreadyExistsError(
+            f"{out} exists and was not made by calibctl demo", "pass --out to another folder"
+        )
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
@@ -83,23 +85,43 @@ def run_demo(settings: Settings, out: Path, emit: Callable[[DemoStep], None]) ->
     board = boards.add_board(
         settings,
         boards.BoardRegistration(
-            name=BOARD, kind="chessboard", cols=truth["board"]["cols"], rows=truth["board"]["rows"],
-            square_mm=square_mm, uncertainty_mm=0.02, instrument="Mitutoyo 500-196 calipers (demo)",
-            measured_by="demo-qa", measured_on="2026-03-11", note="rendered board, measured by definition",
-            span_mm=square_mm * (max(truth["board"]["cols"], truth["board"]["rows"]) - 1), span_uncertainty_mm=0.1,
+            name=BOARD,
+            kind="chessboard",
+            cols=truth["board"]["cols"],
+            rows=truth["board"]["rows"],
+            square_mm=square_mm,
+            uncertainty_mm=0.02,
+            instrument="Mitutoyo 500-196 calipers (demo)",
+            measured_by="demo-qa",
+            measured_on="2026-03-11",
+            note="rendered board, measured by definition",
+            span_mm=square_mm * (max(truth["board"]["cols"], truth["board"]["rows"]) - 1),
+            span_uncertainty_mm=0.1,
             span_instrument="steel rule 300 mm (demo)",
         ),
     )
     emit(DemoStep(f"1. board {board.ref} registered with a measured square size", "board", board))
 
-    rejected: CaptureResult = capture(settings, CaptureRequest(serial=SERIAL, board=board.ref, source=str(flat.out_dir)))
-    emit(DemoStep("2. capture of a flat board set (the operator forgot to tilt): the gates say what to do", "capture", rejected))
+    rejected: CaptureResult = capture(
+        settings, CaptureRequest(serial=SERIAL, board=board.ref, source=str(flat.out_dir))
+    )
+    emit(
+        DemoStep(
+            "2. capture of a flat board set (the operator forgot to tilt): the gates say what to do",
+            "capture",
+            rejected,
+        )
+    )
 
     accepted = capture(settings, CaptureRequest(serial=SERIAL, board=board.ref, source=str(good.out_dir)))
     emit(DemoStep("3. capture of a good board set", "capture", accepted))
 
     solved = solve(settings, SolveRequest(session_id=accepted.session.session_id))
-    emit(DemoStep("4. solve: every parameter with its one-sigma, held-out error and lint verdict", "solve", solved))
+    emit(
+        DemoStep(
+            "4. solve: every parameter with its one-sigma, held-out error and lint verdict", "solve", solved
+        )
+    )
 
     results = run.lint(settings, [], SERIAL, False)
     emit(DemoStep(f"5. calibctl lint --serial {SERIAL}", "lint", results))
@@ -113,8 +135,12 @@ def run_demo(settings: Settings, out: Path, emit: Callable[[DemoStep], None]) ->
     art = solved.artifact
     K = truth["camera"]["K"]
     comparison = TruthComparison(
-        fx_true=K[0][0], fx_est=art.camera_matrix[0][0], sigma_fx=art.stdev.sigma.get("fx"),
-        cx_true=K[0][2], cx_est=art.camera_matrix[0][2], sigma_cx=art.stdev.sigma.get("cx"),
+        fx_true=K[0][0],
+        fx_est=art.camera_matrix[0][0],
+        sigma_fx=art.stdev.sigma.get("fx"),
+        cx_true=K[0][2],
+        cx_est=art.camera_matrix[0][2],
+        sigma_cx=art.stdev.sigma.get("cx"),
     )
     emit(DemoStep("8. against the renderer's truth", "truth", comparison))
     return solved

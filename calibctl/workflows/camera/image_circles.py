@@ -26,10 +26,14 @@ def parse_image_circle(text: str | None) -> tuple[float, float, float] | None:
     except ValueError:
         values = ()
     if len(values) != 3 or not all(np.isfinite(values)):
-        raise UsageError(f"--image-circle '{text}' is not CX,CY,R", "three numbers in pixels, e.g. 640,480,470")
+        raise UsageError(
+            f"--image-circle '{text}' is not CX,CY,R", "three numbers in pixels, e.g. 640,480,470"
+        )
     if values[2] <= 0:
-        raise UsageError(f"--image-circle '{text}': the radius must be positive, got {values[2]:g} px",
-                         "three numbers in pixels, e.g. 640,480,470")
+        raise UsageError(
+            f"--image-circle '{text}': the radius must be positive, got {values[2]:g} px",
+            "three numbers in pixels, e.g. 640,480,470",
+        )
     return values[0], values[1], values[2]
 
 
@@ -37,13 +41,17 @@ def checked_image_circle(circle: tuple[float, float, float], image_size: tuple[i
     """A given circle that fits the (W, H) image, or UsageError (exit 2) with the numbers."""
     problem = circle_problem(circle, image_size)
     if problem is not None:
-        raise UsageError(f"--image-circle: {problem}",
-                         "give the image circle in pixels of the frames (CX,CY = its centre, R = its radius), "
-                         "or leave the option out to find it in the frames")
+        raise UsageError(
+            f"--image-circle: {problem}",
+            "give the image circle in pixels of the frames (CX,CY = its centre, R = its radius), "
+            "or leave the option out to find it in the frames",
+        )
     return ImageCircle(*circle, source="given")
 
 
 def with_circle(gates: list[GateResult], circle: ImageCircle) -> list[GateResult]:
     """The gates with ``circle`` recorded in the coverage gate's detail (a solve's --image-circle)."""
-    return [g.model_copy(update={"detail": {**g.detail, **circle_detail(circle)}}) if g.gate == "coverage" else g
-            for g in gates]
+    return [
+        g.model_copy(update={"detail": {**g.detail, **circle_detail(circle)}}) if g.gate == "coverage" else g
+        for g in gates
+    ]

@@ -63,8 +63,17 @@ Sample = tuple[str, np.ndarray]  # (image name, (H, W) uint8)
 
 def near_patterns(cols: int, rows: int) -> list[tuple[int, int]]:
     """The transposed pattern, one corner more / fewer on one side, then on both sides (each side >= 2)."""
-    candidates = [(rows, cols), (cols + 1, rows), (cols - 1, rows), (cols, rows + 1), (cols, rows - 1),
-                  (cols + 1, rows + 1), (cols - 1, rows - 1), (cols + 1, rows - 1), (cols - 1, rows + 1)]
+    candidates = [
+        (rows, cols),
+        (cols + 1, rows),
+        (cols - 1, rows),
+        (cols, rows + 1),
+        (cols, rows - 1),
+        (cols + 1, rows + 1),
+        (cols - 1, rows - 1),
+        (cols + 1, rows - 1),
+        (cols - 1, rows + 1),
+    ]
     seen: list[tuple[int, int]] = []
     for c, r in candidates:
         if c >= 2 and r >= 2 and (c, r) != (cols, rows) and (c, r) not in seen:
@@ -77,8 +86,12 @@ def _found(sample: Sample, pattern: tuple[int, int], spec: BoardSpec, settings: 
     return detect_board(sample[1], probe, settings)[0] is not None
 
 
-def probe(samples: Sequence[Sample], spec: BoardSpec, patterns: Sequence[tuple[int, int]],
-          classic_only: bool = False) -> dict[tuple[int, int], list[str]]:
+def probe(
+    samples: Sequence[Sample],
+    spec: BoardSpec,
+    patterns: Sequence[tuple[int, int]],
+    classic_only: bool = False,
+) -> dict[tuple[int, int], list[str]]:
     """For each pattern, the names of the samples it is found in (samples x patterns detections)."""
     settings = DetectorSettings(sb_fallback=not classic_only)
     jobs = [(pattern, sample) for pattern in patterns for sample in samples]
@@ -99,8 +112,9 @@ def spread(items: Sequence[Sample], count: int) -> list[Sample]:
     return [items[i] for i in dict.fromkeys(picks.tolist())]
 
 
-def _probe_near(samples: Sequence[Sample], spec: BoardSpec,
-                patterns: Sequence[tuple[int, int]]) -> dict[tuple[int, int], list[str]]:
+def _probe_near(
+    samples: Sequence[Sample], spec: BoardSpec, patterns: Sequence[tuple[int, int]]
+) -> dict[tuple[int, int], list[str]]:
     """``probe`` (classic detector), first the first sample with every pattern, then the other samples
     with the patterns it showed (all of them when it showed none): 9 + 2k detections instead of 27."""
     if not samples:
@@ -130,8 +144,11 @@ def seen_sizes(samples: Sequence[Sample], spec: BoardSpec) -> list[tuple[int, in
     (``board_extent.visible_chessboard``: whatever their size), oriented like the registered pattern,
     the most often seen first, then the largest. A size still has to be confirmed by the classic detector."""
     with ThreadPoolExecutor(max_workers=PROBE_WORKERS) as pool:
-        seen = Counter(_oriented(size, spec) for size in pool.map(lambda sample: visible_chessboard(sample[1]), samples)
-                       if size is not None)
+        seen = Counter(
+            _oriented(size, spec)
+            for size in pool.map(lambda sample: visible_chessboard(sample[1]), samples)
+            if size is not None
+        )
     return sorted(seen, key=lambda size: (seen[size], size[0] * size[1]), reverse=True)
 
 
@@ -145,43 +162,63 @@ def _names(names: Sequence[str]) -> str:
     return ", ".join(names[:-1]) + " and " + names[-1] if len(names) > 1 else names[0]
 
 
-def nothing_found_error(spec: BoardSpec, board_ref: str, board_name: str, where: str, n_readable: int,
-                        samples: Sequence[Sample]) -> InputError:
+def nothing_found_error(
+    spec: BoardSpec, board_ref: str, board_name: str, where: str, n_readable: int, samples: Sequence[Sample]
+) -> InputError:
     """The error for "the registered pattern is in none of the readable pictures" (exit 2)."""
     kind = "ChArUco board" if spec.kind != CHESSBOARD else "chessboard"
-    message = (f"no {spec.cols}x{spec.rows} {kind} (board {board_ref}) was found in any of the {n_readable} "
-               f"readable {where}; nothing was stored")
+    message = (
+        f"no {spec.cols}x{spec.rows} {kind} (board {board_ref}) was found in any of the {n_readable} "
+        f"readable {where}; nothing was stored"
+    )
     registry = f"`calibctl board show {board_name}`"
     if spec.kind != CHESSBOARD:
-        return InputError(message, f"check the board's squares, marker size and dictionary with {registry}, "
-                                   "and that the board is in the frame, lit and in focus")
+        return InputError(
+            message,
+            f"check the board's squares, marker size and dictionary with {registry}, "
+            "and that the board is in the frame, lit and in focus",
+        )
     patterns = near_patterns(spec.cols, spec.rows)
     samples = spread(samples, PROBE_IMAGES)
     found = _probe_near(samples, spec, patterns)
     # a board two or more corners off is not among the near patterns: name what SB sees, once the classic
     # detector confirms it
-    seen = [size for size in seen_sizes(samples, spec) if size not in found and size != (spec.cols, spec.rows)]
+    seen = [
+        size for size in seen_sizes(samples, spec) if size not in found and size != (spec.cols, spec.rows)
+    ]
     found.update(probe(samples, spec, seen, classic_only=True))
     # a sub-board of the real one is found wherever the real one is: prefer the most hits, then the largest
-    visible = sorted(((p, names) for p, names in found.items() if names),
-                     key=lambda item: (len(item[1]), item[0][0] * item[0][1]), reverse=True)
+    visible = sorted(
+        ((p, names) for p, names in found.items() if names),
+        key=lambda item: (len(item[1]), item[0][0] * item[0][1]),
+        reverse=True,
+    )
     tried = ", ".join(f"{c}x{r}" for c, r in patterns)
     if visible:
         (c, r), names = visible[0]
         others = "".join(f"; {_a(pc, pr)} one in {_names(n)}" for (pc, pr), n in visible[1:3])
         message += f"; {_a(c, r)} chessboard is visible in {_names(names)}{others}"
-        hint = (f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and "
-                f"capture with a board registered as {c}x{r}")
+        hint = (
+            f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and "
+            f"capture with a board registered as {c}x{r}"
+        )
     else:
         probed = f"{len(samples)} of them" if samples else "none of them"
         message += f"; the near patterns {tried} are not visible either (probed {probed})"
-        hint = (f"check the registered pattern with {registry} (inner corners, cols x rows, squares - 1 per side), "
-                "and that the whole board is in the frame, lit and in focus")
+        hint = (
+            f"check the registered pattern with {registry} (inner corners, cols x rows, squares - 1 per side), "
+            "and that the whole board is in the frame, lit and in focus"
+        )
     return InputError(message, hint)
 
 
-def larger_board_error(spec: BoardSpec, board_ref: str, board_name: str, samples: Sequence[Sample],
-                       corners_px: Mapping[str, np.ndarray] | None = None) -> InputError | None:
+def larger_board_error(
+    spec: BoardSpec,
+    board_ref: str,
+    board_name: str,
+    samples: Sequence[Sample],
+    corners_px: Mapping[str, np.ndarray] | None = None,
+) -> InputError | None:
     """An error when the pictures show a larger chessboard than the registered one, else None.
 
     ``corners_px``: the registered pattern's detected corners per sample name ((cols * rows, 2) float64,
@@ -193,7 +230,9 @@ def larger_board_error(spec: BoardSpec, board_ref: str, board_name: str, samples
     if spec.kind != CHESSBOARD or len(samples) < LARGER_MIN_HITS:
         return None
     known = corners_px or {}
-    if all(name in known and not might_extend(gray, known[name], spec.cols, spec.rows) for name, gray in samples):
+    if all(
+        name in known and not might_extend(gray, known[name], spec.cols, spec.rows) for name, gray in samples
+    ):
         return None
     need = max(LARGER_MIN_HITS, len(samples) // 2 + 1)
     settings = DetectorSettings(sb_fallback=False)
@@ -214,7 +253,11 @@ def larger_board_error(spec: BoardSpec, board_ref: str, board_name: str, samples
     larger = [size for size in seen_sizes(samples, spec) if _holds_more(size, spec)]
     larger += [p for p in [(spec.cols + 1, spec.rows), (spec.cols, spec.rows + 1)] if p not in larger]
     with ThreadPoolExecutor(max_workers=PROBE_WORKERS) as pool:
-        hits = [(p, names) for p, names in zip(larger, pool.map(hits_of, larger), strict=True) if len(names) >= need]
+        hits = [
+            (p, names)
+            for p, names in zip(larger, pool.map(hits_of, larger), strict=True)
+            if len(names) >= need
+        ]
     if not hits:
         return None
     (c, r), names = max(hits, key=lambda item: (len(item[1]), item[0][0] * item[0][1]))

@@ -65,9 +65,19 @@ from calibctl.workflows.store_admin.records import open_store
 MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
 _OCTANT_LABELS = tuple(f"octant {i}" for i in range(8))
 _FLAG_NAMES = (
-    "CALIB_USE_INTRINSIC_GUESS", "CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_PRINCIPAL_POINT", "CALIB_ZERO_TANGENT_DIST",
-    "CALIB_FIX_K1", "CALIB_FIX_K2", "CALIB_FIX_K3", "CALIB_FIX_K4", "CALIB_FIX_K5", "CALIB_FIX_K6",
-    "CALIB_RATIONAL_MODEL", "CALIB_RECOMPUTE_EXTRINSIC", "CALIB_FIX_SKEW",
+    "CALIB_USE_INTRINSIC_GUESS",
+    "CALIB_FIX_ASPECT_RATIO",
+    "CALIB_FIX_PRINCIPAL_POINT",
+    "CALIB_ZERO_TANGENT_DIST",
+    "CALIB_FIX_K1",
+    "CALIB_FIX_K2",
+    "CALIB_FIX_K3",
+    "CALIB_FIX_K4",
+    "CALIB_FIX_K5",
+    "CALIB_FIX_K6",
+    "CALIB_RATIONAL_MODEL",
+    "CALIB_RECOMPUTE_EXTRINSIC",
+    "CALIB_FIX_SKEW",
 )
 
 
@@ -94,10 +104,14 @@ class SolveOutcome:
 
 
 def flag_names(flags: int) -> list[str]:
-    return [name for name in _FLAG_NAMES if flags & int(getattr(cv2, name, None) or getattr(core_solve, name))]
+    return [
+        name for name in _FLAG_NAMES if flags & int(getattr(cv2, name, None) or getattr(core_solve, name))
+    ]
 
 
-def _rings(fit: ResidualBreakdown, held: ResidualBreakdown, labels: Sequence[str], which: str) -> list[RingRms]:
+def _rings(
+    fit: ResidualBreakdown, held: ResidualBreakdown, labels: Sequence[str], which: str
+) -> list[RingRms]:
     fit_rms = fit.ring_rms_px if which == "ring" else fit.octant_rms_px
     held_rms = held.ring_rms_px if which == "ring" else held.octant_rms_px
     counts = fit.ring_counts if which == "ring" else fit.octant_counts
@@ -116,7 +130,8 @@ def _held_out(report: HoldoutReport) -> HeldOut:
     edges = report.fit.radius_edges_px
     bounds = [0.0, *[float(e) for e in edges], None]
     ring_labels = [
-        f"quintile {i + 1} (r {bounds[i]:.0f}-{bounds[i + 1]:.0f} px)" if bounds[i + 1] is not None
+        f"quintile {i + 1} (r {bounds[i]:.0f}-{bounds[i + 1]:.0f} px)"
+        if bounds[i + 1] is not None
         else f"quintile {i + 1} (r >= {bounds[i]:.0f} px)"
         for i in range(5)
     ]
@@ -150,9 +165,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         # the model is chosen on every corner; the corner rule then runs under the chosen model
         selection = select_model(obj, img, size, lanes=lanes)
         model_name = selection.chosen
-        trail = [
-            {k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail
-        ]
+        trail = [{k: v for k, v in c.__dict__.items() if v is not None} for c in selection.trail]
     else:
         model_name = get_model(request.model).name
     rejection = solve_rejecting_corners(obj, img, size, model_name, ids)
@@ -167,8 +180,11 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
     kept_obj, kept_img = [obj[i] for i in kept], [img[i] for i in kept]
     # the capture gate's views (spread_views): with the gate's corners and model, the gate's answer
     checked = [kept[i] for i in spread_views(len(kept))]
-    split = lanes.start(lambda: check_one_camera([obj[i] for i in checked], [img[i] for i in checked], size,
-                                                 model_name, lanes=lanes))
+    split = lanes.start(
+        lambda: check_one_camera(
+            [obj[i] for i in checked], [img[i] for i in checked], size, model_name, lanes=lanes
+        )
+    )
     try:
         holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
@@ -182,22 +198,40 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         raise
     found = split.result()
     consistency = None if found is None else _consistency(found, [session.views[i].name for i in checked])
-    return (model_name, solution, first, outliers, kept, dropped, holdout, trail, rejection, consistency,
-            detector_rms)
+    return (
+        model_name,
+        solution,
+        first,
+        outliers,
+        kept,
+        dropped,
+        holdout,
+        trail,
+        rejection,
+        consistency,
+        detector_rms,
+    )
 
 
 def _consistency(split: CameraSplit, names: list[str]) -> CameraConsistency:
     Ka, Kb = split.camera_a, split.camera_b
     return CameraConsistency(
-        group_a=[names[i] for i in split.group_a], group_b=[names[i] for i in split.group_b],
-        holdout_rms_px=split.holdout_rms_px, cross_rms_px=split.cross_rms_px,
-        fx_px=(float(Ka[0, 0]), float(Kb[0, 0])), cx_px=(float(Ka[0, 2]), float(Kb[0, 2])),
-        cy_px=(float(Ka[1, 2]), float(Kb[1, 2])), ratio=split.ratio, threshold=split.threshold,
-        two_cameras_suspected=split.suspected)
+        group_a=[names[i] for i in split.group_a],
+        group_b=[names[i] for i in split.group_b],
+        holdout_rms_px=split.holdout_rms_px,
+        cross_rms_px=split.cross_rms_px,
+        fx_px=(float(Ka[0, 0]), float(Kb[0, 0])),
+        cx_px=(float(Ka[0, 2]), float(Kb[0, 2])),
+        cy_px=(float(Ka[1, 2]), float(Kb[1, 2])),
+        ratio=split.ratio,
+        threshold=split.threshold,
+        two_cameras_suspected=split.suspected,
+    )
 
 
-def _views(session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers,
-           kept, dropped) -> list[ViewResult]:
+def _views(
+    session: CaptureSession, solution: IntrinsicsSolution, first: IntrinsicsSolution, outliers, kept, dropped
+) -> list[ViewResult]:
     """Per-view RMS and pose from the final solve; a dropped view keeps those of the solve that flagged it."""
     out, pos = [], {v: i for i, v in enumerate(kept)}
     outlier_views = set(outliers.outlier_views)
@@ -228,8 +262,11 @@ def _covariance(sol: IntrinsicsSolution) -> ParameterCovariance | None:
     cov = sol.covariance
     if cov is None or cov.covariance is None or sol.sigma_refused_reason:
         return None
-    return ParameterCovariance(parameters=list(cov.names), matrix=[[float(x) for x in row] for row in cov.covariance],
-                               aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio))
+    return ParameterCovariance(
+        parameters=list(cov.names),
+        matrix=[[float(x) for x in row] for row in cov.covariance],
+        aspect_ratio=None if sol.aspect_ratio is None else float(sol.aspect_ratio),
+    )
 
 
 def _view_level(sol: IntrinsicsSolution) -> ViewLevelSigma | None:
@@ -237,8 +274,12 @@ def _view_level(sol: IntrinsicsSolution) -> ViewLevelSigma | None:
     cov = sol.covariance
     if cov is None or cov.covariance is None or cov.view_factor is None or sol.sigma_refused_reason:
         return None
-    return ViewLevelSigma(sigma_factor=float(cov.view_factor), views=int(cov.n_views),
-                          used="view-level" if cov.inflated else "jacobian", rule=VIEW_FACTOR_RULE)
+    return ViewLevelSigma(
+        sigma_factor=float(cov.view_factor),
+        views=int(cov.n_views),
+        used="view-level" if cov.inflated else "jacobian",
+        rule=VIEW_FACTOR_RULE,
+    )
 
 
 def _gates(session: CaptureSession, request: SolveRequest) -> list:
@@ -248,15 +289,18 @@ def _gates(session: CaptureSession, request: SolveRequest) -> list:
     return with_circle(list(session.gates), checked_image_circle(request.image_circle, session.image_size))
 
 
-def station_region(settings: Settings, image_size: tuple[int, int],
-                   circle_px: tuple[float, float, float] | None) -> Region:
+def station_region(
+    settings: Settings, image_size: tuple[int, int], circle_px: tuple[float, float, float] | None
+) -> Region:
     """The station's gates.projection_region parsed (UsageError, exit 2, naming it when it is not a region of
     this image)."""
     try:
         return parse_region(settings.gates.projection_region, image_size, circle_px)
     except ValueError as exc:
-        raise UsageError(f"station setting gates.projection_region: {exc}",
-                         "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels") from exc
+        raise UsageError(
+            f"station setting gates.projection_region: {exc}",
+            "declare auto, image, circle or a box U0,V0,U1,V1 inside the image, in pixels",
+        ) from exc
 
 
 def _with_required_region(art: CalibrationArtifact, settings: Settings) -> CalibrationArtifact:
@@ -266,21 +310,44 @@ def _with_required_region(art: CalibrationArtifact, settings: Settings) -> Calib
     if settings.gates.projection_region.strip().lower() == "auto" or art.image_size is None:
         return art
     size = (int(art.image_size[0]), int(art.image_size[1]))
-    circle = facts_from_document(art.model_dump(mode="json", include={"gates", "camera_matrix"}), art.serial).image_circle
+    circle = facts_from_document(
+        art.model_dump(mode="json", include={"gates", "camera_matrix"}), art.serial
+    ).image_circle
     vertices = station_region(settings, size, circle).vertices_px(size)
     return art.model_copy(update={"required_region_px": [(float(u), float(v)) for u, v in vertices]})
 
 
 def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> list[RejectedCorner]:
-    return [RejectedCorner(view=session.views[c.view_index].name, corner_id=c.corner_id, residual_px=c.residual_px,
-                           dx_px=c.dx_px, dy_px=c.dy_px) for c in rejection.rejected]
+    return [
+        RejectedCorner(
+            view=session.views[c.view_index].name,
+            corner_id=c.corner_id,
+            residual_px=c.residual_px,
+            dx_px=c.dx_px,
+            dy_px=c.dy_px,
+        )
+        for c in rejection.rejected
+    ]
 
 
-def build_artifact(session: CaptureSession, request: SolveRequest, settings: Settings) -> tuple[CalibrationArtifact, list]:
+def build_artifact(
+    session: CaptureSession, request: SolveRequest, settings: Settings
+) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
     with verdict_lanes(settings.jobs) as lanes:
-        model_name, sol, first, outliers, kept, dropped, holdout, trail, rejection, consistency, detector_rms = \
-            _solve_numbers(session, request, lanes)
+        (
+            model_name,
+            sol,
+            first,
+            outliers,
+            kept,
+            dropped,
+            holdout,
+            trail,
+            rejection,
+            consistency,
+            detector_rms,
+        ) = _solve_numbers(session, request, lanes)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
@@ -312,8 +379,9 @@ def build_artifact(session: CaptureSession, request: SolveRequest, settings: Set
         board=session.board,
         views=_views(session, sol, first, outliers, kept, dropped),
         rejected_corners=_rejected_corners(session, rejection),
-        observed_region_px=_observed_region(rejection.kept([np.asarray(v.corners_px, np.float64)
-                                                            for v in session.views])),
+        observed_region_px=_observed_region(
+            rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views])
+        ),
         camera_consistency=consistency,
         provenance=Provenance(
             calibctl_version=__version__,
@@ -347,8 +415,11 @@ def checked_override(reason: str | None) -> str | None:
     if reason is None:
         return None
     if not reason.strip():
-        raise UsageError("--override-gauge needs a reason", "say why the failed metric gauge does not apply, e.g. "
-                         "--override-gauge 'fixture moved; board re-measured 2026-11-27 (25.02 mm)'")
+        raise UsageError(
+            "--override-gauge needs a reason",
+            "say why the failed metric gauge does not apply, e.g. "
+            "--override-gauge 'fixture moved; board re-measured 2026-11-27 (25.02 mm)'",
+        )
     return reason.strip()
 
 
@@ -357,8 +428,10 @@ def _check_gauge_override(session: CaptureSession, reason: str | None) -> None:
     gauge = session.metric_gauge
     if reason is not None and (gauge is None or gauge.distance.passed):
         what = "has no metric gauge" if gauge is None else "passed its metric gauge"
-        raise UsageError(f"--override-gauge: session {session.session_id} {what}; there is nothing to override",
-                         "leave --override-gauge out")
+        raise UsageError(
+            f"--override-gauge: session {session.session_id} {what}; there is nothing to override",
+            "leave --override-gauge out",
+        )
 
 
 def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
@@ -375,11 +448,15 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
     report_path = version = None
     with open_store(settings, write=True) as store:
         session = (
-            store.get_session(request.session_id) if request.session_id else store.latest_session(request.serial or "")
+            store.get_session(request.session_id)
+            if request.session_id
+            else store.latest_session(request.serial or "")
         )
         if request.session_id and request.serial and session.serial != request.serial:
-            raise UsageError(f"session {session.session_id} is of camera {session.serial}, not {request.serial}",
-                             "name the session alone, or the serial alone (its latest accepted session)")
+            raise UsageError(
+                f"session {session.session_id} is of camera {session.serial}, not {request.serial}",
+                "name the session alone, or the serial alone (its latest accepted session)",
+            )
         if session.status != "accepted":
             failed = ", ".join(g.gate for g in session.gates if not g.passed) or "capture gates"
             raise UsageError(
@@ -403,4 +480,6 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
         active = store.active_version(stored.serial) == stored.version
     if report_path is not None:
         report_workflow.write_report(settings, stored.ref, report_path, force=False)
-    return SolveOutcome(artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path)
+    return SolveOutcome(
+        artifact=stored, active=active, outlier_corners=corner_outliers, report_path=report_path
+    )

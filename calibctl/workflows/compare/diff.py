@@ -66,21 +66,38 @@ class CameraDiff:
     def as_json(self) -> dict[str, Any]:
         r = self.result
         return {
-            "a": _side(self.a), "b": _side(self.b), "scale": self.scale,
+            "a": _side(self.a),
+            "b": _side(self.b),
+            "scale": self.scale,
             "range_m": None if math.isinf(r.range_m) else r.range_m,
-            "grid": list(r.grid), "samples": len(r.pixels_px), "samples_outside_a_model": r.dropped,
-            "verdict": self.verdict, "reasons": list(r.reasons), "alpha": ALPHA,
+            "grid": list(r.grid),
+            "samples": len(r.pixels_px),
+            "samples_outside_a_model": r.dropped,
+            "verdict": self.verdict,
+            "reasons": list(r.reasons),
+            "alpha": ALPHA,
             "unexplained_limit_px": UNEXPLAINED_LIMIT_PX,
             "raw": _field_json(r.raw),
-            "fit": {**_field_json(r.fit), "rotation_deg": r.rotation_fit_deg, "rvec_rad": r.rvec_fit.tolist(),
-                    "tvec_m": r.tvec_fit_m.tolist()},
-            "notes": self.notes, "map": None if self.map_path is None else str(self.map_path),
+            "fit": {
+                **_field_json(r.fit),
+                "rotation_deg": r.rotation_fit_deg,
+                "rvec_rad": r.rvec_fit.tolist(),
+                "tvec_m": r.tvec_fit_m.tolist(),
+            },
+            "notes": self.notes,
+            "map": None if self.map_path is None else str(self.map_path),
         }
 
 
 def _side(art: CalibrationArtifact) -> dict[str, Any]:
-    return {"ref": art.ref, "status": art.status, "model": art.model.name, "image_size": list(art.image_size),
-            "content_sha256": art.content_sha256, "has_covariance": art.stdev.covariance is not None}
+    return {
+        "ref": art.ref,
+        "status": art.status,
+        "model": art.model.name,
+        "image_size": list(art.image_size),
+        "content_sha256": art.content_sha256,
+        "has_covariance": art.stdev.covariance is not None,
+    }
 
 
 def _field_json(f: DiffField) -> dict[str, Any]:
@@ -90,26 +107,39 @@ def _field_json(f: DiffField) -> dict[str, Any]:
         out["z_max"] = float(f.z.max())
     if f.test is not None:
         t = f.test
-        out["chi2"] = {"statistic": t.statistic, "dof": t.dof, "p_value": t.p_value, "threshold": t.threshold,
-                       "significant": t.significant, "unexplained_max_px": t.unexplained_max_px,
-                       "unexplained_rms_px": t.unexplained_rms_px}
+        out["chi2"] = {
+            "statistic": t.statistic,
+            "dof": t.dof,
+            "p_value": t.p_value,
+            "threshold": t.threshold,
+            "significant": t.significant,
+            "unexplained_max_px": t.unexplained_max_px,
+            "unexplained_rms_px": t.unexplained_rms_px,
+        }
     return out
 
 
 def lens_of(art: CalibrationArtifact) -> Lens:
     """The stored calibration as core.compare's Lens (its covariance when it stores one)."""
     cov = art.stdev.covariance
-    return Lens(np.array(art.camera_matrix, dtype=np.float64), np.array(art.dist_coeffs, dtype=np.float64),
-                (int(art.image_size[0]), int(art.image_size[1])), art.model.name == "fisheye",
-                None if cov is None else np.array(cov.matrix, dtype=np.float64),
-                () if cov is None else tuple(cov.parameters), None if cov is None else cov.aspect_ratio,
-                art.model.name)
+    return Lens(
+        np.array(art.camera_matrix, dtype=np.float64),
+        np.array(art.dist_coeffs, dtype=np.float64),
+        (int(art.image_size[0]), int(art.image_size[1])),
+        art.model.name == "fisheye",
+        None if cov is None else np.array(cov.matrix, dtype=np.float64),
+        () if cov is None else tuple(cov.parameters),
+        None if cov is None else cov.aspect_ratio,
+        art.model.name,
+    )
 
 
 def check_request(request: DiffRequest) -> None:
     """What diff refuses before it opens the store."""
     if not (request.range_m > 0):
-        raise UsageError(f"--range-m must be positive, got {request.range_m}", "metres; omit it for rays (infinity)")
+        raise UsageError(
+            f"--range-m must be positive, got {request.range_m}", "metres; omit it for rays (infinity)"
+        )
     if request.scale is not None and not (math.isfinite(request.scale) and request.scale > 0):
         raise UsageError(f"--scale must be a positive number, got {request.scale}")
     cols, rows = request.grid
@@ -125,43 +155,59 @@ def _pixel_frames(a: CalibrationArtifact, b: CalibrationArtifact, lens_b: Lens, 
                 f"{a.ref} is {wa}x{ha} and {b.ref} is {wb}x{hb}: projections on different pixel grids cannot be "
                 "compared without the scale between them",
                 f"if {b.ref} is the same sensor read out at another resolution, pass --scale S (its pixels times S "
-                f"are {a.ref}'s; here S = {wa / wb:g} if the whole sensor is read out in both)")
+                f"are {a.ref}'s; here S = {wa / wb:g} if the whole sensor is read out in both)",
+            )
         return lens_b
     if (round(wb * scale), round(hb * scale)) != (wa, ha):
-        raise UsageError(f"--scale {scale:g} makes {b.ref}'s {wb}x{hb} into {round(wb * scale)}x{round(hb * scale)}, "
-                         f"not {a.ref}'s {wa}x{ha}", f"pass the scale of the readouts, here {wa / wb:g}")
+        raise UsageError(
+            f"--scale {scale:g} makes {b.ref}'s {wb}x{hb} into {round(wb * scale)}x{round(hb * scale)}, "
+            f"not {a.ref}'s {wa}x{ha}",
+            f"pass the scale of the readouts, here {wa / wb:g}",
+        )
     return lens_b.scaled(scale)
 
 
 def diff_cameras(settings: Settings, request: DiffRequest) -> CameraDiff:
     """Compare two stored camera calibrations (``SERIAL[@N]`` each)."""
     check_request(request)
-    return compare_artifacts(records.show(settings, request.ref_a), records.show(settings, request.ref_b), request)
+    return compare_artifacts(
+        records.show(settings, request.ref_a), records.show(settings, request.ref_b), request
+    )
 
 
 def compare_artifacts(a: CalibrationArtifact, b: CalibrationArtifact, request: DiffRequest) -> CameraDiff:
     """``diff_cameras`` of two calibrations read already (a rollout reads all its targets in one store session)."""
     if a.serial == b.serial and a.version == b.version:
-        raise UsageError(f"{request.ref_a} and {request.ref_b} are both {a.ref}: there is nothing to compare",
-                         "name two different versions (e.g. CAM@3 CAM@4; `calibctl history SERIAL` lists them)")
+        raise UsageError(
+            f"{request.ref_a} and {request.ref_b} are both {a.ref}: there is nothing to compare",
+            "name two different versions (e.g. CAM@3 CAM@4; `calibctl history SERIAL` lists them)",
+        )
     lens_a = lens_of(a)
     lens_b = _pixel_frames(a, b, lens_of(b), request.scale)
-    notes = [f"{art.ref} is a REJECTED calibration (compared as asked; a robot must not load it)"
-             for art in (a, b) if art.status == "rejected"]
+    notes = [
+        f"{art.ref} is a REJECTED calibration (compared as asked; a robot must not load it)"
+        for art in (a, b)
+        if art.status == "rejected"
+    ]
     if a.model.name != b.model.name:
-        notes.append(f"different lens models ({a.model.name} and {b.model.name}): compared by projection; their "
-                     "parameters cannot be compared one by one, and a difference neither model's noise can "
-                     "produce is reported as unexplained")
+        notes.append(
+            f"different lens models ({a.model.name} and {b.model.name}): compared by projection; their "
+            "parameters cannot be compared one by one, and a difference neither model's noise can "
+            "produce is reported as unexplained"
+        )
     if request.scale is not None:
         notes.append(f"{b.ref} scaled by {request.scale:g} into {a.ref}'s pixels")
     try:
         result = projection_diff(lens_a, lens_b, request.grid, request.range_m)
     except ValueError as exc:
-        raise NumericalError(f"cannot compare {a.ref} and {b.ref}: {exc}",
-                             "the two lens models share almost no part of the image") from exc
+        raise NumericalError(
+            f"cannot compare {a.ref} and {b.ref}: {exc}",
+            "the two lens models share almost no part of the image",
+        ) from exc
     out = CameraDiff(a, b, request.scale, result, notes)
     if request.map_path is not None:
-        write_atomic(request.map_path, render_map(out.a.ref, out.b.ref, lens_a.image_size, result),
-                     force=request.force)
+        write_atomic(
+            request.map_path, render_map(out.a.ref, out.b.ref, lens_a.image_size, result), force=request.force
+        )
         out.map_path = request.map_path
     return out

@@ -23,14 +23,31 @@ def _grid_values(result: ProjectionDiff, values: np.ndarray, image_size: tuple[i
     return out
 
 
-def _panel(result: ProjectionDiff, values: np.ndarray, image_size: tuple[int, int], title: str, unit: str) -> str:
+def _panel(
+    result: ProjectionDiff, values: np.ndarray, image_size: tuple[int, int], title: str, unit: str
+) -> str:
     w, h = image_size
     grid = _grid_values(result, values, image_size)
     lo, hi = 0.0, float(np.nanmax(grid)) if np.isfinite(grid).any() else 1.0
-    plot = Plot(title, (0.0, float(w)), (0.0, float(h)), width=520, height=int(40 + 460 * h / w), flip_y=True,
-                x_label="u (px)", y_label="v (px)")
-    heat(plot, grid, np.linspace(0, w, result.grid[0] + 1), np.linspace(0, h, result.grid[1] + 1), lo, hi,
-         empty="#dddddd")
+    plot = Plot(
+        title,
+        (0.0, float(w)),
+        (0.0, float(h)),
+        width=520,
+        height=int(40 + 460 * h / w),
+        flip_y=True,
+        x_label="u (px)",
+        y_label="v (px)",
+    )
+    heat(
+        plot,
+        grid,
+        np.linspace(0, w, result.grid[0] + 1),
+        np.linspace(0, h, result.grid[1] + 1),
+        lo,
+        hi,
+        empty="#dddddd",
+    )
     return plot.svg() + colour_bar(lo, hi, unit, 520)
 
 
@@ -40,15 +57,34 @@ def _magnitude(f: DiffField) -> np.ndarray:
 
 def render_map(ref_a: str, ref_b: str, image_size: tuple[int, int], result: ProjectionDiff) -> str:
     """The HTML page: |difference| as stored and after the fitted rotation, and z where covariances exist."""
-    verdict = {None: "no verdict (a covariance is missing)", True: "significantly different",
-               False: "same within noise"}[result.significant]
-    parts = [f"<h1>{escape(ref_a)} vs {escape(ref_b)}: {escape(verdict)}</h1>",
-             "<p>" + "<br>".join(escape(r) for r in result.reasons) + "</p>",
-             _panel(result, _magnitude(result.raw), image_size, "|q_B - q_A| as stored (px)", "px"),
-             _panel(result, _magnitude(result.fit), image_size,
-                    f"|q_B - q_A| after a {result.rotation_fit_deg:.3f} deg rotation (px)", "px")]
+    verdict = {
+        None: "no verdict (a covariance is missing)",
+        True: "significantly different",
+        False: "same within noise",
+    }[result.significant]
+    parts = [
+        f"<h1>{escape(ref_a)} vs {escape(ref_b)}: {escape(verdict)}</h1>",
+        "<p>" + "<br>".join(escape(r) for r in result.reasons) + "</p>",
+        _panel(result, _magnitude(result.raw), image_size, "|q_B - q_A| as stored (px)", "px"),
+        _panel(
+            result,
+            _magnitude(result.fit),
+            image_size,
+            f"|q_B - q_A| after a {result.rotation_fit_deg:.3f} deg rotation (px)",
+            "px",
+        ),
+    ]
     if result.fit.z is not None:
-        parts.append(_panel(result, result.fit.z, image_size, "z: difference / expected spread, after the rotation",
-                            "sigma"))
-    return ("<!doctype html><html><head><meta charset='utf-8'><title>calibctl diff</title></head>"
-            "<body style='font-family:sans-serif'>" + "".join(parts) + "</body></html>\n")
+        parts.append(
+            _panel(
+                result,
+                result.fit.z,
+                image_size,
+                "z: difference / expected spread, after the rotation",
+                "sigma",
+            )
+        )
+    return (
+        "<!doctype html><html><head><meta charset='utf-8'><title>calibctl diff</title></head>"
+        "<body style='font-family:sans-serif'>" + "".join(parts) + "</body></html>\n"
+    )

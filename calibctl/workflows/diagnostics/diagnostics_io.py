@@ -58,27 +58,42 @@ def _parse_numeric(name: str, cells: list[str], lines: np.ndarray, path: Path) -
         values = np.array(cells, dtype=np.float64)
     except ValueError:
         bad = [f"line {int(lines[i])} ({cell!r})" for i, cell in enumerate(cells) if not _is_number(cell)]
-        raise InputError(f"{path.name}: column {name} has non-numeric cells: {named_list(bad, MAX_LISTED)}",
-                         hint="every cell of a numeric column must be a number") from None
+        raise InputError(
+            f"{path.name}: column {name} has non-numeric cells: {named_list(bad, MAX_LISTED)}",
+            hint="every cell of a numeric column must be a number",
+        ) from None
     finite = np.isfinite(values)
     if not finite.all():
-        raise InputError(f"{path.name}: column {name} has non-finite values (nan/inf) at {lines_text(lines[~finite])}",
-                         hint="drop or repair those rows; a diagnosis cannot be built on NaN")
+        raise InputError(
+            f"{path.name}: column {name} has non-finite values (nan/inf) at {lines_text(lines[~finite])}",
+            hint="drop or repair those rows; a diagnosis cannot be built on NaN",
+        )
     return values
 
 
-def _fast_read(path: Path, header: list[str], numeric_cols: list[str], text_cols: list[str], label_cols: list[str]):
+def _fast_read(
+    path: Path, header: list[str], numeric_cols: list[str], text_cols: list[str], label_cols: list[str]
+):
     """np.loadtxt fast path for well-formed files; None whenever anything needs a line-numbered message."""
     raw = path.read_bytes()
     n_lines = raw.count(b"\n") + (0 if raw.endswith(b"\n") else 1)
     n_rows = n_lines - 1
     if n_rows < 1 or b'"' in raw or raw.count(b",") != n_lines * (len(header) - 1) or b"\r" in raw:
         return None
+
     def load(cols: list[str], dtype):
         if not cols:
             return None
-        return np.loadtxt(path, usecols=[header.index(c) for c in cols], dtype=dtype, delimiter=",", skiprows=1,
-                          comments=None, ndmin=2, encoding="utf-8-sig")
+        return np.loadtxt(
+            path,
+            usecols=[header.index(c) for c in cols],
+            dtype=dtype,
+            delimiter=",",
+            skiprows=1,
+            comments=None,
+            ndmin=2,
+            encoding="utf-8-sig",
+        )
 
     try:
         values = load(numeric_cols + label_cols, np.float64)
@@ -105,9 +120,14 @@ def _label_column(cells: list[str]) -> np.ndarray:
     return values if np.isfinite(values).all() else np.array(cells)
 
 
-def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[str, ...] = (),
-               optional_text: tuple[str, ...] = (), what: str = "CSV",
-               optional_labels: tuple[str, ...] = ()) -> Table:
+def read_table(
+    path: Path,
+    required: tuple[str, ...],
+    optional_numeric: tuple[str, ...] = (),
+    optional_text: tuple[str, ...] = (),
+    what: str = "CSV",
+    optional_labels: tuple[str, ...] = (),
+) -> Table:
     """Read ``path`` (comma-separated, header on line 1). Required columns are numeric.
 
     Well-formed files take a fast np.loadtxt path (about a second per million rows); any file that
@@ -117,7 +137,9 @@ def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[st
     if path.is_file():
         bounded.check_size(path, f"read the {what}")
     try:
-        handle = io.TextIOWrapper(files.open_regular(path, f"read the {what}"), newline="", encoding="utf-8-sig")
+        handle = io.TextIOWrapper(
+            files.open_regular(path, f"read the {what}"), newline="", encoding="utf-8-sig"
+        )
     except FileNotFoundError:
         raise InputError(f"{what} {path} does not exist", hint="check the path") from None
     except OSError as exc:
@@ -127,15 +149,21 @@ def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[st
         try:
             header = next(reader, None)
             if header is None:
-                raise InputError(f"{what} {path} is empty", hint=f"expected a header with columns {', '.join(required)}")
+                raise InputError(
+                    f"{what} {path} is empty", hint=f"expected a header with columns {', '.join(required)}"
+                )
             header = [h.strip() for h in header]
             dupes = sorted({h for h in header if header.count(h) > 1})
             if dupes:
-                raise InputError(f"{path.name}: column(s) {', '.join(dupes)} appear more than once in the header")
+                raise InputError(
+                    f"{path.name}: column(s) {', '.join(dupes)} appear more than once in the header"
+                )
             missing = [c for c in required if c not in header]
             if missing:
-                raise InputError(f"{path.name} is missing column(s) {', '.join(missing)} (found: {', '.join(header)})",
-                                 hint=f"a {what} needs columns {', '.join(required)}")
+                raise InputError(
+                    f"{path.name} is missing column(s) {', '.join(missing)} (found: {', '.join(header)})",
+                    hint=f"a {what} needs columns {', '.join(required)}",
+                )
             numeric_cols = [c for c in (*required, *optional_numeric) if c in header]
             text_cols = [c for c in optional_text if c in header]
             label_cols = [c for c in optional_labels if c in header]
@@ -147,8 +175,10 @@ def read_table(path: Path, required: tuple[str, ...], optional_numeric: tuple[st
                 if not row or (len(row) == 1 and not row[0].strip()):
                     continue
                 if len(row) != len(header):
-                    raise InputError(f"{path.name}: line {reader.line_num} has {len(row)} cells, the header has "
-                                     f"{len(header)}")
+                    raise InputError(
+                        f"{path.name}: line {reader.line_num} has {len(row)} cells, the header has "
+                        f"{len(header)}"
+                    )
                 rows.append(row)
                 line_numbers.append(reader.line_num)
         except (csv.Error, UnicodeDecodeError) as exc:
@@ -169,16 +199,20 @@ def require_increasing(table: Table, column: str) -> None:
     bad = np.flatnonzero(np.diff(values) <= 0)
     if bad.size:
         i = int(bad[0]) + 1
-        raise InputError(f"{table.path.name}: {column} does not increase at line {int(table.lines[i])} "
-                         f"({values[i]:g} after {values[i - 1]:g}); {bad.size} such step(s)",
-                         hint="timestamps must be strictly increasing; sort the log and drop duplicates")
+        raise InputError(
+            f"{table.path.name}: {column} does not increase at line {int(table.lines[i])} "
+            f"({values[i]:g} after {values[i - 1]:g}); {bad.size} such step(s)",
+            hint="timestamps must be strictly increasing; sort the log and drop duplicates",
+        )
 
 
 def require_nonnegative(table: Table, column: str) -> None:
     values = table.numeric[column]
     bad = values < 0
     if bad.any():
-        raise InputError(f"{table.path.name}: column {column} must not be negative; negative at {lines_text(table.lines[bad])}")
+        raise InputError(
+            f"{table.path.name}: column {column} must not be negative; negative at {lines_text(table.lines[bad])}"
+        )
 
 
 def require_min_rows(table: Table, n_min: int, purpose: str) -> None:

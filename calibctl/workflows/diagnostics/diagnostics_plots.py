@@ -31,7 +31,12 @@ _LABELS = {
     "1/Z": ("inverse range 1/Z [1/m]", "residual [px]"),
     "row": ("sensor row", "residual / image speed [s]"),
 }
-_MARKS = {"fault": "#c0392b", "below effect floor": "#e67e22", "not significant": "#7f8c8d", "collinear": "#8e44ad"}
+_MARKS = {
+    "fault": "#c0392b",
+    "below effect floor": "#e67e22",
+    "not significant": "#7f8c8d",
+    "collinear": "#8e44ad",
+}
 
 
 def prepare_plot_dir(plot_dir: Path) -> Path:
@@ -64,7 +69,9 @@ def _marginal_panel(ax, m) -> None:
     xl, yl = _LABELS[m.covariate]
     ax.set_xlabel(xl)
     ax.set_ylabel(yl)
-    ax.set_title(f"slope {b:.4g} {m.slope_unit}  [{ci[0]:.3g}, {ci[1]:.3g}]  t = {m.fit.t[1]:.1f}", fontsize=9)
+    ax.set_title(
+        f"slope {b:.4g} {m.slope_unit}  [{ci[0]:.3g}, {ci[1]:.3g}]  t = {m.fit.t[1]:.1f}", fontsize=9
+    )
     ax.legend(fontsize=7, loc="best")
 
 
@@ -112,7 +119,9 @@ def _camera_panel(ax, summary: TriageSummary) -> None:
     ax.axhline(2.0 * min(rms), color="#c0392b", ls="--", lw=1, label="alarm: 2x the best camera")
     ax.axhline(1.5 * min(rms), color="#e67e22", ls=":", lw=1, label="warn: 1.5x")
     ax.set_ylabel("RMS residual [px]")
-    ax.set_title(f"per-camera RMS, max/min = {summary.camera_rms_ratio:.2f} ({summary.camera_rms_level})", fontsize=9)
+    ax.set_title(
+        f"per-camera RMS, max/min = {summary.camera_rms_ratio:.2f} ({summary.camera_rms_level})", fontsize=9
+    )
     ax.legend(fontsize=7)
 
 
@@ -129,12 +138,18 @@ def plot_gauge(report: GaugeReport, t_s: np.ndarray, ratio: np.ndarray, plot_dir
     med = np.array([w.median_ratio for w in scored])
     spread = np.array([w.spread for w in scored])
     colors = {"ok": "#1e8449", "warn": "#d68910", "alarm": "#c0392b"}
-    top.errorbar(mid, med, yerr=spread, fmt="none", ecolor="0.3", capsize=3, label="per-sample spread (robust sigma)")
-    top.scatter(mid, med, c=[colors[w.level] for w in scored], s=40, zorder=3, label=f"{report.window_s:g} s median")
+    top.errorbar(
+        mid, med, yerr=spread, fmt="none", ecolor="0.3", capsize=3, label="per-sample spread (robust sigma)"
+    )
+    top.scatter(
+        mid, med, c=[colors[w.level] for w in scored], s=40, zorder=3, label=f"{report.window_s:g} s median"
+    )
     lo, hi = min(0.97, float(np.min(med - spread))), max(1.03, float(np.max(med + spread)))
     top.set_ylim(lo - 0.005, hi + 0.005)
     top.set_ylabel("wheel / VIO distance")
-    top.set_title(textwrap.fill(f"metric gauge: {report.level.upper()} - {report.diagnosis}", 140), fontsize=8)
+    top.set_title(
+        textwrap.fill(f"metric gauge: {report.level.upper()} - {report.diagnosis}", 140), fontsize=8
+    )
     top.legend(fontsize=7, loc="best")
     step = max(1, t_s.size // 20000)
     bottom.scatter(t_s[::step], ratio[::step], s=1, alpha=0.25, color="#2c3e50")
@@ -170,30 +185,50 @@ def plot_timeoffset(est: OffsetEstimate, drift: DriftEstimate | None, plot_dir: 
     if est.ncc.size:
         ax.plot(est.lags_s * 1e3, est.ncc, "o-", ms=3, color="#2c3e50", label="normalised cross-correlation")
     if est.td_s is not None and est.sigma_s is not None:
-        ax.axvline(est.td_s * 1e3, color="#c0392b", lw=2,
-                   label=f"td = {est.td_s * 1e3:.3f} +/- {est.sigma_s * 1e3:.3f} ms (parabolic peak)")
+        ax.axvline(
+            est.td_s * 1e3,
+            color="#c0392b",
+            lw=2,
+            label=f"td = {est.td_s * 1e3:.3f} +/- {est.sigma_s * 1e3:.3f} ms (parabolic peak)",
+        )
         _zoom_panel(zoom, est, est.td_s * 1e3)
     else:
         zoom.set_axis_off()
     ax.set_xlabel("td [ms]  (t_gyro = t_camera + td)")
     ax.set_ylabel("NCC")
-    ax.set_title(textwrap.fill("REFUSED: " + est.refused, 90) if est.refused else "camera vs gyro angular rate",
-                 fontsize=9)
+    ax.set_title(
+        textwrap.fill("REFUSED: " + est.refused, 90) if est.refused else "camera vs gyro angular rate",
+        fontsize=9,
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     out.append(_save(fig, plot_dir / "timeoffset.png"))
     if drift is not None:
         fig = Figure(figsize=(10, 5))
         ax = fig.subplots()
-        good = [(tm, e.td_s * 1e3, e.sigma_s * 1e3) for tm, e in drift.windows
-                if e.refused is None and e.td_s is not None and e.sigma_s is not None]
+        good = [
+            (tm, e.td_s * 1e3, e.sigma_s * 1e3)
+            for tm, e in drift.windows
+            if e.refused is None and e.td_s is not None and e.sigma_s is not None
+        ]
         if good:
-            ax.errorbar([g[0] for g in good], [g[1] for g in good], yerr=[g[2] for g in good], fmt="o",
-                        color="#2c3e50", capsize=3, label="per window")
+            ax.errorbar(
+                [g[0] for g in good],
+                [g[1] for g in good],
+                yerr=[g[2] for g in good],
+                fmt="o",
+                color="#2c3e50",
+                capsize=3,
+                label="per window",
+            )
         if drift.fit is not None and drift.drift_ppm is not None and drift.ci_ppm is not None:
             xs = np.array([drift.windows[0][0], drift.windows[-1][0]])
-            ax.plot(xs, (drift.fit.coef[0] + drift.fit.coef[1] * xs) * 1e3, color="#c0392b",
-                    label=f"drift {drift.drift_ppm:.2f} ppm [{drift.ci_ppm[0]:.2f}, {drift.ci_ppm[1]:.2f}]")
+            ax.plot(
+                xs,
+                (drift.fit.coef[0] + drift.fit.coef[1] * xs) * 1e3,
+                color="#c0392b",
+                label=f"drift {drift.drift_ppm:.2f} ppm [{drift.ci_ppm[0]:.2f}, {drift.ci_ppm[1]:.2f}]",
+            )
         ax.set_xlabel("time [s]")
         ax.set_ylabel("td [ms]")
         ax.set_title("REFUSED: " + drift.refused if drift.refused else "time offset over the log", fontsize=9)

@@ -47,23 +47,36 @@ def _is_bundle_folder(path: Path) -> bool:
 def _check_target(out: Path, force: bool) -> None:
     if out.exists() or out.is_symlink():
         if not force:
-            raise AlreadyExistsError(f"{out} already exists",
-                                     "choose a new folder, or pass --force to replace a bundle calibctl wrote there")
+            raise AlreadyExistsError(
+                f"{out} already exists",
+                "choose a new folder, or pass --force to replace a bundle calibctl wrote there",
+            )
         if out.is_symlink() or not out.is_dir() or not _is_bundle_folder(out):
-            raise UsageError(f"{out} is not a bundle calibctl wrote (no calibctl {MANIFEST} in it): --force replaces "
-                             "only a bundle folder", "choose a new folder")
+            raise UsageError(
+                f"{out} is not a bundle calibctl wrote (no calibctl {MANIFEST} in it): --force replaces "
+                "only a bundle folder",
+                "choose a new folder",
+            )
     if not out.parent.is_dir():
         raise FileSystemError(f"cannot write {out}: folder {out.parent} does not exist", "create it first")
 
 
-def write_bundle(out: Path, files: Mapping[str, str], manifest: Mapping[str, Any], *, force: bool = False) -> list[Path]:
+def write_bundle(
+    out: Path, files: Mapping[str, str], manifest: Mapping[str, Any], *, force: bool = False
+) -> list[Path]:
     """Write ``files`` (relative name -> text) and the manifest (``manifest`` plus ``format``, its schema
     version and ``files``: name, sha256, bytes) as the folder ``out``; returns the paths written."""
     out = Path(out)
     _check_target(out, force)
     payloads = {name: text.encode("utf-8") for name, text in files.items()}
-    doc = {"format": BUNDLE_FORMAT, "schema_version": BUNDLE_SCHEMA_VERSION, **manifest,
-           "files": [{"path": name, "sha256": sha256_of(data), "bytes": len(data)} for name, data in payloads.items()]}
+    doc = {
+        "format": BUNDLE_FORMAT,
+        "schema_version": BUNDLE_SCHEMA_VERSION,
+        **manifest,
+        "files": [
+            {"path": name, "sha256": sha256_of(data), "bytes": len(data)} for name, data in payloads.items()
+        ],
+    }
     payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
     file_mode = new_file_mode()
     with file_errors("write the bundle", out):
@@ -116,6 +129,11 @@ def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
         with file_errors("read", path):
             actual = sha256_of(path.read_bytes())
         if actual != sha:
-            findings.append(_finding(f"{path} was changed after calibctl wrote it (sha256 {actual[:12]}, the manifest "
-                                     f"records {sha[:12]})", fix))
+            findings.append(
+                _finding(
+                    f"{path} was changed after calibctl wrote it (sha256 {actual[:12]}, the manifest "
+                    f"records {sha[:12]})",
+                    fix,
+                )
+            )
     return findings

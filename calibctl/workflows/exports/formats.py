@@ -69,14 +69,20 @@ def _one_camera_text(art: CalibrationArtifact, fmt: str) -> str:
     from calibctl.core.extrinsics.rig_tree import RigTree
     from calibctl.workflows.exports import mrcal_model, rig_exports
 
-    member = MemberIntrinsics(art.serial, np.array(art.camera_matrix, dtype=np.float64),
-                              np.array(art.dist_coeffs, dtype=np.float64), art.image_size,
-                              lens="fisheye" if art.model.name == "fisheye" else "pinhole")
+    member = MemberIntrinsics(
+        art.serial,
+        np.array(art.camera_matrix, dtype=np.float64),
+        np.array(art.dist_coeffs, dtype=np.float64),
+        art.image_size,
+        lens="fisheye" if art.model.name == "fisheye" else "pinhole",
+    )
     if fmt == "kalibr":
         return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()))
     model = mrcal_model.cameramodel(member, np.eye(4), f"calibctl {art.ref} {art.status}")
     if model is None:
-        raise InputError(f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead")
+        raise InputError(
+            f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead"
+        )
     return model
 
 
@@ -139,8 +145,10 @@ def opencv_data(text: str, source: str) -> dict[str, Any]:
     except (cv2.error, SystemError) as exc:  # a parse error can surface as SystemError from the binding
         cause = exc.__cause__ or exc
         lines = [line for line in str(cause).strip().splitlines() if line.strip()]
-        raise InputError(f"{source}: OpenCV cannot read this FileStorage file ({lines[-1] if lines else 'parse error'})",
-                         "export it again with `calibctl export SERIAL --format opencv`") from exc
+        raise InputError(
+            f"{source}: OpenCV cannot read this FileStorage file ({lines[-1] if lines else 'parse error'})",
+            "export it again with `calibctl export SERIAL --format opencv`",
+        ) from exc
     data: dict[str, Any] = {}
     try:
         for key in fs.root().keys():  # noqa: SIM118 - a cv2.FileNode, not a dict
@@ -155,8 +163,10 @@ def opencv_data(text: str, source: str) -> dict[str, Any]:
                 try:
                     data[key] = node.mat().tolist()
                 except cv2.error as exc:
-                    raise InputError(f"{source}: {key} is not a matrix OpenCV can read (rows x cols, dt, data)",
-                                     "export it again with `calibctl export SERIAL --format opencv`") from exc
+                    raise InputError(
+                        f"{source}: {key} is not a matrix OpenCV can read (rows x cols, dt, data)",
+                        "export it again with `calibctl export SERIAL --format opencv`",
+                    ) from exc
     finally:
         fs.release()
     return data
@@ -180,8 +190,9 @@ def calibration_from_text(text: str, source: str, is_json: bool = False) -> Cali
 
     header, rig_header = trace_header.read(text), trace_header.read_rig(text)
     if _is_opencv(text):
-        return CalibrationFile(source, "opencv", bounded.check_tree(opencv_data(text, source), source), header,
-                               rig_header)
+        return CalibrationFile(
+            source, "opencv", bounded.check_tree(opencv_data(text, source), source), header, rig_header
+        )
     data = bounded.parse_json(text, source) if is_json else bounded.parse_yaml(text, source)
     if looks_like_artifact(data):
         return CalibrationFile(source, "calibctl", data, header)

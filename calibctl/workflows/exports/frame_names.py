@@ -52,18 +52,24 @@ def parse_frame_map(pairs: Iterable[str], known: Sequence[str]) -> dict[str, str
         serial, sep, name = pair.partition("=")
         serial, name = serial.strip(), name.strip()
         if not sep or not serial or not name:
-            raise UsageError(f"--frame {pair!r} is not SERIAL=NAME", "e.g. --frame LEFT-01=front_left_camera_optical_frame")
+            raise UsageError(
+                f"--frame {pair!r} is not SERIAL=NAME", "e.g. --frame LEFT-01=front_left_camera_optical_frame"
+            )
         if serial not in known:
             raise UsageError(f"--frame {pair}: {serial} is not a frame of this rig ({', '.join(known)})")
         if serial in out:
-            raise UsageError(f"--frame maps {serial} twice ({out[serial]} and {name})", "give each serial one --frame")
+            raise UsageError(
+                f"--frame maps {serial} twice ({out[serial]} and {name})", "give each serial one --frame"
+            )
         if not is_ros_name(name):
             raise UsageError(f"--frame {pair}: '{name}' is not a legal ROS frame name", _NAME_RULE)
         out[serial] = name
     taken: dict[str, str] = {}
     for serial, name in out.items():
         if name in taken:
-            raise UsageError(f"--frame gives {taken[name]} and {serial} the same frame {name}", "give each its own frame")
+            raise UsageError(
+                f"--frame gives {taken[name]} and {serial} the same frame {name}", "give each its own frame"
+            )
         taken[name] = serial
     return out
 
@@ -75,15 +81,19 @@ class FrameNames:
     frames: Mapping[str, str]
 
     @classmethod
-    def of(cls, cameras: Sequence[str], others: Sequence[str] = (), mapped: Mapping[str, str] | None = None) -> FrameNames:
+    def of(
+        cls, cameras: Sequence[str], others: Sequence[str] = (), mapped: Mapping[str, str] | None = None
+    ) -> FrameNames:
         mapped = mapped or {}
         frames = {c: mapped.get(c) or default_frame(c, True) for c in cameras}
         frames.update({f: mapped.get(f) or default_frame(f, False) for f in others})
         seen: dict[str, str] = {}
         for serial, name in frames.items():  # a default may collide with a mapped or another default name
             if name in seen:
-                raise UsageError(f"{seen[name]} and {serial} would both be frame {name}",
-                                 f"name one of them with --frame {serial}=NAME")
+                raise UsageError(
+                    f"{seen[name]} and {serial} would both be frame {name}",
+                    f"name one of them with --frame {serial}=NAME",
+                )
             seen[name] = serial
         return cls(frames)
 
@@ -93,7 +103,9 @@ class FrameNames:
     def base(self, serial: str) -> str:
         """The frame without ``_optical_frame``: the camera's ROS namespace."""
         name = self.frames[serial]
-        return name[: -len(OPTICAL_SUFFIX)] if name.endswith(OPTICAL_SUFFIX) and name != OPTICAL_SUFFIX else name
+        return (
+            name[: -len(OPTICAL_SUFFIX)] if name.endswith(OPTICAL_SUFFIX) and name != OPTICAL_SUFFIX else name
+        )
 
     def camera_name(self, serial: str) -> str:
         return self.base(serial).replace("/", "_")
@@ -106,6 +118,10 @@ class FrameNames:
         from calibctl.core.extrinsics.rig_tree import Edge, RigTree  # cv2: not for `lint FILE` start-up
 
         rename = self.frames.get
-        return RigTree(rename(tree.root) or tree.root,
-                       tuple(Edge(rename(e.parent) or e.parent, rename(e.child) or e.child, e.T_parent_child, e.covariance)
-                             for e in tree.edges))
+        return RigTree(
+            rename(tree.root) or tree.root,
+            tuple(
+                Edge(rename(e.parent) or e.parent, rename(e.child) or e.child, e.T_parent_child, e.covariance)
+                for e in tree.edges
+            ),
+        )

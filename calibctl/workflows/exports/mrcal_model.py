@@ -16,7 +16,12 @@ import numpy as np
 
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 
-LENSMODELS = {4: "LENSMODEL_OPENCV4", 5: "LENSMODEL_OPENCV5", 8: "LENSMODEL_OPENCV8", 12: "LENSMODEL_OPENCV12"}
+LENSMODELS = {
+    4: "LENSMODEL_OPENCV4",
+    5: "LENSMODEL_OPENCV5",
+    8: "LENSMODEL_OPENCV8",
+    12: "LENSMODEL_OPENCV12",
+}
 
 
 def missing_reason(m: MemberIntrinsics) -> str | None:
@@ -40,11 +45,15 @@ def cameramodel(m: MemberIntrinsics, T_cam_ref: np.ndarray, comment: str) -> str
     extrinsics = [*map(float, rvec), *map(float, np.asarray(T_cam_ref, float)[:3, 3])]
 
     def floats(values: list[float]) -> str:
-        return ", ".join(repr(float(v)) for v in values)  # float(): numpy 2 reprs np.float64 as "np.float64(x)"
+        return ", ".join(
+            repr(float(v)) for v in values
+        )  # float(): numpy 2 reprs np.float64 as "np.float64(x)"
 
-    return (f"# {comment}\n{{\n    'lensmodel': '{LENSMODELS[len(dist)]}',\n"
-            f"    # fx, fy, cx, cy (px), then OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4]]]\n"
-            f"    'intrinsics': [{floats([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist])}],\n"
-            f"    # rt_cam_ref: Rodrigues rvec (rad) then t (m); the reference is the rig's root camera\n"
-            f"    'extrinsics': [{floats(extrinsics)}],\n"
-            f"    'imagersize': [{int(m.image_size[0])}, {int(m.image_size[1])}],\n}}\n")
+    return (
+        f"# {comment}\n{{\n    'lensmodel': '{LENSMODELS[len(dist)]}',\n"
+        f"    # fx, fy, cx, cy (px), then OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4]]]\n"
+        f"    'intrinsics': [{floats([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist])}],\n"
+        f"    # rt_cam_ref: Rodrigues rvec (rad) then t (m); the reference is the rig's root camera\n"
+        f"    'extrinsics': [{floats(extrinsics)}],\n"
+        f"    'imagersize': [{int(m.image_size[0])}, {int(m.image_size[1])}],\n}}\n"
+    )

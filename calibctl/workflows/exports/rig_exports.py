@@ -43,34 +43,55 @@ def urdf_rpy(R: np.ndarray) -> list[float]:
     return [float(np.arctan2(-R[1, 2], R[1, 1])), pitch, 0.0]
 
 
-def ros_info(m: MemberIntrinsics, R: np.ndarray, P: np.ndarray, camera_name: str | None = None) -> dict[str, object]:
+def ros_info(
+    m: MemberIntrinsics, R: np.ndarray, P: np.ndarray, camera_name: str | None = None
+) -> dict[str, object]:
     """The camera_info document of one camera: rectification ``R`` (3, 3) and projection ``P`` (3, 4), px."""
-    model, dist = distortion_for([float(v) for v in np.ravel(m.dist_coeffs)], "fisheye" if m.lens == "fisheye" else None)
-    return {"image_width": int(m.image_size[0]), "image_height": int(m.image_size[1]),
-            "camera_name": camera_name or camera_name_for(m.name),
-            "camera_matrix": {"rows": 3, "cols": 3, "data": np.asarray(m.camera_matrix, float).ravel().tolist()},
-            "distortion_model": model, "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
-            "rectification_matrix": {"rows": 3, "cols": 3, "data": np.asarray(R, float).ravel().tolist()},
-            "projection_matrix": {"rows": 3, "cols": 4, "data": np.asarray(P, float).ravel().tolist()}}
+    model, dist = distortion_for(
+        [float(v) for v in np.ravel(m.dist_coeffs)], "fisheye" if m.lens == "fisheye" else None
+    )
+    return {
+        "image_width": int(m.image_size[0]),
+        "image_height": int(m.image_size[1]),
+        "camera_name": camera_name or camera_name_for(m.name),
+        "camera_matrix": {"rows": 3, "cols": 3, "data": np.asarray(m.camera_matrix, float).ravel().tolist()},
+        "distortion_model": model,
+        "distortion_coefficients": {"rows": 1, "cols": len(dist), "data": dist},
+        "rectification_matrix": {"rows": 3, "cols": 3, "data": np.asarray(R, float).ravel().tolist()},
+        "projection_matrix": {"rows": 3, "cols": 4, "data": np.asarray(P, float).ravel().tolist()},
+    }
 
 
 def _yaml(doc: object) -> str:
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
 
 
-def ros_stereo_pair(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray,
-                    names: FrameNames | None = None) -> tuple[str, str]:
+def ros_stereo_pair(
+    left: MemberIntrinsics, right: MemberIntrinsics, T_right_left: np.ndarray, names: FrameNames | None = None
+) -> tuple[str, str]:
     """camera_info YAML of the left and the right camera of a horizontal pair."""
     rect = rectify(left, right, T_right_left)
     if not rect.horizontal:
-        raise InputError(f"{left.name}-{right.name} is a vertical pair; ROS stereo_image_proc rectifies horizontally",
-                         hint="export the OpenCV stereo file instead, or order the cameras left to right")
+        raise InputError(
+            f"{left.name}-{right.name} is a vertical pair; ROS stereo_image_proc rectifies horizontally",
+            hint="export the OpenCV stereo file instead, or order the cameras left to right",
+        )
     name = (lambda m: names.camera_name(m.name)) if names is not None else (lambda m: None)
-    return (_yaml(ros_info(left, rect.R1, rect.P1, name(left))), _yaml(ros_info(right, rect.R2, rect.P2, name(right))))
+    return (
+        _yaml(ros_info(left, rect.R1, rect.P1, name(left))),
+        _yaml(ros_info(right, rect.R2, rect.P2, name(right))),
+    )
 
 
-def ros_camera_infos(members: Sequence[MemberIntrinsics], left: str, right: str, T_right_left: np.ndarray,
-                     names: FrameNames, *, mono_if_vertical: bool = False) -> tuple[dict[str, str], bool]:
+def ros_camera_infos(
+    members: Sequence[MemberIntrinsics],
+    left: str,
+    right: str,
+    T_right_left: np.ndarray,
+    names: FrameNames,
+    *,
+    mono_if_vertical: bool = False,
+) -> tuple[dict[str, str], bool]:
     """One camera_info YAML per camera (serial -> text): the pair ``left``/``right`` with its rectified R/P,
     every other camera as a monocular camera_info (R = I, P = [K | 0]). A vertical pair is an InputError,
     or (``mono_if_vertical``) gets monocular files too; the flag says whether the pair was rectified."""
@@ -85,7 +106,9 @@ def ros_camera_infos(members: Sequence[MemberIntrinsics], left: str, right: str,
     for m in members:
         if m.name not in texts:
             K = np.asarray(m.camera_matrix, float)
-            texts[m.name] = _yaml(ros_info(m, np.eye(3), np.hstack([K, np.zeros((3, 1))]), names.camera_name(m.name)))
+            texts[m.name] = _yaml(
+                ros_info(m, np.eye(3), np.hstack([K, np.zeros((3, 1))]), names.camera_name(m.name))
+            )
     return {m.name: texts[m.name] for m in members}, rectified
 
 
@@ -99,34 +122,58 @@ def opencv_stereo(left: MemberIntrinsics, right: MemberIntrinsics, T_right_left:
     fs.write("image_width", int(left.image_size[0]))
     fs.write("image_height", int(left.image_size[1]))
     if left.lens == "fisheye" and right.lens == "fisheye":
-        fs.write("distortion_model", "equidistant")  # D1/D2 are cv2.fisheye's k1..k4, as the camera export says
-    for key, value in (("K1", left.camera_matrix), ("D1", np.ravel(left.dist_coeffs)[None, :]),
-                       ("K2", right.camera_matrix), ("D2", np.ravel(right.dist_coeffs)[None, :]),
-                       ("R", T_right_left[:3, :3]), ("T", T_right_left[:3, 3:4]),
-                       ("E", essential_matrix(T_right_left)),
-                       ("F", fundamental_matrix(T_right_left, left.camera_matrix, right.camera_matrix)),
-                       ("R1", rect.R1), ("R2", rect.R2), ("P1", rect.P1), ("P2", rect.P2), ("Q", rect.Q)):
+        fs.write(
+            "distortion_model", "equidistant"
+        )  # D1/D2 are cv2.fisheye's k1..k4, as the camera export says
+    for key, value in (
+        ("K1", left.camera_matrix),
+        ("D1", np.ravel(left.dist_coeffs)[None, :]),
+        ("K2", right.camera_matrix),
+        ("D2", np.ravel(right.dist_coeffs)[None, :]),
+        ("R", T_right_left[:3, :3]),
+        ("T", T_right_left[:3, 3:4]),
+        ("E", essential_matrix(T_right_left)),
+        ("F", fundamental_matrix(T_right_left, left.camera_matrix, right.camera_matrix)),
+        ("R1", rect.R1),
+        ("R2", rect.R2),
+        ("P1", rect.P1),
+        ("P2", rect.P2),
+        ("Q", rect.Q),
+    ):
         fs.write(key, np.asarray(value, dtype=np.float64))
     return str(fs.releaseAndGetString())
 
 
-TfEdge = tuple[str, str, Sequence[float], Sequence[float]]  # parent, child, translation_m xyz, quaternion xyzw
+TfEdge = tuple[
+    str, str, Sequence[float], Sequence[float]
+]  # parent, child, translation_m xyz, quaternion xyzw
 
 
 def tf_message(edges: Sequence[TfEdge]) -> str:
     """tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints): one TransformStamped per edge,
     parent = header.frame_id. The one tf writer of rig exports and hand-eye results."""
-    transforms = [{"header": {"frame_id": parent}, "child_frame_id": child,
-                   "transform": {"translation": dict(zip("xyz", map(float, t_m), strict=True)),
-                                 "rotation": dict(zip("xyzw", map(float, q_xyzw), strict=True))}}
-                  for parent, child, t_m, q_xyzw in edges]
+    transforms = [
+        {
+            "header": {"frame_id": parent},
+            "child_frame_id": child,
+            "transform": {
+                "translation": dict(zip("xyz", map(float, t_m), strict=True)),
+                "rotation": dict(zip("xyzw", map(float, q_xyzw), strict=True)),
+            },
+        }
+        for parent, child, t_m, q_xyzw in edges
+    ]
     return yaml.safe_dump({"transforms": transforms}, sort_keys=False)
 
 
 def tf_static(tree: RigTree) -> str:
     """tf_static YAML of every tree edge."""
-    return tf_message([(e.parent, e.child, e.T_parent_child[:3, 3].tolist(), quaternion_xyzw(e.T_parent_child[:3, :3]))
-                       for e in tree.edges])
+    return tf_message(
+        [
+            (e.parent, e.child, e.T_parent_child[:3, 3].tolist(), quaternion_xyzw(e.T_parent_child[:3, :3]))
+            for e in tree.edges
+        ]
+    )
 
 
 def urdf_joints(tree: RigTree) -> str:
@@ -135,9 +182,13 @@ def urdf_joints(tree: RigTree) -> str:
     for e in tree.edges:
         xyz = " ".join(f"{v:.9f}" for v in e.T_parent_child[:3, 3])
         rpy = " ".join(f"{v:.9f}" for v in urdf_rpy(e.T_parent_child[:3, :3]))
-        lines += [f"<joint name={quoteattr(f'{e.parent}_to_{e.child}')} type=\"fixed\">",
-                  f"  <parent link={quoteattr(e.parent)}/>", f"  <child link={quoteattr(e.child)}/>",
-                  f'  <origin xyz="{xyz}" rpy="{rpy}"/>', "</joint>"]
+        lines += [
+            f'<joint name={quoteattr(f"{e.parent}_to_{e.child}")} type="fixed">',
+            f"  <parent link={quoteattr(e.parent)}/>",
+            f"  <child link={quoteattr(e.child)}/>",
+            f'  <origin xyz="{xyz}" rpy="{rpy}"/>',
+            "</joint>",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -159,9 +210,13 @@ def tree_neighbours(tree: RigTree) -> dict[str, set[str]]:
     return out
 
 
-def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree, names: FrameNames | None = None,
-                    overlaps: Mapping[str, Collection[str]] | None = None,
-                    T_cam_imu: Mapping[str, np.ndarray] | None = None) -> str:
+def kalibr_camchain(
+    members: Sequence[MemberIntrinsics],
+    tree: RigTree,
+    names: FrameNames | None = None,
+    overlaps: Mapping[str, Collection[str]] | None = None,
+    T_cam_imu: Mapping[str, np.ndarray] | None = None,
+) -> str:
     """Kalibr camchain YAML, cameras in tree order (root first); ``tree`` names cameras by serial.
 
     Every camera has ``cam_overlaps`` (indices of the cameras it shares views with: ``overlaps``, default its
@@ -179,15 +234,20 @@ def kalibr_camchain(members: Sequence[MemberIntrinsics], tree: RigTree, names: F
         m = by_name[name]
         dist = [float(v) for v in np.ravel(m.dist_coeffs)]
         if m.lens != "fisheye" and (len(dist) > 5 or (len(dist) == 5 and dist[4] != 0.0)):
-            raise InputError(f"camera {name}: Kalibr's radtan model has no k3 or rational terms",
-                             hint="calibrate the members with --model k1k2 for a Kalibr export")
+            raise InputError(
+                f"camera {name}: Kalibr's radtan model has no k3 or rational terms",
+                hint="calibrate the members with --model k1k2 for a Kalibr export",
+            )
         K = np.asarray(m.camera_matrix, float)
-        entry: dict[str, object] = {"camera_model": "pinhole", "intrinsics": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
-                                    "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
-                                    "distortion_coeffs": dist[:4],
-                                    "resolution": [int(m.image_size[0]), int(m.image_size[1])],
-                                    "rostopic": names.topic(name),
-                                    "cam_overlaps": sorted(index[o] for o in near.get(name, ()) if o in index and o != name)}
+        entry: dict[str, object] = {
+            "camera_model": "pinhole",
+            "intrinsics": [float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])],
+            "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
+            "distortion_coeffs": dist[:4],
+            "resolution": [int(m.image_size[0]), int(m.image_size[1])],
+            "rostopic": names.topic(name),
+            "cam_overlaps": sorted(index[o] for o in near.get(name, ()) if o in index and o != name),
+        }
         if previous is not None:
             entry["T_cn_cnm1"] = tree.T(name, previous).tolist()
         if T_cam_imu is not None and name in T_cam_imu:
@@ -202,17 +262,32 @@ def solution_sha256(solution: RigSolution) -> str:
     """sha256 of the RFC 8785 form of what every export of an unstored solve is derived from: per camera
     (tree order) its name, image size, K, distortion and lens, and every tree edge's T_parent_child."""
     by_name = {m.name: m for m in solution.members}
-    doc = {"members": [{"camera": name, "image_size": [int(v) for v in by_name[name].image_size],
-                        "camera_matrix": np.asarray(by_name[name].camera_matrix, float).tolist(),
-                        "dist_coeffs": [float(v) for v in np.ravel(by_name[name].dist_coeffs)],
-                        "lens": by_name[name].lens} for name in solution.tree.frames],
-           "edges": [{"parent": e.parent, "child": e.child, "T_parent_child": np.asarray(e.T_parent_child, float).tolist()}
-                     for e in solution.tree.edges]}
+    doc = {
+        "members": [
+            {
+                "camera": name,
+                "image_size": [int(v) for v in by_name[name].image_size],
+                "camera_matrix": np.asarray(by_name[name].camera_matrix, float).tolist(),
+                "dist_coeffs": [float(v) for v in np.ravel(by_name[name].dist_coeffs)],
+                "lens": by_name[name].lens,
+            }
+            for name in solution.tree.frames
+        ],
+        "edges": [
+            {
+                "parent": e.parent,
+                "child": e.child,
+                "T_parent_child": np.asarray(e.T_parent_child, float).tolist(),
+            }
+            for e in solution.tree.edges
+        ],
+    }
     return sha256_hex(jcs_bytes(doc))
 
 
-def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: str = "rig",
-                  status: str = "accepted") -> list[Path]:
+def write_exports(
+    solution: RigSolution, out: Path, force: bool = True, robot: str = "rig", status: str = "accepted"
+) -> list[Path]:
     """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera;
     ``robot`` names the URDF robot. Each file carries the rig trace header of a solve no store holds: ``not
     stored``, the verdict ``status`` and ``solution_sha256`` (and its file-sha256, which ``calibctl lint`` checks)."""
@@ -223,9 +298,12 @@ def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: s
     left, right = members[0], members[1]
     T_right_left = solution.T_a_b(1, 0)
     written = []
-    texts = {f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
-             "tf_static.yaml": tf_static(names.tree(tree)), "rig.urdf.xml": urdf_robot(names.tree(tree), robot),
-             "camchain.yaml": kalibr_camchain(members, tree, names)}
+    texts = {
+        f"stereo_{left.name}_{right.name}.yaml": opencv_stereo(left, right, T_right_left),
+        "tf_static.yaml": tf_static(names.tree(tree)),
+        "rig.urdf.xml": urdf_robot(names.tree(tree), robot),
+        "camchain.yaml": kalibr_camchain(members, tree, names),
+    }
     try:
         info_left, info_right = ros_stereo_pair(left, right, T_right_left, names)
         texts[f"{left.name}_camera_info.yaml"] = info_left
@@ -234,6 +312,8 @@ def write_exports(solution: RigSolution, out: Path, force: bool = True, robot: s
         pass  # a vertical pair has no ROS stereo export; the other files still describe it
     sha = solution_sha256(solution)
     for name, text in texts.items():
-        write_atomic(out / name, trace_header.stamp_rig(trace_header.NOT_STORED, status, sha, text), force=force)
+        write_atomic(
+            out / name, trace_header.stamp_rig(trace_header.NOT_STORED, status, sha, text), force=force
+        )
         written.append(out / name)
     return written

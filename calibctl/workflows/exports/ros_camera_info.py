@@ -47,8 +47,10 @@ def distortion_for(dist_coeffs: list[float], model_name: str | None = None) -> t
     8 -> rational_polynomial (4 are k1 k2 p1 p2, padded with k3 = 0)."""
     if model_name == "fisheye":
         if len(dist_coeffs) != DISTORTION_COEFFICIENTS["equidistant"]:
-            raise InputError(f"a fisheye calibration has 4 coefficients (k1..k4), this one has {len(dist_coeffs)}",
-                             "export as json instead")
+            raise InputError(
+                f"a fisheye calibration has 4 coefficients (k1..k4), this one has {len(dist_coeffs)}",
+                "export as json instead",
+            )
         return "equidistant", list(dist_coeffs)
     if len(dist_coeffs) == 4:
         return "plumb_bob", [*dist_coeffs, 0.0]
@@ -91,8 +93,12 @@ def looks_like_camera_info(data: Any) -> bool:
 
 
 def _refused(message: str) -> Finding:
-    return Finding(rule="ros-camera-info", severity="error", message=f"ROS would refuse this file: {message}",
-                   fix=_REFUSED_FIX)
+    return Finding(
+        rule="ros-camera-info",
+        severity="error",
+        message=f"ROS would refuse this file: {message}",
+        fix=_REFUSED_FIX,
+    )
 
 
 def _is_number(value: Any) -> bool:
@@ -102,9 +108,17 @@ def _is_number(value: Any) -> bool:
 def _matrix_problem(data: dict[str, Any], name: str, shape: tuple[int, int] | None) -> str | None:
     node = data.get(name)
     if not isinstance(node, dict):
-        return f"{name} is missing (it needs rows, cols and data)" if node is None else f"{name} is not a rows/cols/data map"
+        return (
+            f"{name} is missing (it needs rows, cols and data)"
+            if node is None
+            else f"{name} is not a rows/cols/data map"
+        )
     rows, cols, values = node.get("rows"), node.get("cols"), node.get("data")
-    if not (isinstance(rows, int) and isinstance(cols, int)) or isinstance(rows, bool) or isinstance(cols, bool):
+    if (
+        not (isinstance(rows, int) and isinstance(cols, int))
+        or isinstance(rows, bool)
+        or isinstance(cols, bool)
+    ):
         return f"{name} needs integer rows and cols"
     if shape is not None and (rows, cols) != shape:
         return f"{name} is {rows}x{cols}, ROS reads it as {shape[0]}x{shape[1]}"
@@ -127,24 +141,44 @@ def check_camera_info(data: dict[str, Any]) -> list[Finding]:
     model = data.get("distortion_model")
     findings: list[Finding] = []
     if model is None:
-        findings.append(Finding(rule="ros-distortion-model", severity="warning",
-                                message="no distortion_model: ROS assumes plumb_bob and warns on every load",
-                                fix="add `distortion_model: plumb_bob` (or the model the coefficients belong to)"))
+        findings.append(
+            Finding(
+                rule="ros-distortion-model",
+                severity="warning",
+                message="no distortion_model: ROS assumes plumb_bob and warns on every load",
+                fix="add `distortion_model: plumb_bob` (or the model the coefficients belong to)",
+            )
+        )
         model = "plumb_bob"
     if model not in DISTORTION_COEFFICIENTS:
-        refused.append(Finding(rule="ros-distortion-model", severity="error",
-                               message=f"distortion_model '{model}' is unknown to ROS image_geometry",
-                               fix=f"use one of {', '.join(DISTORTION_COEFFICIENTS)}"))
+        refused.append(
+            Finding(
+                rule="ros-distortion-model",
+                severity="error",
+                message=f"distortion_model '{model}' is unknown to ROS image_geometry",
+                fix=f"use one of {', '.join(DISTORTION_COEFFICIENTS)}",
+            )
+        )
     elif problems["distortion_coefficients"] is None:
         count, expected = len(data["distortion_coefficients"]["data"]), DISTORTION_COEFFICIENTS[model]
         if count != expected:
-            refused.append(Finding(rule="ros-distortion-model", severity="error",
-                                   message=f"{model} takes {expected} distortion coefficients, the file has {count}",
-                                   fix="export again, or name the model the coefficients belong to"))
+            refused.append(
+                Finding(
+                    rule="ros-distortion-model",
+                    severity="error",
+                    message=f"{model} takes {expected} distortion coefficients, the file has {count}",
+                    fix="export again, or name the model the coefficients belong to",
+                )
+            )
     name = data.get("camera_name")
     if not (isinstance(name, str) and CAMERA_NAME.match(name)):
         shown = "missing (ROS uses 'unknown')" if name is None else f"'{name}'"
-        findings.append(Finding(rule="ros-camera-name", severity="warning",
-                                message=f"camera_name {shown} is not valid for camera_info_manager ([A-Za-z0-9_])",
-                                fix="export with --camera-name NAME (letters, digits, '_')"))
+        findings.append(
+            Finding(
+                rule="ros-camera-name",
+                severity="warning",
+                message=f"camera_name {shown} is not valid for camera_info_manager ([A-Za-z0-9_])",
+                fix="export with --camera-name NAME (letters, digits, '_')",
+            )
+        )
     return refused + findings

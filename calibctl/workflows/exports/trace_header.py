@@ -27,17 +27,27 @@ from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
 from calibctl.errors import InputError
 
 _PREFIX = "# calibctl "
-_REF = re.compile(r"^# calibctl (?P<ref>\S+@\d+)(?: (?P<status>accepted|rejected))? sha256 (?P<sha>[0-9a-f]{64})\s*$")
+_REF = re.compile(
+    r"^# calibctl (?P<ref>\S+@\d+)(?: (?P<status>accepted|rejected))? sha256 (?P<sha>[0-9a-f]{64})\s*$"
+)
 _EVIDENCE = re.compile(r"^# calibctl evidence (?P<json>\{.*\})\s*$")
 _FILE_SHA = re.compile(r"^(?:# |<!-- )calibctl file-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
-_RIG_REF = re.compile(r"^(?:# |<!-- )calibctl rig (?P<ref>\S+@\d+) (?P<status>accepted|rejected) sha256 "
-                      r"(?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
-_RIG_NOT_STORED = re.compile(r"^(?:# |<!-- )calibctl rig not stored \(rig solve-folders\) (?P<status>accepted|rejected) "
-                             r"solution-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$")
-_SIGNATURE = re.compile(r"^(?:# |<!-- )calibctl rig-signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
-                        r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)(?: -->)?\s*$")
-_MEMBER = re.compile(r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
-                     r"(?: frame (?P<frame>\S+))?(?: -->)?\s*$")
+_RIG_REF = re.compile(
+    r"^(?:# |<!-- )calibctl rig (?P<ref>\S+@\d+) (?P<status>accepted|rejected) sha256 "
+    r"(?P<sha>[0-9a-f]{64})(?: -->)?\s*$"
+)
+_RIG_NOT_STORED = re.compile(
+    r"^(?:# |<!-- )calibctl rig not stored \(rig solve-folders\) (?P<status>accepted|rejected) "
+    r"solution-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$"
+)
+_SIGNATURE = re.compile(
+    r"^(?:# |<!-- )calibctl rig-signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
+    r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)(?: -->)?\s*$"
+)
+_MEMBER = re.compile(
+    r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
+    r"(?: frame (?P<frame>\S+))?(?: -->)?\s*$"
+)
 HEADER_SCAN_LINES = 8
 
 
@@ -69,7 +79,9 @@ def evidence_of(art: CalibrationArtifact) -> dict[str, Any]:
 
 
 def _without_hash_line(text: str) -> str:
-    return "".join(line for line in text.splitlines(keepends=True) if not _FILE_SHA.match(line.rstrip("\r\n")))
+    return "".join(
+        line for line in text.splitlines(keepends=True) if not _FILE_SHA.match(line.rstrip("\r\n"))
+    )
 
 
 def file_sha256(text: str) -> str:
@@ -110,8 +122,14 @@ class RigTraceHeader:
 NOT_STORED = "not-stored"
 
 
-def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
-              members: tuple[tuple[str, str, str | None], ...] = (), signature: RecordSignature | None = None) -> str:
+def stamp_rig(
+    ref: str,
+    status: str,
+    rig_sha256: str,
+    body: str,
+    members: tuple[tuple[str, str, str | None], ...] = (),
+    signature: RecordSignature | None = None,
+) -> str:
     """``body`` (YAML, OpenCV YAML or XML) with a rig header: ``calibctl rig RIG@N STATUS sha256 S`` (``ref``
     NOT_STORED: ``calibctl rig not stored (rig solve-folders) STATUS solution-sha256 S``), the rig version's
     ``calibctl rig-signature ...`` when it is signed, one ``calibctl member SERIAL@V sha256 S frame F`` line
@@ -119,13 +137,20 @@ def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
     stays first; XML gets the lines as comments."""
     xml = body.startswith("<")  # a URDF robot or its joints alone: XML comments
     open_, close = ("<!-- ", " -->") if xml else ("# ", "")
-    lines = [f"{open_}calibctl rig not stored (rig solve-folders) {status} solution-sha256 {rig_sha256}{close}\n"
-             if ref == NOT_STORED else f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"]
+    lines = [
+        f"{open_}calibctl rig not stored (rig solve-folders) {status} solution-sha256 {rig_sha256}{close}\n"
+        if ref == NOT_STORED
+        else f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"
+    ]
     if signature is not None:
-        lines.append(f"{open_}calibctl rig-signature {signature.algorithm} key_id {signature.key_id} record_sha256 "
-                     f"{signature.record_sha256} value {signature.value}{close}\n")
-    lines += [f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"
-              for m, sha, frame in members]
+        lines.append(
+            f"{open_}calibctl rig-signature {signature.algorithm} key_id {signature.key_id} record_sha256 "
+            f"{signature.record_sha256} value {signature.value}{close}\n"
+        )
+    lines += [
+        f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"
+        for m, sha, frame in members
+    ]
     directive, rest = "", body
     if body.startswith(("%YAML", "<?xml")):
         first, _, rest = body.partition("\n")
@@ -136,16 +161,36 @@ def stamp_rig(ref: str, status: str, rig_sha256: str, body: str,
 
 def read_rig(text: str) -> RigTraceHeader | None:
     """The rig header of ``text``, or None (not a rig export, or one written before rig exports were hashed)."""
-    head = text.splitlines()[:HEADER_SCAN_LINES + 8]
+    head = text.splitlines()[: HEADER_SCAN_LINES + 8]
     ref = next((m for line in head if (m := _RIG_REF.match(line) or _RIG_NOT_STORED.match(line))), None)
     if ref is None:
         return None
-    members = tuple((m.group("ref"), m.group("sha"), m.group("frame")) for line in head if (m := _MEMBER.match(line)))
+    members = tuple(
+        (m.group("ref"), m.group("sha"), m.group("frame")) for line in head if (m := _MEMBER.match(line))
+    )
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
-    seal = next((RecordSignature(algorithm="ed25519", key_id=m.group("key_id"), record_sha256=m.group("record"),
-                                 value=m.group("value")) for line in head if (m := _SIGNATURE.match(line))), None)
-    return RigTraceHeader(ref.groupdict().get("ref") or NOT_STORED, ref.group("status"), ref.group("sha"), members,
-                          sha, file_sha256(text) if sha else None, seal)
+    seal = next(
+        (
+            RecordSignature(
+                algorithm="ed25519",
+                key_id=m.group("key_id"),
+                record_sha256=m.group("record"),
+                value=m.group("value"),
+            )
+            for line in head
+            if (m := _SIGNATURE.match(line))
+        ),
+        None,
+    )
+    return RigTraceHeader(
+        ref.groupdict().get("ref") or NOT_STORED,
+        ref.group("status"),
+        ref.group("sha"),
+        members,
+        sha,
+        file_sha256(text) if sha else None,
+        seal,
+    )
 
 
 def read(text: str) -> TraceHeader | None:
@@ -156,7 +201,9 @@ def read(text: str) -> TraceHeader | None:
         return None
     evidence_match = next((m for line in head if (m := _EVIDENCE.match(line))), None)
     try:
-        evidence = bounded.parse_json(evidence_match.group("json"), "the trace header") if evidence_match else {}
+        evidence = (
+            bounded.parse_json(evidence_match.group("json"), "the trace header") if evidence_match else {}
+        )
     except InputError:  # an unreadable evidence line vouches for nothing; the file hash still decides
         evidence = {}
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)

@@ -57,7 +57,11 @@ def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
     targets = rollout.targets
     since = rollout.start.at
     serials = sorted(name for kind, name in targets if kind == "serial")
-    checks = [(c, sha) for c, sha in store.checks_since(serials, since) if c.version == targets[("serial", c.serial)]]
+    checks = [
+        (c, sha)
+        for c, sha in store.checks_since(serials, since)
+        if c.version == targets[("serial", c.serial)]
+    ]
     reports = store.gate_reports(rollout.start.canary, sorted({name for _, name in targets}), since)
     gate = Gate()
     for robot in rollout.start.canary:
@@ -65,11 +69,33 @@ def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
             if t not in targets:
                 continue
             kind, name = t
-            found = [GateEvidence(robot=robot, target=name, source="check", id=c.check_id, sha256=sha, kind="check",
-                                  passed=c.passed) for c, sha in checks if kind == "serial" and c.serial == name]
-            found += [GateEvidence(robot=robot, target=name, rig=kind == "rig", source="report", id=r.source_id,
-                                   sha256=r.payload_sha256, kind=r.kind, passed=report_passed(r))
-                      for r in reports if r.robot == robot and r.serial == name]
+            found = [
+                GateEvidence(
+                    robot=robot,
+                    target=name,
+                    source="check",
+                    id=c.check_id,
+                    sha256=sha,
+                    kind="check",
+                    passed=c.passed,
+                )
+                for c, sha in checks
+                if kind == "serial" and c.serial == name
+            ]
+            found += [
+                GateEvidence(
+                    robot=robot,
+                    target=name,
+                    rig=kind == "rig",
+                    source="report",
+                    id=r.source_id,
+                    sha256=r.payload_sha256,
+                    kind=r.kind,
+                    passed=report_passed(r),
+                )
+                for r in reports
+                if r.robot == robot and r.serial == name
+            ]
             gate.evidence += found
             if not found:
                 gate.waiting.setdefault(robot, []).append(name if kind == "serial" else f"rig {name}")
@@ -104,11 +130,17 @@ def _compare(store: Store, t: Target, old: int, new: int) -> TargetDiff:
         d = compare_artifacts(store.get_artifact(name, old), store.get_artifact(name, new), DiffRequest(a, b))
     except CalibctlError as exc:
         return TargetDiff(previous=old, verdict="not compared", why=exc.message[:500])
-    return TargetDiff(previous=old, verdict=d.verdict, p50_px=d.result.raw.percentiles_px["p50"],
-                      max_px=d.result.raw.percentiles_px["max"])
+    return TargetDiff(
+        previous=old,
+        verdict=d.verdict,
+        p50_px=d.result.raw.percentiles_px["p50"],
+        max_px=d.result.raw.percentiles_px["max"],
+    )
 
 
-def target_diffs(settings: Settings, fleet: Fleet, name: str, targets: dict[Target, int]) -> dict[Target, TargetDiff]:
+def target_diffs(
+    settings: Settings, fleet: Fleet, name: str, targets: dict[Target, int]
+) -> dict[Target, TargetDiff]:
     """Each of rollout ``name``'s ``targets`` against the version its robots ran before it (none: not compared)."""
     out = {}
     with records.open_store(settings) as store:

@@ -42,8 +42,11 @@ class FileResult:
     refused: list[tuple[int, str]] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
-        return {"path": self.path, "stored": self.stored,
-                "refused": [{"line": n, "why": why} for n, why in self.refused]}
+        return {
+            "path": self.path,
+            "stored": self.stored,
+            "refused": [{"line": n, "why": why} for n, why in self.refused],
+        }
 
 
 def _parse(path: Path) -> tuple[list[HealthReport], list[int], list[tuple[int, str]]]:
@@ -54,8 +57,10 @@ def _parse(path: Path) -> tuple[list[HealthReport], list[int], list[tuple[int, s
     bad: list[tuple[int, str]] = []
     lines = text.splitlines()
     if len(lines) > MAX_LINES:
-        raise InputError(f"{path}: {len(lines)} lines, more than {MAX_LINES} reports in one file",
-                         "split it into files of at most 200000 lines")
+        raise InputError(
+            f"{path}: {len(lines)} lines, more than {MAX_LINES} reports in one file",
+            "split it into files of at most 200000 lines",
+        )
     for number, line in enumerate(lines, start=1):
         if not line.strip():
             continue

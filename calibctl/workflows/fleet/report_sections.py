@@ -20,7 +20,9 @@ from calibctl.workflows.store_admin import records
 
 def _previous_accepted(settings: Settings, serial: str, version: int) -> int | None:
     with records.open_store(settings) as store:
-        earlier = [a.version for a in store.list_artifacts(serial) if a.status == "accepted" and a.version < version]
+        earlier = [
+            a.version for a in store.list_artifacts(serial) if a.status == "accepted" and a.version < version
+        ]
     return max(earlier, default=None)
 
 
@@ -36,8 +38,15 @@ def extend(settings: Settings, data: ReportData) -> ReportData:
             d = diff_cameras(settings, DiffRequest(f"{art.serial}@{previous}", art.ref))
             r = d.result
             sigma = None if r.raw.sigma_px is None else float(np.median(r.raw.sigma_px))
-            diff = DiffSection(f"{art.serial}@{previous}", d.verdict, r.raw.percentiles_px, r.fit.percentiles_px,
-                               r.rotation_fit_deg, sigma, tuple(r.reasons))
+            diff = DiffSection(
+                f"{art.serial}@{previous}",
+                d.verdict,
+                r.raw.percentiles_px,
+                r.fit.percentiles_px,
+                r.rotation_fit_deg,
+                sigma,
+                tuple(r.reasons),
+            )
         except CalibctlError as exc:  # two image sizes, a damaged covariance: say what could not be compared
             note = f"{art.serial}@{previous} and {art.ref} were not compared: {exc.message}"
     try:

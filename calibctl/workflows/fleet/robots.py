@@ -23,7 +23,9 @@ def fleet_event(**fields: Any) -> FleetEvent:
     try:
         return FleetEvent(**fields)
     except ValidationError as exc:
-        raise UsageError(validation_message(exc, "the fleet event"), "check the robot name and the serials") from None
+        raise UsageError(
+            validation_message(exc, "the fleet event"), "check the robot name and the serials"
+        ) from None
 
 
 def check_reason(reason: str) -> None:
@@ -35,8 +37,16 @@ def check_reason(reason: str) -> None:
 def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str], reason: str) -> FleetEvent:
     """Register ``robot`` carrying ``serials`` and ``rigs`` (AlreadyExistsError when it is registered)."""
     check_reason(reason)
-    event = fleet_event(kind="register", robot=robot, serials=serials, rigs=rigs, actor=settings.operator,
-                   station=settings.station, at=utc_now(), reason=reason)
+    event = fleet_event(
+        kind="register",
+        robot=robot,
+        serials=serials,
+        rigs=rigs,
+        actor=settings.operator,
+        station=settings.station,
+        at=utc_now(),
+        reason=reason,
+    )
     with records.open_store(settings, write=True) as store:
         store.add_fleet_event(event)
     return event
@@ -49,8 +59,16 @@ def assign(settings: Settings, robot: str, ref: str, reason: str, *, rig: bool =
     name, version = records.parse_artifact_ref(ref)
     if version is None:
         raise UsageError(f"'{ref}' names no version", f"assign an explicit version, e.g. {name}@3")
-    event = fleet_event(kind="assign", robot=robot, **({"rig": name} if rig else {"serial": name}), version=version,
-                        actor=settings.operator, station=settings.station, at=utc_now(), reason=reason)
+    event = fleet_event(
+        kind="assign",
+        robot=robot,
+        **({"rig": name} if rig else {"serial": name}),
+        version=version,
+        actor=settings.operator,
+        station=settings.station,
+        at=utc_now(),
+        reason=reason,
+    )
     with records.open_store(settings, write=True) as store:
         store.add_fleet_event(event)
     return event
@@ -70,7 +88,11 @@ class SensorState:
             return "unassigned"
         if self.active is None:
             return "no active version"
-        return "current" if self.running == self.active else ("behind" if self.running < self.active else "ahead")
+        return (
+            "current"
+            if self.running == self.active
+            else ("behind" if self.running < self.active else "ahead")
+        )
 
 
 @dataclass
@@ -90,17 +112,31 @@ class FleetStatus:
         def one(s: SensorState, key: str) -> dict[str, Any]:
             return {key: s.serial, "running": s.running, "active": s.active, "state": s.state}
 
-        return {"events": self.events, "robots": [
-            {"robot": r.robot, "rigs": [one(s, "rig") for s in r.rigs], "registered_at": r.registered_at,
-             "sensors": [one(s, "serial") for s in r.sensors]} for r in self.robots]}
+        return {
+            "events": self.events,
+            "robots": [
+                {
+                    "robot": r.robot,
+                    "rigs": [one(s, "rig") for s in r.rigs],
+                    "registered_at": r.registered_at,
+                    "sensors": [one(s, "serial") for s in r.sensors],
+                }
+                for r in self.robots
+            ],
+        }
 
 
 def robot_states(fleet: Fleet, serial_active: dict[str, int], rig_active: dict[str, int]) -> FleetStatus:
     """Each robot of the replayed log, its serials and rigs, the version each runs against the active one."""
     robots = []
     for robot, carried in fleet.carries.items():
-        states = {kind: [SensorState(name, fleet.running.get((robot, (kind, name))), active.get(name))
-                         for k, name in carried if k == kind]
-                  for kind, active in (("serial", serial_active), ("rig", rig_active))}
+        states = {
+            kind: [
+                SensorState(name, fleet.running.get((robot, (kind, name))), active.get(name))
+                for k, name in carried
+                if k == kind
+            ]
+            for kind, active in (("serial", serial_active), ("rig", rig_active))
+        }
         robots.append(RobotState(robot, states["rig"], states["serial"], fleet.registered_at[robot]))
     return FleetStatus(sorted(robots, key=lambda r: r.robot), fleet.length)

@@ -56,19 +56,29 @@ def _gated(store: Store, fleet: Fleet, name: str | None = None) -> None:
             r.state.update({robot: gate.state(robot) for robot, st in r.state.items() if st == "canary"})
 
 
-def _append(settings: Settings, events: list[FleetEvent], after: int,
-            rig_steps: Sequence[RigActivationStep] = ()) -> None:
+def _append(
+    settings: Settings, events: list[FleetEvent], after: int, rig_steps: Sequence[RigActivationStep] = ()
+) -> None:
     with records.open_store(settings, write=True) as store:
         store.append_fleet_events(events, after, rig_steps)
 
 
 def _new(kind: str, settings: Settings, reason: str, **fields: Any) -> FleetEvent:
-    return fleet_event(kind=kind, actor=settings.operator, station=settings.station, at=utc_now(), reason=reason, **fields)
+    return fleet_event(
+        kind=kind, actor=settings.operator, station=settings.station, at=utc_now(), reason=reason, **fields
+    )
 
 
 def _assign(settings: Settings, reason: str, robot: str, t: Target, version: int, name: str) -> FleetEvent:
-    return _new("assign", settings, reason, robot=robot, version=version, rollout=name,
-                **({"serial": t[1]} if t[0] == "serial" else {"rig": t[1]}))
+    return _new(
+        "assign",
+        settings,
+        reason,
+        robot=robot,
+        version=version,
+        rollout=name,
+        **({"serial": t[1]} if t[0] == "serial" else {"rig": t[1]}),
+    )
 
 
 def _parse_targets(serial_refs: list[str], rig_refs: list[str]) -> dict[Target, int]:
@@ -86,8 +96,14 @@ def _parse_targets(serial_refs: list[str], rig_refs: list[str]) -> dict[Target, 
     return wanted
 
 
-def start(settings: Settings, name: str, targets: list[str], canary: list[str], reason: str,
-          rig_targets: list[str] | None = None) -> Rollout:
+def start(
+    settings: Settings,
+    name: str,
+    targets: list[str],
+    canary: list[str],
+    reason: str,
+    rig_targets: list[str] | None = None,
+) -> Rollout:
     """Start rollout ``name``: ``targets`` SERIAL@N and ``rig_targets`` RIG@N, ``canary`` robots get theirs now."""
     check_reason(reason)
     wanted = _parse_targets(targets, rig_targets or [])
@@ -96,23 +112,40 @@ def start(settings: Settings, name: str, targets: list[str], canary: list[str], 
     busy = {robot: r.name for r in open_ for robot in r.start.canary}
     for robot in canary:
         if robot in busy:
-            raise UsageError(f"robot {robot} is already in the canary cohort of open rollout {busy[robot]}",
-                             f"promote or roll back {busy[robot]} first")
+            raise UsageError(
+                f"robot {robot} is already in the canary cohort of open rollout {busy[robot]}",
+                f"promote or roll back {busy[robot]} first",
+            )
         if robot in fleet.carries and not set(fleet.carries[robot]) & set(wanted):
             carried = ", ".join(label(t) for t in fleet.carries[robot])
-            raise UsageError(f"canary robot {robot} carries none of the target serials or rigs (it carries {carried})")
+            raise UsageError(
+                f"canary robot {robot} carries none of the target serials or rigs (it carries {carried})"
+            )
     for r in open_:
         for t in sorted(set(r.targets) & set(wanted)):
-            raise UsageError(f"{ref(t, wanted[t])}: {label(t)} is a target of open rollout {r.name} already "
-                             f"({ref(t, r.targets[t])}); nothing started", f"promote or roll back {r.name} first")
+            raise UsageError(
+                f"{ref(t, wanted[t])}: {label(t)} is a target of open rollout {r.name} already "
+                f"({ref(t, r.targets[t])}); nothing started",
+                f"promote or roll back {r.name} first",
+            )
     diffs = target_diffs(settings, fleet, name, wanted)
-    head = _new("rollout", settings, reason, rollout=name, canary=canary,
-                targets={n: v for (k, n), v in wanted.items() if k == "serial"},
-                rig_targets={n: v for (k, n), v in wanted.items() if k == "rig"},
-                diffs={n: d for (k, n), d in diffs.items() if k == "serial"},
-                rig_diffs={n: d for (k, n), d in diffs.items() if k == "rig"})
-    assigns = [_assign(settings, f"canary of rollout {name}", robot, t, wanted[t], name)
-               for robot in canary for t in fleet.carries.get(robot, []) if t in wanted]
+    head = _new(
+        "rollout",
+        settings,
+        reason,
+        rollout=name,
+        canary=canary,
+        targets={n: v for (k, n), v in wanted.items() if k == "serial"},
+        rig_targets={n: v for (k, n), v in wanted.items() if k == "rig"},
+        diffs={n: d for (k, n), d in diffs.items() if k == "serial"},
+        rig_diffs={n: d for (k, n), d in diffs.items() if k == "rig"},
+    )
+    assigns = [
+        _assign(settings, f"canary of rollout {name}", robot, t, wanted[t], name)
+        for robot in canary
+        for t in fleet.carries.get(robot, [])
+        if t in wanted
+    ]
     _append(settings, [head, *assigns], fleet.length)
     return _read(settings, name)[0].rollouts[name]
 
@@ -127,25 +160,42 @@ def promote(settings: Settings, name: str, reason: str) -> Rollout:
         raise UsageError(f"rollout {name} is {rollout.closed} already")
     if rollout.failing:
         named = "; ".join(f"{robot}: {', '.join(why)}" for robot, why in sorted(rollout.failing.items()))
-        raise VerdictFailed(f"rollout {name} is held: canary robot(s) {', '.join(sorted(rollout.failing))} report "
-                            f"failing checks ({named}); nothing promoted",
-                            f"roll it back: calibctl fleet rollout rollback {name} --reason ...")
+        raise VerdictFailed(
+            f"rollout {name} is held: canary robot(s) {', '.join(sorted(rollout.failing))} report "
+            f"failing checks ({named}); nothing promoted",
+            f"roll it back: calibctl fleet rollout rollback {name} --reason ...",
+        )
     canary = [r for r in rollout.start.canary if r in rollout.state]
     if rollout.waiting or not canary:
         named = "; ".join(f"{robot}: {', '.join(ts)}" for robot, ts in sorted(rollout.waiting.items()))
         robots = ", ".join(sorted(rollout.waiting)) or "(none)"
-        raise UsageError(f"rollout {name} cannot be promoted: canary robot(s) {robots} have no health report yet "
-                         f"({named or 'no canary carries a target'}); nothing promoted",
-                         "check the canary robots' cameras (`calibctl check`) or ingest their reports "
-                         "(`calibctl fleet ingest`), then promote again")
+        raise UsageError(
+            f"rollout {name} cannot be promoted: canary robot(s) {robots} have no health report yet "
+            f"({named or 'no canary carries a target'}); nothing promoted",
+            "check the canary robots' cameras (`calibctl check`) or ingest their reports "
+            "(`calibctl fleet ingest`), then promote again",
+        )
     targets = rollout.targets
-    assigns = [_assign(settings, f"promoted by rollout {name}", robot, t, targets[t], name)
-               for robot, state in sorted(rollout.state.items()) if state == "pending"
-               for t in fleet.carries[robot] if t in targets]
-    steps = [RigActivationStep(rig, v, "activate", rig_active.get(rig), f"promoted by rollout {name}: {reason}")
-             for (kind, rig), v in sorted(targets.items()) if kind == "rig" and rig_active.get(rig) != v]
-    event = _new("promote", settings, reason, rollout=name, gate=rollout.evidence,
-                 restore={s.rig: s.expected_active for s in steps if s.expected_active is not None})
+    assigns = [
+        _assign(settings, f"promoted by rollout {name}", robot, t, targets[t], name)
+        for robot, state in sorted(rollout.state.items())
+        if state == "pending"
+        for t in fleet.carries[robot]
+        if t in targets
+    ]
+    steps = [
+        RigActivationStep(rig, v, "activate", rig_active.get(rig), f"promoted by rollout {name}: {reason}")
+        for (kind, rig), v in sorted(targets.items())
+        if kind == "rig" and rig_active.get(rig) != v
+    ]
+    event = _new(
+        "promote",
+        settings,
+        reason,
+        rollout=name,
+        gate=rollout.evidence,
+        restore={s.rig: s.expected_active for s in steps if s.expected_active is not None},
+    )
     _append(settings, [*assigns, event], fleet.length, steps)
     return _read(settings, name)[0].rollouts[name]
 
@@ -165,9 +215,13 @@ def rollback(settings: Settings, name: str, reason: str) -> Rollout:
         if previous is not None and fleet.running[(robot, t)] != previous:
             assigns.append(_assign(settings, f"rolled back by rollout {name}", robot, t, previous, name))
     restore = {} if rollout.promote is None else rollout.promote.restore
-    rig_steps = [RigActivationStep(rig, old, "rollback", rollout.start.rig_targets[rig],
-                                   f"rolled back by rollout {name}: {reason}") for rig, old in sorted(restore.items())
-                 if rig_active.get(rig) != old]  # put back by hand already: nothing to restore
+    rig_steps = [
+        RigActivationStep(
+            rig, old, "rollback", rollout.start.rig_targets[rig], f"rolled back by rollout {name}: {reason}"
+        )
+        for rig, old in sorted(restore.items())
+        if rig_active.get(rig) != old
+    ]  # put back by hand already: nothing to restore
     _append(settings, [*assigns, _new("rollback", settings, reason, rollout=name)], fleet.length, rig_steps)
     return _read(settings, name)[0].rollouts[name]
 

@@ -76,9 +76,16 @@ class Trends:
 def _bins(temps: np.ndarray, values: np.ndarray) -> list[dict[str, Any]]:
     """Per 10 degC bin: its lower edge, n, mean and max of ``values``."""
     edges = np.floor(temps / TEMPERATURE_BIN_C) * TEMPERATURE_BIN_C
-    return [{"from_c": float(e), "to_c": float(e + TEMPERATURE_BIN_C), "n": int((edges == e).sum()),
-             "mean": float(values[edges == e].mean()), "max": float(values[edges == e].max())}
-            for e in np.unique(edges)]
+    return [
+        {
+            "from_c": float(e),
+            "to_c": float(e + TEMPERATURE_BIN_C),
+            "n": int((edges == e).sum()),
+            "mean": float(values[edges == e].mean()),
+            "max": float(values[edges == e].max()),
+        }
+        for e in np.unique(edges)
+    ]
 
 
 def _counts(values: list[str | None]) -> dict[str, int]:
@@ -88,7 +95,9 @@ def _counts(values: list[str | None]) -> dict[str, int]:
 def compute_trends(serial: str, rows: list[HealthRow], fleet_rms: dict[str, tuple[float, int]]) -> Trends:
     """``serial``'s trends from its ``rows`` and the fleet's serial -> (mean check RMS px, n) (NotFoundError: no rows)."""
     if not rows:
-        raise NotFoundError(f"no health reports for {serial}", "ingest some: calibctl fleet ingest REPORTS.jsonl")
+        raise NotFoundError(
+            f"no health reports for {serial}", "ingest some: calibctl fleet ingest REPORTS.jsonl"
+        )
     by_kind: dict[str, list[HealthRow]] = {}
     for r in rows:
         by_kind.setdefault(r.kind, []).append(r)
@@ -118,10 +127,17 @@ def compute_trends(serial: str, rows: list[HealthRow], fleet_rms: dict[str, tupl
         means = {s: m for s, (m, _) in fleet_rms.items()}
         values = np.array(sorted(means.values()))
         others = [m for s, m in means.items() if s != serial]
-        t.fleet = {"serials": len(means), "this_mean_rms_px": means[serial], "fleet_median_rms_px": float(np.median(values)),
-                   "others_median_rms_px": float(np.median(others)), "min_rms_px": float(values[0]),
-                   "max_rms_px": float(values[-1]), "max_over_min": float(values[-1] / values[0]) if values[0] > 0 else None,
-                   "rank": int(sum(m <= means[serial] for m in values)), "worst": max(means, key=lambda s: means[s])}
+        t.fleet = {
+            "serials": len(means),
+            "this_mean_rms_px": means[serial],
+            "fleet_median_rms_px": float(np.median(values)),
+            "others_median_rms_px": float(np.median(others)),
+            "min_rms_px": float(values[0]),
+            "max_rms_px": float(values[-1]),
+            "max_over_min": float(values[-1] / values[0]) if values[0] > 0 else None,
+            "rank": int(sum(m <= means[serial] for m in values)),
+            "worst": max(means, key=lambda s: means[s]),
+        }
     _findings(t)
     return t
 
@@ -130,16 +146,22 @@ def _findings(t: Trends) -> None:
     """Plain-language flags where a conditional crosses the seed's thresholds (at 2 sigma for slopes)."""
     d = t.td_drift_ppm
     if d is not None and abs(d.slope) > DRIFT_PPM and abs(d.slope) > 2 * d.sigma:
-        t.findings.append(f"time offset drifts {d.slope:+.1f} +- {d.sigma:.1f} ppm (> {DRIFT_PPM:g} ppm): clock drift, "
-                          "a constant td will not hold; estimate it as a state")
+        t.findings.append(
+            f"time offset drifts {d.slope:+.1f} +- {d.sigma:.1f} ppm (> {DRIFT_PPM:g} ppm): clock drift, "
+            "a constant td will not hold; estimate it as a state"
+        )
     s = t.rms_vs_temperature_px_per_c
     if s is not None and s.slope > 2 * s.sigma and len(t.rms_by_temperature) >= 2:
         low, high = t.rms_by_temperature[0], t.rms_by_temperature[-1]
-        t.findings.append(f"RMS rises with temperature, {s.slope:+.4f} +- {s.sigma:.4f} px/degC: {low['mean']:.3f} px "
-                          f"at {low['from_c']:g}..{low['to_c']:g} degC, {high['mean']:.3f} px at "
-                          f"{high['from_c']:g}..{high['to_c']:g} degC (thermal)")
+        t.findings.append(
+            f"RMS rises with temperature, {s.slope:+.4f} +- {s.sigma:.4f} px/degC: {low['mean']:.3f} px "
+            f"at {low['from_c']:g}..{low['to_c']:g} degC, {high['mean']:.3f} px at "
+            f"{high['from_c']:g}..{high['to_c']:g} degC (thermal)"
+        )
     f = t.fleet
     if f is not None and f["max_over_min"] is not None and f["max_over_min"] > SPREAD_RATIO:
         who = "this camera" if f["worst"] == t.serial else f"camera {f['worst']}"
-        t.findings.append(f"per-camera spread {f['max_over_min']:.1f}x (max/min mean RMS > {SPREAD_RATIO:g}): "
-                          f"{who} is the worst, hidden in a fleet median of {f['fleet_median_rms_px']:.3f} px")
+        t.findings.append(
+            f"per-camera spread {f['max_over_min']:.1f}x (max/min mean RMS > {SPREAD_RATIO:g}): "
+            f"{who} is the worst, hidden in a fleet median of {f['fleet_median_rms_px']:.3f} px"
+        )

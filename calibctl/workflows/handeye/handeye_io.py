@@ -71,8 +71,11 @@ def read_rotations(table: dio.Table, prefix: str) -> np.ndarray:
     name = table.path.name
     if len(found) != 1:
         options = "; ".join(", ".join(c) for c in rotation_columns(prefix).values())
-        raise InputError(f"{name}: {'no' if not found else 'more than one'} complete rotation for {prefix} "
-                         f"({', '.join(found) or 'none found'})", hint=f"give exactly one of: {options}")
+        raise InputError(
+            f"{name}: {'no' if not found else 'more than one'} complete rotation for {prefix} "
+            f"({', '.join(found) or 'none found'})",
+            hint=f"give exactly one of: {options}",
+        )
     kind = found[0]
     values = _stack(table, rotation_columns(prefix)[kind])
     if kind == "quaternion":
@@ -80,25 +83,31 @@ def read_rotations(table: dio.Table, prefix: str) -> np.ndarray:
         bad = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
         if bad.any():
             first = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{name}: {prefix} quaternion not normalised at {_bad_lines(table, bad)} "
-                             f"(norm {norm[first]:.4f} at line {int(table.lines[first])})",
-                             hint="divide each quaternion by its norm (w, x, y, z order)")
+            raise InputError(
+                f"{name}: {prefix} quaternion not normalised at {_bad_lines(table, bad)} "
+                f"(norm {norm[first]:.4f} at line {int(table.lines[first])})",
+                hint="divide each quaternion by its norm (w, x, y, z order)",
+            )
         return np.array([se3.rotation_from_quaternion(q / np.linalg.norm(q)) for q in values])
     if kind == "rotvec":
         angle = np.linalg.norm(values, axis=1)
         bad = angle > 2 * math.pi
         if bad.any():
-            raise InputError(f"{name}: {prefix} rotation vector longer than a full turn at {_bad_lines(table, bad)} "
-                             f"(up to {angle.max():.1f}): degrees where radians are expected?",
-                             hint="rotation vectors are axis * angle in radians")
+            raise InputError(
+                f"{name}: {prefix} rotation vector longer than a full turn at {_bad_lines(table, bad)} "
+                f"(up to {angle.max():.1f}): degrees where radians are expected?",
+                hint="rotation vectors are axis * angle in radians",
+            )
         return np.array([se3.rotation_from_rotvec(v) for v in values])
     matrices = values.reshape(-1, 3, 3)
     error = np.array([se3.orthonormality_error(R) for R in matrices])
     bad = error > ORTHONORMAL_TOL
     if bad.any():
-        raise InputError(f"{name}: {prefix} rotation matrix not orthonormal at {_bad_lines(table, bad)} "
-                         f"(|R^T R - I| or |det R - 1| up to {error.max():.2g})",
-                         hint="a rotation matrix has orthonormal rows and determinant +1; re-export it at full precision")
+        raise InputError(
+            f"{name}: {prefix} rotation matrix not orthonormal at {_bad_lines(table, bad)} "
+            f"(|R^T R - I| or |det R - 1| up to {error.max():.2g})",
+            hint="a rotation matrix has orthonormal rows and determinant +1; re-export it at full precision",
+        )
     return matrices
 
 
@@ -108,9 +117,11 @@ def read_transforms(table: dio.Table, prefix: str) -> np.ndarray:
     t = _stack(table, translation_columns(prefix))
     bad = ~(np.abs(t) <= MAX_TRANSLATION_M).all(axis=1)
     if bad.any():  # 1e308 passed the finite check, then overflowed the solve into an SVD traceback
-        raise InputError(f"{table.path.name}: {prefix} translation over {MAX_TRANSLATION_M:g} m at "
-                         f"{_bad_lines(table, bad)} (up to {np.abs(t).max():.3g} m)",
-                         hint="translations are in metres; is a column in another unit, or corrupt?")
+        raise InputError(
+            f"{table.path.name}: {prefix} translation over {MAX_TRANSLATION_M:g} m at "
+            f"{_bad_lines(table, bad)} (up to {np.abs(t).max():.3g} m)",
+            hint="translations are in metres; is a column in another unit, or corrupt?",
+        )
     return np.array([se3.transform(Ri, ti) for Ri, ti in zip(R, t, strict=True)])
 
 
@@ -123,9 +134,11 @@ def read_timestamps(table: dio.Table, max_skew_s: float) -> np.ndarray | None:
         skew = np.abs(table.numeric["a_t_s"] - table.numeric["b_t_s"])
         bad = skew > max_skew_s
         if bad.any():
-            raise InputError(f"{name}: unsynchronised rows: a_t_s and b_t_s differ by up to {skew.max() * 1e3:.1f} ms "
-                             f"at {_bad_lines(table, bad)} (limit {max_skew_s * 1e3:g} ms)",
-                             hint="resample b at a's timestamps (interpolate the poses), or raise --max-skew-ms")
+            raise InputError(
+                f"{name}: unsynchronised rows: a_t_s and b_t_s differ by up to {skew.max() * 1e3:.1f} ms "
+                f"at {_bad_lines(table, bad)} (limit {max_skew_s * 1e3:g} ms)",
+                hint="resample b at a's timestamps (interpolate the poses), or raise --max-skew-ms",
+            )
         dio.require_increasing(table, "a_t_s")
         return table.numeric["a_t_s"]
     if "t_s" in table.numeric:
@@ -155,28 +168,38 @@ def check_units(motions: Motions, path: Path, names: tuple[str, str] = ("a", "b"
     if np.count_nonzero(unexplained & moving) * 2 <= np.count_nonzero(moving):
         return
     big = names[0] if ratio > 1 else names[1]
-    raise InputError(f"{path.name}: {names[0]}'s motions translate {ratio:.4g}x as far as {names[1]}'s "
-                     f"(median), more than a lever arm of up to {LEVER_ARM_MAX_M:g} m explains: {big}'s "
-                     "translations look like millimetres (or another unit), not metres",
-                     hint="convert every translation to metres")
+    raise InputError(
+        f"{path.name}: {names[0]}'s motions translate {ratio:.4g}x as far as {names[1]}'s "
+        f"(median), more than a lever arm of up to {LEVER_ARM_MAX_M:g} m explains: {big}'s "
+        "translations look like millimetres (or another unit), not metres",
+        hint="convert every translation to metres",
+    )
 
 
 def read_motions(path: Path, shape: str, max_skew_s: float) -> tuple[Motions, np.ndarray | None, dio.Table]:
     """Motions from a generic CSV (``shape`` poses or motions); labels name the CSV lines."""
     optional = (*TIME_COLUMNS, *all_pose_columns("a"), *all_pose_columns("b"))
-    table = dio.read_table(path, (*translation_columns("a"), *translation_columns("b")),
-                           optional_numeric=optional, what="motions CSV")
+    table = dio.read_table(
+        path,
+        (*translation_columns("a"), *translation_columns("b")),
+        optional_numeric=optional,
+        what="motions CSV",
+    )
     times = read_timestamps(table, max_skew_s)
     T_a, T_b = read_transforms(table, "a"), read_transforms(table, "b")
     labels = tuple(f"line {int(line)}" for line in table.lines)
     if shape == "motions":
         if table.n_rows < 2:
-            raise InputError(f"{path.name} has {table.n_rows} motion; hand-eye needs at least 2 (about two axes)")
+            raise InputError(
+                f"{path.name} has {table.n_rows} motion; hand-eye needs at least 2 (about two axes)"
+            )
         motions = Motions.from_transforms(T_a, T_b, labels)
     else:
         if table.n_rows < 3:
-            raise InputError(f"{path.name} has {table.n_rows} pose rows, i.e. {max(table.n_rows - 1, 0)} motion(s); "
-                             "hand-eye needs at least 3 poses (2 motions about two axes)")
+            raise InputError(
+                f"{path.name} has {table.n_rows} pose rows, i.e. {max(table.n_rows - 1, 0)} motion(s); "
+                "hand-eye needs at least 3 poses (2 motions about two axes)"
+            )
         motions = Motions.from_poses(T_a, T_b, tuple(str(int(line)) for line in table.lines), prefix="lines ")
     check_units(motions, path)
     return motions, times, table
@@ -206,7 +229,11 @@ def read_matrix_rows(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
             text = handle.read().decode("utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
-    rows = [(i, line) for i, line in enumerate(text.splitlines(), start=1) if line.strip() and not line.lstrip().startswith("#")]
+    rows = [
+        (i, line)
+        for i, line in enumerate(text.splitlines(), start=1)
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
     if not rows or _numbers(rows[0][1]) is None:
         return None
     name = path.name
@@ -214,36 +241,48 @@ def read_matrix_rows(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
     for line_no, line in rows:
         numbers = _numbers(line)
         if numbers is None:
-            raise InputError(f"{name} line {line_no}: not all numbers ({line.strip()[:60]!r})",
-                             hint="a pose file without a header has 16 numbers per line: a row-major 4x4 in metres")
+            raise InputError(
+                f"{name} line {line_no}: not all numbers ({line.strip()[:60]!r})",
+                hint="a pose file without a header has 16 numbers per line: a row-major 4x4 in metres",
+            )
         if len(numbers) != MATRIX_ROW_NUMBERS:
-            raise InputError(f"{name} line {line_no}: {len(numbers)} numbers; a pose file without a header has "
-                             f"{MATRIX_ROW_NUMBERS} per line (a row-major 4x4 T_base_gripper, metres)",
-                             hint="or write the CSV with a header: image, gripper_r11..gripper_r33 (or gripper_q*), "
-                                  "gripper_tx_m, gripper_ty_m, gripper_tz_m")
+            raise InputError(
+                f"{name} line {line_no}: {len(numbers)} numbers; a pose file without a header has "
+                f"{MATRIX_ROW_NUMBERS} per line (a row-major 4x4 T_base_gripper, metres)",
+                hint="or write the CSV with a header: image, gripper_r11..gripper_r33 (or gripper_q*), "
+                "gripper_tx_m, gripper_ty_m, gripper_tz_m",
+            )
         values.append(numbers)
     T = np.array(values, np.float64).reshape(-1, 4, 4)
     lines = np.array([line_no for line_no, _ in rows], np.int64)
     bad = ~np.isfinite(T).reshape(len(T), -1).all(axis=1)
     if bad.any():
-        raise InputError(f"{name}: non-finite numbers (nan or inf) at {dio.lines_text(lines[bad])}",
-                         hint="export every pose in full")
+        raise InputError(
+            f"{name}: non-finite numbers (nan or inf) at {dio.lines_text(lines[bad])}",
+            hint="export every pose in full",
+        )
     bad = np.abs(T[:, 3, :] - [0.0, 0.0, 0.0, 1.0]).max(axis=1) > ORTHONORMAL_TOL
     if bad.any():
-        raise InputError(f"{name}: the 4x4 does not end in 0 0 0 1 at {dio.lines_text(lines[bad])}",
-                         hint="each line is a row-major 4x4 T_base_gripper (a column-major export ends its "
-                              "lines with the translation; transpose it)")
+        raise InputError(
+            f"{name}: the 4x4 does not end in 0 0 0 1 at {dio.lines_text(lines[bad])}",
+            hint="each line is a row-major 4x4 T_base_gripper (a column-major export ends its "
+            "lines with the translation; transpose it)",
+        )
     error = np.array([se3.orthonormality_error(Ti[:3, :3]) for Ti in T])
     bad = error > ORTHONORMAL_TOL
     if bad.any():
-        raise InputError(f"{name}: rotation block not a rotation at {dio.lines_text(lines[bad])} "
-                         f"(|R^T R - I| or |det R - 1| up to {error.max():.2g})",
-                         hint="a rigid transform's 3x3 block has orthonormal rows and determinant +1; "
-                              "re-export it at full precision")
+        raise InputError(
+            f"{name}: rotation block not a rotation at {dio.lines_text(lines[bad])} "
+            f"(|R^T R - I| or |det R - 1| up to {error.max():.2g})",
+            hint="a rigid transform's 3x3 block has orthonormal rows and determinant +1; "
+            "re-export it at full precision",
+        )
     return T, lines
 
 
-def write_motion_log(path: Path, t_s: np.ndarray, T_first: np.ndarray, T_second: np.ndarray, *, force: bool) -> Path:
+def write_motion_log(
+    path: Path, t_s: np.ndarray, T_first: np.ndarray, T_second: np.ndarray, *, force: bool
+) -> Path:
     """The CSV ``read_motions`` reads: t_s, a and b as quaternion + translation."""
     columns: dict[str, np.ndarray] = {"t_s": np.asarray(t_s, np.float64)}
     for prefix, T in (("a", T_first), ("b", T_second)):

@@ -57,10 +57,12 @@ def _read_matrix_rows(path: Path, images: Path) -> tuple[dio.Table, np.ndarray] 
     T_base_gripper, lines = read
     names = [p.name for p in list_images(images)]
     if len(names) != len(lines):
-        raise InputError(f"{path.name} has {len(lines)} poses but {images} has {len(names)} images; a pose file "
-                         "without image names pairs its i-th pose with the i-th image in file-name order",
-                         hint="keep exactly the images the poses were recorded for in --images, or write the CSV "
-                              "with an image column")
+        raise InputError(
+            f"{path.name} has {len(lines)} poses but {images} has {len(names)} images; a pose file "
+            "without image names pairs its i-th pose with the i-th image in file-name order",
+            hint="keep exactly the images the poses were recorded for in --images, or write the CSV "
+            "with an image column",
+        )
     return dio.Table(path, {}, {"image": np.array(names)}, lines), T_base_gripper
 
 
@@ -69,23 +71,32 @@ def _read_robot_csv(path: Path, images: Path) -> tuple[dio.Table, np.ndarray]:
     if matrix_rows is not None:
         table, T_base_gripper = matrix_rows
     else:
-        table = dio.read_table(path, handeye_io.translation_columns(PREFIX),
-                               optional_numeric=handeye_io.all_pose_columns(PREFIX), optional_text=("image",),
-                               what="robot poses CSV")
+        table = dio.read_table(
+            path,
+            handeye_io.translation_columns(PREFIX),
+            optional_numeric=handeye_io.all_pose_columns(PREFIX),
+            optional_text=("image",),
+            what="robot poses CSV",
+        )
         if "image" not in table.text:
-            raise InputError(f"{path.name} has no image column",
-                             hint="one row per arm pose: image, gripper pose columns")
+            raise InputError(
+                f"{path.name} has no image column", hint="one row per arm pose: image, gripper pose columns"
+            )
         T_base_gripper = handeye_io.read_transforms(table, PREFIX)
     reach = np.linalg.norm(T_base_gripper[:, :3, 3], axis=1)
     far = reach > handeye_io.ROBOT_REACH_MAX_M
     if far.any():
-        raise InputError(f"{path.name}: gripper translation {reach.max():.4g} at {dio.lines_text(table.lines[far])} is "
-                         f"beyond any arm's reach in metres: millimetres?",
-                         hint="robot controllers often report mm; divide the gripper_t*_m columns by 1000")
+        raise InputError(
+            f"{path.name}: gripper translation {reach.max():.4g} at {dio.lines_text(table.lines[far])} is "
+            f"beyond any arm's reach in metres: millimetres?",
+            hint="robot controllers often report mm; divide the gripper_t*_m columns by 1000",
+        )
     return table, T_base_gripper
 
 
-def _board_poses(table: dio.Table, images: Path, art: CalibrationArtifact, spec) -> tuple[list, list[str], list[str]]:
+def _board_poses(
+    table: dio.Table, images: Path, art: CalibrationArtifact, spec
+) -> tuple[list, list[str], list[str]]:
     """Per row: T_cam_board or None; the skipped rows with reasons; sha256 of every image read."""
     K, dist = np.array(art.camera_matrix, np.float64), np.array(art.dist_coeffs, np.float64)
     model = spec.object_points()
@@ -96,19 +107,28 @@ def _board_poses(table: dio.Table, images: Path, art: CalibrationArtifact, spec)
         try:
             data = path.read_bytes()
         except OSError as exc:
-            raise InputError(f"{table.path.name} line {int(line)}: cannot read image {path}: {exc.strerror or exc}",
-                             hint="the image column names files inside --images") from None
+            raise InputError(
+                f"{table.path.name} line {int(line)}: cannot read image {path}: {exc.strerror or exc}",
+                hint="the image column names files inside --images",
+            ) from None
         gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
         if gray is None:
             raise InputError(f"{table.path.name} line {int(line)}: {path} is not a readable image")
         if (gray.shape[1], gray.shape[0]) != tuple(art.image_size):
-            raise InputError(f"{path.name} is {gray.shape[1]}x{gray.shape[0]} but {art.ref} was fitted at "
-                             f"{art.image_size[0]}x{art.image_size[1]}",
-                             hint="use images at the calibration's resolution (K scales with the read-out)")
+            raise InputError(
+                f"{path.name} is {gray.shape[1]}x{gray.shape[0]} but {art.ref} was fitted at "
+                f"{art.image_size[0]}x{art.image_size[1]}",
+                hint="use images at the calibration's resolution (K scales with the read-out)",
+            )
         hashes.append(hashlib.sha256(data).hexdigest())
         detection, reason = detect_board(gray, spec)
-        T_cam_board, rms = (None, float("inf")) if detection is None else estimate_board_pose(
-            model[detection.corner_ids], detection.corners_px, K, dist, art.model.name)
+        T_cam_board, rms = (
+            (None, float("inf"))
+            if detection is None
+            else estimate_board_pose(
+                model[detection.corner_ids], detection.corners_px, K, dist, art.model.name
+            )
+        )
         if T_cam_board is None:
             skipped.append(f"{path.name} (line {int(line)}): {reason or 'no board pose'}")
         poses.append(T_cam_board)
@@ -123,10 +143,20 @@ def _load_camera(settings: Settings, serial: str, board: str | None):
         return art, store.get_board(*board_ref(board))
 
 
-def run_robot_handeye(settings: Settings, path: Path, images: Path | None, serial: str | None, parent_frame: str,
-                      child_frame: str, *, board_ref: str | None = None, eye_to_hand: bool = False,
-                      method: str = "park", lever_arm_sigma_min: float | None = None,
-                      outputs: Outputs | None = None) -> HandEyeOutcome:
+def run_robot_handeye(
+    settings: Settings,
+    path: Path,
+    images: Path | None,
+    serial: str | None,
+    parent_frame: str,
+    child_frame: str,
+    *,
+    board_ref: str | None = None,
+    eye_to_hand: bool = False,
+    method: str = "park",
+    lever_arm_sigma_min: float | None = None,
+    outputs: Outputs | None = None,
+) -> HandEyeOutcome:
     check_frames(parent_frame, child_frame)
     if images is None or serial is None:
         raise UsageError("the robot-arm case needs both --images DIR and --serial SERIAL")
@@ -137,16 +167,34 @@ def run_robot_handeye(settings: Settings, path: Path, images: Path | None, seria
     poses, skipped, hashes = _board_poses(table, images, art, board_spec(board))
     keep = [i for i, T in enumerate(poses) if T is not None]
     if len(keep) < MIN_POSES:
-        raise InputError(f"{path.name}: the board was found in {len(keep)} of {len(poses)} images; hand-eye needs "
-                         f"at least {MIN_POSES} poses", hint=named_list(skipped, 3, sep='; ') or None)
-    T_wa_a = T_base_gripper[keep] if not eye_to_hand else np.array([se3.invert(T) for T in T_base_gripper[keep]])
+        raise InputError(
+            f"{path.name}: the board was found in {len(keep)} of {len(poses)} images; hand-eye needs "
+            f"at least {MIN_POSES} poses",
+            hint=named_list(skipped, 3, sep="; ") or None,
+        )
+    T_wa_a = (
+        T_base_gripper[keep] if not eye_to_hand else np.array([se3.invert(T) for T in T_base_gripper[keep]])
+    )
     T_board_cam = np.array([se3.invert(poses[i]) for i in keep])
     labels = tuple(str(table.text["image"][i]) for i in keep)
     motions = Motions.from_poses(T_wa_a, T_board_cam, labels)
     handeye_io.check_units(motions, path, names=(PREFIX, "camera"))
     shape = "robot-eye-to-hand" if eye_to_hand else "robot-eye-in-hand"
-    source = Source(path, shape, camera=art.ref, board=f"{board.name}@{board.revision}", image_sha256=tuple(hashes),
-                    skipped=tuple(skipped))
-    result = solve_result(motions, parent_frame, child_frame, method, thresholds(settings, lever_arm_sigma_min),
-                          settings, source)
+    source = Source(
+        path,
+        shape,
+        camera=art.ref,
+        board=f"{board.name}@{board.revision}",
+        image_sha256=tuple(hashes),
+        skipped=tuple(skipped),
+    )
+    result = solve_result(
+        motions,
+        parent_frame,
+        child_frame,
+        method,
+        thresholds(settings, lever_arm_sigma_min),
+        settings,
+        source,
+    )
     return _write_outputs(result, outputs or Outputs())

@@ -74,7 +74,9 @@ def _core_edge(e: RigEdge) -> Edge:
     return Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance))
 
 
-def tree_edge(parent: str, child: str, T_parent_child: np.ndarray, covariance_left: np.ndarray, source: str) -> RigEdge:
+def tree_edge(
+    parent: str, child: str, T_parent_child: np.ndarray, covariance_left: np.ndarray, source: str
+) -> RigEdge:
     """A solved T_parent_child as a tree edge. ``covariance_left`` is over the solvers' perturbation (R =
     exp(d_rot) R0, t = t0 + d_t; hand-eye and LiDAR alike), re-expressed over (rvec, tvec) as the tree keeps it."""
     T = np.asarray(T_parent_child, np.float64)
@@ -84,10 +86,17 @@ def tree_edge(parent: str, child: str, T_parent_child: np.ndarray, covariance_le
 
     cov = propagate(pose, np.zeros(6), covariance_left)
     e = Edge(parent, child, T, cov)
-    return RigEdge(parent=parent, child=child, T_parent_child=tuple(map(tuple, T.tolist())), covariance=cov.tolist(),
-                   translation_mm=e.translation_mm, sigma_translation_mm=e.sigma_translation_mm,
-                   rotation_deg=e.rotation_deg, sigma_rotation_deg=e.sigma_rotation_deg,
-                   source=source)
+    return RigEdge(
+        parent=parent,
+        child=child,
+        T_parent_child=tuple(map(tuple, T.tolist())),
+        covariance=cov.tolist(),
+        translation_mm=e.translation_mm,
+        sigma_translation_mm=e.sigma_translation_mm,
+        rotation_deg=e.rotation_deg,
+        sigma_rotation_deg=e.sigma_rotation_deg,
+        source=source,
+    )
 
 
 def combined_tree_check(rig: RigDefinition, edges: Sequence[RigEdge], parent: str, child: str) -> None:
@@ -95,41 +104,53 @@ def combined_tree_check(rig: RigDefinition, edges: Sequence[RigEdge], parent: st
     known = [*rig.cameras, *rig.frames]
     for frame in (parent, child):
         if frame not in known:
-            raise NotFoundError(f"frame '{frame}' is not in rig {rig.name} (cameras {', '.join(rig.cameras)}; "
-                                f"frames {', '.join(rig.frames) or 'none declared'})",
-                                hint="name a rig member or a frame declared with `calibctl rig add ... --frame NAME`")
+            raise NotFoundError(
+                f"frame '{frame}' is not in rig {rig.name} (cameras {', '.join(rig.cameras)}; "
+                f"frames {', '.join(rig.frames) or 'none declared'})",
+                hint="name a rig member or a frame declared with `calibctl rig add ... --frame NAME`",
+            )
     if parent in rig.cameras and child in rig.cameras:
-        raise UsageError(f"{parent} and {child} are both cameras of rig {rig.name}: the rig solve relates them",
-                         hint="hand-eye joins a non-camera frame (flange, imu, lidar) to the rig")
+        raise UsageError(
+            f"{parent} and {child} are both cameras of rig {rig.name}: the rig solve relates them",
+            hint="hand-eye joins a non-camera frame (flange, imu, lidar) to the rig",
+        )
     for e in edges:
         if e.source in EVIDENCE_SOURCES and (e.parent, e.child) == (child, parent):
-            raise UsageError(f"rig {rig.name} already has the edge {child} -> {parent}",
-                             hint=f"solve it in that direction (--from {child} --to {parent}) to replace it")
+            raise UsageError(
+                f"rig {rig.name} already has the edge {child} -> {parent}",
+                hint=f"solve it in that direction (--from {child} --to {parent}) to replace it",
+            )
     others = [_core_edge(e) for e in edges if _key(e.parent, e.child) != _key(parent, child)]
     try:
         orient_tree([*others, Edge(parent, child, np.eye(4), np.zeros((6, 6)))], rig.root)
     except ValueError as exc:
-        raise UsageError(f"rig {rig.name}: {parent} -> {child} cannot join the tree: {exc}",
-                         hint="a frame has one path to every other; attach a frame the tree does not reach") from None
+        raise UsageError(
+            f"rig {rig.name}: {parent} -> {child} cannot join the tree: {exc}",
+            hint="a frame has one path to every other; attach a frame the tree does not reach",
+        ) from None
 
 
-def checked(store: object, rig_name: str, parent: str, child: str, serial: str | None,
-            kind: EdgeKind = HANDEYE) -> tuple[RigDefinition, RigCalibration]:
+def checked(
+    store: object, rig_name: str, parent: str, child: str, serial: str | None, kind: EdgeKind = HANDEYE
+) -> tuple[RigDefinition, RigCalibration]:
     """The rig exists and has an active version, the edge can join its tree, and every camera involved
     (a camera frame of the edge, the robot case's --serial) has an active calibration."""
     rig: RigDefinition = store.get_rig(rig_name)  # type: ignore[attr-defined]
     try:
         base: RigCalibration = store.get_rig_calibration(rig_name, None)  # type: ignore[attr-defined]
     except NotFoundError as exc:
-        raise NotFoundError(f"rig {rig_name} has no active version to add a {kind.source} edge to ({exc.message})",
-                            hint=f"solve the rig first (`calibctl rig solve {rig_name}`)") from None
+        raise NotFoundError(
+            f"rig {rig_name} has no active version to add a {kind.source} edge to ({exc.message})",
+            hint=f"solve the rig first (`calibctl rig solve {rig_name}`)",
+        ) from None
     combined_tree_check(rig, base.edges, parent, child)
     cameras = [f for f in (parent, child) if f in rig.cameras] + ([serial] if serial else [])
     missing = [c for c, v in active_versions(store, cameras).items() if v is None]
     if missing:
-        raise NotFoundError(f"camera {missing[0]} has no active calibration",
-                            hint=f"calibrate {missing[0]} (or roll it back to an accepted version), "
-                                 f"then run {kind.command}")
+        raise NotFoundError(
+            f"camera {missing[0]} has no active calibration",
+            hint=f"calibrate {missing[0]} (or roll it back to an accepted version), then run {kind.command}",
+        )
     return rig, base
 
 
@@ -186,29 +207,52 @@ def edge_findings(results: Sequence[Evidence], active: Mapping[str, int | None])
         edge = f"{h.parent_frame} -> {h.child_frame}"
         for g in h.gates:
             if not g.passed:
-                out.append(Finding(rule=f"{k.rule}-gates", severity="error", value=g.value, threshold=g.threshold,
-                                   message=f"{edge}: gate {g.gate} failed: {g.message}",
-                                   fix=g.hint or f"capture again so every gate passes, then run {k.command} again"))
+                out.append(
+                    Finding(
+                        rule=f"{k.rule}-gates",
+                        severity="error",
+                        value=g.value,
+                        threshold=g.threshold,
+                        message=f"{edge}: gate {g.gate} failed: {g.message}",
+                        fix=g.hint or f"capture again so every gate passes, then run {k.command} again",
+                    )
+                )
         why = _no_sigma(h) if h.status == "accepted" else None
         if why is not None:
-            out.append(Finding(rule=f"{k.rule}-uncertainty", severity="error", message=f"{edge}: no one-sigma ({why})",
-                               fix="capture more, varied poses: an edge without an uncertainty cannot join a rig tree"))
+            out.append(
+                Finding(
+                    rule=f"{k.rule}-uncertainty",
+                    severity="error",
+                    message=f"{edge}: no one-sigma ({why})",
+                    fix="capture more, varied poses: an edge without an uncertainty cannot join a rig tree",
+                )
+            )
         elif isinstance(h, LidarEdgeResult) and h.status == "accepted" and h.transform is not None:
             t, r = max(h.transform.sigma_translation_mm), max(h.transform.sigma_rotation_deg)
             if t > LIDAR_LOOSE_TRANSLATION_MM or r > LIDAR_LOOSE_ROTATION_DEG:
-                out.append(Finding(rule="lidar-uncertainty", severity="warning", value=t,
-                                   threshold=LIDAR_LOOSE_TRANSLATION_MM,
-                                   message=f"{edge}: one-sigma up to {t:.1f} mm, {r:.3f} deg (loose above "
-                                           f"{LIDAR_LOOSE_TRANSLATION_MM:g} mm or {LIDAR_LOOSE_ROTATION_DEG:g} deg)",
-                                   fix="add poses nearer the LiDAR and tilted further"))
+                out.append(
+                    Finding(
+                        rule="lidar-uncertainty",
+                        severity="warning",
+                        value=t,
+                        threshold=LIDAR_LOOSE_TRANSLATION_MM,
+                        message=f"{edge}: one-sigma up to {t:.1f} mm, {r:.3f} deg (loose above "
+                        f"{LIDAR_LOOSE_TRANSLATION_MM:g} mm or {LIDAR_LOOSE_ROTATION_DEG:g} deg)",
+                        fix="add poses nearer the LiDAR and tilted further",
+                    )
+                )
         cam = evidence_camera(h)
         if cam is not None and cam[0] in active and active[cam[0]] != cam[1]:
             now = active[cam[0]]
-            out.append(Finding(
-                rule=f"{k.rule}-stale-member", severity="error",
-                message=f"{edge}: solved with {cam[0]}@{cam[1]}, the active one is now "
-                        f"{f'{cam[0]}@{now}' if now is not None else 'none'}",
-                fix=f"re-run `{k.rerun}` with the camera's current calibration"))
+            out.append(
+                Finding(
+                    rule=f"{k.rule}-stale-member",
+                    severity="error",
+                    message=f"{edge}: solved with {cam[0]}@{cam[1]}, the active one is now "
+                    f"{f'{cam[0]}@{now}' if now is not None else 'none'}",
+                    fix=f"re-run `{k.rerun}` with the camera's current calibration",
+                )
+            )
     return out
 
 
@@ -229,35 +273,53 @@ def carried_forward(active: RigCalibration | None, versions: Mapping[str, int | 
     edges: list[RigEdge] = []
     kept: list[Evidence] = []
     dropped = []
-    by_key: dict[tuple[str, str, str], RigEdge] = {(e.parent, e.child, e.source): e for e in active.edges
-                                                   if e.source in EVIDENCE_SOURCES}
+    by_key: dict[tuple[str, str, str], RigEdge] = {
+        (e.parent, e.child, e.source): e for e in active.edges if e.source in EVIDENCE_SOURCES
+    }
     for h in evidence_of(active):
         k = kind_of(h)
         edge = by_key.get((h.parent_frame, h.child_frame, k.source))
         if edge is None:
             continue
         if edge_findings([h], versions):
-            dropped.append(Finding(rule=f"{k.rule}-dropped", severity="warning",
-                                   message=f"{h.parent_frame} -> {h.child_frame} of {active.rig}@{active.version} was "
-                                           f"solved with {camera_ref(h)}, no longer active: not carried",
-                                   fix=f"re-run `{k.rerun}` to put the edge back"))
+            dropped.append(
+                Finding(
+                    rule=f"{k.rule}-dropped",
+                    severity="warning",
+                    message=f"{h.parent_frame} -> {h.child_frame} of {active.rig}@{active.version} was "
+                    f"solved with {camera_ref(h)}, no longer active: not carried",
+                    fix=f"re-run `{k.rerun}` to put the edge back",
+                )
+            )
             continue
         edges.append(edge)
         kept.append(h)
-    return Carried(edges, [h for h in kept if isinstance(h, HandEyeResult)],
-                   [h for h in kept if isinstance(h, LidarEdgeResult)], dropped)
+    return Carried(
+        edges,
+        [h for h in kept if isinstance(h, HandEyeResult)],
+        [h for h in kept if isinstance(h, LidarEdgeResult)],
+        dropped,
+    )
 
 
-def with_evidence(base: RigCalibration, result: Evidence, edge: RigEdge | None,
-                  versions: Mapping[str, int | None], settings: Settings) -> RigCalibration:
+def with_evidence(
+    base: RigCalibration,
+    result: Evidence,
+    edge: RigEdge | None,
+    versions: Mapping[str, int | None],
+    settings: Settings,
+) -> RigCalibration:
     """The next version: ``base`` with ``edge`` (the accepted ``result``'s) added or replacing any evidence
     edge between the same two frames; a rejected result (or one lint rejects) adds none."""
     key = _key(result.parent_frame, result.child_frame)
     findings = edge_findings([result], versions)
     accepted = result.status == "accepted" and edge is not None and not has_errors(findings)
-    others = base.model_copy(update={
-        "handeye": [h for h in base.handeye if _key(h.parent_frame, h.child_frame) != key],
-        "lidar": [h for h in base.lidar if _key(h.parent_frame, h.child_frame) != key]})
+    others = base.model_copy(
+        update={
+            "handeye": [h for h in base.handeye if _key(h.parent_frame, h.child_frame) != key],
+            "lidar": [h for h in base.lidar if _key(h.parent_frame, h.child_frame) != key],
+        }
+    )
     carried = carried_forward(others, versions)  # the other edges; stale ones dropped and named
     edges = [e for e in base.edges if e.source not in EVIDENCE_SOURCES] + carried.edges
     if accepted and edge is not None:
@@ -269,16 +331,34 @@ def with_evidence(base: RigCalibration, result: Evidence, edge: RigEdge | None,
         lidar = [*lidar, result]
     else:
         handeye = [*handeye, result]
-    prov = Provenance(calibctl_version=__version__, opencv_version=cv2.__version__, station=settings.station,
-                      operator=settings.operator, created_at=utc_now(), session_id=base.provenance.session_id)
-    return base.model_copy(update={
-        "version": 1, "status": "accepted" if accepted and not has_errors(lint) else "rejected", "edges": edges,
-        "handeye": handeye, "lidar": lidar, "lint": lint, "provenance": prov})
+    prov = Provenance(
+        calibctl_version=__version__,
+        opencv_version=cv2.__version__,
+        station=settings.station,
+        operator=settings.operator,
+        created_at=utc_now(),
+        session_id=base.provenance.session_id,
+    )
+    return base.model_copy(
+        update={
+            "version": 1,
+            "status": "accepted" if accepted and not has_errors(lint) else "rejected",
+            "edges": edges,
+            "handeye": handeye,
+            "lidar": lidar,
+            "lint": lint,
+            "provenance": prov,
+        }
+    )
 
 
-def store_evidence(settings: Settings, rig_name: str, result: Evidence,
-                   build: Callable[[RigCalibration, Mapping[str, int | None]], RigCalibration],
-                   serial: str | None = None) -> StoredEdge:
+def store_evidence(
+    settings: Settings,
+    rig_name: str,
+    result: Evidence,
+    build: Callable[[RigCalibration, Mapping[str, int | None]], RigCalibration],
+    serial: str | None = None,
+) -> StoredEdge:
     """Store ``build(base, versions)`` as the rig's next version, compare-and-set on ``base``; active only
     when accepted. ``serial``: a camera the result used that is not a frame of the edge (robot hand-eye)."""
     with open_store(settings, write=True) as store:
@@ -286,7 +366,12 @@ def store_evidence(settings: Settings, rig_name: str, result: Evidence,
         versions = active_versions(store, evidence_cameras([*evidence_of(base), result]))
         cal = build(base, versions)
         activate = cal.status == "accepted"
-        stored = store.add_rig_calibration(cal, activate=activate, actor=settings.operator, station=settings.station,
-                                           reason=f"{kind_of(result).source} {result.parent_frame} -> "
-                                                  f"{result.child_frame}", based_on=base.version)
+        stored = store.add_rig_calibration(
+            cal,
+            activate=activate,
+            actor=settings.operator,
+            station=settings.station,
+            reason=f"{kind_of(result).source} {result.parent_frame} -> {result.child_frame}",
+            based_on=base.version,
+        )
     return StoredEdge(stored, activate)

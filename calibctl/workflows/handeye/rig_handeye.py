@@ -40,11 +40,21 @@ from calibctl.workflows.handeye.rig_edges import StoredEdge, active_versions
 from calibctl.workflows.store_admin.records import open_store
 
 HANDEYE_RULES = ("handeye-gates", "handeye-stale-member", "handeye-uncertainty", "handeye-dropped")
-__all__ = ["HANDEYE_RULES", "StoredEdge", "active_versions", "check_target", "edge_export", "rig_edge",
-           "store_handeye", "with_handeye"]
+__all__ = [
+    "HANDEYE_RULES",
+    "StoredEdge",
+    "active_versions",
+    "check_target",
+    "edge_export",
+    "rig_edge",
+    "store_handeye",
+    "with_handeye",
+]
 
 
-def check_target(settings: Settings, rig_name: str, parent: str, child: str, serial: str | None = None) -> None:
+def check_target(
+    settings: Settings, rig_name: str, parent: str, child: str, serial: str | None = None
+) -> None:
     """Before any solve (exit 2): the rig, its active version, the tree and the cameras (rig_edges.checked)."""
     with open_store(settings) as store:
         rig_edges.checked(store, rig_name, parent, child, serial)
@@ -55,12 +65,18 @@ def rig_edge(result: HandEyeResult) -> RigEdge:
     assert result.transform is not None and result.uncertainty is not None
     R = se3.rotation_from_quaternion(np.array(result.transform.rotation_wxyz))
     T = se3.transform(R, list(result.transform.translation_m))
-    return rig_edges.tree_edge(result.parent_frame, result.child_frame, T, np.array(result.uncertainty.covariance),
-                               rig_edges.HANDEYE.source)
+    return rig_edges.tree_edge(
+        result.parent_frame,
+        result.child_frame,
+        T,
+        np.array(result.uncertainty.covariance),
+        rig_edges.HANDEYE.source,
+    )
 
 
-def with_handeye(base: RigCalibration, result: HandEyeResult,
-                 versions: Mapping[str, int | None], settings: Settings) -> RigCalibration:
+def with_handeye(
+    base: RigCalibration, result: HandEyeResult, versions: Mapping[str, int | None], settings: Settings
+) -> RigCalibration:
     """The next version: ``base`` with the edge of ``result`` added or replaced (rejected: removed)."""
     edge = rig_edge(result) if result.status == "accepted" and result.uncertainty is not None else None
     return rig_edges.with_evidence(base, result, edge, versions, settings)
@@ -69,9 +85,13 @@ def with_handeye(base: RigCalibration, result: HandEyeResult,
 def store_handeye(settings: Settings, rig_name: str, result: HandEyeResult) -> StoredEdge:
     """Store ``result`` as the rig's next version; active only when accepted."""
     camera = rig_edges.evidence_camera(result)
-    return rig_edges.store_evidence(settings, rig_name, result,
-                                    lambda base, versions: with_handeye(base, result, versions, settings),
-                                    camera[0] if camera else None)
+    return rig_edges.store_evidence(
+        settings,
+        rig_name,
+        result,
+        lambda base, versions: with_handeye(base, result, versions, settings),
+        camera[0] if camera else None,
+    )
 
 
 def edge_export(cal: RigCalibration, edge: str, fmt: str, frames: Mapping[str, str] | None = None) -> str:
@@ -87,8 +107,10 @@ def edge_export(cal: RigCalibration, edge: str, fmt: str, frames: Mapping[str, s
     found = next((h for h in evidence if (h.parent_frame, h.child_frame) == (parent, child)), None)
     if found is None:
         have = ", ".join(f"{h.parent_frame}:{h.child_frame}" for h in evidence) or "none"
-        raise NotFoundError(f"rig {cal.rig}@{cal.version} has no hand-eye or LiDAR edge {parent} -> {child} "
-                            f"(it has: {have})", hint=f"see `calibctl rig show {cal.rig}@{cal.version}`")
+        raise NotFoundError(
+            f"rig {cal.rig}@{cal.version} has no hand-eye or LiDAR edge {parent} -> {child} (it has: {have})",
+            hint=f"see `calibctl rig show {cal.rig}@{cal.version}`",
+        )
     if fmt == "json":
         return found.model_dump_json(indent=2) + "\n"
     if fmt != "tf":
@@ -96,10 +118,14 @@ def edge_export(cal: RigCalibration, edge: str, fmt: str, frames: Mapping[str, s
     if isinstance(found, HandEyeResult):
         return tf_static_yaml(found, frames)
     if found.transform is None or found.status != "accepted":
-        raise UsageError(f"the LiDAR result {parent} -> {child} of {cal.rig}@{cal.version} was rejected: no transform "
-                         "is published")
+        raise UsageError(
+            f"the LiDAR result {parent} -> {child} of {cal.rig}@{cal.version} was rejected: no transform "
+            "is published"
+        )
     w, x, y, z = found.transform.quaternion_wxyz
     name = (frames or {}).get
     t = [row[3] for row in found.transform.T_lidar_cam[:3]]
-    return (f"# calibctl lidar {parent} -> {child} of rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
-            + tf_message([(name(parent) or parent, name(child) or child, t, (x, y, z, w))]))
+    return (
+        f"# calibctl lidar {parent} -> {child} of rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
+        + tf_message([(name(parent) or parent, name(child) or child, t, (x, y, z, w))])
+    )

@@ -38,10 +38,15 @@ def _numbers(data: dict, key: str, n: int | None, source: str) -> np.ndarray:
     try:
         arr = np.asarray(value, np.float64).reshape(-1)
     except (TypeError, ValueError):
-        raise InputError(f"{source}: {key} is not a list of numbers", "a camera_info file has K (9) and D") from None
+        raise InputError(
+            f"{source}: {key} is not a list of numbers", "a camera_info file has K (9) and D"
+        ) from None
     if (n is not None and arr.size != n) or not np.isfinite(arr).all():
-        raise InputError(f"{source}: {key} holds {arr.size} values{'' if n is None else f' (need {n})'}"
-                         " or a non-finite one", "is this a camera_info file?")
+        raise InputError(
+            f"{source}: {key} holds {arr.size} values{'' if n is None else f' (need {n})'}"
+            " or a non-finite one",
+            "is this a camera_info file?",
+        )
     return arr
 
 
@@ -61,11 +66,15 @@ def lens_from_camera_info(path: Path) -> Lens:
     elif name in _PINHOLE:
         model = _PINHOLE[name]
     else:
-        raise InputError(f"{source}: distortion_model {name!r} is not fisheye, plumb_bob or rational_polynomial")
+        raise InputError(
+            f"{source}: distortion_model {name!r} is not fisheye, plumb_bob or rational_polynomial"
+        )
     try:
         size = (int(data["width"]), int(data["height"]))
     except (KeyError, TypeError, ValueError):
-        raise InputError(f"{source}: no integer width and height", "a camera_info file names its image size") from None
+        raise InputError(
+            f"{source}: no integer width and height", "a camera_info file names its image size"
+        ) from None
     return Lens(K, D, size, model, source)
 
 
@@ -75,12 +84,23 @@ def lens_from_store(settings: Settings, serial: str, version: int | None = None)
 
     with open_store(settings) as store:
         art = store.get_artifact(serial, version)
-    return Lens(np.array(art.camera_matrix, np.float64), np.array(art.dist_coeffs, np.float64),
-                (int(art.image_size[0]), int(art.image_size[1])), art.model.name, f"{art.ref}")
+    return Lens(
+        np.array(art.camera_matrix, np.float64),
+        np.array(art.dist_coeffs, np.float64),
+        (int(art.image_size[0]), int(art.image_size[1])),
+        art.model.name,
+        f"{art.ref}",
+    )
 
 
 def load_lens(settings: Settings, camera_info: Path | None, serial: str | None) -> Lens:
     if (camera_info is None) == (serial is None):
-        raise UsageError("give the camera as exactly one of --camera-info FILE or --serial SERIAL",
-                         "--serial uses the camera's active calibration in the store")
-    return lens_from_camera_info(camera_info) if camera_info is not None else lens_from_store(settings, serial or "")
+        raise UsageError(
+            "give the camera as exactly one of --camera-info FILE or --serial SERIAL",
+            "--serial uses the camera's active calibration in the store",
+        )
+    return (
+        lens_from_camera_info(camera_info)
+        if camera_info is not None
+        else lens_from_store(settings, serial or "")
+    )

@@ -30,7 +30,9 @@ REPORT_WIDTH_PX = 800
 MAX_OFF_AXIS_DEG = 80.0
 
 
-def overlay_image(image_bgr: np.ndarray, points_lidar_m: np.ndarray, T_lidar_cam: np.ndarray, lens: Lens) -> np.ndarray:
+def overlay_image(
+    image_bgr: np.ndarray, points_lidar_m: np.ndarray, T_lidar_cam: np.ndarray, lens: Lens
+) -> np.ndarray:
     """(H, W, 3) uint8 image with the (N, 3) LiDAR points drawn over it; the input is not changed."""
     T_cam_lidar = se3.invert(T_lidar_cam)
     p = points_lidar_m @ T_cam_lidar[:3, :3].T + T_cam_lidar[:3, 3]
@@ -54,8 +56,14 @@ def overlay_image(image_bgr: np.ndarray, points_lidar_m: np.ndarray, T_lidar_cam
     return out
 
 
-def write_overlays(out_dir: Path, pairs: list[tuple[Path, Path]], T_lidar_cam: np.ndarray, lens: Lens,
-                   scale_to_m: float = 1.0, force: bool = False) -> list[str]:
+def write_overlays(
+    out_dir: Path,
+    pairs: list[tuple[Path, Path]],
+    T_lidar_cam: np.ndarray,
+    lens: Lens,
+    scale_to_m: float = 1.0,
+    force: bool = False,
+) -> list[str]:
     """One ``<image stem>_lidar.png`` per (image, scan) pair in ``out_dir``; the paths written."""
     with file_errors("create", out_dir):
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -82,11 +90,16 @@ def report_overlay(settings: Settings, ev: LidarEdgeResult) -> tuple[str | None,
     if ev.status != "accepted" or src is None or t is None:
         return None, "not drawn: no accepted transform to draw through"
     data: dict[str, bytes] = {}
-    for kind, path, sha in (("image", src.image_path, src.image_sha256), ("scan", src.scan_path, src.scan_sha256)):
+    for kind, path, sha in (
+        ("image", src.image_path, src.image_sha256),
+        ("scan", src.scan_path, src.scan_sha256),
+    ):
         p = Path(path)
         if not p.is_file():
-            return None, (f"not drawn: images and scans are not in the store, and the {kind} the solve read "
-                          f"({path}) is not there any more")
+            return None, (
+                f"not drawn: images and scans are not in the store, and the {kind} the solve read "
+                f"({path}) is not there any more"
+            )
         try:
             bounded.check_size(p, f"read {kind}")
             data[kind] = p.read_bytes()
@@ -110,5 +123,7 @@ def report_overlay(settings: Settings, ev: LidarEdgeResult) -> tuple[str | None,
     small = cv2.resize(drawn, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale < 1 else drawn
     ok, jpg = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, 85])
     uri = "data:image/jpeg;base64," + base64.b64encode(jpg.tobytes()).decode("ascii")
-    return uri, (f"{len(cloud.points_m)} points of {Path(src.scan_path).name} over {Path(src.image_path).name} "
-                 f"through the stored T_{ev.parent_frame}_cam (dots by range: near red, far blue)")
+    return uri, (
+        f"{len(cloud.points_m)} points of {Path(src.scan_path).name} over {Path(src.image_path).name} "
+        f"through the stored T_{ev.parent_frame}_cam (dots by range: near red, far blue)"
+    )

@@ -76,8 +76,10 @@ def parse_box(text: str) -> StationBox:
     except ValueError:
         v = []
     if len(v) != 6 or not np.isfinite(v).all() or any(lo >= hi for lo, hi in zip(v[:3], v[3:], strict=True)):
-        raise UsageError(f"--box {text!r} is not xmin,ymin,zmin,xmax,ymax,zmax with each min < max (metres)",
-                         "e.g. --box 1.0,-2.2,-0.8,3.6,1.6,0.6: the region where the board is held, LiDAR frame")
+        raise UsageError(
+            f"--box {text!r} is not xmin,ymin,zmin,xmax,ymax,zmax with each min < max (metres)",
+            "e.g. --box 1.0,-2.2,-0.8,3.6,1.6,0.6: the region where the board is held, LiDAR frame",
+        )
     return StationBox((v[0], v[1], v[2]), (v[3], v[4], v[5]))
 
 
@@ -93,12 +95,19 @@ def board_from_store(settings: Settings, ref: str) -> BackingBoard:
     if board.kind != "chessboard":
         raise UsageError(f"board {board.ref} is a {board.kind}; the camera-LiDAR solve takes a chessboard")
     if board.backing is None:
-        raise UsageError(f"board {board.ref} was registered without its backing board dimensions",
-                         f"register its next revision with them: calibctl board add {board.name} --cols {board.cols} "
-                         f"--rows {board.rows} --square-mm ... --backing-mm W,H [--pattern-offset-mm X,Y]")
+        raise UsageError(
+            f"board {board.ref} was registered without its backing board dimensions",
+            f"register its next revision with them: calibctl board add {board.name} --cols {board.cols} "
+            f"--rows {board.rows} --square-mm ... --backing-mm W,H [--pattern-offset-mm X,Y]",
+        )
     b = board.backing
-    return BackingBoard(board.cols, board.rows, board.square_size_m, (b.width_m, b.height_m),
-                        (b.pattern_offset_m[0], b.pattern_offset_m[1]))
+    return BackingBoard(
+        board.cols,
+        board.rows,
+        board.square_size_m,
+        (b.width_m, b.height_m),
+        (b.pattern_offset_m[0], b.pattern_offset_m[1]),
+    )
 
 
 def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
@@ -107,10 +116,15 @@ def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBo
         data = path.read_bytes()
     gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
     if gray is None:
-        raise InputError(f"{path} is not a readable image", "remove it or give the folder of the camera's images")
+        raise InputError(
+            f"{path} is not a readable image", "remove it or give the folder of the camera's images"
+        )
     if (gray.shape[1], gray.shape[0]) != lens.image_size:
-        raise InputError(f"{path.name} is {gray.shape[1]}x{gray.shape[0]} but the lens ({lens.source}) is "
-                         f"{lens.image_size[0]}x{lens.image_size[1]}", "use the images the calibration is for")
+        raise InputError(
+            f"{path.name} is {gray.shape[1]}x{gray.shape[0]} but the lens ({lens.source}) is "
+            f"{lens.image_size[0]}x{lens.image_size[1]}",
+            "use the images the calibration is for",
+        )
     spec = BoardSpec.chessboard(board.cols, board.rows, board.square_m)
     detection, why = detect_board(gray, spec)
     if detection is None:
@@ -127,34 +141,68 @@ def _shifted(cloud: PointCloud, range_offset_m: float) -> PointCloud:
     if range_offset_m == 0.0 or not len(cloud.points_m):
         return cloud
     r = np.linalg.norm(cloud.points_m, axis=1, keepdims=True)
-    return PointCloud(cloud.points_m * (r + range_offset_m) / np.maximum(r, 1e-9), cloud.intensity, cloud.ring,
-                      cloud.time_s, cloud.dropped_nonfinite)
+    return PointCloud(
+        cloud.points_m * (r + range_offset_m) / np.maximum(r, 1e-9),
+        cloud.intensity,
+        cloud.ring,
+        cloud.time_s,
+        cloud.dropped_nonfinite,
+    )
 
 
 def _gate_json(g: GateResult) -> dict[str, Any]:
-    return {"gate": g.gate, "passed": g.passed, "value": round(g.value, 4), "threshold": round(g.threshold, 4),
-            "message": g.message, "reason": g.reason, "hint": g.hint, "detail": g.detail}
+    return {
+        "gate": g.gate,
+        "passed": g.passed,
+        "value": round(g.value, 4),
+        "threshold": round(g.threshold, 4),
+        "message": g.message,
+        "reason": g.reason,
+        "hint": g.hint,
+        "detail": g.detail,
+    }
 
 
 def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], list[dict[str, Any]]]:
     """Each paired scan segmented and each image posed; (accepted poses, one outcome row per file)."""
     pairing = pair(req.images, req.scans, req.scan_pattern)
-    rows: list[dict[str, Any]] = [{"frame": frame_key(p), "image": None if p.suffix.lower() in SCAN_SUFFIXES else p.name,
-                                   "scan": p.name if p.suffix.lower() in SCAN_SUFFIXES else None,
-                                   "outcome": "not_paired", "message": why} for p, why in pairing.unpaired]
+    rows: list[dict[str, Any]] = [
+        {
+            "frame": frame_key(p),
+            "image": None if p.suffix.lower() in SCAN_SUFFIXES else p.name,
+            "scan": p.name if p.suffix.lower() in SCAN_SUFFIXES else None,
+            "outcome": "not_paired",
+            "message": why,
+        }
+        for p, why in pairing.unpaired
+    ]
     poses = []
     for key, image, scan in pairing.pairs:
         cloud = _shifted(read_scan(scan, req.scan_scale_to_m), req.range_offset_m)
-        found = segment_board(cloud, req.box, req.board.backing_m, min_rings=req.min_rings,
-                              max_dimension_error_m=req.max_dimension_error_m)
+        found = segment_board(
+            cloud,
+            req.box,
+            req.board.backing_m,
+            min_rings=req.min_rings,
+            max_dimension_error_m=req.max_dimension_error_m,
+        )
         camera, why = _camera_board(image, lens, req.board)
         row: dict[str, Any] = {
-            "frame": key, "image": image.name, "scan": scan.name, "outcome": found.outcome, "message": found.message,
-            "points_in_box": found.points_in_box, "rings": found.rings, "dropped_nonfinite": cloud.dropped_nonfinite,
-            "plane_rms_mm": round(found.plane_rms_m * 1e3, 2), "range_m": round(found.range_m, 3),
-            "width_mm": round(found.width_m * 1e3, 1), "height_mm": round(found.height_m * 1e3, 1),
+            "frame": key,
+            "image": image.name,
+            "scan": scan.name,
+            "outcome": found.outcome,
+            "message": found.message,
+            "points_in_box": found.points_in_box,
+            "rings": found.rings,
+            "dropped_nonfinite": cloud.dropped_nonfinite,
+            "plane_rms_mm": round(found.plane_rms_m * 1e3, 2),
+            "range_m": round(found.range_m, 3),
+            "width_mm": round(found.width_m * 1e3, 1),
+            "height_mm": round(found.height_m * 1e3, 1),
             "dimension_error_mm": [round(e * 1e3, 1) for e in found.dimension_error_m],
-            "image_rms_px": None if camera is None else round(camera.rms_px, 3)}
+            "image_rms_px": None if camera is None else round(camera.rms_px, 3),
+        }
         if found.accepted and camera is None:
             row["outcome"], row["message"] = "no_board_in_image", why
         if row["outcome"] == "accepted" and camera is not None:
@@ -164,8 +212,9 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
     return poses, rows
 
 
-def projected_edge_px(T_lidar_cam: np.ndarray, poses: Sequence[lsolve.Pose], board: BackingBoard,
-                      lens: Lens) -> np.ndarray:
+def projected_edge_px(
+    T_lidar_cam: np.ndarray, poses: Sequence[lsolve.Pose], board: BackingBoard, lens: Lens
+) -> np.ndarray:
     """Pixel distance, in the image, between each LiDAR ring end point (through T_cam_lidar and the lens)
     and the nearest point of the backing board's outline as the camera sees it."""
     from calibctl.core.intrinsics.solve import project_points
@@ -195,7 +244,8 @@ def _transform_json(sol: lsolve.LidarSolution) -> dict[str, Any]:
     T = sol.T_lidar_cam
     roll, pitch, yaw = validation.rpy_from_rotation(T[:3, :3])
     return {
-        "name": "T_lidar_cam", "convention": "p_lidar = R p_cam + t (camera frame into the LiDAR frame)",
+        "name": "T_lidar_cam",
+        "convention": "p_lidar = R p_cam + t (camera frame into the LiDAR frame)",
         "matrix": [[round(float(v), 9) for v in row] for row in T],
         "translation_m": [round(float(v), 6) for v in T[:3, 3]],
         "rpy_rad": [round(v, 6) for v in (roll, pitch, yaw)],
@@ -213,17 +263,27 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     """The whole command (module docstring)."""
     problem = req.board.check_pattern_fits()
     if problem:
-        raise UsageError(problem, "check --backing-mm (width,height of the backing board) and --pattern-offset-mm")
+        raise UsageError(
+            problem, "check --backing-mm (width,height of the backing board) and --pattern-offset-mm"
+        )
     lens = load_lens(settings, req.camera_info, req.serial)
     poses, rows = collect_poses(req, lens)
     n_scans = sum(1 for r in rows if r["scan"] is not None)
     pre = [gates.pose_count_gate(len(poses), n_scans, req.min_poses)]
     if len(poses) >= 1:
-        pre += [gates.observability_gate(np.array([p.lidar.normal for p in poses])),
-                gates.range_spread_gate([p.lidar.range_m for p in poses])]
-    result: dict[str, Any] = {"images": str(req.images), "scans": str(req.scans), "lens": lens.source,
-                              "lens_model": lens.model, "range_offset_applied_mm": req.range_offset_m * 1e3,
-                              "outcomes": rows, "transform": None}
+        pre += [
+            gates.observability_gate(np.array([p.lidar.normal for p in poses])),
+            gates.range_spread_gate([p.lidar.range_m for p in poses]),
+        ]
+    result: dict[str, Any] = {
+        "images": str(req.images),
+        "scans": str(req.scans),
+        "lens": lens.source,
+        "lens_model": lens.model,
+        "range_offset_applied_mm": req.range_offset_m * 1e3,
+        "outcomes": rows,
+        "transform": None,
+    }
     counts: dict[str, int] = {}
     for r in rows:
         counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1
@@ -233,43 +293,60 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         return LidarOutcome(result, False, rows)
     sol = lsolve.solve(poses, req.board, req.estimate_range_offset)
     held_plane, held_edge, held_px = validation.held_out(
-        poses, req.board, req.folds, lambda T, test: projected_edge_px(T, test, req.board, lens))
+        poses, req.board, req.folds, lambda T, test: projected_edge_px(T, test, req.board, lens)
+    )
     in_px = projected_edge_px(sol.T_lidar_cam, poses, req.board, lens)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
-    dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions([p.lidar for p in poses], req.board.backing_m)
-    post = [gates.plane_rms_gate(sol.plane_rms_m * 1e3), gates.dimension_gate(dims),
-            gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3)]
+    dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions(
+        [p.lidar for p in poses], req.board.backing_m
+    )
+    post = [
+        gates.plane_rms_gate(sol.plane_rms_m * 1e3),
+        gates.dimension_gate(dims),
+        gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
+    ]
     all_gates = pre + post
     accepted = all(g.passed for g in all_gates)
     result |= {
-        "status": "accepted" if accepted else "rejected", "gates": [_gate_json(g) for g in all_gates],
+        "status": "accepted" if accepted else "rejected",
+        "gates": [_gate_json(g) for g in all_gates],
         "transform": _transform_json(sol),
         "metrics": {
-            "poses": len(poses), "plane_rms_mm": round(sol.plane_rms_m * 1e3, 2),
+            "poses": len(poses),
+            "plane_rms_mm": round(sol.plane_rms_m * 1e3, 2),
             "edge_rms_mm": round(sol.edge_rms_m * 1e3, 2),
-            "projected_edge_rms_px": round(float(np.sqrt(np.mean(in_px ** 2))), 2),
+            "projected_edge_rms_px": round(float(np.sqrt(np.mean(in_px**2))), 2),
             "held_out_projected_edge_rms_px": round(held_px, 2),
             "held_out_plane_rms_mm": round(held_plane * 1e3, 2),
-            "held_out_edge_rms_mm": round(held_edge * 1e3, 2), "folds": req.folds,
+            "held_out_edge_rms_mm": round(held_edge * 1e3, 2),
+            "folds": req.folds,
             "dimension_error_mean_mm": [round(float(v), 1) for v in dims.mean(axis=0)],
             "range_offset_from_dimensions_mm": round(dim_offset * 1e3, 1),
             "range_offset_from_dimensions_sigma_mm": round(dim_offset_sigma * 1e3, 1),
-            "range_offset_estimated_mm": round(sol.range_offset_m * 1e3, 2) if req.estimate_range_offset else None,
-            "range_offset_estimated_sigma_mm": (round(sol.range_offset_sigma_m * 1e3, 2)
-                                                if sol.range_offset_sigma_m is not None else None),
-            "noise_white_mm": round(sol.noise.white_m * 1e3, 2), "noise_laser_mm": round(sol.noise.run_bias_m * 1e3, 2),
+            "range_offset_estimated_mm": round(sol.range_offset_m * 1e3, 2)
+            if req.estimate_range_offset
+            else None,
+            "range_offset_estimated_sigma_mm": (
+                round(sol.range_offset_sigma_m * 1e3, 2) if sol.range_offset_sigma_m is not None else None
+            ),
+            "noise_white_mm": round(sol.noise.white_m * 1e3, 2),
+            "noise_laser_mm": round(sol.noise.run_bias_m * 1e3, 2),
             "pose_offset_sigma_mm": round(sol.pose_offset_sigma_m * 1e3, 2),
             "pose_tilt_sigma_deg": round(float(np.degrees(sol.pose_tilt_sigma_rad)), 3),
         },
     }
     if req.overlay_dir is not None:
         accepted_frames = {int(p.label) for p in poses}
-        pairs = [(img, scan) for key, img, scan in pair(req.images, req.scans, req.scan_pattern).pairs
-                 if key in accepted_frames]
+        pairs = [
+            (img, scan)
+            for key, img, scan in pair(req.images, req.scans, req.scan_pattern).pairs
+            if key in accepted_frames
+        ]
         from calibctl.workflows.lidar.lidar_overlay import write_overlays
 
-        result["overlays"] = write_overlays(req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m,
-                                            req.force)
+        result["overlays"] = write_overlays(
+            req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m, req.force
+        )
     return LidarOutcome(_finite(result), accepted, rows)
 
 

@@ -38,14 +38,17 @@ def read_scan(path: Path, scale_to_m: float = 1.0) -> PointCloud:
     else:
         cloud = parse_array(data, str(path), is_npy=suffix == ".npy")
     if scale_to_m != 1.0:
-        cloud = PointCloud(cloud.points_m * scale_to_m, cloud.intensity, cloud.ring, cloud.time_s,
-                           cloud.dropped_nonfinite)
+        cloud = PointCloud(
+            cloud.points_m * scale_to_m, cloud.intensity, cloud.ring, cloud.time_s, cloud.dropped_nonfinite
+        )
     if len(cloud.points_m):
         median = float(np.median(np.linalg.norm(cloud.points_m, axis=1)))
         if median > MAX_MEDIAN_RANGE_M:
-            raise InputError(f"{path}: median range {median:.0f} m, the points look like millimetres "
-                             "(a board would measure ~1000x its size)",
-                             "give the scans in metres, or pass --scan-units mm")
+            raise InputError(
+                f"{path}: median range {median:.0f} m, the points look like millimetres "
+                "(a board would measure ~1000x its size)",
+                "give the scans in metres, or pass --scan-units mm",
+            )
     return cloud
 
 
@@ -65,9 +68,11 @@ def _by_key(paths: list[Path], what: str) -> tuple[dict[int, Path], list[tuple[P
         if key is None:
             loose.append((p, f"no frame number in the {what}'s name"))
         elif key in out:
-            raise InputError(f"two {what}s with frame number {key}: {out[key].name} and {p.name}",
-                             f"keep one {what} per frame number (the last number in the file name pairs "
-                             "images with scans)")
+            raise InputError(
+                f"two {what}s with frame number {key}: {out[key].name} and {p.name}",
+                f"keep one {what} per frame number (the last number in the file name pairs "
+                "images with scans)",
+            )
         else:
             out[key] = p
     return out, loose
@@ -82,12 +87,16 @@ def pair(images_dir: Path, scans_dir: Path, pattern: str = "*") -> Pairing:
     with files.file_errors("list", images_dir):
         images = list_images(images_dir)
     with files.file_errors("list", scans_dir):
-        scans = sorted(p for p in Path(scans_dir).glob(pattern) if p.is_file() and p.suffix.lower() in SCAN_SUFFIXES)
+        scans = sorted(
+            p for p in Path(scans_dir).glob(pattern) if p.is_file() and p.suffix.lower() in SCAN_SUFFIXES
+        )
     if not images:
         raise InputError(f"no images in {images_dir}", "give the folder of the camera's images of the board")
     if not scans:
-        raise InputError(f"no scans ({', '.join(SCAN_SUFFIXES)}) matching {pattern!r} in {scans_dir}",
-                         "give the folder of the LiDAR sweeps (PCD or N x 3/4 arrays)")
+        raise InputError(
+            f"no scans ({', '.join(SCAN_SUFFIXES)}) matching {pattern!r} in {scans_dir}",
+            "give the folder of the LiDAR sweeps (PCD or N x 3/4 arrays)",
+        )
     img, loose_i = _by_key(images, "image")
     scn, loose_s = _by_key(scans, "scan")
     pairs = tuple((k, img[k], scn[k]) for k in sorted(set(img) & set(scn)))

@@ -63,17 +63,23 @@ def _view_problems(art: CalibrationArtifact) -> list[str]:
         corners = sum(counts)
         derived = math.sqrt(sum(n * r * r for n, r in zip(counts, rms, strict=True)) / max(corners, 1))
         if _differs(art.rms_px, derived):
-            problems.append(f"rms_px {art.rms_px:.6g} but its {len(views)} view(s) of {corners} corners aggregate "
-                            f"to {derived:.6g} px")
+            problems.append(
+                f"rms_px {art.rms_px:.6g} but its {len(views)} view(s) of {corners} corners aggregate "
+                f"to {derived:.6g} px"
+            )
         if art.stdev.residual_count and art.stdev.residual_count != 2 * corners:
-            problems.append(f"residual_count {art.stdev.residual_count} but its views hold {corners} corners "
-                            f"({2 * corners} residuals)")
+            problems.append(
+                f"residual_count {art.stdev.residual_count} but its views hold {corners} corners "
+                f"({2 * corners} residuals)"
+            )
         for rows, name in ((art.held_out.by_radius, "radius"), (art.held_out.by_octant, "octant")):
             total = sum(r.count for r in rows)
             if total and total != corners:
                 problems.append(f"its {name} bins hold {total} corners but its views {corners}")
     elif not min(rms) * (1 - REL_TOL) <= art.rms_px <= max(rms) * (1 + REL_TOL):
-        problems.append(f"rms_px {art.rms_px:.6g} lies outside its views' RMS ({min(rms):.6g} .. {max(rms):.6g} px)")
+        problems.append(
+            f"rms_px {art.rms_px:.6g} lies outside its views' RMS ({min(rms):.6g} .. {max(rms):.6g} px)"
+        )
     return problems
 
 
@@ -86,13 +92,19 @@ def _bin_problems(art: CalibrationArtifact) -> list[str]:
             problems.append(f"rms_px {art.rms_px:.6g} but its {name} bins aggregate to {fit:.6g} px")
         out, _ = _binned(rows, held=True)
         if out is not None and held.rms_px is not None and _differs(held.rms_px, out):
-            problems.append(f"held-out rms_px {held.rms_px:.6g} but its {name} bins aggregate to {out:.6g} px")
+            problems.append(
+                f"held-out rms_px {held.rms_px:.6g} but its {name} bins aggregate to {out:.6g} px"
+            )
     if held.by_radius and held.by_radius[-1].count > 0:
         last = held.by_radius[-1]
-        for stated, binned, what in ((held.fit_outer_ring_rms_px, last.fit_rms_px, "fit"),
-                                     (held.outer_ring_rms_px, last.held_out_rms_px, "held-out")):
+        for stated, binned, what in (
+            (held.fit_outer_ring_rms_px, last.fit_rms_px, "fit"),
+            (held.outer_ring_rms_px, last.held_out_rms_px, "held-out"),
+        ):
             if stated is not None and binned is not None and _differs(stated, binned):
-                problems.append(f"{what} outer-ring RMS {stated:.6g} but its outer radius bin says {binned:.6g} px")
+                problems.append(
+                    f"{what} outer-ring RMS {stated:.6g} but its outer radius bin says {binned:.6g} px"
+                )
     return problems
 
 
@@ -103,21 +115,31 @@ def _covariance_problems(art: CalibrationArtifact) -> list[str]:
     matrix = np.asarray(cov.matrix, dtype=np.float64)
     scale = max(float(np.abs(matrix).max()), 1e-300)
     if float(np.abs(matrix - matrix.T).max()) > 1e-9 * scale:
-        return [f"its covariance is not symmetric (largest asymmetry {float(np.abs(matrix - matrix.T).max()):.3g})"]
+        return [
+            f"its covariance is not symmetric (largest asymmetry {float(np.abs(matrix - matrix.T).max()):.3g})"
+        ]
     problems = []
     smallest = float(np.linalg.eigvalsh(matrix).min())
     if smallest < -1e-9 * scale:
         problems.append(f"its covariance is not positive semi-definite (eigenvalue {smallest:.3g})")
     for i, name in enumerate(cov.parameters):
         if name in sigma and _differs(sigma[name], math.sqrt(max(matrix[i, i], 0.0))):
-            problems.append(f"sigma_{name} {sigma[name]:.6g} but its covariance says {math.sqrt(max(matrix[i, i], 0.0)):.6g}")
+            problems.append(
+                f"sigma_{name} {sigma[name]:.6g} but its covariance says {math.sqrt(max(matrix[i, i], 0.0)):.6g}"
+            )
     if cov.aspect_ratio is not None:
         fx, fy = art.camera_matrix[0][0], art.camera_matrix[1][1]
         if _differs(cov.aspect_ratio, fx / fy):
             problems.append(f"aspect_ratio {cov.aspect_ratio:.9g} but fx / fy = {fx / fy:.9g}")
-        if "fx" not in cov.parameters and "fx" in sigma and "fy" in sigma and _differs(
-                sigma["fx"], cov.aspect_ratio * sigma["fy"]):
-            problems.append(f"sigma_fx {sigma['fx']:.6g} but aspect_ratio x sigma_fy = {cov.aspect_ratio * sigma['fy']:.6g}")
+        if (
+            "fx" not in cov.parameters
+            and "fx" in sigma
+            and "fy" in sigma
+            and _differs(sigma["fx"], cov.aspect_ratio * sigma["fy"])
+        ):
+            problems.append(
+                f"sigma_fx {sigma['fx']:.6g} but aspect_ratio x sigma_fy = {cov.aspect_ratio * sigma['fy']:.6g}"
+            )
     return problems
 
 
@@ -141,14 +163,28 @@ def _geometry_problems(art: CalibrationArtifact) -> list[str]:
         if float(depth_m.min()) <= 0:
             problems.append(f"view {view.name}: its board pose puts corners behind the camera")
             continue
-        projected = -reprojection_residuals(board_m, np.zeros((len(board_m), 2)), view.rvec, view.tvec_m, K, dist,
-                                            fisheye=art.model.name == "fisheye")
+        projected = -reprojection_residuals(
+            board_m,
+            np.zeros((len(board_m), 2)),
+            view.rvec,
+            view.tvec_m,
+            K,
+            dist,
+            fisheye=art.model.name == "fisheye",
+        )
         margin = EDGE_MARGIN_PX + 3 * (view.worst_corner_px or view.rms_px)
-        outside = (projected[:, 0] < -margin) | (projected[:, 0] > width + margin) | (
-            projected[:, 1] < -margin) | (projected[:, 1] > height + margin) | ~np.isfinite(projected).all(axis=1)
+        outside = (
+            (projected[:, 0] < -margin)
+            | (projected[:, 0] > width + margin)
+            | (projected[:, 1] < -margin)
+            | (projected[:, 1] > height + margin)
+            | ~np.isfinite(projected).all(axis=1)
+        )
         if outside.any():
-            problems.append(f"view {view.name}: {int(outside.sum())} of its board's corners project outside the "
-                            f"{width}x{height} image under its pose and lens, yet every corner was detected")
+            problems.append(
+                f"view {view.name}: {int(outside.sum())} of its board's corners project outside the "
+                f"{width}x{height} image under its pose and lens, yet every corner was detected"
+            )
     return problems
 
 

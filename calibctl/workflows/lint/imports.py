@@ -45,32 +45,37 @@ class ImportOutcome:
     held_back: str | None = None  # why an accepted import was left inactive by the signature rule
 
 
-
 def source_label(art: CalibrationArtifact, path: Path) -> str:
     """``CAM@7 sha256 ab12... from station st1 (file x.json)``: enough to find the original again."""
-    return (f"{art.ref} sha256 {art.content_sha256} from station {art.provenance.station} "
-            f"(file {path.name})")
+    return f"{art.ref} sha256 {art.content_sha256} from station {art.provenance.station} (file {path.name})"
 
 
-def rederive(art: CalibrationArtifact, settings: Settings, imported_from: str,
-             import_signature: str | None = None) -> CalibrationArtifact:
+def rederive(
+    art: CalibrationArtifact, settings: Settings, imported_from: str, import_signature: str | None = None
+) -> CalibrationArtifact:
     """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` (and how the source was
     signed) as provenance."""
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.ref), settings.lint)
     failed_gates = [g.gate for g in art.gates if not g.passed]
     if failed_gates:
-        findings.append(Finding(
-            rule="gates", severity="error",
-            message=f"{art.ref} records failed capture gates ({', '.join(failed_gates)})",
-            fix="capture again and solve on this store",
-        ))
+        findings.append(
+            Finding(
+                rule="gates",
+                severity="error",
+                message=f"{art.ref} records failed capture gates ({', '.join(failed_gates)})",
+                fix="capture again and solve on this store",
+            )
+        )
     status = "rejected" if has_errors(findings) else "accepted"
-    provenance = art.provenance.model_copy(update={"imported_from": imported_from,
-                                                   "import_signature": import_signature})
+    provenance = art.provenance.model_copy(
+        update={"imported_from": imported_from, "import_signature": import_signature}
+    )
     return art.model_copy(update={"lint": findings, "status": status, "provenance": provenance})
 
 
-_EDITED_HINT = "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not"
+_EDITED_HINT = (
+    "import the artifact as its store exported it; an edited artifact is never trusted, re-sealed or not"
+)
 FIX_ASPECT_RATIO = 2  # cv2.CALIB_FIX_ASPECT_RATIO (no cv2 import for a number)
 TIED_REL_TOL = 1e-9
 
@@ -88,13 +93,18 @@ def check_self_consistent(art: CalibrationArtifact) -> None:
     problems = []
     if abs(fx / fy - 1.0) > TIED_REL_TOL:
         problems.append(f"fx {fx:.3f} and fy {fy:.3f} differ")
-    if "fx" in sigma and "fy" in sigma and abs(sigma["fx"] - sigma["fy"]) > TIED_REL_TOL * max(sigma["fy"], 1e-12):
+    if (
+        "fx" in sigma
+        and "fy" in sigma
+        and abs(sigma["fx"] - sigma["fy"]) > TIED_REL_TOL * max(sigma["fy"], 1e-12)
+    ):
         problems.append(f"sigma_fx {sigma['fx']:.4g} and sigma_fy {sigma['fy']:.4g} differ")
     if problems:
         raise InconsistentDataError(
             f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
             "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
-            _EDITED_HINT)
+            _EDITED_HINT,
+        )
 
 
 def check_evidence(art: CalibrationArtifact) -> None:
@@ -104,7 +114,8 @@ def check_evidence(art: CalibrationArtifact) -> None:
     if problems:
         raise InconsistentDataError(
             f"{art.ref} does not reproduce its own evidence: {'; '.join(problems)}; nothing was stored",
-            _EDITED_HINT)
+            _EDITED_HINT,
+        )
 
 
 def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationArtifact | None:
@@ -121,8 +132,16 @@ def _previous_import(store: Store, source: CalibrationArtifact) -> CalibrationAr
     return next((a for a in stored if (a.provenance.imported_from or "").startswith(key)), None)
 
 
-def import_artifact(store: Store, source: CalibrationArtifact, path: Path, settings: Settings, *,
-                    activate: bool | None, keep_version: bool = False, trust: keys.SourceTrust | None = None) -> ImportOutcome:
+def import_artifact(
+    store: Store,
+    source: CalibrationArtifact,
+    path: Path,
+    settings: Settings,
+    *,
+    activate: bool | None,
+    keep_version: bool = False,
+    trust: keys.SourceTrust | None = None,
+) -> ImportOutcome:
     """Store ``source`` (hash already checked) as this store's next version with this store's verdict.
     ``activate``: None = when accepted and ``trust.may_activate``; True = when accepted (an override of the
     signature rule is recorded in the event's reason); False = never. ``trust`` None: a store without keys."""
@@ -145,15 +164,27 @@ def import_artifact(store: Store, source: CalibrationArtifact, path: Path, setti
                 "import without --keep-version (the source version is kept in provenance.imported_from)",
             )
     do_activate, override, held_back = trust.activation(mine.status == "accepted", activate)
-    stored = store.add_artifact(mine, activate=do_activate, actor=settings.operator, station=settings.station,
-                                reason=f"imported {source.ref}{override}",
-                                expect_version=source.version if keep_version else None)
-    return ImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, held_back=held_back)
+    stored = store.add_artifact(
+        mine,
+        activate=do_activate,
+        actor=settings.operator,
+        station=settings.station,
+        reason=f"imported {source.ref}{override}",
+        expect_version=source.version if keep_version else None,
+    )
+    return ImportOutcome(
+        stored, source.ref, source.status, do_activate, already_imported=False, held_back=held_back
+    )
 
 
 def import_file(
-    settings: Settings, path: Path, *, activate: bool | None, keep_version: bool = False,
-    require_signature: bool = False, trusted_keys: Path | None = None,
+    settings: Settings,
+    path: Path,
+    *,
+    activate: bool | None,
+    keep_version: bool = False,
+    require_signature: bool = False,
+    trusted_keys: Path | None = None,
 ) -> ImportOutcome:
     """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
     this store's verdict and version (see ``imports``)."""
@@ -162,4 +193,6 @@ def import_file(
     keys.require_trusted(art, str(path), trusted, require_signature)
     trust = keys.source_trust(settings, art, trusted, trusted_keys, require_signature)
     with records.open_store(settings, create=True, write=True) as store:
-        return import_artifact(store, art, path, settings, activate=activate, keep_version=keep_version, trust=trust)
+        return import_artifact(
+            store, art, path, settings, activate=activate, keep_version=keep_version, trust=trust
+        )

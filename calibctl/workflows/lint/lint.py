@@ -54,9 +54,13 @@ class CalibrationFacts:
     fit_rms_px: float | None = None
     detector_rms_px: float | None = None
     fit_ring_rms_px: tuple[float | None, float | None] = (None, None)  # inner and outer radius quintile
-    image_circle: tuple[float, float, float] | None = None  # (cx, cy, r) px from the coverage gate, calibctl only
+    image_circle: tuple[float, float, float] | None = (
+        None  # (cx, cy, r) px from the coverage gate, calibctl only
+    )
     observed_region_px: np.ndarray | None = None  # (K, 2) hull of the solve's corners, calibctl only
-    required_region_px: np.ndarray | None = None  # (K, 2) the station's declared region at the solve, calibctl only
+    required_region_px: np.ndarray | None = (
+        None  # (K, 2) the station's declared region at the solve, calibctl only
+    )
     metric_gauge: dict[str, Any] | None = None  # the capture's distance gauge, calibctl only
     gauge_override: str | None = None  # provenance.gauge_override: why a failed gauge was overridden
     raw_numbers: list[float] = field(default_factory=list)
@@ -147,17 +151,28 @@ def _opencv_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
         kind="opencv",
         image_size=(w, h) if isinstance(w, int) and isinstance(h, int) else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
-        dist_coeffs=_matrix(data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"),
+        dist_coeffs=_matrix(
+            data.get("distortion_coefficients", []), (-1,), source, "distortion_coefficients"
+        ),
         distortion_model=_distortion_model(data.get("distortion_model")),
         raw_numbers=_numbers(data),
     )
 
 
 FACT_FIELDS: dict[str, Any] = {
-    "image_size": True, "camera_matrix": True, "dist_coeffs": True, "model": {"name"}, "rms_px": True,
-    "detector_rms_px": True, "stdev": {"sigma", "refused_reason"}, "board": {"measurement"},
-    "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"}, "camera_consistency": True,
-    "metric_gauge": True, "provenance": {"gauge_override"}, "observed_region_px": True,
+    "image_size": True,
+    "camera_matrix": True,
+    "dist_coeffs": True,
+    "model": {"name"},
+    "rms_px": True,
+    "detector_rms_px": True,
+    "stdev": {"sigma", "refused_reason"},
+    "board": {"measurement"},
+    "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"},
+    "camera_consistency": True,
+    "metric_gauge": True,
+    "provenance": {"gauge_override"},
+    "observed_region_px": True,
     "required_region_px": True,
 }
 """The parts of an artifact's dump ``facts_from_document`` reads (views, provenance, covariance are not)."""
@@ -175,7 +190,9 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
     return CalibrationFacts(
         source=source,
         kind="calibctl",
-        image_size=(int(size[0]), int(size[1])) if isinstance(size, list | tuple) and len(size) == 2 else None,
+        image_size=(int(size[0]), int(size[1]))
+        if isinstance(size, list | tuple) and len(size) == 2
+        else None,
         camera_matrix=_matrix(data["camera_matrix"], (3, 3), source, "camera_matrix"),
         dist_coeffs=_matrix(data.get("dist_coeffs", []), (-1,), source, "dist_coeffs"),
         distortion_model=_distortion_model((data.get("model") or {}).get("name")),
@@ -220,14 +237,25 @@ def _inner_outer(rings: list[dict[str, Any]]) -> tuple[float | None, float | Non
 
 def _field_deg(facts: CalibrationFacts) -> float | None:
     """The lens's diagonal field (model_fit.diagonal_field_deg), None without an image size."""
-    return None if facts.image_size is None else model_fit.diagonal_field_deg(facts.camera_matrix, facts.image_size)
+    return (
+        None
+        if facts.image_size is None
+        else model_fit.diagonal_field_deg(facts.camera_matrix, facts.image_size)
+    )
 
 
 def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.fit_rms_px is None or facts.detector_rms_px is None or facts.model_name is None:
         return []  # only a calibctl solve records what the detector delivered
-    return adopt(model_fit.check_model_misfit(facts.fit_rms_px, facts.detector_rms_px, facts.model_name,
-                                               *facts.fit_ring_rms_px, field_deg=_field_deg(facts)))
+    return adopt(
+        model_fit.check_model_misfit(
+            facts.fit_rms_px,
+            facts.detector_rms_px,
+            facts.model_name,
+            *facts.fit_ring_rms_px,
+            field_deg=_field_deg(facts),
+        )
+    )
 
 
 def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
@@ -238,17 +266,32 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
     if not d or d.get("passed", True):
         return []
     lo, hi = d.get("ratio_limits") or (0.99, 1.01)
-    message = (f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
-               f"{gauge.get('lens_model', '?')} lens, {d['ratio']:.3f}x the surveyed {d['reference_m']:.4f} m (needs "
-               f"{lo}-{hi}): every metric output (translations, baselines, hand-eye) is scaled by it; the "
-               "reprojection residual cannot show it (seed chapter 0)")
+    message = (
+        f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
+        f"{gauge.get('lens_model', '?')} lens, {d['ratio']:.3f}x the surveyed {d['reference_m']:.4f} m (needs "
+        f"{lo}-{hi}): every metric output (translations, baselines, hand-eye) is scaled by it; the "
+        "reprojection residual cannot show it (seed chapter 0)"
+    )
     if facts.gauge_override:
-        return [Finding(rule="metric-gauge", severity="warning", value=d["ratio"],
-                        message=f"{message}; overridden: {facts.gauge_override}")]
-    return [Finding(rule="metric-gauge", severity="error", value=d["ratio"], message=message,
-                    fix="measure the board's squares (calipers) and register the measurement (`calibctl board add`), "
-                        "check the fixture's surveyed distance, then capture again; if the gauge, not the board, "
-                        "is wrong: solve with --override-gauge REASON (recorded in the calibration)")]
+        return [
+            Finding(
+                rule="metric-gauge",
+                severity="warning",
+                value=d["ratio"],
+                message=f"{message}; overridden: {facts.gauge_override}",
+            )
+        ]
+    return [
+        Finding(
+            rule="metric-gauge",
+            severity="error",
+            value=d["ratio"],
+            message=message,
+            fix="measure the board's squares (calipers) and register the measurement (`calibctl board add`), "
+            "check the fixture's surveyed distance, then capture again; if the gauge, not the board, "
+            "is wrong: solve with --override-gauge REASON (recorded in the calibration)",
+        )
+    ]
 
 
 def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
@@ -282,11 +325,16 @@ def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
     if facts.square_size_status == "measured":
         return []
     if facts.square_size_status == "measured-single":
-        return [Finding(rule="square-size-single", severity="warning",
-                        message="the square size was measured once, with nothing independent to catch a wrong "
-                        "number (seed chapter 0: 23 mm typed for 25 mm leaves no residual)",
-                        fix="measure the pattern's span too: `calibctl board add NAME ... --span-mm ... "
-                        "--span-uncertainty-mm ... --span-instrument ...`")]
+        return [
+            Finding(
+                rule="square-size-single",
+                severity="warning",
+                message="the square size was measured once, with nothing independent to catch a wrong "
+                "number (seed chapter 0: 23 mm typed for 25 mm leaves no residual)",
+                fix="measure the pattern's span too: `calibctl board add NAME ... --span-mm ... "
+                "--span-uncertainty-mm ... --span-instrument ...`",
+            )
+        ]
     if facts.square_size_status == "nominal":
         mm = f"{facts.square_size_m * 1000:.3f} mm " if facts.square_size_m else ""
         message = f"square size {mm}is nominal (typed, never measured): every metric output scales with it"
@@ -323,7 +371,9 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
         ]
     return adopt(
         lens_checks.check_outer_ring_holdout(
-            facts.held_out_outer_rms_px, facts.fit_outer_rms_px, limits.outer_ring_ratio_max,
+            facts.held_out_outer_rms_px,
+            facts.fit_outer_rms_px,
+            limits.outer_ring_ratio_max,
             model=facts.model_name,
         )
     )
@@ -337,16 +387,24 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
     held, cross = check["holdout_rms_px"], check["cross_rms_px"]
 
     def group(names: list[str], k: int) -> str:
-        return (f"{len(names)} views ({named_list(names, 3)}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
-                f"cy {check['cy_px'][k]:.1f} px alone)")
+        return (
+            f"{len(names)} views ({named_list(names, 3)}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
+            f"cy {check['cy_px'][k]:.1f} px alone)"
+        )
 
-    return [Finding(
-        rule="one-camera", severity="error", value=check["ratio"], threshold=check["threshold"],
-        message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each group is "
-        f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's camera than by "
-        f"its own (held-out {held[0]:.3f} / {held[1]:.3f} px); this calibration is a blend",
-        fix="calibrate each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
-        "check that nothing moved (focus, zoom, lens) during the capture")]
+    return [
+        Finding(
+            rule="one-camera",
+            severity="error",
+            value=check["ratio"],
+            threshold=check["threshold"],
+            message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each group is "
+            f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's camera than by "
+            f"its own (held-out {held[0]:.3f} / {held[1]:.3f} px); this calibration is a blend",
+            fix="calibrate each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
+            "check that nothing moved (focus, zoom, lens) during the capture",
+        )
+    ]
 
 
 def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "header") -> list[Finding]:
@@ -373,8 +431,15 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
     if size is not None and not findings:
         findings += adopt(lens_checks.check_principal_point(K, size, limits.principal_point_max_frac))
     if trace == "header":
-        findings += adopt(lens_checks.check_sigma_fx(facts.sigma_fx_px, facts.sigma_refused_reason,
-                                                      limits.sigma_fx_max_px, facts.fit_rms_px, facts.detector_rms_px))
+        findings += adopt(
+            lens_checks.check_sigma_fx(
+                facts.sigma_fx_px,
+                facts.sigma_refused_reason,
+                limits.sigma_fx_max_px,
+                facts.fit_rms_px,
+                facts.detector_rms_px,
+            )
+        )
         findings += _outer_ring_rule(facts, limits)
         findings += _provenance_rule(facts)
     findings += _gauge_rule(facts)
@@ -383,14 +448,28 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
     if size is not None and facts.dist_coeffs.size:
         if facts.distortion_model == "equidistant":
-            findings += adopt(lens_checks.check_equidistant_foldover(K, facts.dist_coeffs, size, facts.image_circle,
-                                                                     facts.observed_region_px,
-                                                                     facts.required_region_px))
+            findings += adopt(
+                lens_checks.check_equidistant_foldover(
+                    K,
+                    facts.dist_coeffs,
+                    size,
+                    facts.image_circle,
+                    facts.observed_region_px,
+                    facts.required_region_px,
+                )
+            )
         else:
-            findings += adopt(lens_checks.check_distortion_foldover(K, facts.dist_coeffs, size, facts.image_circle,
-                                                                    model=facts.model_name,
-                                                                    observed_px=facts.observed_region_px,
-                                                                    required_px=facts.required_region_px))
+            findings += adopt(
+                lens_checks.check_distortion_foldover(
+                    K,
+                    facts.dist_coeffs,
+                    size,
+                    facts.image_circle,
+                    model=facts.model_name,
+                    observed_px=facts.observed_region_px,
+                    required_px=facts.required_region_px,
+                )
+            )
     field = _field_deg(facts)
     return _misfit_first(findings, narrow=field is not None and field < model_fit.WIDE_FIELD_DEG)
 
@@ -411,10 +490,16 @@ def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding
         return findings
     drift = next((f for f in findings if f.rule == "one-camera"), None)
     if narrow and drift is not None:
-        first = (f"first fix one-camera ({drift.fix}), then judge this rule again: a lens this narrow misfits when "
-                 "its intrinsics change during the capture")
-        return [f.model_copy(update={"fix": first}) if f.rule in ("model-misfit", *_MISFIT_SYMPTOMS)
-                and f is not drift else f for f in findings]
+        first = (
+            f"first fix one-camera ({drift.fix}), then judge this rule again: a lens this narrow misfits when "
+            "its intrinsics change during the capture"
+        )
+        return [
+            f.model_copy(update={"fix": first})
+            if f.rule in ("model-misfit", *_MISFIT_SYMPTOMS) and f is not drift
+            else f
+            for f in findings
+        ]
     first = f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from the misfit"
     return [f.model_copy(update={"fix": first}) if f.rule in _MISFIT_SYMPTOMS else f for f in findings]
 
@@ -438,20 +523,34 @@ UNCHECKED_WITHOUT_EVIDENCE = "sigma(fx), the held-out outer ring and the square 
 def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
     """Findings about a rig export's header: edited (content-hash), unhashed (traceability), rejected (status)."""
     if header.intact is None:
-        return [Finding(rule="traceability", severity="warning",
-                        message=f"the header names rig {header.ref} but records no file-sha256: it cannot be checked",
-                        fix=f"export rig {header.ref} again")]
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message=f"the header names rig {header.ref} but records no file-sha256: it cannot be checked",
+                fix=f"export rig {header.ref} again",
+            )
+        ]
     if not header.intact:
-        return [Finding(rule="content-hash", severity="error",
-                        message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
-                        f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig {header.ref}",
-                        fix=f"export rig {header.ref} again; never edit an export by hand")]
+        return [
+            Finding(
+                rule="content-hash",
+                severity="error",
+                message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
+                f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig {header.ref}",
+                fix=f"export rig {header.ref} again; never edit an export by hand",
+            )
+        ]
     if header.ref == trace_header.NOT_STORED:
-        return [Finding(rule="traceability", severity="warning",
-                        message=f"written by `calibctl rig solve-folders` (solution sha256 {header.rig_sha256[:12]}), "
-                        "not from a stored rig version: no store can vouch for its cameras' evidence",
-                        fix="for a robot, store the rig (`calibctl rig capture` + `rig solve`) and export it")
-                ] + _status_rule(header.status, "this rig solve")
+        return [
+            Finding(
+                rule="traceability",
+                severity="warning",
+                message=f"written by `calibctl rig solve-folders` (solution sha256 {header.rig_sha256[:12]}), "
+                "not from a stored rig version: no store can vouch for its cameras' evidence",
+                fix="for a robot, store the rig (`calibctl rig capture` + `rig solve`) and export it",
+            )
+        ] + _status_rule(header.status, "this rig solve")
     return _status_rule(header.status, f"rig {header.ref}")
 
 
@@ -459,8 +558,9 @@ def _trace_rules(loaded: formats.CalibrationFile) -> tuple[list[Finding], dict[s
     return trace_rules(loaded.header, loaded.rig_header)
 
 
-def trace_rules(header: trace_header.TraceHeader | None,
-                rig_header: trace_header.RigTraceHeader | None = None) -> tuple[list[Finding], dict[str, Any]]:
+def trace_rules(
+    header: trace_header.TraceHeader | None, rig_header: trace_header.RigTraceHeader | None = None
+) -> tuple[list[Finding], dict[str, Any]]:
     """Findings about an export's header (a camera's, else a rig's), and the evidence it vouches for (when
     intact; {} for a rig export or no header)."""
     if header is None and rig_header is not None:
@@ -506,7 +606,9 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
     if loaded.kind == "calibctl":
         findings = _document_rules(data, source)
         findings += _status_rule(data.get("status"), f"{data.get('serial')}@{data.get('version')}")
-        return LintResult(source, loaded.kind, findings + lint_facts(facts_from_document(data, source), limits))
+        return LintResult(
+            source, loaded.kind, findings + lint_facts(facts_from_document(data, source), limits)
+        )
     findings, evidence = _trace_rules(loaded)
     if loaded.kind == "ros":
         structure = ros_camera_info.check_camera_info(data)
@@ -516,8 +618,14 @@ def lint_file(loaded: formats.CalibrationFile, limits: LintThresholds) -> LintRe
         facts = _ros_facts(data, source)
     else:
         facts = _opencv_facts(data, source)
-    return LintResult(source, loaded.kind, findings + lint_facts(with_evidence(facts, evidence), limits,
-                                                                 trace_of(evidence, loaded.header, loaded.rig_header)))
+    return LintResult(
+        source,
+        loaded.kind,
+        findings
+        + lint_facts(
+            with_evidence(facts, evidence), limits, trace_of(evidence, loaded.header, loaded.rig_header)
+        ),
+    )
 
 
 def trace_of(evidence: dict[str, Any], header: object, rig_header: object) -> str:
@@ -539,11 +647,15 @@ def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
     accepted = [v for v, st in statuses.items() if st == "accepted"]
     listing = ", ".join(f"{v} ({st})" for v, st in statuses.items())
     if accepted:
-        message, fix = (f"{serial} has no active version (versions: {listing})",
-                        f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'")
+        message, fix = (
+            f"{serial} has no active version (versions: {listing})",
+            f"activate an accepted one: calibctl rollback {serial} --to {accepted[-1]} --reason '...'",
+        )
     else:
-        message, fix = (f"{serial} has no accepted calibration (versions: {listing})",
-                        f"recalibrate it: calibctl calibrate --serial {serial} --board BOARD --source ...")
+        message, fix = (
+            f"{serial} has no accepted calibration (versions: {listing})",
+            f"recalibrate it: calibctl calibrate --serial {serial} --board BOARD --source ...",
+        )
     finding = Finding(rule="no-active-version", severity="error", message=message, fix=fix)
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
@@ -551,8 +663,12 @@ def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
 def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
     """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
     document rules (schema, content-hash) are not run again."""
-    data = art.model_dump(mode="json", include=FACT_FIELDS)  # the fact fields only: a third of the dump's cost
-    findings = _status_rule(art.status, art.ref) + lint_facts(facts_from_document(data, art.ref, validated=True), limits)
+    data = art.model_dump(
+        mode="json", include=FACT_FIELDS
+    )  # the fact fields only: a third of the dump's cost
+    findings = _status_rule(art.status, art.ref) + lint_facts(
+        facts_from_document(data, art.ref, validated=True), limits
+    )
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:
         signature_rule(result, art, trusted)
@@ -575,26 +691,35 @@ def lint_store(
             active, inactive = store.active_artifacts()
         else:
             versions: dict[int, str] = {a.version: a.status for a in store.list_artifacts(serial or "")}
-            found = store.get_artifact(serial or "", None) if store.active_version(serial or "") is not None else None
+            found = (
+                store.get_artifact(serial or "", None)
+                if store.active_version(serial or "") is not None
+                else None
+            )
             active, inactive = ({found.serial: found}, {}) if found else ({}, {serial or "": versions})
         if not active and not inactive:
-            raise NotFoundError(f"nothing to lint: the store {store.url} holds no calibrations",
-                                "check --db / CALIBCTL_DB, or calibrate a camera first")
+            raise NotFoundError(
+                f"nothing to lint: the store {store.url} holds no calibrations",
+                "check --db / CALIBCTL_DB, or calibrate a camera first",
+            )
     results = []
     for name in sorted([*active, *inactive]):
         found_or_error = active.get(name)
         if found_or_error is None:
             results.append(_no_active_version(name, inactive[name]))
         elif isinstance(found_or_error, IntegrityError):
-            finding = Finding(rule="content-hash", severity="error", message=found_or_error.message,
-                              fix=found_or_error.hint)
+            finding = Finding(
+                rule="content-hash", severity="error", message=found_or_error.message, fix=found_or_error.hint
+            )
             results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
         else:
             results.append(_lint_stored(found_or_error, settings.lint, trusted))
     return results
 
 
-def signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys) -> None:
+def signature_rule(
+    result: LintResult, art: CalibrationArtifact | dict[str, Any], trusted: TrustedKeys
+) -> None:
     """Add a ``signature`` error unless ``art`` is an artifact signed by a trusted key."""
     if isinstance(art, dict):
         try:
@@ -607,4 +732,6 @@ def signature_rule(result: LintResult, art: CalibrationArtifact | dict[str, Any]
         problem = keys.signature_problem(art, trusted)
     if problem is not None:
         fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
-        result.findings.append(Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix))
+        result.findings.append(
+            Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix)
+        )

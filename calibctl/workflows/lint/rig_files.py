@@ -45,12 +45,16 @@ from calibctl.workflows.lint.lint import (
 )
 from calibctl.workflows.store_admin import keys
 
-if TYPE_CHECKING:  # the rig and hand-eye models are built when such a document is linted, not for a camera file
+if (
+    TYPE_CHECKING
+):  # the rig and hand-eye models are built when such a document is linted, not for a camera file
     from calibctl.artifacts.handeye import HandEyeResult
     from calibctl.artifacts.rig import RigCalibration
 
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
-_FIX_FRAME = "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
+_FIX_FRAME = (
+    "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
+)
 
 
 def _error(rule: str, message: str, fix: str, severity: str = "error") -> Finding:
@@ -65,10 +69,16 @@ def _parse(text: str, source: str) -> Any:
         try:
             return {"mrcal": ast.literal_eval(text)}
         except (ValueError, SyntaxError, MemoryError, RecursionError) as exc:
-            raise InputError(f"{source}: not a readable mrcal .cameramodel ({exc})", "export it again") from exc
+            raise InputError(
+                f"{source}: not a readable mrcal .cameramodel ({exc})", "export it again"
+            ) from exc
     stripped = text.lstrip()
     if stripped.startswith("<"):
-        body = stripped if stripped.startswith(("<?xml", "<robot")) else f"<robot name='joints'>{stripped}</robot>"
+        body = (
+            stripped
+            if stripped.startswith(("<?xml", "<robot"))
+            else f"<robot name='joints'>{stripped}</robot>"
+        )
         try:
             return ET.fromstring(body.encode("utf-8"))
         except ET.ParseError as exc:
@@ -96,7 +106,9 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if isinstance(data.get("transforms"), list):
         return "tf"
-    if data and all(k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()):
+    if data and all(
+        k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()
+    ):
         return "kalibr"
     return None
 
@@ -105,7 +117,9 @@ def _finite_matrix(value: Any, shape: tuple[int, int], what: str) -> tuple[np.nd
     try:
         arr = np.asarray(value, dtype=np.float64).reshape(shape)
     except (TypeError, ValueError):
-        return None, [_error("transform", f"{what} is not a {shape[0]}x{shape[1]} matrix of numbers", "export it again")]
+        return None, [
+            _error("transform", f"{what} is not a {shape[0]}x{shape[1]} matrix of numbers", "export it again")
+        ]
     if not np.all(np.isfinite(arr)):
         return None, [_error("finite", f"{what} has NaN or infinite values", "export it again")]
     return arr, []
@@ -127,11 +141,19 @@ def _tree(edges: list[tuple[str, str]]) -> list[Finding]:
     parents: dict[str, str] = {}
     for parent, child in edges:
         if child in parents:
-            return [_error("frames", f"{child} has two parents ({parents[child]} and {parent}): not a tree", "export again")]
+            return [
+                _error(
+                    "frames",
+                    f"{child} has two parents ({parents[child]} and {parent}): not a tree",
+                    "export again",
+                )
+            ]
         parents[child] = parent
     roots = {p for p, _ in edges if p not in parents}
     if edges and len(roots) != 1:
-        return [_error("frames", f"the frames form {len(roots)} trees or a loop, not one tree", "export again")]
+        return [
+            _error("frames", f"the frames form {len(roots)} trees or a loop, not one tree", "export again")
+        ]
     return []
 
 
@@ -147,10 +169,21 @@ def _tf(data: dict[str, Any]) -> list[Finding]:
         values = [t.get(k) for k in "xyz"] + [q.get(k) for k in "xyzw"]
         numbers = [float(v) for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
         if len(numbers) != 7 or not all(math.isfinite(v) for v in numbers):
-            findings.append(_error("finite", f"transform {parent} -> {child} has a missing or non-finite number", "export again"))
+            findings.append(
+                _error(
+                    "finite",
+                    f"transform {parent} -> {child} has a missing or non-finite number",
+                    "export again",
+                )
+            )
         elif abs(math.sqrt(sum(v * v for v in numbers[3:])) - 1.0) > 1e-6:
-            findings.append(_error("transform", f"transform {parent} -> {child}: the quaternion is not unit length",
-                                   "export again"))
+            findings.append(
+                _error(
+                    "transform",
+                    f"transform {parent} -> {child}: the quaternion is not unit length",
+                    "export again",
+                )
+            )
         edges.append((str(parent), str(child)))
     return findings + _tree(edges)
 
@@ -163,8 +196,13 @@ def _urdf(robot: ET.Element) -> list[Finding]:
         parent, child = (joint.find(k) for k in ("parent", "child"))
         p, c = (None if e is None else e.get("link") for e in (parent, child))
         if links and (p not in links or c not in links):
-            findings.append(_error("frames", f"joint {joint.get('name')} joins {p} -> {c}, not two declared links",
-                                   "export again"))
+            findings.append(
+                _error(
+                    "frames",
+                    f"joint {joint.get('name')} joins {p} -> {c}, not two declared links",
+                    "export again",
+                )
+            )
         origin = joint.find("origin")
         for attr in ("xyz", "rpy"):
             text = "0 0 0" if origin is None else origin.get(attr, "0 0 0")
@@ -173,8 +211,13 @@ def _urdf(robot: ET.Element) -> list[Finding]:
             except ValueError:
                 values = []
             if len(values) != 3 or not all(math.isfinite(v) for v in values):
-                findings.append(_error("finite", f"joint {joint.get('name')} origin {attr}='{text}' is not 3 finite "
-                                       "numbers", "export again"))
+                findings.append(
+                    _error(
+                        "finite",
+                        f"joint {joint.get('name')} origin {attr}='{text}' is not 3 finite numbers",
+                        "export again",
+                    )
+                )
         edges.append((str(p), str(c)))
     return findings + _tree(edges)
 
@@ -190,36 +233,64 @@ class Trace:
         return lint_facts(with_evidence(facts, self.evidence), limits, self.kind)
 
 
-def _camera_facts(source: str, K: np.ndarray, dist: list[float], size: Any, equidistant: bool) -> CalibrationFacts:
+def _camera_facts(
+    source: str, K: np.ndarray, dist: list[float], size: Any, equidistant: bool
+) -> CalibrationFacts:
     ok = isinstance(size, list | tuple) and len(size) == 2 and all(isinstance(v, int) for v in size)
-    return CalibrationFacts(source=source, kind="rig", image_size=(int(size[0]), int(size[1])) if ok else None,
-                            camera_matrix=K, dist_coeffs=np.asarray(dist, dtype=np.float64),
-                            distortion_model="equidistant" if equidistant else "brown-conrady")
+    return CalibrationFacts(
+        source=source,
+        kind="rig",
+        image_size=(int(size[0]), int(size[1])) if ok else None,
+        camera_matrix=K,
+        dist_coeffs=np.asarray(dist, dtype=np.float64),
+        distortion_model="equidistant" if equidistant else "brown-conrady",
+    )
 
 
 def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     findings: list[Finding] = []
     fix = "export it again with `calibctl rig export RIG --format kalibr`"
     for name, cam in data.items():
-        intr, model, dist = cam.get("intrinsics"), cam.get("distortion_model"), cam.get("distortion_coeffs") or []
+        intr, model, dist = (
+            cam.get("intrinsics"),
+            cam.get("distortion_model"),
+            cam.get("distortion_coeffs") or [],
+        )
         if "cam_overlaps" not in cam:
-            findings.append(_error("kalibr", f"{name} has no cam_overlaps: Kalibr's getCamOverlaps fails", fix))
+            findings.append(
+                _error("kalibr", f"{name} has no cam_overlaps: Kalibr's getCamOverlaps fails", fix)
+            )
         if model not in _KALIBR_DISTORTION or len(dist) != _KALIBR_DISTORTION.get(model, -1):
-            findings.append(_error("kalibr", f"{name}: distortion_model {model} with {len(dist)} coefficients is not "
-                                   "a Kalibr model (radtan 4, equidistant 4, fov 1, none 0)", fix))
+            findings.append(
+                _error(
+                    "kalibr",
+                    f"{name}: distortion_model {model} with {len(dist)} coefficients is not "
+                    "a Kalibr model (radtan 4, equidistant 4, fov 1, none 0)",
+                    fix,
+                )
+            )
         if not (isinstance(intr, list) and len(intr) == 4):
             findings.append(_error("kalibr", f"{name}: intrinsics must be [fu, fv, pu, pv]", fix))
             continue
         if cam.get("rostopic") is not None and not ROS_NAME.match(str(cam["rostopic"]).lstrip("/")):
-            findings.append(_error("frames", f"{name}: rostopic '{cam['rostopic']}' is not a legal ROS topic", _FIX_FRAME))
+            findings.append(
+                _error("frames", f"{name}: rostopic '{cam['rostopic']}' is not a legal ROS topic", _FIX_FRAME)
+            )
         for key in ("T_cn_cnm1", "T_cam_imu"):
             if key in cam:
                 T, bad = _finite_matrix(cam[key], (4, 4), f"{name}.{key}")
                 findings += bad + ([] if T is None else _rotation(T[:3, :3], f"{name}.{key}"))
         K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1]], dtype=np.float64)
-        facts = _camera_facts(f"{source}:{name}", K, dist if model == "equidistant" else [*dist, 0.0][:5],
-                              cam.get("resolution"), model == "equidistant")
-        findings += [f.model_copy(update={"message": f"{name}: {f.message}"}) for f in trace.lint(facts, limits)]
+        facts = _camera_facts(
+            f"{source}:{name}",
+            K,
+            dist if model == "equidistant" else [*dist, 0.0][:5],
+            cam.get("resolution"),
+            model == "equidistant",
+        )
+        findings += [
+            f.model_copy(update={"message": f"{name}: {f.message}"}) for f in trace.lint(facts, limits)
+        ]
     return findings
 
 
@@ -236,45 +307,87 @@ def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: Trace)
         findings += bad
         if K is not None:
             dist = list(np.ravel(data.get(f"D{cam}") or []))
-            facts = _camera_facts(f"{source}:K{cam}", K, dist, size, data.get("distortion_model") == "equidistant")
-            findings += [f.model_copy(update={"message": f"camera {cam}: {f.message}"})
-                         for f in trace.lint(facts, limits)]
+            facts = _camera_facts(
+                f"{source}:K{cam}", K, dist, size, data.get("distortion_model") == "equidistant"
+            )
+            findings += [
+                f.model_copy(update={"message": f"camera {cam}: {f.message}"})
+                for f in trace.lint(facts, limits)
+            ]
     return findings
 
 
 def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     lens, intr = str(model.get("lensmodel")), model.get("intrinsics")
     fix = "export it again with `calibctl rig export RIG --format bundle`"
-    n = {"LENSMODEL_OPENCV4": 4, "LENSMODEL_OPENCV5": 5, "LENSMODEL_OPENCV8": 8, "LENSMODEL_OPENCV12": 12}.get(lens)
+    n = {
+        "LENSMODEL_OPENCV4": 4,
+        "LENSMODEL_OPENCV5": 5,
+        "LENSMODEL_OPENCV8": 8,
+        "LENSMODEL_OPENCV12": 12,
+    }.get(lens)
     if n is None:
-        return [_error("mrcal", f"lensmodel {lens} is not one calibctl writes (LENSMODEL_OPENCV4/5/8/12)", fix, "warning")]
+        return [
+            _error(
+                "mrcal",
+                f"lensmodel {lens} is not one calibctl writes (LENSMODEL_OPENCV4/5/8/12)",
+                fix,
+                "warning",
+            )
+        ]
     values, bad = _finite_matrix(intr, (1, 4 + n), "intrinsics")
     _, bad_ext = _finite_matrix(model.get("extrinsics"), (1, 6), "extrinsics")
     if values is None:
         return bad + bad_ext
     fx, fy, cx, cy = values[0, :4]
-    facts = _camera_facts(source, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]]), list(values[0, 4:]),
-                          model.get("imagersize"), False)
+    facts = _camera_facts(
+        source,
+        np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]]),
+        list(values[0, 4:]),
+        model.get("imagersize"),
+        False,
+    )
     return bad_ext + trace.lint(facts, limits)
 
 
-def _document(data: dict[str, Any], source: str, model: type[RigCalibration] | type[HandEyeResult]) -> list[Finding]:
+def _document(
+    data: dict[str, Any], source: str, model: type[RigCalibration] | type[HandEyeResult]
+) -> list[Finding]:
     try:
         doc = model.model_validate(data)
     except ValidationError as exc:
-        return [_error("schema", validation_message(exc, source), "re-export it from the store; never edit one by hand")]
+        return [
+            _error(
+                "schema",
+                validation_message(exc, source),
+                "re-export it from the store; never edit one by hand",
+            )
+        ]
     if doc.computed_sha256() != doc.content_sha256:
-        return [_error("content-hash", f"content sha256 is {doc.computed_sha256()[:12]} but the file records "
-                       f"{doc.content_sha256[:12]}: it was changed after it was written", "re-export it from the store")]
-    return [] if doc.status == "accepted" else [_error("status", f"{source} is a {doc.status} version",
-                                                       "export an accepted version")]
+        return [
+            _error(
+                "content-hash",
+                f"content sha256 is {doc.computed_sha256()[:12]} but the file records "
+                f"{doc.content_sha256[:12]}: it was changed after it was written",
+                "re-export it from the store",
+            )
+        ]
+    return (
+        []
+        if doc.status == "accepted"
+        else [_error("status", f"{source} is a {doc.status} version", "export an accepted version")]
+    )
 
 
-SIGNATURE_FIX = ("load only what a signing store exported: `calibctl keys init` on the store that solves the rig, "
-                 "then trust its public key (--trusted-keys DIR)")
+SIGNATURE_FIX = (
+    "load only what a signing store exported: `calibctl keys init` on the store that solves the rig, "
+    "then trust its public key (--trusted-keys DIR)"
+)
 
 
-def _seal(what: str, seal: RecordSignature | None, content_sha256: str, trusted: TrustedKeys) -> list[Finding]:
+def _seal(
+    what: str, seal: RecordSignature | None, content_sha256: str, trusted: TrustedKeys
+) -> list[Finding]:
     problem = keys.seal_problem(seal, content_sha256, trusted)
     return [] if problem is None else [_error("signature", f"{what} {problem}", SIGNATURE_FIX)]
 
@@ -288,12 +401,20 @@ def _seal_of(value: Any) -> RecordSignature | None:
 
 def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
     """The manifest's rig signature and each member's (a robot loads the members' numbers too)."""
-    findings = _seal(f"rig {data.get('rig')}@{data.get('version')}", _seal_of(data.get("signature")),
-                     str(data.get("content_sha256")), trusted)
+    findings = _seal(
+        f"rig {data.get('rig')}@{data.get('version')}",
+        _seal_of(data.get("signature")),
+        str(data.get("content_sha256")),
+        trusted,
+    )
     for m in data.get("members") or []:
         if isinstance(m, dict):
-            findings += _seal(f"member {m.get('serial')}@{m.get('version')}", _seal_of(m.get("signature")),
-                              str(m.get("content_sha256")), trusted)
+            findings += _seal(
+                f"member {m.get('serial')}@{m.get('version')}",
+                _seal_of(m.get("signature")),
+                str(m.get("content_sha256")),
+                trusted,
+            )
     return findings
 
 
@@ -302,8 +423,13 @@ def _header_signature(header: trace_header.RigTraceHeader | None, trusted: Trust
     if header is None:
         return [_error("signature", "no calibctl rig header: nothing vouches for this file", SIGNATURE_FIX)]
     if header.ref == trace_header.NOT_STORED:
-        return [_error("signature", "written by `rig solve-folders` from no stored rig version: nothing signs it",
-                       "store the rig (`calibctl rig solve`) and export it from a signing store")]
+        return [
+            _error(
+                "signature",
+                "written by `rig solve-folders` from no stored rig version: nothing signs it",
+                "store the rig (`calibctl rig solve`) and export it from a signing store",
+            )
+        ]
     return _seal(f"rig {header.ref}", header.signature, header.rig_sha256, trusted)
 
 
@@ -319,7 +445,9 @@ def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | 
     return result
 
 
-def lint_rig_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> list[LintResult] | None:
+def lint_rig_file(
+    path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None
+) -> list[LintResult] | None:
     """The lint of a rig export file (a bundle: its manifest's result, then one per listed file), or None
     when ``path`` is not one. ``trusted`` (``--require-signature``): the rig version's signature must be a
     trusted key's (a bundle's members' too)."""
@@ -334,7 +462,9 @@ def lint_rig_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | Non
         for entry in data.get("files") or []:
             listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
             if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():
-                results += lint_rig_file(listed, limits, trusted) or [lint_camera_file(listed, limits, trusted)]
+                results += lint_rig_file(listed, limits, trusted) or [
+                    lint_camera_file(listed, limits, trusted)
+                ]
         return results
     if kind in ("rig-json", "handeye-json"):
         from calibctl.artifacts.handeye import HandEyeResult
@@ -343,20 +473,35 @@ def lint_rig_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | Non
         model = RigCalibration if kind == "rig-json" else HandEyeResult
         findings = _document(data, source, model)
         if trusted is not None and kind == "rig-json":
-            findings += _seal(f"rig {data.get('rig')}@{data.get('version')}", _seal_of(data.get("signature")),
-                              str(data.get("content_sha256")), trusted)
+            findings += _seal(
+                f"rig {data.get('rig')}@{data.get('version')}",
+                _seal_of(data.get("signature")),
+                str(data.get("content_sha256")),
+                trusted,
+            )
         elif trusted is not None:
-            findings.append(_error("signature", "a hand-eye result is signed as part of its rig version, not alone",
-                                   "lint the rig version it belongs to: `calibctl rig export RIG --format json`"))
+            findings.append(
+                _error(
+                    "signature",
+                    "a hand-eye result is signed as part of its rig version, not alone",
+                    "lint the rig version it belongs to: `calibctl rig export RIG --format json`",
+                )
+            )
         return [LintResult(source, kind, findings)]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:
         findings += _header_signature(rig, trusted)
     if camera is None and rig is None:
-        findings = [_error("traceability", "no calibctl header: this file cannot be traced to a stored version; "
-                           "linted on its numbers and frames only",
-                           "export it with `calibctl rig export RIG --format ...` or `calibctl export SERIAL`", "warning")]
+        findings = [
+            _error(
+                "traceability",
+                "no calibctl header: this file cannot be traced to a stored version; "
+                "linted on its numbers and frames only",
+                "export it with `calibctl rig export RIG --format ...` or `calibctl export SERIAL`",
+                "warning",
+            )
+        ]
     trace = Trace(trace_of(evidence, camera, rig), evidence)
     if kind == "tf":
         findings += _tf(data)

@@ -28,11 +28,14 @@ def lint(
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
     trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
     if trusted is not None and not trusted.keys:
-        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
+        raise UsageError(
+            "--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys"
+        )
     results = []
     for path in paths:
-        results += (rig_files.lint_rig_file(path, settings.lint, trusted)
-                    or [rig_files.lint_camera_file(path, settings.lint, trusted)])
+        results += rig_files.lint_rig_file(path, settings.lint, trusted) or [
+            rig_files.lint_camera_file(path, settings.lint, trusted)
+        ]
     if serial or all_serials:
         results += lint_store(settings, serial, all_serials, trusted)
     return results

@@ -44,8 +44,9 @@ def _views(art: CalibrationArtifact, session: CaptureSession) -> list[ViewCorner
         keep = [i for i, cid in enumerate(view.corner_ids) if (view.name, cid) not in removed]
         ids = np.asarray(view.corner_ids, dtype=np.int64)[keep]
         corners = np.asarray(view.corners_px, dtype=np.float64)[keep]
-        res = report_maps.reprojection_residuals(model_points[ids], corners, result.rvec, result.tvec_m, K, D,
-                                                   is_fisheye(art.model.name))
+        res = report_maps.reprojection_residuals(
+            model_points[ids], corners, result.rvec, result.tvec_m, K, D, is_fisheye(art.model.name)
+        )
         out.append(ViewCorners(result.name, corners, res, result.outlier, result.dropped))
     return out
 
@@ -56,13 +57,20 @@ def _uncertainty(art: CalibrationArtifact) -> report_maps.UncertaintyMap | None:
         return None
     try:
         return report_maps.projection_uncertainty(
-            np.asarray(art.camera_matrix, dtype=np.float64), np.asarray(art.dist_coeffs, dtype=np.float64),
-            np.asarray(cov.matrix, dtype=np.float64), cov.parameters, cov.aspect_ratio, art.image_size,
-            fisheye=is_fisheye(art.model.name))
+            np.asarray(art.camera_matrix, dtype=np.float64),
+            np.asarray(art.dist_coeffs, dtype=np.float64),
+            np.asarray(cov.matrix, dtype=np.float64),
+            cov.parameters,
+            cov.aspect_ratio,
+            art.image_size,
+            fisheye=is_fisheye(art.model.name),
+        )
     except (ValueError, IndexError) as exc:  # a foreign artifact whose covariance names another model
-        raise InputError(f"{art.ref}: its stored covariance over {cov.parameters} does not fit its "
-                         f"{len(art.dist_coeffs)}-coefficient model ({exc})",
-                         "re-solve the camera, or re-import the artifact from the store that made it") from exc
+        raise InputError(
+            f"{art.ref}: its stored covariance over {cov.parameters} does not fit its "
+            f"{len(art.dist_coeffs)}-coefficient model ({exc})",
+            "re-solve the camera, or re-import the artifact from the store that made it",
+        ) from exc
 
 
 def gather(settings: Settings, ref: str) -> ReportData:
@@ -78,12 +86,20 @@ def gather(settings: Settings, ref: str) -> ReportData:
             try:
                 session = store.get_session(art.provenance.session_id)
             except NotFoundError:
-                note = f"capture session {art.provenance.session_id} is not in this store, so no corners to draw"
+                note = (
+                    f"capture session {art.provenance.session_id} is not in this store, so no corners to draw"
+                )
     views = _views(art, session) if session is not None else []
     K = np.asarray(art.camera_matrix, dtype=np.float64)
     D = np.asarray(art.dist_coeffs, dtype=np.float64)
-    return ReportData(art, active, views, note, _uncertainty(art),
-                      report_maps.distortion_curve(K, D, art.image_size, fisheye=is_fisheye(art.model.name)))
+    return ReportData(
+        art,
+        active,
+        views,
+        note,
+        _uncertainty(art),
+        report_maps.distortion_curve(K, D, art.image_size, fisheye=is_fisheye(art.model.name)),
+    )
 
 
 def page_path(serial: str, version: int, folder: Path | None = None) -> Path:
@@ -95,8 +111,14 @@ def default_path(art: CalibrationArtifact, folder: Path | None = None) -> Path:
     return page_path(art.serial, art.version, folder)
 
 
-def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool,
-                 extend: Callable[[ReportData], ReportData] | None = None) -> tuple[Path, ReportData]:
+def write_report(
+    settings: Settings,
+    ref: str,
+    out: Path | None,
+    *,
+    force: bool,
+    extend: Callable[[ReportData], ReportData] | None = None,
+) -> tuple[Path, ReportData]:
     """Render ``ref`` and write it atomically to ``out`` (default SERIAL-vN-report.html here). ``extend`` adds
     what rooms above this one know (``calibctl report``: the diff against the previous version, the trends)."""
     data = gather(settings, ref)
@@ -111,7 +133,9 @@ def write_report(settings: Settings, ref: str, out: Path | None, *, force: bool,
 def ready_folder(folder: Path) -> Path:
     """Create ``folder`` when missing; checked before a solve, so a solve is never stored without its report."""
     if folder.exists() and not folder.is_dir():
-        raise FileSystemError(f"cannot write reports to {folder}: it is not a folder", "name a folder for --report")
+        raise FileSystemError(
+            f"cannot write reports to {folder}: it is not a folder", "name a folder for --report"
+        )
     with file_errors("create the report folder", folder):
         folder.mkdir(parents=True, exist_ok=True)
     with file_errors("write reports to", folder):  # a read-only folder too: a file is the only honest probe
@@ -127,6 +151,8 @@ def ready_page(folder: Path, serial: str, version: int) -> Path:
     so a solve is not stored and then left without its report."""
     path = page_path(serial, version, folder)
     if existing_target(path) is not None:  # a symlink, FIFO or device there is refused too, before any store
-        raise AlreadyExistsError(f"{path} already exists; nothing was stored",
-                                 "move it away, or give --report another folder (a solve never overwrites a report)")
+        raise AlreadyExistsError(
+            f"{path} already exists; nothing was stored",
+            "move it away, or give --report another folder (a solve never overwrites a report)",
+        )
     return path

@@ -32,7 +32,9 @@ class DiffSection:
     raw_px: dict[str, float]  # |difference| percentiles without re-fitting the camera frame
     fit_px: dict[str, float]  # after fitting the implied rotation (mrcal's projection diff)
     rotation_deg: float
-    expected_sigma_px: float | None  # the median expected one-sigma of the raw difference, from both covariances
+    expected_sigma_px: (
+        float | None
+    )  # the median expected one-sigma of the raw difference, from both covariances
     reasons: tuple[str, ...]
 
 

@@ -58,11 +58,13 @@ def _stride(n: int, most: int = MAX_DOTS) -> int:
 def _verdict(d: ReportData) -> str:
     art = d.artifact
     active = " (active)" if d.active else ""
-    lines = [f'<h1>{escape(art.ref)} <span class="badge {art.status}" data-key="status">{art.status}</span>'
-             f"{active}</h1>",
-             f'<p>active now (the version a robot loads by serial): <b data-key="active">{"yes" if d.active else "no"}'
-             f"</b>. Lint stored at solve time below; <code>calibctl lint --serial {escape(art.serial)}</code> lints "
-             "the active version against today's limits.</p>"]
+    lines = [
+        f'<h1>{escape(art.ref)} <span class="badge {art.status}" data-key="status">{art.status}</span>'
+        f"{active}</h1>",
+        f'<p>active now (the version a robot loads by serial): <b data-key="active">{"yes" if d.active else "no"}'
+        f"</b>. Lint stored at solve time below; <code>calibctl lint --serial {escape(art.serial)}</code> lints "
+        "the active version against today's limits.</p>",
+    ]
     return "".join(lines) + lint_block(art.lint)
 
 
@@ -70,8 +72,13 @@ def lint_block(findings: Sequence[Finding]) -> str:
     """The lint findings as a table (severity, rule, finding, fix), or "lint: clean"."""
     if not findings:
         return '<p data-key="lint">lint: clean</p>'
-    rows = [cell(f.severity, cls=f"l {f.severity}") + cell(f.rule, cls="l") + cell(f.message, cls="l")
-            + cell(f.fix or "", cls="l") for f in findings]
+    rows = [
+        cell(f.severity, cls=f"l {f.severity}")
+        + cell(f.rule, cls="l")
+        + cell(f.message, cls="l")
+        + cell(f.fix or "", cls="l")
+        for f in findings
+    ]
     return table(["severity", "rule", "finding", "fix"], rows)
 
 
@@ -81,36 +88,67 @@ def _parameters(d: ReportData) -> str:
     rows = []
     for name, r, c in _K:
         s = sigma.get(name) if name in art.model.free_parameters else None
-        rows.append(cell(name, cls="l") + cell(num(art.camera_matrix[r][c], 3), name)
-                    + cell(num(s, 3) if s is not None else "fixed", f"sigma_{name}") + cell("px", cls="l"))
+        rows.append(
+            cell(name, cls="l")
+            + cell(num(art.camera_matrix[r][c], 3), name)
+            + cell(num(s, 3) if s is not None else "fixed", f"sigma_{name}")
+            + cell("px", cls="l")
+        )
     for i, value in enumerate(art.dist_coeffs):
         name = _DIST[i] if i < len(_DIST) else f"d{i}"
         if name in art.model.free_parameters or value != 0:
             s = sigma.get(name)
-            rows.append(cell(name, cls="l") + cell(num(value, 5), name)
-                        + cell(num(s, 5) if s is not None else "fixed", f"sigma_{name}") + cell("", cls="l"))
+            rows.append(
+                cell(name, cls="l")
+                + cell(num(value, 5), name)
+                + cell(num(s, 5) if s is not None else "fixed", f"sigma_{name}")
+                + cell("", cls="l")
+            )
     ho = art.held_out
-    summary = (f'<p>model {escape(art.model.name)}, {art.image_size[0]}x{art.image_size[1]} px; RMS fit '
-               f'<b data-key="rms_px">{num(art.rms_px)}</b> px, held-out <b data-key="held_out_rms_px">'
-               f'{num(ho.rms_px)}</b> px ({ho.k_folds}-fold); outer ring fit {num(ho.fit_outer_ring_rms_px)} px / '
-               f"held-out {num(ho.outer_ring_rms_px)} px</p>")
-    refused = f'<p class="warning">no uncertainty: {escape(art.stdev.refused_reason)}</p>' \
-        if art.stdev.refused_reason else ""
-    return "<h2>Parameters (one-sigma)</h2>" + summary + refused + table(["parameter", "value", "sigma", ""], rows)
+    summary = (
+        f"<p>model {escape(art.model.name)}, {art.image_size[0]}x{art.image_size[1]} px; RMS fit "
+        f'<b data-key="rms_px">{num(art.rms_px)}</b> px, held-out <b data-key="held_out_rms_px">'
+        f"{num(ho.rms_px)}</b> px ({ho.k_folds}-fold); outer ring fit {num(ho.fit_outer_ring_rms_px)} px / "
+        f"held-out {num(ho.outer_ring_rms_px)} px</p>"
+    )
+    refused = (
+        f'<p class="warning">no uncertainty: {escape(art.stdev.refused_reason)}</p>'
+        if art.stdev.refused_reason
+        else ""
+    )
+    return (
+        "<h2>Parameters (one-sigma)</h2>"
+        + summary
+        + refused
+        + table(["parameter", "value", "sigma", ""], rows)
+    )
 
 
 def _gates(d: ReportData) -> str:
-    rows = [cell(g.gate, cls="l") + cell("pass" if g.passed else "FAIL", f"gate_{g.gate}")
-            + cell(f"{g.value:.4g}") + cell(f"{g.threshold:g}") + cell(g.hint or "", cls="l")
-            for g in d.artifact.gates]
+    rows = [
+        cell(g.gate, cls="l")
+        + cell("pass" if g.passed else "FAIL", f"gate_{g.gate}")
+        + cell(f"{g.value:.4g}")
+        + cell(f"{g.threshold:g}")
+        + cell(g.hint or "", cls="l")
+        for g in d.artifact.gates
+    ]
     body = table(["gate", "result", "value", "needs", "hint"], rows) if rows else "<p>no gates recorded</p>"
     return "<h2>Capture gates</h2>" + body
 
 
 def _image_plot(d: ReportData, title: str) -> Plot:
     w, h = d.artifact.image_size
-    return Plot(title, (0.0, float(w)), (0.0, float(h)), width=520, height=int(40 + 456 * h / w) + 12,
-                flip_y=True, x_label="u (px)", y_label="v (px)")
+    return Plot(
+        title,
+        (0.0, float(w)),
+        (0.0, float(h)),
+        width=520,
+        height=int(40 + 456 * h / w) + 12,
+        flip_y=True,
+        x_label="u (px)",
+        y_label="v (px)",
+    )
 
 
 def _coverage(d: ReportData) -> str:
@@ -129,10 +167,13 @@ def _coverage(d: ReportData) -> str:
     plot.dots(pts[::k, 0], pts[::k, 1], "#1565c0", 1.2)
     gaps = edge_gaps_px(pts, (w, h))
     empty = int((grid == 0).sum())
-    text = (f'<p>{empty} of {grid.size} cells ({COVERAGE_CELLS[0]}x{COVERAGE_CELLS[1]}) never reached '
-            f'(<span data-key="empty_cells">{empty}</span>). Nearest corner to each edge: '
-            + ", ".join(f'{side} <span data-key="gap_{side}">{gap:.0f}</span> px' for side, gap in gaps.items())
-            + (f"; every {k}th corner drawn" if k > 1 else "") + "</p>")
+    text = (
+        f"<p>{empty} of {grid.size} cells ({COVERAGE_CELLS[0]}x{COVERAGE_CELLS[1]}) never reached "
+        f'(<span data-key="empty_cells">{empty}</span>). Nearest corner to each edge: '
+        + ", ".join(f'{side} <span data-key="gap_{side}">{gap:.0f}</span> px' for side, gap in gaps.items())
+        + (f"; every {k}th corner drawn" if k > 1 else "")
+        + "</p>"
+    )
     return "<h2>Coverage</h2>" + plot.svg() + text
 
 
@@ -155,16 +196,21 @@ def _circle_coverage(d: ReportData, pts: np.ndarray, grid: np.ndarray, circle: I
         for r, c in zip(*np.nonzero(mask), strict=True):
             plot.rect(xe[c], ye[r], xe[c + 1], ye[r + 1], fill)
     a = np.linspace(0.0, 2.0 * np.pi, 97)
-    plot.line(circle.cx_px + circle.radius_px * np.cos(a), circle.cy_px + circle.radius_px * np.sin(a), "#555555")
+    plot.line(
+        circle.cx_px + circle.radius_px * np.cos(a), circle.cy_px + circle.radius_px * np.sin(a), "#555555"
+    )
     k = _stride(len(pts))
     plot.dots(pts[::k, 0], pts[::k, 1], "#1565c0", 1.2)
     inside = int(imaged.sum())
-    text = (f'<p>Image circle ({circle.source}): centre ({circle.cx_px:.1f}, {circle.cy_px:.1f}) px, radius '
-            f'<span data-key="image_circle_radius_px">{circle.radius_px:.1f}</span> px. '
-            f'<span data-key="not_imaged_cells">{grid.size - inside}</span> of {grid.size} cells '
-            f'({COVERAGE_CELLS[0]}x{COVERAGE_CELLS[1]}) lie outside it and are not imaged by the lens; '
-            f'<span data-key="empty_cells">{int(never.sum())}</span> of the {inside} inside it never reached'
-            + (f"; every {k}th corner drawn" if k > 1 else "") + ".</p>")
+    text = (
+        f"<p>Image circle ({circle.source}): centre ({circle.cx_px:.1f}, {circle.cy_px:.1f}) px, radius "
+        f'<span data-key="image_circle_radius_px">{circle.radius_px:.1f}</span> px. '
+        f'<span data-key="not_imaged_cells">{grid.size - inside}</span> of {grid.size} cells '
+        f"({COVERAGE_CELLS[0]}x{COVERAGE_CELLS[1]}) lie outside it and are not imaged by the lens; "
+        f'<span data-key="empty_cells">{int(never.sum())}</span> of the {inside} inside it never reached'
+        + (f"; every {k}th corner drawn" if k > 1 else "")
+        + ".</p>"
+    )
     return "<h2>Coverage</h2>" + plot.svg() + text
 
 
@@ -177,7 +223,9 @@ def _residual_field(d: ReportData) -> str:
     ri = np.clip((pts[:, 1] / h * rows).astype(int), 0, rows - 1)
     flat = ri * cols + ci
     counts = np.bincount(flat, minlength=rows * cols)
-    mean = np.stack([np.bincount(flat, res[:, j], minlength=rows * cols) for j in (0, 1)], axis=1).astype(np.float64)
+    mean = np.stack([np.bincount(flat, res[:, j], minlength=rows * cols) for j in (0, 1)], axis=1).astype(
+        np.float64
+    )
     filled = counts > 0
     mean[filled] /= counts[filled, None]
     biggest = float(np.linalg.norm(mean, axis=1).max()) or 1.0
@@ -191,76 +239,125 @@ def _residual_field(d: ReportData) -> str:
     radius = np.hypot(pts[:, 0] - K[0][2], pts[:, 1] - K[1][2])
     size = np.linalg.norm(res, axis=1)
     k = _stride(len(pts))
-    rplot = Plot("residual vs distance from the principal point", (0.0, float(radius.max()) * 1.02),
-                 (0.0, float(size.max()) * 1.05), width=440, height=300, x_label="radius (px)",
-                 y_label="|residual| (px)")
+    rplot = Plot(
+        "residual vs distance from the principal point",
+        (0.0, float(radius.max()) * 1.02),
+        (0.0, float(size.max()) * 1.05),
+        width=440,
+        height=300,
+        x_label="radius (px)",
+        y_label="|residual| (px)",
+    )
     rplot.dots(radius[::k], size[::k], "#6a1b9a", 1.2)
-    return ("<h2>Residuals</h2><p>observed - projected under the stored model and poses; corners the solve "
-            f"removed ({len(d.artifact.rejected_corners)}) are not drawn.</p>"
-            f'<div class="row">{plot.svg()}{rplot.svg()}</div>')
+    return (
+        "<h2>Residuals</h2><p>observed - projected under the stored model and poses; corners the solve "
+        f"removed ({len(d.artifact.rejected_corners)}) are not drawn.</p>"
+        f'<div class="row">{plot.svg()}{rplot.svg()}</div>'
+    )
 
 
 def _per_view(d: ReportData) -> str:
     views = d.artifact.views
     top = max(v.rms_px for v in views) * 1.1
-    plot = Plot("per-view RMS (red: outlier, grey: dropped)", (0.0, float(len(views))), (0.0, top), width=900,
-                height=260, x_label="view (table below names them)", y_label="RMS (px)")
+    plot = Plot(
+        "per-view RMS (red: outlier, grey: dropped)",
+        (0.0, float(len(views))),
+        (0.0, top),
+        width=900,
+        height=260,
+        x_label="view (table below names them)",
+        y_label="RMS (px)",
+    )
     for i, v in enumerate(views):
         fill = "#9e9e9e" if v.dropped else "#c62828" if v.outlier else "#1565c0"
         plot.rect(i + 0.1, 0.0, i + 0.9, v.rms_px, fill)
-    rows = [cell(str(i), cls="l") + cell(v.name, cls="l") + cell(num(v.rms_px), f"view_rms_{i}")
-            + cell(num(v.worst_corner_px)) + cell("outlier" if v.outlier else "", cls="l")
-            + cell("dropped" if v.dropped else "", cls="l") for i, v in enumerate(views)]
-    return ("<h2>Per-view RMS</h2>" + plot.svg()
-            + table(["#", "view", "RMS px", "worst corner px", "flag", ""], rows))
+    rows = [
+        cell(str(i), cls="l")
+        + cell(v.name, cls="l")
+        + cell(num(v.rms_px), f"view_rms_{i}")
+        + cell(num(v.worst_corner_px))
+        + cell("outlier" if v.outlier else "", cls="l")
+        + cell("dropped" if v.dropped else "", cls="l")
+        for i, v in enumerate(views)
+    ]
+    return (
+        "<h2>Per-view RMS</h2>"
+        + plot.svg()
+        + table(["#", "view", "RMS px", "worst corner px", "flag", ""], rows)
+    )
 
 
 def _held_out(d: ReportData) -> str:
     ho = d.artifact.held_out
 
     def rows(bins, prefix):
-        return [cell(b.label, cls="l") + cell(num(b.fit_rms_px), f"{prefix}_fit_{i}")
-                + cell(num(b.held_out_rms_px), f"{prefix}_held_{i}") + cell(str(b.count))
-                for i, b in enumerate(bins)]
+        return [
+            cell(b.label, cls="l")
+            + cell(num(b.fit_rms_px), f"{prefix}_fit_{i}")
+            + cell(num(b.held_out_rms_px), f"{prefix}_held_{i}")
+            + cell(str(b.count))
+            for i, b in enumerate(bins)
+        ]
 
     header = ["bin", "fit RMS px", "held-out RMS px", "corners"]
-    return (f"<h2>Held-out RMS ({ho.k_folds}-fold; intrinsics frozen, poses re-fitted)</h2>"
-            f'<div class="row">{table(header, rows(ho.by_radius, "ring"))}'
-            f'{table(header, rows(ho.by_octant, "octant"))}</div>')
+    return (
+        f"<h2>Held-out RMS ({ho.k_folds}-fold; intrinsics frozen, poses re-fitted)</h2>"
+        f'<div class="row">{table(header, rows(ho.by_radius, "ring"))}'
+        f"{table(header, rows(ho.by_octant, 'octant'))}</div>"
+    )
 
 
 def _uncertainty(d: ReportData) -> str:
     m = d.uncertainty
     if m is None:
-        return ("<h2>Projection uncertainty</h2><p>not available: this version stores no covariance "
-                f"({escape(d.artifact.stdev.refused_reason or 'made before calibctl stored it')}).</p>")
+        return (
+            "<h2>Projection uncertainty</h2><p>not available: this version stores no covariance "
+            f"({escape(d.artifact.stdev.refused_reason or 'made before calibctl stored it')}).</p>"
+        )
     w, h = d.artifact.image_size
     # nan: a fisheye pixel beyond 88 deg off-axis, where cv2.fisheye projects nothing (report_maps)
     lo, hi = float(np.nanmin(m.sigma_px)), float(np.nanmax(m.sigma_px))
     plot = _image_plot(d, "projection one-sigma, worst direction (px)")
-    heat(plot, m.sigma_px, np.linspace(0, w, len(m.u_px) + 1), np.linspace(0, h, len(m.v_px) + 1), lo, hi,
-         empty="#f2f2f2")
+    heat(
+        plot,
+        m.sigma_px,
+        np.linspace(0, w, len(m.u_px) + 1),
+        np.linspace(0, h, len(m.v_px) + 1),
+        lo,
+        hi,
+        empty="#f2f2f2",
+    )
     if d.views:  # where the corners were: the uncertainty grows where they never reached
         pts = np.concatenate([v.corners_px for v in d.views])
         k = _stride(len(pts), MAX_DOTS // 2)
         plot.dots(pts[::k, 0], pts[::k, 1], "#ffffff", 0.8)
     r, c = len(m.v_px) // 2, len(m.u_px) // 2
-    return ("<h2>Projection uncertainty</h2><p>The stored intrinsic covariance propagated to the projection of "
-            "the ray through each pixel (as mrcal's show-projection-uncertainty, without re-fitting the camera "
-            f'frame); white dots: the corners used. Centre <b data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
-            f'<b data-key="uncertainty_max">{num(hi, 2)}</b> px.</p>' + plot.svg() + colour_bar(lo, hi, "px", 520))
+    return (
+        "<h2>Projection uncertainty</h2><p>The stored intrinsic covariance propagated to the projection of "
+        "the ray through each pixel (as mrcal's show-projection-uncertainty, without re-fitting the camera "
+        f'frame); white dots: the corners used. Centre <b data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
+        f'<b data-key="uncertainty_max">{num(hi, 2)}</b> px.</p>' + plot.svg() + colour_bar(lo, hi, "px", 520)
+    )
 
 
 def _distortion(d: ReportData) -> str:
     r, disp = d.distortion
     lo, hi = float(min(disp.min(), 0.0)), float(max(disp.max(), 0.0))
-    plot = Plot("radial displacement by the lens (negative: barrel)", (0.0, float(r.max()) * 1.02),
-                (lo - 0.05 * (hi - lo + 1), hi + 0.05 * (hi - lo + 1)), width=520, height=300,
-                x_label="distance from the principal point, distorted (px)", y_label="displacement (px)")
+    plot = Plot(
+        "radial displacement by the lens (negative: barrel)",
+        (0.0, float(r.max()) * 1.02),
+        (lo - 0.05 * (hi - lo + 1), hi + 0.05 * (hi - lo + 1)),
+        width=520,
+        height=300,
+        x_label="distance from the principal point, distorted (px)",
+        y_label="displacement (px)",
+    )
     plot.line(np.array([0.0, float(r.max())]), np.zeros(2), "#999", 1.0, "4 3")
     plot.line(r, disp, "#1565c0")
-    return ("<h2>Distortion</h2><p>along the ray to the farthest image corner; at that corner "
-            f'<span data-key="distortion_corner">{num(float(disp[-1]), 1)}</span> px.</p>' + plot.svg())
+    return (
+        "<h2>Distortion</h2><p>along the ray to the farthest image corner; at that corner "
+        f'<span data-key="distortion_corner">{num(float(disp[-1]), 1)}</span> px.</p>' + plot.svg()
+    )
 
 
 def _mm(value_m: float | None) -> str:
@@ -271,15 +368,19 @@ def _provenance(d: ReportData) -> str:
     art = d.artifact
     p, b = art.provenance, art.board
     m = b.measurement
-    rows = [("board", f"{b.ref}: {b.kind} {b.cols}x{b.rows}"),
-            ("square size", f"{m.square_size_m * 1000:.3f} mm +/- {_mm(m.uncertainty_m)} ({m.status})"),
-            ("measured with", f"{m.instrument or 'n/a'} by {m.measured_by or 'n/a'} on {m.measured_on or 'n/a'}"),
-            ("session", p.session_id or "n/a"), ("images", str(len(p.input_image_sha256))),
-            ("station / operator", f"{p.station} / {p.operator}"), ("created", p.created_at.isoformat()),
-            ("calibctl / OpenCV", f"{p.calibctl_version} / {p.opencv_version}"),
-            ("imported from", p.imported_from or "-"),
-            ("content sha256", f"{art.content_sha256} ({art.content_hash_algorithm})")]
-    body = "".join(f"<tr><th class=\"l\">{escape(k)}</th>{cell(v, cls='l')}</tr>" for k, v in rows)
+    rows = [
+        ("board", f"{b.ref}: {b.kind} {b.cols}x{b.rows}"),
+        ("square size", f"{m.square_size_m * 1000:.3f} mm +/- {_mm(m.uncertainty_m)} ({m.status})"),
+        ("measured with", f"{m.instrument or 'n/a'} by {m.measured_by or 'n/a'} on {m.measured_on or 'n/a'}"),
+        ("session", p.session_id or "n/a"),
+        ("images", str(len(p.input_image_sha256))),
+        ("station / operator", f"{p.station} / {p.operator}"),
+        ("created", p.created_at.isoformat()),
+        ("calibctl / OpenCV", f"{p.calibctl_version} / {p.opencv_version}"),
+        ("imported from", p.imported_from or "-"),
+        ("content sha256", f"{art.content_sha256} ({art.content_hash_algorithm})"),
+    ]
+    body = "".join(f'<tr><th class="l">{escape(k)}</th>{cell(v, cls="l")}</tr>' for k, v in rows)
     return f"<h2>Provenance</h2><table>{body}</table>"
 
 
@@ -291,15 +392,30 @@ def _diff(d: ReportData) -> str:
     if x is None:
         return f'<h2>Change from the previous version</h2><p class="note">{escape(d.diff_note or "not compared")}</p>'
     keys = list(x.raw_px)
-    rows = [f"<th class=\"l\">{escape(name)}</th>" + "".join(cell(num(values[k], 3), f"diff_{tag}_{k}") for k in keys)
-            for name, tag, values in (("as stored", "raw", x.raw_px), ("after fitting the rotation", "fit", x.fit_px))]
-    sigma = "" if x.expected_sigma_px is None else (f"; the raw difference expected from the two covariances alone: "
-                                                    f"median one-sigma {num(x.expected_sigma_px, 3)} px")
+    rows = [
+        f'<th class="l">{escape(name)}</th>'
+        + "".join(cell(num(values[k], 3), f"diff_{tag}_{k}") for k in keys)
+        for name, tag, values in (
+            ("as stored", "raw", x.raw_px),
+            ("after fitting the rotation", "fit", x.fit_px),
+        )
+    ]
+    sigma = (
+        ""
+        if x.expected_sigma_px is None
+        else (
+            f"; the raw difference expected from the two covariances alone: "
+            f"median one-sigma {num(x.expected_sigma_px, 3)} px"
+        )
+    )
     why = "".join(f"<li>{escape(r)}</li>" for r in x.reasons)
-    return (f"<h2>Change from the previous version</h2><p><code>calibctl diff {escape(x.previous_ref)} "
-            f'{escape(d.artifact.ref)}</code>: <b data-key="diff_verdict">{escape(x.verdict)}</b>; implied rotation '
-            f"{num(x.rotation_deg, 4)} deg{sigma}.</p>" + table(["projection difference (px)", *keys], rows)
-            + (f"<ul>{why}</ul>" if why else ""))
+    return (
+        f"<h2>Change from the previous version</h2><p><code>calibctl diff {escape(x.previous_ref)} "
+        f'{escape(d.artifact.ref)}</code>: <b data-key="diff_verdict">{escape(x.verdict)}</b>; implied rotation '
+        f"{num(x.rotation_deg, 4)} deg{sigma}.</p>"
+        + table(["projection difference (px)", *keys], rows)
+        + (f"<ul>{why}</ul>" if why else "")
+    )
 
 
 def _trends(d: ReportData) -> str:
@@ -314,24 +430,39 @@ def _trends(d: ReportData) -> str:
         lines.append(f"RMS vs temperature: {s['slope']:+.4f} +- {s['sigma']:.4f} px/degC (n {s['n']})")
     drift = t.get("td_drift_ppm")
     if drift is not None:
-        lines.append(f"time offset vs time: {drift['slope']:+.2f} +- {drift['sigma']:.2f} ppm over "
-                     f"{t['td_span_days']:.1f} days (n {drift['n']})")
+        lines.append(
+            f"time offset vs time: {drift['slope']:+.2f} +- {drift['sigma']:.2f} ppm over "
+            f"{t['td_span_days']:.1f} days (n {drift['n']})"
+        )
     if t.get("gauge"):
         g = t["gauge"]
-        lines.append(f"gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})")
+        lines.append(
+            f"gauge ratio: median {g['median']:.4f}, p05..p95 {g['p05']:.4f}..{g['p95']:.4f} (n {g['n']})"
+        )
     for name in ("check_verdicts", "triage_verdicts"):
         if t.get(name):
             lines.append(f"{name.split('_')[0]}: " + ", ".join(f"{n} {v}" for v, n in t[name].items()))
     f = t.get("fleet")
     if f is not None:
-        lines.append(f"this camera's mean check RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
-                     f"serials (others' median {f['others_median_rms_px']:.3f} px)")
-    bins = [cell(f"{b['from_c']:g}..{b['to_c']:g}", cls="l") + cell(str(b["n"])) + cell(num(b["mean"])) + cell(num(b["max"]))
-            for b in t.get("rms_by_temperature", [])]
+        lines.append(
+            f"this camera's mean check RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+            f"serials (others' median {f['others_median_rms_px']:.3f} px)"
+        )
+    bins = [
+        cell(f"{b['from_c']:g}..{b['to_c']:g}", cls="l")
+        + cell(str(b["n"]))
+        + cell(num(b["mean"]))
+        + cell(num(b["max"]))
+        for b in t.get("rms_by_temperature", [])
+    ]
     findings = "".join(f'<li class="warning">{escape(x)}</li>' for x in t.get("findings", []))
-    return (f'<h2>Field health (robots\' reports)</h2><p data-key="trends_counts">{escape(counts)}</p><ul>'
-            + "".join(f"<li>{escape(x)}</li>" for x in lines) + findings + "</ul>"
-            + (table(["temperature (degC)", "n", "RMS mean (px)", "RMS max (px)"], bins) if bins else ""))
+    return (
+        f'<h2>Field health (robots\' reports)</h2><p data-key="trends_counts">{escape(counts)}</p><ul>'
+        + "".join(f"<li>{escape(x)}</li>" for x in lines)
+        + findings
+        + "</ul>"
+        + (table(["temperature (degC)", "n", "RMS mean (px)", "RMS max (px)"], bins) if bins else "")
+    )
 
 
 def render_html(d: ReportData) -> str:
@@ -340,9 +471,20 @@ def render_html(d: ReportData) -> str:
     if d.views:
         parts += [_coverage(d), _residual_field(d)]
     else:
-        parts.append(f'<h2>Coverage and residuals</h2><p class="note">{escape(d.corners_note or "no corners")}</p>')
-    parts += [_per_view(d) if d.artifact.views else "", _held_out(d), _uncertainty(d), _distortion(d), _diff(d), _trends(d),
-              _provenance(d)]
+        parts.append(
+            f'<h2>Coverage and residuals</h2><p class="note">{escape(d.corners_note or "no corners")}</p>'
+        )
+    parts += [
+        _per_view(d) if d.artifact.views else "",
+        _held_out(d),
+        _uncertainty(d),
+        _distortion(d),
+        _diff(d),
+        _trends(d),
+        _provenance(d),
+    ]
     title = escape(f"calibctl report {d.artifact.ref}")
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
-            f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n")
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+        f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>\n"
+    )

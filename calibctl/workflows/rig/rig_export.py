@@ -32,9 +32,11 @@ from calibctl.workflows.store_admin.records import open_store
 
 EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle")
 FILE_FORMATS = ("ros", "bundle")  # written as several files: export_files
-ROS_ONE_FILE_FIX = ("ROS reads only the first YAML document of a file (a stereo driver would load the left "
-                    "calibration for the right camera): pass -o DIR (one CAMERA.yaml per camera) or "
-                    "-o 'DIR/{camera}.yaml'")
+ROS_ONE_FILE_FIX = (
+    "ROS reads only the first YAML document of a file (a stereo driver would load the left "
+    "calibration for the right camera): pass -o DIR (one CAMERA.yaml per camera) or "
+    "-o 'DIR/{camera}.yaml'"
+)
 
 
 @dataclass(frozen=True)
@@ -60,14 +62,17 @@ class RigExport:
     def stamp(self, body: str, serials: tuple[str, ...] = ()) -> str:
         by = {m.serial: m for m in self.cal.members}
         members = tuple((f"{s}@{by[s].version}", by[s].content_sha256, self.names.frame(s)) for s in serials)
-        return trace_header.stamp_rig(self.ref, self.cal.status, self.cal.content_sha256, body, members,
-                                      self.cal.signature)
+        return trace_header.stamp_rig(
+            self.ref, self.cal.status, self.cal.content_sha256, body, members, self.cal.signature
+        )
 
     def imu_transforms(self) -> dict[str, np.ndarray] | None:
         """serial -> T_cam_imu when the tree has one IMU frame (a declared frame named ``*imu*``)."""
         imus = [f for f in self.full_tree.frames if f not in self.cameras.frames and "imu" in f.lower()]
         if len(imus) > 1:
-            raise UsageError(f"rig {self.ref} has several IMU frames ({', '.join(imus)}); Kalibr's camchain takes one")
+            raise UsageError(
+                f"rig {self.ref} has several IMU frames ({', '.join(imus)}); Kalibr's camchain takes one"
+            )
         return {c: self.full_tree.T(c, imus[0]) for c in self.cameras.frames} if imus else None
 
     def overlaps(self) -> dict[str, set[str]]:
@@ -80,20 +85,32 @@ class RigExport:
         return out
 
 
-def _refuse_unloadable(cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool) -> None:
+def _refuse_unloadable(
+    cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool
+) -> None:
     """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye / LiDAR camera) exit 1."""
     ref = f"rig {cal.rig}@{cal.version}"
     if cal.status != "accepted" and not allow_rejected:
-        raise UsageError(f"{ref} is {cal.status}: a robot must not load it",
-                         hint="export the active version, or pass --allow-rejected to inspect it")
-    stale = [f for f in findings if f.severity == "error" and f.rule in ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")]
+        raise UsageError(
+            f"{ref} is {cal.status}: a robot must not load it",
+            hint="export the active version, or pass --allow-rejected to inspect it",
+        )
+    stale = [
+        f
+        for f in findings
+        if f.severity == "error"
+        and f.rule in ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
+    ]
     if stale and not (allow_stale or allow_rejected):
-        raise VerdictFailed(f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
-                            f"{stale[0].fix}; or pass --allow-stale to export it anyway (a robot must not load it)")
+        raise VerdictFailed(
+            f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
+            f"{stale[0].fix}; or pass --allow-stale to export it anyway (a robot must not load it)",
+        )
 
 
-def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], allow_rejected: bool,
-             allow_stale: bool) -> RigExport:
+def _prepare(
+    settings: Settings, ref: str, pair: str | None, frames: list[str], allow_rejected: bool, allow_stale: bool
+) -> RigExport:
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
         rig = store.get_rig(name)
@@ -112,10 +129,16 @@ def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], 
         findings = rig_findings(cal, rig, active, settings.lint)
         findings += rig_edges.edge_findings(rig_edges.evidence_of(cal), rig_edges.cal_versions(store, cal))
     _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
-    members = [MemberIntrinsics(m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens)
-               for m in cal.members]
+    members = [
+        MemberIntrinsics(
+            m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens
+        )
+        for m in cal.members
+    ]
     edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
-    cameras = RigTree(cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve"))
+    cameras = RigTree(
+        cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve")
+    )
     full_tree = orient_tree(edges, cal.root)
     serials = [m.serial for m in cal.members]
     others = [f for f in full_tree.frames if f not in serials]
@@ -123,12 +146,23 @@ def _prepare(settings: Settings, ref: str, pair: str | None, frames: list[str], 
     right = pair or next(s for s in serials if s != cal.root)
     if right not in serials or right == cal.root:
         raise UsageError(f"--pair {right} is not a non-root member of rig {cal.rig}")
-    member_docs = {m.serial: {"serial": m.serial, "version": m.version, "content_sha256": m.content_sha256,
-                              "frame_id": names.frame(m.serial), "camera_name": names.camera_name(m.serial),
-                              "rostopic": names.topic(m.serial), "lens": m.lens,
-                              "signature": (stored[m.serial].signature.model_dump(mode="json")
-                                            if stored[m.serial] is not None and stored[m.serial].signature else None)}
-                   for m in cal.members}
+    member_docs = {
+        m.serial: {
+            "serial": m.serial,
+            "version": m.version,
+            "content_sha256": m.content_sha256,
+            "frame_id": names.frame(m.serial),
+            "camera_name": names.camera_name(m.serial),
+            "rostopic": names.topic(m.serial),
+            "lens": m.lens,
+            "signature": (
+                stored[m.serial].signature.model_dump(mode="json")
+                if stored[m.serial] is not None and stored[m.serial].signature
+                else None
+            ),
+        }
+        for m in cal.members
+    }
     return RigExport(cal, members, cameras, full_tree, names, cal.root, right, member_docs)
 
 
@@ -143,21 +177,37 @@ def _text(x: RigExport, fmt: str) -> str:
     if fmt == "urdf-joints":
         return x.stamp(rig_exports.urdf_joints(x.names.tree(x.full_tree)))
     if fmt == "kalibr":
-        return x.stamp(rig_exports.kalibr_camchain(x.members, x.cameras, x.names, x.overlaps(), x.imu_transforms()))
+        return x.stamp(
+            rig_exports.kalibr_camchain(x.members, x.cameras, x.names, x.overlaps(), x.imu_transforms())
+        )
     # opencv
-    return x.stamp(rig_exports.opencv_stereo(by_name[x.left], by_name[x.right], x.T_right_left()), (x.left, x.right))
+    return x.stamp(
+        rig_exports.opencv_stereo(by_name[x.left], by_name[x.right], x.T_right_left()), (x.left, x.right)
+    )
 
 
-def export(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
-           allow_rejected: bool = False, allow_stale: bool = False, edge: str | None = None,
-           frames: list[str] | None = None) -> str:
+def export(
+    settings: Settings,
+    ref: str,
+    fmt: str,
+    out: Path | None,
+    *,
+    force: bool,
+    pair: str | None = None,
+    allow_rejected: bool = False,
+    allow_stale: bool = False,
+    edge: str | None = None,
+    frames: list[str] | None = None,
+) -> str:
     """A stored rig calibration as one file of ``fmt``: the text, also written to ``out`` when given.
     ``edge`` FROM:TO exports one hand-eye edge (json or tf)."""
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"unknown rig export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
     if fmt in FILE_FORMATS:
-        raise UsageError(f"--format {fmt} writes one file per camera, not one text", ROS_ONE_FILE_FIX
-                         if fmt == "ros" else "pass -o DIR")
+        raise UsageError(
+            f"--format {fmt} writes one file per camera, not one text",
+            ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR",
+        )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if edge is None:
         text = _text(x, fmt)
@@ -184,8 +234,9 @@ def _ros_paths(out: Path, x: RigExport) -> dict[str, Path]:
 
 def _camera_infos(x: RigExport, *, mono_if_vertical: bool) -> tuple[dict[str, str], bool]:
     """serial -> stamped camera_info, and whether the pair got its rectified R/P (False: a vertical pair)."""
-    infos, rectified = rig_exports.ros_camera_infos(x.members, x.left, x.right, x.T_right_left(), x.names,
-                                                    mono_if_vertical=mono_if_vertical)
+    infos, rectified = rig_exports.ros_camera_infos(
+        x.members, x.left, x.right, x.T_right_left(), x.names, mono_if_vertical=mono_if_vertical
+    )
     return {s: x.stamp(text, (s,)) for s, text in infos.items()}, rectified
 
 
@@ -197,8 +248,10 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
     pairs = []
     for e in x.cameras.edges:
         name = f"stereo_{x.names.camera_name(e.parent)}_{x.names.camera_name(e.child)}.yaml"
-        files[name] = x.stamp(rig_exports.opencv_stereo(by_name[e.parent], by_name[e.child], x.cameras.T(e.child, e.parent)),
-                              (e.parent, e.child))
+        files[name] = x.stamp(
+            rig_exports.opencv_stereo(by_name[e.parent], by_name[e.child], x.cameras.T(e.child, e.parent)),
+            (e.parent, e.child),
+        )
         pairs.append({"left": e.parent, "right": e.child, "opencv": name})
     files["tf_static.yaml"] = _text(x, "tf")
     files["rig.urdf"] = _text(x, "urdf")
@@ -207,8 +260,9 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
     members = []
     for m in x.members:
         doc = dict(x.member_docs[m.name], camera_info=f"{x.names.camera_name(m.name)}.yaml")
-        model = mrcal_model.cameramodel(m, x.full_tree.T(m.name, x.cal.root),
-                                        f"calibctl rig {x.ref} member {m.name}@{doc['version']}")
+        model = mrcal_model.cameramodel(
+            m, x.full_tree.T(m.name, x.cal.root), f"calibctl rig {x.ref} member {m.name}@{doc['version']}"
+        )
         if model is None:
             doc["mrcal"] = None
             doc["mrcal_missing"] = mrcal_model.missing_reason(m)
@@ -216,27 +270,46 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
             doc["mrcal"] = f"{x.names.camera_name(m.name)}.cameramodel"
             files[doc["mrcal"]] = x.stamp(model, (m.name,))
         members.append(doc)
-    manifest = {"rig": x.cal.rig, "version": x.cal.version, "status": x.cal.status,
-                "content_sha256": x.cal.content_sha256,
-                "signature": x.cal.signature.model_dump(mode="json") if x.cal.signature else None,
-                "calibctl_version": __version__,
-                "root_frame": x.names.frame(x.full_tree.root),
-                "frames": dict(x.names.frames), "members": members,
-                "stereo": {"left": x.left, "right": x.right, "rectified_camera_info": rectified},
-                "stereo_pairs": pairs}
+    manifest = {
+        "rig": x.cal.rig,
+        "version": x.cal.version,
+        "status": x.cal.status,
+        "content_sha256": x.cal.content_sha256,
+        "signature": x.cal.signature.model_dump(mode="json") if x.cal.signature else None,
+        "calibctl_version": __version__,
+        "root_frame": x.names.frame(x.full_tree.root),
+        "frames": dict(x.names.frames),
+        "members": members,
+        "stereo": {"left": x.left, "right": x.right, "rectified_camera_info": rectified},
+        "stereo_pairs": pairs,
+    }
     return files, manifest
 
 
-def export_files(settings: Settings, ref: str, fmt: str, out: Path | None, *, force: bool, pair: str | None = None,
-                 allow_rejected: bool = False, allow_stale: bool = False, frames: list[str] | None = None) -> list[Path]:
+def export_files(
+    settings: Settings,
+    ref: str,
+    fmt: str,
+    out: Path | None,
+    *,
+    force: bool,
+    pair: str | None = None,
+    allow_rejected: bool = False,
+    allow_stale: bool = False,
+    frames: list[str] | None = None,
+) -> list[Path]:
     """``ros`` (one camera_info per camera) or ``bundle`` (every file + manifest.json) into ``out``."""
     if out is None:
-        raise UsageError(f"--format {fmt} writes several files", ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR")
+        raise UsageError(
+            f"--format {fmt} writes several files", ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR"
+        )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if fmt == "bundle":
         files, manifest = _bundle_files(x)
         return bundle.write_bundle(out, files, manifest, force=force)
-    texts, _ = _camera_infos(x, mono_if_vertical=False)  # a vertical pair is refused before any folder is made
+    texts, _ = _camera_infos(
+        x, mono_if_vertical=False
+    )  # a vertical pair is refused before any folder is made
     paths = _ros_paths(out, x)
     for serial, path in paths.items():
         if path.exists() and not force:  # check every target before writing any: nothing half-written

@@ -101,8 +101,10 @@ class RigFolderRun:
 def check_min_shared_views(n: int) -> None:
     """UsageError for a rig gate that links nothing (below 1) or nothing can meet."""
     if not 1 <= n <= MAX_MIN_SHARED_VIEWS:
-        raise UsageError(f"--min-shared-views {n} is out of range (1 .. {MAX_MIN_SHARED_VIEWS})",
-                         f"the default is {MIN_SHARED_VIEWS} frames per linking pair")
+        raise UsageError(
+            f"--min-shared-views {n} is out of range (1 .. {MAX_MIN_SHARED_VIEWS})",
+            f"the default is {MIN_SHARED_VIEWS} frames per linking pair",
+        )
 
 
 def parse_sources(items: Sequence[str]) -> dict[str, Path]:
@@ -111,12 +113,16 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
     for item in items:
         name, sep, folder = item.partition("=")
         if not sep or not name or not folder:
-            raise UsageError(f"--source must look like SERIAL=FOLDER (or SERIAL='glob', SERIAL=list.txt), got {item!r}")
+            raise UsageError(
+                f"--source must look like SERIAL=FOLDER (or SERIAL='glob', SERIAL=list.txt), got {item!r}"
+            )
         if name in out:
             raise UsageError(f"camera {name} is given twice", hint="name each camera of the rig once")
         out[name] = Path(folder)
     if len(out) < 2:
-        raise UsageError(f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera")
+        raise UsageError(
+            f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera"
+        )
     return out
 
 
@@ -133,22 +139,39 @@ def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, 
         raise type(exc)(f"camera {name}: {exc.message}", hint) from exc
 
 
-def self_calibrated(name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec,
-                    model: str) -> tuple[MemberIntrinsics, MemberFit]:
+def self_calibrated(
+    name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec, model: str
+) -> tuple[MemberIntrinsics, MemberFit]:
     """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well it fits."""
-    views = [(Path(o.path).name, o.corner_ids, o.corners_px) for o in outcomes
-             if o.accepted and o.corner_ids is not None and o.corners_px is not None]
+    views = [
+        (Path(o.path).name, o.corner_ids, o.corners_px)
+        for o in outcomes
+        if o.accepted and o.corner_ids is not None and o.corners_px is not None
+    ]
     size = next((o.image_size for o in outcomes if o.accepted and o.image_size), None)
     if size is None or not views:
-        raise NumericalError(f"camera {name}: no photo with a detected board", hint="check the folder and the board")
+        raise NumericalError(
+            f"camera {name}: no photo with a detected board", hint="check the folder and the board"
+        )
     points = spec.object_points()
-    return calibrate_member(name, [points[ids] for _, ids, _ in views], [px for _, _, px in views], size, model,
-                            [n for n, _, _ in views])
+    return calibrate_member(
+        name,
+        [points[ids] for _, ids, _ in views],
+        [px for _, _, px in views],
+        size,
+        model,
+        [n for n, _, _ in views],
+    )
 
 
-def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px: Sequence[np.ndarray],
-                     image_size: tuple[int, int], model: str,
-                     view_names: Sequence[str] | None = None) -> tuple[MemberIntrinsics, MemberFit]:
+def calibrate_member(
+    name: str,
+    object_points: Sequence[np.ndarray],
+    corners_px: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    model: str,
+    view_names: Sequence[str] | None = None,
+) -> tuple[MemberIntrinsics, MemberFit]:
     """One camera's intrinsics from its views (V arrays (N_i, 3) m and (N_i, 2) px) and its model fit;
     ``model`` "auto" chooses it for this camera by --model auto's rule (core.intrinsics.model_select).
     ``view_names`` (the photos' file names, as the rig's views name them) let the rig's frame-level covariance
@@ -162,33 +185,53 @@ def calibrate_member(name: str, object_points: Sequence[np.ndarray], corners_px:
     pulls = None
     if ic is not None and cov is not None and ic.view_influences is not None and view_names is not None:
         pulls = dict(zip(view_names, ic.view_influences, strict=True))
-    member = MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, image_size, m.free_intrinsics,
-                              m.free_distortion, sol.aspect_ratio, cov, m.kind,
-                              ic.jacobian_covariance if ic is not None and ic.inflated else None, pulls)
+    member = MemberIntrinsics(
+        name,
+        sol.camera_matrix,
+        sol.dist_coeffs,
+        image_size,
+        m.free_intrinsics,
+        m.free_distortion,
+        sol.aspect_ratio,
+        cov,
+        m.kind,
+        ic.jacobian_covariance if ic is not None and ic.inflated else None,
+        pulls,
+    )
     floor = model_fit.noise_floor_px(object_points, corners_px, image_size, float(sol.rms_px))
     return member, MemberFit(m.name, sol.rms_px, floor)
 
 
-def rig_views(cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]],
-              spec: BoardSpec) -> RigViews:
+def rig_views(
+    cameras: Sequence[str], match: FrameMatch, outcomes: Mapping[str, Sequence[ImageOutcome]], spec: BoardSpec
+) -> RigViews:
     by_path = {o.path: o for name in cameras for o in outcomes[name]}
     rows, names = [], []
     for key, photos in match.frames:
         row: list[BoardView | None] = []
         for name in cameras:
             o = by_path.get(photos[name]) if name in photos else None
-            usable = o is not None and o.status in USABLE and o.corner_ids is not None and o.corners_px is not None
+            usable = (
+                o is not None and o.status in USABLE and o.corner_ids is not None and o.corners_px is not None
+            )
             row.append(BoardView(Path(o.path).name, o.corner_ids, o.corners_px) if usable else None)  # type: ignore[arg-type,union-attr]
         rows.append(tuple(row))
         names.append(str(key))
     return RigViews(tuple(cameras), spec.object_points(), tuple(names), tuple(rows))
 
 
-def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str = DEFAULT_MODEL,
-                      intrinsics: Mapping[str, MemberIntrinsics] | None = None, refine_intrinsics: bool = False,
-                      min_shared_views: int = MIN_SHARED_VIEWS, workers: int | None = None,
-                      limits: LintThresholds | None = None, settings: Settings | None = None,
-                      designs: Sequence[DesignBaseline] = ()) -> RigFolderRun:
+def solve_rig_folders(
+    sources: Mapping[str, Path],
+    spec: BoardSpec,
+    model: str = DEFAULT_MODEL,
+    intrinsics: Mapping[str, MemberIntrinsics] | None = None,
+    refine_intrinsics: bool = False,
+    min_shared_views: int = MIN_SHARED_VIEWS,
+    workers: int | None = None,
+    limits: LintThresholds | None = None,
+    settings: Settings | None = None,
+    designs: Sequence[DesignBaseline] = (),
+) -> RigFolderRun:
     """Run the folder flow (module docstring). The first source is the root camera; ``settings`` the station's
     (gates and lint; default: ``load_settings()``), ``limits`` its lint thresholds when given apart; ``designs``
     the pairs' design baselines (``baseline-design``).
@@ -205,26 +248,37 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
     cameras = tuple(sources)
     for d in designs:
         if d.a not in cameras or d.b not in cameras or d.a == d.b:
-            raise UsageError(f"--design-baseline-mm {d.a}:{d.b}: name two different cameras of the rig "
-                             f"({', '.join(cameras)})")
+            raise UsageError(
+                f"--design-baseline-mm {d.a}:{d.b}: name two different cameras of the rig "
+                f"({', '.join(cameras)})"
+            )
     settings = settings or load_settings()
     if limits is not None:
         settings = settings.model_copy(update={"lint": limits})
     sets = {name: camera_photos(name, source) for name, source in sources.items()}
     photos = {name: images.paths for name, (_, images) in sets.items()}
     same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
-    identity.refuse([replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
-                     for f in identity.shared_images(same_files)], "rig solve-folders")  # before any detection
+    identity.refuse(
+        [
+            replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
+            for f in identity.shared_images(same_files)
+        ],
+        "rig solve-folders",
+    )  # before any detection
     match = match_frames(photos)
     if not match.frames:
-        raise InputError("no photos of different cameras share a frame key, so nothing pairs up",
-                         hint="name the photos so that the last number in the name is the frame number or "
-                              "timestamp, the same for photos taken together (left_0042.png / right_0042.png)")
+        raise InputError(
+            "no photos of different cameras share a frame key, so nothing pairs up",
+            hint="name the photos so that the last number in the name is the frame number or "
+            "timestamp, the same for photos taken together (left_0042.png / right_0042.png)",
+        )
     classified = {name: classify_photos(photos[name], spec, workers=workers) for name in cameras}
     outcomes = {name: found for name, (found, _) in classified.items()}
     for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
-        mixed = capture_sources.mixed_sizes_error(source, {n: o.image_size for n, o in zip(
-            images.names, outcomes[name], strict=True) if o.image_size})
+        mixed = capture_sources.mixed_sizes_error(
+            source,
+            {n: o.image_size for n, o in zip(images.names, outcomes[name], strict=True) if o.image_size},
+        )
         if mixed is not None:
             raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
     members, fits = [], {}
@@ -237,20 +291,40 @@ def solve_rig_folders(sources: Mapping[str, Path], spec: BoardSpec, model: str =
         sizes = {o.image_size for o in outcomes[name] if o.image_size is not None}
         if sizes and sizes != {tuple(given.image_size)}:
             found = ", ".join(f"{w}x{h}" for w, h in sorted(sizes))
-            raise InputError(f"camera {name}: photos are {found} but its calibration is "
-                             f"{given.image_size[0]}x{given.image_size[1]}",
-                             hint="use the calibration made at this resolution, or re-calibrate the camera")
+            raise InputError(
+                f"camera {name}: photos are {found} but its calibration is "
+                f"{given.image_size[0]}x{given.image_size[1]}",
+                hint="use the calibration made at this resolution, or re-calibrate the camera",
+            )
         members.append(given)
-    verdicts = {name: tuple(member_findings(settings, name, sets[name][0], outcomes[name], classified[name][1], spec,
-                                            model)) for name in fits}
+    verdicts = {
+        name: tuple(
+            member_findings(settings, name, sets[name][0], outcomes[name], classified[name][1], spec, model)
+        )
+        for name in fits
+    }
     if model == "auto":
         model = _auto_rig_model(fits, refine_intrinsics)
     views = rig_views(cameras, match, outcomes, spec)
-    identity.refuse(identity.shared_images({n: [o.sha256 for o in outcomes[n] if o.corners_px is not None]
-                                            for n in cameras}) + identity.same_corners(views), "rig solve-folders")
+    identity.refuse(
+        identity.shared_images(
+            {n: [o.sha256 for o in outcomes[n] if o.corners_px is not None] for n in cameras}
+        )
+        + identity.same_corners(views),
+        "rig solve-folders",
+    )
     gate = rig_connected_gate(cameras, views.shared_view_counts(), min_shared_views)
-    run = RigFolderRun(cameras, match, outcomes, views, tuple(members), gate, fits=fits, member_verdicts=verdicts,
-                       designs=tuple(designs))
+    run = RigFolderRun(
+        cameras,
+        match,
+        outcomes,
+        views,
+        tuple(members),
+        gate,
+        fits=fits,
+        member_verdicts=verdicts,
+        designs=tuple(designs),
+    )
     if not gate.passed:
         return run
     return judged_solve(run, model, refine_intrinsics, settings.lint)
@@ -262,24 +336,36 @@ def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> s
     chosen = {name: fit.model for name, fit in fits.items()}
     if refine_intrinsics and len(set(chosen.values())) > 1:
         listed = ", ".join(f"{name}: {m}" for name, m in chosen.items())
-        raise UsageError(f"--model auto chose different lens models for the cameras ({listed}); their intrinsics "
-                         "cannot be refined jointly", "leave out --refine-intrinsics, or give one --model for all")
+        raise UsageError(
+            f"--model auto chose different lens models for the cameras ({listed}); their intrinsics "
+            "cannot be refined jointly",
+            "leave out --refine-intrinsics, or give one --model for all",
+        )
     return next(iter(chosen.values()), DEFAULT_MODEL)
 
 
-def judged_solve(run: RigFolderRun, model: str = DEFAULT_MODEL, refine_intrinsics: bool = False,
-                 limits: LintThresholds | None = None) -> RigFolderRun:
+def judged_solve(
+    run: RigFolderRun,
+    model: str = DEFAULT_MODEL,
+    refine_intrinsics: bool = False,
+    limits: LintThresholds | None = None,
+) -> RigFolderRun:
     """``run`` solved (extrinsics, held-out numbers, loops) and judged (module docstring). A run without
     ``member_verdicts`` (corners without photos) holds its members to ``model-misfit`` alone."""
     views, members, fits = run.views, list(run.members), run.fits or {}
     limits = limits or LintThresholds()
     if run.member_verdicts is not None:
         misfit = [f for found in run.member_verdicts.values() for f in found]
-        bad_lens = {name for name, found in run.member_verdicts.items()
-                    if any(f.rule == "member:model-misfit" for f in found)}
+        bad_lens = {
+            name
+            for name, found in run.member_verdicts.items()
+            if any(f.rule == "member:model-misfit" for f in found)
+        }
     else:
-        lens = {name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
-                for name, fit in fits.items()}
+        lens = {
+            name: adopt(model_fit.check_model_misfit(fit.fit_rms_px, fit.detector_rms_px, fit.model))
+            for name, fit in fits.items()
+        }
         misfit = [member_finding(name, f) for name, found in lens.items() for f in found]
         bad_lens = {name for name, found in lens.items() if found}
     try:
@@ -292,9 +378,15 @@ def judged_solve(run: RigFolderRun, model: str = DEFAULT_MODEL, refine_intrinsic
     rows = {m.name: m.image_size[1] for m in members}
     pairs = rig_pairs(solution, holdout)
     findings = solved_rig_findings(pairs, rig_loops(loops), rows, run.designs, limits, bad_lens)
-    same = [Finding(rule="rig-identity", severity="error", message=f.message,
-                    fix="give each camera its own photos (was the same folder given twice?)")
-            for f in identity.zero_baselines(identity.pair_translations(solution))]
+    same = [
+        Finding(
+            rule="rig-identity",
+            severity="error",
+            message=f.message,
+            fix="give each camera its own photos (was the same folder given twice?)",
+        )
+        for f in identity.zero_baselines(identity.pair_translations(solution))
+    ]
     return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*same, *findings, *misfit))
 
 
@@ -305,9 +397,17 @@ def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair
 
 def rig_loops(loops: Sequence[LoopClosure]) -> list[RigLoop]:
     """Loop closures as the stored rig's loop records."""
-    return [RigLoop(cycle=list(lc.cycle), rotation_deg=lc.rotation_deg, translation_mm=lc.translation_mm,
-                    sigma_rotation_deg=lc.sigma_rotation_deg, sigma_translation_mm=lc.sigma_translation_mm,
-                    mahalanobis=lc.mahalanobis) for lc in loops]
+    return [
+        RigLoop(
+            cycle=list(lc.cycle),
+            rotation_deg=lc.rotation_deg,
+            translation_mm=lc.translation_mm,
+            sigma_rotation_deg=lc.sigma_rotation_deg,
+            sigma_translation_mm=lc.sigma_translation_mm,
+            mahalanobis=lc.mahalanobis,
+        )
+        for lc in loops
+    ]
 
 
 def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict[str, object]]:
@@ -320,14 +420,25 @@ def pair_summary(solution: RigSolution, holdout: RigHoldout | None) -> list[dict
             T = solution.T_a_b(b, a)
             cov = solution.pair_covariance(b, a)
             row: dict[str, object] = {
-                "pair": f"{names[a]}-{names[b]}", "a": names[a], "b": names[b], "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
+                "pair": f"{names[a]}-{names[b]}",
+                "a": names[a],
+                "b": names[b],
+                "baseline_mm": float(np.linalg.norm(T[:3, 3]) * 1e3),
                 "sigma_baseline_mm": sigma_translation_mm(cov, T[:3, 3]),
-                "rotation_deg": rotation_angle_deg(T[:3, :3]), "sigma_rotation_deg": sigma_rotation_deg(cov),
-                "shared_views": solution.views.shared_view_counts()[(a, b)]}
+                "rotation_deg": rotation_angle_deg(T[:3, :3]),
+                "sigma_rotation_deg": sigma_rotation_deg(cov),
+                "shared_views": solution.views.shared_view_counts()[(a, b)],
+            }
             if (a, b) in held:
                 p = held[(a, b)]
-                row.update({"epipolar_rms_px": p.epipolar_rms_px, "epipolar_max_px": p.epipolar_max_px,
-                            "rectified_rms_px": p.rectified_rms_px, "rectified_max_px": p.rectified_max_px})
+                row.update(
+                    {
+                        "epipolar_rms_px": p.epipolar_rms_px,
+                        "epipolar_max_px": p.epipolar_max_px,
+                        "rectified_rms_px": p.rectified_rms_px,
+                        "rectified_max_px": p.rectified_max_px,
+                    }
+                )
             rows.append(row)
     return rows
 
@@ -344,15 +455,37 @@ def run_json(run: RigFolderRun) -> dict[str, object]:
     out: dict[str, object] = {
         "cameras": list(run.cameras),
         "frames": len(run.match.frames),
-        "unmatched": [{"camera": u.camera, "file": Path(u.path).name, "reason": u.reason} for u in run.match.unmatched],
-        "images": {n: {s: sum(1 for o in run.outcomes[n] if o.status == s) for s in {o.status for o in run.outcomes[n]}}
-                   for n in run.cameras},
-        "shared_views": {f"{run.cameras[a]}-{run.cameras[b]}": n for (a, b), n in run.views.shared_view_counts().items()},
-        "gate": {"gate": g.gate, "passed": g.passed, "value": g.value, "threshold": g.threshold, "message": g.message,
-                 "hint": g.hint},
-        "members": [{"name": m.name, "image_size": list(m.image_size), "K": np.asarray(m.camera_matrix).tolist(),
-                     "dist": np.asarray(m.dist_coeffs).tolist(), **_fit_json((run.fits or {}).get(m.name))}
-                    for m in run.members],
+        "unmatched": [
+            {"camera": u.camera, "file": Path(u.path).name, "reason": u.reason} for u in run.match.unmatched
+        ],
+        "images": {
+            n: {
+                s: sum(1 for o in run.outcomes[n] if o.status == s)
+                for s in {o.status for o in run.outcomes[n]}
+            }
+            for n in run.cameras
+        },
+        "shared_views": {
+            f"{run.cameras[a]}-{run.cameras[b]}": n for (a, b), n in run.views.shared_view_counts().items()
+        },
+        "gate": {
+            "gate": g.gate,
+            "passed": g.passed,
+            "value": g.value,
+            "threshold": g.threshold,
+            "message": g.message,
+            "hint": g.hint,
+        },
+        "members": [
+            {
+                "name": m.name,
+                "image_size": list(m.image_size),
+                "K": np.asarray(m.camera_matrix).tolist(),
+                "dist": np.asarray(m.dist_coeffs).tolist(),
+                **_fit_json((run.fits or {}).get(m.name)),
+            }
+            for m in run.members
+        ],
     }
     if run.gate.passed:
         out["verdict"] = "pass" if run.passed else "fail"
@@ -362,16 +495,34 @@ def run_json(run: RigFolderRun) -> dict[str, object]:
         return out
     out["solver"] = sol.solver
     out["root"] = sol.tree.root
-    out["tree"] = [{"parent": e.parent, "child": e.child, "T_parent_child": e.T_parent_child.tolist(),
-                    "translation_mm": e.translation_mm, "sigma_translation_mm": e.sigma_translation_mm,
-                    "rotation_deg": e.rotation_deg, "sigma_rotation_deg": e.sigma_rotation_deg}
-                   for e in sol.tree.edges]
+    out["tree"] = [
+        {
+            "parent": e.parent,
+            "child": e.child,
+            "T_parent_child": e.T_parent_child.tolist(),
+            "translation_mm": e.translation_mm,
+            "sigma_translation_mm": e.sigma_translation_mm,
+            "rotation_deg": e.rotation_deg,
+            "sigma_rotation_deg": e.sigma_rotation_deg,
+        }
+        for e in sol.tree.edges
+    ]
     out["fit_rms_px"] = dict(zip(run.cameras, sol.rms_px, strict=True))
     if run.holdout is not None:
-        out["held_out"] = {"folds": run.holdout.n_folds,
-                           "rms_px": dict(zip(run.cameras, run.holdout.camera_rms_px, strict=True))}
+        out["held_out"] = {
+            "folds": run.holdout.n_folds,
+            "rms_px": dict(zip(run.cameras, run.holdout.camera_rms_px, strict=True)),
+        }
     out["pairs"] = pair_summary(sol, run.holdout)
-    out["loops"] = [{"cycle": list(lc.cycle), "rotation_deg": lc.rotation_deg, "translation_mm": lc.translation_mm,
-                     "sigma_rotation_deg": lc.sigma_rotation_deg, "sigma_translation_mm": lc.sigma_translation_mm,
-                     "mahalanobis": lc.mahalanobis} for lc in run.loops]
+    out["loops"] = [
+        {
+            "cycle": list(lc.cycle),
+            "rotation_deg": lc.rotation_deg,
+            "translation_mm": lc.translation_mm,
+            "sigma_rotation_deg": lc.sigma_rotation_deg,
+            "sigma_translation_mm": lc.sigma_translation_mm,
+            "mahalanobis": lc.mahalanobis,
+        }
+        for lc in run.loops
+    ]
     return out

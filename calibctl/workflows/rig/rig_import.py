@@ -54,17 +54,21 @@ class RigImportOutcome:
 
 
 def _tampered(path: Path, message: str) -> IntegrityError:
-    return IntegrityError(f"{path}: {message}; nothing was stored",
-                          "re-export it from the source store (`calibctl rig export RIG@N --format json` or "
-                          "`--format bundle`); never edit an export by hand")
+    return IntegrityError(
+        f"{path}: {message}; nothing was stored",
+        "re-export it from the source store (`calibctl rig export RIG@N --format json` or "
+        "`--format bundle`); never edit an export by hand",
+    )
 
 
 def _from_bundle(manifest_path: Path) -> tuple[Path, Any]:
     """The rig.json of a bundle whose files are all present and unchanged, and its manifest."""
     manifest = bounded.parse_json(bounded.read_text(manifest_path), str(manifest_path))
     if not bundle.is_manifest(manifest):
-        raise InputError(f"{manifest_path} is not a calibctl bundle manifest",
-                         "pass a rig JSON export or a folder written by `calibctl rig export --format bundle`")
+        raise InputError(
+            f"{manifest_path} is not a calibctl bundle manifest",
+            "pass a rig JSON export or a folder written by `calibctl rig export --format bundle`",
+        )
     problems = [f for f in bundle.check_bundle(manifest_path, manifest) if f.severity == "error"]
     if problems:
         raise _tampered(manifest_path, problems[0].message)
@@ -83,41 +87,63 @@ def read_rig_file(path: Path) -> RigCalibration:
         path, manifest = _from_bundle(path)
     data = bounded.parse_json(bounded.read_text(path), str(path))
     if not (isinstance(data, dict) and {"rig", "edges", "members", "content_sha256"} <= set(data)):
-        raise InputError(f"{path} is not a rig version export",
-                         "pass `calibctl rig export RIG@N --format json` output or a bundle folder")
+        raise InputError(
+            f"{path} is not a rig version export",
+            "pass `calibctl rig export RIG@N --format json` output or a bundle folder",
+        )
     cal = parse_document(RigCalibration, data, str(path))
     actual = cal.computed_sha256()
     if actual != cal.content_sha256:
-        raise _tampered(path, f"content does not match its sha256 (recorded {cal.content_sha256[:12]}, computed "
-                        f"{actual[:12]}): it was changed after export")
-    claimed = None if manifest is None else (manifest.get("rig"), manifest.get("version"), manifest.get("content_sha256"))
+        raise _tampered(
+            path,
+            f"content does not match its sha256 (recorded {cal.content_sha256[:12]}, computed "
+            f"{actual[:12]}): it was changed after export",
+        )
+    claimed = (
+        None
+        if manifest is None
+        else (manifest.get("rig"), manifest.get("version"), manifest.get("content_sha256"))
+    )
     if claimed is not None and claimed != (cal.rig, cal.version, cal.content_sha256):
-        raise _tampered(path, f"the manifest names rig {claimed[0]}@{claimed[1]} sha256 {str(claimed[2])[:12]}, "
-                        f"{RIG_JSON} is {cal.ref} sha256 {cal.content_sha256[:12]}")
+        raise _tampered(
+            path,
+            f"the manifest names rig {claimed[0]}@{claimed[1]} sha256 {str(claimed[2])[:12]}, "
+            f"{RIG_JSON} is {cal.ref} sha256 {cal.content_sha256[:12]}",
+        )
     return cal
 
 
 def _import_hint(serial: str, version: int) -> str:
-    return (f"import the member first: `calibctl export {serial}@{version} --format json -o {serial}.json` on the "
-            f"source store, then `calibctl import {serial}.json` here")
+    return (
+        f"import the member first: `calibctl export {serial}@{version} --format json -o {serial}.json` on the "
+        f"source store, then `calibctl import {serial}.json` here"
+    )
 
 
 def _member_here(store: Store, serial: str, version: int, sha: str, ref: str) -> CalibrationArtifact:
     """This store's version of a member: the same version and hash, or this store's import of exactly it."""
     stored = store.list_artifacts(serial) if serial in store.serials() else []
     if not stored:
-        raise NotFoundError(f"member {serial}@{version} of rig {ref} is not in this store; nothing was stored",
-                            _import_hint(serial, version))
+        raise NotFoundError(
+            f"member {serial}@{version} of rig {ref} is not in this store; nothing was stored",
+            _import_hint(serial, version),
+        )
     exact = next((a for a in stored if a.version == version and a.content_sha256 == sha), None)
     key = f"{serial}@{version} sha256 {sha} "
     found = exact or next((a for a in stored if (a.provenance.imported_from or "").startswith(key)), None)
     if found is not None:
         return found
     same = next((a for a in stored if a.version == version), None)
-    differs = (f"this store's {serial}@{version} is another calibration (sha256 {same.content_sha256[:12]}, the rig "
-               f"was solved with {sha[:12]})" if same is not None else f"this store has no {serial}@{version}")
-    raise NotFoundError(f"member {serial}@{version} of rig {ref}: {differs} and holds no import of it; nothing was "
-                        "stored", _import_hint(serial, version))
+    differs = (
+        f"this store's {serial}@{version} is another calibration (sha256 {same.content_sha256[:12]}, the rig "
+        f"was solved with {sha[:12]})"
+        if same is not None
+        else f"this store has no {serial}@{version}"
+    )
+    raise NotFoundError(
+        f"member {serial}@{version} of rig {ref}: {differs} and holds no import of it; nothing was stored",
+        _import_hint(serial, version),
+    )
 
 
 def _check_layout(rig: RigDefinition, cal: RigCalibration) -> None:
@@ -125,10 +151,12 @@ def _check_layout(rig: RigDefinition, cal: RigCalibration) -> None:
     serials = [m.serial for m in cal.members]
     frames = {f for e in cal.edges for f in (e.parent, e.child)} - set(serials)
     if set(serials) - set(rig.cameras) or cal.root != rig.root or frames - set(rig.frames):
-        raise UsageError(f"rig {cal.ref} (cameras {', '.join(serials)}, root {cal.root}) is not the rig {rig.name} "
-                         f"registered here (cameras {', '.join(rig.cameras)}, root {rig.root}); nothing was stored",
-                         f"import it into a store where {rig.name} is registered with these cameras and root "
-                         f"(`calibctl rig add {rig.name} --camera {' --camera '.join(serials)}`)")
+        raise UsageError(
+            f"rig {cal.ref} (cameras {', '.join(serials)}, root {cal.root}) is not the rig {rig.name} "
+            f"registered here (cameras {', '.join(rig.cameras)}, root {rig.root}); nothing was stored",
+            f"import it into a store where {rig.name} is registered with these cameras and root "
+            f"(`calibctl rig add {rig.name} --camera {' --camera '.join(serials)}`)",
+        )
 
 
 def _previous(store: Store, source: RigCalibration) -> RigCalibration | None:
@@ -138,16 +166,30 @@ def _previous(store: Store, source: RigCalibration) -> RigCalibration | None:
     except NotFoundError:
         return None
     key = f"{source.ref} sha256 {source.content_sha256} "
-    return next((c for c in versions if c.content_sha256 == source.content_sha256
-                 or (c.provenance.imported_from or "").startswith(key)), None)
+    return next(
+        (
+            c
+            for c in versions
+            if c.content_sha256 == source.content_sha256 or (c.provenance.imported_from or "").startswith(key)
+        ),
+        None,
+    )
 
 
-def _rederive(store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings,
-              label: str) -> tuple[RigCalibration, list[Finding]]:
+def _rederive(
+    store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str
+) -> tuple[RigCalibration, list[Finding]]:
     """``source`` pinned to this store's members, with this store's lint and verdict; and the stale findings."""
-    here = {m.serial: _member_here(store, m.serial, m.version, m.content_sha256, source.ref) for m in source.members}
-    members = [m.model_copy(update={"version": here[m.serial].version, "content_sha256": here[m.serial].content_sha256})
-               for m in source.members]
+    here = {
+        m.serial: _member_here(store, m.serial, m.version, m.content_sha256, source.ref)
+        for m in source.members
+    }
+    members = [
+        m.model_copy(
+            update={"version": here[m.serial].version, "content_sha256": here[m.serial].content_sha256}
+        )
+        for m in source.members
+    ]
     mine = source.model_copy(update={"members": members, "signature": None})
     active: dict[str, CalibrationArtifact | None] = {}
     for serial in here:
@@ -164,8 +206,14 @@ def _rederive(store: Store, source: RigCalibration, rig: RigDefinition, settings
     return mine.model_copy(update={"lint": lint, "status": status, "provenance": provenance}), stale
 
 
-def import_rig_file(settings: Settings, path: Path, *, activate: bool | None, require_signature: bool = False,
-                    trusted_keys: Path | None = None) -> RigImportOutcome:
+def import_rig_file(
+    settings: Settings,
+    path: Path,
+    *,
+    activate: bool | None,
+    require_signature: bool = False,
+    trusted_keys: Path | None = None,
+) -> RigImportOutcome:
     """Check ``path``'s hash and signature, then store its rig version with this store's verdict and version.
 
     ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as the
@@ -180,11 +228,25 @@ def import_rig_file(settings: Settings, path: Path, *, activate: bool | None, re
         previous = _previous(store, source)
         if previous is not None:
             active = store.active_rig_version(source.rig) == previous.version
-            return RigImportOutcome(previous, source.ref, source.status, active, already_imported=True, stale=[])
+            return RigImportOutcome(
+                previous, source.ref, source.status, active, already_imported=True, stale=[]
+            )
         _check_layout(rig, source)
         mine, stale = _rederive(store, source, rig, settings, label)
         do_activate, override, held_back = trust.activation(mine.status == "accepted" and not stale, activate)
-        stored = store.add_rig_calibration(mine, activate=do_activate, actor=settings.operator,
-                                           station=settings.station, reason=f"imported rig {source.ref}{override}")
-    return RigImportOutcome(stored, source.ref, source.status, do_activate, already_imported=False, stale=stale,
-                            held_back=held_back)
+        stored = store.add_rig_calibration(
+            mine,
+            activate=do_activate,
+            actor=settings.operator,
+            station=settings.station,
+            reason=f"imported rig {source.ref}{override}",
+        )
+    return RigImportOutcome(
+        stored,
+        source.ref,
+        source.status,
+        do_activate,
+        already_imported=False,
+        stale=stale,
+        held_back=held_back,
+    )

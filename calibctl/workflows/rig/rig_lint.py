@@ -65,9 +65,14 @@ def parse_rig_ref(ref: str) -> tuple[str, int | None]:
     return name, int(version) if sep else None
 
 
-def solved_rig_findings(pairs: Sequence[RigPair], loops: Sequence[RigLoop], rows: Mapping[str, int],
-                        designs: Sequence[DesignBaseline], limits: LintThresholds,
-                        misfit: Collection[str] = ()) -> list[Finding]:
+def solved_rig_findings(
+    pairs: Sequence[RigPair],
+    loops: Sequence[RigLoop],
+    rows: Mapping[str, int],
+    designs: Sequence[DesignBaseline],
+    limits: LintThresholds,
+    misfit: Collection[str] = (),
+) -> list[Finding]:
     """The rules that read only the solve's own numbers, no store: ``baseline-design``, ``epipolar``,
     ``loop-closure`` (``rig solve`` and ``rig lint`` on a stored version, ``rig solve-folders`` on its run).
 
@@ -81,54 +86,91 @@ def solved_rig_findings(pairs: Sequence[RigPair], loops: Sequence[RigLoop], rows
     for d in designs:
         p = by_pair.get(frozenset((d.a, d.b)))
         if p is not None and abs(p.baseline_mm - d.baseline_mm) > d.tolerance_mm:
-            findings.append(Finding(
-                rule="baseline-design", severity="error", value=p.baseline_mm, threshold=d.tolerance_mm,
-                message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
-                        f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
-                fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size"))
+            findings.append(
+                Finding(
+                    rule="baseline-design",
+                    severity="error",
+                    value=p.baseline_mm,
+                    threshold=d.tolerance_mm,
+                    message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
+                    f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
+                    fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size",
+                )
+            )
     for p in pairs:
         limit = limits.epipolar_max_px_at_720 * rows[p.a] / 720.0
         if p.epipolar_rms_px is not None and p.epipolar_rms_px > limit:
             lens = [c for c in (p.a, p.b) if c in misfit]
-            fix = (f"the lens model of {' and '.join(lens)} does not describe the lens (member:model-misfit), "
-                   "the likely cause: calibrate with the model that rule names (a circular fisheye: --model "
-                   "fisheye), then re-solve"
-                   if lens else "re-capture with a still board seen by both cameras, then re-solve")
-            findings.append(Finding(
-                rule="epipolar", severity="error", value=p.epipolar_rms_px, threshold=limit,
-                message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px", fix=fix))
+            fix = (
+                f"the lens model of {' and '.join(lens)} does not describe the lens (member:model-misfit), "
+                "the likely cause: calibrate with the model that rule names (a circular fisheye: --model "
+                "fisheye), then re-solve"
+                if lens
+                else "re-capture with a still board seen by both cameras, then re-solve"
+            )
+            findings.append(
+                Finding(
+                    rule="epipolar",
+                    severity="error",
+                    value=p.epipolar_rms_px,
+                    threshold=limit,
+                    message=f"{p.a}-{p.b}: held-out epipolar RMS {p.epipolar_rms_px:.3f} px > {limit:.3f} px",
+                    fix=fix,
+                )
+            )
     for lc in loops:
         if lc.mahalanobis > limits.loop_closure_max_mahalanobis:
-            findings.append(Finding(
-                rule="loop-closure", severity="error", value=lc.mahalanobis,
-                threshold=limits.loop_closure_max_mahalanobis,
-                message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
-                        f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
-                fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved"))
+            findings.append(
+                Finding(
+                    rule="loop-closure",
+                    severity="error",
+                    value=lc.mahalanobis,
+                    threshold=limits.loop_closure_max_mahalanobis,
+                    message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
+                    f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
+                    fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved",
+                )
+            )
     return findings
 
 
 def member_finding(camera: str, finding: Finding) -> Finding:
     """A member camera's own finding as a rig finding (``member:<rule>``, the message names the camera)."""
-    return finding.model_copy(update={"rule": f"member:{finding.rule}", "message": f"{camera}: {finding.message}"})
+    return finding.model_copy(
+        update={"rule": f"member:{finding.rule}", "message": f"{camera}: {finding.message}"}
+    )
 
 
-def rig_findings(cal: RigCalibration, rig: RigDefinition, active: Mapping[str, CalibrationArtifact | None],
-                 limits: LintThresholds) -> list[Finding]:
+def rig_findings(
+    cal: RigCalibration,
+    rig: RigDefinition,
+    active: Mapping[str, CalibrationArtifact | None],
+    limits: LintThresholds,
+) -> list[Finding]:
     """Every rig rule on ``cal`` given the members' currently active calibrations."""
     findings: list[Finding] = []
     for m in cal.members:
         now = active.get(m.serial)
         if now is None or (now.version, now.content_sha256) != (m.version, m.content_sha256):
             current = f"{now.serial}@{now.version}" if now is not None else "no active calibration"
-            findings.append(Finding(
-                rule="rig-stale-member", severity="error",
-                message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
-                fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)"))
+            findings.append(
+                Finding(
+                    rule="rig-stale-member",
+                    severity="error",
+                    message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
+                    fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)",
+                )
+            )
     members = [(art, lint_artifact(art, limits).findings) for art in active.values() if art is not None]
     misfit = {art.serial for art, found in members if any(f.rule == "model-misfit" for f in found)}
-    findings += solved_rig_findings(cal.pairs, cal.loops, {m.serial: m.image_size[1] for m in cal.members},
-                                    rig.design_baselines, limits, misfit)
+    findings += solved_rig_findings(
+        cal.pairs,
+        cal.loops,
+        {m.serial: m.image_size[1] for m in cal.members},
+        rig.design_baselines,
+        limits,
+        misfit,
+    )
     findings += [member_finding(art.ref, f) for art, found in members for f in found]
     return findings
 
@@ -161,8 +203,11 @@ def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -
 def _signature_findings(store: object, cal: RigCalibration, trusted: TrustedKeys) -> list[Finding]:
     fix = "a robot must load only signed calibrations: sign the store (`calibctl keys init`) and re-solve"
     own = keys.signature_problem(cal, trusted)
-    findings = [] if own is None else [Finding(rule="signature", severity="error", fix=fix,
-                                               message=f"rig {cal.ref} {own}")]
+    findings = (
+        []
+        if own is None
+        else [Finding(rule="signature", severity="error", fix=fix, message=f"rig {cal.ref} {own}")]
+    )
     for m in cal.members:
         try:
             art = store.get_artifact(m.serial, m.version)  # type: ignore[attr-defined]
@@ -171,8 +216,14 @@ def _signature_findings(store: object, cal: RigCalibration, trusted: TrustedKeys
         else:
             problem = keys.signature_problem(art, trusted)
         if problem is not None:
-            findings.append(Finding(rule="signature", severity="error", fix=fix,
-                                    message=f"member {m.serial}@{m.version} {problem}"))
+            findings.append(
+                Finding(
+                    rule="signature",
+                    severity="error",
+                    fix=fix,
+                    message=f"member {m.serial}@{m.version} {problem}",
+                )
+            )
     return findings
 
 
@@ -188,8 +239,9 @@ def show(settings: Settings, ref: str) -> RigCalibration:
         return store.get_rig_calibration(name, version)
 
 
-def rollback(settings: Settings, rig: str, to_version: int, reason: str,
-             expected_active: int | None = None) -> RigActivation | None:
+def rollback(
+    settings: Settings, rig: str, to_version: int, reason: str, expected_active: int | None = None
+) -> RigActivation | None:
     """Roll the rig back as a compare-and-set, like a camera's (``records.rollback``): against
     ``expected_active`` (what the technician saw) when given, else against the active version read first;
     a solve, hand-eye edge or rollback stored in between refuses it (exit 2) instead of being undone.
@@ -197,5 +249,11 @@ def rollback(settings: Settings, rig: str, to_version: int, reason: str,
     check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
         seen = store.active_rig_version(rig) if expected_active is None else expected_active
-        return store.rollback_rig(rig, to_version, reason=reason, actor=settings.operator, station=settings.station,
-                                  expected_active=seen)
+        return store.rollback_rig(
+            rig,
+            to_version,
+            reason=reason,
+            actor=settings.operator,
+            station=settings.station,
+            expected_active=seen,
+        )

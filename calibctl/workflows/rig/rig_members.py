@@ -45,26 +45,51 @@ SCALE_FREE_SQUARE_M = 0.1
 
 def typed_board(spec: BoardSpec, operator: str) -> BoardRevision:
     """The board as ``--cols --rows --square-mm`` typed it: a nominal square size."""
-    return BoardRevision(name=BOARD_NAME, revision=1, kind="chessboard", cols=spec.cols, rows=spec.rows,
-                         measurement=SquareMeasurement(status="nominal", square_size_m=spec.square_size_m),
-                         created_at=utc_now(), created_by=operator)
+    return BoardRevision(
+        name=BOARD_NAME,
+        revision=1,
+        kind="chessboard",
+        cols=spec.cols,
+        rows=spec.rows,
+        measurement=SquareMeasurement(status="nominal", square_size_m=spec.square_size_m),
+        created_at=utc_now(),
+        created_by=operator,
+    )
 
 
-def member_findings(settings: Settings, camera: str, source: capture_sources.SourceSpec,
-                    outcomes: Sequence[ImageOutcome], max_gray: np.ndarray | None, spec: BoardSpec,
-                    model: str) -> list[Finding]:
+def member_findings(
+    settings: Settings,
+    camera: str,
+    source: capture_sources.SourceSpec,
+    outcomes: Sequence[ImageOutcome],
+    max_gray: np.ndarray | None,
+    spec: BoardSpec,
+    model: str,
+) -> list[Finding]:
     """The stored path's verdict on one camera's photos (module docstring), as rig findings."""
     if not spec.square_size_m < 1.0:
         spec = replace(spec, square_size_m=SCALE_FREE_SQUARE_M)
     board = typed_board(spec, settings.operator)
-    request = CaptureRequest(serial=MEMBER_SERIAL, board=board.ref, source=source.label,
-                             lens_model=None if model == "auto" else model)
+    request = CaptureRequest(
+        serial=MEMBER_SERIAL,
+        board=board.ref,
+        source=source.label,
+        lens_model=None if model == "auto" else model,
+    )
     session = photos_session(settings, request, board, spec, source, outcomes, max_gray)
     if session.status != "accepted":
-        return [Finding(rule=f"member:{g.gate}", severity="error", value=g.value, threshold=g.threshold,
-                        message=f"{camera}: the capture gate {g.gate} fails ({g.reason or 'failed'}: {g.value:.4g}, "
-                                f"threshold {g.threshold:.4g}): the stored path would not solve this camera",
-                        fix=g.hint)
-                for g in session.gates if not g.passed and not g.advisory]
+        return [
+            Finding(
+                rule=f"member:{g.gate}",
+                severity="error",
+                value=g.value,
+                threshold=g.threshold,
+                message=f"{camera}: the capture gate {g.gate} fails ({g.reason or 'failed'}: {g.value:.4g}, "
+                f"threshold {g.threshold:.4g}): the stored path would not solve this camera",
+                fix=g.hint,
+            )
+            for g in session.gates
+            if not g.passed and not g.advisory
+        ]
     art, _ = build_artifact(session, SolveRequest(model=model), settings)
     return [member_finding(camera, f) for f in art.lint if f.rule not in NOT_APPLIED]

@@ -70,14 +70,22 @@ class RigSolveOutcome:
     active: bool
 
 
-def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | None,
-            designs: Sequence[str], frames: Sequence[str] = ()) -> RigDefinition:
+def add_rig(
+    settings: Settings,
+    name: str,
+    cameras: Sequence[str],
+    root: str | None,
+    designs: Sequence[str],
+    frames: Sequence[str] = (),
+) -> RigDefinition:
     """Register a rig (see module docstring)."""
     seen = [c for i, c in enumerate(cameras) if c in cameras[:i]]
     if seen:
         raise UsageError(f"camera {seen[0]} is listed twice", hint="name each camera of the rig once")
     if len(cameras) < 2:
-        raise UsageError(f"a rig needs at least two cameras, got {len(cameras)}", hint="pass --camera per member")
+        raise UsageError(
+            f"a rig needs at least two cameras, got {len(cameras)}", hint="pass --camera per member"
+        )
     root = root or cameras[0]
     if root not in cameras:
         raise UsageError(f"--root {root} is not one of the cameras ({', '.join(cameras)})")
@@ -86,22 +94,40 @@ def add_rig(settings: Settings, name: str, cameras: Sequence[str], root: str | N
         unknown = [c for c in cameras if c not in known]
         captured = [c for c in unknown if store.list_sessions(c)]
         if captured:  # "unknown camera" misleads when the store holds its (e.g. gate-rejected) captures
-            raise NotFoundError(f"camera(s) {', '.join(captured)} have capture sessions but no calibration yet",
-                                hint="solve an accepted session of each (`calibctl solve --serial ...`), or capture "
-                                     "again following the gate hints; a rig is solved from calibrated members")
+            raise NotFoundError(
+                f"camera(s) {', '.join(captured)} have capture sessions but no calibration yet",
+                hint="solve an accepted session of each (`calibctl solve --serial ...`), or capture "
+                "again following the gate hints; a rig is solved from calibrated members",
+            )
         if unknown:
-            raise NotFoundError(f"unknown camera(s) {', '.join(unknown)}: the store has no calibration for them",
-                                hint="calibrate each member first (`calibctl calibrate --serial ...`)")
-        doc = parse_document(RigDefinition, {
-            "name": name, "cameras": list(cameras), "root": root,
-            "design_baselines": [parse_design(d).model_dump() for d in designs], "frames": list(frames),
-            "created_at": utc_now(),
-            "created_by": settings.operator, "station": settings.station}, f"rig {name}")
+            raise NotFoundError(
+                f"unknown camera(s) {', '.join(unknown)}: the store has no calibration for them",
+                hint="calibrate each member first (`calibctl calibrate --serial ...`)",
+            )
+        doc = parse_document(
+            RigDefinition,
+            {
+                "name": name,
+                "cameras": list(cameras),
+                "root": root,
+                "design_baselines": [parse_design(d).model_dump() for d in designs],
+                "frames": list(frames),
+                "created_at": utc_now(),
+                "created_by": settings.operator,
+                "station": settings.station,
+            },
+            f"rig {name}",
+        )
         return store.add_rig(doc)
 
 
-def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], board: str,
-                min_shared_views: int = MIN_SHARED_VIEWS) -> RigCaptureResult:
+def capture_rig(
+    settings: Settings,
+    rig_name: str,
+    sources: Mapping[str, str],
+    board: str,
+    min_shared_views: int = MIN_SHARED_VIEWS,
+) -> RigCaptureResult:
     """Capture every member, pair the images into frames, apply the rig gate; store the rig session."""
     check_min_shared_views(min_shared_views)
     with open_store(settings) as store:
@@ -109,39 +135,69 @@ def capture_rig(settings: Settings, rig_name: str, sources: Mapping[str, str], b
     extra = [c for c in sources if c not in rig.cameras]
     missing = [c for c in rig.cameras if c not in sources]
     if extra or missing:
-        raise UsageError(f"rig {rig.name} has cameras {', '.join(rig.cameras)}; "
-                         + (f"unknown: {', '.join(extra)}" if extra else f"no --source for {', '.join(missing)}"),
-                         hint="pass one --source SERIAL=FOLDER per member")
-    results = {c: capture(settings, CaptureRequest(serial=c, board=board, source=sources[c]), store_session=False)
-               for c in rig.cameras}
-    identity.refuse(identity.shared_images({c: [v.image_sha256 for v in r.session.views] for c, r in results.items()}),
-                    f"rig {rig.name} capture")
+        raise UsageError(
+            f"rig {rig.name} has cameras {', '.join(rig.cameras)}; "
+            + (f"unknown: {', '.join(extra)}" if extra else f"no --source for {', '.join(missing)}"),
+            hint="pass one --source SERIAL=FOLDER per member",
+        )
+    results = {
+        c: capture(settings, CaptureRequest(serial=c, board=board, source=sources[c]), store_session=False)
+        for c in rig.cameras
+    }
+    identity.refuse(
+        identity.shared_images({c: [v.image_sha256 for v in r.session.views] for c, r in results.items()}),
+        f"rig {rig.name} capture",
+    )
     names = {c: [o.name for o in r.session.outcomes] for c, r in results.items()}
     match = match_frames(names)
     if not match.frames:
-        raise InputError("no images of different cameras share a frame number, so nothing pairs up",
-                         hint="name the images so that the last number in the name is the frame number or "
-                              "timestamp, the same for images taken together (left_0042.png / right_0042.png)")
+        raise InputError(
+            "no images of different cameras share a frame number, so nothing pairs up",
+            hint="name the images so that the last number in the name is the frame number or "
+            "timestamp, the same for images taken together (left_0042.png / right_0042.png)",
+        )
     with_views = {c: {v.name for v in r.session.views} for c, r in results.items()}
     cams = list(rig.cameras)
-    counts = {(a, b): sum(1 for _, imgs in match.frames
-                          if imgs.get(cams[a]) in with_views[cams[a]] and imgs.get(cams[b]) in with_views[cams[b]])
-              for a in range(len(cams)) for b in range(a + 1, len(cams))}
+    counts = {
+        (a, b): sum(
+            1
+            for _, imgs in match.frames
+            if imgs.get(cams[a]) in with_views[cams[a]] and imgs.get(cams[b]) in with_views[cams[b]]
+        )
+        for a in range(len(cams))
+        for b in range(a + 1, len(cams))
+    }
     g = rig_connected_gate(cams, counts, min_shared_views)
-    gate = RigGate(gate="rig-connected", passed=g.passed, value=g.value, threshold=g.threshold, message=g.message,
-                   hint=g.hint)
+    gate = RigGate(
+        gate="rig-connected",
+        passed=g.passed,
+        value=g.value,
+        threshold=g.threshold,
+        message=g.message,
+        hint=g.hint,
+    )
     session = RigSession(
-        rig_session_id=secrets.token_hex(6), rig=rig.name,
+        rig_session_id=secrets.token_hex(6),
+        rig=rig.name,
         camera_sessions={c: r.session.session_id for c, r in results.items()},
         frames=[RigFrame(key=k, images=dict(imgs)) for k, imgs in match.frames],
         unmatched=[UnmatchedImage(camera=u.camera, name=u.path, reason=u.reason) for u in match.unmatched],
-        shared_views={f"{cams[a]}-{cams[b]}": n for (a, b), n in counts.items()}, gates=[gate],
-        status="accepted" if g.passed else "rejected", created_at=utc_now(), station=settings.station,
-        operator=settings.operator)
-    identity.refuse(identity.same_corners(_session_views(list(rig.cameras), session,
-                                                        {c: r.session for c, r in results.items()})),
-                    f"rig {rig.name} capture")
-    with open_store(settings, write=True) as store:  # every member's session and the rig session, or none; signed
+        shared_views={f"{cams[a]}-{cams[b]}": n for (a, b), n in counts.items()},
+        gates=[gate],
+        status="accepted" if g.passed else "rejected",
+        created_at=utc_now(),
+        station=settings.station,
+        operator=settings.operator,
+    )
+    identity.refuse(
+        identity.same_corners(
+            _session_views(list(rig.cameras), session, {c: r.session for c, r in results.items()})
+        ),
+        f"rig {rig.name} capture",
+    )
+    with open_store(
+        settings, write=True
+    ) as store:  # every member's session and the rig session, or none; signed
         store.add_rig_session(session, [results[c].session for c in rig.cameras])
     return RigCaptureResult(session, results)
 
@@ -154,15 +210,27 @@ def member_intrinsics(art: CalibrationArtifact) -> MemberIntrinsics:
     lens = "fisheye" if model is not None and model.kind == "fisheye" else "pinhole"
     K = np.array(art.camera_matrix, dtype=np.float64)
     aspect = float(K[0, 0] / K[1, 1]) if (model is None or model.fx_tied_to_fy) else None
-    _, names = intrinsic_columns(np.zeros((2, 18)), free_int, free_dist, aspect,
-                                 FISHEYE_DIST_NAMES if lens == "fisheye" else None)
+    _, names = intrinsic_columns(
+        np.zeros((2, 18)), free_int, free_dist, aspect, FISHEYE_DIST_NAMES if lens == "fisheye" else None
+    )
     sig = art.stdev.sigma
     cov = np.diag([sig[n] ** 2 for n in names]) if all(n in sig for n in names) else None
-    return MemberIntrinsics(art.serial, K, np.array(art.dist_coeffs, dtype=np.float64), art.image_size,
-                            free_int, free_dist, aspect, cov, lens)
+    return MemberIntrinsics(
+        art.serial,
+        K,
+        np.array(art.dist_coeffs, dtype=np.float64),
+        art.image_size,
+        free_int,
+        free_dist,
+        aspect,
+        cov,
+        lens,
+    )
 
 
-def _session_views(order: Sequence[str], session: RigSession, cam_sessions: Mapping[str, CaptureSession]) -> RigViews:
+def _session_views(
+    order: Sequence[str], session: RigSession, cam_sessions: Mapping[str, CaptureSession]
+) -> RigViews:
     """The rig session's frames as RigViews over the members' stored corners."""
     from calibctl.workflows.board.boards import board_spec
 
@@ -175,17 +243,26 @@ def _session_views(order: Sequence[str], session: RigSession, cam_sessions: Mapp
             v = by_name[c].get(frame.images.get(c, ""))
             row.append(BoardView(v.name, np.array(v.corner_ids), np.array(v.corners_px)) if v else None)
         rows.append(tuple(row))
-    return RigViews(tuple(order), spec.object_points(), tuple(str(f.key) for f in session.frames), tuple(rows))
+    return RigViews(
+        tuple(order), spec.object_points(), tuple(str(f.key) for f in session.frames), tuple(rows)
+    )
 
 
-def _views(rig: RigDefinition, order: Sequence[str], session: RigSession, store: object
-           ) -> tuple[RigViews, dict[str, CaptureSession]]:
+def _views(
+    rig: RigDefinition, order: Sequence[str], session: RigSession, store: object
+) -> tuple[RigViews, dict[str, CaptureSession]]:
     cam_sessions = {c: store.get_session(session.camera_sessions[c]) for c in order}  # type: ignore[attr-defined]
     return _session_views(order, session, cam_sessions), cam_sessions
 
 
-def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | None = None,
-                     refine_intrinsics: bool = False, model: str = DEFAULT_MODEL, activate: bool = True) -> RigSolveOutcome:
+def solve_rig_stored(
+    settings: Settings,
+    rig_name: str,
+    rig_session_id: str | None = None,
+    refine_intrinsics: bool = False,
+    model: str = DEFAULT_MODEL,
+    activate: bool = True,
+) -> RigSolveOutcome:
     """Solve a stored rig session into the rig's next version (see module docstring)."""
     with open_store(settings, write=True) as store:
         rig = store.get_rig(rig_name)
@@ -196,50 +273,93 @@ def solve_rig_stored(settings: Settings, rig_name: str, rig_session_id: str | No
             try:
                 arts[c] = store.get_artifact(c, None)
             except NotFoundError as exc:
-                raise NotFoundError(f"rig member {c} has no active calibration ({exc.message})",
-                                    hint=f"calibrate {c} (or roll it back to an accepted version) and solve again"
-                                    ) from exc
+                raise NotFoundError(
+                    f"rig member {c} has no active calibration ({exc.message})",
+                    hint=f"calibrate {c} (or roll it back to an accepted version) and solve again",
+                ) from exc
         views, cam_sessions = _views(rig, order, session, store)
         for c in order:
             size = cam_sessions[c].image_size
             if size is not None and tuple(size) != tuple(arts[c].image_size):
-                raise InputError(f"rig member {c}: the capture is {size[0]}x{size[1]} but its calibration "
-                                 f"{arts[c].ref} is {arts[c].image_size[0]}x{arts[c].image_size[1]}",
-                                 hint="capture at the calibrated resolution, or re-calibrate the camera")
+                raise InputError(
+                    f"rig member {c}: the capture is {size[0]}x{size[1]} but its calibration "
+                    f"{arts[c].ref} is {arts[c].image_size[0]}x{arts[c].image_size[1]}",
+                    hint="capture at the calibrated resolution, or re-calibrate the camera",
+                )
         what = f"rig {rig.name} session {session.rig_session_id}"
-        identity.refuse(identity.shared_images({c: [v.image_sha256 for v in cam_sessions[c].views] for c in order})
-                        + identity.same_corners(views), what)  # a session stored before these checks existed
+        identity.refuse(
+            identity.shared_images({c: [v.image_sha256 for v in cam_sessions[c].views] for c in order})
+            + identity.same_corners(views),
+            what,
+        )  # a session stored before these checks existed
         members = [member_intrinsics(arts[c]) for c in order]
         solution = solve_rig(views, members, refine_intrinsics, model)
         holdout = validate_rig_holdout(views, members, refine_intrinsics, model)
         loops = loop_closures(views, members, model) if len(order) >= 3 else ()
         cal = RigCalibration(
-            rig=rig.name, version=1, status="accepted", root=rig.root,
-            members=[RigMember(serial=c, version=arts[c].version, content_sha256=arts[c].content_sha256,
-                               image_size=arts[c].image_size,
-                               camera_matrix=tuple(map(tuple, np.asarray(m.camera_matrix).tolist())),
-                               dist_coeffs=np.asarray(m.dist_coeffs).tolist(), refined=refine_intrinsics,
-                               lens="fisheye" if m.lens == "fisheye" else "pinhole")
-                     for c, m in zip(order, solution.members, strict=True)],
-            edges=[RigEdge(parent=e.parent, child=e.child, T_parent_child=tuple(map(tuple, e.T_parent_child.tolist())),
-                           covariance=e.covariance.tolist(), translation_mm=e.translation_mm,
-                           sigma_translation_mm=e.sigma_translation_mm, rotation_deg=e.rotation_deg,
-                           sigma_rotation_deg=e.sigma_rotation_deg) for e in solution.tree.edges],
-            pairs=rig_pairs(solution, holdout), loops=rig_loops(loops),
+            rig=rig.name,
+            version=1,
+            status="accepted",
+            root=rig.root,
+            members=[
+                RigMember(
+                    serial=c,
+                    version=arts[c].version,
+                    content_sha256=arts[c].content_sha256,
+                    image_size=arts[c].image_size,
+                    camera_matrix=tuple(map(tuple, np.asarray(m.camera_matrix).tolist())),
+                    dist_coeffs=np.asarray(m.dist_coeffs).tolist(),
+                    refined=refine_intrinsics,
+                    lens="fisheye" if m.lens == "fisheye" else "pinhole",
+                )
+                for c, m in zip(order, solution.members, strict=True)
+            ],
+            edges=[
+                RigEdge(
+                    parent=e.parent,
+                    child=e.child,
+                    T_parent_child=tuple(map(tuple, e.T_parent_child.tolist())),
+                    covariance=e.covariance.tolist(),
+                    translation_mm=e.translation_mm,
+                    sigma_translation_mm=e.sigma_translation_mm,
+                    rotation_deg=e.rotation_deg,
+                    sigma_rotation_deg=e.sigma_rotation_deg,
+                )
+                for e in solution.tree.edges
+            ],
+            pairs=rig_pairs(solution, holdout),
+            loops=rig_loops(loops),
             fit_rms_px=dict(zip(order, solution.rms_px, strict=True)),
-            held_out_rms_px=dict(zip(order, holdout.camera_rms_px, strict=True)), held_out_folds=holdout.n_folds,
-            solver=solution.solver, refine_intrinsics=refine_intrinsics, gates=session.gates,
-            provenance=Provenance(calibctl_version=__version__, opencv_version=cv2.__version__,
-                                  station=settings.station, operator=settings.operator, created_at=utc_now(),
-                                  session_id=session.rig_session_id),
-            content_sha256=UNSEALED)
+            held_out_rms_px=dict(zip(order, holdout.camera_rms_px, strict=True)),
+            held_out_folds=holdout.n_folds,
+            solver=solution.solver,
+            refine_intrinsics=refine_intrinsics,
+            gates=session.gates,
+            provenance=Provenance(
+                calibctl_version=__version__,
+                opencv_version=cv2.__version__,
+                station=settings.station,
+                operator=settings.operator,
+                created_at=utc_now(),
+                session_id=session.rig_session_id,
+            ),
+            content_sha256=UNSEALED,
+        )
         identity.refuse(identity.zero_baselines(identity.pair_translations(solution)), what)
         findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint)
-        cal = cal.model_copy(update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"})
+        cal = cal.model_copy(
+            update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"}
+        )
         cal, base = _with_carried_handeye(cal, store)
         do_activate = activate and cal.status == "accepted"
-        stored = store.add_rig_calibration(cal, activate=do_activate, actor=settings.operator,
-                                           station=settings.station, reason="rig solve", based_on=base)
+        stored = store.add_rig_calibration(
+            cal,
+            activate=do_activate,
+            actor=settings.operator,
+            station=settings.station,
+            reason="rig solve",
+            based_on=base,
+        )
         return RigSolveOutcome(stored, do_activate)
 
 
@@ -251,7 +371,12 @@ def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibr
     except NotFoundError:
         return cal, None
     kept = rig_edges.carried_forward(active, rig_edges.cal_versions(store, active))
-    carried = cal.model_copy(update={"edges": [*cal.edges, *kept.edges], "handeye": kept.handeye, "lidar": kept.lidar,
-                                     "lint": [*cal.lint, *kept.dropped]})
+    carried = cal.model_copy(
+        update={
+            "edges": [*cal.edges, *kept.edges],
+            "handeye": kept.handeye,
+            "lidar": kept.lidar,
+            "lint": [*cal.lint, *kept.dropped],
+        }
+    )
     return carried, active.version
-

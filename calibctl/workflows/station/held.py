@@ -33,7 +33,9 @@ class HeldCapture:
         self.session: CaptureSession | None = None
 
     def get_board(self, name: str, revision: int | None = None) -> BoardRevision:
-        return self.board  # the one the station fetched for its --board (store, else spool), asked by that name
+        return (
+            self.board
+        )  # the one the station fetched for its --board (store, else spool), asked by that name
 
     def put_image(self, data: bytes, *, retention_days: int) -> str:
         return self.put_images([data], retention_days=retention_days)[0]

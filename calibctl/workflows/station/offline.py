@@ -48,8 +48,10 @@ class SpoolCapture:
         board = self.spool.board(name, revision)
         if board is None:
             ref = name if revision is None else f"{name}@{revision}"
-            raise NotFoundError(f"board {ref} is unknown offline: {self.why}, and this station's spool has never "
-                                "seen it", "bring the store back, or run the station once while it is reachable")
+            raise NotFoundError(
+                f"board {ref} is unknown offline: {self.why}, and this station's spool has never seen it",
+                "bring the store back, or run the station once while it is reachable",
+            )
         return board
 
     def put_image(self, data: bytes, *, retention_days: int) -> str:
@@ -62,20 +64,38 @@ class SpoolCapture:
         self.session = session  # queued with its calibration, in one spool transaction (queue_unit)
 
 
-def queue_unit(settings: Settings, spool: Spool, boards: dict[str, BoardRevision], request: CaptureRequest,
-               model: str, observer: CaptureObserver, why: str, detected: EarlyDetections | None = None) -> Queued:
+def queue_unit(
+    settings: Settings,
+    spool: Spool,
+    boards: dict[str, BoardRevision],
+    request: CaptureRequest,
+    model: str,
+    observer: CaptureObserver,
+    why: str,
+    detected: EarlyDetections | None = None,
+) -> Queued:
     """Capture, gate and solve one unit into the spool (``why``: what made the station go offline;
     ``detected``: its pictures detected as they landed, watch mode)."""
     sink = SpoolCapture(spool, boards, why)
     captured = capture(settings, request, observer, into=sink, detected=detected)
-    return queue_solved(settings, spool, captured.session, model, session_stored=False,
-                        passed=captured.passed)
+    return queue_solved(
+        settings, spool, captured.session, model, session_stored=False, passed=captured.passed
+    )
 
 
-def queue_solved(settings: Settings, spool: Spool, session: CaptureSession, model: str, *, session_stored: bool,
-                 passed: bool = True) -> Queued:
+def queue_solved(
+    settings: Settings,
+    spool: Spool,
+    session: CaptureSession,
+    model: str,
+    *,
+    session_stored: bool,
+    passed: bool = True,
+) -> Queued:
     """Solve an accepted session here and queue it (``session_stored``: the session itself reached the store)."""
     artifact = None
     if passed:
-        artifact, _ = build_artifact(session, SolveRequest(session_id=session.session_id, model=model), settings)
+        artifact, _ = build_artifact(
+            session, SolveRequest(session_id=session.session_id, model=model), settings
+        )
     return Queued(spool.queue(session, artifact, session_stored=session_stored), session, artifact)

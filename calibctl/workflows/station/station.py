@@ -118,14 +118,27 @@ class UnitResult:
     verdict: str | None = None  # queued / synced: pass or fail, as the unit's own line would have said
     spool_record: int | None = None  # queued / synced: the record number, the order of the sync
     after_last_image_s: float | None = None
-    last_image_at: float | None = field(default=None, repr=False)  # epoch s; after_last_image_s is measured from it
+    last_image_at: float | None = field(
+        default=None, repr=False
+    )  # epoch s; after_last_image_s is measured from it
 
     def as_json(self) -> dict[str, Any]:
-        return {"serial": self.serial, "status": self.status, "message": self.message, "hint": self.hint,
-                "session_id": self.session_id, "version": self.version, "rms_px": self.rms_px,
-                "views": self.views, "unit_s": round(self.unit_s, 4), "verdict": self.verdict,
-                "spool_record": self.spool_record,
-                "after_last_image_s": None if self.after_last_image_s is None else round(self.after_last_image_s, 4)}
+        return {
+            "serial": self.serial,
+            "status": self.status,
+            "message": self.message,
+            "hint": self.hint,
+            "session_id": self.session_id,
+            "version": self.version,
+            "rms_px": self.rms_px,
+            "views": self.views,
+            "unit_s": round(self.unit_s, 4),
+            "verdict": self.verdict,
+            "spool_record": self.spool_record,
+            "after_last_image_s": None
+            if self.after_last_image_s is None
+            else round(self.after_last_image_s, 4),
+        }
 
 
 @dataclass
@@ -137,9 +150,11 @@ class StationSummary:
 def check_request(request: StationRequest) -> None:
     """What is wrong with the whole station run is a usage error (exit 2) before the first unit."""
     if (request.source_template is None) == (request.camera is None):
-        raise UsageError("the station takes one source: --source-template (each unit's pictures in a folder) or "
-                         "--camera (each unit live from the station's camera)",
-                         "e.g. --source-template /data/shots/{serial}, or --camera /dev/video0")
+        raise UsageError(
+            "the station takes one source: --source-template (each unit's pictures in a folder) or "
+            "--camera (each unit live from the station's camera)",
+            "e.g. --source-template /data/shots/{serial}, or --camera /dev/video0",
+        )
     if request.model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{request.model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     if request.camera is not None:
@@ -147,27 +162,35 @@ def check_request(request: StationRequest) -> None:
         return
     assert request.source_template is not None
     if SERIAL_SLOT not in request.source_template:
-        raise UsageError(f"--source-template '{request.source_template}' has no {SERIAL_SLOT}",
-                         "name the folder each unit's pictures arrive in, e.g. /data/shots/{serial}")
+        raise UsageError(
+            f"--source-template '{request.source_template}' has no {SERIAL_SLOT}",
+            "name the folder each unit's pictures arrive in, e.g. /data/shots/{serial}",
+        )
     if request.watch is not None:
         check_rule(request.watch)
         if any(ch in request.source_template for ch in "*?["):
-            raise UsageError(f"--watch watches a folder per unit; --source-template '{request.source_template}' "
-                             "is a glob", "give the folder the camera app saves each unit's pictures in: DIR/{serial}")
+            raise UsageError(
+                f"--watch watches a folder per unit; --source-template '{request.source_template}' is a glob",
+                "give the folder the camera app saves each unit's pictures in: DIR/{serial}",
+            )
 
 
 def _check_camera(camera: LiveCamera, watch: WatchRule | None) -> None:
     if watch is not None:
-        raise UsageError("--watch waits for pictures in a folder; --camera captures each unit live",
-                         "leave out --watch (and --views, --done-file) with --camera")
+        raise UsageError(
+            "--watch waits for pictures in a folder; --camera captures each unit live",
+            "leave out --watch (and --views, --done-file) with --camera",
+        )
     try:
         kind: str | None = sources.resolve_source(camera.device).kind
     except CalibctlError:  # an empty or missing path: worded for --source
         kind = None
     if kind != sources.CAMERA:
-        raise UsageError(f"--camera {camera.device} is not a camera",
-                         "give the device the unit's camera appears as: /dev/videoN or an index such as 0 (a folder "
-                         "of pictures per unit is --source-template DIR/{serial})")
+        raise UsageError(
+            f"--camera {camera.device} is not a camera",
+            "give the device the unit's camera appears as: /dev/videoN or an index such as 0 (a folder "
+            "of pictures per unit is --source-template DIR/{serial})",
+        )
     check_stream_stops(camera.max_views, camera.duration_s)
 
 
@@ -208,7 +231,9 @@ class _UnitObserver(CaptureObserver):
 
     def __init__(self, interrupts: _Interrupts, inner: CaptureObserver) -> None:
         self.interrupts, self.inner = interrupts, inner
-        self.last_frame_at: float | None = None  # epoch s: a stream's last frame selected (a camera unit's stop)
+        self.last_frame_at: float | None = (
+            None  # epoch s: a stream's last frame selected (a camera unit's stop)
+        )
 
     def folder_started(self, total: int) -> None:
         self.interrupts.cancellable = True  # an offline capture after a failed online one starts from nothing
@@ -276,11 +301,15 @@ class _Offline:
 
 
 def _rejected(session: CaptureSession) -> str:
-    reasons = "; ".join(g.reason for g in session.gates if not g.passed and g.reason) or "the distance gauge failed"
+    reasons = (
+        "; ".join(g.reason for g in session.gates if not g.passed and g.reason) or "the distance gauge failed"
+    )
     return f"capture rejected: {reasons}"
 
 
-def _unit_board(settings: Settings, request: StationRequest, offline: _Offline) -> tuple[BoardRevision, str | None]:
+def _unit_board(
+    settings: Settings, request: StationRequest, offline: _Offline
+) -> tuple[BoardRevision, str | None]:
     """The unit's board from the store, else (the store away) from the spool as the capture into it will find it;
     and why the unit goes to the spool (None: the store answered)."""
     name, revision = board_ref(request.board)
@@ -288,13 +317,16 @@ def _unit_board(settings: Settings, request: StationRequest, offline: _Offline) 
         with Store.open(settings.db_url) as store:
             board = store.get_board(name, revision)
     except DatabaseUnreachableError as exc:
-        return SpoolCapture(offline.spool(), offline.boards, exc.message).get_board(name, revision), exc.message
+        return SpoolCapture(offline.spool(), offline.boards, exc.message).get_board(
+            name, revision
+        ), exc.message
     offline.remember(board)
     return board, None
 
 
-def _watched(settings: Settings, request: StationRequest, source: str, offline: _Offline
-             ) -> tuple[Watched, str | None]:
+def _watched(
+    settings: Settings, request: StationRequest, source: str, offline: _Offline
+) -> tuple[Watched, str | None]:
     """Watch mode: the unit's pictures, detected as they land, with the board the capture will use; and why
     the unit goes to the spool (None: the store answered)."""
     assert request.watch is not None
@@ -302,19 +334,32 @@ def _watched(settings: Settings, request: StationRequest, source: str, offline: 
     return watch_unit(Path(source), request.watch, board_spec(board), settings.jobs), away
 
 
-def _capture_request(settings: Settings, request: StationRequest, serial: str, source: str,
-                     camera: LiveCamera | None = None) -> CaptureRequest:
+def _capture_request(
+    settings: Settings, request: StationRequest, serial: str, source: str, camera: LiveCamera | None = None
+) -> CaptureRequest:
     """A unit's capture (``camera``: live, with its stop rule, and Ctrl-C cancels it). As `calibctl calibrate`: the
     gates judge through the lens model the session will be solved with."""
-    return CaptureRequest(serial, request.board, source, jobs=settings.jobs, gauge_model=gauge_model(request.model),
-                          lens_model=None if request.model == "auto" else request.model,
-                          max_views=None if camera is None else camera.max_views,
-                          duration_s=None if camera is None else camera.duration_s,
-                          cancel_on_interrupt=camera is not None)
+    return CaptureRequest(
+        serial,
+        request.board,
+        source,
+        jobs=settings.jobs,
+        gauge_model=gauge_model(request.model),
+        lens_model=None if request.model == "auto" else request.model,
+        max_views=None if camera is None else camera.max_views,
+        duration_s=None if camera is None else camera.duration_s,
+        cancel_on_interrupt=camera is not None,
+    )
 
 
-def _camera_unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver,
-                 offline: _Offline, why_queue: tuple[str, str] | None) -> UnitResult:
+def _camera_unit(
+    settings: Settings,
+    request: StationRequest,
+    serial: str,
+    observer: _UnitObserver,
+    offline: _Offline,
+    why_queue: tuple[str, str] | None,
+) -> UnitResult:
     """One unit live from the station's camera, held in memory until its stream and gates are over
     (``workflows.station.held``), then stored whole, or queued whole when the store is away."""
     assert request.camera is not None
@@ -336,13 +381,23 @@ def _camera_unit(settings: Settings, request: StationRequest, serial: str, obser
     if why_queue is not None:
         spool = offline.spool()
         spool_images(spool, held)
-        result = _queued_line(queue_solved(settings, spool, session, request.model, session_stored=False,
-                                           passed=captured.passed), *why_queue)
+        result = _queued_line(
+            queue_solved(
+                settings, spool, session, request.model, session_stored=False, passed=captured.passed
+            ),
+            *why_queue,
+        )
     return replace(result, last_image_at=observer.last_frame_at)
 
 
-def _unit(settings: Settings, request: StationRequest, serial: str, observer: _UnitObserver, offline: _Offline,
-          why_queue: tuple[str, str] | None) -> UnitResult:
+def _unit(
+    settings: Settings,
+    request: StationRequest,
+    serial: str,
+    observer: _UnitObserver,
+    offline: _Offline,
+    why_queue: tuple[str, str] | None,
+) -> UnitResult:
     if request.camera is not None:
         return _camera_unit(settings, request, serial, observer, offline, why_queue)
     assert request.source_template is not None
@@ -350,63 +405,106 @@ def _unit(settings: Settings, request: StationRequest, serial: str, observer: _U
     watched = None
     if request.watch is not None:
         if Path(source).exists() and not Path(source).is_dir():
-            return UnitResult(serial, ERROR, f"{source} is not a folder; --watch watches a folder per unit",
-                              "point --source-template at the folder the camera app saves each unit's pictures in")
+            return UnitResult(
+                serial,
+                ERROR,
+                f"{source} is not a folder; --watch watches a folder per unit",
+                "point --source-template at the folder the camera app saves each unit's pictures in",
+            )
         watched, away = _watched(settings, request, source, offline)
         if why_queue is None and away is not None:  # not a second connect timeout for the capture
             why_queue = away, _SYNC_HINT
     if not any(ch in source for ch in "*?[") and not Path(source).exists():
-        return UnitResult(serial, ERROR, f"no pictures for {serial}: {source} does not exist",
-                          "put the unit's pictures there (or check the serial), then scan it again")
+        return UnitResult(
+            serial,
+            ERROR,
+            f"no pictures for {serial}: {source} does not exist",
+            "put the unit's pictures there (or check the serial), then scan it again",
+        )
     kind = sources.resolve_source(source).kind
     if kind not in sources.IMAGE_SETS:
-        return UnitResult(serial, ERROR, f"{source} is a {kind}; the station reads a folder, glob or list per unit",
-                          "point --source-template at the folder each unit's pictures are saved in")
+        return UnitResult(
+            serial,
+            ERROR,
+            f"{source} is a {kind}; the station reads a folder, glob or list per unit",
+            "point --source-template at the folder each unit's pictures are saved in",
+        )
     unit = _capture_request(settings, request, serial, source)
     detected = None if watched is None else watched.detected
     if why_queue is None:
         try:
             result = _online_unit(settings, request, unit, observer, offline, detected)
-        except DatabaseUnreachableError as exc:  # before its session was stored: captured again, into the spool
+        except (
+            DatabaseUnreachableError
+        ) as exc:  # before its session was stored: captured again, into the spool
             why_queue = exc.message, _SYNC_HINT
     if why_queue is not None:
         why, hint = why_queue
-        queued = queue_unit(settings, offline.spool(), offline.boards, unit, request.model, observer, why, detected)
+        queued = queue_unit(
+            settings, offline.spool(), offline.boards, unit, request.model, observer, why, detected
+        )
         result = _queued_line(queued, why, hint)
     return result if watched is None else replace(result, last_image_at=watched.last_in_s)
 
 
-def _online_unit(settings: Settings, request: StationRequest, unit: CaptureRequest, observer: CaptureObserver,
-                 offline: _Offline, detected: EarlyDetections | None) -> UnitResult:
+def _online_unit(
+    settings: Settings,
+    request: StationRequest,
+    unit: CaptureRequest,
+    observer: CaptureObserver,
+    offline: _Offline,
+    detected: EarlyDetections | None,
+) -> UnitResult:
     session = capture(settings, unit, observer, detected=detected).session
     offline.remember(session.board)
     return _solved_unit(settings, request, session, offline)
 
 
-def _solved_unit(settings: Settings, request: StationRequest, session: CaptureSession, offline: _Offline
-                 ) -> UnitResult:
+def _solved_unit(
+    settings: Settings, request: StationRequest, session: CaptureSession, offline: _Offline
+) -> UnitResult:
     """A stored session's line: rejected, or solved and stored (its calibration queued when the store went away
     after the session)."""
     if session.status != "accepted":
-        return UnitResult(session.serial, FAIL, _rejected(session), session_id=session.session_id,
-                          views=len(session.views))
+        return UnitResult(
+            session.serial, FAIL, _rejected(session), session_id=session.session_id, views=len(session.views)
+        )
     try:
         art = solve(settings, SolveRequest(session_id=session.session_id, model=request.model)).artifact
     except DatabaseUnreachableError as exc:  # the session is stored; its calibration is queued
-        return _queued_line(queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
-                            exc.message, _SYNC_HINT)
+        return _queued_line(
+            queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
+            exc.message,
+            _SYNC_HINT,
+        )
     status = PASS if art.status == "accepted" else FAIL
-    return UnitResult(session.serial, status, f"calibration v{art.version} {art.status}", session_id=session.session_id,
-                      version=art.version, rms_px=art.rms_px, views=len(session.views))
+    return UnitResult(
+        session.serial,
+        status,
+        f"calibration v{art.version} {art.status}",
+        session_id=session.session_id,
+        version=art.version,
+        rms_px=art.rms_px,
+        views=len(session.views),
+    )
 
 
 def _queued_line(queued: Queued, why: str, hint: str) -> UnitResult:
     session, art = queued.session, queued.artifact
     what = _rejected(session) if art is None else f"calibration {art.status}"
     verdict = PASS if art is not None and art.status == "accepted" else FAIL
-    return UnitResult(session.serial, QUEUED, f"{what}; queued as spool record {queued.seq}, its version comes when "
-                      f"the store is back ({why})", hint, session.session_id, None,
-                      None if art is None else art.rms_px, len(session.views), verdict=verdict, spool_record=queued.seq)
+    return UnitResult(
+        session.serial,
+        QUEUED,
+        f"{what}; queued as spool record {queued.seq}, its version comes when the store is back ({why})",
+        hint,
+        session.session_id,
+        None,
+        None if art is None else art.rms_px,
+        len(session.views),
+        verdict=verdict,
+        spool_record=queued.seq,
+    )
 
 
 def _synced_line(unit: SyncedUnit) -> UnitResult:
@@ -415,14 +513,26 @@ def _synced_line(unit: SyncedUnit) -> UnitResult:
     else:
         what = f"stored as v{unit.version} {unit.status}{', active' if unit.active else ''}"
     already = " (it was in the store already)" if unit.already else ""
-    return UnitResult(unit.serial, SYNCED, f"spool record {unit.seq}: {what}{already}", session_id=unit.session_id,
-                      version=unit.version, rms_px=unit.rms_px, views=unit.views,
-                      verdict=PASS if unit.status == "accepted" else FAIL, spool_record=unit.seq)
+    return UnitResult(
+        unit.serial,
+        SYNCED,
+        f"spool record {unit.seq}: {what}{already}",
+        session_id=unit.session_id,
+        version=unit.version,
+        rms_px=unit.rms_px,
+        views=unit.views,
+        verdict=PASS if unit.status == "accepted" else FAIL,
+        spool_record=unit.seq,
+    )
 
 
-def run_station(settings: Settings, request: StationRequest, serials: Iterable[str],
-                report: Callable[[UnitResult], None], observer: Callable[[], CaptureObserver] = CaptureObserver,
-                ) -> StationSummary:
+def run_station(
+    settings: Settings,
+    request: StationRequest,
+    serials: Iterable[str],
+    report: Callable[[UnitResult], None],
+    observer: Callable[[], CaptureObserver] = CaptureObserver,
+) -> StationSummary:
     """Calibrate one unit per serial line until the lines end or Ctrl-C (see the module docstring).
 
     ``report(result)`` is called once per non-blank line, as soon as its unit is done; ``observer()``
@@ -454,13 +564,23 @@ def run_station(settings: Settings, request: StationRequest, serials: Iterable[s
                 try:
                     why_queue = offline.before_unit(lambda synced: _keep(summary, report, synced))
                     with observer() as display:
-                        result = _unit(settings, request, serial, _UnitObserver(interrupts, display), offline,
-                                       why_queue)
+                        result = _unit(
+                            settings, request, serial, _UnitObserver(interrupts, display), offline, why_queue
+                        )
                 except KeyboardInterrupt:
-                    during = ("captured from the camera" if request.camera is not None else
-                              "awaited or detected" if request.watch is not None else "detected")
-                    result = UnitResult(serial, CANCELLED, f"cancelled (Ctrl-C) while its images were {during}; "
-                                        "nothing was stored", "scan the serial again to calibrate it")
+                    during = (
+                        "captured from the camera"
+                        if request.camera is not None
+                        else "awaited or detected"
+                        if request.watch is not None
+                        else "detected"
+                    )
+                    result = UnitResult(
+                        serial,
+                        CANCELLED,
+                        f"cancelled (Ctrl-C) while its images were {during}; nothing was stored",
+                        "scan the serial again to calibrate it",
+                    )
                 except CalibctlError as exc:
                     result = UnitResult(serial, ERROR, exc.message, exc.hint)
                 if result.status in (PASS, FAIL, QUEUED):
@@ -482,9 +602,17 @@ def _keep(summary: StationSummary, report: Callable[[UnitResult], None], line: U
 
 def _checked_serial(serial: str, seen: dict[str, int]) -> UnitResult | None:
     if not re.fullmatch(SERIAL_PATTERN, serial):
-        return UnitResult(serial, ERROR, f"'{serial}' is not a serial",
-                          "a serial is letters, digits and . _ : - (no spaces, no '@'); scan the label again")
+        return UnitResult(
+            serial,
+            ERROR,
+            f"'{serial}' is not a serial",
+            "a serial is letters, digits and . _ : - (no spaces, no '@'); scan the label again",
+        )
     if serial in seen:
-        return UnitResult(serial, ERROR, f"{serial} was already calibrated in this run (unit {seen[serial]}); "
-                          "not calibrated again", "scan the next unit; to recalibrate this one, run calibctl calibrate")
+        return UnitResult(
+            serial,
+            ERROR,
+            f"{serial} was already calibrated in this run (unit {seen[serial]}); not calibrated again",
+            "scan the next unit; to recalibrate this one, run calibctl calibrate",
+        )
     return None

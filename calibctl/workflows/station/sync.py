@@ -68,13 +68,19 @@ def open_spool(settings: Settings, path: Path | None, *, create: bool = True, si
     when the station has a signing key: records queued are signed with it (``sign``: a command that queues
     nothing needs only the public keys) and records are checked against it and the trusted keys."""
     keyed = bool(settings.signing_key)
-    return Spool.open(path or default_spool_path(settings.station_file, settings.db_url), station=settings.station,
-                      store=store_identity(settings.db_url), create=create,
-                      signer=signer_of(settings) if keyed and sign else None,
-                      trusted=read_trust(settings) if keyed else None)
+    return Spool.open(
+        path or default_spool_path(settings.station_file, settings.db_url),
+        station=settings.station,
+        store=store_identity(settings.db_url),
+        create=create,
+        signer=signer_of(settings) if keyed and sign else None,
+        trusted=read_trust(settings) if keyed else None,
+    )
 
 
-def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord], None] | None = None) -> SyncReport:
+def sync(
+    settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord], None] | None = None
+) -> SyncReport:
     """Sync the queued records in order (see the module docstring). ``after_store(record)`` runs after a
     record is in the store and before it is marked synced (where a kill is worst; tests interrupt there)."""
     report = SyncReport()
@@ -99,26 +105,50 @@ def sync(settings: Settings, spool: Spool, *, after_store: Callable[[SpoolRecord
 def _sync_one(settings: Settings, spool: Spool, store: Store, record: SpoolRecord) -> SyncedUnit:
     session, artifact = spool.opened(record)
     for start in range(0, len(record.image_shas), IMAGE_BATCH):
-        batch = [spool.image_bytes(record, sha) for sha in record.image_shas[start:start + IMAGE_BATCH]]
+        batch = [spool.image_bytes(record, sha) for sha in record.image_shas[start : start + IMAGE_BATCH]]
         store.put_images(batch, retention_days=settings.image_retention_days)
     try:
         store.add_session(session)
     except AlreadyExistsError:
         held = store.get_session(session.session_id)
         if held.model_dump(mode="json") != session.model_dump(mode="json"):
-            raise IntegrityError(f"the store holds another capture session under the id {session.session_id} of "
-                                 f"spool record {record.seq} ({record.serial}); it and the records after it were not "
-                                 "synced", f"compare `calibctl history {record.serial}` with the spool") from None
+            raise IntegrityError(
+                f"the store holds another capture session under the id {session.session_id} of "
+                f"spool record {record.seq} ({record.serial}); it and the records after it were not "
+                "synced",
+                f"compare `calibctl history {record.serial}` with the spool",
+            ) from None
     if artifact is None:
-        return SyncedUnit(record.seq, record.serial, record.session_id, None, "capture rejected", False, False,
-                          views=len(session.views))
+        return SyncedUnit(
+            record.seq,
+            record.serial,
+            record.session_id,
+            None,
+            "capture rejected",
+            False,
+            False,
+            views=len(session.views),
+        )
     accepted = artifact.status == "accepted"
     stored, new = store.add_artifact_once(
-        artifact, activate=accepted, actor=artifact.provenance.operator, station=settings.station,
-        reason=f"solve of session {session.session_id} (queued offline, record {record.seq})")
+        artifact,
+        activate=accepted,
+        actor=artifact.provenance.operator,
+        station=settings.station,
+        reason=f"solve of session {session.session_id} (queued offline, record {record.seq})",
+    )
     active = store.active_version(stored.serial) == stored.version
-    return SyncedUnit(record.seq, record.serial, record.session_id, stored.version, stored.status, active, not new,
-                      stored.rms_px, len(session.views))
+    return SyncedUnit(
+        record.seq,
+        record.serial,
+        record.session_id,
+        stored.version,
+        stored.status,
+        active,
+        not new,
+        stored.rms_px,
+        len(session.views),
+    )
 
 
 @dataclass(frozen=True)
@@ -154,8 +184,16 @@ class SetAsideUnit:
 
     @classmethod
     def of(cls, r: SpoolRecord) -> SetAsideUnit:
-        return cls(r.seq, r.serial, r.session_id, r.queued_at, r.set_aside_at or "", r.set_aside_reason or "",
-                   r.set_aside_by or "", len(r.image_shas))
+        return cls(
+            r.seq,
+            r.serial,
+            r.session_id,
+            r.queued_at,
+            r.set_aside_at or "",
+            r.set_aside_reason or "",
+            r.set_aside_by or "",
+            len(r.image_shas),
+        )
 
 
 @dataclass
@@ -168,8 +206,14 @@ class SpoolStatus:
     set_aside: list[SetAsideUnit] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
-        return {"spool": self.path, "station": self.station, "store": self.store, "synced": self.synced,
-                "queued": [q.as_json() for q in self.queued], "set_aside": [a.as_json() for a in self.set_aside]}
+        return {
+            "spool": self.path,
+            "station": self.station,
+            "store": self.store,
+            "synced": self.synced,
+            "queued": [q.as_json() for q in self.queued],
+            "set_aside": [a.as_json() for a in self.set_aside],
+        }
 
 
 def status(spool: Spool) -> SpoolStatus:
@@ -183,8 +227,18 @@ def status(spool: Spool) -> SpoolStatus:
                 spool.opened(r)
             except IntegrityError as exc:  # content calibctl did not write, under a matching hash
                 problem = exc.message
-        queued.append(QueuedUnit(r.seq, r.serial, r.session_id, r.queued_at, "?" if problem else r.verdict(),
-                                 len(r.image_shas), problem is None, problem))
+        queued.append(
+            QueuedUnit(
+                r.seq,
+                r.serial,
+                r.session_id,
+                r.queued_at,
+                "?" if problem else r.verdict(),
+                len(r.image_shas),
+                problem is None,
+                problem,
+            )
+        )
     set_aside = [SetAsideUnit.of(r) for r in spool.records(set_aside_only=True)]
     return SpoolStatus(str(spool.path), spool.station, spool.store, queued, spool.counts()[1], set_aside)
 
@@ -202,11 +256,15 @@ def set_aside(settings: Settings, spool: Spool, seq: int, reason: str) -> SetAsi
     """Set queued record ``seq`` aside (kept, never synced) with ``reason`` and the operator, under the sync
     lock (refused while a sync runs). Refused (exit 2): no reason, an unknown, synced or set-aside record."""
     if not reason.strip():
-        raise UsageError("setting a spool record aside needs a reason", "pass --reason 'why it is not synced'")
+        raise UsageError(
+            "setting a spool record aside needs a reason", "pass --reason 'why it is not synced'"
+        )
     bounded.check_text(reason, "--reason", "the reason")
     if len(reason) > MAX_REASON_CHARS:
-        raise UsageError(f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
-                         "say why in a sentence or two; put long notes in the ticket the reason names")
+        raise UsageError(
+            f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
+            "say why in a sentence or two; put long notes in the ticket the reason names",
+        )
     with spool.sync_lock("set nothing aside"):
         record = spool.set_aside(seq, reason=reason, operator=settings.operator)
     return SetAside(SetAsideUnit.of(record), spool.counts()[0])

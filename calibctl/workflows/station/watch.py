@@ -53,18 +53,27 @@ class Watched:
 def check_rule(rule: WatchRule) -> None:
     """A rule that cannot work is a usage error (exit 2) before the first unit."""
     if rule.views is None and rule.done_file is None:
-        raise UsageError("--watch needs --views N or --done-file NAME to know when a unit's pictures are all there",
-                         "give the number of pictures the camera app takes per unit, or the file it writes last")
+        raise UsageError(
+            "--watch needs --views N or --done-file NAME to know when a unit's pictures are all there",
+            "give the number of pictures the camera app takes per unit, or the file it writes last",
+        )
     if rule.views is not None and rule.views < 1:
         raise UsageError(f"--views must be 1 or more, got {rule.views}")
-    if rule.done_file is not None and (Path(rule.done_file).name != rule.done_file or rule.done_file in (".", "..")
-                                       or Path(rule.done_file).suffix.lower() in IMAGE_SUFFIXES):
-        raise UsageError(f"--done-file '{rule.done_file}' must be a file name in the unit's folder that is not an "
-                         "image", "e.g. --done-file DONE")
+    if rule.done_file is not None and (
+        Path(rule.done_file).name != rule.done_file
+        or rule.done_file in (".", "..")
+        or Path(rule.done_file).suffix.lower() in IMAGE_SUFFIXES
+    ):
+        raise UsageError(
+            f"--done-file '{rule.done_file}' must be a file name in the unit's folder that is not an image",
+            "e.g. --done-file DONE",
+        )
     if not rule.settle_s >= 0:
         raise UsageError(f"--settle-s must be 0 or more seconds, got {rule.settle_s:g}")
     if not rule.unit_timeout_s > 0:
-        raise UsageError(f"--unit-timeout-s must be a positive number of seconds, got {rule.unit_timeout_s:g}")
+        raise UsageError(
+            f"--unit-timeout-s must be a positive number of seconds, got {rule.unit_timeout_s:g}"
+        )
 
 
 def _complete(folder: Path, rule: WatchRule, arrivals: Arrivals) -> bool:
@@ -79,13 +88,21 @@ def _timed_out(folder: Path, rule: WatchRule, arrivals: Arrivals) -> InputError:
     wanted = "" if rule.views is None else f" of {rule.views}"
     writing = f", {arrivals.pending} more still being written" if arrivals.pending else ""
     marker = "" if rule.done_file is None else f"; no {rule.done_file} written"
-    return InputError(f"no new picture in {folder} for {rule.unit_timeout_s:g} s (--unit-timeout-s): "
-                      f"{arrivals.complete}{wanted} arrived{writing}{marker}; nothing was stored",
-                      "check the camera app, then scan the serial again (the pictures already there are used)")
+    return InputError(
+        f"no new picture in {folder} for {rule.unit_timeout_s:g} s (--unit-timeout-s): "
+        f"{arrivals.complete}{wanted} arrived{writing}{marker}; nothing was stored",
+        "check the camera app, then scan the serial again (the pictures already there are used)",
+    )
 
 
-def watch_unit(folder: Path, rule: WatchRule, spec: BoardSpec, workers: int,
-               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> Watched:
+def watch_unit(
+    folder: Path,
+    rule: WatchRule,
+    spec: BoardSpec,
+    workers: int,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+) -> Watched:
     """Wait for the unit's pictures, detecting each as it lands; return when they are complete and detected.
 
     Raises InputError on the timeout; KeyboardInterrupt propagates (the detections not started are dropped).

@@ -91,14 +91,25 @@ def upgrade(settings: Settings) -> UpgradeResult:
 
 
 def verify(
-    settings: Settings, *, trusted_keys: Path | None = None, require_signature: bool = False, since: str | None = None
+    settings: Settings,
+    *,
+    trusted_keys: Path | None = None,
+    require_signature: bool = False,
+    since: str | None = None,
 ) -> VerifyReport:
     """Check every chain, signature, counter, event and stored hash (or only what came after ``since``)."""
     trusted = keys.trusted_of(settings, trusted_keys)
     with Store.open(settings.db_url, create=False) as store:
         audit = store.verify(trusted, require_signature=require_signature, since=since)
         return VerifyReport(
-            store.url, store.counts(), audit.problems, audit.head(), since, audit.records_checked,
-            audit.signatures_checked, audit.unsigned, len(trusted.keys),
+            store.url,
+            store.counts(),
+            audit.problems,
+            audit.head(),
+            since,
+            audit.records_checked,
+            audit.signatures_checked,
+            audit.unsigned,
+            len(trusted.keys),
             orphan_images=len(store.orphan_images()),
         )

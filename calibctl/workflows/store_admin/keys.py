@@ -139,18 +139,27 @@ class SourceTrust:
         adds, why an acceptable import is held back or None). ``activate``: None = by the rule; True = also
         unsigned or untrusted (the override is recorded); False = never."""
         do_activate = acceptable and (activate if activate is not None else self.may_activate)
-        override = (f" ({self.mark}; activated with --activate although this store requires signatures)"
-                    if do_activate and not self.may_activate else "")
+        override = (
+            f" ({self.mark}; activated with --activate although this store requires signatures)"
+            if do_activate and not self.may_activate
+            else ""
+        )
         held_back = None
         if acceptable and activate is None and not self.may_activate:
-            words = ("unsigned" if self.mark == "unsigned" else
-                     f"signed by a key this store does not trust ({self.mark.split()[-1][:16]})")
-            held_back = f"imported {words}, not active (this store requires signatures; --activate to override)"
+            words = (
+                "unsigned"
+                if self.mark == "unsigned"
+                else f"signed by a key this store does not trust ({self.mark.split()[-1][:16]})"
+            )
+            held_back = (
+                f"imported {words}, not active (this store requires signatures; --activate to override)"
+            )
         return do_activate, override, held_back
 
 
-def source_trust(settings: Settings, art: Sealed, trusted: TrustedKeys, trusted_keys: Path | None,
-                 require_signature: bool) -> SourceTrust:
+def source_trust(
+    settings: Settings, art: Sealed, trusted: TrustedKeys, trusted_keys: Path | None, require_signature: bool
+) -> SourceTrust:
     """``art``'s signature as ``trusted`` judges it, and whether this store requires signatures."""
     mark, ok = signature_mark(art, trusted)
     return SourceTrust(mark, ok, requires_signatures(settings, trusted_keys) or require_signature)
@@ -163,6 +172,10 @@ def require_trusted(art: Sealed, source: str, trusted: TrustedKeys, required: bo
     if problem is None or (not required and "does not match" not in problem):
         return
     if required and not trusted.keys:
-        raise UsageError("--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys")
-    raise InputError(f"{source} ({art.ref}) {problem}",
-                     "import only what a store whose public key is in --trusted-keys DIR exported")
+        raise UsageError(
+            "--require-signature needs trusted keys", "pass --trusted-keys DIR or set trusted_keys"
+        )
+    raise InputError(
+        f"{source} ({art.ref}) {problem}",
+        "import only what a store whose public key is in --trusted-keys DIR exported",
+    )

@@ -32,7 +32,9 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
         raise UsageError(f"'{ref}' is not SERIAL or SERIAL@N")
     version = match.group("version")
     if version and (len(version) > 10 or int(version) > MAX_VERSION):
-        raise UsageError(f"'{ref}': version {version[:20]} is out of range", f"versions go from 1 to {MAX_VERSION}")
+        raise UsageError(
+            f"'{ref}': version {version[:20]} is out of range", f"versions go from 1 to {MAX_VERSION}"
+        )
     return match.group("serial"), int(version) if version else None
 
 
@@ -43,8 +45,12 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
 
-    return Store.open(settings.db_url, create=create, signer=keys.signer_of(settings) if write else None,
-                      trusted=None if write else keys.read_trust(settings))
+    return Store.open(
+        settings.db_url,
+        create=create,
+        signer=keys.signer_of(settings) if write else None,
+        trusted=None if write else keys.read_trust(settings),
+    )
 
 
 @dataclass
@@ -84,8 +90,12 @@ class History:
 def history(settings: Settings, serial: str) -> History:
     artifacts, active, events, checks = sqlite_reads.read(
         settings.db_url,
-        lambda store: (store.list_artifacts(serial), store.active_version(serial), store.events(serial),
-                       store.checks(serial)),
+        lambda store: (
+            store.list_artifacts(serial),
+            store.active_version(serial),
+            store.events(serial),
+            store.checks(serial),
+        ),
         lambda: open_store(settings),
     )
     rows = [
@@ -112,8 +122,12 @@ def show(settings: Settings, ref: str) -> CalibrationArtifact:
     from calibctl.workflows.store_admin import keys  # the trusted keys: `history` reads without them
 
     serial, version = parse_artifact_ref(ref)
-    return sqlite_reads.read(settings.db_url, lambda store: store.get_artifact(serial, version),
-                             lambda: open_store(settings), keys.read_trust(settings))
+    return sqlite_reads.read(
+        settings.db_url,
+        lambda store: store.get_artifact(serial, version),
+        lambda: open_store(settings),
+        keys.read_trust(settings),
+    )
 
 
 def export(
@@ -135,7 +149,9 @@ def export(
     from calibctl.workflows.exports import formats  # the writers: not for history or show
 
     if fmt not in formats.EXPORT_FORMATS:
-        raise UsageError(f"unknown export format '{fmt}'", f"choose one of {', '.join(formats.EXPORT_FORMATS)}")
+        raise UsageError(
+            f"unknown export format '{fmt}'", f"choose one of {', '.join(formats.EXPORT_FORMATS)}"
+        )
     if camera_name is not None and fmt != "ros":
         raise UsageError("--camera-name applies to --format ros only")
     art = show(settings, ref)
@@ -182,19 +198,28 @@ def check_rollback_request(to_version: int, reason: str) -> None:
         raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
     bounded.check_text(reason, "--reason", "the reason")
     if len(reason) > MAX_REASON_CHARS:  # kept forever in the chained event log, printed in every history
-        raise UsageError(f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
-                         "say why in a sentence or two; put long notes in the ticket the reason names")
+        raise UsageError(
+            f"the reason is {len(reason)} characters long (at most {MAX_REASON_CHARS})",
+            "say why in a sentence or two; put long notes in the ticket the reason names",
+        )
     if not 1 <= to_version <= MAX_VERSION:
         raise UsageError(f"version {to_version} is out of range", f"versions go from 1 to {MAX_VERSION}")
 
 
-def rollback(settings: Settings, serial: str, to_version: int, reason: str,
-             expected_active: int | None = None) -> ActivationEvent | None:
+def rollback(
+    settings: Settings, serial: str, to_version: int, reason: str, expected_active: int | None = None
+) -> ActivationEvent | None:
     """Roll back as a compare-and-set: against ``expected_active`` (what the technician saw) when given,
     else against the active version read first; a change in between refuses the rollback. None when
     ``to_version`` is the active version already (nothing written: a retried rollback is done)."""
     check_rollback_request(to_version, reason)
     with open_store(settings, write=True) as store:
         seen = store.active_version(serial) if expected_active is None else expected_active
-        return store.rollback(serial, to_version, reason=reason, actor=settings.operator, station=settings.station,
-                              expected_active=seen)
+        return store.rollback(
+            serial,
+            to_version,
+            reason=reason,
+            actor=settings.operator,
+            station=settings.station,
+            expected_active=seen,
+        )

@@ -60,8 +60,14 @@ class SynthResult:
     n_views: int
 
     def as_json(self) -> dict[str, object]:
-        return {"out_dir": str(self.out_dir), "scenario": self.scenario, "image_size": list(self.image_size),
-                "files": self.files, "truth": str(self.truth_path), "n_views": self.n_views}
+        return {
+            "out_dir": str(self.out_dir),
+            "scenario": self.scenario,
+            "image_size": list(self.image_size),
+            "files": self.files,
+            "truth": str(self.truth_path),
+            "n_views": self.n_views,
+        }
 
 
 def default_board(pattern: str = "chessboard") -> BoardSpec:
@@ -89,7 +95,9 @@ def _prepare_out(out: Path, force: bool) -> None:
         if not force:
             raise AlreadyExistsError(f"{out} is not empty", "choose an empty or new folder, or pass --force")
         olds = list(out.glob("view-*.png")) + [out / VIDEO_FILE, out / TRUTH_FILE]
-        ours = [old for old in olds if existing_target(old) is not None]  # a symlink/FIFO there: refused, kept
+        ours = [
+            old for old in olds if existing_target(old) is not None
+        ]  # a symlink/FIFO there: refused, kept
         with file_errors("clear", out):
             for old in ours:
                 old.unlink()
@@ -101,15 +109,27 @@ def _view_record(camera: PinholeCamera | FisheyeCamera, board: BoardSpec, T: np.
     rvec, tvec = rvec_tvec(T)
     normal = T[:3, 2]
     facing = -normal if normal[2] > 0 else normal
-    return {"rvec": rvec.tolist(), "tvec": tvec.tolist(), "T_cam_board": T.tolist(),
-            "corners_px": true_corners_px(camera, board, T).tolist(),
-            "tilt_deg": math.degrees(math.acos(min(1.0, abs(float(normal[2]))))),
-            "direction_deg": math.degrees(math.atan2(facing[1], facing[0])) % 360.0}
+    return {
+        "rvec": rvec.tolist(),
+        "tvec": tvec.tolist(),
+        "T_cam_board": T.tolist(),
+        "corners_px": true_corners_px(camera, board, T).tolist(),
+        "tilt_deg": math.degrees(math.acos(min(1.0, abs(float(normal[2]))))),
+        "direction_deg": math.degrees(math.atan2(facing[1], facing[0])) % 360.0,
+    }
 
 
-def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | None = None,
-              image_size: tuple[int, int] = (640, 480), pattern: str = "chessboard", force: bool = False,
-              fisheye_fov_deg: float | None = None, circular: bool = True) -> SynthResult:
+def run_synth(
+    out: Path,
+    scenario: str = "good",
+    seed: int = 0,
+    views: int | None = None,
+    image_size: tuple[int, int] = (640, 480),
+    pattern: str = "chessboard",
+    force: bool = False,
+    fisheye_fov_deg: float | None = None,
+    circular: bool = True,
+) -> SynthResult:
     """Render one scenario into ``out``. Deterministic for a given (scenario, seed, views, size, pattern).
 
     ``fisheye_fov_deg``: render through an equidistant fisheye of that field of view instead (scenario
@@ -133,16 +153,22 @@ def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | Non
         else:
             poses = scenario_poses(scenario, camera, board, views or DEFAULT_VIEWS, rng)
     except ValueError as exc:
-        raise UsageError(f"cannot stage scenario {scenario!r} at {image_size[0]}x{image_size[1]}: {exc}") from exc
+        raise UsageError(
+            f"cannot stage scenario {scenario!r} at {image_size[0]}x{image_size[1]}: {exc}"
+        ) from exc
     _prepare_out(out, force)
     background = render_background(image_size, rng)
     records: list[dict[str, object]] = []
     files: list[str] = []
     writer = None
     if scenario == "video":
-        writer = cv2.VideoWriter(str(out / VIDEO_FILE), cv2.VideoWriter.fourcc(*"MJPG"), VIDEO_FPS, image_size, False)
+        writer = cv2.VideoWriter(
+            str(out / VIDEO_FILE), cv2.VideoWriter.fourcc(*"MJPG"), VIDEO_FPS, image_size, False
+        )
         if not writer.isOpened():
-            raise InputError(f"cannot write an MJPG video to {out / VIDEO_FILE}", "is OpenCV built with video I/O?")
+            raise InputError(
+                f"cannot write an MJPG video to {out / VIDEO_FILE}", "is OpenCV built with video I/O?"
+            )
         files.append(VIDEO_FILE)
     photometry = Photometry.random(rng)
     try:
@@ -165,10 +191,18 @@ def run_synth(out: Path, scenario: str = "good", seed: int = 0, views: int | Non
             writer.release()
     truth: dict[str, object] = {
         "schema": TRUTH_SCHEMA,
-        "generator": {"scenario": scenario, "seed": seed, "calibctl_version": __version__,
-                      "opencv_version": cv2.__version__},
-        "camera": {"model": "pinhole + Brown-Conrady (k1, k2, p1, p2, k3)", "K": camera.K.tolist(),
-                   "dist": camera.dist.tolist(), "image_size": list(image_size)},
+        "generator": {
+            "scenario": scenario,
+            "seed": seed,
+            "calibctl_version": __version__,
+            "opencv_version": cv2.__version__,
+        },
+        "camera": {
+            "model": "pinhole + Brown-Conrady (k1, k2, p1, p2, k3)",
+            "K": camera.K.tolist(),
+            "dist": camera.dist.tolist(),
+            "image_size": list(image_size),
+        },
         "board": board.to_dict(),
         "views": records,
     }
@@ -187,8 +221,17 @@ def load_truth(path: Path) -> dict[str, object]:
     return data
 
 
-def _run_fisheye(out: Path, scenario: str, seed: int, views: int | None, image_size: tuple[int, int], pattern: str,
-                 force: bool, fov_deg: float, circular: bool) -> SynthResult:
+def _run_fisheye(
+    out: Path,
+    scenario: str,
+    seed: int,
+    views: int | None,
+    image_size: tuple[int, int],
+    pattern: str,
+    force: bool,
+    fov_deg: float,
+    circular: bool,
+) -> SynthResult:
     """``calibctl synth --fisheye FOV``: PNG views through an equidistant lens, and truth.json."""
     if scenario != "good":
         raise UsageError(f"--fisheye renders the good scenario only, not {scenario!r}", "drop --scenario")
@@ -200,10 +243,20 @@ def _run_fisheye(out: Path, scenario: str, seed: int, views: int | None, image_s
     board = default_board(pattern)
     rng = np.random.default_rng(seed)
     try:
-        poses = fisheye_poses(camera, board.object_points(), views or DEFAULT_VIEWS, rng,
-                              default_fisheye_distance_m(camera, board.square_size_m), (15.0, 45.0), None, 6.0)
+        poses = fisheye_poses(
+            camera,
+            board.object_points(),
+            views or DEFAULT_VIEWS,
+            rng,
+            default_fisheye_distance_m(camera, board.square_size_m),
+            (15.0, 45.0),
+            None,
+            6.0,
+        )
     except ValueError as exc:
-        raise UsageError(f"cannot stage a {fov_deg:g} deg fisheye at {image_size[0]}x{image_size[1]}: {exc}") from exc
+        raise UsageError(
+            f"cannot stage a {fov_deg:g} deg fisheye at {image_size[0]}x{image_size[1]}: {exc}"
+        ) from exc
     _prepare_out(out, force)
     background = render_background(image_size, rng)
     dark = camera.outside_circle()
@@ -217,11 +270,20 @@ def _run_fisheye(out: Path, scenario: str, seed: int, views: int | None, image_s
         records.append({"file": name, **_view_record(camera, board, T)})
     truth = {
         "schema": TRUTH_SCHEMA,
-        "generator": {"scenario": scenario, "seed": seed, "calibctl_version": __version__,
-                      "opencv_version": cv2.__version__},
-        "camera": {"model": "fisheye (equidistant Kannala-Brandt, k1..k4; cv2.fisheye, ROS equidistant)",
-                   "K": camera.K.tolist(), "dist": camera.dist.tolist(), "image_size": list(image_size),
-                   "fov_deg": fov_deg, "image_circle_px": camera.circle_radius_px},
+        "generator": {
+            "scenario": scenario,
+            "seed": seed,
+            "calibctl_version": __version__,
+            "opencv_version": cv2.__version__,
+        },
+        "camera": {
+            "model": "fisheye (equidistant Kannala-Brandt, k1..k4; cv2.fisheye, ROS equidistant)",
+            "K": camera.K.tolist(),
+            "dist": camera.dist.tolist(),
+            "image_size": list(image_size),
+            "fov_deg": fov_deg,
+            "image_circle_px": camera.circle_radius_px,
+        },
         "board": board.to_dict(),
         "views": records,
     }

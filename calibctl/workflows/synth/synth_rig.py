@@ -44,14 +44,24 @@ class RigSynthResult:
     truth_path: Path
 
     def as_json(self) -> dict[str, object]:
-        return {"out_dir": str(self.out_dir), "cameras": list(self.cameras), "n_frames": self.n_frames,
-                "photos_per_camera": dict(zip(self.cameras, self.photos_per_camera, strict=True)),
-                "truth": str(self.truth_path)}
+        return {
+            "out_dir": str(self.out_dir),
+            "cameras": list(self.cameras),
+            "n_frames": self.n_frames,
+            "photos_per_camera": dict(zip(self.cameras, self.photos_per_camera, strict=True)),
+            "truth": str(self.truth_path),
+        }
 
 
-def run_synth_rig(out: Path, n_cameras: int, seed: int = 0, frames: int | None = None,
-                  image_size: tuple[int, int] = (640, 480), baseline_mm: float | None = None,
-                  force: bool = False) -> RigSynthResult:
+def run_synth_rig(
+    out: Path,
+    n_cameras: int,
+    seed: int = 0,
+    frames: int | None = None,
+    image_size: tuple[int, int] = (640, 480),
+    baseline_mm: float | None = None,
+    force: bool = False,
+) -> RigSynthResult:
     """Render a seeded rig session into ``out`` (module docstring). Deterministic for the same arguments."""
     if not 2 <= n_cameras <= 4:
         raise UsageError(f"--rig takes 2 to 4 cameras, got {n_cameras}")
@@ -59,14 +69,18 @@ def run_synth_rig(out: Path, n_cameras: int, seed: int = 0, frames: int | None =
     if not 2 <= n_frames <= 200:
         raise UsageError(f"--views must be between 2 and 200 for a rig, got {n_frames}")
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not force)):
-        raise InputError(f"{out} exists and is not an empty folder", "choose an empty or new folder, or pass --force")
+        raise InputError(
+            f"{out} exists and is not an empty folder", "choose an empty or new folder, or pass --force"
+        )
     board = default_board()
     rng = np.random.default_rng(seed)
     baselines = None if baseline_mm is None else (baseline_mm / 1e3,) * (n_cameras - 1)
     try:
         truth = synthesize_rig(n_cameras, board, n_frames, rng, image_size, baselines, min_cameras=2)
     except ValueError as exc:
-        raise UsageError(f"cannot stage a {n_cameras}-camera rig at {image_size[0]}x{image_size[1]}: {exc}") from exc
+        raise UsageError(
+            f"cannot stage a {n_cameras}-camera rig at {image_size[0]}x{image_size[1]}: {exc}"
+        ) from exc
     counts = [0] * n_cameras
     frame_records = []
     for name in truth.names:
@@ -87,13 +101,24 @@ def run_synth_rig(out: Path, n_cameras: int, seed: int = 0, frames: int | None =
         frame_records.append({"frame": f, "T_root_board": truth.T_root_board[f].tolist(), "seen_by": seen})
     doc = {
         "schema": RIG_TRUTH_SCHEMA,
-        "generator": {"seed": seed, "cameras": n_cameras, "calibctl_version": __version__,
-                      "opencv_version": cv2.__version__},
+        "generator": {
+            "seed": seed,
+            "cameras": n_cameras,
+            "calibctl_version": __version__,
+            "opencv_version": cv2.__version__,
+        },
         "board": board.to_dict(),
         "root": truth.names[0],
-        "cameras": [{"name": n, "K": cam.K.tolist(), "dist": cam.dist.tolist(), "image_size": list(cam.image_size),
-                     "T_root_cam": T.tolist()} for n, cam, T in zip(truth.names, truth.cameras, truth.T_root_cam,
-                                                                   strict=True)],
+        "cameras": [
+            {
+                "name": n,
+                "K": cam.K.tolist(),
+                "dist": cam.dist.tolist(),
+                "image_size": list(cam.image_size),
+                "T_root_cam": T.tolist(),
+            }
+            for n, cam, T in zip(truth.names, truth.cameras, truth.T_root_cam, strict=True)
+        ],
         "frames": frame_records,
     }
     truth_path = out / RIG_TRUTH_FILE

@@ -27,7 +27,9 @@ def renders(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     camera = PinholeCamera.seed_reference()
     rng = np.random.default_rng(5)
     for i, T in enumerate(scenario_poses("good", camera, BOARD, 4, rng)):
-        assert cv2.imwrite(str(folder / f"v{i:02d}.png"), render_view(camera, BOARD, T, rng, Photometry.random(rng)))
+        assert cv2.imwrite(
+            str(folder / f"v{i:02d}.png"), render_view(camera, BOARD, T, rng, Photometry.random(rng))
+        )
     (folder / "w-broken.png").write_bytes(b"not a png")
     return list_images(folder)
 
@@ -75,25 +77,38 @@ def test_early_detections_are_the_outcomes_classify_files_gives(renders: list[Pa
     for future in early.futures():
         future.result()
     batch_halves: list[object] = []
-    batch = classify_files(renders, BOARD, workers=workers, summarize=sized_half, on_summary=batch_halves.append)
+    batch = classify_files(
+        renders, BOARD, workers=workers, summarize=sized_half, on_summary=batch_halves.append
+    )
     calls: list[tuple[int, int, str]] = []
     halves: list[object] = []
     known = early.for_spec(BOARD, sized_half)
     assert known is not None
-    reused = classify_files(renders, BOARD, workers=workers, summarize=sized_half, on_summary=halves.append,
-                            known=known, progress=lambda done, total, o: calls.append((done, total, o.name)))
-    assert [(o.name, o.status, o.reason, o.sha256, o.image_size) for o in reused] == \
-        [(o.name, o.status, o.reason, o.sha256, o.image_size) for o in batch]
+    reused = classify_files(
+        renders,
+        BOARD,
+        workers=workers,
+        summarize=sized_half,
+        on_summary=halves.append,
+        known=known,
+        progress=lambda done, total, o: calls.append((done, total, o.name)),
+    )
+    assert [(o.name, o.status, o.reason, o.sha256, o.image_size) for o in reused] == [
+        (o.name, o.status, o.reason, o.sha256, o.image_size) for o in batch
+    ]
     for a, b in zip(reused, batch, strict=True):
         assert (a.corners_px is None) == (b.corners_px is None)
         if a.corners_px is not None:
             assert np.array_equal(a.corners_px, b.corners_px) and np.array_equal(a.corner_ids, b.corner_ids)
     assert [d for d, _, _ in calls] == list(range(1, len(renders) + 1))
-    assert sorted(np.asarray(h[1]).tobytes() for h in halves) == \
-        sorted(np.asarray(h[1]).tobytes() for h in batch_halves)  # type: ignore[index]
+    assert sorted(np.asarray(h[1]).tobytes() for h in halves) == sorted(
+        np.asarray(h[1]).tobytes() for h in batch_halves
+    )  # type: ignore[index]
 
 
-def test_a_file_changed_since_its_early_detection_is_detected_again(renders: list[Path], tmp_path: Path) -> None:
+def test_a_file_changed_since_its_early_detection_is_detected_again(
+    renders: list[Path], tmp_path: Path
+) -> None:
     shot = tmp_path / "v.png"
     shutil.copyfile(renders[0], shot)
     early = EarlyDetections(BOARD, 1, summarize=sized_half)

@@ -25,8 +25,12 @@ from tests.datasets import BAKA_STEREO, LEFT_RIGHT, UDACITY, needs_datasets
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 MISSING_SIDE_MIN = 3 * OUTER_MAX_FRAC  # the side with the missing squares scored >= 0.63 on every view
-SUB_GRIDS = {"left": (slice(None), slice(1, None)), "right": (slice(None), slice(None, -1)),
-             "top": (slice(1, None), slice(None)), "bottom": (slice(None, -1), slice(None))}
+SUB_GRIDS = {
+    "left": (slice(None), slice(1, None)),
+    "right": (slice(None), slice(None, -1)),
+    "top": (slice(1, None), slice(None)),
+    "bottom": (slice(None, -1), slice(None)),
+}
 
 
 def _gray(path: Path) -> np.ndarray:
@@ -139,7 +143,7 @@ def test_rendered_correct_boards_say_no_and_short_sub_grids_say_maybe(rendered) 
 def test_a_side_whose_outer_row_leaves_the_image_is_unknown(rendered) -> None:
     image, corners = rendered[0]
     right_px = corners.reshape(6, 9, 2)[:, -1, 0].min()
-    cropped = np.ascontiguousarray(image[:, :int(right_px) + 2])  # just past the right column of corners
+    cropped = np.ascontiguousarray(image[:, : int(right_px) + 2])  # just past the right column of corners
     scores = {s.side: s for s in score_sides(cropped, corners, 9, 6)}
     assert scores["right"].maybe and scores["right"].outer is None
     assert might_extend(cropped, corners, 9, 6)
@@ -162,9 +166,13 @@ def test_a_row_of_squares_past_the_ring_is_seen_on_any_side(rendered) -> None:
 
 
 @needs_datasets
-@pytest.mark.parametrize(("folder", "pattern", "board"), [(LEFT_RIGHT, "left*.jpg", (9, 6)),
-                                                           (BAKA_STEREO / "right", "*.jpg", (10, 7))])
-def test_visible_chessboard_most_often_reads_the_whole_board(folder: Path, pattern: str, board: tuple[int, int]) -> None:
+@pytest.mark.parametrize(
+    ("folder", "pattern", "board"),
+    [(LEFT_RIGHT, "left*.jpg", (9, 6)), (BAKA_STEREO / "right", "*.jpg", (10, 7))],
+)
+def test_visible_chessboard_most_often_reads_the_whole_board(
+    folder: Path, pattern: str, board: tuple[int, int]
+) -> None:
     # measured (OpenCV 4.10 / 5.0): the whole board in 12-13 of the 13 left images and 19-20 of the 30 baka
     # right ones; the rest read part of it, none, or (SB reaching into the outer edge) a line more, which is
     # why pattern_check confirms a size with the classic detector before naming it

@@ -52,8 +52,13 @@ def test_the_left_and_right_folder_is_two_cameras_split_exactly(stereo_folder):
     assert {names[i][:5] for i in split.group_b} == {"right"} and len(split.group_b) == 13
     # each group's camera is the camera a plain OpenCV solve of that camera's files finds
     for group, camera in ((split.group_a, split.camera_a), (split.group_b, split.camera_b)):
-        _, K_plain, _, _, _ = cv2.calibrateCamera([obj[i].astype(np.float32) for i in group],
-                                                  [img[i].astype(np.float32) for i in group], (640, 480), None, None)
+        _, K_plain, _, _, _ = cv2.calibrateCamera(
+            [obj[i].astype(np.float32) for i in group],
+            [img[i].astype(np.float32) for i in group],
+            (640, 480),
+            None,
+            None,
+        )
         assert abs(camera[0, 2] - K_plain[0, 2]) < 3.0 and abs(camera[0, 0] - K_plain[0, 0]) < 5.0
     assert abs(split.camera_a[0, 2] - split.camera_b[0, 2]) > 10.0  # cx: 342 vs 326 px
 
@@ -91,8 +96,11 @@ def test_a_principal_point_shift_alone_is_absorbed_by_the_poses() -> None:
     almost as well (each view's pose re-fit absorbs most of it), so this is not called two cameras."""
     one = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 12, seed=1, noise_px=0.2)
     other = synthesize_session(K(800.0, 341.3, 228.7), D, (640, 480), 12, seed=2, noise_px=0.2)
-    split = check_one_camera([*one.object_points_per_view, *other.object_points_per_view],
-                             [*one.image_points_per_view, *other.image_points_per_view], (640, 480))
+    split = check_one_camera(
+        [*one.object_points_per_view, *other.object_points_per_view],
+        [*one.image_points_per_view, *other.image_points_per_view],
+        (640, 480),
+    )
     assert split is not None and split.group_a == tuple(range(12))  # the split itself is found
     assert not split.suspected
 
@@ -106,11 +114,16 @@ def test_the_capture_gate_fails_the_mixed_folder_with_a_hint_and_passes_each_cam
     assert not mixed.passed and mixed.gate == "one_camera" and mixed.reason == "one_camera.two_cameras"
     assert mixed.value >= TWO_CAMERA_RATIO and mixed.threshold == TWO_CAMERA_RATIO
     assert "two cameras" in mixed.hint and "--source 'left*.jpg'" in mixed.hint  # type: ignore[operator]
-    assert float(mixed.detail["ratio_k1k2"]) >= TWO_CAMERA_RATIO and float(mixed.detail["ratio_fisheye"]) >= TWO_CAMERA_RATIO
+    assert (
+        float(mixed.detail["ratio_k1k2"]) >= TWO_CAMERA_RATIO
+        and float(mixed.detail["ratio_fisheye"]) >= TWO_CAMERA_RATIO
+    )
     assert sorted(mixed.detail["group_a"]) == sorted(n for n in names if n.startswith("left"))  # type: ignore[arg-type]
     for camera in ("left", "right"):
         mine = [i for i, n in enumerate(names) if n.startswith(camera)]
-        alone = one_camera_gate([obj[i] for i in mine], [img[i] for i in mine], [names[i] for i in mine], (640, 480))
+        alone = one_camera_gate(
+            [obj[i] for i in mine], [img[i] for i in mine], [names[i] for i in mine], (640, 480)
+        )
         assert alone.passed and 0.0 < alone.value < TWO_CAMERA_RATIO and alone.reason is None
 
 
@@ -131,8 +144,12 @@ def test_the_views_checked_are_spread_evenly_first_and_last_included() -> None:
 def test_the_capture_gate_passes_a_session_too_small_to_check_and_says_so() -> None:
     too_few = max(min_views_to_split(m) for m in camera_split.CAPTURE_MODELS) - 1
     ses = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), too_few, seed=4)
-    gate = one_camera_gate(ses.object_points_per_view, ses.image_points_per_view,
-                           [f"v{i}" for i in range(len(ses.image_points_per_view))], (640, 480))
+    gate = one_camera_gate(
+        ses.object_points_per_view,
+        ses.image_points_per_view,
+        [f"v{i}" for i in range(len(ses.image_points_per_view))],
+        (640, 480),
+    )
     assert gate.passed and gate.value == 0.0 and str(gate.detail["summary"]).startswith("not checked")
 
 
@@ -178,7 +195,9 @@ def test_near_frontal_views_that_fit_any_focal_length_are_no_second_camera(seed)
     K = np.array([[1060.0, 0.0, 480.0], [0.0, 1000.0, 270.0], [0.0, 0.0, 1.0]])
     dist, size = np.array([0.05, -0.1, 0.0, 0.0, 0.0]), (960, 540)
     tilted = synthesize_session(K, dist, size, 6, seed=seed, tilt_deg=(25.0, 40.0), distance_m=(0.45, 0.7))
-    frontal = synthesize_session(K, dist, size, 8, seed=100 + seed, tilt_deg=(0.0, 3.0), distance_m=(0.45, 0.7))
+    frontal = synthesize_session(
+        K, dist, size, 8, seed=100 + seed, tilt_deg=(0.0, 3.0), distance_m=(0.45, 0.7)
+    )
     obj = [*tilted.object_points_per_view, *frontal.object_points_per_view]
     img = [*tilted.image_points_per_view, *frontal.image_points_per_view]
     assert check_one_camera(obj, img, size, "k1k2") is None
@@ -212,7 +231,9 @@ def test_the_same_question_is_answered_once(monkeypatch) -> None:
     real = camera_split._check_one_camera
     monkeypatch.setattr(camera_split, "_check_one_camera", lambda *a: calls.append(a) or real(*a))
     first = check_one_camera(obj, img, (640, 480))
-    again = check_one_camera([o.copy() for o in obj], [np.array(i, dtype=np.float64) for i in img], (640, 480))
+    again = check_one_camera(
+        [o.copy() for o in obj], [np.array(i, dtype=np.float64) for i in img], (640, 480)
+    )
     assert first is not None and again is first and len(calls) == 1
     moved = [i.copy() for i in img]
     moved[5][7, 0] += 1e-6
@@ -232,7 +253,9 @@ def _rounds_with_and_without_settling(monkeypatch, obj, img, size):
     holding the module's constants."""
     camera_split.forget_recent_checks()
     settled = check_one_camera(obj, img, size)
-    monkeypatch.setattr(camera_split, "SETTLED_GAIN", 0.0)  # no reassignment gains less than nothing: never settled
+    monkeypatch.setattr(
+        camera_split, "SETTLED_GAIN", 0.0
+    )  # no reassignment gains less than nothing: never settled
     camera_split.forget_recent_checks()
     full = check_one_camera(obj, img, size)
     camera_split.forget_recent_checks()
@@ -245,8 +268,9 @@ def test_one_camera_stops_alternating_once_only_noise_would_move(monkeypatch) ->
     several rounds to settle; with it the alternation ends after its second round (the first is never
     judged) on a split that is still one camera."""
     same = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 24, seed=30, noise_px=0.1)
-    settled, full = _rounds_with_and_without_settling(monkeypatch, same.object_points_per_view,
-                                                      same.image_points_per_view, (640, 480))
+    settled, full = _rounds_with_and_without_settling(
+        monkeypatch, same.object_points_per_view, same.image_points_per_view, (640, 480)
+    )
     assert full.rounds > settled.rounds >= 2
     assert not settled.suspected and not full.suspected
     assert sorted(settled.group_a + settled.group_b) == list(range(24))
@@ -265,7 +289,9 @@ def test_two_cameras_drifting_apart_slowly_are_not_stopped(monkeypatch) -> None:
     settled, full = _rounds_with_and_without_settling(monkeypatch, obj, img, (640, 480))
     assert full.suspected and full.rounds >= 3
     assert (settled.group_a, settled.rounds, settled.ratio) == (full.group_a, full.rounds, full.ratio)
-    assert len({order[i] < n for i in settled.group_a}) == 1 and len(settled.group_a) == n  # one camera, all of it
+    assert (
+        len({order[i] < n for i in settled.group_a}) == 1 and len(settled.group_a) == n
+    )  # one camera, all of it
 
 
 def test_a_split_with_no_residual_or_a_non_finite_one_never_settles() -> None:

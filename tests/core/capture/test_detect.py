@@ -53,11 +53,15 @@ def good_views() -> list[tuple[np.ndarray, np.ndarray]]:
     """8 rendered views of the good scenario: (image, true corners)."""
     rng = np.random.default_rng(11)
     poses = scenario_poses("good", CAMERA, BOARD, 8, rng)
-    return [(render_view(CAMERA, BOARD, T, rng, Photometry.random(rng)), true_corners_px(CAMERA, BOARD, T))
-            for T in poses]
+    return [
+        (render_view(CAMERA, BOARD, T, rng, Photometry.random(rng)), true_corners_px(CAMERA, BOARD, T))
+        for T in poses
+    ]
 
 
-def corner_errors(views: list[tuple[np.ndarray, np.ndarray]], settings: DetectorSettings | None = None) -> np.ndarray:
+def corner_errors(
+    views: list[tuple[np.ndarray, np.ndarray]], settings: DetectorSettings | None = None
+) -> np.ndarray:
     errors = []
     for img, truth in views:
         det, why = detect_chessboard(img, BOARD.cols, BOARD.rows, settings)
@@ -122,8 +126,14 @@ def test_every_kind_of_bad_image_gets_its_outcome(tmp_path: Path, good_views) ->
     assert by_name["b-copy.png"].reason.startswith("same view as a-good.png: corners moved 0.0 px")
     assert by_name["b-copy.png"].sha256 == by_name["a-good.png"].sha256
     assert by_name["c-other.png"].status == ACCEPTED
-    assert by_name["d-blurred.png"].status == BLURRED and "px wide (limit 8.0 px)" in by_name["d-blurred.png"].reason
-    assert by_name["e-empty-scene.png"].status == NO_BOARD and "9x6 chessboard" in by_name["e-empty-scene.png"].reason
+    assert (
+        by_name["d-blurred.png"].status == BLURRED
+        and "px wide (limit 8.0 px)" in by_name["d-blurred.png"].reason
+    )
+    assert (
+        by_name["e-empty-scene.png"].status == NO_BOARD
+        and "9x6 chessboard" in by_name["e-empty-scene.png"].reason
+    )
     assert by_name["f-big.png"].status == WRONG_SIZE
     assert by_name["f-big.png"].reason == "image is 800x600 but the session's images are 640x480"
     assert by_name["g-text.png"].status == UNREADABLE and by_name["g-text.png"].image_size is None
@@ -133,7 +143,9 @@ def test_every_kind_of_bad_image_gets_its_outcome(tmp_path: Path, good_views) ->
 def test_parallel_and_sequential_runs_agree_and_report_progress(tmp_path: Path, good_views) -> None:
     paths = [write(tmp_path / f"v{i}.png", img) for i, (img, _) in enumerate(good_views[:5])]
     seen: list[tuple[int, int]] = []
-    parallel = classify_files(paths, BOARD, workers=2, progress=lambda done, total, _: seen.append((done, total)))
+    parallel = classify_files(
+        paths, BOARD, workers=2, progress=lambda done, total, _: seen.append((done, total))
+    )
     sequential = classify_files(paths, BOARD, workers=1)
     processes = classify_files(paths[:3], BOARD, workers=2, executor="process")
     assert sorted(seen) == [(i, 5) for i in range(1, 6)]
@@ -149,13 +161,23 @@ def test_parallel_and_sequential_runs_agree_and_report_progress(tmp_path: Path, 
 
 
 @pytest.mark.parametrize("executor", ["thread", "process"])
-def test_workers_hand_a_summary_of_each_decoded_image_back_once(tmp_path: Path, good_views, executor: str) -> None:
+def test_workers_hand_a_summary_of_each_decoded_image_back_once(
+    tmp_path: Path, good_views, executor: str
+) -> None:
     paths = [write(tmp_path / f"v{i}.png", img) for i, (img, _) in enumerate(good_views[:4])]
     (tmp_path / "broken.png").write_bytes(b"not a png")
     seen: list[object] = []
-    outcomes = classify_files([*paths, tmp_path / "broken.png"], BOARD, workers=2, executor=executor,
-                              summarize=sized_half, on_summary=seen.append)
-    assert [o.status for o in outcomes][-1] == UNREADABLE and len(seen) == 4  # the undecodable file is not passed on
+    outcomes = classify_files(
+        [*paths, tmp_path / "broken.png"],
+        BOARD,
+        workers=2,
+        executor=executor,
+        summarize=sized_half,
+        on_summary=seen.append,
+    )
+    assert [o.status for o in outcomes][-1] == UNREADABLE and len(
+        seen
+    ) == 4  # the undecodable file is not passed on
     expected = {half_size(img).tobytes() for img, _ in good_views[:4]}
     assert {reduced.tobytes() for (size, reduced) in seen} == expected  # type: ignore[misc]
     assert {size for size, _ in seen} == {(640, 480)}  # type: ignore[misc]
@@ -189,6 +211,7 @@ def test_charuco_partial_views_keep_their_ids() -> None:
 
 
 # ---- real photos: every per-image outcome, exactly -------------------------------------------------
+
 
 @needs_datasets
 @pytest.mark.parametrize("side", ["left", "right"])
@@ -241,6 +264,7 @@ def test_udacity_every_image_outcome() -> None:
 
 # ---- noise-like images: the classic detector is skipped, SB still runs --------------------------------
 
+
 def _noisy_board(sigma: float, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     T = scenario_poses("good", CAMERA, BOARD, 3, rng)[1]
@@ -291,8 +315,13 @@ def _centred_correlation(gray: np.ndarray, stride: int = 4) -> float:
 def test_the_one_pass_neighbour_correlation_equals_the_centred_form() -> None:
     rng = np.random.default_rng(5)
     noise = rng.integers(0, 256, (240, 320), dtype=np.uint8)
-    images = [noise, cv2.GaussianBlur(noise, (0, 0), 1.0), _noisy_board(80.0, seed=4), np.full((240, 320), 7, np.uint8),
-              render_view(CAMERA, BOARD, scenario_poses("good", CAMERA, BOARD, 1, rng)[0], rng)]
+    images = [
+        noise,
+        cv2.GaussianBlur(noise, (0, 0), 1.0),
+        _noisy_board(80.0, seed=4),
+        np.full((240, 320), 7, np.uint8),
+        render_view(CAMERA, BOARD, scenario_poses("good", CAMERA, BOARD, 1, rng)[0], rng),
+    ]
     got = [neighbour_correlation(g) for g in images]
     np.testing.assert_allclose(got, [_centred_correlation(g) for g in images], atol=1e-9)
     assert got[3] == 1.0 and got[0] < 0.05 < 0.9 < got[4]
@@ -311,11 +340,14 @@ def test_a_board_found_without_a_consistent_grid_is_not_called_no_board() -> Non
     assert cv2.findChessboardCornersSB(noisy, (9, 6))[0]
     outcome = classify_array("noisy.png", "noisy.png", noisy, "0" * 64, BOARD)
     assert outcome.status == BAD_GRID and outcome.corners_px is None
-    assert outcome.reason == ("a 9x6 chessboard was found but its corners do not form a consistent grid "
-                              "(blurred, bent or partly hidden?)")
+    assert outcome.reason == (
+        "a 9x6 chessboard was found but its corners do not form a consistent grid "
+        "(blurred, bent or partly hidden?)"
+    )
 
 
 # ---- a large frame without a board: "no board", from searches on the reduced copy only ----------------
+
 
 def _large_board_free_frame(kind: str) -> np.ndarray:
     """4000x3000 frames that cost the most in benchmarks/bench_detect.py section 2."""
@@ -335,7 +367,13 @@ def _large_board_free_frame(kind: str) -> np.ndarray:
 def test_a_large_board_free_frame_is_no_board_after_two_searches_of_its_quarter_copy(kind: str) -> None:
     frame = _large_board_free_frame(kind)
     levels = search_levels(frame, DetectorSettings())
-    assert [(m, img.shape, k) for m, img, k in levels] == [("classic", (750, 1000), 4), ("sb", (750, 1000), 4)]
+    assert [(m, img.shape, k) for m, img, k in levels] == [
+        ("classic", (750, 1000), 4),
+        ("sb", (750, 1000), 4),
+    ]
     outcome = classify_array("big.png", "big.png", frame, "", BOARD)
     assert outcome.status == NO_BOARD and outcome.corners_px is None and outcome.image_size == (4000, 3000)
-    assert outcome.reason == "no 9x6 chessboard found (classic and SB detectors); is the whole board in the frame?"
+    assert (
+        outcome.reason
+        == "no 9x6 chessboard found (classic and SB detectors); is the whole board in the frame?"
+    )

@@ -78,29 +78,39 @@ def test_calibctl_finds_every_board_a_plain_call_finds(name: str) -> None:
             refused_without_reason.append((path.name, outcome.status, outcome.reason))
     assert lost == [], f"boards a plain OpenCV call finds but calibctl does not: {lost}"
     assert refused_without_reason == []
-    assert all(o.reason.startswith(f"no {cols}x{rows} chessboard found") for o in outcomes if o.status == NO_BOARD)
+    assert all(
+        o.reason.startswith(f"no {cols}x{rows} chessboard found") for o in outcomes if o.status == NO_BOARD
+    )
 
 
 def _solve_rms_fx(corners: list[np.ndarray], image_size: tuple[int, int]) -> tuple[float, float]:
     """Plain cv2.calibrateCamera (default flags, square size 1) on 9x6 views: (RMS px, fx px)."""
     model = BoardSpec.chessboard(9, 6, 1.0).object_points().astype(np.float32)
-    rms, K, *_ = cv2.calibrateCamera([model] * len(corners), [c.astype(np.float32) for c in corners],
-                                     image_size, None, None)
+    rms, K, *_ = cv2.calibrateCamera(
+        [model] * len(corners), [c.astype(np.float32) for c in corners], image_size, None, None
+    )
     return float(rms), float(K[0, 0])
 
 
-@pytest.mark.parametrize(("folder", "glob", "image_size", "reference_rms_px", "reference_fx_px"), [
-    (LEFT_RIGHT, "left*.jpg", (640, 480), 0.408695, 536.0735),  # measured: 0.178 px, fx 533.2
-    (UDACITY, "calibration*.jpg", (1280, 720), 1.003, 1156.46),  # measured: 0.845 px, fx 1156.9
-])
+@pytest.mark.parametrize(
+    ("folder", "glob", "image_size", "reference_rms_px", "reference_fx_px"),
+    [
+        (LEFT_RIGHT, "left*.jpg", (640, 480), 0.408695, 536.0735),  # measured: 0.178 px, fx 533.2
+        (UDACITY, "calibration*.jpg", (1280, 720), 1.003, 1156.46),  # measured: 0.845 px, fx 1156.9
+    ],
+)
 def test_calibctl_corners_fit_better_than_the_datasets_reference_recipe(
-        folder: Path, glob: str, image_size: tuple[int, int], reference_rms_px: float, reference_fx_px: float) -> None:
+    folder: Path, glob: str, image_size: tuple[int, int], reference_rms_px: float, reference_fx_px: float
+) -> None:
     """DATASET.md's reference solves use classic + cornerSubPix 11x11 corners on the images the classic
     detector finds. The same solve on calibctl's corners of the same images must fit at least as well
     and land on the same focal length (within 1 %: mrcal, solving the board's warp, moves
     opencv-left-right's fx by 0.4 %)."""
-    paths = [p for p in sorted(folder.glob(glob))
-             if cv2.findChessboardCorners(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (9, 6), flags=CLASSIC_FLAGS)[0]]
+    paths = [
+        p
+        for p in sorted(folder.glob(glob))
+        if cv2.findChessboardCorners(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (9, 6), flags=CLASSIC_FLAGS)[0]
+    ]
     outcomes = classify_session(paths, BoardSpec.chessboard(9, 6, 0.025), image_size=image_size)
     assert all(o.corners_px is not None for o in outcomes)
     rms_px, fx_px = _solve_rms_fx([o.corners_px for o in outcomes], image_size)  # type: ignore[misc]

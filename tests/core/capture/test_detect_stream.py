@@ -26,8 +26,10 @@ def test_board_free_frames_get_the_full_search_only_every_fifth_frame(monkeypatc
     results = [detector.detect(np.full((720, 1280), i, np.uint8)) for i in range(12)]
     assert calls == [0, 5, 10]  # frames 1, 6 and 11
     assert all(det is None for det, _ in results)
-    assert results[1][1] == ("no 7x10 chessboard: nothing chessboard-like at a quick look (a full search runs on "
-                             "every 5th frame and after each board)")
+    assert results[1][1] == (
+        "no 7x10 chessboard: nothing chessboard-like at a quick look (a full search runs on "
+        "every 5th frame and after each board)"
+    )
     assert results[0][1].startswith("no 7x10 chessboard found")
 
 
@@ -36,8 +38,14 @@ def test_a_board_the_quick_check_misses_is_found_within_five_frames_and_then_kep
     """baka-stereo left_001772846857023.jpg: checkChessboard says no (on the 640 px copy), the classic
     detector finds the board. Held in view from frame 3 on, it is found at frame 6 and in every frame after."""
     board = cv2.imread(str(BAKA_STEREO / "left" / "left_001772846857023.jpg"), cv2.IMREAD_GRAYSCALE)
-    small = cv2.resize(board, (board.shape[1] * STREAM_CHECK_SIDE_PX // board.shape[1],
-                               board.shape[0] * STREAM_CHECK_SIDE_PX // board.shape[1]), interpolation=cv2.INTER_AREA)
+    small = cv2.resize(
+        board,
+        (
+            board.shape[1] * STREAM_CHECK_SIDE_PX // board.shape[1],
+            board.shape[0] * STREAM_CHECK_SIDE_PX // board.shape[1],
+        ),
+        interpolation=cv2.INTER_AREA,
+    )
     assert not cv2.checkChessboard(small, (7, 10))
     blank = np.full_like(board, 128)
     detector = StreamDetector(BAKA_BOARD, full_every=5)
@@ -49,8 +57,12 @@ def _ahead(detector: StreamDetector, frames: list[np.ndarray]) -> list[tuple[obj
     """The frames as a capture with jobs > 1 detects them: every frame probed first (as if on other workers,
     knowing only whether it is forced), then settled in order."""
     planned = [(gray, detector.next_forced()) for gray in frames]
-    probes = [frame_select.probe_frame(gray, detector.spec, detector.settings, forced) for gray, forced in planned]
-    return [detector.settle(gray, forced, probe) for (gray, forced), probe in zip(planned, probes, strict=True)]
+    probes = [
+        frame_select.probe_frame(gray, detector.spec, detector.settings, forced) for gray, forced in planned
+    ]
+    return [
+        detector.settle(gray, forced, probe) for (gray, forced), probe in zip(planned, probes, strict=True)
+    ]
 
 
 def _same(a: list[tuple[object, str]], b: list[tuple[object, str]]) -> bool:
@@ -90,4 +102,6 @@ def test_a_board_the_quick_check_misses_is_settled_as_the_one_thread_detector_fi
     expected = [one_thread.detect(gray) for gray in frames]
     ahead = StreamDetector(BAKA_BOARD, full_every=5)
     assert _same(_ahead(ahead, frames), expected)
-    assert ahead.settled_searches == 4  # frames 7-10: the quick check misses the board the frame before showed
+    assert (
+        ahead.settled_searches == 4
+    )  # frames 7-10: the quick check misses the board the frame before showed

@@ -38,8 +38,11 @@ def _session(root: Path, seed: int) -> tuple[list[BoardView], dict[str, dict]]:
 
 
 def _truly_distinct(views: list[BoardView], truth: dict[str, dict]) -> int:
-    return len(distinct_directions([truth[v.name]["direction_deg"] for v in views
-                                    if 20.0 <= truth[v.name]["tilt_deg"] <= 45.0]))
+    return len(
+        distinct_directions(
+            [truth[v.name]["direction_deg"] for v in views if 20.0 <= truth[v.name]["tilt_deg"] <= 45.0]
+        )
+    )
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +50,9 @@ def renders(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("fisheye-tilt")
 
 
-def test_a_190_deg_session_reads_every_tilt_through_the_fisheye_lens_and_passes_the_gate(renders: Path) -> None:
+def test_a_190_deg_session_reads_every_tilt_through_the_fisheye_lens_and_passes_the_gate(
+    renders: Path,
+) -> None:
     views, truth = _session(renders, 5)
     geo = view_geometries(views, SPEC.object_points(), SIZE)
     assert geo.lens is not None and geo.lens.source == "fisheye" and not geo.unused
@@ -69,6 +74,8 @@ def test_a_flat_190_deg_session_still_fails_the_tilt_gate() -> None:
     camera = FisheyeCamera.from_fov(SIZE, 190.0)
     session = synthesize_fisheye_session(camera, 12, seed=3, tilt_deg=(0.0, 3.0), max_view_deg=8.0)
     assert float(np.max(session.tilt_deg)) < 15.0
-    views = [BoardView(f"view-{i:03d}", np.arange(len(p)), p) for i, p in enumerate(session.image_points_per_view)]
+    views = [
+        BoardView(f"view-{i:03d}", np.arange(len(p)), p) for i, p in enumerate(session.image_points_per_view)
+    ]
     gate = evaluate_gates(views, session.object_points_per_view[0], SIZE).gate("tilt")
     assert not gate.passed and gate.value == 0

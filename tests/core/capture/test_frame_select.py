@@ -55,8 +55,13 @@ def test_one_still_frame_is_kept_per_key_pose_and_never_a_moving_one() -> None:
         if not still:
             assert d.status == MOVING and d.motion_px is not None
             # it read "board moving (156.4 px since the previous frame, still below 2.4 px)"
-            assert re.fullmatch(r"board moving: \d+\.\d px since the previous frame \(still is under \d+\.\d px\)",
-                                d.reason) or d.reason == "board not seen in the previous frame", d.reason
+            assert (
+                re.fullmatch(
+                    r"board moving: \d+\.\d px since the previous frame \(still is under \d+\.\d px\)",
+                    d.reason,
+                )
+                or d.reason == "board not seen in the previous frame"
+            ), d.reason
     # the first frame of each pause follows motion, the ones after the kept frame repeat it
     statuses = [d.status for still, _, d in rows if still]
     assert statuses[:4] == [MOVING, KEPT, NEAR_DUPLICATE, NEAR_DUPLICATE]
@@ -112,7 +117,9 @@ def test_still_views_that_add_nothing_are_declined_once_min_views_is_reached() -
     assert nudged_decisions[3].reason == "adds no coverage or tilt the session lacks"
 
 
-@pytest.mark.parametrize(("tilt", "band"), [(0.0, 0), (9.99, 0), (10.0, 1), (25.0, 2), (30.0, 3), (45.0, 3), (46.0, 4)])
+@pytest.mark.parametrize(
+    ("tilt", "band"), [(0.0, 0), (9.99, 0), (10.0, 1), (25.0, 2), (30.0, 3), (45.0, 3), (46.0, 4)]
+)
 def test_tilt_bands(tilt: float, band: int) -> None:
     assert tilt_band(tilt) == band
 

@@ -32,8 +32,13 @@ BOARD = BoardSpec.chessboard(9, 6, 0.025)
 REF_SIZE = (640, 480)
 
 
-def reference_homographies(tilt_rad: float, scale: float = 1.0, unit: float = 1.0, n_views: int = 8,
-                           directions: list[float] | None = None) -> list[np.ndarray]:
+def reference_homographies(
+    tilt_rad: float,
+    scale: float = 1.0,
+    unit: float = 1.0,
+    n_views: int = 8,
+    directions: list[float] | None = None,
+) -> list[np.ndarray]:
     """The seed's reference rig: f = 800 px, c = (320, 240), board centred at 0.60 m, noiseless, no distortion.
 
     ``scale`` reads the same lens out at scale x the resolution (K scaled); ``unit`` rescales the model.
@@ -76,7 +81,9 @@ def test_observability_does_not_depend_on_square_size_units(unit: float) -> None
 def test_observability_does_not_change_with_readout_resolution(scale: float) -> None:
     native = observability(reference_homographies(0.35), REF_SIZE)
     scaled_size = (round(640 * scale), round(480 * scale))
-    assert observability(reference_homographies(0.35, scale=scale), scaled_size) == pytest.approx(native, rel=INVARIANCE_REL)
+    assert observability(reference_homographies(0.35, scale=scale), scaled_size) == pytest.approx(
+        native, rel=INVARIANCE_REL
+    )
 
 
 def test_observability_needs_three_views() -> None:
@@ -113,7 +120,10 @@ def test_missing_directions_are_the_ones_farthest_from_what_was_collected() -> N
     compass = [45.0 * b for b in range(8)]
     assert directions_to_add([0.0], compass, 2) == [180.0, 90.0]  # right collected -> left, then bottom
     assert directions_to_add([0.0, 180.0], compass, 1) == [90.0]
-    assert directions_to_add([170.0, 200.0], compass, 2) == [0.0, 90.0]  # left, leaning up -> right, then bottom
+    assert directions_to_add([170.0, 200.0], compass, 2) == [
+        0.0,
+        90.0,
+    ]  # left, leaning up -> right, then bottom
 
 
 def test_coverage_counts_cells_reached_by_any_corner() -> None:
@@ -124,8 +134,10 @@ def test_coverage_counts_cells_reached_by_any_corner() -> None:
 def scenario_report(scenario: str, thresholds: GateThresholds | None = None, seed: int = 7):
     camera = PinholeCamera.seed_reference()
     poses = scenario_poses(scenario, camera, BOARD, 12, np.random.default_rng(seed))
-    views = [BoardView(f"v{i}", np.arange(BOARD.n_corners), true_corners_px(camera, BOARD, T))
-             for i, T in enumerate(poses)]
+    views = [
+        BoardView(f"v{i}", np.arange(BOARD.n_corners), true_corners_px(camera, BOARD, T))
+        for i, T in enumerate(poses)
+    ]
     return evaluate_gates(views, BOARD.object_points(), camera.image_size, thresholds)
 
 
@@ -164,7 +176,10 @@ def test_tilt_in_one_direction_trips_the_tilt_gate_with_a_worded_hint() -> None:
     tilt = report.gate("tilt")
     assert not tilt.passed and tilt.reason == "tilt.directions"
     assert tilt.value == 1.0 and tilt.detail["directions"] == ["right"]
-    assert tilt.detail["missing_directions"][0] == "left" and tilt.detail["missing_directions"][1] in ("top", "bottom")
+    assert tilt.detail["missing_directions"][0] == "left" and tilt.detail["missing_directions"][1] in (
+        "top",
+        "bottom",
+    )
     assert tilt.hint.startswith("tilt the board toward the left and ")
     assert "all lean toward the right" in tilt.hint
     assert report.gate("coverage").passed

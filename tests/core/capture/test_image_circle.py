@@ -64,7 +64,10 @@ def test_the_circle_of_a_circular_fisheye_is_found_where_the_render_put_it(circu
     circle = detect_image_circle(_max_picture(sorted(circular_190.glob("view-*.png"))), SIZE)
     assert circle is not None and circle.source == "detected"
     K = np.array(truth["K"])
-    assert abs(circle.cx_px - K[0, 2]) < CENTRE_TOLERANCE_PX and abs(circle.cy_px - K[1, 2]) < CENTRE_TOLERANCE_PX
+    assert (
+        abs(circle.cx_px - K[0, 2]) < CENTRE_TOLERANCE_PX
+        and abs(circle.cy_px - K[1, 2]) < CENTRE_TOLERANCE_PX
+    )
     assert abs(circle.radius_px - truth["image_circle_px"]) < CENTRE_TOLERANCE_PX
 
 
@@ -113,15 +116,20 @@ def test_a_circle_is_found_when_dark_things_inside_it_reach_its_rim() -> None:
 def test_only_cells_mostly_inside_the_circle_are_asked_for() -> None:
     circle = ImageCircle(322.8, 237.4, 236.0, "given")
     assert cells_inside(circle, SIZE, 3) == {(r, c) for r in range(3) for c in range(3)} - CORNER_CELLS
-    assert cells_inside(ImageCircle(320, 240, 2000, "given"), SIZE, 3) == {(r, c) for r in range(3) for c in range(3)}
+    assert cells_inside(ImageCircle(320, 240, 2000, "given"), SIZE, 3) == {
+        (r, c) for r in range(3) for c in range(3)
+    }
 
 
-@pytest.mark.parametrize(("circle", "words"), [
-    ((700.0, 200.0, 100.0), "centre (700, 200) px lies outside the 640x480 image"),
-    ((320.0, 240.0, 0.0), "radius must be positive, got 0 px"),
-    ((320.0, 240.0, 10.0), "covers no cell of the 3x3 coverage grid"),
-    ((320.0, float("nan"), 10.0), "is not three finite numbers"),
-])
+@pytest.mark.parametrize(
+    ("circle", "words"),
+    [
+        ((700.0, 200.0, 100.0), "centre (700, 200) px lies outside the 640x480 image"),
+        ((320.0, 240.0, 0.0), "radius must be positive, got 0 px"),
+        ((320.0, 240.0, 10.0), "covers no cell of the 3x3 coverage grid"),
+        ((320.0, float("nan"), 10.0), "is not three finite numbers"),
+    ],
+)
 def test_a_circle_that_cannot_be_the_image_circle_is_named_with_its_numbers(circle, words) -> None:
     problem = circle_problem(circle, SIZE)
     assert problem is not None and words in problem
@@ -139,14 +147,18 @@ def test_a_circular_session_passes_coverage_with_its_circle_and_fails_without_it
     with_circle = evaluate_gates(views, SPEC.object_points(), SIZE, image_circle=circle).gate("coverage")
     assert with_circle.passed and (with_circle.value, with_circle.threshold) == (5.0, 5.0)
     assert sorted(with_circle.detail["cells_outside_circle"]) == sorted(  # type: ignore[arg-type]
-        ["top-left corner", "top-right corner", "bottom-left corner", "bottom-right corner"])
-    assert circle_from_detail(with_circle.detail) == ImageCircle(*(round(x, 2) for x in circle.as_tuple()),
-                                                                 source="detected")
+        ["top-left corner", "top-right corner", "bottom-left corner", "bottom-right corner"]
+    )
+    assert circle_from_detail(with_circle.detail) == ImageCircle(
+        *(round(x, 2) for x in circle.as_tuple()), source="detected"
+    )
     # a cell inside the circle that no corner reaches is still asked for, by name
     left_only = [v for v in views if np.asarray(v.corners_px)[:, 0].max() < 2 * SIZE[0] / 3]
     missed = evaluate_gates(left_only, SPEC.object_points(), SIZE, image_circle=circle).gate("coverage")
     assert not missed.passed and "right edge" in missed.detail["missing_cells"]  # type: ignore[operator]
-    assert missed.hint is not None and "right edge" in missed.hint and "inside the image circle" in missed.hint
+    assert (
+        missed.hint is not None and "right edge" in missed.hint and "inside the image circle" in missed.hint
+    )
     assert "corner" not in " ".join(missed.detail["missing_cells"])  # type: ignore[arg-type]
 
 
@@ -164,13 +176,17 @@ def test_foldover_beyond_the_image_circle_is_not_held_against_a_pinhole_model() 
     assert not check_distortion_foldover(K, dist, SIZE).passed
     inside = check_distortion_foldover(K, dist, SIZE, (319.5, 239.5, 236.0))
     assert inside.passed and "inside the image circle" in inside.message
-    assert not check_distortion_foldover(K, dist, SIZE, (319.5, 239.5, 280.0)).passed  # r_d 0.93: folds inside
+    assert not check_distortion_foldover(
+        K, dist, SIZE, (319.5, 239.5, 280.0)
+    ).passed  # r_d 0.93: folds inside
 
 
 def test_the_equidistant_foldover_stops_at_the_circle() -> None:
     # theta_d = theta (1 - 0.06 theta^2) peaks at theta = 2.36 rad (135 deg), theta_d = 1.57
     K = np.array([[140.0, 0.0, 319.5], [0.0, 140.0, 239.5], [0.0, 0.0, 1.0]])
     dist = np.array([-0.06, 0.0, 0.0, 0.0])
-    assert check_equidistant_foldover(K, dist, SIZE, (319.5, 239.5, 200.0)).passed  # theta_d 1.43 at the circle
+    assert check_equidistant_foldover(
+        K, dist, SIZE, (319.5, 239.5, 200.0)
+    ).passed  # theta_d 1.43 at the circle
     folded = check_equidistant_foldover(K, dist, SIZE, (319.5, 239.5, 236.0))  # theta_d 1.69: past the peak
     assert not folded.passed and "inside the image circle" in folded.message

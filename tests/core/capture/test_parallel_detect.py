@@ -45,7 +45,9 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     rng = np.random.default_rng(24)
     poses = scenario_poses("good", CAMERA, BOARD, 11, rng)
     for i, T in enumerate(poses[:10]):
-        assert cv2.imwrite(str(folder / f"v{i:02d}.png"), render_view(CAMERA, BOARD, T, rng, Photometry.random(rng)))
+        assert cv2.imwrite(
+            str(folder / f"v{i:02d}.png"), render_view(CAMERA, BOARD, T, rng, Photometry.random(rng))
+        )
     shutil.copy(folder / "v00.png", folder / "w-copy.png")
     blurred = render_view(CAMERA, BOARD, poses[10], rng, Photometry(blur_sigma_px=4.5))
     assert cv2.imwrite(str(folder / "x-blurred.png"), blurred)
@@ -74,8 +76,14 @@ def assert_same(runs: dict[str, list[ImageOutcome]]) -> None:
     for name, outcomes in others:
         assert [o.name for o in outcomes] == [o.name for o in first], name
         for a, b in zip(outcomes, first, strict=True):
-            assert (a.status, a.reason, a.sha256, a.image_size, a.method, a.edge_width_px) == \
-                   (b.status, b.reason, b.sha256, b.image_size, b.method, b.edge_width_px), f"{name} vs {first_name}: {a.name}"
+            assert (a.status, a.reason, a.sha256, a.image_size, a.method, a.edge_width_px) == (
+                b.status,
+                b.reason,
+                b.sha256,
+                b.image_size,
+                b.method,
+                b.edge_width_px,
+            ), f"{name} vs {first_name}: {a.name}"
             if b.corners_px is None:
                 assert a.corners_px is None
             else:
@@ -91,7 +99,9 @@ def runs_at_every_job_count(paths: list[Path]) -> dict[str, list[ImageOutcome]]:
     return runs
 
 
-def test_renders_get_the_same_outcomes_and_bit_identical_corners_at_jobs_1_2_and_4(rendered: list[Path]) -> None:
+def test_renders_get_the_same_outcomes_and_bit_identical_corners_at_jobs_1_2_and_4(
+    rendered: list[Path],
+) -> None:
     runs = runs_at_every_job_count(rendered)
     assert_same(runs)
     statuses = {o.name: o.status for o in runs["thread x1"]}
@@ -142,8 +152,12 @@ def test_ctrl_c_cancels_the_queued_files_and_leaves_the_warm_pool_usable(rendere
     with pytest.raises(KeyboardInterrupt):
         classify_files(paths, BOARD, workers=2, executor="process", progress=interrupt_at_the_third)
     assert seen == [1, 2, 3]  # nothing was reported after the interrupt
-    assert_same({"after": classify_files(rendered, BOARD, workers=2, executor="process"),
-                 "one": classify_files(rendered, BOARD, workers=1)})
+    assert_same(
+        {
+            "after": classify_files(rendered, BOARD, workers=2, executor="process"),
+            "one": classify_files(rendered, BOARD, workers=1),
+        }
+    )
 
 
 def _broken_pool() -> ProcessPoolExecutor:
@@ -168,8 +182,11 @@ def test_a_killed_worker_is_reported_and_the_next_run_gets_a_new_pool(rendered: 
     from calibctl.errors import WorkerDiedError
 
     pool = _broken_pool()
-    with pytest.raises(WorkerDiedError, match=r"a detection worker process died .* not yet detected: .*nothing was "
-                       r"stored") as died:
+    with pytest.raises(
+        WorkerDiedError,
+        match=r"a detection worker process died .* not yet detected: .*nothing was "
+        r"stored",
+    ) as died:
         classify_files(rendered, BOARD, workers=2, executor="process")
     assert isinstance(died.value.__cause__, BrokenProcessPool) and died.value.exit_code == 2
     assert "free memory" in (died.value.hint or "")
@@ -216,8 +233,9 @@ def test_solve_stages_run_opencv_and_blas_on_one_thread_and_give_the_threads_bac
             cv2.setNumThreads(-1)
 
 
-@pytest.mark.parametrize(("n", "workers"), [(0, 2), (1, 2), (7, 2), (15, 2), (45, 2), (96, 2), (97, 4), (96, 16),
-                                            (1000, 1)])
+@pytest.mark.parametrize(
+    ("n", "workers"), [(0, 2), (1, 2), (7, 2), (15, 2), (45, 2), (96, 2), (97, 4), (96, 16), (1000, 1)]
+)
 def test_task_chunks_cover_every_file_once_in_order_and_shrink_to_single_files(n: int, workers: int) -> None:
     todo = list(range(0, 3 * n, 3))  # any file numbers: those a station detected early are left out
     chunks = task_chunks(todo, workers)
@@ -232,12 +250,20 @@ def test_task_chunks_cover_every_file_once_in_order_and_shrink_to_single_files(n
 
 
 @pytest.mark.parametrize("jobs", [2, 4])
-def test_files_in_tasks_report_in_order_once_each_with_an_unreadable_file_inside_a_task(tripled: list[Path],
-                                                                                         jobs: int) -> None:
+def test_files_in_tasks_report_in_order_once_each_with_an_unreadable_file_inside_a_task(
+    tripled: list[Path], jobs: int
+) -> None:
     reported: list[tuple[int, int, str]] = []
-    outcomes = classify_files(tripled, BOARD, workers=jobs, executor="process",
-                              progress=lambda done, total, o: reported.append((done, total, o.name)))
-    assert [done for done, _, _ in reported] == list(range(1, 46)) and {total for _, total, _ in reported} == {45}
+    outcomes = classify_files(
+        tripled,
+        BOARD,
+        workers=jobs,
+        executor="process",
+        progress=lambda done, total, o: reported.append((done, total, o.name)),
+    )
+    assert [done for done, _, _ in reported] == list(range(1, 46)) and {
+        total for _, total, _ in reported
+    } == {45}
     assert sorted(name for _, _, name in reported) == [p.name for p in tripled]  # each file once
     assert [o.name for o in outcomes] == [p.name for p in tripled]
     assert outcomes[14].status == "unreadable" and outcomes[13].status == "no_board" and outcomes[15].accepted
@@ -261,13 +287,21 @@ def test_a_worker_killed_mid_task_names_every_file_of_its_task(tripled: list[Pat
     pool = worker_pool.process_pool(2)
     reported: list[str] = []
     with pytest.raises(WorkerDiedError, match=r"a detection worker process died") as died:
-        classify_files(tripled, BOARD, workers=2, executor="process", summarize=kill_own_worker_at_the_800x600_file,
-                       progress=lambda done, total, o: reported.append(o.name))
+        classify_files(
+            tripled,
+            BOARD,
+            workers=2,
+            executor="process",
+            summarize=kill_own_worker_at_the_800x600_file,
+            progress=lambda done, total, o: reported.append(o.name),
+        )
     assert died.value.exit_code == 2 and isinstance(died.value.__cause__, BrokenProcessPool)
     tasks = task_chunks(range(len(tripled)), 2)
     assert not {tripled[i].name for i in tasks[1]} & set(reported)  # the killed task: none of it reported
     named = int(str(died.value).split(" with ")[1].split(" image(s)")[0])
     assert len(tasks[1]) <= named <= len(tripled) - len(reported)
     first = str(died.value).split("not yet detected: ")[1].split(",")[0]
-    assert first not in reported and first in {tripled[task[0]].name for task in tasks[:2]}  # a whole task named
+    assert first not in reported and first in {
+        tripled[task[0]].name for task in tasks[:2]
+    }  # a whole task named
     assert worker_pool.process_pool(2) is not pool  # forgotten: the next run starts a new pool

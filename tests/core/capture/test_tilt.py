@@ -24,9 +24,14 @@ TILT_ERR_MAX_DEG = 5.0
 def projected_session(camera: PinholeCamera, seed: int, n_views: int = 20, tilt_deg=(0.0, 50.0)):
     rng = np.random.default_rng(seed)
     poses, truth = sweep_poses(camera, BOARD, n_views, rng, tilt_deg)
-    views = [BoardView(f"v{i}", np.arange(BOARD.n_corners),
-                       true_corners_px(camera, BOARD, T) + rng.normal(0.0, NOISE_PX, (BOARD.n_corners, 2)))
-             for i, T in enumerate(poses)]
+    views = [
+        BoardView(
+            f"v{i}",
+            np.arange(BOARD.n_corners),
+            true_corners_px(camera, BOARD, T) + rng.normal(0.0, NOISE_PX, (BOARD.n_corners, 2)),
+        )
+        for i, T in enumerate(poses)
+    ]
     return views, np.array(truth)
 
 
@@ -51,7 +56,9 @@ def test_tilt_reads_true_through_the_seed_lens_across_0_to_50_degrees(size) -> N
 
 
 def test_near_flat_views_read_near_flat_even_at_the_image_edge() -> None:
-    errors, truth = tilt_errors(PinholeCamera.seed_reference((1280, 960)), seeds=range(3), tilt_deg=(0.0, 4.0))
+    errors, truth = tilt_errors(
+        PinholeCamera.seed_reference((1280, 960)), seeds=range(3), tilt_deg=(0.0, 4.0)
+    )
     assert np.all(truth + errors < 4.0 + TILT_ERR_MAX_DEG)
     assert np.abs(errors).max() < TILT_ERR_MAX_DEG
 
@@ -97,15 +104,24 @@ def test_a_view_whose_corners_span_too_small_an_area_is_not_used() -> None:
     assert report.gate("observability").detail["views_used"] == 12
 
 
-@pytest.mark.parametrize(("directions", "expected"), [
-    ([], 0), ([10.0], 1), ([0.0, 45.0, 89.0], 1), ([0.0, 90.0], 2), ([0.0, 45.0, 90.0, 180.0], 3),
-    ([0.0, 120.0, 240.0], 3), ([0.0, 90.0, 180.0, 270.0], 4), ([350.0, 80.0, 170.0, 260.0, 300.0], 4),
-])
+@pytest.mark.parametrize(
+    ("directions", "expected"),
+    [
+        ([], 0),
+        ([10.0], 1),
+        ([0.0, 45.0, 89.0], 1),
+        ([0.0, 90.0], 2),
+        ([0.0, 45.0, 90.0, 180.0], 3),
+        ([0.0, 120.0, 240.0], 3),
+        ([0.0, 90.0, 180.0, 270.0], 4),
+        ([350.0, 80.0, 170.0, 260.0, 300.0], 4),
+    ],
+)
 def test_distinct_directions_are_pairwise_at_least_90_degrees_apart(directions, expected) -> None:
     chosen = distinct_directions(directions)
     assert len(chosen) == expected
     for i, a in enumerate(chosen):
-        for b in chosen[i + 1:]:
+        for b in chosen[i + 1 :]:
             assert min(abs(a - b), 360.0 - abs(a - b)) >= 90.0 - 1e-9
 
 
@@ -127,7 +143,9 @@ def test_one_direction_with_25_degrees_of_scatter_counts_once_and_the_gate_fails
     missing = tilt.detail["missing_directions"]
     assert missing[0] == "right" and missing[1] in ("top", "bottom")
     assert tilt.hint.startswith(f"tilt the board toward the right and {missing[1]}")
-    lax = evaluate_gates(views, BOARD.object_points(), camera.image_size, GateThresholds(tilt_directions_min=1))
+    lax = evaluate_gates(
+        views, BOARD.object_points(), camera.image_size, GateThresholds(tilt_directions_min=1)
+    )
     assert lax.gate("tilt").passed
 
 
@@ -201,8 +219,10 @@ def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
     cam = FisheyeCamera.from_fov((640, 480), 150.0, circular=True)
     s = synthesize_fisheye_session(cam, 10, seed=1)
     model = chessboard_object_points(9, 6, 0.025)
-    views = [BoardView(f"v{i}", np.arange(len(model)), np.asarray(p, np.float64))
-             for i, p in enumerate(s.image_points_per_view)]
+    views = [
+        BoardView(f"v{i}", np.arange(len(model)), np.asarray(p, np.float64))
+        for i, p in enumerate(s.image_points_per_view)
+    ]
     obj, px = [model[v.corner_ids] for v in views], [v.corners_px for v in views]
     solve_module.forget_recent_solves()
     computed: list[str] = []

@@ -23,11 +23,14 @@ def plain_tilts(paths) -> dict[str, float]:
     for path in paths:
         gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         size = (gray.shape[1], gray.shape[0])
-        found, corners = cv2.findChessboardCorners(gray, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        found, corners = cv2.findChessboardCorners(
+            gray, (9, 6), cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+        )
         if not found:
             continue
-        corners = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1),
-                                   (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3))
+        corners = cv2.cornerSubPix(
+            gray, corners, (11, 11), (-1, -1), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+        )
         names.append(path.name)
         obj.append(BOARD.object_points().astype(np.float32))
         img.append(corners.reshape(-1, 2))

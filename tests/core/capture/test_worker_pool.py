@@ -101,8 +101,14 @@ def test_a_worker_killed_while_results_stream_back_settles_every_future(tmp_path
     script.write_text(KILL_WHILE_STREAMING)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
     try:
-        done = subprocess.run([sys.executable, str(script), str(seed)], capture_output=True, text=True,
-                              timeout=300, env=env, cwd=REPO)  # a deadlock guard, not a time limit
+        done = subprocess.run(
+            [sys.executable, str(script), str(seed)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=env,
+            cwd=REPO,
+        )  # a deadlock guard, not a time limit
     except subprocess.TimeoutExpired:
         pytest.fail("the caller never heard of the killed worker: a future never settled")
     assert done.returncode == 0, done.stderr[-2000:]

@@ -30,8 +30,16 @@ def calibrated():
     rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, SIZE, "k1k2", fit=fit)
     h = rep.holdout
     n = sum(len(p) for p in s.image_points_per_view)
-    ref = Reference(rep.holdout_rms_px, n, 20, h.radius_edges_px, h.ring_rms_px, h.ring_counts,
-                    h.octant_rms_px, h.octant_counts)
+    ref = Reference(
+        rep.holdout_rms_px,
+        n,
+        20,
+        h.radius_edges_px,
+        h.ring_rms_px,
+        h.ring_counts,
+        h.octant_rms_px,
+        h.octant_counts,
+    )
     sigma = {"focal": 0.3 / 800, "cx": 0.3, "cy": 0.3}
     return fit, ref, sigma
 
@@ -39,8 +47,15 @@ def calibrated():
 def _check(calibrated, camera: np.ndarray, seed: int, square_m: float = 0.025):
     fit, ref, sigma = calibrated
     s = synthesize_session(camera, D, SIZE, 10, seed=seed, noise_px=NOISE_PX, square_size_m=square_m)
-    return recheck(s.object_points_per_view, s.image_points_per_view, fit.camera_matrix, fit.dist_coeffs, SIZE,
-                   ref, sigma), s
+    return recheck(
+        s.object_points_per_view,
+        s.image_points_per_view,
+        fit.camera_matrix,
+        fit.dist_coeffs,
+        SIZE,
+        ref,
+        sigma,
+    ), s
 
 
 def test_an_unchanged_camera_passes_every_region_and_every_pull(calibrated):
@@ -75,8 +90,10 @@ def test_a_wrong_board_scale_leaves_no_residual_but_scales_the_distance(calibrat
     # Seed chapter 0: printed 25 mm, registered 23 mm -> same pixels, every distance x0.92.
     fit, ref, sigma = calibrated
     s = synthesize_session(K, D, SIZE, 10, seed=103, noise_px=NOISE_PX, square_size_m=0.025)
-    true_d = [float(np.linalg.norm(_R(r) @ s.object_points_per_view[i].mean(axis=0) + t))
-              for i, (r, t) in enumerate(zip(s.rvecs, s.tvecs, strict=True))]
+    true_d = [
+        float(np.linalg.norm(_R(r) @ s.object_points_per_view[i].mean(axis=0) + t))
+        for i, (r, t) in enumerate(zip(s.rvecs, s.tvecs, strict=True))
+    ]
     typo = [o * (0.023 / 0.025) for o in s.object_points_per_view]
     result = recheck(typo, s.image_points_per_view, fit.camera_matrix, fit.dist_coeffs, SIZE, ref, sigma)
     assert result.passed  # the residual cannot see it
@@ -124,11 +141,20 @@ def fisheye_calibrated():
     camera = FisheyeCamera.from_fov((1280, 960), 170.0)
     s = synthesize_fisheye_session(camera, 18, seed=11, noise_px=0.1)
     fit = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, camera.image_size, "fisheye")
-    rep = validate_holdout(s.object_points_per_view, s.image_points_per_view, camera.image_size, "fisheye",
-                           fit=fit)
+    rep = validate_holdout(
+        s.object_points_per_view, s.image_points_per_view, camera.image_size, "fisheye", fit=fit
+    )
     h = rep.holdout
-    ref = Reference(rep.holdout_rms_px, sum(len(p) for p in s.image_points_per_view), 18, h.radius_edges_px,
-                    h.ring_rms_px, h.ring_counts, h.octant_rms_px, h.octant_counts)
+    ref = Reference(
+        rep.holdout_rms_px,
+        sum(len(p) for p in s.image_points_per_view),
+        18,
+        h.radius_edges_px,
+        h.ring_rms_px,
+        h.ring_counts,
+        h.octant_rms_px,
+        h.octant_counts,
+    )
     sigma = {"focal": fit.sigma["fx"] / fit.camera_matrix[0, 0], "cx": fit.sigma["cx"], "cy": fit.sigma["cy"]}
     return camera, fit, ref, sigma
 
@@ -139,10 +165,22 @@ def _fisheye_check(fisheye_calibrated, dcx_px: float, model: str = "fisheye"):
     camera, fit, ref, sigma = fisheye_calibrated
     K = camera.K.copy()
     K[0, 2] += dcx_px
-    fresh = synthesize_fisheye_session(FisheyeCamera(K, camera.dist, camera.image_size, camera.fov_deg,
-                                                     camera.circle_radius_px), 10, seed=12, noise_px=0.1)
-    return recheck(fresh.object_points_per_view, fresh.image_points_per_view, fit.camera_matrix, fit.dist_coeffs,
-                   camera.image_size, ref, sigma, model=model)
+    fresh = synthesize_fisheye_session(
+        FisheyeCamera(K, camera.dist, camera.image_size, camera.fov_deg, camera.circle_radius_px),
+        10,
+        seed=12,
+        noise_px=0.1,
+    )
+    return recheck(
+        fresh.object_points_per_view,
+        fresh.image_points_per_view,
+        fit.camera_matrix,
+        fit.dist_coeffs,
+        camera.image_size,
+        ref,
+        sigma,
+        model=model,
+    )
 
 
 def test_a_fisheye_calibration_is_checked_through_its_own_model(fisheye_calibrated):

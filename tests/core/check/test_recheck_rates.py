@@ -45,9 +45,16 @@ def reference():
     obj, img = _views(_camera(), 20, np.random.default_rng(10_000))
     fit = solve_intrinsics(obj, img, SIZE, "k1k2")
     h = validate_holdout(obj, img, SIZE, "k1k2", fit=fit).holdout
-    ref = Reference(float(np.sqrt(np.nansum(h.ring_rms_px**2 * h.ring_counts) / h.ring_counts.sum())),
-                    int(h.ring_counts.sum()), 20, h.radius_edges_px, h.ring_rms_px, h.ring_counts, h.octant_rms_px,
-                    h.octant_counts)
+    ref = Reference(
+        float(np.sqrt(np.nansum(h.ring_rms_px**2 * h.ring_counts) / h.ring_counts.sum())),
+        int(h.ring_counts.sum()),
+        20,
+        h.radius_edges_px,
+        h.ring_rms_px,
+        h.ring_counts,
+        h.octant_rms_px,
+        h.octant_counts,
+    )
     sigma = {"focal": fit.sigma["fx"] / fit.camera_matrix[0, 0], "cx": fit.sigma["cx"], "cy": fit.sigma["cy"]}
     return fit.camera_matrix, fit.dist_coeffs, ref, sigma
 

@@ -27,10 +27,12 @@ def true_K(focal_scale: float = 1.0, dcx_px: float = 0.0) -> np.ndarray:
     return K
 
 
-def solve(K: np.ndarray, seed: int, model: str = "k1k2", dist: np.ndarray = TRUE_DIST,
-          views: int = VIEWS) -> IntrinsicsSolution:
-    s = synthesize_session(K, dist, SIZE, views, seed, noise_px=NOISE_PX, tilt_deg=(20.0, 45.0),
-                           distance_m=(0.3, 0.5))
+def solve(
+    K: np.ndarray, seed: int, model: str = "k1k2", dist: np.ndarray = TRUE_DIST, views: int = VIEWS
+) -> IntrinsicsSolution:
+    s = synthesize_session(
+        K, dist, SIZE, views, seed, noise_px=NOISE_PX, tilt_deg=(20.0, 45.0), distance_m=(0.3, 0.5)
+    )
     return solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, model)
 
 

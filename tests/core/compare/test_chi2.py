@@ -9,9 +9,18 @@ import pytest
 from calibctl.core.compare.chi2 import chi2_quantile, chi2_sf
 
 
-@pytest.mark.parametrize(("x", "dof", "p"), [(3.841459, 1, 0.05), (6.634897, 1, 0.01), (9.236357, 5, 0.1),
-                                              (16.749602, 5, 0.005), (20.090235, 8, 0.01), (2.0, 2, math.exp(-1.0)),
-                                              (63.690740, 40, 0.01)])
+@pytest.mark.parametrize(
+    ("x", "dof", "p"),
+    [
+        (3.841459, 1, 0.05),
+        (6.634897, 1, 0.01),
+        (9.236357, 5, 0.1),
+        (16.749602, 5, 0.005),
+        (20.090235, 8, 0.01),
+        (2.0, 2, math.exp(-1.0)),
+        (63.690740, 40, 0.01),
+    ],
+)
 def test_survival_function_matches_the_table(x: float, dof: int, p: float) -> None:
     assert chi2_sf(x, dof) == pytest.approx(p, rel=1e-5)
 

@@ -13,8 +13,10 @@ PAIRS = 30
 
 
 def _flagged(K_b: np.ndarray, seed0: int) -> int:
-    return sum(bool(projection_diff(lens(true_K(), seed0 + i), lens(K_b, seed0 + 10_000 + i)).significant)
-               for i in range(PAIRS))
+    return sum(
+        bool(projection_diff(lens(true_K(), seed0 + i), lens(K_b, seed0 + 10_000 + i)).significant)
+        for i in range(PAIRS)
+    )
 
 
 @pytest.mark.slow

@@ -15,7 +15,9 @@ SIZE = (640, 480)
 
 def _lens(camera: FisheyeCamera, seed: int):
     s = synthesize_fisheye_session(camera, 24, seed, noise_px=0.03)
-    return lens_from_solution(solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, "fisheye"))
+    return lens_from_solution(
+        solve_intrinsics(s.object_points_per_view, s.image_points_per_view, SIZE, "fisheye")
+    )
 
 
 @pytest.fixture(scope="module")

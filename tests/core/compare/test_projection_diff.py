@@ -39,7 +39,9 @@ def test_a_focal_change_of_0_3_percent_is_different(reference: list[Lens], seed:
 
 
 @pytest.mark.parametrize("seed", SEEDS_FAST)
-def test_a_1px_principal_point_shift_is_different_and_mostly_a_rotation(reference: list[Lens], seed: int) -> None:
+def test_a_1px_principal_point_shift_is_different_and_mostly_a_rotation(
+    reference: list[Lens], seed: int
+) -> None:
     result = projection_diff(reference[seed], lens(true_K(dcx_px=1.0), 400 + seed))
     assert result.significant is True
     # a shift of the principal point is nearly a yaw of the camera frame: the fitted rotation takes most of it
@@ -92,8 +94,15 @@ def test_projection_jacobians_match_finite_differences() -> None:
     K = np.array([[420.0, 0.0, 330.0], [0.0, 415.0, 242.0], [0.0, 0.0, 1.0]])
     D = np.array([0.02, -0.01, 0.004, -0.001])
     fisheye = Lens(K, D, SIZE, True, np.eye(8), FISHEYE_PARAMETERS)
-    pinhole = Lens(K, np.array([-0.2, 0.08, 0.0, 0.0, 0.0]), SIZE, False, np.eye(5), ("fy", "cx", "cy", "k1", "k2"),
-                   aspect=420.0 / 415.0)
+    pinhole = Lens(
+        K,
+        np.array([-0.2, 0.08, 0.0, 0.0, 0.0]),
+        SIZE,
+        False,
+        np.eye(5),
+        ("fy", "cx", "cy", "k1", "k2"),
+        aspect=420.0 / 415.0,
+    )
     rays, ok = unproject(fisheye, np.array([[100.0, 80.0], [330.0, 240.0], [600.0, 400.0]]))
     assert ok.all()
     for lens_ in (fisheye, pinhole):
@@ -120,8 +129,11 @@ def _bump(lens_: Lens, name: str, h: float) -> Lens:
         if name == "fy" and lens_.aspect is not None:
             K[0, 0] += lens_.aspect * h
     else:
-        D[["k1", "k2", "p1", "p2", "k3", "k4"].index(name) if not lens_.fisheye else
-          ["k1", "k2", "k3", "k4"].index(name)] += h
+        D[
+            ["k1", "k2", "p1", "p2", "k3", "k4"].index(name)
+            if not lens_.fisheye
+            else ["k1", "k2", "k3", "k4"].index(name)
+        ] += h
     return dataclasses.replace(lens_, camera_matrix=K, dist_coeffs=D)
 
 

@@ -29,8 +29,12 @@ def _tree(baseline_m: float = 0.075, yaw_rad: float = 0.0, third: bool = False) 
 def test_an_unchanged_rig_has_no_change_and_no_flag() -> None:
     (pair,) = pair_changes(_tree(), _tree(), [("L", "R")])
     assert pair.a == "L" and pair.b == "R" and not pair.significant
-    assert pair.chi2 == pytest.approx(0.0, abs=1e-9) and pair.baseline_change_mm == pytest.approx(0.0, abs=1e-9)
-    assert pair.sigma_baseline_change_mm == pytest.approx(np.sqrt(2) * 0.03, rel=1e-3)  # two independent solves
+    assert pair.chi2 == pytest.approx(0.0, abs=1e-9) and pair.baseline_change_mm == pytest.approx(
+        0.0, abs=1e-9
+    )
+    assert pair.sigma_baseline_change_mm == pytest.approx(
+        np.sqrt(2) * 0.03, rel=1e-3
+    )  # two independent solves
     assert all(abs(d.error_m) < 1e-9 for d in pair.depth)
 
 

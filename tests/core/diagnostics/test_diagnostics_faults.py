@@ -31,16 +31,32 @@ def test_unknown_fault_is_rejected():
 
 
 def test_buffer_is_deterministic_and_shaped_for_triage():
-    a = faults.synth_residual_buffer("focal", 0.02, seed=3, n_keyframes=20, features_per_keyframe=10, n_cameras=2)
-    b = faults.synth_residual_buffer("focal", 0.02, seed=3, n_keyframes=20, features_per_keyframe=10, n_cameras=2)
-    c = faults.synth_residual_buffer("focal", 0.02, seed=4, n_keyframes=20, features_per_keyframe=10, n_cameras=2)
-    assert set(a) == {"residual_px", "radius_px", "image_speed_px_s", "inv_range_per_m", "row", "keyframe", "camera"}
+    a = faults.synth_residual_buffer(
+        "focal", 0.02, seed=3, n_keyframes=20, features_per_keyframe=10, n_cameras=2
+    )
+    b = faults.synth_residual_buffer(
+        "focal", 0.02, seed=3, n_keyframes=20, features_per_keyframe=10, n_cameras=2
+    )
+    c = faults.synth_residual_buffer(
+        "focal", 0.02, seed=4, n_keyframes=20, features_per_keyframe=10, n_cameras=2
+    )
+    assert set(a) == {
+        "residual_px",
+        "radius_px",
+        "image_speed_px_s",
+        "inv_range_per_m",
+        "row",
+        "keyframe",
+        "camera",
+    }
     assert all(v.shape == (400,) for v in a.values())
     assert all(np.array_equal(a[k], b[k]) for k in a)
     assert not np.array_equal(a["residual_px"], c["residual_px"])
     assert sorted(set(a["camera"].tolist())) == ["cam0", "cam1"]
     ranges_m = 1.0 / a["inv_range_per_m"]
-    nearest = faults.STRUCTURE_RANGE_M[np.argmin(np.abs(np.log(ranges_m[:, None] / faults.STRUCTURE_RANGE_M)), axis=1)]
+    nearest = faults.STRUCTURE_RANGE_M[
+        np.argmin(np.abs(np.log(ranges_m[:, None] / faults.STRUCTURE_RANGE_M)), axis=1)
+    ]
     assert np.all(np.abs(ranges_m / nearest - 1.0) < 0.3)  # every feature sits on one of the six structures
     assert a["row"].min() >= 0 and a["row"].max() <= 959
 

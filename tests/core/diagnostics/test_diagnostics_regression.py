@@ -149,8 +149,9 @@ def test_refuses_rank_deficient_and_dofless_fits():
 
 
 def test_aggregate_by_group_means_and_counts():
-    labels, means, counts = aggregate_by_group(np.array(["b", "a", "b", "a", "a"]),
-                                               {"y": np.array([1.0, 2.0, 3.0, 4.0, 6.0])})
+    labels, means, counts = aggregate_by_group(
+        np.array(["b", "a", "b", "a", "a"]), {"y": np.array([1.0, 2.0, 3.0, 4.0, 6.0])}
+    )
     assert labels.tolist() == ["a", "b"]
     assert counts.tolist() == [3, 2]
     assert means["y"].tolist() == [4.0, 2.0]

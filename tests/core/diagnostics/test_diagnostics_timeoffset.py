@@ -19,12 +19,16 @@ TD_SEED_S = 0.0184
 
 
 def _estimate(gyro, cam, **cfg):
-    return estimate_time_offset(gyro["t_s"], gyro["rate_rad_s"], cam["t_s"], cam["rate_rad_s"], OffsetConfig(**cfg))
+    return estimate_time_offset(
+        gyro["t_s"], gyro["rate_rad_s"], cam["t_s"], cam["rate_rad_s"], OffsetConfig(**cfg)
+    )
 
 
 def test_chapter3_example_18_4_ms_at_200_hz_over_3_s_within_0_05_ms():
     """True 18.4 ms, both streams at 200 Hz (5 ms grid), 3 s, 1% noise (a calibration dance with reversals)."""
-    gyro, cam = synth_rate_logs(td_s=TD_SEED_S, duration_s=3.0, gyro_hz=200.0, camera_hz=200.0, noise_frac=0.01, seed=0)
+    gyro, cam = synth_rate_logs(
+        td_s=TD_SEED_S, duration_s=3.0, gyro_hz=200.0, camera_hz=200.0, noise_frac=0.01, seed=0
+    )
     est = _estimate(gyro, cam)
     assert est.refused is None
     assert est.rate_hz == pytest.approx(200.0)
@@ -37,7 +41,7 @@ def test_chapter3_example_18_4_ms_at_200_hz_over_3_s_within_0_05_ms():
 
 def test_parabolic_vertex_formula():
     for vertex in (-0.45, -0.323, 0.0, 0.2, 0.49):
-        y = [-(d - vertex) ** 2 * 3.0 + 1.0 for d in (-1.0, 0.0, 1.0)]
+        y = [-((d - vertex) ** 2) * 3.0 + 1.0 for d in (-1.0, 0.0, 1.0)]
         assert parabolic_vertex(*y) == pytest.approx(vertex, abs=1e-12)
 
 
@@ -66,7 +70,9 @@ def test_gain_and_bias_of_the_camera_rate_do_not_move_the_peak():
 def test_jackknife_sigma_matches_the_actual_scatter():
     errors, sigmas = [], []
     for seed in range(24):
-        gyro, cam = synth_rate_logs(td_s=TD_SEED_S, duration_s=10.0, camera_hz=200.0, noise_frac=0.05, seed=seed)
+        gyro, cam = synth_rate_logs(
+            td_s=TD_SEED_S, duration_s=10.0, camera_hz=200.0, noise_frac=0.05, seed=seed
+        )
         est = _estimate(gyro, cam)
         errors.append(est.td_s - TD_SEED_S)
         sigmas.append(est.sigma_s)
@@ -97,7 +103,9 @@ def test_refuses_a_peak_on_the_edge_of_the_search_window():
 
 
 def test_refuses_when_sigma_exceeds_the_gate():
-    gyro, cam = synth_rate_logs(td_s=TD_SEED_S, duration_s=2.0, camera_hz=30.0, noise_frac=0.6, seed=5, profile="slalom")
+    gyro, cam = synth_rate_logs(
+        td_s=TD_SEED_S, duration_s=2.0, camera_hz=30.0, noise_frac=0.6, seed=5, profile="slalom"
+    )
     est = _estimate(gyro, cam, max_sigma_s=0.0005)
     assert est.td_s is not None and est.sigma_s > 0.0005
     assert "standard error" in est.refused
@@ -113,7 +121,9 @@ def test_logs_that_do_not_overlap_are_an_input_error():
 
 
 def test_drift_of_40_ppm_is_measured_in_ppm():
-    gyro, cam = synth_rate_logs(td_s=0.010, duration_s=600.0, camera_hz=30.0, noise_frac=0.02, drift_ppm=40.0, seed=1)
+    gyro, cam = synth_rate_logs(
+        td_s=0.010, duration_s=600.0, camera_hz=30.0, noise_frac=0.02, drift_ppm=40.0, seed=1
+    )
     drift = estimate_drift(gyro["t_s"], gyro["rate_rad_s"], cam["t_s"], cam["rate_rad_s"], window_s=60.0)
     assert drift.refused is None
     lo, hi = drift.ci_ppm

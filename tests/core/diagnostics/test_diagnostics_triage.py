@@ -18,14 +18,28 @@ from calibctl.core.diagnostics.triage import (
 from calibctl.errors import InputError
 
 REL_TOL = 0.05  # the "within 5%"
-CHANNEL_OF = {"focal": "focal", "k1": "k1", "translation": "lever_arm", "time-offset": "time_offset",
-              "rolling-shutter": "line_delay", "rotation": "rotation_or_principal_point",
-              "principal-point": "rotation_or_principal_point"}
+CHANNEL_OF = {
+    "focal": "focal",
+    "k1": "k1",
+    "translation": "lever_arm",
+    "time-offset": "time_offset",
+    "rolling-shutter": "line_delay",
+    "rotation": "rotation_or_principal_point",
+    "principal-point": "rotation_or_principal_point",
+}
 
 
 def _run(buf, **kw):
-    return triage_by_camera(buf["residual_px"], buf["radius_px"], buf["image_speed_px_s"], buf["inv_range_per_m"],
-                            buf["row"], keyframe=buf.get("keyframe"), camera=buf.get("camera"), **kw)
+    return triage_by_camera(
+        buf["residual_px"],
+        buf["radius_px"],
+        buf["image_speed_px_s"],
+        buf["inv_range_per_m"],
+        buf["row"],
+        keyframe=buf.get("keyframe"),
+        camera=buf.get("camera"),
+        **kw,
+    )
 
 
 def _channel(cam, key):
@@ -47,8 +61,9 @@ def test_each_fault_is_named_alone_and_measured_within_5_percent(fault, seed):
     assert cam.verdict == f"fault: {got.spec.fault}"
 
 
-@pytest.mark.parametrize(("fault", "magnitude_px"), [("rotation", 800.0 * math.tan(math.radians(1.0))),
-                                                     ("principal-point", 10.0)])
+@pytest.mark.parametrize(
+    ("fault", "magnitude_px"), [("rotation", 800.0 * math.tan(math.radians(1.0))), ("principal-point", 10.0)]
+)
 def test_rotation_and_principal_point_land_in_the_same_column(fault, magnitude_px):
     summary = _run(faults.synth_residual_buffer(fault, faults.DEFAULT_MAGNITUDE[fault], noise_px=0.3, seed=4))
     cam = summary.cameras[0]
@@ -154,8 +169,15 @@ def test_thermal_drift_is_reported_in_px_per_kelvin():
     temp_kf = rng.uniform(10.0, 40.0, 500)
     temperature = temp_kf[buf["keyframe"]]
     buf["residual_px"] = buf["residual_px"] * (1.0 + 0.05 * (temperature - 10.0))  # RMS grows ~0.015 px/K
-    cam = triage_by_camera(buf["residual_px"], buf["radius_px"], buf["image_speed_px_s"], buf["inv_range_per_m"],
-                           buf["row"], keyframe=buf["keyframe"], temperature_c=temperature).cameras[0]
+    cam = triage_by_camera(
+        buf["residual_px"],
+        buf["radius_px"],
+        buf["image_speed_px_s"],
+        buf["inv_range_per_m"],
+        buf["row"],
+        keyframe=buf["keyframe"],
+        temperature_c=temperature,
+    ).cameras[0]
     assert cam.thermal["status"] == "fault"
     assert cam.thermal["slope_px_per_k"] == pytest.approx(0.3 * 0.05, rel=0.25)
     assert "thermal drift" in cam.verdict

@@ -18,8 +18,13 @@ X_3D = se3.transform(se3.rotation_from_rotvec([0.3, -0.5, 1.2]), [0.12, -0.05, 0
 
 def _motions(R_A, t_A, R_B, t_B) -> he.Motions:
     R_A = np.asarray(R_A, float)
-    return he.Motions(R_A, np.asarray(t_A, float), np.asarray(R_B, float), np.asarray(t_B, float),
-                      tuple(f"m{i}" for i in range(len(R_A))))
+    return he.Motions(
+        R_A,
+        np.asarray(t_A, float),
+        np.asarray(R_B, float),
+        np.asarray(t_B, float),
+        tuple(f"m{i}" for i in range(len(R_A))),
+    )
 
 
 def _from_log(log) -> he.Motions:
@@ -71,8 +76,12 @@ def test_worked_example_2_planar_motion_leaves_the_height_unobservable_and_the_g
     motions, _ = _example_2()
     gate = gates.lever_arm_gate(motions, gates.HandEyeThresholds())
     assert not gate.passed and gate.value == pytest.approx(0.0, abs=EXACT)
-    assert gate.detail["weakest_direction_a"] in (["+0.000", "+0.000", "+1.000"], ["+0.000", "+0.000", "-1.000"],
-                                                  ["-0.000", "-0.000", "+1.000"], ["-0.000", "-0.000", "-1.000"])
+    assert gate.detail["weakest_direction_a"] in (
+        ["+0.000", "+0.000", "+1.000"],
+        ["+0.000", "+0.000", "-1.000"],
+        ["-0.000", "-0.000", "+1.000"],
+        ["-0.000", "-0.000", "-1.000"],
+    )
 
 
 def test_corridor_pure_translation_is_refused_not_answered():
@@ -87,14 +96,24 @@ def test_the_seed_message_for_two_deg_of_rotation_about_two_axes():
     R = [se3.rotation_from_rotvec(np.radians([2.0, 0, 0])), se3.rotation_from_rotvec(np.radians([0, 2.0, 0]))]
     gate = gates.lever_arm_gate(_motions(R, np.zeros((2, 3)), R, np.zeros((2, 3))), gates.HandEyeThresholds())
     assert not gate.passed
-    assert gate.message == ("lever arm unobservable: sigma_min 0.035 (about 2 deg of rotation); "
-                            "rotate at least 30 deg about two non-parallel axes")
+    assert gate.message == (
+        "lever arm unobservable: sigma_min 0.035 (about 2 deg of rotation); "
+        "rotate at least 30 deg about two non-parallel axes"
+    )
     assert gate.hint == "rotate at least 30 deg about two non-parallel axes"
 
 
-@pytest.mark.parametrize(("theta_deg", "two_sin", "lever_arm_error_m"), [
-    (2, 0.0349, 0.287), (5, 0.0872, 0.115), (10, 0.1743, 0.057), (30, 0.5176, 0.019), (45, 0.7654, 0.013),
-    (90, 1.4142, 0.007)])
+@pytest.mark.parametrize(
+    ("theta_deg", "two_sin", "lever_arm_error_m"),
+    [
+        (2, 0.0349, 0.287),
+        (5, 0.0872, 0.115),
+        (10, 0.1743, 0.057),
+        (30, 0.5176, 0.019),
+        (45, 0.7654, 0.013),
+        (90, 1.4142, 0.007),
+    ],
+)
 def test_conditioning_table_from_the_error_propagation(theta_deg, two_sin, lever_arm_error_m):
     R_A = se3.rotation_from_rotvec([0, 0, np.radians(theta_deg)])[None]
     sigma_min, _ = gates.lever_arm_conditioning(R_A)
@@ -125,7 +144,10 @@ def test_noise_free_3d_motions_recover_x_exactly(method):
 
 def test_park_and_tsai_closed_forms_agree_on_noisy_data_and_refine_to_one_answer():
     m = _from_log(synthesize_motions(X_3D, 15, noise_rotation_deg=0.1, noise_translation_m=0.003, seed=2))
-    R_park, R_tsai = he.solve_rotation_park(m.rotvec_A_rad, m.rotvec_B_rad), he.solve_rotation_tsai(m.rotvec_A_rad, m.rotvec_B_rad)
+    R_park, R_tsai = (
+        he.solve_rotation_park(m.rotvec_A_rad, m.rotvec_B_rad),
+        he.solve_rotation_tsai(m.rotvec_A_rad, m.rotvec_B_rad),
+    )
     assert np.degrees(se3.rotation_angle_rad(R_park.T @ R_tsai)) < 0.2
     park, tsai = fit_handeye(m, "park"), fit_handeye(m, "tsai")
     np.testing.assert_allclose(park.T_a_b, tsai.T_a_b, atol=1e-8)
@@ -160,7 +182,9 @@ def test_pose_logs_are_refined_on_poses_and_their_sigmas_are_honest_too():
         fit = fit_handeye(_from_log(log))
         assert fit.model == "poses"
         z_t.append((fit.T_a_b[:3, 3] - X_3D[:3, 3]) / fit.sigma_translation_m)
-        z_r.append(np.degrees(se3.rotvec_from_rotation(fit.T_a_b[:3, :3] @ X_3D[:3, :3].T)) / fit.sigma_rotation_deg)
+        z_r.append(
+            np.degrees(se3.rotvec_from_rotation(fit.T_a_b[:3, :3] @ X_3D[:3, :3].T)) / fit.sigma_rotation_deg
+        )
     for z in (np.concatenate(z_t), np.concatenate(z_r)):  # 120 values each: standard error of the mean 0.09
         assert abs(z.mean()) <= 0.3
         assert 0.7 <= z.std() <= 1.5
@@ -169,7 +193,9 @@ def test_pose_logs_are_refined_on_poses_and_their_sigmas_are_honest_too():
 def test_single_axis_motions_fail_the_rotation_gate_two_axes_pass():
     one_axis = synthesize_motions(X_3D, 10, excitation="planar", seed=4)
     assert not gates.rotation_gate(_from_log(one_axis), gates.HandEyeThresholds()).passed
-    assert gates.rotation_gate(_from_log(synthesize_motions(X_3D, 10, seed=4)), gates.HandEyeThresholds()).passed
+    assert gates.rotation_gate(
+        _from_log(synthesize_motions(X_3D, 10, seed=4)), gates.HandEyeThresholds()
+    ).passed
 
 
 def test_a_time_offset_is_named_by_the_angle_screen_and_a_synchronised_log_passes():
@@ -228,8 +254,11 @@ def test_translation_scale_gate_names_the_unit_and_the_sensor():
     clean = _scaled(log, 1.0)
     gate = gates.translation_scale_gate(clean, fit_handeye(clean), ("lidar", "camera"))
     assert gate.passed and gate.value < 1.05 and gate.gate == "translation-scale"
-    for scale_a, scale_b, sensor, unit in ((1000.0, 1.0, "lidar", "millimetres"), (1.0, 100.0, "camera", "centimetres"),
-                                           (1 / 0.3048, 1.0, "lidar", "feet")):
+    for scale_a, scale_b, sensor, unit in (
+        (1000.0, 1.0, "lidar", "millimetres"),
+        (1.0, 100.0, "camera", "centimetres"),
+        (1 / 0.3048, 1.0, "lidar", "feet"),
+    ):
         motions = _scaled(log, scale_a, scale_b)
         fit = fit_handeye(motions)
         gate = gates.translation_scale_gate(motions, fit, ("lidar", "camera"))
@@ -238,7 +267,11 @@ def test_translation_scale_gate_names_the_unit_and_the_sensor():
         assert gate.hint == f"convert {sensor}'s translations to metres"
     motions = _scaled(log, 2.0)  # no unit: a scale-free odometry, a wrong square size
     gate = gates.translation_scale_gate(motions, fit_handeye(motions), ("lidar", "camera"))
-    assert not gate.passed and gate.reason == "translation_scale.mismatch" and gate.value == pytest.approx(2.0, rel=0.05)
+    assert (
+        not gate.passed
+        and gate.reason == "translation_scale.mismatch"
+        and gate.value == pytest.approx(2.0, rel=0.05)
+    )
 
 
 def test_translation_scale_is_not_judged_when_a_never_translates():

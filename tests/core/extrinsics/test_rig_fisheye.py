@@ -24,7 +24,9 @@ from calibctl.workflows.exports.rig_exports import write_exports
 
 BOARD = BoardSpec.chessboard(9, 6, 0.025)
 SIZE = (960, 600)
-T_R_L = se3.transform(se3.rotation_from_rotvec(np.radians([0.4, -0.3, 0.5])), np.array([-0.060, 0.001, 0.002]))
+T_R_L = se3.transform(
+    se3.rotation_from_rotvec(np.radians([0.4, -0.3, 0.5])), np.array([-0.060, 0.001, 0.002])
+)
 NOISE_PX = 0.2
 Z_MAX = 3.5  # |estimate - truth| / sigma
 
@@ -38,26 +40,39 @@ def _cameras() -> tuple[FisheyeCamera, FisheyeCamera]:
 def _sees(camera: FisheyeCamera, obj: np.ndarray, T_cam_board: np.ndarray) -> bool:
     cam = obj @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
     theta = np.arctan2(np.hypot(cam[:, 0], cam[:, 1]), cam[:, 2])
-    return bool(theta.max() < MAX_SOLVE_THETA_RAD and camera.inside(camera.project(obj, T_cam_board), 4.0).all())
+    return bool(
+        theta.max() < MAX_SOLVE_THETA_RAD and camera.inside(camera.project(obj, T_cam_board), 4.0).all()
+    )
 
 
 def _session(seed: int) -> tuple[RigViews, list[MemberIntrinsics]]:
     rng = np.random.default_rng(seed)
     left, right = _cameras()
     obj = BOARD.object_points()
-    poses = fisheye_poses(left, obj, 40, rng, default_fisheye_distance_m(left, BOARD.square_size_m), (15.0, 45.0),
-                          None, 4.0)
+    poses = fisheye_poses(
+        left, obj, 40, rng, default_fisheye_distance_m(left, BOARD.square_size_m), (15.0, 45.0), None, 4.0
+    )
     ids = np.arange(BOARD.n_corners)
     rows = []
     for T_L_board in poses:
         T_R_board = T_R_L @ T_L_board
         if not _sees(right, obj, T_R_board):
             continue
-        rows.append(tuple(BoardView(f"f{len(rows)}", ids, cam.project(obj, T) + rng.normal(0.0, NOISE_PX, (len(ids), 2)))
-                          for cam, T in ((left, T_L_board), (right, T_R_board))))
+        rows.append(
+            tuple(
+                BoardView(
+                    f"f{len(rows)}", ids, cam.project(obj, T) + rng.normal(0.0, NOISE_PX, (len(ids), 2))
+                )
+                for cam, T in ((left, T_L_board), (right, T_R_board))
+            )
+        )
     views = RigViews(("L", "R"), obj, tuple(f"f{i}" for i in range(len(rows))), tuple(rows))
-    members = [MemberIntrinsics(name, cam.K, cam.dist, SIZE, ("fx", "fy", "cx", "cy"), FISHEYE_DIST_NAMES, None,
-                                None, "fisheye") for name, cam in (("L", left), ("R", right))]
+    members = [
+        MemberIntrinsics(
+            name, cam.K, cam.dist, SIZE, ("fx", "fy", "cx", "cy"), FISHEYE_DIST_NAMES, None, None, "fisheye"
+        )
+        for name, cam in (("L", left), ("R", right))
+    ]
     return views, members
 
 
@@ -117,15 +132,25 @@ def test_a_stored_fisheye_calibration_joins_a_rig_as_a_fisheye_member() -> None:
 
     base = calibration()
     sigma = {"fx": 0.3, "fy": 0.3, "cx": 0.2, "cy": 0.2, "k1": 0.001, "k2": 0.002, "k3": 0.003, "k4": 0.004}
-    art = base.model_copy(update={"dist_coeffs": [0.02, -0.01, 0.005, -0.001],
-                                  "model": base.model.model_copy(update={"name": "fisheye"}),
-                                  "stdev": base.stdev.model_copy(update={"sigma": sigma})})
+    art = base.model_copy(
+        update={
+            "dist_coeffs": [0.02, -0.01, 0.005, -0.001],
+            "model": base.model.model_copy(update={"name": "fisheye"}),
+            "stdev": base.stdev.model_copy(update={"sigma": sigma}),
+        }
+    )
     m = member_intrinsics(art)
     assert m.lens == "fisheye" and m.aspect is None and m.free_distortion == FISHEYE_DIST_NAMES
-    assert m.covariance is not None and np.diag(m.covariance) == pytest.approx([v ** 2 for v in sigma.values()])
+    assert m.covariance is not None and np.diag(m.covariance) == pytest.approx([v**2 for v in sigma.values()])
     assert member_intrinsics(base).lens == "pinhole"
-    fields = {"serial": "CAM-0001", "version": 1, "content_sha256": "ab" * 32, "image_size": (640, 480),
-              "camera_matrix": ((800.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0)),
-              "dist_coeffs": [0.0] * 4, "refined": False}
+    fields = {
+        "serial": "CAM-0001",
+        "version": 1,
+        "content_sha256": "ab" * 32,
+        "image_size": (640, 480),
+        "camera_matrix": ((800.0, 0.0, 320.0), (0.0, 800.0, 240.0), (0.0, 0.0, 1.0)),
+        "dist_coeffs": [0.0] * 4,
+        "refined": False,
+    }
     assert "lens" not in RigMember(**fields).model_dump(mode="json")  # pinhole documents hash as before
     assert RigMember(**fields, lens="fisheye").model_dump(mode="json")["lens"] == "fisheye"

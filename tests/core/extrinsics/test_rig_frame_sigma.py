@@ -23,7 +23,9 @@ def _shifted(views: RigViews, rng: np.random.Generator) -> RigViews:
     for row in views.views:
         shift = rng.normal(0.0, FRAME_SHIFT_PX, 2)
         v = row[1]
-        rows.append((row[0], BoardView(v.name, v.corner_ids, v.corners_px + shift) if v is not None else None))
+        rows.append(
+            (row[0], BoardView(v.name, v.corner_ids, v.corners_px + shift) if v is not None else None)
+        )
     return RigViews(views.cameras, views.model_points_m, views.frames, tuple(rows))
 
 
@@ -78,8 +80,16 @@ def test_member_photos_the_rig_does_not_use_are_clusters_too(n_extra):
         p = m.n_params
         pulls = {row[c].name: np.full(p, 1e-3) for row in views.views if row[c] is not None}
         pulls.update({f"only-{c}-{i}": np.full(p, 1e-3) for i in range(n_extra)})
-        members.append(MemberIntrinsics(m.name, m.camera_matrix, m.dist_coeffs, m.image_size,
-                                        covariance=np.eye(p) * 1e-6, view_influences=pulls))
+        members.append(
+            MemberIntrinsics(
+                m.name,
+                m.camera_matrix,
+                m.dist_coeffs,
+                m.image_size,
+                covariance=np.eye(p) * 1e-6,
+                view_influences=pulls,
+            )
+        )
     # view names are per frame ("f0".."f11") and shared by both cameras, as the rig's frames pair them
     sol = solve_rig(views, members)
     assert sol.frame_clusters == len(views.frames) + 2 * n_extra

@@ -9,22 +9,38 @@ from calibctl.core.extrinsics.rig_frames import frame_key, match_frames, rig_con
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, simple_cycles
 
 
-@pytest.mark.parametrize(("name", "key"), [
-    ("left01.jpg", 1), ("right01.jpg", 1), ("left_001772846782141.jpg", 1772846782141),
-    ("cam0_frame_0042.png", 42), ("IMG_0042_left.png", 42), ("left.png", None),
-])
+@pytest.mark.parametrize(
+    ("name", "key"),
+    [
+        ("left01.jpg", 1),
+        ("right01.jpg", 1),
+        ("left_001772846782141.jpg", 1772846782141),
+        ("cam0_frame_0042.png", 42),
+        ("IMG_0042_left.png", 42),
+        ("left.png", None),
+    ],
+)
 def test_frame_key_is_the_last_number_of_the_stem(name, key):
     assert frame_key(f"/some/dir7/{name}") == key
 
 
 def test_match_frames_pairs_by_key_and_reports_the_rest():
-    m = match_frames({"L": ["l/left01.jpg", "l/left02.jpg", "l/left.jpg", "l/left_2.jpg"],
-                      "R": ["r/right01.jpg", "r/right03.jpg"], "C": ["c/c_0002.png"]})
-    assert [(k, dict(v)) for k, v in m.frames] == [(1, {"L": "l/left01.jpg", "R": "r/right01.jpg"}),
-                                                   (2, {"L": "l/left02.jpg", "C": "c/c_0002.png"})]
+    m = match_frames(
+        {
+            "L": ["l/left01.jpg", "l/left02.jpg", "l/left.jpg", "l/left_2.jpg"],
+            "R": ["r/right01.jpg", "r/right03.jpg"],
+            "C": ["c/c_0002.png"],
+        }
+    )
+    assert [(k, dict(v)) for k, v in m.frames] == [
+        (1, {"L": "l/left01.jpg", "R": "r/right01.jpg"}),
+        (2, {"L": "l/left02.jpg", "C": "c/c_0002.png"}),
+    ]
     assert {(u.camera, u.path, u.reason) for u in m.unmatched} == {
-        ("L", "l/left.jpg", "no-frame-key"), ("L", "l/left_2.jpg", "duplicate-frame-key"),
-        ("R", "r/right03.jpg", "no-partner")}
+        ("L", "l/left.jpg", "no-frame-key"),
+        ("L", "l/left_2.jpg", "duplicate-frame-key"),
+        ("R", "r/right03.jpg", "no-partner"),
+    }
 
 
 def test_gate_passes_a_connected_rig_with_enough_views():

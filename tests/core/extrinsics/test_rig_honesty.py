@@ -22,19 +22,31 @@ def _mono_member(name, camera, seed, with_covariance=True):
     sol = solve_intrinsics(s.object_points_per_view, s.image_points_per_view, s.image_size, MODEL)
     m = get_model(MODEL)
     assert sol.covariance is not None and sol.covariance.covariance is not None
-    return MemberIntrinsics(name, sol.camera_matrix, sol.dist_coeffs, s.image_size, m.free_intrinsics,
-                            m.free_distortion, sol.aspect_ratio,
-                            sol.covariance.covariance if with_covariance else None)
+    return MemberIntrinsics(
+        name,
+        sol.camera_matrix,
+        sol.dist_coeffs,
+        s.image_size,
+        m.free_intrinsics,
+        m.free_distortion,
+        sol.aspect_ratio,
+        sol.covariance.covariance if with_covariance else None,
+    )
 
 
 def _z_scores(with_covariance):
     z = []
     for seed in range(N_SESSIONS):
         truth, views = corner_session(2, seed=1000 + seed, baselines_m=(0.075,), n_frames=15)
-        members = [_mono_member(n, c, 5000 + 2 * seed + i, with_covariance)
-                   for i, (n, c) in enumerate(zip(truth.names, truth.cameras, strict=True))]
+        members = [
+            _mono_member(n, c, 5000 + 2 * seed + i, with_covariance)
+            for i, (n, c) in enumerate(zip(truth.names, truth.cameras, strict=True))
+        ]
         edge = solve_rig(views, members).tree.edges[0]
-        z.append((edge.translation_mm - np.linalg.norm(truth.T_root_cam[1][:3, 3]) * 1e3) / edge.sigma_translation_mm)
+        z.append(
+            (edge.translation_mm - np.linalg.norm(truth.T_root_cam[1][:3, 3]) * 1e3)
+            / edge.sigma_translation_mm
+        )
     return np.array(z)
 
 

@@ -48,25 +48,38 @@ def _pair(t_mm, sigma_mm):
     return ("L", "R", np.asarray(t_mm, dtype=float), np.eye(3) * sigma_mm**2)
 
 
-@pytest.mark.parametrize(("t_mm", "sigma", "words"), [
-    ([0.0, 0.0, 0.0], 0.245, "indistinguishable from zero (Mahalanobis 0.00 < 3.76)"),
-    ([1.2, 1.2, 0.3], 0.63, "indistinguishable from zero"),  # |t| 1.7 = 2.7 sigma along t: biased norm of noise
-    ([0.5, 0.0, 0.0], 0.01, f"below the {MIN_BASELINE_MM:g} mm floor"),
-    ([float("nan"), 0.0, 0.0], 0.1, "not a number"),
-])
+@pytest.mark.parametrize(
+    ("t_mm", "sigma", "words"),
+    [
+        ([0.0, 0.0, 0.0], 0.245, "indistinguishable from zero (Mahalanobis 0.00 < 3.76)"),
+        (
+            [1.2, 1.2, 0.3],
+            0.63,
+            "indistinguishable from zero",
+        ),  # |t| 1.7 = 2.7 sigma along t: biased norm of noise
+        ([0.5, 0.0, 0.0], 0.01, f"below the {MIN_BASELINE_MM:g} mm floor"),
+        ([float("nan"), 0.0, 0.0], 0.1, "not a number"),
+    ],
+)
 def test_zero_baselines_refused(t_mm, sigma, words):
     found = zero_baselines([_pair(t_mm, sigma)])
     assert len(found) == 1 and words in found[0].message, found
 
 
 def test_real_baselines_pass():
-    assert zero_baselines([_pair([75.0, 0.1, 0.0], 0.3), _pair([2.0, 0.0, 0.0], 0.1),
-                           _pair([0.0, 4.0, 0.0], float("nan"))]) == []
+    assert (
+        zero_baselines(
+            [_pair([75.0, 0.1, 0.0], 0.3), _pair([2.0, 0.0, 0.0], 0.1), _pair([0.0, 4.0, 0.0], float("nan"))]
+        )
+        == []
+    )
 
 
 def test_refuse_is_a_verdict_naming_every_finding():
     refuse([], "nothing")  # no finding, no error
-    with pytest.raises(InconsistentDataError, match="rig R1 capture: the members are not distinct cameras: .*"
-                                                    "L-R baseline 0.500 \\+/- 0.010 mm") as info:
+    with pytest.raises(
+        InconsistentDataError,
+        match="rig R1 capture: the members are not distinct cameras: .*L-R baseline 0.500 \\+/- 0.010 mm",
+    ) as info:
         refuse(zero_baselines([_pair([0.5, 0, 0], 0.01)]), "rig R1 capture")
     assert info.value.exit_code == 1 and "nothing was stored" in (info.value.hint or "")

@@ -38,7 +38,7 @@ def test_the_joint_covariance_holds_each_pairs_own_on_its_diagonal():
     joint = loop_covariance(sols, views, lambda v: v, x).jacobian
     for i, s in enumerate(sols):
         own = s.jacobian_covariance if s.jacobian_covariance is not None else s.covariance
-        assert np.allclose(joint[6 * i:6 * i + 6, 6 * i:6 * i + 6], own, rtol=1e-6, atol=1e-14)
+        assert np.allclose(joint[6 * i : 6 * i + 6, 6 * i : 6 * i + 6], own, rtol=1e-6, atol=1e-14)
     # pairs 0-1 and 1-2 share camera 1's corners: correlated, which the independent treatment set to 0
     sd = np.sqrt(np.diag(joint))
     correlation = joint / np.outer(sd, sd)
@@ -57,7 +57,7 @@ def test_the_joint_covariance_predicts_the_loop_residual_over_repeated_noise():
         predicted.append(loop_covariance(sols, views, around, x).jacobian)
         block = np.zeros((18, 18))
         for i, s in enumerate(sols):
-            block[6 * i:6 * i + 6, 6 * i:6 * i + 6] = s.covariance
+            block[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = s.covariance
         independent.append(propagate(around, x, block))
     r = np.array(residuals)
     empirical = r.T @ r / len(r)  # the loop closes exactly without noise: the mean is 0
@@ -80,7 +80,9 @@ def test_clean_loops_close_and_broken_loops_are_seen():
                 row[2] = type(row[2])(row[2].name, row[2].corner_ids, row[2].corners_px + [shift_px, 0.0])
         return RigViews(views.cameras, views.model_points_m, views.frames, tuple(tuple(r) for r in rows))
 
-    d = {shift: max(loop.mahalanobis for loop in loop_closures(broken(shift), members)) for shift in (3.0, 1.0)}
+    d = {
+        shift: max(loop.mahalanobis for loop in loop_closures(broken(shift), members)) for shift in (3.0, 1.0)
+    }
     assert d[3.0] > CHI_6DOF_997 and d[1.0] > CHI_6DOF_997, d
 
 

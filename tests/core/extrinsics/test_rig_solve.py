@@ -88,8 +88,12 @@ def test_holdout_sees_a_wrong_baseline():
     members = true_members(truth)
     good = validate_rig_holdout(views, members)
     wrong = list(members)
-    wrong[1] = type(wrong[1])(wrong[1].name, wrong[1].camera_matrix * [[1.0], [1.03], [1.0]], wrong[1].dist_coeffs,
-                              wrong[1].image_size)
+    wrong[1] = type(wrong[1])(
+        wrong[1].name,
+        wrong[1].camera_matrix * [[1.0], [1.03], [1.0]],
+        wrong[1].dist_coeffs,
+        wrong[1].image_size,
+    )
     bad = validate_rig_holdout(views, wrong)
     assert bad.pairs[0].epipolar_rms_px > 2 * good.pairs[0].epipolar_rms_px
 
@@ -97,8 +101,12 @@ def test_holdout_sees_a_wrong_baseline():
 def test_refine_intrinsics_fixes_a_wrong_focal_length():
     truth, views = corner_session(2, seed=33, baselines_m=(0.075,), n_frames=25)
     members = true_members(truth)
-    off = type(members[1])(members[1].name, members[1].camera_matrix * [[1.01], [1.01], [1.0]],
-                           members[1].dist_coeffs, members[1].image_size)
+    off = type(members[1])(
+        members[1].name,
+        members[1].camera_matrix * [[1.01], [1.01], [1.0]],
+        members[1].dist_coeffs,
+        members[1].image_size,
+    )
     fixed = solve_rig(views, [members[0], off])
     refined = solve_rig(views, [members[0], off], refine_intrinsics=True)
     f_true = truth.cameras[1].K[0, 0]
@@ -116,7 +124,9 @@ def test_a_camera_that_shares_no_view_is_named():
 def test_a_solve_that_explains_nothing_is_refused():
     truth, views = corner_session(2, seed=35)
     rng = np.random.default_rng(0)
-    rows = tuple((r[0], type(r[1])(r[1].name, rng.permutation(r[1].corner_ids), r[1].corners_px)) for r in views.views)
+    rows = tuple(
+        (r[0], type(r[1])(r[1].name, rng.permutation(r[1].corner_ids), r[1].corners_px)) for r in views.views
+    )
     with pytest.raises(NumericalError, match="diverged"):
         solve_rig(RigViews(views.cameras, views.model_points_m, views.frames, rows), true_members(truth))
 

@@ -25,7 +25,10 @@ IMU = _edge("imu", "cam1")
 
 def test_the_only_frame_without_a_parent_roots_the_tree():
     tree = orient_tree([CAM, FLANGE], "cam0")
-    assert tree.root == "flange" and [(e.parent, e.child) for e in tree.edges] == [("flange", "cam0"), ("cam0", "cam1")]
+    assert tree.root == "flange" and [(e.parent, e.child) for e in tree.edges] == [
+        ("flange", "cam0"),
+        ("cam0", "cam1"),
+    ]
     assert np.allclose(tree.T("flange", "cam1"), FLANGE.T_parent_child @ CAM.T_parent_child)
 
 
@@ -50,7 +53,13 @@ def test_loops_and_islands_are_refused():
 def test_se3_helpers_agree_with_their_definitions():
     R = se3.rotation_from_rotvec([0.0, 0.0, np.radians(30.0)])
     assert se3.rotation_angle_deg(R) == pytest.approx(30.0, abs=1e-9)
-    assert se3.rotation_angle_deg(se3.rotation_from_rotvec([1e-7, 0.0, 0.0])) == pytest.approx(np.degrees(1e-7), rel=1e-6)
+    assert se3.rotation_angle_deg(se3.rotation_from_rotvec([1e-7, 0.0, 0.0])) == pytest.approx(
+        np.degrees(1e-7), rel=1e-6
+    )
     x, y, z, w = se3.quaternion_xyzw(R)
-    assert (x, y) == (0.0, 0.0) and z == pytest.approx(np.sin(np.radians(15.0))) and w == pytest.approx(np.cos(np.radians(15.0)))
+    assert (
+        (x, y) == (0.0, 0.0)
+        and z == pytest.approx(np.sin(np.radians(15.0)))
+        and w == pytest.approx(np.cos(np.radians(15.0)))
+    )
     assert np.allclose(T_to_pose(se3.invert(se3.transform(R, [1.0, 2.0, 3.0])))[3:], -R.T @ [1.0, 2.0, 3.0])

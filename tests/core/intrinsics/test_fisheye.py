@@ -51,7 +51,9 @@ def test_focal_guess_lands_near_the_true_focal_length(fov_deg, circular):
     assert f is not None and abs(f / cam.K[0, 0] - 1.0) < 0.1
 
 
-@pytest.mark.parametrize(("fov_deg", "circular", "seed"), [(150.0, True, 3), (170.0, False, 4), (190.0, True, 5)])
+@pytest.mark.parametrize(
+    ("fov_deg", "circular", "seed"), [(150.0, True, 3), (170.0, False, 4), (190.0, True, 5)]
+)
 def test_fisheye_solve_recovers_every_parameter_within_three_sigma(fov_deg, circular, seed):
     cam = FisheyeCamera.from_fov(SIZE, fov_deg, circular)
     s = synthesize_fisheye_session(cam, 20, seed=seed, noise_px=0.2)

@@ -191,8 +191,14 @@ def test_outer_ring_ratio_counts_only_above_the_absolute_floor():
 def test_a_k1k2_solve_is_never_told_to_re_solve_with_k1k2():
     outer = check_outer_ring_holdout(1.0762, 0.9766, model="k1k2").fix
     assert outer is not None and "--model k1k2" not in outer and "board is flat" in outer
-    assert "fewer coefficients (--model k1k2 or auto)" in (check_outer_ring_holdout(1.0762, 0.9766, model="rational").fix or "")
+    assert "fewer coefficients (--model k1k2 or auto)" in (
+        check_outer_ring_holdout(1.0762, 0.9766, model="rational").fix or ""
+    )
     fold = check_distortion_foldover(K_WIDE, np.array([-0.5, 0.0, 0.0, 0.0, 0.0]), (1280, 960), model="k1k2")
-    assert not fold.passed and "--model k1k2" not in (fold.fix or "") and "--model fisheye" in (fold.fix or "")
-    fold = check_distortion_foldover(K_WIDE, np.array([-0.5, 0.0, 0.0, 0.0, 0.0]), (1280, 960), model="k1k2k3")
+    assert (
+        not fold.passed and "--model k1k2" not in (fold.fix or "") and "--model fisheye" in (fold.fix or "")
+    )
+    fold = check_distortion_foldover(
+        K_WIDE, np.array([-0.5, 0.0, 0.0, 0.0, 0.0]), (1280, 960), model="k1k2k3"
+    )
     assert "fewer coefficients (--model k1k2)" in (fold.fix or "")

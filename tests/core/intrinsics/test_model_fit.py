@@ -35,8 +35,16 @@ def _close_185_session():
     size = (1032, 778)
     cam = FisheyeCamera.from_fov(size, 185.0, circular=True)
     near, far = default_fisheye_distance_m(cam, 0.025)
-    s = synthesize_fisheye_session(cam, 12, seed=1, max_view_deg=80.0, cols=12, rows=9,
-                                   distance_m=(0.5 * near, 0.5 * far), noise_px=NOISE_PX)
+    s = synthesize_fisheye_session(
+        cam,
+        12,
+        seed=1,
+        max_view_deg=80.0,
+        cols=12,
+        rows=9,
+        distance_m=(0.5 * near, 0.5 * far),
+        noise_px=NOISE_PX,
+    )
     return list(s.object_points_per_view), list(s.image_points_per_view), size
 
 
@@ -73,7 +81,9 @@ def test_the_lens_floor_is_none_when_no_lens_model_can_be_solved():
 def test_detector_noise_is_read_without_a_lens_model():
     K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
     s = synthesize_session(K, np.array([-0.2814, 0.0977, 0, 0, 0]), (640, 480), 12, seed=3, noise_px=NOISE_PX)
-    assert detector_rms_px(s.object_points_per_view, s.image_points_per_view) == pytest.approx(PER_CORNER, rel=0.15)
+    assert detector_rms_px(s.object_points_per_view, s.image_points_per_view) == pytest.approx(
+        PER_CORNER, rel=0.15
+    )
     clean = detector_rms_px(s.object_points_per_view, s.true_image_points_per_view)
     # a 4x4 patch of the strongly distorted seed lens is nearly quadratic: its curvature stays well below the noise
     assert clean < 0.35 * PER_CORNER
@@ -119,9 +129,14 @@ def test_residuals_growing_with_radius_fail():
 
 
 @needs_datasets
-@pytest.mark.parametrize(("pattern", "size"), [("opencv-left-right/left*.jpg", (640, 480)),
-                                               ("opencv-left-right/right*.jpg", (640, 480)),
-                                               ("udacity-camcal/calibration*.jpg", (1280, 720))])
+@pytest.mark.parametrize(
+    ("pattern", "size"),
+    [
+        ("opencv-left-right/left*.jpg", (640, 480)),
+        ("opencv-left-right/right*.jpg", (640, 480)),
+        ("udacity-camcal/calibration*.jpg", (1280, 720)),
+    ],
+)
 def test_real_photo_sets_pass_under_k1k2(pattern, size):
     folder, glob = pattern.split("/")
     root = LEFT_RIGHT if folder == "opencv-left-right" else UDACITY
@@ -132,6 +147,7 @@ def test_real_photo_sets_pass_under_k1k2(pattern, size):
     # and the plain OpenCV solve of the same corners agrees on the fit RMS the rule judged
     import cv2
 
-    rms, *_ = cv2.calibrateCamera([o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], size,
-                                  None, None)
+    rms, *_ = cv2.calibrateCamera(
+        [o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], size, None, None
+    )
     assert rms < MISFIT_RATIO * detector_rms_px(obj, img)

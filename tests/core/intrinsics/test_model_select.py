@@ -17,8 +17,14 @@ SIZE = (640, 480)
 def _session(f_px: float, dist, seed: int = 41, n_views: int = 12):
     K = np.array([[f_px, 0.0, 321.3], [0.0, f_px, 238.7], [0.0, 0.0, 1.0]])
     scale = f_px / 800.0  # keep the board filling the frame at any focal length
-    ses = synthesize_session(K, np.array(dist, dtype=float), SIZE, n_views=n_views, seed=seed,
-                             distance_m=(0.35 * scale, 0.6 * scale))
+    ses = synthesize_session(
+        K,
+        np.array(dist, dtype=float),
+        SIZE,
+        n_views=n_views,
+        seed=seed,
+        distance_m=(0.35 * scale, 0.6 * scale),
+    )
     return ses.object_points_per_view, ses.image_points_per_view
 
 
@@ -33,9 +39,13 @@ def _check_trail_consistency(selection):
         if c.fit_improvement_frac is not None:
             # the verdict follows the rule from the recorded numbers
             prev = next(p for p in selection.trail if p.model == base)
-            rule = (c.fit_improvement_frac >= MIN_FIT_IMPROVEMENT
-                    and c.holdout_outer_rms_px <= prev.holdout_outer_rms_px)
-            if c.model in ALTERNATIVES and current != base:  # ... and predict no worse than the ladder's choice
+            rule = (
+                c.fit_improvement_frac >= MIN_FIT_IMPROVEMENT
+                and c.holdout_outer_rms_px <= prev.holdout_outer_rms_px
+            )
+            if (
+                c.model in ALTERNATIVES and current != base
+            ):  # ... and predict no worse than the ladder's choice
                 chosen = next(p for p in selection.trail if p.model == current)
                 rule = rule and c.holdout_outer_rms_px <= chosen.holdout_outer_rms_px
             assert c.accepted == rule
@@ -122,8 +132,9 @@ def test_non_square_pixels_earn_fx_and_fy_apart(seed):
     # ring 5 % better (measured 0.363 against 0.380 px) and stays; seed 41 is a tie (0.29107 against
     # 0.29104 px) that either may win. Whichever is chosen solves fx and fy apart.
     K = np.array([[848.0, 0.0, 321.3], [0.0, 800.0, 238.7], [0.0, 0.0, 1.0]])
-    ses = synthesize_session(K, np.array([-0.2814, 0.0977, 0, 0, 0]), SIZE, n_views=14, seed=seed,
-                             distance_m=(0.35, 0.6))
+    ses = synthesize_session(
+        K, np.array([-0.2814, 0.0977, 0, 0, 0]), SIZE, n_views=14, seed=seed, distance_m=(0.35, 0.6)
+    )
     sel = select_model(ses.object_points_per_view, ses.image_points_per_view, SIZE)
     assert next(c for c in sel.trail if c.model == "opencv-default").accepted
     assert sel.chosen in ("opencv-default", "fisheye") and (seed != 1 or sel.chosen == "opencv-default")
@@ -182,8 +193,9 @@ def _strong_fisheye_session():
     size = (1032, 778)
     cam = FisheyeCamera.from_fov(size, 185.0, circular=True)
     near, far = default_fisheye_distance_m(cam, 0.025)
-    s = synthesize_fisheye_session(cam, 12, seed=1, max_view_deg=80.0, cols=12, rows=9,
-                                   distance_m=(0.5 * near, 0.5 * far))
+    s = synthesize_fisheye_session(
+        cam, 12, seed=1, max_view_deg=80.0, cols=12, rows=9, distance_m=(0.5 * near, 0.5 * far)
+    )
     return s, size
 
 
@@ -191,12 +203,17 @@ def test_a_rung_that_cannot_be_solved_is_out_and_auto_still_reaches_fisheye():
     s, size = _strong_fisheye_session()
     sel = select_model(s.object_points_per_view, s.image_points_per_view, size)
     trail = {c.model: c for c in sel.trail}
-    assert [c.model for c in sel.trail] == [*LADDER, *ALTERNATIVES]  # every rung and the fisheye branch walked
+    assert [c.model for c in sel.trail] == [
+        *LADDER,
+        *ALTERNATIVES,
+    ]  # every rung and the fisheye branch walked
     assert not trail["k1k2"].accepted and trail["k1k2"].reason.startswith("not solvable: ")
     assert "does not explain the corners" in trail["k1k2"].reason
     start = next(c for c in sel.trail if c.compared_to is None and c.accepted)
     assert start.model != "k1k2" and "k1k2 not solvable" in start.reason
-    assert sel.chosen == "fisheye" and trail["fisheye"].accepted and trail["fisheye"].compared_to == start.model
+    assert (
+        sel.chosen == "fisheye" and trail["fisheye"].accepted and trail["fisheye"].compared_to == start.model
+    )
     assert sel.solution.rms_px < 0.5  # the render's noise is 0.2 px per coordinate
 
 

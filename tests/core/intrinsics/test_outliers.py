@@ -108,7 +108,9 @@ def test_the_moved_corner_is_removed_from_the_solve_by_default(corrupted, clean)
     rejection = solve_rejecting_corners(obj, img, SIZE, "k1k2", ids)
     rejected = {(c.view_index, c.corner_id) for c in rejection.rejected}
     assert (BAD_CORNER_VIEW, BAD_CORNER) in rejected
-    worst = next(c for c in rejection.rejected if (c.view_index, c.corner_id) == (BAD_CORNER_VIEW, BAD_CORNER))
+    worst = next(
+        c for c in rejection.rejected if (c.view_index, c.corner_id) == (BAD_CORNER_VIEW, BAD_CORNER)
+    )
     assert worst.residual_px == pytest.approx(8.0, abs=0.5)  # its residual under the final solve
     assert not rejection.keep_masks[BAD_CORNER_VIEW][BAD_CORNER]
     assert rejection.solution.n_views == len(obj)  # corners go, views stay
@@ -125,7 +127,9 @@ def test_with_one_bad_corner_the_solve_is_the_solve_without_it(clean):
     assert rejection.rounds == 2
     keep = np.arange(54) != BAD_CORNER
     without = [o[keep] if k == BAD_CORNER_VIEW else o for k, o in enumerate(obj)]
-    direct = solve_intrinsics(without, [p[keep] if k == BAD_CORNER_VIEW else p for k, p in enumerate(img)], SIZE)
+    direct = solve_intrinsics(
+        without, [p[keep] if k == BAD_CORNER_VIEW else p for k, p in enumerate(img)], SIZE
+    )
     assert np.array_equal(direct.camera_matrix, rejection.solution.camera_matrix)
     assert rejection.solution.rms_px < solve_intrinsics(obj, img, SIZE).rms_px
 

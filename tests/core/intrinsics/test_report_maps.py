@@ -27,8 +27,12 @@ def test_coverage_grid_counts_every_corner_in_its_cell() -> None:
     grid = coverage_grid(pts, SIZE, (4, 3))
     assert grid.shape == (3, 4) and grid.sum() == 4
     assert grid[0, 0] == 1 and grid[2, 3] == 1 and grid[1, 2] == 2
-    assert edge_gaps_px(pts, SIZE) == {"left": 0.0, "right": pytest.approx(-0.9), "top": 0.0,
-                                       "bottom": pytest.approx(-0.9)}
+    assert edge_gaps_px(pts, SIZE) == {
+        "left": 0.0,
+        "right": pytest.approx(-0.9),
+        "top": 0.0,
+        "bottom": pytest.approx(-0.9),
+    }
 
 
 def test_unproject_inverts_opencv_projection() -> None:
@@ -45,10 +49,19 @@ def test_a_principal_point_sigma_alone_is_the_same_everywhere() -> None:
 
 def test_a_focal_sigma_alone_grows_from_zero_at_the_principal_point() -> None:
     cov = np.diag([1.0, 0.0, 0.0, 0.0, 0.0])
-    m = projection_uncertainty(np.diag([800.0, 800.0, 1.0]) + np.array([[0, 0, 320.0], [0, 0, 240.0], [0, 0, 0]]),
-                               np.zeros(5), cov, NAMES, 1.0, SIZE, grid=(64, 48))
+    m = projection_uncertainty(
+        np.diag([800.0, 800.0, 1.0]) + np.array([[0, 0, 320.0], [0, 0, 240.0], [0, 0, 0]]),
+        np.zeros(5),
+        cov,
+        NAMES,
+        1.0,
+        SIZE,
+        grid=(64, 48),
+    )
     centre = m.sigma_px[23:25, 31:33]
-    assert centre.max() < 0.01 and m.sigma_px[0, 0] == pytest.approx(400.0 / 800.0, rel=0.02)  # r / f * sigma_f
+    assert centre.max() < 0.01 and m.sigma_px[0, 0] == pytest.approx(
+        400.0 / 800.0, rel=0.02
+    )  # r / f * sigma_f
 
 
 def test_projection_uncertainty_matches_a_monte_carlo_through_plain_opencv() -> None:
@@ -62,7 +75,9 @@ def test_projection_uncertainty_matches_a_monte_carlo_through_plain_opencv() -> 
     q = np.empty((len(draws), len(rays), 2))
     for i, (f, cx, cy, k1, k2) in enumerate(draws):
         Ki = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
-        q[i] = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), Ki, np.array([k1, k2, 0.0, 0.0, 0.0]))[0][:, 0]
+        q[i] = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), Ki, np.array([k1, k2, 0.0, 0.0, 0.0]))[0][
+            :, 0
+        ]
     worst = [np.sqrt(np.linalg.eigvalsh(np.cov(q[:, j].T))[-1]) for j in range(len(rays))]
     assert np.allclose(m.sigma_px.ravel(), worst, rtol=MC_TOLERANCE)
 

@@ -36,8 +36,14 @@ def solved(session):
 
 def test_recovers_the_true_camera_within_a_few_reported_sigma(solved):
     truth = {"fx": 800.0, "fy": 800.0, "cx": 321.3, "cy": 238.7, "k1": -0.2814, "k2": 0.0977}
-    est = {"fx": solved.fx, "fy": solved.fy, "cx": solved.cx, "cy": solved.cy,
-           "k1": solved.dist_coeffs[0], "k2": solved.dist_coeffs[1]}
+    est = {
+        "fx": solved.fx,
+        "fy": solved.fy,
+        "cx": solved.cx,
+        "cy": solved.cy,
+        "k1": solved.dist_coeffs[0],
+        "k2": solved.dist_coeffs[1],
+    }
     for name, true_value in truth.items():
         assert abs(est[name] - true_value) < N_SIGMA * solved.sigma[name], name
     assert set(solved.sigma) == {"fx", "fy", "cx", "cy", "k1", "k2"}
@@ -89,8 +95,9 @@ def test_tied_sigma_fx_matches_the_monte_carlo_spread_of_fx(session):
 
 
 def test_untied_sigma_agrees_with_opencv_on_well_posed_data(session):
-    sol = solve_intrinsics(session.object_points_per_view, session.image_points_per_view, SIZE,
-                           "opencv-default")
+    sol = solve_intrinsics(
+        session.object_points_per_view, session.image_points_per_view, SIZE, "opencv-default"
+    )
     assert set(sol.sigma) == {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
     for name, value in sol.sigma_opencv.items():
         assert sol.sigma[name] == pytest.approx(value, rel=1e-3), name
@@ -131,10 +138,14 @@ def test_a_fit_without_uncertainty_is_the_same_solve_without_sigma(session, mode
     full = solve_intrinsics(obj, img, SIZE, model)
     fit = solve_intrinsics(obj, img, SIZE, model, uncertainty=False)
     for name in ("camera_matrix", "dist_coeffs", "rvecs", "tvecs", "per_view_rms_px"):
-        np.testing.assert_allclose(getattr(fit, name), getattr(full, name), rtol=1e-10, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(
+            getattr(fit, name), getattr(full, name), rtol=1e-10, atol=1e-12, err_msg=name
+        )
     assert fit.rms_px == pytest.approx(full.rms_px, rel=1e-10)
     assert fit.n_residuals == full.n_residuals and fit.n_parameters == full.n_parameters
-    assert full.covariance is not None and full.sigma_refused_reason != NO_UNCERTAINTY  # rational: refused, for its reason
+    assert (
+        full.covariance is not None and full.sigma_refused_reason != NO_UNCERTAINTY
+    )  # rational: refused, for its reason
     assert fit.sigma == {} and fit.covariance is None and fit.sigma_opencv == {}
     assert fit.sigma_refused_reason == NO_UNCERTAINTY
     with pytest.raises(ValueError):
@@ -192,7 +203,9 @@ def test_degenerate_views_raise_a_numerical_error(session):
 # Where OpenCV's Levenberg-Marquardt lands on scrambled corners is chaotic: the same seed gives
 # fx = 6.x on one x86-64 CPU and fx = -2.8 or 11.3 on another. The behaviour that holds everywhere is
 # that no calibration comes out: a NumericalError (exit 2) with a hint, whichever refusal fires.
-_REFUSALS = r"the solve diverged: |the solve does not explain the corners: |OpenCV could not solve|NaN or infinite"
+_REFUSALS = (
+    r"the solve diverged: |the solve does not explain the corners: |OpenCV could not solve|NaN or infinite"
+)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
@@ -254,8 +267,15 @@ def test_model_table_flags_and_free_parameters():
 
 
 def test_a_custom_model_row_is_accepted(session):
-    untied = DistortionModel("k1k2-untied", cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
-                             ("fx", "fy", "cx", "cy"), ("k1", "k2"), 5, 3, "test")
+    untied = DistortionModel(
+        "k1k2-untied",
+        cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST,
+        ("fx", "fy", "cx", "cy"),
+        ("k1", "k2"),
+        5,
+        3,
+        "test",
+    )
     sol = solve_intrinsics(session.object_points_per_view, session.image_points_per_view, SIZE, untied)
     assert sol.fx != sol.fy and sol.sigma_opencv["fx"] > 0
 
@@ -271,7 +291,9 @@ def test_the_rational_model_starts_from_the_k1k2_solution_not_cold():
     obj, img = s.object_points_per_view, s.image_points_per_view
     objs = [o.astype(np.float32) for o in obj]
     imgs = [i.astype(np.float32) for i in img]
-    cold_rms, *_ = cv2.calibrateCamera(objs, imgs, size, np.eye(3), np.zeros(8), flags=MODELS["rational"].flags)
+    cold_rms, *_ = cv2.calibrateCamera(
+        objs, imgs, size, np.eye(3), np.zeros(8), flags=MODELS["rational"].flags
+    )
     warm = solve_intrinsics(obj, img, size, "rational")
     assert cold_rms > 1.0 and warm.rms_px < min(0.6, cold_rms / 3)  # OpenCV 5.0: 0.276 px, 4.10: 0.525 px
     k1k2 = solve_intrinsics(obj, img, size, "k1k2")

@@ -34,7 +34,8 @@ def detect(path: Path) -> tuple[np.ndarray | None, tuple[int, int]]:
     """(54, 2) float64 sub-pixel corners or None, and the image's (width, height)."""
     gray = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     ok, corners = cv2.findChessboardCorners(
-        gray, PATTERN, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        gray, PATTERN, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    )
     size = (gray.shape[1], gray.shape[0])
     if not ok:
         return None, size
@@ -103,9 +104,16 @@ def test_udacity_reference_solve_flags_calibration15_and_its_bad_corner(udacity_
     for name, value in reference.items():
         assert getattr(sol, name) == pytest.approx(value, abs=REFERENCE_TOL_PX), name
     assert sol.rms_px == pytest.approx(1.003, abs=5e-4)
-    cov = sol.covariance  # per-view error beyond the corner noise: the view-level sigma is reported (issue 22)
+    cov = (
+        sol.covariance
+    )  # per-view error beyond the corner noise: the view-level sigma is reported (issue 22)
     assert cov is not None and cov.view_factor is not None and cov.inflated
-    for name, value in {"fx": 3.26, "fy": 3.55, "cx": 4.13, "cy": 3.02}.items():  # the Jacobian sigma behind it
+    for name, value in {
+        "fx": 3.26,
+        "fy": 3.55,
+        "cx": 4.13,
+        "cy": 3.02,
+    }.items():  # the Jacobian sigma behind it
         assert sol.sigma[name] / cov.view_factor == pytest.approx(value, abs=0.005), name
 
     report = flag_outliers(sol, corner_ids_per_view=[np.arange(54)] * len(obj))
@@ -121,7 +129,10 @@ def test_udacity_without_the_1281x721_frames_still_exposes_the_bad_corner(udacit
     """Solve only the frames that really are 1280x720; calibration15 (1281x721) is then checked as
     a held-out view: pose re-fitted with the intrinsics frozen, corner rule of the fit."""
     sizes = {n: s for n, _, s in udacity_views}
-    assert sorted(n for n, s in sizes.items() if s == (1281, 721)) == ["calibration15.jpg", "calibration7.jpg"]
+    assert sorted(n for n, s in sizes.items() if s == (1281, 721)) == [
+        "calibration15.jpg",
+        "calibration7.jpg",
+    ]
     kept = [(n, c) for n, c, s in udacity_views if s == (1280, 720)]
     assert len(kept) == 15
     sol = solve_intrinsics([model_points()] * 15, [c for _, c in kept], (1280, 720), "opencv-default")

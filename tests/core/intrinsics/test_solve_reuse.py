@@ -73,8 +73,11 @@ def assert_same_solution(a, b) -> None:
             if x is not None:
                 for g in fields(x):
                     u, v = getattr(x, g.name), getattr(y, g.name)
-                    assert np.array_equal(u, v, equal_nan=True) if isinstance(u, np.ndarray) else \
-                        (u == v or (isinstance(u, float) and math.isnan(u) and math.isnan(v))), g.name
+                    assert (
+                        np.array_equal(u, v, equal_nan=True)
+                        if isinstance(u, np.ndarray)
+                        else (u == v or (isinstance(u, float) and math.isnan(u) and math.isnan(v)))
+                    ), g.name
         elif f.name == "residuals_px":
             assert all(np.array_equal(p, q) for p, q in zip(x, y, strict=True))
         elif isinstance(x, np.ndarray):
@@ -87,7 +90,9 @@ def assert_same_solution(a, b) -> None:
 def test_a_solve_asked_twice_is_computed_once_and_is_the_solve_a_fresh_ask_computes(computed, model):
     obj, img, size = _pinhole()
     first = solve_intrinsics(obj, img, size, model)
-    again = solve_intrinsics([o.copy() for o in obj], [i.copy() for i in img], size, model)  # equal values hit
+    again = solve_intrinsics(
+        [o.copy() for o in obj], [i.copy() for i in img], size, model
+    )  # equal values hit
     assert again is first
     asked = len(computed)
     solve_module.forget_recent_solves()
@@ -104,7 +109,9 @@ def test_another_question_is_solved_again(computed):
         solve_intrinsics(obj, moved, size, "k1k2"),  # one corner moved by 0.01 px
         solve_intrinsics(obj, img, size, "k1k2k3"),
         solve_intrinsics(obj, img, size, "k1k2", initial=np.array(base.camera_matrix)),
-        solve_intrinsics(obj, img, size, "k1k2", uncertainty=False),  # a fit: remembered apart, asked again below
+        solve_intrinsics(
+            obj, img, size, "k1k2", uncertainty=False
+        ),  # a fit: remembered apart, asked again below
     ]
     assert computed == ["k1k2", "k1k2", "k1k2k3", "k1k2", "k1k2"]
     assert all(o is not base for o in others)
@@ -205,8 +212,11 @@ def test_a_view_score_is_remembered_for_its_exact_corners_and_focal_length_only(
     assert len(scored) == 4
     moved = [i.copy() for i in img]
     moved[0][0, 0] += 1e-9
-    scores = [view_guess_rms_px(obj, moved, size, 500.0), view_guess_rms_px(obj, img, size, np.nextafter(500.0, 1e3)),
-              view_guess_rms_px(obj, img, (1281, 960), 500.0)]  # another image centre
+    scores = [
+        view_guess_rms_px(obj, moved, size, 500.0),
+        view_guess_rms_px(obj, img, size, np.nextafter(500.0, 1e3)),
+        view_guess_rms_px(obj, img, (1281, 960), 500.0),
+    ]  # another image centre
     assert len(scored) == 4 + 1 + 4 + 4
     assert np.array_equal(scores[0][1:], first[1:]) and not np.array_equal(scores[2], first)
     solve_module.forget_recent_solves()  # a benchmark's fresh round computes the scores again
@@ -217,8 +227,14 @@ def test_the_fisheye_solves_of_the_folds_are_those_computed_without_remembered_s
     obj, img, size = _wide_fisheye()
     train = [i for i in range(len(obj)) if i % 5 != 0]
     solve_intrinsics(obj, img, size, "fisheye")  # the session's solve scores most of the fold's guess views
-    fold = solve_intrinsics([obj[i] for i in train], [img[i] for i in train], size, "fisheye", uncertainty=False)
+    fold = solve_intrinsics(
+        [obj[i] for i in train], [img[i] for i in train], size, "fisheye", uncertainty=False
+    )
     solve_module.forget_recent_solves()
     monkeypatch.setattr(fisheye_model, "_RECENT_SCORES", RecentAnswers(0))
-    assert_same_solution(solve_intrinsics([obj[i] for i in train], [img[i] for i in train], size, "fisheye",
-                                          uncertainty=False), fold)
+    assert_same_solution(
+        solve_intrinsics(
+            [obj[i] for i in train], [img[i] for i in train], size, "fisheye", uncertainty=False
+        ),
+        fold,
+    )

@@ -88,8 +88,10 @@ def test_holdout_is_deterministic(good):
     ses, report = good
     again = validate_holdout(ses.object_points_per_view, ses.image_points_per_view, SIZE, "k1k2")
     assert again.holdout_rms_px == report.holdout_rms_px
-    assert all(np.array_equal(a, b) for a, b in
-               zip(again.holdout_residuals_px, report.holdout_residuals_px, strict=True))
+    assert all(
+        np.array_equal(a, b)
+        for a, b in zip(again.holdout_residuals_px, report.holdout_residuals_px, strict=True)
+    )
 
 
 @pytest.mark.parametrize("jobs", [2, 4])
@@ -107,24 +109,36 @@ def test_folds_solved_on_lanes_equal_the_sequential_run_bit_for_bit(good, model,
     assert cv2.getNumThreads() == threads_before
     assert np.array_equal(parallel.fold_of_view, sequential.fold_of_view)
     assert np.array_equal(parallel.fold_camera_matrices, sequential.fold_camera_matrices)
-    assert len(parallel.holdout_residuals_px) == len(sequential.holdout_residuals_px) == len(ses.image_points_per_view)
-    assert all(np.array_equal(a, b) for a, b in
-               zip(parallel.holdout_residuals_px, sequential.holdout_residuals_px, strict=True))
+    assert (
+        len(parallel.holdout_residuals_px)
+        == len(sequential.holdout_residuals_px)
+        == len(ses.image_points_per_view)
+    )
+    assert all(
+        np.array_equal(a, b)
+        for a, b in zip(parallel.holdout_residuals_px, sequential.holdout_residuals_px, strict=True)
+    )
     assert np.array_equal(parallel.holdout_per_view_rms_px, sequential.holdout_per_view_rms_px)
     assert parallel.holdout_rms_px == sequential.holdout_rms_px
     for a, b in ((parallel.holdout, sequential.holdout), (parallel.fit, sequential.fit)):
-        assert np.array_equal(a.ring_rms_px, b.ring_rms_px) and np.array_equal(a.octant_rms_px, b.octant_rms_px)
+        assert np.array_equal(a.ring_rms_px, b.ring_rms_px) and np.array_equal(
+            a.octant_rms_px, b.octant_rms_px
+        )
 
 
 def _sparse_outer_ring_session(seed: int):
     """Six small central boards far from the camera and two boards close up reaching the image
     edges: few corners in the outer ring, all of them in two views."""
-    central = synthesize_session(K_TRUE, D_TRUE, SIZE, n_views=6, seed=seed, distance_m=(0.8, 1.1),
-                                 centre_spread=0.2)
-    wide = synthesize_session(K_TRUE, D_TRUE, SIZE, n_views=2, seed=100 + seed, distance_m=(0.3, 0.4),
-                              centre_spread=1.0)
-    return (central.object_points_per_view + wide.object_points_per_view,
-            central.image_points_per_view + wide.image_points_per_view)
+    central = synthesize_session(
+        K_TRUE, D_TRUE, SIZE, n_views=6, seed=seed, distance_m=(0.8, 1.1), centre_spread=0.2
+    )
+    wide = synthesize_session(
+        K_TRUE, D_TRUE, SIZE, n_views=2, seed=100 + seed, distance_m=(0.3, 0.4), centre_spread=1.0
+    )
+    return (
+        central.object_points_per_view + wide.object_points_per_view,
+        central.image_points_per_view + wide.image_points_per_view,
+    )
 
 
 def test_overfit_distortion_shows_in_the_outer_ring_held_out():
@@ -150,8 +164,12 @@ def test_a_fold_that_cannot_be_solved_names_the_fold():
     obj, img = list(ses.object_points_per_view), list(ses.image_points_per_view)
     obj[4], img[4] = obj[4][:9], img[4][:9]
     for jobs in (1, 2, 4):  # on lanes too, the error names the first failing fold
-        with verdict_lanes(jobs) as lanes, pytest.raises(
-                NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"):
+        with (
+            verdict_lanes(jobs) as lanes,
+            pytest.raises(
+                NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): OpenCV could not"
+            ),
+        ):
             validate_holdout(obj, img, SIZE, "k1k2", fit=fit, lanes=lanes)
 
 

@@ -14,9 +14,11 @@ XYZIR = np.array([[1.0, 2.0, 3.0, 10.0, 0], [4.0, 5.0, 6.0, 20.0, 1], [7.0, 8.0,
 
 
 def header(n: int, data: str, points: int | None = None, sizes: str = "4 4 4 4 2") -> bytes:
-    return (f"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity ring\nSIZE {sizes}\nTYPE F F F F U\n"
-            f"COUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n if points is None else points}\n"
-            f"DATA {data}\n").encode()
+    return (
+        f"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity ring\nSIZE {sizes}\nTYPE F F F F U\n"
+        f"COUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n if points is None else points}\n"
+        f"DATA {data}\n"
+    ).encode()
 
 
 def records(rows: np.ndarray) -> np.ndarray:
@@ -31,7 +33,7 @@ def lzf_literals(raw: bytes) -> bytes:
     """A valid LZF stream of literal runs only (<= 32 bytes each)."""
     out = bytearray()
     for i in range(0, len(raw), 32):
-        chunk = raw[i:i + 32]
+        chunk = raw[i : i + 32]
         out.append(len(chunk) - 1)
         out += chunk
     return bytes(out)
@@ -44,8 +46,10 @@ def test_ascii_binary_and_compressed_read_the_same_points() -> None:
     rec = records(XYZIR)
     columns = b"".join(rec[name].tobytes() for name in rec.dtype.names or ())  # PCL: field after field
     packed = lzf_literals(columns)
-    c = parse_pcd(header(3, "binary_compressed") + np.array([len(packed), len(columns)], "<u4").tobytes() + packed,
-                  "c.pcd")
+    c = parse_pcd(
+        header(3, "binary_compressed") + np.array([len(packed), len(columns)], "<u4").tobytes() + packed,
+        "c.pcd",
+    )
     for cloud in (a, b, c):
         np.testing.assert_allclose(cloud.points_m, XYZIR[:, :3])
         np.testing.assert_array_equal(cloud.ring, [0, 1, 2])
@@ -70,15 +74,27 @@ def test_nan_points_are_dropped_and_counted() -> None:
     np.testing.assert_array_equal(cloud.ring, [0, 3])
 
 
-@pytest.mark.parametrize(("blob", "field"), [
-    (header(3, "ascii", points=4) + b"1 2 3 4 0\n1 2 3 4 0\n1 2 3 4 0\n", "WIDTH x HEIGHT"),
-    (header(4, "ascii") + b"1 2 3 4 0\n1 2 3 4 0\n1 2 3 4 0\n", "POINTS says 4 but the ascii data holds 3"),
-    (header(3, "ascii", sizes="4 4 4 4") + b"1 2 3 4 0\n", "SIZE lists 4 entries for 5 FIELDS"),
-    (header(3, "binary") + records(XYZIR).tobytes()[:-5], "POINTS says 3 but the binary data holds 2"),
-    (header(3, "binary_compressed") + np.array([4, 999], "<u4").tobytes() + b"\0\0\0\0", "compressed block holds 999"),
-    (header(2, "ascii") + b"1 2 3\n4 5 6\n", "5 values per point, the data has 3"),
-    (b"VERSION 0.7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n", "has no x"),
-])
+@pytest.mark.parametrize(
+    ("blob", "field"),
+    [
+        (header(3, "ascii", points=4) + b"1 2 3 4 0\n1 2 3 4 0\n1 2 3 4 0\n", "WIDTH x HEIGHT"),
+        (
+            header(4, "ascii") + b"1 2 3 4 0\n1 2 3 4 0\n1 2 3 4 0\n",
+            "POINTS says 4 but the ascii data holds 3",
+        ),
+        (header(3, "ascii", sizes="4 4 4 4") + b"1 2 3 4 0\n", "SIZE lists 4 entries for 5 FIELDS"),
+        (header(3, "binary") + records(XYZIR).tobytes()[:-5], "POINTS says 3 but the binary data holds 2"),
+        (
+            header(3, "binary_compressed") + np.array([4, 999], "<u4").tobytes() + b"\0\0\0\0",
+            "compressed block holds 999",
+        ),
+        (header(2, "ascii") + b"1 2 3\n4 5 6\n", "5 values per point, the data has 3"),
+        (
+            b"VERSION 0.7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n",
+            "has no x",
+        ),
+    ],
+)
 def test_a_header_that_disagrees_with_its_data_is_named(blob: bytes, field: str) -> None:
     with pytest.raises(InputError, match=field) as err:
         parse_pcd(blob, "lying.pcd")

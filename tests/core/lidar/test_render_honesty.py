@@ -42,7 +42,10 @@ def test_z_scores_over_120_seeds_have_unit_spread() -> None:
         sol = ls.solve(poses, session.board)
         T = session.T_lidar_cam
         zt.append((sol.T_lidar_cam[:3, 3] - T[:3, 3]) / sol.sigma_translation_m)
-        zr.append(se3.rotvec_from_rotation(sol.T_lidar_cam[:3, :3] @ T[:3, :3].T) / np.radians(sol.sigma_rotation_deg))
+        zr.append(
+            se3.rotvec_from_rotation(sol.T_lidar_cam[:3, :3] @ T[:3, :3].T)
+            / np.radians(sol.sigma_rotation_deg)
+        )
     z = np.hstack([np.array(zt), np.array(zr)])  # t x y z, rotation about x y z
     assert np.all(np.abs(z.mean(axis=0)) < 0.3), z.mean(axis=0)
     assert np.all((z.std(axis=0) > 0.7) & (z.std(axis=0) < 1.4)), z.std(axis=0)
@@ -60,8 +63,14 @@ def test_the_truth_leaves_unbiased_board_points_and_edges() -> None:
             if not found.accepted or p.camera is None:
                 continue
             T_cam_board = se3.invert(session.T_lidar_cam) @ p.T_lidar_board
-            pr, er = ls.pose_residuals(session.T_lidar_cam, T_cam_board, ls.Pose("x", p.camera, found), session.board,
-                                       0.0, -session.laser_bias_m)
+            pr, er = ls.pose_residuals(
+                session.T_lidar_cam,
+                T_cam_board,
+                ls.Pose("x", p.camera, found),
+                session.board,
+                0.0,
+                -session.laser_bias_m,
+            )
             plane.append(pr)
             edge.append(er)
             upper.append(found.edge_points_m[:, 2] > found.centre_m[2])

@@ -24,7 +24,9 @@ def test_rendered_boards_are_found_with_their_size(session: render.RenderedSessi
         assert abs(found.width_m - 0.61) < SIZE_TOL_M and abs(found.height_m - 0.85) < SIZE_TOL_M
         true_n = pose.T_lidar_board[:3, 2]
         assert abs(abs(found.normal @ true_n) - 1.0) < 1e-3
-        true_centre = pose.T_lidar_board[:3, :3] @ session.board.centre_in_pattern() + pose.T_lidar_board[:3, 3]
+        true_centre = (
+            pose.T_lidar_board[:3, :3] @ session.board.centre_in_pattern() + pose.T_lidar_board[:3, 3]
+        )
         assert np.linalg.norm(found.centre_m - true_centre) < 0.03
         assert found.rings >= 7 and len(found.edge_points_m) == len(found.edge_ring) > 0
 

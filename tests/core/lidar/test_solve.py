@@ -50,8 +50,10 @@ def test_a_30mm_range_offset_is_found() -> None:
     session = render.render_session(12, seed=5, range_offset_m=0.03)
     sol = ls.solve(poses_of(session), session.board, estimate_range_offset=True)
     assert sol.range_offset_sigma_m is not None and sol.range_offset_sigma_m < 0.01
-    assert abs(sol.range_offset_m - 0.03) < 3 * sol.range_offset_sigma_m + 0.002, (sol.range_offset_m,
-                                                                                   sol.range_offset_sigma_m)
+    assert abs(sol.range_offset_m - 0.03) < 3 * sol.range_offset_sigma_m + 0.002, (
+        sol.range_offset_m,
+        sol.range_offset_sigma_m,
+    )
 
 
 def test_boards_all_facing_one_way_are_refused_naming_the_direction() -> None:
@@ -65,11 +67,17 @@ def test_boards_all_facing_one_way_are_refused_naming_the_direction() -> None:
     assert gates.observability_gate(np.array([p.lidar.normal for p in varied])).passed
 
 
-@pytest.mark.parametrize(("gate", "ok"), [
-    (gates.pose_count_gate(3, 10), False), (gates.pose_count_gate(6, 10), True),
-    (gates.range_spread_gate([2.0, 2.1, 2.2]), False), (gates.range_spread_gate([1.5, 3.0]), True),
-    (gates.dimension_gate(np.array([[40.0, 0.0]])), False), (gates.held_out_gate(30.0, 10.0), False),
-])
+@pytest.mark.parametrize(
+    ("gate", "ok"),
+    [
+        (gates.pose_count_gate(3, 10), False),
+        (gates.pose_count_gate(6, 10), True),
+        (gates.range_spread_gate([2.0, 2.1, 2.2]), False),
+        (gates.range_spread_gate([1.5, 3.0]), True),
+        (gates.dimension_gate(np.array([[40.0, 0.0]])), False),
+        (gates.held_out_gate(30.0, 10.0), False),
+    ],
+)
 def test_each_gate_can_fail_and_says_what_to_do(gate, ok: bool) -> None:
     assert gate.passed is ok
     if not ok:

@@ -98,9 +98,11 @@ def test_anti_aliasing_places_edges_to_a_fiftieth_of_a_pixel() -> None:
         T = place_board(pinhole, BOARD, np.eye(3), (319.5 + shift_px, 239.5), 0.6)
         img = render_view(pinhole, BOARD, T, np.random.default_rng(0), CLEAN, np.full((480, 640), 0.4))
         edge_u, _ = pinhole.project(np.array([[BOARD.square_size_m, 0.0, 0.0]]), T)[0]
-        _, row_v = pinhole.project(np.array([[0.5 * BOARD.square_size_m, 0.5 * BOARD.square_size_m, 0.0]]), T)[0]
+        _, row_v = pinhole.project(
+            np.array([[0.5 * BOARD.square_size_m, 0.5 * BOARD.square_size_m, 0.0]]), T
+        )[0]
         lo, hi = int(edge_u) - 6, int(edge_u) + 6
-        profile = img[int(round(row_v)), lo:hi + 1].astype(float)
+        profile = img[int(round(row_v)), lo : hi + 1].astype(float)
         black, white = 0.06 * CLEAN.gain, 0.90 * CLEAN.gain
         white_fraction = np.clip((profile - black) / (white - black), 0.0, 1.0)
         measured = hi + 0.5 - white_fraction.sum()
@@ -145,7 +147,9 @@ def test_video_plan_pauses_at_key_poses_and_moves_between() -> None:
     corners = [true_corners_px(CAMERA, BOARD, T) for T in plan.poses]
     motion = [float(np.linalg.norm(b - a, axis=1).mean()) for a, b in zip(corners, corners[1:], strict=False)]
     still_steps = [m for m, s0, s1 in zip(motion, plan.still, plan.still[1:], strict=False) if s0 and s1]
-    moving_steps = [m for m, s0, s1 in zip(motion, plan.still, plan.still[1:], strict=False) if not (s0 and s1)]
+    moving_steps = [
+        m for m, s0, s1 in zip(motion, plan.still, plan.still[1:], strict=False) if not (s0 and s1)
+    ]
     assert max(still_steps) < 0.2 and min(moving_steps) > 2.0
 
 
@@ -166,9 +170,18 @@ def test_a_190_deg_fisheye_renders_the_board_behind_the_camera_plane() -> None:
     T_cam_board[:3, :3] = np.column_stack([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
     T_cam_board[:3, 3] = [0.1, -0.0375, -0.1]
     background = np.full((480, 640), 0.4, np.float32)  # 94 DN at gain 235
-    img = render_view(camera, board, T_cam_board, np.random.default_rng(0),
-                      Photometry(blur_sigma_px=0.0, read_noise_dn=0.0, shot_noise_gain=0.0), background)
+    img = render_view(
+        camera,
+        board,
+        T_cam_board,
+        np.random.default_rng(0),
+        Photometry(blur_sigma_px=0.0, read_noise_dn=0.0, shot_noise_gain=0.0),
+        background,
+    )
     ray = np.array([[np.sin(np.deg2rad(93.0)), 0.0, np.cos(np.deg2rad(93.0))]])
     u, v = np.rint(project_equidistant(ray, camera.K, camera.dist)[0]).astype(int)
-    assert camera.circle_radius_px is not None and np.hypot(u - camera.K[0, 2], v - camera.K[1, 2]) < camera.circle_radius_px
+    assert (
+        camera.circle_radius_px is not None
+        and np.hypot(u - camera.K[0, 2], v - camera.K[1, 2]) < camera.circle_radius_px
+    )
     assert img[v, u] < 30  # black print (235 x 0.06 x 0.8 = 11 DN), not the background

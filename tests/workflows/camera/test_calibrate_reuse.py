@@ -27,8 +27,17 @@ from tests.artifacts.factories import measured_board
 from tests.workflows.synth_folders import fisheye_gauge_folders, rendered
 
 # what differs between any two runs (ids, times, the hash over them), not what the change touches
-VOLATILE = {"content_sha256", "signature", "signed_by", "created_at", "started_at", "finished_at", "session_id", "lint",
-            "detector_rms_px"}
+VOLATILE = {
+    "content_sha256",
+    "signature",
+    "signed_by",
+    "created_at",
+    "started_at",
+    "finished_at",
+    "session_id",
+    "lint",
+    "detector_rms_px",
+}
 
 
 def _calibrate(tmp_path: Path, name: str, folder: Path, model: str) -> capture_workflow.CalibrateResult:
@@ -36,7 +45,9 @@ def _calibrate(tmp_path: Path, name: str, folder: Path, model: str) -> capture_w
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     settings = load_settings(db=url, station="st-7", operator="op", env={})
-    return capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder), jobs=1), model=model)
+    return capture_workflow.calibrate(
+        settings, CaptureRequest("CAM-0042", "A17", str(folder), jobs=1), model=model
+    )
 
 
 def numbers_without(doc: object, volatile: frozenset[str] | set[str]) -> object:
@@ -52,11 +63,15 @@ def _numbers(doc: object) -> object:
     return numbers_without(doc, VOLATILE)
 
 
-@pytest.mark.parametrize(("scene", "model"), [("good", "k1k2"), ("good", "auto"), ("fisheye", "fisheye"),
-                                              ("fisheye", "auto")])
-def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tmp_path_factory, monkeypatch,
-                                                                    scene, model):
-    folder = rendered(tmp_path_factory, "good") if scene == "good" else fisheye_gauge_folders(tmp_path_factory)[0]
+@pytest.mark.parametrize(
+    ("scene", "model"), [("good", "k1k2"), ("good", "auto"), ("fisheye", "fisheye"), ("fisheye", "auto")]
+)
+def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(
+    tmp_path, tmp_path_factory, monkeypatch, scene, model
+):
+    folder = (
+        rendered(tmp_path_factory, "good") if scene == "good" else fisheye_gauge_folders(tmp_path_factory)[0]
+    )
     solve_module.forget_recent_solves()
     computed: list[str] = []  # the solves each run really computed
     real = solve_module._solve
@@ -74,15 +89,23 @@ def test_calibrate_stores_the_numbers_and_verdicts_it_stored_before(tmp_path, tm
     fisheye_before = computed.count("fisheye")
     new = _calibrate(tmp_path, "after", folder, model)
     assert len(computed) - solves_before <= solves_before - 3  # the gate's solve again, rational and fisheye
-    if scene == "fisheye":  # the tilt lens is the fisheye solve the gate asks for; most guess scores are asked before
+    if (
+        scene == "fisheye"
+    ):  # the tilt lens is the fisheye solve the gate asks for; most guess scores are asked before
         assert computed[solves_before:].count("fisheye") <= fisheye_before - 2
         assert len(scored) - scores_before < scores_before / 2
     assert old.solve is not None and new.solve is not None
-    assert _numbers(new.capture.session.model_dump(mode="json")) == _numbers(old.capture.session.model_dump(mode="json"))
+    assert _numbers(new.capture.session.model_dump(mode="json")) == _numbers(
+        old.capture.session.model_dump(mode="json")
+    )
     a, b = old.solve.artifact, new.solve.artifact
     assert _numbers(b.model_dump(mode="json")) == _numbers(a.model_dump(mode="json"))
     assert (b.status, new.solve.active) == (a.status, old.solve.active) == ("accepted", True)
-    assert [(f.rule, f.severity, f.passed) for f in b.lint] == [(f.rule, f.severity, f.passed) for f in a.lint]
-    assert [f.message for f in b.lint if f.rule != "model-misfit"] == [f.message for f in a.lint if f.rule != "model-misfit"]
+    assert [(f.rule, f.severity, f.passed) for f in b.lint] == [
+        (f.rule, f.severity, f.passed) for f in a.lint
+    ]
+    assert [f.message for f in b.lint if f.rule != "model-misfit"] == [
+        f.message for f in a.lint if f.rule != "model-misfit"
+    ]
     assert a.detector_rms_px is not None and b.detector_rms_px is not None
     assert b.rms_px <= model_fit.MISFIT_MIN_PX and b.detector_rms_px >= a.detector_rms_px

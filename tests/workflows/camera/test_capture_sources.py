@@ -41,7 +41,9 @@ def test_a_relative_glob_is_relative_to_the_working_directory(shots: Path, monke
 def test_a_glob_matching_no_image_names_what_it_matched(shots: Path) -> None:
     with pytest.raises(InputError) as nothing:
         sources.select_images(sources.resolve_source(str(shots / "top*.jpg")))
-    assert f"--source '{shots / 'top*.jpg'}' matches no image file; nothing was stored" in nothing.value.message
+    assert (
+        f"--source '{shots / 'top*.jpg'}' matches no image file; nothing was stored" in nothing.value.message
+    )
     assert nothing.value.exit_code == EXIT_CANNOT_RUN
     with pytest.raises(InputError, match=r"1 file\(s\), none an image by its suffix: notes.md"):
         sources.select_images(sources.resolve_source(str(shots / "*.md")))
@@ -51,8 +53,10 @@ def test_a_list_file_is_read_relative_to_its_own_folder(shots: Path, tmp_path: P
     lists = tmp_path / "lists"
     lists.mkdir()
     listing = lists / "left.txt"
-    listing.write_text(f"# left camera\n../shots/left01.jpg\n\n  ../shots/sub/left03.jpg  \n{shots / 'left02.png'}\n"
-                       "../shots/left01.jpg\n")
+    listing.write_text(
+        f"# left camera\n../shots/left01.jpg\n\n  ../shots/sub/left03.jpg  \n{shots / 'left02.png'}\n"
+        "../shots/left01.jpg\n"
+    )
     monkeypatch.chdir(shots / "sub")  # the working directory plays no part
     spec = sources.resolve_source(str(listing))
     assert spec.kind == sources.LIST and spec.recorded == str(listing)
@@ -68,8 +72,10 @@ def test_a_list_file_naming_missing_or_odd_files_is_refused_naming_each(shots: P
     with pytest.raises(InputError) as bad:
         sources.select_images(sources.resolve_source(str(listing)))
     assert "names 3 file(s) that cannot be used; nothing was stored" in bad.value.message
-    assert "line 2: left09.jpg (missing), line 3: sub (a folder), line 4: notes.md (not an image by its suffix)" \
+    assert (
+        "line 2: left09.jpg (missing), line 3: sub (a folder), line 4: notes.md (not an image by its suffix)"
         in bad.value.message
+    )
     assert str(shots) in bad.value.hint
     (shots / "empty.txt").write_text("# nothing yet\n")
     with pytest.raises(InputError, match="names no image"):
@@ -83,9 +89,13 @@ def test_mixed_sizes_are_an_error_for_a_glob_or_list_only(shots: Path) -> None:
     sizes = {"a.jpg": (1280, 720), "b.jpg": (1280, 720), "c.jpg": (1281, 721)}
     glob_spec = sources.resolve_source(str(shots / "*.jpg"))
     error = sources.mixed_sizes_error(glob_spec, sizes)
-    assert error is not None and "mixes image sizes (1280x720: a.jpg, b.jpg; 1281x721: c.jpg)" in error.message
+    assert (
+        error is not None and "mixes image sizes (1280x720: a.jpg, b.jpg; 1281x721: c.jpg)" in error.message
+    )
     assert sources.mixed_sizes_error(glob_spec, {"a.jpg": (640, 480)}) is None
-    assert sources.mixed_sizes_error(sources.resolve_source(str(shots)), sizes) is None  # a folder: wrong_size
+    assert (
+        sources.mixed_sizes_error(sources.resolve_source(str(shots)), sizes) is None
+    )  # a folder: wrong_size
 
 
 def test_long_listings_are_cut(shots: Path) -> None:
@@ -113,11 +123,13 @@ def _pngs(folder: Path, n: int) -> Path:
     return folder
 
 
-@pytest.mark.parametrize(("images", "jobs", "started"), [
-    (PROCESS_MIN_FILES, 2, True), (PROCESS_MIN_FILES - 1, 2, False), (PROCESS_MIN_FILES, 1, False)])
-def test_the_fork_server_starts_early_only_for_a_capture_the_pool_will_detect(tmp_path: Path, server_starts: list[int],
-                                                                             images: int, jobs: int,
-                                                                             started: bool) -> None:
+@pytest.mark.parametrize(
+    ("images", "jobs", "started"),
+    [(PROCESS_MIN_FILES, 2, True), (PROCESS_MIN_FILES - 1, 2, False), (PROCESS_MIN_FILES, 1, False)],
+)
+def test_the_fork_server_starts_early_only_for_a_capture_the_pool_will_detect(
+    tmp_path: Path, server_starts: list[int], images: int, jobs: int, started: bool
+) -> None:
     folder = _pngs(tmp_path / "shots", images)
     sources.start_detection_early(str(folder), jobs)
     sources.start_detection_early(str(folder / "*.png"), jobs)  # the same files as a glob
@@ -125,9 +137,9 @@ def test_the_fork_server_starts_early_only_for_a_capture_the_pool_will_detect(tm
 
 
 @pytest.mark.parametrize("source", ["missing-folder", "/dev/video7", "empty", "clip.mp4"])
-def test_a_source_the_pool_will_not_detect_starts_nothing_and_raises_nothing(tmp_path: Path, server_starts: list[int],
-                                                                            monkeypatch: pytest.MonkeyPatch,
-                                                                            source: str) -> None:
+def test_a_source_the_pool_will_not_detect_starts_nothing_and_raises_nothing(
+    tmp_path: Path, server_starts: list[int], monkeypatch: pytest.MonkeyPatch, source: str
+) -> None:
     monkeypatch.chdir(tmp_path)
     (tmp_path / "empty").mkdir()
     (tmp_path / "clip.mp4").write_bytes(b"\0" * 64)

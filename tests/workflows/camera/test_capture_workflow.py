@@ -75,23 +75,37 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
             assert store.image_path(o.sha256) is not None, o.name
     assert stored.status == "accepted" and stored.source_kind == "folder" and stored.image_size == (640, 480)
     assert stored.source == str(good.resolve())
-    assert (stored.station, stored.operator, stored.serial, stored.board.ref) == ("st-7", "op-ana", SERIAL, "A17@1")
+    assert (stored.station, stored.operator, stored.serial, stored.board.ref) == (
+        "st-7",
+        "op-ana",
+        SERIAL,
+        "A17@1",
+    )
     assert [o.name for o in stored.outcomes] == [v["file"] for v in truth["views"]]
     assert result.images_stored == len(stored.outcomes) == 12
     # issue 22: a session that is not hopeless also carries the decisive projection gate
-    assert {g.gate: g.passed for g in stored.gates} == {"observability": True, "tilt": True, "coverage": True,
-                                                       "views": True, "one_camera": True, "projection": True}
+    assert {g.gate: g.passed for g in stored.gates} == {
+        "observability": True,
+        "tilt": True,
+        "coverage": True,
+        "views": True,
+        "one_camera": True,
+        "projection": True,
+    }
     assert all(g.reason is None and g.hint is None for g in stored.gates)
     by_file = {v["file"]: np.array(v["corners_px"]) for v in truth["views"]}
     for view in stored.views:
         corners = np.array(view.corners_px, dtype=np.float64)
         error = np.linalg.norm(corners - by_file[view.name][view.corner_ids], axis=1)
         assert error.mean() < CORNER_TRUTH_TOL_PX, (view.name, error.mean())
-        assert 15.0 < view.tilt_deg < 45.0 and view.tilt_direction is not None  # the scene's tilts are 20-40 deg
+        assert (
+            15.0 < view.tilt_deg < 45.0 and view.tilt_direction is not None
+        )  # the scene's tilts are 20-40 deg
 
 
-def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(settings, good: Path, monkeypatch,
-                                                                               thread_workers) -> None:
+def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum(
+    settings, good: Path, monkeypatch, thread_workers
+) -> None:
     files = sorted(good.glob("*.png"))
     expected = None
     for path in files:  # what the capture kept before: a reduced decode of every file, then the maximum
@@ -102,7 +116,9 @@ def test_a_folder_capture_decodes_each_file_once_and_keeps_the_half_size_maximum
     monkeypatch.setattr(cv2, "imdecode", lambda *a: decodes.append(1) or real_imdecode(*a))
     kept = {}
     real_collected = capture_workflow._Collected
-    monkeypatch.setattr(capture_workflow, "_Collected", lambda *a, **k: kept.setdefault("got", real_collected(*a, **k)))
+    monkeypatch.setattr(
+        capture_workflow, "_Collected", lambda *a, **k: kept.setdefault("got", real_collected(*a, **k))
+    )
     capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=2))
     # each file once for detection, plus the pattern check's probe pictures (read as bytes too, since a
     # cv2.imread of a name that is not UTF-8 crashed: docs/hardening.md)
@@ -121,7 +137,11 @@ def test_station_file_overrides_the_gate_thresholds(sqlite_url: str, good: Path,
     assert result.session.status == "rejected"
     assert gates["observability"].threshold == 1e-3 and gates["observability"].reason == "observability.low"
     assert 1e-4 < gates["observability"].value < 1e-3  # passes the default, fails the station's threshold
-    assert gates["views"].threshold == 13 and gates["views"].value == 12 and gates["views"].reason == "views.too_few"
+    assert (
+        gates["views"].threshold == 13
+        and gates["views"].value == 12
+        and gates["views"].reason == "views.too_few"
+    )
     assert gates["coverage"].passed and gates["tilt"].passed
 
 
@@ -174,16 +194,25 @@ def test_max_views_and_duration_stop_a_video(settings, video: Path) -> None:
 
 def _session_numbers(result) -> tuple:
     session = result.session
-    return (result.stop_reason, session.status, [o.model_dump() for o in session.outcomes],
-            [(v.name, v.corner_ids, v.corners_px, v.image_sha256) for v in session.views],
-            [(g.gate, g.passed, g.value) for g in session.gates])
+    return (
+        result.stop_reason,
+        session.status,
+        [o.model_dump() for o in session.outcomes],
+        [(v.name, v.corner_ids, v.corners_px, v.image_sha256) for v in session.views],
+        [(g.gate, g.passed, g.value) for g in session.gates],
+    )
 
 
-@pytest.mark.parametrize("stop", [{}, {"max_views": 6}, {"duration_s": 4.2}], ids=["whole", "max-views", "duration"])
+@pytest.mark.parametrize(
+    "stop", [{}, {"max_views": 6}, {"duration_s": 4.2}], ids=["whole", "max-views", "duration"]
+)
 def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path, stop: dict) -> None:
     """Frames are detected ahead on threads from 2 jobs on (``_detected_frames``) and settled in order: every frame
     gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4 jobs."""
-    runs = {jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=jobs, **stop)) for jobs in (1, 2, 4)}
+    runs = {
+        jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=jobs, **stop))
+        for jobs in (1, 2, 4)
+    }
     one = _session_numbers(runs[1])
     assert one[2] and one[3]  # frames examined and views kept
     assert _session_numbers(runs[2]) == one and _session_numbers(runs[4]) == one
@@ -198,13 +227,17 @@ def test_a_video_of_real_photos_gives_the_same_session_at_every_job_count(settin
     photos = sorted(LEFT_RIGHT.glob("left*.jpg"))
     first = cv2.imread(str(photos[0]))
     clip = tmp_path / "left.avi"
-    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (first.shape[1], first.shape[0]))
+    writer = cv2.VideoWriter(
+        str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (first.shape[1], first.shape[0])
+    )
     for photo in photos:
         image = cv2.imread(str(photo))
         for _ in range(6):
             writer.write(image)
     writer.release()
-    runs = {jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(clip), jobs=jobs)) for jobs in (1, 2, 4)}
+    runs = {
+        jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(clip), jobs=jobs)) for jobs in (1, 2, 4)
+    }
     one = _session_numbers(runs[1])
     assert len(one[2]) == 6 * len(photos) and len(one[3]) >= 8  # every frame judged; most poses kept
     assert _session_numbers(runs[2]) == one and _session_numbers(runs[4]) == one
@@ -241,20 +274,25 @@ def test_ctrl_c_finishes_the_session_with_the_views_kept(settings, video: Path, 
         assert store.get_session(result.session.session_id).status == result.session.status
 
 
-def test_ctrl_c_with_frames_detected_ahead_keeps_the_frames_selected_before_it(settings, video: Path,
-                                                                             monkeypatch) -> None:
+def test_ctrl_c_with_frames_detected_ahead_keeps_the_frames_selected_before_it(
+    settings, video: Path, monkeypatch
+) -> None:
     """At 2 jobs up to 4 frames are read and detected ahead of the one being selected; Ctrl-C drops those (as
     a Ctrl-C a moment earlier would have) and finishes the session with the frames selected before them."""
     at = 35
     reference = capture(settings, CaptureRequest(SERIAL, "A17", str(video), duration_s=at / 10.0, jobs=1))
     monkeypatch.setattr(sources, "open_stream", lambda spec: _InterruptedVideo(video, at))
     result = capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=2))
-    assert result.interrupted and result.stop_reason.startswith("interrupted (Ctrl-C); the session was finished")
+    assert result.interrupted and result.stop_reason.startswith(
+        "interrupted (Ctrl-C); the session was finished"
+    )
     outcomes = [o.model_dump() for o in result.session.outcomes]
     assert at - 2 * 2 <= len(outcomes) < at
-    assert outcomes == [o.model_dump() for o in reference.session.outcomes][:len(outcomes)]
+    assert outcomes == [o.model_dump() for o in reference.session.outcomes][: len(outcomes)]
     kept = {o["name"] for o in outcomes}
-    assert [v.name for v in result.session.views] == [v.name for v in reference.session.views if v.name in kept]
+    assert [v.name for v in result.session.views] == [
+        v.name for v in reference.session.views if v.name in kept
+    ]
 
 
 def test_camera_reader_thread_yields_newest_frames_in_order_and_ends(video: Path) -> None:
@@ -267,8 +305,9 @@ def test_camera_reader_thread_yields_newest_frames_in_order_and_ends(video: Path
     assert indices[-1] <= 73
 
 
-def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(settings, video: Path, tmp_path,
-                                                                             monkeypatch) -> None:
+def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(
+    settings, video: Path, tmp_path, monkeypatch
+) -> None:
     """The real reader thread on a clip of the first 12 frames (one key pose: the gates cannot pass): its reads
     fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the views."""
     clip = tmp_path / "clip.avi"
@@ -282,10 +321,14 @@ def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(s
     writer.release()
     monkeypatch.setattr(sources, "open_stream", lambda spec: sources.CameraSource(str(clip), spec.label))
     with pytest.raises(InputError) as caught:
-        capture(settings, CaptureRequest(SERIAL, "A17", "/dev/video5"))  # never opened: open_stream is the clip
+        capture(
+            settings, CaptureRequest(SERIAL, "A17", "/dev/video5")
+        )  # never opened: open_stream is the clip
     assert caught.value.message.startswith("camera /dev/video5 stopped delivering frames after ")
-    assert "(the gates had not passed): unplugged, or taken by another program?; no session was stored" in \
-        caught.value.message
+    assert (
+        "(the gates had not passed): unplugged, or taken by another program?; no session was stored"
+        in caught.value.message
+    )
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == []
 
@@ -308,8 +351,17 @@ def test_folders_videos_and_bad_sources(tmp_path: Path) -> None:
 
 
 def test_near_patterns_start_with_the_transposed_one() -> None:
-    assert pattern_check.near_patterns(8, 6) == [(6, 8), (9, 6), (7, 6), (8, 7), (8, 5), (9, 7), (7, 5), (9, 5),
-                                                 (7, 7)]
+    assert pattern_check.near_patterns(8, 6) == [
+        (6, 8),
+        (9, 6),
+        (7, 6),
+        (8, 7),
+        (8, 5),
+        (9, 7),
+        (7, 5),
+        (9, 5),
+        (7, 7),
+    ]
     assert pattern_check.near_patterns(3, 2) == [(2, 3), (4, 2), (2, 2), (3, 3), (4, 3)]  # no side below 2
 
 
@@ -318,12 +370,15 @@ def test_larger_board_check_needs_two_hits(good: Path) -> None:
     small = BoardSpec.chessboard(8, 6, 0.025)
     error = pattern_check.larger_board_error(small, "A8@1", "A8", samples)
     assert error is not None and "a 9x6 chessboard is found in" in error.message
-    assert pattern_check.larger_board_error(small, "A8@1", "A8", samples[:1]) is None  # one image proves nothing
+    assert (
+        pattern_check.larger_board_error(small, "A8@1", "A8", samples[:1]) is None
+    )  # one image proves nothing
     assert pattern_check.larger_board_error(BoardSpec.chessboard(9, 6, 0.025), "A9@1", "A9", samples) is None
 
 
 def test_larger_board_probe_is_skipped_only_when_every_probed_view_shows_its_margin(
-        good: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    good: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     samples: list[pattern_check.Sample] = []
     for path in sorted(good.glob("*.png"))[:3]:
         image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
@@ -338,15 +393,19 @@ def test_larger_board_probe_is_skipped_only_when_every_probed_view_shows_its_mar
     calls: list[tuple[int, int]] = []
     real_found = pattern_check._found
 
-    def counted(sample: pattern_check.Sample, pattern: tuple[int, int], spec: BoardSpec,
-                settings: DetectorSettings) -> bool:
+    def counted(
+        sample: pattern_check.Sample, pattern: tuple[int, int], spec: BoardSpec, settings: DetectorSettings
+    ) -> bool:
         calls.append(pattern)
         return real_found(sample, pattern, spec, settings)
 
     monkeypatch.setattr(pattern_check, "_found", counted)
     assert pattern_check.larger_board_error(right, "A9@1", "A9", samples, corners) is None
     assert calls == []  # the margin is visible past every side in all 3: no detector probe
-    assert pattern_check.larger_board_error(right, "A9@1", "A9", samples, dict(list(corners.items())[:2])) is None
+    assert (
+        pattern_check.larger_board_error(right, "A9@1", "A9", samples, dict(list(corners.items())[:2]))
+        is None
+    )
     assert sorted(set(calls)) == [(9, 7), (10, 6)]  # a view without corners is a "maybe": the probe runs
     short = {name: c.reshape(6, 9, 2)[:, 1:].reshape(-1, 2) for name, c in corners.items()}  # an 8x6 part
     error = pattern_check.larger_board_error(BoardSpec.chessboard(8, 6, 0.025), "A8@1", "A8", samples, short)
@@ -365,7 +424,9 @@ def test_larger_board_check_names_the_whole_board_sb_sees() -> None:
     assert error.hint is not None and error.hint.endswith("registered as 10x7")
     transposed = pattern_check.larger_board_error(BoardSpec.chessboard(6, 9, 0.025), "A6@1", "A6", samples)
     assert transposed is not None and "a 7x10 chessboard is found in" in transposed.message
-    assert pattern_check.larger_board_error(BoardSpec.chessboard(10, 7, 0.025), "A10@1", "A10", samples) is None
+    assert (
+        pattern_check.larger_board_error(BoardSpec.chessboard(10, 7, 0.025), "A10@1", "A10", samples) is None
+    )
 
 
 def test_parse_now() -> None:
@@ -390,7 +451,9 @@ def test_a_video_without_the_registered_pattern_names_what_is_visible(settings, 
     with pytest.raises(InputError) as info:
         capture(settings, CaptureRequest(SERIAL, "B10x7", str(video), duration_s=1.6))
     message = info.value.message
-    assert f"no 10x7 chessboard (board B10x7@1) was found in any of the 16 readable frames of {video}" in message
+    assert (
+        f"no 10x7 chessboard (board B10x7@1) was found in any of the 16 readable frames of {video}" in message
+    )
     assert "a 9x6 chessboard is visible in frame-000000 and frame-000015" in message
     with Store.open(settings.db_url) as store:
         assert store.list_sessions() == [] and store.counts()["images"] == 0
@@ -398,7 +461,8 @@ def test_a_video_without_the_registered_pattern_names_what_is_visible(settings, 
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_on_a_large_folder_cancels_the_pending_images_and_stores_nothing(
-        settings, good: Path, tmp_path: Path, monkeypatch, workers: int, thread_workers) -> None:
+    settings, good: Path, tmp_path: Path, monkeypatch, workers: int, thread_workers
+) -> None:
     """KeyboardInterrupt from the third detection: the queued images are never detected (only those
     already running finish), no session and no image is stored."""
     from calibctl.core.capture import image_outcomes
@@ -448,8 +512,9 @@ def _pool_sized_folder(good: Path, tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("jobs", [2, 4])
-def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(settings, good: Path, tmp_path: Path,
-                                                                    jobs: int) -> None:
+def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(
+    settings, good: Path, tmp_path: Path, jobs: int
+) -> None:
     """Ctrl-C arrives in the capturing process (workers ignore SIGINT) while processes detect: it
     propagates, no session and no image is stored, and the next capture on the warm pool works."""
     folder = _pool_sized_folder(good, tmp_path)
@@ -468,19 +533,24 @@ def test_ctrl_c_during_a_capture_on_worker_processes_stores_nothing(settings, go
 
 
 def test_a_capture_stores_the_same_session_at_every_job_count(settings, good: Path) -> None:
-    sessions = [capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs)).session for jobs in (1, 2, 4)]
+    sessions = [
+        capture(settings, CaptureRequest(SERIAL, "A17", str(good), jobs=jobs)).session for jobs in (1, 2, 4)
+    ]
     first = sessions[0]
     for other in sessions[1:]:
         assert [o.model_dump() for o in other.outcomes] == [o.model_dump() for o in first.outcomes]
-        assert [v.model_dump() for v in other.views] == [v.model_dump() for v in first.views]  # corners as floats
+        assert [v.model_dump() for v in other.views] == [
+            v.model_dump() for v in first.views
+        ]  # corners as floats
         assert [g.model_dump() for g in other.gates] == [g.model_dump() for g in first.gates]
 
 
 # the images stored beside the gates (workflows.camera.image_writes) ------------------------------------------
 
 
-def test_a_folders_images_are_stored_beside_the_gates_and_durable_before_its_session(settings, good: Path,
-                                                                                   monkeypatch) -> None:
+def test_a_folders_images_are_stored_beside_the_gates_and_durable_before_its_session(
+    settings, good: Path, monkeypatch
+) -> None:
     """The writes run on their own thread while the gates run (they wait here until the gates have started:
     a capture that stored its images before the gates would time out below), and every image has its row
     and its file when the session is stored."""
@@ -526,8 +596,9 @@ def _image_store_full(monkeypatch) -> None:
 
 
 @pytest.mark.parametrize("gates_fail", [False, True])
-def test_a_full_image_store_is_the_error_and_no_session_is_stored(settings, good: Path, monkeypatch,
-                                                                  gates_fail: bool) -> None:
+def test_a_full_image_store_is_the_error_and_no_session_is_stored(
+    settings, good: Path, monkeypatch, gates_fail: bool
+) -> None:
     """As when the images were stored before the gates: the writes' failure is the one raised, even when
     the gates then fail too (their error comes second in that order)."""
     from calibctl.errors import FileSystemError
@@ -541,8 +612,9 @@ def test_a_full_image_store_is_the_error_and_no_session_is_stored(settings, good
         assert store.list_sessions() == [] and store.counts()["images"] == 0
 
 
-def test_ctrl_c_during_the_gates_stops_the_writes_after_the_batch_in_progress(settings, good: Path, tmp_path: Path,
-                                                                             monkeypatch) -> None:
+def test_ctrl_c_during_the_gates_stops_the_writes_after_the_batch_in_progress(
+    settings, good: Path, tmp_path: Path, monkeypatch
+) -> None:
     """24 images, two batches: Ctrl-C in the gates while the first batch is being written. That batch
     commits whole (one transaction), the second is never written, no session is stored, and every row has
     its file."""
@@ -576,8 +648,9 @@ def test_ctrl_c_during_the_gates_stops_the_writes_after_the_batch_in_progress(se
         assert all(store.image_path(name) is not None for name in files)
 
 
-def test_a_detection_worker_killed_mid_capture_is_a_clear_error_and_stores_nothing(settings, good: Path,
-                                                                                   tmp_path: Path) -> None:
+def test_a_detection_worker_killed_mid_capture_is_a_clear_error_and_stores_nothing(
+    settings, good: Path, tmp_path: Path
+) -> None:
     """The out-of-memory killer (or a crash in a decoder) takes a worker process while the pool detects: the
     capture ends with WorkerDiedError (exit 2) naming the images not detected, nothing is stored, and the next
     capture gets a fresh pool."""
@@ -595,7 +668,9 @@ def test_a_detection_worker_killed_mid_capture_is_a_clear_error_and_stores_nothi
                 for pid in list(worker_pool.process_pool(2)._processes):  # noqa: SLF001 - the test's stand-in for the OOM killer
                     os.kill(pid, signal.SIGKILL)
 
-    with pytest.raises(WorkerDiedError, match=r"worker process died .* not yet detected: img-\d{3}\.png") as died:
+    with pytest.raises(
+        WorkerDiedError, match=r"worker process died .* not yet detected: img-\d{3}\.png"
+    ) as died:
         capture(settings, CaptureRequest(SERIAL, "A17", str(folder), jobs=2), KillWorkers())
     assert died.value.exit_code == 2
     with Store.open(settings.db_url) as store:

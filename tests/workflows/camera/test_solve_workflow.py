@@ -76,7 +76,9 @@ def test_no_activate_keeps_the_previous_active_version(settings):
 
 def test_auto_model_records_its_trail(settings):
     session = _store_session(settings, synthetic_capture(measured_board()))
-    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id, model="auto")).artifact
+    art = solve_workflow.solve(
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, model="auto")
+    ).artifact
     assert art.model.selection and art.model.selection[0]["model"] == "k1k2"
     assert art.model.name in {"k1k2", "k1k2k3", "k1k2p1p2k3", "rational"}
 
@@ -127,7 +129,8 @@ def test_a_noisy_view_is_flagged_and_dropped_only_with_drop_outliers(settings):
     assert kept.views[5].outlier and not kept.views[5].dropped
     assert [v.name for v in kept.views if v.outlier] == ["view05.png"]
     dropped = solve_workflow.solve(
-        settings, solve_workflow.SolveRequest(session_id=session.session_id, drop_outliers=True)).artifact
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, drop_outliers=True)
+    ).artifact
     assert dropped.views[5].outlier and dropped.views[5].dropped
     assert dropped.views[5].tvec_m[2] > 0.1  # the pose of the solve that flagged it
     assert dropped.rms_px < kept.rms_px
@@ -166,8 +169,11 @@ def _two_camera_session(n_each: int) -> CaptureSession:
     K_other = K_TRUE.copy()
     K_other[0, 0] = K_other[1, 1] = 1.04 * K_TRUE[0, 0]
     right = synthetic_capture(measured_board(), n_views=n_each, seed=2, noise_px=0.1, camera_matrix=K_other)
-    return left.model_copy(update={"views": [*left.views, *(v.model_copy(update={"name": "right-" + v.name})
-                                                            for v in right.views)]})
+    return left.model_copy(
+        update={
+            "views": [*left.views, *(v.model_copy(update={"name": "right-" + v.name}) for v in right.views)]
+        }
+    )
 
 
 def test_above_the_capture_cap_the_solve_checks_the_gates_spread_views_and_still_finds_two_cameras(settings):
@@ -181,8 +187,9 @@ def test_above_the_capture_cap_the_solve_checks_the_gates_spread_views_and_still
     assert len(checked) == CAPTURE_MAX_VIEWS and sorted(check.group_a + check.group_b) == sorted(checked)
     assert sorted(check.group_b) == sorted(n for n in checked if n.startswith("right-"))
     assert any(f.rule == "one-camera" and f.severity == "error" for f in art.lint)
-    one = synthetic_capture(measured_board(), serial="CAM-0002", session_id="0123456789cd", n_views=72, seed=5,
-                            noise_px=0.1)
+    one = synthetic_capture(
+        measured_board(), serial="CAM-0002", session_id="0123456789cd", n_views=72, seed=5, noise_px=0.1
+    )
     _store_session(settings, one)
     clean = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=one.session_id)).artifact
     assert clean.camera_consistency is not None and not clean.camera_consistency.two_cameras_suspected
@@ -198,9 +205,12 @@ def test_the_solve_asks_the_capture_gates_question_so_it_is_answered_once(settin
     computed = []
     real = camera_split._check_one_camera
     monkeypatch.setattr(camera_split, "_check_one_camera", lambda *a: computed.append(len(a[0])) or real(*a))
-    gate = camera_split.one_camera_gate([points[np.asarray(v.corner_ids)] for v in session.views],
-                                        [np.asarray(v.corners_px, np.float64) for v in session.views],
-                                        [v.name for v in session.views], (640, 480))
+    gate = camera_split.one_camera_gate(
+        [points[np.asarray(v.corner_ids)] for v in session.views],
+        [np.asarray(v.corners_px, np.float64) for v in session.views],
+        [v.name for v in session.views],
+        (640, 480),
+    )
     art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
     assert gate.passed and computed == [CAPTURE_MAX_VIEWS]  # the gate computed it, the solve remembered it
     assert art.camera_consistency is not None and art.camera_consistency.ratio == gate.value
@@ -227,10 +237,20 @@ def test_fisheye_session_solves_exports_equidistant_and_lints_clean(settings, tm
     from tests.workflows.sessions import fisheye_capture
 
     session = _store_session(settings, fisheye_capture(measured_board()))
-    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id,
-                                                                     model="fisheye")).artifact
+    art = solve_workflow.solve(
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, model="fisheye")
+    ).artifact
     assert art.status == "accepted" and art.lint == [] and art.model.name == "fisheye"
-    assert len(art.dist_coeffs) == 4 and set(art.stdev.sigma) == {"fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"}
+    assert len(art.dist_coeffs) == 4 and set(art.stdev.sigma) == {
+        "fx",
+        "fy",
+        "cx",
+        "cy",
+        "k1",
+        "k2",
+        "k3",
+        "k4",
+    }
     assert "CALIB_FIX_SKEW" in art.model.flag_names
     for fmt in formats.EXPORT_FORMATS:
         path = tmp_path / f"fe.{fmt}.{'json' if fmt == 'json' else 'yaml'}"
@@ -283,12 +303,20 @@ def test_auto_on_a_lens_k1k2_cannot_explain_ends_in_fisheye_instead_of_exit_2(se
     s, size = _strong_fisheye_session()
     board = measured_board().model_copy(update={"cols": 12, "rows": 9})
     base = synthetic_capture(measured_board(), session_id="fe185fe185fe", n_views=2)
-    views = [ViewCorners(name=f"fisheye{i:02d}.png", corner_ids=list(range(12 * 9)),
-                         corners_px=[(float(u), float(v)) for u, v in img])
-             for i, img in enumerate(s.image_points_per_view)]
-    session = _store_session(settings, base.model_copy(update={"board": board, "views": views, "image_size": size}))
-    art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id,
-                                                                     model="auto")).artifact
+    views = [
+        ViewCorners(
+            name=f"fisheye{i:02d}.png",
+            corner_ids=list(range(12 * 9)),
+            corners_px=[(float(u), float(v)) for u, v in img],
+        )
+        for i, img in enumerate(s.image_points_per_view)
+    ]
+    session = _store_session(
+        settings, base.model_copy(update={"board": board, "views": views, "image_size": size})
+    )
+    art = solve_workflow.solve(
+        settings, solve_workflow.SolveRequest(session_id=session.session_id, model="auto")
+    ).artifact
     trail = {c["model"]: c for c in art.model.selection}
     assert art.model.name == "fisheye" and trail["k1k2"]["reason"].startswith("not solvable: ")
     assert art.rms_px < 0.5 and "model-misfit" not in [f.rule for f in art.lint]

@@ -24,7 +24,9 @@ TOLERANCE_PX = 3.0
 
 
 def _feed(tmp_path: Path, frames: list[np.ndarray]) -> _StreamState:
-    settings = load_settings(db=f"sqlite:///{tmp_path / 's.db'}", station="st-test", operator="tester", env={})
+    settings = load_settings(
+        db=f"sqlite:///{tmp_path / 's.db'}", station="st-test", operator="tester", env={}
+    )
     with Store.open(settings.db_url) as store:
         state = _StreamState(store, settings, SPEC)
         for i, image in enumerate(frames):
@@ -49,8 +51,9 @@ def test_a_fisheye_stream_counts_live_coverage_inside_the_circle_it_finds(tmp_pa
     assert coverage.threshold == 5 and coverage.detail["image_circle_source"] == "detected"
 
 
-def test_a_pinhole_stream_finds_no_circle_and_keeps_the_nine_cells(tmp_path_factory: pytest.TempPathFactory,
-                                                                    tmp_path: Path) -> None:
+def test_a_pinhole_stream_finds_no_circle_and_keeps_the_nine_cells(
+    tmp_path_factory: pytest.TempPathFactory, tmp_path: Path
+) -> None:
     video = cv2.VideoCapture(str(rendered(tmp_path_factory, "video") / "video.avi"))
     frames = []
     while len(frames) < 3 * CIRCLE_EVERY_FRAMES:

@@ -31,7 +31,15 @@ from tests.workflows.synth_folders import rendered
 JOBS = (1, 2, 4)
 SIZE = (640, 480)
 D = np.array([-0.12, 0.05, 0.0, 0.0, 0.0])
-VOLATILE = {"content_sha256", "signature", "signed_by", "created_at", "started_at", "finished_at", "session_id"}
+VOLATILE = {
+    "content_sha256",
+    "signature",
+    "signed_by",
+    "created_at",
+    "started_at",
+    "finished_at",
+    "session_id",
+}
 
 
 def _K(f: float) -> np.ndarray:
@@ -41,10 +49,12 @@ def _K(f: float) -> np.ndarray:
 @pytest.fixture
 def forget(monkeypatch):
     """Forget every remembered answer, so that the next run computes its own."""
+
     def clear() -> None:
         solve_module.forget_recent_solves()
         camera_split.forget_recent_checks()
         monkeypatch.setattr(model_select, "_RECENT", RecentAnswers(model_select.RECENT_SELECTIONS))
+
     clear()
     return clear
 
@@ -69,9 +79,12 @@ def _each_jobs(forget, run):
 
 def _same_split(a: camera_split.CameraSplit | None, b: camera_split.CameraSplit | None) -> bool:
     assert a is not None and b is not None
-    return (a.group_a, a.group_b, a.holdout_rms_px, a.cross_rms_px, a.ratio) == \
-        (b.group_a, b.group_b, b.holdout_rms_px, b.cross_rms_px, b.ratio) \
-        and np.array_equal(a.camera_a, b.camera_a) and np.array_equal(a.camera_b, b.camera_b)
+    return (
+        (a.group_a, a.group_b, a.holdout_rms_px, a.cross_rms_px, a.ratio)
+        == (b.group_a, b.group_b, b.holdout_rms_px, b.cross_rms_px, b.ratio)
+        and np.array_equal(a.camera_a, b.camera_a)
+        and np.array_equal(a.camera_b, b.camera_b)
+    )
 
 
 def test_the_split_test_and_its_gate_are_the_same_at_every_job_count(forget) -> None:
@@ -82,9 +95,11 @@ def test_the_split_test_and_its_gate_are_the_same_at_every_job_count(forget) -> 
     names = [f"v{i:02d}" for i in range(len(obj))]
     gates = _each_jobs(forget, lambda lanes: camera_split.one_camera_gate(obj, img, names, SIZE, lanes=lanes))
     assert not gates[1].passed
-    assert all((g.passed, g.value, g.reason, g.hint, g.detail) ==
-               (gates[1].passed, gates[1].value, gates[1].reason, gates[1].hint, gates[1].detail)
-               for g in gates.values())
+    assert all(
+        (g.passed, g.value, g.reason, g.hint, g.detail)
+        == (gates[1].passed, gates[1].value, gates[1].reason, gates[1].hint, gates[1].detail)
+        for g in gates.values()
+    )
 
 
 def test_the_lens_floor_and_the_model_ladder_are_the_same_at_every_job_count(forget) -> None:
@@ -105,12 +120,15 @@ def _numbers(doc: object) -> object:
 
 
 @pytest.mark.parametrize("model", ["k1k2", "auto"])
-def test_calibrate_stores_the_same_numbers_and_verdicts_at_every_job_count(tmp_path, tmp_path_factory, monkeypatch,
-                                                                           forget, model) -> None:
+def test_calibrate_stores_the_same_numbers_and_verdicts_at_every_job_count(
+    tmp_path, tmp_path_factory, monkeypatch, forget, model
+) -> None:
     folder = rendered(tmp_path_factory, "good")
     threads: set[str] = set()
     real = solve_module._solve
-    monkeypatch.setattr(solve_module, "_solve", lambda *a: threads.add(threading.current_thread().name) or real(*a))
+    monkeypatch.setattr(
+        solve_module, "_solve", lambda *a: threads.add(threading.current_thread().name) or real(*a)
+    )
     runs = {}
     for jobs in JOBS:
         forget()
@@ -118,19 +136,29 @@ def test_calibrate_stores_the_same_numbers_and_verdicts_at_every_job_count(tmp_p
         with Store.open(url) as store:
             store.add_board(measured_board("A17", square_mm=25.0))
         settings = load_settings(db=url, station="st-7", operator="op", env={}, jobs=jobs)
-        runs[jobs] = capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder)), model=model)
+        runs[jobs] = capture_workflow.calibrate(
+            settings, CaptureRequest("CAM-0042", "A17", str(folder)), model=model
+        )
     first = runs[1]
     assert first.solve is not None and first.capture.session.status == "accepted"
     for run in runs.values():
         assert run.solve is not None
-        assert _numbers(run.capture.session.model_dump(mode="json")) == \
-            _numbers(first.capture.session.model_dump(mode="json"))
-        assert _numbers(run.solve.artifact.model_dump(mode="json")) == _numbers(first.solve.artifact.model_dump(mode="json"))
-        assert (run.solve.artifact.status, run.solve.active) == (first.solve.artifact.status, first.solve.active)
+        assert _numbers(run.capture.session.model_dump(mode="json")) == _numbers(
+            first.capture.session.model_dump(mode="json")
+        )
+        assert _numbers(run.solve.artifact.model_dump(mode="json")) == _numbers(
+            first.solve.artifact.model_dump(mode="json")
+        )
+        assert (run.solve.artifact.status, run.solve.active) == (
+            first.solve.artifact.status,
+            first.solve.active,
+        )
     assert any(name.startswith("calibctl-verdicts") for name in threads)  # jobs 2 and 4 did solve on the pool
 
 
-def test_a_failing_capture_gate_stage_leaves_no_solve_running(tmp_path, tmp_path_factory, monkeypatch, forget) -> None:
+def test_a_failing_capture_gate_stage_leaves_no_solve_running(
+    tmp_path, tmp_path_factory, monkeypatch, forget
+) -> None:
     """An error in the gates beside the split test reaches the caller after the split test has stopped, and
     nothing is stored (exit 2 path of a bad station region)."""
     folder = rendered(tmp_path_factory, "good")
@@ -138,8 +166,9 @@ def test_a_failing_capture_gate_stage_leaves_no_solve_running(tmp_path, tmp_path
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     settings = load_settings(db=url, station="st-7", operator="op", env={}, jobs=2)
-    settings = settings.model_copy(update={"gates": settings.gates.model_copy(
-        update={"projection_region": "0,0,99999,5"})})
+    settings = settings.model_copy(
+        update={"gates": settings.gates.model_copy(update={"projection_region": "0,0,99999,5"})}
+    )
     with pytest.raises(UsageError, match="projection_region"):
         capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder)), model="k1k2")
     assert not [t for t in threading.enumerate() if t.name.startswith("calibctl-verdicts")]
@@ -149,7 +178,8 @@ def test_a_failing_capture_gate_stage_leaves_no_solve_running(tmp_path, tmp_path
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_a_failing_fold_stops_the_solve_with_the_split_test_stopped_and_nothing_stored(
-        tmp_path, tmp_path_factory, monkeypatch, forget, jobs) -> None:
+    tmp_path, tmp_path_factory, monkeypatch, forget, jobs
+) -> None:
     """The held-out folds fail while the split test runs beside them: the folds' error reaches the caller, at
     every job count the same, after the split test has stopped; no calibration is stored."""
     from calibctl.errors import NotFoundError, NumericalError
@@ -164,7 +194,9 @@ def test_a_failing_fold_stops_the_solve_with_the_split_test_stopped_and_nothing_
     with Store.open(url) as store:
         store.add_board(measured_board("A17", square_mm=25.0))
     settings = load_settings(db=url, station="st-7", operator="op", env={}, jobs=jobs)
-    with pytest.raises(NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): the solve diverged"):
+    with pytest.raises(
+        NumericalError, match=r"held-out fold 0 \(views \[0, 5\] held out\): the solve diverged"
+    ):
         capture_workflow.calibrate(settings, CaptureRequest("CAM-0042", "A17", str(folder)), model="k1k2")
     assert not [t for t in threading.enumerate() if t.name.startswith("calibctl-verdicts")]
     with Store.open(url) as store, pytest.raises(NotFoundError, match="none was solved"):

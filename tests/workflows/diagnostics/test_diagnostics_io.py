@@ -24,7 +24,9 @@ def _write(tmp_path: Path, text: str, name: str = "t.csv") -> Path:
 
 def test_fast_and_careful_paths_agree(tmp_path):
     fast = read_table(_write(tmp_path, "a,b,cam\n1,2.5,x\n3,4e-3,y\n"), REQ, optional_text=("cam",))
-    careful = read_table(_write(tmp_path, 'a,b,cam\n1,2.5,x\n\n3,"4e-3",y\n', "q.csv"), REQ, optional_text=("cam",))
+    careful = read_table(
+        _write(tmp_path, 'a,b,cam\n1,2.5,x\n\n3,"4e-3",y\n', "q.csv"), REQ, optional_text=("cam",)
+    )
     assert fast.numeric["b"].tolist() == careful.numeric["b"].tolist() == [2.5, 0.004]
     assert fast.text["cam"].tolist() == careful.text["cam"].tolist() == ["x", "y"]
     assert fast.lines.tolist() == [2, 3]
@@ -45,8 +47,10 @@ def test_many_non_numeric_cells_name_the_first_and_count_the_rest(tmp_path):
     rows = "".join(f"1,x{i}\n" for i in range(8))  # lines 2..9, every one bad
     with pytest.raises(InputError) as bad:
         read_table(_write(tmp_path, "a,b\n" + rows), REQ)
-    assert "column b has non-numeric cells: line 2 ('x0'), line 3 ('x1'), line 4 ('x2'), line 5 ('x3'), " \
-           "line 6 ('x4') and 3 more" in bad.value.message
+    assert (
+        "column b has non-numeric cells: line 2 ('x0'), line 3 ('x1'), line 4 ('x2'), line 5 ('x3'), "
+        "line 6 ('x4') and 3 more" in bad.value.message
+    )
     assert bad.value.exit_code == 2
 
 
@@ -158,7 +162,9 @@ def test_run_gauge_rejects_decreasing_cumulative_and_negative_steps(tmp_path):
 
 
 def test_run_timeoffset_dict_and_drift(synth_dir, tmp_path):
-    out = wf.run_timeoffset(synth_dir / "tdo_gyro.csv", synth_dir / "tdo_camera.csv", window_s=5.0, plot_dir=tmp_path)
+    out = wf.run_timeoffset(
+        synth_dir / "tdo_gyro.csv", synth_dir / "tdo_camera.csv", window_s=5.0, plot_dir=tmp_path
+    )
     json.dumps(out, allow_nan=False)
     assert out["schema"] == "calibctl.diagnostics.timeoffset/1" and out["verdict"] == "pass"
     assert out["td_ms"] == pytest.approx(18.4, abs=0.3)

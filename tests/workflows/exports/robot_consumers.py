@@ -18,8 +18,16 @@ from pathlib import Path
 
 
 def _msg(info):
-    return {"camera_name": None, "width": info.width, "height": info.height, "K": list(info.K), "D": list(info.D),
-            "R": list(info.R), "P": list(info.P), "distortion_model": info.distortion_model}
+    return {
+        "camera_name": None,
+        "width": info.width,
+        "height": info.height,
+        "K": list(info.K),
+        "D": list(info.D),
+        "R": list(info.R),
+        "P": list(info.P),
+        "distortion_model": info.distortion_model,
+    }
 
 
 def main() -> None:
@@ -49,8 +57,13 @@ def main() -> None:
         rect = (R1 @ X.T).T  # points in the left rectified frame, what StereoCameraModel projects
         pairs = [stereo.project3dToPixel(tuple(p)) for p in rect]
         depth = [stereo.getZ(lp[0] - rp[0]) for lp, rp in pairs]
-        out["image_geometry"] = {"left_px": [list(lp) for lp, _ in pairs], "right_px": [list(rp) for _, rp in pairs],
-                                 "depth_m": depth, "rect_z_m": rect[:, 2].tolist(), "baseline_m": -stereo.right.Tx() / stereo.right.fx()}
+        out["image_geometry"] = {
+            "left_px": [list(lp) for lp, _ in pairs],
+            "right_px": [list(rp) for _, rp in pairs],
+            "depth_m": depth,
+            "rect_z_m": rect[:, 2].tolist(),
+            "baseline_m": -stereo.right.Tx() / stereo.right.fx(),
+        }
     try:
         import mrcal
     except ImportError:
@@ -72,8 +85,13 @@ def main() -> None:
     fs.release()
     raw_l = cv2.projectPoints(X, np.zeros(3), np.zeros(3), K1, D1)[0].reshape(-1, 2)
     raw_r = cv2.projectPoints(X, cv2.Rodrigues(R)[0], T, K2, D2)[0].reshape(-1, 2)
-    out["opencv"] = {"version": cv2.__version__, "left": pair["left"], "right": pair["right"],
-                     "left_px": raw_l.tolist(), "right_px": raw_r.tolist()}
+    out["opencv"] = {
+        "version": cv2.__version__,
+        "left": pair["left"],
+        "right": pair["right"],
+        "left_px": raw_l.tolist(),
+        "right_px": raw_r.tolist(),
+    }
     json.dump(out, sys.stdout)
 
 

@@ -19,8 +19,17 @@ def test_kalibr_of_one_camera_is_cam0_with_overlaps_and_a_legal_topic():
     text = formats.render(art, "kalibr")
     assert trace_header.read(text).ref == "CAM-0001@1" and trace_header.read(text).intact
     cam = yaml.safe_load(text)["cam0"]
-    assert cam["intrinsics"] == [800.0, 800.0, 320.0, 240.0] and cam["distortion_coeffs"] == [-0.2814, 0.0977, 0.0, 0.0]
-    assert (cam["distortion_model"], cam["cam_overlaps"], cam["rostopic"]) == ("radtan", [], "/cam_0001/image_raw")
+    assert cam["intrinsics"] == [800.0, 800.0, 320.0, 240.0] and cam["distortion_coeffs"] == [
+        -0.2814,
+        0.0977,
+        0.0,
+        0.0,
+    ]
+    assert (cam["distortion_model"], cam["cam_overlaps"], cam["rostopic"]) == (
+        "radtan",
+        [],
+        "/cam_0001/image_raw",
+    )
 
 
 def test_mrcal_of_one_camera_projects_as_opencv():
@@ -32,14 +41,20 @@ def test_mrcal_of_one_camera_projects_as_opencv():
     assert (fx, fy, cx, cy) == (K[0, 0], K[1, 1], K[0, 2], K[1, 2]) and dist == art.dist_coeffs
     assert model["imagersize"] == list(art.image_size)
     X = np.array([[0.1, -0.05, 1.0]])
-    assert np.allclose(cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, np.array(dist))[0].ravel(),
-                       cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, np.array(art.dist_coeffs))[0].ravel())
+    assert np.allclose(
+        cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, np.array(dist))[0].ravel(),
+        cv2.projectPoints(X, np.zeros(3), np.zeros(3), K, np.array(art.dist_coeffs))[0].ravel(),
+    )
 
 
 def test_a_fisheye_has_no_mrcal_model_and_says_why():
     art = calibration()
-    fisheye = art.model_copy(update={"model": art.model.model_copy(update={"name": "fisheye"}),
-                                     "dist_coeffs": [0.01, -0.002, 0.0005, 0.0]}).sealed()
+    fisheye = art.model_copy(
+        update={
+            "model": art.model.model_copy(update={"name": "fisheye"}),
+            "dist_coeffs": [0.01, -0.002, 0.0005, 0.0],
+        }
+    ).sealed()
     with pytest.raises(InputError, match="mrcal has no Kannala-Brandt"):
         formats.render(fisheye, "mrcal")
     assert yaml.safe_load(formats.render(fisheye, "kalibr"))["cam0"]["distortion_model"] == "equidistant"

@@ -53,14 +53,34 @@ def test_ros_pair_encodes_the_stereo_geometry(stereo):
     # what image_geometry does: raw pixel -> undistortPoints(K, D, R, P); then depth = -Tx / disparity
     X_l = _points_left()
     X_r = (T_rl[:3, :3] @ X_l.T).T + T_rl[:3, 3]
-    raw_l = cv2.projectPoints(X_l, np.zeros(3), np.zeros(3), _matrix(info_l["camera_matrix"]),
-                              np.array(info_l["distortion_coefficients"]["data"]))[0]
-    raw_r = cv2.projectPoints(X_r, np.zeros(3), np.zeros(3), _matrix(info_r["camera_matrix"]),
-                              np.array(info_r["distortion_coefficients"]["data"]))[0]
-    rect_l = cv2.undistortPoints(raw_l, _matrix(info_l["camera_matrix"]),
-                                 np.array(info_l["distortion_coefficients"]["data"]), R=R1, P=P1).reshape(-1, 2)
-    rect_r = cv2.undistortPoints(raw_r, _matrix(info_r["camera_matrix"]),
-                                 np.array(info_r["distortion_coefficients"]["data"]), R=R2, P=P2).reshape(-1, 2)
+    raw_l = cv2.projectPoints(
+        X_l,
+        np.zeros(3),
+        np.zeros(3),
+        _matrix(info_l["camera_matrix"]),
+        np.array(info_l["distortion_coefficients"]["data"]),
+    )[0]
+    raw_r = cv2.projectPoints(
+        X_r,
+        np.zeros(3),
+        np.zeros(3),
+        _matrix(info_r["camera_matrix"]),
+        np.array(info_r["distortion_coefficients"]["data"]),
+    )[0]
+    rect_l = cv2.undistortPoints(
+        raw_l,
+        _matrix(info_l["camera_matrix"]),
+        np.array(info_l["distortion_coefficients"]["data"]),
+        R=R1,
+        P=P1,
+    ).reshape(-1, 2)
+    rect_r = cv2.undistortPoints(
+        raw_r,
+        _matrix(info_r["camera_matrix"]),
+        np.array(info_r["distortion_coefficients"]["data"]),
+        R=R2,
+        P=P2,
+    ).reshape(-1, 2)
     # cv2.undistortPoints iterates 5 times by default (as image_geometry calls it): 1e-3 px, not 1e-12
     assert np.max(np.abs(rect_l[:, 1] - rect_r[:, 1])) < UNDISTORT_TOL_PX
     depth = -P2[0, 3] / (rect_l[:, 0] - rect_r[:, 0])
@@ -81,7 +101,10 @@ def test_opencv_file_reads_back_with_filestorage(stereo, tmp_path):
     path = tmp_path / "stereo.yaml"
     path.write_text(opencv_stereo(left, right, T_rl), encoding="utf-8")
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    read = {k: fs.getNode(k).mat() for k in ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q")}
+    read = {
+        k: fs.getNode(k).mat()
+        for k in ("K1", "D1", "K2", "D2", "R", "T", "E", "F", "R1", "R2", "P1", "P2", "Q")
+    }
     assert int(fs.getNode("image_width").real()) == 640
     fs.release()
     assert np.allclose(read["R"], T_rl[:3, :3]) and np.allclose(read["T"].ravel(), T_rl[:3, 3])
@@ -100,9 +123,13 @@ def test_tf_static_and_urdf_give_back_the_tree(stereo):
     assert (doc["header"]["frame_id"], doc["child_frame_id"]) == ("CAM0", "CAM1")
     q = doc["transform"]["rotation"]
     x, y, z, w = q["x"], q["y"], q["z"], q["w"]
-    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    R = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     assert np.allclose(R, edge.T_parent_child[:3, :3], atol=1e-12)
     t = doc["transform"]["translation"]
     assert np.allclose([t["x"], t["y"], t["z"]], edge.T_parent_child[:3, 3])
@@ -136,8 +163,9 @@ def test_kalibr_chain_maps_the_previous_camera_into_the_next(stereo):
 
 def test_kalibr_refuses_a_k3_model(stereo):
     members = list(stereo.members)
-    members[1] = type(members[1])(members[1].name, members[1].camera_matrix, np.array([-0.2, 0.1, 0, 0, 0.01]),
-                                  members[1].image_size)
+    members[1] = type(members[1])(
+        members[1].name, members[1].camera_matrix, np.array([-0.2, 0.1, 0, 0, 0.01]), members[1].image_size
+    )
     with pytest.raises(InputError, match="radtan model has no k3"):
         kalibr_camchain(members, stereo.tree)
 
@@ -145,8 +173,14 @@ def test_kalibr_refuses_a_k3_model(stereo):
 def test_write_exports_writes_every_file(stereo, tmp_path):
     names = {p.name for p in write_exports(stereo, tmp_path / "x")}
     assert loadable_urdf((tmp_path / "x" / "rig.urdf.xml").read_text())[1] == "cam0_optical_frame"
-    assert names == {"stereo_CAM0_CAM1.yaml", "tf_static.yaml", "rig.urdf.xml", "camchain.yaml",
-                     "CAM0_camera_info.yaml", "CAM1_camera_info.yaml"}
+    assert names == {
+        "stereo_CAM0_CAM1.yaml",
+        "tf_static.yaml",
+        "rig.urdf.xml",
+        "camchain.yaml",
+        "CAM0_camera_info.yaml",
+        "CAM1_camera_info.yaml",
+    }
     assert pose_to_T(np.zeros(6)).shape == (4, 4)
 
 

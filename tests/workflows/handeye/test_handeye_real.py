@@ -31,15 +31,26 @@ SUBPIX = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
 
 
 def _calibrate(object_points: np.ndarray, corners: list[np.ndarray], size: tuple[int, int]):
-    _, K, dist, _, _ = cv2.calibrateCamera([object_points.astype(np.float32)] * len(corners),
-                                           [c.astype(np.float32) for c in corners], size, None, None)
+    _, K, dist, _, _ = cv2.calibrateCamera(
+        [object_points.astype(np.float32)] * len(corners),
+        [c.astype(np.float32) for c in corners],
+        size,
+        None,
+        None,
+    )
     return K, dist.ravel()
 
 
 def _stereo_T_left_right(object_points, left, right, cal_left, cal_right, size) -> tuple[np.ndarray, float]:
     rms, *_, R, T, _, _ = cv2.stereoCalibrate(
-        [object_points.astype(np.float32)] * len(left), [c.astype(np.float32) for c in left],
-        [c.astype(np.float32) for c in right], *cal_left, *cal_right, size, flags=cv2.CALIB_FIX_INTRINSIC)
+        [object_points.astype(np.float32)] * len(left),
+        [c.astype(np.float32) for c in left],
+        [c.astype(np.float32) for c in right],
+        *cal_left,
+        *cal_right,
+        size,
+        flags=cv2.CALIB_FIX_INTRINSIC,
+    )
     return se3.invert(se3.transform(R, T.ravel())), float(rms)  # OpenCV's (R, T) is T_right_left
 
 
@@ -62,12 +73,18 @@ def test_stereo_pair_as_hand_eye_agrees_with_plain_stereo_calibrate(tmp_path: Pa
             T_cam_board, rms_px = estimate_board_pose(model, c, *cal[side])
             assert T_cam_board is not None and rms_px < 1.0
             ok, rvec, tvec = cv2.solvePnP(model, c, *cal[side])  # the plain call
-            np.testing.assert_allclose(T_cam_board, se3.transform(se3.rotation_from_rotvec(rvec.ravel()), tvec.ravel()),
-                                       atol=1e-6)
+            np.testing.assert_allclose(
+                T_cam_board, se3.transform(se3.rotation_from_rotvec(rvec.ravel()), tvec.ravel()), atol=1e-6
+            )
             poses.append(se3.invert(T_cam_board))
         T_board_cam[side] = np.array(poses)
-    log = write_motion_log(tmp_path / "stereo.csv", np.arange(len(PAIRS), dtype=float), T_board_cam["left"],
-                           T_board_cam["right"], force=False)
+    log = write_motion_log(
+        tmp_path / "stereo.csv",
+        np.arange(len(PAIRS), dtype=float),
+        T_board_cam["left"],
+        T_board_cam["right"],
+        force=False,
+    )
     result = CliRunner().invoke(app, ["handeye", str(log), "--from", "left", "--to", "right", "--json"])
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
@@ -75,9 +92,13 @@ def test_stereo_pair_as_hand_eye_agrees_with_plain_stereo_calibrate(tmp_path: Pa
     sigma_t = np.array(doc["uncertainty"]["sigma_translation_mm"]) / 1e3
     R = se3.rotation_from_quaternion(np.array(doc["transform"]["rotation_wxyz"]))
 
-    T_ref, rms_stereo = _stereo_T_left_right(model, corners["left"], corners["right"], cal["left"], cal["right"], size)
+    T_ref, rms_stereo = _stereo_T_left_right(
+        model, corners["left"], corners["right"], cal["left"], cal["right"], size
+    )
     assert rms_stereo < 0.5
-    assert abs(np.linalg.norm(t) / np.linalg.norm(T_ref[:3, 3]) - 1.0) < 5e-3  # baseline within 0.5 % (0.27 % measured)
+    assert (
+        abs(np.linalg.norm(t) / np.linalg.norm(T_ref[:3, 3]) - 1.0) < 5e-3
+    )  # baseline within 0.5 % (0.27 % measured)
     assert np.all(np.abs(t - T_ref[:3, 3]) < 3.0 * sigma_t)  # the rest within 3 reported sigma
     assert np.degrees(se3.rotation_angle_rad(R.T @ T_ref[:3, :3])) < 0.25
 
@@ -93,17 +114,25 @@ def test_unsynchronised_webcam_pairs_are_named_where_stereo_calibrate_returns_a_
         found = {}
         for side in corners:
             gray = cv2.imread(str(folder / side / f"{side}_{stem}"), cv2.IMREAD_GRAYSCALE)
-            ok, c = cv2.findChessboardCorners(gray, (7, 10), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            ok, c = cv2.findChessboardCorners(
+                gray, (7, 10), flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+            )
             found[side] = cv2.cornerSubPix(gray, c, (11, 11), (-1, -1), SUBPIX).reshape(-1, 2) if ok else None
         if all(v is not None for v in found.values()):
             for side in corners:
                 corners[side].append(found[side])
     size = (1280, 720)
     cal = {side: _calibrate(model, corners[side], size) for side in corners}
-    poses = {side: np.array([se3.invert(estimate_board_pose(model, c, *cal[side])[0]) for c in corners[side]])
-             for side in corners}
-    motions = Motions.from_poses(poses["left"], poses["right"], tuple(str(i) for i in range(len(corners["left"]))))
+    poses = {
+        side: np.array([se3.invert(estimate_board_pose(model, c, *cal[side])[0]) for c in corners[side]])
+        for side in corners
+    }
+    motions = Motions.from_poses(
+        poses["left"], poses["right"], tuple(str(i) for i in range(len(corners["left"])))
+    )
     gate = time_alignment_gate(motions, HandEyeThresholds())
     assert not gate.passed and len(gate.detail["mismatched_motions"]) >= len(corners["left"]) // 2
-    _, rms_stereo = _stereo_T_left_right(model, corners["left"], corners["right"], cal["left"], cal["right"], size)
+    _, rms_stereo = _stereo_T_left_right(
+        model, corners["left"], corners["right"], cal["left"], cal["right"], size
+    )
     assert rms_stereo > 5.0  # the plain tool answers anyway, with a reprojection error of pixels

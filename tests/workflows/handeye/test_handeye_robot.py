@@ -28,8 +28,12 @@ from calibctl.workflows.handeye.handeye_robot import run_robot_handeye
 from tests.artifacts.factories import calibration, measured_board
 
 N_POSES = 15
-X_GRIPPER_CAM = se3.transform(se3.rotation_from_rotvec(np.radians([4.0, -3.0, 90.0])), np.array([0.05, -0.03, 0.10]))
-X_BASE_CAM = se3.transform(se3.rotation_from_rotvec(np.radians([150.0, 10.0, 5.0])), np.array([0.8, 0.2, 0.9]))
+X_GRIPPER_CAM = se3.transform(
+    se3.rotation_from_rotvec(np.radians([4.0, -3.0, 90.0])), np.array([0.05, -0.03, 0.10])
+)
+X_BASE_CAM = se3.transform(
+    se3.rotation_from_rotvec(np.radians([150.0, 10.0, 5.0])), np.array([0.8, 0.2, 0.9])
+)
 TOL_MM, TOL_DEG = 1.0, 0.1
 
 
@@ -49,8 +53,18 @@ def _write_scene(folder: Path, eye_in_hand: bool, seed: int) -> Path:
     folder.mkdir()
     with (folder / "poses.csv").open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["image", "gripper_qw", "gripper_qx", "gripper_qy", "gripper_qz",
-                         "gripper_tx_m", "gripper_ty_m", "gripper_tz_m"])
+        writer.writerow(
+            [
+                "image",
+                "gripper_qw",
+                "gripper_qx",
+                "gripper_qy",
+                "gripper_qz",
+                "gripper_tx_m",
+                "gripper_ty_m",
+                "gripper_tz_m",
+            ]
+        )
         for i, (T_cb, T_bg) in enumerate(zip(T_cam_board, T_base_gripper, strict=True)):
             name = f"pose-{i:02d}.png"
             cv2.imwrite(str(folder / name), render_view(_camera(), spec, T_cb, rng))
@@ -62,15 +76,23 @@ def _write_scene(folder: Path, eye_in_hand: bool, seed: int) -> Path:
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("robot")
-    return {"in-hand": _write_scene(root / "in-hand", True, 3), "to-hand": _write_scene(root / "to-hand", False, 4)}
+    return {
+        "in-hand": _write_scene(root / "in-hand", True, 3),
+        "to-hand": _write_scene(root / "to-hand", False, 4),
+    }
 
 
 @pytest.fixture
 def settings(sqlite_url: str):
     with Store.open(sqlite_url) as store:
         store.add_board(measured_board())
-        store.add_artifact(calibration(cx=319.5, cy=239.5, board=measured_board()), activate=True, actor="qa",
-                           station="test", reason="renderer's camera")
+        store.add_artifact(
+            calibration(cx=319.5, cy=239.5, board=measured_board()),
+            activate=True,
+            actor="qa",
+            station="test",
+            reason="renderer's camera",
+        )
     return load_settings(db=sqlite_url)
 
 
@@ -78,7 +100,9 @@ def _errors(result, X: np.ndarray) -> tuple[float, float]:
     assert result.transform is not None
     t = np.array(result.transform.translation_m)
     R = se3.rotation_from_quaternion(np.array(result.transform.rotation_wxyz))
-    return float(np.linalg.norm(t - X[:3, 3]) * 1e3), float(np.degrees(se3.rotation_angle_rad(R.T @ X[:3, :3])))
+    return float(np.linalg.norm(t - X[:3, 3]) * 1e3), float(
+        np.degrees(se3.rotation_angle_rad(R.T @ X[:3, :3]))
+    )
 
 
 @pytest.mark.parametrize("method", ["park", "tsai"])
@@ -95,7 +119,9 @@ def test_eye_in_hand_recovers_x_within_1_mm_and_0_1_deg(scenes, settings, method
 
 def test_eye_to_hand_recovers_x_within_1_mm_and_0_1_deg(scenes, settings) -> None:
     d = scenes["to-hand"]
-    result = run_robot_handeye(settings, d / "poses.csv", d, "CAM-0001", "base", "camera", eye_to_hand=True).result
+    result = run_robot_handeye(
+        settings, d / "poses.csv", d, "CAM-0001", "base", "camera", eye_to_hand=True
+    ).result
     assert result.status == "accepted", [g.message for g in result.gates]
     assert result.provenance.input_shape == "robot-eye-to-hand"
     error_mm, error_deg = _errors(result, X_BASE_CAM)
@@ -111,7 +137,9 @@ def test_the_wrong_mode_is_rejected_by_the_consistency_gate(scenes, settings) ->
     assert not gates["consistency"].passed and gates["consistency"].value > 1.0
     assert gates["consistency"].message.startswith("motions inconsistent with one rigid transform")
     assert "--eye-in-hand vs --eye-to-hand" in gates["consistency"].hint
-    accepted = run_robot_handeye(settings, d / "poses.csv", d, "CAM-0001", "base", "camera", eye_to_hand=True).result
+    accepted = run_robot_handeye(
+        settings, d / "poses.csv", d, "CAM-0001", "base", "camera", eye_to_hand=True
+    ).result
     assert next(g for g in accepted.gates if g.gate == "consistency").value < 0.1
 
 
@@ -119,8 +147,23 @@ def test_a_camera_with_no_active_calibration_is_exit_2(scenes, settings) -> None
     d = scenes["in-hand"]
     with pytest.raises(NotFoundError, match="CAM-0404"):
         run_robot_handeye(settings, d / "poses.csv", d, "CAM-0404", "gripper", "camera")
-    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(d / "poses.csv"), "--from", "gripper",
-                                      "--to", "camera", "--images", str(d), "--serial", "CAM-0404"])
+    result = CliRunner().invoke(
+        app,
+        [
+            "--db",
+            settings.db_url,
+            "handeye",
+            str(d / "poses.csv"),
+            "--from",
+            "gripper",
+            "--to",
+            "camera",
+            "--images",
+            str(d),
+            "--serial",
+            "CAM-0404",
+        ],
+    )
     assert result.exit_code == 2 and "CAM-0404" in result.stderr and "Traceback" not in result.output
 
 
@@ -130,11 +173,30 @@ def test_a_camera_whose_capture_was_rejected_is_named_as_such_not_unknown(scenes
     with Store.open(settings.db_url) as store:
         store.add_session(capture_session("aaaaaaaaaaa1", serial="CAM-0002", status="rejected"))
     d = scenes["in-hand"]
-    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(d / "poses.csv"), "--from", "gripper",
-                                      "--to", "camera", "--images", str(d), "--serial", "CAM-0002"], terminal_width=200)
+    result = CliRunner().invoke(
+        app,
+        [
+            "--db",
+            settings.db_url,
+            "handeye",
+            str(d / "poses.csv"),
+            "--from",
+            "gripper",
+            "--to",
+            "camera",
+            "--images",
+            str(d),
+            "--serial",
+            "CAM-0002",
+        ],
+        terminal_width=200,
+    )
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "unknown serial" not in result.stderr
-    assert "no calibration is stored for 'CAM-0002': its capture sessions were rejected at the gates" in result.stderr
+    assert (
+        "no calibration is stored for 'CAM-0002': its capture sessions were rejected at the gates"
+        in result.stderr
+    )
     assert "calibctl calibrate --serial CAM-0002" in result.stderr
 
 
@@ -160,9 +222,26 @@ def test_a_missing_image_names_file_and_line(scenes, settings, tmp_path: Path) -
 
 def test_cli_wiring_with_tf_static(scenes, settings, tmp_path: Path) -> None:
     d = scenes["in-hand"]
-    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(d / "poses.csv"), "--from", "tool0",
-                                      "--to", "camera_optical", "--images", str(d), "--serial", "CAM-0001",
-                                      "--tf-static", str(tmp_path / "tf.yaml")], terminal_width=110)
+    result = CliRunner().invoke(
+        app,
+        [
+            "--db",
+            settings.db_url,
+            "handeye",
+            str(d / "poses.csv"),
+            "--from",
+            "tool0",
+            "--to",
+            "camera_optical",
+            "--images",
+            str(d),
+            "--serial",
+            "CAM-0001",
+            "--tf-static",
+            str(tmp_path / "tf.yaml"),
+        ],
+        terminal_width=110,
+    )
     assert result.exit_code == 0, result.output
     assert "robot-eye-in-hand" in result.stdout and "Result: ACCEPTED" in result.stdout
     assert "child_frame_id: camera_optical" in (tmp_path / "tf.yaml").read_text()
@@ -199,7 +278,9 @@ def test_unreadable_or_wrong_size_images_are_named(scenes, settings, tmp_path: P
         run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera")
 
 
-def test_images_without_a_board_are_skipped_and_too_few_left_is_exit_2(scenes, settings, tmp_path: Path) -> None:
+def test_images_without_a_board_are_skipped_and_too_few_left_is_exit_2(
+    scenes, settings, tmp_path: Path
+) -> None:
     d = scenes["in-hand"]
     images = tmp_path / "images"
     images.mkdir()
@@ -207,7 +288,11 @@ def test_images_without_a_board_are_skipped_and_too_few_left_is_exit_2(scenes, s
     for i, p in enumerate(sorted(d.glob("*.png"))):
         (images / p.name).write_bytes(p.read_bytes() if i != 5 else cv2.imencode(".png", blank)[1].tobytes())
     result = run_robot_handeye(settings, d / "poses.csv", images, "CAM-0001", "gripper", "camera").result
-    assert result.status == "accepted" and len(result.skipped) == 1 and result.skipped[0].startswith("pose-05.png")
+    assert (
+        result.status == "accepted"
+        and len(result.skipped) == 1
+        and result.skipped[0].startswith("pose-05.png")
+    )
     for p in images.glob("*.png"):
         cv2.imwrite(str(p), blank)
     with pytest.raises(InputError, match="the board was found in 0 of 15 images"):
@@ -220,7 +305,9 @@ def _pose_rows(d: Path) -> list[np.ndarray]:
     out = []
     for row in sorted(rows, key=lambda r: r["image"]):
         q = np.array([float(row[f"gripper_q{c}"]) for c in "wxyz"])
-        out.append(se3.transform(se3.rotation_from_quaternion(q), [float(row[f"gripper_t{c}_m"]) for c in "xyz"]))
+        out.append(
+            se3.transform(se3.rotation_from_quaternion(q), [float(row[f"gripper_t{c}_m"]) for c in "xyz"])
+        )
     return out
 
 
@@ -230,7 +317,9 @@ def _write_vec(path: Path, poses: list[np.ndarray], sep: str = "\t") -> Path:
 
 
 @pytest.mark.parametrize("sep", ["\t", ",", "  "])
-def test_a_headerless_file_of_16_numbers_per_line_is_read_in_image_order(scenes, settings, tmp_path, sep) -> None:
+def test_a_headerless_file_of_16_numbers_per_line_is_read_in_image_order(
+    scenes, settings, tmp_path, sep
+) -> None:
     # RWHE-Calib's RobotPosesVec.txt layout: one row-major 4x4 T_base_gripper (metres) per image, no names
     d = scenes["in-hand"]
     vec = _write_vec(tmp_path / "RobotPosesVec.txt", _pose_rows(d), sep)
@@ -246,7 +335,9 @@ def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_pa
     poses = _pose_rows(d)
     vec = tmp_path / "p.txt"
     vec.write_text("".join(" ".join("1" for _ in range(12)) + "\n" for _ in poses))
-    with pytest.raises(InputError, match=r"p.txt line 1: 12 numbers; a pose file without a header has 16 per line"):
+    with pytest.raises(
+        InputError, match=r"p.txt line 1: 12 numbers; a pose file without a header has 16 per line"
+    ):
         run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera")
     bad = [T.copy() for T in poses]
     bad[3][0, 3] = np.nan
@@ -264,8 +355,23 @@ def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_pa
     vec.write_text("\n".join([*text[:5], "1 2 three 4", *text[5:]]) + "\n")
     with pytest.raises(InputError, match=r"p.txt line 6: not all numbers"):
         run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera")
-    result = CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(_write_vec(vec, poses[:-1])), "--from",
-                                      "gripper", "--to", "camera", "--images", str(d), "--serial", "CAM-0001"])
+    result = CliRunner().invoke(
+        app,
+        [
+            "--db",
+            settings.db_url,
+            "handeye",
+            str(_write_vec(vec, poses[:-1])),
+            "--from",
+            "gripper",
+            "--to",
+            "camera",
+            "--images",
+            str(d),
+            "--serial",
+            "CAM-0001",
+        ],
+    )
     assert result.exit_code == 2 and "14 poses but" in result.stderr and "Traceback" not in result.output
 
 
@@ -282,7 +388,11 @@ def test_a_mismatch_on_a_static_pose_arm_does_not_send_the_user_to_timeoffset(sc
     result = run_robot_handeye(settings, path, d, "CAM-0001", "gripper", "camera").result
     gate = next(g for g in result.gates if g.gate == "time-alignment")
     assert result.status == "rejected" and not gate.passed
-    assert "timeoffset" not in gate.hint and "held still" in gate.hint and "pairs a photo with the pose" in gate.hint
+    assert (
+        "timeoffset" not in gate.hint
+        and "held still" in gate.hint
+        and "pairs a photo with the pose" in gate.hint
+    )
 
 
 def test_a_mismatch_in_a_log_in_time_still_names_the_time_offset() -> None:

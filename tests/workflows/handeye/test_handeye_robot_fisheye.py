@@ -28,8 +28,12 @@ from calibctl.workflows.handeye import handeye_robot
 from tests.artifacts.factories import calibration, measured_board
 
 N_POSES = 15
-FOV_DEG = 150.0  # the detector finds the board in every view on OpenCV 4.10 and 5.0 (tests/workflows/synth_folders)
-X_GRIPPER_CAM = se3.transform(se3.rotation_from_rotvec(np.radians([4.0, -3.0, 90.0])), np.array([0.05, -0.03, 0.10]))
+FOV_DEG = (
+    150.0  # the detector finds the board in every view on OpenCV 4.10 and 5.0 (tests/workflows/synth_folders)
+)
+X_GRIPPER_CAM = se3.transform(
+    se3.rotation_from_rotvec(np.radians([4.0, -3.0, 90.0])), np.array([0.05, -0.03, 0.10])
+)
 SIGMAS = 4.0  # per translation axis: |error| within this many reported sigmas
 WRONG_MM = 5.0  # the pinhole reading of the same lens misplaces X by more than this
 
@@ -44,29 +48,53 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
     board = measured_board()
     spec = BoardSpec.chessboard(board.cols, board.rows, board.measurement.square_size_m)
     camera, rng = _camera(), np.random.default_rng(5)
-    T_cam_board = fisheye_poses(camera, spec.object_points(), N_POSES, rng,
-                                default_fisheye_distance_m(camera, spec.square_size_m), (15.0, 45.0), None, 8.0)
+    T_cam_board = fisheye_poses(
+        camera,
+        spec.object_points(),
+        N_POSES,
+        rng,
+        default_fisheye_distance_m(camera, spec.square_size_m),
+        (15.0, 45.0),
+        None,
+        8.0,
+    )
     T_base_gripper = robot_arm_poses(T_cam_board, X_GRIPPER_CAM, eye_in_hand=True)
     dark = camera.outside_circle()
     with (folder / "poses.csv").open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(["image", "gripper_qw", "gripper_qx", "gripper_qy", "gripper_qz",
-                         "gripper_tx_m", "gripper_ty_m", "gripper_tz_m"])
+        writer.writerow(
+            [
+                "image",
+                "gripper_qw",
+                "gripper_qx",
+                "gripper_qy",
+                "gripper_qz",
+                "gripper_tx_m",
+                "gripper_ty_m",
+                "gripper_tz_m",
+            ]
+        )
         for i, (T_cb, T_bg) in enumerate(zip(T_cam_board, T_base_gripper, strict=True)):
             image = render_view(camera, spec, T_cb, rng)
             image[dark] = np.minimum(image[dark], 4)  # no light outside the image circle
             cv2.imwrite(str(folder / f"pose-{i:02d}.png"), image)
             q = se3.quaternion_from_rotation(T_bg[:3, :3])
-            writer.writerow([f"pose-{i:02d}.png", *(repr(float(v)) for v in q), *(repr(float(v)) for v in T_bg[:3, 3])])
+            writer.writerow(
+                [f"pose-{i:02d}.png", *(repr(float(v)) for v in q), *(repr(float(v)) for v in T_bg[:3, 3])]
+            )
     return folder
 
 
 @pytest.fixture
 def settings(sqlite_url: str):
     camera, base = _camera(), calibration(board=measured_board())
-    art = base.model_copy(update={"camera_matrix": tuple(tuple(float(v) for v in row) for row in camera.K),
-                                  "dist_coeffs": [float(v) for v in camera.dist],
-                                  "model": base.model.model_copy(update={"name": "fisheye"})}).sealed()
+    art = base.model_copy(
+        update={
+            "camera_matrix": tuple(tuple(float(v) for v in row) for row in camera.K),
+            "dist_coeffs": [float(v) for v in camera.dist],
+            "model": base.model.model_copy(update={"name": "fisheye"}),
+        }
+    ).sealed()
     with Store.open(sqlite_url) as store:
         store.add_board(measured_board())
         store.add_artifact(art, activate=True, actor="qa", station="test", reason="renderer's fisheye camera")
@@ -79,8 +107,9 @@ def _translation_error_mm(result) -> np.ndarray:
 
 
 def test_a_fisheye_camera_on_an_arm_is_solved_through_its_fisheye_model(scene, settings) -> None:
-    result = handeye_robot.run_robot_handeye(settings, scene / "poses.csv", scene, "CAM-0001", "gripper",
-                                             "camera").result
+    result = handeye_robot.run_robot_handeye(
+        settings, scene / "poses.csv", scene, "CAM-0001", "gripper", "camera"
+    ).result
     assert result.status == "accepted" and not result.skipped, [g.message for g in result.gates]
     error = _translation_error_mm(result)
     assert result.uncertainty is not None
@@ -89,14 +118,17 @@ def test_a_fisheye_camera_on_an_arm_is_solved_through_its_fisheye_model(scene, s
     assert np.degrees(se3.rotation_angle_rad(R.T @ X_GRIPPER_CAM[:3, :3])) < 0.1
 
 
-def test_read_as_a_pinhole_the_same_fisheye_misplaces_x(scene, settings, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_read_as_a_pinhole_the_same_fisheye_misplaces_x(
+    scene, settings, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # What handeye did before: solvePnP with k1..k4 taken for k1 k2 p1 p2, whatever the model.
     def pinhole(obj, img, K, dist, model="k1k2"):
         return estimate_board_pose(obj, img, K, dist)
 
     monkeypatch.setattr(handeye_robot, "estimate_board_pose", pinhole)
-    result = handeye_robot.run_robot_handeye(settings, scene / "poses.csv", scene, "CAM-0001", "gripper",
-                                             "camera").result
+    result = handeye_robot.run_robot_handeye(
+        settings, scene / "poses.csv", scene, "CAM-0001", "gripper", "camera"
+    ).result
     if result.status == "accepted":
         assert np.linalg.norm(_translation_error_mm(result)) > WRONG_MM
     else:  # or the gates see that no single X explains the warped poses

@@ -37,8 +37,9 @@ def settings(db_url: str) -> Settings:
     return s
 
 
-def _result(tmp_path: Path, settings: Settings, parent: str, child: str, excitation: str = "3d",
-            seed: int = 0) -> HandEyeResult:
+def _result(
+    tmp_path: Path, settings: Settings, parent: str, child: str, excitation: str = "3d", seed: int = 0
+) -> HandEyeResult:
     csv = tmp_path / f"{parent}-{child}-{excitation}-{seed}.csv"
     run_synth_motions(SynthRequest(csv, excitation=excitation, seed=seed, force=True))
     return run_handeye(settings, csv, parent, child).result
@@ -46,7 +47,9 @@ def _result(tmp_path: Path, settings: Settings, parent: str, child: str, excitat
 
 def _tf(text: str) -> dict[tuple[str, str], np.ndarray]:
     out = {}
-    for tr in yaml.safe_load("\n".join(line for line in text.splitlines() if not line.startswith("#")))["transforms"]:
+    for tr in yaml.safe_load("\n".join(line for line in text.splitlines() if not line.startswith("#")))[
+        "transforms"
+    ]:
         t, q = tr["transform"]["translation"], tr["transform"]["rotation"]
         R = se3.rotation_from_quaternion(np.array([q["w"], q["x"], q["y"], q["z"]]))
         out[(tr["header"]["frame_id"], tr["child_frame_id"])] = se3.transform(R, [t["x"], t["y"], t["z"]])
@@ -68,8 +71,12 @@ def test_an_accepted_edge_is_the_rigs_next_active_version_and_exports_in_the_tre
     assert (edge.parent, edge.child) == ("flange", ROOT)
     assert np.allclose(np.array(edge.T_parent_child), _X(result), atol=1e-12)
     assert cal.handeye == [result]
-    assert result.uncertainty is not None  # the translation block is the result's, untouched by the re-expression
-    assert np.allclose(np.array(edge.covariance)[3:, 3:], np.array(result.uncertainty.covariance)[3:, 3:], rtol=1e-6)
+    assert (
+        result.uncertainty is not None
+    )  # the translation block is the result's, untouched by the re-expression
+    assert np.allclose(
+        np.array(edge.covariance)[3:, 3:], np.array(result.uncertainty.covariance)[3:, 3:], rtol=1e-6
+    )
     with Store.open(settings.db_url) as store:
         assert store.active_rig_version(RIG) == 2
     tf = _tf(rig_export.export(settings, RIG, "tf", None, force=False, allow_stale=True))
@@ -110,7 +117,9 @@ def test_a_rejected_result_is_stored_rejected_never_active_and_carries_no_edge(s
     assert lint.failed and any("gate lever-arm failed" in f.message for f in gates)
     with pytest.raises(UsageError, match="rejected: a robot must not load it"):
         rig_export.export(settings, f"{RIG}@3", "tf", None, force=False, allow_stale=True)
-    assert "imu" not in rig_export.export(settings, f"{RIG}@3", "tf", None, force=False, allow_rejected=True, allow_stale=True)
+    assert "imu" not in rig_export.export(
+        settings, f"{RIG}@3", "tf", None, force=False, allow_rejected=True, allow_stale=True
+    )
     with pytest.raises(UsageError, match="can never become active"):
         rig_lint.rollback(settings, RIG, 3, "try")
 
@@ -129,8 +138,13 @@ def test_history_and_rollback_move_the_hand_eye_edges_with_the_tree(settings, tm
 
 def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(settings, tmp_path):
     generic = _result(tmp_path, settings, "flange", ROOT)
-    robot = generic.model_copy(update={"provenance": generic.provenance.model_copy(
-        update={"camera": f"{ROOT}@1", "input_shape": "robot-eye-in-hand"})}).sealed()
+    robot = generic.model_copy(
+        update={
+            "provenance": generic.provenance.model_copy(
+                update={"camera": f"{ROOT}@1", "input_shape": "robot-eye-in-hand"}
+            )
+        }
+    ).sealed()
     rig_handeye.store_handeye(settings, RIG, robot)
     assert not [f for f in rig_lint.lint_rig(settings, RIG).findings if f.rule.startswith("handeye-")]
     with Store.open(settings.db_url) as store:
@@ -148,7 +162,9 @@ def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(setti
     assert nxt.status == "accepted" and [h.parent_frame for h in nxt.handeye] == ["imu"]
     assert [f.rule for f in nxt.lint] == ["handeye-dropped"] and "flange -> CAM-0001" in nxt.lint[0].message
     # re-running the stale one replaces it: no warning about itself
-    fresh = robot.model_copy(update={"provenance": robot.provenance.model_copy(update={"camera": f"{ROOT}@2"})})
+    fresh = robot.model_copy(
+        update={"provenance": robot.provenance.model_copy(update={"camera": f"{ROOT}@2"})}
+    )
     again = rig_handeye.store_handeye(settings, RIG, fresh.sealed()).calibration
     assert again.status == "accepted" and again.lint == [] and len(again.handeye) == 2
 

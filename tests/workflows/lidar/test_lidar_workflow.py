@@ -27,7 +27,10 @@ def test_pairing_by_last_number_reports_the_unpaired(tmp_path: Path) -> None:
     p = pair(tmp_path / "img", tmp_path / "pcd", "*_full.pcd")
     assert [k for k, _, _ in p.pairs] == [1, 2]
     why = {path.name: reason for path, reason in p.unpaired}
-    assert why == {"pose9.png": "no scan with this frame number", "pose5_full.pcd": "no image with this frame number"}
+    assert why == {
+        "pose9.png": "no scan with this frame number",
+        "pose5_full.pcd": "no image with this frame number",
+    }
 
 
 def test_two_scans_with_one_frame_number_are_an_error(tmp_path: Path) -> None:
@@ -56,7 +59,9 @@ def test_acfr_segmentation_matches_the_authors_crops() -> None:
     for full in sorted((ACFR / "pcd").glob("*_full.pcd")):
         found = segment_board(read_scan(full), ACFR_BOX, (0.61, 0.85))
         outcomes[full.name] = found.outcome
-        theirs = {tuple(np.round(p, 4)) for p in read_scan(Path(str(full).replace("_full", "_target"))).points_m}
+        theirs = {
+            tuple(np.round(p, 4)) for p in read_scan(Path(str(full).replace("_full", "_target"))).points_m
+        }
         ours = {tuple(np.round(p, 4)) for p in found.points_m}
         common = len(ours & theirs)
         assert common / len(ours) > 0.99, full.name
@@ -82,7 +87,7 @@ def test_overlay_draws_the_board_points_where_the_camera_sees_the_board() -> Non
     assert T_cam_board is not None
     centre = T_cam_board[:3, :3] @ session.board.centre_in_pattern() + T_cam_board[:3, 3]
     u, v = (centre[:2] / centre[2] * render.K_RENDER[0, 0] + render.K_RENDER[:2, 2]).round().astype(int)
-    assert drawn[v - 40:v + 40, u - 40:u + 40].any()  # dots around the board's centre in the image
+    assert drawn[v - 40 : v + 40, u - 40 : u + 40].any()  # dots around the board's centre in the image
     wrong = session.T_lidar_cam.copy()
     wrong[:3, 3] += [0.0, 3.0, 0.0]  # 3 m off: the dots land elsewhere
-    assert not overlay_image(blank, board, wrong, lens)[v - 40:v + 40, u - 40:u + 40].any()
+    assert not overlay_image(blank, board, wrong, lens)[v - 40 : v + 40, u - 40 : u + 40].any()

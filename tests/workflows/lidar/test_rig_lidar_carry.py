@@ -29,18 +29,35 @@ def _lidar(camera: str = "CAM0@1", x_m: float = 0.05) -> LidarEdgeResult:
     """An accepted LiDAR result lidar -> CAM0 as `lidar solve` seals it (T and covariance chosen, not solved)."""
     T = se3.transform(se3.rotation_from_rotvec(np.array([0.1, -1.2, 0.3])), [x_m, 0.02, -0.19])
     cov = np.diag([1e-6, 2e-6, 1.5e-6, 1e-6, 4e-6, 9e-6])
-    transform = LidarTransform(T_lidar_cam=tuple(map(tuple, T.tolist())),
-                               quaternion_wxyz=tuple(se3.quaternion_from_rotation(T[:3, :3])), rpy_rad=(0.0, 0.0, 0.0),
-                               sigma_translation_mm=(1.0, 2.0, 3.0), sigma_rotation_deg=(0.06, 0.08, 0.07),
-                               covariance=cov.tolist())
+    transform = LidarTransform(
+        T_lidar_cam=tuple(map(tuple, T.tolist())),
+        quaternion_wxyz=tuple(se3.quaternion_from_rotation(T[:3, :3])),
+        rpy_rad=(0.0, 0.0, 0.0),
+        sigma_translation_mm=(1.0, 2.0, 3.0),
+        sigma_rotation_deg=(0.06, 0.08, 0.07),
+        covariance=cov.tolist(),
+    )
     gate = LidarGate(gate="lidar-observability", passed=True, value=0.2, threshold=0.08, message="spread")
-    return LidarEdgeResult(parent_frame="lidar", child_frame="CAM0", status="accepted", camera=camera, board="L5@1",
-                           images="images", scans="scans", box=(1, -2, -1, 4, 2, 1), range_offset_applied_mm=0.0,
-                           transform=transform, metrics=None, gates=[gate], scans_outcomes=[], created_at=utc_now())
+    return LidarEdgeResult(
+        parent_frame="lidar",
+        child_frame="CAM0",
+        status="accepted",
+        camera=camera,
+        board="L5@1",
+        images="images",
+        scans="scans",
+        box=(1, -2, -1, 4, 2, 1),
+        range_offset_applied_mm=0.0,
+        transform=transform,
+        metrics=None,
+        gates=[gate],
+        scans_outcomes=[],
+        created_at=utc_now(),
+    )
 
 
 @pytest.fixture
-def solved(settings, rig2):  # noqa: F811
+def solved(settings, rig2):
     rigs.add_rig(settings, "R1", ["CAM0", "CAM1"], None, [], frames=["flange", "lidar"])
     rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
     rigs.solve_rig_stored(settings, "R1")
@@ -59,21 +76,28 @@ def test_a_lidar_edge_survives_a_hand_eye_write_and_a_rig_re_solve(solved, tmp_p
     assert again.version == 4 and again.status == "accepted" and again.lidar == [ev]
     assert sorted(e.source for e in again.edges) == ["hand-eye", "lidar-board", "rig-solve"]
     assert not rig_lint.lint_rig(solved, "R1").failed
-    tf = yaml.safe_load("\n".join(x for x in rig_export.export(solved, "R1", "tf", None, force=False).splitlines()
-                                  if not x.startswith("#")))["transforms"]
+    tf = yaml.safe_load(
+        "\n".join(
+            x
+            for x in rig_export.export(solved, "R1", "tf", None, force=False).splitlines()
+            if not x.startswith("#")
+        )
+    )["transforms"]
     # flange and lidar both hang off the cameras: the tree is rooted at CAM0, the lidar edge met from its child
     pairs = [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf]
     assert ("cam0_optical_frame", "lidar") in pairs and len(pairs) == 3
     # a second LiDAR solve of the same edge replaces it: one edge, one result
     second = _lidar(x_m=0.06)
     fifth = rig_lidar.store_lidar(solved, "R1", second).calibration
-    assert fifth.lidar == [second] and [e.T_parent_child[0][3] for e in fifth.edges if e.source == "lidar-board"] == [0.06]
+    assert fifth.lidar == [second] and [
+        e.T_parent_child[0][3] for e in fifth.edges if e.source == "lidar-board"
+    ] == [0.06]
     # `calibctl diff --rig` compares the LiDAR edge of two versions like a hand-eye edge
     change = next(c for c in diff_rigs(solved, "R1@4", "R1@5").edges if (c.a, c.b) == ("lidar", "CAM0"))
     assert change.translation_mm == pytest.approx(10.0, abs=1e-6) and change.significant
 
 
-def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2, tmp_path):  # noqa: F811
+def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2, tmp_path):
     rig_lidar.store_lidar(solved, "R1", _lidar())
     with Store.open(solved.db_url) as store:
         store.add_artifact(_truth_artifact(rig2, "CAM0"), activate=True, **WHO)  # CAM0@2
@@ -84,7 +108,9 @@ def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2,
     assert "lidar -> CAM0 of R1@2 was solved with CAM0@1" in kept.dropped[0].message
     csv = tmp_path / "arm.csv"
     run_synth_motions(SynthRequest(csv))
-    nxt = rig_handeye.store_handeye(solved, "R1", run_handeye(solved, csv, "flange", "CAM1").result).calibration
+    nxt = rig_handeye.store_handeye(
+        solved, "R1", run_handeye(solved, csv, "flange", "CAM1").result
+    ).calibration
     assert nxt.lidar == [] and not [e for e in nxt.edges if e.source == "lidar-board"]
     assert "lidar-dropped" in [f.rule for f in nxt.lint]
 
@@ -101,7 +127,10 @@ def test_a_lidar_edge_is_sealed_chained_and_rolled_back_on_both_backends(db_url)
     stored = rig_lidar.store_lidar(s, RIG, ev)
     assert stored.active and stored.calibration.version == 2
     back = rig_lint.show(s, RIG)
-    assert back.lidar == [ev] and back.computed_sha256() == back.content_sha256 == stored.calibration.content_sha256
+    assert (
+        back.lidar == [ev]
+        and back.computed_sha256() == back.content_sha256 == stored.calibration.content_sha256
+    )
     verify = CliRunner().invoke(app, ["--db", db_url, "db", "verify"])
     assert verify.exit_code == 0, verify.output
     rig_lint.rollback(s, RIG, 1, "lidar edge looked off")

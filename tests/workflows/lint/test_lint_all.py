@@ -15,9 +15,13 @@ WHO = {"actor": "qa", "station": "st1"}
 def _fleet(url: str) -> None:
     with Store.open(url) as store:
         store.add_artifact(calibration(serial="CAM-A"), activate=True, reason="solved", **WHO)
-        store.add_artifact(calibration(serial="CAM-A", cx=400.0), activate=True, reason="solved", **WHO)  # off-centre
+        store.add_artifact(
+            calibration(serial="CAM-A", cx=400.0), activate=True, reason="solved", **WHO
+        )  # off-centre
         store.add_artifact(calibration(serial="CAM-B"), activate=True, reason="solved", **WHO)
-        store.add_artifact(calibration(serial="CAM-C", status="rejected"), activate=False, reason="solved", **WHO)
+        store.add_artifact(
+            calibration(serial="CAM-C", status="rejected"), activate=False, reason="solved", **WHO
+        )
         store.rollback("CAM-A", 1, reason="v2 is off-centre", **WHO)
 
 
@@ -25,7 +29,9 @@ def test_bulk_verdicts_equal_per_serial_verdicts(db_url: str):
     _fleet(db_url)
     settings = load_settings(db=db_url, env={})
     bulk = {r.source: r.as_json() for r in run.lint(settings, [], None, True)}
-    one_by_one = {r.source: r.as_json() for s in ("CAM-A", "CAM-B", "CAM-C") for r in run.lint(settings, [], s, False)}
+    one_by_one = {
+        r.source: r.as_json() for s in ("CAM-A", "CAM-B", "CAM-C") for r in run.lint(settings, [], s, False)
+    }
     assert bulk == one_by_one
     assert sorted(bulk) == ["CAM-A@1", "CAM-B@1", "CAM-C"]
     assert [f["rule"] for f in bulk["CAM-C"]["findings"]] == ["no-active-version"]
@@ -49,12 +55,22 @@ def test_the_stored_lint_reads_only_the_fact_fields_and_gives_the_full_dumps_ver
 
     limits = load_settings(env={}).lint
     front = CalibrationArtifact.model_validate(json.loads(Path("fixtures/camera_front.json").read_text()))
-    arts = [calibration(), calibration(cx=400.0), calibration(status="rejected"), calibration(fx=90.0),
-            calibration(image_size=(4000, 3000)), front,
-            calibration().model_copy(update={"dist_coeffs": [-1.5, 0.0, 0.0, 0.0, 0.0]})]  # folds over
+    arts = [
+        calibration(),
+        calibration(cx=400.0),
+        calibration(status="rejected"),
+        calibration(fx=90.0),
+        calibration(image_size=(4000, 3000)),
+        front,
+        calibration().model_copy(update={"dist_coeffs": [-1.5, 0.0, 0.0, 0.0, 0.0]}),
+    ]  # folds over
     fast = [lint.lint_artifact(a, limits).as_json() for a in arts]
     monkeypatch.setattr(lint, "FACT_FIELDS", None)  # include=None: the whole document
     full = [lint.lint_artifact(a, limits).as_json() for a in arts]
     assert fast == full
     failing = {f["rule"] for r in full for f in r["findings"] if f["severity"] == "error"}
-    assert {"principal-point", "status", "distortion-foldover"} <= failing  # the cases differ in their verdicts
+    assert {
+        "principal-point",
+        "status",
+        "distortion-foldover",
+    } <= failing  # the cases differ in their verdicts

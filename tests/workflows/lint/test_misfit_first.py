@@ -13,10 +13,19 @@ K = np.array([[400.0, 0.0, 320.0], [0.0, 400.0, 240.0], [0.0, 0.0, 1.0]])
 def _facts(fit_rms_px: float, detector_rms_px: float) -> CalibrationFacts:
     """k1k2 on a fisheye: sigma(fx) large, the outer ring worse held out, a polynomial that folds over."""
     return CalibrationFacts(
-        source="t", kind="calibctl", image_size=(640, 480), camera_matrix=K,
-        dist_coeffs=np.array([-0.5, 0.0, 0.0, 0.0, 0.0]), sigma_fx_px=3.1, fit_outer_rms_px=3.0,
-        held_out_outer_rms_px=4.0, square_size_status="measured", model_name="k1k2",
-        fit_rms_px=fit_rms_px, detector_rms_px=detector_rms_px)
+        source="t",
+        kind="calibctl",
+        image_size=(640, 480),
+        camera_matrix=K,
+        dist_coeffs=np.array([-0.5, 0.0, 0.0, 0.0, 0.0]),
+        sigma_fx_px=3.1,
+        fit_outer_rms_px=3.0,
+        held_out_outer_rms_px=4.0,
+        square_size_status="measured",
+        model_name="k1k2",
+        fit_rms_px=fit_rms_px,
+        detector_rms_px=detector_rms_px,
+    )
 
 
 def test_symptom_rules_point_at_the_misfit_fix():
@@ -37,17 +46,35 @@ def test_without_a_misfit_each_rule_keeps_its_own_fix():
 
 
 K_WEBCAM = np.array([[554.0, 0.0, 320.0], [0.0, 554.0, 240.0], [0.0, 0.0, 1.0]])  # 60 deg across 640 px
-DRIFT = {"two_cameras_suspected": True, "group_a": ["v1", "v2", "v3", "v4"], "group_b": ["v5", "v6", "v7", "v8"],
-         "holdout_rms_px": [0.3, 0.3], "cross_rms_px": [2.4, 2.6], "fx_px": [548.0, 561.0], "cx_px": [318.0, 322.0],
-         "cy_px": [239.0, 241.0], "ratio": 8.0, "threshold": 2.0}
+DRIFT = {
+    "two_cameras_suspected": True,
+    "group_a": ["v1", "v2", "v3", "v4"],
+    "group_b": ["v5", "v6", "v7", "v8"],
+    "holdout_rms_px": [0.3, 0.3],
+    "cross_rms_px": [2.4, 2.6],
+    "fx_px": [548.0, 561.0],
+    "cx_px": [318.0, 322.0],
+    "cy_px": [239.0, 241.0],
+    "ratio": 8.0,
+    "threshold": 2.0,
+}
 
 
 def _webcam(consistency: dict | None) -> CalibrationFacts:
     """Issue 22: a ~60 deg webcam whose focus drifted through the session, solved k1k2: misfit (and one-camera)."""
     return CalibrationFacts(
-        source="t", kind="calibctl", image_size=(640, 480), camera_matrix=K_WEBCAM,
-        dist_coeffs=np.array([0.05, -0.1, 0.0, 0.0, 0.0]), sigma_fx_px=0.5, square_size_status="measured",
-        model_name="k1k2", fit_rms_px=1.9, detector_rms_px=0.25, camera_consistency=consistency)
+        source="t",
+        kind="calibctl",
+        image_size=(640, 480),
+        camera_matrix=K_WEBCAM,
+        dist_coeffs=np.array([0.05, -0.1, 0.0, 0.0, 0.0]),
+        sigma_fx_px=0.5,
+        square_size_status="measured",
+        model_name="k1k2",
+        fit_rms_px=1.9,
+        detector_rms_px=0.25,
+        camera_consistency=consistency,
+    )
 
 
 def test_a_narrow_webcam_is_not_sent_to_the_fisheye_model():
@@ -59,7 +86,9 @@ def test_a_narrow_webcam_is_not_sent_to_the_fisheye_model():
 
 def test_a_drifting_webcam_points_the_misfit_at_one_camera():
     findings = {f.rule: f for f in lint_facts(_webcam(DRIFT), LintThresholds())}
-    assert findings["model-misfit"].severity == findings["one-camera"].severity == "error"  # the verdicts stay
+    assert (
+        findings["model-misfit"].severity == findings["one-camera"].severity == "error"
+    )  # the verdicts stay
     assert (findings["model-misfit"].fix or "").startswith("first fix one-camera (calibrate each camera")
     assert "--model fisheye" not in (findings["model-misfit"].fix or "")
     assert not (findings["one-camera"].fix or "").startswith("first fix model-misfit")

@@ -21,7 +21,9 @@ from tests.workflows.sessions import synthetic_capture
 
 @pytest.fixture
 def solved(tmp_path):
-    settings = load_settings(db=f"sqlite:///{tmp_path / 'w.db'}", station="st-test", operator="tester", env={})
+    settings = load_settings(
+        db=f"sqlite:///{tmp_path / 'w.db'}", station="st-test", operator="tester", env={}
+    )
     session = synthetic_capture(measured_board())
     with Store.open(settings.db_url) as store:
         board = store.add_board(session.board)
@@ -63,7 +65,9 @@ def test_the_numbers_shown_are_the_artifacts(solved, tmp_path):
 
 def test_regenerating_is_byte_identical_and_under_a_megabyte(solved, tmp_path):
     settings, art = solved
-    a, _ = report_workflow.write_report(settings, f"{art.serial}@{art.version}", tmp_path / "a.html", force=False)
+    a, _ = report_workflow.write_report(
+        settings, f"{art.serial}@{art.version}", tmp_path / "a.html", force=False
+    )
     b, _ = report_workflow.write_report(settings, art.serial, tmp_path / "b.html", force=False)
     assert a.read_bytes() == b.read_bytes()
     assert 10_000 < a.stat().st_size < report_workflow.MAX_REPORT_BYTES
@@ -74,10 +78,20 @@ def test_regenerating_is_byte_identical_and_under_a_megabyte(solved, tmp_path):
 
 def test_an_artifact_without_covariance_or_session_says_why(solved, tmp_path):
     settings, art = solved
-    old = art.model_copy(update={"stdev": art.stdev.model_copy(update={"covariance": None}),
-                                 "provenance": art.provenance.model_copy(update={"session_id": None})})
-    data = report_workflow.ReportData(old, False, [], "no capture session is recorded for this version (imported)",
-                                      None, report_workflow.gather(settings, art.serial).distortion)
+    old = art.model_copy(
+        update={
+            "stdev": art.stdev.model_copy(update={"covariance": None}),
+            "provenance": art.provenance.model_copy(update={"session_id": None}),
+        }
+    )
+    data = report_workflow.ReportData(
+        old,
+        False,
+        [],
+        "no capture session is recorded for this version (imported)",
+        None,
+        report_workflow.gather(settings, art.serial).distortion,
+    )
     html = report_workflow.render_html(data)
     assert "made before calibctl stored it" in html and "no capture session is recorded" in html
 
@@ -87,8 +101,13 @@ def test_a_200_view_session_stays_under_a_megabyte(solved):
     data = report_workflow.gather(settings, art.serial)
     copies = -(-200 // len(art.views))
     big = report_workflow.ReportData(
-        art.model_copy(update={"views": (art.views * copies)[:200]}), True, (data.views * copies)[:200], None,
-        data.uncertainty, data.distortion)
+        art.model_copy(update={"views": (art.views * copies)[:200]}),
+        True,
+        (data.views * copies)[:200],
+        None,
+        data.uncertainty,
+        data.distortion,
+    )
     corners = sum(len(v.corners_px) for v in big.views)
     html = report_workflow.render_html(big)
     assert corners > 10_000 and len(html.encode()) < report_workflow.MAX_REPORT_BYTES
@@ -100,8 +119,9 @@ def test_a_covariance_that_does_not_fit_the_model_exits_2_naming_it(solved, tmp_
     cov = art.stdev.covariance
     # k4 is not in the artifact's 5-coefficient model (an artifact from elsewhere, hash and all)
     swapped = cov.model_copy(update={"parameters": [*cov.parameters[:-1], "k4"]})
-    bad = art.model_copy(update={"stdev": art.stdev.model_copy(update={"covariance": swapped}),
-                                 "content_sha256": UNSEALED})
+    bad = art.model_copy(
+        update={"stdev": art.stdev.model_copy(update={"covariance": swapped}), "content_sha256": UNSEALED}
+    )
     with Store.open(settings.db_url) as store:
         stored = store.add_artifact(bad, activate=False, actor="t", station="s", reason="foreign")
     with pytest.raises(InputError, match="does not fit") as err:

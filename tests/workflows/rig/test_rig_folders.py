@@ -55,8 +55,11 @@ def test_unmatched_photos_are_outcomes_not_errors(rig2, tmp_path):
     shutil.copy(left / "CAM0_0000.png", left / "nodigits.png")
     run = solve_rig_folders({"L": left, "R": right}, BOARD, min_shared_views=5)
     reasons = {(u.camera, Path(u.path).name): u.reason for u in run.match.unmatched}
-    assert reasons == {("L", "CAM0_0007.png"): "no-partner", ("R", "CAM1_0099.png"): "no-partner",
-                       ("L", "nodigits.png"): "no-frame-key"}
+    assert reasons == {
+        ("L", "CAM0_0007.png"): "no-partner",
+        ("R", "CAM1_0099.png"): "no-partner",
+        ("L", "nodigits.png"): "no-frame-key",
+    }
     assert len(run.match.frames) == 7
 
 
@@ -67,8 +70,11 @@ def test_an_odd_size_is_wrong_size_in_a_folder_and_refused_in_a_glob_as_at_captu
     cv2.imwrite(str(odd), cv2.resize(cv2.imread(str(odd)), (320, 240)))
     run = solve_rig_folders({"L": rig2 / "CAM0", "R": right}, BOARD, min_shared_views=5)
     assert {o.status for o in run.outcomes["R"] if o.path == str(odd)} == {"wrong_size"}
-    with pytest.raises(InputError, match=r"camera R: --source .*\*\.png mixes image sizes \(640x480: .*; "
-                                         r"320x240: CAM1_0003.png\)"):
+    with pytest.raises(
+        InputError,
+        match=r"camera R: --source .*\*\.png mixes image sizes \(640x480: .*; "
+        r"320x240: CAM1_0003.png\)",
+    ):
         solve_rig_folders({"L": rig2 / "CAM0", "R": right / "*.png"}, BOARD, min_shared_views=5)
 
 
@@ -94,11 +100,14 @@ def test_sources_that_do_not_pair_up_are_refused(rig2, tmp_path):
         solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": right}, BOARD)
 
 
-@pytest.mark.parametrize(("items", "message"), [
-    (["A=x", "A=y"], "camera A is given twice"),
-    (["A=x"], "at least two cameras"),
-    (["A", "B=y"], "SERIAL=FOLDER"),
-])
+@pytest.mark.parametrize(
+    ("items", "message"),
+    [
+        (["A=x", "A=y"], "camera A is given twice"),
+        (["A=x"], "at least two cameras"),
+        (["A", "B=y"], "SERIAL=FOLDER"),
+    ],
+)
 def test_bad_sources_are_usage_errors(items, message):
     with pytest.raises(UsageError, match=message):
         parse_sources(items)
@@ -116,7 +125,9 @@ def test_a_missing_or_empty_folder_is_named(rig2, tmp_path):
 def test_opencv_left_right_matches_plain_opencv(tmp_path):
     left, right = split_pairs(LEFT_RIGHT, tmp_path, "left*.jpg", "right*.jpg")
     square_m = 1.0  # unknown square size: baselines are in squares
-    run = solve_rig_folders({"left": left, "right": right}, BoardSpec.chessboard(9, 6, square_m), model="opencv-default")
+    run = solve_rig_folders(
+        {"left": left, "right": right}, BoardSpec.chessboard(9, 6, square_m), model="opencv-default"
+    )
     plain = plain_stereo(left, right, 9, 6, square_m)
     assert run.solution is not None and run.holdout is not None
     edge = run.solution.tree.edges[0]
@@ -170,12 +181,24 @@ def _fisheye_pair(model: str) -> RigFolderRun:
     members, fits = [], {}
     for c, name in enumerate(views.cameras):
         seen = [row[c] for row in views.views if row[c] is not None]
-        member, fits[name] = calibrate_member(name, [v.object_points(views.model_points_m) for v in seen],
-                                              [v.corners_px for v in seen], FISHEYE_SIZE, model)
+        member, fits[name] = calibrate_member(
+            name,
+            [v.object_points(views.model_points_m) for v in seen],
+            [v.corners_px for v in seen],
+            FISHEYE_SIZE,
+            model,
+        )
         members.append(member)
     gate = rig_connected_gate(views.cameras, views.shared_view_counts(), 5)
-    run = RigFolderRun(views.cameras, FrameMatch((), ()), {n: () for n in views.cameras}, views, tuple(members), gate,
-                       fits=fits)
+    run = RigFolderRun(
+        views.cameras,
+        FrameMatch((), ()),
+        {n: () for n in views.cameras},
+        views,
+        tuple(members),
+        gate,
+        fits=fits,
+    )
     return judged_solve(run, model, limits=LintThresholds())
 
 
@@ -188,7 +211,9 @@ def test_a_fisheye_pair_solved_as_pinholes_fails_naming_the_lens_model():
     epipolar = next(f for f in run.findings if f.rule == "epipolar")
     assert "--model fisheye" in (epipolar.fix or "") and "model-misfit" in (epipolar.fix or "")
     misfit = [f for f in run.findings if f.rule == "member:model-misfit"]
-    assert {f.message.split(":")[0] for f in misfit} == {"L", "R"} and "--model fisheye" in (misfit[0].fix or "")
+    assert {f.message.split(":")[0] for f in misfit} == {"L", "R"} and "--model fisheye" in (
+        misfit[0].fix or ""
+    )
     doc = run_json(run)
     assert doc["verdict"] == "fail" and doc["members"][0]["model"] == "k1k2"
     assert doc["members"][0]["fit_rms_px"] > 2.5 * doc["members"][0]["detector_rms_px"]
@@ -202,7 +227,9 @@ def test_the_same_fisheye_pair_solved_as_fisheyes_passes():
 
 def test_the_verdict_uses_the_stations_epipolar_limit(rig2):
     sources = {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}
-    strict = solve_rig_folders(sources, BOARD, min_shared_views=5, limits=LintThresholds(epipolar_max_px_at_720=0.001))
+    strict = solve_rig_folders(
+        sources, BOARD, min_shared_views=5, limits=LintThresholds(epipolar_max_px_at_720=0.001)
+    )
     assert [f.rule for f in strict.findings] == ["epipolar"] and not strict.passed
     assert "re-capture with a still board" in (strict.findings[0].fix or "")  # the lenses fit: not the model
 
@@ -211,12 +238,17 @@ def test_the_verdict_uses_the_stations_epipolar_limit(rig2):
 def test_every_model_solves_a_rendered_pair(rig2, model):
     """issue 22: rational crashed in the rig's Jacobian (stereoCalibrate returned 5 of its 8 coefficients);
     auto was refused by a message that listed auto as valid."""
-    run = solve_rig_folders({"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, model=model, min_shared_views=5)
+    run = solve_rig_folders(
+        {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, model=model, min_shared_views=5
+    )
     assert run.solution is not None and run.gate.passed
     edge = run.solution.tree.edges[0]
     assert abs(edge.translation_mm - true_baseline_mm(rig2)) < 3 * edge.sigma_translation_mm
     members = run_json(run)["members"]
-    assert all(m["model"] in ("k1k2", "k1k2k3", "k1k2p1p2k3", "opencv-default", "rational", "fisheye") for m in members)
+    assert all(
+        m["model"] in ("k1k2", "k1k2k3", "k1k2p1p2k3", "opencv-default", "rational", "fisheye")
+        for m in members
+    )
     if model == "rational":
         assert all(len(m.dist_coeffs) == 8 for m in run.members)
 

@@ -19,8 +19,15 @@ def test_opencv_left_right_baseline_sigma_holds_against_a_frame_jackknife():
     spec, per_cam, size = detect("opencv-left-right")
     keys = sorted(set(per_cam["left"]) | set(per_cam["right"]))
     full = numbers(solve(spec, per_cam, size, keys))
-    without = np.array([[numbers(solve(spec, per_cam, size, [k for k in keys if k != d], names=False))[q]
-                         for q in ("baseline_mm", "rotation_deg")] for d in keys])
+    without = np.array(
+        [
+            [
+                numbers(solve(spec, per_cam, size, [k for k in keys if k != d], names=False))[q]
+                for q in ("baseline_mm", "rotation_deg")
+            ]
+            for d in keys
+        ]
+    )
     n = len(keys)
     sd = np.sqrt((n - 1) / n * ((without - without.mean(axis=0)) ** 2).sum(axis=0))
     for i, q in enumerate(("baseline_mm", "rotation_deg")):

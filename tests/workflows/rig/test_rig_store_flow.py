@@ -26,8 +26,9 @@ def rig2(tmp_path_factory):
 def _truth_artifact(rig2, name, **extra):
     cam = next(c for c in json.loads((rig2 / "rig_truth.json").read_text())["cameras"] if c["name"] == name)
     K = np.array(cam["K"])
-    return calibration(serial=name, fx=K[0, 0], cx=K[0, 2], cy=K[1, 2], board=measured_board(square_mm=25.0),
-                       **extra)
+    return calibration(
+        serial=name, fx=K[0, 0], cx=K[0, 2], cy=K[1, 2], board=measured_board(square_mm=25.0), **extra
+    )
 
 
 @pytest.fixture
@@ -94,8 +95,9 @@ def test_exports_of_a_stored_rig(settings, rig2, tmp_path):
     rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
     rigs.solve_rig_stored(settings, "R1")
     kalibr = yaml.safe_load(rig_export.export(settings, "R1", "kalibr", None, force=False))
-    assert np.allclose(np.linalg.norm(np.array(kalibr["cam1"]["T_cn_cnm1"])[:3, 3]) * 1e3,
-                       true_baseline_mm(rig2), atol=0.2)
+    assert np.allclose(
+        np.linalg.norm(np.array(kalibr["cam1"]["T_cn_cnm1"])[:3, 3]) * 1e3, true_baseline_mm(rig2), atol=0.2
+    )
     path = tmp_path / "stereo.yaml"
     rig_export.export(settings, "R1@1", "opencv", path, force=False)
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
@@ -107,7 +109,9 @@ def test_exports_of_a_stored_rig(settings, rig2, tmp_path):
     with pytest.raises(UsageError, match="ROS reads only the first YAML document"):
         rig_export.export(settings, "R1", "ros", None, force=False)
     # the stereo FileStorage goes to stdout like every other format, byte for byte what -o wrote
-    assert rig_export.export(settings, "R1@1", "opencv", None, force=False) == path.read_text(encoding="utf-8")
+    assert rig_export.export(settings, "R1@1", "opencv", None, force=False) == path.read_text(
+        encoding="utf-8"
+    )
     with pytest.raises(AlreadyExistsError, match="already exists"):
         rig_export.export(settings, "R1@1", "opencv", path, force=False)
 
@@ -137,8 +141,11 @@ def test_capture_refusals(settings, rig2):
 
 def test_a_member_without_an_active_calibration_is_refused(settings, rig2):
     with Store.open(settings.db_url) as store:
-        store.add_artifact(_truth_artifact(rig2, "CAM1").model_copy(update={"serial": "CAM9", "status": "rejected"}),
-                           activate=False, **WHO)
+        store.add_artifact(
+            _truth_artifact(rig2, "CAM1").model_copy(update={"serial": "CAM9", "status": "rejected"}),
+            activate=False,
+            **WHO,
+        )
     rigs.add_rig(settings, "R1", ["CAM0", "CAM9"], None, [])
     rigs.capture_rig(settings, "R1", {"CAM0": str(rig2 / "CAM0"), "CAM9": str(rig2 / "CAM1")}, "A17")
     with pytest.raises(NotFoundError, match="rig member CAM9 has no active calibration"):
@@ -161,9 +168,19 @@ def test_refine_intrinsics_moves_a_wrong_member_focal_length_back(settings, rig2
     with Store.open(settings.db_url) as store:  # CAM1@2: focal length 1 % off the renderer's
         good = _truth_artifact(rig2, "CAM1")
         fx = good.camera_matrix[0][0]
-        store.add_artifact(_truth_artifact(rig2, "CAM1").model_copy(update={"camera_matrix": (
-            (fx * 1.01, 0.0, good.camera_matrix[0][2]), (0.0, fx * 1.01, good.camera_matrix[1][2]), (0.0, 0.0, 1.0))}),
-            activate=True, **WHO)
+        store.add_artifact(
+            _truth_artifact(rig2, "CAM1").model_copy(
+                update={
+                    "camera_matrix": (
+                        (fx * 1.01, 0.0, good.camera_matrix[0][2]),
+                        (0.0, fx * 1.01, good.camera_matrix[1][2]),
+                        (0.0, 0.0, 1.0),
+                    )
+                }
+            ),
+            activate=True,
+            **WHO,
+        )
     rigs.add_rig(settings, "R1", ["CAM0", "CAM1"], None, [])
     rigs.capture_rig(settings, "R1", _sources(rig2), "A17")
     fixed = rigs.solve_rig_stored(settings, "R1").calibration

@@ -17,8 +17,9 @@ def central(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def settings(central: Path):
-    return load_settings(db=f"sqlite:///{central / 'calibctl.db'}", station="line-3", operator="op-ana", env={},
-                         jobs=2)
+    return load_settings(
+        db=f"sqlite:///{central / 'calibctl.db'}", station="line-3", operator="op-ana", env={}, jobs=2
+    )
 
 
 @pytest.fixture

@@ -52,9 +52,14 @@ def queue_three(settings, shots: Path, spool: Path, central: Path) -> None:
     assert [r.status for r in run(settings, shots, ["CAM-1"], spool)] == [PASS]
     with away(central):
         first = run(settings, shots, ["CAM-1", "CAM-2"], spool)
-        again = run(settings, shots, ["CAM-1"], spool)  # a new station run: the same unit calibrated twice offline
+        again = run(
+            settings, shots, ["CAM-1"], spool
+        )  # a new station run: the same unit calibrated twice offline
     assert [(r.serial, r.status, r.verdict, r.spool_record, r.version) for r in first + again] == [
-        ("CAM-1", QUEUED, PASS, 1, None), ("CAM-2", QUEUED, PASS, 2, None), ("CAM-1", QUEUED, PASS, 3, None)]
+        ("CAM-1", QUEUED, PASS, 1, None),
+        ("CAM-2", QUEUED, PASS, 2, None),
+        ("CAM-1", QUEUED, PASS, 3, None),
+    ]
 
 
 @contextmanager

@@ -33,14 +33,19 @@ from tests.workflows.station.spool_setup import away, queue_three, run
 
 
 def test_units_during_an_outage_are_queued_then_stored_in_order_before_the_next_unit(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     with Spool.open(spool, station="line-3", store=f"sqlite:///{central / 'calibctl.db'}") as opened:
         queued = [r.session_id for r in opened.records(pending_only=True)]
     lines = run(settings, shots, ["CAM-3"], spool)  # the store is back: synced at the start of the next unit
     assert [(r.serial, r.status, r.version, r.spool_record) for r in lines] == [
-        ("CAM-1", SYNCED, 2, 1), ("CAM-2", SYNCED, 1, 2), ("CAM-1", SYNCED, 3, 3), ("CAM-3", PASS, 1, None)]
+        ("CAM-1", SYNCED, 2, 1),
+        ("CAM-2", SYNCED, 1, 2),
+        ("CAM-1", SYNCED, 3, 3),
+        ("CAM-3", PASS, 1, None),
+    ]
     with Store.open(settings.db_url) as store:
         cam1 = store.list_artifacts("CAM-1")
         assert [a.version for a in cam1] == [1, 2, 3]  # both offline calibrations, in order, none skipped
@@ -57,17 +62,21 @@ def test_units_during_an_outage_are_queued_then_stored_in_order_before_the_next_
 
 
 def test_a_station_started_with_the_store_away_uses_the_board_its_spool_remembers(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     never_online = tmp_path / "new-spool.sqlite"
     with away(central):
         lines = run(settings, shots, ["CAM-2"], never_online)
     assert [r.status for r in lines] == [ERROR]
     assert "board A17 is unknown offline" in lines[0].message and "never seen it" in lines[0].message
-    queue_three(settings, shots, tmp_path / "spool.sqlite", central)  # the second offline run used the spool's board
+    queue_three(
+        settings, shots, tmp_path / "spool.sqlite", central
+    )  # the second offline run used the spool's board
 
 
 def test_a_sync_killed_after_storing_a_record_and_run_again_stores_nothing_twice(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
 
@@ -81,7 +90,9 @@ def test_a_sync_killed_after_storing_a_record_and_run_again_stores_nothing_twice
         assert [r.seq for r in opened.records(pending_only=True)] == [2, 3]
         again = sync(settings, opened)
     assert [(u.seq, u.serial, u.version, u.already) for u in again.synced] == [
-        (2, "CAM-2", 1, True), (3, "CAM-1", 3, False)]
+        (2, "CAM-2", 1, True),
+        (3, "CAM-1", 3, False),
+    ]
     assert again.error is None and again.left == 0
     with Store.open(settings.db_url) as store:
         assert [a.version for a in store.list_artifacts("CAM-1")] == [1, 2, 3]
@@ -90,7 +101,8 @@ def test_a_sync_killed_after_storing_a_record_and_run_again_stores_nothing_twice
 
 
 def test_a_changed_record_stops_the_sync_there_and_keeps_it_and_the_rest_queued(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     with sqlite3.connect(spool) as conn:
@@ -108,8 +120,9 @@ def test_a_changed_record_stops_the_sync_there_and_keeps_it_and_the_rest_queued(
         assert store.serials() == ["CAM-1"] and [a.version for a in store.list_artifacts("CAM-1")] == [1, 2]
 
 
-def test_a_changed_image_is_found_before_its_record_is_stored(settings, shots: Path, central: Path,
-                                                              tmp_path: Path) -> None:
+def test_a_changed_image_is_found_before_its_record_is_stored(
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     with open_spool(settings, spool) as opened:
@@ -124,7 +137,8 @@ def test_a_changed_image_is_found_before_its_record_is_stored(settings, shots: P
 
 
 def test_another_stations_or_another_stores_spool_is_refused_with_nothing_touched(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     before = spool.read_bytes()
@@ -139,8 +153,9 @@ def test_another_stations_or_another_stores_spool_is_refused_with_nothing_touche
         assert len(opened.records(pending_only=True)) == 3
 
 
-def test_a_second_syncer_is_refused_while_one_holds_the_spool(settings, shots: Path, central: Path,
-                                                               tmp_path: Path) -> None:
+def test_a_second_syncer_is_refused_while_one_holds_the_spool(
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     with open_spool(settings, spool) as first, open_spool(settings, spool) as second, first.sync_lock():
@@ -153,8 +168,9 @@ def test_a_second_syncer_is_refused_while_one_holds_the_spool(settings, shots: P
         assert store.serials() == ["CAM-1"] and len(store.list_artifacts("CAM-1")) == 1
 
 
-def test_a_full_spool_disk_is_a_line_naming_it_and_nothing_is_queued(settings, shots: Path, central: Path,
-                                                                     tmp_path: Path, monkeypatch) -> None:
+def test_a_full_spool_disk_is_a_line_naming_it_and_nothing_is_queued(
+    settings, shots: Path, central: Path, tmp_path: Path, monkeypatch
+) -> None:
     spool = tmp_path / "spool.sqlite"
     assert [r.status for r in run(settings, shots, ["CAM-1"], spool)] == [PASS]
 
@@ -171,8 +187,9 @@ def test_a_full_spool_disk_is_a_line_naming_it_and_nothing_is_queued(settings, s
         assert opened.records() == []
 
 
-def test_a_full_spool_database_refuses_the_record_and_keeps_the_others(settings, shots: Path, central: Path,
-                                                                       tmp_path: Path) -> None:
+def test_a_full_spool_database_refuses_the_record_and_keeps_the_others(
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     with open_spool(settings, spool) as opened:
@@ -180,12 +197,15 @@ def test_a_full_spool_database_refuses_the_record_and_keeps_the_others(settings,
         pages = opened._conn.execute("PRAGMA page_count").fetchone()[0]
         opened._conn.execute(f"PRAGMA max_page_count = {pages}")  # SQLite's own "database or disk is full"
         with pytest.raises(FileSystemError, match="is full"):
-            opened.queue(session.model_copy(update={"session_id": "feedfacecafe"}), artifact, session_stored=False)
+            opened.queue(
+                session.model_copy(update={"session_id": "feedfacecafe"}), artifact, session_stored=False
+            )
         assert [r.seq for r in opened.records()] == [1, 2, 3]
 
 
 def test_the_store_lost_between_the_session_and_its_calibration_queues_the_calibration_alone(
-        settings, shots: Path, central: Path, tmp_path: Path, monkeypatch) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path, monkeypatch
+) -> None:
     spool = tmp_path / "spool.sqlite"
     real_solve = solve_workflow.solve
     calls: list[str] = []
@@ -200,7 +220,10 @@ def test_the_store_lost_between_the_session_and_its_calibration_queues_the_calib
     lines = run(settings, shots, ["CAM-1", "CAM-2"], spool)
     # the store answers again before CAM-2: CAM-1's queued calibration is synced first
     assert [(r.serial, r.status, r.spool_record, r.version) for r in lines] == [
-        ("CAM-1", QUEUED, 1, None), ("CAM-1", SYNCED, 1, 1), ("CAM-2", QUEUED, 2, None)]
+        ("CAM-1", QUEUED, 1, None),
+        ("CAM-1", SYNCED, 1, 1),
+        ("CAM-2", QUEUED, 2, None),
+    ]
     with open_spool(settings, spool) as opened:
         assert [(r.session_stored, r.image_shas) for r in opened.records()] == [(True, ()), (True, ())]
         done = sync(settings, opened)
@@ -234,12 +257,18 @@ with open_spool(settings, spool) as opened:
 
 
 def test_a_sync_process_killed_with_sigkill_leaves_no_lock_and_the_next_sync_finishes_it(
-        settings, shots: Path, central: Path, tmp_path: Path) -> None:
+    settings, shots: Path, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     queue_three(settings, shots, spool, central)
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
-    killed = subprocess.run([sys.executable, "-c", _SYNC_THEN_DIE, settings.db_url, str(spool), "2"], env=env,
-                            capture_output=True, text=True, check=False)
+    killed = subprocess.run(
+        [sys.executable, "-c", _SYNC_THEN_DIE, settings.db_url, str(spool), "2"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert killed.returncode == -signal.SIGKILL, killed.stderr
     with open_spool(settings, spool) as opened:
         assert [r.seq for r in opened.records(pending_only=True)] == [2, 3]

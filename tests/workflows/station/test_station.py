@@ -46,9 +46,13 @@ def shots(tmp_path: Path, good: Path) -> Path:
     return tmp_path / "shots"
 
 
-def run(settings, shots: Path, serials, observer=CaptureObserver, board: str = "A17") -> tuple[list[UnitResult], bool]:
+def run(
+    settings, shots: Path, serials, observer=CaptureObserver, board: str = "A17"
+) -> tuple[list[UnitResult], bool]:
     lines: list[UnitResult] = []
-    summary = run_station(settings, StationRequest(board, f"{shots}/{{serial}}"), serials, lines.append, observer)
+    summary = run_station(
+        settings, StationRequest(board, f"{shots}/{{serial}}"), serials, lines.append, observer
+    )
     assert summary.units == lines
     return lines, summary.interrupted
 
@@ -63,10 +67,17 @@ def test_each_serial_line_calibrates_its_folder_and_blank_lines_are_skipped(sett
         assert store.get_artifact("CAM-2", None).version == 1
 
 
-def test_a_bad_serial_a_repeat_and_a_missing_folder_are_lines_and_the_loop_goes_on(settings, shots: Path) -> None:
+def test_a_bad_serial_a_repeat_and_a_missing_folder_are_lines_and_the_loop_goes_on(
+    settings, shots: Path
+) -> None:
     lines, _ = run(settings, shots, ["CAM 1", "CAM-1", "CAM-1", "CAM-9", "CAM-2"])
-    assert [(r.serial, r.status) for r in lines] == [("CAM 1", ERROR), ("CAM-1", PASS), ("CAM-1", ERROR),
-                                                     ("CAM-9", ERROR), ("CAM-2", PASS)]
+    assert [(r.serial, r.status) for r in lines] == [
+        ("CAM 1", ERROR),
+        ("CAM-1", PASS),
+        ("CAM-1", ERROR),
+        ("CAM-9", ERROR),
+        ("CAM-2", PASS),
+    ]
     assert lines[0].message == "'CAM 1' is not a serial" and "scan the label again" in (lines[0].hint or "")
     assert lines[2].message.startswith("CAM-1 was already calibrated in this run (unit 2)")
     assert lines[3].message == f"no pictures for CAM-9: {shots}/CAM-9 does not exist"
@@ -108,7 +119,8 @@ class CtrlCAt(CaptureObserver):
 
 
 def test_ctrl_c_while_a_unit_is_detected_cancels_it_with_nothing_stored_and_the_next_unit_runs(
-        settings, shots: Path) -> None:
+    settings, shots: Path
+) -> None:
     observers = iter([CtrlCAt(2), CaptureObserver()])
     lines, interrupted = run(settings, shots, ["CAM-1", "CAM-2"], lambda: next(observers))
     assert [(r.serial, r.status) for r in lines] == [("CAM-1", CANCELLED), ("CAM-2", PASS)]
@@ -117,7 +129,9 @@ def test_ctrl_c_while_a_unit_is_detected_cancels_it_with_nothing_stored_and_the_
         assert [s.serial for s in store.list_sessions()] == ["CAM-2"]
 
 
-def test_ctrl_c_after_detection_is_held_until_the_unit_is_stored_then_ends_the_station(settings, shots: Path) -> None:
+def test_ctrl_c_after_detection_is_held_until_the_unit_is_stored_then_ends_the_station(
+    settings, shots: Path
+) -> None:
     lines, interrupted = run(settings, shots, ["CAM-1", "CAM-2"], lambda: CtrlCAt(None))
     assert interrupted and [(r.serial, r.status) for r in lines] == [("CAM-1", PASS)]  # CAM-2 never started
     with Store.open(settings.db_url) as store:

@@ -99,8 +99,12 @@ def test_a_unit_is_captured_live_until_the_gates_pass_then_stored_and_solved(set
     opened = cameras({}, {})
     lines = run(settings, ["CAM-1", "CAM-2"])
     assert [(r.serial, r.status, r.version, r.views) for r in lines] == [
-        ("CAM-1", PASS, 1, VIDEO_VIEWS), ("CAM-2", PASS, 1, VIDEO_VIEWS)]
-    assert [(spec.kind, spec.text) for spec in opened] == [(sources.CAMERA, DEVICE)] * 2  # opened once per unit
+        ("CAM-1", PASS, 1, VIDEO_VIEWS),
+        ("CAM-2", PASS, 1, VIDEO_VIEWS),
+    ]
+    assert [(spec.kind, spec.text) for spec in opened] == [
+        (sources.CAMERA, DEVICE)
+    ] * 2  # opened once per unit
     # the stream's last frame (the one that passed the gates) to the verdict: the session's gates, store and solve
     assert all(r.after_last_image_s is not None and 0.0 < r.after_last_image_s < r.unit_s for r in lines)
     with Store.open(settings.db_url) as store:
@@ -120,7 +124,8 @@ def test_duration_ends_a_unit_judged_with_the_views_kept(settings, cameras) -> N
 
 
 def test_a_camera_unplugged_mid_unit_is_an_error_line_with_nothing_stored_and_the_next_unit_runs(
-        settings, cameras) -> None:
+    settings, cameras
+) -> None:
     cameras({"unplug_after": 45}, {})
     lines = run(settings, ["CAM-1", "CAM-2"])
     assert [(r.serial, r.status) for r in lines] == [("CAM-1", ERROR), ("CAM-2", PASS)]
@@ -128,7 +133,9 @@ def test_a_camera_unplugged_mid_unit_is_an_error_line_with_nothing_stored_and_th
     assert "the gates had not passed" in lines[0].message and "no session was stored" in lines[0].message
     assert "cable" in (lines[0].hint or "")
     serials, counts = stored(settings)
-    assert serials == ["CAM-2"] and counts["images"] == VIDEO_VIEWS  # CAM-1's kept frames never reached the store
+    assert (
+        serials == ["CAM-2"] and counts["images"] == VIDEO_VIEWS
+    )  # CAM-1's kept frames never reached the store
 
 
 def test_a_missing_camera_is_an_error_line_naming_the_devices_present(settings) -> None:
@@ -136,8 +143,9 @@ def test_a_missing_camera_is_an_error_line_naming_the_devices_present(settings) 
     if Path(device).exists():
         pytest.skip(f"{device} exists on this machine: a test never opens a real device")
     lines = run(settings, ["CAM-1"], LiveCamera(device))
-    assert lines[0].status == ERROR and lines[0].message.startswith(f"cannot open camera {device}: {device} does "
-                                                                    "not exist (video devices present: ")
+    assert lines[0].status == ERROR and lines[0].message.startswith(
+        f"cannot open camera {device}: {device} does not exist (video devices present: "
+    )
     assert "plug the camera in" in (lines[0].hint or "")
     assert stored(settings)[0] == []
 
@@ -146,13 +154,17 @@ def test_ctrl_c_while_the_camera_streams_cancels_the_unit_with_nothing_stored(se
     cameras({"ctrl_c_at": 30}, {})
     lines = run(settings, ["CAM-1", "CAM-2"])
     assert [(r.serial, r.status) for r in lines] == [("CAM-1", CANCELLED), ("CAM-2", PASS)]
-    assert lines[0].message == "cancelled (Ctrl-C) while its images were captured from the camera; nothing was stored"
+    assert (
+        lines[0].message
+        == "cancelled (Ctrl-C) while its images were captured from the camera; nothing was stored"
+    )
     serials, counts = stored(settings)
     assert serials == ["CAM-2"] and counts["images"] == VIDEO_VIEWS
 
 
 def test_with_the_store_away_a_unit_is_queued_with_its_frames_then_synced(
-        settings, cameras, central: Path, tmp_path: Path) -> None:
+    settings, cameras, central: Path, tmp_path: Path
+) -> None:
     spool = tmp_path / "spool.sqlite"
     cameras({}, {}, {})
     assert [r.status for r in run(settings, ["CAM-1"], spool=spool)] == [PASS]  # the spool learns the board
@@ -171,7 +183,8 @@ def test_with_the_store_away_a_unit_is_queued_with_its_frames_then_synced(
 
 
 def test_a_store_lost_after_the_stream_queues_the_held_unit_without_capturing_it_again(
-        settings, cameras, tmp_path: Path, monkeypatch) -> None:
+    settings, cameras, tmp_path: Path, monkeypatch
+) -> None:
     opened = cameras({})
 
     def cut(settings, held) -> None:
@@ -185,14 +198,27 @@ def test_a_store_lost_after_the_stream_queues_the_held_unit_without_capturing_it
     assert stored(settings)[0] == []
 
 
-@pytest.mark.parametrize(("request_", "message"), [
-    (StationRequest("A17", "shots/{serial}", camera=LiveCamera(DEVICE)), "the station takes one source"),
-    (StationRequest("A17", None), "the station takes one source"),
-    (StationRequest("A17", None, camera=LiveCamera("shots/{serial}")), "--camera shots/{serial} is not a camera"),
-    (StationRequest("A17", None, camera=LiveCamera(".")), r"--camera \. is not a camera"),
-    (StationRequest("A17", None, watch=WatchRule(views=3), camera=LiveCamera(DEVICE)), "--watch waits for pictures"),
-    (StationRequest("A17", None, camera=LiveCamera(DEVICE, duration_s=0.0)), "--duration must be a positive"),
-], ids=["both", "neither", "missing-path", "a-folder", "watch", "duration"])
+@pytest.mark.parametrize(
+    ("request_", "message"),
+    [
+        (StationRequest("A17", "shots/{serial}", camera=LiveCamera(DEVICE)), "the station takes one source"),
+        (StationRequest("A17", None), "the station takes one source"),
+        (
+            StationRequest("A17", None, camera=LiveCamera("shots/{serial}")),
+            "--camera shots/{serial} is not a camera",
+        ),
+        (StationRequest("A17", None, camera=LiveCamera(".")), r"--camera \. is not a camera"),
+        (
+            StationRequest("A17", None, watch=WatchRule(views=3), camera=LiveCamera(DEVICE)),
+            "--watch waits for pictures",
+        ),
+        (
+            StationRequest("A17", None, camera=LiveCamera(DEVICE, duration_s=0.0)),
+            "--duration must be a positive",
+        ),
+    ],
+    ids=["both", "neither", "missing-path", "a-folder", "watch", "duration"],
+)
 def test_a_camera_station_that_cannot_start_is_a_usage_error(request_: StationRequest, message: str) -> None:
     with pytest.raises(UsageError, match=message):
         check_request(request_)

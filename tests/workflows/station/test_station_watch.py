@@ -50,7 +50,9 @@ def settings(request: pytest.FixtureRequest, sqlite_url: str):
 
 def station(settings, shots: Path, serials: list[str], rule: WatchRule) -> list[UnitResult]:
     lines: list[UnitResult] = []
-    summary = run_station(settings, StationRequest("A17", f"{shots}/{{serial}}", watch=rule), serials, lines.append)
+    summary = run_station(
+        settings, StationRequest("A17", f"{shots}/{{serial}}", watch=rule), serials, lines.append
+    )
     assert summary.units == lines and not summary.interrupted
     return lines
 
@@ -58,8 +60,13 @@ def station(settings, shots: Path, serials: list[str], rule: WatchRule) -> list[
 class Feeder(threading.Thread):
     """A camera app: each picture written under a temporary name, then renamed into the unit's folder."""
 
-    def __init__(self, folder: Path, files: list[Path], pause: threading.Event | None = None,
-                 then: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        files: list[Path],
+        pause: threading.Event | None = None,
+        then: Callable[[], None] | None = None,
+    ) -> None:
         super().__init__(daemon=True)
         self.folder, self.files, self.then = folder, files, then
         self.pause = pause or threading.Event()
@@ -77,6 +84,7 @@ class Feeder(threading.Thread):
 
 def feed_from_first_poll(monkeypatch: pytest.MonkeyPatch, feeder: Feeder) -> None:
     """The feeder starts when the station first waits for the unit's pictures (the serial is read)."""
+
     def sleep(seconds: float) -> None:
         if feeder.ident is None:
             feeder.start()
@@ -87,25 +95,30 @@ def feed_from_first_poll(monkeypatch: pytest.MonkeyPatch, feeder: Feeder) -> Non
 
 def batch_session(settings, folder: Path):
     """The capture `calibctl calibrate` would make of the finished folder (not stored)."""
-    request = CaptureRequest("CAM-B", "A17", str(folder), jobs=settings.jobs, gauge_model=gauge_model("k1k2"),
-                             lens_model="k1k2")
+    request = CaptureRequest(
+        "CAM-B", "A17", str(folder), jobs=settings.jobs, gauge_model=gauge_model("k1k2"), lens_model="k1k2"
+    )
     return capture(settings, request, store_session=False).session
 
 
 def same_capture(a, b) -> None:
     assert [o.model_dump() for o in a.outcomes] == [o.model_dump() for o in b.outcomes]
-    assert [(v.name, v.image_sha256, v.corner_ids, v.corners_px, v.tilt_deg) for v in a.views] == \
-        [(v.name, v.image_sha256, v.corner_ids, v.corners_px, v.tilt_deg) for v in b.views]
+    assert [(v.name, v.image_sha256, v.corner_ids, v.corners_px, v.tilt_deg) for v in a.views] == [
+        (v.name, v.image_sha256, v.corner_ids, v.corners_px, v.tilt_deg) for v in b.views
+    ]
     assert [(g.gate, g.passed, g.value) for g in a.gates] == [(g.gate, g.passed, g.value) for g in b.gates]
     assert (a.status, a.image_size) == (b.status, b.image_size)
 
 
 def test_pictures_renamed_in_one_by_one_give_the_batch_capture_of_the_same_folder(
-        settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+    settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     shots = tmp_path / "shots"
     junk = tmp_path / "junk"
     junk.mkdir()
-    (junk / "broken.png").write_bytes(pictures[0].read_bytes()[:400])  # a truncated picture: unreadable, as today
+    (junk / "broken.png").write_bytes(
+        pictures[0].read_bytes()[:400]
+    )  # a truncated picture: unreadable, as today
     (junk / "notes.txt").write_text("not a picture")  # not an image by its suffix: ignored, as today
     feeder = Feeder(shots / "CAM-1", [*pictures, junk / "broken.png", junk / "notes.txt"])
     feed_from_first_poll(monkeypatch, feeder)
@@ -120,7 +133,8 @@ def test_pictures_renamed_in_one_by_one_give_the_batch_capture_of_the_same_folde
 
 
 def test_a_done_file_completes_the_unit_and_no_picture_is_detected_twice(
-        settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+    settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     shots = tmp_path / "shots"
     feeder = Feeder(shots / "CAM-1", pictures, then=lambda: (shots / "CAM-1" / "DONE").write_text(""))
     detected: list[Path] = []
@@ -154,11 +168,12 @@ class LockstepClock:
 
 
 def test_a_picture_written_in_place_is_detected_only_once_its_size_settled(
-        settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+    settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     folder = tmp_path / "shots" / "CAM-1"
     shutil.copytree(pictures[0].parent, folder, ignore=shutil.ignore_patterns("*.json", pictures[-1].name))
     data = pictures[-1].read_bytes()
-    chunks = [data[i:i + 4096] for i in range(0, len(data), 4096)]
+    chunks = [data[i : i + 4096] for i in range(0, len(data), 4096)]
     slow = (folder / pictures[-1].name).open("wb")  # the last picture, one chunk per poll
 
     def write_a_chunk() -> None:
@@ -178,8 +193,9 @@ def test_a_picture_written_in_place_is_detected_only_once_its_size_settled(
 
     monkeypatch.setattr(image_outcomes, "start_file", spy)
     steps = LockstepClock(write_a_chunk)
-    monkeypatch.setattr(station_module, "watch_unit", functools.partial(watch_unit, clock=steps.clock,
-                                                                        sleep=steps.sleep))
+    monkeypatch.setattr(
+        station_module, "watch_unit", functools.partial(watch_unit, clock=steps.clock, sleep=steps.sleep)
+    )
     lines = station(settings, tmp_path / "shots", ["CAM-1"], WatchRule(views=len(pictures), settle_s=0.1))
     assert [(r.status, r.views) for r in lines] == [(PASS, len(pictures))]
     assert steps.polls > len(data) // 4096  # the station polled while the picture was half written
@@ -189,7 +205,8 @@ def test_a_picture_written_in_place_is_detected_only_once_its_size_settled(
 
 
 def test_a_unit_whose_pictures_stop_is_an_error_line_naming_how_many_arrived_and_nothing_is_stored(
-        settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+    settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     shots = tmp_path / "shots"
     (shots / "CAM-1").mkdir(parents=True)
     for p in pictures[:2]:
@@ -197,20 +214,25 @@ def test_a_unit_whose_pictures_stop_is_an_error_line_naming_how_many_arrived_and
     (shots / "CAM-1" / "half.png").write_bytes(b"\x89PNG")  # still "being written": its size never settles
     grows = LockstepClock(lambda: (shots / "CAM-1" / "half.png").open("ab").write(b"x"))
     shutil.copytree(pictures[0].parent, shots / "CAM-2", ignore=shutil.ignore_patterns("*.json"))
-    monkeypatch.setattr(station_module, "watch_unit", functools.partial(watch_unit, clock=grows.clock,
-                                                                        sleep=grows.sleep))
-    lines = station(settings, shots, ["CAM-1", "CAM-2"], WatchRule(views=len(pictures), settle_s=0.1,
-                                                                    unit_timeout_s=1.0))
+    monkeypatch.setattr(
+        station_module, "watch_unit", functools.partial(watch_unit, clock=grows.clock, sleep=grows.sleep)
+    )
+    lines = station(
+        settings, shots, ["CAM-1", "CAM-2"], WatchRule(views=len(pictures), settle_s=0.1, unit_timeout_s=1.0)
+    )
     assert [(r.serial, r.status) for r in lines] == [("CAM-1", ERROR), ("CAM-2", PASS)]
-    assert lines[0].message == (f"no new picture in {shots}/CAM-1 for 1 s (--unit-timeout-s): 2 of {len(pictures)} "
-                                "arrived, 1 more still being written; nothing was stored")
+    assert lines[0].message == (
+        f"no new picture in {shots}/CAM-1 for 1 s (--unit-timeout-s): 2 of {len(pictures)} "
+        "arrived, 1 more still being written; nothing was stored"
+    )
     assert "scan the serial again" in (lines[0].hint or "")
     with Store.open(settings.db_url) as store:
         assert [s.serial for s in store.list_sessions()] == ["CAM-2"]
 
 
 def test_ctrl_c_while_waiting_for_pictures_cancels_the_unit_and_the_next_one_runs(
-        settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+    settings, tmp_path: Path, pictures: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     shots = tmp_path / "shots"
     shutil.copytree(pictures[0].parent, shots / "CAM-2", ignore=shutil.ignore_patterns("*.json"))
     feeder = Feeder(shots / "CAM-1", pictures[:3], then=lambda: os.kill(os.getpid(), signal.SIGINT))
@@ -218,44 +240,58 @@ def test_ctrl_c_while_waiting_for_pictures_cancels_the_unit_and_the_next_one_run
     feed_from_first_poll(monkeypatch, feeder)  # three pictures come, then the operator presses Ctrl-C
     lines = station(settings, shots, ["CAM-1", "CAM-2"], WatchRule(views=len(pictures), settle_s=0.0))
     assert [(r.serial, r.status) for r in lines] == [("CAM-1", CANCELLED), ("CAM-2", PASS)]
-    assert lines[0].message == "cancelled (Ctrl-C) while its images were awaited or detected; nothing was stored"
+    assert (
+        lines[0].message == "cancelled (Ctrl-C) while its images were awaited or detected; nothing was stored"
+    )
     with Store.open(settings.db_url) as store:
         assert [s.serial for s in store.list_sessions()] == ["CAM-2"]
 
 
-@pytest.mark.parametrize(("rule", "template", "message"), [
-    (WatchRule(), "{serial}", "--watch needs --views N or --done-file NAME"),
-    (WatchRule(views=0), "{serial}", "--views must be 1 or more, got 0"),
-    (WatchRule(done_file="sub/DONE"), "{serial}", "--done-file 'sub/DONE' must be a file name"),
-    (WatchRule(done_file="last.png"), "{serial}", "--done-file 'last.png' must be a file name"),
-    (WatchRule(views=3, settle_s=-1), "{serial}", "--settle-s must be 0 or more seconds, got -1"),
-    (WatchRule(views=3, unit_timeout_s=0), "{serial}", "--unit-timeout-s must be a positive number"),
-    (WatchRule(views=3), "{serial}/*.png", "is a glob"),
-])
+@pytest.mark.parametrize(
+    ("rule", "template", "message"),
+    [
+        (WatchRule(), "{serial}", "--watch needs --views N or --done-file NAME"),
+        (WatchRule(views=0), "{serial}", "--views must be 1 or more, got 0"),
+        (WatchRule(done_file="sub/DONE"), "{serial}", "--done-file 'sub/DONE' must be a file name"),
+        (WatchRule(done_file="last.png"), "{serial}", "--done-file 'last.png' must be a file name"),
+        (WatchRule(views=3, settle_s=-1), "{serial}", "--settle-s must be 0 or more seconds, got -1"),
+        (WatchRule(views=3, unit_timeout_s=0), "{serial}", "--unit-timeout-s must be a positive number"),
+        (WatchRule(views=3), "{serial}/*.png", "is a glob"),
+    ],
+)
 def test_a_watch_rule_that_cannot_work_is_a_usage_error_before_any_unit(
-        sqlite_url: str, tmp_path: Path, rule: WatchRule, template: str, message: str) -> None:
+    sqlite_url: str, tmp_path: Path, rule: WatchRule, template: str, message: str
+) -> None:
     settings = load_settings(db=sqlite_url, env={}, jobs=1)
     with pytest.raises(UsageError, match=message.replace("*", r"\*").replace(".", r"\.")):
-        run_station(settings, StationRequest("A17", f"{tmp_path}/{template}", watch=rule), ["CAM-1"], lambda r: None)
+        run_station(
+            settings, StationRequest("A17", f"{tmp_path}/{template}", watch=rule), ["CAM-1"], lambda r: None
+        )
 
 
 def test_a_unit_path_that_is_a_file_is_an_error_line(settings, tmp_path: Path) -> None:
     (tmp_path / "CAM-1").write_text("a file, not the unit's folder")
     lines = station(settings, tmp_path, ["CAM-1"], WatchRule(views=3))
     assert [(r.status, r.message) for r in lines] == [
-        (ERROR, f"{tmp_path}/CAM-1 is not a folder; --watch watches a folder per unit")]
+        (ERROR, f"{tmp_path}/CAM-1 is not a folder; --watch watches a folder per unit")
+    ]
 
 
 def test_with_the_store_away_a_watched_unit_is_queued_with_its_early_detections(
-        tmp_path: Path, tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
     central = central_folder(tmp_path)
     shots = unit_folders(tmp_path_factory, tmp_path)
     settings = load_settings(db=f"sqlite:///{central / 'calibctl.db'}", station="line-3", env={}, jobs=1)
     views = len(list((shots / "CAM-1").glob("*.png")))
     rule, spool = WatchRule(views=views, settle_s=0.0), tmp_path / "spool.sqlite"
     lines: list[UnitResult] = []
-    run_station(settings, StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule), ["CAM-1"],
-                lines.append)  # online: the spool remembers the board
+    run_station(
+        settings,
+        StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule),
+        ["CAM-1"],
+        lines.append,
+    )  # online: the spool remembers the board
     detected: list[str] = []
     real_classify = image_outcomes.classify_file
 
@@ -265,8 +301,15 @@ def test_with_the_store_away_a_watched_unit_is_queued_with_its_early_detections(
 
     monkeypatch.setattr(image_outcomes, "classify_file", counting)
     with away(central):
-        run_station(settings, StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule), ["CAM-2"],
-                    lines.append)
-    assert [(r.serial, r.status, r.verdict) for r in lines] == [("CAM-1", PASS, None), ("CAM-2", QUEUED, PASS)]
+        run_station(
+            settings,
+            StationRequest("A17", f"{shots}/{{serial}}", spool=spool, watch=rule),
+            ["CAM-2"],
+            lines.append,
+        )
+    assert [(r.serial, r.status, r.verdict) for r in lines] == [
+        ("CAM-1", PASS, None),
+        ("CAM-2", QUEUED, PASS),
+    ]
     assert lines[1].after_last_image_s is not None
     assert len(detected) == views  # each picture once, as it landed; the capture into the spool reused them
