@@ -185,30 +185,20 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
-    import json
-
     from calibctl.core.lidar.target import BackingBoard
-    from calibctl.files import write_atomic
+    from calibctl.workflows.edges.versions import stored_line, stored_summary
+    from calibctl.workflows.lidar import lidar_run
     from calibctl.workflows.lidar import lidar_solve as wf
 
     if scan_units not in ("m", "mm"):
         raise UsageError(f"--scan-units {scan_units!r} is not m or mm")
-    settings = state(ctx).settings()
-    if rig is not None:
-        from calibctl.workflows.lidar import rig_lidar
-
-        if camera_info is not None:
-            raise UsageError(
-                "--rig takes the camera as --serial (its active calibration), not --camera-info",
-                "the rig edge pins the calibration it was solved with",
-            )
-        rig_lidar.check_target(settings, rig, lidar_frame, serial)  # exit 2 before any scan is read
+    board: BackingBoard | str
     if board_ref is not None:
         if any(v is not None for v in (cols, rows, square_mm, backing_mm)):
             raise UsageError(
                 "give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both"
             )
-        board = wf.board_from_store(settings, board_ref)
+        board = board_ref
     else:
         if cols is None or rows is None or square_mm is None or backing_mm is None:
             raise UsageError(
@@ -240,41 +230,23 @@ def solve(
         overlay,
         force,
     )
-    outcome = wf.run_lidar_solve(settings, req)
-    stored = None
-    if rig is not None:
-        described = (
-            board_ref
-            or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
-        )
-        ev = rig_lidar.evidence(outcome.result, req, lidar_frame, serial or "", described)
-        stored = rig_lidar.store_lidar(settings, rig, ev).calibration
-    written = [f"wrote {path}" for path in outcome.result.get("overlays", [])]
-    if out is not None:
-        write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
-        written.append(f"wrote {out}")
-    if tf_static is not None:
-        if outcome.accepted:
-            write_atomic(tf_static, wf.tf_static_yaml(outcome.result, lidar_frame, camera_frame), force=force)
-            written.append(f"wrote {tf_static}")
-        else:
-            written.append(f"not written: {tf_static} (rejected: no transform is published)")
+    described = (
+        board_ref
+        or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
+    )
+    target = None if rig is None else lidar_run.RigTarget(rig, lidar_frame, described)
+    files = lidar_run.LidarFiles(out, tf_static, lidar_frame, camera_frame, force)
+    outcome = lidar_run.run_lidar(state(ctx).settings(), req, files, target)
+    doc = wf.result_json(outcome)
+    stored = outcome.stored
+    written = list(outcome.written)
     if stored is not None:
-        outcome.result["stored"] = {
-            "rig": stored.rig,
-            "version": stored.version,
-            "status": stored.status,
-            "active": stored.status == "accepted",
-            "content_sha256": stored.content_sha256,
-        }
-        written.append(
-            f"stored as rig {stored.rig}@{stored.version} "
-            + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)")
-        )
+        doc["stored"] = stored_summary(stored)
+        written.append(stored_line(stored))
     if wants_json(ctx, json_output):
-        emit_json(outcome.result)
+        emit_json(doc)
     else:
-        render_result(outcome.result)
+        render_result(doc)
         for line in written:
             say(line)
     if not outcome.accepted or (stored is not None and stored.status != "accepted"):

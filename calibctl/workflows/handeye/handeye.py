@@ -31,6 +31,7 @@ from calibctl.artifacts.handeye import (
     MotionResidual,
     RigidTransform,
 )
+from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.handeye import METHODS, Motions
@@ -66,6 +67,7 @@ class HandEyeOutcome:
     result: HandEyeResult
     written: list[str] = field(default_factory=list)
     not_written: list[str] = field(default_factory=list)
+    stored: RigCalibration | None = None  # the rig version written (``--rig``: handeye_run)
 
     @property
     def accepted(self) -> bool:
