@@ -515,7 +515,8 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
 
 def tf_static_yaml(outcome: LidarOutcome, lidar_frame: str, camera_frame: str) -> str:
     """An accepted result's T_lidar_cam as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static`
-    prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the child's pose in the parent)."""
+    prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the child's pose in the
+    parent)."""
     from calibctl.workflows.exports.rig_exports import tf_message
 
     if not outcome.accepted or outcome.fit is None:
