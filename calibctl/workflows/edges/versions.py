@@ -220,7 +220,7 @@ class Carried:
     def __getattr__(self, name: str) -> list[Any]:
         evidence = self.__dict__.get("evidence", {})
         if name in evidence:
-            return evidence[name]  # type: ignore[no-any-return]
+            return evidence[name]
         raise AttributeError(name)
 
     def update(self) -> dict[str, list[Any]]:

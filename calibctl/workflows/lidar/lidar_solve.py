@@ -428,7 +428,7 @@ def result_json(outcome: LidarOutcome) -> dict[str, Any]:
         doc["metrics"] = _metrics_json(outcome.metrics)
     if outcome.overlays is not None:
         doc["overlays"] = outcome.overlays
-    return _finite(doc)  # type: ignore[no-any-return]
+    return _finite(doc)
 
 
 def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
