@@ -63,13 +63,14 @@ def run_lidar(
         ev = rig_lidar.evidence(outcome, req, target.lidar_frame, req.serial or "", target.board)
         outcome.stored = rig_lidar.store_lidar(settings, target.rig, ev).calibration
     outcome.written = [f"wrote {path}" for path in outcome.overlays or []]
+    doc = result_json(outcome)
     if files.out is not None:
-        text = json.dumps(result_json(outcome), indent=2, allow_nan=False) + "\n"
+        text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
         write_atomic(files.out, text, force=files.force)
         outcome.written.append(f"wrote {files.out}")
     if files.tf_static is not None:
         if outcome.accepted:
-            yaml = tf_static_yaml(outcome, files.lidar_frame, files.camera_frame)
+            yaml = tf_static_yaml(doc, files.lidar_frame, files.camera_frame)
             write_atomic(files.tf_static, yaml, force=files.force)
             outcome.written.append(f"wrote {files.tf_static}")
         else:

@@ -513,19 +513,19 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     return outcome
 
 
-def tf_static_yaml(outcome: LidarOutcome, lidar_frame: str, camera_frame: str) -> str:
-    """An accepted result's T_lidar_cam as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static`
-    prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the child's pose in the
-    parent)."""
+def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:
+    """An accepted result's T_lidar_cam (``result_json``'s document) as a tf2_msgs/TFMessage YAML (what
+    `ros2 topic echo /tf_static` prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the
+    child's pose in the parent)."""
     from calibctl.workflows.exports.rig_exports import tf_message
 
-    if not outcome.accepted or outcome.fit is None:
+    t = result.get("transform")
+    if result.get("status") != "accepted" or t is None:
         raise UsageError("a rejected camera-LiDAR result has no transform to export")
-    t = _transform_json(outcome.fit)
     w, x, y, z = t["quaternion_wxyz"]
     header = (
-        f"# calibctl lidar solve T_{lidar_frame}_{camera_frame} (images {outcome.images}, "
-        f"scans {outcome.scans})\n"
+        f"# calibctl lidar solve T_{lidar_frame}_{camera_frame} (images {result['images']}, "
+        f"scans {result['scans']})\n"
     )
     return header + tf_message([(lidar_frame, camera_frame, t["translation_m"], (x, y, z, w))])
 
