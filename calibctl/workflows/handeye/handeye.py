@@ -46,7 +46,7 @@ from calibctl.core.extrinsics.handeye_gates import (
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
 from calibctl.errors import AlreadyExistsError, InputError, NumericalError, UsageError
-from calibctl.workflows.edges.kinds import handeye_tf_yaml as tf_static_yaml
+from calibctl.workflows.edges.kinds import handeye_tf_yaml
 from calibctl.workflows.handeye import handeye_io
 
 UNSEALED = "0" * 64
@@ -247,7 +247,7 @@ def write_outputs(result: HandEyeResult, outputs: Outputs) -> HandEyeOutcome:
         outcome.written.append(str(outputs.result_json))
     if outputs.tf_static is not None:
         if result.status == "accepted":
-            files.write_atomic(outputs.tf_static, tf_static_yaml(result), force=outputs.force)
+            files.write_atomic(outputs.tf_static, handeye_tf_yaml(result), force=outputs.force)
             outcome.written.append(str(outputs.tf_static))
         else:
             outcome.not_written.append(f"{outputs.tf_static} (rejected: no transform is published)")
