@@ -142,7 +142,7 @@ def handeye(
     json_output: JsonFlag = False,
 ) -> None:
     """Extrinsics from motion, A X = X B, gated on observability (exit 1 when a gate rejects)."""
-    from calibctl.workflows.edges.versions import stored_line, stored_summary
+    from calibctl.cli.stored_edge import stored_line, stored_summary
     from calibctl.workflows.handeye import handeye as wf
     from calibctl.workflows.handeye.handeye_run import run_handeye_command
 

@@ -185,8 +185,8 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
+    from calibctl.cli.stored_edge import stored_line, stored_summary
     from calibctl.core.lidar.target import BackingBoard
-    from calibctl.workflows.edges.versions import stored_line, stored_summary
     from calibctl.workflows.lidar import lidar_run
     from calibctl.workflows.lidar import lidar_solve as wf
 

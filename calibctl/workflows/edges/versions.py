@@ -41,24 +41,6 @@ class StoredEdge:
     active: bool
 
 
-def stored_summary(stored: RigCalibration) -> dict[str, Any]:
-    """The ``stored`` block of a command's JSON: the rig version an evidence edge was written as."""
-    return {
-        "rig": stored.rig,
-        "version": stored.version,
-        "status": stored.status,
-        "active": stored.status == "accepted",
-        "content_sha256": stored.content_sha256,
-    }
-
-
-def stored_line(stored: RigCalibration) -> str:
-    """The human line for the same."""
-    return f"stored as rig {stored.rig}@{stored.version} " + (
-        "(active)" if stored.status == "accepted" else "(rejected, never active; no edge)"
-    )
-
-
 def combined_tree_check(rig: RigDefinition, edges: Sequence[RigEdge], parent: str, child: str) -> None:
     """UsageError unless ``parent -> child`` can join ``edges`` as one tree of the rig's frames."""
     known = [*rig.cameras, *rig.frames]
