@@ -515,8 +515,8 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
 
 def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:
     """An accepted result's T_lidar_cam (``result_json``'s document) as a tf2_msgs/TFMessage YAML (what
-    `ros2 topic echo /tf_static` prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the
-    child's pose in the parent)."""
+    `ros2 topic echo /tf_static` prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is
+    the child's pose in the parent)."""
     from calibctl.workflows.exports.rig_exports import tf_message
 
     t = result.get("transform")
