@@ -20,7 +20,8 @@ MAX_MOTION_ROWS = 30
 def _render(outcome) -> None:
     r = outcome.result
     stdout.print(
-        f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} from {escape(r.provenance.input_file)} "
+        f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} "
+        f"from {escape(r.provenance.input_file)} "
         f"({r.provenance.input_shape}, {len(r.motions)} motions, method {r.method})"
     )
     for g in r.gates:

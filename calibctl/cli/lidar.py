@@ -35,14 +35,13 @@ def _num(value: float | None, spec: str = ".1f") -> str:
 
 
 def render_result(doc: dict[str, Any]) -> None:
-    """Human report of ``lidar_solve.run_lidar_solve``'s result."""
+    """Human report of ``lidar_solve.result_json``'s document."""
     counts = ", ".join(f"{k} {v}" for k, v in sorted(doc["outcome_counts"].items()))
     say(f"lidar solve: lens {doc['lens']} ({doc['lens_model']}); scans: {counts}")
     for r in doc["outcomes"]:
         name = r["scan"] or r["image"]
-        say(
-            f"  {str(r['frame']) if r['frame'] is not None else '-':>5} {name:<24} {r['outcome']:<19} {r['message']}"
-        )
+        frame = str(r["frame"]) if r["frame"] is not None else "-"
+        say(f"  {frame:>5} {name:<24} {r['outcome']:<19} {r['message']}")
     for g in doc["gates"]:
         say(f"  gate {g['gate']:<20}{'pass' if g['passed'] else 'FAIL'}  {g['message']}")
         if not g["passed"] and g["hint"]:
@@ -65,14 +64,18 @@ def render_result(doc: dict[str, Any]) -> None:
             + " deg"
         )
         say(
-            f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
-            f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm ({_num(m['projected_edge_rms_px'])} px in "
-            f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, {_num(m['held_out_projected_edge_rms_px'])} px)"
+            f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm "
+            f"(held-out {_num(m['held_out_plane_rms_mm'])} mm, "
+            f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm "
+            f"({_num(m['projected_edge_rms_px'])} px in "
+            f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, "
+            f"{_num(m['held_out_projected_edge_rms_px'])} px)"
             f"; board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
             f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm"
         )
         say(
-            f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
+            "  range offset the board sizes ask for "
+            f"{_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
             f"{_num(m['range_offset_from_dimensions_sigma_mm'])} mm"
             + (
                 ""

@@ -1,4 +1,5 @@
-"""Camera-LiDAR calibration at the station: scans and images in, T_lidar_cam with its one-sigma and a verdict out.
+"""Camera-LiDAR calibration at the station: scans and images in, T_lidar_cam with its one-sigma and a
+verdict out.
 
 ``scans`` reads LiDAR sweeps (bounded) and pairs them with images by the last number in the file name;
 ``camera`` gives the lens (a ROS camera_info file, or a camera's active calibration in the store);

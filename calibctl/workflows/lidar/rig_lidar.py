@@ -1,4 +1,5 @@
-"""A LiDAR is a frame of the robot's tree: ``calibctl lidar solve ... --rig RIG --serial CAM --lidar-frame NAME``.
+"""A LiDAR is a frame of the robot's tree:
+``calibctl lidar solve ... --rig RIG --serial CAM --lidar-frame NAME``.
 
 The same shape as ``handeye --rig`` (the ``edges`` room's machinery and its ``LIDAR`` kind): the
 gated result becomes the rig's next immutable version = the active version's edges with
