@@ -213,7 +213,7 @@ def export(
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if edge is None:
         text = _text(x, fmt)
-    else:  # one hand-eye edge: its tf carries the rig header (and signature) like every rig export
+    else:  # one evidence edge: its tf carries the rig header (and signature) like every rig export
         text = edge_export(x.cal, edge, fmt, x.names.frames)
         text = x.stamp(text) if fmt == "tf" else text
     if out is not None:

@@ -13,10 +13,10 @@ Rules (errors fail lint, exit 1):
 ``baseline-design``, ``epipolar`` and ``loop-closure`` read only the solve's numbers
 (``solved_rig_findings``): ``rig solve-folders`` applies them too, with each self-calibrated member's
 ``model-misfit`` (workflows.rig.rig_folders).
-- hand-eye edges (workflows.handeye.rig_handeye): ``handeye-gates`` (a gate of the stored result failed),
+- hand-eye edges (workflows.edges, its hand-eye kind): ``handeye-gates`` (a gate of the stored result failed),
   ``handeye-stale-member`` (the camera whose calibration gave the board poses was re-calibrated since),
   ``handeye-uncertainty`` (an accepted edge without a one-sigma);
-- camera-LiDAR edges (the same machinery, workflows.edges): ``lidar-gates``,
+- camera-LiDAR edges (the same table, its LiDAR kind): ``lidar-gates``,
   ``lidar-stale-member`` (the camera whose calibration posed the board was re-calibrated since the edge was
   solved), ``lidar-uncertainty`` (no positive-definite covariance: error; a one-sigma over 10 mm or 0.5 deg:
   warning).
