@@ -24,9 +24,11 @@ from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
+from calibctl.workflows.edges.export import edge_export
+from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
-from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -127,7 +129,7 @@ def _prepare(
             except NotFoundError:
                 active[m.serial] = None
         findings = rig_findings(cal, rig, active, settings.lint)
-        findings += rig_edges.edge_findings(rig_edges.evidence_of(cal), rig_edges.cal_versions(store, cal))
+        findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
     _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
     members = [
         MemberIntrinsics(
@@ -211,8 +213,8 @@ def export(
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if edge is None:
         text = _text(x, fmt)
-    else:  # one hand-eye edge: its tf carries the rig header (and signature) like every rig export
-        text = rig_handeye.edge_export(x.cal, edge, fmt, x.names.frames)
+    else:  # one evidence edge: its tf carries the rig header (and signature) like every rig export
+        text = edge_export(x.cal, edge, fmt, x.names.frames)
         text = x.stamp(text) if fmt == "tf" else text
     if out is not None:
         write_atomic(out, text, force=force)
