@@ -7,7 +7,7 @@ station's sync relies on, import under the artifact's own version, and the bulk 
 Decisions worth knowing:
 * ``add_artifact(..., activate=True)`` with a rejected artifact is refused *before anything is
   written* (UsageError): the caller stores rejected artifacts with ``activate=False``.
-* ``rollback`` to the version that is already active is refused (UsageError): nothing would move.
+* ``rollback`` to the version that is already active is done already: nothing is written (None).
 * ``import_artifact`` keeps the artifact's version; versions of a serial may then have gaps, and the
   next solve gets (highest version) + 1.
 """
@@ -56,8 +56,9 @@ class CameraStore:
         self, artifact: CalibrationArtifact, *, activate: bool, actor: str, station: str, reason: str
     ) -> tuple[CalibrationArtifact, bool]:
         """``add_artifact`` unless the serial already has a calibration solved from the same capture session
-        (``provenance.session_id``): then that one, and False. The look and the insert are one transaction
-        under the serial's version lock, so a sync run again after a crash never stores a calibration twice."""
+        (``provenance.session_id``): then that one, and False. The look and the insert are one
+        transaction under the serial's version lock, so a sync run again after a crash never stores a
+        calibration twice."""
         check_activation(artifact, activate, reason)
 
         def work(s: Session) -> tuple[CalibrationArtifact, bool]:
@@ -135,9 +136,10 @@ class CameraStore:
             if row is not None:
                 if row.content_sha256 != artifact.content_sha256:
                     raise AlreadyExistsError(
-                        f"{artifact.ref} already exists in {self._runner.url} with different content (stored sha256 "
-                        f"{row.content_sha256[:12]}, imported {artifact.content_sha256[:12]})",
-                        "versions are immutable: this store's history for that serial differs from the file's",
+                        f"{artifact.ref} already exists in {self._runner.url} with different content "
+                        f"(stored sha256 {row.content_sha256[:12]}, imported {artifact.content_sha256[:12]})",
+                        "versions are immutable: this store's history for that serial differs from the "
+                        "file's",
                     )
                 stored = codec.decode_artifact(row)
             else:

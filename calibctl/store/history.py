@@ -164,7 +164,8 @@ class VersionHistory(Generic[V, E]):
                 f"{label} has no active version; versions: {listing}",
                 f"ask for a version ({key}@N) or roll back to an accepted one"
                 if "accepted" in statuses.values()
-                else f"none is accepted: {self.solve_again(key)}, or ask for a version ({key}@N) to inspect it",
+                else f"none is accepted: {self.solve_again(key)}, or ask for a version ({key}@N) to "
+                "inspect it",
             )
         if version is None and self.active_must_be_accepted and statuses.get(wanted) != "accepted":
             raise IntegrityError(  # only possible if the event log was forged
@@ -224,7 +225,7 @@ class VersionHistory(Generic[V, E]):
         reason: str,
         signer: Signer | None,
     ) -> E:
-        """Append one event to the stream's event log (one hash chain; its counter row is the chain's lock)."""
+        """Append one event to the stream's event log (one hash chain; its counter row is its lock)."""
         counters.next_value(s, "chain", self.event_stream)
         row = self.event_model(
             **{self.key: key},
@@ -324,14 +325,16 @@ def _no_calibration(s: Session, serial: str) -> NoReturn:
         listing = named_list([f"{sid} ({st})" for sid, st in sessions], KNOWN_SHOWN)
         if all(st == "rejected" for _, st in sessions):
             raise NotFoundError(
-                f"no calibration is stored for '{serial}': its capture sessions were rejected at the gates, so "
-                f"it has no accepted version ({listing})",
-                f"capture {serial} again with views the gates accept (the capture's gate messages name what "
-                f"was missing) with `calibctl calibrate --serial {serial} --board ... --source ...`, or relax a "
-                "gate that does not apply at this station in the station file (--station-config, `gates:`)",
+                f"no calibration is stored for '{serial}': its capture sessions were rejected at the gates, "
+                f"so it has no accepted version ({listing})",
+                f"capture {serial} again with views the gates accept (the capture's gate messages name "
+                f"what was missing) with `calibctl calibrate --serial {serial} --board ... --source ...`, or "
+                "relax a gate that does not apply at this station in the station file (--station-config, "
+                "`gates:`)",
             )
         raise NotFoundError(
-            f"no calibration is stored for '{serial}': it has capture sessions ({listing}) but none was solved",
+            f"no calibration is stored for '{serial}': it has capture sessions ({listing}) but none was "
+            "solved",
             f"solve it: `calibctl solve --serial {serial}`",
         )
     serials = list(s.scalars(select(ArtifactRow.serial).distinct().order_by(ArtifactRow.serial)))

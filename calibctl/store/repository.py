@@ -1,18 +1,12 @@
-"""The Store: boards, capture sessions, calibration artifacts, activation events and images.
+"""The Store: one object callers open, made of parts that share one ``runner.Runner``.
 
-Every public method is one transaction and returns contract documents (pydantic), never ORM rows.
-Every read of a document re-checks its hash (IntegrityError naming it on mismatch): a calibration
-artifact by its record's chain hash (covering its bytes and content_sha256), the others by their
-sha256; ``db verify`` and import also re-derive an artifact's content hash. The active
-version of a serial is not a mutable pointer: it is the version of the serial's latest activation
-event, and events are append-only (database triggers refuse UPDATE/DELETE).
-
-Decisions worth knowing:
-* ``add_artifact(..., activate=True)`` with a rejected artifact is refused *before anything is
-  written* (UsageError): the caller stores rejected artifacts with ``activate=False``.
-* ``rollback`` to the version that is already active is refused (UsageError): nothing would move.
-* ``import_artifact`` keeps the artifact's version; versions of a serial may then have gaps, and the
-  next solve gets (highest version) + 1.
+Boards and capture sessions live here; camera artifacts (``cameras``), rigs, images, checks, the fleet log
+and health reports are parts the Store offers under their own method names. Every public method is one
+transaction and returns contract documents (pydantic), never ORM rows. Every read of a document re-checks
+its hash (IntegrityError naming it on mismatch): a calibration by its record's chain hash (covering its
+bytes and content_sha256), the others by their sha256. The active version of a serial or rig is not a
+mutable pointer: it is the version of its latest activation event (``history``), and events are
+append-only (database triggers refuse UPDATE/DELETE).
 """
 
 from __future__ import annotations
@@ -171,8 +165,8 @@ class Store:
                 changed = [f for f in _GEOMETRY if getattr(previous, f) != getattr(board, f)]
                 if changed:
                     raise UsageError(
-                        f"board {previous.ref} is a {previous.cols}x{previous.rows} {previous.kind}; a new revision "
-                        f"may only re-measure it, but {', '.join(changed)} differ",
+                        f"board {previous.ref} is a {previous.cols}x{previous.rows} {previous.kind}; a new "
+                        f"revision may only re-measure it, but {', '.join(changed)} differ",
                         "register a different pattern under a new name",
                     )
             stored = board.model_copy(update={"revision": revision})
@@ -203,7 +197,8 @@ class Store:
             wanted = revisions[-1] if revision is None else revision
             if wanted not in revisions:
                 raise NotFoundError(
-                    f"board {name} has no revision {revision}; revisions: {named_list(revisions, KNOWN_SHOWN)}",
+                    f"board {name} has no revision {revision}; revisions: "
+                    f"{named_list(revisions, KNOWN_SHOWN)}",
                     f"see `calibctl board show {name}`",
                 )
             row = s.scalars(select(BoardRow).where(BoardRow.name == name, BoardRow.revision == wanted)).one()
@@ -242,10 +237,11 @@ class Store:
         self._runner.run(work, write=True, retry_conflicts=True)
 
     def _session_linked(self, s: Session, row: SessionRow) -> SessionRow:
-        """``row`` numbered and chained in its serial's session stream (revision 0009), under that stream's lock
-        (the ('session', serial) counter row). Its id comes from the store-wide ('id', 'capture_sessions')
-        counter, whose row is held only for this one insert (so stations capturing different cameras wait
-        milliseconds, never retry); a counter behind the stored ids (a store chained by 0009) catches up."""
+        """``row`` numbered and chained in its serial's session stream (revision 0009), under that stream's
+        lock (the ('session', serial) counter row). Its id comes from the store-wide
+        ('id', 'capture_sessions') counter, whose row is held only for this one insert (so stations capturing
+        different cameras wait milliseconds, never retry); a counter behind the stored ids (a store chained by
+        0009) catches up."""
         counters.next_value(s, "session", row.serial)
         candidate = counters.next_value(s, "id", "capture_sessions")
         highest = int(s.scalar(select(func.max(SessionRow.id))) or 0)

@@ -264,7 +264,8 @@ class RigStore:
 
         Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
         caller decided on (None: nothing was active); when another writer moved it since (a solve, a
-        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer one)."""
+        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer
+        one)."""
         check_rollback_reason(reason)
         return self._runner.run(
             lambda s: RIGS.move(

@@ -74,7 +74,8 @@ class Runner:
             )
 
     def linked(self, stream: str, s: Session, row: R) -> R:
-        """``row`` with its chain (and, with a key, signature) columns set; the caller holds the stream's lock."""
+        """``row`` with its chain (and, with a key, signature) columns set; the caller holds the stream's
+        lock."""
         chain.link(s, chain.STREAMS[stream], row, self.signer)
         return row
 
