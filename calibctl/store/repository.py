@@ -70,6 +70,12 @@ class Store:
         trusted: TrustedKeys | None = None,
     ) -> None:
         self._runner = Runner(engine, signer, trusted)
+        self._engine, self._write_engine = self._runner.engine, self._runner.write_engine  # tests, benchmarks
+        self.signer, self.trusted, self.image_dir = (
+            signer,
+            trusted,
+            image_dir,
+        )  # as opened; the parts hold them
         self._cameras = CameraStore(self._runner)
         self._rigs = RigStore(self._runner, self._session_linked)
         self._images = ImageStore(self._runner, image_dir)
@@ -114,26 +120,6 @@ class Store:
     @property
     def backend(self) -> str:
         return self._engine.dialect.name
-
-    @property
-    def _engine(self) -> Engine:
-        return self._runner.engine
-
-    @property
-    def _write_engine(self) -> Engine:
-        return self._runner.write_engine
-
-    @property
-    def signer(self) -> Signer | None:
-        return self._runner.signer
-
-    @property
-    def trusted(self) -> TrustedKeys | None:
-        return self._runner.trusted
-
-    @property
-    def image_dir(self) -> Path:
-        return self._images.image_dir
 
     def close(self) -> None:
         self._engine.dispose()
