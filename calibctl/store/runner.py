@@ -8,7 +8,7 @@ functions it is given, never the other parts' private state.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Concatenate, Generic, ParamSpec, TypeVar
+from typing import Any, Concatenate, Generic, ParamSpec, TypeVar, overload
 
 from sqlalchemy import Engine, text
 from sqlalchemy import exc as sa_exc
@@ -93,6 +93,19 @@ class Delegate(Generic[P, T]):
         self._name = method.__name__
         self.__doc__ = method.__doc__
 
-    def __get__(self, store: object, owner: type | None = None) -> Callable[P, T]:
+    def _bound(self, store: object) -> Callable[P, T]:
         method: Callable[P, T] = getattr(getattr(store, self._part), self._name)
         return method
+
+    def __call__(self, store: object, /, *args: P.args, **kwargs: P.kwargs) -> T:
+        """Called off the class, as an unbound method is (``Store.put_images(store, ...)``)."""
+        return self._bound(store)(*args, **kwargs)
+
+    @overload
+    def __get__(self, store: None, owner: type | None = None) -> Delegate[P, T]: ...
+    @overload
+    def __get__(self, store: object, owner: type | None = None) -> Callable[P, T]: ...
+    def __get__(self, store: object | None, owner: type | None = None) -> Delegate[P, T] | Callable[P, T]:
+        if store is None:  # looked up on the class (help(), monkeypatch): the delegate itself
+            return self
+        return self._bound(store)
