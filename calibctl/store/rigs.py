@@ -4,7 +4,9 @@ immutable in the database (revision 0003's triggers), the active version is the 
 versions (per rig) and activation events (one log) are hash-chained and signed like the cameras'
 (revision 0007, ``chain.STREAMS["rig"]`` and ``["rig_event"]``), and so are the definitions (revision
 0008, ``["rig_definition"]``, one log). Rig sessions are not chained, like the cameras' capture
-sessions (docs/trust.md says why).
+sessions (docs/trust.md says why). The version history itself is ``RIGS``, a ``history.VersionHistory``:
+the same code as the cameras', so a rig rollback, a hand-eye edge's compare-and-set and a fleet step
+behave as a camera's do.
 """
 
 from __future__ import annotations
