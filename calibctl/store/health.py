@@ -21,7 +21,13 @@ from calibctl.errors import IntegrityError
 from calibctl.store import codec
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet import _registration
-from calibctl.store.models import CheckEventRow, FleetEventRow, HealthReportRow
+from calibctl.store.models import (
+    ArtifactRow,
+    CheckEventRow,
+    FleetEventRow,
+    HealthReportRow,
+    RigCalibrationRow,
+)
 from calibctl.store.runner import Runner
 
 _CHUNK = 500  # source ids per IN (...) query: under SQLite's bound-parameter limit
@@ -106,12 +112,22 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
                 select(HealthReportRow.source_id).where(HealthReportRow.source_id.in_(ids[i : i + _CHUNK]))
             )
         )
+    first = _first_calibrations(s, {r.serial for r in reports})
     seen: set[str] = set()
     out = []
     for i, r in enumerate(reports):
         serials = carried[r.robot]
+        earliest = first.get(r.serial)
         if serials is None:
             out.append((i, f"robot {r.robot} is not registered"))
+        elif earliest is not None and r.time < earliest:
+            out.append(
+                (
+                    i,
+                    f"time {r.time.isoformat()} is before {r.serial}'s first calibration "
+                    f"({earliest.isoformat()}): the report cannot be about it (robot clock?)",
+                )
+            )
         elif r.serial not in serials:
             out.append(
                 (
@@ -124,6 +140,21 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
         elif r.source_id in seen:
             out.append((i, f"duplicate report: source id {r.source_id} appears twice in this batch"))
         seen.add(r.source_id)
+    return out
+
+
+def _first_calibrations(s: Session, names: set[str]) -> dict[str, datetime]:
+    """When each serial's (or rig's) oldest stored calibration was made: a report measured before it is about
+    nothing the store holds."""
+    out: dict[str, datetime] = {}
+    for key, made in (
+        (ArtifactRow.serial, ArtifactRow.created_at),
+        (RigCalibrationRow.rig, RigCalibrationRow.created_at),
+    ):
+        for name, created in s.execute(
+            select(key, func.min(made)).where(key.in_(sorted(names))).group_by(key)
+        ):
+            out.setdefault(str(name), created)
     return out
 
 
