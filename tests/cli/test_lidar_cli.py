@@ -13,6 +13,7 @@ from calibctl.cli.main import app
 from calibctl.core.extrinsics import se3
 from calibctl.core.lidar import solve as ls
 from calibctl.core.lidar.target import BackingBoard
+from calibctl.errors import NumericalError
 from calibctl.workflows.lidar import lidar_solve as wf
 from tests.datasets import ACFR, require_acfr
 
@@ -450,3 +451,52 @@ def test_synth_refuses_to_overwrite_a_rendered_set_without_force(tmp_path: Path)
     again = invoke(["lidar", "synth", str(out), "--poses", "1"])
     assert again.exit_code == 2 and "already holds a rendered set" in again.output
     assert invoke(["lidar", "synth", str(out), "--poses", "1", "--force"]).exit_code == 0
+
+
+@pytest.fixture(scope="module")
+def eight(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("lidar") / "set"
+    assert invoke(["lidar", "synth", str(out), "--poses", "8", "--seed", "1"]).exit_code == 0
+    return out
+
+
+def _solve_set(out: Path, *board: str, run=invoke):  # type: ignore[no-untyped-def]
+    truth = json.loads((out / "truth.json").read_text())
+    where = ["--images", str(out / "images"), "--scans", str(out / "scans"), "--box", truth["box"]]
+    return run(["lidar", "solve", *where, "--camera-info", str(out / "camera_info.yaml"), *board])
+
+
+@pytest.mark.parametrize("square_mm", ["9.5", "1", "50"])
+def test_a_square_size_the_scans_contradict_is_refused_naming_the_size_that_fits(
+    eight: Path, square_mm: str
+) -> None:
+    board = [a if a != "95" else square_mm for a in BOARD]
+    res = _solve_set(eight, *board)
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert f"with the square size of {square_mm} mm the camera sees the board at" in res.output
+    assert "the two agree at about 9" in res.output and "check --square-mm" in res.output
+
+
+def test_a_registered_board_of_the_wrong_size_is_named(eight: Path, stored) -> None:
+    backing = ["--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+    assert (
+        stored("board", "add", "L5", "--cols", "5", "--rows", "7", "--square-mm", "9.5", *backing).exit_code
+        == 0
+    )
+    res = _solve_set(eight, "--board", "L5", run=lambda args: stored(*args))
+    assert res.exit_code == 2, res.output
+    assert (
+        "board L5's registered square size of 9.5 mm" in res.output and "calibctl board add L5" in res.output
+    )
+
+
+def test_a_solve_that_breaks_down_numerically_is_a_numerical_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    def singular(*_: object) -> None:
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+
+    monkeypatch.setattr(ls, "_solve", singular)
+    board = BackingBoard(5, 7, 0.095, (0.61, 0.85))
+    with pytest.raises(
+        NumericalError, match="the camera-LiDAR solve broke down .Matrix is not positive definite"
+    ):
+        ls.solve([], board)

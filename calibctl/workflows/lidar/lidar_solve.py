@@ -431,10 +431,39 @@ def result_json(outcome: LidarOutcome) -> dict[str, Any]:
     return _finite(doc)
 
 
+SCALE_LIMITS = (0.6, 1.0 / 0.6)
+"""How far the camera's distance to the board centre may be from the LiDAR's (their ratio, medians over the
+poses) before the square size is called wrong: the two sensors sit centimetres apart and see the board at
+metres, so they agree within a few percent; a square size typed x10 off is a ratio of 10."""
+
+
+def refuse_a_wrong_scale(poses: Sequence[lsolve.Pose], board: BackingBoard, registered: str | None) -> None:
+    """UsageError (exit 2) when the camera, posing the board with its square size, puts it at another distance
+    than the LiDAR measures: the square size is wrong, and the solve would not converge on it."""
+    centre = np.append(board.centre_in_pattern(), 1.0)
+    camera_m = float(np.median([np.linalg.norm((p.camera.T_cam_board @ centre)[:3]) for p in poses]))
+    lidar_m = float(np.median([p.lidar.range_m for p in poses]))
+    ratio = camera_m / lidar_m if lidar_m > 0 else float("inf")
+    if SCALE_LIMITS[0] <= ratio <= SCALE_LIMITS[1]:
+        return
+    square_mm = board.square_m * 1e3
+    fits_mm = square_mm / ratio if ratio > 0 else float("nan")
+    where = f"board {registered}'s registered" if registered else "the"
+    raise UsageError(
+        f"with {where} square size of {square_mm:g} mm the camera sees the board at {camera_m:.2f} m but "
+        f"the LiDAR at {lidar_m:.2f} m (medians over {len(poses)} poses): the square size is wrong; the two "
+        f"agree at about {fits_mm:.1f} mm",
+        f"measure the board's squares and register it again (`calibctl board add {registered} ...`)"
+        if registered
+        else "check --square-mm (the printed square's edge in millimetres) and --cols / --rows",
+    )
+
+
 def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     """The whole solve (module docstring); a registered ``req.board`` is read from the store first."""
-    if isinstance(req.board, str):
-        req = replace(req, board=board_from_store(settings, req.board))
+    registered = req.board if isinstance(req.board, str) else None
+    if registered is not None:
+        req = replace(req, board=board_from_store(settings, registered))
     board = req.backing
     problem = board.check_pattern_fits()
     if problem:
@@ -455,6 +484,7 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     )
     if not all(g.passed for g in pre):
         return outcome
+    refuse_a_wrong_scale(poses, board, registered)
     sol = lsolve.solve(poses, board, req.estimate_range_offset)
     held_plane, held_edge, held_px = validation.held_out(
         poses, board, req.folds, lambda T, test: projected_edge_px(T, test, board, lens)
