@@ -131,7 +131,9 @@ def rig_store(db_url: str) -> str:
     return db_url
 
 
-@pytest.mark.parametrize("args", [["rig", "show", RIG], ["rig", "export", RIG, "--format", "json"]])
+@pytest.mark.parametrize(
+    "args", [["rig", "show", RIG], ["rig", "export", RIG, "--format", "json"], ["rig", "lint", RIG]]
+)
 def test_a_rig_edge_moved_with_its_content_hash_recomputed_is_refused_without_keys(
     rig_store: str, args: list[str]
 ) -> None:
