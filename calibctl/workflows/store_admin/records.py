@@ -30,6 +30,13 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     match = _ARTIFACT_REF.match(ref.strip())
     if not match or not match.group("serial"):
         raise UsageError(f"'{ref}' is not SERIAL or SERIAL@N")
+    if "@" in match.group("serial"):  # serials never hold '@': what follows it is a malformed version
+        serial, _, version_text = match.group("serial").partition("@")
+        raise UsageError(
+            f"'{ref}': the version after '@' is '{version_text}', not a number",
+            f"name a version as {serial or 'SERIAL'}@N (N = 1, 2, ...; `calibctl history {serial or 'SERIAL'}` "
+            "lists them), or leave out @N for the active one",
+        )
     version = match.group("version")
     if version and (len(version) > 10 or int(version) > MAX_VERSION):
         raise UsageError(

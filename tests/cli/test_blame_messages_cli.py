@@ -1,0 +1,30 @@
+"""Messages name the real mistake: each input below was refused before, but its message blamed something else."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from calibctl.cli.main import app
+from calibctl.store.repository import Store
+from tests.artifacts.factories import calibration
+
+
+@pytest.fixture
+def db(sqlite_url: str) -> str:
+    with Store.open(sqlite_url) as store:
+        store.add_artifact(
+            calibration(serial="CAM-1"), activate=True, actor="qa", station="st1", reason="solved"
+        )
+    return sqlite_url
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["diff", "CAM-1@x", "CAM-1@1"], ["show", "CAM-1@x"], ["export", "CAM-1@", "--format", "json"]],
+)
+def test_a_malformed_version_is_named_not_an_unknown_serial(db: str, args: list[str]) -> None:
+    res = CliRunner().invoke(app, ["--db", db, *args])
+    assert res.exit_code == 2, res.output
+    assert "the version after '@' is" in res.stderr and "not a number" in res.stderr
+    assert "unknown serial" not in res.output and "CAM-1@N" in res.stderr
