@@ -1,4 +1,5 @@
-"""Messages name the real mistake: each input below was refused before, but its message blamed something else."""
+"""Messages name the real mistake: each input below was refused before, but its message blamed something
+else."""
 
 from __future__ import annotations
 

@@ -500,3 +500,10 @@ def test_a_solve_that_breaks_down_numerically_is_a_numerical_error(monkeypatch: 
         NumericalError, match="the camera-LiDAR solve broke down .Matrix is not positive definite"
     ):
         ls.solve([], board)
+
+
+def test_more_folds_than_poses_is_refused_naming_both(eight: Path) -> None:
+    res = _solve_set(eight, *BOARD, "--folds", "100")
+    assert res.exit_code == 2, res.output
+    assert "--folds 100 is more than the 8 poses" in res.output and "--folds 8 or fewer" in res.output
+    assert "100-fold" not in res.output.replace("a 100-fold held-out check needs", "")

@@ -484,6 +484,12 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     )
     if not all(g.passed for g in pre):
         return outcome
+    if req.folds > len(poses):
+        raise UsageError(
+            f"--folds {req.folds} is more than the {len(poses)} poses: a {req.folds}-fold held-out check "
+            f"needs {req.folds} poses at least (each fold leaves some out)",
+            f"pass --folds {len(poses)} or fewer (default 5), or capture more poses",
+        )
     refuse_a_wrong_scale(poses, board, registered)
     sol = lsolve.solve(poses, board, req.estimate_range_offset)
     held_plane, held_edge, held_px = validation.held_out(

@@ -34,8 +34,8 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
         serial, _, version_text = match.group("serial").partition("@")
         raise UsageError(
             f"'{ref}': the version after '@' is '{version_text}', not a number",
-            f"name a version as {serial or 'SERIAL'}@N (N = 1, 2, ...; `calibctl history {serial or 'SERIAL'}` "
-            "lists them), or leave out @N for the active one",
+            f"name a version as {serial or 'SERIAL'}@N (N = 1, 2, ...; "
+            f"`calibctl history {serial or 'SERIAL'}` lists them), or leave out @N for the active one",
         )
     version = match.group("version")
     if version and (len(version) > 10 or int(version) > MAX_VERSION):
