@@ -507,3 +507,30 @@ def test_more_folds_than_poses_is_refused_naming_both(eight: Path) -> None:
     assert res.exit_code == 2, res.output
     assert "--folds 100 is more than the 8 poses" in res.output and "--folds 8 or fewer" in res.output
     assert "100-fold" not in res.output.replace("a 100-fold held-out check needs", "")
+
+
+def test_a_sweep_of_only_nan_points_is_named_as_such(tmp_path: Path) -> None:
+    img, pcd = acfr_subset(tmp_path, (1, 3))
+    (pcd / "pose1.pcd").unlink()
+    (pcd / "pose1.pcd").write_bytes(_binary_pcd(np.full((50, 3), np.nan)))
+    res = invoke(
+        [
+            "lidar",
+            "solve",
+            "--images",
+            str(img),
+            "--scans",
+            str(pcd),
+            *BOX,
+            *camera(tmp_path),
+            *BOARD,
+            "--json",
+        ]
+    )
+    assert res.exit_code == 1, res.output
+    rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
+    assert rows["pose1.pcd"]["message"] == (
+        "all 50 points of the scan are NaN or infinite (no returns): check the LiDAR's output or the scan "
+        "file"
+    )
+    assert "points inside the station box" not in rows["pose1.pcd"]["message"]

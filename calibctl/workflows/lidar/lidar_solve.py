@@ -302,6 +302,11 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
             None if camera is None else camera.rms_px,
         )
         outcome, message = found.outcome, found.message
+        if not len(cloud.points_m) and cloud.dropped_nonfinite:  # a sweep of no returns, not an empty box
+            message = (
+                f"all {cloud.dropped_nonfinite} points of the scan are NaN or infinite (no returns): "
+                "check the LiDAR's output or the scan file"
+            )
         if found.accepted and camera is None:
             outcome, message = "no_board_in_image", why
         if outcome == "accepted" and camera is not None:
