@@ -3,11 +3,15 @@ else."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
+from calibctl.errors import InputError
 from calibctl.store.repository import Store
+from calibctl.workflows.lidar.camera import lens_from_camera_info
 from tests.artifacts.factories import calibration
 
 
@@ -29,3 +33,13 @@ def test_a_malformed_version_is_named_not_an_unknown_serial(db: str, args: list[
     assert res.exit_code == 2, res.output
     assert "the version after '@' is" in res.stderr and "not a number" in res.stderr
     assert "unknown serial" not in res.output and "CAM-1@N" in res.stderr
+
+
+def test_a_camera_info_with_k_all_zeros_is_named_not_blamed_on_the_poses(tmp_path: Path) -> None:
+    info = tmp_path / "camera_info.yaml"
+    info.write_text(
+        "width: 640\nheight: 480\ndistortion_model: plumb_bob\nK: [0, 0, 0, 0, 0, 0, 0, 0, 0]\n"
+        "D: [0, 0, 0, 0, 0]\n"
+    )
+    with pytest.raises(InputError, match=r"camera_info.yaml: K is not a camera matrix \(fx 0, fy 0"):
+        lens_from_camera_info(info)
