@@ -249,6 +249,8 @@ def _solve_check() -> list[Case]:
         ),
         Case(g, "diff unknown", ["diff", "NOPE@1", "NOPE@2"]),
         Case(g, "diff @0", ["diff", f"{SERIAL}@0", f"{SERIAL}@1"]),
+        Case(g, "diff @x (a malformed version)", ["diff", f"{SERIAL}@x", f"{SERIAL}@1"]),
+        Case(g, "show @ (no version after @)", ["show", f"{SERIAL}@"]),
         *[
             Case(g, f"diff --scale {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--scale", v])
             for v in (*BAD_NUMBERS, "0", "-1")
