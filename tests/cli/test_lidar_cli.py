@@ -534,3 +534,13 @@ def test_a_sweep_of_only_nan_points_is_named_as_such(tmp_path: Path) -> None:
         "file"
     )
     assert "points inside the station box" not in rows["pose1.pcd"]["message"]
+
+
+@pytest.mark.parametrize("option", ["--lidar-frame", "--camera-frame"])
+def test_an_illegal_frame_name_for_tf_static_is_refused_without_a_rig(
+    eight: Path, tmp_path: Path, option: str
+) -> None:
+    tf = tmp_path / "tf.yaml"
+    res = _solve_set(eight, *BOARD, "--tf-static", str(tf), option, "bad name!")
+    assert res.exit_code == 2, res.output
+    assert f"{option} 'bad name!' is not a legal ROS frame name" in res.output and not tf.exists()

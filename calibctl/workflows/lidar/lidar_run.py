@@ -16,6 +16,7 @@ from pathlib import Path
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.files import write_atomic
+from calibctl.workflows.exports.frame_names import is_ros_name
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.lidar.lidar_solve import (
     LidarOutcome,
@@ -51,6 +52,13 @@ def run_lidar(
 ) -> LidarOutcome:
     """The whole command (module docstring); ``outcome.written`` lists the files, ``outcome.stored`` the
     rig version written."""
+    if files.tf_static is not None:  # the frames it is written with are checked with or without --rig
+        for option, name in (("--lidar-frame", files.lidar_frame), ("--camera-frame", files.camera_frame)):
+            if not is_ros_name(name):
+                raise UsageError(
+                    f"{option} {name!r} is not a legal ROS frame name; nothing was solved or written",
+                    rig_lidar.ROS_NAME_RULE,
+                )
     if target is not None:
         if req.camera_info is not None:
             raise UsageError(
