@@ -12,7 +12,7 @@ from calibctl.cli.main import app
 from calibctl.errors import InputError
 from calibctl.store.repository import Store
 from calibctl.workflows.lidar.camera import lens_from_camera_info
-from tests.artifacts.factories import calibration
+from tests.artifacts.factories import calibration, measured_board
 
 
 @pytest.fixture
@@ -43,3 +43,13 @@ def test_a_camera_info_with_k_all_zeros_is_named_not_blamed_on_the_poses(tmp_pat
     )
     with pytest.raises(InputError, match=r"camera_info.yaml: K is not a camera matrix \(fx 0, fy 0"):
         lens_from_camera_info(info)
+
+
+def test_a_scanned_serial_with_escape_sequences_is_shown_escaped(sqlite_url: str, tmp_path: Path) -> None:
+    with Store.open(sqlite_url) as store:
+        store.add_board(measured_board("A17", square_mm=25.0))
+    args = ["--db", sqlite_url, "station", "--board", "A17", "--source-template", f"{tmp_path}/{{serial}}"]
+    for extra in ([], ["--json"]):
+        res = CliRunner().invoke(app, [*args, *extra], input="CAM\x1b[2J-1\n")
+        assert res.exit_code == 0, res.output
+        assert "\x1b" not in res.output and "CAM\\x1b[2J-1" in res.stdout.replace("\\\\", "\\")

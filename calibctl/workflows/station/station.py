@@ -52,6 +52,7 @@ from typing import Any
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
+from calibctl.bounded import printable
 from calibctl.config import Settings
 from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.core.intrinsics.solve import DEFAULT_MODEL
@@ -603,10 +604,11 @@ def _keep(summary: StationSummary, report: Callable[[UnitResult], None], line: U
 
 def _checked_serial(serial: str, seen: dict[str, int]) -> UnitResult | None:
     if not re.fullmatch(SERIAL_PATTERN, serial):
+        shown = printable(serial)  # a scanner's escape sequences never reach the terminal raw
         return UnitResult(
-            serial,
+            shown,
             ERROR,
-            f"'{serial}' is not a serial",
+            f"'{shown}' is not a serial",
             "a serial is letters, digits and . _ : - (no spaces, no '@'); scan the label again",
         )
     if serial in seen:
