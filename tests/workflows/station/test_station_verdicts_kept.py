@@ -1,10 +1,10 @@
 """The station's verdicts stay what they were: the same inputs give the same lines, outcomes, views, corners,
 gates and stored numbers as the code they were recorded from, at 1, 2 and 4 jobs.
 
-``station_verdicts.json`` was recorded from main at 6bb9ba8 (before the station's unit was made cheaper) by
-``python -m tests.workflows.station.test_station_verdicts_kept OUT.json`` on the rendered units below. Numbers are
-compared as the CLI and the records print them (reasons and messages verbatim) and, for the rest, to 6
-significant digits; corners to 1e-6 px.
+``station_verdicts.json`` was recorded from main at 6bb9ba8 (before the station's unit was made cheaper)
+by ``python -m tests.workflows.station.test_station_verdicts_kept OUT.json`` on the rendered units below.
+Numbers are compared as the CLI and the records print them (reasons and messages verbatim) and, for the
+rest, to 6 significant digits; corners to 1e-6 px.
 """
 
 from __future__ import annotations
