@@ -30,8 +30,8 @@
    corners), and runs unchanged when any of them says "maybe" (no corners, a side whose row past the
    ring is mostly out of the image, or squares there). Measured (tests/core/capture/test_board_extent.py):
    registered one column or row short, it says "maybe" in every image the short pattern is found in
-   (8x6: left 13/13, right 13/13, udacity 4/4; 9x5: udacity 3/3; 7x6: left 12/12, right 11/11; 9x5 is found in no left
-   image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6 view of both
+   (8x6: left 13/13, right 13/13, udacity 4/4; 9x5: udacity 3/3; 7x6: left 12/12, right 11/11; 9x5 is
+   found in no left image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6 view of both
    datasets and 48 rendered ones with one outer corner line dropped also says "maybe". Correctly
    registered, it says "no" in left 10/13, right 9/13, udacity 15/18 (the rest: a side's row past the
    ring leaves the image, or right03's background scores 0.23) and 96/96 rendered views (`calibctl
