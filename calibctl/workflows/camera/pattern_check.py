@@ -31,8 +31,8 @@
    ring is mostly out of the image, or squares there). Measured (tests/core/capture/test_board_extent.py):
    registered one column or row short, it says "maybe" in every image the short pattern is found in
    (8x6: left 13/13, right 13/13, udacity 4/4; 9x5: udacity 3/3; 7x6: left 12/12, right 11/11; 9x5 is
-   found in no left image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6 view of both
-   datasets and 48 rendered ones with one outer corner line dropped also says "maybe". Correctly
+   found in no left image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6
+   view of both datasets and 48 rendered ones with one outer corner line dropped also says "maybe". Correctly
    registered, it says "no" in left 10/13, right 9/13, udacity 15/18 (the rest: a side's row past the
    ring leaves the image, or right03's background scores 0.23) and 96/96 rendered views (`calibctl
    synth` scenarios good, flat, centre, one-direction at 640x480 and 1280x960; max score 0.01).
@@ -44,8 +44,9 @@ Bounded: every probe searches a copy of at most ``PROBE_MAX_PIXELS`` (``probe_co
 probed picture (``visible_sizes``), and the nothing-found probe skips the pictures SB sees no chessboard in
 once the first one showed no near pattern. Counted on 12 rendered views at 1280x960
 (tests/workflows/station/test_station_probe_cost.py), against the 3.7 Mpx a clean unit's detection searches:
-one picture with the board and 11 without, 9.8 -> 2.5 Mpx of probes; no board at all, 63 detector calls
-and ~50 -> 27 calls and 5.5 Mpx. (A station unit spent 4.66 s in these probes at full size.)
+one picture with the board and 11 without, 11 probe calls searching 9.8 Mpx before, 2.5 Mpx now; no board
+at all, 63 calls (about 50 Mpx at full size) before, 27 calls and 5.5 Mpx now. (One 20-view station unit
+spent 4.66 s in these probes at full size.)
 """
 
 from __future__ import annotations
