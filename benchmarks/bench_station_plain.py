@@ -41,23 +41,18 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_parallel_detect import template_store
+from bench_parallel_detect import PLAIN_DETECT, template_store
 from machine import cpu_model, load_1min, run_env
 
-PLAIN_LOOP = r"""
+PLAIN_LOOP = (
+    r"""
 import sys, time, glob, os
 import cv2, numpy as np
-FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-CRIT = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
 OBJ = np.zeros((54, 3), np.float32)
 OBJ[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2) * 0.025
-def detect(path):
-    gray = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
-    found, corners = cv2.findChessboardCorners(gray, (9, 6), flags=FLAGS)
-    if not found:
-        return None, gray.shape[::-1]
-    return cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), CRIT), gray.shape[::-1]
-if __name__ == "__main__":
+"""
+    + PLAIN_DETECT.lstrip("\n")
+    + r"""if __name__ == "__main__":
     jobs = int(sys.argv[1])
     pool = None
     if jobs > 1:
@@ -72,6 +67,7 @@ if __name__ == "__main__":
         rms = cv2.calibrateCameraExtended([OBJ] * len(views), views, found[0][1], None, None)[0]
         print(f"RESULT {time.perf_counter() - t:.4f} {len(views)} {rms:.4f}", flush=True)
 """
+)
 WARM_VIEWS = slice(76, 96)
 STRIDE = 15
 
