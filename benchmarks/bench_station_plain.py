@@ -22,6 +22,10 @@ The units go round in turn (station, plain, pool, rotated by one each unit), so 
 the 1-minute load average is printed at each unit. ``--baseline DIR``: the code before a change (``git
 archive``d) runs a second station in the same turns. ``--profile``: no race; the station's own code in this
 process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time.
+``--failed``: no plain loops; per round (``--units``) three units of the first ``--views`` views - clean,
+the board left in one picture only (the others blurred past finding it), no board at all - through the
+station (and ``--baseline``'s), in turns: each kind's ``unit_s`` and its line (the detector calls are
+counted in tests/workflows/station/test_station_probe_cost.py).
 Prints markdown with machine, date and load.
 """
 
@@ -294,6 +298,61 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     )
 
 
+FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD")
+
+
+def failed(args: argparse.Namespace, work: Path) -> None:
+    import cv2
+
+    views = sorted(args.rendered.resolve().glob("*.png"))[: args.views]
+    blurred = {p: cv2.GaussianBlur(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (0, 0), 25) for p in views[1:]}
+    serials = ["WARM-UP"]
+    (work / "shots" / "WARM-UP").mkdir(parents=True)
+    for p in views:
+        shutil.copy(p, work / "shots" / "WARM-UP" / p.name)
+    for r in range(args.units):
+        for kind in FAILED_KINDS:
+            folder = work / "shots" / f"{kind}-{r}"
+            folder.mkdir(parents=True)
+            for i, p in enumerate(views):
+                if kind == "NO-BOARD" or (kind == "ONE-BOARD" and i > 0):
+                    cv2.imwrite(str(folder / p.name), blurred.get(p, blurred[views[1]]))
+                else:
+                    shutil.copy(p, folder / p.name)
+            serials.append(f"{kind}-{r}")
+    env = run_env(work / "pycache")
+    stations = {"calibctl station": Station(work, "station", template_store(work), env, args.jobs)}
+    if args.baseline is not None:
+        stations["before: calibctl station"] = Station(
+            work,
+            "before",
+            template_store(work, args.baseline),
+            run_env(work / "pycache-before", args.baseline.resolve()),
+            args.jobs,
+        )
+    got: dict[tuple[str, str], list[float]] = {}
+    lines: dict[tuple[str, str], set[str]] = {}
+    loads = []
+    for i, serial in enumerate(serials):
+        loads.append(load_1min())
+        names = list(stations)
+        for name in names[i % len(names) :] + names[: i % len(names)]:
+            _, unit_s, what = stations[name].unit(serial)
+            if i > 0:
+                kind = serial.rsplit("-", 1)[0]
+                got.setdefault((name, kind), []).append(unit_s)
+                lines.setdefault((name, kind), set()).add(what.split(" ", 1)[0])
+    for station in stations.values():
+        station.close()
+    print("| station | unit | unit_s median | min | max | line |\n|---|---|---|---|---|---|")
+    for (name, kind), values in got.items():
+        print(
+            f"| {name} | {kind} | {statistics.median(values):.3f} | {min(values):.3f} | {max(values):.3f} | "
+            f"{', '.join(sorted(lines[(name, kind)]))} |"
+        )
+    print(f"\n1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' starts")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("rendered", type=Path)
@@ -306,6 +365,7 @@ def main() -> None:
         "--pool", type=int, default=len(os.sched_getaffinity(0)), help="the plain pool's size"
     )
     parser.add_argument("--profile", action="store_true", help="stage shares of the station's units (jobs 1)")
+    parser.add_argument("--failed", action="store_true", help="units with failed views beside clean ones")
     args = parser.parse_args()
     load = os.getloadavg()
     print(
@@ -316,6 +376,10 @@ def main() -> None:
     )
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
+        if args.failed:
+            with contextlib.chdir(work):
+                failed(args, work)
+            return
         serials = make_units(work, args.rendered.resolve(), args.units, args.views, args.same_views)
         with contextlib.chdir(work):
             (profile if args.profile else race)(args, work, serials)
