@@ -172,19 +172,19 @@ def row(name: str, values: list[float], ref: list[float] | None = None) -> str:
     return f"| {name} | {med:.3f} | {min(values):.3f} | {max(values):.3f} | {ratio} | {paired} |"
 
 
+def stations(args: argparse.Namespace, work: Path, env: dict[str, str]) -> dict[str, Station]:
+    """The station, and the one of ``--baseline`` (its own store and bytecode cache) when given."""
+    started = {"calibctl station": Station(work, "station", template_store(work), env, args.jobs)}
+    if args.baseline is not None:
+        before_env = run_env(work / "pycache-before", args.baseline.resolve())
+        before = Station(work, "before", template_store(work, args.baseline), before_env, args.jobs)
+        started["before: calibctl station"] = before
+    return started
+
+
 def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     env = run_env(work / "pycache")
-    contenders: dict[str, Station | Plain] = {
-        "calibctl station": Station(work, "station", template_store(work), env, args.jobs)
-    }
-    if args.baseline is not None:
-        contenders["before: calibctl station"] = Station(
-            work,
-            "before",
-            template_store(work, args.baseline),
-            run_env(work / "pycache-before", args.baseline.resolve()),
-            args.jobs,
-        )
+    contenders: dict[str, Station | Plain] = {**stations(args, work, env)}
     contenders["plain warm loop (sequential)"] = Plain(work, 1, env)
     contenders[f"plain warm Pool({args.pool}) loop"] = Plain(work, args.pool, env)
     seen: dict[str, list[float]] = {name: [] for name in contenders}
@@ -228,7 +228,8 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
 
 
 # (stage, [(file, function) whose cumulative time it is], [(file, function) taken off]): of the units' time
-STAGES = (
+Key = tuple[str, str]
+STAGES: tuple[tuple[str, list[Key], list[Key]], ...] = (
     ("detection: decode, detect, refine (classify_files)", [("image_outcomes.py", "classify_files")], []),
     (
         "pattern check: 3 pictures decoded, their margins looked at (probes only on a maybe)",
@@ -305,7 +306,8 @@ def failed(args: argparse.Namespace, work: Path) -> None:
     import cv2
 
     views = sorted(args.rendered.resolve().glob("*.png"))[: args.views]
-    blurred = {p: cv2.GaussianBlur(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), (0, 0), 25) for p in views[1:]}
+    grays = {p: cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in views[1:]}
+    blurred = {p: cv2.GaussianBlur(gray, (0, 0), 25) for p, gray in grays.items() if gray is not None}
     serials = ["WARM-UP"]
     (work / "shots" / "WARM-UP").mkdir(parents=True)
     for p in views:
@@ -320,29 +322,20 @@ def failed(args: argparse.Namespace, work: Path) -> None:
                 else:
                     shutil.copy(p, folder / p.name)
             serials.append(f"{kind}-{r}")
-    env = run_env(work / "pycache")
-    stations = {"calibctl station": Station(work, "station", template_store(work), env, args.jobs)}
-    if args.baseline is not None:
-        stations["before: calibctl station"] = Station(
-            work,
-            "before",
-            template_store(work, args.baseline),
-            run_env(work / "pycache-before", args.baseline.resolve()),
-            args.jobs,
-        )
+    running = stations(args, work, run_env(work / "pycache"))
     got: dict[tuple[str, str], list[float]] = {}
     lines: dict[tuple[str, str], set[str]] = {}
     loads = []
     for i, serial in enumerate(serials):
         loads.append(load_1min())
-        names = list(stations)
+        names = list(running)
         for name in names[i % len(names) :] + names[: i % len(names)]:
-            _, unit_s, what = stations[name].unit(serial)
+            _, unit_s, what = running[name].unit(serial)
             if i > 0:
                 kind = serial.rsplit("-", 1)[0]
                 got.setdefault((name, kind), []).append(unit_s)
                 lines.setdefault((name, kind), set()).add(what.split(" ", 1)[0])
-    for station in stations.values():
+    for station in running.values():
         station.close()
     print("| station | unit | unit_s median | min | max | line |\n|---|---|---|---|---|---|")
     for (name, kind), values in got.items():
