@@ -48,7 +48,7 @@ CONSUMER_DEBS = python3-camera-calibration-parsers python3-image-geometry python
 test-consumers: $(STAMP) ## the robot bundle read by ROS camera_calibration_parsers, image_geometry, mrcal, check_urdf (installs them)
 	/usr/bin/python3 -c 'import camera_calibration_parsers, image_geometry, mrcal, cv2' 2>/dev/null && command -v check_urdf >/dev/null || \
 		(apt-get update && apt-get install -y $(CONSUMER_DEBS)) || (sudo apt-get update && sudo apt-get install -y $(CONSUMER_DEBS))
-	$(PY) -m pytest -q -rs tests/cli/test_rig_bundle_consumers.py
+	$(PY) -m pytest -q -rs tests/workflows/exports/test_rig_bundle_consumers.py
 
 lint: $(STAMP) ## ruff, mypy and the import-layer contract
 	$(VENV)/bin/ruff check calibctl tests benchmarks
