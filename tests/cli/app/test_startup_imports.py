@@ -67,7 +67,7 @@ NOT_FOR_READING = (
     "psycopg",
     "sqlalchemy.dialects.postgresql",
 )
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from calibctl.core.intrinsics import model_select
 from calibctl.errors import NotFoundError, NumericalError
 from calibctl.store.repository import Store
 from calibctl.workflows.camera import distance_gauge
-from tests.cli.test_check_cli import assets, db, invoke  # noqa: F401 - the shared rendered fixtures
+from tests.cli.capture.test_check_cli import assets, db, invoke  # noqa: F401 - the shared rendered fixtures
 from tests.workflows.synth_folders import FISHEYE_FIXTURE_M, fisheye_gauge_folders
 
 GAUGE = ("--reference-distance", "0.450+-0.0005")

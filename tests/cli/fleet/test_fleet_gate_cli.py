@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from calibctl.artifacts.common import utc_now
-from tests.cli.fleet_store import run as _run
-from tests.cli.fleet_store import small_fleet
+from tests.cli.fleet.fleet_store import run as _run
+from tests.cli.fleet.fleet_store import small_fleet
 
 ROBOTS = {"amr-1": "CAM-1", "amr-2": "CAM-2"}
 

@@ -98,7 +98,7 @@ def test_report_needs_exactly_one_of_a_serial_and_a_rig(solved, args: tuple[str,
 
 @pytest.mark.slow
 def test_the_rig_page_renders_in_chromium(solved, tmp_path: Path) -> None:
-    from tests.cli.test_report_chromium import ink, screenshot
+    from tests.cli.report.test_report_chromium import ink, screenshot
 
     db, _ = solved
     page = tmp_path / "rig.html"

@@ -11,8 +11,8 @@ import pytest
 from calibctl.artifacts.common import utc_now
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
-from tests.cli.fleet_store import WHO, small_fleet
-from tests.cli.fleet_store import run as _run
+from tests.cli.fleet.fleet_store import WHO, small_fleet
+from tests.cli.fleet.fleet_store import run as _run
 from tests.store.documents import check_event
 
 ROBOTS = {"amr-1": "CAM-1", "amr-2": "CAM-2", "amr-3": "CAM-3"}

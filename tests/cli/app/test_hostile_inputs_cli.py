@@ -19,7 +19,7 @@ from calibctl.cli.main import app
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture.image_outcomes import NO_BOARD, UNREADABLE, classify_file, read_gray
 from calibctl.store.repository import Store
-from tests.cli.test_capture_cli import capture, db, good, sessions  # noqa: F401 - fixtures
+from tests.cli.capture.test_capture_cli import capture, db, good, sessions  # noqa: F401 - fixtures
 
 RUNNER = CliRunner()
 

@@ -11,8 +11,8 @@ import pytest
 from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
-from tests.cli.test_rig_signature_cli import signed, signed_solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_signature_cli import signed, signed_solved  # noqa: F401 - fixtures
 from tests.store.rig_documents import rig_definition
 from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
 

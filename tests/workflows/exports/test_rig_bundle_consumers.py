@@ -23,12 +23,12 @@ import yaml
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.core.extrinsics.rig_metrics import rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
 from tests.workflows.urdf_check import loadable_urdf
 
 PROJECTION_TOL_PX = 1e-6
 SYSTEM_PYTHON = Path("/usr/bin/python3")
-CONSUMERS = Path(__file__).parents[1] / "workflows" / "exports" / "robot_consumers.py"
+CONSUMERS = Path(__file__).parents[2] / "workflows" / "exports" / "robot_consumers.py"
 
 
 def _points_root(n=40, seed=3):

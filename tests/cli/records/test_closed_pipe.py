@@ -17,7 +17,7 @@ from calibctl.cli.streams import EXIT_CLOSED_PIPE
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 runner = CliRunner()
 
 

@@ -257,7 +257,7 @@ def test_plot_dir_that_is_a_file(logs, tmp_path):
     )
 
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "diagnostics"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures" / "diagnostics"
 
 
 @pytest.mark.parametrize(("stem", "fault"), [("time_offset", "time-offset"), ("gauge", "gauge")])

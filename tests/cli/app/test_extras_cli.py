@@ -39,7 +39,7 @@ def _assert_missing_extra(res, extra: str, package: str, purpose: str) -> None:
 
 
 def test_the_hints_name_what_pyproject_declares_and_parse_as_shell_words():
-    declared = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"][
+    declared = tomllib.loads((Path(__file__).parents[3] / "pyproject.toml").read_text())["project"][
         "optional-dependencies"
     ]
     for extra, spec in EXTRA_PACKAGES.items():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
 
 SINGLE_FILE_FORMATS = ("json", "opencv", "tf", "urdf", "urdf-joints", "kalibr")
 

@@ -16,8 +16,8 @@ from calibctl.signing import create_key
 from calibctl.store.repository import Store
 from calibctl.workflows.exports import trace_header
 from tests.artifacts.factories import measured_board
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
-from tests.cli.test_rig_store_cli import _capture
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_store_cli import _capture
 from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
 
 SINGLE_FILE_FORMATS = ("json", "opencv", "tf", "urdf", "urdf-joints", "kalibr")

@@ -12,7 +12,7 @@ import yaml
 
 from calibctl.store.repository import Store
 from calibctl.workflows.exports import trace_header
-from tests.cli.test_rig_store_cli import RUNNER, _capture, app
+from tests.cli.rig.test_rig_store_cli import RUNNER, _capture, app
 from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
 from tests.workflows.rig_folders_data import rendered_rig
 

@@ -21,7 +21,7 @@ from calibctl.store import engine as engine_module
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 READS = [
     ("history", "CAM-0001"),
     ("show", "CAM-0001"),

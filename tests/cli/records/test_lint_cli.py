@@ -13,7 +13,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.workflows.sessions import synthetic_capture
 
-FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
+FIXTURES = Path(__file__).resolve().parents[3] / "fixtures"
 runner = CliRunner()
 
 

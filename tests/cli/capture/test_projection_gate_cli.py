@@ -9,7 +9,7 @@ import pytest
 
 from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
-from tests.cli.test_capture_cli import SERIAL, db, good, invoke  # noqa: F401 - the shared store and rendered folder
+from tests.cli.capture.test_capture_cli import SERIAL, db, good, invoke  # noqa: F401 - shared store, folder
 from tests.datasets import DATASETS, needs_datasets
 
 ACFR_IMAGES = DATASETS / "acfr-lidar-camera" / "images"
