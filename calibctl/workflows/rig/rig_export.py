@@ -4,7 +4,8 @@ named by the robot's frames (workflows.exports.frame_names), each stamped with t
 - single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr) -> ``export`` returns the text;
 - ``ros`` -> ``export_files``: one camera_info file per camera (ROS reads only the first YAML document of
   a file, so two cameras in one file made a stereo driver run the left calibration on the right camera);
-- ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle).
+- ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle);
+- ``lut`` -> ``export_files``: each stereo pair's rectification maps for both cameras (workflows.exports.lut).
 A rejected version, or (step 5 of issue 21) one that ``rig lint`` fails now, is refused unless allowed.
 """
 
@@ -27,13 +28,13 @@ from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
 from calibctl.workflows.edges.kinds import evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
-from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
+from calibctl.workflows.exports import bundle, lut, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle")
-FILE_FORMATS = ("ros", "bundle")  # written as several files: export_files
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle", "lut")
+FILE_FORMATS = ("ros", "bundle", "lut")  # written as several files: export_files
 ROS_ONE_FILE_FIX = (
     "ROS reads only the first YAML document of a file (a stereo driver would load the left "
     "calibration for the right camera): pass -o DIR (one CAMERA.yaml per camera) or "
@@ -288,6 +289,43 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
     return files, manifest
 
 
+def _lut_files(x: RigExport) -> tuple[dict[str, bytes], str]:
+    """Per camera edge (the bundle's stereo pairs): both cameras' rectification maps, R1/P1 and R2/P2 of the
+    pair's stereo file (core.extrinsics.rig_metrics.rectify), and the stamped lut.yaml."""
+    from calibctl.core.extrinsics.rig_metrics import rectify
+
+    by_name = {m.name: m for m in x.members}
+    by_serial = {m.serial: m for m in x.cal.members}
+    cameras = []
+    for e in x.cameras.edges:
+        pair = f"stereo_{x.names.camera_name(e.parent)}_{x.names.camera_name(e.child)}"
+        T_right_left = x.cameras.T(e.child, e.parent)
+        rect = rectify(by_name[e.parent], by_name[e.child], T_right_left)
+        for serial, R, P in ((e.parent, rect.R1, rect.P1), (e.child, rect.R2, rect.P2)):
+            m = by_name[serial]
+            cameras.append(
+                lut.LutCamera(
+                    serial,
+                    by_serial[serial].version,
+                    by_serial[serial].content_sha256,
+                    f"{pair}.{x.names.camera_name(serial)}",
+                    "fisheye" if m.lens == "fisheye" else "pinhole",
+                    m.camera_matrix,
+                    m.dist_coeffs,
+                    m.image_size,
+                    R,
+                    P,
+                    pair=(e.parent, e.child),
+                    frame=x.names.frame(serial),
+                    T_right_left=T_right_left,
+                )
+            )
+    payloads, entries = lut.build(cameras)
+    source = {"kind": "rig", "ref": x.ref, "status": x.cal.status, "content_sha256": x.cal.content_sha256}
+    serials = tuple(dict.fromkeys(c.serial for c in cameras))
+    return payloads, x.stamp(lut.header_body(source, entries), serials)
+
+
 def export_files(
     settings: Settings,
     ref: str,
@@ -300,12 +338,16 @@ def export_files(
     allow_stale: bool = False,
     frames: list[str] | None = None,
 ) -> list[Path]:
-    """``ros`` (one camera_info per camera) or ``bundle`` (every file + manifest.json) into ``out``."""
+    """``ros`` (one camera_info per camera), ``bundle`` (every file + manifest.json) or ``lut`` (each stereo
+    pair's rectification maps + lut.yaml) into ``out``."""
     if out is None:
         raise UsageError(
             f"--format {fmt} writes several files", ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR"
         )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
+    if fmt == "lut":
+        payloads, header = _lut_files(x)
+        return lut.write_lut(out, payloads, header, force=force)
     if fmt == "bundle":
         files, manifest = _bundle_files(x)
         return bundle.write_bundle(out, files, manifest, force=force)
