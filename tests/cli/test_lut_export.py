@@ -194,7 +194,25 @@ def test_a_stereo_pairs_rectification_maps_are_opencvs(store, tmp_path, rig):
         _assert_equal(_maps(out, cam), _opencv_maps(init, K, D, R, P, SIZE))
     header = trace_header.read_rig((out / "lut.yaml").read_text())
     assert header.ref == f"{rig}@1" and header.intact and header.signature is not None
-    assert invoke(store, "lint", str(out)).exit_code == 0
+    assert [(m[0], m[2]) for m in header.members] == [
+        (f"{c['serial']}@1", c["frame_id"]) for c in (left, right)
+    ]
+
+
+def test_a_rig_lut_lints_with_its_signature_and_is_stale_once_the_rig_is_solved_again(
+    store, signed_store, tmp_path
+):
+    out = tmp_path / "rig"
+    assert invoke(store, "rig", "export", "PIN--RIG", "--format", "lut", "-o", str(out)).exit_code == 0
+    trusted = str(signed_store / "trusted")
+    assert _lint(store, out, "--require-signature", "--trusted-keys", trusted) == (0, [])
+    with Store.open(store) as s:
+        again = s.get_rig_calibration("PIN--RIG").model_copy(update={"version": 2, "held_out_folds": 4})
+        s.add_rig_calibration(again, activate=True, **WHO)
+    code, findings = _lint(store, out)
+    assert code == 1 and [f["rule"] for f in findings] == ["lut-stale"]
+    assert "built from PIN--RIG@1, but the active version of rig PIN--RIG is 2" in findings[0]["message"]
+    assert f"calibctl rig export PIN--RIG --format lut -o {out} --force" in findings[0]["fix"]
 
 
 @needs_datasets
@@ -249,7 +267,7 @@ def test_a_stale_lut_is_refused_with_db(store, tmp_path):
     code, findings = _lint(store, tmp_path / "lut")
     assert code == 1 and findings[0]["rule"] == "lut-stale"
     assert "built from PIN-1@1, but the active version of PIN-1 is 2" in findings[0]["message"]
-    assert "calibctl export PIN-1 --format lut" in findings[0]["fix"]
+    assert f"calibctl export PIN-1 --format lut -o {tmp_path / 'lut'} --force" in findings[0]["fix"]
     assert _lint(None, tmp_path / "lut")[0] == 0  # without a store nothing says it is stale
 
 
@@ -277,7 +295,7 @@ def test_bad_luts_are_exit_1_naming_the_file_and_the_fix(store, tmp_path):
         code == 1
         and findings[0]["message"] == f"{out / name} is truncated ({len(good) // 2} of {len(good)} bytes)"
     )
-    assert "calibctl export PIN-1 --format lut -o DIR --force" in findings[0]["fix"]
+    assert f"calibctl export PIN-1 --format lut -o {out} --force" in findings[0]["fix"]
 
     small = tmp_path / "small"  # another image size's map, its sha256 written into the header
     _export(store, "PIN-1", small)

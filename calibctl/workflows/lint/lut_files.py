@@ -57,11 +57,15 @@ def _source_ref(camera: trace_header.TraceHeader | None, rig: trace_header.RigTr
     return camera.ref if camera else rig.ref if rig else "?"
 
 
-def _reexport(camera: trace_header.TraceHeader | None, rig: trace_header.RigTraceHeader | None) -> str:
+def _reexport(
+    camera: trace_header.TraceHeader | None, rig: trace_header.RigTraceHeader | None, folder: Path
+) -> str:
     if rig is not None:
-        return f"export it again: `calibctl rig export {rig.ref.split('@')[0]} --format lut -o DIR --force`"
+        return (
+            f"export it again: `calibctl rig export {rig.ref.split('@')[0]} --format lut -o {folder} --force`"
+        )
     serial = camera.ref.split("@")[0] if camera else "SERIAL"
-    return f"export it again: `calibctl export {serial} --format lut -o DIR --force`"
+    return f"export it again: `calibctl export {serial} --format lut -o {folder} --force`"
 
 
 def _load_map(
@@ -267,7 +271,7 @@ def lint_lut(path: Path, trusted: TrustedKeys | None, store: Settings | None) ->
     if not isinstance(data, dict) or data.get("format") != lut.LUT_FORMAT:
         raise InputError(f"{source} is not a calibctl LUT header", "export it with --format lut")
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
-    fix = _reexport(camera, rig)
+    fix = _reexport(camera, rig, header.parent)
     findings, _ = trace_rules(camera, rig)
     if camera is None and rig is None:
         findings = [_error(f"{source}: no calibctl header: this LUT cannot be traced to a calibration", fix)]
