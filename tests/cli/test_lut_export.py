@@ -330,6 +330,41 @@ def test_a_forged_map_with_every_checksum_recomputed_is_not_the_map_its_numbers_
     assert "pin_1.map_x_32f is not the map its numbers give (off by up to 1 px)" in findings[0]["message"]
 
 
+def test_an_edited_fx_with_its_maps_rebuilt_and_every_checksum_recomputed_is_refused(store, tmp_path):
+    """No key is needed to forge the folder's own checksums: the numbers must be the signed calibration's."""
+    out = tmp_path / "lut"
+    doc = _export(store, "PIN-1", out)
+    cam = doc["cameras"][0]
+    K = np.array(cam["camera_matrix"])
+    K[0, 0] += 1.0  # fx +1 px, the forgery of the issue
+    m1, m2, mx, my = _opencv_maps(
+        cv2.initUndistortRectifyMap, K, np.array(cam["dist_coeffs"]), None, np.array(cam["P"])[:, :3], SIZE
+    )
+    for entry, array in zip(cam["maps"], (m1, m2, mx, my), strict=True):
+        np.save(out / entry["path"], array)
+        entry["sha256"] = hashlib.sha256((out / entry["path"]).read_bytes()).hexdigest()
+
+    def forge(d):
+        d["cameras"][0]["camera_matrix"] = K.tolist()
+        d["cameras"][0]["maps"] = cam["maps"]
+
+    _rewrite(out, forge)
+    code, findings = _lint(store, out)
+    assert code == 1 and [f["rule"] for f in findings] == ["lut"]
+    assert (
+        "PIN-1's camera_matrix are not what calibration.json (the calibration the header"
+        in findings[0]["message"]
+    )
+
+    other = tmp_path / "other"  # another camera's document, its sha256 written into the header
+    _export(store, "RAT-1", other)
+    (out / "calibration.json").write_bytes((other / "calibration.json").read_bytes())
+    sha = hashlib.sha256((out / "calibration.json").read_bytes()).hexdigest()
+    _rewrite(out, lambda d: d["source"].update(document_sha256=sha))
+    code, findings = _lint(store, out)
+    assert code == 1 and "calibration.json is not the calibration lut.yaml names" in findings[0]["message"]
+
+
 def test_export_refuses_a_folder_it_did_not_write_and_the_wrong_lens_option(store, tmp_path):
     out = tmp_path / "notes"
     out.mkdir()

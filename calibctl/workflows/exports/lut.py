@@ -2,9 +2,11 @@
 derived, versioned export of one calibration (``calibctl export SERIAL --format lut -o DIR``) or of each
 stereo pair of a rig version (``calibctl rig export RIG --format lut -o DIR``).
 
-The folder holds ``lut.yaml`` and, per camera, four ``.npy`` maps (core.intrinsics.undistort_maps): OpenCV's
-fixed-point pair (``NAME.map1_16sc2.npy`` int16 (h, w, 2) + ``NAME.map2_16uc1.npy`` uint16 (h, w)) and the
-float pair (``NAME.map_x_32f.npy``, ``NAME.map_y_32f.npy``, float32 (h, w)). ``.npy`` because it is the raw
+The folder holds ``lut.yaml``, the source's own document (``calibration.json``: the artifact as ``export
+--format json`` writes it; ``rig.json``: the rig version) and, per camera, four ``.npy`` maps
+(core.intrinsics.undistort_maps): OpenCV's fixed-point pair (``NAME.map1_16sc2.npy`` int16 (h, w, 2) +
+``NAME.map2_16uc1.npy`` uint16 (h, w)) and the float pair (``NAME.map_x_32f.npy``, ``NAME.map_y_32f.npy``,
+float32 (h, w)). ``.npy`` because it is the raw
 array behind a 128-byte header: ``np.load`` (or a memory map) reads it in the time it takes to read the
 bytes, C++ reads it with cnpy or by skipping the header, and each map has its own sha256; an OpenCV
 FileStorage .yml.gz holds the numbers as text (a 1280x960 float pair: 2.7 s to read against 18 ms for
@@ -15,7 +17,8 @@ sha256 S`` and its ``calibctl signature`` line, or a rig's ``calibctl rig RIG@V 
 ``member`` lines; then ``file-sha256``), and lists per camera what OpenCV needs to build the maps again:
 the source K and distortion, the image size, R, the output projection P (its left 3x3 is the undistorted
 image's K), alpha (pinhole) or balance (fisheye), and each map file's type, shape, bytes and sha256.
-``calibctl lint DIR`` checks every file, derives the maps again from those numbers, and with ``--db`` refuses
+``calibctl lint DIR`` checks every file, checks those numbers against the source document (whose content
+hash is the one the signature covers), derives the maps again from them, and with ``--db`` refuses
 a LUT whose source is not the active version (a stale LUT: seed chapter 1's "apply it to a different
 stream").
 """
@@ -25,7 +28,7 @@ from __future__ import annotations
 import hashlib
 import io
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,11 +39,16 @@ from calibctl import __version__
 from calibctl.workflows.exports import bundle
 
 if TYPE_CHECKING:  # cv2: built when maps are, not when lint recognises a LUT header
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
+    from calibctl.core.extrinsics.rig_tree import RigTree
     from calibctl.core.intrinsics import undistort_maps
 
 LUT_FORMAT = "calibctl-undistortion-lut"
 LUT_SCHEMA_VERSION = 1
 HEADER = "lut.yaml"
+CAMERA_DOCUMENT = "calibration.json"  # the source artifact as `calibctl export --format json` writes it
+RIG_DOCUMENT = "rig.json"  # the source rig version as `calibctl rig export --format json` writes it
 _FORMAT_LINE = re.compile(rf"^format: {LUT_FORMAT}\s*$", re.MULTILINE)
 
 
@@ -97,6 +105,58 @@ def single_camera(
     new_K = undistort_maps.output_camera(K, D, image_size, lens, free)
     P = np.hstack([new_K, np.zeros((3, 1))])
     return LutCamera(serial, version, content_sha256, name, lens, K, D, image_size, np.eye(3), P, free)
+
+
+def rig_cameras(
+    cal: RigCalibration,
+    members: list[MemberIntrinsics],
+    cameras: RigTree,
+    stem: Callable[[str, str, str], str],
+    frame: Callable[[str], str | None],
+) -> list[LutCamera]:
+    """Per camera edge of the rig (the bundle's stereo pairs), both cameras with the pair's rectification:
+    R1/P1 and R2/P2 of the pair's stereo file (core.extrinsics.rig_metrics.rectify) on T_right_left.
+    ``stem(left, right, serial)`` names the files, ``frame(serial)`` the robot frame."""
+    from calibctl.core.extrinsics.rig_metrics import rectify
+
+    by_name = {m.name: m for m in members}
+    by_serial = {m.serial: m for m in cal.members}
+    out = []
+    for e in cameras.edges:
+        T_right_left = cameras.T(e.child, e.parent)
+        rect = rectify(by_name[e.parent], by_name[e.child], T_right_left)
+        for serial, R, P in ((e.parent, rect.R1, rect.P1), (e.child, rect.R2, rect.P2)):
+            m = by_name[serial]
+            out.append(
+                LutCamera(
+                    serial,
+                    by_serial[serial].version,
+                    by_serial[serial].content_sha256,
+                    stem(e.parent, e.child, serial),
+                    "fisheye" if m.lens == "fisheye" else "pinhole",
+                    m.camera_matrix,
+                    m.dist_coeffs,
+                    m.image_size,
+                    R,
+                    P,
+                    pair=(e.parent, e.child),
+                    frame=frame(serial),
+                    T_right_left=T_right_left,
+                )
+            )
+    return out
+
+
+def source_of(kind: str, ref: str, status: str, content_sha256: str, document: bytes) -> dict[str, Any]:
+    """lut.yaml's ``source``: the version the maps were built from and its document in the folder."""
+    return {
+        "kind": kind,
+        "ref": ref,
+        "status": status,
+        "content_sha256": content_sha256,
+        "document": RIG_DOCUMENT if kind == "rig" else CAMERA_DOCUMENT,
+        "document_sha256": hashlib.sha256(document).hexdigest(),
+    }
 
 
 def npy_bytes(array: np.ndarray) -> bytes:

@@ -202,6 +202,120 @@ def _maps(folder: Path, data: dict[str, Any], source: str, fix: str) -> list[Fin
     return findings
 
 
+_NUMBER_TOLERANCE = {"camera_matrix": 1e-9, "dist_coeffs": 1e-12, "R": 1e-9, "P": 1e-6, "T_right_left": 1e-12}
+
+
+def _expected_cameras(doc: Any, data: dict[str, Any], rig: bool) -> dict[tuple[Any, ...], Any]:
+    """(serial, pair) -> the LutCamera the source document gives (a camera: at the header's alpha/balance)."""
+    from calibctl.workflows.exports import rig_exports
+
+    if rig:
+        members, cameras, _ = rig_exports.stored_geometry(doc)
+        built = lut.rig_cameras(doc, members, cameras, lambda *_: "", lambda _: None)
+        return {(c.serial, c.pair): c for c in built}
+    entry = next(iter(data.get("cameras") or []), None)
+    entry = entry if isinstance(entry, dict) else {}
+    lens: Any = "fisheye" if doc.model.name == "fisheye" else "pinhole"
+    free = entry.get("balance" if lens == "fisheye" else "alpha", 0.0)
+    free = float(free) if isinstance(free, int | float) and not isinstance(free, bool) else 0.0
+    camera = lut.single_camera(
+        doc.serial,
+        doc.version,
+        doc.content_sha256,
+        "",
+        lens,
+        doc.camera_matrix,
+        doc.dist_coeffs,
+        doc.image_size,
+        free,
+    )
+    return {(camera.serial, None): camera}
+
+
+def _same(value: Any, expected: np.ndarray, tolerance: float) -> bool:
+    try:
+        got = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return got.shape == expected.shape and bool(np.all(np.abs(got - expected) <= tolerance))
+
+
+def _against_source(
+    folder: Path,
+    data: dict[str, Any],
+    camera: trace_header.TraceHeader | None,
+    rig: trace_header.RigTraceHeader | None,
+    source: str,
+    fix: str,
+) -> list[Finding]:
+    """The header's numbers against the source document in the folder, whose content hash is the one the
+    header (and its signature) names: an edited K with maps built from it is refused here."""
+    from pydantic import ValidationError
+
+    from calibctl.artifacts.calibration import CalibrationArtifact
+    from calibctl.artifacts.rig import RigCalibration
+
+    if camera is None and rig is None:
+        return []
+    name = (data.get("source") or {}).get("document") if isinstance(data.get("source"), dict) else None
+    if not isinstance(name, str) or not _plain_name(name):
+        return [_error(f"{source} names no source document in its folder ({name!r})", fix)]
+    path = folder / name
+    if path.is_symlink() or not path.is_file():
+        return [_error(f"{path} is missing: nothing ties the maps' numbers to the calibration", fix)]
+    text = bounded.read_text(path)
+    if hashlib.sha256(text.encode("utf-8")).hexdigest() != data["source"].get("document_sha256"):
+        return [_error(f"{path} was changed after calibctl wrote it (its sha256 is not lut.yaml's)", fix)]
+    model: Any = RigCalibration if rig is not None else CalibrationArtifact
+    named = rig.rig_sha256 if rig is not None else camera.artifact_sha256 if camera else ""
+    try:
+        doc = model.model_validate(bounded.parse_json(text, str(path)))
+    except ValidationError as exc:
+        return [_error(f"{path} is not a calibctl {'rig version' if rig else 'calibration'}: {exc}", fix)]
+    if doc.computed_sha256() != doc.content_sha256 or doc.content_sha256 != named:
+        return [
+            _error(
+                f"{path} is not the calibration lut.yaml names (content sha256 {doc.computed_sha256()[:12]}, "
+                f"the header names {named[:12]})",
+                fix,
+            )
+        ]
+    expected = _expected_cameras(doc, data, rig is not None)
+    entries = [c for c in data.get("cameras") or [] if isinstance(c, dict)]
+    keys_seen = [
+        (c.get("serial"), tuple(c["rectified_pair"]) if isinstance(c.get("rectified_pair"), list) else None)
+        for c in entries
+    ]
+    if sorted(map(str, keys_seen)) != sorted(map(str, expected)):
+        return [_error(f"{source} lists other cameras than {path.name} gives", fix)]
+    findings = []
+    for entry, key in zip(entries, keys_seen, strict=True):
+        want = expected[key]
+        numbers = {
+            "camera_matrix": want.camera_matrix,
+            "dist_coeffs": np.ravel(want.dist_coeffs),
+            "R": want.R,
+            "P": want.P,
+            **({"T_right_left": want.T_right_left} if want.T_right_left is not None else {}),
+        }
+        wrong = [
+            k
+            for k, v in numbers.items()
+            if not _same(entry.get(k), np.asarray(v, float), _NUMBER_TOLERANCE[k])
+        ]
+        if entry.get("image_size") != list(want.image_size) or entry.get("lens") != want.lens:
+            wrong.insert(0, "image_size / lens")
+        if wrong:
+            findings.append(
+                _error(
+                    f"{source}: {entry.get('serial')}'s {', '.join(wrong)} are not what {path.name} (the "
+                    "calibration the header names) gives",
+                    fix,
+                )
+            )
+    return findings
+
+
 def _signature(
     camera: trace_header.TraceHeader | None, rig: trace_header.RigTraceHeader | None, trusted: TrustedKeys
 ) -> list[Finding]:
@@ -275,6 +389,7 @@ def lint_lut(path: Path, trusted: TrustedKeys | None, store: Settings | None) ->
     findings, _ = trace_rules(camera, rig)
     if camera is None and rig is None:
         findings = [_error(f"{source}: no calibctl header: this LUT cannot be traced to a calibration", fix)]
+    findings += _against_source(header.parent, data, camera, rig, source, fix)
     findings += _maps(header.parent, data, source, fix)
     if trusted is not None:
         findings += _signature(camera, rig, trusted)

@@ -22,7 +22,7 @@ from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
+from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
@@ -132,17 +132,7 @@ def _prepare(
         findings = rig_findings(cal, rig, active, settings.lint)
         findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
     _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
-    members = [
-        MemberIntrinsics(
-            m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens
-        )
-        for m in cal.members
-    ]
-    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
-    cameras = RigTree(
-        cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve")
-    )
-    full_tree = orient_tree(edges, cal.root)
+    members, cameras, full_tree = rig_exports.stored_geometry(cal)
     serials = [m.serial for m in cal.members]
     others = [f for f in full_tree.frames if f not in serials]
     names = FrameNames.of(serials, others, parse_frame_map(frames, [*serials, *others]))
@@ -290,38 +280,20 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
 
 
 def _lut_files(x: RigExport) -> tuple[dict[str, bytes], str]:
-    """Per camera edge (the bundle's stereo pairs): both cameras' rectification maps, R1/P1 and R2/P2 of the
-    pair's stereo file (core.extrinsics.rig_metrics.rectify), and the stamped lut.yaml."""
-    from calibctl.core.extrinsics.rig_metrics import rectify
-
-    by_name = {m.name: m for m in x.members}
-    by_serial = {m.serial: m for m in x.cal.members}
-    cameras = []
-    for e in x.cameras.edges:
-        pair = f"stereo_{x.names.camera_name(e.parent)}_{x.names.camera_name(e.child)}"
-        T_right_left = x.cameras.T(e.child, e.parent)
-        rect = rectify(by_name[e.parent], by_name[e.child], T_right_left)
-        for serial, R, P in ((e.parent, rect.R1, rect.P1), (e.child, rect.R2, rect.P2)):
-            m = by_name[serial]
-            cameras.append(
-                lut.LutCamera(
-                    serial,
-                    by_serial[serial].version,
-                    by_serial[serial].content_sha256,
-                    f"{pair}.{x.names.camera_name(serial)}",
-                    "fisheye" if m.lens == "fisheye" else "pinhole",
-                    m.camera_matrix,
-                    m.dist_coeffs,
-                    m.image_size,
-                    R,
-                    P,
-                    pair=(e.parent, e.child),
-                    frame=x.names.frame(serial),
-                    T_right_left=T_right_left,
-                )
-            )
+    """Per camera edge (the bundle's stereo pairs): both cameras' rectification maps and the stamped lut.yaml
+    with the rig version's JSON beside it (lint checks the header's numbers against it)."""
+    cameras = lut.rig_cameras(
+        x.cal,
+        x.members,
+        x.cameras,
+        lambda left, right, serial: (
+            f"stereo_{x.names.camera_name(left)}_{x.names.camera_name(right)}.{x.names.camera_name(serial)}"
+        ),
+        x.names.frame,
+    )
     payloads, entries = lut.build(cameras)
-    source = {"kind": "rig", "ref": x.ref, "status": x.cal.status, "content_sha256": x.cal.content_sha256}
+    payloads[lut.RIG_DOCUMENT] = _text(x, "json").encode("utf-8")
+    source = lut.source_of("rig", x.ref, x.cal.status, x.cal.content_sha256, payloads[lut.RIG_DOCUMENT])
     serials = tuple(dict.fromkeys(c.serial for c in cameras))
     return payloads, x.stamp(lut.header_body(source, entries), serials)
 

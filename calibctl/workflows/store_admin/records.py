@@ -198,7 +198,7 @@ def export_lut(
 ) -> list[Path]:
     """The undistortion maps of ``ref`` (default: the active version) into the new folder ``out``
     (workflows.exports.lut); a rejected version is refused unless ``allow_rejected``, as for every export."""
-    from calibctl.workflows.exports import lut, trace_header
+    from calibctl.workflows.exports import formats, lut, trace_header
     from calibctl.workflows.exports.frame_names import default_frame
 
     if out is None:
@@ -218,7 +218,8 @@ def export_lut(
         _free_parameter(lens, alpha, balance),
     )
     payloads, entries = lut.build([camera])
-    source = {"kind": "camera", "ref": art.ref, "status": art.status, "content_sha256": art.content_sha256}
+    payloads[lut.CAMERA_DOCUMENT] = formats.render(art, "json").encode("utf-8")
+    source = lut.source_of("camera", art.ref, art.status, art.content_sha256, payloads[lut.CAMERA_DOCUMENT])
     header = trace_header.stamp(art, lut.header_body(source, entries), signed=True)
     return lut.write_lut(out, payloads, header, force=force)
 
