@@ -6,7 +6,8 @@ named by the robot's frames (workflows.exports.frame_names), each stamped with t
   a file, so two cameras in one file made a stereo driver run the left calibration on the right camera);
 - ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle);
 - ``lut`` -> ``export_files``: each stereo pair's rectification maps for both cameras (workflows.exports.lut).
-A rejected version, or (step 5 of issue 21) one that ``rig lint`` fails now, is refused unless allowed.
+A rejected version, or one that ``rig lint`` fails now (a stale member, a failed gate), is refused unless
+allowed.
 """
 
 from __future__ import annotations
