@@ -317,6 +317,25 @@ def test_bad_luts_are_exit_1_naming_the_file_and_the_fix(store, tmp_path):
     )
 
 
+@pytest.mark.parametrize(
+    ("edit", "says"),
+    [
+        (lambda d: d.update(cameras=5), "lut.yaml lists no cameras"),
+        (lambda d: d["cameras"][0]["maps"][0].pop("path"), "a map of camera pin_1 has no path"),
+        (lambda d: d["cameras"][0]["maps"][0].update(path="/etc/passwd"), "names a map outside its folder"),
+        (lambda d: d["cameras"][0].update(alpha="all"), "PIN-1's alpha are not what calibration.json"),
+        (lambda d: d.update(source=None), "lut.yaml names no source document in its folder"),
+    ],
+)
+def test_a_malformed_header_is_a_finding_naming_the_file_never_a_traceback(store, tmp_path, edit, says):
+    out = tmp_path / "lut"
+    _export(store, "PIN-1", out)
+    _rewrite(out, edit)
+    code, findings = _lint(store, out)
+    assert code == 1 and any(says in f["message"] for f in findings), findings
+    assert all(str(out) in f["message"] and str(out) in f["fix"] for f in findings)
+
+
 def test_a_forged_map_with_every_checksum_recomputed_is_not_the_map_its_numbers_give(store, tmp_path):
     out = tmp_path / "lut"
     _export(store, "PIN-1", out)

@@ -166,11 +166,8 @@ def _plain_name(name: str) -> bool:
 
 
 def _maps(folder: Path, data: dict[str, Any], source: str, fix: str) -> list[Finding]:
-    cameras = data.get("cameras")
-    if not isinstance(cameras, list) or not cameras:
-        return [_error(f"{source} lists no cameras", fix)]
     findings: list[Finding] = []
-    for camera in cameras:
+    for camera in data["cameras"]:
         if not isinstance(camera, dict) or not isinstance(camera.get("maps"), list):
             findings.append(_error(f"{source}: a camera entry has no maps", fix))
             continue
@@ -187,7 +184,10 @@ def _maps(folder: Path, data: dict[str, Any], source: str, fix: str) -> list[Fin
         problems: list[Finding] = []
         for entry in camera["maps"]:
             name = entry.get("path") if isinstance(entry, dict) else None
-            if not isinstance(name, str) or not _plain_name(name):
+            if not isinstance(name, str):
+                problems.append(_error(f"{source}: a map of camera {camera.get('name')} has no path", fix))
+                continue
+            if not _plain_name(name):
                 problems.append(_error(f"{source} names a map outside its folder: {name!r}", fix))
                 continue
             path = folder / name
@@ -213,11 +213,12 @@ def _expected_cameras(doc: Any, data: dict[str, Any], rig: bool) -> dict[tuple[A
         members, cameras, _ = rig_exports.stored_geometry(doc)
         built = lut.rig_cameras(doc, members, cameras, lambda *_: "", lambda _: None)
         return {(c.serial, c.pair): c for c in built}
-    entry = next(iter(data.get("cameras") or []), None)
-    entry = entry if isinstance(entry, dict) else {}
+    entry = data["cameras"][0]
     lens: Any = "fisheye" if doc.model.name == "fisheye" else "pinhole"
-    free = entry.get("balance" if lens == "fisheye" else "alpha", 0.0)
-    free = float(free) if isinstance(free, int | float) and not isinstance(free, bool) else 0.0
+    free = entry.get("balance" if lens == "fisheye" else "alpha")
+    free = (
+        float(free) if isinstance(free, int | float) and not isinstance(free, bool) else 0.0
+    )  # else: flagged
     camera = lut.single_camera(
         doc.serial,
         doc.version,
@@ -281,7 +282,7 @@ def _against_source(
             )
         ]
     expected = _expected_cameras(doc, data, rig is not None)
-    entries = [c for c in data.get("cameras") or [] if isinstance(c, dict)]
+    entries = data["cameras"]
     keys_seen = [
         (c.get("serial"), tuple(c["rectified_pair"]) if isinstance(c.get("rectified_pair"), list) else None)
         for c in entries
@@ -305,6 +306,11 @@ def _against_source(
         ]
         if entry.get("image_size") != list(want.image_size) or entry.get("lens") != want.lens:
             wrong.insert(0, "image_size / lens")
+        free_key = "balance" if want.lens == "fisheye" else "alpha"
+        if entry.get(free_key) != (-1.0 if want.free is None else want.free):
+            wrong.append(
+                free_key
+            )  # a pair's is stereoRectify's -1; a camera's must be the number P came from
         if wrong:
             findings.append(
                 _error(
@@ -389,8 +395,12 @@ def lint_lut(path: Path, trusted: TrustedKeys | None, store: Settings | None) ->
     findings, _ = trace_rules(camera, rig)
     if camera is None and rig is None:
         findings = [_error(f"{source}: no calibctl header: this LUT cannot be traced to a calibration", fix)]
-    findings += _against_source(header.parent, data, camera, rig, source, fix)
-    findings += _maps(header.parent, data, source, fix)
+    cameras = data.get("cameras")
+    if not isinstance(cameras, list) or not cameras or not all(isinstance(c, dict) for c in cameras):
+        findings.append(_error(f"{source} lists no cameras (a list of camera entries)", fix))
+    else:
+        findings += _against_source(header.parent, data, camera, rig, source, fix)
+        findings += _maps(header.parent, data, source, fix)
     if trusted is not None:
         findings += _signature(camera, rig, trusted)
     if store is not None:
