@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from calibctl import bounded
+from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding
 from calibctl.config import Settings
 from calibctl.errors import InputError, NotFoundError
@@ -215,10 +216,9 @@ def _expected_cameras(doc: Any, data: dict[str, Any], rig: bool) -> dict[tuple[A
         return {(c.serial, c.pair): c for c in built}
     entry = data["cameras"][0]
     lens: Any = "fisheye" if doc.model.name == "fisheye" else "pinhole"
-    free = entry.get("balance" if lens == "fisheye" else "alpha")
-    free = (
-        float(free) if isinstance(free, int | float) and not isinstance(free, bool) else 0.0
-    )  # else: flagged
+    given = entry.get("balance" if lens == "fisheye" else "alpha")
+    number = isinstance(given, int | float) and not isinstance(given, bool)
+    free = float(given) if number else 0.0  # a value that is no number is flagged by _against_source
     camera = lut.single_camera(
         doc.serial,
         doc.version,
@@ -272,7 +272,7 @@ def _against_source(
     try:
         doc = model.model_validate(bounded.parse_json(text, str(path)))
     except ValidationError as exc:
-        return [_error(f"{path} is not a calibctl {'rig version' if rig else 'calibration'}: {exc}", fix)]
+        return [_error(validation_message(exc, str(path)), fix)]
     if doc.computed_sha256() != doc.content_sha256 or doc.content_sha256 != named:
         return [
             _error(
@@ -306,11 +306,10 @@ def _against_source(
         ]
         if entry.get("image_size") != list(want.image_size) or entry.get("lens") != want.lens:
             wrong.insert(0, "image_size / lens")
+        # alpha / balance: a pair's is stereoRectify's -1, a camera's the number its P came from
         free_key = "balance" if want.lens == "fisheye" else "alpha"
         if entry.get(free_key) != (-1.0 if want.free is None else want.free):
-            wrong.append(
-                free_key
-            )  # a pair's is stereoRectify's -1; a camera's must be the number P came from
+            wrong.append(free_key)
         if wrong:
             findings.append(
                 _error(
