@@ -110,10 +110,6 @@ def export(
     from calibctl.workflows.store_admin import records
 
     if fmt == "lut":
-        if camera_name is not None:
-            from calibctl.errors import UsageError
-
-            raise UsageError("--camera-name applies to --format ros only")
         for path in records.export_lut(
             state(ctx).settings(),
             ref,
@@ -122,13 +118,10 @@ def export(
             allow_rejected=allow_rejected,
             alpha=alpha,
             balance=balance,
+            camera_name=camera_name,
         ):
             print(f"wrote {path}", flush=True)
         return
-    if alpha is not None or balance is not None:
-        from calibctl.errors import UsageError
-
-        raise UsageError("--alpha and --balance apply to --format lut only")
     text = records.export(
         state(ctx).settings(),
         ref,
@@ -137,6 +130,7 @@ def export(
         force=force,
         allow_rejected=allow_rejected,
         camera_name=camera_name,
+        lut_options=alpha is not None or balance is not None,
     )
     if out is None:
         print(text, end="")

@@ -396,6 +396,8 @@ def test_export_refuses_a_folder_it_did_not_write_and_the_wrong_lens_option(stor
     assert not (tmp_path / "f").exists()
     r = invoke(store, "export", "PIN-1", "--format", "lut")
     assert r.exit_code == 2 and "pass -o DIR" in r.output
+    r = invoke(store, "export", "PIN-1", "--format", "ros", "--alpha", "0.5")
+    assert r.exit_code == 2 and "--alpha and --balance apply to --format lut only" in r.output
     _export(store, "PIN-1", tmp_path / "again")
     assert invoke(store, "export", "PIN-1", "--format", "lut", "-o", str(tmp_path / "again")).exit_code == 2
     assert (

@@ -148,12 +148,14 @@ def export(
     force: bool,
     allow_rejected: bool = False,
     camera_name: str | None = None,
+    lut_options: bool = False,
 ) -> str:
     """Render ``ref`` (default: the active version) as ``fmt``; write it to ``out`` when given.
 
     A rejected version is refused unless ``allow_rejected`` (exit 2: nothing was exported, the
     command could not do what was asked; there is no verdict to report). Every export names the
-    version's status: a field in json/yaml, the trace header in ros/opencv.
+    version's status: a field in json/yaml, the trace header in ros/opencv. ``lut_options``: --alpha or
+    --balance was given, which only ``export_lut`` takes.
     """
     from calibctl.workflows.exports import formats  # the writers: not for history or show
 
@@ -163,6 +165,8 @@ def export(
         )
     if camera_name is not None and fmt != "ros":
         raise UsageError("--camera-name applies to --format ros only")
+    if lut_options:
+        raise UsageError("--alpha and --balance apply to --format lut only")
     art = show(settings, ref)
     _refuse_rejected(art, allow_rejected)
     text = formats.render(art, fmt, camera_name=camera_name)
@@ -195,12 +199,15 @@ def export_lut(
     allow_rejected: bool = False,
     alpha: float | None = None,
     balance: float | None = None,
+    camera_name: str | None = None,
 ) -> list[Path]:
     """The undistortion maps of ``ref`` (default: the active version) into the new folder ``out``
     (workflows.exports.lut); a rejected version is refused unless ``allow_rejected``, as for every export."""
     from calibctl.workflows.exports import formats, lut, trace_header
     from calibctl.workflows.exports.frame_names import default_frame
 
+    if camera_name is not None:
+        raise UsageError("--camera-name applies to --format ros only")
     if out is None:
         raise UsageError("--format lut writes a folder of maps", "pass -o DIR (a new folder)")
     art = show(settings, ref)
