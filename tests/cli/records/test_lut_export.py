@@ -19,7 +19,7 @@ from calibctl.signing import create_key
 from calibctl.store.repository import Store
 from calibctl.workflows.exports import trace_header
 from tests.artifacts.factories import calibration
-from tests.cli.test_rig_store_cli import RUNNER, app
+from tests.cli.rig.test_rig_store_cli import RUNNER, app
 from tests.datasets import LEFT_RIGHT, needs_datasets
 from tests.store.rig_documents import rig_calibration, rig_definition
 
