@@ -52,6 +52,7 @@ from calibctl.store.engine import (
 )
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.fleet import FleetStoreMixin
+from calibctl.store.gauge_failures import GaugeFailureStoreMixin
 from calibctl.store.health import HealthStoreMixin
 from calibctl.store.images import ImageStoreMixin
 from calibctl.store.models import ArtifactRow, Base, BoardRow, EventRow, ImageRow, SessionRow
@@ -80,7 +81,9 @@ def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
     )
 
 
-class Store(ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, HealthStoreMixin):
+class Store(
+    ImageStoreMixin, RigStoreMixin, CheckStoreMixin, FleetStoreMixin, HealthStoreMixin, GaugeFailureStoreMixin
+):
     """A calibctl store on SQLite or PostgreSQL. Open it with ``Store.open(url)``."""
 
     def __init__(

@@ -57,9 +57,10 @@ from calibctl.core.intrinsics.validation import (
 from calibctl.core.lanes import Lanes
 from calibctl.errors import UsageError
 from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.board.gauge_failures import board_failures
 from calibctl.workflows.camera.image_circles import checked_image_circle, with_circle
 from calibctl.workflows.camera.verdict_lanes import verdict_lanes
-from calibctl.workflows.lint.lint import facts_from_document, lint_facts
+from calibctl.workflows.lint.lint import board_gauge_fact, facts_from_document, lint_facts
 from calibctl.workflows.store_admin.records import open_store
 
 MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
@@ -331,9 +332,13 @@ def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> li
 
 
 def build_artifact(
-    session: CaptureSession, request: SolveRequest, settings: Settings
+    session: CaptureSession,
+    request: SolveRequest,
+    settings: Settings,
+    board_gauge: tuple[str, str] | None = None,
 ) -> tuple[CalibrationArtifact, list]:
-    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
+    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version).
+    ``board_gauge``: lint's fact of a failed gauge on the session's board revision (``board_gauge_fact``)."""
     with verdict_lanes(settings.jobs) as lanes:
         (
             model_name,
@@ -397,7 +402,9 @@ def build_artifact(
         content_sha256=UNSEALED,
     )
     art = _with_required_region(art, settings)
-    findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
+    facts = facts_from_document(art.model_dump(mode="json"), art.serial)
+    facts.board_gauge = board_gauge
+    findings = lint_facts(facts, settings.lint)
     status = "rejected" if has_errors(findings) else "accepted"
     corner_outliers = [
         {
@@ -423,13 +430,17 @@ def checked_override(reason: str | None) -> str | None:
     return reason.strip()
 
 
-def _check_gauge_override(session: CaptureSession, reason: str | None) -> None:
-    """An override must have a failed gauge to override: anything else is a usage error, nothing stored."""
+def _check_gauge_override(
+    session: CaptureSession, reason: str | None, board_gauge: tuple[str, str] | None
+) -> None:
+    """An override must have a failed gauge to override (the session's own, or one of its board revision):
+    anything else is a usage error, nothing stored."""
     gauge = session.metric_gauge
-    if reason is not None and (gauge is None or gauge.distance.passed):
+    if reason is not None and (gauge is None or gauge.distance.passed) and board_gauge is None:
         what = "has no metric gauge" if gauge is None else "passed its metric gauge"
         raise UsageError(
-            f"--override-gauge: session {session.session_id} {what}; there is nothing to override",
+            f"--override-gauge: session {session.session_id} {what} and its board {session.board.ref} "
+            "has no failed one; there is nothing to override",
             "leave --override-gauge out",
         )
 
@@ -463,11 +474,14 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
                 f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
                 "capture again following the gate hints, then solve the new session",
             )
-        _check_gauge_override(session, request.override_gauge)
+        board_gauge = board_gauge_fact(
+            session.board.ref, session.session_id, board_failures(store, session.board.ref)
+        )
+        _check_gauge_override(session, request.override_gauge, board_gauge)
         if request.report_dir is not None:  # the page of the version about to be stored must be free
             version = store.next_version(session.serial)
             report_path = report_workflow.ready_page(request.report_dir, session.serial, version)
-        art, corner_outliers = build_artifact(session, request, settings)
+        art, corner_outliers = build_artifact(session, request, settings, board_gauge)
         activate = request.activate and art.status == "accepted"
         stored = store.add_artifact(
             art,

@@ -14,9 +14,10 @@ that breaks a rule is a finding (exit 1 when any finding is an error).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -29,8 +30,12 @@ from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
 from calibctl.errors import InputError, IntegrityError, NotFoundError, named_list
 from calibctl.signing import TrustedKeys
+from calibctl.workflows.board.gauge_failures import failure_fix, failure_text
 from calibctl.workflows.exports import formats, ros_camera_info, trace_header
 from calibctl.workflows.store_admin import keys
+
+if TYPE_CHECKING:
+    from calibctl.store.gauge_failures import GaugeFailure
 
 
 @dataclass
@@ -63,6 +68,8 @@ class CalibrationFacts:
     )
     metric_gauge: dict[str, Any] | None = None  # the capture's distance gauge, calibctl only
     gauge_override: str | None = None  # provenance.gauge_override: why a failed gauge was overridden
+    # the store's failed gauges of the board revision (workflows.board.gauge_failures): (board ref, message)
+    board_gauge: tuple[str, str] | None = None
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -264,7 +271,7 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
     gauge = facts.metric_gauge or {}
     d = gauge.get("distance") or {}
     if not d or d.get("passed", True):
-        return []
+        return _board_gauge_rule(facts)
     lo, hi = d.get("ratio_limits") or (0.99, 1.01)
     message = (
         f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
@@ -292,6 +299,19 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
             "is wrong: solve with --override-gauge REASON (recorded in the calibration)",
         )
     ]
+
+
+def _board_gauge_rule(facts: CalibrationFacts) -> list[Finding]:
+    """``metric-gauge`` of the board revision: a gauge that failed with this board revision (another session,
+    another camera, a check) fails every calibration made with it until the board is re-registered; an
+    override with its reason keeps it as a warning."""
+    if facts.board_gauge is None:
+        return []
+    board_ref, message = facts.board_gauge
+    if facts.gauge_override:
+        overridden = f"{message}; overridden: {facts.gauge_override}"
+        return [Finding(rule="metric-gauge", severity="warning", message=overridden)]
+    return [Finding(rule="metric-gauge", severity="error", message=message, fix=failure_fix(board_ref))]
 
 
 def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
@@ -660,15 +680,30 @@ def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
-def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
+def board_gauge_fact(
+    board_ref: str, session_id: str | None, failures: Sequence[GaugeFailure]
+) -> tuple[str, str] | None:
+    """``CalibrationFacts.board_gauge`` from the store's failed gauges of the board revision, leaving out the
+    calibration's own session (its own gauge is ``metric_gauge``)."""
+    others = [f for f in failures if f.record != f"session {session_id}"]
+    return (board_ref, failure_text(board_ref, others)) if others else None
+
+
+def _lint_stored(
+    art: CalibrationArtifact,
+    limits: LintThresholds,
+    trusted: TrustedKeys | None,
+    gauge_failures: Sequence[GaugeFailure] = (),
+) -> LintResult:
     """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
-    document rules (schema, content-hash) are not run again."""
+    document rules (schema, content-hash) are not run again. ``gauge_failures``: the store's failed gauges of
+    its board revision."""
     data = art.model_dump(
         mode="json", include=FACT_FIELDS
     )  # the fact fields only: a third of the dump's cost
-    findings = _status_rule(art.status, art.ref) + lint_facts(
-        facts_from_document(data, art.ref, validated=True), limits
-    )
+    facts = facts_from_document(data, art.ref, validated=True)
+    facts.board_gauge = board_gauge_fact(art.board.ref, art.provenance.session_id, gauge_failures)
+    findings = _status_rule(art.status, art.ref) + lint_facts(facts, limits)
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:
         signature_rule(result, art, trusted)
@@ -702,6 +737,9 @@ def lint_store(
                 f"nothing to lint: the store {store.url} holds no calibrations",
                 "check --db / CALIBCTL_DB, or calibrate a camera first",
             )
+        gauges = store.failed_gauges(
+            a.board.ref for a in active.values() if isinstance(a, CalibrationArtifact)
+        )
     results = []
     for name in sorted([*active, *inactive]):
         found_or_error = active.get(name)
@@ -713,7 +751,8 @@ def lint_store(
             )
             results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
         else:
-            results.append(_lint_stored(found_or_error, settings.lint, trusted))
+            found = found_or_error
+            results.append(_lint_stored(found, settings.lint, trusted, gauges.get(found.board.ref, ())))
     return results
 
 
