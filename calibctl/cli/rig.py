@@ -7,10 +7,12 @@ from typing import Annotated, Any
 
 import typer
 
+from calibctl.cli.capture import ReferenceDistanceOption
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
+from calibctl.cli.solve import OverrideGaugeOption
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 
@@ -211,12 +213,25 @@ def capture(
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: Annotated[
+        str | None,
+        typer.Option(
+            "--reference-source",
+            metavar="SERIAL=SRC",
+            show_default=False,
+            help="With --reference-distance: one member's pictures of the board in the fixture; the gauge "
+            "is judged through that member's session (k1k2), as `capture --reference-distance` does.",
+        ),
+    ] = None,
+    override_gauge: OverrideGaugeOption = None,
     station: StationOption = None,
     operator: OperatorOption = None,
     jobs: JobsOption = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
+    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails
+    or the board revision has a failed metric gauge (this capture's, or one stored) not overridden."""
     from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
@@ -226,6 +241,8 @@ def capture(
         sources,
         board,
         min_shared_views,
+        gauge=rig_gauge(reference_distance, reference_source),
+        override_gauge=override_gauge,
     )
     s = result.session
     if wants_json(ctx, json_output):
@@ -252,6 +269,27 @@ def capture(
             )
     if not result.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def rig_gauge(reference_distance: str | None, reference_source: str | None) -> Any:
+    """``--reference-distance D+-S --reference-source SERIAL=SRC`` -> ``rigs.RigGauge`` (None without)."""
+    from calibctl.workflows.camera.distance_gauge import parse_reference_distance
+    from calibctl.workflows.rig.rigs import RigGauge
+
+    if (reference_distance is None) != (reference_source is None):
+        raise UsageError(
+            "--reference-distance and --reference-source go together",
+            "give the surveyed distance D+-S and one member's fixture pictures, SERIAL=FOLDER",
+        )
+    if reference_distance is None or reference_source is None:
+        return None
+    camera, sep, fixture = reference_source.partition("=")
+    if not sep or not camera or not fixture:
+        raise UsageError(
+            f"--reference-source '{reference_source}' is not SERIAL=SRC",
+            "name the member whose fixture pictures these are, e.g. --reference-source CAM-L=fixture/",
+        )
+    return RigGauge(camera, parse_reference_distance(reference_distance), fixture)
 
 
 def print_rig_calibration(cal: Any, active: bool) -> None:

@@ -653,9 +653,12 @@ def trace_of(evidence: dict[str, Any], header: object, rig_header: object) -> st
     return "header" if evidence else "rig" if header is None and rig_header is not None else "none"
 
 
-def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
-    """Every rule for a stored calibration (rig members use it too)."""
-    return _lint_stored(art, limits, None)
+def lint_artifact(
+    art: CalibrationArtifact, limits: LintThresholds, gauge_failures: Sequence[GaugeFailure] = ()
+) -> LintResult:
+    """Every rule for a stored calibration (rig members use it too); ``gauge_failures``: the store's failed
+    gauges of its board revision (``Store.failed_gauges``)."""
+    return _lint_stored(art, limits, None, gauge_failures)
 
 
 def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
