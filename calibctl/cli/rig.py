@@ -16,6 +16,17 @@ from calibctl.cli.solve import OverrideGaugeOption
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 
+RigReferenceSourceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-source",
+        metavar="SERIAL=SRC",
+        show_default=False,
+        help="With --reference-distance: one camera's pictures of the board in the fixture; the gauge is "
+        "judged through that camera's lens (its own photos' solve), as `capture --reference-distance` does.",
+    ),
+]
+
 rig_app = typer.Typer(
     name="rig",
     help="Camera rigs: extrinsics of 2+ cameras as a tree from one root, with one-sigma per edge.",
@@ -79,6 +90,8 @@ def solve_folders(
             help="Write the exports of a failed verdict too (to inspect them; a robot must not load them).",
         ),
     ] = False,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: RigReferenceSourceOption = None,
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
@@ -91,7 +104,8 @@ def solve_folders(
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
     square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken).
+    rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
+    pictures judged through its lens as the run leaves it.
     """
     from calibctl.core.board.board_spec import BoardSpec
     from calibctl.workflows.rig import rig_folders
@@ -119,6 +133,7 @@ def solve_folders(
         workers=settings.jobs,
         settings=settings,
         designs=designs,
+        gauge=rig_gauge(reference_distance, reference_source),
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []
@@ -214,16 +229,7 @@ def capture(
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
     reference_distance: ReferenceDistanceOption = None,
-    reference_source: Annotated[
-        str | None,
-        typer.Option(
-            "--reference-source",
-            metavar="SERIAL=SRC",
-            show_default=False,
-            help="With --reference-distance: one member's pictures of the board in the fixture; the gauge "
-            "is judged through that member's session (k1k2), as `capture --reference-distance` does.",
-        ),
-    ] = None,
+    reference_source: RigReferenceSourceOption = None,
     override_gauge: OverrideGaugeOption = None,
     station: StationOption = None,
     operator: OperatorOption = None,
@@ -274,7 +280,7 @@ def capture(
 def rig_gauge(reference_distance: str | None, reference_source: str | None) -> Any:
     """``--reference-distance D+-S --reference-source SERIAL=SRC`` -> ``rigs.RigGauge`` (None without)."""
     from calibctl.workflows.camera.distance_gauge import parse_reference_distance
-    from calibctl.workflows.rig.rigs import RigGauge
+    from calibctl.workflows.rig.rig_folders import RigGauge
 
     if (reference_distance is None) != (reference_source is None):
         raise UsageError(

@@ -130,3 +130,24 @@ def test_bad_gauge_input_exits_2_naming_the_fix(db, rig2, extra, says) -> None:
     assert says in done.stderr
     with Store.open(db) as store:
         assert store.list_sessions("CAM0") == []
+
+
+@pytest.mark.parametrize(("square_mm", "passed"), [("23", False), ("25", True)])
+def test_solve_folders_judges_the_gauge_through_a_members_own_lens(rig2, fixture, square_mm, passed) -> None:
+    folder, true_m = fixture
+    done = RUNNER.invoke(
+        app,
+        [
+            "--json", "rig", "solve-folders", "--cols", "9", "--rows", "6", "--square-mm", square_mm,
+            *(a for c in CAMS for a in ("--source", f"{c}={rig2 / c}")),
+            "--reference-distance", f"{true_m:.4f}+-0.0005", "--reference-source", f"CAM0={folder}",
+        ],
+    )  # fmt: skip
+    gauges = [f for f in json.loads(done.stdout)["lint"] if f["rule"] == "metric-gauge"]
+    if passed:
+        assert done.exit_code == 0 and gauges == [], done.output
+        return
+    assert done.exit_code == 1, done.output
+    (finding,) = gauges
+    assert finding["severity"] == "error" and finding["value"] == pytest.approx(0.92, abs=0.01)
+    assert "every baseline is scaled by it" in finding["message"]

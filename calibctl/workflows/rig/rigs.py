@@ -51,10 +51,10 @@ from calibctl.store.gauge_failures import GaugeFailure
 from calibctl.workflows.board.boards import board_ref
 from calibctl.workflows.board.gauge_failures import board_failures, check_override, failure_fix, failure_text
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
-from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS, ReferenceDistance
+from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS
 from calibctl.workflows.camera.solve import checked_override
 from calibctl.workflows.handeye import rig_edges
-from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
+from calibctl.workflows.rig.rig_folders import RigGauge, check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -124,15 +124,6 @@ def add_rig(
             f"rig {name}",
         )
         return store.add_rig(doc)
-
-
-@dataclass(frozen=True)
-class RigGauge:
-    """The metric gauge of a rig capture: ``camera``'s pictures of the board in a fixture at ``reference``."""
-
-    camera: str
-    reference: ReferenceDistance
-    fixture: str
 
 
 def capture_rig(
