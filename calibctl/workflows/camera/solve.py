@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -19,6 +20,7 @@ from calibctl import __version__
 from calibctl.artifacts.calibration import (
     UNSEALED,
     CalibrationArtifact,
+    CameraChange,
     CameraConsistency,
     DistortionModelInfo,
     HeldOut,
@@ -37,6 +39,7 @@ from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera, spread_views
 from calibctl.core.capture.projection_gate import Region, parse_region
 from calibctl.core.intrinsics import solve as core_solve
+from calibctl.core.intrinsics.camera_change import STEP_PARAMETERS, ChangeVerdict, judge_change
 from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
 from calibctl.core.intrinsics.lens_checks import observed_region_px
 from calibctl.core.intrinsics.model_fit import noise_floor_px
@@ -186,6 +189,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
             [obj[i] for i in checked], [img[i] for i in checked], size, model_name, lanes=lanes
         )
     )
+    changed = lanes.start(partial(judge_change, solution, kept_obj, kept_img, size))  # this solve's fit
     try:
         holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
@@ -196,9 +200,11 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         detector_rms = noise_floor_px(obj, img, size, float(solution.rms_px), lanes=lanes)
     except BaseException:
         split.settle()
+        changed.settle()
         raise
     found = split.result()
     consistency = None if found is None else _consistency(found, [session.views[i].name for i in checked])
+    change = _change(changed.result(), [session.views[i].name for i in kept])
     return (
         model_name,
         solution,
@@ -211,6 +217,23 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         rejection,
         consistency,
         detector_rms,
+        change,
+    )
+
+
+def _change(verdict: ChangeVerdict | None, names: list[str]) -> CameraChange | None:
+    if verdict is None:
+        return None
+    return CameraChange(
+        first_view_after=names[verdict.split],
+        views=(verdict.split, len(names) - verdict.split),
+        before_px=dict(zip(STEP_PARAMETERS, verdict.before.tolist(), strict=True)),
+        after_px=dict(zip(STEP_PARAMETERS, verdict.after.tolist(), strict=True)),
+        focal_step=verdict.focal_step,
+        centre_step_px=verdict.centre_step_px,
+        chi2=verdict.chi2,
+        limit=verdict.limit,
+        changed=verdict.changed,
     )
 
 
@@ -352,6 +375,7 @@ def build_artifact(
             rejection,
             consistency,
             detector_rms,
+            change,
         ) = _solve_numbers(session, request, lanes)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
@@ -388,6 +412,7 @@ def build_artifact(
             rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views])
         ),
         camera_consistency=consistency,
+        camera_change=change,
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,

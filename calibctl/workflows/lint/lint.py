@@ -55,6 +55,7 @@ class CalibrationFacts:
     square_size_status: str | None = None  # measured | nominal | None (not recorded)
     square_size_m: float | None = None
     camera_consistency: dict[str, Any] | None = None  # the solve's two-camera check, calibctl artifacts only
+    camera_change: dict[str, Any] | None = None  # the solve's changed-camera check, calibctl artifacts only
     model_name: str | None = None  # calibctl artifacts only, as the three below
     fit_rms_px: float | None = None
     detector_rms_px: float | None = None
@@ -177,6 +178,7 @@ FACT_FIELDS: dict[str, Any] = {
     "board": {"measurement"},
     "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"},
     "camera_consistency": True,
+    "camera_change": True,
     "metric_gauge": True,
     "provenance": {"gauge_override"},
     "observed_region_px": True,
@@ -210,6 +212,7 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
         camera_consistency=data.get("camera_consistency"),
+        camera_change=data.get("camera_change"),
         model_name=(data.get("model") or {}).get("name"),
         fit_rms_px=data.get("rms_px"),
         detector_rms_px=data.get("detector_rms_px"),
@@ -427,6 +430,38 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
     ]
 
 
+def changed_camera_hint(focal_step: float, centre_step_px: float) -> str:
+    """The operator's hint for a camera that changed during the session (lint and the capture gate)."""
+    return (
+        f"the camera changed during the session (focal moved by {100 * focal_step:+.2f} %, principal point "
+        f"by {centre_step_px:.1f} px): check the lens lock and focus, then capture again"
+    )
+
+
+def _camera_change_rule(facts: CalibrationFacts) -> list[Finding]:
+    """``camera-changed``: the views before and after a point in the capture disagree (a knocked or refocused
+    lens); the calibration is a blend of two cameras, several sigma from both."""
+    check = facts.camera_change
+    if not check or not check.get("changed"):
+        return []
+    before, after = check["before_px"], check["after_px"]
+    n_before, n_after = check["views"]
+    return [
+        Finding(
+            rule="camera-changed",
+            severity="error",
+            value=check["chi2"],
+            threshold=check["limit"],
+            message=f"the camera changed during the session: the {n_before} views before "
+            f"{check['first_view_after']} and the {n_after} from it on solve to fx {before['fx']:.1f} / "
+            f"{after['fx']:.1f} px, cx {before['cx']:.1f} / {after['cx']:.1f}, cy {before['cy']:.1f} / "
+            f"{after['cy']:.1f} px (chi2 {check['chi2']:.1f} over each side's own sigma, limit "
+            f"{check['limit']:g}); this calibration is a blend of the two",
+            fix=changed_camera_hint(check["focal_step"], check["centre_step_px"]),
+        )
+    ]
+
+
 def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "header") -> list[Finding]:
     """Every rule that applies to one calibration, in a stable order.
 
@@ -463,6 +498,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
         findings += _outer_ring_rule(facts, limits)
         findings += _provenance_rule(facts)
     findings += _gauge_rule(facts)
+    findings += _camera_change_rule(facts)
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
