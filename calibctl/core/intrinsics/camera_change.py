@@ -184,3 +184,12 @@ def judge_change(
 def _value(sol: IntrinsicsSolution, name: str) -> float:
     K = sol.camera_matrix
     return float({"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}[name])
+
+
+def changed_hint(focal_step: float, centre_step_px: float) -> str:
+    """The operator's hint for a camera that changed during the session (lint's camera-changed, the capture
+    gate that names it as the cause)."""
+    return (
+        f"the camera changed during the session (focal moved by {100 * focal_step:+.2f} %, principal point "
+        f"by {centre_step_px:.1f} px): check the lens lock and focus, then capture again"
+    )

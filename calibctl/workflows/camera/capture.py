@@ -81,6 +81,7 @@ from calibctl.core.capture.image_circle import (
 )
 from calibctl.core.capture.projection_gate import (
     ADVISORY_GATES,
+    cause_first,
     projection_gate,
     session_passed,
     solve_for_gate,
@@ -868,7 +869,9 @@ def _projection(
         )
     except NumericalError as exc:
         solution = exc
-    return projection_gate(solution, image_size, region, settings.gates.projection_sigma_max_px)
+    limit = settings.gates.projection_sigma_max_px
+    gate = projection_gate(solution, image_size, region, limit)
+    return cause_first(gate, solution, obj, px, image_size, region, limit)
 
 
 def _build_session(

@@ -28,6 +28,7 @@ from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
+from calibctl.core.intrinsics.camera_change import changed_hint
 from calibctl.errors import InputError, IntegrityError, NotFoundError, named_list
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.board.gauge_failures import failure_fix, failure_text
@@ -430,14 +431,6 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
     ]
 
 
-def changed_camera_hint(focal_step: float, centre_step_px: float) -> str:
-    """The operator's hint for a camera that changed during the session (lint and the capture gate)."""
-    return (
-        f"the camera changed during the session (focal moved by {100 * focal_step:+.2f} %, principal point "
-        f"by {centre_step_px:.1f} px): check the lens lock and focus, then capture again"
-    )
-
-
 def _camera_change_rule(facts: CalibrationFacts) -> list[Finding]:
     """``camera-changed``: the views before and after a point in the capture disagree (a knocked or refocused
     lens); the calibration is a blend of two cameras, several sigma from both."""
@@ -457,7 +450,7 @@ def _camera_change_rule(facts: CalibrationFacts) -> list[Finding]:
             f"{after['fx']:.1f} px, cx {before['cx']:.1f} / {after['cx']:.1f}, cy {before['cy']:.1f} / "
             f"{after['cy']:.1f} px (chi2 {check['chi2']:.1f} over each side's own sigma, limit "
             f"{check['limit']:g}); this calibration is a blend of the two",
-            fix=changed_camera_hint(check["focal_step"], check["centre_step_px"]),
+            fix=changed_hint(check["focal_step"], check["centre_step_px"]),
         )
     ]
 
@@ -533,22 +526,25 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
 # Rules whose fix assumes the lens model describes the lens: when model-misfit fails, their numbers are the
 # misfit's symptoms (k1k2 on a fisheye also scatters sigma, the outer ring and the view groups) and their
 # own fixes send the user the wrong way ("make the corners sharp", "two cameras").
-_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-foldover")
+_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "camera-changed", "distortion-foldover")
 
 
 def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
     """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a ``narrow``
-    lens (below model_fit.WIDE_FIELD_DEG) with one-camera failed too, the misfit is the symptom: no lens model is
-    wrong there, the intrinsics changed during the capture (issue 22's drifting ~60 deg webcam), so model-misfit
-    and its symptoms point at one-camera's fix instead."""
+    lens (below model_fit.WIDE_FIELD_DEG) with camera-changed or one-camera failed too, the misfit is the
+    symptom: no lens model is wrong there, the intrinsics changed during the capture (issue 22's drifting
+    ~60 deg webcam), so model-misfit and its symptoms point at that rule's fix instead (camera-changed's
+    first)."""
     misfit = next((f for f in findings if f.rule == "model-misfit"), None)
     if misfit is None:
         return findings
-    drift = next((f for f in findings if f.rule == "one-camera"), None)
+    drift = next((f for f in findings if f.rule == "camera-changed"), None) or next(
+        (f for f in findings if f.rule == "one-camera"), None
+    )
     if narrow and drift is not None:
         first = (
-            f"first fix one-camera ({drift.fix}), then judge this rule again: a lens this narrow misfits when "
-            "its intrinsics change during the capture"
+            f"first fix {drift.rule} ({drift.fix}), then judge this rule again: a lens this narrow misfits "
+            "when its intrinsics change during the capture"
         )
         return [
             f.model_copy(update={"fix": first})
