@@ -3,8 +3,8 @@
 For each real set (the corners calibctl detects, views in file-name order) and lens model (k1k2, as a default
 ``calibrate`` asks; none, as a plain ``capture`` chooses between k1k2 and fisheye): the gate's worst
 one-sigma over the image with the Jacobian covariance (what it judges) and with the covariance calibctl
-reports (view-level where that rule fires), its verdict at 5 px, and the reason and first words of the hint once
-``cause_first`` has looked for a lens-model misfit or a camera that changed during the session.
+reports (view-level where that rule fires), its verdict at 5 px, and the reason and first words of the hint
+once ``cause_first`` has looked for a lens-model misfit or a camera that changed during the session.
 
 Run: python benchmarks/bench_gate_cause.py   (from the repository root; needs ../shared/datasets)
 """
