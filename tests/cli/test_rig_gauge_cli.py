@@ -28,7 +28,7 @@ def rig2(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def fixture(rig2, tmp_path_factory):
-    """One CAM0 photo of the rendered rig as the fixture picture, and its true camera-to-board-centre distance."""
+    """A CAM0 photo of the rendered rig as the fixture picture, and its true camera-to-board distance (m)."""
     truth = json.loads((rig2 / "rig_truth.json").read_text())
     frame = next(f for f in truth["frames"] if "CAM0" in f["seen_by"])
     folder = tmp_path_factory.mktemp("rig-fixture")

@@ -173,7 +173,7 @@ def _stamped(
     views: list[outcomes_core.ImageOutcome],
     **verdict: Any,
 ) -> CheckEvent:
-    """A check event of ``art`` on ``views``: its id, what, where, when and who, with the ``verdict`` fields."""
+    """A check event of ``art`` on ``views``: id, what, where, when and who, with the ``verdict`` fields."""
     return CheckEvent(
         check_id=secrets.token_hex(6),
         serial=art.serial,
