@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from calibctl.artifacts.board import parse_board_ref
-from calibctl.errors import UsageError, named_list
+from calibctl.errors import UsageError
 
 if TYPE_CHECKING:
     from calibctl.artifacts.board import BoardRevision
@@ -80,12 +80,3 @@ def check_reregistration(
             "if the span confirms the squares, the gauge (fixture, surveyed distance) is what is wrong: "
             "check it and gauge again, or override the failure with --override-gauge REASON (recorded)",
         )
-
-
-def refusal_reasons(failures_by_ref: dict[str, list[GaugeFailure]]) -> list[str]:
-    """One line per failed board revision (for a gate message)."""
-    return [failure_text(ref, found) for ref, found in sorted(failures_by_ref.items())]
-
-
-def failed_refs_text(failures_by_ref: dict[str, list[GaugeFailure]]) -> str:
-    return named_list(sorted(failures_by_ref), 5)
