@@ -98,12 +98,13 @@ class UnmatchedImage(Document):
 class RigGate(Document):
     """A rig-level capture gate."""
 
-    gate: Literal["rig-connected"] = Field(description="which gate")
-    passed: bool = Field(description="true when satisfied")
+    gate: Literal["rig-connected", "metric-gauge"] = Field(description="which gate")
+    passed: bool = Field(description="true when satisfied (metric-gauge: no failed gauge, or overridden)")
     value: float = Field(
-        description="shared views of the weakest linking pair (or of the best pair across a split)"
+        description="rig-connected: shared views of the weakest linking pair (or of the best pair across a "
+        "split); metric-gauge: |ratio - 1| of the board revision's failed gauge"
     )
-    threshold: float = Field(description="views a linking pair needs")
+    threshold: float = Field(description="rig-connected: views a linking pair needs; metric-gauge: 0.01")
     message: str = Field(description="the verdict in words")
     hint: str | None = Field(None, description="what the operator should do next, naming the pair")
 

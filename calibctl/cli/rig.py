@@ -7,12 +7,25 @@ from typing import Annotated, Any
 
 import typer
 
+from calibctl.cli.capture import ReferenceDistanceOption
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
+from calibctl.cli.solve import OverrideGaugeOption
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
+
+RigReferenceSourceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-source",
+        metavar="SERIAL=SRC",
+        show_default=False,
+        help="With --reference-distance: one camera's pictures of the board in the fixture; the gauge is "
+        "judged through that camera's lens (its own photos' solve), as `capture --reference-distance` does.",
+    ),
+]
 
 rig_app = typer.Typer(
     name="rig",
@@ -77,6 +90,8 @@ def solve_folders(
             help="Write the exports of a failed verdict too (to inspect them; a robot must not load them).",
         ),
     ] = False,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: RigReferenceSourceOption = None,
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
@@ -89,7 +104,8 @@ def solve_folders(
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
     square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken).
+    rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
+    pictures judged through its lens as the run leaves it.
     """
     from calibctl.core.board.board_spec import BoardSpec
     from calibctl.workflows.rig import rig_folders
@@ -117,6 +133,7 @@ def solve_folders(
         workers=settings.jobs,
         settings=settings,
         designs=designs,
+        gauge=rig_gauge(reference_distance, reference_source),
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []
@@ -211,12 +228,16 @@ def capture(
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: RigReferenceSourceOption = None,
+    override_gauge: OverrideGaugeOption = None,
     station: StationOption = None,
     operator: OperatorOption = None,
     jobs: JobsOption = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
+    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails
+    or the board revision has a failed metric gauge (this capture's, or one stored) not overridden."""
     from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
@@ -226,6 +247,8 @@ def capture(
         sources,
         board,
         min_shared_views,
+        gauge=rig_gauge(reference_distance, reference_source),
+        override_gauge=override_gauge,
     )
     s = result.session
     if wants_json(ctx, json_output):
@@ -252,6 +275,27 @@ def capture(
             )
     if not result.passed:
         raise typer.Exit(EXIT_VERDICT_FAIL)
+
+
+def rig_gauge(reference_distance: str | None, reference_source: str | None) -> Any:
+    """``--reference-distance D+-S --reference-source SERIAL=SRC`` -> ``rigs.RigGauge`` (None without)."""
+    from calibctl.workflows.camera.distance_gauge import parse_reference_distance
+    from calibctl.workflows.rig.rig_folders import RigGauge
+
+    if (reference_distance is None) != (reference_source is None):
+        raise UsageError(
+            "--reference-distance and --reference-source go together",
+            "give the surveyed distance D+-S and one member's fixture pictures, SERIAL=FOLDER",
+        )
+    if reference_distance is None or reference_source is None:
+        return None
+    camera, sep, fixture = reference_source.partition("=")
+    if not sep or not camera or not fixture:
+        raise UsageError(
+            f"--reference-source '{reference_source}' is not SERIAL=SRC",
+            "name the member whose fixture pictures these are, e.g. --reference-source CAM-L=fixture/",
+        )
+    return RigGauge(camera, parse_reference_distance(reference_distance), fixture)
 
 
 def print_rig_calibration(cal: Any, active: bool) -> None:

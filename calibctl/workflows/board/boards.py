@@ -31,6 +31,7 @@ from calibctl.config import Settings
 from calibctl.core.board.board_gauge import K_SIGMA, UNIT_SLIPS, compare_span
 from calibctl.errors import InputError, UsageError
 from calibctl.store import sqlite_reads
+from calibctl.workflows.board.gauge_failures import board_failures, check_reregistration
 from calibctl.workflows.store_admin import keys
 
 if TYPE_CHECKING:
@@ -293,6 +294,9 @@ def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
 
     board = build_board(reg, created_by=settings.operator)
     with Store.open(settings.db_url, signer=keys.signer_of(settings)) as store:
+        if store.board_revisions(board.name):
+            previous = store.get_board(board.name, None)
+            check_reregistration(previous, board, board_failures(store, previous.ref))
         return store.add_board(board)
 
 

@@ -56,6 +56,13 @@ from calibctl.errors import CalibctlError, InconsistentDataError, InputError, Nu
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
 from calibctl.workflows.camera.capture import classify_photos
+from calibctl.workflows.camera.distance_gauge import (
+    ReferenceDistance,
+    board_distances_m,
+    detect_fixture_views,
+    distance_reason,
+    judge_distance,
+)
 from calibctl.workflows.lint.lint import adopt
 from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
 from calibctl.workflows.rig.rig_members import member_findings
@@ -71,6 +78,16 @@ class MemberFit:
     model: str
     fit_rms_px: float
     detector_rms_px: float | None
+
+
+@dataclass(frozen=True)
+class RigGauge:
+    """The metric gauge of a rig capture or solve: ``camera``'s pictures of the board in a fixture at
+    ``reference`` (``--reference-distance D+-S --reference-source SERIAL=SRC``)."""
+
+    camera: str
+    reference: ReferenceDistance
+    fixture: str
 
 
 @dataclass(frozen=True)
@@ -231,10 +248,13 @@ def solve_rig_folders(
     limits: LintThresholds | None = None,
     settings: Settings | None = None,
     designs: Sequence[DesignBaseline] = (),
+    gauge: RigGauge | None = None,
 ) -> RigFolderRun:
     """Run the folder flow (module docstring). The first source is the root camera; ``settings`` the station's
     (gates and lint; default: ``load_settings()``), ``limits`` its lint thresholds when given apart; ``designs``
-    the pairs' design baselines (``baseline-design``).
+    the pairs' design baselines (``baseline-design``); ``gauge``: the metric gauge, judged through that
+    camera's lens as the run leaves it (``metric-gauge``, seed chapter 0: the typed square size scales every
+    baseline and no residual shows it).
 
     Raises:
         InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
@@ -246,6 +266,11 @@ def solve_rig_folders(
     if model != "auto":
         get_model(model)  # an unknown name is a usage error before any photo is read
     cameras = tuple(sources)
+    if gauge is not None and gauge.camera not in cameras:
+        raise UsageError(
+            f"--reference-source names {gauge.camera}, not one of the cameras ({', '.join(cameras)})",
+            "give the fixture pictures of one camera: --reference-source SERIAL=FOLDER",
+        )
     for d in designs:
         if d.a not in cameras or d.b not in cameras or d.a == d.b:
             raise UsageError(
@@ -325,9 +350,40 @@ def solve_rig_folders(
         member_verdicts=verdicts,
         designs=tuple(designs),
     )
-    if not gate.passed:
-        return run
-    return judged_solve(run, model, refine_intrinsics, settings.lint)
+    judged = judged_solve(run, model, refine_intrinsics, settings.lint) if gate.passed else run
+    if gauge is None:
+        return judged
+    i = cameras.index(gauge.camera)
+    fit = fits.get(gauge.camera)
+    finding = gauge_finding(gauge, spec, members[i], fit.model if fit else model, workers)
+    return replace(judged, findings=(*judged.findings, *finding))
+
+
+def gauge_finding(
+    gauge: RigGauge, spec: BoardSpec, member: MemberIntrinsics, model: str, workers: int | None
+) -> list[Finding]:
+    """``metric-gauge`` of a folder rig: the fixture pictures' board distance through ``member``'s lens
+    against the surveyed one (an error outside 0.99-1.01, nothing when it passes). CalibctlError (exit 2)
+    when it cannot be judged (``distance_gauge.judge_distance``, ``detect_fixture_views``)."""
+    source = capture_sources.resolve_source(gauge.fixture)
+    views, _ = detect_fixture_views(
+        spec, "the board", source, member.image_size, f"camera {gauge.camera}", workers
+    )
+    recovered = board_distances_m(spec, views, member.camera_matrix, member.dist_coeffs, model)
+    d = judge_distance(gauge.reference, recovered, [v.name for v in views])
+    if d.passed:
+        return []
+    return [
+        Finding(
+            rule="metric-gauge",
+            severity="error",
+            value=d.ratio,
+            message=f"{gauge.camera}: {distance_reason(d)}: every baseline is scaled by it",
+            fix="measure the squares (calipers and a long span) and give that --square-mm, or register the "
+            "board (`calibctl board add`) and use `rig capture` + `rig solve`; check the fixture's surveyed "
+            "distance",
+        )
+    ]
 
 
 def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:
@@ -487,7 +543,7 @@ def run_json(run: RigFolderRun) -> dict[str, object]:
             for m in run.members
         ],
     }
-    if run.gate.passed:
+    if run.gate.passed or run.findings:  # a failed gate leaves no verdict to give, but the gauge judges
         out["verdict"] = "pass" if run.passed else "fail"
         out["lint"] = [f.model_dump(mode="json", exclude_none=True) for f in run.findings]
     sol = run.solution
