@@ -63,7 +63,7 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 R = TypeVar("R", bound=Base)
 MAX_ATTEMPTS = 5
-_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
+_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary", "inverted", "legacy_pattern")
 
 
 def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
