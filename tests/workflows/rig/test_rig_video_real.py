@@ -1,7 +1,7 @@
 """caliscope-4cam (../shared/datasets): four real webcams, one video each, an inverted ChArUco and the
-recorder's timestamps; full resolution, so ``slow``. Every camera finds the board, the frames pair by time, the rig is
-solved and every loop closure judged, and the poses land near the recorder's own (a peer's answer, not truth:
-benchmarks/results/rig_caliscope.md has the numbers and why they differ)."""
+recorder's timestamps; full resolution, so ``slow``. Every camera finds the board, the frames pair by time,
+the rig is solved and every loop closure judged, and the poses land near the recorder's own (a peer's answer,
+not truth: benchmarks/results/rig_caliscope.md has the numbers and why they differ)."""
 
 from __future__ import annotations
 
