@@ -3,12 +3,12 @@ frame detected, the frames of one instant paired by time (core.extrinsics.rig_ti
 
 Where the times come from:
 - ``--timestamps FILE``: the recorder's file (caliscope's ``timestamps.csv``:
-  ``cam_id,frame_index,frame_time``). Its cam_ids are the rig's camera names (``--source 0=cam_0.mp4``); a cam_id that is not a camera, a camera
-  it does not list, a frame listed twice, two frames of one camera at one time and frames past the end of the
-  video are refused, naming the file. ``frame_index`` is the frame's index in the video (or the image's place
-  in name order); a recorder that numbers the frames of its whole session (caliscope's frames 26..136 of a
-  111-frame file) is read from the file's first frame when its indices are one unbroken run exactly as long as
-  the video (said in the report as the offset).
+  ``cam_id,frame_index,frame_time``). Its cam_ids are the rig's camera names (``--source 0=cam_0.mp4``);
+  a cam_id that is not a camera, a camera it does not list, a frame listed twice, two frames of one camera
+  at one time and frames past the end of the video are refused, naming the file. ``frame_index`` is the
+  frame's index in the video (or the image's place in name order); a recorder that numbers the frames of its
+  whole session (caliscope's frames 26..136 of a 111-frame file) is read from the file's first frame when its
+  indices are one unbroken run exactly as long as the video (said in the report as the offset).
 - no file: the container's own per-frame times (``CAP_PROP_POS_MSEC``). Each video's clock starts at its own
   first frame, so those times compare only when the recordings started together: videos of different lengths
   or frame rates are refused (give the recorder's timestamps).
