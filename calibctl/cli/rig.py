@@ -30,9 +30,9 @@ def solve_folders(
         typer.Option(
             "--source",
             help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
-            "glob ('left*.jpg') or a list file as for capture; the first is the "
+            "glob ('left*.jpg'), a list file as for capture, or a video; the first is the "
             "root unless --root. Photos pair up by the last number in their "
-            "names.",
+            "names; videos (or --timestamps) by time.",
         ),
     ],
     cols: Annotated[int, typer.Option("--cols", help="Inner corners per row.")],
