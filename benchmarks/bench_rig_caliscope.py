@@ -35,11 +35,15 @@ import numpy as np
 from machine import cpu_model, load_1min  # benchmarks/machine.py (scripts run from benchmarks/)
 
 from calibctl.core.board.board_spec import BoardSpec, make_charuco_board
+from calibctl.core.board.views import BoardView
 from calibctl.core.capture.detect import detect_board
+from calibctl.core.extrinsics.rig_problem import RigViews
+from calibctl.core.extrinsics.rig_solve import solve_rig
+from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
 from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.errors import CalibctlError
-from calibctl.workflows.rig.rig_folders import solve_rig_folders
+from calibctl.workflows.rig.rig_folders import USABLE, calibrate_member, solve_rig_folders
 
 DATASETS = Path(
     os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
@@ -172,7 +176,7 @@ def calibctl_run(tolerance_ms: float, model: str) -> dict[str, object]:
     except CalibctlError as exc:
         return {"refused": exc.message, "time_s": time.perf_counter() - start}
     elapsed = time.perf_counter() - start
-    out: dict[str, object] = {"run": run, "time_s": elapsed}
+    out: dict[str, object] = {"run": run, "time_s": elapsed, "model": model}
     sol = run.solution
     if sol is not None:
         out["T_0"] = {cam: sol.T_a_b(0, sol.views.cameras.index(cam)) for cam in sol.views.cameras}
@@ -206,6 +210,72 @@ def motion_table(result: dict[str, object]) -> list[str]:
     return lines
 
 
+def bootstrap(result: dict[str, object], resamples: int, seed: int = 0) -> list[str]:
+    """Frame bootstrap of the one-sigma: rig frames drawn with replacement, each member re-calibrated on its
+    views in the drawn frames (the run's model), the rig re-solved; sd of T_0_c's baseline and rotation over
+    the resamples against the sigma the same procedure reports on all rig frames."""
+    run = result["run"]
+    cams, spec = run.cameras, BOARD  # type: ignore[attr-defined]
+    model = result["model"]
+    by_path = {o.path: o for c in cams for o in run.outcomes[c]}  # type: ignore[attr-defined]
+    frames = [photos for _, photos in run.match.frames]  # type: ignore[attr-defined]
+
+    def usable(o: object) -> bool:
+        return o is not None and o.status in USABLE and o.corner_ids is not None  # type: ignore[attr-defined]
+
+    def numbers(drawn: list[dict[str, str]]) -> list[tuple[float, float, float, float]]:
+        views = {c: [by_path[p[c]] for p in drawn if c in p and usable(by_path[p[c]])] for c in cams}
+        members = [
+            calibrate_member(c, [spec.object_points()[o.corner_ids] for o in vs], [o.corners_px for o in vs],
+                             IMAGE_SIZE, str(model))[0]
+            for c, vs in views.items()
+        ]  # fmt: skip
+        rows = tuple(
+            tuple(
+                BoardView(f"{i}", by_path[p[c]].corner_ids, by_path[p[c]].corners_px)
+                if c in p and usable(by_path[p[c]])
+                else None
+                for c in cams
+            )
+            for i, p in enumerate(drawn)
+        )
+        sol = solve_rig(
+            RigViews(cams, spec.object_points(), tuple(str(i) for i in range(len(drawn))), rows), members
+        )
+        out = []
+        for c in range(1, len(cams)):
+            T, cov = sol.T_a_b(c, 0), sol.pair_covariance(c, 0)
+            out.append((float(np.linalg.norm(T[:3, 3]) * 1e3), rotation_angle_deg(T[:3, :3]),
+                        sigma_translation_mm(cov, T[:3, 3]), sigma_rotation_deg(cov)))  # fmt: skip
+        return out
+
+    full = numbers(frames)
+    rng = np.random.default_rng(seed)
+    boot, skipped = [], 0
+    for _ in range(resamples):
+        try:
+            boot.append(numbers([frames[i] for i in rng.integers(0, len(frames), len(frames))]))
+        except CalibctlError:
+            skipped += 1
+    b = np.array(boot)  # (resamples, cameras - 1, 4)
+    lines = [
+        f"Frame bootstrap ({result['label']}): {len(boot)} resamples of the {len(frames)} rig frames "
+        f"({skipped} refused), members re-calibrated each time.",
+        "",
+        "| pair | baseline mm | sigma reported | bootstrap sd | sd / sigma | rotation deg | sigma reported | "
+        "bootstrap sd | sd / sigma |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for k, cam in enumerate(cams[1:]):
+        base, rot, s_t, s_r = full[k]
+        sd_t, sd_r = b[:, k, 0].std(ddof=1), b[:, k, 1].std(ddof=1)
+        lines.append(
+            f"| {cams[0]}-{cam} | {base:.1f} | {s_t:.2f} | {sd_t:.2f} | {sd_t / s_t:.2f} | {rot:.2f} | "
+            f"{s_r:.3f} | {sd_r:.3f} | {sd_r / s_r:.2f} |"
+        )
+    return lines
+
+
 def _compare(T: np.ndarray, ref: np.ndarray) -> tuple[float, float, float, float]:
     """baseline mm, rotation deg, |t - t_ref| mm, rotation between the two deg."""
     return (
@@ -222,6 +292,9 @@ def main() -> int:
         "--runs", default="5:k1k2,5:opencv-default,40:k1k2", help="TOLERANCE_MS:MODEL of each calibctl run"
     )
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--resamples", type=int, default=30, help="frame bootstrap of the first run (0: none)"
+    )
     args = parser.parse_args()
     if not SET.is_dir():
         print(f"caliscope-4cam not found at {SET}", file=sys.stderr)
@@ -325,6 +398,10 @@ def main() -> int:
         if "residuals" in result:
             lines += ["", f"Residual against the rig frame's time spread (calibctl, {tol}):", ""]
             lines += motion_table(result)
+    first_label, first = next(iter(runs.items()))
+    if args.resamples > 0 and first.get("run") is not None and first["run"].solution is not None:  # type: ignore[attr-defined]
+        first["label"] = first_label
+        lines += ["", *bootstrap(first, args.resamples)]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out is not None:
