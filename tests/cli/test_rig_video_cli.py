@@ -34,7 +34,8 @@ def _video(path: Path, frames: list[np.ndarray], fps: float = 6.0) -> Path:
 
 @pytest.fixture(scope="module")
 def videos(tmp_path_factory) -> Path:
-    """A.avi and B.avi: 3 frames each of an inverted ChArUco board; C.avi: 4 frames (a different length)."""
+    """A.avi and B.avi: 3 frames each of an inverted ChArUco board at 6 fps; C.avi: 4 frames (a different
+    length); D.avi: 3 frames at 10 fps."""
     out = tmp_path_factory.mktemp("videos")
     camera = PinholeCamera.seed_reference()
     rng = np.random.default_rng(4)
@@ -51,6 +52,7 @@ def videos(tmp_path_factory) -> Path:
     _video(out / "A.avi", frames[:3])
     _video(out / "B.avi", frames[1:4])
     _video(out / "C.avi", frames)
+    _video(out / "D.avi", frames[:3], fps=10.0)
     (out / "broken.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42 this is not a video" * 20)
     return out
 
@@ -84,6 +86,11 @@ def test_videos_of_different_lengths_without_timestamps_are_refused(run, videos,
     result = run(*_sources(videos, "A", "C"), *CHARUCO, "--inverted", "--export-dir", str(tmp_path / "out"))
     _refused(result, "different lengths", "A.avi: 3", "C.avi: 4", "--timestamps")
     assert not (tmp_path / "out").exists()
+
+
+def test_videos_of_different_frame_rates_without_timestamps_are_refused(run, videos):
+    result = run(*_sources(videos, "A", "D"), *CHARUCO, "--inverted")
+    _refused(result, "different frame rates", "A.avi: 6.0 fps", "D.avi: 10.0 fps", "--timestamps")
 
 
 def test_a_timestamps_file_naming_an_unknown_camera_is_refused(run, videos, tmp_path):
