@@ -44,12 +44,15 @@ class TimeGroup:
 
 @dataclass(frozen=True)
 class UnpairedFrame:
-    """A frame no group took; ``nearest_s``: time to the closest frame of another camera (inf when none)."""
+    """A frame no group took; ``nearest_s``: time to the closest frame of another camera (inf when none);
+    ``stretch_s``: when that frame is in a rig frame, the time span that rig frame would have with this one
+    in it (beyond the tolerance, or this camera has a frame there already), else None."""
 
     camera: str
     index: int
     t_s: float
     nearest_s: float
+    stretch_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -112,14 +115,28 @@ def pair_by_time(times: Mapping[str, Sequence[float]], tolerance_s: float) -> Ti
         ts = [e.t_s for _, e in members.values()]
         frames = {camera: members[camera][1].index for camera in times if camera in members}
         groups.append(TimeGroup(len(groups), frames, first.t_s, max(ts) - min(ts)))
-    return TimePairing(tuple(groups), tuple(_unpaired(alone, times)), tolerance_s)
+    return TimePairing(tuple(groups), tuple(_unpaired(alone, times, groups)), tolerance_s)
 
 
-def _unpaired(alone: Sequence[TimedFrame], times: Mapping[str, Sequence[float]]) -> list[UnpairedFrame]:
+def _unpaired(
+    alone: Sequence[TimedFrame], times: Mapping[str, Sequence[float]], groups: Sequence[TimeGroup]
+) -> list[UnpairedFrame]:
+    member_of = {(c, i): g for g in groups for c, i in g.frames.items()}
     out = []
     for e in alone:
-        others = [abs(t - e.t_s) for camera, ts in times.items() if camera != e.camera for t in ts]
-        out.append(UnpairedFrame(e.camera, e.index, e.t_s, min(others, default=math.inf)))
+        others = [
+            (abs(t - e.t_s), c, i) for c, ts in times.items() if c != e.camera for i, t in enumerate(ts)
+        ]
+        if not others:
+            out.append(UnpairedFrame(e.camera, e.index, e.t_s, math.inf))
+            continue
+        nearest, camera, index = min(others)
+        group = member_of.get((camera, index))
+        stretch = None
+        if group is not None:
+            spanned = [times[c][i] for c, i in group.frames.items()] + [e.t_s]
+            stretch = max(spanned) - min(spanned)
+        out.append(UnpairedFrame(e.camera, e.index, e.t_s, nearest, stretch))
     return out
 
 

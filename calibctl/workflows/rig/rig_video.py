@@ -40,6 +40,7 @@ from calibctl.core.extrinsics.rig_frames import FrameMatch, UnmatchedPhoto
 from calibctl.core.extrinsics.rig_time_pairs import (
     TimePairing,
     TimestampError,
+    UnpairedFrame,
     pair_by_time,
     parse_timestamps,
 )
@@ -302,12 +303,7 @@ def _paired(
         (g.key, {name: path[name][known[name][i]] for name, i in g.frames.items()}) for g in pairing.groups
     )
     unmatched = [
-        UnmatchedPhoto(
-            u.camera,
-            path[u.camera][known[u.camera][u.index]],
-            f"{OUTSIDE_TOLERANCE}: the nearest frame of another camera is {u.nearest_s * 1e3:.1f} ms away "
-            f"(tolerance {tolerance_ms:g} ms)",
-        )
+        UnmatchedPhoto(u.camera, path[u.camera][known[u.camera][u.index]], _outside(u, tolerance_ms))
         for u in pairing.unpaired
     ]
     unmatched += [
@@ -317,6 +313,17 @@ def _paired(
         if t is None
     ]
     return VideoRigCapture(FrameMatch(frames, tuple(unmatched)), cameras, pairing, timestamps)
+
+
+def _outside(frame: UnpairedFrame, tolerance_ms: float) -> str:
+    """Why a frame is in no rig frame, in words."""
+    nearest = f"the nearest frame of another camera is {frame.nearest_s * 1e3:.1f} ms away"
+    if frame.stretch_s is not None and frame.nearest_s * 1e3 <= tolerance_ms:
+        return (
+            f"{OUTSIDE_TOLERANCE}: {nearest}, in a rig frame this one would spread over "
+            f"{frame.stretch_s * 1e3:.1f} ms (tolerance {tolerance_ms:g} ms)"
+        )
+    return f"{OUTSIDE_TOLERANCE}: {nearest} (tolerance {tolerance_ms:g} ms)"
 
 
 def timing_json(capture: VideoRigCapture) -> dict[str, object]:

@@ -32,6 +32,16 @@ def test_a_frame_outside_the_tolerance_is_reported_with_its_distance_not_paired(
     assert math.isclose(pairing.unpaired[0].nearest_s, 0.012, abs_tol=1e-9)
 
 
+def test_a_frame_near_a_rig_frame_it_would_stretch_beyond_the_tolerance_says_so():
+    # C is 1.5 ms from B but 5.5 ms from A, which started the rig frame: C's frame would spread it to 5.5 ms
+    pairing = pair_by_time({"A": _times(0.0), "B": _times(4.0), "C": _times(5.5)}, 0.005)
+    assert dict(pairing.groups[0].frames) == {"A": 0, "B": 0}
+    late = pairing.unpaired[0]
+    assert (late.camera, late.index) == ("C", 0)
+    assert math.isclose(late.nearest_s, 0.0015, abs_tol=1e-9)
+    assert late.stretch_s is not None and math.isclose(late.stretch_s, 0.0055, abs_tol=1e-9)
+
+
 def test_a_dropped_frame_leaves_the_others_paired():
     pairing = pair_by_time(
         {"A": _times(0.0), "B": _times(1.0)[:2] + _times(1.0)[3:], "C": _times(3.0)}, 0.005
