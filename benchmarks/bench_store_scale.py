@@ -119,7 +119,7 @@ def plain_loop(url: str) -> float:
     with Store.open(url, create=False) as store, Session(store._engine) as s:  # noqa: SLF001
         t0 = time.perf_counter()
         for serial in s.scalars(select(ArtifactRow.serial).distinct()):
-            version = history.active_in(s, serial)
+            version = history.CAMERAS.active(s, serial)
             row = s.scalars(
                 select(ArtifactRow).where(ArtifactRow.serial == serial, ArtifactRow.version == version)
             ).one()

@@ -84,7 +84,7 @@ class ParameterCovariance(Document):
 
 
 class ViewLevelSigma(Document):
-    """The view-level check beside the Jacobian sigma (core/intrinsics/covariance.py, issue 22)."""
+    """The view-level check beside the Jacobian sigma, for per-view errors (core/intrinsics/covariance.py)."""
 
     sigma_factor: float = Field(
         ge=0,

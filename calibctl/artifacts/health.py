@@ -1,4 +1,4 @@
-"""What a robot sends instead of images: one health report (issue 25 item 3).
+"""What a robot sends instead of images: one health report.
 
 A robot in the field runs its own field instruments (seed chapter 6, prompt D: a re-check against the
 stored calibration, the gauge, triage, the time-offset estimate) and sends the numbers, one report per

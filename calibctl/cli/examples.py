@@ -204,7 +204,7 @@ def epilog(path: str) -> str:
     r"""The ``Examples:`` block for command ``path`` ("" is calibctl itself); ``\b`` keeps click
     from re-wrapping the lines."""
     examples = EXAMPLES.get(path)
-    if not examples:  # tests/cli/test_cli_habits.py fails on this; a user's --help never does
+    if not examples:  # tests/cli/app/test_cli_habits.py fails on this; a user's --help never does
         return ""
     lines = "\n".join(f"  $ {example}" for example in examples)
     return f"\b\nExamples:\n{lines}"

@@ -20,7 +20,8 @@ MAX_MOTION_ROWS = 30
 def _render(outcome) -> None:
     r = outcome.result
     stdout.print(
-        f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} from {escape(r.provenance.input_file)} "
+        f"hand-eye {escape(r.parent_frame)} -> {escape(r.child_frame)} "
+        f"from {escape(r.provenance.input_file)} "
         f"({r.provenance.input_shape}, {len(r.motions)} motions, method {r.method})"
     )
     for g in r.gates:
@@ -142,67 +143,37 @@ def handeye(
     json_output: JsonFlag = False,
 ) -> None:
     """Extrinsics from motion, A X = X B, gated on observability (exit 1 when a gate rejects)."""
+    from calibctl.cli.stored_edge import stored_line, stored_summary
     from calibctl.workflows.handeye import handeye as wf
+    from calibctl.workflows.handeye.handeye_run import run_handeye_command
 
-    settings = state(ctx).settings()
-    if rig is not None:
-        from calibctl.workflows.handeye import rig_handeye
-
-        rig_handeye.check_target(settings, rig, from_frame, to_frame, serial)  # exit 2 before any solve
-    outputs = wf.Outputs(out, tf_static, force)
-    if images is not None or serial is not None:
-        from calibctl.workflows.handeye import handeye_robot
-
-        outcome = handeye_robot.run_robot_handeye(
-            settings,
-            motions,
-            images,
-            serial,
-            from_frame,
-            to_frame,
-            board_ref=board,
-            eye_to_hand=eye_to_hand,
-            method=method,
-            lever_arm_sigma_min=lever_arm_sigma_min,
-            outputs=outputs,
-        )
-    else:
-        outcome = wf.run_handeye(
-            settings,
-            motions,
-            from_frame,
-            to_frame,
-            shape=input_shape,
-            method=method,
-            max_skew_s=max_skew_ms / 1e3,
-            lever_arm_sigma_min=lever_arm_sigma_min,
-            outputs=outputs,
-        )
-    stored = None
-    if rig is not None:
-        stored = rig_handeye.store_handeye(settings, rig, outcome.result).calibration
+    outcome = run_handeye_command(
+        state(ctx).settings(),
+        motions,
+        from_frame,
+        to_frame,
+        rig=rig,
+        images=images,
+        serial=serial,
+        board_ref=board,
+        eye_to_hand=eye_to_hand,
+        shape=input_shape,
+        method=method,
+        max_skew_s=max_skew_ms / 1e3,
+        lever_arm_sigma_min=lever_arm_sigma_min,
+        outputs=wf.Outputs(out, tf_static, force),
+    )
+    stored = outcome.stored
     if wants_json(ctx, json_output):
         emit_json(
             outcome.result
             if stored is None
-            else {
-                "result": outcome.result.model_dump(mode="json"),
-                "stored": {
-                    "rig": stored.rig,
-                    "version": stored.version,
-                    "status": stored.status,
-                    "active": stored.status == "accepted",
-                    "content_sha256": stored.content_sha256,
-                },
-            }
+            else {"result": outcome.result.model_dump(mode="json"), "stored": stored_summary(stored)}
         )
     else:
         _render(outcome)
         if stored is not None:
-            stdout.print(
-                f"stored as rig {escape(stored.rig)}@{stored.version} "
-                + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)")
-            )
+            stdout.print(escape(stored_line(stored)))
     if not outcome.accepted or (stored is not None and stored.status != "accepted"):
         raise typer.Exit(EXIT_VERDICT_FAIL)
 

@@ -35,14 +35,13 @@ def _num(value: float | None, spec: str = ".1f") -> str:
 
 
 def render_result(doc: dict[str, Any]) -> None:
-    """Human report of ``lidar_solve.run_lidar_solve``'s result."""
+    """Human report of ``lidar_solve.result_json``'s document."""
     counts = ", ".join(f"{k} {v}" for k, v in sorted(doc["outcome_counts"].items()))
     say(f"lidar solve: lens {doc['lens']} ({doc['lens_model']}); scans: {counts}")
     for r in doc["outcomes"]:
         name = r["scan"] or r["image"]
-        say(
-            f"  {str(r['frame']) if r['frame'] is not None else '-':>5} {name:<24} {r['outcome']:<19} {r['message']}"
-        )
+        frame = str(r["frame"]) if r["frame"] is not None else "-"
+        say(f"  {frame:>5} {name:<24} {r['outcome']:<19} {r['message']}")
     for g in doc["gates"]:
         say(f"  gate {g['gate']:<20}{'pass' if g['passed'] else 'FAIL'}  {g['message']}")
         if not g["passed"] and g["hint"]:
@@ -65,14 +64,18 @@ def render_result(doc: dict[str, Any]) -> None:
             + " deg"
         )
         say(
-            f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm (held-out {_num(m['held_out_plane_rms_mm'])} mm, "
-            f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm ({_num(m['projected_edge_rms_px'])} px in "
-            f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, {_num(m['held_out_projected_edge_rms_px'])} px)"
+            f"  point-to-plane RMS {_num(m['plane_rms_mm'])} mm "
+            f"(held-out {_num(m['held_out_plane_rms_mm'])} mm, "
+            f"{m['folds']}-fold), edge RMS {_num(m['edge_rms_mm'])} mm "
+            f"({_num(m['projected_edge_rms_px'])} px in "
+            f"the image, held-out {_num(m['held_out_edge_rms_mm'])} mm, "
+            f"{_num(m['held_out_projected_edge_rms_px'])} px)"
             f"; board dimension error {_num(m['dimension_error_mean_mm'][0], '+.1f')}, "
             f"{_num(m['dimension_error_mean_mm'][1], '+.1f')} mm"
         )
         say(
-            f"  range offset the board sizes ask for {_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
+            "  range offset the board sizes ask for "
+            f"{_num(m['range_offset_from_dimensions_mm'], '+.1f')} +/- "
             f"{_num(m['range_offset_from_dimensions_sigma_mm'])} mm"
             + (
                 ""
@@ -185,30 +188,20 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
-    import json
-
+    from calibctl.cli.stored_edge import stored_line, stored_summary
     from calibctl.core.lidar.target import BackingBoard
-    from calibctl.files import write_atomic
+    from calibctl.workflows.lidar import lidar_run
     from calibctl.workflows.lidar import lidar_solve as wf
 
     if scan_units not in ("m", "mm"):
         raise UsageError(f"--scan-units {scan_units!r} is not m or mm")
-    settings = state(ctx).settings()
-    if rig is not None:
-        from calibctl.workflows.lidar import rig_lidar
-
-        if camera_info is not None:
-            raise UsageError(
-                "--rig takes the camera as --serial (its active calibration), not --camera-info",
-                "the rig edge pins the calibration it was solved with",
-            )
-        rig_lidar.check_target(settings, rig, lidar_frame, serial)  # exit 2 before any scan is read
+    board: BackingBoard | str
     if board_ref is not None:
         if any(v is not None for v in (cols, rows, square_mm, backing_mm)):
             raise UsageError(
                 "give the target as --board NAME or as --cols/--rows/--square-mm/--backing-mm, not both"
             )
-        board = wf.board_from_store(settings, board_ref)
+        board = board_ref
     else:
         if cols is None or rows is None or square_mm is None or backing_mm is None:
             raise UsageError(
@@ -240,41 +233,23 @@ def solve(
         overlay,
         force,
     )
-    outcome = wf.run_lidar_solve(settings, req)
-    stored = None
-    if rig is not None:
-        described = (
-            board_ref
-            or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
-        )
-        ev = rig_lidar.evidence(outcome.result, req, lidar_frame, serial or "", described)
-        stored = rig_lidar.store_lidar(settings, rig, ev).calibration
-    written = [f"wrote {path}" for path in outcome.result.get("overlays", [])]
-    if out is not None:
-        write_atomic(out, json.dumps(outcome.result, indent=2, allow_nan=False) + "\n", force=force)
-        written.append(f"wrote {out}")
-    if tf_static is not None:
-        if outcome.accepted:
-            write_atomic(tf_static, wf.tf_static_yaml(outcome.result, lidar_frame, camera_frame), force=force)
-            written.append(f"wrote {tf_static}")
-        else:
-            written.append(f"not written: {tf_static} (rejected: no transform is published)")
+    described = (
+        board_ref
+        or f"{cols}x{rows} corners, {square_mm:g} mm, backing {backing_mm} mm, offset {pattern_offset_mm} mm"
+    )
+    target = None if rig is None else lidar_run.RigTarget(rig, lidar_frame, described)
+    files = lidar_run.LidarFiles(out, tf_static, lidar_frame, camera_frame, force)
+    outcome = lidar_run.run_lidar(state(ctx).settings(), req, files, target)
+    doc = wf.result_json(outcome)
+    stored = outcome.stored
+    written = list(outcome.written)
     if stored is not None:
-        outcome.result["stored"] = {
-            "rig": stored.rig,
-            "version": stored.version,
-            "status": stored.status,
-            "active": stored.status == "accepted",
-            "content_sha256": stored.content_sha256,
-        }
-        written.append(
-            f"stored as rig {stored.rig}@{stored.version} "
-            + ("(active)" if stored.status == "accepted" else "(rejected, never active; no edge)")
-        )
+        doc["stored"] = stored_summary(stored)
+        written.append(stored_line(stored))
     if wants_json(ctx, json_output):
-        emit_json(outcome.result)
+        emit_json(doc)
     else:
-        render_result(outcome.result)
+        render_result(doc)
         for line in written:
             say(line)
     if not outcome.accepted or (stored is not None and stored.status != "accepted"):

@@ -479,7 +479,8 @@ def export(
             "--format",
             help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
             "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
-            "URDF), kalibr, or bundle (all of them + manifest.json, -o DIR).",
+            "URDF), kalibr, bundle (all of them + manifest.json, -o DIR), or lut (each stereo pair's "
+            "rectification maps for cv2.remap, -o DIR).",
         ),
     ] = "json",
     out: Annotated[
@@ -487,7 +488,7 @@ def export(
         typer.Option(
             "-o",
             "--output",
-            help="Write to this file (ros: a folder or 'DIR/{camera}.yaml'; bundle: a new folder).",
+            help="Write to this file (ros: a folder or 'DIR/{camera}.yaml'; bundle, lut: a new folder).",
             show_default=False,
         ),
     ] = None,
@@ -510,7 +511,7 @@ def export(
         ),
     ] = None,
     force: Annotated[
-        bool, typer.Option("--force", help="Overwrite -o (bundle: only a folder calibctl wrote).")
+        bool, typer.Option("--force", help="Overwrite -o (bundle, lut: only a folder calibctl wrote).")
     ] = False,
     allow_rejected: Annotated[
         bool,
@@ -535,8 +536,9 @@ def export(
         ),
     ] = None,
 ) -> None:
-    """What a robot loads: OpenCV stereo FileStorage, ROS camera_info per camera, tf_static, URDF, Kalibr, or the
-    whole bundle. Exit 1 when `rig lint` fails the version now for a stale member (unless --allow-stale).
+    """What a robot loads: OpenCV stereo FileStorage, ROS camera_info per camera, tf_static, URDF, Kalibr, the
+    whole bundle, or the stereo pairs' rectification maps (lut). Exit 1 when `rig lint` fails the version
+    now for a stale member (unless --allow-stale).
 
     Frames are ROS names (REP 103 optical frames, docs/conventions.md): --frame maps a serial, the default
     is derived from it (LEFT-01 -> left_01_optical_frame). urdf is a complete <robot name="RIG">; tf and urdf

@@ -7,9 +7,7 @@ The table (``models.CheckEventRow``) is chained per serial (revision 0007, ``cha
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from datetime import datetime
-from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -17,26 +15,26 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.check import CheckEvent
 from calibctl.artifacts.common import sha256_hex
 from calibctl.errors import AlreadyExistsError
-from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import statuses
+from calibctl.store.history import CAMERAS
 from calibctl.store.models import CheckEventRow
+from calibctl.store.runner import Runner
 
 CHECK_EVENTS_MESSAGE = "check events are append-only"
 
 
-class CheckStoreMixin:
-    """Check-event methods of ``Store`` (which provides ``_run``)."""
+class CheckStore:
+    """The Store's check events."""
 
-    _run: Callable[..., Any]
-    signer: Signer | None
+    def __init__(self, runner: Runner) -> None:
+        self._runner = runner
 
     def add_check(self, event: CheckEvent) -> CheckEvent:
         """Append a check event; its calibration version must exist (NotFoundError naming the serials)."""
         payload = codec.canonical_text(event)
 
         def work(s: Session) -> CheckEvent:
-            statuses(s, event.serial)  # an unknown serial is a NotFoundError, not a foreign-key error
+            CAMERAS.statuses(s, event.serial)  # an unknown serial is a NotFoundError, not a foreign-key error
             if s.scalar(select(CheckEventRow.id).where(CheckEventRow.check_id == event.check_id)) is not None:
                 raise AlreadyExistsError(f"check {event.check_id} is already stored")
             counters.next_value(s, "check", event.serial)  # the serial's check chain: its lock and its length
@@ -49,12 +47,12 @@ class CheckStoreMixin:
                 payload=payload,
                 payload_sha256=sha256_hex(payload.encode("utf-8")),
             )
-            chain.link(s, chain.STREAMS["check"], row, self.signer)
+            chain.link(s, chain.STREAMS["check"], row, self._runner.signer)
             s.add(row)
             s.flush()
             return event
 
-        return self._run(work, write=True)
+        return self._runner.run(work, write=True)
 
     def checks(self, serial: str) -> list[CheckEvent]:
         """Every check of ``serial``, oldest first."""
@@ -65,7 +63,7 @@ class CheckStoreMixin:
             )
             return [codec.decode_check(r) for r in rows]
 
-        return self._run(work)
+        return self._runner.run(work)
 
     def checks_since(self, serials: list[str], since: datetime) -> list[tuple[CheckEvent, str]]:
         """Every check of ``serials`` stamped at or after ``since``, oldest first, each with its row's payload
@@ -79,4 +77,4 @@ class CheckStoreMixin:
             )
             return [(codec.decode_check(r), r.payload_sha256) for r in rows]
 
-        return self._run(work) if serials else []
+        return self._runner.run(work) if serials else []

@@ -24,6 +24,7 @@ if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (
     from calibctl.artifacts.check import CheckEvent
     from calibctl.artifacts.events import ActivationEvent
     from calibctl.artifacts.fleet import FleetEvent
+    from calibctl.artifacts.rig import RigActivation
     from calibctl.artifacts.session import CaptureSession
     from calibctl.store.models import (
         ArtifactRow,
@@ -31,6 +32,7 @@ if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (
         CheckEventRow,
         EventRow,
         FleetEventRow,
+        RigEventRow,
         SessionRow,
     )
 
@@ -245,20 +247,30 @@ def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
 # events -------------------------------------------------------------------------------------------
 
 
+def _event_fields(row: EventRow | RigEventRow) -> dict[str, Any]:
+    """The columns a camera's and a rig's activation event share (only the subject column differs)."""
+    return {
+        "event_id": row.id,
+        "version": row.version,
+        "previous_version": row.previous_version,
+        "kind": row.kind,
+        "actor": row.actor,
+        "station": row.station,
+        "at": row.at,
+        "reason": row.reason,
+    }
+
+
 def decode_event(row: EventRow) -> ActivationEvent:
     from calibctl.artifacts.events import ActivationEvent
 
-    return ActivationEvent(
-        event_id=row.id,
-        serial=row.serial,
-        version=row.version,
-        previous_version=row.previous_version,
-        kind=row.kind,
-        actor=row.actor,
-        station=row.station,
-        at=row.at,
-        reason=row.reason,
-    )
+    return ActivationEvent(serial=row.serial, **_event_fields(row))
+
+
+def decode_rig_event(row: RigEventRow) -> RigActivation:
+    from calibctl.artifacts.rig import RigActivation
+
+    return RigActivation(rig=row.rig, **_event_fields(row))
 
 
 # check events -------------------------------------------------------------------------------------

@@ -8,9 +8,8 @@ names a registered robot, a serial it carries and a stored version of that seria
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -18,19 +17,14 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.errors import AlreadyExistsError, NotFoundError, StaleActiveVersionError, UsageError
-from calibctl.signing import Signer, TrustedKeys
+from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters, fleet_checkpoints
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet_checkpoints import Loaded
-from calibctl.store.history import check_rollback, statuses
-from calibctl.store.models import EventRow, FleetEventRow, RigEventRow
-from calibctl.store.rigs import (
-    active_rig,
-    append_rig_event,
-    decode_calibration,
-    rig_calibration_row,
-    rig_statuses,
-)
+from calibctl.store.history import CAMERAS
+from calibctl.store.models import FleetEventRow
+from calibctl.store.rigs import RIGS
+from calibctl.store.runner import Runner
 
 
 @dataclass(frozen=True)
@@ -55,12 +49,11 @@ def _registration(s: Session, robot: str) -> FleetEvent | None:
     return None if row is None else decode_fleet_event(row)
 
 
-class FleetStoreMixin:
-    """Fleet methods of ``Store`` (which provides ``_run``)."""
+class FleetStore:
+    """The Store's fleet log (and the rig activations a fleet step makes with it)."""
 
-    _run: Callable[..., Any]
-    signer: Signer | None
-    trusted: TrustedKeys | None
+    def __init__(self, runner: Runner) -> None:
+        self._runner = runner
 
     def add_fleet_event(self, event: FleetEvent) -> int:
         """Append ``event`` to the fleet's log; its position (1, 2, ...). Refused, nothing written: a second
@@ -101,16 +94,16 @@ class FleetStoreMixin:
                     payload=payload,
                     payload_sha256=sha256_hex(payload.encode("utf-8")),
                 )
-                chain.link(s, chain.STREAMS["fleet"], row, self.signer)
+                chain.link(s, chain.STREAMS["fleet"], row, self._runner.signer)
                 s.add(row)
                 s.flush()
             for step in rig_steps:
-                _activate_rig(s, step, events[-1], self.signer)
+                _activate_rig(s, step, events[-1], self._runner.signer)
             if position > current:
-                fleet_checkpoints.write_if_due(s, position, self.signer)
+                fleet_checkpoints.write_if_due(s, position, self._runner.signer)
             return position
 
-        return self._run(work, write=True)
+        return self._runner.run(work, write=True)
 
     def active_versions(self) -> tuple[dict[str, int], dict[str, int]]:
         """Every serial's and every rig's active version (its latest activation event's), two queries in all:
@@ -118,7 +111,8 @@ class FleetStoreMixin:
 
         def work(s: Session) -> tuple[dict[str, int], dict[str, int]]:
             out = []
-            for table, key in ((EventRow, EventRow.serial), (RigEventRow, RigEventRow.rig)):
+            for history in (CAMERAS, RIGS):
+                table, key = history.event_model, getattr(history.event_model, history.key)
                 latest = select(func.max(table.id).label("id")).group_by(key).subquery()
                 out.append(
                     {
@@ -130,22 +124,22 @@ class FleetStoreMixin:
                 )
             return out[0], out[1]
 
-        return self._run(work)
+        return self._runner.run(work)
 
     def fleet(self) -> Loaded:
         """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the events
         after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
 
         def work(s: Session) -> Loaded:
-            loaded = fleet_checkpoints.load(s, trusted=self.trusted)
+            loaded = fleet_checkpoints.load(s, trusted=self._runner.trusted)
             loaded.fleet.settle()
             return loaded
 
-        return self._run(work)
+        return self._runner.run(work)
 
     def fleet_events(self) -> list[FleetEvent]:
         """The whole fleet log, oldest first."""
-        return self._run(
+        return self._runner.run(
             lambda s: [
                 decode_fleet_event(r) for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))
             ]
@@ -168,9 +162,9 @@ def _check(s: Session, event: FleetEvent) -> None:
                 f"rollout {event.subject} exists already", "name the new rollout differently"
             )
         for serial, version in event.targets.items():
-            _check_version(s, serial, version, "roll out")
+            CAMERAS.check_target(s, serial, version, "roll out")
         for rig, version in event.rig_targets.items():
-            _check_rig_version(s, rig, version, "roll out")
+            RIGS.check_target(s, rig, version, "roll out")
         for robot in event.canary:
             if _registration(s, robot) is None:
                 raise NotFoundError(
@@ -182,20 +176,17 @@ def _check(s: Session, event: FleetEvent) -> None:
 
 
 def _activate_rig(s: Session, step: RigActivationStep, event: FleetEvent, signer: Signer | None) -> None:
-    counters.lock(s, "rig", step.rig)
-    already = check_rollback(
-        f"rig {step.rig}",
+    RIGS.move(
+        s,
+        step.rig,
         step.version,
-        rig_statuses(s, step.rig),
-        active_rig(s, step.rig),
+        step.kind,
+        event.actor,
+        event.station,
+        step.reason,
         step.expected_active,
-        f"calibctl rig history {step.rig}",
+        signer,
     )
-    decode_calibration(rig_calibration_row(s, step.rig, step.version))  # never activate tampered bytes
-    if not already:
-        append_rig_event(
-            s, step.rig, step.version, step.kind, event.actor, event.station, step.reason, signer
-        )
 
 
 def _rollout(s: Session, name: str) -> FleetEvent | None:
@@ -203,36 +194,6 @@ def _rollout(s: Session, name: str) -> FleetEvent | None:
         select(FleetEventRow).where(FleetEventRow.subject == name, FleetEventRow.kind == "rollout").limit(1)
     ).first()
     return None if row is None else decode_fleet_event(row)
-
-
-def _check_version(s: Session, serial: str, version: int, what: str) -> None:
-    known = statuses(s, serial)  # NotFoundError for an unknown serial
-    status = known.get(version)
-    if status is None:
-        raise NotFoundError(
-            f"{serial} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
-            f"see `calibctl history {serial}`",
-        )
-    if status != "accepted":
-        raise UsageError(
-            f"{serial}@{version} is {status}: a robot must not run it, so it cannot {what}",
-            "name an accepted version (`calibctl history SERIAL`)",
-        )
-
-
-def _check_rig_version(s: Session, rig: str, version: int, what: str) -> None:
-    known = rig_statuses(s, rig)  # NotFoundError for a rig with no calibration
-    status = known.get(version)
-    if status is None:
-        raise NotFoundError(
-            f"rig {rig} has no version {version}; versions: {', '.join(str(v) for v in sorted(known))}",
-            f"see `calibctl rig history {rig}`",
-        )
-    if status != "accepted":
-        raise UsageError(
-            f"rig {rig}@{version} is {status}: a robot must not run it, so it cannot {what}",
-            "name an accepted version (`calibctl rig history RIG`)",
-        )
 
 
 def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | None) -> None:
@@ -249,7 +210,7 @@ def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | No
                 f"{', '.join(registered.rigs) or 'none'})",
                 "assign one of its own rigs",
             )
-        _check_rig_version(s, event.rig, event.version, "be assigned")
+        RIGS.check_target(s, event.rig, event.version, "be assigned")
         return
     assert event.serial is not None
     if event.serial not in registered.serials:
@@ -258,4 +219,4 @@ def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | No
             f"{', '.join(registered.serials) or 'no camera serials'})",
             "assign one of its own serials",
         )
-    _check_version(s, event.serial, event.version, "be assigned")
+    CAMERAS.check_target(s, event.serial, event.version, "be assigned")

@@ -8,10 +8,9 @@ and carries its serial, and its ``source_id`` is new (in the store and in the ba
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any
 
 from sqlalchemy import Table, func, insert, select
 from sqlalchemy.orm import Session
@@ -23,6 +22,7 @@ from calibctl.store import codec
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet import _registration
 from calibctl.store.models import CheckEventRow, FleetEventRow, HealthReportRow
+from calibctl.store.runner import Runner
 
 _CHUNK = 500  # source ids per IN (...) query: under SQLite's bound-parameter limit
 HEALTH_TABLE: Table = HealthReportRow.__table__  # type: ignore[assignment]  # a mapped class's Table
@@ -127,10 +127,11 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
     return out
 
 
-class HealthStoreMixin:
-    """Health-report methods of ``Store`` (which provides ``_run``)."""
+class HealthStore:
+    """The Store's health reports."""
 
-    _run: Callable[..., Any]
+    def __init__(self, runner: Runner) -> None:
+        self._runner = runner
 
     def add_health_reports(self, reports: Sequence[HealthReport]) -> list[tuple[int, str]]:
         """Store ``reports`` in one transaction, or none of them: the (index, why) of each refused one (then
@@ -163,12 +164,12 @@ class HealthStoreMixin:
             s.connection().execute(insert(HEALTH_TABLE), rows)
             return []
 
-        return self._run(work, write=True)
+        return self._runner.run(work, write=True)
 
     def health_rows(self, serial: str) -> list[HealthRow]:
         """Every stored report on ``serial``, oldest first."""
         cols = [getattr(HealthReportRow, n) for n in ("serial", "kind", "at", *NUMBERS)]
-        return self._run(
+        return self._runner.run(
             lambda s: [
                 HealthRow(*row)
                 for row in s.execute(
@@ -187,7 +188,7 @@ class HealthStoreMixin:
             .where(HealthReportRow.kind == "check", *([] if since is None else [HealthReportRow.at >= since]))
             .group_by(HealthReportRow.serial)
         )
-        return self._run(
+        return self._runner.run(
             lambda s: {str(serial): (float(mean), int(n)) for serial, mean, n in s.execute(stmt)}
         )
 
@@ -218,7 +219,9 @@ class HealthStoreMixin:
         )
         if not robots or not serials:
             return []
-        return self._run(lambda s: [GateReport(*row) for row in s.execute(stmt)])
+        return self._runner.run(lambda s: [GateReport(**row._asdict()) for row in s.execute(stmt)])
 
     def health_report_count(self) -> int:
-        return self._run(lambda s: int(s.scalar(select(func.count()).select_from(HealthReportRow)) or 0))
+        return self._runner.run(
+            lambda s: int(s.scalar(select(func.count()).select_from(HealthReportRow)) or 0)
+        )

@@ -15,9 +15,8 @@ from __future__ import annotations
 import datetime as dt
 import errno
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from sqlalchemy import delete, select
 from sqlalchemy.engine import URL
@@ -28,6 +27,7 @@ from calibctl.errors import UsageError
 from calibctl.files import file_errors, write_atomic
 from calibctl.store.engine import sqlite_path
 from calibctl.store.models import ImageRow
+from calibctl.store.runner import Runner
 
 IMAGE_DIR_ENV = "CALIBCTL_IMAGE_DIR"
 IMAGE_DIR_NAME = "calibctl-images"
@@ -128,11 +128,12 @@ def _has_file(path: Path, size: int) -> bool:
     return path.exists() and path.stat().st_size == size
 
 
-class ImageStoreMixin:
-    """The image methods of the Store (it provides ``image_dir`` and ``_run``)."""
+class ImageStore:
+    """The Store's images: files in ``image_dir``, their rows in the database."""
 
-    image_dir: Path
-    _run: Callable[..., Any]
+    def __init__(self, runner: Runner, image_dir: Path) -> None:
+        self._runner = runner
+        self.image_dir = image_dir
 
     def put_image(self, data: bytes, *, retention_days: int) -> str:
         """Keep ``data`` for ``retention_days`` (an image stored again keeps the later expiry); returns its sha256."""
@@ -176,13 +177,13 @@ class ImageStoreMixin:
         # whose rows never committed is an unreferenced, complete file that the next capture reuses.
         for sha in missing():
             write_durably(image_file(self.image_dir, sha), by_sha[sha])
-        self._run(work, write=True, retry_conflicts=True)
+        self._runner.run(work, write=True, retry_conflicts=True)
         return shas
 
     def image_path(self, sha256: str) -> Path | None:
         """The file of a kept image, or None when it was never stored, has been pruned or is missing."""
         path = image_file(self.image_dir, sha256)
-        row = self._run(lambda s: s.get(ImageRow, sha256))
+        row = self._runner.run(lambda s: s.get(ImageRow, sha256))
         return path if row is not None and path.exists() else None
 
     def orphan_images(self, now: dt.datetime | None = None, grace_s: float = ORPHAN_GRACE_S) -> list[Path]:
@@ -209,7 +210,7 @@ class ImageStoreMixin:
                 )
             return found
 
-        known = self._run(work)
+        known = self._runner.run(work)
         return [path for sha, path in sorted(on_disk.items()) if sha not in known]
 
     def prune_images(self, now: dt.datetime | None = None) -> int:
@@ -227,7 +228,7 @@ class ImageStoreMixin:
                     image_file(self.image_dir, sha).unlink(missing_ok=True)
             return len(expired)
 
-        pruned = int(self._run(work, write=True))
+        pruned = int(self._runner.run(work, write=True))
         for path in self.orphan_images(when):  # a failed capture's files: no row refers to them
             path.unlink(missing_ok=True)
             pruned += 1

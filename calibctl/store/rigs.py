@@ -4,37 +4,36 @@ immutable in the database (revision 0003's triggers), the active version is the 
 versions (per rig) and activation events (one log) are hash-chained and signed like the cameras'
 (revision 0007, ``chain.STREAMS["rig"]`` and ``["rig_event"]``), and so are the definitions (revision
 0008, ``["rig_definition"]``, one log). Rig sessions are not chained, like the cameras' capture
-sessions (docs/trust.md says why).
+sessions (docs/trust.md says why). The version history itself is ``RIGS``, a ``history.VersionHistory``:
+the same code as the cameras', so a rig rollback, a hand-eye edge's compare-and-set and a fleet step
+behave as a camera's do.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from calibctl.artifacts.common import sha256_hex, utc_now
+from calibctl.artifacts.common import sha256_hex
 from calibctl.errors import (
     AlreadyExistsError,
     IntegrityError,
     NotFoundError,
-    StaleActiveVersionError,
     UsageError,
     named_list,
 )
-from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
-from calibctl.store.history import KNOWN_SHOWN, UNCHECKED, check_rollback
+from calibctl.store.history import KNOWN_SHOWN, UNCHECKED, VersionHistory, check_rollback_reason
 from calibctl.store.models import RigCalibrationRow, RigEventRow, RigRow, RigSessionRow, SessionRow
+from calibctl.store.runner import Runner
 
 if TYPE_CHECKING:  # the rig models are built when a rig is read or written, not by every store command
     from calibctl.artifacts.rig import RigActivation, RigCalibration, RigDefinition, RigSession
     from calibctl.artifacts.session import CaptureSession
-
-T = TypeVar("T")
 
 
 def _decode_hashed(model: type[Any], payload: str, recorded: str, what: str) -> Any:
@@ -82,82 +81,39 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
     )  # the row's, never the payload's
 
 
-def _event(row: RigEventRow) -> RigActivation:
-    from calibctl.artifacts.rig import RigActivation
-
-    return RigActivation(
-        event_id=row.id,
-        rig=row.rig,
-        version=row.version,
-        previous_version=row.previous_version,
-        kind=row.kind,
-        actor=row.actor,
-        station=row.station,
-        at=row.at,
-        reason=row.reason,
-    )
-
-
-def rig_calibration_row(s: Session, rig: str, version: int) -> RigCalibrationRow:
-    return s.scalars(
-        select(RigCalibrationRow).where(RigCalibrationRow.rig == rig, RigCalibrationRow.version == version)
-    ).one()
-
-
-def _active(s: Session, rig: str) -> int | None:
-    return s.scalar(
-        select(RigEventRow.version).where(RigEventRow.rig == rig).order_by(RigEventRow.id.desc()).limit(1)
-    )
-
-
-def _append(
-    s: Session,
-    rig: str,
-    version: int,
-    kind: str,
-    actor: str,
-    station: str,
-    reason: str,
-    signer: Signer | None,
-) -> RigActivation:
-    """Append one event to the store's rig event log (one hash chain; its counter row is the chain's lock)."""
-    counters.next_value(s, "chain", "rig_event")
-    row = RigEventRow(
-        rig=rig,
-        version=version,
-        previous_version=_active(s, rig),
-        kind=kind,
-        actor=actor,
-        station=station,
-        at=utc_now(),
-        reason=reason,
-    )
-    chain.link(s, chain.STREAMS["rig_event"], row, signer)
-    s.add(row)
-    s.flush()
-    return _event(row)
-
-
-def _statuses(s: Session, rig: str) -> dict[int, str]:
-    rows = s.execute(
-        select(RigCalibrationRow.version, RigCalibrationRow.status)
-        .where(RigCalibrationRow.rig == rig)
-        .order_by(RigCalibrationRow.version)
-    ).all()
-    if rows:
-        return {int(v): str(st) for v, st in rows}
+def _no_calibration(s: Session, rig: str) -> NoReturn:
     raise NotFoundError(
         f"rig {rig} has no calibration yet", f"run `calibctl rig solve {rig}` after a rig capture"
     )
 
 
-class RigStoreMixin:
-    """Rig methods of ``Store`` (which provides ``_run``)."""
+RIGS: VersionHistory[RigCalibration, RigActivation] = VersionHistory(
+    scope="rig",
+    version_model=RigCalibrationRow,
+    event_model=RigEventRow,
+    key="rig",
+    event_stream="rig_event",
+    label=lambda rig: f"rig {rig}",
+    history_command=lambda rig: f"calibctl rig history {rig}",
+    placeholder="RIG",
+    decode=decode_calibration,
+    decode_event=codec.decode_rig_event,
+    no_versions=_no_calibration,
+    solve_again=lambda rig: (
+        f"solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig capture` if its lint "
+        "blames the capture)"
+    ),
+    active_must_be_accepted=False,
+)
+"""The rigs' calibrations: versions per rig, one activation log for the store."""
 
-    _run: Callable[..., Any]
-    _served: Callable[[Session, str, Any], None]
-    _session_linked: Callable[[Session, SessionRow], SessionRow]
-    signer: Signer | None
+
+class RigStore:
+    """The Store's rigs: definitions, rig sessions and versioned rig calibrations."""
+
+    def __init__(self, runner: Runner, session_linked: Callable[[Session, SessionRow], SessionRow]) -> None:
+        self._runner = runner
+        self._session_linked = session_linked  # the member capture sessions are numbered and chained
 
     # definitions ---------------------------------------------------------------------------------
 
@@ -179,11 +135,11 @@ class RigStoreMixin:
                 payload=payload,
                 payload_sha256=sha256_hex(payload.encode("utf-8")),
             )
-            chain.link(s, chain.STREAMS["rig_definition"], row, self.signer)
+            chain.link(s, chain.STREAMS["rig_definition"], row, self._runner.signer)
             s.add(row)
             return rig
 
-        return self._run(work, write=True)
+        return self._runner.run(work, write=True)
 
     def get_rig(self, name: str) -> RigDefinition:
         def work(s: Session) -> RigDefinition:
@@ -194,7 +150,7 @@ class RigStoreMixin:
                 raise NotFoundError(f"unknown rig '{name}'; {listing}", "register it with `calibctl rig add`")
             return decode_definition(row, by_chain=True)
 
-        return self._run(work)
+        return self._runner.run(work)
 
     # sessions ------------------------------------------------------------------------------------
 
@@ -220,7 +176,7 @@ class RigStoreMixin:
             )
             s.flush()
 
-        self._run(work, write=True, retry_conflicts=True)
+        self._runner.run(work, write=True, retry_conflicts=True)
 
     def get_rig_session(self, rig: str, rig_session_id: str | None = None) -> RigSession:
         """A rig session by id, or the rig's latest accepted one."""
@@ -243,7 +199,7 @@ class RigStoreMixin:
             )
             return out
 
-        return self._run(work)
+        return self._runner.run(work)
 
     # calibrations --------------------------------------------------------------------------------
 
@@ -265,20 +221,9 @@ class RigStoreMixin:
         if activate and cal.status != "accepted":
             raise UsageError(f"rig {cal.rig}: a {cal.status} calibration can never become active")
 
-        def work(s: Session) -> RigCalibration:
-            version = counters.next_value(s, "rig", cal.rig)  # the rig's lock until this transaction ends
-            active = _active(s, cal.rig)
-            if based_on is not UNCHECKED and active != based_on:
-                seen = f"{cal.rig}@{based_on}" if based_on is not None else "no active version"
-                raise StaleActiveVersionError(
-                    f"rig {cal.rig}: the active version changed underneath this write (it was built on {seen}, "
-                    f"the active version is now {cal.rig}@{active}); nothing stored",
-                    f"look at `calibctl rig history {cal.rig}` and run the command again on {cal.rig}@{active}",
-                )
-            stored = cal.model_copy(
-                update={"version": version}
-            ).sealed()  # sealed drops an imported signature
-            row = RigCalibrationRow(
+        def build(version: int) -> tuple[RigCalibration, RigCalibrationRow]:
+            stored = cal.model_copy(update={"version": version}).sealed()  # drops an imported signature
+            return stored, RigCalibrationRow(
                 rig=stored.rig,
                 version=version,
                 status=stored.status,
@@ -286,71 +231,25 @@ class RigStoreMixin:
                 payload=codec.canonical_text(stored),
                 content_sha256=stored.content_sha256,
             )
-            chain.link(s, chain.STREAMS["rig"], row, self.signer)
-            s.add(row)
-            s.flush()
-            if activate:
-                _append(s, stored.rig, version, "activate", actor, station, reason, self.signer)
-            return codec.with_signature(stored, row, f"rig {stored.rig}@{version}")
 
-        return self._run(work, write=True)
+        def work(s: Session) -> RigCalibration:
+            stored, row = RIGS.add(
+                s, cal.rig, build, activate, actor, station, reason, self._runner.signer, based_on=based_on
+            )
+            return codec.with_signature(stored, row, f"rig {stored.rig}@{stored.version}")
+
+        return self._runner.run(work, write=True)
 
     def get_rig_calibration(self, rig: str, version: int | None = None) -> RigCalibration:
         """``rig@version``; None means the active version."""
 
-        def work(s: Session) -> RigCalibration:
-            statuses = _statuses(s, rig)
-            wanted = _active(s, rig) if version is None else version
-            if wanted is None:
-                listing = named_list([f"{v} ({st})" for v, st in statuses.items()], KNOWN_SHOWN)
-                raise NotFoundError(
-                    f"rig {rig} has no active version; versions: {listing}",
-                    f"ask for a version ({rig}@N) or roll back to an accepted one"
-                    if "accepted" in statuses.values()
-                    else f"none is accepted: solve the rig again (`calibctl rig solve {rig}`, after a new `calibctl rig "
-                    f"capture` if its lint blames the capture), or ask for a version ({rig}@N) to inspect it",
-                )
-            if wanted not in statuses:
-                raise NotFoundError(
-                    f"rig {rig} has no version {wanted}; versions: {named_list(list(statuses), KNOWN_SHOWN)}",
-                    f"see `calibctl rig history {rig}`",
-                )
-            row = s.scalars(
-                select(RigCalibrationRow).where(
-                    RigCalibrationRow.rig == rig, RigCalibrationRow.version == wanted
-                )
-            ).one()
-            cal = decode_calibration(row)
-            self._served(s, "rig", row)
-            if version is None:  # the event that makes it active is served too
-                self._served(
-                    s,
-                    "rig_event",
-                    s.scalars(
-                        select(RigEventRow)
-                        .where(RigEventRow.rig == rig)
-                        .order_by(RigEventRow.id.desc())
-                        .limit(1)
-                    ).first(),
-                )
-            return cal
-
-        return self._run(work)
+        return self._runner.run(lambda s: RIGS.read(s, rig, version, self._runner.served))
 
     def list_rig_calibrations(self, rig: str) -> list[RigCalibration]:
-        def work(s: Session) -> list[RigCalibration]:
-            _statuses(s, rig)
-            rows = s.scalars(
-                select(RigCalibrationRow)
-                .where(RigCalibrationRow.rig == rig)
-                .order_by(RigCalibrationRow.version)
-            )
-            return [decode_calibration(r) for r in rows]
-
-        return self._run(work)
+        return self._runner.run(lambda s: RIGS.documents(s, rig))
 
     def active_rig_version(self, rig: str) -> int | None:
-        return self._run(lambda s: _active(s, rig))
+        return self._runner.run(lambda s: RIGS.active(s, rig))
 
     def rollback_rig(
         self,
@@ -367,41 +266,18 @@ class RigStoreMixin:
 
         Compare-and-set like the cameras' ``Store.rollback``: ``expected_active`` is the active version the
         caller decided on (None: nothing was active); when another writer moved it since (a solve, a
-        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer one)."""
-        if not reason.strip():
-            raise UsageError("a rollback needs a reason", "pass --reason 'why this version'")
-
-        def work(s: Session) -> RigActivation | None:
-            counters.lock(s, "rig", rig)
-            already = check_rollback(
-                f"rig {rig}",
-                to_version,
-                _statuses(s, rig),
-                _active(s, rig),
-                expected_active,
-                f"calibctl rig history {rig}",
-            )
-            decode_calibration(rig_calibration_row(s, rig, to_version))
-            if already:
-                return None
-            return _append(s, rig, to_version, "rollback", actor, station, reason, self.signer)
-
-        return self._run(work, write=True)
-
-    def rig_events(self, rig: str) -> list[RigActivation]:
-        return self._run(
-            lambda s: [
-                _event(r)
-                for r in s.scalars(select(RigEventRow).where(RigEventRow.rig == rig).order_by(RigEventRow.id))
-            ]
+        hand-eye edge, another rollback), nothing is written (StaleActiveVersionError naming the newer
+        one)."""
+        check_rollback_reason(reason)
+        return self._runner.run(
+            lambda s: RIGS.move(
+                s, rig, to_version, "rollback", actor, station, reason, expected_active, self._runner.signer
+            ),
+            write=True,
         )
 
-
-active_rig, append_rig_event, rig_statuses = (
-    _active,
-    _append,
-    _statuses,
-)  # for the fleet's rig steps (store.fleet)
+    def rig_events(self, rig: str) -> list[RigActivation]:
+        return self._runner.run(lambda s: RIGS.events(s, rig))
 
 
 def rig_member_session_ids(s: Session) -> set[str]:

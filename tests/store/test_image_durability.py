@@ -22,7 +22,7 @@ MAX_POINTS = 60  # a guard against a sweep that never ends; the work has about 2
 
 
 def _rows(store: Store) -> set[str]:
-    return set(store._run(lambda s: list(s.scalars(select(ImageRow.sha256)))))
+    return set(store._runner.run(lambda s: list(s.scalars(select(ImageRow.sha256)))))
 
 
 def _check_no_row_without_its_file(store: Store) -> set[str]:

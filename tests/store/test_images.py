@@ -92,17 +92,17 @@ def test_a_failed_captures_files_are_found_and_pruned_after_the_grace(store: Sto
     from calibctl.store.images import ORPHAN_GRACE_S, image_file
 
     kept = store.put_image(PNG_A, retention_days=30)
-    real_run = store._run
+    real_run = store._runner.run
 
     def full_disk(work, *, write=False, retry_conflicts=False):
         if write:
             raise DatabaseError("the disk of the store is full; nothing was written")
         return real_run(work, write=write, retry_conflicts=retry_conflicts)
 
-    monkeypatch.setattr(store, "_run", full_disk)
+    monkeypatch.setattr(store._runner, "run", full_disk)
     with pytest.raises(DatabaseError):
         store.put_images([PNG_B], retention_days=30)
-    monkeypatch.setattr(store, "_run", real_run)
+    monkeypatch.setattr(store._runner, "run", real_run)
     orphan = image_file(store.image_dir, sha256_hex(PNG_B))
     assert orphan.exists() and store.image_path(sha256_hex(PNG_B)) is None
     assert store.orphan_images() == []  # within the grace: a capture may be about to commit its rows

@@ -1,4 +1,4 @@
-"""The decisive capture gate: how well the calibration predicts the region the robot uses (issue 22).
+"""The decisive capture gate: how well the calibration predicts the region the robot uses.
 
 Tilt directions and covered cells are proxies for what matters: whether the calibrated lens predicts where
 a ray lands. This gate solves the session (the lens model it will be solved with; without one, the better
@@ -206,7 +206,7 @@ def projection_gate(
     u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
     v = (np.arange(grid[1]) + 0.5) * h / grid[1] - 0.5
     # the Jacobian covariance: the 5 px threshold was measured against it (docs/verdicts.md); the view-level one
-    # (issue 22, "Sigmas that hold on real data") is stored and reported, not yet judged here
+    # (per-view errors, core/intrinsics/covariance.py) is stored and reported, not yet judged here
     jacobian = cov.jacobian_covariance
     assert jacobian is not None
     umap = projection_uncertainty(

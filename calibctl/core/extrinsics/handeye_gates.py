@@ -32,7 +32,7 @@ After the solve, one more gate before the number is reported:
   its own 3 sigma AND the station's tolerance (``translation_scale_tolerance``, 1 % by default: the
   distance gauge's limits, 0.99-1.01) is a metric-gauge verdict (seed chapter 0): one sensor's metres are
   not the other's, for a camera through the board's square size (23 mm typed for 25 mm: s = 0.920 on a
-  noise-free rendered arm log, 0.920 +/- 0.0007 on issue 22's, 120 sigma from 1, accepted before this rule).
+  noise-free rendered arm log, 0.920 +/- 0.0007 on a second one, 120 sigma from 1, accepted before this rule).
   kuka_2's 1.058 (the 15 mm board against the robot's metres) is refused by it unless its sigma exceeds 2 %.
 
 Outlier motions (per-motion residual far above the robust scale of all motions) are named, not dropped.

@@ -1,6 +1,6 @@
 """Which photos of a rig's cameras were taken together, and whether the camera graph holds together.
 
-Frame matching rule (documented for operators in README "Camera rigs"): a photo's frame key is the
+Frame matching rule (documented for operators in docs/rigs.md, "Capture"): a photo's frame key is the
 LAST run of digits in its file name stem, read as an integer, so ``left01.jpg`` / ``right01.jpg`` ->
 1, ``left_001772846782141.jpg`` / ``right_001772846782141.jpg`` -> 1772846782141 (a timestamp),
 ``cam0_frame_0042.png`` -> 42. Photos of different cameras with the same key form one synchronised

@@ -3,7 +3,7 @@
 Pairs (a, b) and (a, c) of one rig are solved on their own but read the same corners of camera a in the frames
 all three saw (and the same intrinsics of a): their errors are correlated, and around a loop much of camera a's
 error cancels. Treated as independent, the loop's covariance is several times too wide (Mahalanobis 0.17-0.67 on
-clean rendered 3-4 camera rigs, issue 22) and the rule fires only on gross errors.
+clean rendered 3-4 camera rigs) and the rule fires only on gross errors.
 
 Joint linearisation (first order, no re-solve): each pair's estimate x_p (the pose vector of T_b_a, its
 cam_poses[1]) moves by G_p r for residuals r, G_p = [H_p^-1]_(x, obs) J_obs^T per (frame, camera) block, the

@@ -9,7 +9,7 @@ Jacobian
     members calibrated on 12 views each, the baseline's (est - true) / sigma has std 1.01 with that
     term and 1.28 without it (tests/core/extrinsics/test_rig_honesty.py).
 
-Frame level (issue 22)
+Frame level
     The Jacobian assumes every corner's error independent. Real rigs carry errors per frame (imperfect sync,
     a hand-held board moving, board warp) shared by all the corners of that frame in every camera, which no
     board pose absorbs. The sandwich with frames as clusters carries them: frame f pulls the solution by

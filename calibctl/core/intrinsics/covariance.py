@@ -17,7 +17,7 @@ S is scaled to unit diagonal, and its reciprocal condition number decides observ
 parameters), the same noise estimate OpenCV uses. On well-posed data this agrees with OpenCV's
 numbers to well under 1 % (tested).
 
-View-level check (issue 22): the Jacobian covariance assumes every corner's error independent. Real sessions
+View-level check: the Jacobian covariance assumes every corner's error independent. Real sessions
 also carry per-view errors (board warp, a hand-held board moving during exposure, sync) that the pose does
 not absorb; they are correlated within a view, so the Jacobian is too narrow. Beside it, a cluster-robust
 (sandwich) covariance with views as clusters, from the same blocks at no extra solve: each view's reduced

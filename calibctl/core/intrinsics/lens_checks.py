@@ -1,9 +1,9 @@
 """Numeric lint checks of a calibration that need only arrays (seed chapter 1, "three-line lint").
 
 Every check returns a Finding: the rule id, the severity it carries when it fails, whether it
-passed, a message with the numbers, and the fix. Thresholds are arguments (defaults are the
-issue's); the caller passes the configured values. Rules that need artifacts (square-size
-provenance, schema, content hash) live with the artifacts, not here.
+passed, a message with the numbers, and the fix. Thresholds are arguments (the defaults match
+config.py's LintThresholds); the caller passes the configured values. Rules that need artifacts
+(square-size provenance, schema, content hash) live with the artifacts, not here.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def check_sigma_fx(
 # (2026-11-23, k-fold held-out of a model that fits): held-out minus fit outer-ring RMS 0.001-0.003 px on
 # pinhole renders (0.2 px noise), 0.007 / 0.009 px on opencv-left-right left / right (k1k2); k1k2 on a
 # 150 deg fisheye render: 1.2 px. 0.05 px is 5x the largest honest excess and far below a misfit's; the
-# issue's rejected wide-angle case (0.142 vs 0.125 px, excess 0.017 px) passes.
+# wide-angle case the plain ratio rejected (0.142 vs 0.125 px, excess 0.017 px) passes.
 OUTER_RING_MIN_EXCESS_PX = 0.05
 
 

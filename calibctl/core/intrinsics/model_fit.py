@@ -8,8 +8,8 @@ The floor is the smaller of two estimates of what the corners deliver, each an u
   the per-coordinate variance is the summed squares over the summed degrees of freedom, and the per-corner
   (2-D) RMS is sqrt(2) x that, the same definition as a solve's ``rms_px``. It over-reads where the field is
   strongly curved: 1.9x on a 185 deg circular render (0.547 px for 0.283 true), 5.9x with a 12 x 9 board held
-  close to the same lens (1.681 px); the issue reports 3.7-4.1 px on a real fisheye set whose corners scatter
-  0.39 px, where k1k2 fits passed the rule.
+  close to the same lens (1.681 px); a real fisheye set whose corners scatter 0.39 px read 3.7-4.1 px
+  (reported by its user), where k1k2 fits passed the rule.
 - Lens-model (``lens_floor_px``): the best of FLOOR_MODELS, the most flexible model of each lens family
   (fisheye, rational), by its own residuals with its degrees of freedom, rms * sqrt(2N / (2N - p)). It
   reads the noise wherever one of them describes the lens: 0.282-0.298 px on the renders above (truth 0.283).
@@ -64,7 +64,7 @@ RADIAL_GROWTH_RATIO = 2.0
 FREE_ASPECT_MODELS = ("fisheye", "opencv-default")
 # The fisheye model is a fix only for a wide lens: diagonal field (the equidistant reading, module below) from
 # this many degrees. A ~60 deg webcam reads ~85 deg; its misfit comes from corners no one lens explains
-# (intrinsics that drift: focus, zoom), which a fisheye model fits no better (issue 22).
+# (intrinsics that drift: focus, zoom), which a fisheye model fits no better.
 WIDE_FIELD_DEG = 100.0
 
 

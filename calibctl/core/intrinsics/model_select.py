@@ -31,9 +31,9 @@ rejected with the reason and is out of the comparison, not the run: when the sta
 fails the full k1k2 solve at 10.9 px), the first rung that can be solved starts the comparison and the
 other lens family is compared with it. Only when no model at all can be solved is the run refused.
 
-Note: this is the issue's wording (enable only if >= 10 % AND not worse held-out). The seed's own
-sentence is the contrapositive of a weaker rule ("disable if < 10 % AND worse held-out"); the issue's
-stricter reading is implemented on purpose, so a coefficient must earn its place on both counts.
+Note: the rule is "enable only if >= 10 % AND not worse held-out". The seed's own sentence is the
+contrapositive of a weaker rule ("disable if < 10 % AND worse held-out"); the stricter reading is
+implemented on purpose, so a coefficient must earn its place on both counts.
 Its cost, measured (tests/core/intrinsics/test_model_select.py): a 12-view session of a lens with k3 = -0.1
 at f = 450 px gains only 9.5 % fit RMS from k3 while its held-out outer-ring RMS drops from 0.47
 to 0.27 px; the AND rule keeps k1k2 there. Fit RMS is diluted by the four inner rings that k3

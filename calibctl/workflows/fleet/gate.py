@@ -1,4 +1,4 @@
-"""A rollout's health gate and what its promote records (issue 25 items 1 and 3).
+"""A rollout's health gate and what its promote records.
 
 Gate inputs, for every canary robot and every target (serial or rig) it carries, measured at or after the
 rollout started (the canary robots run the new version from then on): the stored ``calibctl check`` events of

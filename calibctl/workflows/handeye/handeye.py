@@ -14,7 +14,6 @@ import hashlib
 import json
 import math
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from calibctl.artifacts.handeye import (
     MotionResidual,
     RigidTransform,
 )
+from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.handeye import METHODS, Motions
@@ -46,6 +46,7 @@ from calibctl.core.extrinsics.handeye_gates import (
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
 from calibctl.errors import AlreadyExistsError, InputError, NumericalError, UsageError
+from calibctl.workflows.edges.kinds import handeye_tf_yaml
 from calibctl.workflows.handeye import handeye_io
 
 UNSEALED = "0" * 64
@@ -66,6 +67,7 @@ class HandEyeOutcome:
     result: HandEyeResult
     written: list[str] = field(default_factory=list)
     not_written: list[str] = field(default_factory=list)
+    stored: RigCalibration | None = None  # the rig version written (``--rig``: handeye_run)
 
     @property
     def accepted(self) -> bool:
@@ -238,30 +240,6 @@ def solve_result(
     return result.sealed()
 
 
-def tf_static_yaml(result: HandEyeResult, frames: Mapping[str, str] | None = None) -> str:
-    """The edge as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static` prints); ``frames`` renames
-    its two frames (a rig export's robot frame names, workflows.exports.frame_names)."""
-    if result.transform is None:
-        raise UsageError("a rejected hand-eye result has no transform to export")
-    from calibctl.workflows.exports.rig_exports import tf_message
-
-    w, x, y, z = result.transform.rotation_wxyz
-    header = (
-        f"# calibctl handeye {result.parent_frame} -> {result.child_frame} sha256 {result.content_sha256}\n"
-    )
-    name = (frames or {}).get
-    return header + tf_message(
-        [
-            (
-                name(result.parent_frame) or result.parent_frame,
-                name(result.child_frame) or result.child_frame,
-                result.transform.translation_m,
-                (x, y, z, w),
-            )
-        ]
-    )
-
-
 def write_outputs(result: HandEyeResult, outputs: Outputs) -> HandEyeOutcome:
     outcome = HandEyeOutcome(result)
     if outputs.result_json is not None:
@@ -269,7 +247,7 @@ def write_outputs(result: HandEyeResult, outputs: Outputs) -> HandEyeOutcome:
         outcome.written.append(str(outputs.result_json))
     if outputs.tf_static is not None:
         if result.status == "accepted":
-            files.write_atomic(outputs.tf_static, tf_static_yaml(result), force=outputs.force)
+            files.write_atomic(outputs.tf_static, handeye_tf_yaml(result), force=outputs.force)
             outcome.written.append(str(outputs.tf_static))
         else:
             outcome.not_written.append(f"{outputs.tf_static} (rejected: no transform is published)")

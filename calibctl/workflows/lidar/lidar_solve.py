@@ -2,15 +2,17 @@
 
 Every scan gets an outcome: ``accepted``, ``no_plane``, ``too_few_rings``, ``dimension_mismatch``,
 ``no_board_in_image`` or ``not_paired``. The gates before the solve refuse a set that cannot determine
-T (exit 1, no transform); the gates after it judge the transform. The result is a JSON-ready dict.
+T (exit 1, no transform); the gates after it judge the transform. The result is typed (``LidarOutcome``,
+full float precision: the rig's evidence is built from it); ``result_json`` is its one JSON shape, rounded
+for people, that ``--json`` prints and ``-o`` writes.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -34,17 +36,21 @@ from calibctl.core.lidar.segment import (
 )
 from calibctl.core.lidar.target import BackingBoard, CameraBoard, pose_covariance
 from calibctl.errors import InputError, UsageError
+
+if TYPE_CHECKING:
+    from calibctl.artifacts.rig import RigCalibration
 from calibctl.workflows.lidar.camera import Lens, load_lens
 from calibctl.workflows.lidar.scans import SCAN_SUFFIXES, pair, read_scan
 
 
 @dataclass(frozen=True)
 class LidarRequest:
-    """What the command line asked for (units as named)."""
+    """What the command line asked for (units as named). ``board``: the target's dimensions, or a registered
+    board NAME[@REV] that ``run_lidar_solve`` reads from the store."""
 
     images: Path
     scans: Path
-    board: BackingBoard
+    board: BackingBoard | str
     box: StationBox
     camera_info: Path | None = None
     serial: str | None = None
@@ -59,14 +65,110 @@ class LidarRequest:
     overlay_dir: Path | None = None
     force: bool = False
 
+    @property
+    def backing(self) -> BackingBoard:
+        """The target's dimensions (after ``run_lidar_solve`` read a registered board)."""
+        if isinstance(self.board, str):
+            raise UsageError(f"board {self.board} was not read from the store before the solve")
+        return self.board
+
+
+@dataclass(frozen=True)
+class ScanFigures:
+    """What segmentation and the board pose measured on one paired scan."""
+
+    points_in_box: int
+    rings: int
+    dropped_nonfinite: int
+    plane_rms_mm: float
+    range_m: float
+    width_mm: float
+    height_mm: float
+    dimension_error_mm: tuple[float, ...]
+    image_rms_px: float | None
+
+
+@dataclass(frozen=True)
+class ScanRow:
+    """One scan's (or unpaired file's) outcome; ``figures`` for a paired one."""
+
+    frame: int | None
+    image: str | None
+    scan: str | None
+    outcome: str
+    message: str
+    figures: ScanFigures | None = None
+
+
+@dataclass(frozen=True)
+class LidarFit:
+    """T_lidar_cam (p_lidar = R p_cam + t) with its 6x6 covariance (rotation about LiDAR x, y, z rad,
+    translation x, y, z m; left perturbation) and one-sigmas."""
+
+    T_lidar_cam: np.ndarray
+    covariance: np.ndarray
+    sigma_translation_mm: tuple[float, float, float]
+    sigma_rotation_deg: tuple[float, float, float]
+
+    @property
+    def rpy_rad(self) -> tuple[float, float, float]:
+        roll, pitch, yaw = validation.rpy_from_rotation(self.T_lidar_cam[:3, :3])
+        return (float(roll), float(pitch), float(yaw))
+
+    @property
+    def quaternion_wxyz(self) -> tuple[float, float, float, float]:
+        w, x, y, z = (float(v) for v in se3.quaternion_from_rotation(self.T_lidar_cam[:3, :3]))
+        return (w, x, y, z)
+
+
+@dataclass(frozen=True)
+class LidarFitMetrics:
+    """Fit and held-out figures of a solve (NaN where not computable)."""
+
+    poses: int
+    plane_rms_mm: float
+    edge_rms_mm: float
+    projected_edge_rms_px: float
+    held_out_projected_edge_rms_px: float
+    held_out_plane_rms_mm: float
+    held_out_edge_rms_mm: float
+    folds: int
+    dimension_error_mean_mm: tuple[float, float]
+    range_offset_from_dimensions_mm: float
+    range_offset_from_dimensions_sigma_mm: float
+    range_offset_estimated_mm: float | None
+    range_offset_estimated_sigma_mm: float | None
+    noise_white_mm: float
+    noise_laser_mm: float
+    pose_offset_sigma_mm: float
+    pose_tilt_sigma_deg: float
+
 
 @dataclass
 class LidarOutcome:
-    """The result document and the verdict."""
+    """The typed result and the verdict; ``fit`` and ``metrics`` are None when a gate refused the set before
+    the solve. ``written`` and ``stored`` are filled by ``lidar_run.run_lidar``."""
 
-    result: dict[str, Any]
-    accepted: bool
-    scans: list[dict[str, Any]] = field(default_factory=list)
+    images: str
+    scans: str
+    lens: str
+    lens_model: str
+    range_offset_applied_mm: float
+    rows: list[ScanRow]
+    gates: list[GateResult]
+    fit: LidarFit | None = None
+    metrics: LidarFitMetrics | None = None
+    overlays: list[str] | None = None
+    written: list[str] = field(default_factory=list)
+    stored: RigCalibration | None = None
+
+    @property
+    def accepted(self) -> bool:
+        return self.fit is not None and all(g.passed for g in self.gates)
+
+    @property
+    def status(self) -> str:
+        return "accepted" if self.accepted else "rejected"
 
 
 def parse_box(text: str) -> StationBox:
@@ -163,17 +265,18 @@ def _gate_json(g: GateResult) -> dict[str, Any]:
     }
 
 
-def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], list[dict[str, Any]]]:
+def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], list[ScanRow]]:
     """Each paired scan segmented and each image posed; (accepted poses, one outcome row per file)."""
     pairing = pair(req.images, req.scans, req.scan_pattern)
-    rows: list[dict[str, Any]] = [
-        {
-            "frame": frame_key(p),
-            "image": None if p.suffix.lower() in SCAN_SUFFIXES else p.name,
-            "scan": p.name if p.suffix.lower() in SCAN_SUFFIXES else None,
-            "outcome": "not_paired",
-            "message": why,
-        }
+    board = req.backing
+    rows = [
+        ScanRow(
+            frame_key(p),
+            None if p.suffix.lower() in SCAN_SUFFIXES else p.name,
+            p.name if p.suffix.lower() in SCAN_SUFFIXES else None,
+            "not_paired",
+            why,
+        )
         for p, why in pairing.unpaired
     ]
     poses = []
@@ -182,33 +285,29 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
         found = segment_board(
             cloud,
             req.box,
-            req.board.backing_m,
+            board.backing_m,
             min_rings=req.min_rings,
             max_dimension_error_m=req.max_dimension_error_m,
         )
-        camera, why = _camera_board(image, lens, req.board)
-        row: dict[str, Any] = {
-            "frame": key,
-            "image": image.name,
-            "scan": scan.name,
-            "outcome": found.outcome,
-            "message": found.message,
-            "points_in_box": found.points_in_box,
-            "rings": found.rings,
-            "dropped_nonfinite": cloud.dropped_nonfinite,
-            "plane_rms_mm": round(found.plane_rms_m * 1e3, 2),
-            "range_m": round(found.range_m, 3),
-            "width_mm": round(found.width_m * 1e3, 1),
-            "height_mm": round(found.height_m * 1e3, 1),
-            "dimension_error_mm": [round(e * 1e3, 1) for e in found.dimension_error_m],
-            "image_rms_px": None if camera is None else round(camera.rms_px, 3),
-        }
+        camera, why = _camera_board(image, lens, board)
+        figures = ScanFigures(
+            found.points_in_box,
+            found.rings,
+            cloud.dropped_nonfinite,
+            found.plane_rms_m * 1e3,
+            found.range_m,
+            found.width_m * 1e3,
+            found.height_m * 1e3,
+            tuple(e * 1e3 for e in found.dimension_error_m),
+            None if camera is None else camera.rms_px,
+        )
+        outcome, message = found.outcome, found.message
         if found.accepted and camera is None:
-            row["outcome"], row["message"] = "no_board_in_image", why
-        if row["outcome"] == "accepted" and camera is not None:
+            outcome, message = "no_board_in_image", why
+        if outcome == "accepted" and camera is not None:
             poses.append(lsolve.Pose(f"{key}", camera, found))
-        rows.append(row)
-    rows.sort(key=lambda r: (r["frame"] is None, r["frame"] or 0, r["scan"] or "", r["image"] or ""))
+        rows.append(ScanRow(key, image.name, scan.name, outcome, message, figures))
+    rows.sort(key=lambda r: (r.frame is None, r.frame or 0, r.scan or "", r.image or ""))
     return poses, rows
 
 
@@ -240,101 +339,165 @@ def projected_edge_px(
     return np.concatenate(dists) if dists else np.zeros(0)
 
 
-def _transform_json(sol: lsolve.LidarSolution) -> dict[str, Any]:
-    T = sol.T_lidar_cam
-    roll, pitch, yaw = validation.rpy_from_rotation(T[:3, :3])
+def _transform_json(fit: LidarFit) -> dict[str, Any]:
+    T = fit.T_lidar_cam
     return {
         "name": "T_lidar_cam",
         "convention": "p_lidar = R p_cam + t (camera frame into the LiDAR frame)",
         "matrix": [[round(float(v), 9) for v in row] for row in T],
         "translation_m": [round(float(v), 6) for v in T[:3, 3]],
-        "rpy_rad": [round(v, 6) for v in (roll, pitch, yaw)],
+        "rpy_rad": [round(v, 6) for v in fit.rpy_rad],
         "rpy_order": "R = Rz(yaw) Ry(pitch) Rx(roll) (acfr/cam_lidar_calibration, tf setRPY)",
-        "quaternion_wxyz": [round(float(v), 9) for v in se3.quaternion_from_rotation(T[:3, :3])],
-        "sigma_translation_mm": [round(float(v) * 1e3, 3) for v in sol.sigma_translation_m],
-        "sigma_rotation_deg": [round(float(v), 4) for v in sol.sigma_rotation_deg],
-        "covariance": [[float(v) for v in row] for row in sol.covariance],
+        "quaternion_wxyz": [round(v, 9) for v in fit.quaternion_wxyz],
+        "sigma_translation_mm": [round(v, 3) for v in fit.sigma_translation_mm],
+        "sigma_rotation_deg": [round(v, 4) for v in fit.sigma_rotation_deg],
+        "covariance": [[float(v) for v in row] for row in fit.covariance],
         "covariance_order": "rotation about LiDAR x, y, z (rad), translation x, y, z (m); left perturbation",
         "T_cam_lidar": [[round(float(v), 9) for v in row] for row in se3.invert(T)],
     }
 
 
+def _row_json(r: ScanRow) -> dict[str, Any]:
+    row: dict[str, Any] = {
+        "frame": r.frame,
+        "image": r.image,
+        "scan": r.scan,
+        "outcome": r.outcome,
+        "message": r.message,
+    }
+    f = r.figures
+    if f is not None:
+        row |= {
+            "points_in_box": f.points_in_box,
+            "rings": f.rings,
+            "dropped_nonfinite": f.dropped_nonfinite,
+            "plane_rms_mm": round(f.plane_rms_mm, 2),
+            "range_m": round(f.range_m, 3),
+            "width_mm": round(f.width_mm, 1),
+            "height_mm": round(f.height_mm, 1),
+            "dimension_error_mm": [round(e, 1) for e in f.dimension_error_mm],
+            "image_rms_px": None if f.image_rms_px is None else round(f.image_rms_px, 3),
+        }
+    return row
+
+
+def _metrics_json(m: LidarFitMetrics) -> dict[str, Any]:
+    def r(v: float | None, digits: int) -> float | None:
+        return None if v is None else round(v, digits)
+
+    return {
+        "poses": m.poses,
+        "plane_rms_mm": r(m.plane_rms_mm, 2),
+        "edge_rms_mm": r(m.edge_rms_mm, 2),
+        "projected_edge_rms_px": r(m.projected_edge_rms_px, 2),
+        "held_out_projected_edge_rms_px": r(m.held_out_projected_edge_rms_px, 2),
+        "held_out_plane_rms_mm": r(m.held_out_plane_rms_mm, 2),
+        "held_out_edge_rms_mm": r(m.held_out_edge_rms_mm, 2),
+        "folds": m.folds,
+        "dimension_error_mean_mm": [r(v, 1) for v in m.dimension_error_mean_mm],
+        "range_offset_from_dimensions_mm": r(m.range_offset_from_dimensions_mm, 1),
+        "range_offset_from_dimensions_sigma_mm": r(m.range_offset_from_dimensions_sigma_mm, 1),
+        "range_offset_estimated_mm": r(m.range_offset_estimated_mm, 2),
+        "range_offset_estimated_sigma_mm": r(m.range_offset_estimated_sigma_mm, 2),
+        "noise_white_mm": r(m.noise_white_mm, 2),
+        "noise_laser_mm": r(m.noise_laser_mm, 2),
+        "pose_offset_sigma_mm": r(m.pose_offset_sigma_mm, 2),
+        "pose_tilt_sigma_deg": r(m.pose_tilt_sigma_deg, 3),
+    }
+
+
+def result_json(outcome: LidarOutcome) -> dict[str, Any]:
+    """The result as the JSON people and scripts read (``--json``, ``-o``): rounded for reading, NaN as
+    null; the rig's evidence is built from ``outcome`` itself, at full precision."""
+    counts: dict[str, int] = {}
+    for row in outcome.rows:
+        counts[row.outcome] = counts.get(row.outcome, 0) + 1
+    doc: dict[str, Any] = {
+        "images": outcome.images,
+        "scans": outcome.scans,
+        "lens": outcome.lens,
+        "lens_model": outcome.lens_model,
+        "range_offset_applied_mm": outcome.range_offset_applied_mm,
+        "outcomes": [_row_json(r) for r in outcome.rows],
+        "transform": None if outcome.fit is None else _transform_json(outcome.fit),
+        "outcome_counts": counts,
+        "status": outcome.status,
+        "gates": [_gate_json(g) for g in outcome.gates],
+    }
+    if outcome.metrics is not None:
+        doc["metrics"] = _metrics_json(outcome.metrics)
+    if outcome.overlays is not None:
+        doc["overlays"] = outcome.overlays
+    return _finite(doc)
+
+
 def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
-    """The whole command (module docstring)."""
-    problem = req.board.check_pattern_fits()
+    """The whole solve (module docstring); a registered ``req.board`` is read from the store first."""
+    if isinstance(req.board, str):
+        req = replace(req, board=board_from_store(settings, req.board))
+    board = req.backing
+    problem = board.check_pattern_fits()
     if problem:
         raise UsageError(
             problem, "check --backing-mm (width,height of the backing board) and --pattern-offset-mm"
         )
     lens = load_lens(settings, req.camera_info, req.serial)
     poses, rows = collect_poses(req, lens)
-    n_scans = sum(1 for r in rows if r["scan"] is not None)
+    n_scans = sum(1 for r in rows if r.scan is not None)
     pre = [gates.pose_count_gate(len(poses), n_scans, req.min_poses)]
     if len(poses) >= 1:
         pre += [
             gates.observability_gate(np.array([p.lidar.normal for p in poses])),
             gates.range_spread_gate([p.lidar.range_m for p in poses]),
         ]
-    result: dict[str, Any] = {
-        "images": str(req.images),
-        "scans": str(req.scans),
-        "lens": lens.source,
-        "lens_model": lens.model,
-        "range_offset_applied_mm": req.range_offset_m * 1e3,
-        "outcomes": rows,
-        "transform": None,
-    }
-    counts: dict[str, int] = {}
-    for r in rows:
-        counts[r["outcome"]] = counts.get(r["outcome"], 0) + 1
-    result["outcome_counts"] = counts
-    if not all(g.passed for g in pre):
-        result |= {"status": "rejected", "gates": [_gate_json(g) for g in pre]}
-        return LidarOutcome(result, False, rows)
-    sol = lsolve.solve(poses, req.board, req.estimate_range_offset)
-    held_plane, held_edge, held_px = validation.held_out(
-        poses, req.board, req.folds, lambda T, test: projected_edge_px(T, test, req.board, lens)
+    outcome = LidarOutcome(
+        str(req.images), str(req.scans), lens.source, lens.model, req.range_offset_m * 1e3, rows, pre
     )
-    in_px = projected_edge_px(sol.T_lidar_cam, poses, req.board, lens)
+    if not all(g.passed for g in pre):
+        return outcome
+    sol = lsolve.solve(poses, board, req.estimate_range_offset)
+    held_plane, held_edge, held_px = validation.held_out(
+        poses, board, req.folds, lambda T, test: projected_edge_px(T, test, board, lens)
+    )
+    in_px = projected_edge_px(sol.T_lidar_cam, poses, board, lens)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
     dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions(
-        [p.lidar for p in poses], req.board.backing_m
+        [p.lidar for p in poses], board.backing_m
     )
-    post = [
+    outcome.gates = pre + [
         gates.plane_rms_gate(sol.plane_rms_m * 1e3),
         gates.dimension_gate(dims),
         gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
     ]
-    all_gates = pre + post
-    accepted = all(g.passed for g in all_gates)
-    result |= {
-        "status": "accepted" if accepted else "rejected",
-        "gates": [_gate_json(g) for g in all_gates],
-        "transform": _transform_json(sol),
-        "metrics": {
-            "poses": len(poses),
-            "plane_rms_mm": round(sol.plane_rms_m * 1e3, 2),
-            "edge_rms_mm": round(sol.edge_rms_m * 1e3, 2),
-            "projected_edge_rms_px": round(float(np.sqrt(np.mean(in_px**2))), 2),
-            "held_out_projected_edge_rms_px": round(held_px, 2),
-            "held_out_plane_rms_mm": round(held_plane * 1e3, 2),
-            "held_out_edge_rms_mm": round(held_edge * 1e3, 2),
-            "folds": req.folds,
-            "dimension_error_mean_mm": [round(float(v), 1) for v in dims.mean(axis=0)],
-            "range_offset_from_dimensions_mm": round(dim_offset * 1e3, 1),
-            "range_offset_from_dimensions_sigma_mm": round(dim_offset_sigma * 1e3, 1),
-            "range_offset_estimated_mm": round(sol.range_offset_m * 1e3, 2)
-            if req.estimate_range_offset
-            else None,
-            "range_offset_estimated_sigma_mm": (
-                round(sol.range_offset_sigma_m * 1e3, 2) if sol.range_offset_sigma_m is not None else None
-            ),
-            "noise_white_mm": round(sol.noise.white_m * 1e3, 2),
-            "noise_laser_mm": round(sol.noise.run_bias_m * 1e3, 2),
-            "pose_offset_sigma_mm": round(sol.pose_offset_sigma_m * 1e3, 2),
-            "pose_tilt_sigma_deg": round(float(np.degrees(sol.pose_tilt_sigma_rad)), 3),
-        },
-    }
+    st, sr = sol.sigma_translation_m * 1e3, sol.sigma_rotation_deg
+    outcome.fit = LidarFit(
+        sol.T_lidar_cam,
+        sol.covariance,
+        (float(st[0]), float(st[1]), float(st[2])),
+        (float(sr[0]), float(sr[1]), float(sr[2])),
+    )
+    mean_dims = dims.mean(axis=0)
+    outcome.metrics = LidarFitMetrics(
+        poses=len(poses),
+        plane_rms_mm=sol.plane_rms_m * 1e3,
+        edge_rms_mm=sol.edge_rms_m * 1e3,
+        projected_edge_rms_px=float(np.sqrt(np.mean(in_px**2))),
+        held_out_projected_edge_rms_px=held_px,
+        held_out_plane_rms_mm=held_plane * 1e3,
+        held_out_edge_rms_mm=held_edge * 1e3,
+        folds=req.folds,
+        dimension_error_mean_mm=(float(mean_dims[0]), float(mean_dims[1])),
+        range_offset_from_dimensions_mm=dim_offset * 1e3,
+        range_offset_from_dimensions_sigma_mm=dim_offset_sigma * 1e3,
+        range_offset_estimated_mm=sol.range_offset_m * 1e3 if req.estimate_range_offset else None,
+        range_offset_estimated_sigma_mm=(
+            sol.range_offset_sigma_m * 1e3 if sol.range_offset_sigma_m is not None else None
+        ),
+        noise_white_mm=sol.noise.white_m * 1e3,
+        noise_laser_mm=sol.noise.run_bias_m * 1e3,
+        pose_offset_sigma_mm=sol.pose_offset_sigma_m * 1e3,
+        pose_tilt_sigma_deg=float(np.degrees(sol.pose_tilt_sigma_rad)),
+    )
     if req.overlay_dir is not None:
         accepted_frames = {int(p.label) for p in poses}
         pairs = [
@@ -344,22 +507,26 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         ]
         from calibctl.workflows.lidar.lidar_overlay import write_overlays
 
-        result["overlays"] = write_overlays(
+        outcome.overlays = write_overlays(
             req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m, req.force
         )
-    return LidarOutcome(_finite(result), accepted, rows)
+    return outcome
 
 
 def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:
-    """An accepted result's T_lidar_cam as a tf2_msgs/TFMessage YAML (what `ros2 topic echo /tf_static`
-    prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is the child's pose in the parent)."""
+    """An accepted result's T_lidar_cam (``result_json``'s document) as a tf2_msgs/TFMessage YAML (what
+    `ros2 topic echo /tf_static` prints): parent ``lidar_frame``, child ``camera_frame`` (tf's transform is
+    the child's pose in the parent)."""
     from calibctl.workflows.exports.rig_exports import tf_message
 
     t = result.get("transform")
     if result.get("status") != "accepted" or t is None:
         raise UsageError("a rejected camera-LiDAR result has no transform to export")
     w, x, y, z = t["quaternion_wxyz"]
-    header = f"# calibctl lidar solve T_{lidar_frame}_{camera_frame} (images {result['images']}, scans {result['scans']})\n"
+    header = (
+        f"# calibctl lidar solve T_{lidar_frame}_{camera_frame} (images {result['images']}, "
+        f"scans {result['scans']})\n"
+    )
     return header + tf_message([(lidar_frame, camera_frame, t["translation_m"], (x, y, z, w))])
 
 

@@ -1,6 +1,7 @@
-"""A LiDAR is a frame of the robot's tree: ``calibctl lidar solve ... --rig RIG --serial CAM --lidar-frame NAME``.
+"""A LiDAR is a frame of the robot's tree:
+``calibctl lidar solve ... --rig RIG --serial CAM --lidar-frame NAME``.
 
-The same shape as ``handeye --rig`` (workflows.handeye.rig_edges, whose machinery this reuses): the
+The same shape as ``handeye --rig`` (the ``edges`` room's machinery and its ``LIDAR`` kind): the
 gated result becomes the rig's next immutable version = the active version's edges with
 ``NAME -> CAM`` (``source: "lidar-board"``, T_lidar_cam) added or replaced, and the result's summary
 (T, 6x6 covariance, gates, every scan's outcome, held-out figures; ``RigCalibration.lidar``) sealed
@@ -16,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -30,13 +30,13 @@ from calibctl.artifacts.lidar import (
     LidarScan,
     LidarTransform,
 )
-from calibctl.artifacts.rig import RigEdge
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError, UsageError
+from calibctl.workflows.edges import versions
+from calibctl.workflows.edges.kinds import LIDAR
+from calibctl.workflows.edges.versions import StoredEdge
 from calibctl.workflows.exports.frame_names import is_ros_name
-from calibctl.workflows.handeye import rig_edges
-from calibctl.workflows.handeye.rig_edges import LIDAR, StoredEdge
-from calibctl.workflows.lidar.lidar_solve import LidarRequest
+from calibctl.workflows.lidar.lidar_solve import LidarOutcome, LidarRequest, ScanRow
 from calibctl.workflows.store_admin.records import open_store
 
 ROS_NAME_RULE = "ROS names are [a-zA-Z][a-zA-Z0-9_]* segments separated by '/' (no '-', no leading '/')"
@@ -63,7 +63,7 @@ def check_target(settings: Settings, rig_name: str, lidar_frame: str, serial: st
                 f"--lidar-frame {lidar_frame} is a camera of rig {rig_name}",
                 "name the LiDAR's own frame, declared with `calibctl rig add ... --frame NAME`",
             )
-        rig_edges.checked(store, rig_name, lidar_frame, serial, None, LIDAR)
+        versions.checked(store, rig_name, lidar_frame, serial, None, LIDAR)
 
 
 def _sha256(path: Path) -> str:
@@ -71,11 +71,11 @@ def _sha256(path: Path) -> str:
         return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _overlay_source(req: LidarRequest, rows: list[dict[str, Any]]) -> LidarOverlaySource | None:
-    first = next((r for r in rows if r["outcome"] == "accepted"), None)
-    if first is None:
+def _overlay_source(req: LidarRequest, rows: list[ScanRow]) -> LidarOverlaySource | None:
+    first = next((r for r in rows if r.outcome == "accepted" and r.image and r.scan), None)
+    if first is None or first.image is None or first.scan is None:
         return None
-    image, scan = (req.images / first["image"]).resolve(), (req.scans / first["scan"]).resolve()
+    image, scan = (req.images / first.image).resolve(), (req.scans / first.scan).resolve()
     return LidarOverlaySource(
         image_path=str(image),
         image_sha256=_sha256(image),
@@ -85,62 +85,85 @@ def _overlay_source(req: LidarRequest, rows: list[dict[str, Any]]) -> LidarOverl
     )
 
 
+def _or_none(v: float | None) -> float | None:
+    """A figure that could not be computed (NaN, inf) as None, as the JSON writes it."""
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
 def evidence(
-    result: dict[str, Any], req: LidarRequest, lidar_frame: str, serial: str, board: str
+    outcome: LidarOutcome, req: LidarRequest, lidar_frame: str, serial: str, board: str
 ) -> LidarEdgeResult:
-    """``lidar_solve.run_lidar_solve``'s result as the rig version's evidence."""
-    t, m = result.get("transform"), result.get("metrics")
+    """``lidar_solve.run_lidar_solve``'s typed result as the rig version's evidence, at full precision."""
+    fit, m = outcome.fit, outcome.metrics
     transform = (
         None
-        if t is None
+        if fit is None
         else LidarTransform(
-            T_lidar_cam=tuple(tuple(row) for row in t["matrix"]),
-            quaternion_wxyz=tuple(t["quaternion_wxyz"]),
-            rpy_rad=tuple(t["rpy_rad"]),
-            sigma_translation_mm=tuple(t["sigma_translation_mm"]),
-            sigma_rotation_deg=tuple(t["sigma_rotation_deg"]),
-            covariance=t["covariance"],
+            T_lidar_cam=tuple(tuple(float(v) for v in row) for row in fit.T_lidar_cam),
+            quaternion_wxyz=fit.quaternion_wxyz,
+            rpy_rad=fit.rpy_rad,
+            sigma_translation_mm=fit.sigma_translation_mm,
+            sigma_rotation_deg=fit.sigma_rotation_deg,
+            covariance=[[float(v) for v in row] for row in fit.covariance],
         )
     )
-    metrics = None if m is None else LidarMetrics(**{k: m[k] for k in LidarMetrics.model_fields})
+    metrics = (
+        None
+        if m is None
+        else LidarMetrics(
+            poses=m.poses,
+            plane_rms_mm=m.plane_rms_mm,
+            edge_rms_mm=m.edge_rms_mm,
+            projected_edge_rms_px=_or_none(m.projected_edge_rms_px),
+            held_out_plane_rms_mm=_or_none(m.held_out_plane_rms_mm),
+            held_out_edge_rms_mm=_or_none(m.held_out_edge_rms_mm),
+            held_out_projected_edge_rms_px=_or_none(m.held_out_projected_edge_rms_px),
+            folds=m.folds,
+            dimension_error_mean_mm=m.dimension_error_mean_mm,
+            range_offset_from_dimensions_mm=_or_none(m.range_offset_from_dimensions_mm),
+        )
+    )
     box = req.box
     return LidarEdgeResult(
         parent_frame=lidar_frame,
         child_frame=serial,
-        status=result["status"],
-        camera=result["lens"],
+        status=outcome.status,
+        camera=outcome.lens,
         board=board,
         images=str(req.images),
         scans=str(req.scans),
         box=(*box.lower_m, *box.upper_m),
-        range_offset_applied_mm=result["range_offset_applied_mm"],
+        range_offset_applied_mm=outcome.range_offset_applied_mm,
         transform=transform,
         metrics=metrics,
-        gates=[LidarGate(**{k: g[k] for k in LidarGate.model_fields}) for g in result["gates"]],
-        scans_outcomes=[LidarScan(**{k: r[k] for k in LidarScan.model_fields}) for r in result["outcomes"]],
-        overlay=_overlay_source(req, result["outcomes"]) if t is not None else None,
+        gates=[
+            LidarGate(
+                gate=g.gate,
+                passed=g.passed,
+                value=_or_none(g.value),
+                threshold=g.threshold,
+                message=g.message,
+                hint=g.hint,
+            )
+            for g in outcome.gates
+        ],
+        scans_outcomes=[
+            LidarScan.model_validate(
+                {
+                    "frame": r.frame,
+                    "image": r.image,
+                    "scan": r.scan,
+                    "outcome": r.outcome,
+                    "message": r.message,
+                }
+            )
+            for r in outcome.rows
+        ],
+        overlay=_overlay_source(req, outcome.rows) if fit is not None else None,
         created_at=utc_now(),
-    )
-
-
-def lidar_edge(ev: LidarEdgeResult) -> RigEdge:
-    """An accepted result as the tree edge ``lidar_frame -> camera`` (T_lidar_cam)."""
-    assert ev.transform is not None
-    return rig_edges.tree_edge(
-        ev.parent_frame,
-        ev.child_frame,
-        np.array(ev.transform.T_lidar_cam),
-        np.array(ev.transform.covariance),
-        LIDAR.source,
     )
 
 
 def store_lidar(settings: Settings, rig_name: str, ev: LidarEdgeResult) -> StoredEdge:
     """Store ``ev`` as the rig's next version; active only when accepted (and lint-clean)."""
-    edge = lidar_edge(ev) if ev.status == "accepted" and ev.transform is not None else None
-    return rig_edges.store_evidence(
-        settings,
-        rig_name,
-        ev,
-        lambda base, versions: rig_edges.with_evidence(base, ev, edge, versions, settings),
-    )
+    return versions.store_evidence(settings, rig_name, ev)

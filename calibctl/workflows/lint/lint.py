@@ -481,10 +481,10 @@ _MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-
 
 
 def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
-    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a ``narrow``
-    lens (below model_fit.WIDE_FIELD_DEG) with one-camera failed too, the misfit is the symptom: no lens model is
-    wrong there, the intrinsics changed during the capture (issue 22's drifting ~60 deg webcam), so model-misfit
-    and its symptoms point at one-camera's fix instead."""
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a
+    ``narrow`` lens (below model_fit.WIDE_FIELD_DEG) with one-camera failed too, the misfit is the symptom:
+    no lens model is wrong there, the intrinsics changed during the capture (a ~60 deg webcam whose focus
+    drifted), so model-misfit and its symptoms point at one-camera's fix instead."""
     misfit = next((f for f in findings if f.rule == "model-misfit"), None)
     if misfit is None:
         return findings

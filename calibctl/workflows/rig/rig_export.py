@@ -4,8 +4,10 @@ named by the robot's frames (workflows.exports.frame_names), each stamped with t
 - single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr) -> ``export`` returns the text;
 - ``ros`` -> ``export_files``: one camera_info file per camera (ROS reads only the first YAML document of
   a file, so two cameras in one file made a stereo driver run the left calibration on the right camera);
-- ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle).
-A rejected version, or (step 5 of issue 21) one that ``rig lint`` fails now, is refused unless allowed.
+- ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle);
+- ``lut`` -> ``export_files``: each stereo pair's rectification maps for both cameras (workflows.exports.lut).
+A rejected version, or one that ``rig lint`` fails now (a stale member, a failed gate), is refused unless
+allowed.
 """
 
 from __future__ import annotations
@@ -21,17 +23,19 @@ from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
-from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
+from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
-from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
+from calibctl.workflows.edges.export import edge_export
+from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.versions import cal_versions, edge_findings
+from calibctl.workflows.exports import bundle, lut, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
-from calibctl.workflows.handeye import rig_edges, rig_handeye
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle")
-FILE_FORMATS = ("ros", "bundle")  # written as several files: export_files
+EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle", "lut")
+FILE_FORMATS = ("ros", "bundle", "lut")  # written as several files: export_files
 ROS_ONE_FILE_FIX = (
     "ROS reads only the first YAML document of a file (a stereo driver would load the left "
     "calibration for the right camera): pass -o DIR (one CAMERA.yaml per camera) or "
@@ -127,19 +131,9 @@ def _prepare(
             except NotFoundError:
                 active[m.serial] = None
         findings = rig_findings(cal, rig, active, settings.lint)
-        findings += rig_edges.edge_findings(rig_edges.evidence_of(cal), rig_edges.cal_versions(store, cal))
+        findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
     _refuse_unloadable(cal, findings, allow_rejected, allow_stale)
-    members = [
-        MemberIntrinsics(
-            m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens
-        )
-        for m in cal.members
-    ]
-    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
-    cameras = RigTree(
-        cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve")
-    )
-    full_tree = orient_tree(edges, cal.root)
+    members, cameras, full_tree = rig_exports.stored_geometry(cal)
     serials = [m.serial for m in cal.members]
     others = [f for f in full_tree.frames if f not in serials]
     names = FrameNames.of(serials, others, parse_frame_map(frames, [*serials, *others]))
@@ -211,8 +205,8 @@ def export(
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if edge is None:
         text = _text(x, fmt)
-    else:  # one hand-eye edge: its tf carries the rig header (and signature) like every rig export
-        text = rig_handeye.edge_export(x.cal, edge, fmt, x.names.frames)
+    else:  # one evidence edge: its tf carries the rig header (and signature) like every rig export
+        text = edge_export(x.cal, edge, fmt, x.names.frames)
         text = x.stamp(text) if fmt == "tf" else text
     if out is not None:
         write_atomic(out, text, force=force)
@@ -286,6 +280,25 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
     return files, manifest
 
 
+def _lut_files(x: RigExport) -> tuple[dict[str, bytes], str]:
+    """Per camera edge (the bundle's stereo pairs): both cameras' rectification maps and the stamped lut.yaml
+    with the rig version's JSON beside it (lint checks the header's numbers against it)."""
+    cameras = lut.rig_cameras(
+        x.cal,
+        x.members,
+        x.cameras,
+        lambda left, right, serial: (
+            f"stereo_{x.names.camera_name(left)}_{x.names.camera_name(right)}.{x.names.camera_name(serial)}"
+        ),
+        x.names.frame,
+    )
+    payloads, entries = lut.build(cameras)
+    payloads[lut.RIG_DOCUMENT] = _text(x, "json").encode("utf-8")
+    source = lut.source_of("rig", x.ref, x.cal.status, x.cal.content_sha256, payloads[lut.RIG_DOCUMENT])
+    serials = tuple(dict.fromkeys(c.serial for c in cameras))
+    return payloads, x.stamp(lut.header_body(source, entries), serials)
+
+
 def export_files(
     settings: Settings,
     ref: str,
@@ -298,12 +311,16 @@ def export_files(
     allow_stale: bool = False,
     frames: list[str] | None = None,
 ) -> list[Path]:
-    """``ros`` (one camera_info per camera) or ``bundle`` (every file + manifest.json) into ``out``."""
+    """``ros`` (one camera_info per camera), ``bundle`` (every file + manifest.json) or ``lut`` (each stereo
+    pair's rectification maps + lut.yaml) into ``out``."""
     if out is None:
         raise UsageError(
             f"--format {fmt} writes several files", ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR"
         )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
+    if fmt == "lut":
+        payloads, header = _lut_files(x)
+        return lut.write_lut(out, payloads, header, force=force)
     if fmt == "bundle":
         files, manifest = _bundle_files(x)
         return bundle.write_bundle(out, files, manifest, force=force)

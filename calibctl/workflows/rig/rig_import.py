@@ -31,8 +31,9 @@ from calibctl.artifacts.rig import RigCalibration, RigDefinition
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.store.repository import Store
+from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.exports import bundle
-from calibctl.workflows.handeye import rig_edges
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin import keys, records
 
@@ -198,7 +199,7 @@ def _rederive(
         except NotFoundError:
             active[serial] = None
     findings = rig_findings(mine, rig, active, settings.lint)
-    findings += rig_edges.edge_findings(rig_edges.evidence_of(mine), rig_edges.cal_versions(store, mine))
+    findings += edge_findings(evidence_of(mine), cal_versions(store, mine))
     stale = [f for f in findings if f.rule in STALE_RULES and f.severity == "error"]
     lint = [f for f in findings if f not in stale]
     status = "rejected" if has_errors(lint) else "accepted"

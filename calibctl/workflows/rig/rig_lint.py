@@ -13,10 +13,10 @@ Rules (errors fail lint, exit 1):
 ``baseline-design``, ``epipolar`` and ``loop-closure`` read only the solve's numbers
 (``solved_rig_findings``): ``rig solve-folders`` applies them too, with each self-calibrated member's
 ``model-misfit`` (workflows.rig.rig_folders).
-- hand-eye edges (workflows.handeye.rig_handeye): ``handeye-gates`` (a gate of the stored result failed),
+- hand-eye edges (workflows.edges, its hand-eye kind): ``handeye-gates`` (a gate of the stored result failed),
   ``handeye-stale-member`` (the camera whose calibration gave the board poses was re-calibrated since),
   ``handeye-uncertainty`` (an accepted edge without a one-sigma);
-- camera-LiDAR edges (the same machinery, workflows.handeye.rig_edges): ``lidar-gates``,
+- camera-LiDAR edges (the same table, its LiDAR kind): ``lidar-gates``,
   ``lidar-stale-member`` (the camera whose calibration posed the board was re-calibrated since the edge was
   solved), ``lidar-uncertainty`` (no positive-definite covariance: error; a one-sigma over 10 mm or 0.5 deg:
   warning).
@@ -40,7 +40,8 @@ from calibctl.artifacts.rig import (
 from calibctl.config import LintThresholds, Settings
 from calibctl.errors import NotFoundError, UsageError
 from calibctl.signing import TrustedKeys
-from calibctl.workflows.handeye import rig_edges
+from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
 from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
@@ -194,7 +195,7 @@ def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -
         rig = store.get_rig(name)
         cal = store.get_rig_calibration(name, version)
         findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
-        findings += rig_edges.edge_findings(rig_edges.evidence_of(cal), rig_edges.cal_versions(store, cal))
+        findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
         if trusted is not None:
             findings += _signature_findings(store, cal, trusted)
     return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)

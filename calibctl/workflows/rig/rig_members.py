@@ -1,4 +1,4 @@
-"""How ``rig solve-folders`` judges each self-calibrated member: by the stored path's own verdict (issue 22).
+"""How ``rig solve-folders`` judges each self-calibrated member: by the stored path's own verdict.
 
 The stored path (``capture``, ``solve``, then ``rig solve``, whose lint names every member's findings
 ``member:<rule>``) refuses a member whose capture gates fail (the session is rejected and ``solve`` refuses it)

@@ -48,7 +48,7 @@ from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
-from calibctl.workflows.handeye import rig_edges
+from calibctl.workflows.edges.versions import cal_versions, carried_forward
 from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
@@ -365,17 +365,16 @@ def solve_rig_stored(
 
 def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibration, int | None]:
     """Keep the active version's hand-eye and LiDAR edges (not the stale ones) in the re-solved tree; and that
-    version (None: nothing active), which the store compares-and-sets on (rig_handeye module docstring)."""
+    version (None: nothing active), which the store compares-and-sets on (workflows.edges)."""
     try:
         active = store.get_rig_calibration(cal.rig, None)  # type: ignore[attr-defined]
     except NotFoundError:
         return cal, None
-    kept = rig_edges.carried_forward(active, rig_edges.cal_versions(store, active))
+    kept = carried_forward(active, cal_versions(store, active))
     carried = cal.model_copy(
         update={
             "edges": [*cal.edges, *kept.edges],
-            "handeye": kept.handeye,
-            "lidar": kept.lidar,
+            **kept.update(),
             "lint": [*cal.lint, *kept.dropped],
         }
     )

@@ -14,7 +14,8 @@ from calibctl.config import Settings, load_settings
 from calibctl.core.extrinsics import se3
 from calibctl.errors import NotFoundError, UsageError
 from calibctl.store.repository import Store
-from calibctl.workflows.handeye import rig_edges, rig_handeye
+from calibctl.workflows.edges import versions as rig_edges
+from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
 from calibctl.workflows.rig import rig_export, rig_lint
 from tests.artifacts.factories import calibration

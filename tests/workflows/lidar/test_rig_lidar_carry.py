@@ -16,7 +16,8 @@ from calibctl.config import load_settings
 from calibctl.core.extrinsics import se3
 from calibctl.store.repository import Store
 from calibctl.workflows.compare.rig_diff import diff_rigs
-from calibctl.workflows.handeye import rig_edges, rig_handeye
+from calibctl.workflows.edges import versions as rig_edges
+from calibctl.workflows.handeye import rig_handeye
 from calibctl.workflows.handeye.handeye import SynthRequest, run_handeye, run_synth_motions
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.rig import rig_export, rig_lint, rigs

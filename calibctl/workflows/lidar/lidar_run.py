@@ -1,0 +1,78 @@
+"""``calibctl lidar solve`` as one workflow call: the rig target checked, the solve, the rig's next version
+(``--rig``) and the files (``-o``, ``--tf-static``); the CLI parses, calls ``run_lidar`` and renders.
+
+Order (docs/lidar.md): with ``--rig`` the target is refused before any scan is read (exit 2, nothing stored:
+rig_lidar module docstring); then the solve (lidar_solve), its evidence stored as the rig's next version,
+then the files. ``-o`` holds ``lidar_solve.result_json`` (the rounded shape ``--json`` prints, without the
+``stored`` block); ``--tf-static`` is written for an accepted result only.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from calibctl.config import Settings
+from calibctl.errors import UsageError
+from calibctl.files import write_atomic
+from calibctl.workflows.lidar import rig_lidar
+from calibctl.workflows.lidar.lidar_solve import (
+    LidarOutcome,
+    LidarRequest,
+    result_json,
+    run_lidar_solve,
+    tf_static_yaml,
+)
+
+
+@dataclass(frozen=True)
+class RigTarget:
+    """``--rig RIG``: the edge ``lidar_frame -> --serial`` of that rig; ``board`` as the evidence names it."""
+
+    rig: str
+    lidar_frame: str
+    board: str
+
+
+@dataclass(frozen=True)
+class LidarFiles:
+    """``-o`` (the result JSON), ``--tf-static`` (accepted only, frames as named), ``--force``."""
+
+    out: Path | None = None
+    tf_static: Path | None = None
+    lidar_frame: str = "lidar"
+    camera_frame: str = "camera"
+    force: bool = False
+
+
+def run_lidar(
+    settings: Settings, req: LidarRequest, files: LidarFiles, target: RigTarget | None = None
+) -> LidarOutcome:
+    """The whole command (module docstring); ``outcome.written`` lists the files, ``outcome.stored`` the
+    rig version written."""
+    if target is not None:
+        if req.camera_info is not None:
+            raise UsageError(
+                "--rig takes the camera as --serial (its active calibration), not --camera-info",
+                "the rig edge pins the calibration it was solved with",
+            )
+        rig_lidar.check_target(settings, target.rig, target.lidar_frame, req.serial)
+    outcome = run_lidar_solve(settings, req)
+    if target is not None:
+        ev = rig_lidar.evidence(outcome, req, target.lidar_frame, req.serial or "", target.board)
+        outcome.stored = rig_lidar.store_lidar(settings, target.rig, ev).calibration
+    outcome.written = [f"wrote {path}" for path in outcome.overlays or []]
+    doc = result_json(outcome)
+    if files.out is not None:
+        text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+        write_atomic(files.out, text, force=files.force)
+        outcome.written.append(f"wrote {files.out}")
+    if files.tf_static is not None:
+        if outcome.accepted:
+            yaml = tf_static_yaml(doc, files.lidar_frame, files.camera_frame)
+            write_atomic(files.tf_static, yaml, force=files.force)
+            outcome.written.append(f"wrote {files.tf_static}")
+        else:
+            outcome.written.append(f"not written: {files.tf_static} (rejected: no transform is published)")
+    return outcome
