@@ -43,16 +43,44 @@ def solve_folders(
         typer.Option(
             "--source",
             help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
-            "glob ('left*.jpg') or a list file as for capture; the first is the "
+            "glob ('left*.jpg'), a list file as for capture, or a video; the first is the "
             "root unless --root. Photos pair up by the last number in their "
-            "names.",
+            "names; videos (or --timestamps) by time.",
         ),
     ],
-    cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
-    rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
+    cols: Annotated[int, typer.Option("--cols", help="Inner corners per row.")],
+    rows: Annotated[int, typer.Option("--rows", help="Inner corners per column.")],
     square_mm: Annotated[
         float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")
     ],
+    kind: Annotated[str, typer.Option("--kind", help="chessboard or charuco.")] = "chessboard",
+    marker_mm: Annotated[
+        float | None, typer.Option("--marker-mm", help="ChArUco marker edge, mm.", show_default=False)
+    ] = None,
+    dictionary: Annotated[
+        str | None,
+        typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_4X4_1000.", show_default=False),
+    ] = None,
+    inverted: Annotated[
+        bool, typer.Option("--inverted", help="ChArUco printed white markers on black squares.")
+    ] = False,
+    legacy: Annotated[bool, typer.Option("--legacy", help="ChArUco in the layout of OpenCV < 4.6.")] = False,
+    timestamps: Annotated[
+        Path | None,
+        typer.Option(
+            "--timestamps",
+            help="The recorder's per-frame times (CSV cam_id,frame_index,frame_time; cam_id = the SERIAL of "
+            "--source): frames pair up by time. Without it videos pair by their own per-frame times.",
+            show_default=False,
+        ),
+    ] = None,
+    time_tolerance_ms: Annotated[
+        float,
+        typer.Option(
+            "--time-tolerance-ms",
+            help="Frames of different cameras at most this far apart form one rig frame.",
+        ),
+    ] = 5.0,
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
     ] = None,
@@ -107,7 +135,6 @@ def solve_folders(
     rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
     pictures judged through its lens as the run leaves it.
     """
-    from calibctl.core.board.board_spec import BoardSpec
     from calibctl.workflows.rig import rig_folders
 
     sources = rig_folders.parse_sources(source)
@@ -115,10 +142,7 @@ def solve_folders(
         if root not in sources:
             raise UsageError(f"--root {root} is not one of the cameras ({', '.join(sources)})")
         sources = {root: sources[root], **{k: v for k, v in sources.items() if k != root}}
-    try:
-        spec = BoardSpec.chessboard(cols, rows, square_mm / 1e3)
-    except ValueError as exc:
-        raise UsageError(f"bad board: {exc}") from exc
+    spec = rig_folders.typed_spec(kind, cols, rows, square_mm, marker_mm, dictionary, inverted, legacy)
     from calibctl.workflows.rig.rig_lint import parse_design
 
     designs = [parse_design(d) for d in design or []]
@@ -134,6 +158,8 @@ def solve_folders(
         settings=settings,
         designs=designs,
         gauge=rig_gauge(reference_distance, reference_source),
+        timestamps=timestamps,
+        time_tolerance_ms=time_tolerance_ms,
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []

@@ -39,7 +39,7 @@ from calibctl.store.runner import Delegate, Runner
 if TYPE_CHECKING:
     from calibctl.store import audit
 
-_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
+_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary", "inverted", "legacy_pattern")
 
 
 def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
