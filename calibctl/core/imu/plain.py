@@ -24,6 +24,7 @@ from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuSamples, check_rate_ratio
 
 MIN_POSE_FRAMES = 10
+STEP_FRAMES = 3  # positions differenced over +/-3 frames: PnP noise / (3 h)^2 instead of / h^2
 
 
 @dataclass(frozen=True)
@@ -115,63 +116,78 @@ def kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return U @ D @ Vt
 
 
+class TdUnobservableError(ImuInputError):
+    """The rate cross-correlation cannot pin td (constant rate, no motion, no correlation)."""
+
+
 def rate_alignment(
-    imu: ImuSamples, track: BoardTrack, max_lag_s: float = 0.2
+    imu: ImuSamples, track: BoardTrack, max_lag_s: float = 0.2, td_s: float | None = None
 ) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """td_s by rate cross-correlation, then R_imu_cam and the gyro bias by Kabsch on the rates.
+    """td_s by rate cross-correlation (unless given: then held), then R_imu_cam and the gyro bias by
+    Kabsch on the rates.
 
     Returns:
         (td_s, peak NCC, R_imu_cam (3, 3), gyro bias (3,) rad/s).
 
     Raises:
         ImuUnitError: the gyro swings ~57 times the camera's rate (deg/s).
-        ImuInputError: the cross-correlation cannot pin td (it names why).
+        TdUnobservableError: the cross-correlation cannot pin td (it names why).
     """
     t_mid, interval, w_cam = camera_rates(track)
     gyro_norm = np.linalg.norm(imu.gyro_rad_s, axis=1)
     cam_norm = np.linalg.norm(w_cam, axis=1)
     check_rate_ratio(float(np.std(gyro_norm)), float(np.std(cam_norm)))
-    est = estimate_time_offset(
-        imu.t_s, gyro_norm, t_mid, cam_norm, OffsetConfig(max_lag_s=max_lag_s, max_sigma_s=np.inf)
-    )
-    if est.td_s is None:
-        raise ImuInputError(f"camera-IMU rate alignment: {est.refused}")
-    td = float(est.td_s)
+    if td_s is None:
+        est = estimate_time_offset(
+            imu.t_s, gyro_norm, t_mid, cam_norm, OffsetConfig(max_lag_s=max_lag_s, max_sigma_s=np.inf)
+        )
+        if est.td_s is None:
+            raise TdUnobservableError(f"camera-IMU rate alignment: {est.refused}")
+        td, ncc = float(est.td_s), float(est.peak_ncc or 0.0)
+    else:
+        td, ncc = td_s, float("nan")
     w_imu = mean_gyro(imu, t_mid + td, interval)
     inside = (t_mid + td - interval / 2 >= imu.t_s[0]) & (t_mid + td + interval / 2 <= imu.t_s[-1])
     a, b = w_imu[inside], w_cam[inside]
     R = kabsch(a - a.mean(axis=0), b - b.mean(axis=0))
     bias = a.mean(axis=0) - R @ b.mean(axis=0)
-    return td, float(est.peak_ncc or 0.0), R, bias
+    return td, ncc, R, bias
 
 
-def _consecutive_triples(t_s: np.ndarray) -> np.ndarray:
-    """Indices k with poses k-1, k, k+1 evenly spaced (within 10 %) at the median period."""
-    dt = np.diff(t_s)
-    period = np.median(dt)
-    even = np.abs(dt - period) < 0.1 * period
-    return np.flatnonzero(even[:-1] & even[1:]) + 1
+def _even_triples(t_s: np.ndarray, step: int) -> np.ndarray:
+    """Indices k with poses k-step, k, k+step evenly spaced (within 10 %) at step median periods."""
+    period = np.median(np.diff(t_s))
+    k = np.arange(step, t_s.size - step)
+    before, after = t_s[k] - t_s[k - step], t_s[k + step] - t_s[k]
+    even = (np.abs(before - step * period) < 0.1 * period) & (np.abs(after - step * period) < 0.1 * period)
+    return k[even]
 
 
-def plain_calibration(imu: ImuSamples, frames: CameraFrames, track: BoardTrack | None = None) -> PlainResult:
+def plain_calibration(
+    imu: ImuSamples,
+    frames: CameraFrames,
+    track: BoardTrack | None = None,
+    step_frames: int = STEP_FRAMES,
+    td_s: float | None = None,
+) -> PlainResult:
     """The afternoon script (module docstring).
 
     Raises:
         ImuInputError, ImuUnitError: the recording cannot be aligned (the message says why).
     """
     track = track or board_track(frames)
-    td, ncc, R_i_c, b_g = rate_alignment(imu, track)
+    td, ncc, R_i_c, b_g = rate_alignment(imu, track, td_s=td_s)
     T_w_c = track.T_w_cam
-    k = _consecutive_triples(track.t_s)
+    h = step_frames * np.median(np.diff(track.t_s))
+    k = _even_triples(track.t_s, step_frames)
     t_k = track.t_s[k] + td
-    k = k[(t_k - 1.0 / frames.rate_hz >= imu.t_s[0]) & (t_k + 1.0 / frames.rate_hz <= imu.t_s[-1])]
+    k = k[(t_k - h >= imu.t_s[0]) & (t_k + h <= imu.t_s[-1])]
     if k.size < 10:
         raise ImuInputError("camera and IMU overlap for fewer than 10 evenly spaced frames")
-    h = np.median(np.diff(track.t_s))
     p = T_w_c[:, :3, 3]
     R = T_w_c[:, :3, :3]
-    p_dd = (p[k + 1] - 2 * p[k] + p[k - 1]) / h**2
-    R_dd = (R[k + 1] - 2 * R[k] + R[k - 1]) / h**2
+    p_dd = (p[k + step_frames] - 2 * p[k] + p[k - step_frames]) / h**2
+    R_dd = (R[k + step_frames] - 2 * R[k] + R[k - step_frames]) / h**2
     # The second difference is the acceleration averaged with a triangle of half-width h: average the
     # accelerometer, rotated into the board frame, the same way.
     R_w_i_samples, inside = _imu_orientations(imu, track, td, R_i_c)

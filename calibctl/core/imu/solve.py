@@ -53,6 +53,12 @@ SHARED_NAMES = (
     "ba_x",
     "ba_y",
     "ba_z",
+    "dbg_x",
+    "dbg_y",
+    "dbg_z",
+    "dba_x",
+    "dba_y",
+    "dba_z",
 )
 H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
 H_TIME = 1e-6
@@ -64,7 +70,8 @@ BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the en
 class SolveOptions:
     """knot_spacing_s: spline knot spacing. corner_sigma_px: the corner noise to start from (the
     estimate replaces it unless ``fix_corner_sigma``). estimate_line_delay: add the rolling-shutter
-    line delay. hold_td_s: hold td at this value instead of estimating it. folds: k of the k-fold
+    line delay. bias_drift: let both biases drift linearly over the
+    recording (b(t) = b + b_dot (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of estimating it. folds: k of the k-fold
     held-out residuals (0: none). max_iterations: per LM run."""
 
     knot_spacing_s: float = 0.05
@@ -75,6 +82,7 @@ class SolveOptions:
     folds: int = 3
     max_iterations: int = 40
     margin_s: float = 0.1
+    bias_drift: bool = False
 
 
 @dataclass
@@ -87,6 +95,8 @@ class _State:
     R_g: np.ndarray
     b_g: np.ndarray
     b_a: np.ndarray
+    b_g_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    b_a_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
     cache: dict = field(default_factory=dict, repr=False)
 
 
@@ -196,7 +206,9 @@ class _Problem:
             for i, name in enumerate(SHARED_NAMES)
             if not (name == "td" and options.hold_td_s is not None)
             and not (name == "line_delay" and not options.estimate_line_delay)
+            and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
         ]
+        self.tau = self.t_imu - 0.5 * (self.t_imu[0] + self.t_imu[-1])
         self.R_ref = np.eye(3)
 
     # -- corners -------------------------------------------------------------------------------------
@@ -235,7 +247,9 @@ class _Problem:
             ) / (2 * h[:, None])
         J_xi = np.concatenate([-np.einsum("nij,njk->nik", dX, _skew(RX)), dX], axis=2)  # (N, 2, 6)
         wgt = self.corner_mask / self.sigma_px**2
-        info = np.add.reduceat(np.einsum("nri,nrj,n->nij", J_xi, J_xi, wgt), self.pose_starts, axis=0)
+        info = np.add.reduceat(
+            np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), self.pose_starts, axis=0
+        )
         grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), self.pose_starts, axis=0)
         # d xi / d (local controls, extrinsic, time) per pose point.
         base = (R, tt)
@@ -246,14 +260,17 @@ class _Problem:
             )
 
         P = t.size
-        J_loc = np.empty((P, 6, 24))
+        J_loc = np.zeros((P, 6, 24))
         for j in range(4):
-            for c in range(6):
+            for c in range(3):
                 d = np.zeros((4, 6))
                 d[j, c] = H_CTRL
                 plus = model.camera_pose(loc + d, w0, self.R_ref, s.R_ic, s.t_ic)
                 minus = model.camera_pose(loc - d, w0, self.R_ref, s.R_ic, s.t_ic)
                 J_loc[:, :, j * 6 + c] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
+        # t_cam_w = R_ic^T (-R_i_w p - t_ic): linear in the position control points, rotation untouched.
+        for j in range(4):
+            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = -R * w0[:, j, None, None]
         J_sh = np.zeros((P, 6, len(SHARED_NAMES)))
         for a in range(3):
             dv = np.zeros(3)
@@ -286,19 +303,26 @@ class _Problem:
         w0, w1, w2 = self.imu_w
         g_w = self.gravity(s.R_g)
         gy, ac = model.imu_predict(loc, w0, w1, w2, self.R_ref, g_w)
-        r = np.concatenate([self.gyro - gy - s.b_g, self.accel - ac - s.b_a], axis=1)
+        tau = self.tau[:, None]
+        r = np.concatenate(
+            [self.gyro - gy - s.b_g - s.b_g_dot * tau, self.accel - ac - s.b_a - s.b_a_dot * tau], axis=1
+        )
         if not jacobians:
             return r
         S = r.shape[0]
-        J_loc = np.empty((S, 6, 24))
+        J_loc = np.zeros((S, 6, 24))
         for j in range(4):
-            for c in range(6):
+            for c in range(3):
                 d = np.zeros((4, 6))
                 d[j, c] = H_CTRL
                 gp, ap = model.imu_predict(loc + d, w0, w1, w2, self.R_ref, g_w)
                 gm, am = model.imu_predict(loc - d, w0, w1, w2, self.R_ref, g_w)
                 J_loc[:, :3, j * 6 + c] = (gp - gm) / (2 * H_CTRL)
                 J_loc[:, 3:, j * 6 + c] = (ap - am) / (2 * H_CTRL)
+        # accel = R_i_w (p'' - g): linear in the position control points.
+        R_i_w = np.transpose(self.R_ref @ model.exp_so3(model.spline_value(loc[:, :, :3], w0)), (0, 2, 1))
+        for j in range(4):
+            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = R_i_w * w2[:, j, None, None]
         J_sh = np.zeros((S, 6, len(SHARED_NAMES)))
         for a in range(2):
             dv = np.zeros(3)
@@ -312,6 +336,8 @@ class _Problem:
             J_sh[:, 3:, 8 + a] = (ap - am) / (2 * H_GRAV)
         J_sh[:, :3, 10:13] = np.eye(3)
         J_sh[:, 3:, 13:16] = np.eye(3)
+        J_sh[:, :3, 16:19] = np.eye(3) * self.tau[:, None, None]
+        J_sh[:, 3:, 19:22] = np.eye(3) * self.tau[:, None, None]
         return r, J_loc, J_sh
 
     def imu_weights(self) -> np.ndarray:
@@ -330,27 +356,18 @@ class _Problem:
         Js_i = Js_i * wv[:, :, None]
         cost = float(np.sum(r_c**2 * (self.corner_mask / self.sigma_px**2)[:, None]) + np.sum(r_iw**2))
         n = self.knots.n
+        order = np.argsort(seg_c, kind="stable")  # line-delay pose points need not be in time order
+        Jl_c, info, grad, Js_c, seg_c = Jl_c[order], info[order], grad[order], Js_c[order], seg_c[order]
+        JlT_info = np.transpose(Jl_c, (0, 2, 1)) @ info
         band_c, cross_c, gl_c = scatter_band(
-            n,
-            seg_c,
-            np.einsum("pia,pij,pjb->pab", Jl_c, info, Jl_c),
-            np.einsum("pia,pij,pjb->pab", Jl_c, info, Js_c),
-            np.einsum("pia,pi->pa", Jl_c, grad),
+            n, seg_c, JlT_info @ Jl_c, JlT_info @ Js_c, np.einsum("pia,pi->pa", Jl_c, grad)
         )
-        order = np.argsort(seg_c, kind="stable")  # line-delay pose points may be out of time order
-        if not np.all(order == np.arange(order.size)):
-            band_c, cross_c, gl_c = scatter_band(
-                n,
-                seg_c[order],
-                np.einsum("pia,pij,pjb->pab", Jl_c[order], info[order], Jl_c[order]),
-                np.einsum("pia,pij,pjb->pab", Jl_c[order], info[order], Js_c[order]),
-                np.einsum("pia,pi->pa", Jl_c[order], grad[order]),
-            )
+        JlT_i = np.transpose(Jl_i, (0, 2, 1))
         band_i, cross_i, gl_i = scatter_band(
             n,
             self.imu_seg,
-            np.einsum("sra,srb->sab", Jl_i, Jl_i),
-            np.einsum("sra,srb->sab", Jl_i, Js_i),
+            JlT_i @ Jl_i,
+            JlT_i @ Js_i,
             np.einsum("sra,sr->sa", Jl_i, r_iw),
         )
         band = band_c + band_i
@@ -381,6 +398,8 @@ class _Problem:
             R_g=s.R_g @ se3.rotation_from_rotvec(np.r_[full[8:10], 0.0]),
             b_g=s.b_g + full[10:13],
             b_a=s.b_a + full[13:16],
+            b_g_dot=s.b_g_dot + full[16:19],
+            b_a_dot=s.b_a_dot + full[19:22],
         )
 
     def solve(self, s: _State, max_iterations: int) -> tuple[_State, DenseSystem, int, bool]:
@@ -390,7 +409,7 @@ class _Problem:
             self.retract,
             damping=Damping(initial=1e-4),
             max_iterations=max_iterations,
-            relative_tolerance=1e-10,
+            relative_tolerance=1e-7,
             label="the camera-IMU solve",
             hint="check the IMU units, the held intrinsics and that the recording moves the board in view",
         )
@@ -482,7 +501,7 @@ def solve_imu_camera(
     """
     cpu0 = time.process_time()
     track = track or board_track(frames)
-    plain = plain or plain_calibration(imu, frames, track)
+    plain = plain or plain_calibration(imu, frames, track, td_s=options.hold_td_s)
     td0 = plain.td_s if options.hold_td_s is None else options.hold_td_s
     t_ref = float(imu.t_s[0])
     problem = _Problem(imu, frames, noise, options, td0, t_ref)
