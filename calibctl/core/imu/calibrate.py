@@ -22,10 +22,10 @@ from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_c
 
 @dataclass(frozen=True)
 class Calibration:
-    """solution: the final solve (None: refused before solving, the gates say why). gates: every gate on it. held: "td" when td was held after the
-    correlation gate failed (None otherwise). held_reason: why, in words. passed: every gate passed
-    (a held td passes the correlation gate by construction; the failed first try is in ``gates`` as
-    ``td_rotation_correlation_free``)."""
+    """solution: the final solve (None: refused before solving, the gates say why). gates: every gate
+    on it. held: "td" when td was held after the correlation gate failed (None otherwise).
+    held_reason: why, in words. passed: every gate passed (a held td passes the correlation gate by
+    construction; the failed first try is in ``gates`` as ``td_rotation_correlation_free``)."""
 
     solution: ImuCameraSolution | None
     gates: list[GateResult]

@@ -1,8 +1,8 @@
 """Camera-IMU gates (seed chapters 2-3), each a ``core.gate.GateResult`` with the next action in its hint.
 
 - ``rotational_excitation``: the smallest singular value of the stacked (R_k - I) over the camera's
-  relative rotations between poses ``MOTION_SPAN_S`` apart, per pair of motions
-  (sigma_min * sqrt(2 / m) for m motions: two perpendicular turns of theta give 2 sin(theta / 2)).
+  relative rotations between poses a span apart, per pair of motions (sigma_min * sqrt(2 / m) for m
+  motions: two perpendicular turns of theta give 2 sin(theta / 2)), the best of ``MOTION_SPANS_S``.
   Chapter 2: below ~0.5 (under ~30 deg about two axes) do not trust the translation.
 - ``td_observability``: the median image speed of the corners (px/s); chapter 3's production gate,
   20 px/s (u-dot = 0 makes td unobservable). The speed's spread over time and td's CRLB ride along.
@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibctl.core.extrinsics import se3
 from calibctl.core.gate import GateResult
 from calibctl.core.imu.plain import BoardTrack
 from calibctl.core.imu.samples import CameraFrames, ImuSamples, median_period_s
 
-MOTION_SPAN_S = 1.0
+MOTION_SPANS_S = (0.5, 1.0, 2.0, 3.0)
 MIN_EXCITATION = 0.5
 MIN_IMAGE_SPEED_PX_S = 20.0
 MAX_TD_ROTATION_CORRELATION = 0.95
@@ -32,31 +31,37 @@ MAX_IMU_GAP_PERIODS = 5.0
 MAX_DROPPED_SHARE = 0.05
 
 
-def rotational_excitation(track: BoardTrack, span_s: float = MOTION_SPAN_S) -> GateResult:
+def _excitation(track: BoardTrack, span_s: float) -> tuple[float, int]:
     R = track.T_w_cam[:, :3, :3]
     later = np.searchsorted(track.t_s, track.t_s + span_s)
     ok = later < track.t_s.size
     first, second = np.flatnonzero(ok), later[ok]
     if first.size < 2:
-        value = 0.0
-    else:
-        rel = np.einsum("nji,njk->nik", R[first], R[second])
-        stacked = (rel - np.eye(3)).reshape(-1, 3)
-        value = float(np.linalg.svd(stacked, compute_uv=False)[-1] * np.sqrt(2.0 / first.size))
+        return 0.0, int(first.size)
+    rel = np.einsum("nji,njk->nik", R[first], R[second])
+    stacked = (rel - np.eye(3)).reshape(-1, 3)
+    return float(np.linalg.svd(stacked, compute_uv=False)[-1] * np.sqrt(2.0 / first.size)), int(first.size)
+
+
+def rotational_excitation(track: BoardTrack, spans_s: tuple[float, ...] = MOTION_SPANS_S) -> GateResult:
+    """The best of the spans: a recording that turns slowly about one axis and fast about another is
+    judged on the span that shows both turns."""
+    value, motions, span = max((*_excitation(track, s), s) for s in spans_s)
     passed = value >= MIN_EXCITATION
     return GateResult(
         gate="rotational_excitation",
         passed=passed,
         value=value,
         threshold=MIN_EXCITATION,
-        message=f"rotational excitation {value:.3f} per pair of {span_s:g} s motions (at least "
+        message=f"rotational excitation {value:.3f} per pair of {span:g} s motions (at least "
         f"{MIN_EXCITATION} = about 30 deg about two axes)",
         reason=None if passed else "rotation_starved",
         hint=None
         if passed
-        else "the recording turns about too few axes or too little: record again turning the sensor "
-        "at least 30 deg about each of its three axes, with reversals (a figure-of-eight with wrist turns)",
-        detail={"motions": int(first.size), "span_s": span_s},
+        else "the recording turns about too few axes or too little, so the lever arm (translation) is "
+        "not pinned: record again turning the sensor at least 30 deg about each of its three axes, with "
+        "reversals (a figure-of-eight with wrist turns)",
+        detail={"motions": motions, "span_s": span},
     )
 
 
@@ -191,7 +196,8 @@ def dropped_frames(frames: CameraFrames) -> GateResult:
         passed=passed,
         value=value,
         threshold=MAX_DROPPED_SHARE,
-        message=f"{missing} camera frames missing from an even {1 / period:.1f} Hz stream ({100 * value:.1f} %)",
+        message=f"{missing} camera frames missing from an even {1 / period:.1f} Hz stream "
+        f"({100 * value:.1f} %)",
         reason=None if passed else "frames_dropped",
         hint=None
         if passed

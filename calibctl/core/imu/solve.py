@@ -29,7 +29,6 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from calibctl.core.extrinsics import se3
-from calibctl.core.gate import GateResult
 from calibctl.core.imu import model
 from calibctl.core.imu.plain import BoardTrack, PlainResult, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise, ImuSamples
@@ -70,9 +69,10 @@ BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the en
 class SolveOptions:
     """knot_spacing_s: spline knot spacing. corner_sigma_px: the corner noise to start from (the
     estimate replaces it unless ``fix_corner_sigma``). estimate_line_delay: add the rolling-shutter
-    line delay. bias_drift: let both biases drift linearly over the
-    recording (b(t) = b + b_dot (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of estimating it. folds: k of the k-fold
-    held-out residuals (0: none). max_iterations: per LM run."""
+    line delay. bias_drift: let both biases drift linearly over the recording (b(t) = b + b_dot
+    (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of
+    estimating it. folds: k of the k-fold held-out residuals (0: none). max_iterations: per LM run.
+    margin_s: the spline's reach beyond the first and last frame (td may move within it)."""
 
     knot_spacing_s: float = 0.05
     corner_sigma_px: float = 0.5
@@ -121,6 +121,8 @@ class ImuCameraSolution:
     gyro_bias_rad_s: np.ndarray
     accel_bias_m_s2: np.ndarray
     gravity_w_m_s2: np.ndarray
+    gyro_bias_drift_rad_s2: np.ndarray | None  # per second, about the recording's middle (bias_drift)
+    accel_bias_drift_m_s3: np.ndarray | None
     covariance: np.ndarray  # over ``state_names``
     state_names: tuple[str, ...]
     covariance_7: np.ndarray  # (rot 3 rad, trans 3 m, td s); td row/column zero when held
@@ -222,7 +224,7 @@ class _Problem:
 
     def corners(self, s: _State, jacobians: bool):
         """Residuals (N, 2) px (observed - predicted), and per pose point: info (P, 6, 6), grad (P, 6),
-        J_local (P, 6, 24), J_shared (P, 6, 16), segment (P,)."""
+        J_local (P, 6, 24), J_shared (P, 6, 22), segment (P,)."""
         t, row = self._pose_times(s)
         seg, u = self.knots.locate(t)
         w0 = self.knots.weights(u)
@@ -298,7 +300,7 @@ class _Problem:
         return R_g @ np.array([0.0, 0.0, -self.g_mag])
 
     def imu(self, s: _State, jacobians: bool):
-        """Residuals (S, 6) [gyro, accel] observed - predicted, and J_local (S, 6, 24), J_shared (S, 6, 16)."""
+        """Residuals (S, 6) [gyro, accel] observed - predicted; J_local (S, 6, 24), J_shared (S, 6, 22)."""
         loc = local_controls(s.ctrl, self.imu_seg)
         w0, w1, w2 = self.imu_w
         g_w = self.gravity(s.R_g)
@@ -527,9 +529,10 @@ def solve_imu_camera(
     names = tuple(SHARED_NAMES[i] for i in act)
     index = {name: k for k, name in enumerate(names)}
     seven = np.zeros((7, 7))
-    pick = [index.get(n) for n in ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")]
-    have = [k for k, p in enumerate(pick) if p is not None]
-    seven[np.ix_(have, have)] = cov[np.ix_([pick[k] for k in have], [pick[k] for k in have])]
+    seven_names = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")
+    have = [k for k, n in enumerate(seven_names) if n in index]
+    rows = [index[seven_names[k]] for k in have]
+    seven[np.ix_(have, have)] = cov[np.ix_(rows, rows)]
     A = state.cache["A"]
     td_crlb = 1.0 / np.sqrt(A[index["td"], index["td"]]) if "td" in index else float("nan")
     r_c = problem.corners(state, False)
@@ -544,6 +547,8 @@ def solve_imu_camera(
         gyro_bias_rad_s=state.b_g,
         accel_bias_m_s2=state.b_a,
         gravity_w_m_s2=g_w,
+        gyro_bias_drift_rad_s2=state.b_g_dot if options.bias_drift else None,
+        accel_bias_drift_m_s3=state.b_a_dot if options.bias_drift else None,
         covariance=cov,
         state_names=names,
         covariance_7=seven,
