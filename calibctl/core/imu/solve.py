@@ -266,9 +266,8 @@ class _Problem:
             np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), self.pose_starts, axis=0
         )
         grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), self.pose_starts, axis=0)
-        # d xi / d (local controls, extrinsic, time) per pose point.
-        base = (R, tt)
 
+        # d xi / d (local controls, extrinsic, time) per pose point.
         def xi(Rp: np.ndarray, tp: np.ndarray) -> np.ndarray:
             return np.concatenate(
                 [se3.rotvecs_from_rotations(Rp @ np.transpose(R, (0, 2, 1))), tp - tt], axis=1
@@ -305,7 +304,6 @@ class _Problem:
         dt_col = (xi(*plus) - xi(*minus)) / (2 * H_TIME)
         J_sh[:, :, 6] = dt_col
         J_sh[:, :, 7] = dt_col * row[:, None]
-        del base
         return r, info, grad, J_loc, J_sh, seg
 
     # -- IMU -----------------------------------------------------------------------------------------
