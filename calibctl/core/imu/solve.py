@@ -490,7 +490,7 @@ def _initial_state(
 
 def _safe_inverse(S: np.ndarray) -> np.ndarray:
     """Inverse of a symmetric PSD matrix through its scaled eigen-decomposition; a direction the data
-    cannot see gets an infinite... very large variance instead of a crash."""
+    cannot see gets a very large variance (eigenvalues floored at 1e-14 of the largest), not a crash."""
     d = np.sqrt(np.maximum(np.diag(S), 1e-300))
     Sn = S / np.outer(d, d)
     vals, vecs = np.linalg.eigh(Sn)
