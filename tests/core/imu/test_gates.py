@@ -1,0 +1,43 @@
+"""Camera-IMU gates: a good dance passes; the corridor (constant rate about one axis) is refused, or held
+and named, and never reported with a small sigma."""
+
+from __future__ import annotations
+
+from calibctl.core.imu.calibrate import Calibration, calibrate
+from calibctl.core.imu.solve import SolveOptions
+from calibctl.core.synth.imu import ImuCameraRecording
+from tests.core.imu.conftest import as_inputs
+
+
+def test_the_dance_passes_every_gate(dance_calibration: Calibration) -> None:
+    assert dance_calibration.passed, [g.message for g in dance_calibration.failed]
+    assert dance_calibration.held is None
+    names = {g.gate for g in dance_calibration.gates}
+    assert names >= {
+        "rotational_excitation",
+        "td_observability",
+        "td_rotation_correlation",
+        "saturation",
+        "imu_gaps",
+        "dropped_frames",
+    }
+
+
+def test_the_corridor_is_refused_naming_td_and_rotation(corridor: ImuCameraRecording) -> None:
+    cal = calibrate(*as_inputs(corridor), SolveOptions(folds=0))
+    assert not cal.passed
+    assert cal.solution is None
+    reasons = {g.reason for g in cal.failed}
+    assert "td_rotation_degenerate" in reasons and "rotation_starved" in reasons
+    hint = next(g.hint for g in cal.failed if g.reason == "td_rotation_degenerate")
+    assert hint is not None and "reversals" in hint and "hold td" in hint
+
+
+def test_the_corridor_with_a_known_td_holds_it_and_says_so(corridor: ImuCameraRecording) -> None:
+    cal = calibrate(*as_inputs(corridor), SolveOptions(folds=0), fallback_td_s=corridor.truth.td_s)
+    assert cal.held == "td" and cal.held_reason is not None and "td held" in cal.held_reason
+    s = cal.solution
+    assert s is not None and s.td_held and s.td_s == corridor.truth.td_s
+    # One rotation axis cannot pin the extrinsic: still refused, and with a large sigma, not a small one.
+    assert not cal.passed
+    assert max(s.sigma_rotation_deg) > 1.0 and max(s.sigma_translation_mm) > 50.0
