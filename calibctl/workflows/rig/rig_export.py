@@ -25,7 +25,7 @@ from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
-from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.kinds import STALE_RULES, evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.exports import bundle, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
@@ -90,19 +90,15 @@ class RigExport:
 def _refuse_unloadable(
     cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool
 ) -> None:
-    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye / LiDAR camera) exit 1."""
+    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or the camera of an
+    evidence edge) exit 1."""
     ref = f"rig {cal.rig}@{cal.version}"
     if cal.status != "accepted" and not allow_rejected:
         raise UsageError(
             f"{ref} is {cal.status}: a robot must not load it",
             hint="export the active version, or pass --allow-rejected to inspect it",
         )
-    stale = [
-        f
-        for f in findings
-        if f.severity == "error"
-        and f.rule in ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
-    ]
+    stale = [f for f in findings if f.severity == "error" and f.rule in STALE_RULES]
     if stale and not (allow_stale or allow_rejected):
         raise VerdictFailed(
             f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
