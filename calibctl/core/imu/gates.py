@@ -31,6 +31,29 @@ MAX_IMU_GAP_PERIODS = 5.0
 MAX_DROPPED_SHARE = 0.05
 
 
+def _verdict(
+    gate: str,
+    value: float,
+    threshold: float,
+    passed: bool,
+    message: str,
+    reason: str,
+    hint: str,
+    detail: dict[str, float | int | str | list[str]] | None = None,
+) -> GateResult:
+    """A GateResult whose reason and hint are kept only when it failed."""
+    return GateResult(
+        gate=gate,
+        passed=passed,
+        value=value,
+        threshold=threshold,
+        message=message,
+        reason=None if passed else reason,
+        hint=None if passed else hint,
+        detail=detail or {},
+    )
+
+
 def _excitation(track: BoardTrack, span_s: float) -> tuple[float, int]:
     R = track.T_w_cam[:, :3, :3]
     later = np.searchsorted(track.t_s, track.t_s + span_s)
@@ -48,20 +71,18 @@ def rotational_excitation(track: BoardTrack, spans_s: tuple[float, ...] = MOTION
     judged on the span that shows both turns."""
     value, motions, span = max((*_excitation(track, s), s) for s in spans_s)
     passed = value >= MIN_EXCITATION
-    return GateResult(
-        gate="rotational_excitation",
-        passed=passed,
-        value=value,
-        threshold=MIN_EXCITATION,
-        message=f"rotational excitation {value:.3f} per pair of {span:g} s motions (at least "
+    return _verdict(
+        "rotational_excitation",
+        value,
+        MIN_EXCITATION,
+        passed,
+        f"rotational excitation {value:.3f} per pair of {span:g} s motions (at least "
         f"{MIN_EXCITATION} = about 30 deg about two axes)",
-        reason=None if passed else "rotation_starved",
-        hint=None
-        if passed
-        else "the recording turns about too few axes or too little, so the lever arm (translation) is "
+        "rotation_starved",
+        "the recording turns about too few axes or too little, so the lever arm (translation) is "
         "not pinned: record again turning the sensor at least 30 deg about each of its three axes, with "
         "reversals (a figure-of-eight with wrist turns)",
-        detail={"motions": motions, "span_s": span},
+        {"motions": motions, "span_s": span},
     )
 
 
@@ -97,19 +118,17 @@ def td_observability(frames: CameraFrames, td_crlb_ms: float | None = None) -> G
     }
     if td_crlb_ms is not None:
         detail["td_crlb_ms"] = td_crlb_ms
-    return GateResult(
-        gate="td_observability",
-        passed=passed,
-        value=value,
-        threshold=MIN_IMAGE_SPEED_PX_S,
-        message=f"median corner speed {value:.1f} px/s (at least {MIN_IMAGE_SPEED_PX_S:g}), spread over "
+    return _verdict(
+        "td_observability",
+        value,
+        MIN_IMAGE_SPEED_PX_S,
+        passed,
+        f"median corner speed {value:.1f} px/s (at least {MIN_IMAGE_SPEED_PX_S:g}), spread over "
         f"time {spread:.1f} px/s",
-        reason=None if passed else "image_static",
-        hint=None
-        if passed
-        else "the board barely moves in the image, so td cannot be seen (u-dot = 0): record again "
+        "image_static",
+        "the board barely moves in the image, so td cannot be seen (u-dot = 0): record again "
         "turning the sensor so the board sweeps across the image, with reversals",
-        detail=detail,
+        detail,
     )
 
 
@@ -128,17 +147,15 @@ def td_rotation_correlation(covariance_7: np.ndarray, td_held: bool) -> GateResu
     r2 = float(s_rt @ np.linalg.solve(S_rr, s_rt) / s_tt) if s_tt > 0 else 1.0
     value = float(np.sqrt(np.clip(r2, 0.0, 1.0)))
     passed = value <= MAX_TD_ROTATION_CORRELATION
-    return GateResult(
-        gate="td_rotation_correlation",
-        passed=passed,
-        value=value,
-        threshold=MAX_TD_ROTATION_CORRELATION,
-        message=f"td correlates with the extrinsic rotation at {value:.3f} (at most "
+    return _verdict(
+        "td_rotation_correlation",
+        value,
+        MAX_TD_ROTATION_CORRELATION,
+        passed,
+        f"td correlates with the extrinsic rotation at {value:.3f} (at most "
         f"{MAX_TD_ROTATION_CORRELATION}); sigma td {1e3 * np.sqrt(max(s_tt, 0.0)):.3f} ms",
-        reason=None if passed else "td_rotation_degenerate",
-        hint=None
-        if passed
-        else "the motion rotates at a near-constant rate, so a time offset and an extrinsic rotation "
+        "td_rotation_degenerate",
+        "the motion rotates at a near-constant rate, so a time offset and an extrinsic rotation "
         "explain the data equally (seed chapter 3): record again with rate reversals on every axis, or "
         "hold td at a known value (a hardware-triggered rig: 0) and estimate the extrinsic alone",
     )
@@ -149,19 +166,17 @@ def saturation(imu: ImuSamples) -> GateResult:
     both = gyro | accel
     value = float(both.mean())
     passed = value <= MAX_SATURATED_SHARE
-    return GateResult(
-        gate="saturation",
-        passed=passed,
-        value=value,
-        threshold=MAX_SATURATED_SHARE,
-        message=f"{int(gyro.sum())} gyro and {int(accel.sum())} accelerometer samples saturated "
+    return _verdict(
+        "saturation",
+        value,
+        MAX_SATURATED_SHARE,
+        passed,
+        f"{int(gyro.sum())} gyro and {int(accel.sum())} accelerometer samples saturated "
         f"({100 * value:.2f} % of {both.size})",
-        reason=None if passed else "imu_saturated",
-        hint=None
-        if passed
-        else "the motion exceeded the IMU's range: record again moving less violently, or set a larger "
+        "imu_saturated",
+        "the motion exceeded the IMU's range: record again moving less violently, or set a larger "
         "full-scale range on the IMU",
-        detail={"gyro_samples": int(gyro.sum()), "accel_samples": int(accel.sum())},
+        {"gyro_samples": int(gyro.sum()), "accel_samples": int(accel.sum())},
     )
 
 
@@ -171,18 +186,16 @@ def imu_gaps(imu: ImuSamples) -> GateResult:
     value = float(steps.max() / period)
     passed = value <= MAX_IMU_GAP_PERIODS
     at = float(imu.t_s[int(np.argmax(steps))])
-    return GateResult(
-        gate="imu_gaps",
-        passed=passed,
-        value=value,
-        threshold=MAX_IMU_GAP_PERIODS,
-        message=f"longest IMU gap {1e3 * steps.max():.1f} ms = {value:.1f} sample periods (at {at:.3f} s)",
-        reason=None if passed else "imu_gap",
-        hint=None
-        if passed
-        else "the IMU log drops samples: check the driver's queue and the logger's load, then record "
+    return _verdict(
+        "imu_gaps",
+        value,
+        MAX_IMU_GAP_PERIODS,
+        passed,
+        f"longest IMU gap {1e3 * steps.max():.1f} ms = {value:.1f} sample periods (at {at:.3f} s)",
+        "imu_gap",
+        "the IMU log drops samples: check the driver's queue and the logger's load, then record "
         "again (an integrated gap bends the trajectory)",
-        detail={"at_s": at},
+        {"at_s": at},
     )
 
 
@@ -191,19 +204,16 @@ def dropped_frames(frames: CameraFrames) -> GateResult:
     missing = int(np.sum(np.maximum(np.round(np.diff(frames.t_s) / period) - 1, 0)))
     value = missing / (frames.t_s.size + missing)
     passed = value <= MAX_DROPPED_SHARE
-    return GateResult(
-        gate="dropped_frames",
-        passed=passed,
-        value=value,
-        threshold=MAX_DROPPED_SHARE,
-        message=f"{missing} camera frames missing from an even {1 / period:.1f} Hz stream "
-        f"({100 * value:.1f} %)",
-        reason=None if passed else "frames_dropped",
-        hint=None
-        if passed
-        else "the camera stream drops frames: lower the frame rate or the resolution, or record to a "
+    return _verdict(
+        "dropped_frames",
+        value,
+        MAX_DROPPED_SHARE,
+        passed,
+        f"{missing} camera frames missing from an even {1 / period:.1f} Hz stream ({100 * value:.1f} %)",
+        "frames_dropped",
+        "the camera stream drops frames: lower the frame rate or the resolution, or record to a "
         "faster disk, then record again",
-        detail={"missing": missing},
+        {"missing": missing},
     )
 
 

@@ -17,7 +17,8 @@ on the per-sample local control points and the shared states (each corner's thro
 so the expensive part runs once per frame), analytic only for the lens' 6-dof pose chain.
 
 Weights: corners start at ``corner_sigma_px`` (or 0.5 px), the IMU at its densities; after a first
-solve each group's variance is re-estimated (corners: the RMS; IMU groups: raised, never lowered,
+solve corners over ``OUTLIER_SIGMAS`` robust sigmas (median-based) are left out, each group's
+variance is re-estimated (corners: the RMS; IMU groups: raised, never lowered,
 to their RMS) and the problem solved again, so the reported sigmas carry the residuals actually seen.
 """
 
@@ -62,6 +63,7 @@ SHARED_NAMES = (
 H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
 H_TIME = 1e-6
 H_GRAV = 1e-6
+OUTLIER_SIGMAS = 5.0  # a corner this many robust sigmas off (2-D) after the first solve is left out
 BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the end margin touches)
 
 
@@ -141,6 +143,7 @@ class ImuCameraSolution:
     converged: bool
     n_frames: int
     n_corners: int
+    n_outliers: int  # corners over OUTLIER_SIGMAS robust sigmas after the first solve, left out
     n_imu: int
     knots: Knots
     cpu_s: float
@@ -202,6 +205,7 @@ class _Problem:
         self.imu_seg = seg
         self.imu_w = [self.knots.weights(u, d) for d in range(3)]
         self.corner_mask = np.ones(self.obj.shape[0])
+        self.inliers = np.ones(self.obj.shape[0], bool)
         self.imu_mask = np.ones(self.t_imu.size)
         self.active = [
             i
@@ -516,8 +520,12 @@ def solve_imu_camera(
     # Variance components: corners from their RMS, IMU groups raised to theirs.
     r_c = problem.corners(state, False)
     r_i = problem.imu(state, False)
+    norm = np.linalg.norm(r_c, axis=1)
+    robust_sigma = float(np.median(norm)) / np.sqrt(2 * np.log(2))  # 2-D Gaussian: median |r| = 1.177 sigma
+    problem.inliers = norm <= OUTLIER_SIGMAS * robust_sigma
+    problem.corner_mask = problem.inliers.astype(float)
     if not options.fix_corner_sigma:
-        problem.sigma_px = float(np.sqrt(np.mean(r_c**2)))
+        problem.sigma_px = float(np.sqrt(np.mean(r_c[problem.inliers] ** 2)))
     f_g = max(1.0, float(np.sqrt(np.mean(r_i[:, :3] ** 2))) / problem.sigma_gyro)
     f_a = max(1.0, float(np.sqrt(np.mean(r_i[:, 3:] ** 2))) / problem.sigma_accel)
     problem.sigma_gyro *= f_g
@@ -562,7 +570,8 @@ def solve_imu_camera(
             else None
         ),
         corner_sigma_px=problem.sigma_px,
-        corner_rms_px=float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))),
+        corner_rms_px=float(np.sqrt(np.mean(np.sum(r_c[problem.inliers] ** 2, axis=1)))),
+        n_outliers=int(np.sum(~problem.inliers)),
         gyro_rms_rad_s=float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))),
         accel_rms_m_s2=float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))),
         imu_variance_factors=(f_g, f_a),
@@ -579,6 +588,7 @@ def solve_imu_camera(
             "corner_px": r_c,
             "corner_t_s": problem.t_cam + t_ref,
             "corner_row_px": problem.row,
+            "corner_inlier": problem.inliers,
             "imu_t_s": problem.t_imu + t_ref,
             "gyro_rad_s": r_i[:, :3],
             "accel_m_s2": r_i[:, 3:],
@@ -594,14 +604,14 @@ def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> HeldOut:
     for f in range(k):
         out_c = frame_rank % k == f
         out_i = sample % k == f
-        problem.corner_mask = (~out_c).astype(float)
+        problem.corner_mask = (~out_c & problem.inliers).astype(float)
         problem.imu_mask = (~out_i).astype(float)
         fold_state, _, _, _ = problem.solve(replace(state, cache={}), min(options.max_iterations, 10))
-        r_c = problem.corners(fold_state, False)[out_c]
+        r_c = problem.corners(fold_state, False)[out_c & problem.inliers]
         r_i = problem.imu(fold_state, False)[out_i]
         out.corner_rms_px.append(float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))))
         out.gyro_rms_rad_s.append(float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))))
         out.accel_rms_m_s2.append(float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))))
-    problem.corner_mask = np.ones(problem.obj.shape[0])
+    problem.corner_mask = problem.inliers.astype(float)
     problem.imu_mask = np.ones(problem.t_imu.size)
     return out
