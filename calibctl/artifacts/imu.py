@@ -24,7 +24,8 @@ from calibctl.artifacts.handeye import FRAME_PATTERN
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
 Vector3 = tuple[float, float, float]
-TD_CONVENTION = "t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"
+TdConvention = Literal["t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"]
+TD_CONVENTION: TdConvention = "t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"
 COVARIANCE_LAYOUT = (
     "7x7 over rotation about IMU x, y, z (rad; left perturbation R = Exp(d) R_hat), translation x, y, z "
     "(m), td (s); td's row and column zero when td was held"
@@ -99,6 +100,9 @@ class ImuMetrics(Document):
 
     frames: int = Field(ge=0, description="camera frames used")
     corners: int = Field(ge=0, description="corners used")
+    corners_left_out: int = Field(
+        ge=0, description="corners over 5 robust sigmas after the first solve, left out (blunders)"
+    )
     imu_samples: int = Field(ge=0, description="IMU samples used")
     corner_rms_px: float = Field(ge=0, description="reprojection RMS, px")
     gyro_rms_rad_s: float = Field(ge=0, description="gyro residual RMS, rad/s")
@@ -130,9 +134,7 @@ class ImuEdgeResult(Document):
     child_frame: str = Field(pattern=SERIAL_PATTERN, description="the camera: a rig member's serial")
     status: Literal["accepted", "rejected"] = Field(description="accepted when every gate passed")
     camera: str = Field(description="SERIAL@VERSION of the stored calibration whose intrinsics were held")
-    td_convention: Literal["t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"] = Field(
-        TD_CONVENTION, description="how td_s relates the two clocks"
-    )
+    td_convention: TdConvention = Field(TD_CONVENTION, description="how td_s relates the two clocks")
     recording: str = Field(description="the recording folder as given")
     estimate: ImuEstimate | None = Field(description="the estimate (none when refused before solving)")
     noise: ImuNoiseModel = Field(description="the IMU noise model used")

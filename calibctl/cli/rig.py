@@ -278,6 +278,21 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
             + f", {len(h.motions)} motions from {h.provenance.input_file}"
             + (f", camera {h.provenance.camera}" if h.provenance.camera else "")
         )
+    for ir in cal.imu:
+        failed = [g.gate for g in ir.gates if not g.passed]
+        est = ir.estimate
+        say(
+            f"  imu {ir.parent_frame} -> {ir.child_frame}: {ir.status}"
+            + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
+            + (
+                ""
+                if est is None
+                else f", td {est.td_s * 1e3:+.3f} ms"
+                + (" (held)" if est.td_held else f" +/- {est.sigma_td_ms:.3f} ms")
+                + " (t_imu = t_cam + td)"
+            )
+            + f", camera {ir.camera}, recording {ir.recording}"
+        )
     for lr in cal.lidar:
         failed = [g.gate for g in lr.gates if not g.passed]
         m = lr.metrics
@@ -376,6 +391,9 @@ def history(
                         "lidar": [
                             {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar
                         ],
+                        "imu": [
+                            {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.imu
+                        ],
                     }
                     for c in cals
                 ],
@@ -388,6 +406,7 @@ def history(
         base = named_list([f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs], 3)
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
+        hand_eye += "".join(f"; imu {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.imu)
         say(
             f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
             f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}"
@@ -453,7 +472,8 @@ def export(
             "--format",
             help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
             "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
-            "URDF), kalibr, or bundle (all of them + manifest.json, -o DIR).",
+            "URDF), kalibr (camchain, with T_cam_imu and timeshift_cam_imu when the rig has an IMU), "
+            "kalibr-imu (imu.yaml of the camera-IMU edge), or bundle (all of them + manifest.json, -o DIR).",
         ),
     ] = "json",
     out: Annotated[

@@ -1,0 +1,299 @@
+"""Reading a camera + IMU recording: the IMU log, per-frame corner detections, the IMU noise model.
+
+Layouts (every file read through ``bounded``; timestamps are integer nanoseconds, kept exact as int64
+until one shared origin is subtracted):
+
+- the IMU log: ``imu0/data.csv`` (ASL / EuRoC: ``#timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z
+  [m s^-2]``) or ``imu0.csv`` (yac: ``#ts,wx,wy,wz,ax,ay,az``): stamp, gyro x y z, accel x y z in that
+  order. A header naming deg/s or g is refused naming the factor; so is a log whose magnitudes say so
+  (core.imu.samples.check_units).
+- the corners: ``camN/<ns>.csv``, one file per frame (yac's layout): a stamp column first, then at
+  least ``kp_x, kp_y`` (pixel) and ``p_x, p_y, p_z`` (board point, metres); a file with a header only
+  is a frame without a detection. Beside them the ASL ``camN/data.csv`` (``#timestamp [ns],filename``)
+  may list the frames; a stamp listed twice there is refused.
+- the noise model: Kalibr's ``imu.yaml`` (``gyroscope_noise_density``, ``accelerometer_noise_density``,
+  ``gyroscope_random_walk``, ``accelerometer_random_walk``) or yac's ``config.yaml`` ``imu0`` block
+  (``sigma_g_c``, ``sigma_a_c``, ``sigma_gw_c``, ``sigma_aw_c``, ``g``).
+
+Every refusal is an ``InputError`` (exit 2) naming the file and the fix; the core's refusals
+(``ImuInputError``) are mapped with the file they came from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibctl import bounded, files
+from calibctl.core.imu.samples import GRAVITY_M_S2, CameraFrames, ImuInputError, ImuNoise, ImuSamples
+from calibctl.errors import InputError, UsageError
+from calibctl.workflows.diagnostics import diagnostics_io as dio
+
+CORNER_COLUMNS = ("kp_x", "kp_y", "p_x", "p_y", "p_z")
+KALIBR_NOISE = {
+    "gyroscope_noise_density": "gyro_noise_density",
+    "accelerometer_noise_density": "accel_noise_density",
+    "gyroscope_random_walk": "gyro_random_walk",
+    "accelerometer_random_walk": "accel_random_walk",
+}
+YAC_NOISE = {
+    "sigma_g_c": "gyro_noise_density",
+    "sigma_a_c": "accel_noise_density",
+    "sigma_gw_c": "gyro_random_walk",
+    "sigma_aw_c": "accel_random_walk",
+}
+# EuRoC's ADIS16448 (Kalibr imu.yaml of the EuRoC datasets): used when no noise file is given
+DEFAULT_NOISE = ImuNoise(1.6968e-4, 2.0e-3, 1.9393e-5, 3.0e-3)
+MIN_OVERLAP_SHARE = 0.5  # of the camera's span the IMU log must cover
+_DEG = re.compile(r"deg|°")
+_G_UNIT = re.compile(r"\[\s*g\s*\]|\(\s*g\s*\)|_g$")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording read: IMU samples and camera frames on one time origin (seconds from ``t0_ns``), the
+    files read with their sha256, and what was left out (in words)."""
+
+    imu: ImuSamples
+    frames: CameraFrames
+    t0_ns: int
+    inputs: list[tuple[str, Path, str]]  # (role, path, sha256)
+    notes: list[str]
+
+
+def sha256_of(path: Path) -> str:
+    with files.file_errors("read", path):
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def imu_log_path(folder: Path) -> Path:
+    """``imu0/data.csv`` (ASL) or ``imu0.csv`` (yac) under ``folder``."""
+    for path in (folder / "imu0" / "data.csv", folder / "imu0.csv"):
+        if path.is_file():
+            return path
+    raise InputError(
+        f"{folder}: no IMU log (imu0/data.csv or imu0.csv)",
+        "give the recording folder (the ASL / EuRoC layout or yac's: docs/imu.md)",
+    )
+
+
+def _header(path: Path) -> list[str]:
+    text = bounded.read_text(path, "read the IMU log")
+    first = text.split("\n", 1)[0].strip()
+    if not first.startswith("#") and not re.search(r"[A-Za-z]", first):
+        raise InputError(
+            f"{path}: no header line",
+            "the first line names the columns: stamp (ns), gyro x y z (rad/s), accel x y z (m/s^2)",
+        )
+    return [h.strip() for h in first.split(",")]
+
+
+def _stamps_ns(cells: np.ndarray, path: Path, lines: np.ndarray) -> np.ndarray:
+    try:
+        return np.array([int(c) for c in cells], dtype=np.int64)
+    except ValueError:
+        bad = next(i for i, c in enumerate(cells) if not c.strip().lstrip("-").isdigit())
+        raise InputError(
+            f"{path}: line {int(lines[bad])}: stamp {cells[bad]!r} is not an integer of nanoseconds",
+            "write the stamps as integer nanoseconds (EuRoC / ASL), not seconds",
+        ) from None
+
+
+def _check_header_units(header: list[str], path: Path) -> None:
+    gyro, accel = header[1:4], header[4:7]
+    if any(_DEG.search(h.lower()) for h in gyro):
+        raise InputError(
+            f"{path}: the gyro columns are in deg/s ({', '.join(gyro)})",
+            "multiply them by pi/180 and write rad/s (header [rad s^-1])",
+        )
+    if any(_G_UNIT.search(h.lower()) for h in accel):
+        raise InputError(
+            f"{path}: the accelerometer columns are in g ({', '.join(accel)})",
+            f"multiply them by {GRAVITY_M_S2} and write m/s^2 (header [m s^-2])",
+        )
+
+
+def read_imu_log(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(stamps ns (n,) int64, gyro (n, 3), accel (n, 3)) as written; stamps strictly increasing."""
+    header = _header(path)
+    if len(header) < 7:
+        raise InputError(
+            f"{path}: {len(header)} columns, need 7 (stamp ns, gyro x y z rad/s, accel x y z m/s^2)",
+            "write the IMU log as EuRoC does: #timestamp [ns],w_x,w_y,w_z,a_x,a_y,a_z",
+        )
+    _check_header_units(header, path)
+    table = dio.read_table(path, tuple(header[1:7]), optional_text=(header[0],), what="IMU log")
+    stamps = _stamps_ns(table.text[header[0]], path, table.lines)
+    steps = np.diff(stamps)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise InputError(
+            f"{path}: stamps do not increase at line {int(table.lines[i])} ({stamps[i]} ns after "
+            f"{stamps[i - 1]} ns; {bad.size} such step(s))",
+            "sort the log by stamp and drop duplicated or overlapping samples",
+        )
+    gyro = np.stack([table.numeric[h] for h in header[1:4]], axis=1)
+    accel = np.stack([table.numeric[h] for h in header[4:7]], axis=1)
+    return stamps, gyro, accel
+
+
+def _corner_file(path: Path) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """(board points (N, 3) m, pixels (N, 2), the stamp written inside, if any)."""
+    text = bounded.read_text(path, "read the corners")
+    rows = [line for line in text.splitlines() if line.strip()]
+    if len(rows) <= 1:  # a header only: no board in this frame
+        return np.zeros((0, 3)), np.zeros((0, 2)), None
+    header = [h.strip() for h in rows[0].split(",")]
+    table = dio.read_table(path, CORNER_COLUMNS, optional_text=(header[0],), what="corner CSV")
+    stamps = _stamps_ns(table.text[header[0]], path, table.lines) if header[0] not in CORNER_COLUMNS else None
+    if stamps is not None and np.any(stamps != stamps[0]):
+        raise InputError(
+            f"{path}: the rows carry {np.unique(stamps).size} different stamps",
+            "one file holds one frame's corners: split it by stamp",
+        )
+    obj = np.stack([table.numeric[c] for c in ("p_x", "p_y", "p_z")], axis=1)
+    img = np.stack([table.numeric[c] for c in ("kp_x", "kp_y")], axis=1)
+    return obj, img, None if stamps is None else int(stamps[0])
+
+
+def _asl_listing(folder: Path) -> Path | None:
+    """``camN/data.csv`` when present: checked for duplicated stamps."""
+    path = folder / "data.csv"
+    if not path.is_file():
+        return None
+    text = bounded.read_text(path, "read the camera's frame list")
+    stamps = [line.split(",", 1)[0].strip() for line in text.splitlines()[1:] if line.strip()]
+    seen: dict[str, int] = {}
+    for i, s in enumerate(stamps):
+        if s in seen:
+            raise InputError(
+                f"{path}: frame stamp {s} is listed twice (data lines {seen[s] + 1} and {i + 1})",
+                "drop the duplicated frame; every camera stamp must be unique and increasing",
+            )
+        seen[s] = i
+    return path
+
+
+def read_corners(folder: Path) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[Path]]:
+    """Every ``<ns>.csv`` of a camera folder: (stamps ns, board points, pixels, files), by stamp."""
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such camera folder", "name the camera folder with --camera (cam0)")
+    found = sorted(
+        (int(p.stem), p) for p in folder.iterdir() if p.suffix.lower() == ".csv" and p.stem.isdigit()
+    )
+    if len(found) < 2:
+        raise InputError(
+            f"{folder}: {len(found)} corner files <ns>.csv",
+            "export one CSV per frame named by its stamp in ns (yac's layout: docs/imu.md)",
+        )
+    stamps, objs, imgs, paths = [], [], [], []
+    for stamp, path in found:
+        obj, img, inside = _corner_file(path)
+        if inside is not None and inside != stamp:
+            raise InputError(
+                f"{path}: the file is named {stamp} but its rows are stamped {inside}",
+                "name each corner file by the stamp of its frame",
+            )
+        stamps.append(stamp)
+        objs.append(obj)
+        imgs.append(img)
+        paths.append(path)
+    return np.array(stamps, np.int64), objs, imgs, paths
+
+
+def _number(v: object, key: str, path: Path) -> float:
+    """A YAML number; also one YAML 1.1 reads as text (``1e-05``, no dot: what Kalibr's files hold)."""
+    if not isinstance(v, bool) and isinstance(v, int | float | str):
+        try:
+            return float(v)
+        except ValueError:
+            pass
+    raise InputError(f"{path}: {key} = {v!r} is not a number", "a density in SI units (Kalibr)")
+
+
+def read_noise(path: Path | None) -> tuple[ImuNoise, str]:
+    """The IMU noise model and where it came from (``DEFAULT_NOISE`` without a file)."""
+    if path is None:
+        return DEFAULT_NOISE, "defaults"
+    data = bounded.load_file(path, "read the IMU noise file")
+    if isinstance(data, dict) and isinstance(data.get("imu0"), dict):
+        data, names = data["imu0"], YAC_NOISE
+    else:
+        names = KALIBR_NOISE
+    if not isinstance(data, dict) or not all(k in data for k in names):
+        raise InputError(
+            f"{path}: not a Kalibr imu.yaml (needs {', '.join(KALIBR_NOISE)})",
+            "write the IMU's noise densities and random walks as Kalibr's imu.yaml fields",
+        )
+    values = {}
+    for key, field in names.items():
+        values[field] = _number(data[key], key, path)
+    g = _number(data.get("g", GRAVITY_M_S2), "g", path)
+    try:
+        return ImuNoise(**values, gravity_m_s2=g), str(path)
+    except ImuInputError as exc:
+        raise InputError(f"{path}: {exc}", "fix the value in the noise file") from None
+
+
+def read_recording(
+    folder: Path, camera: str, intrinsics: tuple[np.ndarray, np.ndarray, tuple[int, int]]
+) -> Recording:
+    """The IMU log and one camera's corners under ``folder`` on one origin (module docstring); the
+    camera's held intrinsics (K, distortion in OpenCV's order, image size) come from the store."""
+    if not folder.is_dir():
+        raise InputError(f"{folder}: no such recording folder", "give the folder holding imu0 and cam0")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", camera):
+        raise UsageError(f"--camera {camera!r} is not a folder name", "name it as in the recording: cam0")
+    imu_path = imu_log_path(folder)
+    t_imu_ns, gyro, accel = read_imu_log(imu_path)
+    cam_folder = folder / camera
+    listing = _asl_listing(cam_folder) if cam_folder.is_dir() else None
+    t_cam_ns, objs, imgs, paths = read_corners(cam_folder)
+    notes = []
+    lo, hi = max(t_imu_ns[0], t_cam_ns[0]), min(t_imu_ns[-1], t_cam_ns[-1])
+    span = int(t_cam_ns[-1] - t_cam_ns[0])
+    if hi <= lo or (hi - lo) < MIN_OVERLAP_SHARE * span:
+        raise InputError(
+            f"{cam_folder} and {imu_path} do not overlap in time (camera {t_cam_ns[0]}..{t_cam_ns[-1]} ns, "
+            f"IMU {t_imu_ns[0]}..{t_imu_ns[-1]} ns)",
+            "give a camera and an IMU log of one recording, both stamped in ns on one clock",
+        )
+    inside = (t_cam_ns >= t_imu_ns[0]) & (t_cam_ns <= t_imu_ns[-1])
+    if not inside.all():
+        notes.append(f"{int((~inside).sum())} frame(s) outside the IMU log left out")
+    seen = [i for i in np.flatnonzero(inside) if len(objs[i])]
+    if len(seen) < len(np.flatnonzero(inside)):
+        notes.append(f"{len(np.flatnonzero(inside)) - len(seen)} frame(s) without a board left out")
+    t0 = int(min(t_imu_ns[0], t_cam_ns[0]))
+    K, dist, size = intrinsics
+    try:
+        imu = ImuSamples((t_imu_ns - t0) * 1e-9, gyro, accel)
+    except ImuInputError as exc:
+        raise InputError(f"{imu_path}: {exc}", "fix the log as the message says, then run again") from None
+    try:
+        frames = CameraFrames(
+            (t_cam_ns[seen] - t0) * 1e-9,
+            tuple(objs[i] for i in seen),
+            tuple(imgs[i] for i in seen),
+            K,
+            dist,
+            size,
+        )
+    except ImuInputError as exc:
+        raise InputError(f"{cam_folder}: {exc}", "fix the corner files as the message says") from None
+    inputs = [("imu", imu_path, sha256_of(imu_path))]
+    if listing is not None:
+        inputs.append(("camera", listing, sha256_of(listing)))
+    inputs.append(("corners", cam_folder, folder_sha256([paths[i] for i in seen])))
+    return Recording(imu, frames, t0, inputs, notes)
+
+
+def folder_sha256(paths: list[Path]) -> str:
+    """One digest for many files: sha256 of their ``NAME SHA256`` lines, sorted by name."""
+    lines = sorted(f"{p.name} {sha256_of(p)}\n" for p in paths)
+    return hashlib.sha256("".join(lines).encode()).hexdigest()
