@@ -78,7 +78,7 @@ class ImuEstimate(Document):
     sigma_translation_mm: Vector3 = Field(description="one-sigma along IMU x, y, z, mm")
     sigma_rotation_deg: Vector3 = Field(description="one-sigma about IMU x, y, z, degrees")
     sigma_td_ms: float = Field(ge=0, description="one-sigma of td, ms (0 when held)")
-    td_crlb_ms: float = Field(
+    td_crlb_ms: float | None = Field(
         ge=0,
         description="td's Cramer-Rao bound with every other state known: sigma_px / sqrt(sum |u_dot|^2), ms",
     )

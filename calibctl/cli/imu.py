@@ -51,7 +51,7 @@ def render_result(doc: dict[str, Any]) -> None:
         say(
             f"td {e['td_ms']:+.3f} ms ({e['td_convention']})"
             + (" HELD" if e["td_held"] else f" +/- {e['sigma_td_ms']:.3f} ms")
-            + f"; CRLB {e['td_crlb_ms']:.3f} ms"
+            + ("" if e["td_crlb_ms"] is None else f"; CRLB {e['td_crlb_ms']:.3f} ms")
         )
         if e["line_delay_us"] is not None:
             say(f"rolling-shutter line delay {e['line_delay_us']:.3f} +/- {e['sigma_line_delay_us']} us/row")

@@ -45,6 +45,7 @@ from calibctl.workflows.edges.kinds import IMU
 from calibctl.workflows.imu.recording import Recording, read_noise, read_recording
 from calibctl.workflows.store_admin.records import open_store
 
+FREE_TRY = "td_rotation_correlation_free"  # core.imu.calibrate: the correlation before td was held
 _PINHOLE_MODELS = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default")
 
 
@@ -167,7 +168,7 @@ def estimate_of(outcome: ImuOutcome) -> ImuEstimate | None:
         sigma_translation_mm=_vec3(s.sigma_translation_mm),
         sigma_rotation_deg=_vec3(s.sigma_rotation_deg),
         sigma_td_ms=float(s.sigma_td_ms),
-        td_crlb_ms=float(s.td_crlb_ms),
+        td_crlb_ms=_finite(s.td_crlb_ms),
         line_delay_s=None if s.line_delay_s is None else float(s.line_delay_s),
         sigma_line_delay_us=None if s.sigma_line_delay_us is None else float(s.sigma_line_delay_us),
         gyro_bias_rad_s=_vec3(s.gyro_bias_rad_s),
@@ -221,7 +222,8 @@ def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
             source=outcome.noise_source,
         ),
         metrics=metrics_of(s, req.folds),
-        gates=[_gate(g) for g in outcome.calibration.gates],
+        # the failed first try before td was held is told by td_held_reason, not judged again by lint
+        gates=[_gate(g) for g in outcome.calibration.gates if g.gate != FREE_TRY],
         inputs=[
             ImuInput.model_validate({"role": role, "path": str(path.resolve()), "sha256": sha})
             for role, path, sha in outcome.recording.inputs
@@ -274,8 +276,8 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             "td_ms": round(1e3 * s.td_s, 4),
             "td_convention": TD_CONVENTION,
             "td_held": s.td_held,
-            "sigma_td_ms": round(float(s.sigma_td_ms), 4),
-            "td_crlb_ms": round(float(s.td_crlb_ms), 4),
+            "sigma_td_ms": _r(s.sigma_td_ms, 4),
+            "td_crlb_ms": _r(s.td_crlb_ms, 4),
             "line_delay_us": None if s.line_delay_s is None else round(1e6 * s.line_delay_s, 3),
             "sigma_line_delay_us": _r(s.sigma_line_delay_us, 3),
             "gyro_bias_rad_s": [round(float(v), 6) for v in s.gyro_bias_rad_s],

@@ -217,6 +217,15 @@ def test_a_corridor_recording_is_a_rejected_version_never_active(tmp_path_factor
     assert not [e for e in out.stored.edges if e.source == "camera-imu"]
     with Store.open(url) as store:
         assert store.get_rig_calibration(RIG, None).version == 1
+    # held at a known td, the extrinsic is estimated alone and the hold named; a rotation about one
+    # axis still cannot pin the extrinsic, so the version stays rejected
+    held = imu_solve.run_imu(settings_for(url), imu_solve.ImuRequest(rec, CAM, rig=RIG, hold_td_s=TD_S))
+    assert held.stored is not None and held.stored.status == "rejected"
+    est = held.stored.imu[0].estimate
+    assert est is not None and est.td_held and est.td_s == TD_S and est.sigma_td_ms == 0
+    assert "td held at 12.000 ms" in (est.td_held_reason or "")
+    assert "rotational_excitation" in [g.gate for g in held.stored.imu[0].gates if not g.passed]
+    assert "td_rotation_correlation_free" not in [g.gate for g in held.stored.imu[0].gates]
 
 
 def test_a_camera_recalibrated_since_makes_the_edge_stale_and_the_next_write_drops_it(solved, tmp_path):
