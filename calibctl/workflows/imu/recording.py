@@ -55,8 +55,9 @@ _G_UNIT = re.compile(r"\[\s*g\s*\]|\(\s*g\s*\)|_g$")
 
 @dataclass(frozen=True)
 class Recording:
-    """A recording read: IMU samples and camera frames on one time origin (seconds from ``t0_ns``), the
-    files read with their sha256, and what was left out (in words)."""
+    """A recording read: IMU samples and camera frames on one time origin (seconds from ``t0_ns``; a
+    frame without a board has no corners and still counts, so the dropped-frames gate sees real drops),
+    the files read with their sha256, and what was left out (in words)."""
 
     imu: ImuSamples
     frames: CameraFrames
@@ -266,9 +267,7 @@ def read_recording(
     inside = (t_cam_ns >= t_imu_ns[0]) & (t_cam_ns <= t_imu_ns[-1])
     if not inside.all():
         notes.append(f"{int((~inside).sum())} frame(s) outside the IMU log left out")
-    seen = [i for i in np.flatnonzero(inside) if len(objs[i])]
-    if len(seen) < len(np.flatnonzero(inside)):
-        notes.append(f"{len(np.flatnonzero(inside)) - len(seen)} frame(s) without a board left out")
+    seen = [int(i) for i in np.flatnonzero(inside)]  # a frame without a board still counts as a frame
     t0 = int(min(t_imu_ns[0], t_cam_ns[0]))
     K, dist, size = intrinsics
     try:
