@@ -112,7 +112,7 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if isinstance(data.get("transforms"), list):
         return "tf"
-    if KALIBR_IMU_FIELDS <= set(data):
+    if set(data) >= KALIBR_IMU_FIELDS:
         return "kalibr-imu"
     if data and all(
         k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()
