@@ -27,18 +27,25 @@ The plain approach (``plain``): board_track(frames) -> BoardTrack (PnP poses);
     twice-differentiated positions. The estimator's start and the benchmark's baseline.
 
 The estimator (``solve``): solve_imu_camera(imu, frames, noise, SolveOptions(...)) ->
-    ImuCameraSolution: T_imu_cam (4, 4), td_s, td_held, line_delay_s (s/row from c_y, or None),
-    gyro_bias_rad_s (3,), accel_bias_m_s2 (3,), gravity_w_m_s2 (3,) board frame,
-    covariance over state_names, covariance_7 (7, 7) over (rot 3 rad, trans 3 m, td s),
-    sigma_rotation_deg (3,), sigma_translation_mm (3,), sigma_td_ms, td_crlb_ms (td's bound with
-    every other state known: sigma_px / sqrt(sum |u_dot|^2), chapter 3), sigma_line_delay_us,
-    corner/gyro/accel RMS, held_out (k-fold RMS per fold), residuals (per corner and IMU sample,
-    with stamps and image rows: the report's plots), T_cam_imu, timeshift_cam_imu_s.
+    ImuCameraSolution: T_imu_cam (4, 4), td_s, td_held, line_delay_s (s per row from c_y, or None),
+    gyro_bias_rad_s (3,), accel_bias_m_s2 (3,) (+ *_drift per second with bias_drift),
+    gravity_w_m_s2 (3,) board frame, covariance over state_names, covariance_7 (7, 7) over
+    (rot 3 rad, trans 3 m, td s; td's row and column zero when held), sigma_rotation_deg (3,),
+    sigma_translation_mm (3,), sigma_td_ms, td_crlb_ms (td's bound with every other state known:
+    sigma_px / sqrt(sum |u_dot|^2), chapter 3), sigma_line_delay_us, sigma_inflation (the
+    delete-one-block jackknife's widening per state, >= 1), corner/gyro/accel RMS (corners over 5
+    robust sigmas left out: n_outliers), held_out (k-fold RMS per fold), residuals (per corner and
+    IMU sample, with stamps, image rows and the inlier mask: the report's plots), T_cam_imu,
+    timeshift_cam_imu_s, plain (the PlainResult it started from), cpu_s.
+    SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, estimate_line_delay,
+    bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s.
 
 Gates (``gates``; ``core.gate.GateResult``, each with the next action in its hint):
-    check_recording(imu, frames, solution) -> list[GateResult]: rotational excitation, td
-    observability, the (td, yaw) correlation, saturation, IMU gaps, dropped frames.
-    calibrate(imu, frames, noise, options) -> Calibration(solution, gates, held, verdict text):
-    solve, gate, and on a high (td, rotation) correlation re-solve with td held (when the caller
-    gave a value to hold) or refuse, naming which and why.
+    rotational_excitation(track), td_observability(frames, td_crlb_ms), td_rotation_correlation(
+    covariance_7, td_held), saturation(imu), imu_gaps(imu), dropped_frames(frames).
+The one call (``calibrate``): calibrate(imu, frames, noise, options, fallback_td_s=None) ->
+    Calibration(solution | None, gates, held, held_reason; passed, failed): solve and gate; on a
+    (td, rotation) degeneracy (the correlation gate, or a rate cross-correlation that cannot pin td)
+    re-solve with td held at fallback_td_s and say so (held = "td"), or refuse (passed False,
+    solution None when nothing could be solved). Raises ImuInputError subclasses on bad input.
 """

@@ -64,6 +64,10 @@ H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (r
 H_TIME = 1e-6
 H_GRAV = 1e-6
 OUTLIER_SIGMAS = 5.0  # a corner this many robust sigmas off (2-D) after the first solve is left out
+# The jackknife variance is biased upward (Efron-Stein) and noisy with ten blocks; a state's sigma is
+# widened to the jackknife's only when the jackknife variance exceeds its white-noise variance this many
+# times (the residuals are then correlated in time: real data, not the renders).
+JACKKNIFE_RATIO = 4.0
 BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the end margin touches)
 
 
@@ -73,8 +77,10 @@ class SolveOptions:
     estimate replaces it unless ``fix_corner_sigma``). estimate_line_delay: add the rolling-shutter
     line delay. bias_drift: let both biases drift linearly over the recording (b(t) = b + b_dot
     (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of
-    estimating it. folds: k of the k-fold held-out residuals (0: none). max_iterations: per LM run.
-    margin_s: the spline's reach beyond the first and last frame (td may move within it)."""
+    estimating it. folds: k of the k-fold held-out residuals (0: none). jackknife_blocks: contiguous
+    time blocks of the delete-one-block jackknife that can widen the sigmas (under 3: none).
+    max_iterations: per LM run. margin_s: the spline's reach beyond the first and last frame (td may
+    move within it)."""
 
     knot_spacing_s: float = 0.05
     corner_sigma_px: float = 0.5
@@ -82,6 +88,7 @@ class SolveOptions:
     estimate_line_delay: bool = False
     hold_td_s: float | None = None
     folds: int = 3
+    jackknife_blocks: int = 10
     max_iterations: int = 40
     margin_s: float = 0.1
     bias_drift: bool = False
@@ -104,8 +111,9 @@ class _State:
 
 @dataclass(frozen=True)
 class HeldOut:
-    """k-fold held-out RMS: each fold's corners (every k-th frame) and IMU samples (every k-th) left out of
-    the solve and predicted by it. Lists have one entry per fold."""
+    """k-fold held-out RMS: each fold's corners (every k-th frame) and IMU samples (every k-th) left out,
+    the solution moved by one Gauss-Newton step from the full one (the refit, to first order), and the
+    left-out data predicted by it. Lists have one entry per fold."""
 
     corner_rms_px: list[float]
     gyro_rms_rad_s: list[float]
@@ -138,6 +146,7 @@ class ImuCameraSolution:
     gyro_rms_rad_s: float
     accel_rms_m_s2: float
     imu_variance_factors: tuple[float, float]
+    sigma_inflation: dict[str, float]  # jackknife sigma / white-noise sigma per state, at least 1
     held_out: HeldOut | None
     iterations: int
     converged: bool
@@ -533,6 +542,13 @@ def solve_imu_camera(
     state, system, more, converged = problem.solve(state, options.max_iterations)
     iterations += more
     cov = _safe_inverse(system.H)
+    A_full = state.cache["A"]
+    inflation = np.ones(cov.shape[0])
+    if options.jackknife_blocks >= 3:
+        jk = _block_jackknife(problem, state, options.jackknife_blocks)
+        ratio = np.diag(jk) / np.diag(cov)
+        inflation = np.where(ratio > JACKKNIFE_RATIO, np.sqrt(ratio), 1.0)
+        cov = cov * np.outer(inflation, inflation)
     act = problem.active
     names = tuple(SHARED_NAMES[i] for i in act)
     index = {name: k for k, name in enumerate(names)}
@@ -541,7 +557,7 @@ def solve_imu_camera(
     have = [k for k, n in enumerate(seven_names) if n in index]
     rows = [index[seven_names[k]] for k in have]
     seven[np.ix_(have, have)] = cov[np.ix_(rows, rows)]
-    A = state.cache["A"]
+    A = A_full
     td_crlb = 1.0 / np.sqrt(A[index["td"], index["td"]]) if "td" in index else float("nan")
     r_c = problem.corners(state, False)
     r_i = problem.imu(state, False)
@@ -575,6 +591,7 @@ def solve_imu_camera(
         gyro_rms_rad_s=float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))),
         accel_rms_m_s2=float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))),
         imu_variance_factors=(f_g, f_a),
+        sigma_inflation=dict(zip(names, (float(v) for v in inflation), strict=True)),
         held_out=held_out,
         iterations=iterations,
         converged=converged,
@@ -596,6 +613,45 @@ def solve_imu_camera(
     )
 
 
+def _one_step(
+    problem: _Problem, state: _State, corners_out: np.ndarray, imu_out: np.ndarray
+) -> tuple[np.ndarray, _State]:
+    """The solution with some corners and IMU samples left out, one Gauss-Newton step from ``state``
+    (the full solution): (shared delta, moved state). Restores the problem's masks."""
+    problem.corner_mask = (problem.inliers & ~corners_out).astype(float)
+    problem.imu_mask = (~imu_out).astype(float)
+    probe = replace(state, cache={})
+    system = problem.evaluate(probe)
+    delta = np.linalg.lstsq(system.H, system.g, rcond=None)[0]
+    problem.corner_mask = problem.inliers.astype(float)
+    problem.imu_mask = np.ones(problem.t_imu.size)
+    return delta, problem.retract(probe, delta)
+
+
+def _block_jackknife(problem: _Problem, state: _State, blocks: int) -> np.ndarray:
+    """Delete-one-block jackknife covariance over the active shared states (p, p).
+
+    The camera span is cut into ``blocks`` contiguous time blocks; each block's corners and IMU samples
+    are left out in turn and the solution moved by one Gauss-Newton step from the full one (the
+    linearised jackknife: a block is a small share of the data). The spread of those K answers,
+    (K - 1)/K sum (d_k - mean)(d_k - mean)^T, sees what the white-noise covariance cannot: residuals
+    correlated in time (vibration, a lens error that follows the board across the image).
+    """
+    t_c, t_i = problem.t_cam + state.td, problem.t_imu
+    edges = np.linspace(t_c.min(), t_c.max(), blocks + 1)
+    edges[-1] += 1.0
+    steps = []
+    for b in range(blocks):
+        inside_c, inside_i = (
+            (t_c >= edges[b]) & (t_c < edges[b + 1]),
+            (t_i >= edges[b]) & (t_i < edges[b + 1]),
+        )
+        steps.append(_one_step(problem, state, inside_c, inside_i)[0])
+    d = np.array(steps)
+    d -= d.mean(axis=0)
+    return (blocks - 1) / blocks * d.T @ d
+
+
 def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> HeldOut:
     k = options.folds
     frame_rank = np.unique(problem.frame_of_corner, return_inverse=True)[1]
@@ -604,14 +660,10 @@ def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> HeldOut:
     for f in range(k):
         out_c = frame_rank % k == f
         out_i = sample % k == f
-        problem.corner_mask = (~out_c & problem.inliers).astype(float)
-        problem.imu_mask = (~out_i).astype(float)
-        fold_state, _, _, _ = problem.solve(replace(state, cache={}), min(options.max_iterations, 10))
+        _, fold_state = _one_step(problem, state, out_c, out_i)
         r_c = problem.corners(fold_state, False)[out_c & problem.inliers]
         r_i = problem.imu(fold_state, False)[out_i]
         out.corner_rms_px.append(float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))))
         out.gyro_rms_rad_s.append(float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))))
         out.accel_rms_m_s2.append(float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))))
-    problem.corner_mask = problem.inliers.astype(float)
-    problem.imu_mask = np.ones(problem.t_imu.size)
     return out
