@@ -82,6 +82,11 @@ class ImuEstimate(Document):
         ge=0,
         description="td's Cramer-Rao bound with every other state known: sigma_px / sqrt(sum |u_dot|^2), ms",
     )
+    sigma_inflation: dict[str, float] = Field(
+        default_factory=dict,
+        description="per state: the factor (at least 1) by which a delete-one-block jackknife widened its "
+        "white-noise sigma; the sigmas above include it",
+    )
     line_delay_s: float | None = Field(None, description="rolling-shutter line delay, s per row from c_y")
     sigma_line_delay_us: float | None = Field(None, description="its one-sigma, microseconds per row")
     gyro_bias_rad_s: Vector3 = Field(description="gyro bias, IMU frame, rad/s")
@@ -118,9 +123,11 @@ class ImuMetrics(Document):
 class ImuInput(Document):
     """One input file, pinned by hash."""
 
-    role: Literal["imu", "camera", "corners", "noise"] = Field(description="what it holds")
-    path: str = Field(description="the file as read (absolute path)")
-    sha256: Sha256Hex = Field(description="its sha256")
+    role: Literal["imu", "camera", "corners", "images", "noise"] = Field(description="what it holds")
+    path: str = Field(description="the file (or, for corners and images, the folder) as read, absolute")
+    sha256: Sha256Hex = Field(
+        description="its sha256; for a folder, sha256 of its files' 'NAME SHA256' lines sorted by name"
+    )
 
 
 class ImuEdgeResult(Document):
@@ -136,6 +143,9 @@ class ImuEdgeResult(Document):
     camera: str = Field(description="SERIAL@VERSION of the stored calibration whose intrinsics were held")
     td_convention: TdConvention = Field(TD_CONVENTION, description="how td_s relates the two clocks")
     recording: str = Field(description="the recording folder as given")
+    board: str | None = Field(
+        None, description="NAME@REVISION of the registered board (--board): detected with or checked against"
+    )
     estimate: ImuEstimate | None = Field(description="the estimate (none when refused before solving)")
     noise: ImuNoiseModel = Field(description="the IMU noise model used")
     metrics: ImuMetrics | None = Field(description="fit and held-out figures (none without an estimate)")

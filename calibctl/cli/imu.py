@@ -118,6 +118,14 @@ def solve(
     imu_frame: Annotated[
         str, typer.Option("--imu-frame", help="The IMU's frame, declared in the rig.")
     ] = "imu",
+    board: Annotated[
+        str | None,
+        typer.Option(
+            "--board",
+            help="Registered board NAME[@REV]: detects the corners in CAMERA/data/ images (ASL: "
+            "CAMERA/data.csv lists them), and checks corner files' board points.",
+        ),
+    ] = None,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
     json_output: JsonFlag = False,
@@ -139,6 +147,7 @@ def solve(
         folds,
         out,
         force,
+        board,
     )
     outcome = wf.run_imu(state(ctx).settings(), req)
     doc = wf.result_json(outcome)
@@ -166,6 +175,14 @@ def synth(
         str | None,
         typer.Option("--serial", help="Render through this camera's active stored calibration."),
     ] = None,
+    images: Annotated[
+        bool,
+        typer.Option(
+            "--images",
+            help="Write the ASL image layout (cam0/data.csv + cam0/data/*.png, a 7x6 inner-corner "
+            "chessboard of 50 mm squares) instead of corner files.",
+        ),
+    ] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
     json_output: JsonFlag = False,
 ) -> None:
@@ -181,6 +198,7 @@ def synth(
         td_s=td_ms / 1e3,
         line_delay_s=line_delay_us / 1e6,
         serial=serial,
+        images=images,
         force=force,
     )
     if wants_json(ctx, json_output):

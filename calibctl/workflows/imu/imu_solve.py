@@ -42,7 +42,7 @@ from calibctl.errors import InputError, UsageError
 from calibctl.files import write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
-from calibctl.workflows.imu.recording import Recording, read_noise, read_recording
+from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
 from calibctl.workflows.store_admin.records import open_store
 
 FREE_TRY = "td_rotation_correlation_free"  # core.imu.calibrate: the correlation before td was held
@@ -66,6 +66,7 @@ class ImuRequest:
     folds: int = 3
     out: Path | None = None
     force: bool = False
+    board: str | None = None  # registered NAME[@REV]: detects corners in images, checks corner files'
 
 
 @dataclass
@@ -78,6 +79,7 @@ class ImuOutcome:
     noise: ImuNoise
     noise_source: str
     calibration: Calibration
+    board: str | None = None  # NAME@REV read from the store
     stored: RigCalibration | None = None
     written: list[str] = field(default_factory=list)
 
@@ -119,11 +121,22 @@ def camera_intrinsics(
     return art.ref, (K, np.array(art.dist_coeffs, np.float64), size)
 
 
+def registered_board(settings: Settings, ref: str) -> Board:
+    """The registered board ``NAME[@REV]`` (NotFoundError, exit 2, for an unknown one)."""
+    from calibctl.workflows.board.boards import board_ref, board_spec
+
+    name, revision = board_ref(ref)
+    with open_store(settings) as store:
+        board = store.get_board(name, revision)
+    return Board(board.ref, board_spec(board))
+
+
 def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
     """Read and solve (module docstring); nothing stored."""
     camera, intrinsics = camera_intrinsics(settings, req.serial)
+    board = None if req.board is None else registered_board(settings, req.board)
     noise, source = read_noise(req.noise)
-    rec = read_recording(req.recording, req.camera, intrinsics)
+    rec = read_recording(req.recording, req.camera, intrinsics, board)
     options = SolveOptions(
         knot_spacing_s=req.knot_spacing_s, estimate_line_delay=req.line_delay, folds=req.folds
     )
@@ -131,7 +144,7 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
         cal = calibrate(rec.imu, rec.frames, noise, options, fallback_td_s=req.hold_td_s)
     except ImuInputError as exc:
         raise InputError(f"{req.recording}: {exc}", "fix the recording as the message says") from None
-    return ImuOutcome(req, camera, rec, noise, source, cal)
+    return ImuOutcome(req, camera, rec, noise, source, cal, None if board is None else board.ref)
 
 
 def _vec3(v: np.ndarray) -> tuple[float, float, float]:
@@ -169,6 +182,7 @@ def estimate_of(outcome: ImuOutcome) -> ImuEstimate | None:
         sigma_rotation_deg=_vec3(s.sigma_rotation_deg),
         sigma_td_ms=float(s.sigma_td_ms),
         td_crlb_ms=_finite(s.td_crlb_ms),
+        sigma_inflation={k: float(v) for k, v in s.sigma_inflation.items() if np.isfinite(v)},
         line_delay_s=None if s.line_delay_s is None else float(s.line_delay_s),
         sigma_line_delay_us=None if s.sigma_line_delay_us is None else float(s.sigma_line_delay_us),
         gyro_bias_rad_s=_vec3(s.gyro_bias_rad_s),
@@ -210,6 +224,7 @@ def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
         status="accepted" if outcome.accepted else "rejected",
         camera=outcome.camera,
         recording=str(req.recording),
+        board=outcome.board,
         estimate=estimate_of(outcome),
         noise=ImuNoiseModel(
             gyro_noise_density=n.gyro_noise_density,
@@ -243,6 +258,7 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
     doc: dict[str, Any] = {
         "recording": str(outcome.request.recording),
         "camera": outcome.camera,
+        "board": outcome.board,
         "frames": int(outcome.recording.frames.t_s.size),
         "imu_samples": int(outcome.recording.imu.t_s.size),
         "imu_rate_hz": _r(outcome.recording.imu.rate_hz, 2),
@@ -278,6 +294,9 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             "td_held": s.td_held,
             "sigma_td_ms": _r(s.sigma_td_ms, 4),
             "td_crlb_ms": _r(s.td_crlb_ms, 4),
+            "sigma_inflation": {
+                k: round(float(v), 3) for k, v in s.sigma_inflation.items() if np.isfinite(v)
+            },
             "line_delay_us": None if s.line_delay_s is None else round(1e6 * s.line_delay_s, 3),
             "sigma_line_delay_us": _r(s.sigma_line_delay_us, 3),
             "gyro_bias_rad_s": [round(float(v), 6) for v in s.gyro_bias_rad_s],

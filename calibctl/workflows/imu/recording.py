@@ -10,7 +10,10 @@ until one shared origin is subtracted):
 - the corners: ``camN/<ns>.csv``, one file per frame (yac's layout): a stamp column first, then at
   least ``kp_x, kp_y`` (pixel) and ``p_x, p_y, p_z`` (board point, metres); a file with a header only
   is a frame without a detection. Beside them the ASL ``camN/data.csv`` (``#timestamp [ns],filename``)
-  may list the frames; a stamp listed twice there is refused.
+  may list the frames; a stamp listed twice there is refused. With a registered board (``--board``)
+  every board point must be one of that board's corners.
+- or the images: no corner files, the ASL ``camN/data.csv`` listing ``camN/data/<filename>``; the
+  corners are detected in each image with the registered board (``--board``, a chessboard or ChArUco).
 - the noise model: Kalibr's ``imu.yaml`` (``gyroscope_noise_density``, ``accelerometer_noise_density``,
   ``gyroscope_random_walk``, ``accelerometer_random_walk``) or yac's ``config.yaml`` ``imu0`` block
   (``sigma_g_c``, ``sigma_a_c``, ``sigma_gw_c``, ``sigma_aw_c``, ``g``).
@@ -29,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from calibctl import bounded, files
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.imu.samples import GRAVITY_M_S2, CameraFrames, ImuInputError, ImuNoise, ImuSamples
 from calibctl.errors import InputError, UsageError
 from calibctl.workflows.diagnostics import diagnostics_io as dio
@@ -49,6 +53,7 @@ YAC_NOISE = {
 # EuRoC's ADIS16448 (Kalibr imu.yaml of the EuRoC datasets): used when no noise file is given
 DEFAULT_NOISE = ImuNoise(1.6968e-4, 2.0e-3, 1.9393e-5, 3.0e-3)
 MIN_OVERLAP_SHARE = 0.5  # of the camera's span the IMU log must cover
+BOARD_POINT_TOLERANCE_M = 1e-4  # a corner's board point this far from every corner of --board: another board
 _DEG = re.compile(r"deg|°")
 _G_UNIT = re.compile(r"\[\s*g\s*\]|\(\s*g\s*\)|_g$")
 
@@ -162,25 +167,98 @@ def _corner_file(path: Path) -> tuple[np.ndarray, np.ndarray, int | None]:
     return obj, img, None if stamps is None else int(stamps[0])
 
 
-def _asl_listing(folder: Path) -> Path | None:
-    """``camN/data.csv`` when present: checked for duplicated stamps."""
+@dataclass(frozen=True)
+class Board:
+    """The registered board the corners are detected with or checked against: NAME@REV and its spec."""
+
+    ref: str
+    spec: BoardSpec
+
+
+def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
+    """``camN/data.csv`` when present: (stamp ns, file name) per frame, checked for duplicated stamps."""
     path = folder / "data.csv"
     if not path.is_file():
         return None
     text = bounded.read_text(path, "read the camera's frame list")
-    stamps = [line.split(",", 1)[0].strip() for line in text.splitlines()[1:] if line.strip()]
+    rows = [line.split(",") for line in text.splitlines()[1:] if line.strip()]
     seen: dict[str, int] = {}
-    for i, s in enumerate(stamps):
+    out = []
+    for i, row in enumerate(rows):
+        s = row[0].strip()
         if s in seen:
             raise InputError(
                 f"{path}: frame stamp {s} is listed twice (data lines {seen[s] + 1} and {i + 1})",
                 "drop the duplicated frame; every camera stamp must be unique and increasing",
             )
         seen[s] = i
-    return path
+        if not s.isdigit() or len(row) < 2:
+            raise InputError(
+                f"{path}: data line {i + 1} is not 'stamp_ns,filename'",
+                "the ASL frame list is '#timestamp [ns],filename', one frame a line",
+            )
+        out.append((int(s), row[1].strip()))
+    return out
 
 
-def read_corners(folder: Path) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[Path]]:
+def _check_board_points(path: Path, obj: np.ndarray, board: Board) -> None:
+    """Every board point of a corner file is one of ``board``'s corners; InputError otherwise."""
+    model = board.spec.object_points()
+    d = np.min(np.linalg.norm(obj[:, None, :] - model[None, :, :], axis=2), axis=1)
+    if obj.size and d.max() > BOARD_POINT_TOLERANCE_M:
+        p = obj[int(np.argmax(d))]
+        raise InputError(
+            f"{path}: board point ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m is no corner of board {board.ref} "
+            f"({d.max() * 1e3:.1f} mm from the nearest)",
+            "name the board these corners were detected on (--board), or register it (`calibctl board add`)",
+        )
+
+
+def read_images(
+    folder: Path, listing: list[tuple[int, str]], board: Board | None, image_size: tuple[int, int]
+) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[Path]]:
+    """The ASL image layout: every listed ``camN/data/<filename>`` read (bounded) and its corners detected
+    with the registered board; (stamps ns, board points, pixels, files)."""
+    import cv2
+
+    from calibctl.core.capture.detect import detect_board
+
+    if board is None:
+        raise UsageError(
+            f"{folder} holds images (data.csv), not corner files: the board must be named",
+            "pass --board NAME[@REV], the registered board the images show",
+        )
+    stamps, objs, imgs, paths = [], [], [], []
+    model = board.spec.object_points()
+    for stamp, name in listing:
+        path = folder / "data" / name
+        bounded.check_size(path, "read image")
+        with files.file_errors("read image", path):
+            data = path.read_bytes()
+        gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
+        if gray is None:
+            raise InputError(f"{path} is not a readable image", "remove its line from data.csv or restore it")
+        if (gray.shape[1], gray.shape[0]) != image_size:
+            raise InputError(
+                f"{path} is {gray.shape[1]}x{gray.shape[0]}, the camera's calibration is "
+                f"{image_size[0]}x{image_size[1]}",
+                "name the camera these images are from (--serial, --camera)",
+            )
+        detection, _ = detect_board(gray, board.spec)
+        if detection is None:
+            objs.append(np.zeros((0, 3)))
+            imgs.append(np.zeros((0, 2)))
+        else:
+            objs.append(model[detection.corner_ids])
+            imgs.append(np.asarray(detection.corners_px, np.float64).reshape(-1, 2))
+        stamps.append(stamp)
+        paths.append(path)
+    return np.array(stamps, np.int64), objs, imgs, paths
+
+
+def read_corners(
+    folder: Path, board: Board | None = None
+) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[Path]]:
     """Every ``<ns>.csv`` of a camera folder: (stamps ns, board points, pixels, files), by stamp."""
     if not folder.is_dir():
         raise InputError(f"{folder}: no such camera folder", "name the camera folder with --camera (cam0)")
@@ -195,6 +273,8 @@ def read_corners(folder: Path) -> tuple[np.ndarray, list[np.ndarray], list[np.nd
     stamps, objs, imgs, paths = [], [], [], []
     for stamp, path in found:
         obj, img, inside = _corner_file(path)
+        if board is not None:
+            _check_board_points(path, obj, board)
         if inside is not None and inside != stamp:
             raise InputError(
                 f"{path}: the file is named {stamp} but its rows are stamped {inside}",
@@ -242,10 +322,14 @@ def read_noise(path: Path | None) -> tuple[ImuNoise, str]:
 
 
 def read_recording(
-    folder: Path, camera: str, intrinsics: tuple[np.ndarray, np.ndarray, tuple[int, int]]
+    folder: Path,
+    camera: str,
+    intrinsics: tuple[np.ndarray, np.ndarray, tuple[int, int]],
+    board: Board | None = None,
 ) -> Recording:
-    """The IMU log and one camera's corners under ``folder`` on one origin (module docstring); the
-    camera's held intrinsics (K, distortion in OpenCV's order, image size) come from the store."""
+    """The IMU log and one camera's corners (or images) under ``folder`` on one origin (module
+    docstring); the camera's held intrinsics (K, distortion in OpenCV's order, image size) come from the
+    store, ``board`` (the registered board) detects corners in images and checks the corner files'."""
     if not folder.is_dir():
         raise InputError(f"{folder}: no such recording folder", "give the folder holding imu0 and cam0")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", camera):
@@ -254,7 +338,13 @@ def read_recording(
     t_imu_ns, gyro, accel = read_imu_log(imu_path)
     cam_folder = folder / camera
     listing = _asl_listing(cam_folder) if cam_folder.is_dir() else None
-    t_cam_ns, objs, imgs, paths = read_corners(cam_folder)
+    corner_files = cam_folder.is_dir() and any(
+        p.suffix.lower() == ".csv" and p.stem.isdigit() for p in cam_folder.iterdir()
+    )
+    if listing is not None and not corner_files:
+        t_cam_ns, objs, imgs, paths = read_images(cam_folder, listing, board, intrinsics[2])
+    else:
+        t_cam_ns, objs, imgs, paths = read_corners(cam_folder, board)
     notes = []
     lo, hi = max(t_imu_ns[0], t_cam_ns[0]), min(t_imu_ns[-1], t_cam_ns[-1])
     span = int(t_cam_ns[-1] - t_cam_ns[0])
@@ -287,8 +377,9 @@ def read_recording(
         raise InputError(f"{cam_folder}: {exc}", "fix the corner files as the message says") from None
     inputs = [("imu", imu_path, sha256_of(imu_path))]
     if listing is not None:
-        inputs.append(("camera", listing, sha256_of(listing)))
-    inputs.append(("corners", cam_folder, folder_sha256([paths[i] for i in seen])))
+        inputs.append(("camera", cam_folder / "data.csv", sha256_of(cam_folder / "data.csv")))
+    role = "corners" if corner_files or listing is None else "images"
+    inputs.append((role, cam_folder, folder_sha256([paths[i] for i in seen])))
     return Recording(imu, frames, t0, inputs, notes)
 
 

@@ -18,7 +18,7 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.config import Settings, load_settings
 from calibctl.store.repository import Store
-from tests.artifacts.factories import calibration
+from tests.artifacts.factories import calibration, measured_board
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 
 CAM, OTHER = "CAM-0001", "CAM-0002"
@@ -33,9 +33,14 @@ def settings_for(url: str) -> Settings:
 
 def make_store(db: Path, other_calibrated: bool = True) -> str:
     """Rig STEREO-1 (frame imu) at version 1 over CAM-0001 (and CAM-0002), members pinned to the stored
-    calibrations (lint clean); the url."""
+    calibrations (lint clean), and the boards G7 (the renders' 7 x 6 inner corners, 50 mm) and G7-40
+    (the same at 40 mm); the url."""
     url = f"sqlite:///{db}"
     with Store.open(url) as store:
+        for name, square_mm in (("G7", 50.0), ("G7-40", 40.0)):
+            store.add_board(
+                measured_board(name, square_mm=square_mm).model_copy(update={"cols": 7, "rows": 6})
+            )
         serials = (CAM, OTHER) if other_calibrated else (CAM,)
         arts = [store.add_artifact(calibration(serial=s), activate=True, **WHO) for s in serials]
         store.add_rig(rig_definition().model_copy(update={"frames": ["imu"]}))
@@ -65,12 +70,17 @@ def _cached(base: Path, name: str) -> tuple[Path, bool]:
 
 
 def rendered(tmp_path_factory: pytest.TempPathFactory, motion: str = "dance") -> Path:
-    """A 6 s recording (20 Hz camera, 200 Hz IMU, td 12 ms) rendered through CAM-0001's calibration."""
+    """A 6 s recording (20 Hz camera, 200 Hz IMU, td 12 ms) rendered through CAM-0001's calibration;
+    ``motion`` "images": a 3 s dance as ASL images of board G7 instead of corner files."""
     folder, done = _cached(tmp_path_factory.getbasetemp(), f"imu-{motion}")
     if not done:
         folder.mkdir(exist_ok=True)
         url = make_store(folder / "render.db")
-        args = ["imu", "synth", str(folder / "rec"), "--serial", CAM, "--motion", motion, "--force"]
+        args = ["imu", "synth", str(folder / "rec"), "--serial", CAM, "--force"]
+        if motion == "images":
+            args += ["--images", "--duration-s", "3"]
+        else:
+            args += ["--motion", motion]
         r = cli(url, *args, "--td-ms", str(TD_S * 1e3))
         assert r.exit_code == 0, r.output
         (folder / "done").write_text("")

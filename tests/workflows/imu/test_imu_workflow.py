@@ -241,3 +241,29 @@ def test_a_camera_recalibrated_since_makes_the_edge_stale_and_the_next_write_dro
     ].message
     kept = versions.carried_forward(active, now)
     assert kept.imu == [] and [f.rule for f in kept.dropped] == ["imu-dropped"]
+
+
+def test_corner_files_of_another_board_are_refused_naming_the_board(recording, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    req = imu_solve.ImuRequest(recording, CAM, board="G7-40")
+    wrong = r"m is no corner of board G7-40@1 \(\d+\.\d mm from the nearest\)"
+    with pytest.raises(CalibctlError, match=wrong) as info:
+        imu_solve.run_imu(settings_for(url), req)
+    assert info.value.exit_code == 2 and "name the board these corners were detected on" in (
+        info.value.hint or ""
+    )
+
+
+def test_asl_images_are_detected_with_the_registered_board(tmp_path_factory, tmp_path) -> None:
+    rec = rendered(tmp_path_factory, "images")
+    assert not list((rec / "cam0").glob("*.csv"))[1:]  # data.csv alone: the corners are in the images
+    url = make_store(tmp_path / "c.db")
+    s = settings_for(url)
+    with pytest.raises(CalibctlError, match="holds images \\(data.csv\\), not corner files") as info:
+        imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM))
+    assert info.value.exit_code == 2 and "--board" in (info.value.hint or "")
+    out = imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM, noise=rec / "imu.yaml", rig=RIG, board="G7"))
+    assert out.stored is not None and out.stored.status == "accepted"
+    ev = out.stored.imu[0]
+    assert ev.board == "G7@1" and [i.role for i in ev.inputs] == ["imu", "camera", "images"]
+    assert ev.estimate is not None and abs(ev.estimate.td_s - TD_S) < 5 * ev.estimate.sigma_td_ms / 1e3
