@@ -81,7 +81,8 @@ def solve(
         typer.Argument(
             metavar="RECORDING",
             help="Folder with imu0/data.csv (or imu0.csv: ns, rad/s, m/s^2) and CAMERA/<ns>.csv corner "
-            "files (stamp, kp_x, kp_y, p_x, p_y, p_z).",
+            "files (stamp, kp_x, kp_y, p_x, p_y, p_z) or ASL images (CAMERA/data.csv, CAMERA/data/, with "
+            "--board).",
         ),
     ],
     serial: Annotated[
