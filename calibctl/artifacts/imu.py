@@ -123,7 +123,7 @@ class ImuMetrics(Document):
 class ImuInput(Document):
     """One input file, pinned by hash."""
 
-    role: Literal["imu", "camera", "corners", "images", "noise"] = Field(description="what it holds")
+    role: Literal["imu", "camera", "corners", "images", "bag", "noise"] = Field(description="what it holds")
     path: str = Field(description="the file (or, for corners and images, the folder) as read, absolute")
     sha256: Sha256Hex = Field(
         description="its sha256; for a folder, sha256 of its files' 'NAME SHA256' lines sorted by name"

@@ -82,7 +82,7 @@ def solve(
             metavar="RECORDING",
             help="Folder with imu0/data.csv (or imu0.csv: ns, rad/s, m/s^2) and CAMERA/<ns>.csv corner "
             "files (stamp, kp_x, kp_y, p_x, p_y, p_z) or ASL images (CAMERA/data.csv, CAMERA/data/, with "
-            "--board).",
+            "--board); or a ROS 1 .bag / ROS 2 bag folder (--image-topic, --imu-topic, --board).",
         ),
     ],
     serial: Annotated[
@@ -127,6 +127,13 @@ def solve(
             "CAMERA/data.csv lists them), and checks corner files' board points.",
         ),
     ] = None,
+    image_topic: Annotated[
+        str | None,
+        typer.Option("--image-topic", help="RECORDING a ROS 1/2 bag: its sensor_msgs/Image topic."),
+    ] = None,
+    imu_topic: Annotated[
+        str | None, typer.Option("--imu-topic", help="RECORDING a ROS 1/2 bag: its sensor_msgs/Imu topic.")
+    ] = None,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
     json_output: JsonFlag = False,
@@ -149,6 +156,8 @@ def solve(
         out,
         force,
         board,
+        image_topic,
+        imu_topic,
     )
     outcome = wf.run_imu(state(ctx).settings(), req)
     doc = wf.result_json(outcome)

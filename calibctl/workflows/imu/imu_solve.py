@@ -42,6 +42,7 @@ from calibctl.errors import InputError, UsageError
 from calibctl.files import write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
+from calibctl.workflows.imu.bags import is_bag, read_bag
 from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
 from calibctl.workflows.store_admin.records import open_store
 
@@ -67,6 +68,8 @@ class ImuRequest:
     out: Path | None = None
     force: bool = False
     board: str | None = None  # registered NAME[@REV]: detects corners in images, checks corner files'
+    image_topic: str | None = None  # a ROS bag's sensor_msgs/Image (or CompressedImage) topic
+    imu_topic: str | None = None  # a ROS bag's sensor_msgs/Imu topic
 
 
 @dataclass
@@ -136,7 +139,15 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
     camera, intrinsics = camera_intrinsics(settings, req.serial)
     board = None if req.board is None else registered_board(settings, req.board)
     noise, source = read_noise(req.noise)
-    rec = read_recording(req.recording, req.camera, intrinsics, board)
+    if is_bag(req.recording):
+        if req.image_topic is None or req.imu_topic is None:
+            raise UsageError(
+                f"{req.recording} is a ROS bag: name its topics",
+                "pass --image-topic (sensor_msgs/Image) and --imu-topic (sensor_msgs/Imu)",
+            )
+        rec = read_bag(req.recording, req.image_topic, req.imu_topic, intrinsics, board)
+    else:
+        rec = read_recording(req.recording, req.camera, intrinsics, board)
     options = SolveOptions(
         knot_spacing_s=req.knot_spacing_s, estimate_line_delay=req.line_delay, folds=req.folds
     )

@@ -69,6 +69,7 @@ class Recording:
     t0_ns: int
     inputs: list[tuple[str, Path, str]]  # (role, path, sha256)
     notes: list[str]
+    imu_span_ns: tuple[int, int]  # first and last IMU stamp
 
 
 def sha256_of(path: Path) -> str:
@@ -214,6 +215,27 @@ def _check_board_points(path: Path, obj: np.ndarray, board: Board) -> None:
         )
 
 
+def check_image_size(gray: np.ndarray, image_size: tuple[int, int], source: str) -> None:
+    if (gray.shape[1], gray.shape[0]) != image_size:
+        raise InputError(
+            f"{source} is {gray.shape[1]}x{gray.shape[0]}, the camera's calibration is "
+            f"{image_size[0]}x{image_size[1]}",
+            "name the camera these images are from (--serial, --camera, --image-topic)",
+        )
+
+
+def board_corners(gray: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarray]:
+    """The registered board's corners detected in one image: (board points (N, 3) m, pixels (N, 2));
+    empty when the board is not found."""
+    from calibctl.core.capture.detect import detect_board
+
+    detection, _ = detect_board(gray, board.spec)
+    if detection is None:
+        return np.zeros((0, 3)), np.zeros((0, 2))
+    obj = board.spec.object_points()[detection.corner_ids]
+    return obj, np.asarray(detection.corners_px, np.float64).reshape(-1, 2)
+
+
 def read_images(
     folder: Path, listing: list[tuple[int, str]], board: Board | None, image_size: tuple[int, int]
 ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], list[Path]]:
@@ -221,15 +243,12 @@ def read_images(
     with the registered board; (stamps ns, board points, pixels, files)."""
     import cv2
 
-    from calibctl.core.capture.detect import detect_board
-
     if board is None:
         raise UsageError(
             f"{folder} holds images (data.csv), not corner files: the board must be named",
             "pass --board NAME[@REV], the registered board the images show",
         )
     stamps, objs, imgs, paths = [], [], [], []
-    model = board.spec.object_points()
     for stamp, name in listing:
         path = folder / "data" / name
         bounded.check_size(path, "read image")
@@ -238,19 +257,10 @@ def read_images(
         gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
         if gray is None:
             raise InputError(f"{path} is not a readable image", "remove its line from data.csv or restore it")
-        if (gray.shape[1], gray.shape[0]) != image_size:
-            raise InputError(
-                f"{path} is {gray.shape[1]}x{gray.shape[0]}, the camera's calibration is "
-                f"{image_size[0]}x{image_size[1]}",
-                "name the camera these images are from (--serial, --camera)",
-            )
-        detection, _ = detect_board(gray, board.spec)
-        if detection is None:
-            objs.append(np.zeros((0, 3)))
-            imgs.append(np.zeros((0, 2)))
-        else:
-            objs.append(model[detection.corner_ids])
-            imgs.append(np.asarray(detection.corners_px, np.float64).reshape(-1, 2))
+        check_image_size(gray, image_size, str(path))
+        obj, img = board_corners(gray, board)
+        objs.append(obj)
+        imgs.append(img)
         stamps.append(stamp)
         paths.append(path)
     return np.array(stamps, np.int64), objs, imgs, paths
@@ -345,13 +355,54 @@ def read_recording(
         t_cam_ns, objs, imgs, paths = read_images(cam_folder, listing, board, intrinsics[2])
     else:
         t_cam_ns, objs, imgs, paths = read_corners(cam_folder, board)
+    inputs = [("imu", imu_path, sha256_of(imu_path))]
+    if listing is not None:
+        inputs.append(("camera", cam_folder / "data.csv", sha256_of(cam_folder / "data.csv")))
+    role = "corners" if corner_files or listing is None else "images"
+    cam = CameraStream(str(cam_folder), t_cam_ns, objs, imgs)
+    rec = assemble(ImuStream(str(imu_path), t_imu_ns, gyro, accel), cam, intrinsics, inputs)
+    kept = [paths[i] for i, t in enumerate(t_cam_ns) if rec.imu_span_ns[0] <= t <= rec.imu_span_ns[1]]
+    rec.inputs.append((role, cam_folder, folder_sha256(kept)))
+    return rec
+
+
+@dataclass(frozen=True)
+class ImuStream:
+    """An IMU log as read: ``source`` names it in messages; stamps ns (n,), gyro rad/s, accel m/s^2."""
+
+    source: str
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+
+
+@dataclass(frozen=True)
+class CameraStream:
+    """A camera's frames as read: ``source`` names them; stamps ns (F,), per frame board points and pixels
+    (empty for a frame without a board)."""
+
+    source: str
+    t_ns: np.ndarray
+    objs: list[np.ndarray]
+    imgs: list[np.ndarray]
+
+
+def assemble(
+    imu_in: ImuStream,
+    cam: CameraStream,
+    intrinsics: tuple[np.ndarray, np.ndarray, tuple[int, int]],
+    inputs: list[tuple[str, Path, str]],
+) -> Recording:
+    """The two streams on one origin: refused when they do not overlap, frames outside the IMU log left
+    out (named), the core's checks mapped to one line naming the source."""
+    t_imu_ns, t_cam_ns = imu_in.t_ns, cam.t_ns
     notes = []
     lo, hi = max(t_imu_ns[0], t_cam_ns[0]), min(t_imu_ns[-1], t_cam_ns[-1])
     span = int(t_cam_ns[-1] - t_cam_ns[0])
     if hi <= lo or (hi - lo) < MIN_OVERLAP_SHARE * span:
         raise InputError(
-            f"{cam_folder} and {imu_path} do not overlap in time (camera {t_cam_ns[0]}..{t_cam_ns[-1]} ns, "
-            f"IMU {t_imu_ns[0]}..{t_imu_ns[-1]} ns)",
+            f"{cam.source} and {imu_in.source} do not overlap in time (camera {t_cam_ns[0]}..{t_cam_ns[-1]} "
+            f"ns, IMU {t_imu_ns[0]}..{t_imu_ns[-1]} ns)",
             "give a camera and an IMU log of one recording, both stamped in ns on one clock",
         )
     inside = (t_cam_ns >= t_imu_ns[0]) & (t_cam_ns <= t_imu_ns[-1])
@@ -361,26 +412,23 @@ def read_recording(
     t0 = int(min(t_imu_ns[0], t_cam_ns[0]))
     K, dist, size = intrinsics
     try:
-        imu = ImuSamples((t_imu_ns - t0) * 1e-9, gyro, accel)
+        imu = ImuSamples((t_imu_ns - t0) * 1e-9, imu_in.gyro, imu_in.accel)
     except ImuInputError as exc:
-        raise InputError(f"{imu_path}: {exc}", "fix the log as the message says, then run again") from None
+        raise InputError(
+            f"{imu_in.source}: {exc}", "fix the log as the message says, then run again"
+        ) from None
     try:
         frames = CameraFrames(
             (t_cam_ns[seen] - t0) * 1e-9,
-            tuple(objs[i] for i in seen),
-            tuple(imgs[i] for i in seen),
+            tuple(cam.objs[i] for i in seen),
+            tuple(cam.imgs[i] for i in seen),
             K,
             dist,
             size,
         )
     except ImuInputError as exc:
-        raise InputError(f"{cam_folder}: {exc}", "fix the corner files as the message says") from None
-    inputs = [("imu", imu_path, sha256_of(imu_path))]
-    if listing is not None:
-        inputs.append(("camera", cam_folder / "data.csv", sha256_of(cam_folder / "data.csv")))
-    role = "corners" if corner_files or listing is None else "images"
-    inputs.append((role, cam_folder, folder_sha256([paths[i] for i in seen])))
-    return Recording(imu, frames, t0, inputs, notes)
+        raise InputError(f"{cam.source}: {exc}", "fix the camera frames as the message says") from None
+    return Recording(imu, frames, t0, list(inputs), notes, (int(t_imu_ns[0]), int(t_imu_ns[-1])))
 
 
 def folder_sha256(paths: list[Path]) -> str:

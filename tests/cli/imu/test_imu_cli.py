@@ -120,3 +120,16 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
     assert history["active_version"] == 1
     assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]
+
+
+def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_path) -> None:
+    from tests.cli.test_extras_cli import _assert_missing_extra, _hide
+
+    _hide(monkeypatch, "rosbags")
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    url = make_store(tmp_path / "c.db")
+    args = ["--board", "G7", "--image-topic", "/cam0/image_raw", "--imu-topic", "/imu0"]
+    res = cli(url, "imu", "solve", str(bag), "--serial", CAM, *args)
+    _assert_missing_extra(res, "bags", "rosbags", "reading a ROS bag")
