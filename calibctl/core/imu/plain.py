@@ -134,6 +134,13 @@ def rate_alignment(
         TdUnobservableError: the cross-correlation cannot pin td (it names why).
     """
     t_mid, interval, w_cam = camera_rates(track)
+    overlap_s = min(imu.t_s[-1], t_mid[-1]) - max(imu.t_s[0], t_mid[0])
+    if overlap_s < 4 * max_lag_s:
+        raise ImuInputError(
+            f"the camera ({t_mid[0]:.3f}..{t_mid[-1]:.3f} s) and IMU ({imu.t_s[0]:.3f}..{imu.t_s[-1]:.3f} s) "
+            f"logs overlap for {max(overlap_s, 0.0):.3f} s, under {4 * max_lag_s:g} s: check that both are "
+            "stamped on one clock (ns since the epoch) and come from the same recording"
+        )
     gyro_norm = np.linalg.norm(imu.gyro_rad_s, axis=1)
     cam_norm = np.linalg.norm(w_cam, axis=1)
     check_rate_ratio(float(np.std(gyro_norm)), float(np.std(cam_norm)))

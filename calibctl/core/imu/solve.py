@@ -266,9 +266,8 @@ class _Problem:
             np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), self.pose_starts, axis=0
         )
         grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), self.pose_starts, axis=0)
-        # d xi / d (local controls, extrinsic, time) per pose point.
-        base = (R, tt)
 
+        # d xi / d (local controls, extrinsic, time) per pose point.
         def xi(Rp: np.ndarray, tp: np.ndarray) -> np.ndarray:
             return np.concatenate(
                 [se3.rotvecs_from_rotations(Rp @ np.transpose(R, (0, 2, 1))), tp - tt], axis=1
@@ -305,7 +304,6 @@ class _Problem:
         dt_col = (xi(*plus) - xi(*minus)) / (2 * H_TIME)
         J_sh[:, :, 6] = dt_col
         J_sh[:, :, 7] = dt_col * row[:, None]
-        del base
         return r, info, grad, J_loc, J_sh, seg
 
     # -- IMU -----------------------------------------------------------------------------------------
@@ -492,7 +490,7 @@ def _initial_state(
 
 def _safe_inverse(S: np.ndarray) -> np.ndarray:
     """Inverse of a symmetric PSD matrix through its scaled eigen-decomposition; a direction the data
-    cannot see gets an infinite... very large variance instead of a crash."""
+    cannot see gets a very large variance (eigenvalues floored at 1e-14 of the largest), not a crash."""
     d = np.sqrt(np.maximum(np.diag(S), 1e-300))
     Sn = S / np.outer(d, d)
     vals, vecs = np.linalg.eigh(Sn)

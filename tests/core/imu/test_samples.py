@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from calibctl.core.imu.gates import dropped_frames, imu_gaps, saturation
+from calibctl.core.imu.plain import plain_calibration
 from calibctl.core.imu.samples import (
     CameraFrames,
     ImuInputError,
@@ -94,3 +95,10 @@ def test_clipped_samples_are_found(dance: ImuCameraRecording) -> None:
     assert not saturation(imu).passed
     ok = ImuSamples(dance.imu_t_s, dance.gyro_rad_s, dance.accel_m_s2, gyro_range_rad_s=8.7)
     assert saturation(ok).passed
+
+
+def test_logs_that_do_not_overlap_are_refused_naming_the_clock(dance: ImuCameraRecording) -> None:
+    imu, frames, noise = as_inputs(dance)
+    late = ImuSamples(imu.t_s + 100.0, imu.gyro_rad_s, imu.accel_m_s2)
+    with pytest.raises(ImuInputError, match="overlap for 0.000 s.*one clock"):
+        plain_calibration(late, frames)
