@@ -1,6 +1,6 @@
-"""`imu solve` from a ROS 2 bag (sqlite3), read without ROS: the rendered ASL image recording written as
-sensor_msgs/Image + sensor_msgs/Imu messages, solved like the folder; a missing topic, a topic of another
-type and a repeated image stamp are exit 2 naming the bag and the fix."""
+"""`imu solve` from ROS bags read without ROS (ROS 2 sqlite3 and MCAP, ROS 1): the rendered ASL image
+recording written as sensor_msgs/Image + sensor_msgs/Imu messages, solved like the folder; a missing
+topic, a topic of another type and a repeated image stamp are exit 2 naming the bag and the fix."""
 
 from __future__ import annotations
 
@@ -18,19 +18,29 @@ from tests.workflows.imu.imu_data import CAM, TD_S, make_store, rendered, settin
 rosbags = pytest.importorskip("rosbags")
 
 
-def _write_bag(rec: Path, bag: Path, repeat_stamp: bool = False) -> None:
-    from rosbags.rosbag2 import Writer
+def _write_bag(rec: Path, bag: Path, kind: str = "ros2", repeat_stamp: bool = False) -> None:
+    """``rec`` (the ASL image recording) as a bag: ``kind`` ros2 (sqlite3), ros2-mcap or ros1 (.bag)."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
-    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ros1 = kind == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
     V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    serialize = ts.serialize_ros1 if ros1 else ts.serialize_cdr
 
     def header(ns: int) -> object:
-        return Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="f")
+        stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+        return Header(seq=0, stamp=stamp, frame_id="f") if ros1 else Header(stamp=stamp, frame_id="f")
 
-    with Writer(bag, version=9) as w:
+    if ros1:
+        writer = Writer1(bag)
+    else:
+        plugin = StoragePlugin.MCAP if kind == "ros2-mcap" else StoragePlugin.SQLITE3
+        writer = Writer(bag, version=9, storage_plugin=plugin)
+    with writer as w:
         imu_c = w.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=ts)
         cam_c = w.add_connection("/cam0/image_raw", "sensor_msgs/msg/Image", typestore=ts)
         for line in (rec / "imu0" / "data.csv").read_text().splitlines()[1:]:
@@ -45,7 +55,7 @@ def _write_bag(rec: Path, bag: Path, repeat_stamp: bool = False) -> None:
                 linear_acceleration=V3(x=v[3], y=v[4], z=v[5]),
                 linear_acceleration_covariance=np.zeros(9),
             )
-            w.write(imu_c, ns, ts.serialize_cdr(msg, msg.__msgtype__))
+            w.write(imu_c, ns, serialize(msg, msg.__msgtype__))
         listing = (rec / "cam0" / "data.csv").read_text().splitlines()[1:]
         for i, line in enumerate(listing):
             ns_text, name = line.split(",")
@@ -60,7 +70,7 @@ def _write_bag(rec: Path, bag: Path, repeat_stamp: bool = False) -> None:
                 step=gray.shape[1],
                 data=gray.reshape(-1),
             )
-            w.write(cam_c, int(ns_text), ts.serialize_cdr(msg, msg.__msgtype__))
+            w.write(cam_c, int(ns_text), serialize(msg, msg.__msgtype__))
 
 
 @pytest.fixture(scope="module")
@@ -70,10 +80,13 @@ def bag(tmp_path_factory) -> Path:
     return path
 
 
-def test_a_ros2_bag_solves_like_the_folder(bag, tmp_path) -> None:
+@pytest.mark.parametrize("kind", ["ros2", "ros2-mcap", "ros1"])
+def test_a_bag_solves_like_the_folder(tmp_path_factory, tmp_path, kind) -> None:
+    path = tmp_path / ("rec.bag" if kind == "ros1" else "rec")
+    _write_bag(rendered(tmp_path_factory, "images"), path, kind)
     url = make_store(tmp_path / "c.db")
     req = imu_solve.ImuRequest(
-        bag, CAM, rig=RIG, board="G7", image_topic="/cam0/image_raw", imu_topic="/imu0"
+        path, CAM, rig=RIG, board="G7", image_topic="/cam0/image_raw", imu_topic="/imu0"
     )
     out = imu_solve.run_imu(settings_for(url), req)
     assert out.stored is not None and out.stored.status == "accepted"
