@@ -38,7 +38,8 @@ from calibctl.core.gate import GateResult
 from calibctl.core.imu.calibrate import Calibration, calibrate
 from calibctl.core.imu.samples import ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
-from calibctl.errors import InputError, UsageError
+from calibctl.core.intrinsics.solve import is_fisheye
+from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.files import write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
@@ -47,7 +48,6 @@ from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_
 from calibctl.workflows.store_admin.records import open_store
 
 FREE_TRY = "td_rotation_correlation_free"  # core.imu.calibrate: the correlation before td was held
-_PINHOLE_MODELS = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default")
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,6 @@ def camera_intrinsics(
     settings: Settings, serial: str
 ) -> tuple[str, tuple[np.ndarray, np.ndarray, tuple[int, int]]]:
     """SERIAL@VERSION of the camera's active calibration and its (K, distortion, image size)."""
-    from calibctl.errors import NotFoundError
-
     with open_store(settings) as store:
         try:
             art = store.get_artifact(serial, None)
@@ -113,7 +111,7 @@ def camera_intrinsics(
                 f"camera {serial} has no active calibration",
                 f"calibrate {serial} (or roll it back to an accepted version), then run `calibctl imu solve`",
             ) from None
-    if art.model.name not in _PINHOLE_MODELS:
+    if is_fisheye(art.model.name):
         raise UsageError(
             f"camera {art.ref} is calibrated with the {art.model.name} model; the camera-IMU solve holds "
             "pinhole intrinsics with OpenCV's distortion",

@@ -267,3 +267,14 @@ def test_asl_images_are_detected_with_the_registered_board(tmp_path_factory, tmp
     ev = out.stored.imu[0]
     assert ev.board == "G7@1" and [i.role for i in ev.inputs] == ["imu", "camera", "images"]
     assert ev.estimate is not None and abs(ev.estimate.td_s - TD_S) < 5 * ev.estimate.sigma_td_ms / 1e3
+
+
+def test_a_fisheye_calibration_is_refused_naming_the_model(recording, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    art = calibration(serial=CAM, fx=801.0)
+    fisheye = art.model_copy(update={"model": art.model.model_copy(update={"name": "fisheye"})}).sealed()
+    with Store.open(url) as store:
+        store.add_artifact(fisheye, activate=True, **WHO)
+    with pytest.raises(CalibctlError, match=f"camera {CAM}@2 is calibrated with the fisheye model") as info:
+        imu_solve.run_imu(settings_for(url), imu_solve.ImuRequest(recording, CAM))
+    assert info.value.exit_code == 2 and "pinhole model" in (info.value.hint or "")
