@@ -36,11 +36,23 @@ def test_help_names_the_inputs() -> None:
 
 def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> None:
     url = make_store(tmp_path / "c.db")
+    out = tmp_path / "o.json"
     r = cli(
-        url, "imu", "solve", str(recording), "--serial", CAM, "--noise", str(recording / "imu.yaml"), "--json"
+        url,
+        "imu",
+        "solve",
+        str(recording),
+        "--serial",
+        CAM,
+        "--noise",
+        str(recording / "imu.yaml"),
+        "--json",
+        "-o",
+        str(out),
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
+    assert json.loads(out.read_text()) == doc  # -o holds what --json prints
     e = doc["estimate"]
     assert doc["status"] == "accepted" and doc["camera"] == f"{CAM}@1" and "stored" not in doc
     assert abs(e["td_ms"] - TD_S * 1e3) < 5 * e["sigma_td_ms"]
