@@ -171,7 +171,7 @@ def add(
         typer.Option(
             "--frame",
             help="Non-camera frame (flange, imu, lidar) a "
-            "hand-eye or LiDAR edge may join to the tree (repeat).",
+            "hand-eye, LiDAR or IMU edge may join to the tree (repeat).",
             show_default=False,
         ),
     ] = None,
@@ -524,7 +524,7 @@ def export(
         str | None,
         typer.Option(
             "--edge",
-            help="FROM:TO: one hand-eye or LiDAR edge, its result document (json) or /tf_static (tf).",
+            help="FROM:TO: one hand-eye, LiDAR or IMU edge, its result document (json) or /tf_static (tf).",
             show_default=False,
         ),
     ] = None,
