@@ -1,12 +1,13 @@
 """Solve, gate, and decide: the one call a workflow makes for a camera-IMU calibration.
 
 ``calibrate`` runs the joint estimator (``core.imu.solve``) and the gates (``core.imu.gates``). When
-the (td, rotation) correlation gate fails, the solve has found a plane the data cannot resolve
-(smooth constant-rate motion, seed chapter 3): with ``fallback_td_s`` given (a hardware-triggered rig
-knows td = 0; a stored calibration knows its td) it solves again with td held there and estimates the
+the (td, rotation) correlation gate or the td sigma gate fails, the motion did not pin td (smooth
+constant-rate motion, seed chapter 3): with ``fallback_td_s`` given (a hardware-triggered rig knows
+td = 0; a stored calibration knows its td) it solves again with td held there and estimates the
 extrinsic alone, and says so (``held``, ``held_reason``); without it the verdict is a refusal. td is
 the one held, never the rotation: the rotation is what the robot needs, and a td from a trigger or an
-earlier calibration is a better prior than any extrinsic the degenerate data would leave.
+earlier calibration is a better prior than any extrinsic the degenerate data would leave. A rate
+cross-correlation that cannot pin td at all (no rate variation) is the same refusal, before any solve.
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_c
 class Calibration:
     """solution: the final solve (None: refused before solving, the gates say why). gates: every gate
     on it. held: "td" when td was held after the correlation gate failed (None otherwise).
-    held_reason: why, in words. passed: every gate passed (a held td passes the correlation gate by
-    construction; the failed first try is in ``gates`` as ``td_rotation_correlation_free``)."""
+    held_reason: why, in words. passed: every gate passed (a held td passes the td gates by
+    construction; the failed first try's td gates are in ``gates`` with the suffix ``_free``)."""
 
     solution: ImuCameraSolution | None
     gates: list[GateResult]
@@ -34,11 +35,11 @@ class Calibration:
 
     @property
     def passed(self) -> bool:
-        return all(g.passed for g in self.gates if g.gate != "td_rotation_correlation_free")
+        return all(g.passed for g in self.gates if not g.gate.endswith("_free"))
 
     @property
     def failed(self) -> list[GateResult]:
-        return [g for g in self.gates if not g.passed and g.gate != "td_rotation_correlation_free"]
+        return [g for g in self.gates if not g.passed and not g.gate.endswith("_free")]
 
 
 def calibrate(
@@ -72,22 +73,35 @@ def calibrate(
         observability = gates.td_observability(frames, held.td_crlb_ms)
         return Calibration(
             held,
-            [*recording, observability, free, gates.td_rotation_correlation(held.covariance_7, True)],
+            [
+                *recording,
+                observability,
+                free,
+                gates.td_rotation_correlation(held.covariance_7, True),
+                gates.td_sigma(held.sigma_td_ms, True),
+            ],
             "td",
             reason,
         )
     recording.append(gates.td_observability(frames, solution.td_crlb_ms))
     correlation = gates.td_rotation_correlation(solution.covariance_7, solution.td_held)
-    if correlation.passed or fallback_td_s is None:
-        return Calibration(solution, [*recording, correlation], None, None)
+    sigma = gates.td_sigma(solution.sigma_td_ms, solution.td_held)
+    if (correlation.passed and sigma.passed) or fallback_td_s is None:
+        return Calibration(solution, [*recording, correlation, sigma], None, None)
     held = solve_imu_camera(
         imu, frames, noise, replace(options, hold_td_s=fallback_td_s), track=track, plain=solution.plain
     )
-    reason = (
-        f"td and the extrinsic rotation were not separable (correlation {correlation.value:.3f} > "
-        f"{correlation.threshold}): td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
-    )
-    free = replace(correlation, gate="td_rotation_correlation_free")
+    failed = correlation if not correlation.passed else sigma
+    reason = f"{failed.message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
     return Calibration(
-        held, [*recording, free, gates.td_rotation_correlation(held.covariance_7, True)], "td", reason
+        held,
+        [
+            *recording,
+            replace(correlation, gate="td_rotation_correlation_free"),
+            replace(sigma, gate="td_sigma_free"),
+            gates.td_rotation_correlation(held.covariance_7, True),
+            gates.td_sigma(held.sigma_td_ms, True),
+        ],
+        "td",
+        reason,
     )

@@ -9,6 +9,7 @@
 - ``td_rotation_correlation``: the multiple correlation of td with the three rotation states in the
   solution's covariance. Smooth constant-rate motion makes the (td, yaw) plane rank-deficient (chapter
   3): the solver converges anyway, so a high correlation means hold one of the two or refuse.
+- ``td_sigma``: td's one-sigma against ``MAX_SIGMA_TD_MS``.
 - ``saturation``: the share of IMU samples at full scale or pinned at an axis' extreme.
 - ``imu_gaps`` / ``dropped_frames``: the longest IMU gap in sample periods; the share of camera frames
   missing from an even stream.
@@ -26,6 +27,7 @@ MOTION_SPANS_S = (0.5, 1.0, 2.0, 3.0)
 MIN_EXCITATION = 0.5
 MIN_IMAGE_SPEED_PX_S = 20.0
 MAX_TD_ROTATION_CORRELATION = 0.95
+MAX_SIGMA_TD_MS = 0.5
 MAX_SATURATED_SHARE = 0.001
 MAX_IMU_GAP_PERIODS = 5.0
 MAX_DROPPED_SHARE = 0.05
@@ -158,6 +160,23 @@ def td_rotation_correlation(covariance_7: np.ndarray, td_held: bool) -> GateResu
         "the motion rotates at a near-constant rate, so a time offset and an extrinsic rotation "
         "explain the data equally (seed chapter 3): record again with rate reversals on every axis, or "
         "hold td at a known value (a hardware-triggered rig: 0) and estimate the extrinsic alone",
+    )
+
+
+def td_sigma(sigma_td_ms: float, td_held: bool) -> GateResult:
+    """td's one-sigma: a near-constant rate leaves it large even when no rotation state takes the blame
+    (the rotation about the one turning axis is itself unpinned, so the correlation reads low)."""
+    value = 0.0 if td_held else sigma_td_ms
+    passed = value <= MAX_SIGMA_TD_MS
+    return _verdict(
+        "td_sigma",
+        value,
+        MAX_SIGMA_TD_MS,
+        passed,
+        "td held, not estimated" if td_held else f"sigma td {value:.3f} ms (at most {MAX_SIGMA_TD_MS} ms)",
+        "td_unpinned",
+        "the motion does not pin td: record again with rate reversals on every axis, or hold td at a "
+        "known value (a hardware-triggered rig: 0)",
     )
 
 

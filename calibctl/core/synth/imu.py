@@ -8,7 +8,8 @@ wiggle. Motions:
 - ``"dance"``: phi is a sum of sines on all three axes at different frequencies (rate reversals on
   every axis, what a calibration needs);
 - ``"corridor"``: phi = omega t about the optical axis at a constant rate, no wiggle: smooth
-  constant-rate motion, the (td, rotation) degenerate case of seed chapter 3.
+  constant-rate motion, the (td, rotation) degenerate case of seed chapter 3; ``corridor_wobble_rad_s``
+  swings the rate by that much at 0.5 Hz (nearly degenerate: the cross-correlation finds a peak).
 
 The IMU rides on the camera: T_w_imu = T_w_cam T_imu_cam^-1. Its gyro is the body rate of R_w_imu
 (log of R(t - h)^T R(t + h) / 2h), its accelerometer R_imu_w (p'' - g_w) (five-point second
@@ -75,7 +76,9 @@ def grid_points(cols: int = 7, rows: int = 6, spacing_m: float = 0.05) -> np.nda
 
 
 class _Motion:
-    def __init__(self, kind: str, rng: np.random.Generator, centre: np.ndarray, distance_m: float) -> None:
+    def __init__(
+        self, kind: str, rng: np.random.Generator, centre: np.ndarray, distance_m: float, wobble_rad_s: float
+    ) -> None:
         if kind not in ("dance", "corridor"):
             raise ValueError(f"motion must be 'dance' or 'corridor', not {kind!r}")
         self.kind, self.centre, self.d = kind, centre, distance_m
@@ -86,12 +89,15 @@ class _Motion:
         self.wfreq = rng.uniform(0.3, 0.7, 3)
         self.wphase = rng.uniform(0, 2 * np.pi, 3)
         self.rate = 0.6  # rad/s, the corridor's constant rate
+        self.wobble = wobble_rad_s  # amplitude of a 0.5 Hz swing of the corridor's rate
 
     def pose(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R_w_cam (m, 3, 3), c_w (m, 3)."""
         t = np.asarray(t, np.float64)
         if self.kind == "corridor":
-            phi = np.stack([0 * t, 0 * t, self.rate * t], axis=1)
+            w = 2 * np.pi * 0.5
+            angle = self.rate * t + self.wobble / w * (1 - np.cos(w * t))
+            phi = np.stack([0 * t, 0 * t, angle], axis=1)
             wiggle = np.zeros((t.size, 3))
         else:
             phi = self.amp * np.sin(2 * np.pi * self.freq * t[:, None] + self.phase)
@@ -131,6 +137,7 @@ def synthesize_imu_camera(
     dist_coeffs: np.ndarray | None = None,
     image_size: tuple[int, int] = (752, 480),
     board_points: np.ndarray | None = None,
+    corridor_wobble_rad_s: float = 0.0,
 ) -> ImuCameraRecording:
     """A camera + IMU recording (module docstring); everything from numpy.random.default_rng(seed)."""
     rng = np.random.default_rng(seed)
@@ -142,7 +149,7 @@ def synthesize_imu_camera(
     dist = dist_coeffs if dist_coeffs is not None else np.array([-0.28, 0.074, 0.0002, 0.00002])
     obj = board_points if board_points is not None else grid_points()
     centre = obj.mean(axis=0)
-    mot = _Motion(motion, rng, centre, distance_m)
+    mot = _Motion(motion, rng, centre, distance_m, corridor_wobble_rad_s)
     T_cam_imu = se3.invert(T_imu_cam)
     g_w = np.array([0.0, 9.80665, 0.0])
     # IMU: starts 0.3 s before the first frame and ends 0.3 s after the last (both on the IMU clock).

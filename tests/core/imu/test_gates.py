@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from calibctl.core.imu.calibrate import Calibration, calibrate
 from calibctl.core.imu.solve import SolveOptions
-from calibctl.core.synth.imu import ImuCameraRecording
+from calibctl.core.synth.imu import ImuCameraRecording, synthesize_imu_camera
 from tests.core.imu.conftest import as_inputs
 
 
@@ -20,6 +20,7 @@ def test_the_dance_passes_every_gate(dance_calibration: Calibration) -> None:
         "saturation",
         "imu_gaps",
         "dropped_frames",
+        "td_sigma",
     }
 
 
@@ -42,3 +43,19 @@ def test_the_corridor_with_a_known_td_holds_it_and_says_so(corridor: ImuCameraRe
     # One rotation axis cannot pin the extrinsic: still refused, and with a large sigma, not a small one.
     assert not cal.passed
     assert max(s.sigma_rotation_deg) > 1.0 and max(s.sigma_translation_mm) > 50.0
+
+
+def test_a_corridor_whose_rate_barely_swings_leaves_td_unpinned_and_is_held_when_asked() -> None:
+    # The rate swings 0.05 rad/s: the cross-correlation finds its peak, the joint solve converges, the
+    # (td, rotation) correlation reads low (the rotation about the turning axis is unpinned itself),
+    # and td's sigma says what the motion could not do.
+    rec = synthesize_imu_camera(1, motion="corridor", duration_s=6.0, corridor_wobble_rad_s=0.05)
+    options = SolveOptions(folds=0, jackknife_blocks=0, max_iterations=15)
+    cal = calibrate(*as_inputs(rec), options)
+    assert cal.solution is not None and not cal.passed
+    assert {"td_unpinned", "rotation_starved"} <= {g.reason for g in cal.failed}
+    assert cal.solution.sigma_td_ms > 0.5
+    held = calibrate(*as_inputs(rec), options, fallback_td_s=rec.truth.td_s)
+    assert held.held == "td" and held.held_reason is not None and "sigma td" in held.held_reason
+    assert held.solution is not None and held.solution.td_held
+    assert {g.gate for g in held.gates} >= {"td_sigma_free", "td_rotation_correlation_free", "td_sigma"}
