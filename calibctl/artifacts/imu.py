@@ -36,8 +36,8 @@ class ImuGate(Document):
     """One gate of the camera-IMU solve (core.imu.gates), before or after the solve."""
 
     gate: str = Field(
-        description="rotational_excitation, td_observability, td_rotation_correlation(_free), "
-        "saturation, imu_gaps or dropped_frames"
+        description="rotational_excitation, td_observability, td_rotation_correlation, td_sigma, "
+        "saturation, imu_gaps or dropped_frames (core.imu.gates)"
     )
     passed: bool = Field(description="true when satisfied")
     value: float | None = Field(
