@@ -214,7 +214,7 @@ def add(
         typer.Option(
             "--frame",
             help="Non-camera frame (flange, imu, lidar) a "
-            "hand-eye or LiDAR edge may join to the tree (repeat).",
+            "hand-eye, LiDAR or IMU edge may join to the tree (repeat).",
             show_default=False,
         ),
     ] = None,
@@ -348,6 +348,21 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
             + f", {len(h.motions)} motions from {h.provenance.input_file}"
             + (f", camera {h.provenance.camera}" if h.provenance.camera else "")
         )
+    for ir in cal.imu:
+        failed = [g.gate for g in ir.gates if not g.passed]
+        est = ir.estimate
+        say(
+            f"  imu {ir.parent_frame} -> {ir.child_frame}: {ir.status}"
+            + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
+            + (
+                ""
+                if est is None
+                else f", td {est.td_s * 1e3:+.3f} ms"
+                + (" (held)" if est.td_held else f" +/- {est.sigma_td_ms:.3f} ms")
+                + " (t_imu = t_cam + td)"
+            )
+            + f", camera {ir.camera}, recording {ir.recording}"
+        )
     for lr in cal.lidar:
         failed = [g.gate for g in lr.gates if not g.passed]
         m = lr.metrics
@@ -446,6 +461,9 @@ def history(
                         "lidar": [
                             {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar
                         ],
+                        "imu": [
+                            {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.imu
+                        ],
                     }
                     for c in cals
                 ],
@@ -458,6 +476,7 @@ def history(
         base = named_list([f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs], 3)
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
+        hand_eye += "".join(f"; imu {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.imu)
         say(
             f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
             f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}"
@@ -523,8 +542,9 @@ def export(
             "--format",
             help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
             "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
-            "URDF), kalibr, bundle (all of them + manifest.json, -o DIR), or lut (each stereo pair's "
-            "rectification maps for cv2.remap, -o DIR).",
+            "URDF), kalibr (camchain, with T_cam_imu and timeshift_cam_imu when the rig has an IMU), "
+            "kalibr-imu (imu.yaml of the camera-IMU edge), bundle (all of them + manifest.json, -o DIR), "
+            "or lut (each stereo pair's rectification maps for cv2.remap, -o DIR).",
         ),
     ] = "json",
     out: Annotated[
@@ -575,7 +595,7 @@ def export(
         str | None,
         typer.Option(
             "--edge",
-            help="FROM:TO: one hand-eye or LiDAR edge, its result document (json) or /tf_static (tf).",
+            help="FROM:TO: one hand-eye, LiDAR or IMU edge, its result document (json) or /tf_static (tf).",
             show_default=False,
         ),
     ] = None,

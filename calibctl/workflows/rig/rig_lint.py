@@ -19,7 +19,9 @@ Rules (errors fail lint, exit 1):
 - camera-LiDAR edges (the same table, its LiDAR kind): ``lidar-gates``,
   ``lidar-stale-member`` (the camera whose calibration posed the board was re-calibrated since the edge was
   solved), ``lidar-uncertainty`` (no positive-definite covariance: error; a one-sigma over 10 mm or 0.5 deg:
-  warning).
+  warning);
+- camera-IMU edges (the same table, its IMU kind): ``imu-gates``, ``imu-stale-member`` (the camera whose
+  intrinsics were held was re-calibrated since), ``imu-uncertainty`` (as LiDAR's), ``imu-dropped``.
 """
 
 from __future__ import annotations
