@@ -302,10 +302,7 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
         )
     if reg.kind not in BOARD_KINDS:
         raise UsageError(f"unknown board kind '{reg.kind}'; choose {', '.join(BOARD_KINDS)}")
-    if reg.kind == "aprilgrid":
-        spec = _aprilgrid_spec(reg)
-    else:
-        spec = _grid_spec(reg)
+    spec = _aprilgrid_spec(reg) if reg.kind == "aprilgrid" else _grid_spec(reg)
     measurement = _measurement(reg, now.date())
     backing = _backing(reg)
     try:
