@@ -145,3 +145,13 @@ def test_a_rendered_aprilgrid_session_calibrates(run, shots):
     assert abs(K[0][0] - K_true[0][0]) < 4 * art["stdev"]["sigma"]["fx"]
     assert abs(K[0][2] - K_true[0][2]) < 1.5 and abs(K[1][2] - K_true[1][2]) < 1.5
     assert art["rms_px"] < 0.2
+
+
+def test_a_grid_of_another_family_is_named_when_nothing_is_found(run, shots):
+    added = run("board", "add", "AG16", *GRID, "--family", "16h5")
+    assert added.exit_code == 0, added.output
+    result = run("calibrate", "--serial", "AG-2", "--board", "AG16", "--source", str(shots))
+    assert result.exit_code == 2, result.output
+    assert (
+        "no 6x6-tag AprilGrid (board AG16@1)" in result.output and "tag spacing and family" in result.output
+    )
