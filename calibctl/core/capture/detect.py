@@ -1,4 +1,4 @@
-"""Board detection: chessboards (OpenCV classic, SB fallback) and ChArUco, with sub-pixel refinement.
+"""Board detection: chessboards (OpenCV classic, SB fallback), ChArUco and AprilGrid, sub-pixel refined.
 
 Which chessboard detector, by measurement (benchmarks/bench_detect.py, 2026-11-23; OpenCV 5.0.0, one
 thread, on a loaded 2-core machine; 20 rendered views per size through the seed lens, corner error
@@ -95,7 +95,7 @@ class Detection:
     Attributes:
         corner_ids: (N,) int64 row-major ids (``BoardSpec.object_points`` order).
         corners_px: (N, 2) float64 sub-pixel corners, full-resolution pixels, pixel centres at integers.
-        method: "classic", "sb" or "charuco".
+        method: "classic", "sb", "charuco" or "aprilgrid".
         edge_width_px: mean edge rise width (blur measure), None when not measured (partial ChArUco).
     """
 
