@@ -242,6 +242,10 @@ def _run_fisheye(
         raise UsageError(f"--fisheye field of view must be 60-190 deg, got {fov_deg:g}")
     if pattern not in PATTERNS:
         raise UsageError(f"unknown pattern {pattern!r}", f"choose one of {', '.join(PATTERNS)}")
+    if pattern == "aprilgrid":  # its frame faces the other way (Kalibr's); the fisheye poses are not turned
+        raise UsageError(
+            "--fisheye renders chessboards and ChArUco boards", "drop --fisheye or --pattern aprilgrid"
+        )
     camera = FisheyeCamera.from_fov(image_size, fov_deg, circular)
     board = default_board(pattern)
     rng = np.random.default_rng(seed)

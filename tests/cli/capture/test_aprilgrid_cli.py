@@ -155,3 +155,9 @@ def test_a_grid_of_another_family_is_named_when_nothing_is_found(run, shots):
     assert (
         "no 6x6-tag AprilGrid (board AG16@1)" in result.output and "tag spacing and family" in result.output
     )
+
+
+def test_a_fisheye_aprilgrid_render_is_refused(tmp_path):
+    result = runner.invoke(app, ["synth", str(tmp_path / "fe"), "--pattern", "aprilgrid", "--fisheye", "150"])
+    assert result.exit_code == 2 and "drop --fisheye or --pattern aprilgrid" in result.output
+    assert not (tmp_path / "fe").exists()
