@@ -261,8 +261,9 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
         reg.span_mm / 1000,
         reg.span_uncertainty_mm / 1000,
     )
+    count = f"{edges:g} (tags and gaps)" if aprilgrid else f"{squares} squares"
     said = (
-        f"{size_flag} {reg.square_mm:g} x {f'{edges:g} (tags and gaps)' if aprilgrid else f'{squares} squares'} = "
+        f"{size_flag} {reg.square_mm:g} x {count} = "
         f"{verdict.implied_m * 1000:.2f} mm, but --span-mm "
         f"{reg.span_mm:g}"
     )
