@@ -516,7 +516,8 @@ def _aprilgrid_markers(search: np.ndarray, spec: BoardSpec, refine: int) -> tupl
 # smaller of the tag's two-bit border (0.2 of its edge) and the gap between tags.
 # OpenCV's marker image of a tag is Kalibr's print turned by 180 degrees, so the detector's corners
 # (the marker's top-left, top-right, bottom-right, bottom-left) are the printed tag's bottom-right,
-# bottom-left, top-left and top-right: Kalibr's pIdx columns 1, 0, 3, 2.
+# bottom-left, top-left and top-right: Kalibr's pIdx columns 1, 0, 3, 2 - the mapping Kalibr's own
+# cv2.aruco detector makes (GridCalibrationTargetAprilgridv2::computeObservation).
 _ARUCO_TO_KALIBR_CORNER = (1, 0, 3, 2)
 APRILGRID_REFINE = cv2.aruco.CORNER_REFINE_NONE
 APRILGRID_THRESH_FRACTION = 0.15
