@@ -97,6 +97,7 @@ class Scenario(StrEnum):
 class Pattern(StrEnum):
     chessboard = "chessboard"
     charuco = "charuco"
+    aprilgrid = "aprilgrid"
 
 
 def register(app: typer.Typer) -> None:
@@ -469,7 +470,12 @@ def register_synth(app: typer.Typer) -> None:
             str, typer.Option("--size", help="Image size WxH; the seed's lens is scaled to it.")
         ] = "640x480",
         pattern: Annotated[
-            Pattern, typer.Option("--pattern", help="Board pattern (9x6 inner corners, 25 mm).")
+            Pattern,
+            typer.Option(
+                "--pattern",
+                help="Board pattern: chessboard 9x6 inner corners, 25 mm; charuco 10x7 squares; aprilgrid "
+                "6x6 tags of 30 mm, spacing 0.3.",
+            ),
         ] = (Pattern.chessboard),
         force: Annotated[
             bool, typer.Option("--force", help="Write into a non-empty OUT, replacing earlier synth files.")
