@@ -8,7 +8,7 @@ PYTEST_WORKERS ?= 2
 FLOOR_VENV ?= .venv-floor
 FLOOR_STAMP := $(FLOOR_VENV)/.installed-stamp
 # Everything: both extras (PostgreSQL, plots) and the dev tools, at the versions in the lock file.
-EXTRAS := .[dev,postgres,plots]
+EXTRAS := .[dev,postgres,plots,bags]
 
 .DEFAULT_GOAL := help
 
@@ -35,20 +35,36 @@ demo: $(STAMP) ## render a synthetic board session and run the main job on the e
 test: $(STAMP) ## run the test suite (SQLite and the local PostgreSQL), without the slow marker
 	$(PY) -m pytest -q -n $(PYTEST_WORKERS) -m "not slow"
 
-test-floor: $(FLOOR_STAMP) ## the fast suite on the oldest versions pyproject.toml allows (constraints/floor.txt)
-	$(FLOOR_VENV)/bin/python -m pytest -q -n $(PYTEST_WORKERS) -m "not slow" -p no:cacheprovider
+# What the floor versions (constraints/floor.txt) can break, and only that. A workflow or CLI test above
+# these layers reaches numpy, OpenCV, pydantic, SQLAlchemy, PyYAML, typer and rich through the code these
+# tests hold, so re-running it on the floor proves little more; the whole fast suite again took 16.8 of CI's
+# 54 min on the 2-core host. Kept: the numerics and the detector (tests/core: numpy, OpenCV 4.10), SQL,
+# migrations and the chain (tests/store: SQLAlchemy, alembic, psycopg), the documents and their hashes
+# (tests/artifacts, tests/test_*.py: pydantic, rfc8785, cryptography, PyYAML), the exports and the parsers
+# of what is exported or linted (tests/workflows/exports and lint, the lint/export CLI tests:
+# cv2.FileStorage, PyYAML), and the CLI's own machinery (tests/cli/app: registry, help, defaults, plain
+# text, start-up imports, extras: typer, rich, pydantic's plugin scan).
+FLOOR_TESTS := tests/core tests/store tests/artifacts tests/test_*.py \
+	tests/workflows/exports tests/workflows/lint tests/cli/records/test_lint_cli.py \
+	tests/cli/records/test_export_lint.py tests/cli/app/test_cli_registry.py tests/cli/app/test_cli_habits.py \
+	tests/cli/app/test_cli_defaults.py tests/cli/app/test_plain_text.py tests/cli/app/test_startup_imports.py \
+	tests/cli/app/test_extras_cli.py
 
+test-floor: $(FLOOR_STAMP) ## the tests the oldest allowed versions can break, on them (constraints/floor.txt)
+	$(FLOOR_VENV)/bin/python -m pytest -q -n $(PYTEST_WORKERS) -m "not slow" -p no:cacheprovider $(FLOOR_TESTS)
+
+# --dist loadscope: one module's tests on one worker, so a module fixture (the wheel's venv) is built once.
 test-slow: $(STAMP) ## run only the slow full-resolution / many-session tests (installs chromium when missing)
 	command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium) || \
 		(sudo apt-get update && sudo apt-get install -y chromium)
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadscope -m slow
 
 CONSUMER_DEBS = python3-camera-calibration-parsers python3-image-geometry python3-mrcal python3-opencv liburdfdom-tools
 
 test-consumers: $(STAMP) ## the robot bundle read by ROS camera_calibration_parsers, image_geometry, mrcal, check_urdf (installs them)
 	/usr/bin/python3 -c 'import camera_calibration_parsers, image_geometry, mrcal, cv2' 2>/dev/null && command -v check_urdf >/dev/null || \
 		(apt-get update && apt-get install -y $(CONSUMER_DEBS)) || (sudo apt-get update && sudo apt-get install -y $(CONSUMER_DEBS))
-	$(PY) -m pytest -q -rs tests/cli/test_rig_bundle_consumers.py
+	$(PY) -m pytest -q -rs tests/workflows/exports/test_rig_bundle_consumers.py
 
 lint: $(STAMP) ## ruff, mypy and the import-layer contract
 	$(VENV)/bin/ruff check calibctl tests benchmarks

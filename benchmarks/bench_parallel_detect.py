@@ -48,11 +48,8 @@ from pathlib import Path
 
 from machine import cpu_model, load_1min, run_env  # benchmarks/machine.py (scripts run from benchmarks/)
 
-PLAIN = r"""
-import sys, time, glob, os
-t0 = time.perf_counter()
-import cv2, numpy as np
-folder, jobs, solve = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "solve"
+# The plain script's per-picture work (after ``import cv2``), also the plain warm loops' (bench_station_plain)
+PLAIN_DETECT = r"""
 FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 CRIT = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
 def detect(path):
@@ -61,7 +58,16 @@ def detect(path):
     if not found:
         return None, gray.shape[::-1]
     return cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), CRIT), gray.shape[::-1]
-if __name__ == "__main__":
+"""
+PLAIN = (
+    r"""
+import sys, time, glob, os
+t0 = time.perf_counter()
+import cv2, numpy as np
+folder, jobs, solve = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "solve"
+"""
+    + PLAIN_DETECT.lstrip("\n")
+    + r"""if __name__ == "__main__":
     paths = sorted(p for p in glob.glob(os.path.join(folder, "*")) if p.lower().endswith((".png", ".jpg")))
     t = time.perf_counter()
     if jobs == 1:
@@ -78,6 +84,7 @@ if __name__ == "__main__":
         cv2.calibrateCameraExtended([obj] * len(views), views, found[0][1], None, None)
     print(f"RESULT {t_detect:.4f} {len(views)} {time.perf_counter() - t:.4f}")
 """
+)
 
 CALIBCTL_DETECT = r'''
 import os, sys, time

@@ -54,6 +54,7 @@ BENCHES = (
         ("--seeds", "10", "--scenes", "2", "--repeats", "5"),
     ),
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
+    Bench("bench_rig_caliscope", "bench_rig_caliscope.py", (), ("--runs", "5:k1k2")),
     Bench(
         "bench_tilt",
         "bench_tilt.py",
@@ -79,6 +80,7 @@ BENCHES = (
     Bench("bench_check", "bench_check.py", ("--sessions", "200"), ("--sessions", "20", "--refs", "2")),
     Bench("bench_lm", "bench_lm.py", ("--repeats", "5"), ("--fisheye", "2", "--repeats", "1")),
     Bench("bench_lidar", "bench_lidar.py", ("--repeats", "3"), ("--repeats", "1")),
+    Bench("bench_lut", "bench_lut.py", ("--repeats", "100"), ("--repeats", "10")),
     Bench("bench_stream", "bench_stream.py", ("--repeats", "3"), ("--repeats", "1", "--size", "640x480")),
     Bench(
         "bench_fleet_health",

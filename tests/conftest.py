@@ -6,12 +6,17 @@
   ``pg_ctlcluster``; if it still cannot be reached the test *fails* -- it is never skipped silently.
 * ``db_url``: both of the above (the PostgreSQL parameter carries the ``postgres`` marker).
 
+A new SQLite store is migrated once per process: creating one (``Store.open``, ``db upgrade``) copies
+that file instead of running the 15 migrations again (0.5-1 s each time); tests/store/test_migrations.py
+runs them on every store it makes.
+
 Names are unique per test (uuid), so the suite is safe under ``pytest -n 2``.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -43,6 +48,48 @@ def _no_remembered_checks() -> None:
         module = sys.modules.get(name)
         if module is not None:
             module._RECENT.clear()  # type: ignore[attr-defined]
+
+
+_MIGRATED: dict[str, Path] = {}
+
+
+@pytest.fixture(autouse=True)
+def _new_sqlite_stores_copy_one_migrated_store(
+    request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """``migrate.upgrade`` to head of a SQLite file that does not exist yet puts a copy of a store this
+    process migrated once in its place (linked in whole, so a concurrent opener sees nothing or all of it);
+    anything else (PostgreSQL, another target, a file already there, a missing folder) runs the migrations."""
+    if request.node.path.name == "test_migrations.py":
+        return
+    from calibctl.store import migrate
+    from calibctl.store.engine import make_engine, sqlite_path
+
+    migrate_for_real = migrate.upgrade
+
+    def upgrade(engine, target: str = "head"):
+        path = sqlite_path(engine.url)
+        if target != "head" or path is None or not path.parent.is_dir() or os.path.lexists(path):
+            return migrate_for_real(engine, target)
+        if "sqlite" not in _MIGRATED:
+            migrated = tmp_path_factory.mktemp("migrated") / "calibctl.db"
+            template = make_engine(f"sqlite:///{migrated}")
+            try:
+                migrate_for_real(template)
+            finally:
+                template.dispose()
+            _MIGRATED["sqlite"] = migrated
+        copy = path.with_name(f"{path.name}.{uuid.uuid4().hex}")
+        shutil.copyfile(_MIGRATED["sqlite"], copy)
+        try:
+            os.link(copy, path)
+        except FileExistsError:  # another opener made it meanwhile
+            return migrate_for_real(engine, target)
+        finally:
+            copy.unlink()
+        return None, migrate.head_revision()
+
+    monkeypatch.setattr(migrate, "upgrade", upgrade)
 
 
 @pytest.fixture

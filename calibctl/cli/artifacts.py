@@ -79,7 +79,8 @@ def export(
         str, typer.Argument(metavar="SERIAL[@N]", help="Serial, optionally @version (default: active).")
     ],
     fmt: Annotated[
-        str, typer.Option("--format", "-f", help="json | yaml | ros | opencv | kalibr | mrcal")
+        str,
+        typer.Option("--format", "-f", help="json | yaml | ros | opencv | kalibr | mrcal | lut (-o DIR)"),
     ] = "json",
     out: Annotated[Path | None, typer.Option("--output", "-o", help="Write here instead of stdout.")] = None,
     force: Annotated[
@@ -91,10 +92,36 @@ def export(
     camera_name: Annotated[
         str | None, typer.Option("--camera-name", help="ROS camera_name ([A-Za-z0-9_]; default: the serial).")
     ] = None,
+    alpha: Annotated[
+        float | None,
+        typer.Option(
+            "--alpha", help="lut, pinhole lens: 0 keeps only valid pixels (default), 1 every pixel."
+        ),
+    ] = None,
+    balance: Annotated[
+        float | None,
+        typer.Option(
+            "--balance", help="lut, fisheye lens: 0 keeps only valid pixels (default), 1 every pixel."
+        ),
+    ] = None,
 ) -> None:
-    """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, or OpenCV FileStorage."""
+    """Export what a robot needs: the artifact (json/yaml), ROS camera_info YAML, OpenCV FileStorage, or the
+    undistortion maps cv2.remap reads (lut: a folder of .npy maps and a signed lut.yaml)."""
     from calibctl.workflows.store_admin import records
 
+    if fmt == "lut":
+        for path in records.export_lut(
+            state(ctx).settings(),
+            ref,
+            out,
+            force=force,
+            allow_rejected=allow_rejected,
+            alpha=alpha,
+            balance=balance,
+            camera_name=camera_name,
+        ):
+            print(f"wrote {path}", flush=True)
+        return
     text = records.export(
         state(ctx).settings(),
         ref,
@@ -103,6 +130,7 @@ def export(
         force=force,
         allow_rejected=allow_rejected,
         camera_name=camera_name,
+        lut_options=alpha is not None or balance is not None,
     )
     if out is None:
         print(text, end="")

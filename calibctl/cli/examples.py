@@ -164,6 +164,15 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "calibctl lidar synth lidar-set/ --poses 12 --seed 1",
         "calibctl lidar synth offset-set/ --range-offset-mm 30",
     ),
+    "imu": ("calibctl imu solve recording/ --serial CAM-0042 --noise imu.yaml",),
+    "imu solve": (
+        "calibctl imu solve recording/ --serial CAM-0042 --noise imu.yaml --json",
+        "calibctl imu solve recording/ --serial CAM-0042 --rig ROBOT-7 --imu-frame imu --hold-td-ms 0",
+    ),
+    "imu synth": (
+        "calibctl imu synth imu-set/ --seed 1 --td-ms 12",
+        "calibctl imu synth corridor-set/ --motion corridor --serial CAM-0042",
+    ),
     "rig solve-folders": (
         "calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
         "--square-mm 25.0 --export-dir out/",
@@ -204,7 +213,7 @@ def epilog(path: str) -> str:
     r"""The ``Examples:`` block for command ``path`` ("" is calibctl itself); ``\b`` keeps click
     from re-wrapping the lines."""
     examples = EXAMPLES.get(path)
-    if not examples:  # tests/cli/test_cli_habits.py fails on this; a user's --help never does
+    if not examples:  # tests/cli/app/test_cli_habits.py fails on this; a user's --help never does
         return ""
     lines = "\n".join(f"  $ {example}" for example in examples)
     return f"\b\nExamples:\n{lines}"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -27,7 +28,10 @@ def lint(
         list[Path] | None,
         typer.Argument(
             metavar="[FILE...]",
-            help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's manifest.json) or a ROS camera_info file.",
+            help="Any calibctl export (artifact JSON/YAML, ROS camera_info, OpenCV FileStorage "
+            "YAML/XML/JSON), any rig export (tf, URDF, Kalibr, OpenCV stereo, mrcal, a bundle's "
+            "manifest.json), a LUT folder or its lut.yaml (with --db: refused when stale) or a ROS "
+            "camera_info file.",
         ),
     ] = None,
     serial: Annotated[
@@ -79,6 +83,7 @@ def lint(
             all_serials,
             require_signature=require_signature,
             trusted_keys=trusted_keys,
+            against_store=st.db is not None or bool(os.environ.get("CALIBCTL_DB")),
         )
         if (files or serial or all_serials or not rig)
         else []

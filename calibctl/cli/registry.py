@@ -47,12 +47,13 @@ COMMAND_MODULES: dict[str, str] = {
     "board": "board",
     "rig": "rig",
     "lidar": "lidar",
+    "imu": "imu",
     "db": "db",
     "keys": "keys",
     "fleet": "fleet",
 }
 """Each command or command group -> the ``calibctl.cli`` module whose ``register`` adds it; this order is
-the order in ``--help`` (tests/cli/test_cli_registry.py holds it to what the modules register)."""
+the order in ``--help`` (tests/cli/app/test_cli_registry.py holds it to what the modules register)."""
 
 
 def makers(registry: typer.Typer, style: dict[str, Any]) -> dict[str, Callable[[], ClickCommand]]:

@@ -2,7 +2,7 @@
 virtualenv outside the repository (no extras), it runs ``calibctl demo`` and ``calibctl db upgrade``.
 
 Dependencies come from the package index at the versions of constraints/lock.txt (what
-``make install`` uses, so pip's cache usually serves them).
+``make install`` uses, so pip's cache usually serves them), installed by the test's own pip.
 """
 
 from __future__ import annotations
@@ -48,12 +48,16 @@ def venv_bin(tmp_path_factory) -> Path:
     assert built.returncode == 0, built.stderr
     assert "deprecated" not in built.stderr.lower(), built.stderr  # e.g. the old license table
     (wheel,) = (root / "dist").glob("calibctl-*.whl")
-    created = _run(sys.executable, "-m", "venv", root / "venv", cwd=root)
+    # The venv gets no pip of its own (ensurepip is most of a venv's start): this process's pip installs
+    # into it (--python).
+    created = _run(sys.executable, "-m", "venv", "--without-pip", root / "venv", cwd=root)
     assert created.returncode == 0, created.stderr
     installed = _run(
-        root / "venv/bin/python",
+        sys.executable,
         "-m",
         "pip",
+        "--python",
+        root / "venv/bin/python",
         "install",
         "--quiet",
         "-c",

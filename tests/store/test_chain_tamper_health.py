@@ -17,7 +17,7 @@ from calibctl.signing import Signer, TrustedKeys, create_key
 from calibctl.store import migrate
 from calibctl.store.engine import make_engine
 from calibctl.store.repository import Store
-from tests.cli.fleet_store import run, small_fleet
+from tests.cli.fleet.fleet_store import run, small_fleet
 from tests.store.documents import fleet_event, health_report
 from tests.store.tamper import rechain, run_underneath
 from tests.store.test_chain_tamper import _select

@@ -28,17 +28,25 @@
    there is margin or background, while on a larger board there is another row of alternating squares.
    The probe is skipped when the pre-check says "no" for every probed image (with its detected
    corners), and runs unchanged when any of them says "maybe" (no corners, a side whose row past the
-   ring is mostly out of the image, or squares there). Measured (tests/core/capture/test_board_extent.py): registered one
-   column or row short, it says "maybe" in every image the short pattern is found in (8x6: left 13/13,
-   right 13/13, udacity 4/4; 9x5: udacity 3/3; 7x6: left 12/12, right 11/11; 9x5 is found in no left
-   image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6 view of both
-   datasets and 48 rendered ones with one outer corner line dropped also says "maybe". Correctly
+   ring is mostly out of the image, or squares there). Measured (tests/core/capture/test_board_extent.py):
+   registered one column or row short, it says "maybe" in every image the short pattern is found in
+   (8x6: left 13/13, right 13/13, udacity 4/4; 9x5: udacity 3/3; 7x6: left 12/12, right 11/11; 9x5 is
+   found in no left image), the missing side scoring 0.63-1.03 against a threshold of 0.2; every 9x6
+   view of both datasets and 48 rendered ones with one outer corner line dropped also says "maybe". Correctly
    registered, it says "no" in left 10/13, right 9/13, udacity 15/18 (the rest: a side's row past the
    ring leaves the image, or right03's background scores 0.23) and 96/96 rendered views (`calibctl
    synth` scenarios good, flat, centre, one-direction at 640x480 and 1280x960; max score 0.01).
    A grossly smaller registration (5x4 on the 9x6 board) misses the +1 probes, but SB sees the 9x6
    board, so it is refused naming 9x6 (opencv-left-right left: found in left07 and left08).
 ChArUco boards are not probed: their corner ids come from the markers, a partial view is normal.
+
+Bounded: every probe searches a copy of at most ``PROBE_MAX_PIXELS`` (``probe_copies``), SB runs once per
+probed picture (``visible_sizes``), and the nothing-found probe skips the pictures SB sees no chessboard in
+once the first one showed no near pattern. Counted on 12 rendered views at 1280x960
+(tests/workflows/station/test_station_probe_cost.py), against the 3.7 Mpx a clean unit's detection searches:
+one picture with the board and 11 without, 11 probe calls searching 9.8 Mpx before, 2.5 Mpx now; no board
+at all, 63 calls (about 50 Mpx at full size) before, 27 calls and 5.5 Mpx now. (One 20-view station unit
+spent 4.66 s in these probes at full size.)
 """
 
 from __future__ import annotations
@@ -49,14 +57,19 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from calibctl.core.board.board_spec import CHESSBOARD, BoardSpec
+from calibctl.core.board.board_spec import APRILGRID, CHESSBOARD, BoardSpec
 from calibctl.core.capture.board_extent import might_extend, visible_chessboard
-from calibctl.core.capture.detect import DetectorSettings, detect_board
+from calibctl.core.capture.detect import DetectorSettings, detect_board, downscaled_to_pixels
 from calibctl.errors import InputError
 
 PROBE_IMAGES = 3
 LARGER_MIN_HITS = 2
 PROBE_WORKERS = 2
+# Each probe detection (classic or SB) searches a copy of at most this many pixels (an integer-factor block
+# average, detect.downscaled_to_pixels): the real sets measured above (640x480, 1280x720) keep their full
+# size, a 1280x960 picture is probed at 640x480 and a 4000x3000 one at 1000x750, so a probe costs what
+# detecting a picture of about a megapixel costs, whatever the camera. Only found / not found is read.
+PROBE_MAX_PIXELS = 1_000_000
 
 Sample = tuple[str, np.ndarray]  # (image name, (H, W) uint8)
 
@@ -104,6 +117,11 @@ def probe(
     return found
 
 
+def probe_copies(samples: Sequence[Sample]) -> list[Sample]:
+    """The samples as the probes search them: each reduced to at most ``PROBE_MAX_PIXELS``."""
+    return [(name, downscaled_to_pixels(gray, PROBE_MAX_PIXELS)[0]) for name, gray in samples]
+
+
 def spread(items: Sequence[Sample], count: int) -> list[Sample]:
     """At most ``count`` items evenly spread over ``items`` (first and last included)."""
     if len(items) <= count:
@@ -113,15 +131,21 @@ def spread(items: Sequence[Sample], count: int) -> list[Sample]:
 
 
 def _probe_near(
-    samples: Sequence[Sample], spec: BoardSpec, patterns: Sequence[tuple[int, int]]
+    samples: Sequence[Sample],
+    spec: BoardSpec,
+    patterns: Sequence[tuple[int, int]],
+    sb_sees: Sequence[tuple[int, int] | None],
 ) -> dict[tuple[int, int], list[str]]:
     """``probe`` (classic detector), first the first sample with every pattern, then the other samples
-    with the patterns it showed (all of them when it showed none): 9 + 2k detections instead of 27."""
+    with the patterns it showed (9 + 2k detections instead of 27). When the first showed none, the other
+    samples get every pattern, but only those in which SB sees a chessboard at all (``sb_sees``, one per
+    sample: ``visible_chessboard``), so a unit of blank or boardless pictures costs 9 detections, not 27."""
     if not samples:
         return {}
     found = probe(samples[:1], spec, patterns, classic_only=True)
-    again = [p for p, names in found.items() if names] or list(patterns)
-    for pattern, names in probe(samples[1:], spec, again, classic_only=True).items():
+    again = [p for p, names in found.items() if names]
+    rest = [s for s, seen in zip(samples[1:], sb_sees[1:], strict=True) if again or seen is not None]
+    for pattern, names in probe(rest, spec, again or list(patterns), classic_only=True).items():
         found[pattern] += names
     return found
 
@@ -139,16 +163,24 @@ def _holds_more(size: tuple[int, int], spec: BoardSpec) -> bool:
     return big >= reg_big and small >= reg_small and big * small > reg_big * reg_small
 
 
-def seen_sizes(samples: Sequence[Sample], spec: BoardSpec) -> list[tuple[int, int]]:
-    """The chessboards findChessboardCornersSB sees in the samples growing from a seed grid
-    (``board_extent.visible_chessboard``: whatever their size), oriented like the registered pattern,
-    the most often seen first, then the largest. A size still has to be confirmed by the classic detector."""
+def visible_sizes(samples: Sequence[Sample]) -> list[tuple[int, int] | None]:
+    """Per sample, the chessboard findChessboardCornersSB sees growing from a seed grid
+    (``board_extent.visible_chessboard``: whatever its size; None: none), SB's one call per sample."""
     with ThreadPoolExecutor(max_workers=PROBE_WORKERS) as pool:
-        seen = Counter(
-            _oriented(size, spec)
-            for size in pool.map(lambda sample: visible_chessboard(sample[1]), samples)
-            if size is not None
-        )
+        return list(pool.map(lambda sample: visible_chessboard(sample[1]), samples))
+
+
+def seen_sizes(
+    samples: Sequence[Sample], spec: BoardSpec, sizes: Sequence[tuple[int, int] | None] | None = None
+) -> list[tuple[int, int]]:
+    """The chessboards findChessboardCornersSB sees in the samples (``visible_sizes``, or ``sizes`` when
+    they were looked for already), oriented like the registered pattern, the most often seen first, then the
+    largest. A size still has to be confirmed by the classic detector."""
+    seen = Counter(
+        _oriented(size, spec)
+        for size in (visible_sizes(samples) if sizes is None else sizes)
+        if size is not None
+    )
     return sorted(seen, key=lambda size: (seen[size], size[0] * size[1]), reverse=True)
 
 
@@ -166,25 +198,35 @@ def nothing_found_error(
     spec: BoardSpec, board_ref: str, board_name: str, where: str, n_readable: int, samples: Sequence[Sample]
 ) -> InputError:
     """The error for "the registered pattern is in none of the readable pictures" (exit 2)."""
-    kind = "ChArUco board" if spec.kind != CHESSBOARD else "chessboard"
+    kind = f"{spec.cols}x{spec.rows} " + ("chessboard" if spec.kind == CHESSBOARD else "ChArUco board")
+    if spec.kind == APRILGRID:
+        kind = f"{spec.cols // 2}x{spec.rows // 2}-tag AprilGrid"
     message = (
-        f"no {spec.cols}x{spec.rows} {kind} (board {board_ref}) was found in any of the {n_readable} "
+        f"no {kind} (board {board_ref}) was found in any of the {n_readable} "
         f"readable {where}; nothing was stored"
     )
     registry = f"`calibctl board show {board_name}`"
     if spec.kind != CHESSBOARD:
+        printed = (
+            "tags, tag spacing and family"
+            if spec.kind == APRILGRID
+            else "squares, marker size and dictionary"
+        )
         return InputError(
             message,
-            f"check the board's squares, marker size and dictionary with {registry}, "
-            "and that the board is in the frame, lit and in focus",
+            f"check the board's {printed} with {registry}, and that the board is in the frame, lit and "
+            "in focus",
         )
     patterns = near_patterns(spec.cols, spec.rows)
-    samples = spread(samples, PROBE_IMAGES)
-    found = _probe_near(samples, spec, patterns)
+    samples = probe_copies(spread(samples, PROBE_IMAGES))
+    sb_sees = visible_sizes(samples)
+    found = _probe_near(samples, spec, patterns, sb_sees)
     # a board two or more corners off is not among the near patterns: name what SB sees, once the classic
     # detector confirms it
     seen = [
-        size for size in seen_sizes(samples, spec) if size not in found and size != (spec.cols, spec.rows)
+        size
+        for size in seen_sizes(samples, spec, sb_sees)
+        if size not in found and size != (spec.cols, spec.rows)
     ]
     found.update(probe(samples, spec, seen, classic_only=True))
     # a sub-board of the real one is found wherever the real one is: prefer the most hits, then the largest
@@ -234,6 +276,7 @@ def larger_board_error(
         name in known and not might_extend(gray, known[name], spec.cols, spec.rows) for name, gray in samples
     ):
         return None
+    samples = probe_copies(samples)
     need = max(LARGER_MIN_HITS, len(samples) // 2 + 1)
     settings = DetectorSettings(sb_fallback=False)
 

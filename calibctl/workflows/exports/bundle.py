@@ -44,17 +44,20 @@ def _is_bundle_folder(path: Path) -> bool:
         return False
 
 
-def _check_target(out: Path, force: bool) -> None:
+def check_target(
+    out: Path, force: bool, what: str = "bundle", marker: str = MANIFEST, owned: Any = _is_bundle_folder
+) -> None:
+    """``out`` may be written: new, or (``force``) a ``what`` folder whose ``marker`` file calibctl wrote."""
     if out.exists() or out.is_symlink():
         if not force:
             raise AlreadyExistsError(
                 f"{out} already exists",
-                "choose a new folder, or pass --force to replace a bundle calibctl wrote there",
+                f"choose a new folder, or pass --force to replace a {what} calibctl wrote there",
             )
-        if out.is_symlink() or not out.is_dir() or not _is_bundle_folder(out):
+        if out.is_symlink() or not out.is_dir() or not owned(out):
             raise UsageError(
-                f"{out} is not a bundle calibctl wrote (no calibctl {MANIFEST} in it): --force replaces "
-                "only a bundle folder",
+                f"{out} is not a {what} calibctl wrote (no calibctl {marker} in it): --force replaces "
+                f"only a {what} folder",
                 "choose a new folder",
             )
     if not out.parent.is_dir():
@@ -67,7 +70,7 @@ def write_bundle(
     """Write ``files`` (relative name -> text) and the manifest (``manifest`` plus ``format``, its schema
     version and ``files``: name, sha256, bytes) as the folder ``out``; returns the paths written."""
     out = Path(out)
-    _check_target(out, force)
+    check_target(out, force)
     payloads = {name: text.encode("utf-8") for name, text in files.items()}
     doc = {
         "format": BUNDLE_FORMAT,
@@ -78,8 +81,14 @@ def write_bundle(
         ],
     }
     payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
+    return write_folder(out, payloads, "bundle")
+
+
+def write_folder(out: Path, payloads: Mapping[str, bytes], what: str) -> list[Path]:
+    """Write ``payloads`` (relative name -> bytes) as the folder ``out``, whole or not at all: into a
+    temporary folder beside it, then renamed into place (an old ``out``, checked by the caller, replaced)."""
     file_mode = new_file_mode()
-    with file_errors("write the bundle", out):
+    with file_errors(f"write the {what}", out):
         tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name[:24]}.", suffix=".tmp"))
         try:
             for name, data in payloads.items():

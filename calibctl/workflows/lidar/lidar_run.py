@@ -16,6 +16,7 @@ from pathlib import Path
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.files import write_atomic
+from calibctl.workflows.edges.versions import ROS_NAME_RULE
 from calibctl.workflows.exports.frame_names import is_ros_name
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.lidar.lidar_solve import (
@@ -57,7 +58,7 @@ def run_lidar(
             if not is_ros_name(name):
                 raise UsageError(
                     f"{option} {name!r} is not a legal ROS frame name; nothing was solved or written",
-                    rig_lidar.ROS_NAME_RULE,
+                    ROS_NAME_RULE,
                 )
     if target is not None:
         if req.camera_info is not None:

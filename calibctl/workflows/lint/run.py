@@ -7,7 +7,7 @@ from pathlib import Path
 
 from calibctl.config import Settings
 from calibctl.errors import UsageError
-from calibctl.workflows.lint import rig_files
+from calibctl.workflows.lint import lut_files, rig_files
 from calibctl.workflows.lint.lint import LintResult, lint_store
 from calibctl.workflows.store_admin import keys
 
@@ -20,10 +20,12 @@ def lint(
     *,
     require_signature: bool = False,
     trusted_keys: Path | None = None,
+    against_store: bool = False,
 ) -> list[LintResult]:
     """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
     is a ``signature`` error (a camera's ROS and OpenCV exports carry no signature: lint the artifact export;
-    a rig export carries its rig version's signature in its header)."""
+    a rig export carries its rig version's signature in its header). A LUT folder or header is
+    ``lut_files``' (``against_store``, i.e. --db given: its source must be the active version)."""
     if not paths and not serial and not all_serials:
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
     trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
@@ -33,9 +35,11 @@ def lint(
         )
     results = []
     for path in paths:
-        results += rig_files.lint_rig_file(path, settings.lint, trusted) or [
-            rig_files.lint_camera_file(path, settings.lint, trusted)
-        ]
+        results += (
+            lut_files.lint_lut(path, trusted, settings if against_store else None)
+            or rig_files.lint_rig_file(path, settings.lint, trusted)
+            or [rig_files.lint_camera_file(path, settings.lint, trusted)]
+        )
     if serial or all_serials:
         results += lint_store(settings, serial, all_serials, trusted)
     return results

@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact
@@ -139,6 +139,15 @@ def show(settings: Settings, ref: str) -> CalibrationArtifact:
     )
 
 
+def _refuse_rejected(art: CalibrationArtifact, allow_rejected: bool) -> None:
+    if art.status == "rejected" and not allow_rejected:
+        raise UsageError(
+            f"{art.ref} is a rejected calibration; a robot must not load it",
+            "export an accepted version (see `calibctl history`), or pass --allow-rejected to inspect it "
+            "(the export then says it is rejected)",
+        )
+
+
 def export(
     settings: Settings,
     ref: str,
@@ -148,12 +157,14 @@ def export(
     force: bool,
     allow_rejected: bool = False,
     camera_name: str | None = None,
+    lut_options: bool = False,
 ) -> str:
     """Render ``ref`` (default: the active version) as ``fmt``; write it to ``out`` when given.
 
     A rejected version is refused unless ``allow_rejected`` (exit 2: nothing was exported, the
     command could not do what was asked; there is no verdict to report). Every export names the
-    version's status: a field in json/yaml, the trace header in ros/opencv.
+    version's status: a field in json/yaml, the trace header in ros/opencv. ``lut_options``: --alpha or
+    --balance was given, which only ``export_lut`` takes.
     """
     from calibctl.workflows.exports import formats  # the writers: not for history or show
 
@@ -163,17 +174,70 @@ def export(
         )
     if camera_name is not None and fmt != "ros":
         raise UsageError("--camera-name applies to --format ros only")
+    if lut_options:
+        raise UsageError("--alpha and --balance apply to --format lut only")
     art = show(settings, ref)
-    if art.status == "rejected" and not allow_rejected:
-        raise UsageError(
-            f"{art.ref} is a rejected calibration; a robot must not load it",
-            "export an accepted version (see `calibctl history`), or pass --allow-rejected to inspect it "
-            "(the export then says it is rejected)",
-        )
+    _refuse_rejected(art, allow_rejected)
     text = formats.render(art, fmt, camera_name=camera_name)
     if out is not None:
         write_atomic(out, text, force=force)
     return text
+
+
+def _free_parameter(lens: str, alpha: float | None, balance: float | None) -> float:
+    """alpha (pinhole) or balance (fisheye), 0 to 1, default 0; the other lens's option is refused."""
+    given, wrong = (balance, alpha) if lens == "fisheye" else (alpha, balance)
+    if wrong is not None:
+        name, other = ("--alpha", "--balance") if lens == "fisheye" else ("--balance", "--alpha")
+        raise UsageError(f"{name} applies to the other lens model (this is a {lens} lens)", f"pass {other}")
+    value = 0.0 if given is None else float(given)
+    if not 0.0 <= value <= 1.0:
+        name = "--balance" if lens == "fisheye" else "--alpha"
+        raise UsageError(
+            f"{name} {value} is outside 0..1", "0 keeps only valid pixels, 1 keeps every source pixel"
+        )
+    return value
+
+
+def export_lut(
+    settings: Settings,
+    ref: str,
+    out: Path | None,
+    *,
+    force: bool,
+    allow_rejected: bool = False,
+    alpha: float | None = None,
+    balance: float | None = None,
+    camera_name: str | None = None,
+) -> list[Path]:
+    """The undistortion maps of ``ref`` (default: the active version) into the new folder ``out``
+    (workflows.exports.lut); a rejected version is refused unless ``allow_rejected``, as for every export."""
+    from calibctl.workflows.exports import formats, lut, trace_header
+    from calibctl.workflows.exports.frame_names import default_frame
+
+    if camera_name is not None:
+        raise UsageError("--camera-name applies to --format ros only")
+    if out is None:
+        raise UsageError("--format lut writes a folder of maps", "pass -o DIR (a new folder)")
+    art = show(settings, ref)
+    _refuse_rejected(art, allow_rejected)
+    lens: Literal["pinhole", "fisheye"] = "fisheye" if art.model.name == "fisheye" else "pinhole"
+    camera = lut.single_camera(
+        art.serial,
+        art.version,
+        art.content_sha256,
+        default_frame(art.serial, camera=False),
+        lens,
+        art.camera_matrix,
+        art.dist_coeffs,
+        art.image_size,
+        _free_parameter(lens, alpha, balance),
+    )
+    payloads, entries = lut.build([camera])
+    payloads[lut.CAMERA_DOCUMENT] = formats.render(art, "json").encode("utf-8")
+    source = lut.source_of("camera", art.ref, art.status, art.content_sha256, payloads[lut.CAMERA_DOCUMENT])
+    header = trace_header.stamp(art, lut.header_body(source, entries), signed=True)
+    return lut.write_lut(out, payloads, header, force=force)
 
 
 def read_artifact_file(path: Path) -> CalibrationArtifact:
