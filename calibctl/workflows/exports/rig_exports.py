@@ -23,16 +23,33 @@ import numpy as np
 import yaml
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
+from calibctl.artifacts.rig import RigCalibration
 from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_solve import RigSolution
-from calibctl.core.extrinsics.rig_tree import RigTree
+from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.core.extrinsics.se3 import quaternion_xyzw
 from calibctl.errors import InputError
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.exports import trace_header
 from calibctl.workflows.exports.frame_names import FrameNames
 from calibctl.workflows.exports.ros_camera_info import camera_name_for, distortion_for
+
+
+def stored_geometry(cal: RigCalibration) -> tuple[list[MemberIntrinsics], RigTree, RigTree]:
+    """A stored rig version's members, its camera tree (the rig-solve edges, serials) and its whole tree
+    (hand-eye and LiDAR edges and declared frames too), as every rig export reads them."""
+    members = [
+        MemberIntrinsics(
+            m.serial, np.array(m.camera_matrix), np.array(m.dist_coeffs), m.image_size, lens=m.lens
+        )
+        for m in cal.members
+    ]
+    edges = [Edge(e.parent, e.child, np.array(e.T_parent_child), np.array(e.covariance)) for e in cal.edges]
+    cameras = RigTree(
+        cal.root, tuple(e for e, r in zip(edges, cal.edges, strict=True) if r.source == "rig-solve")
+    )
+    return members, cameras, orient_tree(edges, cal.root)
 
 
 def urdf_rpy(R: np.ndarray) -> list[float]:

@@ -372,6 +372,18 @@ def _document(
                 "re-export it from the store",
             )
         ]
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.workflows.lint import evidence  # numpy, boards: only for a rig document
+
+    problems = evidence.rig_evidence_problems(doc, {}) if isinstance(doc, RigCalibration) else []
+    if problems:  # a number moved and the hash recomputed: the version contradicts itself
+        return [
+            _error(
+                "evidence",
+                f"{source} does not reproduce its own evidence: {'; '.join(problems)}",
+                "re-export it from the store; never edit one by hand, re-hashed or not",
+            )
+        ]
     return (
         []
         if doc.status == "accepted"
@@ -433,6 +445,27 @@ def _header_signature(header: trace_header.RigTraceHeader | None, trusted: Trust
     return _seal(f"rig {header.ref}", header.signature, header.rig_sha256, trusted)
 
 
+def _derived(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
+    """The bundle against what its rig.json derives (``rig_bundle.check_derived``); a rig.json missing or
+    edited leaves nothing to check the files against: an error."""
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.workflows.exports import rig_bundle  # OpenCV: only for a bundle
+
+    path = manifest_path.parent / rig_bundle.RIG_JSON
+    fix = "export the bundle again (`calibctl rig export RIG@N --format bundle -o DIR --force`)"
+    if not path.is_file():
+        return [_error("bundle", f"{path} is missing: nothing vouches for the bundle's files", fix)]
+    try:
+        cal = RigCalibration.model_validate(bounded.parse_json(bounded.read_text(path), str(path)))
+    except (ValidationError, InputError) as exc:
+        return [_error("bundle", f"{path} is not a readable rig version ({exc})", fix)]
+    if cal.computed_sha256() != cal.content_sha256:
+        return [
+            _error("bundle", f"{path} was edited (its content hash does not match): no file is checked", fix)
+        ]
+    return rig_bundle.check_derived(manifest_path, data, cal)
+
+
 def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> LintResult:
     """A camera export, ROS or OpenCV file (a rig's camera_info too); with ``trusted`` its signature: the
     artifact's, or the rig version's in a rig export's header."""
@@ -458,7 +491,7 @@ def lint_rig_file(
         return None
     if kind == "bundle":
         signed = [] if trusted is None else _bundle_signatures(data, trusted)
-        results = [LintResult(source, kind, bundle.check_bundle(path, data) + signed)]
+        results = [LintResult(source, kind, bundle.check_bundle(path, data) + _derived(path, data) + signed)]
         for entry in data.get("files") or []:
             listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
             if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():

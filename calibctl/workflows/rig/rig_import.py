@@ -29,16 +29,17 @@ from calibctl.artifacts.common import parse_document
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.artifacts.rig import RigCalibration, RigDefinition
 from calibctl.config import Settings
-from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import InconsistentDataError, InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.edges.kinds import evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
-from calibctl.workflows.exports import bundle
+from calibctl.workflows.exports import bundle, rig_bundle
+from calibctl.workflows.lint import evidence
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin import keys, records
 
 STALE_RULES = ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
-RIG_JSON = "rig.json"
+RIG_JSON = rig_bundle.RIG_JSON
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,7 @@ def read_rig_file(path: Path) -> RigCalibration:
     manifest = None
     if path.is_dir():
         path = path / bundle.MANIFEST
+    manifest_path = path
     if path.name == bundle.MANIFEST:
         path, manifest = _from_bundle(path)
     data = bounded.parse_json(bounded.read_text(path), str(path))
@@ -111,6 +113,9 @@ def read_rig_file(path: Path) -> RigCalibration:
             f"the manifest names rig {claimed[0]}@{claimed[1]} sha256 {str(claimed[2])[:12]}, "
             f"{RIG_JSON} is {cal.ref} sha256 {cal.content_sha256[:12]}",
         )
+    derived = [] if manifest is None else rig_bundle.check_derived(manifest_path, manifest, cal)
+    if derived:  # a file rig.json does not derive: edited numbers (checksums recomputed), swapped cameras
+        raise _tampered(manifest_path, derived[0].message)
     return cal
 
 
@@ -178,13 +183,20 @@ def _previous(store: Store, source: RigCalibration) -> RigCalibration | None:
 
 
 def _rederive(
-    store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str
+    store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str, mark: str
 ) -> tuple[RigCalibration, list[Finding]]:
     """``source`` pinned to this store's members, with this store's lint and verdict; and the stale findings."""
     here = {
         m.serial: _member_here(store, m.serial, m.version, m.content_sha256, source.ref)
         for m in source.members
     }
+    problems = evidence.rig_evidence_problems(source, here)
+    if problems:
+        raise InconsistentDataError(
+            f"{source.ref} does not reproduce its own evidence: {'; '.join(problems)}; nothing was stored",
+            "import the rig version as its store exported it; an edited version is never trusted, "
+            "re-sealed or not",
+        )
     members = [
         m.model_copy(
             update={"version": here[m.serial].version, "content_sha256": here[m.serial].content_sha256}
@@ -203,7 +215,7 @@ def _rederive(
     stale = [f for f in findings if f.rule in STALE_RULES and f.severity == "error"]
     lint = [f for f in findings if f not in stale]
     status = "rejected" if has_errors(lint) else "accepted"
-    provenance = source.provenance.model_copy(update={"imported_from": label})
+    provenance = source.provenance.model_copy(update={"imported_from": label, "import_signature": mark})
     return mine.model_copy(update={"lint": lint, "status": status, "provenance": provenance}), stale
 
 
@@ -233,7 +245,7 @@ def import_rig_file(
                 previous, source.ref, source.status, active, already_imported=True, stale=[]
             )
         _check_layout(rig, source)
-        mine, stale = _rederive(store, source, rig, settings, label)
+        mine, stale = _rederive(store, source, rig, settings, label, trust.mark)
         do_activate, override, held_back = trust.activation(mine.status == "accepted" and not stale, activate)
         stored = store.add_rig_calibration(
             mine,
