@@ -36,6 +36,8 @@ def _reseal(folder, name, text):
         text,
     )
     (folder / name).write_text(stamped)
+    if not (folder / "manifest.json").exists():
+        return
     manifest = json.loads((folder / "manifest.json").read_text())
     for entry in manifest["files"]:
         if entry["path"] == name:
@@ -167,3 +169,26 @@ def test_a_signature_that_does_not_match_is_refused_by_lint_and_import(signed, d
     r = invoke(url, "rig", "import", str(path), "--trusted-keys", str(trusted))
     assert r.exit_code == 2 and "does not match its content" in _text(r)
     assert _rig_versions(url) == []
+
+
+@pytest.mark.parametrize("fmt", ["ros", "opencv", "kalibr", "mrcal"])
+def test_single_camera_exports_carry_the_artifacts_signature(signed, db, tmp_path, fmt):
+    source, trusted, other = signed
+    path = tmp_path / f"CAM0.{fmt}"
+    assert invoke(source, "export", "CAM0", "--format", fmt, "-o", str(path)).exit_code == 0
+    assert "# calibctl signature ed25519 key_id " in path.read_text()
+    lint = ("lint", str(path), "--require-signature", "--trusted-keys")
+    r = invoke(source, *lint, str(trusted))
+    assert r.exit_code == 0, r.output
+    r = invoke(source, *lint, str(other))
+    assert r.exit_code == 1 and "which is not trusted" in _text(r)
+    text = path.read_text()
+    value = re.search(r"calibctl signature .* value (\S)", text).group(1)
+    _reseal(tmp_path, path.name, text.replace(f" value {value}", f" value {'B' if value != 'B' else 'C'}", 1))
+    r = invoke(source, *lint, str(trusted))
+    assert r.exit_code == 1 and "does not match its content" in _text(r)
+    unsigned = tmp_path / f"unsigned.{fmt}"
+    assert invoke(db, "export", "CAM0", "--format", fmt, "-o", str(unsigned)).exit_code == 0
+    r = invoke(db, "lint", str(unsigned), "--require-signature", "--trusted-keys", str(trusted))
+    assert r.exit_code == 1 and "carries no signature line" in _text(r)
+    assert "from the store that holds it writes the artifact's signature" in _text(r)

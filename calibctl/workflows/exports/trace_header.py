@@ -12,6 +12,10 @@ evidence line carries what lint needs and the format has no field for (sigma(fx)
 ring, how the square size was measured); the last one is checked by ``calibctl lint``, so an edited
 number is a ``content-hash`` error. Anyone can check it: ``grep -v '^# calibctl file-sha256 ' FILE |
 sha256sum``.
+
+A LUT header (``exports.lut``) also carries ``# calibctl signature ed25519 key_id K record_sha256 R value V``:
+the store's signature of the artifact (over its content_sha256, as ``calibctl-record-v1``), the camera
+counterpart of a rig export's ``rig-signature`` line.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ _RIG_NOT_STORED = re.compile(
     r"solution-sha256 (?P<sha>[0-9a-f]{64})(?: -->)?\s*$"
 )
 _SIGNATURE = re.compile(
-    r"^(?:# |<!-- )calibctl rig-signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
+    r"^(?:# |<!-- )calibctl (?:rig-)?signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
     r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)(?: -->)?\s*$"
 )
 _MEMBER = re.compile(
@@ -59,6 +63,7 @@ class TraceHeader:
     evidence: dict[str, Any] = field(default_factory=dict)
     file_sha256: str | None = None  # None: written before exports were hashed
     actual_file_sha256: str | None = None
+    signature: RecordSignature | None = None  # the artifact's store signature, when the export carries it
 
     @property
     def intact(self) -> bool | None:
@@ -88,12 +93,38 @@ def file_sha256(text: str) -> str:
     return hashlib.sha256(_without_hash_line(text).encode("utf-8")).hexdigest()
 
 
-def stamp(art: CalibrationArtifact, body: str) -> str:
-    """``body`` with the header inserted (after a leading ``%YAML`` directive, which must stay first)."""
+def _signature_line(word: str, signature: RecordSignature, open_: str = "# ", close: str = "") -> str:
+    return (
+        f"{open_}calibctl {word} {signature.algorithm} key_id {signature.key_id} record_sha256 "
+        f"{signature.record_sha256} value {signature.value}{close}\n"
+    )
+
+
+def _signature_in(head: list[str]) -> RecordSignature | None:
+    return next(
+        (
+            RecordSignature(
+                algorithm="ed25519",
+                key_id=m.group("key_id"),
+                record_sha256=m.group("record"),
+                value=m.group("value"),
+            )
+            for line in head
+            if (m := _SIGNATURE.match(line))
+        ),
+        None,
+    )
+
+
+def stamp(art: CalibrationArtifact, body: str, *, signed: bool = False) -> str:
+    """``body`` with the header inserted (after a leading ``%YAML`` directive, which must stay first);
+    ``signed``: with a ``calibctl signature ...`` line, the artifact's store signature (when it has one)."""
     lines = [
         f"{_PREFIX}{art.ref} {art.status} sha256 {art.content_sha256}\n",
         f"{_PREFIX}evidence {json.dumps(evidence_of(art), sort_keys=True, separators=(',', ':'), allow_nan=False)}\n",
     ]
+    if signed and art.signature is not None:
+        lines.append(_signature_line("signature", art.signature))
     directive, rest = ("", body)
     if body.startswith("%YAML"):
         first, _, rest = body.partition("\n")
@@ -143,10 +174,7 @@ def stamp_rig(
         else f"{open_}calibctl rig {ref} {status} sha256 {rig_sha256}{close}\n"
     ]
     if signature is not None:
-        lines.append(
-            f"{open_}calibctl rig-signature {signature.algorithm} key_id {signature.key_id} record_sha256 "
-            f"{signature.record_sha256} value {signature.value}{close}\n"
-        )
+        lines.append(_signature_line("rig-signature", signature, open_, close))
     lines += [
         f"{open_}calibctl member {m} sha256 {sha}{f' frame {frame}' if frame else ''}{close}\n"
         for m, sha, frame in members
@@ -169,19 +197,7 @@ def read_rig(text: str) -> RigTraceHeader | None:
         (m.group("ref"), m.group("sha"), m.group("frame")) for line in head if (m := _MEMBER.match(line))
     )
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
-    seal = next(
-        (
-            RecordSignature(
-                algorithm="ed25519",
-                key_id=m.group("key_id"),
-                record_sha256=m.group("record"),
-                value=m.group("value"),
-            )
-            for line in head
-            if (m := _SIGNATURE.match(line))
-        ),
-        None,
-    )
+    seal = _signature_in(head)
     return RigTraceHeader(
         ref.groupdict().get("ref") or NOT_STORED,
         ref.group("status"),
@@ -214,4 +230,5 @@ def read(text: str) -> TraceHeader | None:
         evidence=evidence if isinstance(evidence, dict) else {},
         file_sha256=sha,
         actual_file_sha256=file_sha256(text) if sha else None,
+        signature=_signature_in(head),
     )

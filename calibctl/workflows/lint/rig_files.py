@@ -430,8 +430,31 @@ def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Findi
     return findings
 
 
-def _header_signature(header: trace_header.RigTraceHeader | None, trusted: TrustedKeys) -> list[Finding]:
-    """A rig export's header signature, over the rig version's content hash the header names."""
+def _camera_signature(header: trace_header.TraceHeader, trusted: TrustedKeys) -> list[Finding]:
+    """A camera export's ``calibctl signature`` header line, over the artifact's content hash it names."""
+    if header.signature is None:
+        return [
+            _error(
+                "signature",
+                f"{header.ref}: this file carries no signature line (exported before calibctl wrote one, or "
+                "from a store without a key)",
+                f"export it again: `calibctl export {header.ref} --format ...` from the store that holds it "
+                "writes the artifact's signature; a store without a key signs nothing (`calibctl keys init` "
+                "there, then solve or import the calibration again)",
+            )
+        ]
+    return _seal(header.ref, header.signature, header.artifact_sha256, trusted)
+
+
+def _header_signature(
+    header: trace_header.RigTraceHeader | None,
+    trusted: TrustedKeys,
+    camera: trace_header.TraceHeader | None = None,
+) -> list[Finding]:
+    """A rig export's header signature, over the rig version's content hash the header names; a camera
+    export's (``camera``, no rig header) over the artifact's."""
+    if header is None and camera is not None:
+        return _camera_signature(camera, trusted)
     if header is None:
         return [_error("signature", "no calibctl rig header: nothing vouches for this file", SIGNATURE_FIX)]
     if header.ref == trace_header.NOT_STORED:
@@ -471,8 +494,8 @@ def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | 
     artifact's, or the rig version's in a rig export's header."""
     loaded = formats.load_calibration(path)
     result = lint_file(loaded, limits)
-    if trusted is not None and loaded.rig_header is not None:
-        result.findings.extend(_header_signature(loaded.rig_header, trusted))
+    if trusted is not None and (loaded.rig_header is not None or loaded.kind != "calibctl" and loaded.header):
+        result.findings.extend(_header_signature(loaded.rig_header, trusted, loaded.header))
     elif trusted is not None:
         signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
     return result
@@ -524,7 +547,7 @@ def lint_rig_file(
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:
-        findings += _header_signature(rig, trusted)
+        findings += _header_signature(rig, trusted, camera)
     if camera is None and rig is None:
         findings = [
             _error(
