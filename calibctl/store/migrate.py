@@ -169,7 +169,7 @@ def _sqlite_tables(path: Path) -> set[str]:
             rows = conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
     except sqlite3.DatabaseError as exc:
         raise DatabaseError(
-            f"{path} is not a calibctl store ({exc}); nothing was written to it",
+            f"{path} is not a SQLite database ({exc}); nothing was written to it",
             "point --db (CALIBCTL_DB) at a calibctl store, or at a path that does not exist yet (a new one)",
         ) from exc
     return {str(r[0]) for r in rows if not str(r[0]).startswith("sqlite_")}

@@ -46,7 +46,7 @@ def test_a_file_that_is_no_database_is_refused_and_left_alone(tmp_path):
     path = tmp_path / "notes.db"
     path.write_text("my notes\n")
     r = invoke(f"sqlite:///{path}", "db", "upgrade")
-    assert r.exit_code == 2 and f"{path} is not a calibctl store" in _text(r)
+    assert r.exit_code == 2 and f"{path} is not a SQLite database" in _text(r)
     assert path.read_text() == "my notes\n"
 
 
