@@ -929,7 +929,8 @@ def _link(b: Path) -> None:
 
 
 def _unsigned_ros_export(w: Path) -> None:
-    """The demo camera's ROS export (the demo store has no key) and a trusted-keys folder with a stranger's key."""
+    """The demo camera's ROS export (the demo store has no key), a trusted-keys folder with a stranger's
+    key."""
     (w / "keys").mkdir()
     calibctl(w, ["export", SERIAL, "--format", "ros", "-o", str(w / "c.yaml")])
     calibctl(w, ["keys", "init", "--key", str(w / "k.pem")])
@@ -972,46 +973,19 @@ def _seal() -> list[Case]:
         ),
         Case(
             g,
-            "rig export --force onto a bundle holding notes.txt",
-            [
-                "--db",
-                "sqlite:///{w}/rig.db",
-                "rig",
-                "export",
-                "R1",
-                "--format",
-                "bundle",
-                "-o",
-                "{w}/b",
-                "--force",
-            ],
-            setup=bundle_copy(_notes),
-            protect=["b/notes.txt", "b/manifest.json"],
-        ),
-        Case(
-            g,
-            "rig export --force onto a bundle whose tf_static.yaml is a symlink",
-            [
-                "--db",
-                "sqlite:///{w}/rig.db",
-                "rig",
-                "export",
-                "R1",
-                "--format",
-                "bundle",
-                "-o",
-                "{w}/b",
-                "--force",
-            ],
-            setup=bundle_copy(_link),
-            protect=["b/tf_static.yaml", "victim.txt"],
-        ),
-        Case(
-            g,
             "lint --require-signature on an unsigned store's ros export",
             ["lint", "{w}/c.yaml", "--require-signature", "--trusted-keys", "{w}/keys"],
             setup=_unsigned_ros_export,
         ),
+    ]
+    force = ["--db", "sqlite:///{w}/rig.db", *"rig export R1 --format bundle -o {w}/b --force".split()]
+    intruders = {
+        "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),
+        "whose tf_static.yaml is a symlink": (_link, ["b/tf_static.yaml", "victim.txt"]),
+    }
+    cases += [
+        Case(g, f"rig export --force onto a bundle {n}", force, setup=bundle_copy(f), protect=p)
+        for n, (f, p) in intruders.items()
     ]
     cases += [
         Case(

@@ -246,6 +246,7 @@ def bundle_copy(forge: Callable[[Path], None] | None = None, target: bool = Fals
     def make(w: Path) -> None:
         src = rig_source(w)
         shutil.copytree(src / "bundle", w / "b")
+        shutil.copyfile(src / "rig.db", w / "rig.db")  # the store it came from (`rig export --force` cases)
         if forge is not None:
             forge(w / "b")
         if target:
