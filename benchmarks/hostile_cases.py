@@ -978,13 +978,13 @@ def _seal() -> list[Case]:
             setup=_unsigned_ros_export,
         ),
     ]
-    force = ["--db", "sqlite:///{w}/rig.db", *"rig export R1 --format bundle -o {w}/b --force".split()]
+    force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]
     intruders = {
         "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),
         "whose tf_static.yaml is a symlink": (_link, ["b/tf_static.yaml", "victim.txt"]),
     }
     cases += [
-        Case(g, f"rig export --force onto a bundle {n}", force, setup=bundle_copy(f), protect=p)
+        Case(g, f"rig export --force onto a bundle {n}", [*force, "--force"], setup=bundle_copy(f), protect=p)
         for n, (f, p) in intruders.items()
     ]
     cases += [

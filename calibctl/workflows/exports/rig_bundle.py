@@ -219,15 +219,18 @@ _CHOSEN = ("calibctl_version",)  # the manifest says which calibctl wrote it: no
 
 def derive_from_manifest(cal: RigCalibration, manifest: Mapping[str, Any]) -> RigExport:
     """The export ``rig export --format bundle`` made of ``cal`` with the manifest's choices."""
-    frames = manifest.get("frames") if isinstance(manifest.get("frames"), dict) else {}
-    stereo = manifest.get("stereo") if isinstance(manifest.get("stereo"), dict) else {}
+    frames, stereo = manifest.get("frames"), manifest.get("stereo")
+    frames, stereo = (
+        (frames if isinstance(frames, dict) else {}),
+        (stereo if isinstance(stereo, dict) else {}),
+    )
     signatures = {
         str(m.get("serial")): m.get("signature")
         for m in manifest.get("members") or []
         if isinstance(m, dict) and isinstance(m.get("signature"), dict)
     }
     known = {m.serial for m in cal.members} | {f for e in cal.edges for f in (e.parent, e.child)}
-    mapped = {str(k): str(v) for k, v in (frames or {}).items() if k in known}
+    mapped = {str(k): str(v) for k, v in frames.items() if k in known}
     return derive(
         cal, mapped, stereo.get("right") if isinstance(stereo.get("right"), str) else None, signatures
     )
