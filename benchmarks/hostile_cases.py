@@ -995,7 +995,7 @@ def _seal() -> list[Case]:
             g,
             f"--db another application's SQLite ({journal} journal): {' '.join(args)}",
             ["--db", "sqlite:///{w}/app.db", *args],
-            setup=foreign_sqlite("app.db", journal),
+            setup=both(foreign_sqlite("app.db", journal), exported("x.json")),
             protect=["app.db"],
         )
         for journal in ("delete", "wal")

@@ -96,3 +96,16 @@ def test_bundle_force_never_replaces_a_listed_file_that_became_a_symlink(db, tmp
     assert (out / "tf_static.yaml").is_symlink() and outside.read_text() == "theirs"
     r = invoke(db, "lint", str(out / "manifest.json"))
     assert r.exit_code == 1 and "is a symlink" in _text(r)
+
+
+def test_another_alembic_applications_database_is_refused_as_foreign(tmp_path):
+    path = tmp_path / "app.db"
+    with sqlite3.connect(path) as conn:
+        conn.execute("CREATE TABLE alembic_version (version_num VARCHAR(32) NOT NULL)")
+        conn.execute("INSERT INTO alembic_version VALUES ('1a2b3c4d5e6f')")
+        conn.execute("CREATE TABLE orders (id INTEGER)")
+    conn.close()
+    before = _digest(path)
+    r = invoke(f"sqlite:///{path}", "db", "upgrade")
+    assert r.exit_code == 2 and f"{path} is not a calibctl store" in _text(r) and "(orders)" in _text(r)
+    assert _digest(path) == before
