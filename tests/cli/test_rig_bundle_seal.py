@@ -192,3 +192,17 @@ def test_single_camera_exports_carry_the_artifacts_signature(signed, db, tmp_pat
     r = invoke(db, "lint", str(unsigned), "--require-signature", "--trusted-keys", str(trusted))
     assert r.exit_code == 1 and "carries no signature line" in _text(r)
     assert "from the store that holds it writes the artifact's signature" in _text(r)
+
+
+def test_a_rig_camera_info_whose_header_names_another_camera_is_refused(signed, tmp_path):
+    source, _, _ = signed
+    out = tmp_path / "ros"
+    assert invoke(source, "rig", "export", "R1", "--format", "ros", "-o", str(out)).exit_code == 0
+    assert invoke(source, "lint", str(out / "cam1.yaml")).exit_code == 0
+    text = (out / "cam1.yaml").read_text()
+    _reseal(out, "cam1.yaml", text.replace("camera_name: cam1", "camera_name: cam0", 1))
+    r = invoke(source, "lint", str(out / "cam1.yaml"))
+    assert (
+        r.exit_code == 1
+        and "its header names CAM1@1 (frame cam1_optical_frame) but its camera_name is cam0" in _text(r)
+    )

@@ -32,7 +32,7 @@ from calibctl.config import LintThresholds
 from calibctl.errors import InputError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.exports import bundle, formats, trace_header
-from calibctl.workflows.exports.frame_names import ROS_NAME
+from calibctl.workflows.exports.frame_names import ROS_NAME, FrameNames
 from calibctl.workflows.lint.lint import (
     CalibrationFacts,
     LintResult,
@@ -489,11 +489,33 @@ def _derived(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
     return rig_bundle.check_derived(manifest_path, data, cal)
 
 
+def _role(header: trace_header.RigTraceHeader | None, data: Any) -> list[Finding]:
+    """A rig camera_info whose header names one camera (``member SERIAL@V ... frame F``) and whose
+    ``camera_name`` is another's: the numbers of one camera under another's name."""
+    if header is None or len(header.members) != 1 or not isinstance(data, dict):
+        return []
+    ref, _, frame = header.members[0]
+    name = data.get("camera_name")
+    if frame is None or not isinstance(name, str):
+        return []
+    if name == FrameNames({ref: frame}).camera_name(ref):
+        return []
+    return [
+        _error(
+            "frames",
+            f"its header names {ref} (frame {frame}) but its camera_name is {name}: one camera's file under "
+            "another's name",
+            "export it again (`calibctl rig export RIG --format ros -o DIR`); never edit one by hand",
+        )
+    ]
+
+
 def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> LintResult:
     """A camera export, ROS or OpenCV file (a rig's camera_info too); with ``trusted`` its signature: the
     artifact's, or the rig version's in a rig export's header."""
     loaded = formats.load_calibration(path)
     result = lint_file(loaded, limits)
+    result.findings.extend(_role(loaded.rig_header, loaded.data))
     if trusted is not None and (loaded.rig_header is not None or loaded.kind != "calibctl" and loaded.header):
         result.findings.extend(_header_signature(loaded.rig_header, trusted, loaded.header))
     elif trusted is not None:
