@@ -9,8 +9,9 @@ file whose numbers were edited (its ``file-sha256`` line and the manifest entry 
 anyone can forge) or two camera files swapped (each header naming another camera than its role) differ
 from what ``rig.json`` derives, and are refused: the signature on ``rig.json`` covers every file.
 
-Numbers are compared to 1e-9 relative (a file written by the same calibctl is byte-identical; the margin
-is for another platform's last bits), every other token exactly.
+Floats are compared to 1e-9 (relative, or absolute near zero: a file written by the same calibctl is
+byte-identical; the margin is for another platform's last bits, far below a pixel or a micrometre), every
+other token (integers, names, hashes) exactly.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from calibctl.workflows.exports import mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames
 
 RIG_JSON = "rig.json"
-_NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+# a float standing alone; integers and the digits of a name, a hash or a version are words, compared exactly
+_NUMBER = re.compile(r"(?<![\w.+-])[-+]?(?:(?:\d+\.\d*|\.\d+)(?:[eE][-+]?\d+)?|\d+[eE][-+]?\d+)(?![\w.])")
 _HASH_LINE = re.compile(r"^(?:# |<!-- )calibctl file-sha256 ", re.M)
 REL_TOL = 1e-9
 
@@ -206,7 +208,7 @@ def same_content(a: str, b: str) -> bool:
     return (
         wa == wb
         and len(na) == len(nb)
-        and bool(np.allclose(na, nb, rtol=REL_TOL, atol=REL_TOL * 1e-3, equal_nan=False))
+        and bool(np.allclose(na, nb, rtol=REL_TOL, atol=REL_TOL, equal_nan=False))
     )
 
 
