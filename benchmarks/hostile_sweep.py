@@ -239,20 +239,17 @@ def reseal(path: Path, body: str) -> None:
     manifest.write_text(json.dumps(doc, indent=2))
 
 
-def bundle_copy(forge: Callable[[Path], None] | None = None, target: bool = False) -> Callable[[Path], None]:
-    """The rig source's bundle copied to ``b/`` (then ``forge(b)``); ``target``: the case's store also
-    imports its members and registers R1, as `rig import` needs."""
+def bundle_copy(forge: Callable[[Path], None] | None = None) -> Callable[[Path], None]:
+    """The rig source's bundle copied to ``b/`` (then ``forge(b)``) and its store to ``rig.db``: the store
+    a `rig import` case imports into (its members are there, R1 registered; a forged version it took
+    would be R1@2) and a `rig export --force` case exports from."""
 
     def make(w: Path) -> None:
         src = rig_source(w)
         shutil.copytree(src / "bundle", w / "b")
-        shutil.copyfile(src / "rig.db", w / "rig.db")  # the store it came from (`rig export --force` cases)
+        shutil.copyfile(src / "rig.db", w / "rig.db")
         if forge is not None:
             forge(w / "b")
-        if target:
-            for cam in ("CAM0", "CAM1"):
-                calibctl(w, ["import", str(src / f"{cam}.json")])
-            calibctl(w, ["rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1"])
 
     return make
 
