@@ -214,8 +214,8 @@ def rig_evidence_problems(cal: RigCalibration, members: Mapping[str, Calibration
     this store's artifact of the same version and hash): a member's copy inside the rig that the rig solve
     did not refine is that calibration's numbers (image size, lens, K, distortion); each edge's
     translation and rotation are its T_parent_child's; each pair's baseline is the tree's. (The sigmas are
-    not compared: documents written by hand for tests, and older ones, carry their own.) A forgery that moves one number and recomputes the hash breaks
-    one of these."""
+    not compared: documents written by hand for tests, and older ones, carry their own.) A forgery that
+    moves one number and recomputes the hash breaks one of these."""
     from calibctl.core.extrinsics.rig_tree import Edge, orient_tree  # cv2: only for a rig
 
     problems = []
