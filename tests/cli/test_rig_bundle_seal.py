@@ -21,10 +21,17 @@ def _text(r):
     return " ".join(r.output.split())
 
 
-def _bundle(url, folder):
-    r = invoke(url, "rig", "export", "R1", "--format", "bundle", "-o", str(folder))
+def _bundle(url, folder, *args):
+    r = invoke(url, "rig", "export", "R1", "--format", "bundle", "-o", str(folder), *args)
     assert r.exit_code == 0, r.output
     return folder
+
+
+@pytest.fixture
+def keyed(signed, monkeypatch):
+    """The signed store with its key configured (`rig export --format bundle` signs the manifest)."""
+    monkeypatch.setenv("CALIBCTL_SIGNING_KEY", str(signed[1].parent / "k.pem"))
+    return signed
 
 
 def _reseal(folder, name, text):
@@ -71,8 +78,8 @@ def _lint(folder, trusted, *extra):
     return invoke("sqlite:///unused.db", *args, *extra)
 
 
-def test_an_honest_signed_bundle_lints_clean_and_imports(signed, db_url, tmp_path):
-    source, trusted, _ = signed
+def test_an_honest_signed_bundle_lints_clean_and_imports(keyed, db_url, tmp_path):
+    source, trusted, _ = keyed
     folder = _bundle(source, tmp_path / "bundle")
     r = _lint(folder, trusted)
     assert r.exit_code == 0, r.output
@@ -206,3 +213,42 @@ def test_a_rig_camera_info_whose_header_names_another_camera_is_refused(signed, 
         r.exit_code == 1
         and "its header names CAM1@1 (frame cam1_optical_frame) but its camera_name is cam0" in _text(r)
     )
+
+
+def test_frame_names_swapped_consistently_are_caught_only_by_the_manifests_own_signature(
+    keyed, tmp_path, monkeypatch
+):
+    """The frame names and roles are the exporter's choice (`--frame`), which the rig signature does not
+    cover: every file derived again with CAM0 and CAM1's frames swapped is consistent with rig.json; only the
+    manifest's own signature refuses it."""
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.workflows.exports import bundle, rig_bundle
+
+    source, trusted, _ = keyed
+    folder = _bundle(source, tmp_path / "bundle")
+    assert _lint(folder, trusted).exit_code == 0
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["frames"] = {"CAM0": "cam1_optical_frame", "CAM1": "cam0_optical_frame"}
+    cal = RigCalibration.model_validate(json.loads((folder / "rig.json").read_text()))
+    files, derived = rig_bundle.bundle_files(rig_bundle.derive_from_manifest(cal, manifest))
+    for name, body in files.items():
+        (folder / name).write_text(body)
+    listed = [
+        {"path": n, "sha256": bundle.sha256_of(b.encode()), "bytes": len(b.encode())}
+        for n, b in files.items()
+    ]
+    kept = {k: manifest[k] for k in ("format", "schema_version", "calibctl_version", "manifest_signature")}
+    (folder / "manifest.json").write_text(json.dumps({**derived, **kept, "files": listed}))
+    assert invoke("sqlite:///unused.db", "lint", str(folder / "manifest.json")).exit_code == 0  # consistent
+    r = _lint(folder, trusted)
+    assert (
+        r.exit_code == 1
+        and "the manifest has a signature by key" in _text(r)
+        and "does not match" in _text(r)
+    )
+    renamed = _bundle(source, tmp_path / "renamed", "--frame", "CAM0=left_optical_frame")
+    assert _lint(renamed, trusted).exit_code == 0  # a choice the key holder made and signed
+    monkeypatch.delenv("CALIBCTL_SIGNING_KEY")
+    unsigned = _bundle(source, tmp_path / "unsigned")  # the rig is signed, the manifest is not
+    r = _lint(unsigned, trusted)
+    assert r.exit_code == 1 and "the manifest is not signed" in _text(r)

@@ -18,12 +18,16 @@ import shutil
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from calibctl import bounded
+from calibctl.artifacts.common import jcs_bytes
 from calibctl.artifacts.lint import Finding
 from calibctl.errors import AlreadyExistsError, FileSystemError, UsageError
 from calibctl.files import file_errors, new_file_mode
+
+if TYPE_CHECKING:
+    from calibctl.signing import Signer
 
 MANIFEST = "manifest.json"
 BUNDLE_FORMAT = "calibctl-robot-bundle"
@@ -62,11 +66,27 @@ def _check_target(out: Path, force: bool) -> None:
         raise FileSystemError(f"cannot write {out}: folder {out.parent} does not exist", "create it first")
 
 
+MANIFEST_SIGNATURE = "manifest_signature"
+
+
+def manifest_message(doc: Mapping[str, Any]) -> bytes:
+    """What a manifest's own signature is over: the RFC 8785 form of every field but the signature (the
+    files' sha256 and roles, the frames, the pair: the export's choices no rig signature covers)."""
+    body = {k: v for k, v in doc.items() if k != MANIFEST_SIGNATURE}
+    return f"calibctl-bundle-v1\n{sha256_of(jcs_bytes(body))}".encode("ascii")
+
+
 def write_bundle(
-    out: Path, files: Mapping[str, str], manifest: Mapping[str, Any], *, force: bool = False
+    out: Path,
+    files: Mapping[str, str],
+    manifest: Mapping[str, Any],
+    *,
+    force: bool = False,
+    signer: Signer | None = None,
 ) -> list[Path]:
     """Write ``files`` (relative name -> text) and the manifest (``manifest`` plus ``format``, its schema
-    version and ``files``: name, sha256, bytes) as the folder ``out``; returns the paths written."""
+    version and ``files``: name, sha256, bytes; with ``signer`` its own ``manifest_signature``) as the
+    folder ``out``; returns the paths written."""
     out = Path(out)
     _check_target(out, force)
     payloads = {name: text.encode("utf-8") for name, text in files.items()}
@@ -79,6 +99,12 @@ def write_bundle(
             {"path": name, "sha256": sha256_of(data), "bytes": len(data)} for name, data in payloads.items()
         ],
     }
+    if signer is not None:
+        doc[MANIFEST_SIGNATURE] = {
+            "algorithm": "ed25519",
+            "key_id": signer.key_id,
+            "value": signer.sign(manifest_message(doc)),
+        }
     payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
     file_mode = new_file_mode()
     with file_errors("write the bundle", out):

@@ -411,9 +411,27 @@ def _seal_of(value: Any) -> RecordSignature | None:
         return None
 
 
+def _manifest_seal(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
+    """The manifest's own signature (by the exporting store's key): the export's choices (frame names,
+    roles, the pair, each file's sha256) that no rig signature covers."""
+    seal = data.get(bundle.MANIFEST_SIGNATURE)
+    if not isinstance(seal, dict):
+        return [
+            _error(
+                "signature",
+                "the manifest is not signed: its frame names and file roles are the exporter's choice, "
+                "which only the manifest's own signature covers",
+                "export the bundle again from a store with a key (`calibctl rig export RIG --format bundle`)",
+            )
+        ]
+    problem = trusted.check(seal.get("key_id"), seal.get("value"), bundle.manifest_message(data))
+    return [] if problem is None else [_error("signature", f"the manifest {problem}", SIGNATURE_FIX)]
+
+
 def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
-    """The manifest's rig signature and each member's (a robot loads the members' numbers too)."""
-    findings = _seal(
+    """The manifest's own signature, its rig signature and each member's (a robot loads the members'
+    numbers too)."""
+    findings = _manifest_seal(data, trusted) + _seal(
         f"rig {data.get('rig')}@{data.get('version')}",
         _seal_of(data.get("signature")),
         str(data.get("content_sha256")),

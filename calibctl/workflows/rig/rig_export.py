@@ -28,6 +28,7 @@ from calibctl.workflows.exports.rig_bundle import bundle_files as _bundle_files
 from calibctl.workflows.exports.rig_bundle import camera_infos as _camera_infos
 from calibctl.workflows.exports.rig_bundle import text as _text
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
+from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import open_store
 
 EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle")
@@ -159,7 +160,7 @@ def export_files(
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if fmt == "bundle":
         files, manifest = _bundle_files(x)
-        return bundle.write_bundle(out, files, manifest, force=force)
+        return bundle.write_bundle(out, files, manifest, force=force, signer=keys.signer_of(settings))
     texts, _ = _camera_infos(
         x, mono_if_vertical=False
     )  # a vertical pair is refused before any folder is made
