@@ -3,7 +3,10 @@
 Shaped like the camera ``import`` (workflows.lint.imports): the file's content hash is checked (an edited
 file is exit 1), its signature too (``--require-signature``: a trusted key's, exit 2 otherwise; a signature
 that does not match is refused always), and the version gets this store's verdict, version, hash and
-signature, the source kept in ``provenance.imported_from``. Nothing is stored when any check fails.
+signature, the source kept in ``provenance.imported_from`` (what signed it in ``import_signature``). A
+bundle's every file must be what its rig.json derives (``exports.rig_bundle``), and the version must
+reproduce its own evidence (``lint.evidence.rig_evidence_problems``: edges against their transforms, an
+unrefined member against its calibration here), else exit 1. Nothing is stored when any check fails.
 
 A rig version pins its members by serial, version and content hash. Each must be in this store: the same
 version with the same hash, or this store's import of exactly that version (a camera ``import`` gives it
