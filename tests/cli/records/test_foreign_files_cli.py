@@ -10,7 +10,7 @@ import sqlite3
 import pytest
 import sqlalchemy
 
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
 
 
 def _text(r):

@@ -12,9 +12,9 @@ import re
 import pytest
 
 from calibctl.workflows.exports import trace_header
-from tests.cli.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
-from tests.cli.test_rig_import_cli import _rig_versions
-from tests.cli.test_rig_signature_cli import signed, signed_solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_export_cli import db, invoke, rig2, solved  # noqa: F401 - fixtures
+from tests.cli.rig.test_rig_import_cli import _rig_versions
+from tests.cli.rig.test_rig_signature_cli import signed, signed_solved  # noqa: F401 - fixtures
 
 
 def _text(r):
