@@ -159,6 +159,7 @@ class LidarOutcome:
     fit: LidarFit | None = None
     metrics: LidarFitMetrics | None = None
     overlays: list[str] | None = None
+    notes: list[str] = field(default_factory=list)
     written: list[str] = field(default_factory=list)
     stored: RigCalibration | None = None
 
@@ -428,6 +429,7 @@ def result_json(outcome: LidarOutcome) -> dict[str, Any]:
         doc["metrics"] = _metrics_json(outcome.metrics)
     if outcome.overlays is not None:
         doc["overlays"] = outcome.overlays
+    doc["notes"] = list(outcome.notes)
     return _finite(doc)
 
 
@@ -456,8 +458,14 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     if not all(g.passed for g in pre):
         return outcome
     sol = lsolve.solve(poses, board, req.estimate_range_offset)
+    folds = min(req.folds, len(poses))
+    if folds < req.folds:
+        outcome.notes.append(
+            f"--folds {req.folds} is more than the {len(poses)} accepted poses: the held-out check ran "
+            f"{folds}-fold (leave-one-out); give --folds {len(poses)} or fewer"
+        )
     held_plane, held_edge, held_px = validation.held_out(
-        poses, board, req.folds, lambda T, test: projected_edge_px(T, test, board, lens)
+        poses, board, folds, lambda T, test: projected_edge_px(T, test, board, lens)
     )
     in_px = projected_edge_px(sol.T_lidar_cam, poses, board, lens)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
@@ -485,7 +493,7 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         held_out_projected_edge_rms_px=held_px,
         held_out_plane_rms_mm=held_plane * 1e3,
         held_out_edge_rms_mm=held_edge * 1e3,
-        folds=req.folds,
+        folds=folds,
         dimension_error_mean_mm=(float(mean_dims[0]), float(mean_dims[1])),
         range_offset_from_dimensions_mm=dim_offset * 1e3,
         range_offset_from_dimensions_sigma_mm=dim_offset_sigma * 1e3,

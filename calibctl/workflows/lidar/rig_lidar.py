@@ -35,11 +35,9 @@ from calibctl.errors import NotFoundError, UsageError
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import LIDAR
 from calibctl.workflows.edges.versions import StoredEdge
-from calibctl.workflows.exports.frame_names import is_ros_name
+from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
 from calibctl.workflows.lidar.lidar_solve import LidarOutcome, LidarRequest, ScanRow
 from calibctl.workflows.store_admin.records import open_store
-
-ROS_NAME_RULE = "ROS names are [a-zA-Z][a-zA-Z0-9_]* segments separated by '/' (no '-', no leading '/')"
 
 
 def check_target(settings: Settings, rig_name: str, lidar_frame: str, serial: str | None) -> None:
@@ -50,7 +48,7 @@ def check_target(settings: Settings, rig_name: str, lidar_frame: str, serial: st
             "the edge pins that calibration (not a camera_info file)",
         )
     if not is_ros_name(lidar_frame):
-        raise UsageError(f"--lidar-frame '{lidar_frame}' is not a legal ROS frame name", ROS_NAME_RULE)
+        raise UsageError(f"--lidar-frame '{lidar_frame}' is not a legal ROS frame name", NAME_RULE)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
         if serial not in rig.cameras:
