@@ -54,6 +54,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
@@ -72,6 +73,7 @@ PROBE_WORKERS = 2
 PROBE_MAX_PIXELS = 1_000_000
 
 Sample = tuple[str, np.ndarray]  # (image name, (H, W) uint8)
+T = TypeVar("T")
 
 
 def near_patterns(cols: int, rows: int) -> list[tuple[int, int]]:
@@ -122,7 +124,7 @@ def probe_copies(samples: Sequence[Sample]) -> list[Sample]:
     return [(name, downscaled_to_pixels(gray, PROBE_MAX_PIXELS)[0]) for name, gray in samples]
 
 
-def spread(items: Sequence[Sample], count: int) -> list[Sample]:
+def spread(items: Sequence[T], count: int) -> list[T]:
     """At most ``count`` items evenly spread over ``items`` (first and last included)."""
     if len(items) <= count:
         return list(items)
@@ -195,15 +197,23 @@ def _names(names: Sequence[str]) -> str:
 
 
 def nothing_found_error(
-    spec: BoardSpec, board_ref: str, board_name: str, where: str, n_readable: int, samples: Sequence[Sample]
+    spec: BoardSpec,
+    board_ref: str,
+    board_name: str,
+    where: str,
+    n_readable: int,
+    samples: Sequence[Sample],
+    given: str | None = None,
 ) -> InputError:
-    """The error for "the registered pattern is in none of the readable pictures" (exit 2)."""
+    """The error for "the registered pattern is in none of the readable pictures" (exit 2). ``given``: how
+    the pattern was named when it is not a registered board (e.g. "--cols/--rows"), for the hint."""
     kind = "ChArUco board" if spec.kind != CHESSBOARD else "chessboard"
+    named = f"board {board_ref}" if given is None else f"given as {board_ref}"
     message = (
-        f"no {spec.cols}x{spec.rows} {kind} (board {board_ref}) was found in any of the {n_readable} "
+        f"no {spec.cols}x{spec.rows} {kind} ({named}) was found in any of the {n_readable} "
         f"readable {where}; nothing was stored"
     )
-    registry = f"`calibctl board show {board_name}`"
+    registry = f"`calibctl board show {board_name}`" if given is None else given
     if spec.kind != CHESSBOARD:
         return InputError(
             message,
@@ -235,7 +245,11 @@ def nothing_found_error(
         message += f"; {_a(c, r)} chessboard is visible in {_names(names)}{others}"
         hint = (
             f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and "
-            f"capture with a board registered as {c}x{r}"
+            + (
+                f"capture with a board registered as {c}x{r}"
+                if given is None
+                else f"give the board seen, {c}x{r} inner corners (in the order your set lays it out)"
+            )
         )
     else:
         probed = f"{len(samples)} of them" if samples else "none of them"

@@ -213,11 +213,16 @@ def board_from_store(settings: Settings, ref: str) -> BackingBoard:
     )
 
 
-def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
+def _gray(path: Path) -> np.ndarray | None:
+    """The image at ``path`` in gray, bounded; None when it does not decode."""
     bounded.check_size(path, "read image")
     with files.file_errors("read image", path):
         data = path.read_bytes()
-    gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
+
+
+def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
+    gray = _gray(path)
     if gray is None:
         raise InputError(
             f"{path} is not a readable image", "remove it or give the folder of the camera's images"
@@ -435,6 +440,7 @@ def result_json(outcome: LidarOutcome) -> dict[str, Any]:
 
 def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     """The whole solve (module docstring); a registered ``req.board`` is read from the store first."""
+    named = req.board
     if isinstance(req.board, str):
         req = replace(req, board=board_from_store(settings, req.board))
     board = req.backing
@@ -445,6 +451,8 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         )
     lens = load_lens(settings, req.camera_info, req.serial)
     poses, rows = collect_poses(req, lens)
+    if not poses:
+        _refuse_an_unseen_pattern(req, rows, named)
     n_scans = sum(1 for r in rows if r.scan is not None)
     pre = [gates.pose_count_gate(len(poses), n_scans, req.min_poses)]
     if len(poses) >= 1:
@@ -519,6 +527,36 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
             req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m, req.force
         )
     return outcome
+
+
+def _refuse_an_unseen_pattern(req: LidarRequest, rows: Sequence[ScanRow], named: BackingBoard | str) -> None:
+    """When the board's pattern is in none of the paired images: the capture path's error (exit 2), which
+    names the chessboard that is visible (a 9x6 board given for a 5x7 set), instead of "capture more"."""
+    from calibctl.workflows.camera import pattern_check
+
+    paired = [r for r in rows if r.figures is not None and r.image is not None]
+    if not paired or any(r.figures is not None and r.figures.image_rms_px is not None for r in paired):
+        return
+    board = req.backing
+    samples = []
+    for r in pattern_check.spread(paired, pattern_check.PROBE_IMAGES):
+        gray = _gray(req.images / str(r.image))
+        if gray is not None:
+            samples.append((str(r.image), gray))
+    spec = BoardSpec.chessboard(board.cols, board.rows, board.square_m)
+    if isinstance(named, str):
+        raise pattern_check.nothing_found_error(
+            spec, named, named.partition("@")[0], "images", len(paired), samples
+        )
+    raise pattern_check.nothing_found_error(
+        spec,
+        f"--cols {board.cols} --rows {board.rows}",
+        "",
+        f"images in {req.images}",
+        len(paired),
+        samples,
+        given="--cols/--rows",
+    )
 
 
 def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:

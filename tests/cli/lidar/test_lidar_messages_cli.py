@@ -92,3 +92,20 @@ def test_an_illegal_lidar_frame_is_refused_before_tf_static_is_written(
     assert res.exit_code == 2, res.output
     assert "--lidar-frame 'bad name!' is not a legal ROS frame name" in res.stderr
     assert not tf.exists()
+
+
+def test_a_board_the_images_do_not_show_names_the_one_they_do(lidar_set: Path, tmp_path: Path) -> None:
+    images, scans = tmp_path / "images", tmp_path / "scans"
+    images.mkdir()
+    scans.mkdir()
+    for i in (1, 4, 7):  # three pairs: the refusal needs no solve
+        (images / f"pose{i}.png").symlink_to(lidar_set / "images" / f"pose{i}.png")
+        (scans / f"pose{i}.pcd").symlink_to(lidar_set / "scans" / f"pose{i}.pcd")
+    truth = json.loads((lidar_set / "truth.json").read_text())
+    args = ["lidar", "solve", "--images", str(images), "--scans", str(scans), "--box", truth["box"]]
+    args += ["--camera-info", str(lidar_set / "camera_info.yaml"), "--cols", "9", "--rows", "6"]
+    res = CliRunner().invoke(app, [*args, "--square-mm", "50", "--backing-mm", "610,850"])
+    assert res.exit_code == 2, res.output
+    assert "no 9x6 chessboard (given as --cols 9 --rows 6)" in res.stderr
+    assert "a 7x5 chessboard is visible in" in res.stderr and "check --cols/--rows" in res.stderr
+    assert "more poses" not in res.output
