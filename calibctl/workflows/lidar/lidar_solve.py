@@ -43,6 +43,12 @@ from calibctl.workflows.lidar.camera import Lens, load_lens
 from calibctl.workflows.lidar.scans import SCAN_SUFFIXES, pair, read_scan
 
 
+LENS_RMS_LIMIT_PX = 0.6  # median corner RMS of the board poses: acfr 0.17, pinhole images read as fisheye 1.0
+SCALE_LIMIT = (
+    0.025  # camera / LiDAR pose-to-pose distance - 1: acfr 0.005, rendered 0.002; 100 mm for 95: 0.054
+)
+
+
 @dataclass(frozen=True)
 class LidarRequest:
     """What the command line asked for (units as named). ``board``: the target's dimensions, or a registered
@@ -463,7 +469,9 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     outcome = LidarOutcome(
         str(req.images), str(req.scans), lens.source, lens.model, req.range_offset_m * 1e3, rows, pre
     )
+    cause = _likely_cause(poses, board, lens, named)
     if not all(g.passed for g in pre):
+        outcome.gates = _blaming(pre, cause)
         return outcome
     sol = lsolve.solve(poses, board, req.estimate_range_offset)
     folds = min(req.folds, len(poses))
@@ -480,11 +488,17 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions(
         [p.lidar for p in poses], board.backing_m
     )
-    outcome.gates = pre + [
-        gates.plane_rms_gate(sol.plane_rms_m * 1e3),
-        gates.dimension_gate(dims),
-        gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
-    ]
+    outcome.gates = _blaming(
+        pre
+        + [
+            gates.plane_rms_gate(sol.plane_rms_m * 1e3),
+            gates.dimension_gate(dims),
+            gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
+        ],
+        cause,
+    )
+    if cause is not None and all(g.passed for g in outcome.gates):
+        outcome.notes.append(cause)
     st, sr = sol.sigma_translation_m * 1e3, sol.sigma_rotation_deg
     outcome.fit = LidarFit(
         sol.T_lidar_cam,
@@ -527,6 +541,48 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
             req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m, req.force
         )
     return outcome
+
+
+def _likely_cause(
+    poses: Sequence[lsolve.Pose], board: BackingBoard, lens: Lens, named: BackingBoard | str
+) -> str | None:
+    """What is wrong with the inputs rather than the poses, when the accepted poses show it: a lens that
+    does not fit the images (median corner RMS over ``LENS_RMS_LIMIT_PX``), or a square size the camera and
+    the LiDAR disagree on (``validation.camera_to_lidar_scale`` off 1 by more than ``SCALE_LIMIT``)."""
+    if len(poses) < 2:
+        return None
+    rms = float(np.median([p.camera.rms_px for p in poses]))
+    if rms > LENS_RMS_LIMIT_PX:
+        return (
+            f"the board's corners fit the lens ({lens.model}, {lens.source}) with a median RMS of "
+            f"{rms:.2f} px over {len(poses)} images (a lens that matches fits under {LENS_RMS_LIMIT_PX} px): "
+            "these images do not match that lens or its model (fisheye images declared plumb_bob, or the "
+            "reverse?); give the calibration of the camera that took them"
+        )
+    scale = validation.camera_to_lidar_scale(poses, board)
+    if not abs(scale - 1) > SCALE_LIMIT:
+        return None
+    square_mm = board.square_m * 1e3
+    check = (
+        f"the board's registered square size (`calibctl board show {named.partition('@')[0]}`)"
+        if isinstance(named, str)
+        else "--square-mm"
+    )
+    return (
+        f"the camera places the board {scale:.3f}x as far from pose to pose as the LiDAR measures: its "
+        f"squares look {square_mm / scale:.1f} mm, not the {square_mm:g} mm given; check {check}"
+    )
+
+
+def _blaming(results: list[GateResult], cause: str | None) -> list[GateResult]:
+    """With a ``cause``, the first failed gate's hint is it and the other failed gates' hints are dropped
+    (it explains them all; "capture more poses" would not help); else the gates as they are."""
+    failed = [i for i, g in enumerate(results) if not g.passed]
+    if cause is None or not failed:
+        return results
+    return [
+        g if g.passed else replace(g, hint=cause if i == failed[0] else None) for i, g in enumerate(results)
+    ]
 
 
 def _refuse_an_unseen_pattern(req: LidarRequest, rows: Sequence[ScanRow], named: BackingBoard | str) -> None:

@@ -109,3 +109,48 @@ def test_a_board_the_images_do_not_show_names_the_one_they_do(lidar_set: Path, t
     assert "no 9x6 chessboard (given as --cols 9 --rows 6)" in res.stderr
     assert "a 7x5 chessboard is visible in" in res.stderr and "check --cols/--rows" in res.stderr
     assert "more poses" not in res.output
+
+
+def _camera_info(lidar_set: Path, where: Path, old: str, new: str) -> Path:
+    text = (lidar_set / "camera_info.yaml").read_text()
+    assert old in text
+    where.write_text(text.replace(old, new))
+    return where
+
+
+def test_a_camera_info_with_k_all_zeros_is_named_uncalibrated(lidar_set: Path, tmp_path: Path) -> None:
+    k = next(
+        line for line in (lidar_set / "camera_info.yaml").read_text().splitlines() if line.startswith("K:")
+    )
+    info = _camera_info(lidar_set, tmp_path / "zero.yaml", k, "K: [0, 0, 0, 0, 0, 0, 0, 0, 0]")
+    res = solve(lidar_set, "--camera-info", str(info))
+    assert res.exit_code == 2, res.output
+    assert "K is no camera matrix (fx 0, fy 0" in res.stderr and "the camera is not calibrated" in res.stderr
+    assert "more poses" not in res.output
+
+
+def test_a_square_size_off_the_board_names_the_size_the_camera_and_lidar_agree_on(lidar_set: Path) -> None:
+    res = solve(lidar_set, "--square-mm", "100", "--json")
+    doc = json.loads(res.stdout)
+    hints = [g["hint"] for g in doc["gates"] if g["hint"]]
+    if res.exit_code == 0:  # every gate passed: the suspicion is a note
+        hints = doc["notes"]
+    assert len(hints) == 1 and "not the 100 mm given; check --square-mm" in hints[0], doc["gates"]
+    assert "squares look 9" in hints[0] and "more, varied poses" not in res.stdout
+
+
+def test_the_right_square_size_raises_no_suspicion(lidar_set: Path) -> None:
+    res = solve(lidar_set, "--json")
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["notes"] == []
+
+
+def test_a_lens_model_the_images_do_not_fit_is_named(lidar_set: Path, tmp_path: Path) -> None:
+    info = _camera_info(lidar_set, tmp_path / "fisheye.yaml", "plumb_bob", "equidistant")
+    d = next(line for line in info.read_text().splitlines() if line.startswith("D:"))
+    info.write_text(info.read_text().replace(d, "D: [0, 0, 0, 0]"))
+    res = solve(lidar_set, "--camera-info", str(info), "--json")
+    doc = json.loads(res.stdout)
+    hints = [g["hint"] for g in doc["gates"] if g["hint"]] or doc["notes"]
+    assert len(hints) == 1 and "do not match that lens or its model" in hints[0], doc["gates"]
+    assert "(fisheye, " in hints[0] and "more, varied poses" not in res.stdout
