@@ -243,14 +243,7 @@ def nothing_found_error(
         (c, r), names = visible[0]
         others = "".join(f"; {_a(pc, pr)} one in {_names(n)}" for (pc, pr), n in visible[1:3])
         message += f"; {_a(c, r)} chessboard is visible in {_names(names)}{others}"
-        hint = (
-            f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and "
-            + (
-                f"capture with a board registered as {c}x{r}"
-                if given is None
-                else f"give the board seen, {c}x{r} inner corners (in the order your set lays it out)"
-            )
-        )
+        hint = _recount_hint(registry, c, r, given)
     else:
         probed = f"{len(samples)} of them" if samples else "none of them"
         message += f"; the near patterns {tried} are not visible either (probed {probed})"
@@ -261,14 +254,25 @@ def nothing_found_error(
     return InputError(message, hint)
 
 
+def _recount_hint(registry: str, c: int, r: int, given: str | None) -> str:
+    """Count the corners again: check the registered board (or the options it was ``given`` by)."""
+    return f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and " + (
+        f"capture with a board registered as {c}x{r}"
+        if given is None
+        else f"give the board seen, {c}x{r} inner corners (in the order your set lays it out)"
+    )
+
+
 def larger_board_error(
     spec: BoardSpec,
     board_ref: str,
     board_name: str,
     samples: Sequence[Sample],
     corners_px: Mapping[str, np.ndarray] | None = None,
+    given: str | None = None,
 ) -> InputError | None:
-    """An error when the pictures show a larger chessboard than the registered one, else None.
+    """An error when the pictures show a larger chessboard than the registered one, else None. ``given``:
+    as for ``nothing_found_error``.
 
     ``corners_px``: the registered pattern's detected corners per sample name ((cols * rows, 2) float64,
     row-major). When every probed sample has them and ``board_extent.might_extend`` finds no sign of
@@ -315,6 +319,5 @@ def larger_board_error(
         f"the pictures show a larger board than {board_ref} ({spec.cols}x{spec.rows} inner corners): {_a(c, r)} "
         f"chessboard is found in {_names(names)}. The detector locks onto {_a(spec.cols, spec.rows)} part of it, "
         "so corner ids could slide from view to view; nothing was stored",
-        f"the pattern counts inner corners, cols x rows (squares - 1 per side): check `calibctl board show "
-        f"{board_name}` and capture with a board registered as {c}x{r}",
+        _recount_hint(f"`calibctl board show {board_name}`" if given is None else given, c, r, given),
     )

@@ -42,7 +42,6 @@ if TYPE_CHECKING:
 from calibctl.workflows.lidar.camera import Lens, load_lens
 from calibctl.workflows.lidar.scans import SCAN_SUFFIXES, pair, read_scan
 
-
 LENS_RMS_LIMIT_PX = 0.6  # median corner RMS of the board poses: acfr 0.17, pinhole images read as fisheye 1.0
 SCALE_LIMIT = (
     0.025  # camera / LiDAR pose-to-pose distance - 1: acfr 0.005, rendered 0.002; 100 mm for 95: 0.054
