@@ -414,7 +414,7 @@ def refuse_another_pattern(
 
 
 def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_check.Sample]:
-    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
+    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)
     samples = []
     for name, path in picks:
         gray = outcomes_core.read_gray(str(path))

@@ -1,5 +1,5 @@
-"""rig solve-folders names the real mistake: a pattern that is part of the board seen, a square size no printed
-board has (the rendered 75 mm rig of tests/workflows/rig_folders_data.py, shared per process)."""
+"""rig solve-folders names the real mistake: a pattern that is part of the board seen, a square size no
+printed board has (the rendered 75 mm rig of tests/workflows/rig_folders_data.py, shared per process)."""
 
 from __future__ import annotations
 
