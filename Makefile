@@ -8,7 +8,7 @@ PYTEST_WORKERS ?= 2
 FLOOR_VENV ?= .venv-floor
 FLOOR_STAMP := $(FLOOR_VENV)/.installed-stamp
 # Everything: both extras (PostgreSQL, plots) and the dev tools, at the versions in the lock file.
-EXTRAS := .[dev,postgres,plots]
+EXTRAS := .[dev,postgres,plots,bags]
 
 .DEFAULT_GOAL := help
 

@@ -83,7 +83,10 @@ def renders(n_sessions: int) -> None:
         f"rule fired (> {MAX_SIGMA_FACTOR}) in {fired}"
     )
     for k in truth:
-        print(f"  {k}: z sd before {np.std(z_before[k], ddof=1):.2f}, after {np.std(z_after[k], ddof=1):.2f}")
+        print(
+            f"  {k}: z mean {np.mean(z_after[k]):+.2f}, z sd before {np.std(z_before[k], ddof=1):.2f}, "
+            f"after {np.std(z_after[k], ddof=1):.2f}"
+        )
 
 
 def real_left() -> None:

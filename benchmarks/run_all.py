@@ -54,6 +54,7 @@ BENCHES = (
         ("--seeds", "10", "--scenes", "2", "--repeats", "5"),
     ),
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
+    Bench("bench_rig_caliscope", "bench_rig_caliscope.py", (), ("--runs", "5:k1k2")),
     Bench(
         "bench_tilt",
         "bench_tilt.py",

@@ -97,7 +97,11 @@ class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
 
 
-EXTRA_PACKAGES = {"postgres": "psycopg[binary]>=3.1.4", "plots": "matplotlib>=3.8"}
+EXTRA_PACKAGES = {
+    "postgres": "psycopg[binary]>=3.1.4",
+    "plots": "matplotlib>=3.8",
+    "bags": "rosbags>=0.11.9",
+}
 """Each extra's requirement, as pyproject.toml's optional-dependencies say (a test keeps them equal)."""
 
 

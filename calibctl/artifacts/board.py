@@ -108,6 +108,18 @@ class BoardRevision(Document):
     dictionary: str | None = Field(
         None, description="ChArUco only: cv2.aruco dictionary name, e.g. DICT_5X5_100"
     )
+    # ChArUco variants; left out of the document while False, so boards sealed before them still verify.
+    inverted: bool = Field(
+        False,
+        exclude_if=lambda inverted: not inverted,
+        description="ChArUco only: white markers on black squares (detected with detectInvertedMarker)",
+    )
+    legacy_pattern: bool = Field(
+        False,
+        exclude_if=lambda legacy: not legacy,
+        description="ChArUco only: the layout of OpenCV < 4.6 (CharucoBoard.setLegacyPattern), for an even "
+        "number of square rows",
+    )
     measurement: SquareMeasurement = Field(description="the square size and where it came from")
     created_at: UtcDatetime = Field(description="when this revision was registered (UTC)")
     created_by: str = Field(min_length=1, description="who registered it")
@@ -126,8 +138,15 @@ class BoardRevision(Document):
                 raise ValueError("a ChArUco board needs marker_size_m and dictionary")
             if self.marker_size_m >= self.measurement.square_size_m:
                 raise ValueError("the marker must be smaller than the square")
-        elif self.marker_size_m is not None or self.dictionary is not None:
-            raise ValueError("marker_size_m and dictionary apply to ChArUco boards only")
+        elif (
+            self.marker_size_m is not None
+            or self.dictionary is not None
+            or self.inverted
+            or self.legacy_pattern
+        ):
+            raise ValueError(
+                "marker_size_m, dictionary, inverted and legacy_pattern apply to ChArUco boards only"
+            )
         return self
 
     @property

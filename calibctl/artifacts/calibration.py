@@ -181,6 +181,21 @@ class CameraConsistency(Document):
     two_cameras_suspected: bool = Field(description="the views disagree the way two cameras would")
 
 
+class CameraChange(Document):
+    """Did the camera change during the session? Its views split in capture order, both sides solved apart
+    (core.intrinsics.camera_change)."""
+
+    first_view_after: str = Field(description="the first view (capture order) of the side after the change")
+    views: tuple[int, int] = Field(description="views before and after the split")
+    before_px: dict[str, float] = Field(description="fx, fy, cx, cy of the views before, solved alone, px")
+    after_px: dict[str, float] = Field(description="the same of the views after, px")
+    focal_step: float = Field(description="(f after - f before) / f before, fx and fy's mean")
+    centre_step_px: float = Field(ge=0, description="how far the principal point moved, px")
+    chi2: float = Field(ge=0, description="the step under both sides' own covariances (view-level widened)")
+    limit: float = Field(gt=0, description="chi2 from which the camera changed")
+    changed: bool = Field(description="chi2 over the limit and a step large enough to matter")
+
+
 class Provenance(Document):
     calibctl_version: str = Field(description="calibctl version that produced the artifact")
     opencv_version: str = Field(description="OpenCV version used for the solve")
@@ -291,6 +306,12 @@ class CalibrationArtifact(Document):
         exclude_if=lambda check: check is None,
         description="two-camera check of the solved views; absent when too few views to split, and in "
         "artifacts made before the check existed",
+    )
+    camera_change: CameraChange | None = Field(
+        None,
+        exclude_if=lambda check: check is None,
+        description="changed-camera check of the solved views in capture order; absent when too few views to "
+        "split, and in artifacts made before the check existed",
     )
     lint: list[Finding] = Field(default_factory=list, description="lint findings at the time of the solve")
     provenance: Provenance = Field(description="how, where, when and from what it was made")

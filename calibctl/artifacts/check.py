@@ -76,3 +76,10 @@ class CheckEvent(Document):
     alpha: float = Field(gt=0, lt=1, description="false-fail probability the limits are set for")
     passed: bool = Field(description="every test passed")
     reasons: list[str] = Field(default_factory=list, description="what failed, in words")
+    not_judged: list[str] | None = Field(
+        None,
+        exclude_if=lambda parts: parts is None,
+        description="what this check could not judge, and why (a fixture check of a few pictures of one pose "
+        "judges the metric gauge alone: the statistical re-test needs 10 views); absent when every part ran, "
+        "and in checks made before it was recorded",
+    )

@@ -68,9 +68,9 @@ class EdgeUncertainty(Document):
 class EdgeGate(Document):
     """An observability gate checked before any number is reported."""
 
-    gate: Literal["rotation", "lever-arm", "time-alignment", "consistency", "translation-scale"] = Field(
-        description="which gate"
-    )
+    gate: Literal[
+        "rotation", "lever-arm", "time-alignment", "consistency", "translation-scale", "metric-gauge"
+    ] = Field(description="which gate (metric-gauge: the board revision's failed gauge, seed chapter 0)")
     passed: bool = Field(description="true when the gate is satisfied")
     value: float = Field(
         description="rotation about a second axis (deg), sigma_min of stacked (R_A - I), "

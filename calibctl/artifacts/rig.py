@@ -4,7 +4,8 @@ A rig calibration stores its extrinsics as a tree of named frames with one root 
 child with ``T_parent_child`` and a 6x6 covariance), never as a set of pairs, so every pairwise
 transform is derived and consistent. An edge's ``source`` says what produced it ("rig-solve" today;
 a hand-eye edge such as ``flange -> cam0`` is ``"hand-eye"``, with its evidence in ``handeye``; a camera-LiDAR
-edge ``lidar -> cam0`` is ``"lidar-board"``, with its evidence in ``lidar``). Each member is
+edge ``lidar -> cam0`` is ``"lidar-board"``, with its evidence in ``lidar``; a camera-IMU edge
+``imu -> cam0`` is ``"camera-imu"``, with its evidence (T_imu_cam and td_s) in ``imu``). Each member is
 pinned by serial, version and content_sha256 of the camera calibration the solve used, so
 ``rig-stale-member`` can tell when a member was re-calibrated after the rig solve.
 """
@@ -27,6 +28,7 @@ from calibctl.artifacts.common import (
     content_hash,
 )
 from calibctl.artifacts.handeye import FRAME_PATTERN, HandEyeResult
+from calibctl.artifacts.imu import ImuEdgeResult
 from calibctl.artifacts.lidar import LidarEdgeResult
 from calibctl.artifacts.lint import Finding
 
@@ -98,12 +100,13 @@ class UnmatchedImage(Document):
 class RigGate(Document):
     """A rig-level capture gate."""
 
-    gate: Literal["rig-connected"] = Field(description="which gate")
-    passed: bool = Field(description="true when satisfied")
+    gate: Literal["rig-connected", "metric-gauge"] = Field(description="which gate")
+    passed: bool = Field(description="true when satisfied (metric-gauge: no failed gauge, or overridden)")
     value: float = Field(
-        description="shared views of the weakest linking pair (or of the best pair across a split)"
+        description="rig-connected: shared views of the weakest linking pair (or of the best pair across a "
+        "split); metric-gauge: |ratio - 1| of the board revision's failed gauge"
     )
-    threshold: float = Field(description="views a linking pair needs")
+    threshold: float = Field(description="rig-connected: views a linking pair needs; metric-gauge: 0.01")
     message: str = Field(description="the verdict in words")
     hint: str | None = Field(None, description="what the operator should do next, naming the pair")
 
@@ -164,7 +167,7 @@ class RigEdge(Document):
     sigma_rotation_deg: float = Field(
         ge=0, description="one-sigma of the rotation on its least certain axis, degrees"
     )
-    source: Literal["rig-solve", "hand-eye", "lidar-board"] = Field(
+    source: Literal["rig-solve", "hand-eye", "lidar-board", "camera-imu"] = Field(
         "rig-solve", description="what produced this edge"
     )
 
@@ -231,6 +234,13 @@ class RigCalibration(Document):
         description="evidence of every camera-LiDAR edge of this version (source 'lidar-board'), and for a version "
         "rejected by a LiDAR gate, the rejected result (it adds no edge); absent when empty, so older "
         "versions and their hashes are unchanged",
+    )
+    imu: list[ImuEdgeResult] = Field(
+        default_factory=list,
+        exclude_if=lambda results: not results,
+        description="evidence of every camera-IMU edge of this version (source 'camera-imu': T_imu_cam "
+        "and td_s), and for a version rejected by an IMU gate, the rejected result (it adds no edge); "
+        "absent when empty, so older versions and their hashes are unchanged",
     )
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(

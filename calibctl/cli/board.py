@@ -59,6 +59,8 @@ def pattern_text(board: BoardRevision) -> str:
     text = f"{board.kind} {board.cols}x{board.rows} inner corners"
     if board.kind == "charuco":
         text += f", markers {_mm(board.marker_size_m)} {board.dictionary}"
+        text += ", inverted (white markers on black)" if board.inverted else ""
+        text += ", legacy layout (OpenCV < 4.6)" if board.legacy_pattern else ""
     return text
 
 
@@ -125,6 +127,16 @@ def add(
     dictionary: Annotated[
         str | None, typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_5X5_100.")
     ] = None,
+    inverted: Annotated[
+        bool, typer.Option("--inverted", help="ChArUco printed white markers on black squares.")
+    ] = False,
+    legacy: Annotated[
+        bool,
+        typer.Option(
+            "--legacy",
+            help="ChArUco in the layout of OpenCV < 4.6 (boards with an even number of square rows).",
+        ),
+    ] = False,
     note: Annotated[
         str | None, typer.Option("--note", help="Free text, e.g. why it was re-measured.")
     ] = None,
@@ -174,7 +186,9 @@ def add(
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
         marker_mm=marker_mm, dictionary=dictionary, note=note, span_mm=span_mm,
         span_uncertainty_mm=span_uncertainty_mm, span_instrument=span_instrument, span_squares=span_squares,
-        backing_mm=_pair_mm(backing_mm, "--backing-mm"), pattern_offset_mm=_pair_mm(pattern_offset_mm, "--pattern-offset-mm"),
+        backing_mm=_pair_mm(backing_mm, "--backing-mm"),
+        pattern_offset_mm=_pair_mm(pattern_offset_mm, "--pattern-offset-mm"),
+        inverted=inverted, legacy_pattern=legacy,
     )  # fmt: skip
     board = boards.add_board(state(ctx).settings(), reg)
     if board.measurement.status == "nominal":

@@ -38,6 +38,10 @@ def print_check(event: CheckEvent) -> None:
             f"  distance  {d.recovered_m:.4f} m vs surveyed {d.reference_m:.4f} m: ratio {d.ratio:.4f} "
             f"(needs {d.ratio_limits[0]}-{d.ratio_limits[1]}) {'pass' if d.passed else 'FAIL'}"
         )
+    elif not event.not_judged:
+        say("  distance  not judged: no --reference-distance (the metric gauge, seed chapter 0)")
+    for part in event.not_judged or []:
+        say(f"  not judged: {part}")
     for reason in event.reasons:
         say(f"  -> {reason}")
 

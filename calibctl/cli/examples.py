@@ -164,6 +164,15 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "calibctl lidar synth lidar-set/ --poses 12 --seed 1",
         "calibctl lidar synth offset-set/ --range-offset-mm 30",
     ),
+    "imu": ("calibctl imu solve recording/ --serial CAM-0042 --noise imu.yaml",),
+    "imu solve": (
+        "calibctl imu solve recording/ --serial CAM-0042 --noise imu.yaml --json",
+        "calibctl imu solve recording/ --serial CAM-0042 --rig ROBOT-7 --imu-frame imu --hold-td-ms 0",
+    ),
+    "imu synth": (
+        "calibctl imu synth imu-set/ --seed 1 --td-ms 12",
+        "calibctl imu synth corridor-set/ --motion corridor --serial CAM-0042",
+    ),
     "rig solve-folders": (
         "calibctl rig solve-folders --source CAM-L=left/ --source CAM-R=right/ --cols 9 --rows 6 "
         "--square-mm 25.0 --export-dir out/",

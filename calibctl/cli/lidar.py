@@ -9,7 +9,7 @@ import typer
 
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.render import emit_json, say
-from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
+from calibctl.errors import UsageError
 
 lidar_app = typer.Typer(
     name="lidar",
@@ -190,7 +190,7 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_lidar_cam; exit 1 when a gate rejects the set or the transform."""
-    from calibctl.cli.stored_edge import stored_line, stored_summary
+    from calibctl.cli.stored_edge import finish_solve
     from calibctl.core.lidar.target import BackingBoard
     from calibctl.workflows.lidar import lidar_run
     from calibctl.workflows.lidar import lidar_solve as wf
@@ -243,19 +243,8 @@ def solve(
     files = lidar_run.LidarFiles(out, tf_static, lidar_frame, camera_frame, force)
     outcome = lidar_run.run_lidar(state(ctx).settings(), req, files, target)
     doc = wf.result_json(outcome)
-    stored = outcome.stored
-    written = list(outcome.written)
-    if stored is not None:
-        doc["stored"] = stored_summary(stored)
-        written.append(stored_line(stored))
-    if wants_json(ctx, json_output):
-        emit_json(doc)
-    else:
-        render_result(doc)
-        for line in written:
-            say(line)
-    if not outcome.accepted or (stored is not None and stored.status != "accepted"):
-        raise typer.Exit(EXIT_VERDICT_FAIL)
+    as_json = wants_json(ctx, json_output)
+    finish_solve(doc, as_json, render_result, outcome.accepted, outcome.stored, outcome.written)
 
 
 @lidar_app.command("synth")

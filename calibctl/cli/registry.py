@@ -47,6 +47,7 @@ COMMAND_MODULES: dict[str, str] = {
     "board": "board",
     "rig": "rig",
     "lidar": "lidar",
+    "imu": "imu",
     "db": "db",
     "keys": "keys",
     "fleet": "fleet",

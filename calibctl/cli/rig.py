@@ -7,12 +7,25 @@ from typing import Annotated, Any
 
 import typer
 
+from calibctl.cli.capture import ReferenceDistanceOption
 from calibctl.cli.context import state, wants_json
 from calibctl.cli.options import JobsOption, OperatorOption, StationOption
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
+from calibctl.cli.solve import OverrideGaugeOption
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
+
+RigReferenceSourceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-source",
+        metavar="SERIAL=SRC",
+        show_default=False,
+        help="With --reference-distance: one camera's pictures of the board in the fixture; the gauge is "
+        "judged through that camera's lens (its own photos' solve), as `capture --reference-distance` does.",
+    ),
+]
 
 rig_app = typer.Typer(
     name="rig",
@@ -30,16 +43,44 @@ def solve_folders(
         typer.Option(
             "--source",
             help="SERIAL=SRC, one per camera, SRC a folder, a quoted "
-            "glob ('left*.jpg') or a list file as for capture; the first is the "
+            "glob ('left*.jpg'), a list file as for capture, or a video; the first is the "
             "root unless --root. Photos pair up by the last number in their "
-            "names.",
+            "names; videos (or --timestamps) by time.",
         ),
     ],
-    cols: Annotated[int, typer.Option("--cols", help="Chessboard inner corners per row.")],
-    rows: Annotated[int, typer.Option("--rows", help="Chessboard inner corners per column.")],
+    cols: Annotated[int, typer.Option("--cols", help="Inner corners per row.")],
+    rows: Annotated[int, typer.Option("--rows", help="Inner corners per column.")],
     square_mm: Annotated[
         float, typer.Option("--square-mm", help="Square edge, millimetres (measured, ideally).")
     ],
+    kind: Annotated[str, typer.Option("--kind", help="chessboard or charuco.")] = "chessboard",
+    marker_mm: Annotated[
+        float | None, typer.Option("--marker-mm", help="ChArUco marker edge, mm.", show_default=False)
+    ] = None,
+    dictionary: Annotated[
+        str | None,
+        typer.Option("--dictionary", help="ChArUco dictionary, e.g. DICT_4X4_1000.", show_default=False),
+    ] = None,
+    inverted: Annotated[
+        bool, typer.Option("--inverted", help="ChArUco printed white markers on black squares.")
+    ] = False,
+    legacy: Annotated[bool, typer.Option("--legacy", help="ChArUco in the layout of OpenCV < 4.6.")] = False,
+    timestamps: Annotated[
+        Path | None,
+        typer.Option(
+            "--timestamps",
+            help="The recorder's per-frame times (CSV cam_id,frame_index,frame_time; cam_id = the SERIAL of "
+            "--source): frames pair up by time. Without it videos pair by their own per-frame times.",
+            show_default=False,
+        ),
+    ] = None,
+    time_tolerance_ms: Annotated[
+        float,
+        typer.Option(
+            "--time-tolerance-ms",
+            help="Frames of different cameras at most this far apart form one rig frame.",
+        ),
+    ] = 5.0,
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
     ] = None,
@@ -77,6 +118,8 @@ def solve_folders(
             help="Write the exports of a failed verdict too (to inspect them; a robot must not load them).",
         ),
     ] = False,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: RigReferenceSourceOption = None,
     jobs: JobsOption = None,
     json_output: Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")] = False,
 ) -> None:
@@ -89,9 +132,9 @@ def solve_folders(
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
     square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken).
+    rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
+    pictures judged through its lens as the run leaves it.
     """
-    from calibctl.core.board.board_spec import BoardSpec
     from calibctl.workflows.rig import rig_folders
 
     sources = rig_folders.parse_sources(source)
@@ -99,10 +142,7 @@ def solve_folders(
         if root not in sources:
             raise UsageError(f"--root {root} is not one of the cameras ({', '.join(sources)})")
         sources = {root: sources[root], **{k: v for k, v in sources.items() if k != root}}
-    try:
-        spec = BoardSpec.chessboard(cols, rows, square_mm / 1e3)
-    except ValueError as exc:
-        raise UsageError(f"bad board: {exc}") from exc
+    spec = rig_folders.typed_spec(kind, cols, rows, square_mm, marker_mm, dictionary, inverted, legacy)
     from calibctl.workflows.rig.rig_lint import parse_design
 
     designs = [parse_design(d) for d in design or []]
@@ -117,6 +157,9 @@ def solve_folders(
         workers=settings.jobs,
         settings=settings,
         designs=designs,
+        gauge=rig_gauge(reference_distance, reference_source),
+        timestamps=timestamps,
+        time_tolerance_ms=time_tolerance_ms,
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []
@@ -171,7 +214,7 @@ def add(
         typer.Option(
             "--frame",
             help="Non-camera frame (flange, imu, lidar) a "
-            "hand-eye or LiDAR edge may join to the tree (repeat).",
+            "hand-eye, LiDAR or IMU edge may join to the tree (repeat).",
             show_default=False,
         ),
     ] = None,
@@ -211,12 +254,16 @@ def capture(
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
+    reference_distance: ReferenceDistanceOption = None,
+    reference_source: RigReferenceSourceOption = None,
+    override_gauge: OverrideGaugeOption = None,
     station: StationOption = None,
     operator: OperatorOption = None,
     jobs: JobsOption = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails."""
+    """Capture every member (its own outcomes and gates) and pair the images; exit 1 when the rig gate fails
+    or the board revision has a failed metric gauge (this capture's, or one stored) not overridden."""
     from calibctl.workflows.rig import rig_folders, rigs
 
     sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
@@ -226,6 +273,8 @@ def capture(
         sources,
         board,
         min_shared_views,
+        gauge=rig_gauge(reference_distance, reference_source),
+        override_gauge=override_gauge,
     )
     s = result.session
     if wants_json(ctx, json_output):
@@ -254,6 +303,27 @@ def capture(
         raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
+def rig_gauge(reference_distance: str | None, reference_source: str | None) -> Any:
+    """``--reference-distance D+-S --reference-source SERIAL=SRC`` -> ``rigs.RigGauge`` (None without)."""
+    from calibctl.workflows.camera.distance_gauge import parse_reference_distance
+    from calibctl.workflows.rig.rig_folders import RigGauge
+
+    if (reference_distance is None) != (reference_source is None):
+        raise UsageError(
+            "--reference-distance and --reference-source go together",
+            "give the surveyed distance D+-S and one member's fixture pictures, SERIAL=FOLDER",
+        )
+    if reference_distance is None or reference_source is None:
+        return None
+    camera, sep, fixture = reference_source.partition("=")
+    if not sep or not camera or not fixture:
+        raise UsageError(
+            f"--reference-source '{reference_source}' is not SERIAL=SRC",
+            "name the member whose fixture pictures these are, e.g. --reference-source CAM-L=fixture/",
+        )
+    return RigGauge(camera, parse_reference_distance(reference_distance), fixture)
+
+
 def print_rig_calibration(cal: Any, active: bool) -> None:
     say(
         f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root {cal.root}  "
@@ -277,6 +347,21 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
             + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
             + f", {len(h.motions)} motions from {h.provenance.input_file}"
             + (f", camera {h.provenance.camera}" if h.provenance.camera else "")
+        )
+    for ir in cal.imu:
+        failed = [g.gate for g in ir.gates if not g.passed]
+        est = ir.estimate
+        say(
+            f"  imu {ir.parent_frame} -> {ir.child_frame}: {ir.status}"
+            + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
+            + (
+                ""
+                if est is None
+                else f", td {est.td_s * 1e3:+.3f} ms"
+                + (" (held)" if est.td_held else f" +/- {est.sigma_td_ms:.3f} ms")
+                + " (t_imu = t_cam + td)"
+            )
+            + f", camera {ir.camera}, recording {ir.recording}"
         )
     for lr in cal.lidar:
         failed = [g.gate for g in lr.gates if not g.passed]
@@ -376,6 +461,9 @@ def history(
                         "lidar": [
                             {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.lidar
                         ],
+                        "imu": [
+                            {"edge": f"{h.parent_frame}:{h.child_frame}", "status": h.status} for h in c.imu
+                        ],
                     }
                     for c in cals
                 ],
@@ -388,6 +476,7 @@ def history(
         base = named_list([f"{p.a}-{p.b} {p.baseline_mm:.3f} mm" for p in c.pairs], 3)
         hand_eye = "".join(f"; hand-eye {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.handeye)
         hand_eye += "".join(f"; lidar {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.lidar)
+        hand_eye += "".join(f"; imu {h.parent_frame} -> {h.child_frame} {h.status}" for h in c.imu)
         say(
             f"  {c.version:>3} {c.status:<8} {'*' if c.version == active else ' '} "
             f"{c.provenance.created_at:%Y-%m-%d %H:%M}  {base}{hand_eye}"
@@ -453,8 +542,9 @@ def export(
             "--format",
             help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
             "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
-            "URDF), kalibr, bundle (all of them + manifest.json, -o DIR), or lut (each stereo pair's "
-            "rectification maps for cv2.remap, -o DIR).",
+            "URDF), kalibr (camchain, with T_cam_imu and timeshift_cam_imu when the rig has an IMU), "
+            "kalibr-imu (imu.yaml of the camera-IMU edge), bundle (all of them + manifest.json, -o DIR), "
+            "or lut (each stereo pair's rectification maps for cv2.remap, -o DIR).",
         ),
     ] = "json",
     out: Annotated[
@@ -505,7 +595,7 @@ def export(
         str | None,
         typer.Option(
             "--edge",
-            help="FROM:TO: one hand-eye or LiDAR edge, its result document (json) or /tf_static (tf).",
+            help="FROM:TO: one hand-eye, LiDAR or IMU edge, its result document (json) or /tf_static (tf).",
             show_default=False,
         ),
     ] = None,

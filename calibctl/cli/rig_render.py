@@ -15,7 +15,11 @@ def render_run(doc: dict[str, Any]) -> None:
     say(
         f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)"
     )
+    if "timing" in doc:
+        render_timing(doc["timing"])
     render_unmatched([(u["camera"], u["file"], u["reason"]) for u in unmatched])
+    for f in doc.get("refused", []):
+        say(f"  refused {f['message']} -> {f['fix']}")
     for name, counts in doc["images"].items():
         say(f"  {name}: " + ", ".join(f"{n} {s}" for s, n in sorted(counts.items())))
     say("  shared views: " + ", ".join(f"{p} {n}" for p, n in doc["shared_views"].items()))
@@ -27,6 +31,23 @@ def render_run(doc: dict[str, Any]) -> None:
     if "tree" in doc:
         render_solution(doc)
     render_verdict(doc)
+
+
+def render_timing(timing: dict[str, Any]) -> None:
+    """How the frames were paired by time (``rig_video.timing_json``)."""
+    spread = timing["spread_ms"]
+    line = (
+        f"  paired by time ({timing['times']}): {timing['rig_frames']} rig frames within "
+        f"{timing['tolerance_ms']:g} ms, {timing['outside_tolerance']} frame(s) outside"
+    )
+    if spread["median"] is not None:
+        line += f"; spread median {spread['median']:.2f} ms, max {spread['max']:.2f} ms"
+    say(line)
+    by_offset: dict[int, list[str]] = {}
+    for name, offset in timing["index_offset"].items():
+        by_offset.setdefault(offset, []).append(name)
+    for offset, names in by_offset.items():
+        say(f"  the timestamps number the frames of {', '.join(names)} from {offset}: read as video frame 0")
 
 
 def render_unmatched(rows: list[tuple[str, str, str]]) -> None:

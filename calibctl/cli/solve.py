@@ -42,8 +42,9 @@ OverrideGaugeOption = Annotated[
         "--override-gauge",
         metavar="REASON",
         show_default=False,
-        help="Solve a session whose metric gauge (--reference-distance) failed into a calibration lint can accept; "
-        "REASON is recorded in its provenance and the failed gauge stays a lint warning.",
+        help="Solve a session whose metric gauge (--reference-distance) failed, or whose board revision has "
+        "a failed gauge, into a calibration lint can accept; REASON is recorded in its provenance and the "
+        "failed gauge stays a lint warning.",
     ),
 ]
 

@@ -3,9 +3,14 @@ commands render it: the ``stored`` block of their JSON and the human line."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
+import typer
+
 from calibctl.artifacts.rig import RigCalibration
+from calibctl.cli.render import emit_json, say
+from calibctl.errors import EXIT_VERDICT_FAIL
 
 
 def stored_summary(stored: RigCalibration) -> dict[str, Any]:
@@ -17,6 +22,31 @@ def stored_summary(stored: RigCalibration) -> dict[str, Any]:
         "active": stored.status == "accepted",
         "content_sha256": stored.content_sha256,
     }
+
+
+def finish_solve(
+    doc: dict[str, Any],
+    as_json: bool,
+    render: Callable[[dict[str, Any]], None],
+    accepted: bool,
+    stored: RigCalibration | None,
+    written: list[str],
+) -> None:
+    """How a sensor-edge solve command ends (``lidar solve``, ``imu solve``): the ``stored`` block added,
+    the document printed (``--json``) or rendered with the files written and the version stored, and
+    exit 1 when the result, or the version it was stored as, was rejected."""
+    lines = list(written)
+    if stored is not None:
+        doc["stored"] = stored_summary(stored)
+        lines.append(stored_line(stored))
+    if as_json:
+        emit_json(doc)
+    else:
+        render(doc)
+        for line in lines:
+            say(line)
+    if not accepted or (stored is not None and stored.status != "accepted"):
+        raise typer.Exit(EXIT_VERDICT_FAIL)
 
 
 def stored_line(stored: RigCalibration) -> str:

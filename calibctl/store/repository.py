@@ -28,6 +28,7 @@ from calibctl.store.checks import CheckStore
 from calibctl.store.engine import display_url, sqlite_path
 from calibctl.store.engine import make_engine as _make_engine
 from calibctl.store.fleet import FleetStore
+from calibctl.store.gauge_failures import GaugeFailureStore
 from calibctl.store.health import HealthStore
 from calibctl.store.history import KNOWN_SHOWN
 from calibctl.store.images import ImageStore
@@ -38,7 +39,7 @@ from calibctl.store.runner import Delegate, Runner
 if TYPE_CHECKING:
     from calibctl.store import audit
 
-_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary")
+_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary", "inverted", "legacy_pattern")
 
 
 def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:
@@ -80,6 +81,7 @@ class Store:
         self._rigs = RigStore(self._runner, self._session_linked)
         self._images = ImageStore(self._runner, image_dir)
         self._checks = CheckStore(self._runner)
+        self._gauges = GaugeFailureStore(self._runner)
         self._fleet = FleetStore(self._runner)
         self._health = HealthStore(self._runner)
 
@@ -341,6 +343,8 @@ class Store:
     add_check = Delegate("_checks", CheckStore.add_check)
     checks = Delegate("_checks", CheckStore.checks)
     checks_since = Delegate("_checks", CheckStore.checks_since)
+
+    failed_gauges = Delegate("_gauges", GaugeFailureStore.failed_gauges)
 
     add_fleet_event = Delegate("_fleet", FleetStore.add_fleet_event)
     append_fleet_events = Delegate("_fleet", FleetStore.append_fleet_events)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import datetime as dt
 
-from calibctl.artifacts.check import CheckEvent, RegionCheck
+from calibctl.artifacts.check import CheckEvent, DistanceCheck, RegionCheck
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.artifacts.health import HealthReport
-from calibctl.artifacts.session import CaptureSession, ImageOutcome, ViewCorners
+from calibctl.artifacts.session import CaptureSession, ImageOutcome, MetricGauge, ViewCorners
 from tests.artifacts.factories import FIXED_TIME, measured_board
 
 
@@ -48,6 +48,28 @@ def capture_session(
         ],
         calibctl_version="0.1.0",
         opencv_version="5.0.0",
+    )
+
+
+def gauged_session(
+    session_id: str, ratio: float, serial: str = "CAM-0001", board_name: str = "A17"
+) -> CaptureSession:
+    """``capture_session`` with a metric gauge that read ``ratio`` (failed outside 0.99-1.01), on board
+    ``board_name``@1."""
+    distance = DistanceCheck(
+        reference_m=0.45,
+        reference_sigma_m=0.0005,
+        recovered_m=0.45 * ratio,
+        spread=0.001,
+        ratio=ratio,
+        ratio_limits=(0.99, 1.01),
+        passed=0.99 <= ratio <= 1.01,
+    )
+    return capture_session(session_id, serial).model_copy(
+        update={
+            "board": measured_board(board_name),
+            "metric_gauge": MetricGauge(distance=distance, lens_model="k1k2", reference_source="fixture/"),
+        }
     )
 
 

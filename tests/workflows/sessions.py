@@ -8,7 +8,11 @@ import numpy as np
 
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.session import CaptureSession, GateResult, ViewCorners
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.capture.detect import detect_board
 from calibctl.core.synth.corners import synthesize_session
+from calibctl.core.synth.pinhole import Photometry, PinholeCamera, render_view
+from calibctl.core.synth.scenes import scenario_poses
 
 K_TRUE = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
 D_TRUE = np.array([-0.2814, 0.0977, 0.0, 0.0, 0.0])
@@ -92,3 +96,64 @@ def fisheye_capture(
         for i, img in enumerate(syn.image_points_per_view)
     ]
     return base.model_copy(update={"views": views, "image_size": (1280, 960)})
+
+
+# Renders through the real detector with a camera that changes during the session
+# (core.intrinsics.camera_change, benchmarks/bench_camera_change.py): the seed lens at 640x480, 9x6
+# chessboard, scenario good, 20 views.
+CHANGE_BOARD = BoardSpec.chessboard(9, 6, 0.025)
+CHANGE_SIZE = (640, 480)
+CHANGE_VIEWS = 20
+CHANGE_AT = 10
+
+
+def _stepped(cam: PinholeCamera, focal: float, centre: tuple[float, float]) -> PinholeCamera:
+    K = cam.K.copy()
+    K[0, 0] *= 1 + focal
+    K[1, 1] *= 1 + focal
+    K[0, 2] += centre[0]
+    K[1, 2] += centre[1]
+    return PinholeCamera(K, cam.dist, cam.image_size)
+
+
+def rendered_views(
+    seed: int, focal: float = 0.0, centre: tuple[float, float] = (0.0, 0.0), n_views: int = CHANGE_VIEWS
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(corner ids, detected corners px) per view in capture order; from view CHANGE_AT on the camera's
+    focal length is (1 + focal) x and its principal point ``centre`` px away."""
+    cam = PinholeCamera.seed_reference(CHANGE_SIZE)
+    after = _stepped(cam, focal, centre)
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, T in enumerate(scenario_poses("good", cam, CHANGE_BOARD, n_views, rng)):
+        image = render_view(cam if i < CHANGE_AT else after, CHANGE_BOARD, T, rng, Photometry.random(rng))
+        det, _ = detect_board(image, CHANGE_BOARD)
+        if det is not None:
+            out.append((np.asarray(det.corner_ids), np.asarray(det.corners_px, np.float64)))
+    return out
+
+
+def rendered_session(
+    seed: int, focal: float = 0.0, centre: tuple[float, float] = (0.0, 0.0), n_views: int = CHANGE_VIEWS
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """``rendered_views`` as (object points, corners) per view, as the core solve takes them."""
+    obj_all = CHANGE_BOARD.object_points()
+    views = rendered_views(seed, focal, centre, n_views)
+    return [obj_all[ids] for ids, _ in views], [px for _, px in views]
+
+
+def changed_capture(
+    board: BoardRevision, seed: int, focal: float = 0.0, centre: tuple[float, float] = (0.0, 0.0)
+) -> CaptureSession:
+    """``synthetic_capture`` of ``rendered_views`` (board: a 9x6 revision; views view00.png ... in capture
+    order)."""
+    base = synthetic_capture(board, n_views=1)
+    views = [
+        ViewCorners(
+            name=f"view{i:02d}.png",
+            corner_ids=[int(c) for c in ids],
+            corners_px=[(float(u), float(v)) for u, v in px],
+        )
+        for i, (ids, px) in enumerate(rendered_views(seed, focal, centre))
+    ]
+    return base.model_copy(update={"views": views, "image_size": CHANGE_SIZE})

@@ -36,6 +36,8 @@ class BoardSpec:
         dictionary: ChArUco dictionary name as in cv2.aruco, e.g. "DICT_4X4_50" (ChArUco only).
         legacy_pattern: ChArUco boards printed by OpenCV < 4.6 with an even number of rows
             (cv2.aruco.CharucoBoard.setLegacyPattern).
+        inverted: ChArUco printed white markers on black squares (caliscope's boards); the detector then
+            also reads inverted markers (``DetectorParameters.detectInvertedMarker``).
     """
 
     kind: str
@@ -45,6 +47,7 @@ class BoardSpec:
     marker_size_m: float | None = None
     dictionary: str | None = None
     legacy_pattern: bool = False
+    inverted: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in BOARD_KINDS:
@@ -60,6 +63,8 @@ class BoardSpec:
 
             if self.dictionary is None or not hasattr(cv2.aruco, self.dictionary):
                 raise ValueError(f"unknown ArUco dictionary {self.dictionary!r}")
+        elif self.legacy_pattern or self.inverted:
+            raise ValueError("the legacy layout and inverted markers apply to ChArUco boards only")
 
     @classmethod
     def chessboard(cls, cols: int, rows: int, square_size_m: float) -> BoardSpec:
@@ -73,8 +78,20 @@ class BoardSpec:
         square_size_m: float,
         marker_size_m: float,
         dictionary: str = "DICT_4X4_50",
+        *,
+        legacy_pattern: bool = False,
+        inverted: bool = False,
     ) -> BoardSpec:
-        return cls(CHARUCO, squares_x - 1, squares_y - 1, square_size_m, marker_size_m, dictionary)
+        return cls(
+            CHARUCO,
+            squares_x - 1,
+            squares_y - 1,
+            square_size_m,
+            marker_size_m,
+            dictionary,
+            legacy_pattern,
+            inverted,
+        )
 
     @property
     def n_corners(self) -> int:
@@ -98,6 +115,7 @@ class BoardSpec:
             "marker_size_m": self.marker_size_m,
             "dictionary": self.dictionary,
             "legacy_pattern": self.legacy_pattern,
+            "inverted": self.inverted,
         }
 
 

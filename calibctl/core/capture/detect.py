@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -334,8 +334,91 @@ def _charuco_detector(spec: BoardSpec) -> cv2.aruco.CharucoDetector:
     """One detector per board and thread (OpenCV does not promise detectBoard is thread-safe)."""
     cache: dict[BoardSpec, cv2.aruco.CharucoDetector] = _local.__dict__.setdefault("charuco", {})
     if spec not in cache:
-        cache[spec] = cv2.aruco.CharucoDetector(make_charuco_board(spec))
+        params = cv2.aruco.DetectorParameters()
+        params.detectInvertedMarker = spec.inverted  # reads white-on-black markers too (both polarities)
+        cache[spec] = cv2.aruco.CharucoDetector(
+            make_charuco_board(spec), cv2.aruco.CharucoParameters(), params
+        )
     return cache[spec]
+
+
+OTHER_DICTIONARIES = (
+    "DICT_4X4_1000",
+    "DICT_5X5_1000",
+    "DICT_6X6_1000",
+    "DICT_7X7_1000",
+    "DICT_ARUCO_ORIGINAL",
+)
+"""Tried when the declared dictionary reads no marker (a dictionary's smaller sets are its prefixes)."""
+
+
+@dataclass(frozen=True)
+class VariantCounts:
+    """What each ChArUco variant finds on some frames: markers of the declared dictionary read normal only and
+    with inverted markers too, corners the declared and the other layout (legacy or not) interpolate, and
+    markers of other dictionaries (only looked for when the declared one reads none)."""
+
+    frames: int
+    markers_normal: int = 0
+    markers_inverted: int = 0
+    corners_declared: int = 0
+    corners_other_layout: int = 0
+    other_dictionaries: tuple[tuple[str, int], ...] = ()
+
+
+def charuco_variant_counts(grays: list[np.ndarray], spec: BoardSpec) -> VariantCounts:
+    """Count what each variant of ``spec`` (polarity, layout, dictionary) finds on ``grays``."""
+    normal, inverted, declared, other = 0, 0, 0, 0
+    flipped = replace(spec, inverted=True, legacy_pattern=not spec.legacy_pattern)
+    searches = [downscaled_to_pixels(gray, MAX_SEARCH_PIXELS)[0] for gray in grays]
+    for search in searches:
+        _, _, _, ids = _charuco_detector(replace(spec, inverted=False)).detectBoard(search)
+        normal += 0 if ids is None else len(ids)
+        corners, _, _, ids = _charuco_detector(replace(spec, inverted=True)).detectBoard(search)
+        inverted += 0 if ids is None else len(ids)
+        declared += 0 if corners is None else len(corners)  # inverted finds the normal ones too
+        corners, _, _, _ = _charuco_detector(flipped).detectBoard(search)
+        other += 0 if corners is None else len(corners)
+    counts = VariantCounts(len(grays), normal, inverted, declared, other)
+    if inverted:
+        return counts
+    found = []
+    for name in OTHER_DICTIONARIES:
+        if name == spec.dictionary:
+            continue
+        variant = replace(spec, dictionary=name, inverted=True)
+        n = 0
+        for search in searches:
+            _, _, _, ids = _charuco_detector(variant).detectBoard(search)
+            n += 0 if ids is None else len(ids)
+        if n:
+            found.append((name, n))
+    return replace(counts, other_dictionaries=tuple(found))
+
+
+def charuco_variant_advice(counts: VariantCounts, spec: BoardSpec) -> str | None:
+    """What was seen instead of the declared ChArUco variant, and the declaration that fits, in words; None
+    when the declared variant is what the frames show (or nothing better was found)."""
+    seen = (
+        f"on {counts.frames} frame(s): {counts.markers_normal} markers with {spec.dictionary} normal; "
+        f"{counts.markers_inverted} with inverted"
+    )
+    if not spec.inverted and counts.markers_inverted > max(2 * counts.markers_normal, 4):
+        return f"{seen}: declare --inverted (white markers on black)"
+    if counts.markers_inverted == 0:
+        if counts.other_dictionaries:
+            best, n = max(counts.other_dictionaries, key=lambda item: item[1])
+            return f"{seen}; {n} markers with {best}: declare --dictionary {best}"
+        return None
+    declared_corners = counts.corners_declared
+    if counts.corners_other_layout > max(2 * declared_corners, 6):
+        flag = "drop --legacy" if spec.legacy_pattern else "declare --legacy (OpenCV < 4.6 layout)"
+        return (
+            f"{seen}; {declared_corners} corners with the declared layout, "
+            f"{counts.corners_other_layout} with the {'current' if spec.legacy_pattern else 'legacy'} one: "
+            f"{flag}"
+        )
+    return None
 
 
 # CharucoDetector before OpenCV 4.14 returns every corner shifted by exactly (+0.5, +0.5) px: it

@@ -26,12 +26,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from calibctl.core.capture.gates import CELL_NAMES, COVERAGE_GRID
 from calibctl.core.gate import GateResult
+from calibctl.core.intrinsics.camera_change import changed_hint, judge_change
+from calibctl.core.intrinsics.model_fit import WIDE_FIELD_DEG, diagonal_field_deg
 from calibctl.core.intrinsics.report_maps import projection_uncertainty
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, solve_intrinsics
 from calibctl.errors import NumericalError
@@ -246,6 +248,72 @@ def projection_gate(
         f"capture views with the board in the {', '.join(over)} (tilted 20-40 deg), where the "
         "calibration does not yet predict the lens",
         detail,
+    )
+
+
+def cause_first(
+    gate: GateResult,
+    solution: IntrinsicsSolution | NumericalError,
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    region: Region,
+    threshold_px: float,
+) -> GateResult:
+    """A failed gate whose uncertainty a cause other than the views explains, with that cause and its fix
+    first (the views' hint after it): a pinhole model on a wide lens that the fisheye model fits at least
+    FISHEYE_GAIN better (``projection.lens_model``; judged first: a misfit model also makes the two halves of
+    a session disagree), else a camera that changed during the session (core.intrinsics.camera_change,
+    ``projection.camera_changed``). Any other gate is returned as it is."""
+    if gate.passed or gate.reason != "projection.uncertain" or isinstance(solution, NumericalError):
+        return gate
+    lens = _lens_model_cause(gate, solution, object_points, image_points, image_size, region, threshold_px)
+    if lens is not None:
+        return lens
+    change = judge_change(solution, object_points, image_points, image_size)
+    if change is None or not change.changed:
+        return gate
+    return replace(
+        gate,
+        message=f"{gate.message}; the views before and after view {change.split} disagree (chi2 "
+        f"{change.chi2:.1f}, limit {change.limit:g}): the uncertainty is a blend of two cameras",
+        reason="projection.camera_changed",
+        hint=f"{changed_hint(change.focal_step, change.centre_step_px)}; then, if it is still uncertain: "
+        f"{gate.hint}",
+    )
+
+
+def _lens_model_cause(
+    gate: GateResult,
+    solution: IntrinsicsSolution,
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    region: Region,
+    threshold_px: float,
+) -> GateResult | None:
+    field = diagonal_field_deg(solution.camera_matrix, image_size)
+    if solution.model == "fisheye" or field < WIDE_FIELD_DEG:
+        return None
+    try:
+        fisheye = solve_intrinsics(list(object_points), list(image_points), image_size, "fisheye")
+    except NumericalError:
+        return None
+    if not fisheye.rms_px <= (1.0 - FISHEYE_GAIN) * solution.rms_px:
+        return None
+    better = projection_gate(fisheye, image_size, region, threshold_px)
+    then = (
+        f"the fisheye model predicts {region.describe()} to {better.value:.3g} px"
+        if better.passed
+        else f"then, under the fisheye model ({better.value:.3g} px): {better.hint}"
+    )
+    return replace(
+        gate,
+        message=f"{gate.message}; the {solution.model} lens model does not fit this {field:.0f} deg lens: "
+        f"the fisheye model fits its corners to {fisheye.rms_px:.3f} px against {solution.rms_px:.3f} px",
+        reason="projection.lens_model",
+        hint=f"calibrate with --model fisheye (or --model auto): the {solution.model} model cannot describe "
+        f"this lens, more views will not cure it; {then}",
     )
 
 

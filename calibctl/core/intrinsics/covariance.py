@@ -73,6 +73,9 @@ class IntrinsicCovariance:
         view_influences: (V, p) S^-1 g_i, each view's first-order pull on the parameters (the terms whose
             spread the view-level check measures), in ``names`` order; the rig solve sums them per frame with
             its own (core.extrinsics.rig_solve) when a member was calibrated on the rig's photos.
+        view_information: (V, p, p) each view's share S_i of the reduced information S (px^-2 units of the
+            parameters, before s^2), so that S = sum S_i and g_i = S @ view_influences[i]: the camera-change
+            test (core.intrinsics.camera_change) splits them in capture order without a re-solve.
     """
 
     names: tuple[str, ...]
@@ -84,6 +87,7 @@ class IntrinsicCovariance:
     inflated: bool = False
     n_views: int = 0
     view_influences: np.ndarray | None = None
+    view_information: np.ndarray | None = None
 
     @property
     def jacobian_covariance(self) -> np.ndarray | None:
@@ -170,7 +174,7 @@ def schur_covariance(
     """
     S = None
     names: tuple[str, ...] = ()
-    scores = []
+    scores, blocks = [], []
     for (J_int, J_pose, names), res in zip(view_jacobians, residuals_px_per_view, strict=True):
         C = J_pose.T @ J_pose
         B = J_int.T @ J_pose
@@ -183,6 +187,7 @@ def schur_covariance(
         block = J_int.T @ J_int - B @ CinvBt
         # rows of a projectPoints Jacobian are (u0, v0, u1, v1, ...), the order of a raveled (N, 2) residual
         scores.append((J_int - J_pose @ CinvBt).T @ np.asarray(res, dtype=np.float64).reshape(-1))
+        blocks.append(0.5 * (block + block.T))
         S = block if S is None else S + block
     assert S is not None
     ssr = sum(float(np.sum(np.asarray(res, dtype=np.float64) ** 2)) for res in residuals_px_per_view)
@@ -215,7 +220,9 @@ def schur_covariance(
         assert factor is not None
         cov = cov * factor**2
     influences = np.stack(scores) / d @ S_unit_inv / d  # rows g_i^T S^-1 (S symmetric)
-    return IntrinsicCovariance(names, cov, rcond, s2, None, factor, inflated, n_views, influences)
+    return IntrinsicCovariance(
+        names, cov, rcond, s2, None, factor, inflated, n_views, influences, np.stack(blocks)
+    )
 
 
 def view_sigma_factor(

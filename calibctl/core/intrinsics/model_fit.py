@@ -33,7 +33,12 @@ sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on
 CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
 only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
 misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
-which is never below the full floor; the verdict is the same either way.
+which is never below the full floor; the verdict is the same either way. The floor stored never exceeds the
+fit RMS it judges (``_within_fit``): on a fisheye the patches over-read the noise (an accepted fisheye
+artifact recorded 1.107 px for 0.10 px corner noise), and corners a model fits to R px carry at most R px of
+noise. Measured on seeded fisheye corners at 0.2 px per coordinate (0.283 px per corner; tests/workflows/
+sessions.py fisheye_capture, solved fisheye): 170 deg circular 0.422 -> 0.275 px, 150 deg full-frame 0.302 ->
+0.281 px.
 """
 
 from __future__ import annotations
@@ -168,11 +173,20 @@ def noise_floor_px(
     lens models are not solved. ``lanes``: as lens_floor_px."""
     reads = [detector_rms_px(object_points_per_view, image_points_per_view)]
     if reads[0] is not None and fit_rms_px is not None and not can_misfit(fit_rms_px):
-        return reads[0]
+        return _within_fit(reads[0], fit_rms_px)
     lens = lens_floor_px(object_points_per_view, image_points_per_view, image_size, lanes=lanes)
     reads.append(None if lens is None else lens[0])
     known = [r for r in reads if r is not None]
-    return min(known) if known else None
+    return _within_fit(min(known), fit_rms_px) if known else None
+
+
+def _within_fit(floor_px: float, fit_rms_px: float | None) -> float:
+    """The floor, never above the fit it judges: corners a model fits to ``fit_rms_px`` carry at most that
+    much noise, whatever a curved field makes the lens-free patches read (a floor above the fit cannot make it
+    a misfit, so no verdict moves; only the stored noise figure becomes true)."""
+    if fit_rms_px is None or not np.isfinite(fit_rms_px) or fit_rms_px <= 0:
+        return floor_px
+    return min(floor_px, float(fit_rms_px))
 
 
 def can_misfit(fit_rms_px: float) -> bool:

@@ -179,6 +179,8 @@ class _Pattern:
             pps = CHARUCO_TEXTURE_PX_PER_SQUARE
             sx, sy = board.squares
             img = make_charuco_board(board).generateImage((sx * pps, sy * pps), marginSize=0, borderBits=1)
+            if board.inverted:  # printed as a negative: white markers on black squares
+                img = 255 - img
             self.texture = (
                 BLACK_REFLECTANCE + (WHITE_REFLECTANCE - BLACK_REFLECTANCE) * img.astype(np.float32) / 255.0
             )

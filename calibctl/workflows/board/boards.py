@@ -31,6 +31,7 @@ from calibctl.config import Settings
 from calibctl.core.board.board_gauge import K_SIGMA, UNIT_SLIPS, compare_span
 from calibctl.errors import InputError, UsageError
 from calibctl.store import sqlite_reads
+from calibctl.workflows.board.gauge_failures import board_failures, check_reregistration
 from calibctl.workflows.store_admin import keys
 
 if TYPE_CHECKING:
@@ -73,6 +74,8 @@ class BoardRegistration:
     span_squares: int | None = None
     backing_mm: tuple[float, float] | None = None
     pattern_offset_mm: tuple[float, float] | None = None
+    inverted: bool = False
+    legacy_pattern: bool = False
 
 
 def parse_measured_on(text: str, today: dt.date) -> dt.date:
@@ -224,14 +227,18 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
         raise UsageError(f"unknown board kind '{reg.kind}'; choose {' or '.join(BOARD_KINDS)}")
     if not 0 < reg.square_mm < 1000:
         raise UsageError(f"--square-mm {reg.square_mm:g} must be a positive length below 1000 mm")
-    charuco_flags = reg.marker_mm is not None or reg.dictionary is not None
-    if reg.kind == "chessboard" and charuco_flags:
+    if reg.kind == "chessboard" and (reg.marker_mm is not None or reg.dictionary is not None):
         raise UsageError("--marker-mm and --dictionary apply to ChArUco boards only", "add --kind charuco")
+    if reg.kind == "chessboard" and (reg.inverted or reg.legacy_pattern):
+        raise UsageError("--inverted and --legacy apply to ChArUco boards only", "add --kind charuco")
     if reg.kind == "charuco" and (reg.marker_mm is None or reg.dictionary is None):
         raise UsageError("a ChArUco board needs --marker-mm and --dictionary (e.g. DICT_5X5_100)")
     marker_m = reg.marker_mm / 1000.0 if reg.marker_mm is not None else None
     try:  # the geometry the detector will use: checks the grid, the marker and the dictionary name
-        BoardSpec(reg.kind, reg.cols, reg.rows, reg.square_mm / 1000.0, marker_m, reg.dictionary)
+        BoardSpec(
+            reg.kind, reg.cols, reg.rows, reg.square_mm / 1000.0, marker_m, reg.dictionary,
+            reg.legacy_pattern, reg.inverted,
+        )  # fmt: skip
     except ValueError as exc:
         raise UsageError(f"board {reg.name}: {exc}") from exc
     measurement = _measurement(reg, now.date())
@@ -245,6 +252,8 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
             rows=reg.rows,
             marker_size_m=marker_m,
             dictionary=reg.dictionary,
+            inverted=reg.inverted,
+            legacy_pattern=reg.legacy_pattern,
             measurement=measurement,
             created_at=now,
             created_by=created_by,
@@ -293,6 +302,9 @@ def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
 
     board = build_board(reg, created_by=settings.operator)
     with Store.open(settings.db_url, signer=keys.signer_of(settings)) as store:
+        if store.board_revisions(board.name):
+            previous = store.get_board(board.name, None)
+            check_reregistration(previous, board, board_failures(store, previous.ref))
         return store.add_board(board)
 
 
@@ -330,6 +342,7 @@ def board_spec(board: BoardRevision) -> BoardSpec:
     m = board.measurement
     if board.kind == "charuco":
         return BoardSpec(
-            "charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary
-        )
+            "charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary,
+            board.legacy_pattern, board.inverted,
+        )  # fmt: skip
     return BoardSpec.chessboard(board.cols, board.rows, m.square_size_m)

@@ -81,6 +81,7 @@ from calibctl.core.capture.image_circle import (
 )
 from calibctl.core.capture.projection_gate import (
     ADVISORY_GATES,
+    cause_first,
     projection_gate,
     session_passed,
     solve_for_gate,
@@ -91,6 +92,7 @@ from calibctl.errors import InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.store.repository import Store
 from calibctl.workflows.board.boards import board_ref, board_spec
+from calibctl.workflows.board.gauge_failures import board_failures
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera import pattern_check
 from calibctl.workflows.camera.distance_gauge import ReferenceDistance, gauge_capture, gauge_model
@@ -883,7 +885,9 @@ def _projection(
         )
     except NumericalError as exc:
         solution = exc
-    return projection_gate(solution, image_size, region, settings.gates.projection_sigma_max_px)
+    limit = settings.gates.projection_sigma_max_px
+    gate = projection_gate(solution, image_size, region, limit)
+    return cause_first(gate, solution, obj, px, image_size, region, limit)
 
 
 def _build_session(
@@ -994,9 +998,11 @@ def calibrate(
     if model not in MODEL_CHOICES:
         raise UsageError(f"unknown model '{model}'", f"choose one of {', '.join(MODEL_CHOICES)}")
     checked_override(override_gauge)
-    if override_gauge is not None and request.reference_distance is None:
+    board_failed = override_gauge is not None and _board_has_failed_gauge(settings, request.board)
+    if override_gauge is not None and request.reference_distance is None and not board_failed:
         raise UsageError(
-            "--override-gauge overrides a failed distance gauge, and none is asked for",
+            f"--override-gauge overrides a failed metric gauge: none is asked for and board {request.board} "
+            "has no failed one",
             "give --reference-distance and --reference-source, or leave --override-gauge out",
         )
     # the gauge at capture judges the board distance through the lens this session is solved with
@@ -1015,10 +1021,17 @@ def calibrate(
             model=model,
             activate=activate,
             drop_outliers=drop_outliers,
-            override_gauge=None if captured.passed else override_gauge,
+            override_gauge=override_gauge if board_failed or not captured.passed else None,
         ),
     )
     return CalibrateResult(captured, solved)
+
+
+def _board_has_failed_gauge(settings: Settings, board: str) -> bool:
+    """Whether the board revision ``board`` (NAME or NAME@REV) has a failed metric gauge in the store."""
+    name, revision = board_ref(board)
+    with Store.open(settings.db_url) as store:
+        return bool(board_failures(store, store.get_board(name, revision).ref))
 
 
 def parse_now(text: str) -> dt.datetime:

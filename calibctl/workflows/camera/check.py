@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 import secrets
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -22,14 +23,17 @@ from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.check import CheckEvent, DistanceCheck, RegionCheck, ShiftCheck
 from calibctl.artifacts.common import utc_now
 from calibctl.config import Settings
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.capture import image_outcomes as outcomes_core
-from calibctl.core.check.recheck import MIN_CHECK_VIEWS, RecheckResult, Reference, recheck
-from calibctl.core.intrinsics.validation import N_OCTANTS, N_RINGS
+from calibctl.core.check.recheck import DEFAULT_ALPHA, MIN_CHECK_VIEWS, RecheckResult, Reference, recheck
+from calibctl.core.intrinsics.solve import residual_rms_px
+from calibctl.core.intrinsics.validation import N_OCTANTS, N_RINGS, refit_pose_residuals
 from calibctl.errors import InputError, UsageError
 from calibctl.workflows.board.boards import board_spec
 from calibctl.workflows.camera import capture_sources as sources
 from calibctl.workflows.camera.distance_gauge import (
     ReferenceDistance,
+    board_distances_m,
     detect_fixture_views,
     distance_reason,
     judge_distance,
@@ -145,6 +149,31 @@ def _event(
         ShiftCheck(parameter=p.name, shift=p.shift, sigma=p.sigma, z_limit=p.z_limit, passed=p.passed)
         for p in result.shifts
     ]
+    return _stamped(
+        art,
+        settings,
+        source,
+        n_images,
+        views,
+        view_rms_px=[float(x) for x in result.view_rms_px],
+        regions=regions,
+        shifts=shifts,
+        distance=distance,
+        alpha=result.alpha,
+        passed=result.passed and (distance is None or distance.passed),
+        reasons=reasons,
+    )
+
+
+def _stamped(
+    art: CalibrationArtifact,
+    settings: Settings,
+    source: sources.SourceSpec,
+    n_images: int,
+    views: list[outcomes_core.ImageOutcome],
+    **verdict: Any,
+) -> CheckEvent:
+    """A check event of ``art`` on ``views``: id, what, where, when and who, with the ``verdict`` fields."""
     return CheckEvent(
         check_id=secrets.token_hex(6),
         serial=art.serial,
@@ -157,13 +186,78 @@ def _event(
         image_size=art.image_size,
         images=n_images,
         views=[v.name for v in views],
-        view_rms_px=[float(x) for x in result.view_rms_px],
-        regions=regions,
-        shifts=shifts,
+        **verdict,
+    )
+
+
+ONE_POSE_PX = 3.0  # a fixture holds the board still: its pictures' corners agree to a few pixels at most
+
+
+def one_pose(views: list[outcomes_core.ImageOutcome]) -> None:
+    """A fixture check reads one pose of the board: pictures whose shared corners lie more than ONE_POSE_PX
+    apart (median) show several poses (InputError, exit 2, naming the two pictures)."""
+    first = views[0]
+    ids, px = first.corner_ids, first.corners_px
+    assert ids is not None and px is not None  # accepted views carry corners (detect_fixture_views)
+    where = {int(i): np.asarray(p) for i, p in zip(ids, px, strict=True)}
+    for v in views[1:]:
+        moved = [
+            float(np.linalg.norm(np.asarray(p) - where[int(i)]))
+            for i, p in zip(v.corner_ids, v.corners_px, strict=True)  # type: ignore[arg-type]
+            if int(i) in where
+        ]
+        shift = float(np.median(moved)) if moved else float("inf")
+        if shift > ONE_POSE_PX:
+            raise InputError(
+                f"the fixture pictures show the board in several poses: {v.name} is {shift:.1f} px from "
+                f"{first.name} (a fixture holds one pose; at most {ONE_POSE_PX:g} px); nothing was stored",
+                "give only the pictures taken with the board in the fixture; for the statistical re-test "
+                f"take at least {MIN_CHECK_VIEWS} pictures, tilted, across the image",
+            )
+
+
+def _fixture_event(
+    art: CalibrationArtifact,
+    settings: Settings,
+    spec: BoardSpec,
+    source: sources.SourceSpec,
+    n_images: int,
+    views: list[outcomes_core.ImageOutcome],
+    reference: ReferenceDistance,
+) -> CheckEvent:
+    """The metric gauge (seed chapter 0) from a few pictures of the board in its fixture: the board distance
+    through the stored lens against the surveyed one. The statistical re-test is not run (it needs
+    MIN_CHECK_VIEWS views of many poses) and the event says so."""
+    one_pose(views)
+    K, dist = np.array(art.camera_matrix), np.array(art.dist_coeffs)
+    recovered = board_distances_m(spec, views, K, dist, art.model.name)
+    distance = judge_distance(reference, recovered, [v.name for v in views])
+    obj = spec.object_points()
+    view_rms = [
+        residual_rms_px(
+            refit_pose_residuals(
+                obj[np.asarray(v.corner_ids)], np.asarray(v.corners_px), K, dist, art.model.name
+            )
+        )
+        for v in views
+    ]
+    return _stamped(
+        art,
+        settings,
+        source,
+        n_images,
+        views,
+        view_rms_px=[float(x) for x in view_rms],
+        regions=[],
+        shifts=[],
         distance=distance,
-        alpha=result.alpha,
-        passed=result.passed and (distance is None or distance.passed),
-        reasons=reasons,
+        alpha=DEFAULT_ALPHA,
+        passed=distance.passed,
+        reasons=[] if distance.passed else [distance_reason(distance)],
+        not_judged=[
+            f"the statistical re-test (residuals per region, focal and principal-point pulls): {len(views)} "
+            f"picture(s) of one pose; it needs {MIN_CHECK_VIEWS} views, tilted, across the image"
+        ],
     )
 
 
@@ -195,12 +289,16 @@ def check(settings: Settings, request: CheckRequest) -> CheckEvent:
         views, n_images = detect_fixture_views(
             spec, art.board.ref, source, art.image_size, art.ref, settings.jobs
         )
+        if len(views) < MIN_CHECK_VIEWS and request.reference_distance is not None:
+            event = _fixture_event(art, settings, spec, source, n_images, views, request.reference_distance)
+            return store.add_check(event)
         if len(views) < MIN_CHECK_VIEWS:  # refused before anything is stored: a FAIL here would be noise
             raise InputError(
                 f"cannot judge {art.ref} from {len(views)} board view(s) in {n_images} image(s): the "
                 f"check's statistics need at least {MIN_CHECK_VIEWS}; nothing was stored",
                 f"take {MIN_CHECK_VIEWS - len(views)} more pictures of the board (tilted, across the "
-                "image) and check again",
+                "image) and check again; or, with the board in a surveyed fixture, give --reference-distance "
+                "D+-S to judge the metric gauge from these",
             )
         obj = spec.object_points()
         ids = [np.asarray(v.corner_ids) for v in views]

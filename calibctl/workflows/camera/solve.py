@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -19,6 +20,7 @@ from calibctl import __version__
 from calibctl.artifacts.calibration import (
     UNSEALED,
     CalibrationArtifact,
+    CameraChange,
     CameraConsistency,
     DistortionModelInfo,
     HeldOut,
@@ -37,6 +39,7 @@ from calibctl.config import Settings
 from calibctl.core.capture.camera_split import CameraSplit, check_one_camera, spread_views
 from calibctl.core.capture.projection_gate import Region, parse_region
 from calibctl.core.intrinsics import solve as core_solve
+from calibctl.core.intrinsics.camera_change import STEP_PARAMETERS, ChangeVerdict, judge_change
 from calibctl.core.intrinsics.covariance import VIEW_FACTOR_RULE
 from calibctl.core.intrinsics.lens_checks import observed_region_px
 from calibctl.core.intrinsics.model_fit import noise_floor_px
@@ -57,9 +60,10 @@ from calibctl.core.intrinsics.validation import (
 from calibctl.core.lanes import Lanes
 from calibctl.errors import UsageError
 from calibctl.workflows.board.boards import board_spec
+from calibctl.workflows.board.gauge_failures import board_failures
 from calibctl.workflows.camera.image_circles import checked_image_circle, with_circle
 from calibctl.workflows.camera.verdict_lanes import verdict_lanes
-from calibctl.workflows.lint.lint import facts_from_document, lint_facts
+from calibctl.workflows.lint.lint import board_gauge_fact, facts_from_document, lint_facts
 from calibctl.workflows.store_admin.records import open_store
 
 MODEL_CHOICES = ("k1k2", "k1k2k3", "k1k2p1p2k3", "rational", "opencv-default", "fisheye", "auto")
@@ -185,6 +189,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
             [obj[i] for i in checked], [img[i] for i in checked], size, model_name, lanes=lanes
         )
     )
+    changed = lanes.start(partial(judge_change, solution, kept_obj, kept_img, size))  # this solve's fit
     try:
         holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
@@ -195,9 +200,11 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         detector_rms = noise_floor_px(obj, img, size, float(solution.rms_px), lanes=lanes)
     except BaseException:
         split.settle()
+        changed.settle()
         raise
     found = split.result()
     consistency = None if found is None else _consistency(found, [session.views[i].name for i in checked])
+    change = _change(changed.result(), [session.views[i].name for i in kept])
     return (
         model_name,
         solution,
@@ -210,6 +217,23 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         rejection,
         consistency,
         detector_rms,
+        change,
+    )
+
+
+def _change(verdict: ChangeVerdict | None, names: list[str]) -> CameraChange | None:
+    if verdict is None:
+        return None
+    return CameraChange(
+        first_view_after=names[verdict.split],
+        views=(verdict.split, len(names) - verdict.split),
+        before_px=dict(zip(STEP_PARAMETERS, verdict.before.tolist(), strict=True)),
+        after_px=dict(zip(STEP_PARAMETERS, verdict.after.tolist(), strict=True)),
+        focal_step=verdict.focal_step,
+        centre_step_px=verdict.centre_step_px,
+        chi2=verdict.chi2,
+        limit=verdict.limit,
+        changed=verdict.changed,
     )
 
 
@@ -331,9 +355,13 @@ def _rejected_corners(session: CaptureSession, rejection: CornerRejection) -> li
 
 
 def build_artifact(
-    session: CaptureSession, request: SolveRequest, settings: Settings
+    session: CaptureSession,
+    request: SolveRequest,
+    settings: Settings,
+    board_gauge: tuple[str, str] | None = None,
 ) -> tuple[CalibrationArtifact, list]:
-    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version)."""
+    """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version).
+    ``board_gauge``: lint's fact of a failed gauge on the session's board revision (``board_gauge_fact``)."""
     with verdict_lanes(settings.jobs) as lanes:
         (
             model_name,
@@ -347,6 +375,7 @@ def build_artifact(
             rejection,
             consistency,
             detector_rms,
+            change,
         ) = _solve_numbers(session, request, lanes)
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
@@ -383,6 +412,7 @@ def build_artifact(
             rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views])
         ),
         camera_consistency=consistency,
+        camera_change=change,
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,
@@ -397,7 +427,9 @@ def build_artifact(
         content_sha256=UNSEALED,
     )
     art = _with_required_region(art, settings)
-    findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.serial), settings.lint)
+    facts = facts_from_document(art.model_dump(mode="json"), art.serial)
+    facts.board_gauge = board_gauge
+    findings = lint_facts(facts, settings.lint)
     status = "rejected" if has_errors(findings) else "accepted"
     corner_outliers = [
         {
@@ -423,13 +455,17 @@ def checked_override(reason: str | None) -> str | None:
     return reason.strip()
 
 
-def _check_gauge_override(session: CaptureSession, reason: str | None) -> None:
-    """An override must have a failed gauge to override: anything else is a usage error, nothing stored."""
+def _check_gauge_override(
+    session: CaptureSession, reason: str | None, board_gauge: tuple[str, str] | None
+) -> None:
+    """An override must have a failed gauge to override (the session's own, or one of its board revision):
+    anything else is a usage error, nothing stored."""
     gauge = session.metric_gauge
-    if reason is not None and (gauge is None or gauge.distance.passed):
+    if reason is not None and (gauge is None or gauge.distance.passed) and board_gauge is None:
         what = "has no metric gauge" if gauge is None else "passed its metric gauge"
         raise UsageError(
-            f"--override-gauge: session {session.session_id} {what}; there is nothing to override",
+            f"--override-gauge: session {session.session_id} {what} and its board {session.board.ref} "
+            "has no failed one; there is nothing to override",
             "leave --override-gauge out",
         )
 
@@ -463,11 +499,14 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
                 f"session {session.session_id} was rejected at capture ({failed}); it cannot be solved",
                 "capture again following the gate hints, then solve the new session",
             )
-        _check_gauge_override(session, request.override_gauge)
+        board_gauge = board_gauge_fact(
+            session.board.ref, session.session_id, board_failures(store, session.board.ref)
+        )
+        _check_gauge_override(session, request.override_gauge, board_gauge)
         if request.report_dir is not None:  # the page of the version about to be stored must be free
             version = store.next_version(session.serial)
             report_path = report_workflow.ready_page(request.report_dir, session.serial, version)
-        art, corner_outliers = build_artifact(session, request, settings)
+        art, corner_outliers = build_artifact(session, request, settings, board_gauge)
         activate = request.activate and art.status == "accepted"
         stored = store.add_artifact(
             art,

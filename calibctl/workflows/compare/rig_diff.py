@@ -18,6 +18,7 @@ from calibctl.config import Settings
 from calibctl.core.compare.rig_diff import ALPHA, PairChange, camera_pairs, pair_changes
 from calibctl.core.extrinsics.rig_tree import Edge, RigTree, orient_tree
 from calibctl.errors import UsageError
+from calibctl.workflows.edges.kinds import EVIDENCE_SOURCES
 from calibctl.workflows.store_admin import records
 
 
@@ -100,11 +101,11 @@ def compare_rig_calibrations(a: RigCalibration, b: RigCalibration, ref_a: str, r
     edges = [
         (e.parent, e.child)
         for e in a.edges
-        if e.source in ("hand-eye", "lidar-board") and (e.parent, e.child) in frames_b
+        if e.source in EVIDENCE_SOURCES and (e.parent, e.child) in frames_b
     ]
     if not pairs and not edges:
         raise UsageError(
-            f"{ref_a} and {ref_b} share no camera pair and no hand-eye or LiDAR edge",
+            f"{ref_a} and {ref_b} share no camera pair and no evidence edge (hand-eye, LiDAR, IMU)",
             "compare two versions of one rig, or rigs with two cameras in common",
         )
     changes = pair_changes(tree_a, tree_b, [*pairs, *edges], no_depth=edges)

@@ -13,13 +13,14 @@ from typing import Any
 import numpy as np
 
 from calibctl.artifacts.handeye import HandEyeResult
+from calibctl.artifacts.imu import ImuEdgeResult
 from calibctl.artifacts.lidar import LidarEdgeResult
-from calibctl.artifacts.rig import RigCalibration, RigEdge
+from calibctl.artifacts.rig import Matrix4, RigCalibration, RigEdge
 from calibctl.core.extrinsics import se3
 from calibctl.errors import UsageError
 from calibctl.workflows.edges.tree import tree_edge
 
-Evidence = HandEyeResult | LidarEdgeResult
+Evidence = HandEyeResult | LidarEdgeResult | ImuEdgeResult
 Frames = Mapping[str, str] | None
 
 
@@ -108,22 +109,55 @@ def _lidar_sigmas(ev: LidarEdgeResult) -> tuple[float, float] | None:
     return None if t is None else (max(t.sigma_translation_mm), max(t.sigma_rotation_deg))
 
 
-def _lidar_tf(ev: LidarEdgeResult, cal: RigCalibration, frames: Frames) -> str:
+def _published_tf(
+    word: str, parent: str, child: str, T: Matrix4 | None, accepted: bool, cal: RigCalibration, frames: Frames
+) -> str:
+    """An evidence edge's T_parent_child as /tf_static YAML, its frames renamed by ``frames``; UsageError
+    for a rejected result (no transform is published)."""
     from calibctl.workflows.exports.rig_exports import tf_message
 
-    parent, child = ev.parent_frame, ev.child_frame
-    if ev.transform is None or ev.status != "accepted":
+    if T is None or not accepted:
         raise UsageError(
-            f"the LiDAR result {parent} -> {child} of {cal.rig}@{cal.version} was rejected: no transform "
+            f"the {word} result {parent} -> {child} of {cal.rig}@{cal.version} was rejected: no transform "
             "is published"
         )
-    w, x, y, z = ev.transform.quaternion_wxyz
+    w, x, y, z = se3.quaternion_from_rotation(np.array(T)[:3, :3])
     name = (frames or {}).get
-    t = [row[3] for row in ev.transform.T_lidar_cam[:3]]
+    t = [row[3] for row in T[:3]]
     return (
-        f"# calibctl lidar {parent} -> {child} of rig {cal.rig}@{cal.version} sha256 {cal.content_sha256}\n"
+        f"# calibctl {word.lower()} {parent} -> {child} of rig {cal.rig}@{cal.version} "
+        f"sha256 {cal.content_sha256}\n"
         + tf_message([(name(parent) or parent, name(child) or child, t, (x, y, z, w))])
     )
+
+
+def _lidar_tf(ev: LidarEdgeResult, cal: RigCalibration, frames: Frames) -> str:
+    T = None if ev.transform is None else ev.transform.T_lidar_cam
+    return _published_tf("LiDAR", ev.parent_frame, ev.child_frame, T, ev.status == "accepted", cal, frames)
+
+
+def _imu_edge(ev: ImuEdgeResult) -> RigEdge:
+    assert ev.estimate is not None
+    cov = np.array(ev.estimate.covariance)[:6, :6]  # (rotation, translation); td stays in the evidence
+    return tree_edge(ev.parent_frame, ev.child_frame, np.array(ev.estimate.T_imu_cam), cov, "camera-imu")
+
+
+def _imu_no_sigma(ev: ImuEdgeResult) -> str | None:
+    if ev.estimate is None:
+        return "no estimate"
+    if not np.all(np.linalg.eigvalsh(np.array(ev.estimate.covariance)[:6, :6]) > 0):
+        return "the (rotation, translation) block of the covariance is not positive definite"
+    return None
+
+
+def _imu_sigmas(ev: ImuEdgeResult) -> tuple[float, float] | None:
+    e = ev.estimate
+    return None if e is None else (max(e.sigma_translation_mm), max(e.sigma_rotation_deg))
+
+
+def _imu_tf(ev: ImuEdgeResult, cal: RigCalibration, frames: Frames) -> str:
+    T = None if ev.estimate is None else ev.estimate.T_imu_cam
+    return _published_tf("IMU", ev.parent_frame, ev.child_frame, T, ev.status == "accepted", cal, frames)
 
 
 HANDEYE = EdgeKind(
@@ -164,8 +198,31 @@ LIDAR = EdgeKind(
     loose_rotation_deg=0.5,
     loose_fix="add poses nearer the LiDAR and tilted further",
 )
-KINDS: tuple[EdgeKind, ...] = (HANDEYE, LIDAR)
+# loose-edge warnings of an IMU edge: a 60 s dance with rate reversals on every axis stays well under
+IMU = EdgeKind(
+    source="camera-imu",
+    label="camera-IMU",
+    evidence_field="imu",
+    evidence=ImuEdgeResult,
+    frames="imu -> camera: T_imu_cam, p_imu = R p_cam + t; td_s (t_imu = t_cam + td_s) in the evidence",
+    covariance_layout="rotation about IMU x, y, z (rad), translation x, y, z (m); left perturbation "
+    "(the first 6x6 block of the evidence's 7x7, whose last row and column are td)",
+    rule="imu",
+    rerun="calibctl imu solve ... --rig",
+    command="imu solve",
+    camera_ref=lambda ev: ev.camera,
+    tree_edge=_imu_edge,
+    no_sigma=_imu_no_sigma,
+    sigmas=_imu_sigmas,
+    tf=_imu_tf,
+    loose_translation_mm=10.0,
+    loose_rotation_deg=0.5,
+    loose_fix="record again with rate reversals on every axis and the board near and filling the image",
+)
+KINDS: tuple[EdgeKind, ...] = (HANDEYE, LIDAR, IMU)
 EVIDENCE_SOURCES = tuple(k.source for k in KINDS)
+# the lint rules saying a version was solved with a camera calibration that is no longer active
+STALE_RULES = ("rig-stale-member", *(f"{k.rule}-stale-member" for k in KINDS))
 
 
 def kind_of(ev: object) -> EdgeKind:

@@ -32,6 +32,7 @@ from calibctl.workflows.edges.kinds import (
     kind_of,
 )
 from calibctl.workflows.edges.tree import core_edge, edge_key
+from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
 from calibctl.workflows.store_admin.records import open_store
 
 
@@ -102,6 +103,34 @@ def check_target(
     """Before any solve (exit 2): the rig, its active version, the tree and the cameras (``checked``)."""
     with open_store(settings) as store:
         checked(store, rig_name, parent, child, serial, kind)
+
+
+def check_sensor_target(
+    settings: Settings, rig_name: str, frame: str, serial: str | None, kind: EdgeKind, option: str
+) -> None:
+    """Before any solve of a sensor edge ``frame -> serial`` (a LiDAR, an IMU; exit 2, nothing stored):
+    ``--serial`` given and a member of the rig, ``frame`` (the ``option`` that named it) a legal ROS name
+    declared in the rig and no camera, then ``checked``."""
+    if serial is None:
+        raise UsageError(
+            "--rig needs --serial CAMERA: the rig member whose active calibration the solve uses",
+            "the edge pins that calibration (not a camera_info file)",
+        )
+    if not is_ros_name(frame):
+        raise UsageError(f"{option} '{frame}' is not a legal ROS frame name", NAME_RULE)
+    with open_store(settings) as store:
+        rig = store.get_rig(rig_name)
+        if serial not in rig.cameras:
+            raise NotFoundError(
+                f"camera {serial} is not a member of rig {rig_name} (members {', '.join(rig.cameras)})",
+                f"pass --serial with one of them, or `calibctl rig add` a rig with {serial} in it",
+            )
+        if frame in rig.cameras:
+            raise UsageError(
+                f"{option} {frame} is a camera of rig {rig_name}",
+                f"name the {kind.label} frame, declared with `calibctl rig add ... --frame NAME`",
+            )
+        checked(store, rig_name, frame, serial, None, kind)
 
 
 def active_versions(store: object, serials: Sequence[str]) -> dict[str, int | None]:

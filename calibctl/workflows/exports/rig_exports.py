@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
+from calibctl.artifacts.imu import ImuNoiseModel
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
@@ -233,14 +234,17 @@ def kalibr_camchain(
     names: FrameNames | None = None,
     overlaps: Mapping[str, Collection[str]] | None = None,
     T_cam_imu: Mapping[str, np.ndarray] | None = None,
+    timeshift_cam_imu_s: float = 0.0,
 ) -> str:
     """Kalibr camchain YAML, cameras in tree order (root first); ``tree`` names cameras by serial.
 
     Every camera has ``cam_overlaps`` (indices of the cameras it shares views with: ``overlaps``, default its
     tree neighbours), as Kalibr's ConfigReader ``getCamOverlaps`` requires; ``rostopic`` is the camera's
     legal ROS topic (``names``). ``T_cam_imu`` (serial -> (4, 4), IMU points into the camera frame) adds
-    Kalibr's camchain-imucam fields ``T_cam_imu`` and ``timeshift_cam_imu`` (0.0: calibctl's hand-eye
-    estimates no time shift; its time-alignment gate checked the motions were synchronised)."""
+    Kalibr's camchain-imucam fields ``T_cam_imu`` and ``timeshift_cam_imu``: ``timeshift_cam_imu_s``, the
+    td_s of a camera-IMU edge (Kalibr's ``t_imu = t_cam + shift`` is calibctl's ``t_imu = t_cam + td_s``:
+    the same number), or 0.0 for an IMU joined by hand-eye (which estimates no time shift; its
+    time-alignment gate checked the motions were synchronised)."""
     by_name = {m.name: m for m in members}
     names = names or FrameNames.of([m.name for m in members])
     index = {name: i for i, name in enumerate(tree.frames)}
@@ -269,10 +273,27 @@ def kalibr_camchain(
             entry["T_cn_cnm1"] = tree.T(name, previous).tolist()
         if T_cam_imu is not None and name in T_cam_imu:
             entry["T_cam_imu"] = np.asarray(T_cam_imu[name], float).tolist()
-            entry["timeshift_cam_imu"] = 0.0
+            entry["timeshift_cam_imu"] = float(timeshift_cam_imu_s)
         doc[f"cam{i}"] = entry
         previous = name
     return _yaml(doc)
+
+
+def kalibr_imu(noise: ImuNoiseModel, rostopic: str = "/imu0") -> str:
+    """Kalibr's imu.yaml: the noise model a camera-IMU edge was weighted with (as given, continuous-time
+    densities in SI units), the IMU topic and its measured rate."""
+    return yaml.safe_dump(
+        {
+            "accelerometer_noise_density": noise.accel_noise_density,
+            "accelerometer_random_walk": noise.accel_random_walk,
+            "gyroscope_noise_density": noise.gyro_noise_density,
+            "gyroscope_random_walk": noise.gyro_random_walk,
+            "rostopic": rostopic,
+            "update_rate": round(noise.rate_hz, 3),
+        },
+        sort_keys=False,
+        default_flow_style=False,
+    )
 
 
 def solution_sha256(solution: RigSolution) -> str:

@@ -45,6 +45,7 @@ from calibctl.core.extrinsics.handeye_gates import (
 )
 from calibctl.core.extrinsics.handeye_refine import HandEyeFit, fit_handeye
 from calibctl.core.extrinsics.motion_synth import EXCITATIONS, synthesize_motions, synthesize_pose_log
+from calibctl.core.gate import GateResult
 from calibctl.errors import AlreadyExistsError, InputError, NumericalError, UsageError
 from calibctl.workflows.edges.kinds import handeye_tf_yaml
 from calibctl.workflows.handeye import handeye_io
@@ -84,6 +85,7 @@ class Source:
     board: str | None = None
     image_sha256: tuple[str, ...] = ()
     skipped: tuple[str, ...] = ()
+    gauge: GateResult | None = None  # metric-gauge of the board revision (handeye_robot.gauge_gate)
 
 
 def thresholds(settings: Settings, lever_arm_sigma_min: float | None = None) -> HandEyeThresholds:
@@ -170,6 +172,8 @@ def solve_result(
         raise UsageError(f"unknown method '{method}'", f"choose one of {', '.join(METHODS)}")
     # a robot arm's photos are taken at rest: a time offset is not the cause of a mismatch there
     gates = evaluate_handeye_gates(motions, th, static_poses=source.shape.startswith("robot-"))
+    if source.gauge is not None:  # a board whose gauge failed scales every translation: nothing to solve
+        gates = (source.gauge, *gates)
     fit = fit_handeye(motions, method) if all(g.passed for g in gates) else None
     if fit is not None and not np.isfinite(fit.T_a_b).all():
         raise NumericalError(

@@ -18,7 +18,9 @@ image of another size than the calibration, or a camera with no active calibrati
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -30,8 +32,10 @@ from calibctl.core.capture.image_outcomes import list_images
 from calibctl.core.extrinsics import se3
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
 from calibctl.core.extrinsics.handeye import Motions
+from calibctl.core.gate import GateResult
 from calibctl.errors import InputError, UsageError, named_list
 from calibctl.workflows.board.boards import board_ref, board_spec
+from calibctl.workflows.board.gauge_failures import failure_fix, failure_text
 from calibctl.workflows.diagnostics import diagnostics_io as dio
 from calibctl.workflows.handeye import handeye_io
 from calibctl.workflows.handeye.handeye import (
@@ -44,6 +48,9 @@ from calibctl.workflows.handeye.handeye import (
 )
 from calibctl.workflows.handeye.handeye import write_outputs as _write_outputs
 from calibctl.workflows.store_admin.records import open_store
+
+if TYPE_CHECKING:
+    from calibctl.store.gauge_failures import GaugeFailure
 
 PREFIX = "gripper"
 MIN_POSES = 3
@@ -136,11 +143,39 @@ def _board_poses(
 
 
 def _load_camera(settings: Settings, serial: str, board: str | None):
+    """The camera's active calibration, the board revision, and their failed metric gauges by revision."""
     with open_store(settings) as store:
         art = store.get_artifact(serial)  # NotFoundError (exit 2) without an active calibration
-        if board is None:
-            return art, art.board
-        return art, store.get_board(*board_ref(board))
+        revision = art.board if board is None else store.get_board(*board_ref(board))
+        return art, revision, store.failed_gauges({art.board.ref, revision.ref})
+
+
+def gauge_gate(art: CalibrationArtifact, failures: Mapping[str, Sequence[GaugeFailure]]) -> GateResult | None:
+    """``metric-gauge``: the board revision of the photos or of the camera's calibration has a failed gauge
+    (seed chapter 0: every translation is scaled by it). Passed when the calibration overrode it with a
+    recorded reason; None when there is nothing to judge."""
+    if not failures:
+        return None
+    ref, found = sorted(failures.items())[0]
+    message = failure_text(ref, found)
+    override = art.provenance.gauge_override
+    if override:
+        return GateResult(
+            "metric-gauge",
+            True,
+            abs(found[0].ratio - 1),
+            0.01,
+            f"{message}; overridden in {art.ref}: {override}",
+        )
+    return GateResult(
+        "metric-gauge",
+        False,
+        abs(found[0].ratio - 1),
+        0.01,
+        message,
+        reason="metric_gauge.board_failed",
+        hint=failure_fix(ref, f"calibrate {art.serial} with --override-gauge REASON"),
+    )
 
 
 def run_robot_handeye(
@@ -163,7 +198,7 @@ def run_robot_handeye(
     if not images.is_dir():
         raise InputError(f"--images {images} is not a folder")
     table, T_base_gripper = _read_robot_csv(path, images)
-    art, board = _load_camera(settings, serial, board_ref)
+    art, board, failures = _load_camera(settings, serial, board_ref)
     poses, skipped, hashes = _board_poses(table, images, art, board_spec(board))
     keep = [i for i, T in enumerate(poses) if T is not None]
     if len(keep) < MIN_POSES:
@@ -187,6 +222,7 @@ def run_robot_handeye(
         board=f"{board.name}@{board.revision}",
         image_sha256=tuple(hashes),
         skipped=tuple(skipped),
+        gauge=gauge_gate(art, failures),
     )
     result = solve_result(
         motions,

@@ -31,37 +31,15 @@ from calibctl.artifacts.lidar import (
     LidarTransform,
 )
 from calibctl.config import Settings
-from calibctl.errors import NotFoundError, UsageError
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import LIDAR
 from calibctl.workflows.edges.versions import StoredEdge
-from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
 from calibctl.workflows.lidar.lidar_solve import LidarOutcome, LidarRequest, ScanRow
-from calibctl.workflows.store_admin.records import open_store
 
 
 def check_target(settings: Settings, rig_name: str, lidar_frame: str, serial: str | None) -> None:
     """Before any solve (exit 2; module docstring)."""
-    if serial is None:
-        raise UsageError(
-            "--rig needs --serial CAMERA: the rig member whose active calibration poses the board",
-            "the edge pins that calibration (not a camera_info file)",
-        )
-    if not is_ros_name(lidar_frame):
-        raise UsageError(f"--lidar-frame '{lidar_frame}' is not a legal ROS frame name", NAME_RULE)
-    with open_store(settings) as store:
-        rig = store.get_rig(rig_name)
-        if serial not in rig.cameras:
-            raise NotFoundError(
-                f"camera {serial} is not a member of rig {rig_name} (members {', '.join(rig.cameras)})",
-                f"pass --serial with one of them, or `calibctl rig add` a rig with {serial} in it",
-            )
-        if lidar_frame in rig.cameras:
-            raise UsageError(
-                f"--lidar-frame {lidar_frame} is a camera of rig {rig_name}",
-                "name the LiDAR's own frame, declared with `calibctl rig add ... --frame NAME`",
-            )
-        versions.checked(store, rig_name, lidar_frame, serial, None, LIDAR)
+    versions.check_sensor_target(settings, rig_name, lidar_frame, serial, LIDAR, "--lidar-frame")
 
 
 def _sha256(path: Path) -> str:

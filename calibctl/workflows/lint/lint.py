@@ -14,9 +14,10 @@ that breaks a rule is a finding (exit 1 when any finding is an error).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import ValidationError
@@ -27,10 +28,15 @@ from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.config import LintThresholds, Settings
 from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
+from calibctl.core.intrinsics.camera_change import changed_hint
 from calibctl.errors import InputError, IntegrityError, NotFoundError, named_list
 from calibctl.signing import TrustedKeys
+from calibctl.workflows.board.gauge_failures import failure_fix, failure_text
 from calibctl.workflows.exports import formats, ros_camera_info, trace_header
 from calibctl.workflows.store_admin import keys
+
+if TYPE_CHECKING:
+    from calibctl.store.gauge_failures import GaugeFailure
 
 
 @dataclass
@@ -50,6 +56,7 @@ class CalibrationFacts:
     square_size_status: str | None = None  # measured | nominal | None (not recorded)
     square_size_m: float | None = None
     camera_consistency: dict[str, Any] | None = None  # the solve's two-camera check, calibctl artifacts only
+    camera_change: dict[str, Any] | None = None  # the solve's changed-camera check, calibctl artifacts only
     model_name: str | None = None  # calibctl artifacts only, as the three below
     fit_rms_px: float | None = None
     detector_rms_px: float | None = None
@@ -63,6 +70,8 @@ class CalibrationFacts:
     )
     metric_gauge: dict[str, Any] | None = None  # the capture's distance gauge, calibctl only
     gauge_override: str | None = None  # provenance.gauge_override: why a failed gauge was overridden
+    # the store's failed gauges of the board revision (workflows.board.gauge_failures): (board ref, message)
+    board_gauge: tuple[str, str] | None = None
     raw_numbers: list[float] = field(default_factory=list)
 
 
@@ -170,6 +179,7 @@ FACT_FIELDS: dict[str, Any] = {
     "board": {"measurement"},
     "held_out": {"fit_outer_ring_rms_px", "outer_ring_rms_px", "by_radius"},
     "camera_consistency": True,
+    "camera_change": True,
     "metric_gauge": True,
     "provenance": {"gauge_override"},
     "observed_region_px": True,
@@ -203,6 +213,7 @@ def facts_from_document(data: dict[str, Any], source: str, *, validated: bool = 
         square_size_status=measurement.get("status"),
         square_size_m=measurement.get("square_size_m"),
         camera_consistency=data.get("camera_consistency"),
+        camera_change=data.get("camera_change"),
         model_name=(data.get("model") or {}).get("name"),
         fit_rms_px=data.get("rms_px"),
         detector_rms_px=data.get("detector_rms_px"),
@@ -264,7 +275,7 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
     gauge = facts.metric_gauge or {}
     d = gauge.get("distance") or {}
     if not d or d.get("passed", True):
-        return []
+        return _board_gauge_rule(facts)
     lo, hi = d.get("ratio_limits") or (0.99, 1.01)
     message = (
         f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
@@ -292,6 +303,19 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
             "is wrong: solve with --override-gauge REASON (recorded in the calibration)",
         )
     ]
+
+
+def _board_gauge_rule(facts: CalibrationFacts) -> list[Finding]:
+    """``metric-gauge`` of the board revision: a gauge that failed with this board revision (another session,
+    another camera, a check) fails every calibration made with it until the board is re-registered; an
+    override with its reason keeps it as a warning."""
+    if facts.board_gauge is None:
+        return []
+    board_ref, message = facts.board_gauge
+    if facts.gauge_override:
+        overridden = f"{message}; overridden: {facts.gauge_override}"
+        return [Finding(rule="metric-gauge", severity="warning", message=overridden)]
+    return [Finding(rule="metric-gauge", severity="error", message=message, fix=failure_fix(board_ref))]
 
 
 def _document_rules(data: dict[str, Any], source: str) -> list[Finding]:
@@ -407,6 +431,30 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
     ]
 
 
+def _camera_change_rule(facts: CalibrationFacts) -> list[Finding]:
+    """``camera-changed``: the views before and after a point in the capture disagree (a knocked or refocused
+    lens); the calibration is a blend of two cameras, several sigma from both."""
+    check = facts.camera_change
+    if not check or not check.get("changed"):
+        return []
+    before, after = check["before_px"], check["after_px"]
+    n_before, n_after = check["views"]
+    return [
+        Finding(
+            rule="camera-changed",
+            severity="error",
+            value=check["chi2"],
+            threshold=check["limit"],
+            message=f"the camera changed during the session: the {n_before} views before "
+            f"{check['first_view_after']} and the {n_after} from it on solve to fx {before['fx']:.1f} / "
+            f"{after['fx']:.1f} px, cx {before['cx']:.1f} / {after['cx']:.1f}, cy {before['cy']:.1f} / "
+            f"{after['cy']:.1f} px (chi2 {check['chi2']:.1f} over each side's own sigma, limit "
+            f"{check['limit']:g}); this calibration is a blend of the two",
+            fix=changed_hint(check["focal_step"], check["centre_step_px"]),
+        )
+    ]
+
+
 def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "header") -> list[Finding]:
     """Every rule that applies to one calibration, in a stable order.
 
@@ -443,6 +491,7 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
         findings += _outer_ring_rule(facts, limits)
         findings += _provenance_rule(facts)
     findings += _gauge_rule(facts)
+    findings += _camera_change_rule(facts)
     findings += _one_camera_rule(facts)
     findings += _misfit_rule(facts)
     findings += adopt(lens_checks.check_aspect_ratio(K, limits.aspect_max_frac))
@@ -477,22 +526,25 @@ def lint_facts(facts: CalibrationFacts, limits: LintThresholds, trace: str = "he
 # Rules whose fix assumes the lens model describes the lens: when model-misfit fails, their numbers are the
 # misfit's symptoms (k1k2 on a fisheye also scatters sigma, the outer ring and the view groups) and their
 # own fixes send the user the wrong way ("make the corners sharp", "two cameras").
-_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "distortion-foldover")
+_MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "camera-changed", "distortion-foldover")
 
 
 def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
-    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a
-    ``narrow`` lens (below model_fit.WIDE_FIELD_DEG) with one-camera failed too, the misfit is the symptom:
-    no lens model is wrong there, the intrinsics changed during the capture (a ~60 deg webcam whose focus
-    drifted), so model-misfit and its symptoms point at one-camera's fix instead."""
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a ``narrow``
+    lens (below model_fit.WIDE_FIELD_DEG) with camera-changed or one-camera failed too, the misfit is the
+    symptom: no lens model is wrong there, the intrinsics changed during the capture (a drifting
+    ~60 deg webcam), so model-misfit and its symptoms point at that rule's fix instead (camera-changed's
+    first)."""
     misfit = next((f for f in findings if f.rule == "model-misfit"), None)
     if misfit is None:
         return findings
-    drift = next((f for f in findings if f.rule == "one-camera"), None)
+    drift = next((f for f in findings if f.rule == "camera-changed"), None) or next(
+        (f for f in findings if f.rule == "one-camera"), None
+    )
     if narrow and drift is not None:
         first = (
-            f"first fix one-camera ({drift.fix}), then judge this rule again: a lens this narrow misfits when "
-            "its intrinsics change during the capture"
+            f"first fix {drift.rule} ({drift.fix}), then judge this rule again: a lens this narrow misfits "
+            "when its intrinsics change during the capture"
         )
         return [
             f.model_copy(update={"fix": first})
@@ -633,9 +685,12 @@ def trace_of(evidence: dict[str, Any], header: object, rig_header: object) -> st
     return "header" if evidence else "rig" if header is None and rig_header is not None else "none"
 
 
-def lint_artifact(art: CalibrationArtifact, limits: LintThresholds) -> LintResult:
-    """Every rule for a stored calibration (rig members use it too)."""
-    return _lint_stored(art, limits, None)
+def lint_artifact(
+    art: CalibrationArtifact, limits: LintThresholds, gauge_failures: Sequence[GaugeFailure] = ()
+) -> LintResult:
+    """Every rule for a stored calibration (rig members use it too); ``gauge_failures``: the store's failed
+    gauges of its board revision (``Store.failed_gauges``)."""
+    return _lint_stored(art, limits, None, gauge_failures)
 
 
 def lint_files(paths: list[Path], limits: LintThresholds) -> list[LintResult]:
@@ -660,15 +715,30 @@ def _no_active_version(serial: str, statuses: dict[int, str]) -> LintResult:
     return LintResult(source=serial, kind="calibctl", findings=[finding])
 
 
-def _lint_stored(art: CalibrationArtifact, limits: LintThresholds, trusted: TrustedKeys | None) -> LintResult:
+def board_gauge_fact(
+    board_ref: str, session_id: str | None, failures: Sequence[GaugeFailure]
+) -> tuple[str, str] | None:
+    """``CalibrationFacts.board_gauge`` from the store's failed gauges of the board revision, leaving out the
+    calibration's own session (its own gauge is ``metric_gauge``)."""
+    others = [f for f in failures if f.record != f"session {session_id}"]
+    return (board_ref, failure_text(board_ref, others)) if others else None
+
+
+def _lint_stored(
+    art: CalibrationArtifact,
+    limits: LintThresholds,
+    trusted: TrustedKeys | None,
+    gauge_failures: Sequence[GaugeFailure] = (),
+) -> LintResult:
     """Every rule for a stored version. Its schema and integrity were checked when the store read it, so the
-    document rules (schema, content-hash) are not run again."""
+    document rules (schema, content-hash) are not run again. ``gauge_failures``: the store's failed gauges of
+    its board revision."""
     data = art.model_dump(
         mode="json", include=FACT_FIELDS
     )  # the fact fields only: a third of the dump's cost
-    findings = _status_rule(art.status, art.ref) + lint_facts(
-        facts_from_document(data, art.ref, validated=True), limits
-    )
+    facts = facts_from_document(data, art.ref, validated=True)
+    facts.board_gauge = board_gauge_fact(art.board.ref, art.provenance.session_id, gauge_failures)
+    findings = _status_rule(art.status, art.ref) + lint_facts(facts, limits)
     result = LintResult(art.ref, "calibctl", findings)
     if trusted is not None:
         signature_rule(result, art, trusted)
@@ -702,6 +772,9 @@ def lint_store(
                 f"nothing to lint: the store {store.url} holds no calibrations",
                 "check --db / CALIBCTL_DB, or calibrate a camera first",
             )
+        gauges = store.failed_gauges(
+            a.board.ref for a in active.values() if isinstance(a, CalibrationArtifact)
+        )
     results = []
     for name in sorted([*active, *inactive]):
         found_or_error = active.get(name)
@@ -713,7 +786,8 @@ def lint_store(
             )
             results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
         else:
-            results.append(_lint_stored(found_or_error, settings.lint, trusted))
+            found = found_or_error
+            results.append(_lint_stored(found, settings.lint, trusted, gauges.get(found.board.ref, ())))
     return results
 
 

@@ -51,6 +51,12 @@ if (
     from calibctl.artifacts.handeye import HandEyeResult
     from calibctl.artifacts.rig import RigCalibration
 
+KALIBR_IMU_FIELDS = {
+    "accelerometer_noise_density",
+    "accelerometer_random_walk",
+    "gyroscope_noise_density",
+    "gyroscope_random_walk",
+}
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
 _FIX_FRAME = (
     "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
@@ -89,7 +95,7 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | tf | urdf | kalibr | mrcal | opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | tf | urdf | kalibr | kalibr-imu | mrcal | opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -106,6 +112,8 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if isinstance(data.get("transforms"), list):
         return "tf"
+    if set(data) >= KALIBR_IMU_FIELDS:
+        return "kalibr-imu"
     if data and all(
         k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()
     ):
@@ -276,6 +284,9 @@ def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Tr
             findings.append(
                 _error("frames", f"{name}: rostopic '{cam['rostopic']}' is not a legal ROS topic", _FIX_FRAME)
             )
+        shift = cam.get("timeshift_cam_imu", 0.0)
+        if isinstance(shift, bool) or not isinstance(shift, int | float) or not np.isfinite(shift):
+            findings.append(_error("kalibr", f"{name}: timeshift_cam_imu {shift!r} is not a number (s)", fix))
         for key in ("T_cn_cnm1", "T_cam_imu"):
             if key in cam:
                 T, bad = _finite_matrix(cam[key], (4, 4), f"{name}.{key}")
@@ -291,6 +302,17 @@ def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Tr
         findings += [
             f.model_copy(update={"message": f"{name}: {f.message}"}) for f in trace.lint(facts, limits)
         ]
+    return findings
+
+
+def _kalibr_imu(data: dict[str, Any]) -> list[Finding]:
+    """Kalibr's imu.yaml: every noise field a positive finite number (Kalibr divides by them)."""
+    fix = "export it again with `calibctl rig export RIG --format kalibr-imu`"
+    findings = []
+    for key in sorted(KALIBR_IMU_FIELDS):
+        v = data[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
+            findings.append(_error("kalibr", f"{key} = {v!r} is not a positive number", fix))
     return findings
 
 
@@ -511,6 +533,8 @@ def lint_rig_file(
         findings += _mrcal(data["mrcal"], source, limits, trace)
     elif kind == "kalibr":
         findings += _kalibr(data, source, limits, trace)
+    elif kind == "kalibr-imu":
+        findings += _kalibr_imu(data)
     else:
         findings += _opencv_stereo(text, source, limits, trace)
     return [LintResult(source, kind, findings)]

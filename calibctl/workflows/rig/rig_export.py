@@ -1,7 +1,8 @@
 """``calibctl rig export``: one stored rig version as the files a robot loads (workflows.exports.rig_exports),
 named by the robot's frames (workflows.exports.frame_names), each stamped with the rig's trace header.
 
-- single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr) -> ``export`` returns the text;
+- single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr, kalibr-imu) -> ``export`` returns the
+  text (kalibr-imu: Kalibr's imu.yaml of the version's camera-IMU edge);
 - ``ros`` -> ``export_files``: one camera_info file per camera (ROS reads only the first YAML document of
   a file, so two cameras in one file made a stereo driver run the left calibration on the right camera);
 - ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle);
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from calibctl import __version__
+from calibctl.artifacts.imu import ImuEdgeResult
 from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
@@ -27,14 +29,25 @@ from calibctl.core.extrinsics.rig_tree import RigTree
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
-from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.kinds import STALE_RULES, evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.exports import bundle, lut, mrcal_model, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import FrameNames, parse_frame_map
 from calibctl.workflows.rig.rig_lint import parse_rig_ref, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
-EXPORT_FORMATS = ("json", "opencv", "ros", "tf", "urdf", "urdf-joints", "kalibr", "bundle", "lut")
+EXPORT_FORMATS = (
+    "json",
+    "opencv",
+    "ros",
+    "tf",
+    "urdf",
+    "urdf-joints",
+    "kalibr",
+    "kalibr-imu",
+    "bundle",
+    "lut",
+)
 FILE_FORMATS = ("ros", "bundle", "lut")  # written as several files: export_files
 ROS_ONE_FILE_FIX = (
     "ROS reads only the first YAML document of a file (a stereo driver would load the left "
@@ -70,9 +83,22 @@ class RigExport:
             self.ref, self.cal.status, self.cal.content_sha256, body, members, self.cal.signature
         )
 
+    def imu_edge(self) -> ImuEdgeResult | None:
+        """The accepted camera-IMU evidence of this version (its edge is in the tree), if any."""
+        return next((ev for ev in self.cal.imu if ev.status == "accepted" and ev.estimate is not None), None)
+
+    def imu_timeshift_s(self) -> float:
+        """Kalibr's timeshift_cam_imu: the camera-IMU edge's td_s (the rig's cameras share one clock), or
+        0.0 for an IMU joined by hand-eye."""
+        ev = self.imu_edge()
+        return 0.0 if ev is None or ev.estimate is None else ev.estimate.td_s
+
     def imu_transforms(self) -> dict[str, np.ndarray] | None:
-        """serial -> T_cam_imu when the tree has one IMU frame (a declared frame named ``*imu*``)."""
-        imus = [f for f in self.full_tree.frames if f not in self.cameras.frames and "imu" in f.lower()]
+        """serial -> T_cam_imu when the tree has one IMU frame (a camera-IMU edge's, or a declared frame
+        named ``*imu*``)."""
+        ev = self.imu_edge()
+        named = [f for f in self.full_tree.frames if f not in self.cameras.frames and "imu" in f.lower()]
+        imus = list(dict.fromkeys(([ev.parent_frame] if ev is not None else []) + named))
         if len(imus) > 1:
             raise UsageError(
                 f"rig {self.ref} has several IMU frames ({', '.join(imus)}); Kalibr's camchain takes one"
@@ -92,19 +118,15 @@ class RigExport:
 def _refuse_unloadable(
     cal: RigCalibration, findings: list[Finding], allow_rejected: bool, allow_stale: bool
 ) -> None:
-    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or hand-eye / LiDAR camera) exit 1."""
+    """A rejected version is exit 2; one `rig lint` fails now for a stale member (or the camera of an
+    evidence edge) exit 1."""
     ref = f"rig {cal.rig}@{cal.version}"
     if cal.status != "accepted" and not allow_rejected:
         raise UsageError(
             f"{ref} is {cal.status}: a robot must not load it",
             hint="export the active version, or pass --allow-rejected to inspect it",
         )
-    stale = [
-        f
-        for f in findings
-        if f.severity == "error"
-        and f.rule in ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
-    ]
+    stale = [f for f in findings if f.severity == "error" and f.rule in STALE_RULES]
     if stale and not (allow_stale or allow_rejected):
         raise VerdictFailed(
             f"{ref} fails `calibctl rig lint` now: {stale[0].message}",
@@ -172,8 +194,19 @@ def _text(x: RigExport, fmt: str) -> str:
         return x.stamp(rig_exports.urdf_joints(x.names.tree(x.full_tree)))
     if fmt == "kalibr":
         return x.stamp(
-            rig_exports.kalibr_camchain(x.members, x.cameras, x.names, x.overlaps(), x.imu_transforms())
+            rig_exports.kalibr_camchain(
+                x.members, x.cameras, x.names, x.overlaps(), x.imu_transforms(), x.imu_timeshift_s()
+            )
         )
+    if fmt == "kalibr-imu":
+        ev = x.imu_edge()
+        if ev is None:
+            raise NotFoundError(
+                f"rig {x.ref} has no accepted camera-IMU edge: no imu.yaml to export",
+                f"solve one with `calibctl imu solve RECORDING --serial CAM --rig {x.cal.rig}`",
+            )
+        frame = x.names.frames.get(ev.parent_frame, ev.parent_frame)
+        return x.stamp(rig_exports.kalibr_imu(ev.noise, f"/{frame}"))
     # opencv
     return x.stamp(
         rig_exports.opencv_stereo(by_name[x.left], by_name[x.right], x.T_right_left()), (x.left, x.right)
@@ -250,6 +283,8 @@ def _bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
     files["tf_static.yaml"] = _text(x, "tf")
     files["rig.urdf"] = _text(x, "urdf")
     files["camchain.yaml"] = _text(x, "kalibr")
+    if x.imu_edge() is not None:
+        files["imu.yaml"] = _text(x, "kalibr-imu")
     files["rig.json"] = _text(x, "json")
     members = []
     for m in x.members:

@@ -56,7 +56,15 @@ from calibctl.errors import CalibctlError, InconsistentDataError, InputError, Nu
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
 from calibctl.workflows.camera.capture import classify_photos, refuse_another_pattern
+from calibctl.workflows.camera.distance_gauge import (
+    ReferenceDistance,
+    board_distances_m,
+    detect_fixture_views,
+    distance_reason,
+    judge_distance,
+)
 from calibctl.workflows.lint.lint import adopt
+from calibctl.workflows.rig import rig_video
 from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
 from calibctl.workflows.rig.rig_members import member_findings
 
@@ -80,6 +88,16 @@ PLAUSIBLE_SQUARE_MM = (
 
 
 @dataclass(frozen=True)
+class RigGauge:
+    """The metric gauge of a rig capture or solve: ``camera``'s pictures of the board in a fixture at
+    ``reference`` (``--reference-distance D+-S --reference-source SERIAL=SRC``)."""
+
+    camera: str
+    reference: ReferenceDistance
+    fixture: str
+
+
+@dataclass(frozen=True)
 class RigFolderRun:
     """Everything ``solve-folders`` found; ``solution`` etc. are None when the gate failed or the frames
     contradict each other (then ``findings`` holds ``rig-rigid``)."""
@@ -98,6 +116,8 @@ class RigFolderRun:
     member_verdicts: Mapping[str, tuple[Finding, ...]] | None = None  # rig_members; None: model-misfit only
     designs: tuple[DesignBaseline, ...] = ()
     square_mm: float | None = None  # the board's square as given (the scale of every length)
+    timing: Mapping[str, object] | None = None  # rig_video.timing_json when the frames were paired by time
+    refused: tuple[Finding, ...] = ()  # members that could not be calibrated, left out of the rig
 
     @property
     def passed(self) -> bool:
@@ -131,6 +151,34 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
             f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera"
         )
     return out
+
+
+def typed_spec(
+    kind: str,
+    cols: int,
+    rows: int,
+    square_mm: float,
+    marker_mm: float | None = None,
+    dictionary: str | None = None,
+    inverted: bool = False,
+    legacy: bool = False,
+) -> BoardSpec:
+    """The board as the command line types it (UsageError, exit 2, naming what is wrong)."""
+    charuco = marker_mm is not None or dictionary is not None or inverted or legacy
+    if kind == "chessboard" and charuco:
+        raise UsageError(
+            "--marker-mm, --dictionary, --inverted and --legacy describe a ChArUco board",
+            "add --kind charuco",
+        )
+    if kind == "charuco" and (marker_mm is None or dictionary is None):
+        raise UsageError("a ChArUco board needs --marker-mm and --dictionary (e.g. DICT_4X4_1000)")
+    try:
+        return BoardSpec(
+            kind, cols, rows, square_mm / 1e3, None if marker_mm is None else marker_mm / 1e3, dictionary,
+            legacy, inverted,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise UsageError(f"bad board: {exc}") from exc
 
 
 def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, capture_sources.ImageSet]:
@@ -238,10 +286,16 @@ def solve_rig_folders(
     limits: LintThresholds | None = None,
     settings: Settings | None = None,
     designs: Sequence[DesignBaseline] = (),
+    gauge: RigGauge | None = None,
+    timestamps: Path | None = None,
+    time_tolerance_ms: float = rig_video.DEFAULT_TIME_TOLERANCE_MS,
 ) -> RigFolderRun:
-    """Run the folder flow (module docstring). The first source is the root camera; ``settings`` the station's
-    (gates and lint; default: ``load_settings()``), ``limits`` its lint thresholds when given apart; ``designs``
-    the pairs' design baselines (``baseline-design``).
+    """Run the folder flow (module docstring); a video per camera, or a ``timestamps`` file, pairs the frames
+    by time within ``time_tolerance_ms`` instead (workflows.rig.rig_video). The first source is the root
+    camera; ``settings`` the station's (gates and lint; default: ``load_settings()``), ``limits`` its lint
+    thresholds when given apart; ``designs`` the pairs' design baselines (``baseline-design``); ``gauge``:
+    the metric gauge, judged through that camera's lens as the run leaves it (``metric-gauge``, seed
+    chapter 0: the typed square size scales every baseline and no residual shows it).
 
     Raises:
         InputError, UsageError: a source is missing, holds no photos, is a video or camera, a glob or list
@@ -253,6 +307,11 @@ def solve_rig_folders(
     if model != "auto":
         get_model(model)  # an unknown name is a usage error before any photo is read
     cameras = tuple(sources)
+    if gauge is not None and gauge.camera not in cameras:
+        raise UsageError(
+            f"--reference-source names {gauge.camera}, not one of the cameras ({', '.join(cameras)})",
+            "give the fixture pictures of one camera: --reference-source SERIAL=FOLDER",
+        )
     for d in designs:
         if d.a not in cameras or d.b not in cameras or d.a == d.b:
             raise UsageError(
@@ -262,47 +321,32 @@ def solve_rig_folders(
     settings = settings or load_settings()
     if limits is not None:
         settings = settings.model_copy(update={"lint": limits})
-    sets = {name: camera_photos(name, source) for name, source in sources.items()}
-    photos = {name: images.paths for name, (_, images) in sets.items()}
-    same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
-    identity.refuse(
-        [
-            replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
-            for f in identity.shared_images(same_files)
-        ],
-        "rig solve-folders",
-    )  # before any detection
-    match = match_frames(photos)
+    timed = None
+    if rig_video.is_timed(sources, timestamps):
+        timed = rig_video.capture_timed(sources, spec, timestamps, time_tolerance_ms, workers)
+        match, outcomes = timed.match, {name: list(c.outcomes) for name, c in timed.cameras.items()}
+        gathered = {name: (c.source, c.max_gray) for name, c in timed.cameras.items()}
+    else:
+        match, outcomes, gathered = _photo_frames(sources, spec, workers)
+    if not match.frames and timed is None:
+        raise InputError(
+            "no photos of different cameras share a frame key, so nothing pairs up", hint=_NO_FRAMES_HINT
+        )
     if not match.frames:
         raise InputError(
-            "no photos of different cameras share a frame key, so nothing pairs up",
-            hint="name the photos so that the last number in the name is the frame number or "
-            "timestamp, the same for photos taken together (left_0042.png / right_0042.png)",
+            f"no frames of different cameras lie within {time_tolerance_ms:g} ms of each other, so nothing "
+            "pairs up",
+            hint="check that the timestamps belong to these videos, or widen --time-tolerance-ms",
         )
-    classified = {name: classify_photos(photos[name], spec, workers=workers) for name in cameras}
-    outcomes = {name: found for name, (found, _) in classified.items()}
-    for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
-        mixed = capture_sources.mixed_sizes_error(
-            source,
-            {n: o.image_size for n, o in zip(images.names, outcomes[name], strict=True) if o.image_size},
-        )
-        if mixed is not None:
-            raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
-        readable = [o for o in outcomes[name] if o.status != UNREADABLE]
-        if readable and spec.kind == CHESSBOARD:  # the board given is the board seen (as capture checks)
-            refuse_another_pattern(
-                spec,
-                f"--cols {spec.cols} --rows {spec.rows}",
-                "",
-                f"photos of camera {name}",
-                readable,
-                given="--cols/--rows",
-            )
-    members, fits = [], {}
+    members, fits, refused = [], {}, {}
     for name in cameras:
         given = (intrinsics or {}).get(name)
         if given is None:
-            member, fits[name] = self_calibrated(name, outcomes[name], spec, model)
+            try:
+                member, fits[name] = self_calibrated(name, outcomes[name], spec, model)
+            except NumericalError as exc:  # refused by name; the others go on if the rig stays connected
+                refused[name] = exc
+                continue
             members.append(member)
             continue
         sizes = {o.image_size for o in outcomes[name] if o.image_size is not None}
@@ -314,9 +358,10 @@ def solve_rig_folders(
                 hint="use the calibration made at this resolution, or re-calibrate the camera",
             )
         members.append(given)
+    cameras, match, outcomes = _without(refused, cameras, match, outcomes)
     verdicts = {
         name: tuple(
-            member_findings(settings, name, sets[name][0], outcomes[name], classified[name][1], spec, model)
+            member_findings(settings, name, gathered[name][0], outcomes[name], gathered[name][1], spec, model)
         )
         for name in fits
     }
@@ -342,10 +387,133 @@ def solve_rig_folders(
         member_verdicts=verdicts,
         designs=tuple(designs),
         square_mm=spec.square_size_m * 1e3,
+        timing=rig_video.timing_json(timed) if timed is not None else None,
+        refused=tuple(refused_finding(name, exc) for name, exc in refused.items()),
     )
-    if not gate.passed:
-        return run
-    return judged_solve(run, model, refine_intrinsics, settings.lint)
+    judged = run
+    if gate.passed:
+        solved = judged_solve(run, model, refine_intrinsics, settings.lint)
+        judged = replace(solved, findings=(*run.refused, *solved.findings))
+    if gauge is None:
+        return judged
+    if gauge.camera not in cameras:
+        left_out = Finding(
+            rule="metric-gauge",
+            severity="error",
+            message=f"{gauge.camera} was left out of the rig, so its fixture pictures could not be judged",
+            fix="give the fixture pictures of a camera the rig keeps: --reference-source SERIAL=FOLDER",
+        )
+        return replace(judged, findings=(*judged.findings, left_out))
+    i = cameras.index(gauge.camera)
+    fit = fits.get(gauge.camera)
+    finding = gauge_finding(gauge, spec, members[i], fit.model if fit else model, workers)
+    return replace(judged, findings=(*judged.findings, *finding))
+
+
+def gauge_finding(
+    gauge: RigGauge, spec: BoardSpec, member: MemberIntrinsics, model: str, workers: int | None
+) -> list[Finding]:
+    """``metric-gauge`` of a folder rig: the fixture pictures' board distance through ``member``'s lens
+    against the surveyed one (an error outside 0.99-1.01, nothing when it passes). CalibctlError (exit 2)
+    when it cannot be judged (``distance_gauge.judge_distance``, ``detect_fixture_views``)."""
+    source = capture_sources.resolve_source(gauge.fixture)
+    views, _ = detect_fixture_views(
+        spec, "the board", source, member.image_size, f"camera {gauge.camera}", workers
+    )
+    recovered = board_distances_m(spec, views, member.camera_matrix, member.dist_coeffs, model)
+    d = judge_distance(gauge.reference, recovered, [v.name for v in views])
+    if d.passed:
+        return []
+    return [
+        Finding(
+            rule="metric-gauge",
+            severity="error",
+            value=d.ratio,
+            message=f"{gauge.camera}: {distance_reason(d)}: every baseline is scaled by it",
+            fix="measure the squares (calipers and a long span) and give that --square-mm, or register the "
+            "board (`calibctl board add`) and use `rig capture` + `rig solve`; check the fixture's surveyed "
+            "distance",
+        )
+    ]
+
+
+_NO_FRAMES_HINT = (
+    "name the photos so that the last number in the name is the frame number or timestamp, the same for "
+    "photos taken together (left_0042.png / right_0042.png)"
+)
+MEMBER_REFUSED = "rig-member-refused"
+
+
+def _photo_frames(
+    sources: Mapping[str, Path], spec: BoardSpec, workers: int | None
+) -> tuple[
+    FrameMatch, dict[str, list[ImageOutcome]], dict[str, tuple[capture_sources.SourceSpec, np.ndarray | None]]
+]:
+    """Photo folders paired by the last number in their names: the match, each camera's outcomes, and its
+    source and half-size maximum."""
+    sets = {name: camera_photos(name, source) for name, source in sources.items()}
+    photos = {name: images.paths for name, (_, images) in sets.items()}
+    same_files = {name: [str(Path(p).resolve()) for p in paths] for name, paths in photos.items()}
+    identity.refuse(
+        [
+            replace(f, message=f.message.replace("identical image(s) (same sha256;", "of the same files ("))
+            for f in identity.shared_images(same_files)
+        ],
+        "rig solve-folders",
+    )  # before any detection
+    match = match_frames(photos)
+    if not match.frames:
+        return match, {}, {}
+    classified = {name: classify_photos(photos[name], spec, workers=workers) for name in sources}
+    outcomes = {name: found for name, (found, _) in classified.items()}
+    for name, (source, images) in sets.items():  # as capture: a glob or list of one size, a folder wrong_size
+        mixed = capture_sources.mixed_sizes_error(
+            source,
+            {n: o.image_size for n, o in zip(images.names, outcomes[name], strict=True) if o.image_size},
+        )
+        if mixed is not None:
+            raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
+        readable = [o for o in outcomes[name] if o.status != UNREADABLE]
+        if readable and spec.kind == CHESSBOARD:  # the board given is the board seen (as capture checks)
+            refuse_another_pattern(
+                spec,
+                f"--cols {spec.cols} --rows {spec.rows}",
+                "",
+                f"photos of camera {name}",
+                readable,
+                given="--cols/--rows",
+            )
+    return match, outcomes, {name: (sets[name][0], classified[name][1]) for name in sources}
+
+
+def refused_finding(name: str, exc: CalibctlError) -> Finding:
+    """A member that cannot be calibrated, named: the rest of the rig is solved without it."""
+    return Finding(
+        rule=MEMBER_REFUSED,
+        severity="warning",
+        message=f"{name} is left out of the rig: {exc.message}",
+        fix=exc.hint or "capture more frames with the board well seen by this camera",
+    )
+
+
+def _without(
+    refused: Mapping[str, CalibctlError],
+    cameras: tuple[str, ...],
+    match: FrameMatch,
+    outcomes: Mapping[str, list[ImageOutcome]],
+) -> tuple[tuple[str, ...], FrameMatch, dict[str, list[ImageOutcome]]]:
+    """The rig without its refused members; the first refusal is raised when fewer than two cameras remain."""
+    kept = tuple(name for name in cameras if name not in refused)
+    if len(kept) < 2:
+        raise next(iter(refused.values()))
+    if not refused:
+        return cameras, match, dict(outcomes)
+    frames = []
+    for key, photos in match.frames:
+        left = {c: p for c, p in photos.items() if c in kept}
+        if len(left) >= 2:
+            frames.append((key, left))
+    return kept, FrameMatch(tuple(frames), match.unmatched), {name: outcomes[name] for name in kept}
 
 
 def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:
@@ -530,7 +698,11 @@ def run_json(run: RigFolderRun) -> dict[str, object]:
             for m in run.members
         ],
     }
-    if run.gate.passed:
+    if run.timing is not None:
+        out["timing"] = dict(run.timing)
+    if run.refused:
+        out["refused"] = [f.model_dump(mode="json", exclude_none=True) for f in run.refused]
+    if run.gate.passed or run.findings:  # a failed gate leaves no verdict to give, but the gauge judges
         out["verdict"] = "pass" if run.passed else "fail"
         out["lint"] = [f.model_dump(mode="json", exclude_none=True) for f in run.findings]
     sol = run.solution

@@ -31,13 +31,12 @@ from calibctl.artifacts.rig import RigCalibration, RigDefinition
 from calibctl.config import Settings
 from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.store.repository import Store
-from calibctl.workflows.edges.kinds import evidence_of
+from calibctl.workflows.edges.kinds import STALE_RULES, evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.exports import bundle
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin import keys, records
 
-STALE_RULES = ("rig-stale-member", "handeye-stale-member", "lidar-stale-member")
 RIG_JSON = "rig.json"
 
 

@@ -19,13 +19,16 @@ Rules (errors fail lint, exit 1):
 - camera-LiDAR edges (the same table, its LiDAR kind): ``lidar-gates``,
   ``lidar-stale-member`` (the camera whose calibration posed the board was re-calibrated since the edge was
   solved), ``lidar-uncertainty`` (no positive-definite covariance: error; a one-sigma over 10 mm or 0.5 deg:
-  warning).
+  warning);
+- camera-IMU edges (the same table, its IMU kind): ``imu-gates``, ``imu-stale-member`` (the camera whose
+  intrinsics were held was re-calibrated since), ``imu-uncertainty`` (as LiDAR's), ``imu-dropped``.
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Collection, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.lint import Finding
@@ -45,6 +48,9 @@ from calibctl.workflows.edges.versions import cal_versions, edge_findings
 from calibctl.workflows.lint.lint import LintResult, lint_artifact
 from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
+
+if TYPE_CHECKING:
+    from calibctl.store.gauge_failures import GaugeFailure
 
 _DESIGN = re.compile(r"^(?P<a>[^:=]+):(?P<b>[^:=]+)=(?P<mm>[0-9.]+)(?:(?:\+-|\+/-|±)(?P<tol>[0-9.]+))?$")
 DEFAULT_DESIGN_TOL_MM = 0.5
@@ -147,8 +153,11 @@ def rig_findings(
     rig: RigDefinition,
     active: Mapping[str, CalibrationArtifact | None],
     limits: LintThresholds,
+    gauge_failures: Mapping[str, Sequence[GaugeFailure]] | None = None,
 ) -> list[Finding]:
-    """Every rig rule on ``cal`` given the members' currently active calibrations."""
+    """Every rig rule on ``cal`` given the members' currently active calibrations; ``gauge_failures``: the
+    store's failed gauges by board revision (a member made with a failed board is ``member:metric-gauge``)."""
+    gauges = gauge_failures or {}
     findings: list[Finding] = []
     for m in cal.members:
         now = active.get(m.serial)
@@ -162,7 +171,11 @@ def rig_findings(
                     fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)",
                 )
             )
-    members = [(art, lint_artifact(art, limits).findings) for art in active.values() if art is not None]
+    members = [
+        (art, lint_artifact(art, limits, gauges.get(art.board.ref, ())).findings)
+        for art in active.values()
+        if art is not None
+    ]
     misfit = {art.serial for art, found in members if any(f.rule == "model-misfit" for f in found)}
     findings += solved_rig_findings(
         cal.pairs,
@@ -194,7 +207,9 @@ def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -
     with open_store(settings) as store:
         rig = store.get_rig(name)
         cal = store.get_rig_calibration(name, version)
-        findings = rig_findings(cal, rig, _active_members(store, cal), settings.lint)
+        members = _active_members(store, cal)
+        gauges = store.failed_gauges(a.board.ref for a in members.values() if a is not None)
+        findings = rig_findings(cal, rig, members, settings.lint, gauges)
         findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
         if trusted is not None:
             findings += _signature_findings(store, cal, trusted)

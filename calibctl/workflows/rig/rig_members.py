@@ -14,7 +14,8 @@ Not applied, and why:
   measured, so every run would fail it. Register the board (``board add``) and use ``rig capture`` + ``rig
   solve`` to have it judged.
 - ``rig-stale-member``: there is no stored member version to go stale.
-- ``metric-gauge``: solve-folders takes no ``--reference-distance``; nothing to fail.
+- ``metric-gauge``: not a member rule; ``--reference-distance`` judges it for the whole run
+  (``rig_folders.gauge_finding``).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import numpy as np
 from calibctl import __version__
 from calibctl.artifacts.calibration import CalibrationArtifact, Provenance
 from calibctl.artifacts.common import parse_document, utc_now
-from calibctl.artifacts.lint import has_errors
+from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.artifacts.rig import (
     UNSEALED,
     RigCalibration,
@@ -47,9 +47,14 @@ from calibctl.core.intrinsics.covariance import intrinsic_columns
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.core.intrinsics.solve import FISHEYE_DIST_NAMES, MODELS
 from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.store.gauge_failures import GaugeFailure
+from calibctl.workflows.board.boards import board_ref
+from calibctl.workflows.board.gauge_failures import board_failures, check_override, failure_fix, failure_text
 from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, capture
+from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS
+from calibctl.workflows.camera.solve import checked_override
 from calibctl.workflows.edges.versions import cal_versions, carried_forward
-from calibctl.workflows.rig.rig_folders import check_min_shared_views, rig_loops, rig_pairs
+from calibctl.workflows.rig.rig_folders import RigGauge, check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
@@ -127,11 +132,26 @@ def capture_rig(
     sources: Mapping[str, str],
     board: str,
     min_shared_views: int = MIN_SHARED_VIEWS,
+    gauge: RigGauge | None = None,
+    override_gauge: str | None = None,
 ) -> RigCaptureResult:
-    """Capture every member, pair the images into frames, apply the rig gate; store the rig session."""
+    """Capture every member, pair the images into frames, apply the rig gate and the metric gauge (the
+    board revision's failed gauges, and ``gauge`` when given: judged through that member's session, as
+    ``capture --reference-distance`` does); store the rig session."""
     check_min_shared_views(min_shared_views)
+    override_gauge = checked_override(override_gauge)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
+        board_rev = store.get_board(*board_ref(board))
+        failures = board_failures(store, board_rev.ref)
+    if gauge is not None and gauge.camera not in rig.cameras:
+        raise UsageError(
+            f"--reference-source names {gauge.camera}, not a camera of rig {rig.name}",
+            f"give the fixture pictures of one member: --reference-source SERIAL=FOLDER, SERIAL one of "
+            f"{', '.join(rig.cameras)}",
+        )
+    if gauge is None:
+        check_override(override_gauge, board_rev.ref, failures, f"rig {rig.name} capture")
     extra = [c for c in sources if c not in rig.cameras]
     missing = [c for c in rig.cameras if c not in sources]
     if extra or missing:
@@ -141,9 +161,16 @@ def capture_rig(
             hint="pass one --source SERIAL=FOLDER per member",
         )
     results = {
-        c: capture(settings, CaptureRequest(serial=c, board=board, source=sources[c]), store_session=False)
+        c: capture(settings, _member_request(c, board_rev.ref, sources[c], gauge), store_session=False)
         for c in rig.cameras
     }
+    failures += [
+        GaugeFailure(
+            board_rev.ref, c, f"session {r.session.session_id}", d.ratio, d.recovered_m, d.reference_m
+        )
+        for c, r in results.items()
+        if (d := r.distance) is not None and not d.passed
+    ]
     identity.refuse(
         identity.shared_images({c: [v.image_sha256 for v in r.session.views] for c, r in results.items()}),
         f"rig {rig.name} capture",
@@ -176,6 +203,7 @@ def capture_rig(
         message=g.message,
         hint=g.hint,
     )
+    gates = [gate, *_gauge_gate(board_rev.ref, failures, override_gauge)]
     session = RigSession(
         rig_session_id=secrets.token_hex(6),
         rig=rig.name,
@@ -183,8 +211,8 @@ def capture_rig(
         frames=[RigFrame(key=k, images=dict(imgs)) for k, imgs in match.frames],
         unmatched=[UnmatchedImage(camera=u.camera, name=u.path, reason=u.reason) for u in match.unmatched],
         shared_views={f"{cams[a]}-{cams[b]}": n for (a, b), n in counts.items()},
-        gates=[gate],
-        status="accepted" if g.passed else "rejected",
+        gates=gates,
+        status="accepted" if all(x.passed for x in gates) else "rejected",
         created_at=utc_now(),
         station=settings.station,
         operator=settings.operator,
@@ -200,6 +228,54 @@ def capture_rig(
     ) as store:  # every member's session and the rig session, or none; signed
         store.add_rig_session(session, [results[c].session for c in rig.cameras])
     return RigCaptureResult(session, results)
+
+
+def session_gauge_findings(
+    board: str, failures: Sequence[GaugeFailure], gates: Sequence[RigGate]
+) -> list[Finding]:
+    """``metric-gauge`` of the rig session's board revision: an error when it has a failed gauge the rig
+    capture did not override (a session captured before the gauge failed, or before this gate existed)."""
+    overridden = any(g.gate == "metric-gauge" and g.passed for g in gates)
+    if not failures or overridden:
+        return []
+    return [
+        Finding(
+            rule="metric-gauge",
+            severity="error",
+            message=f"the rig session's {failure_text(board, failures)}",
+            fix=failure_fix(board, "`calibctl rig capture ... --override-gauge REASON`"),
+        )
+    ]
+
+
+def _member_request(camera: str, board: str, source: str, gauge: RigGauge | None) -> CaptureRequest:
+    if gauge is None or gauge.camera != camera:
+        return CaptureRequest(serial=camera, board=board, source=source)
+    return CaptureRequest(
+        serial=camera,
+        board=board,
+        source=source,
+        reference_distance=gauge.reference,
+        reference_source=gauge.fixture,
+    )
+
+
+def _gauge_gate(board: str, failures: Sequence[GaugeFailure], override: str | None) -> list[RigGate]:
+    """The rig's ``metric-gauge`` gate: failed when the board revision has a failed gauge (stored, or this
+    capture's), passed with the override's reason recorded; no gate when there is nothing to judge."""
+    if not failures:
+        return []
+    message = failure_text(board, failures)
+    return [
+        RigGate(
+            gate="metric-gauge",
+            passed=override is not None,
+            value=abs(failures[0].ratio - 1.0),
+            threshold=RATIO_LIMITS[1] - 1.0,
+            message=message if override is None else f"{message}; overridden: {override}",
+            hint=None if override is not None else failure_fix(board),
+        )
+    ]
 
 
 def member_intrinsics(art: CalibrationArtifact) -> MemberIntrinsics:
@@ -346,7 +422,10 @@ def solve_rig_stored(
             content_sha256=UNSEALED,
         )
         identity.refuse(identity.zero_baselines(identity.pair_translations(solution)), what)
-        findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint)
+        board = cam_sessions[order[0]].board.ref
+        gauges = store.failed_gauges([board, *(a.board.ref for a in arts.values())])
+        findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint, gauges)
+        findings += session_gauge_findings(board, gauges.get(board, []), session.gates)
         cal = cal.model_copy(
             update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"}
         )

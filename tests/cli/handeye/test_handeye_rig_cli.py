@@ -105,7 +105,7 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
     for args, message in (
         (
             ("--edge", "flange:CAM-0001"),
-            "has no hand-eye or LiDAR edge flange -> CAM-0001 (it has: imu:CAM-0002)",
+            "has no hand-eye, LiDAR or camera-IMU edge flange -> CAM-0001 (it has: imu:CAM-0002)",
         ),
         (("--edge", "imu"), "--edge must be FROM:TO"),
         (("--edge", "imu:CAM-0002", "--format", "urdf"), "--edge exports json or tf"),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from calibctl.core.intrinsics.model_fit import (
+    MISFIT_MIN_PX,
     MISFIT_RATIO,
     check_model_misfit,
     detector_rms_px,
@@ -14,6 +15,7 @@ from calibctl.core.intrinsics.model_fit import (
     noise_floor_px,
 )
 from calibctl.core.intrinsics.outliers import solve_rejecting_corners
+from calibctl.core.intrinsics.solve import solve_intrinsics
 from calibctl.core.synth.corners import synthesize_session
 from calibctl.core.synth.fisheye import FisheyeCamera, synthesize_fisheye_session
 from tests.core.intrinsics.test_solve_real import _natural, detect_all, model_points
@@ -151,3 +153,16 @@ def test_real_photo_sets_pass_under_k1k2(pattern, size):
         [o.astype(np.float32) for o in obj], [i.astype(np.float32) for i in img], size, None, None
     )
     assert rms < MISFIT_RATIO * detector_rms_px(obj, img)
+
+
+def test_the_stored_floor_of_a_fisheye_fit_is_true_to_the_corner_noise() -> None:
+    """An accepted fisheye fit recorded a floor 10x its corner noise: the lens-free patches over-read a curved
+    field, and a fit under MISFIT_MIN_PX never asked the lens models. The floor never exceeds the fit."""
+    camera = FisheyeCamera.from_fov((1280, 960), 170.0, circular=True)
+    syn = synthesize_fisheye_session(camera, 18, 11, noise_px=0.1)
+    obj, img = list(syn.object_points_per_view), list(syn.image_points_per_view)
+    fit = solve_intrinsics(obj, img, (1280, 960), "fisheye", uncertainty=False)
+    assert fit.rms_px < MISFIT_MIN_PX  # the short path: the lens-free read alone
+    floor = noise_floor_px(obj, img, (1280, 960), float(fit.rms_px))
+    true_px = 0.1 * 2**0.5  # per corner, as rms_px
+    assert floor is not None and floor <= fit.rms_px and floor > 0.85 * true_px

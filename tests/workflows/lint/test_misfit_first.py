@@ -92,3 +92,37 @@ def test_a_drifting_webcam_points_the_misfit_at_one_camera():
     assert (findings["model-misfit"].fix or "").startswith("first fix one-camera (calibrate each camera")
     assert "--model fisheye" not in (findings["model-misfit"].fix or "")
     assert not (findings["one-camera"].fix or "").startswith("first fix model-misfit")
+
+
+CHANGED = {
+    "first_view_after": "v5",
+    "views": [4, 4],
+    "before_px": {"fx": 548.0, "fy": 548.0, "cx": 320.0, "cy": 240.0},
+    "after_px": {"fx": 556.0, "fy": 556.0, "cx": 320.5, "cy": 240.0},
+    "focal_step": 0.0146,
+    "centre_step_px": 0.5,
+    "chi2": 90.0,
+    "limit": 18.0,
+    "changed": True,
+}
+
+
+def test_a_webcam_that_changed_points_the_misfit_and_one_camera_at_the_lens_lock():
+    facts = _webcam(DRIFT)
+    facts.camera_change = CHANGED
+    findings = {f.rule: f for f in lint_facts(facts, LintThresholds())}
+    changed = findings["camera-changed"]
+    assert changed.severity == "error" and (changed.fix or "").startswith(
+        "the camera changed during the session"
+    )
+    for rule in ("model-misfit", "one-camera"):
+        assert (findings[rule].fix or "").startswith("first fix camera-changed (the camera changed")
+
+
+def test_on_a_wide_lens_a_changed_camera_reading_is_a_symptom_of_the_misfit():
+    facts = _facts(2.47, 0.28)
+    facts.camera_change = CHANGED
+    findings = {f.rule: f for f in lint_facts(facts, LintThresholds())}
+    assert (findings["camera-changed"].fix or "").startswith(
+        "first fix model-misfit (solve with --model fisheye"
+    )

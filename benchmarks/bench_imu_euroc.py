@@ -1,0 +1,231 @@
+"""Camera-IMU calibration on EuRoC MAV's imu_april recording: calibctl's joint estimator beside the plain
+afternoon script, against EuRoC's published T_BS (camera into IMU body), for cam0 and cam1.
+
+Data: chutsu/yac's ``yac/tests/test_data/calib/imu_april/`` (per-frame AprilGrid detections as
+``camN/<ns>.csv``: ts, tag rows/cols/size/spacing, kp_x, kp_y, p_x, p_y, p_z, tag_id, corner_idx; the
+200 Hz ``imu0.csv``: ts, w xyz rad/s, a xyz m/s^2; ``config.yaml``: the intrinsics (pinhole radtan4)
+and the IMU noise densities). Its licence is EuRoC's and is not stated there: it is not in this
+repository. Pass the folder as the first argument or in CALIBCTL_IMU_APRIL; without it the benchmark
+says so and exits 0.
+
+Compared in the IMU (EuRoC body) frame: T_imu_cam = T_BS, p_imu = R p_cam + t; the rotation difference
+is the angle of R_calibctl R_euroc^T, the translation difference the norm of t_calibctl - t_euroc.
+td: t_imu = t_cam + td (EuRoC's stamps are hardware-synchronised: td ~ 0). Then the IMU stamps are
+shifted by --shift-ms and td must move by exactly that. Then the cost's growth with recording length
+(the first 25/50/75/100 % of cam0). Also: the two cameras' PnP poses against EuRoC's own stereo
+extrinsic (T_BS0^-1 T_BS1), which bounds how close any calibration with these held intrinsics can
+come to EuRoC's published pair.
+
+Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import warnings
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from machine import cpu_model, load_1min  # noqa: E402
+
+from calibctl.core.extrinsics import se3  # noqa: E402
+from calibctl.core.imu.calibrate import calibrate  # noqa: E402
+from calibctl.core.imu.plain import board_track, plain_calibration  # noqa: E402
+from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples  # noqa: E402
+from calibctl.core.imu.solve import SolveOptions, solve_imu_camera  # noqa: E402
+
+# EuRoC MAV sensor.yaml T_BS (camera into body = IMU), as vendored by VINS-Mono (config/euroc) and
+# ORB-SLAM3 (Examples/Stereo-Inertial/EuRoC.yaml).
+EUROC_T_BS = {
+    "cam0": np.array(
+        [
+            [0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975],
+            [0.999557249008, 0.0149672133247, 0.025715529948, -0.064676986768],
+            [-0.0257744366974, 0.00375618835797, 0.999660727178, 0.00981073058949],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    ),
+    "cam1": np.array(
+        [
+            [0.0125552670891, -0.999755099723, 0.0182237714554, -0.0198435579556],
+            [0.999598781151, 0.0130119051815, 0.0251588363115, 0.0453689425024],
+            [-0.0253898008918, 0.0179005838253, 0.999517347078, 0.00786212447038],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    ),
+}
+
+
+def load(folder: Path, cam: str, shift_s: float = 0.0, keep: tuple[float, float] = (0.0, 1.0)):
+    """(ImuSamples, CameraFrames, ImuNoise) from the yac layout; times in s from the first IMU stamp
+    (plus ``shift_s`` on the IMU); only the frames from share keep[0] to keep[1] of the recording."""
+    config = yaml.safe_load((folder / "config.yaml").read_text())
+    raw = np.loadtxt(folder / "imu0.csv", delimiter=",", comments="#")
+    t0 = int(raw[0, 0])
+    stamps = np.loadtxt(folder / "imu0.csv", delimiter=",", comments="#", usecols=0, dtype=np.int64)
+    imu = ImuSamples((stamps - t0) * 1e-9 + shift_s, raw[:, 1:4], raw[:, 4:7])
+    files = sorted((folder / cam).glob("*.csv"))
+    files = files[int(round(keep[0] * len(files))) : int(round(keep[1] * len(files)))]
+    t, objs, imgs = [], [], []
+    for f in files:
+        t.append((int(f.stem) - t0) * 1e-9)
+        rows = (
+            np.loadtxt(f, delimiter=",", comments="#", ndmin=2)
+            if f.stat().st_size > 200
+            else np.zeros((0, 12))
+        )
+        objs.append(rows[:, 7:10])
+        imgs.append(rows[:, 5:7])
+    fx, fy, cx, cy = config[cam]["proj_params"]
+    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    frames = CameraFrames(
+        np.array(t),
+        tuple(objs),
+        tuple(imgs),
+        K,
+        np.array(config[cam]["dist_params"]),
+        tuple(config[cam]["resolution"]),
+    )
+    i = config["imu0"]
+    noise = ImuNoise(i["sigma_g_c"], i["sigma_a_c"], i["sigma_gw_c"], i["sigma_aw_c"], i["g"])
+    return imu, frames, noise
+
+
+def difference(T: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """(deg, mm) between two T_imu_cam."""
+    return (
+        float(np.degrees(se3.rotation_angle_rad(T[:3, :3] @ ref[:3, :3].T))),
+        float(1e3 * np.linalg.norm(T[:3, 3] - ref[:3, 3])),
+    )
+
+
+def stereo_check(folder: Path) -> tuple[float, float]:
+    """Median relative pose of the two cameras' PnP poses at shared stamps against EuRoC's pair."""
+    _, f0, _ = load(folder, "cam0")
+    _, f1, _ = load(folder, "cam1")
+    a, b = board_track(f0), board_track(f1)
+    common, ia, ib = np.intersect1d(np.round(a.t_s, 4), np.round(b.t_s, 4), return_indices=True)
+    ref = np.linalg.inv(EUROC_T_BS["cam0"]) @ EUROC_T_BS["cam1"]
+    rel = a.T_cam_w[ia] @ np.linalg.inv(b.T_cam_w[ib])
+    rot = np.median(se3.rotvecs_from_rotations(rel[:, :3, :3] @ ref[:3, :3].T), axis=0)
+    tr = np.median(rel[:, :3, 3] - ref[:3, 3], axis=0)
+    return float(np.degrees(np.linalg.norm(rot))), float(1e3 * np.linalg.norm(tr))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("folder", nargs="?", default=os.environ.get("CALIBCTL_IMU_APRIL"))
+    parser.add_argument("--shift-ms", type=float, default=5.0)
+    parser.add_argument("--knot-spacing-s", type=float, default=SolveOptions().knot_spacing_s)
+    parser.add_argument("--no-growth", action="store_true", help="skip the recording-length sweep")
+    parser.add_argument("--quarters", action="store_true", help="solve each quarter of cam0 alone")
+    args = parser.parse_args()
+    if not args.folder or not (Path(args.folder) / "imu0.csv").is_file():
+        print("no imu_april folder (pass it or set CALIBCTL_IMU_APRIL): skipped")
+        return 0
+    warnings.simplefilter("ignore")
+    folder = Path(args.folder)
+    print(
+        f"# {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} CPUs ({cpu_model()}), "
+        f"load {load_1min():.1f}, knot spacing {args.knot_spacing_s} s"
+    )
+    options = SolveOptions(knot_spacing_s=args.knot_spacing_s)
+    for cam in ("cam0", "cam1"):
+        imu, frames, noise = load(folder, cam)
+        ref = EUROC_T_BS[cam]
+        c0 = time.process_time()
+        track = board_track(frames)
+        plain = plain_calibration(imu, frames, track)
+        plain_cpu = time.process_time() - c0
+        c0 = time.process_time()
+        cal = calibrate(imu, frames, noise, options)
+        cpu = time.process_time() - c0
+        s = cal.solution
+        assert s is not None
+        deg, mm = difference(plain.T_imu_cam, ref)
+        print(
+            f"{cam} plain    : {deg:.3f} deg {mm:5.1f} mm  td {1e3 * plain.td_s:+.3f} ms  "
+            f"cpu {plain_cpu:.1f} s"
+        )
+        deg, mm = difference(s.T_imu_cam, ref)
+        print(
+            f"{cam} calibctl : {deg:.3f} deg {mm:5.1f} mm  td {1e3 * s.td_s:+.3f} ms  cpu {cpu:.1f} s "
+            f"(solve {s.cpu_s:.1f} s incl. {len(s.held_out.corner_rms_px) if s.held_out else 0}-fold)  "
+            f"{s.n_frames} frames {s.n_imu} IMU samples, {s.iterations} iterations"
+        )
+        print(
+            f"    sigma rot {np.round(s.sigma_rotation_deg, 4)} deg, "
+            f"t {np.round(s.sigma_translation_mm, 2)} mm, "
+            f"td {s.sigma_td_ms:.4f} ms (CRLB {s.td_crlb_ms:.4f} ms); RMS {s.corner_rms_px:.3f} px, "
+            f"gyro {s.gyro_rms_rad_s:.4f} rad/s, accel {s.accel_rms_m_s2:.3f} m/s^2 (IMU sigma x "
+            f"{s.imu_variance_factors[0]:.1f}, x {s.imu_variance_factors[1]:.1f}); corner sigma "
+            f"{s.corner_sigma_px:.3f} px"
+        )
+        if s.held_out:
+            print(
+                f"    held-out RMS {np.round(s.held_out.corner_rms_px, 3)} px, gyro "
+                f"{np.round(s.held_out.gyro_rms_rad_s, 4)}, accel {np.round(s.held_out.accel_rms_m_s2, 3)}"
+            )
+        print(
+            "    gates: "
+            + "; ".join(f"{g.gate} {'ok' if g.passed else 'FAIL'} {g.value:.3g}" for g in cal.gates)
+        )
+        shifted_imu = ImuSamples(imu.t_s + args.shift_ms * 1e-3, imu.gyro_rad_s, imu.accel_m_s2)
+        moved = solve_imu_camera(
+            shifted_imu, frames, noise, SolveOptions(knot_spacing_s=args.knot_spacing_s, folds=0)
+        )
+        plain_moved = plain_calibration(shifted_imu, frames, track)
+        print(
+            f"    IMU stamps +{args.shift_ms:g} ms: calibctl td moved {1e3 * (moved.td_s - s.td_s):+.3f} ms, "
+            f"plain {1e3 * (plain_moved.td_s - plain.td_s):+.3f} ms"
+        )
+    deg, mm = stereo_check(folder)
+    print(f"cam0-cam1 PnP poses against EuRoC's stereo pair: {deg:.3f} deg {mm:.1f} mm (median)")
+    if not args.no_growth:
+        for share in (0.25, 0.5, 0.75, 1.0):
+            imu, frames, noise = load(folder, "cam0", keep=(0.0, share))
+            c0 = time.process_time()
+            s = solve_imu_camera(
+                imu, frames, noise, SolveOptions(knot_spacing_s=args.knot_spacing_s, folds=0)
+            )
+            print(
+                f"length {100 * share:3.0f} %: {s.n_frames} frames {s.n_imu} IMU samples {s.knots.n} knots: "
+                f"cpu {time.process_time() - c0:.1f} s, {s.iterations} iterations"
+            )
+    if args.quarters:
+        quarters(folder, args.knot_spacing_s)
+    return 0
+
+
+def quarters(folder: Path, knot_spacing_s: float) -> None:
+    """Each quarter of cam0 solved alone: the spread of the four answers against the sigma each reports
+    (the white-noise sigma cannot see correlated residuals such as vibration; the spread can)."""
+    answers = []
+    for q in range(4):
+        imu, frames, noise = load(folder, "cam0", keep=(q / 4, (q + 1) / 4))
+        s = solve_imu_camera(imu, frames, noise, SolveOptions(knot_spacing_s=knot_spacing_s, folds=0))
+        deg, mm = difference(s.T_imu_cam, EUROC_T_BS["cam0"])
+        answers.append(np.r_[se3.rotvec_from_rotation(s.T_imu_cam[:3, :3]), s.T_imu_cam[:3, 3], s.td_s])
+        print(
+            f"quarter {q + 1}: {deg:.3f} deg {mm:.1f} mm td {1e3 * s.td_s:+.3f} ms; sigma rot "
+            f"{np.round(s.sigma_rotation_deg, 4)} deg, t {np.round(s.sigma_translation_mm, 2)} mm, "
+            f"td {s.sigma_td_ms:.4f} ms"
+        )
+    sd = np.std(np.array(answers), axis=0, ddof=1)
+    print(
+        f"spread of the quarters (sd): rot {np.round(np.degrees(sd[:3]), 4)} deg, t "
+        f"{np.round(1e3 * sd[3:6], 2)} mm, td {1e3 * sd[6]:.4f} ms"
+    )
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,680 @@
+"""Camera-IMU calibration as one joint least-squares problem: T_imu_cam, td_s, gravity, biases.
+
+States: T_imu_cam (rotation 3 as a left perturbation in the IMU frame, translation 3, m), td_s
+(t_imu = t_cam + td_s; Kalibr's ``timeshift_cam_imu`` has the same sign), optionally a rolling-shutter
+line delay (s per row, rows counted from the principal point's c_y), the gravity direction in the
+board frame (2), a constant gyro bias (3) and accelerometer bias (3); plus the nuisance IMU trajectory,
+a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing ``knot_spacing_s``). The
+camera intrinsics are held. Residuals: every corner's reprojection (px, / sigma_px), every IMU sample's
+gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)).
+
+The solver is ``core.lm.solve_lm`` over the shared states only: each evaluation eliminates the spline
+(its normal equations are block-banded, ``core.imu.spline.BandedCholesky``), exactly as the Schur path
+eliminates per-view board poses, and hands LM the reduced system S = A - B C^-1 B^T, g - B C^-1 g_b;
+a step moves the spline by the back-substitution C^-1 (g_b - B^T delta). S^-1 at the solution is the
+marginal covariance of the shared states (the spline integrated out). Jacobians: central differences
+on the per-sample local control points and the shared states (each corner's through its camera pose,
+so the expensive part runs once per frame), analytic only for the lens' 6-dof pose chain.
+
+Weights: corners start at ``corner_sigma_px`` (or 0.5 px), the IMU at its densities; after a first
+solve corners over ``OUTLIER_SIGMAS`` robust sigmas (median-based) are left out, each group's
+variance is re-estimated (corners: the RMS; IMU groups: raised, never lowered, to their RMS) and the
+problem solved again, so the reported sigmas carry the residuals actually seen.
+
+Uncertainty: S^-1 is right for white residuals (the renders: z-scores over 60 seeds have sd 0.9-1.1).
+Real residuals are correlated in time (vibration, a lens error that follows the board), so a
+delete-one-block jackknife (``jackknife_blocks`` contiguous blocks) runs beside it and a state's sigma
+is widened to the jackknife's where that variance is over ``JACKKNIFE_RATIO`` times larger
+(benchmarks/results/imu.md: EuRoC's quarters scatter 4-13x beyond the white-noise rotation sigma).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from calibctl.core.extrinsics import se3
+from calibctl.core.imu import model
+from calibctl.core.imu.plain import BoardTrack, PlainResult, board_track, plain_calibration
+from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise, ImuSamples
+from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band
+from calibctl.core.lm import Damping, DenseSystem, solve_lm
+
+SHARED_NAMES = (
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "t_x",
+    "t_y",
+    "t_z",
+    "td",
+    "line_delay",
+    "grav_a",
+    "grav_b",
+    "bg_x",
+    "bg_y",
+    "bg_z",
+    "ba_x",
+    "ba_y",
+    "ba_z",
+    "dbg_x",
+    "dbg_y",
+    "dbg_z",
+    "dba_x",
+    "dba_y",
+    "dba_z",
+)
+H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
+H_TIME = 1e-6
+H_GRAV = 1e-6
+MAX_TURN_RAD = 2.6  # the rotation-vector spline about the middle pose stays clear of its pi singularity
+OUTLIER_SIGMAS = 5.0  # a corner this many robust sigmas off (2-D) after the first solve is left out
+# The jackknife variance is biased upward (Efron-Stein) and noisy with ten blocks; a state's sigma is
+# widened to the jackknife's only when the jackknife variance exceeds its white-noise variance this many
+# times (the residuals are then correlated in time: real data, not the renders).
+JACKKNIFE_RATIO = 4.0
+BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the end margin touches)
+
+
+@dataclass(frozen=True)
+class SolveOptions:
+    """knot_spacing_s: spline knot spacing. corner_sigma_px: the corner noise to start from (the
+    estimate replaces it unless ``fix_corner_sigma``). estimate_line_delay: add the rolling-shutter
+    line delay. bias_drift: let both biases drift linearly over the recording (b(t) = b + b_dot
+    (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of
+    estimating it. folds: k of the k-fold held-out residuals (0: none). jackknife_blocks: contiguous
+    time blocks of the delete-one-block jackknife that can widen the sigmas (under 3: none).
+    max_iterations: per LM run. margin_s: the spline's reach beyond the first and last frame (td may
+    move within it)."""
+
+    knot_spacing_s: float = 0.05
+    corner_sigma_px: float = 0.5
+    fix_corner_sigma: bool = False
+    estimate_line_delay: bool = False
+    hold_td_s: float | None = None
+    folds: int = 3
+    jackknife_blocks: int = 10
+    max_iterations: int = 40
+    margin_s: float = 0.1
+    bias_drift: bool = False
+
+
+@dataclass
+class _State:
+    ctrl: np.ndarray  # (n, 6) [phi, p]
+    R_ic: np.ndarray
+    t_ic: np.ndarray
+    td: float
+    line_delay: float
+    R_g: np.ndarray
+    b_g: np.ndarray
+    b_a: np.ndarray
+    b_g_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    b_a_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    cache: dict = field(default_factory=dict, repr=False)
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """k-fold held-out RMS: each fold's corners (every k-th frame) and IMU samples (every k-th) left out,
+    the solution moved by one Gauss-Newton step from the full one (the refit, to first order), and the
+    left-out data predicted by it. Lists have one entry per fold."""
+
+    corner_rms_px: list[float]
+    gyro_rms_rad_s: list[float]
+    accel_rms_m_s2: list[float]
+
+
+@dataclass(frozen=True)
+class ImuCameraSolution:
+    """The answer. Conventions in the module docstring of ``core.imu``."""
+
+    T_imu_cam: np.ndarray
+    td_s: float
+    td_held: bool
+    line_delay_s: float | None
+    gyro_bias_rad_s: np.ndarray
+    accel_bias_m_s2: np.ndarray
+    gravity_w_m_s2: np.ndarray
+    gyro_bias_drift_rad_s2: np.ndarray | None  # per second, about the recording's middle (bias_drift)
+    accel_bias_drift_m_s3: np.ndarray | None
+    covariance: np.ndarray  # over ``state_names``
+    state_names: tuple[str, ...]
+    covariance_7: np.ndarray  # (rot 3 rad, trans 3 m, td s); td row/column zero when held
+    sigma_rotation_deg: np.ndarray
+    sigma_translation_mm: np.ndarray
+    sigma_td_ms: float
+    td_crlb_ms: float
+    sigma_line_delay_us: float | None
+    corner_sigma_px: float
+    corner_rms_px: float
+    gyro_rms_rad_s: float
+    accel_rms_m_s2: float
+    imu_variance_factors: tuple[float, float]
+    sigma_inflation: dict[str, float]  # jackknife sigma / white-noise sigma per state, at least 1
+    held_out: HeldOut | None
+    iterations: int
+    converged: bool
+    n_frames: int
+    n_corners: int
+    n_outliers: int  # corners over OUTLIER_SIGMAS robust sigmas after the first solve, left out
+    n_imu: int
+    knots: Knots
+    cpu_s: float
+    plain: PlainResult
+    residuals: dict[str, np.ndarray] = field(repr=False)
+
+    @property
+    def T_cam_imu(self) -> np.ndarray:
+        """Kalibr's camchain-imucam T_cam_imu (p_cam = T_cam_imu p_imu)."""
+        return se3.invert(self.T_imu_cam)
+
+    @property
+    def timeshift_cam_imu_s(self) -> float:
+        """Kalibr's timeshift_cam_imu: t_imu = t_cam + shift, the same number as td_s."""
+        return self.td_s
+
+
+class _Problem:
+    """Data fixed for one solve (times relative to ``t_ref``)."""
+
+    def __init__(
+        self,
+        imu: ImuSamples,
+        frames: CameraFrames,
+        noise: ImuNoise,
+        options: SolveOptions,
+        td0: float,
+        t_ref: float,
+    ) -> None:
+        self.opt = options
+        self.K, self.dist = frames.camera_matrix, frames.dist_coeffs
+        self.g_mag = noise.gravity_m_s2
+        counts = np.array([p.shape[0] for p in frames.object_points])
+        use = np.flatnonzero(counts >= 4)
+        self.frame_of_corner = np.repeat(use, counts[use])
+        self.obj = np.concatenate([frames.object_points[f] for f in use])
+        self.img = np.concatenate([frames.image_points[f] for f in use])
+        self.t_cam = frames.t_s[self.frame_of_corner] - t_ref
+        self.row = self.img[:, 1] - self.K[1, 2]
+        if options.estimate_line_delay:
+            self.pose_of_corner = np.arange(self.obj.shape[0])
+        else:
+            self.pose_of_corner = np.repeat(np.arange(use.size), counts[use])
+        self.pose_starts = np.flatnonzero(np.r_[True, np.diff(self.pose_of_corner) != 0])
+        t_first, t_last = frames.t_s[use[0]] - t_ref + td0, frames.t_s[use[-1]] - t_ref + td0
+        self.knots = Knots.covering(t_first, t_last, options.knot_spacing_s, options.margin_s)
+        t_imu = imu.t_s - t_ref
+        keep = (t_imu >= self.knots.t0_s + options.knot_spacing_s) & (
+            t_imu < self.knots.t_end_s - options.knot_spacing_s
+        )
+        self.t_imu = t_imu[keep]
+        self.gyro = imu.gyro_rad_s[keep]
+        self.accel = imu.accel_m_s2[keep]
+        rate = imu.rate_hz
+        self.sigma_gyro = noise.gyro_noise_density * np.sqrt(rate)
+        self.sigma_accel = noise.accel_noise_density * np.sqrt(rate)
+        self.sigma_px = options.corner_sigma_px
+        seg, u = self.knots.locate(self.t_imu)
+        self.imu_seg = seg
+        self.imu_w = [self.knots.weights(u, d) for d in range(3)]
+        self.corner_mask = np.ones(self.obj.shape[0])
+        self.inliers = np.ones(self.obj.shape[0], bool)
+        self.imu_mask = np.ones(self.t_imu.size)
+        self.active = [
+            i
+            for i, name in enumerate(SHARED_NAMES)
+            if not (name == "td" and options.hold_td_s is not None)
+            and not (name == "line_delay" and not options.estimate_line_delay)
+            and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
+        ]
+        self.tau = self.t_imu - 0.5 * (self.t_imu[0] + self.t_imu[-1])
+        self.R_ref = np.eye(3)
+
+    # -- corners -------------------------------------------------------------------------------------
+    def _pose_times(self, s: _State) -> tuple[np.ndarray, np.ndarray]:
+        first = self.pose_starts
+        t = self.t_cam[first] + s.td
+        row = self.row[first]
+        if self.opt.estimate_line_delay:
+            t = t + s.line_delay * row
+        return t, row
+
+    def corners(self, s: _State, jacobians: bool):
+        """Residuals (N, 2) px (observed - predicted), and per pose point: info (P, 6, 6), grad (P, 6),
+        J_local (P, 6, 24), J_shared (P, 6, 22), segment (P,)."""
+        t, row = self._pose_times(s)
+        seg, u = self.knots.locate(t)
+        w0 = self.knots.weights(u)
+        loc = local_controls(s.ctrl, seg)
+        R, tt = model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic)
+        pc = self.pose_of_corner
+        RX = np.einsum("nij,nj->ni", R[pc], self.obj)
+        Xc = RX + tt[pc]
+        pred = model.project(Xc, self.K, self.dist)
+        r = self.img - pred
+        if not jacobians:
+            return r
+        # d pixel / d X_cam by central differences, then the pose chain (left rotation, translation).
+        dX = np.empty((Xc.shape[0], 2, 3))
+        for a in range(3):
+            h = 1e-6 * np.maximum(np.abs(Xc[:, 2]), 1e-3)
+            e = np.zeros(3)
+            e[a] = 1.0
+            dX[:, :, a] = (
+                model.project(Xc + h[:, None] * e, self.K, self.dist)
+                - model.project(Xc - h[:, None] * e, self.K, self.dist)
+            ) / (2 * h[:, None])
+        J_xi = np.concatenate([-np.einsum("nij,njk->nik", dX, _skew(RX)), dX], axis=2)  # (N, 2, 6)
+        wgt = self.corner_mask / self.sigma_px**2
+        info = np.add.reduceat(
+            np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), self.pose_starts, axis=0
+        )
+        grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), self.pose_starts, axis=0)
+
+        # d xi / d (local controls, extrinsic, time) per pose point.
+        def xi(Rp: np.ndarray, tp: np.ndarray) -> np.ndarray:
+            return np.concatenate(
+                [se3.rotvecs_from_rotations(Rp @ np.transpose(R, (0, 2, 1))), tp - tt], axis=1
+            )
+
+        P = t.size
+        J_loc = np.zeros((P, 6, 24))
+        for j in range(4):
+            for c in range(3):
+                d = np.zeros((4, 6))
+                d[j, c] = H_CTRL
+                plus = model.camera_pose(loc + d, w0, self.R_ref, s.R_ic, s.t_ic)
+                minus = model.camera_pose(loc - d, w0, self.R_ref, s.R_ic, s.t_ic)
+                J_loc[:, :, j * 6 + c] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
+        # t_cam_w = R_ic^T (-R_i_w p - t_ic): linear in the position control points, rotation untouched.
+        for j in range(4):
+            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = -R * w0[:, j, None, None]
+        J_sh = np.zeros((P, 6, len(SHARED_NAMES)))
+        for a in range(3):
+            dv = np.zeros(3)
+            dv[a] = H_CTRL
+            Rp, Rm = se3.rotation_from_rotvec(dv) @ s.R_ic, se3.rotation_from_rotvec(-dv) @ s.R_ic
+            J_sh[:, :, a] = (
+                xi(*model.camera_pose(loc, w0, self.R_ref, Rp, s.t_ic))
+                - xi(*model.camera_pose(loc, w0, self.R_ref, Rm, s.t_ic))
+            ) / (2 * H_CTRL)
+            J_sh[:, :, 3 + a] = (
+                xi(*model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic + dv))
+                - xi(*model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic - dv))
+            ) / (2 * H_CTRL)
+        shift = H_TIME / self.knots.dt_s
+        plus = model.camera_pose(loc, self.knots.weights(u + shift), self.R_ref, s.R_ic, s.t_ic)
+        minus = model.camera_pose(loc, self.knots.weights(u - shift), self.R_ref, s.R_ic, s.t_ic)
+        dt_col = (xi(*plus) - xi(*minus)) / (2 * H_TIME)
+        J_sh[:, :, 6] = dt_col
+        J_sh[:, :, 7] = dt_col * row[:, None]
+        return r, info, grad, J_loc, J_sh, seg
+
+    # -- IMU -----------------------------------------------------------------------------------------
+    def gravity(self, R_g: np.ndarray) -> np.ndarray:
+        return R_g @ np.array([0.0, 0.0, -self.g_mag])
+
+    def imu(self, s: _State, jacobians: bool):
+        """Residuals (S, 6) [gyro, accel] observed - predicted; J_local (S, 6, 24), J_shared (S, 6, 22)."""
+        loc = local_controls(s.ctrl, self.imu_seg)
+        w0, w1, w2 = self.imu_w
+        g_w = self.gravity(s.R_g)
+        gy, ac = model.imu_predict(loc, w0, w1, w2, self.R_ref, g_w)
+        tau = self.tau[:, None]
+        r = np.concatenate(
+            [self.gyro - gy - s.b_g - s.b_g_dot * tau, self.accel - ac - s.b_a - s.b_a_dot * tau], axis=1
+        )
+        if not jacobians:
+            return r
+        S = r.shape[0]
+        J_loc = np.zeros((S, 6, 24))
+        for j in range(4):
+            for c in range(3):
+                d = np.zeros((4, 6))
+                d[j, c] = H_CTRL
+                gp, ap = model.imu_predict(loc + d, w0, w1, w2, self.R_ref, g_w)
+                gm, am = model.imu_predict(loc - d, w0, w1, w2, self.R_ref, g_w)
+                J_loc[:, :3, j * 6 + c] = (gp - gm) / (2 * H_CTRL)
+                J_loc[:, 3:, j * 6 + c] = (ap - am) / (2 * H_CTRL)
+        # accel = R_i_w (p'' - g): linear in the position control points.
+        R_i_w = np.transpose(self.R_ref @ model.exp_so3(model.spline_value(loc[:, :, :3], w0)), (0, 2, 1))
+        for j in range(4):
+            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = R_i_w * w2[:, j, None, None]
+        J_sh = np.zeros((S, 6, len(SHARED_NAMES)))
+        for a in range(2):
+            dv = np.zeros(3)
+            dv[a] = H_GRAV
+            _, ap = model.imu_predict(
+                loc, w0, w1, w2, self.R_ref, self.gravity(s.R_g @ se3.rotation_from_rotvec(dv))
+            )
+            _, am = model.imu_predict(
+                loc, w0, w1, w2, self.R_ref, self.gravity(s.R_g @ se3.rotation_from_rotvec(-dv))
+            )
+            J_sh[:, 3:, 8 + a] = (ap - am) / (2 * H_GRAV)
+        J_sh[:, :3, 10:13] = np.eye(3)
+        J_sh[:, 3:, 13:16] = np.eye(3)
+        J_sh[:, :3, 16:19] = np.eye(3) * self.tau[:, None, None]
+        J_sh[:, 3:, 19:22] = np.eye(3) * self.tau[:, None, None]
+        return r, J_loc, J_sh
+
+    def imu_weights(self) -> np.ndarray:
+        return np.r_[np.full(3, 1 / self.sigma_gyro), np.full(3, 1 / self.sigma_accel)]
+
+    # -- normal equations ----------------------------------------------------------------------------
+    def evaluate(self, s: _State) -> DenseSystem:
+        act = self.active
+        r_c, info, grad, Jl_c, Js_c, seg_c = self.corners(s, True)
+        Js_c = Js_c[:, :, act]
+        r_i, Jl_i, Js_i = self.imu(s, True)
+        Js_i = Js_i[:, :, act]
+        wv = self.imu_weights()[None, :] * self.imu_mask[:, None]
+        r_iw = r_i * wv
+        Jl_i = Jl_i * wv[:, :, None]
+        Js_i = Js_i * wv[:, :, None]
+        cost = float(np.sum(r_c**2 * (self.corner_mask / self.sigma_px**2)[:, None]) + np.sum(r_iw**2))
+        n = self.knots.n
+        order = np.argsort(seg_c, kind="stable")  # line-delay pose points need not be in time order
+        Jl_c, info, grad, Js_c, seg_c = Jl_c[order], info[order], grad[order], Js_c[order], seg_c[order]
+        JlT_info = np.transpose(Jl_c, (0, 2, 1)) @ info
+        band_c, cross_c, gl_c = scatter_band(
+            n, seg_c, JlT_info @ Jl_c, JlT_info @ Js_c, np.einsum("pia,pi->pa", Jl_c, grad)
+        )
+        JlT_i = np.transpose(Jl_i, (0, 2, 1))
+        band_i, cross_i, gl_i = scatter_band(
+            n,
+            self.imu_seg,
+            JlT_i @ Jl_i,
+            JlT_i @ Js_i,
+            np.einsum("sra,sr->sa", Jl_i, r_iw),
+        )
+        band = band_c + band_i
+        floor = BAND_FLOOR * max(float(np.max(np.diagonal(band[:, 0], axis1=1, axis2=2))), 1.0)
+        band[:, 0] += floor * np.eye(6)
+        cross = cross_c + cross_i
+        g_l = gl_c + gl_i
+        A = np.einsum("pia,pij,pjb->ab", Js_c, info, Js_c) + np.einsum("sra,srb->ab", Js_i, Js_i)
+        g_s = np.einsum("pia,pi->a", Js_c, grad) + np.einsum("sra,sr->a", Js_i, r_iw)
+        chol = BandedCholesky(band)
+        X = chol.solve(np.concatenate([cross, g_l[:, :, None]], axis=2))
+        X_B, X_g = X[:, :, :-1], X[:, :, -1]
+        S = A - np.einsum("nkp,nkq->pq", cross, X_B)
+        g = g_s - np.einsum("nkp,nk->p", cross, X_g)
+        s.cache = {"X_B": X_B, "X_g": X_g, "A": A}
+        return DenseSystem(cost, 0.5 * (S + S.T), g)
+
+    def retract(self, s: _State, delta: np.ndarray) -> _State:
+        full = np.zeros(len(SHARED_NAMES))
+        full[self.active] = delta
+        d_ctrl = s.cache["X_g"] - np.einsum("nkp,p->nk", s.cache["X_B"], delta)
+        return _State(
+            ctrl=s.ctrl + d_ctrl,
+            R_ic=se3.rotation_from_rotvec(full[0:3]) @ s.R_ic,
+            t_ic=s.t_ic + full[3:6],
+            td=s.td + full[6],
+            line_delay=s.line_delay + full[7],
+            R_g=s.R_g @ se3.rotation_from_rotvec(np.r_[full[8:10], 0.0]),
+            b_g=s.b_g + full[10:13],
+            b_a=s.b_a + full[13:16],
+            b_g_dot=s.b_g_dot + full[16:19],
+            b_a_dot=s.b_a_dot + full[19:22],
+        )
+
+    def solve(self, s: _State, max_iterations: int) -> tuple[_State, DenseSystem, int, bool]:
+        result = solve_lm(
+            self.evaluate,
+            s,
+            self.retract,
+            damping=Damping(initial=1e-4),
+            max_iterations=max_iterations,
+            relative_tolerance=1e-7,
+            label="the camera-IMU solve",
+            hint="check the IMU units, the held intrinsics and that the recording moves the board in view",
+        )
+        system = self.evaluate(result.params)
+        return result.params, system, result.iterations, result.converged
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    K = np.zeros((v.shape[0], 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
+
+
+def _initial_state(
+    problem: _Problem, track: BoardTrack, plain: PlainResult, t_ref: float, td: float
+) -> _State:
+    """The spline fitted to the PnP poses carried into the IMU by the plain extrinsic (linear least
+    squares on knot-centre samples, poses interpolated between frames)."""
+    T_c_i = se3.invert(plain.T_imu_cam)
+    T_w_i = track.T_w_cam @ T_c_i
+    t_pose = track.t_s - t_ref + td
+    R_w_i = T_w_i[:, :3, :3]
+    mid = R_w_i[R_w_i.shape[0] // 2]
+    problem.R_ref = mid
+    phi = se3.rotvecs_from_rotations(np.einsum("ji,njk->nik", mid, R_w_i))
+    turn = float(np.max(np.linalg.norm(phi, axis=1)))
+    if turn > MAX_TURN_RAD:
+        raise ImuInputError(
+            f"the recording turns {np.degrees(turn):.0f} deg away from its middle pose; the trajectory "
+            f"model holds {np.degrees(MAX_TURN_RAD):.0f} deg: cut the recording to the part that faces the "
+            "board"
+        )
+    knots = problem.knots
+    t_s = knots.t0_s + (np.arange(4 * knots.n) / 4) * knots.dt_s
+    t_s = t_s[t_s < knots.t_end_s]
+    tc = np.clip(t_s, t_pose[0], t_pose[-1])
+    vals = np.stack(
+        [np.interp(tc, t_pose, phi[:, k]) for k in range(3)]
+        + [np.interp(tc, t_pose, T_w_i[:, k, 3]) for k in range(3)],
+        axis=1,
+    )
+    seg, u = knots.locate(t_s)
+    w = knots.weights(u)
+    J = np.einsum("mj,cd->mcjd", w, np.eye(6)).reshape(-1, 6, 24)
+    band, cross, g = scatter_band(
+        knots.n,
+        seg,
+        np.einsum("mra,mrb->mab", J, J),
+        np.zeros((seg.size, 24, 1)),
+        np.einsum("mra,mr->ma", J, vals),
+    )
+    band[:, 0] += 1e-9 * np.eye(6)
+    ctrl = BandedCholesky(band).solve(g[:, :, None])[:, :, 0]
+    gravity = plain.gravity_w_m_s2 / np.linalg.norm(plain.gravity_w_m_s2)
+    # R_g maps [0, 0, -1] onto the measured gravity direction.
+    axis = np.cross([0.0, 0.0, -1.0], gravity)
+    angle = np.arctan2(np.linalg.norm(axis), np.dot([0.0, 0.0, -1.0], gravity))
+    R_g = se3.rotation_from_rotvec(axis / max(np.linalg.norm(axis), 1e-12) * angle)
+    return _State(
+        ctrl,
+        plain.T_imu_cam[:3, :3].copy(),
+        plain.T_imu_cam[:3, 3].copy(),
+        td,
+        0.0,
+        R_g,
+        plain.gyro_bias_rad_s.copy(),
+        plain.accel_bias_m_s2.copy(),
+    )
+
+
+def _safe_inverse(S: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric PSD matrix through its scaled eigen-decomposition; a direction the data
+    cannot see gets a very large variance (eigenvalues floored at 1e-14 of the largest), not a crash."""
+    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    Sn = S / np.outer(d, d)
+    vals, vecs = np.linalg.eigh(Sn)
+    vals = np.maximum(vals, 1e-14 * max(vals.max(), 1e-300))
+    return (vecs / vals) @ vecs.T / np.outer(d, d)
+
+
+def solve_imu_camera(
+    imu: ImuSamples,
+    frames: CameraFrames,
+    noise: ImuNoise,
+    options: SolveOptions = SolveOptions(),
+    track: BoardTrack | None = None,
+    plain: PlainResult | None = None,
+) -> ImuCameraSolution:
+    """Joint camera-IMU calibration (module docstring).
+
+    Raises:
+        ImuInputError / ImuUnitError: the recording cannot be aligned or is in the wrong units.
+        NumericalError: the residuals are not finite at the start.
+    """
+    cpu0 = time.process_time()
+    track = track or board_track(frames)
+    plain = plain or plain_calibration(imu, frames, track, td_s=options.hold_td_s)
+    td0 = plain.td_s if options.hold_td_s is None else options.hold_td_s
+    t_ref = float(imu.t_s[0])
+    problem = _Problem(imu, frames, noise, options, td0, t_ref)
+    if problem.t_imu.size < 100:
+        raise ImuInputError(
+            "camera and IMU overlap for fewer than 100 IMU samples; do the logs share a clock?"
+        )
+    state = _initial_state(problem, track, plain, t_ref, td0)
+    state, system, iterations, converged = problem.solve(state, options.max_iterations)
+    # Variance components: corners from their RMS, IMU groups raised to theirs.
+    r_c = problem.corners(state, False)
+    r_i = problem.imu(state, False)
+    norm = np.linalg.norm(r_c, axis=1)
+    robust_sigma = float(np.median(norm)) / np.sqrt(2 * np.log(2))  # 2-D Gaussian: median |r| = 1.177 sigma
+    problem.inliers = norm <= OUTLIER_SIGMAS * robust_sigma
+    problem.corner_mask = problem.inliers.astype(float)
+    if not options.fix_corner_sigma:
+        problem.sigma_px = float(np.sqrt(np.mean(r_c[problem.inliers] ** 2)))
+    f_g = max(1.0, float(np.sqrt(np.mean(r_i[:, :3] ** 2))) / problem.sigma_gyro)
+    f_a = max(1.0, float(np.sqrt(np.mean(r_i[:, 3:] ** 2))) / problem.sigma_accel)
+    problem.sigma_gyro *= f_g
+    problem.sigma_accel *= f_a
+    state, system, more, converged = problem.solve(state, options.max_iterations)
+    iterations += more
+    cov = _safe_inverse(system.H)
+    A_full = state.cache["A"]
+    inflation = np.ones(cov.shape[0])
+    if options.jackknife_blocks >= 3:
+        jk = _block_jackknife(problem, state, options.jackknife_blocks)
+        ratio = np.diag(jk) / np.diag(cov)
+        inflation = np.where(ratio > JACKKNIFE_RATIO, np.sqrt(ratio), 1.0)
+        cov = cov * np.outer(inflation, inflation)
+    act = problem.active
+    names = tuple(SHARED_NAMES[i] for i in act)
+    index = {name: k for k, name in enumerate(names)}
+    seven = np.zeros((7, 7))
+    seven_names = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")
+    have = [k for k, n in enumerate(seven_names) if n in index]
+    rows = [index[seven_names[k]] for k in have]
+    seven[np.ix_(have, have)] = cov[np.ix_(rows, rows)]
+    A = A_full
+    td_crlb = 1.0 / np.sqrt(A[index["td"], index["td"]]) if "td" in index else float("nan")
+    r_c = problem.corners(state, False)
+    r_i = problem.imu(state, False)
+    held_out = _k_fold(problem, state, options) if options.folds >= 2 else None
+    g_w = problem.gravity(state.R_g)
+    return ImuCameraSolution(
+        T_imu_cam=se3.transform(state.R_ic, state.t_ic),
+        td_s=float(state.td),
+        td_held=options.hold_td_s is not None,
+        line_delay_s=float(state.line_delay) if options.estimate_line_delay else None,
+        gyro_bias_rad_s=state.b_g,
+        accel_bias_m_s2=state.b_a,
+        gravity_w_m_s2=g_w,
+        gyro_bias_drift_rad_s2=state.b_g_dot if options.bias_drift else None,
+        accel_bias_drift_m_s3=state.b_a_dot if options.bias_drift else None,
+        covariance=cov,
+        state_names=names,
+        covariance_7=seven,
+        sigma_rotation_deg=np.degrees(np.sqrt(np.diag(seven)[:3])),
+        sigma_translation_mm=1e3 * np.sqrt(np.diag(seven)[3:6]),
+        sigma_td_ms=1e3 * float(np.sqrt(seven[6, 6])),
+        td_crlb_ms=1e3 * float(td_crlb),
+        sigma_line_delay_us=(
+            1e6 * float(np.sqrt(cov[index["line_delay"], index["line_delay"]]))
+            if "line_delay" in index
+            else None
+        ),
+        corner_sigma_px=problem.sigma_px,
+        corner_rms_px=float(np.sqrt(np.mean(np.sum(r_c[problem.inliers] ** 2, axis=1)))),
+        n_outliers=int(np.sum(~problem.inliers)),
+        gyro_rms_rad_s=float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))),
+        accel_rms_m_s2=float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))),
+        imu_variance_factors=(f_g, f_a),
+        sigma_inflation=dict(zip(names, (float(v) for v in inflation), strict=True)),
+        held_out=held_out,
+        iterations=iterations,
+        converged=converged,
+        n_frames=int(np.unique(problem.frame_of_corner).size),
+        n_corners=int(problem.obj.shape[0]),
+        n_imu=int(problem.t_imu.size),
+        knots=problem.knots,
+        cpu_s=time.process_time() - cpu0,
+        plain=plain,
+        residuals={
+            "corner_px": r_c,
+            "corner_t_s": problem.t_cam + t_ref,
+            "corner_row_px": problem.row,
+            "corner_inlier": problem.inliers,
+            "imu_t_s": problem.t_imu + t_ref,
+            "gyro_rad_s": r_i[:, :3],
+            "accel_m_s2": r_i[:, 3:],
+        },
+    )
+
+
+def _one_step(
+    problem: _Problem, state: _State, corners_out: np.ndarray, imu_out: np.ndarray
+) -> tuple[np.ndarray, _State]:
+    """The solution with some corners and IMU samples left out, one Gauss-Newton step from ``state``
+    (the full solution): (shared delta, moved state). Restores the problem's masks."""
+    problem.corner_mask = (problem.inliers & ~corners_out).astype(float)
+    problem.imu_mask = (~imu_out).astype(float)
+    probe = replace(state, cache={})
+    system = problem.evaluate(probe)
+    delta = np.linalg.lstsq(system.H, system.g, rcond=None)[0]
+    problem.corner_mask = problem.inliers.astype(float)
+    problem.imu_mask = np.ones(problem.t_imu.size)
+    return delta, problem.retract(probe, delta)
+
+
+def _block_jackknife(problem: _Problem, state: _State, blocks: int) -> np.ndarray:
+    """Delete-one-block jackknife covariance over the active shared states (p, p).
+
+    The camera span is cut into ``blocks`` contiguous time blocks; each block's corners and IMU samples
+    are left out in turn and the solution moved by one Gauss-Newton step from the full one (the
+    linearised jackknife: a block is a small share of the data). The spread of those K answers,
+    (K - 1)/K sum (d_k - mean)(d_k - mean)^T, sees what the white-noise covariance cannot: residuals
+    correlated in time (vibration, a lens error that follows the board across the image).
+    """
+    t_c, t_i = problem.t_cam + state.td, problem.t_imu
+    edges = np.linspace(t_c.min(), t_c.max(), blocks + 1)
+    edges[-1] += 1.0
+    steps = []
+    for b in range(blocks):
+        inside_c, inside_i = (
+            (t_c >= edges[b]) & (t_c < edges[b + 1]),
+            (t_i >= edges[b]) & (t_i < edges[b + 1]),
+        )
+        steps.append(_one_step(problem, state, inside_c, inside_i)[0])
+    d = np.array(steps)
+    d -= d.mean(axis=0)
+    return (blocks - 1) / blocks * d.T @ d
+
+
+def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> HeldOut:
+    k = options.folds
+    frame_rank = np.unique(problem.frame_of_corner, return_inverse=True)[1]
+    sample = np.arange(problem.t_imu.size)
+    out: HeldOut = HeldOut([], [], [])
+    for f in range(k):
+        out_c = frame_rank % k == f
+        out_i = sample % k == f
+        _, fold_state = _one_step(problem, state, out_c, out_i)
+        r_c = problem.corners(fold_state, False)[out_c & problem.inliers]
+        r_i = problem.imu(fold_state, False)[out_i]
+        out.corner_rms_px.append(float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))))
+        out.gyro_rms_rad_s.append(float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))))
+        out.accel_rms_m_s2.append(float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))))
+    return out

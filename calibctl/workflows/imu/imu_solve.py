@@ -1,0 +1,336 @@
+"""``calibctl imu solve`` as one workflow call: target checked, recording read, solve and gates, the rig's
+next version (``--rig``), the result file (``-o``); the CLI parses, calls ``run_imu`` and renders.
+
+Order: with ``--rig`` the target is refused before anything is read (exit 2, nothing stored:
+``edges.versions.check_sensor_target``); the camera's active stored calibration gives the held
+intrinsics (``--serial``; a camera without one is exit 2); the recording is read (``recording``); the
+core solves and gates it (``core.imu.calibrate``: on a (td, rotation) correlation it cannot resolve it
+holds td at ``--hold-td-ms`` when given, else refuses); the typed result becomes the edge's evidence at
+full precision (``evidence``) and is stored as the rig's next version through the ``edges`` room, a
+rejected result as a rejected version (never active). ``result_json`` is the one rounded JSON shape
+that ``--json`` prints and ``-o`` writes.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibctl.artifacts.common import utc_now
+from calibctl.artifacts.imu import (
+    COVARIANCE_LAYOUT,
+    TD_CONVENTION,
+    ImuEdgeResult,
+    ImuEstimate,
+    ImuGate,
+    ImuInput,
+    ImuMetrics,
+    ImuNoiseModel,
+)
+from calibctl.artifacts.rig import RigCalibration
+from calibctl.config import Settings
+from calibctl.core.extrinsics import se3
+from calibctl.core.gate import GateResult
+from calibctl.core.imu.calibrate import Calibration, calibrate
+from calibctl.core.imu.samples import ImuInputError, ImuNoise
+from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
+from calibctl.core.intrinsics.solve import is_fisheye
+from calibctl.errors import InputError, NotFoundError, UsageError
+from calibctl.files import write_atomic
+from calibctl.workflows.edges import versions
+from calibctl.workflows.edges.kinds import IMU
+from calibctl.workflows.imu.bags import is_bag, read_bag
+from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
+from calibctl.workflows.store_admin.records import open_store
+
+FREE_TRY = "td_rotation_correlation_free"  # core.imu.calibrate: the correlation before td was held
+
+
+@dataclass(frozen=True)
+class ImuRequest:
+    """What the command line asked for. ``hold_td_s``: the td to hold when the motion cannot separate td
+    from the extrinsic rotation (a hardware-triggered rig knows 0); None: refuse instead."""
+
+    recording: Path
+    serial: str
+    camera: str = "cam0"
+    noise: Path | None = None
+    imu_frame: str = "imu"
+    rig: str | None = None
+    hold_td_s: float | None = None
+    line_delay: bool = False
+    knot_spacing_s: float = 0.05
+    folds: int = 3
+    out: Path | None = None
+    force: bool = False
+    board: str | None = None  # registered NAME[@REV]: detects corners in images, checks corner files'
+    image_topic: str | None = None  # a ROS bag's sensor_msgs/Image (or CompressedImage) topic
+    imu_topic: str | None = None  # a ROS bag's sensor_msgs/Imu topic
+
+
+@dataclass
+class ImuOutcome:
+    """The verdict and everything it rests on; ``stored`` / ``written`` filled by ``run_imu``."""
+
+    request: ImuRequest
+    camera: str  # SERIAL@VERSION whose intrinsics were held
+    recording: Recording
+    noise: ImuNoise
+    noise_source: str
+    calibration: Calibration
+    board: str | None = None  # NAME@REV read from the store
+    stored: RigCalibration | None = None
+    written: list[str] = field(default_factory=list)
+
+    @property
+    def solution(self) -> ImuCameraSolution | None:
+        return self.calibration.solution
+
+    @property
+    def accepted(self) -> bool:
+        return self.solution is not None and self.calibration.passed
+
+    @property
+    def status(self) -> str:
+        return "accepted" if self.accepted else "rejected"
+
+
+def camera_intrinsics(
+    settings: Settings, serial: str
+) -> tuple[str, tuple[np.ndarray, np.ndarray, tuple[int, int]]]:
+    """SERIAL@VERSION of the camera's active calibration and its (K, distortion, image size)."""
+    with open_store(settings) as store:
+        try:
+            art = store.get_artifact(serial, None)
+        except NotFoundError:
+            raise NotFoundError(
+                f"camera {serial} has no active calibration",
+                f"calibrate {serial} (or roll it back to an accepted version), then run `calibctl imu solve`",
+            ) from None
+    if is_fisheye(art.model.name):
+        raise UsageError(
+            f"camera {art.ref} is calibrated with the {art.model.name} model; the camera-IMU solve holds "
+            "pinhole intrinsics with OpenCV's distortion",
+            f"calibrate {serial} with a pinhole model (--model k1k2p1p2k3) for the IMU solve",
+        )
+    K = np.array(art.camera_matrix, np.float64)
+    size = (int(art.image_size[0]), int(art.image_size[1]))
+    return art.ref, (K, np.array(art.dist_coeffs, np.float64), size)
+
+
+def registered_board(settings: Settings, ref: str) -> Board:
+    """The registered board ``NAME[@REV]`` (NotFoundError, exit 2, for an unknown one)."""
+    from calibctl.workflows.board.boards import board_ref, board_spec
+
+    name, revision = board_ref(ref)
+    with open_store(settings) as store:
+        board = store.get_board(name, revision)
+    return Board(board.ref, board_spec(board))
+
+
+def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
+    """Read and solve (module docstring); nothing stored."""
+    camera, intrinsics = camera_intrinsics(settings, req.serial)
+    board = None if req.board is None else registered_board(settings, req.board)
+    noise, source = read_noise(req.noise)
+    if is_bag(req.recording):
+        if req.image_topic is None or req.imu_topic is None:
+            raise UsageError(
+                f"{req.recording} is a ROS bag: name its topics",
+                "pass --image-topic (sensor_msgs/Image) and --imu-topic (sensor_msgs/Imu)",
+            )
+        rec = read_bag(req.recording, req.image_topic, req.imu_topic, intrinsics, board)
+    else:
+        rec = read_recording(req.recording, req.camera, intrinsics, board)
+    options = SolveOptions(
+        knot_spacing_s=req.knot_spacing_s, estimate_line_delay=req.line_delay, folds=req.folds
+    )
+    try:
+        cal = calibrate(rec.imu, rec.frames, noise, options, fallback_td_s=req.hold_td_s)
+    except ImuInputError as exc:
+        raise InputError(f"{req.recording}: {exc}", "fix the recording as the message says") from None
+    return ImuOutcome(req, camera, rec, noise, source, cal, None if board is None else board.ref)
+
+
+def _vec3(v: np.ndarray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def _gate(g: GateResult) -> ImuGate:
+    return ImuGate(
+        gate=g.gate,
+        passed=g.passed,
+        value=_finite(g.value),
+        threshold=g.threshold,
+        message=g.message,
+        hint=g.hint,
+    )
+
+
+def estimate_of(outcome: ImuOutcome) -> ImuEstimate | None:
+    s = outcome.solution
+    if s is None:
+        return None
+    w, x, y, z = (float(v) for v in se3.quaternion_from_rotation(s.T_imu_cam[:3, :3]))
+    return ImuEstimate(
+        T_imu_cam=tuple(tuple(float(v) for v in row) for row in s.T_imu_cam),
+        quaternion_wxyz=(w, x, y, z),
+        td_s=float(s.td_s),
+        td_held=bool(s.td_held),
+        td_held_reason=outcome.calibration.held_reason,
+        covariance=[[float(v) for v in row] for row in s.covariance_7],
+        sigma_translation_mm=_vec3(s.sigma_translation_mm),
+        sigma_rotation_deg=_vec3(s.sigma_rotation_deg),
+        sigma_td_ms=float(s.sigma_td_ms),
+        td_crlb_ms=_finite(s.td_crlb_ms),
+        sigma_inflation={k: float(v) for k, v in s.sigma_inflation.items() if np.isfinite(v)},
+        line_delay_s=None if s.line_delay_s is None else float(s.line_delay_s),
+        sigma_line_delay_us=None if s.sigma_line_delay_us is None else float(s.sigma_line_delay_us),
+        gyro_bias_rad_s=_vec3(s.gyro_bias_rad_s),
+        accel_bias_m_s2=_vec3(s.accel_bias_m_s2),
+        gravity_board_m_s2=_vec3(s.gravity_w_m_s2),
+    )
+
+
+def metrics_of(s: ImuCameraSolution | None, folds: int) -> ImuMetrics | None:
+    if s is None:
+        return None
+    held = s.held_out
+    return ImuMetrics(
+        frames=s.n_frames,
+        corners=s.n_corners,
+        corners_left_out=s.n_outliers,
+        imu_samples=s.n_imu,
+        corner_rms_px=float(s.corner_rms_px),
+        gyro_rms_rad_s=float(s.gyro_rms_rad_s),
+        accel_rms_m_s2=float(s.accel_rms_m_s2),
+        folds=folds if held is not None else 0,
+        held_out_corner_rms_px=[] if held is None else [float(v) for v in held.corner_rms_px],
+        held_out_gyro_rms_rad_s=[] if held is None else [float(v) for v in held.gyro_rms_rad_s],
+        held_out_accel_rms_m_s2=[] if held is None else [float(v) for v in held.accel_rms_m_s2],
+        iterations=s.iterations,
+        converged=bool(s.converged),
+    )
+
+
+def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
+    """The typed result as the rig edge's evidence ``imu_frame -> serial``, at full precision."""
+    req, s, n = outcome.request, outcome.solution, outcome.noise
+    factors = (
+        (1.0, 1.0) if s is None else (float(s.imu_variance_factors[0]), float(s.imu_variance_factors[1]))
+    )
+    return ImuEdgeResult(
+        parent_frame=req.imu_frame,
+        child_frame=req.serial,
+        status="accepted" if outcome.accepted else "rejected",
+        camera=outcome.camera,
+        recording=str(req.recording),
+        board=outcome.board,
+        estimate=estimate_of(outcome),
+        noise=ImuNoiseModel(
+            gyro_noise_density=n.gyro_noise_density,
+            accel_noise_density=n.accel_noise_density,
+            gyro_random_walk=n.gyro_random_walk,
+            accel_random_walk=n.accel_random_walk,
+            gravity_m_s2=n.gravity_m_s2,
+            rate_hz=float(outcome.recording.imu.rate_hz),
+            variance_factors=factors,
+            source=outcome.noise_source,
+        ),
+        metrics=metrics_of(s, req.folds),
+        # the failed first try before td was held is told by td_held_reason, not judged again by lint
+        gates=[_gate(g) for g in outcome.calibration.gates if g.gate != FREE_TRY],
+        inputs=[
+            ImuInput.model_validate({"role": role, "path": str(path.resolve()), "sha256": sha})
+            for role, path, sha in outcome.recording.inputs
+        ],
+        created_at=utc_now(),
+    )
+
+
+def _r(v: float | None, digits: int) -> float | None:
+    return None if v is None or not np.isfinite(v) else round(float(v), digits)
+
+
+def result_json(outcome: ImuOutcome) -> dict[str, Any]:
+    """The result as people and scripts read it (``--json``, ``-o``): rounded; the evidence is built from
+    ``outcome`` itself at full precision."""
+    s = outcome.solution
+    doc: dict[str, Any] = {
+        "recording": str(outcome.request.recording),
+        "camera": outcome.camera,
+        "board": outcome.board,
+        "frames": int(outcome.recording.frames.t_s.size),
+        "imu_samples": int(outcome.recording.imu.t_s.size),
+        "imu_rate_hz": _r(outcome.recording.imu.rate_hz, 2),
+        "noise": outcome.noise_source,
+        "notes": list(outcome.recording.notes),
+        "status": outcome.status,
+        "held": outcome.calibration.held,
+        "held_reason": outcome.calibration.held_reason,
+        "gates": [
+            {
+                "gate": g.gate,
+                "passed": g.passed,
+                "value": _r(g.value, 4),
+                "threshold": _r(g.threshold, 4),
+                "message": g.message,
+                "hint": g.hint,
+            }
+            for g in outcome.calibration.gates
+        ],
+        "estimate": None,
+    }
+    if s is not None:
+        T = s.T_imu_cam
+        doc["estimate"] = {
+            "name": "T_imu_cam",
+            "convention": "p_imu = R p_cam + t (camera frame into the IMU frame), metres",
+            "matrix": [[round(float(v), 9) for v in row] for row in T],
+            "translation_m": [round(float(v), 6) for v in T[:3, 3]],
+            "sigma_translation_mm": [round(float(v), 3) for v in s.sigma_translation_mm],
+            "sigma_rotation_deg": [round(float(v), 4) for v in s.sigma_rotation_deg],
+            "td_ms": round(1e3 * s.td_s, 4),
+            "td_convention": TD_CONVENTION,
+            "td_held": s.td_held,
+            "sigma_td_ms": _r(s.sigma_td_ms, 4),
+            "td_crlb_ms": _r(s.td_crlb_ms, 4),
+            "sigma_inflation": {
+                k: round(float(v), 3) for k, v in s.sigma_inflation.items() if np.isfinite(v)
+            },
+            "line_delay_us": None if s.line_delay_s is None else round(1e6 * s.line_delay_s, 3),
+            "sigma_line_delay_us": _r(s.sigma_line_delay_us, 3),
+            "gyro_bias_rad_s": [round(float(v), 6) for v in s.gyro_bias_rad_s],
+            "accel_bias_m_s2": [round(float(v), 5) for v in s.accel_bias_m_s2],
+            "gravity_board_m_s2": [round(float(v), 5) for v in s.gravity_w_m_s2],
+            "covariance": [[float(v) for v in row] for row in s.covariance_7],
+            "covariance_layout": COVARIANCE_LAYOUT,
+            "T_cam_imu": [[round(float(v), 9) for v in row] for row in s.T_cam_imu],
+            "timeshift_cam_imu_s": round(float(s.timeshift_cam_imu_s), 9),
+        }
+        m = metrics_of(s, outcome.request.folds)
+        assert m is not None
+        doc["metrics"] = m.model_dump(mode="json")
+    return doc
+
+
+def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
+    """The whole command (module docstring)."""
+    if req.rig is not None:
+        versions.check_sensor_target(settings, req.rig, req.imu_frame, req.serial, IMU, "--imu-frame")
+    outcome = solve(settings, req)
+    if req.rig is not None:
+        outcome.stored = versions.store_evidence(settings, req.rig, evidence(outcome)).calibration
+    if req.out is not None:
+        text = json.dumps(result_json(outcome), indent=2, allow_nan=False) + "\n"
+        write_atomic(req.out, text, force=req.force)
+        outcome.written.append(f"wrote {req.out}")
+    return outcome

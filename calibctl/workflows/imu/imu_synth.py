@@ -1,0 +1,162 @@
+"""``calibctl imu synth``: a rendered camera + IMU recording with known T_imu_cam and td (tests, demos).
+
+Writes the layout ``imu solve`` reads (``recording``): ``imu0/data.csv`` (EuRoC's header and units:
+ns, rad/s, m/s^2), ``cam0/<ns>.csv`` (one file per frame: stamp, pixel, board point in metres) or, with
+``images``, the ASL image layout ``cam0/data.csv`` + ``cam0/data/<ns>.png`` (the board, a 7 x 6
+inner-corner chessboard of 50 mm squares, rendered from each frame's pose, the camera 1 m from it),
+Kalibr's ``imu.yaml`` with the noise densities rendered, and ``truth.json`` (T_imu_cam, td_s, biases,
+gravity, the intrinsics rendered with, Kalibr's T_cam_imu and timeshift_cam_imu). The recording comes
+from core.synth.imu; with ``serial`` it is rendered through that camera's active stored calibration,
+so ``imu solve --serial`` holds the very intrinsics that made it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibctl.config import Settings
+from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.extrinsics import se3
+from calibctl.core.synth.imu import ImuCameraRecording, grid_points, synthesize_imu_camera
+from calibctl.errors import AlreadyExistsError, UsageError
+from calibctl.files import file_errors, write_atomic
+from calibctl.workflows.imu.imu_solve import camera_intrinsics
+
+EPOCH_NS = 1_600_000_000_000_000_000  # the recording's first stamps sit near this (any clock would do)
+IMU_HEADER = (
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"
+)
+CORNER_HEADER = "#timestamp [ns],kp_x,kp_y,p_x,p_y,p_z,corner_id"
+IMAGE_BOARD = BoardSpec.chessboard(7, 6, 0.05)  # the render's board points (core.synth.imu.grid_points)
+IMAGE_DISTANCE_M = 1.0  # the whole printed board stays in view
+GYRO_RANDOM_WALK = 1e-5  # written to imu.yaml: the render's biases are constant
+ACCEL_RANDOM_WALK = 1e-4
+
+
+def _ns(t_s: np.ndarray) -> np.ndarray:
+    return EPOCH_NS + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
+
+
+def _write_images(out: Path, rec: ImuCameraRecording, stamps: np.ndarray, seed: int, force: bool) -> None:
+    """Each frame's board rendered at the pose its corners give (PnP through the rendered lens)."""
+    import cv2
+
+    from calibctl.core.synth.pinhole import PinholeCamera, render_view
+
+    dist = np.zeros(5)
+    dist[: min(5, rec.dist_coeffs.size)] = rec.dist_coeffs[:5]
+    camera = PinholeCamera(np.asarray(rec.camera_matrix, np.float64), dist, rec.image_size)
+    rng = np.random.default_rng(seed + 7_000_003)
+    with file_errors("create", out / "cam0" / "data"):
+        (out / "cam0" / "data").mkdir(parents=True, exist_ok=True)
+    rows = ["#timestamp [ns],filename"]
+    for t, obj, img in zip(stamps, rec.object_points, rec.image_points, strict=True):
+        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist)
+        if not ok:
+            continue
+        T = se3.transform(se3.rotation_from_rotvec(rvec.ravel()), tvec.ravel())
+        ok, png = cv2.imencode(".png", render_view(camera, IMAGE_BOARD, T, rng, supersample=2))
+        write_atomic(out / "cam0" / "data" / f"{t}.png", png.tobytes(), force=force)
+        rows.append(f"{t},{t}.png")
+    write_atomic(out / "cam0" / "data.csv", "\n".join(rows) + "\n", force=force)
+
+
+def run_imu_synth(
+    settings: Settings,
+    out: Path,
+    seed: int = 0,
+    *,
+    motion: str = "dance",
+    duration_s: float = 6.0,
+    td_s: float = 0.012,
+    line_delay_s: float = 0.0,
+    serial: str | None = None,
+    images: bool = False,
+    force: bool = False,
+) -> dict[str, Any]:
+    """Render and write the recording (module docstring); AlreadyExistsError when ``out`` holds one."""
+    truth_path = out / "truth.json"
+    if truth_path.exists() and not force:
+        raise AlreadyExistsError(f"{out} already holds a rendered recording", "pass --force to overwrite it")
+    if motion not in ("dance", "corridor"):
+        raise UsageError(f"--motion {motion!r} is not dance or corridor")
+    if not 1.0 <= duration_s <= 600.0:
+        raise UsageError(f"--duration-s {duration_s:g} is outside 1..600 s")
+    lens: dict[str, Any] = {}
+    camera = None
+    if serial is not None:
+        camera, (K, dist, size) = camera_intrinsics(settings, serial)
+        lens = {"camera_matrix": K, "dist_coeffs": dist, "image_size": size}
+    if images:
+        lens["distance_m"] = IMAGE_DISTANCE_M
+        assert np.allclose(grid_points(), IMAGE_BOARD.object_points())
+    rec = synthesize_imu_camera(
+        seed, motion=motion, duration_s=duration_s, td_s=td_s, line_delay_s=line_delay_s, **lens
+    )
+    t_imu, t_cam = _ns(rec.imu_t_s), _ns(rec.cam_t_s)
+    rows = [IMU_HEADER] + [
+        f"{t},{w[0]:.9f},{w[1]:.9f},{w[2]:.9f},{a[0]:.9f},{a[1]:.9f},{a[2]:.9f}"
+        for t, w, a in zip(t_imu, rec.gyro_rad_s, rec.accel_m_s2, strict=True)
+    ]
+    for d in ("imu0", "cam0"):
+        with file_errors("create", out / d):
+            (out / d).mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "imu0" / "data.csv", "\n".join(rows) + "\n", force=force)
+    if images:
+        _write_images(out, rec, t_cam, seed, force)
+    for t, obj, img in [] if images else zip(t_cam, rec.object_points, rec.image_points, strict=True):
+        lines = [CORNER_HEADER] + [
+            f"{t},{u:.6f},{v:.6f},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i}"
+            for i, ((u, v), p) in enumerate(zip(img, obj, strict=True))
+        ]
+        write_atomic(out / "cam0" / f"{t}.csv", "\n".join(lines) + "\n", force=force)
+    tr = rec.truth
+    write_atomic(
+        out / "imu.yaml",
+        "# Kalibr imu.yaml: the noise calibctl imu synth rendered\n"
+        f"gyroscope_noise_density: {tr.gyro_noise_density}\n"
+        f"accelerometer_noise_density: {tr.accel_noise_density}\n"
+        f"gyroscope_random_walk: {GYRO_RANDOM_WALK}\n"
+        f"accelerometer_random_walk: {ACCEL_RANDOM_WALK}\n"
+        "rostopic: /imu0\n"
+        f"update_rate: {1.0 / float(np.median(np.diff(rec.imu_t_s))):.1f}\n",
+        force=True,
+    )
+    truth = {
+        "T_imu_cam": tr.T_imu_cam.tolist(),
+        "td_s": tr.td_s,
+        "td_convention": "t_imu = t_cam + td_s",
+        "T_cam_imu": se3.invert(tr.T_imu_cam).tolist(),
+        "timeshift_cam_imu": tr.td_s,
+        "line_delay_s": tr.line_delay_s,
+        "gyro_bias_rad_s": tr.gyro_bias_rad_s.tolist(),
+        "accel_bias_m_s2": tr.accel_bias_m_s2.tolist(),
+        "gravity_board_m_s2": tr.gravity_w_m_s2.tolist(),
+        "noise_px": tr.noise_px,
+        "camera": camera,
+        "camera_matrix": np.asarray(rec.camera_matrix).tolist(),
+        "dist_coeffs": np.asarray(rec.dist_coeffs).tolist(),
+        "image_size": list(rec.image_size),
+        "motion": motion,
+        "board": {"kind": "chessboard", "cols": 7, "rows": 6, "square_mm": 50.0} if images else None,
+        "duration_s": duration_s,
+        "seed": seed,
+        "frames": int(t_cam.size),
+        "imu_samples": int(t_imu.size),
+    }
+    write_atomic(truth_path, json.dumps(truth, indent=2) + "\n", force=True)
+    return {
+        "out": str(out),
+        "frames": truth["frames"],
+        "imu_samples": truth["imu_samples"],
+        "motion": motion,
+        "seed": seed,
+        "td_s": tr.td_s,
+        "camera": camera,
+        "truth": str(truth_path),
+    }
