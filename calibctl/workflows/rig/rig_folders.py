@@ -582,9 +582,11 @@ def judged_solve(
 def square_size_findings(solution: RigSolution, square_mm: float | None) -> list[Finding]:
     """A warning (``square-size``) when the square size given is outside what boards are printed with
     (``PLAUSIBLE_SQUARE_MM``): every length the solve reports scales with it, so a 2.5 typed for 25 passes a
-    75 mm rig as 7.5 mm, seen from a tenth of its real working distance, without any residual showing it."""
+    75 mm rig as 7.5 mm, seen from a tenth of its real working distance, without any residual showing it.
+    ``--square-mm 1`` is the unit square of a board whose size is unknown (every length in squares): no
+    warning."""
     lo, hi = PLAUSIBLE_SQUARE_MM
-    if square_mm is None or lo <= square_mm <= hi:
+    if square_mm is None or lo <= square_mm <= hi or square_mm == 1.0:  # 1: lengths in squares, as asked
         return []
     baselines = [float(np.linalg.norm(p[3:])) * 1e3 for p in solution.cam_poses[1:]]
     distance_mm = float(np.median(np.linalg.norm(solution.board_poses[:, 3:], axis=1))) * 1e3

@@ -46,3 +46,8 @@ def test_a_square_size_no_board_has_is_a_warning_naming_the_baseline_it_makes(ri
 def test_the_right_square_size_raises_no_warning(rig2: Path) -> None:
     doc = json.loads(solve_folders(rig2, "9", "25", "--json").stdout)
     assert not [f for f in doc["lint"] if f["rule"] == "square-size"]
+
+
+def test_the_unit_square_measures_in_squares_without_a_warning(rig2: Path) -> None:
+    doc = json.loads(solve_folders(rig2, "9", "1", "--json").stdout)
+    assert not [f for f in doc["lint"] if f["rule"] == "square-size"]
