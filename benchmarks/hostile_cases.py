@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,13 +12,17 @@ from hostile_sweep import (
     SERIAL,
     Case,
     both,
+    bundle_copy,
     calibctl,
     exported,
     fifo,
     folder,
+    foreign_sqlite,
     motions,
     read_only_file,
     read_only_store,
+    rehashed_rig,
+    reseal,
     residuals,
     second_data_line,
     symlink,
@@ -892,6 +897,109 @@ def _store() -> list[Case]:
     return cases
 
 
+def _fx_plus_one(b: Path) -> None:
+    body = (b / "cam1.yaml").read_text()
+    m = re.search(r"camera_matrix:\n  rows: 3\n  cols: 3\n  data: \[([-0-9.e+]+)", body)
+    if m is None:
+        raise RuntimeError("no camera_matrix in cam1.yaml")
+    reseal(b / "cam1.yaml", body[: m.start(1)] + repr(float(m.group(1)) + 1.0) + body[m.end(1) :])
+
+
+def _swap_cameras(b: Path) -> None:
+    left, right = (b / "cam0.yaml").read_text(), (b / "cam1.yaml").read_text()
+    reseal(b / "cam0.yaml", right)
+    reseal(b / "cam1.yaml", left)
+
+
+def _edge_10mm(doc: dict) -> None:
+    doc["edges"][0]["T_parent_child"][0][3] -= 0.010
+
+
+def _member_fx(doc: dict) -> None:
+    doc["members"][1]["camera_matrix"][0][0] += 5.0
+
+
+def _notes(b: Path) -> None:
+    (b / "notes.txt").write_text("mine\n")
+
+
+def _link(b: Path) -> None:
+    (b.parent / "victim.txt").write_text("not calibctl's\n")
+    (b / "tf_static.yaml").unlink()
+    (b / "tf_static.yaml").symlink_to(b.parent / "victim.txt")
+
+
+def _unsigned_ros_export(w: Path) -> None:
+    """The demo camera's ROS export (the demo store has no key), a trusted-keys folder with a stranger's
+    key."""
+    (w / "keys").mkdir()
+    calibctl(w, ["export", SERIAL, "--format", "ros", "-o", str(w / "c.yaml")])
+    calibctl(w, ["keys", "init", "--key", str(w / "k.pem")])
+    calibctl(w, ["keys", "export-public", "--key", str(w / "k.pem"), "-o", str(w / "keys" / "k.pem")])
+
+
+def _seal() -> list[Case]:
+    """What the robot loads is what was signed: forged bundles (no key, checksums recomputed), a rig.json
+    re-hashed without its signature, another application's database, a bundle folder holding a user's
+    files; each must be refused with nothing stored or changed."""
+    g = "seal"
+    manifest = "{w}/b/manifest.json"
+    forged = {
+        "fx +1 px, checksums recomputed": _fx_plus_one,
+        "cam0/cam1 swapped, manifest fixed": _swap_cameras,
+    }
+    cases = [Case(g, f"lint bundle {n}", ["lint", manifest], setup=bundle_copy(f)) for n, f in forged.items()]
+    into = ["--db", "sqlite:///{w}/rig.db", "rig", "import"]  # the rig's own store: members there
+    cases += [
+        Case(g, f"rig import bundle {n}", [*into, "{w}/b"], setup=bundle_copy(f), protect=["rig.db"])
+        for n, f in forged.items()
+    ]
+    rehashed = {"edge +10 mm": _edge_10mm, "member fx +5 px": _member_fx}
+    cases += [
+        Case(
+            g,
+            f"rig import rig.json {n}, re-hashed, unsigned",
+            [*into, "{w}/R1.json"],
+            setup=bundle_copy(rehashed_rig(e)),
+            protect=["rig.db"],
+        )
+        for n, e in rehashed.items()
+    ]
+    cases += [
+        Case(g, "lint honest bundle", ["lint", manifest], expect="ok", setup=bundle_copy()),
+        Case(
+            g, "rig import honest bundle (already stored)", [*into, "{w}/b"], expect="ok", setup=bundle_copy()
+        ),
+        Case(
+            g,
+            "lint --require-signature on an unsigned store's ros export",
+            ["lint", "{w}/c.yaml", "--require-signature", "--trusted-keys", "{w}/keys"],
+            setup=_unsigned_ros_export,
+        ),
+    ]
+    force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]
+    intruders = {
+        "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),
+        "whose tf_static.yaml is a symlink": (_link, ["b/tf_static.yaml", "victim.txt"]),
+    }
+    cases += [
+        Case(g, f"rig export --force onto a bundle {n}", [*force, "--force"], setup=bundle_copy(f), protect=p)
+        for n, (f, p) in intruders.items()
+    ]
+    cases += [
+        Case(
+            g,
+            f"--db another application's SQLite ({journal} journal): {' '.join(args)}",
+            ["--db", "sqlite:///{w}/app.db", *args],
+            setup=both(foreign_sqlite("app.db", journal), exported("x.json")),
+            protect=["app.db"],
+        )
+        for journal in ("delete", "wal")
+        for args in (["history", SERIAL], ["db", "upgrade"], ["import", "{w}/x.json"])
+    ]
+    return cases
+
+
 LIDAR_BOX = "0.8,-2.5,-1.2,4.5,2.5,1.2"  # `calibctl lidar synth`'s station box
 LIDAR_BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850"]
 
@@ -1074,5 +1182,6 @@ def cases() -> list[Case]:
         *_diagnostics(),
         *_admin(),
         *_store(),
+        *_seal(),
         *_messages(),
     ]

@@ -101,12 +101,31 @@ class BoardRevision(Document):
     schema_version: Literal[1] = Field(BOARD_SCHEMA_VERSION, description="version of this document's schema")
     name: str = Field(pattern=BOARD_NAME_PATTERN, description="board name, unique in a store")
     revision: int = Field(ge=1, description="1, 2, ...; a re-measured board gets the next revision")
-    kind: Literal["chessboard", "charuco"] = Field(description="pattern type")
-    cols: int = Field(ge=2, le=200, description="inner corners per row (OpenCV patternSize width)")
-    rows: int = Field(ge=2, le=200, description="inner corners per column (OpenCV patternSize height)")
+    kind: Literal["chessboard", "charuco", "aprilgrid"] = Field(description="pattern type")
+    cols: int = Field(
+        ge=2,
+        le=200,
+        description="inner corners per row (OpenCV patternSize width); AprilGrid: tag corners, 2 per tag",
+    )
+    rows: int = Field(
+        ge=2,
+        le=200,
+        description="inner corners per column (OpenCV patternSize height); AprilGrid: 2 per tag",
+    )
     marker_size_m: float | None = Field(None, gt=0, description="ChArUco only: marker edge, metres")
     dictionary: str | None = Field(
-        None, description="ChArUco only: cv2.aruco dictionary name, e.g. DICT_5X5_100"
+        None,
+        description="ChArUco and AprilGrid: cv2.aruco dictionary name, e.g. DICT_5X5_100 or "
+        "DICT_APRILTAG_36h11",
+    )
+    # Left out of the document while absent, so boards sealed before AprilGrids still verify.
+    tag_spacing: float | None = Field(
+        None,
+        gt=0,
+        le=1,
+        exclude_if=lambda spacing: spacing is None,
+        description="AprilGrid only: gap between tags over the tag edge (Kalibr's tagSpacing); the tag "
+        "edge is the measured square size",
     )
     # ChArUco variants; left out of the document while False, so boards sealed before them still verify.
     inverted: bool = Field(
@@ -133,6 +152,14 @@ class BoardRevision(Document):
 
     @model_validator(mode="after")
     def _charuco_fields(self) -> BoardRevision:
+        if self.kind == "aprilgrid":
+            if self.tag_spacing is None or self.dictionary is None or self.cols % 2 or self.rows % 2:
+                raise ValueError("an AprilGrid needs tag_spacing, dictionary and two corners per tag and row")
+            if self.marker_size_m is not None or self.inverted or self.legacy_pattern:
+                raise ValueError("marker_size_m, inverted and legacy_pattern apply to ChArUco boards only")
+            return self
+        if self.tag_spacing is not None:
+            raise ValueError("tag_spacing applies to AprilGrids only")
         if self.kind == "charuco":
             if self.marker_size_m is None or self.dictionary is None:
                 raise ValueError("a ChArUco board needs marker_size_m and dictionary")

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 class BoardKind(StrEnum):
     chessboard = "chessboard"
     charuco = "charuco"
+    aprilgrid = "aprilgrid"
 
 
 def say(line: str) -> None:
@@ -51,11 +52,17 @@ def square_text(board: BoardRevision) -> str:
         return f"{_mm(m.square_size_m)} NOMINAL (not measured)"
     text = f"{_mm(m.square_size_m)} ± {_mm(m.uncertainty_m)} (1σ)"
     if m.span is not None:
-        return text + f", span {_mm(m.span.span_m)} over {m.span.squares} squares agrees"
+        unit = "tags" if board.kind == "aprilgrid" else "squares"
+        return text + f", span {_mm(m.span.span_m)} over {m.span.squares} {unit} agrees"
     return text + (" (single measurement)" if m.status == "measured-single" else "")
 
 
 def pattern_text(board: BoardRevision) -> str:
+    if board.kind == "aprilgrid":
+        return (
+            f"aprilgrid {board.cols // 2}x{board.rows // 2} tags ({board.cols}x{board.rows} corners), "
+            f"{board.dictionary}, spacing {board.tag_spacing:g} of the tag"
+        )
     text = f"{board.kind} {board.cols}x{board.rows} inner corners"
     if board.kind == "charuco":
         text += f", markers {_mm(board.marker_size_m)} {board.dictionary}"
@@ -67,7 +74,7 @@ def pattern_text(board: BoardRevision) -> str:
 def print_board(board: BoardRevision, revisions: list[int] | None = None) -> None:
     m = board.measurement
     say(f"board {board.ref}: {pattern_text(board)}")
-    say(f"  square size   {square_text(board)}")
+    say(f"  {'tag size ' if board.kind == 'aprilgrid' else 'square size'}   {square_text(board)}")
     if m.status != "nominal":
         say(f"  measured      with {m.instrument} by {m.measured_by} on {m.measured_on}")
         if m.evidence_sha256:
@@ -108,10 +115,33 @@ def add(
             metavar="NAME", help="Board name, e.g. A17 (an existing name gets its next revision)."
         ),
     ],
-    cols: Annotated[int, typer.Option("--cols", help="Inner corners per row (OpenCV patternSize width).")],
-    rows: Annotated[int, typer.Option("--rows", help="Inner corners per column.")],
-    square_mm: Annotated[float, typer.Option("--square-mm", help="Square edge in millimetres.")],
+    cols: Annotated[
+        int | None, typer.Option("--cols", help="Inner corners per row (OpenCV patternSize width).")
+    ] = None,
+    rows: Annotated[int | None, typer.Option("--rows", help="Inner corners per column.")] = None,
+    square_mm: Annotated[
+        float | None, typer.Option("--square-mm", help="Square edge in millimetres.")
+    ] = None,
     kind: Annotated[BoardKind, typer.Option("--kind", help="Pattern type.")] = BoardKind.chessboard,
+    tag_cols: Annotated[int | None, typer.Option("--tag-cols", help="AprilGrid: tags per row.")] = None,
+    tag_rows: Annotated[int | None, typer.Option("--tag-rows", help="AprilGrid: tags per column.")] = None,
+    tag_size_mm: Annotated[
+        float | None,
+        typer.Option("--tag-size-mm", help="AprilGrid: tag edge (outer edge of its black border), mm."),
+    ] = None,
+    tag_spacing: Annotated[
+        float | None,
+        typer.Option(
+            "--tag-spacing", help="AprilGrid: gap between tags over the tag edge (Kalibr's tagSpacing)."
+        ),
+    ] = None,
+    family: Annotated[
+        str | None, typer.Option("--family", help="AprilGrid: AprilTag family (default 36h11, as Kalibr).")
+    ] = None,
+    from_kalibr: Annotated[
+        Path | None,
+        typer.Option("--from-kalibr", help="AprilGrid: Kalibr's target.yaml instead of the --tag-* options."),
+    ] = None,
     uncertainty_mm: Annotated[
         float | None, typer.Option("--uncertainty-mm", help="One-sigma of the square size, mm.")
     ] = None,
@@ -178,11 +208,15 @@ def add(
     """Register a board. Give the measurement (--uncertainty-mm, --instrument, --measured-by,
     --measured-on, optionally --evidence) and a second, independent one of the pattern's span (--span-mm,
     --span-uncertainty-mm, --span-instrument): a square size the span contradicts is refused. Both: measured;
-    the square only: measured-single (lint warns); only --square-mm: nominal."""
+    the square only: measured-single (lint warns); only --square-mm: nominal. An AprilGrid (Kalibr's target)
+    takes --tag-cols, --tag-rows, --tag-size-mm and --tag-spacing, or --from-kalibr target.yaml; its tag
+    size is measured like a square."""
     from calibctl.workflows.board import boards
 
-    reg = boards.BoardRegistration(
-        name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, uncertainty_mm=uncertainty_mm,
+    reg = boards.registration(
+        name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, tag_cols=tag_cols,
+        tag_rows=tag_rows, tag_size_mm=tag_size_mm, tag_spacing=tag_spacing, family=family,
+        kalibr_target=from_kalibr, uncertainty_mm=uncertainty_mm,
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,
         marker_mm=marker_mm, dictionary=dictionary, note=note, span_mm=span_mm,
         span_uncertainty_mm=span_uncertainty_mm, span_instrument=span_instrument, span_squares=span_squares,
@@ -203,7 +237,8 @@ def add(
     if wants_json(ctx, json_output):
         emit_json(board)
         return
-    say(f"registered board {board.ref}: {pattern_text(board)}, square {square_text(board)}")
+    size = "tag" if board.kind == "aprilgrid" else "square"
+    say(f"registered board {board.ref}: {pattern_text(board)}, {size} {square_text(board)}")
 
 
 @board_app.command("list")

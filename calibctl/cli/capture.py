@@ -12,14 +12,19 @@ from rich.markup import escape
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.options import JobsOption, OperatorOption, StationOption
+from calibctl.cli.options import (
+    JobsOption,
+    OperatorOption,
+    OverrideGaugeOption,
+    ReferenceDistanceOption,
+    StationOption,
+)
 from calibctl.cli.render import emit_json, shown, stderr, stdout
 from calibctl.cli.report import print_gates
 from calibctl.cli.solve import (
     ActivateOption,
     DropOutliersOption,
     ModelOption,
-    OverrideGaugeOption,
     render_outcome,
 )
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
@@ -92,6 +97,7 @@ class Scenario(StrEnum):
 class Pattern(StrEnum):
     chessboard = "chessboard"
     charuco = "charuco"
+    aprilgrid = "aprilgrid"
 
 
 def register(app: typer.Typer) -> None:
@@ -211,17 +217,6 @@ def print_distance(d: DistanceCheck) -> None:
         )
 
 
-ReferenceDistanceOption = Annotated[
-    str | None,
-    typer.Option(
-        "--reference-distance",
-        metavar="D+-S",
-        show_default=False,
-        help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm suffix), "
-        "e.g. 0.450+-0.0005; needs --reference-source. Judged through the lens --model solves with (auto: the "
-        "model auto chooses for the session; k1k2 without --model).",
-    ),
-]
 ReferenceSourceOption = Annotated[
     str | None,
     typer.Option(
@@ -475,7 +470,12 @@ def register_synth(app: typer.Typer) -> None:
             str, typer.Option("--size", help="Image size WxH; the seed's lens is scaled to it.")
         ] = "640x480",
         pattern: Annotated[
-            Pattern, typer.Option("--pattern", help="Board pattern (9x6 inner corners, 25 mm).")
+            Pattern,
+            typer.Option(
+                "--pattern",
+                help="Board pattern: chessboard 9x6 inner corners, 25 mm; charuco 10x7 squares; aprilgrid "
+                "6x6 tags of 30 mm, spacing 0.3.",
+            ),
         ] = (Pattern.chessboard),
         force: Annotated[
             bool, typer.Option("--force", help="Write into a non-empty OUT, replacing earlier synth files.")

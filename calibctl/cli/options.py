@@ -24,3 +24,25 @@ JobsOption = Annotated[
         "count.",
     ),
 ]
+ReferenceDistanceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-distance",
+        metavar="D+-S",
+        show_default=False,
+        help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm suffix), "
+        "e.g. 0.450+-0.0005; needs --reference-source. Judged through the lens --model solves with (auto: the "
+        "model auto chooses for the session; k1k2 without --model).",
+    ),
+]
+OverrideGaugeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--override-gauge",
+        metavar="REASON",
+        show_default=False,
+        help="Solve a session whose metric gauge (--reference-distance) failed, or whose board revision has "
+        "a failed gauge, into a calibration lint can accept; REASON is recorded in its provenance and the "
+        "failed gauge stays a lint warning.",
+    ),
+]

@@ -7,12 +7,16 @@ from typing import Annotated, Any
 
 import typer
 
-from calibctl.cli.capture import ReferenceDistanceOption
 from calibctl.cli.context import state, wants_json
-from calibctl.cli.options import JobsOption, OperatorOption, StationOption
+from calibctl.cli.options import (
+    JobsOption,
+    OperatorOption,
+    OverrideGaugeOption,
+    ReferenceDistanceOption,
+    StationOption,
+)
 from calibctl.cli.render import emit_json, say
 from calibctl.cli.rig_render import print_findings, render_run, render_unmatched
-from calibctl.cli.solve import OverrideGaugeOption
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError, named_list
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import OverrideGaugeOption
 from calibctl.cli.render import emit_json, stdout
 from calibctl.cli.report import print_calibration
 from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
@@ -34,17 +35,6 @@ DropOutliersOption = Annotated[
     bool,
     typer.Option(
         "--drop-outliers", help="Re-solve without outlier views (implausible corners are always removed)."
-    ),
-]
-OverrideGaugeOption = Annotated[
-    str | None,
-    typer.Option(
-        "--override-gauge",
-        metavar="REASON",
-        show_default=False,
-        help="Solve a session whose metric gauge (--reference-distance) failed, or whose board revision has "
-        "a failed gauge, into a calibration lint can accept; REASON is recorded in its provenance and the "
-        "failed gauge stays a lint warning.",
     ),
 ]
 

@@ -39,7 +39,9 @@ from calibctl.store.runner import Delegate, Runner
 if TYPE_CHECKING:
     from calibctl.store import audit
 
-_GEOMETRY = ("kind", "cols", "rows", "marker_size_m", "dictionary", "inverted", "legacy_pattern")
+_GEOMETRY = (
+    "kind", "cols", "rows", "marker_size_m", "dictionary", "inverted", "legacy_pattern", "tag_spacing"
+)  # fmt: skip
 
 
 def _no_store(url: str, status: str, path: Path | None) -> NotFoundError:

@@ -33,9 +33,12 @@ class SpanVerdict:
 
 
 def compare_span(
-    square_m: float, square_sigma_m: float, squares: int, span_m: float, span_sigma_m: float
+    square_m: float, square_sigma_m: float, squares: float, span_m: float, span_sigma_m: float
 ) -> SpanVerdict:
-    """Compare ``squares * square_m`` with ``span_m`` (every length in metres, sigmas one-sigma)."""
+    """Compare ``squares * square_m`` with ``span_m`` (every length in metres, sigmas one-sigma).
+
+    ``squares`` is how many square edges the span is long; an AprilGrid's span over ``n`` tags is
+    ``n + (n - 1) * tag_spacing`` tag edges (the gaps scale with the printed tag)."""
     implied = squares * square_m
     # The square's uncertainty scales with the count when it is one measured square repeated.
     sigma = math.hypot(squares * square_sigma_m, span_sigma_m)

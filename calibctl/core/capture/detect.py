@@ -1,4 +1,4 @@
-"""Board detection: chessboards (OpenCV classic, SB fallback) and ChArUco, with sub-pixel refinement.
+"""Board detection: chessboards (OpenCV classic, SB fallback), ChArUco and AprilGrid, sub-pixel refined.
 
 Which chessboard detector, by measurement (benchmarks/bench_detect.py, 2026-11-23; OpenCV 5.0.0, one
 thread, on a loaded 2-core machine; 20 rendered views per size through the seed lens, corner error
@@ -54,7 +54,14 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from calibctl.core.board.board_spec import CHARUCO, BoardSpec, make_charuco_board
+from calibctl.core.board.board_geometry import aprilgrid_tag_point_ids
+from calibctl.core.board.board_spec import (
+    APRILGRID,
+    APRILGRID_BORDER_BITS,
+    CHARUCO,
+    BoardSpec,
+    make_charuco_board,
+)
 
 MAX_SEARCH_PIXELS = 1_300_000  # 1280x960 and 1281x721 are searched at full resolution, 4000x3000 at 1/4
 QUICK_SEARCH_MIN_SIDE_PX = 320
@@ -88,7 +95,7 @@ class Detection:
     Attributes:
         corner_ids: (N,) int64 row-major ids (``BoardSpec.object_points`` order).
         corners_px: (N, 2) float64 sub-pixel corners, full-resolution pixels, pixel centres at integers.
-        method: "classic", "sb" or "charuco".
+        method: "classic", "sb", "charuco" or "aprilgrid".
         edge_width_px: mean edge rise width (blur measure), None when not measured (partial ChArUco).
     """
 
@@ -458,10 +465,122 @@ def detect_charuco(
     return Detection(ids, corners_px, "charuco", None), ""
 
 
+def _aprilgrid_detector(spec: BoardSpec, refine: int, constant: int) -> cv2.aruco.ArucoDetector:
+    """One AprilTag detector per board, corner refinement, threshold constant and thread."""
+    key = (spec, refine, constant)
+    cache: dict[tuple[BoardSpec, int, int], cv2.aruco.ArucoDetector] = _local.__dict__.setdefault(
+        "aprilgrid", {}
+    )
+    if key not in cache:
+        params = cv2.aruco.DetectorParameters()
+        params.markerBorderBits = APRILGRID_BORDER_BITS
+        params.cornerRefinementMethod = refine
+        params.adaptiveThreshConstant = constant
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, str(spec.dictionary)))
+        cache[key] = cv2.aruco.ArucoDetector(dictionary, params)
+    return cache[key]
+
+
+def _aprilgrid_markers(search: np.ndarray, spec: BoardSpec, refine: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) tag ids and (N, 4, 2) corners of the tags read once (a tag read twice is not this grid's),
+    thresholded with a constant of ``APRILGRID_THRESH_FRACTION`` of the image's contrast."""
+    lo, hi = np.percentile(search[::4, ::4], (5, 95))
+    constant = max(2, round(APRILGRID_THRESH_FRACTION * float(hi - lo)))
+    found, found_ids, _ = _aprilgrid_detector(spec, refine, constant).detectMarkers(search)
+    if found_ids is None:
+        return np.zeros(0, np.int64), np.zeros((0, 4, 2))
+    ids = found_ids.reshape(-1).astype(np.int64)
+    corners = np.asarray(found, np.float64).reshape(-1, 4, 2)
+    once = np.array([np.count_nonzero(ids == tag) == 1 for tag in ids], bool)
+    return ids[once], corners[once]
+
+
+# Which AprilGrid settings, by measurement (12 rendered 640x480 views of a 6x6-tag grid, tagSpacing 0.3,
+# seed lens, OpenCV 5.0.0; error against the renderer's truth; 1728 corners in all):
+#
+#   cv2.aruco corner refinement, then                found    mean / p95 / max err      ms a view
+#   NONE, adaptiveThreshConstant 7 (OpenCV's)         73 %    2.29 / 3.53 px raw            39
+#   NONE, adaptiveThreshConstant 30                   95 %    1.35 / 1.80 / 2.22 px raw     38
+#   NONE, constant 30, + calibctl cornerSubPix        95 %    0.041 / 0.077 / 0.14 px       46
+#   SUBPIX, constant 30, + calibctl cornerSubPix      95 %    0.041 / 0.077 / 0.14 px       43
+#   APRILTAG                                          19 %    0.66 / 0.89 px, (+0.46, +0.47) bias  223
+#   APRILTAG + calibctl cornerSubPix                  19 %    0.036 / 0.067 / 0.09 px      199
+#
+# The tag corners are X-junctions with the black corner squares Kalibr prints, so the grey pixel where a
+# tag touches its corner square joins the two into one contour at OpenCV's threshold constant and the tag
+# is lost; a higher constant keeps it white. A fixed 30 lost every tag of dim renders (gain 40 of 255: 0
+# of 864 corners), so the constant is a fraction of the image's contrast (its 5-95 % grey range): 0.15
+# found 96 % of the 12 views' corners, 99 % of 6 views at gain 80 and 91 % at gain 40 (OpenCV's 7: 63 %
+# and 99.5 %), errors as above (max 0.14 / 0.20 / 0.25 px); a second search at 0.035 of the contrast
+# added 1 % for twice the time. The refined corner is cornerSubPix's with a half-window of 0.8 x the
+# smaller of the tag's two-bit border (0.2 of its edge) and the gap between tags.
+# OpenCV's marker image of a tag is Kalibr's print turned by 180 degrees, so the detector's corners
+# (the marker's top-left, top-right, bottom-right, bottom-left) are the printed tag's bottom-right,
+# bottom-left, top-left and top-right: Kalibr's pIdx columns 1, 0, 3, 2 - the mapping Kalibr's own
+# cv2.aruco detector makes (GridCalibrationTargetAprilgridv2::computeObservation).
+_ARUCO_TO_KALIBR_CORNER = (1, 0, 3, 2)
+APRILGRID_REFINE = cv2.aruco.CORNER_REFINE_NONE
+APRILGRID_THRESH_FRACTION = 0.15
+APRILGRID_MIN_SYMMETRY = 0.95
+"""A refined AprilGrid corner is kept when its patch is this point-symmetric (``point_symmetry``): the 1648
+corners of the 12 views above score 0.989-1.000; on 6 renders with half the grid behind a grey card the
+corners cornerSubPix dragged 0.8-4.7 px off score -0.08 to 0.89."""
+
+
+def detect_aprilgrid(
+    gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None = None, refine: int | None = None
+) -> tuple[Detection | None, str]:
+    """Find the tags of a Kalibr AprilGrid with cv2.aruco's AprilTag dictionary; four corners per tag, ids
+    as Kalibr numbers them (``board_geometry.aprilgrid_tag_point_ids``). Partial views allowed, as for
+    ChArUco: at least ``charuco_min_corners`` corners spanning two rows and two columns.
+    """
+    settings = settings or DetectorSettings()
+    search, k = downscaled_to_pixels(gray, settings.max_search_pixels)
+    method = APRILGRID_REFINE if refine is None else refine
+    tag_ids, marker_corners = _aprilgrid_markers(search, spec, method)
+    tag_cols, tag_rows = spec.tags
+    n_tags = tag_cols * tag_rows
+    mine = tag_ids < n_tags
+    if 4 * int(mine.sum()) < settings.charuco_min_corners:
+        return None, (
+            f"no AprilGrid: {int(mine.sum())} of its {n_tags} {spec.dictionary} tags read "
+            f"({len(tag_ids)} markers; need {settings.charuco_min_corners} corners)"
+        )
+    corners = marker_corners[mine]
+    ids = aprilgrid_tag_point_ids(tag_ids[mine], spec.cols)[:, _ARUCO_TO_KALIBR_CORNER].reshape(-1)
+    corners_px = (corners.reshape(-1, 2) + 0.5) * k - 0.5
+    order = np.argsort(ids)
+    ids, corners_px = ids[order], corners_px[order]
+    if len(set((ids // spec.cols).tolist())) < 2 or len(set((ids % spec.cols).tolist())) < 2:
+        return None, f"AprilGrid corners all on one line ({len(ids)} corners): the board plane is undefined"
+    tag_px = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).min() * k
+    half = round(0.8 * min(0.2, spec.tag_spacing or 0.2) * tag_px)
+    half = min(max(half, SUBPIX_HALF_WINDOW_PX[0]), SUBPIX_HALF_WINDOW_PX[1])
+    corners_px = refine_corners(gray, corners_px, tag_px, half)
+    keep = np.array([point_symmetry(gray, p, half) >= APRILGRID_MIN_SYMMETRY for p in corners_px], bool)
+    return Detection(ids[keep], corners_px[keep], "aprilgrid", None), ""
+
+
+def point_symmetry(gray: np.ndarray, point_px: np.ndarray, half: int) -> float:
+    """Correlation of the (2 half + 1)^2 patch around ``point_px`` with itself turned by 180 degrees.
+
+    An X-junction (a tag corner touching its corner square) is point-symmetric, so it scores near 1; a
+    corner cornerSubPix dragged onto something else (an occluder's edge, the frame border) scores low.
+    """
+    size = 2 * half + 1
+    patch = cv2.getRectSubPix(gray, (size, size), (float(point_px[0]), float(point_px[1]))).astype(np.float64)
+    a = patch - patch.mean()
+    b = a[::-1, ::-1]
+    denom = math.sqrt(float((a * a).sum()) * float((b * b).sum()))
+    return float((a * b).sum()) / denom if denom > 0 else 0.0
+
+
 def detect_board(
     gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | None = None
 ) -> tuple[Detection | None, str]:
     """Dispatch on the board kind. ``gray``: (H, W) uint8."""
     if spec.kind == CHARUCO:
         return detect_charuco(gray, spec, settings)
+    if spec.kind == APRILGRID:
+        return detect_aprilgrid(gray, spec, settings)
     return detect_chessboard(gray, spec.cols, spec.rows, settings)

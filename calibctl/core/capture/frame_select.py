@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from calibctl.core.board.board_spec import CHARUCO, BoardSpec
+from calibctl.core.board.board_spec import CHESSBOARD, BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.detect import BLUR_MAX_EDGE_PX, Detection, DetectorSettings, detect_board
 from calibctl.core.capture.gates import (
@@ -271,7 +271,7 @@ def probe_frame(gray: np.ndarray, spec: BoardSpec, settings: DetectorSettings | 
     ``search`` (the frame is due whatever came before), a ChArUco board (no quick check), or the quick check
     passes; else the quick check's "nothing here". Pure, so it runs ahead on another worker
     (``StreamDetector.settle`` finishes it in frame order)."""
-    if not search and spec.kind != CHARUCO and _quick_reject(gray, spec):
+    if not search and spec.kind == CHESSBOARD and _quick_reject(gray, spec):
         return Probe(
             False, None, f"no {spec.cols}x{spec.rows} chessboard: nothing chessboard-like at a quick look"
         )

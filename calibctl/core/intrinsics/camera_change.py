@@ -32,11 +32,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from calibctl.core.intrinsics.covariance import IntrinsicCovariance
-from calibctl.core.intrinsics.solve import IntrinsicsSolution, solve_intrinsics
+if TYPE_CHECKING:  # lint reads changed_hint without OpenCV (a lint FILE starts without cv2)
+    from calibctl.core.intrinsics.covariance import IntrinsicCovariance
+    from calibctl.core.intrinsics.solve import IntrinsicsSolution
 from calibctl.errors import NumericalError
 
 STEP_PARAMETERS = ("fx", "fy", "cx", "cy")
@@ -140,6 +142,8 @@ def judge_change(
 ) -> ChangeVerdict | None:
     """Steps 1 and 2 (module docstring) on a solve of these views (capture order); None when the session is
     too short to split or a side cannot be solved with a covariance."""
+    from calibctl.core.intrinsics.solve import solve_intrinsics
+
     if solution.covariance is None:
         return None
     scan = scan_change(solution.covariance, min_segment)

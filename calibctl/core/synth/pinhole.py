@@ -14,7 +14,9 @@ inner corner, x along the columns, y along the rows, z = 0 on the printed face (
 ``cv2.projectPoints`` of the model points, so truth and renderer share one camera model.
 
 The printed chessboard has ``cols + 1`` x ``rows + 1`` squares; the square outside corner 0 is black,
-and a white quiet zone of ``margin_squares`` squares surrounds the pattern.
+and a white quiet zone of ``margin_squares`` squares surrounds the pattern. An AprilGrid is printed as
+kalibr_create_target_pdf prints it: each tag with a two-bit black border, its top toward the board's
+``+y``, and a black square of the gap's size at each of its corners; there a "square" is the tag edge.
 """
 
 from __future__ import annotations
@@ -26,7 +28,13 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from calibctl.core.board.board_spec import CHARUCO, BoardSpec, make_charuco_board
+from calibctl.core.board.board_spec import (
+    APRILGRID,
+    APRILGRID_BORDER_BITS,
+    CHARUCO,
+    BoardSpec,
+    make_charuco_board,
+)
 
 # The seed's reference rig (chapter 0 YAML, fitted at 640x480): f = 800 px, c = image centre.
 SEED_IMAGE_SIZE = (640, 480)
@@ -36,6 +44,28 @@ SEED_DIST = (-0.2814, 0.0977, 0.0001, -0.0002, -0.0163)
 BLACK_REFLECTANCE = 0.06
 WHITE_REFLECTANCE = 0.90
 CHARUCO_TEXTURE_PX_PER_SQUARE = 64
+APRILGRID_TEXTURE_PX_PER_TAG = 100
+
+
+def aprilgrid_texture(board: BoardSpec, px_per_tag: int = APRILGRID_TEXTURE_PX_PER_TAG) -> np.ndarray:
+    """(H, W) uint8 print of an AprilGrid, row index growing with the board's ``y``; its pixel 0 starts at
+    ``-tag_spacing`` tags on both axes (the corner squares outside tag 0)."""
+    assert board.tag_spacing is not None and board.dictionary is not None
+    tag_cols, tag_rows = board.tags
+    gap, pitch = board.tag_spacing * px_per_tag, (1.0 + board.tag_spacing) * px_per_tag
+    size = (round(tag_rows * pitch + gap), round(tag_cols * pitch + gap))
+    img = np.full(size, 255, np.uint8)
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary))
+    g = round(gap)
+    for n in range(tag_cols * tag_rows):
+        x0, y0 = round(gap + (n % tag_cols) * pitch), round(gap + (n // tag_cols) * pitch)
+        marker = cv2.aruco.generateImageMarker(dictionary, n, px_per_tag, borderBits=APRILGRID_BORDER_BITS)
+        # Kalibr prints OpenCV's marker turned by 180 degrees, its top toward +y; rows here grow with y
+        img[y0 : y0 + px_per_tag, x0 : x0 + px_per_tag] = marker[:, ::-1]
+        for cy in (y0 - g, y0 + px_per_tag):
+            for cx in (x0 - g, x0 + px_per_tag):
+                img[cy : cy + g, cx : cx + g] = 0
+    return img
 
 
 @dataclass(frozen=True)
@@ -172,15 +202,23 @@ class _Pattern:
 
     def __init__(self, board: BoardSpec, margin_squares: float) -> None:
         self.board = board
-        self.lo_x, self.lo_y = -1.0 - margin_squares, -1.0 - margin_squares
-        self.hi_x, self.hi_y = board.cols + margin_squares, board.rows + margin_squares
+        # the printed pattern, [lo, hi) in square units on both axes, and its texture's scale and origin
+        self.pattern_lo, self.pattern_hi = board.printed_bounds()
+        self.pps, self.origin = float(CHARUCO_TEXTURE_PX_PER_SQUARE), -1.0
         self.texture: np.ndarray | None = None
+        img = None
         if board.kind == CHARUCO:
             pps = CHARUCO_TEXTURE_PX_PER_SQUARE
             sx, sy = board.squares
             img = make_charuco_board(board).generateImage((sx * pps, sy * pps), marginSize=0, borderBits=1)
             if board.inverted:  # printed as a negative: white markers on black squares
                 img = 255 - img
+        elif board.kind == APRILGRID:
+            img = aprilgrid_texture(board)
+            self.pps, self.origin = float(APRILGRID_TEXTURE_PX_PER_TAG), -float(board.tag_spacing or 0.0)
+        self.lo_x, self.lo_y = self.pattern_lo[0] - margin_squares, self.pattern_lo[1] - margin_squares
+        self.hi_x, self.hi_y = self.pattern_hi[0] + margin_squares, self.pattern_hi[1] + margin_squares
+        if img is not None:
             self.texture = (
                 BLACK_REFLECTANCE + (WHITE_REFLECTANCE - BLACK_REFLECTANCE) * img.astype(np.float32) / 255.0
             )
@@ -190,17 +228,17 @@ class _Pattern:
 
     def value(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
         """Reflectance inside the board outline (callers mask the outside)."""
-        b = self.board
-        in_pattern = (bx >= -1.0) & (bx < b.cols) & (by >= -1.0) & (by < b.rows)
+        (lo_x, lo_y), (hi_x, hi_y) = self.pattern_lo, self.pattern_hi
+        in_pattern = (bx >= lo_x) & (bx < hi_x) & (by >= lo_y) & (by < hi_y)
         if self.texture is None:
             black = (np.floor(bx) + np.floor(by)) % 2 == 0
             inner = np.where(black, BLACK_REFLECTANCE, WHITE_REFLECTANCE)
         else:
-            pps = CHARUCO_TEXTURE_PX_PER_SQUARE
+            pps, origin = self.pps, self.origin
             n, width = bx.size, 4096  # cv2.remap wants maps under 32767 rows: sample in 4096-wide rows
             pad = (-n) % width
             maps = [
-                np.pad(((v.ravel() + 1.0) * pps - 0.5).clip(-2, 1e6).astype(np.float32), (0, pad)).reshape(
+                np.pad(((v.ravel() - origin) * pps - 0.5).clip(-2, 1e6).astype(np.float32), (0, pad)).reshape(
                     -1, width
                 )
                 for v in (bx, by)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.board_spec import APRILGRID, BoardSpec
 from calibctl.core.synth.pinhole import PinholeCamera, undistort_normalised
 
 SCENARIOS = ("good", "flat", "centre", "one-direction", "video")
@@ -50,12 +50,18 @@ def tilt_rotation(tilt_rad: float, direction_rad: float, spin_rad: float) -> np.
 def place_board(
     camera: PinholeCamera, board: BoardSpec, R: np.ndarray, target_px: tuple[float, float], distance_m: float
 ) -> np.ndarray:
-    """(4, 4) T_cam_board with the board centre on the ray through ``target_px`` at depth ``distance_m``."""
+    """(4, 4) T_cam_board with the board centre on the ray through ``target_px`` at depth ``distance_m``.
+
+    An AprilGrid's frame is Kalibr's (``y`` up the print, ``z`` out of its face, toward the camera), so
+    ``R`` is turned by 180 degrees about the board's ``x`` for it: the camera still sees the printed face.
+    """
     K = camera.K
     yd = (target_px[1] - K[1, 2]) / K[1, 1]
     xd = (target_px[0] - K[0, 2]) / K[0, 0]
     x, y = undistort_normalised(np.array([xd]), np.array([yd]), camera.dist)
-    centre_board = np.array([(board.cols - 1) / 2, (board.rows - 1) / 2, 0.0]) * board.square_size_m
+    centre_board = board.centre_m()
+    if board.kind == APRILGRID:
+        R = R @ np.diag([1.0, -1.0, -1.0])
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = distance_m * np.array([x[0], y[0], 1.0]) - R @ centre_board
@@ -64,7 +70,8 @@ def place_board(
 
 def outline_points(board: BoardSpec, margin_squares: float = 1.0, per_edge: int = 12) -> np.ndarray:
     """(M, 3) points along the printed outline (quiet zone included), board frame, metres."""
-    lo, hx, hy = -1.0 - margin_squares, board.cols + margin_squares, board.rows + margin_squares
+    (lo_x, lo_y), (hi_x, hi_y) = board.printed_bounds()
+    lo, hx, hy = min(lo_x, lo_y) - margin_squares, hi_x + margin_squares, hi_y + margin_squares
     s = np.linspace(0.0, 1.0, per_edge, endpoint=False)
     xs = np.concatenate([lo + (hx - lo) * s, np.full_like(s, hx), hx - (hx - lo) * s, np.full_like(s, lo)])
     ys = np.concatenate([np.full_like(s, lo), lo + (hy - lo) * s, np.full_like(s, hy), hy - (hy - lo) * s])
@@ -86,9 +93,10 @@ def fits_in_frame(camera: PinholeCamera, board: BoardSpec, T_cam_board: np.ndarr
     if not np.all(inside):
         return False
     corners = camera.project(board.object_points(), T_cam_board).reshape(board.rows, board.cols, 2)
+    step = 2 if board.kind == APRILGRID else 1  # an AprilGrid's tag edges, not the gaps between tags
     edge_px = min(
-        np.linalg.norm(np.diff(corners, axis=1), axis=2).min(),
-        np.linalg.norm(np.diff(corners, axis=0), axis=2).min(),
+        np.linalg.norm(np.diff(corners, axis=1)[:, ::step], axis=2).min(),
+        np.linalg.norm(np.diff(corners, axis=0)[::step], axis=2).min(),
     )
     return bool(edge_px >= max(MIN_SQUARE_PX, MIN_SQUARE_PX_AT_640 * width / 640.0))
 
@@ -133,7 +141,8 @@ def default_distance_range_m(
 ) -> tuple[float, float]:
     """Distances at which the board spans ``fill`` (fractions) of the image width."""
     width = camera.image_size[0]
-    board_w_m = (board.cols + 3) * board.square_size_m
+    (lo_x, _), (hi_x, _) = board.printed_bounds()
+    board_w_m = (hi_x - lo_x + 2) * board.square_size_m  # the pattern and a square of quiet zone each side
     f = camera.K[0, 0]
     return f * board_w_m / (fill[1] * width), f * board_w_m / (fill[0] * width)
 

@@ -13,7 +13,7 @@ import datetime as dt
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
@@ -53,7 +53,11 @@ FUTURE_SLACK = dt.timedelta(days=1)
 
 @dataclass(frozen=True)
 class BoardRegistration:
-    """What ``calibctl board add`` was given (lengths in millimetres, as printed on a caliper)."""
+    """What ``calibctl board add`` was given (lengths in millimetres, as printed on a caliper).
+
+    An AprilGrid (``kind`` "aprilgrid") gives its tags per row and column as ``cols`` and ``rows``, the
+    tag edge as ``square_mm`` (it is the measured length), ``tag_spacing`` and ``family`` (default 36h11).
+    """
 
     name: str
     kind: str
@@ -76,6 +80,68 @@ class BoardRegistration:
     pattern_offset_mm: tuple[float, float] | None = None
     inverted: bool = False
     legacy_pattern: bool = False
+    tag_spacing: float | None = None
+    family: str | None = None
+
+
+def registration(
+    *,
+    kind: str,
+    cols: int | None,
+    rows: int | None,
+    square_mm: float | None,
+    tag_cols: int | None = None,
+    tag_rows: int | None = None,
+    tag_size_mm: float | None = None,
+    tag_spacing: float | None = None,
+    kalibr_target: Path | None = None,
+    **rest: Any,
+) -> BoardRegistration:
+    """The registration ``board add``'s options describe: a chessboard or ChArUco board by ``--cols``,
+    ``--rows`` and ``--square-mm``; an AprilGrid by ``--tag-cols``, ``--tag-rows``, ``--tag-size-mm`` and
+    ``--tag-spacing`` or by Kalibr's target.yaml (``--from-kalibr``), never both."""
+    grid = {"--cols": cols, "--rows": rows, "--square-mm": square_mm}
+    tags = {"--tag-cols": tag_cols, "--tag-rows": tag_rows, "--tag-size-mm": tag_size_mm}
+    tags["--tag-spacing"] = tag_spacing
+    if kind != "aprilgrid":
+        extra = [flag for flag, v in tags.items() if v is not None] + (
+            ["--from-kalibr"] if kalibr_target else []
+        )
+        if extra:
+            raise UsageError(f"{', '.join(extra)} describe an AprilGrid", "add --kind aprilgrid")
+        missing = [flag for flag, v in grid.items() if v is None]
+        if missing:
+            raise UsageError(f"a {kind} needs {', '.join(missing)}", "e.g. --cols 9 --rows 6 --square-mm 25")
+        assert cols is not None and rows is not None and square_mm is not None
+        return BoardRegistration(rest.pop("name"), kind, cols, rows, square_mm, **rest)
+    given = [flag for flag, v in grid.items() if v is not None]
+    if given:
+        raise UsageError(
+            f"{', '.join(given)} describe a chessboard or ChArUco grid",
+            "an AprilGrid takes --tag-cols, --tag-rows, --tag-size-mm and --tag-spacing (or --from-kalibr)",
+        )
+    if kalibr_target is not None:
+        both = [flag for flag, v in tags.items() if v is not None]
+        if both:
+            raise UsageError(
+                f"--from-kalibr gives the grid; {', '.join(both)} would contradict it",
+                "give either Kalibr's target.yaml or the --tag-* options",
+            )
+        target = read_kalibr_target(kalibr_target)
+        tag_cols, tag_rows, tag_size_mm = target.tag_cols, target.tag_rows, target.tag_size_mm
+        tag_spacing = target.tag_spacing
+    tags = {"--tag-cols": tag_cols, "--tag-rows": tag_rows, "--tag-size-mm": tag_size_mm}
+    tags["--tag-spacing"] = tag_spacing
+    missing = [flag for flag, v in tags.items() if v is None]
+    if missing:
+        raise UsageError(
+            f"an AprilGrid needs {', '.join(missing)}",
+            "e.g. --tag-cols 6 --tag-rows 6 --tag-size-mm 88 --tag-spacing 0.3, or --from-kalibr target.yaml",
+        )
+    assert tag_cols is not None and tag_rows is not None and tag_size_mm is not None
+    return BoardRegistration(
+        rest.pop("name"), kind, tag_cols, tag_rows, tag_size_mm, tag_spacing=tag_spacing, **rest
+    )
 
 
 def parse_measured_on(text: str, today: dt.date) -> dt.date:
@@ -105,6 +171,10 @@ def read_evidence(path: Path) -> tuple[str, str]:
     return sha256_hex(data), path.name
 
 
+def _size_flag(reg: BoardRegistration) -> str:
+    return "--tag-size-mm" if reg.kind == "aprilgrid" else "--square-mm"
+
+
 def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     square_m = reg.square_mm / 1000.0
     given = {flag for field, flag in _MEASUREMENT_FLAGS.items() if getattr(reg, field) is not None}
@@ -120,7 +190,7 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     if missing:
         raise UsageError(
             f"a measured square size needs {', '.join(_MEASUREMENT_FLAGS.values())}; missing: {', '.join(missing)}",
-            "give all of them, or only --square-mm to register the size as nominal (unmeasured)",
+            f"give all of them, or only {_size_flag(reg)} to register the size as nominal (unmeasured)",
         )
     assert reg.uncertainty_mm is not None and reg.measured_on is not None
     if not 0 < reg.uncertainty_mm < reg.square_mm:
@@ -169,12 +239,17 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
         and reg.span_instrument is not None
         and reg.uncertainty_mm is not None
     )
-    squares = reg.span_squares if reg.span_squares is not None else max(reg.cols, reg.rows) - 1
-    if not 0 < squares < max(reg.cols, reg.rows):
+    aprilgrid = reg.kind == "aprilgrid"
+    most = max(reg.cols, reg.rows) if aprilgrid else max(reg.cols, reg.rows) - 1
+    squares = reg.span_squares if reg.span_squares is not None else most
+    if not 0 < squares <= most:
         raise UsageError(
-            f"--span-squares {squares} must be between 1 and {max(reg.cols, reg.rows) - 1} "
-            f"(a {reg.cols}x{reg.rows} board)"
+            f"--span-squares {squares} must be between 1 and {most} "
+            f"(a {reg.cols}x{reg.rows}{'-tag' if aprilgrid else ''} board)"
         )
+    # An AprilGrid's span runs from a tag's outer corner over ``squares`` tags and the gaps between them.
+    edges = squares + (squares - 1) * (reg.tag_spacing or 0.0) if aprilgrid else float(squares)
+    size_flag = _size_flag(reg)
     if not 0 < reg.span_uncertainty_mm < reg.span_mm:
         raise UsageError(
             f"--span-uncertainty-mm {reg.span_uncertainty_mm:g} must be positive and smaller than the span"
@@ -182,12 +257,14 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
     verdict = compare_span(
         reg.square_mm / 1000,
         reg.uncertainty_mm / 1000,
-        squares,
+        edges,
         reg.span_mm / 1000,
         reg.span_uncertainty_mm / 1000,
     )
+    count = f"{edges:g} (tags and gaps)" if aprilgrid else f"{squares} squares"
     said = (
-        f"--square-mm {reg.square_mm:g} x {squares} squares = {verdict.implied_m * 1000:.2f} mm, but --span-mm "
+        f"{size_flag} {reg.square_mm:g} x {count} = "
+        f"{verdict.implied_m * 1000:.2f} mm, but --span-mm "
         f"{reg.span_mm:g}"
     )
     if verdict.unit_factor is not None:
@@ -200,8 +277,9 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
         raise UsageError(
             f"{said}: they differ by {verdict.difference_m * 1000:+.2f} mm, more than {K_SIGMA:g} combined sigma "
             f"({verdict.combined_sigma_m * 1000:.2f} mm); the square size or the span is wrong",
-            f"re-measure; the span implies {reg.span_mm / squares:.3f} mm squares. A wrong square size scales "
-            "every distance the robot reports and leaves no residual",
+            f"re-measure; the span implies {reg.span_mm / edges:.3f} mm {'tags' if aprilgrid else 'squares'}"
+            ". "
+            "A wrong square size scales every distance the robot reports and leaves no residual",
         )
     return SpanMeasurement(
         span_m=reg.span_mm / 1000.0,
@@ -215,7 +293,7 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
 
 def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | None = None) -> BoardRevision:
     """The BoardRevision a registration describes (revision 1 here; the store allocates the real one)."""
-    from calibctl.core.board.board_spec import BOARD_KINDS, BoardSpec  # numpy: not for `board list` / `show`
+    from calibctl.core.board.board_spec import BOARD_KINDS  # numpy: not for `board list` / `show`
 
     now = now or utc_now()
     if not re.fullmatch(BOARD_NAME_PATTERN, reg.name):
@@ -224,7 +302,128 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
             "starting with a letter or digit)"
         )
     if reg.kind not in BOARD_KINDS:
-        raise UsageError(f"unknown board kind '{reg.kind}'; choose {' or '.join(BOARD_KINDS)}")
+        raise UsageError(f"unknown board kind '{reg.kind}'; choose {', '.join(BOARD_KINDS)}")
+    spec = _aprilgrid_spec(reg) if reg.kind == "aprilgrid" else _grid_spec(reg)
+    measurement = _measurement(reg, now.date())
+    backing = _backing(reg)
+    try:
+        return BoardRevision(
+            name=reg.name,
+            revision=1,
+            kind=reg.kind,
+            cols=spec.cols,
+            rows=spec.rows,
+            marker_size_m=spec.marker_size_m,
+            dictionary=spec.dictionary,
+            inverted=reg.inverted,
+            legacy_pattern=reg.legacy_pattern,
+            tag_spacing=spec.tag_spacing,
+            measurement=measurement,
+            created_at=now,
+            created_by=created_by,
+            note=reg.note,
+            backing=backing,
+        )
+    except ValidationError as exc:
+        raise UsageError(validation_message(exc, f"board {reg.name}")) from exc
+
+
+def _aprilgrid_spec(reg: BoardRegistration) -> BoardSpec:
+    """The AprilGrid a registration describes; what does not apply to one is refused, naming the fix."""
+    from calibctl.core.board.board_spec import APRILTAG_FAMILIES, BoardSpec
+
+    given = [
+        flag
+        for flag, value in (
+            ("--marker-mm", reg.marker_mm),
+            ("--dictionary", reg.dictionary),
+            ("--inverted", reg.inverted or None),
+            ("--legacy", reg.legacy_pattern or None),
+            ("--backing-mm", reg.backing_mm),
+        )
+        if value is not None
+    ]
+    if given:
+        raise UsageError(
+            f"{', '.join(given)} do not apply to an AprilGrid",
+            "give --tag-cols, --tag-rows, --tag-size-mm, --tag-spacing and optionally --family (36h11)",
+        )
+    if not 0 < reg.square_mm < 1000:
+        raise UsageError(f"--tag-size-mm {reg.square_mm:g} must be a positive length below 1000 mm")
+    if reg.tag_spacing is None:
+        raise UsageError(
+            "an AprilGrid needs --tag-spacing", "the gap between tags over the tag edge, e.g. 0.3"
+        )
+    if not (1 <= reg.cols <= 100 and 1 <= reg.rows <= 100):
+        raise UsageError(f"--tag-cols {reg.cols} and --tag-rows {reg.rows} must be 1 to 100 tags")
+    family = reg.family or "36h11"
+    try:
+        return BoardSpec.aprilgrid(reg.cols, reg.rows, reg.square_mm / 1000.0, reg.tag_spacing, family)
+    except ValueError as exc:
+        raise UsageError(
+            f"board {reg.name}: {exc}",
+            f"--tag-spacing is the gap over the tag edge, in (0, 1]; --family one of "
+            f"{', '.join(APRILTAG_FAMILIES)} (a family OpenCV lacks cannot be detected: print a 36h11 grid)",
+        ) from exc
+
+
+KALIBR_TARGET_FIELDS = ("tagCols", "tagRows", "tagSize", "tagSpacing")
+
+
+@dataclass(frozen=True)
+class KalibrAprilgrid:
+    """Kalibr's target.yaml of an AprilGrid: tags per row and column, tag edge (mm), spacing ratio."""
+
+    tag_cols: int
+    tag_rows: int
+    tag_size_mm: float
+    tag_spacing: float
+
+
+def read_kalibr_target(path: Path) -> KalibrAprilgrid:
+    """Kalibr's ``target.yaml`` (``target_type: 'aprilgrid'``, ``tagCols``, ``tagRows``, ``tagSize`` in
+    metres, ``tagSpacing`` as a ratio), read bounded; any other target, or a field missing or out of
+    range, is an InputError naming the file and the fix."""
+    from calibctl import bounded
+
+    data = bounded.load_file(path, "read the Kalibr target file")
+    if not isinstance(data, dict):
+        raise InputError(f"{path} is not a Kalibr target.yaml (a mapping of target_type, tagCols, ...)")
+    kind = data.get("target_type")
+    if kind != "aprilgrid":
+        raise InputError(
+            f"{path} describes a Kalibr target_type {kind!r}, not an aprilgrid",
+            "register a checkerboard with --kind chessboard --cols --rows --square-mm (Kalibr's targetCols, "
+            "targetRows, rowSpacingMeters x 1000), or give the aprilgrid's target.yaml",
+        )
+    missing = [name for name in KALIBR_TARGET_FIELDS if name not in data]
+    if missing:
+        raise InputError(f"{path}: an aprilgrid target.yaml needs {', '.join(missing)}", "see Kalibr's wiki")
+    values = {name: data[name] for name in KALIBR_TARGET_FIELDS}
+    if any(isinstance(v, bool) or not isinstance(v, int | float) for v in values.values()):
+        raise InputError(f"{path}: {', '.join(KALIBR_TARGET_FIELDS)} must be numbers, got {values}")
+    cols, rows, size_m, spacing = (values[name] for name in KALIBR_TARGET_FIELDS)
+    if cols != int(cols) or rows != int(rows) or not (1 <= cols <= 100 and 1 <= rows <= 100):
+        raise InputError(f"{path}: tagCols {cols} and tagRows {rows} must be whole numbers of tags, 1 to 100")
+    if not 0 < size_m < 1.0:
+        raise InputError(
+            f"{path}: tagSize {size_m:g} is not a tag edge in metres (0 to 1 m)",
+            "Kalibr's tagSize is in metres: 0.088 for 88 mm tags",
+        )
+    if not 0 < spacing <= 1:
+        raise InputError(
+            f"{path}: tagSpacing {spacing:g} is not a ratio in (0, 1]",
+            "Kalibr's tagSpacing is the gap over the tag edge: 0.3 for a 26.4 mm gap between 88 mm tags",
+        )
+    return KalibrAprilgrid(int(cols), int(rows), float(size_m) * 1000.0, float(spacing))
+
+
+def _grid_spec(reg: BoardRegistration) -> BoardSpec:
+    """The chessboard or ChArUco board a registration describes."""
+    from calibctl.core.board.board_spec import BoardSpec
+
+    if reg.tag_spacing is not None or reg.family is not None:
+        raise UsageError("--tag-spacing and --family apply to AprilGrids only", "add --kind aprilgrid")
     if not 0 < reg.square_mm < 1000:
         raise UsageError(f"--square-mm {reg.square_mm:g} must be a positive length below 1000 mm")
     if reg.kind == "chessboard" and (reg.marker_mm is not None or reg.dictionary is not None):
@@ -235,33 +434,12 @@ def build_board(reg: BoardRegistration, *, created_by: str, now: dt.datetime | N
         raise UsageError("a ChArUco board needs --marker-mm and --dictionary (e.g. DICT_5X5_100)")
     marker_m = reg.marker_mm / 1000.0 if reg.marker_mm is not None else None
     try:  # the geometry the detector will use: checks the grid, the marker and the dictionary name
-        BoardSpec(
+        return BoardSpec(
             reg.kind, reg.cols, reg.rows, reg.square_mm / 1000.0, marker_m, reg.dictionary,
             reg.legacy_pattern, reg.inverted,
         )  # fmt: skip
     except ValueError as exc:
         raise UsageError(f"board {reg.name}: {exc}") from exc
-    measurement = _measurement(reg, now.date())
-    backing = _backing(reg)
-    try:
-        return BoardRevision(
-            name=reg.name,
-            revision=1,
-            kind=reg.kind,
-            cols=reg.cols,
-            rows=reg.rows,
-            marker_size_m=marker_m,
-            dictionary=reg.dictionary,
-            inverted=reg.inverted,
-            legacy_pattern=reg.legacy_pattern,
-            measurement=measurement,
-            created_at=now,
-            created_by=created_by,
-            note=reg.note,
-            backing=backing,
-        )
-    except ValidationError as exc:
-        raise UsageError(validation_message(exc, f"board {reg.name}")) from exc
 
 
 def _backing(reg: BoardRegistration) -> BackingBoard | None:
@@ -340,6 +518,11 @@ def board_spec(board: BoardRevision) -> BoardSpec:
     from calibctl.core.board.board_spec import BoardSpec  # numpy: not for `board list` / `show`
 
     m = board.measurement
+    if board.kind == "aprilgrid":
+        return BoardSpec(
+            "aprilgrid", board.cols, board.rows, m.square_size_m, dictionary=board.dictionary,
+            tag_spacing=board.tag_spacing,
+        )  # fmt: skip
     if board.kind == "charuco":
         return BoardSpec(
             "charuco", board.cols, board.rows, m.square_size_m, board.marker_size_m, board.dictionary,

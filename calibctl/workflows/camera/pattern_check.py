@@ -58,7 +58,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from calibctl.core.board.board_spec import CHESSBOARD, BoardSpec
+from calibctl.core.board.board_spec import APRILGRID, CHESSBOARD, BoardSpec
 from calibctl.core.capture.board_extent import might_extend, visible_chessboard
 from calibctl.core.capture.detect import DetectorSettings, detect_board, downscaled_to_pixels
 from calibctl.errors import InputError
@@ -207,18 +207,22 @@ def nothing_found_error(
 ) -> InputError:
     """The error for "the registered pattern is in none of the readable pictures" (exit 2). ``given``: how
     the pattern was named when it is not a registered board (e.g. "--cols/--rows"), for the hint."""
-    kind = "ChArUco board" if spec.kind != CHESSBOARD else "chessboard"
+    kind = f"{spec.cols}x{spec.rows} " + ("chessboard" if spec.kind == CHESSBOARD else "ChArUco board")
+    if spec.kind == APRILGRID:
+        kind = f"{spec.cols // 2}x{spec.rows // 2}-tag AprilGrid"
     named = f"board {board_ref}" if given is None else f"given as {board_ref}"
-    message = (
-        f"no {spec.cols}x{spec.rows} {kind} ({named}) was found in any of the {n_readable} "
-        f"readable {where}; nothing was stored"
-    )
+    message = f"no {kind} ({named}) was found in any of the {n_readable} readable {where}; nothing was stored"
     registry = f"`calibctl board show {board_name}`" if given is None else given
     if spec.kind != CHESSBOARD:
+        printed = (
+            "tags, tag spacing and family"
+            if spec.kind == APRILGRID
+            else "squares, marker size and dictionary"
+        )
         return InputError(
             message,
-            f"check the board's squares, marker size and dictionary with {registry}, "
-            "and that the board is in the frame, lit and in focus",
+            f"check the board's {printed} with {registry}, and that the board is in the frame, lit and "
+            "in focus",
         )
     patterns = near_patterns(spec.cols, spec.rows)
     samples = probe_copies(spread(samples, PROBE_IMAGES))

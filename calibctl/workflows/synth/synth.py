@@ -47,7 +47,7 @@ DEFAULT_VIDEO_KEYS = 8
 VIDEO_FPS = 10.0
 VIDEO_FILE = "video.avi"
 TRUTH_FILE = "truth.json"
-PATTERNS = ("chessboard", "charuco")
+PATTERNS = ("chessboard", "charuco", "aprilgrid")
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,10 @@ class SynthResult:
 
 
 def default_board(pattern: str = "chessboard") -> BoardSpec:
-    """9x6 inner corners, 25 mm squares (the seed's board); ChArUco: 10x7 squares, 18 mm DICT_4X4_50 markers."""
+    """9x6 inner corners, 25 mm squares (the seed's board); ChArUco: 10x7 squares, 18 mm DICT_4X4_50 markers;
+    AprilGrid: Kalibr's 6x6 36h11 tags, scaled to 30 mm tags (tagSpacing 0.3)."""
+    if pattern == "aprilgrid":
+        return BoardSpec.aprilgrid(6, 6, 0.03, 0.3)
     if pattern == "charuco":
         return BoardSpec.charuco(10, 7, 0.025, 0.018, "DICT_4X4_50")
     return BoardSpec.chessboard(9, 6, 0.025)
@@ -239,6 +242,10 @@ def _run_fisheye(
         raise UsageError(f"--fisheye field of view must be 60-190 deg, got {fov_deg:g}")
     if pattern not in PATTERNS:
         raise UsageError(f"unknown pattern {pattern!r}", f"choose one of {', '.join(PATTERNS)}")
+    if pattern == "aprilgrid":  # its frame faces the other way (Kalibr's); the fisheye poses are not turned
+        raise UsageError(
+            "--fisheye renders chessboards and ChArUco boards", "drop --fisheye or --pattern aprilgrid"
+        )
     camera = FisheyeCamera.from_fov(image_size, fov_deg, circular)
     board = default_board(pattern)
     rng = np.random.default_rng(seed)
