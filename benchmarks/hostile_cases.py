@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -999,6 +1000,178 @@ def _seal() -> list[Case]:
     return cases
 
 
+LIDAR_BOX = "0.8,-2.5,-1.2,4.5,2.5,1.2"  # `calibctl lidar synth`'s station box
+LIDAR_BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850"]
+
+
+def lidar_set(w: Path) -> None:
+    """An 8-pose `calibctl lidar synth` set at {w}/ls (a 5x7 board of 95 mm squares on 610 x 850 mm)."""
+    calibctl(w, ["lidar", "synth", str(w / "ls"), "--poses", "8"])
+
+
+def lidar_edit(edit: Callable[[Path], None]) -> Callable[[Path], None]:
+    return both(lidar_set, edit)
+
+
+def _replace_line(path: Path, start: str, line: str) -> None:
+    text_ = path.read_text()
+    old = next(x for x in text_.splitlines() if x.startswith(start))
+    path.write_text(text_.replace(old, line))
+
+
+def _nan_sweep(w: Path) -> None:
+    scan = w / "ls" / "scans" / "pose1.pcd"
+    header, _, body = scan.read_text().partition("DATA ascii\n")
+    scan.write_text(header + "DATA ascii\n" + "nan nan nan 0 0\n" * len(body.splitlines()))
+
+
+def _special_scan(make: Callable[[Path], None]) -> Callable[[Path], None]:
+    def edit(w: Path) -> None:
+        (w / "ls" / "scans" / "pose1.pcd").unlink()
+        make(w / "ls" / "scans" / "pose1.pcd")
+
+    return edit
+
+
+def _lidar(*extra: str) -> list[str]:
+    return [
+        "lidar",
+        "solve",
+        "--images",
+        "{w}/ls/images",
+        "--scans",
+        "{w}/ls/scans",
+        "--box",
+        LIDAR_BOX,
+        *(extra if "--camera-info" in extra else ["--camera-info", "{w}/ls/camera_info.yaml", *extra]),
+        "--pattern-offset-mm",
+        "2,0",
+    ]
+
+
+def _rig_render(w: Path) -> None:
+    calibctl(w, ["synth", str(w / "rig"), "--rig", "2", "--views", "8", "--baseline-mm", "75", "--seed", "7"])
+
+
+def _messages() -> list[Case]:
+    """Messages that used to blame the wrong thing: refused or warned, and ``says`` holds the words that name
+    the real mistake."""
+    g = "messages"
+    board_9x6 = ["--cols", "9", "--rows", "6", "--square-mm", "50", "--backing-mm", "610,850"]
+    square = [a if a != "95" else "100" for a in LIDAR_BOARD]
+    rig = [
+        "rig",
+        "solve-folders",
+        "--source",
+        "CAM0={w}/rig/CAM0",
+        "--source",
+        "CAM1={w}/rig/CAM1",
+        "--rows",
+        "6",
+    ]
+    return [
+        Case(
+            g,
+            "lidar camera_info K all zeros",
+            _lidar(*LIDAR_BOARD),
+            setup=lidar_edit(
+                lambda w: _replace_line(w / "ls" / "camera_info.yaml", "K:", "K: [0, 0, 0, 0, 0, 0, 0, 0, 0]")
+            ),
+            says=("K is no camera matrix", "not calibrated"),
+        ),
+        Case(
+            g,
+            "lidar --square-mm 100 on a 95 mm board",
+            _lidar(*square),
+            setup=lidar_set,
+            says=("squares look 9",),
+        ),
+        Case(
+            g,
+            "lidar pinhole images declared fisheye",
+            _lidar(*LIDAR_BOARD),
+            setup=lidar_edit(
+                lambda w: (
+                    _replace_line(
+                        w / "ls" / "camera_info.yaml", "distortion_model", "distortion_model: equidistant"
+                    ),
+                    _replace_line(w / "ls" / "camera_info.yaml", "D:", "D: [0, 0, 0, 0]"),
+                )
+            ),
+            says=("do not match that lens or its model",),
+        ),
+        Case(
+            g,
+            "lidar 9x6 given for the 5x7 set",
+            _lidar(*board_9x6),
+            setup=lidar_set,
+            says=("chessboard is visible in",),
+        ),
+        Case(
+            g,
+            "lidar all-NaN sweep",
+            _lidar(*LIDAR_BOARD),
+            "any",
+            setup=lidar_edit(_nan_sweep),
+            says=("non-finite",),
+        ),
+        *[
+            Case(
+                g,
+                f"lidar scan pose1.pcd is {kind}",
+                _lidar(*LIDAR_BOARD),
+                setup=lidar_edit(_special_scan(make)),
+                says=("not a regular file",),
+            )
+            for kind, make in (
+                ("a FIFO", os.mkfifo),
+                ("a folder", lambda p: p.mkdir()),
+                ("a symlink loop", lambda p: p.symlink_to(p)),
+            )
+        ],
+        Case(
+            g,
+            "lidar --folds 100 on 8 poses",
+            _lidar(*LIDAR_BOARD, "--folds", "100"),
+            "ok",
+            setup=lidar_set,
+            says=("8-fold (leave-one-out)",),
+        ),
+        Case(
+            g,
+            "lidar --lidar-frame 'bad name!' --tf-static",
+            _lidar(*LIDAR_BOARD, "--lidar-frame", "bad name!", "--tf-static", "{w}/tf.yaml"),
+            setup=lidar_set,
+            protect=["tf.yaml"],
+            says=("not a legal ROS frame name",),
+        ),
+        Case(g, "diff CAM@x", ["diff", f"{SERIAL}@x", SERIAL], says=("is not a whole number",)),
+        Case(
+            g,
+            "station serial with escape sequences",
+            ["station", "--board", BOARD, "--serials", "{w}/lot.txt", "--source-template", "{w}/{serial}"],
+            "ok",
+            setup=text("lot.txt", "CAM\x1b[2J\x1b]0;x\x07-1\n"),
+            says=("\\x1b[2J", "control characters"),
+        ),
+        Case(
+            g,
+            "rig solve-folders --cols 8 on 9x6 photos",
+            [*rig, "--cols", "8", "--square-mm", "25"],
+            setup=_rig_render,
+            says=("9x6",),
+        ),
+        Case(
+            g,
+            "rig solve-folders --square-mm 2.5",
+            [*rig, "--cols", "9", "--square-mm", "2.5"],
+            "ok",
+            setup=_rig_render,
+            says=("square-size", "outside the 5-300 mm"),
+        ),
+    ]
+
+
 def cases() -> list[Case]:
     return [
         *_capture(),
@@ -1010,4 +1183,5 @@ def cases() -> list[Case]:
         *_admin(),
         *_store(),
         *_seal(),
+        *_messages(),
     ]

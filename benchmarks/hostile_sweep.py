@@ -12,6 +12,8 @@ Special files are made in that folder (mkfifo, ln -s), never a system device nod
 * crash: a traceback, a signal, an exit code outside 0/1/2/130, or no answer within the time limit
 * accepted: exit 0 on an input the command should have refused
 * refused: exit 1/2 on an input the command should accept (a read-only store's reads)
+* misnamed: the command answered as it should, but its words miss what the case says the real mistake is
+  (``Case.says``: the board's size, the lens model, a non-regular file...): its hint sends the user elsewhere
 * setup: the sweep could not prepare the case (its own fault; not a finding)
 
 ``--source DIR`` runs another calibctl tree (e.g. ``git archive BASE calibctl | tar -x -C DIR``) for a
@@ -44,7 +46,7 @@ SOURCE = [REPO]  # the calibctl tree under test (--source)
 SERIAL, BOARD = "DEMO-CAM-0001", "demo-A17"
 CASE_TIMEOUT_S = 120
 UNPRIVILEGED = ["setpriv", "--bounding-set=-dac_override,-dac_read_search,-fowner", "--"]
-CATEGORIES = ("clean", "stored", "lost", "crash", "accepted", "refused", "setup")
+CATEGORIES = ("clean", "stored", "lost", "crash", "accepted", "refused", "misnamed", "setup")
 
 
 @dataclass
@@ -60,6 +62,7 @@ class Case:
     unprivileged: bool = False
     interrupt_s: float | None = None
     env: dict[str, str] = field(default_factory=dict)
+    says: tuple[str, ...] = ()  # words the output (stdout and stderr) must hold: the real mistake, named
 
 
 # ---- setup helpers (each takes the case folder) -------------------------------------------------------------
@@ -405,6 +408,9 @@ def judge(
         return "accepted", f"exit 0{' and stored ' + ', '.join(grew) if grew else ''}"
     if case.expect == "ok" and code != 0:
         return "refused", (err.strip().splitlines() or ["(no message)"])[0][:160]
+    missing = [w for w in case.says if w not in out + err]
+    if missing:
+        return "misnamed", f"exit {code} without {missing[0]!r}: " + (err.strip() or out.strip())[:120]
     first = next((line for line in err.splitlines() if line.startswith("Error")), "")
     if case.expect == "refuse" and not first and code == 2:
         return "clean", "exit 2 (usage)"

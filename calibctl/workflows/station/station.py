@@ -50,6 +50,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from calibctl import bounded
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
@@ -622,11 +623,19 @@ def _keep(summary: StationSummary, report: Callable[[UnitResult], None], line: U
 
 def _checked_serial(serial: str, seen: dict[str, int]) -> UnitResult | None:
     if not re.fullmatch(SERIAL_PATTERN, serial):
+        shown = bounded.printable(serial)  # a scanner's escape sequences must not drive the terminal
+        control = shown != serial
         return UnitResult(
-            serial,
+            shown,
             ERROR,
-            f"'{serial}' is not a serial",
-            "a serial is letters, digits and . _ : - (no spaces, no '@'); scan the label again",
+            f"'{shown}' is not a serial"
+            + (": it holds control characters (shown escaped, \\xNN)" if control else ""),
+            "a serial is letters, digits and . _ : - (no spaces, no '@'); "
+            + (
+                "check the scanner's prefix and suffix settings (it sent escape sequences), then scan again"
+                if control
+                else "scan the label again"
+            ),
         )
     if serial in seen:
         return UnitResult(

@@ -30,6 +30,13 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     match = _ARTIFACT_REF.match(ref.strip())
     if not match or not match.group("serial"):
         raise UsageError(f"'{ref}' is not SERIAL or SERIAL@N")
+    serial, at, version_text = ref.strip().rpartition("@")
+    if at and serial and not version_text.isdecimal():
+        raise UsageError(
+            f"'{ref}' is not SERIAL or SERIAL@N: the version '{version_text}' is not a whole number",
+            f"name a version by its number (e.g. {serial}@3; `calibctl history {serial}` lists them), "
+            f"or drop @... for the active one",
+        )
     version = match.group("version")
     if version and (len(version) > 10 or int(version) > MAX_VERSION):
         raise UsageError(
