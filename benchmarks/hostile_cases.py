@@ -2,19 +2,27 @@
 
 from __future__ import annotations
 
+import os
+import re
 from collections.abc import Callable
+from pathlib import Path
 
 from hostile_sweep import (
     BOARD,
     SERIAL,
     Case,
     both,
+    bundle_copy,
+    calibctl,
     exported,
     fifo,
     folder,
+    foreign_sqlite,
     motions,
     read_only_file,
     read_only_store,
+    rehashed_rig,
+    reseal,
     residuals,
     second_data_line,
     symlink,
@@ -249,8 +257,6 @@ def _solve_check() -> list[Case]:
         ),
         Case(g, "diff unknown", ["diff", "NOPE@1", "NOPE@2"]),
         Case(g, "diff @0", ["diff", f"{SERIAL}@0", f"{SERIAL}@1"]),
-        Case(g, "diff @x (a malformed version)", ["diff", f"{SERIAL}@x", f"{SERIAL}@1"]),
-        Case(g, "show @ (no version after @)", ["show", f"{SERIAL}@"]),
         *[
             Case(g, f"diff --scale {v}", ["diff", f"{SERIAL}@1", f"{SERIAL}@1", "--scale", v])
             for v in (*BAD_NUMBERS, "0", "-1")
@@ -891,6 +897,281 @@ def _store() -> list[Case]:
     return cases
 
 
+def _fx_plus_one(b: Path) -> None:
+    body = (b / "cam1.yaml").read_text()
+    m = re.search(r"camera_matrix:\n  rows: 3\n  cols: 3\n  data: \[([-0-9.e+]+)", body)
+    if m is None:
+        raise RuntimeError("no camera_matrix in cam1.yaml")
+    reseal(b / "cam1.yaml", body[: m.start(1)] + repr(float(m.group(1)) + 1.0) + body[m.end(1) :])
+
+
+def _swap_cameras(b: Path) -> None:
+    left, right = (b / "cam0.yaml").read_text(), (b / "cam1.yaml").read_text()
+    reseal(b / "cam0.yaml", right)
+    reseal(b / "cam1.yaml", left)
+
+
+def _edge_10mm(doc: dict) -> None:
+    doc["edges"][0]["T_parent_child"][0][3] -= 0.010
+
+
+def _member_fx(doc: dict) -> None:
+    doc["members"][1]["camera_matrix"][0][0] += 5.0
+
+
+def _notes(b: Path) -> None:
+    (b / "notes.txt").write_text("mine\n")
+
+
+def _link(b: Path) -> None:
+    (b.parent / "victim.txt").write_text("not calibctl's\n")
+    (b / "tf_static.yaml").unlink()
+    (b / "tf_static.yaml").symlink_to(b.parent / "victim.txt")
+
+
+def _unsigned_ros_export(w: Path) -> None:
+    """The demo camera's ROS export (the demo store has no key), a trusted-keys folder with a stranger's
+    key."""
+    (w / "keys").mkdir()
+    calibctl(w, ["export", SERIAL, "--format", "ros", "-o", str(w / "c.yaml")])
+    calibctl(w, ["keys", "init", "--key", str(w / "k.pem")])
+    calibctl(w, ["keys", "export-public", "--key", str(w / "k.pem"), "-o", str(w / "keys" / "k.pem")])
+
+
+def _seal() -> list[Case]:
+    """What the robot loads is what was signed: forged bundles (no key, checksums recomputed), a rig.json
+    re-hashed without its signature, another application's database, a bundle folder holding a user's
+    files; each must be refused with nothing stored or changed."""
+    g = "seal"
+    manifest = "{w}/b/manifest.json"
+    forged = {
+        "fx +1 px, checksums recomputed": _fx_plus_one,
+        "cam0/cam1 swapped, manifest fixed": _swap_cameras,
+    }
+    cases = [Case(g, f"lint bundle {n}", ["lint", manifest], setup=bundle_copy(f)) for n, f in forged.items()]
+    into = ["--db", "sqlite:///{w}/rig.db", "rig", "import"]  # the rig's own store: members there
+    cases += [
+        Case(g, f"rig import bundle {n}", [*into, "{w}/b"], setup=bundle_copy(f), protect=["rig.db"])
+        for n, f in forged.items()
+    ]
+    rehashed = {"edge +10 mm": _edge_10mm, "member fx +5 px": _member_fx}
+    cases += [
+        Case(
+            g,
+            f"rig import rig.json {n}, re-hashed, unsigned",
+            [*into, "{w}/R1.json"],
+            setup=bundle_copy(rehashed_rig(e)),
+            protect=["rig.db"],
+        )
+        for n, e in rehashed.items()
+    ]
+    cases += [
+        Case(g, "lint honest bundle", ["lint", manifest], expect="ok", setup=bundle_copy()),
+        Case(
+            g, "rig import honest bundle (already stored)", [*into, "{w}/b"], expect="ok", setup=bundle_copy()
+        ),
+        Case(
+            g,
+            "lint --require-signature on an unsigned store's ros export",
+            ["lint", "{w}/c.yaml", "--require-signature", "--trusted-keys", "{w}/keys"],
+            setup=_unsigned_ros_export,
+        ),
+    ]
+    force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]
+    intruders = {
+        "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),
+        "whose tf_static.yaml is a symlink": (_link, ["b/tf_static.yaml", "victim.txt"]),
+    }
+    cases += [
+        Case(g, f"rig export --force onto a bundle {n}", [*force, "--force"], setup=bundle_copy(f), protect=p)
+        for n, (f, p) in intruders.items()
+    ]
+    cases += [
+        Case(
+            g,
+            f"--db another application's SQLite ({journal} journal): {' '.join(args)}",
+            ["--db", "sqlite:///{w}/app.db", *args],
+            setup=both(foreign_sqlite("app.db", journal), exported("x.json")),
+            protect=["app.db"],
+        )
+        for journal in ("delete", "wal")
+        for args in (["history", SERIAL], ["db", "upgrade"], ["import", "{w}/x.json"])
+    ]
+    return cases
+
+
+LIDAR_BOX = "0.8,-2.5,-1.2,4.5,2.5,1.2"  # `calibctl lidar synth`'s station box
+LIDAR_BOARD = ["--cols", "5", "--rows", "7", "--square-mm", "95", "--backing-mm", "610,850"]
+
+
+def lidar_set(w: Path) -> None:
+    """An 8-pose `calibctl lidar synth` set at {w}/ls (a 5x7 board of 95 mm squares on 610 x 850 mm)."""
+    calibctl(w, ["lidar", "synth", str(w / "ls"), "--poses", "8"])
+
+
+def lidar_edit(edit: Callable[[Path], None]) -> Callable[[Path], None]:
+    return both(lidar_set, edit)
+
+
+def _replace_line(path: Path, start: str, line: str) -> None:
+    text_ = path.read_text()
+    old = next(x for x in text_.splitlines() if x.startswith(start))
+    path.write_text(text_.replace(old, line))
+
+
+def _nan_sweep(w: Path) -> None:
+    scan = w / "ls" / "scans" / "pose1.pcd"
+    header, _, body = scan.read_text().partition("DATA ascii\n")
+    scan.write_text(header + "DATA ascii\n" + "nan nan nan 0 0\n" * len(body.splitlines()))
+
+
+def _special_scan(make: Callable[[Path], None]) -> Callable[[Path], None]:
+    def edit(w: Path) -> None:
+        (w / "ls" / "scans" / "pose1.pcd").unlink()
+        make(w / "ls" / "scans" / "pose1.pcd")
+
+    return edit
+
+
+def _lidar(*extra: str) -> list[str]:
+    return [
+        "lidar",
+        "solve",
+        "--images",
+        "{w}/ls/images",
+        "--scans",
+        "{w}/ls/scans",
+        "--box",
+        LIDAR_BOX,
+        *(extra if "--camera-info" in extra else ["--camera-info", "{w}/ls/camera_info.yaml", *extra]),
+        "--pattern-offset-mm",
+        "2,0",
+    ]
+
+
+def _rig_render(w: Path) -> None:
+    calibctl(w, ["synth", str(w / "rig"), "--rig", "2", "--views", "8", "--baseline-mm", "75", "--seed", "7"])
+
+
+def _messages() -> list[Case]:
+    """Messages that used to blame the wrong thing: refused or warned, and ``says`` holds the words that name
+    the real mistake."""
+    g = "messages"
+    board_9x6 = ["--cols", "9", "--rows", "6", "--square-mm", "50", "--backing-mm", "610,850"]
+    square = [a if a != "95" else "100" for a in LIDAR_BOARD]
+    rig = [
+        "rig",
+        "solve-folders",
+        "--source",
+        "CAM0={w}/rig/CAM0",
+        "--source",
+        "CAM1={w}/rig/CAM1",
+        "--rows",
+        "6",
+    ]
+    return [
+        Case(
+            g,
+            "lidar camera_info K all zeros",
+            _lidar(*LIDAR_BOARD),
+            setup=lidar_edit(
+                lambda w: _replace_line(w / "ls" / "camera_info.yaml", "K:", "K: [0, 0, 0, 0, 0, 0, 0, 0, 0]")
+            ),
+            says=("K is no camera matrix", "not calibrated"),
+        ),
+        Case(
+            g,
+            "lidar --square-mm 100 on a 95 mm board",
+            _lidar(*square),
+            setup=lidar_set,
+            says=("squares look 9",),
+        ),
+        Case(
+            g,
+            "lidar pinhole images declared fisheye",
+            _lidar(*LIDAR_BOARD),
+            setup=lidar_edit(
+                lambda w: (
+                    _replace_line(
+                        w / "ls" / "camera_info.yaml", "distortion_model", "distortion_model: equidistant"
+                    ),
+                    _replace_line(w / "ls" / "camera_info.yaml", "D:", "D: [0, 0, 0, 0]"),
+                )
+            ),
+            says=("do not match that lens or its model",),
+        ),
+        Case(
+            g,
+            "lidar 9x6 given for the 5x7 set",
+            _lidar(*board_9x6),
+            setup=lidar_set,
+            says=("chessboard is visible in",),
+        ),
+        Case(
+            g,
+            "lidar all-NaN sweep",
+            _lidar(*LIDAR_BOARD),
+            "any",
+            setup=lidar_edit(_nan_sweep),
+            says=("non-finite",),
+        ),
+        *[
+            Case(
+                g,
+                f"lidar scan pose1.pcd is {kind}",
+                _lidar(*LIDAR_BOARD),
+                setup=lidar_edit(_special_scan(make)),
+                says=("not a regular file",),
+            )
+            for kind, make in (
+                ("a FIFO", os.mkfifo),
+                ("a folder", lambda p: p.mkdir()),
+                ("a symlink loop", lambda p: p.symlink_to(p)),
+            )
+        ],
+        Case(
+            g,
+            "lidar --folds 100 on 8 poses",
+            _lidar(*LIDAR_BOARD, "--folds", "100"),
+            "ok",
+            setup=lidar_set,
+            says=("8-fold (leave-one-out)",),
+        ),
+        Case(
+            g,
+            "lidar --lidar-frame 'bad name!' --tf-static",
+            _lidar(*LIDAR_BOARD, "--lidar-frame", "bad name!", "--tf-static", "{w}/tf.yaml"),
+            setup=lidar_set,
+            protect=["tf.yaml"],
+            says=("not a legal ROS frame name",),
+        ),
+        Case(g, "diff CAM@x", ["diff", f"{SERIAL}@x", SERIAL], says=("is not a whole number",)),
+        Case(
+            g,
+            "station serial with escape sequences",
+            ["station", "--board", BOARD, "--serials", "{w}/lot.txt", "--source-template", "{w}/{serial}"],
+            "ok",
+            setup=text("lot.txt", "CAM\x1b[2J\x1b]0;x\x07-1\n"),
+            says=("\\x1b[2J", "control characters"),
+        ),
+        Case(
+            g,
+            "rig solve-folders --cols 8 on 9x6 photos",
+            [*rig, "--cols", "8", "--square-mm", "25"],
+            setup=_rig_render,
+            says=("9x6",),
+        ),
+        Case(
+            g,
+            "rig solve-folders --square-mm 2.5",
+            [*rig, "--cols", "9", "--square-mm", "2.5"],
+            "ok",
+            setup=_rig_render,
+            says=("square-size", "outside the 5-300 mm"),
+        ),
+    ]
+
+
 def cases() -> list[Case]:
     return [
         *_capture(),
@@ -901,4 +1182,6 @@ def cases() -> list[Case]:
         *_diagnostics(),
         *_admin(),
         *_store(),
+        *_seal(),
+        *_messages(),
     ]

@@ -12,6 +12,8 @@ Special files are made in that folder (mkfifo, ln -s), never a system device nod
 * crash: a traceback, a signal, an exit code outside 0/1/2/130, or no answer within the time limit
 * accepted: exit 0 on an input the command should have refused
 * refused: exit 1/2 on an input the command should accept (a read-only store's reads)
+* misnamed: the command answered as it should, but its words miss what the case says the real mistake is
+  (``Case.says``: the board's size, the lens model, a non-regular file...): its hint sends the user elsewhere
 * setup: the sweep could not prepare the case (its own fault; not a finding)
 
 ``--source DIR`` runs another calibctl tree (e.g. ``git archive BASE calibctl | tar -x -C DIR``) for a
@@ -31,6 +33,7 @@ import stat
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -43,7 +46,7 @@ SOURCE = [REPO]  # the calibctl tree under test (--source)
 SERIAL, BOARD = "DEMO-CAM-0001", "demo-A17"
 CASE_TIMEOUT_S = 120
 UNPRIVILEGED = ["setpriv", "--bounding-set=-dac_override,-dac_read_search,-fowner", "--"]
-CATEGORIES = ("clean", "stored", "lost", "crash", "accepted", "refused", "setup")
+CATEGORIES = ("clean", "stored", "lost", "crash", "accepted", "refused", "misnamed", "setup")
 
 
 @dataclass
@@ -59,6 +62,7 @@ class Case:
     unprivileged: bool = False
     interrupt_s: float | None = None
     env: dict[str, str] = field(default_factory=dict)
+    says: tuple[str, ...] = ()  # words the output (stdout and stderr) must hold: the real mistake, named
 
 
 # ---- setup helpers (each takes the case folder) -------------------------------------------------------------
@@ -179,9 +183,115 @@ def second_data_line(value: str) -> Callable[[str], str]:
     return mangle
 
 
-def calibctl(w: Path, args: list[str]) -> subprocess.CompletedProcess[str]:
+_RIG_LOCK = threading.Lock()
+
+
+def rig_source(w: Path) -> Path:
+    """Once per sweep, beside the demo: a store ``rig.db`` whose rig R1 (CAM0 + CAM1, rendered 75 mm apart,
+    calibrated and solved through the CLI on the demo's board) is exported as the bundle ``bundle/`` and
+    its members as ``CAM0.json`` / ``CAM1.json``. The seal cases copy from it."""
+    src = (w / "demo").resolve().parent / "rig"
+    with _RIG_LOCK:
+        if (src / "bundle" / "manifest.json").exists():
+            return src
+        src.mkdir(exist_ok=True)
+        shutil.copyfile(w / "store.db", src / "rig.db")
+        steps = [
+            ["synth", str(src / "r"), "--rig", "2", "--views", "10", "--baseline-mm", "75", "--seed", "7"],
+            *(
+                ["calibrate", "--serial", c, "--board", BOARD, "--source", str(src / "r" / c)]
+                for c in ("CAM0", "CAM1")
+            ),
+            ["rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1"],
+            [
+                "rig",
+                "capture",
+                "R1",
+                "--board",
+                BOARD,
+                "--source",
+                f"CAM0={src}/r/CAM0",
+                "--source",
+                f"CAM1={src}/r/CAM1",
+            ],
+            ["rig", "solve", "R1"],
+            *(["export", c, "-o", str(src / f"{c}.json")] for c in ("CAM0", "CAM1")),
+            ["rig", "export", "R1", "--format", "bundle", "-o", str(src / "bundle")],
+        ]
+        for args in steps:
+            done = calibctl(src, args, db=src / "rig.db")
+            if done.returncode != 0:
+                raise RuntimeError(f"{' '.join(args[:3])}: {done.stderr[-300:]}")
+        return src
+
+
+def reseal(path: Path, body: str) -> None:
+    """What a forger does without the key: write ``body``, recompute its ``file-sha256`` line and its entry
+    in the bundle's manifest (checksums anyone can compute)."""
+    import re
+
+    kept = "".join(line for line in body.splitlines(keepends=True) if "calibctl file-sha256 " not in line)
+    digest = hashlib.sha256(kept.encode()).hexdigest()
+    body = re.sub(r"(calibctl file-sha256 )[0-9a-f]{64}", lambda m: m.group(1) + digest, body)
+    path.write_text(body)
+    manifest = path.parent / "manifest.json"
+    doc = json.loads(manifest.read_text())
+    for entry in doc["files"]:
+        if entry["path"] == path.name:
+            entry.update(sha256=hashlib.sha256(body.encode()).hexdigest(), bytes=len(body.encode()))
+    manifest.write_text(json.dumps(doc, indent=2))
+
+
+def bundle_copy(forge: Callable[[Path], None] | None = None) -> Callable[[Path], None]:
+    """The rig source's bundle copied to ``b/`` (then ``forge(b)``) and its store to ``rig.db``: the store
+    a `rig import` case imports into (its members are there, R1 registered; a forged version it took
+    would be R1@2) and a `rig export --force` case exports from."""
+
+    def make(w: Path) -> None:
+        src = rig_source(w)
+        shutil.copytree(src / "bundle", w / "b")
+        shutil.copyfile(src / "rig.db", w / "rig.db")
+        if forge is not None:
+            forge(w / "b")
+
+    return make
+
+
+def rehashed_rig(edit: Callable[[dict], None]) -> Callable[[Path], None]:
+    """rig.json at ``{w}/R1.json`` edited, its content hash recomputed and its signature dropped (no key)."""
+
+    def forge(b: Path) -> None:
+        doc = json.loads((b / "rig.json").read_text())
+        edit(doc)
+        doc.pop("signature", None)
+        (b.parent / "R1.json").write_text(json.dumps(doc))
+        code = (
+            "import json,sys; from calibctl.artifacts.rig import RigCalibration as R; p=sys.argv[1]; "
+            "d=json.load(open(p)); d['content_sha256']=R.model_validate(d).computed_sha256(); "
+            "json.dump(d, open(p, 'w'))"
+        )
+        subprocess.run([sys.executable, "-c", code, str(b.parent / "R1.json")], env=_env(), check=True)
+
+    return forge
+
+
+def foreign_sqlite(name: str, journal: str = "delete") -> Callable[[Path], None]:
+    """Another application's SQLite database (one table of its own) at ``name``."""
+
+    def make(w: Path) -> None:
+        con = sqlite3.connect(w / name)
+        con.execute(f"PRAGMA journal_mode = {journal}")
+        con.execute("CREATE TABLE notes (body TEXT)")
+        con.execute("INSERT INTO notes VALUES ('mine')")
+        con.commit()
+        con.close()
+
+    return make
+
+
+def calibctl(w: Path, args: list[str], db: Path | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "calibctl", "--db", f"sqlite:///{w / 'store.db'}", *args],
+        [sys.executable, "-m", "calibctl", "--db", f"sqlite:///{db or w / 'store.db'}", *args],
         cwd=w,
         env=_env(),
         capture_output=True,
@@ -298,6 +408,9 @@ def judge(
         return "accepted", f"exit 0{' and stored ' + ', '.join(grew) if grew else ''}"
     if case.expect == "ok" and code != 0:
         return "refused", (err.strip().splitlines() or ["(no message)"])[0][:160]
+    missing = [w for w in case.says if w not in out + err]
+    if missing:
+        return "misnamed", f"exit {code} without {missing[0]!r}: " + (err.strip() or out.strip())[:120]
     first = next((line for line in err.splitlines() if line.startswith("Error")), "")
     if case.expect == "refuse" and not first and code == 2:
         return "clean", "exit 2 (usage)"

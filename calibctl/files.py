@@ -98,6 +98,16 @@ def _kind(st_mode: int) -> str | None:
     return None if stat.S_ISREG(st_mode) else "not a regular file"
 
 
+def not_regular(path: Path | str) -> str | None:
+    """What ``path`` is when it is not (a symbolic link to) a regular file, for a message: "a FIFO (named
+    pipe)", "a folder", "a symbolic link loop or one to nothing"; None for a regular file."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return "a symbolic link loop or one to nothing" if os.path.islink(path) else "unreadable"
+    return _kind(st.st_mode)
+
+
 def existing_target(path: Path) -> os.stat_result | None:
     """``lstat`` of ``path`` (the link itself, never what it points to), or None when nothing is there.
     A path that exists and is not a regular file is refused: calibctl replaces only regular files, so

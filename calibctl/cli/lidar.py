@@ -84,6 +84,8 @@ def render_result(doc: dict[str, Any]) -> None:
                 f"{_num(m['range_offset_estimated_sigma_mm'])} mm"
             )
         )
+    for note in doc.get("notes", []):
+        say(f"  note: {note}")
     if doc["status"] == "accepted":
         say("Result: ACCEPTED")
     else:

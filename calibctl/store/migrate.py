@@ -11,6 +11,7 @@ database at its previous revision.
 from __future__ import annotations
 
 import ast
+import contextlib
 import functools
 import re
 from dataclasses import dataclass
@@ -141,6 +142,57 @@ def _current_revision(conn: Connection) -> str | None:
     return rows[0] if rows else None
 
 
+def refuse_foreign(tables: set[str], url: str, revision: str | None) -> None:
+    """DatabaseError naming the database when it holds tables that are not calibctl's: another
+    application's database is never written into (not a table added, not a byte changed). A store at one
+    of calibctl's own revisions (``revision``) may hold a table an older revision made: its own."""
+    from calibctl.store.models import Base
+
+    if revision is not None and revision in known_revisions():
+        return
+    foreign = sorted(t for t in tables if t not in Base.metadata.tables and t != "alembic_version")
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise DatabaseError(
+            f"the database {url} is not a calibctl store: it holds tables calibctl did not make ({shown}); "
+            "nothing was written to it",
+            "point --db (CALIBCTL_DB) at a calibctl store, or at a new file or empty database for a new one",
+        )
+
+
+def _sqlite_tables(path: Path) -> tuple[set[str], str | None]:
+    """The tables of an existing SQLite file and its alembic revision, read without writing a byte
+    (``immutable=1``: no journal mode set, no -wal or -shm made). A file that is no SQLite database is
+    refused naming it."""
+    import sqlite3
+    import urllib.parse
+
+    uri = f"file:{urllib.parse.quote(str(path.resolve()))}?mode=ro&immutable=1"
+    try:
+        with contextlib.closing(sqlite3.connect(uri, uri=True)) as conn:
+            rows = conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'").fetchall()
+            tables = {str(r[0]) for r in rows if not str(r[0]).startswith("sqlite_")}
+            revisions = (
+                conn.execute("SELECT version_num FROM alembic_version").fetchall()
+                if "alembic_version" in tables
+                else []
+            )
+    except sqlite3.DatabaseError as exc:
+        raise DatabaseError(
+            f"{path} is not a SQLite database ({exc}); nothing was written to it",
+            "point --db (CALIBCTL_DB) at a calibctl store, or at a path that does not exist yet (a new one)",
+        ) from exc
+    return tables, str(revisions[0][0]) if len(revisions) == 1 else None
+
+
+def _refuse_foreign_file(path: Path | None) -> None:
+    """An existing SQLite file with another application's tables (or no database at all) is refused before
+    any connection opens it: a connection sets the WAL journal mode, which rewrites the file's header."""
+    if path is not None and path.is_file() and path.stat().st_size > 0:
+        tables, revision = _sqlite_tables(path)
+        refuse_foreign(tables, str(path), revision)
+
+
 def _state_on(conn: Connection, url: str) -> SchemaState:
     from sqlalchemy import inspect
 
@@ -148,6 +200,7 @@ def _state_on(conn: Connection, url: str) -> SchemaState:
 
     head = head_revision()
     tables = set(inspect(conn).get_table_names())
+    refuse_foreign(tables, url, _current_revision(conn) if "alembic_version" in tables else None)
     if "alembic_version" not in tables or (current := _current_revision(conn)) is None:
         ours = tables & set(Base.metadata.tables)
         if ours:
@@ -171,6 +224,7 @@ def read_state(engine: Engine) -> SchemaState:
     path = sqlite_path(engine.url)
     if path is not None and not path.exists():
         return SchemaState(url, None, head_revision(), "absent")
+    _refuse_foreign_file(path)
     with database_errors(engine), engine.connect() as conn:
         state = _state_on(conn, url)
         conn.rollback()
@@ -180,9 +234,10 @@ def read_state(engine: Engine) -> SchemaState:
 def _migrate(engine: Engine, target: str, *, down: bool) -> tuple[str | None, str | None]:
     from sqlalchemy import text
 
-    from calibctl.store.engine import WRITE_OPTION, database_errors, display_url
+    from calibctl.store.engine import WRITE_OPTION, database_errors, display_url, sqlite_path
 
     url = display_url(engine.url)
+    _refuse_foreign_file(sqlite_path(engine.url))
     with database_errors(engine), engine.connect() as conn:
         conn.execution_options(**{WRITE_OPTION: True})
         with conn.begin():

@@ -241,11 +241,16 @@ def segment_board(
     pts = cloud.points_m[inside]
     n_box = len(pts)
     if n_box < MIN_PLANE_POINTS:
-        return BoardInScan(
-            "no_plane",
-            f"{n_box} points inside the station box (need {MIN_PLANE_POINTS})",
-            points_in_box=n_box,
-        )
+        dropped = cloud.dropped_nonfinite
+        message = f"{n_box} points inside the station box (need {MIN_PLANE_POINTS})"
+        if dropped and not len(cloud.points_m):
+            message = (
+                f"all {dropped} points of the sweep are non-finite (NaN or inf): it holds no measurement; "
+                "export that sweep again from the recording"
+            )
+        elif dropped:
+            message += f"; {dropped} of the sweep's points were non-finite (NaN or inf) and dropped"
+        return BoardInScan("no_plane", message, points_in_box=n_box)
     ring = cloud.ring[inside] if cloud.ring is not None else rings_from_elevation(pts)
     rng = np.random.default_rng(seed)
     remaining = np.ones(n_box, bool)

@@ -81,3 +81,20 @@ def range_offset_from_dimensions(
         return float("nan"), float("nan")
     # the two sides of one board share its range: count boards, not sides, in the sigma
     return float(np.mean(est)), float(np.std(est, ddof=1) / np.sqrt(len(boards)))
+
+
+def camera_to_lidar_scale(poses: Sequence[Pose], board: BackingBoard) -> float:
+    """Median over pose pairs of (distance between the board centres as the camera places them) / (the same
+    distance as the LiDAR measures it). Distances between poses do not depend on T_lidar_cam, so this is 1
+    up to noise when the pattern's square size is right; the camera's poses scale with the square size, so a
+    square given 100 mm on a 95 mm board reads 1.053. NaN with fewer than two poses or no pair 0.2 m apart."""
+    centre = board.centre_in_pattern()
+    cam = np.array([p.camera.T_cam_board[:3, :3] @ centre + p.camera.T_cam_board[:3, 3] for p in poses])
+    lid = np.array([p.lidar.centre_m for p in poses])
+    ratios = []
+    for i in range(len(poses)):
+        for j in range(i + 1, len(poses)):
+            d_lidar = float(np.linalg.norm(lid[i] - lid[j]))
+            if d_lidar >= 0.2:  # metres: shorter moves are dominated by the centres' noise
+                ratios.append(float(np.linalg.norm(cam[i] - cam[j])) / d_lidar)
+    return float(np.median(ratios)) if ratios else float("nan")

@@ -382,8 +382,42 @@ def _record(o: outcomes_core.ImageOutcome) -> OutcomeRecord:
     )
 
 
+def refuse_another_pattern(
+    spec: BoardSpec,
+    board_ref: str,
+    board_name: str,
+    where: str,
+    readable: list[outcomes_core.ImageOutcome],
+    given: str | None = None,
+) -> None:
+    """InputError (exit 2) when the readable pictures show no board of ``spec`` or a larger one
+    (``pattern_check``: the error names the board that is visible); ``given``: the options that named the
+    pattern when no board is registered (e.g. "--cols/--rows")."""
+    with_board = [o for o in readable if o.corner_ids is not None]
+    if not with_board:
+        raise pattern_check.nothing_found_error(
+            spec, board_ref, board_name, where, len(readable), _load_samples(readable), given=given
+        )
+    accepted = [o for o in readable if o.accepted]
+    # one view or none cannot show a larger board, the other images can: a 7x10 board registered as 9x6
+    # shows a 9x6 part of itself in a stray image and nothing in the rest
+    probed = next(
+        (group for group in (accepted, with_board) if len(group) >= pattern_check.LARGER_MIN_HITS), readable
+    )
+    larger = pattern_check.larger_board_error(
+        spec,
+        board_ref,
+        board_name,
+        _load_samples(probed),
+        {o.name: o.corners_px for o in probed if o.corners_px is not None},
+        given=given,
+    )
+    if larger is not None:
+        raise larger
+
+
 def _load_samples(outcomes: list[outcomes_core.ImageOutcome]) -> list[pattern_check.Sample]:
-    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)  # type: ignore[misc]
+    picks = pattern_check.spread([(o.name, o.path) for o in outcomes], pattern_check.PROBE_IMAGES)
     samples = []
     for name, path in picks:
         gray = outcomes_core.read_gray(str(path))
@@ -456,26 +490,8 @@ def _capture_images(
             f"{problems}",
             "re-copy the images from the camera; they are truncated or not images",
         )
-    with_board = [o for o in readable if o.corner_ids is not None]
-    if not with_board:
-        raise pattern_check.nothing_found_error(
-            spec, board.ref, board.name, f"images in {where}", len(readable), _load_samples(readable)
-        )
+    refuse_another_pattern(spec, board.ref, board.name, f"images in {where}", readable)
     accepted = [o for o in results if o.accepted]
-    # one view or none cannot show a larger board, the other images can: a 7x10 board registered as 9x6
-    # shows a 9x6 part of itself in a stray image and nothing in the rest
-    probed = next(
-        (group for group in (accepted, with_board) if len(group) >= pattern_check.LARGER_MIN_HITS), readable
-    )
-    larger = pattern_check.larger_board_error(
-        spec,
-        board.ref,
-        board.name,
-        _load_samples(probed),
-        {o.name: o.corners_px for o in probed if o.corners_px is not None},
-    )
-    if larger is not None:
-        raise larger
     writes = ImageWrites(writer, lambda stop: _store_images(store, settings, readable, where, stop))
     size = outcomes_core.session_image_size(results)
     assert size is not None  # there are readable images

@@ -54,6 +54,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
@@ -72,6 +73,7 @@ PROBE_WORKERS = 2
 PROBE_MAX_PIXELS = 1_000_000
 
 Sample = tuple[str, np.ndarray]  # (image name, (H, W) uint8)
+T = TypeVar("T")
 
 
 def near_patterns(cols: int, rows: int) -> list[tuple[int, int]]:
@@ -122,7 +124,7 @@ def probe_copies(samples: Sequence[Sample]) -> list[Sample]:
     return [(name, downscaled_to_pixels(gray, PROBE_MAX_PIXELS)[0]) for name, gray in samples]
 
 
-def spread(items: Sequence[Sample], count: int) -> list[Sample]:
+def spread(items: Sequence[T], count: int) -> list[T]:
     """At most ``count`` items evenly spread over ``items`` (first and last included)."""
     if len(items) <= count:
         return list(items)
@@ -195,17 +197,22 @@ def _names(names: Sequence[str]) -> str:
 
 
 def nothing_found_error(
-    spec: BoardSpec, board_ref: str, board_name: str, where: str, n_readable: int, samples: Sequence[Sample]
+    spec: BoardSpec,
+    board_ref: str,
+    board_name: str,
+    where: str,
+    n_readable: int,
+    samples: Sequence[Sample],
+    given: str | None = None,
 ) -> InputError:
-    """The error for "the registered pattern is in none of the readable pictures" (exit 2)."""
+    """The error for "the registered pattern is in none of the readable pictures" (exit 2). ``given``: how
+    the pattern was named when it is not a registered board (e.g. "--cols/--rows"), for the hint."""
     kind = f"{spec.cols}x{spec.rows} " + ("chessboard" if spec.kind == CHESSBOARD else "ChArUco board")
     if spec.kind == APRILGRID:
         kind = f"{spec.cols // 2}x{spec.rows // 2}-tag AprilGrid"
-    message = (
-        f"no {kind} (board {board_ref}) was found in any of the {n_readable} "
-        f"readable {where}; nothing was stored"
-    )
-    registry = f"`calibctl board show {board_name}`"
+    named = f"board {board_ref}" if given is None else f"given as {board_ref}"
+    message = f"no {kind} ({named}) was found in any of the {n_readable} readable {where}; nothing was stored"
+    registry = f"`calibctl board show {board_name}`" if given is None else given
     if spec.kind != CHESSBOARD:
         printed = (
             "tags, tag spacing and family"
@@ -240,10 +247,7 @@ def nothing_found_error(
         (c, r), names = visible[0]
         others = "".join(f"; {_a(pc, pr)} one in {_names(n)}" for (pc, pr), n in visible[1:3])
         message += f"; {_a(c, r)} chessboard is visible in {_names(names)}{others}"
-        hint = (
-            f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and "
-            f"capture with a board registered as {c}x{r}"
-        )
+        hint = _recount_hint(registry, c, r, given)
     else:
         probed = f"{len(samples)} of them" if samples else "none of them"
         message += f"; the near patterns {tried} are not visible either (probed {probed})"
@@ -254,14 +258,25 @@ def nothing_found_error(
     return InputError(message, hint)
 
 
+def _recount_hint(registry: str, c: int, r: int, given: str | None) -> str:
+    """Count the corners again: check the registered board (or the options it was ``given`` by)."""
+    return f"the pattern counts inner corners, cols x rows (squares - 1 per side): check {registry} and " + (
+        f"capture with a board registered as {c}x{r}"
+        if given is None
+        else f"give the board seen, {c}x{r} inner corners (in the order your set lays it out)"
+    )
+
+
 def larger_board_error(
     spec: BoardSpec,
     board_ref: str,
     board_name: str,
     samples: Sequence[Sample],
     corners_px: Mapping[str, np.ndarray] | None = None,
+    given: str | None = None,
 ) -> InputError | None:
-    """An error when the pictures show a larger chessboard than the registered one, else None.
+    """An error when the pictures show a larger chessboard than the registered one, else None. ``given``:
+    as for ``nothing_found_error``.
 
     ``corners_px``: the registered pattern's detected corners per sample name ((cols * rows, 2) float64,
     row-major). When every probed sample has them and ``board_extent.might_extend`` finds no sign of
@@ -308,6 +323,5 @@ def larger_board_error(
         f"the pictures show a larger board than {board_ref} ({spec.cols}x{spec.rows} inner corners): {_a(c, r)} "
         f"chessboard is found in {_names(names)}. The detector locks onto {_a(spec.cols, spec.rows)} part of it, "
         "so corner ids could slide from view to view; nothing was stored",
-        f"the pattern counts inner corners, cols x rows (squares - 1 per side): check `calibctl board show "
-        f"{board_name}` and capture with a board registered as {c}x{r}",
+        _recount_hint(f"`calibctl board show {board_name}`" if given is None else given, c, r, given),
     )

@@ -204,6 +204,12 @@ def compare_artifacts(a: CalibrationArtifact, b: CalibrationArtifact, request: D
             f"cannot compare {a.ref} and {b.ref}: {exc}",
             "the two lens models share almost no part of the image",
         ) from exc
+    if a.model.name != b.model.name and result.dropped:
+        notes.append(
+            f"compared over the region both lenses map: {len(result.pixels_px)} of "
+            f"{len(result.pixels_px) + result.dropped} samples; the rest of {a.ref}'s image ({a.model.name}) "
+            f"falls outside what {b.ref} ({b.model.name}) maps into its image"
+        )
     out = CameraDiff(a, b, request.scale, result, notes)
     if request.map_path is not None:
         write_atomic(

@@ -32,10 +32,8 @@ from calibctl.workflows.edges.kinds import (
     kind_of,
 )
 from calibctl.workflows.edges.tree import core_edge, edge_key
-from calibctl.workflows.exports.frame_names import is_ros_name
+from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
 from calibctl.workflows.store_admin.records import open_store
-
-ROS_NAME_RULE = "ROS names are [a-zA-Z][a-zA-Z0-9_]* segments separated by '/' (no '-', no leading '/')"
 
 
 @dataclass(frozen=True)
@@ -119,7 +117,7 @@ def check_sensor_target(
             "the edge pins that calibration (not a camera_info file)",
         )
     if not is_ros_name(frame):
-        raise UsageError(f"{option} '{frame}' is not a legal ROS frame name", ROS_NAME_RULE)
+        raise UsageError(f"{option} '{frame}' is not a legal ROS frame name", NAME_RULE)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
         if serial not in rig.cameras:

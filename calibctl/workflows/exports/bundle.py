@@ -3,8 +3,9 @@
 ``write_bundle`` writes the files and ``manifest.json`` (each file's sha256 and byte count, plus what the
 caller describes: rig version, members, frames) into a temporary folder beside the target and renames it
 into place, so a reader sees the old bundle or the new one, never half of one. An existing target is
-refused unless ``force``, and ``force`` replaces only a folder whose manifest calibctl wrote (never a
-folder of someone else's files). ``check_bundle`` is the manifest's lint: every listed file present and
+refused unless ``force``, and ``force`` replaces only a folder whose manifest calibctl wrote and that holds
+nothing but the files it lists (never a folder of someone else's files, nor a symlink: refused, naming
+what to move). ``check_bundle`` is the manifest's lint: every listed file present, no symlink, and
 unchanged.
 """
 
@@ -17,12 +18,16 @@ import shutil
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from calibctl import bounded
+from calibctl.artifacts.common import jcs_bytes
 from calibctl.artifacts.lint import Finding
 from calibctl.errors import AlreadyExistsError, FileSystemError, UsageError
 from calibctl.files import file_errors, new_file_mode
+
+if TYPE_CHECKING:
+    from calibctl.signing import Signer
 
 MANIFEST = "manifest.json"
 BUNDLE_FORMAT = "calibctl-robot-bundle"
@@ -64,14 +69,31 @@ def check_target(
         raise FileSystemError(f"cannot write {out}: folder {out.parent} does not exist", "create it first")
 
 
+MANIFEST_SIGNATURE = "manifest_signature"
+
+
+def manifest_message(doc: Mapping[str, Any]) -> bytes:
+    """What a manifest's own signature is over: the RFC 8785 form of every field but the signature (the
+    files' sha256 and roles, the frames, the pair: the export's choices no rig signature covers)."""
+    body = {k: v for k, v in doc.items() if k != MANIFEST_SIGNATURE}
+    return f"calibctl-bundle-v1\n{sha256_of(jcs_bytes(body))}".encode("ascii")
+
+
 def write_bundle(
-    out: Path, files: Mapping[str, str], manifest: Mapping[str, Any], *, force: bool = False
+    out: Path,
+    files: Mapping[str, str],
+    manifest: Mapping[str, Any],
+    *,
+    force: bool = False,
+    signer: Signer | None = None,
 ) -> list[Path]:
     """Write ``files`` (relative name -> text) and the manifest (``manifest`` plus ``format``, its schema
-    version and ``files``: name, sha256, bytes) as the folder ``out``; returns the paths written."""
+    version and ``files``: name, sha256, bytes; with ``signer`` its own ``manifest_signature``) as the
+    folder ``out``; returns the paths written."""
     out = Path(out)
     check_target(out, force)
     payloads = {name: text.encode("utf-8") for name, text in files.items()}
+    _refuse_foreign_entries(out)
     doc = {
         "format": BUNDLE_FORMAT,
         "schema_version": BUNDLE_SCHEMA_VERSION,
@@ -80,6 +102,12 @@ def write_bundle(
             {"path": name, "sha256": sha256_of(data), "bytes": len(data)} for name, data in payloads.items()
         ],
     }
+    if signer is not None:
+        doc[MANIFEST_SIGNATURE] = {
+            "algorithm": "ed25519",
+            "key_id": signer.key_id,
+            "value": signer.sign(manifest_message(doc)),
+        }
     payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
     return write_folder(out, payloads, "bundle")
 
@@ -108,6 +136,31 @@ def write_folder(out: Path, payloads: Mapping[str, bytes], what: str) -> list[Pa
     return [out / name for name in payloads]
 
 
+def _refuse_foreign_entries(out: Path) -> None:
+    """``--force`` replaces only what the previous manifest lists: a folder that also holds anything else
+    (a user's notes, a subfolder, a symlink, even one named like a bundle file) is refused, naming it."""
+    if not out.is_dir() or out.is_symlink():
+        return
+    try:
+        listed = json.loads((out / MANIFEST).read_text(encoding="utf-8")).get("files") or []
+    except (OSError, ValueError, AttributeError):
+        listed = []
+    own = {MANIFEST} | {e.get("path") for e in listed if isinstance(e, dict)}
+    foreign = []
+    with file_errors("read the bundle folder", out):
+        for entry in sorted(os.scandir(out), key=lambda e: e.name):
+            if entry.is_symlink():
+                foreign.append(f"{entry.name} (a symlink)")
+            elif entry.name not in own or not entry.is_file(follow_symlinks=False):
+                foreign.append(entry.name + ("/" if entry.is_dir(follow_symlinks=False) else ""))
+    if foreign:
+        raise UsageError(
+            f"{out} holds {', '.join(foreign)}, which its {MANIFEST} does not list: --force replaces only "
+            "the files of the bundle calibctl wrote there; nothing was changed",
+            f"move {', '.join(foreign)} out of {out}, or export into a new folder",
+        )
+
+
 def _finding(message: str, fix: str, severity: str = "error") -> Finding:
     return Finding(rule="bundle", severity=severity, message=message, fix=fix)
 
@@ -131,6 +184,9 @@ def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
             findings.append(_finding(f"{manifest_path}: {name} is outside the bundle folder", fix))
             continue
         path = folder / rel
+        if path.is_symlink():
+            findings.append(_finding(f"{path} is a symlink: a bundle holds its own files, never links", fix))
+            continue
         if not path.is_file():
             findings.append(_finding(f"{path} is listed in the manifest but missing", fix))
             continue

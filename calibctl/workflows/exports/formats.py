@@ -8,8 +8,10 @@
   ``distortion_model: equidistant``: its distortion_coefficients are cv2.fisheye's k1..k4 (pass them to
   cv2.fisheye.*, not to cv2.undistort).
 
-ROS, OpenCV, Kalibr and mrcal exports start with the trace header (``trace_header``): the version, its status, the
-evidence lint needs, and a hash of the file. ``load_calibration`` reads any of the four back.
+ROS, OpenCV, Kalibr and mrcal exports start with the trace header (``trace_header``): the version, its
+status, the evidence lint needs, the artifact's store signature (when its store had a key: ``calibctl lint
+--require-signature`` checks it against the version's content hash) and a hash of the file.
+``load_calibration`` reads any of the four back.
 """
 
 from __future__ import annotations
@@ -103,11 +105,11 @@ def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None
 
     if fmt == "ros":
         info = ros_camera_info.camera_info(art, camera_name)
-        return trace_header.stamp(art, _yaml_text(info, default_flow_style=None))
+        return trace_header.stamp(art, _yaml_text(info, default_flow_style=None), signed=True)
     if fmt == "opencv":
-        return trace_header.stamp(art, _opencv_text(art))
+        return trace_header.stamp(art, _opencv_text(art), signed=True)
     if fmt in ("kalibr", "mrcal"):
-        return trace_header.stamp(art, _one_camera_text(art, fmt))
+        return trace_header.stamp(art, _one_camera_text(art, fmt), signed=True)
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
 
 

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
 ROS_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
 OPTICAL_SUFFIX = "_optical_frame"
-_NAME_RULE = "ROS names are [a-zA-Z][a-zA-Z0-9_]* segments separated by '/' (no '-', no leading '/')"
+NAME_RULE = "ROS names are [a-zA-Z][a-zA-Z0-9_]* segments separated by '/' (no '-', no leading '/')"
 
 
 def is_ros_name(name: str) -> bool:
@@ -62,7 +62,7 @@ def parse_frame_map(pairs: Iterable[str], known: Sequence[str]) -> dict[str, str
                 f"--frame maps {serial} twice ({out[serial]} and {name})", "give each serial one --frame"
             )
         if not is_ros_name(name):
-            raise UsageError(f"--frame {pair}: '{name}' is not a legal ROS frame name", _NAME_RULE)
+            raise UsageError(f"--frame {pair}: '{name}' is not a legal ROS frame name", NAME_RULE)
         out[serial] = name
     taken: dict[str, str] = {}
     for serial, name in out.items():

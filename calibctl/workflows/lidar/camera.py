@@ -58,14 +58,6 @@ def lens_from_camera_info(path: Path) -> Lens:
         raise InputError(f"{source}: not a camera_info mapping", "is this a camera_info file?")
     name = str(data.get("distortion_model", "plumb_bob")).lower()
     K = _numbers(data, "K" if "K" in data else "camera_matrix", 9, source).reshape(3, 3)
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    if not (fx > 0 and fy > 0 and K[2, 2] == 1 and K[1, 0] == K[2, 0] == K[2, 1] == 0 and cx > 0 and cy > 0):
-        raise InputError(
-            f"{source}: K is not a camera matrix (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}, K[2] "
-            f"{K[2].tolist()}): it needs fx, fy, cx, cy > 0 and a last row of 0 0 1",
-            "the camera_info is empty or not this camera's calibration: export it again "
-            "(calibctl export SERIAL --format ros) or pass --serial SERIAL",
-        )
     D = _numbers(data, "D" if "D" in data else "distortion_coefficients", None, source)
     if name in _FISHEYE:
         if D.size != 4:
@@ -83,7 +75,23 @@ def lens_from_camera_info(path: Path) -> Lens:
         raise InputError(
             f"{source}: no integer width and height", "a camera_info file names its image size"
         ) from None
+    _check_camera_matrix(K, size, source)
     return Lens(K, D, size, model, source)
+
+
+def _check_camera_matrix(K: np.ndarray, size: tuple[int, int], source: str) -> None:
+    """K must be a pinhole camera matrix [fx 0 cx; 0 fy cy; 0 0 1] with positive focal lengths and the
+    principal point in the image: an all-zero K is what a driver publishes for an uncalibrated camera."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    w, h = size
+    if not (fx > 0 and fy > 0 and np.allclose(K[2], (0, 0, 1)) and 0 < cx < w and 0 < cy < h):
+        raise InputError(
+            f"{source}: K is no camera matrix (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}, last row "
+            f"{' '.join(f'{v:g}' for v in K[2])}; need fx, fy > 0, the principal point inside the {w}x{h} "
+            "image and a last row 0 0 1): the camera is not calibrated",
+            "calibrate the camera first and give its camera_info (`calibctl export SERIAL --format ros`), "
+            "or --serial SERIAL for its active calibration",
+        )
 
 
 def lens_from_store(settings: Settings, serial: str, version: int | None = None) -> Lens:

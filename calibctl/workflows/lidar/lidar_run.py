@@ -16,8 +16,6 @@ from pathlib import Path
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.files import write_atomic
-from calibctl.workflows.edges.versions import ROS_NAME_RULE
-from calibctl.workflows.exports.frame_names import is_ros_name
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.lidar.lidar_solve import (
     LidarOutcome,
@@ -53,13 +51,8 @@ def run_lidar(
 ) -> LidarOutcome:
     """The whole command (module docstring); ``outcome.written`` lists the files, ``outcome.stored`` the
     rig version written."""
-    if files.tf_static is not None:  # the frames it is written with are checked with or without --rig
-        for option, name in (("--lidar-frame", files.lidar_frame), ("--camera-frame", files.camera_frame)):
-            if not is_ros_name(name):
-                raise UsageError(
-                    f"{option} {name!r} is not a legal ROS frame name; nothing was solved or written",
-                    ROS_NAME_RULE,
-                )
+    if files.tf_static is not None:
+        check_tf_frames(files.lidar_frame, files.camera_frame)
     if target is not None:
         if req.camera_info is not None:
             raise UsageError(
@@ -85,3 +78,19 @@ def run_lidar(
         else:
             outcome.written.append(f"not written: {files.tf_static} (rejected: no transform is published)")
     return outcome
+
+
+def check_tf_frames(lidar_frame: str, camera_frame: str) -> None:
+    """The frames ``--tf-static`` would write: each a legal ROS frame name (UsageError, exit 2, before the
+    solve), as a rig export's are; tf2 rejects a transform between frames such as ``bad name!``."""
+    from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
+
+    for option, name, example in (
+        ("--lidar-frame", lidar_frame, "velodyne"),
+        ("--camera-frame", camera_frame, "camera_optical_frame"),
+    ):
+        if not is_ros_name(name):
+            raise UsageError(
+                f"{option} {name!r} is not a legal ROS frame name, so --tf-static cannot carry it",
+                f"{NAME_RULE}; e.g. {option} {example}",
+            )

@@ -42,6 +42,11 @@ if TYPE_CHECKING:
 from calibctl.workflows.lidar.camera import Lens, load_lens
 from calibctl.workflows.lidar.scans import SCAN_SUFFIXES, pair, read_scan
 
+LENS_RMS_LIMIT_PX = 0.6  # median corner RMS of the board poses: acfr 0.17, pinhole images read as fisheye 1.0
+SCALE_LIMIT = (
+    0.025  # camera / LiDAR pose-to-pose distance - 1: acfr 0.005, rendered 0.002; 100 mm for 95: 0.054
+)
+
 
 @dataclass(frozen=True)
 class LidarRequest:
@@ -159,6 +164,7 @@ class LidarOutcome:
     fit: LidarFit | None = None
     metrics: LidarFitMetrics | None = None
     overlays: list[str] | None = None
+    notes: list[str] = field(default_factory=list)
     written: list[str] = field(default_factory=list)
     stored: RigCalibration | None = None
 
@@ -212,11 +218,16 @@ def board_from_store(settings: Settings, ref: str) -> BackingBoard:
     )
 
 
-def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
+def _gray(path: Path) -> np.ndarray | None:
+    """The image at ``path`` in gray, bounded; None when it does not decode."""
     bounded.check_size(path, "read image")
     with files.file_errors("read image", path):
         data = path.read_bytes()
-    gray = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
+
+
+def _camera_board(path: Path, lens: Lens, board: BackingBoard) -> tuple[CameraBoard | None, str]:
+    gray = _gray(path)
     if gray is None:
         raise InputError(
             f"{path} is not a readable image", "remove it or give the folder of the camera's images"
@@ -302,11 +313,6 @@ def collect_poses(req: LidarRequest, lens: Lens) -> tuple[list[lsolve.Pose], lis
             None if camera is None else camera.rms_px,
         )
         outcome, message = found.outcome, found.message
-        if not len(cloud.points_m) and cloud.dropped_nonfinite:  # a sweep of no returns, not an empty box
-            message = (
-                f"all {cloud.dropped_nonfinite} points of the scan are NaN or infinite (no returns): "
-                "check the LiDAR's output or the scan file"
-            )
         if found.accepted and camera is None:
             outcome, message = "no_board_in_image", why
         if outcome == "accepted" and camera is not None:
@@ -433,42 +439,15 @@ def result_json(outcome: LidarOutcome) -> dict[str, Any]:
         doc["metrics"] = _metrics_json(outcome.metrics)
     if outcome.overlays is not None:
         doc["overlays"] = outcome.overlays
+    doc["notes"] = list(outcome.notes)
     return _finite(doc)
-
-
-SCALE_LIMITS = (0.6, 1.0 / 0.6)
-"""How far the camera's distance to the board centre may be from the LiDAR's (their ratio, medians over the
-poses) before the square size is called wrong: the two sensors sit centimetres apart and see the board at
-metres, so they agree within a few percent; a square size typed x10 off is a ratio of 10."""
-
-
-def refuse_a_wrong_scale(poses: Sequence[lsolve.Pose], board: BackingBoard, registered: str | None) -> None:
-    """UsageError (exit 2) when the camera, posing the board with its square size, puts it at another distance
-    than the LiDAR measures: the square size is wrong, and the solve would not converge on it."""
-    centre = np.append(board.centre_in_pattern(), 1.0)
-    camera_m = float(np.median([np.linalg.norm((p.camera.T_cam_board @ centre)[:3]) for p in poses]))
-    lidar_m = float(np.median([p.lidar.range_m for p in poses]))
-    ratio = camera_m / lidar_m if lidar_m > 0 else float("inf")
-    if SCALE_LIMITS[0] <= ratio <= SCALE_LIMITS[1]:
-        return
-    square_mm = board.square_m * 1e3
-    fits_mm = square_mm / ratio if ratio > 0 else float("nan")
-    where = f"board {registered}'s registered" if registered else "the"
-    raise UsageError(
-        f"with {where} square size of {square_mm:g} mm the camera sees the board at {camera_m:.2f} m but "
-        f"the LiDAR at {lidar_m:.2f} m (medians over {len(poses)} poses): the square size is wrong; the two "
-        f"agree at about {fits_mm:.1f} mm",
-        f"measure the board's squares and register it again (`calibctl board add {registered} ...`)"
-        if registered
-        else "check --square-mm (the printed square's edge in millimetres) and --cols / --rows",
-    )
 
 
 def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     """The whole solve (module docstring); a registered ``req.board`` is read from the store first."""
-    registered = req.board if isinstance(req.board, str) else None
-    if registered is not None:
-        req = replace(req, board=board_from_store(settings, registered))
+    named = req.board
+    if isinstance(req.board, str):
+        req = replace(req, board=board_from_store(settings, req.board))
     board = req.backing
     problem = board.check_pattern_fits()
     if problem:
@@ -477,6 +456,8 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         )
     lens = load_lens(settings, req.camera_info, req.serial)
     poses, rows = collect_poses(req, lens)
+    if not poses:
+        _refuse_an_unseen_pattern(req, rows, named)
     n_scans = sum(1 for r in rows if r.scan is not None)
     pre = [gates.pose_count_gate(len(poses), n_scans, req.min_poses)]
     if len(poses) >= 1:
@@ -487,29 +468,36 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
     outcome = LidarOutcome(
         str(req.images), str(req.scans), lens.source, lens.model, req.range_offset_m * 1e3, rows, pre
     )
+    cause = _likely_cause(poses, board, lens, named)
     if not all(g.passed for g in pre):
+        outcome.gates = _blaming(pre, cause)
         return outcome
-    if req.folds > len(poses):
-        raise UsageError(
-            f"--folds {req.folds} is more than the {len(poses)} poses: a {req.folds}-fold held-out check "
-            f"needs {req.folds} poses at least (each fold leaves some out)",
-            f"pass --folds {len(poses)} or fewer (default 5), or capture more poses",
-        )
-    refuse_a_wrong_scale(poses, board, registered)
     sol = lsolve.solve(poses, board, req.estimate_range_offset)
+    folds = min(req.folds, len(poses))
+    if folds < req.folds:
+        outcome.notes.append(
+            f"--folds {req.folds} is more than the {len(poses)} accepted poses: the held-out check ran "
+            f"{folds}-fold (leave-one-out); give --folds {len(poses)} or fewer"
+        )
     held_plane, held_edge, held_px = validation.held_out(
-        poses, board, req.folds, lambda T, test: projected_edge_px(T, test, board, lens)
+        poses, board, folds, lambda T, test: projected_edge_px(T, test, board, lens)
     )
     in_px = projected_edge_px(sol.T_lidar_cam, poses, board, lens)
     dims = np.array([p.lidar.dimension_error_m for p in poses]) * 1e3
     dim_offset, dim_offset_sigma = validation.range_offset_from_dimensions(
         [p.lidar for p in poses], board.backing_m
     )
-    outcome.gates = pre + [
-        gates.plane_rms_gate(sol.plane_rms_m * 1e3),
-        gates.dimension_gate(dims),
-        gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
-    ]
+    outcome.gates = _blaming(
+        pre
+        + [
+            gates.plane_rms_gate(sol.plane_rms_m * 1e3),
+            gates.dimension_gate(dims),
+            gates.held_out_gate(held_plane * 1e3, sol.plane_rms_m * 1e3),
+        ],
+        cause,
+    )
+    if cause is not None and all(g.passed for g in outcome.gates):
+        outcome.notes.append(cause)
     st, sr = sol.sigma_translation_m * 1e3, sol.sigma_rotation_deg
     outcome.fit = LidarFit(
         sol.T_lidar_cam,
@@ -526,7 +514,7 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
         held_out_projected_edge_rms_px=held_px,
         held_out_plane_rms_mm=held_plane * 1e3,
         held_out_edge_rms_mm=held_edge * 1e3,
-        folds=req.folds,
+        folds=folds,
         dimension_error_mean_mm=(float(mean_dims[0]), float(mean_dims[1])),
         range_offset_from_dimensions_mm=dim_offset * 1e3,
         range_offset_from_dimensions_sigma_mm=dim_offset_sigma * 1e3,
@@ -552,6 +540,78 @@ def run_lidar_solve(settings: Settings, req: LidarRequest) -> LidarOutcome:
             req.overlay_dir, pairs, sol.T_lidar_cam, lens, req.scan_scale_to_m, req.force
         )
     return outcome
+
+
+def _likely_cause(
+    poses: Sequence[lsolve.Pose], board: BackingBoard, lens: Lens, named: BackingBoard | str
+) -> str | None:
+    """What is wrong with the inputs rather than the poses, when the accepted poses show it: a lens that
+    does not fit the images (median corner RMS over ``LENS_RMS_LIMIT_PX``), or a square size the camera and
+    the LiDAR disagree on (``validation.camera_to_lidar_scale`` off 1 by more than ``SCALE_LIMIT``)."""
+    if len(poses) < 2:
+        return None
+    rms = float(np.median([p.camera.rms_px for p in poses]))
+    if rms > LENS_RMS_LIMIT_PX:
+        return (
+            f"the board's corners fit the lens ({lens.model}, {lens.source}) with a median RMS of "
+            f"{rms:.2f} px over {len(poses)} images (a lens that matches fits under {LENS_RMS_LIMIT_PX} px): "
+            "these images do not match that lens or its model (fisheye images declared plumb_bob, or the "
+            "reverse?); give the calibration of the camera that took them"
+        )
+    scale = validation.camera_to_lidar_scale(poses, board)
+    if not abs(scale - 1) > SCALE_LIMIT:
+        return None
+    square_mm = board.square_m * 1e3
+    check = (
+        f"the board's registered square size (`calibctl board show {named.partition('@')[0]}`)"
+        if isinstance(named, str)
+        else "--square-mm"
+    )
+    return (
+        f"the camera places the board {scale:.3f}x as far from pose to pose as the LiDAR measures: its "
+        f"squares look {square_mm / scale:.1f} mm, not the {square_mm:g} mm given; check {check}"
+    )
+
+
+def _blaming(results: list[GateResult], cause: str | None) -> list[GateResult]:
+    """With a ``cause``, the first failed gate's hint is it and the other failed gates' hints are dropped
+    (it explains them all; "capture more poses" would not help); else the gates as they are."""
+    failed = [i for i, g in enumerate(results) if not g.passed]
+    if cause is None or not failed:
+        return results
+    return [
+        g if g.passed else replace(g, hint=cause if i == failed[0] else None) for i, g in enumerate(results)
+    ]
+
+
+def _refuse_an_unseen_pattern(req: LidarRequest, rows: Sequence[ScanRow], named: BackingBoard | str) -> None:
+    """When the board's pattern is in none of the paired images: the capture path's error (exit 2), which
+    names the chessboard that is visible (a 9x6 board given for a 5x7 set), instead of "capture more"."""
+    from calibctl.workflows.camera import pattern_check
+
+    paired = [r for r in rows if r.figures is not None and r.image is not None]
+    if not paired or any(r.figures is not None and r.figures.image_rms_px is not None for r in paired):
+        return
+    board = req.backing
+    samples = []
+    for r in pattern_check.spread(paired, pattern_check.PROBE_IMAGES):
+        gray = _gray(req.images / str(r.image))
+        if gray is not None:
+            samples.append((str(r.image), gray))
+    spec = BoardSpec.chessboard(board.cols, board.rows, board.square_m)
+    if isinstance(named, str):
+        raise pattern_check.nothing_found_error(
+            spec, named, named.partition("@")[0], "images", len(paired), samples
+        )
+    raise pattern_check.nothing_found_error(
+        spec,
+        f"--cols {board.cols} --rows {board.rows}",
+        "",
+        f"images in {req.images}",
+        len(paired),
+        samples,
+        given="--cols/--rows",
+    )
 
 
 def tf_static_yaml(result: dict[str, Any], lidar_frame: str, camera_frame: str) -> str:

@@ -87,9 +87,15 @@ def pair(images_dir: Path, scans_dir: Path, pattern: str = "*") -> Pairing:
     with files.file_errors("list", images_dir):
         images = list_images(images_dir)
     with files.file_errors("list", scans_dir):
-        scans = sorted(
-            p for p in Path(scans_dir).glob(pattern) if p.is_file() and p.suffix.lower() in SCAN_SUFFIXES
-        )
+        named = sorted(p for p in Path(scans_dir).glob(pattern) if p.suffix.lower() in SCAN_SUFFIXES)
+    for p in named:
+        kind = files.not_regular(p)
+        if kind is not None:
+            raise InputError(
+                f"the scan {p} is {kind}, not a regular file",
+                "put the sweep file itself there (or remove that entry), then solve again",
+            )
+    scans = named
     if not images:
         raise InputError(f"no images in {images_dir}", "give the folder of the camera's images of the board")
     if not scans:

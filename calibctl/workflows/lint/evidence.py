@@ -24,11 +24,16 @@ re-solve). ``check_self_consistent`` (imports.py) covers the model's tied focal.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from calibctl.artifacts.calibration import CalibrationArtifact, RingRms
 from calibctl.workflows.board.boards import board_spec
+
+if TYPE_CHECKING:
+    from calibctl.artifacts.rig import RigCalibration
 
 REL_TOL = 1e-6  # the document stores full doubles; its identities hold to ~1e-15
 EDGE_MARGIN_PX = 2.0  # a detected corner lies in the image; its projection is off by its residual at most
@@ -202,3 +207,68 @@ def _rotation(rvec: tuple[float, float, float]) -> np.ndarray:
 def evidence_problems(art: CalibrationArtifact) -> list[str]:
     """Every identity ``art``'s own numbers break (empty: consistent as far as the document can show)."""
     return [*_view_problems(art), *_bin_problems(art), *_covariance_problems(art), *_geometry_problems(art)]
+
+
+def rig_evidence_problems(cal: RigCalibration, members: Mapping[str, CalibrationArtifact]) -> list[str]:
+    """Every identity a rig version's own numbers break, ``members`` the calibrations it pins (serial ->
+    this store's artifact of the same version and hash): a member's copy inside the rig that the rig solve
+    did not refine is that calibration's numbers (image size, lens, K, distortion); each edge's
+    translation and rotation are its T_parent_child's; each pair's baseline is the tree's. (The sigmas are
+    not compared: documents written by hand for tests, and older ones, carry their own.) A forgery that
+    moves one number and recomputes the hash breaks one of these."""
+    from calibctl.core.extrinsics.rig_tree import Edge, orient_tree  # cv2: only for a rig
+
+    problems = []
+    for m in cal.members:
+        art = members.get(m.serial)
+        if art is None:
+            continue
+        lens = "fisheye" if art.model.name == "fisheye" else "pinhole"
+        if tuple(m.image_size) != tuple(art.image_size) or m.lens != lens:
+            problems.append(
+                f"member {m.serial}@{m.version} is a {m.image_size[0]}x{m.image_size[1]} {m.lens} camera in "
+                f"the rig, {art.image_size[0]}x{art.image_size[1]} {lens} in its calibration"
+            )
+            continue
+        if m.refined:
+            continue
+        K, dist = np.asarray(m.camera_matrix), np.asarray(m.dist_coeffs)
+        K_art, dist_art = np.asarray(art.camera_matrix), np.asarray(art.dist_coeffs)
+        n = min(len(dist), len(dist_art))
+        if (
+            not np.allclose(K, K_art, rtol=REL_TOL, atol=0)
+            or not np.allclose(dist[:n], dist_art[:n], rtol=REL_TOL, atol=1e-12)
+            or np.any(dist[n:])
+            or np.any(dist_art[n:])
+        ):
+            problems.append(
+                f"member {m.serial}@{m.version} was not refined by the rig solve, yet its K or distortion "
+                f"in the rig (fx {K[0, 0]:.6g}) is not its calibration's (fx {K_art[0, 0]:.6g})"
+            )
+    edges = [
+        Edge(e.parent, e.child, np.asarray(e.T_parent_child), np.asarray(e.covariance)) for e in cal.edges
+    ]
+    for stored, e in zip(cal.edges, edges, strict=True):
+        for name, stated, derived in (
+            ("translation_mm", stored.translation_mm, e.translation_mm),
+            ("rotation_deg", stored.rotation_deg, e.rotation_deg),
+        ):
+            if _differs(stated, derived) and abs(stated - derived) > 1e-9:
+                problems.append(
+                    f"edge {e.parent} -> {e.child}: {name} {stated:.6g} but its T_parent_child says "
+                    f"{derived:.6g}"
+                )
+    try:
+        tree = orient_tree(edges, cal.root)
+    except ValueError as exc:
+        return [*problems, f"its edges do not form one tree under {cal.root} ({exc})"]
+    serials = {m.serial for m in cal.members}
+    for p in cal.pairs:
+        if p.a not in serials or p.b not in serials:
+            continue
+        baseline_mm = float(np.linalg.norm(tree.T(p.b, p.a)[:3, 3]) * 1e3)
+        if _differs(p.baseline_mm, baseline_mm) and abs(p.baseline_mm - baseline_mm) > 1e-6:
+            problems.append(
+                f"pair {p.a}-{p.b}: baseline_mm {p.baseline_mm:.6g} but its tree says {baseline_mm:.6g}"
+            )
+    return problems

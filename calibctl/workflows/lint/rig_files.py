@@ -32,7 +32,7 @@ from calibctl.config import LintThresholds
 from calibctl.errors import InputError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.exports import bundle, formats, trace_header
-from calibctl.workflows.exports.frame_names import ROS_NAME
+from calibctl.workflows.exports.frame_names import ROS_NAME, FrameNames
 from calibctl.workflows.lint.lint import (
     CalibrationFacts,
     LintResult,
@@ -394,6 +394,18 @@ def _document(
                 "re-export it from the store",
             )
         ]
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.workflows.lint import evidence  # numpy, boards: only for a rig document
+
+    problems = evidence.rig_evidence_problems(doc, {}) if isinstance(doc, RigCalibration) else []
+    if problems:  # a number moved and the hash recomputed: the version contradicts itself
+        return [
+            _error(
+                "evidence",
+                f"{source} does not reproduce its own evidence: {'; '.join(problems)}",
+                "re-export it from the store; never edit one by hand, re-hashed or not",
+            )
+        ]
     return (
         []
         if doc.status == "accepted"
@@ -421,9 +433,27 @@ def _seal_of(value: Any) -> RecordSignature | None:
         return None
 
 
+def _manifest_seal(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
+    """The manifest's own signature (by the exporting store's key): the export's choices (frame names,
+    roles, the pair, each file's sha256) that no rig signature covers."""
+    seal = data.get(bundle.MANIFEST_SIGNATURE)
+    if not isinstance(seal, dict):
+        return [
+            _error(
+                "signature",
+                "the manifest is not signed: its frame names and file roles are the exporter's choice, "
+                "which only the manifest's own signature covers",
+                "export the bundle again from a store with a key (`calibctl rig export RIG --format bundle`)",
+            )
+        ]
+    problem = trusted.check(seal.get("key_id"), seal.get("value"), bundle.manifest_message(data))
+    return [] if problem is None else [_error("signature", f"the manifest {problem}", SIGNATURE_FIX)]
+
+
 def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
-    """The manifest's rig signature and each member's (a robot loads the members' numbers too)."""
-    findings = _seal(
+    """The manifest's own signature, its rig signature and each member's (a robot loads the members'
+    numbers too)."""
+    findings = _manifest_seal(data, trusted) + _seal(
         f"rig {data.get('rig')}@{data.get('version')}",
         _seal_of(data.get("signature")),
         str(data.get("content_sha256")),
@@ -440,8 +470,31 @@ def _bundle_signatures(data: dict[str, Any], trusted: TrustedKeys) -> list[Findi
     return findings
 
 
-def _header_signature(header: trace_header.RigTraceHeader | None, trusted: TrustedKeys) -> list[Finding]:
-    """A rig export's header signature, over the rig version's content hash the header names."""
+def _camera_signature(header: trace_header.TraceHeader, trusted: TrustedKeys) -> list[Finding]:
+    """A camera export's ``calibctl signature`` header line, over the artifact's content hash it names."""
+    if header.signature is None:
+        return [
+            _error(
+                "signature",
+                f"{header.ref}: this file carries no signature line (exported before calibctl wrote one, or "
+                "from a store without a key)",
+                f"export it again: `calibctl export {header.ref} --format ...` from the store that holds it "
+                "writes the artifact's signature; a store without a key signs nothing (`calibctl keys init` "
+                "there, then solve or import the calibration again)",
+            )
+        ]
+    return _seal(header.ref, header.signature, header.artifact_sha256, trusted)
+
+
+def _header_signature(
+    header: trace_header.RigTraceHeader | None,
+    trusted: TrustedKeys,
+    camera: trace_header.TraceHeader | None = None,
+) -> list[Finding]:
+    """A rig export's header signature, over the rig version's content hash the header names; a camera
+    export's (``camera``, no rig header) over the artifact's."""
+    if header is None and camera is not None:
+        return _camera_signature(camera, trusted)
     if header is None:
         return [_error("signature", "no calibctl rig header: nothing vouches for this file", SIGNATURE_FIX)]
     if header.ref == trace_header.NOT_STORED:
@@ -455,13 +508,56 @@ def _header_signature(header: trace_header.RigTraceHeader | None, trusted: Trust
     return _seal(f"rig {header.ref}", header.signature, header.rig_sha256, trusted)
 
 
+def _derived(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
+    """The bundle against what its rig.json derives (``rig_bundle.check_derived``); a rig.json missing or
+    edited leaves nothing to check the files against: an error."""
+    from calibctl.artifacts.rig import RigCalibration
+    from calibctl.workflows.exports import rig_bundle  # OpenCV: only for a bundle
+
+    path = manifest_path.parent / rig_bundle.RIG_JSON
+    fix = "export the bundle again (`calibctl rig export RIG@N --format bundle -o DIR --force`)"
+    if not path.is_file():
+        return [_error("bundle", f"{path} is missing: nothing vouches for the bundle's files", fix)]
+    try:
+        cal = RigCalibration.model_validate(bounded.parse_json(bounded.read_text(path), str(path)))
+    except (ValidationError, InputError) as exc:
+        return [_error("bundle", f"{path} is not a readable rig version ({exc})", fix)]
+    if cal.computed_sha256() != cal.content_sha256:
+        return [
+            _error("bundle", f"{path} was edited (its content hash does not match): no file is checked", fix)
+        ]
+    return rig_bundle.check_derived(manifest_path, data, cal)
+
+
+def _role(header: trace_header.RigTraceHeader | None, data: Any) -> list[Finding]:
+    """A rig camera_info whose header names one camera (``member SERIAL@V ... frame F``) and whose
+    ``camera_name`` is another's: the numbers of one camera under another's name."""
+    if header is None or len(header.members) != 1 or not isinstance(data, dict):
+        return []
+    ref, _, frame = header.members[0]
+    name = data.get("camera_name")
+    if frame is None or not isinstance(name, str):
+        return []
+    if name == FrameNames({ref: frame}).camera_name(ref):
+        return []
+    return [
+        _error(
+            "frames",
+            f"its header names {ref} (frame {frame}) but its camera_name is {name}: one camera's file under "
+            "another's name",
+            "export it again (`calibctl rig export RIG --format ros -o DIR`); never edit one by hand",
+        )
+    ]
+
+
 def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> LintResult:
     """A camera export, ROS or OpenCV file (a rig's camera_info too); with ``trusted`` its signature: the
     artifact's, or the rig version's in a rig export's header."""
     loaded = formats.load_calibration(path)
     result = lint_file(loaded, limits)
-    if trusted is not None and loaded.rig_header is not None:
-        result.findings.extend(_header_signature(loaded.rig_header, trusted))
+    result.findings.extend(_role(loaded.rig_header, loaded.data))
+    if trusted is not None and (loaded.rig_header is not None or loaded.kind != "calibctl" and loaded.header):
+        result.findings.extend(_header_signature(loaded.rig_header, trusted, loaded.header))
     elif trusted is not None:
         signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
     return result
@@ -480,7 +576,7 @@ def lint_rig_file(
         return None
     if kind == "bundle":
         signed = [] if trusted is None else _bundle_signatures(data, trusted)
-        results = [LintResult(source, kind, bundle.check_bundle(path, data) + signed)]
+        results = [LintResult(source, kind, bundle.check_bundle(path, data) + _derived(path, data) + signed)]
         for entry in data.get("files") or []:
             listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
             if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():
@@ -513,7 +609,7 @@ def lint_rig_file(
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:
-        findings += _header_signature(rig, trusted)
+        findings += _header_signature(rig, trusted, camera)
     if camera is None and rig is None:
         findings = [
             _error(

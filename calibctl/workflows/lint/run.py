@@ -23,8 +23,8 @@ def lint(
     against_store: bool = False,
 ) -> list[LintResult]:
     """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
-    is a ``signature`` error (a camera's ROS and OpenCV exports carry no signature: lint the artifact export;
-    a rig export carries its rig version's signature in its header). A LUT folder or header is
+    is a ``signature`` error (a camera's exports and a rig's carry their version's signature in their
+    header; a bundle's manifest carries its own). A LUT folder or header is
     ``lut_files``' (``against_store``, i.e. --db given: its source must be the active version)."""
     if not paths and not serial and not all_serials:
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")

@@ -26,9 +26,9 @@ import numpy as np
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.artifacts.rig import DesignBaseline, RigLoop, RigPair
 from calibctl.config import LintThresholds, Settings, load_settings
-from calibctl.core.board.board_spec import BoardSpec
+from calibctl.core.board.board_spec import CHESSBOARD, BoardSpec
 from calibctl.core.board.views import BoardView
-from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, ImageOutcome
+from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, UNREADABLE, ImageOutcome
 from calibctl.core.extrinsics import rig_identity as identity
 from calibctl.core.extrinsics.rig_frames import (
     MAX_MIN_SHARED_VIEWS,
@@ -55,7 +55,7 @@ from calibctl.core.intrinsics.solve import get_model, solve_intrinsics
 from calibctl.errors import CalibctlError, InconsistentDataError, InputError, NumericalError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
-from calibctl.workflows.camera.capture import classify_photos
+from calibctl.workflows.camera.capture import classify_photos, refuse_another_pattern
 from calibctl.workflows.camera.distance_gauge import (
     ReferenceDistance,
     board_distances_m,
@@ -79,6 +79,12 @@ class MemberFit:
     model: str
     fit_rms_px: float
     detector_rms_px: float | None
+
+
+PLAUSIBLE_SQUARE_MM = (
+    5.0,
+    300.0,
+)  # printed calibration boards; outside it a unit or decimal typo is likelier
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,7 @@ class RigFolderRun:
     findings: tuple[Finding, ...] = ()
     member_verdicts: Mapping[str, tuple[Finding, ...]] | None = None  # rig_members; None: model-misfit only
     designs: tuple[DesignBaseline, ...] = ()
+    square_mm: float | None = None  # the board's square as given (the scale of every length)
     timing: Mapping[str, object] | None = None  # rig_video.timing_json when the frames were paired by time
     refused: tuple[Finding, ...] = ()  # members that could not be calibrated, left out of the rig
 
@@ -379,6 +386,7 @@ def solve_rig_folders(
         fits=fits,
         member_verdicts=verdicts,
         designs=tuple(designs),
+        square_mm=spec.square_size_m * 1e3,
         timing=rig_video.timing_json(timed) if timed is not None else None,
         refused=tuple(refused_finding(name, exc) for name, exc in refused.items()),
     )
@@ -465,6 +473,16 @@ def _photo_frames(
         )
         if mixed is not None:
             raise InputError(f"camera {name}: {mixed.message}", mixed.hint)
+        readable = [o for o in outcomes[name] if o.status != UNREADABLE]
+        if readable and spec.kind == CHESSBOARD:  # the board given is the board seen (as capture checks)
+            refuse_another_pattern(
+                spec,
+                f"--cols {spec.cols} --rows {spec.rows}",
+                "",
+                f"photos of camera {name}",
+                readable,
+                given="--cols/--rows",
+            )
     return match, outcomes, {name: (sets[name][0], classified[name][1]) for name in sources}
 
 
@@ -555,7 +573,34 @@ def judged_solve(
         )
         for f in identity.zero_baselines(identity.pair_translations(solution))
     ]
-    return replace(run, solution=solution, holdout=holdout, loops=loops, findings=(*same, *findings, *misfit))
+    scale = square_size_findings(solution, run.square_mm)
+    return replace(
+        run, solution=solution, holdout=holdout, loops=loops, findings=(*same, *findings, *misfit, *scale)
+    )
+
+
+def square_size_findings(solution: RigSolution, square_mm: float | None) -> list[Finding]:
+    """A warning (``square-size``) when the square size given is outside what boards are printed with
+    (``PLAUSIBLE_SQUARE_MM``): every length the solve reports scales with it, so a 2.5 typed for 25 passes a
+    75 mm rig as 7.5 mm, seen from a tenth of its real working distance, without any residual showing it.
+    ``--square-mm 1`` is the unit square of a board whose size is unknown (every length in squares): no
+    warning."""
+    lo, hi = PLAUSIBLE_SQUARE_MM
+    if square_mm is None or lo <= square_mm <= hi or square_mm == 1.0:  # 1: lengths in squares, as asked
+        return []
+    baselines = [float(np.linalg.norm(p[3:])) * 1e3 for p in solution.cam_poses[1:]]
+    distance_mm = float(np.median(np.linalg.norm(solution.board_poses[:, 3:], axis=1))) * 1e3
+    return [
+        Finding(
+            rule="square-size",
+            severity="warning",
+            message=f"--square-mm {square_mm:g} is outside the {lo:g}-{hi:g} mm that boards are printed "
+            f"with: it makes the baseline {min(baselines):.1f} mm and the board {distance_mm:.0f} mm from "
+            "the root camera (every length scales with the square size)",
+            fix="measure a square with calipers and give --square-mm in millimetres (a slipped decimal point "
+            "scales every length of the rig tenfold)",
+        )
+    ]
 
 
 def rig_pairs(solution: RigSolution, holdout: RigHoldout | None) -> list[RigPair]:

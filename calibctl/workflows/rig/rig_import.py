@@ -3,7 +3,10 @@
 Shaped like the camera ``import`` (workflows.lint.imports): the file's content hash is checked (an edited
 file is exit 1), its signature too (``--require-signature``: a trusted key's, exit 2 otherwise; a signature
 that does not match is refused always), and the version gets this store's verdict, version, hash and
-signature, the source kept in ``provenance.imported_from``. Nothing is stored when any check fails.
+signature, the source kept in ``provenance.imported_from`` (what signed it in ``import_signature``). A
+bundle's every file must be what its rig.json derives (``exports.rig_bundle``), and the version must
+reproduce its own evidence (``lint.evidence.rig_evidence_problems``: edges against their transforms, an
+unrefined member against its calibration here), else exit 1. Nothing is stored when any check fails.
 
 A rig version pins its members by serial, version and content hash. Each must be in this store: the same
 version with the same hash, or this store's import of exactly that version (a camera ``import`` gives it
@@ -29,15 +32,16 @@ from calibctl.artifacts.common import parse_document
 from calibctl.artifacts.lint import Finding, has_errors
 from calibctl.artifacts.rig import RigCalibration, RigDefinition
 from calibctl.config import Settings
-from calibctl.errors import InputError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import InconsistentDataError, InputError, IntegrityError, NotFoundError, UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.edges.kinds import STALE_RULES, evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
-from calibctl.workflows.exports import bundle
+from calibctl.workflows.exports import bundle, rig_bundle
+from calibctl.workflows.lint import evidence
 from calibctl.workflows.rig.rig_lint import rig_findings
 from calibctl.workflows.store_admin import keys, records
 
-RIG_JSON = "rig.json"
+RIG_JSON = rig_bundle.RIG_JSON
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,7 @@ def read_rig_file(path: Path) -> RigCalibration:
     manifest = None
     if path.is_dir():
         path = path / bundle.MANIFEST
+    manifest_path = path
     if path.name == bundle.MANIFEST:
         path, manifest = _from_bundle(path)
     data = bounded.parse_json(bounded.read_text(path), str(path))
@@ -110,6 +115,9 @@ def read_rig_file(path: Path) -> RigCalibration:
             f"the manifest names rig {claimed[0]}@{claimed[1]} sha256 {str(claimed[2])[:12]}, "
             f"{RIG_JSON} is {cal.ref} sha256 {cal.content_sha256[:12]}",
         )
+    derived = [] if manifest is None else rig_bundle.check_derived(manifest_path, manifest, cal)
+    if derived:  # a file rig.json does not derive: edited numbers (checksums recomputed), swapped cameras
+        raise _tampered(manifest_path, derived[0].message)
     return cal
 
 
@@ -177,13 +185,20 @@ def _previous(store: Store, source: RigCalibration) -> RigCalibration | None:
 
 
 def _rederive(
-    store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str
+    store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str, mark: str
 ) -> tuple[RigCalibration, list[Finding]]:
     """``source`` pinned to this store's members, with this store's lint and verdict; and the stale findings."""
     here = {
         m.serial: _member_here(store, m.serial, m.version, m.content_sha256, source.ref)
         for m in source.members
     }
+    problems = evidence.rig_evidence_problems(source, here)
+    if problems:
+        raise InconsistentDataError(
+            f"{source.ref} does not reproduce its own evidence: {'; '.join(problems)}; nothing was stored",
+            "import the rig version as its store exported it; an edited version is never trusted, "
+            "re-sealed or not",
+        )
     members = [
         m.model_copy(
             update={"version": here[m.serial].version, "content_sha256": here[m.serial].content_sha256}
@@ -202,7 +217,7 @@ def _rederive(
     stale = [f for f in findings if f.rule in STALE_RULES and f.severity == "error"]
     lint = [f for f in findings if f not in stale]
     status = "rejected" if has_errors(lint) else "accepted"
-    provenance = source.provenance.model_copy(update={"imported_from": label})
+    provenance = source.provenance.model_copy(update={"imported_from": label, "import_signature": mark})
     return mine.model_copy(update={"lint": lint, "status": status, "provenance": provenance}), stale
 
 
@@ -232,7 +247,7 @@ def import_rig_file(
                 previous, source.ref, source.status, active, already_imported=True, stale=[]
             )
         _check_layout(rig, source)
-        mine, stale = _rederive(store, source, rig, settings, label)
+        mine, stale = _rederive(store, source, rig, settings, label, trust.mark)
         do_activate, override, held_back = trust.activation(mine.status == "accepted" and not stale, activate)
         stored = store.add_rig_calibration(
             mine,

@@ -50,10 +50,10 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from calibctl import bounded
 from calibctl.artifacts.board import BoardRevision
 from calibctl.artifacts.common import SERIAL_PATTERN
 from calibctl.artifacts.session import CaptureSession
-from calibctl.bounded import printable
 from calibctl.config import Settings
 from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.core.intrinsics.solve import DEFAULT_MODEL
@@ -624,12 +624,19 @@ def _keep(summary: StationSummary, report: Callable[[UnitResult], None], line: U
 
 def _checked_serial(serial: str, seen: dict[str, int]) -> UnitResult | None:
     if not re.fullmatch(SERIAL_PATTERN, serial):
-        shown = printable(serial)  # a scanner's escape sequences never reach the terminal raw
+        shown = bounded.printable(serial)  # a scanner's escape sequences must not drive the terminal
+        control = shown != serial
         return UnitResult(
             shown,
             ERROR,
-            f"'{shown}' is not a serial",
-            "a serial is letters, digits and . _ : - (no spaces, no '@'); scan the label again",
+            f"'{shown}' is not a serial"
+            + (": it holds control characters (shown escaped, \\xNN)" if control else ""),
+            "a serial is letters, digits and . _ : - (no spaces, no '@'); "
+            + (
+                "check the scanner's prefix and suffix settings (it sent escape sequences), then scan again"
+                if control
+                else "scan the label again"
+            ),
         )
     if serial in seen:
         return UnitResult(

@@ -30,12 +30,12 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
     match = _ARTIFACT_REF.match(ref.strip())
     if not match or not match.group("serial"):
         raise UsageError(f"'{ref}' is not SERIAL or SERIAL@N")
-    if "@" in match.group("serial"):  # serials never hold '@': what follows it is a malformed version
-        serial, _, version_text = match.group("serial").partition("@")
+    serial, at, version_text = ref.strip().rpartition("@")
+    if at and serial and not version_text.isdecimal():
         raise UsageError(
-            f"'{ref}': the version after '@' is '{version_text}', not a number",
-            f"name a version as {serial or 'SERIAL'}@N (N = 1, 2, ...; "
-            f"`calibctl history {serial or 'SERIAL'}` lists them), or leave out @N for the active one",
+            f"'{ref}' is not SERIAL or SERIAL@N: the version '{version_text}' is not a whole number",
+            f"name a version by its number (e.g. {serial}@3; `calibctl history {serial}` lists them), "
+            f"or drop @... for the active one",
         )
     version = match.group("version")
     if version and (len(version) > 10 or int(version) > MAX_VERSION):
@@ -46,11 +46,11 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
 
 
 def open_store(settings: Settings, *, create: bool = False, write: bool = False) -> Store:
-    """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a new
-    empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked). Commands that
-    write pass ``write=True``: the configured signing key is loaded (and must be readable). With keys
-    configured, what either reads is checked as ``db verify`` would (``store.served``): a write never builds
-    on a record a read would refuse."""
+    """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
+    new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
+    Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable).
+    With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write never
+    builds on a record a read would refuse."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
 

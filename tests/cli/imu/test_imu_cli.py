@@ -135,7 +135,7 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
 
 
 def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_path) -> None:
-    from tests.cli.test_extras_cli import _assert_missing_extra, _hide
+    from tests.cli.app.test_extras_cli import _assert_missing_extra, _hide
 
     _hide(monkeypatch, "rosbags")
     bag = tmp_path / "bag"

@@ -300,8 +300,8 @@ def test_solve_report_stores_nothing_when_another_version_took_the_checked_one(
 
     build = solve_workflow.build_artifact
 
-    def with_an_interloper(session, request, settings):
-        art, outliers = build(session, request, settings)
+    def with_an_interloper(session, request, settings, board_gauge=None):
+        art, outliers = build(session, request, settings, board_gauge)
         with Store.open(db) as store:
             store.add_artifact(art, activate=False, actor="other", station="other", reason="meanwhile")
         return art, outliers

@@ -75,8 +75,9 @@ def test_a_signed_rig_version_exports_its_signature_which_verifies_independently
     assert json.loads(r.stdout)["signature"] == seal  # the store serves what it exported
 
 
-def test_every_rig_export_carries_the_signature_and_lints_signed(signed, tmp_path):
+def test_every_rig_export_carries_the_signature_and_lints_signed(signed, tmp_path, monkeypatch):
     url, trusted, _ = signed
+    monkeypatch.setenv("CALIBCTL_SIGNING_KEY", str(trusted.parent / "k.pem"))  # the bundle's manifest too
     paths = []
     for fmt in SINGLE_FILE_FORMATS:
         paths.append(tmp_path / f"rig.{fmt}")
