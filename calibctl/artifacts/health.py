@@ -8,16 +8,19 @@ reads them back as conditionals (RMS against temperature, time offset against ti
 
 from __future__ import annotations
 
-from datetime import timedelta
-from typing import Literal
+from datetime import UTC, datetime, timedelta
+from typing import Annotated, Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import BeforeValidator, Field, model_validator
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, UtcDatetime, utc_now
 
 HEALTH_REPORT_SCHEMA_VERSION: Literal[1] = 1
 MAX_FUTURE = timedelta(minutes=5)
 """A report stamped further ahead than this is refused: the robot's clock is wrong, so is its time axis."""
+EARLIEST = datetime(2000, 1, 1, tzinfo=UTC)
+"""A report stamped before this is refused: no calibctl calibration was measured then (a robot clock that was
+never set reads 1970-01-01, a default date 0001-01-01)."""
 SOURCE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._:/@-]{0,127}$"
 HealthKind = Literal["check", "gauge", "triage", "timeoffset"]
 _NUMBERS: dict[str, tuple[str, ...]] = {
@@ -32,6 +35,17 @@ _OPTIONAL = {
     "triage": ("temperature_c",),
     "timeoffset": (),
 }
+
+
+def _a_number(value: Any) -> Any:
+    """A JSON number as sent: ``true`` is not 1.0 and ``"0.3"`` is not 0.3 (lax parsing would take both)."""
+    if value is None or (isinstance(value, int | float) and not isinstance(value, bool)):
+        return value
+    raise ValueError(f"must be a number, not {type(value).__name__} {str(value)[:40]}")
+
+
+Number = Annotated[float, BeforeValidator(_a_number)]
+"""A float field of a report: a JSON number only."""
 
 
 class HealthReport(Document):
@@ -61,7 +75,7 @@ class HealthReport(Document):
         "gauge's measured/true ratio; triage: the field triage verdict; timeoffset: the "
         "camera-to-clock time offset estimate"
     )
-    rms_px: float | None = Field(
+    rms_px: Number | None = Field(
         None, ge=0, le=1e4, description="check: reprojection RMS of the re-check, px"
     )
     verdict: str | None = Field(
@@ -69,15 +83,15 @@ class HealthReport(Document):
         pattern=r"^[a-z][a-z0-9_-]{0,31}$",
         description="check: pass | fail; triage: the verdict's name (e.g. ok, intrinsics, extrinsics, time)",
     )
-    ratio: float | None = Field(
+    ratio: Number | None = Field(
         None, gt=0, le=100, description="gauge: measured over true length, dimensionless"
     )
-    sigma: float | None = Field(None, ge=0, le=100, description="gauge: 1-sigma of ratio, dimensionless")
-    td_ms: float | None = Field(
+    sigma: Number | None = Field(None, ge=0, le=100, description="gauge: 1-sigma of ratio, dimensionless")
+    td_ms: Number | None = Field(
         None, ge=-1e6, le=1e6, description="timeoffset: camera time minus clock time, ms"
     )
-    sigma_ms: float | None = Field(None, ge=0, le=1e6, description="timeoffset: 1-sigma of td_ms, ms")
-    temperature_c: float | None = Field(
+    sigma_ms: Number | None = Field(None, ge=0, le=1e6, description="timeoffset: 1-sigma of td_ms, ms")
+    temperature_c: Number | None = Field(
         None,
         ge=-100,
         le=200,
@@ -87,6 +101,11 @@ class HealthReport(Document):
 
     @model_validator(mode="after")
     def _shape(self) -> HealthReport:
+        if self.time < EARLIEST:
+            raise ValueError(
+                f"time {self.time.isoformat()} is before {EARLIEST.date()}, when no calibration was measured "
+                "(robot clock not set?)"
+            )
         if self.time > utc_now() + MAX_FUTURE:
             raise ValueError(
                 f"time {self.time.isoformat()} is more than 5 minutes in the future (robot clock?)"

@@ -342,6 +342,11 @@ def status(
             f"  #{q.seq} {q.serial} session {q.session_id} queued {q.queued_at[:19]}: {q.verdict}, "
             f"{q.images} image(s){mark}"
         )
+    for n in found.missing:
+        print(
+            f"  #{n} MISSING: the record was deleted from the spool; the sync stops before it (restore the "
+            f"spool, or calibctl station set-aside {n} --reason TEXT)"
+        )
     for a in found.set_aside:
         print(
             f"  #{a.seq} {a.serial} session {a.session_id} queued {a.queued_at[:19]}: SET ASIDE "

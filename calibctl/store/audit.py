@@ -150,6 +150,7 @@ def _after(stream: chain.Stream, since: int | None) -> tuple[FromClause, ColumnE
         t.c.id > since,
         t.c.id.is_(None),
         t.c.chain_seq.is_(None),
+        t.c.chain_seq < 1,  # a forged row at position 0 (or below) precedes every head
         latest.c.seq.is_(None),
         t.c.chain_seq > latest.c.seq,
     )
@@ -215,6 +216,12 @@ def _walk(
             last_id, last_version, signed = 0, 0, seq > 0 and _signed_before(s, stream, key, seq)
         if row["chain_hash"] is None or row["chain_seq"] is None:
             audit.problems.append(f"{label} has no chain hash: it was inserted outside calibctl")
+            continue
+        if int(row["chain_seq"]) < 1:  # before the first position: in no chain; the walk goes on past it
+            audit.problems.append(
+                f"{label} is at chain position {row['chain_seq']}, before the first: it was inserted outside "
+                "calibctl"
+            )
             continue
         if row["chain_seq"] == seq:
             audit.problems.append(f"{label} duplicates position {seq} of its chain")

@@ -48,6 +48,7 @@ from calibctl.store.models import (
     CheckEventRow,
     EventRow,
     FleetEventRow,
+    HealthReportRow,
     RigCalibrationRow,
     RigEventRow,
     RigRow,
@@ -91,6 +92,7 @@ _MODELS: dict[str, type[Base]] = {
     "rig_definition": RigRow,
     "session": SessionRow,
     "fleet": FleetEventRow,
+    "health": HealthReportRow,
 }
 STREAMS: dict[str, Stream] = {
     name: Stream(spec.name, spec.key, spec.subject, spec.label, spec.counter, _MODELS[name])

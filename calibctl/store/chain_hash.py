@@ -104,6 +104,14 @@ SPECS: dict[str, StreamSpec] = {
         lambda r: f"fleet event {r['id']} ({r['subject']}, {r['kind']})",
         ("chain", "chain_seq"),
     ),
+    # revision 0016: the robots' health reports a promote decides on, one stream (a deleted report is a gap).
+    "health": StreamSpec(
+        "health",
+        (),
+        "payload_sha256",
+        lambda r: f"health report {r['source_id']} ({r['robot']}, {r['serial']} {r['kind']})",
+        ("chain", "chain_seq"),
+    ),
 }
 """The order is the order of the row ids in a chain head (``audit.make_head``): new streams go last."""
 

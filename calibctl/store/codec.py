@@ -114,11 +114,26 @@ def board_row(board: BoardRevision) -> BoardRow:
     )
 
 
-def decode_board(row: BoardRow) -> BoardRevision:
+def chain_checked(stream: str, row: Any) -> None:
+    """Refuse ``row`` (IntegrityError naming it) unless its chain hash matches its columns: the check every
+    read of a chained record makes, with or without keys (``db verify`` reports the same finding from its
+    walk)."""
+    from calibctl.store import chain_hash
+
+    problem = chain_hash.row_problem(chain_hash.SPECS[stream], row)
+    if problem is not None:
+        raise IntegrityError(problem, TAMPER_HINT)
+
+
+def decode_board(row: BoardRow, *, by_chain: bool = False) -> BoardRevision:
+    """The stored board revision after its payload hash check and, ``by_chain`` (every read), its chain hash:
+    a square size edited with the payload hash recomputed is refused before a calibration uses it."""
     from calibctl.artifacts.board import BoardRevision
 
     what = f"board {row.name}@{row.revision}"
     board: BoardRevision = _decode_hashed(BoardRevision, row, what)
+    if by_chain:
+        chain_checked("board", row)
     _check_columns(
         what,
         {
@@ -200,11 +215,7 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
 
     what = f"{row.serial}@{row.version}"
     if by_chain:
-        from calibctl.store import chain_hash
-
-        problem = chain_hash.row_problem(chain_hash.SPECS["artifact"], row)
-        if problem is not None:
-            raise IntegrityError(problem, TAMPER_HINT)
+        chain_checked("artifact", row)
         try:
             artifact = CalibrationArtifact.model_validate_json(row.payload)
         except ValidationError as exc:
@@ -295,12 +306,16 @@ def decode_check(row: CheckEventRow) -> CheckEvent:
     return event
 
 
-def decode_fleet_event(row: FleetEventRow) -> FleetEvent:
-    """A fleet log row's event, its payload checked against its sha256 (here, not in store.fleet, so the
-    fleet writer and its checkpoints both read events without importing each other)."""
+def decode_fleet_event(row: FleetEventRow, *, by_chain: bool = False) -> FleetEvent:
+    """A fleet log row's event, its payload checked against its sha256 and, ``by_chain`` (every read), its
+    chain hash (here, not in store.fleet, so the fleet writer and its checkpoints both read events without
+    importing each other)."""
     from calibctl.artifacts.fleet import FleetEvent
 
     what = f"fleet event {row.id} ({row.subject}, {row.kind})"
-    return decode_payload(
+    event: FleetEvent = decode_payload(
         FleetEvent, row.payload, row.payload_sha256, what, {"subject": row.subject, "kind": row.kind}
     )
+    if by_chain:
+        chain_checked("fleet", row)
+    return event

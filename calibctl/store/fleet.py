@@ -46,7 +46,7 @@ def _registration(s: Session, robot: str) -> FleetEvent | None:
         .order_by(FleetEventRow.id)
         .limit(1)
     ).first()
-    return None if row is None else decode_fleet_event(row)
+    return None if row is None else decode_fleet_event(row, by_chain=True)
 
 
 class FleetStore:
@@ -141,7 +141,8 @@ class FleetStore:
         """The whole fleet log, oldest first."""
         return self._runner.run(
             lambda s: [
-                decode_fleet_event(r) for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))
+                decode_fleet_event(r, by_chain=True)
+                for r in s.scalars(select(FleetEventRow).order_by(FleetEventRow.id))
             ]
         )
 
@@ -193,7 +194,7 @@ def _rollout(s: Session, name: str) -> FleetEvent | None:
     row = s.scalars(
         select(FleetEventRow).where(FleetEventRow.subject == name, FleetEventRow.kind == "rollout").limit(1)
     ).first()
-    return None if row is None else decode_fleet_event(row)
+    return None if row is None else decode_fleet_event(row, by_chain=True)
 
 
 def _check_assignment(s: Session, event: FleetEvent, registered: FleetEvent | None) -> None:

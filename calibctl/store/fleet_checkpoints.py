@@ -20,17 +20,21 @@ replays the log and catches it either way). A store without keys checks the chai
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
-from sqlalchemy import delete, func, select
+from sqlalchemy import delete, func, select, text
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
+from calibctl.artifacts.fleet import FleetEvent
 from calibctl.errors import IntegrityError
 from calibctl.signing import Signer, TrustedKeys, record_message
+from calibctl.store import chain_hash, served
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet_ledger import STATE_FORMAT, Fleet, from_state, rollout_positions, to_state
-from calibctl.store.models import FleetCheckpointRow, FleetEventRow
+from calibctl.store.models import CounterRow, FleetCheckpointRow, FleetEventRow
 
 EVERY = 1000
 """Events between checkpoints: a read replays at most this many past the newest (20-80 ms of CPU for 1 000 events,
@@ -92,7 +96,7 @@ def _usable(
                 if positions
                 else []
             )
-            fleet = from_state(state, {r.id: decode_fleet_event(r) for r in rows})
+            fleet = from_state(state, {r.id: _served_event(s, r, trusted) for r in rows})
     except (KeyError, TypeError, ValueError, RecursionError) as exc:  # RecursionError: JSON nested too deep
         return f"{at} does not hold a fleet state ({type(exc).__name__}: {str(exc)[:200]})"
     if fleet.length != row.position:
@@ -113,10 +117,65 @@ def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = Non
         loaded.fleet, loaded.since, loaded.last_hash = usable, row.position, row.chain_hash
         break
     tail = select(FleetEventRow).where(FleetEventRow.id > loaded.fleet.length).order_by(FleetEventRow.id)
+    first_signed = s.scalar(
+        select(func.min(FleetEventRow.chain_seq)).where(FleetEventRow.signature.is_not(None))
+    )
     for r in s.scalars(tail.execution_options(yield_per=1000)):
-        loaded.fleet.apply(decode_fleet_event(r))
+        problem = _tail_problem(r, loaded, first_signed, trusted)
+        if problem is not None:
+            raise IntegrityError(f"{problem}; refusing to serve the fleet log", served.REFUSED_HINT)
+        loaded.fleet.apply(decode_fleet_event(r, by_chain=True))
         loaded.last_hash = r.chain_hash
+    counted = s.scalar(
+        select(CounterRow.last_value).where(CounterRow.scope == "chain", CounterRow.key == "fleet")
+    )
+    if loaded.fleet.length != int(counted or 0):
+        raise IntegrityError(
+            f"the fleet log ends at event {loaded.fleet.length} but its counter says {int(counted or 0)}: "
+            "events were removed; refusing to serve the fleet log",
+            served.REFUSED_HINT,
+        )
     return loaded
+
+
+def _tail_problem(
+    row: FleetEventRow, loaded: Loaded, first_signed: int | None, trusted: TrustedKeys | None
+) -> str | None:
+    """What ``db verify`` would say about the log's next event ``row`` after the events replayed so far: its
+    place (the next position, following the hash before it) and, with keys, its signature by a trusted one or,
+    unsigned, no signed event before it. Its own chain hash is ``decode_fleet_event``'s. The replay walks the
+    log in order, so the link needs no query of its own (``served.check`` would cost three an event)."""
+    label = chain_hash.SPECS["fleet"].label(chain_hash.row_values(row))
+    if row.chain_seq != loaded.fleet.length + 1 or row.id != row.chain_seq:
+        return f"{label} is at chain position {row.chain_seq} but {loaded.fleet.length + 1} was expected"
+    if row.chain_prev != loaded.last_hash:
+        return (
+            f"{label} does not follow the event before it: an event was deleted, inserted or rewritten there"
+        )
+    if trusted is None:
+        return None
+    if row.signature or row.key_id:
+        if not trusted.keys:
+            return None
+        why = trusted.check(
+            row.key_id, row.signature, record_message(str(row.chain_hash), row.payload_sha256)
+        )
+        return None if why is None else f"{label} {why}"
+    if first_signed is not None and first_signed < row.chain_seq:
+        return f"{label} is not signed, but events before it in the fleet log are"
+    return None
+
+
+def _served_event(s: Session, row: FleetEventRow, trusted: TrustedKeys | None) -> FleetEvent:
+    """An event before a checkpoint that the checkpoint's state reads (a rollout): its chain hash, its link to
+    its neighbours and, with keys, its signature, as ``served`` checks any record a read serves."""
+    event = decode_fleet_event(row, by_chain=True)
+
+    def query(sql: str, params: dict[str, Any]) -> list[Mapping[str, Any]]:
+        return [dict(r) for r in s.execute(text(sql), params).mappings()]
+
+    served.check("fleet", row, query, trusted or TrustedKeys())
+    return event
 
 
 def write_if_due(s: Session, length: int, signer: Signer | None = None) -> None:

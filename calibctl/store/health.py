@@ -1,9 +1,10 @@
 """Robots' health reports in the store (revision 0011_health_reports_health25): ``HealthReportRow``.
 
-Telemetry, not records: append-only (the migration's triggers refuse UPDATE and DELETE) and each row keeps the
-report's canonical JSON with its sha256, but the rows are not hash-chained (docs/fleet.md says why). A batch is
-written all or nothing; before it is, every report is checked against what it refers to: its robot is registered
-and carries its serial, and its ``source_id`` is new (in the store and in the batch).
+Append-only (the migration's triggers refuse UPDATE and DELETE); each row keeps the report's canonical JSON
+with its sha256, and since revision 0016 the rows are hash-chained in one stream and signed with the station's
+key, because a promote decides on them: a report edited or deleted after it was ingested is refused by the
+gate. A batch is written all or nothing; before it is, every report is checked against what it refers to: its
+robot is registered and carries its serial, and its ``source_id`` is new (in the store and in the batch).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
+from typing import Any
 
 from sqlalchemy import Table, func, insert, select
 from sqlalchemy.orm import Session
@@ -18,10 +20,17 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.artifacts.health import HealthReport
 from calibctl.errors import IntegrityError
-from calibctl.store import codec
+from calibctl.signing import Signer, record_message
+from calibctl.store import chain, codec, counters, served
 from calibctl.store.codec import decode_fleet_event
 from calibctl.store.fleet import _registration
-from calibctl.store.models import CheckEventRow, FleetEventRow, HealthReportRow
+from calibctl.store.models import (
+    ArtifactRow,
+    CheckEventRow,
+    FleetEventRow,
+    HealthReportRow,
+    RigCalibrationRow,
+)
 from calibctl.store.runner import Runner
 
 _CHUNK = 500  # source ids per IN (...) query: under SQLite's bound-parameter limit
@@ -106,12 +115,22 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
                 select(HealthReportRow.source_id).where(HealthReportRow.source_id.in_(ids[i : i + _CHUNK]))
             )
         )
+    first = _first_calibrations(s, {r.serial for r in reports})
     seen: set[str] = set()
     out = []
     for i, r in enumerate(reports):
         serials = carried[r.robot]
+        earliest = first.get(r.serial)
         if serials is None:
             out.append((i, f"robot {r.robot} is not registered"))
+        elif earliest is not None and r.time < earliest:
+            out.append(
+                (
+                    i,
+                    f"time {r.time.isoformat()} is before {r.serial}'s first calibration "
+                    f"({earliest.isoformat()}): the report cannot be about it (robot clock?)",
+                )
+            )
         elif r.serial not in serials:
             out.append(
                 (
@@ -125,6 +144,68 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
             out.append((i, f"duplicate report: source id {r.source_id} appears twice in this batch"))
         seen.add(r.source_id)
     return out
+
+
+def _first_calibrations(s: Session, names: set[str]) -> dict[str, datetime]:
+    """When each serial's (or rig's) oldest stored calibration was made: a report measured before it is about
+    nothing the store holds."""
+    out: dict[str, datetime] = {}
+    for key, made in (
+        (ArtifactRow.serial, ArtifactRow.created_at),
+        (RigCalibrationRow.rig, RigCalibrationRow.created_at),
+    ):
+        for name, created in s.execute(
+            select(key, func.min(made)).where(key.in_(sorted(names))).group_by(key)
+        ):
+            out.setdefault(str(name), created)
+    return out
+
+
+def _sealed(s: Session, rows: list[dict[str, Any]], signer: Signer | None) -> None:
+    """Number, chain and (with a key) sign ``rows`` in the store's health stream (revision 0016), in order,
+    under its lock (the ('chain', 'health') counter row, held until the batch commits)."""
+    stream = chain.STREAMS["health"]
+    first = counters.next_value(s, "chain", "health")
+    if len(rows) > 1:
+        counters.raise_to(s, "chain", "health", first + len(rows) - 1)
+    head = chain.head_of(s, stream, ())
+    prev = None if head is None else head[1]
+    for seq, row in enumerate(rows, start=first):
+        digest = chain.record_hash(stream, (), seq, prev, chain.body(row))
+        row.update(chain_seq=seq, chain_prev=prev, chain_hash=digest, signature=None, key_id=None)
+        if signer is not None:
+            row.update(
+                signature=signer.sign(record_message(digest, row["payload_sha256"])), key_id=signer.key_id
+            )
+        prev = digest
+
+
+def _gate_refusal(s: Session, rows: Sequence[HealthReportRow], runner: Runner) -> None:
+    """Refuse (IntegrityError naming it) a report a gate would read that is not as ingested: its payload, its
+    columns (its chain hash covers both) and, with keys, its link and signature; and any report deleted from
+    the health stream since it was ingested (positions 1..N, N its counter, each held once: a gap is a
+    deletion)."""
+    for row in rows:
+        what = f"health report {row.source_id}"
+        actual = sha256_hex(row.payload.encode("utf-8"))
+        problem = (
+            None
+            if actual == row.payload_sha256
+            else f"{what} does not match its recorded sha256: it was changed after it was ingested"
+        ) or chain.row_problem(chain.STREAMS["health"], row)
+        if problem is not None:
+            raise IntegrityError(f"{problem}; the health gate refuses to read it", served.REFUSED_HINT)
+        runner.served(s, "health", row)
+    counted = counters.peek(s, "chain", "health") or 0
+    held, lowest, highest = s.execute(
+        select(func.count(), func.min(HealthReportRow.chain_seq), func.max(HealthReportRow.chain_seq))
+    ).one()
+    if held != counted or (held and (lowest != 1 or highest != counted)):
+        raise IntegrityError(
+            f"the store's health reports are numbered 1 to {counted} but {held} are stored: a report was "
+            "deleted (or inserted) outside calibctl; the health gate refuses to decide",
+            served.REFUSED_HINT,
+        )
 
 
 class HealthStore:
@@ -159,6 +240,7 @@ class HealthStore:
                         "payload_sha256": sha256_hex(payload.encode("utf-8")),
                     }
                 )
+            _sealed(s, rows, self._runner.signer)
             # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk path,
             # which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
             s.connection().execute(insert(HEALTH_TABLE), rows)
@@ -208,7 +290,7 @@ class HealthStore:
             HealthReportRow.ratio,
         ]
         stmt = (
-            select(*cols)
+            select(HealthReportRow)
             .where(
                 HealthReportRow.serial.in_(list(serials)),
                 HealthReportRow.kind.in_(GATE_KINDS),
@@ -219,7 +301,13 @@ class HealthStore:
         )
         if not robots or not serials:
             return []
-        return self._runner.run(lambda s: [GateReport(**row._asdict()) for row in s.execute(stmt)])
+
+        def work(s: Session) -> list[GateReport]:
+            rows = list(s.scalars(stmt))
+            _gate_refusal(s, rows, self._runner)
+            return [GateReport(**{c.key: getattr(r, c.key) for c in cols}) for r in rows]
+
+        return self._runner.run(work)
 
     def health_report_count(self) -> int:
         return self._runner.run(

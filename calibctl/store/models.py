@@ -368,9 +368,10 @@ class FleetCheckpointRow(Base):
     key_id: Mapped[str | None] = mapped_column(String(SHA256_LEN), nullable=True)
 
 
-class HealthReportRow(Base):
+class HealthReportRow(ChainColumns, Base):
     """One health report a robot sent (revision 0011_health_reports_health25): the numbers as columns, the
-    document's canonical JSON and its sha256. Append-only; not chained (telemetry, see docs/fleet.md)."""
+    document's canonical JSON and its sha256. Append-only; chained since 0016 in one stream for the store
+    (``chain.STREAMS["health"]``): a promote decides on these."""
 
     __tablename__ = "health_reports"
 
@@ -393,8 +394,9 @@ class HealthReportRow(Base):
 
     __table_args__ = (
         Index(None, "serial", "kind", "at"),
-        Index(None, "kind", "at", "serial", "rms_px"),
-    )  # 0014: the per-camera spread's window
+        Index(None, "kind", "at", "serial", "rms_px"),  # 0014: the per-camera spread's window
+        Index(None, "chain_seq", unique=True),  # 0016
+    )
 
 
 IMMUTABLE_TABLES = {

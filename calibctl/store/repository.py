@@ -151,7 +151,7 @@ class Store:
                 .limit(1)
             ).first()
             if latest is not None:
-                previous = codec.decode_board(latest)
+                previous = codec.decode_board(latest, by_chain=True)
                 changed = [f for f in _GEOMETRY if getattr(previous, f) != getattr(board, f)]
                 if changed:
                     raise UsageError(
@@ -192,7 +192,9 @@ class Store:
                     f"see `calibctl board show {name}`",
                 )
             row = s.scalars(select(BoardRow).where(BoardRow.name == name, BoardRow.revision == wanted)).one()
-            return codec.decode_board(row)
+            board = codec.decode_board(row, by_chain=True)
+            self._runner.served(s, "board", row)
+            return board
 
         return self._runner.run(work)
 
@@ -205,13 +207,16 @@ class Store:
         )
 
     def list_boards(self) -> list[BoardRevision]:
-        """Every revision of every board, by name then revision."""
-        return self._runner.run(
-            lambda s: [
-                codec.decode_board(r)
-                for r in s.scalars(select(BoardRow).order_by(BoardRow.name, BoardRow.revision))
-            ]
-        )
+        """Every revision of every board, by name then revision, each checked as ``get_board`` checks it."""
+
+        def work(s: Session) -> list[BoardRevision]:
+            boards = []
+            for row in s.scalars(select(BoardRow).order_by(BoardRow.name, BoardRow.revision)):
+                boards.append(codec.decode_board(row, by_chain=True))
+                self._runner.served(s, "board", row)
+            return boards
+
+        return self._runner.run(work)
 
     # capture sessions ----------------------------------------------------------------------------
 

@@ -49,9 +49,7 @@ def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
     from calibctl.artifacts.rig import RigDefinition
 
     if by_chain:
-        problem = chain.row_problem(chain.STREAMS["rig_definition"], row)
-        if problem is not None:
-            raise IntegrityError(problem, codec.TAMPER_HINT)
+        codec.chain_checked("rig_definition", row)
     rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {row.name}")
     if rig.name != row.name:
         raise IntegrityError(
@@ -60,7 +58,10 @@ def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
     return rig
 
 
-def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
+def decode_calibration(row: RigCalibrationRow, *, by_chain: bool = False) -> RigCalibration:
+    """The stored rig version after its content hash check (re-derived from the parsed document) and,
+    ``by_chain`` (every read), its chain hash: an edge edited with only the content hash recomputed is
+    refused, as a camera's calibration is."""
     from calibctl.artifacts.rig import RigCalibration
 
     what = f"rig {row.rig}@{row.version}"
@@ -68,6 +69,8 @@ def decode_calibration(row: RigCalibrationRow) -> RigCalibration:
     actual = cal.computed_sha256()
     if actual != row.content_sha256:
         raise codec._mismatch(what, row.content_sha256, actual)
+    if by_chain:
+        codec.chain_checked("rig", row)
     codec._check_columns(
         what,
         {
@@ -96,7 +99,7 @@ RIGS: VersionHistory[RigCalibration, RigActivation] = VersionHistory(
     label=lambda rig: f"rig {rig}",
     history_command=lambda rig: f"calibctl rig history {rig}",
     placeholder="RIG",
-    decode=decode_calibration,
+    decode=lambda row: decode_calibration(row, by_chain=True),
     decode_event=codec.decode_rig_event,
     no_versions=_no_calibration,
     solve_again=lambda rig: (

@@ -38,6 +38,7 @@ TABLES = {
     "rig_definition": "rig_definitions",
     "session": "capture_sessions",
     "fleet": "fleet_events",
+    "health": "health_reports",
 }
 """Each stream's table (a test keeps it equal to ``chain.STREAMS``)."""
 

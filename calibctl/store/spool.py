@@ -63,6 +63,7 @@ _RECORD_DOMAIN = (
     "calibctl-spool-1"  # the first line a record's sha256 covers: kept, so format-1 records still match
 )
 LOCK_WAIT_S = 10.0  # sqlite3's busy wait: the station queueing while a sync marks records
+MAX_MISSING_LISTED = 100  # missing record numbers named at most (a forged counter could claim billions)
 ORPHAN_GRACE_S = 3600.0  # image files written for a unit that was never queued (cancelled) go after an hour
 _FORMAT_2_COLUMNS = (
     "set_aside_at",
@@ -80,6 +81,8 @@ CREATE TABLE IF NOT EXISTS units (
     queued_at TEXT NOT NULL, session TEXT NOT NULL, artifact TEXT, session_stored INTEGER NOT NULL,
     images TEXT NOT NULL, record_sha256 TEXT NOT NULL, synced_at TEXT, version INTEGER,
     {", ".join(f"{column} TEXT" for column in _FORMAT_2_COLUMNS)});
+CREATE TABLE IF NOT EXISTS missing_set_aside (seq INTEGER PRIMARY KEY, set_aside_at TEXT NOT NULL,
+                                              set_aside_reason TEXT NOT NULL, set_aside_by TEXT NOT NULL);
 """
 _UNITS_COLUMNS = (
     "seq, serial, session_id, queued_at, session, artifact, session_stored, images, record_sha256, "
@@ -320,6 +323,8 @@ class Spool:
         """Set a queued record aside: kept with its images, never synced (call under ``sync_lock``, so no sync is
         storing it meanwhile). Refused (exit 2) for an unknown, a synced or an already set-aside record."""
         with _tx(self._conn, self.path):
+            if seq in self.missing():
+                return self._set_aside_missing(seq, reason, operator)
             record = self._record(seq)
             if record.synced_at is not None:
                 stored = "a rejected capture session" if record.version is None else f"v{record.version}"
@@ -341,6 +346,61 @@ class Spool:
                 (utc_now().isoformat(), reason, operator, seq),
             )
             return self._record(seq)
+
+    def _set_aside_missing(self, seq: int, reason: str, operator: str) -> SpoolRecord:
+        """Record that the operator knows record ``seq`` is gone (inside ``set_aside``'s transaction): the
+        records after it may sync. A stand-in record for the caller, with no session, calibration or
+        images."""
+        self._conn.execute(
+            "INSERT INTO missing_set_aside VALUES (?, ?, ?, ?)",
+            (seq, utc_now().isoformat(), reason, operator),
+        )
+        return next(r for r in self.missing_set_aside() if r.seq == seq)
+
+    def missing_set_aside(self) -> list[SpoolRecord]:
+        """The missing record numbers the operator set aside, as stand-in records (no session, calibration or
+        images; serial ``?``), oldest first."""
+        return [
+            SpoolRecord(int(n), "?", "(deleted)", "", "", None, False, (), "", None, None, at, reason, by)
+            for n, at, reason, by in self._conn.execute("SELECT * FROM missing_set_aside ORDER BY seq")
+        ]
+
+    def missing(self) -> list[int]:
+        """The record numbers the spool handed out that it no longer holds (records are never deleted, so each
+        is a record removed from the file), less those the operator set aside: 1 up to the highest number
+        given, which SQLite's AUTOINCREMENT keeps even when the newest record is deleted."""
+        (highest,) = self._conn.execute(
+            "SELECT max(coalesce((SELECT seq FROM sqlite_sequence WHERE name = 'units'), 0), "
+            "coalesce((SELECT max(seq) FROM units), 0))"
+        ).fetchone()
+        held = [
+            int(r[0])
+            for r in self._conn.execute(
+                "SELECT seq FROM units UNION SELECT seq FROM missing_set_aside ORDER BY seq"
+            )
+        ]
+        gone: list[int] = []
+        for before, after in zip([0, *held], [*held, int(highest) + 1], strict=True):
+            gone += range(before + 1, min(after, before + 1 + MAX_MISSING_LISTED - len(gone)))
+        return gone
+
+    def gap_before(self, record: SpoolRecord | None) -> IntegrityError | None:
+        """The refusal of ``record`` (None: the end of the queue) when a record numbered before it is missing
+        from the file (deleted: a unit that would be lost without a word, keyed or not), else None."""
+        gone = [n for n in self.missing() if record is None or n < record.seq]
+        if not gone:
+            return None
+        stopped = (
+            f"record {record.seq} ({record.serial}) and the records after it were not synced"
+            if record is not None
+            else "the sync cannot tell whether it was stored"
+        )
+        return IntegrityError(
+            f"spool record {gone[0]} is missing from {self.path} (records are numbered in the order they "
+            f"were queued and never removed): it was deleted; {stopped}",
+            f"restore {self.path} from a backup; or, knowing that unit is lost, set the number aside "
+            f"(calibctl station set-aside {gone[0]} --reason TEXT) so the records after it sync",
+        )
 
     def mark_synced(self, seq: int, version: int | None) -> None:
         with _tx(self._conn, self.path):

@@ -164,13 +164,13 @@ class SqliteReader:
         return art
 
     def list_boards(self) -> list[BoardRevision]:
-        return [
-            codec.decode_board(r)  # type: ignore[arg-type]
-            for r in self._rows(
-                "SELECT name, revision, kind, measurement_status, payload, payload_sha256 FROM board_revisions "
-                "ORDER BY name, revision"
-            )
-        ]
+        """``Store.list_boards``' checks on the same rows: each revision's chain hash and payload hash, and
+        with keys its link and signature."""
+        boards = []
+        for r in self._rows("SELECT * FROM board_revisions ORDER BY name, revision"):
+            boards.append(codec.decode_board(r, by_chain=True))  # type: ignore[arg-type]
+            self._served("board", r)
+        return boards
 
 
 @contextmanager

@@ -103,10 +103,10 @@ def test_0008_chains_the_definitions_stored_before_it(rigs: str):
     engine = make_engine(rigs)
     try:
         assert migrate.downgrade(engine, "0007_chain_rigs_checks") == (
-            "0015_checkpoints_fleet_ckpt",
+            "0016_chain_health_reports",
             "0007_chain_rigs_checks",
         )
-        assert migrate.upgrade(engine) == ("0007_chain_rigs_checks", "0015_checkpoints_fleet_ckpt")
+        assert migrate.upgrade(engine) == ("0007_chain_rigs_checks", "0016_chain_health_reports")
     finally:
         engine.dispose()
     assert _select(rigs, "SELECT name, id, chain_seq FROM rig_definitions ORDER BY id") == [

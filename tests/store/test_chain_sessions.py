@@ -102,10 +102,10 @@ def test_0009_chains_the_sessions_stored_before_it(sessions: str):
     engine = make_engine(sessions)
     try:
         assert migrate.downgrade(engine, "0008_chain_rig_definitions") == (
-            "0015_checkpoints_fleet_ckpt",
+            "0016_chain_health_reports",
             "0008_chain_rig_definitions",
         )
-        assert migrate.upgrade(engine) == ("0008_chain_rig_definitions", "0015_checkpoints_fleet_ckpt")
+        assert migrate.upgrade(engine) == ("0008_chain_rig_definitions", "0016_chain_health_reports")
     finally:
         engine.dispose()
     assert _select(sessions, "SELECT session_id, id, chain_seq FROM capture_sessions ORDER BY id") == [

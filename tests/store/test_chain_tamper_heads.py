@@ -130,6 +130,24 @@ def test_since_head_sees_a_second_record_at_an_old_position(history: str):
     )
 
 
+def test_since_head_sees_a_forged_row_at_position_0(history: str):
+    """A row given position 0 (below every position a head holds) and an id below the head's: no position
+    after the head, no second record at a position, yet it is no part of any chain."""
+    with Store.open(history) as store:
+        head = store.verify().head()
+    run_underneath(
+        history,
+        "INSERT INTO activation_events (id, serial, version, previous_version, kind, actor, "
+        "station, at, reason, chain_seq, chain_prev, chain_hash) VALUES (0, 'CAM-1', 3, 1, "
+        "'rollback', 'qa', 'st1', '2026-11-23 08:00:00', 'x', 0, NULL, %s)",
+        params=("0" * 64,),
+    )
+    forged = "activation event 0 (CAM-1@3, rollback) is at chain position 0, before the first"
+    with Store.open(history) as store:
+        assert forged in store.verify(since=head).problems[0]
+        assert forged in store.verify().problems[0]
+
+
 @pytest.mark.parametrize("dropped", [False, True])
 def test_since_head_checks_the_triggers_too(history: str, dropped: bool):
     with Store.open(history) as store:

@@ -236,10 +236,10 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
     engine = make_engine(history)
     try:
         assert migrate.downgrade(engine, "0006_check_events") == (
-            "0015_checkpoints_fleet_ckpt",
+            "0016_chain_health_reports",
             "0006_check_events",
         )
-        assert migrate.upgrade(engine) == ("0006_check_events", "0015_checkpoints_fleet_ckpt")
+        assert migrate.upgrade(engine) == ("0006_check_events", "0016_chain_health_reports")
     finally:
         engine.dispose()
     with Store.open(history) as store:

@@ -20,7 +20,7 @@ from tests.artifacts.factories import calibration, measured_board
 from tests.store.documents import capture_session
 
 WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
-FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0015_checkpoints_fleet_ckpt"
+FIRST, SECOND, RIGS, HEAD = "0001_initial", "0002_image_retention", "0003_rigs", "0016_chain_health_reports"
 
 
 def _diff(url: str, metadata: MetaData) -> list:
@@ -56,6 +56,7 @@ def test_one_head_and_date_prefixed_file_names():
         "0010_fleet_diff25",
         "0011_health_reports_health25",
         "0014_health_window_fleet25",
+        "0015_checkpoints_fleet_ckpt",
         HEAD,
     ]
     for path in sorted(migrate.MIGRATIONS_DIR.joinpath("versions").glob("*.py")):

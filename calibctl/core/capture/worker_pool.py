@@ -107,6 +107,23 @@ def shielded() -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _safe_path() -> Iterator[None]:
+    """``PYTHONSAFEPATH`` set while the fork server and the resource tracker start: they run ``python -c``,
+    which would put the working folder first on ``sys.path``, and the server's imports (cached in every worker
+    it forks) would then take a ``calibctl/`` folder, a ``cv2.py`` or a ``numpy/`` there for the installed
+    packages."""
+    before = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("PYTHONSAFEPATH", None)
+        else:
+            os.environ["PYTHONSAFEPATH"] = before
+
+
+@contextlib.contextmanager
 def _started_ignoring_sigint() -> Iterator[None]:
     """SIGINT ignored while the fork server and the resource tracker are started: an ignored signal stays
     ignored across exec, so they start (and import OpenCV) immune to Ctrl-C, and the fork server hands the
@@ -133,7 +150,7 @@ def _ensure_server(ctx: multiprocessing.context.BaseContext) -> None:
     if ctx.get_start_method() == "forkserver":
         from multiprocessing import forkserver
 
-        with _started_ignoring_sigint():
+        with _started_ignoring_sigint(), _safe_path():
             forkserver.ensure_running()  # and the resource tracker; returns before the server's imports are done
 
 

@@ -391,7 +391,14 @@ def solve(poses: Sequence[Pose], board: BackingBoard, estimate_range_offset: boo
     (``pose_excess``, carried in through the camera priors) and solved once more. OpenBLAS on one thread:
     its workers spin on these small products (20 poses: 0.6 s of CPU on one thread, 4.8 s with them)."""
     with single_threaded_blas():
-        return _solve(poses, board, estimate_range_offset)
+        try:
+            return _solve(poses, board, estimate_range_offset)
+        except np.linalg.LinAlgError as exc:  # a prior or normal matrix that is not positive definite
+            raise NumericalError(
+                f"the camera-LiDAR solve broke down ({exc}): the board poses the camera gives and the planes "
+                "the LiDAR measures cannot be one rigid transform",
+                "check the board's square size, --cols / --rows and the scan box",
+            ) from exc
 
 
 def _solve(poses: Sequence[Pose], board: BackingBoard, estimate_range_offset: bool) -> LidarSolution:

@@ -479,7 +479,9 @@ def add_board(settings: Settings, reg: BoardRegistration) -> BoardRevision:
     from calibctl.store.repository import Store  # sqlalchemy: `board list` of SQLite reads through sqlite3
 
     board = build_board(reg, created_by=settings.operator)
-    with Store.open(settings.db_url, signer=keys.signer_of(settings)) as store:
+    with Store.open(
+        settings.db_url, signer=keys.signer_of(settings), trusted=keys.read_trust(settings)
+    ) as store:
         if store.board_revisions(board.name):
             previous = store.get_board(board.name, None)
             check_reregistration(previous, board, board_failures(store, previous.ref))
@@ -490,9 +492,10 @@ def list_boards(settings: Settings) -> list[BoardRevision]:
     def full_store() -> Store:
         from calibctl.store.repository import Store
 
-        return Store.open(settings.db_url, create=False)
+        return Store.open(settings.db_url, create=False, trusted=trusted)
 
-    return sqlite_reads.read(settings.db_url, lambda store: store.list_boards(), full_store)
+    trusted = keys.read_trust(settings)
+    return sqlite_reads.read(settings.db_url, lambda store: store.list_boards(), full_store, trusted)
 
 
 def board_ref(ref: str) -> tuple[str, int | None]:
@@ -509,7 +512,7 @@ def show_board(settings: Settings, ref: str) -> tuple[BoardRevision, list[int]]:
     name, revision = board_ref(ref)
     from calibctl.store.repository import Store
 
-    with Store.open(settings.db_url, create=False) as store:
+    with Store.open(settings.db_url, create=False, trusted=keys.read_trust(settings)) as store:
         return store.get_board(name, revision), store.board_revisions(name)
 
 

@@ -107,6 +107,7 @@ from calibctl.workflows.camera.solve import (
     station_region,
 )
 from calibctl.workflows.camera.verdict_lanes import verdict_lanes
+from calibctl.workflows.store_admin import keys
 
 SAMPLE_EVERY_FRAMES = 15  # frames kept aside to probe near patterns when no board is ever found
 # a stream without --image-circle looks for the circle in its frames' maximum this often, so a live
@@ -301,7 +302,7 @@ def capture(
         )
     started = utc_now()
     opened: AbstractContextManager[CaptureStore] = (
-        Store.open(settings.db_url) if into is None else nullcontext(into)
+        Store.open(settings.db_url, trusted=keys.read_trust(settings)) if into is None else nullcontext(into)
     )
     # the pool's exit joins its thread: however capture() ends, no image write outlives it
     with (

@@ -55,7 +55,7 @@ def report_passed(r: GateReport) -> bool:
 def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
     """The gate inputs of ``rollout``'s canary robots from ``store`` (two queries: checks and robots' reports)."""
     targets = rollout.targets
-    since = rollout.start.at
+    since = rollout.start.at.replace(microsecond=0)  # a report stamped in the start's own second counts
     serials = sorted(name for kind, name in targets if kind == "serial")
     checks = [
         (c, sha)

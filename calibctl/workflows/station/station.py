@@ -76,6 +76,7 @@ from calibctl.workflows.station.held import HeldCapture, spool_images, write_to_
 from calibctl.workflows.station.offline import Queued, SpoolCapture, queue_solved, queue_unit
 from calibctl.workflows.station.sync import SyncedUnit, open_spool, sync
 from calibctl.workflows.station.watch import Watched, WatchRule, check_rule, watch_unit
+from calibctl.workflows.store_admin import keys
 
 PASS, FAIL, ERROR, CANCELLED, QUEUED, SYNCED = "pass", "fail", "error", "cancelled", "queued", "synced"
 SERIAL_SLOT = "{serial}"
@@ -316,7 +317,7 @@ def _unit_board(
     and why the unit goes to the spool (None: the store answered)."""
     name, revision = board_ref(request.board)
     try:
-        with Store.open(settings.db_url) as store:
+        with Store.open(settings.db_url, trusted=keys.read_trust(settings)) as store:
             board = store.get_board(name, revision)
     except DatabaseUnreachableError as exc:
         return SpoolCapture(offline.spool(), offline.boards, exc.message).get_board(

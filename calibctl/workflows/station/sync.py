@@ -84,17 +84,23 @@ def sync(
     """Sync the queued records in order (see the module docstring). ``after_store(record)`` runs after a
     record is in the store and before it is marked synced (where a kill is worst; tests interrupt there)."""
     report = SyncReport()
-    if spool.counts()[0] == 0:
+    if spool.counts()[0] == 0 and not spool.missing():
         return report
     with spool.sync_lock():
         pending = spool.records(pending_only=True)  # what another syncer left, now that it is done
         try:
             with open_store(settings, write=True) as store:
                 for record in pending:
+                    gap = spool.gap_before(record)
+                    if gap is not None:
+                        raise gap
                     report.synced.append(_sync_one(settings, spool, store, record))
                     if after_store is not None:
                         after_store(record)
                     spool.mark_synced(record.seq, report.synced[-1].version)
+                gap = spool.gap_before(None)  # the newest records deleted
+                if gap is not None:
+                    raise gap
         except CalibctlError as exc:
             report.error = exc
         report.left = spool.counts()[0]
@@ -204,6 +210,7 @@ class SpoolStatus:
     queued: list[QueuedUnit]
     synced: int
     set_aside: list[SetAsideUnit] = field(default_factory=list)
+    missing: list[int] = field(default_factory=list)  # record numbers deleted from the file (not set aside)
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -213,6 +220,7 @@ class SpoolStatus:
             "synced": self.synced,
             "queued": [q.as_json() for q in self.queued],
             "set_aside": [a.as_json() for a in self.set_aside],
+            "missing": self.missing,
         }
 
 
@@ -239,8 +247,11 @@ def status(spool: Spool) -> SpoolStatus:
                 problem,
             )
         )
-    set_aside = [SetAsideUnit.of(r) for r in spool.records(set_aside_only=True)]
-    return SpoolStatus(str(spool.path), spool.station, spool.store, queued, spool.counts()[1], set_aside)
+    aside = sorted([*spool.records(set_aside_only=True), *spool.missing_set_aside()], key=lambda r: r.seq)
+    set_aside = [SetAsideUnit.of(r) for r in aside]
+    return SpoolStatus(
+        str(spool.path), spool.station, spool.store, queued, spool.counts()[1], set_aside, spool.missing()
+    )
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,9 @@ def parse_artifact_ref(ref: str) -> tuple[str, int | None]:
 def open_store(settings: Settings, *, create: bool = False, write: bool = False) -> Store:
     """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
-    Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable)."""
+    Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable).
+    With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write never
+    builds on a record a read would refuse."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
 
@@ -56,7 +58,7 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
         settings.db_url,
         create=create,
         signer=keys.signer_of(settings) if write else None,
-        trusted=None if write else keys.read_trust(settings),
+        trusted=keys.read_trust(settings),
     )
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.artifacts.common import utc_now
+from calibctl.store.repository import Store
 from tests.cli.fleet.fleet_store import run as _run
 from tests.cli.fleet.fleet_store import small_fleet
 
@@ -94,6 +95,22 @@ def test_no_report_blocks_a_report_from_before_the_start_does_not_count(db: str,
     assert "canary robot(s) amr-1 have no health report yet (amr-1: CAM-1); nothing promoted" in early.stderr
     assert _events(db) == before and _running(db) == {"amr-1": 2, "amr-2": 1}
     assert "amr-1                canary (canary): no report on CAM-1" in _run(db, "fleet", "status").stdout
+
+
+def test_a_report_stamped_in_the_rollouts_start_second_counts(db: str, tmp_path: Path) -> None:
+    _start(db)
+    with Store.open(db) as store:
+        started = next(e for e in store.fleet_events() if e.kind == "rollout").at
+    doc = {"source_id": "a1/start", "robot": "amr-1", "serial": "CAM-1", "kind": "check", "rms_px": 0.2}
+    doc |= {
+        "verdict": "pass",
+        "time": started.replace(microsecond=0).isoformat(),
+    }  # robots stamp whole seconds
+    (tmp_path / "start.jsonl").write_text(json.dumps(doc) + "\n")
+    assert _run(db, "fleet", "ingest", str(tmp_path / "start.jsonl")).exit_code == 0
+    promoted = _run(db, "fleet", "rollout", "promote", "r1", "--reason", "canary healthy", "--json")
+    assert promoted.exit_code == 0, promoted.output
+    assert [g["id"] for g in json.loads(promoted.stdout)["gate"]] == ["a1/start"]
 
 
 @pytest.mark.parametrize(

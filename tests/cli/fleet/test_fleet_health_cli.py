@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from calibctl.workflows.fleet import health
+from tests.artifacts.factories import calibration
 from tests.store.documents import fleet_event, health_report
 
 NOW = datetime.now(UTC).replace(microsecond=0)
@@ -98,6 +99,9 @@ def test_ingest_then_trends_in_text_and_json(db: str, tmp_path: Path) -> None:
         (_report(9, verdict="maybe"), "verdict is pass or fail"),
         (_report(9, td_ms=3.0), "a check report carries rms_px, verdict, temperature_c, not td_ms"),
         ("x" * 5000, "longer than a report"),
+        (_report(9, rms_px=True), "rms_px: Value error, must be a number, not bool True"),
+        (_report(9, rms_px="0.3"), "rms_px: Value error, must be a number, not str 0.3"),
+        (_report(9, time="0001-01-01T00:00:00+00:00"), "is before 2000-01-01"),
     ],
     ids=lambda value: (
         value if isinstance(value, str) and len(value) < 80 and not value.startswith("{") else None
@@ -140,6 +144,22 @@ def test_unreadable_inputs_exit_2(db: str, tmp_path: Path, monkeypatch: pytest.M
     none = _run(db, "trends", "CAM-Z")
     assert none.exit_code == 2 and "no health reports for CAM-Z" in none.stderr
     assert _stored(db) == 0
+
+
+def test_a_report_dated_before_its_serials_first_calibration_is_refused(db: str, tmp_path: Path) -> None:
+    with Store.open(db) as store:  # CAM-A calibrated 2026-03-11 09:30 UTC
+        store.add_artifact(
+            calibration(serial="CAM-A"), activate=True, actor="qa", station="st1", reason="solved"
+        )
+    early = _report(0, time="2026-03-11T09:29:59+00:00")
+    result = _run(db, "ingest", str(_write(tmp_path / "early.jsonl", [early, _report(1)])))
+    assert result.exit_code == 1, result.output
+    assert (
+        "early.jsonl:1: time 2026-03-11T09:29:59+00:00 is before CAM-A's first calibration" in result.stderr
+    )
+    assert _stored(db) == 0
+    on_time = _report(0, time="2026-03-11T09:30:00+00:00")
+    assert _run(db, "ingest", str(_write(tmp_path / "ok.jsonl", [on_time]))).exit_code == 0
 
 
 def test_store_refuses_bad_batches_whole_on_both_backends(db_url: str) -> None:

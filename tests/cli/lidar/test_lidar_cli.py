@@ -13,6 +13,7 @@ from calibctl.cli.main import app
 from calibctl.core.extrinsics import se3
 from calibctl.core.lidar import solve as ls
 from calibctl.core.lidar.target import BackingBoard
+from calibctl.errors import NumericalError
 from calibctl.workflows.lidar import lidar_solve as wf
 from tests.datasets import ACFR, require_acfr
 
@@ -450,3 +451,32 @@ def test_synth_refuses_to_overwrite_a_rendered_set_without_force(tmp_path: Path)
     again = invoke(["lidar", "synth", str(out), "--poses", "1"])
     assert again.exit_code == 2 and "already holds a rendered set" in again.output
     assert invoke(["lidar", "synth", str(out), "--poses", "1", "--force"]).exit_code == 0
+
+
+@pytest.fixture(scope="module")
+def eight(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("lidar") / "set"
+    assert invoke(["lidar", "synth", str(out), "--poses", "8", "--seed", "1"]).exit_code == 0
+    return out
+
+
+@pytest.mark.parametrize("square_mm", ["9.5", "1", "50", "100"])
+def test_any_square_size_solves_or_refuses_without_a_traceback(eight: Path, square_mm: str) -> None:
+    truth = json.loads((eight / "truth.json").read_text())
+    where = ["--images", str(eight / "images"), "--scans", str(eight / "scans"), "--box", truth["box"]]
+    board = [a if a != "95" else square_mm for a in BOARD]
+    res = invoke(["lidar", "solve", *where, "--camera-info", str(eight / "camera_info.yaml"), *board])
+    assert res.exit_code in (1, 2) and "Traceback" not in res.output, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+
+
+def test_a_solve_that_breaks_down_numerically_is_a_numerical_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    def singular(*_: object) -> None:
+        raise np.linalg.LinAlgError("Matrix is not positive definite")
+
+    monkeypatch.setattr(ls, "_solve", singular)
+    board = BackingBoard(5, 7, 0.095, (0.61, 0.85))
+    with pytest.raises(
+        NumericalError, match="the camera-LiDAR solve broke down .Matrix is not positive definite"
+    ):
+        ls.solve([], board)

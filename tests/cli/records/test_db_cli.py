@@ -12,7 +12,7 @@ from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration, measured_board
 from tests.store.tamper import patch_stored_bytes
 
-HEAD = "0015_checkpoints_fleet_ckpt"
+HEAD = "0016_chain_health_reports"
 runner = CliRunner()
 
 

@@ -234,3 +234,43 @@ def test_set_aside_json_and_a_station_with_a_key_refuses_a_spool_queued_without_
     } == {"seq": 1, "serial": "CAM-2", "reason": "queued before the key", "images": 12, "still_queued": 1}
     with Store.open(db) as store:
         assert store.serials() == ["CAM-1"]
+
+
+def test_a_record_deleted_from_the_spool_stops_the_sync_until_it_is_set_aside(
+    queued: tuple[str, Path],
+) -> None:
+    db, spool = queued
+    with sqlite3.connect(spool) as conn:
+        conn.execute("DELETE FROM units WHERE seq = 1")
+    status = station(db, "status", "--spool", str(spool))
+    assert "#1 MISSING: the record was deleted from the spool" in status.stdout
+    assert json.loads(station(db, "status", "--spool", str(spool), "--json").stdout)["missing"] == [1]
+    blocked = station(db, "sync", "--spool", str(spool))
+    assert blocked.exit_code == 1, blocked.output
+    assert (
+        "spool record 1 is missing from" in blocked.output and "(0 synced, 1 still queued)" in blocked.output
+    )
+    assert "calibctl station set-aside 1 --reason TEXT" in blocked.output
+    with Store.open(db) as store:
+        assert store.serials() == ["CAM-1"]
+    aside = station(db, "set-aside", "1", "--reason", "unit lost with the spool", "--spool", str(spool))
+    assert aside.exit_code == 0, aside.output
+    listing = json.loads(station(db, "status", "--spool", str(spool), "--json").stdout)
+    assert listing["missing"] == []
+    assert [(a["seq"], a["serial"], a["reason"]) for a in listing["set_aside"]] == [
+        (1, "?", "unit lost with the spool")
+    ]
+    done = station(db, "sync", "--spool", str(spool))
+    assert done.exit_code == 0 and "CAM-3: spool record 2 stored as v1 accepted, active" in done.stdout
+
+
+def test_the_newest_record_deleted_is_missing_too(queued: tuple[str, Path]) -> None:
+    db, spool = queued
+    with sqlite3.connect(spool) as conn:
+        conn.execute("DELETE FROM units WHERE seq = 2")
+    done = station(db, "sync", "--spool", str(spool))
+    assert done.exit_code == 1, done.output
+    assert (
+        "CAM-2: spool record 1 stored as v1" in done.stdout
+        and "spool record 2 is missing from" in done.output
+    )
