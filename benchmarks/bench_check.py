@@ -14,7 +14,8 @@ Two sources of corners:
 Beside it, the plain-OpenCV way to re-test (solvePnP with the stored K + RMS compared with a fixed 1.1x
 of the held-out RMS), on the same sessions.
 
-Run: python benchmarks/bench_check.py [--mode renders|corners] [--sessions 200] [--refs 5] [--cases unchanged,...]
+Run: python benchmarks/bench_check.py [--mode renders|corners] [--sessions 200] [--refs 5] [--cases
+unchanged,...]
 """
 
 from __future__ import annotations
@@ -61,7 +62,8 @@ def camera_for(case: str) -> PinholeCamera:
 
 
 def near_poses(camera: PinholeCamera, n_views: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """The check protocol's views: the board close (85-100 % of the width), tilted 20-35 deg, directions around."""
+    """The check protocol's views: the board close (85-100 % of the width), tilted 20-35 deg, directions
+    around."""
     near = default_distance_range_m(camera, BOARD, (0.85, 1.0))
     targets = _cell_targets(camera, n_views)
     return [
@@ -170,7 +172,8 @@ def main() -> None:
     args = parser.parse_args()
     refs = [reference(10_000 + r, args.mode, args.noise_px, args.ref_views) for r in range(args.refs)]
     print(
-        f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load {os.getloadavg()[0]:.1f}, "
+        f"# bench_check {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, load "
+        f"{os.getloadavg()[0]:.1f}, "
         f"mode {args.mode}, {args.ref_views}-view references, check poses {args.check_poses}"
         + (f" (noise {args.noise_px} px)" if args.mode == "corners" else "")
     )
@@ -179,7 +182,8 @@ def main() -> None:
         f"solve + held-out {np.median([r[4] for r in refs]) * 1000:.0f} ms median"
     )
     print(
-        "| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time (median) |"
+        "| case | sessions | calibctl check fails | plain OpenCV (RMS > 1.1x held-out) fails | check time "
+        "(median) |"
     )
     print("|---|---|---|---|---|")
     for case in args.cases.split(","):

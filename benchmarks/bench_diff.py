@@ -59,7 +59,8 @@ def corner_rates(pairs: int) -> None:
             stats.append(r.raw.test.statistic)
             dof = r.raw.test.dof
         print(
-            f"| {name} | {flagged} / {pairs} ({100 * flagged / pairs:.1f} %) | {np.median(stats):.1f} ({dof}) |",
+            f"| {name} | {flagged} / {pairs} ({100 * flagged / pairs:.1f} %) | {np.median(stats):.1f} "
+            f"({dof}) |",
             flush=True,
         )
 

@@ -1,12 +1,14 @@
 """End-to-end capture + solve: calibctl against a plain OpenCV script and mrcal, side by side in one run.
 
-    .venv/bin/python benchmarks/bench_e2e.py [--repeats 3] [--seed 1] [--quick] [--out benchmarks/out/bench_e2e.md]
+    .venv/bin/python benchmarks/bench_e2e.py [--repeats 3] [--seed 1] [--quick] [--out
+    benchmarks/out/bench_e2e.md]
 
 Data: ``calibctl synth DIR --scenario good --views 20 --size 1280x960 --seed N`` (PNGs + truth.json), then
 the 13 left images of /work/shared/datasets/opencv-left-right (copied to a temporary folder).
 
 (a) plain OpenCV as a user writes it (``plain_opencv``): sequential imread + findChessboardCorners
-    (ADAPTIVE_THRESH | NORMALIZE_IMAGE) + cornerSubPix winSize (11, 11) as in OpenCV's tutorial and DATASET.md's
+    (ADAPTIVE_THRESH | NORMALIZE_IMAGE) + cornerSubPix winSize (11, 11) as in OpenCV's tutorial and
+    DATASET.md's
     reference (a 23x23 px search window) + calibrateCamera with the production flags
     (CALIB_FIX_K3 | CALIB_ZERO_TANGENT_DIST | CALIB_FIX_ASPECT_RATIO). Timed in-process, and as a script
     (``--plain-only DIR``: a fresh interpreter importing only cv2 and numpy).
@@ -102,7 +104,8 @@ def plain_only(folder: Path, square: float, flags: int) -> int:
 
 
 def write_corners_vnl(path: Path, names: list[str], corners: dict[str, np.ndarray]) -> None:
-    """mrcal's corners.vnl: ``# filename x y level``, a row per corner (row-major, level 0), ``- - -`` if none."""
+    """mrcal's corners.vnl: ``# filename x y level``, a row per corner (row-major, level 0), ``- - -`` if
+    none."""
     rows = ["# filename x y level"]
     for name in names:
         rows += (
@@ -349,7 +352,8 @@ def profile_run(rig: CalibctlRig, folder: Path) -> tuple[float, dict[str, float]
 
 
 def corner_distances(c: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(N,) distances of corners to reference corners, in whichever grid order fits (raw OpenCV order varies)."""
+    """(N,) distances of corners to reference corners, in whichever grid order fits (raw OpenCV order
+    varies)."""
     e1, e2 = np.linalg.norm(c - ref, axis=1), np.linalg.norm(c[::-1] - ref, axis=1)
     return e1 if e1.mean() <= e2.mean() else e2
 
@@ -392,7 +396,8 @@ def machine_lines(repeats: int) -> list[str]:
     load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     return [
         f"Run {dt.datetime.now().astimezone().isoformat(timespec='seconds')} on {platform.node()}: "
-        f"nproc {len(os.sched_getaffinity(0))}, {first('/proc/cpuinfo', 'model name')}, {ram_gib:.1f} GiB RAM, "
+        f"nproc {len(os.sched_getaffinity(0))}, {first('/proc/cpuinfo', 'model name')}, {ram_gib:.1f} GiB "
+        "RAM, "
         f"load average {load} (1/5/15 min) at the start; shared machine.",
         f"Versions: Python {platform.python_version()}, OpenCV {cv2.__version__}, numpy {np.__version__}, "
         f"calibctl {calibctl.__version__}; mrcal {mrcal['mrcal']} under /usr/bin/python3 "
@@ -422,7 +427,8 @@ def accuracy_row(
 
 
 def calibctl_solve_on(plain: dict, square: float, model: str) -> dict:
-    """calibctl's solver (core.intrinsics.solve.solve_intrinsics) on the plain script's corners: the solver alone."""
+    """calibctl's solver (core.intrinsics.solve.solve_intrinsics) on the plain script's corners: the solver
+    alone."""
     from calibctl.core.intrinsics.solve import solve_intrinsics
 
     grid = np.zeros((PATTERN[0] * PATTERN[1], 3))
@@ -500,43 +506,52 @@ def synthetic_section(args: argparse.Namespace, tmp: Path) -> list[str]:
     mr5 = mrcal["LENSMODEL_OPENCV5"]
     w, h = plain["image_size"]
     lines = [
-        f"### Synthetic: {len(paths)} images at {w}x{h} (`calibctl synth --scenario good --seed {args.seed}`)",
+        f"### Synthetic: {len(paths)} images at {w}x{h} (`calibctl synth --scenario good --seed "
+        f"{args.seed}`)",
         "",
         f"Truth: fx = fy = {truth['fx']:.1f}, cx = {truth['cx']:.2f}, cy = {truth['cy']:.2f} px, "
         f"distortion {truth_doc['camera']['dist']} (k1 k2 p1 p2 k3).",
         f"Capture gates: {', '.join(g.gate + (' pass' if g.passed else ' FAIL') for g in session.gates)}; "
         f"session {session.status}, {len(session.views)}/{len(paths)} views accepted; artifact {art.status}, "
-        f"held-out RMS {art.held_out.rms_px:.4f} px ({art.held_out.k_folds} folds), outer ring fit / held-out "
+        f"held-out RMS {art.held_out.rms_px:.4f} px ({art.held_out.k_folds} folds), outer ring fit / "
+        "held-out "
         f"{art.held_out.fit_outer_ring_rms_px:.4f} / {art.held_out.outer_ring_rms_px:.4f} px.",
         "",
         "#### Wall time",
         "",
         "| path | what it does | wall best / median ms | CPU ms |",
         "|---|---|---|---|",
-        f"| (a) plain OpenCV, in-process | sequential detect + calibrateCamera (detect {plain['detect_s'] * 1e3:.0f} ms, "
+        "| (a) plain OpenCV, in-process | sequential detect + calibrateCamera (detect "
+        f"{plain['detect_s'] * 1e3:.0f} ms, "
         f"solve {plain['solve_s'] * 1e3:.0f} ms in the last run) | {ms(t_plain)} |",
-        f"| (a) plain OpenCV script, own process | the same plus Python start-up, import cv2 | {ms(t_plain_proc)} |",
+        "| (a) plain OpenCV script, own process | the same plus Python start-up, import cv2 | "
+        f"{ms(t_plain_proc)} |",
         f"| (b) calibctl library | capture (detect on 2 threads, gates, store session + images) + solve "
         f"(sigma, outliers, {art.held_out.k_folds}-fold held-out, lint, artifact write) | {ms(t_lib)} |",
-        f"| (b) calibctl CLI, own process | `calibctl calibrate` (the same, plus Python start-up and imports) | {ms(t_cli)} |",
-        f"| (b) calibctl CLI start-up alone | `calibctl --version` (imports of the CLI app) | {ms(t_start)} |",
+        "| (b) calibctl CLI, own process | `calibctl calibrate` (the same, plus Python start-up and "
+        f"imports) | {ms(t_cli)} |",
+        "| (b) calibctl CLI start-up alone | `calibctl --version` (imports of the CLI app) | "
+        f"{ms(t_start)} |",
     ]
     for m, r in mrcal.items():
         lines += [
             f"| (c) mrcal-calibrate-cameras {m}, CLI | solve only on (a)'s corners (no detection), "
             f"outlier rejection + board warp (defaults) | {ms(r['cli'])} |",
-            f"| (c) mrcal {m}, in-process | the same tool script via runpy, after a warm-up | {ms(r['inproc'])} |",
+            f"| (c) mrcal {m}, in-process | the same tool script via runpy, after a warm-up | "
+            f"{ms(r['inproc'])} |",
         ]
     lines += [
         "",
         "Ratios (best wall time; CPU time in brackets):",
         "",
-        f"- calibctl library / plain OpenCV in-process: {t_lib[0] / t_plain[0]:.2f} ({t_lib[2] / t_plain[2]:.2f})",
+        f"- calibctl library / plain OpenCV in-process: {t_lib[0] / t_plain[0]:.2f} "
+        f"({t_lib[2] / t_plain[2]:.2f})",
         f"- calibctl CLI / plain OpenCV script process: {t_cli[0] / t_plain_proc[0]:.2f} "
         f"({t_cli[2] / t_plain_proc[2]:.2f})",
         f"- calibctl CLI / mrcal-calibrate-cameras {list(mrcal)[0][10:]} CLI (which does no detection): "
         f"{t_cli[0] / mr5['cli'][0]:.2f} ({t_cli[2] / mr5['cli'][2]:.2f})",
-        f"- calibctl solve part (profile below: store open/reads, solve, outliers, held-out, lint, artifact write)"
+        "- calibctl solve part (profile below: store open/reads, solve, outliers, held-out, lint, "
+        "artifact write)"
         f" / mrcal {list(mrcal)[0][10:]} in-process solve: {solve_stage_s / mr5['inproc'][0]:.2f}",
         f"- calibctl library end-to-end / (plain detection + mrcal in-process solve): "
         f"{t_lib[0] / (plain['detect_s'] + mr5['inproc'][0]):.2f}",
@@ -607,7 +622,8 @@ def synthetic_section(args: argparse.Namespace, tmp: Path) -> list[str]:
         "over its inliers: "
         + ", ".join(f"{m[10:]} dropped {r['n_outliers']}" for m, r in mrcal.items())
         + "). "
-        "z = (estimate - truth) / calibctl's reported sigma; it only covers corner noise, not a lens the model "
+        "z = (estimate - truth) / calibctl's reported sigma; it only covers corner noise, not a lens the "
+        "model "
         "cannot represent (see the notes in BENCHMARKS.md).",
     ]
     return lines
@@ -624,7 +640,8 @@ def dataset_reference() -> dict:
 
 def real_row(name: str, model: str, r: dict, ref: dict, t: tuple[float, float] | None, note: str = "") -> str:
     return (
-        f"| {name} | {model} | {r['fx']:.4f} | {r['fy']:.4f} | {r['cx']:.4f} | {r['cy']:.4f} | {r['rms_px']:.4f} | "
+        f"| {name} | {model} | {r['fx']:.4f} | {r['fy']:.4f} | {r['cx']:.4f} | {r['cy']:.4f} | "
+        f"{r['rms_px']:.4f} | "
         f"{r['fx'] - ref['fx']:+.4f} / {r['fy'] - ref['fy']:+.4f} / {r['cx'] - ref['cx']:+.4f} / "
         f"{r['cy'] - ref['cy']:+.4f} | {ms(t)} | {note} |"
     )
@@ -665,13 +682,16 @@ def real_section(args: argparse.Namespace, tmp: Path) -> list[str]:
         f"Reference (DATASET.md, plain OpenCV default flags, square 1.0): fx {ref['fx']}, fy {ref['fy']}, "
         f"cx {ref['cx']}, cy {ref['cy']}, RMS {ref['rms_px']} px. mrcal --focal 540, --object-spacing 1.0.",
         f"calibctl capture: {len(session.views)}/{len(paths)} views accepted, gates "
-        f"{', '.join(g.gate + (' pass' if g.passed else ' FAIL') for g in session.gates)}; artifact {art.status}; "
+        f"{', '.join(g.gate + (' pass' if g.passed else ' FAIL') for g in session.gates)}; artifact "
+        f"{art.status}; "
         f"outlier views flagged: {', '.join(flagged) or 'none'}; held-out RMS {art.held_out.rms_px:.4f} px.",
         "",
-        "| tool | model | fx | fy | cx | cy | RMS px | delta vs reference fx / fy / cx / cy | wall best / median ms "
+        "| tool | model | fx | fy | cx | cy | RMS px | delta vs reference fx / fy / cx / cy | wall best / "
+        "median ms "
         "| CPU ms | note |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
-        f"| reference | OpenCV flags=0 | {ref['fx']:.4f} | {ref['fy']:.4f} | {ref['cx']:.4f} | {ref['cy']:.4f} | "
+        f"| reference | OpenCV flags=0 | {ref['fx']:.4f} | {ref['fy']:.4f} | {ref['cx']:.4f} | "
+        f"{ref['cy']:.4f} | "
         f"{ref['rms_px']:.4f} | | | | DATASET.md |",
         real_row("(a) plain OpenCV", "flags=0", plain, ref, t_plain, "same recipe as the reference"),
         real_row(
@@ -696,7 +716,8 @@ def real_section(args: argparse.Namespace, tmp: Path) -> list[str]:
             mrcal["LENSMODEL_OPENCV5"],
             ref,
             mrcal["LENSMODEL_OPENCV5"]["inproc"],
-            f"in-process time; {mrcal['LENSMODEL_OPENCV5']['n_outliers']} outliers dropped, board warp solved",
+            f"in-process time; {mrcal['LENSMODEL_OPENCV5']['n_outliers']} outliers dropped, board warp "
+            "solved",
         ),
         real_row(
             "(c) mrcal",

@@ -1,4 +1,5 @@
-"""Fisheye (equidistant Kannala-Brandt): is calibctl's sigma honest, and how does plain cv2.fisheye do on the same corners?
+"""Fisheye (equidistant Kannala-Brandt): is calibctl's sigma honest, and how does plain cv2.fisheye do on the
+same corners?
 
 Sessions (calibctl.core.synth.fisheye, corner level): 1280x960, fields of view cycling 150 / 170 / 190 deg,
 circular and full-frame alternating (full-frame at 150 and 170 only: a 190 deg full-frame lens puts most
@@ -84,7 +85,8 @@ def children_cpu_s() -> float:
 
 
 def run_mrcal(cam: FisheyeCamera, s, focal_px: float, work: str) -> dict:
-    """mrcal-calibrate-cameras with the splined stereographic model on the session's corners (see the docstring)."""
+    """mrcal-calibrate-cameras with the splined stereographic model on the session's corners (see the
+    docstring)."""
     vnl = os.path.join(work, "corners.vnl")
     rows = ["# filename x y level"]
     for k, px in enumerate(s.image_points_per_view):
@@ -138,7 +140,8 @@ def mrcal_table(n_mrcal: int, seed_base: int) -> None:
         return
     print(f"mrcal {MRCAL_SPLINE.format(fov=0).replace('=0', '=FOV')} vs calibctl on the same corners:\n")
     print(
-        "| seed | fov deg | lens | calibctl RMS px | calibctl CPU s | mrcal | mrcal RMS px (inliers) | outliers "
+        "| seed | fov deg | lens | calibctl RMS px | calibctl CPU s | mrcal | mrcal RMS px (inliers) | "
+        "outliers "
         "| mrcal CPU s | mrcal core fx / true fx |\n|---|---|---|---|---|---|---|---|---|---|"
     )
     for i in range(n_mrcal):
@@ -152,7 +155,8 @@ def mrcal_table(n_mrcal: int, seed_base: int) -> None:
         solved = m["outcome"] == "solved"
         print(
             f"| {seed_base + i} | {cam.fov_deg:.0f} | {'circular' if cam.circle_radius_px else 'full-frame'} "
-            f"| {sol.rms_px:.3f} | {cpu:.2f} | {m['outcome']} | {m['rms_px'] if solved else float('nan'):.3f} "
+            f"| {sol.rms_px:.3f} | {cpu:.2f} | {m['outcome']} | "
+            f"{m['rms_px'] if solved else float('nan'):.3f} "
             f"| {m.get('n_outliers', '-')} | {m['cpu_s']:.2f} | "
             f"{(str(round(m['fx'], 1)) + ' / ' + str(round(cam.K[0, 0], 1))) if solved else '-'} |"
         )
@@ -222,7 +226,8 @@ def main(n: int = 30, seed_base: int = 0, n_mrcal: int = 6) -> None:
         f"OpenCV {cv2.__version__}; {datetime.now(UTC):%Y-%m-%d %H:%M} UTC; load {os.getloadavg()[0]:.1f}\n"
     )
     print(
-        "| parameter | mean z | std z | max abs z | bar (abs mean <= 0.3, 0.7 <= std <= 1.5) | bias (antithetic) |\n"
+        "| parameter | mean z | std z | max abs z | bar (abs mean <= 0.3, 0.7 <= std <= 1.5) | bias "
+        "(antithetic) |\n"
         "|---|---|---|---|---|---|"
     )
     for k, p in enumerate(PARAMS):
@@ -240,7 +245,8 @@ def main(n: int = 30, seed_base: int = 0, n_mrcal: int = 6) -> None:
     )
     print(
         f"plain cv2.fisheye.calibrate: {len(ok)}/{n} returned, median |fx error| "
-        f"{np.median(err_cv) if err_cv else float('nan'):.3f} px, max {max(err_cv) if err_cv else float('nan'):.2f} px, "
+        f"{np.median(err_cv) if err_cv else float('nan'):.3f} px, max "
+        f"{max(err_cv) if err_cv else float('nan'):.2f} px, "
         f"{1000 * np.median([p[3] for p in plain]):.0f} ms median per call"
     )
     good = [g for g in guided if g[0] == "returned" and g[2] is not None and g[2] < 1.0]
@@ -250,14 +256,16 @@ def main(n: int = 30, seed_base: int = 0, n_mrcal: int = 6) -> None:
         f"{1000 * np.median([g[3] for g in guided]):.0f} ms median per call\n"
     )
     print(
-        "| seed | fov deg | lens | views | true fx | calibctl fx | sigma fx | calibctl RMS | cv2.fisheye | cv2 fx | cv2 RMS |"
+        "| seed | fov deg | lens | views | true fx | calibctl fx | sigma fx | calibctl RMS | cv2.fisheye | "
+        "cv2 fx | cv2 RMS |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         cv_fx = f"{r[9]:.2f}" if r[9] is not None else "-"
         cv_rms = f"{r[10]:.3f}" if r[10] is not None else "-"
         print(
-            f"| {r[0] + seed_base} | {r[1]:.0f} | {r[2]} | {r[3]} | {r[4]:.2f} | {r[5]:.2f} | {r[6]:.3f} | {r[7]:.3f} "
+            f"| {r[0] + seed_base} | {r[1]:.0f} | {r[2]} | {r[3]} | {r[4]:.2f} | {r[5]:.2f} | {r[6]:.3f} | "
+            f"{r[7]:.3f} "
             f"| {r[8]} | {cv_fx} | {cv_rms} |"
         )
 

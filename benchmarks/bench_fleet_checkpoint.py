@@ -1,20 +1,24 @@
 """`fleet status` on a long fleet log, with and without the fleet checkpoints (store/fleet_checkpoints.py).
 
 A fleet of ROBOTS robots x 4 camera serials: registered and assigned @1 (5 x ROBOTS events), then rollouts of
-every serial's next version, each as the workflows write it: the rollout event (each target's diff recorded), the
+every serial's next version, each as the workflows write it: the rollout event (each target's diff recorded),
+the
 5 canary robots' assignments, the promote (its 20 gate inputs) and the other robots' assignments; every 10th
 rollout is then rolled back (every robot put back). 4 x ROBOTS + 2 events a rollout (2 002 at 500 robots), so
 2.5k, 25k and 250k events are the registrations and about 11 and 124 rollouts (the last one cut where the size
 falls).
 
-The log is written in bulk (chain columns computed as ``chain.link`` computes them, the checks on write skipped:
+The log is written in bulk (chain columns computed as ``chain.link`` computes them, the checks on write
+skipped:
 no calibrations are stored, so every robot's active version reads "no active version"). At each size N, timed
-(wall and this process's CPU, median of REPEATS): ``rollouts.fleet_status`` (the workflow `calibctl fleet status`
+(wall and this process's CPU, median of REPEATS): ``rollouts.fleet_status`` (the workflow `calibctl fleet
+status`
 calls, in-process) with no checkpoint (the whole log replayed, as before), EVERY events past a checkpoint (the
 most a read replays) and right at one; the checkpoint writes (``fleet_checkpoints.write_if_due``, what the
 fleet writer calls in its transaction): the first one of a migrated store (the whole log) and a later one.
 
-Run: python benchmarks/bench_fleet_checkpoint.py [--robots 500] [--sizes 2500 25000 250000] [--pg] [--repeats 3]
+Run: python benchmarks/bench_fleet_checkpoint.py [--robots 500] [--sizes 2500 25000 250000] [--pg] [--repeats
+3]
 """
 
 from __future__ import annotations
@@ -267,14 +271,17 @@ def main() -> None:
                     admin.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
     load1 = os.getloadavg()
     print(
-        f"# fleet status with checkpoints ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} "
+        f"# fleet status with checkpoints ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, "
+        f"{os.cpu_count()} "
         f"CPUs, load (1/5/15 min) {load0[0]:.1f}/{load0[1]:.1f}/{load0[2]:.1f} at the start and "
         f"{load1[0]:.1f}/{load1[1]:.1f}/{load1[2]:.1f} at the end, {'PostgreSQL' if args.pg else 'SQLite'}, "
         f"{args.robots} robots x 4 serials, EVERY {fleet_checkpoints.EVERY}, median of {args.repeats})\n"
     )
     print(
-        f"| events | rollouts | status, whole log replayed (before) | status, {fleet_checkpoints.EVERY:,} events past "
-        "a checkpoint | status at a checkpoint | first checkpoint (whole log) | next checkpoint | checkpoint size |"
+        f"| events | rollouts | status, whole log replayed (before) | status, {fleet_checkpoints.EVERY:,} "
+        "events past "
+        "a checkpoint | status at a checkpoint | first checkpoint (whole log) | next checkpoint | "
+        "checkpoint size |"
     )
     print("|---|---|---|---|---|---|---|---|")
     for row in table:

@@ -1,11 +1,14 @@
 """`calibctl fleet ingest` rate and `fleet trends` latency on a store of a year of daily health reports.
 
 A rendered fleet: ROBOTS robots x 4 camera serials, each serial one `check` (RMS rising 0.004 px/degC with a
-seasonal temperature) and one `timeoffset` (20 ppm drift) report a day for DAYS days; one JSON-lines file per robot,
+seasonal temperature) and one `timeoffset` (20 ppm drift) report a day for DAYS days; one JSON-lines file per
+robot,
 ingested through the workflow the CLI calls (parse, validate, refer-check, insert: all or nothing per file).
-Then `fleet trends` (the workflow: two queries and the fits) for a sample of serials, and the recovered slopes.
+Then `fleet trends` (the workflow: two queries and the fits) for a sample of serials, and the recovered
+slopes.
 
-Run: python benchmarks/bench_fleet_health.py [--robots 25] [--days 365] [--db sqlite:///PATH | postgresql://...]
+Run: python benchmarks/bench_fleet_health.py [--robots 25] [--days 365] [--db sqlite:///PATH |
+postgresql://...]
 """
 
 from __future__ import annotations
@@ -72,7 +75,8 @@ def _files(folder: Path, robots: int, days: int, seed: int = 0) -> list[Path]:
 
 
 def timed_trends(settings: Settings, serials: list[str]) -> tuple[list[float], list[float], list[float]]:
-    """``fleet trends`` (the workflow) of each serial: its wall seconds, RMS slope (px/degC) and td drift (ppm)."""
+    """``fleet trends`` (the workflow) of each serial: its wall seconds, RMS slope (px/degC) and td drift
+    (ppm)."""
     latencies, slopes, drifts = [], [], []
     for serial in serials:
         t1 = time.perf_counter()
@@ -126,11 +130,13 @@ def main() -> None:
     )
     print("| what | value |\n|---|---|")
     print(
-        f"| reports ingested | {stored} ({args.robots * 4} serials x {args.days} days x 2 kinds, {len(paths)} files) |"
+        f"| reports ingested | {stored} ({args.robots * 4} serials x {args.days} days x 2 kinds, "
+        f"{len(paths)} files) |"
     )
     print(f"| ingest wall | {ingest_s:.1f} s = {stored / ingest_s:,.0f} reports/s |")
     print(
-        f"| `fleet trends` latency (workflow, {len(latencies)} serials) | median {statistics.median(latencies) * 1e3:.0f} ms, "
+        f"| `fleet trends` latency (workflow, {len(latencies)} serials) | median "
+        f"{statistics.median(latencies) * 1e3:.0f} ms, "
         f"max {max(latencies) * 1e3:.0f} ms |"
     )
     print(f"| recovered RMS slope (true 0.004 px/degC) | median {statistics.median(slopes):.4f} |")

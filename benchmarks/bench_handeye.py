@@ -177,15 +177,18 @@ def section_robot(scenes: int, cv4: str | None) -> list[str]:
                 errors(np.array(res["cases"][k][m]["T_gripper_cam"]), X_GRIPPER_CAM) for k in cases
             ]
     out = [
-        f"## 2. Robot arm on rendered photos ({scenes} scenes x 15 poses, 640x480, seed lens, camera on the gripper)",
+        f"## 2. Robot arm on rendered photos ({scenes} scenes x 15 poses, 640x480, seed lens, camera on "
+        "the gripper)",
         "",
-        "Board poses: calibctl's detection + solvePnP on the true intrinsics, the same poses for every solver.",
+        "Board poses: calibctl's detection + solvePnP on the true intrinsics, the same poses for every "
+        "solver.",
         "",
         "| solver | worst rotation error deg | worst translation error mm | mean translation error mm |",
         "|---|---|---|---|",
     ]
     out += [
-        f"| {n} | {max(e[0] for e in v):.4f} | {max(e[1] for e in v):.3f} | {np.mean([e[1] for e in v]):.3f} |"
+        f"| {n} | {max(e[0] for e in v):.4f} | {max(e[1] for e in v):.3f} | "
+        f"{np.mean([e[1] for e in v]):.3f} |"
         for n, v in rows.items()
     ]
     return out + [""]
@@ -285,9 +288,8 @@ def section_speed(repeats: int, cv4: str | None) -> list[str]:
     out = [
         f"## 6. Speed of one solve (best of {repeats} in-process calls, ms)",
         "",
-        "| poses | calibctl: gates + park + joint refinement + covariance + consistency and translation-scale gates | "
-        + " | ".join(f"OpenCV {m}" for m in CV4_METHODS)
-        + " |",
+        "| poses | calibctl: gates + park + joint refinement + covariance + consistency and "
+        "translation-scale gates | " + " | ".join(f"OpenCV {m}" for m in CV4_METHODS) + " |",
         "|---|---|" + "---|" * len(CV4_METHODS),
     ]
     for n, log in logs.items():
@@ -332,8 +334,10 @@ def main() -> int:
     head = [
         "# bench_handeye",
         "",
-        f"{dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}; {cpu_model()}, nproc {len(os.sched_getaffinity(0))}; "
-        f"load average before {' '.join(f'{v:.2f}' for v in os.getloadavg())}; Python {platform.python_version()}, "
+        f"{dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}; {cpu_model()}, nproc "
+        f"{len(os.sched_getaffinity(0))}; "
+        f"load average before {' '.join(f'{v:.2f}' for v in os.getloadavg())}; Python "
+        f"{platform.python_version()}, "
         f"OpenCV {cv2.__version__} (calibctl), numpy {np.__version__}; OpenCV 4 for calibrateHandEye: "
         f"{res.get('opencv_version', 'not available')} (numpy {res.get('numpy_version', '-')})",
         "",

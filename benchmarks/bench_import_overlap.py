@@ -8,7 +8,8 @@ whole run). Detection needs only cv2, numpy and calibctl.core, and runs on worke
 the GIL inside OpenCV, so one might hide the imports behind it. Each run here is a fresh interpreter
 that imports cv2, numpy and calibctl.core, then either
 
-* ``sequential``: detects 20 rendered 1280x960 images (``core.capture.image_outcomes.classify_files``, 2 workers)
+* ``sequential``: detects 20 rendered 1280x960 images (``core.capture.image_outcomes.classify_files``, 2
+workers)
   and then imports the store, solve and capture workflows, or
 * ``overlap``: starts those imports on a thread and detects at the same time.
 
@@ -40,7 +41,9 @@ from calibctl.core.board.board_spec import BoardSpec
 mode, folder = sys.argv[1], sys.argv[2]
 paths = sorted(os.path.join(folder, p) for p in os.listdir(folder) if p.endswith(".png"))
 def store_imports():
-    import calibctl.store.repository, calibctl.workflows.camera.solve, calibctl.workflows.camera.capture  # noqa: F401
+    import calibctl.store.repository  # noqa: F401
+    import calibctl.workflows.camera.capture  # noqa: F401
+    import calibctl.workflows.camera.solve  # noqa: F401
 importer = threading.Thread(target=store_imports) if mode == "overlap" else None
 if importer:
     importer.start()
@@ -101,7 +104,8 @@ def main() -> int:
             if i:  # the first round warms the file cache
                 runs[mode].append(json.loads(done.stdout.strip().splitlines()[-1]))
     print(
-        f"{cpu_model()}, {os.cpu_count()} CPUs, load average {', '.join(f'{v:.2f}' for v in os.getloadavg())}; "
+        f"{cpu_model()}, {os.cpu_count()} CPUs, load average "
+        f"{', '.join(f'{v:.2f}' for v in os.getloadavg())}; "
         f"best / median of {opts.repeats}, ms\n"
     )
     print("| order | detection wall | whole run wall | process CPU |\n|---|---|---|---|")

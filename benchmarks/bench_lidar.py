@@ -70,7 +70,8 @@ def main() -> None:
     synth = render.render_session(1, seed=0, azimuth_step_deg=0.19).poses[0].cloud
     print(
         f"## camera-LiDAR (median CPU s of {args.repeats}; {len(sweeps)} acfr sweeps, "
-        f"{int(np.mean([len(s.points_m) for s in sweeps]))} points on average; rendered sweep {len(synth.points_m)} points)\n"
+        f"{int(np.mean([len(s.points_m) for s in sweeps]))} points on average; rendered sweep "
+        f"{len(synth.points_m)} points)\n"
     )
     print("| step | calibctl | plain numpy |\n|---|---|---|")
     ours = timed(lambda: [segment_board(s, BOX, BOARD.backing_m) for s in sweeps], args.repeats) / len(sweeps)
@@ -83,7 +84,8 @@ def main() -> None:
         lambda: plain_segment(synth.points_m, render.RENDER_BOX, np.random.default_rng(0)), args.repeats
     )
     print(
-        f"| segmentation, rendered {len(synth.points_m)}-point sweep | {ours * 1e3:.1f} ms | {plain * 1e3:.1f} ms |"
+        f"| segmentation, rendered {len(synth.points_m)}-point sweep | {ours * 1e3:.1f} ms | "
+        f"{plain * 1e3:.1f} ms |"
     )
     req = wf.LidarRequest(
         ACFR / "images", ACFR / "pcd", BOARD, BOX, ACFR / "camera_info.yaml", scan_pattern="*_full.pcd"

@@ -1,6 +1,7 @@
 """Model adequacy (lint rule model-misfit): fit RMS / detector RMS per model on real photos and renders.
 
-Real photos: opencv-left-right (left, right) and udacity-camcal, detected as tests/core/intrinsics/test_solve_real.py
+Real photos: opencv-left-right (left, right) and udacity-camcal, detected as
+tests/core/intrinsics/test_solve_real.py
 does (plain findChessboardCorners + cornerSubPix). Renders: the seed pinhole lens (0.2 px noise) and
 equidistant fisheye lenses (calibctl.core.synth.fisheye, 18 views, seed 2). Every solve runs the corner
 rule first (calibctl.core.intrinsics.outliers), as `calibctl solve` does.

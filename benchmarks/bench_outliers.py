@@ -4,7 +4,8 @@ Sessions: ``calibctl synth``'s "good" scenario (20 views, a random photometry pe
 command renders them: blur 0.55-0.85 px, gain, illumination slope), seeds 0..N-1, detected by calibctl's
 detector, solved with the production model (k1k2). Nothing in them is an outlier, so every flag is a false
 alarm. Reported per resolution: views flagged by the pre-issue-8 rule (RMS above max(median + 3 MAD-sigma,
-1.5 x median)) and by the current rule (calibctl.core.intrinsics.outliers), corners the corner rule removes, and
+1.5 x median)) and by the current rule (calibctl.core.intrinsics.outliers), corners the corner rule removes,
+and
 the two-camera check's ratio (calibctl.core.capture.camera_split; suspected from 1.4). Real photos:
 opencv-left-right as one folder, left alone, right alone (calibctl's detector, model k1k2).
 Detected corners are cached in benchmarks/out/outlier-sessions/ (git-ignored), so a re-run only solves.
@@ -92,7 +93,8 @@ def run(size: tuple[int, int], sessions: int) -> list[str]:
     r = np.concatenate(ratios)
     return [
         f"| {size[0]}x{size[1]} | {sessions} | {views} | {old} ({100 * old / views:.1f} %) | "
-        f"{new} ({100 * new / views:.1f} %) | {corners} | {np.quantile(r, 0.99):.2f} | {worst[0]:.2f} (seed {worst[1]}) "
+        f"{new} ({100 * new / views:.1f} %) | {corners} | {np.quantile(r, 0.99):.2f} | {worst[0]:.2f} "
+        f"(seed {worst[1]}) "
         f"| {max(split_ratios):.2f}, {suspected} suspected, {len(split_ratios)} of {sessions} judged |"
     ]
 
@@ -117,7 +119,8 @@ def real_two_camera_rows() -> list[str]:
         assert split is not None
         groups = f"{len(split.group_a)} / {len(split.group_b)}"
         rows.append(
-            f"| {label} | {len(obj)} | {groups} | {split.holdout_rms_px[0]:.3f} / {split.holdout_rms_px[1]:.3f} | "
+            f"| {label} | {len(obj)} | {groups} | {split.holdout_rms_px[0]:.3f} / "
+            f"{split.holdout_rms_px[1]:.3f} | "
             f"{split.cross_rms_px[0]:.3f} / {split.cross_rms_px[1]:.3f} | {split.ratio:.2f} | "
             f"{'two cameras' if split.suspected else 'one camera'} |"
         )

@@ -17,7 +17,8 @@ End to end (interpreter start to exit, a fresh SQLite store with the board regis
 Recall is printed beside every time: calibctl must find at least what the plain script finds.
 ``--model M``: calibrate's lens model (default k1k2; the plain script is always calibrateCameraExtended, so
 its ratio is then only the before/after rows' reference). ``--baseline DIR``: the code before a change
-(``git archive BRANCH_POINT | tar -x -C DIR``); its ``classify_files`` at the default jobs and its ``calibrate``
+(``git archive BRANCH_POINT | tar -x -C DIR``); its ``classify_files`` at the default jobs and its
+``calibrate``
 run as three more rows, taking turns with the others, so before and after meet the same load. Every process
 runs in the temporary work folder: ``python -m`` puts the current folder first on sys.path, so a run started
 from a checkout measured that checkout's calibctl in the baseline rows too (before 2026-11-27 07:00 UTC).
@@ -26,7 +27,8 @@ does (``machine.run_env``). CPU: user + system time of the process and of the ch
 (getrusage RUSAGE_CHILDREN), the least over the rounds; on a loaded machine it is the steadier measure.
 The plain Pool's workers are waited for, so counted; calibctl's warm pool's workers belong to its fork server
 and are not: the classify_files rows add the fork server's and its workers' CPU as the script read it from
-/proc at the end (since 2026-11-27; the capture and calibrate rows still leave it out). Prints a markdown report with machine, date and load: the 1-minute load average
+/proc at the end (since 2026-11-27; the capture and calibrate rows still leave it out). Prints a markdown
+report with machine, date and load: the 1-minute load average
 at the start of each path's best run is printed beside it.
 """
 
@@ -108,7 +110,8 @@ if __name__ == "__main__":
     t = time.perf_counter()
     out = classify_files(paths, BoardSpec.chessboard(9, 6, 0.025), workers=int(sys.argv[2]))
     seconds = time.perf_counter() - t
-    print(f"RESULT {seconds:.4f} {sum(o.corners_px is not None for o in out)} {pool_cpu_s(int(sys.argv[2])):.4f}")
+    found = sum(o.corners_px is not None for o in out)
+    print(f"RESULT {seconds:.4f} {found} {pool_cpu_s(int(sys.argv[2])):.4f}")
 '''
 
 
@@ -241,7 +244,8 @@ def main() -> None:
         load = os.getloadavg()
         print(
             f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
-            f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start "
+            f"{platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at "
+            "start "
             f"(a shared machine); best and median of {args.repeats} rounds after a bytecode-warming round; "
             f"calibrate --model {args.model}\n"
         )
@@ -367,8 +371,10 @@ def main() -> None:
                     if name not in best or seconds < best[name][0]:
                         best[name] = (seconds, note, load)
             print(
-                f"### {label}\n\n| path | best s | vs plain sequential | median s | median vs plain | process CPU s "
-                "(least) | CPU vs plain | recall | load at best | load range |\n|---|---|---|---|---|---|---|---|---|---|"
+                f"### {label}\n\n| path | best s | vs plain sequential | median s | median vs plain | "
+                "process CPU s "
+                "(least) | CPU vs plain | recall | load at best | load range "
+                "|\n|---|---|---|---|---|---|---|---|---|---|"
             )
             for group, ref in (
                 (det, "plain sequential loop"),

@@ -2,7 +2,8 @@
 plain OpenCV's numbers on the same files.
 
 Set: ../shared/datasets/opencv-left-right, the 13 left images (640x480), calibrated by calibctl (board 9x6,
-25 mm, model k1k2). calibctl side: ``workflows.report.report.gather`` (store reads, residuals, uncertainty map) and
+25 mm, model k1k2). calibctl side: ``workflows.report.report.gather`` (store reads, residuals, uncertainty
+map) and
 ``render_html`` timed separately, best and median of N after a warm-up, report size, byte-identical check.
 Plain side on the same files: findChessboardCorners + cornerSubPix + cv2.calibrateCameraExtended with the
 same flags, its wall time, and its stdDeviationsIntrinsics for cx and cy, to set beside the report's

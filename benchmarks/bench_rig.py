@@ -103,10 +103,12 @@ def main() -> int:
         print(f"## Rig benchmark {dt.datetime.now().astimezone().isoformat(timespec='seconds')}\n")
         print(
             f"{cpu_model()}, nproc {len(os.sched_getaffinity(0))}, load average before "
-            f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; OpenCV {cv2.__version__}; best of {args.repeats}\n"
+            f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; OpenCV {cv2.__version__}; best of "
+            f"{args.repeats}\n"
         )
         print(
-            "| set | tool | pairs | baseline mm | rotation deg | epipolar RMS px | rectified rows RMS px | time s |"
+            "| set | tool | pairs | baseline mm | rotation deg | epipolar RMS px | rectified rows RMS px | "
+            "time s |"
         )
         print("|---|---|---|---|---|---|---|---|")
         for name, left, right, cols, rows, square in sets:
@@ -120,12 +122,15 @@ def main() -> int:
             )
             if "refused" in mine:
                 print(
-                    f"| {name} | calibctl | - | refused (exit 2): {mine['refused']} | - | - | - | {mine['time_s']:.2f} |"
+                    f"| {name} | calibctl | - | refused (exit 2): {mine['refused']} | - | - | - | "
+                    f"{mine['time_s']:.2f} |"
                 )
             else:
                 print(
-                    f"| {name} | calibctl | {mine['pairs']} | {mine['baseline_mm']:.3f} +/- {mine['sigma_mm']:.3f} | "
-                    f"{mine['rotation_deg']:.4f} +/- {mine['sigma_deg']:.4f} | {mine['epipolar_rms_px']:.3f} (held-out) | "
+                    f"| {name} | calibctl | {mine['pairs']} | {mine['baseline_mm']:.3f} +/- "
+                    f"{mine['sigma_mm']:.3f} | "
+                    f"{mine['rotation_deg']:.4f} +/- {mine['sigma_deg']:.4f} | "
+                    f"{mine['epipolar_rms_px']:.3f} (held-out) | "
                     f"{mine['rectified_rms_px']:.3f} (held-out) | {mine['time_s']:.2f} |"
                 )
             print(

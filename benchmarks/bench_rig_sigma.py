@@ -1,6 +1,7 @@
 """Rig baseline and rotation sigmas (Jacobian, frame-level, reported) against a bootstrap over frames.
 
-Real pairs (shared datasets): each camera's photos detected once by calibctl's detector; the bootstrap draws the
+Real pairs (shared datasets): each camera's photos detected once by calibctl's detector; the bootstrap draws
+the
 frame keys with replacement (a frame: the photos of one key, paired or not), re-calibrates each member on its
 drawn photos (k1k2, as ``rig solve-folders``) and re-solves the rig; sd over the resamples.
 Renders: 2-camera 75 mm rigs rendered and detected (tests/core/rig_sessions), members calibrated on their own
@@ -120,12 +121,14 @@ def real(name: str, resamples: int) -> None:
         f"rotation {full['rotation_deg']:.3f} deg"
     )
     print(
-        f"  baseline sigma jacobian {full['jac_sigma_baseline_mm']:.4f} reported {full['sigma_baseline_mm']:.4f} "
+        f"  baseline sigma jacobian {full['jac_sigma_baseline_mm']:.4f} reported "
+        f"{full['sigma_baseline_mm']:.4f} "
         f"bootstrap sd {sd[0]:.4f} -> sd/reported {sd[0] / full['sigma_baseline_mm']:.2f} "
         f"(sd/jacobian {sd[0] / full['jac_sigma_baseline_mm']:.2f})"
     )
     print(
-        f"  rotation sigma jacobian {full['jac_sigma_rotation_deg']:.4f} reported {full['sigma_rotation_deg']:.4f} "
+        f"  rotation sigma jacobian {full['jac_sigma_rotation_deg']:.4f} reported "
+        f"{full['sigma_rotation_deg']:.4f} "
         f"bootstrap sd {sd[1]:.4f} -> sd/reported {sd[1] / full['sigma_rotation_deg']:.2f} "
         f"(sd/jacobian {sd[1] / full['jac_sigma_rotation_deg']:.2f})"
     )
@@ -169,8 +172,10 @@ def renders(seeds: int) -> None:
         zs = np.array([_z_at(sol, truth, threshold) for sol, truth in sols])
         zj = np.array([_z_at(sol, truth, np.inf)[0] for sol, truth in sols])
         print(
-            f"renders: {seeds} seeds, frame-level used above x{threshold}: baseline z sd {zs[:, 0].std(ddof=1):.2f} "
-            f"(jacobian alone {zj.std(ddof=1):.2f}), z mean {zs[:, 0].mean():+.2f}; reported / jacobian sigma "
+            f"renders: {seeds} seeds, frame-level used above x{threshold}: baseline z sd "
+            f"{zs[:, 0].std(ddof=1):.2f} "
+            f"(jacobian alone {zj.std(ddof=1):.2f}), z mean {zs[:, 0].mean():+.2f}; reported / jacobian "
+            "sigma "
             f"median {np.median(zs[:, 1]):.2f} max {zs[:, 1].max():.2f}"
         )
 

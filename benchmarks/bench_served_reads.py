@@ -7,7 +7,8 @@ A SQLite store made by ``calibctl demo`` (one board, one calibration) is signed 
 artifact is re-stored under ``--serials`` serials with a signing key (``calibctl keys init``), each
 activated. Then, each ``--repeats`` times:
 - ``show``, ``export --format ros`` and ``lint --serial`` of one serial in a fresh process, without keys and
-  with ``CALIBCTL_TRUSTED_KEYS`` (the station's public key): best and median CPU time of the child (the two interleaved);
+  with ``CALIBCTL_TRUSTED_KEYS`` (the station's public key): best and median CPU time of the child (the two
+  interleaved);
 - in-process: ``Store.get_artifact`` of the active version (300 reads) and ``active_artifacts`` of every
   serial (``lint --all``'s read), with and without ``trusted``: milliseconds per record.
 Nothing is asserted; the machine is shared, so the load average is printed first.
@@ -66,7 +67,8 @@ def _make_store(work: Path, serials: int) -> tuple[str, Path]:
 def _time_pair(
     argv: list[str], plain_env: dict[str, str], keyed_env: dict[str, str], repeats: int
 ) -> tuple[list[float], list[float]]:
-    """CPU times (user + system) of ``argv`` without and with keys, the two interleaved so the shared machine's
+    """CPU times (user + system) of ``argv`` without and with keys, the two interleaved so the shared
+    machine's
     load falls on both alike (after one warm-up each: file cache, .pyc); wall time on a loaded machine mostly
     measures the load."""
     times: tuple[list[float], list[float]] = ([], [])
@@ -87,7 +89,8 @@ def _per_record(work: Path, db: str, keys: Path, repeats: int) -> None:
 
     trusted = TrustedKeys.load(keys)
     print(
-        "\n| in-process read | records | without keys, ms/record | with keys, ms/record |\n|---|---:|---:|---:|"
+        "\n| in-process read | records | without keys, ms/record | with keys, ms/record "
+        "|\n|---|---:|---:|---:|"
     )
     for label, n, work_fn in (
         ("Store.get_artifact (active)", 300, lambda store: [store.get_artifact(SERIAL) for _ in range(300)]),
@@ -119,7 +122,8 @@ def main() -> None:
         work = Path(tmp)
         db, keys = _make_store(work, args.serials)
         print(
-            "\n| command (fresh process) | without keys, CPU s best / median | with keys, CPU s best / median |\n|---|---:|---:|"
+            "\n| command (fresh process) | without keys, CPU s best / median | with keys, CPU s best / "
+            "median |\n|---|---:|---:|"
         )
         for name, sub in (
             ("show", ["show", SERIAL]),

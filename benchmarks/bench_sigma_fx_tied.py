@@ -12,7 +12,8 @@ Run: python benchmarks/bench_sigma_fx_tied.py [TRIALS]   (default 400, ~20 s on 
 
 Measured 2026-11-22 (x86_64, 2 shared cores, OpenCV 5.0.0, numpy 2.4.6, 400 trials, seed 7):
 
-| true fx/fy | MC std fx (tied) | mean reported a*sigma(fy) | ratio | MC std fx (untied) | mean reported sigma(fx) untied | ratio |
+| true fx/fy | MC std fx (tied) | mean reported a*sigma(fy) | ratio | MC std fx (untied) | mean reported
+sigma(fx) untied | ratio |
 |---|---|---|---|---|---|---|
 | 1.00 | 1.0075 | 0.9723 | 0.965 | 1.0952 | 1.0634 | 0.971 |
 | 1.03 | 1.0190 | 0.9840 | 0.966 | 1.1084 | 1.0772 | 0.972 |
@@ -90,7 +91,8 @@ def main() -> None:
     )
     print(
         "| true fx/fy | MC std fx (tied) | mean reported a*sigma(fy) | ratio | MC std fx (untied) "
-        "| mean reported sigma(fx) untied | ratio | mean fx bias (tied) | MC rel. error of a std | max abs(fx/fy - a) |"
+        "| mean reported sigma(fx) untied | ratio | mean fx bias (tied) | MC rel. error of a std | max "
+        "abs(fx/fy - a) |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:

@@ -134,7 +134,8 @@ def run_times(
     warm_up: bool = True,
 ) -> tuple[list[float], list[float]]:
     """Wall and CPU (user + system) seconds of each run (after one untimed run when ``warm_up``). On a
-    loaded machine the CPU time is the steadier figure: it does not count the time spent waiting for a core."""
+    loaded machine the CPU time is the steadier figure: it does not count the time spent waiting for a
+    core."""
     wall, cpu = [], []
     for i in range(repeats + warm_up):
         if setup:
@@ -217,7 +218,8 @@ profile.dump_stats(__import__("os").environ["PROFILE_OUT"])
 
 
 def _stage_cpu(stats_path: Path) -> dict[str, float]:
-    """Largest cumulative CPU seconds of a function matching each CALIBRATE_STAGES key (its outermost call)."""
+    """Largest cumulative CPU seconds of a function matching each CALIBRATE_STAGES key (its outermost
+    call)."""
     import pstats
 
     stats = pstats.Stats(str(stats_path)).stats  # type: ignore[attr-defined]
@@ -347,7 +349,8 @@ def calibrate_section(work: Path, repeats: int, checkouts: dict[str, Path]) -> N
     pw, pc = rows[runs[0][0]]
     sw, _ = rows[runs[1][0]]
     print(
-        f"\n- the imports calibrate cannot do without (the design fixes sqlalchemy, pydantic, typer and rich) take "
+        "\n- the imports calibrate cannot do without (the design fixes sqlalchemy, pydantic, typer and "
+        "rich) take "
         f"**{sw / pw:.2f}x** the plain script's whole wall time, before calibctl's own code runs"
     )
     for name in checkouts:

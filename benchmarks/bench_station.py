@@ -1,6 +1,7 @@
 """The station's per-unit time against the plain script's detect + solve of the same views.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_station.py RENDERED_FOLDER [--units 6] [--views 20] [--baseline DIR]
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_station.py RENDERED_FOLDER [--units 6] [--views 20]
+    [--baseline DIR]
 
 Copies the first ``--views`` images of RENDERED_FOLDER (``calibctl synth OUT --views 96 --size
 1280x960``) into one folder per unit, then runs ``calibctl station --serials FILE --json`` once (a fresh
@@ -82,7 +83,8 @@ def main() -> None:
             templates["before: calibctl station"] = template_store(work, args.baseline)
         load = os.getloadavg()
         print(
-            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} "
+            "cores "
             f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
             f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views\n"
         )
@@ -159,7 +161,8 @@ def main() -> None:
                 line = proc.stdout.readline()
                 if not line.startswith("{"):
                     raise SystemExit(
-                        f"{name} stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
+                        f"{name} stopped: "
+                        f"{line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
                     )
                 unit = json.loads(line)
                 if unit["status"] not in ("pass", "fail"):  # an error line's unit_s times nothing
@@ -186,14 +189,16 @@ def main() -> None:
         unit_s = [u["unit_s"] for u in units]
         print("| path | per unit, median s | min s | max s |\n|---|---|---|---|")
         print(
-            f"| calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(unit_s[1:]):.3f} | "
+            f"| calibctl station, unit_s (units 2..{args.units}, warm) | "
+            f"{statistics.median(unit_s[1:]):.3f} | "
             f"{min(unit_s[1:]):.3f} | {max(unit_s[1:]):.3f} |"
         )
         print(f"| calibctl station, first unit | {unit_s[0]:.3f} | | |")
         if args.baseline is not None:
             before = unit_times["before: calibctl station"]
             print(
-                f"| before: calibctl station, unit_s (units 2..{args.units}, warm) | {statistics.median(before[1:]):.3f} "
+                f"| before: calibctl station, unit_s (units 2..{args.units}, warm) | "
+                f"{statistics.median(before[1:]):.3f} "
                 f"| {min(before[1:]):.3f} | {max(before[1:]):.3f} |"
             )
         print(
@@ -206,7 +211,8 @@ def main() -> None:
         )
         print(
             f"\ncalibctl station whole run (start-up, {args.units} units, exit, the plain runs between units "
-            f"included): {station_wall:.2f} s; verdicts: {', '.join(sorted(statuses))}; 1-minute load average "
+            f"included): {station_wall:.2f} s; verdicts: {', '.join(sorted(statuses))}; 1-minute load "
+            "average "
             f"{min(loads):.2f}-{max(loads):.2f} at the units' starts, {load_1min():.2f} at the end"
         )
 
@@ -234,7 +240,8 @@ def feed(
     folder: Path, views: list[Path], pace: tuple[float, float], rng: random.Random, in_place: bool
 ) -> float:
     """A camera app saving the unit's pictures: each written under a temporary name and renamed into place
-    (or, ``in_place``, written under its own name); returns the perf_counter time the last one was complete."""
+    (or, ``in_place``, written under its own name); returns the perf_counter time the last one was
+    complete."""
     folder.mkdir(parents=True, exist_ok=True)
     for p in views:
         time.sleep(rng.uniform(*pace))
@@ -262,9 +269,11 @@ def watch(args: argparse.Namespace) -> None:
         load = os.getloadavg()
         how = f"written in place (--settle-s {args.settle_s:g})" if args.settle_s > 0 else "renamed"
         print(
-            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} cores "
+            f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {len(os.sched_getaffinity(0))} "
+            "cores "
             f"available, Python {platform.python_version()}, load average {load[0]:.2f} / {load[1]:.2f} / "
-            f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views, each picture "
+            f"{load[2]:.2f} at start (a shared machine); {args.units} units of {len(views)} views, each "
+            "picture "
             f"{how} into the "
             f"unit's folder after a pause of {lo:g}-{hi:g} s (uniform, seeded)\n"
         )
@@ -314,7 +323,8 @@ def watch(args: argparse.Namespace) -> None:
             seen = time.perf_counter() - last_in
             if not line.startswith("{"):
                 raise SystemExit(
-                    f"the station stopped: {line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
+                    "the station stopped: "
+                    f"{line}{proc.stdout.read()}{proc.stderr.read() if proc.stderr else ''}"
                 )
             unit = json.loads(line)
             statuses.add(unit["status"])
@@ -343,7 +353,8 @@ def watch(args: argparse.Namespace) -> None:
         if proc.returncode != 0:
             raise SystemExit(f"the station exited {proc.returncode}")
         print(
-            "| per unit (units 2..; the first warmed the caches) | median s | min s | max s |\n|---|---|---|---|"
+            "| per unit (units 2..; the first warmed the caches) | median s | min s | max s "
+            "|\n|---|---|---|---|"
         )
         print(
             summary_row(
@@ -371,9 +382,11 @@ def watch(args: argparse.Namespace) -> None:
         ratio = statistics.median(rows["after"]) / statistics.median(rows["plain"])
         paired = statistics.median(a / p for a, p in zip(rows["after"], rows["plain"], strict=True))
         print(
-            f"\nafter_last_image_s / plain detect + solve: {ratio:.2f} (medians), {paired:.2f} (median of the "
+            f"\nafter_last_image_s / plain detect + solve: {ratio:.2f} (medians), {paired:.2f} (median of "
+            "the "
             f"units' own ratios, each unit beside the plain run that followed it); verdicts: "
-            f"{', '.join(sorted(statuses))}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
+            f"{', '.join(sorted(statuses))}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at "
+            "the units' "
             f"starts, {load_1min():.2f} at the end"
         )
 

@@ -1,8 +1,10 @@
 """Fleet scale: `lint --all`, full `db verify` and `db verify --since HEAD` against store size.
 
     .venv/bin/python benchmarks/bench_store_scale.py                 # 1k artifacts, SQLite (about 1 min)
-    .venv/bin/python benchmarks/bench_store_scale.py --large         # 1k, 10k, 100k (long: fills take most of it)
-    .venv/bin/python benchmarks/bench_store_scale.py --pg            # also PostgreSQL (local server, throwaway db)
+    .venv/bin/python benchmarks/bench_store_scale.py --large         # 1k, 10k, 100k (long: fills take most of
+    it)
+    .venv/bin/python benchmarks/bench_store_scale.py --pg            # also PostgreSQL (local server,
+    throwaway db)
 
 Each store holds N artifacts over 1 000 serials (N/1000 versions each, every one activated, so N events
 too), written through calibctl's own chained, signed insert path (one transaction per 1 000 rows).
@@ -222,12 +224,14 @@ def main() -> None:
     args = parser.parse_args()
     sizes = args.sizes or ([1000, 10_000, 100_000] if args.large else [1000])
     print(
-        f"# store scale: {cpu_model()}, nproc {os.cpu_count()}, load {os.getloadavg()[0]:.2f}, {utc_now():%Y-%m-%d %H:%M} UTC\n"
+        f"# store scale: {cpu_model()}, nproc {os.cpu_count()}, load {os.getloadavg()[0]:.2f}, "
+        f"{utc_now():%Y-%m-%d %H:%M} UTC\n"
     )
     print("wall seconds, with this process's CPU seconds in brackets (the 2 cores were shared)\n")
     print(
         "| backend | artifacts | lint --all s | lint ms/serial (CPU) | plain loop s | db verify s | "
-        "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | history / show / export CPU ms "
+        "verify ms per 1k records (CPU) | --since HEAD s, +1k artifacts (CPU) | history / show / export "
+        "CPU ms "
         "in-process | same, CLI process CPU ms | fill s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -250,8 +254,10 @@ def main() -> None:
             print(
                 f"| {backend} | {total} | {m['lint_all']:.2f} | {1000 * m['lint_all'] / SERIALS:.2f} "
                 f"({1000 * m['lint_cpu'] / SERIALS:.2f}) | {m['plain']:.2f} | {m['verify']:.1f} | "
-                f"{1000 * m['verify'] / (records / 1000):.0f} ({1000 * m['verify_cpu'] / (records / 1000):.0f}) | "
-                f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['history']:.0f} / {m['show']:.0f} / {m['export']:.0f} | "
+                f"{1000 * m['verify'] / (records / 1000):.0f} "
+                f"({1000 * m['verify_cpu'] / (records / 1000):.0f}) | "
+                f"{m['since']:.2f} ({m['since_cpu']:.2f}) | {m['history']:.0f} / {m['show']:.0f} / "
+                f"{m['export']:.0f} | "
                 f"{m['history_cli']:.0f} / {m['show_cli']:.0f} / {m['export_cli']:.0f} | {m['fill']:.0f} |",
                 flush=True,
             )

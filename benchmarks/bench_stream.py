@@ -1,14 +1,20 @@
-"""A video's frames detected by calibctl at 1 job and at every core, beside a plain OpenCV loop and a plain pool.
+"""A video's frames detected by calibctl at 1 job and at every core, beside a plain OpenCV loop and a plain
+pool.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_stream.py [--size 1280x720] [--repeats 3]
 
-The video is ``calibctl synth --scenario video`` at ``--size`` (74 frames, 8 still key poses; rendered once into
-a temporary folder). In one process, the paths taking turns, ``--repeats`` rounds, best wall time and least CPU:
-  * calibctl ``capture`` of the video into a fresh SQLite store at jobs 1 and jobs = cores (frames detected ahead
+The video is ``calibctl synth --scenario video`` at ``--size`` (74 frames, 8 still key poses; rendered once
+into
+a temporary folder). In one process, the paths taking turns, ``--repeats`` rounds, best wall time and least
+CPU:
+  * calibctl ``capture`` of the video into a fresh SQLite store at jobs 1 and jobs = cores (frames detected
+  ahead
     on threads and settled in order, ``workflows.camera.capture._detected_frames``): decode, detection, frame
-    selection and its live gates, the kept frames encoded and stored, the session's gates; plus the CPU time of
+    selection and its live gates, the kept frames encoded and stored, the session's gates; plus the CPU time
+    of
     the calling (main) thread, the part that cannot spread over cores;
-  * the plain script's detection alone: VideoCapture.read + cvtColor + findChessboardCorners (ADAPTIVE_THRESH |
+  * the plain script's detection alone: VideoCapture.read + cvtColor + findChessboardCorners (ADAPTIVE_THRESH
+  |
     NORMALIZE_IMAGE) + cornerSubPix 11x11 on every frame, sequentially and on a multiprocessing.Pool of cores
     workers (frames pickled to them; fork, Linux's default, the pool's start included).
 The plain rows select nothing and store nothing: they are what a user's own loop costs before any of that.
@@ -92,7 +98,8 @@ def main() -> None:
         load = os.getloadavg()
         print(
             f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {cores} cores available, Python "
-            f"{platform.python_version()}, OpenCV {cv2.__version__}, load average {load[0]:.2f} / {load[1]:.2f} / "
+            f"{platform.python_version()}, OpenCV {cv2.__version__}, load average {load[0]:.2f} / "
+            f"{load[1]:.2f} / "
             f"{load[2]:.2f} at start; video {width}x{height}, best of {args.repeats}\n"
         )
 
@@ -129,7 +136,8 @@ def main() -> None:
         for name, (wall, cpu, main_cpu, what, load_at) in best.items():
             main_text = f"{main_cpu:.3f}" if name.startswith("calibctl") else "-"
             print(
-                f"| {name} | {wall:.3f} | {wall / base:.2f}x | {cpu:.3f} | {main_text} | {what} | {load_at:.1f} |"
+                f"| {name} | {wall:.3f} | {wall / base:.2f}x | {cpu:.3f} | {main_text} | {what} | "
+                f"{load_at:.1f} |"
             )
 
 

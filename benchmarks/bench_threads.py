@@ -83,7 +83,8 @@ def main() -> None:
     load = os.getloadavg()
     print(
         f"{dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, {os.cpu_count()} CPUs "
-        f"({len(os.sched_getaffinity(0))} available), Python {platform.python_version()}, OpenCV {cv2.__version__}, "
+        f"({len(os.sched_getaffinity(0))} available), Python {platform.python_version()}, OpenCV "
+        f"{cv2.__version__}, "
         f"load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} at start; code from "
         f"{Path(sys.modules['calibctl'].__file__).parent.parent}\n"
     )

@@ -60,12 +60,14 @@ ACCURACY_CHANNEL = {
 
 
 def accuracy(n_seeds: int) -> None:
-    """Inject each fault at the seed's magnitude (noise 0.3 px, default bench) and tabulate what comes back."""
+    """Inject each fault at the seed's magnitude (noise 0.3 px, default bench) and tabulate what comes
+    back."""
     print(
         f"triage accuracy - default bench (500 keyframes x 80 features, noise 0.3 px), seeds 0..{n_seeds - 1}"
     )
     print(
-        f"{'fault':<16} {'injected':>12} {'mean recovered':>15} {'worst err %':>12} {'named alone':>12}  verdict (seed 0)"
+        f"{'fault':<16} {'injected':>12} {'mean recovered':>15} {'worst err %':>12} {'named alone':>12}  "
+        "verdict (seed 0)"
     )
     for fault, key in ACCURACY_CHANNEL.items():
         mag = DEFAULT_MAGNITUDE[fault]
@@ -89,7 +91,8 @@ def accuracy(n_seeds: int) -> None:
         if key:
             err = max(abs(g - mag) / mag for g in got) * 100
             print(
-                f"{fault:<16} {mag:>12.6g} {statistics.mean(got):>15.6g} {err:>12.2f} {alone:>7}/{n_seeds}  {verdict[:70]}"
+                f"{fault:<16} {mag:>12.6g} {statistics.mean(got):>15.6g} {err:>12.2f} {alone:>7}/{n_seeds} "
+                f" {verdict[:70]}"
             )
         else:
             print(f"{fault:<16} {mag:>12.6g} {'-':>15} {'-':>12} {alone:>7}/{n_seeds}  {verdict[:70]}")
@@ -151,10 +154,12 @@ def main() -> None:
     print(f"calibctl triage benchmark - {dt.datetime.now().astimezone().isoformat(timespec='seconds')}")
     print(f"machine: {os.cpu_count()} CPUs (nproc {len(os.sched_getaffinity(0))}), {cpu_model()}")
     print(
-        f"python {platform.python_version()}, numpy {np.__version__}, {platform.system()} {platform.release()}"
+        f"python {platform.python_version()}, numpy {np.__version__}, {platform.system()} "
+        f"{platform.release()}"
     )
     print(
-        f"input: {n_rows} rows, {CAMERAS} cameras x {keyframes} keyframes x {FEATURES_PER_KEYFRAME} features, "
+        f"input: {n_rows} rows, {CAMERAS} cameras x {keyframes} keyframes x {FEATURES_PER_KEYFRAME} "
+        "features, "
         f"{csv_path.stat().st_size / 1e6:.1f} MB CSV (written in {write_s:.2f} s)"
     )
     print(f"{'stage':<9} {'best s':>8} {'median s':>9} {'rows/s (best)':>15}")

@@ -1,4 +1,5 @@
-"""Capture verdicts, old rule against new (issue 22): false rejects and false accepts on renders and real sets.
+"""Capture verdicts, old rule against new (issue 22): false rejects and false accepts on renders and real
+sets.
 
 Old rule: every capture gate decides (observability, tilt, coverage, views). New rule: observability and views
 refuse a hopeless set, then the projection gate (calibctl.core.capture.projection_gate) decides over the
@@ -224,20 +225,24 @@ def main(thresholds: list[float]) -> None:
         old = [r["old"] for r in rows]
         n_good, n_bad = sum(good), len(rows) - sum(good)
         print(
-            f"T = {T:g} px ({n_good} good, {n_bad} bad): old rule false-reject {_rejects(good, old)}/{n_good}, "
-            f"false-accept {_accepts(good, old)}/{n_bad}; new rule false-reject {_rejects(good, new)}/{n_good}, "
+            f"T = {T:g} px ({n_good} good, {n_bad} bad): old rule false-reject "
+            f"{_rejects(good, old)}/{n_good}, "
+            f"false-accept {_accepts(good, old)}/{n_bad}; new rule false-reject "
+            f"{_rejects(good, new)}/{n_good}, "
             f"false-accept {_accepts(good, new)}/{n_bad}"
         )
     T = thresholds[-1]
     print(
-        f"\n| set | views | model | worst sigma px | max error px | truth | at {T:g} px | old rule | new rule |"
+        f"\n| set | views | model | worst sigma px | max error px | truth | at {T:g} px | old rule | new "
+        "rule |"
     )
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         old = "accept" if r["old"] else f"refuse ({', '.join(r['failed'])})"
         new = "accept" if not r["hopeless"] and r["sigma"] <= T else "refuse"
         print(
-            f"| {r['name']} | {r['views']} | {r['model']} | {r['sigma']:.2f} | {r['err']:.2f} | {r['truth']} | "
+            f"| {r['name']} | {r['views']} | {r['model']} | {r['sigma']:.2f} | {r['err']:.2f} | "
+            f"{r['truth']} | "
             f"{'good' if r['err'] <= T else 'bad'} | {old} | {new} |"
         )
 

@@ -79,7 +79,8 @@ def renders(n_sessions: int) -> None:
             z_after[k].append((v - truth[k]) / sol.sigma[k])
             z_before[k].append((v - truth[k]) / (sol.sigma[k] / scale))
     print(
-        f"renders ({n_sessions} sessions): sigma_factor median {np.median(factors):.2f}, max {max(factors):.2f}; "
+        f"renders ({n_sessions} sessions): sigma_factor median {np.median(factors):.2f}, max "
+        f"{max(factors):.2f}; "
         f"rule fired (> {MAX_SIGMA_FACTOR}) in {fired}"
     )
     for k in truth:

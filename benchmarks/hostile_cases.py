@@ -41,7 +41,8 @@ YAML_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
 
 
 def _out_targets(group: str, argv: list[str], out_flag: str | None = "-o") -> list[Case]:
-    """A writer aimed at a FIFO, a symlink, a dangling symlink and a folder, with --force: nothing replaced."""
+    """A writer aimed at a FIFO, a symlink, a dangling symlink and a folder, with --force: nothing
+    replaced."""
     at = (lambda p: [out_flag, p]) if out_flag else (lambda p: [p])
     return [
         Case(

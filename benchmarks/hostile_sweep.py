@@ -65,7 +65,8 @@ class Case:
     says: tuple[str, ...] = ()  # words the output (stdout and stderr) must hold: the real mistake, named
 
 
-# ---- setup helpers (each takes the case folder) -------------------------------------------------------------
+# ---- setup helpers (each takes the case folder)
+# -------------------------------------------------------------
 
 
 def fifo(name: str) -> Callable[[Path], None]:
@@ -315,7 +316,8 @@ def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
-# ---- the cases ----------------------------------------------------------------------------------------------
+# ---- the cases
+# ----------------------------------------------------------------------------------------------
 
 
 def _cases() -> list[Case]:
@@ -324,7 +326,8 @@ def _cases() -> list[Case]:
     return cases()
 
 
-# ---- running and judging ------------------------------------------------------------------------------------
+# ---- running and judging
+# ------------------------------------------------------------------------------------
 
 
 def _rows(db: Path) -> dict[str, int]:

@@ -1,4 +1,5 @@
-"""mrcal side of benchmarks/bench_e2e.py. Runs under the SYSTEM python (/usr/bin/python3, Debian python3-mrcal).
+"""mrcal side of benchmarks/bench_e2e.py. Runs under the SYSTEM python (/usr/bin/python3, Debian
+python3-mrcal).
 
 calibctl's venv has no mrcal, so bench_e2e.py calls this file as a subprocess:
 

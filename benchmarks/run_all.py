@@ -9,7 +9,8 @@ time, the exit code and the load average before each run is printed and written 
 ``benchmarks/out/SUMMARY.md``. The numbers are copied into BENCHMARKS.md by hand, with the machine and
 the date they were measured on.
 
-Full run: about 4 minutes (221 s on 2026-11-22) on the 2-core shared machine. ``--quick`` (about 1-2 min) uses each
+Full run: about 4 minutes (221 s on 2026-11-22) on the 2-core shared machine. ``--quick`` (about 1-2 min) uses
+each
 script's short mode: fewer repeats, fewer sessions/trials/rows.
 """
 
@@ -114,7 +115,8 @@ def run_one(bench: Bench, quick: bool) -> tuple[int, float, str]:
     elapsed = time.perf_counter() - start
     body = done.stdout if bench.markdown else f"```text\n{done.stdout}```\n"
     header = (
-        f"<!-- {bench.script} {' '.join(args)}; {dt.datetime.now().astimezone().isoformat(timespec='seconds')};"
+        f"<!-- {bench.script} {' '.join(args)}; "
+        f"{dt.datetime.now().astimezone().isoformat(timespec='seconds')};"
         f" {elapsed:.1f} s; load average before: {load} -->\n\n"
     )
     if done.returncode != 0:

@@ -3,7 +3,8 @@
     PYTHONPATH=. .venv/bin/python benchmarks/stress_pool_kill.py [--rounds 30] [--result-kb 300]
 
 Each round starts a fork-server pool of 2 workers (as ``worker_pool`` does), queues 400 tasks that each return
-``--result-kb`` of bytes (a detection result carries the half-size picture: ~300 KB at 1280x960), waits a random
+``--result-kb`` of bytes (a detection result carries the half-size picture: ~300 KB at 1280x960), waits a
+random
 0-50 ms and SIGKILLs one worker, the out-of-memory killer's stand-in. A round "settled" when every future is
 done within 10 s (BrokenProcessPool for the unfinished ones), "hung" when some never are: the pool's manager
 thread blocks reading a half-written result. Two paths, rounds taking turns:

@@ -46,7 +46,8 @@ class GateThresholds(BaseModel):
         5.0,
         gt=0,
         allow_inf_nan=False,
-        description="the decisive gate: worst projection one-sigma over the region, pixels (core.capture.projection_gate)",
+        description="the decisive gate: worst projection one-sigma over the region, pixels "
+        "(core.capture.projection_gate)",
     )
     projection_region: str = Field(
         "auto",

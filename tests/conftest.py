@@ -42,7 +42,8 @@ def _isolated_calibctl_env(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.fixture(autouse=True)
 def _no_remembered_checks() -> None:
-    """core.capture.camera_split and core.intrinsics.model_select remember their last answers by the inputs' values; a test
+    """core.capture.camera_split and core.intrinsics.model_select remember their last answers by the inputs'
+    values; a test
     that patches their constants or solver must not be handed an answer another test computed."""
     for name in ("calibctl.core.capture.camera_split", "calibctl.core.intrinsics.model_select"):
         module = sys.modules.get(name)

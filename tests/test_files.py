@@ -40,8 +40,10 @@ def test_new_files_follow_the_umask_and_overwrites_keep_their_mode(tmp_path):
 
 def test_messages_name_the_path_and_the_reason(tmp_path):
     assert str(os_error(OSError(errno.ENOSPC, "x"), "write", tmp_path / "f")) == (
-        f"cannot write {tmp_path / 'f'}: no space left on the device (free some space or write to another disk; "
-        "no partial file was kept (images a capture had already stored are removed by `calibctl prune` an hour "
+        f"cannot write {tmp_path / 'f'}: no space left on the device (free some space or write to another "
+        "disk; "
+        "no partial file was kept (images a capture had already stored are removed by `calibctl prune` an "
+        "hour "
         "later))"
     )
     unlisted = os_error(OSError(errno.ENXIO, os.strerror(errno.ENXIO), "/dev/x"), "open")
@@ -74,7 +76,8 @@ def test_read_text_refuses_a_file_that_is_not_utf8(tmp_path):
 
 
 def _special(kind: str, path, tmp_path) -> None:
-    """Put a symlink, FIFO, folder or (where the kernel lets us, in tmp_path only) a device node at ``path``."""
+    """Put a symlink, FIFO, folder or (where the kernel lets us, in tmp_path only) a device node at
+    ``path``."""
     if kind == "symlink":
         victim = tmp_path / "victim.txt"
         victim.write_text("not ours\n")

@@ -55,7 +55,8 @@ class DistortionModelInfo(Document):
 
 
 class ParameterCovariance(Document):
-    """Full covariance of the free intrinsics and distortion, board poses marginalised (core/intrinsics/covariance.py)."""
+    """Full covariance of the free intrinsics and distortion, board poses marginalised
+    (core/intrinsics/covariance.py)."""
 
     parameters: list[str] = Field(
         min_length=1,
@@ -93,7 +94,8 @@ class ViewLevelSigma(Document):
     )
     views: int = Field(ge=0, description="views (clusters) the factor was computed from")
     used: Literal["jacobian", "view-level"] = Field(
-        description="which covariance sigma and covariance are: view-level = the Jacobian one times sigma_factor^2"
+        description="which covariance sigma and covariance are: view-level = the Jacobian one times "
+        "sigma_factor^2"
     )
     rule: str = Field(description="when the view-level covariance replaces the Jacobian one")
 
@@ -109,7 +111,8 @@ class Uncertainty(Document):
     covariance: ParameterCovariance | None = Field(
         None,
         exclude_if=lambda cov: cov is None,
-        description="full covariance behind sigma; absent when refused, and in artifacts made before it was stored",
+        description="full covariance behind sigma; absent when refused, and in artifacts made before it "
+        "was stored",
     )
     view_level: ViewLevelSigma | None = Field(
         None,
@@ -210,14 +213,16 @@ class Provenance(Document):
     import_signature: str | None = Field(
         None,
         exclude_if=lambda mark: mark is None,
-        description="set on import: how the source file was signed as this store judged it ('trusted key <id>', "
+        description="set on import: how the source file was signed as this store judged it ('trusted key "
+        "<id>', "
         "'untrusted key <id>', 'unsigned'); this store's own signature of the version says nothing about the "
         "source's. Absent on versions not imported, and on imports made before it was recorded",
     )
     gauge_override: str | None = Field(
         None,
         exclude_if=lambda reason: reason is None,
-        description="--override-gauge: why a failed metric gauge was overridden, in the operator's words; absent "
+        description="--override-gauge: why a failed metric gauge was overridden, in the operator's words; "
+        "absent "
         "when nothing was overridden",
     )
 
@@ -230,7 +235,8 @@ class RecordSignature(Document):
     record_sha256: Sha256Hex = Field(description="the store's chain hash of this version's record")
     value: str = Field(
         pattern=r"^[A-Za-z0-9+/]{86}==$",
-        description="base64 Ed25519 signature of 'calibctl-record-v1\\n<record_sha256>\\n<content_sha256>' (ASCII)",
+        description="base64 Ed25519 signature of 'calibctl-record-v1\\n<record_sha256>\\n<content_sha256>' "
+        "(ASCII)",
     )
 
 
@@ -263,10 +269,14 @@ class CalibrationArtifact(Document):
         None,
         ge=0,
         exclude_if=lambda value: value is None,
-        description="what the corners deliver on this set (the noise floor), per-corner RMS, pixels: the smaller "
-        "of local quadratic fits of 4x4 corner blocks (no lens model) and the best lens model's (fisheye, rational) "
-        "own residuals corrected for its degrees of freedom, or the 4x4 fits alone when rms_px is at most 0.3 px (no "
-        "floor can make such a fit a misfit, so the lens models are not solved); the model-misfit rule compares "
+        description="what the corners deliver on this set (the noise floor), per-corner RMS, pixels: the "
+        "smaller "
+        "of local quadratic fits of 4x4 corner blocks (no lens model) and the best lens model's (fisheye, "
+        "rational) "
+        "own residuals corrected for its degrees of freedom, or the 4x4 fits alone when rms_px is at most "
+        "0.3 px (no "
+        "floor can make such a fit a misfit, so the lens models are not solved); the model-misfit rule "
+        "compares "
         "rms_px with it; absent in artifacts made before the rule",
     )
     held_out: HeldOut = Field(description="held-out validation")
@@ -284,7 +294,8 @@ class CalibrationArtifact(Document):
     metric_gauge: MetricGauge | None = Field(
         None,
         exclude_if=lambda gauge: gauge is None,
-        description="the capture session's metric gauge (--reference-distance), carried into the calibration; "
+        description="the capture session's metric gauge (--reference-distance), carried into the "
+        "calibration; "
         "absent when the session had none",
     )
     observed_region_px: list[tuple[float, float]] | None = Field(
@@ -298,7 +309,8 @@ class CalibrationArtifact(Document):
         None,
         exclude_if=lambda region: region is None,
         description="the station's declared region (gates.projection_region when not auto) at the solve, as "
-        "[u, v] pixel vertices: where the robot will look; lint judges distortion-foldover over its union with "
+        "[u, v] pixel vertices: where the robot will look; lint judges distortion-foldover over its union "
+        "with "
         "observed_region_px; absent when the station declared none, and in artifacts made before the rule",
     )
     camera_consistency: CameraConsistency | None = Field(
@@ -317,8 +329,10 @@ class CalibrationArtifact(Document):
     provenance: Provenance = Field(description="how, where, when and from what it was made")
     content_hash_algorithm: HashAlgorithm = Field(
         LEGACY_HASH,
-        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
-        "other field; sha256-python-json = artifacts written before it (absent field), hashed without this field",
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of "
+        "every "
+        "other field; sha256-python-json = artifacts written before it (absent field), hashed without this "
+        "field",
     )
     content_sha256: Sha256Hex = Field(
         description="sha256 of the canonical JSON of every other field but signature"
@@ -359,13 +373,15 @@ class CalibrationArtifact(Document):
         return f"{self.serial}@{self.version}"
 
     def computed_sha256(self) -> str:
-        """The hash the content should have under its ``content_hash_algorithm``; compare with ``content_sha256``."""
+        """The hash the content should have under its ``content_hash_algorithm``; compare with
+        ``content_sha256``."""
         if self.content_hash_algorithm == LEGACY_HASH:
             return content_hash(self, UNSIGNED_FIELDS | {"content_hash_algorithm"}, LEGACY_HASH)
         return content_hash(self, UNSIGNED_FIELDS, CURRENT_HASH)
 
     def sealed(self) -> CalibrationArtifact:
-        """A copy hashed with the current algorithm (RFC 8785), its ``content_sha256`` matching its content."""
+        """A copy hashed with the current algorithm (RFC 8785), its ``content_sha256`` matching its
+        content."""
         current = self.model_copy(update={"content_hash_algorithm": CURRENT_HASH})
         return current.model_copy(update={"content_sha256": current.computed_sha256()})
 

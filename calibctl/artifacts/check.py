@@ -1,4 +1,5 @@
-"""A re-test of a stored calibration on fresh board views (``calibctl check``): an event in the serial's history.
+"""A re-test of a stored calibration on fresh board views (``calibctl check``): an event in the serial's
+history.
 
 The calibration itself is never changed: the check records which version it tested, on what, the
 numbers and the verdict. Stored immutable (triggers of revision 0006) with the sha256 of its payload.

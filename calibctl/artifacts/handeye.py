@@ -132,12 +132,14 @@ class HandEyeResult(Document):
     transform: RigidTransform | None = Field(description="T_parent_child; null when rejected")
     refinement: Literal["motions", "poses"] | None = Field(
         None,
-        description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when rejected",
+        description="residual model of the joint refinement: per motion, or per pose (AX = YB); null when "
+        "rejected",
     )
     uncertainty: EdgeUncertainty | None = Field(description="one-sigma; null when rejected or not estimable")
     uncertainty_refused_reason: str | None = Field(None, description="why no uncertainty is reported")
     gates: list[EdgeGate] = Field(
-        description="observability gates (before the solve), the consistency and translation-scale gates (after)"
+        description="observability gates (before the solve), the consistency and translation-scale gates "
+        "(after)"
     )
     lever_arm_singular_values: tuple[float, float, float] = Field(
         description="singular values of stacked (R_A - I)"
@@ -151,7 +153,8 @@ class HandEyeResult(Document):
     content_hash_algorithm: HashAlgorithm = Field(
         LEGACY_HASH,
         exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
-        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of "
+        "every "
         "other field, this one included; absent = sha256-python-json, the results written before it",
     )
     content_sha256: Sha256Hex = Field(description="sha256 of the canonical JSON of every other field")

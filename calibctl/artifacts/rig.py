@@ -145,7 +145,8 @@ class RigMember(Document):
     lens: Literal["pinhole", "fisheye"] = Field(
         "pinhole",
         exclude_if=lambda lens: lens == "pinhole",
-        description="pinhole (OpenCV's distortion order) or fisheye (equidistant Kannala-Brandt, dist_coeffs k1..k4); "
+        description="pinhole (OpenCV's distortion order) or fisheye (equidistant Kannala-Brandt, "
+        "dist_coeffs k1..k4); "
         "written only for fisheye, so older documents and their hashes are unchanged",
     )
 
@@ -231,7 +232,8 @@ class RigCalibration(Document):
     lidar: list[LidarEdgeResult] = Field(
         default_factory=list,
         exclude_if=lambda results: not results,
-        description="evidence of every camera-LiDAR edge of this version (source 'lidar-board'), and for a version "
+        description="evidence of every camera-LiDAR edge of this version (source 'lidar-board'), and for a "
+        "version "
         "rejected by a LiDAR gate, the rejected result (it adds no edge); absent when empty, so older "
         "versions and their hashes are unchanged",
     )
@@ -246,7 +248,8 @@ class RigCalibration(Document):
     content_hash_algorithm: HashAlgorithm = Field(
         LEGACY_HASH,
         exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
-        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of every "
+        description="how content_sha256 is computed: sha256-rfc8785 = sha256 of the RFC 8785 (JCS) form of "
+        "every "
         "other field, this one included; absent = sha256-python-json, the versions written before it",
     )
     content_sha256: Sha256Hex = Field(
@@ -256,7 +259,8 @@ class RigCalibration(Document):
         None,
         exclude_if=lambda seal: seal is None,
         description="the writing store's signature of this version's record, when it had a key (absent: "
-        "unsigned); not hashed, and absent from the stored document (the store keeps it in the row's columns)",
+        "unsigned); not hashed, and absent from the stored document (the store keeps it in the row's "
+        "columns)",
     )
 
     @property

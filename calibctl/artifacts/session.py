@@ -29,7 +29,8 @@ class GateResult(Document):
     )
     passed: bool = Field(description="true when the gate is satisfied")
     value: float = Field(
-        description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the two-camera ratio, which must stay below the threshold, 0 when not checked)"
+        description="the gate's measured value (sigma5/sigma1, directions, cells, views; one_camera: the "
+        "two-camera ratio, which must stay below the threshold, 0 when not checked)"
     )
     threshold: float = Field(description="the value it had to reach")
     reason: str | None = Field(
@@ -42,7 +43,8 @@ class GateResult(Document):
     advisory: bool = Field(
         False,
         exclude_if=lambda advisory: not advisory,
-        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) did not",
+        description="guidance only: the projection gate decided the session, this proxy (tilt, coverage) "
+        "did not",
     )
 
 
@@ -78,7 +80,8 @@ class ViewCorners(Document):
 
 
 class MetricGauge(Document):
-    """The distance gauge judged at capture (seed chapter 0): the board in a surveyed fixture, seen through the
+    """The distance gauge judged at capture (seed chapter 0): the board in a surveyed fixture, seen through
+    the
     lens the session is solved with. A failed gauge stops the calibration unless overridden with a reason."""
 
     distance: DistanceCheck = Field(description="surveyed against recovered board distance and the verdict")
@@ -117,6 +120,7 @@ class CaptureSession(Document):
     metric_gauge: MetricGauge | None = Field(
         None,
         exclude_if=lambda gauge: gauge is None,
-        description="--reference-distance: the metric gauge judged at capture; absent without one (and in sessions "
+        description="--reference-distance: the metric gauge judged at capture; absent without one (and in "
+        "sessions "
         "captured before it was recorded)",
     )

@@ -84,7 +84,8 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
     if board.backing is not None:
         b = board.backing
         say(
-            f"  backing board {_mm(b.width_m)} x {_mm(b.height_m)}, pattern offset {_mm(b.pattern_offset_m[0])}, "
+            f"  backing board {_mm(b.width_m)} x {_mm(b.height_m)}, pattern offset "
+            f"{_mm(b.pattern_offset_m[0])}, "
             f"{_mm(b.pattern_offset_m[1])}"
         )
     say(f"  registered    {board.created_at.isoformat()[:19].replace('T', ' ')} UTC by {board.created_by}")

@@ -53,7 +53,8 @@ SourceOption = Annotated[
     typer.Option(
         "--source",
         show_default=False,
-        help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list file "
+        help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a "
+        "list file "
         "(.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a video "
         "file; or a camera (/dev/videoN or an index such as 0).",
     ),
@@ -63,7 +64,8 @@ MaxViewsOption = Annotated[
     typer.Option(
         "--max-views",
         show_default=False,
-        help="Video/camera: stop once the gates pass and this many views are kept (camera default: as soon as "
+        help="Video/camera: stop once the gates pass and this many views are kept (camera default: as soon "
+        "as "
         "the gates pass; a video file is otherwise read to the end).",
     ),
 ]
@@ -80,7 +82,8 @@ ImageCircleOption = Annotated[
         "--image-circle",
         metavar="CX,CY,R",
         show_default=False,
-        help="The image circle of a circular fisheye, pixels: coverage counts only the cells mostly inside it "
+        help="The image circle of a circular fisheye, pixels: coverage counts only the cells mostly inside "
+        "it "
         "(default: found in the frames, none for a pinhole or full-frame lens).",
     ),
 ]
@@ -111,7 +114,8 @@ def register(app: typer.Typer) -> None:
 def _early_settings(
     ctx: typer.Context, source: str, station: str | None, operator: str | None, jobs: int | None
 ) -> Settings:
-    """The settings, and the detection pool's fork server started when ``source`` will need it: before the caller
+    """The settings, and the detection pool's fork server started when ``source`` will need it: before the
+    caller
     imports the capture workflow (its store, models), so the server's imports overlap with those."""
     from calibctl.workflows.camera.capture_sources import start_detection_early
 
@@ -135,7 +139,8 @@ def _outcome_table(result: capture_workflow.CaptureResult) -> Table:
     table = Table(title=f"{'kept frames' if stream else 'images'} of {session.source}", title_justify="left")
     for col in ("image" if not stream else "frame", "status", "size", "corners", "tilt", "reason"):
         table.add_column(col)
-    # an accepted view whose tilt could not be read: the observability gate's detail says why (else a blank cell)
+    # an accepted view whose tilt could not be read: the observability gate's detail says why (else a blank
+    # cell)
     unread = [
         str(w)
         for g in session.gates
@@ -230,7 +235,8 @@ GaugeModelOption = Annotated[
     typer.Option(
         "--model",
         show_default=False,
-        help="With --reference-distance: the lens model the gauge solves the session with, the one `solve --model` "
+        help="With --reference-distance: the lens model the gauge solves the session with, the one `solve "
+        "--model` "
         "will use (as there; default k1k2; auto gauges through the model auto chooses for the session). A "
         "fisheye needs fisheye or auto.",
     ),
@@ -245,9 +251,12 @@ def capture(
         typer.Option(
             "--source",
             show_default=False,
-            help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working directory); a list "
-            "file (.txt/.lst/.list: one image path per line, relative to the list file's folder, # comments); a "
-            "video file; or a camera (/dev/videoN or an index such as 0). With --rig, SERIAL=SRC once per member.",
+            help="A folder of images; a quoted glob ('shots/left*.jpg', relative to the working "
+            "directory); a list "
+            "file (.txt/.lst/.list: one image path per line, relative to the list file's folder, # "
+            "comments); a "
+            "video file; or a camera (/dev/videoN or an index such as 0). With --rig, SERIAL=SRC once per "
+            "member.",
         ),
     ],
     serial: Annotated[
@@ -274,7 +283,8 @@ def capture(
     jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the session.
+    """Detect the board in a folder, glob, list file, video or camera, run the capture gates and store the
+    session.
 
     Exit 0 when every gate passes, 1 when a gate fails (the session is stored as rejected, with its
     reasons and hints) or the board distance misses --reference-distance (the metric scale is wrong),
@@ -429,7 +439,8 @@ def prune(
     ] = None,
     json_output: JsonOption = False,
 ) -> None:
-    """Delete stored images whose retention has expired. Corners, sessions and calibrations are never touched."""
+    """Delete stored images whose retention has expired. Corners, sessions and calibrations are never
+    touched."""
     from calibctl.workflows.camera import capture as capture_workflow
 
     when = capture_workflow.parse_now(now) if now is not None else None
@@ -539,9 +550,10 @@ def register_synth(app: typer.Typer) -> None:
             if wants_json(ctx, json_output):
                 emit_json(rig_result.as_json())
                 return
+            per_camera = zip(rig_result.cameras, rig_result.photos_per_camera, strict=True)
             stdout.print(
                 f"wrote {rig_result.n_frames} synchronised frames of a {rig}-camera rig "
-                f"({', '.join(f'{c}: {n} photos' for c, n in zip(rig_result.cameras, rig_result.photos_per_camera, strict=True))}) "
+                f"({', '.join(f'{c}: {n} photos' for c, n in per_camera)}) "
                 f"and {rig_result.truth_path.name} to {rig_result.out_dir}"
             )
             return

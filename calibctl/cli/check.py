@@ -63,7 +63,8 @@ def check(
             "--reference-distance",
             metavar="D+-S",
             show_default=False,
-            help="Surveyed camera-to-board-centre distance and one-sigma, metres (or mm suffix), e.g. 0.600+-0.001.",
+            help="Surveyed camera-to-board-centre distance and one-sigma, metres (or mm suffix), e.g. "
+            "0.600+-0.001.",
         ),
     ] = None,
     station: Annotated[

@@ -87,7 +87,8 @@ def verify(
         bool, typer.Option("--require-signature", help="An unsigned record is a finding.")
     ] = False,
 ) -> None:
-    """Check every hash chain, signature, version counter, activation event and stored hash. Exit 1 naming each problem."""
+    """Check every hash chain, signature, version counter, activation event and stored hash. Exit 1 naming
+    each problem."""
     from calibctl.workflows.store_admin import database
 
     report = database.verify(
@@ -107,11 +108,13 @@ def verify(
         say(f"verified {scope} in {report.url}: {verdict}")
         if not report.trusted_keys:
             say(
-                f"signatures: not checked (no signing key or trusted keys configured); {report.unsigned} unsigned record(s)"
+                f"signatures: not checked (no signing key or trusted keys configured); {report.unsigned} "
+                "unsigned record(s)"
             )
         else:
             say(
-                f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted key(s); "
+                f"signatures: {report.signatures_checked} checked against {report.trusted_keys} trusted "
+                "key(s); "
                 f"{report.unsigned} unsigned record(s)"
             )
         if report.orphan_images:
@@ -123,7 +126,8 @@ def verify(
             say(f"head {report.head}")
     if not report.ok:
         stderr.print(
-            f"Error: {len(report.problems)} problem(s) in the stored history; restore the named records from an "
+            f"Error: {len(report.problems)} problem(s) in the stored history; restore the named records "
+            "from an "
             "export or a backup",
             soft_wrap=True,
             markup=False,

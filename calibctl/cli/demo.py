@@ -67,7 +67,8 @@ def demo(
         ),
     ] = None,
 ) -> None:
-    """Render a synthetic camera, register a measured board, capture, solve, lint, show history, export ROS YAML."""
+    """Render a synthetic camera, register a measured board, capture, solve, lint, show history, export ROS
+    YAML."""
     from calibctl.workflows.camera import demo as demo_workflow
 
     st = state(ctx)

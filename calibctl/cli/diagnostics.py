@@ -1,6 +1,7 @@
 """calibctl diagnostics commands: triage, gauge, timeoffset, synth-residuals.
 
-Each command parses, calls one workflow in calibctl.workflows.diagnostics.diagnostics, renders (rich tables for
+Each command parses, calls one workflow in calibctl.workflows.diagnostics.diagnostics, renders (rich tables
+for
 people, the documented dict for --json) and exits 0 (pass), 1 (fault named, gauge alarm, time
 offset refused) or 2 (via the error boundary: the input could not support an answer).
 """
@@ -115,7 +116,8 @@ def _render_triage(r: dict) -> None:
             th = cam["thermal"]
             text = (
                 th.get("note")
-                or f"RMS slope {th['slope_px_per_k']:+.4f} px/K (t {th['t']:+.1f}), threshold {th['threshold_px_per_k']} px/K"
+                or f"RMS slope {th['slope_px_per_k']:+.4f} px/K (t {th['t']:+.1f}), threshold "
+                f"{th['threshold_px_per_k']} px/K"
             )
             stdout.print(f"thermal: {th['status']}: {text}")
         stdout.print(f"[bold]Verdict {escape(cam['camera'])}:[/bold] {escape(cam['verdict'])}")
@@ -189,7 +191,8 @@ def _render_gauge(r: dict) -> None:
     )
     stdout.print(
         f"[bold]{r['level'].upper()}[/bold]{first}: median {r['median_ratio']:.4f} "
-        f"(warn outside {r['warn_band'][0]}-{r['warn_band'][1]}, alarm outside {r['alarm_band'][0]}-{r['alarm_band'][1]})"
+        f"(warn outside {r['warn_band'][0]}-{r['warn_band'][1]}, alarm outside "
+        f"{r['alarm_band'][0]}-{r['alarm_band'][1]})"
     )
     stdout.print(escape(r["diagnosis"]))
     _plots_and_result(r)
@@ -224,7 +227,8 @@ def _render_timeoffset(r: dict) -> None:
     if r["td_s"] is not None:
         ci = r["ci95_s"]
         stdout.print(
-            f"[bold]td = {r['td_ms']:+.3f} ms[/bold] +/- {r['sigma_s'] * 1e3:.3f} ms (1 sigma, jackknife over "
+            f"[bold]td = {r['td_ms']:+.3f} ms[/bold] +/- {r['sigma_s'] * 1e3:.3f} ms (1 sigma, jackknife "
+            "over "
             f"{r['jackknife_blocks']} blocks), 95% interval [{ci[0] * 1e3:+.3f}, {ci[1] * 1e3:+.3f}] ms"
         )
         stdout.print(

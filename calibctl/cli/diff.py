@@ -41,7 +41,8 @@ def print_diff(d: CameraDiff) -> None:
         f"{d.b.status}): {d.verdict.upper()}"
     )
     say(
-        f"  {len(r.pixels_px)} samples over {d.a.image_size[0]}x{d.a.image_size[1]} ({r.grid[0]}x{r.grid[1]} grid, "
+        f"  {len(r.pixels_px)} samples over {d.a.image_size[0]}x{d.a.image_size[1]} "
+        f"({r.grid[0]}x{r.grid[1]} grid, "
         f"{r.dropped} outside a model), {rng}"
     )
     say(_field_line("as stored", r.raw))
@@ -58,13 +59,15 @@ def print_rig_diff(d: RigDiff) -> None:
     say(f"diff rig {shown(d.ref_a)} ({d.a.status}) -> {shown(d.ref_b)} ({d.b.status}): {d.verdict.upper()}")
     for p in [*d.pairs, *d.edges]:
         say(
-            f"  {shown(p.a)} -> {shown(p.b)}: rotation {p.rotation_deg:.4f} +/- {p.sigma_rotation_deg:.4f} deg, "
+            f"  {shown(p.a)} -> {shown(p.b)}: rotation {p.rotation_deg:.4f} +/- {p.sigma_rotation_deg:.4f} "
+            "deg, "
             f"translation {p.translation_mm:.3f} +/- {p.sigma_translation_mm:.3f} mm, chi2 {p.chi2:.1f} vs "
             f"{p.threshold:.1f} (6 dof, p = {p.p_value:.2g}) {'DIFFERENT' if p.significant else 'same'}"
         )
         if p.depth:
             say(
-                f"    baseline {p.baseline_a_mm:.3f} -> {p.baseline_b_mm:.3f} mm ({p.baseline_change_mm:+.3f} +/- "
+                f"    baseline {p.baseline_a_mm:.3f} -> {p.baseline_b_mm:.3f} mm "
+                f"({p.baseline_change_mm:+.3f} +/- "
                 f"{p.sigma_baseline_change_mm:.3f} mm); depth error with the old one: "
                 + ", ".join(
                     f"{z.error_m * 1e3:+.1f} +/- {z.sigma_m * 1e3:.1f} mm at {z.depth_m:g} m" for z in p.depth

@@ -26,7 +26,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     ),
     "station": (
         "calibctl station --board A17 --source-template /data/shots/{serial}",
-        "calibctl station --board A17 --source-template '/data/shots/{serial}/*.png' --serials lot-42.txt --json",
+        "calibctl station --board A17 --source-template '/data/shots/{serial}/*.png' --serials lot-42.txt "
+        "--json",
         "calibctl station status",
     ),
     "station status": (
@@ -143,7 +144,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "rig export": (
         "calibctl rig export stereo-7 --format ros -o stereo/",
         "calibctl rig export stereo-7@2 --format opencv -o stereo.yml",
-        "calibctl rig export stereo-7 --format bundle -o robot/ --frame CAM-L=front_left_camera_optical_frame",
+        "calibctl rig export stereo-7 --format bundle -o robot/ --frame "
+        "CAM-L=front_left_camera_optical_frame",
     ),
     "rig import": (
         "calibctl rig import stereo-7.json",
@@ -151,7 +153,8 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     ),
     "lidar": (
         "calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "
-        "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box 1,-2.2,-0.8,3.6,1.6,0.6",
+        "camera_info.yaml --cols 5 --rows 7 --square-mm 95 --backing-mm 610,850 --box "
+        "1,-2.2,-0.8,3.6,1.6,0.6",
     ),
     "lidar solve": (
         "calibctl lidar solve --images images/ --scans pcd/ --scan-pattern '*_full.pcd' --camera-info "

@@ -135,7 +135,8 @@ def ingest(
             )
         if len(r.refused) > MAX_SHOWN_LINES:
             stderr.print(
-                f"{shown(r.path)}: {len(r.refused) - MAX_SHOWN_LINES} more refused line(s) (--json lists all)",
+                f"{shown(r.path)}: {len(r.refused) - MAX_SHOWN_LINES} more refused line(s) (--json lists "
+                "all)",
                 soft_wrap=True,
                 markup=False,
                 highlight=False,
@@ -151,7 +152,8 @@ def _print_trends(t: Trends) -> None:
         say(f"  RMS vs temperature: {s.slope:+.4f} +- {s.sigma:.4f} px/degC (n {s.n})")
     for b in t.rms_by_temperature:
         say(
-            f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  max {b['max']:.3f} px"
+            f"    {b['from_c']:>6.0f}..{b['to_c']:<4.0f} degC  n {b['n']:<5} RMS mean {b['mean']:.3f} px  "
+            f"max {b['max']:.3f} px"
         )
     if t.check_verdicts:
         say("  checks: " + ", ".join(f"{n} {v}" for v, n in t.check_verdicts.items()))
@@ -169,8 +171,10 @@ def _print_trends(t: Trends) -> None:
     if f is not None:
         ratio = "-" if f["max_over_min"] is None else f"{f['max_over_min']:.2f}x"
         say(
-            f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
-            f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max {f['max_rms_px']:.3f} "
+            f"  fleet (last {f.get('window_days', '-')} days): this camera's mean RMS "
+            f"{f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+            f"(others' median {f['others_median_rms_px']:.3f} px, min {f['min_rms_px']:.3f}, max "
+            f"{f['max_rms_px']:.3f} "
             f"px, max/min {ratio})"
         )
     for finding in t.findings:
@@ -183,7 +187,8 @@ def trends(
     serial: Annotated[str, typer.Argument(help="A camera serial with health reports.")],
     json_output: JsonFlag = False,
 ) -> None:
-    """A serial's health as conditionals: RMS vs temperature, td drift in ppm, gauge, its RMS against the fleet's."""
+    """A serial's health as conditionals: RMS vs temperature, td drift in ppm, gauge, its RMS against the
+    fleet's."""
     from calibctl.workflows.fleet import health
 
     t = health.trends(state(ctx).settings(), serial)
@@ -218,7 +223,8 @@ def _print_rollout(r: Rollout) -> None:
     for robot, st in sorted(r.state.items()):
         why = "; ".join([*r.failing.get(robot, []), *(f"no report on {t}" for t in r.waiting.get(robot, []))])
         say(
-            f"  {shown(robot):<20} {st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}"
+            f"  {shown(robot):<20} "
+            f"{st}{' (canary)' if robot in r.start.canary else ''}{f': {shown(why)}' if why else ''}"
         )
     diffs = r.diffs
     if len(diffs) > MAX_SHOWN_DIFFS:
@@ -240,7 +246,8 @@ def _print_rollout(r: Rollout) -> None:
         say(f"  diff {shown(ref(t, d.previous))} -> @{r.targets[t]}: {d.verdict}{numbers}")
     if r.promote is not None:
         say(
-            f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the promote event"
+            f"  promoted on {len(r.promote.gate)} health input(s), recorded with their sha256 in the "
+            "promote event"
         )
 
 

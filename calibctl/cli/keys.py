@@ -33,7 +33,8 @@ keys_app = typer.Typer(
 def init(
     ctx: typer.Context, key: KeyOption = None, force: ForceFlag = False, json_output: JsonFlag = False
 ) -> None:
-    """Create an Ed25519 key pair; the private key file gets mode 0600. Records written afterwards are signed."""
+    """Create an Ed25519 key pair; the private key file gets mode 0600. Records written afterwards are
+    signed."""
     from calibctl.workflows.store_admin import keys
 
     info = keys.init_key(state(ctx).settings(), key, force=force)

@@ -64,7 +64,8 @@ def lint(
         ),
     ] = None,
 ) -> None:
-    """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance, hash."""
+    """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance,
+    hash."""
     from calibctl.core.blas_threads import blas_starts_on_one_thread
 
     with blas_starts_on_one_thread():  # lint computes on a few small arrays: no BLAS worker threads to start

@@ -158,8 +158,10 @@ def main(
 
 PYDANTIC_PLUGINS_ENV = "PYDANTIC_DISABLE_PLUGINS"
 """calibctl's models use no pydantic plugin. Unset, pydantic reads the entry points of every installed
-distribution when the first model is built (2-3 ms of each read command's start, benchmarks/results/startup.md);
-the command line sets it to ``__all__`` unless the user set it (``""`` or a list of names turns plugins back on)."""
+distribution when the first model is built (2-3 ms of each read command's start,
+benchmarks/results/startup.md);
+the command line sets it to ``__all__`` unless the user set it (``""`` or a list of names turns plugins back
+on)."""
 
 
 def run() -> None:

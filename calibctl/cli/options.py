@@ -30,8 +30,10 @@ ReferenceDistanceOption = Annotated[
         "--reference-distance",
         metavar="D+-S",
         show_default=False,
-        help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm suffix), "
-        "e.g. 0.450+-0.0005; needs --reference-source. Judged through the lens --model solves with (auto: the "
+        help="Surveyed camera-to-board-centre distance of a fixture and its one-sigma, metres (or mm "
+        "suffix), "
+        "e.g. 0.450+-0.0005; needs --reference-source. Judged through the lens --model solves with (auto: "
+        "the "
         "model auto chooses for the session; k1k2 without --model).",
     ),
 ]

@@ -1,7 +1,8 @@
 """Output that needs no rich: JSON, stored text made safe to print, and lint's finding lines.
 
 ``calibctl lint FILE`` and ``export`` print through here, so they start without importing rich (about
-20 ms of a 0.3 s start, benchmarks/results/startup.md); ``cli.render`` re-exports these for every other command.
+20 ms of a 0.3 s start, benchmarks/results/startup.md); ``cli.render`` re-exports these for every other
+command.
 """
 
 from __future__ import annotations
@@ -72,7 +73,8 @@ def finding_lines(
     text: Callable[[object], str] = plain,
 ) -> list[str]:
     """The lines that show lint findings under a calibration ("  lint error rule: message", "fix: ...").
-    ``paint(colour, word)`` colours the severity; ``text`` makes stored text printable (rich escapes markup too)."""
+    ``paint(colour, word)`` colours the severity; ``text`` makes stored text printable (rich escapes markup
+    too)."""
     if not findings:
         return [f"  lint: {paint('green', 'clean')}"]
     lines = []

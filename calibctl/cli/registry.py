@@ -2,7 +2,8 @@
 
 typer makes every command of a group when it makes the group, reading each signature and its type
 hints (62-66 ms of CPU for calibctl's 37, benchmarks/results/startup.md), and the CLI imported every command
-module to register them first. The root group looks a command up here instead; ``--help``, shell completion and a mistyped name still see every command.
+module to register them first. The root group looks a command up here instead; ``--help``, shell completion
+and a mistyped name still see every command.
 The commands made, their help and their order are typer's own.
 """
 

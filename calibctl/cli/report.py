@@ -34,7 +34,8 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     status_style = "green" if art.status == "accepted" else "red"
     stdout.print(
         f"[bold]{shown(art.ref)}[/bold]{marker}  [{status_style}]{art.status}[/{status_style}]  "
-        f"{art.image_size[0]}x{art.image_size[1]}  model {shown(art.model.name)}  board {shown(art.board.ref)} "
+        f"{art.image_size[0]}x{art.image_size[1]}  model {shown(art.model.name)}  board "
+        f"{shown(art.board.ref)} "
         f"({art.board.measurement.square_size_m * 1000:.3f} mm, {art.board.measurement.status})"
     )
     sigma = art.stdev.sigma
@@ -51,8 +52,10 @@ def print_calibration(art: CalibrationArtifact, active: bool | None = None) -> N
     vl = art.stdev.view_level
     if vl is not None and vl.used == "view-level":
         stdout.print(
-            f"  [yellow]sigma x {vl.sigma_factor:.2f}: the {vl.views} views scatter more than their corner noise "
-            "explains (per-view error: board warp, motion, sync), so the view-level sigma is reported[/yellow]"
+            f"  [yellow]sigma x {vl.sigma_factor:.2f}: the {vl.views} views scatter more than their corner "
+            "noise "
+            "explains (per-view error: board warp, motion, sync), so the view-level sigma is "
+            "reported[/yellow]"
         )
     ho = art.held_out
     stdout.print(

@@ -224,7 +224,8 @@ def add(
     ] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Register a rig: its member cameras (each calibrated already), the root of its tree, design baselines."""
+    """Register a rig: its member cameras (each calibrated already), the root of its tree, design
+    baselines."""
     from calibctl.workflows.rig import rigs
 
     rig = rigs.add_rig(state(ctx).settings(), name, camera, root, design or [], frame or [])
@@ -330,12 +331,14 @@ def rig_gauge(reference_distance: str | None, reference_source: str | None) -> A
 
 def print_rig_calibration(cal: Any, active: bool) -> None:
     say(
-        f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root {cal.root}  "
+        f"rig {cal.rig}@{cal.version} ({'active' if active else 'not active'})  {cal.status}  root "
+        f"{cal.root}  "
         f"{cal.solver}"
     )
     for m in cal.members:
         say(
-            f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx {m.camera_matrix[0][0]:.2f}"
+            f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx "
+            f"{m.camera_matrix[0][0]:.2f}"
             f"{' (refined)' if m.refined else ''}: RMS fit {cal.fit_rms_px[m.serial]:.3f} px / held-out "
             f"{cal.held_out_rms_px[m.serial]:.3f} px"
         )
@@ -373,7 +376,8 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
         say(
             f"  lidar {lr.parent_frame} -> {lr.child_frame}: {lr.status}"
             + (f" (gates failed: {', '.join(failed)}; no edge)" if failed else "")
-            + f", {sum(r.outcome == 'accepted' for r in lr.scans_outcomes)} of {len(lr.scans_outcomes)} scans accepted"
+            + f", {sum(r.outcome == 'accepted' for r in lr.scans_outcomes)} of {len(lr.scans_outcomes)} "
+            "scans accepted"
             + (
                 f", point-to-plane RMS {m.plane_rms_mm:.1f} mm (held-out {m.held_out_plane_rms_mm:.1f} mm)"
                 if m is not None and m.held_out_plane_rms_mm is not None
@@ -407,7 +411,8 @@ def solve(
     ] = True,
     json_output: JsonFlag = False,
 ) -> None:
-    """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not solve."""
+    """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not
+    solve."""
     from calibctl.workflows.rig import rigs
 
     out = rigs.solve_rig_stored(state(ctx).settings(), name, session, refine_intrinsics, activate=activate)
@@ -662,7 +667,8 @@ def import_(
         typer.Option(
             "--activate/--no-activate",
             show_default=False,
-            help="Make it active (default: when this store accepts it, every member is active here and, in a store "
+            help="Make it active (default: when this store accepts it, every member is active here and, in "
+            "a store "
             "with keys, a trusted key signed it; --activate overrides the signature rule, recorded).",
         ),
     ] = None,
@@ -682,7 +688,8 @@ def import_(
     ] = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Bring a rig version exported by another store into this one: its hash (edited: exit 1) and signature are
+    """Bring a rig version exported by another store into this one: its hash (edited: exit 1) and signature
+    are
     checked, its members must be in this store (the same versions, or imports of them: `calibctl import` them
     first), and its lint, verdict and version are this store's. A rejected or stale import is never active."""
     from calibctl.workflows.rig import rig_import
@@ -710,7 +717,8 @@ def import_(
     else:
         again = "already stored as" if out.already_imported else "imported as"
         say(
-            f"{again} {cal.ref} ({cal.status} by this store's lint, {'active' if out.active else 'not active'}; "
+            f"{again} {cal.ref} ({cal.status} by this store's lint, "
+            f"{'active' if out.active else 'not active'}; "
             f"source {out.source_ref} was {out.source_status}; sha256 {cal.content_sha256[:12]})"
         )
         if not out.already_imported:

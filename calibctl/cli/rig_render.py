@@ -13,7 +13,8 @@ def render_run(doc: dict[str, Any]) -> None:
     """Human report of ``rig_folders.run_json``."""
     unmatched = doc["unmatched"]
     say(
-        f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched photo(s)"
+        f"rig {' '.join(doc['cameras'])}: {doc['frames']} synchronised frames, {len(unmatched)} unmatched "
+        "photo(s)"
     )
     if "timing" in doc:
         render_timing(doc["timing"])
@@ -51,7 +52,8 @@ def render_timing(timing: dict[str, Any]) -> None:
 
 
 def render_unmatched(rows: list[tuple[str, str, str]]) -> None:
-    """(camera, file, reason) of the photos no frame took, the first MAX_UNMATCHED_ROWS, then how many more."""
+    """(camera, file, reason) of the photos no frame took, the first MAX_UNMATCHED_ROWS, then how many
+    more."""
     for camera, file, reason in rows[:MAX_UNMATCHED_ROWS]:
         say(f"  unmatched {camera} {file}: {reason}")
     if len(rows) > MAX_UNMATCHED_ROWS:
@@ -63,13 +65,15 @@ def render_solution(doc: dict[str, Any]) -> None:
     say(f"tree from {doc['root']} ({doc['solver']}):")
     for e in doc["tree"]:
         say(
-            f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- {e['sigma_translation_mm']:.3f} mm, "
+            f"  T_{e['parent']}_{e['child']}: |t| = {e['translation_mm']:.3f} +/- "
+            f"{e['sigma_translation_mm']:.3f} mm, "
             f"rotation {e['rotation_deg']:.4f} +/- {e['sigma_rotation_deg']:.4f} deg"
         )
     held = doc.get("held_out", {})
     for name, rms in doc["fit_rms_px"].items():
         say(
-            f"  {name}: RMS fit {rms:.3f} px / held-out {held.get('rms_px', {}).get(name, float('nan')):.3f} px "
+            f"  {name}: RMS fit {rms:.3f} px / held-out "
+            f"{held.get('rms_px', {}).get(name, float('nan')):.3f} px "
             f"({held.get('folds', 0)}-fold)"
         )
     for p in doc["pairs"]:
@@ -85,8 +89,10 @@ def render_solution(doc: dict[str, Any]) -> None:
         say(line)
     for lc in doc["loops"]:
         say(
-            f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma {lc['sigma_rotation_deg']:.4f}), "
-            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis {lc['mahalanobis']:.2f}"
+            f"  loop {'-'.join(lc['cycle'])}: {lc['rotation_deg']:.4f} deg (sigma "
+            f"{lc['sigma_rotation_deg']:.4f}), "
+            f"{lc['translation_mm']:.3f} mm (sigma {lc['sigma_translation_mm']:.3f}), Mahalanobis "
+            f"{lc['mahalanobis']:.2f}"
         )
 
 

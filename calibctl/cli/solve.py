@@ -22,7 +22,8 @@ ModelOption = Annotated[
     typer.Option(
         "--model",
         help="k1k2 (default: FIX_K3|ZERO_TANGENT_DIST|FIX_ASPECT_RATIO), k1k2k3, k1k2p1p2k3, rational, "
-        "opencv-default (flags 0), fisheye (equidistant k1..k4, cv2.fisheye / ROS equidistant; self-initialising), "
+        "opencv-default (flags 0), fisheye (equidistant k1..k4, cv2.fisheye / ROS equidistant; "
+        "self-initialising), "
         "or auto (enable a coefficient, or switch to fisheye, only if fit RMS improves >= 10% "
         "and the held-out outer ring does not worsen).",
     ),
@@ -115,7 +116,8 @@ def solve(
             "--image-circle",
             metavar="CX,CY,R",
             show_default=False,
-            help="The image circle of a circular fisheye, pixels: recorded with the calibration, the fold-over check "
+            help="The image circle of a circular fisheye, pixels: recorded with the calibration, the "
+            "fold-over check "
             "stops at it (default: the one the capture found or was given).",
         ),
     ] = None,
@@ -131,7 +133,8 @@ def solve(
             raise UsageError(
                 "--report is not available with --rig yet", "run `calibctl solve --rig` without it"
             )
-        # a rig solve keeps its members' calibrations: what shapes one camera's solve would be dropped silently
+        # a rig solve keeps its members' calibrations: what shapes one camera's solve would be dropped
+        # silently
         one_camera = {
             "--serial": serial,
             "--model": model if _given(ctx, "model") else None,

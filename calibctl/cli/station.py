@@ -76,7 +76,8 @@ def _say(result: UnitResult, as_json: bool) -> None:
         else f", {result.after_last_image_s:.2f} s after the last picture"
     )
     print(
-        f"{result.serial}: {result.status.upper()} - {result.message}{numbers} ({result.unit_s:.2f} s{after})",
+        f"{result.serial}: {result.status.upper()} - {result.message}{numbers} ({result.unit_s:.2f} "
+        f"s{after})",
         flush=True,
     )
     if result.hint and result.status not in ("pass",):
@@ -95,7 +96,8 @@ def station(
         typer.Option(
             "--source-template",
             show_default=False,
-            help="Where each unit's pictures arrive, with {serial}: a folder (DIR/{serial}), a quoted glob or a list "
+            help="Where each unit's pictures arrive, with {serial}: a folder (DIR/{serial}), a quoted glob "
+            "or a list "
             "file (this or --camera).",
         ),
     ] = None,
@@ -104,7 +106,8 @@ def station(
         typer.Option(
             "--camera",
             show_default=False,
-            help="Capture each unit live from this camera (/dev/videoN or an index such as 0): the unit's own camera, "
+            help="Capture each unit live from this camera (/dev/videoN or an index such as 0): the unit's "
+            "own camera, "
             "plugged into the station (this or --source-template).",
         ),
     ] = None,
@@ -113,7 +116,8 @@ def station(
         typer.Option(
             "--max-views",
             show_default=False,
-            help="--camera: a unit's capture stops once the gates pass and this many views are kept (default: as soon "
+            help="--camera: a unit's capture stops once the gates pass and this many views are kept "
+            "(default: as soon "
             "as the gates pass).",
         ),
     ] = None,
@@ -185,17 +189,24 @@ def station(
         ),
     ] = None,
 ) -> None:
-    """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial} (or the unit's camera,
+    """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial} (or the unit's
+    camera,
     live, with --camera), solve, store, print the verdict, wait for the next.
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
-    "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are detected it
-    cancels that unit (nothing stored) and the station waits for the next serial. With --watch the station waits,
-    after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands (complete: renamed into
+    "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are
+    detected it
+    cancels that unit (nothing stored) and the station waits for the next serial. With --watch the station
+    waits,
+    after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands (complete: renamed
+    into
     place, or its size unchanged for --settle-s); the unit is captured when --views pictures are there or the
-    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With --camera
-    each unit is captured live (the live view on stderr says what the gates still need) until the gates pass, and
-    stored whole once its stream is over; a camera that cannot be opened or is unplugged mid-unit is an error line,
+    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With
+    --camera
+    each unit is captured live (the live view on stderr says what the gates still need) until the gates pass,
+    and
+    stored whole once its stream is over; a camera that cannot be opened or is unplugged mid-unit is an error
+    line,
     nothing stored. With the store unreachable each
     unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
     "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
@@ -300,7 +311,8 @@ def _spool_of(
     operator: str | None = None,
     sign: bool = True,
 ) -> Iterator[tuple[Settings, Spool]]:
-    """The settings and this station's existing spool (exit 2 when it is missing, another station's or store's)."""
+    """The settings and this station's existing spool (exit 2 when it is missing, another station's or
+    store's)."""
     from calibctl.workflows.station import sync as sync_workflow
 
     settings = state(ctx).settings(station=station_id, operator=operator)
@@ -361,9 +373,11 @@ def sync_command(
     station_id: StationOption = None,
     json_output: JsonFlag = False,
 ) -> None:
-    """Store the spool's queued units in the store, in the order they were calibrated, each getting the serial's
+    """Store the spool's queued units in the store, in the order they were calibrated, each getting the
+    serial's
     next version there (signed with the station's key when one is configured). Run again after a kill: nothing
-    is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones after it
+    is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones
+    after it
     stay queued); 2 when the store is still away, another process is syncing, or the spool is another
     station's or store's."""
     from calibctl.workflows.station.sync import sync

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 @dataclass(frozen=True)
 class GateResult:
-    """One gate. ``reason`` is a machine-readable code when it failed, ``hint`` tells the operator what to do."""
+    """One gate. ``reason`` is a machine-readable code when it failed, ``hint`` tells the operator what to
+    do."""
 
     gate: str
     passed: bool

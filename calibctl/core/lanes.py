@@ -55,7 +55,8 @@ class Lanes:
         return Deferred(None if self._pool is None else self._pool.submit(work), work)
 
     def map(self, work: Callable[[T], R], items: Sequence[T]) -> list[R]:
-        """[work(item) for item in items], the items spread over the lanes, the first error in order raised."""
+        """[work(item) for item in items], the items spread over the lanes, the first error in order
+        raised."""
         if self._pool is None or len(items) < 2:
             return [work(item) for item in items]
         # the caller takes the first item itself; the others are offered to the workers

@@ -1,4 +1,5 @@
-"""One Levenberg-Marquardt solver for calibctl's own least-squares problems: dense, or Schur over per-view blocks.
+"""One Levenberg-Marquardt solver for calibctl's own least-squares problems: dense, or Schur over per-view
+blocks.
 
 It lives at the top of core, beside ``gate`` and ``blas_threads``, because intrinsics and extrinsics both
 solve with it and neither room may import the other.
@@ -99,7 +100,8 @@ class SchurSystem:
 
     @classmethod
     def from_jacobians(cls, blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> SchurSystem:
-        """From per block (J_shared (m_v, p), J_block (m_v, k), r (m_v,)): block v's rows touch only block v."""
+        """From per block (J_shared (m_v, p), J_block (m_v, k), r (m_v,)): block v's rows touch only block
+        v."""
         J_s = [b[0] for b in blocks]
         J_b = [b[1] for b in blocks]
         rs = [b[2] for b in blocks]
@@ -195,7 +197,8 @@ def solve_lm(
     """Minimise r^T r from ``start`` (module docstring).
 
     Args:
-        evaluate: params -> the normal equations there (``DenseSystem`` or ``SchurSystem``, one form per problem).
+        evaluate: params -> the normal equations there (``DenseSystem`` or ``SchurSystem``, one form per
+        problem).
         start: the initial parameters, any type ``retract`` understands.
         retract: (params, delta) -> params moved by delta (flat, the system's layout; e.g. params + delta).
         damping: the schedule. max_iterations: steps tried at most.
@@ -205,7 +208,8 @@ def solve_lm(
         label, hint: name the problem in the error.
 
     Raises:
-        NumericalError: the residuals or their derivatives are not finite at ``start`` (nothing to descend from).
+        NumericalError: the residuals or their derivatives are not finite at ``start`` (nothing to descend
+        from).
     """
     params, system = start, evaluate(start)
     if not system.finite():

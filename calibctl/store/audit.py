@@ -197,7 +197,8 @@ def _walk(
     trusted: TrustedKeys,
     require: bool,
 ) -> None:
-    """Check one chained table's rows written after ``since`` (``_after``), stream by stream, in chain order."""
+    """Check one chained table's rows written after ``since`` (``_after``), stream by stream, in chain
+    order."""
     t = stream.table
     order = [t.c[k] for k in stream.key] + [t.c.chain_seq, t.c.id]
     heads = audit.heads.setdefault(stream.name, dict(start))
@@ -286,7 +287,8 @@ def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
 
 
 def _check_events(s: Session, audit: Audit, since: int | None, stream: str = "event") -> None:
-    """Every activation event (camera, or with ``stream="rig_event"`` rig) written after ``since`` (``_after``)
+    """Every activation event (camera, or with ``stream="rig_event"`` rig) written after ``since``
+    (``_after``)
     names a stored, accepted version and the version that was active before it."""
     events, versions, key = (
         (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")

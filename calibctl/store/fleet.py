@@ -30,7 +30,8 @@ from calibctl.store.runner import Runner
 @dataclass(frozen=True)
 class RigActivationStep:
     """A rig version a fleet step makes active in the same transaction (a promote, or a rollback restoring the
-    version a promote replaced): compare-and-set on ``expected_active``, the active version the step decided on."""
+    version a promote replaced): compare-and-set on ``expected_active``, the active version the step decided
+    on."""
 
     rig: str
     version: int
@@ -58,7 +59,8 @@ class FleetStore:
     def add_fleet_event(self, event: FleetEvent) -> int:
         """Append ``event`` to the fleet's log; its position (1, 2, ...). Refused, nothing written: a second
         registration of a robot (AlreadyExistsError); an assignment to an unknown robot, of a serial the robot
-        does not carry (UsageError), or of an unknown serial or version (NotFoundError); a rejected version."""
+        does not carry (UsageError), or of an unknown serial or version (NotFoundError); a rejected
+        version."""
         return self.append_fleet_events([event])
 
     def append_fleet_events(
@@ -67,8 +69,10 @@ class FleetStore:
         after: int | None = None,
         rig_steps: Sequence[RigActivationStep] = (),
     ) -> int:
-        """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the log's
-        length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole batch
+        """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the
+        log's
+        length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole
+        batch
         (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
         ``rig_steps`` are appended to the rigs' activation log in the same transaction (a rig whose active
         version moved since the caller read it refuses the whole batch)."""
@@ -77,7 +81,8 @@ class FleetStore:
             current = counters.peek(s, "chain", "fleet") or 0
             if after is not None and current != after:
                 raise StaleActiveVersionError(
-                    f"the fleet log changed underneath this step ({current - after} event(s) since it was read); "
+                    f"the fleet log changed underneath this step ({current - after} event(s) since it was "
+                    "read); "
                     "nothing written",
                     "run the command again",
                 )
@@ -127,7 +132,8 @@ class FleetStore:
         return self._runner.run(work)
 
     def fleet(self) -> Loaded:
-        """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the events
+        """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the
+        events
         after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
 
         def work(s: Session) -> Loaded:

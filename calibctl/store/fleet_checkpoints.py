@@ -1,18 +1,22 @@
 """Fleet checkpoints (revision 0015_checkpoints_fleet_ckpt): the fleet log replayed up to event N, so a read
 replays only the events after the newest one instead of the whole log.
 
-Derived data, never the source of truth. A checkpoint is used only when event N's chain hash is still the one it
+Derived data, never the source of truth. A checkpoint is used only when event N's chain hash is still the one
+it
 recorded, its state still matches its sha256 and is of this calibctl's format; otherwise the next older one is
 tried, then the whole log. ``db verify`` re-derives every checkpoint from the log (``problems``).
 
 Written by the fleet writer (``append_fleet_events``), in the same transaction as the events, once the log is
 ``EVERY`` events past the newest checkpoint: the writer holds the fleet's lock, so the state is of exactly the
 log it wrote, and read commands (``fleet status`` on a read-only copy of the store included) never write.
-The cost, a replay of at most ``EVERY`` events from the previous checkpoint, is paid once per ``EVERY`` events;
+The cost, a replay of at most ``EVERY`` events from the previous checkpoint, is paid once per ``EVERY``
+events;
 a store migrated with a long log gets its first one at the next fleet write.
 
-Signed: with a station key the writer signs each checkpoint (its position, event N's chain hash and the state's
-sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so rewriting a
+Signed: with a station key the writer signs each checkpoint (its position, event N's chain hash and the
+state's
+sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so
+rewriting a
 checkpoint together with its sha256 is no longer a way to change what ``fleet status`` serves (``db verify``
 replays the log and catches it either way). A store without keys checks the chain hash and the sha256 only.
 """
@@ -37,16 +41,19 @@ from calibctl.store.fleet_ledger import STATE_FORMAT, Fleet, from_state, rollout
 from calibctl.store.models import CounterRow, FleetCheckpointRow, FleetEventRow
 
 EVERY = 1000
-"""Events between checkpoints: a read replays at most this many past the newest (20-80 ms of CPU for 1 000 events,
+"""Events between checkpoints: a read replays at most this many past the newest (20-80 ms of CPU for 1 000
+events,
 benchmarks/bench_fleet_checkpoint.py); writing one costs the writer a replay of as many, once."""
 
 KEEP = 3
-"""Checkpoints kept (newest first): a read falls back to an older one when the newest does not match the log."""
+"""Checkpoints kept (newest first): a read falls back to an older one when the newest does not match the
+log."""
 
 
 @dataclass
 class Loaded:
-    """The log replayed (not settled): from the checkpoint at ``since`` (0: none), then the events after it."""
+    """The log replayed (not settled): from the checkpoint at ``since`` (0: none), then the events after
+    it."""
 
     fleet: Fleet
     since: int = 0
@@ -66,7 +73,8 @@ def _state_text(fleet: Fleet) -> str:
 def _usable(
     s: Session, row: FleetCheckpointRow, *, rollouts: bool, trusted: TrustedKeys | None
 ) -> Fleet | str:
-    """The checkpoint's fleet, or why it cannot be used (``rollouts``: with its rollouts' events read from the log;
+    """The checkpoint's fleet, or why it cannot be used (``rollouts``: with its rollouts' events read from the
+    log;
     else stand-ins, see ``from_state``)."""
     at = f"fleet checkpoint at event {row.position}"
     if row.format != STATE_FORMAT:
@@ -105,7 +113,8 @@ def _usable(
 
 
 def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = None) -> Loaded:
-    """The log replayed from the newest usable checkpoint (an undecodable event raises IntegrityError, as a full
+    """The log replayed from the newest usable checkpoint (an undecodable event raises IntegrityError, as a
+    full
     replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state`` only).
     ``trusted``: the store's keys; with them only a checkpoint signed by one of them is used."""
     loaded = Loaded(Fleet())
@@ -179,8 +188,10 @@ def _served_event(s: Session, row: FleetEventRow, trusted: TrustedKeys | None) -
 
 
 def write_if_due(s: Session, length: int, signer: Signer | None = None) -> None:
-    """After the fleet writer appended up to event ``length`` (it holds the fleet's lock): a checkpoint there when
-    the log is ``EVERY`` events past the newest one, signed with ``signer`` when there is one; all but the newest
+    """After the fleet writer appended up to event ``length`` (it holds the fleet's lock): a checkpoint there
+    when
+    the log is ``EVERY`` events past the newest one, signed with ``signer`` when there is one; all but the
+    newest
     ``KEEP`` are deleted."""
     newest = s.scalar(select(func.max(FleetCheckpointRow.position))) or 0
     if length - newest < EVERY:

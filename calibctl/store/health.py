@@ -56,7 +56,8 @@ class HealthRow:
 
 @dataclass(frozen=True)
 class GateReport:
-    """A stored report a rollout's health gate reads: who sent it about what, its verdict numbers, its hash."""
+    """A stored report a rollout's health gate reads: who sent it about what, its verdict numbers, its
+    hash."""
 
     source_id: str
     payload_sha256: str
@@ -73,7 +74,8 @@ GATE_KINDS = ("check", "gauge", "triage")
 
 
 def gate_problems(s: Session) -> list[str]:
-    """``db verify``: every report a promote's gate decided on (recorded in the chained promote event) is still
+    """``db verify``: every report a promote's gate decided on (recorded in the chained promote event) is
+    still
     stored with the sha256 the promote recorded, and its payload still hashes to it."""
     out = []
     for row in s.scalars(
@@ -102,7 +104,8 @@ def gate_problems(s: Session) -> list[str]:
 
 
 def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, str]]:
-    """(index in ``reports``, why) for each report that refers to something wrong; empty when all may be stored."""
+    """(index in ``reports``, why) for each report that refers to something wrong; empty when all may be
+    stored."""
     carried: dict[str, set[str] | None] = {}
     for robot in {r.robot for r in reports}:
         registered = _registration(s, robot)
@@ -135,7 +138,8 @@ def _problems(s: Session, reports: Sequence[HealthReport]) -> list[tuple[int, st
             out.append(
                 (
                     i,
-                    f"unknown serial {r.serial}: robot {r.robot} carries {', '.join(sorted(serials)) or 'none'}",
+                    f"unknown serial {r.serial}: robot {r.robot} carries "
+                    f"{', '.join(sorted(serials)) or 'none'}",
                 )
             )
         elif r.source_id in stored:
@@ -241,7 +245,8 @@ class HealthStore:
                     }
                 )
             _sealed(s, rows, self._runner.signer)
-            # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk path,
+            # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk
+            # path,
             # which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
             s.connection().execute(insert(HEALTH_TABLE), rows)
             return []
@@ -263,7 +268,8 @@ class HealthStore:
         )
 
     def fleet_check_rms(self, since: datetime | None = None) -> dict[str, tuple[float, int]]:
-        """Serial -> (mean check RMS px, number of check reports), over every serial with check reports measured at
+        """Serial -> (mean check RMS px, number of check reports), over every serial with check reports
+        measured at
         or after ``since`` (index kind, at, serial, rms_px: the window's rows only, not the whole table)."""
         stmt = (
             select(HealthReportRow.serial, func.avg(HealthReportRow.rms_px), func.count())
@@ -277,7 +283,8 @@ class HealthStore:
     def gate_reports(
         self, robots: Sequence[str], serials: Sequence[str], since: datetime
     ) -> list[GateReport]:
-        """Reports with a verdict (check, gauge, triage) from ``robots`` on ``serials`` (serials or rigs) measured
+        """Reports with a verdict (check, gauge, triage) from ``robots`` on ``serials`` (serials or rigs)
+        measured
         at or after ``since``, oldest first: a rollout's health gate inputs."""
         cols = [
             HealthReportRow.source_id,

@@ -136,7 +136,8 @@ class ImageStore:
         self.image_dir = image_dir
 
     def put_image(self, data: bytes, *, retention_days: int) -> str:
-        """Keep ``data`` for ``retention_days`` (an image stored again keeps the later expiry); returns its sha256."""
+        """Keep ``data`` for ``retention_days`` (an image stored again keeps the later expiry); returns its
+        sha256."""
         return self.put_images([data], retention_days=retention_days)[0]
 
     def put_images(self, images: Sequence[bytes], *, retention_days: int) -> list[str]:

@@ -102,7 +102,8 @@ def _signature_problem(
     label = spec.label(values)
     if values.get("signature") or values.get("key_id"):
         if not trusted.keys:
-            return None  # nothing to check it against (as db verify: its report says signatures were not checked)
+            # nothing to check it against (as db verify: its report says signatures were not checked)
+            return None
         subject = values[spec.subject] if spec.subject else None
         problem = trusted.check(
             values.get("key_id"), values.get("signature"), record_message(str(values["chain_hash"]), subject)
@@ -118,7 +119,8 @@ def _signature_problem(
 
 
 def problem(stream: str, row: Any, query: Query, trusted: TrustedKeys) -> str | None:
-    """None when ``db verify`` with ``trusted`` would not flag the record ``row`` (an ORM row or a plain row of
+    """None when ``db verify`` with ``trusted`` would not flag the record ``row`` (an ORM row or a plain row
+    of
     every column) for its hash, link or signature; else what it would say."""
     spec = SPECS[stream]
     values = row_values(row)

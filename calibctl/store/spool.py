@@ -95,7 +95,8 @@ _FULL_HINT = (
 
 
 def store_identity(db_url: str) -> str:
-    """The central store a spool belongs to: its URL without the password, a SQLite file by its absolute path."""
+    """The central store a spool belongs to: its URL without the password, a SQLite file by its absolute
+    path."""
     url = parse_url(db_url)
     path = sqlite_path(url)
     if path is not None:
@@ -216,7 +217,8 @@ class Spool:
             )
 
     def _upgrade(self, meta: dict[str, str]) -> None:
-        """Format 1 -> 2: add the set-aside and signature columns (after the station and store were checked, so
+        """Format 1 -> 2: add the set-aside and signature columns (after the station and store were checked,
+        so
         another station's spool is left as it is)."""
         if meta.get("format") == SPOOL_FORMAT:
             return
@@ -287,7 +289,8 @@ class Spool:
                 ),
             )
             cursor = self._conn.execute(
-                "INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, images, "
+                "INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, "
+                "images, "
                 "record_sha256) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     session.serial,
@@ -320,7 +323,8 @@ class Spool:
             )
 
     def set_aside(self, seq: int, *, reason: str, operator: str) -> SpoolRecord:
-        """Set a queued record aside: kept with its images, never synced (call under ``sync_lock``, so no sync is
+        """Set a queued record aside: kept with its images, never synced (call under ``sync_lock``, so no sync
+        is
         storing it meanwhile). Refused (exit 2) for an unknown, a synced or an already set-aside record."""
         with _tx(self._conn, self.path):
             if seq in self.missing():
@@ -442,7 +446,8 @@ class Spool:
         }
 
     def records(self, *, pending_only: bool = False, set_aside_only: bool = False) -> list[SpoolRecord]:
-        """Every record, oldest first; ``pending_only``: those a sync stores (neither synced nor set aside)."""
+        """Every record, oldest first; ``pending_only``: those a sync stores (neither synced nor set
+        aside)."""
         where = (
             " WHERE synced_at IS NULL AND set_aside_at IS NULL"
             if pending_only
@@ -496,7 +501,8 @@ class Spool:
         )
         if found == "is not signed":
             return (
-                "is not signed, and this station signs its spool: it was queued by a station without the key, or "
+                "is not signed, and this station signs its spool: it was queued by a station without the "
+                "key, or "
                 "rewritten with its signature taken off"
             )
         if found is not None and "does not match" in found:
@@ -513,7 +519,8 @@ class Spool:
         problem = self.problem(record)
         if problem is not None:
             raise IntegrityError(
-                f"spool record {record.seq} ({record.serial}, session {record.session_id}) {problem}; it and the "
+                f"spool record {record.seq} ({record.serial}, session {record.session_id}) {problem}; it "
+                "and the "
                 f"records after it were not synced",
                 self._restore_hint(record),
             )
@@ -589,7 +596,8 @@ class Spool:
 
     @contextmanager
     def sync_lock(self, nothing_done: str = "synced nothing") -> Iterator[None]:
-        """Hold the spool's sync lock; refused at once (DatabaseError, exit 2) while another process holds it."""
+        """Hold the spool's sync lock; refused at once (DatabaseError, exit 2) while another process holds
+        it."""
         lock_path = self.path.with_name(self.path.name + ".sync-lock")
         with file_errors("open the spool's lock file", lock_path):
             fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -635,12 +643,14 @@ def _record_of(r: tuple[Any, ...]) -> SpoolRecord:
 
 
 def _seal_message(seq: int, record_sha256: str) -> bytes:
-    """What a record's signature is taken over: its number (the sync order) and its sha256 (what it queues)."""
+    """What a record's signature is taken over: its number (the sync order) and its sha256 (what it
+    queues)."""
     return f"calibctl-spool-record-v1\n{seq}\n{record_sha256}".encode("ascii")
 
 
 def default_spool_path(station_file: str | None, db_url: str) -> Path:
-    """``calibctl-spool.sqlite`` in the station's folder: the station file's, else the SQLite store's, else ``.``."""
+    """``calibctl-spool.sqlite`` in the station's folder: the station file's, else the SQLite store's, else
+    ``.``."""
     if station_file:
         return Path(station_file).resolve().parent / "calibctl-spool.sqlite"
     path = sqlite_path(parse_url(db_url))

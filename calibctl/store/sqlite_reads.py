@@ -130,7 +130,8 @@ class SqliteReader:
         return [
             codec.decode_event(r)  # type: ignore[arg-type]
             for r in self._rows(
-                "SELECT id, serial, version, previous_version, kind, actor, station, at, reason FROM activation_events "
+                "SELECT id, serial, version, previous_version, kind, actor, station, at, reason FROM "
+                "activation_events "
                 "WHERE serial = ? ORDER BY id",
                 serial,
             )
@@ -185,7 +186,8 @@ def _open(url: str, trusted: TrustedKeys | None = None) -> Iterator[SqliteReader
     ):
         raise Fallback  # another backend or URL form, no file, a lock timeout to apply: Store does it
     # mode=rw never creates the file; as the last connection of a WAL store closing, it removes the -wal and
-    # -shm files as the ORM's connection does (mode=ro would leave them). query_only: this connection never writes.
+    # -shm files as the ORM's connection does (mode=ro would leave them). query_only: this connection never
+    # writes.
     conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, timeout=LOCK_TIMEOUT_S)
     try:
         conn.execute("PRAGMA query_only = ON")

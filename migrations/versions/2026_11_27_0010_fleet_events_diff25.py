@@ -5,7 +5,8 @@ Revises: 0009_chain_sessions_reads26
 Create Date: 2026-11-27
 
 One table, one hash-chained stream for the store (``chain.STREAMS["fleet"]``, counter row ``version_counters``
-scope ``chain``, key ``fleet``, written by the first event). Rows are never updated or deleted: triggers refuse
+scope ``chain``, key ``fleet``, written by the first event). Rows are never updated or deleted: triggers
+refuse
 UPDATE and DELETE (and TRUNCATE on PostgreSQL, with 0001's calibctl_refuse_change()), as on every other table.
 ``subject`` is the robot an event is about, or the rollout for the rollout kinds.
 """

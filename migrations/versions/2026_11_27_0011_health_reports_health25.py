@@ -5,7 +5,8 @@ Revises: 0010_fleet_diff25
 Create Date: 2026-11-27
 
 One row per report: the numbers as columns (``fleet trends`` reads them without decoding documents) and the
-report's canonical JSON with its sha256. ``source_id`` is unique: a report sent twice is refused. Triggers refuse
+report's canonical JSON with its sha256. ``source_id`` is unique: a report sent twice is refused. Triggers
+refuse
 UPDATE and DELETE (and TRUNCATE on PostgreSQL, with 0001's calibctl_refuse_change()), as on every other table.
 Not hash-chained: telemetry, at fleet volume (500 robots x 4 sensors x daily), see docs/fleet.md.
 """

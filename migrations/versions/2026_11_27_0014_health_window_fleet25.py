@@ -4,7 +4,8 @@ Revision ID: 0014_health_window_fleet25
 Revises: 0011_health_reports_health25
 Create Date: 2026-11-27
 
-``fleet trends`` compares a serial's mean check RMS with every other serial's over the last 30 days of reports.
+``fleet trends`` compares a serial's mean check RMS with every other serial's over the last 30 days of
+reports.
 At 730k reports the former whole-table aggregate took 0.9 s on PostgreSQL (benchmarks/results/fleet_scale.md);
 this index (kind, at, serial, rms_px) serves the window's rows without touching the table.
 """

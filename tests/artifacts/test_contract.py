@@ -121,7 +121,8 @@ def test_serials_that_would_be_ambiguous_or_unsafe_are_refused(serial):
 
 
 def test_rig_hand_eye_fields_are_absent_while_empty_and_frames_are_checked() -> None:
-    """`frames` and `handeye` joined the rig documents later: absent while empty, so older rows hash the same."""
+    """`frames` and `handeye` joined the rig documents later: absent while empty, so older rows hash the
+    same."""
     import pydantic
 
     from tests.store.rig_documents import rig_calibration, rig_definition

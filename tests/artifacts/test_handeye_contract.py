@@ -1,4 +1,5 @@
-"""The hand-eye result document: an accepted edge needs a transform and passed gates; a rejected one has none."""
+"""The hand-eye result document: an accepted edge needs a transform and passed gates; a rejected one has
+none."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""core.lanes: a map over the caller and a pool that keeps the sequential loop's order, results and first error,
+"""core.lanes: a map over the caller and a pool that keeps the sequential loop's order, results and first
+error,
 and never deadlocks a bounded pool on nested work."""
 
 from __future__ import annotations
@@ -101,7 +102,8 @@ def test_a_started_result_is_computed_by_the_caller_when_no_worker_took_it() -> 
 
 
 def test_one_thread_blas_blocks_on_lanes_keep_the_limit_of_the_block_around_the_pool() -> None:
-    """The pool's owner opens a block around the pool; the lanes open and close theirs inside it, in any order:
+    """The pool's owner opens a block around the pool; the lanes open and close theirs inside it, in any
+    order:
     BLAS stays on one thread until the owner's block closes, then gets its threads back."""
     import cv2  # noqa: F401  (its bundled OpenBLAS is one of the libraries limited)
     from threadpoolctl import threadpool_info, threadpool_limits

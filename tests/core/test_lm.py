@@ -148,7 +148,8 @@ def test_a_step_into_non_finite_residuals_is_rejected_and_damped() -> None:
 
 
 def test_a_direction_the_residuals_do_not_see_stays_put() -> None:
-    """A singular J^T J (parameter 2 has no effect): damping keeps the step finite; that parameter never moves."""
+    """A singular J^T J (parameter 2 has no effect): damping keeps the step finite; that parameter never
+    moves."""
 
     def blind(x: np.ndarray) -> DenseSystem:
         system = exponential(x[:3])
@@ -197,7 +198,8 @@ def test_a_step_that_raises_the_cost_only_by_rounding_is_the_minimum() -> None:
 
 
 def test_dense_equations_regrouped_by_block_give_the_dense_step() -> None:
-    """SchurSystem.from_dense on an interleaved layout (blocks between shared parameters, as the rig has it)."""
+    """SchurSystem.from_dense on an interleaved layout (blocks between shared parameters, as the rig has
+    it)."""
     dense = block_dense(START)
     order = np.array([2, 3, 0, 4, 5, 6, 7, 8, 9, 1])  # block 0, a, blocks 1-3, c
     H, g = dense.H[np.ix_(order, order)], dense.g[order]

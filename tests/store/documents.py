@@ -104,7 +104,8 @@ def check_event(serial: str, version: int, sha: str, n: int, passed: bool = True
 
 
 def fleet_event(kind: str, robot: str = "amr-001", **fields: object) -> FleetEvent:
-    """A fleet log step by qa at st1, FIXED_TIME: ``register`` (serials=, rigs=) or ``assign`` (serial=, version=)."""
+    """A fleet log step by qa at st1, FIXED_TIME: ``register`` (serials=, rigs=) or ``assign`` (serial=,
+    version=)."""
     return FleetEvent(
         kind=kind,
         robot=robot,
@@ -119,6 +120,7 @@ def fleet_event(kind: str, robot: str = "amr-001", **fields: object) -> FleetEve
 def health_report(
     serial: str, robot: str = "amr-001", source_id: str = "r-1", **fields: object
 ) -> HealthReport:
-    """A passing check report of ``serial`` from ``robot`` at FIXED_TIME (override kind and numbers with fields)."""
+    """A passing check report of ``serial`` from ``robot`` at FIXED_TIME (override kind and numbers with
+    fields)."""
     numbers = fields or {"kind": "check", "rms_px": 0.3, "verdict": "pass", "temperature_c": 25.0}
     return HealthReport(source_id=source_id, serial=serial, robot=robot, time=FIXED_TIME, **numbers)  # type: ignore[arg-type]

@@ -50,7 +50,8 @@ def forge_activation(url: str, serial: str, version: int) -> None:
     """Insert an activation event the accepted-only trigger would refuse (by removing the trigger first)."""
     insert = (
         "INSERT INTO activation_events (serial, version, previous_version, kind, actor, station, at, reason) "
-        f"VALUES ('{serial}', {version}, NULL, 'rollback', 'mallory', 'nowhere', '2026-01-01 00:00:00', 'forged')"
+        f"VALUES ('{serial}', {version}, NULL, 'rollback', 'mallory', 'nowhere', '2026-01-01 00:00:00', "
+        "'forged')"
     )
     path = _sqlite_file(url)
     if path is not None:

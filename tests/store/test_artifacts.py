@@ -145,7 +145,8 @@ def test_serial_without_an_active_version_says_so(store: Store):
     ) as none:
         store.get_artifact("CAM-0001")
     assert store.active_version("CAM-0001") is None
-    # no accepted version to roll back to (udacity-camcal, every solve rejected): the hint must not say "roll back"
+    # no accepted version to roll back to (udacity-camcal, every solve rejected): the hint must not say "roll
+    # back"
     assert none.value.hint is not None and "roll back" not in none.value.hint
     assert "recalibrate it (`calibctl calibrate --serial CAM-0001 ...`)" in none.value.hint
     assert none.value.exit_code == 2

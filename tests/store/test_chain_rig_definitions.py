@@ -154,7 +154,8 @@ def test_a_head_printed_before_0008_checks_the_definitions_in_full(rigs: str):
         full = store.verify()
     old = ("artifact", "board", "event", "rig", "rig_event", "check")  # the streams a head named in 0007
     ids = ".".join(str(full.last_ids.get(name, 0)) for name in old)
-    head = f"{audit_module.HEAD_PREFIX}:{ids}:{audit_module._digest({n: full.heads[n] for n in old if n in full.heads})}"
+    digest = audit_module._digest({n: full.heads[n] for n in old if n in full.heads})
+    head = f"{audit_module.HEAD_PREFIX}:{ids}:{digest}"
     with Store.open(rigs) as store:
         resumed = store.verify(since=head)
     assert resumed.problems == [] and resumed.records_checked == 2  # the two definitions

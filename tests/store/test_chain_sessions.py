@@ -64,7 +64,8 @@ def test_edited_corners_with_the_payload_hash_recomputed_are_named(sessions: str
 def test_a_deleted_session_breaks_its_serials_chain(sessions: str):
     run_underneath(sessions, "DELETE FROM capture_sessions WHERE session_id = 'aaaaaaaaaaa1'")
     assert problems_of(sessions) == [
-        "capture session aaaaaaaaaaa2 is at chain position 2 but 1 was expected: records before it are missing"
+        "capture session aaaaaaaaaaa2 is at chain position 2 but 1 was expected: records before it are "
+        "missing"
     ]
     run_underneath(
         sessions, "DELETE FROM capture_sessions WHERE session_id = 'ccccccccccc1'"
@@ -88,7 +89,8 @@ def test_signed_sessions_a_rechained_edit_is_refused_by_verify_and_by_reads(db_u
     with Store.open(db_url) as store:
         assert store.verify().problems == []  # self-consistent without the key
         assert store.verify(trusted).problems == [
-            f"capture session aaaaaaaaaaa1 has a signature by key {signer.key_id[:16]} that does not match its content"
+            f"capture session aaaaaaaaaaa1 has a signature by key {signer.key_id[:16]} that does not match "
+            "its content"
         ]
         store.get_session("aaaaaaaaaaa1")  # without keys a read serves it ...
     with (

@@ -23,7 +23,8 @@ WHO = {"actor": "qa", "station": "st1"}
 
 @pytest.fixture
 def history(db_url: str) -> str:
-    """CAM-1: v1 accepted, v2 rejected, v3 accepted; CAM-2: v1. Events 1-4, the last a rollback of CAM-1 to 1."""
+    """CAM-1: v1 accepted, v2 rejected, v3 accepted; CAM-2: v1. Events 1-4, the last a rollback of CAM-1 to
+    1."""
     with Store.open(db_url) as store:
         store.add_board(measured_board())
         store.add_artifact(calibration(serial="CAM-1"), activate=True, reason="solved", **WHO)
@@ -61,7 +62,8 @@ def _reseal_artifact(url: str, serial: str, version: int, **changes: object) -> 
     forged = CalibrationArtifact.model_validate(data).sealed()
     run_underneath(
         url,
-        "UPDATE calibration_artifacts SET payload = %s, content_sha256 = %s, status = %s WHERE serial = %s AND version = %s",
+        "UPDATE calibration_artifacts SET payload = %s, content_sha256 = %s, status = %s WHERE serial = %s "
+        "AND version = %s",
         params=(codec.canonical_text(forged), forged.content_sha256, forged.status, serial, version),
     )
 
@@ -118,7 +120,8 @@ def test_deleted_activation_event(history: str):
 def test_deleted_last_activation_event(history: str):
     run_underneath(history, "DELETE FROM activation_events WHERE id = 4")
     assert problems_of(history) == [
-        "the chain counter of event is 4 but the highest chain_seq stored is 3: the counter or the records were changed"
+        "the chain counter of event is 4 but the highest chain_seq stored is 3: the counter or the records "
+        "were changed"
     ]
 
 
@@ -181,7 +184,8 @@ def test_version_counter_lowered(history: str):
         history, "UPDATE version_counters SET last_value = 1 WHERE scope = 'artifact' AND key = 'CAM-1'"
     )
     assert problems_of(history) == [
-        "the artifact counter of CAM-1 is 1 but the highest version stored is 3: the counter or the records were changed"
+        "the artifact counter of CAM-1 is 1 but the highest version stored is 3: the counter or the "
+        "records were changed"
     ]
 
 

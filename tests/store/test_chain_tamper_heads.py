@@ -1,5 +1,7 @@
-"""Issue 26 item 8, the two gaps no `db verify` mode saw: immutability triggers dropped and left dropped, and a
-forged row given an id below the kept head's (``--since`` looked only at higher ids; it now takes every row past
+"""Issue 26 item 8, the two gaps no `db verify` mode saw: immutability triggers dropped and left dropped, and
+a
+forged row given an id below the kept head's (``--since`` looked only at higher ids; it now takes every row
+past
 the head's *positions*, whatever its id)."""
 
 from __future__ import annotations
@@ -88,7 +90,8 @@ def test_since_head_sees_a_forged_row_with_an_id_below_the_head(history: str):
 
 
 def test_since_head_sees_a_row_appended_after_the_head_with_a_low_id(history: str):
-    """A new version appended at the next position of its chain, given id 0: it is past the head's position."""
+    """A new version appended at the next position of its chain, given id 0: it is past the head's
+    position."""
     with Store.open(history) as store:
         head = store.verify().head()
         store.add_artifact(calibration(serial="CAM-2", fx=790.0), activate=False, reason="solved", **WHO)

@@ -121,7 +121,8 @@ def test_rig_export_refuses_a_rechained_rig_forgery(signed):
 
 
 def test_without_keys_the_same_forgery_is_served(signed, monkeypatch):
-    """What keys are for: a fully re-chained forgery is self-consistent; only a signature (or a kept head) shows it."""
+    """What keys are for: a fully re-chained forgery is self-consistent; only a signature (or a kept head)
+    shows it."""
     url, trusted, head = signed
     _fx_plus_5(url)
     monkeypatch.delenv("CALIBCTL_TRUSTED_KEYS")
@@ -179,7 +180,8 @@ def _signature_stripped(url: str) -> None:
 
 
 def _events_reordered(url: str) -> None:
-    """CAM-1's two activation events swap ids: the older one (v1) becomes the latest, so v1 would be active."""
+    """CAM-1's two activation events swap ids: the older one (v1) becomes the latest, so v1 would be
+    active."""
     ids = [r[0] for r in _select(url, "SELECT id FROM activation_events WHERE serial = 'CAM-1' ORDER BY id")]
     run_underneath(
         url,
@@ -261,7 +263,8 @@ def test_the_served_tables_are_the_chained_ones():
 def test_a_signing_key_this_user_cannot_load_is_passed_over_when_a_trusted_folder_is_set(
     signed, tmp_path: Path, monkeypatch
 ):
-    """Reads need only public keys: a station's private key kept for its service account does not stop `show`."""
+    """Reads need only public keys: a station's private key kept for its service account does not stop
+    `show`."""
     url, _, _ = signed
     _fx_plus_5(url)
     loose = tmp_path / "loose.pem"

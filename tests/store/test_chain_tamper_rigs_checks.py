@@ -139,8 +139,8 @@ def test_hand_eye_version_deleted(history: str):
     )
     problems = problems_of(history)
     assert (
-        f"the rig counter of {RIG} is 3 but the highest version stored is 2: the counter or the records were changed"
-        in problems
+        f"the rig counter of {RIG} is 3 but the highest version stored is 2: the counter or the records "
+        "were changed" in problems
     )
     assert any(
         p.startswith(f"rig activation event 3 ({RIG}@1, rollback) is at chain position 3 but 2 was expected")
@@ -199,7 +199,8 @@ def test_last_check_event_of_a_serial_deleted(history: str):
     """A failed check hidden by deleting it: the serial's check counter still counts it."""
     run_underneath(history, "DELETE FROM check_events WHERE id = 2")
     assert problems_of(history) == [
-        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"
+        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records "
+        "were changed"
     ]
 
 
@@ -252,7 +253,8 @@ def test_0007_chains_the_rows_stored_before_it(history: str):
     ]
     run_underneath(history, "DELETE FROM check_events WHERE id = 2")  # the backfilled counters count them
     assert problems_of(history) == [
-        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records were changed"
+        "the check counter of CAM-1 is 2 but the highest chain_seq stored is 1: the counter or the records "
+        "were changed"
     ]
 
 
@@ -317,7 +319,8 @@ def test_a_head_printed_before_0007_checks_the_new_streams_in_full(history: str)
     run_underneath(history, "DELETE FROM check_events WHERE id = 1")
     with Store.open(history) as store:
         assert store.verify(since=head).problems == [
-            f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are missing"
+            f"check {2:012x} of CAM-1@1 is at chain position 2 but 1 was expected: records before it are "
+            "missing"
         ]
 
 

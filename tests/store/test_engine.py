@@ -114,7 +114,8 @@ def test_a_missing_postgresql_database_is_a_clear_database_error(pg_server: str)
     url = pg_server.rsplit("/", 1)[0] + "/calibctl_no_such_database"
     with pytest.raises(
         DatabaseError,
-        match=r'cannot connect to the database .*/calibctl_no_such_database: .*"calibctl_no_such_database" does not exist',
+        match=r'cannot connect to the database .*/calibctl_no_such_database: .*"calibctl_no_such_database" '
+        r"does not exist",
     ):
         Store.open(url)
 

@@ -1,5 +1,7 @@
-"""Fleet checkpoints (store/fleet_checkpoints.py): a read that starts from the newest checkpoint says what a replay of
-the whole log says, over random logs of assignments and rollouts (started, promoted, rolled back; camera and rig
+"""Fleet checkpoints (store/fleet_checkpoints.py): a read that starts from the newest checkpoint says what a
+replay of
+the whole log says, over random logs of assignments and rollouts (started, promoted, rolled back; camera and
+rig
 targets); a checkpoint that no longer matches the log is ignored by reads and named by `db verify`; one that
 matches the log's hash but not its replay is named by `db verify`."""
 
@@ -136,7 +138,8 @@ def _view(fleet: Fleet) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, 
 
 
 def _play(url: str, ops: list[Op], every: int, signer: Signer | None = None) -> None:
-    """Append each op's step; after each, the store's checkpointed read must equal the whole log replayed (with
+    """Append each op's step; after each, the store's checkpointed read must equal the whole log replayed
+    (with
     ``signer``: the store signs what it writes and trusts that key)."""
     trusted = None if signer is None else TrustedKeys.load(None, signer)
     with pytest.MonkeyPatch.context() as mp, Store.open(url, signer=signer, trusted=trusted) as store:
@@ -159,7 +162,8 @@ def _positions(store: Store) -> list[int]:
 
 
 def _sql(store: Store, sql: str, **params: object) -> None:
-    """What someone with write access to the database can do underneath calibctl (no trigger guards this table)."""
+    """What someone with write access to the database can do underneath calibctl (no trigger guards this
+    table)."""
     with Session(store._write_engine) as s, s.begin():  # noqa: SLF001
         s.execute(text(sql), params)
 
@@ -279,7 +283,8 @@ def test_a_checkpoint_past_the_end_of_the_log_is_ignored_and_flagged(checkpointe
 
 
 def test_a_forged_checkpoint_is_used_by_reads_but_named_by_db_verify(checkpointed: str) -> None:
-    """Its state rewritten with a matching sha256, in a store without keys: reads cannot tell (they would have to
+    """Its state rewritten with a matching sha256, in a store without keys: reads cannot tell (they would have
+    to
     replay the log), `db verify` replays the log and exits 1 naming it (with keys: the next test)."""
     with Store.open(checkpointed) as store:
         newest = _forge_newest(store)
@@ -313,8 +318,10 @@ def _forge_newest(store: Store) -> int:
 
 
 def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url: str, tmp_path: Path) -> None:
-    """A station key signs each checkpoint; a store with keys reads only checkpoints a trusted key signed, so the
-    forgery reads cannot see without keys (state and sha256 rewritten together) is skipped, and db verify names
+    """A station key signs each checkpoint; a store with keys reads only checkpoints a trusted key signed, so
+    the
+    forgery reads cannot see without keys (state and sha256 rewritten together) is skipped, and db verify
+    names
     its signature."""
     signer = create_key(tmp_path / "station.pem")
     trusted = TrustedKeys.load(None, signer)
@@ -352,7 +359,8 @@ def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url:
 
 
 def test_a_store_with_keys_skips_unsigned_checkpoints(checkpointed: str, tmp_path: Path) -> None:
-    """Checkpoints written before the store had keys: reads with keys replay past them (no finding for db verify:
+    """Checkpoints written before the store had keys: reads with keys replay past them (no finding for db
+    verify:
     they are legitimate, only unproven)."""
     signer = create_key(tmp_path / "station.pem")
     trusted = TrustedKeys.load(None, signer)
@@ -364,7 +372,8 @@ def test_a_store_with_keys_skips_unsigned_checkpoints(checkpointed: str, tmp_pat
 
 
 def test_a_checkpoint_of_another_format_is_ignored_without_a_finding(checkpointed: str) -> None:
-    """Written by another calibctl (the state's shape changed): stale, not tampered; the next write replaces it."""
+    """Written by another calibctl (the state's shape changed): stale, not tampered; the next write replaces
+    it."""
     with Store.open(checkpointed) as store:
         _sql(store, "UPDATE fleet_checkpoints SET format = 99")
         loaded = store.fleet()
@@ -374,8 +383,10 @@ def test_a_checkpoint_of_another_format_is_ignored_without_a_finding(checkpointe
 
 
 def test_a_rollback_after_the_checkpoint_puts_back_what_the_robots_ran(checkpointed: str) -> None:
-    """The checkpoint is of the promoted rollout: the rollback reads what to put back from it (its compact history):
-    the version each robot ran before r1; a target r1 gave a robot that ran nothing before keeps r1's version."""
+    """The checkpoint is of the promoted rollout: the rollback reads what to put back from it (its compact
+    history):
+    the version each robot ran before r1; a target r1 gave a robot that ran nothing before keeps r1's
+    version."""
     settings = load_settings(db=checkpointed, station="st1", operator="qa", env={})
     with Store.open(checkpointed) as store:
         before = store.fleet()
@@ -423,7 +434,8 @@ def test_checkpoints_are_written_by_the_fleet_writer_only(
 def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(
     db_url: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Reads no longer decode the events before the checkpoint (that is the point); `db verify` still walks and
+    """Reads no longer decode the events before the checkpoint (that is the point); `db verify` still walks
+    and
     decodes them all, names the changed event, and says it could not re-derive the checkpoints after it."""
     monkeypatch.setattr(fleet_checkpoints, "EVERY", 1)
     _fill(db_url)
@@ -457,7 +469,8 @@ def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(
 
 @pytest.mark.parametrize("state", ["not json", "[]", '{"format": 1}', "[" * 100_000 + "]" * 100_000])
 def test_a_checkpoint_that_holds_no_fleet_state_is_ignored_and_flagged(checkpointed: str, state: str) -> None:
-    """Written with a matching sha256 (by hand, or by a broken writer): reads fall back, `db verify` names it."""
+    """Written with a matching sha256 (by hand, or by a broken writer): reads fall back, `db verify` names
+    it."""
     with Store.open(checkpointed) as store:
         _sql(
             store,
@@ -472,6 +485,7 @@ def test_a_checkpoint_that_holds_no_fleet_state_is_ignored_and_flagged(checkpoin
         )
         assert _view(loaded.fleet) == _view(replay(store.fleet_events()))
         assert [p for p in store.verify().problems if "checkpoint" in p] == [
-            "fleet checkpoint at event 13 is not the log replayed up to event 13 (derived data: delete the row, or "
+            "fleet checkpoint at event 13 is not the log replayed up to event 13 (derived data: delete the "
+            "row, or "
             "restore the store)"
         ]

@@ -146,7 +146,8 @@ def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
     assert (
         problems
         == [
-            "capture session 0123456789ab was changed after it was written (its chain hash no longer matches)",
+            "capture session 0123456789ab was changed after it was written (its chain hash no longer "
+            "matches)",
             *[p for p in problems if "does not match its recorded sha256" in p],
         ]
         and len(problems) == 2

@@ -22,7 +22,9 @@ STORE = "sqlite:////factory/central/calibctl.db"
 # the spool schema of calibctl before format 2 (set-aside and signed records), as it wrote it
 FORMAT_1_SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE boards (ref TEXT PRIMARY KEY, name TEXT NOT NULL, revision INTEGER NOT NULL, document TEXT NOT NULL);
+CREATE TABLE boards (
+    ref TEXT PRIMARY KEY, name TEXT NOT NULL, revision INTEGER NOT NULL, document TEXT NOT NULL
+);
 CREATE TABLE units (
     seq INTEGER PRIMARY KEY AUTOINCREMENT, serial TEXT NOT NULL, session_id TEXT NOT NULL UNIQUE,
     queued_at TEXT NOT NULL, session TEXT NOT NULL, artifact TEXT, session_stored INTEGER NOT NULL,
@@ -69,7 +71,8 @@ def write_format_1(path: Path) -> str:
         )
         conn.execute(
             "INSERT INTO units (serial, session_id, queued_at, session, artifact, session_stored, images, "
-            "record_sha256) VALUES ('CAM-0001', '0123456789ab', '2026-11-26T08:01:00+00:00', ?, ?, 1, '[]', ?)",
+            "record_sha256) VALUES ('CAM-0001', '0123456789ab', '2026-11-26T08:01:00+00:00', ?, ?, 1, "
+            "'[]', ?)",
             (session_text, art_text, sha),
         )
     conn.close()

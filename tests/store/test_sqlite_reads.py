@@ -221,10 +221,13 @@ def test_a_read_leaves_the_store_folder_as_it_found_it(store_url: str, tmp_path:
 
 EDITS_UNDERNEATH = {
     "station": "UPDATE calibration_artifacts SET station = 'elsewhere' WHERE version = 3",
-    "stored_at": "UPDATE calibration_artifacts SET stored_at = '2020-01-01 00:00:00.000000' WHERE version = 3",
-    "payload": 'UPDATE calibration_artifacts SET payload = replace(payload, \'"operator":"op"\', \'"operator":"OP"\') '
+    "stored_at": "UPDATE calibration_artifacts SET stored_at = '2020-01-01 00:00:00.000000' WHERE version "
+    "= 3",
+    "payload": 'UPDATE calibration_artifacts SET payload = replace(payload, \'"operator":"op"\', '
+    '\'"operator":"OP"\') '
     "WHERE version = 3",
-    "content_sha256": "UPDATE calibration_artifacts SET content_sha256 = substr(content_sha256, 2) || '0' WHERE version = 3",
+    "content_sha256": "UPDATE calibration_artifacts SET content_sha256 = substr(content_sha256, 2) || '0' "
+    "WHERE version = 3",
     "chain_hash cleared": "UPDATE calibration_artifacts SET chain_hash = NULL WHERE version = 3",
 }
 

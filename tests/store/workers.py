@@ -64,7 +64,8 @@ if __name__ == "__main__":
 
 
 def write_sessions(url: str, count: int, worker: int, barrier: Any, results: Any) -> None:
-    """Wait for every worker, then store ``count`` capture sessions, alternating two serials (so writers of one
+    """Wait for every worker, then store ``count`` capture sessions, alternating two serials (so writers of
+    one
     serial share its lock and writers of the other race them for the next id); report the session ids."""
     from tests.store.documents import capture_session
 

@@ -55,7 +55,8 @@ class Arrivals:
         self._files: dict[Path, _Seen] = {}
 
     def poll(self, now_s: float) -> list[tuple[Path, Signature]]:
-        """The files that became complete since the last poll, in name order (``now_s``: a monotonic clock)."""
+        """The files that became complete since the last poll, in name order (``now_s``: a monotonic
+        clock)."""
         try:
             listed = set(outcomes_core.list_images(self.folder))  # the files a folder capture will read
         except FileNotFoundError:  # the camera app has not made the unit's folder yet
@@ -85,7 +86,8 @@ class Arrivals:
         return sum(1 for s in self._files.values() if not s.complete)
 
     def last_in_ns(self) -> int | None:
-        """When the last complete file landed: its ctime (the last write or the rename into place), epoch ns."""
+        """When the last complete file landed: its ctime (the last write or the rename into place), epoch
+        ns."""
         times = [s.signature[2] for s in self._files.values() if s.complete]
         return max(times) if times else None
 
@@ -114,7 +116,8 @@ class EarlyDetections:
             future.cancel()
 
     def known(self, path: Path) -> Detected | None:
-        """The early outcome of ``path`` if it is done and the file is still the version detected, else None."""
+        """The early outcome of ``path`` if it is done and the file is still the version detected, else
+        None."""
         started = self._started.get(Path(path))
         if started is None or not started[1].done() or started[1].cancelled():
             return None

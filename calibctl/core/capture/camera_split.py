@@ -12,7 +12,8 @@ The test (``check_one_camera``):
      (``_settled``: one camera's views swap between two near-identical cameras for up to 8 rounds
      otherwise). This also untangles an interleaved capture (tested); a seeded random start is tried
      only when the halves start leaves a group too small to solve.
-  2. Score it honestly: each group's own held-out RMS (k-fold, calibctl.core.intrinsics.validation) against its
+  2. Score it honestly: each group's own held-out RMS (k-fold, calibctl.core.intrinsics.validation) against
+  its
      cross RMS (its views predicted by the other group's camera). ``ratio`` = the smaller of the two
      groups' cross / own; a real second camera makes both groups worse under the other's camera.
   3. Suspect two cameras when ratio >= ``TWO_CAMERA_RATIO`` and each group has >= ``MIN_GROUP_VIEWS``.
@@ -22,7 +23,8 @@ operator hears it while still holding the board. Both ask it of the same views: 
 ``CAPTURE_MAX_VIEWS``, spread evenly over the session (``spread_views``), which bounds its cost. In one
 ``calibrate`` process the solve's question is therefore usually the gate's (k1k2, every corner kept):
 ``check_one_camera`` remembers its last answers by the inputs' values, so it is answered once.
-Measured (tests/core/capture/test_camera_split.py, benchmarks/results/capture-gates.md): the real opencv-left-right folder
+Measured (tests/core/capture/test_camera_split.py, benchmarks/results/capture-gates.md): the real
+opencv-left-right folder
 (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
 score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
 sessions at most 1.08 (1.09 when one camera's alternation ran until nothing moved). Limit: the score is a
@@ -69,7 +71,8 @@ R = TypeVar("R")
 ONE_CAMERA_GATE = "one_camera"
 # Capture does not know the solve's model. k1k2 (cheap) first; a suspected split is confirmed under the
 # equidistant fisheye model, which fits both lens families: on seeded 120-degree fisheye sessions k1k2 alone
-# read 1.38-1.47 (2 of 3 over the threshold), the fisheye model 1.01; opencv-left-right mixed reads 1.65 / 1.58.
+# read 1.38-1.47 (2 of 3 over the threshold), the fisheye model 1.01; opencv-left-right mixed reads 1.65 /
+# 1.58.
 CAPTURE_MODELS = ("k1k2", "fisheye")
 CAPTURE_MODEL = CAPTURE_MODELS[0]
 CAPTURE_MAX_VIEWS = 60  # views checked at capture and at the solve (spread_views), bounding its cost
@@ -134,8 +137,10 @@ def _settled(
 
     The alternation is a descent on the sum of squared residuals (each view under its group's camera). Of one
     camera the two solves differ by their estimation noise and each round swaps views whose two predictions
-    differ by that noise: rendered 60-view sessions took 4-8 rounds to settle (ratio 1.05-1.07), a round lowering
-    the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round (1.09 later).
+    differ by that noise: rendered 60-view sessions took 4-8 rounds to settle (ratio 1.05-1.07), a round
+    lowering
+    the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round (1.09
+    later).
     A real second camera is told apart by both figures, never by one round: a shuffled or alternating
     two-camera session starts from two blends whose cameras agree within their uncertainty (first
     reassignment 1.3-17 %, where one real camera's 13 views gained 2.5 %), and it can then drift for rounds
@@ -166,7 +171,8 @@ def _refine(
     lanes: Lanes | None,
 ):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool, until nothing moves, ``_settled`` or
-    MAX_ROUNDS; (split, solve a, solve b, per-view RMS under a, under b, rounds run), or None when a group gets
+    MAX_ROUNDS; (split, solve a, solve b, per-view RMS under a, under b, rounds run), or None when a group
+    gets
     too small."""
     n_corners = np.array([len(o) for o in obj], dtype=float)
     rounds = 0
@@ -234,7 +240,8 @@ def check_one_camera(
     observe its own intrinsics (the observability gate's measure below OBSERVABILITY_MIN).
 
     Shapes as in solve_intrinsics. The answer is a function of the values alone, so the last
-    RECENT_CHECKS answers are remembered by a digest of the inputs (core.intrinsics.recent_answers): ``calibrate``
+    RECENT_CHECKS answers are remembered by a digest of the inputs (core.intrinsics.recent_answers):
+    ``calibrate``
     asks twice (the capture gate, then the solve) and, when the solve keeps every corner under the gate's
     model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
     ``lanes``: where the two groups are solved at once (core.lanes); the answer does not depend on it.
@@ -284,7 +291,8 @@ def _check_one_camera(
     in_a, sol_a, sol_b, rms_a, rms_b, rounds = best
     a, b = np.flatnonzero(in_a).tolist(), np.flatnonzero(~in_a).tolist()
     if min(_observability(obj, img, group, image_size) for group in (a, b)) < OBSERVABILITY_MIN:
-        return None  # a group that cannot observe its own intrinsics is no camera to compare (see _observability)
+        # a group that cannot observe its own intrinsics is no camera to compare (see _observability)
+        return None
     try:
         hold_a, hold_b = _pair(
             lanes,
@@ -321,7 +329,8 @@ def _check_one_camera(
 def _observability(
     obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: Sequence[int], image_size: tuple[int, int]
 ) -> float:
-    """The observability gate's sigma5 / sigma1 (core.capture.gates) of one group's views. Near-frontal views that
+    """The observability gate's sigma5 / sigma1 (core.capture.gates) of one group's views. Near-frontal views
+    that
     group together fit any focal length: real 960x540 phone-video frames split into 6 tilted views (fx 1083)
     and 8 near-frontal ones (fx 6806, observability 8.9e-6) that "predicted" each other 3.15x better, a
     false two-camera verdict; the groups of the mixed opencv-left-right folder read 5.3e-4 and 5.6e-4."""
@@ -342,7 +351,8 @@ def _first_model_to_clear(
     lanes: Lanes | None,
 ) -> tuple[CameraSplit | None, dict[str, float]]:
     """(the split of the first of ``models`` under which the views are not two cameras, or of the first
-    model when every one suspects two; None when a model finds no split at all), and each tried model's ratio."""
+    model when every one suspects two; None when a model finds no split at all), and each tried model's
+    ratio."""
     first: CameraSplit | None = None
     ratios: dict[str, float] = {}
     for model in models:
@@ -432,8 +442,10 @@ def one_camera_gate(
         "the views look like two cameras: " + message,
         "one_camera.two_cameras",
         f"these views come from two cameras: {_group_words(a)} fx {split.camera_a[0, 0]:.0f} cx "
-        f"{split.camera_a[0, 2]:.0f} px, {_group_words(b)} fx {split.camera_b[0, 0]:.0f} cx {split.camera_b[0, 2]:.0f} "
-        f"px; capture each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, check "
+        f"{split.camera_a[0, 2]:.0f} px, {_group_words(b)} fx {split.camera_b[0, 0]:.0f} cx "
+        f"{split.camera_b[0, 2]:.0f} "
+        "px; capture each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
+        "check "
         f"that focus, zoom and lens did not change",
         detail,
     )

@@ -21,8 +21,10 @@ Feed every frame's detection (or None) to ``FrameSelector.offer`` in order. A fr
 
 Tilt bands are [0, 10), [10, 20), [20, 30), [30, 45] and > 45 degrees; the direction is the 8-sector
 compass direction of ``gates`` (only meaningful from 1 degree). A frame's tilt is read like the gates
-read it (calibctl.core.capture.tilt): through the lens the last ``progress()`` fitted to the kept views, through a
-pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt. ``progress()`` gives what a live view
+read it (calibctl.core.capture.tilt): through the lens the last ``progress()`` fitted to the kept views,
+through a
+pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt.
+``progress()`` gives what a live view
 shows: coverage, tilt directions collected, the observability gauge against its threshold, the view
 count and the gate hints in words.
 """
@@ -179,7 +181,8 @@ class FrameSelector:
                 "board not seen in the previous frame"
                 if motion is None
                 else (
-                    f"board moving: {motion:.1f} px since the previous frame (still is under {still_px:.1f} px)"
+                    f"board moving: {motion:.1f} px since the previous frame (still is under "
+                    f"{still_px:.1f} px)"
                 )
             )
             return FrameDecision(index, name, MOVING, why, motion_px=motion)
@@ -258,7 +261,8 @@ class FrameSelector:
 
 @dataclass(frozen=True)
 class Probe:
-    """What ``probe_frame`` found in one frame: the full search's answer (``searched``), or only that the quick
+    """What ``probe_frame`` found in one frame: the full search's answer (``searched``), or only that the
+    quick
     check saw nothing chessboard-like (``searched`` False, ``detection`` None)."""
 
     searched: bool
@@ -293,7 +297,8 @@ class StreamDetector:
     In one thread: ``detect(gray)`` per frame, in order. Ahead on workers, with the same answers: per frame in
     order ``forced = next_forced()``, then ``probe_frame(gray, spec, settings, forced)`` anywhere, then
     ``settle(gray, forced, probe)`` in order. A frame is due for the full search when it is forced (every
-    ``full_every``-th) or the previous frame had a board; a probe run ahead knows only the first, so a due frame
+    ``full_every``-th) or the previous frame had a board; a probe run ahead knows only the first, so a due
+    frame
     whose quick check said "nothing" is searched in ``settle`` - the search the one-thread detector would have
     run, hence the same answer for every frame whatever ran ahead.
     """

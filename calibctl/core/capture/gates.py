@@ -16,7 +16,8 @@ How the coordinates are normalised (and why):
     gauge is a property of the lens and the poses, not of the readout. At 640x480 the map is the
     identity, so the gauge equals the seed's sigma5/sigma1 of the pixel-unit V: its table (f = 800 px,
     c = (320, 240), 8 views at tilt T in evenly spread directions, board at 0.60 m) is reproduced to
-    about 1% (tests/core/capture/test_gates.py). A centred, Hartley-style normalisation was tried and rejected:
+    about 1% (tests/core/capture/test_gates.py). A centred, Hartley-style normalisation was tried and
+    rejected:
     it is also resolution-free but changes the value by ~300x and not by a constant factor, so the
     seed's 1e-4 threshold would no longer mean what chapter 1 measured.
 
@@ -88,7 +89,8 @@ class GateThresholds:
 class ViewGeometry:
     """Per-view pose summary. ``direction_name`` is None when the board is square-on (tilt < 1 deg).
 
-    ``tilt_sigma_deg``: one-sigma of the board normal at the assumed corner noise (calibctl.core.capture.tilt).
+    ``tilt_sigma_deg``: one-sigma of the board normal at the assumed corner noise
+    (calibctl.core.capture.tilt).
     """
 
     name: str
@@ -275,7 +277,8 @@ def view_geometries(
     image_size: tuple[int, int],
     focal_px: float | None = None,
 ) -> SessionGeometry:
-    """Tilt and direction of every view that can give one (calibctl.core.capture.tilt), and their homographies.
+    """Tilt and direction of every view that can give one (calibctl.core.capture.tilt), and their
+    homographies.
 
     Args:
         model_points: (M, 3) or (M, 2) board model points indexed by ``corner_ids``, any unit.
@@ -337,7 +340,8 @@ def evaluate_gates(
 ) -> GateReport:
     """All capture gates for one session's accepted views (see the module docstring for the maths).
 
-    ``image_circle``: the disc a circular fisheye images (core.capture.image_circle); coverage then counts only
+    ``image_circle``: the disc a circular fisheye images (core.capture.image_circle); coverage then counts
+    only
     the cells mostly inside it. None: every cell of the grid (a pinhole or full-frame lens).
     """
     th = thresholds or GateThresholds()
@@ -418,7 +422,8 @@ def _tilt_gate(
     too_flat = sum(g.tilt_deg < th.tilt_min_deg for g in geo.views)
     too_steep = sum(g.tilt_deg > th.tilt_max_deg for g in geo.views)
     message = (
-        f"{len(distinct)} tilt direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} degrees apart with views at "
+        f"{len(distinct)} tilt direction(s) at least {DISTINCT_DIRECTION_DEG:.0f} degrees apart with views "
+        "at "
         f"{th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees (need {th.tilt_directions_min}); "
         f"{too_flat} view(s) flatter, {too_steep} steeper"
     )
@@ -442,7 +447,8 @@ def _tilt_gate(
     ]
     detail["missing_directions"] = wanted
     hint = (
-        f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} degrees, "
+        f"tilt the board toward the {join_words(wanted)} ({th.tilt_min_deg:.0f}-{th.tilt_max_deg:.0f} "
+        "degrees, "
         f"that side of the board farther from the camera)"
     )
     # every 20-45 degree view's compass name: the per-image table shows them, so the hint must not deny them

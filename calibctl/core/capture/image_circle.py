@@ -55,7 +55,10 @@ class ImageCircle:
 
     def describe(self) -> str:
         how = "detected from the frames" if self.source == "detected" else "given"
-        return f"image circle centre ({self.cx_px:.1f}, {self.cy_px:.1f}) px, radius {self.radius_px:.1f} px ({how})"
+        return (
+            f"image circle centre ({self.cx_px:.1f}, {self.cy_px:.1f}) px, radius {self.radius_px:.1f} "
+            f"px ({how})"
+        )
 
 
 def half_size(gray: np.ndarray) -> np.ndarray:
@@ -68,7 +71,8 @@ def half_size(gray: np.ndarray) -> np.ndarray:
 
 
 def sized_half(gray: np.ndarray) -> tuple[tuple[int, int], np.ndarray]:
-    """((W, H) of ``gray``, ``half_size(gray)``): what a detection worker hands back for the frames' maximum."""
+    """((W, H) of ``gray``, ``half_size(gray)``): what a detection worker hands back for the frames'
+    maximum."""
     return (int(gray.shape[1]), int(gray.shape[0])), half_size(gray)
 
 

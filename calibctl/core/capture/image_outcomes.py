@@ -232,7 +232,8 @@ def finalize_session(
                     outcome,
                     status=WRONG_SIZE,
                     reason=(
-                        f"image is {outcome.image_size[0]}x{outcome.image_size[1]} but the session's images are "
+                        f"image is {outcome.image_size[0]}x{outcome.image_size[1]} but the session's "
+                        "images are "
                         f"{size[0]}x{size[1]}"
                     ),
                 )
@@ -248,7 +249,8 @@ def finalize_session(
                         outcome,
                         status=NEAR_DUPLICATE,
                         reason=(
-                            f"same view as {other.name}: corners moved {moved:.1f} px on average (limit {limit:.1f} px)"
+                            f"same view as {other.name}: corners moved {moved:.1f} px on average (limit "
+                            f"{limit:.1f} px)"
                         ),
                     )
                 )
@@ -308,10 +310,12 @@ def _classify_task(
 
 
 def choose_executor(executor: str, workers: int, total: int) -> str:
-    """ "thread" or "process" for a run of ``total`` files on ``workers`` workers (``executor`` "auto" decides).
+    """ "thread" or "process" for a run of ``total`` files on ``workers`` workers (``executor`` "auto"
+    decides).
 
     auto: processes from ``PROCESS_MIN_FILES`` files on, or whenever the pool is warm already (a
-    station, a second capture in one process: no start-up to pay), threads otherwise. Threads share one GIL, and the
+    station, a second capture in one process: no start-up to pay), threads otherwise. Threads share one GIL,
+    and the
     Python side of each detection (grid checks, canonical order, sha256 of small files) then runs one at a
     time: 96 renders at 1280x960 on 2 cores took 1.30 s on 2 threads and 0.83 s on 2 processes. A pool of
     processes costs its start-up, ~0.3 s on 2 cores (20 renders: 0.22 s on 2 threads, 0.50 s on 2 fresh
@@ -527,7 +531,8 @@ def _succeeded(future: Future[list[tuple[ImageOutcome, object]]]) -> bool:
 
 
 def _worker_died(unfinished: Sequence[Path]) -> WorkerDiedError:
-    """A detection process that died (the kernel's out-of-memory killer, a crash in a decoder) breaks the whole
+    """A detection process that died (the kernel's out-of-memory killer, a crash in a decoder) breaks the
+    whole
     pool: the files it had not finished are named, the pool is started afresh by the next capture."""
     names = [path.name for path in unfinished]
     return WorkerDiedError(
@@ -547,5 +552,6 @@ def classify_session(
     image_size: tuple[int, int] | None = None,
     executor: str = DEFAULT_EXECUTOR,
 ) -> list[ImageOutcome]:
-    """Every image's final outcome: ``classify_files`` then ``finalize_session``, in the order of ``paths``."""
+    """Every image's final outcome: ``classify_files`` then ``finalize_session``, in the order of
+    ``paths``."""
     return finalize_session(classify_files(paths, spec, settings, workers, progress, executor), image_size)

@@ -14,7 +14,8 @@ Grid: GRID_STEP_PX-spaced cell centres (at least 16 x 12), so a corner region is
 Each intrinsic perturbation's pixel shifts are taken less the camera rotation that best explains them over
 the region (report_maps ``rotation_fit``; mrcal compensates the same way, with the full frame transform):
 a principal point shift that the extrinsics absorb does not move one ray relative to another. Without it
-the map is an upper bound dominated by sigma(cx, cy) at the centre and by extrapolation at the corners. Where the region fails,
+the map is an upper bound dominated by sigma(cx, cy) at the centre and by extrapolation at the corners. Where
+the region fails,
 the message names the 3 x 3 cells (capture's words: "bottom-left corner") whose worst sigma is over.
 
 With this gate in the session, tilt and coverage are guidance (``advisory``): the session's verdict is
@@ -66,7 +67,8 @@ class Region:
 
     def vertices_px(self, image_size: tuple[int, int]) -> np.ndarray:
         """(K, 2) px points whose farthest one from any principal point bounds the region (lint's fold-over
-        reads the farthest): the box's or the image's corners, or the circle sampled (CIRCLE_VERTICES, grown so
+        reads the farthest): the box's or the image's corners, or the circle sampled (CIRCLE_VERTICES, grown
+        so
         the polygon contains the circle) and clipped to the image."""
         w, h = image_size
         if self.kind == "circle" and self.circle_px is not None:
@@ -207,7 +209,8 @@ def projection_gate(
     grid = (max(MIN_GRID[0], round(w / GRID_STEP_PX)), max(MIN_GRID[1], round(h / GRID_STEP_PX)))
     u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
     v = (np.arange(grid[1]) + 0.5) * h / grid[1] - 0.5
-    # the Jacobian covariance: the 5 px threshold was measured against it (docs/verdicts.md); the view-level one
+    # the Jacobian covariance: the 5 px threshold was measured against it (docs/verdicts.md); the view-level
+    # one
     # (per-view errors, core/intrinsics/covariance.py) is stored and reported, not yet judged here
     jacobian = cov.jacobian_covariance
     assert jacobian is not None

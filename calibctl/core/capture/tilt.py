@@ -15,7 +15,8 @@ What is done instead (``session_tilts``):
      the image diagonal and c at the centre (a flat board's tilt does not depend on f: K^-1 H keeps
      its columns orthogonal for any f).
      When that small model does not explain the corners (fit RMS above ``FISHEYE_TRY_RMS_PX``, or no
-     plausible fit), the session's equidistant fisheye lens (calibctl.core.intrinsics.fisheye_solve) is fitted too
+     plausible fit), the session's equidistant fisheye lens (calibctl.core.intrinsics.fisheye_solve) is fitted
+     too
      and kept when it fits better: k1 and k2 cannot bend to a 150-190 deg lens past ~60 deg off-axis, and
      tilt read through them was up to 35 deg off on circular renders (benchmarks/results/capture-gates.md).
   3. Each view's pose through that lens is the better of the solve's and both planar (IPPE) solutions.
@@ -230,7 +231,8 @@ _Fit = tuple[float, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]
 def _fit_fisheye(
     object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], image_size: tuple[int, int]
 ) -> _Fit | None:
-    """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.intrinsics.fisheye_solve), or None
+    """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.intrinsics.fisheye_solve), or
+    None
     when it cannot be initialised, fails or lands off the image. Asked through ``solve_intrinsics``, which
     remembers it: the projection gate solves the same views with the same fisheye model when the session is
     solved as fisheye or its lens is unknown (--model auto, a plain capture), and gets this solve."""
@@ -292,7 +294,8 @@ def _calibrate(
 def _centre_sigma_px(
     object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], fit: _Fit
 ) -> np.ndarray:
-    """(2,) one-sigma of (cx, cy) of a c-free fit, poses eliminated (calibctl.core.intrinsics.covariance): linear in the
+    """(2,) one-sigma of (cx, cy) of a c-free fit, poses eliminated (calibctl.core.intrinsics.covariance):
+    linear in the
     view count, where OpenCV's calibrateCameraExtended inverts every pose too (5 s at 100 views)."""
     _, K, D, rvecs, tvecs = fit
     objs = [np.asarray(o, np.float64).reshape(-1, 3) for o in object_points]

@@ -139,9 +139,12 @@ def _started_ignoring_sigint() -> Iterator[None]:
 
 
 def start_server() -> None:
-    """Start the fork server now and return at once: it imports OpenCV and the detection modules on another core
-    while this process goes on (a fresh ``capture`` importing its store and workflow), so the pool's first workers
-    fork from a ready server instead of waiting ~0.2 s for it. A no-op where there is no fork server (spawn)."""
+    """Start the fork server now and return at once: it imports OpenCV and the detection modules on another
+    core
+    while this process goes on (a fresh ``capture`` importing its store and workflow), so the pool's first
+    workers
+    fork from a ready server instead of waiting ~0.2 s for it. A no-op where there is no fork server
+    (spawn)."""
     with _lock:
         _ensure_server(_mp_context())
 
@@ -151,7 +154,8 @@ def _ensure_server(ctx: multiprocessing.context.BaseContext) -> None:
         from multiprocessing import forkserver
 
         with _started_ignoring_sigint(), _safe_path():
-            forkserver.ensure_running()  # and the resource tracker; returns before the server's imports are done
+            # and the resource tracker; returns before the server's imports are done
+            forkserver.ensure_running()
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
@@ -169,7 +173,8 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
 
 
 def submit(pool: ProcessPoolExecutor, fn: Callable[..., R], *args: Any) -> Future[R]:
-    """``pool.submit(fn, *args)`` with the result handed back through a file (the module docstring says why)."""
+    """``pool.submit(fn, *args)`` with the result handed back through a file (the module docstring says
+    why)."""
     return pool.submit(_run_to_file, _results_folder(), fn, *args)
 
 

@@ -156,5 +156,6 @@ def intrinsic_shifts(
 
 
 def stored_delta_covariance(sigma: dict[str, float]) -> np.ndarray:
-    """(3, 3) diagonal covariance of (focal scale, cx, cy) from one-sigmas (``focal`` relative; absent = 0)."""
+    """(3, 3) diagonal covariance of (focal scale, cx, cy) from one-sigmas (``focal`` relative; absent =
+    0)."""
     return np.diag([sigma.get(name, 0.0) ** 2 for name in SHIFT_NAMES])

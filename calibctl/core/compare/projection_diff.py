@@ -166,7 +166,8 @@ def _fit_motion(
 
 
 def _sensitivities(a: Lens, b: Lens, pa: Projection, pb: Projection) -> np.ndarray | None:
-    """G (M, 2, n) with Cov(d) = G G^T per the module docstring; None unless both lenses carry a covariance."""
+    """G (M, 2, n) with Cov(d) = G G^T per the module docstring; None unless both lenses carry a
+    covariance."""
     if a.covariance is None or b.covariance is None or pa.J_theta is None or pb.J_theta is None:
         return None
     if tuple(a.parameters) == tuple(b.parameters) and a.fisheye == b.fisheye:

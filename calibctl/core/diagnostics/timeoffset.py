@@ -80,7 +80,8 @@ def parabolic_vertex(y0: float, y1: float, y2: float) -> float:
 def _lag_block_sums(
     a: np.ndarray, b: np.ndarray, max_lag: int, n_blocks: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-lag, per-block sums (n, Sx, Sy, Sxx, Syy, Sxy) of the pairs (a[i], b[i + L]); shape (lags, blocks, 6).
+    """Per-lag, per-block sums (n, Sx, Sy, Sxx, Syy, Sxy) of the pairs (a[i], b[i + L]); shape (lags, blocks,
+    6).
 
     Blocks partition the index i of ``a`` (the camera), so deleting a block removes the same camera
     samples at every lag.
@@ -219,7 +220,8 @@ class DriftEstimate:
 def estimate_drift(
     t_gyro, rate_gyro, t_cam, rate_cam, window_s: float, cfg: OffsetConfig = OffsetConfig()
 ) -> DriftEstimate:
-    """td in consecutive ``window_s`` windows, then td(t) = td0 + drift * t by OLS; drift in ppm (1e-6 s/s)."""
+    """td in consecutive ``window_s`` windows, then td(t) = td0 + drift * t by OLS; drift in ppm (1e-6
+    s/s)."""
     tg, g = np.asarray(t_gyro, dtype=np.float64), np.asarray(rate_gyro, dtype=np.float64)
     tc, c = np.asarray(t_cam, dtype=np.float64), np.asarray(rate_cam, dtype=np.float64)
     t0, t1 = overlap_of(tg, tc)

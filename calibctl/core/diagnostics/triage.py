@@ -323,7 +323,10 @@ def triage_camera(
             corr_txt = ", ".join(
                 f"corr({a}, {b}) = {c:+.4f}" for a, b, c in pairs if a in group and b in group
             )
-            res.note = f"columns {', '.join(group)} are collinear ({corr_txt or 'VIF >= ' + str(cfg.collinear_vif)}): refusing to attribute"
+            res.note = (
+                f"columns {', '.join(group)} are collinear "
+                f"({corr_txt or 'VIF >= ' + str(cfg.collinear_vif)}): refusing to attribute"
+            )
         else:
             res.value = to_channel_units(spec.key, coef, cfg.focal_px)
             lo, hi = sorted(to_channel_units(spec.key, float(v), cfg.focal_px) for v in ci[i])

@@ -32,7 +32,8 @@ def estimate_board_pose(
     Args:
         object_points_m: (N, 3) float64 board-frame points, metres (z = 0).
         corners_px: (N, 2) float64 detected corners, pixels.
-        camera_matrix: (3, 3) px; dist_coeffs: (n,) in the order of ``model`` (OpenCV's, or k1..k4 of a fisheye).
+        camera_matrix: (3, 3) px; dist_coeffs: (n,) in the order of ``model`` (OpenCV's, or k1..k4 of a
+        fisheye).
         model: the calibration's model name (core.intrinsics.solve.MODELS); pinhole models all project alike.
 
     Returns:

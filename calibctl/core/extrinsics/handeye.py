@@ -124,7 +124,8 @@ def solve_translation(motions: Motions, R_X: np.ndarray) -> np.ndarray:
 
 
 def translation_scale(motions: Motions, R_X: np.ndarray) -> tuple[float, float]:
-    """The scale s on a's translations that best fits the translation half, ``(R_A - I) t_X + s t_A = R_X t_B``.
+    """The scale s on a's translations that best fits the translation half, ``(R_A - I) t_X + s t_A = R_X
+    t_B``.
 
     With R_X known the equation is linear in (t_X, s), so one least-squares solve gives s and its
     one-sigma (from the residual scatter, dof 3n - 4). Both sensors in metres: s = 1 within the noise;

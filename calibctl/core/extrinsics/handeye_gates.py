@@ -166,7 +166,8 @@ def lever_arm_gate(motions: Motions, th: HandEyeThresholds) -> GateResult:
         False,
         sigma_min,
         th.lever_arm_sigma_min,
-        f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} deg of "
+        f"lever arm unobservable: sigma_min {sigma_min:.3f} (about {about:.{0 if about >= 1.5 else 1}f} "
+        "deg of "
         f"rotation); {hint}",
         "lever_arm.unobservable",
         hint,

@@ -114,9 +114,11 @@ def rig_connected_gate(
         False,
         float(n),
         float(min_shared_views),
-        f"the rig falls apart into {n_parts} groups; pair {pair} shares {n} view(s) (needs {min_shared_views})",
+        f"the rig falls apart into {n_parts} groups; pair {pair} shares {n} view(s) (needs "
+        f"{min_shared_views})",
         reason="rig-not-connected",
-        hint=f"capture at least {min_shared_views - n} more frame(s) with the board seen by both {cameras[a]} "
+        hint=f"capture at least {min_shared_views - n} more frame(s) with the board seen by both "
+        f"{cameras[a]} "
         f"and {cameras[b]}",
         detail={"pair": pair, "shared_views": n},
     )

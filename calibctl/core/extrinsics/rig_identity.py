@@ -11,7 +11,8 @@ is true), lint passes, and it became the ACTIVE rig. What gives it away, cheapes
   the same frame for two members, in at least half of their shared frames: a re-encoded copy of the
   same photos (new bytes, same picture);
 * ``zero_baselines``: a solved baseline statistically indistinguishable from zero (the zero vector
-  inside the translation's 99.7 % confidence ellipsoid, ``CHI2_3DOF``), or below ``MIN_BASELINE_MM`` (two lens barrels cannot sit closer; a beam-splitter rig shares
+  inside the translation's 99.7 % confidence ellipsoid, ``CHI2_3DOF``), or below ``MIN_BASELINE_MM`` (two lens
+  barrels cannot sit closer; a beam-splitter rig shares
   one optical centre, which a board-based rig solve cannot tell apart from one camera either).
 
 Each check returns what it found (empty: nothing contradicts); ``refuse`` raises one

@@ -1,6 +1,7 @@
 """Starting point of the joint rig solve: per-view PnP, then a spanning tree of the camera graph.
 
-Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics (core.intrinsics.solve.fit_pose:
+Each camera's board pose in each frame comes from cv2.solvePnP with its intrinsics
+(core.intrinsics.solve.fit_pose:
 through the fisheye model for a fisheye member). A pair's relative
 pose is the chordal mean over the frames both saw (rotation matrices averaged and projected back onto
 SO(3), translations averaged). Cameras are reached from the root breadth-first along the pairs with
@@ -105,7 +106,8 @@ class PairSpread:
     Attributes:
         n_frames: frames both cameras saw whose own board fits (PnP) leave at most ``MAX_RMS_PX``.
         baseline_mm: (min, max) of the per-frame baselines, mm.
-        rotation_deg / rotation_frame: the largest per-frame rotation off their chordal mean, deg, and its frame.
+        rotation_deg / rotation_frame: the largest per-frame rotation off their chordal mean, deg, and its
+        frame.
         transfer_rms_px / transfer_frame: the best frame's relative pose put to every frame: camera a's board
             pose carried into camera b and projected through b's lens, per-corner RMS over all of them (px).
             It bounds what one rigid pose can do on these frames from above (with a's poses fixed).
@@ -132,7 +134,8 @@ class PairSpread:
 def _fit_rms_px(
     view: BoardView, model_points_m: np.ndarray, member: MemberIntrinsics, T_cam_board: np.ndarray
 ) -> float:
-    """Per-corner RMS (px) of ``view``'s corners against the board at T_cam_board through the member's lens."""
+    """Per-corner RMS (px) of ``view``'s corners against the board at T_cam_board through the member's
+    lens."""
     pose = T_to_pose(T_cam_board)
     proj, _ = project_member(view.object_points(model_points_m), pose[:3], pose[3:], member)
     return float(np.sqrt(np.mean(np.sum((view.corners_px - proj.reshape(-1, 2)) ** 2, axis=1))))

@@ -33,7 +33,8 @@ class MemberIntrinsics:
         name: the camera's frame name (its serial).
         camera_matrix: (3, 3) float64 K, px. dist_coeffs: (n,) float64, OpenCV order.
         image_size: (width, height) px the corners are detected at.
-        free_intrinsics, free_distortion: the solve model's free parameter names (core.intrinsics.solve.MODELS).
+        free_intrinsics, free_distortion: the solve model's free parameter names
+        (core.intrinsics.solve.MODELS).
         aspect: fx / fy held fixed by the model, or None.
         covariance: (p, p) covariance of those free parameters in ``intrinsic_columns`` order (px^2,
             unitless^2), or None when unknown (then fixed intrinsics are treated as exact).
@@ -228,7 +229,8 @@ def normal_equations(
     per_frame: bool = False,
 ) -> NormalEquations:
     """Accumulate J^T J and J^T r at (cam_poses (C, 6) with row 0 unused, board_poses (F, 6)); ``per_frame``:
-    each frame's share of H over the non-board unknowns too (the frame-level covariance needs it, the LM not)."""
+    each frame's share of H over the non-board unknowns too (the frame-level covariance needs it, the LM
+    not)."""
     H = np.zeros((layout.size, layout.size))
     g_f = np.zeros((layout.n_frames, layout.size))
     shared = layout.size - 6 * layout.n_frames

@@ -248,8 +248,10 @@ def diverged(views: RigViews, members: Sequence[MemberIntrinsics], worst_rms_px:
     if apart:
         pairs = ", ".join(f"{views.cameras[s.a]}-{views.cameras[s.b]}" for s in apart)
         return InconsistentDataError(
-            f"the rig's frames contradict each other, so the cameras were not rigid or not synchronised: the solve "
-            f"leaves RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px) and no frame's own pose of {pairs} fits "
+            "the rig's frames contradict each other, so the cameras were not rigid or not synchronised: "
+            "the solve "
+            f"leaves RMS {worst_rms_px:.2f} px (limit {MAX_RMS_PX:.0f} px) and no frame's own pose of "
+            f"{pairs} fits "
             f"the other frames within {MAX_RMS_PX:.0f} px; {words}",
             hint=RIGID_HINT,
         )
@@ -276,7 +278,8 @@ def solve_rig(
         views: synchronised views; frames seen by fewer than two cameras are left out.
         members: per camera intrinsics, same order as views.cameras.
         refine_intrinsics: free each member's model parameters too.
-        model: the members' solve model (core.intrinsics.solve.MODELS) whose flags a refining stereo solve uses.
+        model: the members' solve model (core.intrinsics.solve.MODELS) whose flags a refining stereo solve
+        uses.
         solver: "auto" (OpenCV stereo for two cameras, joint LM otherwise), "opencv" or "lm".
 
     Raises:

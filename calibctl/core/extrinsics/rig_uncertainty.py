@@ -16,7 +16,8 @@ Frame level
     IF_f = [(S - S_f)^-1 g_f]_x + A IF_theta,f, its own corners through the rig solve plus, for a member
     calibrated on the same photos (MemberIntrinsics.view_influences), what that photo did to the member's
     intrinsics (IntrinsicCovariance.view_influences), carried through A. A member photo the rig does not use
-    is a cluster of its own. The rig's own term (S the reduced information of the camera poses, every board pose
+    is a cluster of its own. The rig's own term (S the reduced information of the camera poses, every board
+    pose
     eliminated, S_f and g_f frame f's share and score) is the delete-one step (S - S_f)^-1 g_f, not S^-1 g_f
     (the jackknife, CR3): with 6 pose parameters over ~15 frames a frame's leverage is ~0.4 and the plain
     sandwich reads 1.4x short (tests/core/extrinsics/test_rig_frame_sigma.py). Cov_frame = (n-1)/n sum
@@ -89,10 +90,12 @@ class RigLinearisation:
         layout, normal_equations: of the joint problem (per frame).
         H_inv: (n_free, n_free) inverse information of the free unknowns (camera poses, board poses, refined
             intrinsics), unit noise: the Jacobian covariance is residual_variance_px2 * H_inv.
-        intrinsic_gain: (n_free, n_fixed) A = dx/dtheta of intrinsics held fixed with a known covariance, else None.
+        intrinsic_gain: (n_free, n_fixed) A = dx/dtheta of intrinsics held fixed with a known covariance, else
+        None.
         cov_theta_jacobian, cov_theta_unknown: (n_fixed, n_fixed) the members' Jacobian covariances, and the
             covariances of members whose photos are unknown (independent data), None with intrinsic_gain.
-        pulls: cluster -> (n_free,) its pull on the solution: a frame name, or (camera, photo name) for a member
+        pulls: cluster -> (n_free,) its pull on the solution: a frame name, or (camera, photo name) for a
+        member
             photo the rig does not use (module docstring).
     """
 
@@ -201,7 +204,8 @@ def jackknife(pulls: np.ndarray) -> np.ndarray:
 
 
 def _frame_pulls(ne: NormalEquations, layout: Layout, H_inv: np.ndarray, refine: bool) -> np.ndarray:
-    """(F, n_free) x_hat - x_hat(without frame f), one Newton step from the solution: (S - S_f)^-1 g_f over the
+    """(F, n_free) x_hat - x_hat(without frame f), one Newton step from the solution: (S - S_f)^-1 g_f over
+    the
     camera poses (and refined intrinsics), each frame's board pose eliminated (S the reduced information, S_f
     frame f's share, g_f its reduced score). The delete-one step, not S^-1 g_f: a frame that pins the rig more
     than most leaves small residuals behind, and only the leverage-corrected step shows what it holds up."""

@@ -1,17 +1,20 @@
 """Held-out validation of a rig solve (k-fold over synchronised frames) and loop closure.
 
-Held-out: frames go to folds by ``core.intrinsics.validation.fold_assignment`` (frame i -> fold i % k). For each
+Held-out: frames go to folds by ``core.intrinsics.validation.fold_assignment`` (frame i -> fold i % k). For
+each
 fold the rig is re-solved on the other frames; each held-out frame's board pose T_root_board is then
 fitted jointly to every camera's corners with the extrinsics and intrinsics frozen (Levenberg-Marquardt
 on 6 parameters, calibctl.core.lm), so a wrong extrinsic shows up as residual in some camera instead of
-being absorbed by a per-camera pose. Per camera: held-out reprojection RMS. Per pair: epipolar error and rectified
+being absorbed by a per-camera pose. Per camera: held-out reprojection RMS. Per pair: epipolar error and
+rectified
 cross-epipolar disparity (rig_metrics) of the held-out frames both cameras saw.
 
 Loop closure (3+ cameras): every pair with shared frames is solved on its own (a 2-camera solve);
 around every simple cycle of that pair graph the composed transform should be identity. The residual
 (rotation deg, translation mm) is reported with its one-sigma and the Mahalanobis distance of the 6-vector,
 both from the loop's Jacobian covariance with the cross covariances of pairs that share a camera's corners
-(core.extrinsics.rig_loop; treated as independent they read the loop several times too wide). A joint solve closes its own loops by construction; the pairwise loop is
+(core.extrinsics.rig_loop; treated as independent they read the loop several times too wide). A joint solve
+closes its own loops by construction; the pairwise loop is
 the rig's health metric (seed ch. 6 prompt B).
 """
 
@@ -79,7 +82,8 @@ def _rms(x: np.ndarray) -> float:
 def fit_board_pose(
     views: RigViews, f: int, members: Sequence[MemberIntrinsics], cam_poses: np.ndarray
 ) -> np.ndarray:
-    """(6,) T_root_board of frame f fitted to every camera's corners, extrinsics frozen (calibctl.core.lm, dense)."""
+    """(6,) T_root_board of frame f fitted to every camera's corners, extrinsics frozen (calibctl.core.lm,
+    dense)."""
     frame = views.subset([f])
     start = view_poses(frame, members)
     c, T_cam_board = next(iter((k[1], v) for k, v in start.items()))

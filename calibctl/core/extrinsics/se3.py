@@ -30,7 +30,8 @@ def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle_rad(R: np.ndarray) -> float:
-    """Angle (rad, 0..pi) of a (3, 3) rotation; well conditioned at small angles (unlike acos of the trace)."""
+    """Angle (rad, 0..pi) of a (3, 3) rotation; well conditioned at small angles (unlike acos of the
+    trace)."""
     return float(np.linalg.norm(rotvec_from_rotation(R)))
 
 

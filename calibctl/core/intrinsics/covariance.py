@@ -91,7 +91,8 @@ class IntrinsicCovariance:
 
     @property
     def jacobian_covariance(self) -> np.ndarray | None:
-        """(p, p) the Jacobian covariance alone, whether or not the view-level rule inflated ``covariance``."""
+        """(p, p) the Jacobian covariance alone, whether or not the view-level rule inflated
+        ``covariance``."""
         if self.covariance is None or not self.inflated or not self.view_factor:
             return self.covariance
         return self.covariance / self.view_factor**2
@@ -228,7 +229,8 @@ def schur_covariance(
 def view_sigma_factor(
     S_unit_inv: np.ndarray, d: np.ndarray, scores: Sequence[np.ndarray], s2: float
 ) -> float | None:
-    """sqrt(phi): the view-clustered (sandwich) sigma over the Jacobian sigma, averaged over whitened directions.
+    """sqrt(phi): the view-clustered (sandwich) sigma over the Jacobian sigma, averaged over whitened
+    directions.
 
     Args:
         S_unit_inv: (p, p) inverse of the unit-diagonal reduced information matrix; d: (p,) its scaling.

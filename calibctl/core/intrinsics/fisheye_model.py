@@ -71,7 +71,8 @@ def project_equidistant(points_cam: np.ndarray, K: np.ndarray, dist: np.ndarray)
 
 
 def undistort_theta(theta_d: np.ndarray, dist: np.ndarray, iterations: int = 20) -> np.ndarray:
-    """theta of theta_d (rad) by Newton's method from theta = theta_d (the lens is monotonic where it images)."""
+    """theta of theta_d (rad) by Newton's method from theta = theta_d (the lens is monotonic where it
+    images)."""
     theta_d = np.asarray(theta_d, np.float64)
     theta = theta_d.copy()
     k = np.asarray(dist, np.float64).ravel()[:4]
@@ -199,7 +200,8 @@ def _homography_rms_px(obj_xy: np.ndarray, img: np.ndarray, f: float, centre: np
 
 
 class _ViewScores:
-    """The views' homography RMS at any focal f, each view's digest taken once (the scores remembered by it)."""
+    """The views' homography RMS at any focal f, each view's digest taken once (the scores remembered by
+    it)."""
 
     def __init__(
         self,
@@ -235,7 +237,8 @@ def view_guess_rms_px(
 
 
 def forget_view_scores() -> None:
-    """Forget the remembered view scores: a benchmark that times the focal guess again must compute it again."""
+    """Forget the remembered view scores: a benchmark that times the focal guess again must compute it
+    again."""
     _RECENT_SCORES.clear()
 
 

@@ -65,9 +65,11 @@ def _initial(
             rms = view_guess_rms_px(objs, imgs, size, max(size) / math.pi)
             bad = [i for i in range(len(objs)) if not np.isfinite(rms[i])]
             raise NumericalError(
-                "the fisheye solve cannot be initialised: no focal length makes the views' corners fit planar boards"
+                "the fisheye solve cannot be initialised: no focal length makes the views' corners fit "
+                "planar boards"
                 + (f" (views {bad} have fewer than 6 corners within 75 deg of the axis)" if bad else ""),
-                hint="check the image size and the board geometry; capture views with the board nearer the centre",
+                hint="check the image size and the board geometry; capture views with the board nearer the "
+                "centre",
             )
         intr = np.array([f, f, (size[0] - 1) / 2.0, (size[1] - 1) / 2.0, 0.0, 0.0, 0.0, 0.0])
     K = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1.0]])
@@ -97,7 +99,8 @@ def _normal_equations(objs, imgs, intr, rv, tv):
 
 
 def _lm(objs, imgs, intr, rv, tv) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Joint Levenberg-Marquardt (calibctl.core.lm, Schur path); returns the parameters and the iterations used."""
+    """Joint Levenberg-Marquardt (calibctl.core.lm, Schur path); returns the parameters and the iterations
+    used."""
 
     def evaluate(params: tuple[np.ndarray, np.ndarray, np.ndarray]) -> SchurSystem:
         blocks, _ = _normal_equations(objs, imgs, *params)

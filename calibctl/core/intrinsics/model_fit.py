@@ -23,13 +23,15 @@ those pinhole photos would be a "misfit" that no model fixes. The quadratic patc
 0.221 / 0.486 px, and the floor (the smaller) stays there.
 
 Measured (2026-11-27, 1032x778 renders of 15 views at 0.2 px per coordinate, seed 0, and the real sets after
-the corner rule; table in docs/verdicts.md) -- fit RMS / floor (before: / patch alone): k1k2 on fisheye renders
+the corner rule; table in docs/verdicts.md) -- fit RMS / floor (before: / patch alone): k1k2 on fisheye
+renders
 150 / 185 deg circular 5.8 / 8.7 (3.9 / 4.7), 120 deg full-frame 1.26 (1.21); fisheye on them 0.97-0.98
 (0.48-0.93); a 12 x 9 board held close to a 185 deg lens: fisheye 0.98 (0.17). Real photos under k1k2:
 opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75); acfr-lidar-camera (a real
 1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
 The rule fails a calibration when the ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a
-sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44 s of
+sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44
+s of
 CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
 only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
 misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
@@ -89,7 +91,8 @@ FLOOR_MODELS = ("fisheye", "rational")
 
 
 def _grid_index(values: np.ndarray) -> np.ndarray:
-    """Rank of each coordinate among the view's distinct ones (board rows/columns), tolerant of float noise."""
+    """Rank of each coordinate among the view's distinct ones (board rows/columns), tolerant of float
+    noise."""
     distinct = np.unique(np.round(values, 9))
     return np.searchsorted(distinct, np.round(values, 9))
 
@@ -97,7 +100,8 @@ def _grid_index(values: np.ndarray) -> np.ndarray:
 def detector_rms_px(
     object_points_per_view: Sequence[np.ndarray], image_points_per_view: Sequence[np.ndarray]
 ) -> float | None:
-    """Per-corner RMS (px) of the detector, from local quadratic fits; None when no 4 x 4 block has enough corners.
+    """Per-corner RMS (px) of the detector, from local quadratic fits; None when no 4 x 4 block has enough
+    corners.
 
     Args:
         object_points_per_view: V arrays (N_i, 3) float64 board frame (z = 0).
@@ -131,7 +135,8 @@ def lens_floor_px(
     models: Sequence[str] = FLOOR_MODELS,
     lanes: Lanes | None = None,
 ) -> tuple[float, str] | None:
-    """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on these
+    """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on
+    these
     corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px.
     ``lanes``: where the models are solved at once (core.lanes); the answer does not depend on it."""
     # cv2 only here: `lint FILE` reads model_fit's rule without it
@@ -143,7 +148,8 @@ def lens_floor_px(
                 list(object_points_per_view), list(image_points_per_view), image_size, name, uncertainty=False
             )
         except NumericalError:
-            return None  # too few views for it, or it diverged: the other family (or the patch) still reads the floor
+            # too few views for it, or it diverged: the other family (or the patch) still reads the floor
+            return None
 
     with single_threaded_opencv():
         solutions = lanes_map(lanes, solved, list(models))
@@ -169,7 +175,8 @@ def noise_floor_px(
 ) -> float | None:
     """The model-misfit rule's floor, px per corner: the smaller of detector_rms_px and lens_floor_px (module
     docstring); None when neither can be read. ``fit_rms_px``: the fit the floor will judge; when no floor can
-    make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and the
+    make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and
+    the
     lens models are not solved. ``lanes``: as lens_floor_px."""
     reads = [detector_rms_px(object_points_per_view, image_points_per_view)]
     if reads[0] is not None and fit_rms_px is not None and not can_misfit(fit_rms_px):
@@ -190,7 +197,8 @@ def _within_fit(floor_px: float, fit_rms_px: float | None) -> float:
 
 
 def can_misfit(fit_rms_px: float) -> bool:
-    """False when ``misfit`` is False for every floor >= 0: the excess fit - floor never exceeds MISFIT_MIN_PX."""
+    """False when ``misfit`` is False for every floor >= 0: the excess fit - floor never exceeds
+    MISFIT_MIN_PX."""
     return not fit_rms_px <= MISFIT_MIN_PX  # NaN: may be anything, read the floor
 
 
@@ -207,18 +215,24 @@ def check_model_misfit(
     outer_fit_rms_px: float | None = None,
     field_deg: float | None = None,
 ) -> Finding:
-    """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius. ``field_deg``
-    (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of WIDE_FIELD_DEG or more."""
+    """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius.
+    ``field_deg``
+    (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of WIDE_FIELD_DEG or
+    more."""
     fix = (
         "solve with --model fisheye (a wide or fisheye lens), or --model auto"
         if model != "fisheye"
-        else "the fisheye model does not explain these corners either: check the board geometry and corner order"
+        else "the fisheye model does not explain these corners either: check the board geometry and corner "
+        "order"
     )
     if model != "fisheye" and field_deg is not None and field_deg < WIDE_FIELD_DEG:
         fix = (
-            f"a lens of about {field_deg:.0f} deg diagonal is not wide: no richer model is the cure; the corners "
-            "disagree with any one lens: check that focus, zoom and autofocus stayed fixed through the capture "
-            "(see one-camera), that the board is flat and rigid, and the corner order; --model auto tries the "
+            f"a lens of about {field_deg:.0f} deg diagonal is not wide: no richer model is the cure; the "
+            "corners "
+            "disagree with any one lens: check that focus, zoom and autofocus stayed fixed through the "
+            "capture "
+            "(see one-camera), that the board is flat and rigid, and the corner order; --model auto tries "
+            "the "
             "richer models"
         )
     if model not in FREE_ASPECT_MODELS:
@@ -248,7 +262,8 @@ def check_model_misfit(
             "model-misfit",
             ERROR,
             False,
-            f"residuals grow with radius under model {model}: outer-ring fit RMS {outer_fit_rms_px:.3f} px vs "
+            f"residuals grow with radius under model {model}: outer-ring fit RMS {outer_fit_rms_px:.3f} px "
+            "vs "
             f"inner {inner_fit_rms_px:.3f} px (limit {RADIAL_GROWTH_RATIO:.1f}x)",
             fix,
         )

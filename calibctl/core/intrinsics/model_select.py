@@ -23,7 +23,8 @@ Each rung is compared with the currently accepted model and accepted only if BOT
     fit RMS improves by at least MIN_FIT_IMPROVEMENT (10 %), and
     held-out outer-ring RMS (calibctl.core.intrinsics.validation) does not increase at all.
 All rungs share the radius rings of the starting model's fit, so "outer ring" is the same corners
-for every candidate. A rejected rung does not end the search: the next rung is still compared with the accepted model,
+for every candidate. A rejected rung does not end the search: the next rung is still compared with the
+accepted model,
 because e.g. a decentred lens can need the tangential terms while k3 alone buys nothing. A rung that
 cannot be solved (too few views for it, diverged, or a held-out fold it cannot explain) is recorded as
 rejected with the reason and is out of the comparison, not the run: when the starting rung itself is out
@@ -119,7 +120,8 @@ def select_model(
     """Walk the ladder and return the chosen model (shapes as in solve_intrinsics).
 
     The choice is a function of the values alone, so the last RECENT_SELECTIONS are remembered by a
-    digest of the inputs (core.intrinsics.recent_answers): ``calibrate --model auto --reference-distance`` asks at
+    digest of the inputs (core.intrinsics.recent_answers): ``calibrate --model auto --reference-distance``
+    asks at
     capture (the gauge's lens) and again at the solve, on the same corners (about 1 s of ladder each).
     ``lanes``: where each rung's held-out folds are solved (core.lanes); the choice does not depend on it.
 
@@ -203,7 +205,8 @@ def _select_model(
             reason += (
                 f"; against {best} (the ladder's choice): held-out outer-ring RMS "
                 f"{best_hold.holdout_outer_rms_px:.4f} -> {hold.holdout_outer_rms_px:.4f} px "
-                f"({'not worse' if accepted else 'worse'}; fit RMS {best_fit.rms_px:.4f} -> {fit.rms_px:.4f} px "
+                f"({'not worse' if accepted else 'worse'}; fit RMS {best_fit.rms_px:.4f} -> "
+                f"{fit.rms_px:.4f} px "
                 f"is not compared across lens families)"
             )
         trail.append(
@@ -224,7 +227,8 @@ def _select_model(
         raise NumericalError(
             "no model can be solved and validated on these corners: "
             + "; ".join(f"{c.model}: {c.reason.removeprefix('not solvable: ')}" for c in trail),
-            hint="capture more views tilted 20-40 deg in at least three directions, and check the corner order "
+            hint="capture more views tilted 20-40 deg in at least three directions, and check the corner "
+            "order "
             "and that every view shows the declared board",
         )
     assert best_fit is not None and best_hold is not None

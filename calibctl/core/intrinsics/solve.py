@@ -27,7 +27,8 @@ sigma(fx) under CALIB_FIX_ASPECT_RATIO
 
 Initial guess of the rational model
     Started cold (OpenCV's own homography initialisation, all eight coefficients at 0), the rational
-    model can stop in a bad minimum on a wide lens: on a 190 deg circular render (tests/core/intrinsics/test_solve.py)
+    model can stop in a bad minimum on a wide lens: on a 190 deg circular render
+    (tests/core/intrinsics/test_solve.py)
     RMS 4.39 px against 0.276 px from a warm start. Without an ``initial`` K it therefore starts from the
     k1k2 solution's K (CALIB_USE_INTRINSIC_GUESS); where k1k2 itself cannot be solved it starts cold.
     On opencv-left-right, udacity-camcal and 120-170 deg renders the warm and the cold start reach the
@@ -39,13 +40,17 @@ Determinism
     (restored afterwards), which makes it bit-identical run to run.
 
 Solves asked twice
-    A solve of the same corners, model and start is therefore the same solve, and ``calibrate`` asks for it twice:
+    A solve of the same corners, model and start is therefore the same solve, and ``calibrate`` asks for it
+    twice:
     the capture's projection gate solves the session, then the solve's corner rule starts from the same
     solve of the same corners (on a lens the tilt's small model cannot explain, the tilt lens is the same
-    fisheye solve the gate asks for, core.capture.tilt); ``--model auto`` asks its ladder again, its rational folds start from the
+    fisheye solve the gate asks for, core.capture.tilt); ``--model auto`` asks its ladder again, its rational
+    folds start from the
     k1k2 fit of the same fold, and the chosen model's validation refits the folds the ladder fitted. The last
-    RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a digest
-    of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the first
+    RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a
+    digest
+    of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the
+    first
     one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
@@ -164,7 +169,8 @@ _RECENT_FITS: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_FITS)
 
 
 def forget_recent_solves() -> None:
-    """Forget the remembered solves (and the fisheye focal guess's view scores, core.intrinsics.fisheye_model): a
+    """Forget the remembered solves (and the fisheye focal guess's view scores,
+    core.intrinsics.fisheye_model): a
     benchmark that times the same solve again must compute it again."""
     _RECENT.clear()
     _RECENT_FITS.clear()

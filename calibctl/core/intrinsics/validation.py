@@ -105,7 +105,8 @@ def refit_pose(
     dist_coeffs: np.ndarray,
     model: str = DEFAULT_MODEL,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,) m)."""
+    """As refit_pose_residuals, also returning the fitted pose: (residuals (N, 2) px, rvec (3,), tvec (3,)
+    m)."""
     obj = np.asarray(object_points, dtype=np.float64).reshape(-1, 3)
     img = np.asarray(image_points, dtype=np.float64).reshape(-1, 2)
     with single_threaded_opencv():
@@ -343,13 +344,16 @@ def agree_with_folds(
         )
     if fit.rms_px > (1.0 + FOLD_MINIMUM_SLACK) * report.holdout_rms_px:
         raise NumericalError(
-            f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out folds "
-            f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different minima",
+            f"model {fit.model}: the full solve (fit RMS {fit.rms_px:.3f} px) is worse than its held-out "
+            "folds "
+            f"({report.holdout_rms_px:.3f} px) even from the folds' intrinsics: they belong to different "
+            "minima",
             hint=(
                 "capture more views tilted 20-40 deg covering the image, or --model fisheye for a wide lens"
                 if fit.model == "k1k2"
                 # never "fewer coefficients (k1k2)" to a k1k2 solve
-                else "solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a wide lens"
+                else "solve with a model with fewer coefficients (--model k1k2), or --model fisheye for a "
+                "wide lens"
             ),
         )
     return fit, report

@@ -166,5 +166,6 @@ def held_out_gate(held_out_mm: float, in_sample_mm: float, ratio: float = MAX_HE
         None if ok else "held-out",
         None
         if ok
-        else "poses left out disagree with the rest: a few poses dominate the answer; capture more, varied poses",
+        else "poses left out disagree with the rest: a few poses dominate the answer; capture more, varied "
+        "poses",
     )

@@ -53,9 +53,11 @@ class BoardInScan:
 
     Attributes:
         outcome: accepted, no_plane, too_few_rings or dimension_mismatch; message: the numbers in words.
-        normal: (3,) unit plane normal, LiDAR frame, pointing away from the sensor; distance_m: n . p on the plane.
+        normal: (3,) unit plane normal, LiDAR frame, pointing away from the sensor; distance_m: n . p on the
+        plane.
         points_m: (M, 3) board points; ring_of_point: (M,) ring index; edge_points_m: (E, 3) ring end
-            points moved half a step outward, edge_ring: (E,) their rings; centre_m: (3,) rectangle centre; corners_m: (4, 3).
+            points moved half a step outward, edge_ring: (E,) their rings; centre_m: (3,) rectangle centre;
+            corners_m: (4, 3).
         width_m, height_m: measured sides matched to the backing board's (width <= height as registered);
         dimension_error_m: (width, height) measured - registered; rings: rings on the board;
         plane_rms_m: RMS point-to-plane distance of the board points; range_m: sensor to centre.
@@ -236,7 +238,8 @@ def segment_board(
     max_dimension_error_m: float = DEFAULT_MAX_DIMENSION_ERROR_M,
     seed: int = 0,
 ) -> BoardInScan:
-    """Find the board of ``backing_m`` = (width, height) metres in ``cloud`` inside ``box`` (module docstring)."""
+    """Find the board of ``backing_m`` = (width, height) metres in ``cloud`` inside ``box`` (module
+    docstring)."""
     inside = box.contains(cloud.points_m)
     pts = cloud.points_m[inside]
     n_box = len(pts)

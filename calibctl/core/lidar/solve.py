@@ -158,7 +158,8 @@ def range_derivatives(
 ) -> tuple[np.ndarray, np.ndarray]:
     """d(residual)/d(range correction) of each board point (M,) and edge point (E,): the ray direction in
     the pattern frame (z for the plane, the nearest side's axis for an edge). Residuals are linear in a
-    range correction along a fixed ray, so this is exact, and spares the solve a finite difference per laser."""
+    range correction along a fixed ray, so this is exact, and spares the solve a finite difference per
+    laser."""
     T_board_lidar = se3.invert(T_lidar_cam @ T_cam_board)
     Rb = T_board_lidar[:3, :3]
     unit_p = pose.lidar.points_m / np.linalg.norm(pose.lidar.points_m, axis=1, keepdims=True)
@@ -371,7 +372,8 @@ def pose_excess(
 
 
 def inflate_camera(pose: Pose, board: BackingBoard, offset_m: float, tilt_rad: float) -> Pose:
-    """``pose`` with its camera prior widened by a board offset along its normal and tilts about its centre."""
+    """``pose`` with its camera prior widened by a board offset along its normal and tilts about its
+    centre."""
     T = pose.camera.T_cam_board
     R, t = T[:3, :3], T[:3, 3]
     c = T[:3, :3] @ board.centre_in_pattern() + t

@@ -62,7 +62,8 @@ class FisheyeCamera:
         )
 
     def project(self, points_board_m: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
-        """(N, 3) board points, (4, 4) T_cam_board (m) -> (N, 2) px (the same call as PinholeCamera.project)."""
+        """(N, 3) board points, (4, 4) T_cam_board (m) -> (N, 2) px (the same call as
+        PinholeCamera.project)."""
         T = np.asarray(T_cam_board, np.float64)
         return project_equidistant(
             np.asarray(points_board_m, np.float64) @ T[:3, :3].T + T[:3, 3], self.K, self.dist
@@ -165,7 +166,8 @@ def fisheye_poses(
 
 
 def default_fisheye_distance_m(camera: FisheyeCamera, square_size_m: float) -> tuple[float, float]:
-    """Board distances that keep its image size alike at any focal length (0.18-0.35 m at f = 320 px, 25 mm)."""
+    """Board distances that keep its image size alike at any focal length (0.18-0.35 m at f = 320 px, 25
+    mm)."""
     scale = float(camera.K[1, 1]) / 320.0 * square_size_m / 0.025
     return 0.18 * scale, 0.35 * scale
 

@@ -189,7 +189,8 @@ def _measurement(reg: BoardRegistration, today: dt.date) -> SquareMeasurement:
     missing = [flag for flag in _MEASUREMENT_FLAGS.values() if flag not in given]
     if missing:
         raise UsageError(
-            f"a measured square size needs {', '.join(_MEASUREMENT_FLAGS.values())}; missing: {', '.join(missing)}",
+            f"a measured square size needs {', '.join(_MEASUREMENT_FLAGS.values())}; missing: "
+            f"{', '.join(missing)}",
             f"give all of them, or only {_size_flag(reg)} to register the size as nominal (unmeasured)",
         )
     assert reg.uncertainty_mm is not None and reg.measured_on is not None
@@ -275,7 +276,8 @@ def _span(reg: BoardRegistration, day: dt.date) -> SpanMeasurement | None:
         )
     if not verdict.consistent:
         raise UsageError(
-            f"{said}: they differ by {verdict.difference_m * 1000:+.2f} mm, more than {K_SIGMA:g} combined sigma "
+            f"{said}: they differ by {verdict.difference_m * 1000:+.2f} mm, more than {K_SIGMA:g} combined "
+            "sigma "
             f"({verdict.combined_sigma_m * 1000:.2f} mm); the square size or the span is wrong",
             f"re-measure; the span implies {reg.span_mm / edges:.3f} mm {'tags' if aprilgrid else 'squares'}"
             ". "
@@ -468,7 +470,8 @@ def square_size_warning(board: BoardRevision) -> str | None:
     if square_mm >= SMALLEST_LIKELY_SQUARE_MM:
         return None
     return (
-        f"{board.ref} has a {square_mm:g} mm square: --square-mm takes millimetres. If {square_mm:g} was metres, "
+        f"{board.ref} has a {square_mm:g} mm square: --square-mm takes millimetres. If {square_mm:g} was "
+        "metres, "
         f"register it again with --square-mm {square_mm * 1000:g}; a wrong square size scales every distance "
         "and rig baseline and leaves no residual"
     )

@@ -1,4 +1,5 @@
-"""``calibctl capture`` / ``calibrate`` / ``prune``: pictures -> a stored capture session with its gate verdict.
+"""``calibctl capture`` / ``calibrate`` / ``prune``: pictures -> a stored capture session with its gate
+verdict.
 
 A capture reads a folder of images (detected in parallel, every image gets an outcome) or a video /
 live camera (each frame detected in turn and offered to ``core.capture.frame_select.FrameSelector``, which
@@ -12,9 +13,11 @@ What is written, and when:
     ``settings.image_retention_days``): every readable image of a folder, ``IMAGE_BATCH`` images per
     transaction, on a thread of their own while the gates run (``image_writes``), and every kept frame of
     a video or camera encoded as PNG (from 2 jobs on, on the writer thread beside the selection) and stored,
-    ``IMAGE_BATCH`` per transaction, once the stream is over. A crash after this point leaves only images, which
+    ``IMAGE_BATCH`` per transaction, once the stream is over. A crash after this point leaves only images,
+    which
     are harmless (content-addressed, they expire);
-  * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with tilt, gate results with
+  * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with
+  tilt, gate results with
     reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
 Nothing is written when the capture cannot run (exit 2): unknown board, unreadable source, no
 readable image, a pattern that matches nothing or only part of the board.
@@ -24,7 +27,8 @@ without ``max_views`` stops as soon as the gates pass; a video file without it i
 ``duration_s`` (video time for a file, wall time for a camera), at the end of a video file, or on Ctrl-C
 - KeyboardInterrupt finishes the session with the views kept so far and says so (``cancel_on_interrupt``: the
 station's unit is cancelled instead). A camera that stops delivering frames before one of these (unplugged, no
-frame for ``capture_sources.CAMERA_FRAME_WAIT_S``) is an error naming the frames and views it gave (exit 2): its
+frame for ``capture_sources.CAMERA_FRAME_WAIT_S``) is an error naming the frames and views it gave (exit 2):
+its
 views are no verdict on the lens, so no session is stored.
 """
 
@@ -147,7 +151,8 @@ class CaptureRequest:
     # The lens model the projection gate solves with: calibrate's --model (None, and for auto: the better fit
     # of k1k2 and fisheye, core.capture.projection_gate)
     lens_model: str | None = None
-    # Ctrl-C during a video or camera stream: False finishes the session with the views kept (calibctl capture);
+    # Ctrl-C during a video or camera stream: False finishes the session with the views kept (calibctl
+    # capture);
     # True lets the KeyboardInterrupt through, nothing of the stream kept (the station cancels the unit)
     cancel_on_interrupt: bool = False
 
@@ -503,7 +508,8 @@ def _capture_images(
         [_record(o) for o in results],
         views,
         size,
-        f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was examined "
+        f"every image {'in the folder' if source.kind == sources.FOLDER else 'of the ' + source.kind} was "
+        "examined "
         f"({len(results)})",
         0,
         ignored=images.ignored,
@@ -582,7 +588,8 @@ class _StreamState:
                 self.progress = self.selector.progress()
 
     def begin(self, frame: sources.Frame) -> tuple[np.ndarray, tuple[int, int], bool]:
-        """A frame's gray image and size, and whether it has the stream's size (the first frame sets it). Called in
+        """A frame's gray image and size, and whether it has the stream's size (the first frame sets it).
+        Called in
         frame order, possibly ahead of ``finish`` of the frames before it."""
         gray = sources.to_gray(frame.image)
         size = (int(gray.shape[1]), int(gray.shape[0]))
@@ -609,7 +616,8 @@ class _StreamState:
         half: np.ndarray | None = None,
     ) -> FrameDecision | None:
         """Select and (when kept) store one frame, in frame order, given its detection (``found``: None for a
-        frame of the wrong size) and ``half_size(gray)`` when a worker made it; None when it has the wrong size."""
+        frame of the wrong size) and ``half_size(gray)`` when a worker made it; None when it has the wrong
+        size."""
         assert self.selector is not None  # begin() ran
         if found is None:
             w, h = self.selector.image_size
@@ -684,11 +692,14 @@ def _detected_frames(
 ) -> Generator[tuple[sources.Frame, FrameDecision | None], None, None]:
     """Each frame with its decision, in order (``state.take``), detected on ``jobs`` threads.
 
-    With more than one job the frames are detected ahead: up to ``STREAM_AHEAD_PER_JOB`` x jobs frames are read
+    With more than one job the frames are detected ahead: up to ``STREAM_AHEAD_PER_JOB`` x jobs frames are
+    read
     and probed on the threads (``frame_select.probe_frame`` and the half-size copy for the frames' maximum:
     OpenCV releases the GIL) while the frames before them are settled and offered in order
-    (``StreamDetector.settle``, ``finish``), so every frame gets the detection, and the session the decisions, of
-    the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never read
+    (``StreamDetector.settle``, ``finish``), so every frame gets the detection, and the session the decisions,
+    of
+    the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never
+    read
     them.
     """
     if jobs <= 1:
@@ -743,7 +754,8 @@ def _capture_stream(
     observer: CaptureObserver,
     writer: Executor,
 ) -> _Collected:
-    """A video's or camera's frames selected into views; from 2 jobs on the kept frames are encoded as PNG on the
+    """A video's or camera's frames selected into views; from 2 jobs on the kept frames are encoded as PNG on
+    the
     capture's ``writer`` thread (the one a folder's images are stored on) beside the selection."""
     jobs = request.jobs or settings.jobs
     stream = sources.open_stream(source)
@@ -904,7 +916,8 @@ def _build_session(
     circle = session_image_circle(request.image_circle, got, board_views)
     model_points = spec.object_points()
     with verdict_lanes(request.jobs or settings.jobs) as lanes:
-        # Same test as the solve's (lint rule one-camera), while the operator still holds the board; its solves
+        # Same test as the solve's (lint rule one-camera), while the operator still holds the board; its
+        # solves
         # are independent of the other gates', so it runs on another lane beside them (verdict_lanes)
         two_cameras = lanes.start(
             lambda: one_camera_gate(
@@ -1057,8 +1070,10 @@ def prune(settings: Settings, now: dt.datetime | None = None) -> PruneResult:
 def classify_photos(
     paths: Sequence[str | Path], spec: BoardSpec, workers: int | None = None
 ) -> tuple[list[outcomes_core.ImageOutcome], np.ndarray | None]:
-    """Every photo's outcome as a folder capture classifies them (``finalize_session`` included), and the per-pixel
-    maximum of the photos at half size, which a circular fisheye's image circle is found in (None: no image)."""
+    """Every photo's outcome as a folder capture classifies them (``finalize_session`` included), and the
+    per-pixel
+    maximum of the photos at half size, which a circular fisheye's image circle is found in (None: no
+    image)."""
     picture = _MaxPicture()
     with sources.quiet_opencv():
         found = outcomes_core.classify_files(
@@ -1078,7 +1093,8 @@ def photos_session(
     outcomes: Sequence[outcomes_core.ImageOutcome],
     max_gray: np.ndarray | None = None,
 ) -> CaptureSession:
-    """The session a folder ``capture`` builds from photos already classified (``classify_photos``), its gates and
+    """The session a folder ``capture`` builds from photos already classified (``classify_photos``), its gates
+    and
     verdict included, in memory: nothing is stored. ``rig solve-folders`` judges each member by it."""
     size = outcomes_core.session_image_size(list(outcomes))
     if size is None:

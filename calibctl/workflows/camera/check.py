@@ -51,7 +51,8 @@ class CheckRequest:
 
 
 def reference_of(art: CalibrationArtifact) -> Reference:
-    """The calibration's held-out numbers as ``core.check.recheck`` reads them (ring edges from the ring labels)."""
+    """The calibration's held-out numbers as ``core.check.recheck`` reads them (ring edges from the ring
+    labels)."""
     held = art.held_out
     if held.rms_px is None or held.k_folds == 0:
         raise UsageError(
@@ -81,7 +82,8 @@ def reference_of(art: CalibrationArtifact) -> Reference:
 
 
 def stored_covariance(art: CalibrationArtifact) -> np.ndarray | None:
-    """(3, 3) covariance of the stored (focal scale, cx px, cy px) from the artifact's full covariance, or None.
+    """(3, 3) covariance of the stored (focal scale, cx px, cy px) from the artifact's full covariance, or
+    None.
 
     focal scale = the mean of dfx/fx and dfy/fy (fx = aspect * fy when the solve tied them: dfy/fy).
     A parameter the solve held fixed contributes nothing.
@@ -270,7 +272,8 @@ def _shift_text(name: str, shift: float) -> str:
 
 
 def check(settings: Settings, request: CheckRequest) -> CheckEvent:
-    """Re-test the calibration ``request.ref`` names on fresh images and store the event (see module docstring).
+    """Re-test the calibration ``request.ref`` names on fresh images and store the event (see module
+    docstring).
 
     Raises CalibctlError (exit 2) when the check cannot run: unknown serial/version, a source that is
     not a set of images, images of another size, no board found, an unusable reference distance.

@@ -87,13 +87,16 @@ def gauge_model(model: str | None) -> str:
 
 
 def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[str]) -> DistanceCheck:
-    """Compare the per-view recovered distances with the surveyed one (InputError when it cannot be judged)."""
+    """Compare the per-view recovered distances with the surveyed one (InputError when it cannot be
+    judged)."""
     ratio, spread = distance_ratio(recovered_m, ref.distance_m)
     if spread > MAX_SPREAD:
         near, far = int(np.argmin(recovered_m)), int(np.argmax(recovered_m))
         raise InputError(
-            f"the board was not held at one distance: {names[near]} at {recovered_m[near]:.3f} m, {names[far]} at "
-            f"{recovered_m[far]:.3f} m; a reference distance of {ref.distance_m:.3f} m cannot be matched by all views",
+            f"the board was not held at one distance: {names[near]} at {recovered_m[near]:.3f} m, "
+            f"{names[far]} at "
+            f"{recovered_m[far]:.3f} m; a reference distance of {ref.distance_m:.3f} m cannot be matched "
+            "by all views",
             "check with only the pictures taken with the board in the fixture",
         )
     for factor, what in _UNIT_FACTORS.items():
@@ -106,7 +109,8 @@ def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[
                 )
     if not 0.5 < ratio < 2.0:
         raise InputError(
-            f"the board is {float(np.median(recovered_m)):.3f} m away, nowhere near the surveyed {ref.distance_m:.3f} m "
+            f"the board is {float(np.median(recovered_m)):.3f} m away, nowhere near the surveyed "
+            f"{ref.distance_m:.3f} m "
             f"(ratio {ratio:.2f})",
             "put the board in the fixture, or check the surveyed distance and its units",
         )
@@ -125,7 +129,8 @@ def judge_distance(ref: ReferenceDistance, recovered_m: np.ndarray, names: list[
 def distance_reason(d: DistanceCheck) -> str:
     """The seed's explanation of a failed gauge, with the numbers."""
     return (
-        f"board distance {d.recovered_m:.4f} m is {d.ratio:.3f}x the surveyed {d.reference_m:.4f} m: the metric "
+        f"board distance {d.recovered_m:.4f} m is {d.ratio:.3f}x the surveyed {d.reference_m:.4f} m: the "
+        "metric "
         "scale is wrong (board square size?); the residual cannot show it"
     )
 
@@ -138,7 +143,8 @@ def detect_fixture_views(
     calibrated: str,
     jobs: int | None = None,
 ) -> tuple[list[outcomes_core.ImageOutcome], int]:
-    """The accepted board views of an image source, all of ``image_size`` (InputError naming both sizes if not).
+    """The accepted board views of an image source, all of ``image_size`` (InputError naming both sizes if
+    not).
 
     Returns (accepted views with corners, images examined). ``calibrated`` names what the size belongs to;
     ``jobs``: detection workers (None: the cores available).
@@ -178,7 +184,8 @@ def board_distances_m(
     dist_coeffs: np.ndarray,
     model: str,
 ) -> np.ndarray:
-    """(V,) metres from the camera centre to the centre of the corners seen, poses fitted with the lens frozen."""
+    """(V,) metres from the camera centre to the centre of the corners seen, poses fitted with the lens
+    frozen."""
     obj = spec.object_points()
     out = []
     for v in views:
@@ -217,7 +224,8 @@ def gauge_capture(
             lens, fit = model, solve_intrinsics(session_obj, session_px, image_size, model, uncertainty=False)
     except NumericalError as exc:
         raise NumericalError(
-            f"the distance gauge cannot judge this session: its {len(views)} views do not solve with the {model} "
+            f"the distance gauge cannot judge this session: its {len(views)} views do not solve with the "
+            f"{model} "
             f"lens model ({exc.message}); no session was stored",
             f"{exc.hint}; or gauge with the model the lens needs (--model)"
             if exc.hint

@@ -252,7 +252,8 @@ def nothing_found_error(
         probed = f"{len(samples)} of them" if samples else "none of them"
         message += f"; the near patterns {tried} are not visible either (probed {probed})"
         hint = (
-            f"check the registered pattern with {registry} (inner corners, cols x rows, squares - 1 per side), "
+            f"check the registered pattern with {registry} (inner corners, cols x rows, squares - 1 per "
+            "side), "
             "and that the whole board is in the frame, lit and in focus"
         )
     return InputError(message, hint)
@@ -320,8 +321,10 @@ def larger_board_error(
         return None
     (c, r), names = max(hits, key=lambda item: (len(item[1]), item[0][0] * item[0][1]))
     return InputError(
-        f"the pictures show a larger board than {board_ref} ({spec.cols}x{spec.rows} inner corners): {_a(c, r)} "
-        f"chessboard is found in {_names(names)}. The detector locks onto {_a(spec.cols, spec.rows)} part of it, "
+        f"the pictures show a larger board than {board_ref} ({spec.cols}x{spec.rows} inner corners): "
+        f"{_a(c, r)} "
+        f"chessboard is found in {_names(names)}. The detector locks onto {_a(spec.cols, spec.rows)} part "
+        "of it, "
         "so corner ids could slide from view to view; nothing was stored",
         _recount_hint(f"`calibctl board show {board_name}`" if given is None else given, c, r, given),
     )

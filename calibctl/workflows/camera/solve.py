@@ -153,7 +153,8 @@ def _held_out(report: HoldoutReport) -> HeldOut:
 def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes):
     """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
 
-    The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly, as
+    The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly,
+    as
     at capture) and the model, so it runs on another lane
     (verdict_lanes) beside the held-out folds and the model-misfit floor; the folds and the floor's lens
     models spread over the lanes too. The numbers are those of the sequential order."""
@@ -194,8 +195,10 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         holdout = validate_holdout(kept_obj, kept_img, size, model_name, fit=solution, lanes=lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
         solution, holdout = agree_with_folds(kept_obj, kept_img, size, solution, holdout, lanes=lanes)
-        # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the smaller
-        # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit); on every
+        # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the
+        # smaller
+        # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit); on
+        # every
         # corner the rule kept, the views --drop-outliers removes included
         detector_rms = noise_floor_px(obj, img, size, float(solution.rms_px), lanes=lanes)
     except BaseException:
@@ -330,7 +333,8 @@ def station_region(
 def _with_required_region(art: CalibrationArtifact, settings: Settings) -> CalibrationArtifact:
     """The station's declared region (gates.projection_region other than the default auto) recorded as px
     vertices, so lint judges fold-over over it as well as over the observed corners (a robot that looks there
-    needs the model one-to-one there); a region that is not one of this image: UsageError naming it (exit 2)."""
+    needs the model one-to-one there); a region that is not one of this image: UsageError naming it (exit
+    2)."""
     if settings.gates.projection_region.strip().lower() == "auto" or art.image_size is None:
         return art
     size = (int(art.image_size[0]), int(art.image_size[1]))

@@ -1,4 +1,5 @@
-"""The pool the verdict stages of capture and solve share: ``--jobs`` lanes, OpenCV and BLAS on one thread each.
+"""The pool the verdict stages of capture and solve share: ``--jobs`` lanes, OpenCV and BLAS on one thread
+each.
 
 ``calibrate``'s verdicts beyond the plain script's one solve are independent solves (the one-camera split
 test beside the held-out folds and the lens floor, the split test's two groups, the folds themselves);
@@ -22,7 +23,8 @@ from calibctl.core.lanes import Lanes
 
 @contextlib.contextmanager
 def verdict_lanes(jobs: int) -> Iterator[Lanes]:
-    """``jobs`` lanes (at least one) for the verdict stages inside the block; the pool is shut down on leaving."""
+    """``jobs`` lanes (at least one) for the verdict stages inside the block; the pool is shut down on
+    leaving."""
     with single_threaded():
         if jobs <= 1:
             yield Lanes()

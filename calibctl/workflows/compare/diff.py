@@ -152,9 +152,11 @@ def _pixel_frames(a: CalibrationArtifact, b: CalibrationArtifact, lens_b: Lens, 
     if scale is None:
         if (wa, ha) != (wb, hb):
             raise UsageError(
-                f"{a.ref} is {wa}x{ha} and {b.ref} is {wb}x{hb}: projections on different pixel grids cannot be "
+                f"{a.ref} is {wa}x{ha} and {b.ref} is {wb}x{hb}: projections on different pixel grids "
+                "cannot be "
                 "compared without the scale between them",
-                f"if {b.ref} is the same sensor read out at another resolution, pass --scale S (its pixels times S "
+                f"if {b.ref} is the same sensor read out at another resolution, pass --scale S (its pixels "
+                "times S "
                 f"are {a.ref}'s; here S = {wa / wb:g} if the whole sensor is read out in both)",
             )
         return lens_b
@@ -176,7 +178,8 @@ def diff_cameras(settings: Settings, request: DiffRequest) -> CameraDiff:
 
 
 def compare_artifacts(a: CalibrationArtifact, b: CalibrationArtifact, request: DiffRequest) -> CameraDiff:
-    """``diff_cameras`` of two calibrations read already (a rollout reads all its targets in one store session)."""
+    """``diff_cameras`` of two calibrations read already (a rollout reads all its targets in one store
+    session)."""
     if a.serial == b.serial and a.version == b.version:
         raise UsageError(
             f"{request.ref_a} and {request.ref_b} are both {a.ref}: there is nothing to compare",

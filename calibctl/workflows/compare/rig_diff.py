@@ -1,4 +1,5 @@
-"""``calibctl diff --rig A B``: two stored rig versions, pair by pair (core.compare.rig_diff does the numbers).
+"""``calibctl diff --rig A B``: two stored rig versions, pair by pair (core.compare.rig_diff does the
+numbers).
 
 Camera pairs get the rotation, translation and baseline change with sigma and the predicted depth-error
 change at 1, 2, 5, 10 m; hand-eye and camera-LiDAR edges (a camera to a flange, IMU or LiDAR frame) the
@@ -60,7 +61,8 @@ class RigDiff:
 
 
 def tree_of(cal: RigCalibration) -> RigTree:
-    """The stored edges as core's RigTree. Hand-eye and LiDAR edges are stored as measured (``flange -> cam0``,
+    """The stored edges as core's RigTree. Hand-eye and LiDAR edges are stored as measured (``flange ->
+    cam0``,
     ``lidar -> cam0``), not from the root camera down: oriented as the exports do (rig_tree.orient_tree)."""
     return orient_tree(
         [

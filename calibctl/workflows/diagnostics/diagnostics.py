@@ -317,7 +317,8 @@ def run_timeoffset(
         "schema": "calibctl.diagnostics.timeoffset/1",
         "gyro": str(gyro_path),
         "camera": str(camera_path),
-        "sign_convention": "t_gyro = t_camera + td: add td to camera timestamps; positive td = camera stamps early",
+        "sign_convention": "t_gyro = t_camera + td: add td to camera timestamps; positive td = camera "
+        "stamps early",
         **_offset_dict(est),
         "correlation": {"lags_s": [float(v) for v in est.lags_s], "ncc": [float(v) for v in est.ncc]},
         "drift": None,

@@ -211,7 +211,8 @@ def require_nonnegative(table: Table, column: str) -> None:
     bad = values < 0
     if bad.any():
         raise InputError(
-            f"{table.path.name}: column {column} must not be negative; negative at {lines_text(table.lines[bad])}"
+            f"{table.path.name}: column {column} must not be negative; negative at "
+            f"{lines_text(table.lines[bad])}"
         )
 
 

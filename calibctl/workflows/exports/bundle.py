@@ -169,7 +169,10 @@ def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
     """Every problem of a bundle: a listed file missing, changed (sha256) or outside the folder."""
     folder = manifest_path.parent
     ref = f"{data.get('rig')}@{data.get('version')}"
-    fix = f"export the bundle again (`calibctl rig export {ref} --format bundle -o DIR --force`); never edit it by hand"
+    fix = (
+        f"export the bundle again (`calibctl rig export {ref} --format bundle -o DIR --force`); never "
+        "edit it by hand"
+    )
     listed = data.get("files")
     if not isinstance(listed, list) or not listed:
         return [_finding(f"{manifest_path}: the manifest lists no files", fix)]

@@ -201,7 +201,8 @@ def calibration_from_text(text: str, source: str, is_json: bool = False) -> Cali
     if ros_camera_info.looks_like_camera_info(data):
         return CalibrationFile(source, "ros", data, header, rig_header)
     raise InputError(
-        f"{source} is not a calibration: lint looked for a calibctl artifact (camera_matrix + content_sha256), "
+        f"{source} is not a calibration: lint looked for a calibctl artifact (camera_matrix + "
+        "content_sha256), "
         "ROS camera_info (image_width, camera_matrix, ...), OpenCV FileStorage (%YAML:1.0, <opencv_storage>, "
         "or JSON with opencv-matrix nodes) and the rig exports (bundle manifest.json, rig or hand-eye JSON, "
         "tf_static, URDF, Kalibr camchain, OpenCV stereo)",

@@ -328,7 +328,8 @@ def write_exports(
 ) -> list[Path]:
     """Every export of a solved rig into ``out`` (created); the stereo files for the root and the next camera;
     ``robot`` names the URDF robot. Each file carries the rig trace header of a solve no store holds: ``not
-    stored``, the verdict ``status`` and ``solution_sha256`` (and its file-sha256, which ``calibctl lint`` checks)."""
+    stored``, the verdict ``status`` and ``solution_sha256`` (and its file-sha256, which ``calibctl lint``
+    checks)."""
     with file_errors("create the export folder", out):
         out.mkdir(parents=True, exist_ok=True)
     members, tree = solution.members, solution.tree

@@ -88,7 +88,8 @@ _ROS_KEYS = {"image_width", "image_height", "camera_name", "distortion_model", *
 
 
 def looks_like_camera_info(data: Any) -> bool:
-    """Two or more camera_info keys: a camera_info file (perhaps one ROS would refuse), not another document."""
+    """Two or more camera_info keys: a camera_info file (perhaps one ROS would refuse), not another
+    document."""
     return isinstance(data, dict) and len(_ROS_KEYS & set(data)) >= 2
 
 

@@ -121,7 +121,8 @@ def stamp(art: CalibrationArtifact, body: str, *, signed: bool = False) -> str:
     ``signed``: with a ``calibctl signature ...`` line, the artifact's store signature (when it has one)."""
     lines = [
         f"{_PREFIX}{art.ref} {art.status} sha256 {art.content_sha256}\n",
-        f"{_PREFIX}evidence {json.dumps(evidence_of(art), sort_keys=True, separators=(',', ':'), allow_nan=False)}\n",
+        f"{_PREFIX}evidence "
+        f"{json.dumps(evidence_of(art), sort_keys=True, separators=(',', ':'), allow_nan=False)}\n",
     ]
     if signed and art.signature is not None:
         lines.append(_signature_line("signature", art.signature))
@@ -135,7 +136,8 @@ def stamp(art: CalibrationArtifact, body: str, *, signed: bool = False) -> str:
 
 @dataclass(frozen=True)
 class RigTraceHeader:
-    """The header of a rig export: the rig version (and, in a camera's file, the member) it was written from."""
+    """The header of a rig export: the rig version (and, in a camera's file, the member) it was written
+    from."""
 
     ref: str  # RIG@N, or NOT_STORED for `rig solve-folders --export-dir`
     status: str
@@ -188,7 +190,8 @@ def stamp_rig(
 
 
 def read_rig(text: str) -> RigTraceHeader | None:
-    """The rig header of ``text``, or None (not a rig export, or one written before rig exports were hashed)."""
+    """The rig header of ``text``, or None (not a rig export, or one written before rig exports were
+    hashed)."""
     head = text.splitlines()[: HEADER_SCAN_LINES + 8]
     ref = next((m for line in head if (m := _RIG_REF.match(line) or _RIG_NOT_STORED.match(line))), None)
     if ref is None:

@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 
 @dataclass
 class Gate:
-    """The gate's reading of one open rollout: the inputs, and per canary robot its failing and missing targets."""
+    """The gate's reading of one open rollout: the inputs, and per canary robot its failing and missing
+    targets."""
 
     evidence: list[GateEvidence] = field(default_factory=list)
     failing: dict[str, list[str]] = field(default_factory=dict)  # robot -> "CAM-1 check report amr-1/x: fail"
@@ -53,7 +54,8 @@ def report_passed(r: GateReport) -> bool:
 
 
 def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
-    """The gate inputs of ``rollout``'s canary robots from ``store`` (two queries: checks and robots' reports)."""
+    """The gate inputs of ``rollout``'s canary robots from ``store`` (two queries: checks and robots'
+    reports)."""
     targets = rollout.targets
     since = rollout.start.at.replace(microsecond=0)  # a report stamped in the start's own second counts
     serials = sorted(name for kind, name in targets if kind == "serial")
@@ -106,7 +108,8 @@ def read_gate(store: Store, rollout: Rollout, fleet: Fleet) -> Gate:
 
 
 def previous_version(fleet: Fleet, name: str, t: Target) -> int | None:
-    """The version ``t`` ran on its robots before rollout ``name`` (the most common one), None when none ran one."""
+    """The version ``t`` ran on its robots before rollout ``name`` (the most common one), None when none ran
+    one."""
     seen: Counter[int] = Counter()
     for (robot, target), running in fleet.running.items():
         if target != t:
@@ -120,7 +123,8 @@ def previous_version(fleet: Fleet, name: str, t: Target) -> int | None:
 
 
 def _compare(store: Store, t: Target, old: int, new: int) -> TargetDiff:
-    """``calibctl diff`` (or ``diff --rig``) of ``t`` @old against @new; "not compared" with why when it cannot."""
+    """``calibctl diff`` (or ``diff --rig``) of ``t`` @old against @new; "not compared" with why when it
+    cannot."""
     kind, name = t
     a, b = f"{name}@{old}", f"{name}@{new}"
     try:
@@ -141,7 +145,8 @@ def _compare(store: Store, t: Target, old: int, new: int) -> TargetDiff:
 def target_diffs(
     settings: Settings, fleet: Fleet, name: str, targets: dict[Target, int]
 ) -> dict[Target, TargetDiff]:
-    """Each of rollout ``name``'s ``targets`` against the version its robots ran before it (none: not compared)."""
+    """Each of rollout ``name``'s ``targets`` against the version its robots ran before it (none: not
+    compared)."""
     out = {}
     with records.open_store(settings) as store:
         for t, version in sorted(targets.items()):

@@ -1,6 +1,7 @@
 """``calibctl fleet ingest | trends``: the health reports robots send, and their trends per serial.
 
-Ingest reads JSON-lines files (one ``HealthReport`` per line), all or nothing per file: a file with one refused
+Ingest reads JSON-lines files (one ``HealthReport`` per line), all or nothing per file: a file with one
+refused
 line (malformed, from the future, for a serial its robot does not carry, a duplicate source id) writes nothing
 and names each refused line; the other files are still ingested. Trends are conditionals, not aggregates (seed
 chapter 4 and chapter 6's modes): RMS against temperature, time offset against time in ppm, and this camera's
@@ -27,8 +28,10 @@ from calibctl.workflows.store_admin import records
 MAX_LINE_CHARS = 4096
 """A report is a few hundred characters; a longer line is not one."""
 SPREAD_WINDOW = timedelta(days=30)
-"""The per-camera spread compares the serials' check RMS over the 30 days up to this serial's newest report: the
-cameras as they are now (a camera repaired in spring is not the worst all year), and a bounded read at fleet size."""
+"""The per-camera spread compares the serials' check RMS over the 30 days up to this serial's newest report:
+the
+cameras as they are now (a camera repaired in spring is not the worst all year), and a bounded read at fleet
+size."""
 MAX_LINES = 200_000
 """Reports per file: a year of daily reports of 500 robots' sensors is 730k, sent as several files."""
 
@@ -96,7 +99,8 @@ def ingest(settings: Settings, paths: list[Path]) -> list[FileResult]:
 
 
 def trends(settings: Settings, serial: str) -> Trends:
-    """``serial``'s trends from its stored reports, and its RMS against every other serial's (NotFoundError: none)."""
+    """``serial``'s trends from its stored reports, and its RMS against every other serial's (NotFoundError:
+    none)."""
     with records.open_store(settings) as store:
         rows = store.health_rows(serial)  # oldest first
         fleet = store.fleet_check_rms(rows[-1].at - SPREAD_WINDOW) if rows else {}

@@ -1,5 +1,6 @@
 """``calibctl report SERIAL``'s sections from the rooms above the report's: the ``calibctl diff`` against the
-previous accepted version (has it really changed?) and, when robots reported on the serial, its ``fleet trends``.
+previous accepted version (has it really changed?) and, when robots reported on the serial, its ``fleet
+trends``.
 The report room draws them (``ReportData.diff``, ``.trends``); this room, which may read both, fills them."""
 
 from __future__ import annotations

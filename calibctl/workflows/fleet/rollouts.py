@@ -104,7 +104,8 @@ def start(
     reason: str,
     rig_targets: list[str] | None = None,
 ) -> Rollout:
-    """Start rollout ``name``: ``targets`` SERIAL@N and ``rig_targets`` RIG@N, ``canary`` robots get theirs now."""
+    """Start rollout ``name``: ``targets`` SERIAL@N and ``rig_targets`` RIG@N, ``canary`` robots get theirs
+    now."""
     check_reason(reason)
     wanted = _parse_targets(targets, rig_targets or [])
     fleet, _ = _read(settings)
@@ -151,7 +152,8 @@ def start(
 
 
 def promote(settings: Settings, name: str, reason: str) -> Rollout:
-    """The health gate, then every other robot carrying a target gets its version and each rig target becomes its
+    """The health gate, then every other robot carrying a target gets its version and each rig target becomes
+    its
     rig's active version (one transaction); the promote event records the gate's inputs."""
     check_reason(reason)
     fleet, rig_active = _read(settings, name)
@@ -227,7 +229,8 @@ def rollback(settings: Settings, name: str, reason: str) -> Rollout:
 
 
 def fleet_status(settings: Settings) -> tuple[FleetStatus, list[Rollout]]:
-    """``calibctl fleet status``: the robots and every rollout with each robot's state, read in one store session."""
+    """``calibctl fleet status``: the robots and every rollout with each robot's state, read in one store
+    session."""
     with records.open_store(settings) as store:
         fleet = store.fleet().fleet  # from the newest checkpoint that matches the log
         serial_active, rig_active = store.active_versions()

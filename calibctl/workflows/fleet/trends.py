@@ -1,5 +1,7 @@
-"""``fleet trends``: one serial's health as conditionals (seed chapter 6, "the trends"): RMS against temperature
-(thermal, reversible), the time offset against time (clock drift, in ppm), and the per-camera RMS spread (one bad
+"""``fleet trends``: one serial's health as conditionals (seed chapter 6, "the trends"): RMS against
+temperature
+(thermal, reversible), the time offset against time (clock drift, in ppm), and the per-camera RMS spread (one
+bad
 sensor hiding in a fleet aggregate). Each slope is an ordinary least-squares fit with its 1-sigma from the
 residual scatter and its n; each aggregate comes with the breakdown it would hide (per 10 degC bin).
 """
@@ -35,7 +37,8 @@ class Slope:
 
 
 def fit_slope(x: np.ndarray, y: np.ndarray) -> Slope | None:
-    """OLS slope of ``y`` on ``x`` (both shape (n,)) with its standard error; None with n < 3 or no spread in x."""
+    """OLS slope of ``y`` on ``x`` (both shape (n,)) with its standard error; None with n < 3 or no spread in
+    x."""
     n = int(x.size)
     if n < 3:
         return None
@@ -93,7 +96,8 @@ def _counts(values: list[str | None]) -> dict[str, int]:
 
 
 def compute_trends(serial: str, rows: list[HealthRow], fleet_rms: dict[str, tuple[float, int]]) -> Trends:
-    """``serial``'s trends from its ``rows`` and the fleet's serial -> (mean check RMS px, n) (NotFoundError: no rows)."""
+    """``serial``'s trends from its ``rows`` and the fleet's serial -> (mean check RMS px, n) (NotFoundError:
+    no rows)."""
     if not rows:
         raise NotFoundError(
             f"no health reports for {serial}", "ingest some: calibctl fleet ingest REPORTS.jsonl"

@@ -48,7 +48,8 @@ def run_lidar_synth(
     one_way: bool = False,
     force: bool = False,
 ) -> dict[str, Any]:
-    """Render and write the set (module docstring); AlreadyExistsError when ``out`` holds one and not ``force``."""
+    """Render and write the set (module docstring); AlreadyExistsError when ``out`` holds one and not
+    ``force``."""
     truth_path = out / "truth.json"
     if truth_path.exists() and not force:
         raise AlreadyExistsError(f"{out} already holds a rendered set", "pass --force to overwrite it")

@@ -121,7 +121,8 @@ def _covariance_problems(art: CalibrationArtifact) -> list[str]:
     scale = max(float(np.abs(matrix).max()), 1e-300)
     if float(np.abs(matrix - matrix.T).max()) > 1e-9 * scale:
         return [
-            f"its covariance is not symmetric (largest asymmetry {float(np.abs(matrix - matrix.T).max()):.3g})"
+            "its covariance is not symmetric (largest asymmetry "
+            f"{float(np.abs(matrix - matrix.T).max()):.3g})"
         ]
     problems = []
     smallest = float(np.linalg.eigvalsh(matrix).min())
@@ -130,7 +131,8 @@ def _covariance_problems(art: CalibrationArtifact) -> list[str]:
     for i, name in enumerate(cov.parameters):
         if name in sigma and _differs(sigma[name], math.sqrt(max(matrix[i, i], 0.0))):
             problems.append(
-                f"sigma_{name} {sigma[name]:.6g} but its covariance says {math.sqrt(max(matrix[i, i], 0.0)):.6g}"
+                f"sigma_{name} {sigma[name]:.6g} but its covariance says "
+                f"{math.sqrt(max(matrix[i, i], 0.0)):.6g}"
             )
     if cov.aspect_ratio is not None:
         fx, fy = art.camera_matrix[0][0], art.camera_matrix[1][1]
@@ -143,7 +145,8 @@ def _covariance_problems(art: CalibrationArtifact) -> list[str]:
             and _differs(sigma["fx"], cov.aspect_ratio * sigma["fy"])
         ):
             problems.append(
-                f"sigma_fx {sigma['fx']:.6g} but aspect_ratio x sigma_fy = {cov.aspect_ratio * sigma['fy']:.6g}"
+                f"sigma_fx {sigma['fx']:.6g} but aspect_ratio x sigma_fy = "
+                f"{cov.aspect_ratio * sigma['fy']:.6g}"
             )
     return problems
 

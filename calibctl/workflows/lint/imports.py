@@ -53,7 +53,8 @@ def source_label(art: CalibrationArtifact, path: Path) -> str:
 def rederive(
     art: CalibrationArtifact, settings: Settings, imported_from: str, import_signature: str | None = None
 ) -> CalibrationArtifact:
-    """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` (and how the source was
+    """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` (and how the source
+    was
     signed) as provenance."""
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.ref), settings.lint)
     failed_gates = [g.gate for g in art.gates if not g.passed]
@@ -102,7 +103,8 @@ def check_self_consistent(art: CalibrationArtifact) -> None:
     if problems:
         raise InconsistentDataError(
             f"{art.ref}: {' and '.join(problems)}, but its model {art.model.name} ties fx to fy "
-            "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was stored",
+            "(CALIB_FIX_ASPECT_RATIO): these numbers did not come from the solve it names; nothing was "
+            "stored",
             _EDITED_HINT,
         )
 
@@ -186,7 +188,8 @@ def import_file(
     require_signature: bool = False,
     trusted_keys: Path | None = None,
 ) -> ImportOutcome:
-    """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it with
+    """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it
+    with
     this store's verdict and version (see ``imports``)."""
     art = records.read_artifact_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)

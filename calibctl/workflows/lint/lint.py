@@ -270,7 +270,8 @@ def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
 
 
 def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
-    """``metric-gauge``: a failed distance gauge at capture (seed chapter 0) fails the calibration; an override
+    """``metric-gauge``: a failed distance gauge at capture (seed chapter 0) fails the calibration; an
+    override
     with its reason (provenance.gauge_override) keeps it as a warning."""
     gauge = facts.metric_gauge or {}
     d = gauge.get("distance") or {}
@@ -279,7 +280,8 @@ def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
     lo, hi = d.get("ratio_limits") or (0.99, 1.01)
     message = (
         f"the metric gauge failed at capture: the fixture board is {d['recovered_m']:.4f} m away through the "
-        f"{gauge.get('lens_model', '?')} lens, {d['ratio']:.3f}x the surveyed {d['reference_m']:.4f} m (needs "
+        f"{gauge.get('lens_model', '?')} lens, {d['ratio']:.3f}x the surveyed {d['reference_m']:.4f} m "
+        "(needs "
         f"{lo}-{hi}): every metric output (translations, baselines, hand-eye) is scaled by it; the "
         "reprojection residual cannot show it (seed chapter 0)"
     )
@@ -369,7 +371,8 @@ def _provenance_rule(facts: CalibrationFacts) -> list[Finding]:
             rule="square-size-provenance",
             severity="error",
             message=message,
-            fix="measure the squares (calipers), `calibctl board add NAME --square-mm ... --uncertainty-mm ... "
+            fix="measure the squares (calipers), `calibctl board add NAME --square-mm ... --uncertainty-mm "
+            "... "
             "--instrument ... --measured-by ... --measured-on ...`, and recalibrate",
         )
     ]
@@ -388,7 +391,8 @@ def _outer_ring_rule(facts: CalibrationFacts, limits: LintThresholds) -> list[Fi
             Finding(
                 rule="outer-ring-holdout",
                 severity="error",
-                message="no held-out outer-ring error recorded: an over-fitted distortion model would pass unseen",
+                message="no held-out outer-ring error recorded: an over-fitted distortion model would pass "
+                "unseen",
                 fix="recalibrate with calibctl solve (k-fold held-out validation)",
                 threshold=limits.outer_ring_ratio_max,
             )
@@ -412,7 +416,8 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
 
     def group(names: list[str], k: int) -> str:
         return (
-            f"{len(names)} views ({named_list(names, 3)}; fx {check['fx_px'][k]:.1f}, cx {check['cx_px'][k]:.1f}, "
+            f"{len(names)} views ({named_list(names, 3)}; fx {check['fx_px'][k]:.1f}, cx "
+            f"{check['cx_px'][k]:.1f}, "
             f"cy {check['cy_px'][k]:.1f} px alone)"
         )
 
@@ -422,8 +427,10 @@ def _one_camera_rule(facts: CalibrationFacts) -> list[Finding]:
             severity="error",
             value=check["ratio"],
             threshold=check["threshold"],
-            message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each group is "
-            f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's camera than by "
+            message=f"the views disagree the way two cameras would: {group(a, 0)} and {group(b, 1)}; each "
+            "group is "
+            f"predicted {cross[0] / held[0]:.2f}x and {cross[1] / held[1]:.2f}x worse by the other's "
+            "camera than by "
             f"its own (held-out {held[0]:.3f} / {held[1]:.3f} px); this calibration is a blend",
             fix="calibrate each camera from its own images (e.g. --source 'left*.jpg'); if it is one camera, "
             "check that nothing moved (focus, zoom, lens) during the capture",
@@ -530,7 +537,8 @@ _MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "camera-chan
 
 
 def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
-    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a ``narrow``
+    """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a
+    ``narrow``
     lens (below model_fit.WIDE_FIELD_DEG) with camera-changed or one-camera failed too, the misfit is the
     symptom: no lens model is wrong there, the intrinsics changed during the capture (a drifting
     ~60 deg webcam), so model-misfit and its symptoms point at that rule's fix instead (camera-changed's
@@ -552,7 +560,10 @@ def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding
             else f
             for f in findings
         ]
-    first = f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from the misfit"
+    first = (
+        f"first fix model-misfit ({misfit.fix}), then judge this rule again: its numbers follow from "
+        "the misfit"
+    )
     return [f.model_copy(update={"fix": first}) if f.rule in _MISFIT_SYMPTOMS else f for f in findings]
 
 
@@ -573,7 +584,8 @@ UNCHECKED_WITHOUT_EVIDENCE = "sigma(fx), the held-out outer ring and the square 
 
 
 def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
-    """Findings about a rig export's header: edited (content-hash), unhashed (traceability), rejected (status)."""
+    """Findings about a rig export's header: edited (content-hash), unhashed (traceability), rejected
+    (status)."""
     if header.intact is None:
         return [
             Finding(
@@ -589,7 +601,8 @@ def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
                 rule="content-hash",
                 severity="error",
                 message=f"file sha256 is {str(header.actual_file_sha256)[:12]} but its header records "
-                f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig {header.ref}",
+                f"{str(header.file_sha256)[:12]}: it was changed after `calibctl rig export` wrote rig "
+                f"{header.ref}",
                 fix=f"export rig {header.ref} again; never edit an export by hand",
             )
         ]
@@ -598,7 +611,8 @@ def rig_trace_rules(header: trace_header.RigTraceHeader) -> list[Finding]:
             Finding(
                 rule="traceability",
                 severity="warning",
-                message=f"written by `calibctl rig solve-folders` (solution sha256 {header.rig_sha256[:12]}), "
+                message="written by `calibctl rig solve-folders` (solution sha256 "
+                f"{header.rig_sha256[:12]}), "
                 "not from a stored rig version: no store can vouch for its cameras' evidence",
                 fix="for a robot, store the rig (`calibctl rig capture` + `rig solve`) and export it",
             )
@@ -634,7 +648,8 @@ def trace_rules(
             Finding(
                 rule="traceability",
                 severity="warning",
-                message=f"the header names {header.ref} but records no file-sha256 (an older calibctl wrote it): "
+                message=f"the header names {header.ref} but records no file-sha256 (an older calibctl "
+                "wrote it): "
                 "its numbers cannot be checked against that calibration",
                 fix=f"export {header.ref} again",
             )
@@ -805,7 +820,10 @@ def signature_rule(
     else:
         problem = keys.signature_problem(art, trusted)
     if problem is not None:
-        fix = "lint the artifact as the signing store exported it, and trust that store's public key (--trusted-keys DIR)"
+        fix = (
+            "lint the artifact as the signing store exported it, and trust that store's public key "
+            "(--trusted-keys DIR)"
+        )
         result.findings.append(
             Finding(rule="signature", severity="error", message=f"{result.source} {problem}", fix=fix)
         )

@@ -120,7 +120,8 @@ def write_report(
     extend: Callable[[ReportData], ReportData] | None = None,
 ) -> tuple[Path, ReportData]:
     """Render ``ref`` and write it atomically to ``out`` (default SERIAL-vN-report.html here). ``extend`` adds
-    what rooms above this one know (``calibctl report``: the diff against the previous version, the trends)."""
+    what rooms above this one know (``calibctl report``: the diff against the previous version, the
+    trends)."""
     data = gather(settings, ref)
     if extend is not None:
         data = extend(data)
@@ -131,7 +132,8 @@ def write_report(
 
 
 def ready_folder(folder: Path) -> Path:
-    """Create ``folder`` when missing; checked before a solve, so a solve is never stored without its report."""
+    """Create ``folder`` when missing; checked before a solve, so a solve is never stored without its
+    report."""
     if folder.exists() and not folder.is_dir():
         raise FileSystemError(
             f"cannot write reports to {folder}: it is not a folder", "name a folder for --report"

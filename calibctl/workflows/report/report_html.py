@@ -61,8 +61,10 @@ def _verdict(d: ReportData) -> str:
     lines = [
         f'<h1>{escape(art.ref)} <span class="badge {art.status}" data-key="status">{art.status}</span>'
         f"{active}</h1>",
-        f'<p>active now (the version a robot loads by serial): <b data-key="active">{"yes" if d.active else "no"}'
-        f"</b>. Lint stored at solve time below; <code>calibctl lint --serial {escape(art.serial)}</code> lints "
+        "<p>active now (the version a robot loads by serial): <b "
+        f'data-key="active">{"yes" if d.active else "no"}'
+        f"</b>. Lint stored at solve time below; <code>calibctl lint --serial {escape(art.serial)}</code> "
+        "lints "
         "the active version against today's limits.</p>",
     ]
     return "".join(lines) + lint_block(art.lint)
@@ -335,7 +337,8 @@ def _uncertainty(d: ReportData) -> str:
     return (
         "<h2>Projection uncertainty</h2><p>The stored intrinsic covariance propagated to the projection of "
         "the ray through each pixel (as mrcal's show-projection-uncertainty, without re-fitting the camera "
-        f'frame); white dots: the corners used. Centre <b data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
+        "frame); white dots: the corners used. Centre <b "
+        f'data-key="uncertainty_centre">{num(float(m.sigma_px[r, c]), 2)}</b> px, worst '
         f'<b data-key="uncertainty_max">{num(hi, 2)}</b> px.</p>' + plot.svg() + colour_bar(lo, hi, "px", 520)
     )
 
@@ -390,7 +393,10 @@ def _diff(d: ReportData) -> str:
     if x is None and d.diff_note is None:
         return ""  # not asked (a solve's own report)
     if x is None:
-        return f'<h2>Change from the previous version</h2><p class="note">{escape(d.diff_note or "not compared")}</p>'
+        return (
+            "<h2>Change from the previous version</h2><p "
+            f'class="note">{escape(d.diff_note or "not compared")}</p>'
+        )
     keys = list(x.raw_px)
     rows = [
         f'<th class="l">{escape(name)}</th>'
@@ -411,7 +417,8 @@ def _diff(d: ReportData) -> str:
     why = "".join(f"<li>{escape(r)}</li>" for r in x.reasons)
     return (
         f"<h2>Change from the previous version</h2><p><code>calibctl diff {escape(x.previous_ref)} "
-        f'{escape(d.artifact.ref)}</code>: <b data-key="diff_verdict">{escape(x.verdict)}</b>; implied rotation '
+        f'{escape(d.artifact.ref)}</code>: <b data-key="diff_verdict">{escape(x.verdict)}</b>; implied '
+        "rotation "
         f"{num(x.rotation_deg, 4)} deg{sigma}.</p>"
         + table(["projection difference (px)", *keys], rows)
         + (f"<ul>{why}</ul>" if why else "")
@@ -419,7 +426,8 @@ def _diff(d: ReportData) -> str:
 
 
 def _trends(d: ReportData) -> str:
-    """``calibctl fleet trends``: what the robots carrying this serial reported (conditionals, not aggregates)."""
+    """``calibctl fleet trends``: what the robots carrying this serial reported (conditionals, not
+    aggregates)."""
     t = d.trends
     if t is None:
         return ""
@@ -445,7 +453,8 @@ def _trends(d: ReportData) -> str:
     f = t.get("fleet")
     if f is not None:
         lines.append(
-            f"this camera's mean check RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of {f['serials']} "
+            f"this camera's mean check RMS {f['this_mean_rms_px']:.3f} px, rank {f['rank']} of "
+            f"{f['serials']} "
             f"serials (others' median {f['others_median_rms_px']:.3f} px)"
         )
     bins = [

@@ -136,7 +136,8 @@ class Plot:
         for value in nice_ticks(*self.y_range):
             y = float(self.sy(value))
             out.append(
-                f'<text x="{self.margin[3] - 4}" y="{_f(y + 3)}" font-size="9" text-anchor="end">{value:g}</text>'
+                f'<text x="{self.margin[3] - 4}" y="{_f(y + 3)}" font-size="9" '
+                f'text-anchor="end">{value:g}</text>'
             )
         return out
 

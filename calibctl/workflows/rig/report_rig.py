@@ -242,7 +242,8 @@ def _lidar(d: RigReportData) -> str:
         k = f"{ev.parent_frame}-{ev.child_frame}"
         head = (
             f'<h3>{escape(ev.parent_frame)} -> {escape(ev.child_frame)} <span class="badge {ev.status}" '
-            f'data-key="lidar_status_{escape(k)}">{ev.status}</span></h3><p>camera {escape(ev.camera)}, board '
+            f'data-key="lidar_status_{escape(k)}">{ev.status}</span></h3><p>camera {escape(ev.camera)}, '
+            "board "
             f"{escape(ev.board)}; scans {escape(ev.scans)}, images {escape(ev.images)}</p>"
         )
         t, m = ev.transform, ev.metrics

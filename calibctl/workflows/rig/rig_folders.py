@@ -1,7 +1,8 @@
 """``calibctl rig solve-folders``: a camera rig solved from per-camera photo folders, no store needed.
 
 Steps: list each camera's photos (a folder, a quoted glob or a list file, resolved as ``capture --source``
-and ``rig capture`` resolve them: workflows.camera.capture_sources); match them into synchronised frames by frame key (the last run of
+and ``rig capture`` resolve them: workflows.camera.capture_sources); match them into synchronised frames by
+frame key (the last run of
 digits in the file name: core.extrinsics.rig_frames); detect and classify every photo with today's
 per-image outcomes; calibrate each camera on its own accepted photos (core.intrinsics.solve, full covariance)
 unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
@@ -9,9 +10,11 @@ held-out numbers and, for three or more cameras, pairwise loop closure.
 
 Then the verdict the stored path gives (``rig solve`` stores it as the version's lint): the rig lint
 rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline-design`` against
-``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored path
+``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored
+path
 judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
-and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or not
+and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
+not
 synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
@@ -182,7 +185,8 @@ def typed_spec(
 
 
 def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, capture_sources.ImageSet]:
-    """One camera's photos: a folder, glob or list as ``capture --source`` reads it; errors name the camera."""
+    """One camera's photos: a folder, glob or list as ``capture --source`` reads it; errors name the
+    camera."""
     try:
         spec = capture_sources.resolve_source(str(source))
         if spec.kind not in capture_sources.IMAGE_SETS:
@@ -197,7 +201,8 @@ def camera_photos(name: str, source: Path) -> tuple[capture_sources.SourceSpec, 
 def self_calibrated(
     name: str, outcomes: Sequence[ImageOutcome], spec: BoardSpec, model: str
 ) -> tuple[MemberIntrinsics, MemberFit]:
-    """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well it fits."""
+    """Calibrate one camera on its own accepted photos (core.intrinsics.solve, full covariance), and how well
+    it fits."""
     views = [
         (Path(o.path).name, o.corner_ids, o.corners_px)
         for o in outcomes

@@ -1,4 +1,5 @@
-"""``calibctl rig import``: a rig version exported by another store (its JSON, or a bundle folder) into this one.
+"""``calibctl rig import``: a rig version exported by another store (its JSON, or a bundle folder) into this
+one.
 
 Shaped like the camera ``import`` (workflows.lint.imports): the file's content hash is checked (an edited
 file is exit 1), its signature too (``--require-signature``: a trusted key's, exit 2 otherwise; a signature
@@ -83,7 +84,8 @@ def _from_bundle(manifest_path: Path) -> tuple[Path, Any]:
 
 def read_rig_file(path: Path) -> RigCalibration:
     """The rig version in ``path`` (a rig JSON export, a bundle folder or its manifest.json), its content
-    hash checked (IntegrityError, exit 1) and, for a bundle, every listed file and the manifest's own claim."""
+    hash checked (IntegrityError, exit 1) and, for a bundle, every listed file and the manifest's own
+    claim."""
     manifest = None
     if path.is_dir():
         path = path / bundle.MANIFEST
@@ -123,7 +125,8 @@ def read_rig_file(path: Path) -> RigCalibration:
 
 def _import_hint(serial: str, version: int) -> str:
     return (
-        f"import the member first: `calibctl export {serial}@{version} --format json -o {serial}.json` on the "
+        f"import the member first: `calibctl export {serial}@{version} --format json -o {serial}.json` on "
+        "the "
         f"source store, then `calibctl import {serial}.json` here"
     )
 
@@ -187,7 +190,8 @@ def _previous(store: Store, source: RigCalibration) -> RigCalibration | None:
 def _rederive(
     store: Store, source: RigCalibration, rig: RigDefinition, settings: Settings, label: str, mark: str
 ) -> tuple[RigCalibration, list[Finding]]:
-    """``source`` pinned to this store's members, with this store's lint and verdict; and the stale findings."""
+    """``source`` pinned to this store's members, with this store's lint and verdict; and the stale
+    findings."""
     here = {
         m.serial: _member_here(store, m.serial, m.version, m.content_sha256, source.ref)
         for m in source.members
@@ -231,13 +235,18 @@ def import_rig_file(
 ) -> RigImportOutcome:
     """Check ``path``'s hash and signature, then store its rig version with this store's verdict and version.
 
-    ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as the
-    camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False = never."""
+    ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as
+    the
+    camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False =
+    never."""
     source = read_rig_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)
     keys.require_trusted(source, str(path), trusted, require_signature)
     trust = keys.source_trust(settings, source, trusted, trusted_keys, require_signature)
-    label = f"{source.ref} sha256 {source.content_sha256} from station {source.provenance.station} (file {path.name})"
+    label = (
+        f"{source.ref} sha256 {source.content_sha256} from station {source.provenance.station} (file "
+        f"{path.name})"
+    )
     with records.open_store(settings, write=True) as store:  # the rig must be registered: no new store
         rig = store.get_rig(source.rig)
         previous = _previous(store, source)

@@ -99,9 +99,11 @@ def solved_rig_findings(
                     severity="error",
                     value=p.baseline_mm,
                     threshold=d.tolerance_mm,
-                    message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, design "
+                    message=f"{d.a}-{d.b}: baseline {p.baseline_mm:.3f} +/- {p.sigma_baseline_mm:.3f} mm, "
+                    "design "
                     f"{d.baseline_mm:.3f} +/- {d.tolerance_mm:.3f} mm",
-                    fix="check the mount (a camera moved or the wrong rig was captured) and the board's square size",
+                    fix="check the mount (a camera moved or the wrong rig was captured) and the board's "
+                    "square size",
                 )
             )
     for p in pairs:
@@ -133,9 +135,11 @@ def solved_rig_findings(
                     severity="error",
                     value=lc.mahalanobis,
                     threshold=limits.loop_closure_max_mahalanobis,
-                    message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / {lc.translation_mm:.3f} mm "
+                    message=f"{'-'.join(lc.cycle)}: loop residual {lc.rotation_deg:.4f} deg / "
+                    f"{lc.translation_mm:.3f} mm "
                     f"is {lc.mahalanobis:.2f} sigma (Mahalanobis)",
-                    fix="a pair disagrees with the rest of the rig: check its shared views and that no camera moved",
+                    fix="a pair disagrees with the rest of the rig: check its shared views and that no "
+                    "camera moved",
                 )
             )
     return findings
@@ -167,7 +171,8 @@ def rig_findings(
                 Finding(
                     rule="rig-stale-member",
                     severity="error",
-                    message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one is now {current}",
+                    message=f"{m.serial}: the rig was solved with {m.serial}@{m.version}, the active one "
+                    f"is now {current}",
                     fix=f"re-solve the rig (`calibctl rig solve {cal.rig}`)",
                 )
             )

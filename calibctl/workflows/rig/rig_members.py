@@ -1,12 +1,14 @@
 """How ``rig solve-folders`` judges each self-calibrated member: by the stored path's own verdict.
 
 The stored path (``capture``, ``solve``, then ``rig solve``, whose lint names every member's findings
-``member:<rule>``) refuses a member whose capture gates fail (the session is rejected and ``solve`` refuses it)
+``member:<rule>``) refuses a member whose capture gates fail (the session is rejected and ``solve`` refuses
+it)
 or whose calibration lint fails. Here each camera's photos go through the same functions, in memory, nothing
 stored: the capture session (workflows.camera.capture.photos_session: observability, views, one_camera, the
 decisive projection gate over the station's region, tilt and coverage as guidance) and, when it passes, the
 solve with its lint (workflows.camera.solve.build_artifact: principal-point, sigma-fx, outer-ring-holdout,
-model-misfit, one-camera, aspect-ratio, distortion-foldover over the observed region). Findings carry the stored
+model-misfit, one-camera, aspect-ratio, distortion-foldover over the observed region). Findings carry the
+stored
 path's names: ``member:<gate>`` for a failed capture gate, ``member:<rule>`` for a lint finding.
 
 Not applied, and why:
@@ -40,7 +42,8 @@ MEMBER_SERIAL = "solve-folders-member"  # the in-memory session's serial; every 
 BOARD_NAME = "solve-folders"
 NOT_APPLIED = ("square-size-provenance",)
 # A member's gates and lint are scale-free (the board poses scale with the square, the intrinsics do not): a
-# square the board registry refuses (>= 1 m: unit squares, as in OpenCV's stereo sample) is judged at this size.
+# square the board registry refuses (>= 1 m: unit squares, as in OpenCV's stereo sample) is judged at this
+# size.
 SCALE_FREE_SQUARE_M = 0.1
 
 

@@ -92,7 +92,8 @@ def queue_solved(
     session_stored: bool,
     passed: bool = True,
 ) -> Queued:
-    """Solve an accepted session here and queue it (``session_stored``: the session itself reached the store)."""
+    """Solve an accepted session here and queue it (``session_stored``: the session itself reached the
+    store)."""
     artifact = None
     if passed:
         artifact, _ = build_artifact(

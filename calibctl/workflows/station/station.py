@@ -17,11 +17,15 @@ Before each unit the station syncs what is queued (``workflows.station.sync``, o
 record stored, with its version); while anything stays queued, new units queue behind it, so a
 serial's versions keep the order its units were calibrated in.
 
-Camera mode (``StationRequest.camera``, ``LiveCamera``): the unit's own camera is plugged into the station's port
-and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates), until the
-gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory (``workflows.station.held``)
+Camera mode (``StationRequest.camera``, ``LiveCamera``): the unit's own camera is plugged into the station's
+port
+and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates), until
+the
+gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory
+(``workflows.station.held``)
 until its stream and gates are over, then stored - or queued - whole: a camera that cannot be opened or stops
-delivering frames mid-unit (unplugged) is an error line with nothing stored, and a store that goes away does not
+delivering frames mid-unit (unplugged) is an error line with nothing stored, and a store that goes away does
+not
 make the operator capture the unit again.
 
 Watch mode (``StationRequest.watch``, ``workflows.station.watch``): after the serial the station waits for
@@ -32,9 +36,12 @@ Ctrl-C (SIGINT):
   * while waiting for a serial: the station ends cleanly (``StationSummary.interrupted``; exit 0);
   * while waiting for a unit's pictures (watch mode): that unit is cancelled, as below;
   * while a unit's images are being detected, or its camera streams (or the spool synced before it): that unit
-    is cancelled - nothing of it is stored, its line says "cancelled" - and the station waits for the next serial;
-  * once detection is over (a camera unit: its stream and gates) the unit's images, session and calibration are
-    written and solved (a fraction of its time); a Ctrl-C then is held until the unit is complete, and ends the
+    is cancelled - nothing of it is stored, its line says "cancelled" - and the station waits for the next
+    serial;
+  * once detection is over (a camera unit: its stream and gates) the unit's images, session and calibration
+  are
+    written and solved (a fraction of its time); a Ctrl-C then is held until the unit is complete, and ends
+    the
     station after its verdict, so no unit is ever half stored.
 """
 
@@ -85,7 +92,8 @@ _SYNC_HINT = "it is stored when the store is back: before the next unit, or by `
 
 @dataclass(frozen=True)
 class LiveCamera:
-    """The station's camera port: each unit is captured live from ``device`` (the unit's own camera, plugged in),
+    """The station's camera port: each unit is captured live from ``device`` (the unit's own camera, plugged
+    in),
     until the gates pass with ``max_views`` views (None: as soon as they pass) or ``duration_s`` is up."""
 
     device: str  # /dev/videoN or an index, as `calibctl capture --source` names a camera
@@ -105,7 +113,8 @@ class StationRequest:
 
 @dataclass(frozen=True)
 class UnitResult:
-    """One unit's line. ``unit_s``: serial read to verdict out, seconds; ``after_last_image_s`` (watch mode): the
+    """One unit's line. ``unit_s``: serial read to verdict out, seconds; ``after_last_image_s`` (watch mode):
+    the
     unit's last picture landing in its folder (its ctime) to verdict out, seconds (camera mode: the last frame
     selected, the one that stopped the stream, to verdict out)."""
 
@@ -279,7 +288,8 @@ class _Offline:
                 self.spool().remember_board(board)
 
     def before_unit(self, report: Callable[[UnitResult], None]) -> tuple[str, str] | None:
-        """Sync what is queued; why the next unit must be queued too and the hint its line gives (None: nothing
+        """Sync what is queued; why the next unit must be queued too and the hint its line gives (None:
+        nothing
         is left queued)."""
         if self._spool is None or self._spool.counts()[0] == 0:
             return None
@@ -313,7 +323,8 @@ def _rejected(session: CaptureSession) -> str:
 def _unit_board(
     settings: Settings, request: StationRequest, offline: _Offline
 ) -> tuple[BoardRevision, str | None]:
-    """The unit's board from the store, else (the store away) from the spool as the capture into it will find it;
+    """The unit's board from the store, else (the store away) from the spool as the capture into it will find
+    it;
     and why the unit goes to the spool (None: the store answered)."""
     name, revision = board_ref(request.board)
     try:
@@ -340,7 +351,8 @@ def _watched(
 def _capture_request(
     settings: Settings, request: StationRequest, serial: str, source: str, camera: LiveCamera | None = None
 ) -> CaptureRequest:
-    """A unit's capture (``camera``: live, with its stop rule, and Ctrl-C cancels it). As `calibctl calibrate`: the
+    """A unit's capture (``camera``: live, with its stop rule, and Ctrl-C cancels it). As `calibctl
+    calibrate`: the
     gates judge through the lens model the session will be solved with."""
     return CaptureRequest(
         serial,
@@ -466,7 +478,8 @@ def _online_unit(
 def _solved_unit(
     settings: Settings, request: StationRequest, session: CaptureSession, offline: _Offline
 ) -> UnitResult:
-    """A stored session's line: rejected, or solved and stored (its calibration queued when the store went away
+    """A stored session's line: rejected, or solved and stored (its calibration queued when the store went
+    away
     after the session)."""
     if session.status != "accepted":
         return UnitResult(

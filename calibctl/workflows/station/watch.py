@@ -34,7 +34,8 @@ POLL_S = 0.02  # one folder listing and a stat per picture: ~0.1 ms of CPU for 2
 
 @dataclass(frozen=True)
 class WatchRule:
-    """When a unit's pictures are complete (``views`` and/or ``done_file``; at least one) and how long to wait."""
+    """When a unit's pictures are complete (``views`` and/or ``done_file``; at least one) and how long to
+    wait."""
 
     views: int | None = None  # complete when this many pictures are complete
     done_file: str | None = None  # complete when the camera app has written this file into the unit's folder

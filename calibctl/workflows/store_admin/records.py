@@ -49,7 +49,8 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     """The configured store. Read commands pass ``create=False``: a mistyped ``--db`` is an error, never a
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable).
-    With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write never
+    With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write
+    never
     builds on a record a read would refuse."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
@@ -247,7 +248,8 @@ def read_artifact_file(path: Path) -> CalibrationArtifact:
     loaded = formats.load_calibration(path)
     if loaded.kind != "calibctl":
         raise InputError(
-            f"{path} is {_KIND_NAMES[loaded.kind]}: it holds the numbers a robot needs, not the whole artifact",
+            f"{path} is {_KIND_NAMES[loaded.kind]}: it holds the numbers a robot needs, not the whole "
+            "artifact",
             "import the artifact itself: `calibctl export SERIAL --format json` on the source store",
         )
     art = parse_document(CalibrationArtifact, loaded.data, str(path))

@@ -1,4 +1,5 @@
-"""No traceback on a file-system problem: exit 2 and one line naming the path, for every output calibctl writes.
+"""No traceback on a file-system problem: exit 2 and one line naming the path, for every output calibctl
+writes.
 
 The suite runs as root, where permissions and read-only folders do not stop a write, so those failures
 are injected where the operating system would raise them (``tempfile.mkstemp`` in the target folder,

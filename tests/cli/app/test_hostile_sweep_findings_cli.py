@@ -1,4 +1,5 @@
-"""Regression tests for what benchmarks/hostile_sweep.py found (issue 26: the 407-case categories re-measured).
+"""Regression tests for what benchmarks/hostile_sweep.py found (issue 26: the 407-case categories
+re-measured).
 Special files are made in tmp_path only (mkfifo), never a system device node."""
 
 from __future__ import annotations
@@ -129,12 +130,16 @@ def test_store_commands_refuse_a_fifo_input_and_store_nothing(tmp_path: Path, ar
 
 def test_ctrl_c_while_calibctl_starts_is_one_line_and_exit_130():
     """SIGINT during start-up (imports, parsing) ended in a KeyboardInterrupt traceback (sweep: `solve`
-    interrupted at 0.3 s and 0.8 s). The signal is sent once the CLI package is imported, not after a delay."""
+    interrupted at 0.3 s and 0.8 s). The signal is sent once the CLI package is imported, not after a
+    delay."""
     import signal
     import subprocess
     import sys
 
-    code = "import os, signal, calibctl.cli.main; os.kill(os.getpid(), signal.SIGINT); import time; time.sleep(30)"
+    code = (
+        "import os, signal, calibctl.cli.main; os.kill(os.getpid(), signal.SIGINT); import time; "
+        "time.sleep(30)"
+    )
     done = subprocess.run(
         [sys.executable, "-c", code],
         capture_output=True,

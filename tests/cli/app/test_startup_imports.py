@@ -1,4 +1,5 @@
-"""What each command loads: the CLI imports a command's module when it runs, and its workflows inside the command.
+"""What each command loads: the CLI imports a command's module when it runs, and its workflows inside the
+command.
 
 The cost of these imports is measured in benchmarks/bench_e2e.py (CLI start-up), not asserted; this
 only checks which modules a bare ``import calibctl.cli.main`` pulls in, in a fresh interpreter.
@@ -93,7 +94,8 @@ def migrated_store(tmp_path_factory) -> str:
 def test_read_commands_load_no_migration_image_plot_or_postgres_module(migrated_store, args) -> None:
     code = (
         "import typer.main\nfrom calibctl.cli.main import app\n"
-        f"try:\n    typer.main.get_command(app).main({['--db', migrated_store, *args]!r}, standalone_mode=False)\n"
+        f"try:\n    typer.main.get_command(app).main({['--db', migrated_store, *args]!r}, "
+        "standalone_mode=False)\n"
         "except BaseException:\n    pass"
     )  # the exit code is not the point here: the imports are
     loaded = _modules_after(code)
@@ -301,7 +303,8 @@ def _numpy_blas_threads_after(code: str, openblas_env: str | None = None) -> lis
 
 LINT_FILE = (
     "import typer.main\nfrom calibctl.cli.main import app\ntry:\n    typer.main.get_command(app).main("
-    f"['lint', {str(REPO / 'fixtures/camera_front.json')!r}], standalone_mode=False)\nexcept SystemExit:\n    pass"
+    f"['lint', {str(REPO / 'fixtures/camera_front.json')!r}], standalone_mode=False)\nexcept SystemExit:\n "
+    "   pass"
 )
 
 
@@ -326,7 +329,8 @@ def test_lint_starts_numpys_openblas_on_one_thread_and_leaves_the_environment_an
 
 PLUGIN_SCANS = """
 import importlib.metadata, os, sys
-scans = []  # calls made by pydantic's plugin loader: entry_points(group=...) (pydantic 2.10+), distributions() (older)
+# calls made by pydantic's plugin loader: entry_points(group=...) (pydantic 2.10+), distributions() (older)
+scans = []
 def counting(real):
     def call(*args, **kwargs):
         if sys._getframe(1).f_globals.get("__name__") == "pydantic.plugin._loader":

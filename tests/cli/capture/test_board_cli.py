@@ -110,8 +110,9 @@ def test_re_measuring_creates_revision_2_and_name_at_rev_selects(run):
 
 
 def test_charuco_board_records_marker_and_dictionary(run):
-    result = run("board", "add", "C1", "--kind", "charuco", "--cols", "10", "--rows", "7", "--square-mm", "30",
-                 "--marker-mm", "22.5", "--dictionary", "DICT_5X5_100", "--json")  # fmt: skip
+    result = run("board", "add", "C1", "--kind", "charuco", "--cols", "10", "--rows", "7",
+                 "--square-mm", "30", "--marker-mm", "22.5", "--dictionary", "DICT_5X5_100",
+                 "--json")  # fmt: skip
     assert result.exit_code == 0, result.output
     board = json.loads(result.stdout)
     assert (board["kind"], board["marker_size_m"], board["dictionary"]) == ("charuco", 0.0225, "DICT_5X5_100")
@@ -123,7 +124,8 @@ def test_charuco_board_records_marker_and_dictionary(run):
     [
         (
             [*CHESS, "--instrument", "calipers"],
-            "a measured square size needs --uncertainty-mm, --instrument, --measured-by, --measured-on; missing: --uncertainty-mm, --measured-by, --measured-on",
+            "a measured square size needs --uncertainty-mm, --instrument, --measured-by, --measured-on; "
+            "missing: --uncertainty-mm, --measured-by, --measured-on",
         ),
         (
             [*CHESS, *MEASURED[:6], "--measured-on", "11/03/2026"],

@@ -1,4 +1,5 @@
-"""`calibctl capture / calibrate / prune`: real photos, synthetic scenarios, exit codes and every bad input."""
+"""`calibctl capture / calibrate / prune`: real photos, synthetic scenarios, exit codes and every bad
+input."""
 
 from __future__ import annotations
 
@@ -542,7 +543,8 @@ def test_progress_lines_come_at_the_start_and_then_every_few_seconds(capsys) -> 
 
 @needs_datasets
 def test_a_quoted_glob_captures_one_camera_of_a_stereo_folder(db: str) -> None:
-    """opencv-left-right holds both cameras: the whole folder is 26 images, 'left*.jpg' exactly the 13 left."""
+    """opencv-left-right holds both cameras: the whole folder is 26 images, 'left*.jpg' exactly the 13
+    left."""
     whole = json.loads(capture(db, LEFT_RIGHT, "--json").stdout)["session"]
     assert whole["source_kind"] == "folder" and len(whole["outcomes"]) == 26
     result = capture(db, f"{LEFT_RIGHT}/left*.jpg", "--json")

@@ -1,4 +1,5 @@
-"""`calibctl capture --reference-distance`: the gauge at capture catches the 23 mm typo before any solve (seed chapter 0)."""
+"""`calibctl capture --reference-distance`: the gauge at capture catches the 23 mm typo before any solve (seed
+chapter 0)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The decisive projection gate at capture: station region and threshold, guidance proxies, exit 2 on bad input."""
+"""The decisive projection gate at capture: station region and threshold, guidance proxies, exit 2 on bad
+input."""
 
 from __future__ import annotations
 

@@ -36,7 +36,8 @@ def invoke(db: str, *args: str):
 
 
 def test_a_list_file_of_absolute_paths_names_the_views_as_written(db: str, tmp_path: Path) -> None:
-    """`ls /data/left*.jpg > list.txt` names every view ../../data/left01.jpg (relative to the list's folder)."""
+    """`ls /data/left*.jpg > list.txt` names every view ../../data/left01.jpg (relative to the list's
+    folder)."""
     lefts = sorted(LEFT_RIGHT.glob("left*.jpg"))
     listing = tmp_path / "lists" / "left.txt"
     listing.parent.mkdir()

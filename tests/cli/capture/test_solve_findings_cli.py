@@ -51,7 +51,8 @@ def test_left_and_right_in_one_folder_are_called_two_cameras(tmp_path: Path, sql
         session = store.latest_session("STEREO-MIX", status=None)
         assert session.status == "rejected"
         # The same views solved anyway (a session accepted before the gate existed): the solve's own check
-        # rejects the blend, and the verdict lives in the artifact, so lint finds it again in an exported file.
+        # rejects the blend, and the verdict lives in the artifact, so lint finds it again in an exported
+        # file.
         blended = session.model_copy(update={"session_id": session.session_id[::-1], "status": "accepted"})
         store.add_session(blended)
     solved = RUNNER.invoke(app, ["--db", sqlite_url, "solve", blended.session_id], terminal_width=110)

@@ -133,7 +133,8 @@ def test_a_failing_robot_report_holds_the_canary_nothing_applied(
     held = _run(db, "fleet", "rollout", "promote", "r1", "--reason", "looks fine")
     assert held.exit_code == 1, held.output
     assert (
-        f"rollout r1 is held: canary robot(s) amr-1 report failing checks (amr-1: CAM-1 {report['kind']} report "
+        f"rollout r1 is held: canary robot(s) amr-1 report failing checks (amr-1: CAM-1 {report['kind']} "
+        "report "
         "a1/bad: fail); nothing promoted" in held.stderr
     )
     assert _events(db) == before and _running(db) == {"amr-1": 2, "amr-2": 1}
@@ -163,7 +164,8 @@ def test_passing_reports_promote_and_the_promote_records_them_and_the_diff(db: s
         ("a1/triage", "triage", "report", True),
     ]
     assert all(len(g["sha256"]) == 64 for g in doc["gate"])
-    # each target against the version it replaces, recorded in the chained rollout event (the factory's @1 and @2
+    # each target against the version it replaces, recorded in the chained rollout event (the factory's @1 and
+    # @2
     # are one lens: 0 px)
     assert doc["diffs"]["CAM-2"]["previous"] == 1 and doc["diffs"]["CAM-2"]["max_px"] < 1e-9
     assert _running(db) == {"amr-1": 2, "amr-2": 2}

@@ -1,4 +1,5 @@
-"""calibctl fleet ingest | trends: good and refused lines (all or nothing per file), dedup, --json, db verify."""
+"""calibctl fleet ingest | trends: good and refused lines (all or nothing per file), dedup, --json, db
+verify."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""`calibctl handeye` / `synth-motions` on motion logs: wiring, gates (exit 1), bad input (exit 2), outputs."""
+"""`calibctl handeye` / `synth-motions` on motion logs: wiring, gates (exit 1), bad input (exit 2),
+outputs."""
 
 from __future__ import annotations
 

@@ -273,7 +273,8 @@ def test_the_rig_report_shows_the_lidar_section_and_the_overlay(url, renders, tm
     )
     assert 'data-key="lidar_overlay_lidar-CAM-0001"' in html and 'src="data:image/jpeg;base64,' in html
     assert "pose1.pcd over pose1.png" in html
-    # the LiDAR is a frame of the composed table and the top-down view: met from its child, T_root_lidar = T^-1
+    # the LiDAR is a frame of the composed table and the top-down view: met from its child, T_root_lidar =
+    # T^-1
     stored = json.loads(_cli(url, "rig", "show", RIG, "--json").stdout)
     T_lidar_cam = np.array(next(e for e in stored["edges"] if e["source"] == "lidar-board")["T_parent_child"])
     x_mm = float(np.linalg.inv(T_lidar_cam)[0, 3] * 1000)

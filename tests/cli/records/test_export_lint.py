@@ -166,7 +166,8 @@ def test_a_file_without_header_is_linted_on_its_numbers_and_cannot_be_traced(sto
     assert rules["traceability"] == "warning"
     assert "cannot be traced" in next(f["message"] for f in findings(result) if f["rule"] == "traceability")
     # ROS rewrites camera_info without comments (set_camera_info, the convert tool): what only the solve knew
-    # (sigma, held-out outer ring, square size) is named as not checked, never an error whose fix is to re-capture
+    # (sigma, held-out outer ring, square size) is named as not checked, never an error whose fix is to
+    # re-capture
     traced = next(f for f in findings(result) if f["rule"] == "traceability")
     assert (
         "sigma(fx), the held-out outer ring and the square size's provenance are not checked"

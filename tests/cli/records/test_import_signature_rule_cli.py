@@ -132,7 +132,8 @@ def test_explicit_activate_overrides_and_the_event_records_it(world):
     assert active == 1
     assert (
         event.reason
-        == f"imported {SERIAL}@1 (unsigned; activated with --activate although this store requires signatures)"
+        == f"imported {SERIAL}@1 (unsigned; activated with --activate although this store requires "
+        "signatures)"
     )
 
 

@@ -226,7 +226,8 @@ def test_importing_the_stores_own_export_is_a_no_op_and_never_undoes_a_rollback(
 def test_a_forged_artifact_that_breaks_its_models_tied_focal_is_refused_and_nothing_stored(
     run, sqlite_url, tmp_path, update, words
 ):
-    """fx + 5 px on a model that ties fx to fy, hash re-sealed, unsigned: it imported as accepted and active."""
+    """fx + 5 px on a model that ties fx to fy, hash re-sealed, unsigned: it imported as accepted and
+    active."""
     art = calibration(serial=SERIAL, version=7)
     if update == "sigma":
         update = {"stdev": art.stdev.model_copy(update={"sigma": {**art.stdev.sigma, "fx": 0.9, "fy": 0.3}})}

@@ -1,4 +1,5 @@
-"""keys init / export-public, signed exports, and import / lint / db verify that require a trusted signature."""
+"""keys init / export-public, signed exports, and import / lint / db verify that require a trusted
+signature."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""`calibctl report --rig RIG[@N]`: the rig page's numbers match the rig artifact, self-contained, byte-identical."""
+"""`calibctl report --rig RIG[@N]`: the rig page's numbers match the rig artifact, self-contained,
+byte-identical."""
 
 from __future__ import annotations
 
@@ -110,7 +111,8 @@ def test_the_rig_page_renders_in_chromium(solved, tmp_path: Path) -> None:
 
 
 def test_a_version_of_a_rig_with_no_active_version_gets_its_page(solved, tmp_path: Path) -> None:
-    """R@N of a rig solved with --no-activate exited 2 "has no active version": the page asked for the active one."""
+    """R@N of a rig solved with --no-activate exited 2 "has no active version": the page asked for the active
+    one."""
     db, cal = solved
     copy = tmp_path / "copy.db"
     copy.write_bytes(Path(db.removeprefix("sqlite:///")).read_bytes())

@@ -1,4 +1,5 @@
-"""`rig solve-folders` gives the stored path's verdict on its members (issue 22 item 3): a camera the stored path
+"""`rig solve-folders` gives the stored path's verdict on its members (issue 22 item 3): a camera the stored
+path
 would refuse at capture or at lint is refused with the same rule's name, and a baseline far from
 ``--design-baseline-mm`` fails ``baseline-design``."""
 
@@ -79,7 +80,8 @@ def test_a_member_the_stored_path_refuses_at_capture_is_refused_by_the_same_gate
 
 
 def test_a_member_lint_rule_applies_with_the_stations_limits(rig2):
-    """The stored path lints every member's calibration (member:<rule>); so does solve-folders, same limits."""
+    """The stored path lints every member's calibration (member:<rule>); so does solve-folders, same
+    limits."""
     run = solve_rig_folders(
         {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"},
         BOARD,

@@ -1,6 +1,7 @@
 """Rig versions are signed like camera artifacts: `rig solve` with a key signs the version, every rig export
 carries the signature (the JSON's `signature`, each header's `calibctl rig-signature` line, the manifest),
-`lint --require-signature` checks it (files and `--rig`), and `db verify --require-signature` covers rig versions."""
+`lint --require-signature` checks it (files and `--rig`), and `db verify --require-signature` covers rig
+versions."""
 
 from __future__ import annotations
 

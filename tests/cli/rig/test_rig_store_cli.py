@@ -1,4 +1,5 @@
-"""`calibctl rig add | capture | solve | lint | history | show | rollback | export`: wiring, exit codes, --json."""
+"""`calibctl rig add | capture | solve | lint | history | show | rollback | export`: wiring, exit codes,
+--json."""
 
 from __future__ import annotations
 
@@ -257,7 +258,8 @@ def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
 
 
 def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_path, monkeypatch):
-    """It used to let cv2.FileStorage open the file itself: a folder it could not write was a cv2.error traceback."""
+    """It used to let cv2.FileStorage open the file itself: a folder it could not write was a cv2.error
+    traceback."""
     invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
     _capture(db, rig2)
     assert invoke(db, "rig", "solve", "R1").exit_code == 0

@@ -78,7 +78,8 @@ def test_a_template_without_serial_and_a_missing_serials_file_exit_2(
         assert store.list_sessions() == []
 
 
-# --camera: each unit live from the station's camera -------------------------------------------------------------
+# --camera: each unit live from the station's camera
+# -------------------------------------------------------------
 
 
 def test_a_camera_station_gives_a_line_per_unit_and_progress_on_stderr(

@@ -91,7 +91,8 @@ def test_left_photos_registered_one_column_short_say_maybe_in_every_image() -> N
 
 @needs_datasets
 def test_udacity_registered_one_column_or_row_short_says_maybe_in_every_image() -> None:
-    # where 8x6 is found: calibration2, 11, 14 (+8, 15 on some OpenCV versions: 2 on 4.10); 9x5: calibration1, 3, 5
+    # where 8x6 is found: calibration2, 11, 14 (+8, 15 on some OpenCV versions: 2 on 4.10); 9x5: calibration1,
+    # 3, 5
     short_cols = _views(_udacity(2, 8, 11, 14, 15), 8, 6)
     short_rows = _views(_udacity(1, 3, 5), 9, 5)
     assert len(short_cols) >= 2 and len(short_rows) >= 2
@@ -117,7 +118,8 @@ def test_correct_registrations_on_real_photos_mostly_say_no(left_9x6, udacity_9x
 
 @pytest.fixture(scope="module")
 def rendered() -> list[tuple[np.ndarray, np.ndarray]]:
-    """(image, detected 9x6 corners) of 12 good and 12 centre views at 640x480, as `calibctl synth` renders."""
+    """(image, detected 9x6 corners) of 12 good and 12 centre views at 640x480, as `calibctl synth`
+    renders."""
     camera = PinholeCamera.seed_reference()
     views = []
     for scenario in ("good", "centre"):

@@ -224,7 +224,8 @@ def test_a_split_that_does_not_settle_is_scored_on_the_groups_it_was_solved_from
 
 def test_the_same_question_is_answered_once(monkeypatch) -> None:
     """calibrate asks twice (the capture gate, then the solve) with the same corners: the second answer is
-    the first, found by the values (copies hit), and any change in corners, model or threshold is asked anew."""
+    the first, found by the values (copies hit), and any change in corners, model or threshold is asked
+    anew."""
     session = synthesize_session(K(800.0, 321.3, 238.7), D, (640, 480), 20, seed=3, noise_px=0.1)
     obj, img = session.object_points_per_view, session.image_points_per_view
     calls = []

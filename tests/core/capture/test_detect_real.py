@@ -37,7 +37,9 @@ SETS = {  # name: (folder, inner corners cols x rows)
     "baka-stereo-right": (BAKA_STEREO / "right", (7, 10)),
 }
 NAMED_REFUSALS = {BLURRED, NEAR_DUPLICATE, WRONG_SIZE}
-SAME_CORNER_PX = 1.5  # median distance, calibctl vs the plain call; measured max 0.93 px (baka, a far board), 0.13 on opencv-left-right
+# median distance, calibctl vs the plain call; measured max 0.93 px (baka, a far board), 0.13 on
+# opencv-left-right
+SAME_CORNER_PX = 1.5
 CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.001)
 
 

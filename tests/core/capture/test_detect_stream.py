@@ -36,7 +36,8 @@ def test_board_free_frames_get_the_full_search_only_every_fifth_frame(monkeypatc
 @needs_datasets
 def test_a_board_the_quick_check_misses_is_found_within_five_frames_and_then_kept() -> None:
     """baka-stereo left_001772846857023.jpg: checkChessboard says no (on the 640 px copy), the classic
-    detector finds the board. Held in view from frame 3 on, it is found at frame 6 and in every frame after."""
+    detector finds the board. Held in view from frame 3 on, it is found at frame 6 and in every frame
+    after."""
     board = cv2.imread(str(BAKA_STEREO / "left" / "left_001772846857023.jpg"), cv2.IMREAD_GRAYSCALE)
     small = cv2.resize(
         board,

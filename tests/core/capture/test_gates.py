@@ -1,4 +1,5 @@
-"""Capture gates: the seed's observability table, its invariances, tilt/coverage, and the scenario verdicts."""
+"""Capture gates: the seed's observability table, its invariances, tilt/coverage, and the scenario
+verdicts."""
 
 from __future__ import annotations
 
@@ -39,7 +40,8 @@ def reference_homographies(
     n_views: int = 8,
     directions: list[float] | None = None,
 ) -> list[np.ndarray]:
-    """The seed's reference rig: f = 800 px, c = (320, 240), board centred at 0.60 m, noiseless, no distortion.
+    """The seed's reference rig: f = 800 px, c = (320, 240), board centred at 0.60 m, noiseless, no
+    distortion.
 
     ``scale`` reads the same lens out at scale x the resolution (K scaled); ``unit`` rescales the model.
     """

@@ -1,4 +1,5 @@
-"""core.capture.image_circle: the circle found in a session's frames (or not), the cells it covers, and the gates
+"""core.capture.image_circle: the circle found in a session's frames (or not), the cells it covers, and the
+gates
 and the fold-over check read through it (issue 10 items 1 and 6)."""
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ def _max_picture(paths: list[Path]) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def circular_190(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 190 deg circular fisheye session at 640x480, seed 6: its corners miss the top-left cell (on OpenCV 4.10
+    """A 190 deg circular fisheye session at 640x480, seed 6: its corners miss the top-left cell (on OpenCV
+    4.10
     and 5.0 alike: seed 4 lost a rim view and a tilt direction to 4.10's detector)."""
     out = tmp_path_factory.mktemp("fisheye") / "r190"
     run_synth(out, "good", seed=6, views=12, image_size=SIZE, fisheye_fov_deg=190.0)

@@ -206,8 +206,10 @@ def test_every_direction_asked_for_raises_the_count_when_one_can(seed: int) -> N
 
 
 def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
-    """A session the small lens cannot explain reads tilt through its fisheye solve; the projection gate, solving
-    the same views as fisheye (--model fisheye, or a lens not known), gets that solve instead of solving again."""
+    """A session the small lens cannot explain reads tilt through its fisheye solve; the projection gate,
+    solving
+    the same views as fisheye (--model fisheye, or a lens not known), gets that solve instead of solving
+    again."""
     from calibctl.core.board.board_spec import chessboard_object_points
     from calibctl.core.board.views import BoardView
     from calibctl.core.capture.gates import evaluate_gates
@@ -238,7 +240,8 @@ def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
     assert computed == ["fisheye"] * 3  # the tilt's; the gate's was that one
     assert (report.gates, report.views) == (old.gates, old.views)  # the tilts read through the same lens
     assert np.array_equal(report.lens.camera_matrix, gate.camera_matrix)  # the very solve, reused
-    # and the gate's own solve of before, to rounding: two solves of one input need not agree to the bit (on the
+    # and the gate's own solve of before, to rounding: two solves of one input need not agree to the bit (on
+    # the
     # oldest numpy / OpenCV pyproject.toml allows, sigma(cx) differed in the 10th digit)
     assert np.allclose(gate.camera_matrix, old_gate.camera_matrix, rtol=1e-9, atol=0.0)
     assert gate.sigma.keys() == old_gate.sigma.keys()

@@ -1,5 +1,6 @@
 """core.check.recheck's error rates on seeded sessions whose views have unequal detector noise, as rendered
-photos do (blur, gain, tilt differ per view): few false fails, changes caught (benchmarks/results/check.md)."""
+photos do (blur, gain, tilt differ per view): few false fails, changes caught
+(benchmarks/results/check.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""core.compare.rig_diff: the change of each camera pair between two rig versions, its sigma, the depth error."""
+"""core.compare.rig_diff: the change of each camera pair between two rig versions, its sigma, the depth
+error."""
 
 from __future__ import annotations
 

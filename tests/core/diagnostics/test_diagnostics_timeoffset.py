@@ -25,7 +25,8 @@ def _estimate(gyro, cam, **cfg):
 
 
 def test_chapter3_example_18_4_ms_at_200_hz_over_3_s_within_0_05_ms():
-    """True 18.4 ms, both streams at 200 Hz (5 ms grid), 3 s, 1% noise (a calibration dance with reversals)."""
+    """True 18.4 ms, both streams at 200 Hz (5 ms grid), 3 s, 1% noise (a calibration dance with
+    reversals)."""
     gyro, cam = synth_rate_logs(
         td_s=TD_SEED_S, duration_s=3.0, gyro_hz=200.0, camera_hz=200.0, noise_frac=0.01, seed=0
     )

@@ -1,4 +1,5 @@
-"""Loop closure judged with the cross covariances of pair solves that share corners (core.extrinsics.rig_loop):
+"""Loop closure judged with the cross covariances of pair solves that share corners
+(core.extrinsics.rig_loop):
 the joint covariance agrees with each pair's own, predicts the spread of the loop residual over repeated noise
 on one rig, and a broken loop is seen."""
 
@@ -87,8 +88,10 @@ def test_clean_loops_close_and_broken_loops_are_seen():
 
 
 def test_the_loop_closures_run_every_library_on_one_thread(monkeypatch) -> None:
-    """The pair solves and loop covariances run one after another: spare BLAS threads would only spin (a 4-camera
-    rig's solve-folders spent 5-8 % more CPU at the same wall before this block, benchmarks/results/station.md)."""
+    """The pair solves and loop covariances run one after another: spare BLAS threads would only spin (a
+    4-camera
+    rig's solve-folders spent 5-8 % more CPU at the same wall before this block,
+    benchmarks/results/station.md)."""
     from threadpoolctl import threadpool_limits
 
     import calibctl.core.extrinsics.rig_validation as rig_validation

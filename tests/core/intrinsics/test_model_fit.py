@@ -31,7 +31,8 @@ def _verdict(obj, img, size, model):
 
 
 def _close_185_session():
-    """A 185 deg circular fisheye, 12 x 9 board held close (seed 1): the curved field the 4x4 patch over-reads."""
+    """A 185 deg circular fisheye, 12 x 9 board held close (seed 1): the curved field the 4x4 patch
+    over-reads."""
     from calibctl.core.synth.fisheye import default_fisheye_distance_m
 
     size = (1032, 778)
@@ -87,7 +88,8 @@ def test_detector_noise_is_read_without_a_lens_model():
         PER_CORNER, rel=0.15
     )
     clean = detector_rms_px(s.object_points_per_view, s.true_image_points_per_view)
-    # a 4x4 patch of the strongly distorted seed lens is nearly quadratic: its curvature stays well below the noise
+    # a 4x4 patch of the strongly distorted seed lens is nearly quadratic: its curvature stays well below the
+    # noise
     assert clean < 0.35 * PER_CORNER
 
 

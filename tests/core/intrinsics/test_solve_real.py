@@ -86,7 +86,8 @@ def test_left_images_reproduce_the_plain_opencv_reference(left_views):
     assert names[int(np.argmax(sol.per_view_rms_px))] == "left02.jpg"
     assert sol.per_view_rms_px.max() == pytest.approx(1.22, abs=0.005)
     assert "left02.jpg" in [names[i] for i in flag_outliers(sol).outlier_views]
-    # the views scatter more than their corner noise explains (issue 22): the reported sigma is the view-level one,
+    # the views scatter more than their corner noise explains (issue 22): the reported sigma is the view-level
+    # one,
     # the Jacobian one behind it still agrees with OpenCV's
     cov = sol.covariance
     assert cov is not None and cov.view_factor is not None and cov.inflated and cov.view_factor > 1.5

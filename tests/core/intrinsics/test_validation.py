@@ -195,7 +195,8 @@ def test_blas_runs_on_one_thread_inside_the_block_and_gets_its_threads_back():
 
 
 def _stuck(sol, factor):
-    """The same solve reporting a worse minimum than it found (a full solve stuck where its folds were not)."""
+    """The same solve reporting a worse minimum than it found (a full solve stuck where its folds were
+    not)."""
     import dataclasses
 
     return dataclasses.replace(sol, rms_px=sol.rms_px * factor)

@@ -16,7 +16,8 @@ XYZIR = np.array([[1.0, 2.0, 3.0, 10.0, 0], [4.0, 5.0, 6.0, 20.0, 1], [7.0, 8.0,
 def header(n: int, data: str, points: int | None = None, sizes: str = "4 4 4 4 2") -> bytes:
     return (
         f"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity ring\nSIZE {sizes}\nTYPE F F F F U\n"
-        f"COUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n if points is None else points}\n"
+        f"COUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS "
+        f"{n if points is None else points}\n"
         f"DATA {data}\n"
     ).encode()
 

@@ -4,7 +4,8 @@ Each case runs the whole workflow (detection, capture gates, solve, validation, 
 rendered folder: once the way it ran before (no solve or fisheye focal-guess score remembered, the misfit
 floor's lens models always solved) and once as it runs now (the projection gate's solve reused by the solve,
 --model auto's fold fits reused, the lens models skipped where no floor can fail the fit, the tilt lens's
-fisheye solve reused by the projection gate, each view's focal-guess score computed once per focal length). The session's gates and every number of
+fisheye solve reused by the projection gate, each view's focal-guess score computed once per focal length).
+The session's gates and every number of
 the calibration are equal to the bit; the one number that may differ is the stored floor
 (``detector_rms_px``), which is then the lens-free estimate, never below the full floor, with the same
 model-misfit verdict.

@@ -207,8 +207,10 @@ def _session_numbers(result) -> tuple:
     "stop", [{}, {"max_views": 6}, {"duration_s": 4.2}], ids=["whole", "max-views", "duration"]
 )
 def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path, stop: dict) -> None:
-    """Frames are detected ahead on threads from 2 jobs on (``_detected_frames``) and settled in order: every frame
-    gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4 jobs."""
+    """Frames are detected ahead on threads from 2 jobs on (``_detected_frames``) and settled in order: every
+    frame
+    gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4
+    jobs."""
     runs = {
         jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=jobs, **stop))
         for jobs in (1, 2, 4)
@@ -220,8 +222,10 @@ def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path
 
 @needs_datasets
 def test_a_video_of_real_photos_gives_the_same_session_at_every_job_count(settings, tmp_path: Path) -> None:
-    """opencv-left-right's 13 left photos (not made by us), each held still for 6 frames of an MJPG video, as an
-    operator pausing the board would: the threads' look-ahead keeps the one-thread session, frame for frame."""
+    """opencv-left-right's 13 left photos (not made by us), each held still for 6 frames of an MJPG video, as
+    an
+    operator pausing the board would: the threads' look-ahead keeps the one-thread session, frame for
+    frame."""
     from tests.datasets import LEFT_RIGHT
 
     photos = sorted(LEFT_RIGHT.glob("left*.jpg"))
@@ -308,8 +312,10 @@ def test_camera_reader_thread_yields_newest_frames_in_order_and_ends(video: Path
 def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(
     settings, video: Path, tmp_path, monkeypatch
 ) -> None:
-    """The real reader thread on a clip of the first 12 frames (one key pose: the gates cannot pass): its reads
-    fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the views."""
+    """The real reader thread on a clip of the first 12 frames (one key pose: the gates cannot pass): its
+    reads
+    fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the
+    views."""
     clip = tmp_path / "clip.avi"
     reader = cv2.VideoCapture(str(video))
     writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (320, 240))
@@ -545,7 +551,8 @@ def test_a_capture_stores_the_same_session_at_every_job_count(settings, good: Pa
         assert [g.model_dump() for g in other.gates] == [g.model_dump() for g in first.gates]
 
 
-# the images stored beside the gates (workflows.camera.image_writes) ------------------------------------------
+# the images stored beside the gates (workflows.camera.image_writes)
+# ------------------------------------------
 
 
 def test_a_folders_images_are_stored_beside_the_gates_and_durable_before_its_session(

@@ -1,4 +1,5 @@
-"""`calibctl check` of a fisheye calibration goes through the stored fisheye model (issue 13, check for fisheye)."""
+"""`calibctl check` of a fisheye calibration goes through the stored fisheye model (issue 13, check for
+fisheye)."""
 
 from __future__ import annotations
 

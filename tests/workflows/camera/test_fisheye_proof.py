@@ -1,13 +1,15 @@
 """Issue 10's Proof end to end through `calibctl calibrate` on rendered circular fisheyes (images rendered,
 board detected, circle found in the frames, gates, solve): fisheye sessions at 150-190 deg converge, every
-gate passes (the tilt gate read through the fitted fisheye lens, core.capture.tilt), every rendered view is used,
+gate passes (the tilt gate read through the fitted fisheye lens, core.capture.tilt), every rendered view is
+used,
 and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.
 
 190 deg used to miss (|z| of fx 1.2-4.9, of k4 0.8-15.5 on seeds 2-6). The renderer was wrong, not the
 detector: it traced X/Z rays and painted the background on every pixel past 89 deg off-axis, inside the
 95 deg image circle, so the outer squares and quiet zone of boards near the rim were cut off (30 of 60
 views at 190 deg, seeds 2-6) and their corners pulled off by up to 0.24 px RMS. It now traces unit rays
-(synth_fisheye.FisheyeCamera.ray_map); since then seeds 2-6 give max |z| 1.3-3.3 (benchmarks/results/capture-gates.md)."""
+(synth_fisheye.FisheyeCamera.ray_map); since then seeds 2-6 give max |z| 1.3-3.3
+(benchmarks/results/capture-gates.md)."""
 
 from __future__ import annotations
 

@@ -164,7 +164,8 @@ def test_two_cameras_in_one_session_are_a_rejected_blend(settings):
 
 
 def _two_camera_session(n_each: int) -> CaptureSession:
-    """``n_each`` views of K_TRUE then ``n_each`` of a camera with a focal length 4 % longer (names right-*)."""
+    """``n_each`` views of K_TRUE then ``n_each`` of a camera with a focal length 4 % longer (names
+    right-*)."""
     left = synthetic_capture(measured_board(), n_views=n_each, seed=1, noise_px=0.1)
     K_other = K_TRUE.copy()
     K_other[0, 0] = K_other[1, 1] = 1.04 * K_TRUE[0, 0]
@@ -177,7 +178,8 @@ def _two_camera_session(n_each: int) -> CaptureSession:
 
 
 def test_above_the_capture_cap_the_solve_checks_the_gates_spread_views_and_still_finds_two_cameras(settings):
-    """72 views, more than CAPTURE_MAX_VIEWS: the split test runs on the gate's 60 spread views, the groups name
+    """72 views, more than CAPTURE_MAX_VIEWS: the split test runs on the gate's 60 spread views, the groups
+    name
     them, and a second camera among them is still found (lint one-camera) while one camera is not flagged."""
     session = _store_session(settings, _two_camera_session(36))
     art = solve_workflow.solve(settings, solve_workflow.SolveRequest(session_id=session.session_id)).artifact
@@ -198,7 +200,8 @@ def test_above_the_capture_cap_the_solve_checks_the_gates_spread_views_and_still
 
 
 def test_the_solve_asks_the_capture_gates_question_so_it_is_answered_once(settings, monkeypatch):
-    """calibrate: the capture gate, then the solve of the same corners under k1k2 (72 views): one split test."""
+    """calibrate: the capture gate, then the solve of the same corners under k1k2 (72 views): one split
+    test."""
     session = _store_session(settings, synthetic_capture(measured_board(), n_views=72, seed=5, noise_px=0.1))
     points = board_spec(session.board).object_points()
     camera_split.forget_recent_checks()

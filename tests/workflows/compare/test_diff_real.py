@@ -18,7 +18,8 @@ from tests.datasets import LEFT_RIGHT, require_datasets
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory: pytest.TempPathFactory) -> str:
-    """L@1 the 7 even-numbered left views, L@2 the 6 odd ones, R@1 the 13 right views (6-view sessions allowed)."""
+    """L@1 the 7 even-numbered left views, L@2 the 6 odd ones, R@1 the 13 right views (6-view sessions
+    allowed)."""
     require_datasets()
     root = tmp_path_factory.mktemp("diff-real")
     url = f"sqlite:///{root / 'store.db'}"

@@ -1,4 +1,5 @@
-"""Read a calibctl robot bundle with the consumers' own code, as a robot would (run by Debian's /usr/bin/python3,
+"""Read a calibctl robot bundle with the consumers' own code, as a robot would (run by Debian's
+/usr/bin/python3,
 where ROS's camera_calibration_parsers, image_geometry and mrcal are installed; not by the project's venv).
 
     /usr/bin/python3 robot_consumers.py BUNDLE_DIR POINTS_JSON  ->  JSON on stdout

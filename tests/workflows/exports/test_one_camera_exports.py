@@ -1,4 +1,5 @@
-"""A single camera gets a Kalibr camchain and an mrcal .cameramodel too (`calibctl export --format kalibr|mrcal`)."""
+"""A single camera gets a Kalibr camchain and an mrcal .cameramodel too (`calibctl export --format
+kalibr|mrcal`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,7 @@
-"""The bundle of a rendered stereo rig read by the consumers' own code: ROS camera_calibration_parsers (its C++
-parser) and image_geometry's StereoCameraModel, mrcal, Debian's OpenCV (cv2.FileStorage), urdfdom's check_urdf.
+"""The bundle of a rendered stereo rig read by the consumers' own code: ROS camera_calibration_parsers (its
+C++
+parser) and image_geometry's StereoCameraModel, mrcal, Debian's OpenCV (cv2.FileStorage), urdfdom's
+check_urdf.
 Each camera's projection must match calibctl's to 1e-6 px, left and right not swapped.
 
 The consumers are Debian packages for the system python (``make test-consumers`` installs them:
@@ -38,7 +40,8 @@ def _points_root(n=40, seed=3):
 
 
 class Truth:
-    """calibctl's own projections of the stored rig (cv2.projectPoints on the members, rectify on the pair)."""
+    """calibctl's own projections of the stored rig (cv2.projectPoints on the members, rectify on the
+    pair)."""
 
     def __init__(self, cal: RigCalibration, X: np.ndarray, left: str = "CAM0", right: str = "CAM1") -> None:
         m = {x.serial: x for x in cal.members}
@@ -127,7 +130,8 @@ def _consumers(out: Path, X: np.ndarray, tmp_path: Path) -> dict:
 def _check_consumers(
     out: Path, cal: RigCalibration, tmp_path: Path, left: str = "CAM0", right: str = "CAM1"
 ) -> None:
-    """Every consumer's projection of the points equals calibctl's to PROJECTION_TOL_PX, each camera its own."""
+    """Every consumer's projection of the points equals calibctl's to PROJECTION_TOL_PX, each camera its
+    own."""
     X = _points_root()
     truth = Truth(cal, X, left, right)
     got = _consumers(out, X, tmp_path)
@@ -173,7 +177,8 @@ def test_ros_image_geometry_mrcal_and_debian_opencv_read_the_bundle_exactly(bund
 
 @pytest.mark.slow
 def test_the_opencv_left_right_bundle_reads_the_same_in_every_consumer(tmp_path):
-    """Real photos (OpenCV's left01..14 / right01..14, not made by us): calibrate each camera, capture and solve
+    """Real photos (OpenCV's left01..14 / right01..14, not made by us): calibrate each camera, capture and
+    solve
     the rig through the store, export the bundle, read it with the consumers."""
     from calibctl.store.repository import Store
     from tests.artifacts.factories import measured_board

@@ -27,7 +27,8 @@ from tests.workflows.rig.test_rig_store_flow import WHO, _sources, _truth_artifa
 
 
 def _lidar(camera: str = "CAM0@1", x_m: float = 0.05) -> LidarEdgeResult:
-    """An accepted LiDAR result lidar -> CAM0 as `lidar solve` seals it (T and covariance chosen, not solved)."""
+    """An accepted LiDAR result lidar -> CAM0 as `lidar solve` seals it (T and covariance chosen, not
+    solved)."""
     T = se3.transform(se3.rotation_from_rotvec(np.array([0.1, -1.2, 0.3])), [x_m, 0.02, -0.19])
     cov = np.diag([1e-6, 2e-6, 1.5e-6, 1e-6, 4e-6, 9e-6])
     transform = LidarTransform(
@@ -84,7 +85,8 @@ def test_a_lidar_edge_survives_a_hand_eye_write_and_a_rig_re_solve(solved, tmp_p
             if not x.startswith("#")
         )
     )["transforms"]
-    # flange and lidar both hang off the cameras: the tree is rooted at CAM0, the lidar edge met from its child
+    # flange and lidar both hang off the cameras: the tree is rooted at CAM0, the lidar edge met from its
+    # child
     pairs = [(t["header"]["frame_id"], t["child_frame_id"]) for t in tf]
     assert ("cam0_optical_frame", "lidar") in pairs and len(pairs) == 3
     # a second LiDAR solve of the same edge replaces it: one edge, one result

@@ -1,4 +1,5 @@
-"""With model-misfit failed, the rules whose numbers follow from the misfit point at its fix, not their own."""
+"""With model-misfit failed, the rules whose numbers follow from the misfit point at its fix, not their
+own."""
 
 from __future__ import annotations
 
@@ -61,7 +62,8 @@ DRIFT = {
 
 
 def _webcam(consistency: dict | None) -> CalibrationFacts:
-    """Issue 22: a ~60 deg webcam whose focus drifted through the session, solved k1k2: misfit (and one-camera)."""
+    """Issue 22: a ~60 deg webcam whose focus drifted through the session, solved k1k2: misfit (and
+    one-camera)."""
     return CalibrationFacts(
         source="t",
         kind="calibctl",

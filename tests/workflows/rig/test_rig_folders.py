@@ -175,7 +175,8 @@ def test_photos_of_a_rendered_pair_not_taken_together_are_a_failed_verdict(rig2,
 
 
 def _fisheye_pair(model: str) -> RigFolderRun:
-    """The seeded 170/165 deg fisheye pair of tests/core/extrinsics/test_rig_fisheye.py (corner level), each camera
+    """The seeded 170/165 deg fisheye pair of tests/core/extrinsics/test_rig_fisheye.py (corner level), each
+    camera
     self-calibrated with ``model`` on its own views, as ``solve-folders`` does with photos."""
     views, _ = fisheye_session(3)
     members, fits = [], {}

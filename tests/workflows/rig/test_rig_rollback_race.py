@@ -82,7 +82,8 @@ def test_two_technicians_rolling_back_on_the_same_view_one_is_refused(three_vers
 
 
 def test_the_compare_comes_after_the_version_checks(three_versions: str):
-    """An unknown or rejected target is named as such even on a stale view (the stale view is not the problem)."""
+    """An unknown or rejected target is named as such even on a stale view (the stale view is not the
+    problem)."""
     with Store.open(three_versions) as store:
         store.add_rig_calibration(
             rig_calibration(status="rejected"), activate=False, reason="rig solve", **WHO

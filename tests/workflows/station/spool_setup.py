@@ -28,7 +28,8 @@ def central_folder(root: Path) -> Path:
 
 
 def unit_folders(factory: pytest.TempPathFactory, root: Path) -> Path:
-    """One folder of 12 rendered views per unit (CAM-1 .. CAM-3), as the station's watched folder holds them."""
+    """One folder of 12 rendered views per unit (CAM-1 .. CAM-3), as the station's watched folder holds
+    them."""
     good = rendered(factory, "good")  # rendered once per process
     for serial in SERIALS:
         shutil.copytree(good, root / "shots" / serial, ignore=shutil.ignore_patterns("*.json"))
@@ -76,7 +77,8 @@ def away(folder: Path) -> Iterator[None]:
 
 class TcpProxy:
     """127.0.0.1:<port> forwarded to ``target``; ``cut()`` closes the listener and every open connection (a
-    network cut: connects are refused, a connection in use breaks), ``restore()`` listens again on the same port.
+    network cut: connects are refused, a connection in use breaks), ``restore()`` listens again on the same
+    port.
     The PostgreSQL server behind it, shared with other tests, is never touched."""
 
     def __init__(self, target: tuple[str, int]) -> None:

@@ -27,7 +27,8 @@ from tests.workflows.station.spool_setup import queue_three, run
 
 
 def rewrite_rms(spool: Path, seq: int, *, rehash: bool) -> None:
-    """Type a better RMS into record ``seq``'s calibration; ``rehash``: and recompute its sha256 as calibctl does
+    """Type a better RMS into record ``seq``'s calibration; ``rehash``: and recompute its sha256 as calibctl
+    does
     (what anyone who can write the file can do)."""
     from calibctl.store.spool import Spool
 
@@ -173,7 +174,8 @@ def test_a_spool_queued_by_the_previous_calibctl_is_upgraded_and_synced_in_order
         conn.executescript(f"""
             CREATE TABLE units_1 (
                 seq INTEGER PRIMARY KEY AUTOINCREMENT, serial TEXT NOT NULL, session_id TEXT NOT NULL UNIQUE,
-                queued_at TEXT NOT NULL, session TEXT NOT NULL, artifact TEXT, session_stored INTEGER NOT NULL,
+                queued_at TEXT NOT NULL, session TEXT NOT NULL, artifact TEXT,
+                session_stored INTEGER NOT NULL,
                 images TEXT NOT NULL, record_sha256 TEXT NOT NULL, synced_at TEXT, version INTEGER);
             INSERT INTO units_1 SELECT {FORMAT_1_COLUMNS} FROM units;
             DROP TABLE units;

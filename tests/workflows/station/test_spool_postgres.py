@@ -1,4 +1,5 @@
-"""The station against PostgreSQL with the network to it cut and restored inside the test (a TCP proxy in front
+"""The station against PostgreSQL with the network to it cut and restored inside the test (a TCP proxy in
+front
 of the suite's server, so the shared server itself never stops): units during the outage are stored after it,
 in order, each signed with the station's key, none lost or doubled."""
 
@@ -22,7 +23,8 @@ pytestmark = pytest.mark.postgres
 
 @pytest.fixture
 def proxied(pg_url: str, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path):
-    """(proxy, the store's URL through it, the unit folders): a fresh database with board A17 behind a proxy."""
+    """(proxy, the store's URL through it, the unit folders): a fresh database with board A17 behind a
+    proxy."""
     server = urllib.parse.urlsplit(pg_url)
     proxy = TcpProxy((server.hostname or "127.0.0.1", server.port or 5432))
     proxy.restore()

@@ -66,7 +66,8 @@ class UnitCamera:
 
 @pytest.fixture
 def cameras(monkeypatch, video: Path):
-    """Plug units in: ``cameras(UnitCamera kwargs, ...)`` - one per unit, in order; records what was opened."""
+    """Plug units in: ``cameras(UnitCamera kwargs, ...)`` - one per unit, in order; records what was
+    opened."""
     opened: list[sources.SourceSpec] = []
 
     def plug(*units: dict) -> list[sources.SourceSpec]:
@@ -105,7 +106,8 @@ def test_a_unit_is_captured_live_until_the_gates_pass_then_stored_and_solved(set
     assert [(spec.kind, spec.text) for spec in opened] == [
         (sources.CAMERA, DEVICE)
     ] * 2  # opened once per unit
-    # the stream's last frame (the one that passed the gates) to the verdict: the session's gates, store and solve
+    # the stream's last frame (the one that passed the gates) to the verdict: the session's gates, store and
+    # solve
     assert all(r.after_last_image_s is not None and 0.0 < r.after_last_image_s < r.unit_s for r in lines)
     with Store.open(settings.db_url) as store:
         session = store.list_sessions("CAM-1")[0]
