@@ -154,7 +154,9 @@ def test_a_fit_that_cannot_be_a_misfit_reads_the_patch_alone_with_the_same_verdi
     monkeypatch.setattr(model_fit, "lens_floor_px", lambda *a, **k: lens_solves.append(1) or real(*a, **k))
     quick = noise_floor_px(obj, img, size, fit)
     assert lens_solves == []
-    assert quick == detector_rms_px(obj, img) and quick >= full
+    # the lens-free floor, never above the fit it judges (which of the two is lower differs between numpy and
+    # OpenCV builds: the oldest versions allowed read 0.160 px lens-free against a 0.136 px fit)
+    assert quick == min(detector_rms_px(obj, img), fit) and quick >= min(full, fit)
     judged = [check_model_misfit(fit, floor, "k1k2") for floor in (full, quick)]
     assert [f.passed for f in judged] == [True, True] and [f.rule for f in judged] == ["model-misfit"] * 2
 
