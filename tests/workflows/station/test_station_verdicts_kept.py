@@ -3,6 +3,9 @@ gates and stored numbers as the code they were recorded from, at 1, 2 and 4 jobs
 
 ``station_verdicts.json`` was recorded from main at 6bb9ba8 (before the station's unit was made cheaper)
 by ``python -m tests.workflows.station.test_station_verdicts_kept OUT.json`` on the rendered units below.
+Re-recorded once since, when the stored noise floor became capped at the fit it judges: only the two
+accepted units' ``detector_rms_px`` moved (0.0517 -> 0.0382 and 0.0519 -> 0.0399 px); every verdict, line,
+outcome, corner and gate stayed as recorded.
 Numbers are compared as the CLI and the records print them (reasons and messages verbatim) and, for the
 rest, to 6 significant digits; corners to 1e-6 px.
 """
