@@ -8,8 +8,7 @@ the 13 left images of /work/shared/datasets/opencv-left-right (copied to a tempo
 
 (a) plain OpenCV as a user writes it (``plain_opencv``): sequential imread + findChessboardCorners
     (ADAPTIVE_THRESH | NORMALIZE_IMAGE) + cornerSubPix winSize (11, 11) as in OpenCV's tutorial and
-    DATASET.md's
-    reference (a 23x23 px search window) + calibrateCamera with the production flags
+    DATASET.md's reference (a 23x23 px search window) + calibrateCamera with the production flags
     (CALIB_FIX_K3 | CALIB_ZERO_TANGENT_DIST | CALIB_FIX_ASPECT_RATIO). Timed in-process, and as a script
     (``--plain-only DIR``: a fresh interpreter importing only cv2 and numpy).
 (b) calibctl, what a station runs: capture (folder source, detection on 2 workers, gates, session + images

@@ -1,21 +1,17 @@
 """Issue 25 item 4: the fleet at factory size on PostgreSQL: ROBOTS robots x 4 camera serials, a year of daily
 health summaries (500 x 4 x 365 = 730 000 reports), `fleet ingest` rate, `fleet status` and `fleet trends
-SERIAL`
-latency.
+SERIAL` latency.
 
 The store is a fresh PostgreSQL database this script creates and drops (default ``calibctl_bench_fleet`` on
-the
-server of CALIBCTL_TEST_PG_URL, default postgresql://postgres@127.0.0.1:5432/test). Each serial gets two
+the server of CALIBCTL_TEST_PG_URL, default postgresql://postgres@127.0.0.1:5432/test). Each serial gets two
 accepted calibrations (bench_store_scale's bulk fill: chained and signed as the store writes them), each robot
 is
 registered and assigned @1 through the fleet log, and a rollout of every serial's @2 starts (5 canary robots).
 One daily report per serial (check on even days, time offset on odd days), one JSON-lines file per robot,
 ingested through the workflow the CLI calls (parse, validate, refer-check, insert; all or nothing per file);
-then
-the canary robots report a passing check. Timed: the workflows the CLI calls (``rollouts.start``,
+then the canary robots report a passing check. Timed: the workflows the CLI calls (``rollouts.start``,
 ``health.ingest``, ``rollouts.fleet_status``, ``rollouts.promote``, ``health.trends``) and, for comparison,
-the
-former queries (one active-version query per serial; the per-camera spread over the whole table).
+the former queries (one active-version query per serial; the per-camera spread over the whole table).
 
 Run: python benchmarks/bench_fleet_scale.py [--robots 500] [--days 365] [--keep]
 """

@@ -5,8 +5,7 @@ command renders them: blur 0.55-0.85 px, gain, illumination slope), seeds 0..N-1
 detector, solved with the production model (k1k2). Nothing in them is an outlier, so every flag is a false
 alarm. Reported per resolution: views flagged by the pre-issue-8 rule (RMS above max(median + 3 MAD-sigma,
 1.5 x median)) and by the current rule (calibctl.core.intrinsics.outliers), corners the corner rule removes,
-and
-the two-camera check's ratio (calibctl.core.capture.camera_split; suspected from 1.4). Real photos:
+and the two-camera check's ratio (calibctl.core.capture.camera_split; suspected from 1.4). Real photos:
 opencv-left-right as one folder, left alone, right alone (calibctl's detector, model k1k2).
 Detected corners are cached in benchmarks/out/outlier-sessions/ (git-ignored), so a re-run only solves.
 

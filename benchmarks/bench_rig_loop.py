@@ -3,8 +3,7 @@ loops.
 
 Clean: rigs rendered and detected by calibctl's detector (tests/core/rig_sessions.rendered_session, 12 frames,
 every frame seen by >= 3 cameras), the true intrinsics held fixed; every simple cycle of every seed. Under a
-right
-covariance d^2 follows chi-square with 6 dof (mean 6; 99.7 % quantile 20.1, d = 4.48).
+right covariance d^2 follows chi-square with 6 dof (mean 6; 99.7 % quantile 20.1, d = 4.48).
 Broken: corner-level 3-camera rigs (0.2 px iid noise, as tests/core/extrinsics/test_rig_solve.py) and rendered
 3-camera rigs with frames seen by two cameras, camera 2's corners of the frames it shares with camera 0 only
 shifted by ``--shifts`` px: pair 0-2 then disagrees with 0-1-2.

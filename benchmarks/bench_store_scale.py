@@ -2,8 +2,7 @@
 
     .venv/bin/python benchmarks/bench_store_scale.py                 # 1k artifacts, SQLite (about 1 min)
     .venv/bin/python benchmarks/bench_store_scale.py --large         # 1k, 10k, 100k (long: fills take most of
-    it)
-    .venv/bin/python benchmarks/bench_store_scale.py --pg            # also PostgreSQL (local server,
+    it) .venv/bin/python benchmarks/bench_store_scale.py --pg            # also PostgreSQL (local server,
     throwaway db)
 
 Each store holds N artifacts over 1 000 serials (N/1000 versions each, every one activated, so N events

@@ -11,8 +11,7 @@ CPU:
   ahead
     on threads and settled in order, ``workflows.camera.capture._detected_frames``): decode, detection, frame
     selection and its live gates, the kept frames encoded and stored, the session's gates; plus the CPU time
-    of
-    the calling (main) thread, the part that cannot spread over cores;
+    of the calling (main) thread, the part that cannot spread over cores;
   * the plain script's detection alone: VideoCapture.read + cvtColor + findChessboardCorners (ADAPTIVE_THRESH
   |
     NORMALIZE_IMAGE) + cornerSubPix 11x11 on every frame, sequentially and on a multiprocessing.Pool of cores

@@ -10,8 +10,7 @@ time, the exit code and the load average before each run is printed and written 
 the date they were measured on.
 
 Full run: about 4 minutes (221 s on 2026-11-22) on the 2-core shared machine. ``--quick`` (about 1-2 min) uses
-each
-script's short mode: fewer repeats, fewer sessions/trials/rows.
+each script's short mode: fewer repeats, fewer sessions/trials/rows.
 """
 
 from __future__ import annotations

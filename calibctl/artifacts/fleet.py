@@ -11,8 +11,7 @@ healthy, ``rollback`` puts every robot the rollout touched back on the version i
 A target is a camera serial's version or a rig's (``rig_targets``; an ``assign`` names ``serial`` or ``rig``).
 A ``rollout`` records each target's diff against the version its robots ran (``diffs``, ``rig_diffs``); a
 ``promote`` records what its health gate decided on (``gate``: each report's id and sha256, so the decision
-can
-be re-checked against the stored reports) and, for rigs it activated, the version that was active before
+can be re-checked against the stored reports) and, for rigs it activated, the version that was active before
 (``restore``, what a rollback puts back).
 """
 

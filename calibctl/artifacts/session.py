@@ -81,8 +81,8 @@ class ViewCorners(Document):
 
 class MetricGauge(Document):
     """The distance gauge judged at capture (seed chapter 0): the board in a surveyed fixture, seen through
-    the
-    lens the session is solved with. A failed gauge stops the calibration unless overridden with a reason."""
+    the lens the session is solved with. A failed gauge stops the calibration unless overridden with a
+    reason."""
 
     distance: DistanceCheck = Field(description="surveyed against recovered board distance and the verdict")
     lens_model: str = Field(description="the lens model the fixture pictures' poses were fitted through")

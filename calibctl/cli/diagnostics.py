@@ -1,8 +1,7 @@
 """calibctl diagnostics commands: triage, gauge, timeoffset, synth-residuals.
 
 Each command parses, calls one workflow in calibctl.workflows.diagnostics.diagnostics, renders (rich tables
-for
-people, the documented dict for --json) and exits 0 (pass), 1 (fault named, gauge alarm, time
+for people, the documented dict for --json) and exits 0 (pass), 1 (fault named, gauge alarm, time
 offset refused) or 2 (via the error boundary: the input could not support an answer).
 """
 

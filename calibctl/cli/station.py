@@ -190,8 +190,7 @@ def station(
     ] = None,
 ) -> None:
     """Calibrate unit after unit in one warm process: read a serial, capture DIR/{serial} (or the unit's
-    camera,
-    live, with --camera), solve, store, print the verdict, wait for the next.
+    camera, live, with --camera), solve, store, print the verdict, wait for the next.
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
     "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are
@@ -206,8 +205,7 @@ def station(
     each unit is captured live (the live view on stderr says what the gates still need) until the gates pass,
     and
     stored whole once its stream is over; a camera that cannot be opened or is unplugged mid-unit is an error
-    line,
-    nothing stored. With the store unreachable each
+    line, nothing stored. With the store unreachable each
     unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
     "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
     serials file unreadable, another station's or store's spool).
@@ -377,8 +375,7 @@ def sync_command(
     serial's
     next version there (signed with the station's key when one is configured). Run again after a kill: nothing
     is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones
-    after it
-    stay queued); 2 when the store is still away, another process is syncing, or the spool is another
+    after it stay queued); 2 when the store is still away, another process is syncing, or the spool is another
     station's or store's."""
     from calibctl.workflows.station.sync import sync
 

@@ -198,8 +198,7 @@ def solve_lm(
 
     Args:
         evaluate: params -> the normal equations there (``DenseSystem`` or ``SchurSystem``, one form per
-        problem).
-        start: the initial parameters, any type ``retract`` understands.
+        problem). start: the initial parameters, any type ``retract`` understands.
         retract: (params, delta) -> params moved by delta (flat, the system's layout; e.g. params + delta).
         damping: the schedule. max_iterations: steps tried at most.
         relative_tolerance: stop once a trial changes the cost by less than this share of it (either way).

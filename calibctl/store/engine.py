@@ -10,8 +10,7 @@ factory) run the same code and the same migrations. Differences are handled here
   the lock with sleeps growing to 100 ms, which is not fair: under 16 station writers plus 8 rollback
   processes on the 2-core bench machine a writer waited more than 10 s (the old default) for its turn
   8 times in one run; at 60 s none gave up (tests/store/test_mixed_load.py). SQLAlchemy emits the ``BEGIN``
-  itself
-  so that write transactions start with ``BEGIN IMMEDIATE``: writers queue up at the start of the
+  itself so that write transactions start with ``BEGIN IMMEDIATE``: writers queue up at the start of the
   transaction instead of failing half-way when a read lock cannot be upgraded.
 * PostgreSQL: the same setting bounds row-lock waits (``lock_timeout``, default 10 s: row locks are
   per serial and queue fairly); connects give up after 10 s.

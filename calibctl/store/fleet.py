@@ -72,8 +72,7 @@ class FleetStore:
         """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the
         log's
         length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole
-        batch
-        (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
+        batch (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
         ``rig_steps`` are appended to the rigs' activation log in the same transaction (a rig whose active
         version moved since the caller read it refuses the whole batch)."""
 

@@ -10,12 +10,10 @@ Written by the fleet writer (``append_fleet_events``), in the same transaction a
 ``EVERY`` events past the newest checkpoint: the writer holds the fleet's lock, so the state is of exactly the
 log it wrote, and read commands (``fleet status`` on a read-only copy of the store included) never write.
 The cost, a replay of at most ``EVERY`` events from the previous checkpoint, is paid once per ``EVERY``
-events;
-a store migrated with a long log gets its first one at the next fleet write.
+events; a store migrated with a long log gets its first one at the next fleet write.
 
 Signed: with a station key the writer signs each checkpoint (its position, event N's chain hash and the
-state's
-sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so
+state's sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so
 rewriting a
 checkpoint together with its sha256 is no longer a way to change what ``fleet status`` serves (``db verify``
 replays the log and catches it either way). A store without keys checks the chain hash and the sha256 only.

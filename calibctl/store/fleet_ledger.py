@@ -1,15 +1,12 @@
 """The fleet's log replayed: which robot carries which serials and rigs, the version each runs, every rollout.
 
 A target is ``("serial", SERIAL)`` or ``("rig", RIG)``: robots carry both, rollouts roll out both, and a
-serial
-and a rig may share a name without meeting.
+serial and a rig may share a name without meeting.
 
 The replay is incremental (``Fleet.apply`` one event at a time, ``Fleet.settle`` the rollouts' robot states at
-the
-end), and its state up to event N is plain JSON (``to_state``, ``from_state``): the fleet checkpoints
+the end), and its state up to event N is plain JSON (``to_state``, ``from_state``): the fleet checkpoints
 (``fleet_checkpoints``) are that state, so a read replays only the events after the newest one. It lives in
-the
-store layer because ``db verify`` re-derives each checkpoint from the log.
+the store layer because ``db verify`` re-derives each checkpoint from the log.
 """
 
 from __future__ import annotations
@@ -90,10 +87,8 @@ class Fleet:
     """The log replayed up to event ``length``: robots' targets, what each robot runs, rollouts.
 
     ``found`` is the compact history of each (robot, target) that was ever assigned: per rollout that assigned
-    it,
-    the version it ran just before that rollout's first assignment (None: nothing before). That is all a
-    rollback
-    (what to put back) and a rollout's robot states (was it assigned) read, and it does not grow with
+    it, the version it ran just before that rollout's first assignment (None: nothing before). That is all a
+    rollback (what to put back) and a rollout's robot states (was it assigned) read, and it does not grow with
     re-assignments.
     """
 
@@ -167,8 +162,7 @@ STATE_FORMAT = 1
 
 def to_state(fleet: Fleet) -> dict[str, Any]:
     """The replayed log as plain JSON (insertion order kept: it is the order status lists robots and rollouts
-    in).
-    Rollouts are named by the positions of their start and promote events, which are read back from the
+    in). Rollouts are named by the positions of their start and promote events, which are read back from the
     log."""
     return {
         "format": STATE_FORMAT,
@@ -190,8 +184,7 @@ def rollout_positions(state: dict[str, Any]) -> list[int]:
 
 def from_state(state: dict[str, Any], events: dict[int, FleetEvent] | None) -> Fleet:
     """``to_state``'s inverse (not settled); ``events``: the events at ``rollout_positions(state)``; None:
-    each
-    rollout holds a stand-in event that names it and nothing else (enough to apply more events and take
+    each rollout holds a stand-in event that names it and nothing else (enough to apply more events and take
     ``to_state`` again, what the checkpoint writer does, without decoding every rollout with its diffs).
     KeyError, TypeError or ValueError when the state is not of this shape."""
     if state["format"] != STATE_FORMAT:

@@ -6,13 +6,11 @@ Revises: 0014_health_window_fleet25
 Create Date: 2026-11-27
 
 Derived data, never the source of truth (``store/fleet_checkpoints.py``): each row is the replayed state at
-log
-position ``position`` with that event's chain hash, checked on use and by ``db verify``. No immutability
+log position ``position`` with that event's chain hash, checked on use and by ``db verify``. No immutability
 triggers:
 a write prunes all but the newest few, and deleting every row only costs the next read a full replay. With a
 station key a checkpoint is signed (``signature``, ``key_id``): a store with keys uses only checkpoints signed
-by a
-trusted key.
+by a trusted key.
 """
 
 from __future__ import annotations

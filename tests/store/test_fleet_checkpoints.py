@@ -319,8 +319,7 @@ def _forge_newest(store: Store) -> int:
 
 def test_with_keys_checkpoints_are_signed_and_a_forged_one_is_not_served(db_url: str, tmp_path: Path) -> None:
     """A station key signs each checkpoint; a store with keys reads only checkpoints a trusted key signed, so
-    the
-    forgery reads cannot see without keys (state and sha256 rewritten together) is skipped, and db verify
+    the forgery reads cannot see without keys (state and sha256 rewritten together) is skipped, and db verify
     names
     its signature."""
     signer = create_key(tmp_path / "station.pem")

@@ -140,8 +140,7 @@ def _settled(
     differ by that noise: rendered 60-view sessions took 4-8 rounds to settle (ratio 1.05-1.07), a round
     lowering
     the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round (1.09
-    later).
-    A real second camera is told apart by both figures, never by one round: a shuffled or alternating
+    later). A real second camera is told apart by both figures, never by one round: a shuffled or alternating
     two-camera session starts from two blends whose cameras agree within their uncertainty (first
     reassignment 1.3-17 %, where one real camera's 13 views gained 2.5 %), and it can then drift for rounds
     gaining under 1 % before it separates, but its groups then read >= 1.14 in-sample (all 116 the test

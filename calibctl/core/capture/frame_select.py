@@ -22,8 +22,7 @@ Feed every frame's detection (or None) to ``FrameSelector.offer`` in order. A fr
 Tilt bands are [0, 10), [10, 20), [20, 30), [30, 45] and > 45 degrees; the direction is the 8-sector
 compass direction of ``gates`` (only meaningful from 1 degree). A frame's tilt is read like the gates
 read it (calibctl.core.capture.tilt): through the lens the last ``progress()`` fitted to the kept views,
-through a
-pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt.
+through a pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt.
 ``progress()`` gives what a live view
 shows: coverage, tilt directions collected, the observability gauge against its threshold, the view
 count and the gate hints in words.

@@ -341,8 +341,7 @@ def evaluate_gates(
     """All capture gates for one session's accepted views (see the module docstring for the maths).
 
     ``image_circle``: the disc a circular fisheye images (core.capture.image_circle); coverage then counts
-    only
-    the cells mostly inside it. None: every cell of the grid (a pinhole or full-frame lens).
+    only the cells mostly inside it. None: every cell of the grid (a pinhole or full-frame lens).
     """
     th = thresholds or GateThresholds()
     with single_threaded():  # the lens fit behind the tilts: one thread, the same digits on any machine

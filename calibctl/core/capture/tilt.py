@@ -16,8 +16,7 @@ What is done instead (``session_tilts``):
      its columns orthogonal for any f).
      When that small model does not explain the corners (fit RMS above ``FISHEYE_TRY_RMS_PX``, or no
      plausible fit), the session's equidistant fisheye lens (calibctl.core.intrinsics.fisheye_solve) is fitted
-     too
-     and kept when it fits better: k1 and k2 cannot bend to a 150-190 deg lens past ~60 deg off-axis, and
+     too and kept when it fits better: k1 and k2 cannot bend to a 150-190 deg lens past ~60 deg off-axis, and
      tilt read through them was up to 35 deg off on circular renders (benchmarks/results/capture-gates.md).
   3. Each view's pose through that lens is the better of the solve's and both planar (IPPE) solutions.
      Its tilt is the angle between the normal of its fitted pose and the optical axis.

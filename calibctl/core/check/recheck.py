@@ -192,8 +192,7 @@ def recheck(
         object_points_per_view: V arrays (N_i, 3) float64 board frame, metres.
         image_points_per_view: V arrays (N_i, 2) float64 detected corners, px.
         camera_matrix: (3, 3) stored K, px. dist_coeffs: (n,) stored distortion, OpenCV order (fisheye:
-        k1-k4).
-        image_size: (W, H) px of both the calibration and the fresh views.
+        k1-k4). image_size: (W, H) px of both the calibration and the fresh views.
         reference: the calibration's held-out numbers. alpha: whole-check false-fail level, 80 % for
             the parameter tests, 20 % for the region tests.
         stored_sigma: the calibration's one-sigma of ``focal`` (relative), ``cx`` and ``cy`` (px); used

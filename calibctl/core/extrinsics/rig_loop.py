@@ -4,14 +4,12 @@ Pairs (a, b) and (a, c) of one rig are solved on their own but read the same cor
 all three saw (and the same intrinsics of a): their errors are correlated, and around a loop much of camera
 a's
 error cancels. Treated as independent, the loop's covariance is several times too wide (Mahalanobis 0.17-0.67
-on
-clean rendered 3-4 camera rigs) and the rule fires only on gross errors.
+on clean rendered 3-4 camera rigs) and the rule fires only on gross errors.
 
 Joint linearisation (first order, no re-solve): each pair's estimate x_p (the pose vector of T_b_a, its
 cam_poses[1]) moves by G_p r for residuals r, G_p = [H_p^-1]_(x, obs) J_obs^T per (frame, camera) block, the
 board pose of that frame eliminated as in the pair's own solve (core.extrinsics.rig_uncertainty.linearise).
-Two
-pairs share the corners of one camera in one frame with the same corner id, so
+Two pairs share the corners of one camera in one frame with the same corner id, so
 
     Cov_jac(x_p, x_q) = s_p s_q sum_(shared corners) G_p G_q^T + A_p Cov_theta A_q^T (members held fixed)
 

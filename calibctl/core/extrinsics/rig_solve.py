@@ -279,8 +279,7 @@ def solve_rig(
         members: per camera intrinsics, same order as views.cameras.
         refine_intrinsics: free each member's model parameters too.
         model: the members' solve model (core.intrinsics.solve.MODELS) whose flags a refining stereo solve
-        uses.
-        solver: "auto" (OpenCV stereo for two cameras, joint LM otherwise), "opencv" or "lm".
+        uses. solver: "auto" (OpenCV stereo for two cameras, joint LM otherwise), "opencv" or "lm".
 
     Raises:
         NumericalError: too few shared views, unobservable, or diverged on frames that agree.

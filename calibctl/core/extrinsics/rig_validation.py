@@ -1,13 +1,11 @@
 """Held-out validation of a rig solve (k-fold over synchronised frames) and loop closure.
 
 Held-out: frames go to folds by ``core.intrinsics.validation.fold_assignment`` (frame i -> fold i % k). For
-each
-fold the rig is re-solved on the other frames; each held-out frame's board pose T_root_board is then
+each fold the rig is re-solved on the other frames; each held-out frame's board pose T_root_board is then
 fitted jointly to every camera's corners with the extrinsics and intrinsics frozen (Levenberg-Marquardt
 on 6 parameters, calibctl.core.lm), so a wrong extrinsic shows up as residual in some camera instead of
 being absorbed by a per-camera pose. Per camera: held-out reprojection RMS. Per pair: epipolar error and
-rectified
-cross-epipolar disparity (rig_metrics) of the held-out frames both cameras saw.
+rectified cross-epipolar disparity (rig_metrics) of the held-out frames both cameras saw.
 
 Loop closure (3+ cameras): every pair with shared frames is solved on its own (a 2-camera solve);
 around every simple cycle of that pair graph the composed transform should be identity. The residual

@@ -428,8 +428,7 @@ def check_equidistant_foldover(
     ``observed_px`` the observed region grown by OBSERVED_MARGIN, when nearer, replaces both (and the model
     must
     reach it: corners were imaged there): a fold beyond every observed corner is not judged. ``required_px``
-    (the
-    station's declared region) joins the observed one, as for check_distortion_foldover.
+    (the station's declared region) joins the observed one, as for check_distortion_foldover.
     """
     rule = "distortion-foldover"
     fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"

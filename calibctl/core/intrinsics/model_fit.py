@@ -31,8 +31,7 @@ opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75
 1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
 The rule fails a calibration when the ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a
 sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44
-s of
-CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
+s of CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
 only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
 misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
 which is never below the full floor; the verdict is the same either way. The floor stored never exceeds the
@@ -136,8 +135,7 @@ def lens_floor_px(
     lanes: Lanes | None = None,
 ) -> tuple[float, str] | None:
     """(per-corner RMS px corrected for the fit's degrees of freedom, model) of the best of ``models`` on
-    these
-    corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px.
+    these corners; None when none can be solved. Shapes as in detector_rms_px; image_size (width, height) px.
     ``lanes``: where the models are solved at once (core.lanes); the answer does not depend on it."""
     # cv2 only here: `lint FILE` reads model_fit's rule without it
     from calibctl.core.intrinsics.solve import single_threaded_opencv, solve_intrinsics

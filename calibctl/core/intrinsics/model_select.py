@@ -121,8 +121,7 @@ def select_model(
 
     The choice is a function of the values alone, so the last RECENT_SELECTIONS are remembered by a
     digest of the inputs (core.intrinsics.recent_answers): ``calibrate --model auto --reference-distance``
-    asks at
-    capture (the gauge's lens) and again at the solve, on the same corners (about 1 s of ladder each).
+    asks at capture (the gauge's lens) and again at the solve, on the same corners (about 1 s of ladder each).
     ``lanes``: where each rung's held-out folds are solved (core.lanes); the choice does not depend on it.
 
     Raises:

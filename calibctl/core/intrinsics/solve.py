@@ -50,8 +50,7 @@ Solves asked twice
     RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a
     digest
     of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the
-    first
-    one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
+    first one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
 from __future__ import annotations

@@ -54,8 +54,7 @@ class BoardInScan:
     Attributes:
         outcome: accepted, no_plane, too_few_rings or dimension_mismatch; message: the numbers in words.
         normal: (3,) unit plane normal, LiDAR frame, pointing away from the sensor; distance_m: n . p on the
-        plane.
-        points_m: (M, 3) board points; ring_of_point: (M,) ring index; edge_points_m: (E, 3) ring end
+        plane. points_m: (M, 3) board points; ring_of_point: (M,) ring index; edge_points_m: (E, 3) ring end
             points moved half a step outward, edge_ring: (E,) their rings; centre_m: (3,) rectangle centre;
             corners_m: (4, 3).
         width_m, height_m: measured sides matched to the backing board's (width <= height as registered);

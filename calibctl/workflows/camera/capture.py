@@ -14,8 +14,7 @@ What is written, and when:
     transaction, on a thread of their own while the gates run (``image_writes``), and every kept frame of
     a video or camera encoded as PNG (from 2 jobs on, on the writer thread beside the selection) and stored,
     ``IMAGE_BATCH`` per transaction, once the stream is over. A crash after this point leaves only images,
-    which
-    are harmless (content-addressed, they expire);
+    which are harmless (content-addressed, they expire);
   * then, once every image is durable, the whole session - per-image outcomes, per-view float64 corners with
   tilt, gate results with
     reason codes and hints, accepted/rejected - in one transaction (``Store.add_session``).
@@ -28,8 +27,7 @@ without ``max_views`` stops as soon as the gates pass; a video file without it i
 - KeyboardInterrupt finishes the session with the views kept so far and says so (``cancel_on_interrupt``: the
 station's unit is cancelled instead). A camera that stops delivering frames before one of these (unplugged, no
 frame for ``capture_sources.CAMERA_FRAME_WAIT_S``) is an error naming the frames and views it gave (exit 2):
-its
-views are no verdict on the lens, so no session is stored.
+its views are no verdict on the lens, so no session is stored.
 """
 
 from __future__ import annotations
@@ -697,10 +695,8 @@ def _detected_frames(
     and probed on the threads (``frame_select.probe_frame`` and the half-size copy for the frames' maximum:
     OpenCV releases the GIL) while the frames before them are settled and offered in order
     (``StreamDetector.settle``, ``finish``), so every frame gets the detection, and the session the decisions,
-    of
-    the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never
-    read
-    them.
+    of the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never
+    read them.
     """
     if jobs <= 1:
         for frame in frames:

@@ -154,8 +154,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
     """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
 
     The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly,
-    as
-    at capture) and the model, so it runs on another lane
+    as at capture) and the model, so it runs on another lane
     (verdict_lanes) beside the held-out folds and the model-misfit floor; the folds and the floor's lens
     models spread over the lanes too. The numbers are those of the sequential order."""
     size = session.image_size

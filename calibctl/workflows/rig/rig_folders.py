@@ -14,8 +14,7 @@ rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline
 path
 judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
 and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
-not
-synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
+not synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
 from __future__ import annotations

@@ -236,8 +236,7 @@ def import_rig_file(
     """Check ``path``'s hash and signature, then store its rig version with this store's verdict and version.
 
     ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as
-    the
-    camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False =
+    the camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False =
     never."""
     source = read_rig_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)

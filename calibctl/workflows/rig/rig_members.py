@@ -8,8 +8,7 @@ stored: the capture session (workflows.camera.capture.photos_session: observabil
 decisive projection gate over the station's region, tilt and coverage as guidance) and, when it passes, the
 solve with its lint (workflows.camera.solve.build_artifact: principal-point, sigma-fx, outer-ring-holdout,
 model-misfit, one-camera, aspect-ratio, distortion-foldover over the observed region). Findings carry the
-stored
-path's names: ``member:<gate>`` for a failed capture gate, ``member:<rule>`` for a lint finding.
+stored path's names: ``member:<gate>`` for a failed capture gate, ``member:<rule>`` for a lint finding.
 
 Not applied, and why:
 - ``square-size-provenance``: the square size is what ``--square-mm`` typed; no board registry says how it was

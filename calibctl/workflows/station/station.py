@@ -20,13 +20,11 @@ serial's versions keep the order its units were calibrated in.
 Camera mode (``StationRequest.camera``, ``LiveCamera``): the unit's own camera is plugged into the station's
 port
 and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates), until
-the
-gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory
+the gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory
 (``workflows.station.held``)
 until its stream and gates are over, then stored - or queued - whole: a camera that cannot be opened or stops
 delivering frames mid-unit (unplugged) is an error line with nothing stored, and a store that goes away does
-not
-make the operator capture the unit again.
+not make the operator capture the unit again.
 
 Watch mode (``StationRequest.watch``, ``workflows.station.watch``): after the serial the station waits for
 the unit's pictures in its folder and detects each as it lands; once the unit is complete the capture runs
@@ -41,8 +39,7 @@ Ctrl-C (SIGINT):
   * once detection is over (a camera unit: its stream and gates) the unit's images, session and calibration
   are
     written and solved (a fraction of its time); a Ctrl-C then is held until the unit is complete, and ends
-    the
-    station after its verdict, so no unit is ever half stored.
+    the station after its verdict, so no unit is ever half stored.
 """
 
 from __future__ import annotations

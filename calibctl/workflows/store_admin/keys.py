@@ -115,8 +115,7 @@ def requires_signatures(settings: Settings, folder: Path | None = None) -> bool:
 
 def signature_mark(art: Sealed, trusted: TrustedKeys) -> tuple[str, bool]:
     """How ``art`` is signed as ``trusted`` judges it ('trusted key <id>', 'untrusted key <id>', 'unsigned'),
-    and
-    whether that is a valid signature by a trusted key. A signature that does not match is refused before
+    and whether that is a valid signature by a trusted key. A signature that does not match is refused before
     this."""
     if art.signature is None:
         return "unsigned", False

@@ -94,8 +94,7 @@ if __name__ == "__main__":
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_worker_killed_while_results_stream_back_settles_every_future(tmp_path: Path, seed: int) -> None:
     """The out-of-memory killer's stand-in takes a worker 0-50 ms into a stream of 300 KB results, 5 times. In
-    the
-    pipe, such a kill left the caller waiting for ever in 12 to 18 of 30 rounds
+    the pipe, such a kill left the caller waiting for ever in 12 to 18 of 30 rounds
     (benchmarks/stress_pool_kill.py),
     so the scene runs in a child process that this test can kill: a hang fails the test instead of hanging the
     suite."""

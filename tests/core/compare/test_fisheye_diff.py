@@ -1,6 +1,5 @@
 """core.compare on fisheye lenses (cv2.fisheye's projection and Jacobians): one 150 deg lens solved twice is
-the
-same, its focal length 0.3 % longer is different, and pixels beyond the image circle's rays are never
+the same, its focal length 0.3 % longer is different, and pixels beyond the image circle's rays are never
 compared."""
 
 from __future__ import annotations

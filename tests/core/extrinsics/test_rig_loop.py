@@ -89,8 +89,7 @@ def test_clean_loops_close_and_broken_loops_are_seen():
 
 def test_the_loop_closures_run_every_library_on_one_thread(monkeypatch) -> None:
     """The pair solves and loop covariances run one after another: spare BLAS threads would only spin (a
-    4-camera
-    rig's solve-folders spent 5-8 % more CPU at the same wall before this block,
+    4-camera rig's solve-folders spent 5-8 % more CPU at the same wall before this block,
     benchmarks/results/station.md)."""
     from threadpoolctl import threadpool_limits
 

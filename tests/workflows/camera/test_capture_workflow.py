@@ -208,8 +208,7 @@ def _session_numbers(result) -> tuple:
 )
 def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path, stop: dict) -> None:
     """Frames are detected ahead on threads from 2 jobs on (``_detected_frames``) and settled in order: every
-    frame
-    gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4
+    frame gets the one-thread detection, so the outcomes, views, corners and gates are the same at 1, 2 and 4
     jobs."""
     runs = {
         jobs: capture(settings, CaptureRequest(SERIAL, "A17", str(video), jobs=jobs, **stop))
@@ -223,8 +222,7 @@ def test_a_video_gives_the_same_session_at_every_job_count(settings, video: Path
 @needs_datasets
 def test_a_video_of_real_photos_gives_the_same_session_at_every_job_count(settings, tmp_path: Path) -> None:
     """opencv-left-right's 13 left photos (not made by us), each held still for 6 frames of an MJPG video, as
-    an
-    operator pausing the board would: the threads' look-ahead keeps the one-thread session, frame for
+    an operator pausing the board would: the threads' look-ahead keeps the one-thread session, frame for
     frame."""
     from tests.datasets import LEFT_RIGHT
 
@@ -313,8 +311,7 @@ def test_a_camera_that_stops_before_the_gates_pass_is_an_error_with_no_session(
     settings, video: Path, tmp_path, monkeypatch
 ) -> None:
     """The real reader thread on a clip of the first 12 frames (one key pose: the gates cannot pass): its
-    reads
-    fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the
+    reads fail at the clip's end as an unplugged camera's do, and the capture says so instead of judging the
     views."""
     clip = tmp_path / "clip.avi"
     reader = cv2.VideoCapture(str(video))

@@ -1,8 +1,7 @@
 """Issue 10's Proof end to end through `calibctl calibrate` on rendered circular fisheyes (images rendered,
 board detected, circle found in the frames, gates, solve): fisheye sessions at 150-190 deg converge, every
 gate passes (the tilt gate read through the fitted fisheye lens, core.capture.tilt), every rendered view is
-used,
-and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.
+used, and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.
 
 190 deg used to miss (|z| of fx 1.2-4.9, of k4 0.8-15.5 on seeds 2-6). The renderer was wrong, not the
 detector: it traced X/Z rays and painted the background on every pixel past 89 deg off-axis, inside the

@@ -46,5 +46,5 @@ def test_the_lidar_evidence_keeps_full_precision_and_the_json_keeps_its_rounded_
     assert doc["gates"][0]["value"] == round(GATE_VALUE, 4)
     assert list(doc) == [
         "images", "scans", "lens", "lens_model", "range_offset_applied_mm", "outcomes", "transform",
-        "outcome_counts", "status", "gates",
+        "outcome_counts", "status", "gates", "notes",
     ]  # fmt: skip

@@ -1,8 +1,6 @@
 """The bundle of a rendered stereo rig read by the consumers' own code: ROS camera_calibration_parsers (its
-C++
-parser) and image_geometry's StereoCameraModel, mrcal, Debian's OpenCV (cv2.FileStorage), urdfdom's
-check_urdf.
-Each camera's projection must match calibctl's to 1e-6 px, left and right not swapped.
+C++ parser) and image_geometry's StereoCameraModel, mrcal, Debian's OpenCV (cv2.FileStorage), urdfdom's
+check_urdf. Each camera's projection must match calibctl's to 1e-6 px, left and right not swapped.
 
 The consumers are Debian packages for the system python (``make test-consumers`` installs them:
 python3-camera-calibration-parsers python3-image-geometry python3-mrcal liburdfdom-tools); each part skips,
