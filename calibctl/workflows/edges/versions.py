@@ -221,21 +221,12 @@ def edge_findings(results: Sequence[Evidence], active: Mapping[str, int | None])
 @dataclass(frozen=True)
 class Carried:
     """What a new version keeps of the active one's evidence edges: the edges, the evidence by its
-    RigCalibration field (``carried.handeye``, ``carried.lidar``; ``update()`` for a model_copy) and the
-    dropped ones named."""
+    RigCalibration field (``evidence["handeye"]``, ...: a model_copy update as it is) and the dropped ones
+    named."""
 
     edges: list[RigEdge]
     evidence: dict[str, list[Any]]
     dropped: list[Finding]
-
-    def __getattr__(self, name: str) -> list[Any]:
-        evidence = self.__dict__.get("evidence", {})
-        if name in evidence:
-            return evidence[name]
-        raise AttributeError(name)
-
-    def update(self) -> dict[str, list[Any]]:
-        return dict(self.evidence)
 
 
 def carried_forward(active: RigCalibration | None, versions: Mapping[str, int | None]) -> Carried:
@@ -293,7 +284,7 @@ def with_evidence(
         edges.append(edge)
     prefixes = tuple(f"{k.rule}-" for k in KINDS)
     lint = [f for f in base.lint if not f.rule.startswith(prefixes)] + carried.dropped + findings
-    evidence = carried.update()
+    evidence = dict(carried.evidence)
     evidence[kind.evidence_field] = [*evidence[kind.evidence_field], result]
     prov = Provenance(
         calibctl_version=__version__,

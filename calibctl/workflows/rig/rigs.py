@@ -453,7 +453,7 @@ def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibr
     carried = cal.model_copy(
         update={
             "edges": [*cal.edges, *kept.edges],
-            **kept.update(),
+            **kept.evidence,
             "lint": [*cal.lint, *kept.dropped],
         }
     )

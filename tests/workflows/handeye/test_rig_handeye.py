@@ -156,8 +156,8 @@ def test_a_camera_recalibrated_after_a_robot_hand_eye_makes_the_edge_stale(setti
     assert stale and f"{ROOT}@1" in stale[0].message and f"{ROOT}@2" in stale[0].message
     # a rig re-solve does not carry the stale edge; it names it
     kept = rig_edges.carried_forward(active, versions)
-    assert kept.edges == [] and kept.handeye == [] and kept.dropped[0].rule == "handeye-dropped"
-    assert rig_edges.carried_forward(active, {ROOT: 1}).handeye == [robot]
+    assert kept.edges == [] and kept.evidence["handeye"] == [] and kept.dropped[0].rule == "handeye-dropped"
+    assert rig_edges.carried_forward(active, {ROOT: 1}).evidence["handeye"] == [robot]
     # the next hand-eye on the rig drops the stale edge too (named), instead of being rejected for it
     nxt = rig_handeye.store_handeye(settings, RIG, _result(tmp_path, settings, "imu", OTHER)).calibration
     assert nxt.status == "accepted" and [h.parent_frame for h in nxt.handeye] == ["imu"]

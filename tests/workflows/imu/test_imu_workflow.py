@@ -240,7 +240,7 @@ def test_a_camera_recalibrated_since_makes_the_edge_stale_and_the_next_write_dro
         0
     ].message
     kept = versions.carried_forward(active, now)
-    assert kept.imu == [] and [f.rule for f in kept.dropped] == ["imu-dropped"]
+    assert kept.evidence["imu"] == [] and [f.rule for f in kept.dropped] == ["imu-dropped"]
 
 
 def test_corner_files_of_another_board_are_refused_naming_the_board(recording, tmp_path) -> None:

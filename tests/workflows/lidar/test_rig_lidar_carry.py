@@ -107,7 +107,11 @@ def test_a_stale_lidar_edge_is_dropped_and_named_by_the_next_write(solved, rig2,
         active = store.get_rig_calibration("R1")
         versions = rig_edges.cal_versions(store, active)
     kept = rig_edges.carried_forward(active, versions)
-    assert kept.edges == [] and kept.lidar == [] and [f.rule for f in kept.dropped] == ["lidar-dropped"]
+    assert (
+        kept.edges == []
+        and kept.evidence["lidar"] == []
+        and [f.rule for f in kept.dropped] == ["lidar-dropped"]
+    )
     assert "lidar -> CAM0 of R1@2 was solved with CAM0@1" in kept.dropped[0].message
     csv = tmp_path / "arm.csv"
     run_synth_motions(SynthRequest(csv))
