@@ -1,4 +1,4 @@
-"""The cases of benchmarks/hostile_sweep.py, by command group (the issue 26 categories, re-measured)."""
+"""The cases of benchmarks/hostile_sweep.py, by command group (the sweep's categories, re-measured)."""
 
 from __future__ import annotations
 
