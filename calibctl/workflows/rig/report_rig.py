@@ -8,6 +8,7 @@ member's calibration with its verdict and a link to its own report by serial@ver
 camera-LiDAR edge gets a LiDAR section: T_lidar_cam with one-sigma, gates, fit and held-out figures, scan
 outcomes, and the sweep drawn over its image through the stored T when the solve's files are still where
 they were, unchanged (the store keeps neither; the page says so rather than drawing anything else).
+A camera-IMU edge gets its own section (``workflows.imu.imu_report``), drawn from the stored evidence.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError
 from calibctl.files import write_atomic
+from calibctl.workflows.imu.imu_report import imu_section
 from calibctl.workflows.lidar.lidar_overlay import report_overlay
 from calibctl.workflows.report.report import default_path
 from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
@@ -361,7 +363,16 @@ def _provenance(d: RigReportData) -> str:
 
 def render_rig_html(d: RigReportData) -> str:
     """The whole rig page as one string: inline CSS and SVG, no script, nothing fetched."""
-    parts = [_verdict(d), _pairs(d), _tree(d), _lidar(d), _loops(d), _members(d), _provenance(d)]
+    parts = [
+        _verdict(d),
+        _pairs(d),
+        _tree(d),
+        _lidar(d),
+        imu_section(d.calibration.imu),
+        _loops(d),
+        _members(d),
+        _provenance(d),
+    ]
     title = escape(f"calibctl rig report {d.calibration.rig}@{d.calibration.version}")
     return (
         f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'

@@ -145,3 +145,29 @@ def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_p
     args = ["--board", "G7", "--image-topic", "/cam0/image_raw", "--imu-topic", "/imu0"]
     res = cli(url, "imu", "solve", str(bag), "--serial", CAM, *args)
     _assert_missing_extra(res, "bags", "rosbags", "reading a ROS bag")
+
+
+def test_the_rig_report_draws_the_imu_edge_from_the_store_byte_identical(solved, tmp_path) -> None:
+    db, doc = solved
+    url = copy_db(db, tmp_path)
+    (ev,) = doc["imu"]
+    e, k = ev["estimate"], f"imu-{CAM}"
+    page = tmp_path / "rig.html"
+    done = cli(url, "report", "--rig", RIG, "-o", str(page))
+    assert done.exit_code == 0, done.output
+    html = page.read_text()
+    assert "<h2>Camera-IMU</h2>" in html and f'data-key="imu_status_{k}">accepted' in html
+    for i, axis in enumerate("xyz"):
+        assert f'data-key="imu_t_{k}_{axis}">{e["T_imu_cam"][i][3] * 1e3:.2f}<' in html
+        assert f'data-key="imu_sigma_r_{k}_{axis}">{e["sigma_rotation_deg"][i]:.4f}<' in html
+    assert f'data-key="imu_td_{k}">{e["td_s"] * 1e3:.4f}<' in html
+    assert f'data-key="imu_sigma_td_{k}">{e["sigma_td_ms"]:.4f}<' in html
+    assert f'data-key="imu_td_crlb_{k}">{e["td_crlb_ms"]:.4f}<' in html
+    for gate in ev["gates"]:
+        assert f'data-key="imu_gate_{k}_{gate["gate"]}">pass<' in html
+    # a global-shutter render: the residuals do not ramp with the row
+    assert f'data-key="imu_rolling_shutter_{k}">no<' in html and ev["row_test"]["message"] in html
+    assert "gyro (lines) and camera rate (dots)" in html and "time residual over image rows" in html
+    again = tmp_path / "again.html"
+    assert cli(url, "report", "--rig", RIG, "-o", str(again)).exit_code == 0
+    assert again.read_bytes() == page.read_bytes()
