@@ -171,3 +171,115 @@ def test_the_rig_report_draws_the_imu_edge_from_the_store_byte_identical(solved,
     again = tmp_path / "again.html"
     assert cli(url, "report", "--rig", RIG, "-o", str(again)).exit_code == 0
     assert again.read_bytes() == page.read_bytes()
+
+
+def _edit_csv(path, edit) -> None:
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(edit(lines)) + "\n")
+
+
+def _swap_first_rows(rec) -> str:
+    _edit_csv(rec / "imu0" / "data.csv", lambda lines: [lines[0], lines[2], lines[1], *lines[3:]])
+    return "imu0/data.csv: stamps do not increase at line 3"
+
+
+def _accel_in_g(rec) -> str:
+    def edit(lines: list[str]) -> list[str]:
+        rows = [lines[0]]
+        for line in lines[1:]:
+            c = line.split(",")
+            rows.append(",".join([*c[:4], *(f"{float(v) / 9.80665:.6f}" for v in c[4:7])]))
+        return rows
+
+    _edit_csv(rec / "imu0" / "data.csv", edit)
+    return "it reads g; multiply by 9.80665"
+
+
+def _later_imu_clock(rec) -> str:
+    _edit_csv(
+        rec / "imu0" / "data.csv",
+        lambda lines: (
+            [lines[0]] + [f"{int(x.split(',', 1)[0]) + 10**12},{x.split(',', 1)[1]}" for x in lines[1:]]
+        ),
+    )
+    return "do not overlap in time"
+
+
+def _stamp_listed_twice(rec) -> str:
+    stamps = sorted(p.stem for p in (rec / "cam0").glob("*.csv"))
+    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    (rec / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
+    return f"cam0/data.csv: frame stamp {stamps[0]} is listed twice"
+
+
+def _rows_of_another_stamp(rec) -> str:
+    first = sorted((rec / "cam0").glob("*.csv"))[0]
+    other = int(first.stem) + 1
+    _edit_csv(first, lambda lines: [lines[0]] + [f"{other},{x.split(',', 1)[1]}" for x in lines[1:]])
+    return f"named {first.stem} but its rows are stamped {other}"
+
+
+BAD_INPUTS = {
+    "IMU stamps not increasing": (_swap_first_rows, ()),
+    "accelerometer in g": (_accel_in_g, ()),
+    "logs that do not overlap": (_later_imu_clock, ()),
+    "a camera stamp listed twice": (_stamp_listed_twice, ()),
+    "a corner file stamped as another frame": (_rows_of_another_stamp, ()),
+    "a camera without an active calibration": (
+        lambda rec: "camera CAM-0002 has no active calibration",
+        ("--serial", "CAM-0002"),
+    ),
+    "a board that is not registered": (
+        lambda rec: "unknown board 'NOPE'; known: G7, G7-40",
+        ("--board", "NOPE"),
+    ),
+    "corners of another board than the registered one": (
+        lambda rec: "m is no corner of board G7-40@1",
+        ("--board", "G7-40"),
+    ),
+}
+
+
+@pytest.fixture(scope="module")
+def uncalibrated_other(tmp_path_factory) -> str:
+    """The rig store with CAM-0002 a member but never calibrated; every bad input must leave it as it is."""
+    return make_store(tmp_path_factory.mktemp("bad-input") / "c.db", other_calibrated=False)
+
+
+@pytest.mark.parametrize("case", BAD_INPUTS, ids=list(BAD_INPUTS))
+def test_bad_input_is_exit_2_in_one_line_and_nothing_is_stored(case, recording, uncalibrated_other, tmp_path):
+    edit, extra = BAD_INPUTS[case]
+    rec = copy_recording(recording, tmp_path)
+    message = edit(rec)
+    args = ["--serial", CAM, *extra] if "--serial" not in extra else list(extra)
+    r = cli(uncalibrated_other, "imu", "solve", str(rec), *args, "--rig", RIG)
+    assert r.exit_code == 2, r.output
+    assert [x for x in r.output.splitlines() if x.startswith("Error:")] == [
+        next(x for x in r.output.splitlines() if message in x)
+    ]
+    assert "Traceback" not in r.output
+    history = json.loads(cli(uncalibrated_other, "rig", "history", RIG, "--json").stdout)
+    assert [v["version"] for v in history["versions"]] == [1]
+
+
+def test_a_bag_without_the_named_topic_is_exit_2_and_nothing_is_stored(recording, tmp_path) -> None:
+    pytest.importorskip("rosbags")
+    from tests.workflows.imu.test_imu_bags import _write_bag
+
+    rec = copy_recording(recording, tmp_path)
+    (rec / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n")  # the IMU topic alone
+    bag = tmp_path / "run"
+    _write_bag(rec, bag)
+    url = make_store(tmp_path / "c.db")
+    topics = ["--image-topic", "/cam0/image_raw", "--imu-topic", "/imu1"]
+    r = cli(url, "imu", "solve", str(bag), "--serial", CAM, "--board", "G7", *topics, "--rig", RIG)
+    assert r.exit_code == 2, r.output
+    (error,) = [x for x in r.output.splitlines() if x.startswith("Error:")]
+    assert (
+        str(bag) in error
+        and "has no topic /imu1 (it has: /cam0/image_raw (sensor_msgs/msg/Image), /imu0" in error
+    )
+    assert "--imu-topic" in r.output and "Traceback" not in r.output
+    assert [
+        v["version"] for v in json.loads(cli(url, "rig", "history", RIG, "--json").stdout)["versions"]
+    ] == [1]
