@@ -154,7 +154,8 @@ class ImuRowTest(Document):
 
 
 class ImuSeries(Document):
-    """What the report plots over time, in equal bins over the solve's IMU span (none: an empty bin)."""
+    """What the report plots over time, in equal bins (0.05 s, at most 240) over the solve's IMU span
+    (none: an empty bin)."""
 
     t_s: list[float] = Field(description="bin centres, seconds from the first IMU sample (IMU clock)")
     gyro_rad_s: list[tuple[float | None, float | None, float | None]] = Field(

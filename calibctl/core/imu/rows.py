@@ -10,7 +10,7 @@ line delay (s per row) the solve left in its residuals. Its one-sigma is the lar
 real residuals are correlated in time. The image velocity of each corner comes from the PnP poses of the
 neighbouring frames (the board point projected through both, differenced), so no spline is needed.
 
-``report_series`` reduces a solution to what the report page plots, in fixed-size time bins: the gyro
+``report_series`` reduces a solution to what the report page plots, in equal time bins: the gyro
 (bias removed) against the camera's board-derived rate carried into the IMU frame at ``t_cam + td_s``,
 and the corner / gyro / accelerometer residual RMS over time.
 """
@@ -30,7 +30,8 @@ ROW_Z_SIGNIFICANT = 4.0  # |slope| over this many sigmas: rolling shutter suspec
 MIN_SPEED_PX_S = 5.0  # corners slower than this carry no time information
 ROW_BINS = 12
 JACKKNIFE_BLOCKS = 10
-SERIES_BINS = 120
+SERIES_MAX_BINS = 240  # what a 960-pixel plot can show
+SERIES_MIN_BIN_S = 0.05  # no finer than the spline's knots
 
 
 @dataclass(frozen=True)
@@ -179,12 +180,15 @@ def report_series(
     imu: ImuSamples,
     frames: CameraFrames,
     track: BoardTrack | None = None,
-    bins: int = SERIES_BINS,
+    bins: int | None = None,
 ) -> ReportSeries:
-    """The report's time series (``ReportSeries``), binned over the solve's IMU span."""
+    """The report's time series (``ReportSeries``), binned over the solve's IMU span: ``bins`` or bins of
+    ``SERIES_MIN_BIN_S``, at most ``SERIES_MAX_BINS``."""
     res = solution.residuals
     t0 = float(imu.t_s[0])
     t_imu = res["imu_t_s"]
+    span = float(t_imu.max() - t_imu.min())
+    bins = bins or int(min(SERIES_MAX_BINS, max(1, np.ceil(span / SERIES_MIN_BIN_S))))
     edges = np.linspace(t_imu.min(), t_imu.max(), bins + 1)
 
     def which(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -86,7 +86,7 @@ def _rows(test: ImuRowTest) -> str:
     fit = test.offset_us + test.slope_us_per_row * (row - test.principal_row_px)
     pad = float(np.median(np.diff(row))) if row.size > 1 else 1.0
     plot = Plot(
-        "time residual over image rows (dots: bins, one-sigma bars; line: the fit)",
+        "time residual over image rows (dots: bins with white-noise one-sigma; line: the fit)",
         (float(row[0]) - pad, float(row[-1]) + pad),
         _span(mean[ok] + sigma[ok], mean[ok] - sigma[ok], fit, symmetric=True),
         width=480,

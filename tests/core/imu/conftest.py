@@ -36,5 +36,5 @@ def corridor() -> ImuCameraRecording:
 
 @pytest.fixture(scope="session")
 def rolling() -> ImuCameraRecording:
-    """A rolling-shutter dance: 30 us per row."""
-    return synthesize_imu_camera(2, motion="dance", duration_s=4.0, line_delay_s=30e-6)
+    """A 3 s rolling-shutter dance: 30 us per row."""
+    return synthesize_imu_camera(2, motion="dance", duration_s=3.0, line_delay_s=30e-6)
