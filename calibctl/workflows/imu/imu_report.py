@@ -15,7 +15,7 @@ import numpy as np
 
 from calibctl.artifacts.imu import ImuEdgeResult, ImuRowTest, ImuSeries
 from calibctl.core.extrinsics import se3
-from calibctl.workflows.report.report_html import cell, num, table
+from calibctl.workflows.report.report_html import cell, gate_table, num, table
 from calibctl.workflows.report.report_svg import Plot
 
 AXIS_COLOURS = ("#c62828", "#2e7d32", "#1565c0")  # IMU x, y, z
@@ -160,17 +160,6 @@ def _figures(ev: ImuEdgeResult, k: str) -> str:
     return table(["figure", "value"], [cell(a, cls="l") + cell(v, f"imu_{n}_{k}") for a, n, v in figures])
 
 
-def _gates(ev: ImuEdgeResult, k: str) -> str:
-    rows = [
-        cell(g.gate, cls="l")
-        + cell("pass" if g.passed else "FAIL", f"imu_gate_{k}_{g.gate}")
-        + cell(g.message, cls="l")
-        + cell(g.hint or "", cls="l")
-        for g in ev.gates
-    ]
-    return table(["gate", "verdict", "measured", "what to do"], rows)
-
-
 def imu_section(results: list[ImuEdgeResult]) -> str:
     """One block per camera-IMU result of a rig version (accepted edges and a rejected result alike)."""
     out = []
@@ -182,7 +171,7 @@ def imu_section(results: list[ImuEdgeResult]) -> str:
             f"(intrinsics held), board {escape(ev.board or 'from the corner files')}; recording "
             f"{escape(ev.recording)}; IMU noise {escape(ev.noise.source)}</p>"
             + _estimate(ev, k)
-            + _gates(ev, k)
+            + gate_table(ev.gates, f"imu_gate_{k}")
             + _figures(ev, k)
         )
         if ev.row_test is not None:

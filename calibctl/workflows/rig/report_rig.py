@@ -27,7 +27,7 @@ from calibctl.files import write_atomic
 from calibctl.workflows.imu.imu_report import imu_section
 from calibctl.workflows.lidar.lidar_overlay import report_overlay
 from calibctl.workflows.report.report import default_path
-from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
+from calibctl.workflows.report.report_html import CSS, cell, gate_table, lint_block, num, table
 from calibctl.workflows.report.report_svg import Plot
 from calibctl.workflows.rig.rig_lint import lint_rig, parse_rig_ref
 from calibctl.workflows.store_admin.records import open_store
@@ -291,18 +291,11 @@ def _lidar(d: RigReportData) -> str:
                 ["figure", "value"],
                 [cell(a, cls="l") + cell(v, f"lidar_{name}_{k}") for a, name, v in figures],
             )
-        gates = [
-            cell(g.gate, cls="l")
-            + cell("pass" if g.passed else "FAIL", f"lidar_gate_{k}_{g.gate}")
-            + cell(g.message, cls="l")
-            + cell(g.hint or "", cls="l")
-            for g in ev.gates
-        ]
         counts: dict[str, int] = {}
         for r in ev.scans_outcomes:
             counts[r.outcome] = counts.get(r.outcome, 0) + 1
         body += (
-            table(["gate", "verdict", "measured", "what to do"], gates)
+            gate_table(ev.gates, f"lidar_gate_{k}")
             + "<p>scans: "
             + escape(", ".join(f"{o} {n}" for o, n in sorted(counts.items())))
             + "</p>"

@@ -21,6 +21,7 @@ from tests.workflows.imu.imu_data import (
     rendered,
     truth,
 )
+from tests.workflows.imu.test_imu_workflow import IMU_EDITS, _rewrite
 
 
 def _yaml_body(text: str) -> dict:
@@ -173,36 +174,15 @@ def test_the_rig_report_draws_the_imu_edge_from_the_store_byte_identical(solved,
     assert again.read_bytes() == page.read_bytes()
 
 
-def _edit_csv(path, edit) -> None:
-    lines = path.read_text().splitlines()
-    path.write_text("\n".join(edit(lines)) + "\n")
+def _imu_log(case: str):
+    """The workflow test's edit of the IMU log; returns the message it must get."""
+    edit, message, _ = IMU_EDITS[case]
 
+    def make(rec) -> str:
+        _rewrite(rec / "imu0" / "data.csv", edit)
+        return message
 
-def _swap_first_rows(rec) -> str:
-    _edit_csv(rec / "imu0" / "data.csv", lambda lines: [lines[0], lines[2], lines[1], *lines[3:]])
-    return "imu0/data.csv: stamps do not increase at line 3"
-
-
-def _accel_in_g(rec) -> str:
-    def edit(lines: list[str]) -> list[str]:
-        rows = [lines[0]]
-        for line in lines[1:]:
-            c = line.split(",")
-            rows.append(",".join([*c[:4], *(f"{float(v) / 9.80665:.6f}" for v in c[4:7])]))
-        return rows
-
-    _edit_csv(rec / "imu0" / "data.csv", edit)
-    return "it reads g; multiply by 9.80665"
-
-
-def _later_imu_clock(rec) -> str:
-    _edit_csv(
-        rec / "imu0" / "data.csv",
-        lambda lines: (
-            [lines[0]] + [f"{int(x.split(',', 1)[0]) + 10**12},{x.split(',', 1)[1]}" for x in lines[1:]]
-        ),
-    )
-    return "do not overlap in time"
+    return make
 
 
 def _stamp_listed_twice(rec) -> str:
@@ -215,14 +195,14 @@ def _stamp_listed_twice(rec) -> str:
 def _rows_of_another_stamp(rec) -> str:
     first = sorted((rec / "cam0").glob("*.csv"))[0]
     other = int(first.stem) + 1
-    _edit_csv(first, lambda lines: [lines[0]] + [f"{other},{x.split(',', 1)[1]}" for x in lines[1:]])
+    _rewrite(first, lambda lines: [lines[0]] + [f"{other},{x.split(',', 1)[1]}" for x in lines[1:]])
     return f"named {first.stem} but its rows are stamped {other}"
 
 
 BAD_INPUTS = {
-    "IMU stamps not increasing": (_swap_first_rows, ()),
-    "accelerometer in g": (_accel_in_g, ()),
-    "logs that do not overlap": (_later_imu_clock, ()),
+    "IMU stamps not increasing": (_imu_log("stamps not increasing"), ()),
+    "accelerometer in g": (_imu_log("accel numbers in g"), ()),
+    "logs that do not overlap": (_imu_log("logs that do not overlap"), ()),
     "a camera stamp listed twice": (_stamp_listed_twice, ()),
     "a corner file stamped as another frame": (_rows_of_another_stamp, ()),
     "a camera without an active calibration": (
