@@ -61,6 +61,8 @@ def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> 
     assert np.allclose(np.array(e["T_cam_imu"]) @ np.array(e["matrix"]), np.eye(4), atol=1e-6)
     t = truth(recording)
     assert np.allclose(np.array(e["T_cam_imu"])[:3, :3], np.array(t["T_cam_imu"])[:3, :3], atol=2e-3)
+    rows = doc["row_test"]  # a global-shutter render: no ramp over the image rows
+    assert not rows["significant"] and rows["message"].endswith("constant across rows, as a time offset is")
 
 
 def test_the_stored_edge_shows_exports_and_lints_clean(solved, tmp_path) -> None:
