@@ -135,6 +135,22 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
     assert history["active_version"] == 1
     assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]
+    page = tmp_path / "rejected.html"
+    assert cli(url, "report", "--rig", f"{RIG}@2", "-o", str(page)).exit_code == 0
+    html = page.read_text()
+    assert f'data-key="imu_status_imu-{CAM}">rejected' in html and ">FAIL<" in html
+
+
+def test_a_rolling_shutter_solved_without_line_delay_is_named_with_the_fix(tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    rec = tmp_path / "rs"
+    made = cli(url, "imu", "synth", str(rec), "--serial", CAM, "--duration-s", "3", "--line-delay-us", "30")
+    assert made.exit_code == 0, made.output
+    r = cli(url, "imu", "solve", str(rec), "--serial", CAM, "--noise", str(rec / "imu.yaml"))
+    assert (
+        "  row test: rolling shutter suspected: solve with --line-delay; time residual vs image row +"
+        in r.output
+    )
 
 
 def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_path) -> None:
