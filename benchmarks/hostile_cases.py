@@ -25,6 +25,7 @@ from hostile_sweep import (
     reseal,
     residuals,
     second_data_line,
+    signed_forgery,
     symlink,
     text,
     tiny_png,
@@ -976,6 +977,31 @@ def _seal() -> list[Case]:
             "lint --require-signature on an unsigned store's ros export",
             ["lint", "{w}/c.yaml", "--require-signature", "--trusted-keys", "{w}/keys"],
             setup=_unsigned_ros_export,
+        ),
+    ]
+    edited = "a signed export edited (fx +1 px, content hash recomputed, signature kept)"
+    cases += [
+        Case(
+            g,
+            f"import {edited} into a store without keys",
+            ["import", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            protect=["store.db"],
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            f"lint {edited}, no keys",
+            ["lint", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            "import an honest export signed by an untrusted key into a store without keys",
+            ["import", "{w}/signed.json"],
+            expect="ok",
+            setup=signed_forgery("forged.json"),
         ),
     ]
     force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]

@@ -31,7 +31,7 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding
 from calibctl.config import LintThresholds
 from calibctl.errors import InputError
-from calibctl.signing import TrustedKeys
+from calibctl.signing import EDITED, TrustedKeys, is_mismatch
 from calibctl.workflows.exports import bundle, formats, trace_header
 from calibctl.workflows.exports.frame_names import ROS_NAME, FrameNames
 from calibctl.workflows.lint.lint import (
@@ -447,7 +447,10 @@ def _manifest_seal(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
                 "export the bundle again from a store with a key (`calibctl rig export RIG --format bundle`)",
             )
         ]
-    problem = trusted.check(seal.get("key_id"), seal.get("value"), bundle.manifest_message(data))
+    problem = trusted.check(
+        seal.get("key_id"), seal.get("value"), bundle.manifest_message(data), seal.get("public_key")
+    )
+    problem = f"{problem}: {EDITED}" if is_mismatch(problem) else problem
     return [] if problem is None else [_error("signature", f"the manifest {problem}", SIGNATURE_FIX)]
 
 

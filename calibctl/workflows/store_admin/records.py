@@ -177,12 +177,19 @@ def export(
         raise UsageError("--camera-name applies to --format ros only")
     if lut_options:
         raise UsageError("--alpha and --balance apply to --format lut only")
-    art = show(settings, ref)
+    art = _exported(settings, ref)
     _refuse_rejected(art, allow_rejected)
     text = formats.render(art, fmt, camera_name=camera_name)
     if out is not None:
         write_atomic(out, text, force=force)
     return text
+
+
+def _exported(settings: Settings, ref: str) -> CalibrationArtifact:
+    """``ref`` as an export carries it: its signature with the signer's public key, when this store has it."""
+    from calibctl.workflows.store_admin import keys
+
+    return keys.with_public_key(show(settings, ref), keys.read_trust(settings))
 
 
 def _free_parameter(lens: str, alpha: float | None, balance: float | None) -> float:
@@ -220,7 +227,7 @@ def export_lut(
         raise UsageError("--camera-name applies to --format ros only")
     if out is None:
         raise UsageError("--format lut writes a folder of maps", "pass -o DIR (a new folder)")
-    art = show(settings, ref)
+    art = _exported(settings, ref)
     _refuse_rejected(art, allow_rejected)
     lens: Literal["pinhole", "fisheye"] = "fisheye" if art.model.name == "fisheye" else "pinhole"
     camera = lut.single_camera(
