@@ -185,6 +185,7 @@ def second_data_line(value: str) -> Callable[[str], str]:
 
 
 _RIG_LOCK = threading.Lock()
+_LIDAR_LOCK = threading.Lock()
 
 
 def rig_source(w: Path) -> Path:
@@ -224,6 +225,50 @@ def rig_source(w: Path) -> Path:
             if done.returncode != 0:
                 raise RuntimeError(f"{' '.join(args[:3])}: {done.stderr[-300:]}")
         return src
+
+
+def _lidar_solve(src: Path) -> None:
+    """`lidar synth` (8 poses) and a store-free `lidar solve -o result.json` of it, in ``src``."""
+    rendered = src / "set"
+    done = calibctl(src, ["lidar", "synth", str(rendered), "--poses", "8", "--seed", "1"])
+    if done.returncode == 0:
+        box = json.loads((rendered / "truth.json").read_text())["box"]
+        done = calibctl(
+            src,
+            ["lidar", "solve", "--images", str(rendered / "images"), "--scans", str(rendered / "scans")]
+            + [
+                "--camera-info",
+                str(rendered / "camera_info.yaml"),
+                "--box",
+                box,
+                "--cols",
+                "5",
+                "--rows",
+                "7",
+            ]
+            + ["--square-mm", "95", "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+            + ["-o", str(src / "result.json")],
+        )
+    if done.returncode != 0:
+        raise RuntimeError(f"lidar synth / solve: {done.stderr[-300:]}")
+
+
+def lidar_result(name: str, edit: Callable[[dict], None] | None = None) -> Callable[[Path], None]:
+    """Once per sweep, a store-free `lidar solve -o` result of an 8-pose render (``lidar/result.json``);
+    each case gets it at ``name``, ``edit``-ed (the content hash left as written)."""
+
+    def make(w: Path) -> None:
+        src = (w / "demo").resolve().parent / "lidar"
+        with _LIDAR_LOCK:
+            if not (src / "result.json").exists():
+                src.mkdir(exist_ok=True)
+                _lidar_solve(src)
+        doc = json.loads((src / "result.json").read_text())
+        if edit is not None:
+            edit(doc)
+        (w / name).write_text(json.dumps(doc))
+
+    return make
 
 
 def reseal(path: Path, body: str) -> None:
