@@ -19,7 +19,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
 
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
@@ -152,3 +152,4 @@ class ImuEdgeResult(Document):
     gates: list[ImuGate] = Field(description="every gate, in order")
     inputs: list[ImuInput] = Field(description="every file read, with its sha256")
     created_at: UtcDatetime = Field(description="UTC time of the solve")
+    ros_frames: RosFrames | None = ros_frames_field()
