@@ -1037,6 +1037,14 @@ def _seal() -> list[Case]:
     cases.append(
         Case(
             g,
+            "lidar synth --serial of a camera the store does not hold",
+            ["lidar", "synth", "{w}/s", "--serial", "NOPE"],
+            says=("NOPE",),
+        )
+    )
+    cases.append(
+        Case(
+            g,
             "lint a store-free lidar result, honest",
             ["lint", "{w}/r.json"],
             expect="ok",
