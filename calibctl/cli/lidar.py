@@ -276,7 +276,8 @@ def synth(
         emit_json(result)
         return
     through = f" through {result['camera']}'s lens" if result["camera"] else ""
-    say(f"{poses} poses (seed {seed}){through} in {out}; truth {result['truth']}; station box {result['box']}")
+    box = result["box"]
+    say(f"{poses} poses (seed {seed}){through} in {out}; truth {result['truth']}; station box {box}")
 
 
 def register(app: typer.Typer) -> None:
