@@ -82,7 +82,9 @@ def _one_camera_text(art: CalibrationArtifact, fmt: str, topic: str | None = Non
     if fmt == "kalibr":
         topics = {art.serial: topic} if topic else None
         return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()), topics=topics)
-    model = mrcal_model.cameramodel(member, np.eye(4), f"calibctl {art.ref} {art.status}")
+    model = mrcal_model.cameramodel(
+        member, np.eye(4), f"calibctl {art.ref} {art.status}", art.observed_region_px
+    )
     if model is None:
         raise InputError(
             f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead"

@@ -13,22 +13,10 @@ import pytest
 from calibctl.errors import UsageError
 from calibctl.store.repository import Store
 from calibctl.workflows.lidar.lidar_synth import SynthLens
+from tests.cli.lidar.test_lidar_cli import BOARD
 from tests.cli.rig.test_rig_store_cli import RUNNER, _capture, app
-from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
+from tests.workflows.rig.test_rig_store_flow import store_members
 from tests.workflows.rig_folders_data import rendered_rig
-
-BOARD = [
-    "--cols",
-    "5",
-    "--rows",
-    "7",
-    "--square-mm",
-    "95",
-    "--backing-mm",
-    "610,850",
-    "--pattern-offset-mm",
-    "2,0",
-]
 
 
 def invoke(db: str, *args: str):
@@ -38,15 +26,9 @@ def invoke(db: str, *args: str):
 @pytest.fixture(scope="module")
 def solved(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Rig R1 (CAM0, CAM1 of the 2-camera render, 640 x 480; frame lidar declared), solved once."""
-    from tests.artifacts.factories import measured_board
-
     rig2 = rendered_rig(tmp_path_factory)
     path = tmp_path_factory.mktemp("lidar-member") / "c.db"
-    url = f"sqlite:///{path}"
-    with Store.open(url) as store:
-        store.add_board(measured_board(square_mm=25.0))
-        for name in ("CAM0", "CAM1"):
-            store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
+    url = store_members(f"sqlite:///{path}", rig2)
     assert (
         invoke(url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1", "--frame", "lidar").exit_code
         == 0
