@@ -11,13 +11,16 @@ lens-model misfit, a bowed board, a camera that changed during the session and a
 ``explain``: what brings each real set's factor down: richer lens models (k1k2p1p2k3, rational, fisheye)
 and a board allowed to bow (core/intrinsics/board_warp.py).
 
+``baka``: baka-stereo's per-view RMS, left against right (a board that moves is seen by both cameras), and
+its two capture sessions (file stems 3.6 h apart: views 1-19 and 20-30) solved apart.
+
 ``renders N``: N clean sessions rendered through the real detector (tests/workflows/sessions.py
 ``rendered_session``, seeds 100 + i, as benchmarks/bench_camera_change.py) and 10 each with a focal step
 (+0.5 / +1 / +1.5 %) or a 3 px principal-point step at view 10: how many the gate refuses at 5 px judging
 the Jacobian covariance (before) and the reported one (now), and the causes it names.
 
-Run: python benchmarks/bench_gate_cause.py [real] [explain] [renders N]   (from the repository root; the real
-sets need ../shared/datasets; no argument: real and explain)
+Run: python benchmarks/bench_gate_cause.py [real] [explain] [baka] [renders N]   (from the repository root;
+the real sets need ../shared/datasets; no argument: real, explain and baka)
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from calibctl.core.capture.projection_gate import (  # noqa: E402
     solve_for_gate,
 )
 from calibctl.core.intrinsics.board_warp import fit_board_warp  # noqa: E402
-from calibctl.core.intrinsics.report_maps import projection_uncertainty  # noqa: E402
+from calibctl.core.intrinsics.report_maps import projection_uncertainty, unproject  # noqa: E402
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, solve_intrinsics  # noqa: E402
 from calibctl.errors import NumericalError  # noqa: E402
 from tests.core.intrinsics.test_solve_real import _natural  # noqa: E402
@@ -132,9 +135,9 @@ def explain() -> None:
     print(
         "| set | "
         + " | ".join(f"{m}: rms / factor / reported" for m in models)
-        + " | k1k2, board bowed: bow x, y mm / rms / factor / reported |"
+        + " | k1k2, board bowed: bow x, y mm / rms / factor / reported | flat vs bowed, max px |"
     )
-    print("|---|" + "---|" * (len(models) + 1))
+    print("|---|" + "---|" * (len(models) + 2))
     for name, size, obj, img in _sets():
         cells = []
         for m in models:
@@ -148,14 +151,47 @@ def explain() -> None:
         flat = solve_intrinsics(obj, img, size, "k1k2")
         warp = fit_board_warp(flat, obj, img)
         if warp is None:
-            cells.append("not solvable")
+            cells += ["not solvable", "-"]
         else:
             bowed = projection_gate(warp.bowed, size, IMAGE, LIMIT)
             cells.append(
                 f"{1e3 * warp.warp_m[0]:+.2f}, {1e3 * warp.warp_m[1]:+.2f} / {warp.bowed.rms_px:.3f} / "
                 f"{_factor(warp.bowed):.2f} / {bowed.value:.3g}"
             )
+            cells.append(f"{flat_against_bowed_px(flat, warp.bowed, size):.2f}")
         print(f"| {name} | " + " | ".join(cells) + " |")
+
+
+def flat_against_bowed_px(
+    flat: IntrinsicsSolution, bowed: IntrinsicsSolution, size: tuple[int, int]
+) -> float:
+    """The largest rotation-compensated difference over the image between the flat-board calibration and
+    the bowed-board one (bench_verdicts.py's measure of one calibration against another)."""
+    from bench_verdicts import _compensated_max, _grid  # noqa: PLC0415
+
+    q = _grid(size, IMAGE)
+    xy = unproject(q, bowed.camera_matrix, bowed.dist_coeffs)
+    return _compensated_max(flat, np.concatenate([xy, np.ones((len(xy), 1))], axis=1), q)
+
+
+def baka() -> None:
+    """Whose error is baka-stereo's: the per-view RMS of the two cameras at the same instants (a board that
+    moves is seen by both), and the two capture sessions in its file stems solved apart."""
+    sets = {name: (size, obj, img) for name, size, obj, img in _sets() if name.startswith("baka")}
+    rms = {}
+    for name, (size, obj, img) in sets.items():
+        sol = solve_intrinsics(obj, img, size, "k1k2", uncertainty=False)
+        rms[name] = sol.per_view_rms_px
+        parts = []
+        for label, part in (("views 1-19", slice(0, 19)), ("views 20-30", slice(19, 30))):
+            half = solve_intrinsics(obj[part], img[part], size, "k1k2", uncertainty=False)
+            parts.append(f"{label}: rms {half.rms_px:.3f} px, fx {half.fx:.1f}")
+        print(f"{name}: per-view rms {rms[name].min():.2f}-{rms[name].max():.2f} px; " + "; ".join(parts))
+    left, right = rms["baka-stereo left"], rms["baka-stereo right"]
+    ranks = [np.argsort(np.argsort(x)) for x in (left, right)]
+    print(
+        f"per-view rms, left against right: Spearman {np.corrcoef(*ranks)[0, 1]:.2f} over {len(left)} pairs"
+    )
 
 
 def renders(n_clean: int, n_step: int = 10) -> None:
@@ -192,11 +228,13 @@ def renders(n_clean: int, n_step: int = 10) -> None:
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:] or ["real", "explain"]
+    args = sys.argv[1:] or ["real", "explain", "baka"]
     if "real" in args:
         real()
     if "explain" in args:
         explain()
+    if "baka" in args:
+        baka()
     if "renders" in args:
         k = args.index("renders")
         renders(int(args[k + 1]) if len(args) > k + 1 else 60)
