@@ -40,10 +40,10 @@ from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
 from calibctl.core.capture.projection_gate import (  # noqa: E402
     PROJECTION_SIGMA_MAX_PX,
     Region,
-    _seen_worst,
     cause_first,
     projection_gate,
     solve_for_gate,
+    worst_where_seen,
 )
 from calibctl.core.intrinsics.board_warp import fit_board_warp  # noqa: E402
 from calibctl.core.intrinsics.report_maps import projection_uncertainty, unproject  # noqa: E402
@@ -121,7 +121,7 @@ def real() -> None:
                 print(f"| {name} | {len(obj)} | {model or 'none'} (-) | | | | | FAIL | {named.reason} | |")
                 continue
             assert sol.covariance is not None
-            seen = _seen_worst(sol, sol.covariance, img, size, IMAGE)
+            seen = worst_where_seen(sol, sol.covariance, img, size, IMAGE)
             hint = " ".join((named.hint or "").split()[:12])
             print(
                 f"| {name} | {len(obj)} | {model or 'none'} ({sol.model}) | {_factor(sol):.2f} | "

@@ -270,7 +270,7 @@ def _sigma_grid(
     return umap.u_px, umap.v_px, sigma, beyond
 
 
-def _seen_worst(
+def worst_where_seen(
     solution: IntrinsicsSolution,
     cov: IntrinsicCovariance,
     image_points: Sequence[np.ndarray],
@@ -327,7 +327,7 @@ def cause_first(
         )
     if not per_view or cov is None:
         return gate
-    seen = _seen_worst(solution, cov, image_points, image_size, region)
+    seen = worst_where_seen(solution, cov, image_points, image_size, region)
     if seen <= gate.threshold:  # certain where the board was: the views' places are what it lacks
         return gate
     return _scatter_cause(gate, solution, cov.view_factor or 0.0, seen)
