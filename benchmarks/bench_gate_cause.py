@@ -11,6 +11,9 @@ lens-model misfit, a bowed board, a camera that changed during the session and a
 ``explain``: what brings each real set's factor down: richer lens models (k1k2p1p2k3, rational, fisheye)
 and a board allowed to bow (core/intrinsics/board_warp.py).
 
+``caliscope`` (with ``real`` or ``explain``): the four webcams of caliscope-4cam too (every video frame
+calibctl's detector finds the board in; about 10 s more).
+
 ``baka``: baka-stereo's per-view RMS, left against right (a board that moves is seen by both cameras), and
 its two capture sessions (file stems 3.6 h apart: views 1-19 and 20-30) solved apart.
 
@@ -19,8 +22,8 @@ its two capture sessions (file stems 3.6 h apart: views 1-19 and 20-30) solved a
 (+0.5 / +1 / +1.5 %) or a 3 px principal-point step at view 10: how many the gate refuses at 5 px judging
 the Jacobian covariance (before) and the reported one (now), and the causes it names.
 
-Run: python benchmarks/bench_gate_cause.py [real] [explain] [baka] [renders N]   (from the repository root;
-the real sets need ../shared/datasets; no argument: real, explain and baka)
+Run: python benchmarks/bench_gate_cause.py [real] [explain] [baka] [caliscope] [renders N]   (from the
+repository root; the real sets need ../shared/datasets; no argument: real, explain and baka)
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).parent.parent))
 from bench_diff import detected  # noqa: E402  (benchmarks/ scripts import each other)
 
 from calibctl.core.board.board_spec import BoardSpec  # noqa: E402
+from calibctl.core.capture.detect import detect_board  # noqa: E402
 from calibctl.core.capture.projection_gate import (  # noqa: E402
     PROJECTION_SIGMA_MAX_PX,
     Region,
@@ -101,6 +105,27 @@ def _sets():
         views = detected(paths, board)
         size = tuple(cv2.imread(str(paths[0])).shape[1::-1])
         yield name, size, [a for a, _ in views], [b for _, b in views]
+    if "caliscope" in sys.argv:
+        yield from _caliscope()
+
+
+def _caliscope():
+    """caliscope-4cam's four webcams: every video frame calibctl's detector finds the inverted ChArUco in
+    (benchmarks/bench_rig_caliscope.py reads them the same way)."""
+    board = BoardSpec.charuco(4, 5, 0.054, 0.054 * 0.75, "DICT_4X4_1000", inverted=True)
+    for cam in range(4):
+        capture = cv2.VideoCapture(str(DATASETS / "caliscope-4cam" / "extrinsic" / f"cam_{cam}.mp4"))
+        obj, img = [], []
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                break
+            found, _ = detect_board(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), board)
+            if found is not None:
+                obj.append(board.object_points()[found.corner_ids])
+                img.append(found.corners_px)
+        capture.release()
+        yield f"caliscope-4cam cam_{cam}", (1280, 720), obj, img
 
 
 def real() -> None:
