@@ -46,7 +46,7 @@ import time
 from pathlib import Path
 
 from bench_parallel_detect import PLAIN_DETECT, template_store
-from machine import cpu_model, load_1min, run_env
+from machine import cpu_model, load_1min, run_env, tree_cpu_s
 
 PLAIN_LOOP = (
     r"""
@@ -118,19 +118,20 @@ class Station:
             env=env,
         )
 
-    def unit(self, serial: str) -> tuple[float, float, str]:
+    def unit(self, serial: str) -> tuple[float, float, str, float]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), tree_cpu_s(self.proc.pid)
         self.proc.stdin.write(serial + "\n")
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()
         seen = time.perf_counter() - t
+        cpu = tree_cpu_s(self.proc.pid) - cpu
         if not line.startswith("{"):
             raise SystemExit(
                 f"the station stopped: {line}{self.proc.stderr.read() if self.proc.stderr else ''}"
             )
         unit = json.loads(line)
-        return seen, unit["unit_s"], f"{unit['status']} {unit['views']} views RMS {unit['rms_px']}"
+        return seen, unit["unit_s"], f"{unit['status']} {unit['views']} views RMS {unit['rms_px']}", cpu
 
     def close(self) -> None:
         self.proc.communicate("")
@@ -151,13 +152,18 @@ class Plain:
         )
         assert self.proc.stdout is not None and self.proc.stdout.readline().startswith("READY")
 
-    def unit(self, folder: Path) -> tuple[float, float, str]:
+    def unit(self, folder: Path) -> tuple[float, float, str, float]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), tree_cpu_s(self.proc.pid)
         self.proc.stdin.write(f"{folder}\n")
         self.proc.stdin.flush()
         _, inner, views, rms = self.proc.stdout.readline().split()
-        return time.perf_counter() - t, float(inner), f"{views} views RMS {rms}"
+        return (
+            time.perf_counter() - t,
+            float(inner),
+            f"{views} views RMS {rms}",
+            tree_cpu_s(self.proc.pid) - cpu,
+        )
 
     def close(self) -> None:
         self.proc.communicate("")
@@ -189,6 +195,7 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     contenders[f"plain warm Pool({args.pool}) loop"] = Plain(work, args.pool, env)
     seen: dict[str, list[float]] = {name: [] for name in contenders}
     inner: dict[str, list[float]] = {name: [] for name in contenders}
+    cpu: dict[str, list[float]] = {name: [] for name in contenders}
     what: dict[str, set[str]] = {name: set() for name in contenders}
     loads = []
     names = list(contenders)
@@ -201,6 +208,7 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
             if i > 0:  # the warm-up unit is not counted
                 seen[name].append(got[0])
                 inner[name].append(got[1])
+                cpu[name].append(got[3])
                 what[name].add(got[2].rsplit(" RMS", 1)[0])
     for who in contenders.values():
         who.close()
@@ -220,6 +228,10 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     for name in names:
         own = "unit_s (serial read to verdict out)" if name.endswith("station") else "its own clock"
         print(row(f"{name}: {own}", inner[name]))
+    cpu_ref = cpu["plain warm loop (sequential)"]
+    for name in names:
+        label = f"{name}: CPU s of its processes (user + system)"
+        print(row(label, cpu[name], None if name.startswith("plain warm loop") else cpu_ref))
     results = "; ".join(f"{name}: {', '.join(sorted(w))}" for name, w in what.items())
     print(
         f"\nresults: {results}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
@@ -254,7 +266,7 @@ STAGES: tuple[tuple[str, list[Key], list[Key]], ...] = (
         [],
     ),
     ("solve: artifact built and linted", [("solve.py", "build_artifact")], [("solve.py", "_solve_numbers")]),
-    ("calibration written (seal, chain, counters)", [("repository.py", "add_artifact")], []),
+    ("calibration written (seal, chain, counters)", [("cameras.py", "add_artifact")], []),
 )
 
 
@@ -271,25 +283,27 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     lines: list[UnitResult] = []
     run_station(settings, request, serials[:1], lines.append)  # warm
     load = load_1min()
-    prof = cProfile.Profile()
+    prof = cProfile.Profile(time.process_time)  # CPU, not wall: the host is shared
+    cpu = time.process_time()
     with prof:
         run_station(settings, request, serials[1:], lines.append)
+    cpu = time.process_time() - cpu
     units = [u.unit_s for u in lines[1:]]
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
     cum: dict[tuple[str, str], float] = {}
     for (file, _, func), (_, _, _, ct, _) in stats.items():
         cum[(Path(file).name, func)] = cum.get((Path(file).name, func), 0.0) + ct
-    total = sum(units)
+    total = cpu
     shares = {
         stage: sum(cum.get(key, 0.0) for key in plus) - sum(cum.get(key, 0.0) for key in minus)
         for stage, plus, minus in STAGES
     }
     print(
         f"station units at jobs 1 in this process, profiled (cProfile): {len(units)} units, median unit_s "
-        f"{statistics.median(units):.3f} s; 1-minute load average {load:.2f} at start, {load_1min():.2f} at "
-        "the end\n"
+        f"{statistics.median(units):.3f} s, {cpu / len(units):.3f} CPU s a unit (process CPU, the profiler's "
+        f"clock); 1-minute load average {load:.2f} at start, {load_1min():.2f} at the end\n"
     )
-    print("| stage | s per unit | share of the unit |\n|---|---|---|")
+    print("| stage | CPU s per unit | share of the unit's CPU |\n|---|---|---|")
     for stage, seconds in shares.items():
         print(f"| {stage} | {seconds / len(units):.3f} | {seconds / total:.0%} |")
     rest = total - sum(shares.values())
