@@ -22,8 +22,9 @@ The units go round in turn (station, plain, pool, rotated by one each unit), so 
 the 1-minute load average is printed at each unit. ``--baseline DIR``: the code before a change (``git
 archive``d) runs a second station in the same turns. ``--profile``: no race; the station's own code in this
 process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time.
-``--failed``: no plain loops; per round (``--units``) three units of the first ``--views`` views - clean,
-the board left in one picture only (the others blurred past finding it), no board at all - through the
+``--failed``: no plain loops; per round (``--units``) four units of the first ``--views`` views - clean,
+the board left in one picture only (the others blurred past finding it), no board at all, every picture
+black - through the
 station (and ``--baseline``'s), in turns: each kind's ``unit_s`` and its line (the detector calls are
 counted in tests/workflows/station/test_station_probe_cost.py).
 Prints markdown with machine, date and load.
@@ -94,7 +95,7 @@ def make_units(work: Path, rendered: Path, units: int, count: int, same: bool) -
 
 
 class Station:
-    """A warm ``calibctl station`` fed serials; ``unit(serial)`` -> (seconds here, its unit_s, status)."""
+    """A warm ``calibctl station`` fed serials; ``unit(serial)`` -> (s here, its unit_s, status, CPU s)."""
 
     def __init__(self, work: Path, name: str, template: Path, env: dict[str, str], jobs: int | None) -> None:
         store = work / f"{name}.db"
@@ -138,7 +139,7 @@ class Station:
 
 
 class Plain:
-    """The plain warm loop (``jobs`` 1) or Pool(jobs) loop; ``unit(folder)`` -> (s here, its own, what)."""
+    """The plain warm loop (jobs 1) or Pool(jobs) loop; ``unit(folder)`` -> (s here, its own, what, CPU s)."""
 
     def __init__(self, work: Path, jobs: int, env: dict[str, str]) -> None:
         (work / "plain_loop.py").write_text(PLAIN_LOOP)
@@ -313,7 +314,7 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     )
 
 
-FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD")
+FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD", "BLACK")
 
 
 def failed(args: argparse.Namespace, work: Path) -> None:
@@ -331,7 +332,9 @@ def failed(args: argparse.Namespace, work: Path) -> None:
             folder = work / "shots" / f"{kind}-{r}"
             folder.mkdir(parents=True)
             for i, p in enumerate(views):
-                if kind == "NO-BOARD" or (kind == "ONE-BOARD" and i > 0):
+                if kind == "BLACK":  # a camera delivering black frames, a lens cap
+                    cv2.imwrite(str(folder / p.name), 0 * blurred[views[1]])
+                elif kind == "NO-BOARD" or (kind == "ONE-BOARD" and i > 0):
                     cv2.imwrite(str(folder / p.name), blurred.get(p, blurred[views[1]]))
                 else:
                     shutil.copy(p, folder / p.name)
@@ -344,7 +347,7 @@ def failed(args: argparse.Namespace, work: Path) -> None:
         loads.append(load_1min())
         names = list(running)
         for name in names[i % len(names) :] + names[: i % len(names)]:
-            _, unit_s, what = running[name].unit(serial)
+            _, unit_s, what, _ = running[name].unit(serial)
             if i > 0:
                 kind = serial.rsplit("-", 1)[0]
                 got.setdefault((name, kind), []).append(unit_s)

@@ -9,6 +9,7 @@ runs lint on it, and writes it: ``accepted`` and active when lint passes (unless
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -50,6 +51,7 @@ from calibctl.core.intrinsics.outliers import (
     solve_dropping_outliers,
     solve_rejecting_corners,
 )
+from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, get_model
 from calibctl.core.intrinsics.validation import (
     HoldoutReport,
@@ -221,6 +223,40 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
     )
 
 
+# The numbers of sessions started before they were written (start_numbers), by a digest of what
+# _solve_numbers reads; each is taken once, by the solve of the same values.
+_EARLY: RecentAnswers[Future] = RecentAnswers(2)
+
+
+def _numbers_key(session: CaptureSession, request: SolveRequest) -> bytes:
+    """A digest of everything ``_solve_numbers`` reads: the views (names, corner ids, corners), the image
+    size, the board, the model and the outlier rule."""
+    return values_digest(
+        [np.asarray(v.corner_ids, np.float64) for v in session.views],
+        [np.asarray(v.corners_px, np.float64) for v in session.views],
+        session.session_id,
+        tuple(session.image_size or ()),
+        repr(board_spec(session.board)),
+        request.model,
+        request.drop_outliers,
+        tuple(v.name for v in session.views),
+    )
+
+
+def start_numbers(session: CaptureSession, request: SolveRequest, jobs: int, executor: Executor) -> None:
+    """Start the solve's numbers of an accepted session on ``executor`` (on ``jobs`` verdict lanes) while the
+    session is written and read back: ``build_artifact`` of the same values takes them instead of computing
+    them again. The same function of the same values: the numbers are those of the plain order."""
+    if session.status != "accepted" or not session.views or session.image_size is None:
+        return
+
+    def numbers():  # _solve_numbers' tuple
+        with verdict_lanes(jobs) as lanes:
+            return _solve_numbers(session, request, lanes)
+
+    _EARLY.answer(_numbers_key(session, request), lambda: executor.submit(numbers))
+
+
 def _change(verdict: ChangeVerdict | None, names: list[str]) -> CameraChange | None:
     if verdict is None:
         return None
@@ -363,21 +399,26 @@ def build_artifact(
 ) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version).
     ``board_gauge``: lint's fact of a failed gauge on the session's board revision (``board_gauge_fact``)."""
-    with verdict_lanes(settings.jobs) as lanes:
-        (
-            model_name,
-            sol,
-            first,
-            outliers,
-            kept,
-            dropped,
-            holdout,
-            trail,
-            rejection,
-            consistency,
-            detector_rms,
-            change,
-        ) = _solve_numbers(session, request, lanes)
+    early = _EARLY.take(_numbers_key(session, request)) if len(_EARLY) else None
+    if early is not None:  # started while the session was written (start_numbers); its error is raised here
+        numbers = early.result()
+    else:
+        with verdict_lanes(settings.jobs) as lanes:
+            numbers = _solve_numbers(session, request, lanes)
+    (
+        model_name,
+        sol,
+        first,
+        outliers,
+        kept,
+        dropped,
+        holdout,
+        trail,
+        rejection,
+        consistency,
+        detector_rms,
+        change,
+    ) = numbers
     model = get_model(model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
