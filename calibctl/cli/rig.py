@@ -85,6 +85,16 @@ def solve_folders(
             help="Frames of different cameras at most this far apart form one rig frame.",
         ),
     ] = 5.0,
+    frame_shift: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--frame-shift",
+            help="SERIAL=N: that camera's video frame i was taken at the time listed for its frame i - N "
+            "(a recorder whose video holds N frames its timestamps do not list first; rig-frame-shift "
+            "names it).",
+            show_default=False,
+        ),
+    ] = None,
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
     ] = None,
@@ -164,6 +174,7 @@ def solve_folders(
         gauge=rig_gauge(reference_distance, reference_source),
         timestamps=timestamps,
         time_tolerance_ms=time_tolerance_ms,
+        frame_shifts=rig_folders.parse_frame_shifts(frame_shift or []),
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []

@@ -32,11 +32,15 @@ import cv2
 import numpy as np
 
 from calibctl import bounded
+from calibctl.artifacts.lint import Finding
 from calibctl.core.board.board_spec import CHARUCO, BoardSpec
 from calibctl.core.capture.detect import charuco_variant_advice, charuco_variant_counts
 from calibctl.core.capture.image_circle import accumulate_max, half_size
 from calibctl.core.capture.image_outcomes import ImageOutcome, classify_array, finalize_session, read_gray
+from calibctl.core.extrinsics.board_pose import estimate_board_pose
+from calibctl.core.extrinsics.rig_frame_shift import frame_shifts
 from calibctl.core.extrinsics.rig_frames import FrameMatch, UnmatchedPhoto
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_time_pairs import (
     TimePairing,
     TimestampError,
@@ -44,6 +48,7 @@ from calibctl.core.extrinsics.rig_time_pairs import (
     pair_by_time,
     parse_timestamps,
 )
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import CalibctlError, InputError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
@@ -52,6 +57,7 @@ DEFAULT_TIME_TOLERANCE_MS = 5.0
 OUTSIDE_TOLERANCE = "outside-time-tolerance"
 NO_TIMESTAMP = "no-timestamp"
 ADVICE_FRAMES = 12  # frames of a board-less camera the variant check looks at
+FRAME_SHIFT = "rig-frame-shift"
 CAMERA_HINT = "name the cameras as the timestamps file does, e.g. --source 0=cam_0.mp4 for cam_id 0"
 
 
@@ -77,6 +83,8 @@ class VideoRigCapture:
     cameras: Mapping[str, CameraFrames]
     pairing: TimePairing
     timestamps: Path | None
+    frame_groups: tuple[Mapping[str, int], ...] = ()  # the rig frames: camera -> frame index in its video
+    frame_shifts: Mapping[str, int] | None = None  # as declared (--frame-shift)
 
 
 def is_timed(sources: Mapping[str, Path], timestamps: Path | None) -> bool:
@@ -215,6 +223,13 @@ def _file_times(
     return tuple(listed.get(i + offset) for i in range(n)), offset
 
 
+def shifted_times(times: Sequence[float | None], shift: int) -> tuple[float | None, ...]:
+    """A camera's frame times when its video frame i was taken at the time listed for frame i - shift
+    (a declared ``--frame-shift``); frames that then have no time get None."""
+    n = len(times)
+    return tuple(times[i - shift] if 0 <= i - shift < n else None for i in range(n))
+
+
 def _container_times(cameras: Mapping[str, CameraFrames]) -> None:
     """Refuse container clocks that cannot be compared (module docstring)."""
     lengths = {name: len(c.outcomes) for name, c in cameras.items()}
@@ -255,11 +270,19 @@ def capture_timed(
     timestamps: Path | None,
     tolerance_ms: float = DEFAULT_TIME_TOLERANCE_MS,
     workers: int | None = None,
+    frame_shifts: Mapping[str, int] | None = None,
 ) -> VideoRigCapture:
-    """Every camera's frames detected and paired by time (module docstring). Raises InputError / UsageError
+    """Every camera's frames detected and paired by time (module docstring); ``frame_shifts``: camera ->
+    N, its video frame i was taken at the time listed for its frame i - N. Raises InputError / UsageError
     (exit 2) naming the file and the fix."""
     if not (math.isfinite(tolerance_ms) and tolerance_ms > 0):
         raise UsageError(f"--time-tolerance-ms {tolerance_ms:g} must be a positive number of milliseconds")
+    unknown_shift = sorted(set(frame_shifts or {}) - set(sources))
+    if unknown_shift:
+        raise UsageError(
+            f"--frame-shift names camera {', '.join(unknown_shift)}, which is not one of the rig's cameras "
+            f"({', '.join(sources)})"
+        )
     listed = read_timestamps(timestamps) if timestamps is not None else None
     if listed is not None:
         unknown = sorted(set(listed) - set(sources))
@@ -283,7 +306,9 @@ def capture_timed(
         cameras = {name: replace(c, index_offset=timed[name][1]) for name, c in cameras.items()}
     for camera in cameras.values():
         refuse_blind_camera(camera, spec)
-    return _paired(cameras, times, tolerance_ms, timestamps)
+    shifts = {name: n for name, n in (frame_shifts or {}).items() if n}
+    times = {name: shifted_times(ts, shifts.get(name, 0)) for name, ts in times.items()}
+    return replace(_paired(cameras, times, tolerance_ms, timestamps), frame_shifts=shifts or None)
 
 
 def _paired(
@@ -312,7 +337,8 @@ def _paired(
         for i, t in enumerate(ts)
         if t is None
     ]
-    return VideoRigCapture(FrameMatch(frames, tuple(unmatched)), cameras, pairing, timestamps)
+    in_video = tuple({name: known[name][i] for name, i in g.frames.items()} for g in pairing.groups)
+    return VideoRigCapture(FrameMatch(frames, tuple(unmatched)), cameras, pairing, timestamps, in_video)
 
 
 def _outside(frame: UnpairedFrame, tolerance_ms: float) -> str:
@@ -340,4 +366,49 @@ def timing_json(capture: VideoRigCapture) -> dict[str, object]:
         },
         "frames": {name: len(c.outcomes) for name, c in capture.cameras.items()},
         "index_offset": {name: c.index_offset for name, c in capture.cameras.items() if c.index_offset},
+        "frame_shift": dict(capture.frame_shifts or {}),
     }
+
+
+def frame_shift_findings(
+    capture: VideoRigCapture, members: Sequence[MemberIntrinsics], spec: BoardSpec
+) -> list[Finding]:
+    """``rig-frame-shift`` (error) for each camera whose frames fit the others' a whole frame off the times'
+    pairing (core.extrinsics.rig_frame_shift): every frame with a board posed through its member's lens."""
+    points = spec.object_points()
+    poses: dict[str, dict[int, np.ndarray]] = {}
+    for member in members:
+        frames = capture.cameras[member.name].outcomes
+        model = "fisheye" if member.lens == "fisheye" else DEFAULT_MODEL
+        poses[member.name] = {}
+        for i, o in enumerate(frames):
+            if o.corner_ids is None or o.corners_px is None:
+                continue
+            T_cam_board, _ = estimate_board_pose(
+                points[o.corner_ids], o.corners_px, member.camera_matrix, member.dist_coeffs, model
+            )
+            if T_cam_board is not None:
+                poses[member.name][i] = T_cam_board
+    out = []
+    for s in frame_shifts(poses, capture.frame_groups):
+        declared = (capture.frame_shifts or {}).get(s.camera, 0)
+        side = "later" if s.shift > 0 else "earlier"
+        where = capture.timestamps if capture.timestamps is not None else "the videos' own times"
+        out.append(
+            Finding(
+                rule=FRAME_SHIFT,
+                severity="error",
+                message=(
+                    f"camera {s.camera}'s frames fit the other cameras' {abs(s.shift)} frame {side} than "
+                    f"{where} pairs them: the rig frames' own relative poses scatter by "
+                    f"{s.scatter_mm:.1f} mm as paired and by {s.shifted_mm:.1f} mm shifted (against "
+                    f"{', '.join(s.partners)}), "
+                    "so no rigid rig fits them as paired"
+                ),
+                fix=(
+                    f"correct camera {s.camera}'s frame numbers in the timestamps, or declare the shift: "
+                    f"--frame-shift {s.camera}={declared + s.shift:+d}"
+                ),
+            )
+        )
+    return out
