@@ -263,10 +263,28 @@ def capture(
             "--source",
             help="SERIAL=SRC per member, SRC a folder, a quoted glob "
             "('left*.jpg') or a list file; images pair up by the last number in "
-            "their names.",
+            "their names (with --timestamps: by time).",
         ),
     ],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
+    timestamps: Annotated[
+        Path | None,
+        typer.Option(
+            "--timestamps",
+            help="The recorder's per-frame times (CSV cam_id,frame_index,frame_time; frame_index: the "
+            "image's place in its source's order): images pair up by time.",
+            show_default=False,
+        ),
+    ] = None,
+    time_tolerance_ms: Annotated[
+        float | None,
+        typer.Option(
+            "--time-tolerance-ms",
+            help="With --timestamps: images of different cameras at most this far apart form one rig frame "
+            "(default 5).",
+            show_default=False,
+        ),
+    ] = None,
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
@@ -291,6 +309,8 @@ def capture(
         min_shared_views,
         gauge=rig_gauge(reference_distance, reference_source),
         override_gauge=override_gauge,
+        timestamps=timestamps,
+        time_tolerance_ms=time_tolerance_ms,
     )
     s = result.session
     if wants_json(ctx, json_output):

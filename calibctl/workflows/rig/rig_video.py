@@ -205,22 +205,54 @@ def read_timestamps(path: Path) -> dict[str, dict[int, float]]:
 
 
 def _file_times(
-    camera: CameraFrames, listed: Mapping[int, float], timestamps: Path
+    name: str, label: str, n: int, listed: Mapping[int, float], timestamps: Path
 ) -> tuple[tuple[float | None, ...], int]:
-    """A camera's frame times from the timestamps file, and the index offset (module docstring)."""
-    n = len(camera.outcomes)
+    """Camera ``name``'s times of its ``n`` frames (``label``: its source) from the timestamps file, and the
+    index offset (module docstring)."""
     indices = sorted(listed)
     offset = 0
     if indices[-1] >= n:
         unbroken = indices[-1] - indices[0] + 1 == len(indices)
         if not (unbroken and len(indices) == n):
             raise InputError(
-                f"{timestamps} lists frame {indices[-1]} of camera {camera.name}, but {camera.source.label} "
+                f"{timestamps} lists frame {indices[-1]} of camera {name}, but {label} "
                 f"has {n} frames (0..{n - 1}): frames past the end",
                 "give the timestamps file of this very recording (one row per frame of each video)",
             )
         offset = indices[0]
     return tuple(listed.get(i + offset) for i in range(n)), offset
+
+
+def _listed_cameras(timestamps: Path, cameras: Sequence[str]) -> dict[str, dict[int, float]]:
+    """The timestamps file, refused when it names a camera the rig lacks or lacks one of its cameras."""
+    listed = read_timestamps(timestamps)
+    unknown = sorted(set(listed) - set(cameras))
+    if unknown:
+        raise InputError(
+            f"{timestamps} names camera {', '.join(unknown)}, which is not one of the rig's cameras "
+            f"({', '.join(cameras)})",
+            CAMERA_HINT,
+        )
+    absent = [name for name in cameras if name not in listed]
+    if absent:
+        raise InputError(f"{timestamps} lists no frame of camera {', '.join(absent)}", CAMERA_HINT)
+    return listed
+
+
+def pair_images_by_time(
+    images: Mapping[str, Sequence[str]], timestamps: Path, tolerance_ms: float
+) -> tuple[FrameMatch, TimePairing]:
+    """A stored rig capture's images (camera -> image names in capture order: its frames 0..n-1) paired by
+    the recorder's times, with the file rules of the videos (module docstring)."""
+    if not (math.isfinite(tolerance_ms) and tolerance_ms > 0):
+        raise UsageError(f"--time-tolerance-ms {tolerance_ms:g} must be a positive number of milliseconds")
+    listed = _listed_cameras(timestamps, list(images))
+    times = {
+        name: _file_times(name, f"camera {name}'s source", len(paths), listed[name], timestamps)[0]
+        for name, paths in images.items()
+    }
+    match, pairing, _ = _paired(images, times, tolerance_ms)
+    return match, pairing
 
 
 def shifted_times(times: Sequence[float | None], shift: int) -> tuple[float | None, ...]:
@@ -283,62 +315,54 @@ def capture_timed(
             f"--frame-shift names camera {', '.join(unknown_shift)}, which is not one of the rig's cameras "
             f"({', '.join(sources)})"
         )
-    listed = read_timestamps(timestamps) if timestamps is not None else None
-    if listed is not None:
-        unknown = sorted(set(listed) - set(sources))
-        if unknown:
-            raise InputError(
-                f"{timestamps} names camera {', '.join(unknown)}, which is not one of the rig's cameras "
-                f"({', '.join(sources)})",
-                CAMERA_HINT,
-            )
-        absent = [name for name in sources if name not in listed]
-        if absent:
-            raise InputError(f"{timestamps} lists no frame of camera {', '.join(absent)}", CAMERA_HINT)
+    listed = _listed_cameras(timestamps, list(sources)) if timestamps is not None else None
     cameras = {name: detect_camera(name, source, spec, workers) for name, source in sources.items()}
     if listed is None:
         _container_times(cameras)
         times = {name: c.times_s for name, c in cameras.items()}
     else:
         assert timestamps is not None
-        timed = {name: _file_times(c, listed[name], timestamps) for name, c in cameras.items()}
+        timed = {
+            name: _file_times(name, c.source.label, len(c.outcomes), listed[name], timestamps)
+            for name, c in cameras.items()
+        }
         times = {name: t for name, (t, _) in timed.items()}
         cameras = {name: replace(c, index_offset=timed[name][1]) for name, c in cameras.items()}
     for camera in cameras.values():
         refuse_blind_camera(camera, spec)
     shifts = {name: n for name, n in (frame_shifts or {}).items() if n}
     times = {name: shifted_times(ts, shifts.get(name, 0)) for name, ts in times.items()}
-    return replace(_paired(cameras, times, tolerance_ms, timestamps), frame_shifts=shifts or None)
+    paths = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
+    match, pairing, in_video = _paired(paths, times, tolerance_ms)
+    return VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None)
 
 
 def _paired(
-    cameras: Mapping[str, CameraFrames],
-    times: Mapping[str, Sequence[float | None]],
-    tolerance_ms: float,
-    timestamps: Path | None,
-) -> VideoRigCapture:
+    paths: Mapping[str, Sequence[str]], times: Mapping[str, Sequence[float | None]], tolerance_ms: float
+) -> tuple[FrameMatch, TimePairing, tuple[Mapping[str, int], ...]]:
+    """The frames (camera -> their labels, in frame order) paired by their times; and the rig frames as
+    camera -> frame index."""
     known = {name: [i for i, t in enumerate(ts) if t is not None] for name, ts in times.items()}
     timed = {name: [float(times[name][i] or 0.0) for i in idx] for name, idx in known.items()}
     try:
         pairing = pair_by_time(timed, tolerance_ms / 1e3)
     except ValueError as exc:
         raise UsageError(f"--time-tolerance-ms: {exc}", "give a smaller tolerance") from exc
-    path = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
     frames = tuple(
-        (g.key, {name: path[name][known[name][i]] for name, i in g.frames.items()}) for g in pairing.groups
+        (g.key, {name: paths[name][known[name][i]] for name, i in g.frames.items()}) for g in pairing.groups
     )
     unmatched = [
-        UnmatchedPhoto(u.camera, path[u.camera][known[u.camera][u.index]], _outside(u, tolerance_ms))
+        UnmatchedPhoto(u.camera, paths[u.camera][known[u.camera][u.index]], _outside(u, tolerance_ms))
         for u in pairing.unpaired
     ]
     unmatched += [
-        UnmatchedPhoto(name, path[name][i], NO_TIMESTAMP)
+        UnmatchedPhoto(name, paths[name][i], NO_TIMESTAMP)
         for name, ts in times.items()
         for i, t in enumerate(ts)
         if t is None
     ]
-    in_video = tuple({name: known[name][i] for name, i in g.frames.items()} for g in pairing.groups)
-    return VideoRigCapture(FrameMatch(frames, tuple(unmatched)), cameras, pairing, timestamps, in_video)
+    in_frames = tuple({name: known[name][i] for name, i in g.frames.items()} for g in pairing.groups)
+    return FrameMatch(frames, tuple(unmatched)), pairing, in_frames
 
 
 def _outside(frame: UnpairedFrame, tolerance_ms: float) -> str:
