@@ -39,6 +39,14 @@ YAML_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
     for p, c in zip("abcdefgh", "bcdefghi", strict=True)
 )
 
+TIMESTAMPS_HEAD = "sync_index,cam_id,frame_index,frame_time\n"
+
+
+def _two_folders(*extra: str, a: str = "{w}/v", b: str = "{w}/w") -> list[str]:
+    """`rig solve-folders` of cameras A and B on a 9x6 25 mm chessboard, then ``extra``."""
+    return ["rig", "solve-folders", "--source", f"A={a}", "--source", f"B={b}", "--cols", "9", "--rows", "6",
+            "--square-mm", "25", *extra]  # fmt: skip
+
 
 def _out_targets(group: str, argv: list[str], out_flag: str | None = "-o") -> list[Case]:
     """A writer aimed at a FIFO, a symlink, a dangling symlink and a folder, with --force: nothing
@@ -615,27 +623,8 @@ def _admin() -> list[Case]:
             Case(
                 g,
                 f"rig solve-folders --timestamps {what}",
-                [
-                    "rig",
-                    "solve-folders",
-                    "--source",
-                    "A={w}/v",
-                    "--source",
-                    "B={w}/w",
-                    "--cols",
-                    "9",
-                    "--rows",
-                    "6",
-                    "--square-mm",
-                    "25",
-                    "--timestamps",
-                    "{w}/ts.csv",
-                ],  # fmt: skip
-                setup=both(
-                    views("v", 3),
-                    views("w", 3),
-                    text("ts.csv", "sync_index,cam_id,frame_index,frame_time\n" + rows),
-                ),
+                _two_folders("--timestamps", "{w}/ts.csv"),
+                setup=both(views("v", 3), views("w", 3), text("ts.csv", TIMESTAMPS_HEAD + rows)),
                 says=says,
             )
             for what, rows, says in (
@@ -652,42 +641,14 @@ def _admin() -> list[Case]:
         Case(
             g,
             "rig solve-folders undecodable video",
-            [
-                "rig",
-                "solve-folders",
-                "--source",
-                "A={w}/a.mp4",
-                "--source",
-                "B={w}/a.mp4",
-                "--cols",
-                "9",
-                "--rows",
-                "6",
-                "--square-mm",
-                "25",
-            ],  # fmt: skip
+            _two_folders(a="{w}/a.mp4", b="{w}/a.mp4"),
             setup=text("a.mp4", b"\x00\x00\x00\x18ftypmp42 not a video" * 20),
             says=("cannot decode the video",),
         ),
         Case(
             g,
             "rig solve-folders --frame-shift not a number",
-            [
-                "rig",
-                "solve-folders",
-                "--source",
-                "A={w}/v",
-                "--source",
-                "B={w}/w",
-                "--cols",
-                "9",
-                "--rows",
-                "6",
-                "--square-mm",
-                "25",
-                "--frame-shift",
-                "B=half",
-            ],  # fmt: skip
+            _two_folders("--frame-shift", "B=half"),
             setup=both(views("v", 3), views("w", 3)),
             says=("--frame-shift B=half",),
         ),

@@ -17,6 +17,8 @@ from calibctl.cli.options import (
     OperatorOption,
     OverrideGaugeOption,
     ReferenceDistanceOption,
+    RigTimestampsOption,
+    RigTimeToleranceOption,
     StationOption,
 )
 from calibctl.cli.render import emit_json, shown, stderr, stdout
@@ -280,22 +282,8 @@ def capture(
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
     model: GaugeModelOption = None,
-    timestamps: Annotated[
-        Path | None,
-        typer.Option(
-            "--timestamps",
-            help="With --rig: the recorder's per-frame times; the members' images pair up by time.",
-            show_default=False,
-        ),
-    ] = None,
-    time_tolerance_ms: Annotated[
-        float | None,
-        typer.Option(
-            "--time-tolerance-ms",
-            help="With --rig --timestamps: rig frame tolerance (default 5).",
-            show_default=False,
-        ),
-    ] = None,
+    timestamps: RigTimestampsOption = None,
+    time_tolerance_ms: RigTimeToleranceOption = None,
     jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:

@@ -13,6 +13,8 @@ from calibctl.cli.options import (
     OperatorOption,
     OverrideGaugeOption,
     ReferenceDistanceOption,
+    RigTimestampsOption,
+    RigTimeToleranceOption,
     StationOption,
 )
 from calibctl.cli.render import emit_json, say
@@ -146,7 +148,8 @@ def solve_folders(
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
     square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
+    rigid, synchronised rig could have taken), and rig-frame-shift (a camera whose frames fit the others' a
+    whole frame off its times). With --reference-distance, metric-gauge: one camera's fixture
     pictures judged through its lens as the run leaves it.
     """
     from calibctl.workflows.rig import rig_folders
@@ -267,24 +270,8 @@ def capture(
         ),
     ],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
-    timestamps: Annotated[
-        Path | None,
-        typer.Option(
-            "--timestamps",
-            help="The recorder's per-frame times (CSV cam_id,frame_index,frame_time; frame_index: the "
-            "image's place in its source's order): images pair up by time.",
-            show_default=False,
-        ),
-    ] = None,
-    time_tolerance_ms: Annotated[
-        float | None,
-        typer.Option(
-            "--time-tolerance-ms",
-            help="With --timestamps: images of different cameras at most this far apart form one rig frame "
-            "(default 5).",
-            show_default=False,
-        ),
-    ] = None,
+    timestamps: RigTimestampsOption = None,
+    time_tolerance_ms: RigTimeToleranceOption = None,
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,

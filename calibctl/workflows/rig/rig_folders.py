@@ -13,8 +13,9 @@ rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline
 ``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored
 path
 judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
-and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
-not synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
+and why), ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
+not synchronised), and for frames paired by time ``rig-frame-shift`` when a camera's frames fit the others' a
+whole frame off (workflows.rig.rig_video). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
 from __future__ import annotations

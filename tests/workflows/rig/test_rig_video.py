@@ -99,12 +99,6 @@ def test_cameras_exposed_ms_apart_recover_the_truth_within_sigma(timed_rig):
     run = _solve(truth, out)
     _assert_truth_within_sigma(truth, run)
     assert not [f for f in run.findings if f.rule == FRAME_SHIFT]
-    for edge in run.solution.tree.edges:
-        T_true = truth.T_root_cam[truth.names.index(edge.child)]
-        err_mm = abs(edge.translation_mm - np.linalg.norm(T_true[:3, 3]) * 1e3)
-        err_deg = rotation_angle_deg(edge.T_parent_child[:3, :3] @ T_true[:3, :3].T)
-        assert err_mm < Z_MAX * edge.sigma_translation_mm, edge.child
-        assert err_deg < Z_MAX * np.sqrt(3) * edge.sigma_rotation_deg, edge.child
     assert run.timing is not None and (run.timing["rig_frames"], run.timing["outside_tolerance"]) == (
         N_FRAMES,
         1,
