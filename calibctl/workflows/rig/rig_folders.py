@@ -423,7 +423,11 @@ def solve_rig_folders(
         timing=rig_video.timing_json(timed) if timed is not None else None,
         refused=tuple(refused_finding(name, exc) for name, exc in refused.items()),
     )
-    shifted = rig_video.frame_shift_findings(timed, members, spec) if timed is not None else []
+    shifted = []
+    if timed is not None:
+        shifted = rig_video.frame_shift_findings(timed, members, spec)
+        # a whole frame off hides any fraction of one: the offsets are judged once the frames pair right
+        shifted = shifted or rig_video.exposure_offset_findings(timed, members, spec)
     judged = replace(run, findings=(*run.findings, *shifted))
     if gate.passed:
         solved = judged_solve(run, model, refine_intrinsics, settings.lint)

@@ -38,7 +38,7 @@ from calibctl.core.capture.detect import charuco_variant_advice, charuco_variant
 from calibctl.core.capture.image_circle import accumulate_max, half_size
 from calibctl.core.capture.image_outcomes import ImageOutcome, classify_array, finalize_session, read_gray
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
-from calibctl.core.extrinsics.rig_frame_shift import frame_shifts
+from calibctl.core.extrinsics.rig_frame_shift import exposure_offset, frame_shifts, offset_matters
 from calibctl.core.extrinsics.rig_frames import FrameMatch, UnmatchedPhoto
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_time_pairs import (
@@ -58,6 +58,7 @@ OUTSIDE_TOLERANCE = "outside-time-tolerance"
 NO_TIMESTAMP = "no-timestamp"
 ADVICE_FRAMES = 12  # frames of a board-less camera the variant check looks at
 FRAME_SHIFT = "rig-frame-shift"
+EXPOSURE_OFFSET = "rig-exposure-offset"
 CAMERA_HINT = "name the cameras as the timestamps file does, e.g. --source 0=cam_0.mp4 for cam_id 0"
 
 
@@ -85,6 +86,7 @@ class VideoRigCapture:
     timestamps: Path | None
     frame_groups: tuple[Mapping[str, int], ...] = ()  # the rig frames: camera -> frame index in its video
     frame_shifts: Mapping[str, int] | None = None  # as declared (--frame-shift)
+    frame_times: Mapping[str, tuple[float | None, ...]] | None = None  # per frame, as paired (seconds)
 
 
 def is_timed(sources: Mapping[str, Path], timestamps: Path | None) -> bool:
@@ -334,7 +336,7 @@ def capture_timed(
     times = {name: shifted_times(ts, shifts.get(name, 0)) for name, ts in times.items()}
     paths = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
     match, pairing, in_video = _paired(paths, times, tolerance_ms)
-    return VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None)
+    return VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None, times)
 
 
 def _paired(
@@ -435,4 +437,59 @@ def frame_shift_findings(
                 ),
             )
         )
+    return out
+
+
+def exposure_offset_findings(
+    capture: VideoRigCapture, members: Sequence[MemberIntrinsics], spec: BoardSpec
+) -> list[Finding]:
+    """``rig-exposure-offset`` (error) for each pair of pinhole members whose frames fit clearly better with
+    one camera's corners moved a fraction of a frame along their image motion
+    (core.extrinsics.rig_frame_shift.exposure_offset): exposures further apart than the times say, while
+    the board moved."""
+    if capture.frame_times is None:
+        return []
+    views: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
+    for member in members:
+        views[member.name] = {}
+        for i, o in enumerate(capture.cameras[member.name].outcomes):
+            if o.corner_ids is not None and o.corners_px is not None:
+                order = np.argsort(o.corner_ids)
+                views[member.name][i] = (o.corner_ids[order], o.corners_px[order])
+    pinhole = [m for m in members if m.lens != "fisheye"]
+    out = []
+    for n, a in enumerate(pinhole):
+        for b in pinhole[n + 1 :]:
+            pairs = [(g[a.name], g[b.name]) for g in capture.frame_groups if a.name in g and b.name in g]
+            times_b = {i: t for i, t in enumerate(capture.frame_times[b.name]) if t is not None}
+            found = exposure_offset(
+                (a.name, views[a.name], a.camera_matrix, a.dist_coeffs),
+                (b.name, views[b.name], b.camera_matrix, b.dist_coeffs),
+                times_b,
+                pairs,
+                spec.object_points(),
+                a.image_size,
+            )
+            if found is None or not offset_matters(found):
+                continue
+            ms = abs(found.offset_s) * 1e3
+            first, then = (a.name, b.name) if found.offset_s < 0 else (b.name, a.name)
+            out.append(
+                Finding(
+                    rule=EXPOSURE_OFFSET,
+                    severity="error",
+                    message=(
+                        f"pair {a.name}-{b.name}: camera {first} exposed about {ms:.0f} ms before camera "
+                        f"{then} at the same timestamp while the board moved (stereo RMS "
+                        f"{found.rms_px:.2f} px as timestamped, {found.offset_rms_px:.2f} px with camera "
+                        f"{b.name}'s corners moved {found.offset_s * 1e3:+.0f} ms along their image motion; "
+                        f"{found.frames} rig frames): "
+                        "a latency the timestamps do not record"
+                    ),
+                    fix=(
+                        "hold the board still at each pose (or trigger the cameras together) and capture "
+                        "again; a recorder whose timestamps lag by a constant can correct them"
+                    ),
+                )
+            )
     return out
