@@ -37,6 +37,7 @@ from machine import cpu_model, load_1min  # benchmarks/machine.py (scripts run f
 from calibctl.core.board.board_spec import BoardSpec, make_charuco_board
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.detect import detect_board
+from calibctl.core.extrinsics.rig_frame_shift import moved_corners
 from calibctl.core.extrinsics.rig_problem import RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
@@ -133,19 +134,11 @@ def _sync(shifts: dict[str, int]) -> dict[int, dict[str, int]]:
 
 
 def _moved_corners(view_by_frame: dict, k: int, dt_s: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """Frame k's corners moved to dt_s later along their image velocity between frames k - 1 and k + 1
-    (the corners all three frames share); None without both neighbours."""
+    """Frame k's corners moved dt_s later along their image velocity (core.extrinsics.rig_frame_shift,
+    frames FPS apart); None without both neighbours."""
     if dt_s == 0.0:
         return view_by_frame.get(k)
-    here, before, after = (view_by_frame.get(k + d) for d in (0, -1, 1))
-    if here is None or before is None or after is None:
-        return None
-    ids = np.intersect1d(np.intersect1d(here[0], before[0]), after[0])
-    if len(ids) < 6:
-        return None
-    at = {name: v[1][np.searchsorted(v[0], ids)] for name, v in (("k", here), ("b", before), ("a", after))}
-    velocity_px_s = (at["a"] - at["b"]) / (2.0 / FPS)
-    return ids, at["k"] + dt_s * velocity_px_s
+    return moved_corners(view_by_frame, {j: j / FPS for j in (k - 1, k + 1)}, k, dt_s)
 
 
 def _stereo(

@@ -147,10 +147,11 @@ def solve_folders(
     rectified rows per pair, and loop closure for three or more cameras. The verdict: the rig lint rules
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
-    square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken), and rig-frame-shift (a camera whose frames fit the others' a
-    whole frame off its times). With --reference-distance, metric-gauge: one camera's fixture
-    pictures judged through its lens as the run leaves it.
+    square size's provenance, which only a registered board carries), rig-rigid (frames that no
+    rigid, synchronised rig could have taken), rig-frame-shift (a camera whose frames fit the others' a
+    whole frame off its times) and rig-exposure-offset (a pair exposed further apart than its times say).
+    With --reference-distance, metric-gauge: one camera's fixture pictures judged through its lens as the
+    run leaves it.
     """
     from calibctl.workflows.rig import rig_folders
 

@@ -15,7 +15,8 @@ path
 judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
 and why), ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
 not synchronised), and for frames paired by time ``rig-frame-shift`` when a camera's frames fit the others' a
-whole frame off (workflows.rig.rig_video). ``rig-stale-member`` needs the store: there is no stored member to
+whole frame off, else ``rig-exposure-offset`` for a pair exposed further apart than its times say
+(workflows.rig.rig_video). ``rig-stale-member`` needs the store: there is no stored member to
 go stale.
 """
 
