@@ -1,6 +1,6 @@
 """A real 4-camera rig from video (caliscope-4cam): calibctl beside plain OpenCV and the recorder's result.
 
-    .venv/bin/python benchmarks/bench_rig_caliscope.py [--runs 5:k1k2,5:opencv-default,40:k1k2] [--out FILE]
+    .venv/bin/python benchmarks/bench_rig_caliscope.py [--runs 5:opencv-default:1=1,5:k1k2] [--out FILE]
 
 Set: ../shared/datasets/caliscope-4cam (four 1280x720 webcams, 111 frames each as MP4, the recorder's
 timestamps, an inverted 4 x 5-square ChArUco, DICT_4X4_1000, 54 mm squares, markers 0.75 of a square).
@@ -17,6 +17,9 @@ timestamps, an inverted 4 x 5-square ChArUco, DICT_4X4_1000, 54 mm squares, mark
 4. The recorder's camera_array.toml (caliscope's bundle adjustment: a peer's answer, not truth): relative
    poses T_0_c of all three routes compared (baseline, rotation, and the difference of the two poses).
 5. Motion between exposures: calibctl's residual per camera view against the time spread of its rig frame.
+6. Which frames belong together: plain stereo RMS per pair with camera b one frame earlier / as timestamped /
+   one frame later (camera 1's video is one frame off its timestamps: the runs declare --frame-shift 1=+1),
+   and with camera b's corners moved dt along their image motion (an exposure offset the timestamps miss).
 """
 
 from __future__ import annotations
