@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from calibctl.core.gate import GateResult
 from calibctl.core.imu import gates
 from calibctl.core.imu.plain import TdUnobservableError, board_track, plain_calibration
@@ -64,11 +66,12 @@ def calibrate_cameras(
     noise: ImuNoise,
     options: SolveOptions = SolveOptions(),
     fallback_td_s: float | None = None,
+    rig: Sequence[np.ndarray | None] | None = None,
 ) -> list[Calibration]:
     """Solve several cameras and one IMU jointly (``core.imu.solve.solve_imu_cameras``) and gate each
     camera; one ``Calibration`` per camera, in order. The IMU's gates are shared. When any camera's
     motion cannot pin its td, every camera's td is held at ``fallback_td_s`` (one rig clock) or every
-    camera is refused.
+    camera is refused. ``rig``: the cameras the rig already relates to the first (``solve_imu_cameras``).
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be used as it is (the message names the fix).
@@ -95,7 +98,7 @@ def calibrate_cameras(
                 for rec, frames in zip(recording, cameras, strict=True)
             ]
         held = solve_imu_cameras(
-            imu, cameras, noise, replace(options, hold_td_s=fallback_td_s), tracks=tracks
+            imu, cameras, noise, replace(options, hold_td_s=fallback_td_s), tracks=tracks, rig=rig
         )
         reason = f"{exc}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
         free = replace(rate, gate="td_rotation_correlation_free")
@@ -114,7 +117,7 @@ def calibrate_cameras(
             )
             for h, rec, frames in zip(held, recording, cameras, strict=True)
         ]
-    solutions = solve_imu_cameras(imu, cameras, noise, options, tracks, plains)
+    solutions = solve_imu_cameras(imu, cameras, noise, options, tracks, plains, rig)
     for rec, frames, s in zip(recording, cameras, solutions, strict=True):
         rec.append(gates.td_observability(frames, s.td_crlb_ms))
     correlation = [gates.td_rotation_correlation(s.covariance_7, s.td_held) for s in solutions]
@@ -132,6 +135,7 @@ def calibrate_cameras(
         replace(options, hold_td_s=fallback_td_s),
         tracks,
         [s.plain for s in solutions],
+        rig,
     )
     reason = f"{failed[0].message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
     return [

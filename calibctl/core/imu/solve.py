@@ -202,9 +202,14 @@ def _camera_columns(c: int) -> np.ndarray:
 class _Camera:
     """One camera's corners, fixed for a solve (times relative to ``t_ref``)."""
 
-    def __init__(self, frames: CameraFrames, options: SolveOptions, t_ref: float, c: int) -> None:
+    def __init__(
+        self, frames: CameraFrames, options: SolveOptions, t_ref: float, c: int, T_cam0_cam: np.ndarray | None
+    ) -> None:
         self.K, self.dist = frames.camera_matrix, frames.dist_coeffs
         self.columns = _camera_columns(c)
+        self.T_cam0_cam = (
+            T_cam0_cam  # held: T_imu_cam = T_imu_cam0 T_cam0_cam (no extrinsic states of its own)
+        )
         counts = np.array([p.shape[0] for p in frames.object_points])
         use = np.flatnonzero(counts >= 4)
         if use.size == 0:
@@ -236,10 +241,13 @@ class _Problem:
         options: SolveOptions,
         td0: Sequence[float],
         t_ref: float,
+        rig: Sequence[np.ndarray | None],
     ) -> None:
         self.opt = options
         self.g_mag = noise.gravity_m_s2
-        self.cams = [_Camera(f, options, t_ref, c) for c, f in enumerate(cameras)]
+        self.cams = [
+            _Camera(f, options, t_ref, c, T) for c, (f, T) in enumerate(zip(cameras, rig, strict=True))
+        ]
         t_first = min(cam.span[0] + td for cam, td in zip(self.cams, td0, strict=True))
         t_last = max(cam.span[1] + td for cam, td in zip(self.cams, td0, strict=True))
         self.knots = Knots.covering(t_first, t_last, options.knot_spacing_s, options.margin_s)
@@ -258,6 +266,7 @@ class _Problem:
         self.imu_w = [self.knots.weights(u, d) for d in range(3)]
         self.imu_mask = np.ones(self.t_imu.size)
         self.names = state_names(len(self.cams))
+        held = {int(i) for cam in self.cams if cam.T_cam0_cam is not None for i in cam.columns}
         self.width = len(self.names)
         self.active = [
             i
@@ -265,6 +274,7 @@ class _Problem:
             if not ((name := full.split(".")[-1]) == "td" and options.hold_td_s is not None)
             and not (name == "line_delay" and not options.estimate_line_delay)
             and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
+            and not (i in held and name in SHARED_NAMES[:6])
         ]
         self.tau = self.t_imu - 0.5 * (self.t_imu[0] + self.t_imu[-1])
         self.R_ref = np.eye(3)
@@ -350,7 +360,15 @@ class _Problem:
         J_own[:, :, 6] = dt_col
         J_own[:, :, 7] = dt_col * row[:, None]
         J_sh = np.zeros((P, 6, self.width))
-        J_sh[:, :, cam.columns] = J_own
+        if cam.T_cam0_cam is None:
+            J_sh[:, :, cam.columns] = J_own
+        else:
+            # R = Exp(d) R_0 R_c0c, t = Exp(d) R_0 t_c0c + t_0: d moves t by -skew(R_0 t_c0c) d.
+            first = self.cams[0].columns
+            lever = _skew((s.cams[0].R_ic @ cam.T_cam0_cam[:3, 3])[None])[0]
+            J_sh[:, :, first[0:3]] = J_own[:, :, 0:3] - J_own[:, :, 3:6] @ lever
+            J_sh[:, :, first[3:6]] = J_own[:, :, 3:6]
+            J_sh[:, :, cam.columns[6:]] = J_own[:, :, 6:]
         return r, info, grad, J_loc, J_sh, seg
 
     # -- IMU -----------------------------------------------------------------------------------------
@@ -469,13 +487,21 @@ class _Problem:
             )
         return _State(
             ctrl=s.ctrl + d_ctrl,
-            cams=cams,
+            cams=self.tie(cams),
             R_g=s.R_g @ se3.rotation_from_rotvec(np.r_[full[8:10], 0.0]),
             b_g=s.b_g + full[10:13],
             b_a=s.b_a + full[13:16],
             b_g_dot=s.b_g_dot + full[16:19],
             b_a_dot=s.b_a_dot + full[19:22],
         )
+
+    def tie(self, cams: list[_Extrinsic]) -> list[_Extrinsic]:
+        """Each held camera's extrinsic from the first camera's through its rig pose."""
+        R_0, t_0 = cams[0].R_ic, cams[0].t_ic
+        for cam, e in zip(self.cams, cams, strict=True):
+            if cam.T_cam0_cam is not None:
+                e.R_ic, e.t_ic = R_0 @ cam.T_cam0_cam[:3, :3], R_0 @ cam.T_cam0_cam[:3, 3] + t_0
+        return cams
 
     def solve(self, s: _State, max_iterations: int) -> tuple[_State, DenseSystem, int, bool]:
         result = solve_lm(
@@ -552,10 +578,12 @@ def _initial_state(
     R_g = se3.rotation_from_rotvec(axis / max(np.linalg.norm(axis), 1e-12) * angle)
     return _State(
         ctrl,
-        [
-            _Extrinsic(q.T_imu_cam[:3, :3].copy(), q.T_imu_cam[:3, 3].copy(), t)
-            for q, t in zip(plains, td0, strict=True)
-        ],
+        problem.tie(
+            [
+                _Extrinsic(q.T_imu_cam[:3, :3].copy(), q.T_imu_cam[:3, 3].copy(), t)
+                for q, t in zip(plains, td0, strict=True)
+            ]
+        ),
         R_g,
         plain.gyro_bias_rad_s.copy(),
         plain.accel_bias_m_s2.copy(),
@@ -603,12 +631,17 @@ def solve_imu_cameras(
     options: SolveOptions = SolveOptions(),
     tracks: Sequence[BoardTrack] | None = None,
     plains: Sequence[PlainResult] | None = None,
+    rig: Sequence[np.ndarray | None] | None = None,
 ) -> list[ImuCameraSolution]:
     """Several cameras and one IMU in one solve: each camera's own T_imu_cam, td (and line delay)
     against ONE IMU trajectory, gravity and biases, so every camera's corners pin the motion that the
     others' extrinsics are measured against. One solution per camera, in order; each carries its own
     states and the shared IMU states (covariance over ``state_names`` of a one-camera solve), its
     corners' residuals and the shared IMU residuals. The first camera's poses start the trajectory.
+
+    ``rig``: per camera, its pose in the first camera's frame T_cam0_cam (4, 4) where the rig already
+    relates the two (held: that camera's T_imu_cam = T_imu_cam0 T_cam0_cam, its corners then pin the
+    first camera's extrinsic; its td stays its own), or None (estimated). The first entry is None.
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be aligned or is in the wrong units.
@@ -617,6 +650,9 @@ def solve_imu_cameras(
     cpu0 = time.process_time()
     if not cameras:
         raise ImuInputError("no camera to solve: give at least one camera's frames")
+    rig = list(rig) if rig is not None else [None] * len(cameras)
+    if len(rig) != len(cameras) or rig[0] is not None:
+        raise ValueError("rig: one entry per camera, the first None (the cameras are posed in its frame)")
     tracks = list(tracks) if tracks is not None else [board_track(f) for f in cameras]
     plains = (
         list(plains)
@@ -627,7 +663,7 @@ def solve_imu_cameras(
     )
     td0 = [q.td_s if options.hold_td_s is None else options.hold_td_s for q in plains]
     t_ref = float(imu.t_s[0])
-    problem = _Problem(imu, cameras, noise, options, td0, t_ref)
+    problem = _Problem(imu, cameras, noise, options, td0, t_ref, rig)
     if problem.t_imu.size < 100:
         raise ImuInputError(
             "camera and IMU overlap for fewer than 100 IMU samples; do the logs share a clock?"
@@ -667,17 +703,23 @@ def solve_imu_cameras(
     cpu_s = time.process_time() - cpu0
     solutions = []
     for c, cam in enumerate(problem.cams):
-        # This camera's states and the IMU's, under the names of a one-camera solve.
-        pairs = [
-            (full, name)
-            for name in SHARED_NAMES
-            if (full := name if c == 0 or name not in SHARED_NAMES[:CAMERA_STATES] else f"cam{c}.{name}")
-            in index
-        ]
-        rows = [index[full] for full, _ in pairs]
-        names = tuple(name for _, name in pairs)
-        sub = cov[np.ix_(rows, rows)]
-        own = dict(zip(names, range(len(names)), strict=True))
+        # This camera's states and the IMU's, under the names of a one-camera solve; a camera the rig
+        # holds has the first camera's extrinsic states carried through its rig pose.
+        T_rig = cam.T_cam0_cam
+        held = T_rig is not None
+        rows, names = [], []
+        for name in SHARED_NAMES:
+            owner = 0 if held and name in SHARED_NAMES[:6] else c
+            full = name if owner == 0 or name not in SHARED_NAMES[:CAMERA_STATES] else f"cam{owner}.{name}"
+            if full in index:
+                rows.append(index[full])
+                names.append(name)
+        L = np.zeros((len(rows), cov.shape[0]))
+        L[np.arange(len(rows)), rows] = 1.0
+        if T_rig is not None:
+            L[3:6, rows[0:3]] = -_skew((state.cams[0].R_ic @ T_rig[:3, 3])[None])[0]
+        sub = L @ cov @ L.T
+        own = {name: k for k, name in enumerate(names)}
         seven = np.zeros((7, 7))
         seven_names = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")
         have = [k for k, n in enumerate(seven_names) if n in own]
@@ -699,7 +741,7 @@ def solve_imu_cameras(
                 gyro_bias_drift_rad_s2=state.b_g_dot if options.bias_drift else None,
                 accel_bias_drift_m_s3=state.b_a_dot if options.bias_drift else None,
                 covariance=sub,
-                state_names=names,
+                state_names=tuple(names),
                 covariance_7=seven,
                 sigma_rotation_deg=np.degrees(np.sqrt(np.diag(seven)[:3])),
                 sigma_translation_mm=1e3 * np.sqrt(np.diag(seven)[3:6]),

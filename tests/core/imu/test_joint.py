@@ -82,3 +82,19 @@ def test_no_camera_is_refused() -> None:
     imu, _, noise = as_inputs(rec)
     with pytest.raises(ImuInputError, match="at least one camera"):
         solve_imu_cameras(imu, [], noise, OPTIONS)
+
+
+def test_a_camera_the_rig_relates_is_held_through_its_rig_pose(
+    stereo: ImuCameraRecording, joint: list[ImuCameraSolution]
+) -> None:
+    imu, frames, noise = as_inputs(stereo)
+    tied = solve_imu_cameras(
+        imu, [frames, more_frames(stereo, 0)], noise, OPTIONS, rig=[None, EUROC_LIKE_T_CAM0_CAM1]
+    )
+    assert np.allclose(tied[1].T_imu_cam, tied[0].T_imu_cam @ EUROC_LIKE_T_CAM0_CAM1)
+    truths = (stereo.truth, replace(stereo.truth, T_imu_cam=stereo.more_cameras[0].T_imu_cam))
+    for s, truth in zip(tied, truths, strict=True):
+        assert np.all(np.abs(z_scores(s, truth)) < 4.0)
+    # Six fewer states for the same corners: the first camera's rotation is pinned at least as well.
+    assert np.all(tied[0].sigma_rotation_deg <= joint[0].sigma_rotation_deg)
+    assert np.array_equal(tied[0].sigma_rotation_deg, tied[1].sigma_rotation_deg)
