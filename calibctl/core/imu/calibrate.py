@@ -19,7 +19,7 @@ import numpy as np
 
 from calibctl.core.gate import GateResult
 from calibctl.core.imu import gates
-from calibctl.core.imu.plain import TdUnobservableError, board_track, plain_calibration
+from calibctl.core.imu.plain import BoardTrack, TdUnobservableError, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_cameras
 
@@ -102,6 +102,7 @@ def calibrate_cameras(
         )
         reason = f"{exc}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
         free = replace(rate, gate="td_rotation_correlation_free")
+        _rig_gates(recording, cameras, tracks, held, rig)
         return [
             Calibration(
                 h,
@@ -120,6 +121,7 @@ def calibrate_cameras(
     solutions = solve_imu_cameras(imu, cameras, noise, options, tracks, plains, rig)
     for rec, frames, s in zip(recording, cameras, solutions, strict=True):
         rec.append(gates.td_observability(frames, s.td_crlb_ms))
+    _rig_gates(recording, cameras, tracks, solutions, rig)
     correlation = [gates.td_rotation_correlation(s.covariance_7, s.td_held) for s in solutions]
     sigma = [gates.td_sigma(s.sigma_td_ms, s.td_held) for s in solutions]
     failed = [g for pair in zip(correlation, sigma, strict=True) for g in pair if not g.passed]
@@ -153,3 +155,19 @@ def calibrate_cameras(
         )
         for h, rec, corr, sig in zip(held, recording, correlation, sigma, strict=True)
     ]
+
+
+def _rig_gates(
+    recording: list[list[GateResult]],
+    cameras: Sequence[CameraFrames],
+    tracks: Sequence[BoardTrack],
+    solutions: Sequence[ImuCameraSolution],
+    rig: Sequence[np.ndarray | None] | None,
+) -> None:
+    """The ``rig_pose`` gate for every camera held through the rig's pose, appended to its gates and to
+    the first camera's (the held camera's corners pin the first camera's extrinsic)."""
+    for k, (rec, frames, track, s) in enumerate(zip(recording, cameras, tracks, solutions, strict=True)):
+        if rig is not None and rig[k] is not None:
+            gate = gates.rig_pose(s.corner_rms_px, gates.pnp_rms_px(frames, track))
+            rec.append(gate)
+            recording[0].append(replace(gate, gate=f"rig_pose_camera_{k}"))

@@ -98,3 +98,20 @@ def test_a_camera_the_rig_relates_is_held_through_its_rig_pose(
     # Six fewer states for the same corners: the first camera's rotation is pinned at least as well.
     assert np.all(tied[0].sigma_rotation_deg <= joint[0].sigma_rotation_deg)
     assert np.array_equal(tied[0].sigma_rotation_deg, tied[1].sigma_rotation_deg)
+
+
+def test_a_rig_pose_the_corners_contradict_fails_the_rig_pose_gate(stereo: ImuCameraRecording) -> None:
+    imu, frames, noise = as_inputs(stereo)
+    cameras = [frames, more_frames(stereo, 0)]
+    good = calibrate_cameras(imu, cameras, noise, OPTIONS, rig=[None, EUROC_LIKE_T_CAM0_CAM1])
+    (gate,) = [g for g in good[1].gates if g.gate == "rig_pose"]
+    assert gate.passed and gate.value < 1.5
+    assert "rig_pose_camera_1" in {g.gate for g in good[0].gates if g.passed}
+    moved = EUROC_LIKE_T_CAM0_CAM1.copy()
+    moved[0, 3] += 0.03  # the rig says 14 cm, the cameras are 11 cm apart
+    bad = calibrate_cameras(imu, cameras, noise, OPTIONS, rig=[None, moved])
+    (gate,) = [g for g in bad[1].gates if g.gate == "rig_pose"]
+    assert not gate.passed and gate.reason == "rig_pose_contradicted"
+    assert gate.hint is not None and "re-solve the rig" in gate.hint
+    # The held camera's corners moved the first camera's extrinsic: its verdict fails with them.
+    assert not bad[0].passed and "rig_pose_camera_1" in {g.gate for g in bad[0].failed}
