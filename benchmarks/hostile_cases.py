@@ -1,4 +1,4 @@
-"""The cases of benchmarks/hostile_sweep.py, by command group (the issue 26 categories, re-measured)."""
+"""The cases of benchmarks/hostile_sweep.py, by command group (the sweep's categories, re-measured)."""
 
 from __future__ import annotations
 
@@ -1173,6 +1173,127 @@ def _messages() -> list[Case]:
     ]
 
 
+def imu_recording(w: Path) -> None:
+    """A 3 s `calibctl imu synth` recording at {w}/rec rendered through the demo camera (corner files)."""
+    calibctl(w, ["imu", "synth", str(w / "rec"), "--serial", SERIAL, "--duration-s", "3"])
+
+
+def _imu_csv(edit: Callable[[list[str]], list[str]], name: str = "imu0/data.csv") -> Callable[[Path], None]:
+    def make(w: Path) -> None:
+        imu_recording(w)
+        path = w / "rec" / name
+        path.write_text("\n".join(edit(path.read_text().splitlines())) + "\n")
+
+    return make
+
+
+def _scaled(cols: slice, factor: float) -> Callable[[list[str]], list[str]]:
+    def edit(lines: list[str]) -> list[str]:
+        out = [lines[0]]
+        for line in lines[1:]:
+            c = line.split(",")
+            c[cols] = [f"{float(v) * factor:.6f}" for v in c[cols]]
+            out.append(",".join(c))
+        return out
+
+    return edit
+
+
+def _stamp_listed_twice(w: Path) -> None:
+    imu_recording(w)
+    stamps = sorted(p.stem for p in (w / "rec" / "cam0").glob("*.csv"))
+    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    (w / "rec" / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
+
+
+def _imu_only_bag(w: Path) -> None:
+    """A ROS 2 bag holding the recording's IMU topic /imu0 alone (the sweep needs the `bags` extra)."""
+    import numpy as np
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    imu_recording(w)
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    with Writer(w / "bag", version=9) as bag:
+        imu_c = bag.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=ts)
+        for line in (w / "rec" / "imu0" / "data.csv").read_text().splitlines()[1:]:
+            c = line.split(",")
+            ns, v = int(c[0]), [float(x) for x in c[1:]]
+            msg = T["sensor_msgs/msg/Imu"](
+                header=T["std_msgs/msg/Header"](
+                    stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
+                    frame_id="imu",
+                ),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=T["geometry_msgs/msg/Vector3"](x=v[0], y=v[1], z=v[2]),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=T["geometry_msgs/msg/Vector3"](x=v[3], y=v[4], z=v[5]),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            bag.write(imu_c, ns, ts.serialize_cdr(msg, msg.__msgtype__))
+
+
+def _imu() -> list[Case]:
+    """The camera-IMU solve's bad inputs (docs/imu.md): exit 2, one line naming the file and the fix."""
+    g = "imu"
+    solve = ["imu", "solve", "{w}/rec", "--serial", SERIAL]
+    swap = _imu_csv(lambda lines: [lines[0], lines[2], lines[1], *lines[3:]])
+    later = _imu_csv(
+        lambda lines: (
+            [lines[0]] + [f"{int(x.split(',', 1)[0]) + 10**12},{x.split(',', 1)[1]}" for x in lines[1:]]
+        )
+    )
+    bag = [
+        "imu",
+        "solve",
+        "{w}/bag",
+        "--serial",
+        SERIAL,
+        "--board",
+        BOARD,
+        "--image-topic",
+        "/cam0/image_raw",
+        "--imu-topic",
+        "/imu0",
+    ]
+    return [
+        Case(g, "imu stamps not increasing", solve, setup=swap, says=("stamps do not increase at line 3",)),
+        Case(g, "imu gyro in deg/s", solve, setup=_imu_csv(_scaled(slice(1, 4), 57.29578)), says=("pi/180",)),
+        Case(
+            g,
+            "imu accelerometer in g",
+            solve,
+            setup=_imu_csv(_scaled(slice(4, 7), 1 / 9.80665)),
+            says=("9.80665",),
+        ),
+        Case(g, "imu and camera logs do not overlap", solve, setup=later, says=("do not overlap in time",)),
+        Case(g, "imu camera stamp listed twice", solve, setup=_stamp_listed_twice, says=("is listed twice",)),
+        Case(
+            g,
+            "imu camera without an active calibration",
+            ["imu", "solve", "{w}/rec", "--serial", "CAM-NONE"],
+            setup=imu_recording,
+            says=("has no active calibration",),
+        ),
+        Case(
+            g,
+            "imu corners of another board than the registered one",
+            [*solve, "--board", BOARD],
+            setup=imu_recording,
+            says=(f"is no corner of board {BOARD}",),
+        ),
+        Case(
+            g,
+            "imu bag without the named topic",
+            bag,
+            setup=_imu_only_bag,
+            says=("has no topic /cam0/image_raw",),
+        ),
+    ]
+
+
 def cases() -> list[Case]:
     return [
         *_capture(),
@@ -1185,4 +1306,5 @@ def cases() -> list[Case]:
         *_store(),
         *_seal(),
         *_messages(),
+        *_imu(),
     ]

@@ -38,12 +38,17 @@ from calibctl.artifacts.imu import (
     ImuInput,
     ImuMetrics,
     ImuNoiseModel,
+    ImuRowBin,
+    ImuRowTest,
+    ImuSeries,
 )
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.gate import GateResult
 from calibctl.core.imu.calibrate import Calibration, calibrate_cameras
+from calibctl.core.imu.plain import board_track
+from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_test
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
 from calibctl.core.intrinsics.solve import is_fisheye
@@ -92,6 +97,8 @@ class ImuOutcome:
     noise_source: str
     calibration: Calibration
     board: str | None = None  # NAME@REV read from the store
+    rows: RowTest | None = None  # the row test on the solved residuals
+    series: ReportSeries | None = None  # what the report page plots over time
     stored: RigCalibration | None = None
     written: list[str] = field(default_factory=list)
     others: list[ImuOutcome] = field(default_factory=list)  # the further cameras of a joint solve
@@ -238,6 +245,11 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
         ImuOutcome(replace(req, camera=cam, serial=serial, more=()), camera, rec, noise, source, cal, ref)
         for (cam, serial), (camera, _), rec, cal in zip(pairs, held, recs, cals, strict=True)
     ]
+    for o in outcomes:
+        if o.solution is not None:
+            track = board_track(o.recording.frames)
+            o.rows = row_test(o.solution, o.recording.frames, track)
+            o.series = report_series(o.solution, o.recording.imu, o.recording.frames, track)
     for o in outcomes[1:]:
         o.held_by_rig = related[o.request.serial][1] if o.request.serial in related else None
     first = outcomes[0]
@@ -311,6 +323,52 @@ def metrics_of(s: ImuCameraSolution | None, folds: int) -> ImuMetrics | None:
     )
 
 
+def _opt(v: float, digits: int) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None
+
+
+def row_test_of(outcome: ImuOutcome) -> ImuRowTest | None:
+    t = outcome.rows
+    if t is None:
+        return None
+    return ImuRowTest(
+        slope_us_per_row=1e6 * t.slope_s_per_row,
+        sigma_us_per_row=1e6 * t.sigma_s_per_row,
+        offset_us=1e6 * t.offset_s,
+        principal_row_px=float(outcome.recording.frames.camera_matrix[1, 2]),
+        z=t.z,
+        significant=t.significant,
+        line_delay_solved=t.line_delay_solved,
+        corners=t.corners,
+        message=t.message,
+        rows=[
+            ImuRowBin(
+                row_px=float(r), time_residual_us=_opt(1e6 * m, 3), sigma_us=_opt(1e6 * e, 3), corners=int(n)
+            )
+            for r, m, e, n in zip(t.row_px, t.time_residual_s, t.sigma_s, t.counts, strict=True)
+        ],
+    )
+
+
+def series_of(outcome: ImuOutcome) -> ImuSeries | None:
+    """The plotted series, rounded to what a 480-pixel plot can show (they are not estimates)."""
+    s = outcome.series
+    if s is None:
+        return None
+
+    def rows3(a: np.ndarray, digits: int) -> list[tuple[float | None, float | None, float | None]]:
+        return [(_opt(x, digits), _opt(y, digits), _opt(z, digits)) for x, y, z in a]
+
+    return ImuSeries(
+        t_s=[round(float(v), 4) for v in s.t_s],
+        gyro_rad_s=rows3(s.gyro_rad_s, 5),
+        camera_rate_rad_s=rows3(s.camera_rate_rad_s, 5),
+        corner_rms_px=[_opt(v, 4) for v in s.corner_rms_px],
+        gyro_rms_rad_s=[_opt(v, 6) for v in s.gyro_rms_rad_s],
+        accel_rms_m_s2=[_opt(v, 5) for v in s.accel_rms_m_s2],
+    )
+
+
 def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
     """The typed result as the rig edge's evidence ``imu_frame -> serial``, at full precision."""
     req, s, n = outcome.request, outcome.solution, outcome.noise
@@ -343,6 +401,8 @@ def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
             for role, path, sha in outcome.recording.inputs
         ],
         created_at=utc_now(),
+        row_test=row_test_of(outcome),
+        series=series_of(outcome),
     )
 
 
@@ -378,6 +438,7 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             for g in outcome.calibration.gates
         ],
         "estimate": None,
+        "row_test": None,
     }
     if s is not None:
         T = s.T_imu_cam
@@ -409,6 +470,17 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
         m = metrics_of(s, outcome.request.folds)
         assert m is not None
         doc["metrics"] = m.model_dump(mode="json")
+        rows = row_test_of(outcome)
+        if rows is not None:
+            doc["row_test"] = {
+                "slope_us_per_row": round(rows.slope_us_per_row, 3),
+                "sigma_us_per_row": round(rows.sigma_us_per_row, 3),
+                "offset_us": round(rows.offset_us, 3),
+                "z": round(rows.z, 2),
+                "significant": rows.significant,
+                "corners": rows.corners,
+                "message": rows.message,
+            }
     if outcome.others:
         doc["serial"] = outcome.request.serial
         doc["camera_folder"] = outcome.request.camera

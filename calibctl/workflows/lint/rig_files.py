@@ -1,8 +1,8 @@
 """Lint of the files ``calibctl rig export`` writes, recognised by their content: the bundle manifest (every
 listed file present and unchanged, each one linted), the rig and hand-eye JSON documents (schema, content
 hash), tf_static, URDF (a robot or its joints), the Kalibr camchain, mrcal .cameramodel and the OpenCV stereo
-FileStorage
-(parse, numbers, frames). Each checks the rig trace header first (an edited file is ``content-hash``).
+FileStorage (parse, numbers, frames). Each checks the rig trace header first (an edited file is
+``content-hash``).
 
 ``rig_file_kind`` says which of these a text is (None: not a rig export; ``lint.lint_file`` takes the
 camera formats). Rules: ``frames`` (a frame or topic ROS would refuse, a tree that is not one),

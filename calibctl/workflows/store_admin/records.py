@@ -50,8 +50,7 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable).
     With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write
-    never
-    builds on a record a read would refuse."""
+    never builds on a record a read would refuse."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
 

@@ -40,3 +40,9 @@ def more_frames(rec: ImuCameraRecording, k: int) -> CameraFrames:
     return CameraFrames(
         rec.cam_t_s, cam.object_points, cam.image_points, rec.camera_matrix, rec.dist_coeffs, rec.image_size
     )
+
+
+@pytest.fixture(scope="session")
+def rolling() -> ImuCameraRecording:
+    """A 3 s rolling-shutter dance: 30 us per row."""
+    return synthesize_imu_camera(2, motion="dance", duration_s=3.0, line_delay_s=30e-6)
