@@ -637,7 +637,8 @@ def solve_imu_cameras(
     against ONE IMU trajectory, gravity and biases, so every camera's corners pin the motion that the
     others' extrinsics are measured against. One solution per camera, in order; each carries its own
     states and the shared IMU states (covariance over ``state_names`` of a one-camera solve), its
-    corners' residuals and the shared IMU residuals. The first camera's poses start the trajectory.
+    corners' residuals and the shared IMU residuals (``cpu_s`` and ``iterations`` are the whole joint
+    solve's). The first camera's poses start the trajectory.
 
     ``rig``: per camera, its pose in the first camera's frame T_cam0_cam (4, 4) where the rig already
     relates the two (held: that camera's T_imu_cam = T_imu_cam0 T_cam0_cam, its corners then pin the
