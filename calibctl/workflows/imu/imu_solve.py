@@ -250,9 +250,11 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
             track = board_track(o.recording.frames)
             o.rows = row_test(o.solution, o.recording.frames, track)
             o.series = report_series(o.solution, o.recording.imu, o.recording.frames, track)
+    first = outcomes[0]
     for o in outcomes[1:]:
         o.held_by_rig = related[o.request.serial][1] if o.request.serial in related else None
-    first = outcomes[0]
+        if o.held_by_rig is not None:  # its corners moved the first camera's edge: pin them there too
+            first.recording.inputs.extend(i for i in o.recording.inputs if i[0] != "imu")
     first.request = req
     first.others = outcomes[1:]
     return first

@@ -73,7 +73,11 @@ def test_with_the_rig_a_related_camera_is_held_and_only_the_first_edge_stored(st
     T0, T1 = np.array(doc["estimate"]["matrix"]), np.array(more["estimate"]["matrix"])
     assert np.allclose(T1, T0 @ EUROC_LIKE_T_CAM0_CAM1, atol=1e-6)
     exported = json.loads(cli(url, "rig", "export", RIG, "--format", "json").stdout)
-    assert [ev["child_frame"] for ev in exported["imu"]] == [CAM]
+    (ev,) = exported["imu"]
+    assert ev["child_frame"] == CAM
+    # The held camera's corners moved the stored edge: the evidence pins both cameras' corner files.
+    corners = [i["path"] for i in ev["inputs"] if i["role"] == "corners"]
+    assert [Path(p).name for p in corners] == ["cam0", "cam1"]
 
 
 @pytest.mark.parametrize(
