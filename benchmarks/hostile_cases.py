@@ -18,6 +18,7 @@ from hostile_sweep import (
     fifo,
     folder,
     foreign_sqlite,
+    lidar_result,
     motions,
     read_only_file,
     read_only_store,
@@ -25,6 +26,7 @@ from hostile_sweep import (
     reseal,
     residuals,
     second_data_line,
+    signed_forgery,
     symlink,
     text,
     tiny_png,
@@ -920,6 +922,21 @@ def _member_fx(doc: dict) -> None:
     doc["members"][1]["camera_matrix"][0][0] += 5.0
 
 
+def _lidar_10mm(doc: dict) -> None:
+    t = doc["transform"]
+    t["matrix"][0][3] += 0.01
+    t["translation_m"][0] += 0.01
+    t["T_cam_lidar"][0][3] -= 0.01
+
+
+def _lidar_rehashed(doc: dict) -> None:
+    """translation_m moved alone and the content hash recomputed (RFC 8785, no key needed)."""
+    from calibctl.workflows.exports import sealed_result
+
+    doc["transform"]["translation_m"][0] += 0.01
+    doc["content_sha256"] = sealed_result.content_sha256(doc)
+
+
 def _notes(b: Path) -> None:
     (b / "notes.txt").write_text("mine\n")
 
@@ -978,6 +995,62 @@ def _seal() -> list[Case]:
             setup=_unsigned_ros_export,
         ),
     ]
+    edited = "a signed export edited (fx +1 px, content hash recomputed, signature kept)"
+    cases += [
+        Case(
+            g,
+            f"import {edited} into a store without keys",
+            ["import", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            protect=["store.db"],
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            f"lint {edited}, no keys",
+            ["lint", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            "import an honest export signed by an untrusted key into a store without keys",
+            ["import", "{w}/signed.json"],
+            expect="ok",
+            setup=signed_forgery("forged.json"),
+        ),
+    ]
+    lidar = {
+        "translation +10 mm, every derived number too": (_lidar_10mm, "content hash does not match"),
+        "translation_m +10 mm alone, re-hashed": (_lidar_rehashed, "are not transform.matrix's"),
+    }
+    cases += [
+        Case(
+            g,
+            f"lint a store-free lidar result, {n}",
+            ["lint", "{w}/r.json"],
+            setup=lidar_result("r.json", e),
+            says=(w,),
+        )
+        for n, (e, w) in lidar.items()
+    ]
+    cases.append(
+        Case(
+            g,
+            "lidar synth --serial of a camera the store does not hold",
+            ["lidar", "synth", "{w}/s", "--serial", "NOPE"],
+            says=("NOPE",),
+        )
+    )
+    cases.append(
+        Case(
+            g,
+            "lint a store-free lidar result, honest",
+            ["lint", "{w}/r.json"],
+            expect="ok",
+            setup=lidar_result("r.json"),
+        )
+    )
     force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]
     intruders = {
         "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),

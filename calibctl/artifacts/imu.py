@@ -19,7 +19,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
 
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
@@ -213,3 +213,4 @@ class ImuEdgeResult(Document):
         exclude_if=lambda series: series is None,
         description="rates and residuals over time for the report page; absent as row_test is",
     )
+    ros_frames: RosFrames | None = ros_frames_field()
