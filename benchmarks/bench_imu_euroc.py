@@ -16,7 +16,13 @@ shifted by --shift-ms and td must move by exactly that. Then the cost's growth w
 extrinsic (T_BS0^-1 T_BS1), which bounds how close any calibration with these held intrinsics can
 come to EuRoC's published pair.
 
+``--joint``: both cameras against ONE IMU trajectory, gravity and biases in one solve
+(``calibrate_cameras``: each camera's own T_imu_cam and td), with the same +shift check; with
+``--rig-pair`` also with cam1 held through yac's ``T_cam0_cam1`` (EuRoC's published stereo pair).
+``--only-joint`` skips the one-camera runs, the growth sweep and the stereo check.
+
 Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
+     [--joint [--rig-pair] [--only-joint]]
      python benchmarks/bench_imu_euroc.py FOLDER --growth   (the cost's growth alone: 1/4, 1/2, all)
 """
 
@@ -37,11 +43,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from machine import cpu_model, load_1min  # noqa: E402
 
 from calibctl.core.extrinsics import se3  # noqa: E402
-from calibctl.core.imu.calibrate import calibrate  # noqa: E402
+from calibctl.core.imu.calibrate import calibrate, calibrate_cameras  # noqa: E402
 from calibctl.core.imu.plain import board_track, plain_calibration  # noqa: E402
 from calibctl.core.imu.rows import report_series, row_test  # noqa: E402
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples  # noqa: E402
-from calibctl.core.imu.solve import SolveOptions, solve_imu_camera  # noqa: E402
+from calibctl.core.imu.solve import SolveOptions, solve_imu_camera, solve_imu_cameras  # noqa: E402
 
 # EuRoC MAV sensor.yaml T_BS (camera into body = IMU), as vendored by VINS-Mono (config/euroc) and
 # ORB-SLAM3 (Examples/Stereo-Inertial/EuRoC.yaml).
@@ -130,6 +136,9 @@ def main() -> int:
     parser.add_argument("--knot-spacing-s", type=float, default=SolveOptions().knot_spacing_s)
     parser.add_argument("--no-growth", action="store_true", help="skip the recording-length sweep")
     parser.add_argument("--quarters", action="store_true", help="solve each quarter of cam0 alone")
+    parser.add_argument("--joint", action="store_true", help="both cameras against one IMU in one solve")
+    parser.add_argument("--rig-pair", action="store_true", help="--joint with cam1 held by T_cam0_cam1")
+    parser.add_argument("--only-joint", action="store_true", help="only the joint runs")
     parser.add_argument(
         "--growth",
         action="store_true",
@@ -150,6 +159,10 @@ def main() -> int:
         growth(folder, SolveOptions(knot_spacing_s=args.knot_spacing_s), (0.25, 0.5, 1.0))
         return 0
     options = SolveOptions(knot_spacing_s=args.knot_spacing_s)
+    if args.joint or args.only_joint:
+        joint(folder, options, args.shift_ms, args.rig_pair)
+    if args.only_joint:
+        return 0
     for cam in ("cam0", "cam1"):
         imu, frames, noise = load(folder, cam)
         ref = EUROC_T_BS[cam]
@@ -206,6 +219,48 @@ def main() -> int:
     if args.quarters:
         quarters(folder, args.knot_spacing_s)
     return 0
+
+
+def joint(folder: Path, options: SolveOptions, shift_ms: float, rig_pair: bool) -> None:
+    """Both cameras and one IMU in one solve (calibrate_cameras), the shift check on the same solve, and
+    optionally cam1 held through yac's T_cam0_cam1."""
+    imu, f0, noise = load(folder, "cam0")
+    _, f1, _ = load(folder, "cam1")
+    c0 = time.process_time()
+    cals = calibrate_cameras(imu, [f0, f1], noise, options)
+    cpu = time.process_time() - c0
+    for cam, cal in zip(("cam0", "cam1"), cals, strict=True):
+        s = cal.solution
+        assert s is not None
+        deg, mm = difference(s.T_imu_cam, EUROC_T_BS[cam])
+        print(
+            f"{cam} joint    : {deg:.3f} deg {mm:5.2f} mm  td {1e3 * s.td_s:+.3f} ms  "
+            f"cpu {cpu:.1f} s for both ({s.iterations} iterations); "
+            f"sigma rot {np.round(s.sigma_rotation_deg, 4)} deg, t {np.round(s.sigma_translation_mm, 2)} mm, "
+            f"td {s.sigma_td_ms:.4f} ms; RMS {s.corner_rms_px:.3f} px; "
+            f"gates {'pass' if cal.passed else 'FAIL ' + ', '.join(g.gate for g in cal.failed)}"
+        )
+    shifted = ImuSamples(imu.t_s + shift_ms * 1e-3, imu.gyro_rad_s, imu.accel_m_s2)
+    plain_opts = SolveOptions(knot_spacing_s=options.knot_spacing_s, folds=0, jackknife_blocks=0)
+    base = solve_imu_cameras(imu, [f0, f1], noise, plain_opts)
+    moved = solve_imu_cameras(shifted, [f0, f1], noise, plain_opts)
+    print(
+        f"    IMU stamps +{shift_ms:g} ms: joint td moved "
+        + ", ".join(f"{1e3 * (m.td_s - b.td_s):+.3f}" for m, b in zip(moved, base, strict=True))
+        + " ms"
+    )
+    if rig_pair:
+        config = yaml.safe_load((folder / "config.yaml").read_text())
+        T01 = np.array(config["T_cam0_cam1"]["data"], np.float64).reshape(4, 4)
+        c0 = time.process_time()
+        tied = solve_imu_cameras(imu, [f0, f1], noise, plain_opts, rig=[None, T01])
+        cpu = time.process_time() - c0
+        for cam, s in zip(("cam0", "cam1"), tied, strict=True):
+            deg, mm = difference(s.T_imu_cam, EUROC_T_BS[cam])
+            print(
+                f"{cam} rig pair: {deg:.3f} deg {mm:5.2f} mm  td {1e3 * s.td_s:+.3f} ms  "
+                f"cpu {cpu:.1f} s for both"
+            )
 
 
 def growth(folder: Path, options: SolveOptions, shares: tuple[float, ...]) -> None:

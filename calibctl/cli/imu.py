@@ -88,9 +88,17 @@ def solve(
         ),
     ],
     serial: Annotated[
-        str, typer.Option("--serial", help="The camera: its active stored calibration's intrinsics are held.")
+        list[str],
+        typer.Option(
+            "--serial",
+            help="The camera: its active stored calibration's intrinsics are held. Repeat it with --camera "
+            "to solve several cameras against one IMU in one solve (pairs in order).",
+        ),
     ],
-    camera: Annotated[str, typer.Option("--camera", help="The camera's folder in RECORDING.")] = "cam0",
+    camera: Annotated[
+        list[str] | None,
+        typer.Option("--camera", help="The camera's folder in RECORDING (default cam0); one per --serial."),
+    ] = None,
     noise: Annotated[
         Path | None,
         typer.Option("--noise", help="Kalibr imu.yaml (noise densities, random walks); default EuRoC's."),
@@ -141,13 +149,20 @@ def solve(
     json_output: JsonFlag = False,
 ) -> None:
     """Solve T_imu_cam and td; exit 1 when a gate rejects the recording or the estimate."""
-    from calibctl.cli.stored_edge import finish_solve
+    from calibctl.cli.stored_edge import finish_solve, stored_line, stored_summary
+    from calibctl.errors import UsageError
     from calibctl.workflows.imu import imu_solve as wf
 
+    cameras = camera or ["cam0"]
+    if len(cameras) != len(serial):
+        raise UsageError(
+            f"{len(cameras)} --camera for {len(serial)} --serial",
+            "give one --camera FOLDER per --serial SERIAL, in the same order",
+        )
     req = wf.ImuRequest(
         recording,
-        serial,
-        camera,
+        serial[0],
+        cameras[0],
         noise,
         imu_frame,
         rig,
@@ -160,11 +175,30 @@ def solve(
         board,
         image_topic,
         imu_topic,
+        tuple(zip(cameras[1:], serial[1:], strict=True)),
     )
     outcome = wf.run_imu(state(ctx).settings(), req)
     doc = wf.result_json(outcome)
     as_json = wants_json(ctx, json_output)
-    finish_solve(doc, as_json, render_result, outcome.accepted, outcome.stored, outcome.written)
+    written = list(outcome.written)
+    for o, more in zip(outcome.others, doc.get("more_cameras", []), strict=True):
+        if o.stored is not None:
+            more["stored"] = stored_summary(o.stored)
+            written.append(f"{o.request.serial}: {stored_line(o.stored)}")
+    accepted = all(
+        o.accepted and (o.stored is None or o.stored.status == "accepted") for o in outcome.cameras
+    )
+    finish_solve(doc, as_json, render_joint, accepted, outcome.stored, written)
+
+
+def render_joint(doc: dict[str, Any]) -> None:
+    """Human report of a solve: the first camera, then each further camera of a joint solve."""
+    if "more_cameras" in doc:
+        say(f"camera {doc['camera_folder']} ({doc['serial']}):")
+    render_result(doc)
+    for more in doc.get("more_cameras", []):
+        say(f"camera {more['camera_folder']} ({more['serial']}), solved jointly against the same IMU:")
+        render_result(more)
 
 
 @imu_app.command("synth")
@@ -195,6 +229,13 @@ def synth(
             "chessboard of 50 mm squares) instead of corner files.",
         ),
     ] = False,
+    stereo: Annotated[
+        bool,
+        typer.Option(
+            "--stereo",
+            help="Also render a second camera of the rig (cam1/, 11 cm along cam0's x, same lens and clock).",
+        ),
+    ] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing recording.")] = False,
     json_output: JsonFlag = False,
 ) -> None:
@@ -211,6 +252,7 @@ def synth(
         line_delay_s=line_delay_us / 1e6,
         serial=serial,
         images=images,
+        stereo=stereo,
         force=force,
     )
     if wants_json(ctx, json_output):

@@ -39,6 +39,9 @@ The estimator (``solve``): solve_imu_camera(imu, frames, noise, SolveOptions(...
     timeshift_cam_imu_s, plain (the PlainResult it started from), cpu_s.
     SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, estimate_line_delay,
     bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s.
+    solve_imu_cameras(imu, [frames, ...], noise, options, rig=None) -> [ImuCameraSolution, ...]:
+    several cameras against ONE IMU trajectory, gravity and biases (each camera its own T_imu_cam,
+    td, line delay); rig[k] = T_cam0_camk holds camera k through a pose the rig already knows.
 
 The row test and the report's series (``rows``): row_test(solution, frames) -> RowTest
     (slope_s_per_row, sigma_s_per_row, offset_s, z, significant, message, per-row bins) or None;
@@ -53,4 +56,6 @@ The one call (``calibrate``): calibrate(imu, frames, noise, options, fallback_td
     (td, rotation) degeneracy (the correlation gate, or a rate cross-correlation that cannot pin td)
     re-solve with td held at fallback_td_s and say so (held = "td"), or refuse (passed False,
     solution None when nothing could be solved). Raises ImuInputError subclasses on bad input.
+    calibrate_cameras(imu, [frames, ...], noise, options, fallback_td_s=None, rig=None) ->
+    [Calibration, ...]: the same for a joint solve, each camera gated (a held td is held for all).
 """

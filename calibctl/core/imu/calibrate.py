@@ -12,13 +12,16 @@ cross-correlation that cannot pin td at all (no rate variation) is the same refu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+
+import numpy as np
 
 from calibctl.core.gate import GateResult
 from calibctl.core.imu import gates
-from calibctl.core.imu.plain import TdUnobservableError, board_track
+from calibctl.core.imu.plain import BoardTrack, TdUnobservableError, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples
-from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_camera
+from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_cameras
 
 
 @dataclass(frozen=True)
@@ -49,59 +52,122 @@ def calibrate(
     options: SolveOptions = SolveOptions(),
     fallback_td_s: float | None = None,
 ) -> Calibration:
-    """Solve and gate (module docstring).
+    """Solve and gate one camera (module docstring).
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be used as it is (the message names the fix).
     """
-    track = board_track(frames)
+    return calibrate_cameras(imu, [frames], noise, options, fallback_td_s)[0]
+
+
+def calibrate_cameras(
+    imu: ImuSamples,
+    cameras: Sequence[CameraFrames],
+    noise: ImuNoise,
+    options: SolveOptions = SolveOptions(),
+    fallback_td_s: float | None = None,
+    rig: Sequence[np.ndarray | None] | None = None,
+) -> list[Calibration]:
+    """Solve several cameras and one IMU jointly (``core.imu.solve.solve_imu_cameras``) and gate each
+    camera; one ``Calibration`` per camera, in order. The IMU's gates are shared. When any camera's
+    motion cannot pin its td, every camera's td is held at ``fallback_td_s`` (one rig clock) or every
+    camera is refused. ``rig``: the cameras the rig already relates to the first (``solve_imu_cameras``).
+
+    Raises:
+        ImuInputError / ImuUnitError: the recording cannot be used as it is (the message names the fix).
+    """
+    tracks = [board_track(f) for f in cameras]
     recording = [
-        gates.rotational_excitation(track),
-        gates.saturation(imu),
-        gates.imu_gaps(imu),
-        gates.dropped_frames(frames),
+        [
+            gates.rotational_excitation(track),
+            gates.saturation(imu),
+            gates.imu_gaps(imu),
+            gates.dropped_frames(frames),
+        ]
+        for track, frames in zip(tracks, cameras, strict=True)
     ]
     try:
-        solution = solve_imu_camera(imu, frames, noise, options, track=track)
+        plains = [
+            plain_calibration(imu, f, t, td_s=options.hold_td_s) for f, t in zip(cameras, tracks, strict=True)
+        ]
     except TdUnobservableError as exc:
         rate = gates.rate_variation_refused(str(exc))
         if fallback_td_s is None:
-            return Calibration(None, [*recording, gates.td_observability(frames), rate], None, None)
-        held = solve_imu_camera(imu, frames, noise, replace(options, hold_td_s=fallback_td_s), track=track)
+            return [
+                Calibration(None, [*rec, gates.td_observability(frames), rate], None, None)
+                for rec, frames in zip(recording, cameras, strict=True)
+            ]
+        held = solve_imu_cameras(
+            imu, cameras, noise, replace(options, hold_td_s=fallback_td_s), tracks=tracks, rig=rig
+        )
         reason = f"{exc}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
         free = replace(rate, gate="td_rotation_correlation_free")
-        observability = gates.td_observability(frames, held.td_crlb_ms)
-        return Calibration(
-            held,
+        _rig_gates(recording, cameras, tracks, held, rig)
+        return [
+            Calibration(
+                h,
+                [
+                    *rec,
+                    gates.td_observability(frames, h.td_crlb_ms),
+                    free,
+                    gates.td_rotation_correlation(h.covariance_7, True),
+                    gates.td_sigma(h.sigma_td_ms, True),
+                ],
+                "td",
+                reason,
+            )
+            for h, rec, frames in zip(held, recording, cameras, strict=True)
+        ]
+    solutions = solve_imu_cameras(imu, cameras, noise, options, tracks, plains, rig)
+    for rec, frames, s in zip(recording, cameras, solutions, strict=True):
+        rec.append(gates.td_observability(frames, s.td_crlb_ms))
+    _rig_gates(recording, cameras, tracks, solutions, rig)
+    correlation = [gates.td_rotation_correlation(s.covariance_7, s.td_held) for s in solutions]
+    sigma = [gates.td_sigma(s.sigma_td_ms, s.td_held) for s in solutions]
+    failed = [g for pair in zip(correlation, sigma, strict=True) for g in pair if not g.passed]
+    if not failed or fallback_td_s is None:
+        return [
+            Calibration(s, [*rec, corr, sig], None, None)
+            for s, rec, corr, sig in zip(solutions, recording, correlation, sigma, strict=True)
+        ]
+    held = solve_imu_cameras(
+        imu,
+        cameras,
+        noise,
+        replace(options, hold_td_s=fallback_td_s),
+        tracks,
+        [s.plain for s in solutions],
+        rig,
+    )
+    reason = f"{failed[0].message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
+    return [
+        Calibration(
+            h,
             [
-                *recording,
-                observability,
-                free,
-                gates.td_rotation_correlation(held.covariance_7, True),
-                gates.td_sigma(held.sigma_td_ms, True),
+                *rec,
+                replace(corr, gate="td_rotation_correlation_free"),
+                replace(sig, gate="td_sigma_free"),
+                gates.td_rotation_correlation(h.covariance_7, True),
+                gates.td_sigma(h.sigma_td_ms, True),
             ],
             "td",
             reason,
         )
-    recording.append(gates.td_observability(frames, solution.td_crlb_ms))
-    correlation = gates.td_rotation_correlation(solution.covariance_7, solution.td_held)
-    sigma = gates.td_sigma(solution.sigma_td_ms, solution.td_held)
-    if (correlation.passed and sigma.passed) or fallback_td_s is None:
-        return Calibration(solution, [*recording, correlation, sigma], None, None)
-    held = solve_imu_camera(
-        imu, frames, noise, replace(options, hold_td_s=fallback_td_s), track=track, plain=solution.plain
-    )
-    failed = correlation if not correlation.passed else sigma
-    reason = f"{failed.message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
-    return Calibration(
-        held,
-        [
-            *recording,
-            replace(correlation, gate="td_rotation_correlation_free"),
-            replace(sigma, gate="td_sigma_free"),
-            gates.td_rotation_correlation(held.covariance_7, True),
-            gates.td_sigma(held.sigma_td_ms, True),
-        ],
-        "td",
-        reason,
-    )
+        for h, rec, corr, sig in zip(held, recording, correlation, sigma, strict=True)
+    ]
+
+
+def _rig_gates(
+    recording: list[list[GateResult]],
+    cameras: Sequence[CameraFrames],
+    tracks: Sequence[BoardTrack],
+    solutions: Sequence[ImuCameraSolution],
+    rig: Sequence[np.ndarray | None] | None,
+) -> None:
+    """The ``rig_pose`` gate for every camera held through the rig's pose, appended to its gates and to
+    the first camera's (the held camera's corners pin the first camera's extrinsic)."""
+    for k, (rec, frames, track, s) in enumerate(zip(recording, cameras, tracks, solutions, strict=True)):
+        if rig is not None and rig[k] is not None:
+            gate = gates.rig_pose(s.corner_rms_px, gates.pnp_rms_px(frames, track))
+            rec.append(gate)
+            recording[0].append(replace(gate, gate=f"rig_pose_camera_{k}"))

@@ -13,6 +13,8 @@
 - ``saturation``: the share of IMU samples at full scale or pinned at an axis' extreme.
 - ``imu_gaps`` / ``dropped_frames``: the longest IMU gap in sample periods; the share of camera frames
   missing from an even stream.
+- ``rig_pose``: a camera a joint solve held through the rig's pose to the first camera: its corner
+  RMS over its per-frame PnP RMS (``pnp_rms_px``), at most ``MAX_RIG_POSE_RATIO``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibctl.core.gate import GateResult
+from calibctl.core.imu.model import project
 from calibctl.core.imu.plain import BoardTrack
 from calibctl.core.imu.samples import CameraFrames, ImuSamples, median_period_s
 
@@ -31,6 +34,7 @@ MAX_SIGMA_TD_MS = 0.5
 MAX_SATURATED_SHARE = 0.001
 MAX_IMU_GAP_PERIODS = 5.0
 MAX_DROPPED_SHARE = 0.05
+MAX_RIG_POSE_RATIO = 2.0  # a held camera's corner RMS over its per-frame PnP RMS
 
 
 def _verdict(
@@ -248,4 +252,32 @@ def rate_variation_refused(message: str) -> GateResult:
         hint="the gyro rate hardly changes, so td cannot be told from an extrinsic rotation (seed "
         "chapter 3): record again with rate reversals on every axis, or hold td at a known value (a "
         "hardware-triggered rig: 0) and estimate the extrinsic alone",
+    )
+
+
+def pnp_rms_px(frames: CameraFrames, track: BoardTrack) -> float:
+    """The corners' 2-D RMS about each frame's own PnP pose: the floor any trajectory fit is judged by."""
+    r = [
+        frames.image_points[f]
+        - project(frames.object_points[f] @ T[:3, :3].T + T[:3, 3], frames.camera_matrix, frames.dist_coeffs)
+        for f, T in zip(track.frame, track.T_cam_w, strict=True)
+    ]
+    return float(np.sqrt(np.mean(np.sum(np.concatenate(r) ** 2, axis=1))))
+
+
+def rig_pose(corner_rms_px: float, pnp_rms_px: float) -> GateResult:
+    """A camera held through the rig's pose to the first camera: its corners about the joint solve
+    against their own per-frame PnP fit. A rig pose the corners contradict (re-mounted camera, another
+    rig version) leaves them far off both cameras' shared trajectory."""
+    ratio = corner_rms_px / max(pnp_rms_px, 1e-9)
+    return _verdict(
+        "rig_pose",
+        ratio,
+        MAX_RIG_POSE_RATIO,
+        ratio <= MAX_RIG_POSE_RATIO,
+        f"held through the rig's pose to the first camera: corner RMS {corner_rms_px:.3f} px against "
+        f"{pnp_rms_px:.3f} px about its own per-frame poses ({ratio:.2f}x, at most {MAX_RIG_POSE_RATIO:g}x)",
+        "rig_pose_contradicted",
+        "the rig's pose between the cameras does not fit these corners: re-solve the rig, or solve the "
+        "cameras without --rig (each its own T_imu_cam)",
     )

@@ -31,6 +31,7 @@ is widened to the jackknife's where that variance is over ``JACKKNIFE_RATIO`` ti
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -66,6 +67,7 @@ SHARED_NAMES = (
     "dba_y",
     "dba_z",
 )
+CAMERA_STATES = 8  # the first eight shared names are each camera's own: T_imu_cam, td, line delay
 H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
 H_TIME = 1e-6
 H_GRAV = 1e-6
@@ -102,12 +104,19 @@ class SolveOptions:
 
 
 @dataclass
-class _State:
-    ctrl: np.ndarray  # (n, 6) [phi, p]
+class _Extrinsic:
+    """One camera's own states: T_imu_cam as (R_ic, t_ic), td (s), line delay (s per row)."""
+
     R_ic: np.ndarray
     t_ic: np.ndarray
     td: float
-    line_delay: float
+    line_delay: float = 0.0
+
+
+@dataclass
+class _State:
+    ctrl: np.ndarray  # (n, 6) [phi, p]
+    cams: list[_Extrinsic]
     R_g: np.ndarray
     b_g: np.ndarray
     b_a: np.ndarray
@@ -177,34 +186,70 @@ class ImuCameraSolution:
         return self.td_s
 
 
-class _Problem:
-    """Data fixed for one solve (times relative to ``t_ref``)."""
+def state_names(n_cameras: int) -> tuple[str, ...]:
+    """Every shared state of a solve over ``n_cameras`` cameras: ``SHARED_NAMES`` (the first camera and
+    the IMU's states), then each further camera's own eight as ``camK.NAME``."""
+    own = SHARED_NAMES[:CAMERA_STATES]
+    return SHARED_NAMES + tuple(f"cam{c}.{n}" for c in range(1, n_cameras) for n in own)
+
+
+def _camera_columns(c: int) -> np.ndarray:
+    """Columns of camera ``c``'s own states in ``state_names`` order."""
+    first = 0 if c == 0 else len(SHARED_NAMES) + CAMERA_STATES * (c - 1)
+    return first + np.arange(CAMERA_STATES)
+
+
+class _Camera:
+    """One camera's corners, fixed for a solve (times relative to ``t_ref``)."""
 
     def __init__(
-        self,
-        imu: ImuSamples,
-        frames: CameraFrames,
-        noise: ImuNoise,
-        options: SolveOptions,
-        td0: float,
-        t_ref: float,
+        self, frames: CameraFrames, options: SolveOptions, t_ref: float, c: int, T_cam0_cam: np.ndarray | None
     ) -> None:
-        self.opt = options
         self.K, self.dist = frames.camera_matrix, frames.dist_coeffs
-        self.g_mag = noise.gravity_m_s2
+        self.columns = _camera_columns(c)
+        self.T_cam0_cam = (
+            T_cam0_cam  # held: T_imu_cam = T_imu_cam0 T_cam0_cam (no extrinsic states of its own)
+        )
         counts = np.array([p.shape[0] for p in frames.object_points])
         use = np.flatnonzero(counts >= 4)
+        if use.size == 0:
+            raise ImuInputError(f"camera {c} sees no board with 4 corners or more")
         self.frame_of_corner = np.repeat(use, counts[use])
         self.obj = np.concatenate([frames.object_points[f] for f in use])
         self.img = np.concatenate([frames.image_points[f] for f in use])
         self.t_cam = frames.t_s[self.frame_of_corner] - t_ref
+        self.span = (frames.t_s[use[0]] - t_ref, frames.t_s[use[-1]] - t_ref)
         self.row = self.img[:, 1] - self.K[1, 2]
         if options.estimate_line_delay:
             self.pose_of_corner = np.arange(self.obj.shape[0])
         else:
             self.pose_of_corner = np.repeat(np.arange(use.size), counts[use])
         self.pose_starts = np.flatnonzero(np.r_[True, np.diff(self.pose_of_corner) != 0])
-        t_first, t_last = frames.t_s[use[0]] - t_ref + td0, frames.t_s[use[-1]] - t_ref + td0
+        self.sigma_px = options.corner_sigma_px
+        self.corner_mask = np.ones(self.obj.shape[0])
+        self.inliers = np.ones(self.obj.shape[0], bool)
+
+
+class _Problem:
+    """Data fixed for one solve (times relative to ``t_ref``): the cameras' corners and one IMU."""
+
+    def __init__(
+        self,
+        imu: ImuSamples,
+        cameras: Sequence[CameraFrames],
+        noise: ImuNoise,
+        options: SolveOptions,
+        td0: Sequence[float],
+        t_ref: float,
+        rig: Sequence[np.ndarray | None],
+    ) -> None:
+        self.opt = options
+        self.g_mag = noise.gravity_m_s2
+        self.cams = [
+            _Camera(f, options, t_ref, c, T) for c, (f, T) in enumerate(zip(cameras, rig, strict=True))
+        ]
+        t_first = min(cam.span[0] + td for cam, td in zip(self.cams, td0, strict=True))
+        t_last = max(cam.span[1] + td for cam, td in zip(self.cams, td0, strict=True))
         self.knots = Knots.covering(t_first, t_last, options.knot_spacing_s, options.margin_s)
         t_imu = imu.t_s - t_ref
         keep = (t_imu >= self.knots.t0_s + options.knot_spacing_s) & (
@@ -216,63 +261,66 @@ class _Problem:
         rate = imu.rate_hz
         self.sigma_gyro = noise.gyro_noise_density * np.sqrt(rate)
         self.sigma_accel = noise.accel_noise_density * np.sqrt(rate)
-        self.sigma_px = options.corner_sigma_px
         seg, u = self.knots.locate(self.t_imu)
         self.imu_seg = seg
         self.imu_w = [self.knots.weights(u, d) for d in range(3)]
-        self.corner_mask = np.ones(self.obj.shape[0])
-        self.inliers = np.ones(self.obj.shape[0], bool)
         self.imu_mask = np.ones(self.t_imu.size)
+        self.names = state_names(len(self.cams))
+        held = {int(i) for cam in self.cams if cam.T_cam0_cam is not None for i in cam.columns}
+        self.width = len(self.names)
         self.active = [
             i
-            for i, name in enumerate(SHARED_NAMES)
-            if not (name == "td" and options.hold_td_s is not None)
+            for i, full in enumerate(self.names)
+            if not ((name := full.split(".")[-1]) == "td" and options.hold_td_s is not None)
             and not (name == "line_delay" and not options.estimate_line_delay)
             and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
+            and not (i in held and name in SHARED_NAMES[:6])
         ]
         self.tau = self.t_imu - 0.5 * (self.t_imu[0] + self.t_imu[-1])
         self.R_ref = np.eye(3)
 
     # -- corners -------------------------------------------------------------------------------------
-    def _pose_times(self, s: _State) -> tuple[np.ndarray, np.ndarray]:
-        first = self.pose_starts
-        t = self.t_cam[first] + s.td
-        row = self.row[first]
+    def _pose_times(self, s: _State, c: int) -> tuple[np.ndarray, np.ndarray]:
+        cam, e = self.cams[c], s.cams[c]
+        first = cam.pose_starts
+        t = cam.t_cam[first] + e.td
+        row = cam.row[first]
         if self.opt.estimate_line_delay:
-            t = t + s.line_delay * row
+            t = t + e.line_delay * row
         return t, row
 
-    def corners(self, s: _State, jacobians: bool):
-        """Residuals (N, 2) px (observed - predicted), and per pose point: info (P, 6, 6), grad (P, 6),
-        J_local (P, 6, 24), J_shared (P, 6, 22), segment (P,)."""
-        t, row = self._pose_times(s)
+    def corners(self, s: _State, c: int, jacobians: bool):
+        """Camera ``c``'s residuals (N, 2) px (observed - predicted), and per pose point: info (P, 6, 6),
+        grad (P, 6), J_local (P, 6, 24), J_shared (P, 6, width), segment (P,)."""
+        cam, e = self.cams[c], s.cams[c]
+        t, row = self._pose_times(s, c)
         seg, u = self.knots.locate(t)
         w0 = self.knots.weights(u)
         loc = local_controls(s.ctrl, seg)
-        R, tt = model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic)
-        pc = self.pose_of_corner
-        RX = np.einsum("nij,nj->ni", R[pc], self.obj)
+        R, tt = model.camera_pose(loc, w0, self.R_ref, e.R_ic, e.t_ic)
+        pc = cam.pose_of_corner
+        RX = np.einsum("nij,nj->ni", R[pc], cam.obj)
         Xc = RX + tt[pc]
-        pred = model.project(Xc, self.K, self.dist)
-        r = self.img - pred
+        pred = model.project(Xc, cam.K, cam.dist)
+        r = cam.img - pred
         if not jacobians:
             return r
         # d pixel / d X_cam by central differences, then the pose chain (left rotation, translation).
         dX = np.empty((Xc.shape[0], 2, 3))
         for a in range(3):
             h = 1e-6 * np.maximum(np.abs(Xc[:, 2]), 1e-3)
-            e = np.zeros(3)
-            e[a] = 1.0
+            d = np.zeros(3)
+            d[a] = 1.0
             dX[:, :, a] = (
-                model.project(Xc + h[:, None] * e, self.K, self.dist)
-                - model.project(Xc - h[:, None] * e, self.K, self.dist)
+                model.project(Xc + h[:, None] * d, cam.K, cam.dist)
+                - model.project(Xc - h[:, None] * d, cam.K, cam.dist)
             ) / (2 * h[:, None])
         J_xi = np.concatenate([-np.einsum("nij,njk->nik", dX, _skew(RX)), dX], axis=2)  # (N, 2, 6)
-        wgt = self.corner_mask / self.sigma_px**2
+        wgt = cam.corner_mask / cam.sigma_px**2
         info = np.add.reduceat(
-            np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), self.pose_starts, axis=0
+            np.transpose(J_xi, (0, 2, 1)) @ (J_xi * wgt[:, None, None]), cam.pose_starts, axis=0
         )
-        grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), self.pose_starts, axis=0)
+        grad = np.add.reduceat(np.einsum("nri,nr,n->ni", J_xi, r, wgt), cam.pose_starts, axis=0)
 
         # d xi / d (local controls, extrinsic, time) per pose point.
         def xi(Rp: np.ndarray, tp: np.ndarray) -> np.ndarray:
@@ -283,34 +331,44 @@ class _Problem:
         P = t.size
         J_loc = np.zeros((P, 6, 24))
         for j in range(4):
-            for c in range(3):
+            for k in range(3):
                 d = np.zeros((4, 6))
-                d[j, c] = H_CTRL
-                plus = model.camera_pose(loc + d, w0, self.R_ref, s.R_ic, s.t_ic)
-                minus = model.camera_pose(loc - d, w0, self.R_ref, s.R_ic, s.t_ic)
-                J_loc[:, :, j * 6 + c] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
+                d[j, k] = H_CTRL
+                plus = model.camera_pose(loc + d, w0, self.R_ref, e.R_ic, e.t_ic)
+                minus = model.camera_pose(loc - d, w0, self.R_ref, e.R_ic, e.t_ic)
+                J_loc[:, :, j * 6 + k] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
         # t_cam_w = R_ic^T (-R_i_w p - t_ic): linear in the position control points, rotation untouched.
         for j in range(4):
             J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = -R * w0[:, j, None, None]
-        J_sh = np.zeros((P, 6, len(SHARED_NAMES)))
+        J_own = np.zeros((P, 6, CAMERA_STATES))
         for a in range(3):
             dv = np.zeros(3)
             dv[a] = H_CTRL
-            Rp, Rm = se3.rotation_from_rotvec(dv) @ s.R_ic, se3.rotation_from_rotvec(-dv) @ s.R_ic
-            J_sh[:, :, a] = (
-                xi(*model.camera_pose(loc, w0, self.R_ref, Rp, s.t_ic))
-                - xi(*model.camera_pose(loc, w0, self.R_ref, Rm, s.t_ic))
+            Rp, Rm = se3.rotation_from_rotvec(dv) @ e.R_ic, se3.rotation_from_rotvec(-dv) @ e.R_ic
+            J_own[:, :, a] = (
+                xi(*model.camera_pose(loc, w0, self.R_ref, Rp, e.t_ic))
+                - xi(*model.camera_pose(loc, w0, self.R_ref, Rm, e.t_ic))
             ) / (2 * H_CTRL)
-            J_sh[:, :, 3 + a] = (
-                xi(*model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic + dv))
-                - xi(*model.camera_pose(loc, w0, self.R_ref, s.R_ic, s.t_ic - dv))
+            J_own[:, :, 3 + a] = (
+                xi(*model.camera_pose(loc, w0, self.R_ref, e.R_ic, e.t_ic + dv))
+                - xi(*model.camera_pose(loc, w0, self.R_ref, e.R_ic, e.t_ic - dv))
             ) / (2 * H_CTRL)
         shift = H_TIME / self.knots.dt_s
-        plus = model.camera_pose(loc, self.knots.weights(u + shift), self.R_ref, s.R_ic, s.t_ic)
-        minus = model.camera_pose(loc, self.knots.weights(u - shift), self.R_ref, s.R_ic, s.t_ic)
+        plus = model.camera_pose(loc, self.knots.weights(u + shift), self.R_ref, e.R_ic, e.t_ic)
+        minus = model.camera_pose(loc, self.knots.weights(u - shift), self.R_ref, e.R_ic, e.t_ic)
         dt_col = (xi(*plus) - xi(*minus)) / (2 * H_TIME)
-        J_sh[:, :, 6] = dt_col
-        J_sh[:, :, 7] = dt_col * row[:, None]
+        J_own[:, :, 6] = dt_col
+        J_own[:, :, 7] = dt_col * row[:, None]
+        J_sh = np.zeros((P, 6, self.width))
+        if cam.T_cam0_cam is None:
+            J_sh[:, :, cam.columns] = J_own
+        else:
+            # R = Exp(d) R_0 R_c0c, t = Exp(d) R_0 t_c0c + t_0: d moves t by -skew(R_0 t_c0c) d.
+            first = self.cams[0].columns
+            lever = _skew((s.cams[0].R_ic @ cam.T_cam0_cam[:3, 3])[None])[0]
+            J_sh[:, :, first[0:3]] = J_own[:, :, 0:3] - J_own[:, :, 3:6] @ lever
+            J_sh[:, :, first[3:6]] = J_own[:, :, 3:6]
+            J_sh[:, :, cam.columns[6:]] = J_own[:, :, 6:]
         return r, info, grad, J_loc, J_sh, seg
 
     # -- IMU -----------------------------------------------------------------------------------------
@@ -318,7 +376,7 @@ class _Problem:
         return R_g @ np.array([0.0, 0.0, -self.g_mag])
 
     def imu(self, s: _State, jacobians: bool):
-        """Residuals (S, 6) [gyro, accel] observed - predicted; J_local (S, 6, 24), J_shared (S, 6, 22)."""
+        """Residuals (S, 6) [gyro, accel] observed - predicted; J_local (S, 6, 24), J_shared (S, 6, width)."""
         loc = local_controls(s.ctrl, self.imu_seg)
         w0, w1, w2 = self.imu_w
         g_w = self.gravity(s.R_g)
@@ -343,7 +401,7 @@ class _Problem:
         R_i_w = np.transpose(self.R_ref @ model.exp_so3(model.spline_value(loc[:, :, :3], w0)), (0, 2, 1))
         for j in range(4):
             J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = R_i_w * w2[:, j, None, None]
-        J_sh = np.zeros((S, 6, len(SHARED_NAMES)))
+        J_sh = np.zeros((S, 6, self.width))
         for a in range(2):
             dv = np.zeros(3)
             dv[a] = H_GRAV
@@ -366,7 +424,8 @@ class _Problem:
     # -- normal equations ----------------------------------------------------------------------------
     def evaluate(self, s: _State) -> DenseSystem:
         act = self.active
-        r_c, info, grad, Jl_c, Js_c, seg_c = self.corners(s, True)
+        parts = [self.corners(s, c, True) for c in range(len(self.cams))]
+        info, grad, Jl_c, Js_c, seg_c = (np.concatenate([q[k] for q in parts]) for k in range(1, 6))
         Js_c = Js_c[:, :, act]
         r_i, Jl_i, Js_i = self.imu(s, True)
         Js_i = Js_i[:, :, act]
@@ -374,7 +433,13 @@ class _Problem:
         r_iw = r_i * wv
         Jl_i = Jl_i * wv[:, :, None]
         Js_i = Js_i * wv[:, :, None]
-        cost = float(np.sum(r_c**2 * (self.corner_mask / self.sigma_px**2)[:, None]) + np.sum(r_iw**2))
+        cost = float(
+            sum(
+                np.sum(q[0] ** 2 * (cam.corner_mask / cam.sigma_px**2)[:, None])
+                for q, cam in zip(parts, self.cams, strict=True)
+            )
+            + np.sum(r_iw**2)
+        )
         n = self.knots.n
         order = np.argsort(seg_c, kind="stable")  # line-delay pose points need not be in time order
         Jl_c, info, grad, Js_c, seg_c = Jl_c[order], info[order], grad[order], Js_c[order], seg_c[order]
@@ -406,21 +471,37 @@ class _Problem:
         return DenseSystem(cost, 0.5 * (S + S.T), g)
 
     def retract(self, s: _State, delta: np.ndarray) -> _State:
-        full = np.zeros(len(SHARED_NAMES))
+        full = np.zeros(self.width)
         full[self.active] = delta
         d_ctrl = s.cache["X_g"] - np.einsum("nkp,p->nk", s.cache["X_B"], delta)
+        cams = []
+        for cam, e in zip(self.cams, s.cams, strict=True):
+            d = full[cam.columns]
+            cams.append(
+                _Extrinsic(
+                    se3.rotation_from_rotvec(d[0:3]) @ e.R_ic,
+                    e.t_ic + d[3:6],
+                    e.td + d[6],
+                    e.line_delay + d[7],
+                )
+            )
         return _State(
             ctrl=s.ctrl + d_ctrl,
-            R_ic=se3.rotation_from_rotvec(full[0:3]) @ s.R_ic,
-            t_ic=s.t_ic + full[3:6],
-            td=s.td + full[6],
-            line_delay=s.line_delay + full[7],
+            cams=self.tie(cams),
             R_g=s.R_g @ se3.rotation_from_rotvec(np.r_[full[8:10], 0.0]),
             b_g=s.b_g + full[10:13],
             b_a=s.b_a + full[13:16],
             b_g_dot=s.b_g_dot + full[16:19],
             b_a_dot=s.b_a_dot + full[19:22],
         )
+
+    def tie(self, cams: list[_Extrinsic]) -> list[_Extrinsic]:
+        """Each held camera's extrinsic from the first camera's through its rig pose."""
+        R_0, t_0 = cams[0].R_ic, cams[0].t_ic
+        for cam, e in zip(self.cams, cams, strict=True):
+            if cam.T_cam0_cam is not None:
+                e.R_ic, e.t_ic = R_0 @ cam.T_cam0_cam[:3, :3], R_0 @ cam.T_cam0_cam[:3, 3] + t_0
+        return cams
 
     def solve(self, s: _State, max_iterations: int) -> tuple[_State, DenseSystem, int, bool]:
         result = solve_lm(
@@ -445,10 +526,16 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 
 def _initial_state(
-    problem: _Problem, track: BoardTrack, plain: PlainResult, t_ref: float, td: float
+    problem: _Problem,
+    tracks: Sequence[BoardTrack],
+    plains: Sequence[PlainResult],
+    t_ref: float,
+    td0: Sequence[float],
 ) -> _State:
-    """The spline fitted to the PnP poses carried into the IMU by the plain extrinsic (linear least
-    squares on knot-centre samples, poses interpolated between frames)."""
+    """The spline fitted to the first camera's PnP poses carried into the IMU by its plain extrinsic
+    (linear least squares on knot-centre samples, poses interpolated between frames); every camera's
+    extrinsic and td from its own plain result, the biases and gravity from the first camera's."""
+    track, plain, td = tracks[0], plains[0], td0[0]
     T_c_i = se3.invert(plain.T_imu_cam)
     T_w_i = track.T_w_cam @ T_c_i
     t_pose = track.t_s - t_ref + td
@@ -491,10 +578,12 @@ def _initial_state(
     R_g = se3.rotation_from_rotvec(axis / max(np.linalg.norm(axis), 1e-12) * angle)
     return _State(
         ctrl,
-        plain.T_imu_cam[:3, :3].copy(),
-        plain.T_imu_cam[:3, 3].copy(),
-        td,
-        0.0,
+        problem.tie(
+            [
+                _Extrinsic(q.T_imu_cam[:3, :3].copy(), q.T_imu_cam[:3, 3].copy(), t)
+                for q, t in zip(plains, td0, strict=True)
+            ]
+        ),
         R_g,
         plain.gyro_bias_rad_s.copy(),
         plain.accel_bias_m_s2.copy(),
@@ -519,33 +608,81 @@ def solve_imu_camera(
     track: BoardTrack | None = None,
     plain: PlainResult | None = None,
 ) -> ImuCameraSolution:
-    """Joint camera-IMU calibration (module docstring).
+    """Joint camera-IMU calibration of one camera (module docstring; ``solve_imu_cameras`` for several).
+
+    Raises:
+        ImuInputError / ImuUnitError: the recording cannot be aligned or is in the wrong units.
+        NumericalError: the residuals are not finite at the start.
+    """
+    return solve_imu_cameras(
+        imu,
+        [frames],
+        noise,
+        options,
+        None if track is None else [track],
+        None if plain is None else [plain],
+    )[0]
+
+
+def solve_imu_cameras(
+    imu: ImuSamples,
+    cameras: Sequence[CameraFrames],
+    noise: ImuNoise,
+    options: SolveOptions = SolveOptions(),
+    tracks: Sequence[BoardTrack] | None = None,
+    plains: Sequence[PlainResult] | None = None,
+    rig: Sequence[np.ndarray | None] | None = None,
+) -> list[ImuCameraSolution]:
+    """Several cameras and one IMU in one solve: each camera's own T_imu_cam, td (and line delay)
+    against ONE IMU trajectory, gravity and biases, so every camera's corners pin the motion that the
+    others' extrinsics are measured against. One solution per camera, in order; each carries its own
+    states and the shared IMU states (covariance over ``state_names`` of a one-camera solve), its
+    corners' residuals and the shared IMU residuals (``cpu_s`` and ``iterations`` are the whole joint
+    solve's). The first camera's poses start the trajectory.
+
+    ``rig``: per camera, its pose in the first camera's frame T_cam0_cam (4, 4) where the rig already
+    relates the two (held: that camera's T_imu_cam = T_imu_cam0 T_cam0_cam, its corners then pin the
+    first camera's extrinsic; its td stays its own), or None (estimated). The first entry is None.
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be aligned or is in the wrong units.
         NumericalError: the residuals are not finite at the start.
     """
     cpu0 = time.process_time()
-    track = track or board_track(frames)
-    plain = plain or plain_calibration(imu, frames, track, td_s=options.hold_td_s)
-    td0 = plain.td_s if options.hold_td_s is None else options.hold_td_s
+    if not cameras:
+        raise ImuInputError("no camera to solve: give at least one camera's frames")
+    rig = list(rig) if rig is not None else [None] * len(cameras)
+    if len(rig) != len(cameras) or rig[0] is not None:
+        raise ValueError("rig: one entry per camera, the first None (the cameras are posed in its frame)")
+    tracks = list(tracks) if tracks is not None else [board_track(f) for f in cameras]
+    plains = (
+        list(plains)
+        if plains is not None
+        else [
+            plain_calibration(imu, f, t, td_s=options.hold_td_s) for f, t in zip(cameras, tracks, strict=True)
+        ]
+    )
+    td0 = [q.td_s if options.hold_td_s is None else options.hold_td_s for q in plains]
     t_ref = float(imu.t_s[0])
-    problem = _Problem(imu, frames, noise, options, td0, t_ref)
+    problem = _Problem(imu, cameras, noise, options, td0, t_ref, rig)
     if problem.t_imu.size < 100:
         raise ImuInputError(
             "camera and IMU overlap for fewer than 100 IMU samples; do the logs share a clock?"
         )
-    state = _initial_state(problem, track, plain, t_ref, td0)
+    state = _initial_state(problem, tracks, plains, t_ref, td0)
     state, system, iterations, converged = problem.solve(state, options.max_iterations)
-    # Variance components: corners from their RMS, IMU groups raised to theirs.
-    r_c = problem.corners(state, False)
+    # Variance components: each camera's corners from their RMS, IMU groups raised to theirs.
+    for c, cam in enumerate(problem.cams):
+        r_c = problem.corners(state, c, False)
+        norm = np.linalg.norm(r_c, axis=1)
+        robust_sigma = float(np.median(norm)) / np.sqrt(
+            2 * np.log(2)
+        )  # 2-D Gaussian: median |r| = 1.177 sigma
+        cam.inliers = norm <= OUTLIER_SIGMAS * robust_sigma
+        cam.corner_mask = cam.inliers.astype(float)
+        if not options.fix_corner_sigma:
+            cam.sigma_px = float(np.sqrt(np.mean(r_c[cam.inliers] ** 2)))
     r_i = problem.imu(state, False)
-    norm = np.linalg.norm(r_c, axis=1)
-    robust_sigma = float(np.median(norm)) / np.sqrt(2 * np.log(2))  # 2-D Gaussian: median |r| = 1.177 sigma
-    problem.inliers = norm <= OUTLIER_SIGMAS * robust_sigma
-    problem.corner_mask = problem.inliers.astype(float)
-    if not options.fix_corner_sigma:
-        problem.sigma_px = float(np.sqrt(np.mean(r_c[problem.inliers] ** 2)))
     f_g = max(1.0, float(np.sqrt(np.mean(r_i[:, :3] ** 2))) / problem.sigma_gyro)
     f_a = max(1.0, float(np.sqrt(np.mean(r_i[:, 3:] ** 2))) / problem.sigma_accel)
     problem.sigma_gyro *= f_g
@@ -553,88 +690,112 @@ def solve_imu_camera(
     state, system, more, converged = problem.solve(state, options.max_iterations)
     iterations += more
     cov = _safe_inverse(system.H)
-    A_full = state.cache["A"]
+    A = state.cache["A"]
     inflation = np.ones(cov.shape[0])
     if options.jackknife_blocks >= 3:
         jk = _block_jackknife(problem, state, options.jackknife_blocks)
         ratio = np.diag(jk) / np.diag(cov)
         inflation = np.where(ratio > JACKKNIFE_RATIO, np.sqrt(ratio), 1.0)
         cov = cov * np.outer(inflation, inflation)
-    act = problem.active
-    names = tuple(SHARED_NAMES[i] for i in act)
-    index = {name: k for k, name in enumerate(names)}
-    seven = np.zeros((7, 7))
-    seven_names = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")
-    have = [k for k, n in enumerate(seven_names) if n in index]
-    rows = [index[seven_names[k]] for k in have]
-    seven[np.ix_(have, have)] = cov[np.ix_(rows, rows)]
-    A = A_full
-    td_crlb = 1.0 / np.sqrt(A[index["td"], index["td"]]) if "td" in index else float("nan")
-    r_c = problem.corners(state, False)
-    r_i = problem.imu(state, False)
     held_out = _k_fold(problem, state, options) if options.folds >= 2 else None
+    r_i = problem.imu(state, False)
     g_w = problem.gravity(state.R_g)
-    return ImuCameraSolution(
-        T_imu_cam=se3.transform(state.R_ic, state.t_ic),
-        td_s=float(state.td),
-        td_held=options.hold_td_s is not None,
-        line_delay_s=float(state.line_delay) if options.estimate_line_delay else None,
-        gyro_bias_rad_s=state.b_g,
-        accel_bias_m_s2=state.b_a,
-        gravity_w_m_s2=g_w,
-        gyro_bias_drift_rad_s2=state.b_g_dot if options.bias_drift else None,
-        accel_bias_drift_m_s3=state.b_a_dot if options.bias_drift else None,
-        covariance=cov,
-        state_names=names,
-        covariance_7=seven,
-        sigma_rotation_deg=np.degrees(np.sqrt(np.diag(seven)[:3])),
-        sigma_translation_mm=1e3 * np.sqrt(np.diag(seven)[3:6]),
-        sigma_td_ms=1e3 * float(np.sqrt(seven[6, 6])),
-        td_crlb_ms=1e3 * float(td_crlb),
-        sigma_line_delay_us=(
-            1e6 * float(np.sqrt(cov[index["line_delay"], index["line_delay"]]))
-            if "line_delay" in index
-            else None
-        ),
-        corner_sigma_px=problem.sigma_px,
-        corner_rms_px=float(np.sqrt(np.mean(np.sum(r_c[problem.inliers] ** 2, axis=1)))),
-        n_outliers=int(np.sum(~problem.inliers)),
-        gyro_rms_rad_s=float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))),
-        accel_rms_m_s2=float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))),
-        imu_variance_factors=(f_g, f_a),
-        sigma_inflation=dict(zip(names, (float(v) for v in inflation), strict=True)),
-        held_out=held_out,
-        iterations=iterations,
-        converged=converged,
-        n_frames=int(np.unique(problem.frame_of_corner).size),
-        n_corners=int(problem.obj.shape[0]),
-        n_imu=int(problem.t_imu.size),
-        knots=problem.knots,
-        cpu_s=time.process_time() - cpu0,
-        plain=plain,
-        residuals={
-            "corner_px": r_c,
-            "corner_t_s": problem.t_cam + t_ref,
-            "corner_row_px": problem.row,
-            "corner_inlier": problem.inliers,
-            "imu_t_s": problem.t_imu + t_ref,
-            "gyro_rad_s": r_i[:, :3],
-            "accel_m_s2": r_i[:, 3:],
-        },
-    )
+    index = {problem.names[i]: k for k, i in enumerate(problem.active)}
+    cpu_s = time.process_time() - cpu0
+    solutions = []
+    for c, cam in enumerate(problem.cams):
+        # This camera's states and the IMU's, under the names of a one-camera solve; a camera the rig
+        # holds has the first camera's extrinsic states carried through its rig pose.
+        T_rig = cam.T_cam0_cam
+        held = T_rig is not None
+        rows, names = [], []
+        for name in SHARED_NAMES:
+            owner = 0 if held and name in SHARED_NAMES[:6] else c
+            full = name if owner == 0 or name not in SHARED_NAMES[:CAMERA_STATES] else f"cam{owner}.{name}"
+            if full in index:
+                rows.append(index[full])
+                names.append(name)
+        L = np.zeros((len(rows), cov.shape[0]))
+        L[np.arange(len(rows)), rows] = 1.0
+        if T_rig is not None:
+            L[3:6, rows[0:3]] = -_skew((state.cams[0].R_ic @ T_rig[:3, 3])[None])[0]
+        sub = L @ cov @ L.T
+        own = {name: k for k, name in enumerate(names)}
+        seven = np.zeros((7, 7))
+        seven_names = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "td")
+        have = [k for k, n in enumerate(seven_names) if n in own]
+        at = [own[seven_names[k]] for k in have]
+        seven[np.ix_(have, have)] = sub[np.ix_(at, at)]
+        td_full = "td" if c == 0 else f"cam{c}.td"
+        td_crlb = 1.0 / np.sqrt(A[index[td_full], index[td_full]]) if td_full in index else float("nan")
+        e = state.cams[c]
+        r_c = problem.corners(state, c, False)
+        solutions.append(
+            ImuCameraSolution(
+                T_imu_cam=se3.transform(e.R_ic, e.t_ic),
+                td_s=float(e.td),
+                td_held=options.hold_td_s is not None,
+                line_delay_s=float(e.line_delay) if options.estimate_line_delay else None,
+                gyro_bias_rad_s=state.b_g,
+                accel_bias_m_s2=state.b_a,
+                gravity_w_m_s2=g_w,
+                gyro_bias_drift_rad_s2=state.b_g_dot if options.bias_drift else None,
+                accel_bias_drift_m_s3=state.b_a_dot if options.bias_drift else None,
+                covariance=sub,
+                state_names=tuple(names),
+                covariance_7=seven,
+                sigma_rotation_deg=np.degrees(np.sqrt(np.diag(seven)[:3])),
+                sigma_translation_mm=1e3 * np.sqrt(np.diag(seven)[3:6]),
+                sigma_td_ms=1e3 * float(np.sqrt(seven[6, 6])),
+                td_crlb_ms=1e3 * float(td_crlb),
+                sigma_line_delay_us=(
+                    1e6 * float(np.sqrt(sub[own["line_delay"], own["line_delay"]]))
+                    if "line_delay" in own
+                    else None
+                ),
+                corner_sigma_px=cam.sigma_px,
+                corner_rms_px=float(np.sqrt(np.mean(np.sum(r_c[cam.inliers] ** 2, axis=1)))),
+                n_outliers=int(np.sum(~cam.inliers)),
+                gyro_rms_rad_s=float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))),
+                accel_rms_m_s2=float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))),
+                imu_variance_factors=(f_g, f_a),
+                sigma_inflation=dict(zip(names, (float(inflation[k]) for k in rows), strict=True)),
+                held_out=None if held_out is None else held_out[c],
+                iterations=iterations,
+                converged=converged,
+                n_frames=int(np.unique(cam.frame_of_corner).size),
+                n_corners=int(cam.obj.shape[0]),
+                n_imu=int(problem.t_imu.size),
+                knots=problem.knots,
+                cpu_s=cpu_s,
+                plain=plains[c],
+                residuals={
+                    "corner_px": r_c,
+                    "corner_t_s": cam.t_cam + t_ref,
+                    "corner_row_px": cam.row,
+                    "corner_inlier": cam.inliers,
+                    "imu_t_s": problem.t_imu + t_ref,
+                    "gyro_rad_s": r_i[:, :3],
+                    "accel_m_s2": r_i[:, 3:],
+                },
+            )
+        )
+    return solutions
 
 
 def _one_step(
-    problem: _Problem, state: _State, corners_out: np.ndarray, imu_out: np.ndarray
+    problem: _Problem, state: _State, corners_out: Sequence[np.ndarray], imu_out: np.ndarray
 ) -> tuple[np.ndarray, _State]:
-    """The solution with some corners and IMU samples left out, one Gauss-Newton step from ``state``
-    (the full solution): (shared delta, moved state). Restores the problem's masks."""
-    problem.corner_mask = (problem.inliers & ~corners_out).astype(float)
+    """The solution with some corners (a mask per camera) and IMU samples left out, one Gauss-Newton
+    step from ``state`` (the full solution): (shared delta, moved state). Restores the problem's masks."""
+    for cam, out in zip(problem.cams, corners_out, strict=True):
+        cam.corner_mask = (cam.inliers & ~out).astype(float)
     problem.imu_mask = (~imu_out).astype(float)
     probe = replace(state, cache={})
     system = problem.evaluate(probe)
     delta = np.linalg.lstsq(system.H, system.g, rcond=None)[0]
-    problem.corner_mask = problem.inliers.astype(float)
+    for cam in problem.cams:
+        cam.corner_mask = cam.inliers.astype(float)
     problem.imu_mask = np.ones(problem.t_imu.size)
     return delta, problem.retract(probe, delta)
 
@@ -642,39 +803,43 @@ def _one_step(
 def _block_jackknife(problem: _Problem, state: _State, blocks: int) -> np.ndarray:
     """Delete-one-block jackknife covariance over the active shared states (p, p).
 
-    The camera span is cut into ``blocks`` contiguous time blocks; each block's corners and IMU samples
-    are left out in turn and the solution moved by one Gauss-Newton step from the full one (the
-    linearised jackknife: a block is a small share of the data). The spread of those K answers,
-    (K - 1)/K sum (d_k - mean)(d_k - mean)^T, sees what the white-noise covariance cannot: residuals
-    correlated in time (vibration, a lens error that follows the board across the image).
+    The camera span is cut into ``blocks`` contiguous time blocks; each block's corners (of every
+    camera) and IMU samples are left out in turn and the solution moved by one Gauss-Newton step from
+    the full one (the linearised jackknife: a block is a small share of the data). The spread of those
+    K answers, (K - 1)/K sum (d_k - mean)(d_k - mean)^T, sees what the white-noise covariance cannot:
+    residuals correlated in time (vibration, a lens error that follows the board across the image).
     """
-    t_c, t_i = problem.t_cam + state.td, problem.t_imu
-    edges = np.linspace(t_c.min(), t_c.max(), blocks + 1)
+    t_c = [cam.t_cam + e.td for cam, e in zip(problem.cams, state.cams, strict=True)]
+    t_i = problem.t_imu
+    edges = np.linspace(min(t.min() for t in t_c), max(t.max() for t in t_c), blocks + 1)
     edges[-1] += 1.0
     steps = []
     for b in range(blocks):
-        inside_c, inside_i = (
-            (t_c >= edges[b]) & (t_c < edges[b + 1]),
-            (t_i >= edges[b]) & (t_i < edges[b + 1]),
-        )
+        inside_c = [(t >= edges[b]) & (t < edges[b + 1]) for t in t_c]
+        inside_i = (t_i >= edges[b]) & (t_i < edges[b + 1])
         steps.append(_one_step(problem, state, inside_c, inside_i)[0])
     d = np.array(steps)
     d -= d.mean(axis=0)
     return (blocks - 1) / blocks * d.T @ d
 
 
-def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> HeldOut:
+def _k_fold(problem: _Problem, state: _State, options: SolveOptions) -> list[HeldOut]:
+    """One ``HeldOut`` per camera: each fold leaves out every k-th frame of every camera and every k-th
+    IMU sample (the IMU's lists are the same for every camera)."""
     k = options.folds
-    frame_rank = np.unique(problem.frame_of_corner, return_inverse=True)[1]
+    frame_rank = [np.unique(cam.frame_of_corner, return_inverse=True)[1] for cam in problem.cams]
     sample = np.arange(problem.t_imu.size)
-    out: HeldOut = HeldOut([], [], [])
+    outs = [HeldOut([], [], []) for _ in problem.cams]
     for f in range(k):
-        out_c = frame_rank % k == f
+        out_c = [rank % k == f for rank in frame_rank]
         out_i = sample % k == f
         _, fold_state = _one_step(problem, state, out_c, out_i)
-        r_c = problem.corners(fold_state, False)[out_c & problem.inliers]
         r_i = problem.imu(fold_state, False)[out_i]
-        out.corner_rms_px.append(float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))))
-        out.gyro_rms_rad_s.append(float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1)))))
-        out.accel_rms_m_s2.append(float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1)))))
-    return out
+        gyro = float(np.sqrt(np.mean(np.sum(r_i[:, :3] ** 2, axis=1))))
+        accel = float(np.sqrt(np.mean(np.sum(r_i[:, 3:] ** 2, axis=1))))
+        for c, (cam, out) in enumerate(zip(problem.cams, outs, strict=True)):
+            r_c = problem.corners(fold_state, c, False)[out_c[c] & cam.inliers]
+            out.corner_rms_px.append(float(np.sqrt(np.mean(np.sum(r_c**2, axis=1)))))
+            out.gyro_rms_rad_s.append(gyro)
+            out.accel_rms_m_s2.append(accel)
+    return outs

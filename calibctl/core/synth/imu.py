@@ -16,7 +16,9 @@ The IMU rides on the camera: T_w_imu = T_w_cam T_imu_cam^-1. Its gyro is the bod
 difference), both plus constant biases and white noise of density * sqrt(rate) (Kalibr's discrete
 convention). Clocks: the IMU clock is the truth's; a frame stamped t_cam was seen at t_cam + td_s
 (+ line_delay_s * (v - c_y) for a corner on row v, solved by fixed-point iteration). Corners get
-Gaussian noise of ``noise_px``; corners off the image are dropped.
+Gaussian noise of ``noise_px``; corners off the image are dropped. Further cameras
+(``more_cameras``: their T_imu_cam) share the lens, the frame stamps and td (one rig clock) and are
+rendered after everything else, so adding one leaves the first camera and the IMU unchanged.
 """
 
 from __future__ import annotations
@@ -31,6 +33,10 @@ from calibctl.core.intrinsics.lens_checks import distort_normalised
 EUROC_LIKE_T_IMU_CAM = se3.transform(
     np.array([[0.0149, -0.9999, 0.0041], [0.9996, 0.0150, 0.0257], [-0.0258, 0.0038, 0.9997]]),
     [-0.0216, -0.0647, 0.0098],
+)
+# EuRoC's stereo pair: the second camera 11 cm along the first one's x, nearly parallel.
+EUROC_LIKE_T_CAM0_CAM1 = se3.transform(
+    se3.rotation_from_rotvec([0.0141, -0.0004, 0.0023]), [0.110, -0.0002, 0.0009]
 )
 
 
@@ -52,10 +58,21 @@ class ImuCameraTruth:
 
 
 @dataclass(frozen=True)
+class RenderedCamera:
+    """A further camera of the rig: T_imu_cam (4, 4) and its corners per frame (the first camera's
+    stamps, lens and td)."""
+
+    T_imu_cam: np.ndarray
+    object_points: tuple[np.ndarray, ...]
+    image_points: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True)
 class ImuCameraRecording:
     """imu_t_s (n,), gyro_rad_s (n, 3), accel_m_s2 (n, 3): IMU clock. cam_t_s (F,): camera clock;
     object_points / image_points: F arrays (N_f, 3) m / (N_f, 2) px. camera_matrix (3, 3),
-    dist_coeffs (k,), image_size (w, h). truth: what produced it."""
+    dist_coeffs (k,), image_size (w, h). truth: what produced it. more_cameras: the rig's further
+    cameras (``more_cameras`` of ``synthesize_imu_camera``)."""
 
     imu_t_s: np.ndarray
     gyro_rad_s: np.ndarray
@@ -67,6 +84,7 @@ class ImuCameraRecording:
     dist_coeffs: np.ndarray
     image_size: tuple[int, int]
     truth: ImuCameraTruth
+    more_cameras: tuple[RenderedCamera, ...] = ()
 
 
 def grid_points(cols: int = 7, rows: int = 6, spacing_m: float = 0.05) -> np.ndarray:
@@ -117,6 +135,47 @@ def _project(Xc: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return np.stack([K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
 
 
+@dataclass(frozen=True)
+class _Render:
+    """What every camera of one recording shares: the motion, lens, board, clock and corner noise."""
+
+    motion: _Motion
+    T_imu_cam0: np.ndarray
+    K: np.ndarray
+    dist: np.ndarray
+    obj: np.ndarray
+    image_size: tuple[int, int]
+    td_s: float
+    line_delay_s: float
+    noise_px: float
+
+    def frames(
+        self, T_imu_cam: np.ndarray, t_cam: np.ndarray, rng: np.random.Generator
+    ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """Board points and noisy corners per frame of the camera at T_imu_cam (module docstring)."""
+        K, obj = self.K, self.obj
+        # The motion is the first camera's; a further camera rides on it through the IMU.
+        T_c0_c = se3.invert(self.T_imu_cam0) @ T_imu_cam
+        first = T_imu_cam is self.T_imu_cam0
+        objs, imgs = [], []
+        w, hgt = self.image_size
+        for tc in t_cam:
+            rows = np.full(obj.shape[0], K[1, 2])
+            for _ in range(4 if self.line_delay_s else 1):
+                t_true = tc + self.td_s + self.line_delay_s * (rows - K[1, 2])
+                R_w_c, c = self.motion.pose(t_true)
+                if not first:
+                    R_w_c, c = R_w_c @ T_c0_c[:3, :3], c + R_w_c @ T_c0_c[:3, 3]
+                Xc = np.einsum("nji,nj->ni", R_w_c, obj - c)
+                px = _project(Xc, K, self.dist)
+                rows = px[:, 1]
+            px = px + self.noise_px * rng.standard_normal(px.shape)
+            inside = (Xc[:, 2] > 0.05) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < hgt)
+            objs.append(obj[inside])
+            imgs.append(px[inside])
+        return tuple(objs), tuple(imgs)
+
+
 def synthesize_imu_camera(
     seed: int = 0,
     *,
@@ -138,6 +197,7 @@ def synthesize_imu_camera(
     image_size: tuple[int, int] = (752, 480),
     board_points: np.ndarray | None = None,
     corridor_wobble_rad_s: float = 0.0,
+    more_cameras: tuple[np.ndarray, ...] = (),
 ) -> ImuCameraRecording:
     """A camera + IMU recording (module docstring); everything from numpy.random.default_rng(seed)."""
     rng = np.random.default_rng(seed)
@@ -168,20 +228,11 @@ def synthesize_imu_camera(
     accel = accel + np.asarray(accel_bias_m_s2) + sa * rng.standard_normal(accel.shape)
     # Camera frames, stamped on the camera clock.
     t_cam = np.arange(int(round(duration_s * camera_rate_hz))) / camera_rate_hz
-    objs, imgs = [], []
-    w, hgt = image_size
-    for tc in t_cam:
-        rows = np.full(obj.shape[0], K[1, 2])
-        for _ in range(4 if line_delay_s else 1):
-            t_true = tc + td_s + line_delay_s * (rows - K[1, 2])
-            R_w_c, c = mot.pose(t_true)
-            Xc = np.einsum("nji,nj->ni", R_w_c, obj - c)
-            px = _project(Xc, K, dist)
-            rows = px[:, 1]
-        px = px + noise_px * rng.standard_normal(px.shape)
-        inside = (Xc[:, 2] > 0.05) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < hgt)
-        objs.append(obj[inside])
-        imgs.append(px[inside])
+    render = _Render(mot, T_imu_cam, K, dist, obj, image_size, td_s, line_delay_s, noise_px)
+    objs, imgs = render.frames(T_imu_cam, t_cam, rng)
+    more = tuple(
+        RenderedCamera(np.asarray(T, np.float64), *render.frames(T, t_cam, rng)) for T in more_cameras
+    )
     truth = ImuCameraTruth(
         np.asarray(T_imu_cam, np.float64),
         td_s,
@@ -193,4 +244,4 @@ def synthesize_imu_camera(
         accel_noise_density,
         noise_px,
     )
-    return ImuCameraRecording(t_imu, gyro, accel, t_cam, tuple(objs), tuple(imgs), K, dist, image_size, truth)
+    return ImuCameraRecording(t_imu, gyro, accel, t_cam, objs, imgs, K, dist, image_size, truth, more)

@@ -9,12 +9,20 @@ holds td at ``--hold-td-ms`` when given, else refuses); the typed result becomes
 full precision (``evidence``) and is stored as the rig's next version through the ``edges`` room, a
 rejected result as a rejected version (never active). ``result_json`` is the one rounded JSON shape
 that ``--json`` prints and ``-o`` writes.
+
+Several cameras (``ImuRequest.more``: further (camera folder, serial) pairs) are solved in one joint
+solve against one IMU trajectory, gravity and biases (``core.imu.calibrate.calibrate_cameras``); each
+camera keeps its own outcome, edge ``imu_frame -> serial`` and stored version (in the order given), and
+the first camera's outcome carries the others in ``others``. With ``--rig``, a further camera that the
+rig's active tree already relates to the first (not through the IMU frame) is held through that pose
+(``held_by_rig``): its corners pin the first camera's extrinsic, and it gets no edge of its own (the
+tree already gives its T_imu_cam).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,10 +46,10 @@ from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.gate import GateResult
-from calibctl.core.imu.calibrate import Calibration, calibrate
+from calibctl.core.imu.calibrate import Calibration, calibrate_cameras
 from calibctl.core.imu.plain import board_track
 from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_test
-from calibctl.core.imu.samples import ImuInputError, ImuNoise
+from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
 from calibctl.core.intrinsics.solve import is_fisheye
 from calibctl.errors import InputError, NotFoundError, UsageError
@@ -75,6 +83,7 @@ class ImuRequest:
     board: str | None = None  # registered NAME[@REV]: detects corners in images, checks corner files'
     image_topic: str | None = None  # a ROS bag's sensor_msgs/Image (or CompressedImage) topic
     imu_topic: str | None = None  # a ROS bag's sensor_msgs/Imu topic
+    more: tuple[tuple[str, str], ...] = ()  # further (camera folder, serial) solved jointly with the first
 
 
 @dataclass
@@ -92,6 +101,13 @@ class ImuOutcome:
     series: ReportSeries | None = None  # what the report page plots over time
     stored: RigCalibration | None = None
     written: list[str] = field(default_factory=list)
+    others: list[ImuOutcome] = field(default_factory=list)  # the further cameras of a joint solve
+    held_by_rig: str | None = None  # the rig path that holds this camera's pose to the first camera's
+
+    @property
+    def cameras(self) -> list[ImuOutcome]:
+        """This camera's outcome and the further cameras', in the order given."""
+        return [self, *self.others]
 
     @property
     def solution(self) -> ImuCameraSolution | None:
@@ -139,9 +155,62 @@ def registered_board(settings: Settings, ref: str) -> Board:
     return Board(board.ref, board_spec(board))
 
 
+def _camera_pairs(req: ImuRequest) -> list[tuple[str, str]]:
+    """(camera folder, serial) of every camera solved, refusing a folder or serial named twice."""
+    pairs = [(req.camera, req.serial), *req.more]
+    for k, what in ((0, "camera folder"), (1, "serial")):
+        names = [p[k] for p in pairs]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise UsageError(
+                f"the {what} {', '.join(twice)} is named twice",
+                "give each camera once: --camera FOLDER --serial SERIAL, in pairs",
+            )
+    if len(pairs) > 1 and is_bag(req.recording):
+        raise UsageError(
+            f"{req.recording} is a ROS bag: a bag's image topic is one camera",
+            "solve several cameras from a recording folder (cam0/, cam1/, ...) instead",
+        )
+    return pairs
+
+
+def _on_origin(rec: Recording, first: Recording) -> Recording:
+    """``rec`` (another camera of the same recording) on ``first``'s time origin and IMU samples."""
+    shift_s = (rec.t0_ns - first.t0_ns) * 1e-9
+    f = rec.frames
+    frames = CameraFrames(
+        f.t_s + shift_s, f.object_points, f.image_points, f.camera_matrix, f.dist_coeffs, f.image_size
+    )
+    return replace(rec, imu=first.imu, frames=frames, t0_ns=first.t0_ns)
+
+
+def rig_poses(settings: Settings, req: ImuRequest) -> dict[str, tuple[np.ndarray, str]]:
+    """Cameras the rig's active tree relates to the first camera without passing the IMU frame: serial
+    -> (T_cam0_cam (4, 4), the path in words). Empty without ``--rig``."""
+    if req.rig is None:
+        return {}
+    with open_store(settings) as store:
+        cal = store.get_rig_calibration(req.rig, None)
+    edges = [e for e in cal.edges if req.imu_frame not in (e.parent, e.child)]
+    poses: dict[str, tuple[np.ndarray, str]] = {req.serial: (np.eye(4), req.serial)}
+    grown = True
+    while grown:  # the tree is small: walk it from the first camera, either way along each edge
+        grown = False
+        for e in edges:
+            T = np.array(e.T_parent_child, np.float64)
+            for a, b, T_ab in ((e.parent, e.child, T), (e.child, e.parent, se3.invert(T))):
+                if a in poses and b not in poses:
+                    poses[b] = (poses[a][0] @ T_ab, f"{poses[a][1]} -> {b}")
+                    grown = True
+    where = f" of rig {cal.rig}@{cal.version}"
+    return {s: (T, path + where) for s, (T, path) in poses.items() if s != req.serial}
+
+
 def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
     """Read and solve (module docstring); nothing stored."""
-    camera, intrinsics = camera_intrinsics(settings, req.serial)
+    pairs = _camera_pairs(req)
+    related = rig_poses(settings, req)
+    held = [camera_intrinsics(settings, serial) for _, serial in pairs]
     board = None if req.board is None else registered_board(settings, req.board)
     noise, source = read_noise(req.noise)
     if is_bag(req.recording):
@@ -150,22 +219,45 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
                 f"{req.recording} is a ROS bag: name its topics",
                 "pass --image-topic (sensor_msgs/Image) and --imu-topic (sensor_msgs/Imu)",
             )
-        rec = read_bag(req.recording, req.image_topic, req.imu_topic, intrinsics, board)
+        recs = [read_bag(req.recording, req.image_topic, req.imu_topic, held[0][1], board)]
     else:
-        rec = read_recording(req.recording, req.camera, intrinsics, board)
+        recs = [
+            read_recording(req.recording, cam, intr, board)
+            for (cam, _), (_, intr) in zip(pairs, held, strict=True)
+        ]
+        recs = [recs[0], *(_on_origin(r, recs[0]) for r in recs[1:])]
     options = SolveOptions(
         knot_spacing_s=req.knot_spacing_s, estimate_line_delay=req.line_delay, folds=req.folds
     )
     try:
-        cal = calibrate(rec.imu, rec.frames, noise, options, fallback_td_s=req.hold_td_s)
+        cals = calibrate_cameras(
+            recs[0].imu,
+            [r.frames for r in recs],
+            noise,
+            options,
+            fallback_td_s=req.hold_td_s,
+            rig=[None] + [related[s][0] if s in related else None for _, s in pairs[1:]],
+        )
     except ImuInputError as exc:
         raise InputError(f"{req.recording}: {exc}", "fix the recording as the message says") from None
-    outcome = ImuOutcome(req, camera, rec, noise, source, cal, None if board is None else board.ref)
-    if cal.solution is not None:
-        track = board_track(rec.frames)
-        outcome.rows = row_test(cal.solution, rec.frames, track)
-        outcome.series = report_series(cal.solution, rec.imu, rec.frames, track)
-    return outcome
+    ref = None if board is None else board.ref
+    outcomes = [
+        ImuOutcome(replace(req, camera=cam, serial=serial, more=()), camera, rec, noise, source, cal, ref)
+        for (cam, serial), (camera, _), rec, cal in zip(pairs, held, recs, cals, strict=True)
+    ]
+    for o in outcomes:
+        if o.solution is not None:
+            track = board_track(o.recording.frames)
+            o.rows = row_test(o.solution, o.recording.frames, track)
+            o.series = report_series(o.solution, o.recording.imu, o.recording.frames, track)
+    first = outcomes[0]
+    for o in outcomes[1:]:
+        o.held_by_rig = related[o.request.serial][1] if o.request.serial in related else None
+        if o.held_by_rig is not None:  # its corners moved the first camera's edge: pin them there too
+            first.recording.inputs.extend(i for i in o.recording.inputs if i[0] != "imu")
+    first.request = req
+    first.others = outcomes[1:]
+    return first
 
 
 def _vec3(v: np.ndarray) -> tuple[float, float, float]:
@@ -391,16 +483,33 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
                 "corners": rows.corners,
                 "message": rows.message,
             }
+    if outcome.others:
+        doc["serial"] = outcome.request.serial
+        doc["camera_folder"] = outcome.request.camera
+        doc["more_cameras"] = [
+            {
+                **result_json(o),
+                "serial": o.request.serial,
+                "camera_folder": o.request.camera,
+                "held_by_rig": o.held_by_rig,
+            }
+            for o in outcome.others
+        ]
     return doc
 
 
 def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
     """The whole command (module docstring)."""
     if req.rig is not None:
-        versions.check_sensor_target(settings, req.rig, req.imu_frame, req.serial, IMU, "--imu-frame")
+        related = rig_poses(settings, req)
+        for _, serial in _camera_pairs(req):
+            if serial not in related:
+                versions.check_sensor_target(settings, req.rig, req.imu_frame, serial, IMU, "--imu-frame")
     outcome = solve(settings, req)
     if req.rig is not None:
-        outcome.stored = versions.store_evidence(settings, req.rig, evidence(outcome)).calibration
+        for o in outcome.cameras:  # one version per camera's own edge, in the order given
+            if o.held_by_rig is None:
+                o.stored = versions.store_evidence(settings, req.rig, evidence(o)).calibration
     if req.out is not None:
         text = json.dumps(result_json(outcome), indent=2, allow_nan=False) + "\n"
         write_atomic(req.out, text, force=req.force)

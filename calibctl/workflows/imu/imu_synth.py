@@ -7,7 +7,9 @@ inner-corner chessboard of 50 mm squares, rendered from each frame's pose, the c
 Kalibr's ``imu.yaml`` with the noise densities rendered, and ``truth.json`` (T_imu_cam, td_s, biases,
 gravity, the intrinsics rendered with, Kalibr's T_cam_imu and timeshift_cam_imu). The recording comes
 from core.synth.imu; with ``serial`` it is rendered through that camera's active stored calibration,
-so ``imu solve --serial`` holds the very intrinsics that made it.
+so ``imu solve --serial`` holds the very intrinsics that made it. With ``stereo`` a second camera of
+the rig (EuRoC's stereo pair: 11 cm along the first camera's x, the same lens and clock) writes its
+corner files to ``cam1/`` and its T_imu_cam to ``truth.json``'s ``more_cameras``.
 """
 
 from __future__ import annotations
@@ -21,7 +23,13 @@ import numpy as np
 from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.extrinsics import se3
-from calibctl.core.synth.imu import ImuCameraRecording, grid_points, synthesize_imu_camera
+from calibctl.core.synth.imu import (
+    EUROC_LIKE_T_CAM0_CAM1,
+    EUROC_LIKE_T_IMU_CAM,
+    ImuCameraRecording,
+    grid_points,
+    synthesize_imu_camera,
+)
 from calibctl.errors import AlreadyExistsError, UsageError
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.imu.imu_solve import camera_intrinsics
@@ -77,6 +85,7 @@ def run_imu_synth(
     line_delay_s: float = 0.0,
     serial: str | None = None,
     images: bool = False,
+    stereo: bool = False,
     force: bool = False,
 ) -> dict[str, Any]:
     """Render and write the recording (module docstring); AlreadyExistsError when ``out`` holds one."""
@@ -92,6 +101,10 @@ def run_imu_synth(
     if serial is not None:
         camera, (K, dist, size) = camera_intrinsics(settings, serial)
         lens = {"camera_matrix": K, "dist_coeffs": dist, "image_size": size}
+    if stereo and images:
+        raise UsageError("--stereo writes corner files", "drop --images, or --stereo")
+    if stereo:
+        lens["more_cameras"] = (EUROC_LIKE_T_IMU_CAM @ EUROC_LIKE_T_CAM0_CAM1,)
     if images:
         lens["distance_m"] = IMAGE_DISTANCE_M
         assert np.allclose(grid_points(), IMAGE_BOARD.object_points())
@@ -109,12 +122,18 @@ def run_imu_synth(
     write_atomic(out / "imu0" / "data.csv", "\n".join(rows) + "\n", force=force)
     if images:
         _write_images(out, rec, t_cam, seed, force)
-    for t, obj, img in [] if images else zip(t_cam, rec.object_points, rec.image_points, strict=True):
-        lines = [CORNER_HEADER] + [
-            f"{t},{u:.6f},{v:.6f},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i}"
-            for i, ((u, v), p) in enumerate(zip(img, obj, strict=True))
-        ]
-        write_atomic(out / "cam0" / f"{t}.csv", "\n".join(lines) + "\n", force=force)
+    cameras = [("cam0", rec.object_points, rec.image_points)] + [
+        (f"cam{k + 1}", more.object_points, more.image_points) for k, more in enumerate(rec.more_cameras)
+    ]
+    for folder, objs, imgs in [] if images else cameras:
+        with file_errors("create", out / folder):
+            (out / folder).mkdir(parents=True, exist_ok=True)
+        for t, obj, img in zip(t_cam, objs, imgs, strict=True):
+            lines = [CORNER_HEADER] + [
+                f"{t},{u:.6f},{v:.6f},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i}"
+                for i, ((u, v), p) in enumerate(zip(img, obj, strict=True))
+            ]
+            write_atomic(out / folder / f"{t}.csv", "\n".join(lines) + "\n", force=force)
     tr = rec.truth
     write_atomic(
         out / "imu.yaml",
@@ -148,6 +167,10 @@ def run_imu_synth(
         "seed": seed,
         "frames": int(t_cam.size),
         "imu_samples": int(t_imu.size),
+        "more_cameras": [
+            {"folder": f"cam{k + 1}", "T_imu_cam": more.T_imu_cam.tolist()}
+            for k, more in enumerate(rec.more_cameras)
+        ],
     }
     write_atomic(truth_path, json.dumps(truth, indent=2) + "\n", force=True)
     return {

@@ -34,6 +34,14 @@ def corridor() -> ImuCameraRecording:
     return synthesize_imu_camera(1, motion="corridor", duration_s=6.0)
 
 
+def more_frames(rec: ImuCameraRecording, k: int) -> CameraFrames:
+    """The rig's k-th further camera as CameraFrames (the first camera's stamps and lens)."""
+    cam = rec.more_cameras[k]
+    return CameraFrames(
+        rec.cam_t_s, cam.object_points, cam.image_points, rec.camera_matrix, rec.dist_coeffs, rec.image_size
+    )
+
+
 @pytest.fixture(scope="session")
 def rolling() -> ImuCameraRecording:
     """A 3 s rolling-shutter dance: 30 us per row."""
