@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex, utc_now
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, TrustedKeys, create_key
 from calibctl.store import migrate
 from calibctl.store.engine import make_engine
@@ -72,7 +72,7 @@ def test_a_report_edited_to_pass_is_refused_by_the_gate_and_named_by_verify(db_u
     _ingested(db_url)
     _passes(db_url)
     with pytest.raises(
-        IntegrityError, match=r"health report r-2 \(amr-001, CAM-0001 check\) was changed after"
+        UnverifiedRecord, match=r"health report r-2 \(amr-001, CAM-0001 check\) was changed after"
     ):
         _gate(db_url)
     with Store.open(db_url) as store:
@@ -86,7 +86,7 @@ def test_a_rechained_report_is_refused_with_keys(db_url: str, tmp_path: Path) ->
     rechain(db_url)
     trusted = TrustedKeys({signer.key_id: signer.public})
     with pytest.raises(
-        IntegrityError, match=r"health report r-2 .* has a signature by key .* does not match"
+        UnverifiedRecord, match=r"health report r-2 .* has a signature by key .* does not match"
     ):
         _gate(db_url, trusted)
     assert _gate(db_url) == [
@@ -98,12 +98,12 @@ def test_a_rechained_report_is_refused_with_keys(db_url: str, tmp_path: Path) ->
 def test_a_deleted_report_is_refused_by_the_gate(db_url: str) -> None:
     _ingested(db_url)
     run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-2'")
-    with pytest.raises(IntegrityError, match="numbered 1 to 2 but 1 are stored: a report was deleted"):
+    with pytest.raises(UnverifiedRecord, match="numbered 1 to 2 but 1 are stored: a report was deleted"):
         _gate(db_url)
     with Store.open(db_url) as store:  # a passing one ingested after it does not hide it
         assert store.add_health_reports([health_report("CAM-0001", source_id="r-3")]) == []
     run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-1'")
-    with pytest.raises(IntegrityError, match="numbered 1 to 3 but 1 are stored"):
+    with pytest.raises(UnverifiedRecord, match="numbered 1 to 3 but 1 are stored"):
         _gate(db_url)
 
 
@@ -129,12 +129,12 @@ def test_a_promote_over_an_edited_report_refuses_and_promotes_nothing(
     )
     (events,) = _select(sqlite_url, "SELECT count(*) FROM fleet_events")[0]
     refused = run(sqlite_url, "fleet", "rollout", "promote", "r1", "--reason", "go")
-    assert refused.exit_code == 1, refused.output
+    assert refused.exit_code == 2, refused.output  # could not run: a record it needs does not verify
     assert "health report a1/c (amr-1, CAM-1 check) was changed after it was written" in refused.stderr
     assert "Traceback" not in refused.output
     assert _select(sqlite_url, "SELECT count(*) FROM fleet_events")[0] == (events,)  # nothing promoted
     status = run(sqlite_url, "fleet", "status")  # the rollout's gate is not shown as if it held
-    assert status.exit_code == 1 and "health report a1/c" in status.stderr
+    assert status.exit_code == 2 and "health report a1/c" in status.stderr
 
 
 def test_reports_stored_before_0016_are_chained_by_the_migration(db_url: str) -> None:
