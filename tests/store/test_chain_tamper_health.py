@@ -152,3 +152,37 @@ def test_reports_stored_before_0016_are_chained_by_the_migration(db_url: str) ->
         assert store.verify().problems == []
         assert store.add_health_reports([health_report("CAM-0001", source_id="r-3")]) == []
     assert _select(db_url, "SELECT chain_seq FROM health_reports WHERE source_id = 'r-3'") == [(3,)]
+
+
+def _trends_refused(url: str, *expected: str) -> None:
+    res = run(url, "fleet", "trends", "CAM-0001")
+    assert res.exit_code == 2, res.output  # could not run: a report it reads does not verify
+    assert res.stdout == "" and "Traceback" not in res.output and "calibctl db verify" in res.stderr
+    for text in expected:
+        assert text in res.stderr, res.stderr
+
+
+def test_fleet_trends_refuses_an_edited_or_deleted_report(db_url: str) -> None:
+    _ingested(db_url)
+    assert run(db_url, "fleet", "trends", "CAM-0001").exit_code == 0
+    _passes(db_url)
+    _trends_refused(
+        db_url,
+        "health report r-2 (amr-001, CAM-0001 check) was changed after it was written",
+        "fleet trends refuses to read it",
+    )
+    run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-2'")
+    _trends_refused(db_url, "numbered 1 to 2 but 1 are stored: a report was deleted")
+
+
+def test_fleet_trends_refuses_a_rechained_report_with_keys(
+    db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "station.pem"
+    signer = create_key(path)
+    _ingested(db_url, signer)
+    _passes(db_url)
+    rechain(db_url)
+    assert run(db_url, "fleet", "trends", "CAM-0001").exit_code == 0  # consistent without keys
+    monkeypatch.setenv("CALIBCTL_SIGNING_KEY", str(path))
+    _trends_refused(db_url, "health report r-2 (amr-001, CAM-0001 check) has a signature by key")

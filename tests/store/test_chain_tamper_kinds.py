@@ -16,15 +16,18 @@ from typer.testing import CliRunner
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.cli.main import app
+from calibctl.config import load_settings
 from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, create_key
 from calibctl.store.repository import Store
+from calibctl.workflows.lidar import rig_lidar
 from tests.artifacts.factories import FIXED_TIME, calibration, measured_board
 from tests.store.documents import fleet_event
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 from tests.store.tamper import rechain, run_underneath
 from tests.store.test_chain_tamper import _select
 from tests.store.test_chain_tamper_rigs_checks import _reseal_rig, with_handeye_edge
+from tests.workflows.lidar.test_rig_lidar_carry import _lidar
 
 WHO = {"actor": "qa", "station": "st1"}
 runner = CliRunner()
@@ -170,6 +173,26 @@ def test_a_moved_rig_edge_is_never_used_by_a_write(rig_store: str) -> None:
         assert store.active_rig_version(RIG) == 1
 
 
+def test_a_lidar_edge_moved_with_its_content_hash_recomputed_is_refused_by_reads_and_writes(
+    db_url: str,
+) -> None:
+    settings = load_settings(db=db_url, station="st1", operator="qa", env={})
+    with Store.open(db_url) as store:
+        store.add_rig(rig_definition().model_copy(update={"frames": ["lidar"]}))
+        store.add_rig_calibration(rig_calibration(), activate=True, reason="rig solve", **WHO)
+        store.add_artifact(calibration(serial="CAM-0001"), activate=True, reason="solved", **WHO)
+    edge = _lidar(camera="CAM-0001@1").model_copy(update={"child_frame": "CAM-0001"})
+    assert rig_lidar.store_lidar(settings, RIG, edge).calibration.version == 2
+    _reseal_rig(db_url, 2, _moved_edge("lidar-board"))
+    why = f"rig {RIG}@2 was changed after it was written (its chain hash no longer matches)"
+    for args in (["rig", "show", RIG], ["rig", "export", RIG, "--format", "tf"]):
+        _refused(db_url, args, why)
+    _failed_lint(db_url, ["rig", "lint", RIG], why)
+    with pytest.raises(UnverifiedRecord, match=rf"rig {RIG}@2 was changed"):
+        rig_lidar.store_lidar(settings, RIG, edge)  # a new LiDAR result is never built on it
+    assert _select(db_url, "SELECT count(*) FROM rig_calibrations") == [(2,)]
+
+
 # the fleet log ----------
 
 
@@ -202,6 +225,15 @@ def test_a_fleet_event_edited_with_its_payload_hash_recomputed_is_refused(db_url
     _refused(db_url, ["fleet", "status"], "fleet event 3 (r1, rollout) was changed after it was written")
     with Store.open(db_url) as store, pytest.raises(UnverifiedRecord, match=r"fleet event 3 \(r1, rollout\)"):
         store.fleet()
+
+
+def test_a_promote_over_an_edited_fleet_log_refuses_and_writes_nothing(db_url: str) -> None:
+    _fleet(db_url)
+    _rewrite(db_url, "fleet_events", "kind = 'rollout'", _target_back_to_1)
+    res = runner.invoke(app, ["--db", db_url, "fleet", "rollout", "promote", "r1", "--reason", "go"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "fleet event 3 (r1, rollout) was changed after it was written" in res.stderr
+    assert _select(db_url, "SELECT count(*) FROM fleet_events") == [(3,)]
 
 
 def test_a_rechained_fleet_log_is_refused_with_keys(db_url: str, keyed: Signer) -> None:

@@ -784,6 +784,7 @@ def lint_store(
         else:
             name = serial or ""
             found: CalibrationArtifact | UnverifiedRecord | None = None
+            versions: dict[int, str] = {}
             try:
                 versions = {a.version: a.status for a in store.list_artifacts(name)}
                 if store.active_version(name) is not None:
