@@ -1,4 +1,4 @@
-"""Tilt gate on rendered circular fisheyes against the renders' truth (issue 10, fisheye2).
+"""Tilt gate on rendered circular fisheyes against the renders' truth.
 
 Sessions: ``calibctl synth --fisheye`` renders, 640x480, 12 views, "good" scenario, seeds 0..N-1 at each
 field of view; corners found by calibctl's detector; the gates run with the render's image circle.

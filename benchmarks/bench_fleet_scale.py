@@ -1,4 +1,4 @@
-"""Issue 25 item 4: the fleet at factory size on PostgreSQL: ROBOTS robots x 4 camera serials, a year of daily
+"""The fleet at factory size on PostgreSQL: ROBOTS robots x 4 camera serials, a year of daily
 health summaries (500 x 4 x 365 = 730 000 reports), `fleet ingest` rate, `fleet status` and `fleet trends
 SERIAL` latency.
 

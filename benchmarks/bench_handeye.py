@@ -253,7 +253,7 @@ def section_honesty(runs: int) -> list[str]:
     out += [
         f"| all | {zz.mean():+.3f} | {zz.std():.3f} |",
         "",
-        "Bar (issue 12): mean within +/-0.3, std 0.7-1.5.",
+        "The bar: mean within +/-0.3, std 0.7-1.5.",
         "",
     ]
     return out

@@ -17,6 +17,7 @@ extrinsic (T_BS0^-1 T_BS1), which bounds how close any calibration with these he
 come to EuRoC's published pair.
 
 Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
+     python benchmarks/bench_imu_euroc.py FOLDER --growth   (the cost's growth alone: 1/4, 1/2, all)
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from machine import cpu_model, load_1min  # noqa: E402
 from calibctl.core.extrinsics import se3  # noqa: E402
 from calibctl.core.imu.calibrate import calibrate  # noqa: E402
 from calibctl.core.imu.plain import board_track, plain_calibration  # noqa: E402
+from calibctl.core.imu.rows import report_series, row_test  # noqa: E402
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples  # noqa: E402
 from calibctl.core.imu.solve import SolveOptions, solve_imu_camera  # noqa: E402
 
@@ -128,6 +130,12 @@ def main() -> int:
     parser.add_argument("--knot-spacing-s", type=float, default=SolveOptions().knot_spacing_s)
     parser.add_argument("--no-growth", action="store_true", help="skip the recording-length sweep")
     parser.add_argument("--quarters", action="store_true", help="solve each quarter of cam0 alone")
+    parser.add_argument(
+        "--growth",
+        action="store_true",
+        help="only the cost's growth: cam0's first 1/4, 1/2 and all of it, solved as `imu solve` does "
+        "(3-fold held-out, jackknife, gates), then the row test and the report's series",
+    )
     args = parser.parse_args()
     if not args.folder or not (Path(args.folder) / "imu0.csv").is_file():
         print("no imu_april folder (pass it or set CALIBCTL_IMU_APRIL): skipped")
@@ -138,6 +146,9 @@ def main() -> int:
         f"# {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} CPUs ({cpu_model()}), "
         f"load {load_1min():.1f}, knot spacing {args.knot_spacing_s} s"
     )
+    if args.growth:
+        growth(folder, SolveOptions(knot_spacing_s=args.knot_spacing_s), (0.25, 0.5, 1.0))
+        return 0
     options = SolveOptions(knot_spacing_s=args.knot_spacing_s)
     for cam in ("cam0", "cam1"):
         imu, frames, noise = load(folder, cam)
@@ -191,19 +202,34 @@ def main() -> int:
     deg, mm = stereo_check(folder)
     print(f"cam0-cam1 PnP poses against EuRoC's stereo pair: {deg:.3f} deg {mm:.1f} mm (median)")
     if not args.no_growth:
-        for share in (0.25, 0.5, 0.75, 1.0):
-            imu, frames, noise = load(folder, "cam0", keep=(0.0, share))
-            c0 = time.process_time()
-            s = solve_imu_camera(
-                imu, frames, noise, SolveOptions(knot_spacing_s=args.knot_spacing_s, folds=0)
-            )
-            print(
-                f"length {100 * share:3.0f} %: {s.n_frames} frames {s.n_imu} IMU samples {s.knots.n} knots: "
-                f"cpu {time.process_time() - c0:.1f} s, {s.iterations} iterations"
-            )
+        growth(folder, SolveOptions(knot_spacing_s=args.knot_spacing_s, folds=0), (0.25, 0.5, 0.75, 1.0))
     if args.quarters:
         quarters(folder, args.knot_spacing_s)
     return 0
+
+
+def growth(folder: Path, options: SolveOptions, shares: tuple[float, ...]) -> None:
+    """CPU and wall time of ``calibrate`` on cam0's first ``shares`` of the recording, and of what the
+    workflow adds after it (the row test and the report's series, core.imu.rows), with the row test's
+    verdict: EuRoC's cameras are global-shutter, so a significant ramp would be a false alarm."""
+    for share in shares:
+        imu, frames, noise = load(folder, "cam0", keep=(0.0, share))
+        c0, w0 = time.process_time(), time.perf_counter()
+        cal = calibrate(imu, frames, noise, options)
+        cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+        s = cal.solution
+        assert s is not None
+        c0 = time.process_time()
+        track = board_track(frames)
+        rows = row_test(s, frames, track)
+        report_series(s, imu, frames, track)
+        extra = time.process_time() - c0
+        print(
+            f"length {100 * share:3.0f} %: {s.n_frames} frames {s.n_imu} IMU samples {s.knots.n} knots: "
+            f"calibrate cpu {cpu:.1f} s (wall {wall:.1f} s, load {load_1min():.1f}), {s.iterations} "
+            f"iterations, {1e3 * cpu / s.n_frames:.1f} ms cpu per frame; row test + series cpu {extra:.2f} s"
+        )
+        print(f"    row test: {rows.message if rows else 'not run'}")
 
 
 def quarters(folder: Path, knot_spacing_s: float) -> None:

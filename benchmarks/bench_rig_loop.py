@@ -7,7 +7,7 @@ right covariance d^2 follows chi-square with 6 dof (mean 6; 99.7 % quantile 20.1
 Broken: corner-level 3-camera rigs (0.2 px iid noise, as tests/core/extrinsics/test_rig_solve.py) and rendered
 3-camera rigs with frames seen by two cameras, camera 2's corners of the frames it shares with camera 0 only
 shifted by ``--shifts`` px: pair 0-2 then disagrees with 0-1-2.
-Each loop is judged by four covariances: the pairs as independent (Jacobian blocks, the rule before issue 22),
+Each loop is judged by four covariances: the pairs as independent (Jacobian blocks, the old rule),
 the joint Jacobian one (the rule's, core.extrinsics.rig_loop), the joint frame-level one, and the Jacobian one
 scaled by max(1, tr(Cov_jac^-1 Cov_frame) / 6) (a frame-level factor, not used).
 

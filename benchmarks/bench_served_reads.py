@@ -1,5 +1,5 @@
-"""What checking each served record (issue 26 item 8: chain link and signature, ``calibctl.store.served``)
-costs a read, with and without keys configured.
+"""What checking each served record (chain link and signature, ``calibctl.store.served``) costs a read,
+with and without keys configured.
 
     .venv/bin/python benchmarks/bench_served_reads.py [--repeats 7] [--serials 200]
 

@@ -1,4 +1,4 @@
-"""Benchmark: `calibctl triage` on one million residual rows (issue 5). Not a test; prints numbers.
+"""Benchmark: `calibctl triage` on one million residual rows. Not a test; prints numbers.
 
     .venv/bin/python benchmarks/bench_triage.py [--rows 1000000] [--repeats 3] [--keep DIR]
     .venv/bin/python benchmarks/bench_triage.py --accuracy 20     # recovered magnitudes, 20 seeds/fault

@@ -1,5 +1,4 @@
-"""Capture verdicts, old rule against new (issue 22): false rejects and false accepts on renders and real
-sets.
+"""Capture verdicts, old rule against new: false rejects and false accepts on renders and real sets.
 
 Old rule: every capture gate decides (observability, tilt, coverage, views). New rule: observability and views
 refuse a hopeless set, then the projection gate (calibctl.core.capture.projection_gate) decides over the

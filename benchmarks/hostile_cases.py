@@ -1,4 +1,4 @@
-"""The cases of benchmarks/hostile_sweep.py, by command group (the issue 26 categories, re-measured)."""
+"""The cases of benchmarks/hostile_sweep.py, by command group (the sweep's categories, re-measured)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from hostile_sweep import (
     fifo,
     folder,
     foreign_sqlite,
+    lidar_result,
     motions,
     read_only_file,
     read_only_store,
@@ -25,6 +26,7 @@ from hostile_sweep import (
     reseal,
     residuals,
     second_data_line,
+    signed_forgery,
     symlink,
     text,
     tiny_png,
@@ -920,6 +922,21 @@ def _member_fx(doc: dict) -> None:
     doc["members"][1]["camera_matrix"][0][0] += 5.0
 
 
+def _lidar_10mm(doc: dict) -> None:
+    t = doc["transform"]
+    t["matrix"][0][3] += 0.01
+    t["translation_m"][0] += 0.01
+    t["T_cam_lidar"][0][3] -= 0.01
+
+
+def _lidar_rehashed(doc: dict) -> None:
+    """translation_m moved alone and the content hash recomputed (RFC 8785, no key needed)."""
+    from calibctl.workflows.exports import sealed_result
+
+    doc["transform"]["translation_m"][0] += 0.01
+    doc["content_sha256"] = sealed_result.content_sha256(doc)
+
+
 def _notes(b: Path) -> None:
     (b / "notes.txt").write_text("mine\n")
 
@@ -978,6 +995,62 @@ def _seal() -> list[Case]:
             setup=_unsigned_ros_export,
         ),
     ]
+    edited = "a signed export edited (fx +1 px, content hash recomputed, signature kept)"
+    cases += [
+        Case(
+            g,
+            f"import {edited} into a store without keys",
+            ["import", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            protect=["store.db"],
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            f"lint {edited}, no keys",
+            ["lint", "{w}/forged.json"],
+            setup=signed_forgery("forged.json"),
+            says=("edited after signing",),
+        ),
+        Case(
+            g,
+            "import an honest export signed by an untrusted key into a store without keys",
+            ["import", "{w}/signed.json"],
+            expect="ok",
+            setup=signed_forgery("forged.json"),
+        ),
+    ]
+    lidar = {
+        "translation +10 mm, every derived number too": (_lidar_10mm, "content hash does not match"),
+        "translation_m +10 mm alone, re-hashed": (_lidar_rehashed, "are not transform.matrix's"),
+    }
+    cases += [
+        Case(
+            g,
+            f"lint a store-free lidar result, {n}",
+            ["lint", "{w}/r.json"],
+            setup=lidar_result("r.json", e),
+            says=(w,),
+        )
+        for n, (e, w) in lidar.items()
+    ]
+    cases.append(
+        Case(
+            g,
+            "lidar synth --serial of a camera the store does not hold",
+            ["lidar", "synth", "{w}/s", "--serial", "NOPE"],
+            says=("NOPE",),
+        )
+    )
+    cases.append(
+        Case(
+            g,
+            "lint a store-free lidar result, honest",
+            ["lint", "{w}/r.json"],
+            expect="ok",
+            setup=lidar_result("r.json"),
+        )
+    )
     force = ["--db", "sqlite:///{w}/rig.db", "rig", "export", "R1", "--format", "bundle", "-o", "{w}/b"]
     intruders = {
         "holding notes.txt": (_notes, ["b/notes.txt", "b/manifest.json"]),
@@ -1173,6 +1246,127 @@ def _messages() -> list[Case]:
     ]
 
 
+def imu_recording(w: Path) -> None:
+    """A 3 s `calibctl imu synth` recording at {w}/rec rendered through the demo camera (corner files)."""
+    calibctl(w, ["imu", "synth", str(w / "rec"), "--serial", SERIAL, "--duration-s", "3"])
+
+
+def _imu_csv(edit: Callable[[list[str]], list[str]], name: str = "imu0/data.csv") -> Callable[[Path], None]:
+    def make(w: Path) -> None:
+        imu_recording(w)
+        path = w / "rec" / name
+        path.write_text("\n".join(edit(path.read_text().splitlines())) + "\n")
+
+    return make
+
+
+def _scaled(cols: slice, factor: float) -> Callable[[list[str]], list[str]]:
+    def edit(lines: list[str]) -> list[str]:
+        out = [lines[0]]
+        for line in lines[1:]:
+            c = line.split(",")
+            c[cols] = [f"{float(v) * factor:.6f}" for v in c[cols]]
+            out.append(",".join(c))
+        return out
+
+    return edit
+
+
+def _stamp_listed_twice(w: Path) -> None:
+    imu_recording(w)
+    stamps = sorted(p.stem for p in (w / "rec" / "cam0").glob("*.csv"))
+    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    (w / "rec" / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
+
+
+def _imu_only_bag(w: Path) -> None:
+    """A ROS 2 bag holding the recording's IMU topic /imu0 alone (the sweep needs the `bags` extra)."""
+    import numpy as np
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    imu_recording(w)
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    with Writer(w / "bag", version=9) as bag:
+        imu_c = bag.add_connection("/imu0", "sensor_msgs/msg/Imu", typestore=ts)
+        for line in (w / "rec" / "imu0" / "data.csv").read_text().splitlines()[1:]:
+            c = line.split(",")
+            ns, v = int(c[0]), [float(x) for x in c[1:]]
+            msg = T["sensor_msgs/msg/Imu"](
+                header=T["std_msgs/msg/Header"](
+                    stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
+                    frame_id="imu",
+                ),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=T["geometry_msgs/msg/Vector3"](x=v[0], y=v[1], z=v[2]),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=T["geometry_msgs/msg/Vector3"](x=v[3], y=v[4], z=v[5]),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            bag.write(imu_c, ns, ts.serialize_cdr(msg, msg.__msgtype__))
+
+
+def _imu() -> list[Case]:
+    """The camera-IMU solve's bad inputs (docs/imu.md): exit 2, one line naming the file and the fix."""
+    g = "imu"
+    solve = ["imu", "solve", "{w}/rec", "--serial", SERIAL]
+    swap = _imu_csv(lambda lines: [lines[0], lines[2], lines[1], *lines[3:]])
+    later = _imu_csv(
+        lambda lines: (
+            [lines[0]] + [f"{int(x.split(',', 1)[0]) + 10**12},{x.split(',', 1)[1]}" for x in lines[1:]]
+        )
+    )
+    bag = [
+        "imu",
+        "solve",
+        "{w}/bag",
+        "--serial",
+        SERIAL,
+        "--board",
+        BOARD,
+        "--image-topic",
+        "/cam0/image_raw",
+        "--imu-topic",
+        "/imu0",
+    ]
+    return [
+        Case(g, "imu stamps not increasing", solve, setup=swap, says=("stamps do not increase at line 3",)),
+        Case(g, "imu gyro in deg/s", solve, setup=_imu_csv(_scaled(slice(1, 4), 57.29578)), says=("pi/180",)),
+        Case(
+            g,
+            "imu accelerometer in g",
+            solve,
+            setup=_imu_csv(_scaled(slice(4, 7), 1 / 9.80665)),
+            says=("9.80665",),
+        ),
+        Case(g, "imu and camera logs do not overlap", solve, setup=later, says=("do not overlap in time",)),
+        Case(g, "imu camera stamp listed twice", solve, setup=_stamp_listed_twice, says=("is listed twice",)),
+        Case(
+            g,
+            "imu camera without an active calibration",
+            ["imu", "solve", "{w}/rec", "--serial", "CAM-NONE"],
+            setup=imu_recording,
+            says=("has no active calibration",),
+        ),
+        Case(
+            g,
+            "imu corners of another board than the registered one",
+            [*solve, "--board", BOARD],
+            setup=imu_recording,
+            says=(f"is no corner of board {BOARD}",),
+        ),
+        Case(
+            g,
+            "imu bag without the named topic",
+            bag,
+            setup=_imu_only_bag,
+            says=("has no topic /cam0/image_raw",),
+        ),
+    ]
+
+
 def cases() -> list[Case]:
     return [
         *_capture(),
@@ -1185,4 +1379,5 @@ def cases() -> list[Case]:
         *_store(),
         *_seal(),
         *_messages(),
+        *_imu(),
     ]

@@ -1,6 +1,6 @@
 """Hostile-input sweep: run hostile or mistaken inputs against every command group and classify each result.
 
-    python benchmarks/hostile_sweep.py [--only GROUP] [--json OUT]
+    python benchmarks/hostile_sweep.py [--only GROUP] [--name TEXT] [--json OUT]
 
 Each case runs ``python -m calibctl`` in a process of its own (a segfault is seen as one), in a temporary
 folder holding a copy of a demo store (one accepted, active camera DEMO-CAM-0001 on board demo-A17).
@@ -185,6 +185,7 @@ def second_data_line(value: str) -> Callable[[str], str]:
 
 
 _RIG_LOCK = threading.Lock()
+_LIDAR_LOCK = threading.Lock()
 
 
 def rig_source(w: Path) -> Path:
@@ -224,6 +225,50 @@ def rig_source(w: Path) -> Path:
             if done.returncode != 0:
                 raise RuntimeError(f"{' '.join(args[:3])}: {done.stderr[-300:]}")
         return src
+
+
+def _lidar_solve(src: Path) -> None:
+    """`lidar synth` (8 poses) and a store-free `lidar solve -o result.json` of it, in ``src``."""
+    rendered = src / "set"
+    done = calibctl(src, ["lidar", "synth", str(rendered), "--poses", "8", "--seed", "1"])
+    if done.returncode == 0:
+        box = json.loads((rendered / "truth.json").read_text())["box"]
+        done = calibctl(
+            src,
+            ["lidar", "solve", "--images", str(rendered / "images"), "--scans", str(rendered / "scans")]
+            + [
+                "--camera-info",
+                str(rendered / "camera_info.yaml"),
+                "--box",
+                box,
+                "--cols",
+                "5",
+                "--rows",
+                "7",
+            ]
+            + ["--square-mm", "95", "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
+            + ["-o", str(src / "result.json")],
+        )
+    if done.returncode != 0:
+        raise RuntimeError(f"lidar synth / solve: {done.stderr[-300:]}")
+
+
+def lidar_result(name: str, edit: Callable[[dict], None] | None = None) -> Callable[[Path], None]:
+    """Once per sweep, a store-free `lidar solve -o` result of an 8-pose render (``lidar/result.json``);
+    each case gets it at ``name``, ``edit``-ed (the content hash left as written)."""
+
+    def make(w: Path) -> None:
+        src = (w / "demo").resolve().parent / "lidar"
+        with _LIDAR_LOCK:
+            if not (src / "result.json").exists():
+                src.mkdir(exist_ok=True)
+                _lidar_solve(src)
+        doc = json.loads((src / "result.json").read_text())
+        if edit is not None:
+            edit(doc)
+        (w / name).write_text(json.dumps(doc))
+
+    return make
 
 
 def reseal(path: Path, body: str) -> None:
@@ -276,6 +321,35 @@ def rehashed_rig(edit: Callable[[dict], None]) -> Callable[[Path], None]:
     return forge
 
 
+def signed_forgery(name: str) -> Callable[[Path], None]:
+    """The demo camera imported into a store with a key (``signed.db``, key ``k.pem``) and exported from it
+    as ``signed.json`` (its signature carries the public key); ``name``: that export with fx + 1 px and its
+    content hash recomputed, the signature kept (what a forger without the key can do)."""
+
+    def make(w: Path) -> None:
+        key = {"CALIBCTL_SIGNING_KEY": str(w / "k.pem")}
+        steps = [
+            (["keys", "init", "--key", str(w / "k.pem")], None, None),
+            (["export", SERIAL, "-o", str(w / "plain.json")], None, None),
+            (["import", str(w / "plain.json")], w / "signed.db", key),
+            (["export", f"{SERIAL}@1", "-o", str(w / "signed.json")], w / "signed.db", key),
+        ]
+        for args, db, env in steps:
+            done = calibctl(w, args, db=db, env=env)
+            if done.returncode != 0:
+                raise RuntimeError(f"{' '.join(args[:2])}: {done.stderr[-300:]}")
+        code = (
+            "import json,sys; from calibctl.artifacts.calibration import CalibrationArtifact as A; "
+            "d=json.load(open(sys.argv[1])); d['camera_matrix'][0][0]+=1.0; "
+            "d['content_sha256']=A.model_validate(d).computed_sha256(); json.dump(d, open(sys.argv[2], 'w'))"
+        )
+        subprocess.run(
+            [sys.executable, "-c", code, str(w / "signed.json"), str(w / name)], env=_env(), check=True
+        )
+
+    return make
+
+
 def foreign_sqlite(name: str, journal: str = "delete") -> Callable[[Path], None]:
     """Another application's SQLite database (one table of its own) at ``name``."""
 
@@ -290,11 +364,13 @@ def foreign_sqlite(name: str, journal: str = "delete") -> Callable[[Path], None]
     return make
 
 
-def calibctl(w: Path, args: list[str], db: Path | None = None) -> subprocess.CompletedProcess[str]:
+def calibctl(
+    w: Path, args: list[str], db: Path | None = None, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "calibctl", "--db", f"sqlite:///{db or w / 'store.db'}", *args],
         cwd=w,
-        env=_env(),
+        env=_env(env),
         capture_output=True,
         text=True,
         timeout=CASE_TIMEOUT_S,
@@ -473,6 +549,7 @@ def make_base(root: Path) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", help="run only this command group")
+    parser.add_argument("--name", help="run only the cases whose name holds this text")
     parser.add_argument("--json", type=Path, help="write every case's result here")
     parser.add_argument("--workers", type=int, default=2, help="cases run at once")
     parser.add_argument(
@@ -480,7 +557,7 @@ def main() -> None:
     )
     options = parser.parse_args()
     SOURCE[0] = options.source.resolve()
-    cases = [c for c in _cases() if options.only in (None, c.group)]
+    cases = [c for c in _cases() if options.only in (None, c.group) and (options.name or "") in c.name]
     root = Path(tempfile.mkdtemp(prefix="hostile-sweep-"))
     root.chmod(0o755)
     results = []

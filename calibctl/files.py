@@ -173,9 +173,9 @@ def write_atomic(
 
 def open_regular(path: Path | str, what: str = "read") -> BinaryIO:
     """``path`` opened for reading in binary, refused (FileSystemError) unless it is a regular file or a
-    folder
-    (whose read error names it): opened non-blocking and checked with fstat, since a FIFO opened for reading
-    waits for a writer forever (`import x.json` on a FIFO hung) and a device can stream without end."""
+    folder (whose read error names it): opened non-blocking and checked with fstat, since a FIFO opened for
+    reading waits for a writer forever (`import x.json` on a FIFO hung) and a device can stream without
+    end."""
     fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     kind = _kind(os.fstat(fd).st_mode)
     if kind is not None and kind != "a folder":

@@ -4,7 +4,10 @@ A store or station has one key pair. The private key lives in a file outside the
 0600; its path is the ``signing_key`` setting: ``CALIBCTL_SIGNING_KEY`` or the station file); the
 public key is exported as PEM and dropped into other systems' trusted-keys folders. Every signature
 is stored with its *key id*, the sha256 of the raw public key, so a rotated key's old signatures stay
-verifiable as long as its public key stays in the trusted folder.
+verifiable as long as its public key stays in the trusted folder. An exported signature also carries
+the signer's raw public key (``public_key``, base64): it proves nothing about who signed (anyone can make a
+key), but its sha256 must be the key id, so any reader, with trusted keys or none, can tell a signature
+that does not match its content (an edit after signing) from a valid one by a key it does not trust.
 
 What is signed is the record's chain hash (which covers every column of the record and the hash of
 the record before it) and, for a calibration artifact, its ``content_sha256``, so an exported
@@ -27,14 +30,42 @@ from calibctl import files
 from calibctl.errors import AlreadyExistsError, FileSystemError, InputError
 
 ALGORITHM = "ed25519"
+MISMATCH = "does not match its content"
+EDITED = "it was edited after signing"
+
+
+def is_mismatch(problem: str | None) -> bool:
+    """Is ``problem`` (a ``TrustedKeys.check`` answer) a signature that does not verify, which every reader
+    refuses, keys or not (rather than one that is missing or by an untrusted key)?"""
+    return problem is not None and MISMATCH in problem
+
+
+def _raw(public: Ed25519PublicKey) -> bytes:
+    from cryptography.hazmat.primitives import serialization
+
+    return public.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
 
 
 def key_id_of(public: Ed25519PublicKey) -> str:
     """The fingerprint stored beside every signature: sha256 of the 32 raw public-key bytes, hex."""
-    from cryptography.hazmat.primitives import serialization
+    return hashlib.sha256(_raw(public)).hexdigest()
 
-    raw = public.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
-    return hashlib.sha256(raw).hexdigest()
+
+def public_key_text(public: Ed25519PublicKey) -> str:
+    """The raw public key as an exported signature carries it (base64, 44 characters)."""
+    return base64.b64encode(_raw(public)).decode("ascii")
+
+
+def _carried(key_id: str, public_key: str) -> Ed25519PublicKey | None:
+    """The public key a signature carries, or None when it is not the key ``key_id`` names."""
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
+    try:
+        raw = base64.b64decode(public_key, validate=True)
+        key = Ed25519PublicKey.from_public_bytes(raw)
+    except ValueError:
+        return None
+    return key if hashlib.sha256(raw).hexdigest() == key_id else None
 
 
 def record_message(record_sha256: str, subject: str | None) -> bytes:
@@ -59,6 +90,10 @@ class Signer:
 
     def sign(self, message: bytes) -> str:
         return base64.b64encode(self.private.sign(message)).decode("ascii")
+
+    @property
+    def public_key_text(self) -> str:
+        return public_key_text(self.public)
 
     def public_pem(self) -> str:
         from cryptography.hazmat.primitives import serialization
@@ -164,17 +199,25 @@ class TrustedKeys:
             trusted.keys[key_id_of(key)] = key
         return trusted
 
-    def check(self, key_id: str | None, signature: str | None, message: bytes) -> str | None:
-        """None when ``signature`` is a valid signature of ``message`` by a trusted key, else why not."""
+    def check(
+        self, key_id: str | None, signature: str | None, message: bytes, public_key: str | None = None
+    ) -> str | None:
+        """None when ``signature`` is a valid signature of ``message`` by a trusted key, else why not.
+        ``public_key``: the one the signature carries; with it an untrusted key's signature is verified too,
+        so one that does not match (``is_mismatch``) is told from a valid one by a stranger's key."""
         if not signature or not key_id:
             return "is not signed"
         key = self.keys.get(key_id)
-        if key is None:
+        carried = None if public_key is None else _carried(key_id, public_key)
+        if public_key is not None and carried is None:
+            return f"carries a public key that is not key {key_id[:16]}, so its signature {MISMATCH}"
+        verifier = key or carried
+        if verifier is None:
             return f"is signed by key {key_id[:16]}, which is not trusted"
         from cryptography.exceptions import InvalidSignature
 
         try:
-            key.verify(base64.b64decode(signature, validate=True), message)
+            verifier.verify(base64.b64decode(signature, validate=True), message)
         except (InvalidSignature, ValueError):
-            return f"has a signature by key {key_id[:16]} that does not match its content"
-        return None
+            return f"has a signature by key {key_id[:16]} that {MISMATCH}"
+        return None if key is not None else f"is signed by key {key_id[:16]}, which is not trusted"

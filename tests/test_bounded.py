@@ -1,5 +1,5 @@
-"""Hostile input files: each is refused with exit 2 and a message naming what is wrong, in bounded memory
-(issue 14 item 4). The same matrix runs through lint, import, the station file and a CSV log."""
+"""Hostile input files: each is refused with exit 2 and a message naming what is wrong, in bounded memory.
+The same matrix runs through lint, import, the station file and a CSV log."""
 
 from __future__ import annotations
 

@@ -238,6 +238,14 @@ class RecordSignature(Document):
         description="base64 Ed25519 signature of 'calibctl-record-v1\\n<record_sha256>\\n<content_sha256>' "
         "(ASCII)",
     )
+    public_key: str | None = Field(
+        None,
+        pattern=r"^[A-Za-z0-9+/]{43}=$",
+        exclude_if=lambda key: key is None,
+        description="base64 of the signer's raw 32-byte public key (its sha256 is key_id): lets any reader "
+        "refuse a signature that does not match the content, trusted keys or none; says nothing about "
+        "whether the key is trusted. Absent on signatures exported before it was carried",
+    )
 
 
 UNSIGNED_FIELDS = {"content_sha256", "signature"}

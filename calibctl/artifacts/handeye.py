@@ -28,6 +28,27 @@ FRAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_./-]{0,127}$"
 InputShape = Literal["poses", "motions", "robot-eye-in-hand", "robot-eye-to-hand"]
 
 
+ROS_NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$"
+
+
+class RosFrames(Document):
+    """What a robot export calls an edge's two frames (``rig export --edge ... --frame SERIAL=NAME``)."""
+
+    parent_frame: str = Field(pattern=ROS_NAME_PATTERN, description="the ROS frame of parent_frame")
+    child_frame: str = Field(pattern=ROS_NAME_PATTERN, description="the ROS frame of child_frame")
+
+
+def ros_frames_field() -> RosFrames | None:
+    """The optional ``ros_frames`` of an edge document: set on export only, never stored or hashed."""
+    return Field(
+        None,
+        exclude_if=lambda frames: frames is None,
+        description="set by `rig export --edge FROM:TO --format json`: the ROS frames the export names "
+        "parent_frame and child_frame by (the rig export's, --frame SERIAL=NAME or the defaults); not part "
+        "of any content hash (the exporter's choice, like a bundle's frame names)",
+    )
+
+
 class RigidTransform(Document):
     """T_parent_child: the child frame's origin and axes expressed in the parent frame."""
 
@@ -150,6 +171,7 @@ class HandEyeResult(Document):
     )
     skipped: list[str] = Field(default_factory=list, description="inputs left out, each with its reason")
     provenance: EdgeProvenance = Field(description="how, where, when and from what it was made")
+    ros_frames: RosFrames | None = ros_frames_field()
     content_hash_algorithm: HashAlgorithm = Field(
         LEGACY_HASH,
         exclude_if=lambda algorithm: algorithm == LEGACY_HASH,
@@ -171,7 +193,7 @@ class HandEyeResult(Document):
 
     def computed_sha256(self) -> str:
         """The hash under the result's own ``content_hash_algorithm`` (old results keep theirs)."""
-        return content_hash(self, None, self.content_hash_algorithm)
+        return content_hash(self, {"content_sha256", "ros_frames"}, self.content_hash_algorithm)
 
     def sealed(self) -> HandEyeResult:
         """A copy hashed with the current algorithm (RFC 8785)."""

@@ -19,7 +19,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
 
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
@@ -120,6 +120,56 @@ class ImuMetrics(Document):
     converged: bool = Field(description="whether LM converged")
 
 
+class ImuRowBin(Document):
+    """One image-row bin of the row test."""
+
+    row_px: float = Field(description="the bin's centre, image row (px, absolute)")
+    time_residual_us: float | None = Field(
+        description="speed-weighted mean residual along the motion over the speed, microseconds (none: empty)"
+    )
+    sigma_us: float | None = Field(description="its one-sigma, microseconds (none: empty)")
+    corners: int = Field(ge=0, description="inlier corners in the bin that move")
+
+
+class ImuRowTest(Document):
+    """The row test on the solved residuals (core.imu.rows): a time offset is constant across image rows, a
+    rolling shutter ramps with the row."""
+
+    slope_us_per_row: float = Field(
+        description="time residual against image row (from c_y): the line delay the solve left unexplained"
+    )
+    sigma_us_per_row: float = Field(
+        ge=0, description="its one-sigma (the fit's, or a time-block jackknife's when larger)"
+    )
+    offset_us: float = Field(description="the constant part of the time residual, microseconds")
+    principal_row_px: float = Field(
+        description="c_y of the held intrinsics: the row the slope is counted from"
+    )
+    z: float = Field(ge=0, description="|slope| / sigma")
+    significant: bool = Field(description="z over the threshold: rolling shutter suspected")
+    line_delay_solved: bool = Field(description="true when the solve estimated a line delay already")
+    corners: int = Field(ge=0, description="inlier corners that move, used by the fit")
+    message: str = Field(description="the verdict in words, with the next action when significant")
+    rows: list[ImuRowBin] = Field(description="the residual over image rows, binned (the report's plot)")
+
+
+class ImuSeries(Document):
+    """What the report plots over time, in equal bins (0.05 s, at most 240) over the solve's IMU span
+    (none: an empty bin)."""
+
+    t_s: list[float] = Field(description="bin centres, seconds from the first IMU sample (IMU clock)")
+    gyro_rad_s: list[tuple[float | None, float | None, float | None]] = Field(
+        description="mean gyro per bin with the solved bias removed, IMU x, y, z, rad/s"
+    )
+    camera_rate_rad_s: list[tuple[float | None, float | None, float | None]] = Field(
+        description="mean board-derived camera rotation rate per bin, carried into the IMU frame by the "
+        "solved rotation and placed at t_cam + td_s, rad/s"
+    )
+    corner_rms_px: list[float | None] = Field(description="inlier reprojection RMS per bin, px")
+    gyro_rms_rad_s: list[float | None] = Field(description="gyro residual RMS per bin, rad/s")
+    accel_rms_m_s2: list[float | None] = Field(description="accelerometer residual RMS per bin, m/s^2")
+
+
 class ImuInput(Document):
     """One input file, pinned by hash."""
 
@@ -152,3 +202,15 @@ class ImuEdgeResult(Document):
     gates: list[ImuGate] = Field(description="every gate, in order")
     inputs: list[ImuInput] = Field(description="every file read, with its sha256")
     created_at: UtcDatetime = Field(description="UTC time of the solve")
+    row_test: ImuRowTest | None = Field(
+        None,
+        exclude_if=lambda test: test is None,
+        description="the row test on the solved residuals; absent without an estimate and in results "
+        "stored before it existed (their hashes unchanged)",
+    )
+    series: ImuSeries | None = Field(
+        None,
+        exclude_if=lambda series: series is None,
+        description="rates and residuals over time for the report page; absent as row_test is",
+    )
+    ros_frames: RosFrames | None = ros_frames_field()

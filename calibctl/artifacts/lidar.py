@@ -13,7 +13,7 @@ from typing import Literal
 from pydantic import Field
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
 
 LIDAR_SCHEMA_VERSION: Literal[1] = 1
 ScanOutcome = Literal[
@@ -121,3 +121,4 @@ class LidarEdgeResult(Document):
     scans_outcomes: list[LidarScan] = Field(description="one outcome per scan or unpaired image")
     overlay: LidarOverlaySource | None = Field(None, description="files the report overlay is drawn from")
     created_at: UtcDatetime = Field(description="UTC time of the solve")
+    ros_frames: RosFrames | None = ros_frames_field()

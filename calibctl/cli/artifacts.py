@@ -92,6 +92,10 @@ def export(
     camera_name: Annotated[
         str | None, typer.Option("--camera-name", help="ROS camera_name ([A-Za-z0-9_]; default: the serial).")
     ] = None,
+    topic: Annotated[
+        str | None,
+        typer.Option("--topic", help="kalibr: the camera's rostopic (default /<frame>/image_raw)."),
+    ] = None,
     alpha: Annotated[
         float | None,
         typer.Option(
@@ -119,6 +123,7 @@ def export(
             alpha=alpha,
             balance=balance,
             camera_name=camera_name,
+            topic=topic,
         ):
             print(f"wrote {path}", flush=True)
         return
@@ -131,6 +136,7 @@ def export(
         allow_rejected=allow_rejected,
         camera_name=camera_name,
         lut_options=alpha is not None or balance is not None,
+        topic=topic,
     )
     if out is None:
         print(text, end="")

@@ -115,8 +115,7 @@ def _early_settings(
     ctx: typer.Context, source: str, station: str | None, operator: str | None, jobs: int | None
 ) -> Settings:
     """The settings, and the detection pool's fork server started when ``source`` will need it: before the
-    caller
-    imports the capture workflow (its store, models), so the server's imports overlap with those."""
+    caller imports the capture workflow (its store, models), so the server's imports overlap with those."""
     from calibctl.workflows.camera.capture_sources import start_detection_early
 
     settings = state(ctx).settings(station=station, operator=operator, jobs=jobs)

@@ -55,6 +55,8 @@ def render_result(doc: dict[str, Any]) -> None:
         )
         if e["line_delay_us"] is not None:
             say(f"rolling-shutter line delay {e['line_delay_us']:.3f} +/- {e['sigma_line_delay_us']} us/row")
+        if doc["row_test"] is not None:
+            say(f"  row test: {doc['row_test']['message']}")
         m = doc["metrics"]
         held = m["held_out_corner_rms_px"]
         say(

@@ -256,16 +256,28 @@ def synth(
     range_offset_mm: Annotated[float, typer.Option("--range-offset-mm", help="Ranges short by this.")] = 0.0,
     one_way: Annotated[bool, typer.Option("--one-way", help="Every board faces the LiDAR squarely.")] = False,
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing set.")] = False,
+    serial: Annotated[
+        str | None,
+        typer.Option(
+            "--serial",
+            metavar="SERIAL[@N]",
+            help="Render through this camera's stored lens (default: its active calibration), e.g. the rig "
+            "member `lidar solve --rig RIG --serial SERIAL` solves for.",
+        ),
+    ] = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Render a camera + VLP-16-like LiDAR set with known T_lidar_cam (truth.json beside it)."""
-    from calibctl.workflows.lidar.lidar_synth import run_lidar_synth
+    from calibctl.workflows.lidar.lidar_synth import run_lidar_synth, stored_lens
 
-    result = run_lidar_synth(out, poses, seed, range_offset_mm / 1e3, one_way, force)
+    lens = None if serial is None else stored_lens(state(ctx).settings(), serial)
+    result = run_lidar_synth(out, poses, seed, range_offset_mm / 1e3, one_way, force, lens)
     if wants_json(ctx, json_output):
         emit_json(result)
         return
-    say(f"{poses} poses (seed {seed}) in {out}; truth {result['truth']}; station box {result['box']}")
+    through = f" through {result['camera']}'s lens" if result["camera"] else ""
+    box = result["box"]
+    say(f"{poses} poses (seed {seed}){through} in {out}; truth {result['truth']}; station box {box}")
 
 
 def register(app: typer.Typer) -> None:

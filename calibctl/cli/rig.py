@@ -689,9 +689,9 @@ def import_(
     json_output: JsonFlag = False,
 ) -> None:
     """Bring a rig version exported by another store into this one: its hash (edited: exit 1) and signature
-    are
-    checked, its members must be in this store (the same versions, or imports of them: `calibctl import` them
-    first), and its lint, verdict and version are this store's. A rejected or stale import is never active."""
+    are checked, its members must be in this store (the same versions, or imports of them: `calibctl import`
+    them first), and its lint, verdict and version are this store's. A rejected or stale import is never
+    active."""
     from calibctl.workflows.rig import rig_import
 
     out = rig_import.import_rig_file(

@@ -194,21 +194,16 @@ def station(
 
     A bad serial, a serial done twice in this run, a missing folder or an unknown board is a line with status
     "error", and the station goes on. Ctrl-C while waiting ends it (exit 0); while a unit's images are
-    detected it
-    cancels that unit (nothing stored) and the station waits for the next serial. With --watch the station
-    waits,
-    after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands (complete: renamed
-    into
-    place, or its size unchanged for --settle-s); the unit is captured when --views pictures are there or the
-    camera app wrote --done-file, and its line adds the time from the last picture in to the verdict. With
-    --camera
-    each unit is captured live (the live view on stderr says what the gates still need) until the gates pass,
-    and
-    stored whole once its stream is over; a camera that cannot be opened or is unplugged mid-unit is an error
-    line, nothing stored. With the store unreachable each
-    unit is calibrated into the spool (status "queued") and stored, in order, when the store is back (status
-    "synced", with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template,
-    serials file unreadable, another station's or store's spool).
+    detected it cancels that unit (nothing stored) and the station waits for the next serial. With --watch the
+    station waits, after each serial, for the unit's pictures in DIR/{serial} and detects each as it lands
+    (complete: renamed into place, or its size unchanged for --settle-s); the unit is captured when --views
+    pictures are there or the camera app wrote --done-file, and its line adds the time from the last picture
+    in to the verdict. With --camera each unit is captured live (the live view on stderr says what the gates
+    still need) until the gates pass, and stored whole once its stream is over; a camera that cannot be opened
+    or is unplugged mid-unit is an error line, nothing stored. With the store unreachable each unit is
+    calibrated into the spool (status "queued") and stored, in order, when the store is back (status "synced",
+    with its version). Exit 0 when the serials end; 2 when the station cannot start (bad template, serials
+    file unreadable, another station's or store's spool).
     """
     if ctx.invoked_subcommand is not None:
         return
@@ -372,11 +367,10 @@ def sync_command(
     json_output: JsonFlag = False,
 ) -> None:
     """Store the spool's queued units in the store, in the order they were calibrated, each getting the
-    serial's
-    next version there (signed with the station's key when one is configured). Run again after a kill: nothing
-    is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and the ones
-    after it stay queued); 2 when the store is still away, another process is syncing, or the spool is another
-    station's or store's."""
+    serial's next version there (signed with the station's key when one is configured). Run again after a
+    kill: nothing is lost or stored twice. Exit 0 when the queue is empty; 1 when a record was changed (it and
+    the ones after it stay queued); 2 when the store is still away, another process is syncing, or the spool
+    is another station's or store's."""
     from calibctl.workflows.station.sync import sync
 
     as_json = wants_json(ctx, json_output)

@@ -288,8 +288,7 @@ def _check_counters(s: Session, audit: Audit, stream: chain.Stream) -> None:
 
 def _check_events(s: Session, audit: Audit, since: int | None, stream: str = "event") -> None:
     """Every activation event (camera, or with ``stream="rig_event"`` rig) written after ``since``
-    (``_after``)
-    names a stored, accepted version and the version that was active before it."""
+    (``_after``) names a stored, accepted version and the version that was active before it."""
     events, versions, key = (
         (EventRow, ArtifactRow, "serial") if stream == "event" else (RigEventRow, RigCalibrationRow, "rig")
     )

@@ -11,10 +11,9 @@ value still changes the hash); datetimes are ISO 8601 UTC. A stream is a table p
 that split it: calibration artifacts per serial, board revisions per board name, activation events
 one stream for the whole store; since revision 0007 also rig versions per rig, rig activation events
 one stream, check events per serial; since 0008 rig definitions, one stream; since 0009 capture
-sessions, per serial. Editing, deleting,
-inserting or reordering any record breaks the chain at the next record; rewriting a whole stream's
-tail is caught by signatures (the forger has no key) or by a chain head kept elsewhere
-(``db verify --head``).
+sessions, per serial. Editing, deleting, inserting or reordering any record breaks the chain at the next
+record; rewriting a whole stream's tail is caught by signatures (the forger has no key) or by a chain head
+kept elsewhere (``db verify --head``).
 
 The hashing itself (``body``, ``record_hash``, ``row_problem``) is in ``chain_hash``, which imports no
 sqlalchemy (the sqlite3 read path checks with it). A new table joins with a ``StreamSpec`` in

@@ -70,11 +70,10 @@ class FleetStore:
         rig_steps: Sequence[RigActivationStep] = (),
     ) -> int:
         """Append ``events`` in one transaction (all or none); the position of the last. With ``after`` (the
-        log's
-        length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the whole
-        batch (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale fleet.
-        ``rig_steps`` are appended to the rigs' activation log in the same transaction (a rig whose active
-        version moved since the caller read it refuses the whole batch)."""
+        log's length the caller decided on) it is a compare-and-set: a log that grew meanwhile refuses the
+        whole batch (StaleActiveVersionError: read it again), so a promote or rollback never acts on a stale
+        fleet. ``rig_steps`` are appended to the rigs' activation log in the same transaction (a rig whose
+        active version moved since the caller read it refuses the whole batch)."""
 
         def work(s: Session) -> int:
             current = counters.peek(s, "chain", "fleet") or 0
@@ -132,8 +131,7 @@ class FleetStore:
 
     def fleet(self) -> Loaded:
         """The fleet log replayed (settled): from the newest checkpoint that still matches the log, then the
-        events
-        after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
+        events after it (``fleet_checkpoints``); the same state a replay of the whole log gives."""
 
         def work(s: Session) -> Loaded:
             loaded = fleet_checkpoints.load(s, trusted=self._runner.trusted)

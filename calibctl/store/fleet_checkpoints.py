@@ -2,9 +2,8 @@
 replays only the events after the newest one instead of the whole log.
 
 Derived data, never the source of truth. A checkpoint is used only when event N's chain hash is still the one
-it
-recorded, its state still matches its sha256 and is of this calibctl's format; otherwise the next older one is
-tried, then the whole log. ``db verify`` re-derives every checkpoint from the log (``problems``).
+it recorded, its state still matches its sha256 and is of this calibctl's format; otherwise the next older one
+is tried, then the whole log. ``db verify`` re-derives every checkpoint from the log (``problems``).
 
 Written by the fleet writer (``append_fleet_events``), in the same transaction as the events, once the log is
 ``EVERY`` events past the newest checkpoint: the writer holds the fleet's lock, so the state is of exactly the
@@ -14,9 +13,9 @@ events; a store migrated with a long log gets its first one at the next fleet wr
 
 Signed: with a station key the writer signs each checkpoint (its position, event N's chain hash and the
 state's sha256), and a store with keys (``Store.trusted``) uses only a checkpoint signed by a trusted key, so
-rewriting a
-checkpoint together with its sha256 is no longer a way to change what ``fleet status`` serves (``db verify``
-replays the log and catches it either way). A store without keys checks the chain hash and the sha256 only.
+rewriting a checkpoint together with its sha256 is no longer a way to change what ``fleet status`` serves
+(``db verify`` replays the log and catches it either way). A store without keys checks the chain hash and the
+sha256 only.
 """
 
 from __future__ import annotations
@@ -112,9 +111,8 @@ def _usable(
 
 def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = None) -> Loaded:
     """The log replayed from the newest usable checkpoint (an undecodable event raises UnverifiedRecord, as a
-    full
-    replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state`` only).
-    ``trusted``: the store's keys; with them only a checkpoint signed by one of them is used."""
+    full replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state``
+    only). ``trusted``: the store's keys; with them only a checkpoint signed by one of them is used."""
     loaded = Loaded(Fleet())
     for row in s.scalars(select(FleetCheckpointRow).order_by(FleetCheckpointRow.position.desc()).limit(KEEP)):
         usable = _usable(s, row, rollouts=rollouts, trusted=trusted)
@@ -187,10 +185,8 @@ def _served_event(s: Session, row: FleetEventRow, trusted: TrustedKeys | None) -
 
 def write_if_due(s: Session, length: int, signer: Signer | None = None) -> None:
     """After the fleet writer appended up to event ``length`` (it holds the fleet's lock): a checkpoint there
-    when
-    the log is ``EVERY`` events past the newest one, signed with ``signer`` when there is one; all but the
-    newest
-    ``KEEP`` are deleted."""
+    when the log is ``EVERY`` events past the newest one, signed with ``signer`` when there is one; all but
+    the newest ``KEEP`` are deleted."""
     newest = s.scalar(select(func.max(FleetCheckpointRow.position))) or 0
     if length - newest < EVERY:
         return

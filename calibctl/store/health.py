@@ -75,8 +75,7 @@ GATE_KINDS = ("check", "gauge", "triage")
 
 def gate_problems(s: Session) -> list[str]:
     """``db verify``: every report a promote's gate decided on (recorded in the chained promote event) is
-    still
-    stored with the sha256 the promote recorded, and its payload still hashes to it."""
+    still stored with the sha256 the promote recorded, and its payload still hashes to it."""
     out = []
     for row in s.scalars(
         select(FleetEventRow).where(FleetEventRow.kind == "promote").order_by(FleetEventRow.id)
@@ -246,8 +245,7 @@ class HealthStore:
                 )
             _sealed(s, rows, self._runner.signer)
             # Core executemany (the table's INSERT compiled once, batched by the driver), not the ORM's bulk
-            # path,
-            # which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
+            # path, which costs about 2 ms a row on PostgreSQL (benchmarks/results/fleet_scale.md)
             s.connection().execute(insert(HEALTH_TABLE), rows)
             return []
 
@@ -271,8 +269,8 @@ class HealthStore:
 
     def fleet_check_rms(self, since: datetime | None = None) -> dict[str, tuple[float, int]]:
         """Serial -> (mean check RMS px, number of check reports), over every serial with check reports
-        measured at
-        or after ``since`` (index kind, at, serial, rms_px: the window's rows only, not the whole table)."""
+        measured at or after ``since`` (index kind, at, serial, rms_px: the window's rows only, not the whole
+        table)."""
         stmt = (
             select(HealthReportRow.serial, func.avg(HealthReportRow.rms_px), func.count())
             .where(HealthReportRow.kind == "check", *([] if since is None else [HealthReportRow.at >= since]))
@@ -286,8 +284,7 @@ class HealthStore:
         self, robots: Sequence[str], serials: Sequence[str], since: datetime
     ) -> list[GateReport]:
         """Reports with a verdict (check, gauge, triage) from ``robots`` on ``serials`` (serials or rigs)
-        measured
-        at or after ``since``, oldest first: a rollout's health gate inputs."""
+        measured at or after ``since``, oldest first: a rollout's health gate inputs."""
         cols = [
             HealthReportRow.source_id,
             HealthReportRow.payload_sha256,

@@ -350,10 +350,9 @@ class FleetEventRow(ChainColumns, Base):
 
 class FleetCheckpointRow(Base):
     """The fleet log replayed up to event ``position`` (revision 0015_checkpoints_fleet_ckpt): derived data,
-    never
-    the source of truth. ``chain_hash`` is event ``position``'s, so a checkpoint of a log that was rewritten
-    is ignored; ``state`` is ``fleet_ledger.to_state``'s JSON with its sha256. Not immutable: old ones are
-    pruned."""
+    never the source of truth. ``chain_hash`` is event ``position``'s, so a checkpoint of a log that was
+    rewritten is ignored; ``state`` is ``fleet_ledger.to_state``'s JSON with its sha256. Not immutable: old
+    ones are pruned."""
 
     __tablename__ = "fleet_checkpoints"
 

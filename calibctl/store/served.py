@@ -121,8 +121,7 @@ def _signature_problem(
 
 def problem(stream: str, row: Any, query: Query, trusted: TrustedKeys) -> str | None:
     """None when ``db verify`` with ``trusted`` would not flag the record ``row`` (an ORM row or a plain row
-    of
-    every column) for its hash, link or signature; else what it would say."""
+    of every column) for its hash, link or signature; else what it would say."""
     spec = SPECS[stream]
     values = row_values(row)
     return (

@@ -218,8 +218,7 @@ class Spool:
 
     def _upgrade(self, meta: dict[str, str]) -> None:
         """Format 1 -> 2: add the set-aside and signature columns (after the station and store were checked,
-        so
-        another station's spool is left as it is)."""
+        so another station's spool is left as it is)."""
         if meta.get("format") == SPOOL_FORMAT:
             return
         with _tx(
@@ -324,8 +323,7 @@ class Spool:
 
     def set_aside(self, seq: int, *, reason: str, operator: str) -> SpoolRecord:
         """Set a queued record aside: kept with its images, never synced (call under ``sync_lock``, so no sync
-        is
-        storing it meanwhile). Refused (exit 2) for an unknown, a synced or an already set-aside record."""
+        is storing it meanwhile). Refused (exit 2) for an unknown, a synced or an already set-aside record."""
         with _tx(self._conn, self.path):
             if seq in self.missing():
                 return self._set_aside_missing(seq, reason, operator)

@@ -5,13 +5,13 @@ Revises: 0008_chain_rig_definitions
 Create Date: 2026-11-27
 
 A capture session holds the corners every later solve, check and report of its camera reads. Its
-payload_sha256 alone could be recomputed after an edit (issue 26: edited corners went unseen by every
-`db verify` mode), so like 0008: ``capture_sessions`` gets ``chain_seq``, ``chain_prev``, ``chain_hash``,
-``signature``, ``key_id`` and an ``id`` (the session id stays the primary key the artifacts and rig sessions
-name). One stream per serial, counted in ``version_counters`` scope ``session``, key = serial (that row is
-the lock ``Store.add_session`` takes, so stations capturing different cameras never wait on each other for
-long; the ids come from the store-wide counter scope ``id``, key ``capture_sessions``, which catches up
-with the ids given here on its first use).
+payload_sha256 alone could be recomputed after an edit (edited corners went unseen by every `db verify` mode),
+so like 0008: ``capture_sessions`` gets ``chain_seq``, ``chain_prev``, ``chain_hash``, ``signature``,
+``key_id`` and an ``id`` (the session id stays the primary key the artifacts and rig sessions name). One
+stream per serial, counted in ``version_counters`` scope ``session``, key = serial (that row is the lock
+``Store.add_session`` takes, so stations capturing different cameras never wait on each other for long; the
+ids come from the store-wide counter scope ``id``, key ``capture_sessions``, which catches up with the ids
+given here on its first use).
 Rows already stored are numbered in (started_at, session_id) order and chained, unsigned, with the
 immutability triggers lifted for that one UPDATE and restored, so an old store keeps verifying. Unique
 indexes on ``id`` and on (serial, position) refuse a fork.

@@ -1,4 +1,4 @@
-"""health_reports: the health summaries robots send (issue 25 item 3), append-only, not chained
+"""health_reports: the health summaries robots send, append-only, not chained
 
 Revision ID: 0011_health_reports_health25
 Revises: 0010_fleet_diff25

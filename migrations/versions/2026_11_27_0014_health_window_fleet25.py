@@ -1,4 +1,4 @@
-"""health_reports: an index for the per-camera spread over a recent window (issue 25 item 4)
+"""health_reports: an index for the per-camera spread over a recent window
 
 Revision ID: 0014_health_window_fleet25
 Revises: 0011_health_reports_health25

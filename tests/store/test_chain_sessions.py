@@ -1,5 +1,5 @@
-"""Issue 26 item 8: capture sessions join the hash chains (migration 0009, one stream per serial), so edited
-corners with their payload hash recomputed are named by `db verify` and, with keys, refused by reads."""
+"""Capture sessions join the hash chains (migration 0009, one stream per serial), so edited corners with
+their payload hash recomputed are named by `db verify` and, with keys, refused by reads."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The tamper matrix of issue 14: every change someone with write access to the database can make is
+"""The tamper matrix: every change someone with write access to the database can make is
 named by `db verify` (SQLite with its triggers dropped; PostgreSQL with triggers switched off)."""
 
 from __future__ import annotations

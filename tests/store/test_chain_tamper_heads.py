@@ -1,7 +1,6 @@
-"""Issue 26 item 8, the two gaps no `db verify` mode saw: immutability triggers dropped and left dropped, and
-a forged row given an id below the kept head's (``--since`` looked only at higher ids; it now takes every row
-past
-the head's *positions*, whatever its id)."""
+"""The two gaps no `db verify` mode saw: immutability triggers dropped and left dropped, and a forged row
+given an id below the kept head's (``--since`` looked only at higher ids; it now takes every row past the
+head's *positions*, whatever its id)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 26 item 8: with keys configured, reads refuse what `db verify` would flag.
+"""With keys configured, reads refuse what `db verify` would flag.
 
 A careful forger (write access to the database, no signing key) changes a served record and recomputes its
 content hash and every chain hash (``tamper.rechain``): the record's own hash and chain hash then match, so

@@ -1,6 +1,6 @@
-"""The tamper matrix of issue 14, extended to rig versions (hand-eye edges included), rig activation
-events and check events (revision 0007): every change someone with write access makes is named by
-`db verify` (SQLite with its triggers dropped; PostgreSQL with triggers switched off)."""
+"""The tamper matrix of tests/store/test_chain_tamper.py, extended to rig versions (hand-eye edges
+included), rig activation events and check events (revision 0007): every change someone with write access
+makes is named by `db verify` (SQLite with its triggers dropped; PostgreSQL with triggers switched off)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""Durable capture (issue 14 item 5): image files are on disk before the rows naming them commit, and a
-kill at any fsync, link or statement leaves no row without its file and no temporary file."""
+"""Durable capture: image files are on disk before the rows naming them commit, and a kill at any fsync,
+link or statement leaves no row without its file and no temporary file."""
 
 from __future__ import annotations
 

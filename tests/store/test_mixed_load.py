@@ -1,6 +1,5 @@
-"""16 station writers and 8 rollback technicians on one store at once (issue 14 items 6 and 7): nothing
-lost, nothing doubled, nobody gave up on the lock at the default budget, and no rollback undid a version
-it had not seen."""
+"""16 station writers and 8 rollback technicians on one store at once: nothing lost, nothing doubled,
+nobody gave up on the lock at the default budget, and no rollback undid a version it had not seen."""
 
 from __future__ import annotations
 

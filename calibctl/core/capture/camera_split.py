@@ -24,13 +24,12 @@ operator hears it while still holding the board. Both ask it of the same views: 
 ``calibrate`` process the solve's question is therefore usually the gate's (k1k2, every corner kept):
 ``check_one_camera`` remembers its last answers by the inputs' values, so it is answered once.
 Measured (tests/core/capture/test_camera_split.py, benchmarks/results/capture-gates.md): the real
-opencv-left-right folder
-(13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone and right alone
-score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean rendered
-sessions at most 1.08 (1.09 when one camera's alternation ran until nothing moved). Limit: the score is a
-prediction error, so it sees cameras whose difference shows through a re-fitted pose (focal length,
-distortion); a second camera differing only by a principal-point shift of 20 px is largely absorbed by
-each view's pose (ratio 1.07 at 0.2 px noise; the split is still found, but not called two cameras).
+opencv-left-right folder (13 left + 13 right) splits exactly into left and right with ratio 1.65; left alone
+and right alone score 1.08-1.10 (up to 1.19 from other starting splits while this was designed); 60 clean
+rendered sessions at most 1.08 (1.09 when one camera's alternation ran until nothing moved). Limit: the score
+is a prediction error, so it sees cameras whose difference shows through a re-fitted pose (focal length,
+distortion); a second camera differing only by a principal-point shift of 20 px is largely absorbed by each
+view's pose (ratio 1.07 at 0.2 px noise; the split is still found, but not called two cameras).
 """
 
 from __future__ import annotations
@@ -138,17 +137,16 @@ def _settled(
     The alternation is a descent on the sum of squared residuals (each view under its group's camera). Of one
     camera the two solves differ by their estimation noise and each round swaps views whose two predictions
     differ by that noise: rendered 60-view sessions took 4-8 rounds to settle (ratio 1.05-1.07), a round
-    lowering
-    the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round (1.09
-    later). A real second camera is told apart by both figures, never by one round: a shuffled or alternating
-    two-camera session starts from two blends whose cameras agree within their uncertainty (first
+    lowering the sum by 0.01-0.75 %, the groups' in-sample cross / own RMS at most 1.07 in the second round
+    (1.09 later). A real second camera is told apart by both figures, never by one round: a shuffled or
+    alternating two-camera session starts from two blends whose cameras agree within their uncertainty (first
     reassignment 1.3-17 %, where one real camera's 13 views gained 2.5 %), and it can then drift for rounds
-    gaining under 1 % before it separates, but its groups then read >= 1.14 in-sample (all 116 the test
-    calls two cameras of 191 two-camera sessions: seeded pairs 2-5 % apart in f in blocks, shuffled and
-    alternating, opencv-left-right shuffled; none stops here, none changes its split). The held-out ratio
-    judged divides by more than this in-sample one, so the split scored reads below SETTLED_RATIO: one
-    camera, as the settled alternation would have found. Measured: benchmarks/results/capture-gates.md.
-    Degenerate figures (a zero or non-finite sum) never stop it."""
+    gaining under 1 % before it separates, but its groups then read >= 1.14 in-sample (all 116 the test calls
+    two cameras of 191 two-camera sessions: seeded pairs 2-5 % apart in f in blocks, shuffled and alternating,
+    opencv-left-right shuffled; none stops here, none changes its split). The held-out ratio judged divides by
+    more than this in-sample one, so the split scored reads below SETTLED_RATIO: one camera, as the settled
+    alternation would have found. Measured: benchmarks/results/capture-gates.md. Degenerate figures (a zero or
+    non-finite sum) never stop it."""
     own = np.where(in_a, rms_a, rms_b)
     sse = float(np.sum(np.square(own) * n_corners))
     sse_moved = float(np.sum(np.square(np.minimum(rms_a, rms_b)) * n_corners))
@@ -171,8 +169,7 @@ def _refine(
 ):
     """Alternate solve / reassign from the split ``in_a`` (V,) bool, until nothing moves, ``_settled`` or
     MAX_ROUNDS; (split, solve a, solve b, per-view RMS under a, under b, rounds run), or None when a group
-    gets
-    too small."""
+    gets too small."""
     n_corners = np.array([len(o) for o in obj], dtype=float)
     rounds = 0
     for round_ in range(MAX_ROUNDS):
@@ -240,9 +237,8 @@ def check_one_camera(
 
     Shapes as in solve_intrinsics. The answer is a function of the values alone, so the last
     RECENT_CHECKS answers are remembered by a digest of the inputs (core.intrinsics.recent_answers):
-    ``calibrate``
-    asks twice (the capture gate, then the solve) and, when the solve keeps every corner under the gate's
-    model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
+    ``calibrate`` asks twice (the capture gate, then the solve) and, when the solve keeps every corner under
+    the gate's model, the second question is the first one (about 0.2 s of a 20-view 1280x960 ``calibrate``).
     ``lanes``: where the two groups are solved at once (core.lanes); the answer does not depend on it.
     """
     key = values_digest(
@@ -329,9 +325,8 @@ def _observability(
     obj: Sequence[np.ndarray], img: Sequence[np.ndarray], group: Sequence[int], image_size: tuple[int, int]
 ) -> float:
     """The observability gate's sigma5 / sigma1 (core.capture.gates) of one group's views. Near-frontal views
-    that
-    group together fit any focal length: real 960x540 phone-video frames split into 6 tilted views (fx 1083)
-    and 8 near-frontal ones (fx 6806, observability 8.9e-6) that "predicted" each other 3.15x better, a
+    that group together fit any focal length: real 960x540 phone-video frames split into 6 tilted views (fx
+    1083) and 8 near-frontal ones (fx 6806, observability 8.9e-6) that "predicted" each other 3.15x better, a
     false two-camera verdict; the groups of the mixed opencv-left-right folder read 5.3e-4 and 5.6e-4."""
     homographies = [view_homography(obj[i][:, :2], img[i]) for i in group]
     return observability([H for H in homographies if H is not None], image_size)

@@ -23,9 +23,8 @@ Tilt bands are [0, 10), [10, 20), [20, 30), [30, 45] and > 45 degrees; the direc
 compass direction of ``gates`` (only meaningful from 1 degree). A frame's tilt is read like the gates
 read it (calibctl.core.capture.tilt): through the lens the last ``progress()`` fitted to the kept views,
 through a pinhole at the session's focal guess before that; a frame with fewer than 8 corners has no tilt.
-``progress()`` gives what a live view
-shows: coverage, tilt directions collected, the observability gauge against its threshold, the view
-count and the gate hints in words.
+``progress()`` gives what a live view shows: coverage, tilt directions collected, the observability gauge
+against its threshold, the view count and the gate hints in words.
 """
 
 from __future__ import annotations
@@ -261,8 +260,7 @@ class FrameSelector:
 @dataclass(frozen=True)
 class Probe:
     """What ``probe_frame`` found in one frame: the full search's answer (``searched``), or only that the
-    quick
-    check saw nothing chessboard-like (``searched`` False, ``detection`` None)."""
+    quick check saw nothing chessboard-like (``searched`` False, ``detection`` None)."""
 
     searched: bool
     detection: Detection | None
@@ -297,9 +295,8 @@ class StreamDetector:
     order ``forced = next_forced()``, then ``probe_frame(gray, spec, settings, forced)`` anywhere, then
     ``settle(gray, forced, probe)`` in order. A frame is due for the full search when it is forced (every
     ``full_every``-th) or the previous frame had a board; a probe run ahead knows only the first, so a due
-    frame
-    whose quick check said "nothing" is searched in ``settle`` - the search the one-thread detector would have
-    run, hence the same answer for every frame whatever ran ahead.
+    frame whose quick check said "nothing" is searched in ``settle`` - the search the one-thread detector
+    would have run, hence the same answer for every frame whatever ran ahead.
     """
 
     def __init__(

@@ -315,9 +315,8 @@ def choose_executor(executor: str, workers: int, total: int) -> str:
 
     auto: processes from ``PROCESS_MIN_FILES`` files on, or whenever the pool is warm already (a
     station, a second capture in one process: no start-up to pay), threads otherwise. Threads share one GIL,
-    and the
-    Python side of each detection (grid checks, canonical order, sha256 of small files) then runs one at a
-    time: 96 renders at 1280x960 on 2 cores took 1.30 s on 2 threads and 0.83 s on 2 processes. A pool of
+    and the Python side of each detection (grid checks, canonical order, sha256 of small files) then runs one
+    at a time: 96 renders at 1280x960 on 2 cores took 1.30 s on 2 threads and 0.83 s on 2 processes. A pool of
     processes costs its start-up, ~0.3 s on 2 cores (20 renders: 0.22 s on 2 threads, 0.50 s on 2 fresh
     processes), which a warm pool (``worker_pool``) pays once per calibctl process.
     """
@@ -532,8 +531,7 @@ def _succeeded(future: Future[list[tuple[ImageOutcome, object]]]) -> bool:
 
 def _worker_died(unfinished: Sequence[Path]) -> WorkerDiedError:
     """A detection process that died (the kernel's out-of-memory killer, a crash in a decoder) breaks the
-    whole
-    pool: the files it had not finished are named, the pool is started afresh by the next capture."""
+    whole pool: the files it had not finished are named, the pool is started afresh by the next capture."""
     names = [path.name for path in unfinished]
     return WorkerDiedError(
         f"a detection worker process died (killed, out of memory, or a crash decoding an image) with "

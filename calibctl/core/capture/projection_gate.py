@@ -15,8 +15,8 @@ Each intrinsic perturbation's pixel shifts are taken less the camera rotation th
 the region (report_maps ``rotation_fit``; mrcal compensates the same way, with the full frame transform):
 a principal point shift that the extrinsics absorb does not move one ray relative to another. Without it
 the map is an upper bound dominated by sigma(cx, cy) at the centre and by extrapolation at the corners. Where
-the region fails,
-the message names the 3 x 3 cells (capture's words: "bottom-left corner") whose worst sigma is over.
+the region fails, the message names the 3 x 3 cells (capture's words: "bottom-left corner") whose worst sigma
+is over.
 
 With this gate in the session, tilt and coverage are guidance (``advisory``): the session's verdict is
 observability, views, one camera and this gate. A session that cannot be solved at all fails this gate
@@ -68,8 +68,7 @@ class Region:
     def vertices_px(self, image_size: tuple[int, int]) -> np.ndarray:
         """(K, 2) px points whose farthest one from any principal point bounds the region (lint's fold-over
         reads the farthest): the box's or the image's corners, or the circle sampled (CIRCLE_VERTICES, grown
-        so
-        the polygon contains the circle) and clipped to the image."""
+        so the polygon contains the circle) and clipped to the image."""
         w, h = image_size
         if self.kind == "circle" and self.circle_px is not None:
             cx, cy, r = self.circle_px
@@ -210,8 +209,7 @@ def projection_gate(
     u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
     v = (np.arange(grid[1]) + 0.5) * h / grid[1] - 0.5
     # the Jacobian covariance: the 5 px threshold was measured against it (docs/verdicts.md); the view-level
-    # one
-    # (per-view errors, core/intrinsics/covariance.py) is stored and reported, not yet judged here
+    # one (per-view errors, core/intrinsics/covariance.py) is stored and reported, not yet judged here
     jacobian = cov.jacobian_covariance
     assert jacobian is not None
     umap = projection_uncertainty(

@@ -231,10 +231,9 @@ def _fit_fisheye(
     object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], image_size: tuple[int, int]
 ) -> _Fit | None:
     """(rms px, K, k1..k4, rvecs, tvecs) of the equidistant lens (calibctl.core.intrinsics.fisheye_solve), or
-    None
-    when it cannot be initialised, fails or lands off the image. Asked through ``solve_intrinsics``, which
-    remembers it: the projection gate solves the same views with the same fisheye model when the session is
-    solved as fisheye or its lens is unknown (--model auto, a plain capture), and gets this solve."""
+    None when it cannot be initialised, fails or lands off the image. Asked through ``solve_intrinsics``,
+    which remembers it: the projection gate solves the same views with the same fisheye model when the session
+    is solved as fisheye or its lens is unknown (--model auto, a plain capture), and gets this solve."""
     from calibctl.core.intrinsics.solve import (
         solve_intrinsics,  # only for sessions the small model cannot explain
     )
@@ -294,8 +293,8 @@ def _centre_sigma_px(
     object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray], fit: _Fit
 ) -> np.ndarray:
     """(2,) one-sigma of (cx, cy) of a c-free fit, poses eliminated (calibctl.core.intrinsics.covariance):
-    linear in the
-    view count, where OpenCV's calibrateCameraExtended inverts every pose too (5 s at 100 views)."""
+    linear in the view count, where OpenCV's calibrateCameraExtended inverts every pose too (5 s at 100
+    views)."""
     _, K, D, rvecs, tvecs = fit
     objs = [np.asarray(o, np.float64).reshape(-1, 3) for o in object_points]
     residuals = [

@@ -140,10 +140,9 @@ def _started_ignoring_sigint() -> Iterator[None]:
 
 def start_server() -> None:
     """Start the fork server now and return at once: it imports OpenCV and the detection modules on another
-    core
-    while this process goes on (a fresh ``capture`` importing its store and workflow), so the pool's first
-    workers fork from a ready server instead of waiting ~0.2 s for it. A no-op where there is no fork server
-    (spawn)."""
+    core while this process goes on (a fresh ``capture`` importing its store and workflow), so the pool's
+    first workers fork from a ready server instead of waiting ~0.2 s for it. A no-op where there is no fork
+    server (spawn)."""
     with _lock:
         _ensure_server(_mp_context())
 

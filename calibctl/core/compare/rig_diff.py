@@ -86,8 +86,7 @@ def _rebuilt(tree: RigTree, poses: np.ndarray) -> RigTree:
 
 def _depth_m(T_a_b_truth: np.ndarray, T_a_b_used: np.ndarray, depth_m: float) -> float:
     """Depth of the bisector point at ``depth_m`` (a's frame) seen through the truth, triangulated with
-    ``used``
-    (midpoint of the two rays' closest approach)."""
+    ``used`` (midpoint of the two rays' closest approach)."""
     centre_b = T_a_b_truth[:3, 3]
     point = np.array([centre_b[0] / 2.0, centre_b[1] / 2.0, depth_m])
     ray_a = point / np.linalg.norm(point)

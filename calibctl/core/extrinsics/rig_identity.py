@@ -12,8 +12,8 @@ is true), lint passes, and it became the ACTIVE rig. What gives it away, cheapes
   same photos (new bytes, same picture);
 * ``zero_baselines``: a solved baseline statistically indistinguishable from zero (the zero vector
   inside the translation's 99.7 % confidence ellipsoid, ``CHI2_3DOF``), or below ``MIN_BASELINE_MM`` (two lens
-  barrels cannot sit closer; a beam-splitter rig shares
-  one optical centre, which a board-based rig solve cannot tell apart from one camera either).
+  barrels cannot sit closer; a beam-splitter rig shares one optical centre, which a board-based rig solve
+  cannot tell apart from one camera either).
 
 Each check returns what it found (empty: nothing contradicts); ``refuse`` raises one
 InconsistentDataError (exit 1, a verdict on the data) naming every finding with its numbers.

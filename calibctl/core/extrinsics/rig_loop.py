@@ -2,9 +2,8 @@
 
 Pairs (a, b) and (a, c) of one rig are solved on their own but read the same corners of camera a in the frames
 all three saw (and the same intrinsics of a): their errors are correlated, and around a loop much of camera
-a's
-error cancels. Treated as independent, the loop's covariance is several times too wide (Mahalanobis 0.17-0.67
-on clean rendered 3-4 camera rigs) and the rule fires only on gross errors.
+a's error cancels. Treated as independent, the loop's covariance is several times too wide (Mahalanobis
+0.17-0.67 on clean rendered 3-4 camera rigs) and the rule fires only on gross errors.
 
 Joint linearisation (first order, no re-solve): each pair's estimate x_p (the pose vector of T_b_a, its
 cam_poses[1]) moves by G_p r for residuals r, G_p = [H_p^-1]_(x, obs) J_obs^T per (frame, camera) block, the
@@ -16,11 +15,10 @@ Two pairs share the corners of one camera in one frame with the same corner id, 
 (on p = q the pair's own Jacobian covariance). The frame-level side pairs the pulls of the clusters both pairs
 hold (a frame, or a member's photo): Cov_frame(x_p, x_q) = c_pq sum_k (P_pk - mean_p)(P_qk - mean_q)^T, c_pq =
 sqrt((n_p - 1)/n_p (n_q - 1)/n_q) (on p = q the pair's own jackknife). The loop residual's covariance is
-either
-propagated to first order. The rule judges the Jacobian one: a broken loop is a per-frame inconsistency (some
-frames of one pair disagree with the rest), which the frame-level covariance takes for frame-level error and
-absorbs (a 3 px break on corner-level rigs reads d 2.4 with it, 9 with the Jacobian one; per-component scaling
-as for a rig's own sigma also undoes the cancellation around the loop). Measured in docs/verdicts.md
+either propagated to first order. The rule judges the Jacobian one: a broken loop is a per-frame inconsistency
+(some frames of one pair disagree with the rest), which the frame-level covariance takes for frame-level error
+and absorbs (a 3 px break on corner-level rigs reads d 2.4 with it, 9 with the Jacobian one; per-component
+scaling as for a rig's own sigma also undoes the cancellation around the loop). Measured in docs/verdicts.md
 (benchmarks/bench_rig_loop.py).
 """
 
@@ -56,8 +54,7 @@ class _Pair:
 @dataclass(frozen=True)
 class LoopCovariance:
     """(6, 6) covariances of a loop residual (rvec rad, tvec m): the Jacobian one (the rule's), the
-    frame-level
-    one (None under MIN_FRAMES clusters in some pair; not judged, module docstring)."""
+    frame-level one (None under MIN_FRAMES clusters in some pair; not judged, module docstring)."""
 
     jacobian: np.ndarray
     frame_level: np.ndarray | None
@@ -141,8 +138,7 @@ def loop_covariance(
     x: np.ndarray,
 ) -> LoopCovariance:
     """Covariances of ``around(x)``, x the stacked cam_poses[1] of ``pair_solutions`` (2-camera RigSolutions
-    of
-    the rig ``full``), with every cross covariance between the pairs (module docstring)."""
+    of the rig ``full``), with every cross covariance between the pairs (module docstring)."""
     pairs = [_linearised_pair(sol, full) for sol in pair_solutions]
     k = len(pairs)
     jac, frame = np.zeros((6 * k, 6 * k)), np.zeros((6 * k, 6 * k))

@@ -17,12 +17,11 @@ Frame level
     calibrated on the same photos (MemberIntrinsics.view_influences), what that photo did to the member's
     intrinsics (IntrinsicCovariance.view_influences), carried through A. A member photo the rig does not use
     is a cluster of its own. The rig's own term (S the reduced information of the camera poses, every board
-    pose
-    eliminated, S_f and g_f frame f's share and score) is the delete-one step (S - S_f)^-1 g_f, not S^-1 g_f
-    (the jackknife, CR3): with 6 pose parameters over ~15 frames a frame's leverage is ~0.4 and the plain
-    sandwich reads 1.4x short (tests/core/extrinsics/test_rig_frame_sigma.py). Cov_frame = (n-1)/n sum
-    (IF - mean)(IF - mean)^T over the n clusters (+ A Cov_theta A^T for members whose photos are unknown:
-    stored calibrations, independent data).
+    pose eliminated, S_f and g_f frame f's share and score) is the delete-one step (S - S_f)^-1 g_f, not S^-1
+    g_f (the jackknife, CR3): with 6 pose parameters over ~15 frames a frame's leverage is ~0.4 and the plain
+    sandwich reads 1.4x short (tests/core/extrinsics/test_rig_frame_sigma.py). Cov_frame = (n-1)/n sum (IF -
+    mean)(IF - mean)^T over the n clusters (+ A Cov_theta A^T for members whose photos are unknown: stored
+    calibrations, independent data).
 
 Reported (FRAME_LEVEL_RULE): per camera-pose parameter the larger of the two sigmas, the Jacobian covariance
     scaled by f_i = max(1, sqrt(Cov_frame_ii / Cov_jacobian_ii)) on both sides (a covariance again, with the
@@ -205,10 +204,10 @@ def jackknife(pulls: np.ndarray) -> np.ndarray:
 
 def _frame_pulls(ne: NormalEquations, layout: Layout, H_inv: np.ndarray, refine: bool) -> np.ndarray:
     """(F, n_free) x_hat - x_hat(without frame f), one Newton step from the solution: (S - S_f)^-1 g_f over
-    the
-    camera poses (and refined intrinsics), each frame's board pose eliminated (S the reduced information, S_f
-    frame f's share, g_f its reduced score). The delete-one step, not S^-1 g_f: a frame that pins the rig more
-    than most leaves small residuals behind, and only the leverage-corrected step shows what it holds up."""
+    the camera poses (and refined intrinsics), each frame's board pose eliminated (S the reduced information,
+    S_f frame f's share, g_f its reduced score). The delete-one step, not S^-1 g_f: a frame that pins the rig
+    more than most leaves small residuals behind, and only the leverage-corrected step shows what it holds
+    up."""
     assert ne.frame_scores is not None and ne.frame_shared_H is not None
     n_free = H_inv.shape[0]
     s_full = (

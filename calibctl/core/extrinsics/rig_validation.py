@@ -12,8 +12,7 @@ around every simple cycle of that pair graph the composed transform should be id
 (rotation deg, translation mm) is reported with its one-sigma and the Mahalanobis distance of the 6-vector,
 both from the loop's Jacobian covariance with the cross covariances of pairs that share a camera's corners
 (core.extrinsics.rig_loop; treated as independent they read the loop several times too wide). A joint solve
-closes its own loops by construction; the pairwise loop is
-the rig's health metric (seed ch. 6 prompt B).
+closes its own loops by construction; the pairwise loop is the rig's health metric (seed ch. 6 prompt B).
 """
 
 from __future__ import annotations

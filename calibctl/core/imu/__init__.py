@@ -40,6 +40,11 @@ The estimator (``solve``): solve_imu_camera(imu, frames, noise, SolveOptions(...
     SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, estimate_line_delay,
     bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s.
 
+The row test and the report's series (``rows``): row_test(solution, frames) -> RowTest
+    (slope_s_per_row, sigma_s_per_row, offset_s, z, significant, message, per-row bins) or None;
+    report_series(solution, imu, frames) -> ReportSeries (gyro and camera rate, residual RMS per time
+    bin).
+
 Gates (``gates``; ``core.gate.GateResult``, each with the next action in its hint):
     rotational_excitation(track), td_observability(frames, td_crlb_ms), td_rotation_correlation(
     covariance_7, td_held), saturation(imu), imu_gaps(imu), dropped_frames(frames).

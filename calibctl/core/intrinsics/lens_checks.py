@@ -261,14 +261,11 @@ def _farthest_corner_rd(
     required_px: np.ndarray | None = None,
 ) -> tuple[float, str]:
     """Normalised distorted radius out to which a model is judged, and its words: the image point farthest
-    from
-    the principal point (an image corner, or with ``image_circle`` (cx, cy, r px) the farthest point of the
-    image
-    inside the circle); with ``observed_px`` ((K, 2) px, the observed corners' hull) the farthest observed
-    corner
-    grown by OBSERVED_MARGIN when that is nearer (the model is not used beyond it), or the farthest vertex of
-    ``required_px`` ((K, 2) px, the station's declared region) when that reaches farther: the union of
-    both."""
+    from the principal point (an image corner, or with ``image_circle`` (cx, cy, r px) the farthest point of
+    the image inside the circle); with ``observed_px`` ((K, 2) px, the observed corners' hull) the farthest
+    observed corner grown by OBSERVED_MARGIN when that is nearer (the model is not used beyond it), or the
+    farthest vertex of ``required_px`` ((K, 2) px, the station's declared region) when that reaches farther:
+    the union of both."""
     w, h = image_size
     fx, fy = float(camera_matrix[0][0]), float(camera_matrix[1][1])
     cx, cy = float(camera_matrix[0][2]), float(camera_matrix[1][2])
@@ -318,8 +315,8 @@ def check_distortion_foldover(
     px: out to the farthest point of the image inside the circle, where the lens forms an image; with
     ``observed_px`` (the observed corners' hull, px): no farther than the observed region grown by
     OBSERVED_MARGIN, where the calibration is used, alike for every model; with ``required_px`` too, the
-    station's
-    declared region where it reaches farther: a robot that looks there needs the model one-to-one there).
+    station's declared region where it reaches farther: a robot that looks there needs the model one-to-one
+    there).
 
     Radial part: r_d(r_u) = r_u * (1 + k1 r^2 + k2 r^4 + k3 r^6) / (1 + k4 r^2 + k5 r^4 + k6 r^6)
     must increase strictly, with a positive denominator, on a fine grid from 0 until it reaches
@@ -426,9 +423,8 @@ def check_equidistant_foldover(
     With ``image_circle`` (cx, cy, r) px the farthest point of the image inside the circle replaces the
     farthest image corner, and the model must reach it (the lens images the circle's edge). With
     ``observed_px`` the observed region grown by OBSERVED_MARGIN, when nearer, replaces both (and the model
-    must
-    reach it: corners were imaged there): a fold beyond every observed corner is not judged. ``required_px``
-    (the station's declared region) joins the observed one, as for check_distortion_foldover.
+    must reach it: corners were imaged there): a fold beyond every observed corner is not judged.
+    ``required_px`` (the station's declared region) joins the observed one, as for check_distortion_foldover.
     """
     rule = "distortion-foldover"
     fix = "the fisheye polynomial turns back inside the image: re-solve with corners out to the image edge"

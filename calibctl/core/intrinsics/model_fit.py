@@ -24,22 +24,20 @@ those pinhole photos would be a "misfit" that no model fixes. The quadratic patc
 
 Measured (2026-11-27, 1032x778 renders of 15 views at 0.2 px per coordinate, seed 0, and the real sets after
 the corner rule; table in docs/verdicts.md) -- fit RMS / floor (before: / patch alone): k1k2 on fisheye
-renders
-150 / 185 deg circular 5.8 / 8.7 (3.9 / 4.7), 120 deg full-frame 1.26 (1.21); fisheye on them 0.97-0.98
-(0.48-0.93); a 12 x 9 board held close to a 185 deg lens: fisheye 0.98 (0.17). Real photos under k1k2:
-opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75); acfr-lidar-camera (a real
-1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
+renders 150 / 185 deg circular 5.8 / 8.7 (3.9 / 4.7), 120 deg full-frame 1.26 (1.21); fisheye on them
+0.97-0.98 (0.48-0.93); a 12 x 9 board held close to a 185 deg lens: fisheye 0.98 (0.17). Real photos under
+k1k2: opencv-left-right left 1.02 (1.01), right 0.99 (0.83), udacity-camcal 1.75 (1.75); acfr-lidar-camera (a
+real 1920x1208 fisheye lens, ~80 deg across): fisheye 1.04, rational 0.99, k1k2 1.71 (k1k2 passes: 0.216 px).
 The rule fails a calibration when the ratio exceeds MISFIT_RATIO and the excess exceeds MISFIT_MIN_PX (a
 sub-pixel detector's slack). The lens-model estimate costs two solves: 0.22 s on acfr's 20 views; 0.36 / 0.44
-s of CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read
-only when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no
-misfit whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone,
-which is never below the full floor; the verdict is the same either way. The floor stored never exceeds the
-fit RMS it judges (``_within_fit``): on a fisheye the patches over-read the noise (an accepted fisheye
-artifact recorded 1.107 px for 0.10 px corner noise), and corners a model fits to R px carry at most R px of
-noise. Measured on seeded fisheye corners at 0.2 px per coordinate (0.283 px per corner; tests/workflows/
-sessions.py fisheye_capture, solved fisheye): 170 deg circular 0.422 -> 0.275 px, 150 deg full-frame 0.302 ->
-0.281 px.
+s of CPU on the 19 / 86 views of a 20 / 96-image 1280x960 render (2026-11-27, 2-core VM). So it is read only
+when it can matter (``noise_floor_px`` with the fit it judges): a fit of at most MISFIT_MIN_PX is no misfit
+whatever the floor (the excess cannot exceed it), and then the floor stored is the lens-free one alone, which
+is never below the full floor; the verdict is the same either way. The floor stored never exceeds the fit RMS
+it judges (``_within_fit``): on a fisheye the patches over-read the noise (an accepted fisheye artifact
+recorded 1.107 px for 0.10 px corner noise), and corners a model fits to R px carry at most R px of noise.
+Measured on seeded fisheye corners at 0.2 px per coordinate (0.283 px per corner; tests/workflows/sessions.py
+fisheye_capture, solved fisheye): 170 deg circular 0.422 -> 0.275 px, 150 deg full-frame 0.302 -> 0.281 px.
 """
 
 from __future__ import annotations
@@ -174,8 +172,7 @@ def noise_floor_px(
     """The model-misfit rule's floor, px per corner: the smaller of detector_rms_px and lens_floor_px (module
     docstring); None when neither can be read. ``fit_rms_px``: the fit the floor will judge; when no floor can
     make it a misfit (``can_misfit``) and the lens-free estimate reads, that estimate alone is returned and
-    the
-    lens models are not solved. ``lanes``: as lens_floor_px."""
+    the lens models are not solved. ``lanes``: as lens_floor_px."""
     reads = [detector_rms_px(object_points_per_view, image_points_per_view)]
     if reads[0] is not None and fit_rms_px is not None and not can_misfit(fit_rms_px):
         return _within_fit(reads[0], fit_rms_px)
@@ -214,9 +211,8 @@ def check_model_misfit(
     field_deg: float | None = None,
 ) -> Finding:
     """``model-misfit``: the fit RMS far above the detector's, or residuals that grow with radius.
-    ``field_deg``
-    (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of WIDE_FIELD_DEG or
-    more."""
+    ``field_deg`` (diagonal_field_deg, when known) picks the fix: the fisheye model only for a lens of
+    WIDE_FIELD_DEG or more."""
     fix = (
         "solve with --model fisheye (a wide or fisheye lens), or --model auto"
         if model != "fisheye"

@@ -24,13 +24,12 @@ Each rung is compared with the currently accepted model and accepted only if BOT
     held-out outer-ring RMS (calibctl.core.intrinsics.validation) does not increase at all.
 All rungs share the radius rings of the starting model's fit, so "outer ring" is the same corners
 for every candidate. A rejected rung does not end the search: the next rung is still compared with the
-accepted model,
-because e.g. a decentred lens can need the tangential terms while k3 alone buys nothing. A rung that
-cannot be solved (too few views for it, diverged, or a held-out fold it cannot explain) is recorded as
-rejected with the reason and is out of the comparison, not the run: when the starting rung itself is out
-(k1k2 on a strong fisheye: a real 1032x778 set failed one fold at 10.18 px, limit 10; a 185 deg render
-fails the full k1k2 solve at 10.9 px), the first rung that can be solved starts the comparison and the
-other lens family is compared with it. Only when no model at all can be solved is the run refused.
+accepted model, because e.g. a decentred lens can need the tangential terms while k3 alone buys nothing. A
+rung that cannot be solved (too few views for it, diverged, or a held-out fold it cannot explain) is recorded
+as rejected with the reason and is out of the comparison, not the run: when the starting rung itself is out
+(k1k2 on a strong fisheye: a real 1032x778 set failed one fold at 10.18 px, limit 10; a 185 deg render fails
+the full k1k2 solve at 10.9 px), the first rung that can be solved starts the comparison and the other lens
+family is compared with it. Only when no model at all can be solved is the run refused.
 
 Note: the rule is "enable only if >= 10 % AND not worse held-out". The seed's own sentence is the
 contrapositive of a weaker rule ("disable if < 10 % AND worse held-out"); the stricter reading is

@@ -28,11 +28,10 @@ sigma(fx) under CALIB_FIX_ASPECT_RATIO
 Initial guess of the rational model
     Started cold (OpenCV's own homography initialisation, all eight coefficients at 0), the rational
     model can stop in a bad minimum on a wide lens: on a 190 deg circular render
-    (tests/core/intrinsics/test_solve.py)
-    RMS 4.39 px against 0.276 px from a warm start. Without an ``initial`` K it therefore starts from the
-    k1k2 solution's K (CALIB_USE_INTRINSIC_GUESS); where k1k2 itself cannot be solved it starts cold.
-    On opencv-left-right, udacity-camcal and 120-170 deg renders the warm and the cold start reach the
-    same minimum (RMS equal to 1e-3 px).
+    (tests/core/intrinsics/test_solve.py) RMS 4.39 px against 0.276 px from a warm start. Without an
+    ``initial`` K it therefore starts from the k1k2 solution's K (CALIB_USE_INTRINSIC_GUESS); where k1k2
+    itself cannot be solved it starts cold. On opencv-left-right, udacity-camcal and 120-170 deg renders the
+    warm and the cold start reach the same minimum (RMS equal to 1e-3 px).
 
 Determinism
     OpenCV parallelises parts of the solve; with 2+ threads the summation order varies and the
@@ -45,12 +44,10 @@ Solves asked twice
     the capture's projection gate solves the session, then the solve's corner rule starts from the same
     solve of the same corners (on a lens the tilt's small model cannot explain, the tilt lens is the same
     fisheye solve the gate asks for, core.capture.tilt); ``--model auto`` asks its ladder again, its rational
-    folds start from the
-    k1k2 fit of the same fold, and the chosen model's validation refits the folds the ladder fitted. The last
-    RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model, are remembered by a
-    digest
-    of their inputs (``core.intrinsics.recent_answers``): the second ask costs a digest, and its answer is the
-    first one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
+    folds start from the k1k2 fit of the same fold, and the chosen model's validation refits the folds the
+    ladder fitted. The last RECENT_SOLVES solves with uncertainty and RECENT_FITS without, of a named model,
+    are remembered by a digest of their inputs (``core.intrinsics.recent_answers``): the second ask costs a
+    digest, and its answer is the first one's, number for number (tests/core/intrinsics/test_solve_reuse.py).
 """
 
 from __future__ import annotations
@@ -169,8 +166,7 @@ _RECENT_FITS: RecentAnswers[IntrinsicsSolution] = RecentAnswers(RECENT_FITS)
 
 def forget_recent_solves() -> None:
     """Forget the remembered solves (and the fisheye focal guess's view scores,
-    core.intrinsics.fisheye_model): a
-    benchmark that times the same solve again must compute it again."""
+    core.intrinsics.fisheye_model): a benchmark that times the same solve again must compute it again."""
     _RECENT.clear()
     _RECENT_FITS.clear()
     forget_view_scores()

@@ -5,9 +5,9 @@ firings; each ray hitting the backing board returns its range plus Gaussian nois
 a per-laser bias (``laser_bias_m``, fixed per ring for the whole session, as a real unit's) and an
 optional ``range_offset_m`` (a mis-set range calibration: acfr's VLP-16 needed -30 mm). A post behind
 the board adds clutter inside the station box; every other ray ends on a wall 8 m away (a full sweep). The
-camera is a pinhole (f 1000 px, 1280 x 960); its
-board pose comes from the projected inner corners plus ``corner_noise_px`` through the same
-``estimate_board_pose`` the real images use, so its covariance is the one a real view gets.
+camera is a pinhole (f 1000 px, 1280 x 960); its board pose comes from the projected inner corners plus
+``corner_noise_px`` through the same ``estimate_board_pose`` the real images use, so its covariance is the one
+a real view gets.
 """
 
 from __future__ import annotations

@@ -587,8 +587,7 @@ class _StreamState:
 
     def begin(self, frame: sources.Frame) -> tuple[np.ndarray, tuple[int, int], bool]:
         """A frame's gray image and size, and whether it has the stream's size (the first frame sets it).
-        Called in
-        frame order, possibly ahead of ``finish`` of the frames before it."""
+        Called in frame order, possibly ahead of ``finish`` of the frames before it."""
         gray = sources.to_gray(frame.image)
         size = (int(gray.shape[1]), int(gray.shape[0]))
         if self.selector is None:
@@ -691,9 +690,8 @@ def _detected_frames(
     """Each frame with its decision, in order (``state.take``), detected on ``jobs`` threads.
 
     With more than one job the frames are detected ahead: up to ``STREAM_AHEAD_PER_JOB`` x jobs frames are
-    read
-    and probed on the threads (``frame_select.probe_frame`` and the half-size copy for the frames' maximum:
-    OpenCV releases the GIL) while the frames before them are settled and offered in order
+    read and probed on the threads (``frame_select.probe_frame`` and the half-size copy for the frames'
+    maximum: OpenCV releases the GIL) while the frames before them are settled and offered in order
     (``StreamDetector.settle``, ``finish``), so every frame gets the detection, and the session the decisions,
     of the one-thread run. The frames read ahead of a stop are dropped unrecorded, as the one-thread run never
     read them.
@@ -751,8 +749,7 @@ def _capture_stream(
     writer: Executor,
 ) -> _Collected:
     """A video's or camera's frames selected into views; from 2 jobs on the kept frames are encoded as PNG on
-    the
-    capture's ``writer`` thread (the one a folder's images are stored on) beside the selection."""
+    the capture's ``writer`` thread (the one a folder's images are stored on) beside the selection."""
     jobs = request.jobs or settings.jobs
     stream = sources.open_stream(source)
     is_file = source.kind == sources.VIDEO
@@ -913,8 +910,7 @@ def _build_session(
     model_points = spec.object_points()
     with verdict_lanes(request.jobs or settings.jobs) as lanes:
         # Same test as the solve's (lint rule one-camera), while the operator still holds the board; its
-        # solves
-        # are independent of the other gates', so it runs on another lane beside them (verdict_lanes)
+        # solves are independent of the other gates', so it runs on another lane beside them (verdict_lanes)
         two_cameras = lanes.start(
             lambda: one_camera_gate(
                 [model_points[np.asarray(v.corner_ids)] for v in board_views],
@@ -1067,9 +1063,8 @@ def classify_photos(
     paths: Sequence[str | Path], spec: BoardSpec, workers: int | None = None
 ) -> tuple[list[outcomes_core.ImageOutcome], np.ndarray | None]:
     """Every photo's outcome as a folder capture classifies them (``finalize_session`` included), and the
-    per-pixel
-    maximum of the photos at half size, which a circular fisheye's image circle is found in (None: no
-    image)."""
+    per-pixel maximum of the photos at half size, which a circular fisheye's image circle is found in (None:
+    no image)."""
     picture = _MaxPicture()
     with sources.quiet_opencv():
         found = outcomes_core.classify_files(
@@ -1090,8 +1085,7 @@ def photos_session(
     max_gray: np.ndarray | None = None,
 ) -> CaptureSession:
     """The session a folder ``capture`` builds from photos already classified (``classify_photos``), its gates
-    and
-    verdict included, in memory: nothing is stored. ``rig solve-folders`` judges each member by it."""
+    and verdict included, in memory: nothing is stored. ``rig solve-folders`` judges each member by it."""
     size = outcomes_core.session_image_size(list(outcomes))
     if size is None:
         raise InputError(f"none of the {len(outcomes)} photos of {source.label} could be read")

@@ -272,12 +272,10 @@ def select_images(spec: SourceSpec) -> ImageSet:
 
 def start_detection_early(source: str, jobs: int) -> None:
     """Start the detection pool's fork server now when ``source`` will be detected on processes (a folder,
-    glob or
-    list of images that ``choose_executor`` sends to the pool at ``jobs``), before the caller imports its
-    store
-    and workflow: the server's imports run on another core meanwhile (a fresh 96-image capture waited ~0.2 s
-    for
-    them, benchmarks/results/station.md). A source that cannot be read is left to the capture to report."""
+    glob or list of images that ``choose_executor`` sends to the pool at ``jobs``), before the caller imports
+    its store and workflow: the server's imports run on another core meanwhile (a fresh 96-image capture
+    waited ~0.2 s for them, benchmarks/results/station.md). A source that cannot be read is left to the
+    capture to report."""
     if jobs <= 1:
         return
     try:
@@ -414,9 +412,8 @@ class CameraSource:
 @contextlib.contextmanager
 def read_ahead(frames: Iterator[Frame], depth: int) -> Iterator[Iterator[Frame]]:
     """``frames`` read on a thread of their own, at most ``depth`` ahead of the consumer, in order; an
-    exception
-    of the reader (a decode error) is raised where the consumer would have met it. Leaving the block stops the
-    reader (the frames it read ahead are dropped)."""
+    exception of the reader (a decode error) is raised where the consumer would have met it. Leaving the block
+    stops the reader (the frames it read ahead are dropped)."""
     queue: Queue[tuple[Frame | None, BaseException | None]] = Queue(maxsize=max(1, depth))
     stop = threading.Event()
 

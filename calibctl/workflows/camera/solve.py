@@ -154,9 +154,9 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
     """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
 
     The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly,
-    as at capture) and the model, so it runs on another lane
-    (verdict_lanes) beside the held-out folds and the model-misfit floor; the folds and the floor's lens
-    models spread over the lanes too. The numbers are those of the sequential order."""
+    as at capture) and the model, so it runs on another lane (verdict_lanes) beside the held-out folds and the
+    model-misfit floor; the folds and the floor's lens models spread over the lanes too. The numbers are those
+    of the sequential order."""
     size = session.image_size
     if size is None or not session.views:
         raise UsageError(f"session {session.session_id} has no accepted views to solve")
@@ -195,10 +195,8 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         # the fit RMS and the held-out RMS the artifact records must come from one minimum
         solution, holdout = agree_with_folds(kept_obj, kept_img, size, solution, holdout, lanes=lanes)
         # the model-misfit rule's floor: lens-free 4x4 patches or the best lens model's own residuals, the
-        # smaller
-        # (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit); on
-        # every
-        # corner the rule kept, the views --drop-outliers removes included
+        # smaller (the lens models are solved only when the fit could be a misfit: core.intrinsics.model_fit);
+        # on every corner the rule kept, the views --drop-outliers removes included
         detector_rms = noise_floor_px(obj, img, size, float(solution.rms_px), lanes=lanes)
     except BaseException:
         split.settle()

@@ -62,8 +62,8 @@ class RigDiff:
 
 def tree_of(cal: RigCalibration) -> RigTree:
     """The stored edges as core's RigTree. Hand-eye and LiDAR edges are stored as measured (``flange ->
-    cam0``,
-    ``lidar -> cam0``), not from the root camera down: oriented as the exports do (rig_tree.orient_tree)."""
+    cam0``, ``lidar -> cam0``), not from the root camera down: oriented as the exports do
+    (rig_tree.orient_tree)."""
     return orient_tree(
         [
             Edge(

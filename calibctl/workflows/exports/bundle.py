@@ -107,6 +107,7 @@ def write_bundle(
             "algorithm": "ed25519",
             "key_id": signer.key_id,
             "value": signer.sign(manifest_message(doc)),
+            "public_key": signer.public_key_text,
         }
     payloads[MANIFEST] = (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
     return write_folder(out, payloads, "bundle")

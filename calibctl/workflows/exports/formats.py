@@ -62,8 +62,9 @@ def _opencv_text(art: CalibrationArtifact) -> str:
         return Path(path).read_text(encoding="utf-8")
 
 
-def _one_camera_text(art: CalibrationArtifact, fmt: str) -> str:
-    """A one-camera Kalibr camchain (cam0, no overlaps, topic /<frame base>/image_raw) or mrcal .cameramodel
+def _one_camera_text(art: CalibrationArtifact, fmt: str, topic: str | None = None) -> str:
+    """A one-camera Kalibr camchain (cam0, no overlaps, topic ``topic``, default /<frame base>/image_raw) or
+    mrcal .cameramodel
     (the camera is its own reference). mrcal has no Kannala-Brandt model: a fisheye is refused."""
     import numpy as np
 
@@ -79,8 +80,11 @@ def _one_camera_text(art: CalibrationArtifact, fmt: str) -> str:
         lens="fisheye" if art.model.name == "fisheye" else "pinhole",
     )
     if fmt == "kalibr":
-        return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()))
-    model = mrcal_model.cameramodel(member, np.eye(4), f"calibctl {art.ref} {art.status}")
+        topics = {art.serial: topic} if topic else None
+        return rig_exports.kalibr_camchain([member], RigTree(art.serial, ()), topics=topics)
+    model = mrcal_model.cameramodel(
+        member, np.eye(4), f"calibctl {art.ref} {art.status}", art.observed_region_px
+    )
     if model is None:
         raise InputError(
             f"{art.ref}: {mrcal_model.missing_reason(member)}", "export it as opencv or ros instead"
@@ -94,8 +98,11 @@ def _yaml_text(data: Any, **style: Any) -> str:
     return yaml.safe_dump(data, sort_keys=False, **style)
 
 
-def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None) -> str:
-    """The artifact as text in ``fmt``; ``camera_name`` is the ROS camera name (default: from the serial)."""
+def render(
+    art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None, topic: str | None = None
+) -> str:
+    """The artifact as text in ``fmt``; ``camera_name`` is the ROS camera name (default: from the serial),
+    ``topic`` Kalibr's rostopic (default: /<frame base>/image_raw)."""
     document = art.model_dump(mode="json", exclude={"signature"} if art.signature is None else None)
     if fmt == "json":
         return json.dumps(document, indent=2, allow_nan=False) + "\n"
@@ -109,7 +116,7 @@ def render(art: CalibrationArtifact, fmt: str, *, camera_name: str | None = None
     if fmt == "opencv":
         return trace_header.stamp(art, _opencv_text(art), signed=True)
     if fmt in ("kalibr", "mrcal"):
-        return trace_header.stamp(art, _one_camera_text(art, fmt), signed=True)
+        return trace_header.stamp(art, _one_camera_text(art, fmt, topic), signed=True)
     raise InputError(f"unknown export format '{fmt}'", f"choose one of {', '.join(EXPORT_FORMATS)}")
 
 

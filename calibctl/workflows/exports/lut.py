@@ -6,11 +6,10 @@ The folder holds ``lut.yaml``, the source's own document (``calibration.json``: 
 --format json`` writes it; ``rig.json``: the rig version) and, per camera, four ``.npy`` maps
 (core.intrinsics.undistort_maps): OpenCV's fixed-point pair (``NAME.map1_16sc2.npy`` int16 (h, w, 2) +
 ``NAME.map2_16uc1.npy`` uint16 (h, w)) and the float pair (``NAME.map_x_32f.npy``, ``NAME.map_y_32f.npy``,
-float32 (h, w)). ``.npy`` because it is the raw
-array behind a 128-byte header: ``np.load`` (or a memory map) reads it in the time it takes to read the
-bytes, C++ reads it with cnpy or by skipping the header, and each map has its own sha256; an OpenCV
-FileStorage .yml.gz holds the numbers as text (a 1280x960 float pair: 2.7 s to read against 18 ms for
-the two .npy files, docs/exports.md).
+float32 (h, w)). ``.npy`` because it is the raw array behind a 128-byte header: ``np.load`` (or a memory map)
+reads it in the time it takes to read the bytes, C++ reads it with cnpy or by skipping the header, and each
+map has its own sha256; an OpenCV FileStorage .yml.gz holds the numbers as text (a 1280x960 float pair: 2.7 s
+to read against 18 ms for the two .npy files, docs/exports.md).
 
 ``lut.yaml`` starts with the trace header of its source (trace_header: a camera's ``calibctl SERIAL@V STATUS
 sha256 S`` and its ``calibctl signature`` line, or a rig's ``calibctl rig RIG@V ...``, ``rig-signature`` and

@@ -11,6 +11,8 @@ camera gets no .cameramodel: ``cameramodel`` returns None and ``missing_reason``
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import cv2
 import numpy as np
 
@@ -34,9 +36,16 @@ def missing_reason(m: MemberIntrinsics) -> str | None:
     return None
 
 
-def cameramodel(m: MemberIntrinsics, T_cam_ref: np.ndarray, comment: str) -> str | None:
+def cameramodel(
+    m: MemberIntrinsics,
+    T_cam_ref: np.ndarray,
+    comment: str,
+    valid_region_px: Sequence[Sequence[float]] | None = None,
+) -> str | None:
     """The .cameramodel text of ``m`` with extrinsics ``T_cam_ref`` (4, 4), metres; None when mrcal lacks the
-    lens model (``missing_reason``). ``comment`` (one line) says where it came from."""
+    lens model (``missing_reason``). ``comment`` (one line) says where it came from. ``valid_region_px``: the
+    hull of the corners the solve used (the artifact's ``observed_region_px``), written as mrcal's
+    ``valid_intrinsics_region`` (a closed contour: its first vertex repeated last)."""
     if missing_reason(m) is not None:
         return None
     K = np.asarray(m.camera_matrix, float)
@@ -55,5 +64,18 @@ def cameramodel(m: MemberIntrinsics, T_cam_ref: np.ndarray, comment: str) -> str
         f"    'intrinsics': [{floats([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *dist])}],\n"
         f"    # rt_cam_ref: Rodrigues rvec (rad) then t (m); the reference is the rig's root camera\n"
         f"    'extrinsics': [{floats(extrinsics)}],\n"
-        f"    'imagersize': [{int(m.image_size[0])}, {int(m.image_size[1])}],\n}}\n"
+        f"    'imagersize': [{int(m.image_size[0])}, {int(m.image_size[1])}],\n{_region(valid_region_px)}}}\n"
+    )
+
+
+def _region(vertices: Sequence[Sequence[float]] | None) -> str:
+    """mrcal's ``valid_intrinsics_region`` entry (mrcal draws it on its plots and
+    ``mrcal-show-projection-uncertainty``), or nothing without a hull of at least 3 vertices."""
+    if vertices is None or len(vertices) < 3:
+        return ""
+    closed = [*vertices, vertices[0]]
+    points = ", ".join(f"[{float(u)!r}, {float(v)!r}]" for u, v in closed)
+    return (
+        f"    # the hull of the corners the solve used (px): where these intrinsics were measured\n"
+        f"    'valid_intrinsics_region': [{points}],\n"
     )

@@ -235,15 +235,17 @@ def kalibr_camchain(
     overlaps: Mapping[str, Collection[str]] | None = None,
     T_cam_imu: Mapping[str, np.ndarray] | None = None,
     timeshift_cam_imu_s: float = 0.0,
+    topics: Mapping[str, str] | None = None,
 ) -> str:
     """Kalibr camchain YAML, cameras in tree order (root first); ``tree`` names cameras by serial.
 
     Every camera has ``cam_overlaps`` (indices of the cameras it shares views with: ``overlaps``, default its
     tree neighbours), as Kalibr's ConfigReader ``getCamOverlaps`` requires; ``rostopic`` is the camera's
-    legal ROS topic (``names``). ``T_cam_imu`` (serial -> (4, 4), IMU points into the camera frame) adds
-    Kalibr's camchain-imucam fields ``T_cam_imu`` and ``timeshift_cam_imu``: ``timeshift_cam_imu_s``, the
-    td_s of a camera-IMU edge (Kalibr's ``t_imu = t_cam + shift`` is calibctl's ``t_imu = t_cam + td_s``:
-    the same number), or 0.0 for an IMU joined by hand-eye (which estimates no time shift; its
+    legal ROS topic (``names``; ``topics``: serial -> the topic given instead). ``T_cam_imu`` (serial ->
+    (4, 4), IMU points into the camera frame) adds Kalibr's camchain-imucam fields ``T_cam_imu`` and
+    ``timeshift_cam_imu``: ``timeshift_cam_imu_s``, the td_s of a camera-IMU edge (Kalibr's ``t_imu = t_cam
+    + shift`` is calibctl's ``t_imu = t_cam + td_s``: the same number), or 0.0 for an IMU joined by hand-eye
+    (which estimates no time shift; its
     time-alignment gate checked the motions were synchronised)."""
     by_name = {m.name: m for m in members}
     names = names or FrameNames.of([m.name for m in members])
@@ -266,7 +268,7 @@ def kalibr_camchain(
             "distortion_model": "equidistant" if m.lens == "fisheye" else "radtan",
             "distortion_coeffs": dist[:4],
             "resolution": [int(m.image_size[0]), int(m.image_size[1])],
-            "rostopic": names.topic(name),
+            "rostopic": (topics or {}).get(name) or names.topic(name),
             "cam_overlaps": sorted(index[o] for o in near.get(name, ()) if o in index and o != name),
         }
         if previous is not None:

@@ -46,7 +46,8 @@ _RIG_NOT_STORED = re.compile(
 )
 _SIGNATURE = re.compile(
     r"^(?:# |<!-- )calibctl (?:rig-)?signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
-    r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)(?: -->)?\s*$"
+    r"record_sha256 (?P<record>[0-9a-f]{64}) value (?P<value>[A-Za-z0-9+/]{86}==)"
+    r"(?: public_key (?P<public_key>[A-Za-z0-9+/]{43}=))?(?: -->)?\s*$"
 )
 _MEMBER = re.compile(
     r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
@@ -96,7 +97,8 @@ def file_sha256(text: str) -> str:
 def _signature_line(word: str, signature: RecordSignature, open_: str = "# ", close: str = "") -> str:
     return (
         f"{open_}calibctl {word} {signature.algorithm} key_id {signature.key_id} record_sha256 "
-        f"{signature.record_sha256} value {signature.value}{close}\n"
+        f"{signature.record_sha256} value {signature.value}"
+        f"{f' public_key {signature.public_key}' if signature.public_key else ''}{close}\n"
     )
 
 
@@ -108,6 +110,7 @@ def _signature_in(head: list[str]) -> RecordSignature | None:
                 key_id=m.group("key_id"),
                 record_sha256=m.group("record"),
                 value=m.group("value"),
+                public_key=m.group("public_key"),
             )
             for line in head
             if (m := _SIGNATURE.match(line))

@@ -1,11 +1,10 @@
 """``calibctl fleet ingest | trends``: the health reports robots send, and their trends per serial.
 
 Ingest reads JSON-lines files (one ``HealthReport`` per line), all or nothing per file: a file with one
-refused
-line (malformed, from the future, for a serial its robot does not carry, a duplicate source id) writes nothing
-and names each refused line; the other files are still ingested. Trends are conditionals, not aggregates (seed
-chapter 4 and chapter 6's modes): RMS against temperature, time offset against time in ppm, and this camera's
-RMS against the rest of the fleet's cameras, each with its n and sigma.
+refused line (malformed, from the future, for a serial its robot does not carry, a duplicate source id) writes
+nothing and names each refused line; the other files are still ingested. Trends are conditionals, not
+aggregates (seed chapter 4 and chapter 6's modes): RMS against temperature, time offset against time in ppm,
+and this camera's RMS against the rest of the fleet's cameras, each with its n and sigma.
 """
 
 from __future__ import annotations

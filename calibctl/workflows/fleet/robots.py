@@ -54,8 +54,7 @@ def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str
 
 def assign(settings: Settings, robot: str, ref: str, reason: str, *, rig: bool = False) -> FleetEvent:
     """Record that ``robot`` now runs ``SERIAL@N`` (``rig``: ``RIG@N``), an accepted, stored version of a
-    serial
-    (rig) it carries."""
+    serial (rig) it carries."""
     check_reason(reason)
     name, version = records.parse_artifact_ref(ref)
     if version is None:

@@ -4,13 +4,12 @@ promote or roll back the fleet in one command.
 ``start``: new versions for a set of serials and rigs and a canary cohort; the canary robots' assignments are
 written with the rollout, in one transaction; each target is diffed against the version its robots ran
 (``calibctl diff``, recorded in the rollout event), so the operator sees whether the change is beyond
-re-calibration noise. ``promote``: the
-health gate (``gate``: the canary robots' checks and health reports since the start), then every other robot
-carrying a target gets its new version and each rig target becomes its rig's active version, in one
-transaction; the promote event records the gate's inputs. ``rollback``: every robot the rollout
-touched is put back on the version it ran before and each rig the promote activated gets its previous active
-version back, in one transaction. Each is appended with a compare-and-set on the log's length (and on each
-rig's active version), so a step decided on a stale fleet writes nothing.
+re-calibration noise. ``promote``: the health gate (``gate``: the canary robots' checks and health reports
+since the start), then every other robot carrying a target gets its new version and each rig target becomes
+its rig's active version, in one transaction; the promote event records the gate's inputs. ``rollback``: every
+robot the rollout touched is put back on the version it ran before and each rig the promote activated gets its
+previous active version back, in one transaction. Each is appended with a compare-and-set on the log's length
+(and on each rig's active version), so a step decided on a stale fleet writes nothing.
 
 No gate input yet for a canary target: exit 2, nothing promoted; a failing one: exit 1, the rollout is held
 (roll it back).
@@ -153,8 +152,7 @@ def start(
 
 def promote(settings: Settings, name: str, reason: str) -> Rollout:
     """The health gate, then every other robot carrying a target gets its version and each rig target becomes
-    its
-    rig's active version (one transaction); the promote event records the gate's inputs."""
+    its rig's active version (one transaction); the promote event records the gate's inputs."""
     check_reason(reason)
     fleet, rig_active = _read(settings, name)
     rollout = fleet.rollouts[name]

@@ -1,8 +1,8 @@
 """``fleet trends``: one serial's health as conditionals (seed chapter 6, "the trends"): RMS against
-temperature
-(thermal, reversible), the time offset against time (clock drift, in ppm), and the per-camera RMS spread (one
-bad sensor hiding in a fleet aggregate). Each slope is an ordinary least-squares fit with its 1-sigma from the
-residual scatter and its n; each aggregate comes with the breakdown it would hide (per 10 degC bin).
+temperature (thermal, reversible), the time offset against time (clock drift, in ppm), and the per-camera RMS
+spread (one bad sensor hiding in a fleet aggregate). Each slope is an ordinary least-squares fit with its
+1-sigma from the residual scatter and its n; each aggregate comes with the breakdown it would hide (per 10
+degC bin).
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@ The CSV has one row per arm pose: ``image`` (file name inside --images) and the 
 ``T_base_gripper`` as ``gripper_q*``/``gripper_r*_rad``/``gripper_r11..r33`` + ``gripper_t*_m`` (metres;
 see handeye_io). A file without a header, 16 numbers per line (a row-major 4x4, metres, as RWHE-Calib's
 RobotPosesVec.txt), is read too: its i-th line is the i-th image of --images in file-name order. Each image is
-detected and its board pose fitted on the camera's *active*
-calibration from the store, through that calibration's lens model (solvePnP for pinhole models,
-the fisheye projection for ``--model fisheye``). Then, with the board frame as b's world:
+detected and its board pose fitted on the camera's *active* calibration from the store, through that
+calibration's lens model (solvePnP for pinhole models, the fisheye projection for ``--model fisheye``). Then,
+with the board frame as b's world:
 
 - eye-in-hand (camera on the gripper): a = gripper in the base frame, X = T_gripper_camera;
 - eye-to-hand (camera fixed, board on the gripper): a = base seen from the gripper (inverse robot

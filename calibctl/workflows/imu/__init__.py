@@ -5,5 +5,6 @@ gates and a verdict out; with ``--rig`` the rig's next version with the edge ``i
 units checked); ``imu_solve`` pins the camera's active stored calibration, runs core.imu's solve and
 gates, builds the edge's evidence (``RigCalibration.imu``) at full precision and stores it through the
 ``edges`` room (``run_imu`` is the whole command in one call); ``imu_synth`` writes a rendered
-recording with its truth. Beside ``lidar | handeye`` (imports neither), below ``rig``, above ``edges``.
+recording with its truth; ``imu_report`` draws an edge's section of ``calibctl report --rig`` from its
+stored evidence. Beside ``lidar | handeye`` (imports neither), below ``rig``, above ``edges``.
 """

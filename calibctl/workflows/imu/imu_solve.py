@@ -30,12 +30,17 @@ from calibctl.artifacts.imu import (
     ImuInput,
     ImuMetrics,
     ImuNoiseModel,
+    ImuRowBin,
+    ImuRowTest,
+    ImuSeries,
 )
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.gate import GateResult
 from calibctl.core.imu.calibrate import Calibration, calibrate
+from calibctl.core.imu.plain import board_track
+from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_test
 from calibctl.core.imu.samples import ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
 from calibctl.core.intrinsics.solve import is_fisheye
@@ -83,6 +88,8 @@ class ImuOutcome:
     noise_source: str
     calibration: Calibration
     board: str | None = None  # NAME@REV read from the store
+    rows: RowTest | None = None  # the row test on the solved residuals
+    series: ReportSeries | None = None  # what the report page plots over time
     stored: RigCalibration | None = None
     written: list[str] = field(default_factory=list)
 
@@ -153,7 +160,12 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
         cal = calibrate(rec.imu, rec.frames, noise, options, fallback_td_s=req.hold_td_s)
     except ImuInputError as exc:
         raise InputError(f"{req.recording}: {exc}", "fix the recording as the message says") from None
-    return ImuOutcome(req, camera, rec, noise, source, cal, None if board is None else board.ref)
+    outcome = ImuOutcome(req, camera, rec, noise, source, cal, None if board is None else board.ref)
+    if cal.solution is not None:
+        track = board_track(rec.frames)
+        outcome.rows = row_test(cal.solution, rec.frames, track)
+        outcome.series = report_series(cal.solution, rec.imu, rec.frames, track)
+    return outcome
 
 
 def _vec3(v: np.ndarray) -> tuple[float, float, float]:
@@ -221,6 +233,52 @@ def metrics_of(s: ImuCameraSolution | None, folds: int) -> ImuMetrics | None:
     )
 
 
+def _opt(v: float, digits: int) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None
+
+
+def row_test_of(outcome: ImuOutcome) -> ImuRowTest | None:
+    t = outcome.rows
+    if t is None:
+        return None
+    return ImuRowTest(
+        slope_us_per_row=1e6 * t.slope_s_per_row,
+        sigma_us_per_row=1e6 * t.sigma_s_per_row,
+        offset_us=1e6 * t.offset_s,
+        principal_row_px=float(outcome.recording.frames.camera_matrix[1, 2]),
+        z=t.z,
+        significant=t.significant,
+        line_delay_solved=t.line_delay_solved,
+        corners=t.corners,
+        message=t.message,
+        rows=[
+            ImuRowBin(
+                row_px=float(r), time_residual_us=_opt(1e6 * m, 3), sigma_us=_opt(1e6 * e, 3), corners=int(n)
+            )
+            for r, m, e, n in zip(t.row_px, t.time_residual_s, t.sigma_s, t.counts, strict=True)
+        ],
+    )
+
+
+def series_of(outcome: ImuOutcome) -> ImuSeries | None:
+    """The plotted series, rounded to what a 480-pixel plot can show (they are not estimates)."""
+    s = outcome.series
+    if s is None:
+        return None
+
+    def rows3(a: np.ndarray, digits: int) -> list[tuple[float | None, float | None, float | None]]:
+        return [(_opt(x, digits), _opt(y, digits), _opt(z, digits)) for x, y, z in a]
+
+    return ImuSeries(
+        t_s=[round(float(v), 4) for v in s.t_s],
+        gyro_rad_s=rows3(s.gyro_rad_s, 5),
+        camera_rate_rad_s=rows3(s.camera_rate_rad_s, 5),
+        corner_rms_px=[_opt(v, 4) for v in s.corner_rms_px],
+        gyro_rms_rad_s=[_opt(v, 6) for v in s.gyro_rms_rad_s],
+        accel_rms_m_s2=[_opt(v, 5) for v in s.accel_rms_m_s2],
+    )
+
+
 def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
     """The typed result as the rig edge's evidence ``imu_frame -> serial``, at full precision."""
     req, s, n = outcome.request, outcome.solution, outcome.noise
@@ -253,6 +311,8 @@ def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
             for role, path, sha in outcome.recording.inputs
         ],
         created_at=utc_now(),
+        row_test=row_test_of(outcome),
+        series=series_of(outcome),
     )
 
 
@@ -288,6 +348,7 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             for g in outcome.calibration.gates
         ],
         "estimate": None,
+        "row_test": None,
     }
     if s is not None:
         T = s.T_imu_cam
@@ -319,6 +380,17 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
         m = metrics_of(s, outcome.request.folds)
         assert m is not None
         doc["metrics"] = m.model_dump(mode="json")
+        rows = row_test_of(outcome)
+        if rows is not None:
+            doc["row_test"] = {
+                "slope_us_per_row": round(rows.slope_us_per_row, 3),
+                "sigma_us_per_row": round(rows.sigma_us_per_row, 3),
+                "offset_us": round(rows.offset_us, 3),
+                "z": round(rows.z, 2),
+                "significant": rows.significant,
+                "corners": rows.corners,
+                "message": rows.message,
+            }
     return doc
 
 

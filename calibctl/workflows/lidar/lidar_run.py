@@ -4,7 +4,8 @@
 Order (docs/lidar.md): with ``--rig`` the target is refused before any scan is read (exit 2, nothing stored:
 rig_lidar module docstring); then the solve (lidar_solve), its evidence stored as the rig's next version,
 then the files. ``-o`` holds ``lidar_solve.result_json`` (the rounded shape ``--json`` prints, without the
-``stored`` block); ``--tf-static`` is written for an accepted result only.
+``stored`` block) sealed (``exports.sealed_result``: its kind, content hash and, with a configured key, its
+signature); ``--tf-static`` is written for an accepted result only.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from calibctl.config import Settings
 from calibctl.errors import UsageError
 from calibctl.files import write_atomic
+from calibctl.workflows.exports import sealed_result
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.lidar.lidar_solve import (
     LidarOutcome,
@@ -24,6 +26,7 @@ from calibctl.workflows.lidar.lidar_solve import (
     run_lidar_solve,
     tf_static_yaml,
 )
+from calibctl.workflows.store_admin import keys
 
 
 @dataclass(frozen=True)
@@ -66,8 +69,9 @@ def run_lidar(
         outcome.stored = rig_lidar.store_lidar(settings, target.rig, ev).calibration
     outcome.written = [f"wrote {path}" for path in outcome.overlays or []]
     doc = result_json(outcome)
-    if files.out is not None:
-        text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    if files.out is not None:  # hashed, and signed with a configured key: `lint FILE` checks both
+        sealed = sealed_result.seal(doc, sealed_result.LIDAR_RESULT, keys.signer_of(settings))
+        text = json.dumps(sealed, indent=2, allow_nan=False) + "\n"
         write_atomic(files.out, text, force=files.force)
         outcome.written.append(f"wrote {files.out}")
     if files.tf_static is not None:

@@ -54,8 +54,7 @@ def rederive(
     art: CalibrationArtifact, settings: Settings, imported_from: str, import_signature: str | None = None
 ) -> CalibrationArtifact:
     """``art`` with this store's lint findings and verdict, unsealed; ``imported_from`` (and how the source
-    was
-    signed) as provenance."""
+    was signed) as provenance."""
     findings = lint_facts(facts_from_document(art.model_dump(mode="json"), art.ref), settings.lint)
     failed_gates = [g.gate for g in art.gates if not g.passed]
     if failed_gates:
@@ -189,8 +188,7 @@ def import_file(
     trusted_keys: Path | None = None,
 ) -> ImportOutcome:
     """Check the file's hash and (with ``require_signature``) its signature by a trusted key, then store it
-    with
-    this store's verdict and version (see ``imports``)."""
+    with this store's verdict and version (see ``imports``)."""
     art = records.read_artifact_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)
     keys.require_trusted(art, str(path), trusted, require_signature)

@@ -271,8 +271,7 @@ def _misfit_rule(facts: CalibrationFacts) -> list[Finding]:
 
 def _gauge_rule(facts: CalibrationFacts) -> list[Finding]:
     """``metric-gauge``: a failed distance gauge at capture (seed chapter 0) fails the calibration; an
-    override
-    with its reason (provenance.gauge_override) keeps it as a warning."""
+    override with its reason (provenance.gauge_override) keeps it as a warning."""
     gauge = facts.metric_gauge or {}
     d = gauge.get("distance") or {}
     if not d or d.get("passed", True):
@@ -538,10 +537,9 @@ _MISFIT_SYMPTOMS = ("sigma-fx", "outer-ring-holdout", "one-camera", "camera-chan
 
 def _misfit_first(findings: list[Finding], narrow: bool = False) -> list[Finding]:
     """With model-misfit failed, the symptom rules' fixes point at its fix (the verdicts stay). On a
-    ``narrow``
-    lens (below model_fit.WIDE_FIELD_DEG) with camera-changed or one-camera failed too, the misfit is the
-    symptom: no lens model is wrong there, the intrinsics changed during the capture (a drifting
-    ~60 deg webcam), so model-misfit and its symptoms point at that rule's fix instead (camera-changed's
+    ``narrow`` lens (below model_fit.WIDE_FIELD_DEG) with camera-changed or one-camera failed too, the misfit
+    is the symptom: no lens model is wrong there, the intrinsics changed during the capture (a drifting ~60
+    deg webcam), so model-misfit and its symptoms point at that rule's fix instead (camera-changed's
     first)."""
     misfit = next((f for f in findings if f.rule == "model-misfit"), None)
     if misfit is None:

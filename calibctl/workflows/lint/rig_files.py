@@ -1,8 +1,8 @@
 """Lint of the files ``calibctl rig export`` writes, recognised by their content: the bundle manifest (every
 listed file present and unchanged, each one linted), the rig and hand-eye JSON documents (schema, content
 hash), tf_static, URDF (a robot or its joints), the Kalibr camchain, mrcal .cameramodel and the OpenCV stereo
-FileStorage
-(parse, numbers, frames). Each checks the rig trace header first (an edited file is ``content-hash``).
+FileStorage (parse, numbers, frames). Each checks the rig trace header first (an edited file is
+``content-hash``).
 
 ``rig_file_kind`` says which of these a text is (None: not a rig export; ``lint.lint_file`` takes the
 camera formats). Rules: ``frames`` (a frame or topic ROS would refuse, a tree that is not one),
@@ -31,8 +31,8 @@ from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding
 from calibctl.config import LintThresholds
 from calibctl.errors import InputError
-from calibctl.signing import TrustedKeys
-from calibctl.workflows.exports import bundle, formats, trace_header
+from calibctl.signing import EDITED, TrustedKeys, is_mismatch
+from calibctl.workflows.exports import bundle, formats, sealed_result, trace_header
 from calibctl.workflows.exports.frame_names import ROS_NAME, FrameNames
 from calibctl.workflows.lint.lint import (
     CalibrationFacts,
@@ -96,7 +96,8 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | tf | urdf | kalibr | kalibr-imu | mrcal | opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | lidar-result | tf | urdf | kalibr | kalibr-imu | mrcal |
+    opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -111,6 +112,8 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "rig-json"
     if data.get("kind") == "handeye" and "content_sha256" in data:
         return "handeye-json"
+    if data.get("kind") == sealed_result.LIDAR_RESULT or set(data) >= LIDAR_RESULT_FIELDS:
+        return sealed_result.LIDAR_RESULT
     if isinstance(data.get("transforms"), list):
         return "tf"
     if set(data) >= KALIBR_IMU_FIELDS:
@@ -138,6 +141,66 @@ def _rotation(R: np.ndarray, what: str) -> list[Finding]:
     if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or abs(np.linalg.det(R) - 1.0) > 1e-6:
         return [_error("transform", f"{what} is not a rotation (R R^T != I or det != 1)", "export it again")]
     return []
+
+
+LIDAR_RESULT_FIELDS = {"transform", "outcomes", "outcome_counts", "gates", "status"}
+_LIDAR_FIX = "write it again: `calibctl lidar solve ... -o FILE` (with a signing key configured, signed)"
+
+
+def _lidar_result(data: dict[str, Any], source: str, trusted: TrustedKeys) -> list[Finding]:
+    """A store-free ``lidar solve -o`` result: its content hash, its transform's own identities (the
+    inverse, the translation), its status and its signature (``exports.sealed_result``)."""
+    recorded = data.get("content_sha256")
+    if not isinstance(recorded, str):
+        return [
+            _error(
+                "content-hash",
+                f"{source} carries no content hash (written before results were sealed)",
+                _LIDAR_FIX,
+            )
+        ]
+    if recorded != sealed_result.content_sha256(data):
+        return [_error("content-hash", f"{source} was edited (its content hash does not match)", _LIDAR_FIX)]
+    findings = []
+    transform = data.get("transform")
+    if isinstance(transform, dict):
+        T, bad = _finite_matrix(transform.get("matrix"), (4, 4), "transform.matrix")
+        inverse, bad_inverse = _finite_matrix(transform.get("T_cam_lidar"), (4, 4), "transform.T_cam_lidar")
+        findings += bad + bad_inverse
+        if T is not None and inverse is not None:
+            findings += _rotation(T[:3, :3], "transform.matrix")
+            t = np.asarray(transform.get("translation_m"), dtype=np.float64)
+            if (
+                np.max(np.abs(T @ inverse - np.eye(4))) > 1e-6
+                or t.shape != (3,)
+                or np.max(np.abs(t - T[:3, 3])) > 1e-6
+            ):
+                findings.append(
+                    _error(
+                        "transform",
+                        f"{source}: T_cam_lidar and translation_m are not transform.matrix's",
+                        _LIDAR_FIX,
+                    )
+                )
+    if data.get("status") != "accepted":
+        findings.append(
+            _error(
+                "status",
+                f"{source} is a {data.get('status')} result: no transform a robot may load",
+                "capture again as its failed gate says",
+            )
+        )
+    seal = data.get("signature")
+    if not isinstance(seal, dict):
+        return findings + [_error("signature", f"{source} is not signed", SIGNATURE_FIX)]
+    problem = trusted.check(
+        seal.get("key_id"),
+        seal.get("value"),
+        sealed_result.message(sealed_result.LIDAR_RESULT, recorded),
+        seal.get("public_key"),
+    )
+    problem = f"{problem}: {EDITED}" if is_mismatch(problem) else problem
+    return findings + ([] if problem is None else [_error("signature", f"{source} {problem}", SIGNATURE_FIX)])
 
 
 def _frame(name: Any, what: str) -> list[Finding]:
@@ -447,7 +510,10 @@ def _manifest_seal(data: dict[str, Any], trusted: TrustedKeys) -> list[Finding]:
                 "export the bundle again from a store with a key (`calibctl rig export RIG --format bundle`)",
             )
         ]
-    problem = trusted.check(seal.get("key_id"), seal.get("value"), bundle.manifest_message(data))
+    problem = trusted.check(
+        seal.get("key_id"), seal.get("value"), bundle.manifest_message(data), seal.get("public_key")
+    )
+    problem = f"{problem}: {EDITED}" if is_mismatch(problem) else problem
     return [] if problem is None else [_error("signature", f"the manifest {problem}", SIGNATURE_FIX)]
 
 
@@ -607,6 +673,8 @@ def lint_rig_file(
                 )
             )
         return [LintResult(source, kind, findings)]
+    if kind == sealed_result.LIDAR_RESULT:
+        return [LintResult(source, kind, _lidar_result(data, source, trusted or TrustedKeys()))]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:

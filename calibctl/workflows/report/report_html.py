@@ -8,7 +8,7 @@ a ``data-key`` attribute.
 from __future__ import annotations
 
 from html import escape
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -49,6 +49,31 @@ def cell(value: str, key: str | None = None, cls: str = "") -> str:
 def table(header: list[str], rows: list[str]) -> str:
     head = "".join(f"<th>{escape(h)}</th>" for h in header)
     return f"<table><tr>{head}</tr>{''.join(f'<tr>{r}</tr>' for r in rows)}</table>"
+
+
+class EdgeGate(Protocol):
+    """A gate of an evidence edge (LiDAR, IMU) as its artifact stores it."""
+
+    @property
+    def gate(self) -> str: ...
+    @property
+    def passed(self) -> bool: ...
+    @property
+    def message(self) -> str: ...
+    @property
+    def hint(self) -> str | None: ...
+
+
+def gate_table(gates: Sequence[EdgeGate], key: str) -> str:
+    """An evidence edge's gates: name, verdict (``data-key`` KEY_GATE), what was measured, what to do."""
+    rows = [
+        cell(g.gate, cls="l")
+        + cell("pass" if g.passed else "FAIL", f"{key}_{g.gate}")
+        + cell(g.message, cls="l")
+        + cell(g.hint or "", cls="l")
+        for g in gates
+    ]
+    return table(["gate", "verdict", "measured", "what to do"], rows)
 
 
 def _stride(n: int, most: int = MAX_DOTS) -> int:

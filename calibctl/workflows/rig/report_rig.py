@@ -8,6 +8,7 @@ member's calibration with its verdict and a link to its own report by serial@ver
 camera-LiDAR edge gets a LiDAR section: T_lidar_cam with one-sigma, gates, fit and held-out figures, scan
 outcomes, and the sweep drawn over its image through the stored T when the solve's files are still where
 they were, unchanged (the store keeps neither; the page says so rather than drawing anything else).
+A camera-IMU edge gets its own section (``workflows.imu.imu_report``), drawn from the stored evidence.
 """
 
 from __future__ import annotations
@@ -23,9 +24,10 @@ from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError
 from calibctl.files import write_atomic
+from calibctl.workflows.imu.imu_report import imu_section
 from calibctl.workflows.lidar.lidar_overlay import report_overlay
 from calibctl.workflows.report.report import default_path
-from calibctl.workflows.report.report_html import CSS, cell, lint_block, num, table
+from calibctl.workflows.report.report_html import CSS, cell, gate_table, lint_block, num, table
 from calibctl.workflows.report.report_svg import Plot
 from calibctl.workflows.rig.rig_lint import lint_rig, parse_rig_ref
 from calibctl.workflows.store_admin.records import open_store
@@ -289,18 +291,11 @@ def _lidar(d: RigReportData) -> str:
                 ["figure", "value"],
                 [cell(a, cls="l") + cell(v, f"lidar_{name}_{k}") for a, name, v in figures],
             )
-        gates = [
-            cell(g.gate, cls="l")
-            + cell("pass" if g.passed else "FAIL", f"lidar_gate_{k}_{g.gate}")
-            + cell(g.message, cls="l")
-            + cell(g.hint or "", cls="l")
-            for g in ev.gates
-        ]
         counts: dict[str, int] = {}
         for r in ev.scans_outcomes:
             counts[r.outcome] = counts.get(r.outcome, 0) + 1
         body += (
-            table(["gate", "verdict", "measured", "what to do"], gates)
+            gate_table(ev.gates, f"lidar_gate_{k}")
             + "<p>scans: "
             + escape(", ".join(f"{o} {n}" for o, n in sorted(counts.items())))
             + "</p>"
@@ -361,7 +356,16 @@ def _provenance(d: RigReportData) -> str:
 
 def render_rig_html(d: RigReportData) -> str:
     """The whole rig page as one string: inline CSS and SVG, no script, nothing fetched."""
-    parts = [_verdict(d), _pairs(d), _tree(d), _lidar(d), _loops(d), _members(d), _provenance(d)]
+    parts = [
+        _verdict(d),
+        _pairs(d),
+        _tree(d),
+        _lidar(d),
+        imu_section(d.calibration.imu),
+        _loops(d),
+        _members(d),
+        _provenance(d),
+    ]
     title = escape(f"calibctl rig report {d.calibration.rig}@{d.calibration.version}")
     return (
         f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'

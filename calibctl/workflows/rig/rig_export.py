@@ -79,12 +79,14 @@ def _prepare(
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
         rig = store.get_rig(name)
-        cal = store.get_rig_calibration(name, version)
+        cal = keys.with_public_key(store.get_rig_calibration(name, version), store.trusted)
         stored: dict[str, Any] = {}
         active: dict[str, Any] = {}
         for m in cal.members:
             try:
-                stored[m.serial] = store.get_artifact(m.serial, m.version)
+                stored[m.serial] = keys.with_public_key(
+                    store.get_artifact(m.serial, m.version), store.trusted
+                )
             except NotFoundError:
                 stored[m.serial] = None
             try:

@@ -2,19 +2,17 @@
 
 Steps: list each camera's photos (a folder, a quoted glob or a list file, resolved as ``capture --source``
 and ``rig capture`` resolve them: workflows.camera.capture_sources); match them into synchronised frames by
-frame key (the last run of
-digits in the file name: core.extrinsics.rig_frames); detect and classify every photo with today's
-per-image outcomes; calibrate each camera on its own accepted photos (core.intrinsics.solve, full covariance)
-unless its intrinsics are given; the ``rig-connected`` gate; the rig solve (core.extrinsics), k-fold
-held-out numbers and, for three or more cameras, pairwise loop closure.
+frame key (the last run of digits in the file name: core.extrinsics.rig_frames); detect and classify every
+photo with today's per-image outcomes; calibrate each camera on its own accepted photos
+(core.intrinsics.solve, full covariance) unless its intrinsics are given; the ``rig-connected`` gate; the rig
+solve (core.extrinsics), k-fold held-out numbers and, for three or more cameras, pairwise loop closure.
 
 Then the verdict the stored path gives (``rig solve`` stores it as the version's lint): the rig lint
 rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline-design`` against
 ``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored
-path
-judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot apply
-and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
-not synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
+path judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot
+apply and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid
+or not synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
 from __future__ import annotations

@@ -2,13 +2,13 @@
 
 The stored path (``capture``, ``solve``, then ``rig solve``, whose lint names every member's findings
 ``member:<rule>``) refuses a member whose capture gates fail (the session is rejected and ``solve`` refuses
-it)
-or whose calibration lint fails. Here each camera's photos go through the same functions, in memory, nothing
-stored: the capture session (workflows.camera.capture.photos_session: observability, views, one_camera, the
-decisive projection gate over the station's region, tilt and coverage as guidance) and, when it passes, the
-solve with its lint (workflows.camera.solve.build_artifact: principal-point, sigma-fx, outer-ring-holdout,
-model-misfit, one-camera, aspect-ratio, distortion-foldover over the observed region). Findings carry the
-stored path's names: ``member:<gate>`` for a failed capture gate, ``member:<rule>`` for a lint finding.
+it) or whose calibration lint fails. Here each camera's photos go through the same functions, in memory,
+nothing stored: the capture session (workflows.camera.capture.photos_session: observability, views,
+one_camera, the decisive projection gate over the station's region, tilt and coverage as guidance) and, when
+it passes, the solve with its lint (workflows.camera.solve.build_artifact: principal-point, sigma-fx,
+outer-ring-holdout, model-misfit, one-camera, aspect-ratio, distortion-foldover over the observed region).
+Findings carry the stored path's names: ``member:<gate>`` for a failed capture gate, ``member:<rule>`` for a
+lint finding.
 
 Not applied, and why:
 - ``square-size-provenance``: the square size is what ``--square-mm`` typed; no board registry says how it was

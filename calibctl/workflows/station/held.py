@@ -2,12 +2,11 @@
 
 A camera unit cannot be captured twice: its frames are gone once the stream ends. So the station captures it
 into ``HeldCapture`` (the ``CaptureStore`` of ``capture(..., into=...)``): the board the station fetched, the
-kept
-frames' PNG bytes by sha256, the session. Nothing reaches the store while the operator moves the board, so a
-Ctrl-C or an unplugged camera leaves nothing behind; once the stream has ended, ``write_to_store`` stores the
-images then the session (the order ``capture`` keeps: no record names an image that is not durable), or, with
-the store away, ``spool_images`` copies the same bytes into the spool for the unit's queued record, so nothing
-is captured twice.
+kept frames' PNG bytes by sha256, the session. Nothing reaches the store while the operator moves the board,
+so a Ctrl-C or an unplugged camera leaves nothing behind; once the stream has ended, ``write_to_store`` stores
+the images then the session (the order ``capture`` keeps: no record names an image that is not durable), or,
+with the store away, ``spool_images`` copies the same bytes into the spool for the unit's queued record, so
+nothing is captured twice.
 """
 
 from __future__ import annotations

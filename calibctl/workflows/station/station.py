@@ -18,13 +18,11 @@ record stored, with its version); while anything stays queued, new units queue b
 serial's versions keep the order its units were calibrated in.
 
 Camera mode (``StationRequest.camera``, ``LiveCamera``): the unit's own camera is plugged into the station's
-port
-and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates), until
-the gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory
-(``workflows.station.held``)
-until its stream and gates are over, then stored - or queued - whole: a camera that cannot be opened or stops
-delivering frames mid-unit (unplugged) is an error line with nothing stored, and a store that goes away does
-not make the operator capture the unit again.
+port and captured live, as ``calibctl capture --source /dev/videoN`` does (frame selection, the live gates),
+until the gates pass (with ``max_views`` views) or ``duration_s`` is up. The unit is held in memory
+(``workflows.station.held``) until its stream and gates are over, then stored - or queued - whole: a camera
+that cannot be opened or stops delivering frames mid-unit (unplugged) is an error line with nothing stored,
+and a store that goes away does not make the operator capture the unit again.
 
 Watch mode (``StationRequest.watch``, ``workflows.station.watch``): after the serial the station waits for
 the unit's pictures in its folder and detects each as it lands; once the unit is complete the capture runs
@@ -96,8 +94,8 @@ _SYNC_HINT = "it is stored when the store is back: before the next unit, or by `
 @dataclass(frozen=True)
 class LiveCamera:
     """The station's camera port: each unit is captured live from ``device`` (the unit's own camera, plugged
-    in),
-    until the gates pass with ``max_views`` views (None: as soon as they pass) or ``duration_s`` is up."""
+    in), until the gates pass with ``max_views`` views (None: as soon as they pass) or ``duration_s`` is
+    up."""
 
     device: str  # /dev/videoN or an index, as `calibctl capture --source` names a camera
     max_views: int | None = None
@@ -117,9 +115,8 @@ class StationRequest:
 @dataclass(frozen=True)
 class UnitResult:
     """One unit's line. ``unit_s``: serial read to verdict out, seconds; ``after_last_image_s`` (watch mode):
-    the
-    unit's last picture landing in its folder (its ctime) to verdict out, seconds (camera mode: the last frame
-    selected, the one that stopped the stream, to verdict out)."""
+    the unit's last picture landing in its folder (its ctime) to verdict out, seconds (camera mode: the last
+    frame selected, the one that stopped the stream, to verdict out)."""
 
     serial: str
     status: str  # pass | fail | error | cancelled | queued (in the spool) | synced (a queued one stored)
@@ -292,8 +289,7 @@ class _Offline:
 
     def before_unit(self, report: Callable[[UnitResult], None]) -> tuple[str, str] | None:
         """Sync what is queued; why the next unit must be queued too and the hint its line gives (None:
-        nothing
-        is left queued)."""
+        nothing is left queued)."""
         if self._spool is None or self._spool.counts()[0] == 0:
             return None
         try:
@@ -357,8 +353,7 @@ def _capture_request(
     settings: Settings, request: StationRequest, serial: str, source: str, camera: LiveCamera | None = None
 ) -> CaptureRequest:
     """A unit's capture (``camera``: live, with its stop rule, and Ctrl-C cancels it). As `calibctl
-    calibrate`: the
-    gates judge through the lens model the session will be solved with."""
+    calibrate`: the gates judge through the lens model the session will be solved with."""
     return CaptureRequest(
         serial,
         request.board,
@@ -484,8 +479,7 @@ def _solved_unit(
     settings: Settings, request: StationRequest, session: CaptureSession, offline: _Offline
 ) -> UnitResult:
     """A stored session's line: rejected, or solved and stored (its calibration queued when the store went
-    away
-    after the session)."""
+    away after the session)."""
     if session.status != "accepted":
         return UnitResult(
             session.serial, FAIL, _rejected(session), session_id=session.session_id, views=len(session.views)

@@ -8,15 +8,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 from calibctl.config import Settings
 from calibctl.errors import FileSystemError, InputError, UsageError
 from calibctl.files import write_atomic
-from calibctl.signing import Signer, TrustedKeys, create_key, load_signer, record_message
+from calibctl.signing import (
+    EDITED,
+    Signer,
+    TrustedKeys,
+    create_key,
+    is_mismatch,
+    load_signer,
+    public_key_text,
+    record_message,
+)
 
 if TYPE_CHECKING:  # annotations only: `board list` need not build the calibration models
-    from calibctl.artifacts.calibration import RecordSignature
+    from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
+    from calibctl.artifacts.rig import RigCalibration
 
 _NO_KEY_HINT = "set CALIBCTL_SIGNING_KEY or signing_key in the station file, or pass --key FILE"
 
@@ -30,6 +40,15 @@ def trusted_of(settings: Settings, folder: Path | None = None) -> TrustedKeys:
     """The configured key's public half plus every public key in ``folder`` (or the trusted_keys setting)."""
     chosen = folder or (Path(settings.trusted_keys) if settings.trusted_keys else None)
     return TrustedKeys.load(chosen, signer_of(settings))
+
+
+def known_keys(settings: Settings, folder: Path | None = None) -> TrustedKeys:
+    """``trusted_of`` where a signature need not be trusted, only checked: no keys when they cannot be
+    loaded (a signature carrying its public key is still checked against its content)."""
+    try:
+        return trusted_of(settings, folder)
+    except (FileSystemError, InputError):
+        return TrustedKeys()
 
 
 def read_trust(settings: Settings) -> TrustedKeys | None:
@@ -96,10 +115,26 @@ class Sealed(Protocol):
 
 def seal_problem(seal: RecordSignature | None, content_sha256: str, trusted: TrustedKeys) -> str | None:
     """None when ``seal`` is a valid signature by a trusted key of the record whose content hash is
-    ``content_sha256``, else why not (``is not signed`` ...)."""
+    ``content_sha256``, else why not (``is not signed`` ...; a mismatch, told by the public key the seal
+    carries even when no key is trusted, says it was edited)."""
     if seal is None:
         return "is not signed"
-    return trusted.check(seal.key_id, seal.value, record_message(seal.record_sha256, content_sha256))
+    message = record_message(seal.record_sha256, content_sha256)
+    problem = trusted.check(seal.key_id, seal.value, message, seal.public_key)
+    return f"{problem}: {EDITED}" if is_mismatch(problem) else problem
+
+
+SignedT = TypeVar("SignedT", "CalibrationArtifact", "RigCalibration")
+
+
+def with_public_key(doc: SignedT, known: TrustedKeys | None) -> SignedT:
+    """``doc`` whose signature carries its signer's public key, when ``known`` (the store's keys) holds it:
+    an export any reader can check for an edit after signing, trusted keys or none."""
+    seal = doc.signature
+    key = None if seal is None or known is None else known.keys.get(seal.key_id)
+    if seal is None or key is None or seal.public_key is not None:
+        return doc
+    return doc.model_copy(update={"signature": seal.model_copy(update={"public_key": public_key_text(key)})})
 
 
 def signature_problem(art: Sealed, trusted: TrustedKeys) -> str | None:
@@ -170,7 +205,7 @@ def require_trusted(art: Sealed, source: str, trusted: TrustedKeys, required: bo
     """Refuse ``art`` (InputError, exit 2, nothing written) when its signature is required and missing or
     untrusted, and always when it is signed by a trusted key but the signature does not match."""
     problem = signature_problem(art, trusted)
-    if problem is None or (not required and "does not match" not in problem):
+    if problem is None or (not required and not is_mismatch(problem)):
         return
     if required and not trusted.keys:
         raise UsageError(

@@ -50,8 +50,7 @@ def open_store(settings: Settings, *, create: bool = False, write: bool = False)
     new empty store that answers "nothing here" (or lets ``lint --all`` pass with nothing checked).
     Commands that write pass ``write=True``: the configured signing key is loaded (and must be readable).
     With keys configured, what either reads is checked as ``db verify`` would (``store.served``): a write
-    never
-    builds on a record a read would refuse."""
+    never builds on a record a read would refuse."""
     from calibctl.store.repository import Store  # sqlalchemy: history/show/export of SQLite use sqlite_reads
     from calibctl.workflows.store_admin import keys
 
@@ -159,6 +158,7 @@ def export(
     allow_rejected: bool = False,
     camera_name: str | None = None,
     lut_options: bool = False,
+    topic: str | None = None,
 ) -> str:
     """Render ``ref`` (default: the active version) as ``fmt``; write it to ``out`` when given.
 
@@ -175,14 +175,35 @@ def export(
         )
     if camera_name is not None and fmt != "ros":
         raise UsageError("--camera-name applies to --format ros only")
+    if topic is not None:
+        topic = _kalibr_topic(topic, fmt)
     if lut_options:
         raise UsageError("--alpha and --balance apply to --format lut only")
-    art = show(settings, ref)
+    art = _exported(settings, ref)
     _refuse_rejected(art, allow_rejected)
-    text = formats.render(art, fmt, camera_name=camera_name)
+    text = formats.render(art, fmt, camera_name=camera_name, topic=topic)
     if out is not None:
         write_atomic(out, text, force=force)
     return text
+
+
+def _kalibr_topic(topic: str, fmt: str) -> str:
+    """``--topic``: Kalibr's rostopic, a legal ROS name with one leading ``/`` (UsageError otherwise)."""
+    from calibctl.workflows.exports.frame_names import NAME_RULE, is_ros_name
+
+    if fmt != "kalibr":
+        raise UsageError("--topic applies to --format kalibr only", "--camera-name names a ros export")
+    name = topic.removeprefix("/")
+    if not is_ros_name(name):
+        raise UsageError(f"--topic {topic!r} is not a legal ROS topic", f"{NAME_RULE}; e.g. /cam0/image_raw")
+    return f"/{name}"
+
+
+def _exported(settings: Settings, ref: str) -> CalibrationArtifact:
+    """``ref`` as an export carries it: its signature with the signer's public key, when this store has it."""
+    from calibctl.workflows.store_admin import keys
+
+    return keys.with_public_key(show(settings, ref), keys.read_trust(settings))
 
 
 def _free_parameter(lens: str, alpha: float | None, balance: float | None) -> float:
@@ -210,6 +231,7 @@ def export_lut(
     alpha: float | None = None,
     balance: float | None = None,
     camera_name: str | None = None,
+    topic: str | None = None,
 ) -> list[Path]:
     """The undistortion maps of ``ref`` (default: the active version) into the new folder ``out``
     (workflows.exports.lut); a rejected version is refused unless ``allow_rejected``, as for every export."""
@@ -218,9 +240,11 @@ def export_lut(
 
     if camera_name is not None:
         raise UsageError("--camera-name applies to --format ros only")
+    if topic is not None:
+        _kalibr_topic(topic, "lut")
     if out is None:
         raise UsageError("--format lut writes a folder of maps", "pass -o DIR (a new folder)")
-    art = show(settings, ref)
+    art = _exported(settings, ref)
     _refuse_rejected(art, allow_rejected)
     lens: Literal["pinhole", "fisheye"] = "fisheye" if art.model.name == "fisheye" else "pinhole"
     camera = lut.single_camera(

@@ -1,5 +1,4 @@
-"""Regression tests for what benchmarks/hostile_sweep.py found (issue 26: the 407-case categories
-re-measured).
+"""Regression tests for what benchmarks/hostile_sweep.py found (its 407-case categories re-measured).
 Special files are made in tmp_path only (mkfifo), never a system device node."""
 
 from __future__ import annotations

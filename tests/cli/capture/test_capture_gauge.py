@@ -32,7 +32,7 @@ def test_a_board_registered_at_23mm_passes_the_gates_and_fails_the_gauge(db: str
     with Store.open(db) as store:
         (session,) = store.list_sessions("CAM-NEW")
     assert session.status == "accepted"  # every gate passed: only the gauge sees it
-    # ... and the session carries the failed gauge (issue 22: it used to be forgotten once stored)
+    # ... and the session carries the failed gauge (it used to be forgotten once stored)
     assert session.metric_gauge is not None and not session.metric_gauge.distance.passed
     assert session.metric_gauge.distance.ratio == pytest.approx(0.92, abs=0.004)
     assert session.metric_gauge.lens_model == "k1k2"

@@ -1,5 +1,5 @@
 """`--image-circle` and the image circle found in the frames: capture, calibrate and solve of a circular
-fisheye, a pinhole capture unchanged, and every bad circle (issue 10 item 1 and its Bad input)."""
+fisheye, a pinhole capture unchanged, and every bad circle."""
 
 from __future__ import annotations
 

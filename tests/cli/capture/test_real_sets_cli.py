@@ -79,7 +79,7 @@ def test_the_tilt_hint_does_not_deny_the_directions_the_table_shows(db: str, tmp
     for path in sorted(LEFT_RIGHT.glob("left0*.jpg")):
         shutil.copy(path, shots / path.name)
     r = invoke(db, "--json", "capture", "--serial", "L1", "--board", "A17", "--source", str(shots))
-    # issue 22: these 9 views predict the whole image within the projection gate's 5 px, so the session is
+    # these 9 views predict the whole image within the projection gate's 5 px, so the session is
     # accepted and the failed tilt proxy is guidance (advisory); its hint must still be right
     assert r.exit_code == 0, r.output
     session = json.loads(r.stdout)["session"]

@@ -1,7 +1,7 @@
-"""A rollout's health gate reads the canary robots' own health reports (issue 25 item 1): no report yet blocks
-promote (exit 2, naming the robots), a failing check, gauge or triage holds it (exit 1, nothing applied); the
-promote records the reports it decided on with their sha256 (``db verify`` re-checks them) and each target's
-diff against the version it replaces (item 3)."""
+"""A rollout's health gate reads the canary robots' own health reports: no report yet blocks promote (exit 2,
+naming the robots), a failing check, gauge or triage holds it (exit 1, nothing applied); the promote records
+the reports it decided on with their sha256 (``db verify`` re-checks them) and each target's diff against the
+version it replaces."""
 
 from __future__ import annotations
 

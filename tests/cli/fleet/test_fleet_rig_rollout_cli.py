@@ -1,7 +1,7 @@
-"""Rigs as rollout targets (issue 25 item 2): RIG@N targets; promote makes them their rigs' active versions
-and rollback restores the previous ones, in the same transaction as the robots' assignments; a rig in two open
-rollouts, an unknown rig, a rejected rig version and a rig whose active version moved are refused with
-nothing written."""
+"""Rigs as rollout targets: RIG@N targets; promote makes them their rigs' active versions and rollback
+restores the previous ones, in the same transaction as the robots' assignments; a rig in two open rollouts,
+an unknown rig, a rejected rig version and a rig whose active version moved are refused with nothing
+written."""
 
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
-"""A rollout on a small fleet (issue 25 item 2): a canary whose robot reports a failing check is held and
-rolled
-back in one command, the rest never touched; a healthy canary is promoted; every step is in the chained log
-and
+"""A rollout on a small fleet: a canary whose robot reports a failing check is held and rolled back in one
+command, the rest never touched; a healthy canary is promoted; every step is in the chained log and
 `db verify` passes; refused steps write nothing."""
 
 from __future__ import annotations

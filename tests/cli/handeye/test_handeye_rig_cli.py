@@ -100,6 +100,12 @@ def test_accepted_result_is_stored_active_and_shown_in_the_rig(db, tmp_path):
         db, "--json", "lint", str(edge_json)
     )  # lint reads the hand-eye result it wrote (it refused it)
     assert r.exit_code == 0 and json.loads(r.stdout)["results"][0]["kind"] == "handeye-json", r.output
+    named = ("--edge", "imu:CAM-0002", "--format", "json", "--allow-stale", "--frame", "CAM-0002=left_camera")
+    r = invoke(db, "rig", "export", RIG, *named, "-o", str(edge_json), "--force")
+    edge = json.loads(edge_json.read_text())
+    assert edge["ros_frames"] == {"parent_frame": "imu", "child_frame": "left_camera"}  # as the tf names them
+    assert edge["content_sha256"] == doc["result"]["content_sha256"]  # the names are the export's choice
+    assert invoke(db, "lint", str(edge_json)).exit_code == 0
     r = invoke(db, "rig", "history", RIG)
     assert "hand-eye imu -> CAM-0002 accepted" in r.stdout
     for args, message in (

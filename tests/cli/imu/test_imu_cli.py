@@ -21,6 +21,7 @@ from tests.workflows.imu.imu_data import (
     rendered,
     truth,
 )
+from tests.workflows.imu.test_imu_workflow import IMU_EDITS, _rewrite
 
 
 def _yaml_body(text: str) -> dict:
@@ -60,6 +61,8 @@ def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> 
     assert np.allclose(np.array(e["T_cam_imu"]) @ np.array(e["matrix"]), np.eye(4), atol=1e-6)
     t = truth(recording)
     assert np.allclose(np.array(e["T_cam_imu"])[:3, :3], np.array(t["T_cam_imu"])[:3, :3], atol=2e-3)
+    rows = doc["row_test"]  # a global-shutter render: no ramp over the image rows
+    assert not rows["significant"] and rows["message"].endswith("constant across rows, as a time offset is")
 
 
 def test_the_stored_edge_shows_exports_and_lints_clean(solved, tmp_path) -> None:
@@ -132,6 +135,22 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
     assert history["active_version"] == 1
     assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]
+    page = tmp_path / "rejected.html"
+    assert cli(url, "report", "--rig", f"{RIG}@2", "-o", str(page)).exit_code == 0
+    html = page.read_text()
+    assert f'data-key="imu_status_imu-{CAM}">rejected' in html and ">FAIL<" in html
+
+
+def test_a_rolling_shutter_solved_without_line_delay_is_named_with_the_fix(tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    rec = tmp_path / "rs"
+    made = cli(url, "imu", "synth", str(rec), "--serial", CAM, "--duration-s", "3", "--line-delay-us", "30")
+    assert made.exit_code == 0, made.output
+    r = cli(url, "imu", "solve", str(rec), "--serial", CAM, "--noise", str(rec / "imu.yaml"))
+    assert (
+        "  row test: rolling shutter suspected: solve with --line-delay; time residual vs image row +"
+        in r.output
+    )
 
 
 def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_path) -> None:
@@ -145,3 +164,120 @@ def test_a_bag_without_rosbags_installed_names_the_bags_extra(monkeypatch, tmp_p
     args = ["--board", "G7", "--image-topic", "/cam0/image_raw", "--imu-topic", "/imu0"]
     res = cli(url, "imu", "solve", str(bag), "--serial", CAM, *args)
     _assert_missing_extra(res, "bags", "rosbags", "reading a ROS bag")
+
+
+def test_the_rig_report_draws_the_imu_edge_from_the_store_byte_identical(solved, tmp_path) -> None:
+    db, doc = solved
+    url = copy_db(db, tmp_path)
+    (ev,) = doc["imu"]
+    e, k = ev["estimate"], f"imu-{CAM}"
+    page = tmp_path / "rig.html"
+    done = cli(url, "report", "--rig", RIG, "-o", str(page))
+    assert done.exit_code == 0, done.output
+    html = page.read_text()
+    assert "<h2>Camera-IMU</h2>" in html and f'data-key="imu_status_{k}">accepted' in html
+    for i, axis in enumerate("xyz"):
+        assert f'data-key="imu_t_{k}_{axis}">{e["T_imu_cam"][i][3] * 1e3:.2f}<' in html
+        assert f'data-key="imu_sigma_r_{k}_{axis}">{e["sigma_rotation_deg"][i]:.4f}<' in html
+    assert f'data-key="imu_td_{k}">{e["td_s"] * 1e3:.4f}<' in html
+    assert f'data-key="imu_sigma_td_{k}">{e["sigma_td_ms"]:.4f}<' in html
+    assert f'data-key="imu_td_crlb_{k}">{e["td_crlb_ms"]:.4f}<' in html
+    for gate in ev["gates"]:
+        assert f'data-key="imu_gate_{k}_{gate["gate"]}">pass<' in html
+    # a global-shutter render: the residuals do not ramp with the row
+    assert f'data-key="imu_rolling_shutter_{k}">no<' in html and ev["row_test"]["message"] in html
+    assert "gyro (lines) and camera rate (dots)" in html and "time residual over image rows" in html
+    again = tmp_path / "again.html"
+    assert cli(url, "report", "--rig", RIG, "-o", str(again)).exit_code == 0
+    assert again.read_bytes() == page.read_bytes()
+
+
+def _imu_log(case: str):
+    """The workflow test's edit of the IMU log; returns the message it must get."""
+    edit, message, _ = IMU_EDITS[case]
+
+    def make(rec) -> str:
+        _rewrite(rec / "imu0" / "data.csv", edit)
+        return message
+
+    return make
+
+
+def _stamp_listed_twice(rec) -> str:
+    stamps = sorted(p.stem for p in (rec / "cam0").glob("*.csv"))
+    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    (rec / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
+    return f"cam0/data.csv: frame stamp {stamps[0]} is listed twice"
+
+
+def _rows_of_another_stamp(rec) -> str:
+    first = sorted((rec / "cam0").glob("*.csv"))[0]
+    other = int(first.stem) + 1
+    _rewrite(first, lambda lines: [lines[0]] + [f"{other},{x.split(',', 1)[1]}" for x in lines[1:]])
+    return f"named {first.stem} but its rows are stamped {other}"
+
+
+BAD_INPUTS = {
+    "IMU stamps not increasing": (_imu_log("stamps not increasing"), ()),
+    "accelerometer in g": (_imu_log("accel numbers in g"), ()),
+    "logs that do not overlap": (_imu_log("logs that do not overlap"), ()),
+    "a camera stamp listed twice": (_stamp_listed_twice, ()),
+    "a corner file stamped as another frame": (_rows_of_another_stamp, ()),
+    "a camera without an active calibration": (
+        lambda rec: "camera CAM-0002 has no active calibration",
+        ("--serial", "CAM-0002"),
+    ),
+    "a board that is not registered": (
+        lambda rec: "unknown board 'NOPE'; known: G7, G7-40",
+        ("--board", "NOPE"),
+    ),
+    "corners of another board than the registered one": (
+        lambda rec: "m is no corner of board G7-40@1",
+        ("--board", "G7-40"),
+    ),
+}
+
+
+@pytest.fixture(scope="module")
+def uncalibrated_other(tmp_path_factory) -> str:
+    """The rig store with CAM-0002 a member but never calibrated; every bad input must leave it as it is."""
+    return make_store(tmp_path_factory.mktemp("bad-input") / "c.db", other_calibrated=False)
+
+
+@pytest.mark.parametrize("case", BAD_INPUTS, ids=list(BAD_INPUTS))
+def test_bad_input_is_exit_2_in_one_line_and_nothing_is_stored(case, recording, uncalibrated_other, tmp_path):
+    edit, extra = BAD_INPUTS[case]
+    rec = copy_recording(recording, tmp_path)
+    message = edit(rec)
+    args = ["--serial", CAM, *extra] if "--serial" not in extra else list(extra)
+    r = cli(uncalibrated_other, "imu", "solve", str(rec), *args, "--rig", RIG)
+    assert r.exit_code == 2, r.output
+    assert [x for x in r.output.splitlines() if x.startswith("Error:")] == [
+        next(x for x in r.output.splitlines() if message in x)
+    ]
+    assert "Traceback" not in r.output
+    history = json.loads(cli(uncalibrated_other, "rig", "history", RIG, "--json").stdout)
+    assert [v["version"] for v in history["versions"]] == [1]
+
+
+def test_a_bag_without_the_named_topic_is_exit_2_and_nothing_is_stored(recording, tmp_path) -> None:
+    pytest.importorskip("rosbags")
+    from tests.workflows.imu.test_imu_bags import _write_bag
+
+    rec = copy_recording(recording, tmp_path)
+    (rec / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n")  # the IMU topic alone
+    bag = tmp_path / "run"
+    _write_bag(rec, bag)
+    url = make_store(tmp_path / "c.db")
+    topics = ["--image-topic", "/cam0/image_raw", "--imu-topic", "/imu1"]
+    r = cli(url, "imu", "solve", str(bag), "--serial", CAM, "--board", "G7", *topics, "--rig", RIG)
+    assert r.exit_code == 2, r.output
+    (error,) = [x for x in r.output.splitlines() if x.startswith("Error:")]
+    assert (
+        str(bag) in error
+        and "has no topic /imu1 (it has: /cam0/image_raw (sensor_msgs/msg/Image), /imu0" in error
+    )
+    assert "--imu-topic" in r.output and "Traceback" not in r.output
+    assert [
+        v["version"] for v in json.loads(cli(url, "rig", "history", RIG, "--json").stdout)["versions"]
+    ] == [1]

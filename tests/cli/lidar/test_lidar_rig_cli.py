@@ -1,4 +1,4 @@
-"""`calibctl lidar solve --rig`: a LiDAR is a frame of the robot's tree (issue 23 item 6), on renders.
+"""`calibctl lidar solve --rig`: a LiDAR is a frame of the robot's tree, on renders.
 
 An accepted set is the rig's next active version with the edge lidar -> camera (source lidar-board) and the
 result sealed inside it; history, show, rollback, lint (stale camera), tf / URDF / bundle exports and the

@@ -131,6 +131,30 @@ def test_bad_camera_name_exits_2(store_url, args, message):
     assert result.exit_code == 2 and message in result.stderr
 
 
+def test_a_kalibr_export_takes_the_topic_given(store_url, tmp_path):
+    plain, named = tmp_path / "plain.yaml", tmp_path / "named.yaml"
+    assert export(store_url, "CAM-0001", "kalibr", plain).exit_code == 0
+    assert yaml.safe_load(plain.read_text())["cam0"]["rostopic"] == "/cam_0001/image_raw"  # the default
+    assert export(store_url, "CAM-0001", "kalibr", named, "--topic", "/cam0/image_raw").exit_code == 0
+    assert yaml.safe_load(named.read_text())["cam0"]["rostopic"] == "/cam0/image_raw"
+    assert cli("lint", str(named)).exit_code == 0
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ("--format", "kalibr", "--topic", "/cam-0/image_raw"),
+            "'/cam-0/image_raw' is not a legal ROS topic",
+        ),
+        (("--format", "ros", "--topic", "/cam0/image_raw"), "--topic applies to --format kalibr only"),
+    ],
+)
+def test_a_bad_topic_exits_2(store_url, args, message):
+    result = cli("--db", store_url, "export", "CAM-0001", *args)
+    assert result.exit_code == 2 and message in result.stderr
+
+
 def test_opencv_export_is_readable_by_opencv_and_carries_the_status(store_url, tmp_path):
     out = tmp_path / "cam.yaml"
     assert export(store_url, "CAM-0001", "opencv", out).exit_code == 0

@@ -1,5 +1,5 @@
 """An imported artifact whose numbers break the identities its own evidence obeys is refused: exit 1, the
-numbers named, nothing stored (issue 26 item 4; calibctl/workflows/lint/evidence.py)."""
+numbers named, nothing stored (calibctl/workflows/lint/evidence.py)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """A store that requires signatures (it has keys) never makes an unsigned or untrusted import active unless
-``--activate`` says so, and records how the source was signed (issue 26 item 4)."""
+``--activate`` says so, and records how the source was signed."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Import re-derives its verdict and version; rollback is compare-and-set; stores that keep nothing are
-refused; stored text is printed escaped (issue 14 items 1 and 7)."""
+refused; stored text is printed escaped."""
 
 from __future__ import annotations
 

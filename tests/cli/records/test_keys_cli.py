@@ -240,3 +240,103 @@ def test_rig_rollback_through_the_cli_is_signed_with_the_station_key(sqlite_url:
     assert (
         report["unsigned"] == 0 and report["signatures_checked"] == 2 + 3 + 1
     )  # rig versions, rig events, definition
+
+
+def _keyed_export(url: str, key: Path, out: Path, *args: str) -> Path:
+    """A signed store's export made with its key configured: the signature carries the public key."""
+    _signed_export(url, key, out)
+    assert run("--db", url, "export", "CAM-S", "-o", str(out), "--force", *args, env=_KEY(key)).exit_code == 0
+    return out
+
+
+def _KEY(key: Path) -> dict[str, str]:
+    return {"CALIBCTL_SIGNING_KEY": str(key)}
+
+
+def _rehashed(data: dict) -> dict:
+    """What a forger without the key does after an edit: the content hash recomputed, the signature kept."""
+    from calibctl.artifacts.calibration import CalibrationArtifact
+
+    data["content_sha256"] = CalibrationArtifact.model_validate(data).computed_sha256()
+    return data
+
+
+def test_a_signature_that_does_not_match_is_refused_in_a_keyless_store(
+    keys: dict[str, Path], db_url: str, tmp_path: Path
+):
+    exported = _keyed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    honest = json.loads(exported.read_text())
+    assert honest["signature"]["public_key"]  # the key travels with the signature
+    forged = tmp_path / "forged.json"
+    data = json.loads(exported.read_text())
+    data["camera_matrix"][0][0] += 1.0
+    forged.write_text(json.dumps(_rehashed(data)))
+    lint = run("lint", str(forged), "--format", "json")  # no key, no trusted keys, not required
+    messages = [f["message"] for r in json.loads(lint.stdout)["results"] for f in r["findings"]]
+    assert lint.exit_code == 1
+    assert any("does not match its content: it was edited after signing" in m for m in messages)
+    result = run("--db", db_url, "import", str(forged))  # a store with no keys at all
+    assert result.exit_code == 2, result.output
+    assert "forged.json (CAM-S@1) has a signature by key" in result.stderr
+    assert "does not match its content: it was edited after signing" in result.stderr
+    with Store.open(db_url) as store:
+        assert store.serials() == []  # nothing stored
+    assert run("lint", str(exported)).exit_code == 0  # the honest file: a stranger's valid signature
+    ok = run("--db", db_url, "--json", "import", str(exported))
+    assert ok.exit_code == 0, ok.output
+    with Store.open(db_url) as store:
+        mark = store.get_artifact("CAM-S", None).provenance.import_signature
+    assert mark == f"untrusted key {honest['signature']['key_id']}"
+
+
+def test_a_carried_public_key_that_is_not_the_signers_is_refused(keys: dict[str, Path], tmp_path: Path):
+    exported = _keyed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    stranger = _keyed_export(f"sqlite:///{tmp_path / 'o.db'}", keys["stranger"], tmp_path / "o.json")
+    data = json.loads(exported.read_text())
+    data["signature"]["public_key"] = json.loads(stranger.read_text())["signature"]["public_key"]
+    forged = tmp_path / "forged.json"
+    forged.write_text(json.dumps(data))
+    result = run("--db", f"sqlite:///{tmp_path / 't.db'}", "import", str(forged))
+    assert result.exit_code == 2 and "carries a public key that is not key" in result.stderr
+    assert not (tmp_path / "t.db").exists()
+
+
+def test_signature_lines_swapped_between_camera_files_are_refused_without_keys(
+    keys: dict[str, Path], tmp_path: Path
+):
+    """Two cameras' ROS exports from one signed store, each file's signature line moved into the other."""
+    url = f"sqlite:///{tmp_path / 's.db'}"
+    with Store.open(url, signer=signer_of(load_settings(env=_KEY(keys["key"])))) as store:
+        for serial in ("CAM-S", "CAM-T"):
+            store.add_artifact(calibration(serial=serial), activate=True, reason="solved", **WHO)
+    paths = [tmp_path / f"{serial}.yaml" for serial in ("CAM-S", "CAM-T")]
+    for path in paths:
+        args = ("--db", url, "export", path.stem, "--format", "ros", "-o", str(path))
+        assert run(*args, env=_KEY(keys["key"])).exit_code == 0
+    texts = [p.read_text() for p in paths]
+    lines = [next(line for line in t.splitlines() if "calibctl signature " in line) for t in texts]
+    assert all(run("lint", str(p)).exit_code == 0 for p in paths)
+    for path, text, own, other in zip(paths, texts, lines, reversed(lines), strict=True):
+        path.write_text(_with_file_sha256(text.replace(own, other)))
+        lint = run("lint", str(path))
+        assert lint.exit_code == 1 and "it was edited after signing" in lint.output, lint.output
+
+
+def test_an_old_signature_without_its_public_key_verifies_as_before(keys: dict[str, Path], tmp_path: Path):
+    exported = _keyed_export(f"sqlite:///{tmp_path / 's.db'}", keys["key"], tmp_path / "cam.json")
+    data = json.loads(exported.read_text())
+    del data["signature"]["public_key"]
+    exported.write_text(json.dumps(data))
+    trusted = ("--require-signature", "--trusted-keys")
+    assert run("lint", str(exported), *trusted, str(keys["trusted"])).exit_code == 0
+    stranger = run("lint", str(exported), *trusted, str(keys["untrusted"]))
+    assert stranger.exit_code == 1 and "which is not trusted" in stranger.output
+
+
+def _with_file_sha256(text: str) -> str:
+    import re
+
+    from calibctl.workflows.exports import trace_header
+
+    digest = trace_header.file_sha256(text)
+    return re.sub(r"(calibctl file-sha256 )[0-9a-f]{64}", lambda m: m.group(1) + digest, text)

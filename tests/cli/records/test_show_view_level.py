@@ -1,4 +1,4 @@
-"""`show` says when the reported sigma is the view-level one, and why (issue 22)."""
+"""`show` says when the reported sigma is the view-level one, and why."""
 
 from __future__ import annotations
 

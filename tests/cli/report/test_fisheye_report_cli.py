@@ -1,7 +1,7 @@
-"""The report's coverage map of a circular fisheye (issue 10): the image circle the coverage gate recorded
-is drawn, the cells outside it are marked not imaged (grey), and only cells inside it count as never
-reached; the residuals, projection uncertainty and distortion curve go through the fisheye lens. A pinhole
-page has no circle (its bytes are pinned by tests/workflows/report/test_report_workflow.py)."""
+"""The report's coverage map of a circular fisheye: the image circle the coverage gate recorded is drawn,
+the cells outside it are marked not imaged (grey), and only cells inside it count as never reached; the
+residuals, projection uncertainty and distortion curve go through the fisheye lens. A pinhole page has no
+circle (its bytes are pinned by tests/workflows/report/test_report_workflow.py)."""
 
 from __future__ import annotations
 

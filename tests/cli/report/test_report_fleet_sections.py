@@ -1,6 +1,5 @@
 """`calibctl report SERIAL` draws the diff against the previous accepted version and, when robots reported on
-the
-serial, its field trends (issue 25 item 4); what cannot be compared is said, not drawn."""
+the serial, its field trends; what cannot be compared is said, not drawn."""
 
 from __future__ import annotations
 

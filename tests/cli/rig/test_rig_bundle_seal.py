@@ -178,6 +178,31 @@ def test_a_signature_that_does_not_match_is_refused_by_lint_and_import(signed, d
     assert _rig_versions(url) == []
 
 
+def test_a_signature_that_does_not_match_is_refused_in_a_keyless_store(keyed, db_url, tmp_path, monkeypatch):
+    """The exported signature carries its public key: a reader with no trusted keys still tells an edit
+    after signing (refused) from an honest version by a key it does not trust (stored, not trusted)."""
+    source, _, _ = keyed
+    folder = _bundle(source, tmp_path / "bundle")
+    honest = json.loads((folder / "rig.json").read_text())
+    doc = json.loads((folder / "rig.json").read_text())
+    doc["pairs"][0]["shared_views"] += 1  # an edit the evidence checks do not see: only the signature
+    doc = _rehash_rig(doc)
+    doc["signature"] = honest["signature"]
+    path = tmp_path / "R1.json"
+    path.write_text(json.dumps(doc))
+    monkeypatch.delenv("CALIBCTL_SIGNING_KEY")
+    r = invoke("sqlite:///unused.db", "lint", str(path))
+    assert r.exit_code == 1 and "does not match its content: it was edited after signing" in _text(r)
+    url = _target(source, db_url, tmp_path)  # no key, no trusted keys
+    r = invoke(url, "rig", "import", str(path))
+    assert r.exit_code == 2 and "does not match its content: it was edited after signing" in _text(r)
+    assert _rig_versions(url) == []
+    r = invoke(url, "--json", "rig", "import", str(folder / "rig.json"))
+    assert r.exit_code == 0, r.output
+    got = json.loads(invoke(url, "--json", "rig", "show", "R1").stdout)
+    assert got["provenance"]["import_signature"] == f"untrusted key {honest['signature']['key_id']}"
+
+
 @pytest.mark.parametrize("fmt", ["ros", "opencv", "kalibr", "mrcal"])
 def test_single_camera_exports_carry_the_artifacts_signature(signed, db, tmp_path, fmt):
     source, trusted, other = signed
@@ -239,7 +264,11 @@ def test_frame_names_swapped_consistently_are_caught_only_by_the_manifests_own_s
     ]
     kept = {k: manifest[k] for k in ("format", "schema_version", "calibctl_version", "manifest_signature")}
     (folder / "manifest.json").write_text(json.dumps({**derived, **kept, "files": listed}))
-    assert invoke("sqlite:///unused.db", "lint", str(folder / "manifest.json")).exit_code == 0  # consistent
+    plain = invoke(
+        "sqlite:///unused.db", "lint", str(folder / "manifest.json")
+    )  # consistent but for the seal
+    assert plain.exit_code == 1 and "the manifest has a signature by key" in _text(plain)
+    assert "it was edited after signing" in _text(plain)  # told without trusted keys: the key travels along
     r = _lint(folder, trusted)
     assert (
         r.exit_code == 1

@@ -13,7 +13,7 @@ import yaml
 from calibctl.store.repository import Store
 from calibctl.workflows.exports import trace_header
 from tests.cli.rig.test_rig_store_cli import RUNNER, _capture, app
-from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
+from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact, store_members
 from tests.workflows.rig_folders_data import rendered_rig
 
 
@@ -25,14 +25,8 @@ def rig2(tmp_path_factory):
 @pytest.fixture(scope="module")
 def solved(tmp_path_factory, rig2):
     """A store with rig R1 (CAM0 left, CAM1 right, 75 mm) solved once; tests copy it before changing it."""
-    from tests.artifacts.factories import measured_board
-
     path = tmp_path_factory.mktemp("rigdb") / "c.db"
-    url = f"sqlite:///{path}"
-    with Store.open(url) as store:
-        store.add_board(measured_board(square_mm=25.0))
-        for name in ("CAM0", "CAM1"):
-            store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
+    url = store_members(f"sqlite:///{path}", rig2)
     assert invoke(url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1").exit_code == 0
     assert _capture(url, rig2).exit_code == 0
     assert invoke(url, "rig", "solve", "R1").exit_code == 0

@@ -1,6 +1,6 @@
-"""`rig solve-folders` gives the stored path's verdict on its members (issue 22 item 3): a camera the stored
-path would refuse at capture or at lint is refused with the same rule's name, and a baseline far from
-``--design-baseline-mm`` fails ``baseline-design``."""
+"""`rig solve-folders` gives the stored path's verdict on its members: a camera the stored path would refuse
+at capture or at lint is refused with the same rule's name, and a baseline far from ``--design-baseline-mm``
+fails ``baseline-design``."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""Tilt of a circular fisheye read through the equidistant lens fitted to the session (issue 10 item 1:
-"tilt and observability computed from the board views without assuming the pinhole model holds at the
-edge"). Through the small k1k2 model a 190 deg session read tilts up to 33 deg off (seed 5: a 42 deg view
-read 30, a 24 deg view 16) and failed the tilt gate it truly passes."""
+"""Tilt of a circular fisheye read through the equidistant lens fitted to the session: tilt and observability
+are computed from the board views without assuming the pinhole model holds at the edge. Through the small k1k2
+model a 190 deg session read tilts up to 33 deg off (seed 5: a 42 deg view read 30, a 24 deg view 16) and
+failed the tilt gate it truly passes."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """core.capture.image_circle: the circle found in a session's frames (or not), the cells it covers, and the
-gates
-and the fold-over check read through it (issue 10 items 1 and 6)."""
+gates and the fold-over check read through it."""
 
 from __future__ import annotations
 

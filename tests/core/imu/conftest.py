@@ -32,3 +32,9 @@ def dance_calibration(dance: ImuCameraRecording) -> Calibration:
 @pytest.fixture(scope="session")
 def corridor() -> ImuCameraRecording:
     return synthesize_imu_camera(1, motion="corridor", duration_s=6.0)
+
+
+@pytest.fixture(scope="session")
+def rolling() -> ImuCameraRecording:
+    """A 3 s rolling-shutter dance: 30 us per row."""
+    return synthesize_imu_camera(2, motion="dance", duration_s=3.0, line_delay_s=30e-6)

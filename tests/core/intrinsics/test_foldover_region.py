@@ -1,5 +1,5 @@
 """Fold-over is judged where the calibration is used: over the observed corners' region (+ OBSERVED_MARGIN),
-alike for the fisheye and the pinhole models (issue 22: a fisheye fit of the circular pair folded over at
+alike for the fisheye and the pinhole models (a fisheye fit of the circular pair folded over at
 90.8 deg off-axis, beyond every observed corner, and was rejected for it)."""
 
 from __future__ import annotations

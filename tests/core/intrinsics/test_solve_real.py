@@ -86,9 +86,8 @@ def test_left_images_reproduce_the_plain_opencv_reference(left_views):
     assert names[int(np.argmax(sol.per_view_rms_px))] == "left02.jpg"
     assert sol.per_view_rms_px.max() == pytest.approx(1.22, abs=0.005)
     assert "left02.jpg" in [names[i] for i in flag_outliers(sol).outlier_views]
-    # the views scatter more than their corner noise explains (issue 22): the reported sigma is the view-level
-    # one,
-    # the Jacobian one behind it still agrees with OpenCV's
+    # the views scatter more than their corner noise explains: the reported sigma is the view-level one, the
+    # Jacobian one behind it still agrees with OpenCV's
     cov = sol.covariance
     assert cov is not None and cov.view_factor is not None and cov.inflated and cov.view_factor > 1.5
     for name, value in sol.sigma_opencv.items():
@@ -105,9 +104,7 @@ def test_udacity_reference_solve_flags_calibration15_and_its_bad_corner(udacity_
     for name, value in reference.items():
         assert getattr(sol, name) == pytest.approx(value, abs=REFERENCE_TOL_PX), name
     assert sol.rms_px == pytest.approx(1.003, abs=5e-4)
-    cov = (
-        sol.covariance
-    )  # per-view error beyond the corner noise: the view-level sigma is reported (issue 22)
+    cov = sol.covariance  # per-view error beyond the corner noise: the view-level sigma is reported
     assert cov is not None and cov.view_factor is not None and cov.inflated
     for name, value in {
         "fx": 3.26,

@@ -1,5 +1,6 @@
 """The view-level sigma check (core/intrinsics/covariance.py): left alone on per-corner noise, the larger
-sigma reported when every view carries an error of its own (issue 22, "Sigmas that hold on real data")."""
+sigma reported when every view carries an error of its own (docs/verdicts.md, "Sigmas that hold on real
+data")."""
 
 from __future__ import annotations
 

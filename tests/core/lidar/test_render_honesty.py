@@ -2,8 +2,7 @@
 
 Each render has its own true T, 10 mm range noise, a 5 mm bias per laser (fixed per session, as a
 real unit's), 0.2 px corner noise and a post behind the board as clutter. Honest sigma: the z-scores
-of each translation and rotation component have mean within +/-0.3 and standard deviation 0.7-1.4
-(issue 23).
+of each translation and rotation component have mean within +/-0.3 and standard deviation 0.7-1.4.
 
 Why 120 seeds (docs/lidar.md "Honesty on renders"): the mean of one component over n seeds has a standard
 error of ~1.1 / sqrt(n), and translation along LiDAR z and rotation about LiDAR y carry the extra spread of

@@ -83,7 +83,7 @@ def test_folder_capture_stores_outcomes_corners_gates_and_images(any_db_settings
     )
     assert [o.name for o in stored.outcomes] == [v["file"] for v in truth["views"]]
     assert result.images_stored == len(stored.outcomes) == 12
-    # issue 22: a session that is not hopeless also carries the decisive projection gate
+    # a session that is not hopeless also carries the decisive projection gate
     assert {g.gate: g.passed for g in stored.gates} == {
         "observability": True,
         "tilt": True,

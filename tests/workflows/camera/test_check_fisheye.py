@@ -1,5 +1,4 @@
-"""`calibctl check` of a fisheye calibration goes through the stored fisheye model (issue 13, check for
-fisheye)."""
+"""`calibctl check` of a fisheye calibration goes through the stored fisheye model."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 10's Proof end to end through `calibctl calibrate` on rendered circular fisheyes (images rendered,
+"""The circular-fisheye proof end to end through `calibctl calibrate` on rendered fisheyes (images rendered,
 board detected, circle found in the frames, gates, solve): fisheye sessions at 150-190 deg converge, every
 gate passes (the tilt gate read through the fitted fisheye lens, core.capture.tilt), every rendered view is
 used, and fx, cx, cy, k1..k4 come back within 3 sigma at 150, 170 and 190 deg.

@@ -298,7 +298,7 @@ def test_a_good_pinhole_session_records_its_detector_noise_and_passes_model_misf
 
 
 def test_auto_on_a_lens_k1k2_cannot_explain_ends_in_fisheye_instead_of_exit_2(settings):
-    """issue 22: `solve --model auto` exited 2 ("the solve does not explain the corners") when the k1k2 rung
+    """`solve --model auto` used to exit 2 ("the solve does not explain the corners") when the k1k2 rung
     failed; a 185 deg circular render of a 12 x 9 board held close fails the k1k2 solve at 10.9 px."""
     from calibctl.artifacts.session import ViewCorners
     from tests.core.intrinsics.test_model_select import _strong_fisheye_session

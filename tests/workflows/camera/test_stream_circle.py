@@ -1,6 +1,6 @@
 """A video or live camera capture without --image-circle finds the circle in the frames seen so far, so its
-stop decision (the live gates) counts coverage inside a circular fisheye's image circle (issue 10); a
-pinhole stream keeps the nine cells."""
+stop decision (the live gates) counts coverage inside a circular fisheye's image circle; a pinhole stream
+keeps the nine cells."""
 
 from __future__ import annotations
 

@@ -59,3 +59,33 @@ def test_a_fisheye_has_no_mrcal_model_and_says_why():
     with pytest.raises(InputError, match="mrcal has no Kannala-Brandt"):
         formats.render(fisheye, "mrcal")
     assert yaml.safe_load(formats.render(fisheye, "kalibr"))["cam0"]["distortion_model"] == "equidistant"
+
+
+def _with_region():
+    hull = [(40.0, 30.0), (600.0, 35.5), (610.0, 450.0), (35.0, 440.0)]
+    return calibration().model_copy(update={"observed_region_px": hull}).sealed(), hull
+
+
+def test_mrcal_of_one_camera_carries_the_observed_corners_hull_as_its_valid_region():
+    art, hull = _with_region()
+    model = ast.literal_eval(formats.render(art, "mrcal"))
+    assert model["valid_intrinsics_region"] == [list(p) for p in [*hull, hull[0]]]  # closed, as mrcal wants
+    assert "valid_intrinsics_region" not in ast.literal_eval(formats.render(calibration(), "mrcal"))
+
+
+def test_debian_mrcal_reads_the_valid_region(tmp_path):
+    """mrcal's own reader (Debian's python3-mrcal, `make test-consumers`) takes the region as written."""
+    import subprocess
+    from pathlib import Path
+
+    if not Path("/usr/bin/python3").exists():
+        pytest.skip("no /usr/bin/python3: Debian's python3-mrcal is not installed (make test-consumers)")
+    art, hull = _with_region()
+    path = tmp_path / "cam.cameramodel"
+    path.write_text(formats.render(art, "mrcal"))
+    code = "import sys, mrcal; print(mrcal.cameramodel(sys.argv[1]).valid_intrinsics_region().tolist())"
+    run = subprocess.run(["/usr/bin/python3", "-c", code, str(path)], capture_output=True, text=True)
+    if "No module named 'mrcal'" in run.stderr:
+        pytest.skip("Debian's python3-mrcal is not installed (make test-consumers)")
+    assert run.returncode == 0, run.stderr
+    assert ast.literal_eval(run.stdout) == [list(p) for p in [*hull, hull[0]]]

@@ -1,7 +1,7 @@
 """Robot-arm hand-eye on rendered board photos: camera on a gripper (and fixed in the cell), 15 arm poses.
 
 The camera's active calibration sits in a store; calibctl detects the board in every image, solves
-T_cam_board with solvePnP on that calibration and then A X = X B. Bar (issue 12): X within 1 mm and
+T_cam_board with solvePnP on that calibration and then A X = X B. The bar: X within 1 mm and
 0.1 deg of the truth the renderer used.
 """
 
@@ -376,7 +376,7 @@ def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_pa
 
 
 def test_a_mismatch_on_a_static_pose_arm_does_not_send_the_user_to_timeoffset(scenes, settings) -> None:
-    """Issue 22: the arm stops for each photo, so a time offset cannot turn the camera more than the gripper;
+    """The arm stops for each photo, so a time offset cannot turn the camera more than the gripper;
     the pose file shifted one row against the images is (the pairing, not the clock)."""
     d = scenes["in-hand"]
     rows = list(csv.reader((d / "poses.csv").open(newline="")))

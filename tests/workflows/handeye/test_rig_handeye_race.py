@@ -1,5 +1,5 @@
-"""Two `handeye --rig` writers on the same base rig version (issue 14 item 2): the second is refused
-(exit 2, naming the newer version) instead of silently dropping the first one's edge."""
+"""Two `handeye --rig` writers on the same base rig version: the second is refused (exit 2, naming the
+newer version) instead of silently dropping the first one's edge."""
 
 from __future__ import annotations
 

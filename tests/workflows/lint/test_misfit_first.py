@@ -62,8 +62,7 @@ DRIFT = {
 
 
 def _webcam(consistency: dict | None) -> CalibrationFacts:
-    """Issue 22: a ~60 deg webcam whose focus drifted through the session, solved k1k2: misfit (and
-    one-camera)."""
+    """A ~60 deg webcam whose focus drifted through the session, solved k1k2: misfit (and one-camera)."""
     return CalibrationFacts(
         source="t",
         kind="calibctl",

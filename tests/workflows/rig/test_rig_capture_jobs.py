@@ -15,8 +15,7 @@ from calibctl.cli.main import app
 from calibctl.core.capture import image_outcomes, worker_pool
 from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
-from tests.artifacts.factories import measured_board
-from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
+from tests.workflows.rig.test_rig_store_flow import store_members
 from tests.workflows.rig_folders_data import rendered_rig
 
 RUNNER = CliRunner()
@@ -31,11 +30,7 @@ def rig2(tmp_path_factory):
 
 
 def _store(path, rig2) -> str:
-    url = f"sqlite:///{path}"
-    with Store.open(url) as store:
-        store.add_board(measured_board(square_mm=25.0))
-        for name in ("CAM0", "CAM1"):
-            store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
+    url = store_members(f"sqlite:///{path}", rig2)
     assert (
         RUNNER.invoke(
             app, ["--db", url, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1"]

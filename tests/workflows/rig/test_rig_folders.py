@@ -237,7 +237,7 @@ def test_the_verdict_uses_the_stations_epipolar_limit(rig2):
 
 @pytest.mark.parametrize("model", ["rational", "auto"])
 def test_every_model_solves_a_rendered_pair(rig2, model):
-    """issue 22: rational crashed in the rig's Jacobian (stereoCalibrate returned 5 of its 8 coefficients);
+    """Rational used to crash in the rig's Jacobian (stereoCalibrate returned 5 of its 8 coefficients), and
     auto was refused by a message that listed auto as valid."""
     run = solve_rig_folders(
         {"CAM0": rig2 / "CAM0", "CAM1": rig2 / "CAM1"}, BOARD, model=model, min_shared_views=5

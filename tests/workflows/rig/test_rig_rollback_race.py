@@ -1,6 +1,6 @@
-"""`rig rollback` is compare-and-set like the cameras' `rollback` (issue 14 item 7): a rollback decided
-on an active rig version that another writer has moved since (a solve, a hand-eye edge, another
-rollback) is refused with exit 2 naming the newer version, and nothing is written."""
+"""`rig rollback` is compare-and-set like the cameras' `rollback`: a rollback decided on an active rig
+version that another writer has moved since (a solve, a hand-eye edge, another rollback) is refused with
+exit 2 naming the newer version, and nothing is written."""
 
 from __future__ import annotations
 

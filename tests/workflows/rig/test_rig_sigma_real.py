@@ -1,6 +1,5 @@
-"""The rig's reported sigma on a real pair against re-solves without each frame (issue 22 item 4: within 1.5x
-of
-what the frames' scatter says; the Jacobian alone is 3.6x short on this pair). The 100-resample bootstrap of
+"""The rig's reported sigma on a real pair against re-solves without each frame: it must be within 1.5x of
+what the frames' scatter says (the Jacobian alone is 3.6x short on this pair). The 100-resample bootstrap of
 docs/verdicts.md is benchmarks/bench_rig_sigma.py; the delete-one jackknife here is its cheap cousin."""
 
 from __future__ import annotations

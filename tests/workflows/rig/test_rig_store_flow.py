@@ -31,13 +31,19 @@ def _truth_artifact(rig2, name, **extra):
     )
 
 
-@pytest.fixture
-def settings(tmp_path, rig2):
-    s = load_settings(db=f"sqlite:///{tmp_path / 'r.db'}", station="st-test", operator="tester", env={})
-    with Store.open(s.db_url) as store:
+def store_members(url, rig2) -> str:
+    """``url`` with board A17 and CAM0 / CAM1 of the 2-camera render stored at their true lenses, active."""
+    with Store.open(url) as store:
         store.add_board(measured_board(square_mm=25.0))
         for name in ("CAM0", "CAM1"):
             store.add_artifact(_truth_artifact(rig2, name), activate=True, **WHO)
+    return url
+
+
+@pytest.fixture
+def settings(tmp_path, rig2):
+    s = load_settings(db=f"sqlite:///{tmp_path / 'r.db'}", station="st-test", operator="tester", env={})
+    store_members(s.db_url, rig2)
     return s
 
 
