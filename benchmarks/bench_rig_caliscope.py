@@ -1,6 +1,6 @@
 """A real 4-camera rig from video (caliscope-4cam): calibctl beside plain OpenCV and the recorder's result.
 
-    .venv/bin/python benchmarks/bench_rig_caliscope.py [--runs 5:k1k2,5:opencv-default,40:k1k2] [--out FILE]
+    .venv/bin/python benchmarks/bench_rig_caliscope.py [--runs 5:opencv-default:1=1,5:k1k2] [--out FILE]
 
 Set: ../shared/datasets/caliscope-4cam (four 1280x720 webcams, 111 frames each as MP4, the recorder's
 timestamps, an inverted 4 x 5-square ChArUco, DICT_4X4_1000, 54 mm squares, markers 0.75 of a square).
@@ -17,6 +17,9 @@ timestamps, an inverted 4 x 5-square ChArUco, DICT_4X4_1000, 54 mm squares, mark
 4. The recorder's camera_array.toml (caliscope's bundle adjustment: a peer's answer, not truth): relative
    poses T_0_c of all three routes compared (baseline, rotation, and the difference of the two poses).
 5. Motion between exposures: calibctl's residual per camera view against the time spread of its rig frame.
+6. Which frames belong together: plain stereo RMS per pair with camera b one frame earlier / as timestamped /
+   one frame later (camera 1's video is one frame off its timestamps: the runs declare --frame-shift 1=+1),
+   and with camera b's corners moved dt along their image motion (an exposure offset the timestamps miss).
 """
 
 from __future__ import annotations
@@ -37,13 +40,14 @@ from machine import cpu_model, load_1min  # benchmarks/machine.py (scripts run f
 from calibctl.core.board.board_spec import BoardSpec, make_charuco_board
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.detect import detect_board
+from calibctl.core.extrinsics.rig_frame_shift import moved_corners
 from calibctl.core.extrinsics.rig_problem import RigViews
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
 from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.errors import CalibctlError
-from calibctl.workflows.rig.rig_folders import USABLE, calibrate_member, solve_rig_folders
+from calibctl.workflows.rig.rig_folders import USABLE, calibrate_member, parse_frame_shifts, solve_rig_folders
 
 DATASETS = Path(
     os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
@@ -54,6 +58,8 @@ SET = DATASETS / "caliscope-4cam"
 CAMS = ("0", "1", "2", "3")
 BOARD = BoardSpec.charuco(4, 5, 0.054, 0.054 * 0.75, "DICT_4X4_1000", inverted=True)
 IMAGE_SIZE = (1280, 720)
+FPS = 6.0  # the recordings' frame rate (timestamps.csv: 166.7 ms apart)
+SHIFT = {"1": 1}  # camera 1's video is one frame off its timestamps (rig-frame-shift)
 
 
 def _frames(cam: str) -> list[np.ndarray]:
@@ -115,8 +121,65 @@ def recorder_poses() -> dict[str, np.ndarray]:
     return {cam: T_cam_world["0"] @ invert(T_cam_world[cam]) for cam in CAMS}
 
 
-def plain_opencv(views: dict, start: float) -> dict[str, object]:
-    """calibrateCamera per camera, stereoCalibrate per pair on the recorder's sync_index, chained from 0."""
+def _sync(shifts: dict[str, int]) -> dict[int, dict[str, int]]:
+    """The recorder's own pairing: sync_index -> camera -> video frame (its frame k read with the time listed
+    for k - shift, as --frame-shift reads it)."""
+    with (SET / "extrinsic" / "timestamps.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    first = {cam: min(int(r["frame_index"]) for r in rows if r["cam_id"] == cam) for cam in CAMS}
+    sync: dict[int, dict[str, int]] = {}
+    for r in rows:
+        cam = r["cam_id"]
+        sync.setdefault(int(r["sync_index"]), {})[cam] = (
+            int(r["frame_index"]) - first[cam] + shifts.get(cam, 0)
+        )
+    return sync
+
+
+def _moved_corners(view_by_frame: dict, k: int, dt_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Frame k's corners moved dt_s later along their image velocity (core.extrinsics.rig_frame_shift,
+    frames FPS apart); None without both neighbours."""
+    if dt_s == 0.0:
+        return view_by_frame.get(k)
+    return moved_corners(view_by_frame, {j: j / FPS for j in (k - 1, k + 1)}, k, dt_s)
+
+
+def _stereo(
+    views: dict, intr: dict, sync: dict, a: str, b: str, dt_b_s: float = 0.0, moved_only: bool = False
+):
+    """stereoCalibrate (intrinsics fixed) of the pair on the given pairing; camera b's corners at dt_b_s."""
+    obj = BOARD.object_points().astype(np.float32)
+    objs, pts_a, pts_b = [], [], []
+    for frames in sync.values():
+        if a not in frames or b not in frames:
+            continue
+        va = views[a].get(frames[a])
+        vb = (
+            _moved_corners(views[b], frames[b], dt_b_s) if (dt_b_s or moved_only) else views[b].get(frames[b])
+        )
+        if moved_only and _moved_corners(views[b], frames[b], 1e-3) is None:
+            vb = None
+        if va is None or vb is None:
+            continue
+        common = np.intersect1d(va[0], vb[0])
+        if len(common) < 6:
+            continue
+        objs.append(obj[common])
+        pts_a.append(va[1][np.searchsorted(va[0], common)].astype(np.float32))
+        pts_b.append(vb[1][np.searchsorted(vb[0], common)].astype(np.float32))
+    if len(objs) < 3:
+        return None
+    out = cv2.stereoCalibrate(
+        objs, pts_a, pts_b, *intr[a], *intr[b], IMAGE_SIZE, flags=cv2.CALIB_FIX_INTRINSIC
+    )
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = out[5], np.ravel(out[6])
+    return T, len(objs), out[0]  # T_b_a
+
+
+def plain_opencv(views: dict, start: float, shifts: dict[str, int] | None = None) -> dict[str, object]:
+    """calibrateCamera per camera, stereoCalibrate per pair on the recorder's sync_index (camera frames
+    shifted by ``shifts``), chained from 0."""
     obj = BOARD.object_points().astype(np.float32)
     intr, rms = {}, {}
     for cam in CAMS:
@@ -124,36 +187,12 @@ def plain_opencv(views: dict, start: float) -> dict[str, object]:
         obj_pts, img_pts = [obj[i] for i, _ in good], [c.astype(np.float32) for _, c in good]
         err, K, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, IMAGE_SIZE, None, None)
         intr[cam], rms[cam] = (K, dist), err
-    sync: dict[int, dict[str, int]] = {}
-    with (SET / "extrinsic" / "timestamps.csv").open() as handle:
-        rows = list(csv.DictReader(handle))
-    first = {cam: min(int(r["frame_index"]) for r in rows if r["cam_id"] == cam) for cam in CAMS}
-    for r in rows:
-        sync.setdefault(int(r["sync_index"]), {})[r["cam_id"]] = int(r["frame_index"]) - first[r["cam_id"]]
+    sync = _sync(shifts or {})
     pairs = {}
     for a in CAMS:
         for b in CAMS:
-            if a >= b:
-                continue
-            objs, pts_a, pts_b = [], [], []
-            for frames in sync.values():
-                va, vb = views[a].get(frames.get(a, -1)), views[b].get(frames.get(b, -1))
-                if va is None or vb is None:
-                    continue
-                common = np.intersect1d(va[0], vb[0])
-                if len(common) < 6:
-                    continue
-                objs.append(obj[common])
-                pts_a.append(va[1][np.searchsorted(va[0], common)].astype(np.float32))
-                pts_b.append(vb[1][np.searchsorted(vb[0], common)].astype(np.float32))
-            if len(objs) < 3:
-                continue
-            out = cv2.stereoCalibrate(
-                objs, pts_a, pts_b, *intr[a], *intr[b], IMAGE_SIZE, flags=cv2.CALIB_FIX_INTRINSIC
-            )
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = out[5], np.ravel(out[6])
-            pairs[(a, b)] = (T, len(objs), out[0])  # T_b_a
+            if a < b and (found := _stereo(views, intr, sync, a, b)) is not None:
+                pairs[(a, b)] = found
     T_0: dict[str, np.ndarray] = {"0": np.eye(4)}
     while len(T_0) < len(CAMS):
         (a, b), (T, _, _) = max(
@@ -164,19 +203,61 @@ def plain_opencv(views: dict, start: float) -> dict[str, object]:
         else:
             T_0[a] = T_0[b] @ T
     summary = {f"{a}-{b}": (n, r) for (a, b), (_, n, r) in pairs.items()}
-    return {"T_0": T_0, "camera_rms": rms, "pairs": summary, "time_s": time.perf_counter() - start}
+    return {
+        "T_0": T_0,
+        "camera_rms": rms,
+        "pairs": summary,
+        "time_s": time.perf_counter() - start,
+        "intr": intr,
+    }
 
 
-def calibctl_run(tolerance_ms: float, model: str) -> dict[str, object]:
+def timing_tables(views: dict, intr: dict, shifts: dict[str, int]) -> list[str]:
+    """Per pair, plain stereo RMS (intrinsics fixed) (1) with camera b's frames one frame earlier / as the
+    recorder pairs them / one later, and (2) with the declared shift, camera b's corners moved dt along
+    their image velocity: the dt that fits best is the pair's exposure offset the timestamps miss."""
+    lines = ["| pair a-b | b one frame earlier | as timestamped | b one frame later |", "|---|---|---|---|"]
+    for a in CAMS:
+        for b in CAMS:
+            if a < b:
+                rms = [_stereo(views, intr, _sync({b: s}), a, b) for s in (-1, 0, 1)]
+                lines.append(
+                    f"| {a}-{b} | " + " | ".join(f"{r[2]:.3f} px ({r[1]})" if r else "-" for r in rms) + " |"
+                )
+    sync = _sync(shifts)
+    scan_ms = np.arange(-60.0, 61.0, 5.0)
+    lines += [
+        "",
+        f"Declared shift {shifts}; camera b's corners moved by dt along their image velocity (frames with "
+        "both neighbours seen):",
+        "",
+        "| pair a-b | frames | RMS at dt = 0 | best dt ms | RMS at best dt |",
+        "|---|---|---|---|---|",
+    ]
+    for a in CAMS:
+        for b in CAMS:
+            if a < b:
+                fits = [_stereo(views, intr, sync, a, b, dt / 1e3, moved_only=True) for dt in scan_ms]
+                if any(f is None for f in fits):
+                    continue
+                best = int(np.argmin([f[2] for f in fits]))
+                zero = fits[int(np.argmin(np.abs(scan_ms)))]
+                lines.append(
+                    f"| {a}-{b} | {zero[1]} | {zero[2]:.3f} | {scan_ms[best]:+.0f} | {fits[best][2]:.3f} |"
+                )
+    return lines
+
+
+def calibctl_run(tolerance_ms: float, model: str, shifts: dict[str, int]) -> dict[str, object]:
     start = time.perf_counter()
     sources = {cam: SET / "extrinsic" / f"cam_{cam}.mp4" for cam in CAMS}
     try:
         run = solve_rig_folders(sources, BOARD, model, timestamps=SET / "extrinsic" / "timestamps.csv",
-                                time_tolerance_ms=tolerance_ms)  # fmt: skip
+                                time_tolerance_ms=tolerance_ms, frame_shifts=shifts)  # fmt: skip
     except CalibctlError as exc:
         return {"refused": exc.message, "time_s": time.perf_counter() - start}
     elapsed = time.perf_counter() - start
-    out: dict[str, object] = {"run": run, "time_s": elapsed, "model": model}
+    out: dict[str, object] = {"run": run, "time_s": elapsed, "model": model, "shifts": shifts}
     sol = run.solution
     if sol is not None:
         out["T_0"] = {cam: sol.T_a_b(0, sol.views.cameras.index(cam)) for cam in sol.views.cameras}
@@ -197,7 +278,11 @@ def motion_table(result: dict[str, object]) -> list[str]:
     first = {cam: min(times[cam]) for cam in CAMS}
     spreads = {}
     for key, photos in run.match.frames:  # type: ignore[attr-defined]
-        ts = [times[cam][int(str(p).rsplit("#", 1)[1]) + first[cam]] for cam, p in photos.items()]
+        shift = result["shifts"]
+        ts = [
+            times[cam][int(str(p).rsplit("#", 1)[1]) + first[cam] - shift.get(cam, 0)]  # type: ignore[attr-defined]
+            for cam, p in photos.items()
+        ]
         spreads[str(key)] = (max(ts) - min(ts)) * 1e3
     bins = [(0, 1), (1, 2), (2, 3), (3, 5), (5, 10), (10, 20), (20, 45)]
     lines = ["| frame spread ms | camera views | residual RMS px |", "|---|---|---|"]
@@ -289,7 +374,9 @@ def _compare(T: np.ndarray, ref: np.ndarray) -> tuple[float, float, float, float
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--runs", default="5:k1k2,5:opencv-default,40:k1k2", help="TOLERANCE_MS:MODEL of each calibctl run"
+        "--runs",
+        default="5:opencv-default:1=1,5:opencv-default,5:k1k2:1=1,40:opencv-default:1=1",
+        help="TOLERANCE_MS:MODEL[:CAM=SHIFT] of each calibctl run (SHIFT: --frame-shift)",
     )
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument(
@@ -318,10 +405,15 @@ def main() -> int:
     lines += ["", f"Decoding the 4 x 111 frames: {decode_s:.2f} s.", ""]
     recorder = recorder_poses()
     plain = plain_opencv(views, time.perf_counter())
+    plain_shifted = plain_opencv(views, time.perf_counter(), SHIFT)
     runs = {}
     for item in args.runs.split(","):
-        tol, model = item.split(":")
-        runs[f"{float(tol):g} ms, {model}"] = calibctl_run(float(tol), model)
+        tol, model, *shift = item.split(":")
+        shifts = parse_frame_shifts(shift)
+        label = f"{float(tol):g} ms, {model}" + "".join(
+            f", frame shift {c}={n:+d}" for c, n in shifts.items()
+        )
+        runs[label] = calibctl_run(float(tol), model, shifts)
     lines += [
         "| route | camera | baseline T_0_c mm | rotation deg | vs recorder: translation mm | rotation deg |",
         "|---|---|---|---|---|---|",
@@ -329,9 +421,13 @@ def main() -> int:
     for cam in CAMS[1:]:
         b, r, _, _ = _compare(recorder[cam], recorder[cam])
         lines.append(f"| recorder camera_array.toml | {cam} | {b:.1f} | {r:.2f} | - | - |")
-    for cam in CAMS[1:]:
-        b, r, dt_mm, dr = _compare(plain["T_0"][cam], recorder[cam])  # type: ignore[index]
-        lines.append(f"| plain OpenCV (chained pairs) | {cam} | {b:.1f} | {r:.2f} | {dt_mm:.1f} | {dr:.2f} |")
+    for label, route in (("", plain), (", camera 1 one frame later", plain_shifted)):
+        for cam in CAMS[1:]:
+            b, r, dt_mm, dr = _compare(route["T_0"][cam], recorder[cam])  # type: ignore[index]
+            lines.append(
+                f"| plain OpenCV (chained pairs{label}) | {cam} | {b:.1f} | {r:.2f} | {dt_mm:.1f} | "
+                f"{dr:.2f} |"
+            )
     for tol, result in runs.items():
         if "T_0" not in result:
             lines.append(f"| calibctl, {tol} | - | {result.get('refused', 'gate failed')} | | | |")
@@ -352,9 +448,10 @@ def main() -> int:
     lines.append(
         f"| plain OpenCV calibrateCamera, per camera | {per_camera} | {plain['time_s']:.2f} (solves) |"
     )
-    stereo = plain["pairs"].items()  # type: ignore[attr-defined]
-    pair_rms = ", ".join(f"{p} {n} frames {r:.3f}" for p, (n, r) in stereo)
-    lines.append(f"| plain OpenCV stereoCalibrate per pair | {pair_rms} | |")
+    for label, route in (("", plain), (", camera 1 one frame later", plain_shifted)):
+        stereo = route["pairs"].items()  # type: ignore[attr-defined]
+        pair_rms = ", ".join(f"{p} {n} frames {r:.3f}" for p, (n, r) in stereo)
+        lines.append(f"| plain OpenCV stereoCalibrate per pair{label} | {pair_rms} | |")
     detect_s = (
         sum(float(r["ms"]) for r in rows if r["detector"] == "plain CharucoDetector, inverted") * 111 / 1e3
     )
@@ -398,6 +495,12 @@ def main() -> int:
         if "residuals" in result:
             lines += ["", f"Residual against the rig frame's time spread (calibctl, {tol}):", ""]
             lines += motion_table(result)
+    lines += [
+        "",
+        "Which frames belong together: plain stereo RMS per pair (intrinsics fixed, frames counted):",
+        "",
+    ]
+    lines += timing_tables(views, plain["intr"], SHIFT)  # type: ignore[arg-type]
     first_label, first = next(iter(runs.items()))
     if args.resamples > 0 and first.get("run") is not None and first["run"].solution is not None:  # type: ignore[attr-defined]
         first["label"] = first_label

@@ -22,8 +22,9 @@ The units go round in turn (station, plain, pool, rotated by one each unit), so 
 the 1-minute load average is printed at each unit. ``--baseline DIR``: the code before a change (``git
 archive``d) runs a second station in the same turns. ``--profile``: no race; the station's own code in this
 process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time.
-``--failed``: no plain loops; per round (``--units``) three units of the first ``--views`` views - clean,
-the board left in one picture only (the others blurred past finding it), no board at all - through the
+``--failed``: no plain loops; per round (``--units``) four units of the first ``--views`` views - clean,
+the board left in one picture only (the others blurred past finding it), no board at all, every picture
+black - through the
 station (and ``--baseline``'s), in turns: each kind's ``unit_s`` and its line (the detector calls are
 counted in tests/workflows/station/test_station_probe_cost.py).
 Prints markdown with machine, date and load.
@@ -46,7 +47,7 @@ import time
 from pathlib import Path
 
 from bench_parallel_detect import PLAIN_DETECT, template_store
-from machine import cpu_model, load_1min, run_env
+from machine import cpu_model, load_1min, run_env, tree_cpu_s
 
 PLAIN_LOOP = (
     r"""
@@ -94,7 +95,7 @@ def make_units(work: Path, rendered: Path, units: int, count: int, same: bool) -
 
 
 class Station:
-    """A warm ``calibctl station`` fed serials; ``unit(serial)`` -> (seconds here, its unit_s, status)."""
+    """A warm ``calibctl station`` fed serials; ``unit(serial)`` -> (s here, its unit_s, status, CPU s)."""
 
     def __init__(self, work: Path, name: str, template: Path, env: dict[str, str], jobs: int | None) -> None:
         store = work / f"{name}.db"
@@ -118,26 +119,27 @@ class Station:
             env=env,
         )
 
-    def unit(self, serial: str) -> tuple[float, float, str]:
+    def unit(self, serial: str) -> tuple[float, float, str, float]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), tree_cpu_s(self.proc.pid)
         self.proc.stdin.write(serial + "\n")
         self.proc.stdin.flush()
         line = self.proc.stdout.readline()
         seen = time.perf_counter() - t
+        cpu = tree_cpu_s(self.proc.pid) - cpu
         if not line.startswith("{"):
             raise SystemExit(
                 f"the station stopped: {line}{self.proc.stderr.read() if self.proc.stderr else ''}"
             )
         unit = json.loads(line)
-        return seen, unit["unit_s"], f"{unit['status']} {unit['views']} views RMS {unit['rms_px']}"
+        return seen, unit["unit_s"], f"{unit['status']} {unit['views']} views RMS {unit['rms_px']}", cpu
 
     def close(self) -> None:
         self.proc.communicate("")
 
 
 class Plain:
-    """The plain warm loop (``jobs`` 1) or Pool(jobs) loop; ``unit(folder)`` -> (s here, its own, what)."""
+    """The plain warm loop (jobs 1) or Pool(jobs) loop; ``unit(folder)`` -> (s here, its own, what, CPU s)."""
 
     def __init__(self, work: Path, jobs: int, env: dict[str, str]) -> None:
         (work / "plain_loop.py").write_text(PLAIN_LOOP)
@@ -151,13 +153,18 @@ class Plain:
         )
         assert self.proc.stdout is not None and self.proc.stdout.readline().startswith("READY")
 
-    def unit(self, folder: Path) -> tuple[float, float, str]:
+    def unit(self, folder: Path) -> tuple[float, float, str, float]:
         assert self.proc.stdin is not None and self.proc.stdout is not None
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), tree_cpu_s(self.proc.pid)
         self.proc.stdin.write(f"{folder}\n")
         self.proc.stdin.flush()
         _, inner, views, rms = self.proc.stdout.readline().split()
-        return time.perf_counter() - t, float(inner), f"{views} views RMS {rms}"
+        return (
+            time.perf_counter() - t,
+            float(inner),
+            f"{views} views RMS {rms}",
+            tree_cpu_s(self.proc.pid) - cpu,
+        )
 
     def close(self) -> None:
         self.proc.communicate("")
@@ -189,6 +196,7 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     contenders[f"plain warm Pool({args.pool}) loop"] = Plain(work, args.pool, env)
     seen: dict[str, list[float]] = {name: [] for name in contenders}
     inner: dict[str, list[float]] = {name: [] for name in contenders}
+    cpu: dict[str, list[float]] = {name: [] for name in contenders}
     what: dict[str, set[str]] = {name: set() for name in contenders}
     loads = []
     names = list(contenders)
@@ -201,6 +209,7 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
             if i > 0:  # the warm-up unit is not counted
                 seen[name].append(got[0])
                 inner[name].append(got[1])
+                cpu[name].append(got[3])
                 what[name].add(got[2].rsplit(" RMS", 1)[0])
     for who in contenders.values():
         who.close()
@@ -220,6 +229,10 @@ def race(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     for name in names:
         own = "unit_s (serial read to verdict out)" if name.endswith("station") else "its own clock"
         print(row(f"{name}: {own}", inner[name]))
+    cpu_ref = cpu["plain warm loop (sequential)"]
+    for name in names:
+        label = f"{name}: CPU s of its processes (user + system)"
+        print(row(label, cpu[name], None if name.startswith("plain warm loop") else cpu_ref))
     results = "; ".join(f"{name}: {', '.join(sorted(w))}" for name, w in what.items())
     print(
         f"\nresults: {results}; 1-minute load average {min(loads):.2f}-{max(loads):.2f} at the units' "
@@ -254,7 +267,7 @@ STAGES: tuple[tuple[str, list[Key], list[Key]], ...] = (
         [],
     ),
     ("solve: artifact built and linted", [("solve.py", "build_artifact")], [("solve.py", "_solve_numbers")]),
-    ("calibration written (seal, chain, counters)", [("repository.py", "add_artifact")], []),
+    ("calibration written (seal, chain, counters)", [("cameras.py", "add_artifact")], []),
 )
 
 
@@ -271,25 +284,27 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     lines: list[UnitResult] = []
     run_station(settings, request, serials[:1], lines.append)  # warm
     load = load_1min()
-    prof = cProfile.Profile()
+    prof = cProfile.Profile(time.process_time)  # CPU, not wall: the host is shared
+    cpu = time.process_time()
     with prof:
         run_station(settings, request, serials[1:], lines.append)
+    cpu = time.process_time() - cpu
     units = [u.unit_s for u in lines[1:]]
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
     cum: dict[tuple[str, str], float] = {}
     for (file, _, func), (_, _, _, ct, _) in stats.items():
         cum[(Path(file).name, func)] = cum.get((Path(file).name, func), 0.0) + ct
-    total = sum(units)
+    total = cpu
     shares = {
         stage: sum(cum.get(key, 0.0) for key in plus) - sum(cum.get(key, 0.0) for key in minus)
         for stage, plus, minus in STAGES
     }
     print(
         f"station units at jobs 1 in this process, profiled (cProfile): {len(units)} units, median unit_s "
-        f"{statistics.median(units):.3f} s; 1-minute load average {load:.2f} at start, {load_1min():.2f} at "
-        "the end\n"
+        f"{statistics.median(units):.3f} s, {cpu / len(units):.3f} CPU s a unit (process CPU, the profiler's "
+        f"clock); 1-minute load average {load:.2f} at start, {load_1min():.2f} at the end\n"
     )
-    print("| stage | s per unit | share of the unit |\n|---|---|---|")
+    print("| stage | CPU s per unit | share of the unit's CPU |\n|---|---|---|")
     for stage, seconds in shares.items():
         print(f"| {stage} | {seconds / len(units):.3f} | {seconds / total:.0%} |")
     rest = total - sum(shares.values())
@@ -299,7 +314,7 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
     )
 
 
-FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD")
+FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD", "BLACK")
 
 
 def failed(args: argparse.Namespace, work: Path) -> None:
@@ -317,7 +332,9 @@ def failed(args: argparse.Namespace, work: Path) -> None:
             folder = work / "shots" / f"{kind}-{r}"
             folder.mkdir(parents=True)
             for i, p in enumerate(views):
-                if kind == "NO-BOARD" or (kind == "ONE-BOARD" and i > 0):
+                if kind == "BLACK":  # a camera delivering black frames, a lens cap
+                    cv2.imwrite(str(folder / p.name), 0 * blurred[views[1]])
+                elif kind == "NO-BOARD" or (kind == "ONE-BOARD" and i > 0):
                     cv2.imwrite(str(folder / p.name), blurred.get(p, blurred[views[1]]))
                 else:
                     shutil.copy(p, folder / p.name)
@@ -330,7 +347,7 @@ def failed(args: argparse.Namespace, work: Path) -> None:
         loads.append(load_1min())
         names = list(running)
         for name in names[i % len(names) :] + names[: i % len(names)]:
-            _, unit_s, what = running[name].unit(serial)
+            _, unit_s, what, _ = running[name].unit(serial)
             if i > 0:
                 kind = serial.rsplit("-", 1)[0]
                 got.setdefault((name, kind), []).append(unit_s)

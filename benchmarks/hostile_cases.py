@@ -41,6 +41,14 @@ YAML_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
     for p, c in zip("abcdefgh", "bcdefghi", strict=True)
 )
 
+TIMESTAMPS_HEAD = "sync_index,cam_id,frame_index,frame_time\n"
+
+
+def _two_folders(*extra: str, a: str = "{w}/v", b: str = "{w}/w") -> list[str]:
+    """`rig solve-folders` of cameras A and B on a 9x6 25 mm chessboard, then ``extra``."""
+    return ["rig", "solve-folders", "--source", f"A={a}", "--source", f"B={b}", "--cols", "9", "--rows", "6",
+            "--square-mm", "25", *extra]  # fmt: skip
+
 
 def _out_targets(group: str, argv: list[str], out_flag: str | None = "-o") -> list[Case]:
     """A writer aimed at a FIFO, a symlink, a dangling symlink and a folder, with --force: nothing
@@ -612,6 +620,39 @@ def _admin() -> list[Case]:
                 "-1",
             ],
             setup=both(views("v", 3), views("w", 3)),
+        ),
+        *[
+            Case(
+                g,
+                f"rig solve-folders --timestamps {what}",
+                _two_folders("--timestamps", "{w}/ts.csv"),
+                setup=both(views("v", 3), views("w", 3), text("ts.csv", TIMESTAMPS_HEAD + rows)),
+                says=says,
+            )
+            for what, rows, says in (
+                (
+                    "naming a camera that does not exist",
+                    "0,A,0,1.0\n0,B,0,1.001\n0,C,0,1.002\n",
+                    ("names camera C",),
+                ),
+                ("with duplicated times", "0,A,0,1.0\n1,A,1,1.0\n0,B,0,1.001\n", ("same time",)),
+                ("with frames past the end", "0,A,0,1.0\n0,B,0,1.001\n9,A,9,2.0\n", ("frames past the end",)),
+                ("missing a camera", "0,A,0,1.0\n", ("lists no frame of camera B",)),
+            )  # fmt: skip
+        ],
+        Case(
+            g,
+            "rig solve-folders undecodable video",
+            _two_folders(a="{w}/a.mp4", b="{w}/a.mp4"),
+            setup=text("a.mp4", b"\x00\x00\x00\x18ftypmp42 not a video" * 20),
+            says=("cannot decode the video",),
+        ),
+        Case(
+            g,
+            "rig solve-folders --frame-shift not a number",
+            _two_folders("--frame-shift", "B=half"),
+            setup=both(views("v", 3), views("w", 3)),
+            says=("--frame-shift B=half",),
         ),
         Case(g, "rig add unknown member", ["rig", "add", "R1", "--camera", "NOPE", "--camera", "NOPE2"]),
         Case(g, "rig solve unknown", ["rig", "solve", "R9"]),

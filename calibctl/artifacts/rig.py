@@ -92,8 +92,11 @@ class RigFrame(Document):
 class UnmatchedImage(Document):
     camera: str = Field(description="camera serial")
     name: str = Field(description="image name")
-    reason: Literal["no-frame-key", "duplicate-frame-key", "no-partner"] = Field(
-        description="why it is unmatched"
+    reason: Literal[
+        "no-frame-key", "duplicate-frame-key", "no-partner", "outside-time-tolerance", "no-timestamp"
+    ] = Field(
+        description="why it is unmatched (paired by time: no other camera's image within the tolerance, or "
+        "none listed in the timestamps file)"
     )
 
 

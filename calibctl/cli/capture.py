@@ -17,6 +17,8 @@ from calibctl.cli.options import (
     OperatorOption,
     OverrideGaugeOption,
     ReferenceDistanceOption,
+    RigTimestampsOption,
+    RigTimeToleranceOption,
     StationOption,
 )
 from calibctl.cli.render import emit_json, shown, stderr, stdout
@@ -279,6 +281,8 @@ def capture(
     reference_distance: ReferenceDistanceOption = None,
     reference_source: ReferenceSourceOption = None,
     model: GaugeModelOption = None,
+    timestamps: RigTimestampsOption = None,
+    time_tolerance_ms: RigTimeToleranceOption = None,
     jobs: JobsOption = None,
     json_output: JsonOption = False,
 ) -> None:
@@ -316,9 +320,23 @@ def capture(
                 "distance gauge, a video or camera source)",
             )
         capture_rig(
-            ctx, rig, source, board, station=station, operator=operator, jobs=jobs, json_output=json_output
+            ctx,
+            rig,
+            source,
+            board,
+            timestamps=timestamps,
+            time_tolerance_ms=time_tolerance_ms,
+            station=station,
+            operator=operator,
+            jobs=jobs,
+            json_output=json_output,
         )
         return
+    if timestamps is not None or time_tolerance_ms is not None:
+        raise UsageError(
+            "--timestamps and --time-tolerance-ms pair the members of a rig: they need --rig RIG",
+            hint="one camera's capture takes its frames in order",
+        )
     if serial is None:
         raise UsageError("capture needs --serial SERIAL", hint="or capture a registered rig with --rig RIG")
     if len(source) != 1:

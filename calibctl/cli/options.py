@@ -3,6 +3,7 @@ command modules import this and never each other."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -46,5 +47,23 @@ OverrideGaugeOption = Annotated[
         help="Solve a session whose metric gauge (--reference-distance) failed, or whose board revision has "
         "a failed gauge, into a calibration lint can accept; REASON is recorded in its provenance and the "
         "failed gauge stays a lint warning.",
+    ),
+]
+RigTimestampsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--timestamps",
+        show_default=False,
+        help="A rig's recorder's per-frame times (CSV cam_id,frame_index,frame_time; cam_id: the member's "
+        "SERIAL; frame_index: the image's place in its source's order): the members' images pair up by time.",
+    ),
+]
+RigTimeToleranceOption = Annotated[
+    float | None,
+    typer.Option(
+        "--time-tolerance-ms",
+        show_default=False,
+        help="With --timestamps: images of different cameras at most this far apart form one rig frame "
+        "(default 5).",
     ),
 ]

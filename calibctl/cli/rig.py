@@ -13,6 +13,8 @@ from calibctl.cli.options import (
     OperatorOption,
     OverrideGaugeOption,
     ReferenceDistanceOption,
+    RigTimestampsOption,
+    RigTimeToleranceOption,
     StationOption,
 )
 from calibctl.cli.render import emit_json, say
@@ -85,6 +87,16 @@ def solve_folders(
             help="Frames of different cameras at most this far apart form one rig frame.",
         ),
     ] = 5.0,
+    frame_shift: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--frame-shift",
+            help="SERIAL=N: that camera's video frame i was taken at the time listed for its frame i - N "
+            "(a recorder whose video holds N frames its timestamps do not list first; rig-frame-shift "
+            "names it).",
+            show_default=False,
+        ),
+    ] = None,
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
     ] = None,
@@ -135,9 +147,11 @@ def solve_folders(
     rectified rows per pair, and loop closure for three or more cameras. The verdict: the rig lint rules
     that need no store (baseline-design, epipolar, loop-closure; the station's limits), each camera judged
     as the stored path judges it (its capture gates, then its calibration's lint: member:<rule>; not the
-    square size's provenance, which only a registered board carries), and rig-rigid (frames that no
-    rigid, synchronised rig could have taken). With --reference-distance, metric-gauge: one camera's fixture
-    pictures judged through its lens as the run leaves it.
+    square size's provenance, which only a registered board carries), rig-rigid (frames that no
+    rigid, synchronised rig could have taken), rig-frame-shift (a camera whose frames fit the others' a
+    whole frame off its times) and rig-exposure-offset (a pair exposed further apart than its times say).
+    With --reference-distance, metric-gauge: one camera's fixture pictures judged through its lens as the
+    run leaves it.
     """
     from calibctl.workflows.rig import rig_folders
 
@@ -164,6 +178,7 @@ def solve_folders(
         gauge=rig_gauge(reference_distance, reference_source),
         timestamps=timestamps,
         time_tolerance_ms=time_tolerance_ms,
+        frame_shifts=rig_folders.parse_frame_shifts(frame_shift or []),
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []
@@ -252,10 +267,12 @@ def capture(
             "--source",
             help="SERIAL=SRC per member, SRC a folder, a quoted glob "
             "('left*.jpg') or a list file; images pair up by the last number in "
-            "their names.",
+            "their names (with --timestamps: by time).",
         ),
     ],
     board: Annotated[str, typer.Option("--board", help="Registered board (NAME or NAME@REV).")],
+    timestamps: RigTimestampsOption = None,
+    time_tolerance_ms: RigTimeToleranceOption = None,
     min_shared_views: Annotated[
         int, typer.Option("--min-shared-views", help="Rig gate: frames per linking pair.")
     ] = 5,
@@ -280,6 +297,8 @@ def capture(
         min_shared_views,
         gauge=rig_gauge(reference_distance, reference_source),
         override_gauge=override_gauge,
+        timestamps=timestamps,
+        time_tolerance_ms=time_tolerance_ms,
     )
     s = result.session
     if wants_json(ctx, json_output):

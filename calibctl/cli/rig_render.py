@@ -49,6 +49,11 @@ def render_timing(timing: dict[str, Any]) -> None:
         by_offset.setdefault(offset, []).append(name)
     for offset, names in by_offset.items():
         say(f"  the timestamps number the frames of {', '.join(names)} from {offset}: read as video frame 0")
+    for name, shift in timing.get("frame_shift", {}).items():
+        say(
+            f"  camera {name}'s frame i read at the time listed for its frame i{-shift:+d} "
+            f"(--frame-shift {name}={shift:+d})"
+        )
 
 
 def render_unmatched(rows: list[tuple[str, str, str]]) -> None:

@@ -2,9 +2,10 @@
 
 Tilt directions and covered cells are proxies for what matters: whether the calibrated lens predicts where
 a ray lands. This gate solves the session (the lens model it will be solved with; without one, the better
-fit of k1k2 and fisheye), propagates the intrinsic covariance to pixels (core.intrinsics.report_maps, as
-the report draws it and as mrcal's show-projection-uncertainty does in its simplest form) and judges the
-worst one-sigma over a region:
+fit of k1k2 and fisheye), propagates the intrinsic covariance calibctl reports (the Jacobian one, widened
+by the view-level factor where the views scatter more than their corners explain) to pixels (core.intrinsics.
+report_maps, as the report draws it and as mrcal's show-projection-uncertainty does in its simplest form) and
+judges the worst one-sigma over a region:
 
 - ``image``: the whole image (the default for a pinhole or full-frame lens);
 - ``circle``: the image circle of a circular fisheye (the default when one is known);
@@ -33,7 +34,9 @@ import numpy as np
 
 from calibctl.core.capture.gates import CELL_NAMES, COVERAGE_GRID
 from calibctl.core.gate import GateResult
+from calibctl.core.intrinsics.board_warp import BoardWarp, fit_board_warp
 from calibctl.core.intrinsics.camera_change import changed_hint, judge_change
+from calibctl.core.intrinsics.covariance import IntrinsicCovariance
 from calibctl.core.intrinsics.model_fit import WIDE_FIELD_DEG, diagonal_field_deg
 from calibctl.core.intrinsics.report_maps import projection_uncertainty
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, solve_intrinsics
@@ -46,6 +49,7 @@ ADVISORY_GATES = ("tilt", "coverage")  # guidance once the projection gate decid
 UNKNOWN_LENS_MODELS = ("k1k2", "fisheye")
 FISHEYE_GAIN = 0.10  # model_select.MIN_FIT_IMPROVEMENT
 CIRCLE_VERTICES = 72  # a circle region as a polygon (Region.vertices_px)
+WORST_VIEWS_NAMED = 3  # views a scatter hint names, worst first
 UNKNOWN_SIGMA_PX = 1e6  # a grid pixel the model cannot unproject (value stays finite: artifacts refuse inf)
 
 
@@ -204,37 +208,19 @@ def projection_gate(
             "capture views tilted 20-40 deg in at least three directions",
             {"region": where, "model": solution.model},
         )
-    w, h = image_size
-    grid = (max(MIN_GRID[0], round(w / GRID_STEP_PX)), max(MIN_GRID[1], round(h / GRID_STEP_PX)))
-    u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
-    v = (np.arange(grid[1]) + 0.5) * h / grid[1] - 0.5
-    # the Jacobian covariance: the 5 px threshold was measured against it (docs/verdicts.md); the view-level
-    # one (per-view errors, core/intrinsics/covariance.py) is stored and reported, not yet judged here
-    jacobian = cov.jacobian_covariance
-    assert jacobian is not None
-    umap = projection_uncertainty(
-        solution.camera_matrix,
-        solution.dist_coeffs,
-        jacobian,
-        cov.names,
-        solution.aspect_ratio,
-        image_size,
-        grid,
-        fisheye=solution.model == "fisheye",
-        rotation_fit=region.mask(u, v),
-    )
-    inside = region.mask(umap.u_px, umap.v_px)
-    beyond = inside & np.isnan(umap.sigma_px)  # a fisheye's rays past 88 deg off-axis: no projection to judge
-    inside &= ~beyond
-    sigma = np.where(inside & np.isfinite(umap.sigma_px), umap.sigma_px, -1.0)
-    sigma[inside & np.isinf(umap.sigma_px)] = UNKNOWN_SIGMA_PX
+    u_px, v_px, sigma, beyond = _sigma_grid(solution, cov, image_size, region)
+    inside = sigma >= 0
     worst = float(sigma.max()) if inside.any() else 0.0
     detail: dict[str, float | int | str | list[str]] = {"region": where, "model": solution.model}
+    widened = f", view-level x {cov.view_factor:.2f}" if cov.inflated and cov.view_factor else ""
+    if widened:
+        detail["view_factor"] = round(float(cov.view_factor or 0.0), 3)
     if beyond.any():
         detail["not_judged_beyond_88_deg"] = int(beyond.sum())
-    over = _cells_over(sigma, umap.u_px, umap.v_px, image_size, limit)
+    over = _cells_over(sigma, u_px, v_px, image_size, limit)
     message = (
-        f"worst projection one-sigma over {where}: {worst:.3g} px ({solution.model} lens; limit {limit:g} px)"
+        f"worst projection one-sigma over {where}: {worst:.3g} px ({solution.model} lens{widened}; "
+        f"limit {limit:g} px)"
     )
     if worst <= limit:
         return GateResult("projection", True, worst, limit, message, detail=detail)
@@ -252,6 +238,53 @@ def projection_gate(
     )
 
 
+def _sigma_grid(
+    solution: IntrinsicsSolution, cov: IntrinsicCovariance, image_size: tuple[int, int], region: Region
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """u (C,), v (R,) px, the judged one-sigma (R, C) px (-1 outside the region or not judged) and the
+    (R, C) mask of a fisheye's rays past 88 deg off-axis (no projection to judge there)."""
+    w, h = image_size
+    grid = (max(MIN_GRID[0], round(w / GRID_STEP_PX)), max(MIN_GRID[1], round(h / GRID_STEP_PX)))
+    u = (np.arange(grid[0]) + 0.5) * w / grid[0] - 0.5
+    v = (np.arange(grid[1]) + 0.5) * h / grid[1] - 0.5
+    assert cov.covariance is not None
+    # the covariance calibctl reports and stores: the Jacobian one, widened by the view-level factor where
+    # the views scatter more than their corners explain (core/intrinsics/covariance.py)
+    umap = projection_uncertainty(
+        solution.camera_matrix,
+        solution.dist_coeffs,
+        cov.covariance,
+        cov.names,
+        solution.aspect_ratio,
+        image_size,
+        grid,
+        fisheye=solution.model == "fisheye",
+        rotation_fit=region.mask(u, v),
+    )
+    inside = region.mask(umap.u_px, umap.v_px)
+    beyond = inside & np.isnan(umap.sigma_px)
+    inside &= ~beyond
+    sigma = np.where(inside & np.isfinite(umap.sigma_px), umap.sigma_px, -1.0)
+    sigma[inside & np.isinf(umap.sigma_px)] = UNKNOWN_SIGMA_PX
+    return umap.u_px, umap.v_px, sigma, beyond
+
+
+def worst_where_seen(
+    solution: IntrinsicsSolution,
+    cov: IntrinsicCovariance,
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    region: Region,
+) -> float:
+    """The worst judged one-sigma over the grid cells that hold a detected corner: where the board was seen,
+    so more views of other places cannot be what it lacks."""
+    u, v, sigma, _ = _sigma_grid(solution, cov, image_size, region)
+    px = np.concatenate([np.asarray(p, np.float64).reshape(-1, 2) for p in image_points])
+    ci = np.clip(np.rint((px[:, 0] + 0.5) * len(u) / image_size[0] - 0.5).astype(int), 0, len(u) - 1)
+    ri = np.clip(np.rint((px[:, 1] + 0.5) * len(v) / image_size[1] - 0.5).astype(int), 0, len(v) - 1)
+    return float(sigma[ri, ci].max())
+
+
 def cause_first(
     gate: GateResult,
     solution: IntrinsicsSolution | NumericalError,
@@ -265,23 +298,38 @@ def cause_first(
     first (the views' hint after it): a pinhole model on a wide lens that the fisheye model fits at least
     FISHEYE_GAIN better (``projection.lens_model``; judged first: a misfit model also makes the two halves of
     a session disagree), else a camera that changed during the session (core.intrinsics.camera_change,
-    ``projection.camera_changed``). Any other gate is returned as it is."""
+    ``projection.camera_changed``), else, when the view-level factor widened the sigma, a board that is not
+    flat (core.intrinsics.board_warp, ``projection.board_not_flat``) or, when no bow explains the views'
+    scatter, a board that moved or flexed between views (``projection.views_scatter``). Any other gate is
+    returned as it is."""
     if gate.passed or gate.reason != "projection.uncertain" or isinstance(solution, NumericalError):
         return gate
     lens = _lens_model_cause(gate, solution, object_points, image_points, image_size, region, threshold_px)
     if lens is not None:
         return lens
+    cov = solution.covariance
+    per_view = cov is not None and cov.inflated  # the views scatter more than their corners explain
+    # a bowed board before a changed camera: a bow can read as a step between the views (a render bowed
+    # 1 mm did), a step is never absorbed by a bow (renders with focal and centre steps: factor unchanged)
+    warp = fit_board_warp(solution, object_points, image_points) if per_view else None
+    if warp is not None and warp.explains_views:
+        return _board_cause(gate, warp, image_size, region, threshold_px)
     change = judge_change(solution, object_points, image_points, image_size)
-    if change is None or not change.changed:
+    if change is not None and change.changed:
+        return replace(
+            gate,
+            message=f"{gate.message}; the views before and after view {change.split} disagree (chi2 "
+            f"{change.chi2:.1f}, limit {change.limit:g}): the uncertainty is a blend of two cameras",
+            reason="projection.camera_changed",
+            hint=f"{changed_hint(change.focal_step, change.centre_step_px)}; then, if it is still uncertain: "
+            f"{gate.hint}",
+        )
+    if not per_view or cov is None:
         return gate
-    return replace(
-        gate,
-        message=f"{gate.message}; the views before and after view {change.split} disagree (chi2 "
-        f"{change.chi2:.1f}, limit {change.limit:g}): the uncertainty is a blend of two cameras",
-        reason="projection.camera_changed",
-        hint=f"{changed_hint(change.focal_step, change.centre_step_px)}; then, if it is still uncertain: "
-        f"{gate.hint}",
-    )
+    seen = worst_where_seen(solution, cov, image_points, image_size, region)
+    if seen <= gate.threshold:  # certain where the board was: the views' places are what it lacks
+        return gate
+    return _scatter_cause(gate, solution, cov.view_factor or 0.0, seen)
 
 
 def _lens_model_cause(
@@ -315,6 +363,49 @@ def _lens_model_cause(
         reason="projection.lens_model",
         hint=f"calibrate with --model fisheye (or --model auto): the {solution.model} model cannot describe "
         f"this lens, more views will not cure it; {then}",
+    )
+
+
+def _board_cause(
+    gate: GateResult, warp: BoardWarp, image_size: tuple[int, int], region: Region, threshold_px: float
+) -> GateResult:
+    before, after = warp.factors
+    bowed = projection_gate(warp.bowed, image_size, region, threshold_px)
+    bow_mm = ", ".join(f"{abs(w) * 1e3:.2f} mm along {a}" for w, a in zip(warp.warp_m, "xy", strict=True))
+    then = (
+        f"with the bow solved the calibration predicts {region.describe()} to {bowed.value:.3g} px"
+        if bowed.passed
+        else f"then, if it is still uncertain: {gate.hint}"
+    )
+    return replace(
+        gate,
+        message=f"{gate.message}; the views scatter as a board that is not flat would: solved with the board "
+        f"bowed ({bow_mm} at its centre) the corners fit to {warp.bowed.rms_px:.3f} px against "
+        f"{warp.flat.rms_px:.3f} px and the view-level factor falls from {before:.2f} to {after:.2f}",
+        reason="projection.board_not_flat",
+        hint=f"the board is not flat (it bows {bow_mm} at its centre): mount the print flat on a rigid "
+        f"backing (glass, aluminium) and capture again; a richer lens model or more views will not cure "
+        f"it; {then}",
+        detail={**gate.detail, "board_bow_mm": [f"{w * 1e3:.3f}" for w in warp.warp_m]},
+    )
+
+
+def _scatter_cause(gate: GateResult, solution: IntrinsicsSolution, factor: float, seen: float) -> GateResult:
+    """The views disagree beyond their corner noise and neither the lens model, a camera change nor a bowed
+    board explains it: the board moved or flexed from view to view (named with its worst views)."""
+    rms = np.asarray(solution.per_view_rms_px, np.float64)
+    worst = [int(k) + 1 for k in np.argsort(-rms)[:WORST_VIEWS_NAMED]]
+    named = ", ".join(f"{k} ({rms[k - 1]:.2f} px)" for k in worst)
+    return replace(
+        gate,
+        message=f"{gate.message}; the views scatter {factor:.2f}x more than their corners' noise explains "
+        f"(per-view RMS {rms.min():.2f}-{rms.max():.2f} px; {seen:.3g} px even where the board was seen) and "
+        "neither a lens model, a camera change nor a bowed board explains it",
+        reason="projection.views_scatter",
+        hint=f"the board moved or flexed from view to view (worst views in capture order: {named}): hold a "
+        f"rigid board still on a stand for every view and capture again; then, if it is still uncertain: "
+        f"{gate.hint}",
+        detail={**gate.detail, "worst_views": [str(k) for k in worst]},
     )
 
 

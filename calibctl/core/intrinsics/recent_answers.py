@@ -52,6 +52,11 @@ class RecentAnswers(Generic[T]):
                 self._answers.popitem(last=False)
         return value
 
+    def take(self, key: bytes) -> T | None:
+        """The answer remembered under ``key``, forgotten as it is handed out (asked once); None on a miss."""
+        with self._lock:
+            return self._answers.pop(key, None)
+
     def clear(self) -> None:
         with self._lock:
             self._answers.clear()

@@ -206,6 +206,10 @@ class CaptureObserver:
 
     def frame_done(self, decision: FrameDecision, progress: SelectionProgress, t_s: float) -> None: ...
 
+    def session_built(self, session: CaptureSession) -> None:
+        """The session and its gates are final; it is about to be written (the station starts its solve's
+        numbers here, ``workflows.camera.solve.start_numbers``)."""
+
     def __enter__(self) -> CaptureObserver:  # a display to close when the capture ends (cli.live_view)
         return self
 
@@ -359,6 +363,7 @@ def capture(
             if got.writes is not None:
                 got.writes.after(failure)  # a failure of the writes, met first in the sequential order, wins
             raise
+        observer.session_built(session)
         stored = got.images_durable()  # before anything names the images
         if store_session:
             store.add_session(session)

@@ -9,9 +9,11 @@ runs lint on it, and writes it: ``accepted`` and active when lint passes (unless
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -46,10 +48,12 @@ from calibctl.core.intrinsics.model_fit import noise_floor_px
 from calibctl.core.intrinsics.model_select import select_model
 from calibctl.core.intrinsics.outliers import (
     CornerRejection,
+    OutlierReport,
     flag_outliers,
     solve_dropping_outliers,
     solve_rejecting_corners,
 )
+from calibctl.core.intrinsics.recent_answers import RecentAnswers, values_digest
 from calibctl.core.intrinsics.solve import IntrinsicsSolution, get_model
 from calibctl.core.intrinsics.validation import (
     HoldoutReport,
@@ -150,7 +154,24 @@ def _held_out(report: HoldoutReport) -> HeldOut:
     )
 
 
-def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes):
+class SolveNumbers(NamedTuple):
+    """What ``_solve_numbers`` computes of one session: everything the artifact records."""
+
+    model_name: str
+    solution: IntrinsicsSolution
+    first: IntrinsicsSolution  # every view's pose and RMS, the views --drop-outliers removes included
+    outliers: OutlierReport
+    kept: list[int]
+    dropped: tuple[int, ...]
+    holdout: HoldoutReport
+    trail: list[dict[str, float | str | bool]]
+    rejection: CornerRejection
+    consistency: CameraConsistency | None
+    detector_rms: float | None
+    change: CameraChange | None
+
+
+def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes) -> SolveNumbers:
     """Run the core solve pipeline on a session's corners. Returns everything the artifact records.
 
     The one-camera split test needs only the kept corners (of at most CAPTURE_MAX_VIEWS views, spread evenly,
@@ -205,7 +226,7 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
     found = split.result()
     consistency = None if found is None else _consistency(found, [session.views[i].name for i in checked])
     change = _change(changed.result(), [session.views[i].name for i in kept])
-    return (
+    return SolveNumbers(
         model_name,
         solution,
         first,
@@ -219,6 +240,40 @@ def _solve_numbers(session: CaptureSession, request: SolveRequest, lanes: Lanes)
         detector_rms,
         change,
     )
+
+
+# The numbers of sessions started before they were written (start_numbers), by a digest of what
+# _solve_numbers reads; each is taken once, by the solve of the same values.
+_EARLY: RecentAnswers[Future[SolveNumbers]] = RecentAnswers(2)
+
+
+def _numbers_key(session: CaptureSession, request: SolveRequest) -> bytes:
+    """A digest of everything ``_solve_numbers`` reads: the views (names, corner ids, corners), the image
+    size, the board, the model and the outlier rule."""
+    return values_digest(
+        [np.asarray(v.corner_ids, np.float64) for v in session.views],
+        [np.asarray(v.corners_px, np.float64) for v in session.views],
+        session.session_id,
+        tuple(session.image_size or ()),
+        repr(board_spec(session.board)),
+        request.model,
+        request.drop_outliers,
+        tuple(v.name for v in session.views),
+    )
+
+
+def start_numbers(session: CaptureSession, request: SolveRequest, jobs: int, executor: Executor) -> None:
+    """Start the solve's numbers of an accepted session on ``executor`` (on ``jobs`` verdict lanes) while the
+    session is written and read back: ``build_artifact`` of the same values takes them instead of computing
+    them again. The same function of the same values: the numbers are those of the plain order."""
+    if session.status != "accepted" or not session.views or session.image_size is None:
+        return
+
+    def numbers() -> SolveNumbers:
+        with verdict_lanes(jobs) as lanes:
+            return _solve_numbers(session, request, lanes)
+
+    _EARLY.answer(_numbers_key(session, request), lambda: executor.submit(numbers))
 
 
 def _change(verdict: ChangeVerdict | None, names: list[str]) -> CameraChange | None:
@@ -363,57 +418,48 @@ def build_artifact(
 ) -> tuple[CalibrationArtifact, list]:
     """Solve, validate and lint one session; the artifact is unsealed (the store allocates the version).
     ``board_gauge``: lint's fact of a failed gauge on the session's board revision (``board_gauge_fact``)."""
-    with verdict_lanes(settings.jobs) as lanes:
-        (
-            model_name,
-            sol,
-            first,
-            outliers,
-            kept,
-            dropped,
-            holdout,
-            trail,
-            rejection,
-            consistency,
-            detector_rms,
-            change,
-        ) = _solve_numbers(session, request, lanes)
-    model = get_model(model_name)
+    early = _EARLY.take(_numbers_key(session, request)) if len(_EARLY) else None
+    if early is not None:  # started while the session was written (start_numbers); its error is raised here
+        n: SolveNumbers = early.result()
+    else:
+        with verdict_lanes(settings.jobs) as lanes:
+            n = _solve_numbers(session, request, lanes)
+    model = get_model(n.model_name)
     free = [p for p in model.free_intrinsics] + list(model.free_distortion)
     art = CalibrationArtifact(
         serial=session.serial,
         version=1,
         status="accepted",
         image_size=session.image_size,
-        camera_matrix=tuple(tuple(float(x) for x in row) for row in sol.camera_matrix),
-        dist_coeffs=[float(x) for x in sol.dist_coeffs],
+        camera_matrix=tuple(tuple(float(x) for x in row) for row in n.solution.camera_matrix),
+        dist_coeffs=[float(x) for x in n.solution.dist_coeffs],
         model=DistortionModelInfo(
-            name=model_name,
+            name=n.model_name,
             opencv_flags=int(model.flags),
             flag_names=flag_names(int(model.flags)),
             free_parameters=free,
-            selection=trail,
+            selection=n.trail,
         ),
         stdev=Uncertainty(
-            sigma={k: float(v) for k, v in sol.sigma.items()},
-            refused_reason=sol.sigma_refused_reason,
-            residual_count=int(sol.n_residuals),
-            parameter_count=int(sol.n_parameters),
-            covariance=_covariance(sol),
-            view_level=_view_level(sol),
+            sigma={k: float(v) for k, v in n.solution.sigma.items()},
+            refused_reason=n.solution.sigma_refused_reason,
+            residual_count=int(n.solution.n_residuals),
+            parameter_count=int(n.solution.n_parameters),
+            covariance=_covariance(n.solution),
+            view_level=_view_level(n.solution),
         ),
-        rms_px=float(sol.rms_px),
-        detector_rms_px=detector_rms,
-        held_out=_held_out(holdout),
+        rms_px=float(n.solution.rms_px),
+        detector_rms_px=n.detector_rms,
+        held_out=_held_out(n.holdout),
         gates=_gates(session, request),
         board=session.board,
-        views=_views(session, sol, first, outliers, kept, dropped),
-        rejected_corners=_rejected_corners(session, rejection),
+        views=_views(session, n.solution, n.first, n.outliers, n.kept, n.dropped),
+        rejected_corners=_rejected_corners(session, n.rejection),
         observed_region_px=_observed_region(
-            rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views])
+            n.rejection.kept([np.asarray(v.corners_px, np.float64) for v in session.views])
         ),
-        camera_consistency=consistency,
-        camera_change=change,
+        camera_consistency=n.consistency,
+        camera_change=n.change,
         provenance=Provenance(
             calibctl_version=__version__,
             opencv_version=cv2.__version__,
@@ -438,7 +484,7 @@ def build_artifact(
             "corner_id": c.corner_id,
             "residual_px": c.residual_px,
         }
-        for c in outliers.outlier_corners
+        for c in n.outliers.outlier_corners
     ]
     return art.model_copy(update={"lint": findings, "status": status}), corner_outliers
 

@@ -11,8 +11,10 @@ Then the verdict the stored path gives (``rig solve`` stores it as the version's
 rules that need no store (workflows.rig.rig_lint.solved_rig_findings: ``baseline-design`` against
 ``--design-baseline-mm``, ``epipolar``, ``loop-closure``), each self-calibrated member judged as the stored
 path judges it, capture gates and calibration lint (workflows.rig.rig_members, which says the rules it cannot
-apply and why), and ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid
-or not synchronised). ``rig-stale-member`` needs the store: there is no stored member to go stale.
+apply and why), ``rig-rigid`` when the frames contradict each other (core InconsistentDataError: not rigid or
+not synchronised), and for frames paired by time ``rig-frame-shift`` when a camera's frames fit the others' a
+whole frame off, else ``rig-exposure-offset`` for a pair exposed further apart than its times say
+(workflows.rig.rig_video). ``rig-stale-member`` needs the store: there is no stored member to go stale.
 """
 
 from __future__ import annotations
@@ -150,6 +152,25 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
         raise UsageError(
             f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera"
         )
+    return out
+
+
+def parse_frame_shifts(items: Sequence[str]) -> dict[str, int]:
+    """``--frame-shift SERIAL=N`` (N a whole number of frames, signed) -> {SERIAL: N}."""
+    out: dict[str, int] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            n = int(value)
+        except ValueError:
+            n = None
+        if not sep or not name or n is None:
+            raise UsageError(
+                f"--frame-shift {item}: expected SERIAL=N, N a whole number of frames (e.g. 1=+1)"
+            )
+        if name in out:
+            raise UsageError(f"--frame-shift names camera {name} twice")
+        out[name] = n
     return out
 
 
@@ -291,9 +312,12 @@ def solve_rig_folders(
     gauge: RigGauge | None = None,
     timestamps: Path | None = None,
     time_tolerance_ms: float = rig_video.DEFAULT_TIME_TOLERANCE_MS,
+    frame_shifts: Mapping[str, int] | None = None,
 ) -> RigFolderRun:
     """Run the folder flow (module docstring); a video per camera, or a ``timestamps`` file, pairs the frames
-    by time within ``time_tolerance_ms`` instead (workflows.rig.rig_video). The first source is the root
+    by time within ``time_tolerance_ms`` instead (workflows.rig.rig_video; ``frame_shifts``: camera -> N
+    whole frames its video is off its times, as declared, and ``rig-frame-shift`` names an undeclared one).
+    The first source is the root
     camera; ``settings`` the station's (gates and lint; default: ``load_settings()``), ``limits`` its lint
     thresholds when given apart; ``designs`` the pairs' design baselines (``baseline-design``); ``gauge``:
     the metric gauge, judged through that camera's lens as the run leaves it (``metric-gauge``, seed
@@ -324,8 +348,13 @@ def solve_rig_folders(
     if limits is not None:
         settings = settings.model_copy(update={"lint": limits})
     timed = None
+    if frame_shifts and not rig_video.is_timed(sources, timestamps):
+        raise UsageError(
+            "--frame-shift applies to frames paired by time: give videos or --timestamps",
+            hint="photo folders pair by the last number in their names; rename the photos instead",
+        )
     if rig_video.is_timed(sources, timestamps):
-        timed = rig_video.capture_timed(sources, spec, timestamps, time_tolerance_ms, workers)
+        timed = rig_video.capture_timed(sources, spec, timestamps, time_tolerance_ms, workers, frame_shifts)
         match, outcomes = timed.match, {name: list(c.outcomes) for name, c in timed.cameras.items()}
         gathered = {name: (c.source, c.max_gray) for name, c in timed.cameras.items()}
     else:
@@ -392,10 +421,15 @@ def solve_rig_folders(
         timing=rig_video.timing_json(timed) if timed is not None else None,
         refused=tuple(refused_finding(name, exc) for name, exc in refused.items()),
     )
-    judged = run
+    shifted = []
+    if timed is not None:
+        shifted = rig_video.frame_shift_findings(timed, members, spec)
+        # a whole frame off hides any fraction of one: the offsets are judged once the frames pair right
+        shifted = shifted or rig_video.exposure_offset_findings(timed, members, spec)
+    judged = replace(run, findings=(*run.findings, *shifted))
     if gate.passed:
         solved = judged_solve(run, model, refine_intrinsics, settings.lint)
-        judged = replace(solved, findings=(*run.refused, *solved.findings))
+        judged = replace(solved, findings=(*run.refused, *shifted, *solved.findings))
     if gauge is None:
         return judged
     if gauge.camera not in cameras:

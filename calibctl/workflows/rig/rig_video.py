@@ -32,11 +32,15 @@ import cv2
 import numpy as np
 
 from calibctl import bounded
+from calibctl.artifacts.lint import Finding
 from calibctl.core.board.board_spec import CHARUCO, BoardSpec
 from calibctl.core.capture.detect import charuco_variant_advice, charuco_variant_counts
 from calibctl.core.capture.image_circle import accumulate_max, half_size
 from calibctl.core.capture.image_outcomes import ImageOutcome, classify_array, finalize_session, read_gray
+from calibctl.core.extrinsics.board_pose import estimate_board_pose
+from calibctl.core.extrinsics.rig_frame_shift import exposure_offset, frame_shifts, offset_matters
 from calibctl.core.extrinsics.rig_frames import FrameMatch, UnmatchedPhoto
+from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_time_pairs import (
     TimePairing,
     TimestampError,
@@ -44,6 +48,7 @@ from calibctl.core.extrinsics.rig_time_pairs import (
     pair_by_time,
     parse_timestamps,
 )
+from calibctl.core.intrinsics.model_names import DEFAULT_MODEL
 from calibctl.errors import CalibctlError, InputError, UsageError
 from calibctl.files import file_errors
 from calibctl.workflows.camera import capture_sources
@@ -52,6 +57,8 @@ DEFAULT_TIME_TOLERANCE_MS = 5.0
 OUTSIDE_TOLERANCE = "outside-time-tolerance"
 NO_TIMESTAMP = "no-timestamp"
 ADVICE_FRAMES = 12  # frames of a board-less camera the variant check looks at
+FRAME_SHIFT = "rig-frame-shift"
+EXPOSURE_OFFSET = "rig-exposure-offset"
 CAMERA_HINT = "name the cameras as the timestamps file does, e.g. --source 0=cam_0.mp4 for cam_id 0"
 
 
@@ -77,6 +84,9 @@ class VideoRigCapture:
     cameras: Mapping[str, CameraFrames]
     pairing: TimePairing
     timestamps: Path | None
+    frame_groups: tuple[Mapping[str, int], ...] = ()  # the rig frames: camera -> frame index in its video
+    frame_shifts: Mapping[str, int] | None = None  # as declared (--frame-shift)
+    frame_times: Mapping[str, tuple[float | None, ...]] | None = None  # per frame, as paired (seconds)
 
 
 def is_timed(sources: Mapping[str, Path], timestamps: Path | None) -> bool:
@@ -197,22 +207,61 @@ def read_timestamps(path: Path) -> dict[str, dict[int, float]]:
 
 
 def _file_times(
-    camera: CameraFrames, listed: Mapping[int, float], timestamps: Path
+    name: str, label: str, n: int, listed: Mapping[int, float], timestamps: Path
 ) -> tuple[tuple[float | None, ...], int]:
-    """A camera's frame times from the timestamps file, and the index offset (module docstring)."""
-    n = len(camera.outcomes)
+    """Camera ``name``'s times of its ``n`` frames (``label``: its source) from the timestamps file, and the
+    index offset (module docstring)."""
     indices = sorted(listed)
     offset = 0
     if indices[-1] >= n:
         unbroken = indices[-1] - indices[0] + 1 == len(indices)
         if not (unbroken and len(indices) == n):
             raise InputError(
-                f"{timestamps} lists frame {indices[-1]} of camera {camera.name}, but {camera.source.label} "
+                f"{timestamps} lists frame {indices[-1]} of camera {name}, but {label} "
                 f"has {n} frames (0..{n - 1}): frames past the end",
                 "give the timestamps file of this very recording (one row per frame of each video)",
             )
         offset = indices[0]
     return tuple(listed.get(i + offset) for i in range(n)), offset
+
+
+def _listed_cameras(timestamps: Path, cameras: Sequence[str]) -> dict[str, dict[int, float]]:
+    """The timestamps file, refused when it names a camera the rig lacks or lacks one of its cameras."""
+    listed = read_timestamps(timestamps)
+    unknown = sorted(set(listed) - set(cameras))
+    if unknown:
+        raise InputError(
+            f"{timestamps} names camera {', '.join(unknown)}, which is not one of the rig's cameras "
+            f"({', '.join(cameras)})",
+            CAMERA_HINT,
+        )
+    absent = [name for name in cameras if name not in listed]
+    if absent:
+        raise InputError(f"{timestamps} lists no frame of camera {', '.join(absent)}", CAMERA_HINT)
+    return listed
+
+
+def pair_images_by_time(
+    images: Mapping[str, Sequence[str]], timestamps: Path, tolerance_ms: float
+) -> tuple[FrameMatch, TimePairing]:
+    """A stored rig capture's images (camera -> image names in capture order: its frames 0..n-1) paired by
+    the recorder's times, with the file rules of the videos (module docstring)."""
+    if not (math.isfinite(tolerance_ms) and tolerance_ms > 0):
+        raise UsageError(f"--time-tolerance-ms {tolerance_ms:g} must be a positive number of milliseconds")
+    listed = _listed_cameras(timestamps, list(images))
+    times = {
+        name: _file_times(name, f"camera {name}'s source", len(paths), listed[name], timestamps)[0]
+        for name, paths in images.items()
+    }
+    match, pairing, _ = _paired(images, times, tolerance_ms)
+    return match, pairing
+
+
+def shifted_times(times: Sequence[float | None], shift: int) -> tuple[float | None, ...]:
+    """A camera's frame times when its video frame i was taken at the time listed for frame i - shift
+    (a declared ``--frame-shift``); frames that then have no time get None."""
+    n = len(times)
+    return tuple(times[i - shift] if 0 <= i - shift < n else None for i in range(n))
 
 
 def _container_times(cameras: Mapping[str, CameraFrames]) -> None:
@@ -255,64 +304,67 @@ def capture_timed(
     timestamps: Path | None,
     tolerance_ms: float = DEFAULT_TIME_TOLERANCE_MS,
     workers: int | None = None,
+    frame_shifts: Mapping[str, int] | None = None,
 ) -> VideoRigCapture:
-    """Every camera's frames detected and paired by time (module docstring). Raises InputError / UsageError
+    """Every camera's frames detected and paired by time (module docstring); ``frame_shifts``: camera ->
+    N, its video frame i was taken at the time listed for its frame i - N. Raises InputError / UsageError
     (exit 2) naming the file and the fix."""
     if not (math.isfinite(tolerance_ms) and tolerance_ms > 0):
         raise UsageError(f"--time-tolerance-ms {tolerance_ms:g} must be a positive number of milliseconds")
-    listed = read_timestamps(timestamps) if timestamps is not None else None
-    if listed is not None:
-        unknown = sorted(set(listed) - set(sources))
-        if unknown:
-            raise InputError(
-                f"{timestamps} names camera {', '.join(unknown)}, which is not one of the rig's cameras "
-                f"({', '.join(sources)})",
-                CAMERA_HINT,
-            )
-        absent = [name for name in sources if name not in listed]
-        if absent:
-            raise InputError(f"{timestamps} lists no frame of camera {', '.join(absent)}", CAMERA_HINT)
+    unknown_shift = sorted(set(frame_shifts or {}) - set(sources))
+    if unknown_shift:
+        raise UsageError(
+            f"--frame-shift names camera {', '.join(unknown_shift)}, which is not one of the rig's cameras "
+            f"({', '.join(sources)})"
+        )
+    listed = _listed_cameras(timestamps, list(sources)) if timestamps is not None else None
     cameras = {name: detect_camera(name, source, spec, workers) for name, source in sources.items()}
     if listed is None:
         _container_times(cameras)
         times = {name: c.times_s for name, c in cameras.items()}
     else:
         assert timestamps is not None
-        timed = {name: _file_times(c, listed[name], timestamps) for name, c in cameras.items()}
+        timed = {
+            name: _file_times(name, c.source.label, len(c.outcomes), listed[name], timestamps)
+            for name, c in cameras.items()
+        }
         times = {name: t for name, (t, _) in timed.items()}
         cameras = {name: replace(c, index_offset=timed[name][1]) for name, c in cameras.items()}
     for camera in cameras.values():
         refuse_blind_camera(camera, spec)
-    return _paired(cameras, times, tolerance_ms, timestamps)
+    shifts = {name: n for name, n in (frame_shifts or {}).items() if n}
+    times = {name: shifted_times(ts, shifts.get(name, 0)) for name, ts in times.items()}
+    paths = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
+    match, pairing, in_video = _paired(paths, times, tolerance_ms)
+    return VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None, times)
 
 
 def _paired(
-    cameras: Mapping[str, CameraFrames],
-    times: Mapping[str, Sequence[float | None]],
-    tolerance_ms: float,
-    timestamps: Path | None,
-) -> VideoRigCapture:
+    paths: Mapping[str, Sequence[str]], times: Mapping[str, Sequence[float | None]], tolerance_ms: float
+) -> tuple[FrameMatch, TimePairing, tuple[Mapping[str, int], ...]]:
+    """The frames (camera -> their labels, in frame order) paired by their times; and the rig frames as
+    camera -> frame index."""
     known = {name: [i for i, t in enumerate(ts) if t is not None] for name, ts in times.items()}
     timed = {name: [float(times[name][i] or 0.0) for i in idx] for name, idx in known.items()}
     try:
         pairing = pair_by_time(timed, tolerance_ms / 1e3)
     except ValueError as exc:
         raise UsageError(f"--time-tolerance-ms: {exc}", "give a smaller tolerance") from exc
-    path = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
     frames = tuple(
-        (g.key, {name: path[name][known[name][i]] for name, i in g.frames.items()}) for g in pairing.groups
+        (g.key, {name: paths[name][known[name][i]] for name, i in g.frames.items()}) for g in pairing.groups
     )
     unmatched = [
-        UnmatchedPhoto(u.camera, path[u.camera][known[u.camera][u.index]], _outside(u, tolerance_ms))
+        UnmatchedPhoto(u.camera, paths[u.camera][known[u.camera][u.index]], _outside(u, tolerance_ms))
         for u in pairing.unpaired
     ]
     unmatched += [
-        UnmatchedPhoto(name, path[name][i], NO_TIMESTAMP)
+        UnmatchedPhoto(name, paths[name][i], NO_TIMESTAMP)
         for name, ts in times.items()
         for i, t in enumerate(ts)
         if t is None
     ]
-    return VideoRigCapture(FrameMatch(frames, tuple(unmatched)), cameras, pairing, timestamps)
+    in_frames = tuple({name: known[name][i] for name, i in g.frames.items()} for g in pairing.groups)
+    return FrameMatch(frames, tuple(unmatched)), pairing, in_frames
 
 
 def _outside(frame: UnpairedFrame, tolerance_ms: float) -> str:
@@ -340,4 +392,104 @@ def timing_json(capture: VideoRigCapture) -> dict[str, object]:
         },
         "frames": {name: len(c.outcomes) for name, c in capture.cameras.items()},
         "index_offset": {name: c.index_offset for name, c in capture.cameras.items() if c.index_offset},
+        "frame_shift": dict(capture.frame_shifts or {}),
     }
+
+
+def frame_shift_findings(
+    capture: VideoRigCapture, members: Sequence[MemberIntrinsics], spec: BoardSpec
+) -> list[Finding]:
+    """``rig-frame-shift`` (error) for each camera whose frames fit the others' a whole frame off the times'
+    pairing (core.extrinsics.rig_frame_shift): every frame with a board posed through its member's lens."""
+    points = spec.object_points()
+    poses: dict[str, dict[int, np.ndarray]] = {}
+    for member in members:
+        frames = capture.cameras[member.name].outcomes
+        model = "fisheye" if member.lens == "fisheye" else DEFAULT_MODEL
+        poses[member.name] = {}
+        for i, o in enumerate(frames):
+            if o.corner_ids is None or o.corners_px is None:
+                continue
+            T_cam_board, _ = estimate_board_pose(
+                points[o.corner_ids], o.corners_px, member.camera_matrix, member.dist_coeffs, model
+            )
+            if T_cam_board is not None:
+                poses[member.name][i] = T_cam_board
+    out = []
+    for s in frame_shifts(poses, capture.frame_groups):
+        declared = (capture.frame_shifts or {}).get(s.camera, 0)
+        side = "later" if s.shift > 0 else "earlier"
+        where = capture.timestamps if capture.timestamps is not None else "the videos' own times"
+        out.append(
+            Finding(
+                rule=FRAME_SHIFT,
+                severity="error",
+                message=(
+                    f"camera {s.camera}'s frames fit the other cameras' {abs(s.shift)} frame {side} than "
+                    f"{where} pairs them: the rig frames' own relative poses scatter by "
+                    f"{s.scatter_mm:.1f} mm as paired and by {s.shifted_mm:.1f} mm shifted (against "
+                    f"{', '.join(s.partners)}), "
+                    "so no rigid rig fits them as paired"
+                ),
+                fix=(
+                    f"correct camera {s.camera}'s frame numbers in the timestamps, or declare the shift: "
+                    f"--frame-shift {s.camera}={declared + s.shift:+d}"
+                ),
+            )
+        )
+    return out
+
+
+def exposure_offset_findings(
+    capture: VideoRigCapture, members: Sequence[MemberIntrinsics], spec: BoardSpec
+) -> list[Finding]:
+    """``rig-exposure-offset`` (error) for each pair of pinhole members whose frames fit clearly better with
+    one camera's corners moved a fraction of a frame along their image motion
+    (core.extrinsics.rig_frame_shift.exposure_offset): exposures further apart than the times say, while
+    the board moved."""
+    if capture.frame_times is None:
+        return []
+    views: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
+    for member in members:
+        views[member.name] = {}
+        for i, o in enumerate(capture.cameras[member.name].outcomes):
+            if o.corner_ids is not None and o.corners_px is not None:
+                order = np.argsort(o.corner_ids)
+                views[member.name][i] = (o.corner_ids[order], o.corners_px[order])
+    pinhole = [m for m in members if m.lens != "fisheye"]
+    out = []
+    for n, a in enumerate(pinhole):
+        for b in pinhole[n + 1 :]:
+            pairs = [(g[a.name], g[b.name]) for g in capture.frame_groups if a.name in g and b.name in g]
+            times_b = {i: t for i, t in enumerate(capture.frame_times[b.name]) if t is not None}
+            found = exposure_offset(
+                (a.name, views[a.name], a.camera_matrix, a.dist_coeffs),
+                (b.name, views[b.name], b.camera_matrix, b.dist_coeffs),
+                times_b,
+                pairs,
+                spec.object_points(),
+                a.image_size,
+            )
+            if found is None or not offset_matters(found):
+                continue
+            ms = abs(found.offset_s) * 1e3
+            first, then = (a.name, b.name) if found.offset_s < 0 else (b.name, a.name)
+            out.append(
+                Finding(
+                    rule=EXPOSURE_OFFSET,
+                    severity="error",
+                    message=(
+                        f"pair {a.name}-{b.name}: camera {first} exposed about {ms:.0f} ms before camera "
+                        f"{then} at the same timestamp while the board moved (stereo RMS "
+                        f"{found.rms_px:.2f} px as timestamped, {found.offset_rms_px:.2f} px with camera "
+                        f"{b.name}'s corners moved {found.offset_s * 1e3:+.0f} ms along their image motion; "
+                        f"{found.frames} rig frames): "
+                        "a latency the timestamps do not record"
+                    ),
+                    fix=(
+                        "hold the board still at each pose (or trigger the cameras together) and capture "
+                        "again; a recorder whose timestamps lag by a constant can correct them"
+                    ),
+                )
+            )
+    return out

@@ -16,6 +16,7 @@ from __future__ import annotations
 import secrets
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -54,6 +55,7 @@ from calibctl.workflows.camera.capture import CaptureRequest, CaptureResult, cap
 from calibctl.workflows.camera.distance_gauge import RATIO_LIMITS
 from calibctl.workflows.camera.solve import checked_override
 from calibctl.workflows.edges.versions import cal_versions, carried_forward
+from calibctl.workflows.rig import rig_video
 from calibctl.workflows.rig.rig_folders import RigGauge, check_min_shared_views, rig_loops, rig_pairs
 from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
@@ -134,11 +136,27 @@ def capture_rig(
     min_shared_views: int = MIN_SHARED_VIEWS,
     gauge: RigGauge | None = None,
     override_gauge: str | None = None,
+    timestamps: Path | None = None,
+    time_tolerance_ms: float | None = None,
 ) -> RigCaptureResult:
-    """Capture every member, pair the images into frames, apply the rig gate and the metric gauge (the
-    board revision's failed gauges, and ``gauge`` when given: judged through that member's session, as
-    ``capture --reference-distance`` does); store the rig session."""
+    """Capture every member, pair the images into frames (by the last number in their names, or with the
+    recorder's ``timestamps`` by time within ``time_tolerance_ms``: workflows.rig.rig_video), apply the rig
+    gate and the metric gauge (the board revision's failed gauges, and ``gauge`` when given: judged through
+    that member's session, as ``capture --reference-distance`` does); store the rig session."""
     check_min_shared_views(min_shared_views)
+    if timestamps is None and time_tolerance_ms is not None:
+        raise UsageError(
+            "--time-tolerance-ms pairs frames by time: give the recorder's --timestamps",
+            hint="photos without timestamps pair up by the last number in their names",
+        )
+    if timestamps is not None:
+        videos = [c for c, src in sources.items() if rig_video.is_timed({c: Path(src)}, None)]
+        if videos:
+            raise UsageError(
+                f"rig capture pairs photos by time, but the source of {', '.join(videos)} is a video",
+                hint="solve a rig recorded as videos with `calibctl rig solve-folders --timestamps`, or "
+                "extract the frames to a folder per camera",
+            )
     override_gauge = checked_override(override_gauge)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
@@ -176,7 +194,17 @@ def capture_rig(
         f"rig {rig.name} capture",
     )
     names = {c: [o.name for o in r.session.outcomes] for c, r in results.items()}
-    match = match_frames(names)
+    if timestamps is not None:
+        tolerance = rig_video.DEFAULT_TIME_TOLERANCE_MS if time_tolerance_ms is None else time_tolerance_ms
+        match, _ = rig_video.pair_images_by_time(names, timestamps, tolerance)
+        if not match.frames:
+            raise InputError(
+                f"no images of different cameras lie within {tolerance:g} ms of each other, so nothing "
+                "pairs up",
+                hint="check that the timestamps belong to these images, or widen --time-tolerance-ms",
+            )
+    else:
+        match = match_frames(names)
     if not match.frames:
         raise InputError(
             "no images of different cameras share a frame number, so nothing pairs up",
@@ -209,7 +237,11 @@ def capture_rig(
         rig=rig.name,
         camera_sessions={c: r.session.session_id for c, r in results.items()},
         frames=[RigFrame(key=k, images=dict(imgs)) for k, imgs in match.frames],
-        unmatched=[UnmatchedImage(camera=u.camera, name=u.path, reason=u.reason) for u in match.unmatched],
+        # the stored record keeps the reason's code, not the time distances after it
+        unmatched=[
+            UnmatchedImage(camera=u.camera, name=u.path, reason=u.reason.partition(":")[0])
+            for u in match.unmatched
+        ],
         shared_views={f"{cams[a]}-{cams[b]}": n for (a, b), n in counts.items()},
         gates=gates,
         status="accepted" if all(x.passed for x in gates) else "rejected",

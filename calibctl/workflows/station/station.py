@@ -47,6 +47,7 @@ import re
 import signal
 import time
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
@@ -79,7 +80,7 @@ from calibctl.workflows.camera.capture import (
     check_stream_stops,
 )
 from calibctl.workflows.camera.distance_gauge import gauge_model
-from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve
+from calibctl.workflows.camera.solve import MODEL_CHOICES, SolveRequest, solve, start_numbers
 from calibctl.workflows.station.held import HeldCapture, spool_images, write_to_store
 from calibctl.workflows.station.offline import Queued, SpoolCapture, queue_solved, queue_unit
 from calibctl.workflows.station.sync import SyncedUnit, open_spool, sync
@@ -241,8 +242,13 @@ class _UnitObserver(CaptureObserver):
     """Detection may be cancelled; from the last image's outcome on (a camera unit: from the end of its stream
     and gates, ``unit_complete``), the unit runs to its end."""
 
-    def __init__(self, interrupts: _Interrupts, inner: CaptureObserver) -> None:
-        self.interrupts, self.inner = interrupts, inner
+    def __init__(
+        self,
+        interrupts: _Interrupts,
+        inner: CaptureObserver,
+        early: Callable[[CaptureSession], None] | None = None,
+    ) -> None:
+        self.interrupts, self.inner, self.early = interrupts, inner, early
         self.last_frame_at: float | None = (
             None  # epoch s: a stream's last frame selected (a camera unit's stop)
         )
@@ -262,6 +268,32 @@ class _UnitObserver(CaptureObserver):
 
     def unit_complete(self) -> None:
         self.interrupts.cancellable = False
+
+    def session_built(self, session: CaptureSession) -> None:
+        if self.early is not None:
+            self.early(session)
+        self.inner.session_built(session)
+
+
+@contextlib.contextmanager
+def _early_numbers(
+    settings: Settings, request: StationRequest
+) -> Iterator[Callable[[CaptureSession], None] | None]:
+    """What starts an accepted session's solve numbers on another thread as soon as its gates are final, so
+    they are computed while the session and its images are written and read back (about 0.1 s of a unit's
+    main thread); the solve then takes them (``workflows.camera.solve.start_numbers``). With ``--jobs`` 1
+    nothing: that is the plain sequential order, on one thread."""
+    if settings.jobs < 2:
+        yield None
+        return
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="calibctl-early-numbers") as executor:
+        yield lambda session: start_numbers(
+            session, _solve_request(session, request), settings.jobs, executor
+        )
+
+
+def _solve_request(session: CaptureSession, request: StationRequest) -> SolveRequest:
+    return SolveRequest(session_id=session.session_id, model=request.model)
 
 
 class _Offline:
@@ -485,7 +517,7 @@ def _solved_unit(
             session.serial, FAIL, _rejected(session), session_id=session.session_id, views=len(session.views)
         )
     try:
-        art = solve(settings, SolveRequest(session_id=session.session_id, model=request.model)).artifact
+        art = solve(settings, _solve_request(session, request)).artifact
     except DatabaseUnreachableError as exc:  # the session is stored; its calibration is queued
         return _queued_line(
             queue_solved(settings, offline.spool(), session, request.model, session_stored=True),
@@ -559,7 +591,12 @@ def run_station(
     units = 0
     lines: Iterator[str] = iter(serials)
     offline = _Offline(settings, request.spool)
-    with offline, _Interrupts() as interrupts, _sqlite_kept_open(settings):
+    with (
+        offline,
+        _Interrupts() as interrupts,
+        _sqlite_kept_open(settings),
+        _early_numbers(settings, request) as early,
+    ):
         while True:
             interrupts.cancellable, interrupts.pending = True, False
             try:
@@ -579,9 +616,8 @@ def run_station(
                 try:
                     why_queue = offline.before_unit(lambda synced: _keep(summary, report, synced))
                     with observer() as display:
-                        result = _unit(
-                            settings, request, serial, _UnitObserver(interrupts, display), offline, why_queue
-                        )
+                        unit_observer = _UnitObserver(interrupts, display, early)
+                        result = _unit(settings, request, serial, unit_observer, offline, why_queue)
                 except KeyboardInterrupt:
                     during = (
                         "captured from the camera"

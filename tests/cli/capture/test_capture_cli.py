@@ -96,7 +96,7 @@ def test_opencv_left_images_every_outcome_and_the_gates(db: str, left: Path) -> 
 @needs_datasets
 def test_udacity_images_every_outcome_named(db: str) -> None:
     result = capture(db, UDACITY, "--json")
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 1, result.output  # the paper board is not flat: next test
     session = json.loads(result.stdout)["session"]
     outcomes = {o["name"]: o for o in session["outcomes"]}
     assert len(outcomes) == 20
@@ -109,23 +109,26 @@ def test_udacity_images_every_outcome_named(db: str) -> None:
     rest = set(outcomes) - {"calibration1.jpg", "calibration5.jpg", "calibration7.jpg", "calibration15.jpg"}
     assert {outcomes[n]["status"] for n in rest} == {"accepted"} and len(rest) == 16
     assert session["image_size"] == [1280, 720] and len(session["views"]) == 16
-    # measured: sigma5/sigma1 5.9e-4, 5 tilt directions, 9 of 9 cells, 16 views: every gate passes
-    assert session["status"] == "accepted" and all(g["passed"] for g in session["gates"])
+    # measured: sigma5/sigma1 5.9e-4, 5 tilt directions, 9 of 9 cells, 16 views: every gate but the
+    # projection gate passes
+    failed = [g["gate"] for g in session["gates"] if not g["passed"]]
+    assert session["status"] == "rejected" and failed == ["projection"]
 
 
 @needs_datasets
-def test_udacity_calibrate_rejects_on_sigma_fx_and_names_the_corner_scatter(db: str) -> None:
-    # measured: sigma(fx) 2.27 px (limit 2.0) with a 0.889 px fit RMS on a paper board that is not flat
-    # (DATASET.md); the lever is the corners, not more tilted views, and the fix has to say so
+def test_udacity_calibrate_is_refused_at_capture_naming_the_board_that_is_not_flat(db: str) -> None:
+    # a paper board that is not flat (DATASET.md: mrcal's warp): the views scatter 4x more than their corners
+    # explain, the reported sigma is over the gate's limit, and solved with the board bowed the views agree;
+    # the lever is the board, not more tilted views or a richer lens model, and the hint has to say so
     result = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(UDACITY), "--json")
     assert result.exit_code == 1, result.output
-    art = json.loads(result.stdout)["calibration"]
-    assert art["status"] == "rejected" and art["rms_px"] > 0.5
-    sigma = next(f for f in art["lint"] if f["rule"] == "sigma-fx")
-    assert sigma["severity"] == "error" and sigma["message"].endswith("limit 2.000 px")
-    assert (
-        f"this fit leaves {art['rms_px']:.3f} px" in sigma["fix"] and "board flat and rigid" in sigma["fix"]
-    )
+    out = json.loads(result.stdout)
+    assert out["calibration"] is None  # refused at capture: nothing solved
+    gate = next(g for g in out["capture"]["session"]["gates"] if g["gate"] == "projection")
+    assert not gate["passed"] and gate["value"] > gate["threshold"] and gate["detail"]["view_factor"] > 1.5
+    assert gate["reason"] == "projection.board_not_flat"
+    assert gate["hint"].startswith("the board is not flat (it bows ")
+    assert "mount the print flat on a rigid backing" in gate["hint"]
 
 
 def test_a_board_registered_one_column_short_is_refused(db: str, left: Path) -> None:

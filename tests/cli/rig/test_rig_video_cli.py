@@ -137,3 +137,30 @@ def test_a_board_declared_without_its_inversion_is_named_with_what_was_seen(run,
 def test_a_variant_on_a_chessboard_is_a_usage_error(run, videos):
     result = run(*_sources(videos, "A", "B"), "--cols", "9", "--rows", "6", "--square-mm", "25", "--inverted")
     _refused(result, "describe a ChArUco board")
+
+
+def test_a_frame_shift_that_is_not_a_whole_number_is_refused(run, videos):
+    result = run(*_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--frame-shift", "B=half")
+    _refused(result, "--frame-shift B=half", "SERIAL=N")
+
+
+def test_a_frame_shift_naming_an_unknown_camera_is_refused(run, videos, tmp_path):
+    ts = tmp_path / "ts.csv"
+    ts.write_text(
+        HEAD
+        + "".join(
+            f"{i},{c},{i},{10 + i * 0.2 + d:.4f}\n" for i in range(3) for c, d in (("A", 0), ("B", 0.001))
+        )
+    )
+    result = run(
+        *_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--timestamps", str(ts), "--frame-shift", "Z=1"
+    )
+    _refused(result, "--frame-shift names camera Z", "A, B")
+
+
+def test_a_frame_shift_on_photo_folders_is_refused(run, tmp_path):
+    for name in ("L", "R"):
+        (tmp_path / name).mkdir()
+    args = ["--source", f"L={tmp_path / 'L'}", "--source", f"R={tmp_path / 'R'}", *CHARUCO]
+    result = run(*args, "--frame-shift", "R=1")
+    _refused(result, "--frame-shift applies to frames paired by time")

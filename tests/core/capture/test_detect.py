@@ -302,6 +302,31 @@ def test_photographed_scenes_are_not_noise_like() -> None:
     assert [m for m, _, _ in search_levels(clean, DetectorSettings())] == ["classic", "classic", "sb"]
 
 
+# ---- a picture of one grey level: nothing is searched ---------------------------------------------------
+
+
+@pytest.mark.parametrize("level", [0, 255])
+def test_a_flat_picture_is_not_searched_and_says_why(level: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    flat = np.full((960, 1280), level, np.uint8)
+    assert search_levels(flat, DetectorSettings()) == []
+    for name in ("findChessboardCorners", "findChessboardCornersSB"):
+        monkeypatch.setattr(cv2, name, lambda *a, **k: pytest.fail("a detector searched a flat picture"))
+    det, why = detect_chessboard(flat, 9, 6)
+    assert det is None
+    assert why == "no 9x6 chessboard found (the picture is one flat grey level: lens cap, no light?)"
+
+
+def test_a_board_of_two_grey_levels_contrast_is_still_searched_and_found() -> None:
+    """Only an exactly flat picture is skipped: the board at 2 grey levels of contrast, which the half-size
+    copy's averaging may flatten in places, is still found."""
+    rng = np.random.default_rng(2)
+    T = scenario_poses("good", CAMERA, BOARD, 3, rng)[0]
+    faint = np.round(render_view(CAMERA, BOARD, T, rng) / 255.0 * 2 + 20).astype(np.uint8)
+    assert int(faint.max()) - int(faint.min()) == 2
+    det, why = detect_chessboard(faint, 9, 6)
+    assert det is not None, why
+
+
 def _centred_correlation(gray: np.ndarray, stride: int = 4) -> float:
     """The textbook form: correlation of the centred neighbour arrays (float64)."""
     scores = []

@@ -1,7 +1,8 @@
 """caliscope-4cam (../shared/datasets): four real webcams, one video each, an inverted ChArUco and the
 recorder's timestamps; full resolution, so ``slow``. Every camera finds the board, the frames pair by time,
-the rig is solved and every loop closure judged, and the poses land near the recorder's own (a peer's answer,
-not truth: benchmarks/results/rig_caliscope.md has the numbers and why they differ)."""
+the rig is solved and every loop closure judged, camera 1 is named one frame off its timestamps, and the
+poses land near the recorder's own (a peer's answer, not truth: benchmarks/results/rig_caliscope.md has the
+numbers and why they differ)."""
 
 from __future__ import annotations
 
@@ -69,3 +70,9 @@ def test_the_poses_land_near_the_recorders(real_run):
         T, ref = sol.T_a_b(0, c), recorder[cam]
         assert abs(np.linalg.norm(T[:3, 3]) / np.linalg.norm(ref[:3, 3]) - 1) < 0.1, cam
         assert rotation_angle_deg(T[:3, :3] @ ref[:3, :3].T) < 6.0, cam
+
+
+def test_camera_1_one_frame_off_its_timestamps_is_named(real_run):
+    shifted = [f for f in real_run.findings if f.rule == "rig-frame-shift"]
+    assert [f.message.split("'")[0] for f in shifted] == ["camera 1"]
+    assert "1 frame later" in shifted[0].message and "--frame-shift 1=+1" in shifted[0].fix

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 import pytest
 
 from calibctl.config import load_settings
@@ -38,7 +39,8 @@ MAX_PROBE_PIXELS_VS_CLEAN = (
 @pytest.fixture(scope="module")
 def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """CLEAN: the 12 rendered views at 1280x960; ONE-BOARD: the board in one of them, the others blurred
-    past finding it (readable, no board); NO-BOARD: every one blurred."""
+    past finding it (readable, no board); NO-BOARD: every one blurred; BLACK: every one black (a camera
+    delivering black frames, a lens cap)."""
     good = sorted(rendered(tmp_path_factory, "good").glob("*.png"))
     root = tmp_path_factory.mktemp("probe-cost") / "shots"
     for serial in ("CLEAN", "ONE-BOARD", "NO-BOARD"):
@@ -50,6 +52,9 @@ def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
             if serial == "NO-BOARD" or (serial == "ONE-BOARD" and i > 0):
                 big = cv2.GaussianBlur(big, (0, 0), 25)
             cv2.imwrite(str(root / serial / path.name), big)
+    (root / "BLACK").mkdir()
+    for path in good:
+        cv2.imwrite(str(root / "BLACK" / path.name), np.zeros(SIZE[::-1], np.uint8))
     return root
 
 
@@ -133,3 +138,20 @@ def test_a_unit_with_failed_views_costs_a_small_multiple_of_a_clean_one(
             counted["detect"],
             clean_pixels,
         )
+
+
+def test_a_unit_of_black_pictures_searches_none_of_them(
+    shots: Path, tmp_path: Path, counted: dict[str, Counter[str]]
+) -> None:
+    """A picture of one grey level is not searched (core.capture.detect.search_levels): the unit's detector
+    calls are its probes' alone, fewer than a clean unit's, and it ends in its error line."""
+    clean = _unit(shots, tmp_path, "CLEAN")
+    assert clean.status == PASS, clean.message
+    clean_calls = _calls(counted["detect"])
+    for phase in counted.values():
+        phase.clear()
+    line = _unit(shots, tmp_path, "BLACK")
+    assert line.status == ERROR
+    assert "no 9x6 chessboard (board A17@1) was found in any of the 12 readable" in line.message
+    assert _calls(counted["detect"]) == 0
+    assert _calls(counted["probe"]) <= clean_calls

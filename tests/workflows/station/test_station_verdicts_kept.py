@@ -16,6 +16,7 @@ import hashlib
 import json
 import shutil
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,9 @@ import numpy as np
 import pytest
 
 from calibctl.config import load_settings
+from calibctl.errors import NotFoundError, NumericalError
 from calibctl.store.repository import Store
+from calibctl.workflows.camera import solve as solve_workflow
 from calibctl.workflows.station.station import StationRequest, UnitResult, run_station
 from tests.artifacts.factories import measured_board
 from tests.workflows.synth_folders import rendered
@@ -137,12 +140,61 @@ def shots(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("jobs", [1, 2, 4])
-def test_the_station_gives_the_recorded_verdicts(shots: Path, tmp_path: Path, jobs: int) -> None:
+def test_the_station_gives_the_recorded_verdicts(
+    shots: Path, tmp_path: Path, jobs: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """And each solved unit's numbers are computed once: with 2 jobs or more on the station's early thread,
+    while the session is written (``solve.start_numbers``); with 1 in the solve, on the station's thread."""
+    threads: list[str] = []
+    real = solve_workflow._solve_numbers
+
+    def counted(*args: Any) -> Any:
+        threads.append(threading.current_thread().name)
+        return real(*args)
+
+    monkeypatch.setattr(solve_workflow, "_solve_numbers", counted)
     recorded = json.loads(RECORDED.read_text())
     got = station_records(shots, tmp_path / "calibctl.db", jobs)
     assert [u["serial"] for u in got] == list(UNITS)
     for unit, want in zip(got, recorded, strict=True):
         assert unit == want, unit["serial"]
+    solved = sum("calibration" in unit for unit in got)
+    assert solved == 2 and len(threads) == solved
+    assert {name.split("_")[0] for name in threads} == (
+        {"MainThread"} if jobs == 1 else {"calibctl-early-numbers"}
+    )
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_solve_that_fails_gives_the_same_line_with_its_numbers_started_early(
+    shots: Path, tmp_path: Path, jobs: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The error of numbers computed on the early thread is the solve's, as when they are computed inline: the
+    unit's error line names it; its session is stored, no calibration."""
+
+    threads: list[str] = []
+
+    def failing(*args: Any) -> Any:
+        threads.append(threading.current_thread().name.split("_")[0])
+        raise NumericalError("held-out fold 2 (views [2, 7] held out): the solve diverged", hint="recapture")
+
+    monkeypatch.setattr(solve_workflow, "_solve_numbers", failing)
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    with Store.open(url) as store:
+        store.add_board(measured_board("A17", square_mm=25.0))
+    settings = load_settings(db=url, station="line-3", operator="op-ana", env={}, jobs=jobs)
+    lines: list[UnitResult] = []
+    request = StationRequest("A17", f"{shots}/{{serial}}", spool=tmp_path / "c.spool")
+    run_station(settings, request, ["CAM-GOOD"], lines.append)
+    (line,) = lines
+    assert threads == ["MainThread" if jobs == 1 else "calibctl-early-numbers"]
+    assert (line.status, line.message, line.hint) == (
+        "error",
+        "held-out fold 2 (views [2, 7] held out): the solve diverged",
+        "recapture",
+    )
+    with Store.open(url) as store, pytest.raises(NotFoundError, match="sessions .* but none was solved"):
+        store.list_artifacts("CAM-GOOD")
 
 
 if __name__ == "__main__":  # record: python -m tests.workflows.station.test_station_verdicts_kept OUT.json
