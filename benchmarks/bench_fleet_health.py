@@ -8,7 +8,10 @@ Then `fleet trends` (the workflow: two queries and the fits) for a sample of ser
 slopes.
 
 Run: python benchmarks/bench_fleet_health.py [--robots 25] [--days 365] [--db sqlite:///PATH |
-postgresql://...]
+postgresql://...] [--keyed]
+
+``--keyed``: a station key signs the reports at ingest, and `fleet trends` checks each report's link and
+signature as well as its hashes (as a store with keys does).
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from machine import cpu_model  # noqa: E402
 from calibctl.artifacts.common import utc_now  # noqa: E402
 from calibctl.artifacts.fleet import FleetEvent  # noqa: E402
 from calibctl.config import Settings, load_settings  # noqa: E402
+from calibctl.signing import create_key  # noqa: E402
 from calibctl.store.repository import Store  # noqa: E402
 from calibctl.workflows.fleet import health  # noqa: E402
 
@@ -96,6 +100,7 @@ def main() -> None:
         "--db", default=None, help="store URL (default: a fresh SQLite file in a temporary folder)"
     )
     ap.add_argument("--samples", type=int, default=20, help="serials timed for trends")
+    ap.add_argument("--keyed", action="store_true", help="sign at ingest, check signatures in trends")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -114,7 +119,11 @@ def main() -> None:
                     )
                 )
         paths = _files(folder, args.robots, args.days)
-        settings = load_settings(db=url, station="bench", operator="bench", env={})
+        env = {}
+        if args.keyed:
+            create_key(folder / "station.pem")
+            env["CALIBCTL_SIGNING_KEY"] = str(folder / "station.pem")
+        settings = load_settings(db=url, station="bench", operator="bench", env=env)
         t0 = time.perf_counter()
         results = health.ingest(settings, paths)
         ingest_s = time.perf_counter() - t0
@@ -126,7 +135,7 @@ def main() -> None:
         latencies, slopes, drifts = timed_trends(settings, serials)
     print(
         f"# fleet health: ingest and trends ({datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu_model()}, "
-        f"load {os.getloadavg()[0]:.1f}, {url.split(':')[0]})\n"
+        f"load {os.getloadavg()[0]:.1f}, {url.split(':')[0]}{', keyed' if args.keyed else ''})\n"
     )
     print("| what | value |\n|---|---|")
     print(

@@ -8,7 +8,8 @@ anything else that escapes is a bug and keeps its traceback.
 Exit codes:
     0  success; the check passed
     1  the tool worked and the verdict is "fail" (gate, lint, verify, tampered import)
-    2  the tool could not do its job (usage, unreadable input, unknown serial/board/version, database)
+    2  the tool could not do its job (usage, unreadable input, unknown serial/board/version, database, a
+       stored record it needs that does not verify)
 
 ``named_list`` is the one "a, b, c and 4 more" of the messages that name a few of many things (files,
 lines, versions, labels); it lives here because every layer, core included, already imports this module.
@@ -95,6 +96,13 @@ class InconsistentDataError(VerdictFailed):
 
 class IntegrityError(VerdictFailed):
     """Content does not match its recorded sha256: the bytes were changed after they were written."""
+
+
+class UnverifiedRecord(CalibctlError):
+    """A stored record a read serves or a write builds on does not verify (its hash, chain link or signature
+    shows it was changed, deleted or forged after it was written): the command cannot run, exit 2. The message
+    names the record; the commands whose job is the integrity verdict (``db verify``, ``lint``, ``rig lint``)
+    report the same finding as a verdict, exit 1."""
 
 
 EXTRA_PACKAGES = {

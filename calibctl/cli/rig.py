@@ -731,6 +731,7 @@ def import_(
                 "already_imported": out.already_imported,
                 "stale": [f.model_dump(mode="json") for f in out.stale],
                 "held_back": out.held_back,
+                "notes": [f.model_dump(mode="json") for f in out.notes],
             }
         )
     else:
@@ -742,6 +743,7 @@ def import_(
         )
         if not out.already_imported:
             print_findings([f for f in [*cal.lint, *out.stale] if f.severity == "error"])
+        print_findings(out.notes)
         if out.held_back:
             say(out.held_back)
     if (

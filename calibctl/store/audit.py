@@ -32,7 +32,7 @@ from sqlalchemy import ColumnElement, FromClause, and_, func, not_, or_, select,
 from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
-from calibctl.errors import IntegrityError, UsageError
+from calibctl.errors import UnverifiedRecord, UsageError
 from calibctl.signing import TrustedKeys, record_message
 from calibctl.store import chain, codec, fleet_checkpoints, health, rigs, triggers
 from calibctl.store.models import (
@@ -365,7 +365,7 @@ def run(
         for row in s.scalars(select(t).select_from(joined).where(newer).execution_options(yield_per=500)):
             try:
                 decode(row)
-            except IntegrityError as exc:
+            except UnverifiedRecord as exc:
                 audit.problems.append(exc.message)
     audit.problems.extend(health.gate_problems(s))
     audit.problems.extend(fleet_checkpoints.problems(s, trusted))

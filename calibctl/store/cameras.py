@@ -20,7 +20,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
-from calibctl.errors import AlreadyExistsError, IntegrityError
+from calibctl.errors import AlreadyExistsError, IntegrityError, UnverifiedRecord
 from calibctl.store import codec, counters
 from calibctl.store.history import CAMERAS, UNCHECKED, check_activation, check_rollback_reason
 from calibctl.store.models import ArtifactRow, EventRow
@@ -156,7 +156,7 @@ class CameraStore:
 
     def get_artifact(self, serial: str, version: int | None = None) -> CalibrationArtifact:
         """``serial@version``; None means the active version. Its record is checked by its chain hash
-        (IntegrityError): one sha256 over the stored bytes and columns, content_sha256 included, which a
+        (UnverifiedRecord): one sha256 over the stored bytes and columns, content_sha256 included, which a
         writer without the chain cannot change unseen; ``db verify`` and import re-derive content hashes."""
 
         return self._runner.run(lambda s: CAMERAS.read(s, serial, version, self._runner.served))
@@ -167,14 +167,14 @@ class CameraStore:
 
     def active_artifacts(
         self,
-    ) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+    ) -> tuple[dict[str, CalibrationArtifact | UnverifiedRecord], dict[str, dict[int, str]]]:
         """The active version of every serial in three bulk queries (no per-serial round trip), each checked
-        by its chain hash (an IntegrityError in its place when that fails), and version -> status of
+        by its chain hash (an UnverifiedRecord in its place when that fails), and version -> status of
         every serial with nothing active."""
 
         def work(
             s: Session,
-        ) -> tuple[dict[str, CalibrationArtifact | IntegrityError], dict[str, dict[int, str]]]:
+        ) -> tuple[dict[str, CalibrationArtifact | UnverifiedRecord], dict[str, dict[int, str]]]:
             latest = (
                 select(EventRow.serial, func.max(EventRow.id).label("id"))
                 .group_by(EventRow.serial)
@@ -191,7 +191,7 @@ class CameraStore:
                 )
                 .execution_options(yield_per=1000)
             )
-            found: dict[str, CalibrationArtifact | IntegrityError] = {}
+            found: dict[str, CalibrationArtifact | UnverifiedRecord] = {}
             events = (
                 {}
                 if self._runner.trusted is None
@@ -205,13 +205,13 @@ class CameraStore:
                     self._runner.served(s, "artifact", row)
                     self._runner.served(s, "event", events.get(row.serial))
                     if art.status != "accepted":
-                        raise IntegrityError(
+                        raise UnverifiedRecord(
                             f"the active version of {art.serial} is {art.ref}, which is not accepted: "
                             "the activation log was changed outside calibctl",
                             codec.TAMPER_HINT,
                         )
                     found[row.serial] = art
-                except IntegrityError as exc:
+                except UnverifiedRecord as exc:
                     found[row.serial] = exc
             inactive: dict[str, dict[int, str]] = {}
             listing = select(ArtifactRow.serial, ArtifactRow.version, ArtifactRow.status).order_by(

@@ -3,7 +3,7 @@
 A row keeps the canonical JSON of its document (``payload``) and a sha256: for a calibration
 artifact its own ``content_sha256`` (the hash of every other field, as the contract defines it),
 for boards and sessions the sha256 of the payload bytes. Decoding re-computes the hash, checks the
-query columns agree with the payload, and raises IntegrityError naming the document when anything
+query columns agree with the payload, and raises UnverifiedRecord naming the document when anything
 differs: bytes changed underneath the database are never returned as data.
 """
 
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex, validation_message
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 
 if TYPE_CHECKING:  # the decoders read plain attributes: the sqlite3 read path (sqlite_reads) uses them too
     from calibctl.artifacts.board import BoardRevision
@@ -51,8 +51,8 @@ def _short(sha: str) -> str:
     return sha[:12]
 
 
-def _mismatch(what: str, recorded: str, computed: str) -> IntegrityError:
-    return IntegrityError(
+def _mismatch(what: str, recorded: str, computed: str) -> UnverifiedRecord:
+    return UnverifiedRecord(
         f"{what} does not match its recorded sha256 (recorded {_short(recorded)}, content hashes to "
         f"{_short(computed)}): it was changed after it was written",
         TAMPER_HINT,
@@ -64,7 +64,7 @@ def _parse(model: type[BaseModel], payload: str, what: str) -> Any:
         return model.model_validate(json.loads(payload))
     except (ValueError, ValidationError) as exc:  # JSONDecodeError is a ValueError
         first = str(exc).splitlines()[0]
-        raise IntegrityError(f"{what} is stored as an unreadable document ({first})", TAMPER_HINT) from exc
+        raise UnverifiedRecord(f"{what} is stored as an unreadable document ({first})", TAMPER_HINT) from exc
 
 
 def _decode_hashed(model: type[BaseModel], row: BoardRow | SessionRow, what: str) -> Any:
@@ -78,7 +78,7 @@ def _decode_hashed(model: type[BaseModel], row: BoardRow | SessionRow, what: str
 def _check_columns(what: str, pairs: dict[str, tuple[object, object]]) -> None:
     wrong = [name for name, (column, inside) in pairs.items() if column != inside]
     if wrong:
-        raise IntegrityError(
+        raise UnverifiedRecord(
             f"{what}: the stored columns {', '.join(wrong)} disagree with the stored document", TAMPER_HINT
         )
 
@@ -115,14 +115,14 @@ def board_row(board: BoardRevision) -> BoardRow:
 
 
 def chain_checked(stream: str, row: Any) -> None:
-    """Refuse ``row`` (IntegrityError naming it) unless its chain hash matches its columns: the check every
+    """Refuse ``row`` (UnverifiedRecord naming it) unless its chain hash matches its columns: the check every
     read of a chained record makes, with or without keys (``db verify`` reports the same finding from its
     walk)."""
     from calibctl.store import chain_hash
 
     problem = chain_hash.row_problem(chain_hash.SPECS[stream], row)
     if problem is not None:
-        raise IntegrityError(problem, TAMPER_HINT)
+        raise UnverifiedRecord(problem, TAMPER_HINT)
 
 
 def decode_board(row: BoardRow, *, by_chain: bool = False) -> BoardRevision:
@@ -219,7 +219,7 @@ def decode_artifact(row: ArtifactRow, *, by_chain: bool = False) -> CalibrationA
         try:
             artifact = CalibrationArtifact.model_validate_json(row.payload)
         except ValidationError as exc:
-            raise IntegrityError(
+            raise UnverifiedRecord(
                 f"{what} is stored as an unreadable document ({validation_message(exc, what)})", TAMPER_HINT
             ) from exc
     else:
@@ -249,7 +249,7 @@ def with_signature(document: SignedT, row: Any, what: str) -> SignedT:
     try:
         seal = RecordSignature(key_id=row.key_id, record_sha256=row.chain_hash, value=row.signature)
     except ValidationError as exc:
-        raise IntegrityError(
+        raise UnverifiedRecord(
             f"{what} has an unreadable signature ({exc.errors()[0]['msg']})", TAMPER_HINT
         ) from exc
     return document.model_copy(update={"signature": seal})

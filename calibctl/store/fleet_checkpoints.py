@@ -30,7 +30,7 @@ from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.artifacts.fleet import FleetEvent
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, TrustedKeys, record_message
 from calibctl.store import chain_hash, served
 from calibctl.store.codec import decode_fleet_event
@@ -110,7 +110,7 @@ def _usable(
 
 
 def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = None) -> Loaded:
-    """The log replayed from the newest usable checkpoint (an undecodable event raises IntegrityError, as a
+    """The log replayed from the newest usable checkpoint (an undecodable event raises UnverifiedRecord, as a
     full replay does). ``rollouts=False``: the rollouts the checkpoint holds are stand-ins (for ``to_state``
     only). ``trusted``: the store's keys; with them only a checkpoint signed by one of them is used."""
     loaded = Loaded(Fleet())
@@ -128,14 +128,14 @@ def load(s: Session, *, rollouts: bool = True, trusted: TrustedKeys | None = Non
     for r in s.scalars(tail.execution_options(yield_per=1000)):
         problem = _tail_problem(r, loaded, first_signed, trusted)
         if problem is not None:
-            raise IntegrityError(f"{problem}; refusing to serve the fleet log", served.REFUSED_HINT)
+            raise UnverifiedRecord(f"{problem}; refusing to serve the fleet log", served.REFUSED_HINT)
         loaded.fleet.apply(decode_fleet_event(r, by_chain=True))
         loaded.last_hash = r.chain_hash
     counted = s.scalar(
         select(CounterRow.last_value).where(CounterRow.scope == "chain", CounterRow.key == "fleet")
     )
     if loaded.fleet.length != int(counted or 0):
-        raise IntegrityError(
+        raise UnverifiedRecord(
             f"the fleet log ends at event {loaded.fleet.length} but its counter says {int(counted or 0)}: "
             "events were removed; refusing to serve the fleet log",
             served.REFUSED_HINT,
@@ -233,7 +233,7 @@ def problems(s: Session, trusted: TrustedKeys | None = None) -> list[str]:
             row = rows.pop(fleet.length, None)
             if row is not None:
                 found += _compare(row, r.chain_hash, fleet, trusted)
-    except IntegrityError:  # the audit names the event itself
+    except UnverifiedRecord:  # the audit names the event itself
         return [
             *found,
             f"fleet checkpoint(s) at event(s) {', '.join(map(str, sorted(rows)))} not checked: the log "

@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session
 
 from calibctl.artifacts.common import sha256_hex, utc_now
 from calibctl.artifacts.health import HealthReport
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, record_message
 from calibctl.store import chain, codec, counters, served
 from calibctl.store.codec import decode_fleet_event
@@ -82,7 +82,7 @@ def gate_problems(s: Session) -> list[str]:
     ):
         try:
             event = decode_fleet_event(row)
-        except IntegrityError:  # a damaged promote is the chain walk's to report
+        except UnverifiedRecord:  # a damaged promote is the chain walk's to report
             continue
         for e in event.gate:
             table, key = (
@@ -183,11 +183,11 @@ def _sealed(s: Session, rows: list[dict[str, Any]], signer: Signer | None) -> No
         prev = digest
 
 
-def _gate_refusal(s: Session, rows: Sequence[HealthReportRow], runner: Runner) -> None:
-    """Refuse (IntegrityError naming it) a report a gate would read that is not as ingested: its payload, its
-    columns (its chain hash covers both) and, with keys, its link and signature; and any report deleted from
-    the health stream since it was ingested (positions 1..N, N its counter, each held once: a gap is a
-    deletion)."""
+def _refusal(s: Session, rows: Sequence[HealthReportRow], runner: Runner, reader: str) -> None:
+    """Refuse (UnverifiedRecord naming it) a report ``reader`` would read that is not as ingested: its
+    payload, its columns (its chain hash covers both) and, with keys, its link and signature; and any report
+    deleted from the health stream since it was ingested (positions 1..N, N its counter, each held once: a gap
+    is a deletion)."""
     for row in rows:
         what = f"health report {row.source_id}"
         actual = sha256_hex(row.payload.encode("utf-8"))
@@ -197,16 +197,16 @@ def _gate_refusal(s: Session, rows: Sequence[HealthReportRow], runner: Runner) -
             else f"{what} does not match its recorded sha256: it was changed after it was ingested"
         ) or chain.row_problem(chain.STREAMS["health"], row)
         if problem is not None:
-            raise IntegrityError(f"{problem}; the health gate refuses to read it", served.REFUSED_HINT)
+            raise UnverifiedRecord(f"{problem}; {reader} refuses to read it", served.REFUSED_HINT)
         runner.served(s, "health", row)
     counted = counters.peek(s, "chain", "health") or 0
     held, lowest, highest = s.execute(
         select(func.count(), func.min(HealthReportRow.chain_seq), func.max(HealthReportRow.chain_seq))
     ).one()
     if held != counted or (held and (lowest != 1 or highest != counted)):
-        raise IntegrityError(
+        raise UnverifiedRecord(
             f"the store's health reports are numbered 1 to {counted} but {held} are stored: a report was "
-            "deleted (or inserted) outside calibctl; the health gate refuses to decide",
+            f"deleted (or inserted) outside calibctl; {reader} refuses to decide",
             served.REFUSED_HINT,
         )
 
@@ -252,18 +252,20 @@ class HealthStore:
         return self._runner.run(work, write=True)
 
     def health_rows(self, serial: str) -> list[HealthRow]:
-        """Every stored report on ``serial``, oldest first."""
-        cols = [getattr(HealthReportRow, n) for n in ("serial", "kind", "at", *NUMBERS)]
-        return self._runner.run(
-            lambda s: [
-                HealthRow(*row)
-                for row in s.execute(
-                    select(*cols)
-                    .where(HealthReportRow.serial == serial)
-                    .order_by(HealthReportRow.at, HealthReportRow.id)
-                )
-            ]
+        """Every stored report on ``serial``, oldest first, each checked as the health gate checks the reports
+        it reads (UnverifiedRecord naming one edited, re-chained or deleted since it was ingested)."""
+        stmt = (
+            select(HealthReportRow)
+            .where(HealthReportRow.serial == serial)
+            .order_by(HealthReportRow.at, HealthReportRow.id)
         )
+
+        def work(s: Session) -> list[HealthRow]:
+            rows = list(s.scalars(stmt))
+            _refusal(s, rows, self._runner, "fleet trends")
+            return [HealthRow(*(getattr(r, n) for n in ("serial", "kind", "at", *NUMBERS))) for r in rows]
+
+        return self._runner.run(work)
 
     def fleet_check_rms(self, since: datetime | None = None) -> dict[str, tuple[float, int]]:
         """Serial -> (mean check RMS px, number of check reports), over every serial with check reports
@@ -308,7 +310,7 @@ class HealthStore:
 
         def work(s: Session) -> list[GateReport]:
             rows = list(s.scalars(stmt))
-            _gate_refusal(s, rows, self._runner)
+            _refusal(s, rows, self._runner, "the health gate")
             return [GateReport(**{c.key: getattr(r, c.key) for c in cols}) for r in rows]
 
         return self._runner.run(work)

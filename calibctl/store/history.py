@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.calibration import CalibrationArtifact
 from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.events import ActivationEvent
-from calibctl.errors import IntegrityError, NotFoundError, StaleActiveVersionError, UsageError, named_list
+from calibctl.errors import NotFoundError, StaleActiveVersionError, UnverifiedRecord, UsageError, named_list
 from calibctl.signing import Signer
 from calibctl.store import chain, codec, counters
 from calibctl.store.models import ArtifactRow, EventRow, SessionRow
@@ -105,11 +105,11 @@ class VersionHistory(Generic[V, E]):
     label: Callable[[str], str]  # the subject in messages: "CAM-1", "rig R1"
     history_command: Callable[[str], str]  # what lists the subject's versions
     placeholder: str  # the subject in generic hints: "SERIAL", "RIG"
-    decode: Callable[[Any], V]  # a version row's document; IntegrityError when it was tampered with
+    decode: Callable[[Any], V]  # a version row's document; UnverifiedRecord when it was tampered with
     decode_event: Callable[[Any], E]
     no_versions: Callable[[Session, str], NoReturn]  # the NotFoundError of a subject with no version
     solve_again: Callable[[str], str]  # the hint's first words when no version is accepted
-    active_must_be_accepted: bool  # a forged log making a rejected version active is an IntegrityError
+    active_must_be_accepted: bool  # a forged log making a rejected version active is an UnverifiedRecord
 
     def _of(self, model: Any, key: str) -> Any:
         return getattr(model, self.key) == key
@@ -154,7 +154,7 @@ class VersionHistory(Generic[V, E]):
 
     def resolve(self, s: Session, key: str, version: int | None) -> int:
         """``version``, or the active one when None, once it is known to be stored (NotFoundError listing
-        the versions otherwise; IntegrityError when the log makes a non-accepted version active)."""
+        the versions otherwise; UnverifiedRecord when the log makes a non-accepted version active)."""
         statuses = self.statuses(s, key)
         label, command = self.label(key), self.history_command(key)
         wanted = self.active(s, key) if version is None else version
@@ -168,7 +168,7 @@ class VersionHistory(Generic[V, E]):
                 "inspect it",
             )
         if version is None and self.active_must_be_accepted and statuses.get(wanted) != "accepted":
-            raise IntegrityError(  # only possible if the event log was forged
+            raise UnverifiedRecord(  # only possible if the event log was forged
                 f"the active version of {label} is {key}@{wanted}, which is not accepted: "
                 "the activation log was changed outside calibctl",
                 codec.TAMPER_HINT,

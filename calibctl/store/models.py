@@ -71,7 +71,7 @@ class UtcDateTime(TypeDecorator[dt.datetime]):
 
     def result_processor(self, dialect: Dialect, coltype: object) -> Callable[[Any], Any] | None:
         # SQLite keeps text: a value edited outside calibctl ('garbage', a number) fails in SQLAlchemy's own
-        # parser before process_result_value; it is a tampered record (exit 1), never a traceback.
+        # parser before process_result_value; it is a tampered record (exit 2), never a traceback.
         process = super().result_processor(dialect, coltype)
         if process is None:
             return None

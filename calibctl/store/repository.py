@@ -3,7 +3,7 @@
 Boards and capture sessions live here; camera artifacts (``cameras``), rigs, images, checks, the fleet log
 and health reports are parts the Store offers under their own method names. Every public method is one
 transaction and returns contract documents (pydantic), never ORM rows. Every read of a document re-checks
-its hash (IntegrityError naming it on mismatch): a calibration by its record's chain hash (covering its
+its hash (UnverifiedRecord naming it on mismatch): a calibration by its record's chain hash (covering its
 bytes and content_sha256), the others by their sha256. The active version of a serial or rig is not a
 mutable pointer: it is the version of its latest activation event (``history``), and events are
 append-only (database triggers refuse UPDATE/DELETE).

@@ -21,8 +21,8 @@ from sqlalchemy.orm import Session
 from calibctl.artifacts.common import sha256_hex
 from calibctl.errors import (
     AlreadyExistsError,
-    IntegrityError,
     NotFoundError,
+    UnverifiedRecord,
     UsageError,
     named_list,
 )
@@ -52,7 +52,7 @@ def decode_definition(row: RigRow, *, by_chain: bool = False) -> RigDefinition:
         codec.chain_checked("rig_definition", row)
     rig: RigDefinition = _decode_hashed(RigDefinition, row.payload, row.payload_sha256, f"rig {row.name}")
     if rig.name != row.name:
-        raise IntegrityError(
+        raise UnverifiedRecord(
             f"rig {row.name}: the stored name disagrees with the stored document", codec.TAMPER_HINT
         )
     return rig

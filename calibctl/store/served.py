@@ -13,7 +13,8 @@ its event, a capture session) this checks:
 
 Pure Python over one ``Query`` callable (named ``:param`` SQL, which both ``sqlite3`` and sqlalchemy's
 ``text()`` take), so ``Store``'s reads and the sqlite3 read path (``sqlite_reads``) run the same check.
-A refusal is an ``IntegrityError`` (exit 1) naming the record and ``calibctl db verify``.
+A refusal is an ``UnverifiedRecord`` (exit 2: the command cannot run on it) naming the record and
+``calibctl db verify``.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import TrustedKeys, record_message
 from calibctl.store.chain_hash import SPECS, StreamSpec, row_problem, row_values
 
@@ -131,9 +132,9 @@ def problem(stream: str, row: Any, query: Query, trusted: TrustedKeys) -> str | 
 
 
 def check(stream: str, row: Any, query: Query, trusted: TrustedKeys | None) -> None:
-    """Refuse to serve ``row`` (IntegrityError, exit 1) when ``problem`` finds one; no-op without keys."""
+    """Refuse to serve ``row`` (UnverifiedRecord, exit 2) when ``problem`` finds one; no-op without keys."""
     if trusted is None:
         return
     found = problem(stream, row, query, trusted)
     if found is not None:
-        raise IntegrityError(f"{found}; refusing to serve it", REFUSED_HINT)
+        raise UnverifiedRecord(f"{found}; refusing to serve it", REFUSED_HINT)

@@ -10,7 +10,7 @@ import json
 import pytest
 
 from calibctl.artifacts.rig import RigDefinition
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import TrustedKeys, create_key
 from calibctl.store import codec
 from calibctl.store.engine import make_engine
@@ -60,9 +60,9 @@ def test_a_widened_tolerance_with_its_hash_recomputed_is_named_and_refused_on_re
     _widen_tolerance(rigs)
     message = f"rig definition {RIG} was changed after it was written (its chain hash no longer matches)"
     assert problems_of(rigs) == [message]
-    with Store.open(rigs) as store, pytest.raises(IntegrityError) as info:
+    with Store.open(rigs) as store, pytest.raises(UnverifiedRecord) as info:
         store.get_rig(RIG)
-    assert info.value.message == message and info.value.exit_code == 1
+    assert info.value.message == message and info.value.exit_code == 2
     with Store.open(rigs) as store:
         assert store.get_rig(OTHER).name == OTHER  # the other rig still reads
 
@@ -166,12 +166,12 @@ def test_a_head_printed_before_0008_checks_the_definitions_in_full(rigs: str):
         ]
 
 
-def test_the_command_line_refuses_a_changed_definition_with_exit_1(rigs: str):
+def test_the_command_line_refuses_a_changed_definition_with_exit_2(rigs: str):
     from typer.testing import CliRunner
 
     from calibctl.cli.main import app
 
     _widen_tolerance(rigs)
     result = CliRunner().invoke(app, ["--db", rigs, "rig", "history", RIG], terminal_width=200)
-    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert result.exit_code == 2 and "Traceback" not in result.output
     assert f"rig definition {RIG} was changed after it was written" in " ".join(result.stderr.split())

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.artifacts.session import CaptureSession
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import TrustedKeys, create_key
 from calibctl.store import audit as audit_module
 from calibctl.store import codec, migrate
@@ -95,7 +95,7 @@ def test_signed_sessions_a_rechained_edit_is_refused_by_verify_and_by_reads(db_u
         store.get_session("aaaaaaaaaaa1")  # without keys a read serves it ...
     with (
         Store.open(db_url, trusted=trusted) as store,
-        pytest.raises(IntegrityError, match="refusing to serve it"),
+        pytest.raises(UnverifiedRecord, match="refusing to serve it"),
     ):
         store.get_session("aaaaaaaaaaa1")  # ... with keys it does not (report, solve's evidence)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex, utc_now
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, TrustedKeys, create_key
 from calibctl.store import migrate
 from calibctl.store.engine import make_engine
@@ -72,7 +72,7 @@ def test_a_report_edited_to_pass_is_refused_by_the_gate_and_named_by_verify(db_u
     _ingested(db_url)
     _passes(db_url)
     with pytest.raises(
-        IntegrityError, match=r"health report r-2 \(amr-001, CAM-0001 check\) was changed after"
+        UnverifiedRecord, match=r"health report r-2 \(amr-001, CAM-0001 check\) was changed after"
     ):
         _gate(db_url)
     with Store.open(db_url) as store:
@@ -86,7 +86,7 @@ def test_a_rechained_report_is_refused_with_keys(db_url: str, tmp_path: Path) ->
     rechain(db_url)
     trusted = TrustedKeys({signer.key_id: signer.public})
     with pytest.raises(
-        IntegrityError, match=r"health report r-2 .* has a signature by key .* does not match"
+        UnverifiedRecord, match=r"health report r-2 .* has a signature by key .* does not match"
     ):
         _gate(db_url, trusted)
     assert _gate(db_url) == [
@@ -98,12 +98,12 @@ def test_a_rechained_report_is_refused_with_keys(db_url: str, tmp_path: Path) ->
 def test_a_deleted_report_is_refused_by_the_gate(db_url: str) -> None:
     _ingested(db_url)
     run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-2'")
-    with pytest.raises(IntegrityError, match="numbered 1 to 2 but 1 are stored: a report was deleted"):
+    with pytest.raises(UnverifiedRecord, match="numbered 1 to 2 but 1 are stored: a report was deleted"):
         _gate(db_url)
     with Store.open(db_url) as store:  # a passing one ingested after it does not hide it
         assert store.add_health_reports([health_report("CAM-0001", source_id="r-3")]) == []
     run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-1'")
-    with pytest.raises(IntegrityError, match="numbered 1 to 3 but 1 are stored"):
+    with pytest.raises(UnverifiedRecord, match="numbered 1 to 3 but 1 are stored"):
         _gate(db_url)
 
 
@@ -129,12 +129,12 @@ def test_a_promote_over_an_edited_report_refuses_and_promotes_nothing(
     )
     (events,) = _select(sqlite_url, "SELECT count(*) FROM fleet_events")[0]
     refused = run(sqlite_url, "fleet", "rollout", "promote", "r1", "--reason", "go")
-    assert refused.exit_code == 1, refused.output
+    assert refused.exit_code == 2, refused.output  # could not run: a record it needs does not verify
     assert "health report a1/c (amr-1, CAM-1 check) was changed after it was written" in refused.stderr
     assert "Traceback" not in refused.output
     assert _select(sqlite_url, "SELECT count(*) FROM fleet_events")[0] == (events,)  # nothing promoted
     status = run(sqlite_url, "fleet", "status")  # the rollout's gate is not shown as if it held
-    assert status.exit_code == 1 and "health report a1/c" in status.stderr
+    assert status.exit_code == 2 and "health report a1/c" in status.stderr
 
 
 def test_reports_stored_before_0016_are_chained_by_the_migration(db_url: str) -> None:
@@ -152,3 +152,37 @@ def test_reports_stored_before_0016_are_chained_by_the_migration(db_url: str) ->
         assert store.verify().problems == []
         assert store.add_health_reports([health_report("CAM-0001", source_id="r-3")]) == []
     assert _select(db_url, "SELECT chain_seq FROM health_reports WHERE source_id = 'r-3'") == [(3,)]
+
+
+def _trends_refused(url: str, *expected: str) -> None:
+    res = run(url, "fleet", "trends", "CAM-0001")
+    assert res.exit_code == 2, res.output  # could not run: a report it reads does not verify
+    assert res.stdout == "" and "Traceback" not in res.output and "calibctl db verify" in res.stderr
+    for text in expected:
+        assert text in res.stderr, res.stderr
+
+
+def test_fleet_trends_refuses_an_edited_or_deleted_report(db_url: str) -> None:
+    _ingested(db_url)
+    assert run(db_url, "fleet", "trends", "CAM-0001").exit_code == 0
+    _passes(db_url)
+    _trends_refused(
+        db_url,
+        "health report r-2 (amr-001, CAM-0001 check) was changed after it was written",
+        "fleet trends refuses to read it",
+    )
+    run_underneath(db_url, "DELETE FROM health_reports WHERE source_id = 'r-2'")
+    _trends_refused(db_url, "numbered 1 to 2 but 1 are stored: a report was deleted")
+
+
+def test_fleet_trends_refuses_a_rechained_report_with_keys(
+    db_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "station.pem"
+    signer = create_key(path)
+    _ingested(db_url, signer)
+    _passes(db_url)
+    rechain(db_url)
+    assert run(db_url, "fleet", "trends", "CAM-0001").exit_code == 0  # consistent without keys
+    monkeypatch.setenv("CALIBCTL_SIGNING_KEY", str(path))
+    _trends_refused(db_url, "health report r-2 (amr-001, CAM-0001 check) has a signature by key")

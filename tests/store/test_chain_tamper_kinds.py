@@ -16,15 +16,18 @@ from typer.testing import CliRunner
 from calibctl.artifacts.common import canonical_json_bytes, sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.cli.main import app
-from calibctl.errors import IntegrityError
+from calibctl.config import load_settings
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import Signer, create_key
 from calibctl.store.repository import Store
+from calibctl.workflows.lidar import rig_lidar
 from tests.artifacts.factories import FIXED_TIME, calibration, measured_board
 from tests.store.documents import fleet_event
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 from tests.store.tamper import rechain, run_underneath
 from tests.store.test_chain_tamper import _select
 from tests.store.test_chain_tamper_rigs_checks import _reseal_rig, with_handeye_edge
+from tests.workflows.lidar.test_rig_lidar_carry import _lidar
 
 WHO = {"actor": "qa", "station": "st1"}
 runner = CliRunner()
@@ -47,11 +50,21 @@ def _rewrite(url: str, table: str, where: str, change: Callable[[dict[str, Any]]
 
 
 def _refused(url: str, args: list[str], *expected: str) -> None:
+    """A read that cannot use a record that does not verify: exit 2, the record named, nothing served."""
     res = runner.invoke(app, ["--db", url, *args])
-    assert res.exit_code == 1, res.output
+    assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output and res.stdout == ""
     for text in expected:
         assert text in res.stderr, res.stderr
+
+
+def _failed_lint(url: str, args: list[str], *expected: str) -> None:
+    """A lint's verdict on a record that does not verify: exit 1, the record named as a finding."""
+    res = runner.invoke(app, ["--db", url, *args])
+    assert res.exit_code == 1, res.output
+    assert "Traceback" not in res.output and "content-hash" in res.stdout
+    for text in expected:
+        assert text in res.stdout, res.stdout
 
 
 @pytest.fixture
@@ -83,9 +96,9 @@ def test_a_board_edited_with_its_payload_hash_recomputed_is_refused_by_every_rea
     _refused(board_store, ["board", "show", "A17"], why, "calibctl db verify")
     _refused(board_store, ["board", "list"], why)
     with Store.open(board_store) as store:
-        with pytest.raises(IntegrityError, match=r"board A17@1 was changed"):
+        with pytest.raises(UnverifiedRecord, match=r"board A17@1 was changed"):
             store.get_board("A17")  # what capture, solve, lidar and hand-eye calibrate with
-        with pytest.raises(IntegrityError, match=r"board A17@1 was changed"):
+        with pytest.raises(UnverifiedRecord, match=r"board A17@1 was changed"):
             store.add_board(measured_board(square_mm=25.0))  # a new revision is checked against it
         assert store.board_revisions("A17") == [1]
 
@@ -131,9 +144,7 @@ def rig_store(db_url: str) -> str:
     return db_url
 
 
-@pytest.mark.parametrize(
-    "args", [["rig", "show", RIG], ["rig", "export", RIG, "--format", "json"], ["rig", "lint", RIG]]
-)
+@pytest.mark.parametrize("args", [["rig", "show", RIG], ["rig", "export", RIG, "--format", "json"]])
 def test_a_rig_edge_moved_with_its_content_hash_recomputed_is_refused_without_keys(
     rig_store: str, args: list[str]
 ) -> None:
@@ -143,17 +154,43 @@ def test_a_rig_edge_moved_with_its_content_hash_recomputed_is_refused_without_ke
     )
 
 
+@pytest.mark.parametrize("args", [["rig", "lint", RIG], ["lint", "--rig", RIG]])
+def test_rig_lint_fails_a_moved_rig_edge(rig_store: str, args: list[str]) -> None:
+    _reseal_rig(rig_store, 2, _moved_edge("hand-eye"))
+    _failed_lint(rig_store, args, f"rig {RIG}@2 was changed after it was written")
+
+
 def test_a_moved_rig_edge_is_never_used_by_a_write(rig_store: str) -> None:
     _reseal_rig(rig_store, 2, _moved_edge("hand-eye"))
     with Store.open(rig_store) as store:
-        with pytest.raises(IntegrityError, match=rf"rig {RIG}@2 was changed"):
+        with pytest.raises(UnverifiedRecord, match=rf"rig {RIG}@2 was changed"):
             store.get_rig_calibration(RIG)
-        with pytest.raises(IntegrityError, match=rf"rig {RIG}@2 was changed"):
+        with pytest.raises(UnverifiedRecord, match=rf"rig {RIG}@2 was changed"):
             store.list_rig_calibrations(RIG)
-        with pytest.raises(IntegrityError, match=rf"rig {RIG}@2 was changed"):
+        with pytest.raises(UnverifiedRecord, match=rf"rig {RIG}@2 was changed"):
             store.rollback_rig(RIG, 2, reason="restore the hand-eye edge", actor="qa", station="st1")
         store.rollback_rig(RIG, 1, reason="v2 refused", actor="qa", station="st1")
         assert store.active_rig_version(RIG) == 1
+
+
+def test_a_lidar_edge_moved_with_its_content_hash_recomputed_is_refused_by_reads_and_writes(
+    db_url: str,
+) -> None:
+    settings = load_settings(db=db_url, station="st1", operator="qa", env={})
+    with Store.open(db_url) as store:
+        store.add_rig(rig_definition().model_copy(update={"frames": ["lidar"]}))
+        store.add_rig_calibration(rig_calibration(), activate=True, reason="rig solve", **WHO)
+        store.add_artifact(calibration(serial="CAM-0001"), activate=True, reason="solved", **WHO)
+    edge = _lidar(camera="CAM-0001@1").model_copy(update={"child_frame": "CAM-0001"})
+    assert rig_lidar.store_lidar(settings, RIG, edge).calibration.version == 2
+    _reseal_rig(db_url, 2, _moved_edge("lidar-board"))
+    why = f"rig {RIG}@2 was changed after it was written (its chain hash no longer matches)"
+    for args in (["rig", "show", RIG], ["rig", "export", RIG, "--format", "tf"]):
+        _refused(db_url, args, why)
+    _failed_lint(db_url, ["rig", "lint", RIG], why)
+    with pytest.raises(UnverifiedRecord, match=rf"rig {RIG}@2 was changed"):
+        rig_lidar.store_lidar(settings, RIG, edge)  # a new LiDAR result is never built on it
+    assert _select(db_url, "SELECT count(*) FROM rig_calibrations") == [(2,)]
 
 
 # the fleet log ----------
@@ -186,8 +223,17 @@ def test_a_fleet_event_edited_with_its_payload_hash_recomputed_is_refused(db_url
     _fleet(db_url)
     _rewrite(db_url, "fleet_events", "kind = 'rollout'", _target_back_to_1)
     _refused(db_url, ["fleet", "status"], "fleet event 3 (r1, rollout) was changed after it was written")
-    with Store.open(db_url) as store, pytest.raises(IntegrityError, match=r"fleet event 3 \(r1, rollout\)"):
+    with Store.open(db_url) as store, pytest.raises(UnverifiedRecord, match=r"fleet event 3 \(r1, rollout\)"):
         store.fleet()
+
+
+def test_a_promote_over_an_edited_fleet_log_refuses_and_writes_nothing(db_url: str) -> None:
+    _fleet(db_url)
+    _rewrite(db_url, "fleet_events", "kind = 'rollout'", _target_back_to_1)
+    res = runner.invoke(app, ["--db", db_url, "fleet", "rollout", "promote", "r1", "--reason", "go"])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "fleet event 3 (r1, rollout) was changed after it was written" in res.stderr
+    assert _select(db_url, "SELECT count(*) FROM fleet_events") == [(3,)]
 
 
 def test_a_rechained_fleet_log_is_refused_with_keys(db_url: str, keyed: Signer) -> None:

@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.signing import TrustedKeys, create_key
 from calibctl.store import chain, served
 from calibctl.store.repository import Store
@@ -65,7 +65,7 @@ def _fx_plus_5(url: str, serial: str = "CAM-1", version: int = 2) -> None:
 
 def _refused(args: list[str], url: str, record: str) -> None:
     res = runner.invoke(app, ["--db", url, *args])
-    assert res.exit_code == 1, res.output
+    assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output and res.stdout == ""
     assert f"Error: {record} has a signature by key" in res.stderr and "refusing to serve it" in res.stderr
     assert "calibctl db verify" in res.stderr
@@ -76,7 +76,6 @@ READS = {
     "show@N": ["show", "CAM-1@2"],
     "export json": ["export", "CAM-1", "--format", "json"],
     "export ros": ["export", "CAM-1", "--format", "ros"],
-    "lint --serial": ["lint", "--serial", "CAM-1"],
     "report": ["report", "CAM-1"],
 }
 
@@ -88,6 +87,17 @@ def test_a_read_command_refuses_a_rechained_forgery(signed, command: str, tmp_pa
     _fx_plus_5(url)
     _refused(READS[command], url, "CAM-1@2")
     assert not list(tmp_path.glob("*.html"))  # report wrote no page
+
+
+def test_lint_serial_fails_a_rechained_forgery(signed):
+    """lint gives the verdict on the record (exit 1, a content-hash error) where a read cannot run on it."""
+    url, _, _ = signed
+    _fx_plus_5(url)
+    res = runner.invoke(app, ["--db", url, "lint", "--serial", "CAM-1", "--json"])
+    assert res.exit_code == 1, res.output
+    (result,) = json.loads(res.stdout)["results"]
+    (finding,) = [f for f in result["findings"] if f["rule"] == "content-hash"]
+    assert "CAM-1@2 has a signature by key" in finding["message"] and "db verify" in finding["fix"]
 
 
 def test_export_to_a_file_writes_nothing(signed, tmp_path: Path):
@@ -215,14 +225,14 @@ def test_matrix_verify_names_it_and_no_read_serves_it(signed, scenario: str):
         assert store.verify(trusted).problems or store.verify(trusted, since=head).problems
     with (
         Store.open(url, trusted=trusted) as store,
-        pytest.raises(IntegrityError, match="refusing to serve it") as exc,
+        pytest.raises(UnverifiedRecord, match="refusing to serve it") as exc,
     ):
         store.get_artifact("CAM-1")
     assert message in exc.value.message
     res = runner.invoke(
         app, ["--db", url, "show", "CAM-1"]
     )  # the sqlite3 read path on SQLite: the same refusal
-    assert res.exit_code == 1 and message in res.stderr and res.stdout == ""
+    assert res.exit_code == 2 and message in res.stderr and res.stdout == ""
 
 
 def test_a_deleted_newest_event_is_refused_where_it_was_served(signed):
@@ -231,7 +241,7 @@ def test_a_deleted_newest_event_is_refused_where_it_was_served(signed):
     with Store.open(url) as store:
         assert any("counter" in p for p in store.verify(trusted).problems)
     res = runner.invoke(app, ["--db", url, "show", "CAM-1"])
-    assert res.exit_code == 1, res.output
+    assert res.exit_code == 2, res.output
     assert "is the last record of its chain but the chain counter says chain_seq 3" in res.stderr
 
 
@@ -241,7 +251,7 @@ def test_an_untampered_signed_store_is_served_with_keys(signed):
         assert store.get_artifact("CAM-1").version == 2 and store.get_rig_calibration(RIG).version == 1
         found, _ = store.active_artifacts()
         assert sorted(found) == ["CAM-1", "CAM-2"] and not any(
-            isinstance(v, IntegrityError) for v in found.values()
+            isinstance(v, UnverifiedRecord) for v in found.values()
         )
     res = runner.invoke(app, ["--db", url, "export", "CAM-1", "--format", "json"])
     assert res.exit_code == 0 and json.loads(res.stdout)["version"] == 2
@@ -287,4 +297,4 @@ def test_an_empty_trusted_folder_checks_links_not_signatures(signed, tmp_path: P
     )  # as db verify: nothing to check against
     _events_reordered(url)
     res = runner.invoke(app, ["--db", url, "show", "CAM-1"])
-    assert res.exit_code == 1 and "is out of order" in res.stderr
+    assert res.exit_code == 2 and "is out of order" in res.stderr

@@ -24,7 +24,7 @@ from calibctl.artifacts.common import sha256_hex
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.cli.main import app
 from calibctl.config import load_settings
-from calibctl.errors import IntegrityError, NotFoundError
+from calibctl.errors import NotFoundError, UnverifiedRecord
 from calibctl.signing import Signer, TrustedKeys, create_key
 from calibctl.store import fleet_checkpoints
 from calibctl.store.fleet_ledger import Fleet, replay, to_state
@@ -459,7 +459,7 @@ def test_an_event_changed_before_the_checkpoint_is_left_to_db_verify(
     with Store.open(db_url) as store:
         loaded = store.fleet()
         assert loaded.since == 5 and loaded.fleet.running[("amr-2", ("serial", "CAM-0002"))] == 2
-        with pytest.raises(IntegrityError, match=r"fleet event 4 \(amr-2, assign\) does not match"):
+        with pytest.raises(UnverifiedRecord, match=r"fleet event 4 \(amr-2, assign\) does not match"):
             store.fleet_events()
         problems = store.verify().problems
     assert any(p.startswith("fleet event 4 (amr-2, assign)") for p in problems)

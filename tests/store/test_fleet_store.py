@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.errors import AlreadyExistsError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import AlreadyExistsError, NotFoundError, UnverifiedRecord, UsageError
 from calibctl.store.repository import Store
 from tests.artifacts.factories import calibration
 from tests.store.documents import fleet_event
@@ -65,7 +65,7 @@ def test_a_refused_step_writes_nothing(store_url: str, event, error, message: st
 def test_a_tampered_fleet_event_is_caught_on_read_and_by_verify(store_url: str) -> None:
     patch_stored_bytes(store_url, "fleet_events", '"reason":"test register"', '"reason":"test rEgister"')
     with Store.open(store_url) as store:
-        with pytest.raises(IntegrityError, match=r"fleet event 1 \(amr-001, register\) does not match"):
+        with pytest.raises(UnverifiedRecord, match=r"fleet event 1 \(amr-001, register\) does not match"):
             store.fleet_events()
         problems = store.verify().problems
     assert any("fleet event 1" in p for p in problems)

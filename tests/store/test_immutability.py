@@ -10,7 +10,7 @@ from sqlalchemy import text
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from calibctl.errors import IntegrityError
+from calibctl.errors import UnverifiedRecord
 from calibctl.store.engine import make_engine
 from calibctl.store.models import IMMUTABLE_TABLES
 from calibctl.store.repository import Store
@@ -100,13 +100,13 @@ def test_tampered_artifact_bytes_are_caught_on_read_and_by_verify(filled: str):
     with Store.open(filled) as store:
         # a read checks the record's chain hash (one sha256 over the stored bytes and columns)
         with pytest.raises(
-            IntegrityError, match=r"CAM-0001@1 was changed after it was written \(its chain hash"
+            UnverifiedRecord, match=r"CAM-0001@1 was changed after it was written \(its chain hash"
         ) as info:
             store.get_artifact("CAM-0001", 1)
-        assert info.value.exit_code == 1
-        with pytest.raises(IntegrityError, match="CAM-0001@1"):
+        assert info.value.exit_code == 2
+        with pytest.raises(UnverifiedRecord, match="CAM-0001@1"):
             store.get_artifact("CAM-0001")  # the active version is the tampered one
-        with pytest.raises(IntegrityError, match="CAM-0001@1"):
+        with pytest.raises(UnverifiedRecord, match="CAM-0001@1"):
             store.list_artifacts("CAM-0001")
         assert store.get_artifact("CAM-0001", 2).version == 2  # an intact version still reads
         problems = store.verify().problems
@@ -125,7 +125,7 @@ def test_tampered_board_revision_is_caught_on_read_and_by_verify(db_url: str):
         store.add_board(measured_board(name="B2"))
     patch_stored_bytes(db_url, "board_revisions", '"name":"A17"', '"name":"A18"')
     with Store.open(db_url) as store:
-        with pytest.raises(IntegrityError, match=r"board A17@1 does not match its recorded sha256"):
+        with pytest.raises(UnverifiedRecord, match=r"board A17@1 does not match its recorded sha256"):
             store.get_board("A17")
         assert store.get_board("B2").name == "B2"
         problems = store.verify().problems
@@ -140,7 +140,7 @@ def test_tampered_session_is_caught_on_read_and_by_verify(db_url: str):
         store.add_session(capture_session())
     patch_stored_bytes(db_url, "capture_sessions", "[100.25,80.5]", "[100.75,80.5]")  # move one corner
     with Store.open(db_url) as store:
-        with pytest.raises(IntegrityError, match="capture session 0123456789ab does not match"):
+        with pytest.raises(UnverifiedRecord, match="capture session 0123456789ab does not match"):
             store.get_session("0123456789ab")
         problems = store.verify().problems  # the payload hash, and since 0009 the session's chain hash
     assert (
@@ -158,7 +158,7 @@ def test_forged_activation_of_a_rejected_version_is_caught(filled: str):
     forge_activation(filled, "CAM-0001", 2)
     with Store.open(filled) as store:
         with pytest.raises(
-            IntegrityError, match="active version of CAM-0001 is CAM-0001@2, which is not accepted"
+            UnverifiedRecord, match="active version of CAM-0001 is CAM-0001@2, which is not accepted"
         ):
             store.get_artifact("CAM-0001")
         problems = store.verify().problems

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from sqlalchemy import text
 
-from calibctl.errors import AlreadyExistsError, IntegrityError, NotFoundError, UsageError
+from calibctl.errors import AlreadyExistsError, NotFoundError, UnverifiedRecord, UsageError
 from calibctl.store.engine import make_engine
 from calibctl.store.repository import Store
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition, rig_session
@@ -109,7 +109,7 @@ def test_tampered_rig_bytes_are_caught_on_read(db_url: str):
                 conn.execute(text("UPDATE rig_calibrations SET payload = replace(payload, '75.0', '76.0')"))
     finally:
         engine.dispose()
-    with Store.open(db_url) as store, pytest.raises(IntegrityError, match="rig STEREO-1@1 does not match"):
+    with Store.open(db_url) as store, pytest.raises(UnverifiedRecord, match="rig STEREO-1@1 does not match"):
         store.get_rig_calibration(RIG)
 
 

@@ -213,3 +213,26 @@ def test_another_key_an_unkeyed_spool_read_with_a_key_and_a_keyed_one_read_witho
         assert problems(rotated)[2] is None
     with opened(path) as without_key:  # a station without a key checks the sha256 alone (unkeyed)
         assert problems(without_key) == {1: None, 2: None, 3: None}
+
+
+@pytest.mark.parametrize("with_key", [False, True])
+def test_a_deleted_record_is_missing_keyed_or_not_and_stops_the_sync_before_the_next(
+    tmp_path: Path, with_key: bool
+) -> None:
+    path = tmp_path / "spool.sqlite"
+    signer = create_key(tmp_path / "station.pem") if with_key else None
+    spool = keyed(path, signer) if signer else opened(path)
+    assert queue(spool, "aaaaaaaaaaa1", "aaaaaaaaaaa2", "aaaaaaaaaaa3") == [1, 2, 3]
+    spool.close()
+    with sqlite3.connect(path) as conn:
+        conn.execute("DELETE FROM units WHERE seq = 2")
+    spool = keyed(path, signer) if signer else opened(path)
+    assert spool.missing() == [2]
+    first, third = spool.records(pending_only=True)
+    assert spool.gap_before(first) is None  # the record before the gap still syncs
+    refused = spool.gap_before(third)
+    assert refused is not None and refused.exit_code == 1
+    assert refused.message.startswith(f"spool record 2 is missing from {path}")
+    assert "record 3 (CAM-0001) and the records after it were not synced" in refused.message
+    assert "calibctl station set-aside 2 --reason TEXT" in (refused.hint or "")
+    spool.close()

@@ -9,7 +9,7 @@ import pytest
 
 from calibctl.artifacts.check import CheckEvent, RegionCheck
 from calibctl.artifacts.common import utc_now
-from calibctl.errors import CalibctlError, DatabaseOutOfDateError, IntegrityError, NotFoundError
+from calibctl.errors import CalibctlError, DatabaseOutOfDateError, NotFoundError, UnverifiedRecord
 from calibctl.signing import create_key
 from calibctl.store import migrate, sqlite_reads
 from calibctl.store.repository import Store
@@ -146,7 +146,7 @@ def test_a_tampered_artifact_is_refused_by_the_sqlite3_path_too(tmp_path: Path) 
             calibration(serial=SERIAL), activate=True, actor="qa", station="st1", reason="solved"
         )
     patch_stored_bytes(url, "calibration_artifacts", '"operator":"op"', '"operator":"OP"')
-    with pytest.raises(IntegrityError) as exc:
+    with pytest.raises(UnverifiedRecord) as exc:
         sqlite_reads.read(url, lambda s: s.list_artifacts(SERIAL), _no_fallback)
     assert (
         exc.value.message == f"{SERIAL}@1 was changed after it was written (its chain hash no longer matches)"
@@ -155,7 +155,7 @@ def test_a_tampered_artifact_is_refused_by_the_sqlite3_path_too(tmp_path: Path) 
 
 def test_a_forged_activation_of_a_rejected_version_is_left_to_the_store(store_url: str) -> None:
     forge_activation(store_url, SERIAL, 2)
-    with pytest.raises(IntegrityError) as exc:
+    with pytest.raises(UnverifiedRecord) as exc:
         sqlite_reads.read(
             store_url, lambda s: s.get_artifact(SERIAL), lambda: Store.open(store_url, create=False)
         )
@@ -250,7 +250,7 @@ def test_a_column_edited_underneath_gets_the_same_answer_from_both_paths(
 
     run_underneath(store_url, EDITS_UNDERNEATH[edit])
     served = _same_on_both_paths(store_url, read)
-    assert served[0] is IntegrityError and f"{SERIAL}@3 " in served[1]
+    assert served[0] is UnverifiedRecord and f"{SERIAL}@3 " in served[1]
 
 
 def _same_on_both_paths(store_url: str, read: str):
@@ -284,7 +284,7 @@ def test_a_check_event_edited_underneath_gets_the_same_answer_from_both_paths(st
 
     served = _outcome(lambda: sqlite_reads.read(store_url, lambda s: s.checks(SERIAL), _no_fallback))
     assert served == _outcome(via_store)
-    assert served[0] is IntegrityError and "does not match its recorded sha256" in served[1]
+    assert served[0] is UnverifiedRecord and "does not match its recorded sha256" in served[1]
 
 
 def test_the_sqlite3_rows_of_calibrations_hold_the_columns_the_store_hashes(store_url: str) -> None:
@@ -305,13 +305,14 @@ def test_an_unparseable_date_edited_underneath_is_a_tampered_record_on_both_path
     store_url: str, garbage: str, read: str
 ) -> None:
     """SQLite keeps date-times as text: one edited into something that is no date fails in SQLAlchemy's own
-    parser, before any check of calibctl's; it must still be an IntegrityError (exit 1), never a traceback."""
+    parser, before any check of calibctl's; a refused record all the same (UnverifiedRecord), no traceback."""
     from tests.store.tamper import run_underneath
 
     run_underneath(store_url, f"UPDATE calibration_artifacts SET stored_at = {garbage} WHERE version = 3")
     served = _same_on_both_paths(store_url, read)
     assert (
-        served[0] is IntegrityError and "is unreadable: the database was edited outside calibctl" in served[1]
+        served[0] is UnverifiedRecord
+        and "is unreadable: the database was edited outside calibctl" in served[1]
     )
 
 
@@ -322,8 +323,8 @@ def test_an_unparseable_date_fails_db_verify_and_history_with_a_message(store_ur
     from tests.store.tamper import run_underneath
 
     run_underneath(store_url, "UPDATE calibration_artifacts SET stored_at = 'garbage' WHERE version = 3")
-    for args in (["db", "verify"], ["history", SERIAL], ["show", f"{SERIAL}@3"]):
+    for args, code in ((["db", "verify"], 1), (["history", SERIAL], 2), (["show", f"{SERIAL}@3"], 2)):
         result = CliRunner().invoke(app, ["--db", store_url, *args])
-        assert result.exit_code == 1, result.output
+        assert result.exit_code == code, result.output
         assert "a stored date and time ('garbage') is unreadable" in result.output
         assert not isinstance(result.exception, ValueError | TypeError)

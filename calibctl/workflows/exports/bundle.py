@@ -137,6 +137,21 @@ def write_folder(out: Path, payloads: Mapping[str, bytes], what: str) -> list[Pa
     return [out / name for name in payloads]
 
 
+def _foreign_entries(folder: Path, listed: object) -> list[tuple[str, str]]:
+    """(name, how a message names it) of each entry of ``folder`` that is not a plain file its manifest lists
+    (``listed``, the manifest's ``files``): a user's notes, a subfolder, a symlink (even one listed)."""
+    paths = {e.get("path") for e in listed if isinstance(e, dict)} if isinstance(listed, list) else set()
+    own = {MANIFEST} | paths
+    out = []
+    with file_errors("read the bundle folder", folder):
+        for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+            if entry.is_symlink():
+                out.append((entry.name, f"{entry.name} (a symlink)"))
+            elif entry.name not in own or not entry.is_file(follow_symlinks=False):
+                out.append((entry.name, entry.name + ("/" if entry.is_dir(follow_symlinks=False) else "")))
+    return out
+
+
 def _refuse_foreign_entries(out: Path) -> None:
     """``--force`` replaces only what the previous manifest lists: a folder that also holds anything else
     (a user's notes, a subfolder, a symlink, even one named like a bundle file) is refused, naming it."""
@@ -146,14 +161,7 @@ def _refuse_foreign_entries(out: Path) -> None:
         listed = json.loads((out / MANIFEST).read_text(encoding="utf-8")).get("files") or []
     except (OSError, ValueError, AttributeError):
         listed = []
-    own = {MANIFEST} | {e.get("path") for e in listed if isinstance(e, dict)}
-    foreign = []
-    with file_errors("read the bundle folder", out):
-        for entry in sorted(os.scandir(out), key=lambda e: e.name):
-            if entry.is_symlink():
-                foreign.append(f"{entry.name} (a symlink)")
-            elif entry.name not in own or not entry.is_file(follow_symlinks=False):
-                foreign.append(entry.name + ("/" if entry.is_dir(follow_symlinks=False) else ""))
+    foreign = [label for _, label in _foreign_entries(out, listed)]
     if foreign:
         raise UsageError(
             f"{out} holds {', '.join(foreign)}, which its {MANIFEST} does not list: --force replaces only "
@@ -167,7 +175,8 @@ def _finding(message: str, fix: str, severity: str = "error") -> Finding:
 
 
 def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
-    """Every problem of a bundle: a listed file missing, changed (sha256) or outside the folder."""
+    """Every problem of a bundle: a listed file missing, changed (sha256), a symlink or outside the folder
+    (errors); anything else in the folder that the manifest does not list (a warning naming it)."""
     folder = manifest_path.parent
     ref = f"{data.get('rig')}@{data.get('version')}"
     fix = (
@@ -205,4 +214,15 @@ def check_bundle(manifest_path: Path, data: dict[str, Any]) -> list[Finding]:
                     fix,
                 )
             )
+    names = {e.get("path") for e in listed if isinstance(e, dict)}
+    unlisted = [label for name, label in _foreign_entries(folder, listed) if name not in names]
+    if unlisted:  # calibctl did not write them, yet a robot loading the folder may read them
+        findings.append(
+            _finding(
+                f"{folder} holds {', '.join(unlisted)}, which its {MANIFEST} does not list: not part of "
+                f"{ref} as exported",
+                f"move {', '.join(unlisted)} out of the bundle folder",
+                severity="warning",
+            )
+        )
     return findings

@@ -29,7 +29,7 @@ from calibctl.config import LintThresholds, Settings
 from calibctl.core.capture.image_circle import circle_from_detail
 from calibctl.core.intrinsics import lens_checks, model_fit
 from calibctl.core.intrinsics.camera_change import changed_hint
-from calibctl.errors import InputError, IntegrityError, NotFoundError, named_list
+from calibctl.errors import InputError, NotFoundError, UnverifiedRecord, named_list
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.board.gauge_failures import failure_fix, failure_text
 from calibctl.workflows.exports import formats, ros_camera_info, trace_header
@@ -758,6 +758,13 @@ def _lint_stored(
     return result
 
 
+def unverified_result(source: str, kind: str, refused: UnverifiedRecord) -> LintResult:
+    """Lint's verdict on a stored record that does not verify: a ``content-hash`` error (exit 1), where a
+    read that would use the record cannot run (exit 2)."""
+    finding = Finding(rule="content-hash", severity="error", message=refused.message, fix=refused.hint)
+    return LintResult(source=source, kind=kind, findings=[finding])
+
+
 def lint_store(
     settings: Settings, serial: str | None, all_serials: bool, trusted: TrustedKeys | None = None
 ) -> list[LintResult]:
@@ -773,13 +780,16 @@ def lint_store(
         if all_serials:
             active, inactive = store.active_artifacts()
         else:
-            versions: dict[int, str] = {a.version: a.status for a in store.list_artifacts(serial or "")}
-            found = (
-                store.get_artifact(serial or "", None)
-                if store.active_version(serial or "") is not None
-                else None
-            )
-            active, inactive = ({found.serial: found}, {}) if found else ({}, {serial or "": versions})
+            name = serial or ""
+            found: CalibrationArtifact | UnverifiedRecord | None = None
+            versions: dict[int, str] = {}
+            try:
+                versions = {a.version: a.status for a in store.list_artifacts(name)}
+                if store.active_version(name) is not None:
+                    found = store.get_artifact(name, None)
+            except UnverifiedRecord as exc:  # a verdict here, as with --all (a read of it exits 2)
+                found = exc
+            active, inactive = ({name: found}, {}) if found else ({}, {name: versions})
         if not active and not inactive:
             raise NotFoundError(
                 f"nothing to lint: the store {store.url} holds no calibrations",
@@ -793,11 +803,8 @@ def lint_store(
         found_or_error = active.get(name)
         if found_or_error is None:
             results.append(_no_active_version(name, inactive[name]))
-        elif isinstance(found_or_error, IntegrityError):
-            finding = Finding(
-                rule="content-hash", severity="error", message=found_or_error.message, fix=found_or_error.hint
-            )
-            results.append(LintResult(source=name, kind="calibctl", findings=[finding]))
+        elif isinstance(found_or_error, UnverifiedRecord):
+            results.append(unverified_result(name, "calibctl", found_or_error))
         else:
             found = found_or_error
             results.append(_lint_stored(found, settings.lint, trusted, gauges.get(found.board.ref, ())))

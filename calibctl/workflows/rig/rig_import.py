@@ -23,7 +23,7 @@ again (this store's own export brought back, or a source imported before) is a n
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +56,9 @@ class RigImportOutcome:
     already_imported: bool
     stale: list[Finding]  # why an accepted import is not active (a member not active here)
     held_back: str | None = None  # why an accepted import was left inactive by the signature rule
+    notes: list[Finding] = field(
+        default_factory=list
+    )  # the bundle's warnings: files its manifest does not list
 
 
 def _tampered(path: Path, message: str) -> IntegrityError:
@@ -66,32 +69,35 @@ def _tampered(path: Path, message: str) -> IntegrityError:
     )
 
 
-def _from_bundle(manifest_path: Path) -> tuple[Path, Any]:
-    """The rig.json of a bundle whose files are all present and unchanged, and its manifest."""
+def _from_bundle(manifest_path: Path) -> tuple[Path, Any, list[Finding]]:
+    """The rig.json of a bundle whose files are all present and unchanged, its manifest, and the warnings on
+    the folder (what it holds that the manifest does not list)."""
     manifest = bounded.parse_json(bounded.read_text(manifest_path), str(manifest_path))
     if not bundle.is_manifest(manifest):
         raise InputError(
             f"{manifest_path} is not a calibctl bundle manifest",
             "pass a rig JSON export or a folder written by `calibctl rig export --format bundle`",
         )
-    problems = [f for f in bundle.check_bundle(manifest_path, manifest) if f.severity == "error"]
+    found = bundle.check_bundle(manifest_path, manifest)
+    problems = [f for f in found if f.severity == "error"]
     if problems:
         raise _tampered(manifest_path, problems[0].message)
     if not any(isinstance(e, dict) and e.get("path") == RIG_JSON for e in manifest.get("files") or []):
         raise _tampered(manifest_path, f"the manifest lists no {RIG_JSON}")
-    return manifest_path.parent / RIG_JSON, manifest
+    return manifest_path.parent / RIG_JSON, manifest, [f for f in found if f.severity != "error"]
 
 
-def read_rig_file(path: Path) -> RigCalibration:
+def read_rig_file(path: Path) -> tuple[RigCalibration, list[Finding]]:
     """The rig version in ``path`` (a rig JSON export, a bundle folder or its manifest.json), its content
     hash checked (IntegrityError, exit 1) and, for a bundle, every listed file and the manifest's own
-    claim."""
+    claim; and the bundle's warnings (a file in its folder that the manifest does not list)."""
     manifest = None
+    notes: list[Finding] = []
     if path.is_dir():
         path = path / bundle.MANIFEST
     manifest_path = path
     if path.name == bundle.MANIFEST:
-        path, manifest = _from_bundle(path)
+        path, manifest, notes = _from_bundle(path)
     data = bounded.parse_json(bounded.read_text(path), str(path))
     if not (isinstance(data, dict) and {"rig", "edges", "members", "content_sha256"} <= set(data)):
         raise InputError(
@@ -120,7 +126,7 @@ def read_rig_file(path: Path) -> RigCalibration:
     derived = [] if manifest is None else rig_bundle.check_derived(manifest_path, manifest, cal)
     if derived:  # a file rig.json does not derive: edited numbers (checksums recomputed), swapped cameras
         raise _tampered(manifest_path, derived[0].message)
-    return cal
+    return cal, notes
 
 
 def _import_hint(serial: str, version: int) -> str:
@@ -238,7 +244,7 @@ def import_rig_file(
     ``activate``: None = when accepted, no member stale and (a store with keys) signed by a trusted key, as
     the camera ``import`` decides; True = also unsigned or untrusted (recorded in the event's reason); False =
     never."""
-    source = read_rig_file(path)
+    source, notes = read_rig_file(path)
     trusted = keys.trusted_of(settings, trusted_keys)
     keys.require_trusted(source, str(path), trusted, require_signature)
     trust = keys.source_trust(settings, source, trusted, trusted_keys, require_signature)
@@ -252,7 +258,7 @@ def import_rig_file(
         if previous is not None:
             active = store.active_rig_version(source.rig) == previous.version
             return RigImportOutcome(
-                previous, source.ref, source.status, active, already_imported=True, stale=[]
+                previous, source.ref, source.status, active, already_imported=True, stale=[], notes=notes
             )
         _check_layout(rig, source)
         mine, stale = _rederive(store, source, rig, settings, label, trust.mark)
@@ -272,4 +278,5 @@ def import_rig_file(
         already_imported=False,
         stale=stale,
         held_back=held_back,
+        notes=notes,
     )

@@ -41,11 +41,11 @@ from calibctl.artifacts.rig import (
     RigPair,
 )
 from calibctl.config import LintThresholds, Settings
-from calibctl.errors import NotFoundError, UsageError
+from calibctl.errors import NotFoundError, UnverifiedRecord, UsageError
 from calibctl.signing import TrustedKeys
 from calibctl.workflows.edges.kinds import evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
-from calibctl.workflows.lint.lint import LintResult, lint_artifact
+from calibctl.workflows.lint.lint import LintResult, lint_artifact, unverified_result
 from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import check_rollback_request, open_store
 
@@ -210,14 +210,17 @@ def lint_rig(settings: Settings, ref: str, trusted: TrustedKeys | None = None) -
     trusted key, and so must the rig version itself."""
     name, version = parse_rig_ref(ref)
     with open_store(settings) as store:
-        rig = store.get_rig(name)
-        cal = store.get_rig_calibration(name, version)
-        members = _active_members(store, cal)
-        gauges = store.failed_gauges(a.board.ref for a in members.values() if a is not None)
-        findings = rig_findings(cal, rig, members, settings.lint, gauges)
-        findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
-        if trusted is not None:
-            findings += _signature_findings(store, cal, trusted)
+        try:
+            rig = store.get_rig(name)
+            cal = store.get_rig_calibration(name, version)
+            members = _active_members(store, cal)
+            gauges = store.failed_gauges(a.board.ref for a in members.values() if a is not None)
+            findings = rig_findings(cal, rig, members, settings.lint, gauges)
+            findings += edge_findings(evidence_of(cal), cal_versions(store, cal))
+            if trusted is not None:
+                findings += _signature_findings(store, cal, trusted)
+        except UnverifiedRecord as exc:  # the rig, its definition or a member: the verdict on it is lint's
+            return unverified_result(f"rig {ref}", "rig", exc)
     return LintResult(source=f"rig {cal.rig}@{cal.version}", kind="rig", findings=findings)
 
 

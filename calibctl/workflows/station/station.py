@@ -60,7 +60,13 @@ from calibctl.artifacts.session import CaptureSession
 from calibctl.config import Settings
 from calibctl.core.capture.arrivals import EarlyDetections
 from calibctl.core.intrinsics.solve import DEFAULT_MODEL
-from calibctl.errors import CalibctlError, DatabaseUnreachableError, IntegrityError, UsageError
+from calibctl.errors import (
+    CalibctlError,
+    DatabaseUnreachableError,
+    IntegrityError,
+    UnverifiedRecord,
+    UsageError,
+)
 from calibctl.store.repository import Store
 from calibctl.store.spool import Spool, default_spool_path
 from calibctl.workflows.board.boards import board_ref, board_spec
@@ -324,7 +330,9 @@ class _Offline:
             return exc.message, _SYNC_HINT
         for unit in done.synced:
             report(_synced_line(unit))
-        if isinstance(done.error, IntegrityError):  # a refused record: the operator sets it aside (its hint)
+        if isinstance(
+            done.error, IntegrityError | UnverifiedRecord
+        ):  # a refused record: its hint says what to do
             return done.error.message, done.error.hint or _SYNC_HINT
         if done.error is not None:
             return done.error.message, _SYNC_HINT

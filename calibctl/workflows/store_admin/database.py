@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from calibctl.config import Settings
+from calibctl.errors import IntegrityError, UnverifiedRecord
 from calibctl.store import migrate
 from calibctl.store.engine import display_url
 from calibctl.store.repository import Store
@@ -100,7 +101,10 @@ def verify(
     """Check every chain, signature, counter, event and stored hash (or only what came after ``since``)."""
     trusted = keys.trusted_of(settings, trusted_keys)
     with Store.open(settings.db_url, create=False) as store:
-        audit = store.verify(trusted, require_signature=require_signature, since=since)
+        try:
+            audit = store.verify(trusted, require_signature=require_signature, since=since)
+        except UnverifiedRecord as exc:  # a record too damaged to walk past (a date that does not parse)
+            raise IntegrityError(exc.message, exc.hint) from exc  # the verdict, exit 1: it is db verify's job
         return VerifyReport(
             store.url,
             store.counts(),

@@ -281,3 +281,31 @@ def test_frame_names_swapped_consistently_are_caught_only_by_the_manifests_own_s
     unsigned = _bundle(source, tmp_path / "unsigned")  # the rig is signed, the manifest is not
     r = _lint(unsigned, trusted)
     assert r.exit_code == 1 and "the manifest is not signed" in _text(r)
+
+
+def test_a_file_the_manifest_does_not_list_is_named_by_lint_and_import(signed, sqlite_url, tmp_path):
+    source, trusted, _ = signed
+    folder = _bundle(source, tmp_path / "bundle")
+    (folder / "notes.txt").write_text("a technician's notes")
+    r = invoke("sqlite:///unused.db", "lint", str(folder / "manifest.json"))
+    assert r.exit_code == 0, r.output  # a warning: every file the robot needs is as signed
+    assert f"{folder} holds notes.txt, which its manifest.json does not list" in _text(r)
+    url = _target(source, sqlite_url, tmp_path)
+    r = invoke(url, "rig", "import", str(folder), "--trusted-keys", str(trusted))
+    assert r.exit_code == 0 and "holds notes.txt, which its manifest.json does not list" in _text(r), r.output
+    assert _rig_versions(url) == [(1, "accepted")]
+
+
+def test_a_listed_file_turned_into_a_symlink_out_of_the_bundle_is_refused_by_import(
+    signed, sqlite_url, tmp_path
+):
+    source, _, _ = signed
+    folder = _bundle(source, tmp_path / "bundle")
+    outside = tmp_path / "outside.yaml"
+    outside.write_bytes((folder / "cam1.yaml").read_bytes())  # the same bytes: only the link is wrong
+    (folder / "cam1.yaml").unlink()
+    (folder / "cam1.yaml").symlink_to(outside)
+    url = _target(source, sqlite_url, tmp_path)
+    r = invoke(url, "rig", "import", str(folder))
+    assert r.exit_code == 1 and f"{folder / 'cam1.yaml'} is a symlink" in _text(r), r.output
+    assert "nothing was stored" in _text(r) and _rig_versions(url) == []
