@@ -126,16 +126,10 @@ def test_folds_solved_on_lanes_equal_the_sequential_run_bit_for_bit(good, model,
         )
 
 
-@pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3"])
-def test_folds_started_from_the_fit_reach_the_minimum_of_folds_started_cold(good, model, monkeypatch):
-    """A warm fold starts from the fit's K and distortion, and lands where the cold fold lands: the same
-    minimum, to well inside what any recorded figure prints (6 significant digits)."""
+def _fold_starts(monkeypatch) -> list[tuple[np.ndarray | None, np.ndarray | None]]:
+    """(K, distortion) each fold solve of validate_holdout starts from, recorded as they are asked."""
     from calibctl.core.intrinsics import validation
 
-    ses, _ = good
-    args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, model)
-    fit = solve_intrinsics(*args)
-    cold = validate_holdout(*args, fit=fit)
     starts: list[tuple[np.ndarray | None, np.ndarray | None]] = []
     real = validation.solve_intrinsics
 
@@ -144,6 +138,18 @@ def test_folds_started_from_the_fit_reach_the_minimum_of_folds_started_cold(good
         return real(*a, **k)
 
     monkeypatch.setattr(validation, "solve_intrinsics", spy)
+    return starts
+
+
+@pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3"])
+def test_folds_started_from_the_fit_reach_the_minimum_of_folds_started_cold(good, model, monkeypatch):
+    """A warm fold starts from the fit's K and distortion, and lands where the cold fold lands: the same
+    minimum, to well inside what any recorded figure prints (6 significant digits)."""
+    ses, _ = good
+    args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, model)
+    fit = solve_intrinsics(*args)
+    cold = validate_holdout(*args, fit=fit)
+    starts = _fold_starts(monkeypatch)
     warm = validate_holdout(*args, fit=fit, warm=True)
     assert len(starts) == cold.n_folds >= 3
     assert all(K is fit.camera_matrix and D is fit.dist_coeffs for K, D in starts)
@@ -155,19 +161,10 @@ def test_folds_started_from_the_fit_reach_the_minimum_of_folds_started_cold(good
 def test_rational_folds_start_cold_even_when_asked_to_start_from_the_fit(monkeypatch):
     """Rational folds started from the fit can settle in another minimum (solve.starts_warm): each fold is
     the cold solve of its views (its own k1k2 start), as without ``warm``."""
-    from calibctl.core.intrinsics import validation
-
     ses = synthesize_session(K_TRUE, D_TRUE, SIZE, n_views=8, seed=31)
     args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, "rational")
     fit = solve_intrinsics(*args, uncertainty=False)
-    starts: list[tuple[np.ndarray | None, np.ndarray | None]] = []
-    real = validation.solve_intrinsics
-
-    def spy(*a, **k):
-        starts.append((a[4], k.get("initial_dist")))
-        return real(*a, **k)
-
-    monkeypatch.setattr(validation, "solve_intrinsics", spy)
+    starts = _fold_starts(monkeypatch)
     report = validate_holdout(*args, fit=fit, warm=True)
     assert len(starts) == report.n_folds >= 3
     assert all(K is None and D is None for K, D in starts)
