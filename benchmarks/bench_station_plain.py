@@ -312,6 +312,18 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
         f"| the rest (store opens, session read back, lint, records) | {rest / len(units):.3f} | "
         f"{rest / total:.0%} |"
     )
+    solves = {
+        func: (calls, ct)
+        for (_, _, func), (_, calls, _, ct, _) in stats.items()
+        if func in ("<calibrateCamera>", "<calibrateCameraExtended>")
+    }
+    print(
+        "\nOpenCV calibrations (calls a unit, CPU ms a unit): "
+        + ", ".join(
+            f"{func.strip('<>')} {calls / len(units):.1f}, {ct / len(units) * 1e3:.1f}"
+            for func, (calls, ct) in sorted(solves.items())
+        )
+    )
 
 
 FAILED_KINDS = ("CLEAN", "ONE-BOARD", "NO-BOARD", "BLACK")

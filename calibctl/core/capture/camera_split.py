@@ -299,6 +299,7 @@ def _check_one_camera(
                 fit=group[1],
                 max_folds=HOLDOUT_FOLDS,
                 lanes=lanes,
+                warm=True,  # the group's folds start from the group's solve: its own minimum, sooner
             ),
             (a, sol_a),
             (b, sol_b),

@@ -176,6 +176,7 @@ def fit_session_lens(
     diag = math.hypot(*image_size)
     K0 = nominal_camera(image_size, focal_px if focal_px is not None else diag)
     fit = None
+    K_start, D_start = K0, np.zeros(5)
     if focal_source == "session":
         # c free; kept only when it is significantly off the centre (else a weak session lets c wander)
         fit = _calibrate(
@@ -185,21 +186,22 @@ def fit_session_lens(
             np.abs(fit[1][:2, 2] - K0[:2, 2])
             < _CENTRE_SIGNIFICANT_SIGMA * _centre_sigma_px(object_points, image_points, fit)
         ):
+            if _plausible(fit, K0, image_size):
+                # c is the centre's within its noise: the c-fixed fit starts from this one's focal length
+                # and distortion, next to its minimum (the cold start's, benchmarks/results/station.md)
+                K_start, D_start = K0.copy(), fit[2]
+                K_start[0, 0], K_start[1, 1] = fit[1][0, 0], fit[1][1, 1]
             fit = None
     if fit is None:
         fit = _calibrate(
             object_points,
             image_points,
             image_size,
-            K0,
+            K_start,
             _LENS_FLAGS | (0 if focal_source == "session" else cv2.CALIB_FIX_FOCAL_LENGTH),
+            D_start,
         )
-    plausible = fit is not None and (
-        fit[0] < _MAX_LENS_RMS_PX
-        and 0.2 * diag <= fit[1][0, 0] <= 5 * diag
-        and abs(fit[2][0]) < 2.0
-        and bool(np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)))
-    )
+    plausible = fit is not None and _plausible(fit, K0, image_size)
     if not plausible or (fit is not None and fit[0] > FISHEYE_TRY_RMS_PX):
         fisheye = _fit_fisheye(object_points, image_points, image_size)
         if fisheye is not None and (not plausible or (fit is not None and fisheye[0] < fit[0])):
@@ -264,12 +266,24 @@ def _fit_fisheye(
     )
 
 
+def _plausible(fit: _Fit, K0: np.ndarray, image_size: tuple[int, int]) -> bool:
+    """A small-model fit that explains the views: RMS, focal length, k1 and centre in their bounds."""
+    diag = math.hypot(*image_size)
+    return (
+        fit[0] < _MAX_LENS_RMS_PX
+        and 0.2 * diag <= fit[1][0, 0] <= 5 * diag
+        and abs(fit[2][0]) < 2.0
+        and bool(np.all(np.abs(fit[1][:2, 2] - K0[:2, 2]) <= _MAX_CENTRE_SHIFT_FRAC * np.asarray(image_size)))
+    )
+
+
 def _calibrate(
     object_points: Sequence[np.ndarray],
     image_points: Sequence[np.ndarray],
     image_size: tuple[int, int],
     K0: np.ndarray,
     flags: int,
+    D0: np.ndarray | None = None,
 ) -> _Fit | None:
     """(rms px, K, dist (5,), rvecs, tvecs) of cv2.calibrateCamera, or None when it fails or is not finite."""
     try:
@@ -278,7 +292,7 @@ def _calibrate(
             [np.asarray(i, np.float32).reshape(-1, 2) for i in image_points],
             (int(image_size[0]), int(image_size[1])),
             K0.copy(),
-            np.zeros(5),
+            np.zeros(5) if D0 is None else np.array(D0, np.float64),
             flags=flags,
         )
     except cv2.error:

@@ -142,7 +142,7 @@ def judge_change(
 ) -> ChangeVerdict | None:
     """Steps 1 and 2 (module docstring) on a solve of these views (capture order); None when the session is
     too short to split or a side cannot be solved with a covariance."""
-    from calibctl.core.intrinsics.solve import solve_intrinsics
+    from calibctl.core.intrinsics.solve import solve_intrinsics, starts_warm
 
     if solution.covariance is None:
         return None
@@ -151,10 +151,21 @@ def judge_change(
         return None
     obj, img = list(object_points_per_view), list(image_points_per_view)
     k = scan.split
+    # each side starts from the whole session's solve where that finds the same minimum (solve.starts_warm)
+    warm = starts_warm(solution.model)
     sides = []
     for part in (slice(0, k), slice(k, None)):
         try:
-            sides.append(solve_intrinsics(obj[part], img[part], image_size, solution.model))
+            sides.append(
+                solve_intrinsics(
+                    obj[part],
+                    img[part],
+                    image_size,
+                    solution.model,
+                    initial=solution.camera_matrix if warm else None,
+                    initial_dist=solution.dist_coeffs if warm else None,
+                )
+            )
         except NumericalError:
             return None
     names = solution.covariance.names

@@ -247,3 +247,41 @@ def test_a_fisheye_tilt_lens_is_the_projection_gates_fisheye_solve(monkeypatch):
     assert gate.sigma.keys() == old_gate.sigma.keys()
     assert all(np.isclose(gate.sigma[k], old_gate.sigma[k], rtol=1e-6, atol=0.0) for k in gate.sigma)
     solve_module.forget_recent_solves()
+
+
+def test_the_centre_fixed_lens_fit_started_from_the_centre_free_one_lands_where_a_cold_start_does(
+    monkeypatch,
+):
+    """The session's lens: when the centre-free fit keeps c at the centre within its noise, the centre-fixed
+    fit starts from its focal length and distortion, and reaches the nominal start's minimum."""
+    import cv2
+
+    from calibctl.core.capture import tilt
+    from calibctl.core.synth.corners import synthesize_session
+
+    size = (640, 480)
+    K = np.array([[780.0, 0.0, 319.5], [0.0, 780.0, 239.5], [0.0, 0.0, 1.0]])
+    ses = synthesize_session(K, np.array([-0.28, 0.1, 0.0, 0.0, 0.0]), size, n_views=10, seed=4)
+    obj, img = ses.object_points_per_view, ses.image_points_per_view
+    calls: list[tuple[np.ndarray, int, np.ndarray | None]] = []
+    fits: list = []
+    real = tilt._calibrate
+
+    def spy(o, i, s, K0, flags, D0=None):
+        calls.append((K0.copy(), flags, D0))
+        fits.append(real(o, i, s, K0, flags, D0))
+        return fits[-1]
+
+    monkeypatch.setattr(tilt, "_calibrate", spy)
+    lens, _, _ = tilt.fit_session_lens(obj, img, size, None, "session")
+    assert lens.source == "session" and len(calls) == 2
+    free = fits[0]
+    nominal = tilt.nominal_camera(size, math.hypot(*size))
+    (K_start, flags, D_start) = calls[1]
+    assert flags & cv2.CALIB_FIX_PRINCIPAL_POINT and free is not None
+    assert K_start[0, 0] == free[1][0, 0] and np.array_equal(K_start[:2, 2], nominal[:2, 2])
+    assert D_start is not None and np.array_equal(D_start, free[2])
+    cold = real(obj, img, size, nominal, flags)
+    assert cold is not None
+    np.testing.assert_allclose(lens.camera_matrix, cold[1], rtol=1e-7)
+    np.testing.assert_allclose(lens.dist_coeffs, cold[2], rtol=1e-6, atol=1e-9)

@@ -46,9 +46,9 @@ def computed(monkeypatch) -> list[str]:
     seen: list[str] = []
     real = solve_module._solve
 
-    def spy(obj, img, size, m, initial, uncertainty):
+    def spy(obj, img, size, m, initial, uncertainty, initial_dist=None):
         seen.append(m.name)
-        return real(obj, img, size, m, initial, uncertainty)
+        return real(obj, img, size, m, initial, uncertainty, initial_dist)
 
     monkeypatch.setattr(solve_module, "_solve", spy)
     return seen

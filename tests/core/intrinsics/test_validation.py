@@ -126,6 +126,50 @@ def test_folds_solved_on_lanes_equal_the_sequential_run_bit_for_bit(good, model,
         )
 
 
+def _fold_starts(monkeypatch) -> list[tuple[np.ndarray | None, np.ndarray | None]]:
+    """(K, distortion) each fold solve of validate_holdout starts from, recorded as they are asked."""
+    from calibctl.core.intrinsics import validation
+
+    starts: list[tuple[np.ndarray | None, np.ndarray | None]] = []
+    real = validation.solve_intrinsics
+
+    def spy(*a, **k):
+        starts.append((a[4], k.get("initial_dist")))
+        return real(*a, **k)
+
+    monkeypatch.setattr(validation, "solve_intrinsics", spy)
+    return starts
+
+
+@pytest.mark.parametrize("model", ["k1k2", "k1k2p1p2k3"])
+def test_folds_started_from_the_fit_reach_the_minimum_of_folds_started_cold(good, model, monkeypatch):
+    """A warm fold starts from the fit's K and distortion, and lands where the cold fold lands: the same
+    minimum, to well inside what any recorded figure prints (6 significant digits)."""
+    ses, _ = good
+    args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, model)
+    fit = solve_intrinsics(*args)
+    cold = validate_holdout(*args, fit=fit)
+    starts = _fold_starts(monkeypatch)
+    warm = validate_holdout(*args, fit=fit, warm=True)
+    assert len(starts) == cold.n_folds >= 3
+    assert all(K is fit.camera_matrix and D is fit.dist_coeffs for K, D in starts)
+    np.testing.assert_allclose(warm.fold_camera_matrices, cold.fold_camera_matrices, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(warm.holdout_per_view_rms_px, cold.holdout_per_view_rms_px, rtol=1e-6)
+    assert warm.holdout_rms_px == pytest.approx(cold.holdout_rms_px, rel=1e-7)
+
+
+def test_rational_folds_start_cold_even_when_asked_to_start_from_the_fit(monkeypatch):
+    """Rational folds started from the fit can settle in another minimum (solve.starts_warm): each fold is
+    the cold solve of its views (its own k1k2 start), as without ``warm``."""
+    ses = synthesize_session(K_TRUE, D_TRUE, SIZE, n_views=8, seed=31)
+    args = (ses.object_points_per_view, ses.image_points_per_view, SIZE, "rational")
+    fit = solve_intrinsics(*args, uncertainty=False)
+    starts = _fold_starts(monkeypatch)
+    report = validate_holdout(*args, fit=fit, warm=True)
+    assert len(starts) == report.n_folds >= 3
+    assert all(K is None and D is None for K, D in starts)
+
+
 def _sparse_outer_ring_session(seed: int):
     """Six small central boards far from the camera and two boards close up reaching the image
     edges: few corners in the outer ring, all of them in two views."""
