@@ -9,9 +9,10 @@ import json
 import numpy as np
 import yaml
 
-from calibctl.artifacts.imu import ImuModelEstimate, ImuNoiseModel
+from calibctl.artifacts.imu import ImuModelEstimate
 from calibctl.core.imu import intrinsics
 from calibctl.workflows.exports.rig_exports import kalibr_imu
+from tests.artifacts.test_imu_contract import imu_result
 from tests.store.rig_documents import RIG
 from tests.workflows.imu.imu_data import CAM, cli, make_store
 
@@ -42,16 +43,7 @@ def test_a_recording_that_cannot_pin_the_model_is_exit_1_and_never_active(record
 
 
 def test_the_kalibr_imu_yaml_carries_the_model_in_kalibrs_fields() -> None:
-    noise = ImuNoiseModel(
-        gyro_noise_density=1.7e-4,
-        accel_noise_density=2e-3,
-        gyro_random_walk=1.9e-5,
-        accel_random_walk=3e-3,
-        gravity_m_s2=9.81,
-        rate_hz=200.0,
-        variance_factors=(1.0, 1.0),
-        source="defaults",
-    )
+    noise = imu_result().noise
     x = np.arange(24) * 1e-4
     M_g, C, A_g, M_a = intrinsics.matrices(x)
 
