@@ -19,10 +19,12 @@ come to EuRoC's published pair.
 ``--joint``: both cameras against ONE IMU trajectory, gravity and biases in one solve
 (``calibrate_cameras``: each camera's own T_imu_cam and td), with the same +shift check; with
 ``--rig-pair`` also with cam1 held through yac's ``T_cam0_cam1`` (EuRoC's published stereo pair).
-``--only-joint`` skips the one-camera runs, the growth sweep and the stereo check.
+``--only-joint`` skips the one-camera runs, the growth sweep and the stereo check. ``--imu-model
+scale-misalignment``: the joint runs with Kalibr's scale-misalignment IMU model (its 24 states printed
+with their sigmas, and each camera's rotation from EuRoC's per IMU axis).
 
 Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
-     [--joint [--rig-pair] [--only-joint]]
+     [--joint [--rig-pair] [--only-joint] [--imu-model scale-misalignment]]
      python benchmarks/bench_imu_euroc.py FOLDER --growth   (the cost's growth alone: 1/4, 1/2, all)
 """
 
