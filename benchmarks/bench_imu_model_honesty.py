@@ -25,9 +25,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_imu_joint_honesty import summary, z_scores  # noqa: E402
 from machine import cpu_model, load_1min  # noqa: E402
 
-from calibctl.core.extrinsics import se3  # noqa: E402
 from calibctl.core.imu import intrinsics  # noqa: E402
 from calibctl.core.imu.calibrate import calibrate  # noqa: E402
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples  # noqa: E402
@@ -73,21 +73,12 @@ def main() -> int:
             print(f"seed {seed}: refused by " + "; ".join(f"{g.gate} {g.value:.3g}" for g in cal.failed))
         m = s.imu_intrinsics
         z_imu.append((m.x - x_true) / m.sigma)
-        d_rot = se3.rotvec_from_rotation(s.T_imu_cam[:3, :3] @ rec.truth.T_imu_cam[:3, :3].T)
-        err = np.r_[d_rot, s.T_imu_cam[:3, 3] - rec.truth.T_imu_cam[:3, 3], s.td_s - rec.truth.td_s]
-        z_ext.append(err / np.sqrt(np.diag(s.covariance_7)))
+        z_ext.append(z_scores(s, rec.truth))
     zi, ze = np.array(z_imu), np.array(z_ext)
     print(f"gate passed on {passed} of {args.seeds}")
     for name, cols in GROUPS.items():
-        v = zi[:, cols]
-        print(
-            f"{name:9s} z: mean {np.round(v.mean(axis=0), 2)}, sd {np.round(v.std(axis=0, ddof=1), 2)}, "
-            f"largest |z| {np.abs(v).max():.2f}"
-        )
-    print(
-        f"extrinsic z (rot xyz, t xyz, td): mean {np.round(ze.mean(axis=0), 2)}, "
-        f"sd {np.round(ze.std(axis=0, ddof=1), 2)}, largest |z| {np.abs(ze).max():.2f}"
-    )
+        print(f"{name:9s} z: {summary(zi[:, cols])}")
+    print(f"extrinsic z (rot xyz, t xyz, td): {summary(ze)}")
     print(f"cpu {time.process_time() - c0:.1f} s")
     return 0
 
