@@ -1,6 +1,6 @@
 """`calibctl imu solve --imu-model`: an unknown model is exit 2 in one line; a recording too short to pin
 the scale-misalignment model is exit 1, the gate naming the model and the fix, stored never active; the
-Kalibr imu.yaml export carries a solved model in Kalibr's own fields."""
+Kalibr imu.yaml export carries a solved model in Kalibr's own fields, and lint checks them."""
 
 from __future__ import annotations
 
@@ -10,9 +10,11 @@ import numpy as np
 import yaml
 
 from calibctl.artifacts.imu import ImuModelEstimate
+from calibctl.config import LintThresholds
 from calibctl.core.imu import intrinsics
 from calibctl.workflows.exports.rig_exports import kalibr_imu
-from tests.artifacts.test_imu_contract import imu_result
+from calibctl.workflows.lint.rig_files import lint_rig_file
+from tests.artifacts.test_imu_contract import imu_model_estimate, imu_result
 from tests.store.rig_documents import RIG
 from tests.workflows.imu.imu_data import CAM, cli, make_store
 
@@ -69,3 +71,20 @@ def test_the_kalibr_imu_yaml_carries_the_model_in_kalibrs_fields() -> None:
     assert {k: doc[k] for k in plain} == plain and doc["model"] == "scale-misalignment"
     assert np.array_equal(doc["gyroscopes"]["M"], M_g) and np.array_equal(doc["accelerometers"]["M"], M_a)
     assert np.array_equal(doc["gyroscopes"]["A"], A_g) and np.array_equal(doc["gyroscopes"]["C_gyro_i"], C)
+
+
+def test_lint_checks_the_model_in_a_kalibr_imu_yaml(tmp_path) -> None:
+    C = intrinsics.matrices(np.r_[np.zeros(6), [0.01, 0.0, 0.0], np.zeros(15)])[1]
+    model = imu_model_estimate().model_copy(update={"gyro_C_gyro_i": tuple(map(tuple, C.tolist()))})
+    path = tmp_path / "imu.yaml"
+    path.write_text(kalibr_imu(imu_result().noise, "/imu0", model))
+    (result,) = lint_rig_file(path, LintThresholds())
+    assert result.kind == "kalibr-imu" and not [f for f in result.findings if f.severity == "error"]
+    doc = yaml.safe_load(path.read_text())
+    doc["gyroscopes"]["C_gyro_i"][0][0] = 1.5
+    doc["accelerometers"]["M"] = [[1.0, 0.0], [0.0, 1.0]]
+    path.write_text(yaml.safe_dump(doc))
+    (result,) = lint_rig_file(path, LintThresholds())
+    errors = [f.message for f in result.findings if f.severity == "error"]
+    assert "gyroscopes.C_gyro_i is not a rotation (R R^T != I or det != 1)" in errors
+    assert "accelerometers.M is not a 3x3 matrix of numbers" in errors
