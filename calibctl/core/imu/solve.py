@@ -6,9 +6,9 @@ line delay (s per row, rows counted from the principal point's c_y), the gravity
 board frame (2), a constant gyro bias (3) and accelerometer bias (3), optionally the IMU's own
 scale, misalignment and g-sensitivity (24, ``core.imu.intrinsics``, with weak priors); plus the
 nuisance IMU trajectory, a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing
-``knot_spacing_s``). The
-camera intrinsics are held. Residuals: every corner's reprojection (px, / sigma_px), every IMU sample's
-gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)).
+``knot_spacing_s``). The camera intrinsics are held. Residuals: every corner's reprojection (px,
+/ sigma_px), every IMU sample's gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)),
+and the IMU model's priors.
 
 The solver is ``core.lm.solve_lm`` over the shared states only: each evaluation eliminates the spline
 (its normal equations are block-banded, ``core.imu.spline.BandedCholesky``), exactly as the Schur path
