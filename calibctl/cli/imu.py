@@ -55,10 +55,17 @@ def render_result(doc: dict[str, Any]) -> None:
         )
         if "imu_intrinsics" in e:
             m = e["imu_intrinsics"]
-            say(
-                f"IMU model {e['imu_model']} (deviation from identity +/- one-sigma): "
-                + ", ".join(f"{k} {v:+.5f} +/- {m['sigmas'][k]:.5f}" for k, v in m["states"].items())
-            )
+            say(f"IMU model {e['imu_model']} (deviation from identity +/- one-sigma):")
+            groups = (("mg", "M_gyro"), ("cg", "C_gyro_i rad"), ("ma", "M_accel"), ("ag", "A_gyro"))
+            for prefix, what in groups:
+                say(
+                    f"  {what}: "
+                    + ", ".join(
+                        f"{k[3:]} {v:+.5f} +/- {m['sigmas'][k]:.5f}"
+                        for k, v in m["states"].items()
+                        if k.startswith(prefix)
+                    )
+                )
         if e["line_delay_us"] is not None:
             say(f"rolling-shutter line delay {e['line_delay_us']:.3f} +/- {e['sigma_line_delay_us']} us/row")
         if doc["row_test"] is not None:

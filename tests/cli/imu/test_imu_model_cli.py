@@ -31,9 +31,11 @@ def test_an_unknown_imu_model_is_exit_2_in_one_line(recording, tmp_path) -> None
 def test_a_recording_that_cannot_pin_the_model_is_exit_1_and_never_active(recording, tmp_path) -> None:
     url = make_store(tmp_path / "c.db")
     args = ["--noise", str(recording / "imu.yaml"), "--imu-model", "scale-misalignment", "--rig", RIG]
-    r = cli(url, "imu", "solve", str(recording), "--serial", CAM, *args, "--json")
+    r = cli(url, "imu", "solve", str(recording), "--serial", CAM, *args, "-o", str(tmp_path / "o.json"))
     assert r.exit_code == 1, r.output
-    doc = json.loads(r.stdout)
+    assert "Result: REJECTED" in r.output and "IMU model scale-misalignment" in r.output
+    assert "  M_gyro: xx " in r.output and "  A_gyro: xx " in r.output  # each state with its sigma
+    doc = json.loads((tmp_path / "o.json").read_text())
     (gate,) = [g for g in doc["gates"] if g["gate"] == "imu_model_observability"]
     assert not gate["passed"] and "IMU model scale-misalignment" in gate["message"]
     assert "--imu-model calibrated" in gate["hint"]
