@@ -19,10 +19,12 @@ come to EuRoC's published pair.
 ``--joint``: both cameras against ONE IMU trajectory, gravity and biases in one solve
 (``calibrate_cameras``: each camera's own T_imu_cam and td), with the same +shift check; with
 ``--rig-pair`` also with cam1 held through yac's ``T_cam0_cam1`` (EuRoC's published stereo pair).
-``--only-joint`` skips the one-camera runs, the growth sweep and the stereo check.
+``--only-joint`` skips the one-camera runs, the growth sweep and the stereo check. ``--imu-model
+scale-misalignment``: the joint runs with Kalibr's scale-misalignment IMU model (its 24 states printed
+with their sigmas, and each camera's rotation from EuRoC's per IMU axis).
 
 Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
-     [--joint [--rig-pair] [--only-joint]]
+     [--joint [--rig-pair] [--only-joint] [--imu-model scale-misalignment]]
      python benchmarks/bench_imu_euroc.py FOLDER --growth   (the cost's growth alone: 1/4, 1/2, all)
 """
 
@@ -33,6 +35,7 @@ import os
 import sys
 import time
 import warnings
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -44,6 +47,8 @@ from machine import cpu_model, load_1min  # noqa: E402
 
 from calibctl.core.extrinsics import se3  # noqa: E402
 from calibctl.core.imu.calibrate import calibrate, calibrate_cameras  # noqa: E402
+from calibctl.core.imu.intrinsics import IMU_MODELS  # noqa: E402
+from calibctl.core.imu.intrinsics import NAMES as IMU_STATE_NAMES  # noqa: E402
 from calibctl.core.imu.plain import board_track, plain_calibration  # noqa: E402
 from calibctl.core.imu.rows import report_series, row_test  # noqa: E402
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples  # noqa: E402
@@ -140,6 +145,9 @@ def main() -> int:
     parser.add_argument("--rig-pair", action="store_true", help="--joint with cam1 held by T_cam0_cam1")
     parser.add_argument("--only-joint", action="store_true", help="only the joint runs")
     parser.add_argument(
+        "--imu-model", choices=IMU_MODELS, default="calibrated", help="the joint runs' IMU model"
+    )
+    parser.add_argument(
         "--growth",
         action="store_true",
         help="only the cost's growth: cam0's first 1/4, 1/2 and all of it, solved as `imu solve` does "
@@ -160,7 +168,7 @@ def main() -> int:
         return 0
     options = SolveOptions(knot_spacing_s=args.knot_spacing_s)
     if args.joint or args.only_joint:
-        joint(folder, options, args.shift_ms, args.rig_pair)
+        joint(folder, replace(options, imu_model=args.imu_model), args.shift_ms, args.rig_pair)
     if args.only_joint:
         return 0
     for cam in ("cam0", "cam1"):
@@ -240,8 +248,19 @@ def joint(folder: Path, options: SolveOptions, shift_ms: float, rig_pair: bool) 
             f"td {s.sigma_td_ms:.4f} ms; RMS {s.corner_rms_px:.3f} px; "
             f"gates {'pass' if cal.passed else 'FAIL ' + ', '.join(g.gate for g in cal.failed)}"
         )
+        d_rot = se3.rotvecs_from_rotations((s.T_imu_cam[:3, :3] @ EUROC_T_BS[cam][:3, :3].T)[None])[0]
+        print(f"    rotation from EuRoC's about IMU x, y, z: {np.round(np.degrees(d_rot), 3)} deg")
+        if s.imu_intrinsics is not None:  # the gyro triad's view of the camera: C_gyro_i R_imu_cam
+            R_gc = s.imu_intrinsics.C_gyro_i @ s.T_imu_cam[:3, :3]
+            d_gyro = se3.rotvecs_from_rotations((R_gc @ EUROC_T_BS[cam][:3, :3].T)[None])[0]
+            print(f"    gyro triad's rotation from EuRoC's: {np.round(np.degrees(d_gyro), 3)} deg")
+    m = cals[0].solution.imu_intrinsics if cals[0].solution is not None else None
+    if m is not None:
+        print(f"    IMU model {m.model}: least-seen information {m.min_information:.1f} (prior-scaled)")
+        for name, x, sd in zip(IMU_STATE_NAMES, m.x, m.sigma, strict=True):
+            print(f"      {name:6s} {x:+.5f} +/- {sd:.5f}")
     shifted = ImuSamples(imu.t_s + shift_ms * 1e-3, imu.gyro_rad_s, imu.accel_m_s2)
-    plain_opts = SolveOptions(knot_spacing_s=options.knot_spacing_s, folds=0, jackknife_blocks=0)
+    plain_opts = replace(options, folds=0, jackknife_blocks=0)
     base = solve_imu_cameras(imu, [f0, f1], noise, plain_opts)
     moved = solve_imu_cameras(shifted, [f0, f1], noise, plain_opts)
     print(

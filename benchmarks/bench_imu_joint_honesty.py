@@ -43,6 +43,14 @@ def z_scores(s: ImuCameraSolution, truth: ImuCameraTruth) -> np.ndarray:
     return err / np.sqrt(np.diag(s.covariance_7))
 
 
+def summary(z: np.ndarray) -> str:
+    """Per-column mean and sd of (rows, k) z-scores, and the largest |z|."""
+    return (
+        f"mean {np.round(z.mean(axis=0), 2)}, sd {np.round(z.std(axis=0, ddof=1), 2)}, "
+        f"largest |z| {np.abs(z).max():.2f}"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -72,11 +80,7 @@ def main() -> int:
             sols = solve_imu_cameras(imu, cams, noise, SolveOptions(folds=0), rig=rig)
             z[name] += [z_scores(s, t) for s, t in zip(sols, truths, strict=True)]
     for name, rows in z.items():
-        v = np.array(rows)
-        print(
-            f"{name}: {len(v)} rows, mean {np.round(v.mean(axis=0), 2)}, "
-            f"sd {np.round(v.std(axis=0, ddof=1), 2)}, largest |z| {np.abs(v).max():.2f}"
-        )
+        print(f"{name}: {len(rows)} rows, {summary(np.array(rows))}")
     print(f"cpu {time.process_time() - c0:.1f} s")
     return 0
 

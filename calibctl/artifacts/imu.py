@@ -24,6 +24,7 @@ from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_fiel
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
 Vector3 = tuple[float, float, float]
+Matrix3 = tuple[Vector3, Vector3, Vector3]
 TdConvention = Literal["t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"]
 TD_CONVENTION: TdConvention = "t_imu = t_cam + td_s (Kalibr's timeshift_cam_imu, same sign)"
 COVARIANCE_LAYOUT = (
@@ -64,6 +65,28 @@ class ImuNoiseModel(Document):
     source: str = Field(description="the imu.yaml it came from, or 'defaults'")
 
 
+class ImuModelEstimate(Document):
+    """The IMU's own intrinsics the solve estimated beside the extrinsic (core.imu.intrinsics), in Kalibr's
+    scale-misalignment meaning: gyro = M_gyro C_gyro_i w + A_gyro C_gyro_i a + b_g, accel = M_accel a +
+    b_a (w, a: body rate and specific force in the IMU frame, the accelerometer triad's)."""
+
+    model: Literal["scale-misalignment"] = Field(description="the IMU model (Kalibr's --imu-models name)")
+    gyro_M: Matrix3 = Field(description="M_gyro: gyro scale and misalignment, lower-triangular")
+    gyro_C_gyro_i: Matrix3 = Field(description="C_gyro_i: rotation of the gyro triad from the IMU frame")
+    gyro_A: Matrix3 = Field(description="A_gyro: gyro g-sensitivity, (rad/s)/(m/s^2)")
+    accel_M: Matrix3 = Field(description="M_accel: accelerometer scale and misalignment, lower-triangular")
+    states: dict[str, float] = Field(
+        description="the 24 states as solved: M - I lower triangles (mg_*, ma_*), C_gyro_i as a rotation "
+        "vector (cg_*, rad), A_gyro (ag_*)"
+    )
+    sigmas: dict[str, float] = Field(description="their one-sigma (jackknife-widened like every state)")
+    prior_sigmas: dict[str, float] = Field(description="the weak prior's one-sigma about identity")
+    min_information: float = Field(
+        description="smallest eigenvalue of the data's prior-scaled information on the states (gate: at "
+        "least 100)"
+    )
+
+
 class ImuEstimate(Document):
     """T_imu_cam and td_s with their covariance, and the nuisance states the solve estimated beside them."""
 
@@ -92,6 +115,12 @@ class ImuEstimate(Document):
     gyro_bias_rad_s: Vector3 = Field(description="gyro bias, IMU frame, rad/s")
     accel_bias_m_s2: Vector3 = Field(description="accelerometer bias, IMU frame, m/s^2")
     gravity_board_m_s2: Vector3 = Field(description="gravity in the board frame, m/s^2")
+    imu_model: ImuModelEstimate | None = Field(
+        None,
+        exclude_if=lambda model: model is None,
+        description="the IMU's scale, misalignment and g-sensitivity when solved with that model; absent "
+        "for Kalibr's 'calibrated' IMU (and in results stored before it existed: their hashes unchanged)",
+    )
 
     @model_validator(mode="after")
     def _square(self) -> ImuEstimate:

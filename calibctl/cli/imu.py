@@ -53,6 +53,19 @@ def render_result(doc: dict[str, Any]) -> None:
             + (" HELD" if e["td_held"] else f" +/- {e['sigma_td_ms']:.3f} ms")
             + ("" if e["td_crlb_ms"] is None else f"; CRLB {e['td_crlb_ms']:.3f} ms")
         )
+        if "imu_intrinsics" in e:
+            m = e["imu_intrinsics"]
+            say(f"IMU model {e['imu_model']} (deviation from identity +/- one-sigma):")
+            groups = (("mg", "M_gyro"), ("cg", "C_gyro_i rad"), ("ma", "M_accel"), ("ag", "A_gyro"))
+            for prefix, what in groups:
+                say(
+                    f"  {what}: "
+                    + ", ".join(
+                        f"{k[3:]} {v:+.5f} +/- {m['sigmas'][k]:.5f}"
+                        for k, v in m["states"].items()
+                        if k.startswith(prefix)
+                    )
+                )
         if e["line_delay_us"] is not None:
             say(f"rolling-shutter line delay {e['line_delay_us']:.3f} +/- {e['sigma_line_delay_us']} us/row")
         if doc["row_test"] is not None:
@@ -144,6 +157,15 @@ def solve(
     imu_topic: Annotated[
         str | None, typer.Option("--imu-topic", help="RECORDING a ROS 1/2 bag: its sensor_msgs/Imu topic.")
     ] = None,
+    imu_model: Annotated[
+        str,
+        typer.Option(
+            "--imu-model",
+            help="Kalibr's IMU model: calibrated (biases only), or scale-misalignment (gyro and "
+            "accelerometer scale and axis misalignment, gyro-to-accelerometer rotation, gyro "
+            "g-sensitivity, weak priors; refused when the recording cannot pin them).",
+        ),
+    ] = "calibrated",
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
     json_output: JsonFlag = False,
@@ -153,6 +175,8 @@ def solve(
     from calibctl.errors import UsageError
     from calibctl.workflows.imu import imu_solve as wf
 
+    if imu_model not in wf.IMU_MODELS:
+        raise UsageError(f"unknown --imu-model {imu_model!r}", f"use one of {', '.join(wf.IMU_MODELS)}")
     cameras = camera or ["cam0"]
     if len(cameras) != len(serial):
         raise UsageError(
@@ -176,6 +200,7 @@ def solve(
         image_topic,
         imu_topic,
         tuple(zip(cameras[1:], serial[1:], strict=True)),
+        imu_model,
     )
     outcome = wf.run_imu(state(ctx).settings(), req)
     doc = wf.result_json(outcome)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from calibctl.artifacts.imu import ImuEdgeResult, ImuEstimate, ImuGate, ImuNoiseModel
+from calibctl.artifacts.imu import ImuEdgeResult, ImuEstimate, ImuGate, ImuModelEstimate, ImuNoiseModel
 from tests.artifacts.factories import FIXED_TIME
 from tests.store.rig_documents import rig_calibration
 
@@ -78,3 +78,31 @@ def test_a_rig_version_without_an_imu_edge_hashes_as_before_and_one_with_it_carr
     assert with_imu.content_sha256 != cal.content_sha256
     edited = dict(doc, imu=[dict(doc["imu"][0], estimate=dict(doc["imu"][0]["estimate"], td_s=0.013))])
     assert type(with_imu).model_validate(edited).computed_sha256() != with_imu.content_sha256
+
+
+def imu_model_estimate() -> ImuModelEstimate:
+    eye = tuple(map(tuple, np.eye(3).tolist()))
+    zero = tuple(map(tuple, np.zeros((3, 3)).tolist()))
+    return ImuModelEstimate(
+        model="scale-misalignment",
+        gyro_M=eye,
+        gyro_C_gyro_i=eye,
+        gyro_A=zero,
+        accel_M=eye,
+        states={"mg_xx": 0.001},
+        sigmas={"mg_xx": 0.0005},
+        prior_sigmas={"mg_xx": 0.02},
+        min_information=250.0,
+    )
+
+
+def test_an_estimate_without_an_imu_model_dumps_as_before_and_one_with_it_round_trips() -> None:
+    plain = imu_result()
+    assert "imu_model" not in json.loads(plain.model_dump_json())["estimate"]
+    with_model = imu_result(imu_estimate().model_copy(update={"imu_model": imu_model_estimate()}))
+    doc = json.loads(with_model.model_dump_json())
+    assert doc["estimate"]["imu_model"]["model"] == "scale-misalignment"
+    assert ImuEdgeResult.model_validate(doc) == with_model
+    cal = rig_calibration()
+    one, two = (cal.model_copy(update={"imu": [r]}).sealed() for r in (plain, with_model))
+    assert one.content_sha256 != two.content_sha256

@@ -38,7 +38,8 @@ The estimator (``solve``): solve_imu_camera(imu, frames, noise, SolveOptions(...
     IMU sample, with stamps, image rows and the inlier mask: the report's plots), T_cam_imu,
     timeshift_cam_imu_s, plain (the PlainResult it started from), cpu_s.
     SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, estimate_line_delay,
-    bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s.
+    bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s, imu_model
+    ("calibrated" or "scale-misalignment": ``imu_intrinsics`` on the solution).
     solve_imu_cameras(imu, [frames, ...], noise, options, rig=None) -> [ImuCameraSolution, ...]:
     several cameras against ONE IMU trajectory, gravity and biases (each camera its own T_imu_cam,
     td, line delay); rig[k] = T_cam0_camk holds camera k through a pose the rig already knows.
@@ -50,7 +51,12 @@ The row test and the report's series (``rows``): row_test(solution, frames) -> R
 
 Gates (``gates``; ``core.gate.GateResult``, each with the next action in its hint):
     rotational_excitation(track), td_observability(frames, td_crlb_ms), td_rotation_correlation(
-    covariance_7, td_held), saturation(imu), imu_gaps(imu), dropped_frames(frames).
+    covariance_7, td_held), saturation(imu), imu_gaps(imu), dropped_frames(frames),
+    imu_model_observability(model, min_information).
+
+The IMU's own intrinsics (``intrinsics``): Kalibr's scale-misalignment model as 24 states about
+    identity (NAMES, PRIOR_SIGMAS), matrices(x) -> M_gyro, C_gyro_i, A_gyro, M_accel,
+    observability(covariance) -> the data's least prior-scaled information, ImuIntrinsics.
 The one call (``calibrate``): calibrate(imu, frames, noise, options, fallback_td_s=None) ->
     Calibration(solution | None, gates, held, held_reason; passed, failed): solve and gate; on a
     (td, rotation) degeneracy (the correlation gate, or a rate cross-correlation that cannot pin td)

@@ -8,6 +8,8 @@ extrinsic alone, and says so (``held``, ``held_reason``); without it the verdict
 the one held, never the rotation: the rotation is what the robot needs, and a td from a trigger or an
 earlier calibration is a better prior than any extrinsic the degenerate data would leave. A rate
 cross-correlation that cannot pin td at all (no rate variation) is the same refusal, before any solve.
+An IMU model beyond ``calibrated`` (``SolveOptions.imu_model``) adds its observability gate: a recording
+that cannot pin the model's states is refused, naming the model.
 """
 
 from __future__ import annotations
@@ -112,6 +114,7 @@ def calibrate_cameras(
                     free,
                     gates.td_rotation_correlation(h.covariance_7, True),
                     gates.td_sigma(h.sigma_td_ms, True),
+                    *_model_gates(h),
                 ],
                 "td",
                 reason,
@@ -127,7 +130,7 @@ def calibrate_cameras(
     failed = [g for pair in zip(correlation, sigma, strict=True) for g in pair if not g.passed]
     if not failed or fallback_td_s is None:
         return [
-            Calibration(s, [*rec, corr, sig], None, None)
+            Calibration(s, [*rec, corr, sig, *_model_gates(s)], None, None)
             for s, rec, corr, sig in zip(solutions, recording, correlation, sigma, strict=True)
         ]
     held = solve_imu_cameras(
@@ -149,12 +152,19 @@ def calibrate_cameras(
                 replace(sig, gate="td_sigma_free"),
                 gates.td_rotation_correlation(h.covariance_7, True),
                 gates.td_sigma(h.sigma_td_ms, True),
+                *_model_gates(h),
             ],
             "td",
             reason,
         )
         for h, rec, corr, sig in zip(held, recording, correlation, sigma, strict=True)
     ]
+
+
+def _model_gates(s: ImuCameraSolution) -> list[GateResult]:
+    """The IMU model's observability gate, when the solve estimated a model beyond ``calibrated``."""
+    m = s.imu_intrinsics
+    return [] if m is None else [gates.imu_model_observability(m.model, m.min_information)]
 
 
 def _rig_gates(

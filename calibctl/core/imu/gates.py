@@ -13,6 +13,8 @@
 - ``saturation``: the share of IMU samples at full scale or pinned at an axis' extreme.
 - ``imu_gaps`` / ``dropped_frames``: the longest IMU gap in sample periods; the share of camera frames
   missing from an even stream.
+- ``imu_model_observability``: with an IMU model beyond ``calibrated``, the smallest eigenvalue of the
+  data's prior-scaled information on its states, at least ``intrinsics.MIN_INFORMATION``.
 - ``rig_pose``: a camera a joint solve held through the rig's pose to the first camera: its corner
   RMS over its per-frame PnP RMS (``pnp_rms_px``), at most ``MAX_RIG_POSE_RATIO``.
 """
@@ -22,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibctl.core.gate import GateResult
+from calibctl.core.imu import intrinsics
 from calibctl.core.imu.model import project
 from calibctl.core.imu.plain import BoardTrack
 from calibctl.core.imu.samples import CameraFrames, ImuSamples, median_period_s
@@ -280,4 +283,26 @@ def rig_pose(corner_rms_px: float, pnp_rms_px: float) -> GateResult:
         "rig_pose_contradicted",
         "the rig's pose between the cameras does not fit these corners: re-solve the rig, or solve the "
         "cameras without --rig (each its own T_imu_cam)",
+    )
+
+
+def imu_model_observability(model: str, min_information: float) -> GateResult:
+    """The IMU model's states (``core.imu.intrinsics``): the smallest eigenvalue of the data's
+    information on their block, everything else integrated out, scaled by their prior sigmas. Under
+    ``MIN_INFORMATION`` the prior, not the recording, holds some direction of scale, misalignment or
+    g-sensitivity, and the extrinsic rotation (pinned through the accelerometer frame) is not trusted."""
+    value = float(min_information)
+    threshold = intrinsics.MIN_INFORMATION
+    passed = bool(np.isfinite(value) and value >= threshold)
+    return _verdict(
+        "imu_model_observability",
+        value,
+        threshold,
+        passed,
+        f"IMU model {model}: in its least-seen direction the data alone give "
+        f"{1.0 / np.sqrt(max(value, 1e-12)):.2g} of the prior's sigma (prior-scaled information "
+        f"{value:.1f}, at least {threshold:g})",
+        "imu_model_unobservable",
+        f"the motion cannot pin the {model} IMU model's states: record longer with turns about every axis "
+        "and tilts through gravity, or solve with --imu-model calibrated",
     )

@@ -3,10 +3,12 @@
 States: T_imu_cam (rotation 3 as a left perturbation in the IMU frame, translation 3, m), td_s
 (t_imu = t_cam + td_s; Kalibr's ``timeshift_cam_imu`` has the same sign), optionally a rolling-shutter
 line delay (s per row, rows counted from the principal point's c_y), the gravity direction in the
-board frame (2), a constant gyro bias (3) and accelerometer bias (3); plus the nuisance IMU trajectory,
-a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing ``knot_spacing_s``). The
-camera intrinsics are held. Residuals: every corner's reprojection (px, / sigma_px), every IMU sample's
-gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)).
+board frame (2), a constant gyro bias (3) and accelerometer bias (3), optionally the IMU's own
+scale, misalignment and g-sensitivity (24, ``core.imu.intrinsics``, with weak priors); plus the
+nuisance IMU trajectory, a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing
+``knot_spacing_s``). The camera intrinsics are held. Residuals: every corner's reprojection (px,
+/ sigma_px), every IMU sample's gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)),
+and the IMU model's priors.
 
 The solver is ``core.lm.solve_lm`` over the shared states only: each evaluation eliminates the spline
 (its normal equations are block-banded, ``core.imu.spline.BandedCholesky``), exactly as the Schur path
@@ -37,7 +39,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from calibctl.core.extrinsics import se3
-from calibctl.core.imu import model
+from calibctl.core.imu import intrinsics, model
 from calibctl.core.imu.plain import BoardTrack, PlainResult, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise, ImuSamples
 from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band
@@ -66,8 +68,10 @@ SHARED_NAMES = (
     "dba_x",
     "dba_y",
     "dba_z",
+    *intrinsics.NAMES,
 )
 CAMERA_STATES = 8  # the first eight shared names are each camera's own: T_imu_cam, td, line delay
+INTRINSICS = slice(22, 22 + len(intrinsics.NAMES))  # the IMU model's states (core.imu.intrinsics)
 H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
 H_TIME = 1e-6
 H_GRAV = 1e-6
@@ -89,7 +93,8 @@ class SolveOptions:
     estimating it. folds: k of the k-fold held-out residuals (0: none). jackknife_blocks: contiguous
     time blocks of the delete-one-block jackknife that can widen the sigmas (under 3: none).
     max_iterations: per LM run. margin_s: the spline's reach beyond the first and last frame (td may
-    move within it)."""
+    move within it). imu_model: one of ``core.imu.intrinsics.IMU_MODELS``; ``scale-misalignment`` adds
+    the IMU's scale, misalignment, gyro-to-accelerometer rotation and g-sensitivity with weak priors."""
 
     knot_spacing_s: float = 0.05
     corner_sigma_px: float = 0.5
@@ -101,6 +106,7 @@ class SolveOptions:
     max_iterations: int = 40
     margin_s: float = 0.1
     bias_drift: bool = False
+    imu_model: str = "calibrated"
 
 
 @dataclass
@@ -122,6 +128,7 @@ class _State:
     b_a: np.ndarray
     b_g_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
     b_a_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    imu_x: np.ndarray = field(default_factory=lambda: np.zeros(len(intrinsics.NAMES)))
     cache: dict = field(default_factory=dict, repr=False)
 
 
@@ -174,6 +181,7 @@ class ImuCameraSolution:
     cpu_s: float
     plain: PlainResult
     residuals: dict[str, np.ndarray] = field(repr=False)
+    imu_intrinsics: intrinsics.ImuIntrinsics | None = None  # with imu_model scale-misalignment
 
     @property
     def T_cam_imu(self) -> np.ndarray:
@@ -275,7 +283,14 @@ class _Problem:
             and not (name == "line_delay" and not options.estimate_line_delay)
             and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
             and not (i in held and name in SHARED_NAMES[:6])
+            and not (name in intrinsics.NAMES and options.imu_model == "calibrated")
         ]
+        # The IMU model's weak priors: (position among the active states, index into imu_x, 1/sigma^2).
+        inside = range(INTRINSICS.start, INTRINSICS.stop)
+        prior = [(k, i - INTRINSICS.start) for k, i in enumerate(self.active) if i in inside]
+        self.prior_at = np.array([k for k, _ in prior], int)
+        self.prior_of = np.array([j for _, j in prior], int)
+        self.prior_info = 1.0 / intrinsics.PRIOR_SIGMAS[self.prior_of] ** 2
         self.tau = self.t_imu - 0.5 * (self.t_imu[0] + self.t_imu[-1])
         self.R_ref = np.eye(3)
 
@@ -381,9 +396,17 @@ class _Problem:
         w0, w1, w2 = self.imu_w
         g_w = self.gravity(s.R_g)
         gy, ac = model.imu_predict(loc, w0, w1, w2, self.R_ref, g_w)
+        # What the IMU measures of the true rate and specific force (identity for ``calibrated``).
+        T = intrinsics.measurement_map(s.imu_x)
+        raw = np.concatenate([gy, ac], axis=1)
+        pred = raw @ T.T
         tau = self.tau[:, None]
         r = np.concatenate(
-            [self.gyro - gy - s.b_g - s.b_g_dot * tau, self.accel - ac - s.b_a - s.b_a_dot * tau], axis=1
+            [
+                self.gyro - pred[:, :3] - s.b_g - s.b_g_dot * tau,
+                self.accel - pred[:, 3:] - s.b_a - s.b_a_dot * tau,
+            ],
+            axis=1,
         )
         if not jacobians:
             return r
@@ -412,6 +435,10 @@ class _Problem:
                 loc, w0, w1, w2, self.R_ref, self.gravity(s.R_g @ se3.rotation_from_rotvec(-dv))
             )
             J_sh[:, 3:, 8 + a] = (ap - am) / (2 * H_GRAV)
+        if self.opt.imu_model != "calibrated":
+            J_loc = np.einsum("ij,sjk->sik", T, J_loc)
+            J_sh[:, :, 8:10] = np.einsum("ij,sjk->sik", T, J_sh[:, :, 8:10])
+            J_sh[:, :, INTRINSICS] = np.einsum("kij,sj->sik", intrinsics.map_jacobians(s.imu_x), raw)
         J_sh[:, :3, 10:13] = np.eye(3)
         J_sh[:, 3:, 13:16] = np.eye(3)
         J_sh[:, :3, 16:19] = np.eye(3) * self.tau[:, None, None]
@@ -467,6 +494,11 @@ class _Problem:
         X_B, X_g = X[:, :, :-1], X[:, :, -1]
         S = A - np.einsum("nkp,nkq->pq", cross, X_B)
         g = g_s - np.einsum("nkp,nk->p", cross, X_g)
+        if self.prior_at.size:  # the IMU model's priors at zero: residual -x, Jacobian I
+            x = s.imu_x[self.prior_of]
+            S[self.prior_at, self.prior_at] += self.prior_info
+            g[self.prior_at] -= self.prior_info * x
+            cost += float(np.sum(self.prior_info * x**2))
         s.cache = {"X_B": X_B, "X_g": X_g, "A": A}
         return DenseSystem(cost, 0.5 * (S + S.T), g)
 
@@ -493,6 +525,7 @@ class _Problem:
             b_a=s.b_a + full[13:16],
             b_g_dot=s.b_g_dot + full[16:19],
             b_a_dot=s.b_a_dot + full[19:22],
+            imu_x=s.imu_x + full[INTRINSICS],
         )
 
     def tie(self, cams: list[_Extrinsic]) -> list[_Extrinsic]:
@@ -649,6 +682,8 @@ def solve_imu_cameras(
         NumericalError: the residuals are not finite at the start.
     """
     cpu0 = time.process_time()
+    if options.imu_model not in intrinsics.IMU_MODELS:
+        raise ValueError(f"imu_model: one of {', '.join(intrinsics.IMU_MODELS)}, not {options.imu_model!r}")
     if not cameras:
         raise ImuInputError("no camera to solve: give at least one camera's frames")
     rig = list(rig) if rig is not None else [None] * len(cameras)
@@ -691,6 +726,8 @@ def solve_imu_cameras(
     iterations += more
     cov = _safe_inverse(system.H)
     A = state.cache["A"]
+    at_imu = [k for k, i in enumerate(problem.active) if INTRINSICS.start <= i < INTRINSICS.stop]
+    min_information = intrinsics.observability(cov[np.ix_(at_imu, at_imu)]) if at_imu else float("nan")
     inflation = np.ones(cov.shape[0])
     if options.jackknife_blocks >= 3:
         jk = _block_jackknife(problem, state, options.jackknife_blocks)
@@ -701,6 +738,13 @@ def solve_imu_cameras(
     r_i = problem.imu(state, False)
     g_w = problem.gravity(state.R_g)
     index = {problem.names[i]: k for k, i in enumerate(problem.active)}
+    imu_intrinsics = (
+        intrinsics.ImuIntrinsics(
+            options.imu_model, state.imu_x.copy(), np.sqrt(np.diag(cov)[at_imu]), min_information
+        )
+        if at_imu
+        else None
+    )
     cpu_s = time.process_time() - cpu0
     solutions = []
     for c, cam in enumerate(problem.cams):
@@ -778,6 +822,7 @@ def solve_imu_cameras(
                     "gyro_rad_s": r_i[:, :3],
                     "accel_m_s2": r_i[:, 3:],
                 },
+                imu_intrinsics=imu_intrinsics,
             )
         )
     return solutions

@@ -198,8 +198,13 @@ def synthesize_imu_camera(
     board_points: np.ndarray | None = None,
     corridor_wobble_rad_s: float = 0.0,
     more_cameras: tuple[np.ndarray, ...] = (),
+    imu_scale_misalignment: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> ImuCameraRecording:
-    """A camera + IMU recording (module docstring); everything from numpy.random.default_rng(seed)."""
+    """A camera + IMU recording (module docstring); everything from numpy.random.default_rng(seed).
+
+    ``imu_scale_misalignment``: (M_gyro, C_gyro_i, A_gyro, M_accel), each (3, 3), Kalibr's
+    scale-misalignment IMU: the gyro reads M_gyro C_gyro_i w + A_gyro C_gyro_i a and the accelerometer
+    M_accel a (w, a: the true body rate and specific force), before biases and noise."""
     rng = np.random.default_rng(seed)
     K = (
         camera_matrix
@@ -223,6 +228,9 @@ def synthesize_imu_camera(
     p_dd = (-pos[0] + 16 * pos[1] - 30 * pos[2] + 16 * pos[3] - pos[4]) / (12 * hh**2)
     R_w_i, _ = _imu_pose(mot, T_cam_imu, t_imu)
     accel = np.einsum("nji,nj->ni", R_w_i, p_dd - g_w)
+    if imu_scale_misalignment is not None:
+        M_g, C_gi, A_g, M_a = (np.asarray(m, np.float64) for m in imu_scale_misalignment)
+        gyro, accel = (gyro @ C_gi.T @ M_g.T + accel @ C_gi.T @ A_g.T, accel @ M_a.T)
     sg, sa = gyro_noise_density * np.sqrt(imu_rate_hz), accel_noise_density * np.sqrt(imu_rate_hz)
     gyro = gyro + np.asarray(gyro_bias_rad_s) + sg * rng.standard_normal(gyro.shape)
     accel = accel + np.asarray(accel_bias_m_s2) + sa * rng.standard_normal(accel.shape)

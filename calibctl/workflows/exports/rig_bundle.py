@@ -158,7 +158,8 @@ def text(x: RigExport, fmt: str) -> str:
                 f"solve one with `calibctl imu solve RECORDING --serial CAM --rig {x.cal.rig}`",
             )
         frame = x.names.frames.get(ev.parent_frame, ev.parent_frame)
-        return x.stamp(rig_exports.kalibr_imu(ev.noise, f"/{frame}"))
+        model = None if ev.estimate is None else ev.estimate.imu_model
+        return x.stamp(rig_exports.kalibr_imu(ev.noise, f"/{frame}", model))
     # opencv
     return x.stamp(
         rig_exports.opencv_stereo(by_name[x.left], by_name[x.right], x.T_right_left()), (x.left, x.right)

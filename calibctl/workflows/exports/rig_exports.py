@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
-from calibctl.artifacts.imu import ImuNoiseModel
+from calibctl.artifacts.imu import ImuModelEstimate, ImuNoiseModel
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
@@ -281,21 +281,28 @@ def kalibr_camchain(
     return _yaml(doc)
 
 
-def kalibr_imu(noise: ImuNoiseModel, rostopic: str = "/imu0") -> str:
+def kalibr_imu(noise: ImuNoiseModel, rostopic: str = "/imu0", model: ImuModelEstimate | None = None) -> str:
     """Kalibr's imu.yaml: the noise model a camera-IMU edge was weighted with (as given, continuous-time
-    densities in SI units), the IMU topic and its measured rate."""
-    return yaml.safe_dump(
-        {
-            "accelerometer_noise_density": noise.accel_noise_density,
-            "accelerometer_random_walk": noise.accel_random_walk,
-            "gyroscope_noise_density": noise.gyro_noise_density,
-            "gyroscope_random_walk": noise.gyro_random_walk,
-            "rostopic": rostopic,
-            "update_rate": round(noise.rate_hz, 3),
-        },
-        sort_keys=False,
-        default_flow_style=False,
-    )
+    densities in SI units), the IMU topic and its measured rate; with a solved IMU ``model``, the fields
+    Kalibr's own result imu.yaml carries for it (``model``, ``gyroscopes: M, A, C_gyro_i``,
+    ``accelerometers: M``). Without one the file has no ``model`` (Kalibr reads that as ``calibrated``)."""
+    doc: dict[str, object] = {
+        "accelerometer_noise_density": noise.accel_noise_density,
+        "accelerometer_random_walk": noise.accel_random_walk,
+        "gyroscope_noise_density": noise.gyro_noise_density,
+        "gyroscope_random_walk": noise.gyro_random_walk,
+        "rostopic": rostopic,
+        "update_rate": round(noise.rate_hz, 3),
+    }
+    if model is not None:
+        doc["model"] = model.model
+        doc["accelerometers"] = {"M": [list(row) for row in model.accel_M]}
+        doc["gyroscopes"] = {
+            "M": [list(row) for row in model.gyro_M],
+            "A": [list(row) for row in model.gyro_A],
+            "C_gyro_i": [list(row) for row in model.gyro_C_gyro_i],
+        }
+    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=False)
 
 
 def solution_sha256(solution: RigSolution) -> str:

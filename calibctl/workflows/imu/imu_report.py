@@ -13,7 +13,7 @@ from html import escape
 
 import numpy as np
 
-from calibctl.artifacts.imu import ImuEdgeResult, ImuRowTest, ImuSeries
+from calibctl.artifacts.imu import ImuEdgeResult, ImuModelEstimate, ImuRowTest, ImuSeries
 from calibctl.core.extrinsics import se3
 from calibctl.workflows.report.report_html import cell, gate_table, num, table
 from calibctl.workflows.report.report_svg import Plot
@@ -137,6 +137,26 @@ def _estimate(ev: ImuEdgeResult, k: str) -> str:
         + f"<p>td: {escape(ev.td_convention)}; CRLB: td's bound with every other state known</p>"
         + table(["", "value", "one-sigma", "CRLB"], td)
         + held
+        + _imu_model(e.imu_model, k)
+    )
+
+
+def _imu_model(m: ImuModelEstimate | None, k: str) -> str:
+    """The IMU model's states with their one-sigma and prior (nothing for the calibrated IMU)."""
+    if m is None:
+        return ""
+    rows = [
+        cell(name, cls="l")
+        + cell(num(v, 6), f"imu_model_{k}_{name}")
+        + cell(num(m.sigmas[name], 6), f"imu_model_sigma_{k}_{name}")
+        + cell(num(m.prior_sigmas[name], 4))
+        for name, v in m.states.items()
+    ]
+    return (
+        f'<p>IMU model <b data-key="imu_model_{escape(k)}">{escape(m.model)}</b>: deviation from identity '
+        "(M - I lower triangles, C_gyro_i as a rotation vector in rad, g-sensitivity in (rad/s)/(m/s^2)); "
+        f"the data's least prior-scaled information {m.min_information:.1f}</p>"
+        + table(["state", "value", "one-sigma", "prior sigma"], rows)
     )
 
 

@@ -37,6 +37,7 @@ from calibctl.artifacts.imu import (
     ImuGate,
     ImuInput,
     ImuMetrics,
+    ImuModelEstimate,
     ImuNoiseModel,
     ImuRowBin,
     ImuRowTest,
@@ -46,6 +47,7 @@ from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
 from calibctl.core.gate import GateResult
+from calibctl.core.imu import intrinsics
 from calibctl.core.imu.calibrate import Calibration, calibrate_cameras
 from calibctl.core.imu.plain import board_track
 from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_test
@@ -60,6 +62,7 @@ from calibctl.workflows.imu.bags import is_bag, read_bag
 from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
 from calibctl.workflows.store_admin.records import open_store
 
+IMU_MODELS = intrinsics.IMU_MODELS  # what --imu-model accepts
 FREE_TRY = "td_rotation_correlation_free"  # core.imu.calibrate: the correlation before td was held
 
 
@@ -84,6 +87,7 @@ class ImuRequest:
     image_topic: str | None = None  # a ROS bag's sensor_msgs/Image (or CompressedImage) topic
     imu_topic: str | None = None  # a ROS bag's sensor_msgs/Imu topic
     more: tuple[tuple[str, str], ...] = ()  # further (camera folder, serial) solved jointly with the first
+    imu_model: str = "calibrated"  # core.imu.intrinsics.IMU_MODELS: Kalibr's IMU models
 
 
 @dataclass
@@ -227,7 +231,10 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
         ]
         recs = [recs[0], *(_on_origin(r, recs[0]) for r in recs[1:])]
     options = SolveOptions(
-        knot_spacing_s=req.knot_spacing_s, estimate_line_delay=req.line_delay, folds=req.folds
+        knot_spacing_s=req.knot_spacing_s,
+        estimate_line_delay=req.line_delay,
+        folds=req.folds,
+        imu_model=req.imu_model,
     )
     try:
         cals = calibrate_cameras(
@@ -301,6 +308,33 @@ def estimate_of(outcome: ImuOutcome) -> ImuEstimate | None:
         gyro_bias_rad_s=_vec3(s.gyro_bias_rad_s),
         accel_bias_m_s2=_vec3(s.accel_bias_m_s2),
         gravity_board_m_s2=_vec3(s.gravity_w_m_s2),
+        imu_model=imu_model_of(s),
+    )
+
+
+def imu_model_of(s: ImuCameraSolution) -> ImuModelEstimate | None:
+    """The solved IMU model at full precision (None for Kalibr's ``calibrated`` IMU)."""
+    m = s.imu_intrinsics
+    if m is None:
+        return None
+
+    def rows(M: np.ndarray) -> tuple[tuple[float, float, float], ...]:
+        return tuple(_vec3(row) for row in M)
+
+    return ImuModelEstimate.model_validate(
+        {
+            "model": m.model,
+            "gyro_M": rows(m.M_gyro),
+            "gyro_C_gyro_i": rows(m.C_gyro_i),
+            "gyro_A": rows(m.A_gyro),
+            "accel_M": rows(m.M_accel),
+            "states": dict(zip(intrinsics.NAMES, (float(v) for v in m.x), strict=True)),
+            "sigmas": dict(zip(intrinsics.NAMES, (float(v) for v in m.sigma), strict=True)),
+            "prior_sigmas": dict(
+                zip(intrinsics.NAMES, (float(v) for v in intrinsics.PRIOR_SIGMAS), strict=True)
+            ),
+            "min_information": float(m.min_information),
+        }
     )
 
 
@@ -468,7 +502,15 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             "covariance_layout": COVARIANCE_LAYOUT,
             "T_cam_imu": [[round(float(v), 9) for v in row] for row in s.T_cam_imu],
             "timeshift_cam_imu_s": round(float(s.timeshift_cam_imu_s), 9),
+            "imu_model": outcome.request.imu_model,
         }
+        model = imu_model_of(s)
+        if model is not None:
+            doc["estimate"]["imu_intrinsics"] = {
+                "states": {k: round(v, 6) for k, v in model.states.items()},
+                "sigmas": {k: round(v, 6) for k, v in model.sigmas.items()},
+                "min_information": round(model.min_information, 2),
+            }
         m = metrics_of(s, outcome.request.folds)
         assert m is not None
         doc["metrics"] = m.model_dump(mode="json")

@@ -370,13 +370,27 @@ def _kalibr(data: dict[str, Any], source: str, limits: LintThresholds, trace: Tr
 
 
 def _kalibr_imu(data: dict[str, Any]) -> list[Finding]:
-    """Kalibr's imu.yaml: every noise field a positive finite number (Kalibr divides by them)."""
+    """Kalibr's imu.yaml: every noise field a positive finite number (Kalibr divides by them); with
+    ``model: scale-misalignment`` its matrices 3x3 and finite, C_gyro_i a rotation."""
     fix = "export it again with `calibctl rig export RIG --format kalibr-imu`"
     findings = []
     for key in sorted(KALIBR_IMU_FIELDS):
         v = data[key]
         if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v <= 0:
             findings.append(_error("kalibr", f"{key} = {v!r} is not a positive number", fix))
+    model = data.get("model", "calibrated")
+    if model not in ("calibrated", "scale-misalignment"):
+        findings.append(_error("kalibr", f"model {model!r} is not one calibctl writes", fix))
+    elif model == "scale-misalignment":  # Kalibr's own result fields for the model: 3x3, finite
+        gyro, accel = data.get("gyroscopes") or {}, data.get("accelerometers") or {}
+        for what, value in (
+            ("gyroscopes.M", gyro.get("M")),
+            ("gyroscopes.A", gyro.get("A")),
+            ("accelerometers.M", accel.get("M")),
+        ):
+            findings += _finite_matrix(value, (3, 3), what)[1]
+        C, bad = _finite_matrix(gyro.get("C_gyro_i"), (3, 3), "gyroscopes.C_gyro_i")
+        findings += bad + ([] if C is None else _rotation(C, "gyroscopes.C_gyro_i"))
     return findings
 
 
