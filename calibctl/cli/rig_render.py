@@ -54,6 +54,13 @@ def render_timing(timing: dict[str, Any]) -> None:
             f"  camera {name}'s frame i read at the time listed for its frame i{-shift:+d} "
             f"(--frame-shift {name}={shift:+d})"
         )
+    dropped = timing.get("exposure_dropped", {})
+    for name, ms in timing.get("exposure_offset_ms", {}).items():
+        lost = ", ".join(f"{n} {why}" for why, n in dropped.get(name, {}).items()) or "none"
+        say(
+            f"  camera {name}'s corners moved to its frames' listed times, exposed {ms:+g} ms after them "
+            f"(--exposure-offset {name}={ms:+g}); rig frames dropped: {lost}"
+        )
 
 
 def render_unmatched(rows: list[tuple[str, str, str]]) -> None:

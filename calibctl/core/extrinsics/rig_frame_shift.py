@@ -190,3 +190,49 @@ def exposure_offset(
 def offset_matters(offset: ExposureOffset) -> bool:
     """The pair fits clearly better at an offset the timestamps do not record."""
     return abs(offset.offset_s) >= MIN_OFFSET_S and offset.offset_rms_px <= OFFSET_GAIN * offset.rms_px
+
+
+# A declared exposure offset, applied: each frame's corners where they were at the frame's listed time,
+# interpolated linearly in time between the frame and the neighbour exposed on the other side of that time.
+MAX_GAP_FRAMES = 1.5  # a neighbour further than this many median frame intervals away is a gap, not a frame
+MAX_MOTION_ROWS = 0.1  # corners that move more than this fraction of the image height between the two frames
+DROP_NO_NEIGHBOUR = "no-neighbour"  # the neighbouring frame is missing or shows too few of the same corners
+DROP_GAP = "neighbour-too-far-in-time"
+DROP_MOTION = "motion-too-large"
+
+
+def median_interval_s(times_s: Mapping[int, float]) -> float:
+    """A camera's median interval between consecutive frames (seconds; nan with fewer than two)."""
+    order = sorted(times_s)
+    gaps = [times_s[k] - times_s[j] for j, k in zip(order, order[1:], strict=False) if k == j + 1]
+    return float(np.median(gaps)) if gaps else float("nan")
+
+
+def corners_at_listed_time(
+    views: Views, times_s: Mapping[int, float], k: int, offset_s: float, interval_s: float, image_rows: int
+) -> tuple[np.ndarray, np.ndarray] | str:
+    """Frame k's corners at its listed time, for a camera whose frames were exposed ``offset_s`` after
+    their listed times (``interval_s``: its median frame interval); or why the frame is dropped (DROP_*).
+
+    Frame j was exposed at ``t_j + offset_s``; the listed time ``t_k`` lies between the exposures of k and
+    j = k - 1 (a late camera) or k + 1 (an early one), so the corners are ``x_j + w (x_k - x_j)`` with
+    ``w = (t_k - t_j - offset_s) / (t_k - t_j)``, over the corner ids both frames share.
+    """
+    if offset_s == 0.0:
+        here = views.get(k)
+        return here if here is not None else DROP_NO_NEIGHBOUR
+    j = k - 1 if offset_s > 0 else k + 1
+    here, there = views.get(k), views.get(j)
+    if here is None or there is None or k not in times_s or j not in times_s:
+        return DROP_NO_NEIGHBOUR
+    span_s = times_s[k] - times_s[j]
+    if not abs(span_s) <= MAX_GAP_FRAMES * interval_s or abs(offset_s) >= abs(span_s):
+        return DROP_GAP
+    ids = np.intersect1d(here[0], there[0])
+    if len(ids) < MIN_SHARED:
+        return DROP_NO_NEIGHBOUR
+    x_k, x_j = here[1][np.searchsorted(here[0], ids)], there[1][np.searchsorted(there[0], ids)]
+    if np.linalg.norm(x_k - x_j, axis=1).max() > MAX_MOTION_ROWS * image_rows:
+        return DROP_MOTION
+    w = (span_s - offset_s) / span_s
+    return ids, x_j + w * (x_k - x_j)

@@ -19,6 +19,7 @@ whole frame off, else ``rig-exposure-offset`` for a pair exposed further apart t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -152,6 +153,26 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
         raise UsageError(
             f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera"
         )
+    return out
+
+
+def parse_exposure_offsets(items: Sequence[str]) -> dict[str, float]:
+    """``--exposure-offset SERIAL=MS`` (MS a finite signed number of milliseconds) -> {SERIAL: MS}."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            ms = float(value)
+        except ValueError:
+            ms = math.nan
+        if not sep or not name or not math.isfinite(ms):
+            raise UsageError(
+                f"--exposure-offset {item}: expected SERIAL=MS, MS the milliseconds that camera's frames "
+                "were exposed after their listed times (e.g. 0=-28)"
+            )
+        if name in out:
+            raise UsageError(f"--exposure-offset names camera {name} twice")
+        out[name] = ms
     return out
 
 
@@ -313,10 +334,13 @@ def solve_rig_folders(
     timestamps: Path | None = None,
     time_tolerance_ms: float = rig_video.DEFAULT_TIME_TOLERANCE_MS,
     frame_shifts: Mapping[str, int] | None = None,
+    exposure_offsets_ms: Mapping[str, float] | None = None,
 ) -> RigFolderRun:
     """Run the folder flow (module docstring); a video per camera, or a ``timestamps`` file, pairs the frames
     by time within ``time_tolerance_ms`` instead (workflows.rig.rig_video; ``frame_shifts``: camera -> N
-    whole frames its video is off its times, as declared, and ``rig-frame-shift`` names an undeclared one).
+    whole frames its video is off its times, as declared, and ``rig-frame-shift`` names an undeclared one;
+    ``exposure_offsets_ms``: camera -> ms its frames were exposed after their listed times, as declared, its
+    corners interpolated to those times for the rig, and ``rig-exposure-offset`` names an undeclared one).
     The first source is the root
     camera; ``settings`` the station's (gates and lint; default: ``load_settings()``), ``limits`` its lint
     thresholds when given apart; ``designs`` the pairs' design baselines (``baseline-design``); ``gauge``:
@@ -348,13 +372,17 @@ def solve_rig_folders(
     if limits is not None:
         settings = settings.model_copy(update={"lint": limits})
     timed = None
-    if frame_shifts and not rig_video.is_timed(sources, timestamps):
-        raise UsageError(
-            "--frame-shift applies to frames paired by time: give videos or --timestamps",
-            hint="photo folders pair by the last number in their names; rename the photos instead",
-        )
+    for option, stated in (("--frame-shift", frame_shifts), ("--exposure-offset", exposure_offsets_ms)):
+        if stated and not rig_video.is_timed(sources, timestamps):
+            raise UsageError(
+                f"{option} applies to frames paired by time: give videos or --timestamps",
+                hint="photo folders pair by the last number in their names; rename the photos instead",
+            )
     if rig_video.is_timed(sources, timestamps):
-        timed = rig_video.capture_timed(sources, spec, timestamps, time_tolerance_ms, workers, frame_shifts)
+        offsets_s = {name: ms / 1e3 for name, ms in (exposure_offsets_ms or {}).items()}
+        timed = rig_video.capture_timed(
+            sources, spec, timestamps, time_tolerance_ms, workers, frame_shifts, offsets_s
+        )
         match, outcomes = timed.match, {name: list(c.outcomes) for name, c in timed.cameras.items()}
         gathered = {name: (c.source, c.max_gray) for name, c in timed.cameras.items()}
     else:
@@ -398,7 +426,9 @@ def solve_rig_folders(
     }
     if model == "auto":
         model = _auto_rig_model(fits, refine_intrinsics)
-    views = rig_views(cameras, match, outcomes, spec)
+    # a declared exposure offset moves that camera's corners for the rig alone; its lens keeps its frames
+    views = rig_views(cameras, match, {n: rig_video.rig_outcomes(timed, n) if timed else outcomes[n]
+                                       for n in cameras}, spec)  # fmt: skip
     identity.refuse(
         identity.shared_images(
             {n: [o.sha256 for o in outcomes[n] if o.corners_px is not None] for n in cameras}
