@@ -38,7 +38,6 @@ import numpy as np
 from machine import cpu_model, load_1min  # benchmarks/machine.py (scripts run from benchmarks/)
 
 from calibctl.core.board.board_spec import BoardSpec, make_charuco_board
-from calibctl.core.board.views import BoardView
 from calibctl.core.capture.detect import detect_board
 from calibctl.core.extrinsics.rig_frame_shift import moved_corners
 from calibctl.core.extrinsics.rig_problem import RigViews
@@ -47,7 +46,13 @@ from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translat
 from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.errors import CalibctlError
-from calibctl.workflows.rig.rig_folders import USABLE, calibrate_member, parse_frame_shifts, solve_rig_folders
+from calibctl.workflows.rig.rig_folders import (
+    USABLE,
+    calibrate_member,
+    parse_exposure_offsets,
+    parse_frame_shifts,
+    solve_rig_folders,
+)
 
 DATASETS = Path(
     os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
@@ -248,12 +253,15 @@ def timing_tables(views: dict, intr: dict, shifts: dict[str, int]) -> list[str]:
     return lines
 
 
-def calibctl_run(tolerance_ms: float, model: str, shifts: dict[str, int]) -> dict[str, object]:
+def calibctl_run(
+    tolerance_ms: float, model: str, shifts: dict[str, int], offsets_ms: dict[str, float]
+) -> dict[str, object]:
     start = time.perf_counter()
     sources = {cam: SET / "extrinsic" / f"cam_{cam}.mp4" for cam in CAMS}
     try:
         run = solve_rig_folders(sources, BOARD, model, timestamps=SET / "extrinsic" / "timestamps.csv",
-                                time_tolerance_ms=tolerance_ms, frame_shifts=shifts)  # fmt: skip
+                                time_tolerance_ms=tolerance_ms, frame_shifts=shifts,
+                                exposure_offsets_ms=offsets_ms)  # fmt: skip
     except CalibctlError as exc:
         return {"refused": exc.message, "time_s": time.perf_counter() - start}
     elapsed = time.perf_counter() - start
@@ -303,27 +311,23 @@ def bootstrap(result: dict[str, object], resamples: int, seed: int = 0) -> list[
     cams, spec = run.cameras, BOARD  # type: ignore[attr-defined]
     model = result["model"]
     by_path = {o.path: o for c in cams for o in run.outcomes[c]}  # type: ignore[attr-defined]
-    frames = [photos for _, photos in run.match.frames]  # type: ignore[attr-defined]
+    # the rig rows as the run solved them (a declared exposure offset moves that camera's corners); the
+    # members calibrate on their frames as detected
+    frames = list(zip([p for _, p in run.match.frames], run.views.rows, strict=True))  # type: ignore[attr-defined]
 
     def usable(o: object) -> bool:
         return o is not None and o.status in USABLE and o.corner_ids is not None  # type: ignore[attr-defined]
 
-    def numbers(drawn: list[dict[str, str]]) -> list[tuple[float, float, float, float]]:
-        views = {c: [by_path[p[c]] for p in drawn if c in p and usable(by_path[p[c]])] for c in cams}
+    def numbers(
+        drawn: list[tuple[dict[str, str], tuple[object, ...]]],
+    ) -> list[tuple[float, float, float, float]]:
+        views = {c: [by_path[p[c]] for p, _ in drawn if c in p and usable(by_path[p[c]])] for c in cams}
         members = [
             calibrate_member(c, [spec.object_points()[o.corner_ids] for o in vs], [o.corners_px for o in vs],
                              IMAGE_SIZE, str(model))[0]
             for c, vs in views.items()
         ]  # fmt: skip
-        rows = tuple(
-            tuple(
-                BoardView(f"{i}", by_path[p[c]].corner_ids, by_path[p[c]].corners_px)
-                if c in p and usable(by_path[p[c]])
-                else None
-                for c in cams
-            )
-            for i, p in enumerate(drawn)
-        )
+        rows = tuple(row for _, row in drawn)
         sol = solve_rig(
             RigViews(cams, spec.object_points(), tuple(str(i) for i in range(len(drawn))), rows), members
         )
@@ -375,8 +379,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--runs",
-        default="5:opencv-default:1=1,5:opencv-default,5:k1k2:1=1,40:opencv-default:1=1",
-        help="TOLERANCE_MS:MODEL[:CAM=SHIFT] of each calibctl run (SHIFT: --frame-shift)",
+        default="5:opencv-default:1=1:0~-28,5:opencv-default:1=1:2~30:3~25,5:opencv-default:1=1,5:k1k2:1=1:0~-28",
+        help="TOLERANCE_MS:MODEL[:CAM=SHIFT][:CAM~MS] of each calibctl run (SHIFT: --frame-shift, "
+        "MS: --exposure-offset)",
     )
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument(
@@ -408,12 +413,14 @@ def main() -> int:
     plain_shifted = plain_opencv(views, time.perf_counter(), SHIFT)
     runs = {}
     for item in args.runs.split(","):
-        tol, model, *shift = item.split(":")
-        shifts = parse_frame_shifts(shift)
+        tol, model, *extra = item.split(":")
+        shifts = parse_frame_shifts([e for e in extra if "~" not in e])
+        offsets = parse_exposure_offsets([e.replace("~", "=") for e in extra if "~" in e])
         label = f"{float(tol):g} ms, {model}" + "".join(
             f", frame shift {c}={n:+d}" for c, n in shifts.items()
         )
-        runs[label] = calibctl_run(float(tol), model, shifts)
+        label += "".join(f", exposure offset {c}={ms:+g} ms" for c, ms in offsets.items())
+        runs[label] = calibctl_run(float(tol), model, shifts, offsets)
     lines += [
         "| route | camera | baseline T_0_c mm | rotation deg | vs recorder: translation mm | rotation deg |",
         "|---|---|---|---|---|---|",
