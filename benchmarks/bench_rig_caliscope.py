@@ -318,7 +318,7 @@ def bootstrap(result: dict[str, object], resamples: int, seed: int = 0) -> list[
     by_path = {o.path: o for c in cams for o in run.outcomes[c]}  # type: ignore[attr-defined]
     # the rig rows as the run solved them (a declared exposure offset moves that camera's corners); the
     # members calibrate on their frames as detected
-    frames = list(zip([p for _, p in run.match.frames], run.views.rows, strict=True))  # type: ignore[attr-defined]
+    frames = list(zip([p for _, p in run.match.frames], run.views.views, strict=True))  # type: ignore[attr-defined]
 
     def usable(o: object) -> bool:
         return o is not None and o.status in USABLE and o.corner_ids is not None  # type: ignore[attr-defined]
@@ -385,6 +385,7 @@ def offset_scan(camera: str, offsets_ms: list[float], resamples: int, seed: int 
         cap = rig_video.with_exposure_offsets(timed, {camera: ms / 1e3}) if ms else timed
         views = rig_views(CAMS, cap.match, {c: rig_video.rig_outcomes(cap, c) for c in CAMS}, BOARD)
         sol = solve_rig(views, members)
+        views = sol.views  # the frames the solve kept
         residuals = rig_covariance(views, members, sol.cam_poses, sol.board_poses, False).normal_equations
         per_view.append(
             {
