@@ -20,9 +20,10 @@ whole frame off, else ``rig-exposure-offset`` for a pair exposed further apart t
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -71,6 +72,7 @@ from calibctl.workflows.rig import rig_video
 from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
 from calibctl.workflows.rig.rig_members import member_findings
 
+T = TypeVar("T")
 USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
 SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
 
@@ -156,43 +158,40 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
     return out
 
 
-def parse_exposure_offsets(items: Sequence[str]) -> dict[str, float]:
-    """``--exposure-offset SERIAL=MS`` (MS a finite signed number of milliseconds) -> {SERIAL: MS}."""
-    out: dict[str, float] = {}
+def _per_camera(items: Sequence[str], option: str, read: Callable[[str], T], expected: str) -> dict[str, T]:
+    """``OPTION SERIAL=VALUE`` items -> {SERIAL: read(VALUE)}; ``read`` raises ValueError on a bad value."""
+    out: dict[str, T] = {}
     for item in items:
         name, sep, value = item.partition("=")
         try:
-            ms = float(value)
+            read_value = read(value)
         except ValueError:
-            ms = math.nan
-        if not sep or not name or not math.isfinite(ms):
-            raise UsageError(
-                f"--exposure-offset {item}: expected SERIAL=MS, MS the milliseconds that camera's frames "
-                "were exposed after their listed times (e.g. 0=-28)"
-            )
+            read_value = None
+        if not sep or not name or read_value is None:
+            raise UsageError(f"{option} {item}: expected {expected}")
         if name in out:
-            raise UsageError(f"--exposure-offset names camera {name} twice")
-        out[name] = ms
+            raise UsageError(f"{option} names camera {name} twice")
+        out[name] = read_value
     return out
+
+
+def _finite_ms(value: str) -> float:
+    ms = float(value)
+    if not math.isfinite(ms):
+        raise ValueError(value)
+    return ms
+
+
+def parse_exposure_offsets(items: Sequence[str]) -> dict[str, float]:
+    """``--exposure-offset SERIAL=MS`` (MS a finite signed number of milliseconds) -> {SERIAL: MS}."""
+    expected = "SERIAL=MS, MS the milliseconds that camera's frames were exposed after their listed times"
+    expected += " (e.g. 0=-28)"
+    return _per_camera(items, "--exposure-offset", _finite_ms, expected)
 
 
 def parse_frame_shifts(items: Sequence[str]) -> dict[str, int]:
     """``--frame-shift SERIAL=N`` (N a whole number of frames, signed) -> {SERIAL: N}."""
-    out: dict[str, int] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            n = int(value)
-        except ValueError:
-            n = None
-        if not sep or not name or n is None:
-            raise UsageError(
-                f"--frame-shift {item}: expected SERIAL=N, N a whole number of frames (e.g. 1=+1)"
-            )
-        if name in out:
-            raise UsageError(f"--frame-shift names camera {name} twice")
-        out[name] = n
-    return out
+    return _per_camera(items, "--frame-shift", int, "SERIAL=N, N a whole number of frames (e.g. 1=+1)")
 
 
 def typed_spec(
