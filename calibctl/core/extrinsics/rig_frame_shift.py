@@ -236,3 +236,53 @@ def corners_at_listed_time(
         return DROP_MOTION
     w = (span_s - offset_s) / span_s
     return ids, x_j + w * (x_k - x_j)
+
+
+# An exposure offset estimated from the data: the rig's residual over the offset, its minimum and the spread
+# of that minimum over a bootstrap of the rig frames.
+ESTIMATE_STEP_MS = 5.0
+ESTIMATE_RESAMPLES = 200
+
+
+def offset_minimum(
+    offsets_ms: Sequence[float],
+    squared_px2: Sequence[Mapping[tuple[str, int], float]],
+    resamples: int = ESTIMATE_RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float] | None:
+    """The offset where the mean squared residual is least (a parabola through the lowest scanned offset and
+    its neighbours) and its sd over a bootstrap of the rig frames; None when the lowest offset is at either
+    end of the scan, the parabola does not open upward (no minimum inside the scan), or the minimum leaves
+    more than OFFSET_GAIN of the RMS at offset 0 (a residual that barely changes with the offset cannot
+    place it: a board moving steadily hides an offset in the poses, and the minimum then lands anywhere).
+
+    Args:
+        offsets_ms: the scanned offsets, increasing, evenly spaced.
+        squared_px2: per offset, (rig frame, camera) -> mean squared residual of that view (px^2); only the
+            views every offset has are compared.
+    """
+    common = sorted(set.intersection(*(set(v) for v in squared_px2)))
+    frames = sorted({f for f, _ in common})
+    by_frame = {f: [k for k in common if k[0] == f] for f in frames}
+    table = np.array([[v[k] for k in common] for v in squared_px2])  # (offsets, views)
+    column = {k: i for i, k in enumerate(common)}
+
+    def lowest(drawn: Sequence[str]) -> float | None:
+        cols = [column[k] for f in drawn for k in by_frame[f]]
+        ms2 = table[:, cols].mean(axis=1)
+        i = int(np.argmin(ms2))
+        if i in (0, len(offsets_ms) - 1):
+            return None
+        a, b, _ = np.polyfit(offsets_ms[i - 1 : i + 2], ms2[i - 1 : i + 2], 2)
+        return float(-b / (2 * a)) if a > 0 else None
+
+    best = lowest(frames) if frames else None
+    ms2 = table.mean(axis=1) if frames else np.zeros(0)
+    if best is None or not ms2.min() <= OFFSET_GAIN**2 * ms2[list(offsets_ms).index(0.0)]:
+        return None
+    rng = np.random.default_rng(seed)
+    boot = [lowest([frames[i] for i in rng.integers(0, len(frames), len(frames))]) for _ in range(resamples)]
+    found = [b for b in boot if b is not None]
+    if len(found) < 0.9 * resamples:  # the minimum leaves the scan for many resamples: no stated sigma
+        return None
+    return best, float(np.std(found))

@@ -97,6 +97,7 @@ class VideoRigCapture:
     # the outcomes the rig solve reads: a declared offset's camera's corners at their frames' listed times
     rig_outcomes: Mapping[str, tuple[ImageOutcome, ...]] | None = None
     dropped: Mapping[str, Mapping[str, int]] | None = None  # camera -> why -> rig frames it left
+    estimated_sd_s: Mapping[str, float] | None = None  # the offsets estimated from the data: their sd
 
 
 def is_timed(sources: Mapping[str, Path], timestamps: Path | None) -> bool:
@@ -454,6 +455,7 @@ def timing_json(capture: VideoRigCapture) -> dict[str, object]:
         "frame_shift": dict(capture.frame_shifts or {}),
         "exposure_offset_ms": {name: s * 1e3 for name, s in (capture.exposure_offsets_s or {}).items()},
         "exposure_dropped": {name: dict(why) for name, why in (capture.dropped or {}).items()},
+        "exposure_offset_sd_ms": {name: s * 1e3 for name, s in (capture.estimated_sd_s or {}).items()},
     }
 
 

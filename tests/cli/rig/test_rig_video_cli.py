@@ -198,3 +198,18 @@ def test_an_exposure_offset_on_photo_folders_is_refused(run, tmp_path):
         (tmp_path / name).mkdir()
     args = ["--source", f"L={tmp_path / 'L'}", "--source", f"R={tmp_path / 'R'}", *CHARUCO]
     _refused(run(*args, "--exposure-offset", "R=30"), "--exposure-offset applies to frames paired by time")
+
+
+@pytest.mark.parametrize(
+    ("extra", "says"),
+    [
+        (["--estimate-exposure-offset", "Z"], ("--estimate-exposure-offset names camera Z", "A, B")),
+        (
+            ["--estimate-exposure-offset", "B", "--exposure-offset", "B=30"],
+            ("camera B's exposure offset is both declared and to be estimated",),
+        ),
+    ],
+)
+def test_an_offset_to_estimate_for_no_camera_or_declared_too_is_refused(run, videos, tmp_path, extra, says):
+    ts = _timestamps(tmp_path)
+    _refused(run(*_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--timestamps", str(ts), *extra), *says)

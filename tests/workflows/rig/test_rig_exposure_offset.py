@@ -3,7 +3,8 @@ them. With a board that sways, the pairs with CAM2 are named (rig-exposure-offse
 and CAM0 / CAM1 first; the pair CAM0-CAM1, exposed together, is not. With a board that drifts and turns
 steadily the offset hides in the poses (the residual barely moves, CAM2 lands many sigma off); declared
 (--exposure-offset CAM2=+30), CAM2's corners are interpolated to its listed times and the rig recovers the
-truth within its sigma."""
+truth within its sigma. Estimated from the data (--estimate-exposure-offset CAM2), the swaying board gives the
+offset within its sd; the steady one cannot show it and the estimate is refused."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from calibctl.core.extrinsics.rig_frame_shift import DROP_NO_NEIGHBOUR
 from calibctl.core.extrinsics.se3 import rotation_angle_deg
 from calibctl.core.synth.pinhole import render_view
 from calibctl.core.synth.rig import RigTruth, synthesize_rig
+from calibctl.errors import NumericalError
 from calibctl.workflows.rig.rig_folders import solve_rig_folders
 from calibctl.workflows.rig.rig_video import EXPOSURE_OFFSET
 from tests.core.rig_sessions import true_members
@@ -131,3 +133,18 @@ def test_a_declared_offset_recovers_the_truth_a_steady_motion_hides(drifting_rig
     assert declared.timing["exposure_dropped"] == {"CAM2": {DROP_NO_NEIGHBOUR: 1}}
     for camera, z in _z(truth, declared).items():
         assert max(z) < Z_MAX, camera
+
+
+def test_an_estimated_offset_lies_within_its_sd_of_the_truth(swaying_rig):
+    run = _solve(*swaying_rig, estimate_offsets=["CAM2"])
+    assert run.timing is not None
+    (ms,), (sd_ms,) = run.timing["exposure_offset_ms"].values(), run.timing["exposure_offset_sd_ms"].values()
+    assert 0 < sd_ms < 5.0
+    assert abs(ms - LAG_S[2] * 1e3) < Z_MAX * sd_ms
+    assert not [f for f in run.findings if f.rule == EXPOSURE_OFFSET]
+
+
+def test_an_offset_a_steady_board_cannot_show_is_not_estimated(drifting_rig):
+    with pytest.raises(NumericalError, match="CAM2's exposure offset cannot be estimated") as refused:
+        _solve(*drifting_rig, estimate_offsets=["CAM2"])
+    assert "--exposure-offset CAM2=MS" in (refused.value.hint or "")
