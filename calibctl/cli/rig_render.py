@@ -58,7 +58,7 @@ def render_timing(timing: dict[str, Any]) -> None:
     for name, ms in timing.get("exposure_offset_ms", {}).items():
         lost = ", ".join(f"{n} {why}" for why, n in dropped.get(name, {}).items()) or "none"
         how = (
-            f"estimated {ms:+.1f} ms (frame-bootstrap sd {sd[name]:.1f} ms)"
+            f"estimated from the data, frame-bootstrap sd {sd[name]:.1f} ms"
             if name in sd
             else f"--exposure-offset {name}={ms:+g}"
         )
