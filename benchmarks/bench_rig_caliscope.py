@@ -47,7 +47,16 @@ from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translat
 from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.se3 import invert, rotation_angle_deg
 from calibctl.errors import CalibctlError
-from calibctl.workflows.rig.rig_folders import USABLE, calibrate_member, parse_frame_shifts, solve_rig_folders
+from calibctl.workflows.rig import rig_video
+from calibctl.workflows.rig.rig_folders import (
+    USABLE,
+    calibrate_member,
+    parse_exposure_offsets,
+    parse_frame_shifts,
+    rig_views,
+    self_calibrated,
+    solve_rig_folders,
+)
 
 DATASETS = Path(
     os.environ.get("CALIBCTL_TEST_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
@@ -59,6 +68,7 @@ CAMS = ("0", "1", "2", "3")
 BOARD = BoardSpec.charuco(4, 5, 0.054, 0.054 * 0.75, "DICT_4X4_1000", inverted=True)
 IMAGE_SIZE = (1280, 720)
 FPS = 6.0  # the recordings' frame rate (timestamps.csv: 166.7 ms apart)
+Row = tuple[BoardView | None, ...]  # one rig frame: each camera's view
 SHIFT = {"1": 1}  # camera 1's video is one frame off its timestamps (rig-frame-shift)
 
 
@@ -248,12 +258,15 @@ def timing_tables(views: dict, intr: dict, shifts: dict[str, int]) -> list[str]:
     return lines
 
 
-def calibctl_run(tolerance_ms: float, model: str, shifts: dict[str, int]) -> dict[str, object]:
+def calibctl_run(
+    tolerance_ms: float, model: str, shifts: dict[str, int], offsets_ms: dict[str, float]
+) -> dict[str, object]:
     start = time.perf_counter()
     sources = {cam: SET / "extrinsic" / f"cam_{cam}.mp4" for cam in CAMS}
     try:
         run = solve_rig_folders(sources, BOARD, model, timestamps=SET / "extrinsic" / "timestamps.csv",
-                                time_tolerance_ms=tolerance_ms, frame_shifts=shifts)  # fmt: skip
+                                time_tolerance_ms=tolerance_ms, frame_shifts=shifts,
+                                exposure_offsets_ms=offsets_ms)  # fmt: skip
     except CalibctlError as exc:
         return {"refused": exc.message, "time_s": time.perf_counter() - start}
     elapsed = time.perf_counter() - start
@@ -303,27 +316,23 @@ def bootstrap(result: dict[str, object], resamples: int, seed: int = 0) -> list[
     cams, spec = run.cameras, BOARD  # type: ignore[attr-defined]
     model = result["model"]
     by_path = {o.path: o for c in cams for o in run.outcomes[c]}  # type: ignore[attr-defined]
-    frames = [photos for _, photos in run.match.frames]  # type: ignore[attr-defined]
+    # the rig rows as the run solved them (a declared exposure offset moves that camera's corners); the
+    # members calibrate on their frames as detected
+    frames = list(zip([p for _, p in run.match.frames], run.views.views, strict=True))  # type: ignore[attr-defined]
 
     def usable(o: object) -> bool:
         return o is not None and o.status in USABLE and o.corner_ids is not None  # type: ignore[attr-defined]
 
-    def numbers(drawn: list[dict[str, str]]) -> list[tuple[float, float, float, float]]:
-        views = {c: [by_path[p[c]] for p in drawn if c in p and usable(by_path[p[c]])] for c in cams}
+    def numbers(
+        drawn: list[tuple[dict[str, str], Row]],
+    ) -> list[tuple[float, float, float, float]]:
+        views = {c: [by_path[p[c]] for p, _ in drawn if c in p and usable(by_path[p[c]])] for c in cams}
         members = [
             calibrate_member(c, [spec.object_points()[o.corner_ids] for o in vs], [o.corners_px for o in vs],
                              IMAGE_SIZE, str(model))[0]
             for c, vs in views.items()
         ]  # fmt: skip
-        rows = tuple(
-            tuple(
-                BoardView(f"{i}", by_path[p[c]].corner_ids, by_path[p[c]].corners_px)
-                if c in p and usable(by_path[p[c]])
-                else None
-                for c in cams
-            )
-            for i, p in enumerate(drawn)
-        )
+        rows = tuple(row for _, row in drawn)
         sol = solve_rig(
             RigViews(cams, spec.object_points(), tuple(str(i) for i in range(len(drawn))), rows), members
         )
@@ -361,6 +370,60 @@ def bootstrap(result: dict[str, object], resamples: int, seed: int = 0) -> list[
     return lines
 
 
+def offset_scan(camera: str, offsets_ms: list[float], resamples: int, seed: int = 0) -> list[str]:
+    """Camera ``camera``'s exposure offset from the data: the rig (opencv-default members self-calibrated
+    once, camera 1's frame shift declared) solved with that camera's corners interpolated to its listed times
+    at each offset; the joint RMS over the camera views every offset keeps, its minimum by a parabola through
+    the lowest point and its neighbours, and the minimum's sd over a bootstrap of the rig frames (poses kept
+    from each offset's solve)."""
+    start = time.perf_counter()
+    sources = {cam: SET / "extrinsic" / f"cam_{cam}.mp4" for cam in CAMS}
+    timed = rig_video.capture_timed(sources, BOARD, SET / "extrinsic" / "timestamps.csv", 5.0, None, SHIFT)
+    members = [self_calibrated(c, timed.cameras[c].outcomes, BOARD, "opencv-default")[0] for c in CAMS]
+    per_view: list[dict[tuple[str, int], float]] = []  # (rig frame, camera) -> mean squared residual px^2
+    for ms in offsets_ms:
+        cap = rig_video.with_exposure_offsets(timed, {camera: ms / 1e3}) if ms else timed
+        views = rig_views(CAMS, cap.match, {c: rig_video.rig_outcomes(cap, c) for c in CAMS}, BOARD)
+        sol = solve_rig(views, members)
+        views = sol.views  # the frames the solve kept
+        residuals = rig_covariance(views, members, sol.cam_poses, sol.board_poses, False).normal_equations
+        per_view.append(
+            {
+                (views.frames[f], c): float(np.mean(np.sum(r**2, axis=1)))
+                for (f, c), r in residuals.residuals_px.items()
+            }
+        )
+    common = sorted(set.intersection(*(set(v) for v in per_view)))
+    frames = sorted({f for f, _ in common})
+    by_frame = {f: [k for k in common if k[0] == f] for f in frames}
+
+    def minimum(drawn: list[str]) -> tuple[float, np.ndarray]:
+        keys = [k for f in drawn for k in by_frame[f]]
+        ms2 = np.array([np.mean([v[k] for k in keys]) for v in per_view])
+        i = int(np.clip(np.argmin(ms2), 1, len(offsets_ms) - 2))
+        a, b, _ = np.polyfit(offsets_ms[i - 1 : i + 2], ms2[i - 1 : i + 2], 2)
+        return float(-b / (2 * a)) if a > 0 else float(offsets_ms[int(np.argmin(ms2))]), np.sqrt(ms2)
+
+    best, rms = minimum(frames)
+    rng = np.random.default_rng(seed)
+    boot = [
+        minimum([frames[i] for i in rng.integers(0, len(frames), len(frames))])[0] for _ in range(resamples)
+    ]
+    lines = [
+        f"Camera {camera}'s exposure offset from the data ({len(frames)} rig frames, {len(common)} camera "
+        "views "
+        f"kept at every offset; {time.perf_counter() - start:.1f} s):",
+        "",
+        "| offset ms | " + " | ".join(f"{ms:+g}" for ms in offsets_ms) + " |",
+        "|---|" + "---|" * len(offsets_ms),
+        "| joint RMS px | " + " | ".join(f"{r:.3f}" for r in rms) + " |",
+        "",
+        f"Minimum at {best:+.1f} ms; frame bootstrap ({resamples} resamples) sd {np.std(boot):.1f} ms "
+        f"(5-95 %: {np.percentile(boot, 5):+.1f} .. {np.percentile(boot, 95):+.1f} ms).",
+    ]
+    return lines
+
+
 def _compare(T: np.ndarray, ref: np.ndarray) -> tuple[float, float, float, float]:
     """baseline mm, rotation deg, |t - t_ref| mm, rotation between the two deg."""
     return (
@@ -375,10 +438,17 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--runs",
-        default="5:opencv-default:1=1,5:opencv-default,5:k1k2:1=1,40:opencv-default:1=1",
-        help="TOLERANCE_MS:MODEL[:CAM=SHIFT] of each calibctl run (SHIFT: --frame-shift)",
+        default="5:opencv-default:1=1:0~-28,5:opencv-default:1=1:2~30:3~25,5:opencv-default:1=1,5:k1k2:1=1:0~-28",
+        help="TOLERANCE_MS:MODEL[:CAM=SHIFT][:CAM~MS] of each calibctl run (SHIFT: --frame-shift, "
+        "MS: --exposure-offset)",
     )
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--offset-scan",
+        metavar="CAM",
+        default=None,
+        help="only scan camera CAM's exposure offset (-50..+10 ms) and estimate it with a bootstrap sd",
+    )
     parser.add_argument(
         "--resamples", type=int, default=30, help="frame bootstrap of the first run (0: none)"
     )
@@ -387,6 +457,16 @@ def main() -> int:
         print(f"caliscope-4cam not found at {SET}", file=sys.stderr)
         return 2
     load = load_1min()
+    if args.offset_scan is not None:
+        head = (
+            f"Measured {dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC on {cpu_model()}, load {load:.1f} before."
+        )
+        text = "\n".join([head, "", *offset_scan(args.offset_scan, [float(ms) for ms in range(-50, 15, 5)],
+                                                 max(args.resamples, 1))]) + "\n"  # fmt: skip
+        print(text)
+        if args.out is not None:
+            args.out.write_text(text)
+        return 0
     lines = [
         f"Measured {dt.datetime.now(dt.UTC):%Y-%m-%d %H:%M} UTC on {cpu_model()} (nproc {os.cpu_count()}), "
         f"load average {load:.1f} before the run, OpenCV {cv2.__version__}.",
@@ -408,12 +488,14 @@ def main() -> int:
     plain_shifted = plain_opencv(views, time.perf_counter(), SHIFT)
     runs = {}
     for item in args.runs.split(","):
-        tol, model, *shift = item.split(":")
-        shifts = parse_frame_shifts(shift)
+        tol, model, *extra = item.split(":")
+        shifts = parse_frame_shifts([e for e in extra if "~" not in e])
+        offsets = parse_exposure_offsets([e.replace("~", "=") for e in extra if "~" in e])
         label = f"{float(tol):g} ms, {model}" + "".join(
             f", frame shift {c}={n:+d}" for c, n in shifts.items()
         )
-        runs[label] = calibctl_run(float(tol), model, shifts)
+        label += "".join(f", exposure offset {c}={ms:+g} ms" for c, ms in offsets.items())
+        runs[label] = calibctl_run(float(tol), model, shifts, offsets)
     lines += [
         "| route | camera | baseline T_0_c mm | rotation deg | vs recorder: translation mm | rotation deg |",
         "|---|---|---|---|---|---|",

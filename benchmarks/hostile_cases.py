@@ -654,6 +654,13 @@ def _admin() -> list[Case]:
             setup=both(views("v", 3), views("w", 3)),
             says=("--frame-shift B=half",),
         ),
+        Case(
+            g,
+            "rig solve-folders --exposure-offset not a number",
+            _two_folders("--exposure-offset", "B=late"),
+            setup=both(views("v", 3), views("w", 3)),
+            says=("--exposure-offset B=late",),
+        ),
         Case(g, "rig add unknown member", ["rig", "add", "R1", "--camera", "NOPE", "--camera", "NOPE2"]),
         Case(g, "rig solve unknown", ["rig", "solve", "R9"]),
         Case(g, "rig show unknown", ["rig", "show", "R9"]),

@@ -97,6 +97,26 @@ def solve_folders(
             show_default=False,
         ),
     ] = None,
+    exposure_offset: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--exposure-offset",
+            help="SERIAL=MS: that camera's frames were exposed MS ms after their listed times (a latency "
+            "the timestamps miss; rig-exposure-offset names it): its corners are interpolated to the listed "
+            "times between neighbouring frames.",
+            show_default=False,
+        ),
+    ] = None,
+    estimate_exposure_offset: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--estimate-exposure-offset",
+            help="SERIAL: estimate that camera's exposure offset from the data (the rig's residual over "
+            "the offset, its minimum and a frame-bootstrap sd) and apply it; exit 2 when the frames cannot "
+            "show it.",
+            show_default=False,
+        ),
+    ] = None,
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera of the tree.", show_default=False)
     ] = None,
@@ -179,6 +199,8 @@ def solve_folders(
         timestamps=timestamps,
         time_tolerance_ms=time_tolerance_ms,
         frame_shifts=rig_folders.parse_frame_shifts(frame_shift or []),
+        exposure_offsets_ms=rig_folders.parse_exposure_offsets(exposure_offset or []),
+        estimate_offsets=estimate_exposure_offset or [],
     )
     doc = rig_folders.run_json(run)
     exports: list[str] = []

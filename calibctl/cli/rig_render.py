@@ -54,6 +54,18 @@ def render_timing(timing: dict[str, Any]) -> None:
             f"  camera {name}'s frame i read at the time listed for its frame i{-shift:+d} "
             f"(--frame-shift {name}={shift:+d})"
         )
+    dropped, sd = timing.get("exposure_dropped", {}), timing.get("exposure_offset_sd_ms", {})
+    for name, ms in timing.get("exposure_offset_ms", {}).items():
+        lost = ", ".join(f"{n} {why}" for why, n in dropped.get(name, {}).items()) or "none"
+        how = (
+            f"estimated from the data, frame-bootstrap sd {sd[name]:.1f} ms"
+            if name in sd
+            else f"--exposure-offset {name}={ms:+g}"
+        )
+        say(
+            f"  camera {name}'s corners moved to its frames' listed times, exposed {ms:+.1f} ms after them "
+            f"({how}); rig frames dropped: {lost}"
+        )
 
 
 def render_unmatched(rows: list[tuple[str, str, str]]) -> None:

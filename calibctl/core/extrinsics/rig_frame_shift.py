@@ -190,3 +190,99 @@ def exposure_offset(
 def offset_matters(offset: ExposureOffset) -> bool:
     """The pair fits clearly better at an offset the timestamps do not record."""
     return abs(offset.offset_s) >= MIN_OFFSET_S and offset.offset_rms_px <= OFFSET_GAIN * offset.rms_px
+
+
+# A declared exposure offset, applied: each frame's corners where they were at the frame's listed time,
+# interpolated linearly in time between the frame and the neighbour exposed on the other side of that time.
+MAX_GAP_FRAMES = 1.5  # a neighbour further than this many median frame intervals away is a gap, not a frame
+MAX_MOTION_ROWS = 0.1  # corners that move more than this fraction of the image height between the two frames
+DROP_NO_NEIGHBOUR = "no-neighbour"  # the neighbouring frame is missing or shows too few of the same corners
+DROP_GAP = "neighbour-too-far-in-time"
+DROP_MOTION = "motion-too-large"
+
+
+def median_interval_s(times_s: Mapping[int, float]) -> float:
+    """A camera's median interval between consecutive frames (seconds; nan with fewer than two)."""
+    order = sorted(times_s)
+    gaps = [times_s[k] - times_s[j] for j, k in zip(order, order[1:], strict=False) if k == j + 1]
+    return float(np.median(gaps)) if gaps else float("nan")
+
+
+def corners_at_listed_time(
+    views: Views, times_s: Mapping[int, float], k: int, offset_s: float, interval_s: float, image_rows: int
+) -> tuple[np.ndarray, np.ndarray] | str:
+    """Frame k's corners at its listed time, for a camera whose frames were exposed ``offset_s`` after
+    their listed times (``interval_s``: its median frame interval); or why the frame is dropped (DROP_*).
+
+    Frame j was exposed at ``t_j + offset_s``; the listed time ``t_k`` lies between the exposures of k and
+    j = k - 1 (a late camera) or k + 1 (an early one), so the corners are ``x_j + w (x_k - x_j)`` with
+    ``w = (t_k - t_j - offset_s) / (t_k - t_j)``, over the corner ids both frames share.
+    """
+    if offset_s == 0.0:
+        here = views.get(k)
+        return here if here is not None else DROP_NO_NEIGHBOUR
+    j = k - 1 if offset_s > 0 else k + 1
+    here, there = views.get(k), views.get(j)
+    if here is None or there is None or k not in times_s or j not in times_s:
+        return DROP_NO_NEIGHBOUR
+    span_s = times_s[k] - times_s[j]
+    if not abs(span_s) <= MAX_GAP_FRAMES * interval_s or abs(offset_s) >= abs(span_s):
+        return DROP_GAP
+    ids = np.intersect1d(here[0], there[0])
+    if len(ids) < MIN_SHARED:
+        return DROP_NO_NEIGHBOUR
+    x_k, x_j = here[1][np.searchsorted(here[0], ids)], there[1][np.searchsorted(there[0], ids)]
+    if np.linalg.norm(x_k - x_j, axis=1).max() > MAX_MOTION_ROWS * image_rows:
+        return DROP_MOTION
+    w = (span_s - offset_s) / span_s
+    return ids, x_j + w * (x_k - x_j)
+
+
+# An exposure offset estimated from the data: the rig's residual over the offset, its minimum and the spread
+# of that minimum over a bootstrap of the rig frames.
+ESTIMATE_STEP_MS = 5.0
+ESTIMATE_RESAMPLES = 200
+
+
+def offset_minimum(
+    offsets_ms: Sequence[float],
+    squared_px2: Sequence[Mapping[tuple[str, int], float]],
+    resamples: int = ESTIMATE_RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float] | None:
+    """The offset where the mean squared residual is least (a parabola through the lowest scanned offset and
+    its neighbours) and its sd over a bootstrap of the rig frames; None when the lowest offset is at either
+    end of the scan, the parabola does not open upward (no minimum inside the scan), or the minimum leaves
+    more than OFFSET_GAIN of the RMS at offset 0 (a residual that barely changes with the offset cannot
+    place it: a board moving steadily hides an offset in the poses, and the minimum then lands anywhere).
+
+    Args:
+        offsets_ms: the scanned offsets, increasing, evenly spaced.
+        squared_px2: per offset, (rig frame, camera) -> mean squared residual of that view (px^2); only the
+            views every offset has are compared.
+    """
+    common = sorted(set.intersection(*(set(v) for v in squared_px2)))
+    frames = sorted({f for f, _ in common})
+    by_frame = {f: [k for k in common if k[0] == f] for f in frames}
+    table = np.array([[v[k] for k in common] for v in squared_px2])  # (offsets, views)
+    column = {k: i for i, k in enumerate(common)}
+
+    def lowest(drawn: Sequence[str]) -> float | None:
+        cols = [column[k] for f in drawn for k in by_frame[f]]
+        ms2 = table[:, cols].mean(axis=1)
+        i = int(np.argmin(ms2))
+        if i in (0, len(offsets_ms) - 1):
+            return None
+        a, b, _ = np.polyfit(offsets_ms[i - 1 : i + 2], ms2[i - 1 : i + 2], 2)
+        return float(-b / (2 * a)) if a > 0 else None
+
+    best = lowest(frames) if frames else None
+    ms2 = table.mean(axis=1) if frames else np.zeros(0)
+    if best is None or not ms2.min() <= OFFSET_GAIN**2 * ms2[list(offsets_ms).index(0.0)]:
+        return None
+    rng = np.random.default_rng(seed)
+    boot = [lowest([frames[i] for i in rng.integers(0, len(frames), len(frames))]) for _ in range(resamples)]
+    found = [b for b in boot if b is not None]
+    if len(found) < 0.9 * resamples:  # the minimum leaves the scan for many resamples: no stated sigma
+        return None
+    return best, float(np.std(found))

@@ -19,9 +19,11 @@ whole frame off, else ``rig-exposure-offset`` for a pair exposed further apart t
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -32,6 +34,7 @@ from calibctl.core.board.board_spec import CHESSBOARD, BoardSpec
 from calibctl.core.board.views import BoardView
 from calibctl.core.capture.image_outcomes import NEAR_DUPLICATE, UNREADABLE, ImageOutcome
 from calibctl.core.extrinsics import rig_identity as identity
+from calibctl.core.extrinsics.rig_frame_shift import ESTIMATE_STEP_MS, median_interval_s, offset_minimum
 from calibctl.core.extrinsics.rig_frames import (
     MAX_MIN_SHARED_VIEWS,
     MIN_SHARED_VIEWS,
@@ -42,6 +45,7 @@ from calibctl.core.extrinsics.rig_frames import (
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics, RigViews
 from calibctl.core.extrinsics.rig_solve import RigSolution, solve_rig
 from calibctl.core.extrinsics.rig_tree import sigma_rotation_deg, sigma_translation_mm
+from calibctl.core.extrinsics.rig_uncertainty import rig_covariance
 from calibctl.core.extrinsics.rig_validation import (
     LoopClosure,
     RigHoldout,
@@ -70,6 +74,7 @@ from calibctl.workflows.rig import rig_video
 from calibctl.workflows.rig.rig_lint import member_finding, solved_rig_findings
 from calibctl.workflows.rig.rig_members import member_findings
 
+T = TypeVar("T")
 USABLE = ("accepted", NEAR_DUPLICATE)  # a still board is no new geometry for one camera, but a rig frame
 SOURCE_HINT = "give SERIAL=FOLDER, SERIAL='glob' (quoted) or SERIAL=list.txt per camera"
 
@@ -155,23 +160,40 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
     return out
 
 
-def parse_frame_shifts(items: Sequence[str]) -> dict[str, int]:
-    """``--frame-shift SERIAL=N`` (N a whole number of frames, signed) -> {SERIAL: N}."""
-    out: dict[str, int] = {}
+def _per_camera(items: Sequence[str], option: str, read: Callable[[str], T], expected: str) -> dict[str, T]:
+    """``OPTION SERIAL=VALUE`` items -> {SERIAL: read(VALUE)}; ``read`` raises ValueError on a bad value."""
+    out: dict[str, T] = {}
     for item in items:
         name, sep, value = item.partition("=")
         try:
-            n = int(value)
+            read_value = read(value)
         except ValueError:
-            n = None
-        if not sep or not name or n is None:
-            raise UsageError(
-                f"--frame-shift {item}: expected SERIAL=N, N a whole number of frames (e.g. 1=+1)"
-            )
+            read_value = None
+        if not sep or not name or read_value is None:
+            raise UsageError(f"{option} {item}: expected {expected}")
         if name in out:
-            raise UsageError(f"--frame-shift names camera {name} twice")
-        out[name] = n
+            raise UsageError(f"{option} names camera {name} twice")
+        out[name] = read_value
     return out
+
+
+def _finite_ms(value: str) -> float:
+    ms = float(value)
+    if not math.isfinite(ms):
+        raise ValueError(value)
+    return ms
+
+
+def parse_exposure_offsets(items: Sequence[str]) -> dict[str, float]:
+    """``--exposure-offset SERIAL=MS`` (MS a finite signed number of milliseconds) -> {SERIAL: MS}."""
+    expected = "SERIAL=MS, MS the milliseconds that camera's frames were exposed after their listed times"
+    expected += " (e.g. 0=-28)"
+    return _per_camera(items, "--exposure-offset", _finite_ms, expected)
+
+
+def parse_frame_shifts(items: Sequence[str]) -> dict[str, int]:
+    """``--frame-shift SERIAL=N`` (N a whole number of frames, signed) -> {SERIAL: N}."""
+    return _per_camera(items, "--frame-shift", int, "SERIAL=N, N a whole number of frames (e.g. 1=+1)")
 
 
 def typed_spec(
@@ -313,10 +335,15 @@ def solve_rig_folders(
     timestamps: Path | None = None,
     time_tolerance_ms: float = rig_video.DEFAULT_TIME_TOLERANCE_MS,
     frame_shifts: Mapping[str, int] | None = None,
+    exposure_offsets_ms: Mapping[str, float] | None = None,
+    estimate_offsets: Sequence[str] = (),
 ) -> RigFolderRun:
     """Run the folder flow (module docstring); a video per camera, or a ``timestamps`` file, pairs the frames
     by time within ``time_tolerance_ms`` instead (workflows.rig.rig_video; ``frame_shifts``: camera -> N
-    whole frames its video is off its times, as declared, and ``rig-frame-shift`` names an undeclared one).
+    whole frames its video is off its times, as declared, and ``rig-frame-shift`` names an undeclared one;
+    ``exposure_offsets_ms``: camera -> ms its frames were exposed after their listed times, as declared, its
+    corners interpolated to those times for the rig, and ``rig-exposure-offset`` names an undeclared one;
+    ``estimate_offsets``: cameras whose offset is estimated from the data with its sd, then applied).
     The first source is the root
     camera; ``settings`` the station's (gates and lint; default: ``load_settings()``), ``limits`` its lint
     thresholds when given apart; ``designs`` the pairs' design baselines (``baseline-design``); ``gauge``:
@@ -348,13 +375,23 @@ def solve_rig_folders(
     if limits is not None:
         settings = settings.model_copy(update={"lint": limits})
     timed = None
-    if frame_shifts and not rig_video.is_timed(sources, timestamps):
-        raise UsageError(
-            "--frame-shift applies to frames paired by time: give videos or --timestamps",
-            hint="photo folders pair by the last number in their names; rename the photos instead",
-        )
+    _check_estimates(estimate_offsets, cameras, exposure_offsets_ms or {})
+    estimates = {name: 1.0 for name in estimate_offsets}
+    for option, stated in (
+        ("--frame-shift", frame_shifts),
+        ("--exposure-offset", exposure_offsets_ms),
+        ("--estimate-exposure-offset", estimates),
+    ):
+        if stated and not rig_video.is_timed(sources, timestamps):
+            raise UsageError(
+                f"{option} applies to frames paired by time: give videos or --timestamps",
+                hint="photo folders pair by the last number in their names; rename the photos instead",
+            )
     if rig_video.is_timed(sources, timestamps):
-        timed = rig_video.capture_timed(sources, spec, timestamps, time_tolerance_ms, workers, frame_shifts)
+        offsets_s = {name: ms / 1e3 for name, ms in (exposure_offsets_ms or {}).items()}
+        timed = rig_video.capture_timed(
+            sources, spec, timestamps, time_tolerance_ms, workers, frame_shifts, offsets_s
+        )
         match, outcomes = timed.match, {name: list(c.outcomes) for name, c in timed.cameras.items()}
         gathered = {name: (c.source, c.max_gray) for name, c in timed.cameras.items()}
     else:
@@ -398,7 +435,11 @@ def solve_rig_folders(
     }
     if model == "auto":
         model = _auto_rig_model(fits, refine_intrinsics)
-    views = rig_views(cameras, match, outcomes, spec)
+    if timed is not None and estimate_offsets:
+        timed = _with_estimated_offsets(timed, cameras, members, spec, model, estimate_offsets)
+    # a declared exposure offset moves that camera's corners for the rig alone; its lens keeps its frames
+    views = rig_views(cameras, match, {n: rig_video.rig_outcomes(timed, n) if timed else outcomes[n]
+                                       for n in cameras}, spec)  # fmt: skip
     identity.refuse(
         identity.shared_images(
             {n: [o.sha256 for o in outcomes[n] if o.corners_px is not None] for n in cameras}
@@ -550,6 +591,78 @@ def _without(
         if len(left) >= 2:
             frames.append((key, left))
     return kept, FrameMatch(tuple(frames), match.unmatched), {name: outcomes[name] for name in kept}
+
+
+def _check_estimates(names: Sequence[str], cameras: Sequence[str], declared: Mapping[str, float]) -> None:
+    for name in names:
+        if name not in cameras:
+            raise UsageError(
+                f"--estimate-exposure-offset names camera {name}, which is not one of the rig's cameras "
+                f"({', '.join(cameras)})"
+            )
+        if name in declared:
+            raise UsageError(
+                f"camera {name}'s exposure offset is both declared and to be estimated: give one"
+            )
+    if len(set(names)) < len(names):
+        raise UsageError("--estimate-exposure-offset names a camera twice")
+
+
+def _with_estimated_offsets(
+    timed: rig_video.VideoRigCapture,
+    cameras: Sequence[str],
+    members: Sequence[MemberIntrinsics],
+    spec: BoardSpec,
+    model: str,
+    names: Sequence[str],
+) -> rig_video.VideoRigCapture:
+    """The capture with each named camera's exposure offset estimated from the data and applied: the rig
+    solved (members fixed) with that camera's corners interpolated at offsets ESTIMATE_STEP_MS apart, from 0
+    each way while the residual falls (and two steps on), up to half its frame interval; the minimum of the
+    mean squared residual over the views every offset keeps, and its sd over a bootstrap of the rig frames
+    (core.extrinsics.rig_frame_shift.offset_minimum). NumericalError (exit 2) when there is no minimum
+    inside that range with a stated sd: a board standing still or moving steadily cannot show the offset."""
+    offsets_s = dict(timed.exposure_offsets_s or {})
+    sd_s: dict[str, float] = {}
+    solve_model = model if model != "auto" else DEFAULT_MODEL
+    for name in names:
+        assert timed.frame_times is not None
+        times_s = {i: t for i, t in enumerate(timed.frame_times[name]) if t is not None}
+        limit_ms = 0.5 * median_interval_s(times_s) * 1e3
+
+        def squared(ms: float, name: str = name) -> dict[tuple[str, int], float]:
+            cap = rig_video.with_exposure_offsets(timed, {**offsets_s, name: ms / 1e3})
+            views = rig_views(cameras, cap.match, {n: rig_video.rig_outcomes(cap, n) for n in cameras}, spec)
+            sol = solve_rig(views, members, model=solve_model)
+            ne = rig_covariance(sol.views, list(sol.members), sol.cam_poses, sol.board_poses, False)
+            return {
+                (sol.views.frames[f], c): float(np.mean(np.sum(r**2, axis=1)))
+                for (f, c), r in ne.normal_equations.residuals_px.items()
+            }
+
+        scan = {0.0: squared(0.0)}
+        for step in (-ESTIMATE_STEP_MS, ESTIMATE_STEP_MS):
+            ms, rising = step, 0
+            while abs(ms) < limit_ms and rising < 2:
+                scan[ms] = squared(ms)
+                rising = rising + 1 if _mean(scan[ms]) >= _mean(scan[ms - step]) else 0
+                ms += step
+        offsets = sorted(scan)
+        found = offset_minimum(offsets, [scan[ms] for ms in offsets])
+        if found is None:
+            raise NumericalError(
+                f"camera {name}'s exposure offset cannot be estimated: the rig's residual has no clear "
+                f"minimum within {offsets[0]:+.0f}..{offsets[-1]:+.0f} ms that the rig frames agree on",
+                hint=f"a board standing still or moving steadily cannot show it: declare it "
+                f"(--exposure-offset {name}=MS) or capture a board that changes direction",
+            )
+        offsets_s[name], sd_s[name] = found[0] / 1e3, found[1] / 1e3
+    estimated = rig_video.with_exposure_offsets(timed, offsets_s)
+    return replace(estimated, estimated_sd_s=sd_s)
+
+
+def _mean(squared: Mapping[tuple[str, int], float]) -> float:
+    return float(np.mean(list(squared.values()))) if squared else float("nan")
 
 
 def _auto_rig_model(fits: Mapping[str, MemberFit], refine_intrinsics: bool) -> str:

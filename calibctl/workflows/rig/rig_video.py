@@ -38,7 +38,13 @@ from calibctl.core.capture.detect import charuco_variant_advice, charuco_variant
 from calibctl.core.capture.image_circle import accumulate_max, half_size
 from calibctl.core.capture.image_outcomes import ImageOutcome, classify_array, finalize_session, read_gray
 from calibctl.core.extrinsics.board_pose import estimate_board_pose
-from calibctl.core.extrinsics.rig_frame_shift import exposure_offset, frame_shifts, offset_matters
+from calibctl.core.extrinsics.rig_frame_shift import (
+    corners_at_listed_time,
+    exposure_offset,
+    frame_shifts,
+    median_interval_s,
+    offset_matters,
+)
 from calibctl.core.extrinsics.rig_frames import FrameMatch, UnmatchedPhoto
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_time_pairs import (
@@ -87,6 +93,11 @@ class VideoRigCapture:
     frame_groups: tuple[Mapping[str, int], ...] = ()  # the rig frames: camera -> frame index in its video
     frame_shifts: Mapping[str, int] | None = None  # as declared (--frame-shift)
     frame_times: Mapping[str, tuple[float | None, ...]] | None = None  # per frame, as paired (seconds)
+    exposure_offsets_s: Mapping[str, float] | None = None  # as declared (--exposure-offset)
+    # the outcomes the rig solve reads: a declared offset's camera's corners at their frames' listed times
+    rig_outcomes: Mapping[str, tuple[ImageOutcome, ...]] | None = None
+    dropped: Mapping[str, Mapping[str, int]] | None = None  # camera -> why -> rig frames it left
+    estimated_sd_s: Mapping[str, float] | None = None  # the offsets estimated from the data: their sd
 
 
 def is_timed(sources: Mapping[str, Path], timestamps: Path | None) -> bool:
@@ -305,18 +316,21 @@ def capture_timed(
     tolerance_ms: float = DEFAULT_TIME_TOLERANCE_MS,
     workers: int | None = None,
     frame_shifts: Mapping[str, int] | None = None,
+    exposure_offsets_s: Mapping[str, float] | None = None,
 ) -> VideoRigCapture:
     """Every camera's frames detected and paired by time (module docstring); ``frame_shifts``: camera ->
-    N, its video frame i was taken at the time listed for its frame i - N. Raises InputError / UsageError
-    (exit 2) naming the file and the fix."""
+    N, its video frame i was taken at the time listed for its frame i - N; ``exposure_offsets_s``: camera ->
+    seconds its frames were exposed after their listed times (``with_exposure_offsets``). Raises InputError
+    / UsageError (exit 2) naming the file and the fix."""
     if not (math.isfinite(tolerance_ms) and tolerance_ms > 0):
         raise UsageError(f"--time-tolerance-ms {tolerance_ms:g} must be a positive number of milliseconds")
-    unknown_shift = sorted(set(frame_shifts or {}) - set(sources))
-    if unknown_shift:
-        raise UsageError(
-            f"--frame-shift names camera {', '.join(unknown_shift)}, which is not one of the rig's cameras "
-            f"({', '.join(sources)})"
-        )
+    for option, named in (("--frame-shift", frame_shifts), ("--exposure-offset", exposure_offsets_s)):
+        unknown = sorted(set(named or {}) - set(sources))
+        if unknown:
+            raise UsageError(
+                f"{option} names camera {', '.join(unknown)}, which is not one of the rig's cameras "
+                f"({', '.join(sources)})"
+            )
     listed = _listed_cameras(timestamps, list(sources)) if timestamps is not None else None
     cameras = {name: detect_camera(name, source, spec, workers) for name, source in sources.items()}
     if listed is None:
@@ -336,7 +350,53 @@ def capture_timed(
     times = {name: shifted_times(ts, shifts.get(name, 0)) for name, ts in times.items()}
     paths = {name: [o.path for o in c.outcomes] for name, c in cameras.items()}
     match, pairing, in_video = _paired(paths, times, tolerance_ms)
-    return VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None, times)
+    found = VideoRigCapture(match, cameras, pairing, timestamps, in_video, shifts or None, times)
+    offsets = {name: s for name, s in (exposure_offsets_s or {}).items() if s}
+    return with_exposure_offsets(found, offsets) if offsets else found
+
+
+def with_exposure_offsets(capture: VideoRigCapture, offsets_s: Mapping[str, float]) -> VideoRigCapture:
+    """The capture with each declared camera's corners moved to its frames' listed times: the camera's
+    frames were exposed ``offsets_s[camera]`` after them (core.extrinsics.rig_frame_shift
+    .corners_at_listed_time). A rig frame whose neighbour cannot carry the corners loses that camera
+    (rig frames counted by reason); the camera's own outcomes, which calibrate its lens, are left as detected.
+    UsageError when an offset is not shorter than the camera's frame interval (that is a frame shift)."""
+    assert capture.frame_times is not None
+    rig_outcomes, dropped = {}, {}
+    for name, offset_s in offsets_s.items():
+        outcomes = capture.cameras[name].outcomes
+        times_s = {i: t for i, t in enumerate(capture.frame_times[name]) if t is not None}
+        interval_s = median_interval_s(times_s)
+        if not abs(offset_s) < interval_s:
+            raise UsageError(
+                f"--exposure-offset {name}={offset_s * 1e3:+g}: camera {name}'s frames are "
+                f"{interval_s * 1e3:.1f} ms apart, so that is a whole frame or more",
+                hint=f"declare whole frames with --frame-shift {name}=N and the rest with --exposure-offset",
+            )
+        views = {
+            i: (o.corner_ids[order], o.corners_px[order])
+            for i, o in enumerate(outcomes)
+            if o.corner_ids is not None and o.corners_px is not None
+            for order in [np.argsort(o.corner_ids)]
+        }
+        in_frames = {g[name] for g in capture.frame_groups if name in g}
+        moved, why = list(outcomes), dict[str, int]()
+        for i in sorted(views):  # every frame, so the image motion of the moved corners stays consistent
+            rows = (outcomes[i].image_size or (0, 0))[1]
+            at = corners_at_listed_time(views, times_s, i, offset_s, interval_s, rows)
+            if isinstance(at, str):
+                if i in in_frames:
+                    why[at] = why.get(at, 0) + 1
+                moved[i] = replace(outcomes[i], corner_ids=None, corners_px=None)
+            else:
+                moved[i] = replace(outcomes[i], corner_ids=at[0], corners_px=at[1])
+        rig_outcomes[name], dropped[name] = tuple(moved), why
+    return replace(capture, exposure_offsets_s=dict(offsets_s), rig_outcomes=rig_outcomes, dropped=dropped)
+
+
+def rig_outcomes(capture: VideoRigCapture, name: str) -> tuple[ImageOutcome, ...]:
+    """The outcomes of camera ``name`` the rig solve reads (with a declared exposure offset applied)."""
+    return (capture.rig_outcomes or {}).get(name, capture.cameras[name].outcomes)
 
 
 def _paired(
@@ -393,6 +453,9 @@ def timing_json(capture: VideoRigCapture) -> dict[str, object]:
         "frames": {name: len(c.outcomes) for name, c in capture.cameras.items()},
         "index_offset": {name: c.index_offset for name, c in capture.cameras.items() if c.index_offset},
         "frame_shift": dict(capture.frame_shifts or {}),
+        "exposure_offset_ms": {name: s * 1e3 for name, s in (capture.exposure_offsets_s or {}).items()},
+        "exposure_dropped": {name: dict(why) for name, why in (capture.dropped or {}).items()},
+        "exposure_offset_sd_ms": {name: s * 1e3 for name, s in (capture.estimated_sd_s or {}).items()},
     }
 
 
@@ -452,11 +515,12 @@ def exposure_offset_findings(
     views: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
     for member in members:
         views[member.name] = {}
-        for i, o in enumerate(capture.cameras[member.name].outcomes):
+        for i, o in enumerate(rig_outcomes(capture, member.name)):
             if o.corner_ids is not None and o.corners_px is not None:
                 order = np.argsort(o.corner_ids)
                 views[member.name][i] = (o.corner_ids[order], o.corners_px[order])
     pinhole = [m for m in members if m.lens != "fisheye"]
+    declared = capture.exposure_offsets_s or {}
     out = []
     for n, a in enumerate(pinhole):
         for b in pinhole[n + 1 :]:
@@ -474,6 +538,7 @@ def exposure_offset_findings(
                 continue
             ms = abs(found.offset_s) * 1e3
             first, then = (a.name, b.name) if found.offset_s < 0 else (b.name, a.name)
+            late_ms = (declared.get(b.name, 0.0) - found.offset_s) * 1e3  # b's exposures after its times
             out.append(
                 Finding(
                     rule=EXPOSURE_OFFSET,
@@ -487,8 +552,9 @@ def exposure_offset_findings(
                         "a latency the timestamps do not record"
                     ),
                     fix=(
-                        "hold the board still at each pose (or trigger the cameras together) and capture "
-                        "again; a recorder whose timestamps lag by a constant can correct them"
+                        f"declare it (camera {b.name}'s frames exposed that long after their listed times): "
+                        f"--exposure-offset {b.name}={late_ms:+.0f}"
+                        "; or hold the board still at each pose (or trigger the cameras together)"
                     ),
                 )
             )

@@ -164,3 +164,52 @@ def test_a_frame_shift_on_photo_folders_is_refused(run, tmp_path):
     args = ["--source", f"L={tmp_path / 'L'}", "--source", f"R={tmp_path / 'R'}", *CHARUCO]
     result = run(*args, "--frame-shift", "R=1")
     _refused(result, "--frame-shift applies to frames paired by time")
+
+
+def _timestamps(tmp_path: Path) -> Path:
+    """A and B's three frames 200 ms apart, B 1 ms after A."""
+    ts = tmp_path / "ts.csv"
+    rows = [f"{i},{c},{i},{10 + i * 0.2 + d:.4f}\n" for i in range(3) for c, d in (("A", 0), ("B", 0.001))]
+    ts.write_text(HEAD + "".join(rows))
+    return ts
+
+
+@pytest.mark.parametrize("value", ["B=late", "B=nan", "B", "=30"])
+def test_an_exposure_offset_that_is_not_a_number_is_refused(run, videos, value):
+    result = run(*_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--exposure-offset", value)
+    _refused(result, f"--exposure-offset {value}", "SERIAL=MS")
+
+
+@pytest.mark.parametrize(
+    ("value", "says"),
+    [
+        ("Z=30", ("--exposure-offset names camera Z", "A, B")),
+        ("B=+250", ("--exposure-offset B=+250", "200.0 ms apart", "a whole frame or more")),
+    ],
+)
+def test_an_exposure_offset_for_no_camera_or_past_a_frame_is_refused(run, videos, tmp_path, value, says):
+    ts = _timestamps(tmp_path)
+    args = [*_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--timestamps", str(ts)]
+    _refused(run(*args, "--exposure-offset", value), *says)
+
+
+def test_an_exposure_offset_on_photo_folders_is_refused(run, tmp_path):
+    for name in ("L", "R"):
+        (tmp_path / name).mkdir()
+    args = ["--source", f"L={tmp_path / 'L'}", "--source", f"R={tmp_path / 'R'}", *CHARUCO]
+    _refused(run(*args, "--exposure-offset", "R=30"), "--exposure-offset applies to frames paired by time")
+
+
+@pytest.mark.parametrize(
+    ("extra", "says"),
+    [
+        (["--estimate-exposure-offset", "Z"], ("--estimate-exposure-offset names camera Z", "A, B")),
+        (
+            ["--estimate-exposure-offset", "B", "--exposure-offset", "B=30"],
+            ("camera B's exposure offset is both declared and to be estimated",),
+        ),
+    ],
+)
+def test_an_offset_to_estimate_for_no_camera_or_declared_too_is_refused(run, videos, tmp_path, extra, says):
+    ts = _timestamps(tmp_path)
+    _refused(run(*_sources(videos, "A", "B"), *CHARUCO, "--inverted", "--timestamps", str(ts), *extra), *says)
