@@ -70,8 +70,9 @@ def test_sigint_to_the_process_group_during_parallel_detection_stores_nothing(
     )
     try:
         deadline = time.monotonic() + 120
-        # calibctl, the resource tracker, the fork server and a worker: detection is running
-        while len(group_pids(proc.pid)) < 4 and proc.poll() is None and time.monotonic() < deadline:
+        # calibctl, the resource tracker, the fork server and both workers: detection is running, and the fork
+        # server's start, whose few milliseconds ignore SIGINT (worker_pool._started_ignoring_sigint), is over
+        while len(group_pids(proc.pid)) < 5 and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
         assert proc.poll() is None, proc.communicate()
         os.killpg(proc.pid, signal.SIGINT)
