@@ -176,6 +176,31 @@ def view_shape(
     return lines, times
 
 
+def view_shift_lines(t: np.ndarray, views: RigViews, labels: dict) -> list[str]:
+    """Each camera view's mean residual (its whole-view shift): against the view's speed, and against the
+    next video frame's of the same camera (a bumped camera drifts; a timing jitter does not)."""
+    shift, speed = {}, {}
+    for c, cam in enumerate(views.cameras):
+        for f in np.unique(t[t[:, 0] == c, 1]):
+            s = (t[:, 0] == c) & (t[:, 1] == f)
+            idx = labels[(views.frames[int(f)], cam)]
+            shift[(c, idx)] = t[s][:, 4:6].mean(0)
+            speed[(c, idx)] = float(np.linalg.norm(t[s][:, 6:8].mean(0)))
+    lines = ["| camera view speed px/s | views | whole-view shift RMS px |", "|---|---|---|"]
+    for lo, hi in ((0, 20), (20, 40), (40, 70), (70, 150), (150, 1e9)):
+        m = [k for k, v in speed.items() if lo <= v < hi]
+        if m:
+            lines.append(f"| {lo:g}-{hi:g} | {len(m)} | {_rms(np.array([shift[k] for k in m])):.3f} |")
+    lines[-1] = lines[-1].replace("-1e+09", " and up")
+    nan = [k for k, v in speed.items() if not np.isfinite(v)]
+    lines.append(f"| no neighbouring frames | {len(nan)} | {_rms(np.array([shift[k] for k in nan])):.3f} |")
+    pairs = np.array([(shift[(c, i)], shift[(c, i + 1)]) for c, i in shift if (c, i + 1) in shift])
+    corr = [np.corrcoef(pairs[:, 0, k], pairs[:, 1, k])[0, 1] for k in (0, 1)]
+    lines.append(f"\nWhole-view shifts of consecutive video frames of one camera ({len(pairs)} pairs): "
+                 f"correlation {corr[0]:+.2f} in x, {corr[1]:+.2f} in y.")  # fmt: skip
+    return lines
+
+
 def bow_lines(views: RigViews, members: list[MemberIntrinsics]) -> list[str]:
     lines = ["| w_x mm | w_y mm | joint RMS px per camera (0 / 1 / 2 / 3) |", "|---|---|---|"]
     for wx, wy in ((0, 0), (-1, 0), (-0.25, 0), (0.25, 0), (1, 0), (0, -1), (0, -0.25), (0, 0.25), (0, 1)):
@@ -269,6 +294,10 @@ def main() -> int:
         *shape,
         "",
         *shape_free,
+        "",
+        "The whole-view shift (intrinsics fixed) against the view's speed and the next frame's:",
+        "",
+        *view_shift_lines(t, views, labels),
         "",
         f"4. The lens: joint RMS per camera (0 / 1 / 2 / 3) with the intrinsics fixed "
         f"{_per_camera(views, res)}, freed {_per_camera(free_views, free_res)} px; held-out epipolar RMS per "
