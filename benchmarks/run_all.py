@@ -55,6 +55,7 @@ BENCHES = (
     ),
     Bench("bench_rig", "bench_rig.py", ("--repeats", "2"), ("--repeats", "1")),
     Bench("bench_rig_caliscope", "bench_rig_caliscope.py", (), ("--runs", "5:k1k2")),
+    Bench("bench_rig_caliscope_residual", "bench_rig_caliscope_residual.py", (), ()),
     Bench(
         "bench_tilt",
         "bench_tilt.py",

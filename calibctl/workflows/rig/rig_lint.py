@@ -115,7 +115,9 @@ def solved_rig_findings(
                 "the likely cause: calibrate with the model that rule names (a circular fisheye: --model "
                 "fisheye), then re-solve"
                 if lens
-                else "re-capture with a still board seen by both cameras, then re-solve"
+                else "re-capture with a still board seen by both cameras, then re-solve (a board that moves "
+                "between the cameras' exposures shifts each camera's view as a whole: software-synced "
+                "cameras' timestamps do not record it)"
             )
             findings.append(
                 Finding(
