@@ -290,6 +290,8 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
         run_station(settings, request, serials[1:], lines.append)
     cpu = time.process_time() - cpu
     units = [u.unit_s for u in lines[1:]]
+    if args.dump:
+        prof.dump_stats(args.dump)
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
     cum: dict[tuple[str, str], float] = {}
     for (file, _, func), (_, _, _, ct, _) in stats.items():
@@ -387,6 +389,7 @@ def main() -> None:
         "--pool", type=int, default=len(os.sched_getaffinity(0)), help="the plain pool's size"
     )
     parser.add_argument("--profile", action="store_true", help="stage shares of the station's units (jobs 1)")
+    parser.add_argument("--dump", type=Path, help="with --profile: the pstats file to write")
     parser.add_argument("--failed", action="store_true", help="units with failed views beside clean ones")
     args = parser.parse_args()
     load = os.getloadavg()
