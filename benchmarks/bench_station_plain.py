@@ -3,6 +3,7 @@
     PYTHONPATH=. .venv/bin/python benchmarks/bench_station_plain.py RENDERED_96 [--units 6] [--views 20]
         [--same-views] [--baseline DIR] [--jobs N]
     PYTHONPATH=. .venv/bin/python benchmarks/bench_station_plain.py RENDERED_96 --profile [--units 6]
+        [--dump F]
 
 RENDERED_96: ``calibctl synth OUT --views 96 --size 1280x960 --seed 3``. Each unit gets its own ``--views``
 views (unit k: views 15k .. 15k + 19; a camera on a line is a new camera each time, so nothing one unit
@@ -21,7 +22,8 @@ three: each is one process started once, fed one unit folder at a time on stdin,
 The units go round in turn (station, plain, pool, rotated by one each unit), so all three meet the same load;
 the 1-minute load average is printed at each unit. ``--baseline DIR``: the code before a change (``git
 archive``d) runs a second station in the same turns. ``--profile``: no race; the station's own code in this
-process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time.
+process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time
+(``--dump F``: the profile to F as well, for ``pstats``: which functions are called how often).
 ``--failed``: no plain loops; per round (``--units``) four units of the first ``--views`` views - clean,
 the board left in one picture only (the others blurred past finding it), no board at all, every picture
 black - through the
