@@ -3,6 +3,7 @@
     PYTHONPATH=. .venv/bin/python benchmarks/bench_station_plain.py RENDERED_96 [--units 6] [--views 20]
         [--same-views] [--baseline DIR] [--jobs N]
     PYTHONPATH=. .venv/bin/python benchmarks/bench_station_plain.py RENDERED_96 --profile [--units 6]
+        [--dump F]
 
 RENDERED_96: ``calibctl synth OUT --views 96 --size 1280x960 --seed 3``. Each unit gets its own ``--views``
 views (unit k: views 15k .. 15k + 19; a camera on a line is a new camera each time, so nothing one unit
@@ -21,7 +22,8 @@ three: each is one process started once, fed one unit folder at a time on stdin,
 The units go round in turn (station, plain, pool, rotated by one each unit), so all three meet the same load;
 the 1-minute load average is printed at each unit. ``--baseline DIR``: the code before a change (``git
 archive``d) runs a second station in the same turns. ``--profile``: no race; the station's own code in this
-process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time.
+process at jobs 1 (every stage inline, so cProfile sees it), warm, and each stage's share of the units' time
+(``--dump F``: the profile to F as well, for ``pstats``: which functions are called how often).
 ``--failed``: no plain loops; per round (``--units``) four units of the first ``--views`` views - clean,
 the board left in one picture only (the others blurred past finding it), no board at all, every picture
 black - through the
@@ -290,6 +292,8 @@ def profile(args: argparse.Namespace, work: Path, serials: list[str]) -> None:
         run_station(settings, request, serials[1:], lines.append)
     cpu = time.process_time() - cpu
     units = [u.unit_s for u in lines[1:]]
+    if args.dump:
+        prof.dump_stats(args.dump)
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
     cum: dict[tuple[str, str], float] = {}
     for (file, _, func), (_, _, _, ct, _) in stats.items():
@@ -387,6 +391,7 @@ def main() -> None:
         "--pool", type=int, default=len(os.sched_getaffinity(0)), help="the plain pool's size"
     )
     parser.add_argument("--profile", action="store_true", help="stage shares of the station's units (jobs 1)")
+    parser.add_argument("--dump", type=Path, help="with --profile: the pstats file to write")
     parser.add_argument("--failed", action="store_true", help="units with failed views beside clean ones")
     args = parser.parse_args()
     load = os.getloadavg()

@@ -47,18 +47,22 @@ def peek(session: Session, scope: str, key: str) -> int | None:
 def next_value(session: Session, scope: str, key: str) -> int:
     """Bump and return the counter of (scope, key); the first value is 1. At ``MAX_VERSION`` (the
     largest value a version column holds on both backends) it refuses instead of overflowing."""
-    last = peek(session, scope, key)
-    if last is not None and last >= MAX_VERSION:
-        raise UsageError(
-            f"{scope} {key} has reached version {last}, the largest a store holds ({MAX_VERSION})",
-            "use a new serial/name; versions are never reused",
-        )
+    # One round trip: the bump itself refuses a counter at the limit (no row comes back), so the row is
+    # read first only on that failure path, to name its value.
     stmt = _insert(session).values(scope=scope, key=key, last_value=1)
     stmt = stmt.on_conflict_do_update(
         index_elements=[_counters.c.scope, _counters.c.key],
         set_={"last_value": _counters.c.last_value + 1},
+        where=_counters.c.last_value < MAX_VERSION,
     ).returning(_counters.c.last_value)
-    return int(session.execute(stmt).scalar_one())
+    value = session.execute(stmt).scalar_one_or_none()
+    if value is None:
+        raise UsageError(
+            f"{scope} {key} has reached version {peek(session, scope, key)}, the largest a store holds "
+            f"({MAX_VERSION})",
+            "use a new serial/name; versions are never reused",
+        )
+    return int(value)
 
 
 def raise_to(session: Session, scope: str, key: str, value: int) -> int:

@@ -127,11 +127,13 @@ class SchemaState:
             )
 
 
-def _current_revision(conn: Connection) -> str | None:
-    """The revision in alembic's version table (None when there is none)."""
+def _current_revision(conn: Connection, tables: set[str] | None = None) -> str | None:
+    """The revision in alembic's version table (None when there is none). ``tables``: the database's
+    tables when the caller has just listed them (no second look for the version table)."""
     from sqlalchemy import inspect, text
 
-    if not inspect(conn).has_table("alembic_version"):
+    listed = tables is not None and "alembic_version" in tables
+    if not (listed if tables is not None else inspect(conn).has_table("alembic_version")):
         return None
     rows = conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all()
     if len(rows) > 1:
@@ -200,8 +202,9 @@ def _state_on(conn: Connection, url: str) -> SchemaState:
 
     head = head_revision()
     tables = set(inspect(conn).get_table_names())
-    refuse_foreign(tables, url, _current_revision(conn) if "alembic_version" in tables else None)
-    if "alembic_version" not in tables or (current := _current_revision(conn)) is None:
+    current = _current_revision(conn, tables)  # read once: the foreign-table check and the state share it
+    refuse_foreign(tables, url, current)
+    if current is None:
         ours = tables & set(Base.metadata.tables)
         if ours:
             raise DatabaseError(

@@ -563,7 +563,8 @@ def solve(settings: Settings, request: SolveRequest) -> SolveOutcome:
             reason=f"solve of session {session.session_id}",
             expect_version=version,  # with --report: the version whose page was checked, or nothing stored
         )
-        active = store.active_version(stored.serial) == stored.version
+        # not read back: a new version is active exactly when its activation event was written with it
+        active = activate
     if report_path is not None:
         report_workflow.write_report(settings, stored.ref, report_path, force=False)
     return SolveOutcome(
