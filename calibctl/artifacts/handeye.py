@@ -9,7 +9,8 @@ published.
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from typing import Literal, Protocol, Self
 
 from pydantic import Field, field_validator, model_validator
 
@@ -101,6 +102,45 @@ class EdgeGate(Document):
     message: str = Field(description="what was measured, in words")
     hint: str | None = Field(None, description="what to do when it failed")
     detail: dict[str, float | int | str | list[str]] = Field(default_factory=dict, description="gate extras")
+
+
+class GateOutcome(Protocol):
+    """What a core gate result (core.lidar.gates, core.imu.gates) carries into a ``SolveGate``."""
+
+    @property
+    def gate(self) -> str: ...
+    @property
+    def passed(self) -> bool: ...
+    @property
+    def value(self) -> float | None: ...
+    @property
+    def threshold(self) -> float: ...
+    @property
+    def message(self) -> str: ...
+    @property
+    def hint(self) -> str | None: ...
+
+
+class SolveGate(Document):
+    """One gate of a sensor edge's solve (the LiDAR and camera-IMU edges), before or after the solve; each
+    kind names its gates in its own ``gate`` description."""
+
+    gate: str = Field(description="the gate's name")
+    passed: bool = Field(description="true when satisfied")
+    value: float | None = Field(
+        description="what was measured (unit in the message); none when not computable"
+    )
+    threshold: float = Field(description="the limit it was judged against")
+    message: str = Field(description="the verdict in words")
+    hint: str | None = Field(None, description="what to capture or check next when it failed")
+
+    @classmethod
+    def from_result(cls, g: GateOutcome) -> Self:
+        """The stored form of a core gate result; a value that could not be computed (NaN, inf) as None."""
+        value = None if g.value is None or not math.isfinite(g.value) else float(g.value)
+        return cls(
+            gate=g.gate, passed=g.passed, value=value, threshold=g.threshold, message=g.message, hint=g.hint
+        )
 
 
 class MotionResidual(Document):

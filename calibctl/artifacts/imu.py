@@ -19,7 +19,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, SolveGate, ros_frames_field
 
 IMU_SCHEMA_VERSION: Literal[1] = 1
 Matrix4 = tuple[tuple[float, float, float, float], ...]
@@ -33,20 +33,13 @@ COVARIANCE_LAYOUT = (
 )
 
 
-class ImuGate(Document):
+class ImuGate(SolveGate):
     """One gate of the camera-IMU solve (core.imu.gates), before or after the solve."""
 
     gate: str = Field(
         description="rotational_excitation, td_observability, td_rotation_correlation, td_sigma, "
         "saturation, imu_gaps or dropped_frames (core.imu.gates)"
     )
-    passed: bool = Field(description="true when satisfied")
-    value: float | None = Field(
-        description="what was measured (unit in the message); none when not computable"
-    )
-    threshold: float = Field(description="the limit it was judged against")
-    message: str = Field(description="the verdict in words")
-    hint: str | None = Field(None, description="what to capture or check next when it failed")
 
 
 class ImuNoiseModel(Document):

@@ -13,7 +13,7 @@ from typing import Literal
 from pydantic import Field
 
 from calibctl.artifacts.common import SERIAL_PATTERN, Document, Sha256Hex, UtcDatetime
-from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, ros_frames_field
+from calibctl.artifacts.handeye import FRAME_PATTERN, RosFrames, SolveGate, ros_frames_field
 
 LIDAR_SCHEMA_VERSION: Literal[1] = 1
 ScanOutcome = Literal[
@@ -22,20 +22,13 @@ ScanOutcome = Literal[
 Matrix4 = tuple[tuple[float, float, float, float], ...]
 
 
-class LidarGate(Document):
+class LidarGate(SolveGate):
     """One gate of the camera-LiDAR solve (core.lidar.gates), before or after the solve."""
 
     gate: str = Field(
         description="lidar-poses, lidar-observability, lidar-range-spread, lidar-plane-rms, "
         "lidar-dimension or lidar-held-out"
     )
-    passed: bool = Field(description="true when satisfied")
-    value: float | None = Field(
-        description="what was measured (unit in the message); none when not computable"
-    )
-    threshold: float = Field(description="the limit it was judged against")
-    message: str = Field(description="the verdict in words")
-    hint: str | None = Field(None, description="what to capture or check next when it failed")
 
 
 class LidarScan(Document):

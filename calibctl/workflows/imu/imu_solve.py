@@ -46,7 +46,6 @@ from calibctl.artifacts.imu import (
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
 from calibctl.core.extrinsics import se3
-from calibctl.core.gate import GateResult
 from calibctl.core.imu import intrinsics
 from calibctl.core.imu.calibrate import Calibration, calibrate_cameras
 from calibctl.core.imu.plain import board_track
@@ -275,17 +274,6 @@ def _finite(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
-def _gate(g: GateResult) -> ImuGate:
-    return ImuGate(
-        gate=g.gate,
-        passed=g.passed,
-        value=_finite(g.value),
-        threshold=g.threshold,
-        message=g.message,
-        hint=g.hint,
-    )
-
-
 def estimate_of(outcome: ImuOutcome) -> ImuEstimate | None:
     s = outcome.solution
     if s is None:
@@ -431,7 +419,7 @@ def evidence(outcome: ImuOutcome) -> ImuEdgeResult:
         ),
         metrics=metrics_of(s, req.folds),
         # the failed first try before td was held is told by td_held_reason, not judged again by lint
-        gates=[_gate(g) for g in outcome.calibration.gates if g.gate != FREE_TRY],
+        gates=[ImuGate.from_result(g) for g in outcome.calibration.gates if g.gate != FREE_TRY],
         inputs=[
             ImuInput.model_validate({"role": role, "path": str(path.resolve()), "sha256": sha})
             for role, path, sha in outcome.recording.inputs

@@ -112,17 +112,7 @@ def evidence(
         range_offset_applied_mm=outcome.range_offset_applied_mm,
         transform=transform,
         metrics=metrics,
-        gates=[
-            LidarGate(
-                gate=g.gate,
-                passed=g.passed,
-                value=_or_none(g.value),
-                threshold=g.threshold,
-                message=g.message,
-                hint=g.hint,
-            )
-            for g in outcome.gates
-        ],
+        gates=[LidarGate.from_result(g) for g in outcome.gates],
         scans_outcomes=[
             LidarScan.model_validate(
                 {
