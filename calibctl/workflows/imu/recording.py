@@ -10,7 +10,7 @@ until one shared origin is subtracted):
 - the corners: ``camN/<ns>.csv``, one file per frame (yac's layout): a stamp column first, then at
   least ``kp_x, kp_y`` (pixel) and ``p_x, p_y, p_z`` (board point, metres); a file with a header only
   is a frame without a detection. Beside them the ASL ``camN/data.csv`` (``#timestamp [ns],filename``)
-  may list the frames; a stamp listed twice there is refused. With a registered board (``--board``)
+  may list the frames; a stamp listed twice or out of order there is refused. With a registered board (``--board``)
   every board point must be one of that board's corners.
 - or the images: no corner files, the ASL ``camN/data.csv`` listing ``camN/data/<filename>``; the
   corners are detected in each image with the registered board (``--board``, a chessboard or ChArUco).
@@ -197,6 +197,11 @@ def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
             raise InputError(
                 f"{path}: data line {i + 1} is not 'stamp_ns,filename'",
                 "the ASL frame list is '#timestamp [ns],filename', one frame a line",
+            )
+        if out and int(s) < out[-1][0]:  # frames out of order: overlapping logs or a reset clock
+            raise InputError(
+                f"{path}: frame stamp {s} (data line {i + 1}) is before {out[-1][0]} (data line {i})",
+                "list the frames in the order they were taken, one recording per folder",
             )
         out.append((int(s), row[1].strip()))
     return out

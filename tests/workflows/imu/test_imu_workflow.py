@@ -97,13 +97,23 @@ def test_a_bad_imu_log_is_exit_2_naming_the_file_and_the_fix_and_nothing_is_stor
         assert [c.version for c in store.list_rig_calibrations(RIG)] == [1]
 
 
-def test_a_camera_stamp_listed_twice_is_refused_naming_the_list(recording, tmp_path) -> None:
+@pytest.mark.parametrize(
+    ("order", "message"),
+    [
+        ([0, 0, 1, 2], r"cam0/data.csv: frame stamp \d+ is listed twice"),
+        ([0, 2, 1, 3], r"cam0/data.csv: frame stamp \d+ \(data line 3\) is before \d+ \(data line 2\)"),
+    ],
+    ids=["listed twice", "out of order"],
+)
+def test_a_camera_stamp_listed_twice_or_out_of_order_is_refused_naming_the_list(
+    recording, tmp_path, order, message
+) -> None:
     rec = copy_recording(recording, tmp_path)
     stamps = sorted(p.stem for p in (rec / "cam0").glob("*.csv"))
-    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    listing = ["#timestamp [ns],filename"] + [f"{stamps[i]},{stamps[i]}.png" for i in order]
     (rec / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
     url = make_store(tmp_path / "c.db")
-    with pytest.raises(CalibctlError, match=r"cam0/data.csv: frame stamp \d+ is listed twice") as info:
+    with pytest.raises(CalibctlError, match=message) as info:
         imu_solve.run_imu(settings_for(url), imu_solve.ImuRequest(rec, CAM))
     assert info.value.exit_code == 2
 
