@@ -59,6 +59,15 @@ KALIBR_IMU_FIELDS = {
     "gyroscope_random_walk",
 }
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
+_KALIBR_TARGETS: dict[str, dict[str, type]] = {  # field -> the type Kalibr's reader insists on
+    "aprilgrid": {"tagCols": int, "tagRows": int, "tagSize": float, "tagSpacing": float},
+    "checkerboard": {
+        "targetCols": int,
+        "targetRows": int,
+        "rowSpacingMeters": float,
+        "colSpacingMeters": float,
+    },
+}
 _FIX_FRAME = (
     "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
 )
@@ -96,8 +105,8 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | lidar-result | tf | urdf | kalibr | kalibr-imu | mrcal |
-    opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | lidar-result | tf | urdf | kalibr | kalibr-imu | kalibr-target |
+    mrcal | opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -118,6 +127,8 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "tf"
     if set(data) >= KALIBR_IMU_FIELDS:
         return "kalibr-imu"
+    if "target_type" in data:
+        return "kalibr-target"
     if data and all(
         k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()
     ):
@@ -391,6 +402,25 @@ def _kalibr_imu(data: dict[str, Any]) -> list[Finding]:
             findings += _finite_matrix(value, (3, 3), what)[1]
         C, bad = _finite_matrix(gyro.get("C_gyro_i"), (3, 3), "gyroscopes.C_gyro_i")
         findings += bad + ([] if C is None else _rotation(C, "gyroscopes.C_gyro_i"))
+    return findings
+
+
+def _kalibr_target(data: dict[str, Any]) -> list[Finding]:
+    """Kalibr's target.yaml as its ConfigReader ``getTargetParams`` checks it: an aprilgrid's tagCols and
+    tagRows ints of 3 or more, tagSize and tagSpacing positive floats; a checkerboard's targetCols and
+    targetRows likewise, rowSpacingMeters and colSpacingMeters positive floats (Kalibr refuses an int)."""
+    fix = "export it again with `calibctl rig export RIG --format kalibr-target`"
+    kind = data.get("target_type")
+    fields = _KALIBR_TARGETS.get(kind) if isinstance(kind, str) else None
+    if fields is None:
+        return [_error("kalibr", f"target_type {kind!r} is not aprilgrid or checkerboard", fix)]
+    findings = []
+    for key, want in fields.items():
+        v = data.get(key)
+        ok = type(v) is want and (v >= 3 if want is int else np.isfinite(v) and v > 0)
+        if not ok:
+            what = "an int of 3 or more" if want is int else "a positive float"
+            findings.append(_error("kalibr", f"{key} = {v!r} is not {what} (Kalibr refuses it)", fix))
     return findings
 
 
@@ -714,6 +744,8 @@ def lint_rig_file(
         findings += _kalibr(data, source, limits, trace)
     elif kind == "kalibr-imu":
         findings += _kalibr_imu(data)
+    elif kind == "kalibr-target":
+        findings += _kalibr_target(data)
     else:
         findings += _opencv_stereo(text, source, limits, trace)
     return [LintResult(source, kind, findings)]

@@ -93,6 +93,50 @@ def test_the_stored_edge_shows_exports_and_lints_clean(solved, tmp_path) -> None
     assert "imu.yaml (kalibr-imu): pass" in linted.stdout and "camchain.yaml (kalibr): pass" in linted.stdout
 
 
+def test_kalibrs_target_yaml_is_the_edges_board_in_kalibrs_types_and_lint_checks_it(
+    recording, solved, tmp_path
+) -> None:
+    db, _ = solved
+    url = copy_db(db, tmp_path)
+    no_board = cli(url, "rig", "export", RIG, "--format", "kalibr-target")  # solved from corner files alone
+    assert (
+        no_board.exit_code == 2
+        and "without --board" in no_board.output
+        and "Traceback" not in no_board.output
+    )
+    args = ["imu", "solve", str(recording), "--serial", CAM, "--board", "G7", "--rig", RIG]
+    assert cli(url, *args, "--noise", str(recording / "imu.yaml")).exit_code == 0
+    path = tmp_path / "target.yaml"
+    assert cli(url, "rig", "export", RIG, "--format", "kalibr-target", "-o", str(path)).exit_code == 0
+    target = _yaml_body(path.read_text())  # the types Kalibr's ConfigReader insists on: ints and floats
+    assert target == {"target_type": "checkerboard", "targetCols": 7, "targetRows": 6,
+                      "rowSpacingMeters": 0.05, "colSpacingMeters": 0.05}  # fmt: skip
+    assert all(type(target[k]) is float for k in ("rowSpacingMeters", "colSpacingMeters"))
+    linted = cli(url, "lint", str(path))
+    assert linted.exit_code == 0 and "(kalibr-target): pass" in linted.stdout, linted.output
+    path.write_text(path.read_text().replace("0.05\n", "0.06\n"))  # a hand-edited square size
+    assert cli(url, "lint", str(path)).exit_code == 1
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ("target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 1\n", "tagSpacing = 1"),
+        (
+            "target_type: checkerboard\ntargetCols: 2\ntargetRows: 6\nrowSpacingMeters: 0.05\n",
+            "targetCols = 2",
+        ),
+        ("target_type: circles\n", "target_type 'circles' is not"),
+    ],
+    ids=["int tagSpacing", "2 columns", "unknown type"],
+)
+def test_lint_refuses_a_target_yaml_kalibr_would_refuse(tmp_path, body, says) -> None:
+    path = tmp_path / "target.yaml"
+    path.write_text(body)
+    linted = cli(f"sqlite:///{tmp_path / 'none.db'}", "lint", str(path))
+    assert linted.exit_code == 1 and says in linted.output, linted.output
+
+
 def test_an_edited_number_in_the_stored_edge_is_refused_by_lint_and_import(solved, tmp_path) -> None:
     db, doc = solved
     url = copy_db(db, tmp_path)
