@@ -82,6 +82,11 @@ def imu_log_path(folder: Path) -> Path:
     for path in (folder / "imu0" / "data.csv", folder / "imu0.csv"):
         if path.is_file():
             return path
+    if (folder / "mav0" / "imu0" / "data.csv").is_file():  # EuRoC's zip unpacks to NAME/mav0/
+        raise InputError(
+            f"{folder}: no IMU log (imu0/data.csv or imu0.csv); EuRoC's layout keeps it in mav0/",
+            f"give the recording folder {folder / 'mav0'}",
+        )
     raise InputError(
         f"{folder}: no IMU log (imu0/data.csv or imu0.csv)",
         "give the recording folder (the ASL / EuRoC layout or yac's: docs/imu.md)",

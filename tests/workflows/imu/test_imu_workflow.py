@@ -177,7 +177,13 @@ def test_a_recording_without_an_imu_log_or_corners_is_refused(recording, tmp_pat
     (rec / "imu0" / "data.csv").rename(rec / "imu0" / "other.csv")
     with pytest.raises(CalibctlError, match=r"no IMU log \(imu0/data.csv or imu0.csv\)"):
         recording_read(rec)
-    (rec / "imu0" / "other.csv").rename(rec / "imu0.csv")  # yac's name for the same log
+    (rec / "imu0" / "other.csv").rename(rec / "imu0" / "data.csv")
+    (tmp_path / "MH_01").mkdir()
+    rec = rec.rename(tmp_path / "MH_01" / "mav0")  # EuRoC's zip unpacked: the layout one folder down
+    with pytest.raises(CalibctlError, match="EuRoC's layout keeps it in mav0/") as info:
+        recording_read(tmp_path / "MH_01")
+    assert info.value.hint == f"give the recording folder {rec}"
+    (rec / "imu0" / "data.csv").rename(rec / "imu0.csv")  # yac's name for the same log
     with pytest.raises(CalibctlError, match="cam1: no such camera folder"):
         recording_module.read_recording(rec, "cam1", (np.eye(3), np.zeros(5), (640, 480)))
 
