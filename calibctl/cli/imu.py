@@ -254,6 +254,14 @@ def synth(
             "chessboard of 50 mm squares) instead of corner files.",
         ),
     ] = False,
+    pattern: Annotated[
+        str,
+        typer.Option(
+            "--pattern",
+            help="With --images: chessboard, or aprilgrid (Kalibr's target: 6x5 tags of 55 mm, spacing 0.3, "
+            "tag36h11; truth.json's board holds its target.yaml fields).",
+        ),
+    ] = "chessboard",
     stereo: Annotated[
         bool,
         typer.Option(
@@ -277,6 +285,7 @@ def synth(
         line_delay_s=line_delay_us / 1e6,
         serial=serial,
         images=images,
+        pattern=pattern,
         stereo=stereo,
         force=force,
     )

@@ -118,6 +118,34 @@ def test_kalibrs_target_yaml_is_the_edges_board_in_kalibrs_types_and_lint_checks
     assert cli(url, "lint", str(path)).exit_code == 1
 
 
+def test_a_kalibr_users_aprilgrid_recording_solves_and_exports_its_target(tmp_path_factory, tmp_path) -> None:
+    rec = rendered(tmp_path_factory, "aprilgrid")
+    url = make_store(tmp_path / "c.db")
+    given = {k: v for k, v in truth(rec)["board"].items() if k != "kind"}  # Kalibr's target.yaml fields
+    (tmp_path / "target.yaml").write_text(yaml.safe_dump(given))
+    measured = [
+        "--uncertainty-mm",
+        "0.05",
+        "--instrument",
+        "calipers",
+        "--measured-by",
+        "qa",
+        "--measured-on",
+        "2026-12-01",
+    ]
+    added = cli(url, "board", "add", "AG", "--from-kalibr", str(tmp_path / "target.yaml"), *measured)
+    assert added.exit_code == 0, added.output
+    args = ["imu", "solve", str(rec), "--serial", CAM, "--board", "AG", "--noise", str(rec / "imu.yaml")]
+    r = cli(url, *args, "--rig", RIG, "--json")
+    assert r.exit_code == 0, r.output
+    e = json.loads(r.stdout)["estimate"]
+    assert abs(e["td_ms"] - TD_S * 1e3) < 5 * e["sigma_td_ms"]
+    exported = _yaml_body(cli(url, "rig", "export", RIG, "--format", "kalibr-target").stdout)
+    assert exported == given
+    no_images = cli(url, "imu", "synth", str(tmp_path / "x"), "--pattern", "aprilgrid")
+    assert no_images.exit_code == 2 and "add --images" in no_images.output
+
+
 @pytest.mark.parametrize(
     ("body", "says"),
     [
