@@ -26,6 +26,7 @@ from calibctl.workflows.imu.recording import (
     Recording,
     assemble,
     board_corners,
+    check_board_seen,
     check_image_size,
 )
 
@@ -142,6 +143,7 @@ def read_bag(
     for what, stamps, option in (("IMU", t_imu, imu_topic), ("camera", t_cam, image_topic)):
         if len(stamps) < 2:
             raise InputError(f"{bag}: {len(stamps)} {what} messages on {option}", "record longer")
+    check_board_seen(objs, board, f"{bag} {image_topic}")
     cam_ns = np.array(t_cam, np.int64)
     order = np.argsort(cam_ns, kind="stable")  # a bag keeps arrival order; the sensor stamps decide
     cam_ns = cam_ns[order]

@@ -10,10 +10,11 @@ until one shared origin is subtracted):
 - the corners: ``camN/<ns>.csv``, one file per frame (yac's layout): a stamp column first, then at
   least ``kp_x, kp_y`` (pixel) and ``p_x, p_y, p_z`` (board point, metres); a file with a header only
   is a frame without a detection. Beside them the ASL ``camN/data.csv`` (``#timestamp [ns],filename``)
-  may list the frames; a stamp listed twice or out of order there is refused. With a registered board (``--board``)
-  every board point must be one of that board's corners.
+  may list the frames; a stamp listed twice or out of order there is refused. With a registered board
+  (``--board``) every board point must be one of that board's corners.
 - or the images: no corner files, the ASL ``camN/data.csv`` listing ``camN/data/<filename>``; the
-  corners are detected in each image with the registered board (``--board``, a chessboard or ChArUco).
+  corners are detected in each image with the registered board (``--board``, a chessboard, ChArUco or
+  AprilGrid); images in none of which it is found are refused (they show another board).
 - the noise model: Kalibr's ``imu.yaml`` (``gyroscope_noise_density``, ``accelerometer_noise_density``,
   ``gyroscope_random_walk``, ``accelerometer_random_walk``) or yac's ``config.yaml`` ``imu0`` block
   (``sigma_g_c``, ``sigma_a_c``, ``sigma_gw_c``, ``sigma_aw_c``, ``g``).
@@ -273,7 +274,17 @@ def read_images(
         imgs.append(img)
         stamps.append(stamp)
         paths.append(path)
+    check_board_seen(objs, board, f"{folder / 'data'}")
     return np.array(stamps, np.int64), objs, imgs, paths
+
+
+def check_board_seen(objs: list[np.ndarray], board: Board, where: str) -> None:
+    """Refuse images in none of which ``board`` is found: they show another board (or none)."""
+    if objs and not any(len(o) for o in objs):
+        raise InputError(
+            f"{where}: board {board.ref} is found in none of the {len(objs)} images",
+            "name the board the images show with --board NAME[@REV] (`calibctl board list`)",
+        )
 
 
 def read_corners(

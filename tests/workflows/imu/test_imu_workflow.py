@@ -15,7 +15,7 @@ from calibctl.store.repository import Store
 from calibctl.workflows.edges import versions
 from calibctl.workflows.imu import imu_solve
 from calibctl.workflows.imu import recording as recording_module
-from tests.artifacts.factories import calibration
+from tests.artifacts.factories import calibration, measured_board
 from tests.store.rig_documents import RIG
 from tests.workflows.imu.imu_data import (
     CAM,
@@ -277,6 +277,13 @@ def test_asl_images_are_detected_with_the_registered_board(tmp_path_factory, tmp
     s = settings_for(url)
     with pytest.raises(CalibctlError, match="holds images \\(data.csv\\), not corner files") as info:
         imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM))
+    assert info.value.exit_code == 2 and "--board" in (info.value.hint or "")
+    with Store.open(url) as store:
+        store.add_board(measured_board("B9"))  # 9 x 6 inner corners: not the board the images show
+    with pytest.raises(
+        CalibctlError, match=r"cam0/data: board B9@1 is found in none of the 60 images"
+    ) as info:
+        imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM, rig=RIG, board="B9"))
     assert info.value.exit_code == 2 and "--board" in (info.value.hint or "")
     out = imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM, noise=rec / "imu.yaml", rig=RIG, board="G7"))
     assert out.stored is not None and out.stored.status == "accepted"
