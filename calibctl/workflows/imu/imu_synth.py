@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
@@ -171,15 +172,17 @@ def run_imu_synth(
             ]
             write_atomic(out / folder / f"{t}.csv", "\n".join(lines) + "\n", force=force)
     tr = rec.truth
+    noise = {
+        "gyroscope_noise_density": float(tr.gyro_noise_density),
+        "accelerometer_noise_density": float(tr.accel_noise_density),
+        "gyroscope_random_walk": GYRO_RANDOM_WALK,
+        "accelerometer_random_walk": ACCEL_RANDOM_WALK,
+        "rostopic": "/imu0",
+        "update_rate": round(1.0 / float(np.median(np.diff(rec.imu_t_s))), 1),
+    }  # dumped by yaml: 1e-05 written by hand is a string to Kalibr's yaml.safe_load, 1.0e-05 a float
     write_atomic(
         out / "imu.yaml",
-        "# Kalibr imu.yaml: the noise calibctl imu synth rendered\n"
-        f"gyroscope_noise_density: {tr.gyro_noise_density}\n"
-        f"accelerometer_noise_density: {tr.accel_noise_density}\n"
-        f"gyroscope_random_walk: {GYRO_RANDOM_WALK}\n"
-        f"accelerometer_random_walk: {ACCEL_RANDOM_WALK}\n"
-        "rostopic: /imu0\n"
-        f"update_rate: {1.0 / float(np.median(np.diff(rec.imu_t_s))):.1f}\n",
+        "# Kalibr imu.yaml: the noise calibctl imu synth rendered\n" + yaml.safe_dump(noise, sort_keys=False),
         force=True,
     )
     truth = {

@@ -35,6 +35,12 @@ def test_help_names_the_inputs() -> None:
         assert word in r.output
 
 
+def test_synths_imu_yaml_reads_as_kalibr_reads_it(recording) -> None:
+    noise = yaml.safe_load((recording / "imu.yaml").read_text())  # Kalibr's ConfigReader: plain safe_load
+    assert noise["rostopic"] == "/imu0"
+    assert all(type(v) is float and v > 0 for k, v in noise.items() if k != "rostopic"), noise
+
+
 def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> None:
     url = make_store(tmp_path / "c.db")
     out = tmp_path / "o.json"
