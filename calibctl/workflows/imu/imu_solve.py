@@ -8,7 +8,8 @@ core solves and gates it (``core.imu.calibrate``: on a (td, rotation) correlatio
 holds td at ``--hold-td-ms`` when given, else refuses); the typed result becomes the edge's evidence at
 full precision (``evidence``) and is stored as the rig's next version through the ``edges`` room, a
 rejected result as a rejected version (never active). ``result_json`` is the one rounded JSON shape
-that ``--json`` prints and ``-o`` writes.
+that ``--json`` prints and ``-o`` writes (sealed: ``kind``, ``content_sha256`` and, with a signing key,
+its ``signature``, as ``lidar solve -o``; ``calibctl lint FILE`` checks them).
 
 Several cameras (``ImuRequest.more``: further (camera folder, serial) pairs) are solved in one joint
 solve against one IMU trajectory, gravity and biases (``core.imu.calibrate.calibrate_cameras``); each
@@ -57,8 +58,10 @@ from calibctl.errors import InputError, NotFoundError, UsageError
 from calibctl.files import write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
+from calibctl.workflows.exports import sealed_result
 from calibctl.workflows.imu.bags import is_bag, read_bag
 from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
+from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import open_store
 
 IMU_MODELS = intrinsics.IMU_MODELS  # what --imu-model accepts
@@ -540,8 +543,9 @@ def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
         for o in outcome.cameras:  # one version per camera's own edge, in the order given
             if o.held_by_rig is None:
                 o.stored = versions.store_evidence(settings, req.rig, evidence(o)).calibration
-    if req.out is not None:
-        text = json.dumps(result_json(outcome), indent=2, allow_nan=False) + "\n"
+    if req.out is not None:  # hashed, and signed with a configured key: `lint FILE` checks both
+        sealed = sealed_result.seal(result_json(outcome), sealed_result.IMU_RESULT, keys.signer_of(settings))
+        text = json.dumps(sealed, indent=2, allow_nan=False) + "\n"
         write_atomic(req.out, text, force=req.force)
         outcome.written.append(f"wrote {req.out}")
     return outcome

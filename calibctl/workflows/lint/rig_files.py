@@ -105,8 +105,8 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | lidar-result | tf | urdf | kalibr | kalibr-imu | kalibr-target |
-    mrcal | opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | lidar-result | imu-result | tf | urdf | kalibr | kalibr-imu |
+    kalibr-target | mrcal | opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -123,6 +123,8 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if data.get("kind") == sealed_result.LIDAR_RESULT or set(data) >= LIDAR_RESULT_FIELDS:
         return sealed_result.LIDAR_RESULT
+    if data.get("kind") == sealed_result.IMU_RESULT or set(data) >= IMU_RESULT_FIELDS:
+        return sealed_result.IMU_RESULT
     if isinstance(data.get("transforms"), list):
         return "tf"
     if set(data) >= KALIBR_IMU_FIELDS:
@@ -155,44 +157,58 @@ def _rotation(R: np.ndarray, what: str) -> list[Finding]:
 
 
 LIDAR_RESULT_FIELDS = {"transform", "outcomes", "outcome_counts", "gates", "status"}
-_LIDAR_FIX = "write it again: `calibctl lidar solve ... -o FILE` (with a signing key configured, signed)"
+IMU_RESULT_FIELDS = {"recording", "camera", "noise", "gates", "estimate", "row_test"}
+_RESULT_FIX = {
+    kind: f"write it again: `calibctl {room} solve ... -o FILE` (with a signing key configured, signed)"
+    for kind, room in ((sealed_result.LIDAR_RESULT, "lidar"), (sealed_result.IMU_RESULT, "imu"))
+}
 
 
-def _lidar_result(data: dict[str, Any], source: str, trusted: TrustedKeys) -> list[Finding]:
-    """A store-free ``lidar solve -o`` result: its content hash, its transform's own identities (the
-    inverse, the translation), its status and its signature (``exports.sealed_result``)."""
+def _result_transform(data: dict[str, Any], kind: str, source: str) -> list[Finding]:
+    """A sealed result's transform against its own identities: the inverse beside it, the translation
+    (LiDAR: ``transform``; camera-IMU: ``estimate``, T_imu_cam as ``matrix`` beside Kalibr's T_cam_imu)."""
+    if kind == sealed_result.LIDAR_RESULT:
+        block, inverse_key, t_key = data.get("transform"), "T_cam_lidar", "translation_m"
+    else:
+        block, inverse_key, t_key = data.get("estimate"), "T_cam_imu", None
+    if not isinstance(block, dict):
+        return []
+    name = "transform" if kind == sealed_result.LIDAR_RESULT else "estimate"
+    T, bad = _finite_matrix(block.get("matrix"), (4, 4), f"{name}.matrix")
+    inverse, bad_inverse = _finite_matrix(block.get(inverse_key), (4, 4), f"{name}.{inverse_key}")
+    if T is None or inverse is None:
+        return bad + bad_inverse
+    findings = _rotation(T[:3, :3], f"{name}.matrix")
+    t = np.asarray(block.get(t_key) if t_key else T[:3, 3], dtype=np.float64)
+    if (
+        np.max(np.abs(T @ inverse - np.eye(4))) > 1e-6
+        or t.shape != (3,)
+        or np.max(np.abs(t - T[:3, 3])) > 1e-6
+    ):
+        what = f"{inverse_key} and {t_key}" if t_key else inverse_key
+        findings.append(_error("transform", f"{source}: {what} are not {name}.matrix's", _RESULT_FIX[kind]))
+    return findings
+
+
+def _sealed_result(data: dict[str, Any], source: str, trusted: TrustedKeys, kind: str) -> list[Finding]:
+    """A store-free ``lidar solve -o`` or ``imu solve -o`` result: its content hash, its transform's own
+    identities, its status and its signature (``exports.sealed_result``)."""
     recorded = data.get("content_sha256")
     if not isinstance(recorded, str):
         return [
             _error(
                 "content-hash",
                 f"{source} carries no content hash (written before results were sealed)",
-                _LIDAR_FIX,
+                _RESULT_FIX[kind],
             )
         ]
     if recorded != sealed_result.content_sha256(data):
-        return [_error("content-hash", f"{source} was edited (its content hash does not match)", _LIDAR_FIX)]
-    findings = []
-    transform = data.get("transform")
-    if isinstance(transform, dict):
-        T, bad = _finite_matrix(transform.get("matrix"), (4, 4), "transform.matrix")
-        inverse, bad_inverse = _finite_matrix(transform.get("T_cam_lidar"), (4, 4), "transform.T_cam_lidar")
-        findings += bad + bad_inverse
-        if T is not None and inverse is not None:
-            findings += _rotation(T[:3, :3], "transform.matrix")
-            t = np.asarray(transform.get("translation_m"), dtype=np.float64)
-            if (
-                np.max(np.abs(T @ inverse - np.eye(4))) > 1e-6
-                or t.shape != (3,)
-                or np.max(np.abs(t - T[:3, 3])) > 1e-6
-            ):
-                findings.append(
-                    _error(
-                        "transform",
-                        f"{source}: T_cam_lidar and translation_m are not transform.matrix's",
-                        _LIDAR_FIX,
-                    )
-                )
+        return [
+            _error(
+                "content-hash", f"{source} was edited (its content hash does not match)", _RESULT_FIX[kind]
+            )
+        ]
+    findings = _result_transform(data, kind, source)
     if data.get("status") != "accepted":
         findings.append(
             _error(
@@ -207,7 +223,7 @@ def _lidar_result(data: dict[str, Any], source: str, trusted: TrustedKeys) -> li
     problem = trusted.check(
         seal.get("key_id"),
         seal.get("value"),
-        sealed_result.message(sealed_result.LIDAR_RESULT, recorded),
+        sealed_result.message(kind, recorded),
         seal.get("public_key"),
     )
     problem = f"{problem}: {EDITED}" if is_mismatch(problem) else problem
@@ -717,8 +733,8 @@ def lint_rig_file(
                 )
             )
         return [LintResult(source, kind, findings)]
-    if kind == sealed_result.LIDAR_RESULT:
-        return [LintResult(source, kind, _lidar_result(data, source, trusted or TrustedKeys()))]
+    if kind in (sealed_result.LIDAR_RESULT, sealed_result.IMU_RESULT):
+        return [LintResult(source, kind, _sealed_result(data, source, trusted or TrustedKeys(), kind))]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:

@@ -59,7 +59,13 @@ def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> 
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
-    assert json.loads(out.read_text()) == doc  # -o holds what --json prints
+    sealed = json.loads(out.read_text())  # -o holds what --json prints, sealed as lidar solve -o's
+    assert sealed.pop("kind") == "imu-result" and sealed.pop("content_sha256") and sealed == doc
+    linted = cli(url, "lint", str(out))
+    assert linted.exit_code == 0 and "(imu-result): pass" in linted.stdout, linted.output
+    out.write_text(out.read_text().replace(f'"td_ms": {doc["estimate"]["td_ms"]}', '"td_ms": 0.5'))
+    linted = cli(url, "lint", str(out))
+    assert linted.exit_code == 1 and "was edited" in linted.output, linted.output
     e = doc["estimate"]
     assert doc["status"] == "accepted" and doc["camera"] == f"{CAM}@1" and "stored" not in doc
     assert abs(e["td_ms"] - TD_S * 1e3) < 5 * e["sigma_td_ms"]
