@@ -220,7 +220,8 @@ def add(
     from calibctl.workflows.board import boards
 
     reg = boards.registration(
-        name=name, kind=None if kind is None else kind.value, cols=cols, rows=rows, square_mm=square_mm, tag_cols=tag_cols,
+        name=name, kind=None if kind is None else kind.value, cols=cols, rows=rows, square_mm=square_mm,
+        tag_cols=tag_cols,
         tag_rows=tag_rows, tag_size_mm=tag_size_mm, tag_spacing=tag_spacing, family=family,
         kalibr_target=from_kalibr, uncertainty_mm=uncertainty_mm,
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,

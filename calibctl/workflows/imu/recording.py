@@ -190,7 +190,7 @@ def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
     text = bounded.read_text(path, "read the camera's frame list")
     rows = [line.split(",") for line in text.splitlines()[1:] if line.strip()]
     seen: dict[str, int] = {}
-    out = []
+    out: list[tuple[int, str]] = []
     for i, row in enumerate(rows):
         s = row[0].strip()
         if s in seen:

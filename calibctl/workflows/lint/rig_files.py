@@ -433,7 +433,8 @@ def _kalibr_target(data: dict[str, Any]) -> list[Finding]:
     findings = []
     for key, want in fields.items():
         v = data.get(key)
-        ok = type(v) is want and (v >= 3 if want is int else np.isfinite(v) and v > 0)
+        whole = type(v) is int and v >= 3  # bool is no int here: type(True) is bool
+        ok = whole if want is int else type(v) is float and bool(np.isfinite(v)) and v > 0
         if not ok:
             what = "an int of 3 or more" if want is int else "a positive float"
             findings.append(_error("kalibr", f"{key} = {v!r} is not {what} (Kalibr refuses it)", fix))
