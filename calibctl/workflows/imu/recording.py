@@ -361,6 +361,11 @@ def read_recording(
     """The IMU log and one camera's corners (or images) under ``folder`` on one origin (module
     docstring); the camera's held intrinsics (K, distortion in OpenCV's order, image size) come from the
     store, ``board`` (the registered board) detects corners in images and checks the corner files'."""
+    if folder.is_file() and (folder.parent / "metadata.yaml").is_file():  # a .mcap / .db3 of a ROS 2 bag
+        raise InputError(
+            f"{folder} is one file of the ROS 2 bag {folder.parent}",
+            f"give the bag folder {folder.parent} (the one holding metadata.yaml)",
+        )
     if not folder.is_dir():
         raise InputError(f"{folder}: no such recording folder", "give the folder holding imu0 and cam0")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", camera):

@@ -111,6 +111,18 @@ def test_a_bag_without_the_named_topic_is_exit_2(bag, tmp_path, topics, message,
     assert info.value.exit_code == 2 and message in info.value.message and hint in (info.value.hint or "")
 
 
+def test_a_file_of_a_ros2_bag_is_refused_naming_the_bag_folder(bag, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    (storage,) = [p for p in bag.iterdir() if p.name != "metadata.yaml"]  # the .db3 people pick
+    req = imu_solve.ImuRequest(storage, CAM, board="G7", image_topic="/cam0/image_raw", imu_topic="/imu0")
+    with pytest.raises(CalibctlError, match="is one file of the ROS 2 bag") as info:
+        imu_solve.run_imu(settings_for(url), req)
+    assert (
+        info.value.exit_code == 2
+        and info.value.hint == f"give the bag folder {bag} (the one holding metadata.yaml)"
+    )
+
+
 def test_a_repeated_image_stamp_in_a_bag_is_refused(tmp_path_factory, tmp_path) -> None:
     path = tmp_path / "dup"
     _write_bag(rendered(tmp_path_factory, "images"), path, repeat_stamp=True)
