@@ -105,8 +105,8 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | lidar-result | imu-result | tf | urdf | kalibr | kalibr-imu |
-    kalibr-target | mrcal | opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | lidar-result | imu-edge-json | imu-result | tf | urdf | kalibr |
+    kalibr-imu | kalibr-target | mrcal | opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -123,6 +123,8 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if data.get("kind") == sealed_result.LIDAR_RESULT or set(data) >= LIDAR_RESULT_FIELDS:
         return sealed_result.LIDAR_RESULT
+    if data.get("kind") == "imu" and "parent_frame" in data:
+        return "imu-edge-json"
     if data.get("kind") == sealed_result.IMU_RESULT or set(data) >= IMU_RESULT_FIELDS:
         return sealed_result.IMU_RESULT
     if isinstance(data.get("transforms"), list):
@@ -497,6 +499,26 @@ def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: Tr
     return bad_ext + trace.lint(facts, limits)
 
 
+def _imu_edge(data: dict[str, Any], source: str) -> list[Finding]:
+    """One camera-IMU edge as ``rig export --edge IMU:CAM --format json`` writes it: its schema, and a
+    warning that it carries no seal of its own (its rig version's content hash and signature cover it)."""
+    from calibctl.artifacts.imu import ImuEdgeResult
+
+    try:
+        ImuEdgeResult.model_validate(data)
+    except ValidationError as exc:
+        return [_error("schema", validation_message(exc, source), "re-export it from the store")]
+    return [
+        _error(
+            "traceability",
+            f"{source} is one edge of a rig version: it carries no content hash of its own, so an edited "
+            "number cannot be found here",
+            "lint the rig version it came from: `calibctl rig export RIG --format json` (sealed, signed)",
+            "warning",
+        )
+    ]
+
+
 def _document(
     data: dict[str, Any], source: str, model: type[RigCalibration] | type[HandEyeResult]
 ) -> list[Finding]:
@@ -734,6 +756,8 @@ def lint_rig_file(
                 )
             )
         return [LintResult(source, kind, findings)]
+    if kind == "imu-edge-json":
+        return [LintResult(source, kind, _imu_edge(data, source))]
     if kind in (sealed_result.LIDAR_RESULT, sealed_result.IMU_RESULT):
         return [LintResult(source, kind, _sealed_result(data, source, trusted or TrustedKeys(), kind))]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)

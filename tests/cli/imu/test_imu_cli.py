@@ -97,6 +97,14 @@ def test_the_stored_edge_shows_exports_and_lints_clean(solved, tmp_path) -> None
     assert imu_yaml["rostopic"] == "/imu"
     tf = _yaml_body(cli(url, "rig", "export", RIG, "--edge", f"imu:{CAM}", "--format", "tf").stdout)
     assert tf["transforms"][0]["header"]["frame_id"] == "imu"
+    edge = tmp_path / "edge.json"  # unsealed alone: lint checks its schema and says where the seal is
+    assert (
+        cli(url, "rig", "export", RIG, "--edge", f"imu:{CAM}", "--format", "json", "-o", str(edge)).exit_code
+        == 0
+    )
+    linted = cli(url, "lint", str(edge))
+    assert linted.exit_code == 0 and "(imu-edge-json): pass" in linted.stdout, linted.output
+    assert "no content hash of its own" in linted.stdout
     bundle = tmp_path / "bundle"
     assert cli(url, "rig", "export", RIG, "--format", "bundle", "-o", str(bundle)).exit_code == 0
     assert (bundle / "imu.yaml").is_file()
