@@ -224,6 +224,7 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     assert r.exit_code == 1, r.output
     assert "Result: REJECTED" in r.output and "(rejected, never active; no edge)" in r.output
     assert "excite with turns and reversals" in r.output
+    assert "to hold td: imu solve ... --hold-td-ms MS" in r.output  # the other way out, by its flag
     history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
     assert history["active_version"] == 1
     assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]
