@@ -54,8 +54,8 @@ from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_tes
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
 from calibctl.core.intrinsics.solve import is_fisheye
-from calibctl.errors import InputError, NotFoundError, UsageError
-from calibctl.files import write_atomic
+from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
+from calibctl.files import existing_target, write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
 from calibctl.workflows.exports import sealed_result
@@ -533,6 +533,10 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
 
 def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
     """The whole command (module docstring)."""
+    if req.out is not None and not req.force and existing_target(req.out) is not None:
+        raise AlreadyExistsError(  # checked before the solve: a stored version never goes without its file
+            f"{req.out} already exists; nothing was solved or stored", "pass --force to overwrite it"
+        )
     if req.rig is not None:
         related = rig_poses(settings, req)
         for _, serial in _camera_pairs(req):

@@ -118,6 +118,17 @@ def test_a_camera_stamp_listed_twice_or_out_of_order_is_refused_naming_the_list(
     assert info.value.exit_code == 2
 
 
+def test_an_existing_result_file_is_refused_before_anything_is_stored(recording, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    (tmp_path / "out.json").write_text("{}")
+    req = imu_solve.ImuRequest(recording, CAM, rig=RIG, out=tmp_path / "out.json")
+    with pytest.raises(CalibctlError, match="out.json already exists; nothing was solved or stored") as info:
+        imu_solve.run_imu(settings_for(url), req)
+    assert info.value.exit_code == 2 and "--force" in (info.value.hint or "")
+    with Store.open(url) as store:
+        assert [c.version for c in store.list_rig_calibrations(RIG)] == [1]
+
+
 def test_a_corner_file_whose_rows_name_another_stamp_is_refused(recording, tmp_path) -> None:
     rec = copy_recording(recording, tmp_path)
     first = sorted((rec / "cam0").glob("*.csv"))[0]
