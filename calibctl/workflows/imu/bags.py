@@ -5,9 +5,10 @@ ROS 1 ``.bag`` files and ROS 2 bag folders (``metadata.yaml`` with sqlite3 or MC
 rad/s, linear acceleration in m/s^2, the IMU frame) and ``sensor_msgs/Image`` (mono8, mono16, bgr8,
 rgb8, bgra8, rgba8) or ``sensor_msgs/CompressedImage``. Stamps are the messages' ``header.stamp`` (the
 sensor's clock, in ns), not the time the bag recorded them. The corners are detected in every image with
-the registered board. A topic the bag does not hold, of another type, an image stamp repeated: exit 2,
-one line naming the bag and the fix. The bag is bounded like every input: its size by the input limit
-per message read (an image over the limit is refused), the sha256 of the whole bag in the evidence.
+the registered board. A topic the bag does not hold, of another type, an image or IMU stamp repeated
+(both streams are put in stamp order): exit 2, one line naming the bag and the fix. The bag is bounded
+like every input: its size by the input limit per message read (an image over the limit is refused), the
+sha256 of the whole bag in the evidence.
 """
 
 from __future__ import annotations
@@ -154,8 +155,21 @@ def read_bag(
             "every frame must carry its own stamp: fix the camera driver's stamping, then record again",
         )
     imu_ns = np.array(t_imu, np.int64)
+    by_stamp = np.argsort(imu_ns, kind="stable")  # as the images: the sensor stamps decide, not arrival
+    imu_ns = imu_ns[by_stamp]
+    repeated = np.flatnonzero(np.diff(imu_ns) == 0)
+    if repeated.size:
+        raise InputError(
+            f"{bag} {imu_topic}: IMU stamp {imu_ns[repeated[0]]} ns is repeated ({repeated.size} repeats)",
+            "every IMU sample must carry its own header stamp: fix the driver's stamping, then record again",
+        )
     return assemble(
-        ImuStream(f"{bag} {imu_topic}", imu_ns, np.array(gyro, np.float64), np.array(accel, np.float64)),
+        ImuStream(
+            f"{bag} {imu_topic}",
+            imu_ns,
+            np.array(gyro, np.float64)[by_stamp],
+            np.array(accel, np.float64)[by_stamp],
+        ),
         CameraStream(f"{bag} {image_topic}", cam_ns, [objs[i] for i in order], [imgs[i] for i in order]),
         intrinsics,
         [("bag", bag, _sha256(bag))],
