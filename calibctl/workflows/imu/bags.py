@@ -95,6 +95,21 @@ def _connection(reader: Any, topic: str, types: tuple[str, ...], bag: Path, opti
     return found[0]
 
 
+def _in_stamp_order(stamps: list[int], source: str, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """A topic's header stamps in order, with the order that sorts its messages (a bag keeps arrival
+    order; the sensor stamps decide); a stamp carried twice is refused (a driver leaving stamps at zero)."""
+    ns = np.array(stamps, np.int64)
+    order = np.argsort(ns, kind="stable")
+    ns = ns[order]
+    repeated = np.flatnonzero(np.diff(ns) == 0)
+    if repeated.size:
+        raise InputError(
+            f"{source}: {what} stamp {ns[repeated[0]]} ns appears {repeated.size + 1} times",
+            "every message must carry its own header stamp: fix the driver's stamping, then record again",
+        )
+    return ns, order
+
+
 def read_bag(
     bag: Path,
     image_topic: str,
@@ -145,24 +160,8 @@ def read_bag(
         if len(stamps) < 2:
             raise InputError(f"{bag}: {len(stamps)} {what} messages on {option}", "record longer")
     check_board_seen(objs, board, f"{bag} {image_topic}")
-    cam_ns = np.array(t_cam, np.int64)
-    order = np.argsort(cam_ns, kind="stable")  # a bag keeps arrival order; the sensor stamps decide
-    cam_ns = cam_ns[order]
-    repeated = np.flatnonzero(np.diff(cam_ns) == 0)
-    if repeated.size:
-        raise InputError(
-            f"{bag} {image_topic}: image stamp {cam_ns[repeated[0]]} ns appears {repeated.size + 1} times",
-            "every frame must carry its own stamp: fix the camera driver's stamping, then record again",
-        )
-    imu_ns = np.array(t_imu, np.int64)
-    by_stamp = np.argsort(imu_ns, kind="stable")  # as the images: the sensor stamps decide, not arrival
-    imu_ns = imu_ns[by_stamp]
-    repeated = np.flatnonzero(np.diff(imu_ns) == 0)
-    if repeated.size:
-        raise InputError(
-            f"{bag} {imu_topic}: IMU stamp {imu_ns[repeated[0]]} ns is repeated ({repeated.size} repeats)",
-            "every IMU sample must carry its own header stamp: fix the driver's stamping, then record again",
-        )
+    cam_ns, order = _in_stamp_order(t_cam, f"{bag} {image_topic}", "image")
+    imu_ns, by_stamp = _in_stamp_order(t_imu, f"{bag} {imu_topic}", "IMU")
     return assemble(
         ImuStream(
             f"{bag} {imu_topic}",

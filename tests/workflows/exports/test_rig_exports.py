@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import yaml
 
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.extrinsics.rig_metrics import skew
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_tree import pose_to_T
 from calibctl.errors import FileSystemError, InputError
-from calibctl.core.board.board_spec import BoardSpec
 from calibctl.workflows.exports.rig_exports import (
     kalibr_camchain,
     kalibr_target,
