@@ -158,7 +158,7 @@ def registered_board(settings: Settings, ref: str) -> Board:
     name, revision = board_ref(ref)
     with open_store(settings) as store:
         board = store.get_board(name, revision)
-    return Board(board.ref, board_spec(board))
+    return Board(board.ref, board_spec(board), board.measurement.status == "nominal")
 
 
 def _camera_pairs(req: ImuRequest) -> list[tuple[str, str]]:
@@ -232,6 +232,11 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
             for (cam, _), (_, intr) in zip(pairs, held, strict=True)
         ]
         recs = [recs[0], *(_on_origin(r, recs[0]) for r in recs[1:])]
+    if board is not None and board.nominal:  # a camera made with it fails lint; here the metres depend on it
+        recs[0].notes.append(
+            f"board {board.ref}'s size is nominal (typed, never measured): the translation scales with it; "
+            f"measure it (`calibctl board add {board.ref.split('@')[0]} ... --uncertainty-mm ...`)"
+        )
     options = SolveOptions(
         knot_spacing_s=req.knot_spacing_s,
         estimate_line_delay=req.line_delay,

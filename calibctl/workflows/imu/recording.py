@@ -180,6 +180,7 @@ class Board:
 
     ref: str
     spec: BoardSpec
+    nominal: bool = False  # its size typed, never measured: T_imu_cam's translation scales with it
 
 
 def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:

@@ -124,8 +124,11 @@ def test_kalibrs_target_yaml_is_the_edges_board_in_kalibrs_types_and_lint_checks
         and "without --board" in no_board.output
         and "Traceback" not in no_board.output
     )
-    args = ["imu", "solve", str(recording), "--serial", CAM, "--board", "G7", "--rig", RIG]
-    assert cli(url, *args, "--noise", str(recording / "imu.yaml")).exit_code == 0
+    assert cli(url, "board", "add", "G7N", "--cols", "7", "--rows", "6", "--square-mm", "50").exit_code == 0
+    args = ["imu", "solve", str(recording), "--serial", CAM, "--board", "G7N", "--rig", RIG, "--json"]
+    solved_doc = json.loads(cli(url, *args, "--noise", str(recording / "imu.yaml")).stdout)
+    assert solved_doc["stored"]["status"] == "accepted"  # a typed board size is named, not refused
+    assert any("G7N@1's size is nominal" in note for note in solved_doc["notes"])
     path = tmp_path / "target.yaml"
     assert cli(url, "rig", "export", RIG, "--format", "kalibr-target", "-o", str(path)).exit_code == 0
     target = _yaml_body(path.read_text())  # the types Kalibr's ConfigReader insists on: ints and floats
