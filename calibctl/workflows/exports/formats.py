@@ -32,6 +32,8 @@ if TYPE_CHECKING:  # the stamped formats' modules: a JSON export (the default) p
 
 ExportFormat = Literal["json", "yaml", "ros", "opencv", "kalibr", "mrcal"]
 EXPORT_FORMATS: tuple[str, ...] = ("json", "yaml", "ros", "opencv", "kalibr", "mrcal")
+# the formats that carry the trace header (json and yaml are the artifact itself, with its content hash)
+HEADER_FORMATS: tuple[str, ...] = ("ros", "opencv", "kalibr", "mrcal")
 FileKind = Literal["calibctl", "ros", "opencv"]
 
 

@@ -13,6 +13,13 @@ ring, how the square size was measured); the last one is checked by ``calibctl l
 number is a ``content-hash`` error. Anyone can check it: ``grep -v '^# calibctl file-sha256 ' FILE |
 sha256sum``.
 
+Exported where a signing key is configured, the file is also signed as it is: a ``# calibctl
+file-signature ed25519 key_id K value V public_key P`` line after the hash line, the exporting store's
+signature of the file's sha256 (``file_message``; the hash and this line are left out of it). The
+artifact's own signature covers the version the header names, not the numbers in this file: anyone can
+edit one and recompute ``file-sha256``; nobody without the key can re-sign. ``lint --require-signature``
+asks for it (a file inside a bundle is covered by the manifest's signature instead).
+
 A LUT header (``exports.lut``) also carries ``# calibctl signature ed25519 key_id K record_sha256 R value V``:
 the store's signature of the artifact (over its content_sha256, as ``calibctl-record-v1``), the camera
 counterpart of a rig export's ``rig-signature`` line.
@@ -29,6 +36,7 @@ from typing import Any
 from calibctl import bounded
 from calibctl.artifacts.calibration import CalibrationArtifact, RecordSignature
 from calibctl.errors import InputError
+from calibctl.signing import Signer
 
 _PREFIX = "# calibctl "
 _REF = re.compile(
@@ -53,7 +61,30 @@ _MEMBER = re.compile(
     r"^(?:# |<!-- )calibctl member (?P<ref>\S+@\d+) sha256 (?P<sha>[0-9a-f]{64})"
     r"(?: frame (?P<frame>\S+))?(?: -->)?\s*$"
 )
+_FILE_SIGNATURE = re.compile(
+    r"^(?:# |<!-- )calibctl file-signature (?P<algorithm>ed25519) key_id (?P<key_id>[0-9a-f]{64}) "
+    r"value (?P<value>[A-Za-z0-9+/]{86}==) public_key (?P<public_key>[A-Za-z0-9+/]{43}=)(?: -->)?\s*$"
+)
 HEADER_SCAN_LINES = 8
+
+
+@dataclass(frozen=True)
+class FileSignature:
+    """A ``file-signature`` line: the exporting store's key over ``file_message(signed_file_sha256)``."""
+
+    key_id: str
+    value: str
+    public_key: str
+    signed_file_sha256: str  # the sha256 of the file as read (what the signature must cover)
+
+    @property
+    def message(self) -> bytes:
+        return file_message(self.signed_file_sha256)
+
+
+def file_message(file_sha256_hex: str) -> bytes:
+    """The bytes a file signature is taken over."""
+    return f"calibctl-file-v1\n{file_sha256_hex}".encode("ascii")
 
 
 @dataclass(frozen=True)
@@ -65,6 +96,7 @@ class TraceHeader:
     file_sha256: str | None = None  # None: written before exports were hashed
     actual_file_sha256: str | None = None
     signature: RecordSignature | None = None  # the artifact's store signature, when the export carries it
+    file_signature: FileSignature | None = None  # the exporting store's signature of the file itself
 
     @property
     def intact(self) -> bool | None:
@@ -86,7 +118,9 @@ def evidence_of(art: CalibrationArtifact) -> dict[str, Any]:
 
 def _without_hash_line(text: str) -> str:
     return "".join(
-        line for line in text.splitlines(keepends=True) if not _FILE_SHA.match(line.rstrip("\r\n"))
+        line
+        for line in text.splitlines(keepends=True)
+        if not (_FILE_SHA.match(line.rstrip("\r\n")) or _FILE_SIGNATURE.match(line.rstrip("\r\n")))
     )
 
 
@@ -100,6 +134,30 @@ def _signature_line(word: str, signature: RecordSignature, open_: str = "# ", cl
         f"{signature.record_sha256} value {signature.value}"
         f"{f' public_key {signature.public_key}' if signature.public_key else ''}{close}\n"
     )
+
+
+def sign_file(text: str, signer: Signer | None) -> str:
+    """``text`` (an export with its ``file-sha256`` line) with a ``file-signature`` line after that line,
+    by ``signer``; unchanged without a signer or a hash line (a JSON document carries its own hash)."""
+    lines = text.splitlines(keepends=True)
+    at = next((k for k, line in enumerate(lines[: HEADER_SCAN_LINES + 8]) if _FILE_SHA.match(line)), None)
+    if signer is None or at is None:
+        return text
+    xml = lines[at].startswith("<!-- ")
+    open_, close = ("<!-- ", " -->") if xml else ("# ", "")
+    value = signer.sign(file_message(file_sha256(text)))
+    line = (
+        f"{open_}calibctl file-signature ed25519 key_id {signer.key_id} value {value} "
+        f"public_key {signer.public_key_text}{close}\n"
+    )
+    return "".join(lines[: at + 1]) + line + "".join(lines[at + 1 :])
+
+
+def _file_signature_in(head: list[str], text: str) -> FileSignature | None:
+    m = next((m for line in head if (m := _FILE_SIGNATURE.match(line))), None)
+    if m is None:
+        return None
+    return FileSignature(m.group("key_id"), m.group("value"), m.group("public_key"), file_sha256(text))
 
 
 def _signature_in(head: list[str]) -> RecordSignature | None:
@@ -149,6 +207,7 @@ class RigTraceHeader:
     file_sha256: str | None
     actual_file_sha256: str | None
     signature: RecordSignature | None = None  # the rig version's store signature (over rig_sha256)
+    file_signature: FileSignature | None = None  # the exporting store's signature of the file itself
 
     @property
     def intact(self) -> bool | None:
@@ -212,6 +271,7 @@ def read_rig(text: str) -> RigTraceHeader | None:
         sha,
         file_sha256(text) if sha else None,
         seal,
+        _file_signature_in(head, text),
     )
 
 
@@ -237,4 +297,5 @@ def read(text: str) -> TraceHeader | None:
         file_sha256=sha,
         actual_file_sha256=file_sha256(text) if sha else None,
         signature=_signature_in(head),
+        file_signature=_file_signature_in(head, text),
     )

@@ -146,6 +146,17 @@ def _ros_facts(data: dict[str, Any], source: str) -> CalibrationFacts:
     )
 
 
+def file_facts(loaded: formats.CalibrationFile) -> CalibrationFacts | None:
+    """The facts of a ROS or OpenCV file, or None for another kind or one whose numbers cannot be read
+    (``lint_file`` names why)."""
+    try:
+        if loaded.kind == "ros":
+            return _ros_facts(loaded.data, loaded.source)
+        return _opencv_facts(loaded.data, loaded.source) if loaded.kind == "opencv" else None
+    except (InputError, KeyError, TypeError, ValueError):
+        return None
+
+
 def _distortion_model(name: Any) -> str:
     """ROS/OpenCV ``distortion_model`` or a calibctl model name -> the lint's lens family."""
     return "equidistant" if name in ("equidistant", "fisheye") else "brown-conrady"
@@ -649,7 +660,8 @@ def trace_rules(
                 message=f"the header names {header.ref} but records no file-sha256 (an older calibctl "
                 "wrote it): "
                 "its numbers cannot be checked against that calibration",
-                fix=f"export {header.ref} again",
+                fix=f"export {header.ref} again, or lint it with --db URL: its numbers are then compared "
+                "with the stored version",
             )
         ], {}
     if not header.intact:

@@ -29,14 +29,16 @@ from calibctl import bounded
 from calibctl.artifacts.calibration import RecordSignature
 from calibctl.artifacts.common import validation_message
 from calibctl.artifacts.lint import Finding
-from calibctl.config import LintThresholds
+from calibctl.config import LintThresholds, Settings
 from calibctl.errors import InputError
 from calibctl.signing import EDITED, TrustedKeys, is_mismatch
 from calibctl.workflows.exports import bundle, formats, sealed_result, trace_header
 from calibctl.workflows.exports.frame_names import ROS_NAME, FrameNames
+from calibctl.workflows.lint import store_match
 from calibctl.workflows.lint.lint import (
     CalibrationFacts,
     LintResult,
+    file_facts,
     lint_facts,
     lint_file,
     signature_rule,
@@ -636,13 +638,48 @@ def _camera_signature(header: trace_header.TraceHeader, trusted: TrustedKeys) ->
     return _seal(header.ref, header.signature, header.artifact_sha256, trusted)
 
 
+def _file_signature(
+    header: trace_header.RigTraceHeader | trace_header.TraceHeader, trusted: TrustedKeys, in_bundle: bool
+) -> list[Finding]:
+    """The exporting store's signature of the file itself (``trace_header.sign_file``): the header's record
+    signature covers the version it names, not the numbers in the file. Not asked of a file a bundle's
+    signed manifest lists (the manifest signs its sha256); one it carries is still checked."""
+    seal = header.file_signature
+    if seal is None:
+        if in_bundle:
+            return []
+        return [
+            _error(
+                "signature",
+                "the file itself is not signed: the header's signature covers the version it names, not the "
+                "numbers below it (anyone can edit one and recompute the file-sha256 line)",
+                "export it again from a store with its signing key configured (`calibctl keys init` there): "
+                "the export then carries a `calibctl file-signature` line",
+            )
+        ]
+    problem = trusted.check(seal.key_id, seal.value, seal.message, seal.public_key)
+    return [] if problem is None else [_error("signature", f"the file {problem}", SIGNATURE_FIX)]
+
+
 def _header_signature(
     header: trace_header.RigTraceHeader | None,
     trusted: TrustedKeys,
     camera: trace_header.TraceHeader | None = None,
+    in_bundle: bool = False,
 ) -> list[Finding]:
     """A rig export's header signature, over the rig version's content hash the header names; a camera
-    export's (``camera``, no rig header) over the artifact's."""
+    export's (``camera``, no rig header) over the artifact's; then the file's own (``_file_signature``)."""
+    signed = header if header is not None else camera
+    if signed is None:
+        return _record_signature(header, trusted, camera)
+    return _record_signature(header, trusted, camera) + _file_signature(signed, trusted, in_bundle)
+
+
+def _record_signature(
+    header: trace_header.RigTraceHeader | None,
+    trusted: TrustedKeys,
+    camera: trace_header.TraceHeader | None = None,
+) -> list[Finding]:
     if header is None and camera is not None:
         return _camera_signature(camera, trusted)
     if header is None:
@@ -700,21 +737,30 @@ def _role(header: trace_header.RigTraceHeader | None, data: Any) -> list[Finding
     ]
 
 
-def lint_camera_file(path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None) -> LintResult:
+def lint_camera_file(
+    path: Path,
+    limits: LintThresholds,
+    trusted: TrustedKeys | None = None,
+    store: Settings | None = None,
+    in_bundle: bool = False,
+) -> LintResult:
     """A camera export, ROS or OpenCV file (a rig's camera_info too); with ``trusted`` its signature: the
-    artifact's, or the rig version's in a rig export's header."""
+    artifact's, or the rig version's in a rig export's header; with ``store`` (--db) its numbers against
+    the version its header names (``store_match``)."""
     loaded = formats.load_calibration(path)
     result = lint_file(loaded, limits)
+    if store is not None and (facts := file_facts(loaded)) is not None:
+        result.findings.extend(store_match.store_findings(store, loaded, facts))
     result.findings.extend(_role(loaded.rig_header, loaded.data))
     if trusted is not None and (loaded.rig_header is not None or loaded.kind != "calibctl" and loaded.header):
-        result.findings.extend(_header_signature(loaded.rig_header, trusted, loaded.header))
+        result.findings.extend(_header_signature(loaded.rig_header, trusted, loaded.header, in_bundle))
     elif trusted is not None:
         signature_rule(result, loaded.data if loaded.kind == "calibctl" else {}, trusted)
     return result
 
 
 def lint_rig_file(
-    path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None
+    path: Path, limits: LintThresholds, trusted: TrustedKeys | None = None, in_bundle: bool = False
 ) -> list[LintResult] | None:
     """The lint of a rig export file (a bundle: its manifest's result, then one per listed file), or None
     when ``path`` is not one. ``trusted`` (``--require-signature``): the rig version's signature must be a
@@ -730,8 +776,8 @@ def lint_rig_file(
         for entry in data.get("files") or []:
             listed = path.parent / str(entry.get("path", "")) if isinstance(entry, dict) else None
             if listed is not None and listed.is_file() and listed.resolve().parent == path.parent.resolve():
-                results += lint_rig_file(listed, limits, trusted) or [
-                    lint_camera_file(listed, limits, trusted)
+                results += lint_rig_file(listed, limits, trusted, in_bundle=True) or [
+                    lint_camera_file(listed, limits, trusted, in_bundle=True)
                 ]
         return results
     if kind in ("rig-json", "handeye-json"):
@@ -763,7 +809,7 @@ def lint_rig_file(
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:
-        findings += _header_signature(rig, trusted, camera)
+        findings += _header_signature(rig, trusted, camera, in_bundle)
     if camera is None and rig is None:
         findings = [
             _error(

@@ -26,7 +26,8 @@ def lint(
     """Lint files and/or stored versions; with ``require_signature`` anything not signed by a trusted key
     is a ``signature`` error (a camera's exports and a rig's carry their version's signature in their
     header; a bundle's manifest carries its own). A LUT folder or header is
-    ``lut_files``' (``against_store``, i.e. --db given: its source must be the active version)."""
+    ``lut_files``' (``against_store``, i.e. --db given: its source must be the active version); with
+    ``against_store`` a camera export's numbers must be those of the version its header names."""
     if not paths and not serial and not all_serials:
         raise UsageError("nothing to lint", "name files, or pass --serial SERIAL or --all")
     trusted = keys.trusted_of(settings, trusted_keys) if require_signature else None
@@ -41,7 +42,11 @@ def lint(
         found = (
             lut_files.lint_lut(path, file_keys, settings if against_store else None)
             or rig_files.lint_rig_file(path, settings.lint, file_keys)
-            or [rig_files.lint_camera_file(path, settings.lint, file_keys)]
+            or [
+                rig_files.lint_camera_file(
+                    path, settings.lint, file_keys, settings if against_store else None
+                )
+            ]
         )
         results += found if trusted is not None else [_mismatches_only(r) for r in found]
     if serial or all_serials:

@@ -26,7 +26,7 @@ from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
 from calibctl.workflows.edges.kinds import STALE_RULES, evidence_of
 from calibctl.workflows.edges.versions import cal_versions, edge_findings
-from calibctl.workflows.exports import bundle, lut, rig_bundle, rig_exports
+from calibctl.workflows.exports import bundle, lut, rig_bundle, rig_exports, trace_header
 from calibctl.workflows.exports.frame_names import parse_frame_map
 from calibctl.workflows.exports.rig_bundle import RigExport
 from calibctl.workflows.exports.rig_bundle import bundle_files as _bundle_files
@@ -161,6 +161,7 @@ def export(
     else:  # one evidence edge: its tf carries the rig header (and signature) like every rig export
         text = edge_export(x.cal, edge, fmt, x.names.frames)
         text = x.stamp(text) if fmt == "tf" else text
+    text = trace_header.sign_file(text, keys.signer_of(settings))  # the file as written, by this store's key
     if out is not None:
         write_atomic(out, text, force=force)
     return text
@@ -226,6 +227,8 @@ def export_files(
     texts, _ = _camera_infos(
         x, mono_if_vertical=False
     )  # a vertical pair is refused before any folder is made
+    signer = keys.signer_of(settings)
+    texts = {serial: trace_header.sign_file(text, signer) for serial, text in texts.items()}
     paths = _ros_paths(out, x)
     for serial, path in paths.items():
         if path.exists() and not force:  # check every target before writing any: nothing half-written

@@ -182,6 +182,11 @@ def export(
     art = _exported(settings, ref)
     _refuse_rejected(art, allow_rejected)
     text = formats.render(art, fmt, camera_name=camera_name, topic=topic)
+    if fmt in formats.HEADER_FORMATS:  # signed as written where a key is configured: the artifact's
+        from calibctl.workflows.exports import trace_header  # signature does not cover the file's numbers
+        from calibctl.workflows.store_admin import keys
+
+        text = trace_header.sign_file(text, keys.signer_of(settings))
     if out is not None:
         write_atomic(out, text, force=force)
     return text

@@ -169,7 +169,9 @@ def test_lint_require_signature(keys: dict[str, Path], tmp_path: Path):
     url = f"sqlite:///{tmp_path / 's.db'}"
     exported = _signed_export(url, keys["key"], tmp_path / "cam.json")
     ros = tmp_path / "cam.yaml"
-    assert run("--db", url, "export", "CAM-S", "--format", "ros", "-o", str(ros)).exit_code == 0
+    # exported where the key is configured: the file itself is signed too (`lint --require-signature` asks)
+    keyed = {"CALIBCTL_SIGNING_KEY": str(keys["key"])}
+    assert run("--db", url, "export", "CAM-S", "--format", "ros", "-o", str(ros), env=keyed).exit_code == 0
 
     def signature_findings(*args: str) -> tuple[int, list[str]]:
         result = run("--db", url, "lint", *args, "--require-signature", "--format", "json")

@@ -204,17 +204,33 @@ def test_a_signature_that_does_not_match_is_refused_in_a_keyless_store(keyed, db
 
 
 @pytest.mark.parametrize("fmt", ["ros", "opencv", "kalibr", "mrcal"])
-def test_single_camera_exports_carry_the_artifacts_signature(signed, db, tmp_path, fmt):
-    source, trusted, other = signed
+def test_single_camera_exports_carry_the_artifacts_signature(keyed, db, tmp_path, fmt, monkeypatch):
+    source, trusted, other = keyed
     path = tmp_path / f"CAM0.{fmt}"
     assert invoke(source, "export", "CAM0", "--format", fmt, "-o", str(path)).exit_code == 0
-    assert "# calibctl signature ed25519 key_id " in path.read_text()
+    monkeypatch.delenv("CALIBCTL_SIGNING_KEY")  # the reader holds no key: it trusts only --trusted-keys
+    text = path.read_text()
+    assert "# calibctl signature ed25519 key_id " in text and "# calibctl file-signature ed25519 " in text
     lint = ("lint", str(path), "--require-signature", "--trusted-keys")
     r = invoke(source, *lint, str(trusted))
     assert r.exit_code == 0, r.output
     r = invoke(source, *lint, str(other))
     assert r.exit_code == 1 and "which is not trusted" in _text(r)
-    text = path.read_text()
+    # a number edited and the file-sha256 line recomputed: the artifact's signature still matches the
+    # version the header names; the file's own signature does not match the file
+    number = re.search(r"\b(\d{3}\.\d+)", text.split("file-signature", 1)[1]).group(1)
+    _reseal(tmp_path, path.name, text.replace(number, f"{float(number) + 1.5!r}", 1))
+    r = invoke(source, *lint, str(trusted))
+    assert r.exit_code == 1 and "the file has a signature by key" in _text(r)
+    r = invoke(source, "lint", str(path))  # no keys asked for: a signature that does not match still fails
+    assert r.exit_code == 1 and "does not match its content" in _text(r)
+    without = "".join(
+        line for line in text.splitlines(keepends=True) if "calibctl file-signature" not in line
+    )
+    _reseal(tmp_path, path.name, without)  # the file signature removed: only --require-signature asks for it
+    assert invoke(source, "lint", str(path)).exit_code == 0
+    r = invoke(source, *lint, str(trusted))
+    assert r.exit_code == 1 and "the file itself is not signed" in _text(r)
     value = re.search(r"calibctl signature .* value (\S)", text).group(1)
     _reseal(tmp_path, path.name, text.replace(f" value {value}", f" value {'B' if value != 'B' else 'C'}", 1))
     r = invoke(source, *lint, str(trusted))
@@ -309,3 +325,19 @@ def test_a_listed_file_turned_into_a_symlink_out_of_the_bundle_is_refused_by_imp
     r = invoke(url, "rig", "import", str(folder))
     assert r.exit_code == 1 and f"{folder / 'cam1.yaml'} is a symlink" in _text(r), r.output
     assert "nothing was stored" in _text(r) and _rig_versions(url) == []
+
+
+@pytest.mark.parametrize("fmt", ["kalibr", "tf"])
+def test_a_rig_export_is_signed_as_a_file_and_an_edited_number_is_refused(keyed, tmp_path, fmt, monkeypatch):
+    source, trusted, _ = keyed
+    path = tmp_path / f"rig.{fmt}.yaml"
+    assert invoke(source, "rig", "export", "R1", "--format", fmt, "-o", str(path)).exit_code == 0
+    monkeypatch.delenv("CALIBCTL_SIGNING_KEY")
+    text = path.read_text()
+    assert "# calibctl rig-signature ed25519 " in text and "# calibctl file-signature ed25519 " in text
+    lint = ("lint", str(path), "--require-signature", "--trusted-keys", str(trusted))
+    assert invoke(source, *lint).exit_code == 0
+    number = re.search(r"(-?\d\.\d{4,})", text.split("file-signature", 1)[1]).group(1)
+    _reseal(tmp_path, path.name, text.replace(number, f"{float(number) + 0.01!r}", 1))
+    r = invoke(source, *lint)
+    assert r.exit_code == 1 and "the file has a signature by key" in _text(r)
