@@ -97,6 +97,11 @@ def add_rig(
         raise UsageError(f"camera {seen[0]} is listed twice", hint="name each camera of the rig once")
     if not cameras:
         raise UsageError("a rig needs at least one camera", hint="pass --camera per member")
+    if len(cameras) == 1 and designs:
+        raise UsageError(
+            f"rig {name} has one camera: a design baseline is the distance between two",
+            hint="leave --design-baseline-mm out, or add the other camera with a second --camera",
+        )
     root = root or cameras[0]
     if root not in cameras:
         raise UsageError(f"--root {root} is not one of the cameras ({', '.join(cameras)})")

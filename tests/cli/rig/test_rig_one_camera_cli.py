@@ -47,7 +47,7 @@ def mono(tmp_path_factory: pytest.TempPathFactory) -> str:
         ),
         (
             ("rig", "add", "MONO-2", "--camera", CAM, "--design-baseline-mm", f"{CAM}:{CAM}=75"),
-            "does not name two different members",
+            ONE_CAMERA,
         ),
     ],
     ids=lambda v: " ".join(v[:3]) if isinstance(v, tuple) else None,
