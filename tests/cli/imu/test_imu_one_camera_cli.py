@@ -1,7 +1,7 @@
 """One camera and an IMU stored as a versioned rig edge, on the shared render: `rig add` with one camera,
 `rig solve` pins its calibration (no capture, no camera-camera edge), `imu solve --rig` stores the edge as the
-next version; history, rollback, rig lint, Kalibr's camchain-imucam (one camera), tf, URDF and the bundle
-carry it; re-calibrating the camera makes the edge stale until the rig is solved again."""
+next version; history, rollback, rig lint, Kalibr's camchain-imucam (one camera), tf, URDF, the bundle and the
+report carry it; re-calibrating the camera makes the edge stale until the rig is solved again."""
 
 from __future__ import annotations
 
@@ -99,7 +99,7 @@ def test_kalibrs_camchain_imucam_has_the_one_camera_with_T_cam_imu_and_td(stored
     assert linted.exit_code == 0 and "(kalibr): pass" in linted.stdout, linted.output
 
 
-def test_tf_urdf_and_the_bundle_carry_the_imu_frame(stored, url, tmp_path) -> None:
+def test_tf_urdf_the_bundle_and_the_report_carry_the_imu_frame(stored, url, tmp_path) -> None:
     tf = _yaml_body(cli(url, "rig", "export", MONO, "--format", "tf").stdout)
     (transform,) = tf["transforms"]
     assert (transform["header"]["frame_id"], transform["child_frame_id"]) == ("imu", CAM_FRAME)
@@ -112,6 +112,9 @@ def test_tf_urdf_and_the_bundle_carry_the_imu_frame(stored, url, tmp_path) -> No
     assert {"imu.yaml", "camchain.yaml", "cam_0001.yaml", "rig.urdf"} <= {p.name for p in bundle.iterdir()}
     linted = cli(url, "lint", str(bundle / "manifest.json"))
     assert linted.exit_code == 0 and "(bundle): pass" in linted.stdout, linted.output
+    page = tmp_path / "rig.html"
+    assert cli(url, "report", "--rig", MONO, "-o", str(page)).exit_code == 0
+    assert 'data-key="imu_t_' in page.read_text()  # the report's camera-IMU section
     one = tmp_path / "cam.yaml"  # one camera: its camera_info may be one file
     assert cli(url, "rig", "export", MONO, "--format", "ros", "-o", str(one)).exit_code == 0
     assert _yaml_body(one.read_text())["camera_name"] == "cam_0001"
