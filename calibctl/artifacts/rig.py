@@ -53,7 +53,11 @@ class RigDefinition(Document):
 
     schema_version: Literal[1] = Field(RIG_SCHEMA_VERSION, description="version of this document's schema")
     name: str = Field(pattern=RIG_NAME_PATTERN, description="rig name (letters, digits, . _ : -)")
-    cameras: list[str] = Field(min_length=2, description="member camera serials; frame names of the tree")
+    cameras: list[str] = Field(
+        min_length=1,
+        description="member camera serials; frame names of the tree (one camera: the root of its sensor "
+        "edges)",
+    )
     root: str = Field(description="the tree's root camera")
     design_baselines: list[DesignBaseline] = Field(default_factory=list, description="design distances")
     frames: list[Annotated[str, Field(pattern=FRAME_PATTERN)]] = Field(
@@ -213,7 +217,9 @@ class RigCalibration(Document):
     version: int = Field(ge=1, description="1, 2, 3, ... per rig, allocated by the store")
     status: Literal["accepted", "rejected"] = Field(description="accepted when rig lint passed")
     root: str = Field(description="root frame of the tree")
-    members: list[RigMember] = Field(min_length=2, description="the camera calibrations used")
+    members: list[RigMember] = Field(
+        min_length=1, description="the camera calibrations used (one: a one-camera rig, pinned)"
+    )
     edges: list[RigEdge] = Field(description="the tree, parents before children")
     pairs: list[RigPair] = Field(description="every camera pair, derived from the tree")
     loops: list[RigLoop] = Field(default_factory=list, description="loop closure (3+ cameras)")

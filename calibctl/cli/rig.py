@@ -35,7 +35,8 @@ RigReferenceSourceOption = Annotated[
 
 rig_app = typer.Typer(
     name="rig",
-    help="Camera rigs: extrinsics of 2+ cameras as a tree from one root, with one-sigma per edge.",
+    help="Camera rigs: extrinsics of 2+ cameras, or one camera with its sensors (IMU, LiDAR), as a tree "
+    "from one root, with one-sigma per edge.",
     no_args_is_help=True,
     rich_markup_mode=None,
 )
@@ -238,7 +239,14 @@ JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on
 def add(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="RIG", help="Rig name.")],
-    camera: Annotated[list[str], typer.Option("--camera", help="Member camera serial (repeat; 2 or more).")],
+    camera: Annotated[
+        list[str],
+        typer.Option(
+            "--camera",
+            help="Member camera serial (repeat). One camera is a rig too: the root of its IMU, LiDAR and "
+            "hand-eye edges (`rig solve` then pins its calibration).",
+        ),
+    ],
     root: Annotated[
         str | None, typer.Option("--root", help="Root camera (default: the first).", show_default=False)
     ] = None,
@@ -310,7 +318,7 @@ def capture(
     or the board revision has a failed metric gauge (this capture's, or one stored) not overridden."""
     from calibctl.workflows.rig import rig_folders, rigs
 
-    sources = {k: str(v) for k, v in rig_folders.parse_sources(source).items()}
+    sources = {k: str(v) for k, v in rig_folders.parse_sources(source, min_cameras=1).items()}
     result = rigs.capture_rig(
         state(ctx).settings(station=station, operator=operator, jobs=jobs),
         name,
@@ -377,11 +385,12 @@ def print_rig_calibration(cal: Any, active: bool) -> None:
         f"{cal.solver}"
     )
     for m in cal.members:
+        held_out = cal.held_out_rms_px.get(m.serial)  # a pinned member too few views had none
         say(
             f"  member {m.serial}@{m.version} {m.image_size[0]}x{m.image_size[1]} fx "
             f"{m.camera_matrix[0][0]:.2f}"
             f"{' (refined)' if m.refined else ''}: RMS fit {cal.fit_rms_px[m.serial]:.3f} px / held-out "
-            f"{cal.held_out_rms_px[m.serial]:.3f} px"
+            + ("none" if held_out is None else f"{held_out:.3f} px")
         )
     for e in cal.edges:
         say(
@@ -452,8 +461,8 @@ def solve(
     ] = True,
     json_output: JsonFlag = False,
 ) -> None:
-    """Solve a rig capture into the rig's next version; exit 0 accepted, 1 rejected by lint, 2 could not
-    solve."""
+    """Solve a rig capture into the rig's next version (a one-camera rig: no capture, its member's active
+    calibration pinned); exit 0 accepted, 1 rejected by lint, 2 could not solve."""
     from calibctl.workflows.rig import rigs
 
     out = rigs.solve_rig_stored(state(ctx).settings(), name, session, refine_intrinsics, activate=activate)

@@ -86,7 +86,8 @@ def decode_calibration(row: RigCalibrationRow, *, by_chain: bool = False) -> Rig
 
 def _no_calibration(s: Session, rig: str) -> NoReturn:
     raise NotFoundError(
-        f"rig {rig} has no calibration yet", f"run `calibctl rig solve {rig}` after a rig capture"
+        f"rig {rig} has no calibration yet",
+        f"run `calibctl rig solve {rig}` after a rig capture (a one-camera rig needs none)",
     )
 
 

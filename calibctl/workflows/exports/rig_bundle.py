@@ -52,15 +52,16 @@ class RigExport:
     full_tree: RigTree  # hand-eye and LiDAR edges included, serials and declared frames
     names: FrameNames
     left: str
-    right: str
+    right: str | None  # None: a one-camera rig, no stereo pair
     member_docs: dict[str, dict[str, Any]]  # serial -> its manifest entry (signature from the store)
 
     @property
     def ref(self) -> str:
         return f"{self.cal.rig}@{self.cal.version}"
 
-    def T_right_left(self) -> np.ndarray:
-        return self.cameras.T(self.right, self.left)
+    def stereo_pair(self) -> tuple[str, str, np.ndarray] | None:
+        """(left, right, T_right_left) of the stereo pair; None for a one-camera rig."""
+        return None if self.right is None else (self.left, self.right, self.cameras.T(self.right, self.left))
 
     def stamp(self, body: str, serials: tuple[str, ...] = ()) -> str:
         by = {m.serial: m for m in self.cal.members}
@@ -113,8 +114,13 @@ def derive(
     serials = [m.serial for m in cal.members]
     others = [f for f in full_tree.frames if f not in serials]
     names = FrameNames.of(serials, others, mapped)
-    right = pair or next(s for s in serials if s != cal.root)
-    if right not in serials or right == cal.root:
+    if len(serials) == 1 and pair is not None:
+        raise UsageError(
+            f"--pair {pair}: rig {cal.rig} has one camera, no stereo pair",
+            hint="leave --pair out: its exports describe the one camera and its sensor edges",
+        )
+    right = pair or next((s for s in serials if s != cal.root), None)
+    if right is not None and (right not in serials or right == cal.root):
         raise UsageError(f"--pair {right} is not a non-root member of rig {cal.rig}")
     member_docs = {
         m.serial: {
@@ -161,15 +167,21 @@ def text(x: RigExport, fmt: str) -> str:
         model = None if ev.estimate is None else ev.estimate.imu_model
         return x.stamp(rig_exports.kalibr_imu(ev.noise, f"/{frame}", model))
     # opencv
-    return x.stamp(
-        rig_exports.opencv_stereo(by_name[x.left], by_name[x.right], x.T_right_left()), (x.left, x.right)
-    )
+    stereo = x.stereo_pair()
+    if stereo is None:
+        raise UsageError(
+            f"rig {x.ref} has one camera: the OpenCV stereo file needs two",
+            hint="export its camera with `calibctl export SERIAL --format opencv`, or the rig as ros, tf, "
+            "urdf, kalibr or bundle",
+        )
+    left, right, T_right_left = stereo
+    return x.stamp(rig_exports.opencv_stereo(by_name[left], by_name[right], T_right_left), (left, right))
 
 
 def camera_infos(x: RigExport, *, mono_if_vertical: bool) -> tuple[dict[str, str], bool]:
     """serial -> stamped camera_info, and whether the pair got its rectified R/P (False: a vertical pair)."""
     infos, rectified = rig_exports.ros_camera_infos(
-        x.members, x.left, x.right, x.T_right_left(), x.names, mono_if_vertical=mono_if_vertical
+        x.members, x.stereo_pair(), x.names, mono_if_vertical=mono_if_vertical
     )
     return {s: x.stamp(body, (s,)) for s, body in infos.items()}, rectified
 
@@ -216,7 +228,11 @@ def bundle_files(x: RigExport) -> tuple[dict[str, str], dict[str, Any]]:
         "root_frame": x.names.frame(x.full_tree.root),
         "frames": dict(x.names.frames),
         "members": members,
-        "stereo": {"left": x.left, "right": x.right, "rectified_camera_info": rectified},
+        "stereo": (
+            None
+            if x.right is None
+            else {"left": x.left, "right": x.right, "rectified_camera_info": rectified}
+        ),
         "stereo_pairs": pairs,
     }
     return files, manifest

@@ -104,23 +104,24 @@ def ros_stereo_pair(
 
 def ros_camera_infos(
     members: Sequence[MemberIntrinsics],
-    left: str,
-    right: str,
-    T_right_left: np.ndarray,
+    pair: tuple[str, str, np.ndarray] | None,
     names: FrameNames,
     *,
     mono_if_vertical: bool = False,
 ) -> tuple[dict[str, str], bool]:
-    """One camera_info YAML per camera (serial -> text): the pair ``left``/``right`` with its rectified R/P,
-    every other camera as a monocular camera_info (R = I, P = [K | 0]). A vertical pair is an InputError,
-    or (``mono_if_vertical``) gets monocular files too; the flag says whether the pair was rectified."""
+    """One camera_info YAML per camera (serial -> text): the ``pair`` (left, right, T_right_left; None for a
+    one-camera rig) with its rectified R/P, every other camera as a monocular camera_info (R = I,
+    P = [K | 0]). A vertical pair is an InputError, or (``mono_if_vertical``) gets monocular files too; the
+    flag says whether the pair was rectified."""
     by_name = {m.name: m for m in members}
     texts: dict[str, str] = {}
-    try:
-        texts[left], texts[right] = ros_stereo_pair(by_name[left], by_name[right], T_right_left, names)
-    except InputError:
-        if not mono_if_vertical:
-            raise
+    if pair is not None:
+        left, right, T_right_left = pair
+        try:
+            texts[left], texts[right] = ros_stereo_pair(by_name[left], by_name[right], T_right_left, names)
+        except InputError:
+            if not mono_if_vertical:
+                raise
     rectified = bool(texts)
     for m in members:
         if m.name not in texts:

@@ -172,6 +172,8 @@ def _ros_paths(out: Path, x: RigExport) -> dict[str, Path]:
     if "{camera}" in str(out):
         paths = {m.name: Path(str(out).replace("{camera}", x.names.camera_name(m.name))) for m in x.members}
     elif out.suffix.lower() in (".yaml", ".yml") and not out.is_dir():
+        if len(x.members) == 1:  # one camera, one camera_info: the file ROS reads is the whole rig
+            return {x.members[0].name: out}
         raise UsageError(f"-o {out}: a stereo rig is not one camera_info file", ROS_ONE_FILE_FIX)
     else:
         with file_errors("create the export folder", out):
@@ -219,6 +221,12 @@ def export_files(
         )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
     if fmt == "lut":
+        if x.right is None:
+            raise UsageError(
+                f"rig {x.ref} has one camera: rectification maps are made per stereo pair",
+                hint="export the camera's own undistortion maps: `calibctl export SERIAL --format lut -o "
+                "DIR`",
+            )
         payloads, header = _lut_files(x)
         return lut.write_lut(out, payloads, header, force=force)
     if fmt == "bundle":

@@ -141,8 +141,9 @@ def check_min_shared_views(n: int) -> None:
         )
 
 
-def parse_sources(items: Sequence[str]) -> dict[str, Path]:
-    """['CAM=SRC', ...] -> {CAM: SRC}; UsageError on a malformed or repeated camera."""
+def parse_sources(items: Sequence[str], min_cameras: int = 2) -> dict[str, Path]:
+    """['CAM=SRC', ...] -> {CAM: SRC}; UsageError on a malformed or repeated camera, or fewer than
+    ``min_cameras`` (``rig capture`` passes 1: the registered rig says which cameras it needs)."""
     out: dict[str, Path] = {}
     for item in items:
         name, sep, folder = item.partition("=")
@@ -153,7 +154,7 @@ def parse_sources(items: Sequence[str]) -> dict[str, Path]:
         if name in out:
             raise UsageError(f"camera {name} is given twice", hint="name each camera of the rig once")
         out[name] = Path(folder)
-    if len(out) < 2:
+    if len(out) < min_cameras:
         raise UsageError(
             f"a rig needs at least two cameras, got {len(out)}", hint="give one --source per camera"
         )

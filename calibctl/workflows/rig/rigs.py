@@ -1,14 +1,17 @@
 """Rig use cases on the store: register a rig, capture it, solve it into the rig's next version.
 
 - ``add_rig``: members must be serials the store knows (a calibration exists), each once; design
-  baselines are ``A:B=75.0+-0.5`` (mm); ``frames`` are non-camera frames hand-eye edges may join.
+  baselines are ``A:B=75.0+-0.5`` (mm); ``frames`` are non-camera frames hand-eye edges may join. One
+  camera is a rig too: the root of a tree of sensor edges (camera-IMU, camera-LiDAR, hand-eye).
 - ``capture_rig``: one ordinary capture per camera (today's detection, outcomes and gates, stored as
   that camera's session), then the images are paired into frames by the last number in their names
   (core.extrinsics.rig_frames) and the ``rig-connected`` gate decides the rig session's status.
 - ``solve_rig_stored``: member intrinsics from each camera's ACTIVE calibration (fixed, their sigmas
   carried into the extrinsics' covariance as a diagonal: the artifact keeps sigmas, not the full
   covariance), or refined jointly; the solve, held-out numbers, loop closure and rig lint; stored as
-  the rig's next version, accepted and active when lint passes, rejected otherwise.
+  the rig's next version, accepted and active when lint passes, rejected otherwise. A one-camera rig has
+  nothing to capture or solve: its version pins the member's active calibration (no edge, no pair), and the
+  commands that need two cameras refuse it (``refuse_single``, exit 2).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import secrets
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -60,6 +64,8 @@ from calibctl.workflows.rig.rig_folders import RigGauge, check_min_shared_views,
 from calibctl.workflows.rig.rig_lint import parse_design, rig_findings
 from calibctl.workflows.store_admin.records import open_store
 
+PINNED_SOLVER = "pinned: one camera, its active calibration"  # RigCalibration.solver of a one-camera rig
+
 
 @dataclass(frozen=True)
 class RigCaptureResult:
@@ -89,9 +95,12 @@ def add_rig(
     seen = [c for i, c in enumerate(cameras) if c in cameras[:i]]
     if seen:
         raise UsageError(f"camera {seen[0]} is listed twice", hint="name each camera of the rig once")
-    if len(cameras) < 2:
+    if not cameras:
+        raise UsageError("a rig needs at least one camera", hint="pass --camera per member")
+    if len(cameras) == 1 and designs:
         raise UsageError(
-            f"a rig needs at least two cameras, got {len(cameras)}", hint="pass --camera per member"
+            f"rig {name} has one camera: a design baseline is the distance between two",
+            hint="leave --design-baseline-mm out, or add the other camera with a second --camera",
         )
     root = root or cameras[0]
     if root not in cameras:
@@ -160,6 +169,7 @@ def capture_rig(
     override_gauge = checked_override(override_gauge)
     with open_store(settings) as store:
         rig = store.get_rig(rig_name)
+        refuse_single(rig, "rig capture pairs the images of two or more cameras")
         board_rev = store.get_board(*board_ref(board))
         failures = board_failures(store, board_rev.ref)
     if gauge is not None and gauge.camera not in rig.cameras:
@@ -262,6 +272,16 @@ def capture_rig(
     return RigCaptureResult(session, results)
 
 
+def refuse_single(rig: RigDefinition, why: str) -> None:
+    """UsageError (exit 2) for a one-camera rig where ``why`` needs two cameras."""
+    if len(rig.cameras) == 1:
+        raise UsageError(
+            f"rig {rig.name} has one camera ({rig.root}): {why}",
+            hint=f"`calibctl rig solve {rig.name}` pins its calibration for IMU and LiDAR edges; register "
+            "a rig of two or more cameras (`calibctl rig add`) for camera-camera extrinsics",
+        )
+
+
 def session_gauge_findings(
     board: str, failures: Sequence[GaugeFailure], gates: Sequence[RigGate]
 ) -> list[Finding]:
@@ -336,6 +356,20 @@ def member_intrinsics(art: CalibrationArtifact) -> MemberIntrinsics:
     )
 
 
+def rig_member(art: CalibrationArtifact, used: MemberIntrinsics, refined: bool) -> RigMember:
+    """The member ``art`` pinned with the intrinsics the solve ``used`` (refined or as stored)."""
+    return RigMember(
+        serial=art.serial,
+        version=art.version,
+        content_sha256=art.content_sha256,
+        image_size=art.image_size,
+        camera_matrix=tuple(map(tuple, np.asarray(used.camera_matrix).tolist())),
+        dist_coeffs=np.asarray(used.dist_coeffs).tolist(),
+        refined=refined,
+        lens="fisheye" if used.lens == "fisheye" else "pinhole",
+    )
+
+
 def _session_views(
     order: Sequence[str], session: RigSession, cam_sessions: Mapping[str, CaptureSession]
 ) -> RigViews:
@@ -374,17 +408,11 @@ def solve_rig_stored(
     """Solve a stored rig session into the rig's next version (see module docstring)."""
     with open_store(settings, write=True) as store:
         rig = store.get_rig(rig_name)
+        if len(rig.cameras) == 1:
+            return _pin_single(settings, store, rig, rig_session_id, refine_intrinsics, activate)
         session = store.get_rig_session(rig.name, rig_session_id)
         order = [rig.root, *[c for c in rig.cameras if c != rig.root]]
-        arts: dict[str, CalibrationArtifact] = {}
-        for c in order:
-            try:
-                arts[c] = store.get_artifact(c, None)
-            except NotFoundError as exc:
-                raise NotFoundError(
-                    f"rig member {c} has no active calibration ({exc.message})",
-                    hint=f"calibrate {c} (or roll it back to an accepted version) and solve again",
-                ) from exc
+        arts = _active_members(store, order)
         views, cam_sessions = _views(rig, order, session, store)
         for c in order:
             size = cam_sessions[c].image_size
@@ -410,16 +438,7 @@ def solve_rig_stored(
             status="accepted",
             root=rig.root,
             members=[
-                RigMember(
-                    serial=c,
-                    version=arts[c].version,
-                    content_sha256=arts[c].content_sha256,
-                    image_size=arts[c].image_size,
-                    camera_matrix=tuple(map(tuple, np.asarray(m.camera_matrix).tolist())),
-                    dist_coeffs=np.asarray(m.dist_coeffs).tolist(),
-                    refined=refine_intrinsics,
-                    lens="fisheye" if m.lens == "fisheye" else "pinhole",
-                )
+                rig_member(arts[c], m, refine_intrinsics)
                 for c, m in zip(order, solution.members, strict=True)
             ],
             edges=[
@@ -455,23 +474,97 @@ def solve_rig_stored(
         )
         identity.refuse(identity.zero_baselines(identity.pair_translations(solution)), what)
         board = cam_sessions[order[0]].board.ref
-        gauges = store.failed_gauges([board, *(a.board.ref for a in arts.values())])
-        findings = rig_findings(cal, rig, {c: a for c, a in arts.items()}, settings.lint, gauges)
-        findings += session_gauge_findings(board, gauges.get(board, []), session.gates)
-        cal = cal.model_copy(
-            update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"}
+        return _store_solved(settings, store, rig, cal, arts, activate, (board, session.gates))
+
+
+def _active_members(store: Any, order: Sequence[str]) -> dict[str, CalibrationArtifact]:
+    arts: dict[str, CalibrationArtifact] = {}
+    for c in order:
+        try:
+            arts[c] = store.get_artifact(c, None)
+        except NotFoundError as exc:
+            raise NotFoundError(
+                f"rig member {c} has no active calibration ({exc.message})",
+                hint=f"calibrate {c} (or roll it back to an accepted version) and solve again",
+            ) from exc
+    return arts
+
+
+def _pin_single(
+    settings: Settings,
+    store: Any,
+    rig: RigDefinition,
+    rig_session_id: str | None,
+    refine_intrinsics: bool,
+    activate: bool,
+) -> RigSolveOutcome:
+    """A one-camera rig's next version: no camera-camera edge to solve, so its member's active calibration
+    is pinned as it is (the version sensor edges, IMU or LiDAR, are stored on)."""
+    if rig_session_id is not None or refine_intrinsics:
+        raise UsageError(
+            f"rig {rig.name} has one camera: its solve pins {rig.root}'s active calibration, "
+            + ("no rig session to solve" if rig_session_id is not None else "nothing to refine jointly"),
+            hint=f"run `calibctl rig solve {rig.name}` alone (re-calibrate {rig.root} to change its "
+            "intrinsics)",
         )
-        cal, base = _with_carried_handeye(cal, store)
-        do_activate = activate and cal.status == "accepted"
-        stored = store.add_rig_calibration(
-            cal,
-            activate=do_activate,
-            actor=settings.operator,
+    arts = _active_members(store, [rig.root])
+    art = arts[rig.root]
+    cal = RigCalibration(
+        rig=rig.name,
+        version=1,
+        status="accepted",
+        root=rig.root,
+        members=[rig_member(art, member_intrinsics(art), refined=False)],
+        edges=[],
+        pairs=[],
+        fit_rms_px={art.serial: art.rms_px},
+        held_out_rms_px={} if art.held_out.rms_px is None else {art.serial: art.held_out.rms_px},
+        held_out_folds=art.held_out.k_folds,
+        solver=PINNED_SOLVER,
+        refine_intrinsics=False,
+        provenance=Provenance(
+            calibctl_version=__version__,
+            opencv_version=cv2.__version__,
             station=settings.station,
-            reason="rig solve",
-            based_on=base,
-        )
-        return RigSolveOutcome(stored, do_activate)
+            operator=settings.operator,
+            created_at=utc_now(),
+        ),
+        content_sha256=UNSEALED,
+    )
+    return _store_solved(settings, store, rig, cal, arts, activate, None)
+
+
+def _store_solved(
+    settings: Settings,
+    store: Any,
+    rig: RigDefinition,
+    cal: RigCalibration,
+    arts: Mapping[str, CalibrationArtifact],
+    activate: bool,
+    session_board: tuple[str, Sequence[RigGate]] | None,
+) -> RigSolveOutcome:
+    """Lint ``cal`` (the members' rules, and the rig session's board gauge when it has one), keep the active
+    version's evidence edges, store it as the rig's next version; active when accepted and asked."""
+    boards = [session_board[0]] if session_board is not None else []
+    gauges = store.failed_gauges([*boards, *(a.board.ref for a in arts.values())])
+    findings = rig_findings(cal, rig, dict(arts), settings.lint, gauges)
+    if session_board is not None:
+        board, gates = session_board
+        findings += session_gauge_findings(board, gauges.get(board, []), gates)
+    cal = cal.model_copy(
+        update={"lint": findings, "status": "rejected" if has_errors(findings) else "accepted"}
+    )
+    cal, base = _with_carried_handeye(cal, store)
+    do_activate = activate and cal.status == "accepted"
+    stored = store.add_rig_calibration(
+        cal,
+        activate=do_activate,
+        actor=settings.operator,
+        station=settings.station,
+        reason="rig solve",
+        based_on=base,
+    )
+    return RigSolveOutcome(stored, do_activate)
 
 
 def _with_carried_handeye(cal: RigCalibration, store: object) -> tuple[RigCalibration, int | None]:

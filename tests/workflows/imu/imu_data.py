@@ -22,6 +22,7 @@ from tests.artifacts.factories import calibration, measured_board
 from tests.store.rig_documents import RIG, rig_calibration, rig_definition
 
 CAM, OTHER = "CAM-0001", "CAM-0002"
+MONO = "MONO-1"  # a one-camera rig: CAM-0001 and its IMU
 WHO = {"actor": "qa", "station": "st1", "reason": "solved"}
 TD_S = 0.012
 RUNNER = CliRunner()
@@ -62,6 +63,16 @@ def make_store(db: Path, other_calibrated: bool = True) -> str:
 
 def cli(url: str, *args: str) -> Any:
     return RUNNER.invoke(app, ["--db", url, *args])
+
+
+def make_mono_store(db: Path) -> str:
+    """``make_store`` with CAM-0001 alone calibrated, and rig MONO (CAM-0001 alone, frame imu) at version 1:
+    `rig add` with one camera, then `rig solve` pinning its calibration; the url."""
+    url = make_store(db, other_calibrated=False)
+    for args in (("rig", "add", MONO, "--camera", CAM, "--frame", "imu"), ("rig", "solve", MONO)):
+        r = cli(url, *args)
+        assert r.exit_code == 0, r.output
+    return url
 
 
 def _cached(base: Path, name: str) -> tuple[Path, bool]:
