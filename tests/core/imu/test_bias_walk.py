@@ -57,3 +57,18 @@ def test_on_a_constant_bias_the_walk_finds_the_constant(dance: ImuCameraRecordin
 def test_the_walk_and_a_linear_drift_are_one_or_the_other(dance: ImuCameraRecording) -> None:
     with pytest.raises(ValueError, match="bias_walk and bias_drift"):
         solve_imu_camera(*as_inputs(dance), replace(OPTIONS, bias_walk=True, bias_drift=True))
+
+
+def test_fix_imu_sigma_keeps_the_noise_files_densities(dance: ImuCameraRecording) -> None:
+    # The render's IMU noise is its noise file's, so the raise would be near 1 anyway; a noise file that
+    # claims a tenth of it is raised back by the default and kept by fix_imu_sigma (Kalibr's weighting).
+    imu, frames, noise = as_inputs(dance)
+    quiet = replace(noise, gyro_noise_density=noise.gyro_noise_density / 10)
+    raised = solve_imu_camera(imu, frames, quiet, OPTIONS)
+    fixed = solve_imu_camera(imu, frames, quiet, replace(OPTIONS, fix_imu_sigma=True))
+    assert raised.imu_variance_factors[0] > 5.0
+    assert fixed.imu_variance_factors == (1.0, 1.0)
+    # Ten times too confident in the gyro: the gyro bias's sigma shrinks with it (the corners pin the
+    # trajectory's rotation too, so by less than ten times).
+    k = fixed.state_names.index("bg_x")
+    assert np.sqrt(fixed.covariance[k, k]) < 0.95 * np.sqrt(raised.covariance[k, k])
