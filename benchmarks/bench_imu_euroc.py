@@ -346,8 +346,8 @@ def kalibr_differences(folder: Path, names: list[str]) -> None:
                 f"{np.round(np.degrees(d_rot), 3)} deg, t {np.round(d_t, 2)} mm; gyro "
                 f"{s.gyro_rms_rad_s:.4f} rad/s accel {s.accel_rms_m_s2:.3f} m/s^2 (x "
                 f"{s.imu_variance_factors[0]:.2f}, {s.imu_variance_factors[1]:.2f}); corner sigma "
-                f"{s.corner_sigma_px:.3f} px; {s.iterations} iterations, cpu {cpu:.1f} s for both "
-                f"(load {load_1min():.1f})"
+                f"{s.corner_sigma_px:.3f} px; {s.iterations} iterations (converged {s.converged}), "
+                f"cpu {cpu:.1f} s for both (load {load_1min():.1f})"
             )
 
 
