@@ -123,7 +123,12 @@ def add(
     square_mm: Annotated[
         float | None, typer.Option("--square-mm", help="Square edge in millimetres.")
     ] = None,
-    kind: Annotated[BoardKind, typer.Option("--kind", help="Pattern type.")] = BoardKind.chessboard,
+    kind: Annotated[
+        BoardKind | None,
+        typer.Option(
+            "--kind", help="Pattern type: chessboard (default), charuco, or aprilgrid (--from-kalibr's)."
+        ),
+    ] = None,
     tag_cols: Annotated[int | None, typer.Option("--tag-cols", help="AprilGrid: tags per row.")] = None,
     tag_rows: Annotated[int | None, typer.Option("--tag-rows", help="AprilGrid: tags per column.")] = None,
     tag_size_mm: Annotated[
@@ -215,7 +220,8 @@ def add(
     from calibctl.workflows.board import boards
 
     reg = boards.registration(
-        name=name, kind=kind.value, cols=cols, rows=rows, square_mm=square_mm, tag_cols=tag_cols,
+        name=name, kind=None if kind is None else kind.value, cols=cols, rows=rows, square_mm=square_mm,
+        tag_cols=tag_cols,
         tag_rows=tag_rows, tag_size_mm=tag_size_mm, tag_spacing=tag_spacing, family=family,
         kalibr_target=from_kalibr, uncertainty_mm=uncertainty_mm,
         instrument=instrument, measured_by=measured_by, measured_on=measured_on, evidence=evidence,

@@ -18,6 +18,8 @@ imu_app = typer.Typer(
 )
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
+TD_GATES = ("td_rotation_correlation", "td_sigma")  # failed: holding td is the other way out
+
 
 def render_result(doc: dict[str, Any]) -> None:
     """Human report of ``imu_solve.result_json``'s document."""
@@ -31,6 +33,8 @@ def render_result(doc: dict[str, Any]) -> None:
         say(f"  gate {g['gate']:<30}{'pass' if g['passed'] else 'FAIL'}  {g['message']}")
         if not g["passed"] and g["hint"]:
             say(f"       hint: {g['hint']}")
+        if not g["passed"] and g["gate"] in TD_GATES and not doc["held"]:  # the core's hint names no flag
+            say("       to hold td: imu solve ... --hold-td-ms MS (0 on a hardware-triggered rig)")
     if doc["held_reason"]:
         say(f"  held: {doc['held_reason']}")
     e = doc["estimate"]
@@ -263,6 +267,14 @@ def synth(
             "chessboard of 50 mm squares) instead of corner files.",
         ),
     ] = False,
+    pattern: Annotated[
+        str,
+        typer.Option(
+            "--pattern",
+            help="With --images: chessboard, or aprilgrid (Kalibr's target: 6x5 tags of 55 mm, spacing 0.3, "
+            "tag36h11; truth.json's board holds its target.yaml fields).",
+        ),
+    ] = "chessboard",
     stereo: Annotated[
         bool,
         typer.Option(
@@ -286,6 +298,7 @@ def synth(
         line_delay_s=line_delay_us / 1e6,
         serial=serial,
         images=images,
+        pattern=pattern,
         stereo=stereo,
         force=force,
     )

@@ -593,7 +593,8 @@ def export(
             help="json, opencv, ros (one camera_info per camera, -o DIR), tf, "
             "urdf (a <robot> ROS loads), urdf-joints (the joints alone, to paste into your "
             "URDF), kalibr (camchain, with T_cam_imu and timeshift_cam_imu when the rig has an IMU), "
-            "kalibr-imu (imu.yaml of the camera-IMU edge), bundle (all of them + manifest.json, -o DIR), "
+            "kalibr-imu (imu.yaml of the camera-IMU edge), kalibr-target (target.yaml of that edge's board), "
+            "bundle (all of them + manifest.json, -o DIR), "
             "or lut (each stereo pair's rectification maps for cv2.remap, -o DIR).",
         ),
     ] = "json",

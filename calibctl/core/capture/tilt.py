@@ -40,12 +40,14 @@ import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 
 from calibctl.core.intrinsics.covariance import intrinsic_covariance
 from calibctl.core.intrinsics.fisheye_model import fisheye_pose, refine_fisheye_pose
+from calibctl.core.intrinsics.solution import WARM_CRITERIA
 
 MIN_TILT_CORNERS = 8
 TILT_NOISE_FLOOR_PX = 0.2  # corner noise assumed at least this, even when the session fits better
@@ -176,7 +178,7 @@ def fit_session_lens(
     diag = math.hypot(*image_size)
     K0 = nominal_camera(image_size, focal_px if focal_px is not None else diag)
     fit = None
-    K_start, D_start = K0, np.zeros(5)
+    K_start, D_start = K0, None
     if focal_source == "session":
         # c free; kept only when it is significantly off the centre (else a weak session lets c wander)
         fit = _calibrate(
@@ -285,7 +287,9 @@ def _calibrate(
     flags: int,
     D0: np.ndarray | None = None,
 ) -> _Fit | None:
-    """(rms px, K, dist (5,), rvecs, tvecs) of cv2.calibrateCamera, or None when it fails or is not finite."""
+    """(rms px, K, dist (5,), rvecs, tvecs) of cv2.calibrateCamera, or None when it fails or is not finite.
+    ``D0``: a warm start (with ``K0``) next to the minimum, stopped at ``WARM_CRITERIA``."""
+    stop: dict[str, Any] = {} if D0 is None else {"criteria": WARM_CRITERIA}
     try:
         rms, K, D, rvecs, tvecs = cv2.calibrateCamera(
             [np.asarray(o, np.float32).reshape(-1, 3) for o in object_points],
@@ -294,6 +298,7 @@ def _calibrate(
             K0.copy(),
             np.zeros(5) if D0 is None else np.array(D0, np.float64),
             flags=flags,
+            **stop,
         )
     except cv2.error:
         return None

@@ -209,6 +209,17 @@ class IntrinsicsSolution:
         return len(self.residuals_px)
 
 
+# Where a warm start's Levenberg-Marquardt stops (cv2.TermCriteria: at most 100 iterations, as OpenCV's
+# documented default, or an accepted step whose norm is under WARM_STEP_EPS). A solve started from the solve
+# of more of the same views sits next to its minimum; under OpenCV's default (DBL_EPSILON) it takes 20-odd
+# steps, most of them far below any printed digit. Stopped at 1e-10 it takes about half as many and lands
+# within ~1e-8 of the same K and distortion (benchmarks/bench_warm_folds.py). Cold solves keep OpenCV's own
+# criteria: far from their minimum, a run of rejected steps can leave an accepted one tiny, and a step
+# tolerance would end the solve there.
+WARM_STEP_EPS = 1e-10
+WARM_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, WARM_STEP_EPS)
+
+
 @contextlib.contextmanager
 def single_threaded_opencv() -> Iterator[None]:
     """Run OpenCV and the BLAS / OpenMP libraries single-threaded inside the block (bit-identical

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -79,6 +80,7 @@ from calibctl.core.intrinsics.solution import (
     MIN_SIGMA_DOF,
     MODELS,
     NO_UNCERTAINTY,
+    WARM_CRITERIA,
     DistortionModel,
     IntrinsicsSolution,
     check_inputs,
@@ -197,7 +199,8 @@ def solve_intrinsics(
             the (6V + p)-square inverse behind OpenCV's standard deviations, a third of a 16-view k1k2
             solve. Such a solution has no sigma, covariance or sigma_opencv. Fisheye models ignore it.
         initial_dist: optional distortion guess (the model's coefficients, OpenCV order), used with
-            ``initial`` only: a warm start from a solve of more of the same views. Fisheye models ignore it.
+            ``initial`` only: a warm start from a solve of more of the same views, stopped at a relative step
+            (``solution.WARM_CRITERIA``) instead of OpenCV's DBL_EPSILON. Fisheye models ignore it.
 
     Raises:
         InputError: malformed, non-finite, or out-of-image input.
@@ -265,20 +268,22 @@ def _solve(
         flags |= cv2.CALIB_USE_INTRINSIC_GUESS
     aspect = float(K0[0, 0] / K0[1, 1]) if m.fx_tied_to_fy else None
     D0 = np.zeros(m.n_coeffs, dtype=np.float64)
+    stop: dict[str, Any] = {}  # a cold start: OpenCV's own criteria
     if initial is not None and initial_dist is not None:
         guess = np.asarray(initial_dist, dtype=np.float64).ravel()
         if guess.size != m.n_coeffs or not np.isfinite(guess).all():
             raise InputError(f"the initial distortion must be {m.n_coeffs} finite coefficients for {m.name}")
         D0 = guess.copy()
+        stop["criteria"] = WARM_CRITERIA
     try:
         with single_threaded_opencv():
             if uncertainty:
                 rms, K, D, rvecs, tvecs, std_int, _std_ext, per_view = cv2.calibrateCameraExtended(
-                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags
+                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags, **stop
                 )
             else:
                 rms, K, D, rvecs, tvecs = cv2.calibrateCamera(
-                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags
+                    objs, imgs, size, K0.copy(), D0.copy(), flags=flags, **stop
                 )
     except cv2.error as exc:
         detail = str(exc).strip().splitlines()[-1].split(" error: ")[-1]

@@ -86,7 +86,7 @@ class BoardRegistration:
 
 def registration(
     *,
-    kind: str,
+    kind: str | None,
     cols: int | None,
     rows: int | None,
     square_mm: float | None,
@@ -99,7 +99,10 @@ def registration(
 ) -> BoardRegistration:
     """The registration ``board add``'s options describe: a chessboard or ChArUco board by ``--cols``,
     ``--rows`` and ``--square-mm``; an AprilGrid by ``--tag-cols``, ``--tag-rows``, ``--tag-size-mm`` and
-    ``--tag-spacing`` or by Kalibr's target.yaml (``--from-kalibr``), never both."""
+    ``--tag-spacing`` or by Kalibr's target.yaml (``--from-kalibr``), never both. Without ``kind``: an
+    AprilGrid when Kalibr's target.yaml is given (the file says so, as a Kalibr user brings it), else a
+    chessboard."""
+    kind = kind or ("aprilgrid" if kalibr_target is not None else "chessboard")
     grid = {"--cols": cols, "--rows": rows, "--square-mm": square_mm}
     tags = {"--tag-cols": tag_cols, "--tag-rows": tag_rows, "--tag-size-mm": tag_size_mm}
     tags["--tag-spacing"] = tag_spacing

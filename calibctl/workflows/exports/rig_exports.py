@@ -25,6 +25,7 @@ import yaml
 from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.artifacts.imu import ImuModelEstimate, ImuNoiseModel
 from calibctl.artifacts.rig import RigCalibration
+from calibctl.core.board.board_spec import APRILGRID, APRILTAG_FAMILIES, CHARUCO, BoardSpec
 from calibctl.core.extrinsics.rig_metrics import essential_matrix, fundamental_matrix, rectify
 from calibctl.core.extrinsics.rig_problem import MemberIntrinsics
 from calibctl.core.extrinsics.rig_solve import RigSolution
@@ -303,6 +304,35 @@ def kalibr_imu(noise: ImuNoiseModel, rostopic: str = "/imu0", model: ImuModelEst
             "C_gyro_i": [list(row) for row in model.gyro_C_gyro_i],
         }
     return yaml.safe_dump(doc, sort_keys=False, default_flow_style=False)
+
+
+def kalibr_target(board: BoardSpec, ref: str) -> str:
+    """Kalibr's target.yaml of the registered board ``ref`` (its measured size, metres), in the fields and
+    types Kalibr's ConfigReader ``getTargetParams`` checks: an AprilGrid (36h11, Kalibr's only family) as
+    ``tagCols``, ``tagRows`` (ints), ``tagSize``, ``tagSpacing`` (floats); a chessboard as ``checkerboard``
+    ``targetCols``, ``targetRows`` (inner corners) and ``rowSpacingMeters``, ``colSpacingMeters``. Kalibr
+    has no ChArUco target, and reads no grid under 3 x 3: both refused naming the board."""
+    grid = board.tags if board.kind == APRILGRID else (board.cols, board.rows)
+    if board.kind == CHARUCO or (board.kind == APRILGRID and board.dictionary != APRILTAG_FAMILIES["36h11"]):
+        what = "a ChArUco board" if board.kind == CHARUCO else f"an AprilGrid of {board.dictionary}"
+        raise InputError(
+            f"board {ref} is {what}: Kalibr reads AprilGrids of tag36h11 and checkerboards only",
+            "solve the camera-IMU edge with such a board to export Kalibr's target.yaml",
+        )
+    if min(grid) < 3:
+        raise InputError(
+            f"board {ref} is {grid[0]} x {grid[1]}: Kalibr reads no target under 3 x 3",
+            "export the target for Kalibr from a board of 3 x 3 or more",
+        )
+    size_m = float(board.square_size_m)
+    doc: dict[str, object] = (
+        {"target_type": "aprilgrid", "tagCols": int(grid[0]), "tagRows": int(grid[1]), "tagSize": size_m,
+         "tagSpacing": float(board.tag_spacing or 0.0)}
+        if board.kind == APRILGRID
+        else {"target_type": "checkerboard", "targetCols": int(grid[0]), "targetRows": int(grid[1]),
+              "rowSpacingMeters": size_m, "colSpacingMeters": size_m}
+    )  # fmt: skip
+    return yaml.safe_dump(doc, sort_keys=False)
 
 
 def solution_sha256(solution: RigSolution) -> str:

@@ -1,4 +1,5 @@
-"""A result JSON written outside any store (``lidar solve -o``), sealed the way a stored document is.
+"""A result JSON written outside any store (``lidar solve -o``, ``imu solve -o``), sealed the way a stored
+document is.
 
 The file gets ``kind``, ``content_sha256`` (sha256 of the RFC 8785 form of every other field but
 ``signature``) and, with a signing key configured, ``signature``: the key's Ed25519 signature of
@@ -15,6 +16,7 @@ from calibctl.artifacts.common import jcs_bytes, sha256_hex
 from calibctl.signing import ALGORITHM, Signer
 
 LIDAR_RESULT = "lidar-result"
+IMU_RESULT = "imu-result"
 UNSEALED = ("content_sha256", "signature")
 
 

@@ -5,9 +5,10 @@ ROS 1 ``.bag`` files and ROS 2 bag folders (``metadata.yaml`` with sqlite3 or MC
 rad/s, linear acceleration in m/s^2, the IMU frame) and ``sensor_msgs/Image`` (mono8, mono16, bgr8,
 rgb8, bgra8, rgba8) or ``sensor_msgs/CompressedImage``. Stamps are the messages' ``header.stamp`` (the
 sensor's clock, in ns), not the time the bag recorded them. The corners are detected in every image with
-the registered board. A topic the bag does not hold, of another type, an image stamp repeated: exit 2,
-one line naming the bag and the fix. The bag is bounded like every input: its size by the input limit
-per message read (an image over the limit is refused), the sha256 of the whole bag in the evidence.
+the registered board. A topic the bag does not hold, of another type, an image or IMU stamp repeated
+(both streams are put in stamp order): exit 2, one line naming the bag and the fix. The bag is bounded
+like every input: its size by the input limit per message read (an image over the limit is refused), the
+sha256 of the whole bag in the evidence.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from calibctl.workflows.imu.recording import (
     Recording,
     assemble,
     board_corners,
+    check_board_seen,
     check_image_size,
 )
 
@@ -93,6 +95,21 @@ def _connection(reader: Any, topic: str, types: tuple[str, ...], bag: Path, opti
     return found[0]
 
 
+def _in_stamp_order(stamps: list[int], source: str, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """A topic's header stamps in order, with the order that sorts its messages (a bag keeps arrival
+    order; the sensor stamps decide); a stamp carried twice is refused (a driver leaving stamps at zero)."""
+    ns = np.array(stamps, np.int64)
+    order = np.argsort(ns, kind="stable")
+    ns = ns[order]
+    repeated = np.flatnonzero(np.diff(ns) == 0)
+    if repeated.size:
+        raise InputError(
+            f"{source}: {what} stamp {ns[repeated[0]]} ns appears {repeated.size + 1} times",
+            "every message must carry its own header stamp: fix the driver's stamping, then record again",
+        )
+    return ns, order
+
+
 def read_bag(
     bag: Path,
     image_topic: str,
@@ -142,18 +159,16 @@ def read_bag(
     for what, stamps, option in (("IMU", t_imu, imu_topic), ("camera", t_cam, image_topic)):
         if len(stamps) < 2:
             raise InputError(f"{bag}: {len(stamps)} {what} messages on {option}", "record longer")
-    cam_ns = np.array(t_cam, np.int64)
-    order = np.argsort(cam_ns, kind="stable")  # a bag keeps arrival order; the sensor stamps decide
-    cam_ns = cam_ns[order]
-    repeated = np.flatnonzero(np.diff(cam_ns) == 0)
-    if repeated.size:
-        raise InputError(
-            f"{bag} {image_topic}: image stamp {cam_ns[repeated[0]]} ns appears {repeated.size + 1} times",
-            "every frame must carry its own stamp: fix the camera driver's stamping, then record again",
-        )
-    imu_ns = np.array(t_imu, np.int64)
+    check_board_seen(objs, board, f"{bag} {image_topic}")
+    cam_ns, order = _in_stamp_order(t_cam, f"{bag} {image_topic}", "image")
+    imu_ns, by_stamp = _in_stamp_order(t_imu, f"{bag} {imu_topic}", "IMU")
     return assemble(
-        ImuStream(f"{bag} {imu_topic}", imu_ns, np.array(gyro, np.float64), np.array(accel, np.float64)),
+        ImuStream(
+            f"{bag} {imu_topic}",
+            imu_ns,
+            np.array(gyro, np.float64)[by_stamp],
+            np.array(accel, np.float64)[by_stamp],
+        ),
         CameraStream(f"{bag} {image_topic}", cam_ns, [objs[i] for i in order], [imgs[i] for i in order]),
         intrinsics,
         [("bag", bag, _sha256(bag))],

@@ -8,7 +8,8 @@ core solves and gates it (``core.imu.calibrate``: on a (td, rotation) correlatio
 holds td at ``--hold-td-ms`` when given, else refuses); the typed result becomes the edge's evidence at
 full precision (``evidence``) and is stored as the rig's next version through the ``edges`` room, a
 rejected result as a rejected version (never active). ``result_json`` is the one rounded JSON shape
-that ``--json`` prints and ``-o`` writes.
+that ``--json`` prints and ``-o`` writes (sealed: ``kind``, ``content_sha256`` and, with a signing key,
+its ``signature``, as ``lidar solve -o``; ``calibctl lint FILE`` checks them).
 
 Several cameras (``ImuRequest.more``: further (camera folder, serial) pairs) are solved in one joint
 solve against one IMU trajectory, gravity and biases (``core.imu.calibrate.calibrate_cameras``); each
@@ -53,12 +54,14 @@ from calibctl.core.imu.rows import ReportSeries, RowTest, report_series, row_tes
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions
 from calibctl.core.intrinsics.solve import is_fisheye
-from calibctl.errors import InputError, NotFoundError, UsageError
-from calibctl.files import write_atomic
+from calibctl.errors import AlreadyExistsError, InputError, NotFoundError, UsageError
+from calibctl.files import existing_target, write_atomic
 from calibctl.workflows.edges import versions
 from calibctl.workflows.edges.kinds import IMU
+from calibctl.workflows.exports import sealed_result
 from calibctl.workflows.imu.bags import is_bag, read_bag
 from calibctl.workflows.imu.recording import Board, Recording, read_noise, read_recording
+from calibctl.workflows.store_admin import keys
 from calibctl.workflows.store_admin.records import open_store
 
 IMU_MODELS = intrinsics.IMU_MODELS  # what --imu-model accepts
@@ -156,7 +159,7 @@ def registered_board(settings: Settings, ref: str) -> Board:
     name, revision = board_ref(ref)
     with open_store(settings) as store:
         board = store.get_board(name, revision)
-    return Board(board.ref, board_spec(board))
+    return Board(board.ref, board_spec(board), board.measurement.status == "nominal")
 
 
 def _camera_pairs(req: ImuRequest) -> list[tuple[str, str]]:
@@ -230,6 +233,11 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
             for (cam, _), (_, intr) in zip(pairs, held, strict=True)
         ]
         recs = [recs[0], *(_on_origin(r, recs[0]) for r in recs[1:])]
+    if board is not None and board.nominal:  # a camera made with it fails lint; here the metres depend on it
+        recs[0].notes.append(
+            f"board {board.ref}'s size is nominal (typed, never measured): the translation scales with it; "
+            f"measure it (`calibctl board add {board.ref.split('@')[0]} ... --uncertainty-mm ...`)"
+        )
     options = SolveOptions(
         knot_spacing_s=req.knot_spacing_s,
         estimate_line_delay=req.line_delay,
@@ -533,6 +541,10 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
 
 def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
     """The whole command (module docstring)."""
+    if req.out is not None and not req.force and existing_target(req.out) is not None:
+        raise AlreadyExistsError(  # checked before the solve: a stored version never goes without its file
+            f"{req.out} already exists; nothing was solved or stored", "pass --force to overwrite it"
+        )
     if req.rig is not None:
         related = rig_poses(settings, req)
         for _, serial in _camera_pairs(req):
@@ -543,8 +555,9 @@ def run_imu(settings: Settings, req: ImuRequest) -> ImuOutcome:
         for o in outcome.cameras:  # one version per camera's own edge, in the order given
             if o.held_by_rig is None:
                 o.stored = versions.store_evidence(settings, req.rig, evidence(o)).calibration
-    if req.out is not None:
-        text = json.dumps(result_json(outcome), indent=2, allow_nan=False) + "\n"
+    if req.out is not None:  # hashed, and signed with a configured key: `lint FILE` checks both
+        sealed = sealed_result.seal(result_json(outcome), sealed_result.IMU_RESULT, keys.signer_of(settings))
+        text = json.dumps(sealed, indent=2, allow_nan=False) + "\n"
         write_atomic(req.out, text, force=req.force)
         outcome.written.append(f"wrote {req.out}")
     return outcome

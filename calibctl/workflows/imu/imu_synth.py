@@ -3,7 +3,9 @@
 Writes the layout ``imu solve`` reads (``recording``): ``imu0/data.csv`` (EuRoC's header and units:
 ns, rad/s, m/s^2), ``cam0/<ns>.csv`` (one file per frame: stamp, pixel, board point in metres) or, with
 ``images``, the ASL image layout ``cam0/data.csv`` + ``cam0/data/<ns>.png`` (the board, a 7 x 6
-inner-corner chessboard of 50 mm squares, rendered from each frame's pose, the camera 1 m from it),
+inner-corner chessboard of 50 mm squares, or with ``pattern`` aprilgrid Kalibr's AprilGrid of 6 x 5 tags
+of 55 mm, spacing 0.3, its centre where the chessboard's is, rendered from each frame's pose, the camera
+1 m from it),
 Kalibr's ``imu.yaml`` with the noise densities rendered, and ``truth.json`` (T_imu_cam, td_s, biases,
 gravity, the intrinsics rendered with, Kalibr's T_cam_imu and timeshift_cam_imu). The recording comes
 from core.synth.imu; with ``serial`` it is rendered through that camera's active stored calibration,
@@ -19,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from calibctl.config import Settings
 from calibctl.core.board.board_spec import BoardSpec
@@ -41,6 +44,8 @@ IMU_HEADER = (
 )
 CORNER_HEADER = "#timestamp [ns],kp_x,kp_y,p_x,p_y,p_z,corner_id"
 IMAGE_BOARD = BoardSpec.chessboard(7, 6, 0.05)  # the render's board points (core.synth.imu.grid_points)
+# about the chessboard's printed size (412 x 341 mm): a Kalibr user's target, detected with AprilTag 36h11
+IMAGE_BOARDS = {"chessboard": IMAGE_BOARD, "aprilgrid": BoardSpec.aprilgrid(6, 5, 0.055, 0.3)}
 IMAGE_DISTANCE_M = 1.0  # the whole printed board stays in view
 GYRO_RANDOM_WALK = 1e-5  # written to imu.yaml: the render's biases are constant
 ACCEL_RANDOM_WALK = 1e-4
@@ -50,8 +55,22 @@ def _ns(t_s: np.ndarray) -> np.ndarray:
     return EPOCH_NS + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
 
 
-def _write_images(out: Path, rec: ImuCameraRecording, stamps: np.ndarray, seed: int, force: bool) -> None:
-    """Each frame's board rendered at the pose its corners give (PnP through the rendered lens)."""
+def _board_in_grid(board: BoardSpec) -> np.ndarray:
+    """T_grid_board (4, 4): where ``board`` sits in the rendered grid's frame. The chessboard is the grid;
+    another board is centred on it and turned half a turn about x, so its printed face, not its back,
+    faces the camera (the render looks along the grid's -z; a mirrored AprilTag reads as no tag)."""
+    if board == IMAGE_BOARD:
+        return np.eye(4)
+    R = np.diag([1.0, -1.0, -1.0])
+    return se3.transform(R, IMAGE_BOARD.object_points().mean(axis=0) - R @ board.object_points().mean(axis=0))
+
+
+def _write_images(
+    out: Path, rec: ImuCameraRecording, stamps: np.ndarray, seed: int, force: bool, board: BoardSpec
+) -> None:
+    """Each frame's ``board`` rendered at the pose its corners give (PnP through the rendered lens), placed
+    on the rendered grid by ``_board_in_grid`` (the board frame is the solve's to choose: only gravity lives
+    in it, and truth.json turns it with the board)."""
     import cv2
 
     from calibctl.core.synth.pinhole import PinholeCamera, render_view
@@ -63,15 +82,26 @@ def _write_images(out: Path, rec: ImuCameraRecording, stamps: np.ndarray, seed: 
     with file_errors("create", out / "cam0" / "data"):
         (out / "cam0" / "data").mkdir(parents=True, exist_ok=True)
     rows = ["#timestamp [ns],filename"]
+    T_grid_board = _board_in_grid(board)
     for t, obj, img in zip(stamps, rec.object_points, rec.image_points, strict=True):
         ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist)
         if not ok:
             continue
-        T = se3.transform(se3.rotation_from_rotvec(rvec.ravel()), tvec.ravel())
-        ok, png = cv2.imencode(".png", render_view(camera, IMAGE_BOARD, T, rng, supersample=2))
+        T = se3.transform(se3.rotation_from_rotvec(rvec.ravel()), tvec.ravel()) @ T_grid_board
+        ok, png = cv2.imencode(".png", render_view(camera, board, T, rng, supersample=2))
         write_atomic(out / "cam0" / "data" / f"{t}.png", png.tobytes(), force=force)
         rows.append(f"{t},{t}.png")
     write_atomic(out / "cam0" / "data.csv", "\n".join(rows) + "\n", force=force)
+
+
+def _board_truth(pattern: str) -> dict[str, Any]:
+    """truth.json's board: what ``board add`` takes (an AprilGrid also as Kalibr's target.yaml fields)."""
+    if pattern == "chessboard":
+        return {"kind": "chessboard", "cols": 7, "rows": 6, "square_mm": 50.0}
+    b = IMAGE_BOARDS[pattern]
+    cols, rows = b.tags
+    return {"kind": "aprilgrid", "target_type": "aprilgrid", "tagCols": cols, "tagRows": rows,
+            "tagSize": b.square_size_m, "tagSpacing": b.tag_spacing}  # fmt: skip
 
 
 def run_imu_synth(
@@ -85,6 +115,7 @@ def run_imu_synth(
     line_delay_s: float = 0.0,
     serial: str | None = None,
     images: bool = False,
+    pattern: str = "chessboard",
     stereo: bool = False,
     force: bool = False,
 ) -> dict[str, Any]:
@@ -101,6 +132,12 @@ def run_imu_synth(
     if serial is not None:
         camera, (K, dist, size) = camera_intrinsics(settings, serial)
         lens = {"camera_matrix": K, "dist_coeffs": dist, "image_size": size}
+    if pattern not in IMAGE_BOARDS:
+        raise UsageError(f"--pattern {pattern!r} is not {' or '.join(IMAGE_BOARDS)}")
+    if pattern != "chessboard" and not images:
+        raise UsageError(
+            "--pattern draws the board of --images; corner files carry no pattern", "add --images"
+        )
     if stereo and images:
         raise UsageError("--stereo writes corner files", "drop --images, or --stereo")
     if stereo:
@@ -121,7 +158,7 @@ def run_imu_synth(
             (out / d).mkdir(parents=True, exist_ok=True)
     write_atomic(out / "imu0" / "data.csv", "\n".join(rows) + "\n", force=force)
     if images:
-        _write_images(out, rec, t_cam, seed, force)
+        _write_images(out, rec, t_cam, seed, force, IMAGE_BOARDS[pattern])
     cameras = [("cam0", rec.object_points, rec.image_points)] + [
         (f"cam{k + 1}", more.object_points, more.image_points) for k, more in enumerate(rec.more_cameras)
     ]
@@ -135,15 +172,17 @@ def run_imu_synth(
             ]
             write_atomic(out / folder / f"{t}.csv", "\n".join(lines) + "\n", force=force)
     tr = rec.truth
+    noise = {
+        "gyroscope_noise_density": float(tr.gyro_noise_density),
+        "accelerometer_noise_density": float(tr.accel_noise_density),
+        "gyroscope_random_walk": GYRO_RANDOM_WALK,
+        "accelerometer_random_walk": ACCEL_RANDOM_WALK,
+        "rostopic": "/imu0",
+        "update_rate": round(1.0 / float(np.median(np.diff(rec.imu_t_s))), 1),
+    }  # dumped by yaml: 1e-05 written by hand is a string to Kalibr's yaml.safe_load, 1.0e-05 a float
     write_atomic(
         out / "imu.yaml",
-        "# Kalibr imu.yaml: the noise calibctl imu synth rendered\n"
-        f"gyroscope_noise_density: {tr.gyro_noise_density}\n"
-        f"accelerometer_noise_density: {tr.accel_noise_density}\n"
-        f"gyroscope_random_walk: {GYRO_RANDOM_WALK}\n"
-        f"accelerometer_random_walk: {ACCEL_RANDOM_WALK}\n"
-        "rostopic: /imu0\n"
-        f"update_rate: {1.0 / float(np.median(np.diff(rec.imu_t_s))):.1f}\n",
+        "# Kalibr imu.yaml: the noise calibctl imu synth rendered\n" + yaml.safe_dump(noise, sort_keys=False),
         force=True,
     )
     truth = {
@@ -155,14 +194,18 @@ def run_imu_synth(
         "line_delay_s": tr.line_delay_s,
         "gyro_bias_rad_s": tr.gyro_bias_rad_s.tolist(),
         "accel_bias_m_s2": tr.accel_bias_m_s2.tolist(),
-        "gravity_board_m_s2": tr.gravity_w_m_s2.tolist(),
+        "gravity_board_m_s2": (
+            _board_in_grid(IMAGE_BOARDS[pattern])[:3, :3].T @ tr.gravity_w_m_s2
+            if images
+            else tr.gravity_w_m_s2
+        ).tolist(),
         "noise_px": tr.noise_px,
         "camera": camera,
         "camera_matrix": np.asarray(rec.camera_matrix).tolist(),
         "dist_coeffs": np.asarray(rec.dist_coeffs).tolist(),
         "image_size": list(rec.image_size),
         "motion": motion,
-        "board": {"kind": "chessboard", "cols": 7, "rows": 6, "square_mm": 50.0} if images else None,
+        "board": _board_truth(pattern) if images else None,
         "duration_s": duration_s,
         "seed": seed,
         "frames": int(t_cam.size),

@@ -10,10 +10,11 @@ until one shared origin is subtracted):
 - the corners: ``camN/<ns>.csv``, one file per frame (yac's layout): a stamp column first, then at
   least ``kp_x, kp_y`` (pixel) and ``p_x, p_y, p_z`` (board point, metres); a file with a header only
   is a frame without a detection. Beside them the ASL ``camN/data.csv`` (``#timestamp [ns],filename``)
-  may list the frames; a stamp listed twice there is refused. With a registered board (``--board``)
-  every board point must be one of that board's corners.
+  may list the frames; a stamp listed twice or out of order there is refused. With a registered board
+  (``--board``) every board point must be one of that board's corners.
 - or the images: no corner files, the ASL ``camN/data.csv`` listing ``camN/data/<filename>``; the
-  corners are detected in each image with the registered board (``--board``, a chessboard or ChArUco).
+  corners are detected in each image with the registered board (``--board``, a chessboard, ChArUco or
+  AprilGrid); images in none of which it is found are refused (they show another board).
 - the noise model: Kalibr's ``imu.yaml`` (``gyroscope_noise_density``, ``accelerometer_noise_density``,
   ``gyroscope_random_walk``, ``accelerometer_random_walk``) or yac's ``config.yaml`` ``imu0`` block
   (``sigma_g_c``, ``sigma_a_c``, ``sigma_gw_c``, ``sigma_aw_c``, ``g``).
@@ -82,6 +83,11 @@ def imu_log_path(folder: Path) -> Path:
     for path in (folder / "imu0" / "data.csv", folder / "imu0.csv"):
         if path.is_file():
             return path
+    if (folder / "mav0" / "imu0" / "data.csv").is_file():  # EuRoC's zip unpacks to NAME/mav0/
+        raise InputError(
+            f"{folder}: no IMU log (imu0/data.csv or imu0.csv); EuRoC's layout keeps it in mav0/",
+            f"give the recording folder {folder / 'mav0'}",
+        )
     raise InputError(
         f"{folder}: no IMU log (imu0/data.csv or imu0.csv)",
         "give the recording folder (the ASL / EuRoC layout or yac's: docs/imu.md)",
@@ -174,6 +180,7 @@ class Board:
 
     ref: str
     spec: BoardSpec
+    nominal: bool = False  # its size typed, never measured: T_imu_cam's translation scales with it
 
 
 def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
@@ -184,7 +191,7 @@ def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
     text = bounded.read_text(path, "read the camera's frame list")
     rows = [line.split(",") for line in text.splitlines()[1:] if line.strip()]
     seen: dict[str, int] = {}
-    out = []
+    out: list[tuple[int, str]] = []
     for i, row in enumerate(rows):
         s = row[0].strip()
         if s in seen:
@@ -197,6 +204,11 @@ def _asl_listing(folder: Path) -> list[tuple[int, str]] | None:
             raise InputError(
                 f"{path}: data line {i + 1} is not 'stamp_ns,filename'",
                 "the ASL frame list is '#timestamp [ns],filename', one frame a line",
+            )
+        if out and int(s) < out[-1][0]:  # frames out of order: overlapping logs or a reset clock
+            raise InputError(
+                f"{path}: frame stamp {s} (data line {i + 1}) is before {out[-1][0]} (data line {i})",
+                "list the frames in the order they were taken, one recording per folder",
             )
         out.append((int(s), row[1].strip()))
     return out
@@ -263,7 +275,17 @@ def read_images(
         imgs.append(img)
         stamps.append(stamp)
         paths.append(path)
+    check_board_seen(objs, board, f"{folder / 'data'}")
     return np.array(stamps, np.int64), objs, imgs, paths
+
+
+def check_board_seen(objs: list[np.ndarray], board: Board, where: str) -> None:
+    """Refuse images in none of which ``board`` is found: they show another board (or none)."""
+    if objs and not any(len(o) for o in objs):
+        raise InputError(
+            f"{where}: board {board.ref} is found in none of the {len(objs)} images",
+            "name the board the images show with --board NAME[@REV] (`calibctl board list`)",
+        )
 
 
 def read_corners(
@@ -340,6 +362,11 @@ def read_recording(
     """The IMU log and one camera's corners (or images) under ``folder`` on one origin (module
     docstring); the camera's held intrinsics (K, distortion in OpenCV's order, image size) come from the
     store, ``board`` (the registered board) detects corners in images and checks the corner files'."""
+    if folder.is_file() and (folder.parent / "metadata.yaml").is_file():  # a .mcap / .db3 of a ROS 2 bag
+        raise InputError(
+            f"{folder} is one file of the ROS 2 bag {folder.parent}",
+            f"give the bag folder {folder.parent} (the one holding metadata.yaml)",
+        )
     if not folder.is_dir():
         raise InputError(f"{folder}: no such recording folder", "give the folder holding imu0 and cam0")
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", camera):

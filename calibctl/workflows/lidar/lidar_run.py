@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from calibctl.config import Settings
-from calibctl.errors import UsageError
-from calibctl.files import write_atomic
+from calibctl.errors import AlreadyExistsError, UsageError
+from calibctl.files import existing_target, write_atomic
 from calibctl.workflows.exports import sealed_result
 from calibctl.workflows.lidar import rig_lidar
 from calibctl.workflows.lidar.lidar_solve import (
@@ -56,6 +56,7 @@ def run_lidar(
     rig version written."""
     if files.tf_static is not None:
         check_tf_frames(files.lidar_frame, files.camera_frame)
+    check_targets_free(files)
     if target is not None:
         if req.camera_info is not None:
             raise UsageError(
@@ -82,6 +83,19 @@ def run_lidar(
         else:
             outcome.written.append(f"not written: {files.tf_static} (rejected: no transform is published)")
     return outcome
+
+
+def check_targets_free(files: LidarFiles) -> None:
+    """``-o`` and ``--tf-static`` refused before the solve when they exist without ``--force``
+    (AlreadyExistsError, exit 2): checked after the solve, a rig version would be stored and its files
+    not written."""
+    if files.force:
+        return
+    for path in (files.out, files.tf_static):
+        if path is not None and existing_target(path) is not None:
+            raise AlreadyExistsError(
+                f"{path} already exists; nothing was solved or stored", "pass --force to overwrite it"
+            )
 
 
 def check_tf_frames(lidar_frame: str, camera_frame: str) -> None:

@@ -59,6 +59,15 @@ KALIBR_IMU_FIELDS = {
     "gyroscope_random_walk",
 }
 _KALIBR_DISTORTION = {"radtan": 4, "equidistant": 4, "fov": 1, "none": 0}
+_KALIBR_TARGETS: dict[str, dict[str, type]] = {  # field -> the type Kalibr's reader insists on
+    "aprilgrid": {"tagCols": int, "tagRows": int, "tagSize": float, "tagSpacing": float},
+    "checkerboard": {
+        "targetCols": int,
+        "targetRows": int,
+        "rowSpacingMeters": float,
+        "colSpacingMeters": float,
+    },
+}
 _FIX_FRAME = (
     "name the frame with `calibctl rig export ... --frame SERIAL=NAME` ([a-zA-Z][a-zA-Z0-9_]* segments)"
 )
@@ -96,8 +105,8 @@ def _parse(text: str, source: str) -> Any:
 
 
 def rig_file_kind(text: str, data: Any) -> str | None:
-    """bundle | rig-json | handeye-json | lidar-result | tf | urdf | kalibr | kalibr-imu | mrcal |
-    opencv-stereo, or None."""
+    """bundle | rig-json | handeye-json | lidar-result | imu-edge-json | imu-result | tf | urdf | kalibr |
+    kalibr-imu | kalibr-target | mrcal | opencv-stereo, or None."""
     if isinstance(data, ET.Element):
         return "urdf" if data.tag == "robot" else None
     if text.startswith("%YAML"):
@@ -114,10 +123,16 @@ def rig_file_kind(text: str, data: Any) -> str | None:
         return "handeye-json"
     if data.get("kind") == sealed_result.LIDAR_RESULT or set(data) >= LIDAR_RESULT_FIELDS:
         return sealed_result.LIDAR_RESULT
+    if data.get("kind") == "imu" and "parent_frame" in data:
+        return "imu-edge-json"
+    if data.get("kind") == sealed_result.IMU_RESULT or set(data) >= IMU_RESULT_FIELDS:
+        return sealed_result.IMU_RESULT
     if isinstance(data.get("transforms"), list):
         return "tf"
     if set(data) >= KALIBR_IMU_FIELDS:
         return "kalibr-imu"
+    if "target_type" in data:
+        return "kalibr-target"
     if data and all(
         k.startswith("cam") and isinstance(v, dict) and "intrinsics" in v for k, v in data.items()
     ):
@@ -144,44 +159,58 @@ def _rotation(R: np.ndarray, what: str) -> list[Finding]:
 
 
 LIDAR_RESULT_FIELDS = {"transform", "outcomes", "outcome_counts", "gates", "status"}
-_LIDAR_FIX = "write it again: `calibctl lidar solve ... -o FILE` (with a signing key configured, signed)"
+IMU_RESULT_FIELDS = {"recording", "camera", "noise", "gates", "estimate", "row_test"}
+_RESULT_FIX = {
+    kind: f"write it again: `calibctl {room} solve ... -o FILE` (with a signing key configured, signed)"
+    for kind, room in ((sealed_result.LIDAR_RESULT, "lidar"), (sealed_result.IMU_RESULT, "imu"))
+}
 
 
-def _lidar_result(data: dict[str, Any], source: str, trusted: TrustedKeys) -> list[Finding]:
-    """A store-free ``lidar solve -o`` result: its content hash, its transform's own identities (the
-    inverse, the translation), its status and its signature (``exports.sealed_result``)."""
+def _result_transform(data: dict[str, Any], kind: str, source: str) -> list[Finding]:
+    """A sealed result's transform against its own identities: the inverse beside it, the translation
+    (LiDAR: ``transform``; camera-IMU: ``estimate``, T_imu_cam as ``matrix`` beside Kalibr's T_cam_imu)."""
+    if kind == sealed_result.LIDAR_RESULT:
+        block, inverse_key, t_key = data.get("transform"), "T_cam_lidar", "translation_m"
+    else:
+        block, inverse_key, t_key = data.get("estimate"), "T_cam_imu", None
+    if not isinstance(block, dict):
+        return []
+    name = "transform" if kind == sealed_result.LIDAR_RESULT else "estimate"
+    T, bad = _finite_matrix(block.get("matrix"), (4, 4), f"{name}.matrix")
+    inverse, bad_inverse = _finite_matrix(block.get(inverse_key), (4, 4), f"{name}.{inverse_key}")
+    if T is None or inverse is None:
+        return bad + bad_inverse
+    findings = _rotation(T[:3, :3], f"{name}.matrix")
+    t = np.asarray(block.get(t_key) if t_key else T[:3, 3], dtype=np.float64)
+    if (
+        np.max(np.abs(T @ inverse - np.eye(4))) > 1e-6
+        or t.shape != (3,)
+        or np.max(np.abs(t - T[:3, 3])) > 1e-6
+    ):
+        what = f"{inverse_key} and {t_key}" if t_key else inverse_key
+        findings.append(_error("transform", f"{source}: {what} are not {name}.matrix's", _RESULT_FIX[kind]))
+    return findings
+
+
+def _sealed_result(data: dict[str, Any], source: str, trusted: TrustedKeys, kind: str) -> list[Finding]:
+    """A store-free ``lidar solve -o`` or ``imu solve -o`` result: its content hash, its transform's own
+    identities, its status and its signature (``exports.sealed_result``)."""
     recorded = data.get("content_sha256")
     if not isinstance(recorded, str):
         return [
             _error(
                 "content-hash",
                 f"{source} carries no content hash (written before results were sealed)",
-                _LIDAR_FIX,
+                _RESULT_FIX[kind],
             )
         ]
     if recorded != sealed_result.content_sha256(data):
-        return [_error("content-hash", f"{source} was edited (its content hash does not match)", _LIDAR_FIX)]
-    findings = []
-    transform = data.get("transform")
-    if isinstance(transform, dict):
-        T, bad = _finite_matrix(transform.get("matrix"), (4, 4), "transform.matrix")
-        inverse, bad_inverse = _finite_matrix(transform.get("T_cam_lidar"), (4, 4), "transform.T_cam_lidar")
-        findings += bad + bad_inverse
-        if T is not None and inverse is not None:
-            findings += _rotation(T[:3, :3], "transform.matrix")
-            t = np.asarray(transform.get("translation_m"), dtype=np.float64)
-            if (
-                np.max(np.abs(T @ inverse - np.eye(4))) > 1e-6
-                or t.shape != (3,)
-                or np.max(np.abs(t - T[:3, 3])) > 1e-6
-            ):
-                findings.append(
-                    _error(
-                        "transform",
-                        f"{source}: T_cam_lidar and translation_m are not transform.matrix's",
-                        _LIDAR_FIX,
-                    )
-                )
+        return [
+            _error(
+                "content-hash", f"{source} was edited (its content hash does not match)", _RESULT_FIX[kind]
+            )
+        ]
+    findings = _result_transform(data, kind, source)
     if data.get("status") != "accepted":
         findings.append(
             _error(
@@ -196,7 +225,7 @@ def _lidar_result(data: dict[str, Any], source: str, trusted: TrustedKeys) -> li
     problem = trusted.check(
         seal.get("key_id"),
         seal.get("value"),
-        sealed_result.message(sealed_result.LIDAR_RESULT, recorded),
+        sealed_result.message(kind, recorded),
         seal.get("public_key"),
     )
     problem = f"{problem}: {EDITED}" if is_mismatch(problem) else problem
@@ -394,6 +423,26 @@ def _kalibr_imu(data: dict[str, Any]) -> list[Finding]:
     return findings
 
 
+def _kalibr_target(data: dict[str, Any]) -> list[Finding]:
+    """Kalibr's target.yaml as its ConfigReader ``getTargetParams`` checks it: an aprilgrid's tagCols and
+    tagRows ints of 3 or more, tagSize and tagSpacing positive floats; a checkerboard's targetCols and
+    targetRows likewise, rowSpacingMeters and colSpacingMeters positive floats (Kalibr refuses an int)."""
+    fix = "export it again with `calibctl rig export RIG --format kalibr-target`"
+    kind = data.get("target_type")
+    fields = _KALIBR_TARGETS.get(kind) if isinstance(kind, str) else None
+    if fields is None:
+        return [_error("kalibr", f"target_type {kind!r} is not aprilgrid or checkerboard", fix)]
+    findings = []
+    for key, want in fields.items():
+        v = data.get(key)
+        whole = type(v) is int and v >= 3  # bool is no int here: type(True) is bool
+        ok = whole if want is int else type(v) is float and bool(np.isfinite(v)) and v > 0
+        if not ok:
+            what = "an int of 3 or more" if want is int else "a positive float"
+            findings.append(_error("kalibr", f"{key} = {v!r} is not {what} (Kalibr refuses it)", fix))
+    return findings
+
+
 def _opencv_stereo(text: str, source: str, limits: LintThresholds, trace: Trace) -> list[Finding]:
     data = formats.opencv_data(text, source)
     findings: list[Finding] = []
@@ -448,6 +497,26 @@ def _mrcal(model: dict[str, Any], source: str, limits: LintThresholds, trace: Tr
         False,
     )
     return bad_ext + trace.lint(facts, limits)
+
+
+def _imu_edge(data: dict[str, Any], source: str) -> list[Finding]:
+    """One camera-IMU edge as ``rig export --edge IMU:CAM --format json`` writes it: its schema, and a
+    warning that it carries no seal of its own (its rig version's content hash and signature cover it)."""
+    from calibctl.artifacts.imu import ImuEdgeResult
+
+    try:
+        ImuEdgeResult.model_validate(data)
+    except ValidationError as exc:
+        return [_error("schema", validation_message(exc, source), "re-export it from the store")]
+    return [
+        _error(
+            "traceability",
+            f"{source} is one edge of a rig version: it carries no content hash of its own, so an edited "
+            "number cannot be found here",
+            "lint the rig version it came from: `calibctl rig export RIG --format json` (sealed, signed)",
+            "warning",
+        )
+    ]
 
 
 def _document(
@@ -687,8 +756,10 @@ def lint_rig_file(
                 )
             )
         return [LintResult(source, kind, findings)]
-    if kind == sealed_result.LIDAR_RESULT:
-        return [LintResult(source, kind, _lidar_result(data, source, trusted or TrustedKeys()))]
+    if kind == "imu-edge-json":
+        return [LintResult(source, kind, _imu_edge(data, source))]
+    if kind in (sealed_result.LIDAR_RESULT, sealed_result.IMU_RESULT):
+        return [LintResult(source, kind, _sealed_result(data, source, trusted or TrustedKeys(), kind))]
     camera, rig = trace_header.read(text), trace_header.read_rig(text)
     findings, evidence = trace_rules(camera, rig)
     if trusted is not None:
@@ -714,6 +785,8 @@ def lint_rig_file(
         findings += _kalibr(data, source, limits, trace)
     elif kind == "kalibr-imu":
         findings += _kalibr_imu(data)
+    elif kind == "kalibr-target":
+        findings += _kalibr_target(data)
     else:
         findings += _opencv_stereo(text, source, limits, trace)
     return [LintResult(source, kind, findings)]

@@ -1,8 +1,9 @@
 """``calibctl rig export``: one stored rig version as the files a robot loads (workflows.exports.rig_exports),
 named by the robot's frames (workflows.exports.frame_names), each stamped with the rig's trace header.
 
-- single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr, kalibr-imu) -> ``export`` returns the
-  text (kalibr-imu: Kalibr's imu.yaml of the version's camera-IMU edge);
+- single-file formats (json, opencv, tf, urdf, urdf-joints, kalibr, kalibr-imu, kalibr-target) -> ``export``
+  returns the text (kalibr-imu: Kalibr's imu.yaml of the version's camera-IMU edge; kalibr-target: Kalibr's
+  target.yaml of the registered board that edge was solved with, read from the store);
 - ``ros`` -> ``export_files``: one camera_info file per camera (ROS reads only the first YAML document of
   a file, so two cameras in one file made a stereo driver run the left calibration on the right camera);
 - ``bundle`` -> ``export_files``: every format at once plus manifest.json (workflows.exports.bundle);
@@ -19,6 +20,7 @@ from typing import Any
 from calibctl.artifacts.lint import Finding
 from calibctl.artifacts.rig import RigCalibration
 from calibctl.config import Settings
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.files import file_errors, write_atomic
 from calibctl.workflows.edges.export import edge_export
@@ -43,6 +45,7 @@ EXPORT_FORMATS = (
     "urdf-joints",
     "kalibr",
     "kalibr-imu",
+    "kalibr-target",
     "bundle",
     "lut",
 )
@@ -106,6 +109,28 @@ def _prepare(
     return rig_bundle.derive(cal, parse_frame_map(frames, [*serials, *others]), pair, signatures)
 
 
+def _imu_board(settings: Settings, x: RigExport) -> tuple[BoardSpec, str]:
+    """The registered board the version's camera-IMU edge was solved with (``imu solve --board``)."""
+    from calibctl.workflows.board.boards import board_ref, board_spec
+
+    ev = x.imu_edge()
+    rerun = f"calibctl imu solve RECORDING --serial CAM --board BOARD --rig {x.cal.rig}"
+    if ev is None:
+        raise NotFoundError(
+            f"rig {x.ref} has no accepted camera-IMU edge: no target.yaml to export",
+            f"solve one with `{rerun}`",
+        )
+    if ev.board is None:
+        raise NotFoundError(
+            f"the camera-IMU edge of rig {x.ref} was solved from corner files without --board: "
+            "no registered board to write as target.yaml",
+            f"register the board (`calibctl board add`) and solve again with it: `{rerun}`",
+        )
+    with open_store(settings) as store:
+        board = store.get_board(*board_ref(ev.board))
+    return board_spec(board), board.ref
+
+
 def export(
     settings: Settings,
     ref: str,
@@ -129,7 +154,9 @@ def export(
             ROS_ONE_FILE_FIX if fmt == "ros" else "pass -o DIR",
         )
     x = _prepare(settings, ref, pair, frames or [], allow_rejected, allow_stale)
-    if edge is None:
+    if edge is None and fmt == "kalibr-target":
+        text = x.stamp(rig_exports.kalibr_target(*_imu_board(settings, x)))
+    elif edge is None:
         text = _text(x, fmt)
     else:  # one evidence edge: its tf carries the rig header (and signature) like every rig export
         text = edge_export(x.cal, edge, fmt, x.names.frames)

@@ -71,9 +71,8 @@ def test_a_span_that_contradicts_the_tag_size_is_refused(run):
 def test_kalibrs_target_yaml_gives_the_same_board(run, tmp_path):
     target = tmp_path / "target.yaml"
     target.write_text(KALIBR_TARGET)
-    by_file = run(
-        "board", "add", "K1", "--kind", "aprilgrid", "--from-kalibr", str(target), *MEASURED, "--json"
-    )
+    # as a Kalibr user brings it: the file says aprilgrid, so no --kind
+    by_file = run("board", "add", "K1", "--from-kalibr", str(target), *MEASURED, "--json")
     by_flags = run("board", "add", "K2", *GRID, *MEASURED, "--json")
     assert by_file.exit_code == 0 and by_flags.exit_code == 0, by_file.output + by_flags.output
     keys = ("kind", "cols", "rows", "dictionary", "tag_spacing", "measurement")
@@ -121,6 +120,7 @@ def test_a_bad_kalibr_target_is_refused_naming_the_fix(run, tmp_path, yaml_text,
         ([*GRID, "--marker-mm", "20"], "--marker-mm do not apply to an AprilGrid"),
         (["--cols", "9", "--rows", "6", "--square-mm", "25", "--tag-spacing", "0.3"], "add --kind aprilgrid"),
         (["--cols", "9", "--rows", "6"], "a chessboard needs --square-mm"),
+        (["--kind", "chessboard", "--from-kalibr", "target.yaml"], "--from-kalibr describe an AprilGrid"),
     ],
 )
 def test_bad_aprilgrid_options_are_refused(run, args, says):

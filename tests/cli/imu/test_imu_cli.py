@@ -35,6 +35,12 @@ def test_help_names_the_inputs() -> None:
         assert word in r.output
 
 
+def test_synths_imu_yaml_reads_as_kalibr_reads_it(recording) -> None:
+    noise = yaml.safe_load((recording / "imu.yaml").read_text())  # Kalibr's ConfigReader: plain safe_load
+    assert noise["rostopic"] == "/imu0"
+    assert all(type(v) is float and v > 0 for k, v in noise.items() if k != "rostopic"), noise
+
+
 def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> None:
     url = make_store(tmp_path / "c.db")
     out = tmp_path / "o.json"
@@ -53,7 +59,13 @@ def test_synth_solve_json_is_the_truth_within_its_sigma(recording, tmp_path) -> 
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
-    assert json.loads(out.read_text()) == doc  # -o holds what --json prints
+    sealed = json.loads(out.read_text())  # -o holds what --json prints, sealed as lidar solve -o's
+    assert sealed.pop("kind") == "imu-result" and sealed.pop("content_sha256") and sealed == doc
+    linted = cli(url, "lint", str(out))
+    assert linted.exit_code == 0 and "(imu-result): pass" in linted.stdout, linted.output
+    out.write_text(out.read_text().replace(f'"td_ms": {doc["estimate"]["td_ms"]}', '"td_ms": 0.5'))
+    linted = cli(url, "lint", str(out))
+    assert linted.exit_code == 1 and "was edited" in linted.output, linted.output
     e = doc["estimate"]
     assert doc["status"] == "accepted" and doc["camera"] == f"{CAM}@1" and "stored" not in doc
     assert abs(e["td_ms"] - TD_S * 1e3) < 5 * e["sigma_td_ms"]
@@ -85,12 +97,95 @@ def test_the_stored_edge_shows_exports_and_lints_clean(solved, tmp_path) -> None
     assert imu_yaml["rostopic"] == "/imu"
     tf = _yaml_body(cli(url, "rig", "export", RIG, "--edge", f"imu:{CAM}", "--format", "tf").stdout)
     assert tf["transforms"][0]["header"]["frame_id"] == "imu"
+    edge = tmp_path / "edge.json"  # unsealed alone: lint checks its schema and says where the seal is
+    assert (
+        cli(url, "rig", "export", RIG, "--edge", f"imu:{CAM}", "--format", "json", "-o", str(edge)).exit_code
+        == 0
+    )
+    linted = cli(url, "lint", str(edge))
+    assert linted.exit_code == 0 and "(imu-edge-json): pass" in linted.stdout, linted.output
+    assert "no content hash of its own" in linted.stdout
     bundle = tmp_path / "bundle"
     assert cli(url, "rig", "export", RIG, "--format", "bundle", "-o", str(bundle)).exit_code == 0
     assert (bundle / "imu.yaml").is_file()
     linted = cli(url, "lint", str(bundle / "manifest.json"))
     assert linted.exit_code == 0, linted.output
     assert "imu.yaml (kalibr-imu): pass" in linted.stdout and "camchain.yaml (kalibr): pass" in linted.stdout
+
+
+def test_kalibrs_target_yaml_is_the_edges_board_in_kalibrs_types_and_lint_checks_it(
+    recording, solved, tmp_path
+) -> None:
+    db, _ = solved
+    url = copy_db(db, tmp_path)
+    no_board = cli(url, "rig", "export", RIG, "--format", "kalibr-target")  # solved from corner files alone
+    assert (
+        no_board.exit_code == 2
+        and "without --board" in no_board.output
+        and "Traceback" not in no_board.output
+    )
+    assert cli(url, "board", "add", "G7N", "--cols", "7", "--rows", "6", "--square-mm", "50").exit_code == 0
+    args = ["imu", "solve", str(recording), "--serial", CAM, "--board", "G7N", "--rig", RIG, "--json"]
+    solved_doc = json.loads(cli(url, *args, "--noise", str(recording / "imu.yaml")).stdout)
+    assert solved_doc["stored"]["status"] == "accepted"  # a typed board size is named, not refused
+    assert any("G7N@1's size is nominal" in note for note in solved_doc["notes"])
+    path = tmp_path / "target.yaml"
+    assert cli(url, "rig", "export", RIG, "--format", "kalibr-target", "-o", str(path)).exit_code == 0
+    target = _yaml_body(path.read_text())  # the types Kalibr's ConfigReader insists on: ints and floats
+    assert target == {"target_type": "checkerboard", "targetCols": 7, "targetRows": 6,
+                      "rowSpacingMeters": 0.05, "colSpacingMeters": 0.05}  # fmt: skip
+    assert all(type(target[k]) is float for k in ("rowSpacingMeters", "colSpacingMeters"))
+    linted = cli(url, "lint", str(path))
+    assert linted.exit_code == 0 and "(kalibr-target): pass" in linted.stdout, linted.output
+    path.write_text(path.read_text().replace("0.05\n", "0.06\n"))  # a hand-edited square size
+    assert cli(url, "lint", str(path)).exit_code == 1
+
+
+def test_a_kalibr_users_aprilgrid_recording_solves_and_exports_its_target(tmp_path_factory, tmp_path) -> None:
+    rec = rendered(tmp_path_factory, "aprilgrid")
+    url = make_store(tmp_path / "c.db")
+    given = {k: v for k, v in truth(rec)["board"].items() if k != "kind"}  # Kalibr's target.yaml fields
+    (tmp_path / "target.yaml").write_text(yaml.safe_dump(given))
+    measured = [
+        "--uncertainty-mm",
+        "0.05",
+        "--instrument",
+        "calipers",
+        "--measured-by",
+        "qa",
+        "--measured-on",
+        "2026-12-01",
+    ]
+    added = cli(url, "board", "add", "AG", "--from-kalibr", str(tmp_path / "target.yaml"), *measured)
+    assert added.exit_code == 0, added.output
+    args = ["imu", "solve", str(rec), "--serial", CAM, "--board", "AG", "--noise", str(rec / "imu.yaml")]
+    r = cli(url, *args, "--rig", RIG, "--json")
+    assert r.exit_code == 0, r.output
+    e = json.loads(r.stdout)["estimate"]
+    assert abs(e["td_ms"] - TD_S * 1e3) < 5 * e["sigma_td_ms"]
+    exported = _yaml_body(cli(url, "rig", "export", RIG, "--format", "kalibr-target").stdout)
+    assert exported == given
+    no_images = cli(url, "imu", "synth", str(tmp_path / "x"), "--pattern", "aprilgrid")
+    assert no_images.exit_code == 2 and "add --images" in no_images.output
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ("target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 1\n", "tagSpacing = 1"),
+        (
+            "target_type: checkerboard\ntargetCols: 2\ntargetRows: 6\nrowSpacingMeters: 0.05\n",
+            "targetCols = 2",
+        ),
+        ("target_type: circles\n", "target_type 'circles' is not"),
+    ],
+    ids=["int tagSpacing", "2 columns", "unknown type"],
+)
+def test_lint_refuses_a_target_yaml_kalibr_would_refuse(tmp_path, body, says) -> None:
+    path = tmp_path / "target.yaml"
+    path.write_text(body)
+    linted = cli(f"sqlite:///{tmp_path / 'none.db'}", "lint", str(path))
+    assert linted.exit_code == 1 and says in linted.output, linted.output
 
 
 def test_an_edited_number_in_the_stored_edge_is_refused_by_lint_and_import(solved, tmp_path) -> None:
@@ -132,6 +227,7 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     assert r.exit_code == 1, r.output
     assert "Result: REJECTED" in r.output and "(rejected, never active; no edge)" in r.output
     assert "excite with turns and reversals" in r.output
+    assert "to hold td: imu solve ... --hold-td-ms MS" in r.output  # the other way out, by its flag
     history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
     assert history["active_version"] == 1
     assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]

@@ -334,3 +334,18 @@ def test_bad_rig_inputs_exit_2_and_store_nothing(renders, tmp_path, args, messag
         assert [c.version for c in store.list_rig_calibrations(RIG)] == [1] and store.active_rig_version(
             RIG
         ) == 1
+
+
+@pytest.mark.parametrize("option", ["-o", "--tf-static"])
+def test_an_existing_output_file_is_refused_before_the_rig_version_is_stored(renders, tmp_path, option):
+    url = f"sqlite:///{tmp_path / 'calibctl.db'}"
+    _store(url)
+    taken = tmp_path / "taken.out"
+    taken.write_text("someone else's file\n")
+    args = ["--serial", CAM, "--rig", RIG, "--lidar-frame", "lidar", option, str(taken)]
+    done = _cli(url, *_solve_args(renders["good"], *args))
+    assert done.exit_code == 2, done.output
+    assert f"{taken} already exists; nothing was solved or stored" in done.output
+    assert "Traceback" not in done.output and taken.read_text() == "someone else's file\n"
+    with Store.open(url) as store:
+        assert [c.version for c in store.list_rig_calibrations(RIG)] == [1]

@@ -307,3 +307,33 @@ def test_the_rational_model_starts_from_the_k1k2_solution_not_cold():
     # (how far the held-out error lies above the fit is the lens's business: OpenCV 5.0 1.1x, 4.10 4.6x, a
     # rational model on a 190 deg lens generalises poorly; the fit is never below its folds' minimum)
     assert kept is warm and warm.rms_px <= hold.holdout_rms_px
+
+
+def test_a_warm_start_stops_at_a_relative_step_and_lands_on_the_default_criteria_minimum(
+    session, solved, monkeypatch
+):
+    """A solve started from the solve of more of the same views stops once its step falls under
+    WARM_STEP_EPS (OpenCV's default runs on to DBL_EPSILON); a cold solve keeps OpenCV's default. The warm
+    answer is the one the default criteria reach, far inside any printed digit."""
+    from calibctl.core.intrinsics import solve as solve_module
+    from calibctl.core.intrinsics.solution import WARM_CRITERIA, WARM_STEP_EPS
+
+    obj, img = session.object_points_per_view[:12], session.image_points_per_view[:12]
+    asked: list[object] = []
+    real = cv2.calibrateCamera
+
+    def spy(*a, **k):
+        asked.append(k.get("criteria"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(solve_module.cv2, "calibrateCamera", spy)
+    K, D = solved.camera_matrix, solved.dist_coeffs
+    warm = solve_intrinsics(obj, img, SIZE, initial=K, initial_dist=D, uncertainty=False)
+    solve_intrinsics(obj, img, SIZE, uncertainty=False)
+    assert asked == [WARM_CRITERIA, None] and WARM_CRITERIA[2] == WARM_STEP_EPS
+    flags = MODELS["k1k2"].flags | cv2.CALIB_USE_INTRINSIC_GUESS
+    objs = [np.asarray(o, np.float32) for o in obj]
+    imgs = [np.asarray(i, np.float32) for i in img]
+    _, K_default, D_default, _, _ = real(objs, imgs, SIZE, np.array(K), np.array(D), flags=flags)
+    np.testing.assert_allclose(warm.camera_matrix, K_default, rtol=1e-8)
+    np.testing.assert_allclose(warm.dist_coeffs, np.ravel(D_default)[:5], rtol=1e-6, atol=1e-9)

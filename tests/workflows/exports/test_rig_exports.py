@@ -7,12 +7,14 @@ import numpy as np
 import pytest
 import yaml
 
+from calibctl.core.board.board_spec import BoardSpec
 from calibctl.core.extrinsics.rig_metrics import skew
 from calibctl.core.extrinsics.rig_solve import solve_rig
 from calibctl.core.extrinsics.rig_tree import pose_to_T
 from calibctl.errors import FileSystemError, InputError
 from calibctl.workflows.exports.rig_exports import (
     kalibr_camchain,
+    kalibr_target,
     opencv_stereo,
     ros_stereo_pair,
     solution_sha256,
@@ -201,3 +203,17 @@ def test_an_export_folder_that_cannot_be_created_is_a_file_system_error(stereo, 
     with pytest.raises(FileSystemError, match=r"cannot create the export folder .*plain/out") as refused:
         write_exports(stereo, tmp_path / "plain" / "out")
     assert refused.value.exit_code == 2
+
+
+@pytest.mark.parametrize(
+    ("board", "says"),
+    [
+        (BoardSpec.charuco(10, 7, 0.03, 0.022), "is a ChArUco board"),
+        (BoardSpec.aprilgrid(6, 6, 0.088, 0.3, family="25h9"), "is an AprilGrid of DICT_APRILTAG_25h9"),
+        (BoardSpec.aprilgrid(2, 6, 0.088, 0.3), "is 2 x 6: Kalibr reads no target under 3 x 3"),
+    ],
+    ids=["charuco", "other family", "2 tags wide"],
+)
+def test_a_board_kalibr_cannot_read_is_no_target_yaml(board, says) -> None:
+    with pytest.raises(InputError, match=says):
+        kalibr_target(board, "B@1")

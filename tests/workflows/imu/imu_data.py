@@ -71,14 +71,16 @@ def _cached(base: Path, name: str) -> tuple[Path, bool]:
 
 def rendered(tmp_path_factory: pytest.TempPathFactory, motion: str = "dance") -> Path:
     """A 6 s recording (20 Hz camera, 200 Hz IMU, td 12 ms) rendered through CAM-0001's calibration;
-    ``motion`` "images": a 3 s dance as ASL images of board G7 instead of corner files."""
+    ``motion`` "images": a 3 s dance as ASL images of board G7 instead of corner files ("aprilgrid": of
+    Kalibr's AprilGrid, truth.json's board)."""
     folder, done = _cached(tmp_path_factory.getbasetemp(), f"imu-{motion}")
     if not done:
         folder.mkdir(exist_ok=True)
         url = make_store(folder / "render.db")
         args = ["imu", "synth", str(folder / "rec"), "--serial", CAM, "--force"]
-        if motion == "images":
-            args += ["--images", "--duration-s", "3"]
+        if motion in ("images", "aprilgrid"):
+            args += ["--images", "--pattern", "aprilgrid" if motion == "aprilgrid" else "chessboard"]
+            args += ["--duration-s", "3"]
         else:
             args += ["--motion", motion]
         r = cli(url, *args, "--td-ms", str(TD_S * 1e3))

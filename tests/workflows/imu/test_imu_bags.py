@@ -18,8 +18,12 @@ from tests.workflows.imu.imu_data import CAM, TD_S, make_store, rendered, settin
 rosbags = pytest.importorskip("rosbags")
 
 
-def _write_bag(rec: Path, bag: Path, kind: str = "ros2", repeat_stamp: bool = False) -> None:
-    """``rec`` (the ASL image recording) as a bag: ``kind`` ros2 (sqlite3), ros2-mcap or ros1 (.bag)."""
+def _write_bag(
+    rec: Path, bag: Path, kind: str = "ros2", repeat_stamp: bool = False, zero_imu_stamps: bool = False
+) -> None:
+    """``rec`` (the ASL image recording) as a bag: ``kind`` ros2 (sqlite3), ros2-mcap or ros1 (.bag);
+    ``repeat_stamp``: the second image stamped as the first; ``zero_imu_stamps``: a driver that leaves
+    the IMU's header stamps at zero."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -47,7 +51,7 @@ def _write_bag(rec: Path, bag: Path, kind: str = "ros2", repeat_stamp: bool = Fa
             c = line.split(",")
             ns, v = int(c[0]), [float(x) for x in c[1:]]
             msg = T["sensor_msgs/msg/Imu"](
-                header=header(ns),
+                header=header(0 if zero_imu_stamps else ns),
                 orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
                 orientation_covariance=np.zeros(9),
                 angular_velocity=V3(x=v[0], y=v[1], z=v[2]),
@@ -111,11 +115,31 @@ def test_a_bag_without_the_named_topic_is_exit_2(bag, tmp_path, topics, message,
     assert info.value.exit_code == 2 and message in info.value.message and hint in (info.value.hint or "")
 
 
-def test_a_repeated_image_stamp_in_a_bag_is_refused(tmp_path_factory, tmp_path) -> None:
+def test_a_file_of_a_ros2_bag_is_refused_naming_the_bag_folder(bag, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    (storage,) = [p for p in bag.iterdir() if p.name != "metadata.yaml"]  # the .db3 people pick
+    req = imu_solve.ImuRequest(storage, CAM, board="G7", image_topic="/cam0/image_raw", imu_topic="/imu0")
+    with pytest.raises(CalibctlError, match="is one file of the ROS 2 bag") as info:
+        imu_solve.run_imu(settings_for(url), req)
+    assert (
+        info.value.exit_code == 2
+        and info.value.hint == f"give the bag folder {bag} (the one holding metadata.yaml)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        ({"repeat_stamp": True}, r"image stamp \d+ ns appears 2 times"),
+        ({"zero_imu_stamps": True}, r"/imu0: IMU stamp 0 ns appears 720 times"),
+    ],
+    ids=["image", "imu"],
+)
+def test_a_repeated_stamp_in_a_bag_is_refused(tmp_path_factory, tmp_path, edit, message) -> None:
     path = tmp_path / "dup"
-    _write_bag(rendered(tmp_path_factory, "images"), path, repeat_stamp=True)
+    _write_bag(rendered(tmp_path_factory, "images"), path, **edit)
     url = make_store(tmp_path / "c.db")
     req = imu_solve.ImuRequest(path, CAM, board="G7", image_topic="/cam0/image_raw", imu_topic="/imu0")
-    with pytest.raises(CalibctlError, match=r"image stamp \d+ ns appears 2 times") as info:
+    with pytest.raises(CalibctlError, match=message) as info:
         imu_solve.run_imu(settings_for(url), req)
     assert info.value.exit_code == 2

@@ -15,7 +15,7 @@ from calibctl.store.repository import Store
 from calibctl.workflows.edges import versions
 from calibctl.workflows.imu import imu_solve
 from calibctl.workflows.imu import recording as recording_module
-from tests.artifacts.factories import calibration
+from tests.artifacts.factories import calibration, measured_board
 from tests.store.rig_documents import RIG
 from tests.workflows.imu.imu_data import (
     CAM,
@@ -97,15 +97,36 @@ def test_a_bad_imu_log_is_exit_2_naming_the_file_and_the_fix_and_nothing_is_stor
         assert [c.version for c in store.list_rig_calibrations(RIG)] == [1]
 
 
-def test_a_camera_stamp_listed_twice_is_refused_naming_the_list(recording, tmp_path) -> None:
+@pytest.mark.parametrize(
+    ("order", "message"),
+    [
+        ([0, 0, 1, 2], r"cam0/data.csv: frame stamp \d+ is listed twice"),
+        ([0, 2, 1, 3], r"cam0/data.csv: frame stamp \d+ \(data line 3\) is before \d+ \(data line 2\)"),
+    ],
+    ids=["listed twice", "out of order"],
+)
+def test_a_camera_stamp_listed_twice_or_out_of_order_is_refused_naming_the_list(
+    recording, tmp_path, order, message
+) -> None:
     rec = copy_recording(recording, tmp_path)
     stamps = sorted(p.stem for p in (rec / "cam0").glob("*.csv"))
-    listing = ["#timestamp [ns],filename"] + [f"{s},{s}.png" for s in [stamps[0], *stamps[:3]]]
+    listing = ["#timestamp [ns],filename"] + [f"{stamps[i]},{stamps[i]}.png" for i in order]
     (rec / "cam0" / "data.csv").write_text("\n".join(listing) + "\n")
     url = make_store(tmp_path / "c.db")
-    with pytest.raises(CalibctlError, match=r"cam0/data.csv: frame stamp \d+ is listed twice") as info:
+    with pytest.raises(CalibctlError, match=message) as info:
         imu_solve.run_imu(settings_for(url), imu_solve.ImuRequest(rec, CAM))
     assert info.value.exit_code == 2
+
+
+def test_an_existing_result_file_is_refused_before_anything_is_stored(recording, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    (tmp_path / "out.json").write_text("{}")
+    req = imu_solve.ImuRequest(recording, CAM, rig=RIG, out=tmp_path / "out.json")
+    with pytest.raises(CalibctlError, match="out.json already exists; nothing was solved or stored") as info:
+        imu_solve.run_imu(settings_for(url), req)
+    assert info.value.exit_code == 2 and "--force" in (info.value.hint or "")
+    with Store.open(url) as store:
+        assert [c.version for c in store.list_rig_calibrations(RIG)] == [1]
 
 
 def test_a_corner_file_whose_rows_name_another_stamp_is_refused(recording, tmp_path) -> None:
@@ -167,7 +188,13 @@ def test_a_recording_without_an_imu_log_or_corners_is_refused(recording, tmp_pat
     (rec / "imu0" / "data.csv").rename(rec / "imu0" / "other.csv")
     with pytest.raises(CalibctlError, match=r"no IMU log \(imu0/data.csv or imu0.csv\)"):
         recording_read(rec)
-    (rec / "imu0" / "other.csv").rename(rec / "imu0.csv")  # yac's name for the same log
+    (rec / "imu0" / "other.csv").rename(rec / "imu0" / "data.csv")
+    (tmp_path / "MH_01").mkdir()
+    rec = rec.rename(tmp_path / "MH_01" / "mav0")  # EuRoC's zip unpacked: the layout one folder down
+    with pytest.raises(CalibctlError, match="EuRoC's layout keeps it in mav0/") as info:
+        recording_read(tmp_path / "MH_01")
+    assert info.value.hint == f"give the recording folder {rec}"
+    (rec / "imu0" / "data.csv").rename(rec / "imu0.csv")  # yac's name for the same log
     with pytest.raises(CalibctlError, match="cam1: no such camera folder"):
         recording_module.read_recording(rec, "cam1", (np.eye(3), np.zeros(5), (640, 480)))
 
@@ -261,6 +288,13 @@ def test_asl_images_are_detected_with_the_registered_board(tmp_path_factory, tmp
     s = settings_for(url)
     with pytest.raises(CalibctlError, match="holds images \\(data.csv\\), not corner files") as info:
         imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM))
+    assert info.value.exit_code == 2 and "--board" in (info.value.hint or "")
+    with Store.open(url) as store:
+        store.add_board(measured_board("B9"))  # 9 x 6 inner corners: not the board the images show
+    with pytest.raises(
+        CalibctlError, match=r"cam0/data: board B9@1 is found in none of the 60 images"
+    ) as info:
+        imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM, rig=RIG, board="B9"))
     assert info.value.exit_code == 2 and "--board" in (info.value.hint or "")
     out = imu_solve.run_imu(s, imu_solve.ImuRequest(rec, CAM, noise=rec / "imu.yaml", rig=RIG, board="G7"))
     assert out.stored is not None and out.stored.status == "accepted"
