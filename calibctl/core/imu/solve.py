@@ -43,7 +43,7 @@ from calibctl.core.extrinsics import se3
 from calibctl.core.imu import intrinsics, model
 from calibctl.core.imu.plain import BoardTrack, PlainResult, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise, ImuSamples
-from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band
+from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band, segment_gram
 from calibctl.core.lm import Damping, DenseSystem, solve_lm
 
 SHARED_NAMES = (
@@ -492,14 +492,11 @@ class _Problem:
         band_c, cross_c, gl_c = scatter_band(
             n, seg_c, JlT_info @ Jl_c, JlT_info @ Js_c, np.einsum("pia,pi->pa", Jl_c, grad)
         )
-        JlT_i = np.transpose(Jl_i, (0, 2, 1))
-        band_i, cross_i, gl_i = scatter_band(
-            n,
-            self.imu_seg,
-            JlT_i @ Jl_i,
-            JlT_i @ Js_i,
-            np.einsum("sra,sr->sa", Jl_i, r_iw),
-        )
+        # One Gram matrix per segment over [local | shared | residual] columns: the IMU's blocks of the
+        # band, the cross terms, both gradients and its share of A at once.
+        q = Jl_i.shape[2]
+        seg_i, G = segment_gram(self.imu_seg, np.concatenate([Jl_i, Js_i, r_iw[:, :, None]], axis=2))
+        band_i, cross_i, gl_i = scatter_band(n, seg_i, G[:, :q, :q], G[:, :q, q:-1], G[:, :q, -1])
         band = band_c + band_i
         floor = BAND_FLOOR * max(float(np.max(np.diagonal(band[:, 0], axis1=1, axis2=2))), 1.0)
         band[:, 0] += floor * np.eye(self.k)
@@ -507,8 +504,8 @@ class _Problem:
         g_l = gl_c + gl_i
         if self.opt.bias_walk:
             cost += self._walk_prior(s.ctrl[:, 6:], band, g_l)
-        A = np.einsum("pia,pij,pjb->ab", Js_c, info, Js_c) + np.einsum("sra,srb->ab", Js_i, Js_i)
-        g_s = np.einsum("pia,pi->a", Js_c, grad) + np.einsum("sra,sr->a", Js_i, r_iw)
+        A = np.einsum("pia,pij,pjb->ab", Js_c, info, Js_c) + G[:, q:-1, q:-1].sum(axis=0)
+        g_s = np.einsum("pia,pi->a", Js_c, grad) + G[:, q:-1, -1].sum(axis=0)
         chol = BandedCholesky(band)
         X = chol.solve(np.concatenate([cross, g_l[:, :, None]], axis=2))
         X_B, X_g = X[:, :, :-1], X[:, :, -1]
