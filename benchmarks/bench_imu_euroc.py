@@ -23,8 +23,14 @@ come to EuRoC's published pair.
 scale-misalignment``: the joint runs with Kalibr's scale-misalignment IMU model (its 24 states printed
 with their sigmas, and each camera's rotation from EuRoC's per IMU axis).
 
+``--bias-walk``: the joint runs (and ``--growth``) with the biases as random walks.
+``--kalibr-differences [NAME ...]``: the joint solve (no folds, no jackknife: the estimate does not depend
+on them) under each of Kalibr's model choices that calibctl makes differently (``KALIBR_DIFFERENCES``),
+one at a time and together.
+
 Run: python benchmarks/bench_imu_euroc.py [FOLDER] [--shift-ms 5] [--knot-spacing-s 0.05]
-     [--joint [--rig-pair] [--only-joint] [--imu-model scale-misalignment]]
+     [--joint [--rig-pair] [--only-joint] [--imu-model scale-misalignment] [--bias-walk]]
+     python benchmarks/bench_imu_euroc.py FOLDER --kalibr-differences [NAME ...]
      python benchmarks/bench_imu_euroc.py FOLDER --growth   (the cost's growth alone: 1/4, 1/2, all)
 """
 
@@ -73,6 +79,24 @@ EUROC_T_BS = {
             [0.0, 0.0, 0.0, 1.0],
         ]
     ),
+}
+
+
+# Kalibr's kalibr_calibrate_imu_camera defaults that calibctl's default solve makes differently, as
+# SolveOptions fields (name -> fields; "rig_pair": cam1 held through yac's T_cam0_cam1, as Kalibr holds
+# the camera chain's baselines); the spline's order (Kalibr: 6, quintic) is not an option here.
+KALIBR_WEIGHTING = {"fix_corner_sigma": True, "corner_sigma_px": 1.0, "fix_imu_sigma": True}
+KALIBR_DIFFERENCES: dict[str, dict[str, object]] = {
+    "calibctl": {},
+    "bias-walk": {"bias_walk": True},
+    "kalibr-weighting": KALIBR_WEIGHTING,
+    "knots-0.025": {"knot_spacing_s": 0.025},
+    "knots-0.01": {"knot_spacing_s": 0.01},
+    "knots-0.01+bias-walk": {"knot_spacing_s": 0.01, "bias_walk": True},
+    "knots-0.01+kalibr-weighting": {"knot_spacing_s": 0.01, **KALIBR_WEIGHTING},
+    "rig-pair": {"rig_pair": True},
+    "kalibr": {"knot_spacing_s": 0.01, "bias_walk": True, **KALIBR_WEIGHTING},
+    "kalibr+rig-pair": {"knot_spacing_s": 0.01, "bias_walk": True, **KALIBR_WEIGHTING, "rig_pair": True},
 }
 
 
@@ -153,6 +177,15 @@ def main() -> int:
         help="only the cost's growth: cam0's first 1/4, 1/2 and all of it, solved as `imu solve` does "
         "(3-fold held-out, jackknife, gates), then the row test and the report's series",
     )
+    parser.add_argument(
+        "--bias-walk", action="store_true", help="the joint runs' (and --growth's) biases as random walks"
+    )
+    parser.add_argument(
+        "--kalibr-differences",
+        nargs="*",
+        choices=list(KALIBR_DIFFERENCES),
+        help="only the joint solve under Kalibr's model choices (all when none named)",
+    )
     args = parser.parse_args()
     if not args.folder or not (Path(args.folder) / "imu0.csv").is_file():
         print("no imu_april folder (pass it or set CALIBCTL_IMU_APRIL): skipped")
@@ -164,11 +197,19 @@ def main() -> int:
         f"load {load_1min():.1f}, knot spacing {args.knot_spacing_s} s"
     )
     if args.growth:
-        growth(folder, SolveOptions(knot_spacing_s=args.knot_spacing_s), (0.25, 0.5, 1.0))
+        growth(
+            folder,
+            SolveOptions(knot_spacing_s=args.knot_spacing_s, bias_walk=args.bias_walk),
+            (0.25, 0.5, 1.0),
+        )
+        return 0
+    if args.kalibr_differences is not None:
+        kalibr_differences(folder, args.kalibr_differences or list(KALIBR_DIFFERENCES))
         return 0
     options = SolveOptions(knot_spacing_s=args.knot_spacing_s)
     if args.joint or args.only_joint:
-        joint(folder, replace(options, imu_model=args.imu_model), args.shift_ms, args.rig_pair)
+        joint_options = replace(options, imu_model=args.imu_model, bias_walk=args.bias_walk)
+        joint(folder, joint_options, args.shift_ms, args.rig_pair)
     if args.only_joint:
         return 0
     for cam in ("cam0", "cam1"):
@@ -279,6 +320,34 @@ def joint(folder: Path, options: SolveOptions, shift_ms: float, rig_pair: bool) 
             print(
                 f"{cam} rig pair: {deg:.3f} deg {mm:5.2f} mm  td {1e3 * s.td_s:+.3f} ms  "
                 f"cpu {cpu:.1f} s for both"
+            )
+
+
+def kalibr_differences(folder: Path, names: list[str]) -> None:
+    """The joint solve of both cameras under each named set of Kalibr's choices: each camera's distance
+    from EuRoC's T_BS, its rotation from it about the IMU axes, td, the IMU residuals, the CPU."""
+    imu, f0, noise = load(folder, "cam0")
+    _, f1, _ = load(folder, "cam1")
+    config = yaml.safe_load((folder / "config.yaml").read_text())
+    T01 = np.array(config["T_cam0_cam1"]["data"], np.float64).reshape(4, 4)
+    for name in names:
+        fields = dict(KALIBR_DIFFERENCES[name])
+        rig = [None, T01] if fields.pop("rig_pair", False) else None
+        options = replace(SolveOptions(folds=0, jackknife_blocks=0), **fields)  # type: ignore[arg-type]
+        c0 = time.process_time()
+        sols = solve_imu_cameras(imu, [f0, f1], noise, options, rig=rig)
+        cpu = time.process_time() - c0
+        for cam, s in zip(("cam0", "cam1"), sols, strict=True):
+            deg, mm = difference(s.T_imu_cam, EUROC_T_BS[cam])
+            d_rot = se3.rotvecs_from_rotations((s.T_imu_cam[:3, :3] @ EUROC_T_BS[cam][:3, :3].T)[None])[0]
+            d_t = 1e3 * (s.T_imu_cam[:3, 3] - EUROC_T_BS[cam][:3, 3])
+            print(
+                f"{name:28s} {cam}: {deg:.3f} deg {mm:5.2f} mm td {1e3 * s.td_s:+.3f} ms; about IMU x y z "
+                f"{np.round(np.degrees(d_rot), 3)} deg, t {np.round(d_t, 2)} mm; gyro "
+                f"{s.gyro_rms_rad_s:.4f} rad/s accel {s.accel_rms_m_s2:.3f} m/s^2 (x "
+                f"{s.imu_variance_factors[0]:.2f}, {s.imu_variance_factors[1]:.2f}); corner sigma "
+                f"{s.corner_sigma_px:.3f} px; {s.iterations} iterations (converged {s.converged}), "
+                f"cpu {cpu:.1f} s for both (load {load_1min():.1f})"
             )
 
 

@@ -5,9 +5,10 @@ held through the true rig pose.
 The renders of tests/core/imu/test_zscores.py (4 s dances, td from -10 to +14 ms) with a second camera
 11 cm along the first camera's x (``core.synth.imu.EUROC_LIKE_T_CAM0_CAM1``). Both cameras' z rows are
 pooled (they share the trajectory, so they are not independent). Prints the mean and sd of the seven
-z-scores (rotation x y z, translation x y z, td); asserts nothing.
+z-scores (rotation x y z, translation x y z, td); asserts nothing. ``--bias-walk``: the biases solved as
+random walks (``SolveOptions.bias_walk``; the renders' biases are constant, the noise file's walks small).
 
-    python benchmarks/bench_imu_joint_honesty.py [--seeds 30]
+    python benchmarks/bench_imu_joint_honesty.py [--seeds 30] [--bias-walk]
 """
 
 from __future__ import annotations
@@ -56,11 +57,13 @@ def main() -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--seeds", type=int, default=30)
+    parser.add_argument("--bias-walk", action="store_true", help="the biases as random walks")
     args = parser.parse_args()
     print(
         f"# {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {os.cpu_count()} CPUs ({cpu_model()}), "
-        f"load {load_1min():.1f}"
+        f"load {load_1min():.1f}, bias_walk {args.bias_walk}"
     )
+    options = SolveOptions(folds=0, bias_walk=args.bias_walk)
     T1 = EUROC_LIKE_T_IMU_CAM @ EUROC_LIKE_T_CAM0_CAM1
     z: dict[str, list[np.ndarray]] = {"joint": [], "held by the rig": []}
     c0 = time.process_time()
@@ -77,7 +80,7 @@ def main() -> int:
         noise = ImuNoise(rec.truth.gyro_noise_density, rec.truth.accel_noise_density, 1e-5, 1e-4)
         truths = (rec.truth, replace(rec.truth, T_imu_cam=T1))
         for name, rig in (("joint", None), ("held by the rig", [None, EUROC_LIKE_T_CAM0_CAM1])):
-            sols = solve_imu_cameras(imu, cams, noise, SolveOptions(folds=0), rig=rig)
+            sols = solve_imu_cameras(imu, cams, noise, options, rig=rig)
             z[name] += [z_scores(s, t) for s, t in zip(sols, truths, strict=True)]
     for name, rows in z.items():
         print(f"{name}: {len(rows)} rows, {summary(np.array(rows))}")

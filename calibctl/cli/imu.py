@@ -170,6 +170,14 @@ def solve(
             "g-sensitivity, weak priors; refused when the recording cannot pin them).",
         ),
     ] = "calibrated",
+    bias_walk: Annotated[
+        bool,
+        typer.Option(
+            "--bias-walk",
+            help="Let the gyro and accelerometer biases wander as random walks (Kalibr's bias splines, "
+            "weighted by the noise file's random-walk densities) instead of constant.",
+        ),
+    ] = False,
     out: Annotated[Path | None, typer.Option("-o", "--out", help="Write the result JSON here.")] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
     json_output: JsonFlag = False,
@@ -205,6 +213,7 @@ def solve(
         imu_topic,
         tuple(zip(cameras[1:], serial[1:], strict=True)),
         imu_model,
+        bias_walk,
     )
     outcome = wf.run_imu(state(ctx).settings(), req)
     doc = wf.result_json(outcome)

@@ -28,18 +28,20 @@ The plain approach (``plain``): board_track(frames) -> BoardTrack (PnP poses);
 
 The estimator (``solve``): solve_imu_camera(imu, frames, noise, SolveOptions(...)) ->
     ImuCameraSolution: T_imu_cam (4, 4), td_s, td_held, line_delay_s (s per row from c_y, or None),
-    gyro_bias_rad_s (3,), accel_bias_m_s2 (3,) (+ *_drift per second with bias_drift),
-    gravity_w_m_s2 (3,) board frame, covariance over state_names, covariance_7 (7, 7) over
-    (rot 3 rad, trans 3 m, td s; td's row and column zero when held), sigma_rotation_deg (3,),
-    sigma_translation_mm (3,), sigma_td_ms, td_crlb_ms (td's bound with every other state known:
+    gyro_bias_rad_s (3,), accel_bias_m_s2 (3,) (+ *_drift per second with bias_drift; the walks'
+    means with bias_walk), gravity_w_m_s2 (3,) board frame, covariance over state_names, covariance_7
+    (7, 7) over (rot 3 rad, trans 3 m, td s; td's row and column zero when held), sigma_rotation_deg
+    (3,), sigma_translation_mm (3,), sigma_td_ms, td_crlb_ms (td's bound with every other state known:
     sigma_px / sqrt(sum |u_dot|^2), chapter 3), sigma_line_delay_us, sigma_inflation (the
     delete-one-block jackknife's widening per state, >= 1), corner/gyro/accel RMS (corners over 5
     robust sigmas left out: n_outliers), held_out (k-fold RMS per fold), residuals (per corner and
-    IMU sample, with stamps, image rows and the inlier mask: the report's plots), T_cam_imu,
-    timeshift_cam_imu_s, plain (the PlainResult it started from), cpu_s.
-    SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, estimate_line_delay,
-    bias_drift, hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s, imu_model
-    ("calibrated" or "scale-misalignment": ``imu_intrinsics`` on the solution).
+    IMU sample, with stamps, image rows, the inlier mask, and the biases at every IMU sample: the
+    report's plots), T_cam_imu, timeshift_cam_imu_s, plain (the PlainResult it started from), cpu_s.
+    SolveOptions: knot_spacing_s (0.05), corner_sigma_px, fix_corner_sigma, fix_imu_sigma (the IMU at
+    the noise file's densities, not raised to its residuals), estimate_line_delay, bias_drift,
+    bias_walk (the biases as random walks weighted by the noise file's random-walk densities),
+    hold_td_s, folds (3), jackknife_blocks (10), max_iterations, margin_s, imu_model ("calibrated" or
+    "scale-misalignment": ``imu_intrinsics`` on the solution).
     solve_imu_cameras(imu, [frames, ...], noise, options, rig=None) -> [ImuCameraSolution, ...]:
     several cameras against ONE IMU trajectory, gravity and biases (each camera its own T_imu_cam,
     td, line delay); rig[k] = T_cam0_camk holds camera k through a pose the rig already knows.

@@ -104,13 +104,13 @@ def calibrate_cameras(
         )
         reason = f"{exc}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
         free = replace(rate, gate="td_rotation_correlation_free")
-        _rig_gates(recording, cameras, tracks, held, rig)
         return [
             Calibration(
                 h,
                 [
                     *rec,
                     gates.td_observability(frames, h.td_crlb_ms),
+                    *rg,
                     free,
                     gates.td_rotation_correlation(h.covariance_7, True),
                     gates.td_sigma(h.sigma_td_ms, True),
@@ -119,19 +119,27 @@ def calibrate_cameras(
                 "td",
                 reason,
             )
-            for h, rec, frames in zip(held, recording, cameras, strict=True)
+            for h, rec, frames, rg in zip(
+                held, recording, cameras, _rig_gates(cameras, tracks, held, rig), strict=True
+            )
         ]
     solutions = solve_imu_cameras(imu, cameras, noise, options, tracks, plains, rig)
     for rec, frames, s in zip(recording, cameras, solutions, strict=True):
         rec.append(gates.td_observability(frames, s.td_crlb_ms))
-    _rig_gates(recording, cameras, tracks, solutions, rig)
     correlation = [gates.td_rotation_correlation(s.covariance_7, s.td_held) for s in solutions]
     sigma = [gates.td_sigma(s.sigma_td_ms, s.td_held) for s in solutions]
     failed = [g for pair in zip(correlation, sigma, strict=True) for g in pair if not g.passed]
     if not failed or fallback_td_s is None:
         return [
-            Calibration(s, [*rec, corr, sig, *_model_gates(s)], None, None)
-            for s, rec, corr, sig in zip(solutions, recording, correlation, sigma, strict=True)
+            Calibration(s, [*rec, *rg, corr, sig, *_model_gates(s)], None, None)
+            for s, rec, rg, corr, sig in zip(
+                solutions,
+                recording,
+                _rig_gates(cameras, tracks, solutions, rig),
+                correlation,
+                sigma,
+                strict=True,
+            )
         ]
     held = solve_imu_cameras(
         imu,
@@ -143,11 +151,13 @@ def calibrate_cameras(
         rig,
     )
     reason = f"{failed[0].message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
+    # The rig gate judges the reported (held) solution's corners, not the free solve's.
     return [
         Calibration(
             h,
             [
                 *rec,
+                *rg,
                 replace(corr, gate="td_rotation_correlation_free"),
                 replace(sig, gate="td_sigma_free"),
                 gates.td_rotation_correlation(h.covariance_7, True),
@@ -157,7 +167,9 @@ def calibrate_cameras(
             "td",
             reason,
         )
-        for h, rec, corr, sig in zip(held, recording, correlation, sigma, strict=True)
+        for h, rec, rg, corr, sig in zip(
+            held, recording, _rig_gates(cameras, tracks, held, rig), correlation, sigma, strict=True
+        )
     ]
 
 
@@ -168,16 +180,18 @@ def _model_gates(s: ImuCameraSolution) -> list[GateResult]:
 
 
 def _rig_gates(
-    recording: list[list[GateResult]],
     cameras: Sequence[CameraFrames],
     tracks: Sequence[BoardTrack],
     solutions: Sequence[ImuCameraSolution],
     rig: Sequence[np.ndarray | None] | None,
-) -> None:
-    """The ``rig_pose`` gate for every camera held through the rig's pose, appended to its gates and to
-    the first camera's (the held camera's corners pin the first camera's extrinsic)."""
-    for k, (rec, frames, track, s) in enumerate(zip(recording, cameras, tracks, solutions, strict=True)):
+) -> list[list[GateResult]]:
+    """Per camera, the ``rig_pose`` gates on ``solutions`` (the ones reported): every camera held through
+    the rig's pose gets its own, and the first camera a copy (the held camera's corners pin the first
+    camera's extrinsic)."""
+    out: list[list[GateResult]] = [[] for _ in cameras]
+    for k, (frames, track, s) in enumerate(zip(cameras, tracks, solutions, strict=True)):
         if rig is not None and rig[k] is not None:
             gate = gates.rig_pose(s.corner_rms_px, gates.pnp_rms_px(frames, track))
-            rec.append(gate)
-            recording[0].append(replace(gate, gate=f"rig_pose_camera_{k}"))
+            out[k].append(gate)
+            out[0].append(replace(gate, gate=f"rig_pose_camera_{k}"))
+    return out

@@ -3,12 +3,13 @@
 States: T_imu_cam (rotation 3 as a left perturbation in the IMU frame, translation 3, m), td_s
 (t_imu = t_cam + td_s; Kalibr's ``timeshift_cam_imu`` has the same sign), optionally a rolling-shutter
 line delay (s per row, rows counted from the principal point's c_y), the gravity direction in the
-board frame (2), a constant gyro bias (3) and accelerometer bias (3), optionally the IMU's own
+board frame (2), a constant gyro bias (3) and accelerometer bias (3) (or, with ``bias_walk``, each a
+random walk: a spline beside the trajectory's, eliminated with it), optionally the IMU's own
 scale, misalignment and g-sensitivity (24, ``core.imu.intrinsics``, with weak priors); plus the
 nuisance IMU trajectory, a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing
 ``knot_spacing_s``). The camera intrinsics are held. Residuals: every corner's reprojection (px,
 / sigma_px), every IMU sample's gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)),
-and the IMU model's priors.
+the IMU model's priors, and with ``bias_walk`` each walk's increments (/ random_walk * sqrt(knot spacing)).
 
 The solver is ``core.lm.solve_lm`` over the shared states only: each evaluation eliminates the spline
 (its normal equations are block-banded, ``core.imu.spline.BandedCholesky``), exactly as the Schur path
@@ -42,7 +43,7 @@ from calibctl.core.extrinsics import se3
 from calibctl.core.imu import intrinsics, model
 from calibctl.core.imu.plain import BoardTrack, PlainResult, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuInputError, ImuNoise, ImuSamples
-from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band
+from calibctl.core.imu.spline import BandedCholesky, Knots, local_controls, scatter_band, segment_gram
 from calibctl.core.lm import Damping, DenseSystem, solve_lm
 
 SHARED_NAMES = (
@@ -87,11 +88,15 @@ BAND_FLOOR = 1e-9  # relative floor on the spline's diagonal (a knot only the en
 @dataclass(frozen=True)
 class SolveOptions:
     """knot_spacing_s: spline knot spacing. corner_sigma_px: the corner noise to start from (the
-    estimate replaces it unless ``fix_corner_sigma``). estimate_line_delay: add the rolling-shutter
-    line delay. bias_drift: let both biases drift linearly over the recording (b(t) = b + b_dot
-    (t - t_mid), b_dot per second) instead of constant. hold_td_s: hold td at this value instead of
-    estimating it. folds: k of the k-fold held-out residuals (0: none). jackknife_blocks: contiguous
-    time blocks of the delete-one-block jackknife that can widen the sigmas (under 3: none).
+    estimate replaces it unless ``fix_corner_sigma``). fix_imu_sigma: keep the IMU at the noise file's
+    densities (not raised to its residuals; with ``fix_corner_sigma`` and 1 px, Kalibr's weighting).
+    estimate_line_delay: add the rolling-shutter line delay. bias_drift: let both biases drift linearly
+    over the recording (b(t) = b + b_dot (t - t_mid), b_dot per second) instead of constant. bias_walk:
+    the biases as random walks (Kalibr's bias splines): each a cubic B-spline on the trajectory's knots
+    whose consecutive controls differ by N(0, random_walk^2 knot_spacing_s) per axis (the noise file's
+    random-walk densities); the reported biases are the walks' means. hold_td_s: hold td at this value
+    instead of estimating it. folds: k of the k-fold held-out residuals (0: none). jackknife_blocks:
+    contiguous time blocks of the delete-one-block jackknife that can widen the sigmas (under 3: none).
     max_iterations: per LM run. margin_s: the spline's reach beyond the first and last frame (td may
     move within it). imu_model: one of ``core.imu.intrinsics.IMU_MODELS``; ``scale-misalignment`` adds
     the IMU's scale, misalignment, gyro-to-accelerometer rotation and g-sensitivity with weak priors."""
@@ -99,6 +104,7 @@ class SolveOptions:
     knot_spacing_s: float = 0.05
     corner_sigma_px: float = 0.5
     fix_corner_sigma: bool = False
+    fix_imu_sigma: bool = False
     estimate_line_delay: bool = False
     hold_td_s: float | None = None
     folds: int = 3
@@ -106,6 +112,7 @@ class SolveOptions:
     max_iterations: int = 40
     margin_s: float = 0.1
     bias_drift: bool = False
+    bias_walk: bool = False
     imu_model: str = "calibrated"
 
 
@@ -121,7 +128,7 @@ class _Extrinsic:
 
 @dataclass
 class _State:
-    ctrl: np.ndarray  # (n, 6) [phi, p]
+    ctrl: np.ndarray  # (n, 6) [phi, p], or (n, 12) [phi, p, b_g, b_a] with ``bias_walk``
     cams: list[_Extrinsic]
     R_g: np.ndarray
     b_g: np.ndarray
@@ -253,6 +260,12 @@ class _Problem:
     ) -> None:
         self.opt = options
         self.g_mag = noise.gravity_m_s2
+        # Per-knot size of the banded states: the pose, and with ``bias_walk`` both biases' controls.
+        self.k = 12 if options.bias_walk else 6
+        self.walk_info = np.r_[
+            np.full(3, 1.0 / (noise.gyro_random_walk**2 * options.knot_spacing_s)),
+            np.full(3, 1.0 / (noise.accel_random_walk**2 * options.knot_spacing_s)),
+        ]
         self.cams = [
             _Camera(f, options, t_ref, c, T) for c, (f, T) in enumerate(zip(cameras, rig, strict=True))
         ]
@@ -282,6 +295,7 @@ class _Problem:
             if not ((name := full.split(".")[-1]) == "td" and options.hold_td_s is not None)
             and not (name == "line_delay" and not options.estimate_line_delay)
             and not (name.startswith(("dbg", "dba")) and not options.bias_drift)
+            and not (name.startswith(("bg_", "ba_")) and options.bias_walk)
             and not (i in held and name in SHARED_NAMES[:6])
             and not (name in intrinsics.NAMES and options.imu_model == "calibrated")
         ]
@@ -311,7 +325,7 @@ class _Problem:
         t, row = self._pose_times(s, c)
         seg, u = self.knots.locate(t)
         w0 = self.knots.weights(u)
-        loc = local_controls(s.ctrl, seg)
+        loc = local_controls(s.ctrl, seg)[:, :, :6]
         R, tt = model.camera_pose(loc, w0, self.R_ref, e.R_ic, e.t_ic)
         pc = cam.pose_of_corner
         RX = np.einsum("nij,nj->ni", R[pc], cam.obj)
@@ -343,18 +357,18 @@ class _Problem:
                 [se3.rotvecs_from_rotations(Rp @ np.transpose(R, (0, 2, 1))), tp - tt], axis=1
             )
 
-        P = t.size
-        J_loc = np.zeros((P, 6, 24))
+        P, kk = t.size, self.k
+        J_loc = np.zeros((P, 6, 4 * kk))
         for j in range(4):
             for k in range(3):
                 d = np.zeros((4, 6))
                 d[j, k] = H_CTRL
                 plus = model.camera_pose(loc + d, w0, self.R_ref, e.R_ic, e.t_ic)
                 minus = model.camera_pose(loc - d, w0, self.R_ref, e.R_ic, e.t_ic)
-                J_loc[:, :, j * 6 + k] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
+                J_loc[:, :, j * kk + k] = (xi(*plus) - xi(*minus)) / (2 * H_CTRL)
         # t_cam_w = R_ic^T (-R_i_w p - t_ic): linear in the position control points, rotation untouched.
         for j in range(4):
-            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = -R * w0[:, j, None, None]
+            J_loc[:, 3:, j * kk + 3 : j * kk + 6] = -R * w0[:, j, None, None]
         J_own = np.zeros((P, 6, CAMERA_STATES))
         for a in range(3):
             dv = np.zeros(3)
@@ -392,7 +406,7 @@ class _Problem:
 
     def imu(self, s: _State, jacobians: bool):
         """Residuals (S, 6) [gyro, accel] observed - predicted; J_local (S, 6, 24), J_shared (S, 6, width)."""
-        loc = local_controls(s.ctrl, self.imu_seg)
+        loc = local_controls(s.ctrl, self.imu_seg)[:, :, :6]
         w0, w1, w2 = self.imu_w
         g_w = self.gravity(s.R_g)
         gy, ac = model.imu_predict(loc, w0, w1, w2, self.R_ref, g_w)
@@ -400,30 +414,23 @@ class _Problem:
         T = intrinsics.measurement_map(s.imu_x)
         raw = np.concatenate([gy, ac], axis=1)
         pred = raw @ T.T
-        tau = self.tau[:, None]
-        r = np.concatenate(
-            [
-                self.gyro - pred[:, :3] - s.b_g - s.b_g_dot * tau,
-                self.accel - pred[:, 3:] - s.b_a - s.b_a_dot * tau,
-            ],
-            axis=1,
-        )
+        r = np.concatenate([self.gyro, self.accel], axis=1) - pred - self.bias(s)
         if not jacobians:
             return r
-        S = r.shape[0]
-        J_loc = np.zeros((S, 6, 24))
+        S, kk = r.shape[0], self.k
+        J_loc = np.zeros((S, 6, 4 * kk))
         for j in range(4):
             for c in range(3):
                 d = np.zeros((4, 6))
                 d[j, c] = H_CTRL
                 gp, ap = model.imu_predict(loc + d, w0, w1, w2, self.R_ref, g_w)
                 gm, am = model.imu_predict(loc - d, w0, w1, w2, self.R_ref, g_w)
-                J_loc[:, :3, j * 6 + c] = (gp - gm) / (2 * H_CTRL)
-                J_loc[:, 3:, j * 6 + c] = (ap - am) / (2 * H_CTRL)
+                J_loc[:, :3, j * kk + c] = (gp - gm) / (2 * H_CTRL)
+                J_loc[:, 3:, j * kk + c] = (ap - am) / (2 * H_CTRL)
         # accel = R_i_w (p'' - g): linear in the position control points.
         R_i_w = np.transpose(self.R_ref @ model.exp_so3(model.spline_value(loc[:, :, :3], w0)), (0, 2, 1))
         for j in range(4):
-            J_loc[:, 3:, j * 6 + 3 : j * 6 + 6] = R_i_w * w2[:, j, None, None]
+            J_loc[:, 3:, j * kk + 3 : j * kk + 6] = R_i_w * w2[:, j, None, None]
         J_sh = np.zeros((S, 6, self.width))
         for a in range(2):
             dv = np.zeros(3)
@@ -439,11 +446,22 @@ class _Problem:
             J_loc = np.einsum("ij,sjk->sik", T, J_loc)
             J_sh[:, :, 8:10] = np.einsum("ij,sjk->sik", T, J_sh[:, :, 8:10])
             J_sh[:, :, INTRINSICS] = np.einsum("kij,sj->sik", intrinsics.map_jacobians(s.imu_x), raw)
+        if self.opt.bias_walk:  # the biases' controls enter after the IMU model, linearly
+            for j in range(4):
+                J_loc[:, :, j * kk + 6 : j * kk + 12] = np.eye(6) * w0[:, j, None, None]
         J_sh[:, :3, 10:13] = np.eye(3)
         J_sh[:, 3:, 13:16] = np.eye(3)
         J_sh[:, :3, 16:19] = np.eye(3) * self.tau[:, None, None]
         J_sh[:, 3:, 19:22] = np.eye(3) * self.tau[:, None, None]
         return r, J_loc, J_sh
+
+    def bias(self, s: _State) -> np.ndarray:
+        """(S, 6) [gyro, accel] bias at every IMU sample: the walks' splines (``bias_walk``), or the
+        constants plus their linear drift."""
+        if self.opt.bias_walk:
+            return model.spline_value(local_controls(s.ctrl, self.imu_seg)[:, :, 6:], self.imu_w[0])
+        tau = self.tau[:, None]
+        return np.concatenate([s.b_g + s.b_g_dot * tau, s.b_a + s.b_a_dot * tau], axis=1)
 
     def imu_weights(self) -> np.ndarray:
         return np.r_[np.full(3, 1 / self.sigma_gyro), np.full(3, 1 / self.sigma_accel)]
@@ -474,21 +492,20 @@ class _Problem:
         band_c, cross_c, gl_c = scatter_band(
             n, seg_c, JlT_info @ Jl_c, JlT_info @ Js_c, np.einsum("pia,pi->pa", Jl_c, grad)
         )
-        JlT_i = np.transpose(Jl_i, (0, 2, 1))
-        band_i, cross_i, gl_i = scatter_band(
-            n,
-            self.imu_seg,
-            JlT_i @ Jl_i,
-            JlT_i @ Js_i,
-            np.einsum("sra,sr->sa", Jl_i, r_iw),
-        )
+        # One Gram matrix per segment over [local | shared | residual] columns: the IMU's blocks of the
+        # band, the cross terms, both gradients and its share of A at once.
+        q = Jl_i.shape[2]
+        seg_i, G = segment_gram(self.imu_seg, np.concatenate([Jl_i, Js_i, r_iw[:, :, None]], axis=2))
+        band_i, cross_i, gl_i = scatter_band(n, seg_i, G[:, :q, :q], G[:, :q, q:-1], G[:, :q, -1])
         band = band_c + band_i
         floor = BAND_FLOOR * max(float(np.max(np.diagonal(band[:, 0], axis1=1, axis2=2))), 1.0)
-        band[:, 0] += floor * np.eye(6)
+        band[:, 0] += floor * np.eye(self.k)
         cross = cross_c + cross_i
         g_l = gl_c + gl_i
-        A = np.einsum("pia,pij,pjb->ab", Js_c, info, Js_c) + np.einsum("sra,srb->ab", Js_i, Js_i)
-        g_s = np.einsum("pia,pi->a", Js_c, grad) + np.einsum("sra,sr->a", Js_i, r_iw)
+        if self.opt.bias_walk:
+            cost += self._walk_prior(s.ctrl[:, 6:], band, g_l)
+        A = np.einsum("pia,pij,pjb->ab", Js_c, info, Js_c) + G[:, q:-1, q:-1].sum(axis=0)
+        g_s = np.einsum("pia,pi->a", Js_c, grad) + G[:, q:-1, -1].sum(axis=0)
         chol = BandedCholesky(band)
         X = chol.solve(np.concatenate([cross, g_l[:, :, None]], axis=2))
         X_B, X_g = X[:, :, :-1], X[:, :, -1]
@@ -501,6 +518,19 @@ class _Problem:
             cost += float(np.sum(self.prior_info * x**2))
         s.cache = {"X_B": X_B, "X_g": X_g, "A": A}
         return DenseSystem(cost, 0.5 * (S + S.T), g)
+
+    def _walk_prior(self, bias: np.ndarray, band: np.ndarray, g_l: np.ndarray) -> float:
+        """The biases as random walks: consecutive controls differ by the walk's increment over one knot
+        spacing, N(0, random_walk^2 dt) per axis (Kalibr's bias motion term), added into the band and
+        the spline's gradient in place; returns its cost."""
+        step = np.diff(bias, axis=0)  # (n - 1, 6)
+        W = np.diag(self.walk_info)
+        band[:-1, 0, 6:, 6:] += W
+        band[1:, 0, 6:, 6:] += W
+        band[:-1, 1, 6:, 6:] -= W
+        g_l[:-1, 6:] += self.walk_info * step
+        g_l[1:, 6:] -= self.walk_info * step
+        return float(np.sum(self.walk_info * step**2))
 
     def retract(self, s: _State, delta: np.ndarray) -> _State:
         full = np.zeros(self.width)
@@ -604,6 +634,9 @@ def _initial_state(
     )
     band[:, 0] += 1e-9 * np.eye(6)
     ctrl = BandedCholesky(band).solve(g[:, :, None])[:, :, 0]
+    if problem.k == 12:  # bias_walk: every bias control at the plain start's constant
+        biases = np.r_[plain.gyro_bias_rad_s, plain.accel_bias_m_s2]
+        ctrl = np.concatenate([ctrl, np.tile(biases, (knots.n, 1))], axis=1)
     gravity = plain.gravity_w_m_s2 / np.linalg.norm(plain.gravity_w_m_s2)
     # R_g maps [0, 0, -1] onto the measured gravity direction.
     axis = np.cross([0.0, 0.0, -1.0], gravity)
@@ -682,6 +715,8 @@ def solve_imu_cameras(
         NumericalError: the residuals are not finite at the start.
     """
     cpu0 = time.process_time()
+    if options.bias_walk and options.bias_drift:
+        raise ValueError("bias_walk and bias_drift: choose one model of the biases' change")
     if options.imu_model not in intrinsics.IMU_MODELS:
         raise ValueError(f"imu_model: one of {', '.join(intrinsics.IMU_MODELS)}, not {options.imu_model!r}")
     if not cameras:
@@ -720,10 +755,15 @@ def solve_imu_cameras(
     r_i = problem.imu(state, False)
     f_g = max(1.0, float(np.sqrt(np.mean(r_i[:, :3] ** 2))) / problem.sigma_gyro)
     f_a = max(1.0, float(np.sqrt(np.mean(r_i[:, 3:] ** 2))) / problem.sigma_accel)
+    if options.fix_imu_sigma:
+        f_g = f_a = 1.0
     problem.sigma_gyro *= f_g
     problem.sigma_accel *= f_a
     state, system, more, converged = problem.solve(state, options.max_iterations)
     iterations += more
+    bias = problem.bias(state)
+    if options.bias_walk:  # each walk's mean over the recording is the bias reported
+        state.b_g, state.b_a = bias[:, :3].mean(axis=0), bias[:, 3:].mean(axis=0)
     cov = _safe_inverse(system.H)
     A = state.cache["A"]
     at_imu = [k for k, i in enumerate(problem.active) if INTRINSICS.start <= i < INTRINSICS.stop]
@@ -821,6 +861,8 @@ def solve_imu_cameras(
                     "imu_t_s": problem.t_imu + t_ref,
                     "gyro_rad_s": r_i[:, :3],
                     "accel_m_s2": r_i[:, 3:],
+                    "gyro_bias_rad_s": bias[:, :3],
+                    "accel_bias_m_s2": bias[:, 3:],
                 },
                 imu_intrinsics=imu_intrinsics,
             )

@@ -90,6 +90,7 @@ class ImuRequest:
     imu_topic: str | None = None  # a ROS bag's sensor_msgs/Imu topic
     more: tuple[tuple[str, str], ...] = ()  # further (camera folder, serial) solved jointly with the first
     imu_model: str = "calibrated"  # core.imu.intrinsics.IMU_MODELS: Kalibr's IMU models
+    bias_walk: bool = False  # the biases as random walks (core.imu.solve.SolveOptions.bias_walk)
 
 
 @dataclass
@@ -242,6 +243,7 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
         estimate_line_delay=req.line_delay,
         folds=req.folds,
         imu_model=req.imu_model,
+        bias_walk=req.bias_walk,
     )
     try:
         cals = calibrate_cameras(
@@ -499,6 +501,7 @@ def result_json(outcome: ImuOutcome) -> dict[str, Any]:
             "T_cam_imu": [[round(float(v), 9) for v in row] for row in s.T_cam_imu],
             "timeshift_cam_imu_s": round(float(s.timeshift_cam_imu_s), 9),
             "imu_model": outcome.request.imu_model,
+            "bias_walk": outcome.request.bias_walk,
         }
         model = imu_model_of(s)
         if model is not None:

@@ -8,7 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from calibctl.core.imu import gates
 from calibctl.core.imu.calibrate import calibrate_cameras
+from calibctl.core.imu.plain import board_track
 from calibctl.core.imu.samples import ImuInputError
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_camera, solve_imu_cameras
 from calibctl.core.synth.imu import (
@@ -115,3 +117,28 @@ def test_a_rig_pose_the_corners_contradict_fails_the_rig_pose_gate(stereo: ImuCa
     assert gate.hint is not None and "re-solve the rig" in gate.hint
     # The held camera's corners moved the first camera's extrinsic: its verdict fails with them.
     assert not bad[0].passed and "rig_pose_camera_1" in {g.gate for g in bad[0].failed}
+
+
+def test_the_rig_pose_gate_judges_the_held_solution_that_is_reported(
+    stereo: ImuCameraRecording, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Motion that cannot pin td, as the td-sigma gate would say it: every free solve fails it, so the
+    # cameras are solved again with td held (here 2 ms off the truth, so the two solves' corners differ).
+    free_gate = gates.td_sigma
+
+    def unpinned(sigma_td_ms: float, held: bool):
+        return free_gate(sigma_td_ms if held else 10.0, held)
+
+    monkeypatch.setattr(gates, "td_sigma", unpinned)
+    imu, frames, noise = as_inputs(stereo)
+    cameras = [frames, more_frames(stereo, 0)]
+    rig = [None, EUROC_LIKE_T_CAM0_CAM1]
+    free = solve_imu_cameras(imu, cameras, noise, OPTIONS, rig=rig)
+    cal = calibrate_cameras(imu, cameras, noise, OPTIONS, fallback_td_s=stereo.truth.td_s + 2e-3, rig=rig)
+    assert cal[1].held == "td" and cal[1].solution is not None
+    pnp = gates.pnp_rms_px(cameras[1], board_track(cameras[1]))
+    (gate,) = [g for g in cal[1].gates if g.gate == "rig_pose"]
+    assert gate.value == pytest.approx(cal[1].solution.corner_rms_px / pnp)
+    assert abs(gate.value - free[1].corner_rms_px / pnp) > 0.01
+    (copy,) = [g for g in cal[0].gates if g.gate == "rig_pose_camera_1"]
+    assert copy.value == gate.value

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calibctl.core.imu.spline import BandedCholesky, Knots, scatter_band
+from calibctl.core.imu.spline import BandedCholesky, Knots, scatter_band, segment_gram
 
 
 def test_weights_partition_unity_and_differentiate() -> None:
@@ -41,3 +41,14 @@ def test_banded_cholesky_solves_like_a_dense_solve() -> None:
     x = BandedCholesky(band).solve(np.concatenate([cross, g[:, :, None]], axis=2))
     assert np.allclose(x[:, :, -1].ravel(), np.linalg.solve(A, G), atol=1e-10)
     assert np.allclose(x[:, :, :-1].reshape(n * k, p), np.linalg.solve(A, B), atol=1e-10)
+
+
+def test_segment_gram_sums_each_runs_products() -> None:
+    rng = np.random.default_rng(3)
+    segment = np.array([0, 0, 0, 2, 5, 5, 6, 6, 6, 6])  # runs of uneven length, segments skipped
+    J = rng.standard_normal((segment.size, 6, 5))
+    runs, G = segment_gram(segment, J)
+    assert np.array_equal(runs, [0, 2, 5, 6])
+    for run, block in zip(runs, G, strict=True):
+        mine = J[segment == run]
+        assert np.allclose(block, sum(j.T @ j for j in mine))
