@@ -17,7 +17,7 @@ from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
-from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources
 from tests.workflows.urdf_check import loadable_urdf
 
 RUNNER = CliRunner()
@@ -48,9 +48,7 @@ def _add_rig(db):
 
 def _capture(db, rig2, *extra, cam1=None, command=("rig", "capture", "R1")):
     """Capture rig R1 from the rendered CAM0 folder and the CAM1 folder (`cam1`, else the rendered one)."""
-    cam1 = rig2 / "CAM1" if cam1 is None else cam1
-    sources = ("--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={cam1}")
-    return invoke(db, *command, "--board", "A17", *sources, *extra)
+    return invoke(db, *command, "--board", "A17", *rig_sources(rig2, cam1), *extra)
 
 
 def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
