@@ -156,19 +156,13 @@ def fisheye(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return fisheye_gauge_folders(tmp_path_factory)
 
 
+def _fisheye(db: str, command: str, session: Path, *extra: str):
+    return _run(db, command, "FE-0007", "A17", session, *extra)
+
+
 def test_calibrate_model_fisheye_gauges_a_fisheye_board_through_the_fisheye_lens(db: str, fisheye) -> None:
     session, fixture = fisheye
-    done = _run(
-        db,
-        "calibrate",
-        "FE-0007",
-        "A17",
-        session,
-        "--model",
-        "fisheye",
-        *_gauge(fixture, FISHEYE_GAUGE),
-        "--json",
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "fisheye", *_gauge(fixture, FISHEYE_GAUGE), "--json")
     assert done.exit_code == 0, done.output
     out = json.loads(done.stdout)
     distance = out["capture"]["distance"]
@@ -186,17 +180,7 @@ def test_calibrate_model_auto_gauges_through_the_model_auto_chooses(
     walk = model_select._select_model
     monkeypatch.setattr(model_select, "_select_model", lambda *a: ladders.append(a) or walk(*a))
     session, fixture = fisheye
-    done = _run(
-        db,
-        "calibrate",
-        "FE-0007",
-        "A17",
-        session,
-        "--model",
-        "auto",
-        *_gauge(fixture, FISHEYE_GAUGE),
-        "--json",
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "auto", *_gauge(fixture, FISHEYE_GAUGE), "--json")
     assert done.exit_code in (0, 1), done.output  # 1: lint's verdict on the chosen model, not the gauge's
     out = json.loads(done.stdout)
     distance = out["capture"]["distance"]
@@ -204,27 +188,25 @@ def test_calibrate_model_auto_gauges_through_the_model_auto_chooses(
     assert out["calibration"] is not None  # solved: the gauge did not stop it
     lens = out["capture"]["gauge_lens"]
     assert lens != "k1k2" and lens == out["calibration"]["model"]["name"] and len(ladders) == 1
-    capture_only = _run(
-        db, "capture", "FE-0007", "A17", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "auto"
-    )
+    capture_only = _fisheye(db, "capture", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "auto")
     assert capture_only.exit_code == 0, capture_only.output
     assert f"gauged through {lens}, the model --model auto chooses for this session" in capture_only.stdout
 
 
 def test_capture_model_sets_the_gauge_lens_and_without_it_k1k2_fails_a_fisheye(db: str, fisheye) -> None:
     session, fixture = fisheye
-    args = ("capture", "FE-0007", "A17", session, *_gauge(fixture, FISHEYE_GAUGE))
-    plain = _run(db, *args)  # a plain capture gauges with k1k2, the wrong lens for this camera
+    args = ("capture", session, *_gauge(fixture, FISHEYE_GAUGE))
+    plain = _fisheye(db, *args)  # a plain capture gauges with k1k2, the wrong lens for this camera
     assert plain.exit_code == 1, plain.output
     assert "FAIL" in plain.stdout
-    done = _run(db, *args, "--model", "fisheye")
+    done = _fisheye(db, *args, "--model", "fisheye")
     assert done.exit_code == 0, done.output
     assert "vs surveyed 0.1500 m" in done.stdout and " pass" in done.stdout
 
 
 def test_capture_model_without_a_reference_distance_exits_2(db: str, fisheye) -> None:
     session, _ = fisheye
-    done = _run(db, "capture", "FE-0007", "A17", session, "--model", "fisheye")
+    done = _fisheye(db, "capture", session, "--model", "fisheye")
     assert done.exit_code == 2
     assert (
         "--model on capture is the lens of the distance gauge; it needs --reference-distance" in done.stderr
@@ -234,7 +216,7 @@ def test_capture_model_without_a_reference_distance_exits_2(db: str, fisheye) ->
 
 def test_capture_with_an_unknown_gauge_model_exits_2(db: str, fisheye) -> None:
     session, fixture = fisheye
-    done = _run(db, "capture", "FE-0007", "A17", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "fish")
+    done = _fisheye(db, "capture", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "fish")
     assert done.exit_code == 2
     assert "unknown distortion model 'fish'" in done.stderr and "fisheye" in done.stderr
 
@@ -249,9 +231,7 @@ def test_a_session_the_gauge_model_cannot_solve_exits_2_without_a_traceback_or_a
 
     monkeypatch.setattr(distance_gauge, "solve_intrinsics", no_solution)
     session, fixture = fisheye
-    done = _run(
-        db, "calibrate", "FE-0007", "A17", session, "--model", "fisheye", *_gauge(fixture, FISHEYE_GAUGE)
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "fisheye", *_gauge(fixture, FISHEYE_GAUGE))
     assert done.exit_code == 2, done.output
     assert (
         "the distance gauge cannot judge this session: its 10 views do not solve with the fisheye lens "
