@@ -264,6 +264,7 @@ def main() -> None:
             db = work / "run.db"
             url = f"sqlite:///{db}"
             cli = [py, "-m", "calibctl", "--db", url]
+            one = ["--serial", "B-1", "--board", "BENCH", "--source", str(folder)]  # one camera's photos
             e2e = {
                 "plain script (detect + calibrateCameraExtended)": [
                     py,
@@ -279,39 +280,12 @@ def main() -> None:
                     str(cores),
                     "solve",
                 ],
-                "calibctl capture --jobs 1": [
-                    *cli,
-                    "capture",
-                    "--serial",
-                    "B-1",
-                    "--board",
-                    "BENCH",
-                    "--source",
-                    str(folder),
-                    "--jobs",
-                    "1",
-                    "--json",
-                ],
-                "calibctl capture (default jobs)": [
-                    *cli,
-                    "capture",
-                    "--serial",
-                    "B-1",
-                    "--board",
-                    "BENCH",
-                    "--source",
-                    str(folder),
-                    "--json",
-                ],
+                "calibctl capture --jobs 1": [*cli, "capture", *one, "--jobs", "1", "--json"],
+                "calibctl capture (default jobs)": [*cli, "capture", *one, "--json"],
                 "calibctl calibrate --jobs 1": [
                     *cli,
                     "calibrate",
-                    "--serial",
-                    "B-1",
-                    "--board",
-                    "BENCH",
-                    "--source",
-                    str(folder),
+                    *one,
                     "--jobs",
                     "1",
                     "--model",
@@ -321,12 +295,7 @@ def main() -> None:
                 "calibctl calibrate (default jobs)": [
                     *cli,
                     "calibrate",
-                    "--serial",
-                    "B-1",
-                    "--board",
-                    "BENCH",
-                    "--source",
-                    str(folder),
+                    *one,
                     "--model",
                     args.model,
                     "--json",

@@ -95,21 +95,9 @@ def main() -> None:
         for i, (name, station_env) in enumerate(stations.items()):  # one unit each fills the bytecode caches
             shutil.copyfile(templates[name], work / f"warm{i}.db")
             subprocess.run(
-                [
-                    py,
-                    "-m",
-                    "calibctl",
-                    "--db",
-                    f"sqlite:///{work / f'warm{i}.db'}",
-                    "station",
-                    "--board",
-                    "BENCH",
-                    "--source-template",
-                    f"{work / 'shots'}/{{serial}}",
-                    "--json",
-                    "--spool",
-                    str(work / f"warm{i}-spool.sqlite"),
-                ],  # a spool per store
+                station_argv(
+                    py, work / f"warm{i}.db", work / f"warm{i}-spool.sqlite", work / "shots"
+                ),  # a spool per store
                 input=serials[0] + "\n",
                 capture_output=True,
                 text=True,
@@ -129,21 +117,7 @@ def main() -> None:
             shutil.copyfile(templates[name], store)
             walls[name] = time.perf_counter()
             procs[name] = subprocess.Popen(
-                [
-                    py,
-                    "-m",
-                    "calibctl",
-                    "--db",
-                    f"sqlite:///{store}",
-                    "station",
-                    "--board",
-                    "BENCH",
-                    "--source-template",
-                    f"{work / 'shots'}/{{serial}}",
-                    "--json",
-                    "--spool",
-                    str(work / f"{len(procs)}-spool.sqlite"),
-                ],
+                station_argv(py, store, work / f"{len(procs)}-spool.sqlite", work / "shots"),
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
@@ -217,6 +191,12 @@ def main() -> None:
         )
 
 
+def station_argv(py: str, store: Path, spool: Path, shots: Path) -> list[str]:
+    """`calibctl station` on one store with a spool of its own, each serial's photos in SHOTS/SERIAL."""
+    station = ["station", "--board", "BENCH", "--source-template", f"{shots}/{{serial}}", "--json"]
+    return [py, "-m", "calibctl", "--db", f"sqlite:///{store}", *station, "--spool", str(spool)]
+
+
 def tree_cpu_s(root: int) -> float:
     """User + sys CPU seconds of ``root`` and every process below it (the fork server, the detection workers),
     with the children they reaped."""
@@ -279,19 +259,7 @@ def watch(args: argparse.Namespace) -> None:
         )
         env = run_env(work / "pycache")
         command = [
-            py,
-            "-m",
-            "calibctl",
-            "--db",
-            f"sqlite:///{work / 'station.db'}",
-            "station",
-            "--board",
-            "BENCH",
-            "--source-template",
-            f"{work / 'shots'}/{{serial}}",
-            "--json",
-            "--spool",
-            str(work / "spool.sqlite"),
+            *station_argv(py, work / "station.db", work / "spool.sqlite", work / "shots"),
             "--watch",
             "--views",
             str(len(views)),

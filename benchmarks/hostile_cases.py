@@ -734,6 +734,7 @@ def _admin() -> list[Case]:
 
 def _store() -> list[Case]:
     g = "db/keys/fleet/station"
+    station = ["station", "--board", BOARD, "--source-template", "{w}/{serial}"]
     cases = [
         Case(g, "db verify --since garbage", ["db", "verify", "--since", "HEAD"]),
         Case(g, "--db is a folder", ["--db", "sqlite:///{w}", "history", SERIAL]),
@@ -822,69 +823,38 @@ def _store() -> list[Case]:
         Case(
             g,
             "station --serials missing file",
-            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--serials", "{w}/no.txt"],
+            [*station, "--serials", "{w}/no.txt"],
         ),
         Case(
             g,
             "station --serials a FIFO",
-            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--serials", "{w}/t"],
+            [*station, "--serials", "{w}/t"],
             setup=fifo("t"),
         ),
         Case(
             g,
             "station --watch --views 0",
-            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--watch", "--views", "0"],
+            [*station, "--watch", "--views", "0"],
         ),
         Case(
             g,
             "station --views without --watch",
-            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--views", "5"],
+            [*station, "--views", "5"],
         ),
         Case(
             g,
             "station --watch --settle-s -1",
-            [
-                "station",
-                "--board",
-                BOARD,
-                "--source-template",
-                "{w}/{serial}",
-                "--watch",
-                "--views",
-                "5",
-                "--settle-s",
-                "-1",
-            ],
+            [*station, "--watch", "--views", "5", "--settle-s", "-1"],
         ),
         Case(
             g,
             "station --watch --unit-timeout-s nan",
-            [
-                "station",
-                "--board",
-                BOARD,
-                "--source-template",
-                "{w}/{serial}",
-                "--watch",
-                "--views",
-                "5",
-                "--unit-timeout-s",
-                "nan",
-            ],
+            [*station, "--watch", "--views", "5", "--unit-timeout-s", "nan"],
         ),
         Case(
             g,
             "station --watch --done-file ../x",
-            [
-                "station",
-                "--board",
-                BOARD,
-                "--source-template",
-                "{w}/{serial}",
-                "--watch",
-                "--done-file",
-                "../x",
-            ],
+            [*station, "--watch", "--done-file", "../x"],
         ),
         Case(g, "station --camera a folder", ["station", "--board", BOARD, "--camera", "{w}"]),
         Case(g, "station --camera empty", ["station", "--board", BOARD, "--camera", ""]),
@@ -912,7 +882,7 @@ def _store() -> list[Case]:
         Case(
             g,
             "station --max-views without --camera",
-            ["station", "--board", BOARD, "--source-template", "{w}/{serial}", "--max-views", "5"],
+            [*station, "--max-views", "5"],
         ),
         Case(
             g,

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import TrustedKeysOption
 from calibctl.errors import EXIT_VERDICT_FAIL
 
 # render and report (rich) are imported by the commands that print with them: `export` prints the exported
@@ -164,14 +165,7 @@ def import_(
     require_signature: Annotated[
         bool, typer.Option("--require-signature", help="Refuse a file not signed by a trusted key (exit 2).")
     ] = False,
-    trusted_keys: Annotated[
-        Path | None,
-        typer.Option(
-            "--trusted-keys",
-            metavar="DIR",
-            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
-        ),
-    ] = None,
+    trusted_keys: TrustedKeysOption = None,
     json_output: JsonFlag = False,
 ) -> None:
     """Bring an exported artifact into this store: its hash and signature are checked (tampered files exit 1),

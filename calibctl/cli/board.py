@@ -10,8 +10,8 @@ import typer
 from rich.table import Table
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import pair_mm
 from calibctl.cli.render import emit_json, plain, shown, stderr, stdout
-from calibctl.errors import UsageError
 
 if TYPE_CHECKING:
     from calibctl.artifacts.board import BoardRevision
@@ -96,15 +96,7 @@ def print_board(board: BoardRevision, revisions: list[int] | None = None) -> Non
 
 
 def _pair_mm(text: str | None, option: str) -> tuple[float, float] | None:
-    if text is None:
-        return None
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise UsageError(
-            f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850"
-        ) from None
-    return a, b
+    return None if text is None else pair_mm(text, option)
 
 
 @board_app.command("add")

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import TrustedKeysOption
 from calibctl.cli.render import emit_json, say, stderr
 from calibctl.errors import EXIT_VERDICT_FAIL
 
@@ -75,14 +75,7 @@ def verify(
             help="Check only what was written after this chain head (after proving the head unchanged).",
         ),
     ] = None,
-    trusted_keys: Annotated[
-        Path | None,
-        typer.Option(
-            "--trusted-keys",
-            metavar="DIR",
-            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
-        ),
-    ] = None,
+    trusted_keys: TrustedKeysOption = None,
     require_signature: Annotated[
         bool, typer.Option("--require-signature", help="An unsigned record is a finding.")
     ] = False,

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import pair_mm
 from calibctl.cli.render import emit_json, say
 from calibctl.errors import UsageError
 
@@ -20,14 +21,9 @@ lidar_app = typer.Typer(
 JsonFlag = Annotated[bool, typer.Option("--json", help="Machine-readable JSON on stdout.")]
 
 
-def _pair_mm(text: str, option: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise UsageError(
-            f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850"
-        ) from None
-    return a / 1e3, b / 1e3
+def _pair_m(text: str, option: str) -> tuple[float, float]:
+    a_mm, b_mm = pair_mm(text, option)
+    return a_mm / 1e3, b_mm / 1e3
 
 
 def _num(value: float | None, spec: str = ".1f") -> str:
@@ -214,8 +210,8 @@ def solve(
             cols,
             rows,
             square_mm / 1e3,
-            _pair_mm(backing_mm, "--backing-mm"),
-            _pair_mm(pattern_offset_mm, "--pattern-offset-mm"),
+            _pair_m(backing_mm, "--backing-mm"),
+            _pair_m(pattern_offset_mm, "--pattern-offset-mm"),
         )
     req = wf.LidarRequest(
         images,

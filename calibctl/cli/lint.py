@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from calibctl.cli.context import state, wants_json
+from calibctl.cli.options import TrustedKeysOption
 from calibctl.cli.plain_text import emit_json, finding_lines, plain, terminal_paint
 from calibctl.errors import EXIT_VERDICT_FAIL, UsageError
 
@@ -55,14 +56,7 @@ def lint(
     require_signature: Annotated[
         bool, typer.Option("--require-signature", help="Anything not signed by a trusted key is an error.")
     ] = False,
-    trusted_keys: Annotated[
-        Path | None,
-        typer.Option(
-            "--trusted-keys",
-            metavar="DIR",
-            help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
-        ),
-    ] = None,
+    trusted_keys: TrustedKeysOption = None,
 ) -> None:
     """Check calibrations the way CI should: principal point, sigma(fx), held-out outer ring, provenance,
     hash."""

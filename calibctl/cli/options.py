@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from calibctl.errors import UsageError
+
 StationOption = Annotated[str | None, typer.Option("--station", help="Station id (env CALIBCTL_STATION).")]
 OperatorOption = Annotated[
     str | None, typer.Option("--operator", help="Who captures (env CALIBCTL_OPERATOR).")
@@ -49,6 +51,14 @@ OverrideGaugeOption = Annotated[
         "failed gauge stays a lint warning.",
     ),
 ]
+TrustedKeysOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--trusted-keys",
+        metavar="DIR",
+        help="Folder of trusted public keys (*.pem); default: the trusted_keys setting.",
+    ),
+]
 RigTimestampsOption = Annotated[
     Path | None,
     typer.Option(
@@ -67,3 +77,15 @@ RigTimeToleranceOption = Annotated[
         "(default 5).",
     ),
 ]
+
+
+def pair_mm(text: str, option: str) -> tuple[float, float]:
+    """The two millimetre numbers of an ``A,B`` option (--backing-mm, --pattern-offset-mm), or a usage error
+    naming the option."""
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise UsageError(
+            f"{option} {text!r} is not two numbers A,B in millimetres", f"e.g. {option} 610,850"
+        ) from None
+    return a, b

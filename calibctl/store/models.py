@@ -182,13 +182,10 @@ class ArtifactRow(ChainColumns, Base):
     )
 
 
-class EventRow(ChainColumns, Base):
-    """One append-only move of a serial's active version."""
+class ActivationColumns:
+    """One move of an active version (activate or rollback): who, where, when and why. A serial's and a
+    rig's activation events share them; only the subject column and its foreign key differ."""
 
-    __tablename__ = "activation_events"
-
-    id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
     version: Mapped[int] = mapped_column(Integer)
     previous_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
     kind: Mapped[str] = mapped_column(String(16))
@@ -196,6 +193,15 @@ class EventRow(ChainColumns, Base):
     station: Mapped[str] = mapped_column(Text)
     at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
     reason: Mapped[str] = mapped_column(Text)
+
+
+class EventRow(ActivationColumns, ChainColumns, Base):
+    """One append-only move of a serial's active version."""
+
+    __tablename__ = "activation_events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(SERIAL_LEN))
 
     __table_args__ = (
         ForeignKeyConstraint(
@@ -284,20 +290,13 @@ class RigCalibrationRow(ChainColumns, Base):
     )
 
 
-class RigEventRow(ChainColumns, Base):
+class RigEventRow(ActivationColumns, ChainColumns, Base):
     """One append-only move of a rig's active version (revision 0003; one chain for the store since 0007)."""
 
     __tablename__ = "rig_activation_events"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     rig: Mapped[str] = mapped_column(String(SERIAL_LEN))
-    version: Mapped[int] = mapped_column(Integer)
-    previous_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
-    kind: Mapped[str] = mapped_column(String(16))
-    actor: Mapped[str] = mapped_column(Text)
-    station: Mapped[str] = mapped_column(Text)
-    at: Mapped[dt.datetime] = mapped_column(UtcDateTime)
-    reason: Mapped[str] = mapped_column(Text)
 
     __table_args__ = (
         ForeignKeyConstraint(["rig", "version"], ["rig_calibrations.rig", "rig_calibrations.version"]),

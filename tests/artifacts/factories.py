@@ -38,6 +38,13 @@ def measured_board(name: str = "A17", revision: int = 1, square_mm: float = 25.0
     )
 
 
+def measured_board_args(name: str) -> list[str]:
+    """`board add NAME` of a measured 9x6 chessboard with 25 mm squares, as command-line arguments."""
+    grid = ["--kind", "chessboard", "--cols", "9", "--rows", "6", "--square-mm", "25"]
+    measured = ["--uncertainty-mm", "0.02", "--instrument", "calipers", "--measured-by", "qa"]
+    return ["board", "add", name, *grid, *measured, "--measured-on", "2026-03-11"]
+
+
 def nominal_board(name: str = "N1", square_mm: float = 23.0) -> BoardRevision:
     return BoardRevision(
         name=name,

@@ -23,6 +23,12 @@ def rendered_rig(factory: pytest.TempPathFactory) -> Path:
     return _CACHE["rig2"]
 
 
+def rig_sources(rig: Path, cam1: Path | None = None) -> list[str]:
+    """The ``--source CAM0=DIR --source CAM1=DIR`` options of a rendered rig (CAM1's folder ``cam1`` where
+    given)."""
+    return ["--source", f"CAM0={rig / 'CAM0'}", "--source", f"CAM1={rig / 'CAM1' if cam1 is None else cam1}"]
+
+
 def true_baseline_mm(out: Path) -> float:
     truth = json.loads((out / "rig_truth.json").read_text())
     return float(np.linalg.norm(np.array(truth["cameras"][1]["T_root_cam"])[:3, 3]) * 1e3)

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from calibctl.core.intrinsics.covariance import IntrinsicCovariance, schur_covariance
+from calibctl.core.intrinsics.covariance import schur_covariance
 from calibctl.core.intrinsics.fisheye_model import (
     fisheye_pose,
     focal_guess_px,
@@ -40,6 +40,7 @@ from calibctl.core.intrinsics.solution import (
     check_output,
     readonly,
     single_threaded_opencv,
+    too_few_dof_covariance,
 )
 from calibctl.core.lm import Damping, SchurSystem, solve_lm
 from calibctl.errors import InputError, NumericalError
@@ -162,16 +163,7 @@ def solve_fisheye(
         ) from exc
     n_res, n_par = 2 * n_corners, model.n_free_intrinsic_params + 6 * len(objs)
     if n_res - n_par < MIN_SIGMA_DOF:
-        cov = IntrinsicCovariance(
-            (),
-            None,
-            float("nan"),
-            float("nan"),
-            (
-                f"only {n_res - n_par} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
-                f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"
-            ),
-        )
+        cov = too_few_dof_covariance(n_res, n_par)
     else:
         cov = schur_covariance(((Ji, Jp, FISHEYE_NAMES) for Ji, Jp, _ in blocks), residuals, n_res - n_par)
     sigma: dict[str, float] = {}

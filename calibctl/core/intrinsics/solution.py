@@ -294,6 +294,21 @@ def residual_rms_px(residuals: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))))
 
 
+def too_few_dof_covariance(n_residuals: int, n_parameters: int) -> IntrinsicCovariance:
+    """The covariance refused for a fit with under MIN_SIGMA_DOF degrees of freedom."""
+    dof = n_residuals - n_parameters
+    return IntrinsicCovariance(
+        (),
+        None,
+        float("nan"),
+        float("nan"),
+        (
+            f"only {dof} degrees of freedom ({n_residuals} residuals - {n_parameters} parameters); at least "
+            f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"
+        ),
+    )
+
+
 def parameter_count(model: DistortionModel, n_views: int) -> int:
     """Free parameters of a solve: intrinsics + distortion + 6 pose parameters per view."""
     return model.n_free_intrinsic_params + 6 * n_views

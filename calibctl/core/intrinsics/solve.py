@@ -90,6 +90,7 @@ from calibctl.core.intrinsics.solution import (
     readonly,
     residual_rms_px,
     single_threaded_opencv,
+    too_few_dof_covariance,
 )
 from calibctl.errors import InputError, NumericalError
 
@@ -324,16 +325,7 @@ def _solve(
             aspect_ratio=aspect,
         )
     if dof < MIN_SIGMA_DOF:
-        cov = IntrinsicCovariance(
-            (),
-            None,
-            float("nan"),
-            float("nan"),
-            (
-                f"only {dof} degrees of freedom ({n_res} residuals - {n_par} parameters); at least "
-                f"{MIN_SIGMA_DOF} are needed for the residual variance to mean anything"
-            ),
-        )
+        cov = too_few_dof_covariance(n_res, n_par)
     else:
         cov = intrinsic_covariance(
             [o.astype(np.float64) for o in objs],

@@ -28,6 +28,19 @@ def fleet_event(**fields: Any) -> FleetEvent:
         ) from None
 
 
+def new_fleet_event(kind: str, settings: Settings, reason: str, **fields: Any) -> FleetEvent:
+    """A fleet event by the settings' operator at its station, now."""
+    return fleet_event(
+        kind=kind, actor=settings.operator, station=settings.station, at=utc_now(), reason=reason, **fields
+    )
+
+
+def _record(settings: Settings, event: FleetEvent) -> FleetEvent:
+    with records.open_store(settings, write=True) as store:
+        store.add_fleet_event(event)
+    return event
+
+
 def check_reason(reason: str) -> None:
     if not reason.strip():
         raise UsageError("a fleet change needs a reason", "pass --reason 'why'")
@@ -37,19 +50,9 @@ def check_reason(reason: str) -> None:
 def add_robot(settings: Settings, robot: str, serials: list[str], rigs: list[str], reason: str) -> FleetEvent:
     """Register ``robot`` carrying ``serials`` and ``rigs`` (AlreadyExistsError when it is registered)."""
     check_reason(reason)
-    event = fleet_event(
-        kind="register",
-        robot=robot,
-        serials=serials,
-        rigs=rigs,
-        actor=settings.operator,
-        station=settings.station,
-        at=utc_now(),
-        reason=reason,
+    return _record(
+        settings, new_fleet_event("register", settings, reason, robot=robot, serials=serials, rigs=rigs)
     )
-    with records.open_store(settings, write=True) as store:
-        store.add_fleet_event(event)
-    return event
 
 
 def assign(settings: Settings, robot: str, ref: str, reason: str, *, rig: bool = False) -> FleetEvent:
@@ -59,19 +62,10 @@ def assign(settings: Settings, robot: str, ref: str, reason: str, *, rig: bool =
     name, version = records.parse_artifact_ref(ref)
     if version is None:
         raise UsageError(f"'{ref}' names no version", f"assign an explicit version, e.g. {name}@3")
-    event = fleet_event(
-        kind="assign",
-        robot=robot,
-        **({"rig": name} if rig else {"serial": name}),
-        version=version,
-        actor=settings.operator,
-        station=settings.station,
-        at=utc_now(),
-        reason=reason,
+    subject = {"rig": name} if rig else {"serial": name}
+    return _record(
+        settings, new_fleet_event("assign", settings, reason, robot=robot, **subject, version=version)
     )
-    with records.open_store(settings, write=True) as store:
-        store.add_fleet_event(event)
-    return event
 
 
 @dataclass

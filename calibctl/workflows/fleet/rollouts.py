@@ -18,16 +18,15 @@ No gate input yet for a canary target: exit 2, nothing promoted; a failing one: 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from calibctl.artifacts.common import utc_now
 from calibctl.artifacts.fleet import FleetEvent
 from calibctl.config import Settings
 from calibctl.errors import NotFoundError, UsageError, VerdictFailed
 from calibctl.store.fleet import RigActivationStep
 from calibctl.store.fleet_ledger import Fleet, Rollout, Target, label, ref
 from calibctl.workflows.fleet.gate import read_gate, target_diffs
-from calibctl.workflows.fleet.robots import FleetStatus, check_reason, fleet_event, robot_states
+from calibctl.workflows.fleet.robots import FleetStatus, check_reason, new_fleet_event, robot_states
 from calibctl.workflows.store_admin import records
 
 if TYPE_CHECKING:
@@ -62,14 +61,8 @@ def _append(
         store.append_fleet_events(events, after, rig_steps)
 
 
-def _new(kind: str, settings: Settings, reason: str, **fields: Any) -> FleetEvent:
-    return fleet_event(
-        kind=kind, actor=settings.operator, station=settings.station, at=utc_now(), reason=reason, **fields
-    )
-
-
 def _assign(settings: Settings, reason: str, robot: str, t: Target, version: int, name: str) -> FleetEvent:
-    return _new(
+    return new_fleet_event(
         "assign",
         settings,
         reason,
@@ -129,7 +122,7 @@ def start(
                 f"promote or roll back {r.name} first",
             )
     diffs = target_diffs(settings, fleet, name, wanted)
-    head = _new(
+    head = new_fleet_event(
         "rollout",
         settings,
         reason,
@@ -188,7 +181,7 @@ def promote(settings: Settings, name: str, reason: str) -> Rollout:
         for (kind, rig), v in sorted(targets.items())
         if kind == "rig" and rig_active.get(rig) != v
     ]
-    event = _new(
+    event = new_fleet_event(
         "promote",
         settings,
         reason,
@@ -222,7 +215,8 @@ def rollback(settings: Settings, name: str, reason: str) -> Rollout:
         for rig, old in sorted(restore.items())
         if rig_active.get(rig) != old
     ]  # put back by hand already: nothing to restore
-    _append(settings, [*assigns, _new("rollback", settings, reason, rollout=name)], fleet.length, rig_steps)
+    closing = new_fleet_event("rollback", settings, reason, rollout=name)
+    _append(settings, [*assigns, closing], fleet.length, rig_steps)
     return _read(settings, name)[0].rollouts[name]
 
 

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from calibctl.files import read_text
+from tests.artifacts.factories import measured_board_args
 
 runner = CliRunner()
 
@@ -50,27 +51,7 @@ def test_read_text_refuses_a_fifo_and_still_reads_a_regular_file(tmp_path: Path)
     assert read_text(tmp_path / "r.txt") == "ok\n" and read_text(tmp_path / "r.txt", max_bytes=10) == "ok\n"
 
 
-BOARD_ADD = [
-    "board",
-    "add",
-    "B2",
-    "--kind",
-    "chessboard",
-    "--cols",
-    "9",
-    "--rows",
-    "6",
-    "--square-mm",
-    "25",
-    "--uncertainty-mm",
-    "0.02",
-    "--instrument",
-    "calipers",
-    "--measured-by",
-    "qa",
-    "--measured-on",
-    "2026-03-11",
-]
+BOARD_ADD = measured_board_args("B2")
 
 
 @pytest.mark.parametrize(

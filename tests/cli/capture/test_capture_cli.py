@@ -63,8 +63,17 @@ def invoke(db: str, *args: str):
     return RUNNER.invoke(app, ["--db", db, *args], terminal_width=110)
 
 
-def capture(db: str, source: Path | str, *extra: str, board: str = "A17"):
-    return invoke(db, "capture", "--serial", SERIAL, "--board", board, "--source", str(source), *extra)
+def capture(
+    db: str,
+    source: Path | str,
+    *extra: str,
+    board: str = "A17",
+    command: str = "capture",
+    station: Path | None = None,
+):
+    """`capture` (or `calibrate`) of SERIAL from this source, under this station file where one is given."""
+    config = ("--station-config", str(station)) if station is not None else ()
+    return invoke(db, *config, command, "--serial", SERIAL, "--board", board, "--source", str(source), *extra)
 
 
 def sessions(db: str) -> list:
@@ -120,7 +129,7 @@ def test_udacity_calibrate_is_refused_at_capture_naming_the_board_that_is_not_fl
     # a paper board that is not flat (DATASET.md: mrcal's warp): the views scatter 4x more than their corners
     # explain, the reported sigma is over the gate's limit, and solved with the board bowed the views agree;
     # the lever is the board, not more tilted views or a richer lens model, and the hint has to say so
-    result = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(UDACITY), "--json")
+    result = capture(db, UDACITY, "--json", command="calibrate")
     assert result.exit_code == 1, result.output
     out = json.loads(result.stdout)
     assert out["calibration"] is None  # refused at capture: nothing solved
@@ -226,24 +235,13 @@ def test_video_scenario_selects_frames_automatically(db: str, tmp_path_factory) 
 def test_station_file_override_is_used(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("gates: {observability_min: 1.0e-3}\n", encoding="utf-8")
-    result = invoke(
-        db,
-        "--station-config",
-        str(station),
-        "capture",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-    )
+    result = capture(db, good, station=station)
     assert result.exit_code == 1, result.output
     assert "gate observability FAIL" in result.stdout and "(needs 0.001)" in result.stdout
 
 
 def test_calibrate_good_scenario_recovers_fx_within_3_sigma(db: str, good: Path) -> None:
-    result = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--json")
+    result = capture(db, good, "--json", command="calibrate")
     assert result.exit_code == 0, result.output
     doc = json.loads(result.stdout)
     art = doc["calibration"]
@@ -257,16 +255,7 @@ def test_calibrate_good_scenario_recovers_fx_within_3_sigma(db: str, good: Path)
 
 
 def test_calibrate_does_not_solve_a_rejected_capture(db: str, tmp_path_factory) -> None:
-    result = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(rendered(tmp_path_factory, "flat")),
-    )
+    result = capture(db, rendered(tmp_path_factory, "flat"), command="calibrate")
     assert result.exit_code == 1, result.output
     assert "not solved" in result.stdout
     with Store.open(db) as store:
@@ -274,9 +263,7 @@ def test_calibrate_does_not_solve_a_rejected_capture(db: str, tmp_path_factory) 
 
 
 def test_calibrate_unknown_model_exits_2_before_capturing(db: str, good: Path) -> None:
-    result = invoke(
-        db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--model", "k9"
-    )
+    result = capture(db, good, "--model", "k9", command="calibrate")
     assert result.exit_code == 2 and "unknown model 'k9'" in result.stderr
     assert sessions(db) == []
 
@@ -287,19 +274,7 @@ def test_calibrate_unknown_model_exits_2_before_capturing(db: str, good: Path) -
 def test_prune_deletes_expired_images_only(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("image_retention_days: 5\n", encoding="utf-8")
-    done = invoke(
-        db,
-        "--station-config",
-        str(station),
-        "calibrate",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-        "--json",
-    )
+    done = capture(db, good, "--json", command="calibrate", station=station)
     assert done.exit_code == 0, done.output
     session_id = json.loads(done.stdout)["capture"]["session"]["session_id"]
     with Store.open(db) as store:
@@ -473,18 +448,7 @@ def test_bad_arguments_exit_2(db: str, good: Path, args: list[str], message: str
 def test_impossible_station_threshold_exits_2(db: str, good: Path, tmp_path: Path) -> None:
     station = tmp_path / "station.yaml"
     station.write_text("gates: {tilt_directions_min: 9}\n", encoding="utf-8")
-    result = invoke(
-        db,
-        "--station-config",
-        str(station),
-        "capture",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-    )
+    result = capture(db, good, station=station)
     assert result.exit_code == 2 and "gates.tilt_directions_min" in result.stderr
 
 
@@ -642,22 +606,7 @@ def test_ctrl_c_during_a_folder_capture_exits_130_and_stores_nothing(
 
 
 def test_capture_with_jobs_stores_the_same_session_as_one_job(db: str, good: Path) -> None:
-    runs = [
-        invoke(
-            db,
-            "capture",
-            "--serial",
-            SERIAL,
-            "--board",
-            "A17",
-            "--source",
-            str(good),
-            "--jobs",
-            jobs,
-            "--json",
-        )
-        for jobs in ("1", "2")
-    ]
+    runs = [capture(db, good, "--jobs", jobs, "--json") for jobs in ("1", "2")]
     assert [r.exit_code for r in runs] == [0, 0], [r.output for r in runs]
     first, second = (json.loads(r.stdout)["session"] for r in runs)
     assert [o for o in first["outcomes"] if o not in second["outcomes"]] == []
@@ -665,10 +614,10 @@ def test_capture_with_jobs_stores_the_same_session_as_one_job(db: str, good: Pat
 
 
 def test_jobs_below_one_and_a_bad_calibctl_jobs_exit_2_naming_them(db: str, good: Path, monkeypatch) -> None:
-    zero = invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--jobs", "0")
+    zero = capture(db, good, "--jobs", "0")
     assert zero.exit_code == 2 and "--jobs" in zero.output
     monkeypatch.setenv("CALIBCTL_JOBS", "many")
-    bad = invoke(db, "calibrate", "--serial", SERIAL, "--board", "A17", "--source", str(good))
+    bad = capture(db, good, command="calibrate")
     assert bad.exit_code == 2
     assert "CALIBCTL_JOBS must be a whole number of 1 or more, got 'many'" in bad.output
     with Store.open(db) as store:

@@ -18,14 +18,22 @@ from tests.workflows.synth_folders import FISHEYE_FIXTURE_M, fisheye_gauge_folde
 GAUGE = ("--reference-distance", "0.450+-0.0005")
 
 
+def _run(db: str, command: str, serial: str, board: str, source: Path, *extra: str):
+    """`capture` or `calibrate` of one camera's folder against a registered board."""
+    return invoke(db, command, "--serial", serial, "--board", board, "--source", str(source), *extra)
+
+
+def _gauge(fixture: Path, distance: tuple[str, str] = GAUGE) -> tuple[str, ...]:
+    """The distance gauge's options: the surveyed distance and the folder of fixture pictures."""
+    return (*distance, "--reference-source", str(fixture))
+
+
 def _capture(db: str, assets, board: str, *extra: str):
-    return invoke(
-        db, "capture", "--serial", "CAM-NEW", "--board", board, "--source", str(assets["good"]), *extra
-    )
+    return _run(db, "capture", "CAM-NEW", board, assets["good"], *extra)
 
 
 def test_a_board_registered_at_23mm_passes_the_gates_and_fails_the_gauge(db: str, assets) -> None:
-    done = _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"]))
+    done = _capture(db, assets, "TYPO", *_gauge(assets["fixture"]))
     assert done.exit_code == 1, done.output
     assert "ratio 0.920" in done.stdout and "FAIL" in done.stdout
     assert "the metric scale is wrong (board square size?); the residual cannot show it" in done.stdout
@@ -40,7 +48,7 @@ def test_a_board_registered_at_23mm_passes_the_gates_and_fails_the_gauge(db: str
 
 def test_a_session_whose_gauge_failed_solves_only_into_a_rejected_calibration(db: str, assets) -> None:
     """Chapter 0: `solve --serial` of the 23 mm session used to store an accepted, ACTIVE calibration."""
-    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    assert _capture(db, assets, "TYPO", *_gauge(assets["fixture"])).exit_code == 1
     done = invoke(db, "solve", "--serial", "CAM-NEW", "--json")
     assert done.exit_code == 1, done.output
     art = json.loads(done.stdout)
@@ -53,7 +61,7 @@ def test_a_session_whose_gauge_failed_solves_only_into_a_rejected_calibration(db
 
 
 def test_an_override_with_a_reason_is_recorded_and_lint_keeps_a_warning(db: str, assets) -> None:
-    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    assert _capture(db, assets, "TYPO", *_gauge(assets["fixture"])).exit_code == 1
     reason = "fixture bracket bent; surveyed distance invalid until re-survey"
     done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", reason, "--json")
     assert done.exit_code == 0, done.output
@@ -68,7 +76,7 @@ def test_an_override_with_a_reason_is_recorded_and_lint_keeps_a_warning(db: str,
 
 @pytest.mark.parametrize("reason", ["", "   "])
 def test_an_override_without_a_reason_exits_2_and_stores_nothing(db: str, assets, reason: str) -> None:
-    assert _capture(db, assets, "TYPO", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 1
+    assert _capture(db, assets, "TYPO", *_gauge(assets["fixture"])).exit_code == 1
     done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", reason)
     assert done.exit_code == 2, done.output
     assert "--override-gauge needs a reason" in done.stderr
@@ -77,27 +85,16 @@ def test_an_override_without_a_reason_exits_2_and_stores_nothing(db: str, assets
 
 
 def test_an_override_of_a_gauge_that_passed_or_was_never_taken_exits_2(db: str, assets) -> None:
-    assert _capture(db, assets, "A17", *GAUGE, "--reference-source", str(assets["fixture"])).exit_code == 0
+    assert _capture(db, assets, "A17", *_gauge(assets["fixture"])).exit_code == 0
     done = invoke(db, "solve", "--serial", "CAM-NEW", "--override-gauge", "just because")
     assert done.exit_code == 2 and "passed its metric gauge" in done.stderr
     assert "has no failed one; there is nothing to override" in done.stderr
-    plain = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        "CAM-NEW",
-        "--board",
-        "A17",
-        "--source",
-        str(assets["good"]),
-        "--override-gauge",
-        "just because",
-    )
+    plain = _run(db, "calibrate", "CAM-NEW", "A17", assets["good"], "--override-gauge", "just because")
     assert plain.exit_code == 2 and "none is asked for" in plain.stderr
 
 
 def test_the_right_board_passes_the_gauge_and_says_so_in_json(db: str, assets) -> None:
-    done = _capture(db, assets, "A17", *GAUGE, "--reference-source", str(assets["fixture"]), "--json")
+    done = _capture(db, assets, "A17", *_gauge(assets["fixture"]), "--json")
     assert done.exit_code == 0, done.output
     out = json.loads(done.stdout)
     assert out["passed"] and out["distance"]["passed"]
@@ -121,19 +118,7 @@ def test_fixture_pictures_of_another_size_exit_2_naming_both(db: str, assets) ->
 
 
 def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) -> None:
-    done = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        "CAM-NEW",
-        "--board",
-        "TYPO",
-        "--source",
-        str(assets["good"]),
-        *GAUGE,
-        "--reference-source",
-        str(assets["fixture"]),
-    )
+    done = _run(db, "calibrate", "CAM-NEW", "TYPO", assets["good"], *_gauge(assets["fixture"]))
     assert done.exit_code == 1, done.output
     assert "ratio 0.920" in done.stdout and "not solved: the distance gauge failed" in done.stdout
     # no calibration was stored
@@ -145,18 +130,13 @@ def test_calibrate_does_not_solve_a_session_whose_gauge_failed(db: str, assets) 
 
 
 def test_calibrate_with_an_override_solves_and_records_it(db: str, assets) -> None:
-    done = invoke(
+    done = _run(
         db,
         "calibrate",
-        "--serial",
         "CAM-NEW",
-        "--board",
         "TYPO",
-        "--source",
-        str(assets["good"]),
-        *GAUGE,
-        "--reference-source",
-        str(assets["fixture"]),
+        assets["good"],
+        *_gauge(assets["fixture"]),
         "--override-gauge",
         "gauge under repair",
         "--json",
@@ -176,24 +156,13 @@ def fisheye(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return fisheye_gauge_folders(tmp_path_factory)
 
 
+def _fisheye(db: str, command: str, session: Path, *extra: str):
+    return _run(db, command, "FE-0007", "A17", session, *extra)
+
+
 def test_calibrate_model_fisheye_gauges_a_fisheye_board_through_the_fisheye_lens(db: str, fisheye) -> None:
     session, fixture = fisheye
-    done = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        "--model",
-        "fisheye",
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-        "--json",
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "fisheye", *_gauge(fixture, FISHEYE_GAUGE), "--json")
     assert done.exit_code == 0, done.output
     out = json.loads(done.stdout)
     distance = out["capture"]["distance"]
@@ -211,22 +180,7 @@ def test_calibrate_model_auto_gauges_through_the_model_auto_chooses(
     walk = model_select._select_model
     monkeypatch.setattr(model_select, "_select_model", lambda *a: ladders.append(a) or walk(*a))
     session, fixture = fisheye
-    done = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        "--model",
-        "auto",
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-        "--json",
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "auto", *_gauge(fixture, FISHEYE_GAUGE), "--json")
     assert done.exit_code in (0, 1), done.output  # 1: lint's verdict on the chosen model, not the gauge's
     out = json.loads(done.stdout)
     distance = out["capture"]["distance"]
@@ -234,52 +188,25 @@ def test_calibrate_model_auto_gauges_through_the_model_auto_chooses(
     assert out["calibration"] is not None  # solved: the gauge did not stop it
     lens = out["capture"]["gauge_lens"]
     assert lens != "k1k2" and lens == out["calibration"]["model"]["name"] and len(ladders) == 1
-    capture_only = invoke(
-        db,
-        "capture",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-        "--model",
-        "auto",
-    )
+    capture_only = _fisheye(db, "capture", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "auto")
     assert capture_only.exit_code == 0, capture_only.output
     assert f"gauged through {lens}, the model --model auto chooses for this session" in capture_only.stdout
 
 
 def test_capture_model_sets_the_gauge_lens_and_without_it_k1k2_fails_a_fisheye(db: str, fisheye) -> None:
     session, fixture = fisheye
-    args = (
-        "capture",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-    )
-    plain = invoke(db, *args)  # a plain capture gauges with k1k2, the wrong lens for this camera
+    args = ("capture", session, *_gauge(fixture, FISHEYE_GAUGE))
+    plain = _fisheye(db, *args)  # a plain capture gauges with k1k2, the wrong lens for this camera
     assert plain.exit_code == 1, plain.output
     assert "FAIL" in plain.stdout
-    done = invoke(db, *args, "--model", "fisheye")
+    done = _fisheye(db, *args, "--model", "fisheye")
     assert done.exit_code == 0, done.output
     assert "vs surveyed 0.1500 m" in done.stdout and " pass" in done.stdout
 
 
 def test_capture_model_without_a_reference_distance_exits_2(db: str, fisheye) -> None:
     session, _ = fisheye
-    done = invoke(
-        db, "capture", "--serial", "FE-0007", "--board", "A17", "--source", str(session), "--model", "fisheye"
-    )
+    done = _fisheye(db, "capture", session, "--model", "fisheye")
     assert done.exit_code == 2
     assert (
         "--model on capture is the lens of the distance gauge; it needs --reference-distance" in done.stderr
@@ -289,21 +216,7 @@ def test_capture_model_without_a_reference_distance_exits_2(db: str, fisheye) ->
 
 def test_capture_with_an_unknown_gauge_model_exits_2(db: str, fisheye) -> None:
     session, fixture = fisheye
-    done = invoke(
-        db,
-        "capture",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-        "--model",
-        "fish",
-    )
+    done = _fisheye(db, "capture", session, *_gauge(fixture, FISHEYE_GAUGE), "--model", "fish")
     assert done.exit_code == 2
     assert "unknown distortion model 'fish'" in done.stderr and "fisheye" in done.stderr
 
@@ -318,21 +231,7 @@ def test_a_session_the_gauge_model_cannot_solve_exits_2_without_a_traceback_or_a
 
     monkeypatch.setattr(distance_gauge, "solve_intrinsics", no_solution)
     session, fixture = fisheye
-    done = invoke(
-        db,
-        "calibrate",
-        "--serial",
-        "FE-0007",
-        "--board",
-        "A17",
-        "--source",
-        str(session),
-        "--model",
-        "fisheye",
-        *FISHEYE_GAUGE,
-        "--reference-source",
-        str(fixture),
-    )
+    done = _fisheye(db, "calibrate", session, "--model", "fisheye", *_gauge(fixture, FISHEYE_GAUGE))
     assert done.exit_code == 2, done.output
     assert (
         "the distance gauge cannot judge this session: its 10 views do not solve with the fisheye lens "

@@ -10,7 +10,13 @@ import pytest
 
 from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
-from tests.cli.capture.test_capture_cli import SERIAL, db, good, invoke  # noqa: F401 - shared store, folder
+from tests.cli.capture.test_capture_cli import (  # noqa: F401 - the shared store and folder
+    SERIAL,
+    capture,
+    db,
+    good,
+    invoke,
+)
 from tests.datasets import DATASETS, needs_datasets
 
 ACFR_IMAGES = DATASETS / "acfr-lidar-camera" / "images"
@@ -23,7 +29,7 @@ def _station(tmp_path: Path, gates: str) -> Path:
 
 
 def test_a_good_session_carries_the_projection_gate_and_says_where_it_judged(db: str, good: Path) -> None:
-    r = invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good), "--json")
+    r = capture(db, good, "--json")
     assert r.exit_code == 0, r.output
     gate = next(g for g in json.loads(r.stdout)["session"]["gates"] if g["gate"] == "projection")
     assert gate["passed"] and 0 < gate["value"] <= gate["threshold"] == 5.0
@@ -32,18 +38,7 @@ def test_a_good_session_carries_the_projection_gate_and_says_where_it_judged(db:
 
 def test_a_strict_station_threshold_refuses_naming_where(db: str, good: Path, tmp_path: Path) -> None:
     station = _station(tmp_path, "projection_sigma_max_px: 0.05")
-    r = invoke(
-        db,
-        "--station-config",
-        str(station),
-        "capture",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-    )
+    r = capture(db, good, station=station)
     assert r.exit_code == 1, r.output
     assert "gate projection    FAIL" in r.stdout and "(at most 0.05)" in r.stdout
     assert "capture views with the board in the" in r.stdout and "projection.uncertain" in r.stdout
@@ -64,18 +59,7 @@ def test_a_threshold_of_zero_or_nan_is_exit_2(
     gates: str,
     words: str,
 ) -> None:
-    r = invoke(
-        db,
-        "--station-config",
-        str(_station(tmp_path, gates)),
-        "capture",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-    )
+    r = capture(db, good, station=_station(tmp_path, gates))
     assert r.exit_code == 2, r.output
     assert "projection_sigma_max_px" in r.stderr and words in r.stderr
 
@@ -95,18 +79,7 @@ def test_a_region_outside_the_image_is_exit_2_and_stores_no_session(
     region: str,
     words: str,
 ) -> None:
-    r = invoke(
-        db,
-        "--station-config",
-        str(_station(tmp_path, f"projection_region: {region}")),
-        "capture",
-        "--serial",
-        SERIAL,
-        "--board",
-        "A17",
-        "--source",
-        str(good),
-    )
+    r = capture(db, good, station=_station(tmp_path, f"projection_region: {region}"))
     assert r.exit_code == 2, r.output
     assert "gates.projection_region" in r.stderr and words in r.stderr
     with Store.open(db) as store:
@@ -174,7 +147,7 @@ def test_the_solve_records_the_station_region_and_lint_judges_fold_over_there(
     good: Path,
     tmp_path: Path,
 ) -> None:
-    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    assert capture(db, good).exit_code == 0
     station = _station(tmp_path, "projection_region: '100,50,540,430'")
     r = invoke(db, "--station-config", str(station), "solve", "--serial", SERIAL, "--json")
     assert r.exit_code == 0, r.output
@@ -185,7 +158,7 @@ def test_the_solve_records_the_station_region_and_lint_judges_fold_over_there(
 
 
 def test_the_default_region_records_none(db: str, good: Path) -> None:
-    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    assert capture(db, good).exit_code == 0
     assert invoke(db, "solve", "--serial", SERIAL).exit_code == 0
     with Store.open(db) as store:
         art = store.list_artifacts(SERIAL)[-1]
@@ -207,7 +180,7 @@ def test_a_bad_station_region_at_the_solve_is_exit_2_and_stores_nothing(
     region: str,
     words: str,
 ) -> None:
-    assert invoke(db, "capture", "--serial", SERIAL, "--board", "A17", "--source", str(good)).exit_code == 0
+    assert capture(db, good).exit_code == 0
     station = _station(tmp_path, f"projection_region: {region}")
     r = invoke(db, "--station-config", str(station), "solve", "--serial", SERIAL)
     assert r.exit_code == 2, r.output

@@ -17,19 +17,10 @@ from calibctl.errors import NumericalError
 from calibctl.workflows.lidar import lidar_solve as wf
 from tests.datasets import ACFR, require_acfr
 
-BOARD = [
-    "--cols",
-    "5",
-    "--rows",
-    "7",
-    "--square-mm",
-    "95",
-    "--backing-mm",
-    "610,850",
-    "--pattern-offset-mm",
-    "2,0",
-]
+GRID = ["--cols", "5", "--rows", "7", "--square-mm", "95"]
+BOARD = [*GRID, "--backing-mm", "610,850", "--pattern-offset-mm", "2,0"]
 BOX = ["--box", "1,-2.2,-0.8,3.6,1.6,0.6"]
+EMPTY_BOX = ["--box", "-5,-5,-1,-4,-4,1"]  # holds no board: every scan is no_plane
 
 
 def invoke(args: list[str]):
@@ -47,88 +38,44 @@ def acfr_subset(tmp_path: Path, poses: tuple[int, ...] = (1, 3, 5)) -> tuple[Pat
     return img, pcd
 
 
+def solve_args(images: Path, scans: Path, *rest: str) -> list[str]:
+    """`lidar solve` on these image and scan folders, then the rest of its options."""
+    return ["lidar", "solve", "--images", str(images), "--scans", str(scans), *rest]
+
+
 def camera(tmp_path: Path) -> list[str]:
     require_acfr()
     return ["--camera-info", str(ACFR / "camera_info.yaml")]
 
 
 def test_a_malformed_box_is_exit_2(tmp_path: Path) -> None:
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(tmp_path),
-            "--scans",
-            str(tmp_path),
-            "--box",
-            "1,2,3",
-            "--camera-info",
-            "x.yaml",
-            *BOARD,
-        ]
-    )
+    res = invoke(solve_args(tmp_path, tmp_path, "--box", "1,2,3", "--camera-info", "x.yaml", *BOARD))
     assert res.exit_code == 2 and "--box '1,2,3' is not xmin" in res.output
 
 
 def test_the_camera_is_given_exactly_once(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
-    res = invoke(["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *BOARD])
+    res = invoke(solve_args(img, pcd, *BOX, *BOARD))
     assert res.exit_code == 2 and "exactly one of --camera-info FILE or --serial" in res.output
 
 
 def test_a_camera_without_an_active_calibration_is_exit_2(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
-    res = invoke(
-        [
-            "--db",
-            f"sqlite:///{tmp_path / 'c.db'}",
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            "--serial",
-            "CAM-NONE",
-            *BOX,
-            *BOARD,
-        ]
-    )
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    res = invoke(["--db", url, *solve_args(img, pcd, "--serial", "CAM-NONE", *BOX, *BOARD)])
     assert res.exit_code == 2 and "Error:" in res.output and "Traceback" not in res.output
 
 
 def test_a_pattern_bigger_than_its_backing_board_is_exit_2(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            *BOX,
-            *camera(tmp_path),
-            "--cols",
-            "5",
-            "--rows",
-            "7",
-            "--square-mm",
-            "95",
-            "--backing-mm",
-            "400,850",
-        ]
-    )
+    res = invoke(solve_args(img, pcd, *BOX, *camera(tmp_path), *GRID, "--backing-mm", "400,850"))
     assert res.exit_code == 2 and "does not fit on a 400 x 850 mm backing board" in res.output
 
 
 def test_duplicate_frame_numbers_are_exit_2_naming_both(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
     (pcd / "pose1_copy.pcd").symlink_to(ACFR / "pcd" / "pose1_target.pcd")
-    res = invoke(
-        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
-    )
+    res = invoke(solve_args(img, pcd, *BOX, *camera(tmp_path), *BOARD))
     assert res.exit_code == 2 and "two scans with frame number 1" in res.output
 
 
@@ -137,30 +84,14 @@ def test_a_lying_pcd_header_is_exit_2_naming_the_file_and_field(tmp_path: Path) 
     text = (ACFR / "pcd" / "pose3_full.pcd").read_text().replace("POINTS 24262", "POINTS 24000")
     (pcd / "pose3.pcd").unlink()
     (pcd / "pose3.pcd").write_text(text)
-    res = invoke(
-        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
-    )
+    res = invoke(solve_args(img, pcd, *BOX, *camera(tmp_path), *BOARD))
     assert res.exit_code == 2 and "pose3.pcd" in res.output and "WIDTH x HEIGHT" in res.output
 
 
 def test_no_board_in_the_box_and_unpaired_files_are_outcomes_and_exit_1(tmp_path: Path) -> None:
     img, pcd = acfr_subset(tmp_path)
     (img / "pose99.png").symlink_to(ACFR / "images" / "pose7.png")
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            "--box",
-            "-5,-5,-1,-4,-4,1",
-            *camera(tmp_path),
-            *BOARD,
-            "--json",
-        ]
-    )
+    res = invoke(solve_args(img, pcd, *EMPTY_BOX, *camera(tmp_path), *BOARD, "--json"))
     assert res.exit_code == 1
     doc = json.loads(res.stdout)
     outcomes = {(r["scan"] or r["image"]): r["outcome"] for r in doc["outcomes"]}
@@ -180,19 +111,15 @@ def test_a_set_of_boards_facing_one_way_is_refused_with_the_direction(tmp_path: 
     assert invoke(["lidar", "synth", str(out), "--poses", "6", "--seed", "4", "--one-way"]).exit_code == 0
     truth = json.loads((out / "truth.json").read_text())
     res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(out / "images"),
-            "--scans",
-            str(out / "scans"),
+        solve_args(
+            out / "images",
+            out / "scans",
             "--box",
             truth["box"],
             "--camera-info",
             str(out / "camera_info.yaml"),
             *BOARD,
-        ]
+        )
     )
     assert res.exit_code == 1
     assert "gate lidar-observability FAIL" in res.output and "unobservable" in res.output
@@ -205,13 +132,9 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
     src/optimiser.cpp's RotationTranslation * camera point and include/.../optimiser.h Rotation::toMat."""
     require_acfr()
     res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(ACFR / "images"),
-            "--scans",
-            str(ACFR / "pcd"),
+        solve_args(
+            ACFR / "images",
+            ACFR / "pcd",
             "--scan-pattern",
             "*_full.pcd",
             *BOX,
@@ -222,7 +145,7 @@ def test_acfr_agrees_with_the_authors_and_its_halves_agree(tmp_path: Path) -> No
             str(tmp_path / "tf.yaml"),
             "--overlay",
             str(tmp_path / "overlay"),
-        ]
+        )
     )
     assert res.exit_code == 0, res.output
     doc = json.loads(res.stdout)
@@ -262,65 +185,23 @@ def stored(sqlite_url: str, monkeypatch):
 
 
 def test_a_board_registered_with_its_backing_is_the_solve_target(stored, tmp_path: Path) -> None:
-    added = stored(
-        "board",
-        "add",
-        "L5",
-        "--cols",
-        "5",
-        "--rows",
-        "7",
-        "--square-mm",
-        "95",
-        "--backing-mm",
-        "610,850",
-        "--pattern-offset-mm",
-        "2,0",
-    )
+    added = stored("board", "add", "L5", *BOARD)
     assert added.exit_code == 0, added.output
     shown = json.loads(stored("board", "show", "L5", "--json").stdout)
     assert shown["backing"] == {"width_m": 0.61, "height_m": 0.85, "pattern_offset_m": [0.002, 0.0]}
     assert "backing board 610" in stored("board", "show", "L5").output
     img, pcd = acfr_subset(tmp_path)
-    res = stored(
-        "lidar",
-        "solve",
-        "--images",
-        str(img),
-        "--scans",
-        str(pcd),
-        "--box",
-        "-5,-5,-1,-4,-4,1",
-        *camera(tmp_path),
-        "--board",
-        "L5",
-        "--json",
-    )
+    res = stored(*solve_args(img, pcd, *EMPTY_BOX, *camera(tmp_path), "--board", "L5", "--json"))
     assert res.exit_code == 1  # the target was read; the empty box is the verdict
     assert json.loads(res.stdout)["outcome_counts"] == {"no_plane": 3}
-    both = stored(
-        "lidar",
-        "solve",
-        "--images",
-        str(img),
-        "--scans",
-        str(pcd),
-        *BOX,
-        *camera(tmp_path),
-        "--board",
-        "L5",
-        "--cols",
-        "5",
-    )
+    both = stored(*solve_args(img, pcd, *BOX, *camera(tmp_path), "--board", "L5", "--cols", "5"))
     assert both.exit_code == 2 and "not both" in both.output
 
 
 def test_a_board_without_backing_dimensions_is_exit_2_naming_the_fix(stored, tmp_path: Path) -> None:
-    assert stored("board", "add", "A17", "--cols", "5", "--rows", "7", "--square-mm", "95").exit_code == 0
+    assert stored("board", "add", "A17", *GRID).exit_code == 0
     img, pcd = acfr_subset(tmp_path)
-    res = stored(
-        "lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), "--board", "A17"
-    )
+    res = stored(*solve_args(img, pcd, *BOX, *camera(tmp_path), "--board", "A17"))
     assert res.exit_code == 2
     assert "board A17@1 was registered without its backing board dimensions" in res.output
     assert "--backing-mm W,H" in res.output
@@ -335,7 +216,7 @@ def test_a_board_without_backing_dimensions_is_exit_2_naming_the_fix(stored, tmp
     ],
 )
 def test_bad_backing_options_of_board_add_are_exit_2(stored, args: list[str], message: str) -> None:
-    res = stored("board", "add", "B1", "--cols", "5", "--rows", "7", "--square-mm", "95", *args)
+    res = stored("board", "add", "B1", *GRID, *args)
     assert res.exit_code == 2 and message in res.output
 
 
@@ -356,47 +237,16 @@ def test_nan_points_are_counted_and_millimetre_scans_need_their_unit(tmp_path: P
     with_nan = np.vstack([pts, np.full((7, 3), np.nan)])
     (pcd / "pose1.pcd").unlink()
     (pcd / "pose1.pcd").write_bytes(_binary_pcd(with_nan))
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            "--box",
-            "-5,-5,-1,-4,-4,1",
-            *camera(tmp_path),
-            *BOARD,
-            "--json",
-        ]
-    )
+    res = invoke(solve_args(img, pcd, *EMPTY_BOX, *camera(tmp_path), *BOARD, "--json"))
     assert res.exit_code == 1
     rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
     assert rows["pose1.pcd"]["dropped_nonfinite"] == 7 and rows["pose3.pcd"]["dropped_nonfinite"] == 0
     (pcd / "pose3.pcd").unlink()
     np.savetxt(pcd / "pose3.txt", read_scan(ACFR / "pcd" / "pose3_full.pcd").points_m * 1000.0)
-    res = invoke(
-        ["lidar", "solve", "--images", str(img), "--scans", str(pcd), *BOX, *camera(tmp_path), *BOARD]
-    )
+    res = invoke(solve_args(img, pcd, *BOX, *camera(tmp_path), *BOARD))
     assert res.exit_code == 2 and "pose3.txt" in res.output and "millimetres" in res.output
     assert "--scan-units mm" in res.output
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            *BOX,
-            *camera(tmp_path),
-            *BOARD,
-            "--scan-units",
-            "mm",
-            "--json",
-        ]
-    )
+    res = invoke(solve_args(img, pcd, *BOX, *camera(tmp_path), *BOARD, "--scan-units", "mm", "--json"))
     rows = {r["scan"]: r for r in json.loads(res.stdout)["outcomes"]}
     assert rows["pose3.txt"]["outcome"] == "accepted" and res.exit_code == 1  # 2 poses: too few for a solve
 
@@ -406,22 +256,7 @@ def test_tf_static_is_written_only_for_an_accepted_transform(tmp_path: Path) -> 
 
     img, pcd = acfr_subset(tmp_path, (1, 3))
     target = tmp_path / "tf.yaml"
-    res = invoke(
-        [
-            "lidar",
-            "solve",
-            "--images",
-            str(img),
-            "--scans",
-            str(pcd),
-            "--box",
-            "-5,-5,-1,-4,-4,1",
-            *camera(tmp_path),
-            *BOARD,
-            "--tf-static",
-            str(target),
-        ]
-    )
+    res = invoke(solve_args(img, pcd, *EMPTY_BOX, *camera(tmp_path), *BOARD, "--tf-static", str(target)))
     assert res.exit_code == 1 and "not written" in res.output and not target.exists()
     accepted = {
         "status": "accepted",

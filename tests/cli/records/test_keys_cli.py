@@ -14,7 +14,7 @@ from calibctl.cli.main import app
 from calibctl.config import load_settings
 from calibctl.store.repository import Store
 from calibctl.workflows.store_admin.keys import signer_of
-from tests.artifacts.factories import calibration
+from tests.artifacts.factories import calibration, measured_board_args
 
 runner = CliRunner()
 WHO = {"actor": "qa", "station": "st1"}
@@ -76,25 +76,7 @@ def test_a_missing_or_loose_key_file_is_exit_2_and_nothing_is_written(sqlite_url
     missing = run(
         "--db",
         sqlite_url,
-        "board",
-        "add",
-        "A17",
-        "--kind",
-        "chessboard",
-        "--cols",
-        "9",
-        "--rows",
-        "6",
-        "--square-mm",
-        "25",
-        "--uncertainty-mm",
-        "0.02",
-        "--instrument",
-        "calipers",
-        "--measured-by",
-        "qa",
-        "--measured-on",
-        "2026-03-11",
+        *measured_board_args("A17"),
         env={"CALIBCTL_SIGNING_KEY": str(tmp_path / "nope.pem")},
     )
     assert missing.exit_code == 2 and "nope.pem does not exist" in missing.stderr

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from calibctl.cli.main import app
 from tests.datasets import BAKA_STEREO, LEFT_RIGHT, needs_datasets
-from tests.workflows.rig_folders_data import rendered_rig, split_pairs, true_baseline_mm
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources, split_pairs, true_baseline_mm
 
 RUNNER = CliRunner()
 
@@ -24,19 +24,8 @@ def rig2(tmp_path_factory):
     return rendered_rig(tmp_path_factory)
 
 
-def _sources(rig2: Path) -> list[str]:
-    return [
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-        "--cols",
-        "9",
-        "--rows",
-        "6",
-        "--square-mm",
-        "25",
-    ]
+def _sources(rig2: Path, cam1: Path | None = None) -> list[str]:
+    return [*rig_sources(rig2, cam1), "--cols", "9", "--rows", "6", "--square-mm", "25"]
 
 
 def test_solve_folders_reports_the_tree_and_writes_exports(rig2, tmp_path):
@@ -248,20 +237,7 @@ def test_synth_rig_refuses_five_cameras(tmp_path):
 
 
 def test_solve_folders_with_the_same_folder_twice_is_refused_before_detection(rig2):
-    result = invoke(
-        "rig",
-        "solve-folders",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM0'}",
-        "--cols",
-        "9",
-        "--rows",
-        "6",
-        "--square-mm",
-        "25",
-    )
+    result = invoke("rig", "solve-folders", *_sources(rig2, rig2 / "CAM0"))
     assert result.exit_code == 1, result.output
     text = " ".join(result.output.split())
     assert (

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from calibctl.cli.main import app
-from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def rig2(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def solve_folders(rig2: Path, cols: str, square_mm: str, *extra: str):
-    args = ["rig", "solve-folders", "--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}"]
+    args = ["rig", "solve-folders", *rig_sources(rig2)]
     args += ["--cols", cols, "--rows", "6", "--square-mm", square_mm, "--min-shared-views", "5", *extra]
     return CliRunner().invoke(app, args, terminal_width=200)
 

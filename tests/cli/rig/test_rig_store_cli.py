@@ -17,7 +17,7 @@ from calibctl.cli.main import app
 from calibctl.store.repository import Store
 from tests.artifacts.factories import measured_board
 from tests.workflows.rig.test_rig_store_flow import WHO, _truth_artifact
-from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources
 from tests.workflows.urdf_check import loadable_urdf
 
 RUNNER = CliRunner()
@@ -42,19 +42,13 @@ def invoke(db, *args):
     return RUNNER.invoke(app, ["--db", db, *args], terminal_width=110)
 
 
-def _capture(db, rig2):
-    return invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-    )
+def _add_rig(db):
+    return invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+
+
+def _capture(db, rig2, *extra, cam1=None, command=("rig", "capture", "R1")):
+    """Capture rig R1 from the rendered CAM0 folder and the CAM1 folder (`cam1`, else the rendered one)."""
+    return invoke(db, *command, "--board", "A17", *rig_sources(rig2, cam1), *extra)
 
 
 def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
@@ -99,7 +93,7 @@ def test_the_whole_rig_flow_on_the_command_line(db, rig2, tmp_path):
 
 
 def test_a_stale_member_fails_rig_lint_with_exit_1(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     _capture(db, rig2)
     invoke(db, "rig", "solve", "R1")
     with Store.open(db) as store:
@@ -113,31 +107,18 @@ def test_refusals_exit_2_with_a_message(db, rig2):
     assert r.exit_code == 2 and "unknown camera(s) NOPE" in r.output
     r = invoke(db, "rig", "solve", "R9")
     assert r.exit_code == 2 and "unknown rig 'R9'" in r.output
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     r = invoke(db, "rig", "export", "R1", "--format", "nope")
     assert r.exit_code == 2 and "unknown rig export format 'nope'" in r.output
     r = invoke(db, "rig", "export", "R1", "--format", "tf")
     assert r.exit_code == 2 and "rig R1 has no calibration yet" in r.output
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-        "--min-shared-views",
-        "9",
-    )
+    r = _capture(db, rig2, "--min-shared-views", "9")
     assert r.exit_code == 1 and "CAM0-CAM1 shares 8 view(s) (needs 9)" in r.output
     assert "Traceback" not in r.output
 
 
 def test_solve_and_lint_take_rig(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     _capture(db, rig2)
     r = invoke(db, "solve", "--rig", "R1")
     assert r.exit_code == 0 and "rig R1@1 (active)  accepted" in r.output
@@ -149,19 +130,8 @@ def test_solve_and_lint_take_rig(db, rig2):
 
 
 def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "capture",
-        "--rig",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, command=("capture", "--rig", "R1"))
     assert r.exit_code == 0, r.output
     assert "8 synchronised frames" in r.output
     r = invoke(db, "capture", "--board", "A17", "--source", str(rig2 / "CAM0"))
@@ -184,20 +154,8 @@ def test_capture_takes_rig_and_still_needs_a_serial_without_it(db, rig2):
 )
 def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
     """They used to be dropped silently: a rig capture gauged nothing and said nothing."""
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "capture",
-        "--rig",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-        *args,
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, *args, command=("capture", "--rig", "R1"))
     assert r.exit_code == 2, r.output
     text = " ".join(r.output.split())
     assert f"{named}, not to a rig (--rig)" in text and "capture that camera on its own with --serial" in text
@@ -215,7 +173,7 @@ def test_capture_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
 )
 def test_solve_rig_refuses_the_options_of_one_camera(db, rig2, args, named):
     """They used to be dropped silently: the rig solve uses the members' active calibrations."""
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     assert _capture(db, rig2).exit_code == 0
     r = invoke(db, "solve", "--rig", "R1", *args)
     assert r.exit_code == 2, r.output
@@ -233,23 +191,9 @@ def test_refine_intrinsics_without_rig_is_refused(db):
 
 
 def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "--json",
-        "capture",
-        "--rig",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-        "--station",
-        "line-7",
-        "--operator",
-        "ana",
+    _add_rig(db)
+    r = _capture(
+        db, rig2, "--station", "line-7", "--operator", "ana", command=("--json", "capture", "--rig", "R1")
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.output)
@@ -260,7 +204,7 @@ def test_capture_rig_records_the_station_and_operator_it_is_given(db, rig2):
 def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_path, monkeypatch):
     """It used to let cv2.FileStorage open the file itself: a folder it could not write was a cv2.error
     traceback."""
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     _capture(db, rig2)
     assert invoke(db, "rig", "solve", "R1").exit_code == 0
     r = invoke(db, "rig", "export", "R1", "--format", "opencv")  # stdout, as the other formats
@@ -280,7 +224,7 @@ def test_the_opencv_stereo_export_fails_like_every_other_write(db, rig2, tmp_pat
 
 
 def test_rig_export_and_rig_report_never_replace_a_fifo_or_a_symlink(db, rig2, tmp_path):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     _capture(db, rig2)
     assert invoke(db, "rig", "solve", "R1").exit_code == 0
     fifo, link, victim = tmp_path / "s.yaml", tmp_path / "r.html", tmp_path / "victim"
@@ -302,19 +246,8 @@ def test_a_rig_capture_whose_frames_contradict_each_other_is_a_verdict_and_store
     photos = sorted((rig2 / "CAM1").iterdir())
     for i, p in enumerate(photos):
         shutil.copy(p, right / f"CAM1_{(i + 3) % len(photos):04d}.png")
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={right}",
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, cam1=right)
     assert r.exit_code == 0, r.output  # each camera's photos are fine on their own
     r = invoke(db, "rig", "solve", "R1")
     assert r.exit_code == 1, r.output
@@ -339,19 +272,8 @@ def _stored(db) -> tuple[list, int, int]:
 
 def test_the_same_folder_for_two_members_is_refused_and_nothing_is_stored(db, rig2, tmp_path):
     """The operator's typo (the LEFT folder for both cameras), then a copy of it: exit 1 with the numbers."""
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM0'}",
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, cam1=rig2 / "CAM0")
     assert r.exit_code == 1, r.output
     text = " ".join(r.output.split())
     assert "the members are not distinct cameras: CAM0 and CAM1 hold 8 identical image(s)" in text, text
@@ -360,18 +282,7 @@ def test_the_same_folder_for_two_members_is_refused_and_nothing_is_stored(db, ri
     shutil.copytree(rig2 / "CAM0", copy)  # renamed files, same bytes
     for p in copy.iterdir():
         p.rename(copy / p.name.replace("CAM0", "CAM1"))
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={copy}",
-    )
+    r = _capture(db, rig2, cam1=copy)
     assert r.exit_code == 1 and "identical image(s)" in r.output
     assert _stored(db) == ([], 0, 0)
 
@@ -385,19 +296,8 @@ def test_a_re_encoded_copy_is_the_same_corners_and_is_refused(db, rig2, tmp_path
         cv2.imwrite(
             str(copy / p.name.replace("CAM0", "CAM1")), cv2.imread(str(p)), [cv2.IMWRITE_PNG_COMPRESSION, 1]
         )
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={copy}",
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, cam1=copy)
     assert r.exit_code == 1, r.output
     assert "see the board at the same pixels" in " ".join(r.output.split())
     assert _stored(db) == ([], 0, 0)
@@ -408,25 +308,14 @@ def test_a_rig_capture_that_cannot_run_stores_no_member_session(db, rig2, tmp_pa
     right.mkdir()
     for i, p in enumerate(sorted((rig2 / "CAM1").iterdir())):
         shutil.copy(p, right / f"CAM1_{i + 100:04d}.png")  # no frame number in common
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
-    r = invoke(
-        db,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={right}",
-    )
+    _add_rig(db)
+    r = _capture(db, rig2, cam1=right)
     assert r.exit_code == 2 and "nothing pairs up" in r.output
     assert _stored(db) == ([], 0, 0)
 
 
 def test_rig_member_sessions_are_not_picked_by_a_single_camera_solve_unless_named(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     assert _capture(db, rig2).exit_code == 0
     sessions, rig_sessions, _ = _stored(db)
     assert len(sessions) == 2 and rig_sessions == 1  # stored together
@@ -444,7 +333,7 @@ def test_rig_member_sessions_are_not_picked_by_a_single_camera_solve_unless_name
 def test_a_rig_captures_member_sessions_are_chained_like_any_session(db, rig2):
     """The rig capture stores its members in one transaction; each is numbered and chained in its serial's
     session stream, so `db verify` finds nothing inserted outside calibctl."""
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     assert _capture(db, rig2).exit_code == 0
     r = invoke(db, "--json", "db", "verify")
     assert r.exit_code == 0, r.output
@@ -454,24 +343,10 @@ def test_a_rig_captures_member_sessions_are_chained_like_any_session(db, rig2):
 def test_a_session_stored_before_the_checks_existed_is_refused_at_solve(db, rig2, monkeypatch):
     from calibctl.workflows.rig import rigs
 
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     with monkeypatch.context() as m:  # an older calibctl stored the typo without a word
         m.setattr(rigs.identity, "refuse", lambda *a, **k: None)
-        assert (
-            invoke(
-                db,
-                "rig",
-                "capture",
-                "R1",
-                "--board",
-                "A17",
-                "--source",
-                f"CAM0={rig2 / 'CAM0'}",
-                "--source",
-                f"CAM1={rig2 / 'CAM0'}",
-            ).exit_code
-            == 0
-        )
+        assert _capture(db, rig2, cam1=rig2 / "CAM0").exit_code == 0
     r = invoke(db, "rig", "solve", "R1")
     assert r.exit_code == 1, r.output
     assert "identical image(s)" in r.output and "nothing was stored" in " ".join(r.output.split())
@@ -481,7 +356,7 @@ def test_a_session_stored_before_the_checks_existed_is_refused_at_solve(db, rig2
 def test_a_baseline_indistinguishable_from_zero_is_refused_before_storing(db, rig2, monkeypatch):
     from calibctl.workflows.rig import rigs
 
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     assert _capture(db, rig2).exit_code == 0
     real = rigs.identity.zero_baselines
     monkeypatch.setattr(
@@ -496,7 +371,7 @@ def test_a_baseline_indistinguishable_from_zero_is_refused_before_storing(db, ri
 
 
 def test_solve_of_a_session_under_another_serial_is_refused(db, rig2):
-    invoke(db, "rig", "add", "R1", "--camera", "CAM0", "--camera", "CAM1")
+    _add_rig(db)
     assert _capture(db, rig2).exit_code == 0
     named = next(s for s in _stored(db)[0] if s.serial == "CAM1")
     r = invoke(db, "solve", named.session_id, "--serial", "CAM0")

@@ -35,6 +35,13 @@ X_BASE_CAM = se3.transform(
     se3.rotation_from_rotvec(np.radians([150.0, 10.0, 5.0])), np.array([0.8, 0.2, 0.9])
 )
 TOL_MM, TOL_DEG = 1.0, 0.1
+POSE_COLUMNS = ["image", *(f"gripper_q{c}" for c in "wxyz"), *(f"gripper_t{c}_m" for c in "xyz")]
+
+
+def pose_row(image: str, T_base_gripper: np.ndarray) -> list[str]:
+    """One row of the robot pose CSV (POSE_COLUMNS): the image and the gripper's pose in the base frame, m."""
+    q = se3.quaternion_from_rotation(T_base_gripper[:3, :3])
+    return [image, *(repr(float(v)) for v in q), *(repr(float(v)) for v in T_base_gripper[:3, 3])]
 
 
 def _camera() -> PinholeCamera:
@@ -53,23 +60,11 @@ def _write_scene(folder: Path, eye_in_hand: bool, seed: int) -> Path:
     folder.mkdir()
     with (folder / "poses.csv").open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(
-            [
-                "image",
-                "gripper_qw",
-                "gripper_qx",
-                "gripper_qy",
-                "gripper_qz",
-                "gripper_tx_m",
-                "gripper_ty_m",
-                "gripper_tz_m",
-            ]
-        )
+        writer.writerow(POSE_COLUMNS)
         for i, (T_cb, T_bg) in enumerate(zip(T_cam_board, T_base_gripper, strict=True)):
             name = f"pose-{i:02d}.png"
             cv2.imwrite(str(folder / name), render_view(_camera(), spec, T_cb, rng))
-            q = se3.quaternion_from_rotation(T_bg[:3, :3])
-            writer.writerow([name, *(repr(float(v)) for v in q), *(repr(float(v)) for v in T_bg[:3, 3])])
+            writer.writerow(pose_row(name, T_bg))
     return folder
 
 
@@ -103,6 +98,15 @@ def _errors(result, X: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(t - X[:3, 3]) * 1e3), float(
         np.degrees(se3.rotation_angle_rad(R.T @ X[:3, :3]))
     )
+
+
+def _handeye_cli(
+    settings, poses: Path, images: Path, serial: str, *extra: str, frames=("gripper", "camera"), **kw
+):
+    """`calibctl handeye` of this pose file and image folder, for a camera of the store."""
+    source, target = frames
+    options = ["--from", source, "--to", target, "--images", str(images), "--serial", serial]
+    return CliRunner().invoke(app, ["--db", settings.db_url, "handeye", str(poses), *options, *extra], **kw)
 
 
 @pytest.mark.parametrize("method", ["park", "tsai"])
@@ -147,23 +151,7 @@ def test_a_camera_with_no_active_calibration_is_exit_2(scenes, settings) -> None
     d = scenes["in-hand"]
     with pytest.raises(NotFoundError, match="CAM-0404"):
         run_robot_handeye(settings, d / "poses.csv", d, "CAM-0404", "gripper", "camera")
-    result = CliRunner().invoke(
-        app,
-        [
-            "--db",
-            settings.db_url,
-            "handeye",
-            str(d / "poses.csv"),
-            "--from",
-            "gripper",
-            "--to",
-            "camera",
-            "--images",
-            str(d),
-            "--serial",
-            "CAM-0404",
-        ],
-    )
+    result = _handeye_cli(settings, d / "poses.csv", d, "CAM-0404")
     assert result.exit_code == 2 and "CAM-0404" in result.stderr and "Traceback" not in result.output
 
 
@@ -173,24 +161,7 @@ def test_a_camera_whose_capture_was_rejected_is_named_as_such_not_unknown(scenes
     with Store.open(settings.db_url) as store:
         store.add_session(capture_session("aaaaaaaaaaa1", serial="CAM-0002", status="rejected"))
     d = scenes["in-hand"]
-    result = CliRunner().invoke(
-        app,
-        [
-            "--db",
-            settings.db_url,
-            "handeye",
-            str(d / "poses.csv"),
-            "--from",
-            "gripper",
-            "--to",
-            "camera",
-            "--images",
-            str(d),
-            "--serial",
-            "CAM-0002",
-        ],
-        terminal_width=200,
-    )
+    result = _handeye_cli(settings, d / "poses.csv", d, "CAM-0002", terminal_width=200)
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert "unknown serial" not in result.stderr
     assert (
@@ -222,24 +193,14 @@ def test_a_missing_image_names_file_and_line(scenes, settings, tmp_path: Path) -
 
 def test_cli_wiring_with_tf_static(scenes, settings, tmp_path: Path) -> None:
     d = scenes["in-hand"]
-    result = CliRunner().invoke(
-        app,
-        [
-            "--db",
-            settings.db_url,
-            "handeye",
-            str(d / "poses.csv"),
-            "--from",
-            "tool0",
-            "--to",
-            "camera_optical",
-            "--images",
-            str(d),
-            "--serial",
-            "CAM-0001",
-            "--tf-static",
-            str(tmp_path / "tf.yaml"),
-        ],
+    result = _handeye_cli(
+        settings,
+        d / "poses.csv",
+        d,
+        "CAM-0001",
+        "--tf-static",
+        str(tmp_path / "tf.yaml"),
+        frames=("tool0", "camera_optical"),
         terminal_width=110,
     )
     assert result.exit_code == 0, result.output
@@ -355,23 +316,7 @@ def test_a_headerless_pose_file_is_checked_line_by_line(scenes, settings, tmp_pa
     vec.write_text("\n".join([*text[:5], "1 2 three 4", *text[5:]]) + "\n")
     with pytest.raises(InputError, match=r"p.txt line 6: not all numbers"):
         run_robot_handeye(settings, vec, d, "CAM-0001", "gripper", "camera")
-    result = CliRunner().invoke(
-        app,
-        [
-            "--db",
-            settings.db_url,
-            "handeye",
-            str(_write_vec(vec, poses[:-1])),
-            "--from",
-            "gripper",
-            "--to",
-            "camera",
-            "--images",
-            str(d),
-            "--serial",
-            "CAM-0001",
-        ],
-    )
+    result = _handeye_cli(settings, _write_vec(vec, poses[:-1]), d, "CAM-0001")
     assert result.exit_code == 2 and "14 poses but" in result.stderr and "Traceback" not in result.output
 
 

@@ -26,13 +26,11 @@ from calibctl.core.synth.pinhole import render_view
 from calibctl.store.repository import Store
 from calibctl.workflows.handeye import handeye_robot
 from tests.artifacts.factories import calibration, measured_board
+from tests.workflows.handeye.test_handeye_robot import POSE_COLUMNS, X_GRIPPER_CAM, pose_row
 
 N_POSES = 15
 FOV_DEG = (
     150.0  # the detector finds the board in every view on OpenCV 4.10 and 5.0 (tests/workflows/synth_folders)
-)
-X_GRIPPER_CAM = se3.transform(
-    se3.rotation_from_rotvec(np.radians([4.0, -3.0, 90.0])), np.array([0.05, -0.03, 0.10])
 )
 SIGMAS = 4.0  # per translation axis: |error| within this many reported sigmas
 WRONG_MM = 5.0  # the pinhole reading of the same lens misplaces X by more than this
@@ -62,26 +60,12 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
     dark = camera.outside_circle()
     with (folder / "poses.csv").open("w", newline="") as handle:
         writer = csv.writer(handle)
-        writer.writerow(
-            [
-                "image",
-                "gripper_qw",
-                "gripper_qx",
-                "gripper_qy",
-                "gripper_qz",
-                "gripper_tx_m",
-                "gripper_ty_m",
-                "gripper_tz_m",
-            ]
-        )
+        writer.writerow(POSE_COLUMNS)
         for i, (T_cb, T_bg) in enumerate(zip(T_cam_board, T_base_gripper, strict=True)):
             image = render_view(camera, spec, T_cb, rng)
             image[dark] = np.minimum(image[dark], 4)  # no light outside the image circle
             cv2.imwrite(str(folder / f"pose-{i:02d}.png"), image)
-            q = se3.quaternion_from_rotation(T_bg[:3, :3])
-            writer.writerow(
-                [f"pose-{i:02d}.png", *(repr(float(v)) for v in q), *(repr(float(v)) for v in T_bg[:3, 3])]
-            )
+            writer.writerow(pose_row(f"pose-{i:02d}.png", T_bg))
     return folder
 
 

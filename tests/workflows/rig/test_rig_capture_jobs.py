@@ -16,7 +16,7 @@ from calibctl.core.capture import image_outcomes, worker_pool
 from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
 from tests.workflows.rig.test_rig_store_flow import store_members
-from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources
 
 RUNNER = CliRunner()
 # the parts of a session that are the same whoever runs it, whenever (ids and times are not)
@@ -57,21 +57,7 @@ def workers_seen(monkeypatch) -> list[int | None]:
 def _rig_capture(url: str, rig2, *extra: str) -> dict:
     r = RUNNER.invoke(
         app,
-        [
-            "--db",
-            url,
-            "--json",
-            "rig",
-            "capture",
-            "R1",
-            "--board",
-            "A17",
-            "--source",
-            f"CAM0={rig2 / 'CAM0'}",
-            "--source",
-            f"CAM1={rig2 / 'CAM1'}",
-            *extra,
-        ],
+        ["--db", url, "--json", "rig", "capture", "R1", "--board", "A17", *rig_sources(rig2), *extra],
     )
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
@@ -104,61 +90,18 @@ def test_capture_rig_and_solve_folders_take_jobs(tmp_path, rig2, workers_seen):
     url = _store(tmp_path / "c.db", rig2)
     r = RUNNER.invoke(
         app,
-        [
-            "--db",
-            url,
-            "capture",
-            "--rig",
-            "R1",
-            "--board",
-            "A17",
-            "--source",
-            f"CAM0={rig2 / 'CAM0'}",
-            "--source",
-            f"CAM1={rig2 / 'CAM1'}",
-            "--jobs",
-            "2",
-        ],
+        ["--db", url, "capture", "--rig", "R1", "--board", "A17", *rig_sources(rig2), "--jobs", "2"],
     )
     assert r.exit_code == 0, r.output
-    r = RUNNER.invoke(
-        app,
-        [
-            "rig",
-            "solve-folders",
-            "--source",
-            f"CAM0={rig2 / 'CAM0'}",
-            "--source",
-            f"CAM1={rig2 / 'CAM1'}",
-            "--cols",
-            "9",
-            "--rows",
-            "6",
-            "--square-mm",
-            "25",
-            "--jobs",
-            "3",
-        ],
-    )
+    grid = ["--cols", "9", "--rows", "6", "--square-mm", "25"]
+    r = RUNNER.invoke(app, ["rig", "solve-folders", *rig_sources(rig2), *grid, "--jobs", "3"])
     assert r.exit_code in (0, 1), r.output  # the verdict is not this test's business; the detection is
     assert workers_seen == [2, 2, 3, 3]
 
 
 def test_rig_capture_refuses_jobs_below_one_and_stores_nothing(tmp_path, rig2, monkeypatch):
     url = _store(tmp_path / "c.db", rig2)
-    args = [
-        "--db",
-        url,
-        "rig",
-        "capture",
-        "R1",
-        "--board",
-        "A17",
-        "--source",
-        f"CAM0={rig2 / 'CAM0'}",
-        "--source",
-        f"CAM1={rig2 / 'CAM1'}",
-    ]
+    args = ["--db", url, "rig", "capture", "R1", "--board", "A17", *rig_sources(rig2)]
     zero = RUNNER.invoke(app, [*args, "--jobs", "0"])
     assert zero.exit_code == 2 and "--jobs" in zero.output
     monkeypatch.setenv("CALIBCTL_JOBS", "0")

@@ -18,7 +18,7 @@ from calibctl.errors import NotFoundError
 from calibctl.store.repository import Store
 from calibctl.workflows.rig.rig_video import OUTSIDE_TOLERANCE
 from tests.workflows.rig.test_rig_capture_jobs import _store
-from tests.workflows.rig_folders_data import rendered_rig
+from tests.workflows.rig_folders_data import rendered_rig, rig_sources
 
 RUNNER = CliRunner()
 N_FRAMES = 8
@@ -41,7 +41,7 @@ def _timestamps(path: Path) -> Path:
 
 def _capture(url: str, rig2: Path, *extra: str, command: tuple[str, ...] = ("rig", "capture", "R1")):
     args = ["--db", url, "--json", *command, "--board", "A17"]
-    args += ["--source", f"CAM0={rig2 / 'CAM0'}", "--source", f"CAM1={rig2 / 'CAM1'}", *extra]
+    args += [*rig_sources(rig2), *extra]
     return RUNNER.invoke(app, args)
 
 
@@ -97,8 +97,8 @@ def test_a_video_member_with_timestamps_is_refused_and_nothing_stored(tmp_path, 
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 6.0, (64, 48), False)
     writer.write(np.zeros((48, 64), np.uint8))
     writer.release()
-    args = ["--db", url, "rig", "capture", "R1", "--board", "A17", "--source", f"CAM0={rig2 / 'CAM0'}"]
-    args += ["--source", f"CAM1={video}", "--timestamps", str(_timestamps(tmp_path / "ts.csv"))]
+    args = ["--db", url, "rig", "capture", "R1", "--board", "A17", *rig_sources(rig2, video)]
+    args += ["--timestamps", str(_timestamps(tmp_path / "ts.csv"))]
     r = RUNNER.invoke(app, args)
     assert r.exit_code == 2, r.output
     assert "rig capture pairs photos by time, but the source of CAM1 is a video" in r.output
