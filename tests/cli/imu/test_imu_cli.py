@@ -265,18 +265,8 @@ def test_another_lens_intrinsics_are_exit_1_naming_them(recording, tmp_path) -> 
     url = make_store(tmp_path / "c.db")
     with Store.open(url) as store:  # the render's lens is 800 px; this calibration says 752 (6 % short)
         store.add_artifact(calibration(serial=CAM, fx=752.0), activate=True, **WHO)
-    r = cli(
-        url,
-        "imu",
-        "solve",
-        str(recording),
-        "--serial",
-        CAM,
-        "--noise",
-        str(recording / "imu.yaml"),
-        "--rig",
-        RIG,
-    )
+    noise = ("--noise", str(recording / "imu.yaml"))
+    r = cli(url, "imu", "solve", str(recording), "--serial", CAM, *noise, "--rig", RIG)
     _refused_and_never_active(url, r, "the camera's intrinsics do not fit these images")
 
 
