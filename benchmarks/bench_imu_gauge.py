@@ -5,7 +5,7 @@ Each seed renders a 6 s dance (``core.synth.imu``, 50 mm-equivalent board, EuRoC
 it three ways with ``core.imu.calibrate`` (no k-fold): as rendered; with the board's points at 0.8x (a
 50 mm board registered at 40 mm); with fx and fy 6 % short (785 px held for an 835 px lens). Printed per
 run: the verdict, the failed gates, the board scale +/- sigma (``board_scale``) and the camera fit's F
-ratio (``camera_fit``); then per case the refusals and, for the right data, the scale's z-scores.
+ratio and excess (``camera_fit``); then per case the refusals and, for the right data, the scale's z-scores.
 EuRoC's figures come from ``bench_imu_euroc.py`` (its gate line prints both values).
 
 Run: python benchmarks/bench_imu_gauge.py [--seeds 1-24] [--cases ok,board40,lens6]
@@ -82,6 +82,7 @@ def main() -> int:
             print(
                 f"{case:8s} seed {seed:3d}: {'accepted' if cal.passed else 'REFUSED '} "
                 f"{[g.gate for g in cal.failed]} scale {scale.value:.4f} +/- {sigma:.4f} F {fit.value:.2f} "
+                f"excess {float(fit.detail['excess_px']):.3f} px "
                 f"cpu {time.process_time() - c0:.1f} s",
                 flush=True,
             )

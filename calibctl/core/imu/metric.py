@@ -9,9 +9,9 @@ says so, which cannot be judged alone (real IMUs vibrate: EuRoC's accel RMS is 1
 noise). ``board_scale`` solves once more with s = true size / registered size as a state
 (``SolveOptions.board_scale``: the corners see the board scaled by s), its one-sigma from the same
 covariance and block jackknife as every other state (its own: widening it by the first solve's largest
-jackknife widening instead saves about 7 s of EuRoC cam0's 20 but overstates it about 3x on renders). A residual regression on the first solve cannot
-do this: that solve already bent its trajectory until the accelerometer residual is orthogonal to the
-motion (measured: s = 1.002 on a 1.25x board).
+jackknife widening instead saves about 7 s of EuRoC cam0's 20 but overstates it about 3x on renders).
+A residual regression on the first solve cannot do this: that solve already bent its trajectory until
+the accelerometer residual is orthogonal to the motion (measured: s = 1.002 on a 1.25x board).
 
 Camera fit. Wrong intrinsics (a focal length 6 % off) leave the board scale near 1 (the depth error
 is along one axis and the lever arm absorbs it) but the IMU's rotations then cannot carry the corners
@@ -19,7 +19,10 @@ the way the camera model projects them: the corners fit their own per-frame PnP 
 frame) much better than the one IMU trajectory. ``camera_fit`` compares the two robust corner sigmas as
 an F ratio: (v_joint / v_pnp - 1) (n - p) / p with n corner coordinates and p = 6 per-frame pose states;
 about 1 when the camera model is right (the PnP fit is better only by the states it spends), large
-when it is not. The sigmas are median-based: outliers the solve leaves out count in neither.
+when it is not. The sigmas are median-based: outliers the solve leaves out count in neither. Beside it,
+the excess in pixels, sqrt(v_joint - v_pnp n / (n - p)): with corners far more precise than the
+trajectory model (noise-free rendered images: 0.03 px about PnP) F grows large on the spline's own
+misfit (0.06 px), which is no lens error worth refusing.
 """
 
 from __future__ import annotations
@@ -52,13 +55,15 @@ class BoardScale:
 class CameraFit:
     """joint_sigma_px / pnp_sigma_px: robust corner sigmas about the IMU's trajectory and about each
     frame's own PnP pose. coordinates: n, the corner coordinates (2 per corner) of the PnP frames;
-    pose_states: p, 6 per PnP frame. f_ratio: (v_joint / v_pnp - 1) (n - p) / p."""
+    pose_states: p, 6 per PnP frame. f_ratio: (v_joint / v_pnp - 1) (n - p) / p. excess_px: the joint
+    sigma beyond what the per-frame poses' states explain, sqrt(max(v_joint - v_pnp n / (n - p), 0))."""
 
     joint_sigma_px: float
     pnp_sigma_px: float
     coordinates: int
     pose_states: int
     f_ratio: float
+    excess_px: float
 
 
 def board_scale(
@@ -105,5 +110,8 @@ def camera_fit(frames: CameraFrames, track: BoardTrack, solution: ImuCameraSolut
     v_pnp = (_MEDIAN_TO_SIGMA_2D * float(np.median(np.linalg.norm(pnp, axis=1)))) ** 2
     v_joint = (_MEDIAN_TO_SIGMA_2D * float(np.median(np.linalg.norm(joint, axis=1)))) ** 2
     n, p = 2 * pnp.shape[0], 6 * len(track.frame)
-    f_ratio = (v_joint / max(v_pnp, 1e-18) - 1.0) * (n - p) / max(p, 1) if n > p else float("nan")
-    return CameraFit(float(np.sqrt(v_joint)), float(np.sqrt(v_pnp)), n, p, float(f_ratio))
+    if n <= p:
+        return CameraFit(float(np.sqrt(v_joint)), float(np.sqrt(v_pnp)), n, p, float("nan"), float("nan"))
+    f_ratio = (v_joint / max(v_pnp, 1e-18) - 1.0) * (n - p) / p
+    excess = np.sqrt(max(v_joint - v_pnp * n / (n - p), 0.0))
+    return CameraFit(float(np.sqrt(v_joint)), float(np.sqrt(v_pnp)), n, p, float(f_ratio), float(excess))
