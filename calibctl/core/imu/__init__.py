@@ -54,16 +54,25 @@ The row test and the report's series (``rows``): row_test(solution, frames) -> R
 Gates (``gates``; ``core.gate.GateResult``, each with the next action in its hint):
     rotational_excitation(track), td_observability(frames, td_crlb_ms), td_rotation_correlation(
     covariance_7, td_held), saturation(imu), imu_gaps(imu), dropped_frames(frames),
-    imu_model_observability(model, min_information).
+    imu_model_observability(model, min_information), board_scale(BoardScale, square_mm),
+    camera_fit(CameraFit).
+
+The board's metric gauge and the camera's fit (``metric``): board_scale(imu, cameras, noise, options,
+    tracks, solutions, rig) -> BoardScale(scale, sigma, inflation): one more solve with the board's
+    true / registered size as a state (``SolveOptions.board_scale``; ``ImuCameraSolution.board_scale``);
+    camera_fit(frames, track, solution) -> CameraFit: the corners' F ratio about the IMU's trajectory
+    against their per-frame PnP poses; pnp_residuals(frames, track).
 
 The IMU's own intrinsics (``intrinsics``): Kalibr's scale-misalignment model as 24 states about
     identity (NAMES, PRIOR_SIGMAS), matrices(x) -> M_gyro, C_gyro_i, A_gyro, M_accel,
     observability(covariance) -> the data's least prior-scaled information, ImuIntrinsics.
-The one call (``calibrate``): calibrate(imu, frames, noise, options, fallback_td_s=None) ->
+The one call (``calibrate``): calibrate(imu, frames, noise, options, fallback_td_s=None, square_mm=None) ->
     Calibration(solution | None, gates, held, held_reason; passed, failed): solve and gate; on a
     (td, rotation) degeneracy (the correlation gate, or a rate cross-correlation that cannot pin td)
     re-solve with td held at fallback_td_s and say so (held = "td"), or refuse (passed False,
     solution None when nothing could be solved). Raises ImuInputError subclasses on bad input.
-    calibrate_cameras(imu, [frames, ...], noise, options, fallback_td_s=None, rig=None) ->
-    [Calibration, ...]: the same for a joint solve, each camera gated (a held td is held for all).
+    calibrate_cameras(imu, [frames, ...], noise, options, fallback_td_s=None, rig=None, square_mm=None)
+    -> [Calibration, ...]: the same for a joint solve, each camera gated (a held td is held for all).
+    Every solved verdict carries ``board_scale`` (square_mm: the registered edge it names) and
+    ``camera_fit`` (``metric``).
 """

@@ -9,7 +9,9 @@ the one held, never the rotation: the rotation is what the robot needs, and a td
 earlier calibration is a better prior than any extrinsic the degenerate data would leave. A rate
 cross-correlation that cannot pin td at all (no rate variation) is the same refusal, before any solve.
 An IMU model beyond ``calibrated`` (``SolveOptions.imu_model``) adds its observability gate: a recording
-that cannot pin the model's states is refused, naming the model.
+that cannot pin the model's states is refused, naming the model. Every solved verdict carries the
+``board_scale`` gate (one more solve with the board's size as a state: the accelerometer is its metric
+gauge) and each camera's ``camera_fit`` gate (its intrinsics against the IMU's turns), ``core.imu.metric``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from calibctl.core.gate import GateResult
-from calibctl.core.imu import gates
+from calibctl.core.imu import gates, metric
 from calibctl.core.imu.plain import BoardTrack, TdUnobservableError, board_track, plain_calibration
 from calibctl.core.imu.samples import CameraFrames, ImuNoise, ImuSamples
 from calibctl.core.imu.solve import ImuCameraSolution, SolveOptions, solve_imu_cameras
@@ -53,13 +55,14 @@ def calibrate(
     noise: ImuNoise,
     options: SolveOptions = SolveOptions(),
     fallback_td_s: float | None = None,
+    square_mm: float | None = None,
 ) -> Calibration:
     """Solve and gate one camera (module docstring).
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be used as it is (the message names the fix).
     """
-    return calibrate_cameras(imu, [frames], noise, options, fallback_td_s)[0]
+    return calibrate_cameras(imu, [frames], noise, options, fallback_td_s, square_mm=square_mm)[0]
 
 
 def calibrate_cameras(
@@ -69,11 +72,13 @@ def calibrate_cameras(
     options: SolveOptions = SolveOptions(),
     fallback_td_s: float | None = None,
     rig: Sequence[np.ndarray | None] | None = None,
+    square_mm: float | None = None,
 ) -> list[Calibration]:
     """Solve several cameras and one IMU jointly (``core.imu.solve.solve_imu_cameras``) and gate each
     camera; one ``Calibration`` per camera, in order. The IMU's gates are shared. When any camera's
     motion cannot pin its td, every camera's td is held at ``fallback_td_s`` (one rig clock) or every
     camera is refused. ``rig``: the cameras the rig already relates to the first (``solve_imu_cameras``).
+    ``square_mm``: the registered board's square (tag) edge, named by the ``board_scale`` gate.
 
     Raises:
         ImuInputError / ImuUnitError: the recording cannot be used as it is (the message names the fix).
@@ -104,6 +109,8 @@ def calibrate_cameras(
         )
         reason = f"{exc}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
         free = replace(rate, gate="td_rotation_correlation_free")
+        held_options = replace(options, hold_td_s=fallback_td_s)
+        _metric_gates(recording, imu, cameras, noise, held_options, tracks, held, rig, square_mm)
         return [
             Calibration(
                 h,
@@ -130,6 +137,7 @@ def calibrate_cameras(
     sigma = [gates.td_sigma(s.sigma_td_ms, s.td_held) for s in solutions]
     failed = [g for pair in zip(correlation, sigma, strict=True) for g in pair if not g.passed]
     if not failed or fallback_td_s is None:
+        _metric_gates(recording, imu, cameras, noise, options, tracks, solutions, rig, square_mm)
         return [
             Calibration(s, [*rec, *rg, corr, sig, *_model_gates(s)], None, None)
             for s, rec, rg, corr, sig in zip(
@@ -152,6 +160,8 @@ def calibrate_cameras(
     )
     reason = f"{failed[0].message}: td held at {1e3 * fallback_td_s:.3f} ms, the extrinsic estimated alone"
     # The rig gate judges the reported (held) solution's corners, not the free solve's.
+    held_options = replace(options, hold_td_s=fallback_td_s)
+    _metric_gates(recording, imu, cameras, noise, held_options, tracks, held, rig, square_mm)
     return [
         Calibration(
             h,
@@ -195,3 +205,23 @@ def _rig_gates(
             out[k].append(gate)
             out[0].append(replace(gate, gate=f"rig_pose_camera_{k}"))
     return out
+
+
+def _metric_gates(
+    recording: list[list[GateResult]],
+    imu: ImuSamples,
+    cameras: Sequence[CameraFrames],
+    noise: ImuNoise,
+    options: SolveOptions,
+    tracks: Sequence[BoardTrack],
+    solutions: Sequence[ImuCameraSolution],
+    rig: Sequence[np.ndarray | None] | None,
+    square_mm: float | None,
+) -> None:
+    """The ``board_scale`` gate (one board: one more joint solve, shared by every camera) and each
+    camera's ``camera_fit`` gate, appended to its gates (``core.imu.metric``)."""
+    scale = gates.board_scale(
+        metric.board_scale(imu, cameras, noise, options, tracks, solutions, rig), square_mm
+    )
+    for rec, frames, track, s in zip(recording, cameras, tracks, solutions, strict=True):
+        rec += [scale, gates.camera_fit(metric.camera_fit(frames, track, s))]

@@ -15,6 +15,11 @@
   missing from an even stream.
 - ``imu_model_observability``: with an IMU model beyond ``calibrated``, the smallest eigenvalue of the
   data's prior-scaled information on its states, at least ``intrinsics.MIN_INFORMATION``.
+- ``board_scale``: the board's true size over its registered size as the accelerometer measures it
+  (``metric.board_scale``), off 1 by at most ``SCALE_SIGMAS`` sigma or ``MIN_SCALE_ERROR``.
+- ``camera_fit``: the corners' F ratio about the IMU's trajectory against their per-frame PnP fit
+  (``metric.camera_fit``), at most ``MAX_CAMERA_FIT_F`` or an excess under ``MIN_CAMERA_EXCESS_PX``:
+  wrong intrinsics cannot follow the IMU's turns.
 - ``rig_pose``: a camera a joint solve held through the rig's pose to the first camera: its corner
   RMS over its per-frame PnP RMS (``pnp_rms_px``), at most ``MAX_RIG_POSE_RATIO``.
 """
@@ -24,8 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from calibctl.core.gate import GateResult
-from calibctl.core.imu import intrinsics
-from calibctl.core.imu.model import project
+from calibctl.core.imu import intrinsics, metric
 from calibctl.core.imu.plain import BoardTrack
 from calibctl.core.imu.samples import CameraFrames, ImuSamples, median_period_s
 
@@ -38,6 +42,14 @@ MAX_SATURATED_SHARE = 0.001
 MAX_IMU_GAP_PERIODS = 5.0
 MAX_DROPPED_SHARE = 0.05
 MAX_RIG_POSE_RATIO = 2.0  # a held camera's corner RMS over its per-frame PnP RMS
+# The board's scale is refused off 1 by more than both SCALE_SIGMAS sigma and MIN_SCALE_ERROR: a few
+# percent is what an accelerometer's own scale error and a print's shrinkage leave (EuRoC: 0.990).
+SCALE_SIGMAS = 3.0
+MIN_SCALE_ERROR = 0.03
+MAX_CAMERA_FIT_F = 2.0  # the corners' variance excess over their per-frame PnP fit, per pose state
+# ... refused only with at least this much excess RMS: the trajectory model's own floor on noise-free
+# rendered images is 0.064 px, a 6 % focal error's 0.11-0.15 px (benchmarks/results/imu.md).
+MIN_CAMERA_EXCESS_PX = 0.08
 
 
 def _verdict(
@@ -260,12 +272,7 @@ def rate_variation_refused(message: str) -> GateResult:
 
 def pnp_rms_px(frames: CameraFrames, track: BoardTrack) -> float:
     """The corners' 2-D RMS about each frame's own PnP pose: the floor any trajectory fit is judged by."""
-    r = [
-        frames.image_points[f]
-        - project(frames.object_points[f] @ T[:3, :3].T + T[:3, 3], frames.camera_matrix, frames.dist_coeffs)
-        for f, T in zip(track.frame, track.T_cam_w, strict=True)
-    ]
-    return float(np.sqrt(np.mean(np.sum(np.concatenate(r) ** 2, axis=1))))
+    return float(np.sqrt(np.mean(np.sum(metric.pnp_residuals(frames, track) ** 2, axis=1))))
 
 
 def rig_pose(corner_rms_px: float, pnp_rms_px: float) -> GateResult:
@@ -305,4 +312,60 @@ def imu_model_observability(model: str, min_information: float) -> GateResult:
         "imu_model_unobservable",
         f"the motion cannot pin the {model} IMU model's states: record longer with turns about every axis "
         "and tilts through gravity, or solve with --imu-model calibrated",
+    )
+
+
+def board_scale(scale: metric.BoardScale, square_mm: float | None = None) -> GateResult:
+    """The IMU as the board's metric gauge: a board registered at the wrong size (another revision, a
+    print scaled to fit the page) scales every camera position, and the lever arm takes the blame."""
+    error = abs(scale.scale - 1.0)
+    limit = max(SCALE_SIGMAS * scale.sigma, MIN_SCALE_ERROR)
+    sizes = (
+        f" (its square or tag edge {scale.scale * square_mm:.1f} +/- {scale.sigma * square_mm:.1f} mm, not "
+        f"{square_mm:.1f} mm)"
+        if square_mm is not None
+        else ""
+    )
+    return _verdict(
+        "board_scale",
+        scale.scale,
+        limit,
+        error <= limit,
+        f"the accelerometer measures the board at {scale.scale:.3f} +/- {scale.sigma:.3f} times its "
+        f"registered size{sizes}; refused off 1 by more than {SCALE_SIGMAS:g} sigma and "
+        f"{100 * MIN_SCALE_ERROR:g} %",
+        "board_scale_contradicted",
+        "the board filmed is not the size registered: measure its squares (calipers) and register it "
+        "(`calibctl board add NAME --square-mm ... --uncertainty-mm ...`), or pass the board that was "
+        "filmed, then solve again",
+        {"sigma": scale.sigma, "inflation": scale.inflation},
+    )
+
+
+def camera_fit(fit: metric.CameraFit) -> GateResult:
+    """Wrong intrinsics (another camera's, a focal length a few percent off) still let each frame find
+    a pose, but not one IMU trajectory whose turns the gyro measures: the corners' excess over their
+    per-frame fit, per pose state the fit spent, is about 1 with the right camera model."""
+    value = fit.f_ratio
+    small = fit.excess_px < MIN_CAMERA_EXCESS_PX
+    passed = bool(np.isfinite(value) and (value <= MAX_CAMERA_FIT_F or small))
+    return _verdict(
+        "camera_fit",
+        value,
+        MAX_CAMERA_FIT_F,
+        passed,
+        ("" if passed else "the camera's intrinsics do not fit these images: ")
+        + f"corners {fit.joint_sigma_px:.3f} px about the IMU's trajectory against {fit.pnp_sigma_px:.3f} "
+        f"px about their own per-frame poses, F {value:.2f} (at most {MAX_CAMERA_FIT_F:g}), "
+        f"{fit.excess_px:.3f} px beyond what those poses explain (refused from {MIN_CAMERA_EXCESS_PX:g} px)",
+        "intrinsics_contradicted",
+        "check that the recording is this camera's and that its active calibration is this lens' "
+        "(calibrate the camera again, or roll back to the version that fits), then solve again; a "
+        "rolling-shutter camera solved without --line-delay reads the same",
+        {
+            "joint_sigma_px": fit.joint_sigma_px,
+            "pnp_sigma_px": fit.pnp_sigma_px,
+            "pose_states": fit.pose_states,
+            "excess_px": fit.excess_px,
+        },
     )

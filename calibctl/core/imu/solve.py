@@ -5,7 +5,8 @@ States: T_imu_cam (rotation 3 as a left perturbation in the IMU frame, translati
 line delay (s per row, rows counted from the principal point's c_y), the gravity direction in the
 board frame (2), a constant gyro bias (3) and accelerometer bias (3) (or, with ``bias_walk``, each a
 random walk: a spline beside the trajectory's, eliminated with it), optionally the IMU's own
-scale, misalignment and g-sensitivity (24, ``core.imu.intrinsics``, with weak priors); plus the
+scale, misalignment and g-sensitivity (24, ``core.imu.intrinsics``, with weak priors), optionally the
+board's true / registered size (``board_scale``, ``core.imu.metric``); plus the
 nuisance IMU trajectory, a uniform cubic B-spline of the IMU pose (``core.imu.model``; knot spacing
 ``knot_spacing_s``). The camera intrinsics are held. Residuals: every corner's reprojection (px,
 / sigma_px), every IMU sample's gyro and accelerometer residual (/ the Kalibr density * sqrt(rate)),
@@ -70,9 +71,11 @@ SHARED_NAMES = (
     "dba_y",
     "dba_z",
     *intrinsics.NAMES,
+    "board_scale",
 )
 CAMERA_STATES = 8  # the first eight shared names are each camera's own: T_imu_cam, td, line delay
 INTRINSICS = slice(22, 22 + len(intrinsics.NAMES))  # the IMU model's states (core.imu.intrinsics)
+BOARD_SCALE = INTRINSICS.stop  # true board size / registered size (``board_scale``; core.imu.metric)
 H_CTRL = 1e-6  # central-difference steps: control points (rad, m), extrinsic (rad, m), time (s)
 H_TIME = 1e-6
 H_GRAV = 1e-6
@@ -114,6 +117,7 @@ class SolveOptions:
     bias_drift: bool = False
     bias_walk: bool = False
     imu_model: str = "calibrated"
+    board_scale: bool = False
 
 
 @dataclass
@@ -136,6 +140,7 @@ class _State:
     b_g_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
     b_a_dot: np.ndarray = field(default_factory=lambda: np.zeros(3))
     imu_x: np.ndarray = field(default_factory=lambda: np.zeros(len(intrinsics.NAMES)))
+    board_scale: float = 1.0
     cache: dict = field(default_factory=dict, repr=False)
 
 
@@ -189,6 +194,7 @@ class ImuCameraSolution:
     plain: PlainResult
     residuals: dict[str, np.ndarray] = field(repr=False)
     imu_intrinsics: intrinsics.ImuIntrinsics | None = None  # with imu_model scale-misalignment
+    board_scale: float = 1.0  # estimated with SolveOptions.board_scale (its variance in ``covariance``)
 
     @property
     def T_cam_imu(self) -> np.ndarray:
@@ -298,6 +304,7 @@ class _Problem:
             and not (name.startswith(("bg_", "ba_")) and options.bias_walk)
             and not (i in held and name in SHARED_NAMES[:6])
             and not (name in intrinsics.NAMES and options.imu_model == "calibrated")
+            and not (name == "board_scale" and not options.board_scale)
         ]
         # The IMU model's weak priors: (position among the active states, index into imu_x, 1/sigma^2).
         inside = range(INTRINSICS.start, INTRINSICS.stop)
@@ -328,7 +335,7 @@ class _Problem:
         loc = local_controls(s.ctrl, seg)[:, :, :6]
         R, tt = model.camera_pose(loc, w0, self.R_ref, e.R_ic, e.t_ic)
         pc = cam.pose_of_corner
-        RX = np.einsum("nij,nj->ni", R[pc], cam.obj)
+        RX = np.einsum("nij,nj->ni", R[pc], cam.obj) * s.board_scale
         Xc = RX + tt[pc]
         pred = model.project(Xc, cam.K, cam.dist)
         r = cam.img - pred
@@ -398,6 +405,9 @@ class _Problem:
             J_sh[:, :, first[0:3]] = J_own[:, :, 0:3] - J_own[:, :, 3:6] @ lever
             J_sh[:, :, first[3:6]] = J_own[:, :, 3:6]
             J_sh[:, :, cam.columns[6:]] = J_own[:, :, 6:]
+        # A board scaled by k projects as the camera's translation scaled by 1/k (projection ignores depth
+        # scale): d xi / d scale = (0, -t / scale).
+        J_sh[:, 3:, BOARD_SCALE] = -tt / s.board_scale
         return r, info, grad, J_loc, J_sh, seg
 
     # -- IMU -----------------------------------------------------------------------------------------
@@ -556,6 +566,7 @@ class _Problem:
             b_g_dot=s.b_g_dot + full[16:19],
             b_a_dot=s.b_a_dot + full[19:22],
             imu_x=s.imu_x + full[INTRINSICS],
+            board_scale=s.board_scale + full[BOARD_SCALE],
         )
 
     def tie(self, cams: list[_Extrinsic]) -> list[_Extrinsic]:
@@ -865,6 +876,7 @@ def solve_imu_cameras(
                     "accel_bias_m_s2": bias[:, 3:],
                 },
                 imu_intrinsics=imu_intrinsics,
+                board_scale=float(state.board_scale),
             )
         )
     return solutions

@@ -253,6 +253,7 @@ def solve(settings: Settings, req: ImuRequest) -> ImuOutcome:
             options,
             fallback_td_s=req.hold_td_s,
             rig=[None] + [related[s][0] if s in related else None for _, s in pairs[1:]],
+            square_mm=None if board is None else 1e3 * board.spec.square_size_m,
         )
     except ImuInputError as exc:
         raise InputError(f"{req.recording}: {exc}", "fix the recording as the message says") from None

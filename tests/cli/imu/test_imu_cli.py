@@ -5,15 +5,19 @@ by lint and import; bad input is exit 2 in one line; a degenerate motion is exit
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 import yaml
 
+from calibctl.store.repository import Store
+from tests.artifacts.factories import calibration
 from tests.store.rig_documents import RIG
 from tests.workflows.imu.imu_data import (
     CAM,
     TD_S,
+    WHO,
     cli,
     copy_db,
     copy_recording,
@@ -235,6 +239,35 @@ def test_a_corridor_is_exit_1_and_stored_as_a_rejected_version(tmp_path_factory,
     assert cli(url, "report", "--rig", f"{RIG}@2", "-o", str(page)).exit_code == 0
     html = page.read_text()
     assert f'data-key="imu_status_imu-{CAM}">rejected' in html and ">FAIL<" in html
+
+
+def _refused_and_never_active(url: str, r, says: str) -> None:
+    assert r.exit_code == 1, r.output
+    (result,) = [x for x in r.output.splitlines() if x.startswith("Result: REJECTED")]
+    assert says in result, result
+    history = json.loads(cli(url, "rig", "history", RIG, "--json").stdout)
+    assert history["active_version"] == 1
+    assert history["versions"][-1]["imu"] == [{"edge": f"imu:{CAM}", "status": "rejected"}]
+
+
+def test_a_50_mm_board_registered_at_40_mm_is_exit_1_naming_its_size(tmp_path_factory, tmp_path) -> None:
+    rec = rendered(tmp_path_factory, "images")  # board G7: 50 mm squares
+    url = make_store(tmp_path / "c.db")
+    noise = ("--noise", str(rec / "imu.yaml"))
+    r = cli(url, "imu", "solve", str(rec), "--serial", CAM, *noise, "--rig", RIG, "--board", "G7-40")
+    _refused_and_never_active(url, r, "the accelerometer measures the board at 1.2")
+    assert re.search(r"its square or tag edge (49|50|51)\.\d \+/- \d+\.\d mm, not 40\.0 mm", r.output), (
+        r.output
+    )
+
+
+def test_another_lens_intrinsics_are_exit_1_naming_them(recording, tmp_path) -> None:
+    url = make_store(tmp_path / "c.db")
+    with Store.open(url) as store:  # the render's lens is 800 px; this calibration says 752 (6 % short)
+        store.add_artifact(calibration(serial=CAM, fx=752.0), activate=True, **WHO)
+    noise = ("--noise", str(recording / "imu.yaml"))
+    r = cli(url, "imu", "solve", str(recording), "--serial", CAM, *noise, "--rig", RIG)
+    _refused_and_never_active(url, r, "the camera's intrinsics do not fit these images")
 
 
 def test_a_rolling_shutter_solved_without_line_delay_is_named_with_the_fix(tmp_path) -> None:
