@@ -221,7 +221,10 @@ def _metric_gates(
     """The ``board_scale`` gate (one board: one more joint solve, shared by every camera) and each
     camera's ``camera_fit`` gate, appended to its gates (``core.imu.metric``)."""
     scale = gates.board_scale(
-        metric.board_scale(imu, cameras, noise, options, tracks, solutions, rig), square_mm
+        metric.board_scale(
+            imu, cameras, noise, options, tracks, solutions, rig, refusable=gates.MIN_SCALE_ERROR
+        ),
+        square_mm,
     )
     for rec, frames, track, s in zip(recording, cameras, tracks, solutions, strict=True):
         rec += [scale, gates.camera_fit(metric.camera_fit(frames, track, s))]
