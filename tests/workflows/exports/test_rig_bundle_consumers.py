@@ -231,3 +231,29 @@ def test_check_urdf_loads_the_bundle_urdf(bundle):
     assert (
         "robot name is: R1" in run.stdout and "root Link: cam0_optical_frame has 1 child(ren)" in run.stdout
     )
+
+
+def test_the_consumers_read_files_that_carry_a_file_signature(bundle, tmp_path):
+    """A standalone export written where a signing key is configured carries one more header line (the
+    file's own signature): each consumer reads such a file exactly as before."""
+    from calibctl.signing import create_key
+    from calibctl.workflows.exports.trace_header import sign_file
+
+    out, cal = bundle
+    signer = create_key(tmp_path / "k.pem")
+    signed = []
+    for path in sorted(out.iterdir()):
+        try:
+            text = path.read_text()
+        except UnicodeDecodeError:
+            continue
+        if (stamped := sign_file(text, signer)) != text:
+            path.write_text(stamped)
+            signed.append(path.name)
+    assert {"cam0.yaml", "cam1.yaml", "rig.urdf"} <= set(signed)
+    if shutil.which("check_urdf") is not None:
+        run = subprocess.run(
+            ["check_urdf", str(out / "rig.urdf")], capture_output=True, text=True, check=False
+        )
+        assert run.returncode == 0, run.stdout + run.stderr
+    _check_consumers(out, cal, tmp_path)
