@@ -13,7 +13,7 @@ more than a few percent?), so it is solved on at most ``GAUGE_FRAMES`` frames a 
 whole motion, all the IMU samples) and without the jackknife; only a scale off 1 by more than
 ``gates.MIN_SCALE_ERROR`` can be refused, and only then is the jackknife run, so a refusal's sigma is
 the honest one. A passed gauge's sigma is the white-noise one widened by the first solve's largest
-jackknife widening (over-, never understated: about 3x on renders). EuRoC cam0: 15.7 -> ~5 s of CPU.
+jackknife widening (over-, never understated: about 3x on renders). EuRoC cam0: 15.7 -> 6.0 s of CPU.
 A residual regression on the first solve cannot do this: that solve already bent its trajectory until
 the accelerometer residual is orthogonal to the motion (measured: s = 1.002 on a 1.25x board).
 
