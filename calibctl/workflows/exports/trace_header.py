@@ -153,11 +153,11 @@ def sign_file(text: str, signer: Signer | None) -> str:
     return "".join(lines[: at + 1]) + line + "".join(lines[at + 1 :])
 
 
-def _file_signature_in(head: list[str], text: str) -> FileSignature | None:
+def _file_signature_in(head: list[str], actual_sha256: str) -> FileSignature | None:
     m = next((m for line in head if (m := _FILE_SIGNATURE.match(line))), None)
     if m is None:
         return None
-    return FileSignature(m.group("key_id"), m.group("value"), m.group("public_key"), file_sha256(text))
+    return FileSignature(m.group("key_id"), m.group("value"), m.group("public_key"), actual_sha256)
 
 
 def _signature_in(head: list[str]) -> RecordSignature | None:
@@ -263,15 +263,16 @@ def read_rig(text: str) -> RigTraceHeader | None:
     )
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
     seal = _signature_in(head)
+    actual = file_sha256(text)  # hashed once: the hash line and the file signature check the same bytes
     return RigTraceHeader(
         ref.groupdict().get("ref") or NOT_STORED,
         ref.group("status"),
         ref.group("sha"),
         members,
         sha,
-        file_sha256(text) if sha else None,
+        actual if sha else None,
         seal,
-        _file_signature_in(head, text),
+        _file_signature_in(head, actual),
     )
 
 
@@ -289,13 +290,14 @@ def read(text: str) -> TraceHeader | None:
     except InputError:  # an unreadable evidence line vouches for nothing; the file hash still decides
         evidence = {}
     sha = next((m.group("sha") for line in head if (m := _FILE_SHA.match(line))), None)
+    actual = file_sha256(text)  # hashed once: the hash line and the file signature check the same bytes
     return TraceHeader(
         ref=ref.group("ref"),
         status=ref.group("status"),
         artifact_sha256=ref.group("sha"),
         evidence=evidence if isinstance(evidence, dict) else {},
         file_sha256=sha,
-        actual_file_sha256=file_sha256(text) if sha else None,
+        actual_file_sha256=actual if sha else None,
         signature=_signature_in(head),
-        file_signature=_file_signature_in(head, text),
+        file_signature=_file_signature_in(head, actual),
     )

@@ -669,10 +669,9 @@ def _header_signature(
 ) -> list[Finding]:
     """A rig export's header signature, over the rig version's content hash the header names; a camera
     export's (``camera``, no rig header) over the artifact's; then the file's own (``_file_signature``)."""
+    found = _record_signature(header, trusted, camera)
     signed = header if header is not None else camera
-    if signed is None:
-        return _record_signature(header, trusted, camera)
-    return _record_signature(header, trusted, camera) + _file_signature(signed, trusted, in_bundle)
+    return found if signed is None else found + _file_signature(signed, trusted, in_bundle)
 
 
 def _record_signature(
